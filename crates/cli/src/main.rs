@@ -1,0 +1,30 @@
+//! `zoo`: train, evaluate, export and inspect learned motion-transition models.
+
+mod cmd;
+
+use clap::{Parser, Subcommand};
+
+/// zoo: neural motion transitions from training to game engine.
+#[derive(Parser)]
+#[command(name = "zoo", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Inspect and generate motion data.
+    #[command(subcommand)]
+    Data(cmd::data::DataCommand),
+    /// Run the in-betweening benchmark (LaFAN1 protocol) on a BVH dataset.
+    Bench(cmd::bench::BenchArgs),
+}
+
+fn main() -> anyhow::Result<()> {
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Data(c) => cmd::data::run(c),
+        Command::Bench(a) => cmd::bench::run(a),
+    }
+}

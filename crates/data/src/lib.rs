@@ -1,0 +1,4 @@
+//! Dataset tooling of zoo: BVH reading and writing, datasets and windows, the in-betweening
+//! benchmark's metrics and baselines, and synthetic motion.
+
+pub mod bvh;

@@ -1,0 +1,159 @@
+//! Transition blending: inertialization (Bollo, GDC 2018) and target blending.
+
+use crate::quat::{from_scaled_axis, to_scaled_axis};
+use glam::{DQuat, DVec3};
+
+/// Quintic decay of a scalar offset `x0` (>= 0) with initial velocity `v0` towards 0 over
+/// `t1` seconds, evaluated at `t` (Bollo, "Inertialization", GDC 2018).
+///
+/// Overshoot clamp: when the offset already moves towards 0 (`v0 < 0`) the blend time is
+/// shortened to `-5 x0 / v0`, and the initial acceleration is clamped to be >= 0, so the
+/// curve never crosses zero.
+pub fn inertialize_scalar(x0: f64, v0: f64, t1: f64, t: f64) -> f64 {
+    if x0 <= 0.0 || t1 <= 0.0 {
+        return 0.0;
+    }
+    let mut t1 = t1;
+    if v0 < 0.0 {
+        t1 = t1.min(-5.0 * x0 / v0);
+    }
+    if t >= t1 {
+        return 0.0;
+    }
+    let a0 = ((-8.0 * v0 * t1 - 20.0 * x0) / (t1 * t1)).max(0.0);
+    let t12 = t1 * t1;
+    let a = -(a0 * t12 + 6.0 * v0 * t1 + 12.0 * x0) / (2.0 * t12 * t12 * t1);
+    let b = (3.0 * a0 * t12 + 16.0 * v0 * t1 + 30.0 * x0) / (2.0 * t12 * t12);
+    let c = -(3.0 * a0 * t12 + 12.0 * v0 * t1 + 20.0 * x0) / (2.0 * t12 * t1);
+    let d = a0 / 2.0;
+    ((((a * t + b) * t + c) * t + d) * t + v0) * t + x0
+}
+
+/// Inertialization offset of a vector quantity (e.g. root position): the offset
+/// `source - target` at the switch and its velocity decay along the offset's direction.
+pub fn inertialize_vec(offset: DVec3, velocity: DVec3, t1: f64, t: f64) -> DVec3 {
+    let x0 = offset.length();
+    if x0 < 1e-12 {
+        return DVec3::ZERO;
+    }
+    let dir = offset / x0;
+    dir * inertialize_scalar(x0, velocity.dot(dir), t1, t)
+}
+
+/// Inertialization offset of a rotation: `offset = source * target^-1` at the switch,
+/// `angular_velocity` (rad/s, world axis) of that offset; returns the offset rotation to
+/// apply on top of the target stream (`offset_t * target_t`).
+pub fn inertialize_quat(offset: DQuat, angular_velocity: DVec3, t1: f64, t: f64) -> DQuat {
+    let v = to_scaled_axis(offset);
+    let x0 = v.length();
+    if x0 < 1e-12 {
+        return DQuat::IDENTITY;
+    }
+    let axis = v / x0;
+    from_scaled_axis(axis * inertialize_scalar(x0, angular_velocity.dot(axis), t1, t))
+}
+
+/// Inertialized transition from a source stream into a target stream, per joint.
+///
+/// Holds the offsets of the source's last two frames against the target's first frame and
+/// decays them over `blend_time` seconds. Rotations are local (joints x frames); positions are
+/// root translations.
+#[derive(Clone, Debug)]
+pub struct Inertializer {
+    rot_offset: Vec<DQuat>,
+    rot_velocity: Vec<DVec3>,
+    pos_offset: DVec3,
+    pos_velocity: DVec3,
+    blend_time: f64,
+}
+
+impl Inertializer {
+    /// Records the offsets at the switch.
+    ///
+    /// `src_prev`/`src_last` are the source's last two frames (local rotations, root position),
+    /// `dst_first`/`dst_next` the target's first two frames, `dt` seconds per frame.
+    pub fn new(
+        src_prev: (&[DQuat], DVec3),
+        src_last: (&[DQuat], DVec3),
+        dst_first: (&[DQuat], DVec3),
+        dst_next: (&[DQuat], DVec3),
+        dt: f64,
+        blend_time: f64,
+    ) -> Self {
+        let n = src_last.0.len();
+        let mut rot_offset = Vec::with_capacity(n);
+        let mut rot_velocity = Vec::with_capacity(n);
+        for j in 0..n {
+            // offset at the switch and one frame before, both against the target stream
+            let o1 = (src_last.0[j] * dst_first.0[j].inverse()).normalize();
+            let o0 = (src_prev.0[j] * (dst_first.0[j] * dst_next.0[j].inverse() * dst_first.0[j]).inverse()).normalize();
+            let o0 = if o0.dot(o1) < 0.0 { -o0 } else { o0 };
+            let dv = to_scaled_axis((o1 * o0.inverse()).normalize()) / dt;
+            rot_offset.push(o1);
+            rot_velocity.push(dv);
+        }
+        let p1 = src_last.1 - dst_first.1;
+        let p0 = src_prev.1 - (dst_first.1 - (dst_next.1 - dst_first.1));
+        Inertializer { rot_offset, rot_velocity, pos_offset: p1, pos_velocity: (p1 - p0) / dt, blend_time }
+    }
+
+    /// Applies the decayed offsets at time `t` (seconds since the switch) to a target frame.
+    pub fn apply(&self, t: f64, rotations: &mut [DQuat], root: &mut DVec3) {
+        for (j, r) in rotations.iter_mut().enumerate() {
+            let o = inertialize_quat(self.rot_offset[j], self.rot_velocity[j], self.blend_time, t);
+            *r = (o * *r).normalize();
+        }
+        *root += inertialize_vec(self.pos_offset, self.pos_velocity, self.blend_time, t);
+    }
+}
+
+/// Target-blend weight of RTN (Harvey & Pal 2018, eq. 15-16): the weight of the generated
+/// frame at transition step `t` (0-based) of a blend covering the last `blend_len` steps of a
+/// `len`-step transition; 1 before the blend, falling linearly towards 0 at the target.
+pub fn target_blend_weight(t: usize, len: usize, blend_len: usize) -> f64 {
+    if blend_len == 0 || t + blend_len < len {
+        return 1.0;
+    }
+    let k = (t + blend_len + 1 - len) as f64; // 1..=blend_len
+    1.0 - k / (blend_len as f64 + 1.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quintic_boundary_conditions() {
+        let (x0, v0, t1) = (2.0, 1.0, 0.5);
+        assert!((inertialize_scalar(x0, v0, t1, 0.0) - x0).abs() < 1e-12);
+        let h = 1e-6;
+        let d = (inertialize_scalar(x0, v0, t1, h) - x0) / h;
+        assert!((d - v0).abs() < 1e-3);
+        assert!(inertialize_scalar(x0, v0, t1, t1).abs() < 1e-9);
+        assert!(inertialize_scalar(x0, v0, t1, t1 - 1e-4).abs() < 1e-9);
+    }
+
+    #[test]
+    fn overshoot_clamp_never_crosses_zero() {
+        for v0 in [-100.0, -10.0, -1.0, 0.0, 5.0] {
+            for k in 0..=100 {
+                let t = k as f64 * 0.01;
+                assert!(inertialize_scalar(1.0, v0, 1.0, t) >= -1e-9, "v0={v0} t={t}");
+            }
+        }
+    }
+
+    #[test]
+    fn quat_offset_decays_to_identity() {
+        let o = DQuat::from_rotation_y(0.7);
+        assert!(inertialize_quat(o, DVec3::ZERO, 0.3, 0.0).dot(o) > 1.0 - 1e-12);
+        assert!(inertialize_quat(o, DVec3::ZERO, 0.3, 0.3).dot(DQuat::IDENTITY).abs() > 1.0 - 1e-12);
+    }
+
+    #[test]
+    fn blend_weights_ramp_down() {
+        let w: Vec<f64> = (0..6).map(|t| target_blend_weight(t, 6, 3)).collect();
+        assert_eq!(w[..3], [1.0, 1.0, 1.0]);
+        assert!(w[3] > w[4] && w[4] > w[5] && w[5] > 0.0);
+    }
+}

@@ -1,0 +1,144 @@
+//! A clip: per-frame local rotations and local translations of every joint.
+
+use crate::euler::EulerOrder;
+use crate::fk::forward_kinematics;
+use crate::skeleton::Skeleton;
+use glam::{DQuat, DVec3};
+
+/// An animation clip on a skeleton.
+///
+/// `local_rotations[f * J + j]` is joint `j`'s rotation relative to its parent at frame `f`;
+/// `local_positions[f * J + j]` its translation relative to its parent (for the root: the
+/// world position; for other joints usually the bone offset, but BVH files with position
+/// channels on every joint may animate it).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Clip {
+    /// The skeleton.
+    pub skeleton: Skeleton,
+    /// Seconds per frame.
+    pub frame_time: f64,
+    /// Local rotations, frame-major.
+    pub local_rotations: Vec<DQuat>,
+    /// Local translations, frame-major.
+    pub local_positions: Vec<DVec3>,
+}
+
+impl Clip {
+    /// Number of frames.
+    pub fn frames(&self) -> usize {
+        self.local_rotations.len() / self.skeleton.len().max(1)
+    }
+
+    /// Number of joints.
+    pub fn joints(&self) -> usize {
+        self.skeleton.len()
+    }
+
+    /// Frames per second.
+    pub fn fps(&self) -> f64 {
+        1.0 / self.frame_time
+    }
+
+    /// Duration in seconds.
+    pub fn duration(&self) -> f64 {
+        self.frames() as f64 * self.frame_time
+    }
+
+    /// Local rotations of frame `f`.
+    pub fn rotations_at(&self, f: usize) -> &[DQuat] {
+        let j = self.joints();
+        &self.local_rotations[f * j..(f + 1) * j]
+    }
+
+    /// Local positions of frame `f`.
+    pub fn positions_at(&self, f: usize) -> &[DVec3] {
+        let j = self.joints();
+        &self.local_positions[f * j..(f + 1) * j]
+    }
+
+    /// Root (joint 0) translation of frame `f`.
+    pub fn root_position(&self, f: usize) -> DVec3 {
+        self.local_positions[f * self.joints()]
+    }
+
+    /// Global rotations and positions of every frame (frame-major).
+    pub fn global(&self) -> (Vec<DQuat>, Vec<DVec3>) {
+        let n = self.local_rotations.len();
+        let mut gr = vec![DQuat::IDENTITY; n];
+        let mut gp = vec![DVec3::ZERO; n];
+        forward_kinematics(
+            &self.skeleton.parents,
+            &self.local_rotations,
+            &self.local_positions,
+            &mut gr,
+            &mut gp,
+        );
+        (gr, gp)
+    }
+
+    /// Frames `from..to` as a new clip.
+    pub fn slice(&self, from: usize, to: usize) -> Clip {
+        let j = self.joints();
+        Clip {
+            skeleton: self.skeleton.clone(),
+            frame_time: self.frame_time,
+            local_rotations: self.local_rotations[from * j..to * j].to_vec(),
+            local_positions: self.local_positions[from * j..to * j].to_vec(),
+        }
+    }
+
+    /// Makes consecutive quaternions of each joint lie in the same hemisphere
+    /// (see [`crate::quat::remove_sign_flips`]).
+    pub fn remove_sign_flips(&mut self) {
+        let j = self.joints();
+        crate::quat::remove_sign_flips(&mut self.local_rotations, j);
+    }
+
+    /// Euler angles (degrees, channel order of each joint) of frame `f`, joint `j`.
+    pub fn euler_deg(&self, f: usize, j: usize, order: EulerOrder) -> [f64; 3] {
+        order.from_quat_deg(self.local_rotations[f * self.joints() + j])
+    }
+
+    /// Removes the root joint when it only carries its child: the child becomes the root with
+    /// the composed transform. Returns false (and changes nothing) when the root has more
+    /// than one child.
+    pub fn drop_root(&mut self) -> bool {
+        let s = &self.skeleton;
+        let kids = s.children(0);
+        if kids.len() != 1 || kids[0] != 1 || s.len() < 2 {
+            return false;
+        }
+        let jn = s.len();
+        let frames = self.frames();
+        let mut rot = Vec::with_capacity(frames * (jn - 1));
+        let mut pos = Vec::with_capacity(frames * (jn - 1));
+        for f in 0..frames {
+            let r0 = self.local_rotations[f * jn];
+            let p0 = self.local_positions[f * jn];
+            for j in 1..jn {
+                let (r, p) = (self.local_rotations[f * jn + j], self.local_positions[f * jn + j]);
+                if j == 1 {
+                    rot.push(r0 * r);
+                    pos.push(p0 + r0 * p);
+                } else {
+                    rot.push(r);
+                    pos.push(p);
+                }
+            }
+        }
+        let old = &self.skeleton;
+        let mut offsets: Vec<DVec3> = old.offsets[1..].to_vec();
+        offsets[0] = old.offsets[0] + old.offsets[1];
+        self.skeleton = Skeleton {
+            names: old.names[1..].to_vec(),
+            parents: old.parents[1..].iter().map(|p| p.and_then(|p| p.checked_sub(1))).collect(),
+            offsets,
+            end_sites: old.end_sites[1..].to_vec(),
+            channels: old.channels[1..].to_vec(),
+        };
+        self.skeleton.parents[0] = None;
+        self.local_rotations = rot;
+        self.local_positions = pos;
+        true
+    }
+}
