@@ -1,4 +1,7 @@
 //! Dataset tooling of zoo: BVH reading and writing, datasets and windows, the in-betweening
 //! benchmark's metrics and baselines, and synthetic motion.
 
+pub mod benchmark;
 pub mod bvh;
+pub mod dataset;
+pub mod metrics;

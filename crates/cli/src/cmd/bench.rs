@@ -1,16 +1,145 @@
-//! `zoo bench`: the in-betweening benchmark.
+//! `zoo bench`: the in-betweening benchmark (LaFAN1 protocol, `BENCHMARK.md`).
 
+use anyhow::{Context, bail};
 use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+use zoo_data::benchmark::{BenchResult, Benchmark, Interpolation, TransitionMethod, ZeroVelocity};
+use zoo_data::dataset;
 
 /// Arguments of `zoo bench`.
 #[derive(Args)]
 pub struct BenchArgs {
-    /// Dataset folder (training split gives statistics; validation split gives test windows).
+    /// Dataset folder: files not matching `--valid-glob` are the training split (statistics,
+    /// bone offsets, planted foot heights); matching files are the test split.
     #[arg(long)]
-    pub data: std::path::PathBuf,
+    pub data: PathBuf,
+    /// Glob on file names selecting the validation/test split, e.g. `'*_youthful_*'`
+    /// (LaFAN1: `'*subject5*'`).
+    #[arg(long)]
+    pub valid_glob: Option<String>,
+    /// A held-out dataset on the same skeleton: every clip of it is tested instead of the
+    /// validation split of `--data`.
+    #[arg(long)]
+    pub test_data: Option<PathBuf>,
+    /// Comma-separated methods: `zerovel`, `interp`.
+    #[arg(long, default_value = "zerovel,interp", value_delimiter = ',')]
+    pub methods: Vec<String>,
+    /// Comma-separated transition lengths in frames.
+    #[arg(long, default_value = "5,15,30,45", value_delimiter = ',')]
+    pub lengths: Vec<usize>,
+    /// Write the results as JSON to this file.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Compare with reference values (LaFAN1 benchmark key names, e.g.
+    /// `interp_pos_loss@30`) and fail when one differs by more than `--tolerance`.
+    #[arg(long)]
+    pub reference: Option<PathBuf>,
+    /// Relative tolerance of `--reference`.
+    #[arg(long, default_value_t = 1e-3)]
+    pub tolerance: f64,
+}
+
+fn method(name: &str) -> anyhow::Result<Box<dyn TransitionMethod>> {
+    Ok(match name {
+        "zerovel" => Box::new(ZeroVelocity),
+        "interp" => Box::new(Interpolation),
+        other => bail!("unknown method `{other}`: expected one of zerovel, interp"),
+    })
 }
 
 /// Runs the benchmark.
-pub fn run(_a: BenchArgs) -> anyhow::Result<()> {
-    anyhow::bail!("not yet")
+pub fn run(a: BenchArgs) -> anyhow::Result<()> {
+    let start = Instant::now();
+    let methods = a.methods.iter().map(|m| method(m.trim())).collect::<anyhow::Result<Vec<_>>>()?;
+    let pb = ProgressBar::new_spinner();
+    pb.set_style(ProgressStyle::with_template("{spinner} {msg} [{elapsed}]")?);
+    pb.enable_steady_tick(Duration::from_millis(120));
+    pb.set_message(format!("loading {}", a.data.display()));
+    let clips = dataset::load(&a.data).with_context(|| format!("loading {}", a.data.display()))?;
+    let (train, test) = match (&a.test_data, &a.valid_glob) {
+        (Some(test_path), glob) => {
+            let train = match glob {
+                Some(g) => dataset::split(clips, g)?.0,
+                None => clips,
+            };
+            pb.set_message(format!("loading {}", test_path.display()));
+            let test = dataset::load(test_path).with_context(|| format!("loading {}", test_path.display()))?;
+            (train, test)
+        }
+        (None, Some(g)) => dataset::split(clips, g)?,
+        (None, None) => bail!("pass --valid-glob GLOB to choose the test split of --data, or --test-data PATH"),
+    };
+    pb.set_message("preparing windows and statistics");
+    let bench = Benchmark::new(&train, &test).map_err(anyhow::Error::msg)?;
+    pb.set_message(format!("evaluating {} test windows", bench.windows()));
+    let refs: Vec<&dyn TransitionMethod> = methods.iter().map(|m| m.as_ref()).collect();
+    let result = bench.run(&refs, &a.lengths).map_err(anyhow::Error::msg)?;
+    pb.finish_and_clear();
+    println!("{}", result.table(&a.lengths));
+    if let Some(path) = &a.json {
+        std::fs::write(path, serde_json::to_string_pretty(&result)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    println!(
+        "{} training clips, {} test clips, {} test windows, {:.2} s",
+        train.len(),
+        test.len(),
+        result.windows,
+        start.elapsed().as_secs_f64()
+    );
+    if let Some(r) = &a.reference {
+        check_reference(&result, r, a.tolerance)?;
+    }
+    Ok(())
+}
+
+/// Maps a LaFAN1 benchmark key (`zerov_quat_loss@30`) to ours (`zerovel`, `l2q@30`).
+fn map_reference_key(key: &str) -> Option<(String, String)> {
+    let (name, n) = key.split_once('@')?;
+    let (method, metric) = name.split_once('_')?;
+    let method = match method {
+        "zerov" => "zerovel",
+        "interp" => "interp",
+        other => other,
+    };
+    let metric = match metric {
+        "quat_loss" => "l2q",
+        "pos_loss" => "l2p",
+        "npss_loss" => "npss",
+        other => other,
+    };
+    Some((method.to_string(), format!("{metric}@{n}")))
+}
+
+fn check_reference(result: &BenchResult, path: &PathBuf, tol: f64) -> anyhow::Result<()> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let reference: BTreeMap<String, f64> =
+        serde_json::from_str(&text).with_context(|| format!("{}: expected a JSON object of numbers", path.display()))?;
+    let mut worst: f64 = 0.0;
+    let mut failures = Vec::new();
+    for (key, want) in &reference {
+        let Some((m, k)) = map_reference_key(key) else {
+            failures.push(format!("{key}: not a `method_metric@n` key"));
+            continue;
+        };
+        let Some(got) = result.methods.get(&m).and_then(|row| row.get(&k)) else {
+            failures.push(format!("{key}: not computed (run with the method and length it names)"));
+            continue;
+        };
+        let rel = (got - want).abs() / want.abs().max(1e-300);
+        worst = worst.max(rel);
+        println!("{key:<24} reference {want:<22.15} ours {got:<22.15} rel {rel:.2e}");
+        if !(rel <= tol) {
+            failures.push(format!("{key}: ours {got} vs reference {want} (relative error {rel:.2e} > {tol:e})"));
+        }
+    }
+    if failures.is_empty() {
+        println!("reference check: {} values match within {tol:e} (worst relative error {worst:.2e})", reference.len());
+        Ok(())
+    } else {
+        bail!("reference check failed:\n  {}", failures.join("\n  "))
+    }
 }

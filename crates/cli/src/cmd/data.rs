@@ -1,6 +1,14 @@
 //! `zoo data ...`: dataset statistics and synthetic data.
 
+use anyhow::Context;
 use clap::{Args, Subcommand};
+use glam::DVec3;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::path::PathBuf;
+use std::time::Instant;
+use zoo_data::{dataset, metrics};
+use zoo_motion::Skeleton;
 
 /// `zoo data` subcommands.
 #[derive(Subcommand)]
@@ -13,15 +21,158 @@ pub enum DataCommand {
 #[derive(Args)]
 pub struct StatsArgs {
     /// A `.bvh`/`.bvh.gz` file or a folder searched recursively.
-    pub path: std::path::PathBuf,
+    pub path: PathBuf,
     /// Also write the statistics as JSON to this file.
     #[arg(long)]
-    pub json: Option<std::path::PathBuf>,
+    pub json: Option<PathBuf>,
 }
 
 /// Runs a `zoo data` subcommand.
 pub fn run(cmd: DataCommand) -> anyhow::Result<()> {
     match cmd {
-        DataCommand::Stats(_a) => anyhow::bail!("not yet"),
+        DataCommand::Stats(a) => stats(a),
+    }
+}
+
+/// Statistics printed by `zoo data stats` (and written with `--json`).
+#[derive(Serialize)]
+pub struct DataStats {
+    /// Number of clips.
+    pub clips: usize,
+    /// Total frames.
+    pub frames: usize,
+    /// Total duration in seconds.
+    pub duration_s: f64,
+    /// Distinct frame rates found.
+    pub fps: Vec<f64>,
+    /// Joints per frame (after dropping a dummy root).
+    pub joints: usize,
+    /// Joint names.
+    pub joint_names: Vec<String>,
+    /// Parent index per joint (-1 for the root).
+    pub parents: Vec<i32>,
+    /// Horizontal root speed percentiles over all frames (units/s): p5, p25, p50, p75, p95.
+    pub root_speed: RootSpeed,
+    /// Foot joints used for the skate measure.
+    pub foot_joints: Vec<String>,
+    /// Planted height of each foot joint (5th percentile of its height).
+    pub planted_heights: Vec<f64>,
+    /// The data's own foot skate (units per frame, `BENCHMARK.md` definition, all frames).
+    pub foot_skate: f64,
+    /// Seconds taken.
+    pub seconds: f64,
+}
+
+/// Percentiles of the horizontal root speed.
+#[derive(Serialize)]
+pub struct RootSpeed {
+    /// 5th percentile.
+    pub p5: f64,
+    /// 25th percentile.
+    pub p25: f64,
+    /// Median.
+    pub p50: f64,
+    /// 75th percentile.
+    pub p75: f64,
+    /// 95th percentile.
+    pub p95: f64,
+}
+
+fn stats(a: StatsArgs) -> anyhow::Result<()> {
+    let start = Instant::now();
+    let clips = dataset::load(&a.path).with_context(|| format!("loading {}", a.path.display()))?;
+    let skeleton = clips[0].clip.skeleton.clone();
+    let j = skeleton.len();
+    let feet = metrics::foot_joints(&skeleton.names);
+    // Per clip: global positions of the feet and the root's horizontal speed.
+    struct PerClip {
+        feet: Vec<DVec3>,
+        speed: Vec<f64>,
+    }
+    let per: Vec<PerClip> = clips
+        .par_iter()
+        .map(|c| {
+            let (_, gp) = c.clip.global();
+            let frames = c.clip.frames();
+            let mut fp = Vec::with_capacity(frames * feet.len());
+            for f in 0..frames {
+                fp.extend(feet.iter().map(|&k| gp[f * j + k]));
+            }
+            let speed = (1..frames)
+                .map(|f| {
+                    let d = gp[f * j] - gp[(f - 1) * j];
+                    (d.x * d.x + d.z * d.z).sqrt() / c.clip.frame_time
+                })
+                .collect();
+            PerClip { feet: fp, speed }
+        })
+        .collect();
+    let planted: Vec<f64> = (0..feet.len())
+        .map(|k| {
+            let mut h: Vec<f64> =
+                per.iter().flat_map(|p| p.feet.iter().skip(k).step_by(feet.len()).map(|v| v.y)).collect();
+            dataset::percentile(&mut h, 5.0)
+        })
+        .collect();
+    let fs = metrics::FootSkate { joints: (0..feet.len()).collect(), planted: planted.clone(), scale: 2.5 };
+    let (mut skate_sum, mut skate_n) = (0.0, 0usize);
+    for (p, c) in per.iter().zip(&clips) {
+        let frames = c.clip.frames();
+        if frames > 1 {
+            skate_sum += fs.skate(&p.feet, frames, feet.len()) * ((frames - 1) * feet.len()) as f64;
+            skate_n += (frames - 1) * feet.len();
+        }
+    }
+    let mut speeds: Vec<f64> = per.iter().flat_map(|p| p.speed.iter().copied()).collect();
+    let mut pct = |q| dataset::percentile(&mut speeds, q);
+    let root_speed = RootSpeed { p5: pct(5.0), p25: pct(25.0), p50: pct(50.0), p75: pct(75.0), p95: pct(95.0) };
+    let mut fps: Vec<f64> = clips.iter().map(|c| (c.clip.fps() * 1000.0).round() / 1000.0).collect();
+    fps.sort_by(f64::total_cmp);
+    fps.dedup();
+    let frames: usize = clips.iter().map(|c| c.clip.frames()).sum();
+    let out = DataStats {
+        clips: clips.len(),
+        frames,
+        duration_s: clips.iter().map(|c| c.clip.duration()).sum(),
+        fps,
+        joints: j,
+        joint_names: skeleton.names.clone(),
+        parents: skeleton.parents_i32(),
+        root_speed,
+        foot_joints: feet.iter().map(|&k| skeleton.names[k].clone()).collect(),
+        planted_heights: planted,
+        foot_skate: if skate_n > 0 { skate_sum / skate_n as f64 } else { 0.0 },
+        seconds: start.elapsed().as_secs_f64(),
+    };
+    print_stats(&out, &skeleton);
+    if let Some(path) = &a.json {
+        std::fs::write(path, serde_json::to_string_pretty(&out)?).with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
+
+fn print_stats(s: &DataStats, skeleton: &Skeleton) {
+    println!("clips      {}", s.clips);
+    println!("frames     {}", s.frames);
+    println!("duration   {:.1} s ({:.1} min)", s.duration_s, s.duration_s / 60.0);
+    println!("fps        {}", s.fps.iter().map(|f| format!("{f}")).collect::<Vec<_>>().join(", "));
+    println!("joints     {}", s.joints);
+    print_tree(skeleton, 0, 1);
+    let r = &s.root_speed;
+    println!(
+        "root speed (units/s)  p5 {:.1}  p25 {:.1}  median {:.1}  p75 {:.1}  p95 {:.1}",
+        r.p5, r.p25, r.p50, r.p75, r.p95
+    );
+    for (n, h) in s.foot_joints.iter().zip(&s.planted_heights) {
+        println!("planted height  {n:<10} {h:.2}");
+    }
+    println!("foot skate (units/frame, all frames)  {:.4}", s.foot_skate);
+    println!("done in {:.2} s", s.seconds);
+}
+
+fn print_tree(s: &Skeleton, j: usize, depth: usize) {
+    println!("{}{}", "  ".repeat(depth), s.names[j]);
+    for c in s.children(j) {
+        print_tree(s, c, depth + 1);
     }
 }

@@ -1,0 +1,368 @@
+//! Datasets: folders of BVH clips, name-glob splits, sliding windows with the benchmark's
+//! centring and facing unification, and normalisation statistics.
+
+use crate::bvh::{self, BvhError, ReadOptions};
+use glam::{DQuat, DVec3};
+use rayon::prelude::*;
+use std::path::{Path, PathBuf};
+use zoo_motion::facing::yaw_between;
+use zoo_motion::fk::forward_kinematics;
+use zoo_motion::{Clip, Skeleton};
+
+/// Errors of dataset loading.
+#[derive(Debug, thiserror::Error)]
+pub enum DataError {
+    /// A BVH file could not be read or parsed.
+    #[error(transparent)]
+    Bvh(#[from] BvhError),
+    /// The path does not exist or holds no BVH files.
+    #[error("{0}: no .bvh or .bvh.gz files found (pass a BVH file or a folder that contains some)")]
+    Empty(PathBuf),
+    /// Walking the folder failed.
+    #[error("{path}: cannot list folder: {source}")]
+    Io {
+        /// Folder.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// A clip's skeleton differs from the first clip's.
+    #[error(
+        "{path}: skeleton differs from {first} ({why}); every clip of a dataset must use the same rig \
+         (retarget it first, or load the two rigs as separate datasets)"
+    )]
+    Skeleton {
+        /// Offending file.
+        path: PathBuf,
+        /// File that defined the skeleton.
+        first: PathBuf,
+        /// What differs.
+        why: String,
+    },
+    /// A glob pattern is invalid.
+    #[error("invalid glob `{pattern}`: {message}")]
+    Glob {
+        /// The pattern.
+        pattern: String,
+        /// Why.
+        message: String,
+    },
+    /// A split came out empty.
+    #[error("{0}")]
+    Split(String),
+}
+
+/// A clip and the file it came from.
+#[derive(Clone, Debug)]
+pub struct NamedClip {
+    /// File path.
+    pub path: PathBuf,
+    /// File name without folders (what split globs match).
+    pub name: String,
+    /// The motion.
+    pub clip: Clip,
+}
+
+/// Whether a path names a BVH file (`.bvh` or `.bvh.gz`, any case).
+pub fn is_bvh_path(p: &Path) -> bool {
+    let n = p.file_name().and_then(|n| n.to_str()).unwrap_or("").to_ascii_lowercase();
+    n.ends_with(".bvh") || n.ends_with(".bvh.gz")
+}
+
+/// Every BVH file under `path` (recursively), sorted; `path` itself if it is a file.
+pub fn find_bvh_files(path: &Path) -> Result<Vec<PathBuf>, DataError> {
+    if path.is_file() {
+        return Ok(vec![path.to_path_buf()]);
+    }
+    if !path.is_dir() {
+        return Err(DataError::Empty(path.to_path_buf()));
+    }
+    let mut out = Vec::new();
+    let mut stack = vec![path.to_path_buf()];
+    while let Some(dir) = stack.pop() {
+        let rd = std::fs::read_dir(&dir).map_err(|source| DataError::Io { path: dir.clone(), source })?;
+        for entry in rd {
+            let entry = entry.map_err(|source| DataError::Io { path: dir.clone(), source })?;
+            let p = entry.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else if is_bvh_path(&p) {
+                out.push(p);
+            }
+        }
+    }
+    out.sort();
+    if out.is_empty() {
+        return Err(DataError::Empty(path.to_path_buf()));
+    }
+    Ok(out)
+}
+
+/// Loads every clip under `path` in parallel (sorted by path), drops a dummy root, removes
+/// quaternion sign flips over time, and checks that all clips share one skeleton.
+pub fn load(path: &Path) -> Result<Vec<NamedClip>, DataError> {
+    let files = find_bvh_files(path)?;
+    let opts = ReadOptions { drop_dummy_root: true };
+    let clips: Vec<NamedClip> = files
+        .par_iter()
+        .map(|p| {
+            let mut clip = bvh::read_file(p, &opts)?;
+            clip.remove_sign_flips();
+            let name = p.file_name().and_then(|n| n.to_str()).unwrap_or_default().to_string();
+            Ok(NamedClip { path: p.clone(), name, clip })
+        })
+        .collect::<Result<_, DataError>>()?;
+    check_same_skeleton(&clips)?;
+    Ok(clips)
+}
+
+/// Errors unless every clip has the first clip's joint names and parents.
+pub fn check_same_skeleton(clips: &[NamedClip]) -> Result<(), DataError> {
+    if let Some(first) = clips.first() {
+        for c in &clips[1..] {
+            if let Some(why) = first.clip.skeleton.topology_difference(&c.clip.skeleton) {
+                return Err(DataError::Skeleton { path: c.path.clone(), first: first.path.clone(), why });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Compiles a file-name glob (`*` matches any run of characters, including `/`).
+pub fn glob(pattern: &str) -> Result<globset::GlobMatcher, DataError> {
+    globset::Glob::new(pattern)
+        .map(|g| g.compile_matcher())
+        .map_err(|e| DataError::Glob { pattern: pattern.to_string(), message: e.to_string() })
+}
+
+/// Splits clips into (training, validation): validation clips are those whose file name
+/// matches `valid_glob`.
+pub fn split(clips: Vec<NamedClip>, valid_glob: &str) -> Result<(Vec<NamedClip>, Vec<NamedClip>), DataError> {
+    let m = glob(valid_glob)?;
+    let (valid, train): (Vec<_>, Vec<_>) = clips.into_iter().partition(|c| m.is_match(&c.name));
+    if valid.is_empty() {
+        return Err(DataError::Split(format!(
+            "no clip file name matches --valid-glob `{valid_glob}`: the validation split is empty"
+        )));
+    }
+    if train.is_empty() {
+        return Err(DataError::Split(format!(
+            "every clip file name matches --valid-glob `{valid_glob}`: the training split is empty"
+        )));
+    }
+    Ok((train, valid))
+}
+
+/// Fixed-length windows of local motion, frame-major within each window:
+/// `local_rot[(w * window + f) * joints + j]`.
+#[derive(Clone, Debug)]
+pub struct Windows {
+    /// Skeleton the windows are on.
+    pub skeleton: Skeleton,
+    /// Frames per window.
+    pub window: usize,
+    /// Number of windows.
+    pub count: usize,
+    /// Local rotations.
+    pub local_rot: Vec<DQuat>,
+    /// Local positions.
+    pub local_pos: Vec<DVec3>,
+    /// Index of the source clip of each window and its first frame.
+    pub source: Vec<(usize, usize)>,
+}
+
+/// How windows are cut and prepared (benchmark steps 3-5).
+#[derive(Clone, Copy, Debug)]
+pub struct WindowOptions {
+    /// Frames per window.
+    pub window: usize,
+    /// Step between window starts.
+    pub offset: usize,
+    /// Past context frames: facing is unified at frame `n_past - 1`.
+    pub n_past: usize,
+    /// Local axis of the root whose ground projection is "forward" (bandai2 and LaFAN1: +Y).
+    pub forward_axis: DVec3,
+}
+
+impl WindowOptions {
+    /// Training windows of the benchmark: 50 frames, offset 20, 10 past frames.
+    pub const TRAIN: WindowOptions =
+        WindowOptions { window: 50, offset: 20, n_past: 10, forward_axis: DVec3::Y };
+    /// Test windows of the benchmark: 65 frames, offset 40, 10 past frames.
+    pub const TEST: WindowOptions =
+        WindowOptions { window: 65, offset: 40, n_past: 10, forward_axis: DVec3::Y };
+}
+
+impl Windows {
+    /// Joints per frame.
+    pub fn joints(&self) -> usize {
+        self.skeleton.len()
+    }
+
+    /// Local rotations of window `w` (frames x joints).
+    pub fn rot(&self, w: usize) -> &[DQuat] {
+        let n = self.window * self.joints();
+        &self.local_rot[w * n..(w + 1) * n]
+    }
+
+    /// Local positions of window `w` (frames x joints).
+    pub fn pos(&self, w: usize) -> &[DVec3] {
+        let n = self.window * self.joints();
+        &self.local_pos[w * n..(w + 1) * n]
+    }
+
+    /// Global rotations and positions of all windows.
+    pub fn global(&self) -> (Vec<DQuat>, Vec<DVec3>) {
+        let mut gr = vec![DQuat::IDENTITY; self.local_rot.len()];
+        let mut gp = vec![DVec3::ZERO; self.local_pos.len()];
+        forward_kinematics(&self.skeleton.parents, &self.local_rot, &self.local_pos, &mut gr, &mut gp);
+        (gr, gp)
+    }
+}
+
+/// Cuts windows from clips (start 0, step `offset`, while `start + window < frames`), centres
+/// each on the mean root x/z of its frames and unifies facing at frame `n_past - 1`.
+pub fn windows(clips: &[NamedClip], opts: &WindowOptions) -> Windows {
+    let skeleton = clips.first().map(|c| c.clip.skeleton.clone()).unwrap_or_else(|| Skeleton {
+        names: vec![],
+        parents: vec![],
+        offsets: vec![],
+        end_sites: vec![],
+        channels: vec![],
+    });
+    let j = skeleton.len();
+    let mut source = Vec::new();
+    for (ci, c) in clips.iter().enumerate() {
+        let frames = c.clip.frames();
+        let mut i = 0;
+        while i + opts.window < frames {
+            source.push((ci, i));
+            i += opts.offset;
+        }
+    }
+    let per = opts.window * j;
+    let mut local_rot = vec![DQuat::IDENTITY; source.len() * per];
+    let mut local_pos = vec![DVec3::ZERO; source.len() * per];
+    local_rot
+        .par_chunks_mut(per.max(1))
+        .zip(local_pos.par_chunks_mut(per.max(1)))
+        .zip(source.par_iter())
+        .for_each(|((rot, pos), &(ci, start))| {
+            let clip = &clips[ci].clip;
+            rot.copy_from_slice(&clip.local_rotations[start * j..start * j + per]);
+            pos.copy_from_slice(&clip.local_positions[start * j..start * j + per]);
+            prepare_window(rot, pos, j, opts);
+        });
+    Windows { skeleton, window: opts.window, count: source.len(), local_rot, local_pos, source }
+}
+
+/// Benchmark steps 4-5 on one window in place: centre root x/z, then rotate the whole window
+/// about +Y so the root faces +X at frame `n_past - 1`.
+///
+/// Only the root's transform changes: rotating every global transform by the same yaw leaves
+/// the parent-relative (local) transforms of the other joints as they are.
+pub fn prepare_window(rot: &mut [DQuat], pos: &mut [DVec3], joints: usize, opts: &WindowOptions) {
+    let frames = rot.len() / joints;
+    let (mut mx, mut mz) = (0.0, 0.0);
+    for f in 0..frames {
+        mx += pos[f * joints].x;
+        mz += pos[f * joints].z;
+    }
+    mx /= frames as f64;
+    mz /= frames as f64;
+    for f in 0..frames {
+        pos[f * joints].x -= mx;
+        pos[f * joints].z -= mz;
+    }
+    let key = rot[(opts.n_past - 1) * joints];
+    let fwd = key * opts.forward_axis;
+    let fwd = DVec3::new(fwd.x, 0.0, fwd.z).normalize();
+    let inv = yaw_between(DVec3::X, fwd).inverse();
+    for f in 0..frames {
+        rot[f * joints] = inv * rot[f * joints];
+        pos[f * joints] = inv * pos[f * joints];
+    }
+}
+
+/// Normalisation statistics of global joint positions (benchmark step 6).
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct PositionStats {
+    /// Mean per coordinate (joint-major: `j * 3 + axis`).
+    pub mean: Vec<f64>,
+    /// Population standard deviation per coordinate.
+    pub std: Vec<f64>,
+}
+
+/// Per-coordinate mean and population std of global positions over all windows and frames.
+pub fn position_stats(global_pos: &[DVec3], joints: usize) -> PositionStats {
+    let n = (global_pos.len() / joints) as f64;
+    let mut mean = vec![0.0; joints * 3];
+    for (i, p) in global_pos.iter().enumerate() {
+        let j = i % joints;
+        mean[j * 3] += p.x;
+        mean[j * 3 + 1] += p.y;
+        mean[j * 3 + 2] += p.z;
+    }
+    mean.iter_mut().for_each(|m| *m /= n);
+    let mut var = vec![0.0; joints * 3];
+    for (i, p) in global_pos.iter().enumerate() {
+        let j = i % joints;
+        for a in 0..3 {
+            let d = p[a] - mean[j * 3 + a];
+            var[j * 3 + a] += d * d;
+        }
+    }
+    let std = var.into_iter().map(|v| (v / n).sqrt()).collect();
+    PositionStats { mean, std }
+}
+
+/// Linear-interpolation percentile (numpy's default) of `values`, `q` in [0, 100].
+pub fn percentile(values: &mut [f64], q: f64) -> f64 {
+    if values.is_empty() {
+        return f64::NAN;
+    }
+    values.sort_by(|a, b| a.total_cmp(b));
+    let pos = q / 100.0 * (values.len() - 1) as f64;
+    let lo = pos.floor() as usize;
+    let hi = pos.ceil() as usize;
+    values[lo] + (values[hi] - values[lo]) * (pos - lo as f64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percentile_matches_numpy() {
+        // numpy.percentile([1, 2, 3, 4], 5) == 1.15
+        let mut v = vec![4.0, 1.0, 3.0, 2.0];
+        assert!((percentile(&mut v, 5.0) - 1.15).abs() < 1e-12);
+        assert!((percentile(&mut v, 50.0) - 2.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn stats_are_population_std() {
+        let p = [DVec3::new(1.0, 0.0, 0.0), DVec3::new(3.0, 0.0, 0.0)];
+        let s = position_stats(&p, 1);
+        assert_eq!(s.mean[0], 2.0);
+        assert_eq!(s.std[0], 1.0);
+        assert_eq!(s.std[1], 0.0);
+    }
+
+    #[test]
+    fn facing_unified_at_last_past_frame() {
+        let opts = WindowOptions { window: 3, offset: 1, n_past: 2, forward_axis: DVec3::Y };
+        // root facing: local +Y rotated to world -Z, with some tilt
+        let r = DQuat::from_rotation_x(-std::f64::consts::FRAC_PI_2) * DQuat::from_rotation_z(0.1);
+        let mut rot = vec![r; 3];
+        let mut pos = vec![DVec3::new(5.0, 1.0, 2.0), DVec3::new(6.0, 1.0, 3.0), DVec3::new(7.0, 1.0, 4.0)];
+        prepare_window(&mut rot, &mut pos, 1, &opts);
+        let f = rot[1] * DVec3::Y;
+        let f = DVec3::new(f.x, 0.0, f.z).normalize();
+        assert!((f - DVec3::X).length() < 1e-12, "{f:?}");
+        // centred: mean x/z now zero (rotation about Y keeps the centroid at the origin)
+        let mean = (pos[0] + pos[1] + pos[2]) / 3.0;
+        assert!(mean.x.abs() < 1e-12 && mean.z.abs() < 1e-12);
+        assert!((pos[0].y - 1.0).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,6 @@
+#!/usr/bin/env bash
+# The whole test suite, from a fresh clone: builds everything and runs every test.
+# Tests that need ../shared/data/bandai2 print why they have nothing to check when it is absent.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+cargo test --workspace --all-targets "$@"
