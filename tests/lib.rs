@@ -1,0 +1,52 @@
+//! Helpers shared by the workspace-level tests.
+
+use glam::{DQuat, DVec3};
+use std::path::{Path, PathBuf};
+use zoo_motion::{Clip, EulerOrder, JointChannels, Skeleton};
+
+/// Path of the `zoo` binary built for these tests (the CLI crate's binary, built by cargo
+/// before the tests run because the `zoo-cli` package is a workspace member).
+pub fn zoo_bin() -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    let dir = exe.parent().and_then(|d| d.parent()).expect("target dir");
+    let bin = dir.join(format!("zoo{}", std::env::consts::EXE_SUFFIX));
+    assert!(bin.exists(), "{} is missing: build it with `cargo build --bin zoo` (scripts/test.sh does)", bin.display());
+    bin
+}
+
+/// The real dataset folder, when this checkout sits beside `shared/`.
+pub fn bandai2() -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/bandai2");
+    p.is_dir().then_some(p)
+}
+
+/// A small 4-joint chain skeleton (root, spine, leg, foot).
+pub fn toy_skeleton() -> Skeleton {
+    let ch = |position| JointChannels { position, order: EulerOrder::Zxy };
+    Skeleton {
+        names: ["Hips", "Spine", "Leg", "Foot_L"].iter().map(|s| s.to_string()).collect(),
+        parents: vec![None, Some(0), Some(0), Some(2)],
+        offsets: vec![DVec3::ZERO, DVec3::new(0.0, 10.0, 0.0), DVec3::new(0.0, -40.0, 0.0), DVec3::new(0.0, -40.0, 0.0)],
+        end_sites: vec![None, Some(DVec3::new(0.0, 5.0, 0.0)), None, Some(DVec3::new(0.0, 0.0, 10.0))],
+        channels: vec![ch(true), ch(false), ch(false), ch(false)],
+    }
+}
+
+/// A walking-like toy clip: the root moves along a curve, joints swing with a phase.
+pub fn toy_clip(frames: usize, phase: f64) -> Clip {
+    let skeleton = toy_skeleton();
+    let j = skeleton.len();
+    let mut rot = Vec::with_capacity(frames * j);
+    let mut pos = Vec::with_capacity(frames * j);
+    for f in 0..frames {
+        let t = f as f64 / 30.0 + phase;
+        let root = DVec3::new(100.0 * t, 85.0 + 2.0 * (6.0 * t).sin(), 20.0 * (0.5 * t).sin());
+        rot.push(DQuat::from_rotation_y(0.3 * t) * DQuat::from_rotation_x(-std::f64::consts::FRAC_PI_2));
+        rot.push(DQuat::from_rotation_x(0.1 * (3.0 * t).sin()));
+        rot.push(DQuat::from_rotation_x(0.5 * (6.0 * t).sin()));
+        rot.push(DQuat::from_rotation_x(0.2 * (6.0 * t).cos()));
+        pos.push(root);
+        pos.extend_from_slice(&skeleton.offsets[1..]);
+    }
+    Clip { skeleton, frame_time: 1.0 / 30.0, local_rotations: rot, local_positions: pos }
+}
