@@ -151,6 +151,26 @@ mod tests {
     }
 
     #[test]
+    fn inertializer_starts_at_source_and_ends_at_target() {
+        let a = [DQuat::from_rotation_x(0.4), DQuat::from_rotation_z(-0.2)];
+        let b = [DQuat::from_rotation_x(-0.1), DQuat::from_rotation_z(0.3)];
+        let (pa, pb) = (DVec3::new(0.0, 90.0, 0.0), DVec3::new(10.0, 95.0, 5.0));
+        let inert = Inertializer::new((&a, pa), (&a, pa), (&b, pb), (&b, pb), 1.0 / 30.0, 0.5);
+        let (mut r, mut p) = (b, pb);
+        inert.apply(0.0, &mut r, &mut p);
+        for j in 0..2 {
+            assert!(r[j].dot(a[j]).abs() > 1.0 - 1e-9);
+        }
+        assert!((p - pa).length() < 1e-9);
+        let (mut r, mut p) = (b, pb);
+        inert.apply(0.5, &mut r, &mut p);
+        for j in 0..2 {
+            assert!(r[j].dot(b[j]).abs() > 1.0 - 1e-12);
+        }
+        assert!((p - pb).length() < 1e-12);
+    }
+
+    #[test]
     fn blend_weights_ramp_down() {
         let w: Vec<f64> = (0..6).map(|t| target_blend_weight(t, 6, 3)).collect();
         assert_eq!(w[..3], [1.0, 1.0, 1.0]);
