@@ -1,0 +1,37 @@
+//! Times reading every `.bvh`/`.bvh.gz` file of a folder with [`zoo_data::bvh::read_file`]:
+//! single-threaded, then in parallel with rayon.
+//!
+//! `cargo run --release -p zoo-data --example bvh_read_bench -- ../shared/data/bandai2`
+
+use rayon::prelude::*;
+use std::path::PathBuf;
+use std::time::Instant;
+use zoo_data::bvh::{ReadOptions, read_file};
+
+fn main() {
+    let dir = std::env::args().nth(1).unwrap_or_else(|| "../shared/data/bandai2".into());
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("{dir}: {e}"))
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            let n = p.to_string_lossy();
+            n.ends_with(".bvh") || n.ends_with(".bvh.gz")
+        })
+        .collect();
+    files.sort();
+    let opts = ReadOptions { drop_dummy_root: true };
+    for round in 0..3 {
+        let t = Instant::now();
+        let frames: usize = files.iter().map(|p| read_file(p, &opts).unwrap().frames()).sum();
+        let single = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let frames_par: usize = files.par_iter().map(|p| read_file(p, &opts).unwrap().frames()).sum();
+        let par = t.elapsed().as_secs_f64();
+        assert_eq!(frames, frames_par);
+        println!(
+            "round {round}: {} files, {frames} frames: single-threaded {single:.3} s, rayon ({} threads) {par:.3} s",
+            files.len(),
+            rayon::current_num_threads()
+        );
+    }
+}
