@@ -118,6 +118,16 @@ pub fn target_blend_weight(t: usize, len: usize, blend_len: usize) -> f64 {
     1.0 - k / (blend_len as f64 + 1.0)
 }
 
+/// Offset weight `w = 1 - (target - t) / blend_len` of RTN's target blend (eq. 16) for frame
+/// `t` of a generated sequence whose predicted target is frame `target`: 0 outside the last
+/// `blend_len` frames, rising linearly to 1 on the target frame.
+pub fn target_blend_offset_weight(t: usize, target: usize, blend_len: usize) -> f64 {
+    if blend_len == 0 || t > target || target - t >= blend_len {
+        return if blend_len == 0 && t == target { 1.0 } else { 0.0 };
+    }
+    1.0 - (target - t) as f64 / blend_len as f64
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -175,5 +185,13 @@ mod tests {
         let w: Vec<f64> = (0..6).map(|t| target_blend_weight(t, 6, 3)).collect();
         assert_eq!(w[..3], [1.0, 1.0, 1.0]);
         assert!(w[3] > w[4] && w[4] > w[5] && w[5] > 0.0);
+    }
+
+    #[test]
+    fn offset_weights_follow_eq_16() {
+        let w: Vec<f64> = (0..=5).map(|t| target_blend_offset_weight(t, 5, 4)).collect();
+        assert_eq!(w, [0.0, 0.0, 0.25, 0.5, 0.75, 1.0]);
+        assert_eq!(target_blend_offset_weight(5, 5, 0), 1.0);
+        assert_eq!(target_blend_offset_weight(4, 5, 0), 0.0);
     }
 }

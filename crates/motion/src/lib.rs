@@ -13,6 +13,7 @@ pub mod blend;
 pub mod clip;
 pub mod euler;
 pub mod facing;
+pub mod features;
 pub mod fit;
 pub mod fk;
 pub mod quat;

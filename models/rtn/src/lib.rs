@@ -1,0 +1,44 @@
+//! The Recurrent Transition Network (Harvey & Pal, "Recurrent Transition Networks for Character
+//! Locomotion", SIGGRAPH Asia 2018 technical briefs) in candle: the model, its ablations
+//! (Table 4), the training core and checkpoints.
+//!
+//! Data in and out are global joint positions (`f32`, `frames * joints * 3`, frame-major, Y up,
+//! clip units); the feature encoding lives in [`zoo_motion::features`] so the runtime shares it.
+//!
+//! ```no_run
+//! use zoo_rtn::prelude::*;
+//! # fn main() -> Result<(), RtnError> {
+//! # let windows: Vec<Vec<f32>> = vec![];
+//! let config = Config::paper().with_parents(&[None, Some(0), Some(1)]);
+//! let ws: Vec<MotionWindow> = windows.iter().map(|w| MotionWindow::new(w)).collect();
+//! let stats = fit_stats(&config, &ws)?;
+//! let mut trainer = RtnTrainer::new(&config, stats, &candle_core::Device::Cpu)?;
+//! let loss = trainer.train_step(&ws[..32])?;
+//! trainer.save(std::path::Path::new("runs/rtn"))?;
+//! # Ok(()) }
+//! ```
+
+pub mod amsgrad;
+pub mod checkpoint;
+pub mod config;
+pub mod error;
+pub mod model;
+pub mod ops;
+pub mod train;
+pub mod transition;
+
+pub use amsgrad::{AmsGrad, ParamsAmsGrad};
+pub use config::{Config, InitState, TeacherForcing, TrainConfig};
+pub use error::{RtnError, RtnResult};
+pub use model::{Rtn, RtnInputs, RtnSequence, RtnState};
+pub use train::{MotionWindow, RtnTrainer, fit_stats};
+
+/// The common imports.
+pub mod prelude {
+    pub use crate::checkpoint;
+    pub use crate::config::{Config, InitState, TeacherForcing, TrainConfig};
+    pub use crate::error::{RtnError, RtnResult};
+    pub use crate::model::{Rtn, RtnInputs, RtnSequence, RtnState};
+    pub use crate::train::{MotionWindow, RtnTrainer, fit_stats};
+    pub use zoo_motion::features::{FeatureStats, Heightmap};
+}

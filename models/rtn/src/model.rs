@@ -1,0 +1,362 @@
+//! The Recurrent Transition Network (Harvey & Pal 2018, sec. 4).
+
+use crate::config::{Config, InitState};
+use candle_core::{DType, Device, Module, Result, Tensor};
+use candle_nn::{Linear, VarBuilder};
+
+/// Leaky ReLU used by every hidden layer (`phi` in the paper).
+fn leaky(x: &Tensor, slope: f64) -> Result<Tensor> {
+    crate::ops::leaky_relu(x, slope)
+}
+
+/// A stack of linear layers; hidden layers are leaky-ReLU activated, the last one is
+/// activated only when `activate_last`. Weights live under `vb.pp(i)` (`0.weight`, `0.bias`, ...).
+#[derive(Clone, Debug)]
+pub struct Mlp {
+    layers: Vec<Linear>,
+    slope: f64,
+    activate_last: bool,
+}
+
+impl Mlp {
+    /// Layers `input -> sizes[0] -> ... -> sizes[n-1]`.
+    pub fn new(input: usize, sizes: &[usize], slope: f64, activate_last: bool, vb: VarBuilder) -> Result<Self> {
+        let mut layers = Vec::with_capacity(sizes.len());
+        let mut prev = input;
+        for (i, &s) in sizes.iter().enumerate() {
+            layers.push(candle_nn::linear(prev, s, vb.pp(i))?);
+            prev = s;
+        }
+        Ok(Mlp { layers, slope, activate_last })
+    }
+
+    /// Output size.
+    pub fn out_dim(&self) -> usize {
+        self.layers.last().map_or(0, |l| l.weight().dim(0).unwrap_or(0))
+    }
+}
+
+impl Module for Mlp {
+    fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        let n = self.layers.len();
+        let mut h = x.clone();
+        for (i, l) in self.layers.iter().enumerate() {
+            h = l.forward(&h)?;
+            if i + 1 < n || self.activate_last {
+                h = leaky(&h, self.slope)?;
+            }
+        }
+        Ok(h)
+    }
+}
+
+/// The LSTM state `(h, c)`, each `(batch, units)`. Lives outside the model (one per character).
+#[derive(Clone, Debug)]
+pub struct RtnState {
+    /// Output state `h`.
+    pub h: Tensor,
+    /// Cell state `c`.
+    pub c: Tensor,
+}
+
+/// Per-sequence constants: the encoded target's contribution to the gates and the fused gate
+/// weights. Built once per transition by [`Rtn::begin`] (the target is constant, RTN sec. 4.3).
+#[derive(Clone, Debug)]
+pub struct RtnSequence {
+    /// `[W; U; C_O]^T`, `(E + H + O, 4H)`, so each step is one matmul for the four gates.
+    fused_t: Tensor,
+    /// `C_F h_F + b`, `(batch, 4H)` (or `(1, 4H)` without conditioning).
+    gate_bias: Tensor,
+}
+
+/// Inputs of one step, normalised: `x` `(batch, D)`, the global offset `o_t` `(batch, D)`
+/// (ignored without future conditioning) and the terrain patch `(batch, side^2)` when the
+/// model is terrain-aware.
+#[derive(Clone, Copy, Debug)]
+pub struct RtnInputs<'a> {
+    /// Current frame features `x_t`.
+    pub x: &'a Tensor,
+    /// Normalised global offset `o_t` of the current frame from the target.
+    pub offset: Option<&'a Tensor>,
+    /// Normalised terrain patch `p_t`.
+    pub terrain: Option<&'a Tensor>,
+}
+
+/// The Recurrent Transition Network: encoders E, F, O, the conditioned LSTM R, decoder D and
+/// state initialiser H (RTN sec. 4, Fig. 3).
+///
+/// Tensor names: `frame_encoder.{i}.*`, `target_encoder.{i}.*`, `offset_encoder.{i}.*`,
+/// `lstm.{weight_ih,weight_hh,weight_target,weight_offset,bias}` (gate blocks in the order
+/// i, f, g, o like candle's and PyTorch's LSTM), `decoder.{i}.*`, `state_init.{i}.*` (learned H)
+/// or `state_init.{h,c}` (common state).
+#[derive(Clone, Debug)]
+pub struct Rtn {
+    config: Config,
+    device: Device,
+    frame_encoder: Mlp,
+    target_encoder: Option<Mlp>,
+    offset_encoder: Option<Mlp>,
+    weight_ih: Tensor,
+    weight_hh: Tensor,
+    weight_target: Option<Tensor>,
+    weight_offset: Option<Tensor>,
+    bias: Tensor,
+    decoder: Mlp,
+    init: Init,
+}
+
+#[derive(Clone, Debug)]
+enum Init {
+    Learned(Mlp),
+    Zero,
+    Common { h: Tensor, c: Tensor },
+}
+
+impl Rtn {
+    /// Builds (or loads, depending on `vb`) the model.
+    pub fn new(config: &Config, vb: VarBuilder) -> Result<Self> {
+        let d = config.dim();
+        let slope = config.leaky_slope;
+        let hu = config.lstm;
+        let frame_encoder = Mlp::new(d + config.terrain_dim(), &config.frame_encoder, slope, true, vb.pp("frame_encoder"))?;
+        let (target_encoder, offset_encoder) = if config.future_conditioning {
+            (
+                Some(Mlp::new(2 * d, &config.target_encoder, slope, true, vb.pp("target_encoder"))?),
+                Some(Mlp::new(d, &config.offset_encoder, slope, true, vb.pp("offset_encoder"))?),
+            )
+        } else {
+            (None, None)
+        };
+        let e = frame_encoder.out_dim();
+        // PyTorch's LSTM initialisation: U(-1/sqrt(H), 1/sqrt(H)) for every weight and bias.
+        let k = 1.0 / (hu as f64).sqrt();
+        let init = candle_nn::Init::Uniform { lo: -k, up: k };
+        let lv = vb.pp("lstm");
+        let weight_ih = lv.get_with_hints((4 * hu, e), "weight_ih", init)?;
+        let weight_hh = lv.get_with_hints((4 * hu, hu), "weight_hh", init)?;
+        let (weight_target, weight_offset) = match (&target_encoder, &offset_encoder) {
+            (Some(f), Some(o)) => (
+                Some(lv.get_with_hints((4 * hu, f.out_dim()), "weight_target", init)?),
+                Some(lv.get_with_hints((4 * hu, o.out_dim()), "weight_offset", init)?),
+            ),
+            _ => (None, None),
+        };
+        let bias = lv.get_with_hints(4 * hu, "bias", init)?;
+        let mut dec_sizes = config.decoder.clone();
+        dec_sizes.push(d);
+        let decoder = Mlp::new(hu, &dec_sizes, slope, false, vb.pp("decoder"))?;
+        let sv = vb.pp("state_init");
+        let init = match config.init_state {
+            // RTN eq. 14: one hidden layer, linear output of (h, c)
+            InitState::Learned => Init::Learned(Mlp::new(d, &[config.init_hidden, 2 * hu], slope, false, sv)?),
+            InitState::Zero => Init::Zero,
+            InitState::Common => Init::Common {
+                h: sv.get_with_hints((1, hu), "h", candle_nn::Init::Const(0.0))?,
+                c: sv.get_with_hints((1, hu), "c", candle_nn::Init::Const(0.0))?,
+            },
+        };
+        Ok(Rtn {
+            config: config.clone(),
+            device: vb.device().clone(),
+            frame_encoder,
+            target_encoder,
+            offset_encoder,
+            weight_ih,
+            weight_hh,
+            weight_target,
+            weight_offset,
+            bias,
+            decoder,
+            init,
+        })
+    }
+
+    /// The configuration the model was built with.
+    pub fn config(&self) -> &Config {
+        &self.config
+    }
+
+    /// The device of the weights.
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// Zero LSTM state for `batch` sequences.
+    pub fn zero_state(&self, batch: usize, device: &Device) -> Result<RtnState> {
+        let z = Tensor::zeros((batch, self.config.lstm), DType::F32, device)?;
+        Ok(RtnState { h: z.clone(), c: z })
+    }
+
+    /// Initial LSTM state from the first frame `x0` `(batch, D)` (RTN sec. 4.6, eq. 14), or the
+    /// ablations' zero / common learned state.
+    pub fn initial_state(&self, x0: &Tensor) -> Result<RtnState> {
+        let b = x0.dim(0)?;
+        let hu = self.config.lstm;
+        match &self.init {
+            Init::Learned(mlp) => {
+                let hc = mlp.forward(x0)?;
+                Ok(RtnState { h: hc.narrow(1, 0, hu)?, c: hc.narrow(1, hu, hu)? })
+            }
+            Init::Zero => self.zero_state(b, x0.device()),
+            Init::Common { h, c } => Ok(RtnState { h: h.broadcast_as((b, hu))?, c: c.broadcast_as((b, hu))? }),
+        }
+    }
+
+    /// Per-sequence constants from the normalised target vector `(batch, 2D)` (ignored without
+    /// future conditioning): encodes the target once (eq. 3) and fuses the gate weights.
+    pub fn begin(&self, target: &Tensor) -> Result<RtnSequence> {
+        let mut w = vec![&self.weight_ih, &self.weight_hh];
+        if let Some(wo) = &self.weight_offset {
+            w.push(wo);
+        }
+        let fused_t = Tensor::cat(&w, 1)?.t()?.contiguous()?;
+        let gate_bias = match (&self.target_encoder, &self.weight_target) {
+            (Some(f), Some(wt)) => {
+                let hf = f.forward(target)?; // RTN eq. 3
+                hf.matmul(&wt.t()?)?.broadcast_add(&self.bias)?
+            }
+            _ => self.bias.unsqueeze(0)?,
+        };
+        Ok(RtnSequence { fused_t, gate_bias })
+    }
+
+    /// One step: from the current frame `x_t` (and offset, terrain) and the state, the next frame
+    /// `x_(t+1)` `(batch, D)` and the new state.
+    pub fn step(&self, seq: &RtnSequence, inputs: &RtnInputs, state: &RtnState) -> Result<(Tensor, RtnState)> {
+        let hu = self.config.lstm;
+        let x = inputs.x;
+        // RTN eq. 2: h_E = E([x_t, p_t])
+        let he = match (self.config.terrain, inputs.terrain) {
+            (true, Some(p)) => self.frame_encoder.forward(&Tensor::cat(&[x, p], 1)?)?,
+            (true, None) => candle_core::bail!("this RTN is terrain-aware: pass a terrain patch to every step"),
+            (false, _) => self.frame_encoder.forward(x)?,
+        };
+        // RTN eq. 5-8 with one fused matmul: [h_E, h_(t-1), h_O] [W; U; C_O]^T + (C_F h_F + b)
+        let z_in = match &self.offset_encoder {
+            Some(o) => {
+                let Some(off) = inputs.offset else {
+                    candle_core::bail!("this RTN is conditioned on the future: pass the global offset to every step")
+                };
+                let ho = o.forward(off)?; // RTN eq. 4
+                Tensor::cat(&[&he, &state.h, &ho], 1)?
+            }
+            None => Tensor::cat(&[&he, &state.h], 1)?,
+        };
+        let z = z_in.matmul(&seq.fused_t)?.broadcast_add(&seq.gate_bias)?;
+        let s = candle_nn::ops::sigmoid(&z)?;
+        let i = s.narrow(1, 0, hu)?;
+        let f = s.narrow(1, hu, hu)?;
+        let g = z.narrow(1, 2 * hu, hu)?.tanh()?;
+        let o = s.narrow(1, 3 * hu, hu)?;
+        // RTN eq. 9-11
+        let c = ((f * &state.c)? + (i * g)?)?;
+        let h = (o * c.tanh()?)?;
+        // RTN eq. 12-13
+        let dx = self.decoder.forward(&h)?;
+        let next = if self.config.residual { (x + dx)? } else { dx };
+        Ok((next, RtnState { h, c }))
+    }
+
+    /// Total number of parameters.
+    pub fn parameter_count(&self) -> usize {
+        let mut n = 0;
+        let mut add = |t: &Tensor| n += t.elem_count();
+        let mlps = [Some(&self.frame_encoder), self.target_encoder.as_ref(), self.offset_encoder.as_ref(), Some(&self.decoder)];
+        for m in mlps.into_iter().flatten() {
+            for l in &m.layers {
+                add(l.weight());
+                if let Some(b) = l.bias() {
+                    add(b);
+                }
+            }
+        }
+        for t in [Some(&self.weight_ih), Some(&self.weight_hh), self.weight_target.as_ref(), self.weight_offset.as_ref(), Some(&self.bias)]
+            .into_iter()
+            .flatten()
+        {
+            add(t);
+        }
+        match &self.init {
+            Init::Learned(m) => {
+                for l in &m.layers {
+                    add(l.weight());
+                    if let Some(b) = l.bias() {
+                        add(b);
+                    }
+                }
+            }
+            Init::Zero => {}
+            Init::Common { h, c } => {
+                add(h);
+                add(c);
+            }
+        }
+        n
+    }
+}
+
+/// Normalisation constants as tensors, to recompute the global offset `o_t` from generated
+/// frames inside the graph (RTN sec. 3.2: offsets follow the generated frames).
+#[derive(Clone, Debug)]
+pub struct OffsetTensors {
+    /// `sigma_x * m * inv_sigma_o`, `(1, D)`, `m` masking the root-velocity slot.
+    x_scale: Tensor,
+    /// `mu_x * m * inv_sigma_o`, `(1, D)`.
+    x_shift: Tensor,
+    /// `(3, D)`: tiles a root position over every joint and divides by `sigma_o`.
+    root_tile: Tensor,
+    /// `mu_o * inv_sigma_o`, `(1, D)`.
+    o_shift: Tensor,
+    /// `inv_sigma_o`, `(1, D)`.
+    o_inv: Tensor,
+    /// `sigma_x` of the root velocity, `(1, 3)`.
+    v_scale: Tensor,
+    /// `mu_x` of the root velocity, `(1, 3)`.
+    v_shift: Tensor,
+}
+
+impl OffsetTensors {
+    /// From the statistics of features and offsets.
+    pub fn new(stats: &zoo_motion::features::FeatureStats, device: &Device) -> Result<Self> {
+        let d = stats.dim();
+        let inv: Vec<f32> = stats.offset.std.iter().map(|s| 1.0 / s).collect();
+        let mask = |i: usize| if i < 3 { 0.0 } else { 1.0 };
+        let x_scale: Vec<f32> = (0..d).map(|i| stats.x.std[i] * mask(i) * inv[i]).collect();
+        let x_shift: Vec<f32> = (0..d).map(|i| stats.x.mean[i] * mask(i) * inv[i]).collect();
+        let mut tile = vec![0f32; 3 * d];
+        for i in 0..d {
+            tile[(i % 3) * d + i] = inv[i];
+        }
+        let o_shift: Vec<f32> = (0..d).map(|i| stats.offset.mean[i] * inv[i]).collect();
+        let row = |v: Vec<f32>| Tensor::from_vec(v, (1, d), device);
+        Ok(OffsetTensors {
+            x_scale: row(x_scale)?,
+            x_shift: row(x_shift)?,
+            root_tile: Tensor::from_vec(tile, (3, d), device)?,
+            o_shift: row(o_shift)?,
+            o_inv: row(inv)?,
+            v_scale: Tensor::from_slice(&stats.x.std[..3], (1, 3), device)?,
+            v_shift: Tensor::from_slice(&stats.x.mean[..3], (1, 3), device)?,
+        })
+    }
+
+    /// Per-sequence constant `(y_T - mu_o) / sigma_o + mu_x m / sigma_o` from the global target
+    /// frame `(batch, D)`.
+    pub fn target_term(&self, target_global: &Tensor) -> Result<Tensor> {
+        target_global.broadcast_mul(&self.o_inv)?.broadcast_sub(&self.o_shift)?.broadcast_sub(&self.x_shift)
+    }
+
+    /// Global root of a generated frame: previous root plus the denormalised root velocity.
+    pub fn next_root(&self, prev_root: &Tensor, x: &Tensor) -> Result<Tensor> {
+        prev_root + x.narrow(1, 0, 3)?.broadcast_mul(&self.v_scale)?.broadcast_add(&self.v_shift)?
+    }
+
+    /// Normalised global offset `o_t = ((y_T - y_t) - mu_o) / sigma_o` of the frame with
+    /// features `x` `(batch, D)` and global root `root` `(batch, 3)`; `target_term` from
+    /// [`OffsetTensors::target_term`].
+    pub fn offset(&self, target_term: &Tensor, x: &Tensor, root: &Tensor) -> Result<Tensor> {
+        let xs = x.broadcast_mul(&self.x_scale)?;
+        let rt = root.matmul(&self.root_tile)?;
+        (target_term - xs)? - rt
+    }
+}

@@ -1,0 +1,255 @@
+//! Encoding windows of global positions into batches and generating transitions
+//! autoregressively (RTN sec. 3.2, 4, 5).
+
+use crate::config::Config;
+use crate::error::{RtnError, RtnResult};
+use crate::model::{OffsetTensors, Rtn, RtnInputs};
+use candle_core::{Device, Tensor};
+use zoo_motion::features::{self, FeatureStats, Heightmap, YawAbout};
+
+/// One sequence to encode: known frames (global positions, `frames * 3K`), the target frame
+/// and the frame after it, optional terrain and the rotation already applied to the positions.
+#[derive(Clone, Debug)]
+pub(crate) struct SequenceInput<'a> {
+    pub known: std::borrow::Cow<'a, [f32]>,
+    pub target: std::borrow::Cow<'a, [f32]>,
+    pub next: std::borrow::Cow<'a, [f32]>,
+    pub terrain: Option<&'a Heightmap>,
+    pub rotation: Option<YawAbout>,
+}
+
+/// A batch of encoded sequences: one `(batch, D)` tensor per known frame.
+#[derive(Clone, Debug)]
+pub(crate) struct EncodedBatch<'a> {
+    pub batch: usize,
+    /// Normalised features of the known frames.
+    pub x: Vec<Tensor>,
+    /// Global roots `(batch, 3)` of the known frames.
+    pub roots: Vec<Tensor>,
+    /// Normalised target vectors `(batch, 2D)`.
+    pub target: Tensor,
+    /// Global target frames `(batch, D)`.
+    pub target_global: Tensor,
+    /// Terrain of each sequence (when terrain-aware).
+    pub terrain: Vec<(Option<&'a Heightmap>, Option<YawAbout>)>,
+}
+
+/// Checks that `len` values hold `frames` frames of `joints` joints (at least, when `at_least`).
+pub(crate) fn check_frames(what: &str, len: usize, frames: usize, joints: usize, at_least: bool) -> RtnResult<()> {
+    let d = 3 * joints;
+    let ok = if at_least { len >= frames * d && len % d == 0 } else { len == frames * d };
+    if ok {
+        Ok(())
+    } else {
+        Err(RtnError::Size {
+            what: what.to_string(),
+            expected: frames * d,
+            detail: format!("{}{frames} frames x {joints} joints x 3", if at_least { "a multiple of 3K and at least " } else { "" }),
+            found: len,
+        })
+    }
+}
+
+pub(crate) fn encode_batch<'a>(
+    stats: &FeatureStats,
+    items: &[SequenceInput<'a>],
+    device: &Device,
+) -> RtnResult<EncodedBatch<'a>> {
+    let d = stats.dim();
+    let b = items.len();
+    if b == 0 {
+        return Err(RtnError::Config("a batch needs at least one sequence".into()));
+    }
+    let frames = items[0].known.len() / d;
+    let mut x = vec![0f32; frames * b * d];
+    let mut roots = vec![0f32; frames * b * 3];
+    let mut target = vec![0f32; b * 2 * d];
+    let mut target_global = vec![0f32; b * d];
+    let mut buf = vec![0f32; frames * d];
+    for (k, it) in items.iter().enumerate() {
+        debug_assert_eq!(it.known.len(), frames * d);
+        features::encode_positions(&it.known, stats.joints, &mut buf);
+        stats.x.normalize(&mut buf);
+        for f in 0..frames {
+            x[(f * b + k) * d..(f * b + k + 1) * d].copy_from_slice(&buf[f * d..(f + 1) * d]);
+            roots[(f * b + k) * 3..(f * b + k + 1) * 3].copy_from_slice(&it.known[f * d..f * d + 3]);
+        }
+        let t = &mut target[k * 2 * d..(k + 1) * 2 * d];
+        features::target_vector(&it.target, &it.next, t);
+        stats.normalize_target(t);
+        target_global[k * d..(k + 1) * d].copy_from_slice(&it.target);
+    }
+    let xs = (0..frames)
+        .map(|f| Tensor::from_slice(&x[f * b * d..(f + 1) * b * d], (b, d), device))
+        .collect::<candle_core::Result<Vec<_>>>()?;
+    let rs = (0..frames)
+        .map(|f| Tensor::from_slice(&roots[f * b * 3..(f + 1) * b * 3], (b, 3), device))
+        .collect::<candle_core::Result<Vec<_>>>()?;
+    Ok(EncodedBatch {
+        batch: b,
+        x: xs,
+        roots: rs,
+        target: Tensor::from_vec(target, (b, 2 * d), device)?,
+        target_global: Tensor::from_vec(target_global, (b, d), device)?,
+        terrain: items.iter().map(|i| (i.terrain, i.rotation)).collect(),
+    })
+}
+
+/// Normalised terrain patches `(batch, side^2)` under the given roots `(batch, 3)`.
+fn terrain_patches(config: &Config, stats: &FeatureStats, batch: &EncodedBatch, root: &Tensor) -> RtnResult<Tensor> {
+    let Some(ts) = &stats.terrain else {
+        return Err(RtnError::Config("a terrain-aware RTN needs terrain statistics in its FeatureStats".into()));
+    };
+    let roots = root.to_vec2::<f32>()?;
+    let n = config.terrain_dim();
+    let mut out = vec![0f32; batch.batch * n];
+    for (k, r) in roots.iter().enumerate() {
+        let (map, rot) = batch.terrain[k];
+        let Some(map) = map else {
+            return Err(RtnError::Config(format!("sequence {k} has no terrain but the RTN is terrain-aware")));
+        };
+        let p = &mut out[k * n..(k + 1) * n];
+        features::terrain_patch(map, [r[0], r[1], r[2]], config.terrain_extent, config.terrain_side, rot, p);
+        ts.normalize(p);
+    }
+    Ok(Tensor::from_vec(out, (batch.batch, n), root.device())?)
+}
+
+/// Runs the RTN over a batch: known frames `0..past` are fed as context, then `n_out` frames
+/// are predicted (`x_past .. x_(past+n_out-1)`); after the context, input frame `t` is the
+/// ground truth when `teacher()` says so and a ground truth exists (RTN sec. 6.2), else the
+/// previous prediction, whose global root is integrated and whose offset to the target is
+/// recomputed in the graph (sec. 3.2).
+pub(crate) fn generate(
+    model: &Rtn,
+    stats: &FeatureStats,
+    offsets: &OffsetTensors,
+    batch: &EncodedBatch,
+    past: usize,
+    n_out: usize,
+    teacher: &mut dyn FnMut() -> bool,
+) -> RtnResult<Vec<Tensor>> {
+    let config = model.config();
+    if past == 0 || past > batch.x.len() {
+        return Err(RtnError::Config(format!("need 1..={} past frames, got {past}", batch.x.len())));
+    }
+    let seq = model.begin(&batch.target)?;
+    let mut state = model.initial_state(&batch.x[0])?;
+    let target_term = if config.future_conditioning { Some(offsets.target_term(&batch.target_global)?) } else { None };
+    let mut x = batch.x[0].clone();
+    let mut root = batch.roots[0].clone();
+    let mut outs = Vec::with_capacity(n_out);
+    for t in 0..past - 1 + n_out {
+        let offset = match &target_term {
+            Some(tt) => Some(offsets.offset(tt, &x, &root)?),
+            None => None,
+        };
+        let terrain = if config.terrain { Some(terrain_patches(config, stats, batch, &root)?) } else { None };
+        let inputs = RtnInputs { x: &x, offset: offset.as_ref(), terrain: terrain.as_ref() };
+        let (next, st) = model.step(&seq, &inputs, &state)?;
+        state = st;
+        let nt = t + 1;
+        if nt >= past {
+            outs.push(next.clone());
+        }
+        if nt < past || (nt < batch.x.len() && teacher()) {
+            x = batch.x[nt].clone();
+            root = batch.roots[nt].clone();
+        } else {
+            root = offsets.next_root(&root, &next)?;
+            x = next;
+        }
+    }
+    Ok(outs)
+}
+
+impl Rtn {
+    /// Generates a transition autoregressively (RTN sec. 4) for one character.
+    ///
+    /// `past`: global positions of the context frames (`frames * 3K`, at least one frame; the
+    /// paper uses 10); `target` and `next`: the target frame and the one after it (`3K` each,
+    /// for the target velocity); `terrain`: required by a terrain-aware model. Returns
+    /// `n_frames + 1` frames of global positions: the transition and the predicted target,
+    /// without post-processing (see [`Rtn::transition`]).
+    pub fn unroll(
+        &self,
+        stats: &FeatureStats,
+        past: &[f32],
+        target: &[f32],
+        next: &[f32],
+        n_frames: usize,
+        terrain: Option<&Heightmap>,
+    ) -> RtnResult<Vec<f32>> {
+        let k = self.config().joints;
+        let d = 3 * k;
+        if stats.joints != k {
+            return Err(RtnError::Config(format!("statistics are for {} joints, the model for {k}", stats.joints)));
+        }
+        check_frames("past frames", past.len(), 1, k, true)?;
+        check_frames("target frame", target.len(), 1, k, false)?;
+        check_frames("frame after the target", next.len(), 1, k, false)?;
+        let device = self.device();
+        let offsets = OffsetTensors::new(stats, device)?;
+        let item = SequenceInput {
+            known: past.into(),
+            target: target.into(),
+            next: next.into(),
+            terrain,
+            rotation: None,
+        };
+        let batch = encode_batch(stats, std::slice::from_ref(&item), device)?;
+        let n_past = past.len() / d;
+        let outs = generate(self, stats, &offsets, &batch, n_past, n_frames + 1, &mut || false)?;
+        let mut feats = Tensor::cat(&outs, 0)?.flatten_all()?.to_vec1::<f32>()?;
+        stats.x.denormalize(&mut feats);
+        let mut y = vec![0f32; feats.len()];
+        let start = features::root_of(&past[(n_past - 1) * d..]);
+        features::decode_features(start, &feats, k, &mut y);
+        Ok(y)
+    }
+
+    /// [`Rtn::unroll`] followed by the target blend of RTN eq. 15-16 over the configured
+    /// `target_blend` frames: the last of the `n_frames + 1` frames equals `target`.
+    pub fn transition(
+        &self,
+        stats: &FeatureStats,
+        past: &[f32],
+        target: &[f32],
+        next: &[f32],
+        n_frames: usize,
+        terrain: Option<&Heightmap>,
+    ) -> RtnResult<Vec<f32>> {
+        let mut y = self.unroll(stats, past, target, next, n_frames, terrain)?;
+        features::target_blend(&mut y, target, self.config().target_blend);
+        Ok(y)
+    }
+
+    /// Temporal super-resolution (RTN sec. 7.4): rebuilds a clip from its first `past` frames
+    /// and one keyframe pair (target, next) every `interval` frames by chaining transitions,
+    /// each fed the last `past` frames generated so far and target-blended.
+    ///
+    /// `context`: `past * 3K` values; `keys`: for each keyframe, the keyframe and the frame
+    /// after it (`2 * 3K` values each). Returns `past + keys * interval` frames.
+    pub fn super_resolve(
+        &self,
+        stats: &FeatureStats,
+        context: &[f32],
+        keys: &[f32],
+        interval: usize,
+    ) -> RtnResult<Vec<f32>> {
+        let k = self.config().joints;
+        let d = 3 * k;
+        check_frames("context frames", context.len(), 1, k, true)?;
+        if interval == 0 || keys.len() % (2 * d) != 0 {
+            return Err(RtnError::Config("super-resolution needs interval >= 1 and whole (key, next) frame pairs".into()));
+        }
+        let past = context.len() / d;
+        let mut clip = context.to_vec();
+        for key in keys.chunks_exact(2 * d) {
+            let ctx = clip[clip.len() - past * d..].to_vec();
+            let y = self.transition(stats, &ctx, &key[..d], &key[d..], interval - 1, None)?;
+            clip.extend_from_slice(&y);
+        }
+        Ok(clip)
+    }
+}

@@ -1,0 +1,377 @@
+//! Behaviour tests of the RTN: shapes, the conditioning, residual and teacher-forcing paths,
+//! a short training run, checkpoints and bad input.
+
+use candle_core::{DType, Device, Tensor};
+use candle_nn::{VarBuilder, VarMap};
+use zoo_motion::features::{self, FeatureStats, Heightmap};
+use zoo_rtn::prelude::*;
+use zoo_rtn::train::predict_with_teacher;
+
+const PARENTS: [Option<usize>; 4] = [None, Some(0), Some(1), Some(1)];
+
+/// A window of `frames` frames of a 4-joint chain: the root walks along a direction with a
+/// sinusoidal bob, the other joints swing sinusoidally around their rest offsets.
+fn synthetic_window(frames: usize, seed: usize) -> Vec<f32> {
+    let s = seed as f32;
+    let (speed, heading, freq) = (2.0 + (s * 0.7).sin(), s * 0.9, 0.25 + 0.05 * (s % 3.0));
+    let rest = [[0.0, 0.0, 0.0], [0.0, 20.0, 0.0], [10.0, 35.0, 0.0], [-10.0, 35.0, 0.0]];
+    let mut p = Vec::with_capacity(frames * 12);
+    for f in 0..frames {
+        let t = f as f32 + s * 3.0;
+        let root = [speed * t * heading.cos(), 90.0 + 3.0 * (freq * t).sin(), speed * t * heading.sin()];
+        for (j, r) in rest.iter().enumerate() {
+            let ph = freq * t + j as f32;
+            p.extend_from_slice(&[root[0] + r[0] + 4.0 * ph.sin(), root[1] + r[1] + 2.0 * ph.cos(), root[2] + r[2] + 3.0 * (2.0 * ph).sin()]);
+        }
+    }
+    p
+}
+
+fn windows(config: &Config, n: usize) -> Vec<Vec<f32>> {
+    (0..n).map(|i| synthetic_window(config.window_frames(), i)).collect()
+}
+
+fn tiny() -> Config {
+    Config::tiny().with_parents(&PARENTS)
+}
+
+fn build(config: &Config) -> (Rtn, VarMap) {
+    let vm = VarMap::new();
+    let model = Rtn::new(config, VarBuilder::from_varmap(&vm, DType::F32, &Device::Cpu)).unwrap();
+    (model, vm)
+}
+
+fn stats_for(config: &Config, ws: &[Vec<f32>]) -> FeatureStats {
+    let mw: Vec<MotionWindow> = ws.iter().map(|w| MotionWindow::new(w)).collect();
+    fit_stats(config, &mw).unwrap()
+}
+
+/// Splits a window into (past, target, next) for `unroll`.
+fn split(config: &Config, w: &[f32]) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+    let d = config.dim();
+    let (p, t) = (config.past_frames, config.target_frame());
+    (w[..p * d].to_vec(), w[t * d..(t + 1) * d].to_vec(), w[(t + 1) * d..(t + 2) * d].to_vec())
+}
+
+fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
+}
+
+#[test]
+fn output_shapes() {
+    let c = tiny();
+    let (model, _) = build(&c);
+    let dev = Device::Cpu;
+    let (b, d) = (3, c.dim());
+    let x = Tensor::zeros((b, d), DType::F32, &dev).unwrap();
+    let target = Tensor::zeros((b, 2 * d), DType::F32, &dev).unwrap();
+    let seq = model.begin(&target).unwrap();
+    let state = model.initial_state(&x).unwrap();
+    assert_eq!(state.h.dims(), &[b, c.lstm]);
+    let (next, state) = model.step(&seq, &RtnInputs { x: &x, offset: Some(&x), terrain: None }, &state).unwrap();
+    assert_eq!(next.dims(), &[b, d]);
+    assert_eq!((state.h.dims(), state.c.dims()), (&[b, c.lstm][..], &[b, c.lstm][..]));
+    assert_eq!(model.zero_state(b, &dev).unwrap().c.dims(), &[b, c.lstm]);
+
+    let ws = windows(&c, 4);
+    let stats = stats_for(&c, &ws);
+    let mw: Vec<MotionWindow> = ws.iter().map(|w| MotionWindow::new(w)).collect();
+    let pred = predict_with_teacher(&model, &stats, &mw, &mut || false).unwrap();
+    assert_eq!(pred.dims(), &[4, c.transition_frames + 1, d]);
+    let (past, t, n) = split(&c, &ws[0]);
+    let y = model.unroll(&stats, &past, &t, &n, 9, None).unwrap();
+    assert_eq!(y.len(), 10 * d, "9 transition frames and the predicted target");
+}
+
+#[test]
+fn paper_sizes_and_readable_names() {
+    let c = Config::paper();
+    let (model, vm) = build(&c);
+    let names: Vec<String> = vm.data().lock().unwrap().keys().cloned().collect();
+    for n in ["frame_encoder.0.weight", "target_encoder.1.bias", "offset_encoder.0.weight", "lstm.weight_ih", "lstm.weight_hh", "lstm.weight_target", "lstm.weight_offset", "lstm.bias", "decoder.2.weight", "state_init.0.weight"] {
+        assert!(names.iter().any(|k| k == n), "missing `{n}` in {names:?}");
+    }
+    let lstm = vm.data().lock().unwrap()["lstm.weight_hh"].dims().to_vec();
+    assert_eq!(lstm, [4 * 512, 512]);
+    // under the paper's 15 MB
+    assert!(model.parameter_count() * 4 < 15_000_000, "{} parameters", model.parameter_count());
+}
+
+#[test]
+fn changing_the_target_changes_the_output() {
+    let c = tiny();
+    let ws = windows(&c, 6);
+    let stats = stats_for(&c, &ws);
+    let (model, _) = build(&c);
+    let (past, t, n) = split(&c, &ws[0]);
+    let (_, t2, n2) = split(&c, &ws[3]);
+    let a = model.unroll(&stats, &past, &t, &n, 6, None).unwrap();
+    let b = model.unroll(&stats, &past, &t2, &n2, 6, None).unwrap();
+    assert!(max_abs_diff(&a, &b) > 1e-3, "the target must change the transition");
+    // the offset alone (same target pose shifted in space) changes it too
+    let shifted: Vec<f32> = t.iter().enumerate().map(|(i, v)| if i % 3 == 0 { v + 50.0 } else { *v }).collect();
+    let shifted_n: Vec<f32> = n.iter().enumerate().map(|(i, v)| if i % 3 == 0 { v + 50.0 } else { *v }).collect();
+    let s = model.unroll(&stats, &past, &shifted, &shifted_n, 6, None).unwrap();
+    assert!(max_abs_diff(&a, &s) > 1e-3, "the global offset must change the transition");
+}
+
+#[test]
+fn without_future_conditioning_the_target_is_ignored() {
+    let c = Config { future_conditioning: false, ..tiny() };
+    let ws = windows(&c, 6);
+    let stats = stats_for(&c, &ws);
+    let (model, vm) = build(&c);
+    assert!(!vm.data().lock().unwrap().keys().any(|k| k.starts_with("target_encoder") || k == "lstm.weight_offset"));
+    let (past, t, n) = split(&c, &ws[0]);
+    let (_, t2, n2) = split(&c, &ws[3]);
+    let a = model.unroll(&stats, &past, &t, &n, 6, None).unwrap();
+    let b = model.unroll(&stats, &past, &t2, &n2, 6, None).unwrap();
+    assert_eq!(a, b);
+}
+
+#[test]
+fn zeroed_decoder_outputs_the_input_frame() {
+    let dev = Device::Cpu;
+    for residual in [true, false] {
+        let c = Config { residual, ..tiny() };
+        let (model, mut vm) = build(&c);
+        let last = c.decoder.len();
+        let (d, h) = (c.dim(), c.decoder[last - 1]);
+        vm.set_one(format!("decoder.{last}.weight"), Tensor::zeros((d, h), DType::F32, &dev).unwrap()).unwrap();
+        vm.set_one(format!("decoder.{last}.bias"), Tensor::zeros(d, DType::F32, &dev).unwrap()).unwrap();
+        let x = Tensor::randn(0f32, 1.0, (2, d), &dev).unwrap();
+        let target = Tensor::randn(0f32, 1.0, (2, 2 * d), &dev).unwrap();
+        let seq = model.begin(&target).unwrap();
+        let state = model.initial_state(&x).unwrap();
+        let (next, _) = model.step(&seq, &RtnInputs { x: &x, offset: Some(&x), terrain: None }, &state).unwrap();
+        let (next, x) = (next.flatten_all().unwrap().to_vec1::<f32>().unwrap(), x.flatten_all().unwrap().to_vec1::<f32>().unwrap());
+        if residual {
+            assert_eq!(next, x, "RTN eq. 13: x_(t+1) = x_t + D(h_t) with D = 0");
+        } else {
+            assert!(next.iter().all(|v| *v == 0.0), "non-residual output is D(h_t) = 0");
+        }
+    }
+}
+
+/// With p = 1 every input after the context is the ground truth: the same outputs as stepping
+/// the model by hand over ground-truth frames, with features, offsets and the target vector
+/// computed on slices by the motion core (an independent path from the in-graph offsets).
+#[test]
+fn teacher_forcing_one_feeds_the_ground_truth() {
+    let c = tiny();
+    let ws = windows(&c, 5);
+    let stats = stats_for(&c, &ws);
+    let (model, _) = build(&c);
+    let mw: Vec<MotionWindow> = ws.iter().map(|w| MotionWindow::new(w)).collect();
+    let forced = predict_with_teacher(&model, &stats, &mw, &mut || true).unwrap();
+    let free = predict_with_teacher(&model, &stats, &mw, &mut || false).unwrap();
+
+    let (d, b, tf) = (c.dim(), ws.len(), c.target_frame());
+    let dev = Device::Cpu;
+    let mut x = vec![vec![0f32; b * d]; tf + 1];
+    let mut o = vec![vec![0f32; b * d]; tf + 1];
+    let mut target = vec![0f32; b * 2 * d];
+    for (k, w) in ws.iter().enumerate() {
+        let mut feats = vec![0f32; (tf + 1) * d];
+        features::encode_positions(&w[..(tf + 1) * d], c.joints, &mut feats);
+        stats.x.normalize(&mut feats);
+        let y_t = &w[tf * d..(tf + 1) * d];
+        for f in 0..=tf {
+            x[f][k * d..(k + 1) * d].copy_from_slice(&feats[f * d..(f + 1) * d]);
+            let off = &mut o[f][k * d..(k + 1) * d];
+            features::global_offset(&w[f * d..(f + 1) * d], y_t, off);
+            stats.offset.normalize(off);
+        }
+        let tv = &mut target[k * 2 * d..(k + 1) * 2 * d];
+        features::target_vector(y_t, &w[(tf + 1) * d..(tf + 2) * d], tv);
+        stats.normalize_target(tv);
+    }
+    let t = |v: &Vec<f32>, n: usize| Tensor::from_slice(v, (b, n), &dev).unwrap();
+    let seq = model.begin(&t(&target, 2 * d)).unwrap();
+    let mut state = model.initial_state(&t(&x[0], d)).unwrap();
+    let mut manual = Vec::new();
+    for f in 0..tf {
+        let (xf, of) = (t(&x[f], d), t(&o[f], d));
+        let (next, s) = model.step(&seq, &RtnInputs { x: &xf, offset: Some(&of), terrain: None }, &state).unwrap();
+        state = s;
+        if f + 1 >= c.past_frames {
+            manual.push(next);
+        }
+    }
+    let manual = Tensor::stack(&manual, 1).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+    let forced = forced.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+    let free = free.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+    assert!(max_abs_diff(&manual, &forced) < 1e-4, "diff {}", max_abs_diff(&manual, &forced));
+    // the first predicted frame only depends on the context; later ones differ without forcing
+    assert!(max_abs_diff(&manual[..d], &free[..d]) < 1e-4);
+    assert!(max_abs_diff(&manual, &free) > 1e-3);
+}
+
+#[test]
+fn short_training_run_reduces_the_loss() {
+    let c = tiny();
+    let ws = windows(&c, 32);
+    let stats = stats_for(&c, &ws);
+    let mw: Vec<MotionWindow> = ws.iter().map(|w| MotionWindow::new(w)).collect();
+    let mut trainer = RtnTrainer::new(&c, stats, &Device::Cpu).unwrap();
+    let before = trainer.eval_loss(&mw).unwrap();
+    let mut losses = Vec::new();
+    for step in 0..30 {
+        let k = (step * 8) % 32;
+        losses.push(trainer.train_step(&mw[k..k + 8]).unwrap());
+    }
+    let after = trainer.eval_loss(&mw).unwrap();
+    eprintln!("eval loss {before} -> {after}; train losses {losses:?}");
+    assert!(after < 0.5 * before, "validation loss {before} -> {after}");
+    let first: f32 = losses[..4].iter().sum::<f32>() / 4.0;
+    let last: f32 = losses[26..].iter().sum::<f32>() / 4.0;
+    assert!(last < 0.5 * first, "training loss {first} -> {last}");
+    assert_eq!(trainer.steps(), 30);
+}
+
+#[test]
+fn every_ablation_trains_a_step() {
+    let base = tiny();
+    let variants = [
+        Config { future_conditioning: false, ..base.clone() },
+        Config { init_state: InitState::Zero, ..base.clone() },
+        Config { init_state: InitState::Common, ..base.clone() },
+        Config { residual: false, ..base.clone() },
+        Config { train: TrainConfig { teacher_forcing: TeacherForcing::Fixed(0.0), ..base.train.clone() }, ..base.clone() },
+        Config { train: TrainConfig { teacher_forcing: TeacherForcing::Fixed(1.0), ..base.train.clone() }, ..base.clone() },
+        Config { train: TrainConfig { teacher_forcing: TeacherForcing::Scheduled { steps: 10 }, ..base.train.clone() }, ..base.clone() },
+    ];
+    let ws = windows(&base, 8);
+    let mw: Vec<MotionWindow> = ws.iter().map(|w| MotionWindow::new(w)).collect();
+    for c in variants {
+        let stats = stats_for(&c, &ws);
+        let mut t = RtnTrainer::new(&c, stats, &Device::Cpu).unwrap();
+        let l = t.train_step(&mw).unwrap();
+        assert!(l.is_finite() && l > 0.0, "{c:?}");
+    }
+    let common = Config { init_state: InitState::Common, ..base };
+    let (_, vm) = build(&common);
+    assert!(vm.data().lock().unwrap().contains_key("state_init.h"));
+}
+
+fn ramp_terrain(slope: f32) -> Heightmap {
+    let n = 64;
+    let heights = (0..n * n).map(|i| slope * ((i % n) as f32 - 32.0)).collect();
+    Heightmap { cols: n, rows: n, cell: 10.0, origin: [-320.0, -320.0], heights }
+}
+
+#[test]
+fn terrain_aware_model_sees_the_terrain() {
+    let c = tiny().with_terrain(true);
+    let ws = windows(&c, 4);
+    let flat = Heightmap::flat(0.0);
+    let ramp = ramp_terrain(3.0);
+    let mw: Vec<MotionWindow> = ws.iter().map(|w| MotionWindow { positions: w, terrain: Some(&ramp) }).collect();
+    let stats = fit_stats(&c, &mw).unwrap();
+    assert_eq!(stats.terrain.as_ref().unwrap().len(), c.terrain_side * c.terrain_side);
+    let mut trainer = RtnTrainer::new(&c, stats.clone(), &Device::Cpu).unwrap();
+    assert!(trainer.train_step(&mw).unwrap().is_finite());
+    let (past, t, n) = split(&c, &ws[0]);
+    let model = trainer.model();
+    let a = model.unroll(&stats, &past, &t, &n, 6, Some(&flat)).unwrap();
+    let b = model.unroll(&stats, &past, &t, &n, 6, Some(&ramp)).unwrap();
+    assert!(max_abs_diff(&a, &b) > 1e-4);
+    let err = model.unroll(&stats, &past, &t, &n, 6, None).unwrap_err();
+    assert!(err.to_string().contains("terrain"), "{err}");
+}
+
+#[test]
+fn save_load_round_trip_gives_identical_outputs() {
+    let c = tiny();
+    let ws = windows(&c, 8);
+    let stats = stats_for(&c, &ws);
+    let mw: Vec<MotionWindow> = ws.iter().map(|w| MotionWindow::new(w)).collect();
+    let mut trainer = RtnTrainer::new(&c, stats, &Device::Cpu).unwrap();
+    trainer.train_step(&mw).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    trainer.save(dir.path()).unwrap();
+    for f in ["config.json", "model.safetensors", "normalization.json"] {
+        assert!(dir.path().join(f).is_file(), "{f}");
+    }
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 3, "no temporary files left");
+    let (past, t, n) = split(&c, &ws[1]);
+    let want = trainer.model().transition(trainer.stats(), &past, &t, &n, 6, None).unwrap();
+    let (loaded, stats) = checkpoint::load(dir.path(), &Device::Cpu).unwrap();
+    assert_eq!(loaded.config(), &c);
+    assert_eq!(loaded.transition(&stats, &past, &t, &n, 6, None).unwrap(), want);
+    let resumed = RtnTrainer::load(dir.path(), &Device::Cpu).unwrap();
+    assert_eq!(resumed.model().transition(resumed.stats(), &past, &t, &n, 6, None).unwrap(), want);
+    // target blend: the last frame is the target
+    assert!(max_abs_diff(&want[6 * c.dim()..], &t) < 1e-4);
+}
+
+#[test]
+fn infinite_loss_is_refused_and_parameters_are_kept() {
+    let c = tiny();
+    let ws = windows(&c, 4);
+    let stats = stats_for(&c, &ws);
+    let mut bad = ws[0].clone();
+    for (i, v) in bad.iter_mut().enumerate() {
+        *v *= 1e18 * (1.0 + (i % 7) as f32);
+    }
+    let mut trainer = RtnTrainer::new(&c, stats, &Device::Cpu).unwrap();
+    let good: Vec<MotionWindow> = ws.iter().map(|w| MotionWindow::new(w)).collect();
+    trainer.train_step(&good).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    trainer.save(dir.path()).unwrap();
+    let (past, t, n) = split(&c, &ws[1]);
+    let before = trainer.model().unroll(trainer.stats(), &past, &t, &n, 6, None).unwrap();
+    let err = trainer.train_step(&[MotionWindow::new(&bad)]).unwrap_err();
+    assert!(matches!(err, RtnError::NonFiniteLoss { step: 1, .. }), "{err}");
+    assert!(err.to_string().contains("last good checkpoint"));
+    assert_eq!(trainer.model().unroll(trainer.stats(), &past, &t, &n, 6, None).unwrap(), before);
+    assert_eq!(trainer.steps(), 1);
+    let (loaded, stats) = checkpoint::load(dir.path(), &Device::Cpu).unwrap();
+    assert_eq!(loaded.unroll(&stats, &past, &t, &n, 6, None).unwrap(), before);
+}
+
+#[test]
+fn short_window_is_rejected_with_sizes() {
+    let c = tiny();
+    let ws = windows(&c, 2);
+    let stats = stats_for(&c, &ws);
+    let mut trainer = RtnTrainer::new(&c, stats, &Device::Cpu).unwrap();
+    let short = &ws[0][..(c.window_frames() - 1) * c.dim()];
+    let err = trainer.train_step(&[MotionWindow::new(short)]).unwrap_err();
+    let msg = err.to_string();
+    assert!(msg.contains("training window 0") && msg.contains("12 frames x 4 joints"), "{msg}");
+}
+
+#[test]
+fn nan_positions_are_rejected() {
+    let c = tiny();
+    let ws = windows(&c, 2);
+    let stats = stats_for(&c, &ws);
+    let mut trainer = RtnTrainer::new(&c, stats, &Device::Cpu).unwrap();
+    let mut bad = ws[0].clone();
+    bad[5] = f32::NAN;
+    let err = trainer.train_step(&[MotionWindow::new(&bad)]).unwrap_err();
+    assert!(err.to_string().contains("NaN"), "{err}");
+}
+
+#[test]
+fn super_resolution_chains_transitions() {
+    let c = tiny();
+    let ws = windows(&c, 2);
+    let stats = stats_for(&c, &ws);
+    let (model, _) = build(&c);
+    let d = c.dim();
+    let clip = synthetic_window(4 + 2 * 5 + 1, 1);
+    let context = &clip[..4 * d];
+    let mut keys = Vec::new();
+    for k in 1..=2 {
+        let f = 3 + 5 * k;
+        keys.extend_from_slice(&clip[f * d..(f + 2) * d]);
+    }
+    let out = model.super_resolve(&stats, context, &keys, 5).unwrap();
+    assert_eq!(out.len(), (4 + 10) * d);
+    // each keyframe is hit exactly thanks to the target blend
+    assert!(max_abs_diff(&out[8 * d..9 * d], &clip[8 * d..9 * d]) < 1e-3);
+    assert!(max_abs_diff(&out[13 * d..14 * d], &clip[13 * d..14 * d]) < 1e-3);
+}
