@@ -2,3 +2,6 @@
 //! benchmark's metrics and baselines, and synthetic motion.
 
 pub mod bvh;
+pub mod plausibility;
+pub mod synth;
+pub mod terrain;
