@@ -437,7 +437,7 @@ fn plan_trajectory(rng: &mut Rng, gait: Gait, style: &Style, frames: usize, fps:
                     let s = [PI / 2.0, -PI / 2.0, PI][(rng.f64() * 3.0) as usize % 3];
                     (rng.range(0.5, 0.9), s)
                 } else {
-                    (rng.range(1.1, 1.8) * style.stride, 0.0)
+                    (rng.range(1.0, 1.65) * style.stride, 0.0)
                 }
             }
             Gait::Jog => {
@@ -717,10 +717,10 @@ pub fn generate_clip(cfg: &SynthConfig, index: usize) -> SynthClip {
     for f in 0..n {
         let v = traj.speed[f];
         let b = blend[f];
-        let walk_steps = 1.45 + 0.35 * v.min(2.2);
-        let run_steps = 2.45 + 0.12 * v;
+        let walk_steps = 1.6 + 0.45 * v.min(2.2);
+        let run_steps = 2.3 + 0.18 * v;
         let steps_per_s = lerp(walk_steps, run_steps, b) * style.cadence;
-        stance_frac[f] = lerp(0.62, 0.36, b);
+        stance_frac[f] = lerp(0.6, 0.32, b);
         phase[f] = ph;
         ph += steps_per_s * 0.5 * dt;
     }
@@ -753,7 +753,7 @@ pub fn generate_clip(cfg: &SynthConfig, index: usize) -> SynthClip {
         let mut plants: Vec<Plant> = Vec::with_capacity(stances.len());
         let mut moved: Vec<bool> = Vec::with_capacity(stances.len());
         for &(s, e) in &stances {
-            let tm = s as f64 + 0.33 * (e - s) as f64;
+            let tm = s as f64 + lerp(0.3, 0.38, blend[s]) * (e - s) as f64;
             let i = (tm.floor() as usize).min(n - 2);
             let w = (tm - i as f64).clamp(0.0, 1.0);
             let root = traj.pos[i].lerp(traj.pos[i + 1], w);
@@ -783,7 +783,7 @@ pub fn generate_clip(cfg: &SynthConfig, index: usize) -> SynthClip {
                 (Some(true), Some(next)) => {
                     let dist = (next.ankle - plants[i].ankle).with_y(0.0).length();
                     let b = blend[stances[i].0];
-                    lerp(32.0, 22.0, b).to_radians() * (dist / 40.0).clamp(0.2, 1.0)
+                    lerp(55.0, 50.0, b).to_radians() * (dist / 40.0).clamp(0.2, 1.0)
                 }
                 _ => 0.0,
             })
@@ -804,7 +804,8 @@ pub fn generate_clip(cfg: &SynthConfig, index: usize) -> SynthClip {
             let pose = if si < stances.len() && stances[si].0 <= f {
                 // Stance: flat, then the heel lifts about the toe.
                 let p = plants[si];
-                let k = ((u / st - 0.6) / 0.4).clamp(0.0, 1.0);
+                let h0 = lerp(0.45, 0.5, blend[f]);
+                let k = ((u / st - h0) / (1.0 - h0)).clamp(0.0, 1.0);
                 let alpha = heel_off[si] * k * k;
                 let axis = yaw_dir(p.yaw + PI / 2.0);
                 FootPose { ankle: p.toe + rot(axis, alpha, p.ankle - p.toe), toe: p.toe, yaw: p.yaw, contact: true }
@@ -822,7 +823,7 @@ pub fn generate_clip(cfg: &SynthConfig, index: usize) -> SynthClip {
                 let mut ankle = a0.lerp(p1.ankle, s);
                 let dist = (p1.ankle - a0).with_y(0.0).length();
                 let b = blend[f];
-                let base_h = lerp(7.0, 16.0, b) * style.swing_height * (dist / 30.0).clamp(0.15, 1.0);
+                let base_h = lerp(12.0, 28.0, b) * style.swing_height * (dist / 30.0).clamp(0.15, 1.0);
                 // Clearance over the ground between lift-off and landing.
                 let mut need: f64 = 0.0;
                 for q in 1..10 {
@@ -831,7 +832,7 @@ pub fn generate_clip(cfg: &SynthConfig, index: usize) -> SynthClip {
                     let lift = ground(pq.x, pq.z) + ANKLE_HEIGHT + 4.0 - pq.y;
                     need = need.max(lift / (PI * wq).sin().max(0.3));
                 }
-                let arc = base_h.max(need) * (PI * w).sin();
+                let arc = base_h.max(need) * (PI * w.powf(0.75)).sin();
                 ankle.y += arc;
                 // Foot direction: from lift-off to landing, toes up a little mid-swing.
                 let d0 = (t0 - a0).normalize();
@@ -1258,5 +1259,20 @@ mod tests {
         let p = c.terrain_patch(10);
         let y = c.clip.root_position(10).y;
         assert!(p.iter().all(|h| (h + y).abs() < 1e-9));
+    }
+}
+#[cfg(test)]
+mod debug_print {
+    use super::*;
+    #[test]
+    #[ignore]
+    fn dump() {
+        let cfg = SynthConfig { seed: 1, ..SynthConfig::default() };
+        let c = (0..50).map(|i| generate_clip(&cfg, i)).find(|c| c.gait == Gait::Walk).unwrap();
+        let (_, gp) = c.clip.global();
+        for f in (0..30).step_by(3) {
+            let p = |j: usize| gp[f * 21 + j];
+            println!("f{f} root {:.1?} hipL {:.1?} kneeL {:.1?} ankL {:.1?} toeL {:.1?} head {:.1?} contact {:?}", p(0), p(13), p(14), p(15), p(16), p(4), c.contacts[f]);
+        }
     }
 }
