@@ -1,6 +1,7 @@
 //! `zoo`: train, evaluate, export and inspect learned motion-transition models.
 
 mod cmd;
+mod render;
 
 use clap::{Parser, Subcommand};
 
@@ -19,6 +20,8 @@ enum Command {
     Data(cmd::data::DataCommand),
     /// Run the in-betweening benchmark (LaFAN1 protocol) on a BVH dataset.
     Bench(cmd::bench::BenchArgs),
+    /// Draw clips as stick figures: an animated GIF or a PNG contact sheet.
+    Render(cmd::render::RenderArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -26,5 +29,6 @@ fn main() -> anyhow::Result<()> {
     match cli.command {
         Command::Data(c) => cmd::data::run(c),
         Command::Bench(a) => cmd::bench::run(a),
+        Command::Render(a) => cmd::render::run(a),
     }
 }

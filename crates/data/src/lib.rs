@@ -5,3 +5,6 @@ pub mod benchmark;
 pub mod bvh;
 pub mod dataset;
 pub mod metrics;
+pub mod plausibility;
+pub mod synth;
+pub mod terrain;

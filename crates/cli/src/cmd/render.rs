@@ -1,0 +1,71 @@
+//! `zoo render`: stick-figure GIFs and PNG contact sheets of BVH clips.
+
+use crate::render::{RenderClip, RenderOptions, render_gif, render_sheet};
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use std::path::{Path, PathBuf};
+use zoo_data::bvh::{ReadOptions, read_file};
+use zoo_data::terrain::Heightfield;
+
+/// Arguments of `zoo render`.
+#[derive(Args)]
+pub struct RenderArgs {
+    /// The clip (`.bvh` / `.bvh.gz`); a `NAME.terrain.json` beside it is used as its ground.
+    pub clip: PathBuf,
+    /// More clips drawn over the first one in other colours (e.g. a method's output).
+    #[arg(long, num_args = 1..)]
+    pub compare: Vec<PathBuf>,
+    /// First frame.
+    #[arg(long, default_value_t = 0)]
+    pub from: usize,
+    /// One past the last frame (default: the end of the shortest clip).
+    #[arg(long)]
+    pub to: Option<usize>,
+    /// Draw every k-th frame (GIF default: about 15 fps; PNG default: 2 per second).
+    #[arg(long)]
+    pub every: Option<usize>,
+    /// Print frame numbers.
+    #[arg(long)]
+    pub frame_numbers: bool,
+    /// Heightmap header (`.json`, see `zoo_data::terrain`) of the ground under the clips.
+    #[arg(long)]
+    pub terrain: Option<PathBuf>,
+    /// Output file: `.gif` (animation) or `.png` (contact sheet).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+fn label(path: &Path) -> String {
+    let name = path.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    name.trim_end_matches(".gz").trim_end_matches(".bvh").to_string()
+}
+
+/// The `NAME.terrain.json` beside `NAME.bvh[.gz]`, if there is one.
+fn sibling_terrain(path: &Path) -> Option<PathBuf> {
+    let t = path.with_file_name(format!("{}.terrain.json", label(path)));
+    t.exists().then_some(t)
+}
+
+/// Runs `zoo render`.
+pub fn run(a: RenderArgs) -> Result<()> {
+    let ext = a.out.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    if ext != "gif" && ext != "png" {
+        bail!("--out {}: expected a .gif or .png file name", a.out.display());
+    }
+    let terrain_path = a.terrain.clone().or_else(|| sibling_terrain(&a.clip));
+    let terrain = match &terrain_path {
+        Some(p) => Some(Heightfield::read(p)?),
+        None => None,
+    };
+    let read = ReadOptions { drop_dummy_root: true };
+    let mut clips = Vec::new();
+    for path in std::iter::once(&a.clip).chain(&a.compare) {
+        let clip = read_file(path, &read).with_context(|| format!("reading {}", path.display()))?;
+        clips.push(RenderClip { label: label(path), clip, terrain: terrain.clone() });
+    }
+    let opts = RenderOptions { from: a.from, to: a.to, every: a.every, frame_numbers: a.frame_numbers };
+    let n = if ext == "gif" { render_gif(&clips, &opts, &a.out)? } else { render_sheet(&clips, &opts, &a.out)? };
+    let size = std::fs::metadata(&a.out).map(|m| m.len()).unwrap_or(0);
+    println!("{}: {n} frames of {} clip(s), {:.0} kB", a.out.display(), clips.len(), size as f64 / 1024.0);
+    Ok(())
+}
