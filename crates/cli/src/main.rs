@@ -1,6 +1,8 @@
 //! `zoo`: train, evaluate, export and inspect learned motion-transition models.
 
 mod cmd;
+mod methods;
+mod plot;
 mod render;
 
 use clap::{Parser, Subcommand};
@@ -20,6 +22,9 @@ enum Command {
     Data(cmd::data::DataCommand),
     /// Run the in-betweening benchmark (LaFAN1 protocol) on a BVH dataset.
     Bench(cmd::bench::BenchArgs),
+    /// Train a model of the zoo.
+    #[command(subcommand)]
+    Train(cmd::train::TrainCommand),
     /// Draw clips as stick figures: an animated GIF or a PNG contact sheet.
     Render(cmd::render::RenderArgs),
 }
@@ -29,6 +34,7 @@ fn main() -> anyhow::Result<()> {
     match cli.command {
         Command::Data(c) => cmd::data::run(c),
         Command::Bench(a) => cmd::bench::run(a),
+        Command::Train(c) => cmd::train::run(c),
         Command::Render(a) => cmd::render::run(a),
     }
 }

@@ -211,6 +211,13 @@ impl Windows {
         &self.local_pos[w * n..(w + 1) * n]
     }
 
+    /// Global joint positions of all windows as `f32`, `(windows, frames, joints, 3)` flattened:
+    /// the input layout of the position-based models.
+    pub fn global_positions_f32(&self) -> Vec<f32> {
+        let (_, gp) = self.global();
+        gp.iter().flat_map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect()
+    }
+
     /// Global rotations and positions of all windows.
     pub fn global(&self) -> (Vec<DQuat>, Vec<DVec3>) {
         let mut gr = vec![DQuat::IDENTITY; self.local_rot.len()];

@@ -24,7 +24,7 @@ pub struct BenchArgs {
     /// validation split of `--data`.
     #[arg(long)]
     pub test_data: Option<PathBuf>,
-    /// Comma-separated methods: `zerovel`, `interp`.
+    /// Comma-separated methods: `zerovel`, `interp`, `rtn:RUN_DIR` (a `zoo train rtn` run folder).
     #[arg(long, default_value = "zerovel,interp", value_delimiter = ',')]
     pub methods: Vec<String>,
     /// Comma-separated transition lengths in frames.
@@ -46,7 +46,10 @@ fn method(name: &str) -> anyhow::Result<Box<dyn TransitionMethod>> {
     Ok(match name {
         "zerovel" => Box::new(ZeroVelocity),
         "interp" => Box::new(Interpolation),
-        other => bail!("unknown method `{other}`: expected one of zerovel, interp"),
+        other => match other.split_once(':') {
+            Some(("rtn", dir)) => Box::new(crate::methods::RtnMethod::load(std::path::Path::new(dir), other.to_string())?),
+            _ => bail!("unknown method `{other}`: expected zerovel, interp or rtn:RUN_DIR"),
+        },
     })
 }
 
