@@ -708,3 +708,215 @@ pub fn write_file(clip: &Clip, path: &Path) -> std::io::Result<()> {
     }
     result
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A valid file: line numbers in the tests below refer to it.
+    const VALID: &str = "HIERARCHY
+ROOT Hips
+{
+\tOFFSET 0 90 0
+\tCHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+\tJOINT Leg
+\t{
+\t\tOFFSET 10 -40 0
+\t\tCHANNELS 3 Zrotation Xrotation Yrotation
+\t\tEnd Site
+\t\t{
+\t\t\tOFFSET 0 -40 0
+\t\t}
+\t}
+}
+MOTION
+Frames: 2
+Frame Time: 0.0333333
+1 90 2 10 20 30 -5 0 45
+1.5 90.5 2.5 11 21 31 -6 1 44
+";
+
+    fn read(text: &str) -> Result<Clip, BvhError> {
+        parse(text, Path::new("case.bvh"), &ReadOptions::default())
+    }
+
+    /// Parses `text`, which must fail on `line` with a message containing `expected`.
+    fn assert_fails(text: &str, line: usize, expected: &str) {
+        let err = read(text).expect_err("malformed input must be rejected");
+        let shown = err.to_string();
+        assert!(shown.starts_with(&format!("case.bvh:{line}: ")), "wrong file/line in `{shown}`");
+        assert!(shown.contains(expected), "`{shown}` does not say `{expected}`");
+        match err {
+            BvhError::Parse { line: l, .. } => assert_eq!(l, line),
+            other => panic!("expected a parse error, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn valid_file_parses() {
+        let clip = read(VALID).unwrap();
+        assert_eq!(clip.frames(), 2);
+        assert_eq!(clip.joints(), 2);
+    }
+
+    #[test]
+    fn malformed_empty_file() {
+        assert_fails("", 1, "empty file: expected `HIERARCHY`");
+        assert_fails(" \r\n\t\n", 1, "empty file: expected `HIERARCHY`");
+    }
+
+    #[test]
+    fn malformed_missing_hierarchy_keyword() {
+        assert_fails(&VALID.replacen("HIERARCHY", "HIERARCH", 1), 1, "expected `HIERARCHY`");
+    }
+
+    #[test]
+    fn malformed_missing_motion() {
+        let text = VALID.replace("MOTION\n", "");
+        assert_fails(&text, 16, "expected `MOTION`");
+    }
+
+    #[test]
+    fn malformed_truncated_before_motion() {
+        let text = &VALID[..VALID.find("MOTION").unwrap()];
+        assert_fails(text, 16, "expected `MOTION` after the hierarchy, found the end of the file");
+    }
+
+    #[test]
+    fn malformed_missing_frames() {
+        let text = VALID.replace("Frames: 2\n", "");
+        assert_fails(&text, 17, "expected `Frames:` after MOTION");
+    }
+
+    #[test]
+    fn malformed_bad_frame_count() {
+        assert_fails(&VALID.replace("Frames: 2", "Frames: two"), 17, "expected the frame count");
+        assert_fails(&VALID.replace("Frames: 2", "Frames: -2"), 17, "expected the frame count");
+    }
+
+    #[test]
+    fn malformed_missing_frame_time() {
+        let text = VALID.replace("Frame Time: 0.0333333\n", "");
+        assert_fails(&text, 18, "expected `Frame Time:`");
+    }
+
+    #[test]
+    fn malformed_bad_frame_time() {
+        assert_fails(&VALID.replace("0.0333333", "0"), 18, "expected the frame time (a positive number");
+        assert_fails(&VALID.replace("0.0333333", "fast"), 18, "expected the frame time");
+    }
+
+    #[test]
+    fn malformed_row_with_too_few_values() {
+        let text = VALID.replace("1.5 90.5 2.5 11 21 31 -6 1 44", "1.5 90.5 2.5 11 21 31 -6 1");
+        assert_fails(&text, 20, "expected 9 values in frame 2");
+    }
+
+    #[test]
+    fn malformed_row_with_too_many_values() {
+        let text = VALID.replace("-5 0 45", "-5 0 45 7");
+        assert_fails(&text, 19, "expected 9 values in frame 1");
+    }
+
+    #[test]
+    fn malformed_non_number() {
+        let text = VALID.replace("11 21 31", "11 abc 31");
+        assert_fails(&text, 20, "expected a number (value 5 of 9 in frame 2), found `abc`");
+        let text = VALID.replace("11 21 31", "11 21x 31");
+        assert_fails(&text, 20, "expected a number (value 5 of 9 in frame 2), found `21x`");
+        let text = VALID.replace("11 21 31", "11 nan 31");
+        assert_fails(&text, 20, "expected a number");
+    }
+
+    #[test]
+    fn malformed_non_number_offset() {
+        let text = VALID.replace("OFFSET 10 -40 0", "OFFSET 10 - 0");
+        assert_fails(&text, 8, "expected the Y value of the OFFSET of `Leg` (a number), found `-`");
+    }
+
+    #[test]
+    fn malformed_unknown_channel() {
+        let text = VALID.replace("CHANNELS 3 Zrotation Xrotation Yrotation", "CHANNELS 3 Zrotation Wrotation Yrotation");
+        assert_fails(&text, 9, "unknown channel `Wrotation` in joint `Leg`: expected Xposition");
+    }
+
+    #[test]
+    fn malformed_fewer_rows_than_declared() {
+        let text = VALID.replace("Frames: 2", "Frames: 3");
+        assert_fails(&text, 21, "expected 3 frame rows as declared by `Frames:`, found only 2");
+    }
+
+    #[test]
+    fn more_rows_than_declared_reads_the_declared_count() {
+        let clip = read(&VALID.replace("Frames: 2", "Frames: 1")).unwrap();
+        assert_eq!(clip.frames(), 1);
+    }
+
+    #[test]
+    fn malformed_unbalanced_braces_missing_close() {
+        // Drop the `}` closing `Leg` (line 14).
+        let text = VALID.replacen("\t}\n}\nMOTION", "}\nMOTION", 1);
+        assert_fails(&text, 15, "unbalanced braces: expected `}` closing joint `Hips` (opened at line 3)");
+    }
+
+    #[test]
+    fn malformed_unbalanced_braces_extra_close() {
+        let text = VALID.replacen("}\nMOTION", "}\n}\nMOTION", 1);
+        assert_fails(&text, 16, "unbalanced braces");
+        assert_fails(&text, 16, "expected `MOTION`");
+    }
+
+    #[test]
+    fn malformed_unbalanced_braces_at_end_of_file() {
+        let text = &VALID[..VALID.find("\t}\n}").unwrap()];
+        assert_fails(text, 14, "unbalanced braces: expected `}` closing joint `Leg` (opened at line 7)");
+    }
+
+    #[test]
+    fn malformed_bad_channels_count() {
+        let text = VALID.replace("CHANNELS 3 Zrotation", "CHANNELS 4 Zrotation");
+        assert_fails(&text, 9, "expected a CHANNELS count of 3 or 6 in joint `Leg`, found `4`");
+    }
+
+    #[test]
+    fn malformed_channels_without_rotations() {
+        let text = VALID.replace("CHANNELS 3 Zrotation Xrotation Yrotation", "CHANNELS 3 Xposition Yposition Zposition");
+        assert_fails(&text, 9, "expected three rotation channels");
+    }
+
+    #[test]
+    fn malformed_duplicate_joint_names() {
+        let text = VALID.replace("JOINT Leg", "JOINT Hips");
+        assert_fails(&text, 6, "duplicate joint name `Hips`: expected unique joint names");
+    }
+
+    #[test]
+    fn malformed_rotation_order_with_repeated_axis() {
+        let text = VALID.replace("CHANNELS 3 Zrotation Xrotation Yrotation", "CHANNELS 3 Zrotation Xrotation Zrotation");
+        assert_fails(&text, 9, "rotation order with a repeated axis in joint `Leg`: expected each of");
+    }
+
+    #[test]
+    fn malformed_missing_offset() {
+        let text = VALID.replace("\t\tOFFSET 10 -40 0\n", "");
+        assert_fails(&text, 13, "expected an OFFSET line in joint `Leg`");
+    }
+
+    #[test]
+    fn malformed_missing_channels() {
+        let text = VALID.replace("\t\tCHANNELS 3 Zrotation Xrotation Yrotation\n", "");
+        assert_fails(&text, 13, "expected a CHANNELS line in joint `Leg`");
+    }
+
+    #[test]
+    fn malformed_unknown_keyword_in_joint() {
+        let text = VALID.replace("\t\tEnd Site", "\t\tEndSite");
+        assert_fails(&text, 10, "expected OFFSET, CHANNELS, JOINT, End Site or `}` in joint `Leg`, found `EndSite`");
+    }
+
+    #[test]
+    fn huge_declared_frame_count_does_not_allocate_it() {
+        let text = VALID.replace("Frames: 2", "Frames: 18446744073709551615");
+        assert_fails(&text, 21, "expected 18446744073709551615 frame rows");
+    }
+}
