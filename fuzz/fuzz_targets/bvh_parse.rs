@@ -12,8 +12,12 @@ fuzz_target!(|data: &[u8]| {
         let opts = ReadOptions { drop_dummy_root };
         if let Ok(clip) = parse(&text, Path::new("fuzz.bvh"), &opts) {
             let again = to_string(&clip);
-            let back = parse(&again, Path::new("fuzz-rewritten.bvh"), &ReadOptions::default())
-                .expect("a written clip re-reads");
+            let back = parse(
+                &again,
+                Path::new("fuzz-rewritten.bvh"),
+                &ReadOptions::default(),
+            )
+            .expect("a written clip re-reads");
             assert_eq!(back.frames(), clip.frames());
             assert_eq!(back.joints(), clip.joints());
         }

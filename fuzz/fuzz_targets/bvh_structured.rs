@@ -8,7 +8,14 @@ use std::fmt::Write;
 use std::path::Path;
 use zoo_data::bvh::{ReadOptions, parse};
 
-const CHANNELS: [&str; 6] = ["Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation"];
+const CHANNELS: [&str; 6] = [
+    "Xposition",
+    "Yposition",
+    "Zposition",
+    "Xrotation",
+    "Yrotation",
+    "Zrotation",
+];
 
 fuzz_target!(|data: &[u8]| {
     if data.len() < 4 {
@@ -24,7 +31,11 @@ fuzz_target!(|data: &[u8]| {
         let kw = if j == 0 { "ROOT" } else { "JOINT" };
         let _ = writeln!(s, "{kw} j{j}\n{{\n OFFSET {} 0 -1.5", next() as i8);
         let six = next() % 2 == 0;
-        let mut chans: Vec<&str> = if six { CHANNELS.to_vec() } else { CHANNELS[3..].to_vec() };
+        let mut chans: Vec<&str> = if six {
+            CHANNELS.to_vec()
+        } else {
+            CHANNELS[3..].to_vec()
+        };
         // shuffle the channel order
         for i in (1..chans.len()).rev() {
             let k = next() as usize % (i + 1);
@@ -42,7 +53,12 @@ fuzz_target!(|data: &[u8]| {
     let _ = write!(s, "MOTION\nFrames: {frames}\nFrame Time: 0.0333\n");
     for _ in 0..frames {
         for c in 0..columns {
-            let _ = write!(s, "{}{}", if c > 0 { "\t" } else { "" }, next() as i8 as f64 * 7.25);
+            let _ = write!(
+                s,
+                "{}{}",
+                if c > 0 { "\t" } else { "" },
+                next() as i8 as f64 * 7.25
+            );
         }
         s.push_str("\r\n");
     }
@@ -58,6 +74,10 @@ fuzz_target!(|data: &[u8]| {
     }
     let text = String::from_utf8_lossy(&bytes);
     for drop_dummy_root in [false, true] {
-        let _ = parse(&text, Path::new("fuzz.bvh"), &ReadOptions { drop_dummy_root });
+        let _ = parse(
+            &text,
+            Path::new("fuzz.bvh"),
+            &ReadOptions { drop_dummy_root },
+        );
     }
 });
