@@ -726,6 +726,7 @@ impl<'a> Parser<'a> {
 /// skeletons read from BVH). A joint gets `Xposition Yposition Zposition` channels when its
 /// [`JointChannels::position`] is set or when its translation differs from its offset in some
 /// frame (so root motion is never lost), followed by its rotation channels in its own order.
+/// Whitespace in joint names becomes `_` (BVH names are single tokens).
 /// Offsets and the frame time are written with shortest round-trip precision, motion values
 /// with 6 decimals (error <= 5e-7 degrees / clip units).
 pub fn to_string(clip: &Clip) -> String {
@@ -808,7 +809,10 @@ fn write_joint(
     let _ = writeln!(
         out,
         "{ind}{kw} {}\n{ind}{{\n{ind}\tOFFSET {} {} {}",
-        sk.names[j], o.x, o.y, o.z
+        joint_name(&sk.names[j]),
+        o.x,
+        o.y,
+        o.z
     );
     let axes = sk.channels[j]
         .order
@@ -831,6 +835,16 @@ fn write_joint(
         );
     }
     let _ = writeln!(out, "{ind}}}");
+}
+
+/// A joint name as one BVH token: whitespace becomes `_`, an empty name `_`.
+fn joint_name(name: &str) -> String {
+    if name.is_empty() {
+        return "_".into();
+    }
+    name.chars()
+        .map(|c| if c.is_whitespace() { '_' } else { c })
+        .collect()
 }
 
 /// Writes a clip to a `.bvh` file (or gzip-compressed when the name ends in `.gz`).

@@ -486,3 +486,11 @@ fn bandai2_clips_read_and_round_trip() {
         }
     }
 }
+
+#[test]
+fn writer_keeps_joint_names_single_tokens() {
+    let mut clip = read(THREE_CHANNEL);
+    clip.skeleton.names[1] = "Left Thigh".into();
+    let back = round_trip(&clip);
+    assert_eq!(back.skeleton.names, ["Hips", "Left_Thigh", "Shin"]);
+}
