@@ -220,7 +220,8 @@ impl<'a> Parser<'a> {
         }
     }
 
-    fn number(&mut self, what: &str) -> Result<f64, BvhError> {
+    /// Next token as a finite number; `what` describes it for the error message.
+    fn number(&mut self, what: impl FnOnce() -> String) -> Result<f64, BvhError> {
         let t = self.next();
         let v = t.and_then(|t| match parse_partial::<f64, _>(t.text) {
             Ok((v, n)) if n == t.text.len() && v.is_finite() => Some(v),
@@ -229,16 +230,17 @@ impl<'a> Parser<'a> {
         v.ok_or_else(|| {
             self.err(
                 self.line_of(t),
-                format!("expected {what} (a number), found {}", show(t)),
+                format!("expected {} (a number), found {}", what(), show(t)),
             )
         })
     }
 
-    fn vec3(&mut self, what: &str) -> Result<DVec3, BvhError> {
+    /// Three numbers: the X, Y and Z values of `what`.
+    fn vec3(&mut self, what: impl Fn() -> String) -> Result<DVec3, BvhError> {
         Ok(DVec3::new(
-            self.number(&format!("the X value of {what}"))?,
-            self.number(&format!("the Y value of {what}"))?,
-            self.number(&format!("the Z value of {what}"))?,
+            self.number(|| format!("the X value of {}", what()))?,
+            self.number(|| format!("the Y value of {}", what()))?,
+            self.number(|| format!("the Z value of {}", what()))?,
         ))
     }
 
@@ -323,7 +325,7 @@ impl<'a> Parser<'a> {
                 };
                 let cur = stack.last().expect("stack holds the current joint").0;
                 if tok.is("OFFSET") {
-                    sk.offsets[cur] = self.vec3(&format!("the OFFSET of `{}`", sk.names[cur]))?;
+                    sk.offsets[cur] = self.vec3(|| format!("the OFFSET of `{}`", sk.names[cur]))?;
                     have_offset = true;
                 } else if tok.is("CHANNELS") {
                     if layouts[cur].count != 0 {
@@ -345,7 +347,7 @@ impl<'a> Parser<'a> {
                     self.expect("Site", "after `End`")?;
                     self.expect("{", "after `End Site`")?;
                     self.expect("OFFSET", "in `End Site`")?;
-                    let o = self.vec3(&format!("the End Site OFFSET of `{}`", sk.names[cur]))?;
+                    let o = self.vec3(|| format!("the End Site OFFSET of `{}`", sk.names[cur]))?;
                     sk.end_sites[cur] = Some(o);
                     self.expect("}", "closing `End Site`")?;
                 } else if tok.is("}") {
