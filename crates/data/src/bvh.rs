@@ -54,7 +54,10 @@ pub enum BvhError {
 
 /// Reads a `.bvh` or `.bvh.gz` file (gzip detected by its magic bytes).
 pub fn read_file(path: &Path, opts: &ReadOptions) -> Result<Clip, BvhError> {
-    let io = |source| BvhError::Io { path: path.to_path_buf(), source };
+    let io = |source| BvhError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
     let raw = std::fs::read(path).map_err(io)?;
     if raw.starts_with(&[0x1f, 0x8b]) {
         let text = gunzip(&raw).map_err(io)?;
@@ -74,7 +77,10 @@ fn gunzip(raw: &[u8]) -> std::io::Result<Vec<u8>> {
     } else {
         0
     };
-    let cap = isize_hint.min(n.saturating_mul(1032)).max(n.saturating_mul(4)) + 64;
+    let cap = isize_hint
+        .min(n.saturating_mul(1032))
+        .max(n.saturating_mul(4))
+        + 64;
     let mut out = Vec::with_capacity(cap);
     flate2::read::MultiGzDecoder::new(raw).read_to_end(&mut out)?;
     Ok(out)
@@ -88,7 +94,12 @@ pub fn parse(text: &str, path: &Path, opts: &ReadOptions) -> Result<Clip, BvhErr
 /// Parses BVH bytes (ASCII/UTF-8 text); `path` is only used in error messages.
 pub fn parse_bytes(bytes: &[u8], path: &Path, opts: &ReadOptions) -> Result<Clip, BvhError> {
     let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
-    let mut p = Parser { b: bytes, pos: 0, line: 1, path };
+    let mut p = Parser {
+        b: bytes,
+        pos: 0,
+        line: 1,
+        path,
+    };
     let h = p.hierarchy()?;
     let mut clip = p.motion(h)?;
     if opts.drop_dummy_root && clip.dummy_root {
@@ -146,7 +157,11 @@ impl Tok<'_> {
     }
     fn show(&self) -> String {
         let s = String::from_utf8_lossy(&self.text[..self.text.len().min(40)]);
-        if self.text.len() > 40 { format!("`{s}...`") } else { format!("`{s}`") }
+        if self.text.len() > 40 {
+            format!("`{s}...`")
+        } else {
+            format!("`{s}`")
+        }
     }
 }
 
@@ -156,7 +171,11 @@ fn show(t: Option<Tok>) -> String {
 
 impl<'a> Parser<'a> {
     fn err(&self, line: usize, message: impl Into<String>) -> BvhError {
-        BvhError::Parse { path: self.path.to_path_buf(), line, message: message.into() }
+        BvhError::Parse {
+            path: self.path.to_path_buf(),
+            line,
+            message: message.into(),
+        }
     }
 
     /// Next token, skipping whitespace (and counting lines).
@@ -175,7 +194,10 @@ impl<'a> Parser<'a> {
         while self.pos < b.len() && !b[self.pos].is_ascii_whitespace() {
             self.pos += 1;
         }
-        Some(Tok { text: &b[start..self.pos], line: self.line })
+        Some(Tok {
+            text: &b[start..self.pos],
+            line: self.line,
+        })
     }
 
     /// Line for an error at the end of the file.
@@ -191,24 +213,34 @@ impl<'a> Parser<'a> {
         let t = self.next();
         match t {
             Some(t) if t.is(word) => Ok(t),
-            _ => Err(self.err(self.line_of(t), format!("expected `{word}` {context}, found {}", show(t)))),
+            _ => Err(self.err(
+                self.line_of(t),
+                format!("expected `{word}` {context}, found {}", show(t)),
+            )),
         }
     }
 
-    fn number(&mut self, what: &str) -> Result<f64, BvhError> {
+    /// Next token as a finite number; `what` describes it for the error message.
+    fn number(&mut self, what: impl FnOnce() -> String) -> Result<f64, BvhError> {
         let t = self.next();
         let v = t.and_then(|t| match parse_partial::<f64, _>(t.text) {
             Ok((v, n)) if n == t.text.len() && v.is_finite() => Some(v),
             _ => None,
         });
-        v.ok_or_else(|| self.err(self.line_of(t), format!("expected {what} (a number), found {}", show(t))))
+        v.ok_or_else(|| {
+            self.err(
+                self.line_of(t),
+                format!("expected {} (a number), found {}", what(), show(t)),
+            )
+        })
     }
 
-    fn vec3(&mut self, what: &str) -> Result<DVec3, BvhError> {
+    /// Three numbers: the X, Y and Z values of `what`.
+    fn vec3(&mut self, what: impl Fn() -> String) -> Result<DVec3, BvhError> {
         Ok(DVec3::new(
-            self.number(&format!("the X value of {what}"))?,
-            self.number(&format!("the Y value of {what}"))?,
-            self.number(&format!("the Z value of {what}"))?,
+            self.number(|| format!("the X value of {}", what()))?,
+            self.number(|| format!("the Y value of {}", what()))?,
+            self.number(|| format!("the Z value of {}", what()))?,
         ))
     }
 
@@ -218,7 +250,10 @@ impl<'a> Parser<'a> {
             None => return Err(self.err(1, "empty file: expected `HIERARCHY`")),
             Some(t) if t.is("HIERARCHY") => {}
             Some(_) => {
-                return Err(self.err(self.line_of(t), format!("expected `HIERARCHY`, found {}", show(t))));
+                return Err(self.err(
+                    self.line_of(t),
+                    format!("expected `HIERARCHY`, found {}", show(t)),
+                ));
             }
         }
         self.expect("ROOT", "after HIERARCHY")?;
@@ -250,7 +285,10 @@ impl<'a> Parser<'a> {
             if !names.insert(name_tok.text.to_vec()) {
                 return Err(self.err(
                     name_tok.line,
-                    format!("duplicate joint name {}: expected unique joint names", name_tok.show()),
+                    format!(
+                        "duplicate joint name {}: expected unique joint names",
+                        name_tok.show()
+                    ),
                 ));
             }
             let name = String::from_utf8_lossy(name_tok.text).into_owned();
@@ -261,7 +299,13 @@ impl<'a> Parser<'a> {
             sk.offsets.push(DVec3::ZERO);
             sk.end_sites.push(None);
             sk.channels.push(JointChannels::default());
-            layouts.push(Layout { start: columns, count: 0, pos: None, rot: [0, 1, 2], order: EulerOrder::Zxy });
+            layouts.push(Layout {
+                start: columns,
+                count: 0,
+                pos: None,
+                rot: [0, 1, 2],
+                order: EulerOrder::Zxy,
+            });
             stack.push((j, open.line));
             let mut have_offset = false;
             // Body items of joint `j` until its `}` or a child joint.
@@ -281,11 +325,14 @@ impl<'a> Parser<'a> {
                 };
                 let cur = stack.last().expect("stack holds the current joint").0;
                 if tok.is("OFFSET") {
-                    sk.offsets[cur] = self.vec3(&format!("the OFFSET of `{}`", sk.names[cur]))?;
+                    sk.offsets[cur] = self.vec3(|| format!("the OFFSET of `{}`", sk.names[cur]))?;
                     have_offset = true;
                 } else if tok.is("CHANNELS") {
                     if layouts[cur].count != 0 {
-                        return Err(self.err(tok.line, format!("joint `{}` has a second CHANNELS line", sk.names[cur])));
+                        return Err(self.err(
+                            tok.line,
+                            format!("joint `{}` has a second CHANNELS line", sk.names[cur]),
+                        ));
                     }
                     let (lay, ch) = self.channels(tok.line, columns, &sk.names[cur])?;
                     columns += lay.count;
@@ -300,7 +347,7 @@ impl<'a> Parser<'a> {
                     self.expect("Site", "after `End`")?;
                     self.expect("{", "after `End Site`")?;
                     self.expect("OFFSET", "in `End Site`")?;
-                    let o = self.vec3(&format!("the End Site OFFSET of `{}`", sk.names[cur]))?;
+                    let o = self.vec3(|| format!("the End Site OFFSET of `{}`", sk.names[cur]))?;
                     sk.end_sites[cur] = Some(o);
                     self.expect("}", "closing `End Site`")?;
                 } else if tok.is("}") {
@@ -336,7 +383,11 @@ impl<'a> Parser<'a> {
                 break;
             }
         }
-        Ok(Hierarchy { skeleton: sk, layouts, columns })
+        Ok(Hierarchy {
+            skeleton: sk,
+            layouts,
+            columns,
+        })
     }
 
     fn check_joint(
@@ -348,16 +399,27 @@ impl<'a> Parser<'a> {
         line: usize,
     ) -> Result<(), BvhError> {
         if !have_offset {
-            return Err(self.err(line, format!("expected an OFFSET line in joint `{}`", sk.names[j])));
+            return Err(self.err(
+                line,
+                format!("expected an OFFSET line in joint `{}`", sk.names[j]),
+            ));
         }
         if layouts[j].count == 0 {
-            return Err(self.err(line, format!("expected a CHANNELS line in joint `{}`", sk.names[j])));
+            return Err(self.err(
+                line,
+                format!("expected a CHANNELS line in joint `{}`", sk.names[j]),
+            ));
         }
         Ok(())
     }
 
     /// Parses `n name...` after `CHANNELS`.
-    fn channels(&mut self, line: usize, start: usize, joint: &str) -> Result<(Layout, JointChannels), BvhError> {
+    fn channels(
+        &mut self,
+        line: usize,
+        start: usize,
+        joint: &str,
+    ) -> Result<(Layout, JointChannels), BvhError> {
         let t = self.next();
         let count = match t.map(|t| t.text) {
             Some(b"3") => 3,
@@ -365,7 +427,10 @@ impl<'a> Parser<'a> {
             _ => {
                 return Err(self.err(
                     self.line_of(t).max(line),
-                    format!("expected a CHANNELS count of 3 or 6 in joint `{joint}`, found {}", show(t)),
+                    format!(
+                        "expected a CHANNELS count of 3 or 6 in joint `{joint}`, found {}",
+                        show(t)
+                    ),
                 ));
             }
         };
@@ -404,7 +469,10 @@ impl<'a> Parser<'a> {
             let line = self.line_of(t);
             if is_pos {
                 if pos[axis].is_some() {
-                    return Err(self.err(line, format!("repeated position channel in joint `{joint}`")));
+                    return Err(self.err(
+                        line,
+                        format!("repeated position channel in joint `{joint}`"),
+                    ));
                 }
                 pos[axis] = Some(c);
             } else {
@@ -432,11 +500,30 @@ impl<'a> Parser<'a> {
             ));
         }
         let order = EulerOrder::from_axes([rot[0].0, rot[1].0, rot[2].0]).ok_or_else(|| {
-            self.err(line, format!("rotation order with a repeated axis in joint `{joint}`"))
+            self.err(
+                line,
+                format!("rotation order with a repeated axis in joint `{joint}`"),
+            )
         })?;
-        let pos = if n_pos == 3 { Some(pos.map(|p| p.unwrap_or(0))) } else { None };
-        let layout = Layout { start, count, pos, rot: [rot[0].1, rot[1].1, rot[2].1], order };
-        Ok((layout, JointChannels { position: pos.is_some(), order }))
+        let pos = if n_pos == 3 {
+            Some(pos.map(|p| p.unwrap_or(0)))
+        } else {
+            None
+        };
+        let layout = Layout {
+            start,
+            count,
+            pos,
+            rot: [rot[0].1, rot[1].1, rot[2].1],
+            order,
+        };
+        Ok((
+            layout,
+            JointChannels {
+                position: pos.is_some(),
+                order,
+            },
+        ))
     }
 
     fn motion(&mut self, h: Hierarchy) -> Result<Parsed, BvhError> {
@@ -444,7 +531,10 @@ impl<'a> Parser<'a> {
         match t {
             Some(t) if t.is("MOTION") => {}
             Some(t) if t.is("}") => {
-                return Err(self.err(t.line, "unbalanced braces: found `}` after the ROOT joint closed, expected `MOTION`"));
+                return Err(self.err(
+                    t.line,
+                    "unbalanced braces: found `}` after the ROOT joint closed, expected `MOTION`",
+                ));
             }
             _ => {
                 return Err(self.err(
@@ -455,7 +545,10 @@ impl<'a> Parser<'a> {
         }
         let t = self.next();
         if !t.is_some_and(|t| t.is("Frames:")) {
-            return Err(self.err(self.line_of(t), format!("expected `Frames:` after MOTION, found {}", show(t))));
+            return Err(self.err(
+                self.line_of(t),
+                format!("expected `Frames:` after MOTION, found {}", show(t)),
+            ));
         }
         let t = self.next();
         let frames: usize = match t.and_then(|t| std::str::from_utf8(t.text).ok()?.parse().ok()) {
@@ -473,7 +566,13 @@ impl<'a> Parser<'a> {
             t2.is_some_and(|t2| t2.is("Time:"))
         };
         if !ok {
-            return Err(self.err(self.line_of(t), format!("expected `Frame Time:` after the frame count, found {}", show(t))));
+            return Err(self.err(
+                self.line_of(t),
+                format!(
+                    "expected `Frame Time:` after the frame count, found {}",
+                    show(t)
+                ),
+            ));
         }
         let t = self.next();
         let frame_time = t
@@ -484,14 +583,23 @@ impl<'a> Parser<'a> {
             .ok_or_else(|| {
                 self.err(
                     self.line_of(t),
-                    format!("expected the frame time (a positive number of seconds), found {}", show(t)),
+                    format!(
+                        "expected the frame time (a positive number of seconds), found {}",
+                        show(t)
+                    ),
                 )
             })?;
         // Rest of the `Frame Time:` line must be empty.
         self.skip_blank();
         if self.pos < self.b.len() && self.b[self.pos] != b'\n' {
             let t = self.next();
-            return Err(self.err(self.line_of(t), format!("expected the end of the `Frame Time:` line, found {}", show(t))));
+            return Err(self.err(
+                self.line_of(t),
+                format!(
+                    "expected the end of the `Frame Time:` line, found {}",
+                    show(t)
+                ),
+            ));
         }
         self.frames(h, frames, frame_time)
     }
@@ -507,7 +615,11 @@ impl<'a> Parser<'a> {
     /// Reads `frames` rows of `h.columns` numbers each. `pos` is at the end of the
     /// `Frame Time:` line.
     fn frames(&mut self, h: Hierarchy, frames: usize, frame_time: f64) -> Result<Parsed, BvhError> {
-        let Hierarchy { skeleton, layouts, columns } = h;
+        let Hierarchy {
+            skeleton,
+            layouts,
+            columns,
+        } = h;
         let nj = skeleton.len();
         let b = self.b;
         // Pre-size from `Frames:`, bounded by what the remaining bytes can hold (each value
@@ -530,7 +642,9 @@ impl<'a> Parser<'a> {
             if self.pos >= b.len() {
                 return Err(self.err(
                     self.line,
-                    format!("expected {frames} frame rows as declared by `Frames:`, found only {f}"),
+                    format!(
+                        "expected {frames} frame rows as declared by `Frames:`, found only {f}"
+                    ),
                 ));
             }
             let line = self.line;
@@ -542,12 +656,22 @@ impl<'a> Parser<'a> {
                 }
                 let rest = &b[self.pos..];
                 let parsed = match parse_partial::<f64, _>(rest) {
-                    Ok((v, n)) if v.is_finite() && (n == rest.len() || rest[n].is_ascii_whitespace()) => Some((v, n)),
+                    Ok((v, n))
+                        if v.is_finite() && (n == rest.len() || rest[n].is_ascii_whitespace()) =>
+                    {
+                        Some((v, n))
+                    }
                     _ => None,
                 };
                 let Some((v, n)) = parsed else {
-                    let end = rest.iter().position(|x| x.is_ascii_whitespace()).unwrap_or(rest.len());
-                    let tok = Tok { text: &rest[..end], line };
+                    let end = rest
+                        .iter()
+                        .position(|x| x.is_ascii_whitespace())
+                        .unwrap_or(rest.len());
+                    let tok = Tok {
+                        text: &rest[..end],
+                        line,
+                    };
                     return Err(self.err(
                         line,
                         format!(
@@ -573,7 +697,10 @@ impl<'a> Parser<'a> {
             root_nonzero |= row[..root_cols].iter().any(|&v| v != 0.0);
             for (j, l) in layouts.iter().enumerate() {
                 let v = &row[l.start..l.start + l.count];
-                let q = l.order.to_quat_deg([v[l.rot[0]], v[l.rot[1]], v[l.rot[2]]]).normalize();
+                let q = l
+                    .order
+                    .to_quat_deg([v[l.rot[0]], v[l.rot[1]], v[l.rot[2]]])
+                    .normalize();
                 rotations.push(q);
                 positions.push(match l.pos {
                     Some(p) => DVec3::new(v[p[0]], v[p[1]], v[p[2]]),
@@ -583,7 +710,15 @@ impl<'a> Parser<'a> {
             f += 1;
         }
         let dummy_root = !root_nonzero && skeleton.children(0).len() == 1;
-        Ok(Parsed { clip: Clip { skeleton, frame_time, local_rotations: rotations, local_positions: positions }, dummy_root })
+        Ok(Parsed {
+            clip: Clip {
+                skeleton,
+                frame_time,
+                local_rotations: rotations,
+                local_positions: positions,
+            },
+            dummy_root,
+        })
     }
 }
 
@@ -593,6 +728,7 @@ impl<'a> Parser<'a> {
 /// skeletons read from BVH). A joint gets `Xposition Yposition Zposition` channels when its
 /// [`JointChannels::position`] is set or when its translation differs from its offset in some
 /// frame (so root motion is never lost), followed by its rotation channels in its own order.
+/// Whitespace in joint names becomes `_` (BVH names are single tokens).
 /// Offsets and the frame time are written with shortest round-trip precision, motion values
 /// with 6 decimals (error <= 5e-7 degrees / clip units).
 pub fn to_string(clip: &Clip) -> String {
@@ -612,14 +748,23 @@ pub fn to_string(clip: &Clip) -> String {
     let with_pos: Vec<bool> = (0..nj)
         .map(|j| {
             sk.channels[j].position
-                || (0..frames).any(|f| (clip.local_positions[f * nj + j] - sk.offsets[j]).abs().max_element() > 1e-9)
+                || (0..frames).any(|f| {
+                    (clip.local_positions[f * nj + j] - sk.offsets[j])
+                        .abs()
+                        .max_element()
+                        > 1e-9
+                })
         })
         .collect();
     let mut order = Vec::with_capacity(nj);
     out.push_str("HIERARCHY\n");
     write_joint(&mut out, sk, &children, &with_pos, 0, 0, &mut order);
     use std::fmt::Write as _;
-    let _ = write!(out, "MOTION\nFrames: {frames}\nFrame Time: {}\n", clip.frame_time);
+    let _ = write!(
+        out,
+        "MOTION\nFrames: {frames}\nFrame Time: {}\n",
+        clip.frame_time
+    );
     for f in 0..frames {
         let mut first = true;
         let mut num = |out: &mut String, v: f64| {
@@ -637,7 +782,9 @@ pub fn to_string(clip: &Clip) -> String {
                     num(&mut out, v);
                 }
             }
-            let e = sk.channels[j].order.from_quat_deg(clip.local_rotations[f * nj + j]);
+            let e = sk.channels[j]
+                .order
+                .from_quat_deg(clip.local_rotations[f * nj + j]);
             for v in e {
                 num(&mut out, v);
             }
@@ -661,8 +808,18 @@ fn write_joint(
     let ind = "\t".repeat(depth);
     let kw = if depth == 0 { "ROOT" } else { "JOINT" };
     let o = sk.offsets[j];
-    let _ = writeln!(out, "{ind}{kw} {}\n{ind}{{\n{ind}\tOFFSET {} {} {}", sk.names[j], o.x, o.y, o.z);
-    let axes = sk.channels[j].order.axes().map(|a| ["Xrotation", "Yrotation", "Zrotation"][a]);
+    let _ = writeln!(
+        out,
+        "{ind}{kw} {}\n{ind}{{\n{ind}\tOFFSET {} {} {}",
+        joint_name(&sk.names[j]),
+        o.x,
+        o.y,
+        o.z
+    );
+    let axes = sk.channels[j]
+        .order
+        .axes()
+        .map(|a| ["Xrotation", "Yrotation", "Zrotation"][a]);
     let rot = axes.join(" ");
     if with_pos[j] {
         let _ = writeln!(out, "{ind}\tCHANNELS 6 Xposition Yposition Zposition {rot}");
@@ -673,9 +830,23 @@ fn write_joint(
         write_joint(out, sk, children, with_pos, c, depth + 1, order);
     }
     if let Some(e) = sk.end_sites[j] {
-        let _ = writeln!(out, "{ind}\tEnd Site\n{ind}\t{{\n{ind}\t\tOFFSET {} {} {}\n{ind}\t}}", e.x, e.y, e.z);
+        let _ = writeln!(
+            out,
+            "{ind}\tEnd Site\n{ind}\t{{\n{ind}\t\tOFFSET {} {} {}\n{ind}\t}}",
+            e.x, e.y, e.z
+        );
     }
     let _ = writeln!(out, "{ind}}}");
+}
+
+/// A joint name as one BVH token: whitespace becomes `_`, an empty name `_`.
+fn joint_name(name: &str) -> String {
+    if name.is_empty() {
+        return "_".into();
+    }
+    name.chars()
+        .map(|c| if c.is_whitespace() { '_' } else { c })
+        .collect()
 }
 
 /// Writes a clip to a `.bvh` file (or gzip-compressed when the name ends in `.gz`).
@@ -685,9 +856,16 @@ fn write_joint(
 pub fn write_file(clip: &Clip, path: &Path) -> std::io::Result<()> {
     let text = to_string(clip);
     let name = path.file_name().ok_or_else(|| {
-        std::io::Error::new(std::io::ErrorKind::InvalidInput, format!("{}: not a file name", path.display()))
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            format!("{}: not a file name", path.display()),
+        )
     })?;
-    let tmp = path.with_file_name(format!(".{}.{}.tmp", name.to_string_lossy(), std::process::id()));
+    let tmp = path.with_file_name(format!(
+        ".{}.{}.tmp",
+        name.to_string_lossy(),
+        std::process::id()
+    ));
     let gz = name.to_string_lossy().ends_with(".gz");
     let result = (|| {
         let file = std::fs::File::create(&tmp)?;
@@ -707,4 +885,302 @@ pub fn write_file(clip: &Clip, path: &Path) -> std::io::Result<()> {
         let _ = std::fs::remove_file(&tmp);
     }
     result
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A valid file: line numbers in the tests below refer to it.
+    const VALID: &str = "HIERARCHY
+ROOT Hips
+{
+\tOFFSET 0 90 0
+\tCHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+\tJOINT Leg
+\t{
+\t\tOFFSET 10 -40 0
+\t\tCHANNELS 3 Zrotation Xrotation Yrotation
+\t\tEnd Site
+\t\t{
+\t\t\tOFFSET 0 -40 0
+\t\t}
+\t}
+}
+MOTION
+Frames: 2
+Frame Time: 0.0333333
+1 90 2 10 20 30 -5 0 45
+1.5 90.5 2.5 11 21 31 -6 1 44
+";
+
+    fn read(text: &str) -> Result<Clip, BvhError> {
+        parse(text, Path::new("case.bvh"), &ReadOptions::default())
+    }
+
+    /// Parses `text`, which must fail on `line` with a message containing `expected`.
+    fn assert_fails(text: &str, line: usize, expected: &str) {
+        let err = read(text).expect_err("malformed input must be rejected");
+        let shown = err.to_string();
+        assert!(
+            shown.starts_with(&format!("case.bvh:{line}: ")),
+            "wrong file/line in `{shown}`"
+        );
+        assert!(
+            shown.contains(expected),
+            "`{shown}` does not say `{expected}`"
+        );
+        match err {
+            BvhError::Parse { line: l, .. } => assert_eq!(l, line),
+            other => panic!("expected a parse error, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn valid_file_parses() {
+        let clip = read(VALID).unwrap();
+        assert_eq!(clip.frames(), 2);
+        assert_eq!(clip.joints(), 2);
+    }
+
+    #[test]
+    fn malformed_empty_file() {
+        assert_fails("", 1, "empty file: expected `HIERARCHY`");
+        assert_fails(" \r\n\t\n", 1, "empty file: expected `HIERARCHY`");
+    }
+
+    #[test]
+    fn malformed_missing_hierarchy_keyword() {
+        assert_fails(
+            &VALID.replacen("HIERARCHY", "HIERARCH", 1),
+            1,
+            "expected `HIERARCHY`",
+        );
+    }
+
+    #[test]
+    fn malformed_missing_motion() {
+        let text = VALID.replace("MOTION\n", "");
+        assert_fails(&text, 16, "expected `MOTION`");
+    }
+
+    #[test]
+    fn malformed_truncated_before_motion() {
+        let text = &VALID[..VALID.find("MOTION").unwrap()];
+        assert_fails(
+            text,
+            16,
+            "expected `MOTION` after the hierarchy, found the end of the file",
+        );
+    }
+
+    #[test]
+    fn malformed_missing_frames() {
+        let text = VALID.replace("Frames: 2\n", "");
+        assert_fails(&text, 17, "expected `Frames:` after MOTION");
+    }
+
+    #[test]
+    fn malformed_bad_frame_count() {
+        assert_fails(
+            &VALID.replace("Frames: 2", "Frames: two"),
+            17,
+            "expected the frame count",
+        );
+        assert_fails(
+            &VALID.replace("Frames: 2", "Frames: -2"),
+            17,
+            "expected the frame count",
+        );
+    }
+
+    #[test]
+    fn malformed_missing_frame_time() {
+        let text = VALID.replace("Frame Time: 0.0333333\n", "");
+        assert_fails(&text, 18, "expected `Frame Time:`");
+    }
+
+    #[test]
+    fn malformed_bad_frame_time() {
+        assert_fails(
+            &VALID.replace("0.0333333", "0"),
+            18,
+            "expected the frame time (a positive number",
+        );
+        assert_fails(
+            &VALID.replace("0.0333333", "fast"),
+            18,
+            "expected the frame time",
+        );
+    }
+
+    #[test]
+    fn malformed_row_with_too_few_values() {
+        let text = VALID.replace(
+            "1.5 90.5 2.5 11 21 31 -6 1 44",
+            "1.5 90.5 2.5 11 21 31 -6 1",
+        );
+        assert_fails(&text, 20, "expected 9 values in frame 2");
+    }
+
+    #[test]
+    fn malformed_row_with_too_many_values() {
+        let text = VALID.replace("-5 0 45", "-5 0 45 7");
+        assert_fails(&text, 19, "expected 9 values in frame 1");
+    }
+
+    #[test]
+    fn malformed_non_number() {
+        let text = VALID.replace("11 21 31", "11 abc 31");
+        assert_fails(
+            &text,
+            20,
+            "expected a number (value 5 of 9 in frame 2), found `abc`",
+        );
+        let text = VALID.replace("11 21 31", "11 21x 31");
+        assert_fails(
+            &text,
+            20,
+            "expected a number (value 5 of 9 in frame 2), found `21x`",
+        );
+        let text = VALID.replace("11 21 31", "11 nan 31");
+        assert_fails(&text, 20, "expected a number");
+    }
+
+    #[test]
+    fn malformed_non_number_offset() {
+        let text = VALID.replace("OFFSET 10 -40 0", "OFFSET 10 - 0");
+        assert_fails(
+            &text,
+            8,
+            "expected the Y value of the OFFSET of `Leg` (a number), found `-`",
+        );
+    }
+
+    #[test]
+    fn malformed_unknown_channel() {
+        let text = VALID.replace(
+            "CHANNELS 3 Zrotation Xrotation Yrotation",
+            "CHANNELS 3 Zrotation Wrotation Yrotation",
+        );
+        assert_fails(
+            &text,
+            9,
+            "unknown channel `Wrotation` in joint `Leg`: expected Xposition",
+        );
+    }
+
+    #[test]
+    fn malformed_fewer_rows_than_declared() {
+        let text = VALID.replace("Frames: 2", "Frames: 3");
+        assert_fails(
+            &text,
+            21,
+            "expected 3 frame rows as declared by `Frames:`, found only 2",
+        );
+    }
+
+    #[test]
+    fn more_rows_than_declared_reads_the_declared_count() {
+        let clip = read(&VALID.replace("Frames: 2", "Frames: 1")).unwrap();
+        assert_eq!(clip.frames(), 1);
+    }
+
+    #[test]
+    fn malformed_unbalanced_braces_missing_close() {
+        // Drop the `}` closing `Leg` (line 14).
+        let text = VALID.replacen("\t}\n}\nMOTION", "}\nMOTION", 1);
+        assert_fails(
+            &text,
+            15,
+            "unbalanced braces: expected `}` closing joint `Hips` (opened at line 3)",
+        );
+    }
+
+    #[test]
+    fn malformed_unbalanced_braces_extra_close() {
+        let text = VALID.replacen("}\nMOTION", "}\n}\nMOTION", 1);
+        assert_fails(&text, 16, "unbalanced braces");
+        assert_fails(&text, 16, "expected `MOTION`");
+    }
+
+    #[test]
+    fn malformed_unbalanced_braces_at_end_of_file() {
+        let text = &VALID[..VALID.find("\t}\n}").unwrap()];
+        assert_fails(
+            text,
+            14,
+            "unbalanced braces: expected `}` closing joint `Leg` (opened at line 7)",
+        );
+    }
+
+    #[test]
+    fn malformed_bad_channels_count() {
+        let text = VALID.replace("CHANNELS 3 Zrotation", "CHANNELS 4 Zrotation");
+        assert_fails(
+            &text,
+            9,
+            "expected a CHANNELS count of 3 or 6 in joint `Leg`, found `4`",
+        );
+    }
+
+    #[test]
+    fn malformed_channels_without_rotations() {
+        let text = VALID.replace(
+            "CHANNELS 3 Zrotation Xrotation Yrotation",
+            "CHANNELS 3 Xposition Yposition Zposition",
+        );
+        assert_fails(&text, 9, "expected three rotation channels");
+    }
+
+    #[test]
+    fn malformed_duplicate_joint_names() {
+        let text = VALID.replace("JOINT Leg", "JOINT Hips");
+        assert_fails(
+            &text,
+            6,
+            "duplicate joint name `Hips`: expected unique joint names",
+        );
+    }
+
+    #[test]
+    fn malformed_rotation_order_with_repeated_axis() {
+        let text = VALID.replace(
+            "CHANNELS 3 Zrotation Xrotation Yrotation",
+            "CHANNELS 3 Zrotation Xrotation Zrotation",
+        );
+        assert_fails(
+            &text,
+            9,
+            "rotation order with a repeated axis in joint `Leg`: expected each of",
+        );
+    }
+
+    #[test]
+    fn malformed_missing_offset() {
+        let text = VALID.replace("\t\tOFFSET 10 -40 0\n", "");
+        assert_fails(&text, 13, "expected an OFFSET line in joint `Leg`");
+    }
+
+    #[test]
+    fn malformed_missing_channels() {
+        let text = VALID.replace("\t\tCHANNELS 3 Zrotation Xrotation Yrotation\n", "");
+        assert_fails(&text, 13, "expected a CHANNELS line in joint `Leg`");
+    }
+
+    #[test]
+    fn malformed_unknown_keyword_in_joint() {
+        let text = VALID.replace("\t\tEnd Site", "\t\tEndSite");
+        assert_fails(
+            &text,
+            10,
+            "expected OFFSET, CHANNELS, JOINT, End Site or `}` in joint `Leg`, found `EndSite`",
+        );
+    }
+
+    #[test]
+    fn huge_declared_frame_count_does_not_allocate_it() {
+        let text = VALID.replace("Frames: 2", "Frames: 18446744073709551615");
+        assert_fails(&text, 21, "expected 18446744073709551615 frame rows");
+    }
 }
