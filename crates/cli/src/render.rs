@@ -42,10 +42,6 @@ const GRID: (u8, u8, u8) = (200, 200, 205);
 const GROUND: (u8, u8, u8) = (170, 150, 120);
 const TEXT: (u8, u8, u8) = (40, 40, 40);
 
-/// Px per cm of the side view (in a 240 px tall panel: 2.4 m visible).
-const SIDE_SCALE: f64 = 1.0;
-/// Px per cm of the top view.
-const TOP_SCALE: f64 = 0.6;
 
 struct View {
     /// Horizontal direction of travel (unit, y = 0).
@@ -189,6 +185,9 @@ fn draw_frame(
     side_h: f32,
 ) {
     let (px0, py0, w, h) = panel;
+    // Px per cm: 2.4 m visible in the side view, 0.6 of that scale in the top view.
+    let side_scale = side_h as f64 / 240.0;
+    let top_scale = 0.6 * side_scale;
     let (x0, y0) = (0.0f32, 0.0f32);
     let (Some(mut side), Some(mut topv)) =
         (Pixmap::new(w as u32, side_h as u32), Pixmap::new(w as u32, (h - side_h) as u32))
@@ -202,17 +201,17 @@ fn draw_frame(
     let ref_y = root.y - 95.0;
     // --- side view
     let cx = x0 + w as f32 * 0.5;
-    let base = y0 + side_h - 12.0;
+    let base = y0 + side_h - (12.0 * side_scale) as f32;
     let sx = |p: DVec3| -> (f32, f32) {
-        let u = (p - root).dot(view.dir) * SIDE_SCALE;
-        (cx + u as f32, base - ((p.y - ref_y) * SIDE_SCALE) as f32)
+        let u = (p - root).dot(view.dir) * side_scale;
+        (cx + u as f32, base - ((p.y - ref_y) * side_scale) as f32)
     };
     // grid ticks every 50 cm along the travel direction
     let s0 = root.dot(view.dir);
-    let half = (w as f64 * 0.5) / SIDE_SCALE;
+    let half = (w as f64 * 0.5) / side_scale;
     let mut s = ((s0 - half) / 50.0).floor() * 50.0;
     while s <= s0 + half {
-        let x = cx + ((s - s0) * SIDE_SCALE) as f32;
+        let x = cx + ((s - s0) * side_scale) as f32;
         line(&mut side, (x, y0), (x, y0 + side_h), rgb(GRID), 1.0);
         s += 50.0;
     }
@@ -242,12 +241,12 @@ fn draw_frame(
     let tcy = ty0 + th * 0.5;
     let tx = |p: DVec3| -> (f32, f32) {
         let d = p - root;
-        (tcx + (d.dot(view.dir) * TOP_SCALE) as f32, tcy - (d.dot(view.left) * TOP_SCALE) as f32)
+        (tcx + (d.dot(view.dir) * top_scale) as f32, tcy - (d.dot(view.left) * top_scale) as f32)
     };
     if let Some(t) = &main.terrain {
         let g0 = t.height(root.x, root.z);
         let cell = 20.0;
-        let n = ((w.max(th) as f64 / TOP_SCALE) / cell / 2.0).ceil() as i32 + 1;
+        let n = ((w.max(th) as f64 / top_scale) / cell / 2.0).ceil() as i32 + 1;
         for a in -n..=n {
             for b in -n..=n {
                 let p = root + view.dir * (a as f64 * cell) + view.left * (b as f64 * cell);
@@ -258,7 +257,7 @@ fn draw_frame(
                     (255.0 + 120.0 * dh, 255.0 + 60.0 * dh, 255.0)
                 };
                 let q = tx(p);
-                let sz = (cell * TOP_SCALE) as f32;
+                let sz = (cell * top_scale) as f32;
                 if q.0 > x0 - sz && q.0 < x0 + w + sz && q.1 > ty0 - sz && q.1 < ty0 + th + sz {
                     let col = Color::from_rgba8(r as u8, g as u8, bl as u8, 255);
                     rect(&mut topv, q.0 - sz * 0.5, q.1 - sz * 0.5, sz + 0.5, sz + 0.5, col);
@@ -266,7 +265,7 @@ fn draw_frame(
             }
         }
     }
-    let half_t = (w.max(th) as f64) / TOP_SCALE;
+    let half_t = (w.max(th) as f64) / top_scale;
     for axis in [DVec3::X, DVec3::Z] {
         let other = if axis == DVec3::X { DVec3::Z } else { DVec3::X };
         let c0 = root.dot(axis);
@@ -350,12 +349,12 @@ fn prepare(clips: &[RenderClip], opts: &RenderOptions) -> Result<Prepared> {
     Ok(Prepared { from: opts.from, to, globals, view })
 }
 
-/// Writes an animated GIF (480 x 360: side view above, top view below, legend top-left).
+/// Writes an animated GIF (320 x 240: side view above, top view below, legend top-left).
 pub fn render_gif(clips: &[RenderClip], opts: &RenderOptions, path: &Path) -> Result<usize> {
     let p = prepare(clips, opts)?;
     let fps = clips[0].clip.fps();
     let every = opts.every.unwrap_or(((fps / 15.0).round() as usize).max(1));
-    let (w, h, side_h) = (480u16, 360u16, 240.0f32);
+    let (w, h, side_h) = (320u16, 240u16, 160.0f32);
     let file = std::fs::File::create(path).with_context(|| format!("{}: cannot create", path.display()))?;
     let mut enc = gif::Encoder::new(std::io::BufWriter::new(file), w, h, &[])?;
     enc.set_repeat(gif::Repeat::Infinite)?;
@@ -371,7 +370,7 @@ pub fn render_gif(clips: &[RenderClip], opts: &RenderOptions, path: &Path) -> Re
             text(&mut pm, w as f32 - 6.0 - s.len() as f32 * 8.0, 6.0, 2.0, &s, rgb(TEXT));
         }
         let mut rgba = pm.take();
-        let mut frame = gif::Frame::from_rgba_speed(w, h, &mut rgba, 10);
+        let mut frame = gif::Frame::from_rgba_speed(w, h, &mut rgba, 20);
         frame.delay = delay;
         enc.write_frame(&frame)?;
         count += 1;
