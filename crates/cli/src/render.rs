@@ -454,7 +454,6 @@ mod tests {
         for (name, c) in [
             ("synth_walk_flat", find(false, TerrainKind::Flat, Gait::Walk)),
             ("synth_walk_steps", find(true, TerrainKind::Steps, Gait::Walk)),
-            ("synth_run_flat", find(false, TerrainKind::Flat, Gait::Run)),
             ("synth_run_bumps", find(true, TerrainKind::Bumps, Gait::Run)),
         ] {
             let clips = [RenderClip { label: c.name.clone(), clip: c.clip, terrain: c.terrain }];
