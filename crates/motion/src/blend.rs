@@ -86,9 +86,7 @@ impl Inertializer {
         for j in 0..n {
             // offset at the switch and one frame before, both against the target stream
             let o1 = (src_last.0[j] * dst_first.0[j].inverse()).normalize();
-            let o0 = (src_prev.0[j]
-                * (dst_first.0[j] * dst_next.0[j].inverse() * dst_first.0[j]).inverse())
-            .normalize();
+            let o0 = (src_prev.0[j] * (dst_first.0[j] * dst_next.0[j].inverse() * dst_first.0[j]).inverse()).normalize();
             let o0 = if o0.dot(o1) < 0.0 { -o0 } else { o0 };
             let dv = to_scaled_axis((o1 * o0.inverse()).normalize()) / dt;
             rot_offset.push(o1);
@@ -96,13 +94,7 @@ impl Inertializer {
         }
         let p1 = src_last.1 - dst_first.1;
         let p0 = src_prev.1 - (dst_first.1 - (dst_next.1 - dst_first.1));
-        Inertializer {
-            rot_offset,
-            rot_velocity,
-            pos_offset: p1,
-            pos_velocity: (p1 - p0) / dt,
-            blend_time,
-        }
+        Inertializer { rot_offset, rot_velocity, pos_offset: p1, pos_velocity: (p1 - p0) / dt, blend_time }
     }
 
     /// Applies the decayed offsets at time `t` (seconds since the switch) to a target frame.
@@ -146,10 +138,7 @@ mod tests {
         for v0 in [-100.0, -10.0, -1.0, 0.0, 5.0] {
             for k in 0..=100 {
                 let t = k as f64 * 0.01;
-                assert!(
-                    inertialize_scalar(1.0, v0, 1.0, t) >= -1e-9,
-                    "v0={v0} t={t}"
-                );
+                assert!(inertialize_scalar(1.0, v0, 1.0, t) >= -1e-9, "v0={v0} t={t}");
             }
         }
     }
@@ -158,12 +147,7 @@ mod tests {
     fn quat_offset_decays_to_identity() {
         let o = DQuat::from_rotation_y(0.7);
         assert!(inertialize_quat(o, DVec3::ZERO, 0.3, 0.0).dot(o) > 1.0 - 1e-12);
-        assert!(
-            inertialize_quat(o, DVec3::ZERO, 0.3, 0.3)
-                .dot(DQuat::IDENTITY)
-                .abs()
-                > 1.0 - 1e-12
-        );
+        assert!(inertialize_quat(o, DVec3::ZERO, 0.3, 0.3).dot(DQuat::IDENTITY).abs() > 1.0 - 1e-12);
     }
 
     #[test]

@@ -116,10 +116,7 @@ impl Clip {
             let r0 = self.local_rotations[f * jn];
             let p0 = self.local_positions[f * jn];
             for j in 1..jn {
-                let (r, p) = (
-                    self.local_rotations[f * jn + j],
-                    self.local_positions[f * jn + j],
-                );
+                let (r, p) = (self.local_rotations[f * jn + j], self.local_positions[f * jn + j]);
                 if j == 1 {
                     rot.push(r0 * r);
                     pos.push(p0 + r0 * p);
@@ -134,10 +131,7 @@ impl Clip {
         offsets[0] = old.offsets[0] + old.offsets[1];
         self.skeleton = Skeleton {
             names: old.names[1..].to_vec(),
-            parents: old.parents[1..]
-                .iter()
-                .map(|p| p.and_then(|p| p.checked_sub(1)))
-                .collect(),
+            parents: old.parents[1..].iter().map(|p| p.and_then(|p| p.checked_sub(1))).collect(),
             offsets,
             end_sites: old.end_sites[1..].to_vec(),
             channels: old.channels[1..].to_vec(),

@@ -112,11 +112,7 @@ impl std::str::FromStr for EulerOrder {
         EulerOrder::ALL
             .into_iter()
             .find(|o| o.name() == lower)
-            .ok_or_else(|| {
-                format!(
-                    "unknown rotation order `{s}`: expected one of xyz, xzy, yxz, yzx, zxy, zyx"
-                )
-            })
+            .ok_or_else(|| format!("unknown rotation order `{s}`: expected one of xyz, xzy, yxz, yzx, zxy, zyx"))
     }
 }
 
@@ -160,10 +156,7 @@ mod tests {
                 let mut angles = [0.0; 3];
                 angles[slot] = 30.0;
                 let q = order.to_quat_deg(angles);
-                assert!(
-                    close(q, axis_quat(ax[slot], 30f64.to_radians())),
-                    "{order:?} slot {slot}"
-                );
+                assert!(close(q, axis_quat(ax[slot], 30f64.to_radians())), "{order:?} slot {slot}");
             }
         }
     }

@@ -29,11 +29,7 @@ pub fn yaw(angle: f64) -> DQuat {
 /// Removes everything but the rotation about +Y from `q` (swing-twist decomposition).
 pub fn yaw_part(q: DQuat) -> DQuat {
     let t = DQuat::from_xyzw(0.0, q.y, 0.0, q.w);
-    if t.length_squared() < 1e-24 {
-        DQuat::IDENTITY
-    } else {
-        t.normalize()
-    }
+    if t.length_squared() < 1e-24 { DQuat::IDENTITY } else { t.normalize() }
 }
 
 #[cfg(test)]

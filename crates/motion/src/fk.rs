@@ -81,11 +81,7 @@ mod tests {
         let parents = [None, Some(0), Some(1)];
         let rz = DQuat::from_rotation_z(FRAC_PI_2);
         let lr = [rz, rz, DQuat::IDENTITY];
-        let lp = [
-            DVec3::new(1.0, 0.0, 0.0),
-            DVec3::new(2.0, 0.0, 0.0),
-            DVec3::new(0.0, 3.0, 0.0),
-        ];
+        let lp = [DVec3::new(1.0, 0.0, 0.0), DVec3::new(2.0, 0.0, 0.0), DVec3::new(0.0, 3.0, 0.0)];
         let mut gr = [DQuat::IDENTITY; 3];
         let mut gp = [DVec3::ZERO; 3];
         forward_kinematics_frame(&parents, &lr, &lp, &mut gr, &mut gp);

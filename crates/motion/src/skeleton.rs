@@ -15,10 +15,7 @@ pub struct JointChannels {
 
 impl Default for JointChannels {
     fn default() -> Self {
-        JointChannels {
-            position: false,
-            order: EulerOrder::Zxy,
-        }
+        JointChannels { position: false, order: EulerOrder::Zxy }
     }
 }
 
@@ -66,17 +63,12 @@ impl Skeleton {
 
     /// Children of joint `j`, in index order.
     pub fn children(&self, j: usize) -> Vec<usize> {
-        (0..self.len())
-            .filter(|&c| self.parents[c] == Some(j))
-            .collect()
+        (0..self.len()).filter(|&c| self.parents[c] == Some(j)).collect()
     }
 
     /// Parents as `i32` with -1 for the root (the layout of exported metadata).
     pub fn parents_i32(&self) -> Vec<i32> {
-        self.parents
-            .iter()
-            .map(|p| p.map_or(-1, |p| p as i32))
-            .collect()
+        self.parents.iter().map(|p| p.map_or(-1, |p| p as i32)).collect()
     }
 
     /// Checks array lengths, unique names, a single root at 0 and parents before children.
@@ -92,16 +84,11 @@ impl Skeleton {
             ("channels", self.channels.len()),
         ] {
             if len != n {
-                return Err(SkeletonError(format!(
-                    "skeleton has {n} joint names but {len} {what}"
-                )));
+                return Err(SkeletonError(format!("skeleton has {n} joint names but {len} {what}")));
             }
         }
         if self.parents[0].is_some() {
-            return Err(SkeletonError(format!(
-                "joint 0 `{}` must be the root",
-                self.names[0]
-            )));
+            return Err(SkeletonError(format!("joint 0 `{}` must be the root", self.names[0])));
         }
         for j in 1..n {
             match self.parents[j] {
@@ -113,10 +100,7 @@ impl Skeleton {
                     )));
                 }
                 None => {
-                    return Err(SkeletonError(format!(
-                        "joint {j} `{}` is a second root",
-                        self.names[j]
-                    )));
+                    return Err(SkeletonError(format!("joint {j} `{}` is a second root", self.names[j])));
                 }
             }
         }
@@ -137,18 +121,11 @@ impl Skeleton {
     /// Explains how `other` differs from `self` (for "wrong skeleton" errors), or `None`.
     pub fn topology_difference(&self, other: &Skeleton) -> Option<String> {
         if self.len() != other.len() {
-            return Some(format!(
-                "expected {} joints, found {}",
-                self.len(),
-                other.len()
-            ));
+            return Some(format!("expected {} joints, found {}", self.len(), other.len()));
         }
         for j in 0..self.len() {
             if self.names[j] != other.names[j] {
-                return Some(format!(
-                    "joint {j}: expected `{}`, found `{}`",
-                    self.names[j], other.names[j]
-                ));
+                return Some(format!("joint {j}: expected `{}`, found `{}`", self.names[j], other.names[j]));
             }
             if self.parents[j] != other.parents[j] {
                 return Some(format!("joint `{}`: parent differs", self.names[j]));
@@ -160,13 +137,7 @@ impl Skeleton {
     /// Length of each bone (|offset|; 0 for the root).
     pub fn bone_lengths(&self) -> Vec<f64> {
         (0..self.len())
-            .map(|j| {
-                if self.parents[j].is_some() {
-                    self.offsets[j].length()
-                } else {
-                    0.0
-                }
-            })
+            .map(|j| if self.parents[j].is_some() { self.offsets[j].length() } else { 0.0 })
             .collect()
     }
 }
