@@ -209,11 +209,20 @@ fn run_synth(a: SynthArgs) -> anyhow::Result<()> {
     if !(a.minutes > 0.0 && a.clip_seconds > 0.0 && a.fps > 0.0) {
         anyhow::bail!("--minutes, --clip-seconds and --fps must be positive");
     }
-    let cfg = SynthConfig { minutes: a.minutes, seed: a.seed, terrain: a.terrain, fps: a.fps, clip_seconds: a.clip_seconds };
+    let cfg = SynthConfig {
+        minutes: a.minutes,
+        seed: a.seed,
+        terrain: a.terrain,
+        fps: a.fps,
+        clip_seconds: a.clip_seconds,
+    };
     let start = std::time::Instant::now();
     let n = cfg.clip_count();
     let bar = ProgressBar::new(2 * n as u64);
-    bar.set_style(ProgressStyle::with_template("{msg:10} [{bar:40}] {pos}/{len} {elapsed}").expect("template"));
+    bar.set_style(
+        ProgressStyle::with_template("{msg:10} [{bar:40}] {pos}/{len} {elapsed}")
+            .expect("template"),
+    );
     bar.set_message("generate");
     let clips = synth::generate_with_progress(&cfg, &|| bar.inc(1));
     bar.set_message("write");
