@@ -61,7 +61,8 @@ fn stats_reads_a_folder_and_writes_json() {
     let dir = tempfile::tempdir().unwrap();
     toy_dataset(dir.path());
     let json = dir.path().join("stats.json");
-    let out = Command::new(zoo_bin()).args(["data", "stats"]).arg(dir.path()).arg("--json").arg(&json).output().unwrap();
+    let out =
+        Command::new(zoo_bin()).args(["data", "stats"]).arg(dir.path()).arg("--json").arg(&json).output().unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(v["clips"], 4);

@@ -26,7 +26,12 @@ pub fn toy_skeleton() -> Skeleton {
     Skeleton {
         names: ["Hips", "Spine", "Leg", "Foot_L"].iter().map(|s| s.to_string()).collect(),
         parents: vec![None, Some(0), Some(0), Some(2)],
-        offsets: vec![DVec3::ZERO, DVec3::new(0.0, 10.0, 0.0), DVec3::new(0.0, -40.0, 0.0), DVec3::new(0.0, -40.0, 0.0)],
+        offsets: vec![
+            DVec3::ZERO,
+            DVec3::new(0.0, 10.0, 0.0),
+            DVec3::new(0.0, -40.0, 0.0),
+            DVec3::new(0.0, -40.0, 0.0),
+        ],
         end_sites: vec![None, Some(DVec3::new(0.0, 5.0, 0.0)), None, Some(DVec3::new(0.0, 0.0, 10.0))],
         channels: vec![ch(true), ch(false), ch(false), ch(false)],
     }

@@ -4,7 +4,7 @@ use anyhow::Context;
 use glam::{DQuat, DVec3};
 use rayon::prelude::*;
 use std::path::Path;
-use zoo_data::benchmark::{self, Transition, TransitionMethod, TransitionTask, N_PAST};
+use zoo_data::benchmark::{self, N_PAST, Transition, TransitionMethod, TransitionTask};
 use zoo_motion::features::FeatureStats;
 use zoo_motion::fit::fit_rotations;
 use zoo_motion::fk::forward_kinematics_frame;

@@ -8,9 +8,7 @@
 
 use anyhow::{Context, Result, bail};
 use std::path::Path;
-use tiny_skia::{
-    Color, FillRule, Paint, PathBuilder, Pixmap, PixmapPaint, Rect, Stroke, Transform,
-};
+use tiny_skia::{Color, FillRule, Paint, PathBuilder, Pixmap, PixmapPaint, Rect, Stroke, Transform};
 use zoo_data::terrain::Heightfield;
 use zoo_motion::Clip;
 use zoo_motion::glam::DVec3;
@@ -38,14 +36,8 @@ pub struct RenderOptions {
     pub frame_numbers: bool,
 }
 
-const PALETTE: [(u8, u8, u8); 6] = [
-    (30, 90, 200),
-    (220, 60, 40),
-    (30, 150, 60),
-    (150, 60, 190),
-    (230, 140, 0),
-    (0, 150, 160),
-];
+const PALETTE: [(u8, u8, u8); 6] =
+    [(30, 90, 200), (220, 60, 40), (30, 150, 60), (150, 60, 190), (230, 140, 0), (0, 150, 160)];
 const GRID: (u8, u8, u8) = (200, 200, 205);
 const GROUND: (u8, u8, u8) = (170, 150, 120);
 const TEXT: (u8, u8, u8) = (40, 40, 40);
@@ -69,10 +61,7 @@ fn view_of(clip: &Clip, from: usize, to: usize) -> View {
         dir = zoo_motion::facing::ground_forward(r, DVec3::Z);
     }
     let dir = dir.normalize_or(DVec3::Z);
-    View {
-        dir,
-        left: DVec3::new(dir.z, 0.0, -dir.x),
-    }
+    View { dir, left: DVec3::new(dir.z, 0.0, -dir.x) }
 }
 
 fn rgb(c: (u8, u8, u8)) -> Color {
@@ -91,23 +80,14 @@ fn line(pm: &mut Pixmap, a: (f32, f32), b: (f32, f32), c: Color, w: f32) {
     pb.move_to(a.0, a.1);
     pb.line_to(b.0, b.1);
     if let Some(path) = pb.finish() {
-        let stroke = Stroke {
-            width: w,
-            ..Stroke::default()
-        };
+        let stroke = Stroke { width: w, ..Stroke::default() };
         pm.stroke_path(&path, &paint(c), &stroke, Transform::identity(), None);
     }
 }
 
 fn dot(pm: &mut Pixmap, p: (f32, f32), r: f32, c: Color) {
     if let Some(path) = PathBuilder::from_circle(p.0, p.1, r) {
-        pm.fill_path(
-            &path,
-            &paint(c),
-            FillRule::Winding,
-            Transform::identity(),
-            None,
-        );
+        pm.fill_path(&path, &paint(c), FillRule::Winding, Transform::identity(), None);
     }
 }
 
@@ -208,10 +188,9 @@ fn draw_frame(
     let side_scale = side_h as f64 / 240.0;
     let top_scale = 0.6 * side_scale;
     let (x0, y0) = (0.0f32, 0.0f32);
-    let (Some(mut side), Some(mut topv)) = (
-        Pixmap::new(w as u32, side_h as u32),
-        Pixmap::new(w as u32, (h - side_h) as u32),
-    ) else {
+    let (Some(mut side), Some(mut topv)) =
+        (Pixmap::new(w as u32, side_h as u32), Pixmap::new(w as u32, (h - side_h) as u32))
+    else {
         return;
     };
     side.fill(Color::WHITE);
@@ -244,38 +223,16 @@ fn draw_frame(
         let gy = ground(&main.terrain, p.x, p.z);
         let q = sx(DVec3::new(p.x, gy, p.z));
         let q = (q.0, q.1.min(y0 + side_h));
-        rect(
-            &mut side,
-            q.0 - 2.0,
-            q.1,
-            4.0,
-            (y0 + side_h - q.1).max(0.0),
-            Color::from_rgba8(225, 215, 195, 255),
-        );
+        rect(&mut side, q.0 - 2.0, q.1, 4.0, (y0 + side_h - q.1).max(0.0), Color::from_rgba8(225, 215, 195, 255));
         if let Some(pq) = prev {
             line(&mut side, pq, q, rgb(GROUND), 2.0);
         }
         prev = Some(q);
     }
     for (ci, c) in clips.iter().enumerate() {
-        draw_skeleton(
-            &mut side,
-            &c.clip,
-            &globals[ci],
-            f,
-            ci,
-            &sx,
-            |p| (p - root).dot(view.left),
-            2.0,
-        );
+        draw_skeleton(&mut side, &c.clip, &globals[ci], f, ci, &sx, |p| (p - root).dot(view.left), 2.0);
     }
-    line(
-        &mut side,
-        (x0, y0 + side_h),
-        (x0 + w, y0 + side_h),
-        rgb(TEXT),
-        1.0,
-    );
+    line(&mut side, (x0, y0 + side_h), (x0 + w, y0 + side_h), rgb(TEXT), 1.0);
     // --- top view
     let ty0 = 0.0f32;
     let th = h - side_h;
@@ -283,10 +240,7 @@ fn draw_frame(
     let tcy = ty0 + th * 0.5;
     let tx = |p: DVec3| -> (f32, f32) {
         let d = p - root;
-        (
-            tcx + (d.dot(view.dir) * top_scale) as f32,
-            tcy - (d.dot(view.left) * top_scale) as f32,
-        )
+        (tcx + (d.dot(view.dir) * top_scale) as f32, tcy - (d.dot(view.left) * top_scale) as f32)
     };
     if let Some(t) = &main.terrain {
         let g0 = t.height(root.x, root.z);
@@ -305,14 +259,7 @@ fn draw_frame(
                 let sz = (cell * top_scale) as f32;
                 if q.0 > x0 - sz && q.0 < x0 + w + sz && q.1 > ty0 - sz && q.1 < ty0 + th + sz {
                     let col = Color::from_rgba8(r as u8, g as u8, bl as u8, 255);
-                    rect(
-                        &mut topv,
-                        q.0 - sz * 0.5,
-                        q.1 - sz * 0.5,
-                        sz + 0.5,
-                        sz + 0.5,
-                        col,
-                    );
+                    rect(&mut topv, q.0 - sz * 0.5, q.1 - sz * 0.5, sz + 0.5, sz + 0.5, col);
                 }
             }
         }
@@ -342,29 +289,9 @@ fn draw_frame(
         draw_skeleton(&mut topv, &c.clip, &globals[ci], f, ci, &tx, |p| p.y, 1.5);
     }
     let pp = PixmapPaint::default();
-    pm.draw_pixmap(
-        px0 as i32,
-        py0 as i32,
-        side.as_ref(),
-        &pp,
-        Transform::identity(),
-        None,
-    );
-    pm.draw_pixmap(
-        px0 as i32,
-        (py0 + side_h) as i32,
-        topv.as_ref(),
-        &pp,
-        Transform::identity(),
-        None,
-    );
-    line(
-        pm,
-        (px0, py0 + side_h),
-        (px0 + w, py0 + side_h),
-        rgb(TEXT),
-        1.0,
-    );
+    pm.draw_pixmap(px0 as i32, py0 as i32, side.as_ref(), &pp, Transform::identity(), None);
+    pm.draw_pixmap(px0 as i32, (py0 + side_h) as i32, topv.as_ref(), &pp, Transform::identity(), None);
+    line(pm, (px0, py0 + side_h), (px0 + w, py0 + side_h), rgb(TEXT), 1.0);
 }
 
 /// Bones as lines, joints as dots; `depth` orders drawing (far first), left limbs lighter.
@@ -414,20 +341,11 @@ fn prepare(clips: &[RenderClip], opts: &RenderOptions) -> Result<Prepared> {
     let frames = clips.iter().map(|c| c.clip.frames()).min().unwrap_or(0);
     let to = opts.to.unwrap_or(frames).min(frames);
     if opts.from >= to {
-        bail!(
-            "empty frame range {}..{} (the shortest clip has {frames} frames)",
-            opts.from,
-            to
-        );
+        bail!("empty frame range {}..{} (the shortest clip has {frames} frames)", opts.from, to);
     }
     let globals = clips.iter().map(|c| c.clip.global().1).collect();
     let view = view_of(&clips[0].clip, opts.from, to);
-    Ok(Prepared {
-        from: opts.from,
-        to,
-        globals,
-        view,
-    })
+    Ok(Prepared { from: opts.from, to, globals, view })
 }
 
 /// Writes an animated GIF (320 x 240: side view above, top view below, legend top-left).
@@ -436,8 +354,7 @@ pub fn render_gif(clips: &[RenderClip], opts: &RenderOptions, path: &Path) -> Re
     let fps = clips[0].clip.fps();
     let every = opts.every.unwrap_or(((fps / 15.0).round() as usize).max(1));
     let (w, h, side_h) = (320u16, 240u16, 160.0f32);
-    let file = std::fs::File::create(path)
-        .with_context(|| format!("{}: cannot create", path.display()))?;
+    let file = std::fs::File::create(path).with_context(|| format!("{}: cannot create", path.display()))?;
     let mut enc = gif::Encoder::new(std::io::BufWriter::new(file), w, h, &[])?;
     enc.set_repeat(gif::Repeat::Infinite)?;
     let delay = ((every as f64 / fps) * 100.0).round() as u16;
@@ -445,26 +362,11 @@ pub fn render_gif(clips: &[RenderClip], opts: &RenderOptions, path: &Path) -> Re
     for f in (p.from..p.to).step_by(every) {
         let mut pm = Pixmap::new(w as u32, h as u32).context("pixmap")?;
         pm.fill(Color::WHITE);
-        draw_frame(
-            &mut pm,
-            clips,
-            &p.globals,
-            &p.view,
-            f,
-            (0.0, 0.0, w as f32, h as f32),
-            side_h,
-        );
+        draw_frame(&mut pm, clips, &p.globals, &p.view, f, (0.0, 0.0, w as f32, h as f32), side_h);
         legend(&mut pm, clips, 6.0, 6.0);
         if opts.frame_numbers {
             let s = format!("F{f}");
-            text(
-                &mut pm,
-                w as f32 - 6.0 - s.len() as f32 * 8.0,
-                6.0,
-                2.0,
-                &s,
-                rgb(TEXT),
-            );
+            text(&mut pm, w as f32 - 6.0 - s.len() as f32 * 8.0, 6.0, 2.0, &s, rgb(TEXT));
         }
         let mut rgba = pm.take();
         let mut frame = gif::Frame::from_rgba_speed(w, h, &mut rgba, 20);
@@ -492,30 +394,14 @@ pub fn render_sheet(clips: &[RenderClip], opts: &RenderOptions, path: &Path) -> 
     legend(&mut pm, clips, 6.0, 6.0);
     for (i, &f) in frames.iter().enumerate() {
         let (x0, y0) = ((i % cols) as f32 * cw, top + (i / cols) as f32 * ch);
-        draw_frame(
-            &mut pm,
-            clips,
-            &p.globals,
-            &p.view,
-            f,
-            (x0, y0, cw, ch),
-            side_h,
-        );
+        draw_frame(&mut pm, clips, &p.globals, &p.view, f, (x0, y0, cw, ch), side_h);
         line(&mut pm, (x0, y0), (x0 + cw, y0), rgb(TEXT), 1.0);
         line(&mut pm, (x0, y0), (x0, y0 + ch), rgb(TEXT), 1.0);
         if opts.frame_numbers {
-            text(
-                &mut pm,
-                x0 + 4.0,
-                y0 + 4.0,
-                2.0,
-                &format!("F{f}"),
-                rgb(TEXT),
-            );
+            text(&mut pm, x0 + 4.0, y0 + 4.0, 2.0, &format!("F{f}"), rgb(TEXT));
         }
     }
-    pm.save_png(path)
-        .with_context(|| format!("{}: cannot write PNG", path.display()))?;
+    pm.save_png(path).with_context(|| format!("{}: cannot write PNG", path.display()))?;
     Ok(frames.len())
 }
 
@@ -525,45 +411,20 @@ mod tests {
     use zoo_data::synth::{SynthConfig, generate_clip};
 
     fn synth(seed: u64, terrain: bool) -> RenderClip {
-        let c = generate_clip(
-            &SynthConfig {
-                seed,
-                terrain,
-                clip_seconds: 2.0,
-                ..SynthConfig::default()
-            },
-            0,
-        );
-        RenderClip {
-            label: c.name.clone(),
-            clip: c.clip,
-            terrain: c.terrain,
-        }
+        let c = generate_clip(&SynthConfig { seed, terrain, clip_seconds: 2.0, ..SynthConfig::default() }, 0);
+        RenderClip { label: c.name.clone(), clip: c.clip, terrain: c.terrain }
     }
 
     #[test]
     fn gif_and_sheet_are_written() {
         let dir = tempfile::tempdir().unwrap();
         let clips = [synth(1, true), synth(2, false)];
-        let opts = RenderOptions {
-            from: 0,
-            to: Some(30),
-            every: None,
-            frame_numbers: true,
-        };
+        let opts = RenderOptions { from: 0, to: Some(30), every: None, frame_numbers: true };
         let n = render_gif(&clips, &opts, &dir.path().join("a.gif")).unwrap();
         assert_eq!(n, 15);
         let bytes = std::fs::read(dir.path().join("a.gif")).unwrap();
         assert_eq!(&bytes[..6], b"GIF89a");
-        let n = render_sheet(
-            &clips,
-            &RenderOptions {
-                every: Some(10),
-                ..opts
-            },
-            &dir.path().join("s.png"),
-        )
-        .unwrap();
+        let n = render_sheet(&clips, &RenderOptions { every: Some(10), ..opts }, &dir.path().join("s.png")).unwrap();
         assert_eq!(n, 3);
         let bytes = std::fs::read(dir.path().join("s.png")).unwrap();
         assert_eq!(&bytes[1..4], b"PNG");
@@ -572,12 +433,7 @@ mod tests {
     #[test]
     fn empty_range_is_an_error() {
         let clips = [synth(1, false)];
-        let opts = RenderOptions {
-            from: 100,
-            to: Some(50),
-            every: None,
-            frame_numbers: false,
-        };
+        let opts = RenderOptions { from: 100, to: Some(50), every: None, frame_numbers: false };
         let e = render_gif(&clips, &opts, Path::new("/nonexistent/x.gif")).unwrap_err();
         assert!(e.to_string().contains("empty frame range"), "{e}");
     }
@@ -588,50 +444,21 @@ mod tests {
     #[ignore]
     fn docs_previews() {
         use zoo_data::synth::{Gait, TerrainKind};
-        let dir = std::path::PathBuf::from(
-            std::env::var("ZOO_PREVIEW_DIR").expect("set ZOO_PREVIEW_DIR"),
-        );
+        let dir = std::path::PathBuf::from(std::env::var("ZOO_PREVIEW_DIR").expect("set ZOO_PREVIEW_DIR"));
         std::fs::create_dir_all(&dir).unwrap();
         let find = |terrain: bool, kind: TerrainKind, gait: Gait| {
-            let cfg = SynthConfig {
-                seed: 1,
-                terrain,
-                ..SynthConfig::default()
-            };
-            (0..200)
-                .map(|i| generate_clip(&cfg, i))
-                .find(|c| c.terrain_kind == kind && c.gait == gait)
-                .unwrap()
+            let cfg = SynthConfig { seed: 1, terrain, ..SynthConfig::default() };
+            (0..200).map(|i| generate_clip(&cfg, i)).find(|c| c.terrain_kind == kind && c.gait == gait).unwrap()
         };
         for (name, c) in [
-            (
-                "synth_walk_flat",
-                find(false, TerrainKind::Flat, Gait::Walk),
-            ),
-            (
-                "synth_walk_steps",
-                find(true, TerrainKind::Steps, Gait::Walk),
-            ),
+            ("synth_walk_flat", find(false, TerrainKind::Flat, Gait::Walk)),
+            ("synth_walk_steps", find(true, TerrainKind::Steps, Gait::Walk)),
             ("synth_run_bumps", find(true, TerrainKind::Bumps, Gait::Run)),
         ] {
-            let clips = [RenderClip {
-                label: c.name.clone(),
-                clip: c.clip,
-                terrain: c.terrain,
-            }];
-            let gif = RenderOptions {
-                from: 0,
-                to: Some(120),
-                every: Some(3),
-                frame_numbers: true,
-            };
+            let clips = [RenderClip { label: c.name.clone(), clip: c.clip, terrain: c.terrain }];
+            let gif = RenderOptions { from: 0, to: Some(120), every: Some(3), frame_numbers: true };
             render_gif(&clips, &gif, &dir.join(format!("{name}.gif"))).unwrap();
-            let sheet = RenderOptions {
-                from: 0,
-                to: Some(32),
-                every: Some(2),
-                frame_numbers: true,
-            };
+            let sheet = RenderOptions { from: 0, to: Some(32), every: Some(2), frame_numbers: true };
             render_sheet(&clips, &sheet, &dir.join(format!("{name}_sheet.png"))).unwrap();
         }
     }

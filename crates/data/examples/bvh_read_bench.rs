@@ -15,9 +15,7 @@ use std::time::Instant;
 use zoo_data::bvh::{ReadOptions, read_file};
 
 fn main() {
-    let dir = std::env::args()
-        .nth(1)
-        .unwrap_or_else(|| "../shared/data/bandai2".into());
+    let dir = std::env::args().nth(1).unwrap_or_else(|| "../shared/data/bandai2".into());
     let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
         .unwrap_or_else(|e| panic!("{dir}: {e}"))
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -27,21 +25,13 @@ fn main() {
         })
         .collect();
     files.sort();
-    let opts = ReadOptions {
-        drop_dummy_root: true,
-    };
+    let opts = ReadOptions { drop_dummy_root: true };
     for round in 0..3 {
         let t = Instant::now();
-        let frames: usize = files
-            .iter()
-            .map(|p| read_file(p, &opts).unwrap().frames())
-            .sum();
+        let frames: usize = files.iter().map(|p| read_file(p, &opts).unwrap().frames()).sum();
         let single = t.elapsed().as_secs_f64();
         let t = Instant::now();
-        let frames_par: usize = files
-            .par_iter()
-            .map(|p| read_file(p, &opts).unwrap().frames())
-            .sum();
+        let frames_par: usize = files.par_iter().map(|p| read_file(p, &opts).unwrap().frames()).sum();
         let par = t.elapsed().as_secs_f64();
         assert_eq!(frames, frames_par);
         println!(

@@ -8,9 +8,9 @@ use glam::{DQuat, DVec3};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::time::Instant;
+use zoo_motion::Skeleton;
 use zoo_motion::fk::forward_kinematics_frame;
 use zoo_motion::quat::slerp;
-use zoo_motion::Skeleton;
 
 /// Past context frames of every transition.
 pub const N_PAST: usize = 10;
@@ -238,7 +238,8 @@ impl Benchmark {
                 let start = Instant::now();
                 let generated = m.generate(&tasks)?;
                 let ms = start.elapsed().as_secs_f64() * 1e3 / tasks.len() as f64;
-                if generated.len() != tasks.len() || generated.iter().any(|g| g.root.len() != n || g.rot.len() != n * j) {
+                if generated.len() != tasks.len() || generated.iter().any(|g| g.root.len() != n || g.rot.len() != n * j)
+                {
                     return Err(format!("method {} returned transitions of the wrong shape", m.name()));
                 }
                 let (pr, pp) = self.globals(n, Some(&generated));

@@ -54,10 +54,7 @@ pub enum BvhError {
 
 /// Reads a `.bvh` or `.bvh.gz` file (gzip detected by its magic bytes).
 pub fn read_file(path: &Path, opts: &ReadOptions) -> Result<Clip, BvhError> {
-    let io = |source| BvhError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
+    let io = |source| BvhError::Io { path: path.to_path_buf(), source };
     let raw = std::fs::read(path).map_err(io)?;
     if raw.starts_with(&[0x1f, 0x8b]) {
         let text = gunzip(&raw).map_err(io)?;
@@ -72,15 +69,9 @@ fn gunzip(raw: &[u8]) -> std::io::Result<Vec<u8>> {
     // The trailer's ISIZE is the uncompressed size modulo 2^32: a good first capacity, capped
     // by deflate's maximum ratio so a forged trailer cannot request a huge allocation.
     let n = raw.len();
-    let isize_hint = if n >= 18 {
-        u32::from_le_bytes([raw[n - 4], raw[n - 3], raw[n - 2], raw[n - 1]]) as usize
-    } else {
-        0
-    };
-    let cap = isize_hint
-        .min(n.saturating_mul(1032))
-        .max(n.saturating_mul(4))
-        + 64;
+    let isize_hint =
+        if n >= 18 { u32::from_le_bytes([raw[n - 4], raw[n - 3], raw[n - 2], raw[n - 1]]) as usize } else { 0 };
+    let cap = isize_hint.min(n.saturating_mul(1032)).max(n.saturating_mul(4)) + 64;
     let mut out = Vec::with_capacity(cap);
     flate2::read::MultiGzDecoder::new(raw).read_to_end(&mut out)?;
     Ok(out)
@@ -94,12 +85,7 @@ pub fn parse(text: &str, path: &Path, opts: &ReadOptions) -> Result<Clip, BvhErr
 /// Parses BVH bytes (ASCII/UTF-8 text); `path` is only used in error messages.
 pub fn parse_bytes(bytes: &[u8], path: &Path, opts: &ReadOptions) -> Result<Clip, BvhError> {
     let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
-    let mut p = Parser {
-        b: bytes,
-        pos: 0,
-        line: 1,
-        path,
-    };
+    let mut p = Parser { b: bytes, pos: 0, line: 1, path };
     let h = p.hierarchy()?;
     let mut clip = p.motion(h)?;
     if opts.drop_dummy_root && clip.dummy_root {
@@ -157,11 +143,7 @@ impl Tok<'_> {
     }
     fn show(&self) -> String {
         let s = String::from_utf8_lossy(&self.text[..self.text.len().min(40)]);
-        if self.text.len() > 40 {
-            format!("`{s}...`")
-        } else {
-            format!("`{s}`")
-        }
+        if self.text.len() > 40 { format!("`{s}...`") } else { format!("`{s}`") }
     }
 }
 
@@ -171,11 +153,7 @@ fn show(t: Option<Tok>) -> String {
 
 impl<'a> Parser<'a> {
     fn err(&self, line: usize, message: impl Into<String>) -> BvhError {
-        BvhError::Parse {
-            path: self.path.to_path_buf(),
-            line,
-            message: message.into(),
-        }
+        BvhError::Parse { path: self.path.to_path_buf(), line, message: message.into() }
     }
 
     /// Next token, skipping whitespace (and counting lines).
@@ -194,10 +172,7 @@ impl<'a> Parser<'a> {
         while self.pos < b.len() && !b[self.pos].is_ascii_whitespace() {
             self.pos += 1;
         }
-        Some(Tok {
-            text: &b[start..self.pos],
-            line: self.line,
-        })
+        Some(Tok { text: &b[start..self.pos], line: self.line })
     }
 
     /// Line for an error at the end of the file.
@@ -213,10 +188,7 @@ impl<'a> Parser<'a> {
         let t = self.next();
         match t {
             Some(t) if t.is(word) => Ok(t),
-            _ => Err(self.err(
-                self.line_of(t),
-                format!("expected `{word}` {context}, found {}", show(t)),
-            )),
+            _ => Err(self.err(self.line_of(t), format!("expected `{word}` {context}, found {}", show(t)))),
         }
     }
 
@@ -227,12 +199,7 @@ impl<'a> Parser<'a> {
             Ok((v, n)) if n == t.text.len() && v.is_finite() => Some(v),
             _ => None,
         });
-        v.ok_or_else(|| {
-            self.err(
-                self.line_of(t),
-                format!("expected {} (a number), found {}", what(), show(t)),
-            )
-        })
+        v.ok_or_else(|| self.err(self.line_of(t), format!("expected {} (a number), found {}", what(), show(t))))
     }
 
     /// Three numbers: the X, Y and Z values of `what`.
@@ -250,10 +217,7 @@ impl<'a> Parser<'a> {
             None => return Err(self.err(1, "empty file: expected `HIERARCHY`")),
             Some(t) if t.is("HIERARCHY") => {}
             Some(_) => {
-                return Err(self.err(
-                    self.line_of(t),
-                    format!("expected `HIERARCHY`, found {}", show(t)),
-                ));
+                return Err(self.err(self.line_of(t), format!("expected `HIERARCHY`, found {}", show(t))));
             }
         }
         self.expect("ROOT", "after HIERARCHY")?;
@@ -276,19 +240,15 @@ impl<'a> Parser<'a> {
             let name_tok = match name_tok {
                 Some(t) if !t.is("{") && !t.is("}") => t,
                 _ => {
-                    return Err(self.err(
-                        self.line_of(name_tok),
-                        format!("expected a joint name, found {}", show(name_tok)),
-                    ));
+                    return Err(
+                        self.err(self.line_of(name_tok), format!("expected a joint name, found {}", show(name_tok)))
+                    );
                 }
             };
             if !names.insert(name_tok.text.to_vec()) {
                 return Err(self.err(
                     name_tok.line,
-                    format!(
-                        "duplicate joint name {}: expected unique joint names",
-                        name_tok.show()
-                    ),
+                    format!("duplicate joint name {}: expected unique joint names", name_tok.show()),
                 ));
             }
             let name = String::from_utf8_lossy(name_tok.text).into_owned();
@@ -299,13 +259,7 @@ impl<'a> Parser<'a> {
             sk.offsets.push(DVec3::ZERO);
             sk.end_sites.push(None);
             sk.channels.push(JointChannels::default());
-            layouts.push(Layout {
-                start: columns,
-                count: 0,
-                pos: None,
-                rot: [0, 1, 2],
-                order: EulerOrder::Zxy,
-            });
+            layouts.push(Layout { start: columns, count: 0, pos: None, rot: [0, 1, 2], order: EulerOrder::Zxy });
             stack.push((j, open.line));
             let mut have_offset = false;
             // Body items of joint `j` until its `}` or a child joint.
@@ -329,10 +283,7 @@ impl<'a> Parser<'a> {
                     have_offset = true;
                 } else if tok.is("CHANNELS") {
                     if layouts[cur].count != 0 {
-                        return Err(self.err(
-                            tok.line,
-                            format!("joint `{}` has a second CHANNELS line", sk.names[cur]),
-                        ));
+                        return Err(self.err(tok.line, format!("joint `{}` has a second CHANNELS line", sk.names[cur])));
                     }
                     let (lay, ch) = self.channels(tok.line, columns, &sk.names[cur])?;
                     columns += lay.count;
@@ -383,11 +334,7 @@ impl<'a> Parser<'a> {
                 break;
             }
         }
-        Ok(Hierarchy {
-            skeleton: sk,
-            layouts,
-            columns,
-        })
+        Ok(Hierarchy { skeleton: sk, layouts, columns })
     }
 
     fn check_joint(
@@ -399,27 +346,16 @@ impl<'a> Parser<'a> {
         line: usize,
     ) -> Result<(), BvhError> {
         if !have_offset {
-            return Err(self.err(
-                line,
-                format!("expected an OFFSET line in joint `{}`", sk.names[j]),
-            ));
+            return Err(self.err(line, format!("expected an OFFSET line in joint `{}`", sk.names[j])));
         }
         if layouts[j].count == 0 {
-            return Err(self.err(
-                line,
-                format!("expected a CHANNELS line in joint `{}`", sk.names[j]),
-            ));
+            return Err(self.err(line, format!("expected a CHANNELS line in joint `{}`", sk.names[j])));
         }
         Ok(())
     }
 
     /// Parses `n name...` after `CHANNELS`.
-    fn channels(
-        &mut self,
-        line: usize,
-        start: usize,
-        joint: &str,
-    ) -> Result<(Layout, JointChannels), BvhError> {
+    fn channels(&mut self, line: usize, start: usize, joint: &str) -> Result<(Layout, JointChannels), BvhError> {
         let t = self.next();
         let count = match t.map(|t| t.text) {
             Some(b"3") => 3,
@@ -427,10 +363,7 @@ impl<'a> Parser<'a> {
             _ => {
                 return Err(self.err(
                     self.line_of(t).max(line),
-                    format!(
-                        "expected a CHANNELS count of 3 or 6 in joint `{joint}`, found {}",
-                        show(t)
-                    ),
+                    format!("expected a CHANNELS count of 3 or 6 in joint `{joint}`, found {}", show(t)),
                 ));
             }
         };
@@ -469,10 +402,7 @@ impl<'a> Parser<'a> {
             let line = self.line_of(t);
             if is_pos {
                 if pos[axis].is_some() {
-                    return Err(self.err(
-                        line,
-                        format!("repeated position channel in joint `{joint}`"),
-                    ));
+                    return Err(self.err(line, format!("repeated position channel in joint `{joint}`")));
                 }
                 pos[axis] = Some(c);
             } else {
@@ -499,31 +429,11 @@ impl<'a> Parser<'a> {
                 ),
             ));
         }
-        let order = EulerOrder::from_axes([rot[0].0, rot[1].0, rot[2].0]).ok_or_else(|| {
-            self.err(
-                line,
-                format!("rotation order with a repeated axis in joint `{joint}`"),
-            )
-        })?;
-        let pos = if n_pos == 3 {
-            Some(pos.map(|p| p.unwrap_or(0)))
-        } else {
-            None
-        };
-        let layout = Layout {
-            start,
-            count,
-            pos,
-            rot: [rot[0].1, rot[1].1, rot[2].1],
-            order,
-        };
-        Ok((
-            layout,
-            JointChannels {
-                position: pos.is_some(),
-                order,
-            },
-        ))
+        let order = EulerOrder::from_axes([rot[0].0, rot[1].0, rot[2].0])
+            .ok_or_else(|| self.err(line, format!("rotation order with a repeated axis in joint `{joint}`")))?;
+        let pos = if n_pos == 3 { Some(pos.map(|p| p.unwrap_or(0))) } else { None };
+        let layout = Layout { start, count, pos, rot: [rot[0].1, rot[1].1, rot[2].1], order };
+        Ok((layout, JointChannels { position: pos.is_some(), order }))
     }
 
     fn motion(&mut self, h: Hierarchy) -> Result<Parsed, BvhError> {
@@ -531,24 +441,19 @@ impl<'a> Parser<'a> {
         match t {
             Some(t) if t.is("MOTION") => {}
             Some(t) if t.is("}") => {
-                return Err(self.err(
-                    t.line,
-                    "unbalanced braces: found `}` after the ROOT joint closed, expected `MOTION`",
-                ));
+                return Err(
+                    self.err(t.line, "unbalanced braces: found `}` after the ROOT joint closed, expected `MOTION`")
+                );
             }
             _ => {
-                return Err(self.err(
-                    self.line_of(t),
-                    format!("expected `MOTION` after the hierarchy, found {}", show(t)),
-                ));
+                return Err(
+                    self.err(self.line_of(t), format!("expected `MOTION` after the hierarchy, found {}", show(t)))
+                );
             }
         }
         let t = self.next();
         if !t.is_some_and(|t| t.is("Frames:")) {
-            return Err(self.err(
-                self.line_of(t),
-                format!("expected `Frames:` after MOTION, found {}", show(t)),
-            ));
+            return Err(self.err(self.line_of(t), format!("expected `Frames:` after MOTION, found {}", show(t))));
         }
         let t = self.next();
         let frames: usize = match t.and_then(|t| std::str::from_utf8(t.text).ok()?.parse().ok()) {
@@ -566,13 +471,9 @@ impl<'a> Parser<'a> {
             t2.is_some_and(|t2| t2.is("Time:"))
         };
         if !ok {
-            return Err(self.err(
-                self.line_of(t),
-                format!(
-                    "expected `Frame Time:` after the frame count, found {}",
-                    show(t)
-                ),
-            ));
+            return Err(
+                self.err(self.line_of(t), format!("expected `Frame Time:` after the frame count, found {}", show(t)))
+            );
         }
         let t = self.next();
         let frame_time = t
@@ -583,23 +484,16 @@ impl<'a> Parser<'a> {
             .ok_or_else(|| {
                 self.err(
                     self.line_of(t),
-                    format!(
-                        "expected the frame time (a positive number of seconds), found {}",
-                        show(t)
-                    ),
+                    format!("expected the frame time (a positive number of seconds), found {}", show(t)),
                 )
             })?;
         // Rest of the `Frame Time:` line must be empty.
         self.skip_blank();
         if self.pos < self.b.len() && self.b[self.pos] != b'\n' {
             let t = self.next();
-            return Err(self.err(
-                self.line_of(t),
-                format!(
-                    "expected the end of the `Frame Time:` line, found {}",
-                    show(t)
-                ),
-            ));
+            return Err(
+                self.err(self.line_of(t), format!("expected the end of the `Frame Time:` line, found {}", show(t)))
+            );
         }
         self.frames(h, frames, frame_time)
     }
@@ -615,11 +509,7 @@ impl<'a> Parser<'a> {
     /// Reads `frames` rows of `h.columns` numbers each. `pos` is at the end of the
     /// `Frame Time:` line.
     fn frames(&mut self, h: Hierarchy, frames: usize, frame_time: f64) -> Result<Parsed, BvhError> {
-        let Hierarchy {
-            skeleton,
-            layouts,
-            columns,
-        } = h;
+        let Hierarchy { skeleton, layouts, columns } = h;
         let nj = skeleton.len();
         let b = self.b;
         // Pre-size from `Frames:`, bounded by what the remaining bytes can hold (each value
@@ -640,12 +530,8 @@ impl<'a> Parser<'a> {
                 continue;
             }
             if self.pos >= b.len() {
-                return Err(self.err(
-                    self.line,
-                    format!(
-                        "expected {frames} frame rows as declared by `Frames:`, found only {f}"
-                    ),
-                ));
+                return Err(self
+                    .err(self.line, format!("expected {frames} frame rows as declared by `Frames:`, found only {f}")));
             }
             let line = self.line;
             let mut c = 0;
@@ -656,22 +542,12 @@ impl<'a> Parser<'a> {
                 }
                 let rest = &b[self.pos..];
                 let parsed = match parse_partial::<f64, _>(rest) {
-                    Ok((v, n))
-                        if v.is_finite() && (n == rest.len() || rest[n].is_ascii_whitespace()) =>
-                    {
-                        Some((v, n))
-                    }
+                    Ok((v, n)) if v.is_finite() && (n == rest.len() || rest[n].is_ascii_whitespace()) => Some((v, n)),
                     _ => None,
                 };
                 let Some((v, n)) = parsed else {
-                    let end = rest
-                        .iter()
-                        .position(|x| x.is_ascii_whitespace())
-                        .unwrap_or(rest.len());
-                    let tok = Tok {
-                        text: &rest[..end],
-                        line,
-                    };
+                    let end = rest.iter().position(|x| x.is_ascii_whitespace()).unwrap_or(rest.len());
+                    let tok = Tok { text: &rest[..end], line };
                     return Err(self.err(
                         line,
                         format!(
@@ -691,16 +567,16 @@ impl<'a> Parser<'a> {
             if c != columns {
                 return Err(self.err(
                     line,
-                    format!("expected {columns} values in frame {} (the channel count of the hierarchy), found {c}", f + 1),
+                    format!(
+                        "expected {columns} values in frame {} (the channel count of the hierarchy), found {c}",
+                        f + 1
+                    ),
                 ));
             }
             root_nonzero |= row[..root_cols].iter().any(|&v| v != 0.0);
             for (j, l) in layouts.iter().enumerate() {
                 let v = &row[l.start..l.start + l.count];
-                let q = l
-                    .order
-                    .to_quat_deg([v[l.rot[0]], v[l.rot[1]], v[l.rot[2]]])
-                    .normalize();
+                let q = l.order.to_quat_deg([v[l.rot[0]], v[l.rot[1]], v[l.rot[2]]]).normalize();
                 rotations.push(q);
                 positions.push(match l.pos {
                     Some(p) => DVec3::new(v[p[0]], v[p[1]], v[p[2]]),
@@ -711,12 +587,7 @@ impl<'a> Parser<'a> {
         }
         let dummy_root = !root_nonzero && skeleton.children(0).len() == 1;
         Ok(Parsed {
-            clip: Clip {
-                skeleton,
-                frame_time,
-                local_rotations: rotations,
-                local_positions: positions,
-            },
+            clip: Clip { skeleton, frame_time, local_rotations: rotations, local_positions: positions },
             dummy_root,
         })
     }
@@ -748,23 +619,14 @@ pub fn to_string(clip: &Clip) -> String {
     let with_pos: Vec<bool> = (0..nj)
         .map(|j| {
             sk.channels[j].position
-                || (0..frames).any(|f| {
-                    (clip.local_positions[f * nj + j] - sk.offsets[j])
-                        .abs()
-                        .max_element()
-                        > 1e-9
-                })
+                || (0..frames).any(|f| (clip.local_positions[f * nj + j] - sk.offsets[j]).abs().max_element() > 1e-9)
         })
         .collect();
     let mut order = Vec::with_capacity(nj);
     out.push_str("HIERARCHY\n");
     write_joint(&mut out, sk, &children, &with_pos, 0, 0, &mut order);
     use std::fmt::Write as _;
-    let _ = write!(
-        out,
-        "MOTION\nFrames: {frames}\nFrame Time: {}\n",
-        clip.frame_time
-    );
+    let _ = write!(out, "MOTION\nFrames: {frames}\nFrame Time: {}\n", clip.frame_time);
     for f in 0..frames {
         let mut first = true;
         let mut num = |out: &mut String, v: f64| {
@@ -782,9 +644,7 @@ pub fn to_string(clip: &Clip) -> String {
                     num(&mut out, v);
                 }
             }
-            let e = sk.channels[j]
-                .order
-                .from_quat_deg(clip.local_rotations[f * nj + j]);
+            let e = sk.channels[j].order.from_quat_deg(clip.local_rotations[f * nj + j]);
             for v in e {
                 num(&mut out, v);
             }
@@ -808,18 +668,8 @@ fn write_joint(
     let ind = "\t".repeat(depth);
     let kw = if depth == 0 { "ROOT" } else { "JOINT" };
     let o = sk.offsets[j];
-    let _ = writeln!(
-        out,
-        "{ind}{kw} {}\n{ind}{{\n{ind}\tOFFSET {} {} {}",
-        joint_name(&sk.names[j]),
-        o.x,
-        o.y,
-        o.z
-    );
-    let axes = sk.channels[j]
-        .order
-        .axes()
-        .map(|a| ["Xrotation", "Yrotation", "Zrotation"][a]);
+    let _ = writeln!(out, "{ind}{kw} {}\n{ind}{{\n{ind}\tOFFSET {} {} {}", joint_name(&sk.names[j]), o.x, o.y, o.z);
+    let axes = sk.channels[j].order.axes().map(|a| ["Xrotation", "Yrotation", "Zrotation"][a]);
     let rot = axes.join(" ");
     if with_pos[j] {
         let _ = writeln!(out, "{ind}\tCHANNELS 6 Xposition Yposition Zposition {rot}");
@@ -830,11 +680,7 @@ fn write_joint(
         write_joint(out, sk, children, with_pos, c, depth + 1, order);
     }
     if let Some(e) = sk.end_sites[j] {
-        let _ = writeln!(
-            out,
-            "{ind}\tEnd Site\n{ind}\t{{\n{ind}\t\tOFFSET {} {} {}\n{ind}\t}}",
-            e.x, e.y, e.z
-        );
+        let _ = writeln!(out, "{ind}\tEnd Site\n{ind}\t{{\n{ind}\t\tOFFSET {} {} {}\n{ind}\t}}", e.x, e.y, e.z);
     }
     let _ = writeln!(out, "{ind}}}");
 }
@@ -844,9 +690,7 @@ fn joint_name(name: &str) -> String {
     if name.is_empty() {
         return "_".into();
     }
-    name.chars()
-        .map(|c| if c.is_whitespace() { '_' } else { c })
-        .collect()
+    name.chars().map(|c| if c.is_whitespace() { '_' } else { c }).collect()
 }
 
 /// Writes a clip to a `.bvh` file (or gzip-compressed when the name ends in `.gz`).
@@ -856,16 +700,9 @@ fn joint_name(name: &str) -> String {
 pub fn write_file(clip: &Clip, path: &Path) -> std::io::Result<()> {
     let text = to_string(clip);
     let name = path.file_name().ok_or_else(|| {
-        std::io::Error::new(
-            std::io::ErrorKind::InvalidInput,
-            format!("{}: not a file name", path.display()),
-        )
+        std::io::Error::new(std::io::ErrorKind::InvalidInput, format!("{}: not a file name", path.display()))
     })?;
-    let tmp = path.with_file_name(format!(
-        ".{}.{}.tmp",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
+    let tmp = path.with_file_name(format!(".{}.{}.tmp", name.to_string_lossy(), std::process::id()));
     let gz = name.to_string_lossy().ends_with(".gz");
     let result = (|| {
         let file = std::fs::File::create(&tmp)?;
@@ -922,14 +759,8 @@ Frame Time: 0.0333333
     fn assert_fails(text: &str, line: usize, expected: &str) {
         let err = read(text).expect_err("malformed input must be rejected");
         let shown = err.to_string();
-        assert!(
-            shown.starts_with(&format!("case.bvh:{line}: ")),
-            "wrong file/line in `{shown}`"
-        );
-        assert!(
-            shown.contains(expected),
-            "`{shown}` does not say `{expected}`"
-        );
+        assert!(shown.starts_with(&format!("case.bvh:{line}: ")), "wrong file/line in `{shown}`");
+        assert!(shown.contains(expected), "`{shown}` does not say `{expected}`");
         match err {
             BvhError::Parse { line: l, .. } => assert_eq!(l, line),
             other => panic!("expected a parse error, got {other:?}"),
@@ -951,11 +782,7 @@ Frame Time: 0.0333333
 
     #[test]
     fn malformed_missing_hierarchy_keyword() {
-        assert_fails(
-            &VALID.replacen("HIERARCHY", "HIERARCH", 1),
-            1,
-            "expected `HIERARCHY`",
-        );
+        assert_fails(&VALID.replacen("HIERARCHY", "HIERARCH", 1), 1, "expected `HIERARCHY`");
     }
 
     #[test]
@@ -967,11 +794,7 @@ Frame Time: 0.0333333
     #[test]
     fn malformed_truncated_before_motion() {
         let text = &VALID[..VALID.find("MOTION").unwrap()];
-        assert_fails(
-            text,
-            16,
-            "expected `MOTION` after the hierarchy, found the end of the file",
-        );
+        assert_fails(text, 16, "expected `MOTION` after the hierarchy, found the end of the file");
     }
 
     #[test]
@@ -982,16 +805,8 @@ Frame Time: 0.0333333
 
     #[test]
     fn malformed_bad_frame_count() {
-        assert_fails(
-            &VALID.replace("Frames: 2", "Frames: two"),
-            17,
-            "expected the frame count",
-        );
-        assert_fails(
-            &VALID.replace("Frames: 2", "Frames: -2"),
-            17,
-            "expected the frame count",
-        );
+        assert_fails(&VALID.replace("Frames: 2", "Frames: two"), 17, "expected the frame count");
+        assert_fails(&VALID.replace("Frames: 2", "Frames: -2"), 17, "expected the frame count");
     }
 
     #[test]
@@ -1002,24 +817,13 @@ Frame Time: 0.0333333
 
     #[test]
     fn malformed_bad_frame_time() {
-        assert_fails(
-            &VALID.replace("0.0333333", "0"),
-            18,
-            "expected the frame time (a positive number",
-        );
-        assert_fails(
-            &VALID.replace("0.0333333", "fast"),
-            18,
-            "expected the frame time",
-        );
+        assert_fails(&VALID.replace("0.0333333", "0"), 18, "expected the frame time (a positive number");
+        assert_fails(&VALID.replace("0.0333333", "fast"), 18, "expected the frame time");
     }
 
     #[test]
     fn malformed_row_with_too_few_values() {
-        let text = VALID.replace(
-            "1.5 90.5 2.5 11 21 31 -6 1 44",
-            "1.5 90.5 2.5 11 21 31 -6 1",
-        );
+        let text = VALID.replace("1.5 90.5 2.5 11 21 31 -6 1 44", "1.5 90.5 2.5 11 21 31 -6 1");
         assert_fails(&text, 20, "expected 9 values in frame 2");
     }
 
@@ -1032,17 +836,9 @@ Frame Time: 0.0333333
     #[test]
     fn malformed_non_number() {
         let text = VALID.replace("11 21 31", "11 abc 31");
-        assert_fails(
-            &text,
-            20,
-            "expected a number (value 5 of 9 in frame 2), found `abc`",
-        );
+        assert_fails(&text, 20, "expected a number (value 5 of 9 in frame 2), found `abc`");
         let text = VALID.replace("11 21 31", "11 21x 31");
-        assert_fails(
-            &text,
-            20,
-            "expected a number (value 5 of 9 in frame 2), found `21x`",
-        );
+        assert_fails(&text, 20, "expected a number (value 5 of 9 in frame 2), found `21x`");
         let text = VALID.replace("11 21 31", "11 nan 31");
         assert_fails(&text, 20, "expected a number");
     }
@@ -1050,34 +846,20 @@ Frame Time: 0.0333333
     #[test]
     fn malformed_non_number_offset() {
         let text = VALID.replace("OFFSET 10 -40 0", "OFFSET 10 - 0");
-        assert_fails(
-            &text,
-            8,
-            "expected the Y value of the OFFSET of `Leg` (a number), found `-`",
-        );
+        assert_fails(&text, 8, "expected the Y value of the OFFSET of `Leg` (a number), found `-`");
     }
 
     #[test]
     fn malformed_unknown_channel() {
-        let text = VALID.replace(
-            "CHANNELS 3 Zrotation Xrotation Yrotation",
-            "CHANNELS 3 Zrotation Wrotation Yrotation",
-        );
-        assert_fails(
-            &text,
-            9,
-            "unknown channel `Wrotation` in joint `Leg`: expected Xposition",
-        );
+        let text =
+            VALID.replace("CHANNELS 3 Zrotation Xrotation Yrotation", "CHANNELS 3 Zrotation Wrotation Yrotation");
+        assert_fails(&text, 9, "unknown channel `Wrotation` in joint `Leg`: expected Xposition");
     }
 
     #[test]
     fn malformed_fewer_rows_than_declared() {
         let text = VALID.replace("Frames: 2", "Frames: 3");
-        assert_fails(
-            &text,
-            21,
-            "expected 3 frame rows as declared by `Frames:`, found only 2",
-        );
+        assert_fails(&text, 21, "expected 3 frame rows as declared by `Frames:`, found only 2");
     }
 
     #[test]
@@ -1090,11 +872,7 @@ Frame Time: 0.0333333
     fn malformed_unbalanced_braces_missing_close() {
         // Drop the `}` closing `Leg` (line 14).
         let text = VALID.replacen("\t}\n}\nMOTION", "}\nMOTION", 1);
-        assert_fails(
-            &text,
-            15,
-            "unbalanced braces: expected `}` closing joint `Hips` (opened at line 3)",
-        );
+        assert_fails(&text, 15, "unbalanced braces: expected `}` closing joint `Hips` (opened at line 3)");
     }
 
     #[test]
@@ -1107,53 +885,33 @@ Frame Time: 0.0333333
     #[test]
     fn malformed_unbalanced_braces_at_end_of_file() {
         let text = &VALID[..VALID.find("\t}\n}").unwrap()];
-        assert_fails(
-            text,
-            14,
-            "unbalanced braces: expected `}` closing joint `Leg` (opened at line 7)",
-        );
+        assert_fails(text, 14, "unbalanced braces: expected `}` closing joint `Leg` (opened at line 7)");
     }
 
     #[test]
     fn malformed_bad_channels_count() {
         let text = VALID.replace("CHANNELS 3 Zrotation", "CHANNELS 4 Zrotation");
-        assert_fails(
-            &text,
-            9,
-            "expected a CHANNELS count of 3 or 6 in joint `Leg`, found `4`",
-        );
+        assert_fails(&text, 9, "expected a CHANNELS count of 3 or 6 in joint `Leg`, found `4`");
     }
 
     #[test]
     fn malformed_channels_without_rotations() {
-        let text = VALID.replace(
-            "CHANNELS 3 Zrotation Xrotation Yrotation",
-            "CHANNELS 3 Xposition Yposition Zposition",
-        );
+        let text =
+            VALID.replace("CHANNELS 3 Zrotation Xrotation Yrotation", "CHANNELS 3 Xposition Yposition Zposition");
         assert_fails(&text, 9, "expected three rotation channels");
     }
 
     #[test]
     fn malformed_duplicate_joint_names() {
         let text = VALID.replace("JOINT Leg", "JOINT Hips");
-        assert_fails(
-            &text,
-            6,
-            "duplicate joint name `Hips`: expected unique joint names",
-        );
+        assert_fails(&text, 6, "duplicate joint name `Hips`: expected unique joint names");
     }
 
     #[test]
     fn malformed_rotation_order_with_repeated_axis() {
-        let text = VALID.replace(
-            "CHANNELS 3 Zrotation Xrotation Yrotation",
-            "CHANNELS 3 Zrotation Xrotation Zrotation",
-        );
-        assert_fails(
-            &text,
-            9,
-            "rotation order with a repeated axis in joint `Leg`: expected each of",
-        );
+        let text =
+            VALID.replace("CHANNELS 3 Zrotation Xrotation Yrotation", "CHANNELS 3 Zrotation Xrotation Zrotation");
+        assert_fails(&text, 9, "rotation order with a repeated axis in joint `Leg`: expected each of");
     }
 
     #[test]
@@ -1171,11 +929,7 @@ Frame Time: 0.0333333
     #[test]
     fn malformed_unknown_keyword_in_joint() {
         let text = VALID.replace("\t\tEnd Site", "\t\tEndSite");
-        assert_fails(
-            &text,
-            10,
-            "expected OFFSET, CHANNELS, JOINT, End Site or `}` in joint `Leg`, found `EndSite`",
-        );
+        assert_fails(&text, 10, "expected OFFSET, CHANNELS, JOINT, End Site or `}` in joint `Leg`, found `EndSite`");
     }
 
     #[test]

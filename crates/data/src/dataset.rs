@@ -186,11 +186,9 @@ pub struct WindowOptions {
 
 impl WindowOptions {
     /// Training windows of the benchmark: 50 frames, offset 20, 10 past frames.
-    pub const TRAIN: WindowOptions =
-        WindowOptions { window: 50, offset: 20, n_past: 10, forward_axis: DVec3::Y };
+    pub const TRAIN: WindowOptions = WindowOptions { window: 50, offset: 20, n_past: 10, forward_axis: DVec3::Y };
     /// Test windows of the benchmark: 65 frames, offset 40, 10 past frames.
-    pub const TEST: WindowOptions =
-        WindowOptions { window: 65, offset: 40, n_past: 10, forward_axis: DVec3::Y };
+    pub const TEST: WindowOptions = WindowOptions { window: 65, offset: 40, n_past: 10, forward_axis: DVec3::Y };
 }
 
 impl Windows {
@@ -250,16 +248,14 @@ pub fn windows(clips: &[NamedClip], opts: &WindowOptions) -> Windows {
     let per = opts.window * j;
     let mut local_rot = vec![DQuat::IDENTITY; source.len() * per];
     let mut local_pos = vec![DVec3::ZERO; source.len() * per];
-    local_rot
-        .par_chunks_mut(per.max(1))
-        .zip(local_pos.par_chunks_mut(per.max(1)))
-        .zip(source.par_iter())
-        .for_each(|((rot, pos), &(ci, start))| {
+    local_rot.par_chunks_mut(per.max(1)).zip(local_pos.par_chunks_mut(per.max(1))).zip(source.par_iter()).for_each(
+        |((rot, pos), &(ci, start))| {
             let clip = &clips[ci].clip;
             rot.copy_from_slice(&clip.local_rotations[start * j..start * j + per]);
             pos.copy_from_slice(&clip.local_positions[start * j..start * j + per]);
             prepare_window(rot, pos, j, opts);
-        });
+        },
+    );
     Windows { skeleton, window: opts.window, count: source.len(), local_rot, local_pos, source }
 }
 

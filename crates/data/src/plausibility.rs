@@ -29,11 +29,7 @@ pub fn percentile(values: &[f64], q: f64) -> f64 {
     let pos = q / 100.0 * (v.len() - 1) as f64;
     let i = pos.floor() as usize;
     let f = pos - i as f64;
-    if i + 1 < v.len() {
-        v[i] + (v[i + 1] - v[i]) * f
-    } else {
-        v[i]
-    }
+    if i + 1 < v.len() { v[i] + (v[i + 1] - v[i]) * f } else { v[i] }
 }
 
 /// Median of unsorted values.
@@ -44,10 +40,7 @@ pub fn median(values: &[f64]) -> f64 {
 /// Heights above the ground of each skate joint, per clip, frame-major (`frames x 4`),
 /// and the global positions. Joints missing from the skeleton make the clip's entry empty.
 fn foot_tracks(clip: &Clip, terrain: Option<&Heightfield>) -> Option<Vec<[(f64, f64, f64); 4]>> {
-    let idx: Vec<usize> = SKATE_JOINTS
-        .iter()
-        .map(|n| clip.skeleton.index_of(n))
-        .collect::<Option<_>>()?;
+    let idx: Vec<usize> = SKATE_JOINTS.iter().map(|n| clip.skeleton.index_of(n)).collect::<Option<_>>()?;
     let (_, gp) = clip.global();
     let j = clip.joints();
     Some(
@@ -67,16 +60,10 @@ fn foot_tracks(clip: &Clip, terrain: Option<&Heightfield>) -> Option<Vec<[(f64, 
 /// Planted height `g` of each skate joint: the 5th percentile of its height above the
 /// ground over every frame of every clip (BENCHMARK.md).
 pub fn planted_heights(clips: &[ClipOnGround]) -> [f64; 4] {
-    let tracks: Vec<_> = clips
-        .iter()
-        .filter_map(|(c, t)| foot_tracks(c, *t))
-        .collect();
+    let tracks: Vec<_> = clips.iter().filter_map(|(c, t)| foot_tracks(c, *t)).collect();
     let mut g = [0.0; 4];
     for k in 0..4 {
-        let h: Vec<f64> = tracks
-            .iter()
-            .flat_map(|tr| tr.iter().map(move |f| f[k].2))
-            .collect();
+        let h: Vec<f64> = tracks.iter().flat_map(|tr| tr.iter().map(move |f| f[k].2)).collect();
         g[k] = percentile(&h, 5.0);
     }
     g
@@ -104,11 +91,7 @@ pub fn foot_skate(clips: &[ClipOnGround], planted: Option<[f64; 4]>) -> f64 {
             }
         }
     }
-    if count == 0 {
-        f64::NAN
-    } else {
-        sum / count as f64
-    }
+    if count == 0 { f64::NAN } else { sum / count as f64 }
 }
 
 /// Root (joint 0) horizontal speed of each frame transition, m/s (positions in cm).
@@ -190,12 +173,7 @@ pub fn measure(clips: &[(&Clip, Option<&Heightfield>, &str)]) -> Plausibility {
     labels.dedup();
     let median_root_speed = labels
         .iter()
-        .map(|l| {
-            (
-                l.to_string(),
-                median_root_speed(clips.iter().filter(|c| c.2 == *l).map(|c| c.0)),
-            )
-        })
+        .map(|l| (l.to_string(), median_root_speed(clips.iter().filter(|c| c.2 == *l).map(|c| c.0))))
         .collect();
     let only: Vec<&Clip> = clips.iter().map(|c| c.0).collect();
     Plausibility {

@@ -72,10 +72,7 @@ pub enum HeightfieldError {
 }
 
 fn io_err(p: &Path) -> impl FnOnce(std::io::Error) -> HeightfieldError + '_ {
-    move |source| HeightfieldError::Io {
-        path: p.to_path_buf(),
-        source,
-    }
+    move |source| HeightfieldError::Io { path: p.to_path_buf(), source }
 }
 
 #[derive(Serialize, Deserialize)]
@@ -96,25 +93,11 @@ impl Heightfield {
     pub fn flat(x0: f64, z0: f64, x1: f64, z1: f64, cell: f64, h: f32) -> Heightfield {
         let nx = ((x1 - x0) / cell).ceil() as usize + 1;
         let nz = ((z1 - z0) / cell).ceil() as usize + 1;
-        Heightfield {
-            nx,
-            nz,
-            cell,
-            origin_x: x0,
-            origin_z: z0,
-            heights: vec![h; nx * nz],
-        }
+        Heightfield { nx, nz, cell, origin_x: x0, origin_z: z0, heights: vec![h; nx * nz] }
     }
 
     /// A field covering `[x0, x1] x [z0, z1]` with heights `f(x, z)` at the samples.
-    pub fn from_fn(
-        x0: f64,
-        z0: f64,
-        x1: f64,
-        z1: f64,
-        cell: f64,
-        f: impl Fn(f64, f64) -> f64,
-    ) -> Heightfield {
+    pub fn from_fn(x0: f64, z0: f64, x1: f64, z1: f64, cell: f64, f: impl Fn(f64, f64) -> f64) -> Heightfield {
         let mut hf = Heightfield::flat(x0, z0, x1, z1, cell, 0.0);
         for k in 0..hf.nz {
             for i in 0..hf.nx {
@@ -187,10 +170,7 @@ impl Heightfield {
             origin_x: self.origin_x,
             origin_z: self.origin_z,
             units: "cm".into(),
-            data: data_path
-                .file_name()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default(),
+            data: data_path.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
         };
         let text = serde_json::to_string_pretty(&header).expect("header serialises");
         std::fs::write(path, text).map_err(io_err(path))?;
@@ -204,10 +184,8 @@ impl Heightfield {
     /// Reads a heightfield written by [`Heightfield::write`] (give the `.json` header).
     pub fn read(path: &Path) -> Result<Heightfield, HeightfieldError> {
         let text = std::fs::read_to_string(path).map_err(io_err(path))?;
-        let header: Header = serde_json::from_str(&text).map_err(|e| HeightfieldError::Header {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })?;
+        let header: Header = serde_json::from_str(&text)
+            .map_err(|e| HeightfieldError::Header { path: path.to_path_buf(), message: e.to_string() })?;
         if header.format != "zoo-heightfield" || header.version != 1 {
             return Err(HeightfieldError::Header {
                 path: path.to_path_buf(),
@@ -229,10 +207,7 @@ impl Heightfield {
                 nz: header.nz,
             });
         }
-        let heights = bytes
-            .chunks_exact(4)
-            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-            .collect();
+        let heights = bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
         Ok(Heightfield {
             nx: header.nx,
             nz: header.nz,
@@ -250,9 +225,7 @@ mod tests {
 
     #[test]
     fn bilinear_sampling_is_exact_on_a_plane() {
-        let hf = Heightfield::from_fn(-100.0, -50.0, 100.0, 80.0, 10.0, |x, z| {
-            0.1 * x - 0.05 * z + 3.0
-        });
+        let hf = Heightfield::from_fn(-100.0, -50.0, 100.0, 80.0, 10.0, |x, z| 0.1 * x - 0.05 * z + 3.0);
         for (x, z) in [(0.0, 0.0), (13.7, -22.1), (-99.0, 79.0), (55.5, 5.5)] {
             assert!((hf.height(x, z) - (0.1 * x - 0.05 * z + 3.0)).abs() < 1e-4);
         }

@@ -27,12 +27,7 @@ fn clip_error(a: &Clip, b: &Clip) -> (f64, f64) {
     assert_eq!(a.skeleton.names, b.skeleton.names);
     assert_eq!(a.skeleton.parents, b.skeleton.parents);
     assert_eq!(a.frames(), b.frames());
-    let rot = a
-        .local_rotations
-        .iter()
-        .zip(&b.local_rotations)
-        .map(|(&x, &y)| angle_deg(x, y))
-        .fold(0.0, f64::max);
+    let rot = a.local_rotations.iter().zip(&b.local_rotations).map(|(&x, &y)| angle_deg(x, y)).fold(0.0, f64::max);
     let pos = a
         .local_positions
         .iter()
@@ -44,8 +39,7 @@ fn clip_error(a: &Clip, b: &Clip) -> (f64, f64) {
 
 fn round_trip(clip: &Clip) -> Clip {
     let text = to_string(clip);
-    parse(&text, Path::new("written.bvh"), &ReadOptions::default())
-        .unwrap_or_else(|e| panic!("{e}\n{text}"))
+    parse(&text, Path::new("written.bvh"), &ReadOptions::default()).unwrap_or_else(|e| panic!("{e}\n{text}"))
 }
 
 fn assert_round_trip(clip: &Clip) {
@@ -95,41 +89,17 @@ fn reads_three_channel_joints_with_known_rotations() {
     assert_eq!(sk.names, ["Hips", "Thigh", "Shin"]);
     assert_eq!(sk.parents, [None, Some(0), Some(1)]);
     assert_eq!(sk.offsets[1], DVec3::new(10.0, -5.0, 0.0));
-    assert_eq!(
-        sk.end_sites,
-        [None, None, Some(DVec3::new(0.0, -40.0, 2.5))]
-    );
-    assert_eq!(
-        sk.channels[0],
-        JointChannels {
-            position: true,
-            order: EulerOrder::Xyz
-        }
-    );
-    assert_eq!(
-        sk.channels[1],
-        JointChannels {
-            position: false,
-            order: EulerOrder::Xyz
-        }
-    );
-    assert_eq!(
-        sk.channels[2],
-        JointChannels {
-            position: false,
-            order: EulerOrder::Yxz
-        }
-    );
+    assert_eq!(sk.end_sites, [None, None, Some(DVec3::new(0.0, -40.0, 2.5))]);
+    assert_eq!(sk.channels[0], JointChannels { position: true, order: EulerOrder::Xyz });
+    assert_eq!(sk.channels[1], JointChannels { position: false, order: EulerOrder::Xyz });
+    assert_eq!(sk.channels[2], JointChannels { position: false, order: EulerOrder::Yxz });
     assert_eq!(clip.frames(), 3);
     assert!((clip.frame_time - 0.008333).abs() < 1e-15);
     // Frame 0: identity everywhere; 3-channel joints keep their offsets.
     for j in 0..3 {
         assert!(angle_deg(clip.rotations_at(0)[j], DQuat::IDENTITY) < 1e-12);
     }
-    assert_eq!(
-        clip.positions_at(0),
-        &[DVec3::ZERO, sk.offsets[1], sk.offsets[2]]
-    );
+    assert_eq!(clip.positions_at(0), &[DVec3::ZERO, sk.offsets[1], sk.offsets[2]]);
     // Frame 1: single-axis rotations, hand-computed.
     let r = clip.rotations_at(1);
     assert!(angle_deg(r[0], q(DVec3::X, 90.0)) < 1e-12);
@@ -169,23 +139,14 @@ fn interleaved_position_channels_are_read_by_name() {
         "CHANNELS 6 Xposition Yposition Zposition Xrotation Yrotation Zrotation",
         "CHANNELS 6 Xrotation Zposition Yrotation Xposition Zrotation Yposition",
     );
-    for (old, new) in [
-        ("1.5 91 -2 90 0 0 ", "90 -2 0 1.5 0 91 "),
-        ("1 2 3 30 45 60 ", "30 3 45 1 60 2 "),
-    ] {
+    for (old, new) in [("1.5 91 -2 90 0 0 ", "90 -2 0 1.5 0 91 "), ("1 2 3 30 45 60 ", "30 3 45 1 60 2 ")] {
         text = text.replace(old, new);
     }
     let clip = read(&text);
     assert_eq!(clip.local_positions, normal.local_positions);
     let (rot, _) = clip_error(&clip, &normal);
     assert!(rot < 1e-12);
-    assert_eq!(
-        clip.skeleton.channels[0],
-        JointChannels {
-            position: true,
-            order: EulerOrder::Xyz
-        }
-    );
+    assert_eq!(clip.skeleton.channels[0], JointChannels { position: true, order: EulerOrder::Xyz });
 }
 
 #[test]
@@ -207,10 +168,7 @@ fn round_trip_hand_written_file() {
             let order = clip.skeleton.channels[j].order;
             let (a, b) = (clip.euler_deg(f, j, order), back.euler_deg(f, j, order));
             for k in 0..3 {
-                assert!(
-                    (a[k] - b[k]).abs() <= 1e-4,
-                    "frame {f} joint {j}: {a:?} vs {b:?}"
-                );
+                assert!((a[k] - b[k]).abs() <= 1e-4, "frame {f} joint {j}: {a:?} vs {b:?}");
             }
         }
     }
@@ -234,48 +192,28 @@ fn random_clip(frames: usize, seed: u64) -> Clip {
     let skeleton = Skeleton {
         names: (0..n).map(|j| format!("joint_{j}")).collect(),
         parents: (0..n).map(|j| j.checked_sub(1)).collect(),
-        offsets: (0..n)
-            .map(|j| DVec3::new(j as f64 * 1.25, 10.0 / 3.0, -0.1))
-            .collect(),
-        end_sites: (0..n)
-            .map(|j| (j == n - 1).then_some(DVec3::new(0.0, 7.0, 0.0)))
-            .collect(),
+        offsets: (0..n).map(|j| DVec3::new(j as f64 * 1.25, 10.0 / 3.0, -0.1)).collect(),
+        end_sites: (0..n).map(|j| (j == n - 1).then_some(DVec3::new(0.0, 7.0, 0.0))).collect(),
         channels: EulerOrder::ALL
             .iter()
             .enumerate()
-            .map(|(j, &order)| JointChannels {
-                position: j % 2 == 0,
-                order,
-            })
+            .map(|(j, &order)| JointChannels { position: j % 2 == 0, order })
             .collect(),
     };
     let mut local_rotations = Vec::new();
     let mut local_positions = Vec::new();
     for _ in 0..frames {
         for j in 0..n {
-            let angles = [
-                360.0 * rng.next() - 180.0,
-                360.0 * rng.next() - 180.0,
-                360.0 * rng.next() - 180.0,
-            ];
+            let angles = [360.0 * rng.next() - 180.0, 360.0 * rng.next() - 180.0, 360.0 * rng.next() - 180.0];
             local_rotations.push(skeleton.channels[j].order.to_quat_deg(angles));
             local_positions.push(if skeleton.channels[j].position {
-                DVec3::new(
-                    rng.next() * 400.0 - 200.0,
-                    rng.next() * 100.0,
-                    rng.next() * 1e4 - 5e3,
-                )
+                DVec3::new(rng.next() * 400.0 - 200.0, rng.next() * 100.0, rng.next() * 1e4 - 5e3)
             } else {
                 skeleton.offsets[j]
             });
         }
     }
-    Clip {
-        skeleton,
-        frame_time: 1.0 / 30.0,
-        local_rotations,
-        local_positions,
-    }
+    Clip { skeleton, frame_time: 1.0 / 30.0, local_rotations, local_positions }
 }
 
 #[test]
@@ -301,10 +239,7 @@ fn written_file_has_the_standard_layout() {
     assert_eq!(lines[1], "ROOT Hips");
     assert_eq!(lines[2], "{");
     assert_eq!(lines[3], "\tOFFSET 0 90 0");
-    assert_eq!(
-        lines[4],
-        "\tCHANNELS 6 Xposition Yposition Zposition Xrotation Yrotation Zrotation"
-    );
+    assert_eq!(lines[4], "\tCHANNELS 6 Xposition Yposition Zposition Xrotation Yrotation Zrotation");
     assert_eq!(lines[5], "\tJOINT Thigh");
     assert_eq!(lines[8], "\t\tCHANNELS 3 Xrotation Yrotation Zrotation");
     assert_eq!(lines[12], "\t\t\tCHANNELS 3 Yrotation Xrotation Zrotation");
@@ -333,26 +268,17 @@ fn write_file_plain_and_gzip_atomically() {
         // Overwriting works too.
         write_file(&clip, &path).unwrap();
     }
-    let mut left: Vec<String> = std::fs::read_dir(dir.path())
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
+    let mut left: Vec<String> =
+        std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
     left.sort();
-    assert_eq!(
-        left,
-        ["out.bvh", "out.bvh.gz"],
-        "no temporary files are left behind"
-    );
+    assert_eq!(left, ["out.bvh", "out.bvh.gz"], "no temporary files are left behind");
 }
 
 #[test]
 fn read_file_reports_missing_files() {
     let err = read_file(Path::new("/nonexistent/x.bvh"), &ReadOptions::default()).unwrap_err();
     assert!(matches!(err, BvhError::Io { .. }));
-    assert!(
-        err.to_string()
-            .starts_with("/nonexistent/x.bvh: cannot read")
-    );
+    assert!(err.to_string().starts_with("/nonexistent/x.bvh: cannot read"));
 }
 
 /// Like bandai2: an all-zero 6-channel dummy root above `Hips`, ZXY order, CRLF, spaces.
@@ -370,9 +296,7 @@ Frame Time: 0.0333333\r\n\
 fn drop_dummy_root_makes_hips_the_root() {
     let raw = read(DUMMY_ROOT);
     assert_eq!(raw.joints(), 3);
-    let opts = ReadOptions {
-        drop_dummy_root: true,
-    };
+    let opts = ReadOptions { drop_dummy_root: true };
     let clip = parse(DUMMY_ROOT, Path::new("d.bvh"), &opts).unwrap();
     assert_eq!(clip.skeleton.names, ["Hips", "Spine"]);
     assert_eq!(clip.skeleton.parents, [None, Some(0)]);
@@ -380,13 +304,7 @@ fn drop_dummy_root_makes_hips_the_root() {
     assert_eq!(clip.root_position(1), DVec3::new(5.5, 92.5, -420.0));
     let zxy = EulerOrder::Zxy.to_quat_deg([-10.0, -20.0, -30.0]);
     assert!(angle_deg(clip.rotations_at(1)[0], zxy) < 1e-12);
-    assert_eq!(
-        clip.skeleton.channels[0],
-        JointChannels {
-            position: true,
-            order: EulerOrder::Zxy
-        }
-    );
+    assert_eq!(clip.skeleton.channels[0], JointChannels { position: true, order: EulerOrder::Zxy });
     // Global motion is unchanged by dropping the dummy.
     let (_, gp_raw) = raw.global();
     let (_, gp) = clip.global();
@@ -400,19 +318,11 @@ fn drop_dummy_root_makes_hips_the_root() {
 
 #[test]
 fn drop_dummy_root_keeps_a_moving_or_offset_root() {
-    let opts = ReadOptions {
-        drop_dummy_root: true,
-    };
+    let opts = ReadOptions { drop_dummy_root: true };
     let moving = DUMMY_ROOT.replace("0.0 -0 0 0 0 0 5.5", "0.0 -0 0 0 0.5 0 5.5");
-    assert_eq!(
-        parse(&moving, Path::new("d.bvh"), &opts).unwrap().joints(),
-        3
-    );
+    assert_eq!(parse(&moving, Path::new("d.bvh"), &opts).unwrap().joints(), 3);
     let offset = DUMMY_ROOT.replace("OFFSET 0.0 0.0 0.0", "OFFSET 0.0 1.0 0.0");
-    assert_eq!(
-        parse(&offset, Path::new("d.bvh"), &opts).unwrap().joints(),
-        3
-    );
+    assert_eq!(parse(&offset, Path::new("d.bvh"), &opts).unwrap().joints(), 3);
 }
 
 fn bandai2() -> Option<PathBuf> {
@@ -420,10 +330,7 @@ fn bandai2() -> Option<PathBuf> {
     if dir.is_dir() {
         Some(dir)
     } else {
-        eprintln!(
-            "skipping: {} does not exist (real-data test; CI has the data)",
-            dir.display()
-        );
+        eprintln!("skipping: {} does not exist (real-data test; CI has the data)", dir.display());
         None
     }
 }
@@ -431,13 +338,8 @@ fn bandai2() -> Option<PathBuf> {
 /// The `Frames:` value of a gzip-compressed BVH file, read independently of the parser.
 fn declared_frames(path: &Path) -> usize {
     let mut text = String::new();
-    flate2::read::MultiGzDecoder::new(std::fs::File::open(path).unwrap())
-        .read_to_string(&mut text)
-        .unwrap();
-    let line = text
-        .lines()
-        .find(|l| l.trim_start().starts_with("Frames:"))
-        .unwrap();
+    flate2::read::MultiGzDecoder::new(std::fs::File::open(path).unwrap()).read_to_string(&mut text).unwrap();
+    let line = text.lines().find(|l| l.trim_start().starts_with("Frames:")).unwrap();
     line.trim_start()["Frames:".len()..].trim().parse().unwrap()
 }
 
@@ -458,23 +360,12 @@ fn bandai2_clips_read_and_round_trip() {
         assert_eq!(raw.skeleton.names[0], "joint_Root");
         assert_eq!(raw.frames(), declared_frames(path), "{}", path.display());
         assert!((raw.fps() - 30.0).abs() < 1e-3);
-        let clip = read_file(
-            path,
-            &ReadOptions {
-                drop_dummy_root: true,
-            },
-        )
-        .unwrap();
+        let clip = read_file(path, &ReadOptions { drop_dummy_root: true }).unwrap();
         assert_eq!(clip.joints(), 21);
         assert_eq!(clip.skeleton.names[0], "Hips");
         assert_eq!(clip.skeleton.parents[0], None);
         assert_eq!(clip.frames(), raw.frames());
-        assert!(
-            clip.skeleton
-                .channels
-                .iter()
-                .all(|c| c.position && c.order == EulerOrder::Zxy)
-        );
+        assert!(clip.skeleton.channels.iter().all(|c| c.position && c.order == EulerOrder::Zxy));
         clip.skeleton.validate().unwrap();
         assert_round_trip(&clip);
         if i == 0 {

@@ -86,7 +86,8 @@ impl Inertializer {
         for j in 0..n {
             // offset at the switch and one frame before, both against the target stream
             let o1 = (src_last.0[j] * dst_first.0[j].inverse()).normalize();
-            let o0 = (src_prev.0[j] * (dst_first.0[j] * dst_next.0[j].inverse() * dst_first.0[j]).inverse()).normalize();
+            let o0 =
+                (src_prev.0[j] * (dst_first.0[j] * dst_next.0[j].inverse() * dst_first.0[j]).inverse()).normalize();
             let o0 = if o0.dot(o1) < 0.0 { -o0 } else { o0 };
             let dv = to_scaled_axis((o1 * o0.inverse()).normalize()) / dt;
             rot_offset.push(o1);

@@ -66,13 +66,7 @@ impl Clip {
         let n = self.local_rotations.len();
         let mut gr = vec![DQuat::IDENTITY; n];
         let mut gp = vec![DVec3::ZERO; n];
-        forward_kinematics(
-            &self.skeleton.parents,
-            &self.local_rotations,
-            &self.local_positions,
-            &mut gr,
-            &mut gp,
-        );
+        forward_kinematics(&self.skeleton.parents, &self.local_rotations, &self.local_positions, &mut gr, &mut gp);
         (gr, gp)
     }
 

@@ -27,14 +27,8 @@ pub enum EulerOrder {
 
 impl EulerOrder {
     /// All six orders.
-    pub const ALL: [EulerOrder; 6] = [
-        EulerOrder::Xyz,
-        EulerOrder::Xzy,
-        EulerOrder::Yxz,
-        EulerOrder::Yzx,
-        EulerOrder::Zxy,
-        EulerOrder::Zyx,
-    ];
+    pub const ALL: [EulerOrder; 6] =
+        [EulerOrder::Xyz, EulerOrder::Xzy, EulerOrder::Yxz, EulerOrder::Yzx, EulerOrder::Zxy, EulerOrder::Zyx];
 
     /// Axis indices (0 = X, 1 = Y, 2 = Z) in channel order.
     pub fn axes(self) -> [usize; 3] {
@@ -171,13 +165,8 @@ mod tests {
 
     #[test]
     fn round_trip_every_order() {
-        let samples = [
-            [10.0, 20.0, 30.0],
-            [-170.0, 80.0, 5.0],
-            [45.0, -60.0, 179.0],
-            [0.0, 0.0, 0.0],
-            [123.0, -1.0, -77.0],
-        ];
+        let samples =
+            [[10.0, 20.0, 30.0], [-170.0, 80.0, 5.0], [45.0, -60.0, 179.0], [0.0, 0.0, 0.0], [123.0, -1.0, -77.0]];
         for order in EulerOrder::ALL {
             for s in samples {
                 let q = order.to_quat_deg(s);

@@ -443,7 +443,13 @@ mod tests {
         assert!((p[0] - 0.0).abs() < 1e-6 && (p[2] + 1.0).abs() < 1e-6);
         assert!((p[3] - 2.0).abs() < 1e-6 && (p[4] - 5.0).abs() < 1e-6);
         // a ramp rising along +X, rotated by 90 degrees, rises along -Z
-        let map = Heightmap { cols: 11, rows: 11, cell: 1.0, origin: [-5.0, -5.0], heights: (0..121).map(|i| (i % 11) as f32).collect() };
+        let map = Heightmap {
+            cols: 11,
+            rows: 11,
+            cell: 1.0,
+            origin: [-5.0, -5.0],
+            heights: (0..121).map(|i| (i % 11) as f32).collect(),
+        };
         let rot = YawAbout { angle: std::f32::consts::FRAC_PI_2, center: [0.0, 0.0] };
         let mut patch = vec![0.0; 9];
         terrain_patch(&map, [0.0, 0.0, 0.0], 2.0, 3, Some(rot), &mut patch);

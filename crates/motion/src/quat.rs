@@ -20,13 +20,7 @@ pub fn slerp(a: DQuat, b: DQuat, t: f64) -> DQuat {
         let s = omega.sin();
         (((1.0 - t) * omega).sin() / s, (t * omega).sin() / s)
     };
-    DQuat::from_xyzw(
-        wa * a.x + wb * b.x,
-        wa * a.y + wb * b.y,
-        wa * a.z + wb * b.z,
-        wa * a.w + wb * b.w,
-    )
-    .normalize()
+    DQuat::from_xyzw(wa * a.x + wb * b.x, wa * a.y + wb * b.y, wa * a.z + wb * b.z, wa * a.w + wb * b.w).normalize()
 }
 
 /// `q` or `-q`, whichever lies in the hemisphere of `reference` (dot >= 0).

@@ -136,8 +136,6 @@ impl Skeleton {
 
     /// Length of each bone (|offset|; 0 for the root).
     pub fn bone_lengths(&self) -> Vec<f64> {
-        (0..self.len())
-            .map(|j| if self.parents[j].is_some() { self.offsets[j].length() } else { 0.0 })
-            .collect()
+        (0..self.len()).map(|j| if self.parents[j].is_some() { self.offsets[j].length() } else { 0.0 }).collect()
     }
 }

@@ -16,7 +16,11 @@ fn window(frames: usize, joints: usize, seed: usize) -> Vec<f32> {
         let root = [2.5 * t * (0.3 * s).cos(), 90.0 + 3.0 * (0.3 * t).sin(), 2.5 * t * (0.3 * s).sin()];
         for j in 0..joints {
             let ph = 0.25 * t + j as f32 * 0.4 + s;
-            p.extend_from_slice(&[root[0] + 10.0 * ph.sin(), root[1] + 5.0 * j as f32 + 4.0 * ph.cos(), root[2] + 8.0 * (2.0 * ph).sin()]);
+            p.extend_from_slice(&[
+                root[0] + 10.0 * ph.sin(),
+                root[1] + 5.0 * j as f32 + 4.0 * ph.cos(),
+                root[2] + 8.0 * (2.0 * ph).sin(),
+            ]);
         }
     }
     p
@@ -46,10 +50,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let d = config.dim();
     let e = 512;
     let per_frame: usize = [
-        (d, 512), (512, 512),                     // E
-        (e + 512 + 128, 4 * 512),                 // fused gates
-        (512, 256), (256, 128), (128, d),         // D
-        (d, 128), (128, 128),                     // O
+        (d, 512),
+        (512, 512),               // E
+        (e + 512 + 128, 4 * 512), // fused gates
+        (512, 256),
+        (256, 128),
+        (128, d), // D
+        (d, 128),
+        (128, 128), // O
     ]
     .iter()
     .map(|(i, o)| 2 * i * o)

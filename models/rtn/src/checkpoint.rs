@@ -77,7 +77,10 @@ pub fn read_meta(dir: &Path) -> RtnResult<(Config, FeatureStats)> {
 pub fn load_weights(dir: &Path, varmap: &VarMap) -> RtnResult<()> {
     let path = dir.join(WEIGHTS_FILE);
     if !path.is_file() {
-        return Err(RtnError::Io { path, source: std::io::Error::new(std::io::ErrorKind::NotFound, "no weights file") });
+        return Err(RtnError::Io {
+            path,
+            source: std::io::Error::new(std::io::ErrorKind::NotFound, "no weights file"),
+        });
     }
     let mut vm = varmap.clone();
     vm.load(&path).map_err(|e| RtnError::Config(format!("{}: {e}", path.display())))?;

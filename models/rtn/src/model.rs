@@ -118,7 +118,8 @@ impl Rtn {
         let d = config.dim();
         let slope = config.leaky_slope;
         let hu = config.lstm;
-        let frame_encoder = Mlp::new(d + config.terrain_dim(), &config.frame_encoder, slope, true, vb.pp("frame_encoder"))?;
+        let frame_encoder =
+            Mlp::new(d + config.terrain_dim(), &config.frame_encoder, slope, true, vb.pp("frame_encoder"))?;
         let (target_encoder, offset_encoder) = if config.future_conditioning {
             (
                 Some(Mlp::new(2 * d, &config.target_encoder, slope, true, vb.pp("target_encoder"))?),
@@ -261,7 +262,12 @@ impl Rtn {
     pub fn parameter_count(&self) -> usize {
         let mut n = 0;
         let mut add = |t: &Tensor| n += t.elem_count();
-        let mlps = [Some(&self.frame_encoder), self.target_encoder.as_ref(), self.offset_encoder.as_ref(), Some(&self.decoder)];
+        let mlps = [
+            Some(&self.frame_encoder),
+            self.target_encoder.as_ref(),
+            self.offset_encoder.as_ref(),
+            Some(&self.decoder),
+        ];
         for m in mlps.into_iter().flatten() {
             for l in &m.layers {
                 add(l.weight());
@@ -270,9 +276,15 @@ impl Rtn {
                 }
             }
         }
-        for t in [Some(&self.weight_ih), Some(&self.weight_hh), self.weight_target.as_ref(), self.weight_offset.as_ref(), Some(&self.bias)]
-            .into_iter()
-            .flatten()
+        for t in [
+            Some(&self.weight_ih),
+            Some(&self.weight_hh),
+            self.weight_target.as_ref(),
+            self.weight_offset.as_ref(),
+            Some(&self.bias),
+        ]
+        .into_iter()
+        .flatten()
         {
             add(t);
         }

@@ -61,12 +61,8 @@ pub fn fit_stats(config: &Config, windows: &[MotionWindow]) -> RtnResult<Feature
     for (i, w) in windows.iter().enumerate() {
         check_frames(&format!("training window {i}"), w.positions.len(), config.window_frames(), k, true)?;
     }
-    let mut stats = FeatureStats::fit(
-        windows.iter().map(|w| w.positions),
-        k,
-        config.target_frame(),
-        config.train.random_rotation,
-    );
+    let mut stats =
+        FeatureStats::fit(windows.iter().map(|w| w.positions), k, config.target_frame(), config.train.random_rotation);
     if config.terrain {
         let mut m = Moments::new(1);
         let n = config.terrain_dim();
@@ -74,7 +70,9 @@ pub fn fit_stats(config: &Config, windows: &[MotionWindow]) -> RtnResult<Feature
         let d = config.dim();
         for (i, w) in windows.iter().enumerate() {
             let Some(map) = w.terrain else {
-                return Err(RtnError::Config(format!("training window {i} has no terrain but the RTN is terrain-aware")));
+                return Err(RtnError::Config(format!(
+                    "training window {i} has no terrain but the RTN is terrain-aware"
+                )));
             };
             for f in 0..=config.target_frame() {
                 let r = features::root_of(&w.positions[f * d..]);
@@ -107,7 +105,12 @@ impl RtnTrainer {
     }
 
     /// A trainer around `varmap`: variables it already holds are reused (e.g. loaded weights).
-    pub(crate) fn with_varmap(config: &Config, stats: FeatureStats, varmap: VarMap, device: &Device) -> RtnResult<Self> {
+    pub(crate) fn with_varmap(
+        config: &Config,
+        stats: FeatureStats,
+        varmap: VarMap,
+        device: &Device,
+    ) -> RtnResult<Self> {
         if stats.joints != config.joints {
             return Err(RtnError::Config(format!(
                 "statistics are for {} joints, the configuration for {}",
@@ -162,7 +165,11 @@ impl RtnTrainer {
 
     /// Encodes windows, rotating each one about the vertical axis in [-pi, pi] when `rotate`
     /// (RTN sec. 3.3: on global positions before any processing; the terrain follows).
-    fn encode<'a>(&mut self, windows: &[MotionWindow<'a>], rotate: bool) -> RtnResult<crate::transition::EncodedBatch<'a>> {
+    fn encode<'a>(
+        &mut self,
+        windows: &[MotionWindow<'a>],
+        rotate: bool,
+    ) -> RtnResult<crate::transition::EncodedBatch<'a>> {
         let c = &self.config;
         let d = c.dim();
         let tf = c.target_frame();

@@ -44,7 +44,10 @@ pub(crate) fn check_frames(what: &str, len: usize, frames: usize, joints: usize,
         Err(RtnError::Size {
             what: what.to_string(),
             expected: frames * d,
-            detail: format!("{}{frames} frames x {joints} joints x 3", if at_least { "a multiple of 3K and at least " } else { "" }),
+            detail: format!(
+                "{}{frames} frames x {joints} joints x 3",
+                if at_least { "a multiple of 3K and at least " } else { "" }
+            ),
             found: len,
         })
     }
@@ -190,13 +193,8 @@ impl Rtn {
         check_frames("frame after the target", next.len(), 1, k, false)?;
         let device = self.device();
         let offsets = OffsetTensors::new(stats, device)?;
-        let item = SequenceInput {
-            known: past.into(),
-            target: target.into(),
-            next: next.into(),
-            terrain,
-            rotation: None,
-        };
+        let item =
+            SequenceInput { known: past.into(), target: target.into(), next: next.into(), terrain, rotation: None };
         let batch = encode_batch(stats, std::slice::from_ref(&item), device)?;
         let n_past = past.len() / d;
         let outs = generate(self, stats, &offsets, &batch, n_past, n_frames + 1, &mut || false)?;
@@ -241,7 +239,9 @@ impl Rtn {
         let d = 3 * k;
         check_frames("context frames", context.len(), 1, k, true)?;
         if interval == 0 || keys.len() % (2 * d) != 0 {
-            return Err(RtnError::Config("super-resolution needs interval >= 1 and whole (key, next) frame pairs".into()));
+            return Err(RtnError::Config(
+                "super-resolution needs interval >= 1 and whole (key, next) frame pairs".into(),
+            ));
         }
         let past = context.len() / d;
         let mut clip = context.to_vec();

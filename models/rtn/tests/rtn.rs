@@ -21,7 +21,11 @@ fn synthetic_window(frames: usize, seed: usize) -> Vec<f32> {
         let root = [speed * t * heading.cos(), 90.0 + 3.0 * (freq * t).sin(), speed * t * heading.sin()];
         for (j, r) in rest.iter().enumerate() {
             let ph = freq * t + j as f32;
-            p.extend_from_slice(&[root[0] + r[0] + 4.0 * ph.sin(), root[1] + r[1] + 2.0 * ph.cos(), root[2] + r[2] + 3.0 * (2.0 * ph).sin()]);
+            p.extend_from_slice(&[
+                root[0] + r[0] + 4.0 * ph.sin(),
+                root[1] + r[1] + 2.0 * ph.cos(),
+                root[2] + r[2] + 3.0 * (2.0 * ph).sin(),
+            ]);
         }
     }
     p
@@ -89,7 +93,18 @@ fn paper_sizes_and_readable_names() {
     let c = Config::paper();
     let (model, vm) = build(&c);
     let names: Vec<String> = vm.data().lock().unwrap().keys().cloned().collect();
-    for n in ["frame_encoder.0.weight", "target_encoder.1.bias", "offset_encoder.0.weight", "lstm.weight_ih", "lstm.weight_hh", "lstm.weight_target", "lstm.weight_offset", "lstm.bias", "decoder.2.weight", "state_init.0.weight"] {
+    for n in [
+        "frame_encoder.0.weight",
+        "target_encoder.1.bias",
+        "offset_encoder.0.weight",
+        "lstm.weight_ih",
+        "lstm.weight_hh",
+        "lstm.weight_target",
+        "lstm.weight_offset",
+        "lstm.bias",
+        "decoder.2.weight",
+        "state_init.0.weight",
+    ] {
         assert!(names.iter().any(|k| k == n), "missing `{n}` in {names:?}");
     }
     let lstm = vm.data().lock().unwrap()["lstm.weight_hh"].dims().to_vec();
@@ -145,7 +160,8 @@ fn zeroed_decoder_outputs_the_input_frame() {
         let seq = model.begin(&target).unwrap();
         let state = model.initial_state(&x).unwrap();
         let (next, _) = model.step(&seq, &RtnInputs { x: &x, offset: Some(&x), terrain: None }, &state).unwrap();
-        let (next, x) = (next.flatten_all().unwrap().to_vec1::<f32>().unwrap(), x.flatten_all().unwrap().to_vec1::<f32>().unwrap());
+        let (next, x) =
+            (next.flatten_all().unwrap().to_vec1::<f32>().unwrap(), x.flatten_all().unwrap().to_vec1::<f32>().unwrap());
         if residual {
             assert_eq!(next, x, "RTN eq. 13: x_(t+1) = x_t + D(h_t) with D = 0");
         } else {
@@ -238,9 +254,18 @@ fn every_ablation_trains_a_step() {
         Config { init_state: InitState::Zero, ..base.clone() },
         Config { init_state: InitState::Common, ..base.clone() },
         Config { residual: false, ..base.clone() },
-        Config { train: TrainConfig { teacher_forcing: TeacherForcing::Fixed(0.0), ..base.train.clone() }, ..base.clone() },
-        Config { train: TrainConfig { teacher_forcing: TeacherForcing::Fixed(1.0), ..base.train.clone() }, ..base.clone() },
-        Config { train: TrainConfig { teacher_forcing: TeacherForcing::Scheduled { steps: 10 }, ..base.train.clone() }, ..base.clone() },
+        Config {
+            train: TrainConfig { teacher_forcing: TeacherForcing::Fixed(0.0), ..base.train.clone() },
+            ..base.clone()
+        },
+        Config {
+            train: TrainConfig { teacher_forcing: TeacherForcing::Fixed(1.0), ..base.train.clone() },
+            ..base.clone()
+        },
+        Config {
+            train: TrainConfig { teacher_forcing: TeacherForcing::Scheduled { steps: 10 }, ..base.train.clone() },
+            ..base.clone()
+        },
     ];
     let ws = windows(&base, 8);
     let mw: Vec<MotionWindow> = ws.iter().map(|w| MotionWindow::new(w)).collect();

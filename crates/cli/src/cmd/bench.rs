@@ -47,7 +47,9 @@ fn method(name: &str) -> anyhow::Result<Box<dyn TransitionMethod>> {
         "zerovel" => Box::new(ZeroVelocity),
         "interp" => Box::new(Interpolation),
         other => match other.split_once(':') {
-            Some(("rtn", dir)) => Box::new(crate::methods::RtnMethod::load(std::path::Path::new(dir), other.to_string())?),
+            Some(("rtn", dir)) => {
+                Box::new(crate::methods::RtnMethod::load(std::path::Path::new(dir), other.to_string())?)
+            }
             _ => bail!("unknown method `{other}`: expected zerovel, interp or rtn:RUN_DIR"),
         },
     })
@@ -119,8 +121,8 @@ fn map_reference_key(key: &str) -> Option<(String, String)> {
 
 fn check_reference(result: &BenchResult, path: &PathBuf, tol: f64) -> anyhow::Result<()> {
     let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let reference: BTreeMap<String, f64> =
-        serde_json::from_str(&text).with_context(|| format!("{}: expected a JSON object of numbers", path.display()))?;
+    let reference: BTreeMap<String, f64> = serde_json::from_str(&text)
+        .with_context(|| format!("{}: expected a JSON object of numbers", path.display()))?;
     let mut worst: f64 = 0.0;
     let mut failures = Vec::new();
     for (key, want) in &reference {

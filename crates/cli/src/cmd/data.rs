@@ -3,14 +3,14 @@
 use anyhow::Context;
 use clap::{Args, Subcommand};
 use glam::DVec3;
+use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::PathBuf;
 use std::time::Instant;
+use zoo_data::synth::{self, SynthConfig};
 use zoo_data::{dataset, metrics};
 use zoo_motion::Skeleton;
-use indicatif::{ProgressBar, ProgressStyle};
-use zoo_data::synth::{self, SynthConfig};
 
 /// `zoo data` subcommands.
 #[derive(Subcommand)]
@@ -174,7 +174,8 @@ fn stats(a: StatsArgs) -> anyhow::Result<()> {
     };
     print_stats(&out, &skeleton);
     if let Some(path) = &a.json {
-        std::fs::write(path, serde_json::to_string_pretty(&out)?).with_context(|| format!("writing {}", path.display()))?;
+        std::fs::write(path, serde_json::to_string_pretty(&out)?)
+            .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())
 }
@@ -209,20 +210,12 @@ fn run_synth(a: SynthArgs) -> anyhow::Result<()> {
     if !(a.minutes > 0.0 && a.clip_seconds > 0.0 && a.fps > 0.0) {
         anyhow::bail!("--minutes, --clip-seconds and --fps must be positive");
     }
-    let cfg = SynthConfig {
-        minutes: a.minutes,
-        seed: a.seed,
-        terrain: a.terrain,
-        fps: a.fps,
-        clip_seconds: a.clip_seconds,
-    };
+    let cfg =
+        SynthConfig { minutes: a.minutes, seed: a.seed, terrain: a.terrain, fps: a.fps, clip_seconds: a.clip_seconds };
     let start = std::time::Instant::now();
     let n = cfg.clip_count();
     let bar = ProgressBar::new(2 * n as u64);
-    bar.set_style(
-        ProgressStyle::with_template("{msg:10} [{bar:40}] {pos}/{len} {elapsed}")
-            .expect("template"),
-    );
+    bar.set_style(ProgressStyle::with_template("{msg:10} [{bar:40}] {pos}/{len} {elapsed}").expect("template"));
     bar.set_message("generate");
     let clips = synth::generate_with_progress(&cfg, &|| bar.inc(1));
     bar.set_message("write");

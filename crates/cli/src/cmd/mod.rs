@@ -2,5 +2,5 @@
 
 pub mod bench;
 pub mod data;
-pub mod train;
 pub mod render;
+pub mod train;

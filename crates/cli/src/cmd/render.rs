@@ -36,13 +36,8 @@ pub struct RenderArgs {
 }
 
 fn label(path: &Path) -> String {
-    let name = path
-        .file_name()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    name.trim_end_matches(".gz")
-        .trim_end_matches(".bvh")
-        .to_string()
+    let name = path.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    name.trim_end_matches(".gz").trim_end_matches(".bvh").to_string()
 }
 
 /// The `NAME.terrain.json` beside `NAME.bvh[.gz]`, if there is one.
@@ -53,52 +48,24 @@ fn sibling_terrain(path: &Path) -> Option<PathBuf> {
 
 /// Runs `zoo render`.
 pub fn run(a: RenderArgs) -> Result<()> {
-    let ext = a
-        .out
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase();
+    let ext = a.out.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     if ext != "gif" && ext != "png" {
-        bail!(
-            "--out {}: expected a .gif or .png file name",
-            a.out.display()
-        );
+        bail!("--out {}: expected a .gif or .png file name", a.out.display());
     }
     let terrain_path = a.terrain.clone().or_else(|| sibling_terrain(&a.clip));
     let terrain = match &terrain_path {
         Some(p) => Some(Heightfield::read(p)?),
         None => None,
     };
-    let read = ReadOptions {
-        drop_dummy_root: true,
-    };
+    let read = ReadOptions { drop_dummy_root: true };
     let mut clips = Vec::new();
     for path in std::iter::once(&a.clip).chain(&a.compare) {
         let clip = read_file(path, &read).with_context(|| format!("reading {}", path.display()))?;
-        clips.push(RenderClip {
-            label: label(path),
-            clip,
-            terrain: terrain.clone(),
-        });
+        clips.push(RenderClip { label: label(path), clip, terrain: terrain.clone() });
     }
-    let opts = RenderOptions {
-        from: a.from,
-        to: a.to,
-        every: a.every,
-        frame_numbers: a.frame_numbers,
-    };
-    let n = if ext == "gif" {
-        render_gif(&clips, &opts, &a.out)?
-    } else {
-        render_sheet(&clips, &opts, &a.out)?
-    };
+    let opts = RenderOptions { from: a.from, to: a.to, every: a.every, frame_numbers: a.frame_numbers };
+    let n = if ext == "gif" { render_gif(&clips, &opts, &a.out)? } else { render_sheet(&clips, &opts, &a.out)? };
     let size = std::fs::metadata(&a.out).map(|m| m.len()).unwrap_or(0);
-    println!(
-        "{}: {n} frames of {} clip(s), {:.0} kB",
-        a.out.display(),
-        clips.len(),
-        size as f64 / 1024.0
-    );
+    println!("{}: {n} frames of {} clip(s), {:.0} kB", a.out.display(), clips.len(), size as f64 / 1024.0);
     Ok(())
 }

@@ -116,8 +116,12 @@ const LAST_DIR: &str = "last";
 
 /// Training and validation clips: `--data` split by `--valid-glob`, or synthetic clips with
 /// every tenth clip held out.
-pub fn load_clips(data: &Option<PathBuf>, valid_glob: &Option<String>, minutes: f64, seed: u64)
--> anyhow::Result<(Vec<NamedClip>, Vec<NamedClip>, String)> {
+pub fn load_clips(
+    data: &Option<PathBuf>,
+    valid_glob: &Option<String>,
+    minutes: f64,
+    seed: u64,
+) -> anyhow::Result<(Vec<NamedClip>, Vec<NamedClip>, String)> {
     match data {
         Some(path) => {
             let clips = dataset::load(path).with_context(|| format!("loading {}", path.display()))?;
@@ -187,8 +191,8 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
         Some(dir) => {
             let last = dir.join(LAST_DIR);
             let from = if last.join(zoo_rtn::checkpoint::CONFIG_FILE).is_file() { last } else { dir.clone() };
-            let trainer = RtnTrainer::load(&from, &device)
-                .with_context(|| format!("resuming from {}", from.display()))?;
+            let trainer =
+                RtnTrainer::load(&from, &device).with_context(|| format!("resuming from {}", from.display()))?;
             if trainer.config().joints != tw.joints() {
                 bail!(
                     "{} holds a model for {} joints but the data has {}: resume with the data it was trained on",
