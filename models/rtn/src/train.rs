@@ -24,7 +24,10 @@ pub struct MotionWindow<'a> {
 impl<'a> MotionWindow<'a> {
     /// A window without terrain.
     pub fn new(positions: &'a [f32]) -> Self {
-        MotionWindow { positions, terrain: None }
+        MotionWindow {
+            positions,
+            terrain: None,
+        }
     }
 }
 
@@ -59,7 +62,13 @@ impl SplitMix64 {
 pub fn fit_stats(config: &Config, windows: &[MotionWindow]) -> RtnResult<FeatureStats> {
     let k = config.joints;
     for (i, w) in windows.iter().enumerate() {
-        check_frames(&format!("training window {i}"), w.positions.len(), config.window_frames(), k, true)?;
+        check_frames(
+            &format!("training window {i}"),
+            w.positions.len(),
+            config.window_frames(),
+            k,
+            true,
+        )?;
     }
     let mut stats = FeatureStats::fit(
         windows.iter().map(|w| w.positions),
@@ -74,16 +83,28 @@ pub fn fit_stats(config: &Config, windows: &[MotionWindow]) -> RtnResult<Feature
         let d = config.dim();
         for (i, w) in windows.iter().enumerate() {
             let Some(map) = w.terrain else {
-                return Err(RtnError::Config(format!("training window {i} has no terrain but the RTN is terrain-aware")));
+                return Err(RtnError::Config(format!(
+                    "training window {i} has no terrain but the RTN is terrain-aware"
+                )));
             };
             for f in 0..=config.target_frame() {
                 let r = features::root_of(&w.positions[f * d..]);
-                features::terrain_patch(map, r, config.terrain_extent, config.terrain_side, None, &mut patch);
+                features::terrain_patch(
+                    map,
+                    r,
+                    config.terrain_extent,
+                    config.terrain_side,
+                    None,
+                    &mut patch,
+                );
                 m.add(&patch);
             }
         }
         let s = m.finish(false);
-        stats.terrain = Some(MeanStd { mean: vec![s.mean[0]; n], std: vec![s.std[0]; n] });
+        stats.terrain = Some(MeanStd {
+            mean: vec![s.mean[0]; n],
+            std: vec![s.std[0]; n],
+        });
     }
     Ok(stats)
 }
@@ -107,7 +128,12 @@ impl RtnTrainer {
     }
 
     /// A trainer around `varmap`: variables it already holds are reused (e.g. loaded weights).
-    pub(crate) fn with_varmap(config: &Config, stats: FeatureStats, varmap: VarMap, device: &Device) -> RtnResult<Self> {
+    pub(crate) fn with_varmap(
+        config: &Config,
+        stats: FeatureStats,
+        varmap: VarMap,
+        device: &Device,
+    ) -> RtnResult<Self> {
         if stats.joints != config.joints {
             return Err(RtnError::Config(format!(
                 "statistics are for {} joints, the configuration for {}",
@@ -115,12 +141,19 @@ impl RtnTrainer {
             )));
         }
         if config.terrain && stats.terrain.is_none() {
-            return Err(RtnError::Config("terrain-aware configuration but no terrain statistics".into()));
+            return Err(RtnError::Config(
+                "terrain-aware configuration but no terrain statistics".into(),
+            ));
         }
         let vb = VarBuilder::from_varmap(&varmap, DType::F32, device);
         let model = Rtn::new(config, vb)?;
         let t = &config.train;
-        let params = ParamsAmsGrad { lr: t.learning_rate, beta1: t.beta1, beta2: t.beta2, eps: t.eps };
+        let params = ParamsAmsGrad {
+            lr: t.learning_rate,
+            beta1: t.beta1,
+            beta2: t.beta2,
+            eps: t.eps,
+        };
         let opt = AmsGrad::new(varmap.all_vars(), params)?;
         let offsets = OffsetTensors::new(&stats, device)?;
         Ok(RtnTrainer {
@@ -162,21 +195,36 @@ impl RtnTrainer {
 
     /// Encodes windows, rotating each one about the vertical axis in [-pi, pi] when `rotate`
     /// (RTN sec. 3.3: on global positions before any processing; the terrain follows).
-    fn encode<'a>(&mut self, windows: &[MotionWindow<'a>], rotate: bool) -> RtnResult<crate::transition::EncodedBatch<'a>> {
+    fn encode<'a>(
+        &mut self,
+        windows: &[MotionWindow<'a>],
+        rotate: bool,
+    ) -> RtnResult<crate::transition::EncodedBatch<'a>> {
         let c = &self.config;
         let d = c.dim();
         let tf = c.target_frame();
         let mut items = Vec::with_capacity(windows.len());
         for (i, w) in windows.iter().enumerate() {
-            check_frames(&format!("training window {i}"), w.positions.len(), c.window_frames(), c.joints, true)?;
+            check_frames(
+                &format!("training window {i}"),
+                w.positions.len(),
+                c.window_frames(),
+                c.joints,
+                true,
+            )?;
             if !w.positions[..(tf + 2) * d].iter().all(|v| v.is_finite()) {
-                return Err(RtnError::Config(format!("training window {i} holds NaN or inf positions")));
+                return Err(RtnError::Config(format!(
+                    "training window {i} holds NaN or inf positions"
+                )));
             }
             let mut p = w.positions[..(tf + 2) * d].to_vec();
             let rotation = if rotate {
                 let angle = ((self.rng.next_f64() * 2.0 - 1.0) * std::f64::consts::PI) as f32;
                 let r = features::root_of(&p[(c.past_frames - 1) * d..]);
-                let rot = YawAbout { angle, center: [r[0], r[2]] };
+                let rot = YawAbout {
+                    angle,
+                    center: [r[0], r[2]],
+                };
                 features::rotate_about_y(&mut p, rot.angle, rot.center);
                 Some(rot)
             } else {
@@ -197,12 +245,25 @@ impl RtnTrainer {
     }
 
     /// Generated and ground-truth frames `(batch, P + 1, D)` of a batch.
-    fn predict(&mut self, windows: &[MotionWindow], rotate: bool, p_teacher: f64) -> RtnResult<(Tensor, Tensor)> {
+    fn predict(
+        &mut self,
+        windows: &[MotionWindow],
+        rotate: bool,
+        p_teacher: f64,
+    ) -> RtnResult<(Tensor, Tensor)> {
         let batch = self.encode(windows, rotate)?;
         let (past, n_out) = (self.config.past_frames, self.config.transition_frames + 1);
         let rng = &mut self.rng;
         let mut teacher = || p_teacher > 0.0 && (p_teacher >= 1.0 || rng.next_f64() < p_teacher);
-        let outs = generate(&self.model, &self.stats, &self.offsets, &batch, past, n_out, &mut teacher)?;
+        let outs = generate(
+            &self.model,
+            &self.stats,
+            &self.offsets,
+            &batch,
+            past,
+            n_out,
+            &mut teacher,
+        )?;
         let pred = Tensor::stack(&outs, 1)?;
         let truth = Tensor::stack(&batch.x[past..past + n_out], 1)?;
         Ok((pred, truth))
@@ -220,7 +281,10 @@ impl RtnTrainer {
         let loss = (pred - truth)?.sqr()?.mean_all()?;
         let value = loss.to_scalar::<f32>()?;
         if !value.is_finite() {
-            return Err(RtnError::NonFiniteLoss { step: self.step, loss: value });
+            return Err(RtnError::NonFiniteLoss {
+                step: self.step,
+                loss: value,
+            });
         }
         self.opt.backward_step(&loss)?;
         self.step += 1;
@@ -230,7 +294,10 @@ impl RtnTrainer {
     /// Validation loss: the same MSE without teacher forcing and without rotation.
     pub fn eval_loss(&mut self, windows: &[MotionWindow]) -> RtnResult<f32> {
         let (pred, truth) = self.predict(windows, false, 0.0)?;
-        Ok((pred.detach() - truth)?.sqr()?.mean_all()?.to_scalar::<f32>()?)
+        Ok((pred.detach() - truth)?
+            .sqr()?
+            .mean_all()?
+            .to_scalar::<f32>()?)
     }
 
     /// Saves `config.json`, `model.safetensors` and `normalization.json` into `dir` (see
@@ -272,6 +339,14 @@ pub fn predict_with_teacher(
         .collect();
     let batch = encode_batch(stats, &items, model.device())?;
     let offsets = OffsetTensors::new(stats, model.device())?;
-    let outs = generate(model, stats, &offsets, &batch, c.past_frames, c.transition_frames + 1, teacher)?;
+    let outs = generate(
+        model,
+        stats,
+        &offsets,
+        &batch,
+        c.past_frames,
+        c.transition_frames + 1,
+        teacher,
+    )?;
     Ok(Tensor::stack(&outs, 1)?)
 }
