@@ -5,6 +5,12 @@
 //! `RAYON_NUM_THREADS=2 cargo run --release -p zoo-rtn --example train_speed -- [steps]`
 
 use candle_core::{DType, Device, Tensor};
+
+/// candle allocates a fresh buffer per op; glibc's malloc hands the large ones back to the OS
+/// and page-faults them in again every step (~30% of a step on this machine). mimalloc keeps
+/// them (so does `MALLOC_MMAP_THRESHOLD_=1073741824 MALLOC_TRIM_THRESHOLD_=4294967296` with glibc).
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 use std::time::Instant;
 use zoo_rtn::prelude::*;
 

@@ -15,7 +15,7 @@ pub enum InitState {
 }
 
 /// Probability of feeding the ground-truth previous frame instead of the prediction during
-/// training (RTN sec. 6.2, Table 4).
+/// training (RTN sec. 6.2, Table 4). One draw per time step, shared by the whole mini-batch.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum TeacherForcing {
