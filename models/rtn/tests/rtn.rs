@@ -588,3 +588,26 @@ fn super_resolution_chains_transitions() {
     assert!(max_abs_diff(&out[8 * d..9 * d], &clip[8 * d..9 * d]) < 1e-3);
     assert!(max_abs_diff(&out[13 * d..14 * d], &clip[13 * d..14 * d]) < 1e-3);
 }
+
+#[test]
+fn saving_nan_parameters_is_refused_and_keeps_the_old_checkpoint() {
+    let c = tiny();
+    let ws = windows(&c, 4);
+    let stats = stats_for(&c, &ws);
+    let trainer = RtnTrainer::new(&c, stats, &Device::Cpu).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    trainer.save(dir.path()).unwrap();
+    let before = std::fs::read(dir.path().join("model.safetensors")).unwrap();
+    let mut vm = trainer.varmap().clone();
+    let nan = Tensor::full(f32::NAN, c.lstm * 4, &Device::Cpu).unwrap();
+    vm.set_one("lstm.bias", nan).unwrap();
+    let err = trainer.save(dir.path()).unwrap_err();
+    assert!(
+        matches!(&err, RtnError::NonFiniteParameter { name } if name == "lstm.bias"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read(dir.path().join("model.safetensors")).unwrap(),
+        before
+    );
+}
