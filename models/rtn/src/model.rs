@@ -81,11 +81,13 @@ pub struct RtnSequence {
     gate_bias: Tensor,
 }
 
-/// Inputs of one step, normalised: `x` `(batch, D)`, the global offset `o_t` `(batch, D)`
-/// (ignored without future conditioning) and the terrain patch `(batch, side^2)` when the
-/// model is terrain-aware.
+/// Inputs of one step, normalised: the sequence constants from [`Rtn::begin`], `x` `(batch, D)`,
+/// the global offset `o_t` `(batch, D)` (ignored without future conditioning) and the terrain
+/// patch `(batch, side^2)` when the model is terrain-aware.
 #[derive(Clone, Copy, Debug)]
 pub struct RtnInputs<'a> {
+    /// Per-sequence constants (encoded target, fused gate weights).
+    pub sequence: &'a RtnSequence,
     /// Current frame features `x_t`.
     pub x: &'a Tensor,
     /// Normalised global offset `o_t` of the current frame from the target.
@@ -264,14 +266,9 @@ impl Rtn {
 
     /// One step: from the current frame `x_t` (and offset, terrain) and the state, the next frame
     /// `x_(t+1)` `(batch, D)` and the new state.
-    pub fn step(
-        &self,
-        seq: &RtnSequence,
-        inputs: &RtnInputs,
-        state: &RtnState,
-    ) -> Result<(Tensor, RtnState)> {
+    pub fn step(&self, inputs: &RtnInputs, state: &RtnState) -> Result<(Tensor, RtnState)> {
         let hu = self.config.lstm;
-        let x = inputs.x;
+        let (x, seq) = (inputs.x, inputs.sequence);
         // RTN eq. 2: h_E = E([x_t, p_t])
         let he = match (self.config.terrain, inputs.terrain) {
             (true, Some(p)) => self.frame_encoder.forward(&Tensor::cat(&[x, p], 1)?)?,

@@ -193,11 +193,12 @@ pub(crate) fn generate(
             None
         };
         let inputs = RtnInputs {
+            sequence: &seq,
             x: &x,
             offset: offset.as_ref(),
             terrain: terrain.as_ref(),
         };
-        let (next, st) = model.step(&seq, &inputs, &state)?;
+        let (next, st) = model.step(&inputs, &state)?;
         state = st;
         let nt = t + 1;
         if nt >= past {

@@ -97,8 +97,8 @@ fn output_shapes() {
     assert_eq!(state.h.dims(), &[b, c.lstm]);
     let (next, state) = model
         .step(
-            &seq,
             &RtnInputs {
+                sequence: &seq,
                 x: &x,
                 offset: Some(&x),
                 terrain: None,
@@ -237,8 +237,8 @@ fn zeroed_decoder_outputs_the_input_frame() {
         let state = model.initial_state(&x).unwrap();
         let (next, _) = model
             .step(
-                &seq,
                 &RtnInputs {
+                    sequence: &seq,
                     x: &x,
                     offset: Some(&x),
                     terrain: None,
@@ -302,8 +302,8 @@ fn teacher_forcing_one_feeds_the_ground_truth() {
         let (xf, of) = (t(&x[f], d), t(&o[f], d));
         let (next, s) = model
             .step(
-                &seq,
                 &RtnInputs {
+                    sequence: &seq,
                     x: &xf,
                     offset: Some(&of),
                     terrain: None,
