@@ -45,16 +45,9 @@ pub fn encode_frame(prev_root: [f32; 3], frame: &[f32], out: &mut [f32]) {
 /// position; returns the new root position (root velocity integration, RTN sec. 4.5).
 pub fn decode_frame(prev_root: [f32; 3], features: &[f32], out: &mut [f32]) -> [f32; 3] {
     debug_assert_eq!(features.len(), out.len());
-    let r = [
-        prev_root[0] + features[0],
-        prev_root[1] + features[1],
-        prev_root[2] + features[2],
-    ];
+    let r = [prev_root[0] + features[0], prev_root[1] + features[1], prev_root[2] + features[2]];
     out[..3].copy_from_slice(&r);
-    for (o, x) in out[3..]
-        .chunks_exact_mut(3)
-        .zip(features[3..].chunks_exact(3))
-    {
+    for (o, x) in out[3..].chunks_exact_mut(3).zip(features[3..].chunks_exact(3)) {
         for a in 0..3 {
             o[a] = x[a] + r[a];
         }
@@ -67,16 +60,8 @@ pub fn decode_frame(prev_root: [f32; 3], features: &[f32], out: &mut [f32]) -> [
 /// (zero for a one-frame sequence).
 pub fn encode_positions(positions: &[f32], joints: usize, out: &mut [f32]) {
     let d = feature_dim(joints);
-    assert_eq!(
-        positions.len(),
-        out.len(),
-        "positions and features must have the same length"
-    );
-    assert_eq!(
-        positions.len() % d,
-        0,
-        "positions must hold whole frames of {joints} joints"
-    );
+    assert_eq!(positions.len(), out.len(), "positions and features must have the same length");
+    assert_eq!(positions.len() % d, 0, "positions must hold whole frames of {joints} joints");
     let frames = positions.len() / d;
     for f in 0..frames {
         let frame = &positions[f * d..(f + 1) * d];
@@ -84,11 +69,7 @@ pub fn encode_positions(positions: &[f32], joints: usize, out: &mut [f32]) {
             root_of(&positions[(f - 1) * d..])
         } else if frames > 1 {
             let (r0, r1) = (root_of(frame), root_of(&positions[d..]));
-            [
-                2.0 * r0[0] - r1[0],
-                2.0 * r0[1] - r1[1],
-                2.0 * r0[2] - r1[2],
-            ]
+            [2.0 * r0[0] - r1[0], 2.0 * r0[1] - r1[1], 2.0 * r0[2] - r1[2]]
         } else {
             root_of(frame)
         };
@@ -100,11 +81,7 @@ pub fn encode_positions(positions: &[f32], joints: usize, out: &mut [f32]) {
 /// from `start_root` (the root of the frame before the first one).
 pub fn decode_features(start_root: [f32; 3], features: &[f32], joints: usize, out: &mut [f32]) {
     let d = feature_dim(joints);
-    assert_eq!(
-        features.len(),
-        out.len(),
-        "features and positions must have the same length"
-    );
+    assert_eq!(features.len(), out.len(), "features and positions must have the same length");
     let mut root = start_root;
     for (x, y) in features.chunks_exact(d).zip(out.chunks_exact_mut(d)) {
         root = decode_frame(root, x, y);
@@ -123,16 +100,8 @@ pub fn global_offset(frame: &[f32], target: &[f32], out: &mut [f32]) {
 /// forward root velocity, then the global velocity of every joint.
 pub fn target_vector(target: &[f32], next: &[f32], out: &mut [f32]) {
     let d = target.len();
-    assert_eq!(
-        next.len(),
-        d,
-        "target and next frames must have the same length"
-    );
-    assert_eq!(
-        out.len(),
-        2 * d,
-        "the target vector has twice the frame size"
-    );
+    assert_eq!(next.len(), d, "target and next frames must have the same length");
+    assert_eq!(out.len(), 2 * d, "the target vector has twice the frame size");
     let (r, n) = (root_of(target), root_of(next));
     let prev = [2.0 * r[0] - n[0], 2.0 * r[1] - n[1], 2.0 * r[2] - n[2]];
     encode_frame(prev, target, &mut out[..d]);
@@ -165,11 +134,7 @@ pub fn target_blend(frames: &mut [f32], target: &[f32], blend_len: usize) {
         "frames must hold whole target-sized frames"
     );
     let n = frames.len() / d;
-    let e: Vec<f32> = target
-        .iter()
-        .zip(&frames[(n - 1) * d..])
-        .map(|(t, y)| t - y)
-        .collect();
+    let e: Vec<f32> = target.iter().zip(&frames[(n - 1) * d..]).map(|(t, y)| t - y).collect();
     for f in 0..n {
         let w = target_blend_offset_weight(f, n - 1, blend_len) as f32;
         if w > 0.0 {
@@ -199,13 +164,7 @@ pub struct Heightmap {
 impl Heightmap {
     /// A flat heightmap at height `h`.
     pub fn flat(h: f32) -> Self {
-        Heightmap {
-            cols: 1,
-            rows: 1,
-            cell: 1.0,
-            origin: [0.0, 0.0],
-            heights: vec![h],
-        }
+        Heightmap { cols: 1, rows: 1, cell: 1.0, origin: [0.0, 0.0], heights: vec![h] }
     }
 
     /// Height at world `(x, z)`, bilinear, clamped at the border.
@@ -243,24 +202,12 @@ pub fn terrain_patch(
     rotation: Option<YawAbout>,
     out: &mut [f32],
 ) {
-    assert_eq!(
-        out.len(),
-        side * side,
-        "a terrain patch has side * side values"
-    );
-    let step = if side > 1 {
-        extent / (side - 1) as f32
-    } else {
-        0.0
-    };
+    assert_eq!(out.len(), side * side, "a terrain patch has side * side values");
+    let step = if side > 1 { extent / (side - 1) as f32 } else { 0.0 };
     let half = extent * 0.5;
     for i in 0..side {
         for j in 0..side {
-            let mut p = [
-                root[0] - half + j as f32 * step,
-                0.0,
-                root[2] - half + i as f32 * step,
-            ];
+            let mut p = [root[0] - half + j as f32 * step, 0.0, root[2] - half + i as f32 * step];
             if let Some(r) = rotation {
                 rotate_about_y(&mut p, -r.angle, r.center);
             }
@@ -284,10 +231,7 @@ impl MeanStd {
 
     /// Identity statistics (mean 0, std 1) of `n` values.
     pub fn identity(n: usize) -> Self {
-        MeanStd {
-            mean: vec![0.0; n],
-            std: vec![1.0; n],
-        }
+        MeanStd { mean: vec![0.0; n], std: vec![1.0; n] }
     }
 
     /// Number of values.
@@ -330,11 +274,7 @@ pub struct Moments {
 impl Moments {
     /// Empty moments of `n` values.
     pub fn new(n: usize) -> Self {
-        Moments {
-            count: 0.0,
-            sum: vec![0.0; n],
-            sum_sq: vec![0.0; n],
-        }
+        Moments { count: 0.0, sum: vec![0.0; n], sum_sq: vec![0.0; n] }
     }
 
     /// Adds consecutive vectors of `n` values.
@@ -356,9 +296,7 @@ impl Moments {
         let c = self.count.max(1.0);
         let n = self.sum.len();
         let mut mean: Vec<f64> = self.sum.iter().map(|s| s / c).collect();
-        let mut var: Vec<f64> = (0..n)
-            .map(|i| (self.sum_sq[i] / c - mean[i] * mean[i]).max(0.0))
-            .collect();
+        let mut var: Vec<f64> = (0..n).map(|i| (self.sum_sq[i] / c - mean[i] * mean[i]).max(0.0)).collect();
         if yaw_invariant {
             assert_eq!(n % 3, 0, "yaw-invariant statistics need 3-D vectors");
             for k in 0..n / 3 {
@@ -372,10 +310,7 @@ impl Moments {
         }
         MeanStd {
             mean: mean.iter().map(|&m| m as f32).collect(),
-            std: var
-                .iter()
-                .map(|&v| (v.sqrt() as f32).max(MeanStd::MIN_STD))
-                .collect(),
+            std: var.iter().map(|&v| (v.sqrt() as f32).max(MeanStd::MIN_STD)).collect(),
         }
     }
 }
@@ -421,10 +356,7 @@ impl FeatureStats {
         let (mut mx, mut mv, mut mo) = (Moments::new(d), Moments::new(d), Moments::new(d));
         let mut buf = Vec::new();
         for w in windows {
-            assert!(
-                w.len() >= d * (target_frame + 2),
-                "window shorter than target frame + 2"
-            );
+            assert!(w.len() >= d * (target_frame + 2), "window shorter than target frame + 2");
             buf.resize(w.len(), 0.0);
             encode_positions(w, joints, &mut buf);
             mx.add(&buf);
@@ -471,11 +403,7 @@ mod tests {
         for f in 0..frames {
             let t = f as f32 * 0.1;
             for j in 0..joints {
-                p.extend_from_slice(&[
-                    t * 3.0 + j as f32,
-                    90.0 + (t + j as f32).sin(),
-                    t * 2.0 - j as f32 * 0.5,
-                ]);
+                p.extend_from_slice(&[t * 3.0 + j as f32, 90.0 + (t + j as f32).sin(), t * 2.0 - j as f32 * 0.5]);
             }
         }
         p
@@ -506,10 +434,7 @@ mod tests {
         let d = 3 * joints;
         let mut t = vec![0.0; 2 * d];
         target_vector(&p[..d], &p[d..], &mut t);
-        assert!(
-            (t[0] - (p[d] - p[0])).abs() < 1e-6,
-            "root slot is the forward root velocity"
-        );
+        assert!((t[0] - (p[d] - p[0])).abs() < 1e-6, "root slot is the forward root velocity");
         assert!((t[d + 4] - (p[d + 4] - p[4])).abs() < 1e-6);
         assert!((t[5] - (p[5] - p[2])).abs() < 1e-6);
     }
@@ -528,10 +453,7 @@ mod tests {
             origin: [-5.0, -5.0],
             heights: (0..121).map(|i| (i % 11) as f32).collect(),
         };
-        let rot = YawAbout {
-            angle: std::f32::consts::FRAC_PI_2,
-            center: [0.0, 0.0],
-        };
+        let rot = YawAbout { angle: std::f32::consts::FRAC_PI_2, center: [0.0, 0.0] };
         let mut patch = vec![0.0; 9];
         terrain_patch(&map, [0.0, 0.0, 0.0], 2.0, 3, Some(rot), &mut patch);
         // rows go along +Z: height decreases with z after the rotation

@@ -21,11 +21,7 @@ fn window(frames: usize, joints: usize, seed: usize) -> Vec<f32> {
     let mut p = Vec::with_capacity(frames * joints * 3);
     for f in 0..frames {
         let t = f as f32 + 7.0 * s;
-        let root = [
-            2.5 * t * (0.3 * s).cos(),
-            90.0 + 3.0 * (0.3 * t).sin(),
-            2.5 * t * (0.3 * s).sin(),
-        ];
+        let root = [2.5 * t * (0.3 * s).cos(), 90.0 + 3.0 * (0.3 * t).sin(), 2.5 * t * (0.3 * s).sin()];
         for j in 0..joints {
             let ph = 0.25 * t + j as f32 * 0.4 + s;
             p.extend_from_slice(&[
@@ -39,19 +35,11 @@ fn window(frames: usize, joints: usize, seed: usize) -> Vec<f32> {
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let steps: usize = std::env::args()
-        .nth(1)
-        .map(|s| s.parse())
-        .transpose()?
-        .unwrap_or(5);
-    let parents: Vec<Option<usize>> = (0..22)
-        .map(|j| if j == 0 { None } else { Some((j - 1) / 2) })
-        .collect();
+    let steps: usize = std::env::args().nth(1).map(|s| s.parse()).transpose()?.unwrap_or(5);
+    let parents: Vec<Option<usize>> = (0..22).map(|j| if j == 0 { None } else { Some((j - 1) / 2) }).collect();
     let config = Config::paper().with_parents(&parents);
     let dev = Device::Cpu;
-    let ws: Vec<Vec<f32>> = (0..64)
-        .map(|i| window(config.window_frames(), 22, i))
-        .collect();
+    let ws: Vec<Vec<f32>> = (0..64).map(|i| window(config.window_frames(), 22, i)).collect();
     let mw: Vec<MotionWindow> = ws.iter().map(|w| MotionWindow::new(w)).collect();
     let stats = fit_stats(&config, &mw)?;
     let mut trainer = RtnTrainer::new(&config, stats, &dev)?;
@@ -93,8 +81,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for _ in 0..reps {
         let _ = a.matmul(&w)?.to_dtype(DType::F32)?;
     }
-    let mm =
-        reps as f64 * 2.0 * (b * (e + 512 + 128) * 4 * 512) as f64 / t1.elapsed().as_secs_f64();
+    let mm = reps as f64 * 2.0 * (b * (e + 512 + 128) * 4 * 512) as f64 / t1.elapsed().as_secs_f64();
     println!(
         "{steps} steps of batch {b}: {dt:.2} s, {wps:.1} windows/s, {:.1} ms/step, loss {loss:.4}; \
          ~{:.1} GFLOP/s achieved vs {:.1} GFLOP/s matmul at the gate shape ({:.0}%)",

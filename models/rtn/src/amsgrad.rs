@@ -25,12 +25,7 @@ pub struct ParamsAmsGrad {
 impl Default for ParamsAmsGrad {
     /// The paper's settings: lr 5e-4, Adam's default betas, eps 1e-8.
     fn default() -> Self {
-        ParamsAmsGrad {
-            lr: 5e-4,
-            beta1: 0.9,
-            beta2: 0.999,
-            eps: 1e-8,
-        }
+        ParamsAmsGrad { lr: 5e-4, beta1: 0.9, beta2: 0.999, eps: 1e-8 }
     }
 }
 
@@ -66,19 +61,10 @@ impl Optimizer for AmsGrad {
             .filter(|v| v.dtype().is_float())
             .map(|var| {
                 let z = || Var::zeros(var.shape(), var.dtype(), var.device());
-                Ok(Slot {
-                    m: z()?,
-                    v: z()?,
-                    v_max: z()?,
-                    var,
-                })
+                Ok(Slot { m: z()?, v: z()?, v_max: z()?, var })
             })
             .collect::<Result<Vec<_>>>()?;
-        Ok(AmsGrad {
-            slots,
-            t: 0,
-            params,
-        })
+        Ok(AmsGrad { slots, t: 0, params })
     }
 
     fn step(&mut self, grads: &GradStore) -> Result<()> {
@@ -131,16 +117,10 @@ mod tests {
     fn amsgrad_matches_two_hand_computed_steps() -> Result<()> {
         let dev = Device::Cpu;
         let theta = Var::from_slice(&[1.0f32, -2.0], 2, &dev)?;
-        let params = ParamsAmsGrad {
-            lr: 0.1,
-            ..ParamsAmsGrad::default()
-        };
+        let params = ParamsAmsGrad { lr: 0.1, ..ParamsAmsGrad::default() };
         let mut opt = AmsGrad::new(vec![theta.clone()], params)?;
         for g in [[10.0f32, 1.0], [0.1, -1.0]] {
-            let loss = theta
-                .as_tensor()
-                .mul(&Tensor::from_slice(&g, 2, &dev)?)?
-                .sum_all()?;
+            let loss = theta.as_tensor().mul(&Tensor::from_slice(&g, 2, &dev)?)?.sum_all()?;
             opt.backward_step(&loss)?;
         }
         let got = theta.as_tensor().to_vec1::<f32>()?;
@@ -148,10 +128,7 @@ mod tests {
         for (g, w) in got.iter().zip(want) {
             assert!((g - w).abs() < 2e-6, "got {got:?}, want {want:?}");
         }
-        assert!(
-            (got[0] - 0.832_253).abs() > 1e-5,
-            "the max of the second moments must be kept"
-        );
+        assert!((got[0] - 0.832_253).abs() > 1e-5, "the max of the second moments must be kept");
         assert_eq!(opt.steps(), 2);
         Ok(())
     }

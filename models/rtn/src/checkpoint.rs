@@ -20,10 +20,7 @@ pub const WEIGHTS_FILE: &str = "model.safetensors";
 pub const STATS_FILE: &str = "normalization.json";
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> RtnError + '_ {
-    move |source| RtnError::Io {
-        path: path.to_path_buf(),
-        source,
-    }
+    move |source| RtnError::Io { path: path.to_path_buf(), source }
 }
 
 fn tmp_path(dir: &Path, name: &str) -> PathBuf {
@@ -32,37 +29,23 @@ fn tmp_path(dir: &Path, name: &str) -> PathBuf {
 
 fn write_json_tmp<T: serde::Serialize>(dir: &Path, name: &str, value: &T) -> RtnResult<PathBuf> {
     let tmp = tmp_path(dir, name);
-    let text = serde_json::to_string_pretty(value).map_err(|source| RtnError::Json {
-        path: tmp.clone(),
-        source,
-    })?;
+    let text = serde_json::to_string_pretty(value).map_err(|source| RtnError::Json { path: tmp.clone(), source })?;
     std::fs::write(&tmp, text).map_err(io(&tmp))?;
     Ok(tmp)
 }
 
 fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> RtnResult<T> {
     let text = std::fs::read_to_string(path).map_err(io(path))?;
-    serde_json::from_str(&text).map_err(|source| RtnError::Json {
-        path: path.to_path_buf(),
-        source,
-    })
+    serde_json::from_str(&text).map_err(|source| RtnError::Json { path: path.to_path_buf(), source })
 }
 
 /// Checks that every variable is finite.
 pub fn check_finite(varmap: &VarMap) -> RtnResult<()> {
-    let data = varmap
-        .data()
-        .lock()
-        .expect("the VarMap lock is not poisoned");
+    let data = varmap.data().lock().expect("the VarMap lock is not poisoned");
     let mut names: Vec<&String> = data.keys().collect();
     names.sort();
     for name in names {
-        let s = data[name]
-            .as_tensor()
-            .abs()?
-            .sum_all()?
-            .to_dtype(DType::F32)?
-            .to_scalar::<f32>()?;
+        let s = data[name].as_tensor().abs()?.sum_all()?.to_dtype(DType::F32)?.to_scalar::<f32>()?;
         if !s.is_finite() {
             return Err(RtnError::NonFiniteParameter { name: name.clone() });
         }
@@ -87,10 +70,7 @@ pub fn save(dir: &Path, config: &Config, varmap: &VarMap, stats: &FeatureStats) 
 
 /// Reads the configuration and statistics of a checkpoint folder.
 pub fn read_meta(dir: &Path) -> RtnResult<(Config, FeatureStats)> {
-    Ok((
-        read_json(&dir.join(CONFIG_FILE))?,
-        read_json(&dir.join(STATS_FILE))?,
-    ))
+    Ok((read_json(&dir.join(CONFIG_FILE))?, read_json(&dir.join(STATS_FILE))?))
 }
 
 /// Fills the variables of `varmap` from the folder's weights (every variable must be present).
@@ -103,8 +83,7 @@ pub fn load_weights(dir: &Path, varmap: &VarMap) -> RtnResult<()> {
         });
     }
     let mut vm = varmap.clone();
-    vm.load(&path)
-        .map_err(|e| RtnError::Config(format!("{}: {e}", path.display())))?;
+    vm.load(&path).map_err(|e| RtnError::Config(format!("{}: {e}", path.display())))?;
     Ok(())
 }
 
@@ -113,10 +92,7 @@ pub fn load_weights(dir: &Path, varmap: &VarMap) -> RtnResult<()> {
 pub fn load(dir: &Path, device: &Device) -> RtnResult<(Rtn, FeatureStats)> {
     let (config, stats) = read_meta(dir)?;
     let varmap = VarMap::new();
-    let model = Rtn::new(
-        &config,
-        VarBuilder::from_varmap(&varmap, DType::F32, device),
-    )?;
+    let model = Rtn::new(&config, VarBuilder::from_varmap(&varmap, DType::F32, device))?;
     load_weights(dir, &varmap)?;
     Ok((model, stats))
 }

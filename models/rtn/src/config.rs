@@ -34,9 +34,7 @@ impl TeacherForcing {
     pub fn probability(&self, step: u64) -> f64 {
         match *self {
             TeacherForcing::Fixed(p) => p,
-            TeacherForcing::Scheduled { steps } => {
-                (1.0 - step as f64 / steps.max(1) as f64).max(0.0)
-            }
+            TeacherForcing::Scheduled { steps } => (1.0 - step as f64 / steps.max(1) as f64).max(0.0),
         }
     }
 }
@@ -164,11 +162,7 @@ impl Config {
             init_hidden: 32,
             terrain_side: 5,
             target_blend: 2,
-            train: TrainConfig {
-                learning_rate: 3e-3,
-                batch_size: 8,
-                ..TrainConfig::default()
-            },
+            train: TrainConfig { learning_rate: 3e-3, batch_size: 8, ..TrainConfig::default() },
             ..Config::paper()
         }
     }
@@ -193,11 +187,7 @@ impl Config {
 
     /// Terrain patch size (0 without terrain).
     pub fn terrain_dim(&self) -> usize {
-        if self.terrain {
-            self.terrain_side * self.terrain_side
-        } else {
-            0
-        }
+        if self.terrain { self.terrain_side * self.terrain_side } else { 0 }
     }
 
     /// Index of the target frame in a training window (`past_frames + transition_frames`).

@@ -20,31 +20,19 @@ pub struct Mlp {
 
 impl Mlp {
     /// Layers `input -> sizes[0] -> ... -> sizes[n-1]`.
-    pub fn new(
-        input: usize,
-        sizes: &[usize],
-        slope: f64,
-        activate_last: bool,
-        vb: VarBuilder,
-    ) -> Result<Self> {
+    pub fn new(input: usize, sizes: &[usize], slope: f64, activate_last: bool, vb: VarBuilder) -> Result<Self> {
         let mut layers = Vec::with_capacity(sizes.len());
         let mut prev = input;
         for (i, &s) in sizes.iter().enumerate() {
             layers.push(candle_nn::linear(prev, s, vb.pp(i))?);
             prev = s;
         }
-        Ok(Mlp {
-            layers,
-            slope,
-            activate_last,
-        })
+        Ok(Mlp { layers, slope, activate_last })
     }
 
     /// Output size.
     pub fn out_dim(&self) -> usize {
-        self.layers
-            .last()
-            .map_or(0, |l| l.weight().dim(0).unwrap_or(0))
+        self.layers.last().map_or(0, |l| l.weight().dim(0).unwrap_or(0))
     }
 }
 
@@ -132,29 +120,12 @@ impl Rtn {
         let d = config.dim();
         let slope = config.leaky_slope;
         let hu = config.lstm;
-        let frame_encoder = Mlp::new(
-            d + config.terrain_dim(),
-            &config.frame_encoder,
-            slope,
-            true,
-            vb.pp("frame_encoder"),
-        )?;
+        let frame_encoder =
+            Mlp::new(d + config.terrain_dim(), &config.frame_encoder, slope, true, vb.pp("frame_encoder"))?;
         let (target_encoder, offset_encoder) = if config.future_conditioning {
             (
-                Some(Mlp::new(
-                    2 * d,
-                    &config.target_encoder,
-                    slope,
-                    true,
-                    vb.pp("target_encoder"),
-                )?),
-                Some(Mlp::new(
-                    d,
-                    &config.offset_encoder,
-                    slope,
-                    true,
-                    vb.pp("offset_encoder"),
-                )?),
+                Some(Mlp::new(2 * d, &config.target_encoder, slope, true, vb.pp("target_encoder"))?),
+                Some(Mlp::new(d, &config.offset_encoder, slope, true, vb.pp("offset_encoder"))?),
             )
         } else {
             (None, None)
@@ -180,13 +151,7 @@ impl Rtn {
         let sv = vb.pp("state_init");
         let init = match config.init_state {
             // RTN eq. 14: one hidden layer, linear output of (h, c)
-            InitState::Learned => Init::Learned(Mlp::new(
-                d,
-                &[config.init_hidden, 2 * hu],
-                slope,
-                false,
-                sv,
-            )?),
+            InitState::Learned => Init::Learned(Mlp::new(d, &[config.init_hidden, 2 * hu], slope, false, sv)?),
             InitState::Zero => Init::Zero,
             InitState::Common => Init::Common {
                 h: sv.get_with_hints((1, hu), "h", candle_nn::Init::Const(0.0))?,
@@ -233,16 +198,10 @@ impl Rtn {
         match &self.init {
             Init::Learned(mlp) => {
                 let hc = mlp.forward(x0)?;
-                Ok(RtnState {
-                    h: hc.narrow(1, 0, hu)?,
-                    c: hc.narrow(1, hu, hu)?,
-                })
+                Ok(RtnState { h: hc.narrow(1, 0, hu)?, c: hc.narrow(1, hu, hu)? })
             }
             Init::Zero => self.zero_state(b, x0.device()),
-            Init::Common { h, c } => Ok(RtnState {
-                h: h.broadcast_as((b, hu))?,
-                c: c.broadcast_as((b, hu))?,
-            }),
+            Init::Common { h, c } => Ok(RtnState { h: h.broadcast_as((b, hu))?, c: c.broadcast_as((b, hu))? }),
         }
     }
 
@@ -281,9 +240,7 @@ impl Rtn {
         let z_in = match &self.offset_encoder {
             Some(o) => {
                 let Some(off) = inputs.offset else {
-                    candle_core::bail!(
-                        "this RTN is conditioned on the future: pass the global offset to every step"
-                    )
+                    candle_core::bail!("this RTN is conditioned on the future: pass the global offset to every step")
                 };
                 let ho = o.forward(off)?; // RTN eq. 4
                 Tensor::cat(&[&he, &state.h, &ho], 1)?
@@ -402,18 +359,12 @@ impl OffsetTensors {
     /// Per-sequence constant `(y_T - mu_o) / sigma_o + mu_x m / sigma_o` from the global target
     /// frame `(batch, D)`.
     pub fn target_term(&self, target_global: &Tensor) -> Result<Tensor> {
-        target_global
-            .broadcast_mul(&self.o_inv)?
-            .broadcast_sub(&self.o_shift)?
-            .broadcast_sub(&self.x_shift)
+        target_global.broadcast_mul(&self.o_inv)?.broadcast_sub(&self.o_shift)?.broadcast_sub(&self.x_shift)
     }
 
     /// Global root of a generated frame: previous root plus the denormalised root velocity.
     pub fn next_root(&self, prev_root: &Tensor, x: &Tensor) -> Result<Tensor> {
-        prev_root
-            + x.narrow(1, 0, 3)?
-                .broadcast_mul(&self.v_scale)?
-                .broadcast_add(&self.v_shift)?
+        prev_root + x.narrow(1, 0, 3)?.broadcast_mul(&self.v_scale)?.broadcast_add(&self.v_shift)?
     }
 
     /// Normalised global offset `o_t = ((y_T - y_t) - mu_o) / sigma_o` of the frame with

@@ -27,10 +27,7 @@ impl CustomOp1 for LeakyRelu {
     }
 
     fn bwd(&self, arg: &Tensor, _res: &Tensor, grad: &Tensor) -> Result<Option<Tensor>> {
-        Ok(Some(arg.apply_op2_no_bwd(
-            &grad.contiguous()?,
-            &LeakyReluGrad(self.0),
-        )?))
+        Ok(Some(arg.apply_op2_no_bwd(&grad.contiguous()?, &LeakyReluGrad(self.0))?))
     }
 }
 
@@ -39,20 +36,10 @@ impl CustomOp2 for LeakyReluGrad {
         "leaky-relu-grad"
     }
 
-    fn cpu_fwd(
-        &self,
-        s1: &CpuStorage,
-        l1: &Layout,
-        s2: &CpuStorage,
-        l2: &Layout,
-    ) -> Result<(CpuStorage, Shape)> {
+    fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
         let (x, g) = (contiguous_f32(s1, l1)?, contiguous_f32(s2, l2)?);
         let a = self.0;
-        let y: Vec<f32> = x
-            .iter()
-            .zip(g)
-            .map(|(&v, &g)| if v > 0.0 { g } else { g * a })
-            .collect();
+        let y: Vec<f32> = x.iter().zip(g).map(|(&v, &g)| if v > 0.0 { g } else { g * a }).collect();
         Ok((CpuStorage::F32(y), l1.shape().clone()))
     }
 }
@@ -73,11 +60,7 @@ mod tests {
 
     #[test]
     fn fused_leaky_relu_matches_candle_forward_and_backward() -> Result<()> {
-        let x = Var::from_vec(
-            vec![-2.0f32, -0.5, 0.0, 0.5, 3.0, -1.0],
-            (2, 3),
-            &Device::Cpu,
-        )?;
+        let x = Var::from_vec(vec![-2.0f32, -0.5, 0.0, 0.5, 3.0, -1.0], (2, 3), &Device::Cpu)?;
         let w = Tensor::new(&[[1.0f32, 2.0, 3.0], [4.0, 5.0, 6.0]], &Device::Cpu)?;
         let a = leaky_relu(x.as_tensor(), 0.1)?;
         let b = candle_nn::ops::leaky_relu(x.as_tensor(), 0.1)?;

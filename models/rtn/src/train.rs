@@ -24,10 +24,7 @@ pub struct MotionWindow<'a> {
 impl<'a> MotionWindow<'a> {
     /// A window without terrain.
     pub fn new(positions: &'a [f32]) -> Self {
-        MotionWindow {
-            positions,
-            terrain: None,
-        }
+        MotionWindow { positions, terrain: None }
     }
 }
 
@@ -62,13 +59,7 @@ impl SplitMix64 {
 pub fn fit_stats(config: &Config, windows: &[MotionWindow]) -> RtnResult<FeatureStats> {
     let k = config.joints;
     for (i, w) in windows.iter().enumerate() {
-        check_frames(
-            &format!("training window {i}"),
-            w.positions.len(),
-            config.window_frames(),
-            k,
-            true,
-        )?;
+        check_frames(&format!("training window {i}"), w.positions.len(), config.window_frames(), k, true)?;
     }
     let mut stats =
         FeatureStats::fit(windows.iter().map(|w| w.positions), k, config.target_frame(), config.train.random_rotation);
@@ -85,22 +76,12 @@ pub fn fit_stats(config: &Config, windows: &[MotionWindow]) -> RtnResult<Feature
             };
             for f in 0..=config.target_frame() {
                 let r = features::root_of(&w.positions[f * d..]);
-                features::terrain_patch(
-                    map,
-                    r,
-                    config.terrain_extent,
-                    config.terrain_side,
-                    None,
-                    &mut patch,
-                );
+                features::terrain_patch(map, r, config.terrain_extent, config.terrain_side, None, &mut patch);
                 m.add(&patch);
             }
         }
         let s = m.finish(false);
-        stats.terrain = Some(MeanStd {
-            mean: vec![s.mean[0]; n],
-            std: vec![s.std[0]; n],
-        });
+        stats.terrain = Some(MeanStd { mean: vec![s.mean[0]; n], std: vec![s.std[0]; n] });
     }
     Ok(stats)
 }
@@ -137,19 +118,12 @@ impl RtnTrainer {
             )));
         }
         if config.terrain && stats.terrain.is_none() {
-            return Err(RtnError::Config(
-                "terrain-aware configuration but no terrain statistics".into(),
-            ));
+            return Err(RtnError::Config("terrain-aware configuration but no terrain statistics".into()));
         }
         let vb = VarBuilder::from_varmap(&varmap, DType::F32, device);
         let model = Rtn::new(config, vb)?;
         let t = &config.train;
-        let params = ParamsAmsGrad {
-            lr: t.learning_rate,
-            beta1: t.beta1,
-            beta2: t.beta2,
-            eps: t.eps,
-        };
+        let params = ParamsAmsGrad { lr: t.learning_rate, beta1: t.beta1, beta2: t.beta2, eps: t.eps };
         let opt = AmsGrad::new(varmap.all_vars(), params)?;
         let offsets = OffsetTensors::new(&stats, device)?;
         Ok(RtnTrainer {
@@ -201,26 +175,15 @@ impl RtnTrainer {
         let tf = c.target_frame();
         let mut items = Vec::with_capacity(windows.len());
         for (i, w) in windows.iter().enumerate() {
-            check_frames(
-                &format!("training window {i}"),
-                w.positions.len(),
-                c.window_frames(),
-                c.joints,
-                true,
-            )?;
+            check_frames(&format!("training window {i}"), w.positions.len(), c.window_frames(), c.joints, true)?;
             if !w.positions[..(tf + 2) * d].iter().all(|v| v.is_finite()) {
-                return Err(RtnError::Config(format!(
-                    "training window {i} holds NaN or inf positions"
-                )));
+                return Err(RtnError::Config(format!("training window {i} holds NaN or inf positions")));
             }
             let mut p = w.positions[..(tf + 2) * d].to_vec();
             let rotation = if rotate {
                 let angle = ((self.rng.next_f64() * 2.0 - 1.0) * std::f64::consts::PI) as f32;
                 let r = features::root_of(&p[(c.past_frames - 1) * d..]);
-                let rot = YawAbout {
-                    angle,
-                    center: [r[0], r[2]],
-                };
+                let rot = YawAbout { angle, center: [r[0], r[2]] };
                 features::rotate_about_y(&mut p, rot.angle, rot.center);
                 Some(rot)
             } else {
@@ -241,25 +204,12 @@ impl RtnTrainer {
     }
 
     /// Generated and ground-truth frames `(batch, P + 1, D)` of a batch.
-    fn predict(
-        &mut self,
-        windows: &[MotionWindow],
-        rotate: bool,
-        p_teacher: f64,
-    ) -> RtnResult<(Tensor, Tensor)> {
+    fn predict(&mut self, windows: &[MotionWindow], rotate: bool, p_teacher: f64) -> RtnResult<(Tensor, Tensor)> {
         let batch = self.encode(windows, rotate)?;
         let (past, n_out) = (self.config.past_frames, self.config.transition_frames + 1);
         let rng = &mut self.rng;
         let mut teacher = || p_teacher > 0.0 && (p_teacher >= 1.0 || rng.next_f64() < p_teacher);
-        let outs = generate(
-            &self.model,
-            &self.stats,
-            &self.offsets,
-            &batch,
-            past,
-            n_out,
-            &mut teacher,
-        )?;
+        let outs = generate(&self.model, &self.stats, &self.offsets, &batch, past, n_out, &mut teacher)?;
         let pred = Tensor::stack(&outs, 1)?;
         let truth = Tensor::stack(&batch.x[past..past + n_out], 1)?;
         Ok((pred, truth))
@@ -277,10 +227,7 @@ impl RtnTrainer {
         let loss = (pred - truth)?.sqr()?.mean_all()?;
         let value = loss.to_scalar::<f32>()?;
         if !value.is_finite() {
-            return Err(RtnError::NonFiniteLoss {
-                step: self.step,
-                loss: value,
-            });
+            return Err(RtnError::NonFiniteLoss { step: self.step, loss: value });
         }
         self.opt.backward_step(&loss)?;
         self.step += 1;
@@ -290,10 +237,7 @@ impl RtnTrainer {
     /// Validation loss: the same MSE without teacher forcing and without rotation.
     pub fn eval_loss(&mut self, windows: &[MotionWindow]) -> RtnResult<f32> {
         let (pred, truth) = self.predict(windows, false, 0.0)?;
-        Ok((pred.detach() - truth)?
-            .sqr()?
-            .mean_all()?
-            .to_scalar::<f32>()?)
+        Ok((pred.detach() - truth)?.sqr()?.mean_all()?.to_scalar::<f32>()?)
     }
 
     /// Saves `config.json`, `model.safetensors` and `normalization.json` into `dir` (see
@@ -335,14 +279,6 @@ pub fn predict_with_teacher(
         .collect();
     let batch = encode_batch(stats, &items, model.device())?;
     let offsets = OffsetTensors::new(stats, model.device())?;
-    let outs = generate(
-        model,
-        stats,
-        &offsets,
-        &batch,
-        c.past_frames,
-        c.transition_frames + 1,
-        teacher,
-    )?;
+    let outs = generate(model, stats, &offsets, &batch, c.past_frames, c.transition_frames + 1, teacher)?;
     Ok(Tensor::stack(&outs, 1)?)
 }

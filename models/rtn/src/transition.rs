@@ -35,19 +35,9 @@ pub(crate) struct EncodedBatch<'a> {
 }
 
 /// Checks that `len` values hold `frames` frames of `joints` joints (at least, when `at_least`).
-pub(crate) fn check_frames(
-    what: &str,
-    len: usize,
-    frames: usize,
-    joints: usize,
-    at_least: bool,
-) -> RtnResult<()> {
+pub(crate) fn check_frames(what: &str, len: usize, frames: usize, joints: usize, at_least: bool) -> RtnResult<()> {
     let d = 3 * joints;
-    let ok = if at_least {
-        len >= frames * d && len.is_multiple_of(d)
-    } else {
-        len == frames * d
-    };
+    let ok = if at_least { len >= frames * d && len.is_multiple_of(d) } else { len == frames * d };
     if ok {
         Ok(())
     } else {
@@ -56,11 +46,7 @@ pub(crate) fn check_frames(
             expected: frames * d,
             detail: format!(
                 "{}{frames} frames x {joints} joints x 3",
-                if at_least {
-                    "a multiple of 3K and at least "
-                } else {
-                    ""
-                }
+                if at_least { "a multiple of 3K and at least " } else { "" }
             ),
             found: len,
         })
@@ -75,9 +61,7 @@ pub(crate) fn encode_batch<'a>(
     let d = stats.dim();
     let b = items.len();
     if b == 0 {
-        return Err(RtnError::Config(
-            "a batch needs at least one sequence".into(),
-        ));
+        return Err(RtnError::Config("a batch needs at least one sequence".into()));
     }
     let frames = items[0].known.len() / d;
     let mut x = vec![0f32; frames * b * d];
@@ -91,8 +75,7 @@ pub(crate) fn encode_batch<'a>(
         stats.x.normalize(&mut buf);
         for f in 0..frames {
             x[(f * b + k) * d..(f * b + k + 1) * d].copy_from_slice(&buf[f * d..(f + 1) * d]);
-            roots[(f * b + k) * 3..(f * b + k + 1) * 3]
-                .copy_from_slice(&it.known[f * d..f * d + 3]);
+            roots[(f * b + k) * 3..(f * b + k + 1) * 3].copy_from_slice(&it.known[f * d..f * d + 3]);
         }
         let t = &mut target[k * 2 * d..(k + 1) * 2 * d];
         features::target_vector(&it.target, &it.next, t);
@@ -116,16 +99,9 @@ pub(crate) fn encode_batch<'a>(
 }
 
 /// Normalised terrain patches `(batch, side^2)` under the given roots `(batch, 3)`.
-fn terrain_patches(
-    config: &Config,
-    stats: &FeatureStats,
-    batch: &EncodedBatch,
-    root: &Tensor,
-) -> RtnResult<Tensor> {
+fn terrain_patches(config: &Config, stats: &FeatureStats, batch: &EncodedBatch, root: &Tensor) -> RtnResult<Tensor> {
     let Some(ts) = &stats.terrain else {
-        return Err(RtnError::Config(
-            "a terrain-aware RTN needs terrain statistics in its FeatureStats".into(),
-        ));
+        return Err(RtnError::Config("a terrain-aware RTN needs terrain statistics in its FeatureStats".into()));
     };
     let roots = root.to_vec2::<f32>()?;
     let n = config.terrain_dim();
@@ -133,19 +109,10 @@ fn terrain_patches(
     for (k, r) in roots.iter().enumerate() {
         let (map, rot) = batch.terrain[k];
         let Some(map) = map else {
-            return Err(RtnError::Config(format!(
-                "sequence {k} has no terrain but the RTN is terrain-aware"
-            )));
+            return Err(RtnError::Config(format!("sequence {k} has no terrain but the RTN is terrain-aware")));
         };
         let p = &mut out[k * n..(k + 1) * n];
-        features::terrain_patch(
-            map,
-            [r[0], r[1], r[2]],
-            config.terrain_extent,
-            config.terrain_side,
-            rot,
-            p,
-        );
+        features::terrain_patch(map, [r[0], r[1], r[2]], config.terrain_extent, config.terrain_side, rot, p);
         ts.normalize(p);
     }
     Ok(Tensor::from_vec(out, (batch.batch, n), root.device())?)
@@ -167,18 +134,11 @@ pub(crate) fn generate(
 ) -> RtnResult<Vec<Tensor>> {
     let config = model.config();
     if past == 0 || past > batch.x.len() {
-        return Err(RtnError::Config(format!(
-            "need 1..={} past frames, got {past}",
-            batch.x.len()
-        )));
+        return Err(RtnError::Config(format!("need 1..={} past frames, got {past}", batch.x.len())));
     }
     let seq = model.begin(&batch.target)?;
     let mut state = model.initial_state(&batch.x[0])?;
-    let target_term = if config.future_conditioning {
-        Some(offsets.target_term(&batch.target_global)?)
-    } else {
-        None
-    };
+    let target_term = if config.future_conditioning { Some(offsets.target_term(&batch.target_global)?) } else { None };
     let mut x = batch.x[0].clone();
     let mut root = batch.roots[0].clone();
     let mut outs = Vec::with_capacity(n_out);
@@ -187,17 +147,8 @@ pub(crate) fn generate(
             Some(tt) => Some(offsets.offset(tt, &x, &root)?),
             None => None,
         };
-        let terrain = if config.terrain {
-            Some(terrain_patches(config, stats, batch, &root)?)
-        } else {
-            None
-        };
-        let inputs = RtnInputs {
-            sequence: &seq,
-            x: &x,
-            offset: offset.as_ref(),
-            terrain: terrain.as_ref(),
-        };
+        let terrain = if config.terrain { Some(terrain_patches(config, stats, batch, &root)?) } else { None };
+        let inputs = RtnInputs { sequence: &seq, x: &x, offset: offset.as_ref(), terrain: terrain.as_ref() };
         let (next, st) = model.step(&inputs, &state)?;
         state = st;
         let nt = t + 1;
@@ -235,10 +186,7 @@ impl Rtn {
         let k = self.config().joints;
         let d = 3 * k;
         if stats.joints != k {
-            return Err(RtnError::Config(format!(
-                "statistics are for {} joints, the model for {k}",
-                stats.joints
-            )));
+            return Err(RtnError::Config(format!("statistics are for {} joints, the model for {k}", stats.joints)));
         }
         check_frames("past frames", past.len(), 1, k, true)?;
         check_frames("target frame", target.len(), 1, k, false)?;
@@ -249,15 +197,7 @@ impl Rtn {
             SequenceInput { known: past.into(), target: target.into(), next: next.into(), terrain, rotation: None };
         let batch = encode_batch(stats, std::slice::from_ref(&item), device)?;
         let n_past = past.len() / d;
-        let outs = generate(
-            self,
-            stats,
-            &offsets,
-            &batch,
-            n_past,
-            n_frames + 1,
-            &mut || false,
-        )?;
+        let outs = generate(self, stats, &offsets, &batch, n_past, n_frames + 1, &mut || false)?;
         let mut feats = Tensor::cat(&outs, 0)?.flatten_all()?.to_vec1::<f32>()?;
         stats.x.denormalize(&mut feats);
         let mut y = vec![0f32; feats.len()];
