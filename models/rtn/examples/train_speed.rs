@@ -3,6 +3,9 @@
 //! fused LSTM gate shape for comparison.
 //!
 //! `MIMALLOC_PURGE_DELAY=-1 RAYON_NUM_THREADS=2 cargo run --release -p zoo-rtn --example train_speed -- [steps]`
+//!
+//! On a loaded machine (other builds running) one thread is faster than two: candle's parallel
+//! ops spin on barriers when their second thread is descheduled.
 
 use candle_core::{DType, Device, Tensor};
 
