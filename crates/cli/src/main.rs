@@ -7,6 +7,11 @@ mod render;
 
 use clap::{Parser, Subcommand};
 
+// candle allocates a fresh buffer per op; glibc's malloc returns large ones to the kernel and
+// page-faults them back in every training step (about 30% of a step), mimalloc does not.
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 /// zoo: neural motion transitions from training to game engine.
 #[derive(Parser)]
 #[command(name = "zoo", version, about)]
