@@ -30,6 +30,10 @@ enum Command {
     /// Train a model of the zoo.
     #[command(subcommand)]
     Train(cmd::train::TrainCommand),
+    /// Generate a transition between two clips with a trained RTN.
+    Transition(cmd::transition::TransitionArgs),
+    /// Rebuild a clip from sparse keyframes with a trained RTN (temporal super-resolution).
+    Decompress(cmd::decompress::DecompressArgs),
     /// Draw clips as stick figures: an animated GIF or a PNG contact sheet.
     Render(cmd::render::RenderArgs),
 }
@@ -40,6 +44,8 @@ fn main() -> anyhow::Result<()> {
         Command::Data(c) => cmd::data::run(c),
         Command::Bench(a) => cmd::bench::run(a),
         Command::Train(c) => cmd::train::run(c),
+        Command::Transition(a) => cmd::transition::run(a),
+        Command::Decompress(a) => cmd::decompress::run(a),
         Command::Render(a) => cmd::render::run(a),
     }
 }

@@ -93,3 +93,32 @@ impl TransitionMethod for RtnMethod {
             .collect()
     }
 }
+
+/// Global joint positions (f32, `frames * joints * 3`) of clip frames `from..to`.
+pub fn clip_positions_f32(clip: &zoo_motion::Clip, from: usize, to: usize) -> Vec<f32> {
+    let (_, gp) = clip.slice(from, to).global();
+    gp.iter().flat_map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect()
+}
+
+/// Local rotations and root positions fitted to generated global positions
+/// (`frames * joints * 3`), twist taken from `reference` (local rotations, frames x joints).
+pub fn fit_frames(
+    skeleton: &zoo_motion::Skeleton,
+    offsets: &[DVec3],
+    positions: &[f32],
+    reference: &[DQuat],
+) -> (Vec<DQuat>, Vec<DVec3>) {
+    let j = skeleton.len();
+    let frames = positions.len() / (3 * j);
+    let mut rot = vec![DQuat::IDENTITY; frames * j];
+    let mut root = Vec::with_capacity(frames);
+    for f in 0..frames {
+        let pos: Vec<DVec3> = positions[f * 3 * j..(f + 1) * 3 * j]
+            .chunks_exact(3)
+            .map(|p| DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64))
+            .collect();
+        fit_rotations(&skeleton.parents, offsets, &pos, &reference[f * j..(f + 1) * j], &mut rot[f * j..(f + 1) * j]);
+        root.push(pos[0]);
+    }
+    (rot, root)
+}

@@ -441,7 +441,7 @@ mod tests {
     /// Renders the documentation pictures of synthetic clips into `$ZOO_PREVIEW_DIR`
     /// (`cargo test -p zoo-cli -- --ignored docs_previews`).
     #[test]
-    #[ignore]
+    #[ignore = "writes the documentation pictures, not a check: ZOO_PREVIEW_DIR=docs cargo test -p zoo-cli -- --ignored docs_previews"]
     fn docs_previews() {
         use zoo_data::synth::{Gait, TerrainKind};
         let dir = std::path::PathBuf::from(std::env::var("ZOO_PREVIEW_DIR").expect("set ZOO_PREVIEW_DIR"));

@@ -2,5 +2,7 @@
 
 pub mod bench;
 pub mod data;
+pub mod decompress;
 pub mod render;
 pub mod train;
+pub mod transition;
