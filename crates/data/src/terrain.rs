@@ -256,3 +256,12 @@ mod tests {
         assert_eq!(Heightfield::read(&path).unwrap(), hf);
     }
 }
+
+/// The heightmap header `NAME.terrain.json` beside a clip `NAME.bvh[.gz]`, if there is one
+/// (the layout `zoo data synth` writes).
+pub fn sibling_of(clip_path: &Path) -> Option<std::path::PathBuf> {
+    let name = clip_path.file_name()?.to_string_lossy().into_owned();
+    let stem = name.trim_end_matches(".gz").trim_end_matches(".bvh");
+    let t = clip_path.with_file_name(format!("{stem}.terrain.json"));
+    t.exists().then_some(t)
+}

@@ -9,6 +9,7 @@ use serde::Serialize;
 use std::path::PathBuf;
 use std::time::Instant;
 use zoo_data::synth::{self, SynthConfig};
+use zoo_data::terrain::Heightfield;
 use zoo_data::{dataset, metrics};
 use zoo_motion::Skeleton;
 
@@ -85,8 +86,12 @@ pub struct DataStats {
     pub foot_joints: Vec<String>,
     /// Planted height of each foot joint (5th percentile of its height).
     pub planted_heights: Vec<f64>,
-    /// The data's own foot skate (units per frame, `BENCHMARK.md` definition, all frames).
+    /// The data's own foot skate (units per frame, `BENCHMARK.md` definition, all frames; heights
+    /// above the clip's terrain when a `NAME.terrain.json` lies beside it).
     pub foot_skate: f64,
+    /// Lowest foot-joint height over all frames (above the terrain when there is one): how far
+    /// feet sink below the ground if negative.
+    pub min_foot_height: f64,
     /// Seconds taken.
     pub seconds: f64,
 }
@@ -122,9 +127,17 @@ fn stats(a: StatsArgs) -> anyhow::Result<()> {
         .map(|c| {
             let (_, gp) = c.clip.global();
             let frames = c.clip.frames();
+            // Heights are measured above the clip's own terrain when it has a heightmap.
+            let ground = match zoo_data::terrain::sibling_of(&c.path) {
+                Some(t) => Some(Heightfield::read(&t)?),
+                None => None,
+            };
             let mut fp = Vec::with_capacity(frames * feet.len());
             for f in 0..frames {
-                fp.extend(feet.iter().map(|&k| gp[f * j + k]));
+                fp.extend(feet.iter().map(|&k| {
+                    let p = gp[f * j + k];
+                    DVec3::new(p.x, p.y - ground.as_ref().map_or(0.0, |g| g.height(p.x, p.z)), p.z)
+                }));
             }
             let speed = (1..frames)
                 .map(|f| {
@@ -132,9 +145,9 @@ fn stats(a: StatsArgs) -> anyhow::Result<()> {
                     (d.x * d.x + d.z * d.z).sqrt() / c.clip.frame_time
                 })
                 .collect();
-            PerClip { feet: fp, speed }
+            Ok(PerClip { feet: fp, speed })
         })
-        .collect();
+        .collect::<anyhow::Result<_>>()?;
     let planted: Vec<f64> = (0..feet.len())
         .map(|k| {
             let mut h: Vec<f64> =
@@ -170,6 +183,7 @@ fn stats(a: StatsArgs) -> anyhow::Result<()> {
         foot_joints: feet.iter().map(|&k| skeleton.names[k].clone()).collect(),
         planted_heights: planted,
         foot_skate: if skate_n > 0 { skate_sum / skate_n as f64 } else { 0.0 },
+        min_foot_height: per.iter().flat_map(|p| p.feet.iter().map(|v| v.y)).fold(f64::INFINITY, f64::min),
         seconds: start.elapsed().as_secs_f64(),
     };
     print_stats(&out, &skeleton);
@@ -196,6 +210,7 @@ fn print_stats(s: &DataStats, skeleton: &Skeleton) {
         println!("planted height  {n:<10} {h:.2}");
     }
     println!("foot skate (units/frame, all frames)  {:.4}", s.foot_skate);
+    println!("lowest foot joint height              {:.2}", s.min_foot_height);
     println!("done in {:.2} s", s.seconds);
 }
 

@@ -40,19 +40,13 @@ fn label(path: &Path) -> String {
     name.trim_end_matches(".gz").trim_end_matches(".bvh").to_string()
 }
 
-/// The `NAME.terrain.json` beside `NAME.bvh[.gz]`, if there is one.
-fn sibling_terrain(path: &Path) -> Option<PathBuf> {
-    let t = path.with_file_name(format!("{}.terrain.json", label(path)));
-    t.exists().then_some(t)
-}
-
 /// Runs `zoo render`.
 pub fn run(a: RenderArgs) -> Result<()> {
     let ext = a.out.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     if ext != "gif" && ext != "png" {
         bail!("--out {}: expected a .gif or .png file name", a.out.display());
     }
-    let terrain_path = a.terrain.clone().or_else(|| sibling_terrain(&a.clip));
+    let terrain_path = a.terrain.clone().or_else(|| zoo_data::terrain::sibling_of(&a.clip));
     let terrain = match &terrain_path {
         Some(p) => Some(Heightfield::read(p)?),
         None => None,
