@@ -224,7 +224,8 @@ impl Rtn {
 
     /// Temporal super-resolution (RTN sec. 7.4): rebuilds a clip from its first `past` frames
     /// and one keyframe pair (target, next) every `interval` frames by chaining transitions,
-    /// each fed the last `past` frames generated so far and target-blended.
+    /// each fed the last `past` frames generated so far and target-blended; from the second
+    /// segment on, the context ends on the stored frame after the previous keyframe.
     ///
     /// `context`: `past * 3K` values; `keys`: for each keyframe, the keyframe and the frame
     /// after it (`2 * 3K` values each). Returns `past + keys * interval` frames.
@@ -245,10 +246,26 @@ impl Rtn {
         }
         let past = context.len() / d;
         let mut clip = context.to_vec();
+        let mut prev_next: Option<&[f32]> = None;
         for key in keys.chunks_exact(2 * d) {
-            let ctx = clip[clip.len() - past * d..].to_vec();
-            let y = self.transition(stats, &ctx, &key[..d], &key[d..], interval - 1, None)?;
-            clip.extend_from_slice(&y);
+            // After the first keyframe, the stored frame after it is known motion: the next
+            // segment's context ends on it, so the segment starts with the true velocity at the
+            // key instead of the target blend's slowdown (which chained transitions amplify).
+            match prev_next {
+                Some(next) if interval >= 3 => {
+                    let mut ctx = clip[clip.len() - (past - 1) * d..].to_vec();
+                    ctx.extend_from_slice(next);
+                    let y = self.transition(stats, &ctx, &key[..d], &key[d..], interval - 2, None)?;
+                    clip.extend_from_slice(next);
+                    clip.extend_from_slice(&y);
+                }
+                _ => {
+                    let ctx = clip[clip.len() - past * d..].to_vec();
+                    let y = self.transition(stats, &ctx, &key[..d], &key[d..], interval - 1, None)?;
+                    clip.extend_from_slice(&y);
+                }
+            }
+            prev_next = Some(&key[d..]);
         }
         Ok(clip)
     }
