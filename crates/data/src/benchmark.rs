@@ -219,6 +219,43 @@ impl Benchmark {
 
     /// Runs `methods` at every transition length in `lengths`.
     pub fn run(&self, methods: &[&dyn TransitionMethod], lengths: &[usize]) -> Result<BenchResult, String> {
+        self.run_with(methods, lengths, &mut |_, _, _| {})
+    }
+
+    /// Test window `w` cut to `N_PAST + n + N_FUTURE` frames, with the evaluation offsets, and
+    /// with `transition` in place of its frames `N_PAST..N_PAST + n` when given (the ground
+    /// truth otherwise): a clip to write as BVH or render.
+    pub fn window_clip(&self, w: usize, n: usize, transition: Option<&Transition>) -> zoo_motion::Clip {
+        let j = self.test.joints();
+        let frames = N_PAST + n + N_FUTURE;
+        let mut clip = zoo_motion::Clip {
+            skeleton: self.test.skeleton.clone(),
+            frame_time: 1.0 / 30.0,
+            local_rotations: self.test.rot(w)[..frames * j].to_vec(),
+            local_positions: Vec::with_capacity(frames * j),
+        };
+        for f in 0..frames {
+            clip.local_positions.push(self.roots[w * self.test.window + f]);
+            clip.local_positions.extend_from_slice(&self.offsets);
+        }
+        if let Some(t) = transition {
+            for k in 0..n {
+                let f = N_PAST + k;
+                clip.local_rotations[f * j..(f + 1) * j].copy_from_slice(&t.rot[k * j..(k + 1) * j]);
+                clip.local_positions[f * j] = t.root[k];
+            }
+        }
+        clip
+    }
+
+    /// [`Self::run`], handing every method's transitions at every length to `generated`
+    /// (method name, length, one transition per test window).
+    pub fn run_with(
+        &self,
+        methods: &[&dyn TransitionMethod],
+        lengths: &[usize],
+        generated_out: &mut dyn FnMut(&str, usize, &[Transition]),
+    ) -> Result<BenchResult, String> {
         let j = self.test.joints();
         let mut result = BenchResult { windows: self.test.count, gt: BTreeMap::new(), methods: BTreeMap::new() };
         for &n in lengths {
@@ -242,6 +279,7 @@ impl Benchmark {
                 {
                     return Err(format!("method {} returned transitions of the wrong shape", m.name()));
                 }
+                generated_out(&m.name(), n, &generated);
                 let (pr, pp) = self.globals(n, Some(&generated));
                 let (prt, ppt) = (transition_part(&pr, n, j), transition_part(&pp, n, j));
                 let row = result.methods.entry(m.name()).or_default();

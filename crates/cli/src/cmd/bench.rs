@@ -40,6 +40,14 @@ pub struct BenchArgs {
     /// Relative tolerance of `--reference`.
     #[arg(long, default_value_t = 1e-3)]
     pub tolerance: f64,
+    /// Write BVH files of the first `--save-count` test windows into this folder: the ground
+    /// truth and every method's transition, per length (`w0003_n30_interp.bvh`, ...), ready for
+    /// `zoo render ... --compare ...`.
+    #[arg(long)]
+    pub save_bvh: Option<PathBuf>,
+    /// How many test windows `--save-bvh` writes (evenly spread over the test set).
+    #[arg(long, default_value_t = 4)]
+    pub save_count: usize,
 }
 
 fn method(name: &str) -> anyhow::Result<Box<dyn TransitionMethod>> {
@@ -81,7 +89,38 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
     let bench = Benchmark::new(&train, &test).map_err(anyhow::Error::msg)?;
     pb.set_message(format!("evaluating {} test windows", bench.windows()));
     let refs: Vec<&dyn TransitionMethod> = methods.iter().map(|m| m.as_ref()).collect();
-    let result = bench.run(&refs, &a.lengths).map_err(anyhow::Error::msg)?;
+    let picks: Vec<usize> = match &a.save_bvh {
+        Some(dir) => {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+            let k = a.save_count.min(bench.windows()).max(1);
+            (0..k).map(|i| i * bench.windows() / k).collect()
+        }
+        None => Vec::new(),
+    };
+    let mut write_err: Option<anyhow::Error> = None;
+    let mut save = |method: &str, n: usize, transitions: &[zoo_data::benchmark::Transition]| {
+        let Some(dir) = &a.save_bvh else { return };
+        for &w in &picks {
+            // `rtn:runs/rtn-bandai2` -> `rtn-rtn-bandai2`
+            let tag = match method.split_once(':') {
+                Some((kind, path)) => {
+                    let last = std::path::Path::new(path).file_name().map(|f| f.to_string_lossy().into_owned());
+                    format!("{kind}-{}", last.unwrap_or_default())
+                }
+                None => method.to_string(),
+            };
+            for (name, t) in [("gt".to_string(), None), (tag, Some(&transitions[w]))] {
+                let path = dir.join(format!("w{w:04}_n{n}_{name}.bvh"));
+                if let Err(e) = zoo_data::bvh::write_file(&bench.window_clip(w, n, t), &path) {
+                    write_err.get_or_insert(anyhow::anyhow!("writing {}: {e}", path.display()));
+                }
+            }
+        }
+    };
+    let result = bench.run_with(&refs, &a.lengths, &mut save).map_err(anyhow::Error::msg)?;
+    if let Some(e) = write_err {
+        return Err(e);
+    }
     pb.finish_and_clear();
     println!("{}", result.table(&a.lengths));
     if let Some(path) = &a.json {
