@@ -92,3 +92,27 @@ fn malformed_bvh_error_names_file_and_line() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("broken_walk_normal_009.bvh") && err.contains(&format!(":{}:", row + 1)), "{err}");
 }
+
+#[test]
+fn stats_glob_selects_clips_and_reports_rigid_bones() {
+    let dir = tempfile::tempdir().unwrap();
+    toy_dataset(dir.path());
+    let json = dir.path().join("stats.json");
+    let out = Command::new(zoo_bin())
+        .args(["data", "stats"])
+        .arg(dir.path())
+        .args(["--glob", "*_youthful_*", "--json"])
+        .arg(&json)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(v["clips"], 1);
+    assert_eq!(v["frames"], 160);
+    // BVH text keeps 6 decimals: bone lengths stay constant to well under a micrometre-scale unit.
+    assert!(v["max_bone_length_change"].as_f64().unwrap() < 1e-4);
+    let none =
+        Command::new(zoo_bin()).args(["data", "stats"]).arg(dir.path()).args(["--glob", "*nothing*"]).output().unwrap();
+    assert!(!none.status.success());
+    assert!(String::from_utf8_lossy(&none.stderr).contains("matches `*nothing*`"));
+}

@@ -101,7 +101,19 @@ pub fn find_bvh_files(path: &Path) -> Result<Vec<PathBuf>, DataError> {
 /// Loads every clip under `path` in parallel (sorted by path), drops a dummy root, removes
 /// quaternion sign flips over time, and checks that all clips share one skeleton.
 pub fn load(path: &Path) -> Result<Vec<NamedClip>, DataError> {
-    let files = find_bvh_files(path)?;
+    load_matching(path, None)
+}
+
+/// [`load`], keeping only files whose name matches `name_glob` (when given).
+pub fn load_matching(path: &Path, name_glob: Option<&str>) -> Result<Vec<NamedClip>, DataError> {
+    let mut files = find_bvh_files(path)?;
+    if let Some(pattern) = name_glob {
+        let m = glob(pattern)?;
+        files.retain(|p| p.file_name().is_some_and(|n| m.is_match(n)));
+        if files.is_empty() {
+            return Err(DataError::Split(format!("no file name under {} matches `{pattern}`", path.display())));
+        }
+    }
     let opts = ReadOptions { drop_dummy_root: true };
     let clips: Vec<NamedClip> = files
         .par_iter()

@@ -30,6 +30,9 @@ pub struct StatsArgs {
     /// Also write the statistics as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Only the clips whose file name matches this glob, e.g. `'synth_walk_*'`.
+    #[arg(long)]
+    pub glob: Option<String>,
 }
 
 /// Arguments of `zoo data synth`.
@@ -92,6 +95,8 @@ pub struct DataStats {
     /// Lowest foot-joint height over all frames (above the terrain when there is one): how far
     /// feet sink below the ground if negative.
     pub min_foot_height: f64,
+    /// Largest change of a bone's length within a clip (0 for rigid skeletons).
+    pub max_bone_length_change: f64,
     /// Seconds taken.
     pub seconds: f64,
 }
@@ -113,7 +118,8 @@ pub struct RootSpeed {
 
 fn stats(a: StatsArgs) -> anyhow::Result<()> {
     let start = Instant::now();
-    let clips = dataset::load(&a.path).with_context(|| format!("loading {}", a.path.display()))?;
+    let clips =
+        dataset::load_matching(&a.path, a.glob.as_deref()).with_context(|| format!("loading {}", a.path.display()))?;
     let skeleton = clips[0].clip.skeleton.clone();
     let j = skeleton.len();
     let feet = metrics::foot_joints(&skeleton.names);
@@ -121,6 +127,7 @@ fn stats(a: StatsArgs) -> anyhow::Result<()> {
     struct PerClip {
         feet: Vec<DVec3>,
         speed: Vec<f64>,
+        bone_drift: f64,
     }
     let per: Vec<PerClip> = clips
         .par_iter()
@@ -145,7 +152,16 @@ fn stats(a: StatsArgs) -> anyhow::Result<()> {
                     (d.x * d.x + d.z * d.z).sqrt() / c.clip.frame_time
                 })
                 .collect();
-            Ok(PerClip { feet: fp, speed })
+            // Largest change of any bone's length (global joint distance) from frame 0.
+            let mut bone_drift: f64 = 0.0;
+            for k in 1..j {
+                let p = c.clip.skeleton.parents[k].unwrap_or(0);
+                let len0 = (gp[k] - gp[p]).length();
+                for f in 1..frames {
+                    bone_drift = bone_drift.max(((gp[f * j + k] - gp[f * j + p]).length() - len0).abs());
+                }
+            }
+            Ok(PerClip { feet: fp, speed, bone_drift })
         })
         .collect::<anyhow::Result<_>>()?;
     let planted: Vec<f64> = (0..feet.len())
@@ -184,6 +200,7 @@ fn stats(a: StatsArgs) -> anyhow::Result<()> {
         planted_heights: planted,
         foot_skate: if skate_n > 0 { skate_sum / skate_n as f64 } else { 0.0 },
         min_foot_height: per.iter().flat_map(|p| p.feet.iter().map(|v| v.y)).fold(f64::INFINITY, f64::min),
+        max_bone_length_change: per.iter().map(|p| p.bone_drift).fold(0.0, f64::max),
         seconds: start.elapsed().as_secs_f64(),
     };
     print_stats(&out, &skeleton);
@@ -211,6 +228,7 @@ fn print_stats(s: &DataStats, skeleton: &Skeleton) {
     }
     println!("foot skate (units/frame, all frames)  {:.4}", s.foot_skate);
     println!("lowest foot joint height              {:.2}", s.min_foot_height);
+    println!("largest bone length change            {:.2e}", s.max_bone_length_change);
     println!("done in {:.2} s", s.seconds);
 }
 
