@@ -255,13 +255,12 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
                 Ok(l) => l,
                 Err(e) => {
                     pb.abandon();
-                    bail!(
-                        "training stopped at epoch {} step {}: {e}. The last good checkpoint in {} is kept; \
-                         try a lower --lr, or --resume from it",
-                        state.epoch + 1,
-                        trainer.steps(),
-                        out.display()
-                    );
+                    let kept = if state.epoch > 0 {
+                        format!("the checkpoints in {} (best: epoch {}) are untouched", out.display(), state.best_epoch)
+                    } else {
+                        "no checkpoint had been written yet".to_string()
+                    };
+                    bail!("training stopped in epoch {} at step {}: {e} ({kept})", state.epoch + 1, trainer.steps());
                 }
             };
             sum += loss as f64 * chunk.len() as f64;

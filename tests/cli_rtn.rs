@@ -1,0 +1,115 @@
+//! End-to-end tests of `zoo train rtn`, `zoo transition` and `zoo decompress` on the embedded
+//! synthetic data (a paper-size RTN trained for one or two short epochs).
+
+use std::process::Command;
+use zoo_tests::zoo_bin;
+
+fn run(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(zoo_bin()).args(args).output().unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn train_resume_transition_and_decompress() {
+    let dir = tempfile::tempdir().unwrap();
+    let runp = dir.path().join("run");
+    let run_dir = runp.to_str().unwrap();
+    let (ok, stdout, stderr) = run(&["train", "rtn", "--synth-minutes", "2", "--epochs", "1", "--out", run_dir]);
+    assert!(ok, "{stdout}\n{stderr}");
+    for f in [
+        "config.json",
+        "model.safetensors",
+        "normalization.json",
+        "loss_curve.png",
+        "summary.json",
+        "train_state.json",
+        "last/model.safetensors",
+    ] {
+        assert!(runp.join(f).is_file(), "{f} missing in the run folder");
+    }
+    let size = std::fs::metadata(runp.join("model.safetensors")).unwrap().len();
+    assert!(size <= 15 * 1024 * 1024, "parameter file is {size} bytes");
+    let (ok, stdout, stderr) = run(&["train", "rtn", "--synth-minutes", "2", "--epochs", "2", "--resume", run_dir]);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("epoch   2:") && !stdout.contains("epoch   1:"), "{stdout}");
+    let state: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(runp.join("train_state.json")).unwrap()).unwrap();
+    assert_eq!(state["epoch"], 2);
+    assert_eq!(state["valid_loss"].as_array().unwrap().len(), 2);
+
+    // Transition and super-resolution on synthetic BVH clips.
+    let data = dir.path().join("synth");
+    let (ok, _, stderr) = run(&["data", "synth", "--out", data.to_str().unwrap(), "--minutes", "1", "--seed", "3"]);
+    assert!(ok, "{stderr}");
+    let mut clips: Vec<_> = std::fs::read_dir(&data)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "bvh"))
+        .collect();
+    clips.sort();
+    let (a, b) = (clips[0].to_str().unwrap(), clips[1].to_str().unwrap());
+    let out = dir.path().join("t.bvh");
+    let (ok, stdout, stderr) = run(&[
+        "transition",
+        "--model",
+        run_dir,
+        "--from",
+        &format!("{a}:60"),
+        "--to",
+        &format!("{b}:40"),
+        "--frames",
+        "20",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stdout}\n{stderr}");
+    let ca = zoo_data::bvh::read_file(&clips[0], &Default::default()).unwrap();
+    let cb = zoo_data::bvh::read_file(&clips[1], &Default::default()).unwrap();
+    let t = zoo_data::bvh::read_file(&out, &Default::default()).unwrap();
+    assert_eq!(t.frames(), 60 + 20 + (cb.frames() - 40));
+    assert_eq!(t.skeleton.names, ca.skeleton.names);
+    // The output plays A unchanged before the transition.
+    for f in [0, 30, 59] {
+        assert!((t.root_position(f) - ca.root_position(f)).length() < 1e-3);
+    }
+    let rebuilt = dir.path().join("r.bvh");
+    let (ok, stdout, stderr) = run(&["decompress", "--model", run_dir, a, "--out", rebuilt.to_str().unwrap()]);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("mean joint position error"), "{stdout}");
+    let r = zoo_data::bvh::read_file(&rebuilt, &Default::default()).unwrap();
+    assert_eq!(r.frames(), 10 + (ca.frames() - 11) / 30 * 30);
+    assert!(r.local_rotations.iter().all(|q| q.is_finite()));
+}
+
+#[test]
+fn diverging_training_stops_with_a_message() {
+    let dir = tempfile::tempdir().unwrap();
+    let runp = dir.path().join("run");
+    let (ok, stdout, stderr) =
+        run(&["train", "rtn", "--synth-minutes", "2", "--epochs", "1", "--lr", "1e8", "--out", runp.to_str().unwrap()]);
+    assert!(!ok, "{stdout}");
+    assert!(stderr.contains("training stopped") && stderr.contains("NaN"), "{stderr}");
+    assert!(!runp.join("model.safetensors").exists(), "a diverged run must not write weights");
+}
+
+#[test]
+fn transition_rejects_bad_frame_references() {
+    let dir = tempfile::tempdir().unwrap();
+    let (ok, _, stderr) = run(&[
+        "transition",
+        "--model",
+        dir.path().to_str().unwrap(),
+        "--from",
+        "nofile.bvh",
+        "--to",
+        "x.bvh:3",
+        "--out",
+        "o.bvh",
+    ]);
+    assert!(!ok);
+    assert!(stderr.contains("expected CLIP.bvh:FRAME"), "{stderr}");
+}
