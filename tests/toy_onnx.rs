@@ -112,7 +112,7 @@ impl ToyModel {
         let sig = |v: f64| 1.0 / (1.0 + (-v).exp());
         let e: Vec<f32> = linear(&self.enc_w, &self.enc_b, x, self.enc)
             .into_iter()
-            .map(|v| if v < 0.0 { LEAKY_ALPHA as f64 * v } else { v } as f32)
+            .map(|v| (if v < 0.0 { LEAKY_ALPHA as f64 * v } else { v }) as f32)
             .collect();
         let g = self.cell.gates() * self.hidden;
         let gi = linear(&self.w_ih, &self.b_ih, &e, g);

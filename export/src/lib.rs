@@ -33,7 +33,6 @@ use prost::Message;
 use serde::Serialize;
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::path::Path;
-use tract_onnx::pb;
 
 /// The prost ONNX types (`ModelProto`, `NodeProto`, ...), re-exported from tract-onnx.
 pub use tract_onnx::pb;

@@ -22,6 +22,7 @@
 pub mod error;
 pub mod metadata;
 pub mod model;
+pub mod pose;
 
 pub use error::MotionError;
 pub use metadata::{
