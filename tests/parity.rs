@@ -22,9 +22,9 @@ const TOLERANCE: f32 = 1e-4;
 
 /// The onnxruntime library: `ORT_DYLIB_PATH`, else `<workspace>/.onnxruntime/libonnxruntime.so.1.31.1`.
 fn onnxruntime_library() -> PathBuf {
-    let path = std::env::var_os("ORT_DYLIB_PATH").map(PathBuf::from).unwrap_or_else(|| {
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../.onnxruntime/libonnxruntime.so.1.31.1")
-    });
+    let path = std::env::var_os("ORT_DYLIB_PATH")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../.onnxruntime/libonnxruntime.so.1.31.1"));
     // ort panics with "Failed to load ONNX Runtime dylib" on a missing file (DEPENDENCY-FACTS):
     // check first and say how to provision it.
     assert!(
@@ -71,10 +71,7 @@ impl OrtSession {
             })
             .collect();
         let out = self.0.run(values).expect("onnxruntime runs the step");
-        outputs
-            .iter()
-            .map(|name| out[*name].try_extract_tensor::<f32>().expect("f32 output").1.to_vec())
-            .collect()
+        outputs.iter().map(|name| out[*name].try_extract_tensor::<f32>().expect("f32 output").1.to_vec()).collect()
     }
 
     fn metadata(&self, key: &str) -> Option<String> {

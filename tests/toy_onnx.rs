@@ -6,7 +6,7 @@
 //! and are converted to ONNX layout by the graph builders, so the reference also checks the
 //! gate reordering of `zoo_export::reorder_gates`.
 
-use zoo_export::{Dim, GraphBuilder, GRU_TORCH_TO_ONNX, LSTM_TORCH_TO_ONNX, OnnxModel, RnnDirection, RnnInputs, Value};
+use zoo_export::{Dim, GRU_TORCH_TO_ONNX, GraphBuilder, LSTM_TORCH_TO_ONNX, OnnxModel, RnnDirection, RnnInputs, Value};
 use zoo_runtime::metadata::{
     FORMAT_VERSION, MotionFeatureSegment, MotionMeanStd, MotionModelMetadata, MotionSkeletonInfo, MotionStatePair,
 };
@@ -106,7 +106,14 @@ impl ToyModel {
     pub fn step(&self, x: &[f32], state: &mut [Vec<f32>]) -> Vec<f32> {
         let linear = |w: &[f32], b: &[f32], v: &[f32], rows: usize| -> Vec<f64> {
             (0..rows)
-                .map(|r| b[r] as f64 + w[r * v.len()..(r + 1) * v.len()].iter().zip(v).map(|(a, b)| *a as f64 * *b as f64).sum::<f64>())
+                .map(|r| {
+                    b[r] as f64
+                        + w[r * v.len()..(r + 1) * v.len()]
+                            .iter()
+                            .zip(v)
+                            .map(|(a, b)| *a as f64 * *b as f64)
+                            .sum::<f64>()
+                })
                 .collect()
         };
         let sig = |v: f64| 1.0 / (1.0 + (-v).exp());

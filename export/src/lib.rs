@@ -48,10 +48,14 @@ pub const BATCH_DIM: &str = "batch";
 #[derive(Debug, thiserror::Error)]
 pub enum ExportError {
     /// Two values, nodes or initializers were given the same name.
-    #[error("the name `{0}` is used twice in the graph; give every node and initializer its own name (e.g. a candle variable path)")]
+    #[error(
+        "the name `{0}` is used twice in the graph; give every node and initializer its own name (e.g. a candle variable path)"
+    )]
     DuplicateName(String),
     /// A node refers to a value no input, initializer or earlier node produces.
-    #[error("node `{node}` reads `{value}`, which no graph input, initializer or earlier node produces; create values before using them")]
+    #[error(
+        "node `{node}` reads `{value}`, which no graph input, initializer or earlier node produces; create values before using them"
+    )]
     UnknownValue {
         /// The node that reads the value.
         node: String,
@@ -262,11 +266,7 @@ impl GraphBuilder {
     /// Declares `value` as an f32 graph output called `name` with the given dimensions.
     /// When `value` has another name an `Identity` node renames it.
     pub fn output(&mut self, name: &str, value: &Value, dims: &[Dim]) -> Value {
-        let out = if value.0 == name {
-            value.clone()
-        } else {
-            self.node("Identity", name, &[value], vec![])
-        };
+        let out = if value.0 == name { value.clone() } else { self.node("Identity", name, &[value], vec![]) };
         self.outputs.push(value_info(name, dims));
         out
     }
@@ -431,7 +431,10 @@ impl GraphBuilder {
     /// `Concat(values, axis)`.
     pub fn concat(&mut self, name: &str, values: &[&Value], axis: i64) -> Value {
         if values.is_empty() {
-            self.fail(ExportError::InvalidOp { node: name.to_string(), message: "Concat needs at least one input".into() });
+            self.fail(ExportError::InvalidOp {
+                node: name.to_string(),
+                message: "Concat needs at least one input".into(),
+            });
         }
         self.node("Concat", name, values, vec![attr_int("axis", axis)])
     }
@@ -466,7 +469,10 @@ impl GraphBuilder {
     /// Outputs are named `<name>.0`, `<name>.1`, ...
     pub fn split(&mut self, name: &str, x: &Value, sizes: &[usize], axis: i64) -> Vec<Value> {
         if sizes.is_empty() {
-            self.fail(ExportError::InvalidOp { node: name.to_string(), message: "Split needs at least one size".into() });
+            self.fail(ExportError::InvalidOp {
+                node: name.to_string(),
+                message: "Split needs at least one size".into(),
+            });
         }
         let sizes: Vec<i64> = sizes.iter().map(|&s| s as i64).collect();
         let s = self.i64_vector(name, "split", &sizes);

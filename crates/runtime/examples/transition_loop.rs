@@ -117,7 +117,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         if tick % 10 == 9 {
             let dist = joints[0].distance(Vec3::from_slice(&target[..3]));
-            println!("tick {:3}: hips {:>6.2?}  head {:>6.2?}  |hips - target| {dist:.2}", tick + 1, joints[0], joints[1]);
+            println!(
+                "tick {:3}: hips {:>6.2?}  head {:>6.2?}  |hips - target| {dist:.2}",
+                tick + 1,
+                joints[0],
+                joints[1]
+            );
         }
     }
     let per_tick = start.elapsed().as_secs_f64() * 1e3 / ticks as f64;

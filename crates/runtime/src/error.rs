@@ -20,13 +20,17 @@ pub enum MotionError {
         reason: String,
     },
     /// A metadata_props entry the runtime needs is absent.
-    #[error("the model has no metadata_props entry `{key}`; it was not written by `zoo export` (or by an older exporter): re-export it with `zoo export --onnx MODEL_DIR --out FILE.onnx`")]
+    #[error(
+        "the model has no metadata_props entry `{key}`; it was not written by `zoo export` (or by an older exporter): re-export it with `zoo export --onnx MODEL_DIR --out FILE.onnx`"
+    )]
     MissingMetadata {
         /// The key.
         key: String,
     },
     /// The model's format version is not one this runtime reads.
-    #[error("model format version {found} is not supported by this runtime (it reads version {supported}); re-export the model with the `zoo export` of this release, or upgrade the runtime")]
+    #[error(
+        "model format version {found} is not supported by this runtime (it reads version {supported}); re-export the model with the `zoo export` of this release, or upgrade the runtime"
+    )]
     UnknownFormatVersion {
         /// Version in the file.
         found: String,
@@ -82,7 +86,9 @@ pub enum MotionError {
         found: usize,
     },
     /// An input holds NaN or infinity.
-    #[error("input `{name}` holds a non-finite value ({value}) at index {index} (character {character}); fix the caller's data, the model would spread it into every later frame")]
+    #[error(
+        "input `{name}` holds a non-finite value ({value}) at index {index} (character {character}); fix the caller's data, the model would spread it into every later frame"
+    )]
     NonFinite {
         /// Input name.
         name: String,
@@ -94,7 +100,9 @@ pub enum MotionError {
         value: f32,
     },
     /// A state does not belong to this model.
-    #[error("the character state does not fit this model (state `{name}`: expected {expected} values, found {found}); create it with MotionModel::new_state of the same model")]
+    #[error(
+        "the character state does not fit this model (state `{name}`: expected {expected} values, found {found}); create it with MotionModel::new_state of the same model"
+    )]
     StateMismatch {
         /// State name.
         name: String,

@@ -122,11 +122,7 @@ impl MotionSkeletonInfo {
     fn check(&self) -> Result<(), String> {
         let n = self.names.len();
         if self.parents.len() != n || self.offsets.len() != n {
-            return Err(format!(
-                "{n} names but {} parents and {} offsets",
-                self.parents.len(),
-                self.offsets.len()
-            ));
+            return Err(format!("{n} names but {} parents and {} offsets", self.parents.len(), self.offsets.len()));
         }
         for (j, &p) in self.parents.iter().enumerate() {
             if (j == 0 && p != -1) || (j > 0 && !(0..j as i32).contains(&p)) {
@@ -210,7 +206,8 @@ impl MotionModelMetadata {
             req(key)?;
         }
         fn parse<T: serde::de::DeserializeOwned>(key: &str, s: &str) -> Result<T, MotionError> {
-            serde_json::from_str(s).map_err(|e| MotionError::BadMetadata { key: key.to_string(), reason: e.to_string() })
+            serde_json::from_str(s)
+                .map_err(|e| MotionError::BadMetadata { key: key.to_string(), reason: e.to_string() })
         }
         let config_json = req(keys::CONFIG)?;
         parse::<serde_json::Value>(keys::CONFIG, &config_json)?;

@@ -134,7 +134,8 @@ impl MotionModel {
     /// Loads an exported `.onnx` file.
     pub fn load(path: impl AsRef<Path>) -> Result<Self, MotionError> {
         let path = path.as_ref();
-        let bytes = std::fs::read(path).map_err(|source| MotionError::Io { path: path.display().to_string(), source })?;
+        let bytes =
+            std::fs::read(path).map_err(|source| MotionError::Io { path: path.display().to_string(), source })?;
         Self::from_bytes_named(&bytes, &path.display().to_string())
     }
 
@@ -172,12 +173,21 @@ impl MotionModel {
         let mut graph_outputs: Vec<Option<Source>> = vec![None; graph.output.len()];
         let mut states = Vec::new();
         for (k, pair) in metadata.state.iter().enumerate() {
-            let bad = |what, name: &str, reason: String| MotionError::BadGraphIo { what, name: name.to_string(), reason };
+            let bad =
+                |what, name: &str, reason: String| MotionError::BadGraphIo { what, name: name.to_string(), reason };
             let i = in_pos(&pair.input).ok_or_else(|| {
-                bad("input", &pair.input, format!("is named as a state in `{}` but the graph has no such input", keys::STATE))
+                bad(
+                    "input",
+                    &pair.input,
+                    format!("is named as a state in `{}` but the graph has no such input", keys::STATE),
+                )
             })?;
             let o = out_pos(&pair.output).ok_or_else(|| {
-                bad("output", &pair.output, format!("is named as a state in `{}` but the graph has no such output", keys::STATE))
+                bad(
+                    "output",
+                    &pair.output,
+                    format!("is named as a state in `{}` but the graph has no such output", keys::STATE),
+                )
             })?;
             if in_dims[i] != out_dims[o] {
                 return Err(bad(
@@ -191,20 +201,32 @@ impl MotionModel {
             }
             graph_inputs[i] = Some(Source::State(k));
             graph_outputs[o] = Some(Source::State(k));
-            states.push(MotionStateInfo { input: pair.input.clone(), output: pair.output.clone(), width: width(&in_dims[i]) });
+            states.push(MotionStateInfo {
+                input: pair.input.clone(),
+                output: pair.output.clone(),
+                width: width(&in_dims[i]),
+            });
         }
         let mut inputs = Vec::new();
         for (i, v) in graph.input.iter().enumerate() {
             if graph_inputs[i].is_none() {
                 graph_inputs[i] = Some(Source::Frame(inputs.len()));
-                inputs.push(MotionTensorInfo { name: v.name.clone(), width: width(&in_dims[i]), dims: in_dims[i].clone() });
+                inputs.push(MotionTensorInfo {
+                    name: v.name.clone(),
+                    width: width(&in_dims[i]),
+                    dims: in_dims[i].clone(),
+                });
             }
         }
         let mut outputs = Vec::new();
         for (o, v) in graph.output.iter().enumerate() {
             if graph_outputs[o].is_none() {
                 graph_outputs[o] = Some(Source::Frame(outputs.len()));
-                outputs.push(MotionTensorInfo { name: v.name.clone(), width: width(&out_dims[o]), dims: out_dims[o].clone() });
+                outputs.push(MotionTensorInfo {
+                    name: v.name.clone(),
+                    width: width(&out_dims[o]),
+                    dims: out_dims[o].clone(),
+                });
             }
         }
         let unsupported = |e: TractError| MotionError::Unsupported { reason: chain(&e) };
@@ -318,7 +340,12 @@ impl MotionRunner {
     /// `inputs[i]` holds `model.inputs()[i].width` values; `outputs[i]` receives
     /// `model.outputs()[i].width` values; `state` is read and replaced by the next state.
     /// Invalid sizes or non-finite inputs return an error and leave `state` unchanged.
-    pub fn step(&mut self, state: &mut MotionState, inputs: &[&[f32]], outputs: &mut [&mut [f32]]) -> Result<(), MotionError> {
+    pub fn step(
+        &mut self,
+        state: &mut MotionState,
+        inputs: &[&[f32]],
+        outputs: &mut [&mut [f32]],
+    ) -> Result<(), MotionError> {
         self.run(std::slice::from_mut(state), inputs, outputs)
     }
 
@@ -335,7 +362,12 @@ impl MotionRunner {
         self.run(states, inputs, outputs)
     }
 
-    fn run(&mut self, states: &mut [MotionState], inputs: &[&[f32]], outputs: &mut [&mut [f32]]) -> Result<(), MotionError> {
+    fn run(
+        &mut self,
+        states: &mut [MotionState],
+        inputs: &[&[f32]],
+        outputs: &mut [&mut [f32]],
+    ) -> Result<(), MotionError> {
         let inner = &*self.model.inner;
         let batch = states.len();
         if batch == 0 {
@@ -345,7 +377,11 @@ impl MotionRunner {
             return Err(MotionError::BufferCount { what: "inputs", expected: inner.inputs.len(), found: inputs.len() });
         }
         if outputs.len() != inner.outputs.len() {
-            return Err(MotionError::BufferCount { what: "outputs", expected: inner.outputs.len(), found: outputs.len() });
+            return Err(MotionError::BufferCount {
+                what: "outputs",
+                expected: inner.outputs.len(),
+                found: outputs.len(),
+            });
         }
         for (info, data) in inner.inputs.iter().zip(inputs) {
             check_len(&info.name, data.len(), batch, info.width)?;
