@@ -64,11 +64,11 @@ fn toy_model(path: &std::path::Path) -> Result<(), Box<dyn std::error::Error>> {
     };
     let out = g.gru("gru", &rnn, true);
     let h_next = g.squeeze("h_next", &out.y_h, &[0]);
-    let dv: Vec<f32> = (0..FRAME * HIDDEN).map(|i| ((i * 29 % 89) as f32 / 89.0 - 0.5) * 2.0).collect();
+    let dv: Vec<f32> = (0..FRAME * HIDDEN).map(|i| ((i * 29 % 89) as f32 / 89.0 - 0.5) * 0.2).collect();
     let d = g.initializer_f32("decoder.weight", &[FRAME, HIDDEN], &dv);
     let delta = g.gemm("decoder", &h_next, &d, None, true);
-    // Pull towards the target: pose + 0.1 * offset + delta
-    let k = g.initializer_f32("blend.rate", &[1], &[0.1]);
+    // Pull towards the target: pose + 0.2 * offset + delta
+    let k = g.initializer_f32("blend.rate", &[1], &[0.2]);
     let pull = g.mul("blend.pull", &offset, &k);
     let next = g.add("blend.add", &pose, &pull);
     let next = g.add("pose_next_sum", &next, &delta);
