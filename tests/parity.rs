@@ -125,7 +125,7 @@ fn tract_loop(toy: &ToyModel, model: &OnnxModel) -> (Trace, Trace) {
     }
     // The batch-1 plan, one character after the other.
     let x0 = initial_frames(toy);
-    let mut singles = vec![Vec::with_capacity(BATCH * toy.frame); FRAMES];
+    let mut singles = vec![Vec::new(); FRAMES];
     for c in 0..BATCH {
         let mut state = model.new_state();
         let mut x = x0[c * toy.frame..(c + 1) * toy.frame].to_vec();
