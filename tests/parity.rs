@@ -91,12 +91,14 @@ fn initial_frames(toy: &ToyModel) -> Vec<f32> {
     lcg(99, BATCH * toy.frame, 1.0)
 }
 
-fn reference_loop(toy: &ToyModel) -> Trace {
+fn reference_loop(toy: &ToyModel, start: bool) -> Trace {
     let x0 = initial_frames(toy);
     let mut per_char: Vec<(Vec<f32>, Vec<Vec<f32>>)> = (0..BATCH)
         .map(|c| {
             let x = x0[c * toy.frame..(c + 1) * toy.frame].to_vec();
-            (x, toy.state_widths().iter().map(|&w| vec![0.0; w]).collect())
+            let state =
+                if start { toy.start_state(&x) } else { toy.state_widths().iter().map(|&w| vec![0.0; w]).collect() };
+            (x, state)
         })
         .collect();
     (0..FRAMES)
@@ -116,6 +118,8 @@ fn tract_loop(toy: &ToyModel, model: &OnnxModel) -> (Trace, Trace) {
     let mut runner = model.runner().unwrap();
     let mut states: Vec<MotionState> = (0..BATCH).map(|_| model.new_state()).collect();
     let mut x = initial_frames(toy);
+    let start_inputs: Vec<&[f32]> = if model.has_start_graph() { vec![&x] } else { vec![] };
+    runner.start_batch(&mut states, &start_inputs).unwrap();
     let mut y = vec![0.0; x.len()];
     let mut batched = Vec::new();
     for _ in 0..FRAMES {
@@ -129,6 +133,8 @@ fn tract_loop(toy: &ToyModel, model: &OnnxModel) -> (Trace, Trace) {
     for c in 0..BATCH {
         let mut state = model.new_state();
         let mut x = x0[c * toy.frame..(c + 1) * toy.frame].to_vec();
+        let start_inputs: Vec<&[f32]> = if model.has_start_graph() { vec![&x] } else { vec![] };
+        runner.start(&mut state, &start_inputs).unwrap();
         let mut y = vec![0.0; toy.frame];
         for frame in singles.iter_mut() {
             runner.step(&mut state, &[&x], &mut [&mut y]).unwrap();
@@ -139,7 +145,7 @@ fn tract_loop(toy: &ToyModel, model: &OnnxModel) -> (Trace, Trace) {
     (batched, singles)
 }
 
-fn ort_loop(toy: &ToyModel, model: &OnnxModel) -> Trace {
+fn ort_loop(toy: &ToyModel, model: &OnnxModel, start: bool) -> Trace {
     let mut session = OrtSession::new(model);
     assert_eq!(session.metadata("zoo.format_version").as_deref(), Some("1"), "metadata_props reach onnxruntime");
     let mut x = initial_frames(toy);
@@ -148,6 +154,14 @@ fn ort_loop(toy: &ToyModel, model: &OnnxModel) -> Trace {
         Cell::Lstm => (&["h", "c"], &["h_next", "c_next"]),
         Cell::Gru => (&["h"], &["h_next"]),
     };
+    if start {
+        // The start graph as an engine would read it: decoded from the step file's metadata.
+        use base64::Engine;
+        let encoded = session.metadata(zoo_runtime::metadata::keys::START_GRAPH).expect("embedded start graph");
+        let bytes = base64::engine::general_purpose::STANDARD.decode(encoded).unwrap();
+        let start_graph = zoo_export::OnnxModel::from_proto(prost::Message::decode(bytes.as_slice()).unwrap());
+        states = OrtSession::new(&start_graph).run(&[("x0", BATCH, &x)], state_in);
+    }
     let mut trace = Vec::new();
     for _ in 0..FRAMES {
         let mut inputs = vec![("x", BATCH, x.as_slice())];
@@ -180,9 +194,10 @@ fn rounded(trace: &Trace, frame: usize) -> Vec<Vec<Vec<f64>>> {
 }
 
 fn check_parity(name: &str, toy: &ToyModel, model: &OnnxModel) {
-    let reference = reference_loop(toy);
+    let start = model.proto().metadata_props.iter().any(|p| p.key == zoo_runtime::metadata::keys::START_GRAPH);
+    let reference = reference_loop(toy, start);
     let (tract_batched, tract_single) = tract_loop(toy, model);
-    let ort = ort_loop(toy, model);
+    let ort = ort_loop(toy, model, start);
     let pairs = [
         ("reference-tract", trace_diff(&reference, &tract_batched)),
         ("reference-tract_batch1", trace_diff(&reference, &tract_single)),
@@ -216,6 +231,19 @@ fn lstm_op_graph_parity() {
 fn gru_op_graph_parity() {
     let toy = ToyModel::new(Cell::Gru, 6, 8, 5);
     check_parity("gru_op", &toy, &toy.rnn_op_graph());
+}
+
+#[test]
+fn lstm_op_graph_with_start_graph_parity() {
+    // A whole transition: the embedded start graph sets (h, c) from the first frame, then 30 steps.
+    let toy = ToyModel::new(Cell::Lstm, 6, 8, 5);
+    check_parity("lstm_op_start", &toy, &toy.with_start(&toy.rnn_op_graph()));
+}
+
+#[test]
+fn gru_op_graph_with_start_graph_parity() {
+    let toy = ToyModel::new(Cell::Gru, 6, 8, 5);
+    check_parity("gru_op_start", &toy, &toy.with_start(&toy.rnn_op_graph()));
 }
 
 #[test]

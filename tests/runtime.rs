@@ -207,3 +207,46 @@ fn batch_sizes_can_change_between_calls() {
         assert!(y.chunks(6).all(|c| c == &y[..6]), "same input, same output for every character");
     }
 }
+
+#[test]
+fn a_start_graph_sets_the_state() {
+    let toy = toy();
+    let model = load(&toy.with_start(&toy.rnn_op_graph())).unwrap();
+    assert!(model.has_start_graph());
+    assert_eq!(model.start_inputs()[0].name, "x0");
+    let mut runner = model.runner().unwrap();
+    let mut state = model.new_state();
+    let x0 = [0.3, -0.2, 0.1, 0.5, -0.4, 0.2];
+    runner.start(&mut state, &[&x0]).unwrap();
+    let expected = toy.start_state(&x0);
+    for (k, e) in expected.iter().enumerate() {
+        let d = state.slot(k).iter().zip(e).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
+        assert!(d < 1e-6, "slot {k}: {d}");
+    }
+    let err = runner.start(&mut state, &[&x0[..5]]).unwrap_err();
+    assert!(matches!(err, MotionError::BufferLength { .. }), "{err}");
+}
+
+#[test]
+fn without_a_start_graph_start_zeroes_the_state() {
+    let (_, mut runner, mut state) = ready();
+    state.slot_mut(0)[0] = 1.0;
+    runner.start(&mut state, &[]).unwrap();
+    assert!(state.slot(0).iter().all(|v| *v == 0.0));
+    let err = runner.start(&mut state, &[&[0.0; 6]]).unwrap_err();
+    assert!(matches!(err, MotionError::BufferCount { expected: 0, .. }), "{err}");
+}
+
+#[test]
+fn a_start_graph_writing_an_unknown_state_is_refused() {
+    let gru = ToyModel::new(Cell::Gru, 6, 8, 5);
+    // The LSTM start graph writes `c`, which the GRU step graph does not have.
+    let mut proto = gru.rnn_op_graph().proto().clone();
+    proto.metadata_props.push(zoo_export::pb::StringStringEntryProto {
+        key: keys::START_GRAPH.into(),
+        value: toy().start_graph().to_base64(),
+    });
+    let err = MotionModel::from_bytes(&OnnxModel::from_proto(proto).to_bytes()).unwrap_err();
+    assert!(matches!(&err, MotionError::BadMetadata { key, .. } if key == keys::START_GRAPH), "{err}");
+    assert!(err.to_string().contains("`c`"), "{err}");
+}

@@ -155,6 +155,55 @@ impl ToyModel {
         x.iter().zip(d).map(|(x, d)| (*x as f64 + d) as f32).collect()
     }
 
+    /// Start-graph weight `[hidden, frame]` (fixed).
+    fn start_w(&self) -> Vec<f32> {
+        lcg(9, self.hidden * self.frame, 1.0 / (self.frame as f32).sqrt())
+    }
+
+    /// Initial state from the first frame, as the start graph computes it:
+    /// `h = tanh(W_s x0)`, `c = 0.5 h` (LSTM only).
+    pub fn start_state(&self, x0: &[f32]) -> Vec<Vec<f32>> {
+        let w = self.start_w();
+        let h: Vec<f32> = (0..self.hidden)
+            .map(|r| {
+                let z: f64 =
+                    w[r * self.frame..(r + 1) * self.frame].iter().zip(x0).map(|(a, b)| *a as f64 * *b as f64).sum();
+                z.tanh() as f32
+            })
+            .collect();
+        match self.cell {
+            Cell::Lstm => vec![h.clone(), h.iter().map(|v| 0.5 * v).collect()],
+            Cell::Gru => vec![h],
+        }
+    }
+
+    /// The transition-start graph: `x0` `[batch, frame]` -> the state inputs `h` (and `c`).
+    pub fn start_graph(&self) -> OnnxModel {
+        let mut g = GraphBuilder::new("toy_start");
+        let b = Dim::batch;
+        let x0 = g.input("x0", &[b(), Dim::Fixed(self.frame)]);
+        let w = g.initializer_f32("state_init.weight", &[self.hidden, self.frame], &self.start_w());
+        let z = g.gemm("state_init.gemm", &x0, &w, None, true);
+        let h = g.tanh("h", &z);
+        g.output("h", &h, &[b(), Dim::Fixed(self.hidden)]);
+        if self.cell == Cell::Lstm {
+            let half = g.initializer_f32("state_init.c_scale", &[1], &[0.5]);
+            let c = g.mul("c", &h, &half);
+            g.output("c", &c, &[b(), Dim::Fixed(self.hidden)]);
+        }
+        g.finish().expect("toy start graph")
+    }
+
+    /// `step` with the start graph embedded in its metadata_props (`zoo.start_graph`).
+    pub fn with_start(&self, step: &OnnxModel) -> OnnxModel {
+        let mut proto = step.proto().clone();
+        proto.metadata_props.push(zoo_export::pb::StringStringEntryProto {
+            key: zoo_runtime::metadata::keys::START_GRAPH.into(),
+            value: self.start_graph().to_base64(),
+        });
+        OnnxModel::from_proto(proto)
+    }
+
     /// Format-1 metadata for the toy's step graphs.
     pub fn metadata(&self) -> MotionModelMetadata {
         let state = match self.cell {

@@ -704,6 +704,13 @@ impl OnnxModel {
         self.proto.encode_to_vec()
     }
 
+    /// The encoded model as standard base64, to embed one graph in another model's
+    /// metadata_props (the runtime's `zoo.start_graph`: one file carries both graphs).
+    pub fn to_base64(&self) -> String {
+        use base64::Engine;
+        base64::engine::general_purpose::STANDARD.encode(self.to_bytes())
+    }
+
     /// Writes the encoded model to `path`.
     pub fn write(&self, path: &Path) -> Result<(), ExportError> {
         std::fs::write(path, self.to_bytes())

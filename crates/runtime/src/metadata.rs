@@ -14,6 +14,11 @@
 //! | `zoo.feature_layout`  | `[{"name": "..", "start": 0, "len": 3}, ..]`                 |
 //! | `zoo.fps`             | frames per second of the training data, e.g. `"30"`          |
 //! | `zoo.state`           | `[{"input": "h", "output": "h_next"}, ..]`                   |
+//! | `zoo.start_graph`     | optional: base64 ONNX of the transition-start graph (below)  |
+//!
+//! The start graph runs once when a transition starts (e.g. target encoding, hidden-state
+//! initialiser). Its inputs are `[batch, ...]` f32; each of its outputs is named like a state
+//! *input* of the step graph and sets that state slot; slots it does not produce start at zero.
 
 use crate::error::MotionError;
 use glam::Vec3;
@@ -41,6 +46,8 @@ pub mod keys {
     pub const FPS: &str = "zoo.fps";
     /// Recurrent state pairs of the step graph, JSON.
     pub const STATE: &str = "zoo.state";
+    /// Optional base64 ONNX of the transition-start graph.
+    pub const START_GRAPH: &str = "zoo.start_graph";
     /// All keys a format-1 model must carry.
     pub const REQUIRED: [&str; 8] =
         [FORMAT_VERSION, MODEL_KIND, CONFIG, NORMALISATION, SKELETON, FEATURE_LAYOUT, FPS, STATE];

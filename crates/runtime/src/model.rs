@@ -49,6 +49,20 @@ struct Inner {
     single: Plan,
     /// Plan with a symbolic batch dimension.
     batched: Plan,
+    /// The transition-start graph, when the model has one.
+    start: Option<StartGraph>,
+}
+
+/// The transition-start graph (`zoo.start_graph`): all inputs are caller buffers, every output
+/// sets one state slot.
+#[derive(Debug)]
+struct StartGraph {
+    inputs: Vec<MotionTensorInfo>,
+    widths: Vec<usize>,
+    /// State slot of each graph output, in graph order.
+    out_slots: Vec<usize>,
+    single: Plan,
+    batched: Plan,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -130,6 +144,76 @@ fn plan(model: &InferenceModel, concrete_batch: Option<usize>, dims: &[Vec<usize
     model.into_optimized()?.into_runnable()
 }
 
+/// A decoded ONNX model, its tract model and the per-character dims of its inputs and outputs.
+struct Parsed {
+    proto: pb::ModelProto,
+    model: InferenceModel,
+    in_dims: Vec<Vec<usize>>,
+    out_dims: Vec<Vec<usize>>,
+}
+
+fn parse(bytes: &[u8], origin: &str) -> Result<Parsed, MotionError> {
+    let not_onnx = |reason: String| MotionError::NotOnnx { origin: origin.to_string(), reason };
+    let proto = pb::ModelProto::decode(bytes).map_err(|e| not_onnx(format!("protobuf decoding failed: {e}")))?;
+    let graph = match &proto.graph {
+        Some(g) if proto.ir_version > 0 && !g.node.is_empty() => g,
+        _ => return Err(not_onnx("no IR version or no graph nodes".into())),
+    };
+    let model =
+        tract_onnx::onnx().model_for_proto_model(&proto).map_err(|e| MotionError::Unsupported { reason: chain(&e) })?;
+    let in_dims = graph.input.iter().map(|v| read_dims(v, "input")).collect::<Result<_, _>>()?;
+    let out_dims = graph.output.iter().map(|v| read_dims(v, "output")).collect::<Result<_, _>>()?;
+    Ok(Parsed { proto, model, in_dims, out_dims })
+}
+
+fn width(d: &[usize]) -> usize {
+    d.iter().product()
+}
+
+fn plans(p: &Parsed) -> Result<(Plan, Plan), MotionError> {
+    let unsupported = |e: TractError| MotionError::Unsupported { reason: chain(&e) };
+    let single = plan(&p.model, Some(1), &p.in_dims).map_err(unsupported)?;
+    let batched = plan(&p.model, None, &p.in_dims).map_err(unsupported)?;
+    Ok((single, batched))
+}
+
+fn start_graph(encoded: &str, states: &[MotionStateInfo]) -> Result<StartGraph, MotionError> {
+    use base64::Engine;
+    let bad = |reason: String| MotionError::BadMetadata { key: keys::START_GRAPH.into(), reason };
+    let bytes = base64::engine::general_purpose::STANDARD
+        .decode(encoded.trim())
+        .map_err(|e| bad(format!("not base64: {e}")))?;
+    let p = parse(&bytes, "the start graph (metadata_props `zoo.start_graph`)")?;
+    let graph = p.proto.graph.as_ref().expect("parse checked the graph");
+    let mut out_slots = Vec::new();
+    for (o, v) in graph.output.iter().enumerate() {
+        let Some(k) = states.iter().position(|s| s.input == v.name) else {
+            return Err(bad(format!(
+                "start graph output `{}` is not a state input of the step graph (states: {})",
+                v.name,
+                states.iter().map(|s| s.input.as_str()).collect::<Vec<_>>().join(", ")
+            )));
+        };
+        if width(&p.out_dims[o]) != states[k].width || out_slots.contains(&k) {
+            return Err(bad(format!(
+                "start graph output `{}` has {} values per character, its state has {} (or it appears twice)",
+                v.name,
+                width(&p.out_dims[o]),
+                states[k].width
+            )));
+        }
+        out_slots.push(k);
+    }
+    let inputs: Vec<MotionTensorInfo> = graph
+        .input
+        .iter()
+        .zip(&p.in_dims)
+        .map(|(v, d)| MotionTensorInfo { name: v.name.clone(), width: width(d), dims: d.clone() })
+        .collect();
+    let (single, batched) = plans(&p)?;
+    Ok(StartGraph { widths: inputs.iter().map(|i| i.width).collect(), inputs, out_slots, single, batched })
+}
+
 impl MotionModel {
     /// Loads an exported `.onnx` file.
     pub fn load(path: impl AsRef<Path>) -> Result<Self, MotionError> {
@@ -145,15 +229,9 @@ impl MotionModel {
     }
 
     fn from_bytes_named(bytes: &[u8], origin: &str) -> Result<Self, MotionError> {
-        let not_onnx = |reason: String| MotionError::NotOnnx { origin: origin.to_string(), reason };
-        let proto = pb::ModelProto::decode(bytes).map_err(|e| not_onnx(format!("protobuf decoding failed: {e}")))?;
-        let graph = match &proto.graph {
-            Some(g) if proto.ir_version > 0 && !g.node.is_empty() => g,
-            _ => return Err(not_onnx("no IR version or no graph nodes".into())),
-        };
-        let model = tract_onnx::onnx()
-            .model_for_proto_model(&proto)
-            .map_err(|e| MotionError::Unsupported { reason: chain(&e) })?;
+        let parsed = parse(bytes, origin)?;
+        let Parsed { proto, model, in_dims, out_dims } = &parsed;
+        let graph = proto.graph.as_ref().expect("parse checked the graph");
         // DEPENDENCY-FACTS (tract 0.23.9): metadata_props appear in `model.properties` as
         // "onnx.metadata_props.<key>" string scalars.
         let get = |key: &str| {
@@ -162,10 +240,6 @@ impl MotionModel {
         };
         let metadata = MotionModelMetadata::from_props(get)?;
 
-        let in_dims: Vec<Vec<usize>> = graph.input.iter().map(|v| read_dims(v, "input")).collect::<Result<_, _>>()?;
-        let out_dims: Vec<Vec<usize>> =
-            graph.output.iter().map(|v| read_dims(v, "output")).collect::<Result<_, _>>()?;
-        let width = |d: &Vec<usize>| d.iter().product::<usize>();
         let in_pos = |name: &str| graph.input.iter().position(|v| v.name == name);
         let out_pos = |name: &str| graph.output.iter().position(|v| v.name == name);
 
@@ -229,9 +303,8 @@ impl MotionModel {
                 });
             }
         }
-        let unsupported = |e: TractError| MotionError::Unsupported { reason: chain(&e) };
-        let single = plan(&model, Some(1), &in_dims).map_err(unsupported)?;
-        let batched = plan(&model, None, &in_dims).map_err(unsupported)?;
+        let start = get(keys::START_GRAPH).map(|s| start_graph(&s, &states)).transpose()?;
+        let (single, batched) = plans(&parsed)?;
         Ok(MotionModel {
             inner: Arc::new(Inner {
                 metadata,
@@ -240,9 +313,10 @@ impl MotionModel {
                 states,
                 graph_inputs: graph_inputs.into_iter().flatten().collect(),
                 graph_outputs: graph_outputs.into_iter().flatten().collect(),
-                graph_input_widths: in_dims.iter().map(width).collect(),
+                graph_input_widths: in_dims.iter().map(|d| width(d)).collect(),
                 single,
                 batched,
+                start,
             }),
         })
     }
@@ -267,6 +341,17 @@ impl MotionModel {
         &self.inner.states
     }
 
+    /// Inputs of the transition-start graph, in the order `start` takes them (empty when the
+    /// model has no start graph).
+    pub fn start_inputs(&self) -> &[MotionTensorInfo] {
+        self.inner.start.as_ref().map_or(&[], |s| &s.inputs)
+    }
+
+    /// Whether the model carries a transition-start graph (`zoo.start_graph`).
+    pub fn has_start_graph(&self) -> bool {
+        self.inner.start.is_some()
+    }
+
     /// A zero state for one character.
     pub fn new_state(&self) -> MotionState {
         MotionState { slots: self.inner.states.iter().map(|s| vec![0.0; s.width]).collect() }
@@ -276,7 +361,7 @@ impl MotionModel {
     /// every frame; it allocates its buffers here and when the batch size changes.
     pub fn runner(&self) -> Result<MotionRunner, MotionError> {
         let single = Session::new(&self.inner.single, 1, &self.inner.graph_input_widths)?;
-        Ok(MotionRunner { model: self.clone(), single, batched: None })
+        Ok(MotionRunner { model: self.clone(), single, batched: None, start: None })
     }
 }
 
@@ -308,6 +393,30 @@ pub struct MotionRunner {
     model: MotionModel,
     single: Session,
     batched: Option<Session>,
+    /// Start-graph session, created on the first `start` (and when the batch size changes).
+    start: Option<Session>,
+}
+
+fn check_states(inner: &Inner, states: &[MotionState]) -> Result<(), MotionError> {
+    for state in states {
+        if state.slots.len() != inner.states.len() {
+            return Err(MotionError::StateMismatch {
+                name: "(number of slots)".into(),
+                expected: inner.states.len(),
+                found: state.slots.len(),
+            });
+        }
+        for (info, slot) in inner.states.iter().zip(&state.slots) {
+            if slot.len() != info.width {
+                return Err(MotionError::StateMismatch {
+                    name: info.input.clone(),
+                    expected: info.width,
+                    found: slot.len(),
+                });
+            }
+        }
+    }
+    Ok(())
 }
 
 fn check_len(name: &str, found: usize, batch: usize, width: usize) -> Result<(), MotionError> {
@@ -362,6 +471,75 @@ impl MotionRunner {
         self.run(states, inputs, outputs)
     }
 
+    /// Starts a transition for one character: runs the start graph on `inputs`
+    /// (`inputs[i]` holds `model.start_inputs()[i].width` values) and sets `state` from its
+    /// outputs; slots the start graph does not produce are zeroed. Without a start graph it
+    /// zeroes `state` and takes no inputs.
+    pub fn start(&mut self, state: &mut MotionState, inputs: &[&[f32]]) -> Result<(), MotionError> {
+        self.start_batch(std::slice::from_mut(state), inputs)
+    }
+
+    /// [`MotionRunner::start`] for `states.len()` characters in one run (character-major buffers).
+    pub fn start_batch(&mut self, states: &mut [MotionState], inputs: &[&[f32]]) -> Result<(), MotionError> {
+        let inner = &*self.model.inner;
+        let batch = states.len();
+        if batch == 0 {
+            return Err(MotionError::EmptyBatch);
+        }
+        check_states(inner, states)?;
+        let Some(start) = &inner.start else {
+            if !inputs.is_empty() {
+                return Err(MotionError::BufferCount { what: "start inputs", expected: 0, found: inputs.len() });
+            }
+            states.iter_mut().for_each(MotionState::reset);
+            return Ok(());
+        };
+        if inputs.len() != start.inputs.len() {
+            return Err(MotionError::BufferCount {
+                what: "start inputs",
+                expected: start.inputs.len(),
+                found: inputs.len(),
+            });
+        }
+        for (info, data) in start.inputs.iter().zip(inputs) {
+            check_len(&info.name, data.len(), batch, info.width)?;
+            check_finite(&info.name, data, info.width)?;
+        }
+        if self.start.as_ref().is_none_or(|s| s.batch != batch) {
+            let plan = if batch == 1 { &start.single } else { &start.batched };
+            self.start = Some(Session::new(plan, batch, &start.widths)?);
+        }
+        let session = self.start.as_mut().expect("start session set above");
+        let run_err = |e: TractError| MotionError::Run { reason: chain(&e) };
+        for (g, data) in inputs.iter().enumerate() {
+            let tensor = Arc::make_mut(&mut session.inputs[g]);
+            let mut view = tensor.try_as_plain_ram_mut().map_err(run_err)?;
+            view.as_slice_mut::<f32>().map_err(run_err)?.copy_from_slice(data);
+        }
+        let values: TVec<TValue> = session.inputs.iter().map(|t| TValue::from_const(t.clone())).collect();
+        let results = session.state.run(values).map_err(run_err)?;
+        states.iter_mut().for_each(MotionState::reset);
+        for (o, &k) in start.out_slots.iter().enumerate() {
+            let view = results[o].try_as_plain_ram().map_err(run_err)?;
+            let src = view.as_slice::<f32>().map_err(run_err)?;
+            let width = inner.states[k].width;
+            if src.len() != batch * width {
+                return Err(MotionError::Run {
+                    reason: format!(
+                        "start output for state `{}` has {} values, expected {}",
+                        inner.states[k].input,
+                        src.len(),
+                        batch * width
+                    ),
+                });
+            }
+            for (c, state) in states.iter_mut().enumerate() {
+                state.slots[k].copy_from_slice(&src[c * width..(c + 1) * width]);
+            }
+        }
+        Ok(())
+    }
+
     fn run(
         &mut self,
         states: &mut [MotionState],
@@ -390,24 +568,7 @@ impl MotionRunner {
         for (info, data) in inner.outputs.iter().zip(outputs.iter()) {
             check_len(&info.name, data.len(), batch, info.width)?;
         }
-        for state in states.iter() {
-            if state.slots.len() != inner.states.len() {
-                return Err(MotionError::StateMismatch {
-                    name: "(number of slots)".into(),
-                    expected: inner.states.len(),
-                    found: state.slots.len(),
-                });
-            }
-            for (info, slot) in inner.states.iter().zip(&state.slots) {
-                if slot.len() != info.width {
-                    return Err(MotionError::StateMismatch {
-                        name: info.input.clone(),
-                        expected: info.width,
-                        found: slot.len(),
-                    });
-                }
-            }
-        }
+        check_states(inner, states)?;
 
         let session = if batch == 1 {
             &mut self.single
