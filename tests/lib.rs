@@ -1,5 +1,7 @@
 //! Helpers shared by the workspace-level tests.
 
+pub mod toy_onnx;
+
 use glam::{DQuat, DVec3};
 use std::path::{Path, PathBuf};
 use zoo_motion::{Clip, EulerOrder, JointChannels, Skeleton};

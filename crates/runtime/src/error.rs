@@ -1,0 +1,128 @@
+//! Errors of the runtime: what was wrong, and how to fix it.
+
+/// Why a model could not be loaded or a step could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum MotionError {
+    /// The model file could not be read.
+    #[error("cannot read model file {path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The bytes are not an ONNX model.
+    #[error("{origin} is not an ONNX model ({reason}); pass the .onnx file written by `zoo export --onnx`")]
+    NotOnnx {
+        /// File path or "bytes".
+        origin: String,
+        /// What the decoder saw.
+        reason: String,
+    },
+    /// A metadata_props entry the runtime needs is absent.
+    #[error(
+        "the model has no metadata_props entry `{key}`; it was not written by `zoo export` (or by an older exporter): re-export it with `zoo export --onnx MODEL_DIR --out FILE.onnx`"
+    )]
+    MissingMetadata {
+        /// The key.
+        key: String,
+    },
+    /// The model's format version is not one this runtime reads.
+    #[error(
+        "model format version {found} is not supported by this runtime (it reads version {supported}); re-export the model with the `zoo export` of this release, or upgrade the runtime"
+    )]
+    UnknownFormatVersion {
+        /// Version in the file.
+        found: String,
+        /// Version this runtime reads.
+        supported: u32,
+    },
+    /// A metadata entry is present but malformed.
+    #[error("metadata_props entry `{key}` is malformed: {reason}; re-export the model")]
+    BadMetadata {
+        /// The key.
+        key: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// The graph's inputs or outputs do not follow the step-graph convention.
+    #[error("graph {what} `{name}`: {reason}")]
+    BadGraphIo {
+        /// "input" or "output".
+        what: &'static str,
+        /// Its name.
+        name: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// tract could not load, optimise or plan the graph.
+    #[error("tract cannot run this graph: {reason}; export only the ops listed in export/README.md")]
+    Unsupported {
+        /// tract's error chain.
+        reason: String,
+    },
+    /// A step was given the wrong number of input or output buffers.
+    #[error("{what}: expected {expected} buffers (one per graph {what}, in model order), found {found}")]
+    BufferCount {
+        /// "inputs" or "outputs".
+        what: &'static str,
+        /// Expected count.
+        expected: usize,
+        /// Given count.
+        found: usize,
+    },
+    /// A buffer has the wrong length.
+    #[error("`{name}`: expected {expected} values ({batch} x {width}), found {found}")]
+    BufferLength {
+        /// Input, output or state name.
+        name: String,
+        /// Expected length.
+        expected: usize,
+        /// Batch size of the call.
+        batch: usize,
+        /// Values per character.
+        width: usize,
+        /// Given length.
+        found: usize,
+    },
+    /// An input holds NaN or infinity.
+    #[error(
+        "input `{name}` holds a non-finite value ({value}) at index {index} (character {character}); fix the caller's data, the model would spread it into every later frame"
+    )]
+    NonFinite {
+        /// Input name.
+        name: String,
+        /// Flat index in the buffer.
+        index: usize,
+        /// Character (batch row).
+        character: usize,
+        /// The value.
+        value: f32,
+    },
+    /// A state does not belong to this model.
+    #[error(
+        "the character state does not fit this model (state `{name}`: expected {expected} values, found {found}); create it with MotionModel::new_state of the same model"
+    )]
+    StateMismatch {
+        /// State name.
+        name: String,
+        /// Expected length.
+        expected: usize,
+        /// Found length.
+        found: usize,
+    },
+    /// A batch call with no characters.
+    #[error("a batch step needs at least one character state")]
+    EmptyBatch,
+    /// tract failed while running the graph.
+    #[error("tract failed to run the step graph: {reason}")]
+    Run {
+        /// tract's error chain.
+        reason: String,
+    },
+}
+
+/// Formats an anyhow-style error chain on one line.
+pub(crate) fn chain(e: &tract_onnx::prelude::TractError) -> String {
+    format!("{e:#}")
+}

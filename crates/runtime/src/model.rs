@@ -1,0 +1,670 @@
+//! Loading an exported step graph and running it one frame at a time.
+
+use crate::error::{MotionError, chain};
+use crate::metadata::{MotionModelMetadata, keys};
+use prost::Message;
+use std::path::Path;
+use std::sync::Arc;
+use tract_onnx::pb;
+use tract_onnx::prelude::*;
+
+type Plan = Arc<TypedRunnableModel>;
+
+/// Name and per-character width of one graph input or output (`[batch, width]`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct MotionTensorInfo {
+    /// Graph name.
+    pub name: String,
+    /// Values per character (product of the non-batch dimensions).
+    pub width: usize,
+    /// Dimensions after the batch dimension.
+    pub dims: Vec<usize>,
+}
+
+/// One recurrent state slot: read from graph input `input`, replaced by graph output `output`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct MotionStateInfo {
+    /// Graph input name.
+    pub input: String,
+    /// Graph output name.
+    pub output: String,
+    /// Values per character.
+    pub width: usize,
+}
+
+#[derive(Debug)]
+struct Inner {
+    metadata: MotionModelMetadata,
+    /// Frame inputs (graph inputs that are not state), in graph order.
+    inputs: Vec<MotionTensorInfo>,
+    /// Frame outputs (graph outputs that are not state), in graph order.
+    outputs: Vec<MotionTensorInfo>,
+    states: Vec<MotionStateInfo>,
+    /// For each graph input, in graph order: where its value comes from.
+    graph_inputs: Vec<Source>,
+    /// For each graph output, in graph order: where its value goes.
+    graph_outputs: Vec<Source>,
+    graph_input_widths: Vec<usize>,
+    /// Plan with every batch dimension set to 1 (lowest latency for one character).
+    single: Plan,
+    /// Plan with a symbolic batch dimension.
+    batched: Plan,
+    /// The transition-start graph, when the model has one.
+    start: Option<StartGraph>,
+}
+
+/// The transition-start graph (`zoo.start_graph`): all inputs are caller buffers, every output
+/// sets one state slot.
+#[derive(Debug)]
+struct StartGraph {
+    inputs: Vec<MotionTensorInfo>,
+    widths: Vec<usize>,
+    /// State slot of each graph output, in graph order.
+    out_slots: Vec<usize>,
+    single: Plan,
+    batched: Plan,
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Source {
+    Frame(usize),
+    State(usize),
+}
+
+/// A loaded model. Cheap to clone (one shared allocation), `Send + Sync`: load it once and
+/// share it between characters and threads.
+#[derive(Clone, Debug)]
+pub struct MotionModel {
+    inner: Arc<Inner>,
+}
+
+/// The recurrent state of one character, created by [`MotionModel::new_state`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct MotionState {
+    slots: Vec<Vec<f32>>,
+}
+
+impl MotionState {
+    /// Values of state slot `slot` (see [`MotionModel::states`]).
+    pub fn slot(&self, slot: usize) -> &[f32] {
+        &self.slots[slot]
+    }
+
+    /// Mutable values of state slot `slot`, e.g. to set a transition's initial state.
+    pub fn slot_mut(&mut self, slot: usize) -> &mut [f32] {
+        &mut self.slots[slot]
+    }
+
+    /// Number of state slots.
+    pub fn slots(&self) -> usize {
+        self.slots.len()
+    }
+
+    /// Sets every state value to zero.
+    pub fn reset(&mut self) {
+        for s in &mut self.slots {
+            s.fill(0.0);
+        }
+    }
+}
+
+fn read_dims(v: &pb::ValueInfoProto, what: &'static str) -> Result<Vec<usize>, MotionError> {
+    use pb::tensor_shape_proto::dimension::Value as D;
+    let bad = |reason: String| MotionError::BadGraphIo { what, name: v.name.clone(), reason };
+    let Some(pb::TypeProto { value: Some(pb::type_proto::Value::TensorType(t)), .. }) = &v.r#type else {
+        return Err(bad("has no tensor type".into()));
+    };
+    if t.elem_type != pb::tensor_proto::DataType::Float as i32 {
+        return Err(bad(format!("has element type {} but step graphs take f32 (1)", t.elem_type)));
+    }
+    let dims = t.shape.as_ref().map(|s| s.dim.as_slice()).unwrap_or_default();
+    let mut out = Vec::new();
+    for (i, d) in dims.iter().enumerate() {
+        match (i, &d.value) {
+            (0, Some(D::DimParam(_))) => {}
+            (0, _) => return Err(bad("the first dimension must be the symbolic batch dimension".into())),
+            (_, Some(D::DimValue(n))) if *n > 0 => out.push(*n as usize),
+            _ => return Err(bad(format!("dimension {i} must be a fixed positive size"))),
+        }
+    }
+    if dims.is_empty() {
+        return Err(bad("has no shape; declare [batch, ...]".into()));
+    }
+    Ok(out)
+}
+
+fn plan(model: &InferenceModel, concrete_batch: Option<usize>, dims: &[Vec<usize>]) -> TractResult<Plan> {
+    let mut model = model.clone();
+    if let Some(b) = concrete_batch {
+        for (i, d) in dims.iter().enumerate() {
+            let shape: TVec<usize> = std::iter::once(b).chain(d.iter().copied()).collect();
+            model.set_input_fact(i, f32::fact(&shape).into())?;
+        }
+    }
+    model.into_optimized()?.into_runnable()
+}
+
+/// A decoded ONNX model, its tract model and the per-character dims of its inputs and outputs.
+struct Parsed {
+    proto: pb::ModelProto,
+    model: InferenceModel,
+    in_dims: Vec<Vec<usize>>,
+    out_dims: Vec<Vec<usize>>,
+}
+
+fn parse(bytes: &[u8], origin: &str) -> Result<Parsed, MotionError> {
+    let not_onnx = |reason: String| MotionError::NotOnnx { origin: origin.to_string(), reason };
+    let proto = pb::ModelProto::decode(bytes).map_err(|e| not_onnx(format!("protobuf decoding failed: {e}")))?;
+    let graph = match &proto.graph {
+        Some(g) if proto.ir_version > 0 && !g.node.is_empty() => g,
+        _ => return Err(not_onnx("no IR version or no graph nodes".into())),
+    };
+    let model =
+        tract_onnx::onnx().model_for_proto_model(&proto).map_err(|e| MotionError::Unsupported { reason: chain(&e) })?;
+    let in_dims = graph.input.iter().map(|v| read_dims(v, "input")).collect::<Result<_, _>>()?;
+    let out_dims = graph.output.iter().map(|v| read_dims(v, "output")).collect::<Result<_, _>>()?;
+    Ok(Parsed { proto, model, in_dims, out_dims })
+}
+
+fn width(d: &[usize]) -> usize {
+    d.iter().product()
+}
+
+fn plans(p: &Parsed) -> Result<(Plan, Plan), MotionError> {
+    let unsupported = |e: TractError| MotionError::Unsupported { reason: chain(&e) };
+    let single = plan(&p.model, Some(1), &p.in_dims).map_err(unsupported)?;
+    let batched = plan(&p.model, None, &p.in_dims).map_err(unsupported)?;
+    Ok((single, batched))
+}
+
+fn start_graph(encoded: &str, states: &[MotionStateInfo]) -> Result<StartGraph, MotionError> {
+    use base64::Engine;
+    let bad = |reason: String| MotionError::BadMetadata { key: keys::START_GRAPH.into(), reason };
+    let bytes = base64::engine::general_purpose::STANDARD
+        .decode(encoded.trim())
+        .map_err(|e| bad(format!("not base64: {e}")))?;
+    let p = parse(&bytes, "the start graph (metadata_props `zoo.start_graph`)")?;
+    let graph = p.proto.graph.as_ref().expect("parse checked the graph");
+    let mut out_slots = Vec::new();
+    for (o, v) in graph.output.iter().enumerate() {
+        let Some(k) = states.iter().position(|s| s.input == v.name) else {
+            return Err(bad(format!(
+                "start graph output `{}` is not a state input of the step graph (states: {})",
+                v.name,
+                states.iter().map(|s| s.input.as_str()).collect::<Vec<_>>().join(", ")
+            )));
+        };
+        if width(&p.out_dims[o]) != states[k].width || out_slots.contains(&k) {
+            return Err(bad(format!(
+                "start graph output `{}` has {} values per character, its state has {} (or it appears twice)",
+                v.name,
+                width(&p.out_dims[o]),
+                states[k].width
+            )));
+        }
+        out_slots.push(k);
+    }
+    let inputs: Vec<MotionTensorInfo> = graph
+        .input
+        .iter()
+        .zip(&p.in_dims)
+        .map(|(v, d)| MotionTensorInfo { name: v.name.clone(), width: width(d), dims: d.clone() })
+        .collect();
+    let (single, batched) = plans(&p)?;
+    Ok(StartGraph { widths: inputs.iter().map(|i| i.width).collect(), inputs, out_slots, single, batched })
+}
+
+impl MotionModel {
+    /// Loads an exported `.onnx` file.
+    pub fn load(path: impl AsRef<Path>) -> Result<Self, MotionError> {
+        let path = path.as_ref();
+        let bytes =
+            std::fs::read(path).map_err(|source| MotionError::Io { path: path.display().to_string(), source })?;
+        Self::from_bytes_named(&bytes, &path.display().to_string())
+    }
+
+    /// Loads an exported model from its bytes.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, MotionError> {
+        Self::from_bytes_named(bytes, "the given bytes")
+    }
+
+    fn from_bytes_named(bytes: &[u8], origin: &str) -> Result<Self, MotionError> {
+        let parsed = parse(bytes, origin)?;
+        let Parsed { proto, model, in_dims, out_dims } = &parsed;
+        let graph = proto.graph.as_ref().expect("parse checked the graph");
+        // DEPENDENCY-FACTS (tract 0.23.9): metadata_props appear in `model.properties` as
+        // "onnx.metadata_props.<key>" string scalars.
+        let get = |key: &str| {
+            let t = model.properties.get(&format!("onnx.metadata_props.{key}"))?;
+            t.try_as_plain_ram().ok()?.to_scalar::<String>().ok().cloned()
+        };
+        let metadata = MotionModelMetadata::from_props(get)?;
+
+        let in_pos = |name: &str| graph.input.iter().position(|v| v.name == name);
+        let out_pos = |name: &str| graph.output.iter().position(|v| v.name == name);
+
+        let mut graph_inputs: Vec<Option<Source>> = vec![None; graph.input.len()];
+        let mut graph_outputs: Vec<Option<Source>> = vec![None; graph.output.len()];
+        let mut states = Vec::new();
+        for (k, pair) in metadata.state.iter().enumerate() {
+            let bad =
+                |what, name: &str, reason: String| MotionError::BadGraphIo { what, name: name.to_string(), reason };
+            let i = in_pos(&pair.input).ok_or_else(|| {
+                bad(
+                    "input",
+                    &pair.input,
+                    format!("is named as a state in `{}` but the graph has no such input", keys::STATE),
+                )
+            })?;
+            let o = out_pos(&pair.output).ok_or_else(|| {
+                bad(
+                    "output",
+                    &pair.output,
+                    format!("is named as a state in `{}` but the graph has no such output", keys::STATE),
+                )
+            })?;
+            if in_dims[i] != out_dims[o] {
+                return Err(bad(
+                    "output",
+                    &pair.output,
+                    format!("has dims {:?} but its state input `{}` has {:?}", out_dims[o], pair.input, in_dims[i]),
+                ));
+            }
+            if graph_inputs[i].is_some() || graph_outputs[o].is_some() {
+                return Err(bad("input", &pair.input, "appears in two state pairs".into()));
+            }
+            graph_inputs[i] = Some(Source::State(k));
+            graph_outputs[o] = Some(Source::State(k));
+            states.push(MotionStateInfo {
+                input: pair.input.clone(),
+                output: pair.output.clone(),
+                width: width(&in_dims[i]),
+            });
+        }
+        let mut inputs = Vec::new();
+        for (i, v) in graph.input.iter().enumerate() {
+            if graph_inputs[i].is_none() {
+                graph_inputs[i] = Some(Source::Frame(inputs.len()));
+                inputs.push(MotionTensorInfo {
+                    name: v.name.clone(),
+                    width: width(&in_dims[i]),
+                    dims: in_dims[i].clone(),
+                });
+            }
+        }
+        let mut outputs = Vec::new();
+        for (o, v) in graph.output.iter().enumerate() {
+            if graph_outputs[o].is_none() {
+                graph_outputs[o] = Some(Source::Frame(outputs.len()));
+                outputs.push(MotionTensorInfo {
+                    name: v.name.clone(),
+                    width: width(&out_dims[o]),
+                    dims: out_dims[o].clone(),
+                });
+            }
+        }
+        let start = get(keys::START_GRAPH).map(|s| start_graph(&s, &states)).transpose()?;
+        let (single, batched) = plans(&parsed)?;
+        Ok(MotionModel {
+            inner: Arc::new(Inner {
+                metadata,
+                inputs,
+                outputs,
+                states,
+                graph_inputs: graph_inputs.into_iter().flatten().collect(),
+                graph_outputs: graph_outputs.into_iter().flatten().collect(),
+                graph_input_widths: in_dims.iter().map(|d| width(d)).collect(),
+                single,
+                batched,
+                start,
+            }),
+        })
+    }
+
+    /// The metadata the model was exported with.
+    pub fn metadata(&self) -> &MotionModelMetadata {
+        &self.inner.metadata
+    }
+
+    /// Per-frame inputs (graph inputs that are not state), in the order `step` takes them.
+    pub fn inputs(&self) -> &[MotionTensorInfo] {
+        &self.inner.inputs
+    }
+
+    /// Per-frame outputs (graph outputs that are not state), in the order `step` fills them.
+    pub fn outputs(&self) -> &[MotionTensorInfo] {
+        &self.inner.outputs
+    }
+
+    /// Recurrent state slots, in the order of [`MotionState::slot`].
+    pub fn states(&self) -> &[MotionStateInfo] {
+        &self.inner.states
+    }
+
+    /// Inputs of the transition-start graph, in the order `start` takes them (empty when the
+    /// model has no start graph).
+    pub fn start_inputs(&self) -> &[MotionTensorInfo] {
+        self.inner.start.as_ref().map_or(&[], |s| &s.inputs)
+    }
+
+    /// Whether the model carries a transition-start graph (`zoo.start_graph`).
+    pub fn has_start_graph(&self) -> bool {
+        self.inner.start.is_some()
+    }
+
+    /// A zero state for one character.
+    pub fn new_state(&self) -> MotionState {
+        MotionState { slots: self.inner.states.iter().map(|s| vec![0.0; s.width]).collect() }
+    }
+
+    /// A runner: the scratch space of one thread. Keep one per worker thread and reuse it
+    /// every frame; it allocates its buffers here and when the batch size changes.
+    pub fn runner(&self) -> Result<MotionRunner, MotionError> {
+        let single = Session::new(&self.inner.single, 1, &self.inner.graph_input_widths)?;
+        Ok(MotionRunner { model: self.clone(), single, batched: None, start: None })
+    }
+}
+
+/// A spawned tract state with preallocated input tensors for one batch size.
+#[derive(Debug)]
+struct Session {
+    batch: usize,
+    state: TypedSimpleState,
+    /// One tensor per graph input, reused every call (exclusive again once tract returns).
+    inputs: Vec<Arc<Tensor>>,
+}
+
+impl Session {
+    fn new(plan: &Plan, batch: usize, widths: &[usize]) -> Result<Self, MotionError> {
+        let run = |e: TractError| MotionError::Run { reason: chain(&e) };
+        let state = plan.spawn().map_err(run)?;
+        let inputs = widths
+            .iter()
+            .map(|&w| Tensor::zero::<f32>(&[batch, w]).map(Arc::new))
+            .collect::<TractResult<Vec<_>>>()
+            .map_err(run)?;
+        Ok(Session { batch, state, inputs })
+    }
+}
+
+/// Scratch space for stepping a [`MotionModel`] on one thread (not shared: `Send`, not `Sync`).
+#[derive(Debug)]
+pub struct MotionRunner {
+    model: MotionModel,
+    single: Session,
+    batched: Option<Session>,
+    /// Start-graph session, created on the first `start` (and when the batch size changes).
+    start: Option<Session>,
+}
+
+fn check_states(inner: &Inner, states: &[MotionState]) -> Result<(), MotionError> {
+    for state in states {
+        if state.slots.len() != inner.states.len() {
+            return Err(MotionError::StateMismatch {
+                name: "(number of slots)".into(),
+                expected: inner.states.len(),
+                found: state.slots.len(),
+            });
+        }
+        for (info, slot) in inner.states.iter().zip(&state.slots) {
+            if slot.len() != info.width {
+                return Err(MotionError::StateMismatch {
+                    name: info.input.clone(),
+                    expected: info.width,
+                    found: slot.len(),
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+fn check_len(name: &str, found: usize, batch: usize, width: usize) -> Result<(), MotionError> {
+    if found != batch * width {
+        return Err(MotionError::BufferLength { name: name.to_string(), expected: batch * width, batch, width, found });
+    }
+    Ok(())
+}
+
+fn check_finite(name: &str, data: &[f32], width: usize) -> Result<(), MotionError> {
+    if let Some(index) = data.iter().position(|v| !v.is_finite()) {
+        return Err(MotionError::NonFinite {
+            name: name.to_string(),
+            index,
+            character: index / width.max(1),
+            value: data[index],
+        });
+    }
+    Ok(())
+}
+
+impl MotionRunner {
+    /// The model this runner steps.
+    pub fn model(&self) -> &MotionModel {
+        &self.model
+    }
+
+    /// Advances one character by one frame.
+    ///
+    /// `inputs[i]` holds `model.inputs()[i].width` values; `outputs[i]` receives
+    /// `model.outputs()[i].width` values; `state` is read and replaced by the next state.
+    /// Invalid sizes or non-finite inputs return an error and leave `state` unchanged.
+    pub fn step(
+        &mut self,
+        state: &mut MotionState,
+        inputs: &[&[f32]],
+        outputs: &mut [&mut [f32]],
+    ) -> Result<(), MotionError> {
+        self.run(std::slice::from_mut(state), inputs, outputs)
+    }
+
+    /// Advances `states.len()` characters by one frame in one graph run.
+    ///
+    /// Buffers are character-major: `inputs[i]` holds `states.len() * model.inputs()[i].width`
+    /// values, row `c` for character `c`; outputs likewise.
+    pub fn step_batch(
+        &mut self,
+        states: &mut [MotionState],
+        inputs: &[&[f32]],
+        outputs: &mut [&mut [f32]],
+    ) -> Result<(), MotionError> {
+        self.run(states, inputs, outputs)
+    }
+
+    /// Starts a transition for one character: runs the start graph on `inputs`
+    /// (`inputs[i]` holds `model.start_inputs()[i].width` values) and sets `state` from its
+    /// outputs; slots the start graph does not produce are zeroed. Without a start graph it
+    /// zeroes `state` and takes no inputs.
+    pub fn start(&mut self, state: &mut MotionState, inputs: &[&[f32]]) -> Result<(), MotionError> {
+        self.start_batch(std::slice::from_mut(state), inputs)
+    }
+
+    /// [`MotionRunner::start`] for `states.len()` characters in one run (character-major buffers).
+    pub fn start_batch(&mut self, states: &mut [MotionState], inputs: &[&[f32]]) -> Result<(), MotionError> {
+        let inner = &*self.model.inner;
+        let batch = states.len();
+        if batch == 0 {
+            return Err(MotionError::EmptyBatch);
+        }
+        check_states(inner, states)?;
+        let Some(start) = &inner.start else {
+            if !inputs.is_empty() {
+                return Err(MotionError::BufferCount { what: "start inputs", expected: 0, found: inputs.len() });
+            }
+            states.iter_mut().for_each(MotionState::reset);
+            return Ok(());
+        };
+        if inputs.len() != start.inputs.len() {
+            return Err(MotionError::BufferCount {
+                what: "start inputs",
+                expected: start.inputs.len(),
+                found: inputs.len(),
+            });
+        }
+        for (info, data) in start.inputs.iter().zip(inputs) {
+            check_len(&info.name, data.len(), batch, info.width)?;
+            check_finite(&info.name, data, info.width)?;
+        }
+        if self.start.as_ref().is_none_or(|s| s.batch != batch) {
+            let plan = if batch == 1 { &start.single } else { &start.batched };
+            self.start = Some(Session::new(plan, batch, &start.widths)?);
+        }
+        let session = self.start.as_mut().expect("start session set above");
+        let run_err = |e: TractError| MotionError::Run { reason: chain(&e) };
+        for (g, data) in inputs.iter().enumerate() {
+            let tensor = Arc::make_mut(&mut session.inputs[g]);
+            let mut view = tensor.try_as_plain_ram_mut().map_err(run_err)?;
+            view.as_slice_mut::<f32>().map_err(run_err)?.copy_from_slice(data);
+        }
+        let values: TVec<TValue> = session.inputs.iter().map(|t| TValue::from_const(t.clone())).collect();
+        let results = session.state.run(values).map_err(run_err)?;
+        states.iter_mut().for_each(MotionState::reset);
+        for (o, &k) in start.out_slots.iter().enumerate() {
+            let view = results[o].try_as_plain_ram().map_err(run_err)?;
+            let src = view.as_slice::<f32>().map_err(run_err)?;
+            let width = inner.states[k].width;
+            if src.len() != batch * width {
+                return Err(MotionError::Run {
+                    reason: format!(
+                        "start output for state `{}` has {} values, expected {}",
+                        inner.states[k].input,
+                        src.len(),
+                        batch * width
+                    ),
+                });
+            }
+            for (c, state) in states.iter_mut().enumerate() {
+                state.slots[k].copy_from_slice(&src[c * width..(c + 1) * width]);
+            }
+        }
+        Ok(())
+    }
+
+    fn run(
+        &mut self,
+        states: &mut [MotionState],
+        inputs: &[&[f32]],
+        outputs: &mut [&mut [f32]],
+    ) -> Result<(), MotionError> {
+        let inner = &*self.model.inner;
+        let batch = states.len();
+        if batch == 0 {
+            return Err(MotionError::EmptyBatch);
+        }
+        if inputs.len() != inner.inputs.len() {
+            return Err(MotionError::BufferCount { what: "inputs", expected: inner.inputs.len(), found: inputs.len() });
+        }
+        if outputs.len() != inner.outputs.len() {
+            return Err(MotionError::BufferCount {
+                what: "outputs",
+                expected: inner.outputs.len(),
+                found: outputs.len(),
+            });
+        }
+        for (info, data) in inner.inputs.iter().zip(inputs) {
+            check_len(&info.name, data.len(), batch, info.width)?;
+            check_finite(&info.name, data, info.width)?;
+        }
+        for (info, data) in inner.outputs.iter().zip(outputs.iter()) {
+            check_len(&info.name, data.len(), batch, info.width)?;
+        }
+        check_states(inner, states)?;
+
+        let session = if batch == 1 {
+            &mut self.single
+        } else {
+            if self.batched.as_ref().is_none_or(|s| s.batch != batch) {
+                self.batched = Some(Session::new(&inner.batched, batch, &inner.graph_input_widths)?);
+            }
+            self.batched.as_mut().expect("batched session set above")
+        };
+        let run_err = |e: TractError| MotionError::Run { reason: chain(&e) };
+
+        // Fill the preallocated input tensors.
+        for (g, source) in inner.graph_inputs.iter().enumerate() {
+            let width = inner.graph_input_widths[g];
+            // Exclusive unless tract kept a reference; then this copies once.
+            let tensor = Arc::make_mut(&mut session.inputs[g]);
+            let mut view = tensor.try_as_plain_ram_mut().map_err(run_err)?;
+            let dst = view.as_slice_mut::<f32>().map_err(run_err)?;
+            match *source {
+                Source::Frame(i) => dst.copy_from_slice(inputs[i]),
+                Source::State(k) => {
+                    for (c, state) in states.iter().enumerate() {
+                        dst[c * width..(c + 1) * width].copy_from_slice(&state.slots[k]);
+                    }
+                }
+            }
+        }
+        // A TVec holds up to 4 values inline: no allocation for graphs of up to 4 inputs.
+        let values: TVec<TValue> = session.inputs.iter().map(|t| TValue::from_const(t.clone())).collect();
+        let results = session.state.run(values).map_err(run_err)?;
+
+        for (o, source) in inner.graph_outputs.iter().enumerate() {
+            let view = results[o].try_as_plain_ram().map_err(run_err)?;
+            let src = view.as_slice::<f32>().map_err(run_err)?;
+            match *source {
+                Source::Frame(i) => {
+                    if src.len() != outputs[i].len() {
+                        return Err(MotionError::Run {
+                            reason: format!(
+                                "output `{}` has {} values, expected {}",
+                                inner.outputs[i].name,
+                                src.len(),
+                                outputs[i].len()
+                            ),
+                        });
+                    }
+                    outputs[i].copy_from_slice(src);
+                }
+                Source::State(k) => {
+                    let width = inner.states[k].width;
+                    if src.len() != batch * width {
+                        return Err(MotionError::Run {
+                            reason: format!(
+                                "state output `{}` has {} values, expected {}",
+                                inner.states[k].output,
+                                src.len(),
+                                batch * width
+                            ),
+                        });
+                    }
+                    for (c, state) in states.iter_mut().enumerate() {
+                        state.slots[k].copy_from_slice(&src[c * width..(c + 1) * width]);
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn assert_send_sync<T: Send + Sync>() {}
+    fn assert_send<T: Send>() {}
+
+    #[test]
+    fn thread_safety() {
+        assert_send_sync::<MotionModel>();
+        assert_send_sync::<MotionState>();
+        assert_send::<MotionRunner>();
+    }
+
+    #[test]
+    fn garbage_is_not_onnx() {
+        let err = MotionModel::from_bytes(b"BVH HIERARCHY ROOT Hips { OFFSET 0 0 0 }").unwrap_err();
+        assert!(matches!(err, MotionError::NotOnnx { .. }), "{err}");
+        assert!(err.to_string().contains("zoo export"), "{err}");
+        let err = MotionModel::from_bytes(&[]).unwrap_err();
+        assert!(matches!(err, MotionError::NotOnnx { .. }), "{err}");
+    }
+
+    #[test]
+    fn missing_file_is_an_io_error() {
+        let err = MotionModel::load("/nonexistent/model.onnx").unwrap_err();
+        assert!(matches!(err, MotionError::Io { .. }), "{err}");
+    }
+}

@@ -1,0 +1,252 @@
+//! zoo-runtime on exported toy models: bad input of every kind returns a named error (never a
+//! panic), and one loaded model serves many characters on many threads.
+
+use std::sync::Arc;
+use zoo_export::OnnxModel;
+use zoo_runtime::metadata::keys;
+use zoo_runtime::prelude::*;
+use zoo_tests::toy_onnx::{Cell, ToyModel};
+
+fn toy() -> ToyModel {
+    ToyModel::new(Cell::Lstm, 6, 8, 5)
+}
+
+fn load(model: &OnnxModel) -> Result<MotionModel, MotionError> {
+    MotionModel::from_bytes(&model.to_bytes())
+}
+
+/// The toy LSTM graph with its metadata_props edited by `edit`.
+fn with_props(edit: impl FnOnce(&mut Vec<zoo_export::pb::StringStringEntryProto>)) -> Vec<u8> {
+    let mut proto = toy().rnn_op_graph().proto().clone();
+    edit(&mut proto.metadata_props);
+    OnnxModel::from_proto(proto).to_bytes()
+}
+
+#[test]
+fn loads_and_describes_the_step_graph() {
+    let model = load(&toy().rnn_op_graph()).unwrap();
+    let names = |v: &[zoo_runtime::MotionTensorInfo]| v.iter().map(|t| (t.name.clone(), t.width)).collect::<Vec<_>>();
+    assert_eq!(names(model.inputs()), vec![("x".to_string(), 6)]);
+    assert_eq!(names(model.outputs()), vec![("y".to_string(), 6)]);
+    let states: Vec<_> = model.states().iter().map(|s| (s.input.as_str(), s.output.as_str(), s.width)).collect();
+    assert_eq!(states, vec![("h", "h_next", 5), ("c", "c_next", 5)]);
+    let meta = model.metadata();
+    assert_eq!((meta.model_kind.as_str(), meta.fps), ("toy_lstm", 30.0));
+    assert_eq!(meta.skeleton.to_skeleton().names, vec!["Hips", "Spine"]);
+}
+
+#[test]
+fn a_file_path_loads() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("toy.onnx");
+    toy().cell_graph().write(&path).unwrap();
+    assert_eq!(MotionModel::load(&path).unwrap().states().len(), 2);
+}
+
+#[test]
+fn a_bvh_file_is_not_onnx() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("walk.onnx");
+    std::fs::write(&path, "HIERARCHY\nROOT Hips\n{\n\tOFFSET 0 0 0\n}\n").unwrap();
+    let err = MotionModel::load(&path).unwrap_err();
+    assert!(matches!(err, MotionError::NotOnnx { .. }), "{err}");
+    assert!(err.to_string().contains("walk.onnx"), "{err}");
+}
+
+#[test]
+fn a_truncated_file_is_not_onnx() {
+    let bytes = toy().rnn_op_graph().to_bytes();
+    let err = MotionModel::from_bytes(&bytes[..bytes.len() / 2]).unwrap_err();
+    assert!(matches!(err, MotionError::NotOnnx { .. }), "{err}");
+}
+
+#[test]
+fn a_model_without_metadata_is_refused() {
+    let bytes = with_props(|p| p.clear());
+    let err = MotionModel::from_bytes(&bytes).unwrap_err();
+    assert!(matches!(&err, MotionError::MissingMetadata { key } if key == keys::FORMAT_VERSION), "{err}");
+    assert!(err.to_string().contains("re-export"), "{err}");
+}
+
+#[test]
+fn an_unknown_format_version_is_refused() {
+    let bytes = with_props(|p| {
+        p.iter_mut().find(|e| e.key == keys::FORMAT_VERSION).unwrap().value = "2".into();
+    });
+    let err = MotionModel::from_bytes(&bytes).unwrap_err();
+    assert!(matches!(err, MotionError::UnknownFormatVersion { .. }), "{err}");
+    assert!(err.to_string().contains("version 2") && err.to_string().contains("reads version 1"), "{err}");
+}
+
+#[test]
+fn a_state_pair_naming_a_missing_input_is_refused() {
+    let bytes = with_props(|p| {
+        p.iter_mut().find(|e| e.key == keys::STATE).unwrap().value =
+            r#"[{"input": "hidden", "output": "h_next"}]"#.into();
+    });
+    let err = MotionModel::from_bytes(&bytes).unwrap_err();
+    assert!(matches!(err, MotionError::BadGraphIo { .. }) && err.to_string().contains("`hidden`"), "{err}");
+}
+
+#[test]
+fn malformed_metadata_json_is_refused() {
+    let bytes = with_props(|p| {
+        p.iter_mut().find(|e| e.key == keys::SKELETON).unwrap().value = "{not json".into();
+    });
+    let err = MotionModel::from_bytes(&bytes).unwrap_err();
+    assert!(matches!(&err, MotionError::BadMetadata { key, .. } if key == keys::SKELETON), "{err}");
+}
+
+fn ready() -> (MotionModel, MotionRunner, MotionState) {
+    let model = load(&toy().rnn_op_graph()).unwrap();
+    let runner = model.runner().unwrap();
+    let state = model.new_state();
+    (model, runner, state)
+}
+
+#[test]
+fn a_wrong_input_width_is_an_error() {
+    let (_, mut runner, mut state) = ready();
+    let mut y = [0.0; 6];
+    let err = runner.step(&mut state, &[&[0.0; 5]], &mut [&mut y]).unwrap_err();
+    assert!(matches!(&err, MotionError::BufferLength { name, expected: 6, found: 5, .. } if name == "x"), "{err}");
+}
+
+#[test]
+fn a_wrong_output_width_is_an_error() {
+    let (_, mut runner, mut state) = ready();
+    let mut y = [0.0; 7];
+    let err = runner.step(&mut state, &[&[0.0; 6]], &mut [&mut y]).unwrap_err();
+    assert!(matches!(&err, MotionError::BufferLength { name, .. } if name == "y"), "{err}");
+}
+
+#[test]
+fn a_wrong_buffer_count_is_an_error() {
+    let (_, mut runner, mut state) = ready();
+    let mut y = [0.0; 6];
+    let err = runner.step(&mut state, &[&[0.0; 6], &[0.0; 6]], &mut [&mut y]).unwrap_err();
+    assert!(matches!(err, MotionError::BufferCount { what: "inputs", expected: 1, found: 2 }), "{err}");
+}
+
+#[test]
+fn a_nan_input_is_an_error_and_leaves_the_state_alone() {
+    let (_, mut runner, mut state) = ready();
+    let mut y = [0.0; 6];
+    runner.step(&mut state, &[&[0.5; 6]], &mut [&mut y]).unwrap();
+    let before = state.clone();
+    let mut x = [0.5; 6];
+    x[3] = f32::NAN;
+    let err = runner.step(&mut state, &[&x], &mut [&mut y]).unwrap_err();
+    assert!(matches!(err, MotionError::NonFinite { index: 3, character: 0, .. }), "{err}");
+    assert_eq!(state, before);
+}
+
+#[test]
+fn an_infinite_input_in_a_batch_names_the_character() {
+    let (model, mut runner, _) = ready();
+    let mut states = vec![model.new_state(); 3];
+    let mut x = vec![0.0; 18];
+    x[13] = f32::INFINITY;
+    let mut y = vec![0.0; 18];
+    let err = runner.step_batch(&mut states, &[&x], &mut [&mut y]).unwrap_err();
+    assert!(matches!(err, MotionError::NonFinite { character: 2, .. }), "{err}");
+}
+
+#[test]
+fn a_state_of_another_model_is_an_error() {
+    let (_, mut runner, _) = ready();
+    let other = load(&ToyModel::new(Cell::Gru, 6, 8, 5).rnn_op_graph()).unwrap();
+    let mut state = other.new_state();
+    let mut y = [0.0; 6];
+    let err = runner.step(&mut state, &[&[0.0; 6]], &mut [&mut y]).unwrap_err();
+    assert!(matches!(err, MotionError::StateMismatch { .. }), "{err}");
+}
+
+#[test]
+fn an_empty_batch_is_an_error() {
+    let (_, mut runner, _) = ready();
+    let err = runner.step_batch(&mut [], &[&[]], &mut [&mut []]).unwrap_err();
+    assert!(matches!(err, MotionError::EmptyBatch), "{err}");
+}
+
+#[test]
+fn one_model_serves_characters_on_many_threads() {
+    let model = Arc::new(load(&toy().cell_graph()).unwrap());
+    let run = |model: &MotionModel| {
+        let mut runner = model.runner().unwrap();
+        let mut state = model.new_state();
+        let mut x = vec![0.3; 6];
+        let mut y = vec![0.0; 6];
+        for _ in 0..30 {
+            runner.step(&mut state, &[&x], &mut [&mut y]).unwrap();
+            std::mem::swap(&mut x, &mut y);
+        }
+        x
+    };
+    let expected = run(&model);
+    let handles: Vec<_> = (0..4)
+        .map(|_| {
+            let model = Arc::clone(&model);
+            std::thread::spawn(move || run(&model))
+        })
+        .collect();
+    for h in handles {
+        assert_eq!(h.join().unwrap(), expected);
+    }
+}
+
+#[test]
+fn batch_sizes_can_change_between_calls() {
+    let (model, mut runner, _) = ready();
+    for n in [4, 2, 4, 1, 7] {
+        let mut states = vec![model.new_state(); n];
+        let x = vec![0.1; n * 6];
+        let mut y = vec![0.0; n * 6];
+        runner.step_batch(&mut states, &[&x], &mut [&mut y]).unwrap();
+        assert!(y.iter().all(|v| v.is_finite()));
+        assert!(y.chunks(6).all(|c| c == &y[..6]), "same input, same output for every character");
+    }
+}
+
+#[test]
+fn a_start_graph_sets_the_state() {
+    let toy = toy();
+    let model = load(&toy.with_start(&toy.rnn_op_graph())).unwrap();
+    assert!(model.has_start_graph());
+    assert_eq!(model.start_inputs()[0].name, "x0");
+    let mut runner = model.runner().unwrap();
+    let mut state = model.new_state();
+    let x0 = [0.3, -0.2, 0.1, 0.5, -0.4, 0.2];
+    runner.start(&mut state, &[&x0]).unwrap();
+    let expected = toy.start_state(&x0);
+    for (k, e) in expected.iter().enumerate() {
+        let d = state.slot(k).iter().zip(e).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
+        assert!(d < 1e-6, "slot {k}: {d}");
+    }
+    let err = runner.start(&mut state, &[&x0[..5]]).unwrap_err();
+    assert!(matches!(err, MotionError::BufferLength { .. }), "{err}");
+}
+
+#[test]
+fn without_a_start_graph_start_zeroes_the_state() {
+    let (_, mut runner, mut state) = ready();
+    state.slot_mut(0)[0] = 1.0;
+    runner.start(&mut state, &[]).unwrap();
+    assert!(state.slot(0).iter().all(|v| *v == 0.0));
+    let err = runner.start(&mut state, &[&[0.0; 6]]).unwrap_err();
+    assert!(matches!(err, MotionError::BufferCount { expected: 0, .. }), "{err}");
+}
+
+#[test]
+fn a_start_graph_writing_an_unknown_state_is_refused() {
+    let gru = ToyModel::new(Cell::Gru, 6, 8, 5);
+    // The LSTM start graph writes `c`, which the GRU step graph does not have.
+    let mut proto = gru.rnn_op_graph().proto().clone();
+    proto.metadata_props.push(zoo_export::pb::StringStringEntryProto {
+        key: keys::START_GRAPH.into(),
+        value: toy().start_graph().to_base64(),
+    });
+    let err = MotionModel::from_bytes(&OnnxModel::from_proto(proto).to_bytes()).unwrap_err();
+    assert!(matches!(&err, MotionError::BadMetadata { key, .. } if key == keys::START_GRAPH), "{err}");
+    assert!(err.to_string().contains("`c`"), "{err}");
+}

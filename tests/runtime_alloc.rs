@@ -1,0 +1,112 @@
+//! Allocations per frame of `MotionRunner::step` and `step_batch`, counted by a global
+//! allocator wrapper in this test binary (its own process, so other tests cannot interfere).
+//!
+//! Our side (validation, copies into the preallocated input tensors, copies out) allocates
+//! nothing (checked on an identity graph); what remains is tract's: the output tensors of the
+//! plan's nodes, per run.
+//! The test prints the counts and fails if they grow with the number of frames played.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use zoo_export::{Dim, GraphBuilder};
+use zoo_runtime::prelude::*;
+use zoo_tests::toy_onnx::{Cell, ToyModel};
+
+struct Counting;
+
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+// SAFETY: forwards every call to the system allocator unchanged; only counts.
+#[allow(unsafe_code)]
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn per_frame(frames: usize, mut step: impl FnMut()) -> f64 {
+    // Warm-up: the first calls may size caches.
+    for _ in 0..3 {
+        step();
+    }
+    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    for _ in 0..frames {
+        step();
+    }
+    (ALLOCATIONS.load(Ordering::Relaxed) - before) as f64 / frames as f64
+}
+
+/// `y = Identity(x)` with no state: tract's fixed cost of one run.
+fn identity_graph() -> zoo_export::OnnxModel {
+    let mut g = GraphBuilder::new("identity");
+    let mut meta = ToyModel::new(Cell::Gru, 6, 2, 2).metadata();
+    meta.state.clear();
+    for (k, v) in meta.to_props() {
+        g.metadata(&k, &v);
+    }
+    let x = g.input("x", &[Dim::batch(), Dim::Fixed(6)]);
+    g.output("y", &x, &[Dim::batch(), Dim::Fixed(6)]);
+    let y = g.identity("copy", &x);
+    g.output("y2", &y, &[Dim::batch(), Dim::Fixed(6)]);
+    g.finish().unwrap()
+}
+
+/// Our side of a step (validation, copies into the preallocated inputs, copies out) allocates
+/// nothing: with a graph tract reduces to no work, a step allocates nothing at all.
+fn identity_allocations() {
+    let model = MotionModel::from_bytes(&identity_graph().to_bytes()).unwrap();
+    let mut runner = model.runner().unwrap();
+    let mut state = model.new_state();
+    let x = vec![0.2; 6];
+    let (mut y, mut y2) = (vec![0.0; 6], vec![0.0; 6]);
+    let a = per_frame(100, || runner.step(&mut state, &[&x], &mut [&mut y, &mut y2]).unwrap());
+    eprintln!("identity graph (1 ONNX node, no state): {a:.1} allocations per step at batch 1");
+    assert_eq!(a, 0.0, "the runtime's own per-step work must not allocate");
+}
+
+// One test function: the counter is process-wide, so measurements must not run in parallel.
+#[test]
+fn allocations_per_step() {
+    identity_allocations();
+    for (name, graph) in [
+        ("lstm_cell_graph", ToyModel::new(Cell::Lstm, 6, 8, 5).cell_graph()),
+        ("lstm_op_graph", ToyModel::new(Cell::Lstm, 6, 8, 5).rnn_op_graph()),
+    ] {
+        let model = MotionModel::from_bytes(&graph.to_bytes()).unwrap();
+        let nodes = graph.proto().graph.as_ref().unwrap().node.len();
+        let mut runner = model.runner().unwrap();
+        let mut state = model.new_state();
+        let mut x = vec![0.2; 6];
+        let mut y = vec![0.0; 6];
+        let mut step1 = || {
+            runner.step(&mut state, &[&x], &mut [&mut y]).unwrap();
+            std::mem::swap(&mut x, &mut y);
+        };
+        let a100 = per_frame(100, &mut step1);
+        let a1000 = per_frame(1000, &mut step1);
+        let mut states = vec![model.new_state(); 64];
+        let xb = vec![0.2; 64 * 6];
+        let mut yb = vec![0.0; 64 * 6];
+        let b64 = per_frame(100, || runner.step_batch(&mut states, &[&xb], &mut [&mut yb]).unwrap());
+        eprintln!(
+            "{name} ({nodes} ONNX nodes): {a100:.1} allocations per step at batch 1 (over 100 frames), \
+             {a1000:.1} (over 1000), {b64:.1} per batch-64 step"
+        );
+        assert!((a1000 - a100).abs() < 0.5, "allocations per step should not grow with frames played");
+    }
+}
