@@ -1,5 +1,6 @@
 //! Helpers shared by the workspace-level tests.
 
+pub mod onnxruntime;
 pub mod toy_onnx;
 
 use glam::{DQuat, DVec3};

@@ -9,75 +9,14 @@
 //! onnxruntime: `bash scripts/onnxruntime.sh` provisions `.onnxruntime/libonnxruntime.so.1.31.1`
 //! (or set `ORT_DYLIB_PATH`). A missing library fails these tests; they do not skip.
 
-use std::borrow::Cow;
-use std::path::PathBuf;
-use std::sync::OnceLock;
 use zoo_export::OnnxModel;
 use zoo_runtime::{MotionModel, MotionState};
+use zoo_tests::onnxruntime::OrtSession;
 use zoo_tests::toy_onnx::{Cell, ToyModel, lcg, ops_graph, ops_reference};
 
 const FRAMES: usize = 30;
 const BATCH: usize = 3;
 const TOLERANCE: f32 = 1e-4;
-
-/// The onnxruntime library: `ORT_DYLIB_PATH`, else `<workspace>/.onnxruntime/libonnxruntime.so.1.31.1`.
-fn onnxruntime_library() -> PathBuf {
-    let path = std::env::var_os("ORT_DYLIB_PATH")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../.onnxruntime/libonnxruntime.so.1.31.1"));
-    // ort panics with "Failed to load ONNX Runtime dylib" on a missing file (DEPENDENCY-FACTS):
-    // check first and say how to provision it.
-    assert!(
-        path.is_file(),
-        "onnxruntime library not found at {}: run `bash scripts/onnxruntime.sh` from the workspace root \
-         (it downloads the onnxruntime==1.31.1 wheel from PyPI and extracts the library), or set ORT_DYLIB_PATH",
-        path.display()
-    );
-    path
-}
-
-fn ort_environment() -> &'static ort::environment::Environment {
-    static ENV: OnceLock<ort::environment::Environment> = OnceLock::new();
-    ENV.get_or_init(|| {
-        let lib = onnxruntime_library();
-        ort::init_from(&lib)
-            .unwrap_or_else(|e| panic!("cannot load onnxruntime from {}: {e}", lib.display()))
-            .build()
-            .expect("onnxruntime environment")
-    })
-}
-
-/// An onnxruntime session of `model`, run with named `[batch, width]` f32 inputs.
-struct OrtSession(ort::session::Session);
-
-impl OrtSession {
-    fn new(model: &OnnxModel) -> Self {
-        let session = ort::session::Session::builder(ort_environment())
-            .expect("session builder")
-            .with_intra_threads(1)
-            .expect("threads")
-            .commit_from_memory(&model.to_bytes())
-            .expect("onnxruntime loads the exported model");
-        OrtSession(session)
-    }
-
-    fn run(&mut self, inputs: &[(&str, usize, &[f32])], outputs: &[&str]) -> Vec<Vec<f32>> {
-        let values: Vec<(Cow<'_, str>, ort::session::SessionInputValue<'_>)> = inputs
-            .iter()
-            .map(|(name, batch, data)| {
-                let shape = vec![*batch as i64, (data.len() / batch) as i64];
-                let t = ort::value::Tensor::from_array((shape, data.to_vec())).expect("tensor");
-                (Cow::Owned(name.to_string()), t.into())
-            })
-            .collect();
-        let out = self.0.run(values).expect("onnxruntime runs the step");
-        outputs.iter().map(|name| out[*name].try_extract_tensor::<f32>().expect("f32 output").1.to_vec()).collect()
-    }
-
-    fn metadata(&self, key: &str) -> Option<String> {
-        self.0.metadata().expect("metadata").custom(key)
-    }
-}
 
 fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
     assert_eq!(a.len(), b.len());

@@ -29,6 +29,8 @@
 //! assert!(!bytes.is_empty());
 //! ```
 
+pub mod rtn;
+
 use prost::Message;
 use serde::Serialize;
 use std::collections::{BTreeMap, HashMap, HashSet};
@@ -85,6 +87,9 @@ pub enum ExportError {
     /// The graph has no outputs.
     #[error("graph `{0}` has no outputs; declare at least one with GraphBuilder::output")]
     NoOutputs(String),
+    /// A model cannot be exported (missing weight, skeleton, inconsistent checkpoint).
+    #[error("cannot export the model: {0}")]
+    Model(String),
     /// Writing the file failed.
     #[error("cannot write ONNX file {path}: {source}")]
     Io {

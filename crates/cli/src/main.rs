@@ -34,6 +34,8 @@ enum Command {
     Transition(cmd::transition::TransitionArgs),
     /// Rebuild a clip from sparse keyframes with a trained RTN (temporal super-resolution).
     Decompress(cmd::decompress::DecompressArgs),
+    /// Export a trained model as one ONNX file for the engine runtime (`zoo export --onnx DIR --out F.onnx`).
+    Export(cmd::export::ExportArgs),
     /// Draw clips as stick figures: an animated GIF or a PNG contact sheet.
     Render(cmd::render::RenderArgs),
 }
@@ -46,6 +48,7 @@ fn main() -> anyhow::Result<()> {
         Command::Train(c) => cmd::train::run(c),
         Command::Transition(a) => cmd::transition::run(a),
         Command::Decompress(a) => cmd::decompress::run(a),
+        Command::Export(a) => cmd::export::run(a),
         Command::Render(a) => cmd::render::run(a),
     }
 }

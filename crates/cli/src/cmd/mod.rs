@@ -3,6 +3,7 @@
 pub mod bench;
 pub mod data;
 pub mod decompress;
+pub mod export;
 pub mod render;
 pub mod train;
 pub mod transition;

@@ -1,0 +1,341 @@
+//! Export of a trained Recurrent Transition Network (Harvey & Pal 2018) to one ONNX file.
+//!
+//! The file holds the per-frame **step graph** and, in its metadata_props
+//! (`zoo.start_graph`, base64), the **transition-start graph**, the way `zoo-runtime` loads them.
+//!
+//! Step graph (state in, state out; one call per frame, all tensors `[batch, n]` f32):
+//!
+//! | inputs | when | outputs |
+//! |---|---|---|
+//! | `x`: normalised features `x_t` (D) | always | `x_next`: normalised `x_(t+1)` (D) |
+//! | `offset`: normalised global offset `o_t` (D) | `future_conditioning` | |
+//! | `terrain`: normalised terrain patch (side^2) | `terrain` | |
+//! | `h`, `c`: LSTM state (H) | always | `h_next`, `c_next` |
+//! | `gate_bias`: `C_F h_F + b` (4H), constant over a transition | `future_conditioning` | `gate_bias_next` (= `gate_bias`) |
+//!
+//! Start graph (once per transition): inputs `target` (normalised target vector, 2D; with
+//! `future_conditioning`) and `x0` (normalised first frame, D; with a learned or common initial
+//! state); outputs named like the step graph's state inputs: `gate_bias` (RTN eq. 3 and the
+//! target term of eq. 5-8), `h`, `c` (RTN eq. 14, or the common learned state). Slots it does
+//! not produce start at zero (`init_state = zero`). A model without future conditioning and
+//! with a zero initial state has no start graph.
+//!
+//! Initializers keep the candle variable paths (`frame_encoder.0.weight`, `lstm.weight_ih`, ...);
+//! the LSTM is written with Gemm/Split/Sigmoid/Tanh/Mul/Add in candle's gate order i, f, g, o,
+//! so no gate reordering is needed. The offset `o_t` is recomputed by the caller from the
+//! generated frame (as candle's `generate` does), which keeps the step graph free of the root
+//! integration.
+
+use crate::{Dim, ExportError, GraphBuilder, OnnxModel, Value};
+use candle_nn::VarMap;
+use serde_json::json;
+use std::collections::HashMap;
+use std::path::Path;
+use zoo_motion::features::{FeatureStats, MeanStd};
+use zoo_rtn::{Config, InitState};
+
+/// Format version of the metadata written (`zoo_runtime::FORMAT_VERSION`).
+pub const FORMAT_VERSION: u32 = 1;
+
+/// What the run folder may not record: joint names, rest offsets and the frame rate.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RtnExportOptions {
+    /// Joint names; default `joint0`, `joint1`, ...
+    pub names: Option<Vec<String>>,
+    /// Rest offset of each joint from its parent (clip units); default zero.
+    pub offsets: Option<Vec<[f32; 3]>>,
+    /// Parent of each joint (-1 for the root), when the config has none.
+    pub parents: Option<Vec<i32>>,
+    /// Frames per second of the training data; default 30.
+    pub fps: Option<f32>,
+}
+
+fn model_err(message: impl Into<String>) -> ExportError {
+    ExportError::Model(message.into())
+}
+
+/// Loads a `zoo train rtn` run folder (`config.json`, `model.safetensors`,
+/// `normalization.json`) and exports it (see [`export_rtn`]).
+pub fn export_rtn_dir(dir: &Path, options: &RtnExportOptions) -> Result<OnnxModel, ExportError> {
+    let (config, stats) =
+        zoo_rtn::checkpoint::read_meta(dir).map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
+    let config_path = dir.join(zoo_rtn::checkpoint::CONFIG_FILE);
+    let config_json = std::fs::read_to_string(&config_path)
+        .map_err(|source| ExportError::Io { path: config_path.display().to_string(), source })?;
+    let varmap = VarMap::new();
+    let vb = candle_nn::VarBuilder::from_varmap(&varmap, candle_core::DType::F32, &candle_core::Device::Cpu);
+    zoo_rtn::Rtn::new(&config, vb).map_err(|e| model_err(format!("building the RTN of {}: {e}", dir.display())))?;
+    zoo_rtn::checkpoint::load_weights(dir, &varmap).map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
+    export_rtn(&config, Some(&config_json), &stats, &varmap, options)
+}
+
+/// Weights by candle variable path, as row-major f32 with their shapes.
+struct Weights(HashMap<String, (Vec<usize>, Vec<f32>)>);
+
+impl Weights {
+    fn from_varmap(varmap: &VarMap) -> Result<Self, ExportError> {
+        let data = varmap.data().lock().map_err(|_| model_err("the VarMap lock is poisoned"))?;
+        let mut out = HashMap::new();
+        for (name, var) in data.iter() {
+            let t = var.as_tensor();
+            let dims = t.dims().to_vec();
+            let values = t
+                .to_dtype(candle_core::DType::F32)
+                .and_then(|t| t.flatten_all())
+                .and_then(|t| t.to_vec1::<f32>())
+                .map_err(|e| model_err(format!("reading weight `{name}`: {e}")))?;
+            if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+                return Err(model_err(format!("weight `{name}` holds {} at index {i}", values[i])));
+            }
+            out.insert(name.clone(), (dims, values));
+        }
+        Ok(Weights(out))
+    }
+
+    fn get(&self, name: &str) -> Result<&(Vec<usize>, Vec<f32>), ExportError> {
+        self.0.get(name).ok_or_else(|| model_err(format!("the checkpoint has no weight `{name}`")))
+    }
+
+    /// Adds the weight `name` as an initializer of the same name.
+    fn init(&self, g: &mut GraphBuilder, name: &str) -> Result<Value, ExportError> {
+        let (dims, data) = self.get(name)?;
+        Ok(g.initializer_f32(name, dims, data))
+    }
+}
+
+/// A candle MLP (`prefix.{i}.weight`, `prefix.{i}.bias`, PyTorch `[out, in]` weights): leaky
+/// ReLU after every layer but the last, and after the last when `activate_last`.
+fn mlp(
+    g: &mut GraphBuilder,
+    w: &Weights,
+    prefix: &str,
+    layers: usize,
+    x: &Value,
+    slope: f32,
+    activate_last: bool,
+) -> Result<Value, ExportError> {
+    let mut h = x.clone();
+    for i in 0..layers {
+        let wt = w.init(g, &format!("{prefix}.{i}.weight"))?;
+        let b = w.init(g, &format!("{prefix}.{i}.bias"))?;
+        h = g.gemm(&format!("{prefix}.{i}"), &h, &wt, Some(&b), true);
+        if i + 1 < layers || activate_last {
+            h = g.leaky_relu(&format!("{prefix}.{i}.act"), &h, slope);
+        }
+    }
+    Ok(h)
+}
+
+fn batch(n: usize) -> [Dim; 2] {
+    [Dim::batch(), Dim::Fixed(n)]
+}
+
+fn mean_std(m: &MeanStd) -> serde_json::Value {
+    json!({"mean": m.mean, "std": m.std})
+}
+
+/// The metadata_props of an exported RTN (keys of `zoo_runtime::metadata::keys`).
+fn metadata(
+    config: &Config,
+    config_json: &str,
+    stats: &FeatureStats,
+    options: &RtnExportOptions,
+) -> Result<Vec<(String, String)>, ExportError> {
+    let k = config.joints;
+    let d = config.dim();
+    let parents = match (&options.parents, config.parents.is_empty()) {
+        (Some(p), _) => p.clone(),
+        (None, false) => config.parents.clone(),
+        (None, true) => {
+            return Err(model_err(
+                "the config has no skeleton parents: pass them as an export option (e.g. --skeleton FILE.bvh)",
+            ));
+        }
+    };
+    let names = options.names.clone().unwrap_or_else(|| (0..k).map(|j| format!("joint{j}")).collect());
+    let offsets = options.offsets.clone().unwrap_or_else(|| vec![[0.0; 3]; k]);
+    if parents.len() != k || names.len() != k || offsets.len() != k {
+        return Err(model_err(format!(
+            "the model has {k} joints but the skeleton has {} parents, {} names and {} offsets",
+            parents.len(),
+            names.len(),
+            offsets.len()
+        )));
+    }
+    let fps = options.fps.unwrap_or(30.0);
+    if !(fps.is_finite() && fps > 0.0) {
+        return Err(model_err(format!("fps must be a positive number, got {fps}")));
+    }
+    let mut norm = serde_json::Map::new();
+    norm.insert("x".into(), mean_std(&stats.x));
+    norm.insert("velocity".into(), mean_std(&stats.velocity));
+    norm.insert("offset".into(), mean_std(&stats.offset));
+    if let Some(t) = &stats.terrain {
+        norm.insert("terrain".into(), mean_std(t));
+    }
+    let layout = json!([
+        {"name": "root_velocity", "start": 0, "len": 3},
+        {"name": "joint_positions_root_relative", "start": 3, "len": d - 3},
+    ]);
+    let mut state = vec![json!({"input": "h", "output": "h_next"}), json!({"input": "c", "output": "c_next"})];
+    if config.future_conditioning {
+        state.push(json!({"input": "gate_bias", "output": "gate_bias_next"}));
+    }
+    Ok(vec![
+        ("zoo.format_version".into(), FORMAT_VERSION.to_string()),
+        ("zoo.model_kind".into(), "rtn".into()),
+        ("zoo.config".into(), config_json.to_string()),
+        ("zoo.normalisation".into(), serde_json::Value::Object(norm).to_string()),
+        ("zoo.skeleton".into(), json!({"names": names, "parents": parents, "offsets": offsets}).to_string()),
+        ("zoo.feature_layout".into(), layout.to_string()),
+        ("zoo.fps".into(), fps.to_string()),
+        ("zoo.state".into(), serde_json::Value::Array(state).to_string()),
+    ])
+}
+
+/// Exports an RTN from its configuration, statistics and weights (a VarMap filled by
+/// `zoo_rtn::Rtn::new`). `config_json`: the run folder's `config.json` verbatim (default: the
+/// config serialised). Errors on a terrain-aware model mismatch, a missing weight or skeleton.
+pub fn export_rtn(
+    config: &Config,
+    config_json: Option<&str>,
+    stats: &FeatureStats,
+    varmap: &VarMap,
+    options: &RtnExportOptions,
+) -> Result<OnnxModel, ExportError> {
+    if stats.joints != config.joints {
+        return Err(model_err(format!(
+            "the statistics are for {} joints, the model for {}",
+            stats.joints, config.joints
+        )));
+    }
+    if config.terrain && stats.terrain.is_none() {
+        return Err(model_err("a terrain-aware RTN needs terrain statistics in normalization.json"));
+    }
+    let w = Weights::from_varmap(varmap)?;
+    let serialised;
+    let config_json = match config_json {
+        Some(s) => s,
+        None => {
+            serialised = serde_json::to_string_pretty(config).map_err(|e| model_err(e.to_string()))?;
+            &serialised
+        }
+    };
+    let start = start_graph(config, &w)?;
+    let mut g = step_graph(config, &w)?;
+    g.doc("Recurrent Transition Network (Harvey & Pal 2018), per-frame step graph; see zoo-export rtn.rs");
+    for (k, v) in metadata(config, config_json, stats, options)? {
+        g.metadata(&k, &v);
+    }
+    if let Some(start) = start {
+        g.metadata("zoo.start_graph", &start.to_base64());
+    }
+    g.finish()
+}
+
+/// The per-frame step graph (RTN eq. 2, 4-13).
+fn step_graph(config: &Config, w: &Weights) -> Result<GraphBuilder, ExportError> {
+    let d = config.dim();
+    let hu = config.lstm;
+    let slope = config.leaky_slope as f32;
+    let mut g = GraphBuilder::new("rtn_step");
+    let x = g.input("x", &batch(d));
+    let offset = config.future_conditioning.then(|| g.input("offset", &batch(d)));
+    let terrain = config.terrain.then(|| g.input("terrain", &batch(config.terrain_dim())));
+    let h = g.input("h", &batch(hu));
+    let c = g.input("c", &batch(hu));
+    let gate_bias = config.future_conditioning.then(|| g.input("gate_bias", &batch(4 * hu)));
+
+    // RTN eq. 2: h_E = E([x_t, p_t])
+    let e_in = match &terrain {
+        Some(p) => g.concat("frame_encoder.input", &[&x, p], 1),
+        None => x.clone(),
+    };
+    let he = mlp(&mut g, w, "frame_encoder", config.frame_encoder.len(), &e_in, slope, true)?;
+    // RTN eq. 5-8: z = W h_E + U h_(t-1) + C_O h_O + (C_F h_F + b)
+    let w_ih = w.init(&mut g, "lstm.weight_ih")?;
+    let w_hh = w.init(&mut g, "lstm.weight_hh")?;
+    let mut z = g.gemm("lstm.input_gates", &he, &w_ih, None, true);
+    let zh = g.gemm("lstm.hidden_gates", &h, &w_hh, None, true);
+    z = g.add("lstm.gates_ih_hh", &z, &zh);
+    z = match (&offset, &gate_bias) {
+        (Some(off), Some(gb)) => {
+            // RTN eq. 4: h_O = O(o_t)
+            let ho = mlp(&mut g, w, "offset_encoder", config.offset_encoder.len(), off, slope, true)?;
+            let w_o = w.init(&mut g, "lstm.weight_offset")?;
+            let zo = g.gemm("lstm.offset_gates", &ho, &w_o, Some(gb), true);
+            g.add("lstm.gates", &z, &zo)
+        }
+        _ => {
+            let b = w.init(&mut g, "lstm.bias")?;
+            g.add("lstm.gates", &z, &b)
+        }
+    };
+    // Gate blocks in candle's order i, f, g, o.
+    let parts = g.split("lstm.split", &z, &[hu; 4], 1);
+    let i = g.sigmoid("lstm.i", &parts[0]);
+    let f = g.sigmoid("lstm.f", &parts[1]);
+    let gg = g.tanh("lstm.g", &parts[2]);
+    let o = g.sigmoid("lstm.o", &parts[3]);
+    // RTN eq. 9-11
+    let fc = g.mul("lstm.f_c", &f, &c);
+    let ig = g.mul("lstm.i_g", &i, &gg);
+    let c_next = g.add("lstm.c", &fc, &ig);
+    let tc = g.tanh("lstm.tanh_c", &c_next);
+    let h_next = g.mul("lstm.h", &o, &tc);
+    // RTN eq. 12-13
+    let dx = mlp(&mut g, w, "decoder", config.decoder.len() + 1, &h_next, slope, false)?;
+    let x_next = if config.residual { g.add("residual", &x, &dx) } else { dx };
+    g.output("x_next", &x_next, &batch(d));
+    g.output("h_next", &h_next, &batch(hu));
+    g.output("c_next", &c_next, &batch(hu));
+    if let Some(gb) = &gate_bias {
+        g.output("gate_bias_next", gb, &batch(4 * hu));
+    }
+    Ok(g)
+}
+
+/// The transition-start graph (RTN eq. 3 and 14), or `None` when nothing is to compute.
+fn start_graph(config: &Config, w: &Weights) -> Result<Option<OnnxModel>, ExportError> {
+    let d = config.dim();
+    let hu = config.lstm;
+    let slope = config.leaky_slope as f32;
+    if !config.future_conditioning && config.init_state == InitState::Zero {
+        return Ok(None);
+    }
+    let mut g = GraphBuilder::new("rtn_start");
+    g.doc("Recurrent Transition Network, transition-start graph: target encoding and initial state");
+    if config.future_conditioning {
+        let target = g.input("target", &batch(2 * d));
+        // RTN eq. 3: h_F = F(t); the gates' per-sequence term C_F h_F + b
+        let hf = mlp(&mut g, w, "target_encoder", config.target_encoder.len(), &target, slope, true)?;
+        let wt = w.init(&mut g, "lstm.weight_target")?;
+        let b = w.init(&mut g, "lstm.bias")?;
+        let gb = g.gemm("lstm.target_gates", &hf, &wt, Some(&b), true);
+        g.output("gate_bias", &gb, &batch(4 * hu));
+    }
+    match config.init_state {
+        InitState::Zero => {}
+        InitState::Learned => {
+            let x0 = g.input("x0", &batch(d));
+            // RTN eq. 14: (h_0, c_0) = H(x_0), one hidden layer, linear output
+            let hc = mlp(&mut g, w, "state_init", 2, &x0, slope, false)?;
+            let parts = g.split("state_init.split", &hc, &[hu, hu], 1);
+            g.output("h", &parts[0], &batch(hu));
+            g.output("c", &parts[1], &batch(hu));
+        }
+        InitState::Common => {
+            // One learned (h, c) for every sequence, broadcast to the batch: x0[:, :1] * 0 + h.
+            let x0 = g.input("x0", &batch(d));
+            let col = g.slice("state_init.batch_column", &x0, &[1], &[0], &[1]);
+            let zero = g.initializer_f32("state_init.zero", &[1], &[0.0]);
+            let zeros = g.mul("state_init.batch_zeros", &col, &zero);
+            for s in ["h", "c"] {
+                let v = w.init(&mut g, &format!("state_init.{s}"))?;
+                let out = g.add(&format!("state_init.{s}.broadcast"), &zeros, &v);
+                g.output(s, &out, &batch(hu));
+            }
+        }
+    }
+    Ok(Some(g.finish()?))
+}
