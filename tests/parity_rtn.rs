@@ -1,0 +1,545 @@
+//! Parity of the exported RTN: candle (`zoo-rtn`), tract (through `zoo-runtime`) and
+//! onnxruntime (through `ort`, `load-dynamic`) run the same transitions of a tiny RTN.
+//!
+//! Where the expected numbers come from: candle's `Rtn::begin` / `initial_state` / `step`,
+//! driven exactly like `zoo_rtn::transition::generate` (context frames fed as ground truth, then
+//! each generated frame fed back, its root integrated and its offset to the target recomputed),
+//! and checked against `Rtn::unroll`. The exported graphs are driven the same way, the offset and
+//! root being recomputed on the host from the generated frame. Weights are fixed LCG draws
+//! (`Config::tiny`, 4 joints), statistics fixed. Every pair must agree within 1e-4 in normalised
+//! units on every frame. The snapshots hold candle's outputs rounded to 4 decimals and the graph
+//! summaries.
+//!
+//! onnxruntime: `bash scripts/onnxruntime.sh` (or `ORT_DYLIB_PATH`); a missing library fails.
+
+use candle_core::{DType, Device, Tensor};
+use candle_nn::{VarBuilder, VarMap};
+use std::collections::HashMap;
+use zoo_export::OnnxModel;
+use zoo_export::rtn::{RtnExportOptions, export_rtn, export_rtn_dir};
+use zoo_motion::features::{self, FeatureStats, MeanStd};
+use zoo_rtn::model::{OffsetTensors, RtnInputs, RtnState};
+use zoo_rtn::{Config, InitState, Rtn};
+use zoo_runtime::{MotionModel, MotionState};
+use zoo_tests::onnxruntime::OrtSession;
+use zoo_tests::toy_onnx::lcg;
+
+const BATCH: usize = 3;
+const PAST: usize = 4;
+const FRAMES: usize = 30;
+const TOLERANCE: f32 = 1e-4;
+const PARENTS: [Option<usize>; 4] = [None, Some(0), Some(0), Some(2)];
+
+/// Normalised per-step outputs `x_(t+1)` of every character, `[step][character * D + k]`.
+type Trace = Vec<Vec<f32>>;
+
+struct Fixture {
+    config: Config,
+    varmap: VarMap,
+    model: Rtn,
+    stats: FeatureStats,
+}
+
+fn fixture(config: Config) -> Fixture {
+    let mut varmap = VarMap::new();
+    let model = Rtn::new(&config, VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu)).unwrap();
+    let mut vars: Vec<(String, Vec<usize>)> =
+        varmap.data().lock().unwrap().iter().map(|(n, v)| (n.clone(), v.dims().to_vec())).collect();
+    vars.sort();
+    for (k, (name, dims)) in vars.iter().enumerate() {
+        let fan_in = if dims.len() == 2 { dims[1] } else { config.lstm };
+        let n = dims.iter().product();
+        let t = Tensor::from_vec(lcg(1000 + k as u64, n, 1.5 / (fan_in as f32).sqrt()), dims.as_slice(), &Device::Cpu)
+            .unwrap();
+        varmap.set_one(name, &t).unwrap();
+    }
+    let d = config.dim();
+    let ms = |seed: u64, mean: f32, std: f32, root_std: f32| MeanStd {
+        mean: lcg(seed, d, mean),
+        std: lcg(seed + 1, d, 0.3)
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (1.0 + v) * if i < 3 { root_std } else { std })
+            .collect(),
+    };
+    let stats = FeatureStats {
+        joints: config.joints,
+        x: ms(1, 5.0, 20.0, 2.0),
+        velocity: ms(3, 0.5, 2.0, 2.0),
+        offset: ms(5, 20.0, 60.0, 60.0),
+        terrain: None,
+    };
+    Fixture { config, varmap, model, stats }
+}
+
+fn tiny() -> Config {
+    Config::tiny().with_parents(&PARENTS)
+}
+
+fn export(f: &Fixture) -> OnnxModel {
+    let options = RtnExportOptions {
+        names: Some(["Hips", "Spine", "Leg", "Foot_L"].iter().map(|s| s.to_string()).collect()),
+        offsets: Some(vec![[0.0; 3], [0.0, 10.0, 0.0], [0.0, -40.0, 0.0], [0.0, -40.0, 0.0]]),
+        parents: None,
+        fps: Some(30.0),
+    };
+    export_rtn(&f.config, None, &f.stats, &f.varmap, &options).expect("the RTN exports")
+}
+
+/// Global positions of frame `f` of character `c` (4 joints, clip units).
+fn pose(c: usize, f: usize) -> Vec<f32> {
+    let (t, p) = (f as f32, c as f32);
+    let root = [2.0 * t + 10.0 * p, 90.0 + 3.0 * (0.3 * t + p).sin(), 0.5 * t * p];
+    let rel = [
+        [0.0, 0.0, 0.0],
+        [0.0, 20.0 + 2.0 * (0.2 * t).sin(), 0.0],
+        [5.0 * (0.4 * t + p).sin(), -40.0, 3.0 * (0.4 * t).cos()],
+        [8.0 * (0.4 * t + p + 1.0).sin(), -75.0, 4.0 * (0.4 * t + p).cos()],
+    ];
+    rel.iter().flat_map(|r| (0..3).map(move |a| root[a] + r[a])).collect()
+}
+
+/// One character's transition inputs, as `generate` encodes them.
+struct Character {
+    past: Vec<f32>,
+    target_pose: Vec<f32>,
+    next_pose: Vec<f32>,
+    /// Normalised context features, one frame each.
+    x: Vec<Vec<f32>>,
+    roots: Vec<[f32; 3]>,
+    /// Normalised target vector (2D).
+    target: Vec<f32>,
+}
+
+fn character(stats: &FeatureStats, c: usize) -> Character {
+    let d = stats.dim();
+    let past: Vec<f32> = (0..PAST).flat_map(|f| pose(c, f)).collect();
+    let target_frame = PAST + FRAMES - 1;
+    let (target_pose, next_pose) = (pose(c, target_frame), pose(c, target_frame + 1));
+    let mut feats = vec![0.0; past.len()];
+    features::encode_positions(&past, stats.joints, &mut feats);
+    stats.x.normalize(&mut feats);
+    let mut target = vec![0.0; 2 * d];
+    features::target_vector(&target_pose, &next_pose, &mut target);
+    stats.normalize_target(&mut target);
+    Character {
+        x: feats.chunks(d).map(<[f32]>::to_vec).collect(),
+        roots: past.chunks(d).map(features::root_of).collect(),
+        past,
+        target_pose,
+        next_pose,
+        target,
+    }
+}
+
+fn characters(stats: &FeatureStats) -> Vec<Character> {
+    (0..BATCH).map(|c| character(stats, c)).collect()
+}
+
+fn cat<'a>(chars: &'a [&Character], part: impl Fn(&'a Character) -> &'a [f32]) -> Vec<f32> {
+    chars.iter().flat_map(|c| part(c).iter().copied()).collect()
+}
+
+/// Candle, batched, exactly like `zoo_rtn::transition::generate` with no teacher forcing.
+fn candle_loop(f: &Fixture, chars: &[Character], n_out: usize) -> Trace {
+    let dev = Device::Cpu;
+    let d = f.config.dim();
+    let refs: Vec<&Character> = chars.iter().collect();
+    let b = chars.len();
+    let t = |v: Vec<f32>, w: usize| Tensor::from_vec(v, (b, w), &dev).unwrap();
+    let offsets = OffsetTensors::new(&f.stats, &dev).unwrap();
+    let seq = f.model.begin(&t(cat(&refs, |c| &c.target), 2 * d)).unwrap();
+    let mut state = f.model.initial_state(&t(cat(&refs, |c| &c.x[0]), d)).unwrap();
+    let target_term =
+        f.config.future_conditioning.then(|| offsets.target_term(&t(cat(&refs, |c| &c.target_pose), d)).unwrap());
+    let mut x = t(cat(&refs, |c| &c.x[0]), d);
+    let mut root = t(cat(&refs, |c| &c.roots[0]), 3);
+    let mut trace = Vec::new();
+    for step in 0..PAST - 1 + n_out {
+        let offset = target_term.as_ref().map(|tt| offsets.offset(tt, &x, &root).unwrap());
+        let inputs = RtnInputs { sequence: &seq, x: &x, offset: offset.as_ref(), terrain: None };
+        let (next, st) = f.model.step(&inputs, &state).unwrap();
+        state = st;
+        trace.push(next.flatten_all().unwrap().to_vec1::<f32>().unwrap());
+        let nt = step + 1;
+        if nt < PAST {
+            x = t(cat(&refs, |c| &c.x[nt]), d);
+            root = t(cat(&refs, |c| &c.roots[nt]), 3);
+        } else {
+            root = offsets.next_root(&root, &next).unwrap();
+            x = next;
+        }
+    }
+    trace
+}
+
+/// Normalised offset `o_t = ((y_T - y_t) - mu_o) / sigma_o` of a frame with normalised
+/// features `x` and global root `root` (host side, what an engine computes).
+fn host_offset(stats: &FeatureStats, x: &[f32], root: [f32; 3], target_pose: &[f32]) -> Vec<f32> {
+    let mut feat = x.to_vec();
+    stats.x.denormalize(&mut feat);
+    let mut o: Vec<f32> =
+        (0..x.len()).map(|i| target_pose[i] - if i < 3 { root[i] } else { feat[i] + root[i % 3] }).collect();
+    stats.offset.normalize(&mut o);
+    o
+}
+
+/// The generate loop on the host around an exported graph. `start` gets the named start inputs
+/// (`target`, `x0`); `step` gets the named frame inputs (`x`, `offset`) and returns `x_next`.
+fn host_loop(
+    f: &Fixture,
+    chars: &[&Character],
+    n_out: usize,
+    start: &mut dyn FnMut(&HashMap<&str, Vec<f32>>),
+    step: &mut dyn FnMut(&HashMap<&str, Vec<f32>>) -> Vec<f32>,
+) -> Trace {
+    let d = f.config.dim();
+    start(&HashMap::from([("target", cat(chars, |c| &c.target)), ("x0", cat(chars, |c| &c.x[0]))]));
+    let mut x = cat(chars, |c| &c.x[0]);
+    let mut roots: Vec<[f32; 3]> = chars.iter().map(|c| c.roots[0]).collect();
+    let mut trace = Vec::new();
+    for s in 0..PAST - 1 + n_out {
+        let offset: Vec<f32> = chars
+            .iter()
+            .enumerate()
+            .flat_map(|(k, c)| host_offset(&f.stats, &x[k * d..(k + 1) * d], roots[k], &c.target_pose))
+            .collect();
+        let next = step(&HashMap::from([("x", x.clone()), ("offset", offset)]));
+        trace.push(next.clone());
+        let nt = s + 1;
+        if nt < PAST {
+            x = cat(chars, |c| &c.x[nt]);
+            roots = chars.iter().map(|c| c.roots[nt]).collect();
+        } else {
+            for (k, r) in roots.iter_mut().enumerate() {
+                for a in 0..3 {
+                    r[a] += next[k * d + a] * f.stats.x.std[a] + f.stats.x.mean[a];
+                }
+            }
+            x = next;
+        }
+    }
+    trace
+}
+
+fn named<'a>(map: &'a HashMap<&str, Vec<f32>>, name: &str) -> &'a [f32] {
+    map.get(name).unwrap_or_else(|| panic!("the exported graph asks for unknown input `{name}`"))
+}
+
+fn tract_loop(f: &Fixture, onnx: &OnnxModel, chars: &[&Character], n_out: usize) -> Trace {
+    let model = MotionModel::from_bytes(&onnx.to_bytes()).expect("zoo-runtime loads the exported RTN");
+    let mut runner = model.runner().unwrap();
+    let mut states: Vec<MotionState> = chars.iter().map(|_| model.new_state()).collect();
+    let d = f.config.dim();
+    // Both closures drive the same runner and states.
+    let cell = std::cell::RefCell::new((&mut runner, &mut states));
+    host_loop(
+        f,
+        chars,
+        n_out,
+        &mut |inputs| {
+            let mut g = cell.borrow_mut();
+            let (runner, states) = &mut *g;
+            let ins: Vec<&[f32]> = model.start_inputs().iter().map(|i| named(inputs, &i.name)).collect();
+            runner.start_batch(states, &ins).unwrap();
+        },
+        &mut |inputs| {
+            let mut g = cell.borrow_mut();
+            let (runner, states) = &mut *g;
+            let ins: Vec<&[f32]> = model.inputs().iter().map(|i| named(inputs, &i.name)).collect();
+            let mut y = vec![0.0; states.len() * d];
+            runner.step_batch(states, &ins, &mut [&mut y]).unwrap();
+            y
+        },
+    )
+}
+
+/// The start graph as an engine would read it: decoded from the step file's metadata.
+fn embedded_start_graph(onnx: &OnnxModel) -> Option<OnnxModel> {
+    use base64::Engine;
+    let encoded = onnx.proto().metadata_props.iter().find(|p| p.key == "zoo.start_graph")?.value.clone();
+    let bytes = base64::engine::general_purpose::STANDARD.decode(encoded).unwrap();
+    Some(OnnxModel::from_proto(prost::Message::decode(bytes.as_slice()).unwrap()))
+}
+
+fn io_names(onnx: &OnnxModel) -> (Vec<String>, Vec<String>) {
+    let g = onnx.proto().graph.as_ref().unwrap();
+    (g.input.iter().map(|v| v.name.clone()).collect(), g.output.iter().map(|v| v.name.clone()).collect())
+}
+
+fn ort_loop(f: &Fixture, onnx: &OnnxModel, chars: &[&Character], n_out: usize) -> Trace {
+    let b = chars.len();
+    let hu = f.config.lstm;
+    let mut session = OrtSession::new(onnx);
+    assert_eq!(session.metadata("zoo.model_kind").as_deref(), Some("rtn"), "metadata_props reach onnxruntime");
+    let (step_in, step_out) = io_names(onnx);
+    let mut state: HashMap<String, Vec<f32>> =
+        HashMap::from([("h".into(), vec![0.0; b * hu]), ("c".into(), vec![0.0; b * hu])]);
+    if f.config.future_conditioning {
+        state.insert("gate_bias".into(), vec![0.0; b * 4 * hu]);
+    }
+    let start_graph = embedded_start_graph(onnx);
+    let state_cell = std::cell::RefCell::new(state);
+    host_loop(
+        f,
+        chars,
+        n_out,
+        &mut |inputs| {
+            let Some(sg) = &start_graph else { return };
+            let (ins, outs) = io_names(sg);
+            let feed: Vec<(&str, usize, &[f32])> = ins.iter().map(|n| (n.as_str(), b, named(inputs, n))).collect();
+            let out_refs: Vec<&str> = outs.iter().map(String::as_str).collect();
+            let values = OrtSession::new(sg).run(&feed, &out_refs);
+            let mut state = state_cell.borrow_mut();
+            for (name, v) in outs.iter().zip(values) {
+                state.insert(name.clone(), v);
+            }
+        },
+        &mut |inputs| {
+            let mut state = state_cell.borrow_mut();
+            let feed: Vec<(&str, usize, &[f32])> = step_in
+                .iter()
+                .map(|n| match state.get(n) {
+                    Some(s) => (n.as_str(), b, s.as_slice()),
+                    None => (n.as_str(), b, named(inputs, n)),
+                })
+                .collect();
+            let out_refs: Vec<&str> = step_out.iter().map(String::as_str).collect();
+            let values = session.run(&feed, &out_refs);
+            let mut x_next = Vec::new();
+            for (name, v) in step_out.iter().zip(values) {
+                match name.strip_suffix("_next").filter(|s| *s != "x") {
+                    Some(slot) => {
+                        state.insert(slot.to_string(), v);
+                    }
+                    None => x_next = v,
+                }
+            }
+            x_next
+        },
+    )
+}
+
+fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
+}
+
+fn trace_diff(a: &Trace, b: &Trace) -> f32 {
+    assert_eq!(a.len(), b.len());
+    a.iter().zip(b).map(|(a, b)| max_abs_diff(a, b)).fold(0.0, f32::max)
+}
+
+/// Runs candle, tract (batched and batch 1) and onnxruntime; asserts every pair; returns candle's trace.
+fn check_transition(name: &str, f: &Fixture, onnx: &OnnxModel, n_out: usize) -> Trace {
+    let chars = characters(&f.stats);
+    let refs: Vec<&Character> = chars.iter().collect();
+    let candle = candle_loop(f, &chars, n_out);
+    let tract = tract_loop(f, onnx, &refs, n_out);
+    let mut tract1: Trace = vec![Vec::new(); candle.len()];
+    for c in &refs {
+        for (frame, v) in tract1.iter_mut().zip(tract_loop(f, onnx, std::slice::from_ref(c), n_out)) {
+            frame.extend(v);
+        }
+    }
+    let ort = ort_loop(f, onnx, &refs, n_out);
+    let pairs = [
+        ("candle-tract", trace_diff(&candle, &tract)),
+        ("candle-tract_batch1", trace_diff(&candle, &tract1)),
+        ("candle-onnxruntime", trace_diff(&candle, &ort)),
+        ("tract-onnxruntime", trace_diff(&tract, &ort)),
+        ("tract-tract_batch1", trace_diff(&tract, &tract1)),
+    ];
+    for (pair, diff) in pairs {
+        eprintln!("{name}: max |{pair}| over {} steps x {BATCH} characters = {diff:.3e}", candle.len());
+        assert!(diff <= TOLERANCE, "{name}: {pair} differ by {diff:e} > {TOLERANCE:e}");
+    }
+    let moved = max_abs_diff(&candle[PAST], &candle[candle.len() - 1]);
+    assert!(moved > 1e-2, "{name}: the transition should move (moved {moved})");
+    candle
+}
+
+/// Candle's outputs of character `c` on every 5th generated frame, rounded to 4 decimals.
+fn rounded(trace: &Trace, d: usize) -> Vec<Vec<Vec<f64>>> {
+    (0..BATCH)
+        .map(|c| {
+            (PAST - 1..trace.len())
+                .step_by(5)
+                .chain([trace.len() - 1])
+                .map(|s| trace[s][c * d..(c + 1) * d].iter().map(|v| (*v as f64 * 1e4).round() / 1e4).collect())
+                .collect()
+        })
+        .collect()
+}
+
+#[test]
+fn rtn_transition_parity() {
+    let f = fixture(tiny());
+    let onnx = export(&f);
+    let trace = check_transition("rtn", &f, &onnx, FRAMES);
+    insta::assert_json_snapshot!("rtn_step_graph", onnx.summary());
+    insta::assert_json_snapshot!("rtn_start_graph", embedded_start_graph(&onnx).unwrap().summary());
+    insta::assert_json_snapshot!("rtn_transition_outputs", rounded(&trace, f.config.dim()));
+}
+
+#[test]
+fn candle_loop_matches_unroll() {
+    // The candle reference of these tests is `Rtn::unroll`'s loop: decode its generated frames.
+    let f = fixture(tiny());
+    let d = f.config.dim();
+    let chars = characters(&f.stats);
+    let trace = candle_loop(&f, &chars, FRAMES);
+    for (k, c) in chars.iter().enumerate() {
+        let mut feats: Vec<f32> = trace[PAST - 1..].iter().flat_map(|s| s[k * d..(k + 1) * d].to_vec()).collect();
+        f.stats.x.denormalize(&mut feats);
+        let mut ours = vec![0.0; feats.len()];
+        features::decode_features(features::root_of(&c.past[(PAST - 1) * d..]), &feats, f.config.joints, &mut ours);
+        let unroll = f.model.unroll(&f.stats, &c.past, &c.target_pose, &c.next_pose, FRAMES - 1, None).unwrap();
+        let diff = max_abs_diff(&ours, &unroll);
+        assert!(diff <= 1e-3, "character {k}: candle loop vs Rtn::unroll differ by {diff:e} (clip units)");
+    }
+}
+
+#[test]
+fn rtn_single_step_parity() {
+    // One step from an arbitrary state: start graph (gate bias) + step graph vs candle.
+    let f = fixture(tiny());
+    let onnx = export(&f);
+    let (d, hu) = (f.config.dim(), f.config.lstm);
+    let chars = characters(&f.stats);
+    let refs: Vec<&Character> = chars.iter().collect();
+    let (h, c) = (lcg(41, BATCH * hu, 0.8), lcg(42, BATCH * hu, 1.5));
+    let x = lcg(43, BATCH * d, 1.5);
+    let offset = lcg(44, BATCH * d, 1.5);
+    let target = cat(&refs, |c| &c.target);
+    let dev = Device::Cpu;
+    let t = |v: &[f32], w: usize| Tensor::from_slice(v, (BATCH, w), &dev).unwrap();
+    let seq = f.model.begin(&t(&target, 2 * d)).unwrap();
+    let state = RtnState { h: t(&h, hu), c: t(&c, hu) };
+    let (xt, ot) = (t(&x, d), t(&offset, d));
+    let inputs = RtnInputs { sequence: &seq, x: &xt, offset: Some(&ot), terrain: None };
+    let (next, st) = f.model.step(&inputs, &state).unwrap();
+    let flat = |t: &Tensor| t.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+    let candle = [flat(&next), flat(&st.h), flat(&st.c)];
+
+    let model = MotionModel::from_bytes(&onnx.to_bytes()).unwrap();
+    let mut runner = model.runner().unwrap();
+    let mut states: Vec<MotionState> = (0..BATCH).map(|_| model.new_state()).collect();
+    let x0 = cat(&refs, |c| &c.x[0]);
+    runner.start_batch(&mut states, &[&target, &x0]).unwrap();
+    let slot = |name: &str| model.states().iter().position(|s| s.input == name).unwrap();
+    for (k, s) in states.iter_mut().enumerate() {
+        s.slot_mut(slot("h")).copy_from_slice(&h[k * hu..(k + 1) * hu]);
+        s.slot_mut(slot("c")).copy_from_slice(&c[k * hu..(k + 1) * hu]);
+    }
+    let mut y = vec![0.0; BATCH * d];
+    runner.step_batch(&mut states, &[&x, &offset], &mut [&mut y]).unwrap();
+    let gather = |name: &str| -> Vec<f32> { states.iter().flat_map(|s| s.slot(slot(name)).to_vec()).collect() };
+    let tract = [y, gather("h"), gather("c")];
+
+    let gate_bias = OrtSession::new(&embedded_start_graph(&onnx).unwrap())
+        .run(&[("target", BATCH, &target), ("x0", BATCH, &x0)], &["gate_bias"])
+        .remove(0);
+    let ort = OrtSession::new(&onnx).run(
+        &[
+            ("x", BATCH, &x),
+            ("offset", BATCH, &offset),
+            ("h", BATCH, &h),
+            ("c", BATCH, &c),
+            ("gate_bias", BATCH, &gate_bias),
+        ],
+        &["x_next", "h_next", "c_next"],
+    );
+    for (i, what) in ["x_next", "h_next", "c_next"].iter().enumerate() {
+        for (pair, diff) in [
+            ("candle-tract", max_abs_diff(&candle[i], &tract[i])),
+            ("candle-onnxruntime", max_abs_diff(&candle[i], &ort[i])),
+            ("tract-onnxruntime", max_abs_diff(&tract[i], &ort[i])),
+        ] {
+            eprintln!("one step, {what}: max |{pair}| = {diff:.3e}");
+            assert!(diff <= TOLERANCE, "one step, {what}: {pair} differ by {diff:e}");
+        }
+    }
+}
+
+#[test]
+fn rtn_ablation_variants_parity() {
+    // Every config switch the exporter respects: no future conditioning, zero / common initial
+    // state, no residual output.
+    let variants: [(&str, fn(&mut Config)); 5] = [
+        ("no_future", |c: &mut Config| c.future_conditioning = false),
+        ("h0", |c: &mut Config| c.init_state = InitState::Zero),
+        ("hcommon", |c: &mut Config| c.init_state = InitState::Common),
+        ("no_residual", |c: &mut Config| c.residual = false),
+        ("no_future_h0", |c: &mut Config| {
+            c.future_conditioning = false;
+            c.init_state = InitState::Zero;
+        }),
+    ];
+    for (name, change) in variants {
+        let mut config = tiny();
+        change(&mut config);
+        let f = fixture(config);
+        let onnx = export(&f);
+        let has_start = embedded_start_graph(&onnx).is_some();
+        assert_eq!(has_start, name != "no_future_h0", "{name}: start graph present only when it computes something");
+        check_transition(name, &f, &onnx, 12);
+    }
+}
+
+#[test]
+fn exported_metadata_reaches_the_runtime() {
+    let f = fixture(tiny());
+    let model = MotionModel::from_bytes(&export(&f).to_bytes()).unwrap();
+    let m = model.metadata();
+    assert_eq!(m.model_kind, "rtn");
+    assert_eq!(m.skeleton.names, ["Hips", "Spine", "Leg", "Foot_L"]);
+    assert_eq!(m.skeleton.parents, [-1, 0, 0, 2]);
+    assert_eq!(m.fps, 30.0);
+    assert_eq!(m.normalisation["x"].mean, f.stats.x.mean);
+    assert_eq!(m.normalisation["offset"].std, f.stats.offset.std);
+    let config: Config = serde_json::from_str(&m.config_json).unwrap();
+    assert_eq!(config, f.config);
+    let names: Vec<&str> = model.inputs().iter().map(|i| i.name.as_str()).collect();
+    assert_eq!(names, ["x", "offset"]);
+    let start: Vec<&str> = model.start_inputs().iter().map(|i| i.name.as_str()).collect();
+    assert_eq!(start, ["target", "x0"]);
+}
+
+#[test]
+fn export_without_skeleton_parents_is_refused() {
+    let f = fixture(Config::tiny());
+    let err = export_rtn(&f.config, None, &f.stats, &f.varmap, &RtnExportOptions::default()).unwrap_err();
+    assert!(err.to_string().contains("no skeleton parents"), "{err}");
+}
+
+#[test]
+fn run_folder_and_cli_export() {
+    // A checkpoint folder exports to the same bytes as the in-memory model, and `zoo export`
+    // writes a file the runtime loads.
+    let f = fixture(tiny());
+    let dir = tempfile::tempdir().unwrap();
+    zoo_rtn::checkpoint::save(dir.path(), &f.config, &f.varmap, &f.stats).unwrap();
+    let options = RtnExportOptions::default();
+    let from_dir = export_rtn_dir(dir.path(), &options).unwrap();
+    let in_memory = export_rtn(&f.config, None, &f.stats, &f.varmap, &options).unwrap();
+    assert!(from_dir.to_bytes() == in_memory.to_bytes(), "run-folder export differs from the in-memory export");
+    let out = dir.path().join("rtn.onnx");
+    let status = std::process::Command::new(zoo_tests::zoo_bin())
+        .args(["export", "--onnx"])
+        .arg(dir.path())
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(status.status.success(), "zoo export failed: {}", String::from_utf8_lossy(&status.stderr));
+    let model = MotionModel::load(&out).unwrap();
+    assert_eq!(model.metadata().skeleton.names, ["joint0", "joint1", "joint2", "joint3"]);
+    let err = std::process::Command::new(zoo_tests::zoo_bin())
+        .args(["export", "--onnx", "/nonexistent/run", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(!err.status.success());
+    assert!(String::from_utf8_lossy(&err.stderr).contains("not a run folder"));
+}
