@@ -18,18 +18,10 @@ fn ground(t: Option<&Heightfield>, x: f64, z: f64) -> f64 {
     t.map_or(0.0, |t| t.height(x, z))
 }
 
-/// Percentile `q` in [0, 100] with linear interpolation between order statistics
-/// (numpy's default), of unsorted `values`.
+/// Percentile `q` in [0, 100] (numpy's linear interpolation) of unsorted `values`, without
+/// reordering them: [`crate::dataset::percentile`] on a copy.
 pub fn percentile(values: &[f64], q: f64) -> f64 {
-    if values.is_empty() {
-        return f64::NAN;
-    }
-    let mut v = values.to_vec();
-    v.sort_by(|a, b| a.total_cmp(b));
-    let pos = q / 100.0 * (v.len() - 1) as f64;
-    let i = pos.floor() as usize;
-    let f = pos - i as f64;
-    if i + 1 < v.len() { v[i] + (v[i + 1] - v[i]) * f } else { v[i] }
+    crate::dataset::percentile(&mut values.to_vec(), q)
 }
 
 /// Median of unsorted values.
