@@ -20,9 +20,9 @@ use zoo_export::rtn::{RtnExportOptions, export_rtn, export_rtn_dir};
 use zoo_motion::features::{self, FeatureStats, MeanStd};
 use zoo_rtn::model::{OffsetTensors, RtnInputs, RtnState};
 use zoo_rtn::{Config, InitState, Rtn};
-use zoo_runtime::{MotionModel, MotionState};
+use zoo_runtime::{MotionError, MotionModel, MotionState, TransitionModel};
 use zoo_tests::onnxruntime::OrtSession;
-use zoo_tests::toy_onnx::lcg;
+use zoo_tests::toy_onnx::{Cell, ToyModel, lcg};
 
 const BATCH: usize = 3;
 const PAST: usize = 4;
@@ -542,4 +542,92 @@ fn run_folder_and_cli_export() {
         .unwrap();
     assert!(!err.status.success());
     assert!(String::from_utf8_lossy(&err.stderr).contains("not a run folder"));
+}
+
+/// The engine-facing API (`zoo_runtime::TransitionRunner`) against candle's `Rtn::transition`:
+/// whole target-blended transitions in global positions, one character at a time and batched.
+#[test]
+fn runtime_transition_api_matches_candle() {
+    let f = fixture(tiny());
+    let model = TransitionModel::new(MotionModel::from_bytes(&export(&f).to_bytes()).unwrap()).unwrap();
+    assert_eq!(model.joints(), 4);
+    assert_eq!(model.target_blend(), f.config.target_blend);
+    let chars = characters(&f.stats);
+    let d = f.config.dim();
+    let mut runner = model.runner().unwrap();
+    let mut single = Vec::new();
+    for c in &chars {
+        let want = f.model.transition(&f.stats, &c.past, &c.target_pose, &c.next_pose, FRAMES, None).unwrap();
+        let mut state = model.new_transition();
+        let mut out = vec![0.0; want.len()];
+        runner.generate(&mut state, &c.past, &c.target_pose, &c.next_pose, &mut out).unwrap();
+        assert_eq!(state.frames_generated(), FRAMES + 1);
+        // Positions are in clip units (~100): 1e-4 relative.
+        let diff = max_abs_diff(&want, &out);
+        assert!(diff <= 1e-2, "runtime vs candle transition: max abs diff {diff} (clip units)");
+        let end = max_abs_diff(&out[FRAMES * d..], &c.target_pose);
+        assert!(end <= 1e-3, "the blended transition ends on the target (max abs diff {end})");
+        single.push(out);
+    }
+    // Batched: all characters in one graph run per frame give the same frames.
+    let refs: Vec<&Character> = chars.iter().collect();
+    let mut states: Vec<_> = chars.iter().map(|_| model.new_transition()).collect();
+    let mut out = vec![0.0; BATCH * (FRAMES + 1) * d];
+    runner
+        .generate_batch(
+            &mut states,
+            &cat(&refs, |c| &c.past),
+            &cat(&refs, |c| &c.target_pose),
+            &cat(&refs, |c| &c.next_pose),
+            &mut out,
+        )
+        .unwrap();
+    let flat: Vec<f32> = single.concat();
+    let diff = max_abs_diff(&flat, &out);
+    assert!(diff <= 1e-3, "batched vs one-by-one: max abs diff {diff}");
+    // Stepping frame by frame gives the unblended frames of candle's unroll.
+    let c = &chars[1];
+    let want = f.model.unroll(&f.stats, &c.past, &c.target_pose, &c.next_pose, FRAMES, None).unwrap();
+    let mut state = model.new_transition();
+    runner.start(&mut state, &c.past, &c.target_pose, &c.next_pose).unwrap();
+    let mut pose = vec![0.0; d];
+    for (t, frame) in want.chunks_exact(d).enumerate() {
+        runner.step(&mut state, &mut pose).unwrap();
+        let diff = max_abs_diff(frame, &pose);
+        assert!(diff <= 1e-2, "step {t}: runtime vs candle unroll max abs diff {diff}");
+    }
+}
+
+#[test]
+fn runtime_transition_api_rejects_bad_input() {
+    let f = fixture(tiny());
+    let model = TransitionModel::new(MotionModel::from_bytes(&export(&f).to_bytes()).unwrap()).unwrap();
+    let mut runner = model.runner().unwrap();
+    let c = character(&f.stats, 0);
+    let d = f.config.dim();
+    let mut state = model.new_transition();
+    let mut pose = vec![0.0; d];
+    // Stepping before starting.
+    let err = runner.step(&mut state, &mut pose).unwrap_err();
+    assert!(err.to_string().contains("start the transition"), "{err}");
+    // Wrong joint count (a 5-joint pose for a 4-joint model).
+    let err = runner.start(&mut state, &c.past, &[0.0; 15], &c.next_pose).unwrap_err();
+    assert!(matches!(err, MotionError::BufferLength { .. }), "{err}");
+    assert!(err.to_string().contains("target"), "{err}");
+    let err = runner.start(&mut state, &c.past[..c.past.len() - 1], &c.target_pose, &c.next_pose).unwrap_err();
+    assert!(err.to_string().contains("past"), "{err}");
+    // NaN in the context.
+    let mut past = c.past.clone();
+    past[7] = f32::NAN;
+    let err = runner.start(&mut state, &past, &c.target_pose, &c.next_pose).unwrap_err();
+    assert!(matches!(err, MotionError::NonFinite { index: 7, .. }), "{err}");
+    assert!(!state.is_started());
+    // Output buffer of the wrong size.
+    runner.start(&mut state, &c.past, &c.target_pose, &c.next_pose).unwrap();
+    let err = runner.step(&mut state, &mut pose[..d - 1]).unwrap_err();
+    assert!(matches!(err, MotionError::BufferLength { .. }), "{err}");
+    // A step graph that is not an RTN.
+    let toy = ToyModel::new(Cell::Lstm, 6, 8, 5).cell_graph();
+    let err = TransitionModel::new(MotionModel::from_bytes(&toy.to_bytes()).unwrap()).unwrap_err();
+    assert!(err.to_string().contains("not an RTN"), "{err}");
 }

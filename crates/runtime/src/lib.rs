@@ -23,12 +23,14 @@ pub mod error;
 pub mod metadata;
 pub mod model;
 pub mod pose;
+pub mod transition;
 
 pub use error::MotionError;
 pub use metadata::{
     FORMAT_VERSION, MotionFeatureSegment, MotionMeanStd, MotionModelMetadata, MotionSkeletonInfo, MotionStatePair,
 };
 pub use model::{MotionModel, MotionRunner, MotionState, MotionStateInfo, MotionTensorInfo};
+pub use transition::{TransitionModel, TransitionRunner, TransitionState};
 
 /// Re-exported so callers use the same glam version as the runtime.
 pub use glam;
@@ -38,4 +40,5 @@ pub mod prelude {
     pub use crate::error::MotionError;
     pub use crate::metadata::{MotionModelMetadata, MotionSkeletonInfo};
     pub use crate::model::{MotionModel, MotionRunner, MotionState};
+    pub use crate::transition::{TransitionModel, TransitionRunner, TransitionState};
 }
