@@ -631,3 +631,24 @@ fn runtime_transition_api_rejects_bad_input() {
     let err = TransitionModel::new(MotionModel::from_bytes(&toy.to_bytes()).unwrap()).unwrap_err();
     assert!(err.to_string().contains("not an RTN"), "{err}");
 }
+
+#[test]
+fn runtime_foot_lock_is_the_motion_core_post_process() {
+    let f = fixture(tiny());
+    let model = TransitionModel::new(MotionModel::from_bytes(&export(&f).to_bytes()).unwrap()).unwrap();
+    let lock = model.default_foot_lock().expect("the fixture skeleton has a Foot_L joint");
+    assert_eq!(lock.legs.len(), 1);
+    assert_eq!((lock.legs[0].hip, lock.legs[0].knee, lock.legs[0].ankle), (0, 2, 3));
+    let c = character(&f.stats, 2);
+    let d = f.config.dim();
+    let mut runner = model.runner().unwrap();
+    let mut state = model.new_transition();
+    let mut plain = vec![0.0; (FRAMES + 1) * d];
+    runner.generate(&mut state, &c.past, &c.target_pose, &c.next_pose, &mut plain).unwrap();
+    runner.set_foot_lock(Some(lock.clone()));
+    let mut locked = vec![0.0; (FRAMES + 1) * d];
+    runner.generate(&mut state, &c.past, &c.target_pose, &c.next_pose, &mut locked).unwrap();
+    let mut want = plain.clone();
+    lock.apply(&c.past[c.past.len() - d..], &mut want);
+    assert_eq!(locked, want);
+}

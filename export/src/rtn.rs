@@ -339,3 +339,67 @@ fn start_graph(config: &Config, w: &Weights) -> Result<Option<OnnxModel>, Export
     }
     Ok(Some(g.finish()?))
 }
+
+/// The config and candle weights of an exported RTN, read back from the file's initializers
+/// (step graph and the embedded start graph), keyed by their candle variable paths: the
+/// inverse of [`export_rtn`] for the weights, so candle can run exactly the exported model
+/// (`zoo bench runtime`). Initializers that are not model weights (constants the graphs
+/// need) are left out.
+pub fn import_rtn(bytes: &[u8]) -> Result<(Config, HashMap<String, candle_core::Tensor>), ExportError> {
+    use base64::Engine;
+    use prost::Message;
+    let decode = |b: &[u8], what: &str| {
+        tract_onnx::pb::ModelProto::decode(b).map_err(|e| model_err(format!("{what} is not an ONNX model: {e}")))
+    };
+    let step = decode(bytes, "the file")?;
+    let prop = |key: &str| step.metadata_props.iter().find(|p| p.key == key).map(|p| p.value.clone());
+    match prop("zoo.model_kind").as_deref() {
+        Some("rtn") => {}
+        other => {
+            return Err(model_err(format!(
+                "not an RTN export (zoo.model_kind = {other:?}); write one with `zoo export --onnx RUN_DIR`"
+            )));
+        }
+    }
+    let config: Config = serde_json::from_str(&prop("zoo.config").ok_or_else(|| model_err("no zoo.config"))?)
+        .map_err(|e| model_err(format!("zoo.config: {e}")))?;
+    let mut graphs = vec![step.graph.clone()];
+    if let Some(encoded) = prop("zoo.start_graph") {
+        let raw = base64::engine::general_purpose::STANDARD
+            .decode(encoded.trim())
+            .map_err(|e| model_err(format!("zoo.start_graph is not base64: {e}")))?;
+        graphs.push(decode(&raw, "zoo.start_graph")?.graph);
+    }
+    // The variable paths candle expects, with their shapes.
+    let varmap = VarMap::new();
+    zoo_rtn::Rtn::new(
+        &config,
+        candle_nn::VarBuilder::from_varmap(&varmap, candle_core::DType::F32, &candle_core::Device::Cpu),
+    )
+    .map_err(|e| model_err(format!("building the RTN of zoo.config: {e}")))?;
+    let wanted: HashMap<String, Vec<usize>> =
+        varmap.data().lock().expect("varmap lock").iter().map(|(n, v)| (n.clone(), v.dims().to_vec())).collect();
+    let mut weights = HashMap::new();
+    for init in graphs.iter().flatten().flat_map(|g| &g.initializer) {
+        let Some(dims) = wanted.get(&init.name) else { continue };
+        if weights.contains_key(&init.name) {
+            continue;
+        }
+        let data: Vec<f32> = if !init.raw_data.is_empty() {
+            init.raw_data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
+        } else {
+            init.float_data.clone()
+        };
+        let n: usize = dims.iter().product();
+        if data.len() != n {
+            return Err(model_err(format!("initializer `{}` has {} values, the RTN needs {n}", init.name, data.len())));
+        }
+        let t = candle_core::Tensor::from_vec(data, dims.as_slice(), &candle_core::Device::Cpu)
+            .map_err(|e| model_err(e.to_string()))?;
+        weights.insert(init.name.clone(), t);
+    }
+    if let Some(missing) = wanted.keys().find(|k| !weights.contains_key(*k)) {
+        return Err(model_err(format!("the file has no initializer `{missing}` of the RTN")));
+    }
+    Ok((config, weights))
+}

@@ -15,6 +15,8 @@ use zoo_rtn::Rtn;
 /// interpolation of the context and target rotations.
 pub struct RtnMethod {
     name: String,
+    /// Foot-lock post-process (`rtn+lock:DIR`).
+    pub foot_lock: bool,
     model: Rtn,
     stats: FeatureStats,
 }
@@ -24,7 +26,7 @@ impl RtnMethod {
     pub fn load(dir: &Path, name: String) -> anyhow::Result<Self> {
         let (model, stats) = zoo_rtn::checkpoint::load(dir, &candle_core::Device::Cpu)
             .with_context(|| format!("loading the RTN in {}", dir.display()))?;
-        Ok(RtnMethod { name, model, stats })
+        Ok(RtnMethod { name, foot_lock: false, model, stats })
     }
 }
 
@@ -67,31 +69,93 @@ impl TransitionMethod for RtnMethod {
                     .model
                     .transition(&self.stats, &past, &tgt[..d], &tgt[d..2 * d], t.frames, None)
                     .map_err(|e| e.to_string())?;
-                let interp = benchmark::interpolate(t);
-                let mut offsets = vec![DVec3::ZERO; j];
-                offsets[1..].copy_from_slice(t.offsets);
-                let mut raw = Vec::with_capacity(t.frames * j);
-                let mut rot = vec![DQuat::IDENTITY; t.frames * j];
-                let mut root = Vec::with_capacity(t.frames);
-                for f in 0..t.frames {
-                    let pos: Vec<DVec3> = y[f * d..(f + 1) * d]
-                        .chunks_exact(3)
-                        .map(|p| DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64))
-                        .collect();
-                    fit_rotations(
-                        &t.skeleton.parents,
-                        &offsets,
-                        &pos,
-                        &interp.rot[f * j..(f + 1) * j],
-                        &mut rot[f * j..(f + 1) * j],
-                    );
-                    root.push(pos[0]);
-                    raw.extend_from_slice(&pos);
-                }
-                Ok(Transition { root, rot, raw_positions: Some(raw) })
+                Ok(fit_transition(t, &past[past.len() - d..], &y, self.foot_lock))
             })
             .collect()
     }
+}
+
+/// The exported RTN run through the engine runtime (`onnx:FILE.onnx`, `zoo-runtime` on
+/// tract): the same inputs and post-processing as `rtn:DIR`.
+pub struct OnnxMethod {
+    name: String,
+    /// Foot-lock post-process (`onnx+lock:FILE`).
+    pub foot_lock: bool,
+    model: zoo_runtime::TransitionModel,
+}
+
+impl OnnxMethod {
+    /// Loads a file written by `zoo export --onnx`.
+    pub fn load(path: &Path, name: String) -> anyhow::Result<Self> {
+        let model = zoo_runtime::TransitionModel::load(path)
+            .with_context(|| format!("loading the exported RTN {}", path.display()))?;
+        Ok(OnnxMethod { name, foot_lock: false, model })
+    }
+}
+
+impl TransitionMethod for OnnxMethod {
+    fn name(&self) -> String {
+        self.name.clone()
+    }
+
+    fn generate(&self, tasks: &[TransitionTask<'_>]) -> Result<Vec<Transition>, String> {
+        let k = self.model.joints();
+        tasks
+            .par_iter()
+            .map_init(
+                || self.model.runner().map(|r| (r, self.model.new_transition())),
+                |runner, t| {
+                    let (runner, state) = runner.as_mut().map_err(|e| e.to_string())?;
+                    let j = t.skeleton.len();
+                    if j != k {
+                        return Err(format!("{}: the model was exported for {k} joints, the data has {j}", self.name));
+                    }
+                    let (mut past, mut tgt) = (Vec::new(), Vec::new());
+                    global_positions_f32(t, t.past_rot, &t.past_root[..N_PAST], &mut past);
+                    global_positions_f32(t, t.target_rot, t.target_root, &mut tgt);
+                    let d = 3 * j;
+                    let mut y = vec![0.0; (t.frames + 1) * d];
+                    runner
+                        .generate(state, &past, &tgt[..d], &tgt[d..2 * d], &mut y)
+                        .map_err(|e| format!("{}: {e}", self.name))?;
+                    Ok(fit_transition(t, &past[past.len() - d..], &y, self.foot_lock))
+                },
+            )
+            .collect()
+    }
+}
+
+/// A benchmark transition from generated global positions (`(frames + 1) * 3K`: the transition
+/// and the target frame): joint rotations fitted to them with twist from the interpolation of
+/// the context and target rotations; the network's positions are kept as the raw output.
+///
+/// With `foot_lock`, the fitted skeleton's own joint positions are foot-locked
+/// ([`zoo_motion::footlock`], after the last context frame `prev`) and fitted again: locking the
+/// skeleton's positions (exact bone lengths) rather than the network's makes the refit
+/// reproduce the locked feet exactly.
+fn fit_transition(t: &TransitionTask<'_>, prev: &[f32], y: &[f32], foot_lock: bool) -> Transition {
+    let j = t.skeleton.len();
+    let d = 3 * j;
+    let interp = benchmark::interpolate(t);
+    let reference = &interp.rot[..t.frames * j];
+    let mut offsets = vec![DVec3::ZERO; j];
+    offsets[1..].copy_from_slice(t.offsets);
+    let (mut rot, mut root) = fit_frames(t.skeleton, &offsets, &y[..t.frames * d], reference);
+    if foot_lock {
+        if let Some(mut lock) = zoo_motion::footlock::FootLock::from_skeleton(&t.skeleton.names, &t.skeleton.parents) {
+            if let Ok(v) = std::env::var("ZOO_FOOTLOCK_TUNE") {
+                let p: Vec<f32> = v.split(',').map(|x| x.parse().unwrap()).collect();
+                (lock.contact_height, lock.lock_speed, lock.swing_speed) = (p[0], p[1], p[2]);
+            }
+            let mut fitted = Vec::with_capacity(y.len());
+            global_positions_f32(t, &rot, &root, &mut fitted);
+            fitted.extend_from_slice(&y[t.frames * d..(t.frames + 1) * d]);
+            lock.apply(prev, &mut fitted);
+            (rot, root) = fit_frames(t.skeleton, &offsets, &fitted[..t.frames * d], reference);
+        }
+    }
+    let raw = y[..t.frames * d].chunks_exact(3).map(|p| DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64)).collect();
+    Transition { root, rot, raw_positions: Some(raw) }
 }
 
 /// Global joint positions (f32, `frames * joints * 3`) of clip frames `from..to`.

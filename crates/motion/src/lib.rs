@@ -16,6 +16,7 @@ pub mod facing;
 pub mod features;
 pub mod fit;
 pub mod fk;
+pub mod footlock;
 pub mod quat;
 pub mod skeleton;
 

@@ -4,7 +4,8 @@ use crate::error::{MotionError, chain};
 use crate::metadata::{MotionModelMetadata, keys};
 use prost::Message;
 use std::path::Path;
-use std::sync::Arc;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
 use tract_onnx::pb;
 use tract_onnx::prelude::*;
 
@@ -47,10 +48,33 @@ struct Inner {
     graph_input_widths: Vec<usize>,
     /// Plan with every batch dimension set to 1 (lowest latency for one character).
     single: Plan,
-    /// Plan with a symbolic batch dimension.
+    /// Plan with a symbolic batch dimension (checked at load; used when a concrete plan fails).
     batched: Plan,
+    /// The step graph before planning and its per-character input dims, to plan concrete batch
+    /// sizes: tract picks faster kernels for a known batch than for a symbolic one.
+    source: InferenceModel,
+    in_dims: Vec<Vec<usize>>,
+    /// Plans for concrete batch sizes, made on first use and shared by every runner.
+    concrete: Mutex<HashMap<usize, Plan>>,
     /// The transition-start graph, when the model has one.
     start: Option<StartGraph>,
+}
+
+impl Inner {
+    /// The plan for `batch` characters: concrete (made once per batch size), else symbolic.
+    fn plan_for(&self, batch: usize) -> Plan {
+        let mut cache = self.concrete.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some(p) = cache.get(&batch) {
+            return p.clone();
+        }
+        match plan(&self.source, Some(batch), &self.in_dims) {
+            Ok(p) => {
+                cache.insert(batch, p.clone());
+                p
+            }
+            Err(_) => self.batched.clone(),
+        }
+    }
 }
 
 /// The transition-start graph (`zoo.start_graph`): all inputs are caller buffers, every output
@@ -316,6 +340,9 @@ impl MotionModel {
                 graph_input_widths: in_dims.iter().map(|d| width(d)).collect(),
                 single,
                 batched,
+                source: model.clone(),
+                in_dims: in_dims.clone(),
+                concrete: Mutex::new(HashMap::new()),
                 start,
             }),
         })
@@ -574,7 +601,7 @@ impl MotionRunner {
             &mut self.single
         } else {
             if self.batched.as_ref().is_none_or(|s| s.batch != batch) {
-                self.batched = Some(Session::new(&inner.batched, batch, &inner.graph_input_widths)?);
+                self.batched = Some(Session::new(&inner.plan_for(batch), batch, &inner.graph_input_widths)?);
             }
             self.batched.as_mut().expect("batched session set above")
         };

@@ -16,6 +16,7 @@ use crate::metadata::MotionMeanStd;
 use crate::model::{MotionModel, MotionRunner, MotionState};
 use std::path::Path;
 use zoo_motion::features;
+use zoo_motion::footlock::FootLock;
 
 /// What a frame input of the step graph is fed from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -88,6 +89,8 @@ pub struct TransitionRunner {
     poses: Vec<f32>,
     /// Recurrent states swapped in from the characters for a batched run.
     motion: Vec<MotionState>,
+    /// Foot-lock post-process of `generate`, off unless set.
+    foot_lock: Option<FootLock>,
 }
 
 fn bad(key: &str, reason: String) -> MotionError {
@@ -209,6 +212,15 @@ impl TransitionModel {
         self.target_blend
     }
 
+    /// The foot-lock post-process for this model's skeleton (legs found by joint name, defaults
+    /// for centimetres), `None` when the skeleton has no `foot` joints. Enable it on a runner
+    /// with [`TransitionRunner::set_foot_lock`].
+    pub fn default_foot_lock(&self) -> Option<FootLock> {
+        let sk = &self.model.metadata().skeleton;
+        let parents: Vec<Option<usize>> = sk.parents.iter().map(|&p| usize::try_from(p).ok()).collect();
+        FootLock::from_skeleton(&sk.names, &parents)
+    }
+
     /// A fresh transition state for one character.
     pub fn new_transition(&self) -> TransitionState {
         let d = 3 * self.joints;
@@ -235,6 +247,7 @@ impl TransitionModel {
             next: Vec::new(),
             poses: Vec::new(),
             motion: Vec::new(),
+            foot_lock: None,
         })
     }
 }
@@ -243,6 +256,12 @@ impl TransitionRunner {
     /// The model this runner steps.
     pub fn model(&self) -> &TransitionModel {
         &self.model
+    }
+
+    /// Sets the foot-lock post-process that [`TransitionRunner::generate`] applies after the
+    /// target blend (`None`: off, the default). See `zoo_motion::footlock`.
+    pub fn set_foot_lock(&mut self, lock: Option<FootLock>) {
+        self.foot_lock = lock;
     }
 
     /// Starts a transition: `past` holds the context frames (global positions, `frames * 3K`,
@@ -410,7 +429,8 @@ impl TransitionRunner {
 
     /// A whole transition of `frames` new frames into `out` (`(frames + 1) * 3K` values: the
     /// transition, then the target frame), target-blended (RTN eq. 15-16) so that the last
-    /// frame equals `target` and the motion reaches it without a pop.
+    /// frame equals `target` and the motion reaches it without a pop, then foot-locked when
+    /// [`TransitionRunner::set_foot_lock`] enabled it.
     pub fn generate(
         &mut self,
         state: &mut TransitionState,
@@ -463,8 +483,13 @@ impl TransitionRunner {
         }
         self.poses = poses;
         result?;
+        let past_per = past.len() / n;
         for c in 0..n {
-            features::target_blend(&mut out[c * per..(c + 1) * per], &target[c * d..(c + 1) * d], self.model.target_blend);
+            let row = &mut out[c * per..(c + 1) * per];
+            features::target_blend(row, &target[c * d..(c + 1) * d], self.model.target_blend);
+            if let Some(lock) = &self.foot_lock {
+                lock.apply(&past[(c + 1) * past_per - d..(c + 1) * past_per], row);
+            }
         }
         Ok(())
     }

@@ -31,6 +31,8 @@ impl Default for ParamsAmsGrad {
 
 #[derive(Debug)]
 struct Slot {
+    /// Variable name (for saving the state); empty when built through `Optimizer::new`.
+    name: String,
     var: Var,
     m: Var,
     v: Var,
@@ -45,10 +47,63 @@ pub struct AmsGrad {
     params: ParamsAmsGrad,
 }
 
+/// Name of the step counter in a saved optimiser state.
+const STEP_KEY: &str = "__amsgrad_step";
+
 impl AmsGrad {
     /// Number of steps taken.
     pub fn steps(&self) -> u64 {
         self.t
+    }
+
+    /// An optimiser over named variables, whose state can be saved and loaded by name.
+    pub fn new_named(vars: Vec<(String, Var)>, params: ParamsAmsGrad) -> Result<Self> {
+        let slots = vars
+            .into_iter()
+            .filter(|(_, v)| v.dtype().is_float())
+            .map(|(name, var)| {
+                let z = || Var::zeros(var.shape(), var.dtype(), var.device());
+                Ok(Slot { name, m: z()?, v: z()?, v_max: z()?, var })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(AmsGrad { slots, t: 0, params })
+    }
+
+    /// The state (`NAME.m`, `NAME.v`, `NAME.v_max` and the step count) as named tensors, for
+    /// a safetensors file; needs names ([`AmsGrad::new_named`]).
+    pub fn state(&self) -> Result<std::collections::HashMap<String, candle_core::Tensor>> {
+        let mut out = std::collections::HashMap::new();
+        for s in &self.slots {
+            if s.name.is_empty() {
+                candle_core::bail!("this AMSGrad was built without variable names: its state cannot be saved");
+            }
+            out.insert(format!("{}.m", s.name), s.m.as_tensor().clone());
+            out.insert(format!("{}.v", s.name), s.v.as_tensor().clone());
+            out.insert(format!("{}.v_max", s.name), s.v_max.as_tensor().clone());
+        }
+        let device = self.slots.first().map_or(candle_core::Device::Cpu, |s| s.var.device().clone());
+        out.insert(STEP_KEY.into(), candle_core::Tensor::new(&[self.t as f64], &device)?);
+        Ok(out)
+    }
+
+    /// Restores a state written from [`AmsGrad::state`]: every variable must be present with
+    /// its shape.
+    pub fn set_state(&mut self, state: &std::collections::HashMap<String, candle_core::Tensor>) -> Result<()> {
+        for s in &self.slots {
+            for (suffix, var) in [("m", &s.m), ("v", &s.v), ("v_max", &s.v_max)] {
+                let key = format!("{}.{suffix}", s.name);
+                let Some(t) = state.get(&key) else {
+                    candle_core::bail!("the optimiser state has no `{key}`: it was saved for another model")
+                };
+                if t.dims() != var.dims() {
+                    candle_core::bail!("optimiser state `{key}` has shape {:?}, the variable {:?}", t.dims(), var.dims())
+                }
+                var.set(&t.to_dtype(var.dtype())?.to_device(var.device())?)?;
+            }
+        }
+        let Some(step) = state.get(STEP_KEY) else { candle_core::bail!("the optimiser state has no step count") };
+        self.t = step.to_vec1::<f64>()?.first().copied().unwrap_or(0.0) as u64;
+        Ok(())
     }
 }
 
@@ -61,7 +116,7 @@ impl Optimizer for AmsGrad {
             .filter(|v| v.dtype().is_float())
             .map(|var| {
                 let z = || Var::zeros(var.shape(), var.dtype(), var.device());
-                Ok(Slot { m: z()?, v: z()?, v_max: z()?, var })
+                Ok(Slot { name: String::new(), m: z()?, v: z()?, v_max: z()?, var })
             })
             .collect::<Result<Vec<_>>>()?;
         Ok(AmsGrad { slots, t: 0, params })

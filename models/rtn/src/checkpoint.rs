@@ -68,6 +68,23 @@ pub fn save(dir: &Path, config: &Config, varmap: &VarMap, stats: &FeatureStats) 
     Ok(())
 }
 
+/// Optimiser state of a training checkpoint (`RtnTrainer::save_with_optimizer`).
+pub const OPTIMIZER_FILE: &str = "optimizer.safetensors";
+
+/// Writes named tensors to `dir/name` atomically (a temporary file renamed into place).
+pub fn save_tensors(
+    dir: &Path,
+    name: &str,
+    tensors: &std::collections::HashMap<String, candle_core::Tensor>,
+) -> RtnResult<()> {
+    std::fs::create_dir_all(dir).map_err(io(dir))?;
+    let tmp = tmp_path(dir, name);
+    candle_core::safetensors::save(tensors, &tmp)?;
+    let dst = dir.join(name);
+    std::fs::rename(&tmp, &dst).map_err(io(&dst))?;
+    Ok(())
+}
+
 /// Reads the configuration and statistics of a checkpoint folder.
 pub fn read_meta(dir: &Path) -> RtnResult<(Config, FeatureStats)> {
     Ok((read_json(&dir.join(CONFIG_FILE))?, read_json(&dir.join(STATS_FILE))?))

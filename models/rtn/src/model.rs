@@ -69,6 +69,14 @@ pub struct RtnSequence {
     gate_bias: Tensor,
 }
 
+impl RtnSequence {
+    /// `C_F h_F + b`, the per-sequence gate bias `(batch, 4H)` (`(1, 4H)` without future
+    /// conditioning): the `gate_bias` state of the exported step graph.
+    pub fn gate_bias(&self) -> &Tensor {
+        &self.gate_bias
+    }
+}
+
 /// Inputs of one step, normalised: the sequence constants from [`Rtn::begin`], `x` `(batch, D)`,
 /// the global offset `o_t` `(batch, D)` (ignored without future conditioning) and the terrain
 /// patch `(batch, side^2)` when the model is terrain-aware.

@@ -124,7 +124,10 @@ impl RtnTrainer {
         let model = Rtn::new(config, vb)?;
         let t = &config.train;
         let params = ParamsAmsGrad { lr: t.learning_rate, beta1: t.beta1, beta2: t.beta2, eps: t.eps };
-        let opt = AmsGrad::new(varmap.all_vars(), params)?;
+        let mut named: Vec<(String, candle_core::Var)> =
+            varmap.data().lock().expect("varmap lock").iter().map(|(n, v)| (n.clone(), v.clone())).collect();
+        named.sort_by(|a, b| a.0.cmp(&b.0));
+        let opt = AmsGrad::new_named(named, params)?;
         let offsets = OffsetTensors::new(&stats, device)?;
         Ok(RtnTrainer {
             config: config.clone(),
@@ -246,13 +249,39 @@ impl RtnTrainer {
         crate::checkpoint::save(dir, &self.config, &self.varmap, &self.stats)
     }
 
-    /// Resumes from a checkpoint folder (fresh optimiser state).
+    /// The optimiser (its state: [`AmsGrad::state`]).
+    pub fn optimizer(&self) -> &AmsGrad {
+        &self.opt
+    }
+
+    /// [`RtnTrainer::save`] plus the optimiser state (`optimizer.safetensors`, written
+    /// atomically), so that [`RtnTrainer::load`] continues the run exactly.
+    pub fn save_with_optimizer(&self, dir: &std::path::Path) -> RtnResult<()> {
+        self.save(dir)?;
+        crate::checkpoint::save_tensors(dir, crate::checkpoint::OPTIMIZER_FILE, &self.opt.state()?)
+    }
+
+    /// Resumes from a checkpoint folder: weights, statistics and, when the folder has one, the
+    /// optimiser state (else a fresh one; returned `false`).
     pub fn load(dir: &std::path::Path, device: &Device) -> RtnResult<Self> {
+        Ok(Self::load_with_optimizer(dir, device)?.0)
+    }
+
+    /// [`RtnTrainer::load`], also telling whether the optimiser state was restored.
+    pub fn load_with_optimizer(dir: &std::path::Path, device: &Device) -> RtnResult<(Self, bool)> {
         let (config, stats) = crate::checkpoint::read_meta(dir)?;
         let varmap = VarMap::new();
-        let t = Self::with_varmap(&config, stats, varmap, device)?;
+        let mut t = Self::with_varmap(&config, stats, varmap, device)?;
         crate::checkpoint::load_weights(dir, &t.varmap)?;
-        Ok(t)
+        let path = dir.join(crate::checkpoint::OPTIMIZER_FILE);
+        if !path.is_file() {
+            return Ok((t, false));
+        }
+        let state = candle_core::safetensors::load(&path, device)
+            .map_err(|e| RtnError::Config(format!("{}: {e}", path.display())))?;
+        t.opt.set_state(&state).map_err(|e| RtnError::Config(format!("{}: {e}", path.display())))?;
+        t.step = t.opt.steps();
+        Ok((t, true))
     }
 }
 

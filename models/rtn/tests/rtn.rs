@@ -335,6 +335,42 @@ fn save_load_round_trip_gives_identical_outputs() {
 }
 
 #[test]
+fn resume_restores_the_optimiser_state() {
+    let c = tiny();
+    let ws = windows(&c, 8);
+    let stats = stats_for(&c, &ws);
+    let mw: Vec<MotionWindow> = ws.iter().map(|w| MotionWindow::new(w)).collect();
+    let mut trainer = RtnTrainer::new(&c, stats, &Device::Cpu).unwrap();
+    for _ in 0..3 {
+        trainer.train_step(&mw).unwrap();
+    }
+    let dir = tempfile::tempdir().unwrap();
+    trainer.save_with_optimizer(dir.path()).unwrap();
+    let (resumed, restored) = RtnTrainer::load_with_optimizer(dir.path(), &Device::Cpu).unwrap();
+    assert!(restored);
+    assert_eq!(resumed.steps(), 3);
+    let (a, b) = (trainer.optimizer().state().unwrap(), resumed.optimizer().state().unwrap());
+    assert_eq!(a.len(), b.len());
+    for (k, t) in &a {
+        let (x, y) = (t.flatten_all().unwrap().to_vec1::<f64>().ok(), b[k].flatten_all().unwrap().to_vec1::<f64>().ok());
+        let (x, y) = match (x, y) {
+            (Some(x), Some(y)) => (x, y),
+            _ => (
+                t.flatten_all().unwrap().to_vec1::<f32>().unwrap().iter().map(|&v| v as f64).collect(),
+                b[k].flatten_all().unwrap().to_vec1::<f32>().unwrap().iter().map(|&v| v as f64).collect(),
+            ),
+        };
+        assert_eq!(x, y, "{k}");
+        assert!(k.starts_with("__") || x.iter().any(|&v| v != 0.0), "{k} is all zeros after 3 steps");
+    }
+    // A folder without optimiser state still loads, with a fresh optimiser.
+    std::fs::remove_file(dir.path().join(checkpoint::OPTIMIZER_FILE)).unwrap();
+    let (fresh, restored) = RtnTrainer::load_with_optimizer(dir.path(), &Device::Cpu).unwrap();
+    assert!(!restored);
+    assert_eq!(fresh.steps(), 0);
+}
+
+#[test]
 fn infinite_loss_is_refused_and_parameters_are_kept() {
     let c = tiny();
     let ws = windows(&c, 4);

@@ -11,11 +11,15 @@ use zoo_data::dataset;
 
 /// Arguments of `zoo bench`.
 #[derive(Args)]
+#[command(args_conflicts_with_subcommands = true)]
 pub struct BenchArgs {
+    /// Other benchmarks.
+    #[command(subcommand)]
+    pub command: Option<BenchCommand>,
     /// Dataset folder: files not matching `--valid-glob` are the training split (statistics,
     /// bone offsets, planted foot heights); matching files are the test split.
     #[arg(long)]
-    pub data: PathBuf,
+    pub data: Option<PathBuf>,
     /// Glob on file names selecting the validation/test split, e.g. `'*_youthful_*'`
     /// (LaFAN1: `'*subject5*'`).
     #[arg(long)]
@@ -24,7 +28,9 @@ pub struct BenchArgs {
     /// validation split of `--data`.
     #[arg(long)]
     pub test_data: Option<PathBuf>,
-    /// Comma-separated methods: `zerovel`, `interp`, `rtn:RUN_DIR` (a `zoo train rtn` run folder).
+    /// Comma-separated methods: `zerovel`, `interp`, `rtn:RUN_DIR` (a `zoo train rtn` run folder),
+    /// `onnx:FILE.onnx` (a `zoo export --onnx` file run by the engine runtime on tract);
+    /// `rtn+lock:RUN_DIR` and `onnx+lock:FILE.onnx` add the foot-lock post-process.
     #[arg(long, default_value = "zerovel,interp", value_delimiter = ',')]
     pub methods: Vec<String>,
     /// Comma-separated transition lengths in frames.
@@ -50,28 +56,49 @@ pub struct BenchArgs {
     pub save_count: usize,
 }
 
+/// Benchmarks other than the in-betweening table.
+#[derive(clap::Subcommand)]
+pub enum BenchCommand {
+    /// Per-frame step latency (batch 1) and throughput (batch 64) of an exported model through
+    /// candle, tract and onnxruntime, side by side.
+    Runtime(crate::cmd::bench_runtime::RuntimeArgs),
+}
+
 fn method(name: &str) -> anyhow::Result<Box<dyn TransitionMethod>> {
     Ok(match name {
         "zerovel" => Box::new(ZeroVelocity),
         "interp" => Box::new(Interpolation),
         other => match other.split_once(':') {
-            Some(("rtn", dir)) => {
-                Box::new(crate::methods::RtnMethod::load(std::path::Path::new(dir), other.to_string())?)
+            Some((kind @ ("rtn" | "rtn+lock"), dir)) => {
+                let mut m = crate::methods::RtnMethod::load(std::path::Path::new(dir), other.to_string())?;
+                m.foot_lock = kind == "rtn+lock";
+                Box::new(m)
             }
-            _ => bail!("unknown method `{other}`: expected zerovel, interp or rtn:RUN_DIR"),
+            Some((kind @ ("onnx" | "onnx+lock"), file)) => {
+                let mut m = crate::methods::OnnxMethod::load(std::path::Path::new(file), other.to_string())?;
+                m.foot_lock = kind == "onnx+lock";
+                Box::new(m)
+            }
+            _ => bail!("unknown method `{other}`: expected zerovel, interp, rtn:RUN_DIR, onnx:FILE.onnx, rtn+lock:RUN_DIR or onnx+lock:FILE.onnx"),
         },
     })
 }
 
 /// Runs the benchmark.
 pub fn run(a: BenchArgs) -> anyhow::Result<()> {
+    if let Some(BenchCommand::Runtime(r)) = a.command {
+        return crate::cmd::bench_runtime::run(r);
+    }
+    let Some(data) = a.data.clone() else {
+        bail!("pass --data DATASET (and --valid-glob GLOB) for the in-betweening benchmark, or use `zoo bench runtime`")
+    };
     let start = Instant::now();
     let methods = a.methods.iter().map(|m| method(m.trim())).collect::<anyhow::Result<Vec<_>>>()?;
     let pb = ProgressBar::new_spinner();
     pb.set_style(ProgressStyle::with_template("{spinner} {msg} [{elapsed}]")?);
     pb.enable_steady_tick(Duration::from_millis(120));
-    pb.set_message(format!("loading {}", a.data.display()));
-    let clips = dataset::load(&a.data).with_context(|| format!("loading {}", a.data.display()))?;
+    pb.set_message(format!("loading {}", data.display()));
+    let clips = dataset::load(&data).with_context(|| format!("loading {}", data.display()))?;
     let (train, test) = match (&a.test_data, &a.valid_glob) {
         (Some(test_path), glob) => {
             let train = match glob {

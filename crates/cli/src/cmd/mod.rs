@@ -1,6 +1,7 @@
 //! One module per subcommand.
 
 pub mod bench;
+pub mod bench_runtime;
 pub mod data;
 pub mod decompress;
 pub mod export;

@@ -191,8 +191,15 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
         Some(dir) => {
             let last = dir.join(LAST_DIR);
             let from = if last.join(zoo_rtn::checkpoint::CONFIG_FILE).is_file() { last } else { dir.clone() };
-            let trainer =
-                RtnTrainer::load(&from, &device).with_context(|| format!("resuming from {}", from.display()))?;
+            let (trainer, restored) = RtnTrainer::load_with_optimizer(&from, &device)
+                .with_context(|| format!("resuming from {}", from.display()))?;
+            if !restored {
+                println!(
+                    "note: {} has no optimiser state (written by an older zoo): AMSGrad restarts from zero moments, \
+                     which perturbs the first epochs",
+                    from.display()
+                );
+            }
             if trainer.config().joints != tw.joints() {
                 bail!(
                     "{} holds a model for {} joints but the data has {}: resume with the data it was trained on",
@@ -288,7 +295,7 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
             state.best_valid = Some(vloss);
             state.best_epoch = state.epoch;
         }
-        trainer.save(&out.join(LAST_DIR))?;
+        trainer.save_with_optimizer(&out.join(LAST_DIR))?;
         write_json_atomic(&out.join(STATE_FILE), &state)?;
         plot::loss_curve(&out.join("loss_curve.png"), &state.train_loss, &state.valid_loss)?;
         println!(

@@ -1,0 +1,410 @@
+//! `zoo bench runtime --model FILE.onnx`: per-frame step latency (batch 1) and throughput
+//! (batch 64) of one exported RTN through candle, tract (`zoo-runtime`) and onnxruntime, side by
+//! side in one run.
+//!
+//! All three run the same step (`x`, `offset`, LSTM state in; `x_next`, state out) with the
+//! same weights: candle's are read back from the file's initializers. Each backend runs on one
+//! thread (candle inside a one-thread rayon pool, onnxruntime with one intra-op thread; tract is
+//! single-threaded), and the backends take turns round by round so that machine noise hits
+//! them alike. The figure per backend is the median over rounds of the mean step time.
+
+use anyhow::{Context, anyhow, bail};
+use candle_core::{Device, Tensor};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::Serialize;
+use std::borrow::Cow;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use zoo_rtn::{Rtn, RtnInputs, RtnState};
+use zoo_runtime::{MotionModel, MotionState};
+
+/// Arguments of `zoo bench runtime`.
+#[derive(Args)]
+pub struct RuntimeArgs {
+    /// A file written by `zoo export --onnx` (an RTN).
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Batch sizes to measure (characters per step).
+    #[arg(long, default_value = "1,64", value_delimiter = ',')]
+    pub batch: Vec<usize>,
+    /// Rounds per batch size (each backend runs once per round).
+    #[arg(long, default_value_t = 11)]
+    pub rounds: usize,
+    /// Character-steps per backend per round (steps = this / batch, at least 5).
+    #[arg(long, default_value_t = 1280)]
+    pub work: usize,
+    /// onnxruntime library (default: `ORT_DYLIB_PATH`, else `.onnxruntime/libonnxruntime.so*`
+    /// in the current folder or one of its parents).
+    #[arg(long)]
+    pub onnxruntime: Option<PathBuf>,
+    /// Write the figures as JSON to this file.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+/// Figures of one backend at one batch size.
+#[derive(Clone, Debug, Serialize)]
+pub struct BackendFigure {
+    /// `candle`, `tract` or `onnxruntime`.
+    pub backend: String,
+    /// Batch size.
+    pub batch: usize,
+    /// Median over rounds of the mean time of one step of the whole batch, milliseconds.
+    pub step_ms: f64,
+    /// Character-frames per second at that median.
+    pub frames_per_second: f64,
+    /// Every round's mean step time, milliseconds.
+    pub rounds_ms: Vec<f64>,
+}
+
+/// A backend under test: one step of the whole batch per call.
+trait StepBackend {
+    fn name(&self) -> &'static str;
+    fn step(&mut self) -> anyhow::Result<()>;
+    /// The frame output of the last step (for the agreement check).
+    fn output(&self) -> &[f32];
+}
+
+/// Deterministic inputs in [-1, 1] (normalised units).
+fn inputs(n: usize, seed: u64) -> Vec<f32> {
+    let mut s = seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
+    (0..n)
+        .map(|_| {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 40) as f32 / (1u64 << 23) as f32 - 1.0
+        })
+        .collect()
+}
+
+/// The frame inputs of the step graph, by name.
+struct Frame {
+    names: Vec<String>,
+    data: Vec<Vec<f32>>,
+}
+
+struct CandleBackend {
+    model: Rtn,
+    sequence: zoo_rtn::RtnSequence,
+    x: Tensor,
+    offset: Option<Tensor>,
+    state: RtnState,
+    out: Vec<f32>,
+    pool: rayon::ThreadPool,
+}
+
+impl StepBackend for CandleBackend {
+    fn name(&self) -> &'static str {
+        "candle"
+    }
+
+    fn step(&mut self) -> anyhow::Result<()> {
+        let (model, sequence, x, offset, state) = (&self.model, &self.sequence, &self.x, &self.offset, &self.state);
+        let (next, state) = self.pool.install(|| {
+            let inputs = RtnInputs { sequence, x, offset: offset.as_ref(), terrain: None };
+            model.step(&inputs, state)
+        })?;
+        self.out = next.flatten_all()?.to_vec1::<f32>()?;
+        self.state = state;
+        Ok(())
+    }
+
+    fn output(&self) -> &[f32] {
+        &self.out
+    }
+}
+
+struct TractBackend {
+    runner: zoo_runtime::MotionRunner,
+    states: Vec<MotionState>,
+    frame: Frame,
+    out: Vec<f32>,
+}
+
+impl StepBackend for TractBackend {
+    fn name(&self) -> &'static str {
+        "tract"
+    }
+
+    fn step(&mut self) -> anyhow::Result<()> {
+        let inputs: Vec<&[f32]> = self.frame.data.iter().map(Vec::as_slice).collect();
+        self.runner.step_batch(&mut self.states, &inputs, &mut [&mut self.out])?;
+        Ok(())
+    }
+
+    fn output(&self) -> &[f32] {
+        &self.out
+    }
+}
+
+struct OrtBackend {
+    session: ort::session::Session,
+    batch: usize,
+    frame: Frame,
+    /// State slots: (graph input, graph output, values).
+    states: Vec<(String, String, Vec<f32>)>,
+    out_name: String,
+    out: Vec<f32>,
+}
+
+impl StepBackend for OrtBackend {
+    fn name(&self) -> &'static str {
+        "onnxruntime"
+    }
+
+    fn step(&mut self) -> anyhow::Result<()> {
+        let b = self.batch;
+        let tensor = |data: &[f32]| {
+            ort::value::Tensor::from_array((vec![b as i64, (data.len() / b) as i64], data.to_vec()))
+                .map_err(|e| anyhow!("onnxruntime tensor: {e}"))
+        };
+        let mut values: Vec<(Cow<'_, str>, ort::session::SessionInputValue<'_>)> = Vec::new();
+        for (name, data) in self.frame.names.iter().zip(&self.frame.data) {
+            values.push((Cow::Owned(name.clone()), tensor(data)?.into()));
+        }
+        for (input, _, data) in &self.states {
+            values.push((Cow::Owned(input.clone()), tensor(data)?.into()));
+        }
+        let out = self.session.run(values).map_err(|e| anyhow!("onnxruntime run: {e}"))?;
+        let extract = |name: &str| -> anyhow::Result<Vec<f32>> {
+            Ok(out[name].try_extract_tensor::<f32>().map_err(|e| anyhow!("onnxruntime output `{name}`: {e}"))?.1.to_vec())
+        };
+        let next = extract(&self.out_name)?;
+        let mut new_states = Vec::with_capacity(self.states.len());
+        for (_, output, _) in &self.states {
+            new_states.push(extract(output)?);
+        }
+        drop(out);
+        self.out = next;
+        for (slot, v) in self.states.iter_mut().zip(new_states) {
+            slot.2 = v;
+        }
+        Ok(())
+    }
+
+    fn output(&self) -> &[f32] {
+        &self.out
+    }
+}
+
+/// The onnxruntime library to load.
+fn onnxruntime_library(explicit: &Option<PathBuf>) -> anyhow::Result<PathBuf> {
+    let help = "run `bash scripts/onnxruntime.sh` in the zoo workspace (it fetches the onnxruntime wheel from PyPI \
+                into .onnxruntime/), or pass --onnxruntime /path/to/libonnxruntime.so, or set ORT_DYLIB_PATH";
+    if let Some(p) = explicit.clone().or_else(|| std::env::var_os("ORT_DYLIB_PATH").map(PathBuf::from)) {
+        if p.is_file() {
+            return Ok(p);
+        }
+        bail!("onnxruntime library {} does not exist: {help}", p.display());
+    }
+    let cwd = std::env::current_dir()?;
+    for dir in cwd.ancestors() {
+        let folder = dir.join(".onnxruntime");
+        let Ok(entries) = std::fs::read_dir(&folder) else { continue };
+        let mut libs: Vec<PathBuf> = entries
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.file_name().is_some_and(|n| n.to_string_lossy().starts_with("libonnxruntime.so")))
+            .collect();
+        libs.sort();
+        if let Some(lib) = libs.pop() {
+            return Ok(lib);
+        }
+    }
+    bail!("no onnxruntime library found (looked in .onnxruntime/ of {} and its parents): {help}", cwd.display())
+}
+
+fn frame_inputs(model: &MotionModel, batch: usize) -> Frame {
+    let names: Vec<String> = model.inputs().iter().map(|i| i.name.clone()).collect();
+    let data = model.inputs().iter().enumerate().map(|(k, i)| inputs(batch * i.width, 7 + k as u64)).collect();
+    Frame { names, data }
+}
+
+fn make_backends(
+    bytes: &[u8],
+    model: &MotionModel,
+    candle: &Rtn,
+    env: &ort::environment::Environment,
+    batch: usize,
+) -> anyhow::Result<Vec<Box<dyn StepBackend>>> {
+    let frame = frame_inputs(model, batch);
+    let d = model.outputs()[0].width;
+    // Initial recurrent state: small deterministic values, the same for every backend.
+    let states: Vec<Vec<f32>> =
+        model.states().iter().enumerate().map(|(k, s)| inputs(batch * s.width, 101 + k as u64)).collect();
+    let mut states: Vec<Vec<f32>> = states.into_iter().map(|v| v.into_iter().map(|x| 0.5 * x).collect()).collect();
+
+    // candle
+    let dev = Device::Cpu;
+    let hu = candle.config().lstm;
+    let get = |name: &str| -> anyhow::Result<Tensor> {
+        let k = frame.names.iter().position(|n| n == name).ok_or_else(|| anyhow!("the step graph has no `{name}`"))?;
+        Ok(Tensor::from_slice(&frame.data[k], (batch, frame.data[k].len() / batch), &dev)?)
+    };
+    let x = get("x")?;
+    let offset = if candle.config().future_conditioning { Some(get("offset")?) } else { None };
+    let target = Tensor::from_vec(inputs(batch * 2 * d, 55), (batch, 2 * d), &dev)?;
+    let sequence = candle.begin(&target)?;
+    // The exported step graph carries the per-sequence gate bias as a state slot.
+    if let Some(k) = model.states().iter().position(|s| s.input == "gate_bias") {
+        states[k] = sequence.gate_bias().flatten_all()?.to_vec1::<f32>()?;
+    }
+    let slot = |name: &str| -> anyhow::Result<Tensor> {
+        let k = model
+            .states()
+            .iter()
+            .position(|s| s.input == name)
+            .ok_or_else(|| anyhow!("the step graph has no state `{name}`"))?;
+        Ok(Tensor::from_slice(&states[k], (batch, hu), &dev)?)
+    };
+    let state = RtnState { h: slot("h")?, c: slot("c")? };
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+    let candle = CandleBackend { model: candle.clone(), sequence, x, offset, state, out: Vec::new(), pool };
+
+    // tract
+    let mut tract_states: Vec<MotionState> = (0..batch).map(|_| model.new_state()).collect();
+    for (c, s) in tract_states.iter_mut().enumerate() {
+        for (k, info) in model.states().iter().enumerate() {
+            s.slot_mut(k).copy_from_slice(&states[k][c * info.width..(c + 1) * info.width]);
+        }
+    }
+    let tract = TractBackend {
+        runner: model.runner()?,
+        states: tract_states,
+        frame: Frame { names: frame.names.clone(), data: frame.data.clone() },
+        out: vec![0.0; batch * d],
+    };
+
+    // onnxruntime
+    let opt = |e: ort::Error<_>| anyhow!("onnxruntime session options: {e}");
+    let session = ort::session::Session::builder(env)
+        .map_err(|e| anyhow!("onnxruntime session: {e}"))?
+        .with_intra_threads(1)
+        .map_err(opt)?
+        .with_inter_threads(1)
+        .map_err(|e| anyhow!("onnxruntime session options: {e}"))?
+        .commit_from_memory(bytes)
+        .map_err(|e| anyhow!("onnxruntime cannot load the model: {e}"))?;
+    let ort = OrtBackend {
+        session,
+        batch,
+        frame,
+        states: model
+            .states()
+            .iter()
+            .zip(states)
+            .map(|(s, v)| (s.input.clone(), s.output.clone(), v))
+            .collect(),
+        out_name: model.outputs()[0].name.clone(),
+        out: Vec::new(),
+    };
+    Ok(vec![Box::new(candle), Box::new(tract), Box::new(ort)])
+}
+
+fn median(v: &[f64]) -> f64 {
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    let n = s.len();
+    if n % 2 == 1 { s[n / 2] } else { 0.5 * (s[n / 2 - 1] + s[n / 2]) }
+}
+
+/// Runs `zoo bench runtime`.
+pub fn run(a: RuntimeArgs) -> anyhow::Result<()> {
+    let bytes = std::fs::read(&a.model).with_context(|| format!("reading {}", a.model.display()))?;
+    let model = MotionModel::from_bytes(&bytes).with_context(|| format!("loading {}", a.model.display()))?;
+    let (config, weights) = zoo_export::rtn::import_rtn(&bytes)
+        .with_context(|| format!("reading the RTN weights of {} for candle", a.model.display()))?;
+    if config.terrain {
+        bail!("{}: terrain-aware RTNs are not supported by `zoo bench runtime` yet", a.model.display());
+    }
+    let candle = Rtn::new(&config, candle_nn::VarBuilder::from_tensors(weights, candle_core::DType::F32, &Device::Cpu))?;
+    let lib = onnxruntime_library(&a.onnxruntime)?;
+    let env = ort::init_from(&lib)
+        .map_err(|e| anyhow!("cannot load onnxruntime from {}: {e}", lib.display()))?
+        .build()
+        .map_err(|e| anyhow!("onnxruntime environment: {e}"))?;
+    if a.rounds == 0 || a.batch.is_empty() || a.batch.contains(&0) {
+        bail!("--rounds and every --batch must be at least 1");
+    }
+    println!(
+        "{}: RTN, {} parameters, LSTM {} units; onnxruntime {}; one thread per backend",
+        a.model.display(),
+        candle.parameter_count(),
+        config.lstm,
+        lib.display()
+    );
+    let mut figures = Vec::new();
+    for &batch in &a.batch {
+        let mut backends = make_backends(&bytes, &model, &candle, &env, batch)?;
+        // Warm-up and agreement: one step from the same state and inputs.
+        for b in backends.iter_mut() {
+            b.step().with_context(|| format!("{} step", b.name()))?;
+        }
+        let reference = backends[1].output().to_vec();
+        for b in &backends {
+            let diff = b.output().iter().zip(&reference).map(|(p, q)| (p - q).abs()).fold(0.0f32, f32::max);
+            if b.output().len() != reference.len() || diff > 1e-3 {
+                bail!("{} disagrees with tract on the first step (max abs diff {diff}): the benchmark would compare different computations", b.name());
+            }
+        }
+        for b in backends.iter_mut() {
+            for _ in 0..5 {
+                b.step()?;
+            }
+        }
+        let steps = (a.work / batch).max(5);
+        let pb = ProgressBar::new((a.rounds * backends.len()) as u64);
+        pb.set_style(ProgressStyle::with_template("batch {prefix}: [{bar:30}] {pos}/{len} backend rounds {elapsed}")?);
+        pb.set_prefix(batch.to_string());
+        let mut times = vec![Vec::with_capacity(a.rounds); backends.len()];
+        for _ in 0..a.rounds {
+            for (k, b) in backends.iter_mut().enumerate() {
+                let t = Instant::now();
+                for _ in 0..steps {
+                    b.step()?;
+                }
+                times[k].push(t.elapsed().as_secs_f64() * 1e3 / steps as f64);
+                pb.inc(1);
+            }
+        }
+        pb.finish_and_clear();
+        for (b, t) in backends.iter().zip(times) {
+            let step_ms = median(&t);
+            figures.push(BackendFigure {
+                backend: b.name().to_string(),
+                batch,
+                step_ms,
+                frames_per_second: batch as f64 * 1e3 / step_ms,
+                rounds_ms: t,
+            });
+        }
+    }
+    println!("{}", table(&figures, a.rounds, a.work));
+    if let Some(path) = &a.json {
+        write_json(path, &figures)?;
+    }
+    Ok(())
+}
+
+fn write_json(path: &Path, figures: &[BackendFigure]) -> anyhow::Result<()> {
+    std::fs::write(path, serde_json::to_string_pretty(figures)?).with_context(|| format!("writing {}", path.display()))
+}
+
+/// The figures as a text table with ratios to onnxruntime.
+fn table(figures: &[BackendFigure], rounds: usize, work: usize) -> String {
+    let mut s = format!(
+        "median of {rounds} rounds, ~{work} character-steps per backend per round\n\
+         {:<6} {:<12} {:>12} {:>16} {:>12} {:>14}\n",
+        "batch", "backend", "step (ms)", "frames/s", "time/ort", "throughput/ort"
+    );
+    for f in figures {
+        let ort = figures.iter().find(|g| g.batch == f.batch && g.backend == "onnxruntime");
+        let (rt, rf) = ort.map_or((f64::NAN, f64::NAN), |o| (f.step_ms / o.step_ms, f.frames_per_second / o.frames_per_second));
+        s += &format!(
+            "{:<6} {:<12} {:>12.4} {:>16.0} {:>11.2}x {:>13.2}x\n",
+            f.batch, f.backend, f.step_ms, f.frames_per_second, rt, rf
+        );
+    }
+    s
+}

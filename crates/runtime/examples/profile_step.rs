@@ -1,0 +1,75 @@
+//! Per-node time of an exported step graph in tract: where a step's time goes.
+//!
+//! `cargo run --release -p zoo-runtime --example profile_step -- MODEL.onnx [BATCH] [STEPS]`
+//!
+//! Plans the step graph for a concrete batch like `MotionRunner` does, runs it `STEPS` times on
+//! fixed inputs and prints the nodes of the optimised plan by total time.
+
+use std::collections::HashMap;
+use std::time::Instant;
+use tract_onnx::prelude::*;
+use tract_onnx::tract_core::plan::eval;
+
+fn main() -> TractResult<()> {
+    let args: Vec<String> = std::env::args().collect();
+    let path = args.get(1).expect("usage: profile_step MODEL.onnx [BATCH] [STEPS]");
+    let batch: usize = args.get(2).map_or(1, |s| s.parse().expect("batch"));
+    let steps: usize = args.get(3).map_or(2000, |s| s.parse().expect("steps"));
+    let bytes = std::fs::read(path)?;
+    let proto = <tract_onnx::pb::ModelProto as prost::Message>::decode(bytes.as_slice())?;
+    let mut model = tract_onnx::onnx().model_for_proto_model(&proto)?;
+    let mut widths = Vec::new();
+    for (i, v) in proto.graph.as_ref().expect("graph").input.iter().enumerate() {
+        use tract_onnx::pb::tensor_shape_proto::dimension::Value;
+        let Some(tract_onnx::pb::type_proto::Value::TensorType(t)) = v.r#type.as_ref().and_then(|t| t.value.as_ref())
+        else {
+            panic!("input {} has no tensor type", v.name)
+        };
+        let dims = &t.shape.as_ref().expect("shape").dim;
+        let w: usize = dims[1..]
+            .iter()
+            .map(|d| match d.value {
+                Some(Value::DimValue(n)) => n as usize,
+                _ => 1,
+            })
+            .product();
+        widths.push(w);
+        model.set_input_fact(i, f32::fact([batch, w]).into())?;
+    }
+    let plan = model.into_optimized()?.into_runnable()?;
+    let mut state = plan.spawn()?;
+    let inputs: TVec<TValue> = widths
+        .iter()
+        .map(|&w| {
+            let v: Vec<f32> = (0..batch * w).map(|i| ((i * 37 % 101) as f32 / 101.0 - 0.5) * 0.5).collect();
+            tensor1(&v).into_shape(&[batch, w]).unwrap().into_tvalue()
+        })
+        .collect();
+    for _ in 0..20 {
+        state.run(inputs.clone())?;
+    }
+    let mut per_node: HashMap<String, (f64, usize)> = HashMap::new();
+    let t0 = Instant::now();
+    for _ in 0..steps {
+        state.run(inputs.clone())?;
+    }
+    let plain = t0.elapsed().as_secs_f64() / steps as f64;
+    for _ in 0..steps {
+        state.run_plan_with_eval(inputs.clone(), |ctx, op_state, node, input| {
+            let t = Instant::now();
+            let r = eval(ctx, op_state, node, input);
+            let e = per_node.entry(format!("{} ({})", node.name, node.op().name())).or_default();
+            e.0 += t.elapsed().as_secs_f64();
+            e.1 += 1;
+            r
+        })?;
+    }
+    let mut rows: Vec<_> = per_node.into_iter().collect();
+    rows.sort_by(|a, b| b.1.0.total_cmp(&a.1.0));
+    let total: f64 = rows.iter().map(|r| r.1.0).sum::<f64>() / steps as f64;
+    println!("batch {batch}: plain run {:.1} us/step; sum of node times {:.1} us/step", plain * 1e6, total * 1e6);
+    for (name, (t, _)) in rows.iter().take(25) {
+        println!("{:>9.2} us  {name}", t / steps as f64 * 1e6);
+    }
+    Ok(())
+}
