@@ -109,4 +109,45 @@ fn allocations_per_step() {
         );
         assert!((a1000 - a100).abs() < 0.5, "allocations per step should not grow with frames played");
     }
+    transition_allocations();
+}
+
+/// `TransitionRunner::step` (feature decoding, offsets, root integration around the graph run)
+/// adds no allocation to the graph run itself.
+fn transition_allocations() {
+    use candle_core::{DType, Device};
+    use candle_nn::{VarBuilder, VarMap};
+    use zoo_motion::features::{FeatureStats, MeanStd};
+    let parents = [None, Some(0), Some(0), Some(2)];
+    let config = zoo_rtn::Config::tiny().with_parents(&parents);
+    let varmap = VarMap::new();
+    zoo_rtn::Rtn::new(&config, VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu)).unwrap();
+    let d = config.dim();
+    let unit = || MeanStd { mean: vec![0.0; d], std: vec![10.0; d] };
+    let stats = FeatureStats { joints: 4, x: unit(), velocity: unit(), offset: unit(), terrain: None };
+    let options = zoo_export::rtn::RtnExportOptions {
+        names: Some(["Hips", "Spine", "Leg", "Foot_L"].iter().map(|s| s.to_string()).collect()),
+        offsets: Some(vec![[0.0; 3], [0.0, 10.0, 0.0], [0.0, -40.0, 0.0], [0.0, -40.0, 0.0]]),
+        parents: None,
+        fps: Some(30.0),
+    };
+    let onnx = zoo_export::rtn::export_rtn(&config, None, &stats, &varmap, &options).unwrap();
+    let model = TransitionModel::new(MotionModel::from_bytes(&onnx.to_bytes()).unwrap()).unwrap();
+    let pose = |f: usize| -> Vec<f32> { (0..d).map(|i| (i as f32 * 7.0 + f as f32 * 3.0).sin() * 20.0).collect() };
+    let past: Vec<f32> = (0..config.past_frames).flat_map(pose).collect();
+    let (target, next) = (pose(40), pose(41));
+    let mut runner = model.runner().unwrap();
+    let mut state = model.new_transition();
+    runner.start(&mut state, &past, &target, &next).unwrap();
+    let mut out = vec![0.0; d];
+    let t = per_frame(100, || runner.step(&mut state, &mut out).unwrap());
+    // The same graph through the raw MotionRunner.
+    let raw = model.model();
+    let mut raw_runner = raw.runner().unwrap();
+    let mut raw_state = raw.new_state();
+    let x = vec![0.1; d];
+    let mut y = vec![0.0; d];
+    let g = per_frame(100, || raw_runner.step(&mut raw_state, &[&x, &x], &mut [&mut y]).unwrap());
+    eprintln!("tiny RTN: {t:.1} allocations per TransitionRunner::step, {g:.1} per raw graph step");
+    assert!(t <= g + 0.01, "TransitionRunner::step allocates {t} per frame, the graph run alone {g}");
 }

@@ -142,11 +142,7 @@ fn fit_transition(t: &TransitionTask<'_>, prev: &[f32], y: &[f32], foot_lock: bo
     offsets[1..].copy_from_slice(t.offsets);
     let (mut rot, mut root) = fit_frames(t.skeleton, &offsets, &y[..t.frames * d], reference);
     if foot_lock {
-        if let Some(mut lock) = zoo_motion::footlock::FootLock::from_skeleton(&t.skeleton.names, &t.skeleton.parents) {
-            if let Ok(v) = std::env::var("ZOO_FOOTLOCK_TUNE") {
-                let p: Vec<f32> = v.split(',').map(|x| x.parse().unwrap()).collect();
-                (lock.contact_height, lock.lock_speed, lock.swing_speed) = (p[0], p[1], p[2]);
-            }
+        if let Some(lock) = zoo_motion::footlock::FootLock::from_skeleton(&t.skeleton.names, &t.skeleton.parents) {
             let mut fitted = Vec::with_capacity(y.len());
             global_positions_f32(t, &rot, &root, &mut fitted);
             fitted.extend_from_slice(&y[t.frames * d..(t.frames + 1) * d]);

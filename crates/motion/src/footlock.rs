@@ -41,9 +41,9 @@ pub struct FootLock {
     /// Height above ground where contact ends, clip units (default 5 cm).
     pub contact_height: f32,
     /// Horizontal speed (clip units per frame) up to which a grounded joint is fully locked
-    /// (default 1.5 cm/frame).
+    /// (default 8 cm/frame).
     pub lock_speed: f32,
-    /// Horizontal speed from which a joint is moving on purpose and not locked (default 4).
+    /// Horizontal speed from which a joint is moving on purpose and not locked (default 16).
     pub swing_speed: f32,
 }
 
@@ -66,8 +66,8 @@ impl FootLock {
         (!legs.is_empty()).then_some(FootLock {
             legs,
             contact_height: 5.0,
-            lock_speed: 1.5,
-            swing_speed: 4.0,
+            lock_speed: 8.0,
+            swing_speed: 16.0,
         })
     }
 

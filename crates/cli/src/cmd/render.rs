@@ -30,6 +30,11 @@ pub struct RenderArgs {
     /// Heightmap header (`.json`, see `zoo_data::terrain`) of the ground under the clips.
     #[arg(long)]
     pub terrain: Option<PathBuf>,
+    /// Draw the clips side by side, this far apart (clip units, e.g. 75 for cm) along the
+    /// direction of travel, instead of over each other: the first clip in the middle (the camera
+    /// follows it), the others alternately behind and ahead of it.
+    #[arg(long)]
+    pub side_by_side: Option<f64>,
     /// Output file: `.gif` (animation) or `.png` (contact sheet).
     #[arg(long)]
     pub out: PathBuf,
@@ -56,6 +61,20 @@ pub fn run(a: RenderArgs) -> Result<()> {
     for path in std::iter::once(&a.clip).chain(&a.compare) {
         let clip = read_file(path, &read).with_context(|| format!("reading {}", path.display()))?;
         clips.push(RenderClip { label: label(path), clip, terrain: terrain.clone() });
+    }
+    if let Some(spacing) = a.side_by_side {
+        let c0 = &clips[0].clip;
+        let last = c0.frames().saturating_sub(1);
+        let d = c0.root_position(last) - c0.root_position(0);
+        let along = glam::DVec3::new(d.x, 0.0, d.z).normalize_or(glam::DVec3::X);
+        for (k, rc) in clips.iter_mut().enumerate().skip(1) {
+            let j = rc.clip.joints();
+            let slot = k.div_ceil(2) as f64 * if k % 2 == 1 { -1.0 } else { 1.0 };
+            let shift = along * (slot * spacing);
+            for f in 0..rc.clip.frames() {
+                rc.clip.local_positions[f * j] += shift;
+            }
+        }
     }
     let opts = RenderOptions { from: a.from, to: a.to, every: a.every, frame_numbers: a.frame_numbers };
     let n = if ext == "gif" { render_gif(&clips, &opts, &a.out)? } else { render_sheet(&clips, &opts, &a.out)? };
