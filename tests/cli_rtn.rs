@@ -40,6 +40,9 @@ fn train_resume_transition_and_decompress() {
         serde_json::from_str(&std::fs::read_to_string(runp.join("train_state.json")).unwrap()).unwrap();
     assert_eq!(state["epoch"], 2);
     assert_eq!(state["valid_loss"].as_array().unwrap().len(), 2);
+    // The last checkpoint carries the optimiser state, so the resume continued it exactly.
+    assert!(runp.join("last/optimizer.safetensors").is_file());
+    assert!(!stdout.contains("no optimiser state"), "{stdout}");
 
     // Transition and super-resolution on synthetic BVH clips.
     let data = dir.path().join("synth");
@@ -83,6 +86,53 @@ fn train_resume_transition_and_decompress() {
     let r = zoo_data::bvh::read_file(&rebuilt, &Default::default()).unwrap();
     assert_eq!(r.frames(), 10 + (ca.frames() - 11) / 30 * 30);
     assert!(r.local_rotations.iter().all(|q| q.is_finite()));
+
+    // Export, then the benchmark through candle (`rtn:`) and through the runtime (`onnx:`),
+    // with and without the foot lock: every metric agrees within 1e-3.
+    let onnx = dir.path().join("rtn.onnx");
+    let (ok, stdout, stderr) = run(&["export", "--onnx", run_dir, "--out", onnx.to_str().unwrap()]);
+    assert!(ok, "{stdout}\n{stderr}");
+    let onnx = onnx.to_str().unwrap();
+    let json = dir.path().join("bench.json");
+    let methods = format!("interp,rtn:{run_dir},onnx:{onnx},rtn+lock:{run_dir},onnx+lock:{onnx}");
+    let (ok, stdout, stderr) = run(&[
+        "bench",
+        "--data",
+        data.to_str().unwrap(),
+        "--valid-glob",
+        "*_0001*",
+        "--lengths",
+        "5,15",
+        "--methods",
+        &methods,
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stdout}\n{stderr}");
+    let result: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let rows = result["methods"].as_object().unwrap();
+    let mut compared = 0;
+    for (candle, runtime) in [(format!("rtn:{run_dir}"), format!("onnx:{onnx}")), (format!("rtn+lock:{run_dir}"), format!("onnx+lock:{onnx}"))] {
+        let (a, b) = (rows[&candle].as_object().unwrap(), rows[&runtime].as_object().unwrap());
+        for (key, value) in a {
+            let (Some(x), Some(y)) = (value.as_f64(), b.get(key).and_then(|v| v.as_f64())) else { continue };
+            if key.starts_with("ms") {
+                continue;
+            }
+            assert!((x - y).abs() <= 1e-3, "{key}: {candle} {x} vs {runtime} {y}");
+            compared += 1;
+        }
+    }
+    assert!(compared >= 20, "compared only {compared} metrics: {rows:?}");
+
+    // Step latency and throughput through candle, tract and onnxruntime.
+    let (ok, stdout, stderr) =
+        run(&["bench", "runtime", "--model", onnx, "--rounds", "1", "--work", "8", "--batch", "1,4"]);
+    assert!(ok, "{stdout}\n{stderr}");
+    for backend in ["candle", "tract", "onnxruntime"] {
+        let rows = stdout.lines().filter(|l| l.split_whitespace().nth(1) == Some(backend)).count();
+        assert_eq!(rows, 2, "one row per batch size for {backend}:\n{stdout}");
+    }
 }
 
 #[test]
