@@ -596,6 +596,16 @@ fn runtime_transition_api_matches_candle() {
         let diff = max_abs_diff(frame, &pose);
         assert!(diff <= 1e-2, "step {t}: runtime vs candle unroll max abs diff {diff}");
     }
+    // The same frames as glam vectors.
+    let mut state = model.new_transition();
+    runner.start(&mut state, &c.past, &c.target_pose, &c.next_pose).unwrap();
+    let mut joints = vec![zoo_runtime::glam::Vec3::ZERO; 4];
+    for frame in want.chunks_exact(d).take(3) {
+        runner.step_vec3(&mut state, &mut joints).unwrap();
+        let flat: Vec<f32> = joints.iter().flat_map(|p| p.to_array()).collect();
+        assert!(max_abs_diff(frame, &flat) <= 1e-2);
+    }
+    assert!(runner.step_vec3(&mut state, &mut joints[..3]).is_err());
 }
 
 #[test]

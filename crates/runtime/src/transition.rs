@@ -390,6 +390,22 @@ impl TransitionRunner {
         self.step_batch(std::slice::from_mut(state), pose)
     }
 
+    /// [`TransitionRunner::step`] into glam vectors, one per joint (`K` of them).
+    pub fn step_vec3(&mut self, state: &mut TransitionState, joints: &mut [glam::Vec3]) -> Result<(), MotionError> {
+        let d = 3 * self.model.joints;
+        if joints.len() != self.model.joints {
+            return Err(wrong_len("joints", self.model.joints, 1, joints.len()));
+        }
+        let mut pose = std::mem::take(&mut self.poses);
+        pose.resize(d, 0.0);
+        let r = self.step_batch(std::slice::from_mut(state), &mut pose[..d]);
+        if r.is_ok() {
+            crate::pose::read_positions(&pose[..d], joints);
+        }
+        self.poses = pose;
+        r
+    }
+
     /// [`TransitionRunner::step`] for `states.len()` characters in one graph run: `poses`
     /// receives `N * 3K` values, character-major.
     pub fn step_batch(&mut self, states: &mut [TransitionState], poses: &mut [f32]) -> Result<(), MotionError> {
