@@ -312,7 +312,7 @@ fn median(v: &[f64]) -> f64 {
 /// Runs `zoo bench runtime`.
 pub fn run(a: RuntimeArgs) -> anyhow::Result<()> {
     let bytes = std::fs::read(&a.model).with_context(|| format!("reading {}", a.model.display()))?;
-    let model = MotionModel::from_bytes(&bytes).with_context(|| format!("loading {}", a.model.display()))?;
+    let model = MotionModel::load(&a.model).with_context(|| format!("loading {}", a.model.display()))?;
     let (config, weights) = zoo_export::rtn::import_rtn(&bytes)
         .with_context(|| format!("reading the RTN weights of {} for candle", a.model.display()))?;
     if config.terrain {
