@@ -112,7 +112,10 @@ fn train_resume_transition_and_decompress() {
     let result: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let rows = result["methods"].as_object().unwrap();
     let mut compared = 0;
-    for (candle, runtime) in [(format!("rtn:{run_dir}"), format!("onnx:{onnx}")), (format!("rtn+lock:{run_dir}"), format!("onnx+lock:{onnx}"))] {
+    for (candle, runtime) in [
+        (format!("rtn:{run_dir}"), format!("onnx:{onnx}")),
+        (format!("rtn+lock:{run_dir}"), format!("onnx+lock:{onnx}")),
+    ] {
         let (a, b) = (rows[&candle].as_object().unwrap(), rows[&runtime].as_object().unwrap());
         for (key, value) in a {
             let (Some(x), Some(y)) = (value.as_f64(), b.get(key).and_then(|v| v.as_f64())) else { continue };

@@ -63,12 +63,7 @@ impl FootLock {
                 Some(Leg { hip, knee, ankle, toes })
             })
             .collect();
-        (!legs.is_empty()).then_some(FootLock {
-            legs,
-            contact_height: 5.0,
-            lock_speed: 8.0,
-            swing_speed: 16.0,
-        })
+        (!legs.is_empty()).then_some(FootLock { legs, contact_height: 5.0, lock_speed: 8.0, swing_speed: 16.0 })
     }
 
     /// Applies the lock to `frames` (`n * 3K` values) that follow the frame `prev` (`3K`,

@@ -28,7 +28,9 @@ fn rest_pose(skeleton: &MotionSkeletonInfo, root: Vec3) -> Vec<f32> {
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let Some(path) = std::env::args().nth(1) else {
-        eprintln!("usage: rtn_tick MODEL.onnx [CHARACTERS] (export one with `zoo export --onnx RUN_DIR --out rtn.onnx`)");
+        eprintln!(
+            "usage: rtn_tick MODEL.onnx [CHARACTERS] (export one with `zoo export --onnx RUN_DIR --out rtn.onnx`)"
+        );
         std::process::exit(2);
     };
     let characters: usize = std::env::args().nth(2).map_or(Ok(8), |s| s.parse())?;
@@ -80,9 +82,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             );
         }
     }
-    println!(
-        "{ticks} ticks of {characters} characters: {:.3} ms per batched step",
-        step_time * 1e3 / ticks as f64
-    );
+    println!("{ticks} ticks of {characters} characters: {:.3} ms per batched step", step_time * 1e3 / ticks as f64);
     Ok(())
 }

@@ -3,8 +3,8 @@
 use crate::error::{MotionError, chain};
 use crate::metadata::{MotionModelMetadata, keys};
 use prost::Message;
-use std::path::Path;
 use std::collections::HashMap;
+use std::path::Path;
 use std::sync::{Arc, Mutex};
 use tract_onnx::pb;
 use tract_onnx::prelude::*;

@@ -107,7 +107,12 @@ fn check_rows(name: &str, data: &[f32], batch: usize, width: usize) -> Result<()
         return Err(wrong_len(name, width, batch, data.len()));
     }
     if let Some(index) = data.iter().position(|v| !v.is_finite()) {
-        return Err(MotionError::NonFinite { name: name.to_string(), index, character: index / width, value: data[index] });
+        return Err(MotionError::NonFinite {
+            name: name.to_string(),
+            index,
+            character: index / width,
+            value: data[index],
+        });
     }
     Ok(())
 }

@@ -105,7 +105,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
             pos = 0;
         }
-        let batch: Vec<MotionWindow> = order[pos..pos + 32].iter().map(|&i| MotionWindow { positions: windows[i].positions, terrain: windows[i].terrain }).collect();
+        let batch: Vec<MotionWindow> = order[pos..pos + 32]
+            .iter()
+            .map(|&i| MotionWindow { positions: windows[i].positions, terrain: windows[i].terrain })
+            .collect();
         pos += 32;
         let loss = trainer.train_step(&batch)?;
         if step % 50 == 49 {

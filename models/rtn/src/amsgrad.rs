@@ -96,7 +96,11 @@ impl AmsGrad {
                     candle_core::bail!("the optimiser state has no `{key}`: it was saved for another model")
                 };
                 if t.dims() != var.dims() {
-                    candle_core::bail!("optimiser state `{key}` has shape {:?}, the variable {:?}", t.dims(), var.dims())
+                    candle_core::bail!(
+                        "optimiser state `{key}` has shape {:?}, the variable {:?}",
+                        t.dims(),
+                        var.dims()
+                    )
                 }
                 var.set(&t.to_dtype(var.dtype())?.to_device(var.device())?)?;
             }

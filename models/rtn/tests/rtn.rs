@@ -352,7 +352,8 @@ fn resume_restores_the_optimiser_state() {
     let (a, b) = (trainer.optimizer().state().unwrap(), resumed.optimizer().state().unwrap());
     assert_eq!(a.len(), b.len());
     for (k, t) in &a {
-        let (x, y) = (t.flatten_all().unwrap().to_vec1::<f64>().ok(), b[k].flatten_all().unwrap().to_vec1::<f64>().ok());
+        let (x, y) =
+            (t.flatten_all().unwrap().to_vec1::<f64>().ok(), b[k].flatten_all().unwrap().to_vec1::<f64>().ok());
         let (x, y) = match (x, y) {
             (Some(x), Some(y)) => (x, y),
             _ => (

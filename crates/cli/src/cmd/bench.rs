@@ -79,7 +79,9 @@ fn method(name: &str) -> anyhow::Result<Box<dyn TransitionMethod>> {
                 m.foot_lock = kind == "onnx+lock";
                 Box::new(m)
             }
-            _ => bail!("unknown method `{other}`: expected zerovel, interp, rtn:RUN_DIR, onnx:FILE.onnx, rtn+lock:RUN_DIR or onnx+lock:FILE.onnx"),
+            _ => bail!(
+                "unknown method `{other}`: expected zerovel, interp, rtn:RUN_DIR, onnx:FILE.onnx, rtn+lock:RUN_DIR or onnx+lock:FILE.onnx"
+            ),
         },
     })
 }

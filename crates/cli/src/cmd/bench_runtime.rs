@@ -169,7 +169,11 @@ impl StepBackend for OrtBackend {
         }
         let out = self.session.run(values).map_err(|e| anyhow!("onnxruntime run: {e}"))?;
         let extract = |name: &str| -> anyhow::Result<Vec<f32>> {
-            Ok(out[name].try_extract_tensor::<f32>().map_err(|e| anyhow!("onnxruntime output `{name}`: {e}"))?.1.to_vec())
+            Ok(out[name]
+                .try_extract_tensor::<f32>()
+                .map_err(|e| anyhow!("onnxruntime output `{name}`: {e}"))?
+                .1
+                .to_vec())
         };
         let next = extract(&self.out_name)?;
         let mut new_states = Vec::with_capacity(self.states.len());
@@ -290,12 +294,7 @@ fn make_backends(
         session,
         batch,
         frame,
-        states: model
-            .states()
-            .iter()
-            .zip(states)
-            .map(|(s, v)| (s.input.clone(), s.output.clone(), v))
-            .collect(),
+        states: model.states().iter().zip(states).map(|(s, v)| (s.input.clone(), s.output.clone(), v)).collect(),
         out_name: model.outputs()[0].name.clone(),
         out: Vec::new(),
     };
@@ -318,7 +317,8 @@ pub fn run(a: RuntimeArgs) -> anyhow::Result<()> {
     if config.terrain {
         bail!("{}: terrain-aware RTNs are not supported by `zoo bench runtime` yet", a.model.display());
     }
-    let candle = Rtn::new(&config, candle_nn::VarBuilder::from_tensors(weights, candle_core::DType::F32, &Device::Cpu))?;
+    let candle =
+        Rtn::new(&config, candle_nn::VarBuilder::from_tensors(weights, candle_core::DType::F32, &Device::Cpu))?;
     let lib = onnxruntime_library(&a.onnxruntime)?;
     let env = ort::init_from(&lib)
         .map_err(|e| anyhow!("cannot load onnxruntime from {}: {e}", lib.display()))?
@@ -345,7 +345,10 @@ pub fn run(a: RuntimeArgs) -> anyhow::Result<()> {
         for b in &backends {
             let diff = b.output().iter().zip(&reference).map(|(p, q)| (p - q).abs()).fold(0.0f32, f32::max);
             if b.output().len() != reference.len() || diff > 1e-3 {
-                bail!("{} disagrees with tract on the first step (max abs diff {diff}): the benchmark would compare different computations", b.name());
+                bail!(
+                    "{} disagrees with tract on the first step (max abs diff {diff}): the benchmark would compare different computations",
+                    b.name()
+                );
             }
         }
         for b in backends.iter_mut() {
@@ -400,7 +403,8 @@ fn table(figures: &[BackendFigure], rounds: usize, work: usize) -> String {
     );
     for f in figures {
         let ort = figures.iter().find(|g| g.batch == f.batch && g.backend == "onnxruntime");
-        let (rt, rf) = ort.map_or((f64::NAN, f64::NAN), |o| (f.step_ms / o.step_ms, f.frames_per_second / o.frames_per_second));
+        let (rt, rf) =
+            ort.map_or((f64::NAN, f64::NAN), |o| (f.step_ms / o.step_ms, f.frames_per_second / o.frames_per_second));
         s += &format!(
             "{:<6} {:<12} {:>12.4} {:>16.0} {:>11.2}x {:>13.2}x\n",
             f.batch, f.backend, f.step_ms, f.frames_per_second, rt, rf
