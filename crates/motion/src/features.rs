@@ -45,11 +45,17 @@ pub fn encode_frame(prev_root: [f32; 3], frame: &[f32], out: &mut [f32]) {
 /// position; returns the new root position (root velocity integration, RTN sec. 4.5).
 pub fn decode_frame(prev_root: [f32; 3], features: &[f32], out: &mut [f32]) -> [f32; 3] {
     debug_assert_eq!(features.len(), out.len());
-    let r = [prev_root[0] + features[0], prev_root[1] + features[1], prev_root[2] + features[2]];
-    out[..3].copy_from_slice(&r);
-    for (o, x) in out[3..].chunks_exact_mut(3).zip(features[3..].chunks_exact(3)) {
+    out.copy_from_slice(features);
+    decode_frame_in_place(prev_root, out)
+}
+
+/// [`decode_frame`] on a buffer holding the features, replaced by the positions.
+pub fn decode_frame_in_place(prev_root: [f32; 3], frame: &mut [f32]) -> [f32; 3] {
+    let r = [prev_root[0] + frame[0], prev_root[1] + frame[1], prev_root[2] + frame[2]];
+    frame[..3].copy_from_slice(&r);
+    for p in frame[3..].chunks_exact_mut(3) {
         for a in 0..3 {
-            o[a] = x[a] + r[a];
+            p[a] += r[a];
         }
     }
     r

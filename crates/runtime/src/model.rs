@@ -446,14 +446,14 @@ fn check_states(inner: &Inner, states: &[MotionState]) -> Result<(), MotionError
     Ok(())
 }
 
-fn check_len(name: &str, found: usize, batch: usize, width: usize) -> Result<(), MotionError> {
+pub(crate) fn check_len(name: &str, found: usize, batch: usize, width: usize) -> Result<(), MotionError> {
     if found != batch * width {
         return Err(MotionError::BufferLength { name: name.to_string(), expected: batch * width, batch, width, found });
     }
     Ok(())
 }
 
-fn check_finite(name: &str, data: &[f32], width: usize) -> Result<(), MotionError> {
+pub(crate) fn check_finite(name: &str, data: &[f32], width: usize) -> Result<(), MotionError> {
     if let Some(index) = data.iter().position(|v| !v.is_finite()) {
         return Err(MotionError::NonFinite {
             name: name.to_string(),

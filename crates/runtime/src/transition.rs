@@ -13,7 +13,7 @@
 
 use crate::error::MotionError;
 use crate::metadata::MotionMeanStd;
-use crate::model::{MotionModel, MotionRunner, MotionState};
+use crate::model::{MotionModel, MotionRunner, MotionState, check_finite, check_len};
 use std::path::Path;
 use zoo_motion::features;
 use zoo_motion::footlock::FootLock;
@@ -103,18 +103,8 @@ fn wrong_len(name: &str, width: usize, batch: usize, found: usize) -> MotionErro
 
 /// Checks a character-major buffer of `batch` rows of `width` finite values.
 fn check_rows(name: &str, data: &[f32], batch: usize, width: usize) -> Result<(), MotionError> {
-    if data.len() != batch * width {
-        return Err(wrong_len(name, width, batch, data.len()));
-    }
-    if let Some(index) = data.iter().position(|v| !v.is_finite()) {
-        return Err(MotionError::NonFinite {
-            name: name.to_string(),
-            index,
-            character: index / width,
-            value: data[index],
-        });
-    }
-    Ok(())
+    check_len(name, data.len(), batch, width)?;
+    check_finite(name, data, width)
 }
 
 impl TransitionModel {
@@ -431,18 +421,9 @@ impl TransitionRunner {
         for (c, (s, pose)) in states.iter_mut().zip(poses.chunks_exact_mut(d)).enumerate() {
             let next = &self.next[c * d..(c + 1) * d];
             s.x.copy_from_slice(next);
-            for i in 0..d {
-                pose[i] = next[i] * m.x.std[i] + m.x.mean[i];
-            }
-            // Root velocity integration (RTN sec. 4.5), then root-relative joints to global.
-            for a in 0..3 {
-                s.root[a] += pose[a];
-            }
-            let root = s.root;
-            pose[..3].copy_from_slice(&root);
-            for (i, p) in pose.iter_mut().enumerate().skip(3) {
-                *p += root[i % 3];
-            }
+            pose.copy_from_slice(next);
+            m.x.denormalise(pose);
+            s.root = features::decode_frame_in_place(s.root, pose);
             s.frames += 1;
         }
         Ok(())
