@@ -44,6 +44,15 @@ pub fn global_positions_f32(task: &TransitionTask<'_>, rot: &[DQuat], roots: &[D
     }
 }
 
+/// Global positions of a task's context frames and of its target frame and the one after it:
+/// what a position-based method is given.
+fn task_positions(t: &TransitionTask<'_>) -> (Vec<f32>, Vec<f32>) {
+    let (mut past, mut target) = (Vec::new(), Vec::new());
+    global_positions_f32(t, t.past_rot, &t.past_root[..N_PAST], &mut past);
+    global_positions_f32(t, t.target_rot, t.target_root, &mut target);
+    (past, target)
+}
+
 impl TransitionMethod for RtnMethod {
     fn name(&self) -> String {
         self.name.clone()
@@ -61,9 +70,7 @@ impl TransitionMethod for RtnMethod {
                         self.model.config().joints
                     ));
                 }
-                let (mut past, mut tgt) = (Vec::new(), Vec::new());
-                global_positions_f32(t, t.past_rot, &t.past_root[..N_PAST], &mut past);
-                global_positions_f32(t, t.target_rot, t.target_root, &mut tgt);
+                let (past, tgt) = task_positions(t);
                 let d = 3 * j;
                 let y = self
                     .model
@@ -110,9 +117,7 @@ impl TransitionMethod for OnnxMethod {
                     if j != k {
                         return Err(format!("{}: the model was exported for {k} joints, the data has {j}", self.name));
                     }
-                    let (mut past, mut tgt) = (Vec::new(), Vec::new());
-                    global_positions_f32(t, t.past_rot, &t.past_root[..N_PAST], &mut past);
-                    global_positions_f32(t, t.target_rot, t.target_root, &mut tgt);
+                    let (past, tgt) = task_positions(t);
                     let d = 3 * j;
                     let mut y = vec![0.0; (t.frames + 1) * d];
                     runner

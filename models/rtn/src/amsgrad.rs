@@ -56,7 +56,8 @@ impl AmsGrad {
         self.t
     }
 
-    /// An optimiser over named variables, whose state can be saved and loaded by name.
+    /// An optimiser over named variables, whose state can be saved and loaded by name
+    /// (`Optimizer::new` builds one without names).
     pub fn new_named(vars: Vec<(String, Var)>, params: ParamsAmsGrad) -> Result<Self> {
         let slots = vars
             .into_iter()
@@ -115,15 +116,7 @@ impl Optimizer for AmsGrad {
     type Config = ParamsAmsGrad;
 
     fn new(vars: Vec<Var>, params: ParamsAmsGrad) -> Result<Self> {
-        let slots = vars
-            .into_iter()
-            .filter(|v| v.dtype().is_float())
-            .map(|var| {
-                let z = || Var::zeros(var.shape(), var.dtype(), var.device());
-                Ok(Slot { name: String::new(), m: z()?, v: z()?, v_max: z()?, var })
-            })
-            .collect::<Result<Vec<_>>>()?;
-        Ok(AmsGrad { slots, t: 0, params })
+        AmsGrad::new_named(vars.into_iter().map(|v| (String::new(), v)).collect(), params)
     }
 
     fn step(&mut self, grads: &GradStore) -> Result<()> {
