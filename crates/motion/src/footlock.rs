@@ -97,23 +97,16 @@ impl FootLock {
                 let c = corrected[t];
                 let goal = glam::Vec3::new(c[0], ankle.y, c[1]);
                 let (new_knee, new_ankle) = two_bone_ik(hip, knee, ankle, goal);
-                let toes: Vec<(usize, glam::Vec3, f32)> = leg
-                    .toes
-                    .iter()
-                    .enumerate()
-                    .map(|(i, &j)| {
-                        let toe = get(f, j);
-                        let c = corrected[(i + 1) * n + t];
-                        (j, glam::Vec3::new(c[0], toe.y, c[1]), (toe - ankle).length())
-                    })
-                    .collect();
-                let mut set = |j: usize, p: glam::Vec3| f[3 * j..3 * j + 3].copy_from_slice(&p.to_array());
-                set(leg.knee, new_knee);
-                set(leg.ankle, new_ankle);
-                for (j, goal, len) in toes {
-                    let dir = (goal - new_ankle).normalize_or_zero();
+                let set = |f: &mut [f32], j: usize, p: glam::Vec3| f[3 * j..3 * j + 3].copy_from_slice(&p.to_array());
+                set(f, leg.knee, new_knee);
+                set(f, leg.ankle, new_ankle);
+                // Each toe towards its corrected position, at its distance from the (old) ankle.
+                for (i, &j) in leg.toes.iter().enumerate() {
+                    let toe = get(f, j);
+                    let c = corrected[(i + 1) * n + t];
+                    let dir = (glam::Vec3::new(c[0], toe.y, c[1]) - new_ankle).normalize_or_zero();
                     if dir != glam::Vec3::ZERO {
-                        set(j, new_ankle + dir * len);
+                        set(f, j, new_ankle + dir * (toe - ankle).length());
                     }
                 }
             }
