@@ -108,6 +108,18 @@ impl Heightfield {
         hf
     }
 
+    /// The same grid as the motion core's [`zoo_motion::features::Heightmap`] (what RTN's
+    /// terrain patches sample).
+    pub fn to_heightmap(&self) -> zoo_motion::features::Heightmap {
+        zoo_motion::features::Heightmap {
+            cols: self.nx,
+            rows: self.nz,
+            cell: self.cell as f32,
+            origin: [self.origin_x as f32, self.origin_z as f32],
+            heights: self.heights.clone(),
+        }
+    }
+
     /// Height of sample `(i, k)`, indices clamped to the grid.
     #[inline]
     pub fn at(&self, i: isize, k: isize) -> f64 {
@@ -222,6 +234,16 @@ impl Heightfield {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn heightmap_samples_the_same_terrain() {
+        let hf = Heightfield::from_fn(-100.0, -50.0, 100.0, 150.0, 10.0, |x, z| 0.1 * x - 0.05 * z + (0.03 * x).sin());
+        let map = hf.to_heightmap();
+        for (x, z) in [(-95.0, -45.0), (0.0, 0.0), (33.3, 77.7), (99.0, 149.0)] {
+            let (a, b) = (hf.height(x, z), map.sample(x as f32, z as f32) as f64);
+            assert!((a - b).abs() < 1e-3, "({x}, {z}): heightfield {a}, heightmap {b}");
+        }
+    }
 
     #[test]
     fn bilinear_sampling_is_exact_on_a_plane() {

@@ -35,17 +35,10 @@ fn sequences(clips: &[synth::SynthClip]) -> Vec<Sequence> {
         .iter()
         .map(|c| {
             let (_, gp) = c.clip.global();
-            let t = c.terrain.as_ref().expect("terrain clips");
             Sequence {
                 positions: gp.iter().flat_map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect(),
                 frames: c.clip.frames(),
-                map: Heightmap {
-                    cols: t.nx,
-                    rows: t.nz,
-                    cell: t.cell as f32,
-                    origin: [t.origin_x as f32, t.origin_z as f32],
-                    heights: t.heights.clone(),
-                },
+                map: c.terrain.as_ref().expect("terrain clips").to_heightmap(),
             }
         })
         .collect()
@@ -92,16 +85,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         steps
     );
     let mut order: Vec<usize> = (0..windows.len()).collect();
-    let mut rng = 0x2545_f491_4f6c_dd1du64;
+    let mut rng = zoo_rtn::train::SplitMix64::new(7);
     let started = std::time::Instant::now();
     let mut pos = order.len();
     for step in 0..steps {
         if pos + 32 > order.len() {
             for i in (1..order.len()).rev() {
-                rng ^= rng << 13;
-                rng ^= rng >> 7;
-                rng ^= rng << 17;
-                order.swap(i, (rng % (i as u64 + 1)) as usize);
+                order.swap(i, (rng.next_u64() % (i as u64 + 1)) as usize);
             }
             pos = 0;
         }

@@ -66,17 +66,10 @@ trait StepBackend {
     fn output(&self) -> &[f32];
 }
 
-/// Deterministic inputs in [-1, 1] (normalised units).
+/// Deterministic inputs in [-1, 1) (normalised units).
 fn inputs(n: usize, seed: u64) -> Vec<f32> {
-    let mut s = seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
-    (0..n)
-        .map(|_| {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 40) as f32 / (1u64 << 23) as f32 - 1.0
-        })
-        .collect()
+    let mut rng = zoo_rtn::train::SplitMix64::new(seed);
+    (0..n).map(|_| (2.0 * rng.next_f64() - 1.0) as f32).collect()
 }
 
 /// The frame inputs of the step graph, by name.
@@ -301,13 +294,6 @@ fn make_backends(
     Ok(vec![Box::new(candle), Box::new(tract), Box::new(ort)])
 }
 
-fn median(v: &[f64]) -> f64 {
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    let n = s.len();
-    if n % 2 == 1 { s[n / 2] } else { 0.5 * (s[n / 2 - 1] + s[n / 2]) }
-}
-
 /// Runs `zoo bench runtime`.
 pub fn run(a: RuntimeArgs) -> anyhow::Result<()> {
     let bytes = std::fs::read(&a.model).with_context(|| format!("reading {}", a.model.display()))?;
@@ -373,7 +359,7 @@ pub fn run(a: RuntimeArgs) -> anyhow::Result<()> {
         }
         pb.finish_and_clear();
         for (b, t) in backends.iter().zip(times) {
-            let step_ms = median(&t);
+            let step_ms = zoo_data::dataset::percentile(&mut t.clone(), 50.0);
             figures.push(BackendFigure {
                 backend: b.name().to_string(),
                 batch,
