@@ -43,6 +43,14 @@ fn train_resume_transition_and_decompress() {
     // The last checkpoint carries the optimiser state, so the resume continued it exactly.
     assert!(runp.join("last/optimizer.safetensors").is_file());
     assert!(!stdout.contains("no optimiser state"), "{stdout}");
+    // The moving average of the weights (on by default) is validated every epoch and resumed.
+    assert!(runp.join("last/ema.safetensors").is_file());
+    assert_eq!(state["valid_loss_ema"].as_array().unwrap().len(), 2);
+    assert!(stdout.contains("averaged"), "{stdout}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(runp.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["ema_decay"], 0.999);
+    assert!(summary["best_is_moving_average"].is_boolean());
 
     // Transition and super-resolution on synthetic BVH clips.
     let data = dir.path().join("synth");

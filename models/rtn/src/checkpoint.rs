@@ -70,6 +70,8 @@ pub fn save(dir: &Path, config: &Config, varmap: &VarMap, stats: &FeatureStats) 
 
 /// Optimiser state of a training checkpoint (`RtnTrainer::save_with_optimizer`).
 pub const OPTIMIZER_FILE: &str = "optimizer.safetensors";
+/// Moving average of the weights of a training checkpoint (when the run keeps one).
+pub const EMA_FILE: &str = "ema.safetensors";
 
 /// Writes named tensors to `dir/name` atomically (a temporary file renamed into place).
 pub fn save_tensors(

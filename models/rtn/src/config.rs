@@ -58,6 +58,11 @@ pub struct TrainConfig {
     pub random_rotation: bool,
     /// Seed of the trainer's random numbers (teacher forcing draws, rotations).
     pub seed: u64,
+    /// Decay of an exponential moving average of the weights (Polyak averaging), kept beside
+    /// the trained weights; `None` keeps none (the paper's recipe). Not in the paper: the
+    /// averaged weights are a second candidate for the best checkpoint (see `RtnTrainer`).
+    #[serde(default)]
+    pub ema_decay: Option<f64>,
 }
 
 impl Default for TrainConfig {
@@ -71,6 +76,7 @@ impl Default for TrainConfig {
             teacher_forcing: TeacherForcing::Fixed(0.2),
             random_rotation: true,
             seed: 0x5eed,
+            ema_decay: None,
         }
     }
 }

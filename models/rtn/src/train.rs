@@ -96,6 +96,9 @@ pub struct RtnTrainer {
     offsets: OffsetTensors,
     rng: SplitMix64,
     step: u64,
+    /// Moving average of every variable, in the optimiser's (sorted) order, when
+    /// `config.train.ema_decay` is set.
+    ema: Option<Vec<(candle_core::Var, Tensor)>>,
 }
 
 impl RtnTrainer {
@@ -127,6 +130,18 @@ impl RtnTrainer {
         let mut named: Vec<(String, candle_core::Var)> =
             varmap.data().lock().expect("varmap lock").iter().map(|(n, v)| (n.clone(), v.clone())).collect();
         named.sort_by(|a, b| a.0.cmp(&b.0));
+        let ema = match t.ema_decay {
+            Some(d) if !(d > 0.0 && d < 1.0) => {
+                return Err(RtnError::Config(format!("EMA decay {d} is outside (0, 1)")));
+            }
+            Some(_) => Some(
+                named
+                    .iter()
+                    .map(|(_, v)| Ok((v.clone(), v.as_tensor().detach().copy()?)))
+                    .collect::<RtnResult<Vec<_>>>()?,
+            ),
+            None => None,
+        };
         let opt = AmsGrad::new_named(named, params)?;
         let offsets = OffsetTensors::new(&stats, device)?;
         Ok(RtnTrainer {
@@ -138,6 +153,7 @@ impl RtnTrainer {
             offsets,
             rng: SplitMix64::new(t.seed),
             step: 0,
+            ema,
         })
     }
 
@@ -234,7 +250,79 @@ impl RtnTrainer {
         }
         self.opt.backward_step(&loss)?;
         self.step += 1;
+        self.update_ema()?;
         Ok(value)
+    }
+
+    /// Folds the current weights into the moving average. The decay warms up as
+    /// `min(decay, (1 + t) / (10 + t))` so that the initial weights fade quickly.
+    fn update_ema(&mut self) -> RtnResult<()> {
+        let (Some(ema), Some(decay)) = (self.ema.as_mut(), self.config.train.ema_decay) else {
+            return Ok(());
+        };
+        let t = self.step as f64;
+        let d = decay.min((1.0 + t) / (10.0 + t));
+        for (var, avg) in ema.iter_mut() {
+            // Detached: the average must not keep a graph back to every earlier step.
+            *avg = (avg.affine(d, 0.0)? + var.as_tensor().detach().affine(1.0 - d, 0.0)?)?.detach();
+        }
+        Ok(())
+    }
+
+    /// Whether the trainer keeps a moving average of the weights.
+    pub fn has_ema(&self) -> bool {
+        self.ema.is_some()
+    }
+
+    /// Runs `f` with the moving-average weights in place of the trained ones, then puts the
+    /// trained weights back (also when `f` fails). Without a moving average, `f` sees the trained
+    /// weights.
+    pub fn with_ema_weights<R>(&mut self, f: impl FnOnce(&mut Self) -> RtnResult<R>) -> RtnResult<R> {
+        let Some(ema) = self.ema.as_ref() else {
+            return f(self);
+        };
+        let mut saved = Vec::with_capacity(ema.len());
+        for (var, avg) in ema {
+            saved.push(var.as_tensor().detach().copy()?);
+            var.set(avg)?;
+        }
+        let out = f(self);
+        if let Some(ema) = self.ema.as_ref() {
+            for ((var, _), w) in ema.iter().zip(&saved) {
+                var.set(w)?;
+            }
+        }
+        out
+    }
+
+    /// The moving-average tensors by variable name (for `--resume`), or `None`.
+    pub fn ema_state(&self) -> RtnResult<Option<std::collections::HashMap<String, Tensor>>> {
+        let Some(ema) = self.ema.as_ref() else { return Ok(None) };
+        let data = self.varmap.data().lock().expect("varmap lock");
+        let mut out = std::collections::HashMap::new();
+        for (name, var) in data.iter() {
+            if let Some((_, avg)) = ema.iter().find(|(v, _)| v.as_tensor().id() == var.as_tensor().id()) {
+                out.insert(format!("ema.{name}"), avg.clone());
+            }
+        }
+        Ok(Some(out))
+    }
+
+    fn set_ema_state(&mut self, state: &std::collections::HashMap<String, Tensor>) -> RtnResult<()> {
+        let Some(ema) = self.ema.as_mut() else { return Ok(()) };
+        let data = self.varmap.data().lock().expect("varmap lock");
+        for (name, var) in data.iter() {
+            let Some(saved) = state.get(&format!("ema.{name}")) else {
+                return Err(RtnError::Config(format!("the moving average has no tensor for {name}")));
+            };
+            if saved.dims() != var.as_tensor().dims() {
+                return Err(RtnError::Config(format!("the moving average of {name} has the wrong shape")));
+            }
+            if let Some((_, avg)) = ema.iter_mut().find(|(v, _)| v.as_tensor().id() == var.as_tensor().id()) {
+                *avg = saved.clone();
+            }
+        }
+        Ok(())
     }
 
     /// Validation loss: the same MSE without teacher forcing and without rotation.
@@ -258,7 +346,11 @@ impl RtnTrainer {
     /// atomically), so that [`RtnTrainer::load`] continues the run exactly.
     pub fn save_with_optimizer(&self, dir: &std::path::Path) -> RtnResult<()> {
         self.save(dir)?;
-        crate::checkpoint::save_tensors(dir, crate::checkpoint::OPTIMIZER_FILE, &self.opt.state()?)
+        crate::checkpoint::save_tensors(dir, crate::checkpoint::OPTIMIZER_FILE, &self.opt.state()?)?;
+        if let Some(ema) = self.ema_state()? {
+            crate::checkpoint::save_tensors(dir, crate::checkpoint::EMA_FILE, &ema)?;
+        }
+        Ok(())
     }
 
     /// Resumes from a checkpoint folder: weights, statistics and, when the folder has one, the
@@ -281,6 +373,12 @@ impl RtnTrainer {
             .map_err(|e| RtnError::Config(format!("{}: {e}", path.display())))?;
         t.opt.set_state(&state).map_err(|e| RtnError::Config(format!("{}: {e}", path.display())))?;
         t.step = t.opt.steps();
+        let ema_path = dir.join(crate::checkpoint::EMA_FILE);
+        if t.ema.is_some() && ema_path.is_file() {
+            let ema = candle_core::safetensors::load(&ema_path, device)
+                .map_err(|e| RtnError::Config(format!("{}: {e}", ema_path.display())))?;
+            t.set_ema_state(&ema).map_err(|e| RtnError::Config(format!("{}: {e}", ema_path.display())))?;
+        }
         Ok((t, true))
     }
 }

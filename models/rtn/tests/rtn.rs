@@ -457,3 +457,46 @@ fn saving_nan_parameters_is_refused_and_keeps_the_old_checkpoint() {
     assert!(matches!(&err, RtnError::NonFiniteParameter { name } if name == "lstm.bias"), "{err}");
     assert_eq!(std::fs::read(dir.path().join("model.safetensors")).unwrap(), before);
 }
+
+/// All variables of a trainer as one flat vector, in name order.
+fn flat_weights(trainer: &RtnTrainer) -> Vec<f32> {
+    let data = trainer.varmap().data().lock().unwrap();
+    let mut names: Vec<&String> = data.keys().collect();
+    names.sort();
+    names.iter().flat_map(|n| data[*n].as_tensor().flatten_all().unwrap().to_vec1::<f32>().unwrap()).collect()
+}
+
+#[test]
+fn moving_average_is_kept_swapped_in_and_resumed() {
+    let mut c = tiny();
+    c.train.ema_decay = Some(0.9);
+    let ws = windows(&c, 8);
+    let stats = stats_for(&c, &ws);
+    let mw: Vec<MotionWindow> = ws.iter().map(|w| MotionWindow::new(w)).collect();
+    let mut trainer = RtnTrainer::new(&c, stats.clone(), &Device::Cpu).unwrap();
+    assert!(trainer.has_ema());
+    for _ in 0..4 {
+        trainer.train_step(&mw).unwrap();
+    }
+    let trained = flat_weights(&trainer);
+    let (averaged, loss_avg) = trainer.with_ema_weights(|t| Ok((flat_weights(t), t.eval_loss(&mw).unwrap()))).unwrap();
+    let loss_trained = trainer.eval_loss(&mw).unwrap();
+    assert_eq!(flat_weights(&trainer), trained, "the trained weights are back after the swap");
+    assert!(max_abs_diff(&trained, &averaged) > 1e-5, "the average lags the trained weights");
+    assert_ne!(loss_avg, loss_trained);
+    // A checkpoint carries the average; the resumed trainer swaps in the same weights.
+    let dir = tempfile::tempdir().unwrap();
+    trainer.save_with_optimizer(dir.path()).unwrap();
+    assert!(dir.path().join(checkpoint::EMA_FILE).is_file());
+    let mut resumed = RtnTrainer::load(dir.path(), &Device::Cpu).unwrap();
+    assert_eq!(flat_weights(&resumed), trained);
+    let again = resumed.with_ema_weights(|t| Ok(flat_weights(t))).unwrap();
+    assert_eq!(again, averaged);
+    // Without a moving average, the swap is a no-op; a decay outside (0, 1) is refused.
+    let plain = RtnTrainer::new(&tiny(), stats.clone(), &Device::Cpu).unwrap();
+    assert!(!plain.has_ema());
+    let mut bad = tiny();
+    bad.train.ema_decay = Some(1.0);
+    let err = RtnTrainer::new(&bad, stats, &Device::Cpu).err().expect("decay 1 is refused").to_string();
+    assert!(err.contains("EMA decay"), "{err}");
+}

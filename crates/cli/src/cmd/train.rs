@@ -77,6 +77,11 @@ pub struct RtnArgs {
     /// Seed of the synthetic data and of the trainer.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Decay of a moving average of the weights kept beside the trained ones (not in the
+    /// paper). Each epoch both are validated and the better one becomes the best checkpoint;
+    /// 0 keeps no average (the paper's recipe exactly).
+    #[arg(long, default_value_t = 0.999)]
+    pub ema: f64,
 }
 
 /// Runs a `zoo train` subcommand.
@@ -101,6 +106,12 @@ pub struct TrainState {
     pub best_valid: Option<f64>,
     /// Epoch of the best validation loss (1-based).
     pub best_epoch: usize,
+    /// Validation loss of the moving-average weights per epoch (runs that keep one).
+    #[serde(default)]
+    pub valid_loss_ema: Vec<f64>,
+    /// Whether the best checkpoint holds the moving-average weights.
+    #[serde(default)]
+    pub best_is_ema: bool,
     /// Seconds of training so far.
     pub seconds: f64,
     /// Training windows per second over the run.
@@ -216,6 +227,13 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
             config.train.batch_size = a.batch_size;
             config.train.learning_rate = a.lr;
             config.train.seed = a.seed;
+            if !(0.0..1.0).contains(&a.ema) {
+                bail!(
+                    "--ema {} is not a decay in [0, 1) (0.999 averages over about 1000 steps; 0 turns it off)",
+                    a.ema
+                );
+            }
+            config.train.ema_decay = (a.ema > 0.0).then_some(a.ema);
             apply_variant(&mut config, a.variant, steps_per_epoch * a.epochs as u64);
             let stats = fit_stats(&config, &train_windows)?;
             let trainer = RtnTrainer::new(&config, stats, &device)?;
@@ -283,27 +301,48 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
             vsum += trainer.eval_loss(c)? as f64 * c.len() as f64;
         }
         let vloss = vsum / valid_windows.len() as f64;
+        let vloss_ema = if trainer.has_ema() {
+            let v = trainer.with_ema_weights(|t| {
+                let mut s = 0.0;
+                for c in valid_windows.chunks(64) {
+                    s += t.eval_loss(c)? as f64 * c.len() as f64;
+                }
+                Ok(s / valid_windows.len() as f64)
+            })?;
+            state.valid_loss_ema.push(v);
+            Some(v)
+        } else {
+            None
+        };
+        let use_ema = vloss_ema.is_some_and(|v| v < vloss);
+        let vbest = if use_ema { vloss_ema.unwrap_or(vloss) } else { vloss };
         state.epoch += 1;
         state.steps = trainer.steps();
         state.train_loss.push(sum / n as f64);
         state.valid_loss.push(vloss);
         state.seconds = seconds_before + started.elapsed().as_secs_f64();
         state.windows_per_second = (state.epoch * train_windows.len()) as f64 / state.seconds;
-        let best = state.best_valid.is_none_or(|b| vloss < b);
+        let best = state.best_valid.is_none_or(|b| vbest < b);
         if best {
-            trainer.save(&out)?;
-            state.best_valid = Some(vloss);
+            if use_ema {
+                trainer.with_ema_weights(|t| t.save(&out))?;
+            } else {
+                trainer.save(&out)?;
+            }
+            state.best_valid = Some(vbest);
             state.best_epoch = state.epoch;
+            state.best_is_ema = use_ema;
         }
         trainer.save_with_optimizer(&out.join(LAST_DIR))?;
         write_json_atomic(&out.join(STATE_FILE), &state)?;
         plot::loss_curve(&out.join("loss_curve.png"), &state.train_loss, &state.valid_loss)?;
         println!(
-            "epoch {:>3}: train loss {:.5}  valid loss {:.5}{}  {:.1} windows/s  {:.0} s",
+            "epoch {:>3}: train loss {:.5}  valid loss {:.5}{}{}  {:.1} windows/s  {:.0} s",
             state.epoch,
             sum / n as f64,
             vloss,
-            if best { " (best)" } else { "" },
+            vloss_ema.map(|v| format!("  averaged {v:.5}")).unwrap_or_default(),
+            if best { if use_ema { " (best: averaged)" } else { " (best)" } } else { "" },
             train_windows.len() as f64 / epoch_secs,
             epoch_secs
         );
@@ -316,6 +355,8 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
         "steps": state.steps,
         "best_epoch": state.best_epoch,
         "best_valid_loss": state.best_valid,
+        "best_is_moving_average": state.best_is_ema,
+        "ema_decay": trainer.config().train.ema_decay,
         "final_train_loss": state.train_loss.last(),
         "seconds": state.seconds,
         "windows_per_second": state.windows_per_second,
