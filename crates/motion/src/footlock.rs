@@ -13,14 +13,20 @@
 //!   the transition, or in the target frame when it ends it, so the transition still joins both;
 //! - between contacts the horizontal correction is interpolated linearly in time, from zero at
 //!   the context frame to zero at the target frame;
+//! - only `strength` (default 1/2) of that correction is applied: in the bandai2 benchmark a
+//!   full pin moved the legs away from the ground truth more than half a pin did, for a little
+//!   less skate;
+//! - a foot that moves faster than `lift_speed` while its ankle or a toe is within
+//!   `lift_height` of the ground is raised towards that clearance (a swinging foot is off the
+//!   ground; a learned transition tends to drag it, which reads as skate);
 //! - the ankle reaches its corrected position by two-bone IK of hip, knee and ankle (the knee
 //!   stays in its bend plane); the toes move with the ankle, so the foot keeps the orientation
 //!   the model gave it (locking toes on their own turns the foot and costs accuracy: on the
 //!   bandai2 benchmark at n = 30 it raised L2Q from 0.85 to 1.02 for the same skate).
 //!
-//! It needs the whole transition (it is applied by `generate`, after the target blend), and it
-//! changes horizontal positions only. Positions are `f32` global positions, joint-major, `+Y`
-//! up, in clip units (cm for bandai2).
+//! It needs the whole transition (it is applied by `generate`, after the target blend). It
+//! changes horizontal positions, and heights only where it lifts a dragged foot. Positions are
+//! `f32` global positions, joint-major, `+Y` up, in clip units (cm for bandai2).
 
 /// One leg: joints from the hip down (indices into the skeleton).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -47,9 +53,14 @@ pub struct FootLock {
     pub lock_speed: f32,
     /// Horizontal speed from which a joint is moving on purpose and not locked (default 16).
     pub swing_speed: f32,
-    /// Fraction of the correction applied, in `0..=1` (default 1: planted feet fully pinned;
-    /// lower values trade foot skate for staying closer to the generated motion).
+    /// Fraction of the horizontal correction applied, in `0..=1` (default 0.5: planted feet
+    /// keep half their slide; 1 pins them, at a larger departure from the generated motion).
     pub strength: f32,
+    /// Horizontal ankle speed (clip units per frame) from which a foot near the ground is lifted
+    /// (default 4 cm/frame; 0 turns lifting off).
+    pub lift_speed: f32,
+    /// Clearance above the ground a moving foot is lifted towards (default 4 cm).
+    pub lift_height: f32,
 }
 
 impl FootLock {
@@ -73,7 +84,9 @@ impl FootLock {
             contact_height: 5.0,
             lock_speed: 8.0,
             swing_speed: 16.0,
-            strength: 1.0,
+            strength: 0.5,
+            lift_speed: 4.0,
+            lift_height: 4.0,
         })
     }
 
@@ -92,11 +105,17 @@ impl FootLock {
         };
         for leg in &self.legs {
             let offsets = self.offsets(n, |t| frame(t, leg.ankle));
+            // Ground level of the ankle and of each toe: its lowest height over the window.
+            let ground: Vec<f32> = std::iter::once(leg.ankle)
+                .chain(leg.toes.iter().copied())
+                .map(|j| (-1..=n as isize).map(|u| frame(u, j)[1]).fold(f32::INFINITY, f32::min))
+                .collect();
             for (t, o) in offsets.iter().enumerate() {
                 let f = &mut frames[t * d..(t + 1) * d];
                 let get = |f: &[f32], j: usize| glam::Vec3::new(f[3 * j], f[3 * j + 1], f[3 * j + 2]);
                 let (hip, knee, ankle) = (get(f, leg.hip), get(f, leg.knee), get(f, leg.ankle));
-                let goal = ankle + self.strength * glam::Vec3::new(o[0], 0.0, o[1]);
+                let lift = self.lift(t, leg, &ground, &frame);
+                let goal = ankle + glam::Vec3::new(self.strength * o[0], lift, self.strength * o[1]);
                 let (new_knee, new_ankle) = two_bone_ik(hip, knee, ankle, goal);
                 let set = |f: &mut [f32], j: usize, p: glam::Vec3| f[3 * j..3 * j + 3].copy_from_slice(&p.to_array());
                 set(f, leg.knee, new_knee);
@@ -111,6 +130,24 @@ impl FootLock {
 }
 
 impl FootLock {
+    /// Height to add to the ankle (and toes) at transition frame `t`: a foot moving faster than
+    /// `lift_speed` with its ankle or a toe closer than `lift_height` to the ground is raised
+    /// towards that clearance, fully from twice `lift_speed` on (a swinging foot is off the
+    /// ground; a learned transition tends to drag it).
+    fn lift(&self, t: usize, leg: &Leg, ground: &[f32], frame: &impl Fn(isize, usize) -> [f32; 3]) -> f32 {
+        if self.lift_speed <= 0.0 || self.lift_height <= 0.0 {
+            return 0.0;
+        }
+        let (cur, last) = (frame(t as isize, leg.ankle), frame(t as isize - 1, leg.ankle));
+        let v = (cur[0] - last[0]).hypot(cur[2] - last[2]);
+        let clearance = std::iter::once(leg.ankle)
+            .chain(leg.toes.iter().copied())
+            .zip(ground)
+            .map(|(j, g)| frame(t as isize, j)[1] - g)
+            .fold(f32::INFINITY, f32::min);
+        ((v - self.lift_speed) / self.lift_speed).clamp(0.0, 1.0) * (self.lift_height - clearance).max(0.0)
+    }
+
     /// Horizontal corrections `(x, z)` of one joint for transition frames `0..n`; `frame(t)`
     /// gives its position at `t` in `-1..=n` (`-1` the context frame, `n` the target).
     fn offsets(&self, n: usize, frame: impl Fn(isize) -> [f32; 3]) -> Vec<[f32; 2]> {
@@ -250,7 +287,8 @@ mod tests {
     #[test]
     fn a_sliding_planted_foot_is_held_and_the_target_is_kept() {
         let (names, parents) = skeleton();
-        let lock = FootLock::from_skeleton(&names, &parents).unwrap();
+        let mut lock = FootLock::from_skeleton(&names, &parents).unwrap();
+        lock.strength = 1.0;
         let d = 15;
         // The body walks forward while the planted foot slides 0.5 cm per frame (skate), then
         // the foot lifts (frames 10..16) and lands ahead; 20 frames and the target.
@@ -286,6 +324,31 @@ mod tests {
             // The foot keeps its orientation.
             let foot = |f: &[f32]| Vec3::from_slice(&f[t * d + 12..]) - Vec3::from_slice(&f[t * d + 9..]);
             assert!((foot(&frames) - foot(&raw)).length() < 1e-4, "frame {t}");
+        }
+    }
+
+    #[test]
+    fn a_dragged_swinging_foot_is_lifted_and_a_planted_one_is_not() {
+        let (names, parents) = skeleton();
+        let lock = FootLock::from_skeleton(&names, &parents).unwrap();
+        let d = 15;
+        // Frames 1..=5 planted (foot still), 6..=10 the foot swings forward 10 cm per frame but
+        // stays on the ground (dragged), 11..=15 planted again; then the target.
+        let foot_x = |t: usize| 10.0 * (t.clamp(5, 10) - 5) as f32;
+        let prev = pose(0.0, 0.0, 0.0);
+        let raw: Vec<f32> = (1..=16).flat_map(|t| pose(3.0 * t as f32, foot_x(t), 0.0)).collect();
+        let mut frames = raw.clone();
+        lock.apply(&prev, &mut frames);
+        let ankle_y = |f: &[f32], t: usize| f[t * d + 10];
+        let toe_y = |f: &[f32], t: usize| f[t * d + 13];
+        for t in 5..10 {
+            // transition frame t is clip frame t + 1: swinging at 10 cm/frame
+            let lifted = ankle_y(&frames, t) - ankle_y(&raw, t);
+            assert!(lifted > 3.0, "frame {t} lifted {lifted}");
+            assert!((toe_y(&frames, t) - toe_y(&raw, t) - lifted).abs() < 1e-3, "the toes follow");
+        }
+        for t in (0..4).chain(11..15) {
+            assert!((ankle_y(&frames, t) - ankle_y(&raw, t)).abs() < 1e-3, "planted frame {t} is not lifted");
         }
     }
 
