@@ -87,6 +87,18 @@ fn train_resume_transition_and_decompress() {
     for f in [0, 30, 59] {
         assert!((t.root_position(f) - ca.root_position(f)).length() < 1e-3);
     }
+    // The same with the foot lock: same frames, A and B untouched, every value finite.
+    let locked = dir.path().join("t_lock.bvh");
+    let args = ["transition", "--model", run_dir, "--from", &format!("{a}:60"), "--to", &format!("{b}:40")];
+    let (ok, stdout, stderr) =
+        run(&[&args[..], &["--frames", "20", "--foot-lock", "--out", locked.to_str().unwrap()]].concat());
+    assert!(ok, "{stdout}\n{stderr}");
+    let tl = zoo_data::bvh::read_file(&locked, &Default::default()).unwrap();
+    assert_eq!(tl.frames(), t.frames());
+    assert!(tl.local_rotations.iter().all(|q| q.is_finite()));
+    for f in (0..60).chain(80..tl.frames()) {
+        assert!((tl.root_position(f) - t.root_position(f)).length() < 1e-3, "frame {f}");
+    }
     let rebuilt = dir.path().join("r.bvh");
     let (ok, stdout, stderr) = run(&["decompress", "--model", run_dir, a, "--out", rebuilt.to_str().unwrap()]);
     assert!(ok, "{stdout}\n{stderr}");

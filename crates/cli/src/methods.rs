@@ -33,15 +33,53 @@ impl RtnMethod {
 /// Global positions (f32, joint-major xyz) of frames given local rotations and root positions,
 /// with `offsets` for joints `1..`.
 pub fn global_positions_f32(task: &TransitionTask<'_>, rot: &[DQuat], roots: &[DVec3], out: &mut Vec<f32>) {
-    let j = task.skeleton.len();
-    let mut lp = vec![DVec3::ZERO; j];
-    lp[1..].copy_from_slice(task.offsets);
+    let mut offsets = vec![DVec3::ZERO; task.skeleton.len()];
+    offsets[1..].copy_from_slice(task.offsets);
+    skeleton_positions_f32(task.skeleton, &offsets, rot, roots, out);
+}
+
+/// Global positions (f32, joint-major xyz) of frames of `skeleton` given local rotations, root
+/// positions and the local `offsets` of every joint (the root's is ignored).
+fn skeleton_positions_f32(
+    skeleton: &zoo_motion::Skeleton,
+    offsets: &[DVec3],
+    rot: &[DQuat],
+    roots: &[DVec3],
+    out: &mut Vec<f32>,
+) {
+    let j = skeleton.len();
+    let mut lp = offsets.to_vec();
     let (mut gr, mut gp) = (vec![DQuat::IDENTITY; j], vec![DVec3::ZERO; j]);
     for (f, root) in roots.iter().enumerate() {
         lp[0] = *root;
-        forward_kinematics_frame(&task.skeleton.parents, &rot[f * j..(f + 1) * j], &lp, &mut gr, &mut gp);
+        forward_kinematics_frame(&skeleton.parents, &rot[f * j..(f + 1) * j], &lp, &mut gr, &mut gp);
         out.extend(gp.iter().flat_map(|p| [p.x as f32, p.y as f32, p.z as f32]));
     }
+}
+
+/// Foot-locks a fitted transition ([`zoo_motion::footlock`] with the skeleton's defaults): the
+/// fitted skeleton's own joint positions, after the last context frame `prev` and followed by
+/// the `target` frame, are locked and fitted again. Locking the skeleton's positions (exact bone
+/// lengths) rather than the network's makes the refit reproduce the locked feet exactly. A
+/// skeleton without joints named `foot` is returned unchanged.
+pub fn foot_lock_fitted(
+    skeleton: &zoo_motion::Skeleton,
+    offsets: &[DVec3],
+    fitted: (Vec<DQuat>, Vec<DVec3>),
+    prev: &[f32],
+    target: &[f32],
+    reference: &[DQuat],
+) -> (Vec<DQuat>, Vec<DVec3>) {
+    let Some(lock) = zoo_motion::footlock::FootLock::from_skeleton(&skeleton.names, &skeleton.parents) else {
+        return fitted;
+    };
+    let (rot, root) = fitted;
+    let mut positions = Vec::with_capacity((root.len() + 1) * target.len());
+    skeleton_positions_f32(skeleton, offsets, &rot, &root, &mut positions);
+    let n = positions.len();
+    positions.extend_from_slice(target);
+    lock.apply(prev, &mut positions);
+    fit_frames(skeleton, offsets, &positions[..n], reference)
 }
 
 /// Global positions of a task's context frames and of its target frame and the one after it:
@@ -134,10 +172,8 @@ impl TransitionMethod for OnnxMethod {
 /// and the target frame): joint rotations fitted to them with twist from the interpolation of
 /// the context and target rotations; the network's positions are kept as the raw output.
 ///
-/// With `foot_lock`, the fitted skeleton's own joint positions are foot-locked
-/// ([`zoo_motion::footlock`], after the last context frame `prev`) and fitted again: locking the
-/// skeleton's positions (exact bone lengths) rather than the network's makes the refit
-/// reproduce the locked feet exactly.
+/// With `foot_lock`, the fit is foot-locked ([`foot_lock_fitted`], after the last context
+/// frame `prev`).
 fn fit_transition(t: &TransitionTask<'_>, prev: &[f32], y: &[f32], foot_lock: bool) -> Transition {
     let j = t.skeleton.len();
     let d = 3 * j;
@@ -145,16 +181,12 @@ fn fit_transition(t: &TransitionTask<'_>, prev: &[f32], y: &[f32], foot_lock: bo
     let reference = &interp.rot[..t.frames * j];
     let mut offsets = vec![DVec3::ZERO; j];
     offsets[1..].copy_from_slice(t.offsets);
-    let (mut rot, mut root) = fit_frames(t.skeleton, &offsets, &y[..t.frames * d], reference);
+    let mut fitted = fit_frames(t.skeleton, &offsets, &y[..t.frames * d], reference);
     if foot_lock {
-        if let Some(lock) = zoo_motion::footlock::FootLock::from_skeleton(&t.skeleton.names, &t.skeleton.parents) {
-            let mut fitted = Vec::with_capacity(y.len());
-            global_positions_f32(t, &rot, &root, &mut fitted);
-            fitted.extend_from_slice(&y[t.frames * d..(t.frames + 1) * d]);
-            lock.apply(prev, &mut fitted);
-            (rot, root) = fit_frames(t.skeleton, &offsets, &fitted[..t.frames * d], reference);
-        }
+        let target = &y[t.frames * d..(t.frames + 1) * d];
+        fitted = foot_lock_fitted(t.skeleton, &offsets, fitted, prev, target, reference);
     }
+    let (rot, root) = fitted;
     let raw = y[..t.frames * d].chunks_exact(3).map(|p| DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64)).collect();
     Transition { root, rot, raw_positions: Some(raw) }
 }

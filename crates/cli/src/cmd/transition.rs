@@ -1,6 +1,6 @@
 //! `zoo transition`: generate a transition between two clips with a trained RTN.
 
-use crate::methods::{clip_positions_f32, fit_frames};
+use crate::methods::{clip_positions_f32, fit_frames, foot_lock_fitted};
 use anyhow::{Context, bail};
 use clap::Args;
 use glam::{DQuat, DVec3};
@@ -31,6 +31,10 @@ pub struct TransitionArgs {
     /// Output BVH: A up to FRAME, the transition, then B from its FRAME on, aligned in space.
     #[arg(long)]
     pub out: PathBuf,
+    /// Foot-lock the transition (`zoo_motion::footlock`: planted feet slide less, dragged feet
+    /// are lifted); legs are found by joints named `foot`.
+    #[arg(long)]
+    pub foot_lock: bool,
 }
 
 /// Parses `PATH:FRAME`.
@@ -116,7 +120,13 @@ pub fn run(a: TransitionArgs) -> anyhow::Result<()> {
         .collect();
     let offsets: Vec<DVec3> =
         ca.positions_at(0).iter().enumerate().map(|(i, p)| if i == 0 { DVec3::ZERO } else { *p }).collect();
-    let (rot, root) = fit_frames(&ca.skeleton, &offsets, generated, &reference);
+    let mut fitted = fit_frames(&ca.skeleton, &offsets, generated, &reference);
+    if a.foot_lock {
+        let prev = &past[past.len() - d..];
+        fitted =
+            foot_lock_fitted(&ca.skeleton, &offsets, fitted, prev, &y[a.frames * d..(a.frames + 1) * d], &reference);
+    }
+    let (rot, root) = fitted;
 
     let mut out = ca.slice(0, fa);
     for f in 0..a.frames {
