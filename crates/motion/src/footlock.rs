@@ -104,12 +104,12 @@ impl FootLock {
             [src[3 * j], src[3 * j + 1], src[3 * j + 2]]
         };
         for leg in &self.legs {
-            let offsets = self.offsets(n, |t| frame(t, leg.ankle));
             // Ground level of the ankle and of each toe: its lowest height over the window.
             let ground: Vec<f32> = std::iter::once(leg.ankle)
                 .chain(leg.toes.iter().copied())
                 .map(|j| (-1..=n as isize).map(|u| frame(u, j)[1]).fold(f32::INFINITY, f32::min))
                 .collect();
+            let offsets = self.offsets(n, ground[0], |t| frame(t, leg.ankle));
             for (t, o) in offsets.iter().enumerate() {
                 let f = &mut frames[t * d..(t + 1) * d];
                 let get = |f: &[f32], j: usize| glam::Vec3::new(f[3 * j], f[3 * j + 1], f[3 * j + 2]);
@@ -149,9 +149,9 @@ impl FootLock {
     }
 
     /// Horizontal corrections `(x, z)` of one joint for transition frames `0..n`; `frame(t)`
-    /// gives its position at `t` in `-1..=n` (`-1` the context frame, `n` the target).
-    fn offsets(&self, n: usize, frame: impl Fn(isize) -> [f32; 3]) -> Vec<[f32; 2]> {
-        let ground = (-1..=n as isize).map(|t| frame(t)[1]).fold(f32::INFINITY, f32::min);
+    /// gives its position at `t` in `-1..=n` (`-1` the context frame, `n` the target), `ground`
+    /// its lowest height over those frames.
+    fn offsets(&self, n: usize, ground: f32, frame: impl Fn(isize) -> [f32; 3]) -> Vec<[f32; 2]> {
         let weight: Vec<f32> = (0..n as isize)
             .map(|t| {
                 let (cur, last) = (frame(t), frame(t - 1));

@@ -86,6 +86,13 @@ pub fn fit_stats(config: &Config, windows: &[MotionWindow]) -> RtnResult<Feature
     Ok(stats)
 }
 
+/// One variable of a trainer and its moving average.
+struct Averaged {
+    name: String,
+    var: candle_core::Var,
+    avg: Tensor,
+}
+
 /// Trains an RTN: owns the variables, the optimiser state, the statistics and the random source.
 pub struct RtnTrainer {
     config: Config,
@@ -98,7 +105,7 @@ pub struct RtnTrainer {
     step: u64,
     /// Moving average of every variable, in the optimiser's (sorted) order, when
     /// `config.train.ema_decay` is set.
-    ema: Option<Vec<(candle_core::Var, Tensor)>>,
+    ema: Option<Vec<Averaged>>,
 }
 
 impl RtnTrainer {
@@ -137,7 +144,9 @@ impl RtnTrainer {
             Some(_) => Some(
                 named
                     .iter()
-                    .map(|(_, v)| Ok((v.clone(), v.as_tensor().detach().copy()?)))
+                    .map(|(name, var)| {
+                        Ok(Averaged { name: name.clone(), var: var.clone(), avg: var.as_tensor().detach().copy()? })
+                    })
                     .collect::<RtnResult<Vec<_>>>()?,
             ),
             None => None,
@@ -262,7 +271,7 @@ impl RtnTrainer {
         };
         let t = self.step as f64;
         let d = decay.min((1.0 + t) / (10.0 + t));
-        for (var, avg) in ema.iter_mut() {
+        for Averaged { var, avg, .. } in ema.iter_mut() {
             // Detached: the average must not keep a graph back to every earlier step.
             *avg = (avg.affine(d, 0.0)? + var.as_tensor().detach().affine(1.0 - d, 0.0)?)?.detach();
         }
@@ -282,45 +291,35 @@ impl RtnTrainer {
             return f(self);
         };
         let mut saved = Vec::with_capacity(ema.len());
-        for (var, avg) in ema {
+        for Averaged { var, avg, .. } in ema {
             saved.push(var.as_tensor().detach().copy()?);
             var.set(avg)?;
         }
         let out = f(self);
         if let Some(ema) = self.ema.as_ref() {
-            for ((var, _), w) in ema.iter().zip(&saved) {
-                var.set(w)?;
+            for (a, w) in ema.iter().zip(&saved) {
+                a.var.set(w)?;
             }
         }
         out
     }
 
     /// The moving-average tensors by variable name (for `--resume`), or `None`.
-    pub fn ema_state(&self) -> RtnResult<Option<std::collections::HashMap<String, Tensor>>> {
-        let Some(ema) = self.ema.as_ref() else { return Ok(None) };
-        let data = self.varmap.data().lock().expect("varmap lock");
-        let mut out = std::collections::HashMap::new();
-        for (name, var) in data.iter() {
-            if let Some((_, avg)) = ema.iter().find(|(v, _)| v.as_tensor().id() == var.as_tensor().id()) {
-                out.insert(format!("ema.{name}"), avg.clone());
-            }
-        }
-        Ok(Some(out))
+    pub fn ema_state(&self) -> Option<std::collections::HashMap<String, Tensor>> {
+        let ema = self.ema.as_ref()?;
+        Some(ema.iter().map(|a| (format!("ema.{}", a.name), a.avg.clone())).collect())
     }
 
     fn set_ema_state(&mut self, state: &std::collections::HashMap<String, Tensor>) -> RtnResult<()> {
         let Some(ema) = self.ema.as_mut() else { return Ok(()) };
-        let data = self.varmap.data().lock().expect("varmap lock");
-        for (name, var) in data.iter() {
-            let Some(saved) = state.get(&format!("ema.{name}")) else {
-                return Err(RtnError::Config(format!("the moving average has no tensor for {name}")));
+        for a in ema.iter_mut() {
+            let Some(saved) = state.get(&format!("ema.{}", a.name)) else {
+                return Err(RtnError::Config(format!("the moving average has no tensor for {}", a.name)));
             };
-            if saved.dims() != var.as_tensor().dims() {
-                return Err(RtnError::Config(format!("the moving average of {name} has the wrong shape")));
+            if saved.dims() != a.var.as_tensor().dims() {
+                return Err(RtnError::Config(format!("the moving average of {} has the wrong shape", a.name)));
             }
-            if let Some((_, avg)) = ema.iter_mut().find(|(v, _)| v.as_tensor().id() == var.as_tensor().id()) {
-                *avg = saved.clone();
-            }
+            a.avg = saved.clone();
         }
         Ok(())
     }
@@ -347,7 +346,7 @@ impl RtnTrainer {
     pub fn save_with_optimizer(&self, dir: &std::path::Path) -> RtnResult<()> {
         self.save(dir)?;
         crate::checkpoint::save_tensors(dir, crate::checkpoint::OPTIMIZER_FILE, &self.opt.state()?)?;
-        if let Some(ema) = self.ema_state()? {
+        if let Some(ema) = self.ema_state() {
             crate::checkpoint::save_tensors(dir, crate::checkpoint::EMA_FILE, &ema)?;
         }
         Ok(())

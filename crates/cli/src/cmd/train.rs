@@ -181,6 +181,15 @@ pub fn write_json_atomic<T: Serialize>(path: &Path, value: &T) -> anyhow::Result
     Ok(())
 }
 
+/// Mean validation loss over `windows`, in batches of 64.
+fn valid_loss(trainer: &mut RtnTrainer, windows: &[MotionWindow]) -> RtnResult<f64> {
+    let mut sum = 0.0;
+    for c in windows.chunks(64) {
+        sum += trainer.eval_loss(c)? as f64 * c.len() as f64;
+    }
+    Ok(sum / windows.len() as f64)
+}
+
 fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
     let device = candle_core::Device::Cpu;
     let out = a.resume.clone().unwrap_or_else(|| a.out.clone());
@@ -296,26 +305,16 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
         }
         pb.finish_and_clear();
         let epoch_secs = epoch_start.elapsed().as_secs_f64();
-        let mut vsum = 0.0;
-        for c in valid_windows.chunks(64) {
-            vsum += trainer.eval_loss(c)? as f64 * c.len() as f64;
-        }
-        let vloss = vsum / valid_windows.len() as f64;
+        let vloss = valid_loss(&mut trainer, &valid_windows)?;
         let vloss_ema = if trainer.has_ema() {
-            let v = trainer.with_ema_weights(|t| {
-                let mut s = 0.0;
-                for c in valid_windows.chunks(64) {
-                    s += t.eval_loss(c)? as f64 * c.len() as f64;
-                }
-                Ok(s / valid_windows.len() as f64)
-            })?;
+            let v = trainer.with_ema_weights(|t| valid_loss(t, &valid_windows))?;
             state.valid_loss_ema.push(v);
             Some(v)
         } else {
             None
         };
         let use_ema = vloss_ema.is_some_and(|v| v < vloss);
-        let vbest = if use_ema { vloss_ema.unwrap_or(vloss) } else { vloss };
+        let vbest = vloss_ema.filter(|_| use_ema).unwrap_or(vloss);
         state.epoch += 1;
         state.steps = trainer.steps();
         state.train_loss.push(sum / n as f64);
