@@ -18,6 +18,7 @@ pub mod fit;
 pub mod fk;
 pub mod footlock;
 pub mod quat;
+pub mod rng;
 pub mod skeleton;
 
 pub use clip::Clip;
