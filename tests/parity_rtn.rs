@@ -17,7 +17,7 @@ use candle_nn::{VarBuilder, VarMap};
 use std::collections::HashMap;
 use zoo_export::OnnxModel;
 use zoo_export::rtn::{RtnExportOptions, export_rtn, export_rtn_dir};
-use zoo_motion::features::{self, FeatureStats, MeanStd};
+use zoo_rtn::features::{self, FeatureStats, MeanStd};
 use zoo_rtn::model::{OffsetTensors, RtnInputs, RtnState};
 use zoo_rtn::{Config, InitState, Rtn};
 use zoo_runtime::{MotionError, MotionModel, MotionState, TransitionModel};

@@ -117,7 +117,7 @@ fn allocations_per_step() {
 fn transition_allocations() {
     use candle_core::{DType, Device};
     use candle_nn::{VarBuilder, VarMap};
-    use zoo_motion::features::{FeatureStats, MeanStd};
+    use zoo_rtn::features::{FeatureStats, MeanStd};
     let parents = [None, Some(0), Some(0), Some(2)];
     let config = zoo_rtn::Config::tiny().with_parents(&parents);
     let varmap = VarMap::new();

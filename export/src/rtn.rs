@@ -31,7 +31,7 @@ use candle_nn::VarMap;
 use serde_json::json;
 use std::collections::HashMap;
 use std::path::Path;
-use zoo_motion::features::{FeatureStats, MeanStd};
+use zoo_rtn::features::{FeatureStats, MeanStd};
 use zoo_rtn::{Config, InitState};
 
 /// Format version of the metadata written (`zoo_runtime::FORMAT_VERSION`).

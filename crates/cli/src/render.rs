@@ -9,7 +9,7 @@
 use anyhow::{Context, Result, bail};
 use std::path::Path;
 use tiny_skia::{Color, FillRule, Paint, PathBuilder, Pixmap, PixmapPaint, Rect, Stroke, Transform};
-use zoo_data::terrain::Heightfield;
+use zoo_data::terrain::Heightmap;
 use zoo_motion::Clip;
 use zoo_motion::glam::DVec3;
 
@@ -20,7 +20,7 @@ pub struct RenderClip {
     /// The motion (cm, Y up).
     pub clip: Clip,
     /// The ground (`None`: flat floor at y = 0).
-    pub terrain: Option<Heightfield>,
+    pub terrain: Option<Heightmap>,
 }
 
 /// What to draw.
@@ -49,7 +49,7 @@ struct View {
     left: DVec3,
 }
 
-fn ground(t: &Option<Heightfield>, x: f64, z: f64) -> f64 {
+fn ground(t: &Option<Heightmap>, x: f64, z: f64) -> f64 {
     t.as_ref().map_or(0.0, |t| t.height(x, z))
 }
 

@@ -1,7 +1,7 @@
 //! Times reading every `.bvh`/`.bvh.gz` file of a folder with [`zoo_data::bvh::read_file`]:
 //! single-threaded, then in parallel with rayon.
 //!
-//! `cargo run --release -p zoo-data --example bvh_read_bench -- ../shared/data/bandai2`
+//! `cargo run --release -p zoo-data --example bvh_read_bench -- DATASET_DIR` (e.g. the bandai2 folder)
 //!
 //! Measured 2026-11-22 on the shared 2-core machine (load average ~10, so wall times are
 //! inflated): all 962 bandai2 files (149,239 frames, 199 MB of text) take 1.24 s of CPU
@@ -15,7 +15,10 @@ use std::time::Instant;
 use zoo_data::bvh::{ReadOptions, read_file};
 
 fn main() {
-    let dir = std::env::args().nth(1).unwrap_or_else(|| "../shared/data/bandai2".into());
+    let Some(dir) = std::env::args().nth(1) else {
+        eprintln!("usage: bvh_read_bench DATASET_DIR (a folder of .bvh / .bvh.gz files, e.g. bandai2)");
+        std::process::exit(2);
+    };
     let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
         .unwrap_or_else(|e| panic!("{dir}: {e}"))
         .filter_map(|e| e.ok().map(|e| e.path()))

@@ -5,7 +5,7 @@
 //! blocks and any frame time. Rotation channels map to an [`EulerOrder`] in file order
 //! (`Zrotation Xrotation Yrotation` is `q = qz * qx * qy`); angles are degrees. Position
 //! channels become the joint's local translation; joints without them use their `OFFSET` in
-//! every frame. Quaternions are normalised but their signs are left as the Euler conversion
+//! every frame. Quaternions are normalized but their signs are left as the Euler conversion
 //! gives them: callers that need continuity call [`Clip::remove_sign_flips`].
 //!
 //! The motion section may hold more rows than `Frames:` declares: the declared count is read
@@ -62,6 +62,14 @@ pub fn read_file(path: &Path, opts: &ReadOptions) -> Result<Clip, BvhError> {
     } else {
         parse_bytes(&raw, path, opts)
     }
+}
+
+/// Reads a clip the way the models see it: the dummy root dropped
+/// ([`ReadOptions::drop_dummy_root`]) and quaternion sign flips removed.
+pub fn read_model_clip(path: &Path) -> Result<Clip, BvhError> {
+    let mut clip = read_file(path, &ReadOptions { drop_dummy_root: true })?;
+    clip.remove_sign_flips();
+    Ok(clip)
 }
 
 /// Decompresses a (possibly multi-member) gzip buffer.

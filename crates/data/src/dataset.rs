@@ -1,5 +1,5 @@
 //! Datasets: folders of BVH clips, name-glob splits, sliding windows with the benchmark's
-//! centring and facing unification, and normalisation statistics.
+//! centring and facing unification, and normalization statistics.
 
 use crate::bvh::{self, BvhError, ReadOptions};
 use glam::{DQuat, DVec3};
@@ -299,7 +299,7 @@ pub fn prepare_window(rot: &mut [DQuat], pos: &mut [DVec3], joints: usize, opts:
     }
 }
 
-/// Normalisation statistics of global joint positions (benchmark step 6).
+/// Normalization statistics of global joint positions (benchmark step 6).
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct PositionStats {
     /// Mean per coordinate (joint-major: `j * 3 + axis`).

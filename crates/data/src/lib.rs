@@ -6,5 +6,6 @@ pub mod bvh;
 pub mod dataset;
 pub mod metrics;
 pub mod plausibility;
+pub mod position_method;
 pub mod synth;
 pub mod terrain;

@@ -23,7 +23,7 @@ pub fn l2q(pred: &[DQuat], gt: &[DQuat], joints: usize) -> f64 {
     total / frames as f64
 }
 
-/// L2P: global positions normalised per coordinate with training `mean`/`std`
+/// L2P: global positions normalized per coordinate with training `mean`/`std`
 /// (joint-major, 3 per joint), per-frame L2 norm over coordinates, mean over frames.
 pub fn l2p(pred: &[DVec3], gt: &[DVec3], joints: usize, std: &[f64]) -> f64 {
     // (p - m) / s - (g - m) / s = (p - g) / s: the mean cancels.
@@ -52,7 +52,7 @@ pub fn aco(pred: &[DVec3], gt: &[DVec3]) -> f64 {
 }
 
 /// NPSS of global quaternions, `(windows, frames, joints)`: per (window, component) the
-/// normalised cumulative power spectrum (real part of the FFT along time, squared), EMD = L1
+/// normalized cumulative power spectrum (real part of the FFT along time, squared), EMD = L1
 /// distance of the cumulative sums, averaged with the ground truth's total power as weight.
 pub fn npss(pred: &[DQuat], gt: &[DQuat], windows: usize, frames: usize, joints: usize) -> f64 {
     let dims = joints * 4;

@@ -4,17 +4,17 @@
 //! Every function takes clips with an optional terrain each (`None`: flat floor at y = 0);
 //! heights are measured above the ground under the joint.
 
-use crate::terrain::Heightfield;
+use crate::terrain::Heightmap;
 use serde::Serialize;
 use zoo_motion::Clip;
 
 /// One clip and the ground under it.
-pub type ClipOnGround<'a> = (&'a Clip, Option<&'a Heightfield>);
+pub type ClipOnGround<'a> = (&'a Clip, Option<&'a Heightmap>);
 
 /// The foot joints of the foot-skate metric (bandai2 names).
 pub const SKATE_JOINTS: [&str; 4] = ["Foot_L", "Toes_L", "Foot_R", "Toes_R"];
 
-fn ground(t: Option<&Heightfield>, x: f64, z: f64) -> f64 {
+fn ground(t: Option<&Heightmap>, x: f64, z: f64) -> f64 {
     t.map_or(0.0, |t| t.height(x, z))
 }
 
@@ -31,7 +31,7 @@ pub fn median(values: &[f64]) -> f64 {
 
 /// Heights above the ground of each skate joint, per clip, frame-major (`frames x 4`),
 /// and the global positions. Joints missing from the skeleton make the clip's entry empty.
-fn foot_tracks(clip: &Clip, terrain: Option<&Heightfield>) -> Option<Vec<[(f64, f64, f64); 4]>> {
+fn foot_tracks(clip: &Clip, terrain: Option<&Heightmap>) -> Option<Vec<[(f64, f64, f64); 4]>> {
     let idx: Vec<usize> = SKATE_JOINTS.iter().map(|n| clip.skeleton.index_of(n)).collect::<Option<_>>()?;
     let (_, gp) = clip.global();
     let j = clip.joints();
@@ -157,7 +157,7 @@ pub struct Plausibility {
 
 /// All figures of a labelled motion set (`label` groups clips for the median speeds, e.g.
 /// `walk` / `run`).
-pub fn measure(clips: &[(&Clip, Option<&Heightfield>, &str)]) -> Plausibility {
+pub fn measure(clips: &[(&Clip, Option<&Heightmap>, &str)]) -> Plausibility {
     let on_ground: Vec<ClipOnGround> = clips.iter().map(|(c, t, _)| (*c, *t)).collect();
     let g = planted_heights(&on_ground);
     let mut labels: Vec<&str> = clips.iter().map(|c| c.2).collect();

@@ -9,14 +9,14 @@ pub fn heading_angle(dir: DVec3) -> f64 {
 }
 
 /// The root's forward direction on the ground: `root_rotation * local_forward` with its Y
-/// removed, normalised (zero when it points straight up or down).
+/// removed, normalized (zero when it points straight up or down).
 pub fn ground_forward(root_rotation: DQuat, local_forward: DVec3) -> DVec3 {
     let f = root_rotation * local_forward;
     DVec3::new(f.x, 0.0, f.z).normalize_or_zero()
 }
 
 /// Rotation about +Y that turns `reference` into the ground direction `forward`:
-/// `normalise(quat_between(reference, forward))` (benchmark step 5 uses `reference = +X`).
+/// `normalize(quat_between(reference, forward))` (benchmark step 5 uses `reference = +X`).
 pub fn yaw_between(reference: DVec3, forward: DVec3) -> DQuat {
     quat_between(reference, forward).normalize()
 }

@@ -1,9 +1,12 @@
 //! The small motion core of zoo.
 //!
 //! Skeletons, clips of local joint transforms, quaternion and Euler utilities, forward
-//! kinematics, facing/heading helpers and transition blending. Offline data tools, the
-//! candle models and the engine-side runtime all read motion through these types, so they
-//! share one implementation of every convention (units, frames, rotation orders).
+//! kinematics, facing/heading helpers, transition blending, the positional features the
+//! runtime shares with training, terrain heightmaps, the seeded random generator, and the
+//! motion pipeline around a model (fitting rotations to generated positions, the foot lock,
+//! splicing clips). Offline data tools, the candle models and the engine-side runtime all read
+//! motion through these types, so they share one implementation of every convention (units,
+//! frames, rotation orders). Nothing here reads files or depends on candle.
 //!
 //! Conventions: quaternions are glam `DQuat` (stored x, y, z, w; the benchmark prints w first),
 //! positions are `DVec3` in the clip's own units (bandai2 and the synthetic data: cm, Y up).
@@ -17,9 +20,11 @@ pub mod features;
 pub mod fit;
 pub mod fk;
 pub mod footlock;
+pub mod pipeline;
 pub mod quat;
 pub mod rng;
 pub mod skeleton;
+pub mod terrain;
 
 pub use clip::Clip;
 pub use euler::EulerOrder;

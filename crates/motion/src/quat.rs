@@ -3,8 +3,8 @@
 use glam::{DQuat, DVec3};
 
 /// Spherical interpolation from `a` to `b` at `t` in [0, 1], as the benchmark defines it:
-/// inputs are normalised, `b` is flipped into `a`'s hemisphere, plain LERP is used when
-/// `1 - |dot| < 0.01`, and the output is normalised.
+/// inputs are normalized, `b` is flipped into `a`'s hemisphere, plain LERP is used when
+/// `1 - |dot| < 0.01`, and the output is normalized.
 pub fn slerp(a: DQuat, b: DQuat, t: f64) -> DQuat {
     let a = a.normalize();
     let mut b = b.normalize();
@@ -41,8 +41,8 @@ pub fn remove_sign_flips(rotations: &mut [DQuat], joints: usize) {
     }
 }
 
-/// The (unnormalised) quaternion turning direction `a` into `b`: `(|a||b| + a.b, a x b)`.
-/// Normalise it before use; it is undefined for opposite vectors.
+/// The (unnormalized) quaternion turning direction `a` into `b`: `(|a||b| + a.b, a x b)`.
+/// Normalize it before use; it is undefined for opposite vectors.
 pub fn quat_between(a: DVec3, b: DVec3) -> DQuat {
     let c = a.cross(b);
     let w = (a.length_squared() * b.length_squared()).sqrt() + a.dot(b);

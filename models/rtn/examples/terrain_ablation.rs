@@ -21,7 +21,7 @@ static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 use candle_core::Device;
 use zoo_data::synth::{self, SynthConfig};
-use zoo_motion::features::Heightmap;
+use zoo_rtn::features::Heightmap;
 use zoo_rtn::prelude::*;
 
 struct Sequence {
@@ -38,7 +38,7 @@ fn sequences(clips: &[synth::SynthClip]) -> Vec<Sequence> {
             Sequence {
                 positions: gp.iter().flat_map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect(),
                 frames: c.clip.frames(),
-                map: c.terrain.as_ref().expect("terrain clips").to_heightmap(),
+                map: c.terrain.as_ref().expect("terrain clips").clone(),
             }
         })
         .collect()

@@ -10,7 +10,7 @@ use crate::model::Rtn;
 use candle_core::{DType, Device};
 use candle_nn::{VarBuilder, VarMap};
 use std::path::{Path, PathBuf};
-use zoo_motion::features::FeatureStats;
+use crate::features::FeatureStats;
 
 /// File name of the configuration.
 pub const CONFIG_FILE: &str = "config.json";

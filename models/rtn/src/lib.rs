@@ -22,6 +22,8 @@ pub mod amsgrad;
 pub mod checkpoint;
 pub mod config;
 pub mod error;
+pub mod features;
+pub mod method;
 pub mod model;
 pub mod ops;
 pub mod train;
@@ -40,5 +42,5 @@ pub mod prelude {
     pub use crate::error::{RtnError, RtnResult};
     pub use crate::model::{Rtn, RtnInputs, RtnSequence, RtnState};
     pub use crate::train::{MotionWindow, RtnTrainer, fit_stats};
-    pub use zoo_motion::features::{FeatureStats, Heightmap};
+    pub use crate::features::{FeatureStats, Heightmap};
 }

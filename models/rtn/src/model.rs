@@ -341,7 +341,7 @@ pub struct OffsetTensors {
 
 impl OffsetTensors {
     /// From the statistics of features and offsets.
-    pub fn new(stats: &zoo_motion::features::FeatureStats, device: &Device) -> Result<Self> {
+    pub fn new(stats: &crate::features::FeatureStats, device: &Device) -> Result<Self> {
         let d = stats.dim();
         let inv: Vec<f32> = stats.offset.std.iter().map(|s| 1.0 / s).collect();
         let mask = |i: usize| if i < 3 { 0.0 } else { 1.0 };

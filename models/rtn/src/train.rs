@@ -8,7 +8,7 @@ use crate::model::{OffsetTensors, Rtn};
 use crate::transition::{SequenceInput, check_frames, encode_batch, generate};
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{Optimizer, VarBuilder, VarMap};
-use zoo_motion::features::{self, FeatureStats, Heightmap, MeanStd, Moments, YawAbout};
+use crate::features::{self, FeatureStats, Heightmap, MeanStd, Moments, YawAbout};
 
 /// A training window: global joint positions (`frames * joints * 3`, frame-major, at least
 /// [`Config::window_frames`] frames: past context, transition, target and the frame after it;

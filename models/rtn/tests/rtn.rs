@@ -3,7 +3,7 @@
 
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{VarBuilder, VarMap};
-use zoo_motion::features::{self, FeatureStats, Heightmap};
+use zoo_rtn::features::{self, FeatureStats, Heightmap};
 use zoo_rtn::prelude::*;
 use zoo_rtn::train::predict_with_teacher;
 

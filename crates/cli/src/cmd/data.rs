@@ -9,7 +9,6 @@ use serde::Serialize;
 use std::path::PathBuf;
 use std::time::Instant;
 use zoo_data::synth::{self, SynthConfig};
-use zoo_data::terrain::Heightfield;
 use zoo_data::{dataset, metrics};
 use zoo_motion::Skeleton;
 
@@ -136,7 +135,7 @@ fn stats(a: StatsArgs) -> anyhow::Result<()> {
             let frames = c.clip.frames();
             // Heights are measured above the clip's own terrain when it has a heightmap.
             let ground = match zoo_data::terrain::sibling_of(&c.path) {
-                Some(t) => Some(Heightfield::read(&t)?),
+                Some(t) => Some(zoo_data::terrain::read(&t)?),
                 None => None,
             };
             let mut fp = Vec::with_capacity(frames * feet.len());

@@ -5,7 +5,6 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use std::path::{Path, PathBuf};
 use zoo_data::bvh::{ReadOptions, read_file};
-use zoo_data::terrain::Heightfield;
 
 /// Arguments of `zoo render`.
 #[derive(Args)]
@@ -53,7 +52,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     }
     let terrain_path = a.terrain.clone().or_else(|| zoo_data::terrain::sibling_of(&a.clip));
     let terrain = match &terrain_path {
-        Some(p) => Some(Heightfield::read(p)?),
+        Some(p) => Some(zoo_data::terrain::read(p)?),
         None => None,
     };
     let read = ReadOptions { drop_dummy_root: true };
