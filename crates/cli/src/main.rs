@@ -3,6 +3,7 @@
 mod cmd;
 mod methods;
 mod plot;
+mod registry;
 mod render;
 
 use clap::{Parser, Subcommand};

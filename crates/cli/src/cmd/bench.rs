@@ -6,7 +6,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
-use zoo_data::benchmark::{BenchResult, Benchmark, Interpolation, TransitionMethod, ZeroVelocity};
+use zoo_data::benchmark::{BenchResult, Benchmark, TransitionMethod};
 use zoo_data::dataset;
 
 /// Arguments of `zoo bench`.
@@ -28,9 +28,10 @@ pub struct BenchArgs {
     /// validation split of `--data`.
     #[arg(long)]
     pub test_data: Option<PathBuf>,
-    /// Comma-separated methods: `zerovel`, `interp`, `rtn:RUN_DIR` (a `zoo train rtn` run folder),
-    /// `onnx:FILE.onnx` (a `zoo export --onnx` file run by the engine runtime on tract);
-    /// `rtn+lock:RUN_DIR` and `onnx+lock:FILE.onnx` add the foot-lock post-process.
+    /// Comma-separated methods: `zerovel`, `interp`, `KIND:RUN_DIR` (a `zoo train KIND` run
+    /// folder whose config.json names model KIND, e.g. `rtn:runs/rtn`), `onnx:FILE.onnx` (a
+    /// `zoo export --onnx` file run by the engine runtime on tract); `KIND+lock:RUN_DIR` and
+    /// `onnx+lock:FILE.onnx` add the foot-lock post-process.
     #[arg(long, default_value = "zerovel,interp", value_delimiter = ',')]
     pub methods: Vec<String>,
     /// Comma-separated transition lengths in frames.
@@ -64,26 +65,8 @@ pub enum BenchCommand {
     Runtime(crate::cmd::bench_runtime::RuntimeArgs),
 }
 
-fn method(name: &str) -> anyhow::Result<Box<dyn TransitionMethod>> {
-    Ok(match name {
-        "zerovel" => Box::new(ZeroVelocity),
-        "interp" => Box::new(Interpolation),
-        other => match other.split_once(':') {
-            Some((kind @ ("rtn" | "rtn+lock"), dir)) => {
-                let mut m = crate::methods::RtnMethod::load(std::path::Path::new(dir), other.to_string())?;
-                m.foot_lock = kind == "rtn+lock";
-                Box::new(m)
-            }
-            Some((kind @ ("onnx" | "onnx+lock"), file)) => {
-                let mut m = crate::methods::OnnxMethod::load(std::path::Path::new(file), other.to_string())?;
-                m.foot_lock = kind == "onnx+lock";
-                Box::new(m)
-            }
-            _ => bail!(
-                "unknown method `{other}`: expected zerovel, interp, rtn:RUN_DIR, onnx:FILE.onnx, rtn+lock:RUN_DIR or onnx+lock:FILE.onnx"
-            ),
-        },
-    })
+fn method(spec: &str) -> anyhow::Result<Box<dyn TransitionMethod>> {
+    crate::registry::load_method(&crate::registry::parse_method(spec)?)
 }
 
 /// Runs the benchmark.

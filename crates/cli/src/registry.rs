@@ -1,0 +1,301 @@
+//! The CLI's model registry: which model a run folder holds and what the CLI does with it.
+//!
+//! Every run folder's `config.json` names its model in a top-level `"model"` field (folders
+//! written before the field existed hold an RTN: a missing field means `rtn`). A kind maps to
+//! its benchmark method (`zoo bench --methods KIND:DIR`, `KIND+lock:DIR` with the foot lock)
+//! and, for transition models, to the loader of `zoo transition` / `zoo decompress`. An
+//! exported file is benchmarked as `onnx:FILE.onnx` (`onnx+lock:FILE.onnx`), run by the engine
+//! runtime, which checks the file's own model kind.
+
+use anyhow::{Context, bail};
+use std::path::{Path, PathBuf};
+use zoo_data::benchmark::{Interpolation, TransitionMethod, ZeroVelocity};
+
+/// The run folder's configuration file, holding the `"model"` field.
+pub const CONFIG_FILE: &str = "config.json";
+
+/// The kind assumed when `config.json` has no `"model"` field.
+pub const DEFAULT_KIND: &str = "rtn";
+
+/// The method kind of exported ONNX files (`onnx:FILE.onnx`).
+pub const ONNX_KIND: &str = "onnx";
+
+/// Loads a benchmark method from a run folder: `(folder, method name, foot lock)`.
+type BenchLoader = fn(&Path, String, bool) -> anyhow::Result<Box<dyn TransitionMethod>>;
+
+/// What the CLI does with one kind of model.
+pub struct ModelEntry {
+    /// The kind's name, as in `config.json` and `--methods KIND:DIR`.
+    pub kind: &'static str,
+    /// What the model is for, in a few words (said when it is used for something else).
+    pub purpose: &'static str,
+    /// Its benchmark method, for models that generate transitions.
+    pub bench: Option<BenchLoader>,
+    /// Whether `zoo transition` and `zoo decompress` can run it.
+    pub transitions: bool,
+}
+
+/// The models the CLI knows.
+pub const MODELS: &[ModelEntry] = &[ModelEntry {
+    kind: "rtn",
+    purpose: "transitions between a context and a target pose (Recurrent Transition Network)",
+    bench: Some(load_rtn_method),
+    transitions: true,
+}];
+
+fn load_rtn_method(dir: &Path, name: String, foot_lock: bool) -> anyhow::Result<Box<dyn TransitionMethod>> {
+    let m =
+        zoo_rtn::method::load(dir, name, foot_lock).with_context(|| format!("loading the RTN in {}", dir.display()))?;
+    Ok(Box::new(m))
+}
+
+fn known_kinds(models: &[ModelEntry]) -> String {
+    models.iter().map(|m| m.kind).collect::<Vec<_>>().join(", ")
+}
+
+/// The entry of `kind` in `models`; an unknown kind is refused with the list of known ones.
+fn entry_in<'a>(models: &'a [ModelEntry], kind: &str) -> anyhow::Result<&'a ModelEntry> {
+    models.iter().find(|m| m.kind == kind).with_context(|| {
+        format!("unknown model kind `{kind}`: this zoo knows {} (update zoo for newer models)", known_kinds(models))
+    })
+}
+
+/// The model kind named by the `"model"` field of `config` (the text of a run folder's
+/// `config.json`); [`DEFAULT_KIND`] when the field is absent.
+pub fn kind_of_config(config: &str, path: &Path) -> anyhow::Result<String> {
+    let v: serde_json::Value =
+        serde_json::from_str(config).with_context(|| format!("{}: not valid JSON", path.display()))?;
+    match v.get("model") {
+        None => Ok(DEFAULT_KIND.to_string()),
+        Some(serde_json::Value::String(s)) => Ok(s.clone()),
+        Some(other) => bail!("{}: `\"model\"` must be a model kind such as \"rtn\", found {other}", path.display()),
+    }
+}
+
+/// The model kind of run folder `dir` (see [`kind_of_config`]).
+pub fn model_kind(dir: &Path) -> anyhow::Result<String> {
+    let path = dir.join(CONFIG_FILE);
+    if !path.is_file() {
+        bail!("{} is not a run folder of `zoo train` (no {CONFIG_FILE})", dir.display());
+    }
+    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    kind_of_config(&text, &path)
+}
+
+/// A parsed `--methods` entry.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum MethodSpec {
+    /// `zerovel`: the zero-velocity baseline.
+    ZeroVelocity,
+    /// `interp`: the interpolation baseline.
+    Interpolation,
+    /// `KIND:PATH` or `KIND+lock:PATH`: a trained model (a run folder, or an exported file for
+    /// `onnx`).
+    Model {
+        /// The whole spec, the method's name in the table.
+        name: String,
+        /// Model kind (or `onnx`).
+        kind: String,
+        /// Run folder or file.
+        path: PathBuf,
+        /// `+lock`: foot-lock the fitted transitions.
+        foot_lock: bool,
+    },
+}
+
+fn method_forms(models: &[ModelEntry]) -> String {
+    let mut forms = vec!["zerovel".to_string(), "interp".to_string()];
+    for m in models.iter().filter(|m| m.bench.is_some()) {
+        forms.push(format!("{0}:RUN_DIR, {0}+lock:RUN_DIR", m.kind));
+    }
+    forms.push(format!("{ONNX_KIND}:FILE.onnx, {ONNX_KIND}+lock:FILE.onnx"));
+    forms.join(", ")
+}
+
+fn parse_method_in(models: &[ModelEntry], spec: &str) -> anyhow::Result<MethodSpec> {
+    match spec {
+        "zerovel" => return Ok(MethodSpec::ZeroVelocity),
+        "interp" => return Ok(MethodSpec::Interpolation),
+        _ => {}
+    }
+    let Some((head, path)) = spec.split_once(':') else {
+        bail!("unknown method `{spec}`: expected {}", method_forms(models));
+    };
+    let (kind, foot_lock) = match head.strip_suffix("+lock") {
+        Some(kind) => (kind, true),
+        None => (head, false),
+    };
+    if path.is_empty() {
+        bail!("method `{spec}`: the path after `{head}:` is empty");
+    }
+    if kind != ONNX_KIND {
+        let entry =
+            entry_in(models, kind).with_context(|| format!("method `{spec}`: expected {}", method_forms(models)))?;
+        if entry.bench.is_none() {
+            bail!("method `{spec}`: a `{kind}` model is for {}, not for the transition benchmark", entry.purpose);
+        }
+    }
+    Ok(MethodSpec::Model { name: spec.to_string(), kind: kind.to_string(), path: PathBuf::from(path), foot_lock })
+}
+
+/// Parses one `--methods` entry (`zerovel`, `interp`, `KIND:PATH`, `KIND+lock:PATH`).
+pub fn parse_method(spec: &str) -> anyhow::Result<MethodSpec> {
+    parse_method_in(MODELS, spec)
+}
+
+/// Refuses a method spec whose kind is not the one the folder's `config.json` names.
+fn check_folder_kind(spec: &str, kind: &str, dir: &Path, found: &str) -> anyhow::Result<()> {
+    if found != kind {
+        bail!(
+            "method `{spec}`: {} names model `{found}`, not `{kind}`: write `{found}:{}`",
+            dir.join(CONFIG_FILE).display(),
+            dir.display()
+        );
+    }
+    Ok(())
+}
+
+fn load_method_in(models: &[ModelEntry], spec: &MethodSpec) -> anyhow::Result<Box<dyn TransitionMethod>> {
+    Ok(match spec {
+        MethodSpec::ZeroVelocity => Box::new(ZeroVelocity),
+        MethodSpec::Interpolation => Box::new(Interpolation),
+        MethodSpec::Model { name, kind, path, foot_lock } if kind == ONNX_KIND => {
+            Box::new(crate::methods::load_onnx(path, name.clone(), *foot_lock)?)
+        }
+        MethodSpec::Model { name, kind, path, foot_lock } => {
+            check_folder_kind(name, kind, path, &model_kind(path)?)?;
+            let entry = entry_in(models, kind)?;
+            let Some(load) = entry.bench else {
+                bail!("method `{name}`: a `{kind}` model is for {}, not for the transition benchmark", entry.purpose);
+            };
+            load(path, name.clone(), *foot_lock)?
+        }
+    })
+}
+
+/// Loads a parsed `--methods` entry.
+pub fn load_method(spec: &MethodSpec) -> anyhow::Result<Box<dyn TransitionMethod>> {
+    load_method_in(MODELS, spec)
+}
+
+/// Checks that `kind` is a transition model for `zoo COMMAND`.
+fn check_transition_kind(models: &[ModelEntry], kind: &str, dir: &Path, command: &str) -> anyhow::Result<()> {
+    let entry = entry_in(models, kind).with_context(|| format!("{}", dir.display()))?;
+    if !entry.transitions {
+        bail!(
+            "`zoo {command}` runs an RTN run folder; {} holds a `{kind}` model, which is for {}",
+            dir.display(),
+            entry.purpose
+        );
+    }
+    Ok(())
+}
+
+/// The RTN of run folder `dir` and its statistics, for `zoo COMMAND` (`transition`,
+/// `decompress`); a folder of another kind is refused with what that kind is for.
+pub fn load_transition_model(
+    dir: &Path,
+    command: &str,
+) -> anyhow::Result<(zoo_rtn::Rtn, zoo_rtn::features::FeatureStats)> {
+    check_transition_kind(MODELS, &model_kind(dir)?, dir, command)?;
+    zoo_rtn::checkpoint::load(dir, &candle_core::Device::Cpu)
+        .with_context(|| format!("loading the RTN in {}", dir.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn no_bench(_: &Path, _: String, _: bool) -> anyhow::Result<Box<dyn TransitionMethod>> {
+        unreachable!("the test registry's loader is never called")
+    }
+
+    /// RTN plus two made-up kinds: one for something else, one benchmarked but not a
+    /// `zoo transition` model.
+    const TEST_MODELS: &[ModelEntry] = &[
+        ModelEntry { kind: "rtn", purpose: "transitions", bench: Some(no_bench), transitions: true },
+        ModelEntry { kind: "gmm", purpose: "sampling poses", bench: None, transitions: false },
+        ModelEntry { kind: "arnn", purpose: "long in-betweens", bench: Some(no_bench), transitions: false },
+    ];
+
+    fn err<T>(r: anyhow::Result<T>) -> String {
+        match r {
+            Ok(_) => panic!("expected an error"),
+            Err(e) => format!("{e:#}"),
+        }
+    }
+
+    #[test]
+    fn the_known_spellings_parse() {
+        assert_eq!(parse_method("zerovel").unwrap(), MethodSpec::ZeroVelocity);
+        assert_eq!(parse_method("interp").unwrap(), MethodSpec::Interpolation);
+        for (spec, kind, lock) in [
+            ("rtn:runs/a", "rtn", false),
+            ("rtn+lock:runs/a", "rtn", true),
+            ("onnx:m.onnx", "onnx", false),
+            ("onnx+lock:m.onnx", "onnx", true),
+        ] {
+            let MethodSpec::Model { name, kind: k, path, foot_lock } = parse_method(spec).unwrap() else {
+                panic!("{spec}: not a model method")
+            };
+            assert_eq!((name.as_str(), k.as_str(), foot_lock), (spec, kind, lock));
+            assert_eq!(path, PathBuf::from(spec.split_once(':').unwrap().1));
+        }
+    }
+
+    #[test]
+    fn an_unknown_method_lists_the_known_forms() {
+        let e = err(parse_method("nearest"));
+        assert!(
+            e.contains("unknown method `nearest`") && e.contains("rtn+lock:RUN_DIR") && e.contains("onnx:FILE.onnx"),
+            "{e}"
+        );
+        let e = err(parse_method_in(TEST_MODELS, "rmr:runs/x"));
+        assert!(e.contains("unknown model kind `rmr`: this zoo knows rtn, gmm, arnn"), "{e}");
+        let e = err(parse_method("rtn:"));
+        assert!(e.contains("the path after `rtn:` is empty"), "{e}");
+    }
+
+    #[test]
+    fn a_kind_without_a_benchmark_method_is_refused_with_its_purpose() {
+        let e = err(parse_method_in(TEST_MODELS, "gmm:runs/g"));
+        assert!(e.contains("a `gmm` model is for sampling poses, not for the transition benchmark"), "{e}");
+        assert!(parse_method_in(TEST_MODELS, "arnn+lock:runs/a").is_ok());
+    }
+
+    #[test]
+    fn the_config_names_the_model_and_defaults_to_rtn() {
+        let p = Path::new("run/config.json");
+        assert_eq!(kind_of_config(r#"{"joints": 4}"#, p).unwrap(), "rtn");
+        assert_eq!(kind_of_config(r#"{"model": "arnn", "joints": 4}"#, p).unwrap(), "arnn");
+        let e = err(kind_of_config(r#"{"model": 3}"#, p));
+        assert!(e.contains("run/config.json: `\"model\"` must be a model kind"), "{e}");
+        assert!(err(kind_of_config("{", p)).contains("run/config.json: not valid JSON"));
+    }
+
+    #[test]
+    fn a_folder_of_another_kind_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join(CONFIG_FILE), r#"{"model": "arnn"}"#).unwrap();
+        let spec = parse_method_in(TEST_MODELS, &format!("rtn:{}", dir.path().display())).unwrap();
+        let e = err(load_method_in(TEST_MODELS, &spec));
+        assert!(e.contains("names model `arnn`, not `rtn`: write `arnn:"), "{e}");
+        let e = err(model_kind(&dir.path().join("missing")));
+        assert!(e.contains("is not a run folder of `zoo train` (no config.json)"), "{e}");
+    }
+
+    #[test]
+    fn transitions_refuse_other_kinds_with_their_purpose() {
+        let dir = Path::new("runs/x");
+        assert!(check_transition_kind(TEST_MODELS, "rtn", dir, "transition").is_ok());
+        let e = err(check_transition_kind(TEST_MODELS, "gmm", dir, "decompress"));
+        assert!(
+            e.contains(
+                "`zoo decompress` runs an RTN run folder; runs/x holds a `gmm` model, which is for sampling poses"
+            ),
+            "{e}"
+        );
+        let e = err(check_transition_kind(TEST_MODELS, "rmr", dir, "transition"));
+        assert!(e.contains("unknown model kind `rmr`"), "{e}");
+    }
+}
