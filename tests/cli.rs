@@ -116,3 +116,82 @@ fn stats_glob_selects_clips_and_reports_rigid_bones() {
     assert!(!none.status.success());
     assert!(String::from_utf8_lossy(&none.stderr).contains("matches `*nothing*`"));
 }
+
+#[test]
+fn bench_lists_the_known_methods_for_an_unknown_one() {
+    let dir = tempfile::tempdir().unwrap();
+    toy_dataset(dir.path());
+    let out = Command::new(zoo_bin())
+        .args(["bench", "--data"])
+        .arg(dir.path())
+        .args(["--valid-glob", "*_youthful_*", "--methods", "interp,nearest"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("unknown method `nearest`") && err.contains("rtn+lock:RUN_DIR"), "{err}");
+}
+
+#[test]
+fn bench_refuses_a_run_folder_of_another_model() {
+    let dir = tempfile::tempdir().unwrap();
+    toy_dataset(dir.path());
+    let run = dir.path().join("run");
+    std::fs::create_dir(&run).unwrap();
+    std::fs::write(run.join("config.json"), r#"{"model": "arnn"}"#).unwrap();
+    let out = Command::new(zoo_bin())
+        .args(["bench", "--data"])
+        .arg(dir.path())
+        .args(["--valid-glob", "*_youthful_*", "--methods"])
+        .arg(format!("rtn:{}", run.display()))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("names model `arnn`, not `rtn`"), "{err}");
+}
+
+#[test]
+fn transition_refuses_an_unknown_model_kind_and_lists_the_known_ones() {
+    let dir = tempfile::tempdir().unwrap();
+    toy_dataset(dir.path());
+    let run = dir.path().join("run");
+    std::fs::create_dir(&run).unwrap();
+    std::fs::write(run.join("config.json"), r#"{"model": "rmr"}"#).unwrap();
+    let clip = dir.path().join("toy_walk_normal_000.bvh");
+    let out = Command::new(zoo_bin())
+        .args(["transition", "--model"])
+        .arg(&run)
+        .arg("--from")
+        .arg(format!("{}:20", clip.display()))
+        .arg("--to")
+        .arg(format!("{}:60", clip.display()))
+        .arg("--out")
+        .arg(dir.path().join("out.bvh"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("unknown model kind `rmr`: this zoo knows rtn"), "{err}");
+}
+
+#[test]
+fn transition_refuses_a_source_frame_without_context() {
+    let dir = tempfile::tempdir().unwrap();
+    toy_dataset(dir.path());
+    let clip = dir.path().join("toy_walk_normal_000.bvh");
+    let out = Command::new(zoo_bin())
+        .args(["transition", "--model"])
+        .arg(dir.path().join("no-run"))
+        .arg("--from")
+        .arg(format!("{}:3", clip.display()))
+        .arg("--to")
+        .arg(format!("{}:60", clip.display()))
+        .arg("--out")
+        .arg(dir.path().join("out.bvh"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("source frame 3: needs 10 context frames"), "{err}");
+}
