@@ -22,6 +22,7 @@ pub mod amsgrad;
 pub mod checkpoint;
 pub mod config;
 pub mod error;
+pub mod export;
 pub mod model;
 pub mod ops;
 pub mod train;
