@@ -6,7 +6,7 @@
 //! each generated frame fed back, its root integrated and its offset to the target recomputed),
 //! and checked against `Rtn::unroll`. The exported graphs are driven the same way, the offset and
 //! root being recomputed on the host from the generated frame. Weights are fixed LCG draws
-//! (`Config::tiny`, 4 joints), statistics fixed. Every pair must agree within 1e-4 in normalised
+//! (`Config::tiny`, 4 joints), statistics fixed. Every pair must agree within 1e-4 in normalized
 //! units on every frame. The snapshots hold candle's outputs rounded to 4 decimals and the graph
 //! summaries.
 //!
@@ -31,7 +31,7 @@ const FRAMES: usize = 30;
 const TOLERANCE: f32 = 1e-4;
 const PARENTS: [Option<usize>; 4] = [None, Some(0), Some(0), Some(2)];
 
-/// Normalised per-step outputs `x_(t+1)` of every character, `[step][character * D + k]`.
+/// Normalized per-step outputs `x_(t+1)` of every character, `[step][character * D + k]`.
 type Trace = Vec<Vec<f32>>;
 
 struct Fixture {
@@ -105,10 +105,10 @@ struct Character {
     past: Vec<f32>,
     target_pose: Vec<f32>,
     next_pose: Vec<f32>,
-    /// Normalised context features, one frame each.
+    /// Normalized context features, one frame each.
     x: Vec<Vec<f32>>,
     roots: Vec<[f32; 3]>,
-    /// Normalised target vector (2D).
+    /// Normalized target vector (2D).
     target: Vec<f32>,
 }
 
@@ -174,7 +174,7 @@ fn candle_loop(f: &Fixture, chars: &[Character], n_out: usize) -> Trace {
     trace
 }
 
-/// Normalised offset `o_t = ((y_T - y_t) - mu_o) / sigma_o` of a frame with normalised
+/// Normalized offset `o_t = ((y_T - y_t) - mu_o) / sigma_o` of a frame with normalized
 /// features `x` and global root `root` (host side, what an engine computes).
 fn host_offset(stats: &FeatureStats, x: &[f32], root: [f32; 3], target_pose: &[f32]) -> Vec<f32> {
     let mut feat = x.to_vec();

@@ -27,7 +27,7 @@ pub struct GraphSummary {
     pub metadata_keys: Vec<String>,
 }
 
-/// Summarises any ONNX model proto (also ones not built by this crate).
+/// Summarizes any ONNX model proto (also ones not built by this crate).
 pub fn summarize(proto: &pb::ModelProto) -> GraphSummary {
     let graph = proto.graph.clone().unwrap_or_default();
     let describe = |v: &pb::ValueInfoProto| {

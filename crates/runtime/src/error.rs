@@ -103,7 +103,7 @@ pub enum MotionError {
         /// What is wrong.
         reason: String,
     },
-    /// tract could not load, optimise or plan the graph.
+    /// tract could not load, optimize or plan the graph.
     #[error("tract cannot run this graph: {reason}; export only the ops listed in export/README.md")]
     Unsupported {
         /// tract's error chain.

@@ -264,7 +264,7 @@ pub struct MotionModelMetadata {
     /// The task and its typed section.
     pub task: MotionTask,
     /// The model's configuration JSON, verbatim: informational (tools that rebuild the model
-    /// read it, e.g. `zoo bench runtime`); the runtime never reads it for behaviour.
+    /// read it, e.g. `zoo bench runtime`); the runtime never reads it for behavior.
     pub config_json: String,
     /// Named normalization groups.
     pub normalization: BTreeMap<String, MotionMeanStd>,
