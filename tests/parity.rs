@@ -86,7 +86,8 @@ fn tract_loop(toy: &ToyModel, model: &OnnxModel) -> (Trace, Trace) {
 
 fn ort_loop(toy: &ToyModel, model: &OnnxModel, start: bool) -> Trace {
     let mut session = OrtSession::new(model);
-    assert_eq!(session.metadata("zoo.format_version").as_deref(), Some("1"), "metadata_props reach onnxruntime");
+    let version = zoo_runtime::FORMAT_VERSION.to_string();
+    assert_eq!(session.metadata("zoo.format_version"), Some(version), "metadata_props reach onnxruntime");
     let mut x = initial_frames(toy);
     let mut states: Vec<Vec<f32>> = toy.state_widths().iter().map(|&w| vec![0.0; BATCH * w]).collect();
     let (state_in, state_out): (&[&str], &[&str]) = match toy.cell {

@@ -6,7 +6,7 @@
 //! each generated frame fed back, its root integrated and its offset to the target recomputed),
 //! and checked against `Rtn::unroll`. The exported graphs are driven the same way, the offset and
 //! root being recomputed on the host from the generated frame. Weights are fixed LCG draws
-//! (`Config::tiny`, 4 joints), statistics fixed. Every pair must agree within 1e-4 in normalised
+//! (`Config::tiny`, 4 joints), statistics fixed. Every pair must agree within 1e-4 in normalized
 //! units on every frame. The snapshots hold candle's outputs rounded to 4 decimals and the graph
 //! summaries.
 //!
@@ -16,11 +16,12 @@ use candle_core::{DType, Device, Tensor};
 use candle_nn::{VarBuilder, VarMap};
 use std::collections::HashMap;
 use zoo_export::OnnxModel;
-use zoo_export::rtn::{RtnExportOptions, export_rtn, export_rtn_dir};
 use zoo_rtn::features::{self, FeatureStats, MeanStd};
+use zoo_rtn::export::{RtnExportOptions, export_rtn, export_rtn_dir};
 use zoo_rtn::model::{OffsetTensors, RtnInputs, RtnState};
 use zoo_rtn::{Config, InitState, Rtn};
-use zoo_runtime::{MotionError, MotionModel, MotionState, TransitionModel};
+use zoo_runtime::metadata::{TransitionTask, keys};
+use zoo_runtime::{LoadedModel, MotionError, MotionModel, MotionState, MotionTask, TransitionModel};
 use zoo_tests::onnxruntime::OrtSession;
 use zoo_tests::toy_onnx::{Cell, ToyModel, lcg};
 
@@ -30,7 +31,7 @@ const FRAMES: usize = 30;
 const TOLERANCE: f32 = 1e-4;
 const PARENTS: [Option<usize>; 4] = [None, Some(0), Some(0), Some(2)];
 
-/// Normalised per-step outputs `x_(t+1)` of every character, `[step][character * D + k]`.
+/// Normalized per-step outputs `x_(t+1)` of every character, `[step][character * D + k]`.
 type Trace = Vec<Vec<f32>>;
 
 struct Fixture {
@@ -104,10 +105,10 @@ struct Character {
     past: Vec<f32>,
     target_pose: Vec<f32>,
     next_pose: Vec<f32>,
-    /// Normalised context features, one frame each.
+    /// Normalized context features, one frame each.
     x: Vec<Vec<f32>>,
     roots: Vec<[f32; 3]>,
-    /// Normalised target vector (2D).
+    /// Normalized target vector (2D).
     target: Vec<f32>,
 }
 
@@ -173,7 +174,7 @@ fn candle_loop(f: &Fixture, chars: &[Character], n_out: usize) -> Trace {
     trace
 }
 
-/// Normalised offset `o_t = ((y_T - y_t) - mu_o) / sigma_o` of a frame with normalised
+/// Normalized offset `o_t = ((y_T - y_t) - mu_o) / sigma_o` of a frame with normalized
 /// features `x` and global root `root` (host side, what an engine computes).
 fn host_offset(stats: &FeatureStats, x: &[f32], root: [f32; 3], target_pose: &[f32]) -> Vec<f32> {
     let mut feat = x.to_vec();
@@ -496,8 +497,18 @@ fn exported_metadata_reaches_the_runtime() {
     assert_eq!(m.skeleton.names, ["Hips", "Spine", "Leg", "Foot_L"]);
     assert_eq!(m.skeleton.parents, [-1, 0, 0, 2]);
     assert_eq!(m.fps, 30.0);
-    assert_eq!(m.normalisation["x"].mean, f.stats.x.mean);
-    assert_eq!(m.normalisation["offset"].std, f.stats.offset.std);
+    assert_eq!(m.normalization["x"].mean, f.stats.x.mean);
+    assert_eq!(m.normalization["offset"].std, f.stats.offset.std);
+    let task = TransitionTask {
+        past_frames: f.config.past_frames,
+        transition_frames: f.config.transition_frames,
+        target_blend: f.config.target_blend,
+        frame_dim: f.config.dim(),
+        offset_input: true,
+        terrain: None,
+    };
+    assert_eq!(m.task, MotionTask::Transition(task));
+    // The config travels as an informational copy (read back by `import_rtn`, not the runtime).
     let config: Config = serde_json::from_str(&m.config_json).unwrap();
     assert_eq!(config, f.config);
     let names: Vec<&str> = model.inputs().iter().map(|i| i.name.as_str()).collect();
@@ -542,6 +553,19 @@ fn run_folder_and_cli_export() {
         .unwrap();
     assert!(!err.status.success());
     assert!(String::from_utf8_lossy(&err.stderr).contains("not a run folder"));
+    // A run folder of a model `zoo export` does not know.
+    let other = tempfile::tempdir().unwrap();
+    std::fs::write(other.path().join("config.json"), r#"{"model": "rmr"}"#).unwrap();
+    let err = std::process::Command::new(zoo_tests::zoo_bin())
+        .args(["export", "--onnx"])
+        .arg(other.path())
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(!err.status.success());
+    let stderr = String::from_utf8_lossy(&err.stderr);
+    assert!(stderr.contains("model `rmr`") && stderr.contains("exports: rtn"), "{stderr}");
 }
 
 /// The engine-facing API (`zoo_runtime::TransitionRunner`) against candle's `Rtn::transition`:
@@ -636,10 +660,11 @@ fn runtime_transition_api_rejects_bad_input() {
     runner.start(&mut state, &c.past, &c.target_pose, &c.next_pose).unwrap();
     let err = runner.step(&mut state, &mut pose[..d - 1]).unwrap_err();
     assert!(matches!(err, MotionError::BufferLength { .. }), "{err}");
-    // A step graph that is not an RTN.
+    // A step graph of another task.
     let toy = ToyModel::new(Cell::Lstm, 6, 8, 5).cell_graph();
     let err = TransitionModel::new(MotionModel::from_bytes(&toy.to_bytes()).unwrap()).unwrap_err();
-    assert!(err.to_string().contains("not an RTN"), "{err}");
+    assert!(matches!(err, MotionError::WrongTask { .. }), "{err}");
+    assert!(err.to_string().contains("`step` model (kind `toy_lstm`)"), "{err}");
 }
 
 #[test]
@@ -661,4 +686,85 @@ fn runtime_foot_lock_is_the_motion_core_post_process() {
     let mut want = plain.clone();
     lock.apply(&c.past[c.past.len() - d..], &mut want);
     assert_eq!(locked, want);
+}
+
+/// The exported RTN with metadata entry `key` replaced by `value` (`None`: removed).
+fn with_prop(f: &Fixture, key: &str, value: Option<&str>) -> Vec<u8> {
+    let mut proto = export(f).proto().clone();
+    match value {
+        Some(v) => proto.metadata_props.iter_mut().find(|p| p.key == key).unwrap().value = v.to_string(),
+        None => proto.metadata_props.retain(|p| p.key != key),
+    }
+    OnnxModel::from_proto(proto).to_bytes()
+}
+
+#[test]
+fn loaded_model_dispatches_an_rtn_to_the_transition_loader() {
+    let f = fixture(tiny());
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("rtn.onnx");
+    export(&f).write(&path).unwrap();
+    let loaded = LoadedModel::load(&path).unwrap();
+    assert_eq!((loaded.kind(), loaded.task()), ("rtn", "transition"));
+    let LoadedModel::Transition(model) = loaded else { panic!("an RTN loads as a transition model") };
+    assert_eq!(model.past_frames(), f.config.past_frames);
+    assert_eq!(model.transition_frames(), f.config.transition_frames);
+}
+
+#[test]
+fn a_missing_transition_section_is_refused() {
+    let f = fixture(tiny());
+    let err = LoadedModel::from_bytes(&with_prop(&f, keys::TRANSITION, None)).unwrap_err();
+    assert!(matches!(&err, MotionError::MissingMetadata { key } if key == keys::TRANSITION), "{err}");
+    assert!(err.to_string().contains("re-export"), "{err}");
+}
+
+#[test]
+fn a_malformed_transition_section_is_refused() {
+    let f = fixture(tiny());
+    for bad in ["{\"past_frames\": 4", "{\"past_frames\": 4}", "[]"] {
+        let err = MotionModel::from_bytes(&with_prop(&f, keys::TRANSITION, Some(bad))).unwrap_err();
+        assert!(matches!(&err, MotionError::BadMetadata { key, .. } if key == keys::TRANSITION), "{bad}: {err}");
+    }
+}
+
+#[test]
+fn a_transition_section_that_does_not_match_the_graph_is_refused() {
+    let f = fixture(tiny());
+    let mut task = zoo_rtn::export::transition_task(&f.config);
+    task.offset_input = false;
+    let json = serde_json::to_string(&task).unwrap();
+    let err = TransitionModel::new(MotionModel::from_bytes(&with_prop(&f, keys::TRANSITION, Some(&json))).unwrap())
+        .unwrap_err();
+    assert!(matches!(&err, MotionError::BadGraphIo { name, .. } if name == "offset"), "{err}");
+    task = zoo_rtn::export::transition_task(&f.config);
+    task.frame_dim = 15;
+    let json = serde_json::to_string(&task).unwrap();
+    let err = LoadedModel::from_bytes(&with_prop(&f, keys::TRANSITION, Some(&json))).unwrap_err();
+    assert!(err.to_string().contains("frame_dim is 15"), "{err}");
+}
+
+#[test]
+fn an_rtn_file_of_another_task_is_refused_by_the_transition_loader() {
+    let f = fixture(tiny());
+    let err = LoadedModel::from_bytes(&with_prop(&f, keys::TASK, Some("step"))).unwrap_err();
+    assert!(matches!(err, MotionError::WrongTask { expected: "transition", .. }), "{err}");
+    assert!(err.to_string().contains("`step` model (kind `rtn`)"), "{err}");
+}
+
+#[test]
+fn import_rtn_reads_back_the_exported_weights() {
+    let f = fixture(tiny());
+    let (config, weights) = zoo_rtn::export::import_rtn(&export(&f).to_bytes()).unwrap();
+    assert_eq!(config, f.config);
+    let data = f.varmap.data().lock().unwrap();
+    assert_eq!(weights.len(), data.len());
+    for (name, var) in data.iter() {
+        let want = var.as_tensor().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        let got = weights[name].flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        assert_eq!(want, got, "weight `{name}`");
+    }
+    let toy = ToyModel::new(Cell::Lstm, 6, 8, 5).cell_graph();
+    let err = zoo_rtn::export::import_rtn(&toy.to_bytes()).unwrap_err();
+    assert!(err.to_string().contains("not an RTN export"), "{err}");
 }

@@ -68,14 +68,84 @@ fn a_model_without_metadata_is_refused() {
     assert!(err.to_string().contains("re-export"), "{err}");
 }
 
+fn set(props: &mut [zoo_export::pb::StringStringEntryProto], key: &str, value: &str) {
+    props.iter_mut().find(|e| e.key == key).unwrap().value = value.into();
+}
+
 #[test]
 fn an_unknown_format_version_is_refused() {
-    let bytes = with_props(|p| {
-        p.iter_mut().find(|e| e.key == keys::FORMAT_VERSION).unwrap().value = "2".into();
-    });
+    let bytes = with_props(|p| set(p, keys::FORMAT_VERSION, "7"));
     let err = MotionModel::from_bytes(&bytes).unwrap_err();
     assert!(matches!(err, MotionError::UnknownFormatVersion { .. }), "{err}");
-    assert!(err.to_string().contains("version 2") && err.to_string().contains("reads version 1"), "{err}");
+    assert!(err.to_string().contains("version 7") && err.to_string().contains("reads version 2"), "{err}");
+}
+
+#[test]
+fn a_version_1_file_is_asked_to_re_export() {
+    // A format-1 file: its version and the keys it had (no task, `zoo.normalisation`).
+    let bytes = with_props(|p| {
+        set(p, keys::FORMAT_VERSION, "1");
+        p.retain(|e| e.key != keys::TASK);
+        p.iter_mut().find(|e| e.key == keys::NORMALIZATION).unwrap().key = "zoo.normalisation".into();
+    });
+    for err in [MotionModel::from_bytes(&bytes).unwrap_err(), LoadedModel::from_bytes(&bytes).unwrap_err()] {
+        assert!(matches!(err, MotionError::FormatTooOld { found: 1, supported: 2 }), "{err}");
+        assert!(err.to_string().contains("re-export it with `zoo export --onnx"), "{err}");
+    }
+}
+
+#[test]
+fn an_unknown_model_kind_is_refused_with_the_known_kinds() {
+    // The raw step graph loads whatever its kind; the dispatching loader needs a known kind.
+    assert!(load(&toy().rnn_op_graph()).is_ok());
+    let err = LoadedModel::from_bytes(&toy().rnn_op_graph().to_bytes()).unwrap_err();
+    assert!(matches!(&err, MotionError::UnknownModelKind { kind, .. } if kind == "toy_lstm"), "{err}");
+    assert!(err.to_string().contains("`rtn` (task `transition`)"), "{err}");
+    assert!(err.to_string().contains("MotionModel::load"), "{err}");
+}
+
+#[test]
+fn a_file_of_the_wrong_task_is_refused_naming_both() {
+    // Kind `rtn` but task `step`: LoadedModel picks the transition loader, which refuses it.
+    let bytes = with_props(|p| set(p, keys::MODEL_KIND, "rtn"));
+    let err = LoadedModel::from_bytes(&bytes).unwrap_err();
+    assert!(matches!(err, MotionError::WrongTask { expected: "transition", .. }), "{err}");
+    let msg = err.to_string();
+    assert!(msg.contains("`step` model (kind `rtn`)") && msg.contains("TransitionModel"), "{msg}");
+    assert!(msg.contains("LoadedModel::load"), "{msg}");
+    let err = TransitionModel::new(load(&toy().rnn_op_graph()).unwrap()).unwrap_err();
+    assert!(err.to_string().contains("`step` model (kind `toy_lstm`)"), "{err}");
+}
+
+#[test]
+fn an_unknown_task_is_refused_with_the_known_tasks() {
+    let bytes = with_props(|p| set(p, keys::TASK, "stitch"));
+    let err = MotionModel::from_bytes(&bytes).unwrap_err();
+    assert!(matches!(&err, MotionError::UnknownTask { task, .. } if task == "stitch"), "{err}");
+    assert!(err.to_string().contains("transition, step"), "{err}");
+}
+
+#[test]
+fn a_missing_task_section_is_refused() {
+    // Task `transition` without its `zoo.transition` section.
+    let bytes = with_props(|p| set(p, keys::TASK, "transition"));
+    let err = MotionModel::from_bytes(&bytes).unwrap_err();
+    assert!(matches!(&err, MotionError::MissingMetadata { key } if key == keys::TRANSITION), "{err}");
+    assert!(err.to_string().contains("re-export"), "{err}");
+}
+
+#[test]
+fn a_malformed_task_section_is_refused() {
+    let bytes = with_props(|p| {
+        set(p, keys::TASK, "transition");
+        p.push(zoo_export::pb::StringStringEntryProto {
+            key: keys::TRANSITION.into(),
+            value: "{\"past_frames\": 10".into(),
+        });
+    });
+    let err = MotionModel::from_bytes(&bytes).unwrap_err();
+    assert!(matches!(&err, MotionError::BadMetadata { key, .. } if key == keys::TRANSITION), "{err}");
+    assert!(err.to_string().contains("re-export"), "{err}");
 }
 
 #[test]

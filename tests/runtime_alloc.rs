@@ -125,13 +125,13 @@ fn transition_allocations() {
     let d = config.dim();
     let unit = || MeanStd { mean: vec![0.0; d], std: vec![10.0; d] };
     let stats = FeatureStats { joints: 4, x: unit(), velocity: unit(), offset: unit(), terrain: None };
-    let options = zoo_export::rtn::RtnExportOptions {
+    let options = zoo_rtn::export::RtnExportOptions {
         names: Some(["Hips", "Spine", "Leg", "Foot_L"].iter().map(|s| s.to_string()).collect()),
         offsets: Some(vec![[0.0; 3], [0.0, 10.0, 0.0], [0.0, -40.0, 0.0], [0.0, -40.0, 0.0]]),
         parents: None,
         fps: Some(30.0),
     };
-    let onnx = zoo_export::rtn::export_rtn(&config, None, &stats, &varmap, &options).unwrap();
+    let onnx = zoo_rtn::export::export_rtn(&config, None, &stats, &varmap, &options).unwrap();
     let model = TransitionModel::new(MotionModel::from_bytes(&onnx.to_bytes()).unwrap()).unwrap();
     let pose = |f: usize| -> Vec<f32> { (0..d).map(|i| (i as f32 * 7.0 + f as f32 * 3.0).sin() * 20.0).collect() };
     let past: Vec<f32> = (0..config.past_frames).flat_map(pose).collect();

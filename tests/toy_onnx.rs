@@ -9,6 +9,7 @@
 use zoo_export::{Dim, GRU_TORCH_TO_ONNX, GraphBuilder, LSTM_TORCH_TO_ONNX, OnnxModel, RnnDirection, RnnInputs, Value};
 use zoo_runtime::metadata::{
     FORMAT_VERSION, MotionFeatureSegment, MotionMeanStd, MotionModelMetadata, MotionSkeletonInfo, MotionStatePair,
+    MotionTask,
 };
 
 /// Slope of the encoder's LeakyRelu.
@@ -204,7 +205,8 @@ impl ToyModel {
         OnnxModel::from_proto(proto)
     }
 
-    /// Format-1 metadata for the toy's step graphs.
+    /// Metadata of the toy's step graphs: task `step` (no task section), kind `toy_lstm` or
+    /// `toy_gru`, which no task loader knows.
     pub fn metadata(&self) -> MotionModelMetadata {
         let state = match self.cell {
             Cell::Lstm => vec![
@@ -216,8 +218,9 @@ impl ToyModel {
         MotionModelMetadata {
             format_version: FORMAT_VERSION,
             model_kind: format!("toy_{:?}", self.cell).to_lowercase(),
+            task: MotionTask::Step,
             config_json: format!("{{\"frame\": {}, \"enc\": {}, \"hidden\": {}}}", self.frame, self.enc, self.hidden),
-            normalisation: [(
+            normalization: [(
                 "x".to_string(),
                 MotionMeanStd { mean: vec![0.0; self.frame], std: vec![1.0; self.frame] },
             )]

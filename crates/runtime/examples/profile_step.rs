@@ -3,7 +3,7 @@
 //! `cargo run --release -p zoo-runtime --example profile_step -- MODEL.onnx [BATCH] [STEPS]`
 //!
 //! Plans the step graph for a concrete batch like `MotionRunner` does, runs it `STEPS` times on
-//! fixed inputs and prints the nodes of the optimised plan by total time.
+//! fixed inputs and prints the nodes of the optimized plan by total time.
 
 use std::collections::HashMap;
 use std::time::Instant;

@@ -12,6 +12,7 @@ use zoo_export::{Dim, GraphBuilder, RnnDirection, RnnInputs};
 use zoo_runtime::glam::Vec3;
 use zoo_runtime::metadata::{
     FORMAT_VERSION, MotionFeatureSegment, MotionMeanStd, MotionModelMetadata, MotionSkeletonInfo, MotionStatePair,
+    MotionTask,
 };
 use zoo_runtime::prelude::*;
 
@@ -27,8 +28,9 @@ fn toy_model(path: &std::path::Path) -> Result<(), Box<dyn std::error::Error>> {
     let meta = MotionModelMetadata {
         format_version: FORMAT_VERSION,
         model_kind: "toy_transition".into(),
+        task: MotionTask::Step,
         config_json: format!("{{\"hidden\": {HIDDEN}}}"),
-        normalisation: [("pose".to_string(), MotionMeanStd { mean: vec![0.0; FRAME], std: vec![1.0; FRAME] })].into(),
+        normalization: [("pose".to_string(), MotionMeanStd { mean: vec![0.0; FRAME], std: vec![1.0; FRAME] })].into(),
         skeleton: MotionSkeletonInfo {
             names: vec!["Hips".into(), "Head".into()],
             parents: vec![-1, 0],

@@ -37,6 +37,54 @@ pub enum MotionError {
         /// Version this runtime reads.
         supported: u32,
     },
+    /// The model was written in an older format version, before this runtime's.
+    #[error(
+        "the model has format version {found}, written by an older `zoo export`; this runtime reads version {supported}: re-export it with `zoo export --onnx MODEL_DIR --out FILE.onnx` of this release"
+    )]
+    FormatTooOld {
+        /// Version in the file.
+        found: u32,
+        /// Version this runtime reads.
+        supported: u32,
+    },
+    /// The model's task (`zoo.task`) is not one this runtime knows.
+    #[error(
+        "the model (kind `{kind}`) has task `{task}`, which this runtime does not know (it knows: {known}); upgrade the runtime or re-export the model with the `zoo export` of this release"
+    )]
+    UnknownTask {
+        /// Task in the file.
+        task: String,
+        /// Model kind in the file.
+        kind: String,
+        /// The tasks this runtime knows, comma-separated.
+        known: String,
+    },
+    /// The model's kind (`zoo.model_kind`) has no loader in this runtime.
+    #[error(
+        "unknown model kind `{kind}` (task `{task}`): this runtime loads {known}; upgrade the runtime, or drive the raw step graph with `MotionModel::load`"
+    )]
+    UnknownModelKind {
+        /// Kind in the file.
+        kind: String,
+        /// Task in the file.
+        task: String,
+        /// The kinds this runtime loads, with their tasks.
+        known: String,
+    },
+    /// A task's loader was given a file of another task.
+    #[error(
+        "this file is a `{task}` model (kind `{kind}`), not a `{expected}` model: {loader} loads only `{expected}` models; load the file with `zoo_runtime::LoadedModel::load`, which picks the loader of its kind"
+    )]
+    WrongTask {
+        /// Task in the file.
+        task: String,
+        /// Model kind in the file.
+        kind: String,
+        /// The task the loader runs.
+        expected: &'static str,
+        /// The loader (e.g. `TransitionModel`).
+        loader: &'static str,
+    },
     /// A metadata entry is present but malformed.
     #[error("metadata_props entry `{key}` is malformed: {reason}; re-export the model")]
     BadMetadata {
@@ -55,7 +103,7 @@ pub enum MotionError {
         /// What is wrong.
         reason: String,
     },
-    /// tract could not load, optimise or plan the graph.
+    /// tract could not load, optimize or plan the graph.
     #[error("tract cannot run this graph: {reason}; export only the ops listed in export/README.md")]
     Unsupported {
         /// tract's error chain.

@@ -1,35 +1,47 @@
-//! Engine-side runtime of zoo.
+//! Engine-side runtime of zoo, and the owner of the exported file format.
 //!
-//! Loads a model exported by `zoo export --onnx` once ([`MotionModel`], `Send + Sync`), keeps
-//! one small [`MotionState`] per character, and advances characters one frame per call with a
-//! per-thread [`MotionRunner`] (state in, state out, preallocated buffers). The graph runs on
-//! tract; the public API takes and returns plain `f32` slices and glam types only.
+//! [`metadata`] defines the format (version, keys, typed metadata and per-task sections);
+//! exporters write through it. [`LoadedModel::load`] loads any exported file and dispatches on
+//! its model kind to the loader of its task (today [`TransitionModel`] for `rtn`); each task's
+//! loader refuses files of another task. Underneath, [`MotionModel`] is the raw step graph
+//! (loaded once, `Send + Sync`), one small [`MotionState`] per character, advanced one frame
+//! per call by a per-thread [`MotionRunner`] (state in, state out, preallocated buffers). The
+//! graph runs on tract; the public API takes and returns plain `f32` slices and glam types only.
 //!
 //! Depends on tract-onnx and the motion core only: never on candle, the dataset tooling or
 //! the CLI (checked with `cargo tree -p zoo-runtime -e normal`).
 //!
 //! ```no_run
 //! use zoo_runtime::prelude::*;
-//! let model = MotionModel::load("rtn.onnx")?;
+//! let loaded = LoadedModel::load("rtn.onnx")?;
+//! let Some(model) = loaded.as_transition() else { return Ok(()) };
 //! let mut runner = model.runner()?;
-//! let mut state = model.new_state();
-//! let input = vec![0.0; model.inputs()[0].width];
-//! let mut output = vec![0.0; model.outputs()[0].width];
-//! runner.step(&mut state, &[&input], &mut [&mut output])?;
+//! let mut state = model.new_transition();
+//! let k = model.joints();
+//! let past = vec![0.0; model.past_frames() * 3 * k];
+//! let (target, next) = (vec![0.0; 3 * k], vec![0.0; 3 * k]);
+//! runner.start(&mut state, &past, &target, &next)?;
+//! let mut pose = vec![0.0; 3 * k];
+//! runner.step(&mut state, &mut pose)?;
 //! # Ok::<(), MotionError>(())
 //! ```
 
 pub mod error;
+pub mod loaded;
 pub mod metadata;
 pub mod model;
 pub mod pose;
+pub mod runner;
 pub mod transition;
 
 pub use error::MotionError;
+pub use loaded::{LoadedModel, MODEL_KINDS};
 pub use metadata::{
     FORMAT_VERSION, MotionFeatureSegment, MotionMeanStd, MotionModelMetadata, MotionSkeletonInfo, MotionStatePair,
+    MotionTask, TransitionTask, TransitionTerrain,
 };
-pub use model::{MotionModel, MotionRunner, MotionState, MotionStateInfo, MotionTensorInfo};
+pub use model::{MotionModel, MotionState, MotionStateInfo, MotionTensorInfo};
+pub use runner::MotionRunner;
 pub use transition::{TransitionModel, TransitionRunner, TransitionState};
 
 /// Re-exported so callers use the same glam version as the runtime.
@@ -38,7 +50,9 @@ pub use glam;
 /// The common imports of engine code.
 pub mod prelude {
     pub use crate::error::MotionError;
-    pub use crate::metadata::{MotionModelMetadata, MotionSkeletonInfo};
-    pub use crate::model::{MotionModel, MotionRunner, MotionState};
+    pub use crate::loaded::LoadedModel;
+    pub use crate::metadata::{MotionModelMetadata, MotionSkeletonInfo, MotionTask};
+    pub use crate::model::{MotionModel, MotionState};
+    pub use crate::runner::MotionRunner;
     pub use crate::transition::{TransitionModel, TransitionRunner, TransitionState};
 }

@@ -1,32 +1,45 @@
-//! The metadata an exported model carries in its ONNX `metadata_props` (format version 1).
+//! The exported file format: what a model carries in its ONNX `metadata_props` (format
+//! version 2). This module is its one owner: exporters build a [`MotionModelMetadata`] and
+//! write [`MotionModelMetadata::to_props`]; the runtime reads it back with
+//! [`MotionModelMetadata::from_props`] and refuses files without it.
 //!
-//! Every entry is a string; structured entries are JSON. Exporters build a
-//! [`MotionModelMetadata`] and write [`MotionModelMetadata::to_props`]; the runtime reads it
-//! back with [`MotionModelMetadata::from_props`] and refuses files without it.
+//! Every entry is a string; structured entries are JSON, parsed strictly (a missing or
+//! malformed entry is an error naming the key, never a silent default).
 //!
 //! | key                   | value                                                        |
 //! |-----------------------|--------------------------------------------------------------|
-//! | `zoo.format_version`  | `"1"`                                                        |
-//! | `zoo.model_kind`      | e.g. `"rtn"`                                                 |
-//! | `zoo.config`          | the model's `config.json`, verbatim                          |
-//! | `zoo.normalisation`   | `{"x": {"mean": [..], "std": [..]}, ...}` named groups       |
+//! | `zoo.format_version`  | `"2"`                                                        |
+//! | `zoo.model_kind`      | the model, e.g. `"rtn"`                                      |
+//! | `zoo.task`            | what the model does, [`MotionTask`]: `"transition"`, `"step"` |
+//! | `zoo.config`          | the model's `config.json`, verbatim: informational, for tools that rebuild the model; the runtime never reads it |
+//! | `zoo.normalization`   | `{"x": {"mean": [..], "std": [..]}, ...}` named groups       |
 //! | `zoo.skeleton`        | `{"names": [..], "parents": [-1, 0, ..], "offsets": [[x,y,z]..]}` |
 //! | `zoo.feature_layout`  | `[{"name": "..", "start": 0, "len": 3}, ..]`                 |
 //! | `zoo.fps`             | frames per second of the training data, e.g. `"30"`          |
 //! | `zoo.state`           | `[{"input": "h", "output": "h_next"}, ..]`                   |
+//! | `zoo.transition`      | task `transition` only: [`TransitionTask`] JSON              |
 //! | `zoo.start_graph`     | optional: base64 ONNX of the transition-start graph (below)  |
 //!
 //! The start graph runs once when a transition starts (e.g. target encoding, hidden-state
-//! initialiser). Its inputs are `[batch, ...]` f32; each of its outputs is named like a state
+//! initializer). Its inputs are `[batch, ...]` f32; each of its outputs is named like a state
 //! *input* of the step graph and sets that state slot; slots it does not produce start at zero.
+//!
+//! Version 1 (before the task section) kept the model's config in `zoo.config` and the
+//! statistics in `zoo.normalisation`; this runtime refuses it and asks for a re-export.
+//!
+//! Adding a task: a section type in a new submodule (like [`transition`]), an arm of
+//! [`MotionTask`], and its key in [`keys`].
+
+pub mod transition;
 
 use crate::error::MotionError;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
+pub use transition::{TransitionTask, TransitionTerrain};
 
 /// The format version this runtime reads and exporters write.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 
 /// metadata_props keys.
 pub mod keys {
@@ -34,10 +47,12 @@ pub mod keys {
     pub const FORMAT_VERSION: &str = "zoo.format_version";
     /// Model kind (`rtn`, ...).
     pub const MODEL_KIND: &str = "zoo.model_kind";
-    /// Model configuration JSON.
+    /// Task of the model (`transition`, `step`).
+    pub const TASK: &str = "zoo.task";
+    /// The model's configuration JSON, informational.
     pub const CONFIG: &str = "zoo.config";
-    /// Normalisation statistics JSON.
-    pub const NORMALISATION: &str = "zoo.normalisation";
+    /// Normalization statistics JSON.
+    pub const NORMALIZATION: &str = "zoo.normalization";
     /// Skeleton JSON.
     pub const SKELETON: &str = "zoo.skeleton";
     /// Feature layout JSON.
@@ -48,12 +63,14 @@ pub mod keys {
     pub const STATE: &str = "zoo.state";
     /// Optional base64 ONNX of the transition-start graph.
     pub const START_GRAPH: &str = "zoo.start_graph";
-    /// All keys a format-1 model must carry.
-    pub const REQUIRED: [&str; 8] =
-        [FORMAT_VERSION, MODEL_KIND, CONFIG, NORMALISATION, SKELETON, FEATURE_LAYOUT, FPS, STATE];
+    /// The `transition` task section, JSON.
+    pub const TRANSITION: &str = super::transition::KEY;
+    /// All keys every format-2 model carries (a task may require its section besides).
+    pub const REQUIRED: [&str; 9] =
+        [FORMAT_VERSION, MODEL_KIND, TASK, CONFIG, NORMALIZATION, SKELETON, FEATURE_LAYOUT, FPS, STATE];
 }
 
-/// Mean and standard deviation of a group of features (normalised = (x - mean) / std).
+/// Mean and standard deviation of a group of features (normalized = (x - mean) / std).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct MotionMeanStd {
     /// Per-feature mean.
@@ -63,15 +80,15 @@ pub struct MotionMeanStd {
 }
 
 impl MotionMeanStd {
-    /// Normalises `v` in place. `v.len()` must equal the number of features.
-    pub fn normalise(&self, v: &mut [f32]) {
+    /// Normalizes `v` in place. `v.len()` must equal the number of features.
+    pub fn normalize(&self, v: &mut [f32]) {
         for ((x, m), s) in v.iter_mut().zip(&self.mean).zip(&self.std) {
             *x = (*x - m) / s;
         }
     }
 
-    /// Undoes [`MotionMeanStd::normalise`] in place.
-    pub fn denormalise(&self, v: &mut [f32]) {
+    /// Undoes [`MotionMeanStd::normalize`] in place.
+    pub fn denormalize(&self, v: &mut [f32]) {
         for ((x, m), s) in v.iter_mut().zip(&self.mean).zip(&self.std) {
             *x = *x * s + m;
         }
@@ -164,17 +181,93 @@ pub struct MotionStatePair {
     pub output: String,
 }
 
-/// Everything a format-1 model carries besides the graph.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+/// What an exported model does, with the task's own typed section.
+#[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
+pub enum MotionTask {
+    /// A transition from context frames to a target pose (RTN); section `zoo.transition`.
+    /// Runs with [`crate::TransitionModel`].
+    Transition(TransitionTask),
+    /// A bare recurrent step graph with no task-level API and no section: the engine drives
+    /// it through [`crate::MotionRunner`] (test fixtures, hand-written graphs).
+    Step,
+}
+
+impl MotionTask {
+    /// Task names this runtime knows, as written in `zoo.task`.
+    pub const NAMES: [&'static str; 2] = ["transition", "step"];
+
+    /// The task's name, as written in `zoo.task`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            MotionTask::Transition(_) => "transition",
+            MotionTask::Step => "step",
+        }
+    }
+
+    /// The metadata key of the task's section, if it has one.
+    pub fn section_key(&self) -> Option<&'static str> {
+        match self {
+            MotionTask::Transition(_) => Some(keys::TRANSITION),
+            MotionTask::Step => None,
+        }
+    }
+
+    /// The transition section, when this is a `transition` model.
+    pub fn as_transition(&self) -> Option<&TransitionTask> {
+        match self {
+            MotionTask::Transition(t) => Some(t),
+            _ => None,
+        }
+    }
+
+    fn section_json(&self) -> Option<String> {
+        match self {
+            MotionTask::Transition(t) => Some(json(t)),
+            MotionTask::Step => None,
+        }
+    }
+
+    fn check(&self) -> Result<(), MotionError> {
+        let bad = |key: &str, reason: String| MotionError::BadMetadata { key: key.to_string(), reason };
+        match self {
+            MotionTask::Transition(t) => t.check().map_err(|r| bad(keys::TRANSITION, r)),
+            MotionTask::Step => Ok(()),
+        }
+    }
+
+    /// Parses task `name` (of a model of kind `kind`) and its section.
+    fn from_props(name: &str, kind: &str, get: &impl Fn(&str) -> Option<String>) -> Result<Self, MotionError> {
+        match name {
+            "transition" => {
+                let text = get(keys::TRANSITION)
+                    .ok_or_else(|| MotionError::MissingMetadata { key: keys::TRANSITION.to_string() })?;
+                Ok(MotionTask::Transition(parse(keys::TRANSITION, &text)?))
+            }
+            "step" => Ok(MotionTask::Step),
+            other => Err(MotionError::UnknownTask {
+                task: other.to_string(),
+                kind: kind.to_string(),
+                known: MotionTask::NAMES.join(", "),
+            }),
+        }
+    }
+}
+
+/// Everything a format-2 model carries besides the graph.
+#[derive(Clone, Debug, PartialEq)]
 pub struct MotionModelMetadata {
     /// Format version ([`FORMAT_VERSION`]).
     pub format_version: u32,
     /// Model kind (`rtn`, ...).
     pub model_kind: String,
-    /// The model's configuration JSON, verbatim.
+    /// The task and its typed section.
+    pub task: MotionTask,
+    /// The model's configuration JSON, verbatim: informational (tools that rebuild the model
+    /// read it, e.g. `zoo bench runtime`); the runtime never reads it for behavior.
     pub config_json: String,
-    /// Named normalisation groups.
-    pub normalisation: BTreeMap<String, MotionMeanStd>,
+    /// Named normalization groups.
+    pub normalization: BTreeMap<String, MotionMeanStd>,
     /// Skeleton.
     pub skeleton: MotionSkeletonInfo,
     /// Layout of the model's per-frame feature vector.
@@ -185,75 +278,106 @@ pub struct MotionModelMetadata {
     pub state: Vec<MotionStatePair>,
 }
 
+fn parse<T: serde::de::DeserializeOwned>(key: &str, s: &str) -> Result<T, MotionError> {
+    serde_json::from_str(s).map_err(|e| MotionError::BadMetadata { key: key.to_string(), reason: e.to_string() })
+}
+
 impl MotionModelMetadata {
-    /// The metadata_props entries, in a fixed order.
+    /// The metadata_props entries, in a fixed order (the task section last).
     pub fn to_props(&self) -> Vec<(String, String)> {
-        vec![
+        let mut props = vec![
             (keys::FORMAT_VERSION.into(), self.format_version.to_string()),
             (keys::MODEL_KIND.into(), self.model_kind.clone()),
+            (keys::TASK.into(), self.task.name().to_string()),
             (keys::CONFIG.into(), self.config_json.clone()),
-            (keys::NORMALISATION.into(), json(&self.normalisation)),
+            (keys::NORMALIZATION.into(), json(&self.normalization)),
             (keys::SKELETON.into(), json(&self.skeleton)),
             (keys::FEATURE_LAYOUT.into(), json(&self.feature_layout)),
             (keys::FPS.into(), self.fps.to_string()),
             (keys::STATE.into(), json(&self.state)),
-        ]
+        ];
+        if let (Some(key), Some(section)) = (self.task.section_key(), self.task.section_json()) {
+            props.push((key.to_string(), section));
+        }
+        props
+    }
+
+    /// Checks what [`MotionModelMetadata::from_props`] checks, so that an exporter refuses to
+    /// write a file the runtime would refuse to load.
+    pub fn check(&self) -> Result<(), MotionError> {
+        let bad = |key: &str, reason: String| MotionError::BadMetadata { key: key.to_string(), reason };
+        if self.format_version != FORMAT_VERSION {
+            return Err(bad(
+                keys::FORMAT_VERSION,
+                format!("version {} given, this zoo writes {FORMAT_VERSION}", self.format_version),
+            ));
+        }
+        if self.model_kind.trim().is_empty() {
+            return Err(bad(keys::MODEL_KIND, "the model kind is empty".into()));
+        }
+        if !(self.fps.is_finite() && self.fps > 0.0) {
+            return Err(bad(keys::FPS, format!("`{}` is not a positive number", self.fps)));
+        }
+        serde_json::from_str::<serde_json::Value>(&self.config_json).map_err(|e| bad(keys::CONFIG, e.to_string()))?;
+        for (name, g) in &self.normalization {
+            if g.mean.len() != g.std.len() {
+                return Err(bad(
+                    keys::NORMALIZATION,
+                    format!("group `{name}` has {} means but {} stds", g.mean.len(), g.std.len()),
+                ));
+            }
+            if let Some(i) = g.std.iter().position(|s| !(s.is_finite() && *s > 0.0)) {
+                return Err(bad(
+                    keys::NORMALIZATION,
+                    format!("group `{name}` has std {} at index {i}; every std must be > 0", g.std[i]),
+                ));
+            }
+        }
+        self.skeleton.check().map_err(|reason| bad(keys::SKELETON, reason))?;
+        self.task.check()
     }
 
     /// Reads and checks the metadata; `get` returns the value of a key, if present.
-    /// The format version is checked first, so a newer file says so instead of failing on
-    /// an entry it renamed.
+    /// The format version is checked first, so an older or newer file says so instead of
+    /// failing on an entry that was renamed.
     pub fn from_props(get: impl Fn(&str) -> Option<String>) -> Result<Self, MotionError> {
         let req = |key: &str| get(key).ok_or_else(|| MotionError::MissingMetadata { key: key.to_string() });
         let version = req(keys::FORMAT_VERSION)?;
-        if version.trim().parse::<u32>().ok() != Some(FORMAT_VERSION) {
-            return Err(MotionError::UnknownFormatVersion { found: version, supported: FORMAT_VERSION });
+        match version.trim().parse::<u32>() {
+            Ok(FORMAT_VERSION) => {}
+            Ok(found) if found < FORMAT_VERSION => {
+                return Err(MotionError::FormatTooOld { found, supported: FORMAT_VERSION });
+            }
+            _ => return Err(MotionError::UnknownFormatVersion { found: version, supported: FORMAT_VERSION }),
         }
         for key in keys::REQUIRED {
             req(key)?;
         }
-        fn parse<T: serde::de::DeserializeOwned>(key: &str, s: &str) -> Result<T, MotionError> {
-            serde_json::from_str(s)
-                .map_err(|e| MotionError::BadMetadata { key: key.to_string(), reason: e.to_string() })
-        }
-        let config_json = req(keys::CONFIG)?;
-        parse::<serde_json::Value>(keys::CONFIG, &config_json)?;
+        let model_kind = req(keys::MODEL_KIND)?;
+        let task = MotionTask::from_props(&req(keys::TASK)?, &model_kind, &get)?;
         let fps_s = req(keys::FPS)?;
-        let fps = fps_s.trim().parse::<f32>().ok().filter(|f| f.is_finite() && *f > 0.0).ok_or_else(|| {
-            MotionError::BadMetadata { key: keys::FPS.into(), reason: format!("`{fps_s}` is not a positive number") }
+        let fps = fps_s.trim().parse::<f32>().map_err(|_| MotionError::BadMetadata {
+            key: keys::FPS.into(),
+            reason: format!("`{fps_s}` is not a positive number"),
         })?;
-        let normalisation: BTreeMap<String, MotionMeanStd> = parse(keys::NORMALISATION, &req(keys::NORMALISATION)?)?;
-        for (name, g) in &normalisation {
-            if g.mean.len() != g.std.len() {
-                return Err(MotionError::BadMetadata {
-                    key: keys::NORMALISATION.into(),
-                    reason: format!("group `{name}` has {} means but {} stds", g.mean.len(), g.std.len()),
-                });
-            }
-            if let Some(i) = g.std.iter().position(|s| !(s.is_finite() && *s > 0.0)) {
-                return Err(MotionError::BadMetadata {
-                    key: keys::NORMALISATION.into(),
-                    reason: format!("group `{name}` has std {} at index {i}; every std must be > 0", g.std[i]),
-                });
-            }
-        }
-        let skeleton: MotionSkeletonInfo = parse(keys::SKELETON, &req(keys::SKELETON)?)?;
-        skeleton.check().map_err(|reason| MotionError::BadMetadata { key: keys::SKELETON.into(), reason })?;
-        Ok(MotionModelMetadata {
+        let metadata = MotionModelMetadata {
             format_version: FORMAT_VERSION,
-            model_kind: req(keys::MODEL_KIND)?,
-            config_json,
-            normalisation,
-            skeleton,
+            model_kind,
+            task,
+            config_json: req(keys::CONFIG)?,
+            normalization: parse(keys::NORMALIZATION, &req(keys::NORMALIZATION)?)?,
+            skeleton: parse(keys::SKELETON, &req(keys::SKELETON)?)?,
             feature_layout: parse(keys::FEATURE_LAYOUT, &req(keys::FEATURE_LAYOUT)?)?,
             fps,
             state: parse(keys::STATE, &req(keys::STATE)?)?,
-        })
+        };
+        metadata.check()?;
+        Ok(metadata)
     }
 }
 
 fn json<T: Serialize>(v: &T) -> String {
-    // Plain structs of strings, numbers and vectors: serialisation cannot fail.
+    // Plain structs of strings, numbers and vectors: serialization cannot fail.
     serde_json::to_string(v).unwrap_or_default()
 }
 
@@ -261,12 +385,24 @@ fn json<T: Serialize>(v: &T) -> String {
 mod tests {
     use super::*;
 
+    fn transition() -> TransitionTask {
+        TransitionTask {
+            past_frames: 10,
+            transition_frames: 30,
+            target_blend: 5,
+            frame_dim: 6,
+            offset_input: true,
+            terrain: None,
+        }
+    }
+
     fn sample() -> MotionModelMetadata {
         MotionModelMetadata {
             format_version: FORMAT_VERSION,
             model_kind: "toy".into(),
+            task: MotionTask::Transition(transition()),
             config_json: "{\"hidden\": 4}".into(),
-            normalisation: [("x".to_string(), MotionMeanStd { mean: vec![0.0, 1.0], std: vec![1.0, 2.0] })].into(),
+            normalization: [("x".to_string(), MotionMeanStd { mean: vec![0.0, 1.0], std: vec![1.0, 2.0] })].into(),
             skeleton: MotionSkeletonInfo {
                 names: vec!["Hips".into(), "Spine".into()],
                 parents: vec![-1, 0],
@@ -282,11 +418,26 @@ mod tests {
         |k| props.iter().find(|(key, _)| key == k).map(|(_, v)| v.clone())
     }
 
+    fn edited(edit: impl FnOnce(&mut Vec<(String, String)>)) -> Result<MotionModelMetadata, MotionError> {
+        let mut props = sample().to_props();
+        edit(&mut props);
+        MotionModelMetadata::from_props(lookup(&props))
+    }
+
+    fn set(props: &mut [(String, String)], key: &str, value: &str) {
+        props.iter_mut().find(|(k, _)| k == key).unwrap().1 = value.to_string();
+    }
+
     #[test]
     fn round_trip() {
         let m = sample();
         let props = m.to_props();
+        assert_eq!(props.last().unwrap().0, keys::TRANSITION);
         assert_eq!(MotionModelMetadata::from_props(lookup(&props)).unwrap(), m);
+        let step = MotionModelMetadata { task: MotionTask::Step, ..sample() };
+        let props = step.to_props();
+        assert!(props.iter().all(|(k, _)| k != keys::TRANSITION), "a step model has no section");
+        assert_eq!(MotionModelMetadata::from_props(lookup(&props)).unwrap(), step);
     }
 
     #[test]
@@ -298,11 +449,66 @@ mod tests {
     }
 
     #[test]
-    fn missing_key_is_named() {
-        let mut props = sample().to_props();
-        props.retain(|(k, _)| k != keys::SKELETON);
+    fn a_version_1_file_is_asked_to_re_export() {
+        let props = vec![(keys::FORMAT_VERSION.to_string(), "1".to_string())];
         let err = MotionModelMetadata::from_props(lookup(&props)).unwrap_err();
+        assert!(matches!(err, MotionError::FormatTooOld { found: 1, supported: FORMAT_VERSION }), "{err}");
+        assert!(err.to_string().contains("re-export") && err.to_string().contains("zoo export --onnx"), "{err}");
+    }
+
+    #[test]
+    fn missing_key_is_named() {
+        let err = edited(|p| p.retain(|(k, _)| k != keys::SKELETON)).unwrap_err();
         assert!(err.to_string().contains("zoo.skeleton"), "{err}");
+    }
+
+    #[test]
+    fn a_missing_task_section_is_named() {
+        let err = edited(|p| p.retain(|(k, _)| k != keys::TRANSITION)).unwrap_err();
+        assert!(matches!(&err, MotionError::MissingMetadata { key } if key == keys::TRANSITION), "{err}");
+        assert!(err.to_string().contains("re-export"), "{err}");
+    }
+
+    #[test]
+    fn a_task_section_missing_a_field_is_refused() {
+        let err = edited(|p| set(p, keys::TRANSITION, r#"{"past_frames": 10, "target_blend": 5}"#)).unwrap_err();
+        assert!(matches!(&err, MotionError::BadMetadata { key, .. } if key == keys::TRANSITION), "{err}");
+        assert!(err.to_string().contains("transition_frames"), "{err}");
+    }
+
+    #[test]
+    fn a_malformed_task_section_is_refused() {
+        let err = edited(|p| set(p, keys::TRANSITION, "{past_frames: 10")).unwrap_err();
+        assert!(matches!(&err, MotionError::BadMetadata { key, .. } if key == keys::TRANSITION), "{err}");
+        let err = edited(|p| {
+            let t = json(&transition()).replace("\"past_frames\":10", "\"past_frames\":\"ten\"");
+            set(p, keys::TRANSITION, &t)
+        })
+        .unwrap_err();
+        assert!(err.to_string().contains("zoo.transition"), "{err}");
+        let err = edited(|p| {
+            let t = json(&transition()).replace("}", ",\"blend\":3}");
+            set(p, keys::TRANSITION, &t)
+        })
+        .unwrap_err();
+        assert!(err.to_string().contains("unknown field `blend`"), "{err}");
+    }
+
+    #[test]
+    fn a_bad_task_section_value_is_refused() {
+        let err = edited(|p| {
+            let t = json(&TransitionTask { frame_dim: 7, ..transition() });
+            set(p, keys::TRANSITION, &t)
+        })
+        .unwrap_err();
+        assert!(err.to_string().contains("frame_dim 7"), "{err}");
+    }
+
+    #[test]
+    fn an_unknown_task_is_refused_with_the_known_ones() {
+        let err = edited(|p| set(p, keys::TASK, "stitch")).unwrap_err();
+        assert!(matches!(&err, MotionError::UnknownTask { task, .. } if task == "stitch"), "{err}");
+        assert!(err.to_string().contains("transition, step") && err.to_string().contains("`toy`"), "{err}");
     }
 
     #[test]
@@ -311,20 +517,31 @@ mod tests {
         m.skeleton.parents = vec![-1, 5];
         let err = MotionModelMetadata::from_props(lookup(&m.to_props())).unwrap_err();
         assert!(err.to_string().contains("`Spine`"), "{err}");
+        assert!(m.check().is_err(), "exporters run the same check");
         let mut m = sample();
-        m.normalisation.get_mut("x").unwrap().std[1] = 0.0;
+        m.normalization.get_mut("x").unwrap().std[1] = 0.0;
         let err = MotionModelMetadata::from_props(lookup(&m.to_props())).unwrap_err();
         assert!(err.to_string().contains("std 0"), "{err}");
     }
 
     #[test]
-    fn normalise_round_trip_and_skeleton_conversion() {
+    fn bad_fps_and_config_are_refused() {
+        let err = edited(|p| set(p, keys::FPS, "fast")).unwrap_err();
+        assert!(matches!(&err, MotionError::BadMetadata { key, .. } if key == keys::FPS), "{err}");
+        let err = edited(|p| set(p, keys::FPS, "-30")).unwrap_err();
+        assert!(matches!(&err, MotionError::BadMetadata { key, .. } if key == keys::FPS), "{err}");
+        let err = edited(|p| set(p, keys::CONFIG, "{oops")).unwrap_err();
+        assert!(matches!(&err, MotionError::BadMetadata { key, .. } if key == keys::CONFIG), "{err}");
+    }
+
+    #[test]
+    fn normalize_round_trip_and_skeleton_conversion() {
         let m = sample();
-        let g = &m.normalisation["x"];
+        let g = &m.normalization["x"];
         let mut v = [3.0, 5.0];
-        g.normalise(&mut v);
+        g.normalize(&mut v);
         assert_eq!(v, [3.0, 2.0]);
-        g.denormalise(&mut v);
+        g.denormalize(&mut v);
         assert_eq!(v, [3.0, 5.0]);
         let s = m.skeleton.to_skeleton();
         assert_eq!(s.parents, vec![None, Some(0)]);

@@ -1,7 +1,10 @@
-//! Loading an exported step graph and running it one frame at a time.
+//! Loading an exported file: decoding the ONNX protobuf, reading and checking the metadata,
+//! binding state pairs and frame inputs/outputs, and planning the step and start graphs.
+//! Running them is [`crate::runner`]'s.
 
 use crate::error::{MotionError, chain};
 use crate::metadata::{MotionModelMetadata, keys};
+use crate::runner::MotionRunner;
 use prost::Message;
 use std::collections::HashMap;
 use std::path::Path;
@@ -9,7 +12,7 @@ use std::sync::{Arc, Mutex};
 use tract_onnx::pb;
 use tract_onnx::prelude::*;
 
-type Plan = Arc<TypedRunnableModel>;
+pub(crate) type Plan = Arc<TypedRunnableModel>;
 
 /// Name and per-character width of one graph input or output (`[batch, width]`).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -34,35 +37,35 @@ pub struct MotionStateInfo {
 }
 
 #[derive(Debug)]
-struct Inner {
-    metadata: MotionModelMetadata,
+pub(crate) struct Inner {
+    pub(crate) metadata: MotionModelMetadata,
     /// Frame inputs (graph inputs that are not state), in graph order.
-    inputs: Vec<MotionTensorInfo>,
+    pub(crate) inputs: Vec<MotionTensorInfo>,
     /// Frame outputs (graph outputs that are not state), in graph order.
-    outputs: Vec<MotionTensorInfo>,
-    states: Vec<MotionStateInfo>,
+    pub(crate) outputs: Vec<MotionTensorInfo>,
+    pub(crate) states: Vec<MotionStateInfo>,
     /// For each graph input, in graph order: where its value comes from.
-    graph_inputs: Vec<Source>,
+    pub(crate) graph_inputs: Vec<Source>,
     /// For each graph output, in graph order: where its value goes.
-    graph_outputs: Vec<Source>,
-    graph_input_widths: Vec<usize>,
+    pub(crate) graph_outputs: Vec<Source>,
+    pub(crate) graph_input_widths: Vec<usize>,
     /// Plan with every batch dimension set to 1 (lowest latency for one character).
-    single: Plan,
+    pub(crate) single: Plan,
     /// Plan with a symbolic batch dimension (checked at load; used when a concrete plan fails).
-    batched: Plan,
+    pub(crate) batched: Plan,
     /// The step graph before planning and its per-character input dims, to plan concrete batch
     /// sizes: tract picks faster kernels for a known batch than for a symbolic one.
-    source: InferenceModel,
-    in_dims: Vec<Vec<usize>>,
+    pub(crate) source: InferenceModel,
+    pub(crate) in_dims: Vec<Vec<usize>>,
     /// Plans for concrete batch sizes, made on first use and shared by every runner.
-    concrete: Mutex<HashMap<usize, Plan>>,
+    pub(crate) concrete: Mutex<HashMap<usize, Plan>>,
     /// The transition-start graph, when the model has one.
-    start: Option<StartGraph>,
+    pub(crate) start: Option<StartGraph>,
 }
 
 impl Inner {
     /// The plan for `batch` characters: concrete (made once per batch size), else symbolic.
-    fn plan_for(&self, batch: usize) -> Plan {
+    pub(crate) fn plan_for(&self, batch: usize) -> Plan {
         let mut cache = self.concrete.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
         if let Some(p) = cache.get(&batch) {
             return p.clone();
@@ -80,17 +83,17 @@ impl Inner {
 /// The transition-start graph (`zoo.start_graph`): all inputs are caller buffers, every output
 /// sets one state slot.
 #[derive(Debug)]
-struct StartGraph {
-    inputs: Vec<MotionTensorInfo>,
-    widths: Vec<usize>,
+pub(crate) struct StartGraph {
+    pub(crate) inputs: Vec<MotionTensorInfo>,
+    pub(crate) widths: Vec<usize>,
     /// State slot of each graph output, in graph order.
-    out_slots: Vec<usize>,
-    single: Plan,
-    batched: Plan,
+    pub(crate) out_slots: Vec<usize>,
+    pub(crate) single: Plan,
+    pub(crate) batched: Plan,
 }
 
 #[derive(Clone, Copy, Debug)]
-enum Source {
+pub(crate) enum Source {
     Frame(usize),
     State(usize),
 }
@@ -99,13 +102,13 @@ enum Source {
 /// share it between characters and threads.
 #[derive(Clone, Debug)]
 pub struct MotionModel {
-    inner: Arc<Inner>,
+    pub(crate) inner: Arc<Inner>,
 }
 
 /// The recurrent state of one character, created by [`MotionModel::new_state`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct MotionState {
-    slots: Vec<Vec<f32>>,
+    pub(crate) slots: Vec<Vec<f32>>,
 }
 
 impl MotionState {
@@ -190,7 +193,7 @@ fn parse(bytes: &[u8], origin: &str) -> Result<Parsed, MotionError> {
     Ok(Parsed { proto, model, in_dims, out_dims })
 }
 
-fn width(d: &[usize]) -> usize {
+pub(crate) fn width(d: &[usize]) -> usize {
     d.iter().product()
 }
 
@@ -387,282 +390,7 @@ impl MotionModel {
     /// A runner: the scratch space of one thread. Keep one per worker thread and reuse it
     /// every frame; it allocates its buffers here and when the batch size changes.
     pub fn runner(&self) -> Result<MotionRunner, MotionError> {
-        let single = Session::new(&self.inner.single, 1, &self.inner.graph_input_widths)?;
-        Ok(MotionRunner { model: self.clone(), single, batched: None, start: None })
-    }
-}
-
-/// A spawned tract state with preallocated input tensors for one batch size.
-#[derive(Debug)]
-struct Session {
-    batch: usize,
-    state: TypedSimpleState,
-    /// One tensor per graph input, reused every call (exclusive again once tract returns).
-    inputs: Vec<Arc<Tensor>>,
-}
-
-impl Session {
-    fn new(plan: &Plan, batch: usize, widths: &[usize]) -> Result<Self, MotionError> {
-        let run = |e: TractError| MotionError::Run { reason: chain(&e) };
-        let state = plan.spawn().map_err(run)?;
-        let inputs = widths
-            .iter()
-            .map(|&w| Tensor::zero::<f32>(&[batch, w]).map(Arc::new))
-            .collect::<TractResult<Vec<_>>>()
-            .map_err(run)?;
-        Ok(Session { batch, state, inputs })
-    }
-}
-
-/// Scratch space for stepping a [`MotionModel`] on one thread (not shared: `Send`, not `Sync`).
-#[derive(Debug)]
-pub struct MotionRunner {
-    model: MotionModel,
-    single: Session,
-    batched: Option<Session>,
-    /// Start-graph session, created on the first `start` (and when the batch size changes).
-    start: Option<Session>,
-}
-
-fn check_states(inner: &Inner, states: &[MotionState]) -> Result<(), MotionError> {
-    for state in states {
-        if state.slots.len() != inner.states.len() {
-            return Err(MotionError::StateMismatch {
-                name: "(number of slots)".into(),
-                expected: inner.states.len(),
-                found: state.slots.len(),
-            });
-        }
-        for (info, slot) in inner.states.iter().zip(&state.slots) {
-            if slot.len() != info.width {
-                return Err(MotionError::StateMismatch {
-                    name: info.input.clone(),
-                    expected: info.width,
-                    found: slot.len(),
-                });
-            }
-        }
-    }
-    Ok(())
-}
-
-pub(crate) fn check_len(name: &str, found: usize, batch: usize, width: usize) -> Result<(), MotionError> {
-    if found != batch * width {
-        return Err(MotionError::BufferLength { name: name.to_string(), expected: batch * width, batch, width, found });
-    }
-    Ok(())
-}
-
-pub(crate) fn check_finite(name: &str, data: &[f32], width: usize) -> Result<(), MotionError> {
-    if let Some(index) = data.iter().position(|v| !v.is_finite()) {
-        return Err(MotionError::NonFinite {
-            name: name.to_string(),
-            index,
-            character: index / width.max(1),
-            value: data[index],
-        });
-    }
-    Ok(())
-}
-
-impl MotionRunner {
-    /// The model this runner steps.
-    pub fn model(&self) -> &MotionModel {
-        &self.model
-    }
-
-    /// Advances one character by one frame.
-    ///
-    /// `inputs[i]` holds `model.inputs()[i].width` values; `outputs[i]` receives
-    /// `model.outputs()[i].width` values; `state` is read and replaced by the next state.
-    /// Invalid sizes or non-finite inputs return an error and leave `state` unchanged.
-    pub fn step(
-        &mut self,
-        state: &mut MotionState,
-        inputs: &[&[f32]],
-        outputs: &mut [&mut [f32]],
-    ) -> Result<(), MotionError> {
-        self.run(std::slice::from_mut(state), inputs, outputs)
-    }
-
-    /// Advances `states.len()` characters by one frame in one graph run.
-    ///
-    /// Buffers are character-major: `inputs[i]` holds `states.len() * model.inputs()[i].width`
-    /// values, row `c` for character `c`; outputs likewise.
-    pub fn step_batch(
-        &mut self,
-        states: &mut [MotionState],
-        inputs: &[&[f32]],
-        outputs: &mut [&mut [f32]],
-    ) -> Result<(), MotionError> {
-        self.run(states, inputs, outputs)
-    }
-
-    /// Starts a transition for one character: runs the start graph on `inputs`
-    /// (`inputs[i]` holds `model.start_inputs()[i].width` values) and sets `state` from its
-    /// outputs; slots the start graph does not produce are zeroed. Without a start graph it
-    /// zeroes `state` and takes no inputs.
-    pub fn start(&mut self, state: &mut MotionState, inputs: &[&[f32]]) -> Result<(), MotionError> {
-        self.start_batch(std::slice::from_mut(state), inputs)
-    }
-
-    /// [`MotionRunner::start`] for `states.len()` characters in one run (character-major buffers).
-    pub fn start_batch(&mut self, states: &mut [MotionState], inputs: &[&[f32]]) -> Result<(), MotionError> {
-        let inner = &*self.model.inner;
-        let batch = states.len();
-        if batch == 0 {
-            return Err(MotionError::EmptyBatch);
-        }
-        check_states(inner, states)?;
-        let Some(start) = &inner.start else {
-            if !inputs.is_empty() {
-                return Err(MotionError::BufferCount { what: "start inputs", expected: 0, found: inputs.len() });
-            }
-            states.iter_mut().for_each(MotionState::reset);
-            return Ok(());
-        };
-        if inputs.len() != start.inputs.len() {
-            return Err(MotionError::BufferCount {
-                what: "start inputs",
-                expected: start.inputs.len(),
-                found: inputs.len(),
-            });
-        }
-        for (info, data) in start.inputs.iter().zip(inputs) {
-            check_len(&info.name, data.len(), batch, info.width)?;
-            check_finite(&info.name, data, info.width)?;
-        }
-        if self.start.as_ref().is_none_or(|s| s.batch != batch) {
-            let plan = if batch == 1 { &start.single } else { &start.batched };
-            self.start = Some(Session::new(plan, batch, &start.widths)?);
-        }
-        let session = self.start.as_mut().expect("start session set above");
-        let run_err = |e: TractError| MotionError::Run { reason: chain(&e) };
-        for (g, data) in inputs.iter().enumerate() {
-            let tensor = Arc::make_mut(&mut session.inputs[g]);
-            let mut view = tensor.try_as_plain_ram_mut().map_err(run_err)?;
-            view.as_slice_mut::<f32>().map_err(run_err)?.copy_from_slice(data);
-        }
-        let values: TVec<TValue> = session.inputs.iter().map(|t| TValue::from_const(t.clone())).collect();
-        let results = session.state.run(values).map_err(run_err)?;
-        states.iter_mut().for_each(MotionState::reset);
-        for (o, &k) in start.out_slots.iter().enumerate() {
-            let view = results[o].try_as_plain_ram().map_err(run_err)?;
-            let src = view.as_slice::<f32>().map_err(run_err)?;
-            let width = inner.states[k].width;
-            if src.len() != batch * width {
-                return Err(MotionError::Run {
-                    reason: format!(
-                        "start output for state `{}` has {} values, expected {}",
-                        inner.states[k].input,
-                        src.len(),
-                        batch * width
-                    ),
-                });
-            }
-            for (c, state) in states.iter_mut().enumerate() {
-                state.slots[k].copy_from_slice(&src[c * width..(c + 1) * width]);
-            }
-        }
-        Ok(())
-    }
-
-    fn run(
-        &mut self,
-        states: &mut [MotionState],
-        inputs: &[&[f32]],
-        outputs: &mut [&mut [f32]],
-    ) -> Result<(), MotionError> {
-        let inner = &*self.model.inner;
-        let batch = states.len();
-        if batch == 0 {
-            return Err(MotionError::EmptyBatch);
-        }
-        if inputs.len() != inner.inputs.len() {
-            return Err(MotionError::BufferCount { what: "inputs", expected: inner.inputs.len(), found: inputs.len() });
-        }
-        if outputs.len() != inner.outputs.len() {
-            return Err(MotionError::BufferCount {
-                what: "outputs",
-                expected: inner.outputs.len(),
-                found: outputs.len(),
-            });
-        }
-        for (info, data) in inner.inputs.iter().zip(inputs) {
-            check_len(&info.name, data.len(), batch, info.width)?;
-            check_finite(&info.name, data, info.width)?;
-        }
-        for (info, data) in inner.outputs.iter().zip(outputs.iter()) {
-            check_len(&info.name, data.len(), batch, info.width)?;
-        }
-        check_states(inner, states)?;
-
-        let session = if batch == 1 {
-            &mut self.single
-        } else {
-            if self.batched.as_ref().is_none_or(|s| s.batch != batch) {
-                self.batched = Some(Session::new(&inner.plan_for(batch), batch, &inner.graph_input_widths)?);
-            }
-            self.batched.as_mut().expect("batched session set above")
-        };
-        let run_err = |e: TractError| MotionError::Run { reason: chain(&e) };
-
-        // Fill the preallocated input tensors.
-        for (g, source) in inner.graph_inputs.iter().enumerate() {
-            let width = inner.graph_input_widths[g];
-            // Exclusive unless tract kept a reference; then this copies once.
-            let tensor = Arc::make_mut(&mut session.inputs[g]);
-            let mut view = tensor.try_as_plain_ram_mut().map_err(run_err)?;
-            let dst = view.as_slice_mut::<f32>().map_err(run_err)?;
-            match *source {
-                Source::Frame(i) => dst.copy_from_slice(inputs[i]),
-                Source::State(k) => {
-                    for (c, state) in states.iter().enumerate() {
-                        dst[c * width..(c + 1) * width].copy_from_slice(&state.slots[k]);
-                    }
-                }
-            }
-        }
-        // A TVec holds up to 4 values inline: no allocation for graphs of up to 4 inputs.
-        let values: TVec<TValue> = session.inputs.iter().map(|t| TValue::from_const(t.clone())).collect();
-        let results = session.state.run(values).map_err(run_err)?;
-
-        for (o, source) in inner.graph_outputs.iter().enumerate() {
-            let view = results[o].try_as_plain_ram().map_err(run_err)?;
-            let src = view.as_slice::<f32>().map_err(run_err)?;
-            match *source {
-                Source::Frame(i) => {
-                    if src.len() != outputs[i].len() {
-                        return Err(MotionError::Run {
-                            reason: format!(
-                                "output `{}` has {} values, expected {}",
-                                inner.outputs[i].name,
-                                src.len(),
-                                outputs[i].len()
-                            ),
-                        });
-                    }
-                    outputs[i].copy_from_slice(src);
-                }
-                Source::State(k) => {
-                    let width = inner.states[k].width;
-                    if src.len() != batch * width {
-                        return Err(MotionError::Run {
-                            reason: format!(
-                                "state output `{}` has {} values, expected {}",
-                                inner.states[k].output,
-                                src.len(),
-                                batch * width
-                            ),
-                        });
-                    }
-                    for (c, state) in states.iter_mut().enumerate() {
-                        state.slots[k].copy_from_slice(&src[c * width..(c + 1) * width]);
-                    }
-                }
-            }
-        }
-        Ok(())
+        MotionRunner::new(self.clone())
     }
 }
 

@@ -40,7 +40,7 @@ pub fn write_rotations(src: &[Quat], dst: &mut [f32]) -> bool {
     true
 }
 
-/// Reads joint rotations (`x, y, z, w` per joint) and normalises them.
+/// Reads joint rotations (`x, y, z, w` per joint) and normalizes them.
 /// Returns `false` (reading nothing) when `src.len() != 4 * dst.len()`.
 pub fn read_rotations(src: &[f32], dst: &mut [Quat]) -> bool {
     if src.len() != 4 * dst.len() {

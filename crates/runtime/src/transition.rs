@@ -4,16 +4,19 @@
 //!
 //! Feature encoding, offsets and the target blend come from `zoo_motion::features`, the code
 //! the training uses. The step and start graphs are those of `zoo export --onnx` for an RTN
-//! (`zoo.model_kind = "rtn"`): frame inputs `x` and (with future conditioning) `offset`, frame
-//! output `x_next`, start inputs `target` and/or `x0`.
+//! (`zoo.model_kind = "rtn"`, `zoo.task = "transition"`): frame inputs `x` and (with future
+//! conditioning) `offset`, frame output `x_next`, start inputs `target` and/or `x0`. How to drive
+//! them (context length, blend length, which inputs exist) comes from the typed task section
+//! [`crate::metadata::TransitionTask`], never from the model's config.
 //!
 //! Poses are flat `f32` buffers of global joint positions, joint-major (`[x0, y0, z0, x1, ...]`,
 //! `3K` values for `K` joints, the model's skeleton order); [`crate::pose`] converts glam
 //! vectors. Batched calls take character-major buffers (character `c` at `c * 3K`).
 
 use crate::error::MotionError;
-use crate::metadata::MotionMeanStd;
-use crate::model::{MotionModel, MotionRunner, MotionState, check_finite, check_len};
+use crate::metadata::{MotionMeanStd, MotionTask, keys};
+use crate::model::{MotionModel, MotionState};
+use crate::runner::{MotionRunner, check_finite, check_len};
 use std::path::Path;
 use zoo_motion::features;
 use zoo_motion::footlock::FootLock;
@@ -31,6 +34,7 @@ pub struct TransitionModel {
     model: MotionModel,
     joints: usize,
     past_frames: usize,
+    transition_frames: usize,
     x: MotionMeanStd,
     velocity: MotionMeanStd,
     offset: MotionMeanStd,
@@ -45,7 +49,7 @@ pub struct TransitionModel {
 #[derive(Clone, Debug)]
 pub struct TransitionState {
     motion: MotionState,
-    /// Normalised features of the frame fed next.
+    /// Normalized features of the frame fed next.
     x: Vec<f32>,
     /// Global root position of that frame.
     root: [f32; 3],
@@ -78,7 +82,7 @@ impl TransitionState {
 pub struct TransitionRunner {
     model: TransitionModel,
     runner: MotionRunner,
-    /// Normalised features of the context frames, character-major.
+    /// Normalized features of the context frames, character-major.
     feats: Vec<f32>,
     target_vec: Vec<f32>,
     x0: Vec<f32>,
@@ -107,25 +111,55 @@ fn check_rows(name: &str, data: &[f32], batch: usize, width: usize) -> Result<()
     check_finite(name, data, width)
 }
 
+/// The model kinds that run the `transition` task with [`TransitionModel`].
+pub const TRANSITION_KINDS: [&str; 1] = ["rtn"];
+
 impl TransitionModel {
-    /// Loads an RTN exported by `zoo export --onnx`.
+    /// Loads an RTN exported by `zoo export --onnx`; refuses a file of another task or kind
+    /// (load any exported file with [`crate::LoadedModel::load`]).
     pub fn load(path: impl AsRef<Path>) -> Result<Self, MotionError> {
         Self::new(MotionModel::load(path)?)
     }
 
-    /// Wraps a loaded model; refuses models that are not RTN step graphs.
+    /// Wraps a loaded model; refuses models of another task or kind, and step graphs that do
+    /// not match their `zoo.transition` section.
     pub fn new(model: MotionModel) -> Result<Self, MotionError> {
         let m = model.metadata();
-        if m.model_kind != "rtn" {
-            return Err(bad("zoo.model_kind", format!("`{}` is not an RTN; transitions need `rtn`", m.model_kind)));
+        let MotionTask::Transition(task) = &m.task else {
+            return Err(MotionError::WrongTask {
+                task: m.task.name().to_string(),
+                kind: m.model_kind.clone(),
+                expected: "transition",
+                loader: "TransitionModel",
+            });
+        };
+        if !TRANSITION_KINDS.contains(&m.model_kind.as_str()) {
+            return Err(MotionError::UnknownModelKind {
+                kind: m.model_kind.clone(),
+                task: m.task.name().to_string(),
+                known: format!("transition models of kind {}", TRANSITION_KINDS.join(", ")),
+            });
         }
         let joints = m.skeleton.parents.len();
         let d = 3 * joints;
+        if task.frame_dim != d {
+            return Err(bad(
+                keys::TRANSITION,
+                format!("frame_dim is {} but the skeleton has {joints} joints ({d} values)", task.frame_dim),
+            ));
+        }
+        if task.terrain.is_some() {
+            return Err(MotionError::BadGraphIo {
+                what: "input",
+                name: "terrain".into(),
+                reason: "is not supported by TransitionModel (terrain-aware RTNs need the raw MotionRunner)".into(),
+            });
+        }
         let group = |name: &str| -> Result<MotionMeanStd, MotionError> {
-            let g = m.normalisation.get(name).ok_or_else(|| bad("zoo.normalisation", format!("no group `{name}`")))?;
+            let g = m.normalization.get(name).ok_or_else(|| bad(keys::NORMALIZATION, format!("no group `{name}`")))?;
             if g.mean.len() != d || g.std.len() != d {
                 return Err(bad(
-                    "zoo.normalisation",
+                    keys::NORMALIZATION,
                     format!("group `{name}` has {} means and {} deviations, expected {d}", g.mean.len(), g.std.len()),
                 ));
             }
@@ -136,29 +170,32 @@ impl TransitionModel {
             .iter()
             .map(|i| match i.name.as_str() {
                 "x" if i.width == d => Ok(FrameInput::X),
-                "offset" if i.width == d => Ok(FrameInput::Offset),
+                "offset" if i.width == d && task.offset_input => Ok(FrameInput::Offset),
                 other => Err(MotionError::BadGraphIo {
                     what: "input",
                     name: other.to_string(),
                     reason: format!(
-                        "is not supported by TransitionModel (it feeds `x` and `offset` of {d} values; \
-                         terrain-aware RTNs need the raw MotionRunner)"
+                        "is not an input of this transition model (`x`{} of {d} values, from `{}`)",
+                        if task.offset_input { " and `offset`" } else { "" },
+                        keys::TRANSITION
                     ),
                 }),
             })
             .collect::<Result<Vec<_>, _>>()?;
-        if !frame_inputs.contains(&FrameInput::X) {
-            return Err(MotionError::BadGraphIo {
-                what: "input",
-                name: "x".into(),
-                reason: format!("an RTN step graph takes the current frame `x` of {d} values"),
-            });
+        for (name, want) in [("x", FrameInput::X), ("offset", FrameInput::Offset)] {
+            if (want == FrameInput::X || task.offset_input) && !frame_inputs.contains(&want) {
+                return Err(MotionError::BadGraphIo {
+                    what: "input",
+                    name: name.into(),
+                    reason: format!("a transition step graph takes `{name}` of {d} values (`{}`)", keys::TRANSITION),
+                });
+            }
         }
         if model.outputs().len() != 1 || model.outputs()[0].width != d {
             return Err(MotionError::BadGraphIo {
                 what: "output",
                 name: model.outputs().first().map_or(String::new(), |o| o.name.clone()),
-                reason: format!("an RTN step graph has one frame output `x_next` of {d} values"),
+                reason: format!("a transition step graph has one frame output `x_next` of {d} values"),
             });
         }
         let start_target = model
@@ -167,22 +204,19 @@ impl TransitionModel {
             .map(|i| match i.name.as_str() {
                 "target" if i.width == 2 * d => Ok(true),
                 "x0" if i.width == d => Ok(false),
-                other => Err(bad("zoo.start_graph", format!("unexpected start input `{other}`"))),
+                other => Err(bad(keys::START_GRAPH, format!("unexpected start input `{other}`"))),
             })
             .collect::<Result<Vec<_>, _>>()?;
-        let config: serde_json::Value =
-            serde_json::from_str(&m.config_json).map_err(|e| bad("zoo.config", e.to_string()))?;
-        let target_blend = config.get("target_blend").and_then(|v| v.as_u64()).unwrap_or(0) as usize;
-        let past_frames = config.get("past_frames").and_then(|v| v.as_u64()).unwrap_or(10) as usize;
         Ok(TransitionModel {
             joints,
-            past_frames,
+            past_frames: task.past_frames,
+            transition_frames: task.transition_frames,
             x: group("x")?,
             velocity: group("velocity")?,
             offset: group("offset")?,
             frame_inputs,
             start_target,
-            target_blend,
+            target_blend: task.target_blend,
             model,
         })
     }
@@ -197,12 +231,17 @@ impl TransitionModel {
         self.past_frames
     }
 
+    /// Transition length P the model was trained on, in frames (the paper's 30).
+    pub fn transition_frames(&self) -> usize {
+        self.transition_frames
+    }
+
     /// The underlying step-graph model (metadata, skeleton, fps).
     pub fn model(&self) -> &MotionModel {
         &self.model
     }
 
-    /// Target-blend length of the post-process (RTN eq. 15-16), from the model's config.
+    /// Target-blend length of the post-process (RTN eq. 15-16), from `zoo.transition`.
     pub fn target_blend(&self) -> usize {
         self.target_blend
     }
@@ -304,12 +343,12 @@ impl TransitionRunner {
         check_rows("next", next, n, d)?;
         let frames = per / d;
         let m = &self.model;
-        // Context features and target vectors, normalised like in training.
+        // Context features and target vectors, normalized like in training.
         self.feats.resize(past.len(), 0.0);
         for (p, f) in past.chunks_exact(per).zip(self.feats.chunks_exact_mut(per)) {
             features::encode_positions(p, k, f);
             for frame in f.chunks_exact_mut(d) {
-                m.x.normalise(frame);
+                m.x.normalize(frame);
             }
         }
         self.target_vec.resize(n * 2 * d, 0.0);
@@ -317,8 +356,8 @@ impl TransitionRunner {
         for c in 0..n {
             let tv = &mut self.target_vec[c * 2 * d..(c + 1) * 2 * d];
             features::target_vector(&target[c * d..(c + 1) * d], &next[c * d..(c + 1) * d], tv);
-            m.x.normalise(&mut tv[..d]);
-            m.velocity.normalise(&mut tv[d..]);
+            m.x.normalize(&mut tv[..d]);
+            m.velocity.normalize(&mut tv[d..]);
             self.x0[c * d..(c + 1) * d].copy_from_slice(&self.feats[c * per..c * per + d]);
         }
         let inputs: Vec<&[f32]> =
@@ -356,13 +395,13 @@ impl TransitionRunner {
         for (c, s) in states.iter().enumerate() {
             let (xb, ob) = (&mut self.xb[c * d..(c + 1) * d], &mut self.offset[c * d..(c + 1) * d]);
             xb.copy_from_slice(&s.x);
-            // o_t = ((y_T - y_t) - mu_o) / sigma_o, y_t decoded from the normalised x_t and its root.
+            // o_t = ((y_T - y_t) - mu_o) / sigma_o, y_t decoded from the normalized x_t and its root.
             for i in 0..d {
                 let f = s.x[i] * m.x.std[i] + m.x.mean[i];
                 let y = if i < 3 { s.root[i] } else { f + s.root[i % 3] };
                 ob[i] = s.target[i] - y;
             }
-            m.offset.normalise(ob);
+            m.offset.normalize(ob);
         }
         let (x, offset) = (&self.xb[..], &self.offset[..]);
         let mut inputs: [&[f32]; 2] = [&[], &[]];
@@ -422,7 +461,7 @@ impl TransitionRunner {
             let next = &self.next[c * d..(c + 1) * d];
             s.x.copy_from_slice(next);
             pose.copy_from_slice(next);
-            m.x.denormalise(pose);
+            m.x.denormalize(pose);
             s.root = features::decode_frame_in_place(s.root, pose);
             s.frames += 1;
         }
@@ -462,7 +501,7 @@ impl TransitionRunner {
         if out.is_empty() || !out.len().is_multiple_of(n) || per < d || !per.is_multiple_of(d) {
             return Err(MotionError::BufferLength {
                 name: "out".into(),
-                expected: n * d * (self.model.past_frames * 3 + 1),
+                expected: n * d * (self.model.transition_frames + 1),
                 batch: n,
                 width: d * (per / d).max(1),
                 found: out.len(),

@@ -24,6 +24,7 @@ pub mod config;
 pub mod error;
 pub mod features;
 pub mod method;
+pub mod export;
 pub mod model;
 pub mod ops;
 pub mod train;

@@ -66,7 +66,7 @@ trait StepBackend {
     fn output(&self) -> &[f32];
 }
 
-/// Deterministic inputs in [-1, 1) (normalised units).
+/// Deterministic inputs in [-1, 1) (normalized units).
 fn inputs(n: usize, seed: u64) -> Vec<f32> {
     let mut rng = zoo_rtn::train::SplitMix64::new(seed);
     (0..n).map(|_| (2.0 * rng.next_f64() - 1.0) as f32).collect()
@@ -298,7 +298,7 @@ fn make_backends(
 pub fn run(a: RuntimeArgs) -> anyhow::Result<()> {
     let bytes = std::fs::read(&a.model).with_context(|| format!("reading {}", a.model.display()))?;
     let model = MotionModel::load(&a.model).with_context(|| format!("loading {}", a.model.display()))?;
-    let (config, weights) = zoo_export::rtn::import_rtn(&bytes)
+    let (config, weights) = zoo_rtn::export::import_rtn(&bytes)
         .with_context(|| format!("reading the RTN weights of {} for candle", a.model.display()))?;
     if config.terrain {
         bail!("{}: terrain-aware RTNs are not supported by `zoo bench runtime` yet", a.model.display());

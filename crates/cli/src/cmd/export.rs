@@ -1,12 +1,15 @@
 //! `zoo export --onnx`: writes a trained model as one ONNX file for the engine runtime
 //! (`zoo-runtime`): the per-frame step graph with the transition-start graph and the
-//! metadata (config, normalisation, skeleton, feature layout, fps) embedded.
+//! metadata (model kind, task section, normalization, skeleton, feature layout, fps) embedded.
+//!
+//! The run folder's `config.json` names its model (`"model"`; folders written before the field
+//! existed are RTN folders); each kind's exporter lives beside its candle model.
 
 use crate::cmd::transition::read_clip;
 use anyhow::{Context, bail};
 use clap::Args;
-use std::path::PathBuf;
-use zoo_export::rtn::{RtnExportOptions, export_rtn_dir};
+use std::path::{Path, PathBuf};
+use zoo_rtn::export::{RtnExportOptions, export_rtn_dir};
 
 /// Arguments of `zoo export`.
 #[derive(Args)]
@@ -27,6 +30,25 @@ pub struct ExportArgs {
     pub fps: Option<f32>,
 }
 
+/// The model kinds `zoo export` writes.
+const EXPORT_KINDS: [&str; 1] = [zoo_rtn::export::MODEL_KIND];
+
+/// The `"model"` field of a run folder's `config.json` (`None` when absent: an RTN folder).
+fn model_kind(config_path: &Path) -> anyhow::Result<Option<String>> {
+    let text = std::fs::read_to_string(config_path).with_context(|| format!("reading {}", config_path.display()))?;
+    let config: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("{} is not JSON", config_path.display()))?;
+    match config.get("model") {
+        None => Ok(None),
+        Some(serde_json::Value::String(kind)) => Ok(Some(kind.clone())),
+        Some(other) => bail!(
+            "{}: \"model\" must be a model kind string (one of {}), found {other}",
+            config_path.display(),
+            EXPORT_KINDS.join(", ")
+        ),
+    }
+}
+
 /// Runs `zoo export`.
 pub fn run(a: ExportArgs) -> anyhow::Result<()> {
     let mut options = RtnExportOptions { fps: a.fps, ..RtnExportOptions::default() };
@@ -38,8 +60,17 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
         options.parents = Some(s.parents.iter().map(|p| p.map_or(-1, |p| p as i32)).collect());
         options.fps = options.fps.or(Some(clip.fps() as f32));
     }
-    if !a.onnx.join(zoo_rtn::checkpoint::CONFIG_FILE).is_file() {
-        bail!("{} is not a run folder of `zoo train rtn` (no config.json)", a.onnx.display());
+    let config_path = a.onnx.join(zoo_rtn::checkpoint::CONFIG_FILE);
+    if !config_path.is_file() {
+        bail!("{} is not a run folder of `zoo train` (no config.json)", a.onnx.display());
+    }
+    match model_kind(&config_path)?.as_deref() {
+        None | Some(zoo_rtn::export::MODEL_KIND) => {}
+        Some(other) => bail!(
+            "{}: `zoo export` does not know model `{other}` (config.json \"model\"); it exports: {}",
+            a.onnx.display(),
+            EXPORT_KINDS.join(", ")
+        ),
     }
     let model = export_rtn_dir(&a.onnx, &options).with_context(|| format!("exporting {}", a.onnx.display()))?;
     model.write(&a.out)?;

@@ -1,4 +1,7 @@
-//! Export of a trained Recurrent Transition Network (Harvey & Pal 2018) to one ONNX file.
+//! Export of a trained Recurrent Transition Network (Harvey & Pal 2018) to one ONNX file: the
+//! graph definition beside the candle forward pass of [`crate::model`] (same equations), written
+//! with the generic `zoo-export` writer, metadata through `zoo_runtime::metadata` (the format's
+//! owner; model kind `rtn`, task `transition`).
 //!
 //! The file holds the per-frame **step graph** and, in its metadata_props
 //! (`zoo.start_graph`, base64), the **transition-start graph**, the way `zoo-runtime` loads them.
@@ -7,14 +10,14 @@
 //!
 //! | inputs | when | outputs |
 //! |---|---|---|
-//! | `x`: normalised features `x_t` (D) | always | `x_next`: normalised `x_(t+1)` (D) |
-//! | `offset`: normalised global offset `o_t` (D) | `future_conditioning` | |
-//! | `terrain`: normalised terrain patch (side^2) | `terrain` | |
+//! | `x`: normalized features `x_t` (D) | always | `x_next`: normalized `x_(t+1)` (D) |
+//! | `offset`: normalized global offset `o_t` (D) | `future_conditioning` | |
+//! | `terrain`: normalized terrain patch (side^2) | `terrain` | |
 //! | `h`, `c`: LSTM state (H) | always | `h_next`, `c_next` |
 //! | `gate_bias`: `C_F h_F + b` (4H), constant over a transition | `future_conditioning` | `gate_bias_next` (= `gate_bias`) |
 //!
-//! Start graph (once per transition): inputs `target` (normalised target vector, 2D; with
-//! `future_conditioning`) and `x0` (normalised first frame, D; with a learned or common initial
+//! Start graph (once per transition): inputs `target` (normalized target vector, 2D; with
+//! `future_conditioning`) and `x0` (normalized first frame, D; with a learned or common initial
 //! state); outputs named like the step graph's state inputs: `gate_bias` (RTN eq. 3 and the
 //! target term of eq. 5-8), `h`, `c` (RTN eq. 14, or the common learned state). Slots it does
 //! not produce start at zero (`init_state = zero`). A model without future conditioning and
@@ -26,16 +29,19 @@
 //! generated frame (as candle's `generate` does), which keeps the step graph free of the root
 //! integration.
 
-use crate::{Dim, ExportError, GraphBuilder, OnnxModel, Value};
+use crate::{Config, InitState};
 use candle_nn::VarMap;
-use serde_json::json;
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
-use zoo_rtn::features::{FeatureStats, MeanStd};
-use zoo_rtn::{Config, InitState};
+use crate::features::{FeatureStats, MeanStd};
+use zoo_export::{Dim, ExportError, GraphBuilder, OnnxModel, Value};
+use zoo_runtime::metadata::{
+    FORMAT_VERSION, MotionFeatureSegment, MotionMeanStd, MotionModelMetadata, MotionSkeletonInfo, MotionStatePair,
+    MotionTask, TransitionTask, TransitionTerrain, keys,
+};
 
-/// Format version of the metadata written (`zoo_runtime::FORMAT_VERSION`).
-pub const FORMAT_VERSION: u32 = 1;
+/// `zoo.model_kind` of an exported RTN.
+pub const MODEL_KIND: &str = "rtn";
 
 /// What the run folder may not record: joint names, rest offsets and the frame rate.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -58,14 +64,14 @@ fn model_err(message: impl Into<String>) -> ExportError {
 /// `normalization.json`) and exports it (see [`export_rtn`]).
 pub fn export_rtn_dir(dir: &Path, options: &RtnExportOptions) -> Result<OnnxModel, ExportError> {
     let (config, stats) =
-        zoo_rtn::checkpoint::read_meta(dir).map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
-    let config_path = dir.join(zoo_rtn::checkpoint::CONFIG_FILE);
+        crate::checkpoint::read_meta(dir).map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
+    let config_path = dir.join(crate::checkpoint::CONFIG_FILE);
     let config_json = std::fs::read_to_string(&config_path)
         .map_err(|source| ExportError::Io { path: config_path.display().to_string(), source })?;
     let varmap = VarMap::new();
     let vb = candle_nn::VarBuilder::from_varmap(&varmap, candle_core::DType::F32, &candle_core::Device::Cpu);
-    zoo_rtn::Rtn::new(&config, vb).map_err(|e| model_err(format!("building the RTN of {}: {e}", dir.display())))?;
-    zoo_rtn::checkpoint::load_weights(dir, &varmap).map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
+    crate::Rtn::new(&config, vb).map_err(|e| model_err(format!("building the RTN of {}: {e}", dir.display())))?;
+    crate::checkpoint::load_weights(dir, &varmap).map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
     export_rtn(&config, Some(&config_json), &stats, &varmap, options)
 }
 
@@ -130,17 +136,32 @@ fn batch(n: usize) -> [Dim; 2] {
     [Dim::batch(), Dim::Fixed(n)]
 }
 
-fn mean_std(m: &MeanStd) -> serde_json::Value {
-    json!({"mean": m.mean, "std": m.std})
+fn mean_std(m: &MeanStd) -> MotionMeanStd {
+    MotionMeanStd { mean: m.mean.clone(), std: m.std.clone() }
 }
 
-/// The metadata_props of an exported RTN (keys of `zoo_runtime::metadata::keys`).
-fn metadata(
+/// The `zoo.transition` section of an exported RTN: how the runtime drives it.
+pub fn transition_task(config: &Config) -> TransitionTask {
+    TransitionTask {
+        past_frames: config.past_frames,
+        transition_frames: config.transition_frames,
+        target_blend: config.target_blend,
+        frame_dim: config.dim(),
+        offset_input: config.future_conditioning,
+        terrain: config
+            .terrain
+            .then_some(TransitionTerrain { side: config.terrain_side, extent: config.terrain_extent }),
+    }
+}
+
+/// The metadata of an exported RTN (format of `zoo_runtime::metadata`), checked like the
+/// runtime checks it on load.
+pub fn metadata(
     config: &Config,
     config_json: &str,
     stats: &FeatureStats,
     options: &RtnExportOptions,
-) -> Result<Vec<(String, String)>, ExportError> {
+) -> Result<MotionModelMetadata, ExportError> {
     let k = config.joints;
     let d = config.dim();
     let parents = match (&options.parents, config.parents.is_empty()) {
@@ -166,36 +187,37 @@ fn metadata(
     if !(fps.is_finite() && fps > 0.0) {
         return Err(model_err(format!("fps must be a positive number, got {fps}")));
     }
-    let mut norm = serde_json::Map::new();
-    norm.insert("x".into(), mean_std(&stats.x));
-    norm.insert("velocity".into(), mean_std(&stats.velocity));
-    norm.insert("offset".into(), mean_std(&stats.offset));
+    let mut normalization = BTreeMap::new();
+    normalization.insert("x".to_string(), mean_std(&stats.x));
+    normalization.insert("velocity".to_string(), mean_std(&stats.velocity));
+    normalization.insert("offset".to_string(), mean_std(&stats.offset));
     if let Some(t) = &stats.terrain {
-        norm.insert("terrain".into(), mean_std(t));
+        normalization.insert("terrain".to_string(), mean_std(t));
     }
-    let layout = json!([
-        {"name": "root_velocity", "start": 0, "len": 3},
-        {"name": "joint_positions_root_relative", "start": 3, "len": d - 3},
-    ]);
-    let mut state = vec![json!({"input": "h", "output": "h_next"}), json!({"input": "c", "output": "c_next"})];
+    let segment = |name: &str, start, len| MotionFeatureSegment { name: name.to_string(), start, len };
+    let pair = |input: &str, output: &str| MotionStatePair { input: input.to_string(), output: output.to_string() };
+    let mut state = vec![pair("h", "h_next"), pair("c", "c_next")];
     if config.future_conditioning {
-        state.push(json!({"input": "gate_bias", "output": "gate_bias_next"}));
+        state.push(pair("gate_bias", "gate_bias_next"));
     }
-    Ok(vec![
-        ("zoo.format_version".into(), FORMAT_VERSION.to_string()),
-        ("zoo.model_kind".into(), "rtn".into()),
-        ("zoo.config".into(), config_json.to_string()),
-        ("zoo.normalisation".into(), serde_json::Value::Object(norm).to_string()),
-        ("zoo.skeleton".into(), json!({"names": names, "parents": parents, "offsets": offsets}).to_string()),
-        ("zoo.feature_layout".into(), layout.to_string()),
-        ("zoo.fps".into(), fps.to_string()),
-        ("zoo.state".into(), serde_json::Value::Array(state).to_string()),
-    ])
+    let metadata = MotionModelMetadata {
+        format_version: FORMAT_VERSION,
+        model_kind: MODEL_KIND.to_string(),
+        task: MotionTask::Transition(transition_task(config)),
+        config_json: config_json.to_string(),
+        normalization,
+        skeleton: MotionSkeletonInfo { names, parents, offsets },
+        feature_layout: vec![segment("root_velocity", 0, 3), segment("joint_positions_root_relative", 3, d - 3)],
+        fps,
+        state,
+    };
+    metadata.check().map_err(|e| model_err(format!("the metadata would not load: {e}")))?;
+    Ok(metadata)
 }
 
 /// Exports an RTN from its configuration, statistics and weights (a VarMap filled by
-/// `zoo_rtn::Rtn::new`). `config_json`: the run folder's `config.json` verbatim (default: the
-/// config serialised). Errors on a terrain-aware model mismatch, a missing weight or skeleton.
+/// [`crate::Rtn::new`]). `config_json`: the run folder's `config.json` verbatim, kept as the
+/// informational `zoo.config` (default: the config serialized). Errors on a terrain-aware model mismatch, a missing weight or skeleton.
 pub fn export_rtn(
     config: &Config,
     config_json: Option<&str>,
@@ -213,22 +235,22 @@ pub fn export_rtn(
         return Err(model_err("a terrain-aware RTN needs terrain statistics in normalization.json"));
     }
     let w = Weights::from_varmap(varmap)?;
-    let serialised;
+    let serialized;
     let config_json = match config_json {
         Some(s) => s,
         None => {
-            serialised = serde_json::to_string_pretty(config).map_err(|e| model_err(e.to_string()))?;
-            &serialised
+            serialized = serde_json::to_string_pretty(config).map_err(|e| model_err(e.to_string()))?;
+            &serialized
         }
     };
     let start = start_graph(config, &w)?;
     let mut g = step_graph(config, &w)?;
-    g.doc("Recurrent Transition Network (Harvey & Pal 2018), per-frame step graph; see zoo-export rtn.rs");
-    for (k, v) in metadata(config, config_json, stats, options)? {
+    g.doc("Recurrent Transition Network (Harvey & Pal 2018), per-frame step graph; see zoo_rtn::export");
+    for (k, v) in metadata(config, config_json, stats, options)?.to_props() {
         g.metadata(&k, &v);
     }
     if let Some(start) = start {
-        g.metadata("zoo.start_graph", &start.to_base64());
+        g.metadata(keys::START_GRAPH, &start.to_base64());
     }
     g.finish()
 }
@@ -346,39 +368,38 @@ fn start_graph(config: &Config, w: &Weights) -> Result<Option<OnnxModel>, Export
 /// (`zoo bench runtime`). Initializers that are not model weights (constants the graphs
 /// need) are left out.
 pub fn import_rtn(bytes: &[u8]) -> Result<(Config, HashMap<String, candle_core::Tensor>), ExportError> {
-    use base64::Engine;
-    use prost::Message;
-    let decode = |b: &[u8], what: &str| {
-        tract_onnx::pb::ModelProto::decode(b).map_err(|e| model_err(format!("{what} is not an ONNX model: {e}")))
-    };
-    let step = decode(bytes, "the file")?;
-    let prop = |key: &str| step.metadata_props.iter().find(|p| p.key == key).map(|p| p.value.clone());
-    match prop("zoo.model_kind").as_deref() {
-        Some("rtn") => {}
+    let step = OnnxModel::from_bytes(bytes, "the file")?;
+    match step.metadata_value(keys::MODEL_KIND) {
+        Some(MODEL_KIND) => {}
         other => {
             return Err(model_err(format!(
-                "not an RTN export (zoo.model_kind = {other:?}); write one with `zoo export --onnx RUN_DIR`"
+                "not an RTN export ({} = {other:?}); write one with `zoo export --onnx RUN_DIR --out FILE.onnx`",
+                keys::MODEL_KIND
             )));
         }
     }
-    let config: Config = serde_json::from_str(&prop("zoo.config").ok_or_else(|| model_err("no zoo.config"))?)
-        .map_err(|e| model_err(format!("zoo.config: {e}")))?;
-    let mut graphs = vec![step.graph.clone()];
-    if let Some(encoded) = prop("zoo.start_graph") {
-        let raw = base64::engine::general_purpose::STANDARD
-            .decode(encoded.trim())
-            .map_err(|e| model_err(format!("zoo.start_graph is not base64: {e}")))?;
-        graphs.push(decode(&raw, "zoo.start_graph")?.graph);
+    let config_json =
+        step.metadata_value(keys::CONFIG).ok_or_else(|| model_err(format!("the file has no {}", keys::CONFIG)))?;
+    let config: Config = serde_json::from_str(config_json)
+        .map_err(|e| model_err(format!("{} is not an RTN config: {e}", keys::CONFIG)))?;
+    let mut graphs = vec![step.proto().graph.clone()];
+    if let Some(encoded) = step.metadata_value(keys::START_GRAPH) {
+        graphs.push(OnnxModel::from_base64(encoded, keys::START_GRAPH)?.proto().graph.clone());
     }
     // The variable paths candle expects, with their shapes.
     let varmap = VarMap::new();
-    zoo_rtn::Rtn::new(
+    crate::Rtn::new(
         &config,
         candle_nn::VarBuilder::from_varmap(&varmap, candle_core::DType::F32, &candle_core::Device::Cpu),
     )
-    .map_err(|e| model_err(format!("building the RTN of zoo.config: {e}")))?;
-    let wanted: HashMap<String, Vec<usize>> =
-        varmap.data().lock().expect("varmap lock").iter().map(|(n, v)| (n.clone(), v.dims().to_vec())).collect();
+    .map_err(|e| model_err(format!("building the RTN of {}: {e}", keys::CONFIG)))?;
+    let wanted: HashMap<String, Vec<usize>> = varmap
+        .data()
+        .lock()
+        .map_err(|_| model_err("the VarMap lock is poisoned"))?
+        .iter()
+        .map(|(n, v)| (n.clone(), v.dims().to_vec()))
+        .collect();
     let mut weights = HashMap::new();
     for init in graphs.iter().flatten().flat_map(|g| &g.initializer) {
         let Some(dims) = wanted.get(&init.name) else { continue };

@@ -1,0 +1,287 @@
+//! Running a loaded model one frame at a time: per-thread sessions with preallocated input
+//! tensors, buffer and state checks, and the copies between caller buffers, character states
+//! and tract tensors.
+
+use crate::error::{MotionError, chain};
+use crate::model::{Inner, MotionModel, MotionState, Plan, Source};
+use std::sync::Arc;
+use tract_onnx::prelude::*;
+
+/// A spawned tract state with preallocated input tensors for one batch size.
+#[derive(Debug)]
+struct Session {
+    batch: usize,
+    state: TypedSimpleState,
+    /// One tensor per graph input, reused every call (exclusive again once tract returns).
+    inputs: Vec<Arc<Tensor>>,
+}
+
+impl Session {
+    fn new(plan: &Plan, batch: usize, widths: &[usize]) -> Result<Self, MotionError> {
+        let run = |e: TractError| MotionError::Run { reason: chain(&e) };
+        let state = plan.spawn().map_err(run)?;
+        let inputs = widths
+            .iter()
+            .map(|&w| Tensor::zero::<f32>(&[batch, w]).map(Arc::new))
+            .collect::<TractResult<Vec<_>>>()
+            .map_err(run)?;
+        Ok(Session { batch, state, inputs })
+    }
+}
+
+/// Scratch space for stepping a [`MotionModel`] on one thread (not shared: `Send`, not `Sync`).
+#[derive(Debug)]
+pub struct MotionRunner {
+    model: MotionModel,
+    single: Session,
+    batched: Option<Session>,
+    /// Start-graph session, created on the first `start` (and when the batch size changes).
+    start: Option<Session>,
+}
+
+fn check_states(inner: &Inner, states: &[MotionState]) -> Result<(), MotionError> {
+    for state in states {
+        if state.slots.len() != inner.states.len() {
+            return Err(MotionError::StateMismatch {
+                name: "(number of slots)".into(),
+                expected: inner.states.len(),
+                found: state.slots.len(),
+            });
+        }
+        for (info, slot) in inner.states.iter().zip(&state.slots) {
+            if slot.len() != info.width {
+                return Err(MotionError::StateMismatch {
+                    name: info.input.clone(),
+                    expected: info.width,
+                    found: slot.len(),
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+pub(crate) fn check_len(name: &str, found: usize, batch: usize, width: usize) -> Result<(), MotionError> {
+    if found != batch * width {
+        return Err(MotionError::BufferLength { name: name.to_string(), expected: batch * width, batch, width, found });
+    }
+    Ok(())
+}
+
+pub(crate) fn check_finite(name: &str, data: &[f32], width: usize) -> Result<(), MotionError> {
+    if let Some(index) = data.iter().position(|v| !v.is_finite()) {
+        return Err(MotionError::NonFinite {
+            name: name.to_string(),
+            index,
+            character: index / width.max(1),
+            value: data[index],
+        });
+    }
+    Ok(())
+}
+
+impl MotionRunner {
+    pub(crate) fn new(model: MotionModel) -> Result<Self, MotionError> {
+        let single = Session::new(&model.inner.single, 1, &model.inner.graph_input_widths)?;
+        Ok(MotionRunner { model, single, batched: None, start: None })
+    }
+
+    /// The model this runner steps.
+    pub fn model(&self) -> &MotionModel {
+        &self.model
+    }
+
+    /// Advances one character by one frame.
+    ///
+    /// `inputs[i]` holds `model.inputs()[i].width` values; `outputs[i]` receives
+    /// `model.outputs()[i].width` values; `state` is read and replaced by the next state.
+    /// Invalid sizes or non-finite inputs return an error and leave `state` unchanged.
+    pub fn step(
+        &mut self,
+        state: &mut MotionState,
+        inputs: &[&[f32]],
+        outputs: &mut [&mut [f32]],
+    ) -> Result<(), MotionError> {
+        self.run(std::slice::from_mut(state), inputs, outputs)
+    }
+
+    /// Advances `states.len()` characters by one frame in one graph run.
+    ///
+    /// Buffers are character-major: `inputs[i]` holds `states.len() * model.inputs()[i].width`
+    /// values, row `c` for character `c`; outputs likewise.
+    pub fn step_batch(
+        &mut self,
+        states: &mut [MotionState],
+        inputs: &[&[f32]],
+        outputs: &mut [&mut [f32]],
+    ) -> Result<(), MotionError> {
+        self.run(states, inputs, outputs)
+    }
+
+    /// Starts a transition for one character: runs the start graph on `inputs`
+    /// (`inputs[i]` holds `model.start_inputs()[i].width` values) and sets `state` from its
+    /// outputs; slots the start graph does not produce are zeroed. Without a start graph it
+    /// zeroes `state` and takes no inputs.
+    pub fn start(&mut self, state: &mut MotionState, inputs: &[&[f32]]) -> Result<(), MotionError> {
+        self.start_batch(std::slice::from_mut(state), inputs)
+    }
+
+    /// [`MotionRunner::start`] for `states.len()` characters in one run (character-major buffers).
+    pub fn start_batch(&mut self, states: &mut [MotionState], inputs: &[&[f32]]) -> Result<(), MotionError> {
+        let inner = &*self.model.inner;
+        let batch = states.len();
+        if batch == 0 {
+            return Err(MotionError::EmptyBatch);
+        }
+        check_states(inner, states)?;
+        let Some(start) = &inner.start else {
+            if !inputs.is_empty() {
+                return Err(MotionError::BufferCount { what: "start inputs", expected: 0, found: inputs.len() });
+            }
+            states.iter_mut().for_each(MotionState::reset);
+            return Ok(());
+        };
+        if inputs.len() != start.inputs.len() {
+            return Err(MotionError::BufferCount {
+                what: "start inputs",
+                expected: start.inputs.len(),
+                found: inputs.len(),
+            });
+        }
+        for (info, data) in start.inputs.iter().zip(inputs) {
+            check_len(&info.name, data.len(), batch, info.width)?;
+            check_finite(&info.name, data, info.width)?;
+        }
+        if self.start.as_ref().is_none_or(|s| s.batch != batch) {
+            let plan = if batch == 1 { &start.single } else { &start.batched };
+            self.start = Some(Session::new(plan, batch, &start.widths)?);
+        }
+        let session = self.start.as_mut().expect("start session set above");
+        let run_err = |e: TractError| MotionError::Run { reason: chain(&e) };
+        for (g, data) in inputs.iter().enumerate() {
+            let tensor = Arc::make_mut(&mut session.inputs[g]);
+            let mut view = tensor.try_as_plain_ram_mut().map_err(run_err)?;
+            view.as_slice_mut::<f32>().map_err(run_err)?.copy_from_slice(data);
+        }
+        let values: TVec<TValue> = session.inputs.iter().map(|t| TValue::from_const(t.clone())).collect();
+        let results = session.state.run(values).map_err(run_err)?;
+        states.iter_mut().for_each(MotionState::reset);
+        for (o, &k) in start.out_slots.iter().enumerate() {
+            let view = results[o].try_as_plain_ram().map_err(run_err)?;
+            let src = view.as_slice::<f32>().map_err(run_err)?;
+            let width = inner.states[k].width;
+            if src.len() != batch * width {
+                return Err(MotionError::Run {
+                    reason: format!(
+                        "start output for state `{}` has {} values, expected {}",
+                        inner.states[k].input,
+                        src.len(),
+                        batch * width
+                    ),
+                });
+            }
+            for (c, state) in states.iter_mut().enumerate() {
+                state.slots[k].copy_from_slice(&src[c * width..(c + 1) * width]);
+            }
+        }
+        Ok(())
+    }
+
+    fn run(
+        &mut self,
+        states: &mut [MotionState],
+        inputs: &[&[f32]],
+        outputs: &mut [&mut [f32]],
+    ) -> Result<(), MotionError> {
+        let inner = &*self.model.inner;
+        let batch = states.len();
+        if batch == 0 {
+            return Err(MotionError::EmptyBatch);
+        }
+        if inputs.len() != inner.inputs.len() {
+            return Err(MotionError::BufferCount { what: "inputs", expected: inner.inputs.len(), found: inputs.len() });
+        }
+        if outputs.len() != inner.outputs.len() {
+            return Err(MotionError::BufferCount {
+                what: "outputs",
+                expected: inner.outputs.len(),
+                found: outputs.len(),
+            });
+        }
+        for (info, data) in inner.inputs.iter().zip(inputs) {
+            check_len(&info.name, data.len(), batch, info.width)?;
+            check_finite(&info.name, data, info.width)?;
+        }
+        for (info, data) in inner.outputs.iter().zip(outputs.iter()) {
+            check_len(&info.name, data.len(), batch, info.width)?;
+        }
+        check_states(inner, states)?;
+
+        let session = if batch == 1 {
+            &mut self.single
+        } else {
+            if self.batched.as_ref().is_none_or(|s| s.batch != batch) {
+                self.batched = Some(Session::new(&inner.plan_for(batch), batch, &inner.graph_input_widths)?);
+            }
+            self.batched.as_mut().expect("batched session set above")
+        };
+        let run_err = |e: TractError| MotionError::Run { reason: chain(&e) };
+
+        // Fill the preallocated input tensors.
+        for (g, source) in inner.graph_inputs.iter().enumerate() {
+            let width = inner.graph_input_widths[g];
+            // Exclusive unless tract kept a reference; then this copies once.
+            let tensor = Arc::make_mut(&mut session.inputs[g]);
+            let mut view = tensor.try_as_plain_ram_mut().map_err(run_err)?;
+            let dst = view.as_slice_mut::<f32>().map_err(run_err)?;
+            match *source {
+                Source::Frame(i) => dst.copy_from_slice(inputs[i]),
+                Source::State(k) => {
+                    for (c, state) in states.iter().enumerate() {
+                        dst[c * width..(c + 1) * width].copy_from_slice(&state.slots[k]);
+                    }
+                }
+            }
+        }
+        // A TVec holds up to 4 values inline: no allocation for graphs of up to 4 inputs.
+        let values: TVec<TValue> = session.inputs.iter().map(|t| TValue::from_const(t.clone())).collect();
+        let results = session.state.run(values).map_err(run_err)?;
+
+        for (o, source) in inner.graph_outputs.iter().enumerate() {
+            let view = results[o].try_as_plain_ram().map_err(run_err)?;
+            let src = view.as_slice::<f32>().map_err(run_err)?;
+            match *source {
+                Source::Frame(i) => {
+                    if src.len() != outputs[i].len() {
+                        return Err(MotionError::Run {
+                            reason: format!(
+                                "output `{}` has {} values, expected {}",
+                                inner.outputs[i].name,
+                                src.len(),
+                                outputs[i].len()
+                            ),
+                        });
+                    }
+                    outputs[i].copy_from_slice(src);
+                }
+                Source::State(k) => {
+                    let width = inner.states[k].width;
+                    if src.len() != batch * width {
+                        return Err(MotionError::Run {
+                            reason: format!(
+                                "state output `{}` has {} values, expected {}",
+                                inner.states[k].output,
+                                src.len(),
+                                batch * width
+                            ),
+                        });
+                    }
+                    for (c, state) in states.iter_mut().enumerate() {
+                        state.slots[k].copy_from_slice(&src[c * width..(c + 1) * width]);
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
