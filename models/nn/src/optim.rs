@@ -561,14 +561,14 @@ mod tests {
         let mut grads = loss().backward().unwrap();
         clip_grad_value(&mut grads, &vars, 2.0).unwrap();
         assert_eq!(grads.get(&a).unwrap().to_vec1::<f64>().unwrap(), [2.0, -2.0]);
-        assert_eq!(grads.get(&b).unwrap().to_vec1::<f64>().unwrap(), [0.5]);
+        assert_eq!(grads.get(&b).unwrap().to_vec1::<f64>().unwrap(), [1.0]);
         let mut grads = loss().backward().unwrap();
-        // norm = sqrt(9 + 16 + 0.25) = 5.0249; scaled to 1.
+        // norm = sqrt(9 + 16 + 1) = 5.0990; scaled to 1.
         let norm = clip_grad_norm(&mut grads, &vars, 1.0).unwrap();
-        assert!((norm - 25.25f64.sqrt()).abs() < 1e-12);
+        assert!((norm - 26f64.sqrt()).abs() < 1e-12);
         let f = 1.0 / (norm + 1e-6);
         close(&grads.get(&a).unwrap().to_vec1::<f64>().unwrap(), &[3.0 * f, -4.0 * f]);
-        close(&grads.get(&b).unwrap().to_vec1::<f64>().unwrap(), &[0.5 * f]);
+        close(&grads.get(&b).unwrap().to_vec1::<f64>().unwrap(), &[f]);
         let mut grads = loss().backward().unwrap();
         clip_grad_norm(&mut grads, &vars, 10.0).unwrap();
         assert_eq!(grads.get(&a).unwrap().to_vec1::<f64>().unwrap(), [3.0, -4.0], "below the limit: unchanged");
