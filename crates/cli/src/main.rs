@@ -2,7 +2,6 @@
 
 mod cmd;
 mod methods;
-mod plot;
 mod render;
 
 use clap::{Parser, Subcommand};
