@@ -2,7 +2,6 @@
 
 mod cmd;
 mod methods;
-mod plot;
 mod registry;
 mod render;
 

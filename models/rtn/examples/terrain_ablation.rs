@@ -85,7 +85,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         steps
     );
     let mut order: Vec<usize> = (0..windows.len()).collect();
-    let mut rng = zoo_rtn::train::SplitMix64::new(7);
+    let mut rng = zoo_nn::rng::SplitMix64::new(7);
     let started = std::time::Instant::now();
     let mut pos = order.len();
     for step in 0..steps {

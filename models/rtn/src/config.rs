@@ -81,11 +81,25 @@ impl Default for TrainConfig {
     }
 }
 
+/// The model a configuration is for: `config.json`'s top-level `"model"` field, which names the
+/// model of a run folder (the registry key of `zoo train`, `zoo export` and `zoo bench`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum ModelName {
+    /// The Recurrent Transition Network.
+    #[default]
+    #[serde(rename = "rtn")]
+    Rtn,
+}
+
 /// The RTN's configuration: sizes, ablation switches and training settings.
 ///
 /// Layer sizes follow Fig. 3 of the paper in [`Config::paper`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Config {
+    /// Always `"rtn"`; folders written before the field existed load as `"rtn"`, a
+    /// configuration of another model is refused with its name.
+    #[serde(default)]
+    pub model: ModelName,
     /// Number of joints K of the skeleton; a feature frame has `D = 3K` values.
     pub joints: usize,
     /// Parent of each joint (-1 for the root), kept for export and evaluation; empty when unknown.
@@ -132,6 +146,7 @@ impl Config {
     /// skeleton with [`Config::with_parents`].
     pub fn paper() -> Self {
         Config {
+            model: ModelName::Rtn,
             joints: 22,
             parents: Vec::new(),
             past_frames: 10,
@@ -154,7 +169,9 @@ impl Config {
         }
     }
 
-    /// A small model for tests: same structure, tiny sizes, short windows, 4 joints.
+    /// A small model for tests: same structure, tiny sizes, short windows (12 frames: 4 past,
+    /// 6 transition, target and the frame after it, so it trains on the 50-frame windows of
+    /// the data too), 4 joints until [`Config::with_parents`] sets the skeleton.
     pub fn tiny() -> Self {
         Config {
             joints: 4,

@@ -50,12 +50,35 @@ pub enum RtnError {
         /// The loss value.
         loss: f32,
     },
+    /// The shared toolkit failed (a checkpoint file, an optimiser or moving-average state).
+    #[error(transparent)]
+    Nn(zoo_nn::NnError),
     /// A parameter holds NaN or inf, so it is not saved.
     #[error("parameter `{name}` holds NaN or inf; refusing to overwrite the last good checkpoint")]
     NonFiniteParameter {
         /// Tensor name.
         name: String,
     },
+}
+
+impl From<zoo_nn::NnError> for RtnError {
+    fn from(e: zoo_nn::NnError) -> Self {
+        use zoo_nn::NnError as N;
+        match e {
+            N::Candle(e) => RtnError::Candle(e),
+            N::Io { path, source } => RtnError::Io { path, source },
+            N::Json { path, source } => RtnError::Json { path, source },
+            N::NonFiniteParameter { name } => RtnError::NonFiniteParameter { name },
+            N::Config(m) => RtnError::Config(m),
+            e => RtnError::Nn(e),
+        }
+    }
+}
+
+impl From<RtnError> for zoo_nn::TrainError {
+    fn from(e: RtnError) -> Self {
+        zoo_nn::TrainError::model(e)
+    }
 }
 
 /// Result with [`RtnError`].

@@ -1,6 +1,7 @@
 //! The Recurrent Transition Network (Harvey & Pal, "Recurrent Transition Networks for Character
 //! Locomotion", SIGGRAPH Asia 2018 technical briefs) in candle: the model, its ablations
-//! (Table 4), the training core and checkpoints.
+//! (Table 4), the training core and checkpoints, built on the shared toolkit [`zoo_nn`]
+//! (optimiser, moving average, checkpoints, the training loop via [`RtnTraining`]).
 //!
 //! Data in and out are global joint positions (`f32`, `frames * joints * 3`, frame-major, Y up,
 //! clip units); the feature encoding lives in [`zoo_motion::features`] so the runtime shares it.
@@ -18,7 +19,6 @@
 //! # Ok(()) }
 //! ```
 
-pub mod amsgrad;
 pub mod checkpoint;
 pub mod config;
 pub mod error;
@@ -30,11 +30,10 @@ pub mod ops;
 pub mod train;
 pub mod transition;
 
-pub use amsgrad::{AmsGrad, ParamsAmsGrad};
-pub use config::{Config, InitState, TeacherForcing, TrainConfig};
+pub use config::{Config, InitState, ModelName, TeacherForcing, TrainConfig};
 pub use error::{RtnError, RtnResult};
 pub use model::{Rtn, RtnInputs, RtnSequence, RtnState};
-pub use train::{MotionWindow, RtnTrainer, fit_stats};
+pub use train::{MotionWindow, RtnTrainer, RtnTraining, fit_stats};
 
 /// The common imports.
 pub mod prelude {
@@ -42,6 +41,7 @@ pub mod prelude {
     pub use crate::config::{Config, InitState, TeacherForcing, TrainConfig};
     pub use crate::error::{RtnError, RtnResult};
     pub use crate::model::{Rtn, RtnInputs, RtnSequence, RtnState};
-    pub use crate::train::{MotionWindow, RtnTrainer, fit_stats};
+    pub use crate::train::{MotionWindow, RtnTrainer, RtnTraining, fit_stats};
     pub use crate::features::{FeatureStats, Heightmap};
+    pub use zoo_nn::optim::StatefulOptimizer;
 }

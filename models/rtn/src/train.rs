@@ -1,14 +1,22 @@
 //! The training core (RTN sec. 3.3 and 6): random rotations, probabilistic teacher forcing,
-//! MSE over the P + 1 predicted frames, AMSGrad.
+//! MSE over the P + 1 predicted frames, AMSGrad; [`RtnTraining`] plugs it into the shared
+//! training loop ([`zoo_nn::train_loop`]).
 
-use crate::amsgrad::{AmsGrad, ParamsAmsGrad};
 use crate::config::Config;
 use crate::error::{RtnError, RtnResult};
 use crate::model::{OffsetTensors, Rtn};
 use crate::transition::{SequenceInput, check_frames, encode_batch, generate};
 use candle_core::{DType, Device, Tensor};
-use candle_nn::{Optimizer, VarBuilder, VarMap};
+use candle_nn::{Optimizer, VarMap};
+use std::path::Path;
 use crate::features::{self, FeatureStats, Heightmap, MeanStd, Moments, YawAbout};
+use zoo_nn::checkpoint as ck;
+use zoo_nn::optim::{AmsGrad, ParamsAmsGrad, StatefulOptimizer};
+use zoo_nn::train_loop::{Trainable, Validation};
+use zoo_nn::{Ema, SeededVarMap, TrainError};
+
+/// The one seeded generator (kept at this path for the callers that import it from here).
+pub use zoo_nn::rng::SplitMix64;
 
 /// A training window: global joint positions (`frames * joints * 3`, frame-major, at least
 /// [`Config::window_frames`] frames: past context, transition, target and the frame after it;
@@ -25,31 +33,6 @@ impl<'a> MotionWindow<'a> {
     /// A window without terrain.
     pub fn new(positions: &'a [f32]) -> Self {
         MotionWindow { positions, terrain: None }
-    }
-}
-
-/// SplitMix64: the trainer's small, seedable random source.
-#[derive(Clone, Debug)]
-pub struct SplitMix64(u64);
-
-impl SplitMix64 {
-    /// A generator from a seed.
-    pub fn new(seed: u64) -> Self {
-        SplitMix64(seed)
-    }
-
-    /// Next 64 random bits.
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    pub fn next_f64(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
     }
 }
 
@@ -86,13 +69,6 @@ pub fn fit_stats(config: &Config, windows: &[MotionWindow]) -> RtnResult<Feature
     Ok(stats)
 }
 
-/// One variable of a trainer and its moving average.
-struct Averaged {
-    name: String,
-    var: candle_core::Var,
-    avg: Tensor,
-}
-
 /// Trains an RTN: owns the variables, the optimiser state, the statistics and the random source.
 pub struct RtnTrainer {
     config: Config,
@@ -101,15 +77,19 @@ pub struct RtnTrainer {
     model: Rtn,
     opt: AmsGrad,
     offsets: OffsetTensors,
+    /// Rotation angles (one per window) and teacher-forcing draws (one per step), in that order.
     rng: SplitMix64,
     step: u64,
-    /// Moving average of every variable, in the optimiser's (sorted) order, when
-    /// `config.train.ema_decay` is set.
-    ema: Option<Vec<Averaged>>,
+    /// Moving average of every variable when `config.train.ema_decay` is set.
+    ema: Option<Ema>,
 }
 
+/// The key of the trainer's generator in `rng.json`.
+const RNG_KEY: &str = "trainer";
+
 impl RtnTrainer {
-    /// A freshly initialised model.
+    /// A freshly initialised model: weights drawn with `config.train.seed` and their names
+    /// ([`SeededVarMap`]), so one seed gives one initial model.
     pub fn new(config: &Config, stats: FeatureStats, device: &Device) -> RtnResult<Self> {
         Self::with_varmap(config, stats, VarMap::new(), device)
     }
@@ -130,27 +110,14 @@ impl RtnTrainer {
         if config.terrain && stats.terrain.is_none() {
             return Err(RtnError::Config("terrain-aware configuration but no terrain statistics".into()));
         }
-        let vb = VarBuilder::from_varmap(&varmap, DType::F32, device);
+        let vb = SeededVarMap::builder(&varmap, config.train.seed, DType::F32, device);
         let model = Rtn::new(config, vb)?;
         let t = &config.train;
         let params = ParamsAmsGrad { lr: t.learning_rate, beta1: t.beta1, beta2: t.beta2, eps: t.eps };
         let mut named: Vec<(String, candle_core::Var)> =
             varmap.data().lock().expect("varmap lock").iter().map(|(n, v)| (n.clone(), v.clone())).collect();
         named.sort_by(|a, b| a.0.cmp(&b.0));
-        let ema = match t.ema_decay {
-            Some(d) if !(d > 0.0 && d < 1.0) => {
-                return Err(RtnError::Config(format!("EMA decay {d} is outside (0, 1)")));
-            }
-            Some(_) => Some(
-                named
-                    .iter()
-                    .map(|(name, var)| {
-                        Ok(Averaged { name: name.clone(), var: var.clone(), avg: var.as_tensor().detach().copy()? })
-                    })
-                    .collect::<RtnResult<Vec<_>>>()?,
-            ),
-            None => None,
-        };
+        let ema = t.ema_decay.map(|d| Ema::new(named.clone(), d)).transpose()?;
         let opt = AmsGrad::new_named(named, params)?;
         let offsets = OffsetTensors::new(&stats, device)?;
         Ok(RtnTrainer {
@@ -259,23 +226,10 @@ impl RtnTrainer {
         }
         self.opt.backward_step(&loss)?;
         self.step += 1;
-        self.update_ema()?;
-        Ok(value)
-    }
-
-    /// Folds the current weights into the moving average. The decay warms up as
-    /// `min(decay, (1 + t) / (10 + t))` so that the initial weights fade quickly.
-    fn update_ema(&mut self) -> RtnResult<()> {
-        let (Some(ema), Some(decay)) = (self.ema.as_mut(), self.config.train.ema_decay) else {
-            return Ok(());
-        };
-        let t = self.step as f64;
-        let d = decay.min((1.0 + t) / (10.0 + t));
-        for Averaged { var, avg, .. } in ema.iter_mut() {
-            // Detached: the average must not keep a graph back to every earlier step.
-            *avg = (avg.affine(d, 0.0)? + var.as_tensor().detach().affine(1.0 - d, 0.0)?)?.detach();
+        if let Some(ema) = self.ema.as_mut() {
+            ema.update(self.step)?;
         }
-        Ok(())
+        Ok(value)
     }
 
     /// Whether the trainer keeps a moving average of the weights.
@@ -287,41 +241,17 @@ impl RtnTrainer {
     /// trained weights back (also when `f` fails). Without a moving average, `f` sees the trained
     /// weights.
     pub fn with_ema_weights<R>(&mut self, f: impl FnOnce(&mut Self) -> RtnResult<R>) -> RtnResult<R> {
-        let Some(ema) = self.ema.as_ref() else {
-            return f(self);
-        };
-        let mut saved = Vec::with_capacity(ema.len());
-        for Averaged { var, avg, .. } in ema {
-            saved.push(var.as_tensor().detach().copy()?);
-            var.set(avg)?;
-        }
+        let trained = self.ema.as_ref().map(Ema::swap_in).transpose()?;
         let out = f(self);
-        if let Some(ema) = self.ema.as_ref() {
-            for (a, w) in ema.iter().zip(&saved) {
-                a.var.set(w)?;
-            }
+        if let (Some(ema), Some(trained)) = (self.ema.as_ref(), trained) {
+            ema.swap_out(trained)?;
         }
         out
     }
 
-    /// The moving-average tensors by variable name (for `--resume`), or `None`.
+    /// The moving-average tensors by variable name (`ema.{name}`, for `--resume`), or `None`.
     pub fn ema_state(&self) -> Option<std::collections::HashMap<String, Tensor>> {
-        let ema = self.ema.as_ref()?;
-        Some(ema.iter().map(|a| (format!("ema.{}", a.name), a.avg.clone())).collect())
-    }
-
-    fn set_ema_state(&mut self, state: &std::collections::HashMap<String, Tensor>) -> RtnResult<()> {
-        let Some(ema) = self.ema.as_mut() else { return Ok(()) };
-        for a in ema.iter_mut() {
-            let Some(saved) = state.get(&format!("ema.{}", a.name)) else {
-                return Err(RtnError::Config(format!("the moving average has no tensor for {}", a.name)));
-            };
-            if saved.dims() != a.var.as_tensor().dims() {
-                return Err(RtnError::Config(format!("the moving average of {} has the wrong shape", a.name)));
-            }
-            a.avg = saved.clone();
-        }
-        Ok(())
+        self.ema.as_ref().map(Ema::state)
     }
 
     /// Validation loss: the same MSE without teacher forcing and without rotation.
@@ -336,49 +266,176 @@ impl RtnTrainer {
         crate::checkpoint::save(dir, &self.config, &self.varmap, &self.stats)
     }
 
-    /// The optimiser (its state: [`AmsGrad::state`]).
+    /// The optimiser (its state: [`StatefulOptimizer::state`]).
     pub fn optimizer(&self) -> &AmsGrad {
         &self.opt
     }
 
-    /// [`RtnTrainer::save`] plus the optimiser state (`optimizer.safetensors`, written
-    /// atomically), so that [`RtnTrainer::load`] continues the run exactly.
-    pub fn save_with_optimizer(&self, dir: &std::path::Path) -> RtnResult<()> {
+    /// [`RtnTrainer::save`] plus the training state ([`RtnTrainer::save_training_state`]), so
+    /// that [`RtnTrainer::load`] continues the run exactly.
+    pub fn save_with_optimizer(&self, dir: &Path) -> RtnResult<()> {
         self.save(dir)?;
-        crate::checkpoint::save_tensors(dir, crate::checkpoint::OPTIMIZER_FILE, &self.opt.state()?)?;
+        self.save_training_state(dir)
+    }
+
+    /// Writes the optimiser state (`optimizer.safetensors`), the moving average
+    /// (`ema.safetensors`, when kept) and the generator's state (`rng.json`), each atomically.
+    pub fn save_training_state(&self, dir: &Path) -> RtnResult<()> {
+        ck::write_tensors(&dir.join(ck::OPTIMIZER_FILE), &self.opt.state()?)?;
         if let Some(ema) = self.ema_state() {
-            crate::checkpoint::save_tensors(dir, crate::checkpoint::EMA_FILE, &ema)?;
+            ck::write_tensors(&dir.join(ck::EMA_FILE), &ema)?;
         }
+        ck::write_json(&dir.join(ck::RNG_FILE), &serde_json::json!({ "trainer": self.rng.state() }))?;
         Ok(())
+    }
+
+    /// Restores the weights and whatever training state the folder holds: the optimiser
+    /// (returns `false` when the folder has none: a fresh one is kept), the moving average and
+    /// the generator (folders written before it was saved keep the freshly seeded one).
+    pub fn load_training_state(&mut self, dir: &Path) -> RtnResult<bool> {
+        crate::checkpoint::load_weights(dir, &self.varmap)?;
+        let device = self.model.device().clone();
+        let path = dir.join(ck::OPTIMIZER_FILE);
+        if !path.is_file() {
+            return Ok(false);
+        }
+        self.opt.set_state(&ck::read_tensors(&path, &device)?).map_err(|e| in_file(&path, e))?;
+        self.step = self.opt.steps();
+        let ema_path = dir.join(ck::EMA_FILE);
+        if let Some(ema) = self.ema.as_mut().filter(|_| ema_path.is_file()) {
+            ema.set_state(&ck::read_tensors(&ema_path, &device)?).map_err(|e| in_file(&ema_path, e))?;
+        }
+        let rng_path = dir.join(ck::RNG_FILE);
+        if rng_path.is_file() {
+            let saved: serde_json::Value = ck::read_json(&rng_path)?;
+            let Some(state) = saved[RNG_KEY].as_u64() else {
+                return Err(RtnError::Config(format!(
+                    "{}: no `{RNG_KEY}` generator state (a u64): the file was written for another model",
+                    rng_path.display()
+                )));
+            };
+            self.rng = SplitMix64::from_state(state);
+        }
+        Ok(true)
     }
 
     /// Resumes from a checkpoint folder: weights, statistics and, when the folder has one, the
     /// optimiser state (else a fresh one; returned `false`).
-    pub fn load(dir: &std::path::Path, device: &Device) -> RtnResult<Self> {
+    pub fn load(dir: &Path, device: &Device) -> RtnResult<Self> {
         Ok(Self::load_with_optimizer(dir, device)?.0)
     }
 
     /// [`RtnTrainer::load`], also telling whether the optimiser state was restored.
-    pub fn load_with_optimizer(dir: &std::path::Path, device: &Device) -> RtnResult<(Self, bool)> {
+    pub fn load_with_optimizer(dir: &Path, device: &Device) -> RtnResult<(Self, bool)> {
         let (config, stats) = crate::checkpoint::read_meta(dir)?;
-        let varmap = VarMap::new();
-        let mut t = Self::with_varmap(&config, stats, varmap, device)?;
-        crate::checkpoint::load_weights(dir, &t.varmap)?;
-        let path = dir.join(crate::checkpoint::OPTIMIZER_FILE);
-        if !path.is_file() {
-            return Ok((t, false));
+        let mut t = Self::with_varmap(&config, stats, VarMap::new(), device)?;
+        let restored = t.load_training_state(dir)?;
+        Ok((t, restored))
+    }
+}
+
+fn in_file(path: &Path, e: zoo_nn::NnError) -> RtnError {
+    RtnError::Config(format!("{}: {e}", path.display()))
+}
+
+/// Mean loss over `windows` in chunks of 64 (the RTN's validation batches).
+fn mean_eval_loss(trainer: &mut RtnTrainer, windows: &[MotionWindow]) -> RtnResult<f64> {
+    let mut sum = 0.0;
+    for c in windows.chunks(64) {
+        sum += trainer.eval_loss(c)? as f64 * c.len() as f64;
+    }
+    Ok(sum / windows.len() as f64)
+}
+
+/// An [`RtnTrainer`] with its training and validation windows, for the shared training loop
+/// ([`zoo_nn::train_loop::train`]): one AMSGrad step per batch, validation in chunks of 64 of
+/// the trained weights and then of the moving average, checkpoints through
+/// [`RtnTrainer::save`] and [`RtnTrainer::save_training_state`].
+pub struct RtnTraining<'a> {
+    trainer: RtnTrainer,
+    train: &'a [MotionWindow<'a>],
+    valid: &'a [MotionWindow<'a>],
+    batch: Vec<MotionWindow<'a>>,
+}
+
+impl<'a> RtnTraining<'a> {
+    /// Trains `trainer` on `train`, validating on `valid` (neither may be empty).
+    pub fn new(trainer: RtnTrainer, train: &'a [MotionWindow<'a>], valid: &'a [MotionWindow<'a>]) -> RtnResult<Self> {
+        if train.is_empty() || valid.is_empty() {
+            return Err(RtnError::Config(format!(
+                "need training and validation windows (training {}, validation {})",
+                train.len(),
+                valid.len()
+            )));
         }
-        let state = candle_core::safetensors::load(&path, device)
-            .map_err(|e| RtnError::Config(format!("{}: {e}", path.display())))?;
-        t.opt.set_state(&state).map_err(|e| RtnError::Config(format!("{}: {e}", path.display())))?;
-        t.step = t.opt.steps();
-        let ema_path = dir.join(crate::checkpoint::EMA_FILE);
-        if t.ema.is_some() && ema_path.is_file() {
-            let ema = candle_core::safetensors::load(&ema_path, device)
-                .map_err(|e| RtnError::Config(format!("{}: {e}", ema_path.display())))?;
-            t.set_ema_state(&ema).map_err(|e| RtnError::Config(format!("{}: {e}", ema_path.display())))?;
+        Ok(RtnTraining { trainer, train, valid, batch: Vec::new() })
+    }
+
+    /// The trainer.
+    pub fn trainer(&self) -> &RtnTrainer {
+        &self.trainer
+    }
+
+    /// The trainer, once training is over.
+    pub fn into_trainer(self) -> RtnTrainer {
+        self.trainer
+    }
+}
+
+impl Trainable for RtnTraining<'_> {
+    fn train_len(&self) -> usize {
+        self.train.len()
+    }
+
+    fn batch_size(&self) -> usize {
+        self.trainer.config.train.batch_size
+    }
+
+    fn train_step(&mut self, samples: &[usize]) -> Result<f64, TrainError> {
+        self.batch.clear();
+        self.batch.extend(samples.iter().map(|&i| self.train[i]));
+        Ok(self.trainer.train_step(&self.batch)? as f64)
+    }
+
+    fn steps(&self) -> u64 {
+        self.trainer.steps()
+    }
+
+    fn validate(&mut self) -> Result<Validation, TrainError> {
+        let valid = self.valid;
+        let loss = mean_eval_loss(&mut self.trainer, valid)?;
+        let averaged = if self.trainer.has_ema() {
+            Some(self.trainer.with_ema_weights(|t| mean_eval_loss(t, valid))?)
+        } else {
+            None
+        };
+        Ok(Validation { loss, averaged })
+    }
+
+    fn save_model(&mut self, dir: &Path, averaged: bool) -> Result<(), TrainError> {
+        if averaged {
+            self.trainer.with_ema_weights(|t| t.save(dir))?;
+        } else {
+            self.trainer.save(dir)?;
         }
-        Ok((t, true))
+        Ok(())
+    }
+
+    fn save_training_state(&self, dir: &Path) -> Result<(), TrainError> {
+        Ok(self.trainer.save_training_state(dir)?)
+    }
+
+    fn load_training_state(&mut self, dir: &Path) -> Result<(), TrainError> {
+        self.trainer.load_training_state(dir)?;
+        Ok(())
+    }
+
+    fn summary(&self) -> serde_json::Map<String, serde_json::Value> {
+        let mut m = serde_json::Map::new();
+        m.insert("model".into(), "rtn".into());
+        m.insert("ema_decay".into(), serde_json::json!(self.trainer.config.train.ema_decay));
+        m.insert("parameters".into(), serde_json::json!(self.trainer.model.parameter_count()));
+        m
     }
 }
 

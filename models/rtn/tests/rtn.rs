@@ -500,3 +500,56 @@ fn moving_average_is_kept_swapped_in_and_resumed() {
     let err = RtnTrainer::new(&bad, stats, &Device::Cpu).err().expect("decay 1 is refused").to_string();
     assert!(err.contains("EMA decay"), "{err}");
 }
+
+#[test]
+fn config_names_its_model_and_older_configs_load() {
+    let c = tiny();
+    let json = serde_json::to_value(&c).unwrap();
+    assert_eq!(json["model"], "rtn");
+    let mut old = json.clone();
+    old.as_object_mut().unwrap().remove("model");
+    assert_eq!(serde_json::from_value::<Config>(old).unwrap(), c, "a config.json without `model` is an RTN's");
+    let mut other = json;
+    other["model"] = "rmr".into();
+    let err = serde_json::from_value::<Config>(other).unwrap_err().to_string();
+    assert!(err.contains("rmr") && err.contains("rtn"), "{err}");
+}
+
+#[test]
+fn one_seed_gives_one_initial_model() {
+    let c = tiny();
+    let stats = stats_for(&c, &windows(&c, 4));
+    let a = RtnTrainer::new(&c, stats.clone(), &Device::Cpu).unwrap();
+    let b = RtnTrainer::new(&c, stats.clone(), &Device::Cpu).unwrap();
+    assert_eq!(flat_weights(&a), flat_weights(&b));
+    let mut other = c.clone();
+    other.train.seed += 1;
+    let d = RtnTrainer::new(&other, stats, &Device::Cpu).unwrap();
+    assert_ne!(flat_weights(&a), flat_weights(&d));
+}
+
+/// A trainer saved with its training state and reloaded takes the same steps as the original:
+/// same rotations and teacher-forcing draws, same AMSGrad moments, same moving average.
+#[test]
+fn a_reloaded_trainer_continues_exactly() {
+    let mut c = tiny();
+    c.train.ema_decay = Some(0.9);
+    let ws = windows(&c, 8);
+    let stats = stats_for(&c, &ws);
+    let mw: Vec<MotionWindow> = ws.iter().map(|w| MotionWindow::new(w)).collect();
+    let mut trainer = RtnTrainer::new(&c, stats, &Device::Cpu).unwrap();
+    for _ in 0..2 {
+        trainer.train_step(&mw[..4]).unwrap();
+    }
+    let dir = tempfile::tempdir().unwrap();
+    trainer.save_with_optimizer(dir.path()).unwrap();
+    assert!(dir.path().join(checkpoint::RNG_FILE).is_file());
+    let mut resumed = RtnTrainer::load(dir.path(), &Device::Cpu).unwrap();
+    for k in 0..3 {
+        let batch = &mw[k * 2..k * 2 + 4];
+        assert_eq!(trainer.train_step(batch).unwrap(), resumed.train_step(batch).unwrap(), "step {k}");
+    }
+    assert_eq!(flat_weights(&trainer), flat_weights(&resumed));
+    let a = trainer.with_ema_weights(|t| Ok(flat_weights(t))).unwrap();
+    assert_eq!(a, resumed.with_ema_weights(|t| Ok(flat_weights(t))).unwrap());
+}

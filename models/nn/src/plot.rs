@@ -1,13 +1,16 @@
-//! Small PNG plots (loss curves) rasterised with tiny-skia.
+//! The loss-curve PNG of a run, rasterised with tiny-skia.
 
-use anyhow::Context;
+use crate::checkpoint::io;
+use crate::error::{NnError, NnResult};
 use std::path::Path;
 use tiny_skia::{Color, Paint, PathBuilder, Pixmap, Stroke, Transform};
 
-/// Plots training (blue) and validation (orange) loss per epoch on a log scale.
-pub fn loss_curve(path: &Path, train: &[f64], valid: &[f64]) -> anyhow::Result<()> {
+/// Plots training (blue) and validation (orange) loss per epoch on a log scale (one grey line
+/// per decade), 640 x 360 pixels; writes `path` atomically. Non-finite and non-positive values
+/// are skipped; nothing is written when no value is left.
+pub fn loss_curve(path: &Path, train: &[f64], valid: &[f64]) -> NnResult<()> {
     let (w, h, m) = (640.0f32, 360.0f32, 30.0f32);
-    let mut pm = Pixmap::new(w as u32, h as u32).context("pixmap")?;
+    let mut pm = Pixmap::new(w as u32, h as u32).ok_or_else(|| NnError::Config("cannot allocate the plot".into()))?;
     pm.fill(Color::WHITE);
     let all: Vec<f64> = train.iter().chain(valid).copied().filter(|v| v.is_finite() && *v > 0.0).collect();
     if all.is_empty() {
@@ -21,7 +24,6 @@ pub fn loss_curve(path: &Path, train: &[f64], valid: &[f64]) -> anyhow::Result<(
     let mut stroke = Stroke { width: 1.0, ..Stroke::default() };
     let mut paint = Paint::default();
     paint.set_color_rgba8(200, 200, 200, 255);
-    // grid: one line per decade
     for d in (lo.floor() as i32)..=(hi.ceil() as i32) {
         let yy = y(10f64.powi(d));
         if (m..=h - m).contains(&yy) {
@@ -44,8 +46,18 @@ pub fn loss_curve(path: &Path, train: &[f64], valid: &[f64]) -> anyhow::Result<(
             pm.stroke_path(&p, &paint, &stroke, Transform::identity(), None);
         }
     }
-    let tmp = path.with_extension("png.tmp");
-    pm.save_png(&tmp).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))?;
-    Ok(())
+    let png =
+        pm.encode_png().map_err(|e| NnError::Config(format!("{}: cannot encode the PNG: {e}", path.display())))?;
+    crate::checkpoint::commit([crate::checkpoint::stage(path, |tmp| std::fs::write(tmp, &png).map_err(io(tmp)))?])
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn writes_a_png() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("loss.png");
+        super::loss_curve(&p, &[1.0, 0.5, 0.2], &[1.2, f64::NAN, 0.3]).unwrap();
+        assert_eq!(&std::fs::read(&p).unwrap()[1..4], b"PNG");
+    }
 }

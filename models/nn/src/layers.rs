@@ -1,0 +1,183 @@
+//! Feed-forward layers: a multi-layer perceptron with a chosen activation, and seeded dropout.
+
+use crate::rng::SplitMix64;
+use candle_core::{Module, Result, Tensor};
+use candle_nn::{Linear, VarBuilder};
+
+/// The activation of an [`Mlp`]'s hidden layers.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Activation {
+    /// `max(x, 0) + alpha * min(x, 0)`.
+    LeakyRelu(f64),
+    /// `max(x, 0)`.
+    Relu,
+    /// SELU (Klambauer et al. 2017, eq. 2): `scale * (x if x > 0 else alpha * (exp(x) - 1))`,
+    /// with `alpha = 1.6732632423543772` and `scale = 1.0507009873554805`.
+    Selu,
+}
+
+/// SELU's `alpha`.
+pub const SELU_ALPHA: f64 = 1.673_263_242_354_377_2;
+/// SELU's `scale`.
+pub const SELU_SCALE: f64 = 1.050_700_987_355_480_5;
+
+impl Activation {
+    /// Applies the activation element-wise.
+    pub fn apply(&self, x: &Tensor) -> Result<Tensor> {
+        match *self {
+            Activation::LeakyRelu(alpha) => candle_nn::ops::leaky_relu(x, alpha),
+            Activation::Relu => x.relu(),
+            Activation::Selu => x.elu(SELU_ALPHA)? * SELU_SCALE,
+        }
+    }
+}
+
+/// A stack of linear layers `input -> widths[0] -> ... -> widths[n-1]`; every layer but the last
+/// is followed by the activation, the last one only when `activate_last`.
+///
+/// Tensor names: `{prefix}.{i}.weight` `(widths[i], fan_in)` and `{prefix}.{i}.bias`, candle's
+/// `Linear` initialisation. Input `(..., input)`, output `(..., widths[n-1])`.
+#[derive(Clone, Debug)]
+pub struct Mlp {
+    layers: Vec<Linear>,
+    activation: Activation,
+    activate_last: bool,
+}
+
+impl Mlp {
+    /// Builds (or loads, depending on `vb`) the layers.
+    pub fn new(
+        input: usize,
+        widths: &[usize],
+        activation: Activation,
+        activate_last: bool,
+        vb: VarBuilder,
+    ) -> Result<Self> {
+        let mut layers = Vec::with_capacity(widths.len());
+        let mut prev = input;
+        for (i, &w) in widths.iter().enumerate() {
+            layers.push(candle_nn::linear(prev, w, vb.pp(i))?);
+            prev = w;
+        }
+        Ok(Mlp { layers, activation, activate_last })
+    }
+
+    /// Output size (0 without layers).
+    pub fn out_dim(&self) -> usize {
+        self.layers.last().map_or(0, |l| l.weight().dim(0).unwrap_or(0))
+    }
+
+    /// The forward pass with dropout after each activated layer: `rng` `Some` in training,
+    /// `None` at evaluation (then equal to [`Module::forward`]).
+    pub fn forward_dropout(&self, x: &Tensor, dropout: &Dropout, mut rng: Option<&mut SplitMix64>) -> Result<Tensor> {
+        let n = self.layers.len();
+        let mut h = x.clone();
+        for (i, l) in self.layers.iter().enumerate() {
+            h = l.forward(&h)?;
+            if i + 1 < n || self.activate_last {
+                h = self.activation.apply(&h)?;
+                h = dropout.forward(&h, rng.as_deref_mut())?;
+            }
+        }
+        Ok(h)
+    }
+}
+
+impl Module for Mlp {
+    fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        self.forward_dropout(x, &Dropout::new(0.0), None)
+    }
+}
+
+/// Inverted dropout: in training each value is zeroed with probability `p` and the others are
+/// scaled by `1 / (1 - p)`; at evaluation it is the identity. The masks are drawn from the
+/// caller's generator, so a seeded run is reproducible and a resumed run draws the same masks.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Dropout {
+    p: f64,
+}
+
+impl Dropout {
+    /// Dropout with drop probability `p`, clamped to `[0, 1)`.
+    pub fn new(p: f64) -> Self {
+        Dropout { p: p.clamp(0.0, 1.0 - 1e-9) }
+    }
+
+    /// The drop probability.
+    pub fn p(&self) -> f64 {
+        self.p
+    }
+
+    /// Applies dropout: training when `rng` is `Some` (one draw per value, row-major),
+    /// identity when `None` or `p == 0`.
+    pub fn forward(&self, x: &Tensor, rng: Option<&mut SplitMix64>) -> Result<Tensor> {
+        let Some(rng) = rng else { return Ok(x.clone()) };
+        if self.p == 0.0 {
+            return Ok(x.clone());
+        }
+        let keep = 1.0 / (1.0 - self.p);
+        let mask: Vec<f32> =
+            (0..x.elem_count()).map(|_| if rng.next_f64() < self.p { 0.0 } else { keep as f32 }).collect();
+        let mask = Tensor::from_vec(mask, x.shape(), x.device())?.to_dtype(x.dtype())?;
+        x.mul(&mask)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::init::SeededVarMap;
+    use candle_core::{DType, Device};
+    use candle_nn::VarMap;
+
+    #[test]
+    fn mlp_names_shapes_and_activations() -> Result<()> {
+        let vm = VarMap::new();
+        let vb = SeededVarMap::builder(&vm, 1, DType::F32, &Device::Cpu);
+        let mlp = Mlp::new(3, &[8, 5], Activation::Relu, false, vb.pp("enc"))?;
+        let mut names: Vec<String> = vm.data().lock().unwrap().keys().cloned().collect();
+        names.sort();
+        assert_eq!(names, ["enc.0.bias", "enc.0.weight", "enc.1.bias", "enc.1.weight"]);
+        assert_eq!(mlp.out_dim(), 5);
+        let x = Tensor::ones((2, 3), DType::F32, &Device::Cpu)?;
+        let y = mlp.forward(&x)?;
+        assert_eq!(y.dims(), &[2, 5]);
+        // Hand-computed: relu(x W0^T + b0) W1^T + b1, the last layer not activated.
+        let data = vm.data().lock().unwrap();
+        let w = |n: &str| data[n].as_tensor().clone();
+        let h = x.matmul(&w("enc.0.weight").t()?)?.broadcast_add(&w("enc.0.bias"))?.relu()?;
+        let want = h.matmul(&w("enc.1.weight").t()?)?.broadcast_add(&w("enc.1.bias"))?;
+        assert_eq!(y.to_vec2::<f32>()?, want.to_vec2::<f32>()?);
+        Ok(())
+    }
+
+    #[test]
+    fn activations_match_their_formulas() -> Result<()> {
+        let x = Tensor::new(&[-2.0f64, -0.5, 0.0, 1.5], &Device::Cpu)?;
+        let leaky = Activation::LeakyRelu(0.1).apply(&x)?.to_vec1::<f64>()?;
+        assert_eq!(leaky, [-0.2, -0.05, 0.0, 1.5]);
+        assert_eq!(Activation::Relu.apply(&x)?.to_vec1::<f64>()?, [0.0, 0.0, 0.0, 1.5]);
+        let selu = Activation::Selu.apply(&x)?.to_vec1::<f64>()?;
+        for (got, v) in selu.iter().zip([-2.0f64, -0.5, 0.0, 1.5]) {
+            let want = SELU_SCALE * if v > 0.0 { v } else { SELU_ALPHA * (v.exp() - 1.0) };
+            assert!((got - want).abs() < 1e-12, "selu({v}) = {got}, want {want}");
+        }
+        Ok(())
+    }
+
+    #[test]
+    fn dropout_is_seeded_scaled_and_off_in_evaluation() -> Result<()> {
+        let x = Tensor::ones((100, 100), DType::F32, &Device::Cpu)?;
+        let d = Dropout::new(0.25);
+        assert_eq!(d.forward(&x, None)?.to_vec2::<f32>()?, x.to_vec2::<f32>()?);
+        let a = d.forward(&x, Some(&mut SplitMix64::new(3)))?.flatten_all()?.to_vec1::<f32>()?;
+        let b = d.forward(&x, Some(&mut SplitMix64::new(3)))?.flatten_all()?.to_vec1::<f32>()?;
+        let c = d.forward(&x, Some(&mut SplitMix64::new(4)))?.flatten_all()?.to_vec1::<f32>()?;
+        assert_eq!(a, b);
+        assert_ne!(a, c);
+        let dropped = a.iter().filter(|&&v| v == 0.0).count() as f64 / a.len() as f64;
+        assert!((dropped - 0.25).abs() < 0.02, "dropped {dropped}");
+        assert!(a.iter().all(|&v| v == 0.0 || (v - 4.0 / 3.0).abs() < 1e-6));
+        Ok(())
+    }
+}

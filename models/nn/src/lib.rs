@@ -1,0 +1,32 @@
+//! The shared candle toolkit of the zoo's models: what two or more models need, tested once here.
+//!
+//! - [`rng`]: the one seeded generator ([`SplitMix64`]);
+//! - [`init`]: seeded weight initialisation (weights depend on the seed and the variable name only);
+//! - [`layers`]: [`Mlp`] with a chosen activation, seeded [`Dropout`];
+//! - [`recurrent`]: multi-layer [`Gru`] and [`Lstm`] with the state outside the layer, and
+//!   bidirectional [`BiGru`] / [`BiLstm`] over a sequence;
+//! - [`optim`]: [`AmsGrad`], [`Adam`], [`RmsProp`] with their state saved by name, gradient clipping;
+//! - [`ema`]: the moving average of the weights;
+//! - [`checkpoint`]: atomic writes of JSON, weights and named tensors;
+//! - [`train_loop`]: the one training loop, driving any model that implements [`Trainable`];
+//! - [`plot`]: the loss-curve PNG.
+
+pub mod checkpoint;
+pub mod ema;
+pub mod error;
+pub mod init;
+pub mod layers;
+pub mod optim;
+pub mod plot;
+pub mod recurrent;
+pub mod rng;
+pub mod train_loop;
+
+pub use ema::Ema;
+pub use error::{NnError, NnResult, TrainError};
+pub use init::SeededVarMap;
+pub use layers::{Activation, Dropout, Mlp};
+pub use optim::{Adam, AmsGrad, ParamsAdam, ParamsAmsGrad, ParamsRmsProp, RmsProp, StatefulOptimizer};
+pub use recurrent::{BiGru, BiLstm, Gru, GruState, Lstm, LstmState};
+pub use rng::SplitMix64;
+pub use train_loop::{TrainOptions, TrainState, Trainable, Validation};

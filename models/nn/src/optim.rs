@@ -1,0 +1,576 @@
+//! Optimisers whose state is saved and restored by checkpoints as named tensors: AMSGrad, Adam
+//! and RMSProp (candle-nn has only SGD and AdamW), and gradient clipping by value and by norm.
+//!
+//! Each optimiser also implements [`candle_nn::Optimizer`] (`backward_step`, learning rate).
+//! Variables are named (e.g. by their `VarMap` name) so that a saved state is matched by name:
+//! `NAME.m`, `NAME.v`, ... plus scalar entries starting with `__`.
+
+use crate::error::{NnError, NnResult};
+use candle_core::backprop::GradStore;
+use candle_core::{Device, Result, Tensor, Var};
+use candle_nn::Optimizer;
+use std::collections::HashMap;
+
+/// An optimiser whose whole state can be saved and restored, so that a resumed run continues
+/// exactly.
+pub trait StatefulOptimizer: Optimizer {
+    /// The state as named tensors (for a safetensors file).
+    fn state(&self) -> NnResult<HashMap<String, Tensor>>;
+    /// Restores a state written by [`StatefulOptimizer::state`]: every variable must be present
+    /// with its shape.
+    fn set_state(&mut self, state: &HashMap<String, Tensor>) -> NnResult<()>;
+    /// Optimiser steps taken.
+    fn steps(&self) -> u64;
+}
+
+/// Named variables and their per-variable moment tensors.
+#[derive(Debug)]
+struct Slots {
+    names: Vec<String>,
+    vars: Vec<Var>,
+    /// `moments[k][i]`: moment `kinds[k]` of variable `i`.
+    moments: Vec<Vec<Var>>,
+    kinds: &'static [&'static str],
+}
+
+impl Slots {
+    fn new(vars: Vec<(String, Var)>, kinds: &'static [&'static str]) -> Result<Self> {
+        let vars: Vec<(String, Var)> = vars.into_iter().filter(|(_, v)| v.dtype().is_float()).collect();
+        let moments = kinds
+            .iter()
+            .map(|_| vars.iter().map(|(_, v)| Var::zeros(v.shape(), v.dtype(), v.device())).collect::<Result<Vec<_>>>())
+            .collect::<Result<Vec<_>>>()?;
+        let (names, vars): (Vec<String>, Vec<Var>) = vars.into_iter().unzip();
+        Ok(Slots { names, vars, moments, kinds })
+    }
+
+    fn device(&self) -> Device {
+        self.vars.first().map_or(Device::Cpu, |v| v.device().clone())
+    }
+
+    fn state(&self, scalars: &[(&str, f64)]) -> NnResult<HashMap<String, Tensor>> {
+        let mut out = HashMap::new();
+        for (i, name) in self.names.iter().enumerate() {
+            if name.is_empty() {
+                return Err(NnError::State(
+                    "this optimiser was built without variable names (`Optimizer::new`): build it with `new_named` to save its state".into(),
+                ));
+            }
+            for (k, kind) in self.kinds.iter().enumerate() {
+                out.insert(format!("{name}.{kind}"), self.moments[k][i].as_tensor().clone());
+            }
+        }
+        let device = self.device();
+        for (key, value) in scalars {
+            out.insert(key.to_string(), Tensor::new(&[*value], &device)?);
+        }
+        Ok(out)
+    }
+
+    fn set_state(&mut self, state: &HashMap<String, Tensor>) -> NnResult<()> {
+        for (i, name) in self.names.iter().enumerate() {
+            for (k, kind) in self.kinds.iter().enumerate() {
+                let key = format!("{name}.{kind}");
+                let var = &self.moments[k][i];
+                let Some(t) = state.get(&key) else {
+                    return Err(NnError::State(format!(
+                        "the optimiser state has no `{key}`: it was saved for another model"
+                    )));
+                };
+                if t.dims() != var.dims() {
+                    return Err(NnError::State(format!(
+                        "optimiser state `{key}` has shape {:?}, the variable {:?}",
+                        t.dims(),
+                        var.dims()
+                    )));
+                }
+                var.set(&t.to_dtype(var.dtype())?.to_device(var.device())?)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+fn scalar(state: &HashMap<String, Tensor>, key: &str) -> NnResult<f64> {
+    let Some(t) = state.get(key) else {
+        return Err(NnError::State(format!("the optimiser state has no `{key}`: it was saved by another optimiser")));
+    };
+    t.to_vec1::<f64>()?.first().copied().ok_or_else(|| NnError::State(format!("optimiser state `{key}` is empty")))
+}
+
+/// Unnamed variables (for [`Optimizer::new`]: such an optimiser cannot save its state).
+fn unnamed(vars: Vec<Var>) -> Vec<(String, Var)> {
+    vars.into_iter().map(|v| (String::new(), v)).collect()
+}
+
+/// AMSGrad hyper-parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ParamsAmsGrad {
+    /// Learning rate.
+    pub lr: f64,
+    /// First-moment decay.
+    pub beta1: f64,
+    /// Second-moment decay.
+    pub beta2: f64,
+    /// Added to the denominator.
+    pub eps: f64,
+}
+
+impl Default for ParamsAmsGrad {
+    /// RTN's settings (sec. 6.3): lr 5e-4, Adam's default betas, eps 1e-8.
+    fn default() -> Self {
+        ParamsAmsGrad { lr: 5e-4, beta1: 0.9, beta2: 0.999, eps: 1e-8 }
+    }
+}
+
+/// AMSGrad (Reddi, Kale & Kumar, ICLR 2018, Alg. 2 with bias correction), the optimiser of
+/// RTN sec. 6.3. Same update as PyTorch's `Adam(amsgrad=True)` without weight decay:
+/// `m = b1 m + (1 - b1) g`, `v = b2 v + (1 - b2) g^2`, `v_max = max(v_max, v)`,
+/// `theta -= lr / (1 - b1^t) * m / (sqrt(v_max) / sqrt(1 - b2^t) + eps)`.
+///
+/// State: `NAME.m`, `NAME.v`, `NAME.v_max`, `__amsgrad_step`.
+#[derive(Debug)]
+pub struct AmsGrad {
+    slots: Slots,
+    t: u64,
+    params: ParamsAmsGrad,
+}
+
+const AMSGRAD_STEP: &str = "__amsgrad_step";
+
+impl AmsGrad {
+    /// An optimiser over named variables (non-float variables are skipped).
+    pub fn new_named(vars: Vec<(String, Var)>, params: ParamsAmsGrad) -> Result<Self> {
+        Ok(AmsGrad { slots: Slots::new(vars, &["m", "v", "v_max"])?, t: 0, params })
+    }
+}
+
+impl Optimizer for AmsGrad {
+    type Config = ParamsAmsGrad;
+
+    fn new(vars: Vec<Var>, params: ParamsAmsGrad) -> Result<Self> {
+        AmsGrad::new_named(unnamed(vars), params)
+    }
+
+    fn step(&mut self, grads: &GradStore) -> Result<()> {
+        self.t += 1;
+        let p = self.params;
+        let t = self.t as i32;
+        let bc1 = 1.0 - p.beta1.powi(t);
+        let bc2 = 1.0 - p.beta2.powi(t);
+        let step_size = p.lr / bc1;
+        let inv_sqrt_bc2 = 1.0 / bc2.sqrt();
+        let s = &self.slots;
+        for (i, var) in s.vars.iter().enumerate() {
+            let Some(g) = grads.get(var) else { continue };
+            let (sm, sv, svm) = (&s.moments[0][i], &s.moments[1][i], &s.moments[2][i]);
+            let m = ((sm.as_tensor() * p.beta1)? + (g * (1.0 - p.beta1))?)?;
+            let v = ((sv.as_tensor() * p.beta2)? + (g.sqr()? * (1.0 - p.beta2))?)?;
+            let v_max = svm.as_tensor().maximum(&v)?;
+            let denom = ((v_max.sqrt()? * inv_sqrt_bc2)? + p.eps)?;
+            let update = ((&m / denom)? * step_size)?;
+            var.set(&var.as_tensor().sub(&update)?)?;
+            sm.set(&m)?;
+            sv.set(&v)?;
+            svm.set(&v_max)?;
+        }
+        Ok(())
+    }
+
+    fn learning_rate(&self) -> f64 {
+        self.params.lr
+    }
+
+    fn set_learning_rate(&mut self, lr: f64) {
+        self.params.lr = lr;
+    }
+}
+
+impl StatefulOptimizer for AmsGrad {
+    fn state(&self) -> NnResult<HashMap<String, Tensor>> {
+        self.slots.state(&[(AMSGRAD_STEP, self.t as f64)])
+    }
+
+    fn set_state(&mut self, state: &HashMap<String, Tensor>) -> NnResult<()> {
+        self.slots.set_state(state)?;
+        self.t = scalar(state, AMSGRAD_STEP)? as u64;
+        Ok(())
+    }
+
+    fn steps(&self) -> u64 {
+        self.t
+    }
+}
+
+/// Adam hyper-parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ParamsAdam {
+    /// Learning rate.
+    pub lr: f64,
+    /// First-moment decay.
+    pub beta1: f64,
+    /// Second-moment decay.
+    pub beta2: f64,
+    /// Added to the denominator.
+    pub eps: f64,
+}
+
+impl Default for ParamsAdam {
+    /// Kingma & Ba's defaults: lr 1e-3, betas (0.9, 0.999), eps 1e-8.
+    fn default() -> Self {
+        ParamsAdam { lr: 1e-3, beta1: 0.9, beta2: 0.999, eps: 1e-8 }
+    }
+}
+
+/// Adam (Kingma & Ba, ICLR 2015, Alg. 1), as PyTorch's `Adam` without weight decay:
+/// `m = b1 m + (1 - b1) g`, `v = b2 v + (1 - b2) g^2`,
+/// `theta -= lr / (1 - b1^t) * m / (sqrt(v) / sqrt(1 - b2^t) + eps)`.
+///
+/// State: `NAME.m`, `NAME.v`, `__adam_step`.
+#[derive(Debug)]
+pub struct Adam {
+    slots: Slots,
+    t: u64,
+    params: ParamsAdam,
+}
+
+const ADAM_STEP: &str = "__adam_step";
+
+impl Adam {
+    /// An optimiser over named variables (non-float variables are skipped).
+    pub fn new_named(vars: Vec<(String, Var)>, params: ParamsAdam) -> Result<Self> {
+        Ok(Adam { slots: Slots::new(vars, &["m", "v"])?, t: 0, params })
+    }
+}
+
+impl Optimizer for Adam {
+    type Config = ParamsAdam;
+
+    fn new(vars: Vec<Var>, params: ParamsAdam) -> Result<Self> {
+        Adam::new_named(unnamed(vars), params)
+    }
+
+    fn step(&mut self, grads: &GradStore) -> Result<()> {
+        self.t += 1;
+        let p = self.params;
+        let t = self.t as i32;
+        let step_size = p.lr / (1.0 - p.beta1.powi(t));
+        let inv_sqrt_bc2 = 1.0 / (1.0 - p.beta2.powi(t)).sqrt();
+        let s = &self.slots;
+        for (i, var) in s.vars.iter().enumerate() {
+            let Some(g) = grads.get(var) else { continue };
+            let (sm, sv) = (&s.moments[0][i], &s.moments[1][i]);
+            let m = ((sm.as_tensor() * p.beta1)? + (g * (1.0 - p.beta1))?)?;
+            let v = ((sv.as_tensor() * p.beta2)? + (g.sqr()? * (1.0 - p.beta2))?)?;
+            let denom = ((v.sqrt()? * inv_sqrt_bc2)? + p.eps)?;
+            var.set(&var.as_tensor().sub(&((&m / denom)? * step_size)?)?)?;
+            sm.set(&m)?;
+            sv.set(&v)?;
+        }
+        Ok(())
+    }
+
+    fn learning_rate(&self) -> f64 {
+        self.params.lr
+    }
+
+    fn set_learning_rate(&mut self, lr: f64) {
+        self.params.lr = lr;
+    }
+}
+
+impl StatefulOptimizer for Adam {
+    fn state(&self) -> NnResult<HashMap<String, Tensor>> {
+        self.slots.state(&[(ADAM_STEP, self.t as f64)])
+    }
+
+    fn set_state(&mut self, state: &HashMap<String, Tensor>) -> NnResult<()> {
+        self.slots.set_state(state)?;
+        self.t = scalar(state, ADAM_STEP)? as u64;
+        Ok(())
+    }
+
+    fn steps(&self) -> u64 {
+        self.t
+    }
+}
+
+/// RMSProp hyper-parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ParamsRmsProp {
+    /// Learning rate of the first epoch.
+    pub lr: f64,
+    /// Decay `rho` of the mean square (PyTorch's `alpha`: 0.99; Keras and many papers: 0.9).
+    pub rho: f64,
+    /// Added to the denominator.
+    pub eps: f64,
+    /// Factor applied to the learning rate at the end of every epoch ([`RmsProp::end_epoch`];
+    /// 1 keeps it constant, e.g. 0.95).
+    pub lr_decay: f64,
+}
+
+impl Default for ParamsRmsProp {
+    /// PyTorch's defaults (lr 1e-2, rho 0.99, eps 1e-8), no decay.
+    fn default() -> Self {
+        ParamsRmsProp { lr: 1e-2, rho: 0.99, eps: 1e-8, lr_decay: 1.0 }
+    }
+}
+
+/// RMSProp (Tieleman & Hinton 2012, lecture 6.5), as PyTorch's `RMSprop` without momentum:
+/// `v = rho v + (1 - rho) g^2`, `theta -= lr * g / (sqrt(v) + eps)`, with the learning rate
+/// multiplied by `lr_decay` after every epoch.
+///
+/// State: `NAME.v`, `__rmsprop_step`, `__rmsprop_lr` (the decayed learning rate).
+#[derive(Debug)]
+pub struct RmsProp {
+    slots: Slots,
+    t: u64,
+    params: ParamsRmsProp,
+}
+
+const RMSPROP_STEP: &str = "__rmsprop_step";
+const RMSPROP_LR: &str = "__rmsprop_lr";
+
+impl RmsProp {
+    /// An optimiser over named variables (non-float variables are skipped).
+    pub fn new_named(vars: Vec<(String, Var)>, params: ParamsRmsProp) -> Result<Self> {
+        Ok(RmsProp { slots: Slots::new(vars, &["v"])?, t: 0, params })
+    }
+
+    /// Applies the per-epoch learning-rate decay: `lr *= lr_decay`.
+    pub fn end_epoch(&mut self) {
+        self.params.lr *= self.params.lr_decay;
+    }
+}
+
+impl Optimizer for RmsProp {
+    type Config = ParamsRmsProp;
+
+    fn new(vars: Vec<Var>, params: ParamsRmsProp) -> Result<Self> {
+        RmsProp::new_named(unnamed(vars), params)
+    }
+
+    fn step(&mut self, grads: &GradStore) -> Result<()> {
+        self.t += 1;
+        let p = self.params;
+        let s = &self.slots;
+        for (i, var) in s.vars.iter().enumerate() {
+            let Some(g) = grads.get(var) else { continue };
+            let sv = &s.moments[0][i];
+            let v = ((sv.as_tensor() * p.rho)? + (g.sqr()? * (1.0 - p.rho))?)?;
+            let update = ((g / (v.sqrt()? + p.eps)?)? * p.lr)?;
+            var.set(&var.as_tensor().sub(&update)?)?;
+            sv.set(&v)?;
+        }
+        Ok(())
+    }
+
+    fn learning_rate(&self) -> f64 {
+        self.params.lr
+    }
+
+    fn set_learning_rate(&mut self, lr: f64) {
+        self.params.lr = lr;
+    }
+}
+
+impl StatefulOptimizer for RmsProp {
+    fn state(&self) -> NnResult<HashMap<String, Tensor>> {
+        self.slots.state(&[(RMSPROP_STEP, self.t as f64), (RMSPROP_LR, self.params.lr)])
+    }
+
+    fn set_state(&mut self, state: &HashMap<String, Tensor>) -> NnResult<()> {
+        self.slots.set_state(state)?;
+        self.t = scalar(state, RMSPROP_STEP)? as u64;
+        self.params.lr = scalar(state, RMSPROP_LR)?;
+        Ok(())
+    }
+
+    fn steps(&self) -> u64 {
+        self.t
+    }
+}
+
+/// Clips every gradient component of `vars` to `[-clip, clip]`.
+pub fn clip_grad_value(grads: &mut GradStore, vars: &[Var], clip: f64) -> Result<()> {
+    for var in vars {
+        if let Some(g) = grads.get(var) {
+            let clipped = g.clamp(-clip, clip)?;
+            grads.insert(var, clipped);
+        }
+    }
+    Ok(())
+}
+
+/// Scales the gradients of `vars` so that their global L2 norm is at most `max_norm`
+/// (PyTorch's `clip_grad_norm_`: factor `max_norm / (norm + 1e-6)` when `norm > max_norm`);
+/// returns the norm before clipping.
+pub fn clip_grad_norm(grads: &mut GradStore, vars: &[Var], max_norm: f64) -> Result<f64> {
+    let mut sq = 0.0;
+    for var in vars {
+        if let Some(g) = grads.get(var) {
+            sq += g.sqr()?.sum_all()?.to_dtype(candle_core::DType::F64)?.to_scalar::<f64>()?;
+        }
+    }
+    let norm = sq.sqrt();
+    if norm > max_norm {
+        let factor = max_norm / (norm + 1e-6);
+        for var in vars {
+            if let Some(g) = grads.get(var) {
+                let scaled = (g * factor)?;
+                grads.insert(var, scaled);
+            }
+        }
+    }
+    Ok(norm)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GRADS: [[f64; 2]; 2] = [[10.0, 1.0], [0.1, -1.0]];
+
+    /// Runs two steps on `theta = [1, -2]` (f64) with the gradients [`GRADS`] (losses
+    /// `sum(g * theta)`), calling `between` after the first step.
+    fn run<O: Optimizer>(opt: &mut O, theta: &Var, between: impl FnOnce(&mut O)) -> Vec<f64> {
+        let mut between = Some(between);
+        for g in GRADS {
+            let loss = theta.as_tensor().mul(&Tensor::new(&g, &Device::Cpu).unwrap()).unwrap().sum_all().unwrap();
+            opt.backward_step(&loss).unwrap();
+            if let Some(f) = between.take() {
+                f(&mut *opt);
+            }
+        }
+        theta.as_tensor().to_vec1::<f64>().unwrap()
+    }
+
+    fn theta() -> Var {
+        Var::new(&[1.0f64, -2.0], &Device::Cpu).unwrap()
+    }
+
+    fn close(got: &[f64], want: &[f64]) {
+        for (g, w) in got.iter().zip(want) {
+            assert!((g - w).abs() < 1e-12, "got {got:?}, want {want:?}");
+        }
+    }
+
+    /// The hand computation in plain f64: Adam, or AMSGrad when `amsgrad`.
+    fn adam_by_hand(lr: f64, amsgrad: bool) -> Vec<f64> {
+        let (b1, b2, eps) = (0.9f64, 0.999f64, 1e-8);
+        let mut th = [1.0f64, -2.0];
+        let (mut m, mut v, mut vmax) = ([0.0f64; 2], [0.0f64; 2], [0.0f64; 2]);
+        for (t, g) in GRADS.iter().enumerate() {
+            let t = t as i32 + 1;
+            for j in 0..2 {
+                m[j] = b1 * m[j] + (1.0 - b1) * g[j];
+                v[j] = b2 * v[j] + (1.0 - b2) * g[j] * g[j];
+                vmax[j] = vmax[j].max(v[j]);
+                let second = if amsgrad { vmax[j] } else { v[j] };
+                th[j] -= lr / (1.0 - b1.powi(t)) * m[j] / (second.sqrt() / (1.0 - b2.powi(t)).sqrt() + eps);
+            }
+        }
+        th.to_vec()
+    }
+
+    /// Two steps on `theta = [1, -2]` with gradients `[10, 1]` then `[0.1, -1]`, lr 0.1, betas
+    /// (0.9, 0.999), eps 1e-8, by hand:
+    ///
+    /// step 1: m = [1, 0.1], v = v_max = [0.1, 0.001], bc1 = 0.1, bc2 = 0.001,
+    ///   update = 0.1 / 0.1 * m / (sqrt(v_max / 0.001) + eps) = [0.1, 0.1] -> theta = [0.9, -2.1].
+    /// step 2: m = [0.91, -0.01], v = [0.09991, 0.001999], v_max = [0.1 (kept: v fell), 0.001999],
+    ///   bc1 = 0.19, bc2 = 0.001999, update_0 = 0.1 / 0.19 * 0.91 / sqrt(0.1 / 0.001999)
+    ///   = 0.0677165 -> theta_0 = 0.8322835 (Adam, using v instead of v_max, would give 0.8322530);
+    ///   update_1 = 0.1 / 0.19 * -0.01 / 1 = -0.0052632 -> theta_1 = -2.0947368.
+    #[test]
+    fn amsgrad_matches_two_hand_computed_steps() {
+        let th = theta();
+        let mut opt = AmsGrad::new(vec![th.clone()], ParamsAmsGrad { lr: 0.1, ..ParamsAmsGrad::default() }).unwrap();
+        let got = run(&mut opt, &th, |_| {});
+        close(&got, &adam_by_hand(0.1, true));
+        assert!((got[0] - 0.832_283_5).abs() < 1e-7 && (got[1] + 2.094_736_8).abs() < 1e-7, "{got:?}");
+        assert!((got[0] - 0.832_253).abs() > 1e-5, "the max of the second moments must be kept");
+        assert_eq!(opt.steps(), 2);
+    }
+
+    #[test]
+    fn adam_matches_two_hand_computed_steps() {
+        let th = theta();
+        let mut opt = Adam::new(vec![th.clone()], ParamsAdam { lr: 0.1, ..ParamsAdam::default() }).unwrap();
+        let got = run(&mut opt, &th, |_| {});
+        close(&got, &adam_by_hand(0.1, false));
+        assert!((got[0] - 0.832_253).abs() < 1e-6, "{got:?}");
+    }
+
+    #[test]
+    fn rmsprop_with_decay_matches_two_hand_computed_steps() {
+        let th = theta();
+        let params = ParamsRmsProp { lr: 0.1, rho: 0.9, eps: 1e-8, lr_decay: 0.95 };
+        let mut opt = RmsProp::new(vec![th.clone()], params).unwrap();
+        let got = run(&mut opt, &th, |o| o.end_epoch());
+        // step 1 (lr 0.1): v = 0.1 g^2 = [10, 0.1]; theta -= 0.1 g / sqrt(v).
+        // end of epoch: lr = 0.095.
+        // step 2 (lr 0.095): v = 0.9 v + 0.1 g^2; theta -= 0.095 g / sqrt(v).
+        let mut th = [1.0f64, -2.0];
+        let mut v = [0.0f64; 2];
+        for (g, lr) in GRADS.iter().zip([0.1, 0.1 * 0.95]) {
+            for j in 0..2 {
+                v[j] = 0.9 * v[j] + 0.1 * g[j] * g[j];
+                th[j] -= lr * g[j] / (v[j].sqrt() + 1e-8);
+            }
+        }
+        close(&got, &th);
+        assert!((opt.learning_rate() - 0.095).abs() < 1e-15);
+    }
+
+    /// A state saved after one step and loaded into a fresh optimiser continues exactly.
+    #[test]
+    fn saved_state_continues_exactly() {
+        let named = |th: &Var| vec![("theta".to_string(), th.clone())];
+        let (a, b) = (theta(), theta());
+        let params = ParamsRmsProp { lr: 0.1, rho: 0.9, eps: 1e-8, lr_decay: 0.5 };
+        let mut whole = RmsProp::new_named(named(&a), params).unwrap();
+        let want = run(&mut whole, &a, |o| o.end_epoch());
+        let mut first = RmsProp::new_named(named(&b), params).unwrap();
+        let g = Tensor::new(&GRADS[0], &Device::Cpu).unwrap();
+        first.backward_step(&b.as_tensor().mul(&g).unwrap().sum_all().unwrap()).unwrap();
+        first.end_epoch();
+        let state = first.state().unwrap();
+        assert!(state.contains_key("theta.v") && state.contains_key("__rmsprop_lr"));
+        let mut resumed = RmsProp::new_named(named(&b), params).unwrap();
+        resumed.set_state(&state).unwrap();
+        assert_eq!(resumed.steps(), 1);
+        let g = Tensor::new(&GRADS[1], &Device::Cpu).unwrap();
+        resumed.backward_step(&b.as_tensor().mul(&g).unwrap().sum_all().unwrap()).unwrap();
+        assert_eq!(b.as_tensor().to_vec1::<f64>().unwrap(), want);
+        let mut other = Adam::new_named(named(&b), ParamsAdam::default()).unwrap();
+        let err = other.set_state(&state).unwrap_err().to_string();
+        assert!(err.contains("theta.m") && err.contains("another model"), "{err}");
+        let unnamed = Adam::new(vec![b.clone()], ParamsAdam::default()).unwrap();
+        assert!(unnamed.state().unwrap_err().to_string().contains("new_named"));
+    }
+
+    #[test]
+    fn clipping_by_value_and_by_norm() {
+        let (a, b) = (Var::new(&[3.0f64, -4.0], &Device::Cpu).unwrap(), Var::new(&[0.5f64], &Device::Cpu).unwrap());
+        let loss = || {
+            let ga = Tensor::new(&[3.0f64, -4.0], &Device::Cpu).unwrap();
+            (a.as_tensor().mul(&ga).unwrap().sum_all().unwrap() + b.as_tensor().sum_all().unwrap()).unwrap()
+        };
+        let vars = [a.clone(), b.clone()];
+        let mut grads = loss().backward().unwrap();
+        clip_grad_value(&mut grads, &vars, 2.0).unwrap();
+        assert_eq!(grads.get(&a).unwrap().to_vec1::<f64>().unwrap(), [2.0, -2.0]);
+        assert_eq!(grads.get(&b).unwrap().to_vec1::<f64>().unwrap(), [1.0]);
+        let mut grads = loss().backward().unwrap();
+        // norm = sqrt(9 + 16 + 1) = 5.0990; scaled to 1.
+        let norm = clip_grad_norm(&mut grads, &vars, 1.0).unwrap();
+        assert!((norm - 26f64.sqrt()).abs() < 1e-12);
+        let f = 1.0 / (norm + 1e-6);
+        close(&grads.get(&a).unwrap().to_vec1::<f64>().unwrap(), &[3.0 * f, -4.0 * f]);
+        close(&grads.get(&b).unwrap().to_vec1::<f64>().unwrap(), &[f]);
+        let mut grads = loss().backward().unwrap();
+        clip_grad_norm(&mut grads, &vars, 10.0).unwrap();
+        assert_eq!(grads.get(&a).unwrap().to_vec1::<f64>().unwrap(), [3.0, -4.0], "below the limit: unchanged");
+    }
+}
