@@ -121,10 +121,12 @@ pub fn load_clips(
         None => {
             let cfg = SynthConfig { minutes, seed, terrain: false, ..SynthConfig::default() };
             let clips = synth::generate(&cfg);
+            // Every tenth clip validates; with fewer than ten clips, the last one does.
+            let n = clips.len();
             let (mut train, mut valid) = (Vec::new(), Vec::new());
             for (i, c) in clips.into_iter().enumerate() {
                 let named = NamedClip { path: PathBuf::from(&c.name), name: c.name, clip: c.clip };
-                if i % 10 == 9 { valid.push(named) } else { train.push(named) }
+                if i % 10 == 9 || (n < 10 && i + 1 == n) { valid.push(named) } else { train.push(named) }
             }
             Ok((train, valid, format!("synthetic locomotion, {minutes} min, seed {seed}")))
         }
