@@ -8,11 +8,11 @@
 
 use crate::config::Config;
 use crate::error::RtnResult;
+use crate::features::FeatureStats;
 use crate::model::Rtn;
 use candle_core::{DType, Device};
 use candle_nn::{VarBuilder, VarMap};
 use std::path::Path;
-use crate::features::FeatureStats;
 use zoo_nn::checkpoint as ck;
 
 pub use zoo_nn::checkpoint::{CONFIG_FILE, EMA_FILE, OPTIMIZER_FILE, RNG_FILE, STATS_FILE, WEIGHTS_FILE, check_finite};

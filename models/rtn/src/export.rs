@@ -29,11 +29,11 @@
 //! generated frame (as candle's `generate` does), which keeps the step graph free of the root
 //! integration.
 
+use crate::features::{FeatureStats, MeanStd};
 use crate::{Config, InitState};
 use candle_nn::VarMap;
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
-use crate::features::{FeatureStats, MeanStd};
 use zoo_export::{Dim, ExportError, GraphBuilder, OnnxModel, Value};
 use zoo_runtime::metadata::{
     FORMAT_VERSION, MotionFeatureSegment, MotionMeanStd, MotionModelMetadata, MotionSkeletonInfo, MotionStatePair,

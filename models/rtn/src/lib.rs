@@ -22,9 +22,9 @@
 pub mod checkpoint;
 pub mod config;
 pub mod error;
+pub mod export;
 pub mod features;
 pub mod method;
-pub mod export;
 pub mod model;
 pub mod ops;
 pub mod train;
@@ -40,8 +40,8 @@ pub mod prelude {
     pub use crate::checkpoint;
     pub use crate::config::{Config, InitState, TeacherForcing, TrainConfig};
     pub use crate::error::{RtnError, RtnResult};
+    pub use crate::features::{FeatureStats, Heightmap};
     pub use crate::model::{Rtn, RtnInputs, RtnSequence, RtnState};
     pub use crate::train::{MotionWindow, RtnTrainer, RtnTraining, fit_stats};
-    pub use crate::features::{FeatureStats, Heightmap};
     pub use zoo_nn::optim::StatefulOptimizer;
 }

@@ -4,12 +4,12 @@
 
 use crate::config::Config;
 use crate::error::{RtnError, RtnResult};
+use crate::features::{self, FeatureStats, Heightmap, MeanStd, Moments, YawAbout};
 use crate::model::{OffsetTensors, Rtn};
 use crate::transition::{SequenceInput, check_frames, encode_batch, generate};
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{Optimizer, VarMap};
 use std::path::Path;
-use crate::features::{self, FeatureStats, Heightmap, MeanStd, Moments, YawAbout};
 use zoo_nn::checkpoint as ck;
 use zoo_nn::optim::{AmsGrad, ParamsAmsGrad, StatefulOptimizer};
 use zoo_nn::train_loop::{Trainable, Validation};

@@ -3,9 +3,9 @@
 
 use crate::config::Config;
 use crate::error::{RtnError, RtnResult};
+use crate::features::{self, FeatureStats, Heightmap, YawAbout};
 use crate::model::{OffsetTensors, Rtn, RtnInputs};
 use candle_core::{Device, Tensor};
-use crate::features::{self, FeatureStats, Heightmap, YawAbout};
 
 /// One sequence to encode: known frames (global positions, `frames * 3K`), the target frame
 /// and the frame after it, optional terrain and the rotation already applied to the positions.
