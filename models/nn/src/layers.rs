@@ -25,7 +25,7 @@ impl Activation {
     /// Applies the activation element-wise.
     pub fn apply(&self, x: &Tensor) -> Result<Tensor> {
         match *self {
-            Activation::LeakyRelu(alpha) => candle_nn::ops::leaky_relu(x, alpha),
+            Activation::LeakyRelu(alpha) => crate::ops::leaky_relu(x, alpha),
             Activation::Relu => x.relu(),
             Activation::Selu => x.elu(SELU_ALPHA)? * SELU_SCALE,
         }
@@ -60,6 +60,11 @@ impl Mlp {
             prev = w;
         }
         Ok(Mlp { layers, activation, activate_last })
+    }
+
+    /// The linear layers, input side first.
+    pub fn layers(&self) -> &[Linear] {
+        &self.layers
     }
 
     /// Output size (0 without layers).

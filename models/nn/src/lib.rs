@@ -3,6 +3,7 @@
 //! - [`rng`]: the one seeded generator ([`SplitMix64`]);
 //! - [`init`]: seeded weight initialisation (weights depend on the seed and the variable name only);
 //! - [`layers`]: [`Mlp`] with a chosen activation, seeded [`Dropout`];
+//! - [`ops`]: fused CPU kernels (the leaky ReLU);
 //! - [`recurrent`]: multi-layer [`Gru`] and [`Lstm`] with the state outside the layer, and
 //!   bidirectional [`BiGru`] / [`BiLstm`] over a sequence;
 //! - [`optim`]: [`AmsGrad`], [`Adam`], [`RmsProp`] with their state saved by name, gradient clipping;
@@ -16,6 +17,7 @@ pub mod ema;
 pub mod error;
 pub mod init;
 pub mod layers;
+pub mod ops;
 pub mod optim;
 pub mod plot;
 pub mod recurrent;

@@ -26,7 +26,6 @@ pub mod export;
 pub mod features;
 pub mod method;
 pub mod model;
-pub mod ops;
 pub mod train;
 pub mod transition;
 

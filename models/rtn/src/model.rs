@@ -2,53 +2,8 @@
 
 use crate::config::{Config, InitState};
 use candle_core::{DType, Device, Module, Result, Tensor};
-use candle_nn::{Linear, VarBuilder};
-
-/// Leaky ReLU used by every hidden layer (`phi` in the paper).
-fn leaky(x: &Tensor, slope: f64) -> Result<Tensor> {
-    crate::ops::leaky_relu(x, slope)
-}
-
-/// A stack of linear layers; hidden layers are leaky-ReLU activated, the last one is
-/// activated only when `activate_last`. Weights live under `vb.pp(i)` (`0.weight`, `0.bias`, ...).
-#[derive(Clone, Debug)]
-pub struct Mlp {
-    layers: Vec<Linear>,
-    slope: f64,
-    activate_last: bool,
-}
-
-impl Mlp {
-    /// Layers `input -> sizes[0] -> ... -> sizes[n-1]`.
-    pub fn new(input: usize, sizes: &[usize], slope: f64, activate_last: bool, vb: VarBuilder) -> Result<Self> {
-        let mut layers = Vec::with_capacity(sizes.len());
-        let mut prev = input;
-        for (i, &s) in sizes.iter().enumerate() {
-            layers.push(candle_nn::linear(prev, s, vb.pp(i))?);
-            prev = s;
-        }
-        Ok(Mlp { layers, slope, activate_last })
-    }
-
-    /// Output size.
-    pub fn out_dim(&self) -> usize {
-        self.layers.last().map_or(0, |l| l.weight().dim(0).unwrap_or(0))
-    }
-}
-
-impl Module for Mlp {
-    fn forward(&self, x: &Tensor) -> Result<Tensor> {
-        let n = self.layers.len();
-        let mut h = x.clone();
-        for (i, l) in self.layers.iter().enumerate() {
-            h = l.forward(&h)?;
-            if i + 1 < n || self.activate_last {
-                h = leaky(&h, self.slope)?;
-            }
-        }
-        Ok(h)
-    }
-}
+use candle_nn::VarBuilder;
+use zoo_nn::{Activation, Mlp};
 
 /// The LSTM state `(h, c)`, each `(batch, units)`. Lives outside the model (one per character).
 #[derive(Clone, Debug)]
@@ -126,14 +81,15 @@ impl Rtn {
     /// Builds (or loads, depending on `vb`) the model.
     pub fn new(config: &Config, vb: VarBuilder) -> Result<Self> {
         let d = config.dim();
-        let slope = config.leaky_slope;
+        // `phi` in the paper: every hidden layer is leaky-ReLU activated.
+        let phi = Activation::LeakyRelu(config.leaky_slope);
         let hu = config.lstm;
         let frame_encoder =
-            Mlp::new(d + config.terrain_dim(), &config.frame_encoder, slope, true, vb.pp("frame_encoder"))?;
+            Mlp::new(d + config.terrain_dim(), &config.frame_encoder, phi, true, vb.pp("frame_encoder"))?;
         let (target_encoder, offset_encoder) = if config.future_conditioning {
             (
-                Some(Mlp::new(2 * d, &config.target_encoder, slope, true, vb.pp("target_encoder"))?),
-                Some(Mlp::new(d, &config.offset_encoder, slope, true, vb.pp("offset_encoder"))?),
+                Some(Mlp::new(2 * d, &config.target_encoder, phi, true, vb.pp("target_encoder"))?),
+                Some(Mlp::new(d, &config.offset_encoder, phi, true, vb.pp("offset_encoder"))?),
             )
         } else {
             (None, None)
@@ -155,11 +111,11 @@ impl Rtn {
         let bias = lv.get_with_hints(4 * hu, "bias", init)?;
         let mut dec_sizes = config.decoder.clone();
         dec_sizes.push(d);
-        let decoder = Mlp::new(hu, &dec_sizes, slope, false, vb.pp("decoder"))?;
+        let decoder = Mlp::new(hu, &dec_sizes, phi, false, vb.pp("decoder"))?;
         let sv = vb.pp("state_init");
         let init = match config.init_state {
             // RTN eq. 14: one hidden layer, linear output of (h, c)
-            InitState::Learned => Init::Learned(Mlp::new(d, &[config.init_hidden, 2 * hu], slope, false, sv)?),
+            InitState::Learned => Init::Learned(Mlp::new(d, &[config.init_hidden, 2 * hu], phi, false, sv)?),
             InitState::Zero => Init::Zero,
             InitState::Common => Init::Common {
                 h: sv.get_with_hints((1, hu), "h", candle_nn::Init::Const(0.0))?,
@@ -281,7 +237,7 @@ impl Rtn {
             Some(&self.decoder),
         ];
         for m in mlps.into_iter().flatten() {
-            for l in &m.layers {
+            for l in m.layers() {
                 add(l.weight());
                 if let Some(b) = l.bias() {
                     add(b);
@@ -302,7 +258,7 @@ impl Rtn {
         }
         match &self.init {
             Init::Learned(m) => {
-                for l in &m.layers {
+                for l in m.layers() {
                     add(l.weight());
                     if let Some(b) = l.bias() {
                         add(b);
