@@ -103,6 +103,85 @@ fn unnamed(vars: Vec<Var>) -> Vec<(String, Var)> {
     vars.into_iter().map(|v| (String::new(), v)).collect()
 }
 
+/// The step of [`Adam`] and, with `amsgrad` (the slots then also hold `v_max`), of [`AmsGrad`]:
+/// `m = b1 m + (1 - b1) g`, `v = b2 v + (1 - b2) g^2`, (`v_max = max(v_max, v)`),
+/// `theta -= lr / (1 - b1^t) * m / (sqrt(v or v_max) / sqrt(1 - b2^t) + eps)`.
+#[allow(clippy::too_many_arguments)]
+fn adam_step(
+    slots: &Slots,
+    grads: &GradStore,
+    t: u64,
+    lr: f64,
+    beta1: f64,
+    beta2: f64,
+    eps: f64,
+    amsgrad: bool,
+) -> Result<()> {
+    let t = t as i32;
+    let step_size = lr / (1.0 - beta1.powi(t));
+    let inv_sqrt_bc2 = 1.0 / (1.0 - beta2.powi(t)).sqrt();
+    for (i, var) in slots.vars.iter().enumerate() {
+        let Some(g) = grads.get(var) else { continue };
+        let (sm, sv) = (&slots.moments[0][i], &slots.moments[1][i]);
+        let m = ((sm.as_tensor() * beta1)? + (g * (1.0 - beta1))?)?;
+        let v = ((sv.as_tensor() * beta2)? + (g.sqr()? * (1.0 - beta2))?)?;
+        let v_max = if amsgrad { Some(slots.moments[2][i].as_tensor().maximum(&v)?) } else { None };
+        let denom = ((v_max.as_ref().unwrap_or(&v).sqrt()? * inv_sqrt_bc2)? + eps)?;
+        let update = ((&m / denom)? * step_size)?;
+        var.set(&var.as_tensor().sub(&update)?)?;
+        sm.set(&m)?;
+        sv.set(&v)?;
+        if let Some(v_max) = v_max {
+            slots.moments[2][i].set(&v_max)?;
+        }
+    }
+    Ok(())
+}
+
+/// `Optimizer` and `StatefulOptimizer` for an optimiser of the Adam family (fields `slots`, `t`,
+/// `params` with `lr`, `beta1`, `beta2`, `eps`), its step counter saved as `$step`.
+macro_rules! adam_family {
+    ($name:ident, $params:ident, $step:ident, $amsgrad:expr) => {
+        impl Optimizer for $name {
+            type Config = $params;
+
+            fn new(vars: Vec<Var>, params: $params) -> Result<Self> {
+                $name::new_named(unnamed(vars), params)
+            }
+
+            fn step(&mut self, grads: &GradStore) -> Result<()> {
+                self.t += 1;
+                let p = self.params;
+                adam_step(&self.slots, grads, self.t, p.lr, p.beta1, p.beta2, p.eps, $amsgrad)
+            }
+
+            fn learning_rate(&self) -> f64 {
+                self.params.lr
+            }
+
+            fn set_learning_rate(&mut self, lr: f64) {
+                self.params.lr = lr;
+            }
+        }
+
+        impl StatefulOptimizer for $name {
+            fn state(&self) -> NnResult<HashMap<String, Tensor>> {
+                self.slots.state(&[($step, self.t as f64)])
+            }
+
+            fn set_state(&mut self, state: &HashMap<String, Tensor>) -> NnResult<()> {
+                self.slots.set_state(state)?;
+                self.t = scalar(state, $step)? as u64;
+                Ok(())
+            }
+
+            fn steps(&self) -> u64 {
+                self.t
+            }
+        }
+    };
+}
+
 /// AMSGrad hyper-parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ParamsAmsGrad {
@@ -145,62 +224,7 @@ impl AmsGrad {
     }
 }
 
-impl Optimizer for AmsGrad {
-    type Config = ParamsAmsGrad;
-
-    fn new(vars: Vec<Var>, params: ParamsAmsGrad) -> Result<Self> {
-        AmsGrad::new_named(unnamed(vars), params)
-    }
-
-    fn step(&mut self, grads: &GradStore) -> Result<()> {
-        self.t += 1;
-        let p = self.params;
-        let t = self.t as i32;
-        let bc1 = 1.0 - p.beta1.powi(t);
-        let bc2 = 1.0 - p.beta2.powi(t);
-        let step_size = p.lr / bc1;
-        let inv_sqrt_bc2 = 1.0 / bc2.sqrt();
-        let s = &self.slots;
-        for (i, var) in s.vars.iter().enumerate() {
-            let Some(g) = grads.get(var) else { continue };
-            let (sm, sv, svm) = (&s.moments[0][i], &s.moments[1][i], &s.moments[2][i]);
-            let m = ((sm.as_tensor() * p.beta1)? + (g * (1.0 - p.beta1))?)?;
-            let v = ((sv.as_tensor() * p.beta2)? + (g.sqr()? * (1.0 - p.beta2))?)?;
-            let v_max = svm.as_tensor().maximum(&v)?;
-            let denom = ((v_max.sqrt()? * inv_sqrt_bc2)? + p.eps)?;
-            let update = ((&m / denom)? * step_size)?;
-            var.set(&var.as_tensor().sub(&update)?)?;
-            sm.set(&m)?;
-            sv.set(&v)?;
-            svm.set(&v_max)?;
-        }
-        Ok(())
-    }
-
-    fn learning_rate(&self) -> f64 {
-        self.params.lr
-    }
-
-    fn set_learning_rate(&mut self, lr: f64) {
-        self.params.lr = lr;
-    }
-}
-
-impl StatefulOptimizer for AmsGrad {
-    fn state(&self) -> NnResult<HashMap<String, Tensor>> {
-        self.slots.state(&[(AMSGRAD_STEP, self.t as f64)])
-    }
-
-    fn set_state(&mut self, state: &HashMap<String, Tensor>) -> NnResult<()> {
-        self.slots.set_state(state)?;
-        self.t = scalar(state, AMSGRAD_STEP)? as u64;
-        Ok(())
-    }
-
-    fn steps(&self) -> u64 {
-        self.t
-    }
-}
+adam_family!(AmsGrad, ParamsAmsGrad, AMSGRAD_STEP, true);
 
 /// Adam hyper-parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -243,57 +267,7 @@ impl Adam {
     }
 }
 
-impl Optimizer for Adam {
-    type Config = ParamsAdam;
-
-    fn new(vars: Vec<Var>, params: ParamsAdam) -> Result<Self> {
-        Adam::new_named(unnamed(vars), params)
-    }
-
-    fn step(&mut self, grads: &GradStore) -> Result<()> {
-        self.t += 1;
-        let p = self.params;
-        let t = self.t as i32;
-        let step_size = p.lr / (1.0 - p.beta1.powi(t));
-        let inv_sqrt_bc2 = 1.0 / (1.0 - p.beta2.powi(t)).sqrt();
-        let s = &self.slots;
-        for (i, var) in s.vars.iter().enumerate() {
-            let Some(g) = grads.get(var) else { continue };
-            let (sm, sv) = (&s.moments[0][i], &s.moments[1][i]);
-            let m = ((sm.as_tensor() * p.beta1)? + (g * (1.0 - p.beta1))?)?;
-            let v = ((sv.as_tensor() * p.beta2)? + (g.sqr()? * (1.0 - p.beta2))?)?;
-            let denom = ((v.sqrt()? * inv_sqrt_bc2)? + p.eps)?;
-            var.set(&var.as_tensor().sub(&((&m / denom)? * step_size)?)?)?;
-            sm.set(&m)?;
-            sv.set(&v)?;
-        }
-        Ok(())
-    }
-
-    fn learning_rate(&self) -> f64 {
-        self.params.lr
-    }
-
-    fn set_learning_rate(&mut self, lr: f64) {
-        self.params.lr = lr;
-    }
-}
-
-impl StatefulOptimizer for Adam {
-    fn state(&self) -> NnResult<HashMap<String, Tensor>> {
-        self.slots.state(&[(ADAM_STEP, self.t as f64)])
-    }
-
-    fn set_state(&mut self, state: &HashMap<String, Tensor>) -> NnResult<()> {
-        self.slots.set_state(state)?;
-        self.t = scalar(state, ADAM_STEP)? as u64;
-        Ok(())
-    }
-
-    fn steps(&self) -> u64 {
-        self.t
-    }
-}
+adam_family!(Adam, ParamsAdam, ADAM_STEP, false);
 
 /// RMSProp hyper-parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
