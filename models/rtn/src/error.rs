@@ -1,29 +1,8 @@
 //! Errors of the RTN crate.
 
-use std::path::PathBuf;
-
 /// What went wrong while building, running, training, saving or loading an RTN.
 #[derive(Debug, thiserror::Error)]
 pub enum RtnError {
-    /// A tensor operation failed (usually a shape bug or an unsupported device).
-    #[error(transparent)]
-    Candle(#[from] candle_core::Error),
-    /// Reading or writing a file failed.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The cause.
-        source: std::io::Error,
-    },
-    /// A JSON file could not be read or written.
-    #[error("{path}: invalid JSON: {source}")]
-    Json {
-        /// The file.
-        path: PathBuf,
-        /// The cause.
-        source: serde_json::Error,
-    },
     /// A motion window or frame buffer has the wrong size.
     #[error("{what}: expected {expected} values ({detail}), found {found}")]
     Size {
@@ -50,28 +29,25 @@ pub enum RtnError {
         /// The loss value.
         loss: f32,
     },
-    /// The shared toolkit failed (a checkpoint file, an optimiser or moving-average state).
+    /// A tensor operation, a file, a JSON file, a non-finite parameter, or the shared toolkit
+    /// (a checkpoint file, an optimiser or moving-average state) failed.
     #[error(transparent)]
     Nn(zoo_nn::NnError),
-    /// A parameter holds NaN or inf, so it is not saved.
-    #[error("parameter `{name}` holds NaN or inf; refusing to overwrite the last good checkpoint")]
-    NonFiniteParameter {
-        /// Tensor name.
-        name: String,
-    },
 }
 
 impl From<zoo_nn::NnError> for RtnError {
     fn from(e: zoo_nn::NnError) -> Self {
-        use zoo_nn::NnError as N;
         match e {
-            N::Candle(e) => RtnError::Candle(e),
-            N::Io { path, source } => RtnError::Io { path, source },
-            N::Json { path, source } => RtnError::Json { path, source },
-            N::NonFiniteParameter { name } => RtnError::NonFiniteParameter { name },
-            N::Config(m) => RtnError::Config(m),
+            // RTN's configuration errors keep their `configuration: ` prefix.
+            zoo_nn::NnError::Config(m) => RtnError::Config(m),
             e => RtnError::Nn(e),
         }
+    }
+}
+
+impl From<candle_core::Error> for RtnError {
+    fn from(e: candle_core::Error) -> Self {
+        RtnError::Nn(zoo_nn::NnError::Candle(e))
     }
 }
 

@@ -454,7 +454,7 @@ fn saving_nan_parameters_is_refused_and_keeps_the_old_checkpoint() {
     let nan = Tensor::full(f32::NAN, c.lstm * 4, &Device::Cpu).unwrap();
     vm.set_one("lstm.bias", nan).unwrap();
     let err = trainer.save(dir.path()).unwrap_err();
-    assert!(matches!(&err, RtnError::NonFiniteParameter { name } if name == "lstm.bias"), "{err}");
+    assert!(matches!(&err, RtnError::Nn(zoo_nn::NnError::NonFiniteParameter { name }) if name == "lstm.bias"), "{err}");
     assert_eq!(std::fs::read(dir.path().join("model.safetensors")).unwrap(), before);
 }
 
