@@ -125,45 +125,34 @@ impl GraphBuilder {
 
     /// An f32 initializer (a constant weight) of shape `dims` from row-major `data`.
     pub fn initializer_f32(&mut self, name: &str, dims: &[usize], data: &[f32]) -> Value {
-        let expected: usize = dims.iter().product();
-        if expected != data.len() {
-            self.fail(ExportError::ShapeMismatch {
-                name: name.to_string(),
-                dims: dims.to_vec(),
-                expected,
-                found: data.len(),
-            });
-        }
-        let v = self.new_value(name);
         let raw: Vec<u8> = data.iter().flat_map(|x| x.to_le_bytes()).collect();
-        self.initializers.push(pb::TensorProto {
-            name: name.to_string(),
-            dims: dims.iter().map(|&d| d as i64).collect(),
-            data_type: pb::tensor_proto::DataType::Float as i32,
-            raw_data: raw,
-            ..Default::default()
-        });
-        self.init_shapes.insert(name.to_string(), dims.to_vec());
-        v
+        self.initializer(name, dims, data.len(), pb::tensor_proto::DataType::Float, raw)
     }
 
     /// An i64 initializer (indices, axes, shapes) of shape `dims` from row-major `data`.
     pub fn initializer_i64(&mut self, name: &str, dims: &[usize], data: &[i64]) -> Value {
+        let raw: Vec<u8> = data.iter().flat_map(|x| x.to_le_bytes()).collect();
+        self.initializer(name, dims, data.len(), pb::tensor_proto::DataType::Int64, raw)
+    }
+
+    /// An initializer of `len` values of type `data_type`, little-endian in `raw`.
+    fn initializer(
+        &mut self,
+        name: &str,
+        dims: &[usize],
+        len: usize,
+        data_type: pb::tensor_proto::DataType,
+        raw: Vec<u8>,
+    ) -> Value {
         let expected: usize = dims.iter().product();
-        if expected != data.len() {
-            self.fail(ExportError::ShapeMismatch {
-                name: name.to_string(),
-                dims: dims.to_vec(),
-                expected,
-                found: data.len(),
-            });
+        if expected != len {
+            self.fail(ExportError::ShapeMismatch { name: name.to_string(), dims: dims.to_vec(), expected, found: len });
         }
         let v = self.new_value(name);
-        let raw: Vec<u8> = data.iter().flat_map(|x| x.to_le_bytes()).collect();
         self.initializers.push(pb::TensorProto {
             name: name.to_string(),
             dims: dims.iter().map(|&d| d as i64).collect(),
-            data_type: pb::tensor_proto::DataType::Int64 as i32,
+            data_type: data_type as i32,
             raw_data: raw,
             ..Default::default()
         });
