@@ -166,21 +166,29 @@ mod tests {
     use super::*;
     use crate::Dim;
 
+    /// A graph with input `x` `(1, batch, 2)` and zero single-direction weights `w`
+    /// `(1, gates * 3, 2)` and `r` `(1, gates * 3, 3)`: hidden size 3.
+    fn one_step_graph(name: &str, gates: usize) -> (GraphBuilder, Value, Value, Value) {
+        let mut g = GraphBuilder::new(name);
+        let x = g.input("x", &[Dim::Fixed(1), Dim::batch(), Dim::Fixed(2)]);
+        let w = g.initializer_f32("w", &[1, gates * 3, 2], &vec![0.0; gates * 6]);
+        let r = g.initializer_f32("r", &[1, gates * 3, 3], &vec![0.0; gates * 9]);
+        (g, x, w, r)
+    }
+
+    /// The inputs of [`one_step_graph`]'s recurrent op without biases.
+    fn one_step_inputs<'a>(
+        (x, w, r): (&'a Value, &'a Value, &'a Value),
+        initial_h: Option<&'a Value>,
+        direction: RnnDirection,
+    ) -> RnnInputs<'a> {
+        RnnInputs { x, w, r, b: None, initial_h, hidden_size: 3, direction }
+    }
+
     #[test]
     fn rnn_weight_shapes_are_checked_against_direction() {
-        let mut g = GraphBuilder::new("rnn");
-        let x = g.input("x", &[Dim::Fixed(1), Dim::batch(), Dim::Fixed(2)]);
-        let w = g.initializer_f32("w", &[1, 12, 2], &[0.0; 24]);
-        let r = g.initializer_f32("r", &[1, 12, 3], &[0.0; 36]);
-        let rnn = RnnInputs {
-            x: &x,
-            w: &w,
-            r: &r,
-            b: None,
-            initial_h: None,
-            hidden_size: 3,
-            direction: RnnDirection::Bidirectional,
-        };
+        let (mut g, x, w, r) = one_step_graph("rnn", 4);
+        let rnn = one_step_inputs((&x, &w, &r), None, RnnDirection::Bidirectional);
         let o = g.lstm("lstm", &rnn, None);
         g.output("h", &o.y_h, &[Dim::Fixed(2), Dim::batch(), Dim::Fixed(3)]);
         let err = g.finish().unwrap_err().to_string();
@@ -189,20 +197,9 @@ mod tests {
 
     #[test]
     fn omitted_optional_rnn_inputs_are_trimmed_or_blank() {
-        let mut g = GraphBuilder::new("gru");
-        let x = g.input("x", &[Dim::Fixed(1), Dim::batch(), Dim::Fixed(2)]);
+        let (mut g, x, w, r) = one_step_graph("gru", 3);
         let h0 = g.input("h0", &[Dim::Fixed(1), Dim::batch(), Dim::Fixed(3)]);
-        let w = g.initializer_f32("w", &[1, 9, 2], &[0.0; 18]);
-        let r = g.initializer_f32("r", &[1, 9, 3], &[0.0; 27]);
-        let rnn = RnnInputs {
-            x: &x,
-            w: &w,
-            r: &r,
-            b: None,
-            initial_h: Some(&h0),
-            hidden_size: 3,
-            direction: RnnDirection::Forward,
-        };
+        let rnn = one_step_inputs((&x, &w, &r), Some(&h0), RnnDirection::Forward);
         let o = g.gru("gru", &rnn, true);
         g.output("h", &o.y_h, &[Dim::Fixed(1), Dim::batch(), Dim::Fixed(3)]);
         let m = g.finish().unwrap();
