@@ -11,6 +11,13 @@ fn toy_dataset(dir: &std::path::Path) {
     }
 }
 
+/// Runs a `zoo` command that must fail and returns its standard error.
+fn failure(cmd: &mut Command) -> String {
+    let out = cmd.output().unwrap();
+    assert!(!out.status.success(), "expected a failure, got: {}", String::from_utf8_lossy(&out.stdout));
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
 #[test]
 fn bench_prints_table_and_writes_json() {
     let dir = tempfile::tempdir().unwrap();
@@ -45,14 +52,8 @@ fn bench_prints_table_and_writes_json() {
 fn bench_rejects_a_glob_matching_nothing() {
     let dir = tempfile::tempdir().unwrap();
     toy_dataset(dir.path());
-    let out = Command::new(zoo_bin())
-        .args(["bench", "--data"])
-        .arg(dir.path())
-        .args(["--valid-glob", "*subject5*"])
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err =
+        failure(Command::new(zoo_bin()).args(["bench", "--data"]).arg(dir.path()).args(["--valid-glob", "*subject5*"]));
     assert!(err.contains("no clip file name matches --valid-glob `*subject5*`"), "{err}");
 }
 
@@ -87,9 +88,7 @@ fn malformed_bvh_error_names_file_and_line() {
     vals.pop();
     lines[row] = vals.join(" ");
     std::fs::write(&bad, lines.join("\n")).unwrap();
-    let out = Command::new(zoo_bin()).args(["data", "stats"]).arg(dir.path()).output().unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = failure(Command::new(zoo_bin()).args(["data", "stats"]).arg(dir.path()));
     assert!(err.contains("broken_walk_normal_009.bvh") && err.contains(&format!(":{}:", row + 1)), "{err}");
 }
 
@@ -121,14 +120,12 @@ fn stats_glob_selects_clips_and_reports_rigid_bones() {
 fn bench_lists_the_known_methods_for_an_unknown_one() {
     let dir = tempfile::tempdir().unwrap();
     toy_dataset(dir.path());
-    let out = Command::new(zoo_bin())
-        .args(["bench", "--data"])
-        .arg(dir.path())
-        .args(["--valid-glob", "*_youthful_*", "--methods", "interp,nearest"])
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = failure(Command::new(zoo_bin()).args(["bench", "--data"]).arg(dir.path()).args([
+        "--valid-glob",
+        "*_youthful_*",
+        "--methods",
+        "interp,nearest",
+    ]));
     assert!(err.contains("unknown method `nearest`") && err.contains("rtn+lock:RUN_DIR"), "{err}");
 }
 
@@ -139,15 +136,13 @@ fn bench_refuses_a_run_folder_of_another_model() {
     let run = dir.path().join("run");
     std::fs::create_dir(&run).unwrap();
     std::fs::write(run.join("config.json"), r#"{"model": "arnn"}"#).unwrap();
-    let out = Command::new(zoo_bin())
-        .args(["bench", "--data"])
-        .arg(dir.path())
-        .args(["--valid-glob", "*_youthful_*", "--methods"])
-        .arg(format!("rtn:{}", run.display()))
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = failure(
+        Command::new(zoo_bin())
+            .args(["bench", "--data"])
+            .arg(dir.path())
+            .args(["--valid-glob", "*_youthful_*", "--methods"])
+            .arg(format!("rtn:{}", run.display())),
+    );
     assert!(err.contains("names model `arnn`, not `rtn`"), "{err}");
 }
 
@@ -159,19 +154,17 @@ fn transition_refuses_an_unknown_model_kind_and_lists_the_known_ones() {
     std::fs::create_dir(&run).unwrap();
     std::fs::write(run.join("config.json"), r#"{"model": "rmr"}"#).unwrap();
     let clip = dir.path().join("toy_walk_normal_000.bvh");
-    let out = Command::new(zoo_bin())
-        .args(["transition", "--model"])
-        .arg(&run)
-        .arg("--from")
-        .arg(format!("{}:20", clip.display()))
-        .arg("--to")
-        .arg(format!("{}:60", clip.display()))
-        .arg("--out")
-        .arg(dir.path().join("out.bvh"))
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = failure(
+        Command::new(zoo_bin())
+            .args(["transition", "--model"])
+            .arg(&run)
+            .arg("--from")
+            .arg(format!("{}:20", clip.display()))
+            .arg("--to")
+            .arg(format!("{}:60", clip.display()))
+            .arg("--out")
+            .arg(dir.path().join("out.bvh")),
+    );
     assert!(err.contains("unknown model kind `rmr`: this zoo knows rtn"), "{err}");
 }
 
@@ -180,18 +173,16 @@ fn transition_refuses_a_source_frame_without_context() {
     let dir = tempfile::tempdir().unwrap();
     toy_dataset(dir.path());
     let clip = dir.path().join("toy_walk_normal_000.bvh");
-    let out = Command::new(zoo_bin())
-        .args(["transition", "--model"])
-        .arg(dir.path().join("no-run"))
-        .arg("--from")
-        .arg(format!("{}:3", clip.display()))
-        .arg("--to")
-        .arg(format!("{}:60", clip.display()))
-        .arg("--out")
-        .arg(dir.path().join("out.bvh"))
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = failure(
+        Command::new(zoo_bin())
+            .args(["transition", "--model"])
+            .arg(dir.path().join("no-run"))
+            .arg("--from")
+            .arg(format!("{}:3", clip.display()))
+            .arg("--to")
+            .arg(format!("{}:60", clip.display()))
+            .arg("--out")
+            .arg(dir.path().join("out.bvh")),
+    );
     assert!(err.contains("source frame 3: needs 10 context frames"), "{err}");
 }
