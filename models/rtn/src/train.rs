@@ -12,11 +12,9 @@ use candle_nn::{Optimizer, VarMap};
 use std::path::Path;
 use zoo_nn::checkpoint as ck;
 use zoo_nn::optim::{AmsGrad, ParamsAmsGrad, StatefulOptimizer};
+use zoo_nn::rng::SplitMix64;
 use zoo_nn::train_loop::{Trainable, Validation};
 use zoo_nn::{Ema, SeededVarMap, TrainError};
-
-/// The one seeded generator (kept at this path for the callers that import it from here).
-pub use zoo_nn::rng::SplitMix64;
 
 /// A training window: global joint positions (`frames * joints * 3`, frame-major, at least
 /// [`Config::window_frames`] frames: past context, transition, target and the frame after it;

@@ -68,7 +68,7 @@ trait StepBackend {
 
 /// Deterministic inputs in [-1, 1) (normalized units).
 fn inputs(n: usize, seed: u64) -> Vec<f32> {
-    let mut rng = zoo_rtn::train::SplitMix64::new(seed);
+    let mut rng = zoo_motion::rng::SplitMix64::new(seed);
     (0..n).map(|_| (2.0 * rng.next_f64() - 1.0) as f32).collect()
 }
 
