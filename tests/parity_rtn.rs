@@ -579,6 +579,14 @@ fn runtime_transition_api_matches_candle() {
     let chars = characters(&f.stats);
     let d = f.config.dim();
     let mut runner = model.runner().unwrap();
+    // FRAMES is longer than the tiny model's trained length: refused unless allowed.
+    let c = &chars[0];
+    let mut out = vec![0.0; (FRAMES + 1) * d];
+    let err =
+        runner.generate(&mut model.new_transition(), &c.past, &c.target_pose, &c.next_pose, &mut out).unwrap_err();
+    assert!(matches!(err, MotionError::BeyondTrainedLength { requested: FRAMES, trained: 6 }), "{err}");
+    assert!(err.to_string().contains("allow_beyond_trained"), "{err}");
+    runner.allow_beyond_trained(true);
     let mut single = Vec::new();
     for c in &chars {
         let want = f.model.transition(&f.stats, &c.past, &c.target_pose, &c.next_pose, FRAMES, None).unwrap();
@@ -609,22 +617,22 @@ fn runtime_transition_api_matches_candle() {
     let flat: Vec<f32> = single.concat();
     let diff = max_abs_diff(&flat, &out);
     assert!(diff <= 1e-3, "batched vs one-by-one: max abs diff {diff}");
-    // Stepping frame by frame gives the unblended frames of candle's unroll.
+    // Raw stepping frame by frame gives the unblended frames of candle's unroll.
     let c = &chars[1];
     let want = f.model.unroll(&f.stats, &c.past, &c.target_pose, &c.next_pose, FRAMES, None).unwrap();
     let mut state = model.new_transition();
     runner.start(&mut state, &c.past, &c.target_pose, &c.next_pose).unwrap();
     let mut pose = vec![0.0; d];
     for (t, frame) in want.chunks_exact(d).enumerate() {
-        runner.step(&mut state, &mut pose).unwrap();
+        runner.step_raw(&mut state, &mut pose).unwrap();
         let diff = max_abs_diff(frame, &pose);
         assert!(diff <= 1e-2, "step {t}: runtime vs candle unroll max abs diff {diff}");
     }
-    // The same frames as glam vectors.
+    // Blended stepping as glam vectors: the frames of `generate`.
     let mut state = model.new_transition();
-    runner.start(&mut state, &c.past, &c.target_pose, &c.next_pose).unwrap();
+    runner.start_for(&mut state, &c.past, &c.target_pose, &c.next_pose, FRAMES).unwrap();
     let mut joints = vec![zoo_runtime::glam::Vec3::ZERO; 4];
-    for frame in want.chunks_exact(d).take(3) {
+    for frame in single[1].chunks_exact(d).take(3) {
         runner.step_vec3(&mut state, &mut joints).unwrap();
         let flat: Vec<f32> = joints.iter().flat_map(|p| p.to_array()).collect();
         assert!(max_abs_diff(frame, &flat) <= 1e-2);
@@ -667,6 +675,131 @@ fn runtime_transition_api_rejects_bad_input() {
     assert!(err.to_string().contains("`step` model (kind `toy_lstm`)"), "{err}");
 }
 
+/// Per-frame stepping is `generate` frame by frame: the target blend applied as the frames
+/// come, the trained length enforced, the miss of the network's own target frame exposed.
+#[test]
+fn runtime_stepping_is_generate_frame_by_frame() {
+    let f = fixture(tiny());
+    let model = TransitionModel::new(MotionModel::from_bytes(&export(&f).to_bytes()).unwrap()).unwrap();
+    let (d, p, blend) = (f.config.dim(), f.config.transition_frames, f.config.target_blend);
+    assert!(blend >= 1 && p > blend, "the fixture has a blend window inside the transition");
+    let mut runner = model.runner().unwrap();
+    let c = character(&f.stats, 0);
+    let mut generated = vec![0.0; (p + 1) * d];
+    let mut state = model.new_transition();
+    runner.generate(&mut state, &c.past, &c.target_pose, &c.next_pose, &mut generated).unwrap();
+    let generated_miss = state.target_miss().expect("generate measures the miss");
+    // The same frames, bit for bit, one step at a time; the miss appears with the blend window.
+    let mut state = model.new_transition();
+    runner.start(&mut state, &c.past, &c.target_pose, &c.next_pose).unwrap();
+    assert_eq!((state.length(), state.frames_left()), (p, p + 1));
+    let mut pose = vec![0.0; d];
+    for (t, frame) in generated.chunks_exact(d).enumerate() {
+        runner.step(&mut state, &mut pose).unwrap();
+        assert_eq!(pose, frame, "step {t} differs from generate");
+        assert_eq!(state.target_miss().is_some(), t + blend > p, "miss known at step {t}");
+    }
+    assert!(state.is_finished() && state.frames_left() == 0);
+    assert!(max_abs_diff(&pose, &c.target_pose) <= 1e-3, "the last frame is the target");
+    assert_eq!(state.target_miss(), Some(generated_miss));
+    let err = runner.step(&mut state, &mut pose).unwrap_err();
+    assert!(matches!(err, MotionError::TransitionSequence { character: 0, .. }), "{err}");
+    assert!(err.to_string().contains("already returned its target frame"), "{err}");
+    // The miss is the distance of the raw (unblended) target frame to the target.
+    let mut state = model.new_transition();
+    runner.start(&mut state, &c.past, &c.target_pose, &c.next_pose).unwrap();
+    for _ in 0..=p {
+        runner.step_raw(&mut state, &mut pose).unwrap();
+    }
+    let dists: Vec<f32> = pose
+        .chunks_exact(3)
+        .zip(c.target_pose.chunks_exact(3))
+        .map(|(a, b)| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt())
+        .collect();
+    let mean = dists.iter().sum::<f32>() / dists.len() as f32;
+    let max = dists.iter().copied().fold(0.0, f32::max);
+    assert!((generated_miss.mean - mean).abs() <= 1e-4 && (generated_miss.max - max).abs() <= 1e-4);
+    assert!(generated_miss.max > 0.0 && generated_miss.mean <= generated_miss.max);
+    // Raw and blended stepping do not mix.
+    let err = runner.step(&mut state, &mut pose).unwrap_err();
+    assert!(err.to_string().contains("do not mix"), "{err}");
+    let mut state = model.new_transition();
+    runner.start(&mut state, &c.past, &c.target_pose, &c.next_pose).unwrap();
+    runner.step(&mut state, &mut pose).unwrap();
+    let err = runner.step_raw(&mut state, &mut pose).unwrap_err();
+    assert!(err.to_string().contains("do not mix"), "{err}");
+    // Longer than trained: refused, then allowed on request.
+    let err = runner.start_for(&mut state, &c.past, &c.target_pose, &c.next_pose, p + 1).unwrap_err();
+    assert!(
+        matches!(err, MotionError::BeyondTrainedLength { requested, trained } if requested == p + 1 && trained == p)
+    );
+    runner.allow_beyond_trained(true);
+    runner.start_for(&mut state, &c.past, &c.target_pose, &c.next_pose, p + 1).unwrap();
+    // Shorter than the blend window: the whole transition is blended from its first frame.
+    let mut short = vec![0.0; 2 * d];
+    runner.generate(&mut state, &c.past, &c.target_pose, &c.next_pose, &mut short).unwrap();
+    runner.start_for(&mut state, &c.past, &c.target_pose, &c.next_pose, 1).unwrap();
+    for frame in short.chunks_exact(d) {
+        runner.step(&mut state, &mut pose).unwrap();
+        assert_eq!(pose, frame);
+    }
+    assert!(max_abs_diff(&pose, &c.target_pose) <= 1e-3);
+}
+
+/// Characters at different frames of their transitions step together in one batch and get
+/// the frames they get one by one (up to tract's batched float rounding).
+#[test]
+fn runtime_batched_stepping_at_different_frames_matches_one_by_one() {
+    let f = fixture(tiny());
+    let model = TransitionModel::new(MotionModel::from_bytes(&export(&f).to_bytes()).unwrap()).unwrap();
+    let (d, p) = (f.config.dim(), f.config.transition_frames);
+    let mut runner = model.runner().unwrap();
+    let chars = [character(&f.stats, 1), character(&f.stats, 2), character(&f.stats, 3)];
+    // One by one: each character's whole transition.
+    let alone: Vec<Vec<f32>> = chars
+        .iter()
+        .map(|c| {
+            let mut out = vec![0.0; (p + 1) * d];
+            runner.generate(&mut model.new_transition(), &c.past, &c.target_pose, &c.next_pose, &mut out).unwrap();
+            out
+        })
+        .collect();
+    // Together: character i starts 2 * i frames after character 0.
+    let mut states: Vec<_> = chars.iter().map(|_| model.new_transition()).collect();
+    let mut got: Vec<Vec<f32>> = vec![Vec::new(); chars.len()];
+    let mut pose = vec![0.0; d];
+    let mut poses = Vec::new();
+    let mut tick = 0;
+    while got.iter().any(|g| g.len() < (p + 1) * d) {
+        let mut active = Vec::new();
+        for (i, c) in chars.iter().enumerate() {
+            if tick == 2 * i {
+                runner.start(&mut states[i], &c.past, &c.target_pose, &c.next_pose).unwrap();
+            }
+            if tick >= 2 * i && !states[i].is_finished() {
+                active.push(i);
+            }
+        }
+        if active.len() == chars.len() {
+            poses.resize(chars.len() * d, 0.0);
+            runner.step_batch(&mut states, &mut poses).unwrap();
+            for i in 0..chars.len() {
+                got[i].extend_from_slice(&poses[i * d..(i + 1) * d]);
+            }
+        } else {
+            for i in active {
+                runner.step(&mut states[i], &mut pose).unwrap();
+                got[i].extend_from_slice(&pose);
+            }
+        }
+        tick += 1;
+    }
+    for (i, (a, g)) in alone.iter().zip(&got).enumerate() {
+        let diff = max_abs_diff(a, g);
+        assert!(diff <= 1e-3, "character {i}: batched vs one-by-one max abs diff {diff}");
+    }
+}
+
 #[test]
 fn runtime_foot_lock_is_the_motion_core_post_process() {
     let f = fixture(tiny());
@@ -677,6 +810,7 @@ fn runtime_foot_lock_is_the_motion_core_post_process() {
     let c = character(&f.stats, 2);
     let d = f.config.dim();
     let mut runner = model.runner().unwrap();
+    runner.allow_beyond_trained(true);
     let mut state = model.new_transition();
     let mut plain = vec![0.0; (FRAMES + 1) * d];
     runner.generate(&mut state, &c.past, &c.target_pose, &c.next_pose, &mut plain).unwrap();

@@ -112,8 +112,8 @@ fn allocations_per_step() {
     transition_allocations();
 }
 
-/// `TransitionRunner::step` (feature decoding, offsets, root integration around the graph run)
-/// adds no allocation to the graph run itself.
+/// `TransitionRunner::step_raw` (feature decoding, offsets, root integration around the graph
+/// run) adds no allocation to the graph run itself, and blended stepping none to raw stepping.
 fn transition_allocations() {
     use candle_core::{DType, Device};
     use candle_nn::{VarBuilder, VarMap};
@@ -140,7 +140,24 @@ fn transition_allocations() {
     let mut state = model.new_transition();
     runner.start(&mut state, &past, &target, &next).unwrap();
     let mut out = vec![0.0; d];
-    let t = per_frame(100, || runner.step(&mut state, &mut out).unwrap());
+    let t = per_frame(100, || runner.step_raw(&mut state, &mut out).unwrap());
+    // Whole blended transitions (start, the trained length, the target frame; the blend
+    // window computed ahead) allocate what raw stepping of the same frames does.
+    let frames = model.transition_frames() + 1;
+    let mut transition = |blended: bool| {
+        runner.start(&mut state, &past, &target, &next).unwrap();
+        for _ in 0..frames {
+            if blended {
+                runner.step(&mut state, &mut out).unwrap();
+            } else {
+                runner.step_raw(&mut state, &mut out).unwrap();
+            }
+        }
+    };
+    let blended = per_frame(20, || transition(true));
+    let unblended = per_frame(20, || transition(false));
+    eprintln!("tiny RTN: {blended:.1} allocations per blended transition of {frames} frames, {unblended:.1} raw");
+    assert!(blended <= unblended + 0.01, "blended stepping allocates {blended} per transition, raw {unblended}");
     // The same graph through the raw MotionRunner.
     let raw = model.model();
     let mut raw_runner = raw.runner().unwrap();
@@ -148,6 +165,6 @@ fn transition_allocations() {
     let x = vec![0.1; d];
     let mut y = vec![0.0; d];
     let g = per_frame(100, || raw_runner.step(&mut raw_state, &[&x, &x], &mut [&mut y]).unwrap());
-    eprintln!("tiny RTN: {t:.1} allocations per TransitionRunner::step, {g:.1} per raw graph step");
-    assert!(t <= g + 0.01, "TransitionRunner::step allocates {t} per frame, the graph run alone {g}");
+    eprintln!("tiny RTN: {t:.1} allocations per TransitionRunner::step_raw, {g:.1} per raw graph step");
+    assert!(t <= g + 0.01, "TransitionRunner::step_raw allocates {t} per frame, the graph run alone {g}");
 }

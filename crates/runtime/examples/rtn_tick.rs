@@ -1,5 +1,6 @@
 //! An engine tick loop with an exported RTN: characters walk, and every second each one starts
-//! a transition to a new target pose, which then plays one frame per tick.
+//! a transition to a new target pose, which then plays one frame per tick (target-blended, ending
+//! on the target).
 //!
 //! `cargo run --release -p zoo-runtime --example rtn_tick -- rtn.onnx [CHARACTERS]`
 //! (`rtn.onnx` from `zoo export --onnx RUN_DIR --out rtn.onnx`).
@@ -40,9 +41,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let fps = model.model().metadata().fps;
     let (k, past_frames) = (model.joints(), model.past_frames());
     let d = 3 * k;
-    let frames = 30;
+    // Each transition plays its trained length and ends on its target frame.
+    let frames = model.transition_frames() + 1;
     let mut runner = model.runner()?; // one per worker thread
-    runner.set_foot_lock(None); // per-frame stepping: no post-process (see `generate`)
     let mut states: Vec<TransitionState> = (0..characters).map(|_| model.new_transition()).collect();
     let mut poses = vec![0.0f32; characters * d];
     let mut joints = vec![Vec3::ZERO; k];

@@ -168,6 +168,25 @@ pub enum MotionError {
         /// tract's error chain.
         reason: String,
     },
+    /// A transition longer than the model was trained for, refused unless the runner allows it.
+    #[error(
+        "a transition of {requested} frames is longer than the {trained} frames this model was trained for (beyond its training length the network drifts from the target); request at most {trained} frames, or opt in with TransitionRunner::allow_beyond_trained(true)"
+    )]
+    BeyondTrainedLength {
+        /// Frames requested (before the target frame).
+        requested: usize,
+        /// Transition length the model was trained on.
+        trained: usize,
+    },
+    /// A call that does not fit where a character's transition stands (not started,
+    /// finished, or raw and blended stepping mixed).
+    #[error("character {character}: {reason}")]
+    TransitionSequence {
+        /// Character (batch row).
+        character: usize,
+        /// What is wrong and what to do.
+        reason: String,
+    },
 }
 
 /// Formats an anyhow-style error chain on one line.

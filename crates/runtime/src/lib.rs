@@ -42,7 +42,7 @@ pub use metadata::{
 };
 pub use model::{MotionModel, MotionState, MotionStateInfo, MotionTensorInfo};
 pub use runner::MotionRunner;
-pub use transition::{TransitionModel, TransitionRunner, TransitionState};
+pub use transition::{TargetMiss, TransitionModel, TransitionRunner, TransitionState};
 
 /// Re-exported so callers use the same glam version as the runtime.
 pub use glam;

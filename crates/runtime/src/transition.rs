@@ -56,7 +56,18 @@ pub struct TransitionState {
     /// Global target pose.
     target: Vec<f32>,
     started: bool,
+    /// Frames returned since the transition started (blended or raw).
     frames: usize,
+    /// Transition length `L` of this transition: frames `0..L` lead to the target frame `L`.
+    length: usize,
+    /// Frames of the blend window computed ahead (global positions, blended), capacity
+    /// `(target_blend + 1) * 3K`, allocated once by `new_transition`.
+    ahead: Vec<f32>,
+    /// Frame index of `ahead`'s first frame.
+    ahead_from: usize,
+    /// Whether `step_raw` was used since the start (raw and blended stepping do not mix).
+    raw: bool,
+    miss: Option<TargetMiss>,
 }
 
 impl TransitionState {
@@ -70,10 +81,45 @@ impl TransitionState {
         self.frames
     }
 
+    /// The transition length `L` given at the start: [`TransitionRunner::step`] returns frames
+    /// `0..=L`, the last one the target frame.
+    pub fn length(&self) -> usize {
+        self.length
+    }
+
+    /// Frames [`TransitionRunner::step`] still returns before the transition is finished.
+    pub fn frames_left(&self) -> usize {
+        (self.length + 1).saturating_sub(self.frames)
+    }
+
+    /// Whether the target frame was returned (a further step is an error).
+    pub fn is_finished(&self) -> bool {
+        self.started && self.frames > self.length
+    }
+
     /// The target pose of the transition (`3K` global positions).
     pub fn target(&self) -> &[f32] {
         &self.target
     }
+
+    /// How far the network's own prediction of the target frame lies from the requested
+    /// target, before the target blend hides it: the engine's cue to fall back (e.g. to
+    /// inertialization) when the network is far off. Known once stepping reaches the blend
+    /// window (the last [`TransitionModel::target_blend`] frames, where the runner computes the
+    /// rest of the transition ahead) and after [`TransitionRunner::generate`]; `None` before.
+    pub fn target_miss(&self) -> Option<TargetMiss> {
+        self.miss
+    }
+}
+
+/// The distance between the network's predicted target frame and the requested target, per
+/// joint, in the model's units (see [`TransitionState::target_miss`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TargetMiss {
+    /// Mean over joints of the distance.
+    pub mean: f32,
+    /// Largest distance over joints.
+    pub max: f32,
 }
 
 /// Per-thread scratch space for transitions (`Send`, not `Sync`). Buffers grow to the largest
@@ -93,8 +139,14 @@ pub struct TransitionRunner {
     poses: Vec<f32>,
     /// Recurrent states swapped in from the characters for a batched run.
     motion: Vec<MotionState>,
+    /// Characters of the current graph run (indices into the states of the call).
+    sel: Vec<usize>,
+    /// Characters of a step call that compute their blend window ahead.
+    ahead_sel: Vec<usize>,
     /// Foot-lock post-process of `generate`, off unless set.
     foot_lock: Option<FootLock>,
+    /// Whether transitions longer than the trained length are accepted.
+    beyond_trained: bool,
 }
 
 fn bad(key: &str, reason: String) -> MotionError {
@@ -265,6 +317,11 @@ impl TransitionModel {
             target: vec![0.0; d],
             started: false,
             frames: 0,
+            length: 0,
+            ahead: Vec::with_capacity((self.target_blend + 1) * d),
+            ahead_from: 0,
+            raw: false,
+            miss: None,
         }
     }
 
@@ -281,7 +338,10 @@ impl TransitionModel {
             next: Vec::new(),
             poses: Vec::new(),
             motion: Vec::new(),
+            sel: Vec::new(),
+            ahead_sel: Vec::new(),
             foot_lock: None,
+            beyond_trained: false,
         })
     }
 }
@@ -293,16 +353,28 @@ impl TransitionRunner {
     }
 
     /// Sets the foot-lock post-process that [`TransitionRunner::generate`] applies after the
-    /// target blend (`None`: off, the default). See `zoo_motion::footlock`.
+    /// target blend (`None`: off, the default). Per-frame stepping never applies it: it needs
+    /// the whole transition. See `zoo_motion::footlock`.
     pub fn set_foot_lock(&mut self, lock: Option<FootLock>) {
         self.foot_lock = lock;
     }
 
-    /// Starts a transition: `past` holds the context frames (global positions, `frames * 3K`,
-    /// at least one; the model was trained with [`TransitionModel::past_frames`] of them),
-    /// `target` the target pose and `next` the pose after it (`3K` each, for the target
-    /// velocity). The context is fed through the model as in training; the next
-    /// [`TransitionRunner::step`] returns the first new frame.
+    /// Whether this runner accepts transitions longer than the model was trained for
+    /// ([`TransitionModel::transition_frames`]). Off by default: such a request is refused
+    /// with [`MotionError::BeyondTrainedLength`], because beyond its training length the
+    /// network drifts from the target and the target blend has to hide a larger miss. Turn
+    /// it on to measure that (the benchmark does) or when the engine checks
+    /// [`TransitionState::target_miss`] itself.
+    pub fn allow_beyond_trained(&mut self, allow: bool) {
+        self.beyond_trained = allow;
+    }
+
+    /// Starts a transition of the trained length ([`TransitionModel::transition_frames`]):
+    /// `past` holds the context frames (global positions, `frames * 3K`, at least one; the
+    /// model was trained with [`TransitionModel::past_frames`] of them), `target` the target
+    /// pose and `next` the pose after it (`3K` each, for the target velocity). The context is
+    /// fed through the model as in training; [`TransitionRunner::step`] then returns the
+    /// frames of the transition one by one, the last one the target.
     pub fn start(
         &mut self,
         state: &mut TransitionState,
@@ -310,7 +382,22 @@ impl TransitionRunner {
         target: &[f32],
         next: &[f32],
     ) -> Result<(), MotionError> {
-        self.start_batch(std::slice::from_mut(state), past, target, next)
+        let length = self.model.transition_frames;
+        self.start_batch_for(std::slice::from_mut(state), past, target, next, length)
+    }
+
+    /// [`TransitionRunner::start`] with a transition of `length` frames before the target
+    /// frame (`length + 1` steps in all); longer than the trained length only when
+    /// [`TransitionRunner::allow_beyond_trained`] is on.
+    pub fn start_for(
+        &mut self,
+        state: &mut TransitionState,
+        past: &[f32],
+        target: &[f32],
+        next: &[f32],
+        length: usize,
+    ) -> Result<(), MotionError> {
+        self.start_batch_for(std::slice::from_mut(state), past, target, next, length)
     }
 
     /// [`TransitionRunner::start`] for `states.len()` characters in one run per context frame:
@@ -323,9 +410,27 @@ impl TransitionRunner {
         target: &[f32],
         next: &[f32],
     ) -> Result<(), MotionError> {
+        let length = self.model.transition_frames;
+        self.start_batch_for(states, past, target, next, length)
+    }
+
+    /// [`TransitionRunner::start_batch`] with a transition of `length` frames (see
+    /// [`TransitionRunner::start_for`]).
+    pub fn start_batch_for(
+        &mut self,
+        states: &mut [TransitionState],
+        past: &[f32],
+        target: &[f32],
+        next: &[f32],
+        length: usize,
+    ) -> Result<(), MotionError> {
         let n = states.len();
         if n == 0 {
             return Err(MotionError::EmptyBatch);
+        }
+        let trained = self.model.transition_frames;
+        if length > trained && !self.beyond_trained {
+            return Err(MotionError::BeyondTrainedLength { requested: length, trained });
         }
         let (k, d) = (self.model.joints, 3 * self.model.joints);
         let per = past.len() / n;
@@ -362,7 +467,7 @@ impl TransitionRunner {
         }
         let inputs: Vec<&[f32]> =
             m.start_target.iter().map(|&t| if t { &self.target_vec[..] } else { &self.x0[..] }).collect();
-        let result = with_motion_states(&mut self.motion, states, &m.model, |runner_states| {
+        let result = with_motion_states(&mut self.motion, states, 0..n, &m.model, |runner_states| {
             self.runner.start_batch(runner_states, &inputs)
         });
         result?;
@@ -372,28 +477,45 @@ impl TransitionRunner {
             s.root = features::root_of(&past[c * per..]);
             s.started = true;
             s.frames = 0;
+            s.length = length;
+            s.ahead.clear();
+            s.ahead_from = 0;
+            s.raw = false;
+            s.miss = None;
         }
+        let mut sel = std::mem::take(&mut self.sel);
+        sel.clear();
+        sel.extend(0..n);
+        let mut result = Ok(());
         for f in 1..frames {
-            self.advance(states)?;
+            result = self.advance(states, &sel);
+            if result.is_err() {
+                break;
+            }
             for (c, s) in states.iter_mut().enumerate() {
                 let at = c * per + f * d;
                 s.x.copy_from_slice(&self.feats[at..at + d]);
                 s.root = features::root_of(&past[at..]);
             }
         }
-        Ok(())
+        self.sel = sel;
+        if result.is_err() {
+            states.iter_mut().for_each(|s| s.started = false);
+        }
+        result
     }
 
-    /// Runs the step graph on every state's `x` into `self.next` (character-major) and
-    /// advances the recurrent states.
-    fn advance(&mut self, states: &mut [TransitionState]) -> Result<(), MotionError> {
+    /// Runs the step graph on the `x` of the characters in `sel` into `self.next` (row `i` for
+    /// character `sel[i]`) and advances their recurrent states.
+    fn advance(&mut self, states: &mut [TransitionState], sel: &[usize]) -> Result<(), MotionError> {
         let m = &self.model;
-        let (n, d) = (states.len(), 3 * m.joints);
+        let (n, d) = (sel.len(), 3 * m.joints);
         self.xb.resize(n * d, 0.0);
         self.offset.resize(n * d, 0.0);
         self.next.resize(n * d, 0.0);
-        for (c, s) in states.iter().enumerate() {
-            let (xb, ob) = (&mut self.xb[c * d..(c + 1) * d], &mut self.offset[c * d..(c + 1) * d]);
+        for (row, &c) in sel.iter().enumerate() {
+            let s = &states[c];
+            let (xb, ob) = (&mut self.xb[row * d..(row + 1) * d], &mut self.offset[row * d..(row + 1) * d]);
             xb.copy_from_slice(&s.x);
             // o_t = ((y_T - y_t) - mu_o) / sigma_o, y_t decoded from the normalized x_t and its root.
             for i in 0..d {
@@ -414,12 +536,30 @@ impl TransitionRunner {
         let inputs = &inputs[..m.frame_inputs.len()];
         let next = &mut self.next[..];
         let runner = &mut self.runner;
-        with_motion_states(&mut self.motion, states, &m.model, |s| runner.step_batch(s, inputs, &mut [next]))
+        with_motion_states(&mut self.motion, states, sel.iter().copied(), &m.model, |s| {
+            runner.step_batch(s, inputs, &mut [next])
+        })
     }
 
-    /// Generates the next frame of one character's transition into `pose` (`3K` global
-    /// positions), without the target blend (it needs the predicted target frame: see
-    /// [`TransitionRunner::generate`]).
+    /// Takes row `row` of the last graph run as character `s`'s next raw frame: feeds it back
+    /// and writes its global positions into `pose`.
+    fn take_raw(&self, s: &mut TransitionState, row: usize, pose: &mut [f32]) {
+        let d = pose.len();
+        let next = &self.next[row * d..(row + 1) * d];
+        s.x.copy_from_slice(next);
+        pose.copy_from_slice(next);
+        self.model.x.denormalize(pose);
+        s.root = features::decode_frame_in_place(s.root, pose);
+    }
+
+    /// The next frame of one character's transition into `pose` (`3K` global positions):
+    /// frame `i` of `0..=L` of the target-blended transition (RTN eq. 15-16), the same frames
+    /// [`TransitionRunner::generate`] writes (without its optional foot lock). When stepping
+    /// reaches the blend window (the last [`TransitionModel::target_blend`] frames), this call
+    /// computes the rest of the transition ahead (the blend needs the network's predicted
+    /// target frame), so that call costs up to `target_blend + 1` graph runs and the later
+    /// ones none; [`TransitionState::target_miss`] is known from then on. Stepping past the
+    /// target frame is an error.
     pub fn step(&mut self, state: &mut TransitionState, pose: &mut [f32]) -> Result<(), MotionError> {
         self.step_batch(std::slice::from_mut(state), pose)
     }
@@ -440,29 +580,154 @@ impl TransitionRunner {
         r
     }
 
-    /// [`TransitionRunner::step`] for `states.len()` characters in one graph run: `poses`
-    /// receives `N * 3K` values, character-major.
-    pub fn step_batch(&mut self, states: &mut [TransitionState], poses: &mut [f32]) -> Result<(), MotionError> {
+    /// Checks that every character can take a step; `raw` for [`TransitionRunner::step_raw`].
+    fn check_steppable(&self, states: &[TransitionState], poses: usize, raw: bool) -> Result<(), MotionError> {
         let (n, d) = (states.len(), 3 * self.model.joints);
         if n == 0 {
             return Err(MotionError::EmptyBatch);
         }
-        if poses.len() != n * d {
-            return Err(wrong_len("poses", d, n, poses.len()));
+        if poses != n * d {
+            return Err(wrong_len("poses", d, n, poses));
         }
-        if let Some(c) = states.iter().position(|s| !s.started) {
-            return Err(MotionError::Run {
-                reason: format!("character {c}: start the transition (TransitionRunner::start) before stepping it"),
-            });
+        let sequence = |character: usize, reason: String| MotionError::TransitionSequence { character, reason };
+        for (c, s) in states.iter().enumerate() {
+            if !s.started {
+                return Err(sequence(c, "start the transition (TransitionRunner::start) before stepping it".into()));
+            }
+            if raw && s.frames > 0 && !s.raw {
+                return Err(sequence(
+                    c,
+                    "this transition is stepped with the target blend (step); raw and blended stepping do not mix: start a new transition for step_raw".into(),
+                ));
+            }
+            if !raw && s.raw {
+                return Err(sequence(
+                    c,
+                    "this transition is stepped raw (step_raw); raw and blended stepping do not mix: start a new transition for step".into(),
+                ));
+            }
+            if !raw && s.frames > s.length {
+                return Err(sequence(
+                    c,
+                    format!(
+                        "the transition already returned its target frame (frame {} of 0..={}); start a new transition",
+                        s.frames, s.length
+                    ),
+                ));
+            }
         }
-        self.advance(states)?;
-        let m = &self.model;
+        Ok(())
+    }
+
+    /// [`TransitionRunner::step`] for `states.len()` characters in one graph run: `poses`
+    /// receives `N * 3K` values, character-major. Characters may be at different frames of
+    /// their transitions. Results match one-by-one stepping up to float rounding of tract's
+    /// batched kernels (below 1e-3 clip units over a 30-frame transition in the tests).
+    pub fn step_batch(&mut self, states: &mut [TransitionState], poses: &mut [f32]) -> Result<(), MotionError> {
+        self.check_steppable(states, poses.len(), false)?;
+        let (d, blend) = (3 * self.model.joints, self.model.target_blend);
+        let (mut sel, mut ahead_sel) = (std::mem::take(&mut self.sel), std::mem::take(&mut self.ahead_sel));
+        sel.clear();
+        ahead_sel.clear();
+        for (c, s) in states.iter().enumerate() {
+            let f = s.frames;
+            if f >= s.ahead_from && f < s.ahead_from + s.ahead.len() / d {
+                continue; // served from the blend window computed ahead
+            }
+            sel.push(c);
+            if features_blend_weight(f, s.length, blend) > 0.0 {
+                ahead_sel.push(c);
+            }
+        }
+        let result = self.step_selected(states, poses, &mut sel, &ahead_sel);
+        self.sel = sel;
+        self.ahead_sel = ahead_sel;
+        result?;
+        for (s, pose) in states.iter_mut().zip(poses.chunks_exact_mut(d)) {
+            let f = s.frames;
+            if f >= s.ahead_from && f < s.ahead_from + s.ahead.len() / d {
+                let i = f - s.ahead_from;
+                pose.copy_from_slice(&s.ahead[i * d..(i + 1) * d]);
+            }
+            s.frames += 1;
+        }
+        Ok(())
+    }
+
+    /// One graph run for the characters in `sel` (their next raw frame goes to `poses`), then
+    /// the blend windows of the characters in `ahead_sel` (a subset) computed ahead.
+    fn step_selected(
+        &mut self,
+        states: &mut [TransitionState],
+        poses: &mut [f32],
+        sel: &mut Vec<usize>,
+        ahead_sel: &[usize],
+    ) -> Result<(), MotionError> {
+        let (d, blend) = (3 * self.model.joints, self.model.target_blend);
+        if sel.is_empty() {
+            return Ok(());
+        }
+        self.advance(states, sel)?;
+        for (row, &c) in sel.iter().enumerate() {
+            let s = &mut states[c];
+            if ahead_sel.contains(&c) {
+                // The first frame of the blend window: keep it raw in `ahead`.
+                s.ahead_from = s.frames;
+                s.ahead.resize(d, 0.0);
+                let mut frame = std::mem::take(&mut s.ahead);
+                self.take_raw(s, row, &mut frame[..d]);
+                s.ahead = frame;
+            } else {
+                self.take_raw(s, row, &mut poses[c * d..(c + 1) * d]);
+            }
+        }
+        // The rest of each blend window, all characters that need it in one run per frame.
+        loop {
+            sel.clear();
+            sel.extend(ahead_sel.iter().copied().filter(|&c| {
+                let s = &states[c];
+                s.ahead_from + s.ahead.len() / d <= s.length
+            }));
+            if sel.is_empty() {
+                break;
+            }
+            self.advance(states, sel)?;
+            for (row, &c) in sel.iter().enumerate() {
+                let s = &mut states[c];
+                let at = s.ahead.len();
+                s.ahead.resize(at + d, 0.0);
+                let mut frames = std::mem::take(&mut s.ahead);
+                self.take_raw(s, row, &mut frames[at..at + d]);
+                s.ahead = frames;
+            }
+        }
+        for &c in ahead_sel {
+            let s = &mut states[c];
+            s.miss = Some(blend_window(&mut s.ahead, s.ahead_from, s.length, &s.target, blend));
+        }
+        Ok(())
+    }
+
+    /// The network's next frame, without the target blend and without a length limit: the
+    /// frames of the raw unroll (what the model predicts, as candle's `Rtn::unroll`), for
+    /// callers that post-process themselves. A transition is stepped either raw or blended.
+    pub fn step_raw(&mut self, state: &mut TransitionState, pose: &mut [f32]) -> Result<(), MotionError> {
+        self.step_raw_batch(std::slice::from_mut(state), pose)
+    }
+
+    /// [`TransitionRunner::step_raw`] for `states.len()` characters in one graph run.
+    pub fn step_raw_batch(&mut self, states: &mut [TransitionState], poses: &mut [f32]) -> Result<(), MotionError> {
+        self.check_steppable(states, poses.len(), true)?;
+        let d = 3 * self.model.joints;
+        let mut sel = std::mem::take(&mut self.sel);
+        sel.clear();
+        sel.extend(0..states.len());
+        let result = self.advance(states, &sel);
+        self.sel = sel;
+        result?;
         for (c, (s, pose)) in states.iter_mut().zip(poses.chunks_exact_mut(d)).enumerate() {
-            let next = &self.next[c * d..(c + 1) * d];
-            s.x.copy_from_slice(next);
-            pose.copy_from_slice(next);
-            m.x.denormalize(pose);
-            s.root = features::decode_frame_in_place(s.root, pose);
+            self.take_raw(s, c, pose);
+            s.raw = true;
             s.frames += 1;
         }
         Ok(())
@@ -471,7 +736,9 @@ impl TransitionRunner {
     /// A whole transition of `frames` new frames into `out` (`(frames + 1) * 3K` values: the
     /// transition, then the target frame), target-blended (RTN eq. 15-16) so that the last
     /// frame equals `target` and the motion reaches it without a pop, then foot-locked when
-    /// [`TransitionRunner::set_foot_lock`] enabled it.
+    /// [`TransitionRunner::set_foot_lock`] enabled it. The same frames as starting with
+    /// [`TransitionRunner::start_for`] and stepping `frames + 1` times; `frames` beyond the
+    /// trained length needs [`TransitionRunner::allow_beyond_trained`].
     pub fn generate(
         &mut self,
         state: &mut TransitionState,
@@ -507,8 +774,8 @@ impl TransitionRunner {
                 found: out.len(),
             });
         }
-        self.start_batch(states, past, target, next)?;
         let steps = per / d;
+        self.start_batch_for(states, past, target, next, steps - 1)?;
         // Step all characters frame by frame through a contiguous scratch row, then scatter.
         let mut poses = std::mem::take(&mut self.poses);
         poses.resize(n * d, 0.0);
@@ -524,36 +791,65 @@ impl TransitionRunner {
         }
         self.poses = poses;
         result?;
-        let past_per = past.len() / n;
-        for c in 0..n {
-            let row = &mut out[c * per..(c + 1) * per];
-            features::target_blend(row, &target[c * d..(c + 1) * d], self.model.target_blend);
-            if let Some(lock) = &self.foot_lock {
-                lock.apply(&past[(c + 1) * past_per - d..(c + 1) * past_per], row);
+        if let Some(lock) = &self.foot_lock {
+            let past_per = past.len() / n;
+            for c in 0..n {
+                lock.apply(&past[(c + 1) * past_per - d..(c + 1) * past_per], &mut out[c * per..(c + 1) * per]);
             }
         }
         Ok(())
     }
 }
 
-/// Runs `f` on the characters' recurrent states gathered into `scratch` (swapped, not copied),
-/// and swaps them back whatever `f` returns.
+/// The offset weight of frame `f` of a transition whose target frame is `length`.
+fn features_blend_weight(f: usize, length: usize, blend: usize) -> f64 {
+    zoo_motion::blend::target_blend_offset_weight(f, length, blend)
+}
+
+/// Blends the raw frames `ahead` (frames `from..=length`, global positions, the last one the
+/// network's target frame) towards `target` as [`features::target_blend`] does over a whole
+/// transition, and returns the miss of the raw target frame.
+fn blend_window(ahead: &mut [f32], from: usize, length: usize, target: &[f32], blend: usize) -> TargetMiss {
+    let d = target.len();
+    let last = ahead.len() - d;
+    let (mut sum, mut max) = (0.0f32, 0.0f32);
+    for (t, y) in target.chunks_exact(3).zip(ahead[last..].chunks_exact(3)) {
+        let dist = ((t[0] - y[0]).powi(2) + (t[1] - y[1]).powi(2) + (t[2] - y[2]).powi(2)).sqrt();
+        sum += dist;
+        max = max.max(dist);
+    }
+    let miss = TargetMiss { mean: sum / (d / 3) as f32, max };
+    for i in 0..ahead.len() / d {
+        let w = features_blend_weight(from + i, length, blend) as f32;
+        if w > 0.0 {
+            for j in 0..d {
+                let e = target[j] - ahead[last + j];
+                ahead[i * d + j] += w * e;
+            }
+        }
+    }
+    miss
+}
+
+/// Runs `f` on the recurrent states of the characters `which` (indices into `states`)
+/// gathered into `scratch` (swapped, not copied), and swaps them back whatever `f` returns.
 fn with_motion_states<R>(
     scratch: &mut Vec<MotionState>,
     states: &mut [TransitionState],
+    which: impl Iterator<Item = usize> + Clone,
     model: &MotionModel,
     f: impl FnOnce(&mut [MotionState]) -> R,
 ) -> R {
-    let n = states.len();
+    let n = which.clone().count();
     while scratch.len() < n {
         scratch.push(model.new_state());
     }
-    for (s, t) in scratch.iter_mut().zip(states.iter_mut()) {
-        std::mem::swap(s, &mut t.motion);
+    for (s, c) in scratch.iter_mut().zip(which.clone()) {
+        std::mem::swap(s, &mut states[c].motion);
     }
     let r = f(&mut scratch[..n]);
-    for (s, t) in scratch.iter_mut().zip(states.iter_mut()) {
-        std::mem::swap(s, &mut t.motion);
+    for (s, c) in scratch.iter_mut().zip(which) {
+        std::mem::swap(s, &mut states[c].motion);
     }
     r
 }
