@@ -20,8 +20,9 @@ use zoo_rtn::export::{RtnExportOptions, export_rtn, export_rtn_dir};
 use zoo_rtn::features::{self, FeatureStats, MeanStd};
 use zoo_rtn::model::{OffsetTensors, RtnInputs, RtnState};
 use zoo_rtn::{Config, InitState, Rtn};
+use zoo_runtime::glam::{Quat, Vec3};
 use zoo_runtime::metadata::{TransitionTask, keys};
-use zoo_runtime::{LoadedModel, MotionError, MotionModel, MotionState, MotionTask, TransitionModel};
+use zoo_runtime::{EnginePose, LoadedModel, MotionError, MotionModel, MotionState, MotionTask, TransitionModel};
 use zoo_tests::onnxruntime::OrtSession;
 use zoo_tests::toy_onnx::{Cell, ToyModel, lcg};
 
@@ -798,6 +799,137 @@ fn runtime_batched_stepping_at_different_frames_matches_one_by_one() {
         let diff = max_abs_diff(a, g);
         assert!(diff <= 1e-3, "character {i}: batched vs one-by-one max abs diff {diff}");
     }
+}
+
+/// Engine poses of character `c` at frame `f` on the fixture skeleton: the hips walk along
+/// +Z and turn slowly, the other joints swing.
+fn engine_pose(c: usize, f: usize) -> EnginePose {
+    let (t, p) = (f as f32, c as f32);
+    let hips = Vec3::new(10.0 * p + 0.3 * t, 90.0 + 2.0 * (0.3 * t).sin(), 2.0 * t);
+    let rotations = [
+        Quat::from_rotation_y(0.05 * t + 0.2 * p) * Quat::from_rotation_x(0.1 * (0.2 * t).sin()),
+        Quat::from_rotation_z(0.2 * (0.3 * t + p).sin()),
+        Quat::from_rotation_x(0.5 * (0.4 * t + p).sin()),
+        Quat::from_rotation_x(-0.3 * (0.4 * t).cos().abs()) * Quat::from_rotation_y(0.1 * p),
+    ];
+    EnginePose::from_world(hips, &rotations)
+}
+
+/// A whole transition as engine poses: local rotations that a skinned character can use, root
+/// motion that integrates to the root positions, the target reached, and a BVH written from
+/// the local rotations alone reproducing the runtime's global positions.
+#[test]
+fn runtime_engine_poses_are_skinnable() {
+    let f = fixture(tiny());
+    let model = TransitionModel::new(MotionModel::from_bytes(&export(&f).to_bytes()).unwrap()).unwrap();
+    let info = model.model().metadata().skeleton.clone();
+    let (k, p) = (model.joints(), model.transition_frames());
+    let mut runner = model.runner().unwrap();
+    let past: Vec<EnginePose> = (0..f.config.past_frames).map(|t| engine_pose(0, t)).collect();
+    let at = f.config.past_frames + p;
+    let (target, next) = (engine_pose(0, at), engine_pose(0, at + 1));
+    let mut state = model.new_transition();
+    runner.start_posed(&mut state, &past, &target, &next).unwrap();
+    // The same transition in positions: its hips are the engine poses' hips.
+    let mut positions = Vec::new();
+    let mut pos_state = model.new_transition();
+    let flat = |poses: &[EnginePose]| -> Vec<f32> { poses.iter().flat_map(|q| global_positions(&info, q)).collect() };
+    let mut out = vec![0.0; (p + 1) * 3 * k];
+    runner
+        .generate(
+            &mut pos_state,
+            &flat(&past),
+            &flat(std::slice::from_ref(&target)),
+            &flat(std::slice::from_ref(&next)),
+            &mut out,
+        )
+        .unwrap();
+    positions.extend_from_slice(&out);
+    let mut frames = Vec::new();
+    let mut pose = EnginePose::with_global_positions(k);
+    let last = &past[past.len() - 1];
+    let (mut root, mut yaw) = (last.root_position, last.root_rotation);
+    for t in 0..=p {
+        runner.step_posed(&mut state, &mut pose).unwrap();
+        // Root motion integrates to the root transform.
+        root += yaw * pose.root_delta_position;
+        yaw = (yaw * Quat::from_rotation_y(pose.root_delta_yaw)).normalize();
+        assert!(
+            root.abs_diff_eq(pose.root_position, 1e-3),
+            "frame {t}: integrated root {root} vs {}",
+            pose.root_position
+        );
+        assert!(yaw.dot(pose.root_rotation).abs() > 1.0 - 1e-6, "frame {t}: integrated facing");
+        assert_eq!(pose.root_position.y, 0.0);
+        // The hips are the network's; the bones have the skeleton's lengths exactly.
+        let hips = Vec3::from_slice(&positions[t * 3 * k..t * 3 * k + 3]);
+        assert!(pose.hips_world().abs_diff_eq(hips, 1e-3), "frame {t}: hips {} vs {hips}", pose.hips_world());
+        assert!(pose.global_positions[0].abs_diff_eq(hips, 1e-3));
+        for j in 1..k {
+            let parent = info.parents[j] as usize;
+            let bone = pose.global_positions[j].distance(pose.global_positions[parent]);
+            assert!((bone - info.offset(j).length()).abs() < 1e-3, "frame {t} joint {j}: bone {bone}");
+        }
+        // The pose's global positions are forward kinematics of its own rotations (f32 here).
+        let fk: Vec<f32> = global_positions(&info, &pose);
+        let given: Vec<f32> = pose.global_positions.iter().flat_map(|v| v.to_array()).collect();
+        assert!(max_abs_diff(&fk, &given) <= 1e-3, "frame {t}: global positions are not the FK of the rotations");
+        frames.push(pose.clone());
+    }
+    // The last frame is the target pose.
+    let end = &frames[p];
+    assert!(end.hips_world().abs_diff_eq(target.hips_world(), 1e-2));
+    for (a, b) in end.local_rotations.iter().zip(&target.local_rotations) {
+        assert!(a.dot(*b).abs() > 1.0 - 1e-4, "target rotation {a} vs {b}");
+    }
+    // A BVH of the local rotations alone re-reads to the runtime's global positions.
+    let mut skeleton = info.to_skeleton();
+    skeleton.channels[0].position = true;
+    let mut clip =
+        zoo_motion::Clip { skeleton, frame_time: 1.0 / 30.0, local_rotations: Vec::new(), local_positions: Vec::new() };
+    for q in &frames {
+        clip.local_positions.push(q.hips_world().as_dvec3());
+        clip.local_positions.extend((1..k).map(|j| info.offset(j).as_dvec3()));
+        clip.local_rotations.push(q.hips_world_rotation().as_dquat());
+        clip.local_rotations.extend(q.local_rotations[1..].iter().map(|r| r.as_dquat()));
+    }
+    let text = zoo_data::bvh::to_string(&clip);
+    let back = zoo_data::bvh::parse(&text, std::path::Path::new("transition.bvh"), &Default::default()).unwrap();
+    let (_, global) = back.global();
+    let mut worst = 0.0f64;
+    for (t, q) in frames.iter().enumerate() {
+        for j in 0..k {
+            worst = worst.max(global[t * k + j].distance(q.global_positions[j].as_dvec3()));
+        }
+    }
+    assert!(worst <= 0.1, "BVH round trip: worst joint error {worst} cm");
+    // Bad input.
+    let err = runner.start_posed(&mut state, &past, &EnginePose::new(k + 1), &next).unwrap_err();
+    assert!(err.to_string().contains("target[0].local_rotations"), "{err}");
+    let mut small = EnginePose::new(k - 1);
+    runner.start_posed(&mut state, &past, &target, &next).unwrap();
+    assert!(runner.step_posed(&mut state, &mut small).is_err());
+    let c = character(&f.stats, 0);
+    runner.start(&mut state, &c.past, &c.target_pose, &c.next_pose).unwrap();
+    let err = runner.step_posed(&mut state, &mut pose).unwrap_err();
+    assert!(err.to_string().contains("start_posed"), "{err}");
+}
+
+/// Global joint positions of `pose` by forward kinematics over `info` (flat, joint-major).
+fn global_positions(info: &zoo_runtime::MotionSkeletonInfo, pose: &EnginePose) -> Vec<f32> {
+    let k = info.len();
+    let (mut rot, mut pos) = (vec![Quat::IDENTITY; k], vec![Vec3::ZERO; k]);
+    for j in 0..k {
+        if j == 0 {
+            rot[0] = pose.hips_world_rotation().normalize();
+            pos[0] = pose.hips_world();
+        } else {
+            let p = info.parents[j] as usize;
+            pos[j] = rot[p] * info.offset(j) + pos[p];
+            rot[j] = rot[p] * pose.local_rotations[j];
+        }
+    }
+    pos.iter().flat_map(|v| v.to_array()).collect()
 }
 
 #[test]

@@ -158,6 +158,28 @@ fn transition_allocations() {
     let unblended = per_frame(20, || transition(false));
     eprintln!("tiny RTN: {blended:.1} allocations per blended transition of {frames} frames, {unblended:.1} raw");
     assert!(blended <= unblended + 0.01, "blended stepping allocates {blended} per transition, raw {unblended}");
+    // Engine poses: forward kinematics of the inputs, the rotation fit and root motion of
+    // every frame add nothing once the runner's and the state's buffers exist.
+    let posed = |f: usize| {
+        let rotations: Vec<zoo_runtime::glam::Quat> =
+            (0..4).map(|j| zoo_runtime::glam::Quat::from_rotation_x(0.1 * (j + f) as f32)).collect();
+        EnginePose::from_world(zoo_runtime::glam::Vec3::new(0.0, 90.0, 3.0 * f as f32), &rotations)
+    };
+    let past_poses: Vec<EnginePose> = (0..config.past_frames).map(posed).collect();
+    let (target_pose, next_pose) = (posed(40), posed(41));
+    let mut pose = EnginePose::with_global_positions(4);
+    let mut posed_transition = || {
+        runner.start_posed(&mut state, &past_poses, &target_pose, &next_pose).unwrap();
+        for _ in 0..frames {
+            runner.step_posed(&mut state, &mut pose).unwrap();
+        }
+    };
+    let with_poses = per_frame(20, &mut posed_transition);
+    eprintln!("tiny RTN: {with_poses:.1} allocations per transition of {frames} engine poses");
+    assert!(
+        with_poses <= unblended + 0.01,
+        "engine-pose stepping allocates {with_poses} per transition, raw positions {unblended}"
+    );
     // The same graph through the raw MotionRunner.
     let raw = model.model();
     let mut raw_runner = raw.runner().unwrap();

@@ -10,6 +10,15 @@
 use crate::quat::shortest_arc;
 use glam::{DQuat, DVec3};
 
+/// Reusable buffers of [`fit_rotations_with`]: after the first frame of a skeleton, fitting
+/// allocates nothing.
+#[derive(Clone, Debug, Default)]
+pub struct FitScratch {
+    global: Vec<DQuat>,
+    a: Vec<DVec3>,
+    b: Vec<DVec3>,
+}
+
 /// Fits local rotations of one frame to global positions.
 ///
 /// - `parents`, `offsets`: the skeleton (rest offsets of each joint from its parent);
@@ -25,10 +34,22 @@ pub fn fit_rotations(
     reference: &[DQuat],
     out: &mut [DQuat],
 ) {
+    fit_rotations_with(&mut FitScratch::default(), parents, offsets, positions, reference, out);
+}
+
+/// [`fit_rotations`] with caller-owned buffers (for per-frame use without allocation).
+pub fn fit_rotations_with(
+    scratch: &mut FitScratch,
+    parents: &[Option<usize>],
+    offsets: &[DVec3],
+    positions: &[DVec3],
+    reference: &[DQuat],
+    out: &mut [DQuat],
+) {
     let n = parents.len();
-    let mut global = vec![DQuat::IDENTITY; n];
-    let mut a = Vec::with_capacity(4);
-    let mut b = Vec::with_capacity(4);
+    let FitScratch { global, a, b } = scratch;
+    global.clear();
+    global.resize(n, DQuat::IDENTITY);
     for j in 0..n {
         let parent_global = parents[j].map_or(DQuat::IDENTITY, |p| global[p]);
         let guess = (parent_global * reference[j]).normalize();
@@ -50,7 +71,7 @@ pub fn fit_rotations(
         let fix = match a.len() {
             0 => DQuat::IDENTITY,
             1 => shortest_arc(a[0], b[0]),
-            _ => wahba(&a, &b),
+            _ => wahba(a, b),
         };
         global[j] = (fix * guess).normalize();
         let inv_parent = parent_global.inverse();

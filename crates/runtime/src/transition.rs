@@ -13,10 +13,14 @@
 //! `3K` values for `K` joints, the model's skeleton order); [`crate::pose`] converts glam
 //! vectors. Batched calls take character-major buffers (character `c` at `c * 3K`).
 
+mod posed;
+
 use crate::error::MotionError;
 use crate::metadata::{MotionMeanStd, MotionTask, keys};
 use crate::model::{MotionModel, MotionState};
 use crate::runner::{MotionRunner, check_finite, check_len};
+use glam::DVec3;
+use posed::{PosedScratch, PosedState};
 use std::path::Path;
 use zoo_motion::features;
 use zoo_motion::footlock::FootLock;
@@ -42,6 +46,9 @@ pub struct TransitionModel {
     /// For each start-graph input: `true` for the target vector, `false` for `x0`.
     start_target: Vec<bool>,
     target_blend: usize,
+    /// The skeleton: parents and rest offsets (for engine poses).
+    parents: Vec<Option<usize>>,
+    offsets: Vec<DVec3>,
 }
 
 /// One character's transition in progress (from [`TransitionModel::new_transition`]); a few
@@ -68,6 +75,8 @@ pub struct TransitionState {
     /// Whether `step_raw` was used since the start (raw and blended stepping do not mix).
     raw: bool,
     miss: Option<TargetMiss>,
+    /// Rotations of a transition started from engine poses.
+    posed: PosedState,
 }
 
 impl TransitionState {
@@ -147,6 +156,8 @@ pub struct TransitionRunner {
     foot_lock: Option<FootLock>,
     /// Whether transitions longer than the trained length are accepted.
     beyond_trained: bool,
+    /// Buffers of posed transitions.
+    posed: PosedScratch,
 }
 
 fn bad(key: &str, reason: String) -> MotionError {
@@ -269,6 +280,8 @@ impl TransitionModel {
             frame_inputs,
             start_target,
             target_blend: task.target_blend,
+            parents: m.skeleton.parents.iter().map(|&p| usize::try_from(p).ok()).collect(),
+            offsets: m.skeleton.offsets.iter().map(|o| glam::Vec3::from_array(*o).as_dvec3()).collect(),
             model,
         })
     }
@@ -322,6 +335,7 @@ impl TransitionModel {
             ahead_from: 0,
             raw: false,
             miss: None,
+            posed: PosedState::new(self.joints),
         }
     }
 
@@ -342,6 +356,7 @@ impl TransitionModel {
             ahead_sel: Vec::new(),
             foot_lock: None,
             beyond_trained: false,
+            posed: PosedScratch::default(),
         })
     }
 }
@@ -482,6 +497,7 @@ impl TransitionRunner {
             s.ahead_from = 0;
             s.raw = false;
             s.miss = None;
+            s.posed.active = false;
         }
         let mut sel = std::mem::take(&mut self.sel);
         sel.clear();
