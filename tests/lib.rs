@@ -58,3 +58,26 @@ pub fn toy_clip(frames: usize, phase: f64) -> Clip {
     }
     Clip { skeleton, frame_time: 1.0 / 30.0, local_rotations: rot, local_positions: pos }
 }
+
+/// A tiny RTN (`zoo_rtn::Config::tiny`) on the 4-joint [`toy_skeleton`] with unit statistics,
+/// exported as `zoo export --onnx` would (its weights are candle's random initialization): the
+/// engine tests' model file.
+pub fn tiny_rtn_onnx() -> zoo_export::OnnxModel {
+    use candle_core::{DType, Device};
+    use candle_nn::{VarBuilder, VarMap};
+    use zoo_rtn::features::{FeatureStats, MeanStd};
+    let skeleton = toy_skeleton();
+    let config = zoo_rtn::Config::tiny().with_parents(&skeleton.parents);
+    let varmap = VarMap::new();
+    zoo_rtn::Rtn::new(&config, VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu)).expect("tiny RTN");
+    let d = config.dim();
+    let unit = || MeanStd { mean: vec![0.0; d], std: vec![10.0; d] };
+    let stats = FeatureStats { joints: skeleton.len(), x: unit(), velocity: unit(), offset: unit(), terrain: None };
+    let options = zoo_rtn::export::RtnExportOptions {
+        names: Some(skeleton.names.clone()),
+        offsets: Some(skeleton.offsets.iter().map(|o| o.as_vec3().to_array()).collect()),
+        parents: None,
+        fps: Some(30.0),
+    };
+    zoo_rtn::export::export_rtn(&config, None, &stats, &varmap, &options).expect("the tiny RTN exports")
+}

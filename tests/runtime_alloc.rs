@@ -115,23 +115,9 @@ fn allocations_per_step() {
 /// `TransitionRunner::step_raw` (feature decoding, offsets, root integration around the graph
 /// run) adds no allocation to the graph run itself, and blended stepping none to raw stepping.
 fn transition_allocations() {
-    use candle_core::{DType, Device};
-    use candle_nn::{VarBuilder, VarMap};
-    use zoo_rtn::features::{FeatureStats, MeanStd};
-    let parents = [None, Some(0), Some(0), Some(2)];
-    let config = zoo_rtn::Config::tiny().with_parents(&parents);
-    let varmap = VarMap::new();
-    zoo_rtn::Rtn::new(&config, VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu)).unwrap();
-    let d = config.dim();
-    let unit = || MeanStd { mean: vec![0.0; d], std: vec![10.0; d] };
-    let stats = FeatureStats { joints: 4, x: unit(), velocity: unit(), offset: unit(), terrain: None };
-    let options = zoo_rtn::export::RtnExportOptions {
-        names: Some(["Hips", "Spine", "Leg", "Foot_L"].iter().map(|s| s.to_string()).collect()),
-        offsets: Some(vec![[0.0; 3], [0.0, 10.0, 0.0], [0.0, -40.0, 0.0], [0.0, -40.0, 0.0]]),
-        parents: None,
-        fps: Some(30.0),
-    };
-    let onnx = zoo_rtn::export::export_rtn(&config, None, &stats, &varmap, &options).unwrap();
+    let config = zoo_rtn::Config::tiny();
+    let d = 3 * 4;
+    let onnx = zoo_tests::tiny_rtn_onnx();
     let model = TransitionModel::new(MotionModel::from_bytes(&onnx.to_bytes()).unwrap()).unwrap();
     let pose = |f: usize| -> Vec<f32> { (0..d).map(|i| (i as f32 * 7.0 + f as f32 * 3.0).sin() * 20.0).collect() };
     let past: Vec<f32> = (0..config.past_frames).flat_map(pose).collect();

@@ -1,0 +1,346 @@
+//! The C ABI (`crates/capi`): its header is what cbindgen generates from the source, the C
+//! example compiles with the system C compiler, runs a batch of characters for 300 frames and
+//! prints what the Rust API computes, and every malformed call returns an error code and a
+//! readable message.
+// Calling the C ABI from Rust needs raw pointers, as a C caller has.
+#![allow(unsafe_code)]
+
+use std::ffi::{CString, c_char};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::ptr;
+use zoo_capi::*;
+use zoo_runtime::glam::{Quat, Vec3};
+use zoo_runtime::{EnginePose, TransitionModel};
+
+fn capi_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../crates/capi")
+}
+
+/// The model file of these tests: a tiny RTN on a 4-joint skeleton.
+fn model_file(dir: &Path) -> PathBuf {
+    let path = dir.join("rtn.onnx");
+    zoo_tests::tiny_rtn_onnx().write(&path).unwrap();
+    path
+}
+
+fn last_error() -> String {
+    let len = unsafe { zoo_last_error(ptr::null_mut(), 0) };
+    let mut buf = vec![0u8; len + 1];
+    unsafe { zoo_last_error(buf.as_mut_ptr().cast::<c_char>(), buf.len()) };
+    String::from_utf8_lossy(&buf[..len]).into_owned()
+}
+
+/// Asserts `status` and that the thread's last error mentions `needle`.
+#[track_caller]
+fn assert_error(status: ZooStatus, expected: ZooStatus, needle: &str) {
+    assert_eq!(status, expected, "status (message: {})", last_error());
+    let message = last_error();
+    assert!(message.contains(needle), "message `{message}` should mention `{needle}`");
+}
+
+#[test]
+fn header_is_up_to_date() {
+    let dir = capi_dir();
+    let config = cbindgen::Config::from_file(dir.join("cbindgen.toml")).unwrap();
+    let bindings = cbindgen::Builder::new()
+        .with_config(config)
+        .with_src(dir.join("src/lib.rs"))
+        .generate()
+        .expect("cbindgen generates the header");
+    let mut generated = Vec::new();
+    bindings.write(&mut generated);
+    let header = dir.join("include/zoo.h");
+    if std::env::var_os("ZOO_BLESS_HEADER").is_some() {
+        std::fs::write(&header, &generated).unwrap();
+    }
+    let committed = std::fs::read(&header).unwrap_or_default();
+    assert!(
+        committed == generated,
+        "crates/capi/include/zoo.h is not what cbindgen generates from crates/capi/src/lib.rs; regenerate it with \
+         `ZOO_BLESS_HEADER=1 cargo test --workspace --test capi header_is_up_to_date` and commit it"
+    );
+}
+
+/// The static library cargo built for these tests.
+fn static_lib() -> PathBuf {
+    let exe = std::env::current_exe().unwrap();
+    let deps = exe.parent().unwrap();
+    let mut candidates: Vec<PathBuf> = std::fs::read_dir(deps)
+        .unwrap()
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            let name = p.file_name().unwrap().to_string_lossy();
+            name.starts_with("libzoo_capi") && name.ends_with(".a")
+        })
+        .collect();
+    candidates.push(deps.parent().unwrap().join("libzoo_capi.a"));
+    candidates
+        .into_iter()
+        .filter(|p| p.exists())
+        .max_by_key(|p| p.metadata().and_then(|m| m.modified()).ok())
+        .expect("libzoo_capi.a: build the workspace first (`cargo build --workspace`)")
+}
+
+/// The C example's walk pose of character `c` at frame `f`, built exactly as in C.
+fn walk_pose(k: usize, hips_height: f64, speed: f64, c: usize, f: usize) -> EnginePose {
+    let mut pose = EnginePose::new(k);
+    pose.root_position = Vec3::new((200.0 * c as f64) as f32, 0.0, (speed * f as f64) as f32);
+    pose.root_rotation = Quat::IDENTITY;
+    pose.hips_position = Vec3::new(0.0, hips_height as f32, 0.0);
+    for (j, q) in pose.local_rotations.iter_mut().enumerate() {
+        let angle = 0.2 * (0.3 * f as f64 + j as f64 + 0.5 * c as f64).sin();
+        *q = Quat::from_xyzw((0.5 * angle).sin() as f32, 0.0, 0.0, (0.5 * angle).cos() as f32);
+    }
+    pose
+}
+
+#[test]
+fn c_example_matches_the_rust_api() {
+    let tmp = tempfile::tempdir().unwrap();
+    let model_path = model_file(tmp.path());
+    let exe = tmp.path().join("transition");
+    let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
+    let dir = capi_dir();
+    let out = Command::new(&cc)
+        .args(["-std=c99", "-Wall", "-Wextra", "-Werror", "-I"])
+        .arg(dir.join("include"))
+        .arg(dir.join("examples/transition.c"))
+        .arg(static_lib())
+        .args(["-lm", "-lpthread", "-ldl", "-lrt", "-lgcc_s", "-lc", "-o"])
+        .arg(&exe)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run the C compiler `{cc}` ({e}); install gcc or set CC"));
+    assert!(out.status.success(), "the C example does not compile:\n{}", String::from_utf8_lossy(&out.stderr));
+    let (n, total) = (3usize, 300usize);
+    let run = Command::new(&exe).arg(&model_path).arg(n.to_string()).arg(total.to_string()).output().unwrap();
+    assert!(run.status.success(), "the C example failed:\n{}", String::from_utf8_lossy(&run.stderr));
+    let text = String::from_utf8(run.stdout).unwrap();
+
+    // The same loop through the Rust API.
+    let model = TransitionModel::load(&model_path).unwrap();
+    let info = &model.model().metadata().skeleton;
+    let k = model.joints();
+    let mut rest_y = vec![0.0f64; k];
+    let mut lowest = 0.0f64;
+    for j in 0..k {
+        rest_y[j] =
+            if info.parents[j] < 0 { 0.0 } else { rest_y[info.parents[j] as usize] + info.offsets[j][1] as f64 };
+        lowest = lowest.min(rest_y[j]);
+    }
+    let (hips_height, speed) = (-lowest, 120.0 / model.model().metadata().fps as f64);
+    let (past_frames, length) = (model.past_frames(), model.transition_frames());
+    let mut runner = model.runner().unwrap();
+    let mut states: Vec<_> = (0..n).map(|_| model.new_transition()).collect();
+    let mut poses: Vec<EnginePose> = (0..n).map(|_| EnginePose::new(k)).collect();
+    let mut lines = text.lines();
+    let mut worst = 0.0f32;
+    for tick in 0..total {
+        if tick % (length + 1) == 0 {
+            let past: Vec<EnginePose> = (0..n)
+                .flat_map(|c| (0..past_frames).map(move |f| (c, f)))
+                .map(|(c, f)| walk_pose(k, hips_height, speed, c, tick + f))
+                .collect();
+            let t = tick + past_frames + length;
+            let target: Vec<EnginePose> = (0..n).map(|c| walk_pose(k, hips_height, speed, c, t)).collect();
+            let next: Vec<EnginePose> = (0..n).map(|c| walk_pose(k, hips_height, speed, c, t + 1)).collect();
+            runner.start_posed_batch_for(&mut states, &past, &target, &next, length).unwrap();
+        }
+        runner.step_posed_batch(&mut states, &mut poses).unwrap();
+        for (c, p) in poses.iter().enumerate() {
+            let line = lines.next().unwrap_or_else(|| panic!("the C example printed no line for frame {tick}"));
+            let values: Vec<f32> = line.split_whitespace().map(|v| v.parse().unwrap()).collect();
+            assert_eq!((values[0] as usize, values[1] as usize), (tick, c));
+            let mut want = Vec::new();
+            want.extend(p.root_position.to_array());
+            want.extend(p.root_rotation.to_array());
+            want.extend(p.root_delta_position.to_array());
+            want.push(p.root_delta_yaw);
+            want.extend(p.hips_position.to_array());
+            want.extend(p.local_rotations.iter().flat_map(|q| q.to_array()));
+            assert_eq!(values.len() - 2, want.len(), "frame {tick} character {c}: values per line");
+            for (a, b) in values[2..].iter().zip(&want) {
+                worst = worst.max((a - b).abs() / b.abs().max(1.0));
+            }
+        }
+    }
+    assert!(lines.next().is_none(), "the C example printed more lines than frames x characters");
+    eprintln!("C example vs Rust API: {total} frames x {n} characters, worst relative difference {worst:e}");
+    assert!(worst <= 1e-5, "C example vs Rust API: worst relative difference {worst}");
+}
+
+/// Loads the test model through the C ABI.
+fn load(path: &Path) -> *mut ZooModel {
+    let c_path = CString::new(path.to_str().unwrap()).unwrap();
+    let mut model = ptr::null_mut();
+    assert_eq!(unsafe { zoo_model_load(c_path.as_ptr(), &mut model) }, ZooStatus::Ok, "{}", last_error());
+    model
+}
+
+#[test]
+fn malformed_calls_return_an_error_code_and_a_message() {
+    let tmp = tempfile::tempdir().unwrap();
+    let path = model_file(tmp.path());
+    unsafe {
+        // Unknown, unreadable, not-ONNX and wrong-task model files; a path that is not UTF-8.
+        let mut model = ptr::null_mut();
+        let missing = CString::new(tmp.path().join("missing.onnx").to_str().unwrap()).unwrap();
+        assert_error(zoo_model_load(missing.as_ptr(), &mut model), ZooStatus::LoadFailed, "missing.onnx");
+        assert!(model.is_null());
+        let text = tmp.path().join("notes.onnx");
+        std::fs::write(&text, "not a model").unwrap();
+        let text = CString::new(text.to_str().unwrap()).unwrap();
+        assert_error(zoo_model_load(text.as_ptr(), &mut model), ZooStatus::LoadFailed, "not an ONNX model");
+        let toy = tmp.path().join("toy.onnx");
+        zoo_tests::toy_onnx::ToyModel::new(zoo_tests::toy_onnx::Cell::Lstm, 6, 8, 5).cell_graph().write(&toy).unwrap();
+        let toy = CString::new(toy.to_str().unwrap()).unwrap();
+        assert_error(zoo_model_load(toy.as_ptr(), &mut model), ZooStatus::WrongModel, "transition models");
+        let bad_utf8 = [0xffu8, 0xfe, 0];
+        assert_error(
+            zoo_model_load(bad_utf8.as_ptr().cast::<c_char>(), &mut model),
+            ZooStatus::InvalidArgument,
+            "UTF-8",
+        );
+        assert_error(zoo_model_load(ptr::null(), &mut model), ZooStatus::NullPointer, "`path` is NULL");
+        let c_path = CString::new(path.to_str().unwrap()).unwrap();
+        assert_error(zoo_model_load(c_path.as_ptr(), ptr::null_mut()), ZooStatus::NullPointer, "`out` is NULL");
+
+        // Null handles.
+        let mut info = ZooModelInfo::default();
+        assert_error(zoo_model_info(ptr::null(), &mut info), ZooStatus::NullPointer, "`model` is NULL");
+        let model = load(&path);
+        assert_eq!(zoo_model_info(model, &mut info), ZooStatus::Ok);
+        let (k, p) = (info.joints, info.transition_frames);
+        assert_eq!((k, p), (4, zoo_rtn::Config::tiny().transition_frames));
+        let mut runner = ptr::null_mut();
+        assert_error(zoo_runner_new(ptr::null(), &mut runner), ZooStatus::NullPointer, "`model` is NULL");
+        assert_eq!(zoo_runner_new(model, &mut runner), ZooStatus::Ok);
+        let mut chars = ptr::null_mut();
+        assert_error(zoo_characters_new(model, 0, &mut chars), ZooStatus::InvalidArgument, "`count` is 0");
+        assert_eq!(zoo_characters_new(model, 2, &mut chars), ZooStatus::Ok);
+        let d = 3 * k;
+        let mut poses = vec![0.0f32; 2 * d];
+        assert_error(
+            zoo_step(ptr::null_mut(), chars, poses.as_mut_ptr(), poses.len()),
+            ZooStatus::NullPointer,
+            "`runner` is NULL",
+        );
+        assert_error(
+            zoo_step(runner, ptr::null_mut(), poses.as_mut_ptr(), poses.len()),
+            ZooStatus::NullPointer,
+            "`characters` is NULL",
+        );
+        assert_error(zoo_step(runner, chars, ptr::null_mut(), 0), ZooStatus::NullPointer, "`poses` is NULL");
+
+        // Stepping before starting.
+        assert_error(zoo_step(runner, chars, poses.as_mut_ptr(), poses.len()), ZooStatus::InvalidState, "start");
+
+        // Wrong sizes and NaN.
+        let pose = |f: usize| -> Vec<f32> { (0..d).map(|i| ((i * 7 + f * 3) as f32).sin() * 20.0).collect() };
+        let past: Vec<f32> = (0..2).flat_map(|_| (0..info.past_frames).flat_map(pose)).collect();
+        let (target, next): (Vec<f32>, Vec<f32>) = ([pose(40), pose(40)].concat(), [pose(41), pose(41)].concat());
+        let start = |past: &[f32], target: &[f32], length: usize| {
+            zoo_start(
+                runner,
+                chars,
+                past.as_ptr(),
+                past.len(),
+                target.as_ptr(),
+                target.len(),
+                next.as_ptr(),
+                next.len(),
+                length,
+            )
+        };
+        assert_error(start(&past[..past.len() - 1], &target, p), ZooStatus::InvalidArgument, "`past`");
+        assert_error(start(&past, &target[..d], p), ZooStatus::InvalidArgument, "`target`");
+        let mut with_nan = past.clone();
+        with_nan[5] = f32::NAN;
+        assert_error(start(&with_nan, &target, p), ZooStatus::InvalidArgument, "non-finite");
+        // Longer than trained: refused until allowed.
+        assert_error(start(&past, &target, p + 1), ZooStatus::InvalidState, "allow_beyond_trained");
+        assert_eq!(zoo_runner_allow_beyond_trained(runner, true), ZooStatus::Ok);
+        assert_eq!(start(&past, &target, p + 1), ZooStatus::Ok);
+        assert_eq!(zoo_runner_allow_beyond_trained(runner, false), ZooStatus::Ok);
+        assert_eq!(start(&past, &target, p), ZooStatus::Ok);
+        assert_error(zoo_step(runner, chars, poses.as_mut_ptr(), d), ZooStatus::InvalidArgument, "`poses`");
+        let (mut mean, mut max) = (0.0f32, 0.0f32);
+        assert_error(zoo_target_miss(chars, 0, &mut mean, &mut max), ZooStatus::NotAvailable, "blend window");
+        assert_error(zoo_target_miss(chars, 2, &mut mean, &mut max), ZooStatus::InvalidArgument, "character 2");
+        let mut left = 0usize;
+        assert_eq!(zoo_frames_left(chars, 1, &mut left), ZooStatus::Ok);
+        assert_eq!(left, p + 1);
+        for _ in 0..=p {
+            assert_eq!(zoo_step(runner, chars, poses.as_mut_ptr(), poses.len()), ZooStatus::Ok, "{}", last_error());
+        }
+        assert_eq!(zoo_target_miss(chars, 1, &mut mean, &mut max), ZooStatus::Ok);
+        assert!(mean.is_finite() && max >= mean);
+        // The transition returned its target frame: another step is refused.
+        assert_error(zoo_step(runner, chars, poses.as_mut_ptr(), poses.len()), ZooStatus::InvalidState, "target frame");
+
+        // Engine poses: wrong sizes, a transition started from positions.
+        let mut roots = vec![ZooRootMotion::default(); 2];
+        let mut rotations = vec![0.0f32; 2 * 4 * k];
+        assert_eq!(start(&past, &target, p), ZooStatus::Ok);
+        assert_error(
+            zoo_step_posed(runner, chars, roots.as_mut_ptr(), roots.len(), rotations.as_mut_ptr(), rotations.len()),
+            ZooStatus::InvalidState,
+            "start_posed",
+        );
+        assert_error(
+            zoo_step_posed(runner, chars, roots.as_mut_ptr(), 1, rotations.as_mut_ptr(), rotations.len()),
+            ZooStatus::InvalidArgument,
+            "`roots`",
+        );
+        let identity: Vec<f32> = (0..2 * info.past_frames * k).flat_map(|_| [0.0, 0.0, 0.0, 1.0]).collect();
+        let past_roots =
+            vec![ZooRootMotion { root_rotation: [0.0, 0.0, 0.0, 1.0], ..Default::default() }; 2 * info.past_frames];
+        let start_posed = |rotations_len: usize, past_rotations: &[f32]| {
+            zoo_start_posed(
+                runner,
+                chars,
+                past_roots.as_ptr(),
+                past_roots.len(),
+                past_rotations.as_ptr(),
+                past_rotations.len(),
+                past_roots.as_ptr(),
+                identity.as_ptr(),
+                past_roots.as_ptr(),
+                identity.as_ptr(),
+                rotations_len,
+                p,
+            )
+        };
+        assert_error(start_posed(2 * 4 * k - 1, &identity), ZooStatus::InvalidArgument, "rotations_len");
+        assert_error(
+            start_posed(2 * 4 * k, &identity[..identity.len() - 4]),
+            ZooStatus::InvalidArgument,
+            "past_rotations",
+        );
+        let mut nan = identity.clone();
+        nan[3] = f32::NAN;
+        assert_error(start_posed(2 * 4 * k, &nan), ZooStatus::InvalidArgument, "non-finite");
+        assert_eq!(start_posed(2 * 4 * k, &identity), ZooStatus::Ok, "{}", last_error());
+        assert_eq!(
+            zoo_step_posed(runner, chars, roots.as_mut_ptr(), roots.len(), rotations.as_mut_ptr(), rotations.len()),
+            ZooStatus::Ok
+        );
+        assert!(rotations.iter().all(|v| v.is_finite()));
+
+        // The message is truncated to the buffer and NUL-terminated; its full length is returned.
+        assert_error(zoo_model_info(ptr::null(), &mut info), ZooStatus::NullPointer, "NULL");
+        let mut small = [1 as c_char; 8];
+        let full = zoo_last_error(small.as_mut_ptr(), small.len());
+        assert!(full > 7);
+        assert_eq!(small[7], 0);
+        assert_eq!(std::ffi::CStr::from_ptr(small.as_ptr()).to_bytes().len(), 7);
+
+        // Null frees are no-ops; everything is freed once.
+        zoo_characters_free(ptr::null_mut());
+        zoo_runner_free(ptr::null_mut());
+        zoo_model_free(ptr::null_mut());
+        zoo_characters_free(chars);
+        zoo_runner_free(runner);
+        zoo_model_free(model);
+    }
+}
