@@ -1,0 +1,198 @@
+//! The RNN-GMM generator end to end on synthetic locomotion: shapes, a short training run whose
+//! NLL falls, checkpoints, an exact resume, seeded synthesis and the initial state (eq. 26).
+
+use candle_core::{DType, Device, Tensor};
+use candle_nn::{VarBuilder, VarMap};
+use std::path::Path;
+use zoo_data::synth::{SynthConfig, generate_clip};
+use zoo_motion::Clip;
+use zoo_nn::train_loop::{TrainOptions, train};
+use zoo_rnngmm::prelude::*;
+use zoo_rnngmm::{GeneratorTraining, TrainingData};
+
+/// `n` synthetic clips of 6 s (seed 3), flat floor, 30 fps.
+fn clips(n: usize) -> Vec<Clip> {
+    let cfg = SynthConfig { minutes: 1.0, seed: 3, terrain: false, fps: 30.0, clip_seconds: 6.0 };
+    (0..n).map(|i| generate_clip(&cfg, i).clip).collect()
+}
+
+fn data(config: &Config) -> TrainingData {
+    let clips = clips(6);
+    let refs: Vec<&Clip> = clips.iter().collect();
+    TrainingData::from_clips(config, 30.0, &refs[..5], &refs[5..]).unwrap()
+}
+
+fn opts(out: &Path, epochs: usize) -> TrainOptions {
+    TrainOptions { progress: false, print: false, ..TrainOptions::new(out, epochs, 9) }
+}
+
+fn bytes(p: &Path) -> Vec<u8> {
+    std::fs::read(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
+#[test]
+fn shapes_of_the_generator_and_its_mixture() {
+    let config = Config::tiny();
+    let varmap = VarMap::new();
+    let g = Generator::new(&config, VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu)).unwrap();
+    let (b, t, d, m) = (3, 7, config.dim, config.components);
+    let state = g.zero_state(b).unwrap();
+    assert_eq!((state.h.len(), state.h[0].dims()), (2, &[b, config.lstm][..]));
+    let x = Tensor::zeros((b, d), DType::F32, &Device::Cpu).unwrap();
+    let (raw, next) = g.step(&x, &state).unwrap();
+    assert_eq!(raw.dims(), &[b, m * (1 + 2 * d)]);
+    assert_eq!(next.c[1].dims(), &[b, config.lstm]);
+    let xs = Tensor::zeros((b, t, d), DType::F32, &Device::Cpu).unwrap();
+    let (raw_seq, _) = g.forward_seq(&xs, &state).unwrap();
+    assert_eq!(raw_seq.dims(), &[b, t, m * (1 + 2 * d)]);
+    // The first output of the sequence is the step's output.
+    let first = raw_seq.narrow(1, 0, 1).unwrap().squeeze(1).unwrap();
+    let diff = (first - &raw).unwrap().abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap();
+    assert!(diff < 1e-5, "{diff}");
+    let mix = g.mixture(&raw_seq).unwrap();
+    assert_eq!(mix.log_weights.dims(), &[b, t, m]);
+    assert_eq!(mix.means.dims(), &[b, t, m, d]);
+    assert_eq!(mix.log_stds.dims(), &[b, t, m, d]);
+    let counted: usize = varmap.all_vars().iter().map(|v| v.elem_count()).sum();
+    assert_eq!(g.parameter_count(), counted);
+    // The paper preset, for the record in docs/rnn-gmm.md.
+    let paper = Config::paper();
+    let varmap = VarMap::new();
+    let g = Generator::new(&paper, VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu)).unwrap();
+    assert_eq!(g.parameter_count(), varmap.all_vars().iter().map(|v| v.elem_count()).sum::<usize>());
+}
+
+#[test]
+fn training_lowers_the_nll_and_resumes_exactly() {
+    let config = Config::tiny();
+    let data = data(&config);
+    assert_eq!(data.spec.dim(), config.dim);
+    assert!(data.train.len() >= 40 && !data.valid.is_empty(), "{} windows", data.train.len());
+    let dir = tempfile::tempdir().unwrap();
+    let (whole, part) = (dir.path().join("whole"), dir.path().join("part"));
+    let run = |out: &Path, epochs: usize, resume: bool| {
+        let trainer = GeneratorTrainer::new(&config, data.spec.clone(), data.norm.clone(), &Device::Cpu).unwrap();
+        let mut training = GeneratorTraining::new(trainer, &data.train, &data.valid).unwrap();
+        let state = train(&mut training, &TrainOptions { resume, ..opts(out, epochs) }).unwrap();
+        (state, training.into_trainer())
+    };
+    let (a, trainer) = run(&whole, 4, false);
+    assert!(
+        a.valid_loss[3] < a.valid_loss[0] - 5.0 && a.train_loss[3] < a.train_loss[0],
+        "valid {:?} train {:?}",
+        a.valid_loss,
+        a.train_loss
+    );
+    // RMSProp's learning rate decays by 0.95 per epoch.
+    let lr = candle_nn::Optimizer::learning_rate(trainer.optimizer());
+    assert!((lr - 3e-3 * 0.95f64.powi(4)).abs() < 1e-12, "{lr}");
+    run(&part, 2, false);
+    let (b, _) = run(&part, 4, true);
+    // Epochs 3-4 of the resumed run are computed again: bit for bit the same. Epochs 1-2 come
+    // back from `train_state.json`, which serde_json may parse 1 ULP off.
+    assert_eq!((&a.train_loss[2..], &a.valid_loss[2..]), (&b.train_loss[2..], &b.valid_loss[2..]));
+    for (x, y) in a.train_loss.iter().chain(&a.valid_loss).zip(b.train_loss.iter().chain(&b.valid_loss)) {
+        assert!((x - y).abs() <= 1e-12 * x.abs(), "{x} vs {y}");
+    }
+    for f in ["model.safetensors", "last/model.safetensors", "last/optimizer.safetensors", "last/rng.json"] {
+        assert_eq!(bytes(&whole.join(f)), bytes(&part.join(f)), "{f}");
+    }
+    let summary: serde_json::Value = serde_json::from_slice(&bytes(&whole.join("summary.json"))).unwrap();
+    assert_eq!(summary["model"], "rnn-gmm");
+}
+
+#[test]
+fn checkpoints_round_trip_and_refuse_other_models() {
+    let config = Config::tiny();
+    let data = data(&config);
+    let mut trainer = GeneratorTrainer::new(&config, data.spec.clone(), data.norm.clone(), &Device::Cpu).unwrap();
+    let batch: Vec<&[f32]> = (0..4).map(|i| data.train.get(i)).collect();
+    trainer.train_step(&batch).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    trainer.save(dir.path()).unwrap();
+    trainer.save_training_state(dir.path()).unwrap();
+    let config_json: serde_json::Value = serde_json::from_slice(&bytes(&dir.path().join("config.json"))).unwrap();
+    assert_eq!(config_json["model"], "rnn-gmm");
+    let loaded = checkpoint::load(dir.path(), &Device::Cpu).unwrap();
+    assert_eq!((&loaded.spec, &loaded.norm), (&data.spec, &data.norm));
+    let before = trainer.eval_loss(&batch).unwrap();
+    let mut resumed = GeneratorTrainer::load(dir.path(), &Device::Cpu).unwrap();
+    assert_eq!(resumed.eval_loss(&batch).unwrap(), before);
+    assert_eq!(resumed.steps(), 1);
+    // The next steps are the same for the original and the resumed trainer.
+    assert_eq!(trainer.train_step(&batch).unwrap(), resumed.train_step(&batch).unwrap());
+    let x = Tensor::from_slice(&data.valid.get(0)[..config.dim], (1, config.dim), &Device::Cpu).unwrap();
+    let s = loaded.generator.zero_state(1).unwrap();
+    let (r1, _) = loaded.generator.step(&x, &s).unwrap();
+    let (r2, _) = GeneratorTrainer::load(dir.path(), &Device::Cpu).unwrap().model().step(&x, &s).unwrap();
+    assert_eq!(r1.to_vec2::<f32>().unwrap(), r2.to_vec2::<f32>().unwrap());
+    // Another model's folder is refused by name.
+    std::fs::write(dir.path().join("config.json"), r#"{"model": "rtn"}"#).unwrap();
+    let err = checkpoint::load(dir.path(), &Device::Cpu).unwrap_err().to_string();
+    assert!(err.contains("`rtn` checkpoint"), "{err}");
+}
+
+#[test]
+fn bad_training_input_is_refused() {
+    let config = Config::tiny();
+    let data = data(&config);
+    let mut trainer = GeneratorTrainer::new(&config, data.spec.clone(), data.norm.clone(), &Device::Cpu).unwrap();
+    let short = &data.train.get(0)[..config.dim * 3];
+    let err = trainer.train_step(&[short]).unwrap_err().to_string();
+    assert!(err.contains("training window 0") && err.contains("20 frames"), "{err}");
+    let mut nan = data.train.get(0).to_vec();
+    nan[5] = f32::NAN;
+    assert!(trainer.train_step(&[&nan]).unwrap_err().to_string().contains("NaN"));
+    assert_eq!(trainer.steps(), 0);
+    let wrong = config.clone().with_dim(config.dim + 3);
+    assert!(GeneratorTrainer::new(&wrong, data.spec.clone(), data.norm.clone(), &Device::Cpu).is_err());
+    let long = Config { train: TrainConfig { window: 400, ..config.train.clone() }, ..config.clone() };
+    let clips = clips(2);
+    let refs: Vec<&Clip> = clips.iter().collect();
+    let err = TrainingData::from_clips(&long, 30.0, &refs[..1], &refs[1..]).unwrap_err().to_string();
+    assert!(err.contains("too short"), "{err}");
+}
+
+#[test]
+fn synthesis_is_seeded_and_decodes_to_motion() {
+    let config = Config::tiny();
+    let data = data(&config);
+    let trainer = GeneratorTrainer::new(&config, data.spec.clone(), data.norm.clone(), &Device::Cpu).unwrap();
+    let g = trainer.model();
+    let d = config.dim;
+    let seed = &data.valid.get(0)[..2 * d];
+    let sample = |s: u64, t: f64| {
+        let mut rng = SplitMix64::new(s);
+        g.sample(seed, &g.zero_state(1).unwrap(), 30, &mut rng, t).unwrap().0
+    };
+    let (a, b, c) = (sample(1, 1.0), sample(1, 1.0), sample(2, 1.0));
+    assert_eq!(a, b);
+    assert_ne!(a, c);
+    let cold = sample(1, 0.1);
+    assert_ne!(a, cold);
+    let mut frames = a.clone();
+    data.norm.denormalize(&mut frames);
+    let motion = data.spec.decode(&frames, RootPlacement::default()).unwrap();
+    assert_eq!((motion.clip.frames(), motion.contacts.len()), (30, 30));
+    assert!(motion.clip.global().1.iter().all(|p| p.is_finite()));
+    assert!(g.sample(&seed[..d - 1], &g.zero_state(1).unwrap(), 3, &mut SplitMix64::new(1), 1.0).is_err());
+    assert!(g.sample(seed, &g.zero_state(1).unwrap(), 3, &mut SplitMix64::new(1), f64::NAN).is_err());
+}
+
+#[test]
+fn the_estimated_initial_state_makes_the_seed_frames_more_likely() {
+    let config = Config::tiny();
+    let data = data(&config);
+    let mut trainer = GeneratorTrainer::new(&config, data.spec.clone(), data.norm.clone(), &Device::Cpu).unwrap();
+    let batch: Vec<&[f32]> = (0..8).map(|i| data.train.get(i)).collect();
+    for _ in 0..5 {
+        trainer.train_step(&batch).unwrap();
+    }
+    let d = config.dim;
+    let frames = &data.valid.get(0)[..2 * d];
+    let est = estimate_initial_state(trainer.model(), frames, 30, 0.05).unwrap();
+    assert!(est.nll < est.nll_zero - 1.0, "{} vs {}", est.nll, est.nll_zero);
+    let again = estimate_initial_state(trainer.model(), frames, 30, 0.05).unwrap();
+    assert_eq!(est.nll, again.nll);
+    assert!(estimate_initial_state(trainer.model(), &frames[..d], 30, 0.05).is_err());
+}
