@@ -57,6 +57,148 @@ impl Default for TrainConfig {
     }
 }
 
+/// The refiner R, the discriminator D and their adversarial training (sec. 4.2). The paper
+/// gives the widths only in its Fig. 4-5; [`RefinerConfig::default`] takes 256 (refiner) and 128
+/// (discriminator, per direction).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RefinerConfig {
+    /// Width of the refiner's first fully connected layer (FC1, ReLU).
+    pub refiner_fc: usize,
+    /// Units of the refiner's LSTM.
+    pub refiner_lstm: usize,
+    /// Width of the discriminator's first fully connected layer (ReLU).
+    pub discriminator_fc: usize,
+    /// Units per direction of the discriminator's bidirectional LSTM.
+    pub discriminator_lstm: usize,
+    /// Weight of the self-regularisation term (eq. 13; paper: 20), on the normalised root
+    /// values `dtx, dtz, dry, ty`.
+    pub lambda: f64,
+    /// RMSProp learning rate of the refiner (paper: 0.002).
+    pub refiner_lr: f64,
+    /// RMSProp learning rate of the discriminator (paper: 0.005).
+    pub discriminator_lr: f64,
+    /// RMSProp decay of both (paper: 0.9).
+    pub rho: f64,
+    /// Every gradient component is clipped to `[-clip, clip]` (the generator's 5; not stated
+    /// for the refiner).
+    pub clip: f64,
+    /// Refiner updates before adversarial rounds start (paper: 75).
+    pub warmup_refiner: usize,
+    /// Discriminator updates before adversarial rounds start (paper: 75).
+    pub warmup_discriminator: usize,
+    /// Refiner updates per discriminator update at the start (paper: 5).
+    pub refiner_updates: usize,
+    /// The most refiner updates per discriminator update the adaptation may reach.
+    pub max_refiner_updates: usize,
+    /// Discriminator loss below which the refiner's updates are doubled (paper: 0.01).
+    pub low_loss: f64,
+    /// Discriminator loss above which they are halved (paper: 1).
+    pub high_loss: f64,
+    /// Refined motions kept in the history buffer (paper: B = 320).
+    pub history: usize,
+    /// Windows per batch (paper: b = 32); half the discriminator's fakes come from the buffer.
+    pub batch: usize,
+    /// Generator sequences sampled once as the refiner's training input (`x_RNN`).
+    pub fake_windows: usize,
+    /// Real frames fed to the generator before it samples a fake window.
+    pub seed_frames: usize,
+    /// Temperature of that sampling.
+    pub temperature: f64,
+    /// Discriminator collapse: its loss stays below `collapse_loss` for `collapse_rounds`
+    /// consecutive rounds while the refiner already gets `max_refiner_updates`: training stops
+    /// with an error and the last good checkpoint is kept.
+    pub collapse_loss: f64,
+    /// See `collapse_loss`.
+    pub collapse_rounds: usize,
+    /// Seed of the refiner's and discriminator's weights and of the sampling and batch draws.
+    pub seed: u64,
+}
+
+impl Default for RefinerConfig {
+    fn default() -> Self {
+        RefinerConfig {
+            refiner_fc: 256,
+            refiner_lstm: 256,
+            discriminator_fc: 128,
+            discriminator_lstm: 128,
+            lambda: 20.0,
+            refiner_lr: 0.002,
+            discriminator_lr: 0.005,
+            rho: 0.9,
+            clip: 5.0,
+            warmup_refiner: 75,
+            warmup_discriminator: 75,
+            refiner_updates: 5,
+            max_refiner_updates: 40,
+            low_loss: 0.01,
+            high_loss: 1.0,
+            history: 320,
+            batch: 32,
+            fake_windows: 640,
+            seed_frames: 10,
+            temperature: 1.0,
+            collapse_loss: 1e-3,
+            collapse_rounds: 50,
+            seed: 0xad5e,
+        }
+    }
+}
+
+impl RefinerConfig {
+    /// Small sizes for tests.
+    pub fn tiny() -> Self {
+        RefinerConfig {
+            refiner_fc: 16,
+            refiner_lstm: 16,
+            discriminator_fc: 16,
+            discriminator_lstm: 8,
+            warmup_refiner: 3,
+            warmup_discriminator: 3,
+            refiner_updates: 2,
+            max_refiner_updates: 8,
+            history: 16,
+            batch: 8,
+            fake_windows: 24,
+            seed_frames: 4,
+            collapse_rounds: 5,
+            ..RefinerConfig::default()
+        }
+    }
+
+    /// Checks sizes and settings.
+    pub fn validate(&self) -> RnnGmmResult<()> {
+        let sizes = [self.refiner_fc, self.refiner_lstm, self.discriminator_fc, self.discriminator_lstm];
+        if sizes.contains(&0) || self.refiner_updates == 0 || self.max_refiner_updates < self.refiner_updates {
+            return Err(RnnGmmError::Config(format!(
+                "refiner: widths {sizes:?} must be positive, refiner_updates ({}) positive and at most \
+                 max_refiner_updates ({})",
+                self.refiner_updates, self.max_refiner_updates
+            )));
+        }
+        if self.batch < 2 || self.history < self.batch / 2 || self.fake_windows < self.history.max(self.batch) {
+            return Err(RnnGmmError::Config(format!(
+                "refiner: batch ({}) must be at least 2, history ({}) at least half a batch, fake_windows ({}) at \
+                 least the history and a batch",
+                self.batch, self.history, self.fake_windows
+            )));
+        }
+        if !(self.refiner_lr > 0.0 && self.discriminator_lr > 0.0 && (0.0..1.0).contains(&self.rho) && self.clip > 0.0)
+        {
+            return Err(RnnGmmError::Config(format!(
+                "refiner: learning rates ({}, {}) and clip ({}) must be positive, rho ({}) in [0, 1)",
+                self.refiner_lr, self.discriminator_lr, self.clip, self.rho
+            )));
+        }
+        if !(self.lambda >= 0.0 && self.temperature >= 0.0 && self.low_loss < self.high_loss) {
+            return Err(RnnGmmError::Config(format!(
+                "refiner: lambda ({}) and temperature ({}) must not be negative, low_loss ({}) below high_loss ({})",
+                self.lambda, self.temperature, self.low_loss, self.high_loss
+            )));
+        }
+        Ok(())
+    }
+}
+
 /// The RNN-GMM's configuration.
 ///
 /// The paper gives the layer widths only in its Fig. 3 (not in the text); [`Config::paper`]
@@ -85,6 +227,9 @@ pub struct Config {
     pub max_log_std: f64,
     /// Generator training.
     pub train: TrainConfig,
+    /// Refiner, discriminator and adversarial training.
+    #[serde(default)]
+    pub refiner: RefinerConfig,
 }
 
 impl Config {
@@ -100,6 +245,7 @@ impl Config {
             min_log_std: -5.0,
             max_log_std: 5.0,
             train: TrainConfig::default(),
+            refiner: RefinerConfig::default(),
         }
     }
 
@@ -116,6 +262,7 @@ impl Config {
                 window_stride: 10,
                 ..TrainConfig::default()
             },
+            refiner: RefinerConfig::tiny(),
             ..Config::paper()
         }
     }
@@ -180,7 +327,7 @@ impl Config {
                 t.batch_size, t.window_stride, t.window
             ));
         }
-        Ok(())
+        self.refiner.validate()
     }
 }
 

@@ -33,6 +33,10 @@ pub enum RnnGmmError {
         /// The loss value.
         loss: f64,
     },
+    /// Adversarial training diverged (discriminator collapse); the step's updates were made but
+    /// the last good checkpoint is kept by the training loop.
+    #[error("adversarial training diverged: {0}")]
+    Diverged(String),
     /// A tensor operation, a file, a JSON file, a non-finite parameter, or the shared toolkit
     /// (a checkpoint file, an optimiser state) failed.
     #[error(transparent)]

@@ -7,6 +7,9 @@
 //! - [`gmm`]: the Gaussian mixture over the next frame (eq. 6-8) and seeded sampling;
 //! - [`model`]: the generator G (FC1-FC3, 2-layer LSTM, mixture head) with the state outside;
 //! - [`initial_state`]: initial hidden state estimation (eq. 26);
+//! - [`fk`]: differentiable forward kinematics of the features (end effectors, root trajectory);
+//! - [`refiner`]: the refiner and the discriminator (eq. 9-13) and their adversarial training
+//!   ([`AdversarialTraining`] for the shared loop);
 //! - [`train`]: the generator's training ([`GeneratorTraining`] for the shared loop);
 //! - [`checkpoint`]: run folders.
 //!
@@ -29,28 +32,32 @@ pub mod checkpoint;
 pub mod config;
 pub mod error;
 pub mod features;
+pub mod fk;
 pub mod gmm;
 pub mod initial_state;
 pub mod model;
+pub mod refiner;
 pub mod train;
 
-pub use config::{Config, ModelName, TrainConfig};
+pub use config::{Config, ModelName, RefinerConfig, TrainConfig};
 pub use error::{RnnGmmError, RnnGmmResult};
 pub use features::{ContactParams, DecodedMotion, EncodedClip, FeatureSpec, Normalization, RootPlacement};
 pub use gmm::Mixture;
 pub use initial_state::{InitialState, estimate_initial_state};
 pub use model::Generator;
+pub use refiner::{AdversarialTrainer, AdversarialTraining, EffectorNorm, RefinerNets};
 pub use train::{GeneratorTrainer, GeneratorTraining, TrainingData, Windows};
 
 /// The common imports.
 pub mod prelude {
     pub use crate::checkpoint;
-    pub use crate::config::{Config, TrainConfig};
+    pub use crate::config::{Config, RefinerConfig, TrainConfig};
     pub use crate::error::{RnnGmmError, RnnGmmResult};
     pub use crate::features::{FeatureSpec, Normalization, RootPlacement};
     pub use crate::gmm::Mixture;
     pub use crate::initial_state::estimate_initial_state;
     pub use crate::model::Generator;
+    pub use crate::refiner::{AdversarialTrainer, AdversarialTraining};
     pub use crate::train::{GeneratorTrainer, GeneratorTraining, TrainingData, Windows};
     pub use zoo_motion::rng::SplitMix64;
     pub use zoo_nn::LstmState;

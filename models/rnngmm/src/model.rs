@@ -142,4 +142,51 @@ impl Generator {
         }
         Ok((out, state))
     }
+
+    /// Batched random synthesis: `n` sequences, each seeded with its own `seed_len` normalised
+    /// frames (`start`: `n * seed_len * D` values, sequence-major) fed from zero states, then
+    /// `frames` sampled frames each. Returns `n * frames * D` values, sequence-major.
+    /// Deterministic for a seed (draws go sequence by sequence within each frame).
+    pub fn sample_batch(
+        &self,
+        start: &[f32],
+        n: usize,
+        seed_len: usize,
+        frames: usize,
+        rng: &mut SplitMix64,
+        temperature: f64,
+    ) -> RnnGmmResult<Vec<f32>> {
+        let d = self.config.dim;
+        if n == 0 || seed_len == 0 || start.len() != n * seed_len * d {
+            return Err(RnnGmmError::Size {
+                what: "seed frames".into(),
+                expected: n * seed_len * d,
+                detail: format!("{n} sequences of {seed_len} frames of D = {d}, both positive"),
+                found: start.len(),
+            });
+        }
+        if !(temperature.is_finite() && temperature >= 0.0) {
+            return Err(RnnGmmError::Config(format!(
+                "temperature must be finite and not negative, found {temperature}"
+            )));
+        }
+        let seeds = Tensor::from_slice(start, (n, seed_len, d), &self.device)?;
+        let (raw, mut state) = self.forward_seq(&seeds, &self.zero_state(n)?)?;
+        let mut raw = raw.narrow(1, seed_len - 1, 1)?.squeeze(1)?;
+        let mut out = vec![0f32; n * frames * d];
+        let mut frame = vec![0f32; n * d];
+        for f in 0..frames {
+            let heads = raw.to_dtype(DType::F32)?.to_vec2::<f32>()?;
+            for (i, head) in heads.iter().enumerate() {
+                let x = &mut frame[i * d..(i + 1) * d];
+                self.mixture_of(head)?.sample(rng, temperature, x);
+                out[(i * frames + f) * d..(i * frames + f + 1) * d].copy_from_slice(x);
+            }
+            if f + 1 < frames {
+                let (r, s) = self.step(&Tensor::from_slice(&frame, (n, d), &self.device)?, &state)?;
+                (raw, state) = (r, s);
+            }
+        }
+        Ok(out)
+    }
 }

@@ -196,3 +196,89 @@ fn the_estimated_initial_state_makes_the_seed_frames_more_likely() {
     assert_eq!(est.nll, again.nll);
     assert!(estimate_initial_state(trainer.model(), &frames[..d], 30, 0.05).is_err());
 }
+
+/// A tiny generator trained for a few steps, saved in `dir`; the first 24 training windows.
+fn generator_run(dir: &Path) -> (Config, TrainingData, Windows) {
+    let config = Config::tiny();
+    let data = data(&config);
+    let mut trainer = GeneratorTrainer::new(&config, data.spec.clone(), data.norm.clone(), &Device::Cpu).unwrap();
+    let batch: Vec<&[f32]> = (0..8).map(|i| data.train.get(i)).collect();
+    for _ in 0..3 {
+        trainer.train_step(&batch).unwrap();
+    }
+    trainer.save(dir).unwrap();
+    let n = 24 * config.train.window * config.dim;
+    let real = Windows { data: data.train.data[..n].to_vec(), ..data.train.clone() };
+    (config, data, real)
+}
+
+#[test]
+fn adversarial_rounds_run_with_finite_losses_and_resume_exactly() {
+    let dir = tempfile::tempdir().unwrap();
+    let gen_dir = dir.path().join("generator");
+    let (config, data, real) = generator_run(&gen_dir);
+    let make = || AdversarialTrainer::new(&gen_dir, &config.refiner, &real, &data.valid, &Device::Cpu).unwrap();
+    let (whole, part) = (dir.path().join("whole"), dir.path().join("part"));
+    let run = |out: &Path, epochs: usize, resume: bool| {
+        let mut training = AdversarialTraining::new(make(), &real);
+        let state = train(&mut training, &TrainOptions { resume, ..opts(out, epochs) }).unwrap();
+        (state, training.trainer().last_discriminator_loss(), training.trainer().refiner_updates())
+    };
+    let (a, d_loss, k) = run(&whole, 2, false);
+    assert!(a.train_loss.iter().chain(&a.valid_loss).all(|l| l.is_finite()), "{a:?}");
+    let d_loss = d_loss.unwrap();
+    assert!(d_loss.is_finite() && d_loss > 0.0, "{d_loss}");
+    assert!((1..=config.refiner.max_refiner_updates).contains(&k));
+    // Warm-up (3) plus k refiner updates per round (3 rounds of 8 of the 24 windows per epoch).
+    assert!(a.steps >= 3 + 6, "{} refiner steps", a.steps);
+    for f in
+        ["refiner.safetensors", "discriminator.safetensors", "effectors.json", "model.safetensors", "features.json"]
+    {
+        assert!(whole.join(f).is_file(), "{f}");
+    }
+    for f in [
+        "refiner_optimizer.safetensors",
+        "discriminator_optimizer.safetensors",
+        "history.safetensors",
+        "adversarial.json",
+    ] {
+        assert!(whole.join("last").join(f).is_file(), "{f}");
+    }
+    run(&part, 1, false);
+    let (b, _, _) = run(&part, 2, true);
+    assert_eq!((a.train_loss[1], a.valid_loss[1], a.steps), (b.train_loss[1], b.valid_loss[1], b.steps));
+    for f in ["last/refiner.safetensors", "last/discriminator.safetensors", "last/history.safetensors"] {
+        assert_eq!(bytes(&whole.join(f)), bytes(&part.join(f)), "{f}");
+    }
+    let summary: serde_json::Value = serde_json::from_slice(&bytes(&whole.join("summary.json"))).unwrap();
+    assert_eq!((summary["model"].as_str(), summary["stage"].as_str()), (Some("rnn-gmm"), Some("refiner")));
+}
+
+#[test]
+fn discriminator_collapse_stops_training_and_keeps_the_last_good_checkpoint() {
+    let dir = tempfile::tempdir().unwrap();
+    let gen_dir = dir.path().join("generator");
+    let (config, data, real) = generator_run(&gen_dir);
+    let out = dir.path().join("run");
+    let good = AdversarialTrainer::new(&gen_dir, &config.refiner, &real, &data.valid, &Device::Cpu).unwrap();
+    train(&mut AdversarialTraining::new(good, &real), &opts(&out, 1)).unwrap();
+    let kept = bytes(&out.join("refiner.safetensors"));
+    // Every loss counts as collapsed: the refiner already gets its most updates, and two such
+    // rounds in a row stop the run.
+    let collapsing = RefinerConfig {
+        collapse_loss: f64::INFINITY,
+        collapse_rounds: 2,
+        max_refiner_updates: config.refiner.refiner_updates,
+        ..config.refiner.clone()
+    };
+    let bad = AdversarialTrainer::new(&gen_dir, &collapsing, &real, &data.valid, &Device::Cpu).unwrap();
+    let err = train(&mut AdversarialTraining::new(bad, &real), &TrainOptions { resume: true, ..opts(&out, 3) })
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("discriminator collapse") && err.contains("last good checkpoint is kept"), "{err}");
+    assert_eq!(bytes(&out.join("refiner.safetensors")), kept);
+    // Bad settings are refused before anything runs.
+    let wrong = RefinerConfig { history: 2, ..config.refiner.clone() };
+    let err = AdversarialTrainer::new(&gen_dir, &wrong, &real, &data.valid, &Device::Cpu).err().unwrap().to_string();
+    assert!(err.contains("history"), "{err}");
+}
