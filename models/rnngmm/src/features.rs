@@ -234,7 +234,7 @@ impl FeatureSpec {
             .map(|j| {
                 let [x, y, z, w] = sum[j];
                 let q = DQuat::from_xyzw(x, y, z, w);
-                if j == 0 || !(q.length() > 1e-9) {
+                if j == 0 || q.length().is_nan() || q.length() <= 1e-9 {
                     return DQuat::IDENTITY;
                 }
                 // On a 1e-9 grid, so the reference survives `features.json` bit for bit (serde_json
@@ -327,7 +327,8 @@ impl FeatureSpec {
             )));
         }
         let fps = clip.fps();
-        if !((fps - self.fps).abs() <= 0.01 * self.fps) {
+        let off = (fps - self.fps).abs();
+        if off.is_nan() || off > 0.01 * self.fps {
             return Err(RnnGmmError::Motion(format!(
                 "the clip is at {fps:.2} fps, the features are defined at {} fps: resample the clip first",
                 self.fps

@@ -195,6 +195,45 @@ impl RefinerNets {
     }
 }
 
+/// A trained generator and refiner for inference, from a run folder of the refiner stage.
+#[derive(Clone, Debug)]
+pub struct LoadedModel {
+    /// The generator with its feature and statistics.
+    pub generator: rck::LoadedGenerator,
+    /// The refiner and the discriminator.
+    pub nets: RefinerNets,
+    /// The end-effector statistics.
+    pub effectors: EffectorNorm,
+}
+
+/// Loads the generator, the refiner and the discriminator of a run folder written by
+/// [`AdversarialTrainer::save`]. A folder of the generator stage only (no `refiner.safetensors`)
+/// is refused with a message saying so.
+pub fn load(dir: &Path, device: &Device) -> RnnGmmResult<LoadedModel> {
+    let generator = rck::load(dir, device)?;
+    if !dir.join(REFINER_FILE).is_file() {
+        return Err(RnnGmmError::Config(format!(
+            "{} holds no {REFINER_FILE}: it is a generator run; train the refiner stage on it first (or generate \
+             without the refiner)",
+            dir.display()
+        )));
+    }
+    let config = generator.generator.config().clone();
+    let effectors: EffectorNorm = ck::read_json(&dir.join(EFFECTORS_FILE))?;
+    let (r_varmap, d_varmap) = (VarMap::new(), VarMap::new());
+    let nets = RefinerNets::new(
+        &config,
+        &generator.spec,
+        &generator.norm,
+        &effectors,
+        VarBuilder::from_varmap(&r_varmap, DType::F32, device),
+        VarBuilder::from_varmap(&d_varmap, DType::F32, device),
+    )?;
+    ck::read_varmap(&dir.join(REFINER_FILE), &r_varmap)?;
+    ck::read_varmap(&dir.join(DISCRIMINATOR_FILE), &d_varmap)?;
+    Ok(LoadedModel { generator, nets, effectors })
+}
+
 /// Counters and generator state of an adversarial run (`adversarial.json`).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 struct AdversarialState {

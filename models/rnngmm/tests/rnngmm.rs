@@ -252,6 +252,16 @@ fn adversarial_rounds_run_with_finite_losses_and_resume_exactly() {
     }
     let summary: serde_json::Value = serde_json::from_slice(&bytes(&whole.join("summary.json"))).unwrap();
     assert_eq!((summary["model"].as_str(), summary["stage"].as_str()), (Some("rnn-gmm"), Some("refiner")));
+    // The run folder loads for inference; the refiner changes the motion but keeps its shape.
+    let last = whole.join("last");
+    let model = zoo_rnngmm::refiner::load(&last, &Device::Cpu).unwrap();
+    let x = Tensor::from_slice(data.valid.get(0), (1, config.train.window, config.dim), &Device::Cpu).unwrap();
+    let r = model.nets.refine(&x).unwrap();
+    assert_eq!(r.dims(), x.dims());
+    let moved = (r - &x).unwrap().abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap();
+    assert!(moved > 0.0 && moved.is_finite(), "{moved}");
+    let err = zoo_rnngmm::refiner::load(&gen_dir, &Device::Cpu).unwrap_err().to_string();
+    assert!(err.contains("generator run"), "{err}");
 }
 
 #[test]
@@ -281,4 +291,38 @@ fn discriminator_collapse_stops_training_and_keeps_the_last_good_checkpoint() {
     let wrong = RefinerConfig { history: 2, ..config.refiner.clone() };
     let err = AdversarialTrainer::new(&gen_dir, &wrong, &real, &data.valid, &Device::Cpu).err().unwrap().to_string();
     assert!(err.contains("history"), "{err}");
+}
+
+/// Throughput of one generator training step and one adversarial round at the paper's sizes on
+/// synthetic locomotion (for the training budget; run with `--ignored --nocapture`).
+#[test]
+#[ignore = "timing: prints windows/s of the paper preset"]
+fn paper_preset_throughput() {
+    let config = Config::paper();
+    let clips = clips(12);
+    let refs: Vec<&Clip> = clips.iter().collect();
+    let data = TrainingData::from_clips(&config, 30.0, &refs[..10], &refs[10..]).unwrap();
+    let mut trainer = GeneratorTrainer::new(&config, data.spec.clone(), data.norm.clone(), &Device::Cpu).unwrap();
+    let b = config.train.batch_size;
+    let batch: Vec<&[f32]> = (0..b).map(|i| data.train.get(i)).collect();
+    trainer.train_step(&batch).unwrap();
+    let steps = 5;
+    let t = std::time::Instant::now();
+    for _ in 0..steps {
+        trainer.train_step(&batch).unwrap();
+    }
+    let secs = t.elapsed().as_secs_f64();
+    eprintln!(
+        "generator (paper, batch {b}, window {}): {:.1} windows/s",
+        config.train.window,
+        (steps * b) as f64 / secs
+    );
+    let dir = tempfile::tempdir().unwrap();
+    trainer.save(dir.path()).unwrap();
+    let mut adv = AdversarialTrainer::new(dir.path(), &config.refiner, &data.train, &data.valid, &Device::Cpu).unwrap();
+    let t = std::time::Instant::now();
+    for _ in 0..3 {
+        adv.refiner_update().unwrap();
+    }
+    eprintln!("refiner update (batch {}): {:.2} s", config.refiner.batch, t.elapsed().as_secs_f64() / 3.0);
 }
