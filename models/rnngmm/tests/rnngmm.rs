@@ -326,3 +326,43 @@ fn paper_preset_throughput() {
     }
     eprintln!("refiner update (batch {}): {:.2} s", config.refiner.batch, t.elapsed().as_secs_f64() / 3.0);
 }
+
+/// The feature on real motion: bandai2's walks and runs round-trip, both feet are found, the
+/// joint rotation vectors stay away from pi, contact bits are neither always on nor always off.
+#[test]
+#[ignore = "needs ../shared/data/bandai2 (run with --ignored --nocapture)"]
+fn bandai2_clips_round_trip_through_the_feature() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/bandai2");
+    let clips = zoo_data::dataset::load_matching(&root, Some("dataset-2_*_00[1-3].bvh*")).unwrap();
+    let refs: Vec<&Clip> = clips.iter().map(|c| &c.clip).collect();
+    let spec = FeatureSpec::fit(&refs[0].skeleton, 30.0, &refs).unwrap();
+    assert_eq!(spec.dim(), 68);
+    let (mut worst, mut largest_angle, mut on, mut total) = (0f64, 0f32, 0usize, 0usize);
+    for c in &clips {
+        let enc = spec.encode(&c.clip).unwrap();
+        let dec = spec.decode(&enc.values, enc.origin).unwrap();
+        let (_, a) = c.clip.global();
+        let (_, b) = dec.clip.global();
+        let err = a.iter().zip(&b).map(|(p, q)| (*p - *q).length()).fold(0.0, f64::max);
+        worst = worst.max(err);
+        for f in 0..enc.frames() {
+            let x = enc.frame(f);
+            for j in 1..spec.skeleton.len() {
+                let i = spec.joint_index(j);
+                largest_angle = largest_angle.max((x[i] * x[i] + x[i + 1] * x[i + 1] + x[i + 2] * x[i + 2]).sqrt());
+            }
+            on += (x[66] > 0.5) as usize + (x[67] > 0.5) as usize;
+            total += 2;
+        }
+    }
+    let frac = on as f64 / total as f64;
+    eprintln!(
+        "bandai2: {} clips, largest position error {worst:.2e} cm, largest joint rotation from its reference \
+         {largest_angle:.2} rad, feet planted {:.1}% of foot-frames",
+        clips.len(),
+        100.0 * frac
+    );
+    assert!(worst < 1e-3, "{worst}");
+    assert!(largest_angle < 2.5, "{largest_angle}");
+    assert!((0.2..0.9).contains(&frac), "{frac}");
+}
