@@ -366,3 +366,23 @@ fn bandai2_clips_round_trip_through_the_feature() {
     assert!(largest_angle < 2.5, "{largest_angle}");
     assert!((0.2..0.9).contains(&frac), "{frac}");
 }
+
+#[test]
+fn refiner_updates_per_round_follow_the_discriminator_loss() {
+    let dir = tempfile::tempdir().unwrap();
+    let gen_dir = dir.path().join("generator");
+    let (config, data, real) = generator_run(&gen_dir);
+    let idx: Vec<usize> = (0..config.refiner.batch).collect();
+    // Every discriminator loss counts as "too strong": the refiner's updates double up to the cap.
+    let strong = RefinerConfig { low_loss: f64::MAX / 2.0, high_loss: f64::MAX, ..config.refiner.clone() };
+    let mut t = AdversarialTrainer::new(&gen_dir, &strong, &real, &data.valid, &Device::Cpu).unwrap();
+    assert_eq!(t.refiner_updates(), 2);
+    let ks: Vec<usize> = (0..3).map(|_| t.round(&real, &idx).map(|_| t.refiner_updates()).unwrap()).collect();
+    assert_eq!(ks, [4, 8, 8]);
+    // Every loss counts as "too weak": they halve down to 1.
+    let weak = RefinerConfig { low_loss: -2.0, high_loss: -1.0, refiner_updates: 4, ..config.refiner.clone() };
+    let mut t = AdversarialTrainer::new(&gen_dir, &weak, &real, &data.valid, &Device::Cpu).unwrap();
+    let ks: Vec<usize> = (0..3).map(|_| t.round(&real, &idx).map(|_| t.refiner_updates()).unwrap()).collect();
+    assert_eq!(ks, [2, 1, 1]);
+    assert!(t.last_discriminator_loss().is_some_and(f64::is_finite));
+}
