@@ -48,7 +48,9 @@ pub fn read_meta(dir: &Path) -> RnnGmmResult<(Config, FeatureSpec, Normalization
     }
     let config: Config = serde_json::from_value(value)
         .map_err(|e| RnnGmmError::Config(format!("{}: not an RNN-GMM configuration: {e}", config_path.display())))?;
-    let spec: FeatureSpec = ck::read_json(&dir.join(FEATURES_FILE))?;
+    let spec_path = dir.join(FEATURES_FILE);
+    let spec: FeatureSpec = ck::read_json(&spec_path)?;
+    spec.validate().map_err(|e| RnnGmmError::Config(format!("{}: {e}", spec_path.display())))?;
     let norm: Normalization = ck::read_json(&dir.join(STATS_FILE))?;
     check_agree(&config, &spec, &norm)?;
     Ok((config, spec, norm))

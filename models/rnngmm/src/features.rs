@@ -254,6 +254,41 @@ impl FeatureSpec {
         })
     }
 
+    /// Checks that the parts agree (e.g. after reading `features.json`): a valid skeleton, one
+    /// reference rotation per joint, feet that are joints, positive frame rate and thresholds.
+    pub fn validate(&self) -> RnnGmmResult<()> {
+        let bad = |m: String| Err(RnnGmmError::Config(format!("feature definition: {m}")));
+        self.skeleton.validate().map_err(|e| RnnGmmError::Config(format!("feature definition: skeleton: {e}")))?;
+        let j = self.skeleton.len();
+        if self.reference.len() != j || self.reference.iter().any(|q| !q.is_finite()) {
+            return bad(format!(
+                "{} finite reference rotations needed for {j} joints, found {}",
+                j,
+                self.reference.len()
+            ));
+        }
+        if self.left_foot.is_empty()
+            || self.right_foot.is_empty()
+            || self.left_foot.iter().chain(&self.right_foot).any(|&f| f == 0 || f >= j)
+        {
+            return bad(format!(
+                "feet {:?} and {:?} must be non-empty lists of non-root joints (below {j})",
+                self.left_foot, self.right_foot
+            ));
+        }
+        let c = &self.contact;
+        if !(self.fps > 0.0 && c.height > 0.0 && c.lock_speed >= 0.0 && c.swing_speed > c.lock_speed)
+            || !(0.0..=100.0).contains(&c.ground_percentile)
+        {
+            return bad(format!(
+                "fps ({}) and contact height ({}) must be positive, 0 <= lock_speed ({}) < swing_speed ({}), \
+                 ground_percentile ({}) in [0, 100]",
+                self.fps, c.height, c.lock_speed, c.swing_speed, c.ground_percentile
+            ));
+        }
+        Ok(())
+    }
+
     /// Values per frame.
     pub fn dim(&self) -> usize {
         feature_dim(self.skeleton.len())
@@ -270,8 +305,14 @@ impl FeatureSpec {
     }
 
     /// Per frame: is the left / right foot planted (see [`ContactParams`]), from global positions.
+    /// `global_pos` holds `frames * joints` positions (frame-major); fewer frames are read when
+    /// it is shorter.
     pub fn detect_contacts(&self, global_pos: &[DVec3], frames: usize) -> Vec<[bool; 2]> {
         let joints = self.skeleton.len();
+        let frames = frames.min(global_pos.len() / joints.max(1));
+        if frames == 0 {
+            return Vec::new();
+        }
         let c = &self.contact;
         let dt = 1.0 / self.fps;
         let percentile = |j: usize| {
@@ -659,6 +700,23 @@ mod tests {
         let mut skel = s.clip.skeleton.clone();
         skel.names[15] = "Ankle_L".into();
         assert!(FeatureSpec::fit(&skel, 30.0, &[]).unwrap_err().to_string().contains("left"));
+    }
+
+    #[test]
+    fn a_damaged_feature_definition_is_refused() {
+        let s = synth(0, 1.0);
+        let spec = FeatureSpec::fit(&s.clip.skeleton, 30.0, &[&s.clip]).unwrap();
+        spec.validate().unwrap();
+        let mut short = spec.clone();
+        short.reference.pop();
+        assert!(short.validate().unwrap_err().to_string().contains("reference rotations"));
+        let mut feet = spec.clone();
+        feet.left_foot = vec![99];
+        assert!(feet.validate().unwrap_err().to_string().contains("feet"));
+        let mut c = spec.clone();
+        c.contact.swing_speed = 0.0;
+        assert!(c.validate().unwrap_err().to_string().contains("swing_speed"));
+        assert!(spec.detect_contacts(&[], 10).is_empty());
     }
 
     #[test]
