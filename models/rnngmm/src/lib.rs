@@ -10,6 +10,7 @@
 //! - [`fk`]: differentiable forward kinematics of the features (end effectors, root trajectory);
 //! - [`refiner`]: the refiner and the discriminator (eq. 9-13) and their adversarial training
 //!   ([`AdversarialTraining`] for the shared loop);
+//! - [`synthesis`]: random synthesis continuing a clip (seed, eq. 26, sampling, refiner, decoding);
 //! - [`train`]: the generator's training ([`GeneratorTraining`] for the shared loop);
 //! - [`checkpoint`]: run folders.
 //!
@@ -37,6 +38,7 @@ pub mod gmm;
 pub mod initial_state;
 pub mod model;
 pub mod refiner;
+pub mod synthesis;
 pub mod train;
 
 pub use config::{Config, ModelName, RefinerConfig, TrainConfig};
@@ -46,6 +48,7 @@ pub use gmm::Mixture;
 pub use initial_state::{InitialState, estimate_initial_state};
 pub use model::Generator;
 pub use refiner::{AdversarialTrainer, AdversarialTraining, EffectorNorm, RefinerNets};
+pub use synthesis::{Synthesis, SynthesisOptions, synthesize};
 pub use train::{GeneratorTrainer, GeneratorTraining, TrainingData, Windows};
 
 /// The common imports.
@@ -58,6 +61,7 @@ pub mod prelude {
     pub use crate::initial_state::estimate_initial_state;
     pub use crate::model::Generator;
     pub use crate::refiner::{AdversarialTrainer, AdversarialTraining};
+    pub use crate::synthesis::{SynthesisOptions, synthesize};
     pub use crate::train::{GeneratorTrainer, GeneratorTraining, TrainingData, Windows};
     pub use zoo_motion::rng::SplitMix64;
     pub use zoo_nn::LstmState;

@@ -262,6 +262,25 @@ fn adversarial_rounds_run_with_finite_losses_and_resume_exactly() {
     assert!(moved > 0.0 && moved.is_finite(), "{moved}");
     let err = zoo_rnngmm::refiner::load(&gen_dir, &Device::Cpu).unwrap_err().to_string();
     assert!(err.contains("generator run"), "{err}");
+    // Synthesis continues a clip where it stands, seeded, with and without the refiner.
+    let clip = &clips(7)[6];
+    let o = SynthesisOptions { frames: 40, init_steps: 10, seed_frames: 3, ..SynthesisOptions::default() };
+    let s1 = synthesize(&model.generator, Some(&model.nets), clip, 10, &o).unwrap();
+    let s2 = synthesize(&model.generator, Some(&model.nets), clip, 10, &o).unwrap();
+    let raw = synthesize(&model.generator, None, clip, 10, &o).unwrap();
+    let other =
+        synthesize(&model.generator, Some(&model.nets), clip, 10, &SynthesisOptions { seed: 2, ..o.clone() }).unwrap();
+    assert_eq!(s1.features, s2.features);
+    assert_ne!(s1.features, raw.features);
+    assert_ne!(s1.features, other.features);
+    assert_eq!((s1.motion.clip.frames(), s1.motion.contacts.len()), (40, 40));
+    assert!(s1.seed_nll.1 <= s1.seed_nll.0, "{:?}", s1.seed_nll);
+    let (start, first) = (clip.root_position(10), s1.motion.clip.root_position(0));
+    let hop = ((start.x - first.x).powi(2) + (start.z - first.z).powi(2)).sqrt();
+    assert!(hop < 60.0, "the first generated frame is {hop} cm from the seed frame");
+    assert!(s1.motion.clip.global().1.iter().all(|p| p.is_finite()));
+    let err = synthesize(&model.generator, None, clip, 1, &o).unwrap_err().to_string();
+    assert!(err.contains("seed frames"), "{err}");
 }
 
 #[test]
