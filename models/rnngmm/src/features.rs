@@ -277,9 +277,12 @@ impl FeatureSpec {
             ));
         }
         let c = &self.contact;
-        if !(self.fps > 0.0 && c.height > 0.0 && c.lock_speed >= 0.0 && c.swing_speed > c.lock_speed)
-            || !(0.0..=100.0).contains(&c.ground_percentile)
-        {
+        let sane = self.fps > 0.0
+            && c.height > 0.0
+            && c.lock_speed >= 0.0
+            && c.swing_speed > c.lock_speed
+            && (0.0..=100.0).contains(&c.ground_percentile);
+        if !sane {
             return bad(format!(
                 "fps ({}) and contact height ({}) must be positive, 0 <= lock_speed ({}) < swing_speed ({}), \
                  ground_percentile ({}) in [0, 100]",
