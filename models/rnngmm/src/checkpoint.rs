@@ -1,0 +1,97 @@
+//! RNN-GMM checkpoint folders: `config.json`, `model.safetensors`, `features.json` (the
+//! [`FeatureSpec`]: skeleton, frame rate, reference rotations, feet), `normalization.json`, and
+//! for training `optimizer.safetensors` and `rng.json` (file names and atomic writes from
+//! [`zoo_nn::checkpoint`]).
+
+use crate::config::Config;
+use crate::error::{RnnGmmError, RnnGmmResult};
+use crate::features::{FeatureSpec, Normalization};
+use crate::model::Generator;
+use candle_core::{DType, Device};
+use candle_nn::{VarBuilder, VarMap};
+use std::path::Path;
+use zoo_nn::checkpoint as ck;
+
+pub use zoo_nn::checkpoint::{CONFIG_FILE, OPTIMIZER_FILE, RNG_FILE, STATS_FILE, WEIGHTS_FILE};
+
+/// The feature definition of a run folder.
+pub const FEATURES_FILE: &str = "features.json";
+
+/// Writes a checkpoint folder atomically (created if missing): weights (refused when one holds
+/// NaN/inf), feature definition, statistics, then the configuration.
+pub fn save(
+    dir: &Path,
+    config: &Config,
+    varmap: &VarMap,
+    spec: &FeatureSpec,
+    norm: &Normalization,
+) -> RnnGmmResult<()> {
+    std::fs::create_dir_all(dir).map_err(ck::io(dir))?;
+    let weights = ck::stage_varmap(&dir.join(WEIGHTS_FILE), varmap)?;
+    let features = ck::stage_json(&dir.join(FEATURES_FILE), spec)?;
+    let stats = ck::stage_json(&dir.join(STATS_FILE), norm)?;
+    let cfg = ck::stage_json(&dir.join(CONFIG_FILE), config)?;
+    ck::commit([weights, features, stats, cfg])?;
+    Ok(())
+}
+
+/// Reads the configuration, feature definition and statistics of a checkpoint folder, and
+/// checks that they agree.
+pub fn read_meta(dir: &Path) -> RnnGmmResult<(Config, FeatureSpec, Normalization)> {
+    let config_path = dir.join(CONFIG_FILE);
+    let value: serde_json::Value = ck::read_json(&config_path)?;
+    if let Some(model) = value.get("model").and_then(|m| m.as_str()).filter(|m| *m != "rnn-gmm") {
+        return Err(RnnGmmError::Config(format!(
+            "{} is a `{model}` checkpoint, not an `rnn-gmm` one",
+            config_path.display()
+        )));
+    }
+    let config: Config = serde_json::from_value(value)
+        .map_err(|e| RnnGmmError::Config(format!("{}: not an RNN-GMM configuration: {e}", config_path.display())))?;
+    let spec_path = dir.join(FEATURES_FILE);
+    let spec: FeatureSpec = ck::read_json(&spec_path)?;
+    spec.validate().map_err(|e| RnnGmmError::Config(format!("{}: {e}", spec_path.display())))?;
+    let norm: Normalization = ck::read_json(&dir.join(STATS_FILE))?;
+    check_agree(&config, &spec, &norm)?;
+    Ok((config, spec, norm))
+}
+
+/// Checks that the configuration, the feature and the statistics have the same frame size.
+pub fn check_agree(config: &Config, spec: &FeatureSpec, norm: &Normalization) -> RnnGmmResult<()> {
+    if config.dim != spec.dim() || norm.dim() != spec.dim() || norm.std.len() != spec.dim() {
+        return Err(RnnGmmError::Config(format!(
+            "the configuration has D = {}, the feature of {} joints D = {}, the statistics {} means and {} stds",
+            config.dim,
+            spec.skeleton.len(),
+            spec.dim(),
+            norm.mean.len(),
+            norm.std.len()
+        )));
+    }
+    Ok(())
+}
+
+/// Fills the variables of `varmap` from the folder's weights (every variable must be present).
+pub fn load_weights(dir: &Path, varmap: &VarMap) -> RnnGmmResult<()> {
+    Ok(ck::read_varmap(&dir.join(WEIGHTS_FILE), varmap)?)
+}
+
+/// A trained generator with its feature definition and statistics.
+#[derive(Clone, Debug)]
+pub struct LoadedGenerator {
+    /// The generator (its configuration: [`Generator::config`]).
+    pub generator: Generator,
+    /// The state feature.
+    pub spec: FeatureSpec,
+    /// The normalisation statistics.
+    pub norm: Normalization,
+}
+
+/// Loads a generator for inference from a checkpoint folder.
+pub fn load(dir: &Path, device: &Device) -> RnnGmmResult<LoadedGenerator> {
+    let (config, spec, norm) = read_meta(dir)?;
+    let varmap = VarMap::new();
+    let generator = Generator::new(&config, VarBuilder::from_varmap(&varmap, DType::F32, device))?;
+    load_weights(dir, &varmap)?;
+    Ok(LoadedGenerator { generator, spec, norm })
+}

@@ -1,0 +1,685 @@
+//! The refiner R and the discriminator D (sec. 4.2.1, eq. 9-13) and their adversarial training
+//! (sec. 4.2.2): warm-up, several refiner updates per discriminator update adapted to the
+//! discriminator's loss, a history buffer of refined motions, and discriminator-collapse
+//! detection. [`AdversarialTraining`] plugs it into the shared training loop.
+//!
+//! - Refiner (eq. 11): `R(x) = W2 lstm(relu(W1 [x; p_end(x); v_end(x)] + b1)) + b2 + x` on
+//!   normalised features; `W2, b2` start at zero, so R starts as the identity.
+//! - Discriminator (eq. 12): `D(x) = W2 bilstm(relu(W1 [p_end(x); v_end(x); c(x)] + b1)) + b2`,
+//!   one logit per frame (`c`: the contact values); a window's loss is the mean over its frames.
+//! - Losses: refiner `-log D(R(x)) + lambda |root(x) - root(R(x))|^2` (eq. 13, the root values
+//!   `dtx, dtz, dry, ty` normalised, squared error summed over them and averaged over frames);
+//!   discriminator `-log(1 - D(R(x))) - log D(x_real)` (eq. 10); `-log sigma(l)` is computed as
+//!   `softplus(-l)`.
+//! - End-effector features ([`crate::fk`]) are normalised with statistics of the real training
+//!   windows ([`EffectorNorm`], saved as `effectors.json`).
+
+use crate::checkpoint as rck;
+use crate::config::{Config, RefinerConfig};
+use crate::error::{RnnGmmError, RnnGmmResult};
+use crate::features::{FeatureSpec, Normalization};
+use crate::fk::{TensorFk, end_effectors};
+use crate::model::Generator;
+use crate::train::Windows;
+use candle_core::{D, DType, Device, Module, Result, Tensor, Var};
+use candle_nn::{Init, Linear, Optimizer, VarBuilder, VarMap};
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+use std::path::Path;
+use zoo_motion::rng::SplitMix64;
+use zoo_nn::checkpoint as ck;
+use zoo_nn::optim::{ParamsRmsProp, RmsProp, StatefulOptimizer, clip_grad_value};
+use zoo_nn::train_loop::{Trainable, Validation};
+use zoo_nn::{BiLstm, Lstm, SeededVarMap, TrainError};
+
+/// The refiner's weights.
+pub const REFINER_FILE: &str = "refiner.safetensors";
+/// The discriminator's weights.
+pub const DISCRIMINATOR_FILE: &str = "discriminator.safetensors";
+/// The end-effector statistics.
+pub const EFFECTORS_FILE: &str = "effectors.json";
+/// The refiner's optimiser state.
+pub const REFINER_OPTIMIZER_FILE: &str = "refiner_optimizer.safetensors";
+/// The discriminator's optimiser state.
+pub const DISCRIMINATOR_OPTIMIZER_FILE: &str = "discriminator_optimizer.safetensors";
+/// The history buffer of refined motions.
+pub const HISTORY_FILE: &str = "history.safetensors";
+/// Counters and the generator state of adversarial training.
+pub const ADVERSARIAL_FILE: &str = "adversarial.json";
+
+/// Root values of the self-regularisation term: `dtx, dtz, dry, ty`.
+const ROOT_REG_DIMS: usize = 4;
+
+/// End effectors and the mean / std of their features `[p_end; v_end]` (`6 E` values).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EffectorNorm {
+    /// Joint index of each end effector.
+    pub effectors: Vec<usize>,
+    /// Mean of each feature.
+    pub mean: Vec<f32>,
+    /// Standard deviation of each feature (1 where it does not vary).
+    pub std: Vec<f32>,
+}
+
+impl EffectorNorm {
+    /// Fits the statistics on every frame of `windows`.
+    pub fn fit(fk: &TensorFk, effectors: &[usize], windows: &Windows, device: &Device) -> RnnGmmResult<Self> {
+        let n = 6 * effectors.len();
+        let (mut sum, mut sq, mut count) = (vec![0f64; n], vec![0f64; n], 0usize);
+        for start in (0..windows.len()).step_by(64) {
+            let k = (windows.len() - start).min(64);
+            let data = &windows.data[start * windows.window * windows.dim..(start + k) * windows.window * windows.dim];
+            let x = Tensor::from_slice(data, (k, windows.window, windows.dim), device)?;
+            let f = fk.effector_features(&x)?.reshape((k * windows.window, n))?.to_vec2::<f32>()?;
+            for row in f {
+                for (i, v) in row.iter().enumerate() {
+                    sum[i] += *v as f64;
+                    sq[i] += (*v as f64).powi(2);
+                }
+                count += 1;
+            }
+        }
+        if count == 0 {
+            return Err(RnnGmmError::Config("no real windows to fit the end-effector statistics on".into()));
+        }
+        let mean: Vec<f64> = sum.iter().map(|s| s / count as f64).collect();
+        let std = sq
+            .iter()
+            .zip(&mean)
+            .map(|(q, m)| {
+                let s = (q / count as f64 - m * m).max(0.0).sqrt();
+                if s < Normalization::MIN_STD { 1.0 } else { s as f32 }
+            })
+            .collect();
+        Ok(EffectorNorm { effectors: effectors.to_vec(), mean: mean.iter().map(|&m| m as f32).collect(), std })
+    }
+}
+
+/// `log(1 + e^x)`, stable for large `|x|`.
+fn softplus(x: &Tensor) -> Result<Tensor> {
+    x.relu()? + (x.abs()?.neg()?.exp()? + 1.0)?.log()?
+}
+
+fn zero_linear(input: usize, output: usize, vb: VarBuilder) -> Result<Linear> {
+    let w = vb.get_with_hints((output, input), "weight", Init::Const(0.0))?;
+    let b = vb.get_with_hints(output, "bias", Init::Const(0.0))?;
+    Ok(Linear::new(w, Some(b)))
+}
+
+/// The refiner and the discriminator with the end-effector computation they share.
+#[derive(Clone, Debug)]
+pub struct RefinerNets {
+    fk: TensorFk,
+    eff_mean: Tensor,
+    eff_std: Tensor,
+    r_fc1: Linear,
+    r_lstm: Lstm,
+    r_fc2: Linear,
+    d_fc1: Linear,
+    d_bilstm: BiLstm,
+    d_fc2: Linear,
+    contact: usize,
+}
+
+impl RefinerNets {
+    /// Builds (or loads) the refiner from `rvb` (`fc1`, `lstm`, `fc2`) and the discriminator from
+    /// `dvb` (`fc1`, `bilstm`, `fc2`).
+    pub fn new(
+        config: &Config,
+        spec: &FeatureSpec,
+        norm: &Normalization,
+        eff: &EffectorNorm,
+        rvb: VarBuilder,
+        dvb: VarBuilder,
+    ) -> RnnGmmResult<Self> {
+        let c = &config.refiner;
+        let device = rvb.device().clone();
+        let fk = TensorFk::new(spec, norm, &eff.effectors, &device)?;
+        let e = 6 * eff.effectors.len();
+        if eff.mean.len() != e || eff.std.len() != e {
+            return Err(RnnGmmError::Config(format!(
+                "end-effector statistics of {} / {} values for {} effectors (6 values each)",
+                eff.mean.len(),
+                eff.std.len(),
+                eff.effectors.len()
+            )));
+        }
+        let d = config.dim;
+        Ok(RefinerNets {
+            eff_mean: Tensor::from_slice(&eff.mean, e, &device)?,
+            eff_std: Tensor::from_slice(&eff.std, e, &device)?,
+            r_fc1: candle_nn::linear(d + e, c.refiner_fc, rvb.pp("fc1"))?,
+            r_lstm: Lstm::new(c.refiner_fc, c.refiner_lstm, 1, 0.0, rvb.pp("lstm"))?,
+            r_fc2: zero_linear(c.refiner_lstm, d, rvb.pp("fc2"))?,
+            d_fc1: candle_nn::linear(e + 2, c.discriminator_fc, dvb.pp("fc1"))?,
+            d_bilstm: BiLstm::new(c.discriminator_fc, c.discriminator_lstm, 1, 0.0, dvb.pp("bilstm"))?,
+            d_fc2: candle_nn::linear(2 * c.discriminator_lstm, 1, dvb.pp("fc2"))?,
+            contact: spec.contact_index(),
+            fk,
+        })
+    }
+
+    /// Normalised `[p_end; v_end]` of normalised features `(batch, time, D)`: `(batch, time, 6 E)`.
+    pub fn effector_input(&self, x: &Tensor) -> Result<Tensor> {
+        self.fk.effector_features(x)?.broadcast_sub(&self.eff_mean)?.broadcast_div(&self.eff_std)
+    }
+
+    /// `R(x)` (eq. 11), normalised features in and out, `(batch, time, D)`.
+    pub fn refine(&self, x: &Tensor) -> Result<Tensor> {
+        let e = self.effector_input(x)?.detach();
+        let h = self.r_fc1.forward(&Tensor::cat(&[x, &e], 2)?)?.relu()?;
+        let (h, _) = self.r_lstm.forward_seq(&h, &self.r_lstm.zero_state(x.dim(0)?)?, None)?;
+        self.r_fc2.forward(&h)? + x
+    }
+
+    /// Discriminator logits (eq. 12), one per frame: `(batch, time)`.
+    pub fn logits(&self, x: &Tensor) -> Result<Tensor> {
+        let input = Tensor::cat(&[&self.effector_input(x)?, &x.narrow(2, self.contact, 2)?], 2)?;
+        let h = self.d_fc1.forward(&input)?.relu()?;
+        self.d_fc2.forward(&self.d_bilstm.forward(&h, None)?)?.squeeze(D::Minus1)
+    }
+
+    /// The refiner's loss (eq. 13) on fake windows `x`, and its two terms (adversarial,
+    /// regularisation) as numbers.
+    pub fn refiner_loss(&self, x: &Tensor, lambda: f64) -> Result<(Tensor, f64, f64)> {
+        let r = self.refine(x)?;
+        let adv = softplus(&self.logits(&r)?.neg()?)?.mean_all()?;
+        let reg = (r.narrow(2, 0, ROOT_REG_DIMS)? - x.narrow(2, 0, ROOT_REG_DIMS)?)?.sqr()?.sum(2)?.mean_all()?;
+        let (a, g) = (adv.to_scalar::<f32>()? as f64, reg.to_scalar::<f32>()? as f64);
+        Ok(((adv + (reg * lambda)?)?, a, g))
+    }
+
+    /// The discriminator's loss (eq. 10) on real and refined windows.
+    pub fn discriminator_loss(&self, real: &Tensor, refined: &Tensor) -> Result<Tensor> {
+        softplus(&self.logits(real)?.neg()?)?.mean_all()? + softplus(&self.logits(refined)?)?.mean_all()?
+    }
+}
+
+/// A trained generator and refiner for inference, from a run folder of the refiner stage.
+#[derive(Clone, Debug)]
+pub struct LoadedModel {
+    /// The generator with its feature and statistics.
+    pub generator: rck::LoadedGenerator,
+    /// The refiner and the discriminator.
+    pub nets: RefinerNets,
+    /// The end-effector statistics.
+    pub effectors: EffectorNorm,
+}
+
+/// Loads the generator, the refiner and the discriminator of a run folder written by
+/// [`AdversarialTrainer::save`]. A folder of the generator stage only (no `refiner.safetensors`)
+/// is refused with a message saying so.
+pub fn load(dir: &Path, device: &Device) -> RnnGmmResult<LoadedModel> {
+    let generator = rck::load(dir, device)?;
+    if !dir.join(REFINER_FILE).is_file() {
+        return Err(RnnGmmError::Config(format!(
+            "{} holds no {REFINER_FILE}: it is a generator run; train the refiner stage on it first (or generate \
+             without the refiner)",
+            dir.display()
+        )));
+    }
+    let config = generator.generator.config().clone();
+    let effectors: EffectorNorm = ck::read_json(&dir.join(EFFECTORS_FILE))?;
+    let (r_varmap, d_varmap) = (VarMap::new(), VarMap::new());
+    let nets = RefinerNets::new(
+        &config,
+        &generator.spec,
+        &generator.norm,
+        &effectors,
+        VarBuilder::from_varmap(&r_varmap, DType::F32, device),
+        VarBuilder::from_varmap(&d_varmap, DType::F32, device),
+    )?;
+    ck::read_varmap(&dir.join(REFINER_FILE), &r_varmap)?;
+    ck::read_varmap(&dir.join(DISCRIMINATOR_FILE), &d_varmap)?;
+    Ok(LoadedModel { generator, nets, effectors })
+}
+
+/// Counters and generator state of an adversarial run (`adversarial.json`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+struct AdversarialState {
+    rng: u64,
+    refiner_updates: usize,
+    collapse_count: usize,
+    warmed_up: bool,
+    rounds: u64,
+    last_discriminator_loss: Option<f64>,
+}
+
+/// Trains the refiner and the discriminator against a frozen generator.
+pub struct AdversarialTrainer {
+    config: Config,
+    spec: FeatureSpec,
+    norm: Normalization,
+    eff: EffectorNorm,
+    gen_varmap: VarMap,
+    r_varmap: VarMap,
+    d_varmap: VarMap,
+    nets: RefinerNets,
+    opt_r: RmsProp,
+    opt_d: RmsProp,
+    r_vars: Vec<Var>,
+    d_vars: Vec<Var>,
+    /// `x_RNN`: windows sampled from the generator (normalised).
+    fakes: Windows,
+    /// Fixed fakes for validation.
+    valid_fakes: Windows,
+    /// Refined windows of earlier refiners, `history * window * D`.
+    history: Vec<f32>,
+    rng: SplitMix64,
+    k: usize,
+    collapse_count: usize,
+    warmed_up: bool,
+    rounds: u64,
+    last_d: Option<f64>,
+    device: Device,
+}
+
+fn sorted_vars(varmap: &VarMap) -> Vec<(String, Var)> {
+    let mut named: Vec<(String, Var)> =
+        varmap.data().lock().expect("varmap lock").iter().map(|(n, v)| (n.clone(), v.clone())).collect();
+    named.sort_by(|a, b| a.0.cmp(&b.0));
+    named
+}
+
+/// Samples `count` fake windows from the generator, each seeded with the first frames of a real
+/// window (cycling through `real`).
+fn sample_fakes(
+    generator: &Generator,
+    real: &Windows,
+    count: usize,
+    c: &RefinerConfig,
+    rng: &mut SplitMix64,
+) -> RnnGmmResult<Windows> {
+    let (w, d) = (real.window, real.dim);
+    let seed_len = c.seed_frames.clamp(1, w);
+    let mut data = Vec::with_capacity(count * w * d);
+    for start in (0..count).step_by(64) {
+        let n = (count - start).min(64);
+        let mut seeds = Vec::with_capacity(n * seed_len * d);
+        for i in start..start + n {
+            seeds.extend_from_slice(&real.get(i % real.len())[..seed_len * d]);
+        }
+        data.extend(generator.sample_batch(&seeds, n, seed_len, w, rng, c.temperature)?);
+    }
+    Ok(Windows { window: w, dim: d, data })
+}
+
+impl AdversarialTrainer {
+    /// A trainer for the generator in run folder `generator_dir`: samples its fake windows
+    /// (seeded from `train` and `valid`), fits the end-effector statistics on `train`, builds the
+    /// refiner (near the identity) and the discriminator, and fills the history buffer with the
+    /// initial refiner's output. `config.refiner` replaces the folder's refiner settings.
+    pub fn new(
+        generator_dir: &Path,
+        refiner: &RefinerConfig,
+        train: &Windows,
+        valid: &Windows,
+        device: &Device,
+    ) -> RnnGmmResult<Self> {
+        let (mut config, spec, norm) = rck::read_meta(generator_dir)?;
+        config.refiner = refiner.clone();
+        config.validate()?;
+        let gen_varmap = VarMap::new();
+        let generator = Generator::new(&config, VarBuilder::from_varmap(&gen_varmap, DType::F32, device))?;
+        rck::load_weights(generator_dir, &gen_varmap)?;
+        for (what, w) in [("training", train), ("validation", valid)] {
+            if w.is_empty() || w.dim != config.dim || w.window < 2 {
+                return Err(RnnGmmError::Config(format!(
+                    "{what} windows: {} windows of {} frames of {} values; adversarial training needs at least one \
+                     of at least 2 frames of {}",
+                    w.len(),
+                    w.window,
+                    w.dim,
+                    config.dim
+                )));
+            }
+        }
+        let c = &config.refiner;
+        let mut rng = SplitMix64::new(c.seed);
+        let fakes = sample_fakes(&generator, train, c.fake_windows, c, &mut rng)?;
+        let valid_fakes = sample_fakes(&generator, valid, valid.len().clamp(1, c.batch.max(8)), c, &mut rng)?;
+        let effectors = end_effectors(&spec);
+        let fk = TensorFk::new(&spec, &norm, &effectors, device)?;
+        let eff = EffectorNorm::fit(&fk, &effectors, train, device)?;
+        Self::build(config, spec, norm, eff, gen_varmap, fakes, valid_fakes, rng, device)
+    }
+
+    fn build(
+        config: Config,
+        spec: FeatureSpec,
+        norm: Normalization,
+        eff: EffectorNorm,
+        gen_varmap: VarMap,
+        fakes: Windows,
+        valid_fakes: Windows,
+        rng: SplitMix64,
+        device: &Device,
+    ) -> RnnGmmResult<Self> {
+        let c = &config.refiner;
+        let (r_varmap, d_varmap) = (VarMap::new(), VarMap::new());
+        let rvb = SeededVarMap::builder(&r_varmap, c.seed, DType::F32, device);
+        let dvb = SeededVarMap::builder(&d_varmap, c.seed ^ 0xd15c, DType::F32, device);
+        let nets = RefinerNets::new(&config, &spec, &norm, &eff, rvb, dvb)?;
+        let (r_named, d_named) = (sorted_vars(&r_varmap), sorted_vars(&d_varmap));
+        let r_vars = r_named.iter().map(|(_, v)| v.clone()).collect();
+        let d_vars = d_named.iter().map(|(_, v)| v.clone()).collect();
+        let params = |lr: f64| ParamsRmsProp { lr, rho: c.rho, eps: 1e-8, lr_decay: 1.0 };
+        let opt_r = RmsProp::new_named(r_named, params(c.refiner_lr))?;
+        let opt_d = RmsProp::new_named(d_named, params(c.discriminator_lr))?;
+        let mut t = AdversarialTrainer {
+            k: c.refiner_updates,
+            config,
+            spec,
+            norm,
+            eff,
+            gen_varmap,
+            r_varmap,
+            d_varmap,
+            nets,
+            opt_r,
+            opt_d,
+            r_vars,
+            d_vars,
+            fakes,
+            valid_fakes,
+            history: Vec::new(),
+            rng,
+            collapse_count: 0,
+            warmed_up: false,
+            rounds: 0,
+            last_d: None,
+            device: device.clone(),
+        };
+        // "We generate B fake data in the very beginning": the initial refiner's output.
+        let hist: Vec<usize> = (0..t.config.refiner.history).collect();
+        t.history = t.refine_windows(&hist)?.flatten_all()?.to_vec1::<f32>()?;
+        Ok(t)
+    }
+
+    /// The configuration (with the refiner settings in use).
+    pub fn config(&self) -> &Config {
+        &self.config
+    }
+
+    /// The refiner and the discriminator.
+    pub fn nets(&self) -> &RefinerNets {
+        &self.nets
+    }
+
+    /// Refiner updates per discriminator update now.
+    pub fn refiner_updates(&self) -> usize {
+        self.k
+    }
+
+    /// The last discriminator loss.
+    pub fn last_discriminator_loss(&self) -> Option<f64> {
+        self.last_d
+    }
+
+    /// Fake windows `(batch, window, D)` by index into the fake pool.
+    fn fake_tensor(&self, idx: &[usize]) -> Result<Tensor> {
+        let mut data = Vec::with_capacity(idx.len() * self.fakes.window * self.fakes.dim);
+        for &i in idx {
+            data.extend_from_slice(self.fakes.get(i));
+        }
+        Tensor::from_vec(data, (idx.len(), self.fakes.window, self.fakes.dim), &self.device)
+    }
+
+    fn refine_windows(&self, idx: &[usize]) -> Result<Tensor> {
+        Ok(self.nets.refine(&self.fake_tensor(idx)?)?.detach())
+    }
+
+    fn draw(&mut self, n: usize, below: usize) -> Vec<usize> {
+        (0..n).map(|_| self.rng.below(below as u64) as usize).collect()
+    }
+
+    fn check(value: f64, what: &str, step: u64) -> RnnGmmResult<f64> {
+        if value.is_finite() {
+            Ok(value)
+        } else {
+            Err(RnnGmmError::Config(format!(
+                "the {what} loss became {value} at step {step}; the update was not applied"
+            )))
+        }
+    }
+
+    /// One refiner update on a batch of fakes; returns its loss.
+    pub fn refiner_update(&mut self) -> RnnGmmResult<f64> {
+        let c = self.config.refiner.clone();
+        let idx = self.draw(c.batch, self.fakes.len());
+        let x = self.fake_tensor(&idx)?;
+        let (loss, _, _) = self.nets.refiner_loss(&x, c.lambda)?;
+        let value = Self::check(loss.to_scalar::<f32>()? as f64, "refiner", self.opt_r.steps())?;
+        let mut grads = loss.backward()?;
+        clip_grad_value(&mut grads, &self.r_vars, c.clip)?;
+        self.opt_r.step(&grads)?;
+        Ok(value)
+    }
+
+    /// One discriminator update: real windows against half fresh refined windows and half from
+    /// the history buffer, whose entries are then partly replaced by the fresh ones. Returns its
+    /// loss.
+    pub fn discriminator_update(&mut self, real: &Tensor) -> RnnGmmResult<f64> {
+        let c = self.config.refiner.clone();
+        let half = (c.batch / 2).max(1);
+        let fresh_idx = self.draw(half, self.fakes.len());
+        let fresh = self.refine_windows(&fresh_idx)?;
+        let n = self.fakes.window * self.fakes.dim;
+        let slots = self.draw(half, c.history);
+        let mut old = Vec::with_capacity(half * n);
+        for &s in &slots {
+            old.extend_from_slice(&self.history[s * n..(s + 1) * n]);
+        }
+        let old = Tensor::from_vec(old, (half, self.fakes.window, self.fakes.dim), &self.device)?;
+        let refined = Tensor::cat(&[&fresh, &old], 0)?;
+        let loss = self.nets.discriminator_loss(real, &refined)?;
+        let value = Self::check(loss.to_scalar::<f32>()? as f64, "discriminator", self.opt_d.steps())?;
+        let mut grads = loss.backward()?;
+        clip_grad_value(&mut grads, &self.d_vars, c.clip)?;
+        self.opt_d.step(&grads)?;
+        let fresh = fresh.flatten_all()?.to_vec1::<f32>()?;
+        let replace = self.draw(half, c.history);
+        for (k, &s) in replace.iter().enumerate() {
+            self.history[s * n..(s + 1) * n].copy_from_slice(&fresh[k * n..(k + 1) * n]);
+        }
+        Ok(value)
+    }
+
+    fn real_tensor(&self, windows: &Windows, idx: &[usize]) -> Result<Tensor> {
+        let mut data = Vec::with_capacity(idx.len() * windows.window * windows.dim);
+        for &i in idx {
+            data.extend_from_slice(windows.get(i));
+        }
+        Tensor::from_vec(data, (idx.len(), windows.window, windows.dim), &self.device)
+    }
+
+    /// One round (sec. 4.2.2): the warm-up first if it has not run (75 refiner and 75
+    /// discriminator updates), then `k` refiner updates and one discriminator update on the real
+    /// windows `real_idx` of `real`; `k` doubles when the discriminator's loss is below
+    /// `low_loss` and halves above `high_loss`. Returns the refiner's mean loss of the round.
+    ///
+    /// Discriminator collapse (see [`RefinerConfig::collapse_loss`]) returns
+    /// [`RnnGmmError::Diverged`].
+    pub fn round(&mut self, real: &Windows, real_idx: &[usize]) -> RnnGmmResult<f64> {
+        let c = self.config.refiner.clone();
+        if !self.warmed_up {
+            for _ in 0..c.warmup_refiner {
+                self.refiner_update()?;
+            }
+            for _ in 0..c.warmup_discriminator {
+                let idx = self.draw(c.batch, real.len());
+                let x = self.real_tensor(real, &idx)?;
+                self.discriminator_update(&x)?;
+            }
+            self.warmed_up = true;
+        }
+        let mut sum = 0.0;
+        for _ in 0..self.k {
+            sum += self.refiner_update()?;
+        }
+        let loss = sum / self.k as f64;
+        let x = self.real_tensor(real, real_idx)?;
+        let d = self.discriminator_update(&x)?;
+        self.last_d = Some(d);
+        self.rounds += 1;
+        let at_max = self.k >= c.max_refiner_updates;
+        if d < c.low_loss {
+            self.k = (2 * self.k).min(c.max_refiner_updates);
+        } else if d > c.high_loss {
+            self.k = (self.k / 2).max(1);
+        }
+        self.collapse_count = if d < c.collapse_loss && at_max { self.collapse_count + 1 } else { 0 };
+        if self.collapse_count >= c.collapse_rounds {
+            return Err(RnnGmmError::Diverged(format!(
+                "discriminator collapse: its loss stayed below {} for {} rounds (last {d:.3e}) with {} refiner \
+                 updates per round, so the refiner no longer learns; lower discriminator_lr or raise lambda",
+                c.collapse_loss, self.collapse_count, self.k
+            )));
+        }
+        Ok(loss)
+    }
+
+    /// Mean refiner loss (eq. 13) on the fixed validation fakes, without updating anything.
+    pub fn validation_loss(&self) -> RnnGmmResult<f64> {
+        let n = self.valid_fakes.len();
+        let x = Tensor::from_slice(
+            &self.valid_fakes.data,
+            (n, self.valid_fakes.window, self.valid_fakes.dim),
+            &self.device,
+        )?;
+        let (loss, _, _) = self.nets.refiner_loss(&x, self.config.refiner.lambda)?;
+        Ok(loss.to_scalar::<f32>()? as f64)
+    }
+
+    /// Writes the generator's checkpoint files with this configuration, the refiner's and the
+    /// discriminator's weights and the end-effector statistics.
+    pub fn save(&self, dir: &Path) -> RnnGmmResult<()> {
+        std::fs::create_dir_all(dir).map_err(ck::io(dir))?;
+        let r = ck::stage_varmap(&dir.join(REFINER_FILE), &self.r_varmap)?;
+        let d = ck::stage_varmap(&dir.join(DISCRIMINATOR_FILE), &self.d_varmap)?;
+        let e = ck::stage_json(&dir.join(EFFECTORS_FILE), &self.eff)?;
+        ck::commit([r, d, e])?;
+        rck::save(dir, &self.config, &self.gen_varmap, &self.spec, &self.norm)
+    }
+
+    /// Writes both optimisers, the history buffer and the counters.
+    pub fn save_training_state(&self, dir: &Path) -> RnnGmmResult<()> {
+        ck::write_tensors(&dir.join(REFINER_OPTIMIZER_FILE), &self.opt_r.state()?)?;
+        ck::write_tensors(&dir.join(DISCRIMINATOR_OPTIMIZER_FILE), &self.opt_d.state()?)?;
+        let n = self.history.len() / (self.fakes.window * self.fakes.dim);
+        let hist = Tensor::from_slice(&self.history, (n, self.fakes.window, self.fakes.dim), &Device::Cpu)?;
+        ck::write_tensors(&dir.join(HISTORY_FILE), &HashMap::from([("history".to_string(), hist)]))?;
+        let state = AdversarialState {
+            rng: self.rng.state(),
+            refiner_updates: self.k,
+            collapse_count: self.collapse_count,
+            warmed_up: self.warmed_up,
+            rounds: self.rounds,
+            last_discriminator_loss: self.last_d,
+        };
+        Ok(ck::write_json(&dir.join(ADVERSARIAL_FILE), &state)?)
+    }
+
+    /// Restores the weights and the training state written by [`AdversarialTrainer::save`] and
+    /// [`AdversarialTrainer::save_training_state`].
+    pub fn load_training_state(&mut self, dir: &Path) -> RnnGmmResult<()> {
+        ck::read_varmap(&dir.join(REFINER_FILE), &self.r_varmap)?;
+        ck::read_varmap(&dir.join(DISCRIMINATOR_FILE), &self.d_varmap)?;
+        for (file, opt) in [(REFINER_OPTIMIZER_FILE, &mut self.opt_r), (DISCRIMINATOR_OPTIMIZER_FILE, &mut self.opt_d)]
+        {
+            let path = dir.join(file);
+            opt.set_state(&ck::read_tensors(&path, &self.device)?)
+                .map_err(|e| RnnGmmError::Config(format!("{}: {e}", path.display())))?;
+        }
+        let path = dir.join(HISTORY_FILE);
+        let hist = ck::read_tensors(&path, &Device::Cpu)?;
+        let history = hist
+            .get("history")
+            .map(|t| t.flatten_all().and_then(|t| t.to_vec1::<f32>()))
+            .transpose()?
+            .filter(|h| h.len() == self.history.len())
+            .ok_or_else(|| {
+                RnnGmmError::Config(format!(
+                    "{}: no `history` tensor of {} values (another history size?)",
+                    path.display(),
+                    self.history.len()
+                ))
+            })?;
+        self.history = history;
+        let s: AdversarialState = ck::read_json(&dir.join(ADVERSARIAL_FILE))?;
+        self.rng = SplitMix64::from_state(s.rng);
+        self.k = s.refiner_updates.clamp(1, self.config.refiner.max_refiner_updates);
+        self.collapse_count = s.collapse_count;
+        self.warmed_up = s.warmed_up;
+        self.rounds = s.rounds;
+        self.last_d = s.last_discriminator_loss;
+        Ok(())
+    }
+}
+
+/// An [`AdversarialTrainer`] with its real windows, for the shared training loop: each
+/// `train_step` is one round ([`AdversarialTrainer::round`]) whose discriminator sees the batch's
+/// real windows; the tracked loss is the refiner's; validation is the refiner's loss on fixed
+/// generator samples; both optimisers, the history buffer and the counters are saved.
+pub struct AdversarialTraining<'a> {
+    trainer: AdversarialTrainer,
+    real: &'a Windows,
+}
+
+impl<'a> AdversarialTraining<'a> {
+    /// Trains on the real windows `real` (those the trainer was built with).
+    pub fn new(trainer: AdversarialTrainer, real: &'a Windows) -> Self {
+        AdversarialTraining { trainer, real }
+    }
+
+    /// The trainer.
+    pub fn trainer(&self) -> &AdversarialTrainer {
+        &self.trainer
+    }
+}
+
+impl Trainable for AdversarialTraining<'_> {
+    fn train_len(&self) -> usize {
+        self.real.len()
+    }
+
+    fn batch_size(&self) -> usize {
+        self.trainer.config.refiner.batch
+    }
+
+    fn train_step(&mut self, samples: &[usize]) -> std::result::Result<f64, TrainError> {
+        Ok(self.trainer.round(self.real, samples)?)
+    }
+
+    fn steps(&self) -> u64 {
+        self.trainer.opt_r.steps()
+    }
+
+    fn validate(&mut self) -> std::result::Result<Validation, TrainError> {
+        Ok(Validation { loss: self.trainer.validation_loss()?, averaged: None })
+    }
+
+    fn save_model(&mut self, dir: &Path, _averaged: bool) -> std::result::Result<(), TrainError> {
+        Ok(self.trainer.save(dir)?)
+    }
+
+    fn save_training_state(&self, dir: &Path) -> std::result::Result<(), TrainError> {
+        Ok(self.trainer.save_training_state(dir)?)
+    }
+
+    fn load_training_state(&mut self, dir: &Path) -> std::result::Result<(), TrainError> {
+        Ok(self.trainer.load_training_state(dir)?)
+    }
+
+    fn summary(&self) -> serde_json::Map<String, serde_json::Value> {
+        let t = &self.trainer;
+        let mut m = serde_json::Map::new();
+        m.insert("model".into(), "rnn-gmm".into());
+        m.insert("stage".into(), "refiner".into());
+        m.insert("refiner_updates_per_round".into(), serde_json::json!(t.k));
+        m.insert("rounds".into(), serde_json::json!(t.rounds));
+        m.insert("discriminator_updates".into(), serde_json::json!(t.opt_d.steps()));
+        m.insert("last_discriminator_loss".into(), serde_json::json!(t.last_d));
+        m
+    }
+}
