@@ -27,9 +27,16 @@ pub fn distance_bounded(a: &[f32], b: &[f32], bound: f32) -> Option<f32> {
     let mut acc = [0.0f32; LANES];
     let total = |acc: &[f32; LANES]| acc.iter().fold(0.0f32, |s, v| s + v);
     for (ab, bb) in a.chunks(BLOCK).zip(b.chunks(BLOCK)) {
-        for (i, (x, y)) in ab.iter().zip(bb).enumerate() {
+        let (mut xa, mut xb) = (ab.chunks_exact(LANES), bb.chunks_exact(LANES));
+        for (x, y) in (&mut xa).zip(&mut xb) {
+            for l in 0..LANES {
+                let d = x[l] - y[l];
+                acc[l] += d * d;
+            }
+        }
+        for (l, (x, y)) in xa.remainder().iter().zip(xb.remainder()).enumerate() {
             let d = x - y;
-            acc[i % LANES] += d * d;
+            acc[l] += d * d;
         }
         if total(&acc) > bound {
             return None;
