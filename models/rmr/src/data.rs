@@ -11,7 +11,7 @@ use crate::error::RmrResult;
 use crate::features::{FeatureLayout, FeatureStats, PairFeatures, encode_clip};
 use rayon::prelude::*;
 use std::time::Instant;
-use zoo_data::stitch::{MotionSet, PairConfig, PairSpec, StitchDatabases, build_pair, plan_pairs};
+use zoo_data::stitch::{MotionSet, PairConfig, PairPlan, PairSpec, StitchDatabases, build_pair, plan_pairs};
 use zoo_motion::Clip;
 
 /// Encoded pairs ready for training, with what made them.
@@ -29,9 +29,9 @@ pub struct RmrData {
     pub train_specs: Vec<PairSpec>,
     /// Plans of the validation pairs.
     pub valid_specs: Vec<PairSpec>,
-    /// Segments in the databases.
+    /// Segments in the databases (0 when every plan came from the cache).
     pub database_segments: usize,
-    /// Seconds spent building the databases.
+    /// Seconds spent building the databases (0 when every plan came from the cache).
     pub database_seconds: f64,
 }
 
@@ -49,6 +49,23 @@ pub fn make_pairs(config: &Config, train: Vec<Clip>, valid: Vec<Clip>) -> RmrRes
 /// Builds the databases on `train`, plans and encodes the training and validation pairs, and
 /// fits the statistics.
 pub fn make_pairs_from_sets(config: &Config, train: MotionSet, valid: MotionSet) -> RmrResult<RmrData> {
+    make_pairs_cached(config, train, valid, None)
+}
+
+/// Training plan file in a cache folder.
+pub const TRAIN_PLAN_FILE: &str = "pairs_train.json";
+/// Validation plan file in a cache folder.
+pub const VALID_PLAN_FILE: &str = "pairs_valid.json";
+
+/// [`make_pairs_from_sets`], reusing the planned pairs saved in `cache` ([`TRAIN_PLAN_FILE`],
+/// [`VALID_PLAN_FILE`]) when they were made from the same clips and configuration, and saving
+/// them there otherwise (the databases are then built only when a plan is missing).
+pub fn make_pairs_cached(
+    config: &Config,
+    train: MotionSet,
+    valid: MotionSet,
+    cache: Option<&std::path::Path>,
+) -> RmrResult<RmrData> {
     config.validate()?;
     config.check_skeleton(&train.clips[0].skeleton)?;
     train.check_compatible(&valid)?;
@@ -60,13 +77,28 @@ pub fn make_pairs_from_sets(config: &Config, train: MotionSet, valid: MotionSet)
     let valid = MotionSet { layout, ..valid };
 
     let pc = &config.pairs;
-    let t0 = Instant::now();
-    let dbs = StitchDatabases::build(&train, &pc.segment_lengths(), pc.database_stride)?;
-    let database_seconds = t0.elapsed().as_secs_f64();
     let train_cfg = PairConfig { exclude_same_clip: true, ..pc.clone() };
     let valid_cfg = PairConfig { exclude_same_clip: false, seed: pc.seed ^ 0x7a11d, ..pc.clone() };
-    let train_specs = plan_pairs(&train, &train, &dbs, &train_cfg)?;
-    let valid_specs = plan_pairs(&valid, &train, &dbs, &valid_cfg)?;
+    let mut dbs: Option<StitchDatabases> = None;
+    let mut database_seconds = 0.0;
+    let mut plan = |gt: &MotionSet, cfg: &PairConfig, file: &str| -> RmrResult<Vec<PairSpec>> {
+        let mut run = || {
+            if dbs.is_none() {
+                let t0 = Instant::now();
+                dbs = Some(StitchDatabases::build(&train, &pc.segment_lengths(), pc.database_stride)?);
+                database_seconds = t0.elapsed().as_secs_f64();
+            }
+            plan_pairs(gt, &train, dbs.as_ref().expect("built above"), cfg)
+        };
+        Ok(match cache {
+            Some(dir) => PairPlan::load_or_plan(&dir.join(file), cfg, gt, &train, run)?.0,
+            None => run()?,
+        })
+    };
+    let train_specs = plan(&train, &train_cfg, TRAIN_PLAN_FILE)?;
+    let valid_specs = plan(&valid, &valid_cfg, VALID_PLAN_FILE)?;
+    drop(plan);
+    let database_segments = dbs.as_ref().map_or(0, StitchDatabases::total_segments);
     let train_raw = encode_specs(&train_specs, &train, &train, &train_cfg)?;
     let valid_raw = encode_specs(&valid_specs, &valid, &train, &valid_cfg)?;
     let fl = FeatureLayout::new(config.joints, config.layout.lower_body.len());
@@ -78,7 +110,7 @@ pub fn make_pairs_from_sets(config: &Config, train: MotionSet, valid: MotionSet)
         stats,
         train_specs,
         valid_specs,
-        database_segments: dbs.total_segments(),
+        database_segments,
         database_seconds,
     })
 }

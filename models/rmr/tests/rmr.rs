@@ -290,3 +290,27 @@ fn bad_input_gets_a_clear_error() {
     assert!(err.contains("joint 15: expected `Foot_L`, found `LeftFoot`"), "{err}");
     let _ = (GroundRoot::IDENTITY, DVec3::ZERO);
 }
+
+#[test]
+fn planned_pairs_are_cached_in_the_run_folder() {
+    let clips = synth_clips(0.6, 6);
+    let config = Config::tiny();
+    let sets = || {
+        let layout = config.layout.clone();
+        (
+            zoo_data::stitch::MotionSet::new(clips[..4].to_vec(), vec![], layout.clone()).unwrap(),
+            zoo_data::stitch::MotionSet::new(clips[4..].to_vec(), vec![], layout).unwrap(),
+        )
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let (t, v) = sets();
+    let first = zoo_rmr::data::make_pairs_cached(&config, t, v, Some(dir.path())).unwrap();
+    assert!(first.database_segments > 0);
+    assert!(dir.path().join(zoo_rmr::data::TRAIN_PLAN_FILE).is_file());
+    let (t, v) = sets();
+    let second = zoo_rmr::data::make_pairs_cached(&config, t, v, Some(dir.path())).unwrap();
+    assert_eq!(second.database_segments, 0, "both plans came from the cache: no database was built");
+    assert_eq!(first.train, second.train);
+    assert_eq!(first.valid, second.valid);
+    assert_eq!(first.stats, second.stats);
+}
