@@ -7,10 +7,11 @@
 //! ```
 //! Defaults: `../shared/data/bandai2`, `*_youthful_*` (the fixed bandai2 split), stride 1.
 
+use rayon::prelude::*;
 use std::path::PathBuf;
 use std::time::Instant;
 use zoo_data::dataset;
-use zoo_data::stitch::{MotionSet, PairConfig, StitchDatabases, StitchLayout, plan_pairs};
+use zoo_data::stitch::{MotionSet, PairConfig, StitchDatabases, StitchLayout, build_pair, plan_pairs};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
@@ -52,6 +53,33 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let plan_s = t3.elapsed().as_secs_f64();
     let mean_k: f64 = specs.iter().map(|s| s.c.k as f64).sum::<f64>() / specs.len() as f64;
 
+    // What the seams look like: foot (ankle and toe) displacement across each seam in the input
+    // X and in the ground truth Y, and the mean foot position gap between X and Y.
+    let feet = set.layout.contacts;
+    let (jx, jy, gap, n_seams) = specs
+        .par_iter()
+        .map(|spec| {
+            let pair = build_pair(spec, &set, &set, &cfg).expect("planned pairs build");
+            let ((_, gx), (_, gy)) = (pair.input.global(), pair.target.global());
+            let j = pair.input.joints();
+            let (mut jx, mut jy, mut gap) = (0.0, 0.0, 0.0);
+            for &s in &pair.seams {
+                for &f in &feet {
+                    jx += (gx[s * j + f] - gx[(s - 1) * j + f]).length();
+                    jy += (gy[s * j + f] - gy[(s - 1) * j + f]).length();
+                }
+            }
+            for t in spec.lengths[0]..cfg.window {
+                for &f in &feet {
+                    gap += (gx[t * j + f] - gy[t * j + f]).length();
+                }
+            }
+            let retrieved = (cfg.window - spec.lengths[0]) as f64;
+            (jx, jy, gap / retrieved, pair.seams.len())
+        })
+        .reduce(|| (0.0, 0.0, 0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2, a.3 + b.3));
+    let per_seam = |v: f64| v / (n_seams * feet.len()) as f64;
+
     println!(
         "data: {} ({} training clips, {} frames; {} validation clips)",
         data.display(),
@@ -75,5 +103,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     println!("planned {} training pairs (exact k-th neighbour searches) in {plan_s:.2} s", specs.len());
     println!("mean k of segment C: {mean_k:.2}");
+    println!(
+        "seams: {n_seams}; foot displacement across a seam: input {:.2} cm, ground truth {:.2} cm; \
+         mean foot gap input-truth over B and C: {:.2} cm",
+        per_seam(jx),
+        per_seam(jy),
+        gap / (specs.len() * feet.len()) as f64
+    );
     Ok(())
 }

@@ -419,6 +419,7 @@ mod tests {
             let db = dbs.get(length).unwrap();
             let mut q = vec![0.0f32; db.dim];
             set.segment_feature(spec.clip, spec.start + 60 - length, length, &mut q);
+            let q = db.permute(&q);
             let all = super::super::knn::k_nearest_brute_force(&db.features, db.dim, &q, usize::MAX, |i| {
                 db.segments[i].clip as usize == spec.clip
             });

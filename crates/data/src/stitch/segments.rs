@@ -6,8 +6,9 @@
 //! `u` is the root trajectory (ground position x, z and forward direction x, z of every frame,
 //! in the same frame), with `w_1 = 0.1`, `w_L = 1`, `w_u = 1`. The weights are applied when the
 //! feature is stored, so the distance is the plain Euclidean one. Values are stored in the
-//! order `[w_L j_L (3J), w_u u (4L), w_1 j_1 (3J)]`, most telling first, so that the search can
-//! stop summing a candidate early; the distance does not depend on the order.
+//! order `[w_L j_L (3J), w_u u (4L), w_1 j_1 (3J)]`; a database stores its rows permuted by
+//! decreasing variance so that the search can stop summing a candidate early (the distance does
+//! not depend on the order).
 
 use super::layout::{GroundRoot, StitchLayout};
 use super::{StitchError, knn};
@@ -146,14 +147,21 @@ pub struct SegmentRef {
 }
 
 /// Every segment of one length (starts every `stride` frames of every clip) and its feature.
+///
+/// Rows are stored with their values permuted by decreasing variance over the database
+/// ([`SegmentDatabase::order`]), so that the early-terminating search sums the most telling
+/// values first; a query goes through [`SegmentDatabase::permute`] (done by
+/// [`SegmentDatabase::nearest`]). Distances do not depend on the order.
 #[derive(Clone, Debug)]
 pub struct SegmentDatabase {
     /// Frames per segment.
     pub length: usize,
     /// Values per feature.
     pub dim: usize,
-    /// Features, one row of `dim` values per segment.
+    /// Features, one row of `dim` values per segment, permuted by `order`.
     pub features: Vec<f32>,
+    /// Stored value `i` of a row is value `order[i]` of [`MotionSet::segment_feature`].
+    pub order: Vec<usize>,
     /// Source of each row.
     pub segments: Vec<SegmentRef>,
 }
@@ -174,7 +182,29 @@ impl SegmentDatabase {
         features.par_chunks_mut(dim).zip(segments.par_iter()).for_each(|(row, s)| {
             set.segment_feature(s.clip as usize, s.start as usize, length, row);
         });
-        SegmentDatabase { length, dim, features, segments }
+        let n = segments.len().max(1) as f64;
+        let (mut sum, mut sq) = (vec![0.0f64; dim], vec![0.0f64; dim]);
+        for row in features.chunks_exact(dim) {
+            for (i, &v) in row.iter().enumerate() {
+                sum[i] += v as f64;
+                sq[i] += (v as f64) * (v as f64);
+            }
+        }
+        let var: Vec<f64> = sum.iter().zip(&sq).map(|(s, q)| q / n - (s / n) * (s / n)).collect();
+        let mut order: Vec<usize> = (0..dim).collect();
+        order.sort_by(|&a, &b| var[b].total_cmp(&var[a]).then(a.cmp(&b)));
+        features.par_chunks_mut(dim).for_each(|row| {
+            let orig = row.to_vec();
+            for (dst, &src) in row.iter_mut().zip(&order) {
+                *dst = orig[src];
+            }
+        });
+        SegmentDatabase { length, dim, features, order, segments }
+    }
+
+    /// A feature of [`MotionSet::segment_feature`]'s layout in the stored order.
+    pub fn permute(&self, feature: &[f32]) -> Vec<f32> {
+        self.order.iter().map(|&i| feature[i]).collect()
     }
 
     /// Number of segments.
@@ -187,16 +217,16 @@ impl SegmentDatabase {
         self.segments.is_empty()
     }
 
-    /// Feature row `i`.
+    /// Feature row `i` (in the stored order).
     pub fn feature(&self, i: usize) -> &[f32] {
         &self.features[i * self.dim..(i + 1) * self.dim]
     }
 
-    /// The `k` nearest segments to `query` (exact; ascending distance, ties by index),
-    /// skipping segments of clip `exclude_clip`.
+    /// The `k` nearest segments to `query` (a feature in [`MotionSet::segment_feature`]'s
+    /// layout; exact; ascending distance, ties by index), skipping segments of clip `exclude_clip`.
     pub fn nearest(&self, query: &[f32], k: usize, exclude_clip: Option<usize>) -> Vec<knn::Neighbour> {
         let skip = |i: usize| exclude_clip.is_some_and(|c| self.segments[i].clip as usize == c);
-        knn::k_nearest(&self.features, self.dim, query, k, skip)
+        knn::k_nearest(&self.features, self.dim, &self.permute(query), k, skip)
     }
 }
 
@@ -310,6 +340,13 @@ mod tests {
         assert_eq!(dbs.get(10).unwrap().len(), 10);
         assert_eq!(dbs.get(20).unwrap().len(), 3);
         assert!(dbs.get(30).unwrap_err().to_string().contains("[10, 20]"));
+        let db = dbs.get(10).unwrap();
+        let mut m = vec![0.0f32; set.feature_dim(10)];
+        set.segment_feature(0, 4, 10, &mut m);
+        assert_eq!(db.feature(2), db.permute(&m).as_slice(), "row 2 is clip 0 from frame 4, permuted");
+        let mut sorted = db.order.clone();
+        sorted.sort_unstable();
+        assert_eq!(sorted, (0..db.dim).collect::<Vec<_>>());
         assert!(StitchDatabases::build(&set, &[30], 1).unwrap_err().to_string().contains("longest has 25"));
         let mut other = clip.clone();
         other.frame_time = 1.0 / 60.0;
