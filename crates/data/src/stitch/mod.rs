@@ -7,6 +7,7 @@
 //!   `{0.1 * first pose, 1.0 * last pose, 1.0 * root trajectory}`;
 //! - [`knn`]: exact k-th nearest neighbour search over a database (brute force with early
 //!   termination, ties broken by index);
+//! - [`align`]: the runtime's alignment of whole clips end to start (sec. 6);
 //! - [`cache`]: planned pairs saved as JSON and reused for the same clips and configuration;
 //! - [`pairs`]: ground-truth windows, random segment lengths, retrieval of B and C, alignment,
 //!   and the input clip `X` beside the ground truth `Y`.
@@ -15,12 +16,14 @@
 //! runs the searches and returns small [`pairs::PairSpec`]s (serde), and [`pairs::build_pair`]
 //! turns one spec into its two clips in microseconds.
 
+pub mod align;
 pub mod cache;
 pub mod knn;
 pub mod layout;
 pub mod pairs;
 pub mod segments;
 
+pub use align::{AlignedClips, MIN_CLIP_FRAMES, align_clips};
 pub use cache::{PairPlan, SetFingerprint};
 pub use layout::{GroundRoot, StitchLayout, ground_roots};
 pub use pairs::{PairConfig, PairSpec, Retrieved, StitchPair, build_pair, make_pairs, plan_pairs};
