@@ -71,6 +71,10 @@ impl Default for TrainConfig {
     }
 }
 
+fn default_fps() -> f64 {
+    30.0
+}
+
 /// The RMR's configuration.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Config {
@@ -84,6 +88,9 @@ pub struct Config {
     pub parents: Vec<i32>,
     /// Lower body, contact joints and thresholds, planted heights, forward axis.
     pub layout: StitchLayout,
+    /// Frames per second of the training clips (clips to stitch must have it).
+    #[serde(default = "default_fps")]
+    pub fps: f64,
     /// Hidden sizes of the encoder E (paper: 256, 256; ReLU after each).
     pub encoder: Vec<usize>,
     /// Units of each recurrent layer (per direction; paper: 256).
@@ -133,6 +140,7 @@ impl Config {
             names: skeleton.names.clone(),
             parents: skeleton.parents_i32(),
             layout,
+            fps: 30.0,
             encoder: vec![256, 256],
             hidden: 256,
             layers: 2,

@@ -73,6 +73,7 @@ pub fn make_pairs_cached(
         train.layout.clone().with_planted_heights(train.global_positions.iter().map(Vec::as_slice), train.joints());
     let mut config = config.clone();
     config.layout = layout.clone();
+    config.fps = train.fps;
     let train = MotionSet { layout: layout.clone(), ..train };
     let valid = MotionSet { layout, ..valid };
 

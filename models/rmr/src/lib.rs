@@ -28,6 +28,7 @@ pub mod export;
 pub mod features;
 pub mod loss;
 pub mod model;
+pub mod stitch;
 pub mod train;
 
 pub use config::{Config, ModelName, RefinerCell, TrainConfig};

@@ -314,3 +314,44 @@ fn planned_pairs_are_cached_in_the_run_folder() {
     assert_eq!(first.valid, second.valid);
     assert_eq!(first.stats, second.stats);
 }
+
+#[test]
+fn stitching_slides_windows_over_aligned_clips() {
+    use zoo_rmr::stitch::{RefineOptions, refine_sequence, stitch_clips, window_starts};
+    assert_eq!(window_starts(100, 30, 15), vec![0, 15, 30, 45, 60, 70]);
+    assert_eq!(window_starts(60, 60, 30), vec![0]);
+    assert!(window_starts(20, 30, 15).is_empty());
+    let config = Config::tiny();
+    let (model, _) = build(&config);
+    let d = config.dim();
+    let stats = FeatureStats { mean: vec![0.0; d], std: vec![1.0; d] };
+    let clips = synth_clips(0.3, 8);
+    let parts = [clips[0].slice(0, 40), clips[1].slice(30, 70), clips[2].slice(5, 30)];
+    let opts = RefineOptions { window: 30, stride: 15, blend_frames: 10 };
+    let s = stitch_clips(&model, &stats, &parts, opts).unwrap();
+    assert_eq!(s.starts, vec![0, 40, 80]);
+    assert_eq!(s.output.frames(), 105);
+    assert_eq!(s.contacts.len(), 105);
+    assert!(s.output.local_rotations.iter().all(|q| (q.length() - 1.0).abs() < 1e-6));
+    // The blend: with a window starting at frame 15, the output at frame 15 is the previous
+    // window's output there (the whole offset), whatever the model says.
+    let x = encode_clip(&s.input, &config.layout).unwrap();
+    let y = refine_sequence(&model, &stats, &x, RefineOptions { window: 30, stride: 15, blend_frames: 10 }).unwrap();
+    let first_only =
+        refine_sequence(&model, &stats, &x[..30 * d], RefineOptions { window: 30, stride: 30, blend_frames: 10 })
+            .unwrap();
+    let pose = FeatureLayout::new(config.joints, 9).contacts();
+    for i in 0..pose {
+        assert!((y[15 * d + i] - first_only[15 * d + i]).abs() < 1e-4, "value {i}");
+    }
+    // Bad input.
+    let long = RefineOptions { window: 200, stride: 100, blend_frames: 10 };
+    let err = stitch_clips(&model, &stats, &parts, long).unwrap_err().to_string();
+    assert!(err.contains("longer than the sequence (105 frames)"), "{err}");
+    let err = stitch_clips(&model, &stats, &[parts[0].clone(), parts[1].slice(0, 8)], opts).unwrap_err().to_string();
+    assert!(err.contains("8 frames") && err.contains("at least 10"), "{err}");
+    let mut fast = parts[1].clone();
+    fast.frame_time = 1.0 / 60.0;
+    let err = stitch_clips(&model, &stats, &[parts[0].clone(), fast], opts).unwrap_err().to_string();
+    assert!(err.contains("60 fps") && err.contains("trained at 30 fps"), "{err}");
+}
