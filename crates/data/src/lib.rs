@@ -7,5 +7,6 @@ pub mod dataset;
 pub mod metrics;
 pub mod plausibility;
 pub mod position_method;
+pub mod stitch;
 pub mod synth;
 pub mod terrain;

@@ -1,0 +1,189 @@
+//! Export of a trained RMR to ONNX: the refiner over one window (RMR sec. 5, Figure 5), beside
+//! the candle forward pass of [`crate::model`] (same equations), written with `zoo-export`.
+//!
+//! Graph (layout 0, time-major like ONNX's recurrent ops; `frames` and `batch` symbolic):
+//!
+//! | input | output |
+//! |---|---|
+//! | `x`: normalised pose vectors `[frames, batch, dim]` | `y`: refined normalised pose vectors `[frames, batch, dim]` (contacts as logits) |
+//!
+//! Encoder and decoder are `MatMul` + `Add` (+ `LeakyRelu` with slope 0, i.e. ReLU) with the
+//! candle weights transposed by a `Transpose` node, so initializers keep the candle paths
+//! (`encoder.0.weight`, ...). Each recurrent layer is one ONNX `LSTM` or `GRU` node
+//! (`bidirectional` for BLSTM/BGRU, `linear_before_reset = 1` for the GRU), gates reordered from
+//! candle's order (LSTM i,f,g,o -> i,o,f,c; GRU r,z,n -> z,r,h); a bidirectional layer's
+//! `Y [frames, 2, batch, H]` becomes `[frames, batch, 2H]` (forward then backward, as candle
+//! concatenates) by `Transpose` + `Reshape`.
+//!
+//! Metadata (`metadata_props`): `zoo.model_kind` = `rmr`, `zoo.rmr.format_version`,
+//! `zoo.rmr.config` (the run's `config.json`), `zoo.rmr.normalization` (mean and std).
+//! The runtime's typed stitching task section is not written yet (the runtime owns the format).
+
+use crate::config::{Config, RefinerCell};
+use crate::features::FeatureStats;
+use candle_nn::VarMap;
+use std::collections::HashMap;
+use std::path::Path;
+use zoo_export::{
+    Dim, ExportError, GRU_TORCH_TO_ONNX, GraphBuilder, LSTM_TORCH_TO_ONNX, OnnxModel, RnnDirection, RnnInputs, Value,
+    reorder_gates,
+};
+
+/// `zoo.model_kind` of an exported RMR.
+pub const MODEL_KIND: &str = "rmr";
+/// Version of the RMR metadata written here.
+pub const FORMAT_VERSION: u32 = 1;
+/// Metadata key of the configuration JSON.
+pub const CONFIG_KEY: &str = "zoo.rmr.config";
+/// Metadata key of the normalisation statistics JSON.
+pub const NORMALIZATION_KEY: &str = "zoo.rmr.normalization";
+
+fn model_err(message: impl Into<String>) -> ExportError {
+    ExportError::Model(message.into())
+}
+
+/// Loads a `zoo train rmr` run folder and exports it (see [`export_rmr`]).
+pub fn export_rmr_dir(dir: &Path) -> Result<OnnxModel, ExportError> {
+    let (config, stats) =
+        crate::checkpoint::read_meta(dir).map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
+    let varmap = VarMap::new();
+    let vb = candle_nn::VarBuilder::from_varmap(&varmap, candle_core::DType::F32, &candle_core::Device::Cpu);
+    crate::Rmr::new(&config, vb).map_err(|e| model_err(format!("building the RMR of {}: {e}", dir.display())))?;
+    crate::checkpoint::load_weights(dir, &varmap).map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
+    export_rmr(&config, &stats, &varmap)
+}
+
+/// Weights by candle variable path, row-major f32 with their shapes.
+struct Weights(HashMap<String, (Vec<usize>, Vec<f32>)>);
+
+impl Weights {
+    fn from_varmap(varmap: &VarMap) -> Result<Self, ExportError> {
+        let data = varmap.data().lock().map_err(|_| model_err("the VarMap lock is poisoned"))?;
+        let mut out = HashMap::new();
+        for (name, var) in data.iter() {
+            let t = var.as_tensor();
+            let values = t
+                .to_dtype(candle_core::DType::F32)
+                .and_then(|t| t.flatten_all())
+                .and_then(|t| t.to_vec1::<f32>())
+                .map_err(|e| model_err(format!("reading weight `{name}`: {e}")))?;
+            if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+                return Err(model_err(format!("weight `{name}` holds {} at index {i}", values[i])));
+            }
+            out.insert(name.clone(), (t.dims().to_vec(), values));
+        }
+        Ok(Weights(out))
+    }
+
+    fn get(&self, name: &str) -> Result<&(Vec<usize>, Vec<f32>), ExportError> {
+        self.0.get(name).ok_or_else(|| model_err(format!("the checkpoint has no weight `{name}`")))
+    }
+}
+
+/// An MLP over the last axis: `h = relu(h W^T + b)` per layer, the last one linear unless
+/// `activate_last`.
+fn mlp(
+    g: &mut GraphBuilder,
+    w: &Weights,
+    prefix: &str,
+    layers: usize,
+    x: &Value,
+    activate_last: bool,
+) -> Result<Value, ExportError> {
+    let mut h = x.clone();
+    for i in 0..layers {
+        let p = format!("{prefix}.{i}");
+        let (dims, data) = w.get(&format!("{p}.weight"))?;
+        let wt = g.initializer_f32(&format!("{p}.weight"), dims, data);
+        let (bd, bias) = w.get(&format!("{p}.bias"))?;
+        let b = g.initializer_f32(&format!("{p}.bias"), bd, bias);
+        let wt = g.transpose(&format!("{p}.weight_t"), &wt, &[1, 0]);
+        h = g.matmul(&format!("{p}.matmul"), &h, &wt);
+        h = g.add(&format!("{p}.add"), &h, &b);
+        if i + 1 < layers || activate_last {
+            h = g.leaky_relu(&format!("{p}.relu"), &h, 0.0);
+        }
+    }
+    Ok(h)
+}
+
+/// Stacks the candle weights of one layer's directions in ONNX gate order:
+/// `W [dirs, G*H, in]`, `R [dirs, G*H, H]`, `B [dirs, 2*G*H]`.
+fn rnn_weights(
+    g: &mut GraphBuilder,
+    w: &Weights,
+    layer: usize,
+    dirs: usize,
+    hidden: usize,
+    order: &[usize],
+) -> Result<(Value, Value, Value), ExportError> {
+    let gates = order.len();
+    let (mut wd, mut rd, mut bd) = (Vec::new(), Vec::new(), Vec::new());
+    let mut input = 0;
+    for d in 0..dirs {
+        let suffix = if d == 0 { format!("l{layer}") } else { format!("l{layer}_reverse") };
+        let (wdims, wih) = w.get(&format!("refiner.weight_ih_{suffix}"))?;
+        let (_, whh) = w.get(&format!("refiner.weight_hh_{suffix}"))?;
+        let (_, bih) = w.get(&format!("refiner.bias_ih_{suffix}"))?;
+        let (_, bhh) = w.get(&format!("refiner.bias_hh_{suffix}"))?;
+        if wdims.first() != Some(&(gates * hidden)) {
+            return Err(model_err(format!(
+                "refiner.weight_ih_{suffix} has shape {wdims:?}, expected [{}, in]",
+                gates * hidden
+            )));
+        }
+        input = wdims[1];
+        wd.extend(reorder_gates(wih, hidden, input, order));
+        rd.extend(reorder_gates(whh, hidden, hidden, order));
+        bd.extend(reorder_gates(bih, hidden, 1, order));
+        bd.extend(reorder_gates(bhh, hidden, 1, order));
+    }
+    let name = format!("refiner.l{layer}");
+    Ok((
+        g.initializer_f32(&format!("{name}.W"), &[dirs, gates * hidden, input], &wd),
+        g.initializer_f32(&format!("{name}.R"), &[dirs, gates * hidden, hidden], &rd),
+        g.initializer_f32(&format!("{name}.B"), &[dirs, 2 * gates * hidden], &bd),
+    ))
+}
+
+/// Exports the refiner of `config` with the weights in `varmap` (as built by [`crate::Rmr::new`]).
+pub fn export_rmr(config: &Config, stats: &FeatureStats, varmap: &VarMap) -> Result<OnnxModel, ExportError> {
+    config.validate().map_err(|e| model_err(e.to_string()))?;
+    let d = config.dim();
+    if stats.dim() != d {
+        return Err(model_err(format!("statistics have {} values per frame, the model {d}", stats.dim())));
+    }
+    let w = Weights::from_varmap(varmap)?;
+    let mut g = GraphBuilder::new("rmr_refiner");
+    g.doc("Recurrent Motion Refiner (Kim et al. 2023): refines one window of normalised pose vectors.");
+    let dims = [Dim::Symbol("frames".into()), Dim::batch(), Dim::Fixed(d)];
+    let x = g.input("x", &dims);
+    let mut h = mlp(&mut g, &w, "encoder", config.encoder.len(), &x, true)?;
+    let (lstm, direction) = match config.cell {
+        RefinerCell::Lstm => (true, RnnDirection::Forward),
+        RefinerCell::Gru => (false, RnnDirection::Forward),
+        RefinerCell::Blstm => (true, RnnDirection::Bidirectional),
+        RefinerCell::Bgru => (false, RnnDirection::Bidirectional),
+    };
+    let dirs = direction.num_directions();
+    let hid = config.hidden;
+    for layer in 0..config.layers {
+        let order: &[usize] = if lstm { &LSTM_TORCH_TO_ONNX } else { &GRU_TORCH_TO_ONNX };
+        let (wv, rv, bv) = rnn_weights(&mut g, &w, layer, dirs, hid, order)?;
+        let rnn = RnnInputs { x: &h, w: &wv, r: &rv, b: Some(&bv), initial_h: None, hidden_size: hid, direction };
+        let name = format!("refiner.l{layer}");
+        let out = if lstm { g.lstm(&name, &rnn, None) } else { g.gru(&name, &rnn, true) };
+        // Y [frames, dirs, batch, H] -> [frames, batch, dirs * H]
+        let y = g.transpose(&format!("{name}.y_t"), &out.y, &[0, 2, 1, 3]);
+        h = g.reshape(&format!("{name}.y_cat"), &y, &[0, 0, (dirs * hid) as i64]);
+    }
+    let y = mlp(&mut g, &w, "decoder", config.decoder.len() + 1, &h, false)?;
+    g.output("y", &y, &dims);
+    let config_json = serde_json::to_string(config).map_err(|e| model_err(format!("configuration to JSON: {e}")))?;
+    let stats_json = serde_json::to_string(stats).map_err(|e| model_err(format!("statistics to JSON: {e}")))?;
+    g.metadata("zoo.model_kind", MODEL_KIND)
+        .metadata("zoo.rmr.format_version", &FORMAT_VERSION.to_string())
+        .metadata(CONFIG_KEY, &config_json)
+        .metadata(NORMALIZATION_KEY, &stats_json);
+    g.finish()
+}

@@ -1,0 +1,123 @@
+//! The network of RMR sec. 5 (Figure 5): encoder E (fully connected, ReLU), recurrent refiner R
+//! (two layers; the cell is the Table 1 switch), decoder D (fully connected, ReLU, last layer
+//! linear). Sequences are batch-first `(batch, frames, dim)` in normalised units.
+
+use crate::config::{Config, RefinerCell};
+use crate::error::{RmrError, RmrResult};
+use candle_core::{Device, Module, Tensor};
+use candle_nn::VarBuilder;
+use zoo_nn::rng::SplitMix64;
+use zoo_nn::{Activation, BiGru, BiLstm, Gru, Lstm, Mlp};
+
+/// The recurrent refiner R.
+#[derive(Clone, Debug)]
+pub enum Refiner {
+    /// Unidirectional LSTM from a zero state.
+    Lstm(Lstm),
+    /// Unidirectional GRU from a zero state.
+    Gru(Gru),
+    /// Bidirectional LSTM.
+    Blstm(BiLstm),
+    /// Bidirectional GRU (the paper's).
+    Bgru(BiGru),
+}
+
+impl Refiner {
+    fn new(config: &Config, vb: VarBuilder) -> candle_core::Result<Refiner> {
+        let (i, h, l, p) = (*config.encoder.last().unwrap_or(&0), config.hidden, config.layers, config.dropout);
+        Ok(match config.cell {
+            RefinerCell::Lstm => Refiner::Lstm(Lstm::new(i, h, l, p, vb)?),
+            RefinerCell::Gru => Refiner::Gru(Gru::new(i, h, l, p, vb)?),
+            RefinerCell::Blstm => Refiner::Blstm(BiLstm::new(i, h, l, p, vb)?),
+            RefinerCell::Bgru => Refiner::Bgru(BiGru::new(i, h, l, p, vb)?),
+        })
+    }
+
+    /// `(batch, frames, in)` -> `(batch, frames, H)` or `(batch, frames, 2H)` (bidirectional:
+    /// forward then backward hidden state of the last layer, concatenated).
+    pub fn forward(&self, xs: &Tensor, rng: Option<&mut SplitMix64>) -> candle_core::Result<Tensor> {
+        let batch = xs.dim(0)?;
+        match self {
+            Refiner::Lstm(r) => Ok(r.forward_seq(xs, &r.zero_state(batch)?, rng)?.0),
+            Refiner::Gru(r) => Ok(r.forward_seq(xs, &r.zero_state(batch)?, rng)?.0),
+            Refiner::Blstm(r) => r.forward(xs, rng),
+            Refiner::Bgru(r) => r.forward(xs, rng),
+        }
+    }
+}
+
+/// The Recurrent Motion Refiner. Weights: `encoder.{0,1}`, `refiner.weight_ih_l0...`,
+/// `decoder.{0,1}`.
+#[derive(Clone, Debug)]
+pub struct Rmr {
+    config: Config,
+    encoder: Mlp,
+    refiner: Refiner,
+    decoder: Mlp,
+    device: Device,
+}
+
+impl Rmr {
+    /// Builds (or loads, depending on `vb`) the model.
+    pub fn new(config: &Config, vb: VarBuilder) -> RmrResult<Rmr> {
+        config.validate()?;
+        let d = config.dim();
+        let encoder = Mlp::new(d, &config.encoder, Activation::Relu, true, vb.pp("encoder"))?;
+        let refiner = Refiner::new(config, vb.pp("refiner"))?;
+        let width = if config.cell.bidirectional() { 2 * config.hidden } else { config.hidden };
+        let mut widths = config.decoder.clone();
+        widths.push(d);
+        let decoder = Mlp::new(width, &widths, Activation::Relu, false, vb.pp("decoder"))?;
+        Ok(Rmr { config: config.clone(), encoder, refiner, decoder, device: vb.device().clone() })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &Config {
+        &self.config
+    }
+
+    /// The device of the weights.
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// The refiner.
+    pub fn refiner(&self) -> &Refiner {
+        &self.refiner
+    }
+
+    /// Refines normalised sequences `(batch, frames, dim)` into `(batch, frames, dim)` (the
+    /// contact values are logits). Dropout is drawn from `rng` when it is `Some` (training).
+    pub fn forward(&self, xs: &Tensor, rng: Option<&mut SplitMix64>) -> RmrResult<Tensor> {
+        let d = self.config.dim();
+        let dims = xs.dims();
+        if dims.len() != 3 || dims[2] != d || dims[1] == 0 {
+            return Err(RmrError::Config(format!(
+                "the refiner takes (batch, frames >= 1, {d}) pose vectors, got shape {dims:?}"
+            )));
+        }
+        let h = self.encoder.forward(xs)?;
+        let h = self.refiner.forward(&h, rng)?;
+        Ok(self.decoder.forward(&h)?)
+    }
+
+    /// Refines one sequence of normalised pose vectors (`frames * dim`), evaluation mode.
+    pub fn refine(&self, x: &[f32]) -> RmrResult<Vec<f32>> {
+        let d = self.config.dim();
+        if x.is_empty() || !x.len().is_multiple_of(d) {
+            return Err(RmrError::Size {
+                what: "window".into(),
+                expected: d,
+                detail: format!("a positive multiple of the pose vector size {d}"),
+                found: x.len(),
+            });
+        }
+        let xs = Tensor::from_slice(x, (1, x.len() / d, d), &self.device)?;
+        Ok(self.forward(&xs, None)?.flatten_all()?.to_vec1()?)
+    }
+}
+
+/// Number of scalar parameters in `varmap`.
+pub fn parameter_count(varmap: &candle_nn::VarMap) -> usize {
+    varmap.all_vars().iter().map(|v| v.elem_count()).sum()
+}

@@ -1,0 +1,147 @@
+//! Stitching with a trained RMR (sec. 6): align the clips end to start, slide a window of `w`
+//! frames by `s` frames over the aligned sequence, refine each window with the model (its
+//! input holds the frames earlier windows already refined), and blend the difference between
+//! the previous output and each new window's first pose away over `blend_frames` frames.
+//!
+//! The blend is a linear decay of the offset in pose-vector space (RMR sec. 6 cites
+//! inertialization; the offset here is the small one the beginning loss leaves, and the
+//! pose vector is decoded afterwards, renormalising the quaternions). The foot lock by the
+//! predicted contacts is not applied yet.
+
+use crate::config::Config;
+use crate::error::{RmrError, RmrResult};
+use crate::features::{FeatureLayout, FeatureStats, decode, encode_clip};
+use crate::model::Rmr;
+use zoo_data::stitch::{MIN_CLIP_FRAMES, align_clips, ground_roots};
+use zoo_motion::Clip;
+
+/// How a sequence is refined.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RefineOptions {
+    /// Window `w`, frames.
+    pub window: usize,
+    /// Step `s` between windows, frames (`1..=w`).
+    pub stride: usize,
+    /// Frames over which each window's first-frame difference is blended away.
+    pub blend_frames: usize,
+}
+
+impl RefineOptions {
+    /// The configuration's runtime window, stride and blend.
+    pub fn of(config: &Config) -> RefineOptions {
+        RefineOptions { window: config.window, stride: config.stride, blend_frames: config.blend_frames }
+    }
+}
+
+/// Window starts: every `stride` frames while the window fits, plus a last window ending on
+/// the last frame when the stride does not land there.
+pub fn window_starts(frames: usize, window: usize, stride: usize) -> Vec<usize> {
+    if window > frames || stride == 0 {
+        return Vec::new();
+    }
+    let mut starts: Vec<usize> = (0..=frames - window).step_by(stride).collect();
+    if starts.last() != Some(&(frames - window)) {
+        starts.push(frames - window);
+    }
+    starts
+}
+
+/// Refines a sequence of raw pose vectors (`frames * dim`, [`encode_clip`]'s layout) window by
+/// window; returns raw pose vectors with contacts as 0/1.
+pub fn refine_sequence(
+    model: &Rmr,
+    stats: &FeatureStats,
+    features: &[f32],
+    opts: RefineOptions,
+) -> RmrResult<Vec<f32>> {
+    let config = model.config();
+    let d = config.dim();
+    if stats.dim() != d || features.is_empty() || !features.len().is_multiple_of(d) {
+        return Err(RmrError::Size {
+            what: "sequence to refine".into(),
+            expected: d,
+            detail: format!("whole frames of {d} values and statistics of {d} (found {})", stats.dim()),
+            found: features.len(),
+        });
+    }
+    let frames = features.len() / d;
+    if opts.window > frames {
+        return Err(RmrError::Config(format!(
+            "the window of {} frames is longer than the sequence ({frames} frames): use a window of at most {frames}",
+            opts.window
+        )));
+    }
+    if opts.stride == 0 || opts.stride > opts.window {
+        return Err(RmrError::Config(format!(
+            "the stride {} must be in 1..={} (the window)",
+            opts.stride, opts.window
+        )));
+    }
+    let fl = FeatureLayout::new(config.joints, config.layout.lower_body.len());
+    let pose = fl.contacts();
+    let mut out = features.to_vec();
+    stats.normalize(&mut out);
+    for ws in window_starts(frames, opts.window, opts.stride) {
+        let span = ws * d..(ws + opts.window) * d;
+        let mut y = model.refine(&out[span.clone()])?;
+        if ws > 0 {
+            // out[ws] is the previous output at the window's first frame.
+            let offset: Vec<f32> = (0..pose).map(|i| out[ws * d + i] - y[i]).collect();
+            for k in 0..opts.blend_frames.min(opts.window) {
+                let w = 1.0 - k as f32 / opts.blend_frames as f32;
+                for (v, o) in y[k * d..k * d + pose].iter_mut().zip(&offset) {
+                    *v += w * o;
+                }
+            }
+        }
+        for f in y.chunks_exact_mut(d) {
+            for c in &mut f[pose..] {
+                *c = if *c > 0.0 { 1.0 } else { 0.0 }; // sigmoid(logit) > 0.5
+            }
+        }
+        out[span].copy_from_slice(&y);
+    }
+    stats.denormalize(&mut out);
+    for f in out.chunks_exact_mut(d) {
+        for c in &mut f[pose..] {
+            *c = if *c > 0.5 { 1.0 } else { 0.0 };
+        }
+    }
+    Ok(out)
+}
+
+/// A stitched sequence.
+#[derive(Clone, Debug)]
+pub struct Stitched {
+    /// The aligned input (what plain concatenation gives).
+    pub input: Clip,
+    /// The refined motion.
+    pub output: Clip,
+    /// Predicted contacts per frame (heel L, toe L, heel R, toe R).
+    pub contacts: Vec<[bool; 4]>,
+    /// First frame of each clip.
+    pub starts: Vec<usize>,
+}
+
+/// Aligns `clips`, refines them and decodes the result. Refuses clips of another rig or frame
+/// rate than the model's, clips shorter than 10 frames and a window longer than the sequence.
+pub fn stitch_clips(model: &Rmr, stats: &FeatureStats, clips: &[Clip], opts: RefineOptions) -> RmrResult<Stitched> {
+    let config = model.config();
+    for (i, c) in clips.iter().enumerate() {
+        config.check_skeleton(&c.skeleton).map_err(|e| RmrError::Config(format!("clip {i}: {e}")))?;
+        if (c.fps() - config.fps).abs() > 1e-6 * config.fps {
+            return Err(RmrError::Config(format!(
+                "clip {i} is {} fps but the model was trained at {} fps; resample it first",
+                c.fps(),
+                config.fps
+            )));
+        }
+    }
+    let aligned = align_clips(clips, &config.layout, MIN_CLIP_FRAMES)?;
+    let x = encode_clip(&aligned.clip, &config.layout)?;
+    let y = refine_sequence(model, stats, &x, opts)?;
+    let start = ground_roots(&aligned.clip, &config.layout)[0];
+    let first = &clips[0];
+    let (output, contacts) = decode(&y, &first.skeleton, &config.layout, first.frame_time, start)?;
+    Ok(Stitched { input: aligned.clip, output, contacts, starts: aligned.starts })
+}

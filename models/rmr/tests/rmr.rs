@@ -1,0 +1,357 @@
+//! Behaviour tests of the RMR: the pose vector, shapes of every refiner cell, each loss term on
+//! a hand-made case, the configuration switches, a short training run whose loss falls,
+//! checkpoints, an exact resume through the shared loop, and bad input.
+
+use candle_core::{DType, Device, Tensor};
+use candle_nn::{VarBuilder, VarMap};
+use zoo_data::stitch::{GroundRoot, StitchLayout};
+use zoo_data::synth::{SynthConfig, generate};
+use zoo_motion::Clip;
+use zoo_motion::glam::DVec3;
+use zoo_rmr::data::{RmrData, make_pairs};
+use zoo_rmr::features::{FeatureLayout, FeatureStats, decode, encode_clip};
+use zoo_rmr::loss::{Loss, begin_sigmoid};
+use zoo_rmr::prelude::*;
+
+fn synth_clips(minutes: f64, seed: u64) -> Vec<Clip> {
+    let cfg = SynthConfig { minutes, seed, clip_seconds: 6.0, ..SynthConfig::default() };
+    generate(&cfg).into_iter().map(|c| c.clip).collect()
+}
+
+fn tiny_data() -> RmrData {
+    let clips = synth_clips(1.0, 4); // 10 clips of 180 frames
+    let (train, valid) = clips.split_at(8);
+    make_pairs(&Config::tiny(), train.to_vec(), valid.to_vec()).unwrap()
+}
+
+fn build(config: &Config) -> (Rmr, VarMap) {
+    let vm = VarMap::new();
+    let model = Rmr::new(config, VarBuilder::from_varmap(&vm, DType::F32, &Device::Cpu)).unwrap();
+    (model, vm)
+}
+
+#[test]
+fn pose_vectors_round_trip_to_the_clip() {
+    let clip = synth_clips(0.1, 1).remove(0).slice(20, 60);
+    let layout = StitchLayout::bandai2(&clip.skeleton).unwrap();
+    let x = encode_clip(&clip, &layout).unwrap();
+    let fl = FeatureLayout::new(21, 9);
+    assert_eq!(fl.dim(), 7 + 6 * 9 + 4 * 21);
+    assert_eq!(x.len(), 40 * fl.dim());
+    let d = fl.dim();
+    assert_eq!(&x[..3], &x[d..d + 3], "frame 0 repeats frame 1's displacement");
+    assert!(x.chunks_exact(d).all(|f| f[fl.contacts()..].iter().all(|&c| c == 0.0 || c == 1.0)));
+    let roots = zoo_data::stitch::ground_roots(&clip, &layout);
+    let (back, contacts) = decode(&x, &clip.skeleton, &layout, clip.frame_time, roots[0]).unwrap();
+    let ((_, a), (_, b)) = (clip.global(), back.global());
+    let worst = a.iter().zip(&b).map(|(p, q)| (*p - *q).length()).fold(0.0, f64::max);
+    assert!(worst < 0.05, "positions come back within 0.05 cm, worst {worst}");
+    for (f, c) in contacts.iter().enumerate() {
+        assert_eq!(*c, layout.contacts_of(&a[f * 21..(f + 1) * 21]));
+    }
+    // The walk has contacts and lifts.
+    assert!(contacts.iter().any(|c| c[1]) && contacts.iter().any(|c| !c[1]));
+    assert!(encode_clip(&clip.slice(0, 1), &layout).unwrap_err().to_string().contains("at least 2 frames"));
+}
+
+#[test]
+fn every_refiner_cell_has_the_right_shapes_and_weights() {
+    let x = Tensor::randn(0f32, 1.0, (2, 7, Config::tiny().dim()), &Device::Cpu).unwrap();
+    let mut counts = Vec::new();
+    for (cell, reverse) in
+        [(RefinerCell::Lstm, false), (RefinerCell::Gru, false), (RefinerCell::Blstm, true), (RefinerCell::Bgru, true)]
+    {
+        let config = Config::tiny().with_cell(cell);
+        let (model, vm) = build(&config);
+        let y = model.forward(&x, None).unwrap();
+        assert_eq!(y.dims(), x.dims(), "{cell:?}");
+        let names: Vec<String> = vm.data().lock().unwrap().keys().cloned().collect();
+        assert!(names.iter().any(|n| n == "refiner.weight_ih_l1"), "{names:?}");
+        assert_eq!(names.iter().any(|n| n == "refiner.weight_hh_l1_reverse"), reverse, "{cell:?}");
+        assert!(names.iter().any(|n| n == "encoder.1.weight") && names.iter().any(|n| n == "decoder.1.bias"));
+        counts.push(zoo_rmr::model::parameter_count(&vm));
+        // A bidirectional refiner sees the future: changing the last frame changes frame 0.
+        let mut x2 = x.to_vec3::<f32>().unwrap();
+        x2[0][6][0] += 5.0;
+        let y2 = model.forward(&Tensor::new(x2, &Device::Cpu).unwrap(), None).unwrap();
+        let d0 = (y2.narrow(1, 0, 1).unwrap() - y.narrow(1, 0, 1).unwrap())
+            .unwrap()
+            .abs()
+            .unwrap()
+            .max_all()
+            .unwrap()
+            .to_scalar::<f32>()
+            .unwrap();
+        assert_eq!(d0 > 0.0, reverse, "{cell:?}: frame 0 depends on the future only when bidirectional");
+    }
+    assert!(counts[0] > counts[1] && counts[2] > counts[3] && counts[3] > counts[1], "{counts:?}");
+    // Paper sizes: encoder 145->256->256, BGRU 2x2x(3x256x(in+256)+6x256), decoder 512->256->145.
+    let (_, vm) = build(&Config::paper());
+    let d = 145;
+    let gru = |i: usize| 2 * (3 * 256 * (i + 256) + 6 * 256);
+    let want = (d * 256 + 256) + (256 * 256 + 256) + gru(256) + gru(512) + (512 * 256 + 256) + (256 * d + d);
+    assert_eq!(zoo_rmr::model::parameter_count(&vm), want);
+}
+
+/// One joint (the root, also every contact), identity statistics: the pose vector is
+/// `r (3), p (3), q (4), v (3), c (4)` = 17 values and normalised units are raw units.
+fn one_joint_loss(t_begin: usize, trajectory: bool) -> (Loss, Config) {
+    let mut config = Config::tiny().with_t_begin(t_begin).with_trajectory_loss(trajectory);
+    config.joints = 1;
+    config.names = vec!["Hips".into()];
+    config.parents = vec![-1];
+    config.layout.lower_body = vec![0];
+    config.layout.contacts = [0; 4];
+    assert_eq!(config.dim(), 17);
+    let stats = FeatureStats { mean: vec![0.0; 17], std: vec![1.0; 17] };
+    (Loss::new(&config, &stats, &Device::Cpu).unwrap(), config)
+}
+
+fn seq(frames: &[[f32; 17]]) -> Tensor {
+    let flat: Vec<f32> = frames.iter().flatten().copied().collect();
+    Tensor::from_vec(flat, (1, frames.len(), 17), &Device::Cpu).unwrap()
+}
+
+fn value(t: &Tensor) -> f64 {
+    t.to_scalar::<f32>().unwrap() as f64
+}
+
+#[test]
+fn each_loss_term_on_a_hand_made_case() {
+    let (loss, _) = one_joint_loss(2, true);
+    let zero = seq(&[[0.0; 17]; 3]);
+    // Pose: frame 0 off by 0.5 in p, frame 2 off by -1 in q and 2 in v: (0.5 + 0 + 3) / 3.
+    let mut out = [[0.0f32; 17]; 3];
+    out[0][3] = 0.5;
+    out[2][6] = -1.0;
+    out[2][12] = 2.0;
+    let t = loss.terms(&seq(&out), &seq(&out), &zero).unwrap();
+    assert!((value(&t.pose) - 3.5 / 3.0).abs() < 1e-6);
+    assert!(value(&t.trajectory).abs() < 1e-7 && value(&t.begin).abs() < 1e-7);
+    // Contacts: logits 0 -> sigmoid 0.5 against labels 1, 0, 1, 0: 2 per frame.
+    assert!((value(&t.foot) - 2.0).abs() < 1e-6);
+
+    // Trajectory: frame 0's displacement is ignored; frame 1 moves 100 units along x and turns
+    // 0.5 rad; frame 2 moves 100 units forward (z) in the turned frame.
+    let mut out = [[0.0f32; 17]; 3];
+    out[0][..3].copy_from_slice(&[7.0, 7.0, 7.0]);
+    out[1][..3].copy_from_slice(&[100.0, 0.5, 0.0]);
+    out[2][..3].copy_from_slice(&[0.0, 0.0, 100.0]);
+    let g = loss.trajectory(&seq(&out)).unwrap().squeeze(0).unwrap().to_vec2::<f32>().unwrap();
+    let want = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.5], [1.0 + 0.5f32.sin(), 0.5f32.cos(), 0.5]];
+    for (a, b) in g.iter().zip(&want) {
+        for (x, y) in a.iter().zip(b) {
+            assert!((x - y).abs() < 1e-5, "{g:?} vs {want:?}");
+        }
+    }
+    let mut target = [[0.0f32; 17]; 3];
+    for f in 0..3 {
+        target[f][13..].copy_from_slice(&[0.0; 4]);
+    }
+    let t = loss.terms(&seq(&out), &seq(&out), &seq(&target)).unwrap();
+    let want_trj = (1.5 + (1.0 + 0.5f64.sin() + 0.5f64.cos() + 0.5)) / 3.0;
+    assert!((value(&t.trajectory) - want_trj).abs() < 1e-5, "{} vs {want_trj}", value(&t.trajectory));
+
+    // Beginning loss, T_begin = 2: frames 1 and 2 (0 and 1 here) against the input, weights
+    // sig(1/2) = 0.5 and sig(1); frame 3 is not counted.
+    let mut out = [[0.0f32; 17]; 3];
+    out[0][4] = 1.0;
+    out[1][8] = -2.0;
+    out[2][3] = 4.0;
+    let t = loss.terms(&seq(&out), &zero, &seq(&out)).unwrap();
+    assert!((begin_sigmoid(0.5) - 0.5).abs() < 1e-12);
+    let want_begin = (0.5 * 1.0 + begin_sigmoid(1.0) * 2.0) / 2.0;
+    assert!((value(&t.begin) - want_begin).abs() < 1e-6, "{} vs {want_begin}", value(&t.begin));
+    assert!(value(&t.pose).abs() < 1e-7);
+    // Total: 1 pose + 1 trajectory + 0.5 foot + 1 begin.
+    let want_total = value(&t.pose) + value(&t.trajectory) + 0.5 * value(&t.foot) + value(&t.begin);
+    assert!((value(&t.total) - want_total).abs() < 1e-5);
+}
+
+#[test]
+fn ablation_switches_change_the_loss_and_parse() {
+    let mut out = [[0.0f32; 17]; 12];
+    for (f, row) in out.iter_mut().enumerate() {
+        row[..4].copy_from_slice(&[10.0 * f as f32, 0.1, 5.0, 1.0 + f as f32]);
+    }
+    let zero = seq(&[[0.0; 17]; 12]);
+    let begin = |t_begin| value(&one_joint_loss(t_begin, true).0.terms(&seq(&out), &zero, &zero).unwrap().begin);
+    let (b3, b5, b10) = (begin(3), begin(5), begin(10));
+    assert!(b3 != b5 && b5 != b10 && b3 > 0.0, "T_begin changes the beginning loss: {b3} {b5} {b10}");
+    assert_eq!(begin(0), 0.0);
+    let on = one_joint_loss(5, true).0.terms(&seq(&out), &zero, &zero).unwrap();
+    let off = one_joint_loss(5, false).0.terms(&seq(&out), &zero, &zero).unwrap();
+    assert!(value(&on.trajectory) > 0.0);
+    assert!((value(&on.total) - value(&off.total) - value(&on.trajectory)).abs() < 1e-4);
+    assert_eq!(RefinerCell::parse("BGRU").unwrap(), RefinerCell::Bgru);
+    assert!(RefinerCell::parse("rnn").unwrap_err().to_string().contains("lstm, gru, blstm or bgru"));
+    assert!(Config::preset("huge").unwrap_err().to_string().contains("paper or tiny"));
+    let json = serde_json::to_value(Config::paper().with_cell(RefinerCell::Blstm)).unwrap();
+    assert_eq!(json["model"], "rmr");
+    assert_eq!(json["cell"], "blstm");
+    let bad = Config::tiny().with_window(30, 0);
+    assert!(bad.validate().unwrap_err().to_string().contains("stride"));
+    let bad = Config::tiny().with_t_begin(100);
+    assert!(bad.validate().unwrap_err().to_string().contains("t_begin"));
+}
+
+#[test]
+fn a_short_training_run_lowers_the_loss() {
+    let data = tiny_data();
+    assert!(data.train.count >= 80 && data.valid.count >= 20, "{} / {}", data.train.count, data.valid.count);
+    assert_eq!(data.train.frames, 30);
+    let planted = data.config.layout.planted;
+    assert!((planted[0] - 11.7).abs() < 3.0 && (planted[1] - 4.3).abs() < 3.0, "{planted:?}");
+    let mut trainer = RmrTrainer::new(&data.config, data.stats.clone(), &Device::Cpu).unwrap();
+    let before = trainer.eval_all(&data.valid).unwrap();
+    let idx: Vec<usize> = (0..data.train.count).collect();
+    for _ in 0..10 {
+        for b in idx.chunks(8) {
+            let (x, y) = trainer.batch(&data.train, b).unwrap();
+            trainer.train_step(&x, &y).unwrap();
+        }
+    }
+    let after = trainer.eval_all(&data.valid).unwrap();
+    // Seeded: 312.8 -> 215.4 here (0.69x).
+    assert!(after.total < 0.8 * before.total, "validation loss {before:?} -> {after:?}");
+    assert!(after.pose < before.pose && after.foot < before.foot);
+}
+
+#[test]
+fn checkpoints_round_trip_and_refuse_other_models() {
+    let config = Config::tiny();
+    let stats = FeatureStats { mean: vec![0.1; config.dim()], std: vec![2.0; config.dim()] };
+    let trainer = RmrTrainer::new(&config, stats.clone(), &Device::Cpu).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    trainer.save(dir.path()).unwrap();
+    let (model, loaded_stats) = checkpoint::load(dir.path(), &Device::Cpu).unwrap();
+    assert_eq!(loaded_stats, stats);
+    assert_eq!(model.config(), &config);
+    let x: Vec<f32> = (0..10 * config.dim()).map(|i| ((i * 37 % 101) as f32 / 50.0) - 1.0).collect();
+    assert_eq!(model.refine(&x).unwrap(), trainer.model().refine(&x).unwrap());
+    // A folder of another model.
+    let cfg_path = dir.path().join(checkpoint::CONFIG_FILE);
+    let text = std::fs::read_to_string(&cfg_path).unwrap().replace("\"rmr\"", "\"rtn\"");
+    std::fs::write(&cfg_path, text).unwrap();
+    let err = checkpoint::load(dir.path(), &Device::Cpu).unwrap_err().to_string();
+    assert!(err.contains("`rtn` model") && err.contains("zoo train rmr"), "{err}");
+    let err = checkpoint::load(&dir.path().join("missing"), &Device::Cpu).unwrap_err().to_string();
+    assert!(err.contains("missing"), "{err}");
+}
+
+#[test]
+fn the_shared_loop_resumes_exactly() {
+    let data = tiny_data();
+    let run = |dir: &std::path::Path, epochs: usize, resume: bool| {
+        let trainer = RmrTrainer::new(&data.config, data.stats.clone(), &Device::Cpu).unwrap();
+        let mut t = RmrTraining::new(trainer, &data.train, &data.valid).unwrap();
+        let mut opts = zoo_nn::TrainOptions::new(dir, epochs, 9);
+        opts.resume = resume;
+        opts.progress = false;
+        opts.print = false;
+        zoo_nn::train_loop::train(&mut t, &opts).unwrap()
+    };
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let sa = run(a.path(), 2, false);
+    run(b.path(), 1, false);
+    let sb = run(b.path(), 2, true);
+    assert_eq!(sa.steps, sb.steps);
+    let w = |d: &std::path::Path| std::fs::read(d.join("last").join(checkpoint::WEIGHTS_FILE)).unwrap();
+    assert_eq!(w(a.path()), w(b.path()), "resumed weights are bit-identical");
+    let cfg: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(a.path().join(checkpoint::CONFIG_FILE)).unwrap()).unwrap();
+    assert_eq!(cfg["model"], "rmr");
+}
+
+#[test]
+fn bad_input_gets_a_clear_error() {
+    let config = Config::tiny();
+    let (model, _) = build(&config);
+    let x = Tensor::zeros((1, 5, config.dim() + 1), DType::F32, &Device::Cpu).unwrap();
+    let err = model.forward(&x, None).unwrap_err().to_string();
+    assert!(err.contains("(batch, frames >= 1, 145)"), "{err}");
+    assert!(model.refine(&[0.0; 10]).unwrap_err().to_string().contains("145"));
+    let stats = FeatureStats { mean: vec![0.0; 3], std: vec![1.0; 3] };
+    assert!(RmrTrainer::new(&config, stats, &Device::Cpu).is_err());
+    // Clips of another frame rate in the validation split.
+    let clips = synth_clips(0.3, 2);
+    let mut valid = clips[2].clone();
+    valid.frame_time = 1.0 / 60.0;
+    let err = make_pairs(&config, clips[..2].to_vec(), vec![valid]).unwrap_err().to_string();
+    assert!(err.contains("fps"), "{err}");
+    // Clips shorter than the training window.
+    let short: Vec<Clip> = clips.iter().map(|c| c.slice(0, 20)).collect();
+    let err = make_pairs(&config, short.clone(), short).unwrap_err().to_string();
+    assert!(err.contains("frames or more"), "{err}");
+    // A skeleton without bandai2's joints.
+    let mut other = clips[0].clone();
+    other.skeleton.names[15] = "LeftFoot".into();
+    let err = make_pairs(&config, vec![other], clips[1..].to_vec()).unwrap_err().to_string();
+    assert!(err.contains("joint 15: expected `Foot_L`, found `LeftFoot`"), "{err}");
+    let _ = (GroundRoot::IDENTITY, DVec3::ZERO);
+}
+
+#[test]
+fn planned_pairs_are_cached_in_the_run_folder() {
+    let clips = synth_clips(0.6, 6);
+    let config = Config::tiny();
+    let sets = || {
+        let layout = config.layout.clone();
+        (
+            zoo_data::stitch::MotionSet::new(clips[..4].to_vec(), vec![], layout.clone()).unwrap(),
+            zoo_data::stitch::MotionSet::new(clips[4..].to_vec(), vec![], layout).unwrap(),
+        )
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let (t, v) = sets();
+    let first = zoo_rmr::data::make_pairs_cached(&config, t, v, Some(dir.path())).unwrap();
+    assert!(first.database_segments > 0);
+    assert!(dir.path().join(zoo_rmr::data::TRAIN_PLAN_FILE).is_file());
+    let (t, v) = sets();
+    let second = zoo_rmr::data::make_pairs_cached(&config, t, v, Some(dir.path())).unwrap();
+    assert_eq!(second.database_segments, 0, "both plans came from the cache: no database was built");
+    assert_eq!(first.train, second.train);
+    assert_eq!(first.valid, second.valid);
+    assert_eq!(first.stats, second.stats);
+}
+
+#[test]
+fn stitching_slides_windows_over_aligned_clips() {
+    use zoo_rmr::stitch::{RefineOptions, refine_sequence, stitch_clips, window_starts};
+    assert_eq!(window_starts(100, 30, 15), vec![0, 15, 30, 45, 60, 70]);
+    assert_eq!(window_starts(60, 60, 30), vec![0]);
+    assert!(window_starts(20, 30, 15).is_empty());
+    let config = Config::tiny();
+    let (model, _) = build(&config);
+    let d = config.dim();
+    let stats = FeatureStats { mean: vec![0.0; d], std: vec![1.0; d] };
+    let clips = synth_clips(0.3, 8);
+    let parts = [clips[0].slice(0, 40), clips[1].slice(30, 70), clips[2].slice(5, 30)];
+    let opts = RefineOptions { window: 30, stride: 15, blend_frames: 10 };
+    let s = stitch_clips(&model, &stats, &parts, opts).unwrap();
+    assert_eq!(s.starts, vec![0, 40, 80]);
+    assert_eq!(s.output.frames(), 105);
+    assert_eq!(s.contacts.len(), 105);
+    assert!(s.output.local_rotations.iter().all(|q| (q.length() - 1.0).abs() < 1e-6));
+    // The blend: with a window starting at frame 15, the output at frame 15 is the previous
+    // window's output there (the whole offset), whatever the model says.
+    let x = encode_clip(&s.input, &config.layout).unwrap();
+    let y = refine_sequence(&model, &stats, &x, RefineOptions { window: 30, stride: 15, blend_frames: 10 }).unwrap();
+    let first_only =
+        refine_sequence(&model, &stats, &x[..30 * d], RefineOptions { window: 30, stride: 30, blend_frames: 10 })
+            .unwrap();
+    let pose = FeatureLayout::new(config.joints, 9).contacts();
+    for i in 0..pose {
+        assert!((y[15 * d + i] - first_only[15 * d + i]).abs() < 1e-4, "value {i}");
+    }
+    // Bad input.
+    let long = RefineOptions { window: 200, stride: 100, blend_frames: 10 };
+    let err = stitch_clips(&model, &stats, &parts, long).unwrap_err().to_string();
+    assert!(err.contains("longer than the sequence (105 frames)"), "{err}");
+    let err = stitch_clips(&model, &stats, &[parts[0].clone(), parts[1].slice(0, 8)], opts).unwrap_err().to_string();
+    assert!(err.contains("8 frames") && err.contains("at least 10"), "{err}");
+    let mut fast = parts[1].clone();
+    fast.frame_time = 1.0 / 60.0;
+    let err = stitch_clips(&model, &stats, &[parts[0].clone(), fast], opts).unwrap_err().to_string();
+    assert!(err.contains("60 fps") && err.contains("trained at 30 fps"), "{err}");
+}
