@@ -28,7 +28,7 @@ pub type LampPose = [f64; DOFS];
 /// Geometry, masses, controller gains and simulation settings of the lamp.
 ///
 /// Lengths in metres, masses in kilograms, gains in N m/rad and N m s/rad. The defaults
-/// ([`LampParams::default`]) are a desk lamp about 55 cm tall and 2 kg; `docs/arnn.md` says
+/// ([`LampParams::default`]) are a desk lamp about 55 cm tall and 1.8 kg; `docs/arnn.md` says
 /// why each number was chosen.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LampParams {
