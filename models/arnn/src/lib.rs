@@ -12,7 +12,7 @@ pub mod train;
 
 pub use config::{ArnnConfig, Curriculum};
 pub use model::{Arnn, ArnnState};
-pub use train::{ArnnTrainer, Normalization};
+pub use train::{ArnnTrainer, Normalization, complete};
 
 /// What went wrong while building, training or saving an ARNN.
 #[derive(Debug, thiserror::Error)]

@@ -49,6 +49,11 @@ impl Arnn {
         &self.config
     }
 
+    /// The device of the weights.
+    pub fn device(&self) -> &candle_core::Device {
+        self.decoder.layers()[0].weight().device()
+    }
+
     /// The zero state for `batch` sequences.
     pub fn zero_state(&self, batch: usize) -> Result<ArnnState> {
         Ok(ArnnState { gru: [self.gru1.zero_state(batch)?, self.gru2.zero_state(batch)?] })

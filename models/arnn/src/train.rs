@@ -109,6 +109,11 @@ impl ArnnTrainer {
         &self.model
     }
 
+    /// The normalisation statistics of the training set.
+    pub fn normalization(&self) -> &Normalization {
+        &self.norm
+    }
+
     /// Number of trainable values.
     pub fn parameter_count(&self) -> usize {
         self.varmap.all_vars().iter().map(|v| v.elem_count()).sum()
@@ -296,4 +301,51 @@ impl Trainable for ArnnTrainer {
         m.insert("parameters".into(), self.parameter_count().into());
         m
     }
+}
+
+/// Fills in every frame from keys (section 8): `key_frames` (increasing, the first 0) and one
+/// pose per key, in physical units (metres, radians). Returns `key_frames.last() + 1` poses;
+/// frame 0 is the first key, later frames are the network's autoregressive predictions.
+pub fn complete(
+    model: &Arnn,
+    norm: &Normalization,
+    key_frames: &[usize],
+    key_poses: &[Vec<f64>],
+) -> ArnnResult<Vec<Vec<f64>>> {
+    let d = model.config().dofs;
+    if key_frames.len() < 2 || key_frames.len() != key_poses.len() {
+        return Err(ArnnError::Config(format!(
+            "need at least two keys and one pose per key, found {} key frames and {} poses",
+            key_frames.len(),
+            key_poses.len()
+        )));
+    }
+    if key_frames[0] != 0 || key_frames.windows(2).any(|w| w[0] >= w[1]) {
+        return Err(ArnnError::Config(format!(
+            "key frames must start at 0 and strictly increase, found {key_frames:?}"
+        )));
+    }
+    if let Some(k) = key_poses.iter().position(|p| p.len() != d || p.iter().any(|v| !v.is_finite())) {
+        return Err(ArnnError::Config(format!("key {k} must hold {d} finite values, found {:?}", key_poses[k])));
+    }
+    if norm.mean.len() != d || norm.std.len() != d {
+        return Err(ArnnError::Config(format!("normalization is for {} values, the model for {d}", norm.mean.len())));
+    }
+    let device = model.device();
+    let to_tensor = |p: &[f64]| Tensor::from_vec(norm.apply(p).collect::<Vec<f32>>(), (1, d), device);
+    let keys: Vec<Tensor> = key_poses.iter().map(|p| to_tensor(p)).collect::<candle_core::Result<_>>()?;
+    let last = *key_frames.last().unwrap_or(&0);
+    let mut out = vec![key_poses[0].clone()];
+    let mut prev = keys[0].clone();
+    let mut state = model.zero_state(1)?;
+    for t in 1..=last {
+        let (a, b, rel) = KeyedSequence::interval(key_frames, t);
+        let t_rel = Tensor::full(rel as f32, (1, 1), device)?;
+        let (y, s) = model.step(&prev, &keys[a], &keys[b], &t_rel, &state, None)?;
+        state = s;
+        let v: Vec<f32> = y.flatten_all()?.to_vec1()?;
+        out.push(v.iter().zip(&norm.mean).zip(&norm.std).map(|((x, m), s)| *x as f64 * s + m).collect());
+        prev = y;
+    }
+    Ok(out)
 }

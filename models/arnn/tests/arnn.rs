@@ -2,7 +2,7 @@
 
 use candle_core::{DType, Device, Tensor};
 use candle_nn::VarMap;
-use zoo_arnn::{Arnn, ArnnConfig, ArnnTrainer, Curriculum};
+use zoo_arnn::{Arnn, ArnnConfig, ArnnTrainer, Curriculum, complete};
 use zoo_data::luxo::preprocess::{KeyedSequence, preprocess};
 use zoo_data::luxo::{GenerateOptions, generate_sequence};
 use zoo_nn::SeededVarMap;
@@ -81,4 +81,37 @@ fn bad_keys_are_rejected() {
     seqs[0].frames[5][2] = f64::NAN;
     let e = ArnnTrainer::new(&ArnnConfig::tiny(), seqs, vec![], &Device::Cpu).err().unwrap().to_string();
     assert!(e.contains("finite"), "{e}");
+}
+
+#[test]
+fn complete_fills_every_frame_and_rejects_bad_keys() {
+    let seqs = lamp_sequences(2);
+    let t = ArnnTrainer::new(&ArnnConfig::tiny(), seqs.clone(), vec![], &Device::Cpu).unwrap();
+    let s = &seqs[0];
+    let poses: Vec<Vec<f64>> = s.key_poses().iter().map(|p| p.to_vec()).collect();
+    let out = complete(t.model(), t.normalization(), &s.keys, &poses).unwrap();
+    assert_eq!(out.len(), s.frames.len());
+    assert_eq!(out[0], poses[0]);
+    assert!(out.iter().flatten().all(|v| v.is_finite()));
+    let err = |keys: &[usize], poses: &[Vec<f64>]| {
+        complete(t.model(), t.normalization(), keys, poses).err().expect("bad keys accepted").to_string()
+    };
+    // Keys out of order.
+    let mut k = s.keys.clone();
+    k.swap(1, 2);
+    assert!(err(&k, &poses).contains("strictly increase"));
+    // A key that does not start the sequence.
+    let mut k = s.keys.clone();
+    k[0] = 1;
+    assert!(err(&k, &poses).contains("start at 0"));
+    // NaN in a key.
+    let mut p = poses.clone();
+    p[3][1] = f64::NAN;
+    assert!(err(&s.keys, &p).contains("finite"));
+    // Another skeleton: keys with the wrong number of values.
+    let mut p = poses.clone();
+    p[2].push(0.0);
+    assert!(err(&s.keys, &p).contains("6 finite values"));
+    // Fewer poses than keys.
+    assert!(err(&s.keys, &poses[..3]).contains("one pose per key"));
 }
