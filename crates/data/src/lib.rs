@@ -4,6 +4,7 @@
 pub mod benchmark;
 pub mod bvh;
 pub mod dataset;
+pub mod luxo;
 pub mod metrics;
 pub mod plausibility;
 pub mod position_method;

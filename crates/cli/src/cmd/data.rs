@@ -19,6 +19,8 @@ pub enum DataCommand {
     Stats(StatsArgs),
     /// Generate procedural locomotion (BVH + heightmaps + manifest) into a folder.
     Synth(SynthArgs),
+    /// Simulate hop sequences of the planar lamp (ARNN): BVH + JSON per sequence.
+    Luxo(super::data_luxo::LuxoArgs),
 }
 
 /// Arguments of `zoo data stats`.
@@ -62,6 +64,7 @@ pub fn run(cmd: DataCommand) -> anyhow::Result<()> {
     match cmd {
         DataCommand::Stats(a) => stats(a),
         DataCommand::Synth(a) => run_synth(a),
+        DataCommand::Luxo(a) => super::data_luxo::run(a),
     }
 }
 

@@ -1,0 +1,271 @@
+//! The hopping lamp of "Data-driven Autocompletion for Keyframe Animation" (Zhang and van de
+//! Panne 2018, sections 4 and 5): a planar articulated lamp simulated with rapier2d
+//! ([`lamp`]), its hop controller ([`controller`]), simulated annealing over hop policies
+//! ([`anneal`]), the generated sequences and their files ([`sequence`]), and the preprocessing
+//! into training sequences with keys ([`preprocess`]).
+//!
+//! [`generate`] writes a data set: per sequence `luxo_NNNN.bvh` (opens in Blender) and
+//! `luxo_NNNN.json` ([`LuxoSequence`]), and `luxo.json`, a manifest with the settings.
+//! Sequence `i` draws all its random numbers from `SplitMix64::with_stream(seed, i)`, so the
+//! files do not depend on the number of threads or the order in which sequences finish.
+
+pub mod anneal;
+pub mod controller;
+pub mod lamp;
+pub mod preprocess;
+pub mod sequence;
+
+pub use anneal::{AnnealConfig, Evaluation};
+pub use controller::{HopPolicy, RolloutOptions};
+pub use lamp::{DOF_NAMES, DOFS, LampParams, LampPose};
+pub use sequence::{KeyKind, LuxoKey, LuxoSequence};
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use zoo_motion::rng::SplitMix64;
+
+/// Format name of the data set manifest `luxo.json`.
+pub const MANIFEST_FORMAT: &str = "zoo-luxo";
+/// File name of the manifest.
+pub const MANIFEST_FILE: &str = "luxo.json";
+
+/// An error of the lamp data tools.
+#[derive(Debug, thiserror::Error)]
+pub enum LuxoError {
+    /// A file or folder could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// File or folder.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// A JSON file could not be written or parsed.
+    #[error("{path}: invalid JSON: {message}")]
+    Json {
+        /// File.
+        path: PathBuf,
+        /// What serde reported.
+        message: String,
+    },
+    /// A sequence file is well-formed JSON but not a usable sequence.
+    #[error("{path}: {message}")]
+    BadSequence {
+        /// File.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// The settings are not usable.
+    #[error("invalid lamp data settings: {0}")]
+    Config(String),
+    /// No annealing run produced a satisfactory hop sequence.
+    #[error(
+        "sequence {index}: none of {attempts} simulated annealing runs made {hops} hops of at least {min_distance} m \
+         in total and {min_height} m high; raise max_attempts or lower min_distance/min_height"
+    )]
+    NoHops {
+        /// Sequence index.
+        index: usize,
+        /// Runs tried.
+        attempts: usize,
+        /// Hops required.
+        hops: usize,
+        /// Required distance (metres).
+        min_distance: f64,
+        /// Required height (metres).
+        min_height: f64,
+    },
+    /// A data set folder holds no sequence.
+    #[error("{0}: no luxo_*.json sequence found; generate some with `zoo data luxo --out {0}`")]
+    Empty(PathBuf),
+}
+
+/// Settings of a generated data set (written to the manifest).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GenerateOptions {
+    /// Number of sequences.
+    pub sequences: usize,
+    /// Seed: the same seed writes the same files.
+    pub seed: u64,
+    /// The lamp.
+    pub lamp: LampParams,
+    /// Simulated annealing (section 4.4).
+    pub anneal: AnnealConfig,
+    /// Annealing runs tried per sequence before giving up.
+    pub max_attempts: usize,
+    /// One frame is recorded every `record_every` integration steps.
+    pub record_every: usize,
+}
+
+impl GenerateOptions {
+    /// The paper's settings (K_max = 1000) for `sequences` sequences from `seed`.
+    pub fn new(sequences: usize, seed: u64) -> GenerateOptions {
+        GenerateOptions {
+            sequences,
+            seed,
+            lamp: LampParams::default(),
+            anneal: AnnealConfig::default(),
+            max_attempts: 20,
+            record_every: 4,
+        }
+    }
+
+    /// Frames per second of the recorded tracks.
+    pub fn fps(&self) -> f64 {
+        1.0 / (self.lamp.dt * self.record_every as f64)
+    }
+
+    /// Checks every setting.
+    pub fn validate(&self) -> Result<(), LuxoError> {
+        self.lamp.validate().map_err(LuxoError::Config)?;
+        self.anneal.validate().map_err(LuxoError::Config)?;
+        if self.sequences == 0 {
+            return Err(LuxoError::Config("--sequences must be at least 1".into()));
+        }
+        if self.max_attempts == 0 || self.record_every == 0 {
+            return Err(LuxoError::Config("max_attempts and record_every must be at least 1".into()));
+        }
+        Ok(())
+    }
+}
+
+/// What [`generate`] did.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GenerateSummary {
+    /// Sequences written.
+    pub sequences: usize,
+    /// Annealing runs in all (successful or not).
+    pub attempts: usize,
+    /// Frames written in all.
+    pub frames: usize,
+    /// Seconds taken.
+    pub seconds: f64,
+}
+
+#[derive(Serialize, Deserialize)]
+struct Manifest {
+    format: String,
+    version: u32,
+    options: GenerateOptions,
+    sequences: Vec<String>,
+}
+
+/// Simulates sequence `index` of a data set: annealing runs from the hand-set hop, each with
+/// a fresh `w_e` uniform in [0, 1), until one is satisfactory.
+pub fn generate_sequence(options: &GenerateOptions, index: usize) -> Result<LuxoSequence, LuxoError> {
+    options.validate()?;
+    let mut rng = SplitMix64::with_stream(options.seed, index as u64);
+    let cfg = &options.anneal;
+    for attempt in 1..=options.max_attempts {
+        let w_e = rng.next_f64();
+        let outcome =
+            anneal::anneal(&options.lamp, cfg, &HopPolicy::hand_set(), w_e, &mut rng).map_err(LuxoError::Config)?;
+        if !outcome.evaluation.satisfactory {
+            continue;
+        }
+        let (rollout, hops, evaluation) =
+            anneal::score(&options.lamp, &outcome.best, w_e, cfg).map_err(LuxoError::Config)?;
+        let in_air: Vec<usize> =
+            hops.iter().map(|_| 1 + rng.below((sequence::HOP_SAMPLES - 2) as u64) as usize).collect();
+        return Ok(LuxoSequence::from_rollout(
+            sequence_name(index),
+            index,
+            options.seed,
+            &rollout,
+            options.record_every,
+            &hops,
+            &in_air,
+            outcome.best,
+            w_e,
+            evaluation,
+            attempt,
+        ));
+    }
+    Err(LuxoError::NoHops {
+        index,
+        attempts: options.max_attempts,
+        hops: cfg.rollout.cycles,
+        min_distance: cfg.min_distance,
+        min_height: cfg.min_height,
+    })
+}
+
+/// File stem of sequence `index`.
+pub fn sequence_name(index: usize) -> String {
+    format!("luxo_{index:04}")
+}
+
+/// Generates `sequences` sequences from `seed` with the paper's settings into `out_dir`; see
+/// [`generate_with`].
+pub fn generate(
+    out_dir: &Path,
+    sequences: usize,
+    seed: u64,
+    progress: &(dyn Fn() + Sync),
+) -> Result<GenerateSummary, LuxoError> {
+    generate_with(out_dir, &GenerateOptions::new(sequences, seed), progress)
+}
+
+/// Generates a data set into `out_dir` (created if needed), in parallel on rayon's pool:
+/// `luxo_NNNN.bvh` and `luxo_NNNN.json` per sequence, then the manifest `luxo.json`.
+/// `progress` is called once per sequence written.
+pub fn generate_with(
+    out_dir: &Path,
+    options: &GenerateOptions,
+    progress: &(dyn Fn() + Sync),
+) -> Result<GenerateSummary, LuxoError> {
+    options.validate()?;
+    let start = std::time::Instant::now();
+    std::fs::create_dir_all(out_dir).map_err(|source| LuxoError::Io { path: out_dir.to_path_buf(), source })?;
+    let done: Vec<(usize, usize)> = (0..options.sequences)
+        .into_par_iter()
+        .map(|i| {
+            let seq = generate_sequence(options, i)?;
+            let bvh = out_dir.join(format!("{}.bvh", seq.name));
+            crate::bvh::write_file(&seq.to_clip(&options.lamp), &bvh)
+                .map_err(|source| LuxoError::Io { path: bvh, source })?;
+            seq.write_json(&out_dir.join(format!("{}.json", seq.name)))?;
+            progress();
+            Ok((seq.attempts, seq.frames.len()))
+        })
+        .collect::<Result<_, LuxoError>>()?;
+    let manifest = Manifest {
+        format: MANIFEST_FORMAT.into(),
+        version: sequence::VERSION,
+        options: options.clone(),
+        sequences: (0..options.sequences).map(sequence_name).collect(),
+    };
+    let path = out_dir.join(MANIFEST_FILE);
+    let text = serde_json::to_string_pretty(&manifest)
+        .map_err(|e| LuxoError::Json { path: path.clone(), message: e.to_string() })?;
+    sequence::write_atomic(&path, text.as_bytes())?;
+    Ok(GenerateSummary {
+        sequences: done.len(),
+        attempts: done.iter().map(|d| d.0).sum(),
+        frames: done.iter().map(|d| d.1).sum(),
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// Reads every `luxo_*.json` sequence of a folder, in name order.
+pub fn load_dir(dir: &Path) -> Result<Vec<LuxoSequence>, LuxoError> {
+    let entries = std::fs::read_dir(dir).map_err(|source| LuxoError::Io { path: dir.to_path_buf(), source })?;
+    let mut paths = Vec::new();
+    for e in entries {
+        let p = e.map_err(|source| LuxoError::Io { path: dir.to_path_buf(), source })?.path();
+        let name = p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        if name.starts_with("luxo_") && name.ends_with(".json") {
+            paths.push(p);
+        }
+    }
+    if paths.is_empty() {
+        return Err(LuxoError::Empty(dir.to_path_buf()));
+    }
+    paths.sort();
+    paths.iter().map(|p| LuxoSequence::read_json(p)).collect()
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,49 @@
+//! The autoregressive recurrent network of "Data-driven Autocompletion for Keyframe Animation"
+//! (Zhang and van de Panne, MIG 2018) in candle, on the shared toolkit [`zoo_nn`]: the model
+//! (section 6), the loss with its curriculum and scheduled sampling (section 7) and a
+//! [`zoo_nn::Trainable`] for the shared training loop.
+//!
+//! Data are the lamp's preprocessed sequences ([`zoo_data::luxo::preprocess::KeyedSequence`]):
+//! six degrees of freedom per frame and the frames that are keys.
+
+pub mod config;
+pub mod model;
+pub mod train;
+
+pub use config::{ArnnConfig, Curriculum};
+pub use model::{Arnn, ArnnState};
+pub use train::{ArnnTrainer, Normalization, complete};
+
+/// What went wrong while building, training or saving an ARNN.
+#[derive(Debug, thiserror::Error)]
+pub enum ArnnError {
+    /// The configuration or the data do not fit.
+    #[error("configuration: {0}")]
+    Config(String),
+    /// The loss became NaN or infinite; the weights were not updated.
+    #[error("training loss became {loss} at step {step}; the weights were not updated: lower the learning rate")]
+    NonFiniteLoss {
+        /// Training step.
+        step: u64,
+        /// The loss.
+        loss: f64,
+    },
+    /// A tensor operation, a file or the toolkit failed.
+    #[error(transparent)]
+    Nn(#[from] zoo_nn::NnError),
+}
+
+impl From<candle_core::Error> for ArnnError {
+    fn from(e: candle_core::Error) -> Self {
+        ArnnError::Nn(zoo_nn::NnError::Candle(e))
+    }
+}
+
+impl From<ArnnError> for zoo_nn::TrainError {
+    fn from(e: ArnnError) -> Self {
+        zoo_nn::TrainError::model(e)
+    }
+}
+
+/// Result with [`ArnnError`].
+pub type ArnnResult<T> = std::result::Result<T, ArnnError>;

@@ -1,0 +1,351 @@
+//! Training (section 7): the loss `MSE(Y, Y') + 100 omega key loss` (eq. 4), the curriculum
+//! (omega annealing and scheduled sampling), key dropping, Adam; [`ArnnTrainer`] implements
+//! [`Trainable`] for the shared loop.
+//!
+//! The key loss is the mean squared error over the key frames after the first (the first key
+//! is the given start pose), so that it and the frame loss are on one scale, as in Tables 1-2.
+
+use crate::config::ArnnConfig;
+use crate::model::Arnn;
+use crate::{ArnnError, ArnnResult};
+use candle_core::{DType, Device, Tensor};
+use candle_nn::{Optimizer, VarMap};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+use zoo_data::luxo::preprocess::{KeyedSequence, drop_keys};
+use zoo_nn::checkpoint as ck;
+use zoo_nn::optim::{Adam, ParamsAdam, StatefulOptimizer};
+use zoo_nn::rng::SplitMix64;
+use zoo_nn::train_loop::{Trainable, Validation};
+use zoo_nn::{SeededVarMap, TrainError};
+
+/// Mean and standard deviation of each degree of freedom; the network sees `(x - mean) / std`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Normalization {
+    /// Mean per degree of freedom.
+    pub mean: Vec<f64>,
+    /// Standard deviation per degree of freedom (never below 1e-6).
+    pub std: Vec<f64>,
+}
+
+impl Normalization {
+    /// Fits the statistics of a training set.
+    pub fn fit(seqs: &[KeyedSequence]) -> Self {
+        let (mean, std) = zoo_data::luxo::preprocess::dof_statistics(seqs);
+        Normalization { mean: mean.to_vec(), std: std.to_vec() }
+    }
+
+    fn apply<'a>(&'a self, pose: &'a [f64]) -> impl Iterator<Item = f32> + 'a {
+        pose.iter().zip(&self.mean).zip(&self.std).map(|((v, m), s)| ((v - m) / s) as f32)
+    }
+}
+
+/// Losses of one batch (normalised units).
+#[derive(Clone, Debug)]
+pub struct Losses {
+    /// `frame + key_weight * omega * key`, the optimised loss.
+    pub total: Tensor,
+    /// Frame loss: MSE over every predicted frame.
+    pub frame: Tensor,
+    /// Key loss: MSE over the key frames after the first.
+    pub key: Tensor,
+}
+
+/// Trains an ARNN on preprocessed lamp sequences.
+pub struct ArnnTrainer {
+    config: ArnnConfig,
+    norm: Normalization,
+    varmap: VarMap,
+    model: Arnn,
+    opt: Adam,
+    /// Key drops, teacher-forcing draws and dropout masks, in that order per step.
+    rng: SplitMix64,
+    step: u64,
+    train: Vec<KeyedSequence>,
+    valid: Vec<KeyedSequence>,
+    device: Device,
+}
+
+const RNG_KEY: &str = "trainer";
+
+impl ArnnTrainer {
+    /// A fresh model (weights from `config.seed`) and the statistics of `train`.
+    pub fn new(
+        config: &ArnnConfig,
+        train: Vec<KeyedSequence>,
+        valid: Vec<KeyedSequence>,
+        device: &Device,
+    ) -> ArnnResult<Self> {
+        config.validate().map_err(ArnnError::Config)?;
+        for s in train.iter().chain(&valid) {
+            check_sequence(config, s)?;
+        }
+        if train.is_empty() {
+            return Err(ArnnError::Config("no training sequence".into()));
+        }
+        let norm = Normalization::fit(&train);
+        let varmap = VarMap::new();
+        let model = Arnn::new(config, SeededVarMap::builder(&varmap, config.seed, DType::F32, device))?;
+        let mut named: Vec<(String, candle_core::Var)> =
+            varmap.data().lock().expect("varmap lock").iter().map(|(n, v)| (n.clone(), v.clone())).collect();
+        named.sort_by(|a, b| a.0.cmp(&b.0));
+        let opt = Adam::new_named(named, ParamsAdam { lr: config.learning_rate, ..ParamsAdam::default() })?;
+        Ok(ArnnTrainer {
+            config: config.clone(),
+            norm,
+            varmap,
+            model,
+            opt,
+            rng: SplitMix64::new(config.seed ^ 0xA77),
+            step: 0,
+            train,
+            valid,
+            device: device.clone(),
+        })
+    }
+
+    /// The model.
+    pub fn model(&self) -> &Arnn {
+        &self.model
+    }
+
+    /// The normalisation statistics of the training set.
+    pub fn normalization(&self) -> &Normalization {
+        &self.norm
+    }
+
+    /// Number of trainable values.
+    pub fn parameter_count(&self) -> usize {
+        self.varmap.all_vars().iter().map(|v| v.elem_count()).sum()
+    }
+
+    /// Runs the model over sequences with the given keys (frame 0 is the start pose), feeding
+    /// the ground truth back with probability `teacher` per step; dropout when `train`.
+    pub fn losses(
+        &mut self,
+        seqs: &[&KeyedSequence],
+        keys: &[Vec<usize>],
+        teacher: f64,
+        omega: f64,
+        train: bool,
+    ) -> ArnnResult<Losses> {
+        let (b, d) = (seqs.len(), self.config.dofs);
+        let t_len = seqs.first().map_or(0, |s| s.frames.len());
+        if b == 0 || t_len < 2 || seqs.iter().any(|s| s.frames.len() != t_len) {
+            return Err(ArnnError::Config(format!(
+                "a batch needs sequences of one length of at least 2 frames, found {:?}",
+                seqs.iter().map(|s| s.frames.len()).collect::<Vec<_>>()
+            )));
+        }
+        let mut gt = Vec::with_capacity(b * t_len * d);
+        for s in seqs {
+            for f in &s.frames {
+                gt.extend(self.norm.apply(f));
+            }
+        }
+        let gt = Tensor::from_vec(gt, (b, t_len, d), &self.device)?;
+        // Inputs per step t = 1..T: X_K, X_{K+1}, t_rel; and the key-frame mask of the outputs.
+        let steps = t_len - 1;
+        let (mut ka, mut kb, mut tr, mut mask) = (vec![], vec![], vec![], vec![0f32; steps * b]);
+        for t in 1..t_len {
+            for (i, s) in seqs.iter().enumerate() {
+                let k = &keys[i];
+                let (a, c, rel) = KeyedSequence::interval(k, t);
+                ka.extend(self.norm.apply(&s.frames[k[a]]));
+                kb.extend(self.norm.apply(&s.frames[k[c]]));
+                tr.push(rel as f32);
+                if k[1..].contains(&t) {
+                    mask[(t - 1) * b + i] = 1.0;
+                }
+            }
+        }
+        let ka = Tensor::from_vec(ka, (steps, b, d), &self.device)?;
+        let kb = Tensor::from_vec(kb, (steps, b, d), &self.device)?;
+        let tr = Tensor::from_vec(tr, (steps, b, 1), &self.device)?;
+        let mask = Tensor::from_vec(mask, (steps, b, 1), &self.device)?;
+        let mut state = self.model.zero_state(b)?;
+        let mut prev = gt.narrow(1, 0, 1)?.squeeze(1)?;
+        let mut outs = Vec::with_capacity(steps);
+        for t in 1..t_len {
+            let rng = if train { Some(&mut self.rng) } else { None };
+            let (y, s) = self.model.step(&prev, &ka.get(t - 1)?, &kb.get(t - 1)?, &tr.get(t - 1)?, &state, rng)?;
+            state = s;
+            let use_truth = train && self.rng.next_f64() < teacher;
+            prev = if use_truth { gt.narrow(1, t, 1)?.squeeze(1)? } else { y.clone() };
+            outs.push(y);
+        }
+        let pred = Tensor::stack(&outs, 0)?; // (steps, b, d)
+        let target = gt.narrow(1, 1, steps)?.transpose(0, 1)?;
+        let sq = (pred - target)?.sqr()?;
+        let frame = sq.mean_all()?;
+        let n_keys = mask.sum_all()?.to_scalar::<f32>()?.max(1.0) as f64;
+        let key = (sq.broadcast_mul(&mask)?.sum_all()? / (n_keys * d as f64))?;
+        let total = (&frame + (&key * (self.config.key_weight * omega))?)?;
+        Ok(Losses { total, frame, key })
+    }
+
+    /// One Adam step on training sequences `samples`, 0-2 keys dropped from each.
+    pub fn train_on(&mut self, samples: &[usize]) -> ArnnResult<f64> {
+        let seqs: Vec<KeyedSequence> = samples.iter().map(|&i| self.train[i].clone()).collect();
+        let keys: Vec<Vec<usize>> = seqs.iter().map(|s| drop_keys(&s.keys, &mut self.rng)).collect();
+        let c = self.config.curriculum;
+        let (teacher, omega) = (c.teacher_forcing(self.step), c.omega(self.step));
+        let refs: Vec<&KeyedSequence> = seqs.iter().collect();
+        let losses = self.losses(&refs, &keys, teacher, omega, true)?;
+        let value = losses.total.to_scalar::<f32>()? as f64;
+        if !value.is_finite() {
+            return Err(ArnnError::NonFiniteLoss { step: self.step, loss: value });
+        }
+        self.opt.backward_step(&losses.total)?;
+        self.step += 1;
+        Ok(value)
+    }
+
+    /// Frame and key losses on the validation sequences with all their keys, no teacher
+    /// forcing, no dropout.
+    pub fn evaluate(&mut self) -> ArnnResult<(f64, f64)> {
+        let valid = std::mem::take(&mut self.valid);
+        let result = (|| {
+            let (mut frame, mut key) = (0.0, 0.0);
+            for chunk in valid.chunks(self.config.batch_size) {
+                let refs: Vec<&KeyedSequence> = chunk.iter().collect();
+                let keys: Vec<Vec<usize>> = chunk.iter().map(|s| s.keys.clone()).collect();
+                let l = self.losses(&refs, &keys, 0.0, 1.0, false)?;
+                frame += l.frame.to_scalar::<f32>()? as f64 * chunk.len() as f64;
+                key += l.key.to_scalar::<f32>()? as f64 * chunk.len() as f64;
+            }
+            let n = valid.len().max(1) as f64;
+            Ok((frame / n, key / n))
+        })();
+        self.valid = valid;
+        result
+    }
+
+    /// Writes `config.json`, `model.safetensors` and `normalization.json`.
+    pub fn save(&self, dir: &Path) -> ArnnResult<()> {
+        let w = ck::stage_varmap(&dir.join(ck::WEIGHTS_FILE), &self.varmap)?;
+        let n = ck::stage_json(&dir.join(ck::STATS_FILE), &self.norm)?;
+        let c = ck::stage_json(&dir.join(ck::CONFIG_FILE), &self.config)?;
+        ck::commit([w, n, c])?;
+        Ok(())
+    }
+}
+
+fn check_sequence(config: &ArnnConfig, s: &KeyedSequence) -> ArnnResult<()> {
+    let n = s.frames.len();
+    let ok_keys = s.keys.len() >= 2
+        && s.keys[0] == 0
+        && *s.keys.last().unwrap_or(&0) == n - 1
+        && s.keys.windows(2).all(|w| w[0] < w[1]);
+    if !ok_keys {
+        return Err(ArnnError::Config(format!(
+            "{}: keys must increase from frame 0 to the last frame ({}), found {:?}",
+            s.name,
+            n.saturating_sub(1),
+            s.keys
+        )));
+    }
+    if s.frames.iter().any(|f| f.len() != config.dofs || f.iter().any(|v| !v.is_finite())) {
+        return Err(ArnnError::Config(format!("{}: frames must hold {} finite values", s.name, config.dofs)));
+    }
+    Ok(())
+}
+
+impl Trainable for ArnnTrainer {
+    fn train_len(&self) -> usize {
+        self.train.len()
+    }
+
+    fn batch_size(&self) -> usize {
+        self.config.batch_size
+    }
+
+    fn train_step(&mut self, samples: &[usize]) -> Result<f64, TrainError> {
+        Ok(self.train_on(samples)?)
+    }
+
+    fn steps(&self) -> u64 {
+        self.step
+    }
+
+    fn validate(&mut self) -> Result<Validation, TrainError> {
+        let (frame, key) = self.evaluate()?;
+        Ok(Validation { loss: frame + key, averaged: None })
+    }
+
+    fn save_model(&mut self, dir: &Path, _averaged: bool) -> Result<(), TrainError> {
+        Ok(self.save(dir)?)
+    }
+
+    fn save_training_state(&self, dir: &Path) -> Result<(), TrainError> {
+        ck::write_tensors(&dir.join(ck::OPTIMIZER_FILE), &self.opt.state()?)?;
+        ck::write_json(&dir.join(ck::RNG_FILE), &serde_json::json!({ RNG_KEY: self.rng.state() }))?;
+        Ok(())
+    }
+
+    fn load_training_state(&mut self, dir: &Path) -> Result<(), TrainError> {
+        ck::read_varmap(&dir.join(ck::WEIGHTS_FILE), &self.varmap)?;
+        self.opt.set_state(&ck::read_tensors(&dir.join(ck::OPTIMIZER_FILE), &self.device)?)?;
+        self.step = self.opt.steps();
+        let saved: serde_json::Value = ck::read_json(&dir.join(ck::RNG_FILE))?;
+        let state = saved[RNG_KEY].as_u64().ok_or_else(|| {
+            TrainError::Config(format!("{}: no \"{RNG_KEY}\" generator state", dir.join(ck::RNG_FILE).display()))
+        })?;
+        self.rng = SplitMix64::from_state(state);
+        Ok(())
+    }
+
+    fn summary(&self) -> serde_json::Map<String, serde_json::Value> {
+        let mut m = serde_json::Map::new();
+        m.insert("model".into(), "arnn".into());
+        m.insert("parameters".into(), self.parameter_count().into());
+        m
+    }
+}
+
+/// Fills in every frame from keys (section 8): `key_frames` (increasing, the first 0) and one
+/// pose per key, in physical units (metres, radians). Returns `key_frames.last() + 1` poses;
+/// frame 0 is the first key, later frames are the network's autoregressive predictions.
+pub fn complete(
+    model: &Arnn,
+    norm: &Normalization,
+    key_frames: &[usize],
+    key_poses: &[Vec<f64>],
+) -> ArnnResult<Vec<Vec<f64>>> {
+    let d = model.config().dofs;
+    if key_frames.len() < 2 || key_frames.len() != key_poses.len() {
+        return Err(ArnnError::Config(format!(
+            "need at least two keys and one pose per key, found {} key frames and {} poses",
+            key_frames.len(),
+            key_poses.len()
+        )));
+    }
+    if key_frames[0] != 0 || key_frames.windows(2).any(|w| w[0] >= w[1]) {
+        return Err(ArnnError::Config(format!(
+            "key frames must start at 0 and strictly increase, found {key_frames:?}"
+        )));
+    }
+    if let Some(k) = key_poses.iter().position(|p| p.len() != d || p.iter().any(|v| !v.is_finite())) {
+        return Err(ArnnError::Config(format!("key {k} must hold {d} finite values, found {:?}", key_poses[k])));
+    }
+    if norm.mean.len() != d || norm.std.len() != d {
+        return Err(ArnnError::Config(format!("normalization is for {} values, the model for {d}", norm.mean.len())));
+    }
+    let device = model.device();
+    let to_tensor = |p: &[f64]| Tensor::from_vec(norm.apply(p).collect::<Vec<f32>>(), (1, d), device);
+    let keys: Vec<Tensor> = key_poses.iter().map(|p| to_tensor(p)).collect::<candle_core::Result<_>>()?;
+    let last = *key_frames.last().unwrap_or(&0);
+    let mut out = vec![key_poses[0].clone()];
+    let mut prev = keys[0].clone();
+    let mut state = model.zero_state(1)?;
+    for t in 1..=last {
+        let (a, b, rel) = KeyedSequence::interval(key_frames, t);
+        let t_rel = Tensor::full(rel as f32, (1, 1), device)?;
+        let (y, s) = model.step(&prev, &keys[a], &keys[b], &t_rel, &state, None)?;
+        state = s;
+        let v: Vec<f32> = y.flatten_all()?.to_vec1()?;
+        out.push(v.iter().zip(&norm.mean).zip(&norm.std).map(|((x, m), s)| *x as f64 * s + m).collect());
+        prev = y;
+    }
+    Ok(out)
+}

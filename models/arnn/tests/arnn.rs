@@ -1,0 +1,117 @@
+//! ARNN: shapes, the curriculum, a short training run on simulated lamp hops, bad input.
+
+use candle_core::{DType, Device, Tensor};
+use candle_nn::VarMap;
+use zoo_arnn::{Arnn, ArnnConfig, ArnnTrainer, Curriculum, complete};
+use zoo_data::luxo::preprocess::{KeyedSequence, preprocess};
+use zoo_data::luxo::{GenerateOptions, generate_sequence};
+use zoo_nn::SeededVarMap;
+use zoo_nn::train_loop::Trainable;
+
+/// A few simulated, preprocessed lamp sequences (small annealing budget: seconds).
+fn lamp_sequences(n: usize) -> Vec<KeyedSequence> {
+    let mut o = GenerateOptions::new(n, 17);
+    o.anneal.k_max = 2;
+    (0..n).map(|i| preprocess(&generate_sequence(&o, i).unwrap()).unwrap()).collect()
+}
+
+#[test]
+fn step_shapes_and_residual() {
+    let config = ArnnConfig::tiny();
+    let varmap = VarMap::new();
+    let model = Arnn::new(&config, SeededVarMap::builder(&varmap, 1, DType::F32, &Device::Cpu)).unwrap();
+    let pose = Tensor::zeros((3, 6), DType::F32, &Device::Cpu).unwrap();
+    let t_rel = Tensor::full(0.5f32, (3, 1), &Device::Cpu).unwrap();
+    let state = model.zero_state(3).unwrap();
+    let (y, s) = model.step(&pose, &pose, &pose, &t_rel, &state, None).unwrap();
+    assert_eq!(y.dims(), &[3, 6]);
+    assert_eq!(s.gru[0].output().dims(), &[3, config.hidden]);
+    assert_eq!(s.gru[1].output().dims(), &[3, config.hidden]);
+    // The paper's sizes: GRUs of 100 units, decoder of 10.
+    let paper = ArnnConfig::paper();
+    assert_eq!((paper.hidden, paper.decoder, paper.key_weight), (100, 10, 100.0));
+}
+
+#[test]
+fn curriculum_follows_section_7_2() {
+    let c = Curriculum { total_steps: 1000, width: 0.05, enabled: true };
+    assert!(c.teacher_forcing(0) > 0.99 && c.teacher_forcing(499) < 0.01 && c.teacher_forcing(700) == 0.0);
+    assert!(c.teacher_forcing(100) > c.teacher_forcing(300));
+    assert_eq!(c.omega(0), 0.0);
+    assert_eq!(c.omega(499), 0.0);
+    assert!(c.omega(500) < 0.01 && c.omega(1000) > 0.99 && c.omega(800) > c.omega(700));
+    let off = Curriculum { enabled: false, ..c };
+    assert_eq!((off.teacher_forcing(0), off.omega(0)), (0.0, 1.0));
+}
+
+#[test]
+fn loss_falls_on_lamp_sequences() {
+    let seqs = lamp_sequences(4);
+    assert!(seqs.iter().all(|s| s.frames.len() == 87 && s.keys.len() == 9));
+    let mut config = ArnnConfig::tiny();
+    config.learning_rate = 3e-3;
+    config.curriculum = Curriculum { total_steps: 60, width: 0.05, enabled: false };
+    let mut t = ArnnTrainer::new(&config, seqs.clone(), seqs[..2].to_vec(), &Device::Cpu).unwrap();
+    let before = t.evaluate().unwrap();
+    let mut losses = vec![];
+    for _ in 0..40 {
+        losses.push(t.train_step(&[0, 1, 2, 3]).unwrap());
+    }
+    let after = t.evaluate().unwrap();
+    assert!(losses.iter().all(|l| l.is_finite()));
+    assert!(after.0 + after.1 < 0.7 * (before.0 + before.1), "validation {before:?} -> {after:?}");
+    assert_eq!(t.steps(), 40);
+    let dir = tempfile::tempdir().unwrap();
+    t.save(dir.path()).unwrap();
+    for f in ["config.json", "model.safetensors", "normalization.json"] {
+        assert!(dir.path().join(f).is_file(), "{f}");
+    }
+}
+
+#[test]
+fn bad_keys_are_rejected() {
+    let mut seqs = lamp_sequences(1);
+    seqs[0].keys.swap(1, 2);
+    let e = ArnnTrainer::new(&ArnnConfig::tiny(), seqs.clone(), vec![], &Device::Cpu).err().unwrap().to_string();
+    assert!(e.contains("keys must increase"), "{e}");
+    seqs[0].keys.swap(1, 2);
+    seqs[0].keys.push(200);
+    assert!(ArnnTrainer::new(&ArnnConfig::tiny(), seqs.clone(), vec![], &Device::Cpu).is_err());
+    seqs[0].keys.pop();
+    seqs[0].frames[5][2] = f64::NAN;
+    let e = ArnnTrainer::new(&ArnnConfig::tiny(), seqs, vec![], &Device::Cpu).err().unwrap().to_string();
+    assert!(e.contains("finite"), "{e}");
+}
+
+#[test]
+fn complete_fills_every_frame_and_rejects_bad_keys() {
+    let seqs = lamp_sequences(2);
+    let t = ArnnTrainer::new(&ArnnConfig::tiny(), seqs.clone(), vec![], &Device::Cpu).unwrap();
+    let s = &seqs[0];
+    let poses: Vec<Vec<f64>> = s.key_poses().iter().map(|p| p.to_vec()).collect();
+    let out = complete(t.model(), t.normalization(), &s.keys, &poses).unwrap();
+    assert_eq!(out.len(), s.frames.len());
+    assert_eq!(out[0], poses[0]);
+    assert!(out.iter().flatten().all(|v| v.is_finite()));
+    let err = |keys: &[usize], poses: &[Vec<f64>]| {
+        complete(t.model(), t.normalization(), keys, poses).err().expect("bad keys accepted").to_string()
+    };
+    // Keys out of order.
+    let mut k = s.keys.clone();
+    k.swap(1, 2);
+    assert!(err(&k, &poses).contains("strictly increase"));
+    // A key that does not start the sequence.
+    let mut k = s.keys.clone();
+    k[0] = 1;
+    assert!(err(&k, &poses).contains("start at 0"));
+    // NaN in a key.
+    let mut p = poses.clone();
+    p[3][1] = f64::NAN;
+    assert!(err(&s.keys, &p).contains("finite"));
+    // Another skeleton: keys with the wrong number of values.
+    let mut p = poses.clone();
+    p[2].push(0.0);
+    assert!(err(&s.keys, &p).contains("6 finite values"));
+    // Fewer poses than keys.
+    assert!(err(&s.keys, &poses[..3]).contains("one pose per key"));
+}
