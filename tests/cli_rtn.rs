@@ -338,6 +338,12 @@ fn broken_run_folders_are_refused_by_transition_export_and_resume() {
     let config_path = model.join("config.json");
     let good_config = std::fs::read_to_string(&config_path).unwrap();
     let out = dir.path().join("t.bvh");
+    // The same edit in the best checkpoint (what transition and export load) and in `last/`
+    // (what a resume loads).
+    let put = |path: &std::path::Path, text: String| {
+        std::fs::write(path, &text).unwrap();
+        std::fs::write(model.join("last").join(path.file_name().unwrap()), &text).unwrap();
+    };
     let mut check = |what: &str, expected: &str| {
         let (ok, _, err) = zoo(&transition_args(&model, &clip, "30", &out));
         assert!(!ok && err.contains(expected) && !err.contains("panicked"), "{what}, transition: {err}");
@@ -351,25 +357,25 @@ fn broken_run_folders_are_refused_by_transition_export_and_resume() {
     };
     let mut stats: serde_json::Value = serde_json::from_str(&good_stats).unwrap();
     stats["x"]["std"][4] = 0.0.into();
-    std::fs::write(&stats_path, stats.to_string()).unwrap();
+    put(&stats_path, stats.to_string());
     check("zero std", "normalization.json: group `x` has std 0 at index 4; every std must be > 0");
     let mut stats: serde_json::Value = serde_json::from_str(&good_stats).unwrap();
     stats["velocity"]["mean"].as_array_mut().unwrap().truncate(5);
     stats["velocity"]["std"].as_array_mut().unwrap().truncate(5);
-    std::fs::write(&stats_path, stats.to_string()).unwrap();
+    put(&stats_path, stats.to_string());
     check("short mean", "group `velocity` has 5 values, expected");
     let mut stats: serde_json::Value = serde_json::from_str(&good_stats).unwrap();
     stats["offset"]["std"].as_array_mut().unwrap().pop();
-    std::fs::write(&stats_path, stats.to_string()).unwrap();
+    put(&stats_path, stats.to_string());
     check("short std", "group `offset` has");
-    std::fs::write(&stats_path, &good_stats).unwrap();
+    put(&stats_path, good_stats.clone());
     let mut config: serde_json::Value = serde_json::from_str(&good_config).unwrap();
     config["parents"][2] = 7.into();
-    std::fs::write(&config_path, config.to_string()).unwrap();
+    put(&config_path, config.to_string());
     check("bad parent", "config.json: joint 2 (in `parents`) has parent 7");
     let mut config: serde_json::Value = serde_json::from_str(&good_config).unwrap();
     config["lstm"] = 0.into();
-    std::fs::write(&config_path, config.to_string()).unwrap();
+    put(&config_path, config.to_string());
     check("zero size", "config.json: lstm is 0");
 }
 
