@@ -391,6 +391,17 @@ fn transition_refuses_a_clip_with_another_hierarchy() {
     zoo_data::bvh::write_file(&c, &other).unwrap();
     let (ok, _, err) = zoo(&transition_args(&model, &other, "30", &dir.path().join("t.bvh")));
     assert!(!ok && err.contains("has the model's") && err.contains("but another hierarchy"), "{err}");
+    let onnx = dir.path().join("m.onnx");
+    let (ok, _, err) = run(&[
+        "export",
+        "--onnx",
+        model.to_str().unwrap(),
+        "--skeleton",
+        other.to_str().unwrap(),
+        "--out",
+        onnx.to_str().unwrap(),
+    ]);
+    assert!(!ok && err.contains("is not the one the model in") && !onnx.exists(), "{err}");
 }
 
 /// Inference memory does not grow with the transition length: thousands of frames complete

@@ -558,6 +558,13 @@ mod tests {
         m.normalization.get_mut("x").unwrap().mean[0] = f32::NAN;
         let err = m.check().unwrap_err();
         assert!(err.to_string().contains("group `x` has mean NaN at index 0"), "{err}");
+        // The skeleton must be the one the transition section's frames are for.
+        let mut m = sample();
+        m.skeleton.names.push("Head".into());
+        m.skeleton.parents.push(1);
+        m.skeleton.offsets.push([0.0, 5.0, 0.0]);
+        let err = MotionModelMetadata::from_props(lookup(&m.to_props())).unwrap_err();
+        assert!(err.to_string().contains("frame_dim is 6 but the skeleton has 3 joints (9 values)"), "{err}");
     }
 
     #[test]
