@@ -240,6 +240,16 @@ fn every_numeric_option_refuses_bad_values_with_its_name_and_range() {
         ),
         (vec!["data", "synth", "--out", "d", "--fps", "NaN"], "--fps <FPS>", "not a finite"),
     ];
+    // Values each valid alone but too much together are refused before any work.
+    let out = Command::new(zoo_bin()).args(["data", "synth", "--out", "d", "--clip-seconds", "1e-9"]).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("--clip-seconds 0.000000001 at 30 fps is less than 2 frames"),
+        "{err}"
+    );
+    let out = Command::new(zoo_bin()).args(["train", "rtn", "--synth-minutes", "1e6"]).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("--synth-minutes 1000000 at 30 fps is 1800000000 frames"), "{err}");
     for (args, option, range) in cases {
         let err = refused(&args);
         assert!(err.contains(option) && err.contains(range), "`zoo {}`: {err}", args.join(" "));

@@ -16,6 +16,34 @@ fn real(s: &str) -> Result<f64, String> {
     if v.is_finite() { Ok(v) } else { Err(format!("{v} is not a finite number")) }
 }
 
+/// The most frames `zoo data synth` and `zoo train rtn` (without `--data`) generate in memory
+/// (about 18.5 hours at 30 fps, a few GB).
+pub const MAX_SYNTH_FRAMES: f64 = 2_000_000.0;
+
+/// Checks the size of synthetic data: `minutes` at `fps` in clips of `clip_seconds`, naming
+/// the options as the command spells them.
+pub fn check_synth_size(minutes: (&str, f64), clip_seconds: f64, fps: f64) -> Result<(), String> {
+    let (option, minutes) = minutes;
+    if !(1.0..=1000.0).contains(&fps) {
+        return Err(format!("--fps {fps} is outside the valid range 1..=1000"));
+    }
+    let frames = minutes * 60.0 * fps;
+    if frames > MAX_SYNTH_FRAMES {
+        return Err(format!(
+            "{option} {minutes} at {fps} fps is {frames:.0} frames, more than the {MAX_SYNTH_FRAMES} this command generates \
+             in memory (at most {:.0} minutes at this frame rate)",
+            MAX_SYNTH_FRAMES / 60.0 / fps
+        ));
+    }
+    if clip_seconds * fps < 2.0 {
+        return Err(format!(
+            "--clip-seconds {clip_seconds} at {fps} fps is less than 2 frames per clip (at least {} s)",
+            2.0 / fps
+        ));
+    }
+    Ok(())
+}
+
 /// A whole number >= 1.
 pub fn at_least_one(s: &str) -> Result<usize, String> {
     match whole(s)? {
@@ -85,5 +113,10 @@ mod tests {
         assert!(non_negative("-0.5").unwrap_err().contains("negative"));
         assert_eq!(decay("0"), Ok(0.0));
         assert!(decay("1").unwrap_err().contains("[0, 1)"));
+        assert!(check_synth_size(("--minutes", 10.0), 10.0, 30.0).is_ok());
+        let e = check_synth_size(("--minutes", 2000.0), 10.0, 30.0).unwrap_err();
+        assert!(e.contains("--minutes 2000 at 30 fps is 3600000 frames") && e.contains("at most 1111 minutes"), "{e}");
+        assert!(check_synth_size(("--minutes", 1.0), 1e-9, 30.0).unwrap_err().contains("less than 2 frames"));
+        assert!(check_synth_size(("--minutes", 1.0), 10.0, 1e9).unwrap_err().contains("1..=1000"));
     }
 }

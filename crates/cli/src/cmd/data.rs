@@ -263,6 +263,7 @@ fn run_synth(a: SynthArgs) -> anyhow::Result<()> {
     if !(a.minutes > 0.0 && a.clip_seconds > 0.0 && a.fps > 0.0) {
         anyhow::bail!("--minutes, --clip-seconds and --fps must be positive");
     }
+    crate::args::check_synth_size(("--minutes", a.minutes), a.clip_seconds, a.fps).map_err(anyhow::Error::msg)?;
     crate::cmd::check_output_dir("--out", &a.out)?;
     let cfg =
         SynthConfig { minutes: a.minutes, seed: a.seed, terrain: a.terrain, fps: a.fps, clip_seconds: a.clip_seconds };

@@ -258,6 +258,11 @@ fn prepare_run_folder(a: &RtnArgs) -> anyhow::Result<PathBuf> {
 
 fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
     let device = candle_core::Device::Cpu;
+    if a.data.is_none() {
+        let cfg = SynthConfig::default();
+        crate::args::check_synth_size(("--synth-minutes", a.synth_minutes), cfg.clip_seconds, cfg.fps)
+            .map_err(anyhow::Error::msg)?;
+    }
     let out = prepare_run_folder(&a)?;
     let (train, valid, source) = load_clips(&a.data, &a.valid_glob, a.synth_minutes, a.seed, a.skip_invalid)?;
     let tw = dataset::windows(&train, &WindowOptions::TRAIN);
