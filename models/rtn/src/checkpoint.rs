@@ -44,6 +44,27 @@ fn positive_sizes(what: &str, sizes: &[usize]) -> Result<(), String> {
     }
 }
 
+/// The most parameters a configuration may describe (2 GB of f32), so that a corrupt
+/// `config.json` is refused instead of aborting on an allocation.
+pub const MAX_PARAMETERS: f64 = 5e8;
+
+/// About how many parameters the configuration's layers hold (f64: a corrupt size cannot overflow).
+fn parameter_estimate(c: &Config) -> f64 {
+    let d = 3.0 * c.joints as f64;
+    let chain = |input: f64, sizes: &[usize]| -> (f64, f64) {
+        sizes.iter().fold((0.0, input), |(n, prev), &s| (n + prev * s as f64 + s as f64, s as f64))
+    };
+    let terrain = if c.terrain { (c.terrain_side as f64).powi(2) } else { 0.0 };
+    let (fe, fe_out) = chain(d + terrain, &c.frame_encoder);
+    let (te, te_out) = chain(2.0 * d, &c.target_encoder);
+    let (oe, oe_out) = chain(d, &c.offset_encoder);
+    let h = c.lstm as f64;
+    let input = fe_out + if c.future_conditioning { te_out + oe_out } else { 0.0 };
+    let (dec, dec_out) = chain(h, &c.decoder);
+    let init = (d + 1.0) * c.init_hidden as f64 + (c.init_hidden as f64 + 1.0) * 2.0 * h;
+    fe + te + oe + 4.0 * h * (input + h + 2.0) + dec + dec_out * d + init
+}
+
 /// Checks that a configuration and its statistics describe one usable model, with the checks
 /// the runtime applies to an exported file (`zoo_runtime::metadata`): sizes >= 1, a valid
 /// skeleton of `joints` joints, finite training settings, and statistics of the config's sizes
@@ -76,14 +97,22 @@ pub fn check_meta(config: &Config, stats: &FeatureStats) -> Result<(), String> {
     positive_sizes("target_encoder", &config.target_encoder)?;
     positive_sizes("offset_encoder", &config.offset_encoder)?;
     positive_sizes("decoder", &config.decoder)?;
+    let params = parameter_estimate(config);
+    if params > MAX_PARAMETERS {
+        return Err(format!(
+            "{CONFIG_FILE} describes a model of about {params:.3e} parameters, more than the {MAX_PARAMETERS:.0e} zoo \
+             builds (check `joints` and the layer sizes)"
+        ));
+    }
     if !config.leaky_slope.is_finite() {
         return Err(format!("{CONFIG_FILE}: leaky_slope {} is not finite", config.leaky_slope));
     }
     if config.terrain
-        && (config.terrain_side == 0 || !(config.terrain_extent.is_finite() && config.terrain_extent > 0.0))
+        && (!(1..=1024).contains(&config.terrain_side)
+            || !(config.terrain_extent.is_finite() && config.terrain_extent > 0.0))
     {
         return Err(format!(
-            "{CONFIG_FILE}: terrain patch of side {} and extent {} is empty",
+            "{CONFIG_FILE}: terrain patch of side {} (1..=1024) and extent {} (> 0) is not a patch",
             config.terrain_side, config.terrain_extent
         ));
     }
@@ -143,4 +172,26 @@ pub fn load(dir: &Path, device: &Device) -> RtnResult<(Rtn, FeatureStats)> {
     let model = Rtn::new(&config, VarBuilder::from_varmap(&varmap, DType::F32, device))?;
     load_weights(dir, &varmap)?;
     Ok((model, stats))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use candle_nn::VarBuilder;
+
+    #[test]
+    fn the_parameter_estimate_is_close_and_bounds_corrupt_sizes() {
+        let config = Config::paper();
+        let varmap = VarMap::new();
+        let model = Rtn::new(&config, VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu)).unwrap();
+        let (estimate, actual) = (parameter_estimate(&config), model.parameter_count() as f64);
+        assert!((estimate / actual - 1.0).abs() < 0.1, "estimate {estimate} vs {actual}");
+        let stats = FeatureStats::identity(config.joints);
+        assert!(check_meta(&config, &stats).is_ok());
+        let huge = Config { lstm: 1 << 20, ..Config::paper() };
+        let err = check_meta(&huge, &stats).unwrap_err();
+        assert!(err.contains("more than the 5e8 zoo builds"), "{err}");
+        let huge = Config { joints: usize::MAX / 2, ..Config::paper() };
+        assert!(check_meta(&huge, &FeatureStats::identity(1)).unwrap_err().contains("parameters"));
+    }
 }
