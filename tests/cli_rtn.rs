@@ -402,6 +402,24 @@ fn transition_refuses_a_clip_with_another_hierarchy() {
         onnx.to_str().unwrap(),
     ]);
     assert!(!ok && err.contains("is not the one the model in") && !onnx.exists(), "{err}");
+    let data = dir.path().join("other_data");
+    std::fs::create_dir(&data).unwrap();
+    for name in ["a_train.bvh", "b_test.bvh"] {
+        std::fs::copy(&other, data.join(name)).unwrap();
+    }
+    let method = format!("rtn:{}", model.display());
+    let (ok, _, err) = run(&[
+        "bench",
+        "--data",
+        data.to_str().unwrap(),
+        "--valid-glob",
+        "b_*",
+        "--lengths",
+        "5",
+        "--methods",
+        &method,
+    ]);
+    assert!(!ok && err.contains("the model was trained on another skeleton"), "{err}");
 }
 
 /// Inference memory does not grow with the transition length: thousands of frames complete

@@ -107,6 +107,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
         (None, Some(g)) => dataset::split(clips, g)?,
         (None, None) => bail!("pass --valid-glob GLOB to choose the test split of --data, or --test-data PATH"),
     };
+    check_rtn_skeletons(&a.methods, &train)?;
     pb.set_message("preparing windows and statistics");
     let bench = Benchmark::new(&train, &test).map_err(anyhow::Error::msg)?;
     pb.set_message(format!("evaluating {} test windows", bench.windows()));
@@ -158,6 +159,33 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
     );
     if let Some(r) = &a.reference {
         check_reference(&result, r, a.tolerance)?;
+    }
+    Ok(())
+}
+
+/// Refuses an RTN run folder trained on another hierarchy than the dataset's (the same joint
+/// count is not enough: the joints would be paired with the wrong bones).
+fn check_rtn_skeletons(methods: &[String], train: &[dataset::NamedClip]) -> anyhow::Result<()> {
+    let Some(first) = train.first() else { return Ok(()) };
+    let parents = first.clip.skeleton.parents_i32();
+    for spec in methods {
+        if let crate::registry::MethodSpec::Model { kind, path, .. } = crate::registry::parse_method(spec.trim())?
+            && kind == "rtn"
+        {
+            let (config, _) = zoo_rtn::checkpoint::read_meta(&path)
+                .with_context(|| format!("method `{spec}`: loading the RTN in {}", path.display()))?;
+            if !config.parents.is_empty() && config.parents != parents {
+                bail!(
+                    "method `{spec}`: the model was trained on another skeleton ({} joints, parents {:?}) than the \
+                     dataset's ({} joints, parents {:?}, from {})",
+                    config.joints,
+                    config.parents,
+                    parents.len(),
+                    parents,
+                    first.path.display()
+                );
+            }
+        }
     }
     Ok(())
 }
