@@ -455,3 +455,48 @@ fn two_runs_with_the_same_seed_and_one_thread_are_bit_identical() {
         assert!(std::fs::read(a.join(f)).unwrap() == std::fs::read(b.join(f)).unwrap(), "{f} differs");
     }
 }
+
+/// `zoo decompress` with a 5000-frame keyframe interval: one transition of about 5000 frames
+/// (the stack overflow), which now completes.
+#[test]
+fn decompress_with_a_5000_frame_gap_completes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, _) = tiny_model(dir.path());
+    let data = dir.path().join("long");
+    let (ok, _, err) = run(&[
+        "data",
+        "synth",
+        "--out",
+        data.to_str().unwrap(),
+        "--minutes",
+        "3",
+        "--clip-seconds",
+        "180",
+        "--seed",
+        "4",
+    ]);
+    assert!(ok, "{err}");
+    let clip = data.join("synth_walk_0000.bvh");
+    let clip = if clip.is_file() {
+        clip
+    } else {
+        std::fs::read_dir(&data)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .find(|p| p.extension().is_some_and(|e| e == "bvh"))
+            .unwrap()
+    };
+    let out = dir.path().join("rebuilt.bvh");
+    let (ok, stdout, err) = run(&[
+        "decompress",
+        "--model",
+        model.to_str().unwrap(),
+        clip.to_str().unwrap(),
+        "--interval",
+        "5000",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stdout}\n{err}");
+    assert!(stdout.contains("rebuilt 5010 frames") && stdout.contains("1 keyframes (every 5000)"), "{stdout}");
+}
