@@ -260,3 +260,243 @@ fn resume_after_sigkill_continues_exactly() {
         serde_json::from_str(&std::fs::read_to_string(whole.join("config.json")).unwrap()).unwrap();
     assert_eq!(config["model"], "rtn");
 }
+
+/// A tiny RTN trained for one epoch on one minute of synthetic motion, and a synthetic BVH
+/// clip of its skeleton: `(run folder, clip)`.
+fn tiny_model(dir: &std::path::Path) -> (std::path::PathBuf, std::path::PathBuf) {
+    let run_dir = dir.join("run");
+    let out = tiny_command(&tiny_run("--out", run_dir.to_str().unwrap(), "1")).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let data = dir.join("synth");
+    let (ok, _, stderr) = run(&["data", "synth", "--out", data.to_str().unwrap(), "--minutes", "0.5", "--seed", "3"]);
+    assert!(ok, "{stderr}");
+    let clip = std::fs::read_dir(&data)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "bvh"))
+        .min()
+        .unwrap();
+    (run_dir, clip)
+}
+
+fn transition_args(
+    model: &std::path::Path,
+    clip: &std::path::Path,
+    frames: &str,
+    out: &std::path::Path,
+) -> Vec<String> {
+    let c = clip.display();
+    ["transition", "--model", &model.display().to_string(), "--from", &format!("{c}:20"), "--to", &format!("{c}:60")]
+        .iter()
+        .map(|s| s.to_string())
+        .chain(["--frames".into(), frames.into(), "--out".into(), out.display().to_string()])
+        .collect()
+}
+
+fn zoo(args: &[String]) -> (bool, String, String) {
+    let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+    run(&refs)
+}
+
+/// `--out` on a folder that holds a trained run refuses (the run is untouched) unless
+/// `--resume` or `--overwrite` says what to do.
+#[test]
+fn train_refuses_to_replace_a_trained_run_without_overwrite() {
+    let dir = tempfile::tempdir().unwrap();
+    let run_dir = dir.path().join("run");
+    let s = run_dir.to_str().unwrap();
+    let out = tiny_command(&tiny_run("--out", s, "1")).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let weights = std::fs::read(run_dir.join("model.safetensors")).unwrap();
+    let out = tiny_command(&tiny_run("--out", s, "1")).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "a second run into the same folder must be refused");
+    assert!(
+        err.contains("already holds a run trained for 1 epochs")
+            && err.contains("--resume")
+            && err.contains("--overwrite"),
+        "{err}"
+    );
+    assert!(std::fs::read(run_dir.join("model.safetensors")).unwrap() == weights, "the trained model was touched");
+    let mut args = tiny_run("--out", s, "1");
+    args.push("--overwrite");
+    let out = tiny_command(&args).output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(stdout.contains("--overwrite: deleted the run in"), "{stdout}");
+    assert_eq!(read_state(&run_dir)["epoch"], 1);
+}
+
+/// The candle path (transition), the exporter and a resume refuse a run folder whose
+/// statistics or configuration the runtime would refuse, with the file and the problem.
+#[test]
+fn broken_run_folders_are_refused_by_transition_export_and_resume() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, clip) = tiny_model(dir.path());
+    let stats_path = model.join("normalization.json");
+    let good_stats = std::fs::read_to_string(&stats_path).unwrap();
+    let config_path = model.join("config.json");
+    let good_config = std::fs::read_to_string(&config_path).unwrap();
+    let out = dir.path().join("t.bvh");
+    // The same edit in the best checkpoint (what transition and export load) and in `last/`
+    // (what a resume loads).
+    let put = |path: &std::path::Path, text: String| {
+        std::fs::write(path, &text).unwrap();
+        std::fs::write(model.join("last").join(path.file_name().unwrap()), &text).unwrap();
+    };
+    let mut check = |what: &str, expected: &str| {
+        let (ok, _, err) = zoo(&transition_args(&model, &clip, "30", &out));
+        assert!(!ok && err.contains(expected) && !err.contains("panicked"), "{what}, transition: {err}");
+        assert!(!out.exists(), "{what}: transition wrote a file");
+        let (ok, _, err) =
+            run(&["export", "--onnx", model.to_str().unwrap(), "--out", dir.path().join("m.onnx").to_str().unwrap()]);
+        assert!(!ok && err.contains(expected), "{what}, export: {err}");
+        let out = tiny_command(&tiny_run("--resume", model.to_str().unwrap(), "2")).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains(expected), "{what}, resume: {err}");
+    };
+    let mut stats: serde_json::Value = serde_json::from_str(&good_stats).unwrap();
+    stats["x"]["std"][4] = 0.0.into();
+    put(&stats_path, stats.to_string());
+    check("zero std", "normalization.json: group `x` has std 0 at index 4; every std must be > 0");
+    let mut stats: serde_json::Value = serde_json::from_str(&good_stats).unwrap();
+    stats["velocity"]["mean"].as_array_mut().unwrap().truncate(5);
+    stats["velocity"]["std"].as_array_mut().unwrap().truncate(5);
+    put(&stats_path, stats.to_string());
+    check("short mean", "group `velocity` has 5 values, expected");
+    let mut stats: serde_json::Value = serde_json::from_str(&good_stats).unwrap();
+    stats["offset"]["std"].as_array_mut().unwrap().pop();
+    put(&stats_path, stats.to_string());
+    check("short std", "group `offset` has");
+    put(&stats_path, good_stats.clone());
+    let mut config: serde_json::Value = serde_json::from_str(&good_config).unwrap();
+    config["parents"][2] = 7.into();
+    put(&config_path, config.to_string());
+    check("bad parent", "config.json: joint 2 (in `parents`) has parent 7");
+    let mut config: serde_json::Value = serde_json::from_str(&good_config).unwrap();
+    config["lstm"] = 0.into();
+    put(&config_path, config.to_string());
+    check("zero size", "config.json: lstm is 0");
+}
+
+/// `zoo transition` with a clip that has the model's joint count but another hierarchy.
+#[test]
+fn transition_refuses_a_clip_with_another_hierarchy() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, clip) = tiny_model(dir.path());
+    let mut c = zoo_data::bvh::read_model_clip(&clip).unwrap();
+    let j = (2..c.joints()).find(|&j| c.skeleton.parents[j] != Some(j - 1)).unwrap();
+    c.skeleton.parents[j] = Some(j - 1);
+    let other = dir.path().join("other.bvh");
+    zoo_data::bvh::write_file(&c, &other).unwrap();
+    let (ok, _, err) = zoo(&transition_args(&model, &other, "30", &dir.path().join("t.bvh")));
+    assert!(!ok && err.contains("has the model's") && err.contains("but another hierarchy"), "{err}");
+    let onnx = dir.path().join("m.onnx");
+    let (ok, _, err) = run(&[
+        "export",
+        "--onnx",
+        model.to_str().unwrap(),
+        "--skeleton",
+        other.to_str().unwrap(),
+        "--out",
+        onnx.to_str().unwrap(),
+    ]);
+    assert!(!ok && err.contains("is not the one the model in") && !onnx.exists(), "{err}");
+    let data = dir.path().join("other_data");
+    std::fs::create_dir(&data).unwrap();
+    for name in ["a_train.bvh", "b_test.bvh"] {
+        std::fs::copy(&other, data.join(name)).unwrap();
+    }
+    let method = format!("rtn:{}", model.display());
+    let (ok, _, err) = run(&[
+        "bench",
+        "--data",
+        data.to_str().unwrap(),
+        "--valid-glob",
+        "b_*",
+        "--lengths",
+        "5",
+        "--methods",
+        &method,
+    ]);
+    assert!(!ok && err.contains("the model was trained on another skeleton"), "{err}");
+}
+
+/// Inference memory does not grow with the transition length: thousands of frames complete
+/// (a candle graph kept over every step overflowed the stack at 4500).
+#[test]
+fn a_transition_of_4500_frames_completes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, clip) = tiny_model(dir.path());
+    let out = dir.path().join("long.bvh");
+    let (ok, stdout, err) = zoo(&transition_args(&model, &clip, "4500", &out));
+    assert!(ok, "{stdout}\n{err}");
+    assert!(stdout.contains("4500 generated"), "{stdout}");
+    let c = zoo_data::bvh::read_file(&out, &Default::default()).unwrap();
+    assert!(c.frames() > 4500 && c.local_positions.iter().all(|p| p.is_finite()));
+}
+
+/// Two runs of the same command (seed, one thread) give the same losses epoch by epoch and
+/// the same weights, byte for byte.
+#[test]
+fn two_runs_with_the_same_seed_and_one_thread_are_bit_identical() {
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    for run_dir in [&a, &b] {
+        let out = tiny_command(&tiny_run("--out", run_dir.to_str().unwrap(), "2")).output().unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    }
+    let (sa, sb) = (read_state(&a), read_state(&b));
+    for key in ["train_loss", "valid_loss", "valid_loss_ema", "best_epoch", "steps"] {
+        assert_eq!(sa[key], sb[key], "{key}");
+    }
+    assert_eq!(sa["train_loss"].as_array().unwrap().len(), 2);
+    for f in ["model.safetensors", "last/model.safetensors", "last/optimizer.safetensors", "last/ema.safetensors"] {
+        assert!(std::fs::read(a.join(f)).unwrap() == std::fs::read(b.join(f)).unwrap(), "{f} differs");
+    }
+}
+
+/// `zoo decompress` with a 5000-frame keyframe interval: one transition of about 5000 frames
+/// (the stack overflow), which now completes.
+#[test]
+fn decompress_with_a_5000_frame_gap_completes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, _) = tiny_model(dir.path());
+    let data = dir.path().join("long");
+    let (ok, _, err) = run(&[
+        "data",
+        "synth",
+        "--out",
+        data.to_str().unwrap(),
+        "--minutes",
+        "3",
+        "--clip-seconds",
+        "180",
+        "--seed",
+        "4",
+    ]);
+    assert!(ok, "{err}");
+    let clip = data.join("synth_walk_0000.bvh");
+    let clip = if clip.is_file() {
+        clip
+    } else {
+        std::fs::read_dir(&data)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .find(|p| p.extension().is_some_and(|e| e == "bvh"))
+            .unwrap()
+    };
+    let out = dir.path().join("rebuilt.bvh");
+    let (ok, stdout, err) = run(&[
+        "decompress",
+        "--model",
+        model.to_str().unwrap(),
+        clip.to_str().unwrap(),
+        "--interval",
+        "5000",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stdout}\n{err}");
+    assert!(stdout.contains("rebuilt 5010 frames") && stdout.contains("1 keyframes (every 5000)"), "{stdout}");
+}

@@ -1,5 +1,6 @@
 //! `zoo`: train, evaluate, export and inspect learned motion-transition models.
 
+mod args;
 mod cmd;
 mod methods;
 mod registry;
@@ -40,7 +41,23 @@ enum Command {
     Render(cmd::render::RenderArgs),
 }
 
+/// Whether a panic is `println!` failing on a closed pipe (`zoo data stats ... | head`).
+fn is_broken_pipe(info: &std::panic::PanicHookInfo) -> bool {
+    let payload = info.payload();
+    let text = payload.downcast_ref::<String>().map(String::as_str).or_else(|| payload.downcast_ref::<&str>().copied());
+    text.is_some_and(|t| t.contains("failed printing to stdout") && t.contains("Broken pipe"))
+}
+
 fn main() -> anyhow::Result<()> {
+    // Rust ignores SIGPIPE, so printing to a pipe whose reader has gone makes `println!` panic:
+    // end quietly instead, like a tool killed by SIGPIPE would, without a panic message.
+    let default_hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        if is_broken_pipe(info) {
+            std::process::exit(0);
+        }
+        default_hook(info)
+    }));
     let cli = Cli::parse();
     match cli.command {
         Command::Data(c) => cmd::data::run(c),

@@ -268,8 +268,11 @@ impl Benchmark {
             }
             let tasks = self.tasks(n);
             let (gt_r, gt_p) = self.globals(n, None);
-            let gt_skate = self.skate.skate(&gt_p, n + 1, j);
-            result.gt.insert(format!("skate@{n}"), gt_skate);
+            // Without foot joints there is no skate to measure: no figure rather than a 0.
+            let feet = !self.skate.joints.is_empty();
+            if feet {
+                result.gt.insert(format!("skate@{n}"), self.skate.skate(&gt_p, n + 1, j));
+            }
             let (gt_rt, gt_pt) = (transition_part(&gt_r, n, j), transition_part(&gt_p, n, j));
             for m in methods {
                 let start = Instant::now();
@@ -287,7 +290,9 @@ impl Benchmark {
                 row.insert(format!("l2p@{n}"), metrics::l2p(&ppt, &gt_pt, j, &self.stats.std));
                 row.insert(format!("npss@{n}"), metrics::npss(&prt, &gt_rt, self.test.count, n, j));
                 row.insert(format!("aco@{n}"), metrics::aco(&ppt, &gt_pt));
-                row.insert(format!("skate@{n}"), self.skate.skate(&pp, n + 1, j));
+                if feet {
+                    row.insert(format!("skate@{n}"), self.skate.skate(&pp, n + 1, j));
+                }
                 row.insert(format!("ms_per_transition@{n}"), ms);
                 if generated.iter().all(|g| g.raw_positions.is_some()) {
                     let raw: Vec<DVec3> = generated.iter().flat_map(|g| g.raw_positions.clone().unwrap()).collect();
@@ -303,6 +308,10 @@ impl Benchmark {
 fn transition_part<T: Copy>(all: &[T], n: usize, joints: usize) -> Vec<T> {
     all.chunks_exact((n + 1) * joints).flat_map(|c| c[joints..].iter().copied()).collect()
 }
+
+/// What the table says instead of foot-skate figures when the skeleton has no foot joints.
+pub const NO_FEET: &str =
+    "not measured: no joint name contains `foot` or `toe`, so the benchmark found no feet (rename the foot joints)";
 
 /// Benchmark results, shaped as the JSON output.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
@@ -334,6 +343,9 @@ impl BenchResult {
             let rows: Vec<(&String, &BTreeMap<String, f64>)> =
                 self.methods.iter().filter(|(_, m)| m.keys().any(|k| k.starts_with(&format!("{key}@")))).collect();
             if rows.is_empty() {
+                if key == "skate" && !self.methods.is_empty() {
+                    let _ = writeln!(s, "\n{title}: {NO_FEET}");
+                }
                 continue;
             }
             let _ = write!(s, "\n{title:<22}");

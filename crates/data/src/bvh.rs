@@ -8,8 +8,8 @@
 //! every frame. Quaternions are normalized but their signs are left as the Euler conversion
 //! gives them: callers that need continuity call [`Clip::remove_sign_flips`].
 //!
-//! The motion section may hold more rows than `Frames:` declares: the declared count is read
-//! and the rest is ignored. Fewer rows is an error. Blank lines between rows are skipped.
+//! The motion section must hold exactly the rows `Frames:` declares: fewer or more rows is an
+//! error (never silently dropped motion). Blank lines between rows are skipped.
 //!
 //! Writing produces the standard layout (`HIERARCHY`, `ROOT`, `JOINT`, `End Site`, `MOTION`,
 //! `Frames:`, `Frame Time:`) with tab indentation that Blender and MotionBuilder import.
@@ -593,6 +593,28 @@ impl<'a> Parser<'a> {
             }
             f += 1;
         }
+        // Rows beyond the declared count: an error, not silently dropped motion.
+        loop {
+            self.skip_blank();
+            if self.pos < b.len() && b[self.pos] == b'\n' {
+                self.pos += 1;
+                self.line += 1;
+                continue;
+            }
+            break;
+        }
+        if self.pos < b.len() {
+            let extra =
+                b[self.pos..].split(|&c| c == b'\n').filter(|l| l.iter().any(|c| !c.is_ascii_whitespace())).count();
+            return Err(self.err(
+                self.line,
+                format!(
+                    "{extra} more frame row(s) than the {frames} declared by `Frames:`; set `Frames: {}` if they \
+                     belong to the clip, or delete them",
+                    frames + extra
+                ),
+            ));
+        }
         let dummy_root = !root_nonzero && skeleton.children(0).len() == 1;
         Ok(Parsed {
             clip: Clip { skeleton, frame_time, local_rotations: rotations, local_positions: positions },
@@ -871,9 +893,19 @@ Frame Time: 0.0333333
     }
 
     #[test]
-    fn more_rows_than_declared_reads_the_declared_count() {
-        let clip = read(&VALID.replace("Frames: 2", "Frames: 1")).unwrap();
-        assert_eq!(clip.frames(), 1);
+    fn malformed_more_rows_than_declared() {
+        assert_fails(
+            &VALID.replace("Frames: 2", "Frames: 1"),
+            20,
+            "1 more frame row(s) than the 1 declared by `Frames:`",
+        );
+        assert_fails(
+            &VALID.replace("Frames: 2", "Frames: 0"),
+            19,
+            "2 more frame row(s) than the 0 declared by `Frames:`; set `Frames: 2`",
+        );
+        // Trailing blank lines and spaces are not rows.
+        assert_eq!(read(&format!("{VALID}\n  \r\n\n")).unwrap().frames(), 2);
     }
 
     #[test]

@@ -29,7 +29,7 @@ pub enum DataError {
     /// A clip's skeleton differs from the first clip's.
     #[error(
         "{path}: skeleton differs from {first} ({why}); every clip of a dataset must use the same rig \
-         (retarget it first, or load the two rigs as separate datasets)"
+         (retarget it first, load the two rigs as separate datasets, or pass --skip-invalid to leave such clips out)"
     )]
     Skeleton {
         /// Offending file.
@@ -38,6 +38,29 @@ pub enum DataError {
         first: PathBuf,
         /// What differs.
         why: String,
+    },
+    /// A clip's frame rate differs from the first clip's.
+    #[error(
+        "{path}: {fps} fps but {first} has {first_fps} fps; every clip of a dataset must have one frame rate \
+         (resample it first, or pass --skip-invalid to leave such clips out)"
+    )]
+    FrameRate {
+        /// Offending file.
+        path: PathBuf,
+        /// Its frame rate.
+        fps: f64,
+        /// File that defined the frame rate.
+        first: PathBuf,
+        /// The dataset's frame rate.
+        first_fps: f64,
+    },
+    /// `skip_invalid` left no clip.
+    #[error("{path}: all {skipped} clips were skipped as invalid; nothing is left to load")]
+    AllSkipped {
+        /// The dataset.
+        path: PathBuf,
+        /// How many were skipped.
+        skipped: usize,
     },
     /// A glob pattern is invalid.
     #[error("invalid glob `{pattern}`: {message}")]
@@ -98,34 +121,149 @@ pub fn find_bvh_files(path: &Path) -> Result<Vec<PathBuf>, DataError> {
     Ok(out)
 }
 
-/// Loads every clip under `path` in parallel (sorted by path), drops a dummy root, removes
-/// quaternion sign flips over time, and checks that all clips share one skeleton.
+/// Loads every clip under `path` in parallel (sorted by path), drops or folds a dummy root,
+/// removes quaternion sign flips over time, and checks that all clips share one skeleton and
+/// one frame rate (see [`load_with`]); any bad clip refuses the dataset.
 pub fn load(path: &Path) -> Result<Vec<NamedClip>, DataError> {
     load_matching(path, None)
 }
 
 /// [`load`], keeping only files whose name matches `name_glob` (when given).
 pub fn load_matching(path: &Path, name_glob: Option<&str>) -> Result<Vec<NamedClip>, DataError> {
+    Ok(load_with(path, &LoadOptions { name_glob, skip_invalid: false })?.clips)
+}
+
+/// How [`load_with`] loads a dataset.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct LoadOptions<'a> {
+    /// Keep only files whose name matches this glob.
+    pub name_glob: Option<&'a str>,
+    /// Leave out the clips that cannot join the dataset (unreadable, another skeleton, another
+    /// frame rate) and list them in [`Dataset::skipped`], instead of refusing the dataset.
+    pub skip_invalid: bool,
+}
+
+/// A clip left out by `skip_invalid`, and why.
+#[derive(Clone, Debug)]
+pub struct SkippedClip {
+    /// File.
+    pub path: PathBuf,
+    /// The error that refused it.
+    pub reason: String,
+}
+
+/// A loaded dataset: its clips, the clips left out and what was changed on the way.
+#[derive(Clone, Debug, Default)]
+pub struct Dataset {
+    /// The clips, sorted by path.
+    pub clips: Vec<NamedClip>,
+    /// Clips left out (only with [`LoadOptions::skip_invalid`]).
+    pub skipped: Vec<SkippedClip>,
+    /// Harmless differences that were repaired, one line each (e.g. a folded dummy root).
+    pub notices: Vec<String>,
+}
+
+/// Two frame times are the same rate when their frame rates differ by less than this (fps).
+const FPS_TOLERANCE: f64 = 1e-3;
+
+/// Loads a dataset: every BVH file under `path` in parallel (sorted by path).
+///
+/// - A dummy root (a first joint with a single child and a zero offset, like bandai2's
+///   `joint_Root`) that is zero in every frame is dropped. One that carries motion while the
+///   dataset's other clips have it zero is folded into its child (the child's global motion
+///   is the same, see `Clip::drop_root`), with a notice, instead of making its clip another
+///   skeleton.
+/// - Every clip must have the hierarchy (joint names and parents) of the first clip that has
+///   no such moving dummy root, and its frame rate: another one is refused (they are not
+///   resampled), or left out with `skip_invalid`, like a file that does not parse.
+pub fn load_with(path: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> {
     let mut files = find_bvh_files(path)?;
-    if let Some(pattern) = name_glob {
+    if let Some(pattern) = opts.name_glob {
         let m = glob(pattern)?;
         files.retain(|p| p.file_name().is_some_and(|n| m.is_match(n)));
         if files.is_empty() {
             return Err(DataError::Split(format!("no file name under {} matches `{pattern}`", path.display())));
         }
     }
-    let opts = ReadOptions { drop_dummy_root: true };
-    let clips: Vec<NamedClip> = files
+    let read = ReadOptions { drop_dummy_root: true };
+    let read: Vec<Result<NamedClip, DataError>> = files
         .par_iter()
         .map(|p| {
-            let mut clip = bvh::read_file(p, &opts)?;
-            clip.remove_sign_flips();
+            let clip = bvh::read_file(p, &read)?;
             let name = p.file_name().and_then(|n| n.to_str()).unwrap_or_default().to_string();
             Ok(NamedClip { path: p.clone(), name, clip })
         })
-        .collect::<Result<_, DataError>>()?;
-    check_same_skeleton(&clips)?;
-    Ok(clips)
+        .collect();
+    let mut out = Dataset::default();
+    let mut clips = Vec::with_capacity(read.len());
+    for (r, p) in read.into_iter().zip(&files) {
+        match r {
+            Ok(c) => clips.push(c),
+            Err(e) if opts.skip_invalid => out.skipped.push(SkippedClip { path: p.clone(), reason: e.to_string() }),
+            Err(e) => return Err(e),
+        }
+    }
+    let Some(reference) = reference_clip(&clips) else {
+        return Err(DataError::AllSkipped { path: path.to_path_buf(), skipped: out.skipped.len() });
+    };
+    let (first, first_skeleton, first_fps) =
+        (clips[reference].path.clone(), clips[reference].clip.skeleton.clone(), clips[reference].clip.fps());
+    for mut c in clips {
+        let mut why = first_skeleton.topology_difference(&c.clip.skeleton);
+        if why.is_some() && has_dummy_shaped_root(&c.clip) {
+            let mut folded = c.clip.clone();
+            let dummy = folded.skeleton.names[0].clone();
+            if folded.drop_root() && first_skeleton.topology_difference(&folded.skeleton).is_none() {
+                out.notices.push(format!(
+                    "{}: its dummy root `{dummy}` carries motion; folded into `{}` (the same global motion)",
+                    c.path.display(),
+                    folded.skeleton.names[0]
+                ));
+                c.clip = folded;
+                why = None;
+            }
+        }
+        let err = match why {
+            Some(why) => Some(DataError::Skeleton { path: c.path.clone(), first: first.clone(), why }),
+            None if (c.clip.fps() - first_fps).abs() > FPS_TOLERANCE => {
+                Some(DataError::FrameRate { path: c.path.clone(), fps: c.clip.fps(), first: first.clone(), first_fps })
+            }
+            None => None,
+        };
+        match err {
+            None => {
+                c.clip.remove_sign_flips();
+                out.clips.push(c);
+            }
+            Some(e) if opts.skip_invalid => out.skipped.push(SkippedClip { path: c.path, reason: e.to_string() }),
+            Some(e) => return Err(e),
+        }
+    }
+    out.clips.sort_by(|a, b| a.path.cmp(&b.path));
+    out.skipped.sort_by(|a, b| a.path.cmp(&b.path));
+    Ok(out)
+}
+
+/// The clip whose skeleton and frame rate the others must have: among the clips without a
+/// moving dummy root (its dummy was dropped, or it never had one; all clips when every one has
+/// it), the first of those whose hierarchy most clips share.
+fn reference_clip(clips: &[NamedClip]) -> Option<usize> {
+    let plain: Vec<usize> = (0..clips.len()).filter(|&i| !has_dummy_shaped_root(&clips[i].clip)).collect();
+    let pool = if plain.is_empty() { (0..clips.len()).collect() } else { plain };
+    let key = |i: usize| (&clips[i].clip.skeleton.names, &clips[i].clip.skeleton.parents);
+    let mut votes = std::collections::HashMap::new();
+    for &i in &pool {
+        *votes.entry(key(i)).or_insert(0usize) += 1;
+    }
+    // max_by_key keeps the last of equal maxima: scan in reverse to keep the first.
+    pool.iter().rev().copied().max_by_key(|&i| votes[&key(i)])
+}
+
+/// Whether the root is shaped like a dummy root: one child and a zero offset (it was kept
+/// because its channels carry motion).
+fn has_dummy_shaped_root(clip: &Clip) -> bool {
+    let s = &clip.skeleton;
+    s.len() >= 2 && s.offsets[0] == DVec3::ZERO && s.children(0) == [1]
 }
 
 /// Errors unless every clip has the first clip's joint names and parents.
@@ -346,6 +484,52 @@ pub fn percentile(values: &mut [f64], q: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// joint_Root (a dummy: one child, zero offset) -> Hips -> (Spine, Leg); `root` is the
+    /// dummy's six channel values in both frames.
+    fn dummy_rooted(root: &str) -> String {
+        format!(
+            "HIERARCHY\nROOT joint_Root\n{{\nOFFSET 0 0 0\nCHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n\
+             JOINT Hips\n{{\nOFFSET 0 90 0\nCHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n\
+             JOINT Spine\n{{\nOFFSET 0 10 0\nCHANNELS 3 Zrotation Xrotation Yrotation\nEnd Site\n{{\nOFFSET 0 5 0\n}}\n}}\n\
+             JOINT Leg\n{{\nOFFSET 5 -40 0\nCHANNELS 3 Zrotation Xrotation Yrotation\nEnd Site\n{{\nOFFSET 0 -40 0\n}}\n}}\n}}\n}}\n\
+             MOTION\nFrames: 2\nFrame Time: 0.0333333\n\
+             {root} 1 90 2 10 20 30 5 0 0 0 0 10\n{root} 2 91 2 12 22 28 6 1 0 0 1 11\n"
+        )
+    }
+
+    #[test]
+    fn a_moving_dummy_root_is_folded_with_the_same_global_motion() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("a_still.bvh"), dummy_rooted("0 0 0 0 0 0")).unwrap();
+        let moving = dummy_rooted("30 -2 7 15 -5 40");
+        std::fs::write(dir.path().join("b_moving.bvh"), &moving).unwrap();
+        let d = load_with(dir.path(), &LoadOptions::default()).unwrap();
+        assert_eq!(d.clips.len(), 2);
+        assert!(
+            d.notices.len() == 1 && d.notices[0].contains("b_moving.bvh: its dummy root `joint_Root`"),
+            "{:?}",
+            d.notices
+        );
+        let folded = &d.clips[1].clip;
+        assert_eq!(folded.skeleton.names, ["Hips", "Spine", "Leg"]);
+        assert_eq!(folded.skeleton.parents, d.clips[0].clip.skeleton.parents);
+        // The same global motion: every remaining joint where it was under the moving dummy.
+        let raw = bvh::parse(&moving, Path::new("b_moving.bvh"), &ReadOptions { drop_dummy_root: false }).unwrap();
+        let (_, before) = raw.global();
+        let (_, after) = folded.global();
+        for f in 0..2 {
+            for j in 0..3 {
+                let (a, b) = (before[f * 4 + j + 1], after[f * 3 + j]);
+                assert!((a - b).length() < 1e-9, "frame {f} joint {j}: {a} vs {b}");
+            }
+        }
+        // Alone, a moving dummy is part of the skeleton: nothing to fold it for.
+        let alone = tempfile::tempdir().unwrap();
+        std::fs::write(alone.path().join("b_moving.bvh"), &moving).unwrap();
+        let d = load_with(alone.path(), &LoadOptions::default()).unwrap();
+        assert_eq!((d.clips[0].clip.joints(), d.notices.len()), (4, 0));
+    }
 
     #[test]
     fn percentile_matches_numpy() {

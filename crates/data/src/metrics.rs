@@ -117,7 +117,11 @@ impl FootSkate {
     /// `global_pos` is `(sequences, frames, joints)` frame-major with `frames` including that
     /// leading frame. skate = v * clamp(2 - 2^(h / scale), 0, 1), v the horizontal displacement
     /// since the previous frame, h the height above the planted height.
+    /// NaN when there is nothing to measure (no foot joint, or fewer than two frames).
     pub fn skate(&self, global_pos: &[DVec3], frames: usize, joints: usize) -> f64 {
+        if frames * joints == 0 {
+            return f64::NAN;
+        }
         let seqs = global_pos.len() / (frames * joints);
         let (mut total, mut count) = (0.0, 0usize);
         for s in 0..seqs {
@@ -132,7 +136,7 @@ impl FootSkate {
                 }
             }
         }
-        if count == 0 { 0.0 } else { total / count as f64 }
+        if count == 0 { f64::NAN } else { total / count as f64 }
     }
 }
 

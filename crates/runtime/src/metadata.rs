@@ -93,6 +93,43 @@ impl MotionMeanStd {
             *x = *x * s + m;
         }
     }
+
+    /// The one check of a normalization group, shared by the runtime loader, the exporters and
+    /// the candle models' run-folder loaders: as many means as deviations (`len` of each when
+    /// given), every mean finite, every deviation finite and > 0. The error names `group` and
+    /// the first bad index.
+    pub fn check(&self, group: &str, len: Option<usize>) -> Result<(), String> {
+        if self.mean.len() != self.std.len() {
+            return Err(format!("group `{group}` has {} means but {} stds", self.mean.len(), self.std.len()));
+        }
+        if let Some(n) = len
+            && self.mean.len() != n
+        {
+            return Err(format!("group `{group}` has {} values, expected {n}", self.mean.len()));
+        }
+        if let Some(i) = self.mean.iter().position(|m| !m.is_finite()) {
+            return Err(format!("group `{group}` has mean {} at index {i}; every mean must be finite", self.mean[i]));
+        }
+        if let Some(i) = self.std.iter().position(|s| !(s.is_finite() && *s > 0.0)) {
+            return Err(format!("group `{group}` has std {} at index {i}; every std must be > 0", self.std[i]));
+        }
+        Ok(())
+    }
+}
+
+/// The one check of a skeleton's parent list (`-1` for the root), shared like
+/// [`MotionMeanStd::check`]: the root is joint 0 and every parent comes before its child.
+/// `name(j)` names joint `j` in the message.
+pub fn check_parents(parents: &[i32], name: impl Fn(usize) -> String) -> Result<(), String> {
+    for (j, &p) in parents.iter().enumerate() {
+        if (j == 0 && p != -1) || (j > 0 && !(0..j as i32).contains(&p)) {
+            return Err(format!(
+                "joint {j} ({}) has parent {p}; the root must be joint 0 with parent -1 and every parent must come before its child",
+                name(j)
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// The skeleton a model was trained on.
@@ -148,15 +185,7 @@ impl MotionSkeletonInfo {
         if self.parents.len() != n || self.offsets.len() != n {
             return Err(format!("{n} names but {} parents and {} offsets", self.parents.len(), self.offsets.len()));
         }
-        for (j, &p) in self.parents.iter().enumerate() {
-            if (j == 0 && p != -1) || (j > 0 && !(0..j as i32).contains(&p)) {
-                return Err(format!(
-                    "joint {j} (`{}`) has parent {p}; the root must be joint 0 with parent -1 and every parent must come before its child",
-                    self.names[j]
-                ));
-            }
-        }
-        Ok(())
+        check_parents(&self.parents, |j| format!("`{}`", self.names[j]))
     }
 }
 
@@ -320,21 +349,24 @@ impl MotionModelMetadata {
         }
         serde_json::from_str::<serde_json::Value>(&self.config_json).map_err(|e| bad(keys::CONFIG, e.to_string()))?;
         for (name, g) in &self.normalization {
-            if g.mean.len() != g.std.len() {
+            g.check(name, None).map_err(|r| bad(keys::NORMALIZATION, r))?;
+        }
+        self.skeleton.check().map_err(|reason| bad(keys::SKELETON, reason))?;
+        self.task.check()?;
+        if let MotionTask::Transition(t) = &self.task {
+            let d = 3 * self.skeleton.len();
+            if t.frame_dim != d {
                 return Err(bad(
-                    keys::NORMALIZATION,
-                    format!("group `{name}` has {} means but {} stds", g.mean.len(), g.std.len()),
-                ));
-            }
-            if let Some(i) = g.std.iter().position(|s| !(s.is_finite() && *s > 0.0)) {
-                return Err(bad(
-                    keys::NORMALIZATION,
-                    format!("group `{name}` has std {} at index {i}; every std must be > 0", g.std[i]),
+                    keys::TRANSITION,
+                    format!(
+                        "frame_dim is {} but the skeleton has {} joints ({d} values)",
+                        t.frame_dim,
+                        self.skeleton.len()
+                    ),
                 ));
             }
         }
-        self.skeleton.check().map_err(|reason| bad(keys::SKELETON, reason))?;
-        self.task.check()
+        Ok(())
     }
 
     /// Reads and checks the metadata; `get` returns the value of a key, if present.
@@ -522,6 +554,17 @@ mod tests {
         m.normalization.get_mut("x").unwrap().std[1] = 0.0;
         let err = MotionModelMetadata::from_props(lookup(&m.to_props())).unwrap_err();
         assert!(err.to_string().contains("std 0"), "{err}");
+        let mut m = sample();
+        m.normalization.get_mut("x").unwrap().mean[0] = f32::NAN;
+        let err = m.check().unwrap_err();
+        assert!(err.to_string().contains("group `x` has mean NaN at index 0"), "{err}");
+        // The skeleton must be the one the transition section's frames are for.
+        let mut m = sample();
+        m.skeleton.names.push("Head".into());
+        m.skeleton.parents.push(1);
+        m.skeleton.offsets.push([0.0, 5.0, 0.0]);
+        let err = MotionModelMetadata::from_props(lookup(&m.to_props())).unwrap_err();
+        assert!(err.to_string().contains("frame_dim is 6 but the skeleton has 3 joints (9 values)"), "{err}");
     }
 
     #[test]

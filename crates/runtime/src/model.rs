@@ -186,11 +186,40 @@ fn parse(bytes: &[u8], origin: &str) -> Result<Parsed, MotionError> {
         Some(g) if proto.ir_version > 0 && !g.node.is_empty() => g,
         _ => return Err(not_onnx("no IR version or no graph nodes".into())),
     };
-    let model =
-        tract_onnx::onnx().model_for_proto_model(&proto).map_err(|e| MotionError::Unsupported { reason: chain(&e) })?;
+    check_names(graph).map_err(not_onnx)?;
+    // tract 0.23.9 panics on some malformed graphs (found by `fuzz/fuzz_targets/model_load.rs`);
+    // `check_names` refuses the known ones first, and a panic left is reported as an error.
+    let model = std::panic::catch_unwind(|| tract_onnx::onnx().model_for_proto_model(&proto))
+        .map_err(|_| not_onnx("tract could not read the graph (it panicked on it)".into()))?
+        .map_err(|e| MotionError::Unsupported { reason: chain(&e) })?;
     let in_dims = graph.input.iter().map(|v| read_dims(v, "input")).collect::<Result<_, _>>()?;
     let out_dims = graph.output.iter().map(|v| read_dims(v, "output")).collect::<Result<_, _>>()?;
     Ok(Parsed { proto, model, in_dims, out_dims })
+}
+
+/// Refuses a graph whose outputs or node inputs name a value that no graph input,
+/// initializer or node output defines (tract indexes them without checking).
+fn check_names(graph: &pb::GraphProto) -> Result<(), String> {
+    let mut defined: std::collections::HashSet<&str> = graph.input.iter().map(|v| v.name.as_str()).collect();
+    defined.extend(graph.initializer.iter().map(|t| t.name.as_str()));
+    for node in &graph.node {
+        if let Some(missing) = node.input.iter().find(|i| !i.is_empty() && !defined.contains(i.as_str())) {
+            return Err(format!(
+                "node `{}` reads `{missing}`, which no input, initializer or earlier node defines",
+                node.name
+            ));
+        }
+        defined.extend(node.output.iter().map(String::as_str));
+    }
+    // tract's raw-data reader has no arm for strings (an `unimplemented!`).
+    let attr_tensors = graph.node.iter().flat_map(|n| &n.attribute).flat_map(|a| a.t.iter().chain(&a.tensors));
+    if let Some(t) = graph.initializer.iter().chain(attr_tensors).find(|t| !t.raw_data.is_empty() && t.data_type == 8) {
+        return Err(format!("tensor `{}` holds strings as raw data, which tract cannot read", t.name));
+    }
+    match graph.output.iter().find(|o| !defined.contains(o.name.as_str())) {
+        Some(o) => Err(format!("graph output `{}` is produced by no node", o.name)),
+        None => Ok(()),
+    }
 }
 
 pub(crate) fn width(d: &[usize]) -> usize {
@@ -421,5 +450,41 @@ mod tests {
     fn missing_file_is_an_io_error() {
         let err = MotionModel::load("/nonexistent/model.onnx").unwrap_err();
         assert!(matches!(err, MotionError::Io { .. }), "{err}");
+    }
+}
+
+#[cfg(test)]
+mod name_tests {
+    use super::*;
+
+    fn value(name: &str) -> pb::ValueInfoProto {
+        pb::ValueInfoProto { name: name.into(), ..Default::default() }
+    }
+
+    /// The fuzzer's first find: an output name no node produces made tract panic.
+    #[test]
+    fn undefined_value_names_are_refused_before_tract_sees_them() {
+        let node = pb::NodeProto {
+            name: "add".into(),
+            input: vec!["x".into(), "x".into()],
+            output: vec!["y".into()],
+            ..Default::default()
+        };
+        let mut g = pb::GraphProto {
+            node: vec![node],
+            input: vec![value("x")],
+            output: vec![value("y")],
+            ..Default::default()
+        };
+        assert!(check_names(&g).is_ok());
+        g.output[0].name = "\0".into();
+        assert!(check_names(&g).unwrap_err().contains("graph output `\0` is produced by no node"));
+        g.output[0].name = "y".into();
+        g.node[0].input[1] = "z".into();
+        assert!(check_names(&g).unwrap_err().contains("node `add` reads `z`"));
+        // The second find: string raw data reached an `unimplemented!` in tract.
+        g.node[0].input[1] = "x".into();
+        g.initializer.push(pb::TensorProto { name: "s".into(), data_type: 8, raw_data: vec![1], ..Default::default() });
+        assert!(check_names(&g).unwrap_err().contains("tensor `s` holds strings as raw data"));
     }
 }

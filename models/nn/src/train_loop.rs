@@ -297,6 +297,15 @@ pub fn train<M: Trainable + ?Sized>(model: &mut M, opts: &TrainOptions) -> Resul
             );
         }
     }
+    if state.epoch == 0 {
+        return Err(TrainError::Config(format!(
+            "no epoch was trained ({} epochs asked, time limit {:?}): {} holds no model; ask for at least one \
+             epoch and a positive time limit",
+            opts.epochs,
+            opts.time_limit,
+            out.display()
+        )));
+    }
     let mut summary = model.summary();
     for (k, v) in &state.extra {
         summary.entry(k.clone()).or_insert_with(|| v.clone());
@@ -342,7 +351,7 @@ mod tests {
         x: Vec<[f64; 3]>,
         y: Vec<f64>,
         nan_at_step: Option<u64>,
-        nan_validation: bool,
+        bad_validation: Option<f64>,
         sleep: Duration,
     }
 
@@ -372,7 +381,7 @@ mod tests {
                 x,
                 y,
                 nan_at_step: None,
-                nan_validation: false,
+                bad_validation: None,
                 sleep: Duration::ZERO,
             }
         }
@@ -414,7 +423,7 @@ mod tests {
             self.opt.steps()
         }
         fn validate(&mut self) -> Result<Validation, TrainError> {
-            let loss = if self.nan_validation { f64::NAN } else { self.valid_loss() };
+            let loss = self.bad_validation.unwrap_or_else(|| self.valid_loss());
             let trained = self.ema.swap_in()?;
             let averaged = self.valid_loss();
             self.ema.swap_out(trained)?;
@@ -504,7 +513,7 @@ mod tests {
         assert_eq!(bytes(out.join("last/model.safetensors")), last);
         // A NaN validation loss stops the run too, and is not recorded as the best.
         let mut toy = Toy::new(2);
-        toy.nan_validation = true;
+        toy.bad_validation = Some(f64::NAN);
         let err = train(&mut toy, &TrainOptions { resume: true, ..opts(&out, 5) }).unwrap_err().to_string();
         assert!(err.contains("validation loss became NaN") && err.contains("best: epoch"), "{err}");
         assert_eq!(bytes(out.join(WEIGHTS_FILE)), weights);
@@ -516,6 +525,40 @@ mod tests {
         let err = train(&mut toy, &opts(&dir.path().join("fresh"), 1)).unwrap_err().to_string();
         assert!(err.contains("no checkpoint had been written yet"), "{err}");
         assert!(!dir.path().join("fresh").join(WEIGHTS_FILE).exists());
+    }
+
+    #[test]
+    fn an_infinite_validation_loss_is_divergence_and_the_run_resumes() {
+        let dir = tempfile::tempdir().unwrap();
+        let (out, whole) = (dir.path().join("run"), dir.path().join("whole"));
+        let uninterrupted = train(&mut Toy::new(4), &opts(&whole, 3)).unwrap();
+        let before = train(&mut Toy::new(4), &opts(&out, 2)).unwrap();
+        let weights = bytes(out.join(WEIGHTS_FILE));
+        let mut toy = Toy::new(4);
+        toy.bad_validation = Some(f64::INFINITY);
+        let err = train(&mut toy, &TrainOptions { resume: true, ..opts(&out, 3) }).unwrap_err();
+        let msg = err.to_string();
+        assert!(matches!(err, TrainError::Stopped { epoch: 3, .. }), "{msg}");
+        assert!(msg.contains("validation loss became inf") && msg.contains("last good checkpoint is kept"), "{msg}");
+        assert_eq!(bytes(out.join(WEIGHTS_FILE)), weights, "an inf loss is never the best checkpoint");
+        let kept: TrainState = checkpoint::read_json(&out.join(TRAIN_STATE_FILE)).unwrap();
+        assert_eq!((kept.epoch, kept.best_epoch, kept.best_valid), (2, before.best_epoch, before.best_valid));
+        // The kept checkpoint resumes, and ends where an uninterrupted run ends.
+        let resumed = train(&mut Toy::new(4), &TrainOptions { resume: true, ..opts(&out, 3) }).unwrap();
+        assert_eq!(resumed.valid_loss, uninterrupted.valid_loss);
+        assert!(resumed.best_valid.unwrap().is_finite());
+        assert_eq!(bytes(out.join("last/model.safetensors")), bytes(whole.join("last/model.safetensors")));
+    }
+
+    #[test]
+    fn a_run_that_trains_no_epoch_says_so_and_claims_no_model() {
+        let dir = tempfile::tempdir().unwrap();
+        let o = TrainOptions { time_limit: Some(Duration::ZERO), ..opts(dir.path(), 3) };
+        let err = train(&mut Toy::new(5), &o).unwrap_err().to_string();
+        assert!(err.contains("no epoch was trained") && err.contains("holds no model"), "{err}");
+        assert!(!dir.path().join(SUMMARY_FILE).exists() && !dir.path().join(WEIGHTS_FILE).exists());
+        let err = train(&mut Toy::new(5), &opts(&dir.path().join("zero"), 0)).unwrap_err().to_string();
+        assert!(err.contains("no epoch was trained (0 epochs asked"), "{err}");
     }
 
     #[test]

@@ -202,7 +202,7 @@ impl RtnTrainer {
         let (past, n_out) = (self.config.past_frames, self.config.transition_frames + 1);
         let rng = &mut self.rng;
         let mut teacher = || p_teacher > 0.0 && (p_teacher >= 1.0 || rng.next_f64() < p_teacher);
-        let outs = generate(&self.model, &self.stats, &self.offsets, &batch, past, n_out, &mut teacher)?;
+        let outs = generate(&self.model, &self.stats, &self.offsets, &batch, past, n_out, true, &mut teacher)?;
         let pred = Tensor::stack(&outs, 1)?;
         let truth = Tensor::stack(&batch.x[past..past + n_out], 1)?;
         Ok((pred, truth))
@@ -460,6 +460,6 @@ pub fn predict_with_teacher(
         .collect();
     let batch = encode_batch(stats, &items, model.device())?;
     let offsets = OffsetTensors::new(stats, model.device())?;
-    let outs = generate(model, stats, &offsets, &batch, c.past_frames, c.transition_frames + 1, teacher)?;
+    let outs = generate(model, stats, &offsets, &batch, c.past_frames, c.transition_frames + 1, true, teacher)?;
     Ok(Tensor::stack(&outs, 1)?)
 }

@@ -4,7 +4,7 @@
 use crate::config::Config;
 use crate::error::{RtnError, RtnResult};
 use crate::features::{self, FeatureStats, Heightmap, YawAbout};
-use crate::model::{OffsetTensors, Rtn, RtnInputs};
+use crate::model::{OffsetTensors, Rtn, RtnInputs, RtnState};
 use candle_core::{Device, Tensor};
 
 /// One sequence to encode: known frames (global positions, `frames * 3K`), the target frame
@@ -123,6 +123,10 @@ fn terrain_patches(config: &Config, stats: &FeatureStats, batch: &EncodedBatch, 
 /// ground truth when `teacher()` says so and a ground truth exists (RTN sec. 6.2), else the
 /// previous prediction, whose global root is integrated and whose offset to the target is
 /// recomputed in the graph (sec. 3.2).
+///
+/// `grad`: keep the graph for backpropagation (training). Without it every step's outputs are
+/// detached, so memory and the depth of candle's graph do not grow with `n_out` (a graph kept
+/// over thousands of steps used gigabytes and overflowed the stack when it was dropped).
 pub(crate) fn generate(
     model: &Rtn,
     stats: &FeatureStats,
@@ -130,6 +134,7 @@ pub(crate) fn generate(
     batch: &EncodedBatch,
     past: usize,
     n_out: usize,
+    grad: bool,
     teacher: &mut dyn FnMut() -> bool,
 ) -> RtnResult<Vec<Tensor>> {
     let config = model.config();
@@ -149,7 +154,11 @@ pub(crate) fn generate(
         };
         let terrain = if config.terrain { Some(terrain_patches(config, stats, batch, &root)?) } else { None };
         let inputs = RtnInputs { sequence: &seq, x: &x, offset: offset.as_ref(), terrain: terrain.as_ref() };
-        let (next, st) = model.step(&inputs, &state)?;
+        let (mut next, mut st) = model.step(&inputs, &state)?;
+        if !grad {
+            next = next.detach();
+            st = RtnState { h: st.h.detach(), c: st.c.detach() };
+        }
         state = st;
         let nt = t + 1;
         if nt >= past {
@@ -160,6 +169,9 @@ pub(crate) fn generate(
             root = batch.roots[nt].clone();
         } else {
             root = offsets.next_root(&root, &next)?;
+            if !grad {
+                root = root.detach();
+            }
             x = next;
         }
     }
@@ -197,7 +209,7 @@ impl Rtn {
             SequenceInput { known: past.into(), target: target.into(), next: next.into(), terrain, rotation: None };
         let batch = encode_batch(stats, std::slice::from_ref(&item), device)?;
         let n_past = past.len() / d;
-        let outs = generate(self, stats, &offsets, &batch, n_past, n_frames + 1, &mut || false)?;
+        let outs = generate(self, stats, &offsets, &batch, n_past, n_frames + 1, false, &mut || false)?;
         let mut feats = Tensor::cat(&outs, 0)?.flatten_all()?.to_vec1::<f32>()?;
         stats.x.denormalize(&mut feats);
         let mut y = vec![0f32; feats.len()];

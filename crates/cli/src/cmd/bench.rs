@@ -35,7 +35,7 @@ pub struct BenchArgs {
     #[arg(long, default_value = "zerovel,interp", value_delimiter = ',')]
     pub methods: Vec<String>,
     /// Comma-separated transition lengths in frames.
-    #[arg(long, default_value = "5,15,30,45", value_delimiter = ',')]
+    #[arg(long, default_value = "5,15,30,45", value_delimiter = ',', allow_hyphen_values = true, value_parser = crate::args::frame_count)]
     pub lengths: Vec<usize>,
     /// Write the results as JSON to this file.
     #[arg(long)]
@@ -45,7 +45,7 @@ pub struct BenchArgs {
     #[arg(long)]
     pub reference: Option<PathBuf>,
     /// Relative tolerance of `--reference`.
-    #[arg(long, default_value_t = 1e-3)]
+    #[arg(long, default_value_t = 1e-3, allow_hyphen_values = true, value_parser = crate::args::non_negative)]
     pub tolerance: f64,
     /// Write BVH files of the first `--save-count` test windows into this folder: the ground
     /// truth and every method's transition, per length (`w0003_n30_interp.bvh`, ...), ready for
@@ -53,8 +53,12 @@ pub struct BenchArgs {
     #[arg(long)]
     pub save_bvh: Option<PathBuf>,
     /// How many test windows `--save-bvh` writes (evenly spread over the test set).
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, default_value_t = 4, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
     pub save_count: usize,
+    /// Leave out the clips that cannot join the dataset (unreadable, another skeleton or
+    /// frame rate) and list them, instead of refusing the dataset.
+    #[arg(long)]
+    pub skip_invalid: bool,
 }
 
 /// Benchmarks other than the in-betweening table.
@@ -77,13 +81,19 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
     let Some(data) = a.data.clone() else {
         bail!("pass --data DATASET (and --valid-glob GLOB) for the in-betweening benchmark, or use `zoo bench runtime`")
     };
+    if let Some(path) = &a.json {
+        crate::cmd::check_output_file("--json", path)?;
+    }
+    if let Some(dir) = &a.save_bvh {
+        crate::cmd::check_output_dir("--save-bvh", dir)?;
+    }
     let start = Instant::now();
     let methods = a.methods.iter().map(|m| method(m.trim())).collect::<anyhow::Result<Vec<_>>>()?;
     let pb = ProgressBar::new_spinner();
     pb.set_style(ProgressStyle::with_template("{spinner} {msg} [{elapsed}]")?);
     pb.enable_steady_tick(Duration::from_millis(120));
     pb.set_message(format!("loading {}", data.display()));
-    let clips = dataset::load(&data).with_context(|| format!("loading {}", data.display()))?;
+    let clips = crate::cmd::load_dataset(&data, None, a.skip_invalid)?;
     let (train, test) = match (&a.test_data, &a.valid_glob) {
         (Some(test_path), glob) => {
             let train = match glob {
@@ -91,12 +101,13 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
                 None => clips,
             };
             pb.set_message(format!("loading {}", test_path.display()));
-            let test = dataset::load(test_path).with_context(|| format!("loading {}", test_path.display()))?;
+            let test = crate::cmd::load_dataset(test_path, None, a.skip_invalid)?;
             (train, test)
         }
         (None, Some(g)) => dataset::split(clips, g)?,
         (None, None) => bail!("pass --valid-glob GLOB to choose the test split of --data, or --test-data PATH"),
     };
+    check_rtn_skeletons(&a.methods, &train)?;
     pb.set_message("preparing windows and statistics");
     let bench = Benchmark::new(&train, &test).map_err(anyhow::Error::msg)?;
     pb.set_message(format!("evaluating {} test windows", bench.windows()));
@@ -148,6 +159,33 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
     );
     if let Some(r) = &a.reference {
         check_reference(&result, r, a.tolerance)?;
+    }
+    Ok(())
+}
+
+/// Refuses an RTN run folder trained on another hierarchy than the dataset's (the same joint
+/// count is not enough: the joints would be paired with the wrong bones).
+fn check_rtn_skeletons(methods: &[String], train: &[dataset::NamedClip]) -> anyhow::Result<()> {
+    let Some(first) = train.first() else { return Ok(()) };
+    let parents = first.clip.skeleton.parents_i32();
+    for spec in methods {
+        if let crate::registry::MethodSpec::Model { kind, path, .. } = crate::registry::parse_method(spec.trim())?
+            && kind == "rtn"
+        {
+            let (config, _) = zoo_rtn::checkpoint::read_meta(&path)
+                .with_context(|| format!("method `{spec}`: loading the RTN in {}", path.display()))?;
+            if !config.parents.is_empty() && config.parents != parents {
+                bail!(
+                    "method `{spec}`: the model was trained on another skeleton ({} joints, parents {:?}) than the \
+                     dataset's ({} joints, parents {:?}, from {})",
+                    config.joints,
+                    config.parents,
+                    parents.len(),
+                    parents,
+                    first.path.display()
+                );
+            }
+        }
     }
     Ok(())
 }

@@ -26,13 +26,13 @@ pub struct RuntimeArgs {
     #[arg(long)]
     pub model: PathBuf,
     /// Batch sizes to measure (characters per step).
-    #[arg(long, default_value = "1,64", value_delimiter = ',')]
+    #[arg(long, default_value = "1,64", value_delimiter = ',', allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
     pub batch: Vec<usize>,
     /// Rounds per batch size (each backend runs once per round).
-    #[arg(long, default_value_t = 11)]
+    #[arg(long, default_value_t = 11, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
     pub rounds: usize,
     /// Character-steps per backend per round (steps = this / batch, at least 5).
-    #[arg(long, default_value_t = 1280)]
+    #[arg(long, default_value_t = 1280, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
     pub work: usize,
     /// onnxruntime library (default: `ORT_DYLIB_PATH`, else `.onnxruntime/libonnxruntime.so*`
     /// in the current folder or one of its parents).
@@ -296,6 +296,9 @@ fn make_backends(
 
 /// Runs `zoo bench runtime`.
 pub fn run(a: RuntimeArgs) -> anyhow::Result<()> {
+    if let Some(path) = &a.json {
+        crate::cmd::check_output_file("--json", path)?;
+    }
     let bytes = std::fs::read(&a.model).with_context(|| format!("reading {}", a.model.display()))?;
     let model = MotionModel::load(&a.model).with_context(|| format!("loading {}", a.model.display()))?;
     let (config, weights) = zoo_rtn::export::import_rtn(&bytes)

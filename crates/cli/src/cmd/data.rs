@@ -34,6 +34,10 @@ pub struct StatsArgs {
     /// Only the clips whose file name matches this glob, e.g. `'synth_walk_*'`.
     #[arg(long)]
     pub glob: Option<String>,
+    /// Leave out the clips that cannot join the dataset (unreadable, another skeleton or
+    /// frame rate) and list them, instead of refusing the dataset.
+    #[arg(long)]
+    pub skip_invalid: bool,
 }
 
 /// Arguments of `zoo data synth`.
@@ -43,7 +47,7 @@ pub struct SynthArgs {
     #[arg(long)]
     pub out: std::path::PathBuf,
     /// Minutes of motion to generate.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, allow_hyphen_values = true, value_parser = crate::args::positive)]
     pub minutes: f64,
     /// Random seed: the same seed writes the same files.
     #[arg(long, default_value_t = 0)]
@@ -52,10 +56,10 @@ pub struct SynthArgs {
     #[arg(long)]
     pub terrain: bool,
     /// Seconds per clip.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, allow_hyphen_values = true, value_parser = crate::args::positive)]
     pub clip_seconds: f64,
     /// Frames per second.
-    #[arg(long, default_value_t = 30.0)]
+    #[arg(long, default_value_t = 30.0, allow_hyphen_values = true, value_parser = crate::args::positive)]
     pub fps: f64,
 }
 
@@ -85,18 +89,20 @@ pub struct DataStats {
     pub joint_names: Vec<String>,
     /// Parent index per joint (-1 for the root).
     pub parents: Vec<i32>,
-    /// Horizontal root speed percentiles over all frames (units/s): p5, p25, p50, p75, p95.
-    pub root_speed: RootSpeed,
-    /// Foot joints used for the skate measure.
+    /// Horizontal root speed percentiles over all frames (units/s): p5, p25, p50, p75, p95;
+    /// `null` when no clip has two frames.
+    pub root_speed: Option<RootSpeed>,
+    /// Foot joints used for the skate measure (empty: none found, no foot figures).
     pub foot_joints: Vec<String>,
     /// Planted height of each foot joint (5th percentile of its height).
     pub planted_heights: Vec<f64>,
     /// The data's own foot skate (units per frame, `BENCHMARK.md` definition, all frames; heights
-    /// above the clip's terrain when a `NAME.terrain.json` lies beside it).
-    pub foot_skate: f64,
+    /// above the clip's terrain when a `NAME.terrain.json` lies beside it); `null` without feet
+    /// or without two consecutive frames.
+    pub foot_skate: Option<f64>,
     /// Lowest foot-joint height over all frames (above the terrain when there is one): how far
-    /// feet sink below the ground if negative.
-    pub min_foot_height: f64,
+    /// feet sink below the ground if negative; `null` without feet or frames.
+    pub min_foot_height: Option<f64>,
     /// Largest change of a bone's length within a clip (0 for rigid skeletons).
     pub max_bone_length_change: f64,
     /// Seconds taken.
@@ -119,9 +125,11 @@ pub struct RootSpeed {
 }
 
 fn stats(a: StatsArgs) -> anyhow::Result<()> {
+    if let Some(path) = &a.json {
+        crate::cmd::check_output_file("--json", path)?;
+    }
     let start = Instant::now();
-    let clips =
-        dataset::load_matching(&a.path, a.glob.as_deref()).with_context(|| format!("loading {}", a.path.display()))?;
+    let clips = crate::cmd::load_dataset(&a.path, a.glob.as_deref(), a.skip_invalid)?;
     let skeleton = clips[0].clip.skeleton.clone();
     let j = skeleton.len();
     let feet = metrics::foot_joints(&skeleton.names);
@@ -156,7 +164,7 @@ fn stats(a: StatsArgs) -> anyhow::Result<()> {
                 .collect();
             // Largest change of any bone's length (global joint distance) from frame 0.
             let mut bone_drift: f64 = 0.0;
-            for k in 1..j {
+            for k in (1..j).filter(|_| frames > 0) {
                 let p = c.clip.skeleton.parents[k].unwrap_or(0);
                 let len0 = (gp[k] - gp[p]).length();
                 for f in 1..frames {
@@ -177,14 +185,16 @@ fn stats(a: StatsArgs) -> anyhow::Result<()> {
     let (mut skate_sum, mut skate_n) = (0.0, 0usize);
     for (p, c) in per.iter().zip(&clips) {
         let frames = c.clip.frames();
-        if frames > 1 {
+        if frames > 1 && !feet.is_empty() {
             skate_sum += fs.skate(&p.feet, frames, feet.len()) * ((frames - 1) * feet.len()) as f64;
             skate_n += (frames - 1) * feet.len();
         }
     }
     let mut speeds: Vec<f64> = per.iter().flat_map(|p| p.speed.iter().copied()).collect();
-    let mut pct = |q| dataset::percentile(&mut speeds, q);
-    let root_speed = RootSpeed { p5: pct(5.0), p25: pct(25.0), p50: pct(50.0), p75: pct(75.0), p95: pct(95.0) };
+    let root_speed = (!speeds.is_empty()).then(|| {
+        let mut pct = |q| dataset::percentile(&mut speeds, q);
+        RootSpeed { p5: pct(5.0), p25: pct(25.0), p50: pct(50.0), p75: pct(75.0), p95: pct(95.0) }
+    });
     let mut fps: Vec<f64> = clips.iter().map(|c| (c.clip.fps() * 1000.0).round() / 1000.0).collect();
     fps.sort_by(f64::total_cmp);
     fps.dedup();
@@ -200,8 +210,8 @@ fn stats(a: StatsArgs) -> anyhow::Result<()> {
         root_speed,
         foot_joints: feet.iter().map(|&k| skeleton.names[k].clone()).collect(),
         planted_heights: planted,
-        foot_skate: if skate_n > 0 { skate_sum / skate_n as f64 } else { 0.0 },
-        min_foot_height: per.iter().flat_map(|p| p.feet.iter().map(|v| v.y)).fold(f64::INFINITY, f64::min),
+        foot_skate: (skate_n > 0).then(|| skate_sum / skate_n as f64),
+        min_foot_height: per.iter().flat_map(|p| p.feet.iter().map(|v| v.y)).reduce(f64::min),
         max_bone_length_change: per.iter().map(|p| p.bone_drift).fold(0.0, f64::max),
         seconds: start.elapsed().as_secs_f64(),
     };
@@ -220,16 +230,27 @@ fn print_stats(s: &DataStats, skeleton: &Skeleton) {
     println!("fps        {}", s.fps.iter().map(|f| format!("{f}")).collect::<Vec<_>>().join(", "));
     println!("joints     {}", s.joints);
     print_tree(skeleton, 0, 1);
-    let r = &s.root_speed;
-    println!(
-        "root speed (units/s)  p5 {:.1}  p25 {:.1}  median {:.1}  p75 {:.1}  p95 {:.1}",
-        r.p5, r.p25, r.p50, r.p75, r.p95
-    );
+    match &s.root_speed {
+        Some(r) => println!(
+            "root speed (units/s)  p5 {:.1}  p25 {:.1}  median {:.1}  p75 {:.1}  p95 {:.1}",
+            r.p5, r.p25, r.p50, r.p75, r.p95
+        ),
+        None => println!("root speed            not measured: no clip has two frames"),
+    }
     for (n, h) in s.foot_joints.iter().zip(&s.planted_heights) {
         println!("planted height  {n:<10} {h:.2}");
     }
-    println!("foot skate (units/frame, all frames)  {:.4}", s.foot_skate);
-    println!("lowest foot joint height              {:.2}", s.min_foot_height);
+    if s.foot_joints.is_empty() {
+        println!("foot skate            not measured: no joint name contains `foot` or `toe`");
+    } else {
+        match s.foot_skate {
+            Some(v) => println!("foot skate (units/frame, all frames)  {v:.4}"),
+            None => println!("foot skate            not measured: no clip has two frames"),
+        }
+        if let Some(h) = s.min_foot_height {
+            println!("lowest foot joint height              {h:.2}");
+        }
+    }
     println!("largest bone length change            {:.2e}", s.max_bone_length_change);
     println!("done in {:.2} s", s.seconds);
 }
@@ -245,6 +266,8 @@ fn run_synth(a: SynthArgs) -> anyhow::Result<()> {
     if !(a.minutes > 0.0 && a.clip_seconds > 0.0 && a.fps > 0.0) {
         anyhow::bail!("--minutes, --clip-seconds and --fps must be positive");
     }
+    crate::args::check_synth_size(("--minutes", a.minutes), a.clip_seconds, a.fps).map_err(anyhow::Error::msg)?;
+    crate::cmd::check_output_dir("--out", &a.out)?;
     let cfg =
         SynthConfig { minutes: a.minutes, seed: a.seed, terrain: a.terrain, fps: a.fps, clip_seconds: a.clip_seconds };
     let start = std::time::Instant::now();

@@ -2,7 +2,7 @@
 //! first 10 frames and one keyframe per interval by chaining RTN transitions.
 
 use crate::cmd::transition::read_clip;
-use anyhow::{Context, bail};
+use anyhow::Context;
 use clap::Args;
 use std::path::PathBuf;
 use zoo_data::bvh;
@@ -17,7 +17,7 @@ pub struct DecompressArgs {
     /// Clip to compress and rebuild.
     pub input: PathBuf,
     /// Frames between keyframes (default: one keyframe per second).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::frame_count)]
     pub interval: Option<usize>,
     /// Output BVH of the rebuilt clip.
     #[arg(long)]
@@ -26,14 +26,13 @@ pub struct DecompressArgs {
 
 /// Runs `zoo decompress`.
 pub fn run(a: DecompressArgs) -> anyhow::Result<()> {
+    crate::cmd::check_output_file("--out", &a.out)?;
     let clip = read_clip(&a.input)?;
     let interval = a.interval.unwrap_or_else(|| clip.fps().round() as usize).max(1);
     let j = clip.joints();
     let keys = pipeline::keyframe_inputs(&clip, interval).with_context(|| format!("{}", a.input.display()))?;
     let (model, stats) = crate::registry::load_transition_model(&a.model, "decompress")?;
-    if model.config().joints != j {
-        bail!("the model was trained on {} joints, {} has {j}", model.config().joints, a.input.display());
-    }
+    crate::cmd::transition::check_skeleton(&a.model, model.config(), &clip, &a.input)?;
     let y = model.super_resolve(&stats, &keys.context, &keys.keys, interval).context("rebuilding the clip")?;
     let frames = y.len() / (3 * j);
     let out = pipeline::rebuild_from_keyframes(&clip, interval, &y);

@@ -26,7 +26,7 @@ pub struct ExportArgs {
     #[arg(long, value_name = "FILE.bvh")]
     pub skeleton: Option<PathBuf>,
     /// Frames per second of the training data (default: the skeleton clip's, else 30).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::positive_f32)]
     pub fps: Option<f32>,
 }
 
@@ -51,6 +51,7 @@ fn model_kind(config_path: &Path) -> anyhow::Result<Option<String>> {
 
 /// Runs `zoo export`.
 pub fn run(a: ExportArgs) -> anyhow::Result<()> {
+    crate::cmd::check_output_file("--out", &a.out)?;
     let mut options = RtnExportOptions { fps: a.fps, ..RtnExportOptions::default() };
     if let Some(path) = &a.skeleton {
         let clip = read_clip(path).with_context(|| format!("reading the skeleton of {}", path.display()))?;
@@ -71,6 +72,23 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
             a.onnx.display(),
             EXPORT_KINDS.join(", ")
         ),
+    }
+    let (config, _) =
+        zoo_rtn::checkpoint::read_meta(&a.onnx).with_context(|| format!("exporting {}", a.onnx.display()))?;
+    if let (Some(path), Some(parents)) = (&a.skeleton, &options.parents)
+        && !config.parents.is_empty()
+        && &config.parents != parents
+    {
+        bail!(
+            "--skeleton {}: its hierarchy ({} joints, parents {:?}) is not the one the model in {} was trained on \
+             ({} joints, parents {:?}); pass a clip of the training skeleton",
+            path.display(),
+            parents.len(),
+            parents,
+            a.onnx.display(),
+            config.joints,
+            config.parents
+        );
     }
     let model = export_rtn_dir(&a.onnx, &options).with_context(|| format!("exporting {}", a.onnx.display()))?;
     model.write(&a.out)?;

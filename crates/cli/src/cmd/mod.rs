@@ -9,3 +9,65 @@ pub mod export;
 pub mod render;
 pub mod train;
 pub mod transition;
+
+use anyhow::{Context, bail};
+use std::path::Path;
+
+/// Checks, before the long work, that `path` (an option's output file) can be written: its
+/// folder exists and is writable, and `path` is not a folder. Leaves no file behind.
+pub fn check_output_file(option: &str, path: &Path) -> anyhow::Result<()> {
+    if path.is_dir() {
+        bail!("{option} {}: is a folder; give a file name", path.display());
+    }
+    let parent = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    if !parent.is_dir() {
+        bail!("{option} {}: the folder {} does not exist (create it first)", path.display(), parent.display());
+    }
+    let existed = path.exists();
+    std::fs::OpenOptions::new()
+        .append(true)
+        .create(true)
+        .open(path)
+        .with_context(|| format!("{option} {}: cannot write there", path.display()))?;
+    if !existed {
+        std::fs::remove_file(path)
+            .with_context(|| format!("{option} {}: cannot remove the test file", path.display()))?;
+    }
+    Ok(())
+}
+
+/// Creates `dir` (an option's output folder) if needed and checks, before the long work, that
+/// files can be written in it.
+pub fn check_output_dir(option: &str, dir: &Path) -> anyhow::Result<()> {
+    if dir.exists() && !dir.is_dir() {
+        bail!("{option} {}: is a file, not a folder", dir.display());
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("{option} {}: cannot create the folder", dir.display()))?;
+    let probe = dir.join(format!(".zoo-write-test-{}", std::process::id()));
+    std::fs::write(&probe, b"").with_context(|| format!("{option} {}: cannot write in this folder", dir.display()))?;
+    std::fs::remove_file(&probe)
+        .with_context(|| format!("{option} {}: cannot remove {}", dir.display(), probe.display()))?;
+    Ok(())
+}
+
+/// Loads a dataset for a command: with `skip_invalid`, the clips that cannot join it are left
+/// out and listed with the reason; repaired differences (a folded dummy root) are noted. Both
+/// go to standard error, before the long work.
+pub fn load_dataset(
+    path: &Path,
+    name_glob: Option<&str>,
+    skip_invalid: bool,
+) -> anyhow::Result<Vec<zoo_data::dataset::NamedClip>> {
+    let opts = zoo_data::dataset::LoadOptions { name_glob, skip_invalid };
+    let d = zoo_data::dataset::load_with(path, &opts).with_context(|| format!("loading {}", path.display()))?;
+    for n in &d.notices {
+        eprintln!("note: {n}");
+    }
+    if !d.skipped.is_empty() {
+        eprintln!("--skip-invalid: skipped {} of {} clips:", d.skipped.len(), d.skipped.len() + d.clips.len());
+        for s in &d.skipped {
+            eprintln!("  {}", s.reason);
+        }
+    }
+    Ok(d.clips)
+}

@@ -21,7 +21,7 @@ pub struct RenderArgs {
     #[arg(long)]
     pub to: Option<usize>,
     /// Draw every k-th frame (GIF default: about 15 fps; PNG default: 2 per second).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
     pub every: Option<usize>,
     /// Print frame numbers.
     #[arg(long)]
@@ -32,7 +32,7 @@ pub struct RenderArgs {
     /// Draw the clips side by side, this far apart (clip units, e.g. 75 for cm) along the
     /// direction of travel, instead of over each other: the first clip in the middle (the camera
     /// follows it), the others alternately behind and ahead of it.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::positive)]
     pub side_by_side: Option<f64>,
     /// Output file: `.gif` (animation) or `.png` (contact sheet).
     #[arg(long)]
@@ -50,6 +50,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     if ext != "gif" && ext != "png" {
         bail!("--out {}: expected a .gif or .png file name", a.out.display());
     }
+    crate::cmd::check_output_file("--out", &a.out)?;
     let terrain_path = a.terrain.clone().or_else(|| zoo_data::terrain::sibling_of(&a.clip));
     let terrain = match &terrain_path {
         Some(p) => Some(zoo_data::terrain::read(p)?),

@@ -3,10 +3,11 @@
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand, ValueEnum};
 use serde::{Deserialize, Serialize};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 use zoo_data::dataset::{self, NamedClip, WindowOptions};
 use zoo_data::synth::{self, SynthConfig};
+use zoo_nn::checkpoint;
 use zoo_nn::train_loop::{self, TrainOptions};
 use zoo_rtn::prelude::*;
 
@@ -57,11 +58,15 @@ pub struct RtnArgs {
     /// Glob on file names selecting the validation split of `--data` (best checkpoint).
     #[arg(long)]
     pub valid_glob: Option<String>,
+    /// Leave out the clips of `--data` that cannot join the dataset (unreadable, another
+    /// skeleton or frame rate) and list them, instead of refusing the dataset.
+    #[arg(long)]
+    pub skip_invalid: bool,
     /// Epochs to train (an epoch visits every training window once).
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, default_value_t = 10, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
     pub epochs: usize,
     /// Stop after this many minutes of training (the epoch in progress finishes first).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::positive)]
     pub time_limit: Option<f64>,
     /// Run folder: config, weights, statistics, loss curve and summary.
     #[arg(long, default_value = "runs/rtn")]
@@ -69,6 +74,10 @@ pub struct RtnArgs {
     /// Continue the run in this folder (its config is kept; `--epochs` is the new total).
     #[arg(long)]
     pub resume: Option<PathBuf>,
+    /// Replace the run already in `--out`: its model, statistics, state and `last/` checkpoint
+    /// are deleted before training. Without it, `--out` on a folder that holds a run is refused.
+    #[arg(long, conflicts_with = "resume")]
+    pub overwrite: bool,
     /// Model variant (Table 4 ablations).
     #[arg(long, value_enum, default_value_t = RtnVariant::Rtn)]
     pub variant: RtnVariant,
@@ -76,13 +85,13 @@ pub struct RtnArgs {
     #[arg(long, value_enum, default_value_t = RtnPreset::Paper)]
     pub preset: RtnPreset,
     /// Mini-batch size [default: the preset's; paper: 32].
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
     pub batch_size: Option<usize>,
     /// AMSGrad learning rate [default: the preset's; paper: 5e-4].
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::positive)]
     pub lr: Option<f64>,
     /// Minutes of synthetic motion when `--data` is not given.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, allow_hyphen_values = true, value_parser = crate::args::positive)]
     pub synth_minutes: f64,
     /// Seed of the synthetic data and of the trainer.
     #[arg(long, default_value_t = 1)]
@@ -90,7 +99,7 @@ pub struct RtnArgs {
     /// Decay of a moving average of the weights kept beside the trained ones (not in the
     /// paper). Each epoch both are validated and the better one becomes the best checkpoint;
     /// 0 keeps no average (the paper's recipe exactly).
-    #[arg(long, default_value_t = 0.999)]
+    #[arg(long, default_value_t = 0.999, allow_hyphen_values = true, value_parser = crate::args::decay)]
     pub ema: f64,
 }
 
@@ -108,13 +117,15 @@ pub fn load_clips(
     valid_glob: &Option<String>,
     minutes: f64,
     seed: u64,
+    skip_invalid: bool,
 ) -> anyhow::Result<(Vec<NamedClip>, Vec<NamedClip>, String)> {
     match data {
         Some(path) => {
-            let clips = dataset::load(path).with_context(|| format!("loading {}", path.display()))?;
             let Some(glob) = valid_glob else {
                 bail!("--data needs --valid-glob GLOB to choose the validation clips (bandai2: '*_youthful_*')")
             };
+            dataset::glob(glob)?;
+            let clips = crate::cmd::load_dataset(path, None, skip_invalid)?;
             let (train, valid) = dataset::split(clips, glob)?;
             Ok((train, valid, format!("{} (validation: {glob})", path.display())))
         }
@@ -172,10 +183,88 @@ fn fresh_config(a: &RtnArgs, parents: &[Option<usize>], train_windows: usize) ->
     Ok(config)
 }
 
+/// The files and folders of a run that `--overwrite` deletes (the ones training writes).
+const RUN_FILES: [&str; 10] = [
+    checkpoint::CONFIG_FILE,
+    checkpoint::WEIGHTS_FILE,
+    checkpoint::STATS_FILE,
+    checkpoint::OPTIMIZER_FILE,
+    checkpoint::EMA_FILE,
+    checkpoint::RNG_FILE,
+    checkpoint::TRAIN_STATE_FILE,
+    checkpoint::SUMMARY_FILE,
+    checkpoint::LOSS_CURVE_FILE,
+    checkpoint::LAST_DIR,
+];
+
+/// Whether `dir` holds (part of) a run: a model, a state or a `last/` checkpoint.
+fn holds_run(dir: &Path) -> bool {
+    [checkpoint::CONFIG_FILE, checkpoint::WEIGHTS_FILE, checkpoint::TRAIN_STATE_FILE, checkpoint::LAST_DIR]
+        .iter()
+        .any(|f| dir.join(f).exists())
+}
+
+/// The run folder, checked before any data is loaded: a fresh run never replaces a trained one
+/// unless `--overwrite` says so (then the old run's files are deleted), a resumed run must be
+/// a run folder, and the folder must be writable.
+fn prepare_run_folder(a: &RtnArgs) -> anyhow::Result<PathBuf> {
+    match &a.resume {
+        Some(dir) => {
+            if !dir.is_dir() {
+                bail!("--resume {}: no such folder (start a new run with --out instead)", dir.display());
+            }
+            train_loop::read_state(dir)?;
+            crate::cmd::check_output_dir("--resume", dir)?;
+            Ok(dir.clone())
+        }
+        None => {
+            let out = &a.out;
+            if holds_run(out) {
+                if !a.overwrite {
+                    let state = train_loop::read_state(out).ok();
+                    let what = match state {
+                        Some(s) if s.epoch > 0 => format!(
+                            "a run trained for {} epochs (best validation loss {:.5} at epoch {})",
+                            s.epoch,
+                            s.best_valid.unwrap_or(f64::NAN),
+                            s.best_epoch
+                        ),
+                        _ => "a run".to_string(),
+                    };
+                    bail!(
+                        "--out {} already holds {what}: continue it with `--resume {0}`, replace it with \
+                         --overwrite, or choose another --out",
+                        out.display()
+                    );
+                }
+                for name in RUN_FILES {
+                    let p = out.join(name);
+                    let removed = if p.is_dir() {
+                        std::fs::remove_dir_all(&p)
+                    } else if p.exists() {
+                        std::fs::remove_file(&p)
+                    } else {
+                        Ok(())
+                    };
+                    removed.with_context(|| format!("--overwrite: cannot delete {}", p.display()))?;
+                }
+                println!("--overwrite: deleted the run in {}", out.display());
+            }
+            crate::cmd::check_output_dir("--out", out)?;
+            Ok(out.clone())
+        }
+    }
+}
+
 fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
     let device = candle_core::Device::Cpu;
-    let out = a.resume.clone().unwrap_or_else(|| a.out.clone());
-    let (train, valid, source) = load_clips(&a.data, &a.valid_glob, a.synth_minutes, a.seed)?;
+    if a.data.is_none() {
+        let cfg = SynthConfig::default();
+        crate::args::check_synth_size(("--synth-minutes", a.synth_minutes), cfg.clip_seconds, cfg.fps)
+            .map_err(anyhow::Error::msg)?;
+    }
+    let out = prepare_run_folder(&a)?;
+    let (train, valid, source) = load_clips(&a.data, &a.valid_glob, a.synth_minutes, a.seed, a.skip_invalid)?;
     let tw = dataset::windows(&train, &WindowOptions::TRAIN);
     let vw = dataset::windows(&valid, &WindowOptions::TRAIN);
     if tw.count == 0 || vw.count == 0 {
@@ -194,12 +283,17 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
             let from = train_loop::resume_dir(dir);
             let (config, stats) = zoo_rtn::checkpoint::read_meta(&from)
                 .with_context(|| format!("resuming from {}: it holds no RTN checkpoint", from.display()))?;
-            if config.joints != tw.joints() {
+            if config.joints != tw.joints()
+                || (!config.parents.is_empty() && config.parents != tw.skeleton.parents_i32())
+            {
                 bail!(
-                    "{} holds a model for {} joints but the data has {}: resume with the data it was trained on",
+                    "{} holds a model for {} joints (parents {:?}) but the data's skeleton differs ({} joints, parents \
+                     {:?}): resume with the data it was trained on",
                     dir.display(),
                     config.joints,
-                    tw.joints()
+                    config.parents,
+                    tw.joints(),
+                    tw.skeleton.parents_i32()
                 );
             }
             if !from.join(zoo_rtn::checkpoint::OPTIMIZER_FILE).is_file() {
@@ -230,7 +324,8 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
     let seed = trainer.config().train.seed;
     let mut training = RtnTraining::new(trainer, &train_windows, &valid_windows)?;
     let opts = TrainOptions {
-        time_limit: a.time_limit.map(|m| Duration::from_secs_f64(m.max(0.0) * 60.0)),
+        // A limit too large for a Duration is no limit.
+        time_limit: a.time_limit.and_then(|m| Duration::try_from_secs_f64(m * 60.0).ok()),
         resume: a.resume.is_some(),
         data: source,
         extra,

@@ -20,7 +20,7 @@ pub struct TransitionArgs {
     #[arg(long)]
     pub to: String,
     /// Transition length in frames.
-    #[arg(long, default_value_t = 30)]
+    #[arg(long, default_value_t = 30, allow_hyphen_values = true, value_parser = crate::args::frame_count)]
     pub frames: usize,
     /// Output BVH: A up to FRAME, the transition, then B from its FRAME on, aligned in space.
     #[arg(long)]
@@ -44,8 +44,38 @@ pub fn read_clip(path: &Path) -> anyhow::Result<Clip> {
     Ok(bvh::read_model_clip(path)?)
 }
 
+/// Refuses a clip whose skeleton is not the model's: another joint count, or the same count
+/// in another hierarchy (the parents the run folder's `config.json` records).
+pub fn check_skeleton(model_dir: &Path, config: &zoo_rtn::Config, clip: &Clip, path: &Path) -> anyhow::Result<()> {
+    if config.joints != clip.joints() {
+        bail!(
+            "the model in {} was trained on {} joints, {} has {}",
+            model_dir.display(),
+            config.joints,
+            path.display(),
+            clip.joints()
+        );
+    }
+    let parents = clip.skeleton.parents_i32();
+    if !config.parents.is_empty() && config.parents != parents {
+        let j = (0..parents.len()).find(|&j| config.parents[j] != parents[j]).unwrap_or(0);
+        bail!(
+            "{} has the model's {} joints but another hierarchy: joint {j} (`{}`) has parent {}, the model in {} \
+             was trained with parent {}; use a clip of the training skeleton",
+            path.display(),
+            config.joints,
+            clip.skeleton.names[j],
+            parents[j],
+            model_dir.display(),
+            config.parents[j]
+        );
+    }
+    Ok(())
+}
+
 /// Runs `zoo transition`.
 pub fn run(a: TransitionArgs) -> anyhow::Result<()> {
+    crate::cmd::check_output_file("--out", &a.out)?;
     let (pa, fa) = clip_and_frame(&a.from)?;
     let (pb, fb) = clip_and_frame(&a.to)?;
     let ca = read_clip(&pa)?;
@@ -53,15 +83,8 @@ pub fn run(a: TransitionArgs) -> anyhow::Result<()> {
     let inputs = pipeline::transition_inputs(&ca, fa, &mut cb, fb, a.frames)
         .with_context(|| format!("--from {} --to {} --frames {}", a.from, a.to, a.frames))?;
     let (model, stats) = crate::registry::load_transition_model(&a.model, "transition")?;
-    if model.config().joints != ca.joints() {
-        bail!(
-            "the model in {} was trained on {} joints, {} has {}",
-            a.model.display(),
-            model.config().joints,
-            pa.display(),
-            ca.joints()
-        );
-    }
+    check_skeleton(&a.model, model.config(), &ca, &pa)?;
+    check_skeleton(&a.model, model.config(), &cb, &pb)?;
     let y = model
         .transition(&stats, &inputs.past, &inputs.target, &inputs.next, a.frames, None)
         .with_context(|| "generating the transition")?;
