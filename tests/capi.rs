@@ -194,7 +194,7 @@ fn malformed_calls_return_an_error_code_and_a_message() {
         let toy = tmp.path().join("toy.onnx");
         zoo_tests::toy_onnx::ToyModel::new(zoo_tests::toy_onnx::Cell::Lstm, 6, 8, 5).cell_graph().write(&toy).unwrap();
         let toy = CString::new(toy.to_str().unwrap()).unwrap();
-        assert_error(zoo_model_load(toy.as_ptr(), &mut model), ZooStatus::WrongModel, "transition models");
+        assert_error(zoo_model_load(toy.as_ptr(), &mut model), ZooStatus::LoadFailed, "unknown model kind");
         let bad_utf8 = [0xffu8, 0xfe, 0];
         assert_error(
             zoo_model_load(bad_utf8.as_ptr().cast::<c_char>(), &mut model),
