@@ -344,7 +344,7 @@ fn broken_run_folders_are_refused_by_transition_export_and_resume() {
         std::fs::write(path, &text).unwrap();
         std::fs::write(model.join("last").join(path.file_name().unwrap()), &text).unwrap();
     };
-    let mut check = |what: &str, expected: &str| {
+    let check = |what: &str, expected: &str| {
         let (ok, _, err) = zoo(&transition_args(&model, &clip, "30", &out));
         assert!(!ok && err.contains(expected) && !err.contains("panicked"), "{what}, transition: {err}");
         assert!(!out.exists(), "{what}: transition wrote a file");
