@@ -41,8 +41,8 @@ pub use metadata::{
     MotionTask, TransitionTask, TransitionTerrain,
 };
 pub use model::{MotionModel, MotionState, MotionStateInfo, MotionTensorInfo};
-pub use runner::MotionRunner;
 pub use pose::EnginePose;
+pub use runner::MotionRunner;
 pub use transition::{TargetMiss, TransitionModel, TransitionRunner, TransitionState};
 
 /// Re-exported so callers use the same glam version as the runtime.
@@ -54,7 +54,7 @@ pub mod prelude {
     pub use crate::loaded::LoadedModel;
     pub use crate::metadata::{MotionModelMetadata, MotionSkeletonInfo, MotionTask};
     pub use crate::model::{MotionModel, MotionState};
-    pub use crate::runner::MotionRunner;
     pub use crate::pose::EnginePose;
+    pub use crate::runner::MotionRunner;
     pub use crate::transition::{TransitionModel, TransitionRunner, TransitionState};
 }
