@@ -9,6 +9,8 @@
 //! - [`optim`]: [`AmsGrad`], [`Adam`], [`RmsProp`] with their state saved by name, gradient clipping;
 //! - [`ema`]: the moving average of the weights;
 //! - [`checkpoint`]: atomic writes of JSON, weights and named tensors;
+//! - [`parallel`]: data-parallel training steps ([`DataParallel`]: one worker thread per
+//!   share of the batch, gradients summed before the one optimiser step);
 //! - [`train_loop`]: the one training loop, driving any model that implements [`Trainable`];
 //! - [`plot`]: the loss-curve PNG.
 
@@ -19,6 +21,7 @@ pub mod init;
 pub mod layers;
 pub mod ops;
 pub mod optim;
+pub mod parallel;
 pub mod plot;
 pub mod recurrent;
 pub mod rng;
@@ -29,6 +32,7 @@ pub use error::{NnError, NnResult, TrainError};
 pub use init::SeededVarMap;
 pub use layers::{Activation, Dropout, Mlp};
 pub use optim::{Adam, AmsGrad, ParamsAdam, ParamsAmsGrad, ParamsRmsProp, RmsProp, StatefulOptimizer};
+pub use parallel::DataParallel;
 pub use recurrent::{BiGru, BiLstm, Gru, GruState, Lstm, LstmState};
 pub use rng::SplitMix64;
 pub use train_loop::{TrainOptions, TrainState, Trainable, Validation};

@@ -6,12 +6,13 @@ use crate::config::Config;
 use crate::error::{RtnError, RtnResult};
 use crate::features::{self, FeatureStats, Heightmap, MeanStd, Moments, YawAbout};
 use crate::model::{OffsetTensors, Rtn};
-use crate::transition::{SequenceInput, check_frames, encode_batch, generate};
+use crate::transition::{SequenceInput, check_frames, encode_batch, generate, teacher_calls};
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{Optimizer, VarMap};
 use std::path::Path;
 use zoo_nn::checkpoint as ck;
 use zoo_nn::optim::{AmsGrad, ParamsAmsGrad, StatefulOptimizer};
+use zoo_nn::parallel::DataParallel;
 use zoo_nn::rng::SplitMix64;
 use zoo_nn::train_loop::{Trainable, Validation};
 use zoo_nn::{Ema, SeededVarMap, TrainError};
@@ -80,6 +81,10 @@ pub struct RtnTrainer {
     step: u64,
     /// Moving average of every variable when `config.train.ema_decay` is set.
     ema: Option<Ema>,
+    /// The variables sorted by name (the gradients of data-parallel steps are summed over them).
+    vars: Vec<candle_core::Var>,
+    /// Workers of the data-parallel training step ([`RtnTrainer::set_threads`]; one by default).
+    parallel: DataParallel,
 }
 
 /// The key of the trainer's generator in `rng.json`.
@@ -116,6 +121,7 @@ impl RtnTrainer {
             varmap.data().lock().expect("varmap lock").iter().map(|(n, v)| (n.clone(), v.clone())).collect();
         named.sort_by(|a, b| a.0.cmp(&b.0));
         let ema = t.ema_decay.map(|d| Ema::new(named.clone(), d)).transpose()?;
+        let vars = named.iter().map(|(_, v)| v.clone()).collect();
         let opt = AmsGrad::new_named(named, params)?;
         let offsets = OffsetTensors::new(&stats, device)?;
         Ok(RtnTrainer {
@@ -128,7 +134,23 @@ impl RtnTrainer {
             rng: SplitMix64::new(t.seed),
             step: 0,
             ema,
+            vars,
+            parallel: DataParallel::new(1)?,
         })
+    }
+
+    /// Trains with `threads` data-parallel workers ([`zoo_nn::parallel`]): each runs candle on
+    /// one thread over its share of every batch, and their gradients are summed before the one
+    /// optimiser step. The update equals the one-worker update up to float summation order;
+    /// runs are bit-identical for a fixed seed and thread count, not across thread counts.
+    pub fn set_threads(&mut self, threads: usize) -> RtnResult<()> {
+        self.parallel = DataParallel::new(threads)?;
+        Ok(())
+    }
+
+    /// The number of data-parallel workers.
+    pub fn threads(&self) -> usize {
+        self.parallel.threads()
     }
 
     /// The model being trained.
@@ -163,6 +185,13 @@ impl RtnTrainer {
         windows: &[MotionWindow<'a>],
         rotate: bool,
     ) -> RtnResult<crate::transition::EncodedBatch<'a>> {
+        let items = self.sequence_inputs(windows, rotate)?;
+        encode_batch(&self.stats, &items, self.model.device())
+    }
+
+    /// The sequences of `windows` to encode, each rotated as [`RtnTrainer::encode`] says (one
+    /// draw of the trainer's generator per window when `rotate`).
+    fn sequence_inputs<'a>(&mut self, windows: &[MotionWindow<'a>], rotate: bool) -> RtnResult<Vec<SequenceInput<'a>>> {
         let c = &self.config;
         let d = c.dim();
         let tf = c.target_frame();
@@ -193,7 +222,7 @@ impl RtnTrainer {
                 rotation,
             });
         }
-        encode_batch(&self.stats, &items, self.model.device())
+        Ok(items)
     }
 
     /// Generated and ground-truth frames `(batch, P + 1, D)` of a batch.
@@ -211,23 +240,67 @@ impl RtnTrainer {
     /// One AMSGrad step on a mini-batch; returns the loss before the step: the MSE over the
     /// P + 1 predicted frames including the target (RTN eq. 17, averaged over values).
     ///
+    /// The random draws of the step (one rotation per window, then the teacher-forcing draws)
+    /// are made here, in the batch's order, before the batch is shared out among the workers
+    /// ([`RtnTrainer::set_threads`]), so they do not depend on the thread count.
+    ///
     /// A NaN or infinite loss returns [`RtnError::NonFiniteLoss`] and leaves the parameters as
     /// they were.
     pub fn train_step(&mut self, windows: &[MotionWindow]) -> RtnResult<f32> {
-        let p = self.config.train.teacher_forcing.probability(self.step);
-        let rotate = self.config.train.random_rotation;
-        let (pred, truth) = self.predict(windows, rotate, p)?;
-        let loss = (pred - truth)?.sqr()?.mean_all()?;
-        let value = loss.to_scalar::<f32>()?;
-        if !value.is_finite() {
+        let (value, grads) = self.loss_and_gradients(windows)?;
+        let Some(grads) = grads else {
             return Err(RtnError::NonFiniteLoss { step: self.step, loss: value });
-        }
-        self.opt.backward_step(&loss)?;
+        };
+        self.opt.step(&grads)?;
         self.step += 1;
         if let Some(ema) = self.ema.as_mut() {
             ema.update(self.step)?;
         }
         Ok(value)
+    }
+
+    /// The loss of a training step on `windows` and the gradient of every variable, by name,
+    /// without updating anything but the trainer's generator (the step's random draws are
+    /// made as [`RtnTrainer::train_step`] makes them). For checking the data-parallel sum.
+    pub fn batch_gradients(&mut self, windows: &[MotionWindow]) -> RtnResult<(f32, Vec<(String, Tensor)>)> {
+        let (value, grads) = self.loss_and_gradients(windows)?;
+        let Some(grads) = grads else {
+            return Err(RtnError::NonFiniteLoss { step: self.step, loss: value });
+        };
+        let data = self.varmap.data().lock().expect("varmap lock");
+        let mut out: Vec<(String, Tensor)> =
+            data.iter().filter_map(|(n, v)| grads.get(v.as_tensor()).map(|g| (n.clone(), g.clone()))).collect();
+        out.sort_by(|a, b| a.0.cmp(&b.0));
+        Ok((value, out))
+    }
+
+    /// The step's random draws, then the loss and gradients over the data-parallel workers;
+    /// no gradients for a non-finite loss.
+    fn loss_and_gradients(
+        &mut self,
+        windows: &[MotionWindow],
+    ) -> RtnResult<(f32, Option<candle_core::backprop::GradStore>)> {
+        let p = self.config.train.teacher_forcing.probability(self.step);
+        let rotate = self.config.train.random_rotation;
+        let items = self.sequence_inputs(windows, rotate)?;
+        let (past, n_out) = (self.config.past_frames, self.config.transition_frames + 1);
+        let calls = teacher_calls(past, n_out, self.config.target_frame() + 1);
+        let rng = &mut self.rng;
+        let draws: Vec<bool> = (0..calls).map(|_| p > 0.0 && (p >= 1.0 || rng.next_f64() < p)).collect();
+        let (model, stats, offsets) = (&self.model, &self.stats, &self.offsets);
+        let shard_loss = |r: std::ops::Range<usize>| -> candle_core::Result<Tensor> {
+            let batch = encode_batch(stats, &items[r], model.device()).map_err(candle_core::Error::wrap)?;
+            let mut next = draws.iter().copied();
+            let mut teacher = || next.next().unwrap_or(false);
+            let outs = generate(model, stats, offsets, &batch, past, n_out, true, &mut teacher)
+                .map_err(candle_core::Error::wrap)?;
+            let pred = Tensor::stack(&outs, 1)?;
+            let truth = Tensor::stack(&batch.x[past..past + n_out], 1)?;
+            (pred - truth)?.sqr()?.mean_all()
+        };
+        let (value, grads) = self.parallel.backward(items.len(), &self.vars, shard_loss)?;
+        let value = value as f32;
+        Ok((value, grads.filter(|_| value.is_finite())))
     }
 
     /// Whether the trainer keeps a moving average of the weights.

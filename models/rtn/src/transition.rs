@@ -118,6 +118,14 @@ fn terrain_patches(config: &Config, stats: &FeatureStats, batch: &EncodedBatch, 
     Ok(Tensor::from_vec(out, (batch.batch, n), root.device())?)
 }
 
+/// How many times [`generate`] calls `teacher()` for `past` context frames, `n_out` outputs and
+/// `known` known frames: once for each input frame `nt` in `past..=min(past - 1 + n_out, known
+/// - 1)`, in order (the calls do not depend on the data, so the draws can be made in advance).
+pub(crate) fn teacher_calls(past: usize, n_out: usize, known: usize) -> usize {
+    let last = (past + n_out).saturating_sub(1).min(known.saturating_sub(1));
+    (last + 1).saturating_sub(past)
+}
+
 /// Runs the RTN over a batch: known frames `0..past` are fed as context, then `n_out` frames
 /// are predicted (`x_past .. x_(past+n_out-1)`); after the context, input frame `t` is the
 /// ground truth when `teacher()` says so and a ground truth exists (RTN sec. 6.2), else the

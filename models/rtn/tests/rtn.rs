@@ -553,3 +553,79 @@ fn a_reloaded_trainer_continues_exactly() {
     let a = trainer.with_ema_weights(|t| Ok(flat_weights(t))).unwrap();
     assert_eq!(a, resumed.with_ema_weights(|t| Ok(flat_weights(t))).unwrap());
 }
+
+/// Every variable of a trainer by name, as flat vectors.
+fn weights(t: &RtnTrainer) -> Vec<(String, Vec<f32>)> {
+    let data = t.varmap().data().lock().unwrap();
+    let mut v: Vec<(String, Vec<f32>)> =
+        data.iter().map(|(n, v)| (n.clone(), v.as_tensor().flatten_all().unwrap().to_vec1::<f32>().unwrap())).collect();
+    v.sort_by(|a, b| a.0.cmp(&b.0));
+    v
+}
+
+/// The data-parallel update (issue 18): two workers, each on half the batch, give the
+/// gradient of one worker on the whole batch to 1e-5 relative (to each tensor's largest
+/// gradient), with rotation and teacher forcing on, so the random draws must be shared out the
+/// same way too. The AMSGrad step then follows from the same gradient; its first step divides
+/// each component by its own magnitude, so components whose gradient is at float-noise level
+/// (|g| ~ eps = 1e-8) can move by a different fraction of the learning rate in either run:
+/// their weights are compared to the learning rate, the rest to 1e-5. The same thread count
+/// repeats bit for bit.
+#[test]
+fn two_thread_data_parallel_step_matches_the_one_thread_step() {
+    let config = tiny();
+    assert!(config.train.random_rotation && config.train.teacher_forcing.probability(0) > 0.0);
+    let ws = windows(&config, 9);
+    let stats = stats_for(&config, &ws);
+    let mw: Vec<MotionWindow> = ws.iter().map(|w| MotionWindow::new(w)).collect();
+    let trainer = |threads: usize| {
+        let mut t = RtnTrainer::new(&config, stats.clone(), &Device::Cpu).unwrap();
+        t.set_threads(threads).unwrap();
+        t
+    };
+    let (mut one, mut two) = (trainer(1), trainer(2));
+    assert_eq!(two.threads(), 2);
+    let (l1, g1) = one.batch_gradients(&mw).unwrap();
+    let (l2, g2) = two.batch_gradients(&mw).unwrap();
+    assert!((l1 - l2).abs() <= 1e-5 * l1.abs(), "loss {l1} vs {l2}");
+    assert_eq!(g1.len(), g2.len());
+    let mut worst = 0f32;
+    for ((n, a), (m, b)) in g1.iter().zip(&g2) {
+        assert_eq!(n, m);
+        let a = a.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        let b = b.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        let scale = a.iter().fold(0f32, |m, v| m.max(v.abs()));
+        for (x, y) in a.iter().zip(&b) {
+            worst = worst.max((x - y).abs() / scale);
+        }
+    }
+    assert!(worst <= 1e-5, "worst gradient difference {worst} of the tensor's largest gradient");
+    // One step each from the same start.
+    let (mut one, mut two) = (trainer(1), trainer(2));
+    let before = weights(&one);
+    let s1 = one.train_step(&mw).unwrap();
+    let s2 = two.train_step(&mw).unwrap();
+    assert_eq!(s1, l1);
+    assert_eq!(s2, l2);
+    let lr = config.train.learning_rate as f32;
+    let (w1, w2) = (weights(&one), weights(&two));
+    let (mut moved, mut noisy, mut total) = (0usize, 0usize, 0usize);
+    for (((n, a), (_, b)), (_, w0)) in w1.iter().zip(&w2).zip(&before) {
+        let scale = w0.iter().fold(0f32, |m, v| m.max(v.abs())).max(1e-3);
+        for ((x, y), z) in a.iter().zip(b).zip(w0) {
+            let d = (x - y).abs();
+            assert!(d <= 2.0 * lr, "{n}: {x} (1 thread) vs {y} (2 threads) differ by more than the step");
+            noisy += usize::from(d > 1e-5 * scale);
+            moved += usize::from(x != z);
+            total += 1;
+        }
+    }
+    eprintln!("worst gradient difference {worst:.2e}; {noisy} of {total} weights beyond 1e-5 after the step");
+    assert!(moved > 0, "the step changed no weight");
+    assert!(noisy * 1000 <= total, "{noisy} of {total} weights differ by more than 1e-5 relative");
+    // Same seed and thread count: the same bits.
+    let mut again = trainer(2);
+    assert_eq!(again.train_step(&mw).unwrap().to_bits(), s2.to_bits());
+    assert_eq!(weights(&again), w2);
+    assert!(two.set_threads(0).unwrap_err().to_string().contains("1..=256"));
+}

@@ -67,6 +67,9 @@ pub enum BenchCommand {
     /// Per-frame step latency (batch 1) and throughput (batch 64) of an exported model through
     /// candle, tract and onnxruntime, side by side.
     Runtime(crate::cmd::bench_runtime::RuntimeArgs),
+    /// Training throughput per thread count (data-parallel), GFLOP/s and the fraction of a
+    /// candle matmul, optionally beside the PyTorch reference of the same shapes.
+    Train(crate::cmd::bench_train::TrainBenchArgs),
 }
 
 fn method(spec: &str) -> anyhow::Result<Box<dyn TransitionMethod>> {
@@ -75,6 +78,9 @@ fn method(spec: &str) -> anyhow::Result<Box<dyn TransitionMethod>> {
 
 /// Runs the benchmark.
 pub fn run(a: BenchArgs) -> anyhow::Result<()> {
+    if let Some(BenchCommand::Train(t)) = a.command {
+        return crate::cmd::bench_train::run(t);
+    }
     if let Some(BenchCommand::Runtime(r)) = a.command {
         return crate::cmd::bench_runtime::run(r);
     }

@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod bench_runtime;
+pub mod bench_train;
 pub mod data;
 pub mod data_luxo;
 pub mod decompress;

@@ -101,6 +101,26 @@ pub struct RtnArgs {
     /// 0 keeps no average (the paper's recipe exactly).
     #[arg(long, default_value_t = 0.999, allow_hyphen_values = true, value_parser = crate::args::decay)]
     pub ema: f64,
+    /// Data-parallel training threads (`1..=256`) [default: the cores available]. Each thread
+    /// trains on its share of every batch and the gradients are summed before the one update:
+    /// the same update as one thread up to float summation order. Results are reproducible
+    /// for a fixed seed and thread count, not across thread counts.
+    #[arg(long, allow_hyphen_values = true, value_parser = training_threads)]
+    pub threads: Option<usize>,
+}
+
+/// A training thread count in `1..=MAX_THREADS`.
+fn training_threads(s: &str) -> Result<usize, String> {
+    let max = zoo_nn::parallel::MAX_THREADS;
+    match s.trim().parse::<usize>() {
+        Ok(n @ 1..) if n <= max => Ok(n),
+        _ => Err(format!("`{s}` is not a thread count: valid range 1..={max}")),
+    }
+}
+
+/// The thread count of a run: `--threads`, else the cores available to the process.
+pub fn default_threads(threads: Option<usize>) -> usize {
+    threads.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1))
 }
 
 /// Runs a `zoo train` subcommand.
@@ -278,7 +298,7 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
     let valid_windows: Vec<MotionWindow> = valid_pos.chunks_exact(per).map(MotionWindow::new).collect();
 
     let mut extra = serde_json::Map::new();
-    let (trainer, variant) = match &a.resume {
+    let (mut trainer, variant) = match &a.resume {
         Some(dir) => {
             let from = train_loop::resume_dir(dir);
             let (config, stats) = zoo_rtn::checkpoint::read_meta(&from)
@@ -322,6 +342,10 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
         out.display()
     );
     let seed = trainer.config().train.seed;
+    let threads = default_threads(a.threads);
+    trainer.set_threads(threads)?;
+    println!("training threads: {threads} (data-parallel; --threads to change)");
+    extra.insert("threads".into(), threads.into());
     let mut training = RtnTraining::new(trainer, &train_windows, &valid_windows)?;
     let opts = TrainOptions {
         // A limit too large for a Duration is no limit.
