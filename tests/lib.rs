@@ -78,6 +78,7 @@ pub fn tiny_rtn_onnx() -> zoo_export::OnnxModel {
         offsets: Some(skeleton.offsets.iter().map(|o| o.as_vec3().to_array()).collect()),
         parents: None,
         fps: Some(30.0),
+        frame: Some(zoo_runtime::CoordinateFrame::ZOO_CM),
     };
     zoo_rtn::export::export_rtn(&config, None, &stats, &varmap, &options).expect("the tiny RTN exports")
 }

@@ -84,6 +84,7 @@ fn export(f: &Fixture) -> OnnxModel {
         offsets: Some(vec![[0.0; 3], [0.0, 10.0, 0.0], [0.0, -40.0, 0.0], [0.0, -40.0, 0.0]]),
         parents: None,
         fps: Some(30.0),
+        frame: Some(zoo_runtime::CoordinateFrame::ZOO_CM),
     };
     export_rtn(&f.config, None, &f.stats, &f.varmap, &options).expect("the RTN exports")
 }
@@ -532,21 +533,55 @@ fn run_folder_and_cli_export() {
     let f = fixture(tiny());
     let dir = tempfile::tempdir().unwrap();
     zoo_rtn::checkpoint::save(dir.path(), &f.config, &f.varmap, &f.stats).unwrap();
-    let options = RtnExportOptions::default();
-    let from_dir = export_rtn_dir(dir.path(), &options).unwrap();
+    let out = dir.path().join("rtn.onnx");
+    let export_cli = |extra: &[&str]| {
+        std::process::Command::new(zoo_tests::zoo_bin())
+            .args(["export", "--onnx"])
+            .arg(dir.path())
+            .arg("--out")
+            .arg(&out)
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    // Without a skeleton (no --skeleton, no skeleton.json) the file would not say what it
+    // animates: refused, by the library and by `zoo export`.
+    let err = export_rtn_dir(dir.path(), &RtnExportOptions::default()).unwrap_err();
+    assert!(err.to_string().contains("joint names is required"), "{err}");
+    let refused = export_cli(&[]);
+    assert!(!refused.status.success());
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(stderr.contains("no skeleton.json") && stderr.contains("--skeleton FILE.bvh"), "{stderr}");
+    // A run folder of `zoo train` keeps its skeleton: the export needs nothing else.
+    let options = RtnExportOptions {
+        names: Some(["Hips", "Spine", "Leg", "Foot_L"].iter().map(|s| s.to_string()).collect()),
+        offsets: Some(vec![[0.0; 3], [0.0, 10.0, 0.0], [0.0, -40.0, 0.0], [0.0, -40.0, 0.0]]),
+        parents: Some(vec![-1, 0, 0, 2]),
+        fps: Some(30.0),
+        frame: Some(zoo_runtime::CoordinateFrame::ZOO_CM),
+    };
+    zoo_nn::checkpoint::RunSkeleton {
+        names: options.names.clone().unwrap(),
+        parents: options.parents.clone().unwrap(),
+        offsets: options.offsets.clone().unwrap(),
+        fps: 30.0,
+        frame: zoo_runtime::CoordinateFrame::ZOO_CM,
+    }
+    .write(dir.path())
+    .unwrap();
+    let from_dir = export_rtn_dir(dir.path(), &RtnExportOptions::default()).unwrap();
     let in_memory = export_rtn(&f.config, None, &f.stats, &f.varmap, &options).unwrap();
     assert!(from_dir.to_bytes() == in_memory.to_bytes(), "run-folder export differs from the in-memory export");
-    let out = dir.path().join("rtn.onnx");
-    let status = std::process::Command::new(zoo_tests::zoo_bin())
-        .args(["export", "--onnx"])
-        .arg(dir.path())
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .unwrap();
+    let status = export_cli(&[]);
     assert!(status.status.success(), "zoo export failed: {}", String::from_utf8_lossy(&status.stderr));
     let model = MotionModel::load(&out).unwrap();
-    assert_eq!(model.metadata().skeleton.names, ["joint0", "joint1", "joint2", "joint3"]);
+    assert_eq!(model.metadata().skeleton.names, ["Hips", "Spine", "Leg", "Foot_L"]);
+    assert_eq!(model.metadata().frame, zoo_runtime::CoordinateFrame::ZOO_CM);
+    assert_eq!(model.metadata().skeleton.offsets[2], [0.0, -40.0, 0.0]);
+    // --units overrides the run folder's unit.
+    let status = export_cli(&["--units", "m"]);
+    assert!(status.status.success(), "zoo export --units m failed: {}", String::from_utf8_lossy(&status.stderr));
+    assert_eq!(MotionModel::load(&out).unwrap().metadata().frame.metres_per_unit, 1.0);
     let err = std::process::Command::new(zoo_tests::zoo_bin())
         .args(["export", "--onnx", "/nonexistent/run", "--out"])
         .arg(&out)

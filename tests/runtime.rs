@@ -77,7 +77,7 @@ fn an_unknown_format_version_is_refused() {
     let bytes = with_props(|p| set(p, keys::FORMAT_VERSION, "7"));
     let err = MotionModel::from_bytes(&bytes).unwrap_err();
     assert!(matches!(err, MotionError::UnknownFormatVersion { .. }), "{err}");
-    assert!(err.to_string().contains("version 7") && err.to_string().contains("reads version 2"), "{err}");
+    assert!(err.to_string().contains("version 7") && err.to_string().contains("reads version 3"), "{err}");
 }
 
 #[test]
@@ -89,7 +89,20 @@ fn a_version_1_file_is_asked_to_re_export() {
         p.iter_mut().find(|e| e.key == keys::NORMALIZATION).unwrap().key = "zoo.normalisation".into();
     });
     for err in [MotionModel::from_bytes(&bytes).unwrap_err(), LoadedModel::from_bytes(&bytes).unwrap_err()] {
-        assert!(matches!(err, MotionError::FormatTooOld { found: 1, supported: 2 }), "{err}");
+        assert!(matches!(err, MotionError::FormatTooOld { found: 1, supported: 3 }), "{err}");
+        assert!(err.to_string().contains("re-export it with `zoo export --onnx"), "{err}");
+    }
+}
+
+#[test]
+fn a_version_2_file_without_units_is_asked_to_re_export() {
+    // A format-2 file: everything but `zoo.frame` (its units and axes).
+    let bytes = with_props(|p| {
+        set(p, keys::FORMAT_VERSION, "2");
+        p.retain(|e| e.key != keys::FRAME);
+    });
+    for err in [MotionModel::from_bytes(&bytes).unwrap_err(), LoadedModel::from_bytes(&bytes).unwrap_err()] {
+        assert!(matches!(err, MotionError::FormatTooOld { found: 2, supported: 3 }), "{err}");
         assert!(err.to_string().contains("re-export it with `zoo export --onnx"), "{err}");
     }
 }

@@ -232,6 +232,7 @@ impl ToyModel {
             },
             feature_layout: vec![MotionFeatureSegment { name: "frame".into(), start: 0, len: self.frame }],
             fps: 30.0,
+            frame: zoo_runtime::metadata::CoordinateFrame::ZOO_CM,
             state,
         }
     }

@@ -47,6 +47,7 @@ fn valid() -> &'static (pb::ModelProto, Vec<(String, String)>) {
             },
             feature_layout: vec![MotionFeatureSegment { name: "x".into(), start: 0, len: D }],
             fps: 30.0,
+            frame: zoo_runtime::metadata::CoordinateFrame::ZOO_CM,
             state: vec![MotionStatePair { input: "h".into(), output: "h_next".into() }],
         };
         let mut g = GraphBuilder::new("fuzz_step");
@@ -86,6 +87,7 @@ const KEYS: [&str; 12] = [
     keys::SKELETON,
     keys::FEATURE_LAYOUT,
     keys::FPS,
+    keys::FRAME,
     keys::STATE,
     keys::TRANSITION,
     keys::START_GRAPH,

@@ -20,6 +20,7 @@ pub mod features;
 pub mod fit;
 pub mod fk;
 pub mod footlock;
+pub mod frame;
 pub mod pipeline;
 pub mod quat;
 pub mod rng;

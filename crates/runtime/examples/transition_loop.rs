@@ -38,6 +38,7 @@ fn toy_model(path: &std::path::Path) -> Result<(), Box<dyn std::error::Error>> {
         },
         feature_layout: vec![MotionFeatureSegment { name: "positions".into(), start: 0, len: FRAME }],
         fps: 30.0,
+        frame: zoo_runtime::metadata::CoordinateFrame::ZOO_CM,
         state: vec![MotionStatePair { input: "h".into(), output: "h_next".into() }],
     };
     for (k, v) in meta.to_props() {

@@ -41,7 +41,7 @@ pub use metadata::{
     MotionTask, TransitionTask, TransitionTerrain,
 };
 pub use model::{MotionModel, MotionState, MotionStateInfo, MotionTensorInfo};
-pub use pose::EnginePose;
+pub use pose::{Conversion, CoordinateFrame, EnginePose, Handedness, UpAxis};
 pub use runner::MotionRunner;
 pub use transition::{TargetMiss, TransitionModel, TransitionRunner, TransitionState};
 
@@ -54,7 +54,7 @@ pub mod prelude {
     pub use crate::loaded::LoadedModel;
     pub use crate::metadata::{MotionModelMetadata, MotionSkeletonInfo, MotionTask};
     pub use crate::model::{MotionModel, MotionState};
-    pub use crate::pose::EnginePose;
+    pub use crate::pose::{Conversion, CoordinateFrame, EnginePose, Handedness, UpAxis};
     pub use crate::runner::MotionRunner;
     pub use crate::transition::{TransitionModel, TransitionRunner, TransitionState};
 }

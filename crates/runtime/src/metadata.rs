@@ -1,5 +1,5 @@
 //! The exported file format: what a model carries in its ONNX `metadata_props` (format
-//! version 2). This module is its one owner: exporters build a [`MotionModelMetadata`] and
+//! version 3). This module is its one owner: exporters build a [`MotionModelMetadata`] and
 //! write [`MotionModelMetadata::to_props`]; the runtime reads it back with
 //! [`MotionModelMetadata::from_props`] and refuses files without it.
 //!
@@ -8,7 +8,7 @@
 //!
 //! | key                   | value                                                        |
 //! |-----------------------|--------------------------------------------------------------|
-//! | `zoo.format_version`  | `"2"`                                                        |
+//! | `zoo.format_version`  | `"3"`                                                        |
 //! | `zoo.model_kind`      | the model, e.g. `"rtn"`                                      |
 //! | `zoo.task`            | what the model does, [`MotionTask`]: `"transition"`, `"step"` |
 //! | `zoo.config`          | the model's `config.json`, verbatim: informational, for tools that rebuild the model; the runtime never reads it |
@@ -16,6 +16,7 @@
 //! | `zoo.skeleton`        | `{"names": [..], "parents": [-1, 0, ..], "offsets": [[x,y,z]..]}` |
 //! | `zoo.feature_layout`  | `[{"name": "..", "start": 0, "len": 3}, ..]`                 |
 //! | `zoo.fps`             | frames per second of the training data, e.g. `"30"`          |
+//! | `zoo.frame`           | units and axes of positions and rotations: `{"metres_per_unit": 0.01, "up_axis": "y", "handedness": "right"}` ([`CoordinateFrame`]) |
 //! | `zoo.state`           | `[{"input": "h", "output": "h_next"}, ..]`                   |
 //! | `zoo.transition`      | task `transition` only: [`TransitionTask`] JSON              |
 //! | `zoo.start_graph`     | optional: base64 ONNX of the transition-start graph (below)  |
@@ -24,6 +25,8 @@
 //! initializer). Its inputs are `[batch, ...]` f32; each of its outputs is named like a state
 //! *input* of the step graph and sets that state slot; slots it does not produce start at zero.
 //!
+//! Version 2 had no `zoo.frame` (its files are centimetres, Y up, right-handed, like the data);
+//! this runtime refuses it and asks for a re-export, so that every file says its units.
 //! Version 1 (before the task section) kept the model's config in `zoo.config` and the
 //! statistics in `zoo.normalisation`; this runtime refuses it and asks for a re-export.
 //!
@@ -37,9 +40,10 @@ use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 pub use transition::{TransitionTask, TransitionTerrain};
+pub use zoo_motion::frame::CoordinateFrame;
 
 /// The format version this runtime reads and exporters write.
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 
 /// metadata_props keys.
 pub mod keys {
@@ -61,13 +65,15 @@ pub mod keys {
     pub const FPS: &str = "zoo.fps";
     /// Recurrent state pairs of the step graph, JSON.
     pub const STATE: &str = "zoo.state";
+    /// Units, up axis and handedness, JSON ([`zoo_motion::frame::CoordinateFrame`]).
+    pub const FRAME: &str = "zoo.frame";
     /// Optional base64 ONNX of the transition-start graph.
     pub const START_GRAPH: &str = "zoo.start_graph";
     /// The `transition` task section, JSON.
     pub const TRANSITION: &str = super::transition::KEY;
-    /// All keys every format-2 model carries (a task may require its section besides).
-    pub const REQUIRED: [&str; 9] =
-        [FORMAT_VERSION, MODEL_KIND, TASK, CONFIG, NORMALIZATION, SKELETON, FEATURE_LAYOUT, FPS, STATE];
+    /// All keys every format-3 model carries (a task may require its section besides).
+    pub const REQUIRED: [&str; 10] =
+        [FORMAT_VERSION, MODEL_KIND, TASK, CONFIG, NORMALIZATION, SKELETON, FEATURE_LAYOUT, FPS, FRAME, STATE];
 }
 
 /// Mean and standard deviation of a group of features (normalized = (x - mean) / std).
@@ -283,7 +289,7 @@ impl MotionTask {
     }
 }
 
-/// Everything a format-2 model carries besides the graph.
+/// Everything a format-3 model carries besides the graph.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MotionModelMetadata {
     /// Format version ([`FORMAT_VERSION`]).
@@ -303,6 +309,9 @@ pub struct MotionModelMetadata {
     pub feature_layout: Vec<MotionFeatureSegment>,
     /// Frames per second of the training data.
     pub fps: f32,
+    /// Units, up axis and handedness of the model's positions and rotations (the training
+    /// data's; [`zoo_motion::frame::Conversion`] converts the runtime's poses for an engine).
+    pub frame: CoordinateFrame,
     /// Recurrent state pairs of the step graph.
     pub state: Vec<MotionStatePair>,
 }
@@ -323,6 +332,7 @@ impl MotionModelMetadata {
             (keys::SKELETON.into(), json(&self.skeleton)),
             (keys::FEATURE_LAYOUT.into(), json(&self.feature_layout)),
             (keys::FPS.into(), self.fps.to_string()),
+            (keys::FRAME.into(), json(&self.frame)),
             (keys::STATE.into(), json(&self.state)),
         ];
         if let (Some(key), Some(section)) = (self.task.section_key(), self.task.section_json()) {
@@ -347,6 +357,7 @@ impl MotionModelMetadata {
         if !(self.fps.is_finite() && self.fps > 0.0) {
             return Err(bad(keys::FPS, format!("`{}` is not a positive number", self.fps)));
         }
+        self.frame.check().map_err(|r| bad(keys::FRAME, r))?;
         serde_json::from_str::<serde_json::Value>(&self.config_json).map_err(|e| bad(keys::CONFIG, e.to_string()))?;
         for (name, g) in &self.normalization {
             g.check(name, None).map_err(|r| bad(keys::NORMALIZATION, r))?;
@@ -401,6 +412,7 @@ impl MotionModelMetadata {
             skeleton: parse(keys::SKELETON, &req(keys::SKELETON)?)?,
             feature_layout: parse(keys::FEATURE_LAYOUT, &req(keys::FEATURE_LAYOUT)?)?,
             fps,
+            frame: parse(keys::FRAME, &req(keys::FRAME)?)?,
             state: parse(keys::STATE, &req(keys::STATE)?)?,
         };
         metadata.check()?;
@@ -442,6 +454,7 @@ mod tests {
             },
             feature_layout: vec![MotionFeatureSegment { name: "x".into(), start: 0, len: 2 }],
             fps: 30.0,
+            frame: CoordinateFrame::ZOO_CM,
             state: vec![MotionStatePair { input: "h".into(), output: "h_next".into() }],
         }
     }
@@ -458,6 +471,18 @@ mod tests {
 
     fn set(props: &mut [(String, String)], key: &str, value: &str) {
         props.iter_mut().find(|(k, _)| k == key).unwrap().1 = value.to_string();
+    }
+
+    #[test]
+    fn the_frame_is_required_and_checked() {
+        let err = edited(|p| p.retain(|(k, _)| k != keys::FRAME)).unwrap_err();
+        assert!(matches!(&err, MotionError::MissingMetadata { key } if key == keys::FRAME), "{err}");
+        let err = edited(|p| set(p, keys::FRAME, r#"{"metres_per_unit": 0, "up_axis": "y", "handedness": "right"}"#))
+            .unwrap_err();
+        assert!(err.to_string().contains("metres_per_unit must be a positive number"), "{err}");
+        let err = edited(|p| set(p, keys::FRAME, r#"{"metres_per_unit": 1, "up_axis": "x", "handedness": "right"}"#))
+            .unwrap_err();
+        assert!(err.to_string().contains(keys::FRAME), "{err}");
     }
 
     #[test]

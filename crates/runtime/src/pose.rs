@@ -6,10 +6,12 @@
 
 use glam::{DQuat, DVec3, Quat, Vec3};
 use zoo_motion::facing::yaw_part;
+pub use zoo_motion::frame::{Conversion, CoordinateFrame, Handedness, UpAxis};
 
 /// A character pose as a game engine consumes it: a root transform on the ground that carries
 /// the character (root motion), the hips relative to it, and every joint's local rotation in
-/// the model skeleton's order. Y is up; units are the model's (see its skeleton offsets).
+/// the model skeleton's order. Y is up, right-handed; units are the model's (its file's
+/// `frame`); [`EnginePose::convert`] converts to an engine's units and axes.
 ///
 /// World space: `hips = root_position + root_rotation * hips_position`, the hips' world
 /// rotation is `root_rotation * local_rotations[0]`, and every other joint `j` is its parent's
@@ -61,6 +63,30 @@ impl EnginePose {
     /// Number of joints.
     pub fn joints(&self) -> usize {
         self.local_rotations.len()
+    }
+
+    /// Converts the pose in place from the model's coordinate frame (its file's
+    /// [`crate::metadata::MotionModelMetadata::frame`]) to an engine's: positions scaled and
+    /// re-axed, rotations conjugated, the yaw delta reversed by a change of handedness (see
+    /// [`zoo_motion::frame`]). Build the conversion once with
+    /// `Conversion::between(&model.metadata().frame, &engine_frame)` and convert the
+    /// skeleton's rest offsets with [`Conversion::position`] too. No allocation.
+    ///
+    /// After the conversion the pose is in the engine's frame: its root still sits on the
+    /// ground plane and turns about the (new) up axis; the relations of [`EnginePose`] hold with
+    /// the converted offsets.
+    pub fn convert(&mut self, c: &Conversion) {
+        self.root_position = c.position(self.root_position);
+        self.root_rotation = c.rotation(self.root_rotation);
+        self.root_delta_position = c.position(self.root_delta_position);
+        self.root_delta_yaw = c.yaw(self.root_delta_yaw);
+        self.hips_position = c.position(self.hips_position);
+        for q in &mut self.local_rotations {
+            *q = c.rotation(*q);
+        }
+        for p in &mut self.global_positions {
+            *p = c.position(*p);
+        }
     }
 
     /// The pose of a character given in world space, as BVH stores it: the hips' world
@@ -222,5 +248,54 @@ mod tests {
         assert!((yaw - 0.1).abs() < 1e-6, "{yaw}");
         let (_, yaw) = root_delta(p0, Quat::from_rotation_y(3.1), p1, Quat::from_rotation_y(-3.1));
         assert!((yaw - (std::f32::consts::TAU - 6.2)).abs() < 1e-5, "{yaw}");
+    }
+
+    /// World positions of a 3-joint chain posed by `pose` with rest `offsets` (the relations
+    /// documented on [`EnginePose`]).
+    fn chain_world(pose: &EnginePose, offsets: &[Vec3]) -> Vec<Vec3> {
+        let mut pos = vec![pose.hips_world()];
+        let mut rot = pose.hips_world_rotation();
+        for j in 1..offsets.len() {
+            let p = pos[j - 1] + rot * offsets[j];
+            rot *= pose.local_rotations[j];
+            pos.push(p);
+        }
+        pos
+    }
+
+    #[test]
+    fn converted_poses_skin_to_the_converted_positions() {
+        let hips = Vec3::new(10.0, 90.0, -4.0);
+        let rots = [
+            Quat::from_rotation_y(0.7) * Quat::from_rotation_x(0.2),
+            Quat::from_rotation_z(0.3),
+            Quat::from_rotation_x(-0.8),
+        ];
+        let offsets = [Vec3::ZERO, Vec3::new(0.0, 20.0, 2.0), Vec3::new(5.0, 30.0, 0.0)];
+        let mut pose = EnginePose::from_world(hips, &rots);
+        pose.root_delta_position = Vec3::new(1.0, 0.0, 2.0);
+        pose.root_delta_yaw = 0.1;
+        let world = chain_world(&pose, &offsets);
+        for to in [
+            CoordinateFrame::metres(UpAxis::Z, Handedness::Right),
+            CoordinateFrame::metres(UpAxis::Y, Handedness::Left),
+            CoordinateFrame { metres_per_unit: 0.01, up_axis: UpAxis::Z, handedness: Handedness::Left },
+        ] {
+            let c = Conversion::between(&CoordinateFrame::ZOO_CM, &to);
+            let mut converted = pose.clone();
+            converted.convert(&c);
+            let offs: Vec<Vec3> = offsets.iter().map(|o| c.position(*o)).collect();
+            let got = chain_world(&converted, &offs);
+            for (g, w) in got.iter().zip(&world) {
+                let want = c.position(*w);
+                assert!((*g - want).length() <= 1e-4 * want.length().max(1.0), "{to:?}: {g} vs {want}");
+            }
+            // The root stays on the ground plane of the new up axis and turns about it.
+            let up = c.direction(Vec3::Y);
+            assert!(converted.root_position.dot(up).abs() < 1e-5, "{to:?}");
+            let axis = converted.root_rotation.to_axis_angle().0;
+            assert!(axis.cross(up).length() < 1e-4, "{to:?}: root turns about {axis}");
+            assert_eq!(converted.root_delta_yaw, c.yaw(0.1));
+        }
     }
 }

@@ -34,6 +34,49 @@ pub const LOSS_CURVE_FILE: &str = "loss_curve.png";
 /// Sub-folder of the last epoch's checkpoint.
 pub const LAST_DIR: &str = "last";
 
+/// The run folder's skeleton ([`RunSkeleton`]): what an export needs beyond the config.
+pub const SKELETON_FILE: &str = "skeleton.json";
+
+/// The skeleton a model was trained on, kept in its run folder ([`SKELETON_FILE`]) so that
+/// `zoo export` writes the names, rest offsets, frame rate and units without being told.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RunSkeleton {
+    /// Joint names.
+    pub names: Vec<String>,
+    /// Parent of each joint (-1 for the root).
+    pub parents: Vec<i32>,
+    /// Rest offset of each joint from its parent, in the data's unit.
+    pub offsets: Vec<[f32; 3]>,
+    /// Frames per second of the training data.
+    pub fps: f32,
+    /// Units and axes of the training data.
+    pub frame: zoo_motion::frame::CoordinateFrame,
+}
+
+impl RunSkeleton {
+    /// The skeleton of `s` at `fps` frames per second, in `frame`.
+    pub fn new(s: &zoo_motion::Skeleton, fps: f32, frame: zoo_motion::frame::CoordinateFrame) -> Self {
+        RunSkeleton {
+            names: s.names.clone(),
+            parents: s.parents.iter().map(|p| p.map_or(-1, |p| p as i32)).collect(),
+            offsets: s.offsets.iter().map(|o| o.as_vec3().to_array()).collect(),
+            fps,
+            frame,
+        }
+    }
+
+    /// Writes it into run folder `dir` (atomically).
+    pub fn write(&self, dir: &Path) -> NnResult<()> {
+        write_json(&dir.join(SKELETON_FILE), self)
+    }
+
+    /// The skeleton of run folder `dir`, `None` when it has none (folders of older versions).
+    pub fn read(dir: &Path) -> NnResult<Option<Self>> {
+        let path = dir.join(SKELETON_FILE);
+        if path.is_file() { read_json(&path).map(Some) } else { Ok(None) }
+    }
+}
+
 /// An error mapper for I/O on `path`.
 pub fn io(path: &Path) -> impl FnOnce(std::io::Error) -> NnError + '_ {
     move |source| NnError::Io { path: path.to_path_buf(), source }

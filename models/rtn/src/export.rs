@@ -35,6 +35,8 @@ use candle_nn::VarMap;
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 use zoo_export::{Dim, ExportError, GraphBuilder, OnnxModel, Value};
+use zoo_nn::checkpoint::RunSkeleton;
+use zoo_runtime::metadata::CoordinateFrame;
 use zoo_runtime::metadata::{
     FORMAT_VERSION, MotionFeatureSegment, MotionMeanStd, MotionModelMetadata, MotionSkeletonInfo, MotionStatePair,
     MotionTask, TransitionTask, TransitionTerrain, keys,
@@ -46,14 +48,41 @@ pub const MODEL_KIND: &str = "rtn";
 /// What the run folder may not record: joint names, rest offsets and the frame rate.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct RtnExportOptions {
-    /// Joint names; default `joint0`, `joint1`, ...
+    /// Joint names (required).
     pub names: Option<Vec<String>>,
-    /// Rest offset of each joint from its parent (clip units); default zero.
+    /// Rest offset of each joint from its parent (clip units; required).
     pub offsets: Option<Vec<[f32; 3]>>,
     /// Parent of each joint (-1 for the root), when the config has none.
     pub parents: Option<Vec<i32>>,
-    /// Frames per second of the training data; default 30.
+    /// Frames per second of the training data (required).
     pub fps: Option<f32>,
+    /// Units, up axis and handedness of the training data (required; zoo's data: centimetres,
+    /// Y up, right-handed, [`CoordinateFrame::ZOO_CM`]).
+    pub frame: Option<CoordinateFrame>,
+}
+
+impl RtnExportOptions {
+    /// The options of a run folder's [`RunSkeleton`].
+    pub fn from_run_skeleton(s: &RunSkeleton) -> Self {
+        RtnExportOptions {
+            names: Some(s.names.clone()),
+            offsets: Some(s.offsets.clone()),
+            parents: Some(s.parents.clone()),
+            fps: Some(s.fps),
+            frame: Some(s.frame),
+        }
+    }
+
+    /// These options, with what they leave out taken from `other`.
+    pub fn or(self, other: RtnExportOptions) -> Self {
+        RtnExportOptions {
+            names: self.names.or(other.names),
+            offsets: self.offsets.or(other.offsets),
+            parents: self.parents.or(other.parents),
+            fps: self.fps.or(other.fps),
+            frame: self.frame.or(other.frame),
+        }
+    }
 }
 
 fn model_err(message: impl Into<String>) -> ExportError {
@@ -61,8 +90,15 @@ fn model_err(message: impl Into<String>) -> ExportError {
 }
 
 /// Loads a `zoo train rtn` run folder (`config.json`, `model.safetensors`,
-/// `normalization.json`) and exports it (see [`export_rtn`]).
+/// `normalization.json`, and `skeleton.json` for what `options` leave out) and exports it (see
+/// [`export_rtn`]).
 pub fn export_rtn_dir(dir: &Path, options: &RtnExportOptions) -> Result<OnnxModel, ExportError> {
+    let run_skeleton = RunSkeleton::read(dir).map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
+    let options = match run_skeleton {
+        Some(s) => options.clone().or(RtnExportOptions::from_run_skeleton(&s)),
+        None => options.clone(),
+    };
+    let options = &options;
     let (config, stats) =
         crate::checkpoint::read_meta(dir).map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
     let config_path = dir.join(crate::checkpoint::CONFIG_FILE);
@@ -173,8 +209,15 @@ pub fn metadata(
             ));
         }
     };
-    let names = options.names.clone().unwrap_or_else(|| (0..k).map(|j| format!("joint{j}")).collect());
-    let offsets = options.offsets.clone().unwrap_or_else(|| vec![[0.0; 3]; k]);
+    let missing = |what: &str| {
+        model_err(format!(
+            "the skeleton's {what} is required in the model file: pass --skeleton FILE.bvh (a clip of the \
+             training skeleton) to `zoo export`; run folders trained by this zoo keep it in skeleton.json"
+        ))
+    };
+    let names = options.names.clone().ok_or_else(|| missing("joint names"))?;
+    let offsets = options.offsets.clone().ok_or_else(|| missing("rest offsets"))?;
+    let frame = options.frame.ok_or_else(|| missing("unit and axes (CoordinateFrame)"))?;
     if parents.len() != k || names.len() != k || offsets.len() != k {
         return Err(model_err(format!(
             "the model has {k} joints but the skeleton has {} parents, {} names and {} offsets",
@@ -183,7 +226,7 @@ pub fn metadata(
             offsets.len()
         )));
     }
-    let fps = options.fps.unwrap_or(30.0);
+    let fps = options.fps.ok_or_else(|| missing("frame rate"))?;
     if !(fps.is_finite() && fps > 0.0) {
         return Err(model_err(format!("fps must be a positive number, got {fps}")));
     }
@@ -209,6 +252,7 @@ pub fn metadata(
         skeleton: MotionSkeletonInfo { names, parents, offsets },
         feature_layout: vec![segment("root_velocity", 0, 3), segment("joint_positions_root_relative", 3, d - 3)],
         fps,
+        frame,
         state,
     };
     metadata.check().map_err(|e| model_err(format!("the metadata would not load: {e}")))?;

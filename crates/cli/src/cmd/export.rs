@@ -25,9 +25,14 @@ pub struct ExportArgs {
     /// and offsets zero).
     #[arg(long, value_name = "FILE.bvh")]
     pub skeleton: Option<PathBuf>,
-    /// Frames per second of the training data (default: the skeleton clip's, else 30).
+    /// Frames per second of the training data (default: the run folder's skeleton.json, else
+    /// the skeleton clip's).
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::positive_f32)]
     pub fps: Option<f32>,
+    /// Length unit of the training data: cm, m, mm or in (default: the run folder's
+    /// skeleton.json, else cm, zoo's convention for BVH, which does not say its unit).
+    #[arg(long, value_parser = ["cm", "m", "mm", "in"])]
+    pub units: Option<String>,
 }
 
 /// The model kinds `zoo export` writes.
@@ -53,6 +58,11 @@ fn model_kind(config_path: &Path) -> anyhow::Result<Option<String>> {
 pub fn run(a: ExportArgs) -> anyhow::Result<()> {
     crate::cmd::check_output_file("--out", &a.out)?;
     let mut options = RtnExportOptions { fps: a.fps, ..RtnExportOptions::default() };
+    if let Some(u) = &a.units {
+        let metres_per_unit = zoo_motion::frame::CoordinateFrame::metres_per(u).context("--units: cm, m, mm or in")?;
+        options.frame =
+            Some(zoo_motion::frame::CoordinateFrame { metres_per_unit, ..zoo_motion::frame::CoordinateFrame::ZOO_CM });
+    }
     if let Some(path) = &a.skeleton {
         let clip = read_clip(path).with_context(|| format!("reading the skeleton of {}", path.display()))?;
         let s = &clip.skeleton;
@@ -73,6 +83,13 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
             EXPORT_KINDS.join(", ")
         ),
     }
+    if a.skeleton.is_none() && zoo_nn::checkpoint::RunSkeleton::read(&a.onnx)?.is_none() {
+        bail!(
+            "{} has no skeleton.json (trained by an older zoo): pass --skeleton FILE.bvh, a clip of the training \
+             skeleton, so the model file carries joint names, rest offsets and the frame rate",
+            a.onnx.display()
+        );
+    }
     let (config, _) =
         zoo_rtn::checkpoint::read_meta(&a.onnx).with_context(|| format!("exporting {}", a.onnx.display()))?;
     if let (Some(path), Some(parents)) = (&a.skeleton, &options.parents)
@@ -89,6 +106,10 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
             config.joints,
             config.parents
         );
+    }
+    if options.frame.is_none() && zoo_nn::checkpoint::RunSkeleton::read(&a.onnx)?.is_none() {
+        // BVH does not say its unit: zoo's convention is centimetres, Y up, right-handed.
+        options.frame = Some(zoo_motion::frame::CoordinateFrame::ZOO_CM);
     }
     let model = export_rtn_dir(&a.onnx, &options).with_context(|| format!("exporting {}", a.onnx.display()))?;
     model.write(&a.out)?;

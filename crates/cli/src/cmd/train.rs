@@ -341,6 +341,13 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
         trainer.model().parameter_count(),
         out.display()
     );
+    // What `zoo export` needs beyond the config: names, rest offsets, fps and units (BVH
+    // carries no unit: zoo's data is in centimetres, Y up, right-handed).
+    if zoo_nn::checkpoint::RunSkeleton::read(&out)?.is_none() {
+        let fps = train.first().map_or(30.0, |c| c.clip.fps() as f32);
+        zoo_nn::checkpoint::RunSkeleton::new(&tw.skeleton, fps, zoo_motion::frame::CoordinateFrame::ZOO_CM)
+            .write(&out)?;
+    }
     let seed = trainer.config().train.seed;
     let threads = default_threads(a.threads);
     trainer.set_threads(threads)?;
