@@ -26,7 +26,7 @@ pub struct ExportArgs {
     #[arg(long, value_name = "FILE.bvh")]
     pub skeleton: Option<PathBuf>,
     /// Frames per second of the training data (default: the skeleton clip's, else 30).
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::positive_f32)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::fps_f32)]
     pub fps: Option<f32>,
 }
 
