@@ -35,6 +35,17 @@ fn every_numeric_option_of_every_subcommand_refuses_bad_values_with_its_range() 
         (with(&tr, ["--frames", "100001"]), "--frames <FRAMES>", "(must be <= 100000)"),
         (with(&tr, ["--frames", "-3"]), "--frames <FRAMES>", "not a whole number (valid range 1..=100000)"),
         (with(&tr, ["--frames", "NaN"]), "--frames <FRAMES>", frames),
+        (
+            with(&tr[..3], ["--from", "a.bvh:-1"]),
+            "--from <FROM>",
+            "frame `-1` is not a whole number (valid range 0..=10000000)",
+        ),
+        (
+            with(&tr[..3], ["--from", "a.bvh"]),
+            "--from <FROM>",
+            "expected CLIP.bvh:FRAME, e.g. walk.bvh:120 (FRAME in 0..=10000000)",
+        ),
+        (with(&tr[..5], ["--to", "b.bvh:18446744073709551615"]), "--to <TO>", "outside the valid range 0..=10000000"),
         (with(&dc, ["--interval", "0"]), "--interval <INTERVAL>", frames),
         (with(&dc, ["--interval", "1e9"]), "--interval <INTERVAL>", frames),
         (with(&ex, ["--fps", "0"]), "--fps <FPS>", "not a positive number (valid range [1, 1000])"),

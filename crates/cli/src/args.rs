@@ -195,6 +195,19 @@ pub fn frame_end(s: &str) -> Result<usize, String> {
     whole_in(s, 1..=MAX_FRAME_INDEX, "")
 }
 
+/// A clip and frame, `CLIP.bvh:FRAME`, with FRAME in `0..=MAX_FRAME_INDEX` (whether the clip
+/// has that frame is checked once it is read); the text is kept as given.
+pub fn clip_frame(s: &str) -> Result<String, String> {
+    let Some((path, frame)) = s.rsplit_once(':') else {
+        return Err(format!("expected CLIP.bvh:FRAME, e.g. walk.bvh:120 (FRAME in 0..={MAX_FRAME_INDEX})"));
+    };
+    if path.is_empty() {
+        return Err(format!("the clip before `:{frame}` is empty: expected CLIP.bvh:FRAME"));
+    }
+    whole_in(frame, 0..=MAX_FRAME_INDEX, "").map_err(|e| format!("frame {e}"))?;
+    Ok(s.to_string())
+}
+
 /// A random seed: any 64-bit unsigned whole number.
 pub fn seed(s: &str) -> Result<u64, String> {
     s.trim().parse::<u64>().map_err(|_| format!("`{s}` is not a seed: a whole number in 0..={}", u64::MAX))
@@ -342,6 +355,13 @@ mod tests {
         assert_eq!(seed("18446744073709551615"), Ok(u64::MAX));
         assert!(seed("-1").unwrap_err().contains("0..=18446744073709551615"));
         assert!(seed("18446744073709551616").unwrap_err().contains("not a seed"));
+        assert_eq!(clip_frame("a:b.bvh:12"), Ok("a:b.bvh:12".to_string()));
+        assert!(clip_frame("walk.bvh").unwrap_err().contains("expected CLIP.bvh:FRAME"));
+        assert!(clip_frame(":3").unwrap_err().contains("is empty"));
+        assert_eq!(
+            clip_frame("b.bvh:18446744073709551615").unwrap_err(),
+            "frame 18446744073709551615 is outside the valid range 0..=10000000 (must be <= 10000000)"
+        );
     }
 
     #[test]
