@@ -143,7 +143,7 @@ fn failed(args: &[&str]) -> String {
 /// Options valid alone but too much together (synthetic data larger than memory) are refused
 /// before any work, with the range at that frame rate, and nothing is written.
 #[test]
-fn synthetic_data_larger_than_memory_is_refused_before_the_work() {
+fn synthetic_data_options_valid_alone_but_not_together_are_refused_before_the_work() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("synth");
     let o = out.to_str().unwrap();
@@ -154,6 +154,12 @@ fn synthetic_data_larger_than_memory_is_refused_before_the_work() {
     assert!(err.contains("--minutes 2000 at 30 fps is 3600000 frames") && err.contains("(0, 1111] minutes"), "{err}");
     let err = failed(&["data", "synth", "--out", o, "--clip-seconds", "0.01"]);
     assert!(err.contains("--clip-seconds 0.01 at 30 fps is less than 2 frames per clip"), "{err}");
+    // Clips so short that the generator would plan no foot plant (it panicked at 1000 fps).
+    let err = failed(&["data", "synth", "--out", o, "--clip-seconds", "0.3", "--fps", "1000"]);
+    assert!(
+        err.contains("--clip-seconds 0.3 at 1000 fps is too short for the motion generator (at least 0.910 s"),
+        "{err}"
+    );
     assert!(!out.exists(), "a refused command created its output folder");
     let err = failed(&["train", "rtn", "--synth-minutes", "1e5", "--out", o]);
     assert!(err.contains("--synth-minutes 100000 at 30 fps is 180000000 frames"), "{err}");

@@ -68,6 +68,12 @@ pub const MAX_ATTEMPTS: usize = 1_000;
 /// (about 18.5 hours at 30 fps, a few GB).
 pub const MAX_SYNTH_FRAMES: f64 = 2_000_000.0;
 
+/// The frames of run-up `zoo_data::synth` generates around each clip (twice its `ROLL`).
+const SYNTH_RUN_UP_FRAMES: f64 = 90.0;
+
+/// The shortest span (clip plus run-up) the motion generator is asked to plan, seconds.
+const MIN_SYNTH_SPAN_SECONDS: f64 = 1.0;
+
 /// A whole number in `range`; `unit` names what it counts in the message (`frames`, `epochs`).
 pub fn whole_in(s: &str, range: RangeInclusive<usize>, unit: &str) -> Result<usize, String> {
     let (lo, hi) = (*range.start(), *range.end());
@@ -158,6 +164,17 @@ pub fn check_synth_size(minutes: (&str, f64), clip_seconds: f64, fps: f64) -> Re
         return Err(format!(
             "--clip-seconds {clip_seconds} at {fps} fps is less than 2 frames per clip (at least {} s)",
             2.0 / fps
+        ));
+    }
+    // The generator plans each clip with 45 frames of run-up on either side; a planned span
+    // shorter than about half a second may hold no foot plant, which its feet planner cannot
+    // handle (`synth/feet.rs`): ask for a second, twice the longest failing span measured.
+    let min_seconds = MIN_SYNTH_SPAN_SECONDS - SYNTH_RUN_UP_FRAMES / fps;
+    if clip_seconds < min_seconds {
+        return Err(format!(
+            "--clip-seconds {clip_seconds} at {fps} fps is too short for the motion generator (at least {:.3} s at this \
+             frame rate)",
+            (min_seconds * 1000.0).ceil() / 1000.0
         ));
     }
     // `SynthConfig::clip_count` clips of `clip_seconds * fps` frames each.
@@ -399,5 +416,10 @@ mod tests {
         let e = check_synth_size(("--minutes", 0.01), 3600.0, 1000.0).unwrap_err();
         assert!(e.contains("3600000 frames"), "{e}");
         assert!(check_synth_size(("--minutes", 1.0), 1e9, 30.0).unwrap_err().contains("(0, 3600]"));
+        // At 1000 fps the 90 frames of run-up are 0.09 s: a clip needs 0.91 s more.
+        let e = check_synth_size(("--minutes", 1.0), 0.5, 1000.0).unwrap_err();
+        assert!(e.contains("too short for the motion generator (at least 0.910 s at this frame rate)"), "{e}");
+        assert!(check_synth_size(("--minutes", 1.0), 0.91, 1000.0).is_ok());
+        assert!(check_synth_size(("--minutes", 1.0), 0.1, 30.0).is_ok());
     }
 }
