@@ -182,7 +182,7 @@ pub fn check_synth_size(minutes: (&str, f64), clip_seconds: f64, fps: f64) -> Re
     // `SynthConfig::clip_count` clips of `clip_seconds * fps` frames each.
     let clips = (minutes * 60.0 / clip_seconds).ceil().max(1.0);
     let frames = clips * (clip_seconds * fps).round();
-    if !(minutes > 0.0) || !frames.is_finite() || frames > MAX_SYNTH_FRAMES {
+    if minutes.is_nan() || minutes <= 0.0 || !frames.is_finite() || frames > MAX_SYNTH_FRAMES {
         let most = MAX_SYNTH_FRAMES / 60.0 / fps;
         return Err(format!(
             "{option} {minutes} at {fps} fps is {frames:.0} frames (in clips of {clip_seconds} s), more than the \
