@@ -5,6 +5,7 @@
 use anyhow::Context;
 use std::path::Path;
 use zoo_data::position_method::{PositionGenerator, PositionMethod};
+use zoo_runtime::metadata::MotionSkeletonInfo;
 use zoo_runtime::{TransitionModel, TransitionRunner, TransitionState};
 
 /// An exported transition model run by the engine runtime; one runner and state per thread.
@@ -43,7 +44,18 @@ impl PositionGenerator for OnnxGenerator {
 /// The benchmark method `onnx:FILE` (or `onnx+lock:FILE` with `foot_lock`) named `name`, from a
 /// file written by `zoo export --onnx`.
 pub fn load_onnx(path: &Path, name: String, foot_lock: bool) -> anyhow::Result<PositionMethod<OnnxGenerator>> {
+    Ok(load_onnx_with_skeleton(path, name, foot_lock)?.0)
+}
+
+/// [`load_onnx`], and the skeleton the model was trained on (from the file's metadata), for
+/// checking it against a dataset's.
+pub fn load_onnx_with_skeleton(
+    path: &Path,
+    name: String,
+    foot_lock: bool,
+) -> anyhow::Result<(PositionMethod<OnnxGenerator>, MotionSkeletonInfo)> {
     let model =
         TransitionModel::load(path).with_context(|| format!("loading the exported model {}", path.display()))?;
-    Ok(PositionMethod::new(name, OnnxGenerator { model }, foot_lock))
+    let skeleton = model.model().metadata().skeleton.clone();
+    Ok((PositionMethod::new(name, OnnxGenerator { model }, foot_lock), skeleton))
 }

@@ -506,10 +506,11 @@ impl<'a> Parser<'a> {
         self.frames(h, frames, frame_time)
     }
 
-    /// Skips spaces, tabs and carriage returns (not line feeds).
+    /// Skips the whitespace of a line: every ASCII whitespace but the line feed (spaces, tabs,
+    /// carriage returns, form feeds), the same set that separates tokens.
     #[inline]
     fn skip_blank(&mut self) {
-        while self.pos < self.b.len() && matches!(self.b[self.pos], b' ' | b'\t' | b'\r') {
+        while self.pos < self.b.len() && matches!(self.b[self.pos], b' ' | b'\t' | b'\r' | b'\x0c') {
             self.pos += 1;
         }
     }
@@ -970,6 +971,41 @@ Frame Time: 0.0333333
     fn malformed_unknown_keyword_in_joint() {
         let text = VALID.replace("\t\tEnd Site", "\t\tEndSite");
         assert_fails(&text, 10, "expected OFFSET, CHANNELS, JOINT, End Site or `}` in joint `Leg`, found `EndSite`");
+    }
+
+    /// Values without a leading digit, with a sign or an exponent are the numbers they spell.
+    #[test]
+    fn frame_values_without_a_leading_digit_with_signs_and_exponents() {
+        let plain = read(VALID).unwrap();
+        let spelled = VALID
+            .replace("1 90 2 10 20 30 -5 0 45", "+1 9e1 2.0 1E1 +.2e2 30. -.5e1 -0 4.5e+1")
+            .replace("1.5 90.5 2.5 11 21 31 -6 1 44", ".15e1 +90.5 2.5E0 11 21 31 -6e0 1. 440e-1");
+        let c = read(&spelled).unwrap();
+        assert_eq!(c.local_positions, plain.local_positions);
+        assert_eq!(c.local_rotations, plain.local_rotations);
+        let c = read(&VALID.replace("1 90 2 10", "-.5 .25 +.75 10")).unwrap();
+        assert_eq!(c.local_positions[0], DVec3::new(-0.5, 0.25, 0.75));
+    }
+
+    /// Rows of such values beyond the declared count are counted as rows, whatever their first
+    /// character; blank lines (spaces, tabs, CR, form feeds) are not rows.
+    #[test]
+    fn extra_rows_starting_with_a_dot_sign_or_exponent_are_counted() {
+        let text = VALID.replace("Frames: 2", "Frames: 1")
+            + "\t.5 -.5 +1 1e1 -1E-1 .0 0. -0 +.5\r\n\r\n-.5 0 0 0 0 0 0 0 0\n\x0c\n+1e0 0 0 0 0 0 0 0 0";
+        assert_fails(&text, 20, "4 more frame row(s) than the 1 declared by `Frames:`; set `Frames: 5`");
+        assert_eq!(read(&format!("{VALID}\x0c\n \x0c\r\n\t")).unwrap().frames(), 2);
+        let text = VALID.replace("1 90 2 10", "\x0c1 90 2 10");
+        assert_eq!(read(&text).unwrap().frames(), 2);
+    }
+
+    /// Malformed numbers are refused with the value as written.
+    #[test]
+    fn malformed_number_forms() {
+        for bad in ["1e", "--1", "+-1", "1.2.3", "1,5", ".", "e5", "0x10", "1e400", "-inf", "+", "1e+", "1d5"] {
+            let text = VALID.replace("11 21 31", &format!("11 {bad} 31"));
+            assert_fails(&text, 20, &format!("expected a number (value 5 of 9 in frame 2), found `{bad}`"));
+        }
     }
 
     #[test]

@@ -1,5 +1,6 @@
 //! `zoo bench`: the in-betweening benchmark (LaFAN1 protocol, `BENCHMARK.md`).
 
+use crate::registry::MethodSpec;
 use anyhow::{Context, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -45,7 +46,7 @@ pub struct BenchArgs {
     #[arg(long)]
     pub reference: Option<PathBuf>,
     /// Relative tolerance of `--reference`.
-    #[arg(long, default_value_t = 1e-3, allow_hyphen_values = true, value_parser = crate::args::non_negative)]
+    #[arg(long, default_value_t = 1e-3, allow_hyphen_values = true, value_parser = crate::args::relative_tolerance)]
     pub tolerance: f64,
     /// Write BVH files of the first `--save-count` test windows into this folder: the ground
     /// truth and every method's transition, per length (`w0003_n30_interp.bvh`, ...), ready for
@@ -53,7 +54,7 @@ pub struct BenchArgs {
     #[arg(long)]
     pub save_bvh: Option<PathBuf>,
     /// How many test windows `--save-bvh` writes (evenly spread over the test set).
-    #[arg(long, default_value_t = 4, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
+    #[arg(long, default_value_t = 4, allow_hyphen_values = true, value_parser = crate::args::save_count)]
     pub save_count: usize,
     /// Leave out the clips that cannot join the dataset (unreadable, another skeleton or
     /// frame rate) and list them, instead of refusing the dataset.
@@ -72,8 +73,33 @@ pub enum BenchCommand {
     Train(crate::cmd::bench_train::TrainBenchArgs),
 }
 
-fn method(spec: &str) -> anyhow::Result<Box<dyn TransitionMethod>> {
-    crate::registry::load_method(&crate::registry::parse_method(spec)?)
+/// The hierarchy a benchmarked model was trained on, checked against the dataset's.
+struct TrainedOn {
+    /// Parent of each joint, -1 for the root.
+    parents: Vec<i32>,
+    /// Joint names, when the model records real ones (an exported file made with `--skeleton`).
+    names: Option<Vec<String>>,
+}
+
+/// A `--methods` entry, loaded, with the hierarchy its model was trained on (`None` for the
+/// baselines and for models that record none).
+fn method(spec: &str) -> anyhow::Result<(Box<dyn TransitionMethod>, Option<TrainedOn>)> {
+    let parsed = crate::registry::parse_method(spec)?;
+    match &parsed {
+        MethodSpec::Model { name, kind, path, foot_lock } if kind == crate::registry::ONNX_KIND => {
+            let (m, s) = crate::methods::load_onnx_with_skeleton(path, name.clone(), *foot_lock)?;
+            // `zoo export` without `--skeleton` names the joints `joint0`, `joint1`, ...
+            let placeholder = s.names.iter().enumerate().all(|(j, n)| *n == format!("joint{j}"));
+            Ok((Box::new(m), Some(TrainedOn { parents: s.parents, names: (!placeholder).then_some(s.names) })))
+        }
+        MethodSpec::Model { kind, path, .. } if kind == "rtn" => {
+            let m = crate::registry::load_method(&parsed)?;
+            let (config, _) = zoo_rtn::checkpoint::read_meta(path)
+                .with_context(|| format!("method `{spec}`: loading the RTN in {}", path.display()))?;
+            Ok((m, (!config.parents.is_empty()).then_some(TrainedOn { parents: config.parents, names: None })))
+        }
+        _ => Ok((crate::registry::load_method(&parsed)?, None)),
+    }
 }
 
 /// Runs the benchmark.
@@ -94,7 +120,8 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
         crate::cmd::check_output_dir("--save-bvh", dir)?;
     }
     let start = Instant::now();
-    let methods = a.methods.iter().map(|m| method(m.trim())).collect::<anyhow::Result<Vec<_>>>()?;
+    let (methods, trained_on): (Vec<_>, Vec<_>) =
+        a.methods.iter().map(|m| method(m.trim())).collect::<anyhow::Result<Vec<_>>>()?.into_iter().unzip();
     let pb = ProgressBar::new_spinner();
     pb.set_style(ProgressStyle::with_template("{spinner} {msg} [{elapsed}]")?);
     pb.enable_steady_tick(Duration::from_millis(120));
@@ -113,7 +140,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
         (None, Some(g)) => dataset::split(clips, g)?,
         (None, None) => bail!("pass --valid-glob GLOB to choose the test split of --data, or --test-data PATH"),
     };
-    check_rtn_skeletons(&a.methods, &train)?;
+    check_skeletons(&a.methods, &trained_on, &train)?;
     pb.set_message("preparing windows and statistics");
     let bench = Benchmark::new(&train, &test).map_err(anyhow::Error::msg)?;
     pb.set_message(format!("evaluating {} test windows", bench.windows()));
@@ -169,28 +196,40 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Refuses an RTN run folder trained on another hierarchy than the dataset's (the same joint
-/// count is not enough: the joints would be paired with the wrong bones).
-fn check_rtn_skeletons(methods: &[String], train: &[dataset::NamedClip]) -> anyhow::Result<()> {
+/// Refuses a model (an RTN run folder or an exported file) trained on another hierarchy than
+/// the dataset's: the same joint count is not enough, the joints would be paired with the wrong
+/// bones.
+fn check_skeletons(
+    specs: &[String],
+    trained_on: &[Option<TrainedOn>],
+    train: &[dataset::NamedClip],
+) -> anyhow::Result<()> {
     let Some(first) = train.first() else { return Ok(()) };
     let parents = first.clip.skeleton.parents_i32();
-    for spec in methods {
-        if let crate::registry::MethodSpec::Model { kind, path, .. } = crate::registry::parse_method(spec.trim())?
-            && kind == "rtn"
+    let names = &first.clip.skeleton.names;
+    for (spec, trained) in specs.iter().zip(trained_on) {
+        let Some(t) = trained else { continue };
+        if t.parents != parents {
+            bail!(
+                "method `{spec}`: the model was trained on another skeleton ({} joints, parents {:?}) than the \
+                 dataset's ({} joints, parents {:?}, from {})",
+                t.parents.len(),
+                t.parents,
+                parents.len(),
+                parents,
+                first.path.display()
+            );
+        }
+        if let Some(model_names) = &t.names
+            && let Some(j) = (0..names.len()).find(|&j| model_names[j] != names[j])
         {
-            let (config, _) = zoo_rtn::checkpoint::read_meta(&path)
-                .with_context(|| format!("method `{spec}`: loading the RTN in {}", path.display()))?;
-            if !config.parents.is_empty() && config.parents != parents {
-                bail!(
-                    "method `{spec}`: the model was trained on another skeleton ({} joints, parents {:?}) than the \
-                     dataset's ({} joints, parents {:?}, from {})",
-                    config.joints,
-                    config.parents,
-                    parents.len(),
-                    parents,
-                    first.path.display()
-                );
-            }
+            bail!(
+                "method `{spec}`: the model was trained on another skeleton: its joint {j} is `{}`, the dataset's \
+                 is `{}` (from {})",
+                model_names[j],
+                names[j],
+                first.path.display()
+            );
         }
     }
     Ok(())

@@ -26,13 +26,13 @@ pub struct RuntimeArgs {
     #[arg(long)]
     pub model: PathBuf,
     /// Batch sizes to measure (characters per step).
-    #[arg(long, default_value = "1,64", value_delimiter = ',', allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
+    #[arg(long, default_value = "1,64", value_delimiter = ',', allow_hyphen_values = true, value_parser = crate::args::runtime_batch)]
     pub batch: Vec<usize>,
     /// Rounds per batch size (each backend runs once per round).
-    #[arg(long, default_value_t = 11, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
+    #[arg(long, default_value_t = 11, allow_hyphen_values = true, value_parser = crate::args::rounds)]
     pub rounds: usize,
     /// Character-steps per backend per round (steps = this / batch, at least 5).
-    #[arg(long, default_value_t = 1280, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
+    #[arg(long, default_value_t = 1280, allow_hyphen_values = true, value_parser = crate::args::character_steps)]
     pub work: usize,
     /// onnxruntime library (default: `ORT_DYLIB_PATH`, else `.onnxruntime/libonnxruntime.so*`
     /// in the current folder or one of its parents).

@@ -32,14 +32,14 @@ pub struct TrainBenchArgs {
     #[arg(long, value_enum, default_value = "rtn")]
     pub model: TrainBenchModel,
     /// Thread counts to measure, comma-separated (each `1..=256`).
-    #[arg(long, value_delimiter = ',', default_value = "1,2", value_parser = thread_count)]
+    #[arg(long, value_delimiter = ',', default_value = "1,2", allow_hyphen_values = true, value_parser = thread_count)]
     pub threads: Vec<usize>,
     /// Training steps per timed repeat.
-    #[arg(long, default_value_t = 10, value_parser = |v: &str| whole_in(v, 1, 100_000))]
+    #[arg(long, default_value_t = 10, allow_hyphen_values = true, value_parser = |v: &str| whole_in(v, 1, 100_000))]
     pub steps: usize,
     /// Timed repeats per thread count; the median is reported. The thread counts are measured
     /// in turn within each repeat, so that a change of machine load hits them alike.
-    #[arg(long, default_value_t = 5, value_parser = |v: &str| whole_in(v, 1, 1_000))]
+    #[arg(long, default_value_t = 5, allow_hyphen_values = true, value_parser = |v: &str| whole_in(v, 1, 1_000))]
     pub repeats: usize,
     /// Also run the PyTorch reference of the same shapes (`scripts/bench_train_torch.sh`,
     /// which installs the pinned PyTorch into `.venv-bench/` the first time) after zoo's runs.

@@ -47,19 +47,19 @@ pub struct SynthArgs {
     #[arg(long)]
     pub out: std::path::PathBuf,
     /// Minutes of motion to generate.
-    #[arg(long, default_value_t = 10.0, allow_hyphen_values = true, value_parser = crate::args::positive)]
+    #[arg(long, default_value_t = 10.0, allow_hyphen_values = true, value_parser = crate::args::synth_minutes)]
     pub minutes: f64,
     /// Random seed: the same seed writes the same files.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_hyphen_values = true, value_parser = crate::args::seed)]
     pub seed: u64,
     /// Uneven terrain (slopes, steps, bumps) with a heightmap per clip; flat floor otherwise.
     #[arg(long)]
     pub terrain: bool,
     /// Seconds per clip.
-    #[arg(long, default_value_t = 10.0, allow_hyphen_values = true, value_parser = crate::args::positive)]
+    #[arg(long, default_value_t = 10.0, allow_hyphen_values = true, value_parser = crate::args::clip_seconds)]
     pub clip_seconds: f64,
     /// Frames per second.
-    #[arg(long, default_value_t = 30.0, allow_hyphen_values = true, value_parser = crate::args::positive)]
+    #[arg(long, default_value_t = 30.0, allow_hyphen_values = true, value_parser = crate::args::fps)]
     pub fps: f64,
 }
 

@@ -14,16 +14,16 @@ pub struct LuxoArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// Number of hop sequences (the paper uses 300).
-    #[arg(long, default_value_t = 12)]
+    #[arg(long, default_value_t = 12, allow_hyphen_values = true, value_parser = crate::args::sequences)]
     pub sequences: usize,
     /// Random seed: the same seed writes the same files, whatever the number of threads.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_hyphen_values = true, value_parser = crate::args::seed)]
     pub seed: u64,
     /// Simulated annealing iterations per run (the paper's K_max).
-    #[arg(long, default_value_t = 1000)]
+    #[arg(long, default_value_t = 1000, allow_hyphen_values = true, value_parser = crate::args::anneal_iterations)]
     pub k_max: usize,
     /// Annealing runs tried per sequence before giving up.
-    #[arg(long, default_value_t = 20)]
+    #[arg(long, default_value_t = 20, allow_hyphen_values = true, value_parser = crate::args::attempts)]
     pub max_attempts: usize,
     /// Print the summary as JSON.
     #[arg(long)]

@@ -21,13 +21,13 @@ pub struct ExportArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// A BVH clip of the training skeleton: joint names, parents, rest offsets and fps are taken
-    /// from it (the run folder records only the parents; without it names are `joint0`, ...
-    /// and offsets zero).
+    /// from it (default: the run folder's skeleton.json, which `zoo train` writes; a folder
+    /// without one needs this option).
     #[arg(long, value_name = "FILE.bvh")]
     pub skeleton: Option<PathBuf>,
     /// Frames per second of the training data (default: the run folder's skeleton.json, else
     /// the skeleton clip's).
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::positive_f32)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::fps_f32)]
     pub fps: Option<f32>,
     /// Length unit of the training data: cm, m, mm or in (default: the run folder's
     /// skeleton.json, else cm, zoo's convention for BVH, which does not say its unit).

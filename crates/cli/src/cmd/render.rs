@@ -15,13 +15,13 @@ pub struct RenderArgs {
     #[arg(long, num_args = 1..)]
     pub compare: Vec<PathBuf>,
     /// First frame.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_hyphen_values = true, value_parser = crate::args::frame_index)]
     pub from: usize,
     /// One past the last frame (default: the end of the shortest clip).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::frame_end)]
     pub to: Option<usize>,
     /// Draw every k-th frame (GIF default: about 15 fps; PNG default: 2 per second).
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::frame_count)]
     pub every: Option<usize>,
     /// Print frame numbers.
     #[arg(long)]
@@ -32,7 +32,7 @@ pub struct RenderArgs {
     /// Draw the clips side by side, this far apart (clip units, e.g. 75 for cm) along the
     /// direction of travel, instead of over each other: the first clip in the middle (the camera
     /// follows it), the others alternately behind and ahead of it.
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::positive)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::spacing)]
     pub side_by_side: Option<f64>,
     /// Output file: `.gif` (animation) or `.png` (contact sheet).
     #[arg(long)]

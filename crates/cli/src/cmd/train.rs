@@ -63,10 +63,10 @@ pub struct RtnArgs {
     #[arg(long)]
     pub skip_invalid: bool,
     /// Epochs to train (an epoch visits every training window once).
-    #[arg(long, default_value_t = 10, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
+    #[arg(long, default_value_t = 10, allow_hyphen_values = true, value_parser = crate::args::epochs)]
     pub epochs: usize,
     /// Stop after this many minutes of training (the epoch in progress finishes first).
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::positive)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::time_limit_minutes)]
     pub time_limit: Option<f64>,
     /// Run folder: config, weights, statistics, loss curve and summary.
     #[arg(long, default_value = "runs/rtn")]
@@ -85,16 +85,16 @@ pub struct RtnArgs {
     #[arg(long, value_enum, default_value_t = RtnPreset::Paper)]
     pub preset: RtnPreset,
     /// Mini-batch size [default: the preset's; paper: 32].
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::batch_size)]
     pub batch_size: Option<usize>,
     /// AMSGrad learning rate [default: the preset's; paper: 5e-4].
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::positive)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::learning_rate)]
     pub lr: Option<f64>,
     /// Minutes of synthetic motion when `--data` is not given.
-    #[arg(long, default_value_t = 10.0, allow_hyphen_values = true, value_parser = crate::args::positive)]
+    #[arg(long, default_value_t = 10.0, allow_hyphen_values = true, value_parser = crate::args::synth_minutes)]
     pub synth_minutes: f64,
     /// Seed of the synthetic data and of the trainer.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_hyphen_values = true, value_parser = crate::args::seed)]
     pub seed: u64,
     /// Decay of a moving average of the weights kept beside the trained ones (not in the
     /// paper). Each epoch both are validated and the better one becomes the best checkpoint;

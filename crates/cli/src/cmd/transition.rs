@@ -14,10 +14,10 @@ pub struct TransitionArgs {
     #[arg(long)]
     pub model: PathBuf,
     /// Source clip and frame, `A.bvh:FRAME`: the transition starts after the 10 frames before FRAME.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::clip_frame)]
     pub from: String,
     /// Target clip and frame, `B.bvh:FRAME`: the transition ends in this pose.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::clip_frame)]
     pub to: String,
     /// Transition length in frames.
     #[arg(long, default_value_t = 30, allow_hyphen_values = true, value_parser = crate::args::frame_count)]
