@@ -3,6 +3,7 @@
 # (feature `load-dynamic`): downloads the onnxruntime 1.31.1 wheel from PyPI, extracts
 # libonnxruntime.so.1.31.1 into <workspace>/.onnxruntime/ (gitignored) and prints its path.
 # Then: export ORT_DYLIB_PATH=<printed path>   (the tests default to that path anyway).
+# Also installs the onnxruntime Python package and numpy into <workspace>/.onnxruntime/venv.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 VERSION=1.31.1
@@ -21,5 +22,12 @@ with zipfile.ZipFile(wheel) as z, z.open(f"onnxruntime/capi/libonnxruntime.so.{v
     shutil.copyfileobj(src, dst)
 PY
     rm -rf "$DIR/wheel"
+fi
+# The Python side of tests/protocol.rs (an independent implementation of
+# docs/runtime-protocol.md): the same onnxruntime as a Python package, with numpy, in a venv.
+VENV="$DIR/venv"
+if ! "$VENV/bin/python" -c 'import onnxruntime, numpy' 2>/dev/null; then
+    python3 -m venv "$VENV" >&2
+    "$VENV/bin/pip" install --quiet --disable-pip-version-check "onnxruntime==$VERSION" "numpy==2.4.6" >&2
 fi
 realpath "$LIB"

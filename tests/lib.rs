@@ -63,6 +63,12 @@ pub fn toy_clip(frames: usize, phase: f64) -> Clip {
 /// exported as `zoo export --onnx` would (its weights are candle's random initialization): the
 /// engine tests' model file.
 pub fn tiny_rtn_onnx() -> zoo_export::OnnxModel {
+    tiny_rtn_onnx_with_std(10.0)
+}
+
+/// [`tiny_rtn_onnx`] with every normalization standard deviation `std`: the step's random
+/// outputs become motion of about `std` cm per frame (1: a walk; 10: metres per second).
+pub fn tiny_rtn_onnx_with_std(std: f32) -> zoo_export::OnnxModel {
     use candle_core::{DType, Device};
     use candle_nn::{VarBuilder, VarMap};
     use zoo_rtn::features::{FeatureStats, MeanStd};
@@ -71,7 +77,7 @@ pub fn tiny_rtn_onnx() -> zoo_export::OnnxModel {
     let varmap = VarMap::new();
     zoo_rtn::Rtn::new(&config, VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu)).expect("tiny RTN");
     let d = config.dim();
-    let unit = || MeanStd { mean: vec![0.0; d], std: vec![10.0; d] };
+    let unit = || MeanStd { mean: vec![0.0; d], std: vec![std; d] };
     let stats = FeatureStats { joints: skeleton.len(), x: unit(), velocity: unit(), offset: unit(), terrain: None };
     let options = zoo_rtn::export::RtnExportOptions {
         names: Some(skeleton.names.clone()),
