@@ -8,7 +8,7 @@ pub mod data_luxo;
 pub mod decompress;
 pub mod export;
 pub mod render;
-//TMP pub mod stitch;
+pub mod stitch;
 pub mod train;
 pub mod train_rmr;
 pub mod transition;
