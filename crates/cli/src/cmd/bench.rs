@@ -67,6 +67,9 @@ pub enum BenchCommand {
     /// Per-frame step latency (batch 1) and throughput (batch 64) of an exported model through
     /// candle, tract and onnxruntime, side by side.
     Runtime(crate::cmd::bench_runtime::RuntimeArgs),
+    /// The stitching benchmark (RMR, issue 12): concatenation, inertialization, interpolation
+    /// and trained RMRs on section-4 cases with a ground truth and on free multi-clip cases.
+    Stitch(crate::cmd::bench_stitch::StitchBenchArgs),
 }
 
 fn method(spec: &str) -> anyhow::Result<Box<dyn TransitionMethod>> {
@@ -75,6 +78,9 @@ fn method(spec: &str) -> anyhow::Result<Box<dyn TransitionMethod>> {
 
 /// Runs the benchmark.
 pub fn run(a: BenchArgs) -> anyhow::Result<()> {
+    if let Some(BenchCommand::Stitch(s)) = a.command {
+        return crate::cmd::bench_stitch::run(s);
+    }
     if let Some(BenchCommand::Runtime(r)) = a.command {
         return crate::cmd::bench_runtime::run(r);
     }

@@ -2,7 +2,7 @@
 
 pub mod bench;
 pub mod bench_runtime;
-//TMP pub mod bench_stitch;
+pub mod bench_stitch;
 pub mod data;
 pub mod data_luxo;
 pub mod decompress;
