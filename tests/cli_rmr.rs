@@ -94,6 +94,14 @@ fn train_resume_and_stitch() {
     assert!(!ok);
     assert!(stderr.contains("already holds a run trained for 2 epochs") && stderr.contains("--resume"), "{stderr}");
 
+    // Export: the window refiner with its metadata.
+    let onnx = dir.path().join("rmr.onnx");
+    let (ok, stdout, stderr) = run(&["export", "--onnx", s(&run_dir), "--out", s(&onnx)]);
+    assert!(ok, "{stdout}\n{stderr}");
+    let exported = zoo_export::OnnxModel::from_bytes(&std::fs::read(&onnx).unwrap(), "rmr.onnx").unwrap();
+    assert_eq!(exported.metadata_value("zoo.model_kind"), Some("rmr"));
+    assert!(exported.metadata_value(zoo_rmr::export::CONFIG_KEY).is_some_and(|c| c.contains("\"bgru\"")));
+
     // Stitch three ranges of synthetic clips with every method.
     let (_, clips) = synth_clips(dir.path(), "1");
     let (a, b, c) = (s(&clips[0]), s(&clips[1]), s(&clips[2]));
