@@ -185,7 +185,12 @@ fn the_stitching_benchmark_measures_every_method() {
     let run_dir = train_tiny(dir.path(), "1");
     let (data, _) = synth_clips(dir.path(), "2");
     let json = dir.path().join("bench.json");
-    let methods = format!("concat,inertialize,interp,rmr:{0},rmr+lock:{0}", s(&run_dir));
+    // A tiny RTN in-betweens across the seams.
+    let rtn = dir.path().join("rtn");
+    let (ok, stdout, stderr) =
+        run(&["train", "rtn", "--preset", "tiny", "--synth-minutes", "1", "--epochs", "1", "--out", s(&rtn)]);
+    assert!(ok, "{stdout}\n{stderr}");
+    let methods = format!("concat,inertialize,interp,rmr:{0},rmr+lock:{0},rtn:{1}", s(&run_dir), s(&rtn));
     let (ok, stdout, stderr) = run(&[
         "bench",
         "stitch",
@@ -209,7 +214,7 @@ fn the_stitching_benchmark_measures_every_method() {
     assert!(cases >= 10, "{cases} cases");
     assert_eq!(r["free_cases"], 6);
     let rows = r["methods"].as_object().unwrap();
-    assert_eq!(rows.len(), 5);
+    assert_eq!(rows.len(), 6);
     for (name, row) in rows {
         assert_eq!(row["cases"].as_u64(), Some(cases), "{name}");
         for key in ["l2p", "l2q", "npss", "foot_sliding", "skate", "root_deviation", "pops_mean"] {
@@ -223,6 +228,6 @@ fn the_stitching_benchmark_measures_every_method() {
     assert!(r["ground_truth"]["l2p"].is_null());
     // Unknown and non-stitching methods are refused.
     let (ok, _, e) =
-        run(&["bench", "stitch", "--data", s(&data), "--valid-glob", "*_0010.bvh", "--methods", "rtn:runs/x"]);
-    assert!(!ok && e.contains("unknown method `rtn:runs/x`"), "{e}");
+        run(&["bench", "stitch", "--data", s(&data), "--valid-glob", "*_0010.bvh", "--methods", "gmm:runs/x"]);
+    assert!(!ok && e.contains("unknown method `gmm:runs/x`"), "{e}");
 }
