@@ -156,5 +156,5 @@ pub fn refine_clip(
     let x = encode_clip(aligned, &config.layout)?;
     let y = refine_sequence(model, stats, &x, opts)?;
     let start = ground_roots(aligned, &config.layout)[0];
-    Ok(decode(&y, &aligned.skeleton, &config.layout, aligned.frame_time, start)?)
+    decode(&y, &aligned.skeleton, &config.layout, aligned.frame_time, start)
 }
