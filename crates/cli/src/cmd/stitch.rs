@@ -47,7 +47,8 @@ pub struct StitchArgs {
     /// RMR window `w` in frames [default: the model's, 60].
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::frame_count)]
     pub window: Option<usize>,
-    /// RMR window step `s` in frames, at most the window [default: the model's, 30].
+    /// RMR window step `s` in frames, at most the window [default: the model's, 30; half the
+    /// window when `--window` is given].
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::frame_count)]
     pub stride: Option<usize>,
     /// Frames of the blend at each seam (inertialize, interp) or after each RMR window.
