@@ -591,7 +591,7 @@ fn run_folder_and_cli_export() {
     assert!(String::from_utf8_lossy(&err.stderr).contains("not a run folder"));
     // A run folder of a model `zoo export` does not know.
     let other = tempfile::tempdir().unwrap();
-    std::fs::write(other.path().join("config.json"), r#"{"model": "rmr"}"#).unwrap();
+    std::fs::write(other.path().join("config.json"), r#"{"model": "nope"}"#).unwrap();
     let err = std::process::Command::new(zoo_tests::zoo_bin())
         .args(["export", "--onnx"])
         .arg(other.path())
@@ -601,7 +601,7 @@ fn run_folder_and_cli_export() {
         .unwrap();
     assert!(!err.status.success());
     let stderr = String::from_utf8_lossy(&err.stderr);
-    assert!(stderr.contains("model `rmr`") && stderr.contains("exports: rtn"), "{stderr}");
+    assert!(stderr.contains("model `nope`") && stderr.contains("exports: rtn"), "{stderr}");
 }
 
 /// The engine-facing API (`zoo_runtime::TransitionRunner`) against candle's `Rtn::transition`:

@@ -98,7 +98,6 @@ pub fn make_pairs_cached(
     };
     let train_specs = plan(&train, &train_cfg, TRAIN_PLAN_FILE)?;
     let valid_specs = plan(&valid, &valid_cfg, VALID_PLAN_FILE)?;
-    drop(plan);
     let database_segments = dbs.as_ref().map_or(0, StitchDatabases::total_segments);
     let train_raw = encode_specs(&train_specs, &train, &train, &train_cfg)?;
     let valid_raw = encode_specs(&valid_specs, &valid, &train, &valid_cfg)?;

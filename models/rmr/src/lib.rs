@@ -26,6 +26,7 @@ pub mod data;
 pub mod error;
 pub mod export;
 pub mod features;
+pub mod footlock;
 pub mod loss;
 pub mod model;
 pub mod stitch;

@@ -6,7 +6,7 @@
 //! The blend is a linear decay of the offset in pose-vector space (RMR sec. 6 cites
 //! inertialization; the offset here is the small one the beginning loss leaves, and the
 //! pose vector is decoded afterwards, renormalising the quaternions). The foot lock by the
-//! predicted contacts is not applied yet.
+//! predicted contacts is a separate step ([`crate::footlock::lock_feet`]).
 
 use crate::config::Config;
 use crate::error::{RmrError, RmrResult};
@@ -138,10 +138,23 @@ pub fn stitch_clips(model: &Rmr, stats: &FeatureStats, clips: &[Clip], opts: Ref
         }
     }
     let aligned = align_clips(clips, &config.layout, MIN_CLIP_FRAMES)?;
-    let x = encode_clip(&aligned.clip, &config.layout)?;
-    let y = refine_sequence(model, stats, &x, opts)?;
-    let start = ground_roots(&aligned.clip, &config.layout)[0];
-    let first = &clips[0];
-    let (output, contacts) = decode(&y, &first.skeleton, &config.layout, first.frame_time, start)?;
+    let (output, contacts) = refine_clip(model, stats, &aligned.clip, opts)?;
     Ok(Stitched { input: aligned.clip, output, contacts, starts: aligned.starts })
+}
+
+/// Refines an already aligned sequence (e.g. a test case of the stitching benchmark): encodes
+/// it, refines it window by window and decodes it from its first ground root. Returns the
+/// refined clip and the predicted contacts per frame (heel L, toe L, heel R, toe R).
+pub fn refine_clip(
+    model: &Rmr,
+    stats: &FeatureStats,
+    aligned: &Clip,
+    opts: RefineOptions,
+) -> RmrResult<(Clip, Vec<[bool; 4]>)> {
+    let config = model.config();
+    config.check_skeleton(&aligned.skeleton)?;
+    let x = encode_clip(aligned, &config.layout)?;
+    let y = refine_sequence(model, stats, &x, opts)?;
+    let start = ground_roots(aligned, &config.layout)[0];
+    decode(&y, &aligned.skeleton, &config.layout, aligned.frame_time, start)
 }

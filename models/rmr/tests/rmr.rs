@@ -355,3 +355,50 @@ fn stitching_slides_windows_over_aligned_clips() {
     let err = stitch_clips(&model, &stats, &[parts[0].clone(), fast], opts).unwrap_err().to_string();
     assert!(err.contains("60 fps") && err.contains("trained at 30 fps"), "{err}");
 }
+
+#[test]
+fn the_foot_lock_pins_the_predicted_contacts() {
+    use zoo_rmr::footlock::lock_feet;
+    let clip = synth_clips(0.2, 3).remove(0).slice(0, 90);
+    let mut layout = StitchLayout::bandai2(&clip.skeleton).unwrap();
+    layout = layout.with_planted_heights([clip.global().1.as_slice()], clip.joints());
+    let j = clip.joints();
+    let contacts: Vec<[bool; 4]> = {
+        let (_, gp) = clip.global();
+        (0..clip.frames()).map(|f| layout.contacts_of(&gp[f * j..(f + 1) * j])).collect()
+    };
+    assert!(contacts.iter().filter(|c| c[0]).count() > 10, "the clip has heel contacts");
+    // Feet slide: the hips drift sideways by 0.6 cm per frame.
+    let mut sliding = clip.clone();
+    for f in 0..sliding.frames() {
+        sliding.local_positions[f * j].x += 0.6 * f as f64;
+    }
+    let slide = |c: &zoo_motion::Clip| {
+        let (_, gp) = c.global();
+        let (mut total, mut n) = (0.0, 0);
+        for f in 1..c.frames() {
+            for (k, &jt) in layout.contacts.iter().enumerate() {
+                if contacts[f][k] && contacts[f - 1][k] {
+                    let d = gp[f * j + jt] - gp[(f - 1) * j + jt];
+                    total += (d.x * d.x + d.z * d.z).sqrt();
+                    n += 1;
+                }
+            }
+        }
+        total / n as f64
+    };
+    let (truth, before) = (slide(&clip), slide(&sliding));
+    let mut locked = sliding.clone();
+    let moved = lock_feet(&mut locked, &contacts, &layout);
+    let after = slide(&locked);
+    assert!(moved > 0.0);
+    assert!(after < 0.5 * before && after < truth + 0.3, "sliding {truth:.3} (truth), {before:.3} -> {after:.3}");
+    // Bone lengths are kept (rotations only) and the hips are untouched.
+    assert_eq!(locked.local_positions, sliding.local_positions);
+    assert!(locked.local_rotations.iter().all(|q| (q.length() - 1.0).abs() < 1e-9));
+    // Without contacts nothing moves.
+    let mut free = sliding.clone();
+    let none = vec![[false; 4]; free.frames()];
+    assert_eq!(lock_feet(&mut free, &none, &layout), 0.0);
+    assert_eq!(free.local_rotations, sliding.local_rotations);
+}

@@ -71,6 +71,9 @@ pub enum BenchCommand {
     /// Training throughput per thread count (data-parallel), GFLOP/s and the fraction of a
     /// candle matmul, optionally beside the PyTorch reference of the same shapes.
     Train(crate::cmd::bench_train::TrainBenchArgs),
+    /// The stitching benchmark (RMR, issue 12): concatenation, inertialization, interpolation
+    /// and trained RMRs on section-4 cases with a ground truth and on free multi-clip cases.
+    Stitch(crate::cmd::bench_stitch::StitchBenchArgs),
 }
 
 /// The hierarchy a benchmarked model was trained on, checked against the dataset's.
@@ -106,6 +109,9 @@ fn method(spec: &str) -> anyhow::Result<(Box<dyn TransitionMethod>, Option<Train
 pub fn run(a: BenchArgs) -> anyhow::Result<()> {
     if let Some(BenchCommand::Train(t)) = a.command {
         return crate::cmd::bench_train::run(t);
+    }
+    if let Some(BenchCommand::Stitch(s)) = a.command {
+        return crate::cmd::bench_stitch::run(s);
     }
     if let Some(BenchCommand::Runtime(r)) = a.command {
         return crate::cmd::bench_runtime::run(r);

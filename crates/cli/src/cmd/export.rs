@@ -36,7 +36,7 @@ pub struct ExportArgs {
 }
 
 /// The model kinds `zoo export` writes.
-const EXPORT_KINDS: [&str; 1] = [zoo_rtn::export::MODEL_KIND];
+const EXPORT_KINDS: [&str; 2] = [zoo_rtn::export::MODEL_KIND, zoo_rmr::export::MODEL_KIND];
 
 /// The `"model"` field of a run folder's `config.json` (`None` when absent: an RTN folder).
 fn model_kind(config_path: &Path) -> anyhow::Result<Option<String>> {
@@ -77,6 +77,13 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
     }
     match model_kind(&config_path)?.as_deref() {
         None | Some(zoo_rtn::export::MODEL_KIND) => {}
+        Some(zoo_rmr::export::MODEL_KIND) => {
+            let model =
+                zoo_rmr::export::export_rmr_dir(&a.onnx).with_context(|| format!("exporting {}", a.onnx.display()))?;
+            model.write(&a.out)?;
+            println!("wrote {}: RMR window refiner with its configuration and statistics", a.out.display());
+            return Ok(());
+        }
         Some(other) => bail!(
             "{}: `zoo export` does not know model `{other}` (config.json \"model\"); it exports: {}",
             a.onnx.display(),

@@ -3,12 +3,15 @@
 pub mod bench;
 pub mod bench_runtime;
 pub mod bench_train;
+pub mod bench_stitch;
 pub mod data;
 pub mod data_luxo;
 pub mod decompress;
 pub mod export;
 pub mod render;
+pub mod stitch;
 pub mod train;
+pub mod train_rmr;
 pub mod transition;
 
 use anyhow::{Context, bail};

@@ -16,6 +16,8 @@ use zoo_rtn::prelude::*;
 pub enum TrainCommand {
     /// The Recurrent Transition Network (Harvey & Pal 2018).
     Rtn(RtnArgs),
+    /// The Recurrent Motion Refiner for locomotion stitching (Kim et al. 2023).
+    Rmr(crate::cmd::train_rmr::RmrArgs),
 }
 
 /// Which RTN to train: the paper's model or one of its Table 4 ablations.
@@ -127,6 +129,7 @@ pub fn default_threads(threads: Option<usize>) -> usize {
 pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
     match cmd {
         TrainCommand::Rtn(a) => train_rtn(a),
+        TrainCommand::Rmr(a) => crate::cmd::train_rmr::run(a),
     }
 }
 

@@ -8,6 +8,8 @@
 //! - [`knn`]: exact k-th nearest neighbour search over a database (brute force with early
 //!   termination, ties broken by index);
 //! - [`align`]: the runtime's alignment of whole clips end to start (sec. 6);
+//! - [`baselines`]: inertialization and interpolation at the seams of an aligned sequence;
+//! - [`eval`]: the stitching benchmark's measures (pose error, foot sliding, skate, pops);
 //! - [`cache`]: planned pairs saved as JSON and reused for the same clips and configuration;
 //! - [`pairs`]: ground-truth windows, random segment lengths, retrieval of B and C, alignment,
 //!   and the input clip `X` beside the ground truth `Y`.
@@ -17,7 +19,9 @@
 //! turns one spec into its two clips in microseconds.
 
 pub mod align;
+pub mod baselines;
 pub mod cache;
+pub mod eval;
 pub mod knn;
 pub mod layout;
 pub mod pairs;

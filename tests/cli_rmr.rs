@@ -1,0 +1,233 @@
+//! End-to-end tests of `zoo train rmr`, `zoo stitch` and `zoo bench stitch` on the embedded
+//! synthetic data (a tiny RMR trained for one or two short epochs), and their bad-input errors.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use zoo_tests::zoo_bin;
+
+fn run(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(zoo_bin()).args(args).env("RAYON_NUM_THREADS", "1").output().unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// A tiny RMR trained on 1.5 minutes of synthetic motion into `dir/run`.
+fn train_tiny(dir: &Path, epochs: &str) -> PathBuf {
+    let run_dir = dir.join("run");
+    let (ok, stdout, stderr) = run(&[
+        "train",
+        "rmr",
+        "--preset",
+        "tiny",
+        "--synth-minutes",
+        "1.5",
+        "--epochs",
+        epochs,
+        "--seed",
+        "3",
+        "--out",
+        s(&run_dir),
+    ]);
+    assert!(ok, "{stdout}\n{stderr}");
+    run_dir
+}
+
+/// Synthetic BVH clips in `dir/synth`, sorted by name.
+fn synth_clips(dir: &Path, minutes: &str) -> (PathBuf, Vec<PathBuf>) {
+    let data = dir.join("synth");
+    let (ok, _, stderr) = run(&["data", "synth", "--out", s(&data), "--minutes", minutes, "--seed", "7"]);
+    assert!(ok, "{stderr}");
+    let mut clips: Vec<PathBuf> = std::fs::read_dir(&data)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "bvh"))
+        .collect();
+    clips.sort();
+    (data, clips)
+}
+
+fn read(p: &Path) -> zoo_motion::Clip {
+    zoo_data::bvh::read_model_clip(p).unwrap()
+}
+
+#[test]
+fn train_resume_and_stitch() {
+    let dir = tempfile::tempdir().unwrap();
+    let run_dir = train_tiny(dir.path(), "1");
+    for f in ["config.json", "model.safetensors", "normalization.json", "train_state.json", "pairs_train.json"] {
+        assert!(run_dir.join(f).is_file(), "{f} missing in the run folder");
+    }
+    let config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run_dir.join("config.json")).unwrap()).unwrap();
+    assert_eq!(config["model"], "rmr");
+    // Resume: the cached pair plans are reused and only epoch 2 runs.
+    let (ok, stdout, stderr) = run(&[
+        "train",
+        "rmr",
+        "--preset",
+        "tiny",
+        "--synth-minutes",
+        "1.5",
+        "--epochs",
+        "2",
+        "--seed",
+        "3",
+        "--resume",
+        s(&run_dir),
+    ]);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("pair plans reused"), "{stdout}");
+    assert!(stdout.contains("epoch   2:") && !stdout.contains("epoch   1:"), "{stdout}");
+    let state: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run_dir.join("train_state.json")).unwrap()).unwrap();
+    assert_eq!(state["epoch"], 2);
+    // A fresh run on the folder is refused.
+    let (ok, _, stderr) =
+        run(&["train", "rmr", "--preset", "tiny", "--synth-minutes", "1.5", "--epochs", "1", "--out", s(&run_dir)]);
+    assert!(!ok);
+    assert!(stderr.contains("already holds a run trained for 2 epochs") && stderr.contains("--resume"), "{stderr}");
+
+    // Export: the window refiner with its metadata.
+    let onnx = dir.path().join("rmr.onnx");
+    let (ok, stdout, stderr) = run(&["export", "--onnx", s(&run_dir), "--out", s(&onnx)]);
+    assert!(ok, "{stdout}\n{stderr}");
+    let exported = zoo_export::OnnxModel::from_bytes(&std::fs::read(&onnx).unwrap(), "rmr.onnx").unwrap();
+    assert_eq!(exported.metadata_value("zoo.model_kind"), Some("rmr"));
+    assert!(exported.metadata_value(zoo_rmr::export::CONFIG_KEY).is_some_and(|c| c.contains("\"bgru\"")));
+
+    // Stitch three ranges of synthetic clips with every method.
+    let (_, clips) = synth_clips(dir.path(), "1");
+    let (a, b, c) = (s(&clips[0]), s(&clips[1]), s(&clips[2]));
+    let (la, lc) = (read(&clips[0]), read(&clips[2]));
+    let out = dir.path().join("stitched.bvh");
+    let ranges = [format!("{a}:0:50"), format!("{b}:20:90"), format!("{c}:100:")];
+    let (ok, stdout, stderr) =
+        run(&["stitch", "--model", s(&run_dir), &ranges[0], &ranges[1], &ranges[2], "--out", s(&out), "--save-input"]);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("seams at [50, 120]") && stdout.contains("feet locked"), "{stdout}");
+    let frames = 50 + 70 + lc.frames() - 100;
+    let (stitched, input) = (read(&out), read(&dir.path().join("stitched.input.bvh")));
+    assert_eq!((stitched.frames(), input.frames()), (frames, frames));
+    assert!(stitched.local_rotations.iter().all(|q| q.is_finite()));
+    // The input is the aligned concatenation: the first clip unchanged.
+    for f in [0, 25, 49] {
+        assert!((input.root_position(f) - la.root_position(f)).length() < 1e-3, "frame {f}");
+    }
+    for method in ["inertialize", "interp", "concat"] {
+        let o = dir.path().join(format!("{method}.bvh"));
+        let (ok, stdout, stderr) = run(&["stitch", &ranges[0], &ranges[1], "--method", method, "--out", s(&o)]);
+        assert!(ok, "{method}: {stdout}\n{stderr}");
+        let clip = read(&o);
+        assert_eq!(clip.frames(), 120, "{method}");
+        // Before the seam region every method plays the first clip as it is.
+        assert!((clip.root_position(30) - la.root_position(30)).length() < 1e-3, "{method}");
+    }
+}
+
+#[test]
+fn stitch_refuses_bad_input_with_a_message() {
+    let dir = tempfile::tempdir().unwrap();
+    let run_dir = train_tiny(dir.path(), "1");
+    let (_, clips) = synth_clips(dir.path(), "0.5");
+    let (a, b) = (s(&clips[0]), s(&clips[1]));
+    let out = dir.path().join("o.bvh");
+    let stitch = |extra: &[&str]| {
+        let mut args = vec!["stitch", "--model", s(&run_dir), "--out", s(&out)];
+        args.extend_from_slice(extra);
+        let (ok, stdout, stderr) = run(&args);
+        assert!(!ok, "expected a refusal of {extra:?}: {stdout}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+        stderr
+    };
+    let e = stitch(&[&format!("{a}:0:8"), b]);
+    assert!(e.contains("has 8 frames; stitching needs at least 10 frames per clip"), "{e}");
+    let e = stitch(&[&format!("{a}:0:20"), &format!("{b}:0:20"), "--window", "60"]);
+    assert!(e.contains("the window of 60 frames is longer than the stitched sequence (40 frames)"), "{e}");
+    let e = stitch(&[&format!("{a}:0:99999"), b]);
+    assert!(e.contains("is outside the clip's"), "{e}");
+    // Another skeleton, another frame rate.
+    let mut other = read(&clips[1]);
+    other.skeleton.names[15] = "LeftFoot".into();
+    let other_path = dir.path().join("other.bvh");
+    zoo_data::bvh::write_file(&other, &other_path).unwrap();
+    let e = stitch(&[a, s(&other_path)]);
+    assert!(e.contains("another skeleton") && e.contains("LeftFoot"), "{e}");
+    let mut fast = read(&clips[1]);
+    fast.frame_time = 1.0 / 60.0;
+    let fast_path = dir.path().join("fast.bvh");
+    zoo_data::bvh::write_file(&fast, &fast_path).unwrap();
+    let e = stitch(&[a, s(&fast_path)]);
+    assert!(e.contains("fps") && e.contains("resample"), "{e}");
+    // A run folder of another model.
+    let rtn = dir.path().join("rtn");
+    std::fs::create_dir_all(&rtn).unwrap();
+    std::fs::write(rtn.join("config.json"), r#"{"model": "rtn"}"#).unwrap();
+    let (ok, _, e) = run(&["stitch", "--model", s(&rtn), a, b, "--out", s(&out)]);
+    assert!(!ok && e.contains("holds a `rtn` model") && e.contains("zoo train rmr"), "{e}");
+    // --method rmr without a model; a single clip.
+    let (ok, _, e) = run(&["stitch", a, b, "--out", s(&out)]);
+    assert!(!ok && e.contains("--method rmr needs --model"), "{e}");
+    let (ok, _, e) = run(&["stitch", a, "--out", s(&out)]);
+    assert!(!ok && e.contains("CLIP.bvh"), "{e}");
+    assert!(!out.exists(), "no output after a refusal");
+}
+
+#[test]
+fn the_stitching_benchmark_measures_every_method() {
+    let dir = tempfile::tempdir().unwrap();
+    let run_dir = train_tiny(dir.path(), "1");
+    let (data, _) = synth_clips(dir.path(), "2");
+    let json = dir.path().join("bench.json");
+    // A tiny RTN in-betweens across the seams.
+    let rtn = dir.path().join("rtn");
+    let (ok, stdout, stderr) =
+        run(&["train", "rtn", "--preset", "tiny", "--synth-minutes", "1", "--epochs", "1", "--out", s(&rtn)]);
+    assert!(ok, "{stdout}\n{stderr}");
+    let methods = format!("concat,inertialize,interp,rmr:{0},rmr+lock:{0},rtn:{1}", s(&run_dir), s(&rtn));
+    let (ok, stdout, stderr) = run(&[
+        "bench",
+        "stitch",
+        "--data",
+        s(&data),
+        "--valid-glob",
+        "*_001[0-2].bvh",
+        "--methods",
+        &methods,
+        "--free-cases",
+        "3",
+        "--database-stride",
+        "2",
+        "--json",
+        s(&json),
+    ]);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("cases with ground truth") && stdout.contains("free cases"), "{stdout}");
+    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let cases = r["cases"].as_u64().unwrap();
+    assert!(cases >= 10, "{cases} cases");
+    assert_eq!(r["free_cases"], 6);
+    let rows = r["methods"].as_object().unwrap();
+    assert_eq!(rows.len(), 6);
+    for (name, row) in rows {
+        assert_eq!(row["cases"].as_u64(), Some(cases), "{name}");
+        for key in ["l2p", "l2q", "npss", "foot_sliding", "skate", "root_deviation", "pops_mean"] {
+            let v = row[key].as_f64().unwrap_or(f64::NAN);
+            assert!(v.is_finite() && v >= 0.0, "{name} {key} = {v}");
+        }
+    }
+    // Concatenation keeps the input's root path and has a pose error (the retrieved segments).
+    assert_eq!(rows["concat"]["root_deviation"].as_f64(), Some(0.0));
+    assert!(rows["concat"]["l2p"].as_f64().unwrap() > 0.0);
+    assert!(r["ground_truth"]["l2p"].is_null());
+    // Unknown and non-stitching methods are refused.
+    let (ok, _, e) =
+        run(&["bench", "stitch", "--data", s(&data), "--valid-glob", "*_0010.bvh", "--methods", "gmm:runs/x"]);
+    assert!(!ok && e.contains("unknown method `gmm:runs/x`"), "{e}");
+}
