@@ -173,6 +173,13 @@ pub fn run(a: TrainBenchArgs) -> anyhow::Result<()> {
         a.repeats,
         a.steps
     );
+    let env = |k: &str| std::env::var(k).unwrap_or_else(|_| "unset".into());
+    println!(
+        "environment: CANDLE_NUM_THREADS={} MIMALLOC_PURGE_DELAY={} RAYON_NUM_THREADS={}",
+        env("CANDLE_NUM_THREADS"),
+        env("MIMALLOC_PURGE_DELAY"),
+        env("RAYON_NUM_THREADS")
+    );
     let bar = indicatif::ProgressBar::new((a.repeats * a.threads.len()) as u64);
     bar.set_style(indicatif::ProgressStyle::with_template("bench train: [{bar:30}] {pos}/{len} timed runs {elapsed}")?);
     let mut rates = vec![Vec::new(); a.threads.len()];
