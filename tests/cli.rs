@@ -152,20 +152,26 @@ fn transition_refuses_an_unknown_model_kind_and_lists_the_known_ones() {
     toy_dataset(dir.path());
     let run = dir.path().join("run");
     std::fs::create_dir(&run).unwrap();
-    std::fs::write(run.join("config.json"), r#"{"model": "rmr"}"#).unwrap();
     let clip = dir.path().join("toy_walk_normal_000.bvh");
-    let err = failure(
-        Command::new(zoo_bin())
-            .args(["transition", "--model"])
-            .arg(&run)
-            .arg("--from")
-            .arg(format!("{}:20", clip.display()))
-            .arg("--to")
-            .arg(format!("{}:60", clip.display()))
-            .arg("--out")
-            .arg(dir.path().join("out.bvh")),
-    );
-    assert!(err.contains("unknown model kind `rmr`: this zoo knows rtn"), "{err}");
+    let transition = |kind: &str| {
+        std::fs::write(run.join("config.json"), format!(r#"{{"model": "{kind}"}}"#)).unwrap();
+        failure(
+            Command::new(zoo_bin())
+                .args(["transition", "--model"])
+                .arg(&run)
+                .arg("--from")
+                .arg(format!("{}:20", clip.display()))
+                .arg("--to")
+                .arg(format!("{}:60", clip.display()))
+                .arg("--out")
+                .arg(dir.path().join("out.bvh")),
+        )
+    };
+    let err = transition("nope");
+    assert!(err.contains("unknown model kind `nope`: this zoo knows rtn, rmr"), "{err}");
+    // A kind zoo knows, for another task: said what it is for.
+    let err = transition("rmr");
+    assert!(err.contains("holds a `rmr` model, which is for stitching"), "{err}");
 }
 
 #[test]
