@@ -27,6 +27,9 @@ fn every_numeric_option_of_every_subcommand_refuses_bad_values_with_its_range() 
     let br = ["bench", "runtime", "--model", "m.onnx"];
     let rtn = ["train", "rtn"];
     let bt = ["bench", "train"];
+    let rmr = ["train", "rmr"];
+    let st = ["stitch", "--method", "concat", "a.bvh", "b.bvh", "--out", "o.bvh"];
+    let bs = ["bench", "stitch", "--data", "d", "--valid-glob", "*x*"];
     let sy = ["data", "synth", "--out", "d"];
     let lx = ["data", "luxo", "--out", "d"];
     let with = |base: &[&'static str], more: [&'static str; 2]| [base, &more[..]].concat();
@@ -101,6 +104,30 @@ fn every_numeric_option_of_every_subcommand_refuses_bad_values_with_its_range() 
         (with(&rtn, ["--ema", "1"]), "--ema <EMA>", "not a decay in [0, 1)"),
         (with(&rtn, ["--ema", "-0.5"]), "--ema <EMA>", "not a decay in [0, 1)"),
         (with(&rtn, ["--ema", "NaN"]), "--ema <EMA>", "not a finite number (valid range [0, 1))"),
+        (with(&rmr, ["--epochs", "0"]), "--epochs <EPOCHS>", "0 epochs is outside the valid range 1..=100000"),
+        (
+            with(&rmr, ["--time-limit", "0"]),
+            "--time-limit <TIME_LIMIT>",
+            "not a positive number (valid range (0, 43200])",
+        ),
+        (with(&rmr, ["--t-begin", "100001"]), "--t-begin <T_BEGIN>", "outside the valid range 0..=100000"),
+        (with(&rmr, ["--hidden", "0"]), "--hidden <HIDDEN>", "0 units is outside the valid range 1..=65536"),
+        (with(&rmr, ["--batch-size", "65537"]), "--batch-size <BATCH_SIZE>", "valid range 1..=65536"),
+        (with(&rmr, ["--lr", "-1"]), "--lr <LR>", "not a positive number (valid range (0, 1000000000])"),
+        (with(&rmr, ["--database-stride", "0"]), "--database-stride <DATABASE_STRIDE>", frames),
+        (with(&rmr, ["--synth-minutes", "0"]), "--synth-minutes <SYNTH_MINUTES>", "not a positive number"),
+        (with(&rmr, ["--seed", "-1"]), "--seed <SEED>", "not a seed: a whole number in 0..=18446744073709551615"),
+        (with(&st, ["--window", "0"]), "--window <WINDOW>", frames),
+        (with(&st, ["--stride", "100001"]), "--stride <STRIDE>", frames),
+        (with(&st, ["--blend-frames", "-2"]), "--blend-frames <BLEND_FRAMES>", frames),
+        (with(&bs, ["--blend-frames", "0"]), "--blend-frames <BLEND_FRAMES>", frames),
+        (
+            with(&bs, ["--free-cases", "100001"]),
+            "--free-cases <FREE_CASES>",
+            "cases is outside the valid range 0..=100000",
+        ),
+        (with(&bs, ["--seed", "x"]), "--seed <SEED>", "not a seed"),
+        (with(&bs, ["--database-stride", "0"]), "--database-stride <DATABASE_STRIDE>", frames),
         (with(&rtn, ["--threads", "0"]), "--threads <THREADS>", "not a thread count: valid range 1..=256"),
         (with(&rtn, ["--threads", "257"]), "--threads <THREADS>", "not a thread count: valid range 1..=256"),
         (with(&bt, ["--threads", "0"]), "--threads <THREADS>", "outside the valid range 1..=256"),

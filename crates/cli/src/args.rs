@@ -242,6 +242,27 @@ pub fn batch_size(s: &str) -> Result<usize, String> {
     whole_in(s, 1..=MAX_BATCH_SIZE, "")
 }
 
+/// The most units a layer of a model may have (`--hidden`).
+pub const MAX_LAYER_WIDTH: usize = 65_536;
+
+/// The most test cases a benchmark may be asked to make.
+pub const MAX_CASES: usize = 100_000;
+
+/// A layer width (units of a recurrent or dense layer), `1..=MAX_LAYER_WIDTH`.
+pub fn layer_width(s: &str) -> Result<usize, String> {
+    whole_in(s, 1..=MAX_LAYER_WIDTH, "units")
+}
+
+/// A frame count that may be zero (`0` turns the feature off), `0..=MAX_FRAMES`.
+pub fn frames_or_zero(s: &str) -> Result<usize, String> {
+    whole_in(s, 0..=MAX_FRAMES, "frames")
+}
+
+/// A number of benchmark cases, `0..=MAX_CASES`.
+pub fn case_count(s: &str) -> Result<usize, String> {
+    whole_in(s, 0..=MAX_CASES, "cases")
+}
+
 /// A learning rate in `(0, MAX_LEARNING_RATE]`.
 pub fn learning_rate(s: &str) -> Result<f64, String> {
     real_in(s, Interval::above(0.0, MAX_LEARNING_RATE), "")

@@ -54,13 +54,13 @@ pub struct StitchBenchArgs {
     #[arg(long, default_value_t = 10, allow_hyphen_values = true, value_parser = crate::args::frame_count)]
     pub blend_frames: usize,
     /// Free cases of each kind (two clips, three clips).
-    #[arg(long, default_value_t = 50)]
+    #[arg(long, default_value_t = 50, allow_hyphen_values = true, value_parser = crate::args::case_count)]
     pub free_cases: usize,
     /// Seed of the test cases (segment lengths, neighbour ranks, free cuts).
-    #[arg(long, default_value_t = 12)]
+    #[arg(long, default_value_t = 12, allow_hyphen_values = true, value_parser = crate::args::seed)]
     pub seed: u64,
     /// Database segments start every this many frames (1: every segment, exact search).
-    #[arg(long, default_value_t = 1, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
+    #[arg(long, default_value_t = 1, allow_hyphen_values = true, value_parser = crate::args::frame_count)]
     pub database_stride: usize,
     /// Write the results as JSON to this file.
     #[arg(long)]

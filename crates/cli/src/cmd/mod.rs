@@ -2,8 +2,8 @@
 
 pub mod bench;
 pub mod bench_runtime;
-pub mod bench_train;
 pub mod bench_stitch;
+pub mod bench_train;
 pub mod data;
 pub mod data_luxo;
 pub mod decompress;

@@ -62,10 +62,10 @@ pub struct RmrArgs {
     #[arg(long)]
     pub skip_invalid: bool,
     /// Epochs to train (an epoch visits every training pair once).
-    #[arg(long, default_value_t = 10, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
+    #[arg(long, default_value_t = 10, allow_hyphen_values = true, value_parser = crate::args::epochs)]
     pub epochs: usize,
     /// Stop after this many minutes of training (the epoch in progress finishes first).
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::positive)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::time_limit_minutes)]
     pub time_limit: Option<f64>,
     /// Run folder: config, weights, statistics, cached pair plans, loss curve and summary.
     #[arg(long, default_value = "runs/rmr")]
@@ -85,29 +85,29 @@ pub struct RmrArgs {
     #[arg(long, value_enum)]
     pub cell: Option<CellArg>,
     /// Frames of the beginning loss, `T_begin` (Table 2: 3, 5, 10; 0 turns it off) [default: 5].
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::frames_or_zero)]
     pub t_begin: Option<usize>,
     /// Train without the root trajectory loss (the Figure 9 ablation).
     #[arg(long)]
     pub no_trajectory_loss: bool,
     /// Units of each recurrent layer, per direction [default: the preset's; paper: 256].
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::layer_width)]
     pub hidden: Option<usize>,
     /// Mini-batch size [default: the preset's; paper: 32].
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::batch_size)]
     pub batch_size: Option<usize>,
     /// Adam learning rate [default: the preset's; paper: 1e-4].
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::positive)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::learning_rate)]
     pub lr: Option<f64>,
     /// Database segments start every this many frames (1: every frame, the exact search over
     /// every segment; 2 halves the databases and the planning time) [default: the preset's].
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::frame_count)]
     pub database_stride: Option<usize>,
     /// Minutes of synthetic motion when `--data` is not given.
-    #[arg(long, default_value_t = 10.0, allow_hyphen_values = true, value_parser = crate::args::positive)]
+    #[arg(long, default_value_t = 10.0, allow_hyphen_values = true, value_parser = crate::args::synth_minutes)]
     pub synth_minutes: f64,
     /// Seed of the synthetic data, of the weights, the dropout and the shuffles.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_hyphen_values = true, value_parser = crate::args::seed)]
     pub seed: u64,
 }
 
