@@ -48,6 +48,37 @@ fn bench_prints_table_and_writes_json() {
     assert!(v["methods"]["interp"]["l2p@30"].as_f64() < v["methods"]["zerovel"]["l2p@30"].as_f64());
 }
 
+/// `--exclude-glob` (the out-of-distribution protocol, docs/ood.md): the excluded clips are
+/// neither test nor statistics, and excluding everything is refused.
+#[test]
+fn bench_exclude_glob_leaves_clips_out_before_the_split() {
+    let dir = tempfile::tempdir().unwrap();
+    toy_dataset(dir.path());
+    let json = dir.path().join("out.json");
+    let bench = |extra: &[&str]| {
+        Command::new(zoo_bin())
+            .args(["bench", "--data"])
+            .arg(dir.path())
+            .args(["--valid-glob", "*_youthful_*", "--lengths", "5", "--json"])
+            .arg(&json)
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let out = bench(&["--exclude-glob", "*_active_*"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("--exclude-glob *_active_*: left out 1 of 4 clips"), "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(v["windows"], 3);
+    // Excluding the test clips leaves no test split.
+    let out = bench(&["--exclude-glob", "*_youthful_*"]);
+    assert!(!out.status.success());
+    let out = bench(&["--exclude-glob", "toy_*"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("every one of the 4 clips matches; nothing is left"), "{stderr}");
+}
+
 #[test]
 fn bench_rejects_a_glob_matching_nothing() {
     let dir = tempfile::tempdir().unwrap();

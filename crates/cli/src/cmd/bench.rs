@@ -60,6 +60,10 @@ pub struct BenchArgs {
     /// frame rate) and list them, instead of refusing the dataset.
     #[arg(long)]
     pub skip_invalid: bool,
+    /// Leave out of `--data` every clip whose file name matches this glob, before the split
+    /// (e.g. a content type, for the out-of-distribution protocol of docs/ood.md).
+    #[arg(long)]
+    pub exclude_glob: Option<String>,
 }
 
 /// Benchmarks other than the in-betweening table.
@@ -133,6 +137,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
     pb.enable_steady_tick(Duration::from_millis(120));
     pb.set_message(format!("loading {}", data.display()));
     let clips = crate::cmd::load_dataset(&data, None, a.skip_invalid)?;
+    let clips = crate::cmd::exclude_clips(clips, a.exclude_glob.as_deref())?;
     let (train, test) = match (&a.test_data, &a.valid_glob) {
         (Some(test_path), glob) => {
             let train = match glob {

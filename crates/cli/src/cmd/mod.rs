@@ -75,3 +75,20 @@ pub fn load_dataset(
     }
     Ok(d.clips)
 }
+
+/// Leaves out the clips whose file name matches `exclude` (`--exclude-glob`: e.g. a content
+/// type held out of training for the out-of-distribution protocol, docs/ood.md); says how many.
+pub fn exclude_clips(
+    clips: Vec<zoo_data::dataset::NamedClip>,
+    exclude: Option<&str>,
+) -> anyhow::Result<Vec<zoo_data::dataset::NamedClip>> {
+    let Some(pattern) = exclude else { return Ok(clips) };
+    let m = zoo_data::dataset::glob(pattern)?;
+    let before = clips.len();
+    let kept: Vec<_> = clips.into_iter().filter(|c| !m.is_match(&c.name)).collect();
+    if kept.is_empty() {
+        bail!("--exclude-glob {pattern}: every one of the {before} clips matches; nothing is left");
+    }
+    eprintln!("--exclude-glob {pattern}: left out {} of {before} clips", before - kept.len());
+    Ok(kept)
+}

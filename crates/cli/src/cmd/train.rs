@@ -60,6 +60,10 @@ pub struct RtnArgs {
     /// Glob on file names selecting the validation split of `--data` (best checkpoint).
     #[arg(long)]
     pub valid_glob: Option<String>,
+    /// Leave out of `--data` every clip whose file name matches this glob (e.g. a content type
+    /// held out for the out-of-distribution protocol of docs/ood.md).
+    #[arg(long)]
+    pub exclude_glob: Option<String>,
     /// Leave out the clips of `--data` that cannot join the dataset (unreadable, another
     /// skeleton or frame rate) and list them, instead of refusing the dataset.
     #[arg(long)]
@@ -142,6 +146,18 @@ pub fn load_clips(
     seed: u64,
     skip_invalid: bool,
 ) -> anyhow::Result<(Vec<NamedClip>, Vec<NamedClip>, String)> {
+    load_clips_excluding(data, valid_glob, None, minutes, seed, skip_invalid)
+}
+
+/// [`load_clips`] leaving out the clips of `--data` that match `exclude` (`--exclude-glob`).
+pub fn load_clips_excluding(
+    data: &Option<PathBuf>,
+    valid_glob: &Option<String>,
+    exclude: Option<&str>,
+    minutes: f64,
+    seed: u64,
+    skip_invalid: bool,
+) -> anyhow::Result<(Vec<NamedClip>, Vec<NamedClip>, String)> {
     match data {
         Some(path) => {
             let Some(glob) = valid_glob else {
@@ -149,8 +165,10 @@ pub fn load_clips(
             };
             dataset::glob(glob)?;
             let clips = crate::cmd::load_dataset(path, None, skip_invalid)?;
+            let clips = crate::cmd::exclude_clips(clips, exclude)?;
             let (train, valid) = dataset::split(clips, glob)?;
-            Ok((train, valid, format!("{} (validation: {glob})", path.display())))
+            let without = exclude.map_or(String::new(), |e| format!(", without {e}"));
+            Ok((train, valid, format!("{} (validation: {glob}{without})", path.display())))
         }
         None => {
             let cfg = SynthConfig { minutes, seed, terrain: false, ..SynthConfig::default() };
@@ -287,7 +305,17 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
             .map_err(anyhow::Error::msg)?;
     }
     let out = prepare_run_folder(&a)?;
-    let (train, valid, source) = load_clips(&a.data, &a.valid_glob, a.synth_minutes, a.seed, a.skip_invalid)?;
+    if a.exclude_glob.is_some() && a.data.is_none() {
+        bail!("--exclude-glob leaves clips of --data out: pass --data too");
+    }
+    let (train, valid, source) = load_clips_excluding(
+        &a.data,
+        &a.valid_glob,
+        a.exclude_glob.as_deref(),
+        a.synth_minutes,
+        a.seed,
+        a.skip_invalid,
+    )?;
     let tw = dataset::windows(&train, &WindowOptions::TRAIN);
     let vw = dataset::windows(&valid, &WindowOptions::TRAIN);
     if tw.count == 0 || vw.count == 0 {
