@@ -39,6 +39,10 @@ enum Command {
     Export(cmd::export::ExportArgs),
     /// Draw clips as stick figures: an animated GIF or a PNG contact sheet.
     Render(cmd::render::RenderArgs),
+    /// Random motion synthesis of any length with a trained RNN-GMM (BVH + contact labels).
+    Generate(cmd::generate::GenerateArgs),
+    /// The synthesis benchmark: seeded RNN-GMM sequences against held-out real motion.
+    BenchSynthesis(cmd::bench_synthesis::BenchSynthesisArgs),
 }
 
 /// Whether a panic is `println!` failing on a closed pipe (`zoo data stats ... | head`).
@@ -67,5 +71,7 @@ fn main() -> anyhow::Result<()> {
         Command::Decompress(a) => cmd::decompress::run(a),
         Command::Export(a) => cmd::export::run(a),
         Command::Render(a) => cmd::render::run(a),
+        Command::Generate(a) => cmd::generate::run(a),
+        Command::BenchSynthesis(a) => cmd::bench_synthesis::run(a),
     }
 }

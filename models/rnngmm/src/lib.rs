@@ -48,7 +48,7 @@ pub use gmm::Mixture;
 pub use initial_state::{InitialState, estimate_initial_state};
 pub use model::Generator;
 pub use refiner::{AdversarialTrainer, AdversarialTraining, EffectorNorm, RefinerNets};
-pub use synthesis::{Synthesis, SynthesisOptions, synthesize};
+pub use synthesis::{Synthesis, SynthesisChunk, SynthesisOptions, SynthesisStream, synthesize};
 pub use train::{GeneratorTrainer, GeneratorTraining, TrainingData, Windows};
 
 /// The common imports.
@@ -61,7 +61,7 @@ pub mod prelude {
     pub use crate::initial_state::estimate_initial_state;
     pub use crate::model::Generator;
     pub use crate::refiner::{AdversarialTrainer, AdversarialTraining};
-    pub use crate::synthesis::{SynthesisOptions, synthesize};
+    pub use crate::synthesis::{SynthesisOptions, SynthesisStream, synthesize};
     pub use crate::train::{GeneratorTrainer, GeneratorTraining, TrainingData, Windows};
     pub use zoo_motion::rng::SplitMix64;
     pub use zoo_nn::LstmState;

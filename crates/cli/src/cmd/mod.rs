@@ -2,12 +2,15 @@
 
 pub mod bench;
 pub mod bench_runtime;
+pub mod bench_synthesis;
 pub mod data;
 pub mod data_luxo;
 pub mod decompress;
 pub mod export;
+pub mod generate;
 pub mod render;
 pub mod train;
+pub mod train_rnngmm;
 pub mod transition;
 
 use anyhow::{Context, bail};

@@ -16,6 +16,8 @@ use zoo_rtn::prelude::*;
 pub enum TrainCommand {
     /// The Recurrent Transition Network (Harvey & Pal 2018).
     Rtn(RtnArgs),
+    /// RNN-GMM with an adversarial refiner (Wang, Chai & Xia 2019): random motion synthesis.
+    RnnGmm(crate::cmd::train_rnngmm::RnnGmmArgs),
 }
 
 /// Which RTN to train: the paper's model or one of its Table 4 ablations.
@@ -107,6 +109,7 @@ pub struct RtnArgs {
 pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
     match cmd {
         TrainCommand::Rtn(a) => train_rtn(a),
+        TrainCommand::RnnGmm(a) => crate::cmd::train_rnngmm::run(a),
     }
 }
 
