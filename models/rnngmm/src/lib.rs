@@ -12,7 +12,8 @@
 //!   ([`AdversarialTraining`] for the shared loop);
 //! - [`synthesis`]: random synthesis continuing a clip (seed, eq. 26, sampling, refiner, decoding);
 //! - [`train`]: the generator's training ([`GeneratorTraining`] for the shared loop);
-//! - [`checkpoint`]: run folders.
+//! - [`checkpoint`]: run folders;
+//! - [`export`]: the generator's step graph as ONNX for the engine runtime.
 //!
 //! ```no_run
 //! use zoo_rnngmm::prelude::*;
@@ -32,6 +33,7 @@
 pub mod checkpoint;
 pub mod config;
 pub mod error;
+pub mod export;
 pub mod features;
 pub mod fk;
 pub mod gmm;
