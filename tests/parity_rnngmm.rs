@@ -8,6 +8,9 @@
 //! skeleton; the inputs are fixed LCG draws of 1.5 normalised units. Every pair must agree within
 //! 1e-4 on every output of every step.
 //!
+//! The runtime's synthesis task (`zoo_runtime::synthesis`) is checked against candle's sampling
+//! and decoding of the same draws, and for determinism across runs, batches and threads.
+//!
 //! onnxruntime: `bash scripts/onnxruntime.sh` (or `ORT_DYLIB_PATH`); a missing library fails.
 
 use candle_core::{Device, Tensor};
@@ -16,7 +19,8 @@ use zoo_motion::Clip;
 use zoo_rnngmm::export::{MODEL_KIND, export_generator};
 use zoo_rnngmm::prelude::*;
 use zoo_runtime::metadata::keys;
-use zoo_runtime::{MotionModel, MotionState};
+use zoo_runtime::synthesis::SynthesisModel;
+use zoo_runtime::{EnginePose, MotionModel, MotionState};
 use zoo_tests::onnxruntime::OrtSession;
 use zoo_tests::toy_onnx::lcg;
 
@@ -139,4 +143,115 @@ fn a_generator_export_refuses_mismatched_statistics() {
     norm.mean.pop();
     let err = export_generator(&config, None, trainer.spec(), &norm, trainer.varmap()).unwrap_err().to_string();
     assert!(err.contains("statistics"), "{err}");
+}
+
+/// A start frame (clip units) of a synthetic clip on the fixture's skeleton.
+fn start_frame(trainer: &GeneratorTrainer) -> Vec<f32> {
+    let cfg = SynthConfig { minutes: 0.2, seed: 4, terrain: false, fps: 30.0, clip_seconds: 6.0 };
+    let clip = generate_clip(&cfg, 0).clip;
+    trainer.spec().encode(&clip).unwrap().frame(10).to_vec()
+}
+
+/// `frames` poses of character `seed` in a batch with characters of other seeds.
+fn runtime_poses(
+    model: &SynthesisModel,
+    start: &[f32],
+    seeds: &[u64],
+    frames: usize,
+) -> Vec<Vec<(EnginePose, [bool; 2])>> {
+    let mut runner = model.runner(seeds.len()).unwrap();
+    let mut chars: Vec<_> = seeds.iter().map(|&s| model.new_character(s)).collect();
+    for c in &mut chars {
+        c.start(model, start, 10.0, -5.0, 0.3).unwrap();
+    }
+    let mut poses: Vec<EnginePose> = seeds.iter().map(|_| EnginePose::with_global_positions(model.joints())).collect();
+    let mut contacts = vec![[false; 2]; seeds.len()];
+    let mut out = vec![Vec::new(); seeds.len()];
+    for _ in 0..frames {
+        runner.step_batch(&mut chars, 1.0, &mut poses, &mut contacts).unwrap();
+        for (c, o) in out.iter_mut().enumerate() {
+            o.push((poses[c].clone(), contacts[c]));
+        }
+    }
+    out
+}
+
+#[test]
+fn runtime_synthesis_is_seeded_and_does_not_depend_on_the_batch_or_thread() {
+    let (config, trainer) = fixture();
+    let bytes = export_generator(&config, None, trainer.spec(), trainer.norm(), trainer.varmap()).unwrap().to_bytes();
+    let model = SynthesisModel::from_bytes(&bytes).unwrap();
+    let start = start_frame(&trainer);
+    let alone = runtime_poses(&model, &start, &[5], 200).remove(0);
+    let again = runtime_poses(&model, &start, &[5], 200).remove(0);
+    assert_eq!(alone, again, "same seed, other poses");
+    let batch = runtime_poses(&model, &start, &[6, 5, 7], 200);
+    assert_eq!(batch[1], alone, "character 5 moved differently in a batch");
+    assert_ne!(batch[0], alone);
+    let m2 = model.clone();
+    let s2 = start.clone();
+    let threaded = std::thread::spawn(move || runtime_poses(&m2, &s2, &[5], 200).remove(0)).join().unwrap();
+    assert_eq!(threaded, alone);
+    assert!(alone.iter().all(|(p, _)| p.global_positions.iter().all(|g| g.is_finite())));
+    // The hips' world position is the root's plus the hips' offset in root space.
+    let (p, _) = &alone[50];
+    assert!((p.global_positions[0] - (p.root_position + p.root_rotation * p.hips_position)).length() < 1e-4);
+}
+
+#[test]
+fn runtime_synthesis_decodes_like_candle() {
+    let (config, trainer) = fixture();
+    let bytes = export_generator(&config, None, trainer.spec(), trainer.norm(), trainer.varmap()).unwrap().to_bytes();
+    let model = SynthesisModel::from_bytes(&bytes).unwrap();
+    let start = start_frame(&trainer);
+    let frames = 20;
+    let runtime = runtime_poses(&model, &start, &[9], frames).remove(0);
+    // candle: the same draws (SplitMix64(9): a component, then D normals per frame).
+    let (g, d) = (trainer.model(), config.dim);
+    let mut x = start.clone();
+    trainer.norm().normalize(&mut x);
+    let mut state = g.zero_state(1).unwrap();
+    let mut rng = SplitMix64::new(9);
+    let mut sampled = Vec::new();
+    for _ in 0..frames {
+        let (raw, next) = g.step(&Tensor::from_slice(&x, (1, d), &Device::Cpu).unwrap(), &state).unwrap();
+        state = next;
+        let head = raw.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        g.mixture_of(&head).unwrap().sample(&mut rng, 1.0, &mut x);
+        sampled.extend_from_slice(&x);
+    }
+    trainer.norm().denormalize(&mut sampled);
+    let origin = zoo_rnngmm::RootPlacement { x: 10.0, z: -5.0, yaw: 0.3 };
+    let decoded = trainer.spec().decode(&sampled, origin).unwrap();
+    let j = model.joints();
+    for (f, (pose, contacts)) in runtime.iter().enumerate() {
+        let hips = pose.root_position + pose.root_rotation * pose.hips_position;
+        let expected = decoded.clip.root_position(f).as_vec3();
+        assert!((hips - expected).length() < 1e-2, "frame {f}: hips {hips} vs candle {expected}");
+        let world_hips = (pose.root_rotation * pose.local_rotations[0]).as_dquat();
+        assert!(world_hips.dot(decoded.clip.local_rotations[f * j]).abs() > 1.0 - 1e-5, "frame {f}: hips rotation");
+        for k in 1..j {
+            let q = pose.local_rotations[k].as_dquat();
+            assert!(q.dot(decoded.clip.local_rotations[f * j + k]).abs() > 1.0 - 1e-5, "frame {f}, joint {k}");
+        }
+        assert_eq!(*contacts, decoded.contacts[f], "frame {f}");
+    }
+}
+
+#[test]
+fn a_step_model_without_the_synthesis_section_is_refused() {
+    let (config, trainer) = fixture();
+    let onnx = export_generator(&config, None, trainer.spec(), trainer.norm(), trainer.varmap()).unwrap();
+    let mut proto = onnx.proto().clone();
+    proto.metadata_props.retain(|p| p.key != zoo_runtime::metadata::synthesis::KEY);
+    let err = SynthesisModel::from_bytes(&zoo_export::OnnxModel::from_proto(proto).to_bytes()).unwrap_err().to_string();
+    assert!(err.contains("not a `synthesis` model") && err.contains("rnn-gmm"), "{err}");
+    let model = SynthesisModel::from_bytes(&onnx.to_bytes()).unwrap();
+    let mut ch = model.new_character(1);
+    let err = ch.start(&model, &[0.0; 3], 0.0, 0.0, 0.0).unwrap_err().to_string();
+    assert!(err.contains("start frame"), "{err}");
+    let mut runner = model.runner(1).unwrap();
+    let mut pose = EnginePose::new(model.joints());
+    let err = runner.step(&mut ch, 1.0, &mut pose).unwrap_err().to_string();
+    assert!(err.contains("was not started"), "{err}");
 }

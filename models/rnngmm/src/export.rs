@@ -13,6 +13,9 @@
 //! | | `stds`: `sigma = exp(clamp(sigma^))` (M D) |
 //! | `h{k}`, `c{k}`: LSTM state of layer `k` (H each) | `h{k}_next`, `c{k}_next` |
 //!
+//! The `zoo.synthesis` section ([`zoo_runtime::metadata::synthesis`]) holds the mixture size and
+//! the reference rotations, so `zoo_runtime::synthesis::SynthesisModel` samples and decodes poses.
+//!
 //! Initializers keep the candle variable paths (`fc.0.weight`, `lstm.weight_ih_l0`,
 //! `head.weight`, ...); the LSTM is written with Gemm/Split/Sigmoid/Tanh/Mul/Add in candle's gate
 //! order i, f, g, o; ReLU is `LeakyRelu` with slope 0 (the same function, in every runtime).
@@ -26,6 +29,7 @@ use candle_nn::VarMap;
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 use zoo_export::{Dim, ExportError, GraphBuilder, OnnxModel, Value, attr_int};
+use zoo_runtime::metadata::synthesis::{self, SynthesisTask};
 use zoo_runtime::metadata::{
     FORMAT_VERSION, MotionFeatureSegment, MotionMeanStd, MotionModelMetadata, MotionSkeletonInfo, MotionStatePair,
     MotionTask,
@@ -121,6 +125,17 @@ pub fn metadata(
     Ok(metadata)
 }
 
+/// The `zoo.synthesis` section: mixture size and the reference rotations that decode a frame.
+pub fn synthesis_task(config: &Config, spec: &FeatureSpec) -> Result<SynthesisTask, ExportError> {
+    let task = SynthesisTask {
+        frame_dim: config.dim,
+        components: config.components,
+        references: spec.reference.iter().map(|q| [q.x, q.y, q.z, q.w]).collect(),
+    };
+    task.check(spec.skeleton.len()).map_err(|e| model_err(format!("the synthesis section would not load: {e}")))?;
+    Ok(task)
+}
+
 /// Exports the generator of `config` with the weights of `varmap` (filled by
 /// [`crate::Generator::new`]). `config_json`: the run folder's `config.json` verbatim (default:
 /// the config serialised).
@@ -146,6 +161,8 @@ pub fn export_generator(
     for (k, v) in metadata(config, config_json, spec, norm)?.to_props() {
         g.metadata(&k, &v);
     }
+    let task = synthesis_task(config, spec)?;
+    g.metadata(synthesis::KEY, &serde_json::to_string(&task).map_err(|e| model_err(e.to_string()))?);
     g.finish()
 }
 
