@@ -69,9 +69,11 @@ fn two_stages_train_resume_and_refuse_to_overwrite() {
     // A fresh run on it is refused; the refiner stage trains on the generator, then resumes.
     let (ok, _, stderr) = train(&["--epochs", "1", "--out", r]);
     assert!(!ok && stderr.contains("already holds a run") && stderr.contains("--resume"), "{stderr}");
-    let (ok, stdout, stderr) = train(&["--stage", "refiner", "--refiner-epochs", "1", "--out", r]);
+    let (ok, stdout, stderr) =
+        train(&["--stage", "refiner", "--refiner-epochs", "1", "--refiner-warmup", "2", "--out", r]);
     assert!(ok, "{stdout}\n{stderr}");
-    assert!(stdout.contains("refiner: 1 epochs (2 rounds)"), "{stdout}");
+    assert!(stdout.contains("refiner: 1 epochs (2 rounds)") && stdout.contains("warm-up: 2 refiner + 2"), "{stdout}");
+    assert_eq!(json(&runp.join("refiner/config.json"))["refiner"]["warmup_discriminator"], 2);
     for f in ["refiner.safetensors", "discriminator.safetensors", "effectors.json"] {
         assert!(runp.join(f).is_file(), "{f} missing in the run folder");
     }
@@ -177,6 +179,13 @@ fn generate_is_deterministic_streams_and_refuses_bad_input() {
     let e = fails(&["generate", "--model", broken.to_str().unwrap(), "--frames", "10", "--out", &out("z.bvh")]);
     assert!(e.contains("no generator weights") && e.contains("it has a refiner"), "{e}");
     assert!(!dir.path().join("z.bvh").exists() && !dir.path().join("y.bvh").exists());
+
+    // The generator's export loads as a synthesis model of the runtime.
+    let onnx = out("gmm.onnx");
+    let stdout = ok(&["export", "--onnx", &r, "--out", &onnx]);
+    assert!(stdout.contains("RNN-GMM generator step graph"), "{stdout}");
+    let model = zoo_runtime::synthesis::SynthesisModel::load(&onnx).unwrap();
+    assert_eq!(model.model().metadata().model_kind, "rnn-gmm");
 
     // The synthesis benchmark on synthetic clips written as BVH.
     let data = out("synth");

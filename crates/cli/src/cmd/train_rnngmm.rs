@@ -85,6 +85,10 @@ pub struct RnnGmmArgs {
     /// update; the first also runs the warm-up).
     #[arg(long, default_value_t = 10, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
     pub refiner_rounds: usize,
+    /// Warm-up updates of the refiner stage, refiner and discriminator each [default: the
+    /// preset's; paper: 75]. Ignored when a refiner stage is resumed (its own setting is kept).
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
+    pub refiner_warmup: Option<usize>,
     /// Stop the generator stage after this many minutes (checked between epochs: the epoch in
     /// progress finishes first).
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::positive)]
@@ -394,7 +398,19 @@ pub fn run(a: RnnGmmArgs) -> anyhow::Result<()> {
             rck::read_meta(&gen_dir).with_context(|| format!("reading the generator in {}", gen_dir.display()))?;
         let tw = windows_with(&spec, &norm, &config, &train, "training")?;
         let vw = windows_with(&spec, &norm, &config, &valid, "validation")?;
-        let c = &config.refiner;
+        // A resumed stage keeps its own refiner settings; a fresh one takes the generator's
+        // (the preset's) with the command's overrides.
+        let refiner_config = if resume {
+            let from = train_loop::resume_dir(&ref_dir);
+            rck::read_meta(&from).with_context(|| format!("resuming the refiner from {}", from.display()))?.0.refiner
+        } else {
+            let mut r = config.refiner.clone();
+            if let Some(n) = a.refiner_warmup {
+                (r.warmup_refiner, r.warmup_discriminator) = (n, n);
+            }
+            r
+        };
+        let c = &refiner_config;
         println!(
             "training the RNN-GMM refiner on {} real windows against {} generator samples (warm-up: {} refiner + {} \
              discriminator updates in the first round), run folder {}",
@@ -404,14 +420,14 @@ pub fn run(a: RnnGmmArgs) -> anyhow::Result<()> {
             c.warmup_discriminator,
             ref_dir.display()
         );
-        let trainer = AdversarialTrainer::new(&gen_dir, &config.refiner, &tw, &vw, &device)
+        let trainer = AdversarialTrainer::new(&gen_dir, &refiner_config, &tw, &vw, &device)
             .with_context(|| format!("building the refiner stage on {}", gen_dir.display()))?;
         let mut training = AdversarialTraining::new(trainer, &tw).with_rounds_per_epoch(a.refiner_rounds);
         let opts = TrainOptions {
             time_limit: minutes(a.refiner_time_limit.or(a.time_limit)),
             resume,
             data: source.clone(),
-            ..TrainOptions::new(&ref_dir, a.refiner_epochs, config.refiner.seed)
+            ..TrainOptions::new(&ref_dir, a.refiner_epochs, refiner_config.seed)
         };
         let result = train_loop::train(&mut training, &opts);
         let published = ref_dir.join(REFINER_FILE).is_file();
