@@ -255,3 +255,55 @@ fn a_step_model_without_the_synthesis_section_is_refused() {
     let err = runner.step(&mut ch, 1.0, &mut pose).unwrap_err().to_string();
     assert!(err.contains("was not started"), "{err}");
 }
+
+/// Step latency (batch 1) and throughput (batch 64) of the paper-size generator step through
+/// the runtime (tract) and onnxruntime, one thread each. Ignored: a measurement, not a check.
+#[test]
+#[ignore = "timing of the paper-size generator step; run with --ignored --nocapture"]
+fn paper_size_step_timings() {
+    let cfg = SynthConfig { minutes: 0.2, seed: 3, terrain: false, fps: 30.0, clip_seconds: 6.0 };
+    let clips: Vec<Clip> = (0..2).map(|i| generate_clip(&cfg, i).clip).collect();
+    let refs: Vec<&Clip> = clips.iter().collect();
+    let config = Config::paper();
+    let data = TrainingData::from_clips(&config, 30.0, &refs[..1], &refs[1..]).unwrap();
+    let config = config.with_dim(data.spec.dim());
+    let trainer = GeneratorTrainer::new(&config, data.spec.clone(), data.norm.clone(), &Device::Cpu).unwrap();
+    let onnx = export_generator(&config, None, trainer.spec(), trainer.norm(), trainer.varmap()).unwrap();
+    let model = MotionModel::from_bytes(&onnx.to_bytes()).unwrap();
+    let (m, d, h) = (config.components, config.dim, config.lstm);
+    for batch in [1usize, 64] {
+        let steps = if batch == 1 { 300 } else { 30 };
+        let x = lcg(5, batch * d, 1.0);
+        let mut runner = model.runner().unwrap();
+        let mut states: Vec<MotionState> = (0..batch).map(|_| model.new_state()).collect();
+        let (mut w, mut mu, mut sd) = (vec![0.0; batch * m], vec![0.0; batch * m * d], vec![0.0; batch * m * d]);
+        runner.step_batch(&mut states, &[&x], &mut [&mut w, &mut mu, &mut sd]).unwrap();
+        let t = std::time::Instant::now();
+        for _ in 0..steps {
+            runner.step_batch(&mut states, &[&x], &mut [&mut w, &mut mu, &mut sd]).unwrap();
+        }
+        let tract = t.elapsed().as_secs_f64() / steps as f64;
+        let mut session = OrtSession::new(&onnx);
+        let zero = vec![0.0; batch * h];
+        let feed: Vec<(&str, usize, &[f32])> = vec![
+            ("x", batch, &x),
+            ("h0", batch, &zero),
+            ("c0", batch, &zero),
+            ("h1", batch, &zero),
+            ("c1", batch, &zero),
+        ];
+        session.run(&feed, &["weights"]);
+        let t = std::time::Instant::now();
+        for _ in 0..steps {
+            session.run(&feed, &["weights", "means", "stds", "h0_next", "c0_next", "h1_next", "c1_next"]);
+        }
+        let ort = t.elapsed().as_secs_f64() / steps as f64;
+        println!(
+            "batch {batch}: tract {:.3} ms/step ({:.0} character-frames/s), onnxruntime {:.3} ms/step ({:.0} character-frames/s)",
+            tract * 1e3,
+            batch as f64 / tract,
+            ort * 1e3,
+            batch as f64 / ort
+        );
+    }
+}
