@@ -31,7 +31,7 @@ const TOLERANCE: f32 = 1e-4;
 /// `[step] -> (weights, means, stds)`, each character-major.
 type Trace = Vec<[Vec<f32>; 3]>;
 
-fn fixture() -> (Config, GeneratorTrainer) {
+fn fixture_with_data() -> (Config, TrainingData, GeneratorTrainer) {
     let cfg = SynthConfig { minutes: 0.2, seed: 3, terrain: false, fps: 30.0, clip_seconds: 6.0 };
     let clips: Vec<Clip> = (0..2).map(|i| generate_clip(&cfg, i).clip).collect();
     let refs: Vec<&Clip> = clips.iter().collect();
@@ -39,6 +39,11 @@ fn fixture() -> (Config, GeneratorTrainer) {
     let data = TrainingData::from_clips(&config, 30.0, &refs[..1], &refs[1..]).unwrap();
     let config = config.with_dim(data.spec.dim());
     let trainer = GeneratorTrainer::new(&config, data.spec.clone(), data.norm.clone(), &Device::Cpu).unwrap();
+    (config, data, trainer)
+}
+
+fn fixture() -> (Config, GeneratorTrainer) {
+    let (config, _, trainer) = fixture_with_data();
     (config, trainer)
 }
 
@@ -306,4 +311,86 @@ fn paper_size_step_timings() {
             batch as f64 / ort
         );
     }
+}
+
+/// A tract plan of `graph` for inputs `[BATCH, widths[i]]`, run on flat buffers.
+fn tract_runner(graph: &zoo_export::OnnxModel, widths: &[usize]) -> impl FnMut(&[&[f32]]) -> Vec<Vec<f32>> + use<> {
+    use tract_onnx::prelude::*;
+    let mut model = tract_onnx::onnx().model_for_proto_model(graph.proto()).expect("tract reads the graph");
+    for (i, w) in widths.iter().enumerate() {
+        model.set_input_fact(i, f32::fact([BATCH, *w]).into()).unwrap();
+    }
+    let plan = model.into_optimized().expect("tract optimises the graph").into_runnable().unwrap();
+    let widths = widths.to_vec();
+    move |inputs: &[&[f32]]| {
+        let values: TVec<TValue> = inputs
+            .iter()
+            .zip(&widths)
+            .map(|(v, w)| TValue::from_const(std::sync::Arc::new(Tensor::from_shape::<f32>(&[BATCH, *w], v).unwrap())))
+            .collect();
+        let out = plan.run(values).expect("tract runs the graph");
+        out.iter().map(|o| o.try_as_plain_ram().unwrap().as_slice::<f32>().unwrap().to_vec()).collect()
+    }
+}
+
+/// The refiner's step graph (embedded in the export of a refiner-stage run folder) against
+/// candle's `RefinerNets::refine_chunk` over 10 frames of 3 characters, the end-effector input
+/// computed by candle (`RefinerNets::effector_input`) and fed to the graph, the LSTM state
+/// carried from step to step; tract and onnxruntime both within 1e-4.
+#[test]
+fn the_exported_refiner_step_matches_candle_in_tract_and_onnxruntime() {
+    use zoo_rnngmm::export::{REFINER_GRAPH_KEY, export_generator_dir};
+    let (config, data, trainer) = fixture_with_data();
+    let dir = tempfile::tempdir().unwrap();
+    let gen_dir = dir.path().join("generator");
+    trainer.save(&gen_dir).unwrap();
+    let mut adv = AdversarialTrainer::new(&gen_dir, &config.refiner, &data.train, &data.valid, &Device::Cpu).unwrap();
+    for _ in 0..3 {
+        adv.refiner_update().unwrap();
+    }
+    let run = dir.path().join("run");
+    adv.save(&run).unwrap();
+    let onnx = export_generator_dir(&run).unwrap();
+    let refiner =
+        zoo_export::OnnxModel::from_base64(onnx.metadata_value(REFINER_GRAPH_KEY).unwrap(), "refiner").unwrap();
+    let nets = adv.nets();
+    let (t, d, hu) = (10, config.dim, config.refiner.refiner_lstm);
+    let all = Tensor::from_vec(lcg(123, BATCH * (t + 1) * d, 1.0), (BATCH, t + 1, d), &Device::Cpu).unwrap();
+    let (prev, x) = (all.narrow(1, 0, 1).unwrap(), all.narrow(1, 1, t).unwrap());
+    let (candle, _) = nets.refine_chunk(&x, Some(&prev), &nets.refiner_zero_state(BATCH).unwrap()).unwrap();
+    let e = nets.effector_input(&all).unwrap().narrow(1, 1, t).unwrap();
+    let ew = e.dim(2).unwrap();
+    let frame = |v: &Tensor, f: usize| v.narrow(1, f, 1).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+    let mut tract = tract_runner(&refiner, &[d, ew, hu, hu]);
+    let mut session = OrtSession::new(&refiner);
+    let (mut th, mut tc) = (vec![0f32; BATCH * hu], vec![0f32; BATCH * hu]);
+    let (mut oh, mut oc) = (th.clone(), tc.clone());
+    let (mut worst_tract, mut worst_ort) = (0f32, 0f32);
+    for f in 0..t {
+        let (xf, ef, want) = (frame(&x, f), frame(&e, f), frame(&candle, f));
+        let mut out = tract(&[&xf, &ef, &th, &tc]);
+        let got = out.remove(0);
+        (th, tc) = (out.remove(0), out.remove(0));
+        let o = session.run(
+            &[("x", BATCH, &xf), ("effectors", BATCH, &ef), ("h", BATCH, &oh), ("c", BATCH, &oc)],
+            &["x_refined", "h_next", "c_next"],
+        );
+        for (a, b) in want.iter().zip(&got) {
+            worst_tract = worst_tract.max((a - b).abs());
+        }
+        for (a, b) in want.iter().zip(&o[0]) {
+            worst_ort = worst_ort.max((a - b).abs());
+        }
+        (oh, oc) = (o[1].clone(), o[2].clone());
+    }
+    println!(
+        "refiner step, {t} frames of {BATCH} characters: candle/tract {worst_tract:.2e}, candle/onnxruntime {worst_ort:.2e}"
+    );
+    assert!(
+        worst_tract <= TOLERANCE && worst_ort <= TOLERANCE,
+        "candle/tract {worst_tract}, candle/onnxruntime {worst_ort}"
+    );
+    // The refiner moved the frames (its last layer starts at zero).
+    let moved = (candle - &x).unwrap().abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap();
+    assert!(moved > 1e-4, "{moved}");
 }

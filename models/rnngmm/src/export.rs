@@ -20,8 +20,14 @@
 //! `head.weight`, ...); the LSTM is written with Gemm/Split/Sigmoid/Tanh/Mul/Add in candle's gate
 //! order i, f, g, o; ReLU is `LeakyRelu` with slope 0 (the same function, in every runtime).
 //!
-//! Not exported yet: the refiner's step (its input needs the end-effector forward kinematics of
-//! [`crate::fk`] in the graph) and the discriminator (training only).
+//! With a refiner in the run folder, its step graph is embedded in the metadata (base64 ONNX
+//! under [`REFINER_GRAPH_KEY`], its end-effector statistics under [`REFINER_KEY`]): inputs `x`
+//! (the generator's normalised frame, D), `effectors` (the normalised end-effector positions and
+//! velocities of that frame, 6 E, computed by the caller with the forward kinematics of
+//! [`crate::fk`]: the previous frame is needed for the velocities), `h`, `c` (its LSTM state);
+//! outputs `x_refined` (D, eq. 11: `W2 lstm(relu(W1 [x; e] + b1)) + b2 + x`), `h_next`, `c_next`.
+//! The runtime does not run it yet (it needs that forward kinematics); the discriminator is
+//! training-only.
 
 use crate::config::Config;
 use crate::features::{CONTACT_DIMS, FeatureSpec, Normalization, ROOT_DIMS};
@@ -37,6 +43,10 @@ use zoo_runtime::metadata::{
 
 /// `zoo.model_kind` of an exported RNN-GMM.
 pub const MODEL_KIND: &str = "rnn-gmm";
+/// metadata_props key of the embedded refiner step graph (base64 ONNX).
+pub const REFINER_GRAPH_KEY: &str = "zoo.rnngmm.refiner_graph";
+/// metadata_props key of the refiner's end-effector statistics ([`crate::EffectorNorm`], JSON).
+pub const REFINER_KEY: &str = "zoo.rnngmm.refiner";
 
 fn model_err(message: impl Into<String>) -> ExportError {
     ExportError::Model(message.into())
@@ -55,7 +65,95 @@ pub fn export_generator_dir(dir: &Path) -> Result<OnnxModel, ExportError> {
     crate::Generator::new(&config, vb)
         .map_err(|e| model_err(format!("building the generator of {}: {e}", dir.display())))?;
     crate::checkpoint::load_weights(dir, &varmap).map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
-    export_generator(&config, Some(&config_json), &spec, &norm, &varmap)
+    let generator = export_generator(&config, Some(&config_json), &spec, &norm, &varmap)?;
+    if !dir.join(crate::refiner::REFINER_FILE).is_file() {
+        return Ok(generator);
+    }
+    let eff: crate::EffectorNorm = zoo_nn::checkpoint::read_json(&dir.join(crate::refiner::EFFECTORS_FILE))
+        .map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
+    let path = dir.join(crate::refiner::REFINER_FILE);
+    let tensors = candle_core::safetensors::load(&path, &candle_core::Device::Cpu)
+        .map_err(|e| model_err(format!("{}: {e}", path.display())))?;
+    let refiner = export_refiner(&config, &eff, &tensors)?;
+    let mut proto = generator.proto().clone();
+    for (key, value) in [
+        (REFINER_GRAPH_KEY, refiner.to_base64()),
+        (REFINER_KEY, serde_json::to_string(&eff).map_err(|e| model_err(e.to_string()))?),
+    ] {
+        proto.metadata_props.push(zoo_export::pb::StringStringEntryProto { key: key.into(), value });
+    }
+    Ok(OnnxModel::from_proto(proto))
+}
+
+/// The refiner's step graph (eq. 11) from its weights (`fc1.*`, `lstm.*_l0`, `fc2.*`, as in
+/// `refiner.safetensors`). See the module docs for its inputs and outputs.
+pub fn export_refiner(
+    config: &Config,
+    eff: &crate::EffectorNorm,
+    tensors: &HashMap<String, candle_core::Tensor>,
+) -> Result<OnnxModel, ExportError> {
+    let mut weights = HashMap::new();
+    for (name, t) in tensors {
+        let values = t
+            .to_dtype(candle_core::DType::F32)
+            .and_then(|t| t.flatten_all())
+            .and_then(|t| t.to_vec1::<f32>())
+            .map_err(|e| model_err(format!("reading refiner weight `{name}`: {e}")))?;
+        if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+            return Err(model_err(format!("refiner weight `{name}` holds {} at index {i}", values[i])));
+        }
+        weights.insert(name.clone(), (t.dims().to_vec(), values));
+    }
+    let w = Weights(weights);
+    let (d, e, hu) = (config.dim, 6 * eff.effectors.len(), config.refiner.refiner_lstm);
+    let mut g = GraphBuilder::new("rnngmm_refiner_step");
+    g.doc("RNN-GMM refiner (eq. 11), per-frame step graph; see zoo_rnngmm::export");
+    let x = g.input("x", &batch(d));
+    let effectors = g.input("effectors", &batch(e));
+    let h = g.input("h", &batch(hu));
+    let c = g.input("c", &batch(hu));
+    let input = g.concat("fc1.input", &[&x, &effectors], 1);
+    let (w1, b1) = (w.init(&mut g, "fc1.weight")?, w.init(&mut g, "fc1.bias")?);
+    let z = g.gemm("fc1", &input, &w1, Some(&b1), true);
+    let z = g.leaky_relu("fc1.relu", &z, 0.0);
+    let (h_next, c_next) = lstm_cell(&mut g, &w, 0, &z, &h, &c, hu)?;
+    let (w2, b2) = (w.init(&mut g, "fc2.weight")?, w.init(&mut g, "fc2.bias")?);
+    let dx = g.gemm("fc2", &h_next, &w2, Some(&b2), true);
+    let refined = g.add("residual", &x, &dx);
+    g.output("x_refined", &refined, &batch(d));
+    g.output("h_next", &h_next, &batch(hu));
+    g.output("c_next", &c_next, &batch(hu));
+    g.finish()
+}
+
+/// One step of layer `k` of a candle LSTM (`lstm.{weight,bias}_{ih,hh}_l{k}`, gates i, f, g, o):
+/// returns `(h_next, c_next)`.
+fn lstm_cell(
+    g: &mut GraphBuilder,
+    w: &Weights,
+    k: usize,
+    x: &Value,
+    hk: &Value,
+    ck: &Value,
+    hu: usize,
+) -> Result<(Value, Value), ExportError> {
+    let p = |s: &str| format!("lstm.{s}_l{k}");
+    let (w_ih, b_ih) = (w.init(g, &p("weight_ih"))?, w.init(g, &p("bias_ih"))?);
+    let (w_hh, b_hh) = (w.init(g, &p("weight_hh"))?, w.init(g, &p("bias_hh"))?);
+    let zx = g.gemm(&p("input_gates"), x, &w_ih, Some(&b_ih), true);
+    let zh = g.gemm(&p("hidden_gates"), hk, &w_hh, Some(&b_hh), true);
+    let z = g.add(&p("gates"), &zx, &zh);
+    let parts = g.split(&p("split"), &z, &[hu; 4], 1);
+    let i = g.sigmoid(&p("i"), &parts[0]);
+    let f = g.sigmoid(&p("f"), &parts[1]);
+    let gg = g.tanh(&p("g"), &parts[2]);
+    let o = g.sigmoid(&p("o"), &parts[3]);
+    let fc = g.mul(&p("f_c"), &f, ck);
+    let ig = g.mul(&p("i_g"), &i, &gg);
+    let c_next = g.add(&p("c"), &fc, &ig);
+    let tc = g.tanh(&p("tanh_c"), &c_next);
+    let h_next = g.mul(&p("h"), &o, &tc);
+    Ok((h_next, c_next))
 }
 
 /// Weights by candle variable path, as row-major f32 with their shapes.
@@ -185,22 +283,7 @@ fn step_graph(config: &Config, w: &Weights) -> Result<GraphBuilder, ExportError>
     // The 2-layer LSTM, gates in candle's order i, f, g, o.
     let mut outputs = Vec::new();
     for (k, (hk, ck)) in states.iter().enumerate() {
-        let p = |s: &str| format!("lstm.{s}_l{k}");
-        let (w_ih, b_ih) = (w.init(&mut g, &p("weight_ih"))?, w.init(&mut g, &p("bias_ih"))?);
-        let (w_hh, b_hh) = (w.init(&mut g, &p("weight_hh"))?, w.init(&mut g, &p("bias_hh"))?);
-        let zx = g.gemm(&p("input_gates"), &h, &w_ih, Some(&b_ih), true);
-        let zh = g.gemm(&p("hidden_gates"), hk, &w_hh, Some(&b_hh), true);
-        let z = g.add(&p("gates"), &zx, &zh);
-        let parts = g.split(&p("split"), &z, &[hu; 4], 1);
-        let i = g.sigmoid(&p("i"), &parts[0]);
-        let f = g.sigmoid(&p("f"), &parts[1]);
-        let gg = g.tanh(&p("g"), &parts[2]);
-        let o = g.sigmoid(&p("o"), &parts[3]);
-        let fc = g.mul(&p("f_c"), &f, ck);
-        let ig = g.mul(&p("i_g"), &i, &gg);
-        let c_next = g.add(&p("c"), &fc, &ig);
-        let tc = g.tanh(&p("tanh_c"), &c_next);
-        let h_next = g.mul(&p("h"), &o, &tc);
+        let (h_next, c_next) = lstm_cell(&mut g, w, k, &h, hk, ck, hu)?;
         outputs.push((h_next.clone(), c_next));
         h = h_next;
     }
