@@ -170,6 +170,10 @@ fn generate_is_deterministic_streams_and_refuses_bad_input() {
     assert!(e.contains("frame 5000 is past the clip's last frame"), "{e}");
     let e = fails(&["generate", "--model", &r, "--frames", "10", "--count", "2", "--out", &out("y.bvh")]);
     assert!(e.contains("give a folder as --out"), "{e}");
+    let e = fails(&["generate", "--model", &r, "--frames", "10", "--init-steps", "99999999", "--out", &out("y.bvh")]);
+    assert!(e.contains("--init-steps") && e.contains("0..=10000"), "{e}");
+    let e = fails(&["generate", "--model", &r, "--out", &out("y.bvh")]);
+    assert!(e.contains("--frames N or --seconds S"), "{e}");
     // A refiner without its generator.
     let broken = dir.path().join("broken");
     std::fs::create_dir(&broken).unwrap();

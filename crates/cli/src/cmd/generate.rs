@@ -48,9 +48,19 @@ pub struct GenerateArgs {
     /// Generate with the generator alone (also for a folder of the generator stage).
     #[arg(long)]
     pub no_refiner: bool,
-    /// Steps of the initial state estimation (eq. 26); 0 starts from the zero state.
-    #[arg(long, default_value_t = 50)]
+    /// Steps of the initial state estimation (eq. 26, `0..=10000`); 0 starts from the zero state.
+    #[arg(long, default_value_t = 50, value_parser = init_steps)]
     pub init_steps: usize,
+}
+
+/// The most Adam steps `--init-steps` takes (each is a forward and backward pass over the seed).
+const MAX_INIT_STEPS: usize = 10_000;
+
+fn init_steps(s: &str) -> Result<usize, String> {
+    match s.trim().parse::<usize>() {
+        Ok(n) if n <= MAX_INIT_STEPS => Ok(n),
+        _ => Err(format!("`{s}` is not a step count in the valid range 0..={MAX_INIT_STEPS}")),
+    }
 }
 
 /// The model of a run folder: the generator, and the refiner unless `no_refiner`. A folder of
@@ -245,7 +255,7 @@ pub fn run(a: GenerateArgs) -> anyhow::Result<()> {
         (None, None) => bail!("say how long: --frames N or --seconds S"),
     };
     let (clip, frame, from) = start_clip(&a.model, a.from.as_deref(), &g)?;
-    let pb = ProgressBar::new((frames * a.count) as u64);
+    let pb = ProgressBar::new((frames as u64).saturating_mul(a.count as u64));
     pb.set_style(
         ProgressStyle::with_template("generating [{bar:30}] {pos}/{len} frames  {per_sec}  {elapsed}<{eta}")
             .context("progress bar template")?,
