@@ -203,20 +203,15 @@ fn runtime_synthesis_is_seeded_and_does_not_depend_on_the_batch_or_thread() {
     assert!((p.global_positions[0] - (p.root_position + p.root_rotation * p.hips_position)).length() < 1e-4);
 }
 
-#[test]
-fn runtime_synthesis_decodes_like_candle() {
-    let (config, trainer) = fixture();
-    let bytes = export_generator(&config, None, trainer.spec(), trainer.norm(), trainer.varmap()).unwrap().to_bytes();
-    let model = SynthesisModel::from_bytes(&bytes).unwrap();
-    let start = start_frame(&trainer);
-    let frames = 20;
-    let runtime = runtime_poses(&model, &start, &[9], frames).remove(0);
-    // candle: the same draws (SplitMix64(9): a component, then D normals per frame).
-    let (g, d) = (trainer.model(), config.dim);
-    let mut x = start.clone();
+/// candle's draws for character `seed` from `start` (clip units): `SplitMix64(seed)`, a
+/// component then D normals per frame, each frame fed back. Normalised, `frames * D`.
+fn candle_samples(trainer: &GeneratorTrainer, start: &[f32], seed: u64, frames: usize) -> Vec<f32> {
+    let g = trainer.model();
+    let d = g.config().dim;
+    let mut x = start.to_vec();
     trainer.norm().normalize(&mut x);
     let mut state = g.zero_state(1).unwrap();
-    let mut rng = SplitMix64::new(9);
+    let mut rng = SplitMix64::new(seed);
     let mut sampled = Vec::new();
     for _ in 0..frames {
         let (raw, next) = g.step(&Tensor::from_slice(&x, (1, d), &Device::Cpu).unwrap(), &state).unwrap();
@@ -225,10 +220,15 @@ fn runtime_synthesis_decodes_like_candle() {
         g.mixture_of(&head).unwrap().sample(&mut rng, 1.0, &mut x);
         sampled.extend_from_slice(&x);
     }
-    trainer.norm().denormalize(&mut sampled);
+    sampled
+}
+
+/// Runtime poses against candle's decoding of `features` (clip units) from the runtime test's
+/// start placement.
+fn assert_poses_match(trainer: &GeneratorTrainer, runtime: &[(EnginePose, [bool; 2])], features: &[f32]) {
     let origin = zoo_rnngmm::RootPlacement { x: 10.0, z: -5.0, yaw: 0.3 };
-    let decoded = trainer.spec().decode(&sampled, origin).unwrap();
-    let j = model.joints();
+    let decoded = trainer.spec().decode(features, origin).unwrap();
+    let j = trainer.spec().skeleton.len();
     for (f, (pose, contacts)) in runtime.iter().enumerate() {
         let hips = pose.root_position + pose.root_rotation * pose.hips_position;
         let expected = decoded.clip.root_position(f).as_vec3();
@@ -241,6 +241,60 @@ fn runtime_synthesis_decodes_like_candle() {
         }
         assert_eq!(*contacts, decoded.contacts[f], "frame {f}");
     }
+}
+
+#[test]
+fn runtime_synthesis_refines_like_candle() {
+    use zoo_rnngmm::export::export_generator_dir;
+    let (config, data, trainer) = fixture_with_data();
+    let dir = tempfile::tempdir().unwrap();
+    let gen_dir = dir.path().join("generator");
+    trainer.save(&gen_dir).unwrap();
+    let mut adv = AdversarialTrainer::new(&gen_dir, &config.refiner, &data.train, &data.valid, &Device::Cpu).unwrap();
+    for _ in 0..3 {
+        adv.refiner_update().unwrap();
+    }
+    let run = dir.path().join("run");
+    adv.save(&run).unwrap();
+    let model = SynthesisModel::from_bytes(&export_generator_dir(&run).unwrap().to_bytes()).unwrap();
+    assert!(model.has_refiner());
+    let start = start_frame(&trainer);
+    let frames = 20;
+    let refined_rt = runtime_poses(&model, &start, &[9], frames).remove(0);
+    let raw_rt = runtime_poses(&model.clone().without_refiner(), &start, &[9], frames).remove(0);
+    assert_ne!(refined_rt, raw_rt);
+    // candle: the same draws refined by refine_chunk after the start frame.
+    let d = config.dim;
+    let sampled = candle_samples(&trainer, &start, 9, frames);
+    let mut prev = start.clone();
+    trainer.norm().normalize(&mut prev);
+    let nets = adv.nets();
+    let (refined, _) = nets
+        .refine_chunk(
+            &Tensor::from_slice(&sampled, (1, frames, d), &Device::Cpu).unwrap(),
+            Some(&Tensor::from_slice(&prev, (1, 1, d), &Device::Cpu).unwrap()),
+            &nets.refiner_zero_state(1).unwrap(),
+        )
+        .unwrap();
+    let mut refined = refined.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+    trainer.norm().denormalize(&mut refined);
+    assert_poses_match(&trainer, &refined_rt, &refined);
+    let mut raw = sampled;
+    trainer.norm().denormalize(&mut raw);
+    assert_poses_match(&trainer, &raw_rt, &raw);
+}
+
+#[test]
+fn runtime_synthesis_decodes_like_candle() {
+    let (config, trainer) = fixture();
+    let bytes = export_generator(&config, None, trainer.spec(), trainer.norm(), trainer.varmap()).unwrap().to_bytes();
+    let model = SynthesisModel::from_bytes(&bytes).unwrap();
+    let start = start_frame(&trainer);
+    let frames = 20;
+    let runtime = runtime_poses(&model, &start, &[9], frames).remove(0);
+    let mut sampled = candle_samples(&trainer, &start, 9, frames);
+    trainer.norm().denormalize(&mut sampled);
+    assert_poses_match(&trainer, &runtime, &sampled);
 }
 
 #[test]

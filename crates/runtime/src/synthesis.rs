@@ -11,9 +11,15 @@
 //! character's frames depend only on its seed and start frame: the same in any batch, on any
 //! thread, in any run.
 //!
-//! Not here yet: the refiner (its export needs the end-effector forward kinematics in the
-//! graph) and the initial state estimation of eq. 26 (a start from the zero state, as the
-//! paper's baseline).
+//! When the file embeds the refiner's step graph (`zoo.rnngmm.refiner_graph`, written by
+//! `zoo_rnngmm::export` for a run folder with a refiner), each sampled frame is refined behind
+//! the generator (eq. 11): the runtime computes its end-effector positions and velocities (the
+//! forward kinematics of `zoo_rnngmm::fk`, in f64), runs the refiner step (its LSTM state is the
+//! character's), and decodes the refined frame; the generator still reads its own samples. The
+//! refiner adds no latency in frames (it is causal: frame `t` needs frames up to `t`). The
+//! refiner graph runs per character at batch 1 through tract, which allocates per call (the
+//! generator's batched step does not). Not here yet: the initial state estimation of eq. 26 (a
+//! start from the zero state, as the paper's baseline).
 
 use crate::error::MotionError;
 use crate::metadata::synthesis::{KEY, SynthesisTask};
@@ -26,8 +32,29 @@ use std::path::Path;
 use zoo_motion::quat::from_scaled_axis;
 use zoo_motion::rng::SplitMix64;
 
-/// A loaded synthesis model (the step graph and its `zoo.synthesis` section). Cheap to clone,
-/// `Send + Sync`.
+/// metadata_props key of the embedded refiner step graph (base64 ONNX).
+pub const REFINER_GRAPH_KEY: &str = "zoo.rnngmm.refiner_graph";
+/// metadata_props key of the refiner's end-effector statistics (JSON).
+pub const REFINER_KEY: &str = "zoo.rnngmm.refiner";
+
+/// The refiner's end-effector statistics as the exporter writes them.
+#[derive(Clone, Debug, serde::Deserialize)]
+struct EffectorStats {
+    effectors: Vec<usize>,
+    mean: Vec<f32>,
+    std: Vec<f32>,
+}
+
+/// The refiner step graph (batch 1) and what its input needs.
+#[derive(Clone, Debug)]
+struct Refiner {
+    plan: std::sync::Arc<tract_onnx::prelude::TypedRunnableModel>,
+    stats: EffectorStats,
+    hidden: usize,
+}
+
+/// A loaded synthesis model (the step graph, its `zoo.synthesis` section, and the refiner's
+/// step when the file has one). Cheap to clone, `Send + Sync`.
 #[derive(Clone, Debug)]
 pub struct SynthesisModel {
     model: MotionModel,
@@ -35,6 +62,46 @@ pub struct SynthesisModel {
     references: Vec<DQuat>,
     mean: Vec<f32>,
     std: Vec<f32>,
+    refiner: Option<Refiner>,
+}
+
+/// The refiner of a file, if it embeds one.
+fn load_refiner(proto: &tract_onnx::pb::ModelProto, d: usize) -> Result<Option<Refiner>, MotionError> {
+    use base64::Engine as _;
+    use tract_onnx::prelude::*;
+    let prop = |key: &str| proto.metadata_props.iter().find(|p| p.key == key).map(|p| p.value.as_str());
+    let (Some(graph), Some(stats)) = (prop(REFINER_GRAPH_KEY), prop(REFINER_KEY)) else { return Ok(None) };
+    let stats: EffectorStats = serde_json::from_str(stats).map_err(|e| bad(REFINER_KEY, e.to_string()))?;
+    let e = 6 * stats.effectors.len();
+    if stats.mean.len() != e || stats.std.len() != e || stats.std.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+        return Err(bad(REFINER_KEY, format!("{} effectors need {e} means and positive stds", stats.effectors.len())));
+    }
+    let bytes = base64::engine::general_purpose::STANDARD
+        .decode(graph)
+        .map_err(|err| bad(REFINER_GRAPH_KEY, err.to_string()))?;
+    let run = |err: TractError| MotionError::Run { reason: format!("{err:#}") };
+    let graph_proto =
+        tract_onnx::pb::ModelProto::decode(&bytes[..]).map_err(|err| bad(REFINER_GRAPH_KEY, err.to_string()))?;
+    let h = graph_proto
+        .graph
+        .as_ref()
+        .and_then(|g| g.input.get(2))
+        .and_then(|v| match &v.r#type {
+            Some(tract_onnx::pb::TypeProto {
+                value: Some(tract_onnx::pb::type_proto::Value::TensorType(t)), ..
+            }) => t.shape.as_ref().and_then(|s| s.dim.get(1)).and_then(|d| match d.value {
+                Some(tract_onnx::pb::tensor_shape_proto::dimension::Value::DimValue(n)) if n > 0 => Some(n as usize),
+                _ => None,
+            }),
+            _ => None,
+        })
+        .ok_or_else(|| bad(REFINER_GRAPH_KEY, "input 2 (`h`) has no fixed width"))?;
+    let mut model = tract_onnx::onnx().model_for_proto_model(&graph_proto).map_err(run)?;
+    for (i, w) in [d, e, h, h].iter().enumerate() {
+        model.set_input_fact(i, f32::fact([1, *w]).into()).map_err(run)?;
+    }
+    let plan = model.into_optimized().and_then(|m| m.into_runnable()).map_err(run)?;
+    Ok(Some(Refiner { plan, stats, hidden: h }))
 }
 
 fn bad(key: &str, reason: impl Into<String>) -> MotionError {
@@ -87,7 +154,46 @@ impl SynthesisModel {
         };
         let (mean, std) = (norm.mean.clone(), norm.std.clone());
         let references = task.references.iter().map(|q| DQuat::from_xyzw(q[0], q[1], q[2], q[3]).normalize()).collect();
-        Ok(SynthesisModel { model, task, references, mean, std })
+        let refiner = load_refiner(&proto, d)?;
+        Ok(SynthesisModel { model, task, references, mean, std, refiner })
+    }
+
+    /// Whether frames are refined (the file embeds the refiner's step).
+    pub fn has_refiner(&self) -> bool {
+        self.refiner.is_some()
+    }
+
+    /// The same model without its refiner (the generator's own frames).
+    pub fn without_refiner(mut self) -> Self {
+        self.refiner = None;
+        self
+    }
+
+    /// End-effector positions of a frame (normalised) in the heading frame: the forward
+    /// kinematics of `zoo_rnngmm::fk` (root tilt at height `ty`, heading and ground position
+    /// removed), in f64.
+    fn effector_positions(
+        &self,
+        x: &[f32],
+        stats: &EffectorStats,
+        out: &mut [DVec3],
+        rot: &mut [DQuat],
+        pos: &mut [DVec3],
+    ) {
+        let v = |i: usize| (x[i] * self.std[i] + self.mean[i]) as f64;
+        let skeleton = &self.model.metadata().skeleton;
+        rot[0] = from_scaled_axis(DVec3::new(v(4), 0.0, v(5)));
+        pos[0] = DVec3::new(0.0, v(3), 0.0);
+        for j in 1..self.joints() {
+            let p = skeleton.parents[j] as usize;
+            let i = 6 + 3 * (j - 1);
+            let local = self.references[j] * from_scaled_axis(DVec3::new(v(i), v(i + 1), v(i + 2)));
+            pos[j] = pos[p] + rot[p] * skeleton.offset(j).as_dvec3();
+            rot[j] = rot[p] * local;
+        }
+        for (k, &j) in stats.effectors.iter().enumerate() {
+            out[k] = pos[j];
+        }
     }
 
     /// The step graph.
@@ -108,12 +214,16 @@ impl SynthesisModel {
     /// A character standing at the origin facing +Z, seeded with `seed`; give it a start frame
     /// with [`SynthesisCharacter::start`] before stepping it.
     pub fn new_character(&self, seed: u64) -> SynthesisCharacter {
+        let (hu, e) = self.refiner.as_ref().map_or((0, 0), |r| (r.hidden, r.stats.effectors.len()));
         SynthesisCharacter {
             state: self.model.new_state(),
             rng: SplitMix64::new(seed),
             x: vec![0.0; self.task.frame_dim],
             placement: [0.0; 3],
             started: false,
+            refiner_h: vec![0.0; hu],
+            refiner_c: vec![0.0; hu],
+            effectors: vec![DVec3::ZERO; e],
         }
     }
 
@@ -130,6 +240,10 @@ impl SynthesisModel {
             stds: vec![0.0; n * m * d],
             states: Vec::with_capacity(n),
             world: vec![Quat::IDENTITY; self.references.len()],
+            refined: vec![0.0; d],
+            effectors: vec![DVec3::ZERO; self.refiner.as_ref().map_or(0, |r| r.stats.effectors.len())],
+            fk_rot: vec![DQuat::IDENTITY; self.references.len()],
+            fk_pos: vec![DVec3::ZERO; self.references.len()],
         })
     }
 }
@@ -144,6 +258,11 @@ pub struct SynthesisCharacter {
     /// Ground position x, z and heading of the root.
     placement: [f64; 3],
     started: bool,
+    /// The refiner's LSTM state.
+    refiner_h: Vec<f32>,
+    refiner_c: Vec<f32>,
+    /// End-effector positions of the previous (unrefined) frame, for the velocities.
+    effectors: Vec<DVec3>,
 }
 
 impl SynthesisCharacter {
@@ -166,6 +285,13 @@ impl SynthesisCharacter {
         self.state.reset();
         self.placement = [x as f64, z as f64, yaw as f64];
         self.started = true;
+        if let Some(r) = &model.refiner {
+            self.refiner_h.fill(0.0);
+            self.refiner_c.fill(0.0);
+            let j = model.joints();
+            let (mut rot, mut pos) = (vec![DQuat::IDENTITY; j], vec![DVec3::ZERO; j]);
+            model.effector_positions(&self.x, &r.stats, &mut self.effectors, &mut rot, &mut pos);
+        }
         Ok(())
     }
 
@@ -187,6 +313,10 @@ pub struct SynthesisRunner {
     stds: Vec<f32>,
     states: Vec<MotionState>,
     world: Vec<Quat>,
+    refined: Vec<f32>,
+    effectors: Vec<DVec3>,
+    fk_rot: Vec<DQuat>,
+    fk_pos: Vec<DVec3>,
 }
 
 impl SynthesisRunner {
@@ -276,16 +406,57 @@ impl SynthesisRunner {
                 let z = ch.rng.normal();
                 ch.x[j] = (mu[k * d + j] as f64 + temperature as f64 * sd[k * d + j] as f64 * z) as f32;
             }
-            contacts[c] = self.decode(ch, &mut poses[c]);
+            let refined = self.refine(ch)?;
+            contacts[c] = self.decode(ch, refined, &mut poses[c]);
         }
         Ok(())
     }
 
-    /// Decodes the character's (new) current frame into `pose`, advancing its placement.
-    fn decode(&mut self, ch: &mut SynthesisCharacter, pose: &mut EnginePose) -> [bool; 2] {
+    /// Refines the character's new frame into `self.refined` (eq. 11); returns whether it did.
+    fn refine(&mut self, ch: &mut SynthesisCharacter) -> Result<bool, MotionError> {
+        use tract_onnx::prelude::*;
+        let Some(r) = &self.model.refiner else { return Ok(false) };
+        let d = self.model.task.frame_dim;
+        let s = &r.stats;
+        self.model.effector_positions(&ch.x, s, &mut self.effectors, &mut self.fk_rot, &mut self.fk_pos);
+        // v_t = (dtx, 0, dtz) + yaw(dry) p_t - p_(t-1), in the previous heading frame.
+        let v = |i: usize| (ch.x[i] * self.model.std[i] + self.model.mean[i]) as f64;
+        let step = DVec3::new(v(0), 0.0, v(1));
+        let turn = DQuat::from_rotation_y(v(2));
+        let n = s.effectors.len();
+        let mut e = vec![0f32; 6 * n];
+        for (k, p) in self.effectors.iter().enumerate() {
+            let vel = step + turn * *p - ch.effectors[k];
+            for a in 0..3 {
+                e[3 * k + a] = p[a] as f32;
+                e[3 * n + 3 * k + a] = vel[a] as f32;
+            }
+        }
+        for (i, v) in e.iter_mut().enumerate() {
+            *v = (*v - s.mean[i]) / s.std[i];
+        }
+        ch.effectors.copy_from_slice(&self.effectors);
+        let run = |err: TractError| MotionError::Run { reason: format!("{err:#}") };
+        let t = |v: &[f32]| -> Result<TValue, MotionError> {
+            Ok(Tensor::from_shape::<f32>(&[1, v.len()], v).map_err(run)?.into_tvalue())
+        };
+        let out = r.plan.run(tvec![t(&ch.x)?, t(&e)?, t(&ch.refiner_h)?, t(&ch.refiner_c)?]).map_err(run)?;
+        let get = |i: usize| -> Result<&[f32], MotionError> {
+            out[i].try_as_plain_ram().and_then(|t| t.as_slice::<f32>()).map_err(run)
+        };
+        self.refined[..d].copy_from_slice(get(0)?);
+        ch.refiner_h.copy_from_slice(get(1)?);
+        ch.refiner_c.copy_from_slice(get(2)?);
+        Ok(true)
+    }
+
+    /// Decodes the character's new frame (refined when `refined`) into `pose`, advancing its
+    /// placement.
+    fn decode(&mut self, ch: &mut SynthesisCharacter, refined: bool, pose: &mut EnginePose) -> [bool; 2] {
         let model = &self.model;
         let d = model.task.frame_dim;
-        let v = |i: usize| (ch.x[i] * model.std[i] + model.mean[i]) as f64;
+        let x: &[f32] = if refined { &self.refined } else { &ch.x };
+        let v = |i: usize| (x[i] * model.std[i] + model.mean[i]) as f64;
         let [px, pz, yaw] = ch.placement;
         let step = DQuat::from_rotation_y(yaw) * DVec3::new(v(0), 0.0, v(1));
         ch.placement = [px + step.x, pz + step.z, yaw + v(2)];
