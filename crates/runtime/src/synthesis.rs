@@ -22,7 +22,7 @@
 //! start from the zero state, as the paper's baseline).
 
 use crate::error::MotionError;
-use crate::metadata::synthesis::{KEY, SynthesisTask};
+use crate::metadata::synthesis::{KEY, REFINER_GRAPH_KEY, REFINER_KEY, SynthesisTask};
 use crate::model::{MotionModel, MotionState};
 use crate::pose::EnginePose;
 use crate::runner::{MotionRunner, check_finite, check_len};
@@ -31,11 +31,6 @@ use prost::Message;
 use std::path::Path;
 use zoo_motion::quat::from_scaled_axis;
 use zoo_motion::rng::SplitMix64;
-
-/// metadata_props key of the embedded refiner step graph (base64 ONNX).
-pub const REFINER_GRAPH_KEY: &str = "zoo.rnngmm.refiner_graph";
-/// metadata_props key of the refiner's end-effector statistics (JSON).
-pub const REFINER_KEY: &str = "zoo.rnngmm.refiner";
 
 /// The refiner's end-effector statistics as the exporter writes them.
 #[derive(Clone, Debug, serde::Deserialize)]

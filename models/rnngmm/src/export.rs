@@ -26,8 +26,8 @@
 //! velocities of that frame, 6 E, computed by the caller with the forward kinematics of
 //! [`crate::fk`]: the previous frame is needed for the velocities), `h`, `c` (its LSTM state);
 //! outputs `x_refined` (D, eq. 11: `W2 lstm(relu(W1 [x; e] + b1)) + b2 + x`), `h_next`, `c_next`.
-//! The runtime does not run it yet (it needs that forward kinematics); the discriminator is
-//! training-only.
+//! `zoo_runtime::synthesis` runs it behind the generator (with its own forward kinematics);
+//! the discriminator is training-only.
 
 use crate::config::Config;
 use crate::features::{CONTACT_DIMS, FeatureSpec, Normalization, ROOT_DIMS};
@@ -43,10 +43,7 @@ use zoo_runtime::metadata::{
 
 /// `zoo.model_kind` of an exported RNN-GMM.
 pub const MODEL_KIND: &str = "rnn-gmm";
-/// metadata_props key of the embedded refiner step graph (base64 ONNX).
-pub const REFINER_GRAPH_KEY: &str = "zoo.rnngmm.refiner_graph";
-/// metadata_props key of the refiner's end-effector statistics ([`crate::EffectorNorm`], JSON).
-pub const REFINER_KEY: &str = "zoo.rnngmm.refiner";
+pub use zoo_runtime::metadata::synthesis::{REFINER_GRAPH_KEY, REFINER_KEY};
 
 fn model_err(message: impl Into<String>) -> ExportError {
     ExportError::Model(message.into())

@@ -9,6 +9,12 @@ use serde::{Deserialize, Serialize};
 
 /// metadata_props key of the [`SynthesisTask`] section.
 pub const KEY: &str = "zoo.synthesis";
+/// metadata_props key of the refiner's step graph (base64 ONNX; optional): inputs `x` (D),
+/// `effectors` (6 E), `h`, `c`; outputs `x_refined` (D), `h_next`, `c_next`.
+pub const REFINER_GRAPH_KEY: &str = "zoo.rnngmm.refiner_graph";
+/// metadata_props key of the refiner's end effectors and their statistics (JSON
+/// `{"effectors": [joint, ...], "mean": [6 E], "std": [6 E]}`; with the refiner graph).
+pub const REFINER_KEY: &str = "zoo.rnngmm.refiner";
 
 /// How a synthesis model is driven and decoded. Feature frame layout (`D` values, clip units):
 /// `dtx, dtz` (root step in the previous heading frame), `dry` (heading change), `ty` (root
