@@ -187,9 +187,13 @@ fn generate_is_deterministic_streams_and_refuses_bad_input() {
     // The generator's export loads as a synthesis model of the runtime.
     let onnx = out("gmm.onnx");
     let stdout = ok(&["export", "--onnx", &r, "--out", &onnx]);
-    assert!(stdout.contains("RNN-GMM generator step graph"), "{stdout}");
+    assert!(stdout.contains("RNN-GMM generator step graph") && stdout.contains("and the refiner's step"), "{stdout}");
     let model = zoo_runtime::synthesis::SynthesisModel::load(&onnx).unwrap();
     assert_eq!(model.model().metadata().model_kind, "rnn-gmm");
+    assert!(model.has_refiner());
+    let stdout = ok(&["export", "--onnx", &gen_dir, "--out", &onnx]);
+    assert!(stdout.contains("without a refiner"), "{stdout}");
+    assert!(!zoo_runtime::synthesis::SynthesisModel::load(&onnx).unwrap().has_refiner());
 
     // The synthesis benchmark on synthetic clips written as BVH.
     let data = out("synth");

@@ -72,12 +72,13 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
                 .with_context(|| format!("exporting {}", a.onnx.display()))?;
             model.write(&a.out)?;
             let summary = model.summary();
+            let refiner = model.metadata_value(zoo_rnngmm::export::REFINER_GRAPH_KEY).is_some();
             println!(
-                "wrote {}: RNN-GMM generator step graph ({} nodes, {} parameters) with its metadata (the refiner is \
-                 not exported yet)",
+                "wrote {}: RNN-GMM generator step graph ({} nodes, {} parameters) with its metadata, {}",
                 a.out.display(),
                 summary.op_counts.values().sum::<usize>(),
-                summary.parameters
+                summary.parameters,
+                if refiner { "and the refiner's step graph" } else { "without a refiner (generator stage only)" }
             );
             return Ok(());
         }
