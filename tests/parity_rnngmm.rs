@@ -450,3 +450,28 @@ fn the_exported_refiner_step_matches_candle_in_tract_and_onnxruntime() {
     let moved = (candle - &x).unwrap().abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap();
     assert!(moved > 1e-4, "{moved}");
 }
+
+/// Frame latency (one character) and throughput (64 characters) of the runtime's synthesis,
+/// with and without the refiner, on an exported file named by `ZOO_RNNGMM_ONNX` (e.g. `zoo
+/// export` of a bandai2 run). Ignored: a measurement, not a check.
+#[test]
+#[ignore = "timing of an exported RNN-GMM; set ZOO_RNNGMM_ONNX and run with --ignored --nocapture"]
+fn runtime_synthesis_timings() {
+    let path = std::env::var("ZOO_RNNGMM_ONNX").expect("set ZOO_RNNGMM_ONNX to an exported RNN-GMM");
+    let full = SynthesisModel::load(&path).unwrap();
+    let start: Vec<f32> = full.model().metadata().normalization["x"].mean.clone();
+    for (name, model) in [("with the refiner", full.clone()), ("generator only", full.clone().without_refiner())] {
+        for batch in [1usize, 64] {
+            let frames = if batch == 1 { 300 } else { 20 };
+            let seeds: Vec<u64> = (0..batch as u64).collect();
+            let t = std::time::Instant::now();
+            runtime_poses(&model, &start, &seeds, frames);
+            let s = t.elapsed().as_secs_f64() / frames as f64;
+            println!(
+                "{name}, batch {batch}: {:.3} ms per frame step, {:.0} character-frames/s",
+                s * 1e3,
+                batch as f64 / s
+            );
+        }
+    }
+}
