@@ -41,6 +41,10 @@ enum Command {
     Render(cmd::render::RenderArgs),
     /// Join locomotion clips into one with a trained RMR (or inertialization, interpolation).
     Stitch(cmd::stitch::StitchArgs),
+    /// Random motion synthesis of any length with a trained RNN-GMM (BVH + contact labels).
+    Generate(cmd::generate::GenerateArgs),
+    /// The synthesis benchmark: seeded RNN-GMM sequences against held-out real motion.
+    BenchSynthesis(cmd::bench_synthesis::BenchSynthesisArgs),
 }
 
 /// Environment of the training commands (`zoo train`, `zoo bench train`), which must be in
@@ -109,5 +113,7 @@ fn main() -> anyhow::Result<()> {
         Command::Export(a) => cmd::export::run(a),
         Command::Render(a) => cmd::render::run(a),
         Command::Stitch(a) => cmd::stitch::run(a),
+        Command::Generate(a) => cmd::generate::run(a),
+        Command::BenchSynthesis(a) => cmd::bench_synthesis::run(a),
     }
 }

@@ -49,6 +49,12 @@ pub const MODELS: &[ModelEntry] = &[
         bench: None,
         transitions: false,
     },
+    ModelEntry {
+        kind: "rnn-gmm",
+        purpose: "random motion synthesis (`zoo generate`, `zoo bench-synthesis`)",
+        bench: None,
+        transitions: false,
+    },
 ];
 
 fn load_rtn_method(dir: &Path, name: String, foot_lock: bool) -> anyhow::Result<Box<dyn TransitionMethod>> {

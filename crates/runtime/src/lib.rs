@@ -32,6 +32,7 @@ pub mod metadata;
 pub mod model;
 pub mod pose;
 pub mod runner;
+pub mod synthesis;
 pub mod transition;
 
 pub use error::MotionError;

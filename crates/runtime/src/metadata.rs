@@ -33,6 +33,7 @@
 //! Adding a task: a section type in a new submodule (like [`transition`]), an arm of
 //! [`MotionTask`], and its key in [`keys`].
 
+pub mod synthesis;
 pub mod transition;
 
 use crate::error::MotionError;

@@ -12,7 +12,8 @@
 //!   ([`AdversarialTraining`] for the shared loop);
 //! - [`synthesis`]: random synthesis continuing a clip (seed, eq. 26, sampling, refiner, decoding);
 //! - [`train`]: the generator's training ([`GeneratorTraining`] for the shared loop);
-//! - [`checkpoint`]: run folders.
+//! - [`checkpoint`]: run folders;
+//! - [`export`]: the generator's step graph as ONNX for the engine runtime.
 //!
 //! ```no_run
 //! use zoo_rnngmm::prelude::*;
@@ -32,6 +33,7 @@
 pub mod checkpoint;
 pub mod config;
 pub mod error;
+pub mod export;
 pub mod features;
 pub mod fk;
 pub mod gmm;
@@ -48,7 +50,7 @@ pub use gmm::Mixture;
 pub use initial_state::{InitialState, estimate_initial_state};
 pub use model::Generator;
 pub use refiner::{AdversarialTrainer, AdversarialTraining, EffectorNorm, RefinerNets};
-pub use synthesis::{Synthesis, SynthesisOptions, synthesize};
+pub use synthesis::{Synthesis, SynthesisChunk, SynthesisOptions, SynthesisStream, synthesize};
 pub use train::{GeneratorTrainer, GeneratorTraining, TrainingData, Windows};
 
 /// The common imports.
@@ -61,7 +63,7 @@ pub mod prelude {
     pub use crate::initial_state::estimate_initial_state;
     pub use crate::model::Generator;
     pub use crate::refiner::{AdversarialTrainer, AdversarialTraining};
-    pub use crate::synthesis::{SynthesisOptions, synthesize};
+    pub use crate::synthesis::{SynthesisOptions, SynthesisStream, synthesize};
     pub use crate::train::{GeneratorTrainer, GeneratorTraining, TrainingData, Windows};
     pub use zoo_motion::rng::SplitMix64;
     pub use zoo_nn::LstmState;

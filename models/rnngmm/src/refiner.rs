@@ -30,7 +30,7 @@ use zoo_motion::rng::SplitMix64;
 use zoo_nn::checkpoint as ck;
 use zoo_nn::optim::{ParamsRmsProp, RmsProp, StatefulOptimizer, clip_grad_value};
 use zoo_nn::train_loop::{Trainable, Validation};
-use zoo_nn::{BiLstm, Lstm, SeededVarMap, TrainError};
+use zoo_nn::{BiLstm, Lstm, LstmState, SeededVarMap, TrainError};
 
 /// The refiner's weights.
 pub const REFINER_FILE: &str = "refiner.safetensors";
@@ -170,6 +170,29 @@ impl RefinerNets {
         let h = self.r_fc1.forward(&Tensor::cat(&[x, &e], 2)?)?.relu()?;
         let (h, _) = self.r_lstm.forward_seq(&h, &self.r_lstm.zero_state(x.dim(0)?)?, None)?;
         self.r_fc2.forward(&h)? + x
+    }
+
+    /// `R(x)` over a long sequence in chunks (streaming synthesis): refines the chunk `x`
+    /// `(batch, time, D)` that follows frame `prev` `(batch, 1, D)` (`None` for the first chunk,
+    /// which needs at least 2 frames), continuing the refiner's LSTM from `state`
+    /// ([`RefinerNets::refiner_zero_state`] at the start). Returns the refined chunk and the
+    /// state after it. Refining a sequence chunk by chunk gives what [`RefinerNets::refine`]
+    /// gives on the whole (up to float rounding): the end-effector velocities of a chunk's first
+    /// frame use `prev`, as they would in the whole sequence.
+    pub fn refine_chunk(&self, x: &Tensor, prev: Option<&Tensor>, state: &LstmState) -> Result<(Tensor, LstmState)> {
+        let t = x.dim(1)?;
+        let e = match prev {
+            Some(p) => self.effector_input(&Tensor::cat(&[p, x], 1)?)?.narrow(1, 1, t)?,
+            None => self.effector_input(x)?,
+        };
+        let h = self.r_fc1.forward(&Tensor::cat(&[x, &e.detach()], 2)?)?.relu()?;
+        let (h, state) = self.r_lstm.forward_seq(&h, state, None)?;
+        Ok(((self.r_fc2.forward(&h)? + x)?, state))
+    }
+
+    /// The refiner LSTM's zero state for `batch` sequences.
+    pub fn refiner_zero_state(&self, batch: usize) -> Result<LstmState> {
+        self.r_lstm.zero_state(batch)
     }
 
     /// Discriminator logits (eq. 12), one per frame: `(batch, time)`.
@@ -416,6 +439,11 @@ impl AdversarialTrainer {
         self.last_d
     }
 
+    /// Adversarial rounds run (the warm-up not counted).
+    pub fn rounds(&self) -> u64 {
+        self.rounds
+    }
+
     /// Fake windows `(batch, window, D)` by index into the fake pool.
     fn fake_tensor(&self, idx: &[usize]) -> Result<Tensor> {
         let mut data = Vec::with_capacity(idx.len() * self.fakes.window * self.fakes.dim);
@@ -624,12 +652,23 @@ impl AdversarialTrainer {
 pub struct AdversarialTraining<'a> {
     trainer: AdversarialTrainer,
     real: &'a Windows,
+    rounds_per_epoch: Option<usize>,
 }
 
 impl<'a> AdversarialTraining<'a> {
-    /// Trains on the real windows `real` (those the trainer was built with).
+    /// Trains on the real windows `real` (those the trainer was built with); an epoch is one
+    /// pass over them (`real.len() / batch` rounds).
     pub fn new(trainer: AdversarialTrainer, real: &'a Windows) -> Self {
-        AdversarialTraining { trainer, real }
+        AdversarialTraining { trainer, real, rounds_per_epoch: None }
+    }
+
+    /// Makes an epoch `rounds` rounds (at least 1) whose real windows are drawn at random from
+    /// all of `real` with the trainer's seeded generator (saved with the training state), instead
+    /// of one pass over them. A round costs several refiner updates, so a pass over a large set
+    /// can take longer than a time limit, which the training loop checks between epochs.
+    pub fn with_rounds_per_epoch(mut self, rounds: usize) -> Self {
+        self.rounds_per_epoch = Some(rounds.max(1));
+        self
     }
 
     /// The trainer.
@@ -640,7 +679,10 @@ impl<'a> AdversarialTraining<'a> {
 
 impl Trainable for AdversarialTraining<'_> {
     fn train_len(&self) -> usize {
-        self.real.len()
+        match self.rounds_per_epoch {
+            Some(r) => r * self.trainer.config.refiner.batch,
+            None => self.real.len(),
+        }
     }
 
     fn batch_size(&self) -> usize {
@@ -648,6 +690,10 @@ impl Trainable for AdversarialTraining<'_> {
     }
 
     fn train_step(&mut self, samples: &[usize]) -> std::result::Result<f64, TrainError> {
+        if self.rounds_per_epoch.is_some() {
+            let idx = self.trainer.draw(samples.len(), self.real.len());
+            return Ok(self.trainer.round(self.real, &idx)?);
+        }
         Ok(self.trainer.round(self.real, samples)?)
     }
 

@@ -36,7 +36,8 @@ pub struct ExportArgs {
 }
 
 /// The model kinds `zoo export` writes.
-const EXPORT_KINDS: [&str; 2] = [zoo_rtn::export::MODEL_KIND, zoo_rmr::export::MODEL_KIND];
+const EXPORT_KINDS: [&str; 3] =
+    [zoo_rtn::export::MODEL_KIND, zoo_rmr::export::MODEL_KIND, zoo_rnngmm::export::MODEL_KIND];
 
 /// The `"model"` field of a run folder's `config.json` (`None` when absent: an RTN folder).
 fn model_kind(config_path: &Path) -> anyhow::Result<Option<String>> {
@@ -82,6 +83,21 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
                 zoo_rmr::export::export_rmr_dir(&a.onnx).with_context(|| format!("exporting {}", a.onnx.display()))?;
             model.write(&a.out)?;
             println!("wrote {}: RMR window refiner with its configuration and statistics", a.out.display());
+            return Ok(());
+        }
+        Some(zoo_rnngmm::export::MODEL_KIND) => {
+            let model = zoo_rnngmm::export::export_generator_dir(&a.onnx)
+                .with_context(|| format!("exporting {}", a.onnx.display()))?;
+            model.write(&a.out)?;
+            let summary = model.summary();
+            let refiner = model.metadata_value(zoo_rnngmm::export::REFINER_GRAPH_KEY).is_some();
+            println!(
+                "wrote {}: RNN-GMM generator step graph ({} nodes, {} parameters) with its metadata, {}",
+                a.out.display(),
+                summary.op_counts.values().sum::<usize>(),
+                summary.parameters,
+                if refiner { "and the refiner's step graph" } else { "without a refiner (generator stage only)" }
+            );
             return Ok(());
         }
         Some(other) => bail!(

@@ -3,15 +3,18 @@
 pub mod bench;
 pub mod bench_runtime;
 pub mod bench_stitch;
+pub mod bench_synthesis;
 pub mod bench_train;
 pub mod data;
 pub mod data_luxo;
 pub mod decompress;
 pub mod export;
+pub mod generate;
 pub mod render;
 pub mod stitch;
 pub mod train;
 pub mod train_rmr;
+pub mod train_rnngmm;
 pub mod transition;
 
 use anyhow::{Context, bail};

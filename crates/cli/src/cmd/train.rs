@@ -18,6 +18,8 @@ pub enum TrainCommand {
     Rtn(RtnArgs),
     /// The Recurrent Motion Refiner for locomotion stitching (Kim et al. 2023).
     Rmr(crate::cmd::train_rmr::RmrArgs),
+    /// RNN-GMM with an adversarial refiner (Wang, Chai & Xia 2019): random motion synthesis.
+    RnnGmm(crate::cmd::train_rnngmm::RnnGmmArgs),
 }
 
 /// Which RTN to train: the paper's model or one of its Table 4 ablations.
@@ -134,6 +136,7 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
     match cmd {
         TrainCommand::Rtn(a) => train_rtn(a),
         TrainCommand::Rmr(a) => crate::cmd::train_rmr::run(a),
+        TrainCommand::RnnGmm(a) => crate::cmd::train_rnngmm::run(a),
     }
 }
 

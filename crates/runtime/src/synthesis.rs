@@ -1,0 +1,481 @@
+//! Random motion synthesis with an exported RNN-GMM generator (Wang, Chai & Xia 2019): one
+//! [`SynthesisModel`] shared by many characters, one [`SynthesisCharacter`] per character (its
+//! generator state, its seeded random numbers, its current frame and where it stands), and a
+//! [`SynthesisRunner`] per thread that steps one character or a batch of them.
+//!
+//! Each step runs the generator's step graph (mixture weights, means and standard deviations
+//! of the next frame), samples the next frame from the mixture with the character's own
+//! `SplitMix64` (a component by its weight, then `mu + temperature * sigma * n` per value, as
+//! `zoo_rnngmm::Mixture::sample` does), feeds it back, and decodes it into an [`EnginePose`]
+//! (root motion accumulated as in the paper's eq. 4) plus the left / right contact bits. A
+//! character's frames depend only on its seed and start frame: the same in any batch, on any
+//! thread, in any run.
+//!
+//! When the file embeds the refiner's step graph (`zoo.rnngmm.refiner_graph`, written by
+//! `zoo_rnngmm::export` for a run folder with a refiner), each sampled frame is refined behind
+//! the generator (eq. 11): the runtime computes its end-effector positions and velocities (the
+//! forward kinematics of `zoo_rnngmm::fk`, in f64), runs the refiner step (its LSTM state is the
+//! character's), and decodes the refined frame; the generator still reads its own samples. The
+//! refiner adds no latency in frames (it is causal: frame `t` needs frames up to `t`). The
+//! refiner graph runs per character at batch 1 through tract, which allocates per call (the
+//! generator's batched step does not). Not here yet: the initial state estimation of eq. 26 (a
+//! start from the zero state, as the paper's baseline).
+
+use crate::error::MotionError;
+use crate::metadata::synthesis::{KEY, REFINER_GRAPH_KEY, REFINER_KEY, SynthesisTask};
+use crate::model::{MotionModel, MotionState};
+use crate::pose::EnginePose;
+use crate::runner::{MotionRunner, check_finite, check_len};
+use glam::{DQuat, DVec3, Quat, Vec3};
+use prost::Message;
+use std::path::Path;
+use zoo_motion::quat::from_scaled_axis;
+use zoo_motion::rng::SplitMix64;
+
+/// The refiner's end-effector statistics as the exporter writes them.
+#[derive(Clone, Debug, serde::Deserialize)]
+struct EffectorStats {
+    effectors: Vec<usize>,
+    mean: Vec<f32>,
+    std: Vec<f32>,
+}
+
+/// The refiner step graph (batch 1) and what its input needs.
+#[derive(Clone, Debug)]
+struct Refiner {
+    plan: std::sync::Arc<tract_onnx::prelude::TypedRunnableModel>,
+    stats: EffectorStats,
+    hidden: usize,
+}
+
+/// A loaded synthesis model (the step graph, its `zoo.synthesis` section, and the refiner's
+/// step when the file has one). Cheap to clone, `Send + Sync`.
+#[derive(Clone, Debug)]
+pub struct SynthesisModel {
+    model: MotionModel,
+    task: SynthesisTask,
+    references: Vec<DQuat>,
+    mean: Vec<f32>,
+    std: Vec<f32>,
+    refiner: Option<Refiner>,
+}
+
+/// The refiner of a file, if it embeds one.
+fn load_refiner(proto: &tract_onnx::pb::ModelProto, d: usize) -> Result<Option<Refiner>, MotionError> {
+    use base64::Engine as _;
+    use tract_onnx::prelude::*;
+    let prop = |key: &str| proto.metadata_props.iter().find(|p| p.key == key).map(|p| p.value.as_str());
+    let (Some(graph), Some(stats)) = (prop(REFINER_GRAPH_KEY), prop(REFINER_KEY)) else { return Ok(None) };
+    let stats: EffectorStats = serde_json::from_str(stats).map_err(|e| bad(REFINER_KEY, e.to_string()))?;
+    let e = 6 * stats.effectors.len();
+    if stats.mean.len() != e || stats.std.len() != e || stats.std.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+        return Err(bad(REFINER_KEY, format!("{} effectors need {e} means and positive stds", stats.effectors.len())));
+    }
+    let bytes = base64::engine::general_purpose::STANDARD
+        .decode(graph)
+        .map_err(|err| bad(REFINER_GRAPH_KEY, err.to_string()))?;
+    let run = |err: TractError| MotionError::Run { reason: format!("{err:#}") };
+    let graph_proto =
+        tract_onnx::pb::ModelProto::decode(&bytes[..]).map_err(|err| bad(REFINER_GRAPH_KEY, err.to_string()))?;
+    let h = graph_proto
+        .graph
+        .as_ref()
+        .and_then(|g| g.input.get(2))
+        .and_then(|v| match &v.r#type {
+            Some(tract_onnx::pb::TypeProto {
+                value: Some(tract_onnx::pb::type_proto::Value::TensorType(t)), ..
+            }) => t.shape.as_ref().and_then(|s| s.dim.get(1)).and_then(|d| match d.value {
+                Some(tract_onnx::pb::tensor_shape_proto::dimension::Value::DimValue(n)) if n > 0 => Some(n as usize),
+                _ => None,
+            }),
+            _ => None,
+        })
+        .ok_or_else(|| bad(REFINER_GRAPH_KEY, "input 2 (`h`) has no fixed width"))?;
+    let mut model = tract_onnx::onnx().model_for_proto_model(&graph_proto).map_err(run)?;
+    for (i, w) in [d, e, h, h].iter().enumerate() {
+        model.set_input_fact(i, f32::fact([1, *w]).into()).map_err(run)?;
+    }
+    let plan = model.into_optimized().and_then(|m| m.into_runnable()).map_err(run)?;
+    Ok(Some(Refiner { plan, stats, hidden: h }))
+}
+
+fn bad(key: &str, reason: impl Into<String>) -> MotionError {
+    MotionError::BadMetadata { key: key.to_string(), reason: reason.into() }
+}
+
+impl SynthesisModel {
+    /// Loads an exported RNN-GMM generator (`zoo export --onnx RUN_DIR --out FILE.onnx`).
+    pub fn load(path: impl AsRef<Path>) -> Result<Self, MotionError> {
+        let path = path.as_ref();
+        let bytes =
+            std::fs::read(path).map_err(|source| MotionError::Io { path: path.display().to_string(), source })?;
+        Self::from_bytes(&bytes)
+    }
+
+    /// Loads an exported RNN-GMM generator from the bytes of its file.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, MotionError> {
+        let model = MotionModel::from_bytes(bytes)?;
+        let proto = tract_onnx::pb::ModelProto::decode(bytes)
+            .map_err(|e| MotionError::NotOnnx { origin: "the model bytes".into(), reason: e.to_string() })?;
+        let meta = model.metadata();
+        let Some(section) = proto.metadata_props.iter().find(|p| p.key == KEY) else {
+            return Err(MotionError::WrongTask {
+                task: meta.task.name().to_string(),
+                kind: meta.model_kind.clone(),
+                expected: "synthesis",
+                loader: "SynthesisModel",
+            });
+        };
+        let task: SynthesisTask = serde_json::from_str(&section.value).map_err(|e| bad(KEY, e.to_string()))?;
+        task.check(meta.skeleton.len()).map_err(|r| bad(KEY, r))?;
+        let (d, m) = (task.frame_dim, task.components);
+        let widths = |infos: &[crate::model::MotionTensorInfo]| -> Vec<(String, usize)> {
+            infos.iter().map(|i| (i.name.clone(), i.width)).collect()
+        };
+        let want_in = vec![("x".to_string(), d)];
+        let want_out = vec![("weights".to_string(), m), ("means".to_string(), m * d), ("stds".to_string(), m * d)];
+        if widths(model.inputs()) != want_in || widths(model.outputs()) != want_out {
+            return Err(bad(
+                KEY,
+                format!(
+                    "the step graph takes {:?} and gives {:?}; a synthesis model takes {want_in:?} and gives {want_out:?}",
+                    widths(model.inputs()),
+                    widths(model.outputs())
+                ),
+            ));
+        }
+        let Some(norm) = meta.normalization.get("x").filter(|n| n.mean.len() == d) else {
+            return Err(bad(crate::metadata::keys::NORMALIZATION, format!("no group `x` of {d} values")));
+        };
+        let (mean, std) = (norm.mean.clone(), norm.std.clone());
+        let references = task.references.iter().map(|q| DQuat::from_xyzw(q[0], q[1], q[2], q[3]).normalize()).collect();
+        let refiner = load_refiner(&proto, d)?;
+        Ok(SynthesisModel { model, task, references, mean, std, refiner })
+    }
+
+    /// Whether frames are refined (the file embeds the refiner's step).
+    pub fn has_refiner(&self) -> bool {
+        self.refiner.is_some()
+    }
+
+    /// The same model without its refiner (the generator's own frames).
+    pub fn without_refiner(mut self) -> Self {
+        self.refiner = None;
+        self
+    }
+
+    /// End-effector positions of a frame (normalised) in the heading frame: the forward
+    /// kinematics of `zoo_rnngmm::fk` (root tilt at height `ty`, heading and ground position
+    /// removed), in f64.
+    fn effector_positions(
+        &self,
+        x: &[f32],
+        stats: &EffectorStats,
+        out: &mut [DVec3],
+        rot: &mut [DQuat],
+        pos: &mut [DVec3],
+    ) {
+        let v = |i: usize| (x[i] * self.std[i] + self.mean[i]) as f64;
+        let skeleton = &self.model.metadata().skeleton;
+        rot[0] = from_scaled_axis(DVec3::new(v(4), 0.0, v(5)));
+        pos[0] = DVec3::new(0.0, v(3), 0.0);
+        for j in 1..self.joints() {
+            let p = skeleton.parents[j] as usize;
+            let i = 6 + 3 * (j - 1);
+            let local = self.references[j] * from_scaled_axis(DVec3::new(v(i), v(i + 1), v(i + 2)));
+            pos[j] = pos[p] + rot[p] * skeleton.offset(j).as_dvec3();
+            rot[j] = rot[p] * local;
+        }
+        for (k, &j) in stats.effectors.iter().enumerate() {
+            out[k] = pos[j];
+        }
+    }
+
+    /// The step graph.
+    pub fn model(&self) -> &MotionModel {
+        &self.model
+    }
+
+    /// Values per feature frame.
+    pub fn frame_dim(&self) -> usize {
+        self.task.frame_dim
+    }
+
+    /// Joints of the skeleton.
+    pub fn joints(&self) -> usize {
+        self.references.len()
+    }
+
+    /// A character standing at the origin facing +Z, seeded with `seed`; give it a start frame
+    /// with [`SynthesisCharacter::start`] before stepping it.
+    pub fn new_character(&self, seed: u64) -> SynthesisCharacter {
+        let (hu, e) = self.refiner.as_ref().map_or((0, 0), |r| (r.hidden, r.stats.effectors.len()));
+        SynthesisCharacter {
+            state: self.model.new_state(),
+            rng: SplitMix64::new(seed),
+            x: vec![0.0; self.task.frame_dim],
+            placement: [0.0; 3],
+            started: false,
+            refiner_h: vec![0.0; hu],
+            refiner_c: vec![0.0; hu],
+            effectors: vec![DVec3::ZERO; e],
+        }
+    }
+
+    /// A runner for one thread, with scratch space for batches of up to `max_batch` characters.
+    pub fn runner(&self, max_batch: usize) -> Result<SynthesisRunner, MotionError> {
+        let n = max_batch.max(1);
+        let (d, m) = (self.task.frame_dim, self.task.components);
+        Ok(SynthesisRunner {
+            model: self.clone(),
+            runner: self.model.runner()?,
+            x: vec![0.0; n * d],
+            weights: vec![0.0; n * m],
+            means: vec![0.0; n * m * d],
+            stds: vec![0.0; n * m * d],
+            states: Vec::with_capacity(n),
+            world: vec![Quat::IDENTITY; self.references.len()],
+            refined: vec![0.0; d],
+            effectors: vec![DVec3::ZERO; self.refiner.as_ref().map_or(0, |r| r.stats.effectors.len())],
+            fk_rot: vec![DQuat::IDENTITY; self.references.len()],
+            fk_pos: vec![DVec3::ZERO; self.references.len()],
+        })
+    }
+}
+
+/// One character: its generator state, random numbers, current frame and placement.
+#[derive(Clone, Debug)]
+pub struct SynthesisCharacter {
+    state: MotionState,
+    rng: SplitMix64,
+    /// The current frame, normalised (the next step's input).
+    x: Vec<f32>,
+    /// Ground position x, z and heading of the root.
+    placement: [f64; 3],
+    started: bool,
+    /// The refiner's LSTM state.
+    refiner_h: Vec<f32>,
+    refiner_c: Vec<f32>,
+    /// End-effector positions of the previous (unrefined) frame, for the velocities.
+    effectors: Vec<DVec3>,
+}
+
+impl SynthesisCharacter {
+    /// Starts from a feature frame in clip units (`frame_dim` values, e.g. a frame of a clip
+    /// encoded by `zoo_rnngmm::FeatureSpec::encode`) with the root at `(x, z)` facing `yaw`
+    /// (radians about +Y), from the zero generator state. The random numbers are not reset.
+    pub fn start(
+        &mut self,
+        model: &SynthesisModel,
+        frame: &[f32],
+        x: f32,
+        z: f32,
+        yaw: f32,
+    ) -> Result<(), MotionError> {
+        check_len("start frame", frame.len(), 1, model.task.frame_dim)?;
+        check_finite("start frame", frame, model.task.frame_dim)?;
+        for (i, v) in frame.iter().enumerate() {
+            self.x[i] = (v - model.mean[i]) / model.std[i];
+        }
+        self.state.reset();
+        self.placement = [x as f64, z as f64, yaw as f64];
+        self.started = true;
+        if let Some(r) = &model.refiner {
+            self.refiner_h.fill(0.0);
+            self.refiner_c.fill(0.0);
+            let j = model.joints();
+            let (mut rot, mut pos) = (vec![DQuat::IDENTITY; j], vec![DVec3::ZERO; j]);
+            model.effector_positions(&self.x, &r.stats, &mut self.effectors, &mut rot, &mut pos);
+        }
+        Ok(())
+    }
+
+    /// The state of the character's random numbers (`SplitMix64::from_state` restores it).
+    pub fn rng_state(&self) -> u64 {
+        self.rng.state()
+    }
+}
+
+/// Steps characters on one thread; allocates nothing per frame (up to the batch size it was
+/// made for; a larger batch grows the scratch space once).
+#[derive(Debug)]
+pub struct SynthesisRunner {
+    model: SynthesisModel,
+    runner: MotionRunner,
+    x: Vec<f32>,
+    weights: Vec<f32>,
+    means: Vec<f32>,
+    stds: Vec<f32>,
+    states: Vec<MotionState>,
+    world: Vec<Quat>,
+    refined: Vec<f32>,
+    effectors: Vec<DVec3>,
+    fk_rot: Vec<DQuat>,
+    fk_pos: Vec<DVec3>,
+}
+
+impl SynthesisRunner {
+    /// Generates the next frame of one character into `pose`; returns its contact bits
+    /// `[left, right]`. `temperature` scales the mixture's standard deviations (1: the model's).
+    pub fn step(
+        &mut self,
+        character: &mut SynthesisCharacter,
+        temperature: f32,
+        pose: &mut EnginePose,
+    ) -> Result<[bool; 2], MotionError> {
+        let mut contacts = [[false; 2]];
+        self.step_batch(std::slice::from_mut(character), temperature, std::slice::from_mut(pose), &mut contacts)?;
+        Ok(contacts[0])
+    }
+
+    /// Generates the next frame of every character in one graph run: `poses[c]` and
+    /// `contacts[c]` receive character `c`'s. Each character samples with its own random
+    /// numbers, so its frames do not depend on the batch.
+    pub fn step_batch(
+        &mut self,
+        characters: &mut [SynthesisCharacter],
+        temperature: f32,
+        poses: &mut [EnginePose],
+        contacts: &mut [[bool; 2]],
+    ) -> Result<(), MotionError> {
+        let n = characters.len();
+        let (d, m, joints) = (self.model.task.frame_dim, self.model.task.components, self.model.joints());
+        if poses.len() != n || contacts.len() != n {
+            return Err(MotionError::BufferCount {
+                what: "poses and contacts",
+                expected: n,
+                found: poses.len().min(contacts.len()),
+            });
+        }
+        if !(temperature.is_finite() && temperature >= 0.0) {
+            return Err(MotionError::NonFinite {
+                name: "temperature".into(),
+                index: 0,
+                character: 0,
+                value: temperature,
+            });
+        }
+        for (c, (ch, pose)) in characters.iter().zip(poses.iter()).enumerate() {
+            if !ch.started {
+                return Err(bad(KEY, format!("character {c} was not started: call SynthesisCharacter::start first")));
+            }
+            check_len("pose local_rotations", pose.local_rotations.len(), 1, joints)?;
+        }
+        if self.x.len() < n * d {
+            self.x.resize(n * d, 0.0);
+            self.weights.resize(n * m, 0.0);
+            self.means.resize(n * m * d, 0.0);
+            self.stds.resize(n * m * d, 0.0);
+        }
+        for (c, ch) in characters.iter().enumerate() {
+            self.x[c * d..(c + 1) * d].copy_from_slice(&ch.x);
+        }
+        // The characters' states, moved into one slice for the batched run and back.
+        self.states.clear();
+        for ch in characters.iter_mut() {
+            self.states.push(std::mem::replace(&mut ch.state, MotionState { slots: Vec::new() }));
+        }
+        let run = self.runner.step_batch(
+            &mut self.states,
+            &[&self.x[..n * d]],
+            &mut [&mut self.weights[..n * m], &mut self.means[..n * m * d], &mut self.stds[..n * m * d]],
+        );
+        for (ch, state) in characters.iter_mut().zip(self.states.drain(..)) {
+            ch.state = state;
+        }
+        run?;
+        for (c, ch) in characters.iter_mut().enumerate() {
+            let w = &self.weights[c * m..(c + 1) * m];
+            let (mu, sd) = (&self.means[c * m * d..(c + 1) * m * d], &self.stds[c * m * d..(c + 1) * m * d]);
+            // A component by its weight, then mu + temperature * sigma * n (Mixture::sample).
+            let u = ch.rng.next_f64();
+            let (mut acc, mut k) = (0.0, m - 1);
+            for (i, wi) in w.iter().enumerate() {
+                acc += *wi as f64;
+                if u < acc {
+                    k = i;
+                    break;
+                }
+            }
+            for j in 0..d {
+                let z = ch.rng.normal();
+                ch.x[j] = (mu[k * d + j] as f64 + temperature as f64 * sd[k * d + j] as f64 * z) as f32;
+            }
+            let refined = self.refine(ch)?;
+            contacts[c] = self.decode(ch, refined, &mut poses[c]);
+        }
+        Ok(())
+    }
+
+    /// Refines the character's new frame into `self.refined` (eq. 11); returns whether it did.
+    fn refine(&mut self, ch: &mut SynthesisCharacter) -> Result<bool, MotionError> {
+        use tract_onnx::prelude::*;
+        let Some(r) = &self.model.refiner else { return Ok(false) };
+        let d = self.model.task.frame_dim;
+        let s = &r.stats;
+        self.model.effector_positions(&ch.x, s, &mut self.effectors, &mut self.fk_rot, &mut self.fk_pos);
+        // v_t = (dtx, 0, dtz) + yaw(dry) p_t - p_(t-1), in the previous heading frame.
+        let v = |i: usize| (ch.x[i] * self.model.std[i] + self.model.mean[i]) as f64;
+        let step = DVec3::new(v(0), 0.0, v(1));
+        let turn = DQuat::from_rotation_y(v(2));
+        let n = s.effectors.len();
+        let mut e = vec![0f32; 6 * n];
+        for (k, p) in self.effectors.iter().enumerate() {
+            let vel = step + turn * *p - ch.effectors[k];
+            for a in 0..3 {
+                e[3 * k + a] = p[a] as f32;
+                e[3 * n + 3 * k + a] = vel[a] as f32;
+            }
+        }
+        for (i, v) in e.iter_mut().enumerate() {
+            *v = (*v - s.mean[i]) / s.std[i];
+        }
+        ch.effectors.copy_from_slice(&self.effectors);
+        let run = |err: TractError| MotionError::Run { reason: format!("{err:#}") };
+        let t = |v: &[f32]| -> Result<TValue, MotionError> {
+            Ok(Tensor::from_shape::<f32>(&[1, v.len()], v).map_err(run)?.into_tvalue())
+        };
+        let out = r.plan.run(tvec![t(&ch.x)?, t(&e)?, t(&ch.refiner_h)?, t(&ch.refiner_c)?]).map_err(run)?;
+        let get = |i: usize| -> Result<&[f32], MotionError> {
+            out[i].try_as_plain_ram().and_then(|t| t.as_slice::<f32>()).map_err(run)
+        };
+        self.refined[..d].copy_from_slice(get(0)?);
+        ch.refiner_h.copy_from_slice(get(1)?);
+        ch.refiner_c.copy_from_slice(get(2)?);
+        Ok(true)
+    }
+
+    /// Decodes the character's new frame (refined when `refined`) into `pose`, advancing its
+    /// placement.
+    fn decode(&mut self, ch: &mut SynthesisCharacter, refined: bool, pose: &mut EnginePose) -> [bool; 2] {
+        let model = &self.model;
+        let d = model.task.frame_dim;
+        let x: &[f32] = if refined { &self.refined } else { &ch.x };
+        let v = |i: usize| (x[i] * model.std[i] + model.mean[i]) as f64;
+        let [px, pz, yaw] = ch.placement;
+        let step = DQuat::from_rotation_y(yaw) * DVec3::new(v(0), 0.0, v(1));
+        ch.placement = [px + step.x, pz + step.z, yaw + v(2)];
+        pose.root_position = Vec3::new(ch.placement[0] as f32, 0.0, ch.placement[1] as f32);
+        pose.root_rotation = Quat::from_rotation_y(ch.placement[2] as f32);
+        pose.root_delta_position = Vec3::new(v(0) as f32, 0.0, v(1) as f32);
+        pose.root_delta_yaw = v(2) as f32;
+        pose.hips_position = Vec3::new(0.0, v(3) as f32, 0.0);
+        pose.local_rotations[0] = from_scaled_axis(DVec3::new(v(4), 0.0, v(5))).as_quat();
+        for j in 1..model.joints() {
+            let i = 6 + 3 * (j - 1);
+            let q = model.references[j] * from_scaled_axis(DVec3::new(v(i), v(i + 1), v(i + 2)));
+            pose.local_rotations[j] = q.normalize().as_quat();
+        }
+        let skeleton = &model.model.metadata().skeleton;
+        if pose.global_positions.len() == model.joints() {
+            self.world[0] = pose.root_rotation * pose.local_rotations[0];
+            pose.global_positions[0] = pose.root_position + pose.root_rotation * pose.hips_position;
+            for j in 1..model.joints() {
+                let p = skeleton.parents[j] as usize;
+                pose.global_positions[j] = pose.global_positions[p] + self.world[p] * skeleton.offset(j);
+                self.world[j] = self.world[p] * pose.local_rotations[j];
+            }
+        }
+        [v(d - 2) > 0.5, v(d - 1) > 0.5]
+    }
+}

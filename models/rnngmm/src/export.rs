@@ -1,0 +1,307 @@
+//! Export of a trained RNN-GMM generator to one ONNX file: its per-frame step graph (sec. 4.1.2,
+//! eq. 5-7), state in and state out, written with the generic `zoo-export` writer beside the
+//! candle forward pass of [`crate::model`] (same equations), metadata through
+//! `zoo_runtime::metadata` (model kind `rnn-gmm`, task `step`: the engine drives it with
+//! `zoo_runtime::MotionRunner` and samples the mixture itself).
+//!
+//! Step graph (all tensors `[batch, n]` f32, normalised units):
+//!
+//! | inputs | outputs |
+//! |---|---|
+//! | `x`: normalised frame `x_t` (D) | `weights`: mixture weights `w` (M, softmax, eq. 7) |
+//! | | `means`: `mu` (M D, component-major) |
+//! | | `stds`: `sigma = exp(clamp(sigma^))` (M D) |
+//! | `h{k}`, `c{k}`: LSTM state of layer `k` (H each) | `h{k}_next`, `c{k}_next` |
+//!
+//! The `zoo.synthesis` section ([`zoo_runtime::metadata::synthesis`]) holds the mixture size and
+//! the reference rotations, so `zoo_runtime::synthesis::SynthesisModel` samples and decodes poses.
+//!
+//! Initializers keep the candle variable paths (`fc.0.weight`, `lstm.weight_ih_l0`,
+//! `head.weight`, ...); the LSTM is written with Gemm/Split/Sigmoid/Tanh/Mul/Add in candle's gate
+//! order i, f, g, o; ReLU is `LeakyRelu` with slope 0 (the same function, in every runtime).
+//!
+//! With a refiner in the run folder, its step graph is embedded in the metadata (base64 ONNX
+//! under [`REFINER_GRAPH_KEY`], its end-effector statistics under [`REFINER_KEY`]): inputs `x`
+//! (the generator's normalised frame, D), `effectors` (the normalised end-effector positions and
+//! velocities of that frame, 6 E, computed by the caller with the forward kinematics of
+//! [`crate::fk`]: the previous frame is needed for the velocities), `h`, `c` (its LSTM state);
+//! outputs `x_refined` (D, eq. 11: `W2 lstm(relu(W1 [x; e] + b1)) + b2 + x`), `h_next`, `c_next`.
+//! `zoo_runtime::synthesis` runs it behind the generator (with its own forward kinematics);
+//! the discriminator is training-only.
+
+use crate::config::Config;
+use crate::features::{CONTACT_DIMS, FeatureSpec, Normalization, ROOT_DIMS};
+use candle_nn::VarMap;
+use std::collections::{BTreeMap, HashMap};
+use std::path::Path;
+use zoo_export::{Dim, ExportError, GraphBuilder, OnnxModel, Value, attr_int};
+use zoo_runtime::metadata::synthesis::{self, SynthesisTask};
+use zoo_runtime::metadata::{
+    FORMAT_VERSION, MotionFeatureSegment, MotionMeanStd, MotionModelMetadata, MotionSkeletonInfo, MotionStatePair,
+    MotionTask,
+};
+
+/// `zoo.model_kind` of an exported RNN-GMM.
+pub const MODEL_KIND: &str = "rnn-gmm";
+pub use zoo_runtime::metadata::synthesis::{REFINER_GRAPH_KEY, REFINER_KEY};
+
+fn model_err(message: impl Into<String>) -> ExportError {
+    ExportError::Model(message.into())
+}
+
+/// Loads the generator of a run folder (`config.json`, `model.safetensors`, `features.json`,
+/// `normalization.json`) and exports its step graph (see [`export_generator`]).
+pub fn export_generator_dir(dir: &Path) -> Result<OnnxModel, ExportError> {
+    let (config, spec, norm) =
+        crate::checkpoint::read_meta(dir).map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
+    let config_path = dir.join(crate::checkpoint::CONFIG_FILE);
+    let config_json = std::fs::read_to_string(&config_path)
+        .map_err(|source| ExportError::Io { path: config_path.display().to_string(), source })?;
+    let varmap = VarMap::new();
+    let vb = candle_nn::VarBuilder::from_varmap(&varmap, candle_core::DType::F32, &candle_core::Device::Cpu);
+    crate::Generator::new(&config, vb)
+        .map_err(|e| model_err(format!("building the generator of {}: {e}", dir.display())))?;
+    crate::checkpoint::load_weights(dir, &varmap).map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
+    let generator = export_generator(&config, Some(&config_json), &spec, &norm, &varmap)?;
+    if !dir.join(crate::refiner::REFINER_FILE).is_file() {
+        return Ok(generator);
+    }
+    let eff: crate::EffectorNorm = zoo_nn::checkpoint::read_json(&dir.join(crate::refiner::EFFECTORS_FILE))
+        .map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
+    let path = dir.join(crate::refiner::REFINER_FILE);
+    let tensors = candle_core::safetensors::load(&path, &candle_core::Device::Cpu)
+        .map_err(|e| model_err(format!("{}: {e}", path.display())))?;
+    let refiner = export_refiner(&config, &eff, &tensors)?;
+    let mut proto = generator.proto().clone();
+    for (key, value) in [
+        (REFINER_GRAPH_KEY, refiner.to_base64()),
+        (REFINER_KEY, serde_json::to_string(&eff).map_err(|e| model_err(e.to_string()))?),
+    ] {
+        proto.metadata_props.push(zoo_export::pb::StringStringEntryProto { key: key.into(), value });
+    }
+    Ok(OnnxModel::from_proto(proto))
+}
+
+/// The refiner's step graph (eq. 11) from its weights (`fc1.*`, `lstm.*_l0`, `fc2.*`, as in
+/// `refiner.safetensors`). See the module docs for its inputs and outputs.
+pub fn export_refiner(
+    config: &Config,
+    eff: &crate::EffectorNorm,
+    tensors: &HashMap<String, candle_core::Tensor>,
+) -> Result<OnnxModel, ExportError> {
+    let mut weights = HashMap::new();
+    for (name, t) in tensors {
+        let values = t
+            .to_dtype(candle_core::DType::F32)
+            .and_then(|t| t.flatten_all())
+            .and_then(|t| t.to_vec1::<f32>())
+            .map_err(|e| model_err(format!("reading refiner weight `{name}`: {e}")))?;
+        if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+            return Err(model_err(format!("refiner weight `{name}` holds {} at index {i}", values[i])));
+        }
+        weights.insert(name.clone(), (t.dims().to_vec(), values));
+    }
+    let w = Weights(weights);
+    let (d, e, hu) = (config.dim, 6 * eff.effectors.len(), config.refiner.refiner_lstm);
+    let mut g = GraphBuilder::new("rnngmm_refiner_step");
+    g.doc("RNN-GMM refiner (eq. 11), per-frame step graph; see zoo_rnngmm::export");
+    let x = g.input("x", &batch(d));
+    let effectors = g.input("effectors", &batch(e));
+    let h = g.input("h", &batch(hu));
+    let c = g.input("c", &batch(hu));
+    let input = g.concat("fc1.input", &[&x, &effectors], 1);
+    let (w1, b1) = (w.init(&mut g, "fc1.weight")?, w.init(&mut g, "fc1.bias")?);
+    let z = g.gemm("fc1", &input, &w1, Some(&b1), true);
+    let z = g.leaky_relu("fc1.relu", &z, 0.0);
+    let (h_next, c_next) = lstm_cell(&mut g, &w, 0, &z, &h, &c, hu)?;
+    let (w2, b2) = (w.init(&mut g, "fc2.weight")?, w.init(&mut g, "fc2.bias")?);
+    let dx = g.gemm("fc2", &h_next, &w2, Some(&b2), true);
+    let refined = g.add("residual", &x, &dx);
+    g.output("x_refined", &refined, &batch(d));
+    g.output("h_next", &h_next, &batch(hu));
+    g.output("c_next", &c_next, &batch(hu));
+    g.finish()
+}
+
+/// One step of layer `k` of a candle LSTM (`lstm.{weight,bias}_{ih,hh}_l{k}`, gates i, f, g, o):
+/// returns `(h_next, c_next)`.
+fn lstm_cell(
+    g: &mut GraphBuilder,
+    w: &Weights,
+    k: usize,
+    x: &Value,
+    hk: &Value,
+    ck: &Value,
+    hu: usize,
+) -> Result<(Value, Value), ExportError> {
+    let p = |s: &str| format!("lstm.{s}_l{k}");
+    let (w_ih, b_ih) = (w.init(g, &p("weight_ih"))?, w.init(g, &p("bias_ih"))?);
+    let (w_hh, b_hh) = (w.init(g, &p("weight_hh"))?, w.init(g, &p("bias_hh"))?);
+    let zx = g.gemm(&p("input_gates"), x, &w_ih, Some(&b_ih), true);
+    let zh = g.gemm(&p("hidden_gates"), hk, &w_hh, Some(&b_hh), true);
+    let z = g.add(&p("gates"), &zx, &zh);
+    let parts = g.split(&p("split"), &z, &[hu; 4], 1);
+    let i = g.sigmoid(&p("i"), &parts[0]);
+    let f = g.sigmoid(&p("f"), &parts[1]);
+    let gg = g.tanh(&p("g"), &parts[2]);
+    let o = g.sigmoid(&p("o"), &parts[3]);
+    let fc = g.mul(&p("f_c"), &f, ck);
+    let ig = g.mul(&p("i_g"), &i, &gg);
+    let c_next = g.add(&p("c"), &fc, &ig);
+    let tc = g.tanh(&p("tanh_c"), &c_next);
+    let h_next = g.mul(&p("h"), &o, &tc);
+    Ok((h_next, c_next))
+}
+
+/// Weights by candle variable path, as row-major f32 with their shapes.
+struct Weights(HashMap<String, (Vec<usize>, Vec<f32>)>);
+
+impl Weights {
+    fn from_varmap(varmap: &VarMap) -> Result<Self, ExportError> {
+        let data = varmap.data().lock().map_err(|_| model_err("the VarMap lock is poisoned"))?;
+        let mut out = HashMap::new();
+        for (name, var) in data.iter() {
+            let t = var.as_tensor();
+            let values = t
+                .to_dtype(candle_core::DType::F32)
+                .and_then(|t| t.flatten_all())
+                .and_then(|t| t.to_vec1::<f32>())
+                .map_err(|e| model_err(format!("reading weight `{name}`: {e}")))?;
+            if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+                return Err(model_err(format!("weight `{name}` holds {} at index {i}", values[i])));
+            }
+            out.insert(name.clone(), (t.dims().to_vec(), values));
+        }
+        Ok(Weights(out))
+    }
+
+    fn init(&self, g: &mut GraphBuilder, name: &str) -> Result<Value, ExportError> {
+        let (dims, data) =
+            self.0.get(name).ok_or_else(|| model_err(format!("the checkpoint has no weight `{name}`")))?;
+        Ok(g.initializer_f32(name, dims, data))
+    }
+}
+
+fn batch(n: usize) -> [Dim; 2] {
+    [Dim::batch(), Dim::Fixed(n)]
+}
+
+/// The metadata of an exported generator, checked like the runtime checks it on load.
+pub fn metadata(
+    config: &Config,
+    config_json: &str,
+    spec: &FeatureSpec,
+    norm: &Normalization,
+) -> Result<MotionModelMetadata, ExportError> {
+    let d = config.dim;
+    let mut normalization = BTreeMap::new();
+    normalization.insert("x".to_string(), MotionMeanStd { mean: norm.mean.clone(), std: norm.std.clone() });
+    let segment = |name: &str, start, len| MotionFeatureSegment { name: name.to_string(), start, len };
+    let pair = |input: String, output: String| MotionStatePair { input, output };
+    let state = (0..config.lstm_layers)
+        .flat_map(|k| [pair(format!("h{k}"), format!("h{k}_next")), pair(format!("c{k}"), format!("c{k}_next"))])
+        .collect();
+    let metadata = MotionModelMetadata {
+        format_version: FORMAT_VERSION,
+        model_kind: MODEL_KIND.to_string(),
+        task: MotionTask::Step,
+        config_json: config_json.to_string(),
+        normalization,
+        skeleton: MotionSkeletonInfo::from_skeleton(&spec.skeleton),
+        feature_layout: vec![
+            segment("root_dtx_dtz_dry_ty_rx_rz", 0, ROOT_DIMS),
+            segment("joint_rotation_vectors_about_references", ROOT_DIMS, d - ROOT_DIMS - CONTACT_DIMS),
+            segment("contacts_left_right", d - CONTACT_DIMS, CONTACT_DIMS),
+        ],
+        fps: spec.fps as f32,
+        frame: zoo_runtime::metadata::CoordinateFrame::ZOO_CM,
+        state,
+    };
+    metadata.check().map_err(|e| model_err(format!("the metadata would not load: {e}")))?;
+    Ok(metadata)
+}
+
+/// The `zoo.synthesis` section: mixture size and the reference rotations that decode a frame.
+pub fn synthesis_task(config: &Config, spec: &FeatureSpec) -> Result<SynthesisTask, ExportError> {
+    let task = SynthesisTask {
+        frame_dim: config.dim,
+        components: config.components,
+        references: spec.reference.iter().map(|q| [q.x, q.y, q.z, q.w]).collect(),
+    };
+    task.check(spec.skeleton.len()).map_err(|e| model_err(format!("the synthesis section would not load: {e}")))?;
+    Ok(task)
+}
+
+/// Exports the generator of `config` with the weights of `varmap` (filled by
+/// [`crate::Generator::new`]). `config_json`: the run folder's `config.json` verbatim (default:
+/// the config serialised).
+pub fn export_generator(
+    config: &Config,
+    config_json: Option<&str>,
+    spec: &FeatureSpec,
+    norm: &Normalization,
+    varmap: &VarMap,
+) -> Result<OnnxModel, ExportError> {
+    crate::checkpoint::check_agree(config, spec, norm).map_err(|e| model_err(e.to_string()))?;
+    let w = Weights::from_varmap(varmap)?;
+    let serialized;
+    let config_json = match config_json {
+        Some(s) => s,
+        None => {
+            serialized = serde_json::to_string_pretty(config).map_err(|e| model_err(e.to_string()))?;
+            &serialized
+        }
+    };
+    let mut g = step_graph(config, &w)?;
+    g.doc("RNN-GMM generator (Wang, Chai & Xia 2019), per-frame step graph; see zoo_rnngmm::export");
+    for (k, v) in metadata(config, config_json, spec, norm)?.to_props() {
+        g.metadata(&k, &v);
+    }
+    let task = synthesis_task(config, spec)?;
+    g.metadata(synthesis::KEY, &serde_json::to_string(&task).map_err(|e| model_err(e.to_string()))?);
+    g.finish()
+}
+
+/// The generator's step (sec. 4.1.2, eq. 5-7).
+fn step_graph(config: &Config, w: &Weights) -> Result<GraphBuilder, ExportError> {
+    let (d, hu, m) = (config.dim, config.lstm, config.components);
+    let mut g = GraphBuilder::new("rnngmm_generator_step");
+    let x = g.input("x", &batch(d));
+    let states: Vec<(Value, Value)> = (0..config.lstm_layers)
+        .map(|k| (g.input(&format!("h{k}"), &batch(hu)), g.input(&format!("c{k}"), &batch(hu))))
+        .collect();
+    // FC1-FC3 with ReLU.
+    let mut h = x;
+    for i in 0..config.fc.len() {
+        let wt = w.init(&mut g, &format!("fc.{i}.weight"))?;
+        let b = w.init(&mut g, &format!("fc.{i}.bias"))?;
+        h = g.gemm(&format!("fc.{i}"), &h, &wt, Some(&b), true);
+        h = g.leaky_relu(&format!("fc.{i}.relu"), &h, 0.0);
+    }
+    // The 2-layer LSTM, gates in candle's order i, f, g, o.
+    let mut outputs = Vec::new();
+    for (k, (hk, ck)) in states.iter().enumerate() {
+        let (h_next, c_next) = lstm_cell(&mut g, w, k, &h, hk, ck, hu)?;
+        outputs.push((h_next.clone(), c_next));
+        h = h_next;
+    }
+    // The mixture head (eq. 7): softmax weights, means, exp of the clamped log stds.
+    let wt = w.init(&mut g, "head.weight")?;
+    let b = w.init(&mut g, "head.bias")?;
+    let raw = g.gemm("head", &h, &wt, Some(&b), true);
+    let parts = g.split("head.split", &raw, &[m, m * d, m * d], 1);
+    let weights = g.custom_op("Softmax", "mixture.weights", &[&parts[0]], vec![attr_int("axis", 1)]);
+    let lo = g.initializer_f32("mixture.min_log_std", &[1], &[config.min_log_std as f32]);
+    let hi = g.initializer_f32("mixture.max_log_std", &[1], &[config.max_log_std as f32]);
+    let clamped = g.custom_op("Max", "mixture.log_std_floor", &[&parts[2], &lo], vec![]);
+    let clamped = g.custom_op("Min", "mixture.log_std_ceiling", &[&clamped, &hi], vec![]);
+    let stds = g.custom_op("Exp", "mixture.stds", &[&clamped], vec![]);
+    g.output("weights", &weights, &batch(m));
+    g.output("means", &parts[1], &batch(m * d));
+    g.output("stds", &stds, &batch(m * d));
+    for (k, (h_next, c_next)) in outputs.iter().enumerate() {
+        g.output(&format!("h{k}_next"), h_next, &batch(hu));
+        g.output(&format!("c{k}_next"), c_next, &batch(hu));
+    }
+    Ok(g)
+}

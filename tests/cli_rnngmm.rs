@@ -1,0 +1,228 @@
+//! End-to-end tests of `zoo train rnn-gmm`, `zoo generate` and `zoo bench-synthesis` on the
+//! embedded synthetic data with the tiny preset (a few seconds each).
+
+use std::path::Path;
+use std::process::Command;
+use zoo_tests::zoo_bin;
+
+fn run(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(zoo_bin()).args(args).output().unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn ok(args: &[&str]) -> String {
+    let (ok, stdout, stderr) = run(args);
+    assert!(ok, "zoo {}\n{stdout}\n{stderr}", args.join(" "));
+    stdout
+}
+
+fn fails(args: &[&str]) -> String {
+    let (ok, stdout, stderr) = run(args);
+    assert!(!ok, "zoo {} should fail\n{stdout}", args.join(" "));
+    stderr
+}
+
+fn json(p: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+}
+
+/// `zoo train rnn-gmm` with the tiny preset on one minute of synthetic motion, plus `extra`.
+fn train(extra: &[&str]) -> (bool, String, String) {
+    let mut args =
+        vec!["train", "rnn-gmm", "--preset", "tiny", "--synth-minutes", "1", "--refiner-rounds", "2", "--seed", "5"];
+    args.extend_from_slice(extra);
+    run(&args)
+}
+
+/// A run folder with both stages trained (generator 1 epoch, refiner 1 epoch).
+fn trained(dir: &Path) -> String {
+    let run_dir = dir.join("run");
+    let r = run_dir.to_str().unwrap().to_string();
+    let (ok, stdout, stderr) = train(&["--epochs", "1", "--refiner-epochs", "1", "--out", &r]);
+    assert!(ok, "{stdout}\n{stderr}");
+    r
+}
+
+#[test]
+fn two_stages_train_resume_and_refuse_to_overwrite() {
+    let dir = tempfile::tempdir().unwrap();
+    let runp = dir.path().join("run");
+    let r = runp.to_str().unwrap();
+    // The generator stage alone, then resumed to a second epoch.
+    let (ok, stdout, stderr) = train(&["--stage", "generator", "--epochs", "1", "--out", r]);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("epoch   1:") && stdout.contains("generator: 1 epochs"), "{stdout}");
+    for f in ["config.json", "model.safetensors", "features.json", "normalization.json", "start.bvh"] {
+        assert!(runp.join(f).is_file(), "{f} missing in the run folder");
+        assert!(runp.join("generator").join(f).is_file(), "{f} missing in the generator stage");
+    }
+    assert!(runp.join("generator/last/optimizer.safetensors").is_file());
+    assert!(!runp.join("refiner.safetensors").exists());
+    let (ok, stdout, stderr) = train(&["--stage", "generator", "--epochs", "2", "--resume", r]);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("epoch   2:") && !stdout.contains("epoch   1:"), "{stdout}");
+    assert_eq!(json(&runp.join("generator/train_state.json"))["epoch"], 2);
+    // A fresh run on it is refused; the refiner stage trains on the generator, then resumes.
+    let (ok, _, stderr) = train(&["--epochs", "1", "--out", r]);
+    assert!(!ok && stderr.contains("already holds a run") && stderr.contains("--resume"), "{stderr}");
+    let (ok, stdout, stderr) =
+        train(&["--stage", "refiner", "--refiner-epochs", "1", "--refiner-warmup", "2", "--out", r]);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("refiner: 1 epochs (2 rounds)") && stdout.contains("warm-up: 2 refiner + 2"), "{stdout}");
+    assert_eq!(json(&runp.join("refiner/config.json"))["refiner"]["warmup_discriminator"], 2);
+    for f in ["refiner.safetensors", "discriminator.safetensors", "effectors.json"] {
+        assert!(runp.join(f).is_file(), "{f} missing in the run folder");
+    }
+    let (ok, _, stderr) = train(&["--stage", "refiner", "--out", r]);
+    assert!(!ok && stderr.contains("already holds a refiner stage"), "{stderr}");
+    let (ok, stdout, stderr) = train(&["--stage", "refiner", "--refiner-epochs", "2", "--resume", r]);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("refiner: 2 epochs (4 rounds)"), "{stdout}");
+    let state = json(&runp.join("refiner/train_state.json"));
+    assert_eq!(state["epoch"], 2);
+    assert!(runp.join("refiner/last/history.safetensors").is_file());
+    // Continuing the generator under a trained refiner would leave the refiner stale.
+    let (ok, _, stderr) = train(&["--stage", "generator", "--epochs", "3", "--resume", r]);
+    assert!(!ok && stderr.contains("trained on the older generator"), "{stderr}");
+    assert_eq!(json(&runp.join("config.json"))["model"], "rnn-gmm");
+}
+
+#[test]
+fn a_refiner_needs_a_generator_and_options_are_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    let empty = dir.path().join("empty");
+    let (ok, _, stderr) = train(&["--stage", "refiner", "--out", empty.to_str().unwrap()]);
+    assert!(!ok && stderr.contains("holds no trained generator") && stderr.contains("--stage generator"), "{stderr}");
+    let (ok, _, stderr) = train(&["--epochs", "0", "--out", empty.to_str().unwrap()]);
+    assert!(!ok && stderr.contains("--epochs"), "{stderr}");
+    let (ok, _, stderr) = train(&["--valid-glob", "*x*", "--out", empty.to_str().unwrap()]);
+    assert!(!ok && stderr.contains("give --data PATH"), "{stderr}");
+    let (ok, _, stderr) = train(&["--resume", dir.path().join("nothing").to_str().unwrap()]);
+    assert!(!ok && stderr.contains("no such folder"), "{stderr}");
+}
+
+#[test]
+fn generate_is_deterministic_streams_and_refuses_bad_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let r = trained(dir.path());
+    let out = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    // 700 frames: three chunks of the stream.
+    let gen_args = |o: &str, seed: &str| -> Vec<String> {
+        ["generate", "--model", &r, "--frames", "700", "--seed", seed, "--out", o, "--init-steps", "5"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect()
+    };
+    let call = |args: Vec<String>| ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    call(gen_args(&out("a.bvh"), "3"));
+    call(gen_args(&out("b.bvh"), "3"));
+    call(gen_args(&out("c.bvh"), "4"));
+    let bytes = |n: &str| std::fs::read(dir.path().join(n)).unwrap();
+    assert_eq!(bytes("a.bvh"), bytes("b.bvh"), "same seed, different files");
+    assert_eq!(bytes("a.contacts.json"), bytes("b.contacts.json"));
+    assert_ne!(bytes("a.bvh"), bytes("c.bvh"), "another seed, same file");
+    let clip = zoo_data::bvh::read_file(&dir.path().join("a.bvh"), &Default::default()).unwrap();
+    assert_eq!(clip.frames(), 700);
+    assert!(clip.local_rotations.iter().all(|q| q.is_finite()));
+    let contacts = json(&dir.path().join("a.contacts.json"));
+    assert_eq!(contacts["contacts"].as_array().unwrap().len(), 700);
+    assert_eq!(contacts["frames"], 700);
+    // Several sequences into a folder: seeds 3 and 4 are the single files above.
+    let mut many = gen_args(&out("many"), "3");
+    many.extend(["--count".to_string(), "2".to_string()]);
+    call(many);
+    assert_eq!(bytes("many/seed3.bvh"), bytes("a.bvh"));
+    assert_eq!(bytes("many/seed4.bvh"), bytes("c.bvh"));
+    // The generator alone gives other motion; the generator stage folder has no refiner.
+    let mut raw = gen_args(&out("raw.bvh"), "3");
+    raw.push("--no-refiner".into());
+    call(raw);
+    assert_ne!(bytes("raw.bvh"), bytes("a.bvh"));
+    let gen_dir = format!("{r}/generator");
+    let e = fails(&["generate", "--model", &gen_dir, "--frames", "10", "--out", &out("x.bvh")]);
+    assert!(e.contains("holds no refiner") && e.contains("--no-refiner"), "{e}");
+    ok(&["generate", "--model", &gen_dir, "--frames", "10", "--out", &out("x.bvh"), "--no-refiner"]);
+
+    // A start clip of another skeleton.
+    let toy = dir.path().join("toy.bvh");
+    zoo_data::bvh::write_file(&zoo_tests::toy_clip(40, 0.0), &toy).unwrap();
+    let from = format!("{}:20", toy.display());
+    let e = fails(&["generate", "--model", &r, "--frames", "10", "--from", &from, "--out", &out("y.bvh")]);
+    assert!(e.contains("another skeleton"), "{e}");
+    // NaN in the start clip.
+    let text = std::fs::read_to_string(Path::new(&r).join("start.bvh")).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let row = lines.iter().position(|l| l.starts_with("Frame Time")).unwrap() + 3;
+    let first = lines[row].split(' ').next().unwrap().len();
+    lines[row].replace_range(..first, "nan");
+    let nan = dir.path().join("nan.bvh");
+    std::fs::write(&nan, lines.join("\n") + "\n").unwrap();
+    let from = format!("{}:20", nan.display());
+    let e = fails(&["generate", "--model", &r, "--frames", "10", "--from", &from, "--out", &out("y.bvh")]);
+    assert!(e.contains("expected a number") && e.contains("nan"), "{e}");
+    // A frame past the clip's end, and several sequences into one file.
+    let from = format!("{}:5000", Path::new(&r).join("start.bvh").display());
+    let e = fails(&["generate", "--model", &r, "--frames", "10", "--from", &from, "--out", &out("y.bvh")]);
+    assert!(e.contains("frame 5000 is past the clip's last frame"), "{e}");
+    let e = fails(&["generate", "--model", &r, "--frames", "10", "--count", "2", "--out", &out("y.bvh")]);
+    assert!(e.contains("give a folder as --out"), "{e}");
+    let e = fails(&["generate", "--model", &r, "--frames", "10", "--init-steps", "99999999", "--out", &out("y.bvh")]);
+    assert!(e.contains("--init-steps") && e.contains("0..=10000"), "{e}");
+    let e = fails(&["generate", "--model", &r, "--out", &out("y.bvh")]);
+    assert!(e.contains("--frames N or --seconds S"), "{e}");
+    // A refiner without its generator.
+    let broken = dir.path().join("broken");
+    std::fs::create_dir(&broken).unwrap();
+    for f in ["config.json", "features.json", "normalization.json", "refiner.safetensors", "effectors.json"] {
+        std::fs::copy(Path::new(&r).join(f), broken.join(f)).unwrap();
+    }
+    let e = fails(&["generate", "--model", broken.to_str().unwrap(), "--frames", "10", "--out", &out("z.bvh")]);
+    assert!(e.contains("no generator weights") && e.contains("it has a refiner"), "{e}");
+    assert!(!dir.path().join("z.bvh").exists() && !dir.path().join("y.bvh").exists());
+
+    // The generator's export loads as a synthesis model of the runtime.
+    let onnx = out("gmm.onnx");
+    let stdout = ok(&["export", "--onnx", &r, "--out", &onnx]);
+    assert!(stdout.contains("RNN-GMM generator step graph") && stdout.contains("and the refiner's step"), "{stdout}");
+    let model = zoo_runtime::synthesis::SynthesisModel::load(&onnx).unwrap();
+    assert_eq!(model.model().metadata().model_kind, "rnn-gmm");
+    assert!(model.has_refiner());
+    let stdout = ok(&["export", "--onnx", &gen_dir, "--out", &onnx]);
+    assert!(stdout.contains("without a refiner"), "{stdout}");
+    assert!(!zoo_runtime::synthesis::SynthesisModel::load(&onnx).unwrap().has_refiner());
+
+    // The synthesis benchmark on synthetic clips written as BVH.
+    let data = out("synth");
+    ok(&["data", "synth", "--out", &data, "--minutes", "0.5", "--seed", "9"]);
+    let report = out("bench.json");
+    let stdout = ok(&[
+        "bench-synthesis",
+        "--model",
+        &r,
+        "--data",
+        &data,
+        "--glob",
+        "*",
+        "--sequences",
+        "3",
+        "--seconds",
+        "3",
+        "--json",
+        &report,
+    ]);
+    assert!(stdout.contains("| rnn+refiner |") && stdout.contains("first-frame jump"), "{stdout}");
+    let j = json(Path::new(&report));
+    let rows = j["rows"].as_array().unwrap();
+    assert_eq!(rows.iter().map(|r| r["name"].as_str().unwrap()).collect::<Vec<_>>(), ["real", "rnn", "rnn+refiner"]);
+    assert_eq!(rows[0]["root_speed_w1"], 0.0);
+    assert_eq!(rows[0]["jerk_ratio"], 1.0);
+    assert!(rows[1]["foot_skate"].as_f64().unwrap() > 0.0);
+    assert!(rows[2]["contact_accuracy"].as_f64().unwrap() >= 0.0);
+    assert!(j["first_frame_jump_eq26"].as_f64().unwrap().is_finite());
+    let e = fails(&["bench-synthesis", "--model", &r, "--data", &data, "--glob", "nothing*"]);
+    assert!(e.contains("nothing*") || e.contains("no clip"), "{e}");
+}
