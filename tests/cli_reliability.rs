@@ -28,6 +28,9 @@ fn every_numeric_option_of_every_subcommand_refuses_bad_values_with_its_range() 
     let rtn = ["train", "rtn"];
     let bt = ["bench", "train"];
     let rmr = ["train", "rmr"];
+    let rg = ["train", "rnn-gmm"];
+    let ge = ["generate", "--model", "m", "--out", "o.bvh"];
+    let bsy = ["bench-synthesis", "--model", "m", "--data", "d"];
     let st = ["stitch", "--method", "concat", "a.bvh", "b.bvh", "--out", "o.bvh"];
     let bs = ["bench", "stitch", "--data", "d", "--valid-glob", "*x*"];
     let sy = ["data", "synth", "--out", "d"];
@@ -128,6 +131,33 @@ fn every_numeric_option_of_every_subcommand_refuses_bad_values_with_its_range() 
         ),
         (with(&bs, ["--seed", "x"]), "--seed <SEED>", "not a seed"),
         (with(&bs, ["--database-stride", "0"]), "--database-stride <DATABASE_STRIDE>", frames),
+        (with(&rg, ["--epochs", "0"]), "--epochs <EPOCHS>", "0 epochs is outside the valid range 1..=100000"),
+        (with(&rg, ["--refiner-epochs", "100001"]), "--refiner-epochs <REFINER_EPOCHS>", "valid range 1..=100000"),
+        (with(&rg, ["--refiner-rounds", "0"]), "--refiner-rounds <REFINER_ROUNDS>", "valid range 1..=10000"),
+        (with(&rg, ["--refiner-warmup", "-1"]), "--refiner-warmup <REFINER_WARMUP>", "valid range 1..=10000"),
+        (
+            with(&rg, ["--time-limit", "0"]),
+            "--time-limit <TIME_LIMIT>",
+            "not a positive number (valid range (0, 43200])",
+        ),
+        (
+            with(&rg, ["--refiner-time-limit", "1e9"]),
+            "--refiner-time-limit <REFINER_TIME_LIMIT>",
+            "minutes is outside the valid range (0, 43200]",
+        ),
+        (with(&rg, ["--synth-minutes", "0"]), "--synth-minutes <SYNTH_MINUTES>", "not a positive number"),
+        (with(&rg, ["--seed", "-1"]), "--seed <SEED>", "not a seed"),
+        (with(&ge, ["--frames", "0"]), "--frames <FRAMES>", "valid range 1..=10000000"),
+        (with(&ge, ["--seconds", "0"]), "--seconds <SECONDS>", "not a positive number (valid range (0, 360000])"),
+        (with(&ge, ["--count", "0"]), "--count <COUNT>", "valid range 1..=100000"),
+        (with(&ge, ["--seed", "x"]), "--seed <SEED>", "not a seed"),
+        (with(&ge, ["--temperature", "-1"]), "--temperature <TEMPERATURE>", "valid range [0, 100]"),
+        (with(&ge, ["--init-steps", "10001"]), "--init-steps <INIT_STEPS>", "valid range 0..=10000"),
+        (with(&bsy, ["--sequences", "0"]), "--sequences <SEQUENCES>", "valid range 1..=100000"),
+        (with(&bsy, ["--seconds", "1e9"]), "--seconds <SECONDS>", "valid range (0, 360000]"),
+        (with(&bsy, ["--seed", "x"]), "--seed <SEED>", "not a seed"),
+        (with(&bsy, ["--temperature", "101"]), "--temperature <TEMPERATURE>", "valid range [0, 100]"),
+        (with(&bsy, ["--range-margin", "11"]), "--range-margin <RANGE_MARGIN>", "valid range [0, 10]"),
         (with(&rtn, ["--threads", "0"]), "--threads <THREADS>", "not a thread count: valid range 1..=256"),
         (with(&rtn, ["--threads", "257"]), "--threads <THREADS>", "not a thread count: valid range 1..=256"),
         (with(&bt, ["--threads", "0"]), "--threads <THREADS>", "outside the valid range 1..=256"),

@@ -263,6 +263,32 @@ pub fn case_count(s: &str) -> Result<usize, String> {
     whole_in(s, 0..=MAX_CASES, "cases")
 }
 
+/// The longest synthesis, seconds (100 hours).
+pub const MAX_SYNTHESIS_SECONDS: f64 = 360_000.0;
+
+/// The largest sampling temperature.
+pub const MAX_TEMPERATURE: f64 = 100.0;
+
+/// A frame count of a streamed output (synthesis of any length), `1..=MAX_FRAME_INDEX`.
+pub fn long_frame_count(s: &str) -> Result<usize, String> {
+    whole_in(s, 1..=MAX_FRAME_INDEX, "frames")
+}
+
+/// A duration of generated motion in seconds, `(0, MAX_SYNTHESIS_SECONDS]`.
+pub fn duration_seconds(s: &str) -> Result<f64, String> {
+    real_in(s, Interval::above(0.0, MAX_SYNTHESIS_SECONDS), "seconds")
+}
+
+/// A sampling temperature, `[0, MAX_TEMPERATURE]` (0: the most likely component's mean).
+pub fn temperature(s: &str) -> Result<f64, String> {
+    real_in(s, Interval::closed(0.0, MAX_TEMPERATURE), "")
+}
+
+/// A margin as a fraction of a range, `[0, 10]`.
+pub fn margin_fraction(s: &str) -> Result<f64, String> {
+    real_in(s, Interval::closed(0.0, 10.0), "")
+}
+
 /// A learning rate in `(0, MAX_LEARNING_RATE]`.
 pub fn learning_rate(s: &str) -> Result<f64, String> {
     real_in(s, Interval::above(0.0, MAX_LEARNING_RATE), "")

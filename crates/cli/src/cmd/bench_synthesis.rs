@@ -35,23 +35,23 @@ pub struct BenchSynthesisArgs {
     #[arg(long)]
     pub glob: String,
     /// Sequences to generate.
-    #[arg(long, default_value_t = 100, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
+    #[arg(long, default_value_t = 100, allow_hyphen_values = true, value_parser = crate::args::sequences)]
     pub sequences: usize,
     /// Length of each sequence in seconds.
-    #[arg(long, default_value_t = 60.0, allow_hyphen_values = true, value_parser = crate::args::positive)]
+    #[arg(long, default_value_t = 60.0, allow_hyphen_values = true, value_parser = crate::args::duration_seconds)]
     pub seconds: f64,
     /// Seed: sequence i uses seed + i for its sampling; the start frames are drawn with the seed.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_hyphen_values = true, value_parser = crate::args::seed)]
     pub seed: u64,
     /// Sampling temperature.
-    #[arg(long, default_value_t = 1.0, allow_hyphen_values = true, value_parser = crate::args::non_negative)]
+    #[arg(long, default_value_t = 1.0, allow_hyphen_values = true, value_parser = crate::args::temperature)]
     pub temperature: f64,
     /// Benchmark the generator alone (a folder without a refiner).
     #[arg(long)]
     pub no_refiner: bool,
     /// A sequence leaves the data's range when a joint-angle value falls outside the real
     /// clips' [min, max] widened by this fraction of its span on each side.
-    #[arg(long, default_value_t = 0.1, allow_hyphen_values = true, value_parser = crate::args::non_negative)]
+    #[arg(long, default_value_t = 0.1, allow_hyphen_values = true, value_parser = crate::args::margin_fraction)]
     pub range_margin: f64,
     /// Leave out the clips of --data that cannot be read or do not join the dataset.
     #[arg(long)]

@@ -26,16 +26,16 @@ pub struct GenerateArgs {
     #[arg(long)]
     pub from: Option<String>,
     /// Frames to generate (any number: the motion is streamed to the file).
-    #[arg(long, conflicts_with = "seconds", allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
+    #[arg(long, conflicts_with = "seconds", allow_hyphen_values = true, value_parser = crate::args::long_frame_count)]
     pub frames: Option<usize>,
     /// Seconds to generate (at the model's frame rate) instead of --frames.
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::positive)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::duration_seconds)]
     pub seconds: Option<f64>,
     /// Sequences to generate, with seeds SEED, SEED + 1, ...
-    #[arg(long, default_value_t = 1, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
+    #[arg(long, default_value_t = 1, allow_hyphen_values = true, value_parser = crate::args::sequences)]
     pub count: usize,
     /// Seed of the sampling: the same seed gives the same file, byte for byte.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_hyphen_values = true, value_parser = crate::args::seed)]
     pub seed: u64,
     /// Output: a `.bvh` file (one sequence), or a folder that receives `seed<S>.bvh` files.
     /// Contact labels go to `<name>.contacts.json` beside each BVH.
@@ -43,7 +43,7 @@ pub struct GenerateArgs {
     pub out: PathBuf,
     /// Scale on the mixture's standard deviations (1: the model's own spread; lower is
     /// calmer, 0 takes the chosen component's mean).
-    #[arg(long, default_value_t = 1.0, allow_hyphen_values = true, value_parser = crate::args::non_negative)]
+    #[arg(long, default_value_t = 1.0, allow_hyphen_values = true, value_parser = crate::args::temperature)]
     pub temperature: f64,
     /// Generate with the generator alone (also for a folder of the generator stage).
     #[arg(long)]

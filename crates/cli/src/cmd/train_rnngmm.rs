@@ -75,26 +75,26 @@ pub struct RnnGmmArgs {
     pub stage: Stage,
     /// Generator epochs (an epoch visits every training window once; a resumed run continues
     /// up to this total).
-    #[arg(long, default_value_t = 10, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
+    #[arg(long, default_value_t = 10, allow_hyphen_values = true, value_parser = crate::args::epochs)]
     pub epochs: usize,
     /// Refiner epochs (an epoch is `--refiner-rounds` adversarial rounds; a resumed run
     /// continues up to this total).
-    #[arg(long, default_value_t = 10, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
+    #[arg(long, default_value_t = 10, allow_hyphen_values = true, value_parser = crate::args::epochs)]
     pub refiner_epochs: usize,
     /// Adversarial rounds per refiner epoch (a round: k refiner updates and one discriminator
     /// update; the first also runs the warm-up).
-    #[arg(long, default_value_t = 10, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
+    #[arg(long, default_value_t = 10, allow_hyphen_values = true, value_parser = crate::args::rounds)]
     pub refiner_rounds: usize,
     /// Warm-up updates of the refiner stage, refiner and discriminator each [default: the
     /// preset's; paper: 75]. Ignored when a refiner stage is resumed (its own setting is kept).
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::rounds)]
     pub refiner_warmup: Option<usize>,
     /// Stop the generator stage after this many minutes (checked between epochs: the epoch in
     /// progress finishes first).
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::positive)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::time_limit_minutes)]
     pub time_limit: Option<f64>,
     /// Stop the refiner stage after this many minutes [default: --time-limit].
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::positive)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::time_limit_minutes)]
     pub refiner_time_limit: Option<f64>,
     /// Run folder (see `docs/rnn-gmm.md`).
     #[arg(long, default_value = "runs/rnn-gmm")]
@@ -110,11 +110,11 @@ pub struct RnnGmmArgs {
     #[arg(long, value_enum, default_value_t = RnnGmmPreset::Paper)]
     pub preset: RnnGmmPreset,
     /// Minutes of synthetic motion when `--data` is not given.
-    #[arg(long, default_value_t = 10.0, allow_hyphen_values = true, value_parser = crate::args::positive)]
+    #[arg(long, default_value_t = 10.0, allow_hyphen_values = true, value_parser = crate::args::synth_minutes)]
     pub synth_minutes: f64,
     /// Seed of the synthetic data, the weights, the input noise, the shuffles and the
     /// adversarial draws.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_hyphen_values = true, value_parser = crate::args::seed)]
     pub seed: u64,
 }
 
