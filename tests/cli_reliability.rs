@@ -147,6 +147,7 @@ fn every_numeric_option_of_every_subcommand_refuses_bad_values_with_its_range() 
         ),
         (with(&rg, ["--synth-minutes", "0"]), "--synth-minutes <SYNTH_MINUTES>", "not a positive number"),
         (with(&rg, ["--seed", "-1"]), "--seed <SEED>", "not a seed"),
+        (with(&rg, ["--threads", "0"]), "--threads <THREADS>", "not a thread count: valid range 1..=256"),
         (with(&ge, ["--frames", "0"]), "--frames <FRAMES>", "valid range 1..=10000000"),
         (with(&ge, ["--seconds", "0"]), "--seconds <SECONDS>", "not a positive number (valid range (0, 360000])"),
         (with(&ge, ["--count", "0"]), "--count <COUNT>", "valid range 1..=100000"),

@@ -500,3 +500,27 @@ fn decompress_with_a_5000_frame_gap_completes() {
     assert!(ok, "{stdout}\n{err}");
     assert!(stdout.contains("rebuilt 5010 frames") && stdout.contains("1 keyframes (every 5000)"), "{stdout}");
 }
+
+/// `zoo bench train` (issue 18): one timed step per thread count at the paper's sizes, in the
+/// training environment, with its JSON; models that are not data-parallel yet are refused.
+#[test]
+fn bench_train_measures_every_thread_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("train.json");
+    let json_s = json.to_str().unwrap();
+    let (ok, stdout, stderr) =
+        run(&["bench", "train", "--threads", "1,2", "--steps", "1", "--repeats", "1", "--json", json_s]);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("environment: CANDLE_NUM_THREADS=1 MIMALLOC_PURGE_DELAY=-1"), "{stdout}");
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let rows = v["results"].as_array().unwrap();
+    assert_eq!(rows.len(), 2);
+    for (row, threads) in rows.iter().zip([1, 2]) {
+        assert_eq!(row["threads"], threads);
+        assert!(row["windows_per_s_median"].as_f64().unwrap() > 0.0, "{row}");
+        assert!(row["gflops"].as_f64().unwrap() > 0.0, "{row}");
+    }
+    assert!(v["matmul_gflops_one_thread"].as_f64().unwrap() > 0.0);
+    let (ok, _, stderr) = run(&["bench", "train", "--model", "arnn"]);
+    assert!(!ok && stderr.contains("rtn and rnn-gmm are data-parallel so far"), "{stderr}");
+}

@@ -140,6 +140,8 @@ pub struct GeneratorTrainer {
     vars: Vec<Var>,
     /// Input noise, one standard normal per input value, batch after batch.
     rng: SplitMix64,
+    /// Workers of the data-parallel step ([`GeneratorTrainer::set_threads`]; one by default).
+    parallel: zoo_nn::DataParallel,
 }
 
 impl GeneratorTrainer {
@@ -166,7 +168,17 @@ impl GeneratorTrainer {
             opt,
             vars,
             rng: SplitMix64::new(t.seed),
+            parallel: zoo_nn::DataParallel::new(1)?,
         })
+    }
+
+    /// Trains with `threads` data-parallel workers (`zoo_nn::parallel`): the batch (its input
+    /// noise drawn first, in the batch's order) is shared out among them and their gradients
+    /// are summed before clipping and the one RMSProp step, so the update equals the one-worker
+    /// update up to float summation order.
+    pub fn set_threads(&mut self, threads: usize) -> RnnGmmResult<()> {
+        self.parallel = zoo_nn::DataParallel::new(threads)?;
+        Ok(())
     }
 
     /// The generator being trained.
@@ -246,12 +258,14 @@ impl GeneratorTrainer {
     /// as they were.
     pub fn train_step(&mut self, windows: &[&[f32]]) -> RnnGmmResult<f64> {
         let (inputs, targets) = self.batch(windows, true)?;
-        let loss = self.model.sequence_nll(&inputs, &targets)?;
-        let value = loss.to_scalar::<f32>()? as f64;
-        if !value.is_finite() {
+        let model = &self.model;
+        let shard = |r: std::ops::Range<usize>| {
+            model.sequence_nll(&inputs.narrow(0, r.start, r.len())?, &targets.narrow(0, r.start, r.len())?)
+        };
+        let (value, grads) = self.parallel.backward(windows.len(), &self.vars, shard)?;
+        let Some(mut grads) = grads.filter(|_| value.is_finite()) else {
             return Err(RnnGmmError::NonFiniteLoss { step: self.opt.steps(), loss: value });
-        }
-        let mut grads = loss.backward()?;
+        };
         clip_grad_value(&mut grads, &self.vars, self.config.train.clip)?;
         self.opt.step(&grads)?;
         Ok(value)

@@ -441,3 +441,47 @@ fn streaming_synthesis_does_not_depend_on_the_chunks() {
     // The refiner changed the motion.
     assert_ne!(whole.motion.clip.local_rotations, raw.clip.local_rotations);
 }
+
+fn all_weights(t: &GeneratorTrainer) -> Vec<(String, Vec<f32>)> {
+    let data = t.varmap().data().lock().unwrap();
+    let mut v: Vec<(String, Vec<f32>)> =
+        data.iter().map(|(n, v)| (n.clone(), v.as_tensor().flatten_all().unwrap().to_vec1::<f32>().unwrap())).collect();
+    v.sort_by(|a, b| a.0.cmp(&b.0));
+    v
+}
+
+/// Data-parallel generator training (issue 18): two workers give the one-worker loss and,
+/// after the RMSProp step, the same weights to 1e-5 relative for all but float-noise-level
+/// gradient components (RMSProp's first step divides each component by its own magnitude);
+/// the same thread count repeats bit for bit.
+#[test]
+fn two_thread_generator_step_matches_the_one_thread_step() {
+    let config = Config::tiny();
+    let data = data(&config);
+    let batch: Vec<&[f32]> = (0..5).map(|i| data.train.get(i)).collect();
+    let trainer = |threads: usize| {
+        let mut t = GeneratorTrainer::new(&config, data.spec.clone(), data.norm.clone(), &Device::Cpu).unwrap();
+        t.set_threads(threads).unwrap();
+        t
+    };
+    let (mut one, mut two) = (trainer(1), trainer(2));
+    let before = all_weights(&one);
+    let (l1, l2) = (one.train_step(&batch).unwrap(), two.train_step(&batch).unwrap());
+    assert!((l1 - l2).abs() <= 1e-5 * l1.abs(), "loss {l1} vs {l2}");
+    let (w1, w2) = (all_weights(&one), all_weights(&two));
+    let (mut noisy, mut total, mut moved) = (0, 0, 0);
+    for (((n, a), (_, b)), (_, w0)) in w1.iter().zip(&w2).zip(&before) {
+        let scale = w0.iter().fold(0f32, |m, v| m.max(v.abs())).max(1e-3);
+        for ((x, y), z) in a.iter().zip(b).zip(w0) {
+            assert!((x - y).abs() <= 0.1 * scale, "{n}: {x} vs {y}");
+            noisy += usize::from((x - y).abs() > 1e-5 * scale);
+            moved += usize::from(x != z);
+            total += 1;
+        }
+    }
+    assert!(moved > 0);
+    assert!(noisy * 1000 <= total, "{noisy} of {total} weights differ by more than 1e-5 relative");
+    let mut again = trainer(2);
+    assert_eq!(again.train_step(&batch).unwrap().to_bits(), l2.to_bits());
+    assert_eq!(all_weights(&again), w2);
+}

@@ -133,46 +133,109 @@ fn matmul_gflops(m: usize, k: usize, n: usize) -> anyhow::Result<f64> {
     })
 }
 
+/// What one thread count's timed training steps run: a closure doing one step.
+type Step<'a> = Box<dyn FnMut() -> anyhow::Result<()> + 'a>;
+
+/// The model under test: its description, the windows per step, the matmul FLOPs per window
+/// and the main matmul shape `(m, k, n)` of one step.
+struct Bench<'a> {
+    what: String,
+    batch: usize,
+    flops: f64,
+    gate: (usize, usize, usize),
+    steps: Vec<Step<'a>>,
+}
+
+/// The RNN-GMM generator at the paper's sizes (3 x 512 dense, 2 x 512 LSTM, M = 5, windows of
+/// 50 frames, batch 20) on the embedded synthetic locomotion.
+fn rnn_gmm_bench(threads: &[usize]) -> anyhow::Result<Bench<'static>> {
+    use zoo_rnngmm::prelude::*;
+    let cfg = zoo_data::synth::SynthConfig { minutes: 2.0, seed: 1, terrain: false, ..Default::default() };
+    let clips = zoo_data::synth::generate(&cfg);
+    let refs: Vec<&zoo_motion::Clip> = clips.iter().map(|c| &c.clip).collect();
+    let config = Config::paper();
+    let data = zoo_rnngmm::TrainingData::from_clips(&config, cfg.fps, &refs[1..], &refs[..1])?;
+    let config = config.with_dim(data.spec.dim());
+    let b = config.train.batch_size;
+    if data.train.len() < b {
+        bail!("the synthetic data gave {} windows, fewer than a batch of {b}", data.train.len());
+    }
+    let windows: Vec<Vec<f32>> = (0..b).map(|i| data.train.get(i).to_vec()).collect();
+    let mut steps: Vec<Step> = Vec::new();
+    let mut params = 0;
+    for &t in threads {
+        let mut tr = GeneratorTrainer::new(&config, data.spec.clone(), data.norm.clone(), &Device::Cpu)?;
+        tr.set_threads(t)?;
+        params = tr.model().parameter_count();
+        let windows = windows.clone();
+        let refs: Vec<&[f32]> = windows.iter().map(|w| w.as_slice()).collect();
+        tr.train_step(&refs)?; // warm-up
+        steps.push(Box::new(move || {
+            let refs: Vec<&[f32]> = windows.iter().map(|w| w.as_slice()).collect();
+            tr.train_step(&refs)?;
+            Ok(())
+        }));
+    }
+    let w = config.train.window;
+    Ok(Bench {
+        what: format!("RNN-GMM generator, paper sizes ({params} parameters, batch {b}, windows of {w} frames)"),
+        batch: b,
+        // Forward 2 flops per weight per frame, backward twice that.
+        flops: 6.0 * params as f64 * (w - 1) as f64,
+        gate: (b, 2 * config.lstm, 4 * config.lstm),
+        steps,
+    })
+}
+
+/// The RTN at the paper's sizes on deterministic synthetic windows.
+fn rtn_bench<'a>(threads: &[usize], ws: &'a [Vec<f32>]) -> anyhow::Result<Bench<'a>> {
+    let parents: Vec<Option<usize>> = (0..22).map(|j| if j == 0 { None } else { Some((j - 1) / 2) }).collect();
+    let config = Config::paper().with_parents(&parents);
+    let b = config.train.batch_size;
+    let mw: Vec<MotionWindow> = ws.iter().map(|w| MotionWindow::new(w)).collect();
+    let stats = fit_stats(&config, &mw)?;
+    let mut steps: Vec<Step> = Vec::new();
+    for &t in threads {
+        let mut tr = RtnTrainer::new(&config, stats.clone(), &Device::Cpu)?;
+        tr.set_threads(t)?;
+        tr.train_step(&mw[..b])?; // warm-up: first-touch allocations
+        let mw = mw.clone();
+        steps.push(Box::new(move || {
+            tr.train_step(&mw[..b])?;
+            Ok(())
+        }));
+    }
+    let e = *config.frame_encoder.last().unwrap_or(&0);
+    let gate_k = e + config.lstm + config.offset_encoder.last().copied().unwrap_or(0);
+    Ok(Bench {
+        what: format!(
+            "RTN paper sizes (K = 22, batch {b}, {} + {} frames)",
+            config.past_frames, config.transition_frames
+        ),
+        batch: b,
+        flops: rtn_flops_per_window(&config),
+        gate: (b, gate_k, 4 * config.lstm),
+        steps,
+    })
+}
+
 /// Runs `zoo bench train`.
 pub fn run(a: TrainBenchArgs) -> anyhow::Result<()> {
-    if a.model != TrainBenchModel::Rtn {
-        bail!(
-            "--model {:?}: only rtn is data-parallel so far; rmr, arnn and rnn-gmm train through the \
-             shared loop on one thread (issue 18 is open for them)",
-            a.model
-        );
-    }
     if let Some(j) = &a.json {
         crate::cmd::check_output_file("--json", j)?;
     }
-    let parents: Vec<Option<usize>> = (0..22).map(|j| if j == 0 { None } else { Some((j - 1) / 2) }).collect();
-    let config = Config::paper().with_parents(&parents);
-    let dev = Device::Cpu;
-    let b = config.train.batch_size;
-    let ws: Vec<Vec<f32>> = (0..2 * b).map(|i| window(config.window_frames(), 22, i)).collect();
-    let mw: Vec<MotionWindow> = ws.iter().map(|w| MotionWindow::new(w)).collect();
-    let stats = fit_stats(&config, &mw)?;
-    let flops = rtn_flops_per_window(&config);
-    let e = *config.frame_encoder.last().unwrap_or(&0);
-    let gate_k = e + config.lstm + config.offset_encoder.last().copied().unwrap_or(0);
-    let mut trainers = a
-        .threads
-        .iter()
-        .map(|&t| -> anyhow::Result<RtnTrainer> {
-            let mut tr = RtnTrainer::new(&config, stats.clone(), &dev)?;
-            tr.set_threads(t)?;
-            tr.train_step(&mw[..b])?; // warm-up: first-touch allocations
-            Ok(tr)
-        })
-        .collect::<anyhow::Result<Vec<_>>>()?;
-    println!(
-        "RTN paper sizes (K = 22, batch {b}, {} + {} frames, {:.2} GFLOP per window); {} repeats of {} steps",
-        config.past_frames,
-        config.transition_frames,
-        flops / 1e9,
-        a.repeats,
-        a.steps
-    );
+    let parents_frames = Config::paper().window_frames();
+    let ws: Vec<Vec<f32>> = (0..64).map(|i| window(parents_frames, 22, i)).collect();
+    let mut bench = match a.model {
+        TrainBenchModel::Rtn => rtn_bench(&a.threads, &ws)?,
+        TrainBenchModel::RnnGmm => rnn_gmm_bench(&a.threads)?,
+        other => bail!(
+            "--model {other:?}: rtn and rnn-gmm are data-parallel so far; rmr and arnn train through the shared \
+             loop on one thread (their dropout draws inside the step come next, issue 18)"
+        ),
+    };
+    let (b, flops) = (bench.batch, bench.flops);
+    println!("{}: {:.2} GFLOP per window; {} repeats of {} steps", bench.what, flops / 1e9, a.repeats, a.steps);
     let env = |k: &str| std::env::var(k).unwrap_or_else(|_| "unset".into());
     println!(
         "environment: CANDLE_NUM_THREADS={} MIMALLOC_PURGE_DELAY={} RAYON_NUM_THREADS={}",
@@ -184,19 +247,19 @@ pub fn run(a: TrainBenchArgs) -> anyhow::Result<()> {
     bar.set_style(indicatif::ProgressStyle::with_template("bench train: [{bar:30}] {pos}/{len} timed runs {elapsed}")?);
     let mut rates = vec![Vec::new(); a.threads.len()];
     for _ in 0..a.repeats {
-        for (k, tr) in trainers.iter_mut().enumerate() {
+        for (k, step) in bench.steps.iter_mut().enumerate() {
             let t0 = Instant::now();
-            for s in 0..a.steps {
-                let off = (s * b) % b;
-                tr.train_step(&mw[off..off + b])?;
+            for _ in 0..a.steps {
+                step()?;
             }
             rates[k].push((a.steps * b) as f64 / t0.elapsed().as_secs_f64());
             bar.inc(1);
         }
     }
     bar.finish_and_clear();
-    // The matmul reference on one thread, at the fused LSTM gate shape of one worker's shard.
-    let mm = matmul_gflops(b, gate_k, 4 * config.lstm)?;
+    // The matmul reference on one thread, at the main (LSTM gate) shape of one step.
+    let (gm, gk, gn) = bench.gate;
+    let mm = matmul_gflops(gm, gk, gn)?;
     let mut rows = Vec::new();
     let base = median(&rates[0]);
     for (k, &t) in a.threads.iter().enumerate() {
@@ -205,14 +268,16 @@ pub fn run(a: TrainBenchArgs) -> anyhow::Result<()> {
         let frac = gflops / (t as f64 * mm);
         println!(
             "zoo   {t} thread(s): {m:7.1} windows/s (median; {:.2}x the first row), {gflops:6.1} GFLOP/s, \
-             {:.0}% of {t} x {mm:.1} GFLOP/s (one-thread candle matmul {b}x{gate_k}x{})",
+             {:.0}% of {t} x {mm:.1} GFLOP/s (one-thread candle matmul {gm}x{gk}x{gn})",
             m / base,
             100.0 * frac,
-            4 * config.lstm
         );
-        rows.push(json!({"framework": "zoo", "model": "rtn", "threads": t, "batch": b,
+        rows.push(json!({"framework": "zoo", "model": format!("{:?}", a.model), "threads": t, "batch": b,
             "windows_per_s_median": m, "windows_per_s": rates[k], "gflops": gflops,
             "matmul_fraction": frac}));
+    }
+    if a.pytorch && a.model != TrainBenchModel::Rtn {
+        bail!("--pytorch: the PyTorch reference script covers the RTN only");
     }
     if a.pytorch {
         let script = std::path::Path::new("scripts/bench_train_torch.sh");

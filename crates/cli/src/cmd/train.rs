@@ -118,7 +118,7 @@ pub struct RtnArgs {
 }
 
 /// A training thread count in `1..=MAX_THREADS`.
-fn training_threads(s: &str) -> Result<usize, String> {
+pub fn training_threads(s: &str) -> Result<usize, String> {
     let max = zoo_nn::parallel::MAX_THREADS;
     match s.trim().parse::<usize>() {
         Ok(n @ 1..) if n <= max => Ok(n),

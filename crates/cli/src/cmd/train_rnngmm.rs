@@ -116,6 +116,10 @@ pub struct RnnGmmArgs {
     /// adversarial draws.
     #[arg(long, default_value_t = 1, allow_hyphen_values = true, value_parser = crate::args::seed)]
     pub seed: u64,
+    /// Data-parallel threads of the generator stage (`1..=256`) [default: the cores available];
+    /// the refiner stage runs on one. See `zoo train rtn --help`.
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::cmd::train::training_threads)]
+    pub threads: Option<usize>,
 }
 
 /// The files of a model folder that the stages copy up into the run folder.
@@ -334,7 +338,7 @@ pub fn run(a: RnnGmmArgs) -> anyhow::Result<()> {
     let valid_refs: Vec<&zoo_motion::Clip> = valid.iter().map(|c| &c.clip).collect();
 
     if p.generator {
-        let (trainer, data) = if p.resume_generator {
+        let (mut trainer, data) = if p.resume_generator {
             let from = train_loop::resume_dir(&gen_dir);
             let trainer = GeneratorTrainer::load(&from, &device)
                 .with_context(|| format!("resuming the generator from {}", from.display()))?;
@@ -368,6 +372,9 @@ pub fn run(a: RnnGmmArgs) -> anyhow::Result<()> {
             trainer.model().parameter_count(),
             gen_dir.display()
         );
+        let threads = crate::cmd::train::default_threads(a.threads);
+        trainer.set_threads(threads)?;
+        println!("generator training threads: {threads} (data-parallel; --threads to change)");
         let seed = trainer.config().train.seed;
         let mut training = GeneratorTraining::new(trainer, &data.train, &data.valid)?;
         let opts = TrainOptions {
