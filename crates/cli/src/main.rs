@@ -60,8 +60,8 @@ enum Command {
 ///
 /// Setting the environment of a running program is `unsafe` in Rust 2024 (other threads may
 /// read it), so the process replaces itself once (`exec`, same process id, same arguments)
-/// with these variables set. Variables the user set are kept; `ZOO_TRAINING_ENV=0` turns this
-/// off.
+/// with these variables set. Variables the user set are kept; setting `ZOO_TRAINING_ENV` (to
+/// anything) turns this off.
 fn training_environment() {
     let args: Vec<std::ffi::OsString> = std::env::args_os().collect();
     let sub: Vec<&str> = args.iter().skip(1).take(2).filter_map(|a| a.to_str()).collect();
