@@ -39,6 +39,8 @@ enum Command {
     Export(cmd::export::ExportArgs),
     /// Draw clips as stick figures: an animated GIF or a PNG contact sheet.
     Render(cmd::render::RenderArgs),
+    /// Complete an animator's keys into a whole motion with a trained ARNN (`zoo complete --model DIR --keys K.json --out F.bvh`).
+    Complete(cmd::complete::CompleteArgs),
 }
 
 /// Whether a panic is `println!` failing on a closed pipe (`zoo data stats ... | head`).
@@ -67,5 +69,6 @@ fn main() -> anyhow::Result<()> {
         Command::Decompress(a) => cmd::decompress::run(a),
         Command::Export(a) => cmd::export::run(a),
         Command::Render(a) => cmd::render::run(a),
+        Command::Complete(a) => cmd::complete::run(a),
     }
 }

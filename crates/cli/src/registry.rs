@@ -36,12 +36,20 @@ pub struct ModelEntry {
 }
 
 /// The models the CLI knows.
-pub const MODELS: &[ModelEntry] = &[ModelEntry {
-    kind: "rtn",
-    purpose: "transitions between a context and a target pose (Recurrent Transition Network)",
-    bench: Some(load_rtn_method),
-    transitions: true,
-}];
+pub const MODELS: &[ModelEntry] = &[
+    ModelEntry {
+        kind: "rtn",
+        purpose: "transitions between a context and a target pose (Recurrent Transition Network)",
+        bench: Some(load_rtn_method),
+        transitions: true,
+    },
+    ModelEntry {
+        kind: "arnn",
+        purpose: "completing an animator's keys of the lamp (`zoo complete`, keyframe autocompletion ARNN)",
+        bench: None,
+        transitions: false,
+    },
+];
 
 fn load_rtn_method(dir: &Path, name: String, foot_lock: bool) -> anyhow::Result<Box<dyn TransitionMethod>> {
     let m =

@@ -2,12 +2,14 @@
 
 pub mod bench;
 pub mod bench_runtime;
+pub mod complete;
 pub mod data;
 pub mod data_luxo;
 pub mod decompress;
 pub mod export;
 pub mod render;
 pub mod train;
+pub mod train_arnn;
 pub mod transition;
 
 use anyhow::{Context, bail};

@@ -16,6 +16,8 @@ use zoo_rtn::prelude::*;
 pub enum TrainCommand {
     /// The Recurrent Transition Network (Harvey & Pal 2018).
     Rtn(RtnArgs),
+    /// The keyframe autocompletion network ARNN (Zhang & van de Panne 2018) on the simulated lamp.
+    Arnn(crate::cmd::train_arnn::ArnnArgs),
 }
 
 /// Which RTN to train: the paper's model or one of its Table 4 ablations.
@@ -107,6 +109,7 @@ pub struct RtnArgs {
 pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
     match cmd {
         TrainCommand::Rtn(a) => train_rtn(a),
+        TrainCommand::Arnn(a) => crate::cmd::train_arnn::run(a),
     }
 }
 

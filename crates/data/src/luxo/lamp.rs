@@ -29,8 +29,9 @@ pub type LampPose = [f64; DOFS];
 ///
 /// Lengths in metres, masses in kilograms, gains in N m/rad and N m s/rad. The defaults
 /// ([`LampParams::default`]) are a desk lamp about 55 cm tall and 1.8 kg; `docs/arnn.md` says
-/// why each number was chosen.
+/// why each number was chosen. In JSON, a missing field takes its default.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct LampParams {
     /// Half the width of the base plate.
     pub base_half_width: f64,
