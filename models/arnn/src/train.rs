@@ -416,8 +416,10 @@ mod tests {
         let poses: Vec<Vec<f64>> = s.keys.iter().map(|&k| s.frames[k].to_vec()).collect();
         let a = complete(t.model(), t.normalization(), &s.keys, &poses).unwrap();
         let b = complete(&model, &norm, &s.keys, &poses).unwrap();
-        assert_eq!(a.len(), 31);
-        assert_eq!(a, b);
+        assert_eq!((a.len(), b.len()), (31, 31));
+        // The statistics go through JSON: equal to the last bits of an f64.
+        let diff = a.iter().flatten().zip(b.iter().flatten()).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+        assert!(diff < 1e-9, "the reloaded model differs by {diff}");
         assert_eq!(a[0], poses[0]);
     }
 
