@@ -53,7 +53,14 @@ fn train_resume_and_complete() {
     let (ok, stdout, stderr) = train(&runp, 1, false);
     assert!(ok, "{stdout}\n{stderr}");
     assert!(stdout.contains("4 training / 1 test sequences of 87 frames"), "{stdout}");
-    for f in ["config.json", "model.safetensors", "normalization.json", "summary.json", "last/optimizer.safetensors"] {
+    for f in [
+        "config.json",
+        "model.safetensors",
+        "normalization.json",
+        "summary.json",
+        "last/optimizer.safetensors",
+        "completion_test.png",
+    ] {
         assert!(runp.join(f).is_file(), "{f} missing in the run folder");
     }
     let config: serde_json::Value =
@@ -84,7 +91,7 @@ fn train_resume_and_complete() {
     // Completion: a BVH of the lamp with one frame per network frame, starting on the first key.
     let keys = dir.path().join("keys.json");
     std::fs::write(&keys, hop_keys()).unwrap();
-    let (bvh, json) = (dir.path().join("hop.bvh"), dir.path().join("hop.json"));
+    let (bvh, json, png) = (dir.path().join("hop.bvh"), dir.path().join("hop.json"), dir.path().join("hop.png"));
     let (ok, stdout, stderr) = run(&[
         "complete",
         "--model",
@@ -95,12 +102,15 @@ fn train_resume_and_complete() {
         bvh.to_str().unwrap(),
         "--json",
         json.to_str().unwrap(),
+        "--plot",
+        png.to_str().unwrap(),
     ]);
     assert!(ok, "{stdout}\n{stderr}");
     assert!(
         stdout.contains("completed 25 frames from 3 keys (40 fps)") && stdout.contains("largest key miss"),
         "{stdout}"
     );
+    assert_eq!(&std::fs::read(&png).unwrap()[1..4], b"PNG");
     let clip = zoo_data::bvh::read_file(&bvh, &Default::default()).unwrap();
     assert_eq!(clip.frames(), 25);
     assert_eq!(clip.skeleton.names, ["base", "leg", "neck", "head"]);

@@ -32,6 +32,10 @@ pub struct CompleteArgs {
     /// Also write every completed pose (and the key misses) to this JSON file.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Also plot each degree of freedom over the frames (blue) with the keys (circles) into this
+    /// PNG, like the paper's Figure 8.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
     /// Frames per second of the output [default: the keys file's `fps`, else 50].
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::positive)]
     pub fps: Option<f64>,
@@ -165,6 +169,9 @@ pub fn run(a: CompleteArgs) -> anyhow::Result<()> {
     if let Some(j) = &a.json {
         crate::cmd::check_output_file("--json", j)?;
     }
+    if let Some(p) = &a.plot {
+        crate::cmd::check_output_file("--plot", p)?;
+    }
     let (model, norm) = zoo_arnn::checkpoint::load(&a.model, &candle_core::Device::Cpu)
         .with_context(|| format!("loading the ARNN in {}", a.model.display()))?;
     let config = model.config();
@@ -206,6 +213,10 @@ pub fn run(a: CompleteArgs) -> anyhow::Result<()> {
             "frames": frames,
         });
         std::fs::write(j, serde_json::to_string_pretty(&v)?).with_context(|| format!("writing {}", j.display()))?;
+    }
+    if let Some(p) = &a.plot {
+        let keyed: Vec<(usize, Vec<f64>)> = keys.frames.iter().copied().zip(keys.poses.iter().cloned()).collect();
+        plot_dofs(p, &[DofSeries { frames: &frames, rgb: (31, 80, 180), width: 2.0 }], &keyed)?;
     }
     let worst = |range: std::ops::Range<usize>| {
         misses
@@ -267,4 +278,71 @@ mod tests {
         let e = err(format!(r#"{{"keys": [{{"frame": 0, "pose": {pose}}}, {{"frame": 300000, "pose": {pose}}}]}}"#));
         assert!(e.contains("past the 100000 frames"), "{e}");
     }
+}
+
+/// One curve of [`plot_dofs`]: a pose per frame and its colour.
+pub struct DofSeries<'a> {
+    /// Poses, one per frame from frame 0.
+    pub frames: &'a [Vec<f64>],
+    /// Colour (red, green, blue).
+    pub rgb: (u8, u8, u8),
+    /// Line width in pixels.
+    pub width: f32,
+}
+
+/// Plots each degree of freedom over the frames, one panel per degree of freedom (two columns,
+/// in pose order, each scaled to its own range), like the paper's Figure 8: the curves of
+/// `series` in order (later ones on top) and the keys as circles. 960 x 720 pixels.
+pub fn plot_dofs(path: &Path, series: &[DofSeries], keys: &[(usize, Vec<f64>)]) -> anyhow::Result<()> {
+    use tiny_skia::{Color, Paint, PathBuilder, Pixmap, Stroke, Transform};
+    let d = series.first().and_then(|s| s.frames.first()).map_or(0, |f| f.len());
+    let frames = series.iter().map(|s| s.frames.len()).max().unwrap_or(0);
+    if d == 0 || frames < 2 {
+        bail!("{}: nothing to plot", path.display());
+    }
+    let (w, h, cols) = (960u32, 720u32, 2usize);
+    let rows = d.div_ceil(cols);
+    let (pw, ph, m) = (w as f32 / cols as f32, h as f32 / rows as f32, 14.0f32);
+    let mut pm = Pixmap::new(w, h).context("cannot allocate the plot")?;
+    pm.fill(Color::WHITE);
+    let mut paint = Paint { anti_alias: true, ..Paint::default() };
+    for j in 0..d {
+        let (x0, y0) = ((j % cols) as f32 * pw, (j / cols) as f32 * ph);
+        let values = series.iter().flat_map(|s| s.frames.iter().map(|f| f[j])).chain(keys.iter().map(|k| k.1[j]));
+        let (lo, hi) =
+            values.filter(|v| v.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
+        let (lo, hi) = if hi - lo < 1e-9 { (lo - 0.5, hi + 0.5) } else { (lo, hi) };
+        let x = |t: usize| x0 + m + (pw - 2.0 * m) * t as f32 / (frames - 1) as f32;
+        let y = |v: f64| y0 + ph - m - (ph - 2.0 * m) * ((v - lo) / (hi - lo)) as f32;
+        // Panel frame.
+        paint.set_color_rgba8(190, 190, 190, 255);
+        if let Some(r) = tiny_skia::Rect::from_xywh(x0 + m, y0 + m, pw - 2.0 * m, ph - 2.0 * m) {
+            let p = PathBuilder::from_rect(r);
+            pm.stroke_path(&p, &paint, &Stroke::default(), Transform::identity(), None);
+        }
+        for s in series {
+            let mut pb = PathBuilder::new();
+            for (t, f) in s.frames.iter().enumerate().filter(|(_, f)| f[j].is_finite()) {
+                if pb.is_empty() { pb.move_to(x(t), y(f[j])) } else { pb.line_to(x(t), y(f[j])) }
+            }
+            paint.set_color_rgba8(s.rgb.0, s.rgb.1, s.rgb.2, 255);
+            if let Some(p) = pb.finish() {
+                pm.stroke_path(
+                    &p,
+                    &paint,
+                    &Stroke { width: s.width, ..Stroke::default() },
+                    Transform::identity(),
+                    None,
+                );
+            }
+        }
+        paint.set_color_rgba8(0, 110, 40, 255);
+        for (t, pose) in keys {
+            if let Some(c) = PathBuilder::from_circle(x(*t), y(pose[j]), 5.0) {
+                pm.stroke_path(&c, &paint, &Stroke { width: 2.0, ..Stroke::default() }, Transform::identity(), None);
+            }
+        }
+    }
+    let png = pm.encode_png().map_err(|e| anyhow::anyhow!("{}: cannot encode the PNG: {e}", path.display()))?;
+    std::fs::write(path, png).with_context(|| format!("writing {}", path.display()))
 }

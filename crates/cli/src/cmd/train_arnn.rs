@@ -2,6 +2,7 @@
 //! sequences of the simulated lamp, from a folder written by `zoo data luxo` or generated in
 //! memory. Ends with the test error of completion against linear and spline interpolation.
 
+use crate::cmd::complete::DofSeries;
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -103,8 +104,12 @@ pub struct DataSettings {
     pub test_fraction: f64,
 }
 
+/// The plot of a test sequence written at the end of training.
+pub const PLOT_FILE: &str = "completion_test.png";
+
 /// The files and folders of a run that `--overwrite` deletes (the ones training writes).
-const RUN_FILES: [&str; 9] = [
+const RUN_FILES: [&str; 10] = [
+    PLOT_FILE,
     checkpoint::CONFIG_FILE,
     checkpoint::WEIGHTS_FILE,
     checkpoint::STATS_FILE,
@@ -384,6 +389,24 @@ pub fn run(a: ArnnArgs) -> anyhow::Result<()> {
         .with_context(|| format!("loading the best checkpoint in {}", out.display()))?;
     let r = zoo_arnn::eval::evaluate(&model, &norm, &data.test)?;
     let completion = report(&r);
+    // Figure 8: the first test sequence, ground truth, spline and ARNN, keys circled.
+    let seq = &data.test[0];
+    let poses: Vec<Vec<f64>> = seq.keys.iter().map(|&k| seq.frames[k].to_vec()).collect();
+    let arnn = zoo_arnn::complete(&model, &norm, &seq.keys, &poses)?;
+    let spline = zoo_arnn::eval::cubic_spline(&seq.keys, &poses);
+    let truth: Vec<Vec<f64>> = seq.frames.iter().map(|f| f.to_vec()).collect();
+    let keyed: Vec<(usize, Vec<f64>)> = seq.keys.iter().copied().zip(poses).collect();
+    let plot = out.join(PLOT_FILE);
+    crate::cmd::complete::plot_dofs(
+        &plot,
+        &[
+            DofSeries { frames: &truth, rgb: (150, 220, 150), width: 5.0 },
+            DofSeries { frames: &spline, rgb: (170, 170, 170), width: 1.5 },
+            DofSeries { frames: &arnn, rgb: (31, 80, 180), width: 2.0 },
+        ],
+        &keyed,
+    )?;
+    println!("{}: {} completed (blue) against the simulation (green) and the spline (grey)", plot.display(), seq.name);
     let summary_path = out.join(checkpoint::SUMMARY_FILE);
     let mut summary: serde_json::Map<String, serde_json::Value> = checkpoint::read_json(&summary_path)?;
     summary.insert("completion".into(), completion);
