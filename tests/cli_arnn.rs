@@ -119,6 +119,12 @@ fn train_resume_and_complete() {
     for d in 0..6 {
         assert!((poses[0][d] - REST[d]).abs() < 1e-4, "frame 0 is not the first key: {:?}", poses[0]);
     }
+    // Export: the step graph loads in the runtime, an ARNN driven as a bare step model.
+    let onnx = dir.path().join("arnn.onnx");
+    let (ok, stdout, stderr) = run(&["export", "--onnx", runp.to_str().unwrap(), "--out", onnx.to_str().unwrap()]);
+    assert!(ok && stdout.contains("ARNN step graph"), "{stdout}\n{stderr}");
+    let m = zoo_runtime::MotionModel::load(&onnx).unwrap();
+    assert_eq!((m.metadata().model_kind.as_str(), m.states().len()), ("arnn", 2));
     let out: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(out["frames"].as_array().unwrap().len(), 25);
     assert_eq!(out["key_misses"].as_array().unwrap().len(), 3);

@@ -9,6 +9,7 @@
 pub mod checkpoint;
 pub mod config;
 pub mod eval;
+pub mod export;
 pub mod model;
 pub mod train;
 

@@ -31,7 +31,7 @@ pub struct ExportArgs {
 }
 
 /// The model kinds `zoo export` writes.
-const EXPORT_KINDS: [&str; 1] = [zoo_rtn::export::MODEL_KIND];
+const EXPORT_KINDS: [&str; 2] = [zoo_rtn::export::MODEL_KIND, zoo_arnn::export::MODEL_KIND];
 
 /// The `"model"` field of a run folder's `config.json` (`None` when absent: an RTN folder).
 fn model_kind(config_path: &Path) -> anyhow::Result<Option<String>> {
@@ -67,6 +67,19 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
     }
     match model_kind(&config_path)?.as_deref() {
         None | Some(zoo_rtn::export::MODEL_KIND) => {}
+        Some(zoo_arnn::export::MODEL_KIND) => {
+            let model = zoo_arnn::export::export_arnn_dir(&a.onnx)
+                .with_context(|| format!("exporting {}", a.onnx.display()))?;
+            model.write(&a.out)?;
+            let summary = model.summary();
+            println!(
+                "wrote {}: ARNN step graph ({} nodes, {} parameters) with its metadata",
+                a.out.display(),
+                summary.op_counts.values().sum::<usize>(),
+                summary.parameters
+            );
+            return Ok(());
+        }
         Some(other) => bail!(
             "{}: `zoo export` does not know model `{other}` (config.json \"model\"); it exports: {}",
             a.onnx.display(),
