@@ -82,29 +82,29 @@ pub fn parse_keys(text: &str, dof_names: &[String]) -> Result<Keys, String> {
              \"pose\": [...]}}, ...]}}; NaN and infinity are not JSON numbers, every value must be finite)"
         )
     })?;
-    if let Some(f) = &file.format {
-        if f != KEYS_FORMAT {
-            return Err(format!("format is \"{f}\", expected \"{KEYS_FORMAT}\""));
-        }
+    if let Some(f) = &file.format
+        && f != KEYS_FORMAT
+    {
+        return Err(format!("format is \"{f}\", expected \"{KEYS_FORMAT}\""));
     }
-    if let Some(v) = file.version {
-        if v != 1 {
-            return Err(format!("keys file version {v} is not known to this zoo (it reads version 1): update zoo"));
-        }
+    if let Some(v) = file.version
+        && v != 1
+    {
+        return Err(format!("keys file version {v} is not known to this zoo (it reads version 1): update zoo"));
     }
     let d = dof_names.len();
-    if let Some(names) = &file.dof_names {
-        if names != dof_names {
-            return Err(format!(
-                "the keys are for the degrees of freedom {names:?}, but the model was trained on {dof_names:?}: \
-                 this keys file is for another character"
-            ));
-        }
+    if let Some(names) = &file.dof_names
+        && names != dof_names
+    {
+        return Err(format!(
+            "the keys are for the degrees of freedom {names:?}, but the model was trained on {dof_names:?}: this \
+             keys file is for another character"
+        ));
     }
-    if let Some(fps) = file.fps {
-        if !(fps.is_finite() && fps > 0.0) {
-            return Err(format!("fps {fps} must be a positive number"));
-        }
+    if let Some(fps) = file.fps
+        && !(fps.is_finite() && fps > 0.0)
+    {
+        return Err(format!("fps {fps} must be a positive number"));
     }
     let n = file.keys.len();
     if n < 2 {
@@ -243,43 +243,6 @@ pub fn run(a: CompleteArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn names() -> Vec<String> {
-        zoo_data::luxo::DOF_NAMES.iter().map(|s| s.to_string()).collect()
-    }
-
-    #[test]
-    fn keys_parse_and_start_at_frame_zero() {
-        let text = r#"{"format": "zoo-arnn-keys", "version": 1, "fps": 30,
-            "keys": [{"frame": 5, "pose": [0, 0.02, 0, 0.5, -1.1, -1.2]}, {"frame": 29, "pose": [0.4, 0.02, 0, 0.5, -1.1, -1.2]}]}"#;
-        let k = parse_keys(text, &names()).unwrap();
-        assert_eq!((k.frames, k.offset, k.fps), (vec![0, 24], 5, Some(30.0)));
-    }
-
-    #[test]
-    fn bad_keys_are_named() {
-        let pose = "[0, 0.02, 0, 0.5, -1.1, -1.2]";
-        let err = |t: String| parse_keys(&t, &names()).unwrap_err();
-        let e = err(format!(r#"{{"keys": [{{"frame": 0, "pose": {pose}}}]}}"#));
-        assert!(e.contains("1 key(s) given: completion needs at least 2"), "{e}");
-        let e = err(format!(r#"{{"keys": [{{"frame": 9, "pose": {pose}}}, {{"frame": 3, "pose": {pose}}}]}}"#));
-        assert!(e.contains("key 1 is at frame 3 but key 0 is at frame 9"), "{e}");
-        let e = err(format!(r#"{{"keys": [{{"frame": 0, "pose": {pose}}}, {{"frame": 3, "pose": [1, 2]}}]}}"#));
-        assert!(e.contains("key 1 (frame 3) has 2 values; the model completes 6"), "{e}");
-        let e = err(format!(
-            r#"{{"keys": [{{"frame": 0, "pose": {pose}}}, {{"frame": 3, "pose": [NaN, 0, 0, 0, 0, 0]}}]}}"#
-        ));
-        assert!(e.contains("not a keys file") && e.contains("finite"), "{e}");
-        let e = err(format!(r#"{{"dof_names": ["a"], "keys": [{{"frame": 0, "pose": {pose}}}]}}"#));
-        assert!(e.contains("another character"), "{e}");
-        let e = err(format!(r#"{{"keys": [{{"frame": 0, "pose": {pose}}}, {{"frame": 300000, "pose": {pose}}}]}}"#));
-        assert!(e.contains("past the 100000 frames"), "{e}");
-    }
-}
-
 /// One curve of [`plot_dofs`]: a pose per frame and its colour.
 pub struct DofSeries<'a> {
     /// Poses, one per frame from frame 0.
@@ -345,4 +308,41 @@ pub fn plot_dofs(path: &Path, series: &[DofSeries], keys: &[(usize, Vec<f64>)]) 
     }
     let png = pm.encode_png().map_err(|e| anyhow::anyhow!("{}: cannot encode the PNG: {e}", path.display()))?;
     std::fs::write(path, png).with_context(|| format!("writing {}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn names() -> Vec<String> {
+        zoo_data::luxo::DOF_NAMES.iter().map(|s| s.to_string()).collect()
+    }
+
+    #[test]
+    fn keys_parse_and_start_at_frame_zero() {
+        let text = r#"{"format": "zoo-arnn-keys", "version": 1, "fps": 30,
+            "keys": [{"frame": 5, "pose": [0, 0.02, 0, 0.5, -1.1, -1.2]}, {"frame": 29, "pose": [0.4, 0.02, 0, 0.5, -1.1, -1.2]}]}"#;
+        let k = parse_keys(text, &names()).unwrap();
+        assert_eq!((k.frames, k.offset, k.fps), (vec![0, 24], 5, Some(30.0)));
+    }
+
+    #[test]
+    fn bad_keys_are_named() {
+        let pose = "[0, 0.02, 0, 0.5, -1.1, -1.2]";
+        let err = |t: String| parse_keys(&t, &names()).unwrap_err();
+        let e = err(format!(r#"{{"keys": [{{"frame": 0, "pose": {pose}}}]}}"#));
+        assert!(e.contains("1 key(s) given: completion needs at least 2"), "{e}");
+        let e = err(format!(r#"{{"keys": [{{"frame": 9, "pose": {pose}}}, {{"frame": 3, "pose": {pose}}}]}}"#));
+        assert!(e.contains("key 1 is at frame 3 but key 0 is at frame 9"), "{e}");
+        let e = err(format!(r#"{{"keys": [{{"frame": 0, "pose": {pose}}}, {{"frame": 3, "pose": [1, 2]}}]}}"#));
+        assert!(e.contains("key 1 (frame 3) has 2 values; the model completes 6"), "{e}");
+        let e = err(format!(
+            r#"{{"keys": [{{"frame": 0, "pose": {pose}}}, {{"frame": 3, "pose": [NaN, 0, 0, 0, 0, 0]}}]}}"#
+        ));
+        assert!(e.contains("not a keys file") && e.contains("finite"), "{e}");
+        let e = err(format!(r#"{{"dof_names": ["a"], "keys": [{{"frame": 0, "pose": {pose}}}]}}"#));
+        assert!(e.contains("another character"), "{e}");
+        let e = err(format!(r#"{{"keys": [{{"frame": 0, "pose": {pose}}}, {{"frame": 300000, "pose": {pose}}}]}}"#));
+        assert!(e.contains("past the 100000 frames"), "{e}");
+    }
 }
