@@ -23,7 +23,7 @@ pub struct CompleteArgs {
     /// Run folder of `zoo train arnn`.
     #[arg(long)]
     pub model: PathBuf,
-    /// Keys file: frames and poses (format in docs/arnn.md, example in examples/arnn/keys.json).
+    /// Keys file: frames and poses (format in docs/arnn.md, example in docs/arnn-keys-example.json).
     #[arg(long)]
     pub keys: PathBuf,
     /// Output BVH of the lamp (Blender opens it).
