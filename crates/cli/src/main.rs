@@ -45,6 +45,8 @@ enum Command {
     Generate(cmd::generate::GenerateArgs),
     /// The synthesis benchmark: seeded RNN-GMM sequences against held-out real motion.
     BenchSynthesis(cmd::bench_synthesis::BenchSynthesisArgs),
+    /// Complete an animator's keys into a whole motion with a trained ARNN (`zoo complete --model DIR --keys K.json --out F.bvh`).
+    Complete(cmd::complete::CompleteArgs),
 }
 
 /// Environment of the training commands (`zoo train`, `zoo bench train`), which must be in
@@ -115,5 +117,6 @@ fn main() -> anyhow::Result<()> {
         Command::Stitch(a) => cmd::stitch::run(a),
         Command::Generate(a) => cmd::generate::run(a),
         Command::BenchSynthesis(a) => cmd::bench_synthesis::run(a),
+        Command::Complete(a) => cmd::complete::run(a),
     }
 }

@@ -55,6 +55,12 @@ pub const MODELS: &[ModelEntry] = &[
         bench: None,
         transitions: false,
     },
+    ModelEntry {
+        kind: "arnn",
+        purpose: "completing an animator's keys of the lamp (`zoo complete`, keyframe autocompletion ARNN)",
+        bench: None,
+        transitions: false,
+    },
 ];
 
 fn load_rtn_method(dir: &Path, name: String, foot_lock: bool) -> anyhow::Result<Box<dyn TransitionMethod>> {

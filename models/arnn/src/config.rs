@@ -1,6 +1,11 @@
 //! Configuration of the ARNN: sizes of section 6, training settings of section 7.
 
 use serde::{Deserialize, Serialize};
+use zoo_data::luxo::{DOF_NAMES, LampParams};
+
+/// The largest layer width or number of degrees of freedom a configuration may name, so that
+/// a corrupt `config.json` is refused instead of aborting on an allocation.
+pub const MAX_WIDTH: usize = 4096;
 
 /// The curriculum of section 7.2 as functions of training progress `u = step / total_steps`.
 ///
@@ -50,6 +55,13 @@ pub struct ArnnConfig {
     pub model: String,
     /// Degrees of freedom per frame (6 for the lamp).
     pub dofs: usize,
+    /// Names of the degrees of freedom, in pose order (the lamp's
+    /// [`zoo_data::luxo::DOF_NAMES`]); a keys file naming others is refused.
+    #[serde(default)]
+    pub dof_names: Vec<String>,
+    /// The lamp the training data came from: its geometry draws the completed motion as BVH.
+    #[serde(default)]
+    pub lamp: Option<LampParams>,
     /// Width of the two layers of each pose feature net (the paper does not give it).
     pub feature: usize,
     /// Hidden units of each of the two GRU layers (paper: 100).
@@ -79,6 +91,8 @@ impl ArnnConfig {
         ArnnConfig {
             model: "arnn".into(),
             dofs: 6,
+            dof_names: DOF_NAMES.iter().map(|s| s.to_string()).collect(),
+            lamp: Some(LampParams::default()),
             feature: 32,
             hidden: 100,
             decoder: 10,
@@ -112,6 +126,12 @@ impl ArnnConfig {
         }
         if self.dofs == 0 || self.feature == 0 || self.hidden == 0 || self.decoder == 0 || self.batch_size == 0 {
             return Err("dofs, feature, hidden, decoder and batch_size must be at least 1".into());
+        }
+        if [self.dofs, self.feature, self.hidden, self.decoder].iter().any(|&w| w > MAX_WIDTH) {
+            return Err(format!("dofs, feature, hidden and decoder must be at most {MAX_WIDTH}"));
+        }
+        if !self.dof_names.is_empty() && self.dof_names.len() != self.dofs {
+            return Err(format!("dof_names has {} names for {} degrees of freedom", self.dof_names.len(), self.dofs));
         }
         let drops = self.gru_dropout.iter().chain(&self.linear_dropout);
         if drops.clone().any(|p| !(0.0..1.0).contains(p)) {

@@ -6,11 +6,15 @@
 //! Data are the lamp's preprocessed sequences ([`zoo_data::luxo::preprocess::KeyedSequence`]):
 //! six degrees of freedom per frame and the frames that are keys.
 
+pub mod checkpoint;
 pub mod config;
+pub mod eval;
+pub mod export;
 pub mod model;
 pub mod train;
 
 pub use config::{ArnnConfig, Curriculum};
+pub use eval::{CompletionError, CompletionReport};
 pub use model::{Arnn, ArnnState};
 pub use train::{ArnnTrainer, Normalization, complete};
 

@@ -76,6 +76,19 @@ impl ArnnTrainer {
         valid: Vec<KeyedSequence>,
         device: &Device,
     ) -> ArnnResult<Self> {
+        let norm = Normalization::fit(&train);
+        Self::with_normalization(config, norm, train, valid, device)
+    }
+
+    /// A fresh model (weights from `config.seed`) with given statistics (a resumed run keeps
+    /// the ones it started with).
+    pub fn with_normalization(
+        config: &ArnnConfig,
+        norm: Normalization,
+        train: Vec<KeyedSequence>,
+        valid: Vec<KeyedSequence>,
+        device: &Device,
+    ) -> ArnnResult<Self> {
         config.validate().map_err(ArnnError::Config)?;
         for s in train.iter().chain(&valid) {
             check_sequence(config, s)?;
@@ -83,7 +96,13 @@ impl ArnnTrainer {
         if train.is_empty() {
             return Err(ArnnError::Config("no training sequence".into()));
         }
-        let norm = Normalization::fit(&train);
+        if norm.mean.len() != config.dofs || norm.std.len() != config.dofs {
+            return Err(ArnnError::Config(format!(
+                "normalization is for {} values, the model for {}",
+                norm.mean.len(),
+                config.dofs
+            )));
+        }
         let varmap = VarMap::new();
         let model = Arnn::new(config, SeededVarMap::builder(&varmap, config.seed, DType::F32, device))?;
         let mut named: Vec<(String, candle_core::Var)> =
@@ -112,6 +131,16 @@ impl ArnnTrainer {
     /// The normalisation statistics of the training set.
     pub fn normalization(&self) -> &Normalization {
         &self.norm
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &ArnnConfig {
+        &self.config
+    }
+
+    /// Optimiser steps taken.
+    pub fn step(&self) -> u64 {
+        self.step
     }
 
     /// Number of trainable values.
@@ -348,4 +377,62 @@ pub fn complete(
         prev = y;
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Smooth made-up sequences of 31 frames with keys every 10 frames.
+    fn sequences(n: usize) -> Vec<KeyedSequence> {
+        (0..n)
+            .map(|i| KeyedSequence {
+                name: format!("s{i}"),
+                frames: (0..31)
+                    .map(|t| {
+                        let u = t as f64 / 30.0 + 0.1 * i as f64;
+                        [u, 0.1 * (3.0 * u).sin(), 0.0, 0.5 + 0.2 * u, -1.0 - 0.3 * (2.0 * u).cos(), -1.2]
+                    })
+                    .collect(),
+                keys: vec![0, 10, 20, 30],
+            })
+            .collect()
+    }
+
+    #[test]
+    fn training_lowers_the_loss_and_a_saved_model_completes_the_same() {
+        let config = ArnnConfig { learning_rate: 1e-2, ..ArnnConfig::tiny() };
+        let mut t = ArnnTrainer::new(&config, sequences(4), sequences(2), &Device::Cpu).unwrap();
+        let (f0, k0) = t.evaluate().unwrap();
+        for _ in 0..30 {
+            t.train_on(&[0, 1, 2, 3]).unwrap();
+        }
+        let (f1, k1) = t.evaluate().unwrap();
+        assert!(f1 + k1 < 0.5 * (f0 + k0), "validation loss {} -> {}", f0 + k0, f1 + k1);
+        let dir = tempfile::tempdir().unwrap();
+        t.save(dir.path()).unwrap();
+        let (model, norm) = crate::checkpoint::load(dir.path(), &Device::Cpu).unwrap();
+        let s = &sequences(1)[0];
+        let poses: Vec<Vec<f64>> = s.keys.iter().map(|&k| s.frames[k].to_vec()).collect();
+        let a = complete(t.model(), t.normalization(), &s.keys, &poses).unwrap();
+        let b = complete(&model, &norm, &s.keys, &poses).unwrap();
+        assert_eq!((a.len(), b.len()), (31, 31));
+        // The statistics go through JSON: equal to the last bits of an f64.
+        let diff = a.iter().flatten().zip(b.iter().flatten()).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+        assert!(diff < 1e-9, "the reloaded model differs by {diff}");
+        assert_eq!(a[0], poses[0]);
+    }
+
+    #[test]
+    fn complete_refuses_bad_keys() {
+        let t = ArnnTrainer::new(&ArnnConfig::tiny(), sequences(1), vec![], &Device::Cpu).unwrap();
+        let p = vec![vec![0.0; 6]; 3];
+        let err = |frames: &[usize], poses: &[Vec<f64>]| {
+            complete(t.model(), t.normalization(), frames, poses).unwrap_err().to_string()
+        };
+        assert!(err(&[0, 5, 3], &p).contains("strictly increase"));
+        assert!(err(&[0], &p[..1]).contains("at least two keys"));
+        assert!(err(&[0, 5], &[vec![0.0; 6], vec![f64::NAN; 6]]).contains("finite"));
+        assert!(err(&[0, 5], &[vec![0.0; 6], vec![0.0; 4]]).contains("6 finite values"));
+    }
 }

@@ -94,7 +94,7 @@ fn complete_fills_every_frame_and_rejects_bad_keys() {
     assert_eq!(out[0], poses[0]);
     assert!(out.iter().flatten().all(|v| v.is_finite()));
     let err = |keys: &[usize], poses: &[Vec<f64>]| {
-        complete(t.model(), t.normalization(), keys, poses).err().expect("bad keys accepted").to_string()
+        complete(t.model(), t.normalization(), keys, poses).expect_err("bad keys accepted").to_string()
     };
     // Keys out of order.
     let mut k = s.keys.clone();

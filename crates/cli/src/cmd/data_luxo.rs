@@ -25,6 +25,14 @@ pub struct LuxoArgs {
     /// Annealing runs tried per sequence before giving up.
     #[arg(long, default_value_t = 20, allow_hyphen_values = true, value_parser = crate::args::attempts)]
     pub max_attempts: usize,
+    /// Lamp parameters (JSON object of `zoo_data::luxo::LampParams` fields; the fields not
+    /// given keep their defaults), e.g. `{"base_mass": 1.5}`.
+    #[arg(long)]
+    pub lamp: Option<PathBuf>,
+    /// The hop every annealing run starts from (JSON `{"durations": [4 s], "poses": [4 x [3
+    /// rad]]}`) [default: `HopPolicy::hand_set`].
+    #[arg(long)]
+    pub init: Option<PathBuf>,
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
@@ -35,6 +43,18 @@ pub fn run(a: LuxoArgs) -> anyhow::Result<()> {
     let mut options = GenerateOptions::new(a.sequences, a.seed);
     options.anneal.k_max = a.k_max;
     options.max_attempts = a.max_attempts;
+    if let Some(path) = &a.lamp {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("--lamp {}: cannot read it", path.display()))?;
+        options.lamp = serde_json::from_str(&text)
+            .with_context(|| format!("--lamp {}: not a JSON object of lamp parameters", path.display()))?;
+    }
+    if let Some(path) = &a.init {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("--init {}: cannot read it", path.display()))?;
+        options.init = serde_json::from_str(&text)
+            .with_context(|| format!("--init {}: not a hop policy (durations and poses)", path.display()))?;
+    }
     options.validate()?;
     let bar = ProgressBar::new(a.sequences as u64);
     bar.set_style(
@@ -45,6 +65,8 @@ pub fn run(a: LuxoArgs) -> anyhow::Result<()> {
     bar.finish_and_clear();
     let threads = rayon::current_num_threads();
     let per_minute = summary.sequences as f64 / summary.seconds.max(1e-9) * 60.0;
+    let s = summary.anneal;
+    let pct = |n: usize| 100.0 * n as f64 / s.candidates.max(1) as f64;
     if a.json {
         let mut v = serde_json::to_value(&summary)?;
         v["threads"] = threads.into();
@@ -53,13 +75,17 @@ pub fn run(a: LuxoArgs) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         println!(
-            "wrote {} lamp sequences ({} frames at {} fps, {} annealing runs of K_max {}) to {} in {:.1} s: \
-             {:.2} sequences/min on {} threads",
+            "wrote {} lamp sequences ({} frames at {} fps, {} annealing runs of K_max {}; candidates: {:.1}% valid, \
+             {:.1}% accepted, {:.1}% fell, {:.1}% other hop counts) to {} in {:.1} s: {:.2} sequences/min on {} threads",
             summary.sequences,
             summary.frames,
             options.fps(),
             summary.attempts,
             a.k_max,
+            pct(s.valid),
+            pct(s.accepted),
+            pct(s.fell),
+            pct(s.wrong_hops),
             a.out.display(),
             summary.seconds,
             per_minute,

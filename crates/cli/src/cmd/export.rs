@@ -36,8 +36,12 @@ pub struct ExportArgs {
 }
 
 /// The model kinds `zoo export` writes.
-const EXPORT_KINDS: [&str; 3] =
-    [zoo_rtn::export::MODEL_KIND, zoo_rmr::export::MODEL_KIND, zoo_rnngmm::export::MODEL_KIND];
+const EXPORT_KINDS: [&str; 4] = [
+    zoo_rtn::export::MODEL_KIND,
+    zoo_rmr::export::MODEL_KIND,
+    zoo_rnngmm::export::MODEL_KIND,
+    zoo_arnn::export::MODEL_KIND,
+];
 
 /// The `"model"` field of a run folder's `config.json` (`None` when absent: an RTN folder).
 fn model_kind(config_path: &Path) -> anyhow::Result<Option<String>> {
@@ -97,6 +101,19 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
                 summary.op_counts.values().sum::<usize>(),
                 summary.parameters,
                 if refiner { "and the refiner's step graph" } else { "without a refiner (generator stage only)" }
+            );
+            return Ok(());
+        }
+        Some(zoo_arnn::export::MODEL_KIND) => {
+            let model = zoo_arnn::export::export_arnn_dir(&a.onnx)
+                .with_context(|| format!("exporting {}", a.onnx.display()))?;
+            model.write(&a.out)?;
+            let summary = model.summary();
+            println!(
+                "wrote {}: ARNN step graph ({} nodes, {} parameters) with its metadata",
+                a.out.display(),
+                summary.op_counts.values().sum::<usize>(),
+                summary.parameters
             );
             return Ok(());
         }

@@ -20,6 +20,8 @@ pub enum TrainCommand {
     Rmr(crate::cmd::train_rmr::RmrArgs),
     /// RNN-GMM with an adversarial refiner (Wang, Chai & Xia 2019): random motion synthesis.
     RnnGmm(crate::cmd::train_rnngmm::RnnGmmArgs),
+    /// The keyframe autocompletion network ARNN (Zhang & van de Panne 2018) on the simulated lamp.
+    Arnn(crate::cmd::train_arnn::ArnnArgs),
 }
 
 /// Which RTN to train: the paper's model or one of its Table 4 ablations.
@@ -137,6 +139,7 @@ pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
         TrainCommand::Rtn(a) => train_rtn(a),
         TrainCommand::Rmr(a) => crate::cmd::train_rmr::run(a),
         TrainCommand::RnnGmm(a) => crate::cmd::train_rnngmm::run(a),
+        TrainCommand::Arnn(a) => crate::cmd::train_arnn::run(a),
     }
 }
 

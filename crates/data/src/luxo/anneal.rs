@@ -161,6 +161,32 @@ pub fn neighbour(policy: &HopPolicy, params: &LampParams, cfg: &AnnealConfig, rn
     next
 }
 
+/// What happened to the candidates of annealing runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct AnnealStats {
+    /// Candidates simulated (`K_max` per run).
+    pub candidates: usize,
+    /// Candidates that made the requested hops without falling (finite energy).
+    pub valid: usize,
+    /// Candidates accepted by the Metropolis rule.
+    pub accepted: usize,
+    /// Candidates whose rollout fell over.
+    pub fell: usize,
+    /// Candidates that did not fall but made another number of hops.
+    pub wrong_hops: usize,
+}
+
+impl AnnealStats {
+    /// Adds another run's counts.
+    pub fn add(&mut self, o: &AnnealStats) {
+        self.candidates += o.candidates;
+        self.valid += o.valid;
+        self.accepted += o.accepted;
+        self.fell += o.fell;
+        self.wrong_hops += o.wrong_hops;
+    }
+}
+
 /// The result of one annealing run.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AnnealOutcome {
@@ -170,6 +196,8 @@ pub struct AnnealOutcome {
     pub evaluation: Evaluation,
     /// Candidates accepted.
     pub accepted: usize,
+    /// What happened to the candidates.
+    pub stats: AnnealStats,
 }
 
 /// Algorithm 1 from `init` with energy weight `w_e`: `k_max` neighbours, each accepted when
@@ -187,10 +215,18 @@ pub fn anneal(
     let mut current = *init;
     let mut best = (current, current_eval.clone());
     let mut accepted = 0;
+    let mut stats = AnnealStats { candidates: cfg.k_max, ..AnnealStats::default() };
     let mut temperature = cfg.t_max;
     for k in 0..cfg.k_max {
         let candidate = neighbour(&current, params, cfg, rng);
         let (_, _, eval) = score(params, &candidate, w_e, cfg)?;
+        if eval.fell {
+            stats.fell += 1;
+        } else if eval.hops != cfg.rollout.cycles {
+            stats.wrong_hops += 1;
+        } else {
+            stats.valid += 1;
+        }
         let delta = eval.energy - current_eval.energy;
         // Draw every iteration so the random stream does not depend on the energies.
         let u = rng.next_f64();
@@ -204,7 +240,8 @@ pub fn anneal(
         }
         temperature = cfg.temperature(k + 1);
     }
-    Ok(AnnealOutcome { best: best.0, evaluation: best.1, accepted })
+    stats.accepted = accepted;
+    Ok(AnnealOutcome { best: best.0, evaluation: best.1, accepted, stats })
 }
 
 #[cfg(test)]

@@ -29,8 +29,9 @@ pub type LampPose = [f64; DOFS];
 ///
 /// Lengths in metres, masses in kilograms, gains in N m/rad and N m s/rad. The defaults
 /// ([`LampParams::default`]) are a desk lamp about 55 cm tall and 1.8 kg; `docs/arnn.md` says
-/// why each number was chosen.
+/// why each number was chosen. In JSON, a missing field takes its default.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct LampParams {
     /// Half the width of the base plate.
     pub base_half_width: f64,
@@ -77,7 +78,7 @@ pub struct LampParams {
 impl Default for LampParams {
     fn default() -> Self {
         LampParams {
-            base_half_width: 0.10,
+            base_half_width: 0.13,
             base_half_height: 0.02,
             base_mass: 1.0,
             leg_length: 0.22,
@@ -89,7 +90,7 @@ impl Default for LampParams {
             head_half_width: 0.05,
             head_mass: 0.3,
             kp: [30.0, 20.0, 5.0],
-            kd: [0.75, 0.5, 0.1],
+            kd: [3.0, 2.0, 0.4],
             max_torque: [10.0, 7.5, 2.5],
             joint_limits: [[-1.6, 1.6], [-2.7, 2.7], [-2.7, 2.7]],
             friction: 0.9,

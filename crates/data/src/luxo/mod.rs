@@ -15,7 +15,7 @@ pub mod lamp;
 pub mod preprocess;
 pub mod sequence;
 
-pub use anneal::{AnnealConfig, Evaluation};
+pub use anneal::{AnnealConfig, AnnealStats, Evaluation};
 pub use controller::{HopPolicy, RolloutOptions};
 pub use lamp::{DOF_NAMES, DOFS, LampParams, LampPose};
 pub use sequence::{KeyKind, LuxoKey, LuxoSequence};
@@ -93,6 +93,9 @@ pub struct GenerateOptions {
     pub lamp: LampParams,
     /// Simulated annealing (section 4.4).
     pub anneal: AnnealConfig,
+    /// Where every annealing run starts (section 4.4's `INIT()`).
+    #[serde(default = "HopPolicy::hand_set")]
+    pub init: HopPolicy,
     /// Annealing runs tried per sequence before giving up.
     pub max_attempts: usize,
     /// One frame is recorded every `record_every` integration steps.
@@ -107,6 +110,7 @@ impl GenerateOptions {
             seed,
             lamp: LampParams::default(),
             anneal: AnnealConfig::default(),
+            init: HopPolicy::hand_set(),
             max_attempts: 20,
             record_every: 4,
         }
@@ -121,6 +125,7 @@ impl GenerateOptions {
     pub fn validate(&self) -> Result<(), LuxoError> {
         self.lamp.validate().map_err(LuxoError::Config)?;
         self.anneal.validate().map_err(LuxoError::Config)?;
+        self.init.validate().map_err(LuxoError::Config)?;
         if self.sequences == 0 {
             return Err(LuxoError::Config("--sequences must be at least 1".into()));
         }
@@ -140,6 +145,9 @@ pub struct GenerateSummary {
     pub attempts: usize,
     /// Frames written in all.
     pub frames: usize,
+    /// What happened to the annealing candidates of all runs.
+    #[serde(default)]
+    pub anneal: AnnealStats,
     /// Seconds taken.
     pub seconds: f64,
 }
@@ -152,16 +160,17 @@ struct Manifest {
     sequences: Vec<String>,
 }
 
-/// Simulates sequence `index` of a data set: annealing runs from the hand-set hop, each with
+/// Simulates sequence `index` of a data set: annealing runs from `options.init`, each with
 /// a fresh `w_e` uniform in [0, 1), until one is satisfactory.
 pub fn generate_sequence(options: &GenerateOptions, index: usize) -> Result<LuxoSequence, LuxoError> {
     options.validate()?;
     let mut rng = SplitMix64::with_stream(options.seed, index as u64);
     let cfg = &options.anneal;
+    let mut stats = AnnealStats::default();
     for attempt in 1..=options.max_attempts {
         let w_e = rng.next_f64();
-        let outcome =
-            anneal::anneal(&options.lamp, cfg, &HopPolicy::hand_set(), w_e, &mut rng).map_err(LuxoError::Config)?;
+        let outcome = anneal::anneal(&options.lamp, cfg, &options.init, w_e, &mut rng).map_err(LuxoError::Config)?;
+        stats.add(&outcome.stats);
         if !outcome.evaluation.satisfactory {
             continue;
         }
@@ -169,7 +178,7 @@ pub fn generate_sequence(options: &GenerateOptions, index: usize) -> Result<Luxo
             anneal::score(&options.lamp, &outcome.best, w_e, cfg).map_err(LuxoError::Config)?;
         let in_air: Vec<usize> =
             hops.iter().map(|_| 1 + rng.below((sequence::HOP_SAMPLES - 2) as u64) as usize).collect();
-        return Ok(LuxoSequence::from_rollout(
+        let mut seq = LuxoSequence::from_rollout(
             sequence_name(index),
             index,
             options.seed,
@@ -181,7 +190,9 @@ pub fn generate_sequence(options: &GenerateOptions, index: usize) -> Result<Luxo
             w_e,
             evaluation,
             attempt,
-        ));
+        );
+        seq.anneal = stats;
+        return Ok(seq);
     }
     Err(LuxoError::NoHops {
         index,
@@ -219,7 +230,7 @@ pub fn generate_with(
     options.validate()?;
     let start = std::time::Instant::now();
     std::fs::create_dir_all(out_dir).map_err(|source| LuxoError::Io { path: out_dir.to_path_buf(), source })?;
-    let done: Vec<(usize, usize)> = (0..options.sequences)
+    let done: Vec<(usize, usize, AnnealStats)> = (0..options.sequences)
         .into_par_iter()
         .map(|i| {
             let seq = generate_sequence(options, i)?;
@@ -228,9 +239,13 @@ pub fn generate_with(
                 .map_err(|source| LuxoError::Io { path: bvh, source })?;
             seq.write_json(&out_dir.join(format!("{}.json", seq.name)))?;
             progress();
-            Ok((seq.attempts, seq.frames.len()))
+            Ok((seq.attempts, seq.frames.len(), seq.anneal))
         })
         .collect::<Result<_, LuxoError>>()?;
+    let mut anneal = AnnealStats::default();
+    for d in &done {
+        anneal.add(&d.2);
+    }
     let manifest = Manifest {
         format: MANIFEST_FORMAT.into(),
         version: sequence::VERSION,
@@ -245,8 +260,42 @@ pub fn generate_with(
         sequences: done.len(),
         attempts: done.iter().map(|d| d.0).sum(),
         frames: done.iter().map(|d| d.1).sum(),
+        anneal,
         seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+/// Reads the settings a data set was generated with, from its manifest `luxo.json`.
+pub fn read_options(dir: &Path) -> Result<GenerateOptions, LuxoError> {
+    let path = dir.join(MANIFEST_FILE);
+    let text = std::fs::read_to_string(&path).map_err(|source| LuxoError::Io { path: path.clone(), source })?;
+    let manifest: Manifest =
+        serde_json::from_str(&text).map_err(|e| LuxoError::Json { path: path.clone(), message: e.to_string() })?;
+    if manifest.format != MANIFEST_FORMAT {
+        return Err(LuxoError::BadSequence {
+            path,
+            message: format!("not a {MANIFEST_FORMAT} manifest (format {:?})", manifest.format),
+        });
+    }
+    manifest.options.validate()?;
+    Ok(manifest.options)
+}
+
+/// Generates sequences `0..options.sequences` in memory, in parallel on rayon's pool (the
+/// same sequences [`generate_with`] writes); `progress` is called once per sequence.
+pub fn generate_in_memory(
+    options: &GenerateOptions,
+    progress: &(dyn Fn() + Sync),
+) -> Result<Vec<LuxoSequence>, LuxoError> {
+    options.validate()?;
+    (0..options.sequences)
+        .into_par_iter()
+        .map(|i| {
+            let seq = generate_sequence(options, i);
+            progress();
+            seq
+        })
+        .collect()
 }
 
 /// Reads every `luxo_*.json` sequence of a folder, in name order.

@@ -2,7 +2,7 @@
 //! events, the keys of section 5, and its files (BVH for Blender, JSON for training).
 
 use super::LuxoError;
-use super::anneal::Evaluation;
+use super::anneal::{AnnealStats, Evaluation};
 use super::controller::{HopPolicy, Rollout};
 use super::lamp::{DOF_NAMES, DOFS, LampParams, LampPose};
 use glam::{DQuat, DVec3};
@@ -117,6 +117,10 @@ pub struct LuxoSequence {
     pub evaluation: Evaluation,
     /// Annealing runs needed to find a satisfactory policy.
     pub attempts: usize,
+    /// What happened to the candidates of those runs (absent in files written before it was
+    /// recorded).
+    #[serde(default)]
+    pub anneal: AnnealStats,
 }
 
 /// Linear interpolation of a track sampled at `fps` at time `t` (clamped to the track).
@@ -181,6 +185,7 @@ impl LuxoSequence {
             w_e,
             evaluation,
             attempts,
+            anneal: AnnealStats::default(),
         }
     }
 

@@ -1,0 +1,348 @@
+//! `zoo complete`: an animator's keys (frames and lamp poses, a JSON file) completed into a
+//! whole motion by a trained ARNN, written as a BVH of the lamp (and optionally as JSON).
+//! The keys file format is documented in `docs/arnn.md` ("Keys file").
+
+use anyhow::{Context, bail};
+use clap::Args;
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+use zoo_data::luxo::LampPose;
+use zoo_data::luxo::sequence::poses_to_clip;
+
+/// Format name of a keys file.
+pub const KEYS_FORMAT: &str = "zoo-arnn-keys";
+/// Format name of the JSON written by `--json`.
+pub const COMPLETION_FORMAT: &str = "zoo-arnn-completion";
+/// Frames per second of the BVH when neither the keys file nor `--fps` gives one: the lamp's
+/// hops (25 network frames from liftoff to landing, about 0.45 s) play near their simulated speed.
+pub const DEFAULT_FPS: f64 = 50.0;
+
+/// Arguments of `zoo complete`.
+#[derive(Args)]
+pub struct CompleteArgs {
+    /// Run folder of `zoo train arnn`.
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Keys file: frames and poses (format in docs/arnn.md, example in docs/arnn-keys-example.json).
+    #[arg(long)]
+    pub keys: PathBuf,
+    /// Output BVH of the lamp (Blender opens it).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Also write every completed pose (and the key misses) to this JSON file.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Also plot each degree of freedom over the frames (blue) with the keys (circles) into this
+    /// PNG, like the paper's Figure 8.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+    /// Frames per second of the output [default: the keys file's `fps`, else 50].
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::positive)]
+    pub fps: Option<f64>,
+}
+
+/// One key as written in the file.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct KeyEntry {
+    frame: usize,
+    pose: Vec<f64>,
+}
+
+/// A keys file as written.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct KeysFile {
+    format: Option<String>,
+    version: Option<u32>,
+    dof_names: Option<Vec<String>>,
+    fps: Option<f64>,
+    keys: Vec<KeyEntry>,
+}
+
+/// Checked keys: frames relative to the first key (which is frame 0), one pose per key.
+#[derive(Debug, PartialEq)]
+pub struct Keys {
+    /// Key frames, strictly increasing, the first 0.
+    pub frames: Vec<usize>,
+    /// Frame of the first key in the file (the output starts there).
+    pub offset: usize,
+    /// One pose per key.
+    pub poses: Vec<Vec<f64>>,
+    /// Frames per second, if the file gives it.
+    pub fps: Option<f64>,
+}
+
+/// Parses and checks the text of a keys file for a model of `dof_names` degrees of freedom.
+/// Errors say what is wrong and how to fix it (without the file name).
+pub fn parse_keys(text: &str, dof_names: &[String]) -> Result<Keys, String> {
+    let file: KeysFile = serde_json::from_str(text).map_err(|e| {
+        format!(
+            "not a keys file: {e} (expected {{\"format\": \"{KEYS_FORMAT}\", \"version\": 1, \"keys\": [{{\"frame\": 0, \
+             \"pose\": [...]}}, ...]}}; NaN and infinity are not JSON numbers, every value must be finite)"
+        )
+    })?;
+    if let Some(f) = &file.format
+        && f != KEYS_FORMAT
+    {
+        return Err(format!("format is \"{f}\", expected \"{KEYS_FORMAT}\""));
+    }
+    if let Some(v) = file.version
+        && v != 1
+    {
+        return Err(format!("keys file version {v} is not known to this zoo (it reads version 1): update zoo"));
+    }
+    let d = dof_names.len();
+    if let Some(names) = &file.dof_names
+        && names != dof_names
+    {
+        return Err(format!(
+            "the keys are for the degrees of freedom {names:?}, but the model was trained on {dof_names:?}: this \
+             keys file is for another character"
+        ));
+    }
+    if let Some(fps) = file.fps
+        && !(fps.is_finite() && fps > 0.0)
+    {
+        return Err(format!("fps {fps} must be a positive number"));
+    }
+    let n = file.keys.len();
+    if n < 2 {
+        return Err(format!(
+            "{n} key(s) given: completion needs at least 2 (the motion is filled in between the first and the last key)"
+        ));
+    }
+    for (i, k) in file.keys.iter().enumerate() {
+        if k.pose.len() != d {
+            return Err(format!(
+                "key {i} (frame {}) has {} values; the model completes {d} degrees of freedom: {}",
+                k.frame,
+                k.pose.len(),
+                dof_names.join(", ")
+            ));
+        }
+        if let Some(j) = k.pose.iter().position(|v| !v.is_finite()) {
+            return Err(format!("key {i} (frame {}): {} is {}, not a finite number", k.frame, dof_names[j], k.pose[j]));
+        }
+        if i > 0 && k.frame <= file.keys[i - 1].frame {
+            return Err(format!(
+                "key {i} is at frame {} but key {} is at frame {}: keys must be in increasing frame order, one key per \
+                 frame",
+                k.frame,
+                i - 1,
+                file.keys[i - 1].frame
+            ));
+        }
+    }
+    let offset = file.keys[0].frame;
+    let span = file.keys[n - 1].frame - offset;
+    if span >= crate::args::MAX_FRAMES {
+        return Err(format!(
+            "the keys span {span} frames (frame {offset} to {}), past the {} frames zoo complete generates",
+            file.keys[n - 1].frame,
+            crate::args::MAX_FRAMES
+        ));
+    }
+    Ok(Keys {
+        frames: file.keys.iter().map(|k| k.frame - offset).collect(),
+        offset,
+        poses: file.keys.into_iter().map(|k| k.pose).collect(),
+        fps: file.fps,
+    })
+}
+
+fn read_keys(path: &Path, dof_names: &[String]) -> anyhow::Result<Keys> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("--keys {}: cannot read it", path.display()))?;
+    parse_keys(&text, dof_names).map_err(|e| anyhow::anyhow!("--keys {}: {e}", path.display()))
+}
+
+/// Runs `zoo complete`.
+pub fn run(a: CompleteArgs) -> anyhow::Result<()> {
+    let kind = crate::registry::model_kind(&a.model)?;
+    if kind != "arnn" {
+        bail!(
+            "--model {}: `zoo complete` runs an ARNN run folder (`zoo train arnn`), this one holds a `{kind}` model",
+            a.model.display()
+        );
+    }
+    crate::cmd::check_output_file("--out", &a.out)?;
+    if let Some(j) = &a.json {
+        crate::cmd::check_output_file("--json", j)?;
+    }
+    if let Some(p) = &a.plot {
+        crate::cmd::check_output_file("--plot", p)?;
+    }
+    let (model, norm) = zoo_arnn::checkpoint::load(&a.model, &candle_core::Device::Cpu)
+        .with_context(|| format!("loading the ARNN in {}", a.model.display()))?;
+    let config = model.config();
+    let Some(lamp) = config.lamp.clone() else {
+        bail!("{}: the model has no lamp geometry in config.json (retrain it with `zoo train arnn`)", a.model.display())
+    };
+    let dof_names: Vec<String> = if config.dof_names.is_empty() {
+        (0..config.dofs).map(|i| format!("dof{i}")).collect()
+    } else {
+        config.dof_names.clone()
+    };
+    let keys = read_keys(&a.keys, &dof_names)?;
+    let fps = a.fps.or(keys.fps).unwrap_or(DEFAULT_FPS);
+    let frames = zoo_arnn::complete(&model, &norm, &keys.frames, &keys.poses)?;
+    // Misses: the completed pose at each key frame against the key.
+    let misses: Vec<Vec<f64>> = keys
+        .frames
+        .iter()
+        .zip(&keys.poses)
+        .map(|(&f, p)| frames[f].iter().zip(p).map(|(y, x)| y - x).collect())
+        .collect();
+    let poses: Vec<LampPose> = frames
+        .iter()
+        .map(|f| <LampPose>::try_from(f.as_slice()))
+        .collect::<Result<_, _>>()
+        .map_err(|_| anyhow::anyhow!("the model completes {} values per frame, not the lamp's 6", config.dofs))?;
+    zoo_data::bvh::write_file(&poses_to_clip(&poses, fps, &lamp), &a.out)
+        .with_context(|| format!("writing {}", a.out.display()))?;
+    if let Some(j) = &a.json {
+        let v = serde_json::json!({
+            "format": COMPLETION_FORMAT,
+            "version": 1,
+            "model": a.model,
+            "fps": fps,
+            "first_frame": keys.offset,
+            "dof_names": dof_names,
+            "key_frames": keys.frames,
+            "key_misses": misses,
+            "frames": frames,
+        });
+        std::fs::write(j, serde_json::to_string_pretty(&v)?).with_context(|| format!("writing {}", j.display()))?;
+    }
+    if let Some(p) = &a.plot {
+        let keyed: Vec<(usize, Vec<f64>)> = keys.frames.iter().copied().zip(keys.poses.iter().cloned()).collect();
+        plot_dofs(p, &[DofSeries { frames: &frames, rgb: (31, 80, 180), width: 2.0 }], &keyed)?;
+    }
+    let worst = |range: std::ops::Range<usize>| {
+        misses
+            .iter()
+            .enumerate()
+            .flat_map(|(k, m)| range.clone().map(move |j| (m[j].abs(), k, j)))
+            .fold((0.0, 0, 0), |a, b| if b.0 > a.0 { b } else { a })
+    };
+    let (pos, pk, pj) = worst(0..2);
+    let (ang, ak, aj) = worst(2..config.dofs.max(2));
+    println!(
+        "completed {} frames from {} keys ({} fps) into {}{}; largest key miss: {:.2} cm ({} at key {pk}), {:.2} deg \
+         ({} at key {ak})",
+        frames.len(),
+        keys.frames.len(),
+        fps,
+        a.out.display(),
+        a.json.as_ref().map(|j| format!(" and {}", j.display())).unwrap_or_default(),
+        pos * 100.0,
+        dof_names[pj],
+        ang.to_degrees(),
+        dof_names.get(aj).map_or("-", |s| s.as_str()),
+    );
+    Ok(())
+}
+
+/// One curve of [`plot_dofs`]: a pose per frame and its colour.
+pub struct DofSeries<'a> {
+    /// Poses, one per frame from frame 0.
+    pub frames: &'a [Vec<f64>],
+    /// Colour (red, green, blue).
+    pub rgb: (u8, u8, u8),
+    /// Line width in pixels.
+    pub width: f32,
+}
+
+/// Plots each degree of freedom over the frames, one panel per degree of freedom (two columns,
+/// in pose order, each scaled to its own range), like the paper's Figure 8: the curves of
+/// `series` in order (later ones on top) and the keys as circles. 960 x 720 pixels.
+pub fn plot_dofs(path: &Path, series: &[DofSeries], keys: &[(usize, Vec<f64>)]) -> anyhow::Result<()> {
+    use tiny_skia::{Color, Paint, PathBuilder, Pixmap, Stroke, Transform};
+    let d = series.first().and_then(|s| s.frames.first()).map_or(0, |f| f.len());
+    let frames = series.iter().map(|s| s.frames.len()).max().unwrap_or(0);
+    if d == 0 || frames < 2 {
+        bail!("{}: nothing to plot", path.display());
+    }
+    let (w, h, cols) = (960u32, 720u32, 2usize);
+    let rows = d.div_ceil(cols);
+    let (pw, ph, m) = (w as f32 / cols as f32, h as f32 / rows as f32, 14.0f32);
+    let mut pm = Pixmap::new(w, h).context("cannot allocate the plot")?;
+    pm.fill(Color::WHITE);
+    let mut paint = Paint { anti_alias: true, ..Paint::default() };
+    for j in 0..d {
+        let (x0, y0) = ((j % cols) as f32 * pw, (j / cols) as f32 * ph);
+        let values = series.iter().flat_map(|s| s.frames.iter().map(|f| f[j])).chain(keys.iter().map(|k| k.1[j]));
+        let (lo, hi) =
+            values.filter(|v| v.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
+        let (lo, hi) = if hi - lo < 1e-9 { (lo - 0.5, hi + 0.5) } else { (lo, hi) };
+        let x = |t: usize| x0 + m + (pw - 2.0 * m) * t as f32 / (frames - 1) as f32;
+        let y = |v: f64| y0 + ph - m - (ph - 2.0 * m) * ((v - lo) / (hi - lo)) as f32;
+        // Panel frame.
+        paint.set_color_rgba8(190, 190, 190, 255);
+        if let Some(r) = tiny_skia::Rect::from_xywh(x0 + m, y0 + m, pw - 2.0 * m, ph - 2.0 * m) {
+            let p = PathBuilder::from_rect(r);
+            pm.stroke_path(&p, &paint, &Stroke::default(), Transform::identity(), None);
+        }
+        for s in series {
+            let mut pb = PathBuilder::new();
+            for (t, f) in s.frames.iter().enumerate().filter(|(_, f)| f[j].is_finite()) {
+                if pb.is_empty() { pb.move_to(x(t), y(f[j])) } else { pb.line_to(x(t), y(f[j])) }
+            }
+            paint.set_color_rgba8(s.rgb.0, s.rgb.1, s.rgb.2, 255);
+            if let Some(p) = pb.finish() {
+                pm.stroke_path(
+                    &p,
+                    &paint,
+                    &Stroke { width: s.width, ..Stroke::default() },
+                    Transform::identity(),
+                    None,
+                );
+            }
+        }
+        paint.set_color_rgba8(0, 110, 40, 255);
+        for (t, pose) in keys {
+            if let Some(c) = PathBuilder::from_circle(x(*t), y(pose[j]), 5.0) {
+                pm.stroke_path(&c, &paint, &Stroke { width: 2.0, ..Stroke::default() }, Transform::identity(), None);
+            }
+        }
+    }
+    let png = pm.encode_png().map_err(|e| anyhow::anyhow!("{}: cannot encode the PNG: {e}", path.display()))?;
+    std::fs::write(path, png).with_context(|| format!("writing {}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn names() -> Vec<String> {
+        zoo_data::luxo::DOF_NAMES.iter().map(|s| s.to_string()).collect()
+    }
+
+    #[test]
+    fn keys_parse_and_start_at_frame_zero() {
+        let text = r#"{"format": "zoo-arnn-keys", "version": 1, "fps": 30,
+            "keys": [{"frame": 5, "pose": [0, 0.02, 0, 0.5, -1.1, -1.2]}, {"frame": 29, "pose": [0.4, 0.02, 0, 0.5, -1.1, -1.2]}]}"#;
+        let k = parse_keys(text, &names()).unwrap();
+        assert_eq!((k.frames, k.offset, k.fps), (vec![0, 24], 5, Some(30.0)));
+    }
+
+    #[test]
+    fn bad_keys_are_named() {
+        let pose = "[0, 0.02, 0, 0.5, -1.1, -1.2]";
+        let err = |t: String| parse_keys(&t, &names()).unwrap_err();
+        let e = err(format!(r#"{{"keys": [{{"frame": 0, "pose": {pose}}}]}}"#));
+        assert!(e.contains("1 key(s) given: completion needs at least 2"), "{e}");
+        let e = err(format!(r#"{{"keys": [{{"frame": 9, "pose": {pose}}}, {{"frame": 3, "pose": {pose}}}]}}"#));
+        assert!(e.contains("key 1 is at frame 3 but key 0 is at frame 9"), "{e}");
+        let e = err(format!(r#"{{"keys": [{{"frame": 0, "pose": {pose}}}, {{"frame": 3, "pose": [1, 2]}}]}}"#));
+        assert!(e.contains("key 1 (frame 3) has 2 values; the model completes 6"), "{e}");
+        let e = err(format!(
+            r#"{{"keys": [{{"frame": 0, "pose": {pose}}}, {{"frame": 3, "pose": [NaN, 0, 0, 0, 0, 0]}}]}}"#
+        ));
+        assert!(e.contains("not a keys file") && e.contains("finite"), "{e}");
+        let e = err(format!(r#"{{"dof_names": ["a"], "keys": [{{"frame": 0, "pose": {pose}}}]}}"#));
+        assert!(e.contains("another character"), "{e}");
+        let e = err(format!(r#"{{"keys": [{{"frame": 0, "pose": {pose}}}, {{"frame": 300000, "pose": {pose}}}]}}"#));
+        assert!(e.contains("past the 100000 frames"), "{e}");
+    }
+}

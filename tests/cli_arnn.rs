@@ -1,0 +1,202 @@
+//! End-to-end tests of `zoo train arnn` and `zoo complete`: a tiny ARNN trained for an epoch or
+//! two on a few lamp sequences generated in memory with a short annealing (`--k-max 2`).
+
+use std::path::Path;
+use std::process::Command;
+use zoo_tests::zoo_bin;
+
+fn run(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(zoo_bin()).args(args).output().unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// Trains a tiny ARNN into `dir` for `epochs` epochs (or resumes it).
+fn train(dir: &Path, epochs: usize, resume: bool) -> (bool, String, String) {
+    let d = dir.to_str().unwrap();
+    let e = epochs.to_string();
+    let base = ["train", "arnn", "--preset", "tiny", "--epochs", &e];
+    if resume {
+        run(&[&base[..], &["--resume", d]].concat())
+    } else {
+        run(&[&base[..], &["--sequences", "5", "--k-max", "2", "--seed", "3", "--out", d]].concat())
+    }
+}
+
+const REST: [f64; 6] = [0.0, 0.02, 0.0, 0.5, -1.1, -1.2];
+
+fn pose_json(p: &[f64]) -> String {
+    format!("[{}]", p.iter().map(|v| v.to_string()).collect::<Vec<_>>().join(", "))
+}
+
+/// A keys file: a hop forward, its apex and the landing.
+fn hop_keys() -> String {
+    let apex = [0.25, 0.25, 0.0, 0.7, -1.5, -1.3];
+    let land = [0.5, 0.02, 0.0, 0.5, -1.1, -1.2];
+    format!(
+        r#"{{"format": "zoo-arnn-keys", "version": 1, "fps": 40,
+            "dof_names": ["base_x", "base_y", "base_angle", "theta1", "theta2", "theta3"],
+            "keys": [{{"frame": 0, "pose": {}}}, {{"frame": 12, "pose": {}}}, {{"frame": 24, "pose": {}}}]}}"#,
+        pose_json(&REST),
+        pose_json(&apex),
+        pose_json(&land)
+    )
+}
+
+#[test]
+fn train_resume_and_complete() {
+    let dir = tempfile::tempdir().unwrap();
+    let runp = dir.path().join("run");
+    let (ok, stdout, stderr) = train(&runp, 1, false);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("4 training / 1 test sequences of 87 frames"), "{stdout}");
+    for f in [
+        "config.json",
+        "model.safetensors",
+        "normalization.json",
+        "summary.json",
+        "last/optimizer.safetensors",
+        "completion_test.png",
+    ] {
+        assert!(runp.join(f).is_file(), "{f} missing in the run folder");
+    }
+    let config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(runp.join("config.json")).unwrap()).unwrap();
+    assert_eq!(config["model"], "arnn");
+    // The test-set comparison with interpolation is in the summary.
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(runp.join("summary.json")).unwrap()).unwrap();
+    for m in ["arnn", "linear", "spline"] {
+        assert!(summary["completion"][m]["frame"].as_f64().unwrap().is_finite(), "{summary}");
+    }
+    assert!(stdout.contains("ARNN frame error / spline frame error"), "{stdout}");
+
+    // A second fresh run into the same folder is refused; resuming continues it.
+    let (ok, _, stderr) = train(&runp, 1, false);
+    assert!(
+        !ok && stderr.contains("already holds a run trained for 1 epochs") && stderr.contains("--resume"),
+        "{stderr}"
+    );
+    let (ok, stdout, stderr) = train(&runp, 2, true);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("epoch   2:") && !stdout.contains("epoch   1:"), "{stdout}");
+    let state: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(runp.join("train_state.json")).unwrap()).unwrap();
+    assert_eq!(state["epoch"], 2);
+    assert_eq!(state["data_settings"]["sequences"], 5);
+
+    // Completion: a BVH of the lamp with one frame per network frame, starting on the first key.
+    let keys = dir.path().join("keys.json");
+    std::fs::write(&keys, hop_keys()).unwrap();
+    let (bvh, json, png) = (dir.path().join("hop.bvh"), dir.path().join("hop.json"), dir.path().join("hop.png"));
+    let (ok, stdout, stderr) = run(&[
+        "complete",
+        "--model",
+        runp.to_str().unwrap(),
+        "--keys",
+        keys.to_str().unwrap(),
+        "--out",
+        bvh.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+        "--plot",
+        png.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(
+        stdout.contains("completed 25 frames from 3 keys (40 fps)") && stdout.contains("largest key miss"),
+        "{stdout}"
+    );
+    assert_eq!(&std::fs::read(&png).unwrap()[1..4], b"PNG");
+    let clip = zoo_data::bvh::read_file(&bvh, &Default::default()).unwrap();
+    assert_eq!(clip.frames(), 25);
+    assert_eq!(clip.skeleton.names, ["base", "leg", "neck", "head"]);
+    assert!((clip.frame_time - 1.0 / 40.0).abs() < 1e-6);
+    let poses = zoo_data::luxo::sequence::clip_to_poses(&clip).unwrap();
+    for d in 0..6 {
+        assert!((poses[0][d] - REST[d]).abs() < 1e-4, "frame 0 is not the first key: {:?}", poses[0]);
+    }
+    // Export: the step graph loads in the runtime, an ARNN driven as a bare step model.
+    let onnx = dir.path().join("arnn.onnx");
+    let (ok, stdout, stderr) = run(&["export", "--onnx", runp.to_str().unwrap(), "--out", onnx.to_str().unwrap()]);
+    assert!(ok && stdout.contains("ARNN step graph"), "{stdout}\n{stderr}");
+    let m = zoo_runtime::MotionModel::load(&onnx).unwrap();
+    assert_eq!((m.metadata().model_kind.as_str(), m.states().len()), ("arnn", 2));
+    let out: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(out["frames"].as_array().unwrap().len(), 25);
+    assert_eq!(out["key_misses"].as_array().unwrap().len(), 3);
+    assert!(out["frames"].as_array().unwrap().iter().flat_map(|f| f.as_array().unwrap()).all(|v| v.is_f64()));
+}
+
+#[test]
+fn bad_keys_and_folders_are_refused_with_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let runp = dir.path().join("run");
+    let (ok, stdout, stderr) = train(&runp, 1, false);
+    assert!(ok, "{stdout}\n{stderr}");
+    let model = runp.to_str().unwrap();
+    let out = dir.path().join("o.bvh");
+    let complete = |keys: &str| {
+        let path = dir.path().join("k.json");
+        std::fs::write(&path, keys).unwrap();
+        let (ok, stdout, stderr) =
+            run(&["complete", "--model", model, "--keys", path.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+        assert!(!ok, "accepted {keys}: {stdout}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+        stderr
+    };
+    let rest = pose_json(&REST);
+    let key = |frame: usize, pose: &str| format!(r#"{{"frame": {frame}, "pose": {pose}}}"#);
+    let file = |keys: &[String]| format!(r#"{{"keys": [{}]}}"#, keys.join(", "));
+
+    let e = complete(&file(&[key(0, &rest), key(20, &rest), key(10, &rest)]));
+    assert!(e.contains("key 2 is at frame 10 but key 1 is at frame 20: keys must be in increasing frame order"), "{e}");
+    let e = complete(&file(&[key(0, &rest), key(10, "[0.1, 0.02, 0.0]")]));
+    assert!(e.contains("key 1 (frame 10) has 3 values; the model completes 6 degrees of freedom"), "{e}");
+    let e = complete(&file(&[key(0, &rest)]));
+    assert!(e.contains("1 key(s) given: completion needs at least 2"), "{e}");
+    let e = complete(&file(&[key(0, &rest), key(10, "[NaN, 0.02, 0.0, 0.5, -1.1, -1.2]")]));
+    assert!(e.contains("not a keys file") && e.contains("every value must be finite"), "{e}");
+    let e = complete(&file(&[key(0, &rest), key(10, "[0.1, null, 0.0, 0.5, -1.1, -1.2]")]));
+    assert!(e.contains("not a keys file") && e.contains("invalid type: null"), "{e}");
+    let e = complete(&file(&[key(0, &rest), key(1_000_000, &rest)]));
+    assert!(e.contains("past the 100000 frames zoo complete generates"), "{e}");
+    let other =
+        r#"{"dof_names": ["Hips", "Spine"], "keys": [{"frame": 0, "pose": [0, 0]}, {"frame": 5, "pose": [1, 1]}]}"#;
+    let e = complete(other);
+    assert!(e.contains("this keys file is for another character"), "{e}");
+    let e = complete(r#"{"format": "zoo-luxo-sequence", "keys": []}"#);
+    assert!(e.contains("format is \"zoo-luxo-sequence\", expected \"zoo-arnn-keys\""), "{e}");
+    assert!(!out.exists(), "a refused completion wrote its output");
+
+    // A run folder of another model, and a folder that is not a run.
+    let rtn = dir.path().join("rtn");
+    std::fs::create_dir(&rtn).unwrap();
+    std::fs::write(rtn.join("config.json"), r#"{"joints": 4}"#).unwrap();
+    let keys = dir.path().join("keys.json");
+    std::fs::write(&keys, hop_keys()).unwrap();
+    let args = |m: &Path| {
+        run(&[
+            "complete",
+            "--model",
+            m.to_str().unwrap(),
+            "--keys",
+            keys.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+    };
+    let (ok, _, e) = args(&rtn);
+    assert!(!ok && e.contains("`zoo complete` runs an ARNN run folder") && e.contains("`rtn` model"), "{e}");
+    let (ok, _, e) = args(dir.path());
+    assert!(!ok && e.contains("is not a run folder of `zoo train` (no config.json)"), "{e}");
+    // Data options that do not fit are refused before any work.
+    let y = dir.path().join("y");
+    let (ok, _, e) = run(&["train", "arnn", "--data", dir.path().to_str().unwrap(), "--out", y.to_str().unwrap()]);
+    assert!(!ok && e.contains("no luxo_*.json sequence found"), "{e}");
+    let (ok, _, e) = run(&["train", "arnn", "--test-fraction", "1", "--out", dir.path().join("x").to_str().unwrap()]);
+    assert!(!ok && e.contains("--test-fraction 1 must be below 1"), "{e}");
+}

@@ -1,0 +1,142 @@
+//! Parity of the exported ARNN: candle (`zoo_arnn::complete`), tract (through `zoo-runtime`'s
+//! `MotionRunner`) and onnxruntime (through `ort`, `load-dynamic`) complete the same keys with a
+//! tiny ARNN, two characters in one batch.
+//!
+//! Where the expected numbers come from: candle's `zoo_arnn::complete`, the function `zoo
+//! complete` runs (frame 0 is the first key, each later frame from the keys around it and the
+//! previous output). The exported step graph is driven the same way on the host, the previous
+//! output fed back as `prev`. Weights are fixed LCG draws (`ArnnConfig::tiny`), statistics and
+//! keys fixed. Every pair must agree within 1e-4 (metres and radians) on every frame of the
+//! whole completed sequences (40 frames).
+//!
+//! onnxruntime: `bash scripts/onnxruntime.sh` (or `ORT_DYLIB_PATH`); a missing library fails.
+
+use candle_core::{DType, Device, Tensor};
+use candle_nn::{VarBuilder, VarMap};
+use zoo_arnn::{Arnn, ArnnConfig, Normalization};
+use zoo_data::luxo::preprocess::KeyedSequence;
+use zoo_runtime::{MotionModel, MotionTask};
+use zoo_tests::onnxruntime::OrtSession;
+use zoo_tests::toy_onnx::lcg;
+
+const TOLERANCE: f64 = 1e-4;
+const KEY_FRAMES: [usize; 4] = [0, 9, 24, 39];
+
+fn fixture() -> (ArnnConfig, VarMap, Arnn, Normalization) {
+    let config = ArnnConfig::tiny();
+    let mut varmap = VarMap::new();
+    let model = Arnn::new(&config, VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu)).unwrap();
+    let mut vars: Vec<(String, Vec<usize>)> =
+        varmap.data().lock().unwrap().iter().map(|(n, v)| (n.clone(), v.dims().to_vec())).collect();
+    vars.sort();
+    for (k, (name, dims)) in vars.iter().enumerate() {
+        let fan_in = if dims.len() == 2 { dims[1] } else { config.hidden };
+        let t = Tensor::from_vec(
+            lcg(500 + k as u64, dims.iter().product(), 1.5 / (fan_in as f32).sqrt()),
+            dims.as_slice(),
+            &Device::Cpu,
+        )
+        .unwrap();
+        varmap.set_one(name, &t).unwrap();
+    }
+    let norm = Normalization { mean: vec![0.5, 0.1, 0.0, 0.5, -1.1, -1.2], std: vec![0.4, 0.06, 0.3, 0.2, 0.5, 0.3] };
+    (config, varmap, model, norm)
+}
+
+/// The keys of character `c`: a hop-like sequence, different per character.
+fn keys(c: usize) -> Vec<Vec<f64>> {
+    let r = lcg(40 + c as u64, KEY_FRAMES.len() * 6, 0.2);
+    KEY_FRAMES
+        .iter()
+        .enumerate()
+        .map(|(k, &f)| {
+            let base = [0.02 * f as f64, 0.02 + 0.1 * (k % 2) as f64, 0.0, 0.5, -1.1, -1.2];
+            (0..6).map(|j| base[j] + r[k * 6 + j] as f64).collect()
+        })
+        .collect()
+}
+
+/// Inputs of frame `t` for one character: `key_a`, `key_b`, `t_rel`.
+fn step_inputs(poses: &[Vec<f64>], t: usize) -> (Vec<f32>, Vec<f32>, f32) {
+    let (a, b, rel) = KeyedSequence::interval(&KEY_FRAMES, t);
+    let f = |p: &[f64]| p.iter().map(|v| *v as f32).collect::<Vec<f32>>();
+    (f(&poses[a]), f(&poses[b]), rel as f32)
+}
+
+fn max_diff(a: &[Vec<f64>], b: &[Vec<f64>]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    a.iter().flatten().zip(b.iter().flatten()).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
+}
+
+#[test]
+fn candle_tract_and_onnxruntime_complete_the_same_keys() {
+    let (config, varmap, model, norm) = fixture();
+    let chars = 2;
+    let last = *KEY_FRAMES.last().unwrap();
+    let all_keys: Vec<Vec<Vec<f64>>> = (0..chars).map(keys).collect();
+    let candle: Vec<Vec<Vec<f64>>> =
+        all_keys.iter().map(|k| zoo_arnn::complete(&model, &norm, &KEY_FRAMES, k).unwrap()).collect();
+    assert_eq!(candle[0].len(), last + 1);
+    // The completion moves: not the keys held still.
+    assert!(max_diff(&candle[0][..1], &candle[0][20..21]) > 0.05);
+
+    let onnx = zoo_arnn::export::export_arnn(&config, &norm, &varmap).unwrap();
+    let summary = onnx.summary();
+    // SELU after both layers of each feature net, after each GRU and between the decoder layers.
+    assert_eq!(summary.op_counts["Exp"], 10, "{:?}", summary.op_counts);
+    // Three feature nets of 2 layers, two GRU cells of 2 projections, a decoder of 3.
+    assert_eq!(summary.op_counts["Gemm"], 13, "{:?}", summary.op_counts);
+
+    // tract through the runtime: both characters in one batch.
+    let tract_model = MotionModel::from_bytes(&onnx.to_bytes()).unwrap();
+    assert_eq!(tract_model.metadata().model_kind, "arnn");
+    assert_eq!(tract_model.metadata().task, MotionTask::Step);
+    let names: Vec<&str> = tract_model.inputs().iter().map(|i| i.name.as_str()).collect();
+    assert_eq!(names, ["prev", "key_a", "key_b", "t_rel"]);
+    let mut runner = tract_model.runner().unwrap();
+    let mut states: Vec<_> = (0..chars).map(|_| tract_model.new_state()).collect();
+    let mut tract: Vec<Vec<Vec<f64>>> = all_keys.iter().map(|k| vec![k[0].clone()]).collect();
+    // onnxruntime: the state passed by hand.
+    let mut ort = OrtSession::new(&onnx);
+    let h = config.hidden;
+    let (mut h1, mut h2) = (vec![0f32; chars * h], vec![0f32; chars * h]);
+    let mut ort_out: Vec<Vec<Vec<f64>>> = all_keys.iter().map(|k| vec![k[0].clone()]).collect();
+    for t in 1..=last {
+        let (mut prev, mut ka, mut kb, mut tr, mut prev_ort) = (vec![], vec![], vec![], vec![], vec![]);
+        for c in 0..chars {
+            let (a, b, rel) = step_inputs(&all_keys[c], t);
+            prev.extend(tract[c][t - 1].iter().map(|v| *v as f32));
+            prev_ort.extend(ort_out[c][t - 1].iter().map(|v| *v as f32));
+            ka.extend(a);
+            kb.extend(b);
+            tr.push(rel);
+        }
+        let mut pose = vec![0f32; chars * 6];
+        runner.step_batch(&mut states, &[&prev, &ka, &kb, &tr], &mut [&mut pose]).unwrap();
+        let out = ort.run(
+            &[
+                ("prev", chars, &prev_ort),
+                ("key_a", chars, &ka),
+                ("key_b", chars, &kb),
+                ("t_rel", chars, &tr),
+                ("h1", chars, &h1),
+                ("h2", chars, &h2),
+            ],
+            &["pose", "h1_next", "h2_next"],
+        );
+        (h1, h2) = (out[1].clone(), out[2].clone());
+        for c in 0..chars {
+            tract[c].push(pose[c * 6..(c + 1) * 6].iter().map(|v| *v as f64).collect());
+            ort_out[c].push(out[0][c * 6..(c + 1) * 6].iter().map(|v| *v as f64).collect());
+        }
+    }
+    for c in 0..chars {
+        let (ct, co, to) =
+            (max_diff(&candle[c], &tract[c]), max_diff(&candle[c], &ort_out[c]), max_diff(&tract[c], &ort_out[c]));
+        eprintln!("character {c}: largest difference candle-tract {ct:e}, candle-ort {co:e}, tract-ort {to:e}");
+        assert!(
+            ct <= TOLERANCE && co <= TOLERANCE && to <= TOLERANCE,
+            "character {c}: candle-tract {ct:e}, candle-ort {co:e}, tract-ort {to:e}"
+        );
+    }
+}
