@@ -198,5 +198,5 @@ fn bad_keys_and_folders_are_refused_with_clear_errors() {
     let (ok, _, e) = run(&["train", "arnn", "--data", dir.path().to_str().unwrap(), "--out", y.to_str().unwrap()]);
     assert!(!ok && e.contains("no luxo_*.json sequence found"), "{e}");
     let (ok, _, e) = run(&["train", "arnn", "--test-fraction", "1", "--out", dir.path().join("x").to_str().unwrap()]);
-    assert!(!ok && e.contains("--test-fraction 1 must be below 1"), "{e}");
+    assert!(!ok && e.contains("--test-fraction <TEST_FRACTION>': 1 is outside the valid range (0, 1)"), "{e}");
 }

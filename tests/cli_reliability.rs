@@ -29,6 +29,8 @@ fn every_numeric_option_of_every_subcommand_refuses_bad_values_with_its_range() 
     let bt = ["bench", "train"];
     let rmr = ["train", "rmr"];
     let rg = ["train", "rnn-gmm"];
+    let ta = ["train", "arnn"];
+    let cp = ["complete", "--model", "m", "--keys", "k.json", "--out", "o.bvh"];
     let ge = ["generate", "--model", "m", "--out", "o.bvh"];
     let bsy = ["bench-synthesis", "--model", "m", "--data", "d"];
     let st = ["stitch", "--method", "concat", "a.bvh", "b.bvh", "--out", "o.bvh"];
@@ -159,6 +161,15 @@ fn every_numeric_option_of_every_subcommand_refuses_bad_values_with_its_range() 
         (with(&bsy, ["--seed", "x"]), "--seed <SEED>", "not a seed"),
         (with(&bsy, ["--temperature", "101"]), "--temperature <TEMPERATURE>", "valid range [0, 100]"),
         (with(&bsy, ["--range-margin", "11"]), "--range-margin <RANGE_MARGIN>", "valid range [0, 10]"),
+        (with(&ta, ["--sequences", "0"]), "--sequences <SEQUENCES>", "valid range 1..=100000"),
+        (with(&ta, ["--k-max", "1000001"]), "--k-max <K_MAX>", "valid range 1..=1000000"),
+        (with(&ta, ["--test-fraction", "1"]), "--test-fraction <TEST_FRACTION>", "valid range (0, 1)"),
+        (with(&ta, ["--epochs", "0"]), "--epochs <EPOCHS>", "0 epochs is outside the valid range 1..=100000"),
+        (with(&ta, ["--time-limit", "-1"]), "--time-limit <TIME_LIMIT>", "valid range (0, 43200]"),
+        (with(&ta, ["--batch-size", "0"]), "--batch-size <BATCH_SIZE>", "valid range 1..=65536"),
+        (with(&ta, ["--lr", "NaN"]), "--lr <LR>", "not a finite number"),
+        (with(&ta, ["--seed", "x"]), "--seed <SEED>", "not a seed"),
+        (with(&cp, ["--fps", "0"]), "--fps <FPS>", "valid range [1, 1000]"),
         (with(&rtn, ["--threads", "0"]), "--threads <THREADS>", "not a thread count: valid range 1..=256"),
         (with(&rtn, ["--threads", "257"]), "--threads <THREADS>", "not a thread count: valid range 1..=256"),
         (with(&bt, ["--threads", "0"]), "--threads <THREADS>", "outside the valid range 1..=256"),

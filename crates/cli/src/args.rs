@@ -284,6 +284,11 @@ pub fn temperature(s: &str) -> Result<f64, String> {
     real_in(s, Interval::closed(0.0, MAX_TEMPERATURE), "")
 }
 
+/// A fraction strictly between 0 and 1 (`--test-fraction`).
+pub fn unit_fraction(s: &str) -> Result<f64, String> {
+    real_in(s, Interval { lo: 0.0, lo_open: true, hi: 1.0, hi_open: true }, "")
+}
+
 /// A margin as a fraction of a range, `[0, 10]`.
 pub fn margin_fraction(s: &str) -> Result<f64, String> {
     real_in(s, Interval::closed(0.0, 10.0), "")

@@ -37,7 +37,7 @@ pub struct CompleteArgs {
     #[arg(long)]
     pub plot: Option<PathBuf>,
     /// Frames per second of the output [default: the keys file's `fps`, else 50].
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::positive)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::fps)]
     pub fps: Option<f64>,
 }
 

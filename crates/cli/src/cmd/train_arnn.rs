@@ -43,22 +43,22 @@ pub struct ArnnArgs {
     #[arg(long)]
     pub data: Option<PathBuf>,
     /// Sequences generated when `--data` is not given.
-    #[arg(long, default_value_t = 24, conflicts_with = "data", allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
+    #[arg(long, default_value_t = 24, conflicts_with = "data", allow_hyphen_values = true, value_parser = crate::args::sequences)]
     pub sequences: usize,
     /// Simulated annealing iterations per run for the generated sequences (the paper's
     /// K_max = 1000; fewer is faster and gives hops closer to the hand-set one).
-    #[arg(long, default_value_t = 100, conflicts_with = "data", allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
+    #[arg(long, default_value_t = 100, conflicts_with = "data", allow_hyphen_values = true, value_parser = crate::args::anneal_iterations)]
     pub k_max: usize,
     /// Fraction of the sequences held out as the test set (whole sequences, fixed by `--seed`;
     /// 0.2 gives the paper's 240/60 of 300). The test set also picks the best checkpoint.
-    #[arg(long, default_value_t = 0.2, allow_hyphen_values = true, value_parser = crate::args::positive)]
+    #[arg(long, default_value_t = 0.2, allow_hyphen_values = true, value_parser = crate::args::unit_fraction)]
     pub test_fraction: f64,
     /// Epochs to train (an epoch visits every training sequence once). The curriculum spans
     /// this many epochs: with `--time-limit`, choose epochs that fit in it.
-    #[arg(long, default_value_t = 300, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
+    #[arg(long, default_value_t = 300, allow_hyphen_values = true, value_parser = crate::args::epochs)]
     pub epochs: usize,
     /// Stop after this many minutes of training (the epoch in progress finishes first).
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::positive)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::time_limit_minutes)]
     pub time_limit: Option<f64>,
     /// Run folder: config, weights, statistics, loss curve and summary.
     #[arg(long, default_value = "runs/arnn")]
@@ -78,13 +78,13 @@ pub struct ArnnArgs {
     #[arg(long, value_enum, default_value_t = ArnnPreset::Paper)]
     pub preset: ArnnPreset,
     /// Sequences per batch [default: the preset's].
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::at_least_one)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::batch_size)]
     pub batch_size: Option<usize>,
     /// Adam learning rate [default: the preset's; paper: 1e-3].
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::positive)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::learning_rate)]
     pub lr: Option<f64>,
     /// Seed of the generated data, the split, the weights and the trainer.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_hyphen_values = true, value_parser = crate::args::seed)]
     pub seed: u64,
 }
 
