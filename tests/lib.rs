@@ -67,15 +67,16 @@ pub fn tiny_rtn_onnx() -> zoo_export::OnnxModel {
 }
 
 /// [`tiny_rtn_onnx`] with every normalization standard deviation `std`: the step's random
-/// outputs become motion of about `std` cm per frame (1: a walk; 10: metres per second).
+/// outputs become motion of about `std` cm per frame (1: a walk; 10: metres per second). The
+/// weights are seeded ([`zoo_nn::SeededVarMap`], seed 7): the same model every run.
 pub fn tiny_rtn_onnx_with_std(std: f32) -> zoo_export::OnnxModel {
     use candle_core::{DType, Device};
-    use candle_nn::{VarBuilder, VarMap};
+    use candle_nn::VarMap;
     use zoo_rtn::features::{FeatureStats, MeanStd};
     let skeleton = toy_skeleton();
     let config = zoo_rtn::Config::tiny().with_parents(&skeleton.parents);
     let varmap = VarMap::new();
-    zoo_rtn::Rtn::new(&config, VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu)).expect("tiny RTN");
+    zoo_rtn::Rtn::new(&config, zoo_nn::SeededVarMap::builder(&varmap, 7, DType::F32, &Device::Cpu)).expect("tiny RTN");
     let d = config.dim();
     let unit = || MeanStd { mean: vec![0.0; d], std: vec![std; d] };
     let stats = FeatureStats { joints: skeleton.len(), x: unit(), velocity: unit(), offset: unit(), terrain: None };

@@ -96,6 +96,19 @@ pub fn parse_clip_spec(s: &str) -> anyhow::Result<ClipSpec> {
     if s.is_empty() {
         bail!("an empty clip argument: expected CLIP.bvh or CLIP.bvh:FROM:TO");
     }
+    // `CLIP.bvh:FROM:TO` whose numbers are not frame numbers (negative, too large): say so
+    // instead of looking for a file of that name.
+    let numeric = |v: &str| !v.is_empty() && v.trim().chars().all(|c| c.is_ascii_digit() || c == '-' || c == '+');
+    if let (Some(to), Some(from), Some(path)) = (last, mid, head)
+        && numeric(from)
+        && (to.is_empty() || numeric(to))
+        && !std::path::Path::new(s).exists()
+    {
+        bail!(
+            "`{s}`: FROM and TO of {path}:FROM:TO must be frame numbers in 0..={} (found `{from}` and `{to}`)",
+            crate::args::MAX_FRAME_INDEX
+        );
+    }
     Ok(ClipSpec { path: PathBuf::from(s), from: 0, to: None })
 }
 
@@ -269,5 +282,10 @@ mod tests {
         assert!(e.contains("the range 70:10 is empty"), "{e}");
         // Not a range: kept as a file name.
         assert_eq!(parse_clip_spec("odd:name.bvh").unwrap().path, PathBuf::from("odd:name.bvh"));
+        // Numbers that are not frame numbers: said so, not looked up as a file.
+        for bad in ["walk.bvh:-1:5", "walk.bvh:0:99999999999999999999999"] {
+            let e = parse_clip_spec(bad).unwrap_err().to_string();
+            assert!(e.contains("must be frame numbers in 0..=10000000"), "{e}");
+        }
     }
 }
