@@ -231,7 +231,8 @@ fn fresh_config(a: &RtnArgs, parents: &[Option<usize>], train_windows: usize) ->
 }
 
 /// The files and folders of a run that `--overwrite` deletes (the ones training writes).
-const RUN_FILES: [&str; 10] = [
+const RUN_FILES: [&str; 11] = [
+    checkpoint::SKELETON_FILE,
     checkpoint::CONFIG_FILE,
     checkpoint::WEIGHTS_FILE,
     checkpoint::STATS_FILE,
@@ -255,52 +256,60 @@ fn holds_run(dir: &Path) -> bool {
 /// unless `--overwrite` says so (then the old run's files are deleted), a resumed run must be
 /// a run folder, and the folder must be writable.
 fn prepare_run_folder(a: &RtnArgs) -> anyhow::Result<PathBuf> {
-    match &a.resume {
-        Some(dir) => {
-            if !dir.is_dir() {
-                bail!("--resume {}: no such folder (start a new run with --out instead)", dir.display());
-            }
-            train_loop::read_state(dir)?;
-            crate::cmd::check_output_dir("--resume", dir)?;
-            Ok(dir.clone())
+    prepare_run_folder_for(&a.out, a.resume.as_deref(), a.overwrite, &RUN_FILES, |_| Ok(()))
+}
+
+/// [`prepare_run_folder`] for any model: `run_files` are the files and folders of its runs
+/// (what `--overwrite` deletes); `check_resume` checks that a folder to resume holds a run of
+/// this model (after it is known to be a run folder).
+pub fn prepare_run_folder_for(
+    out: &Path,
+    resume: Option<&Path>,
+    overwrite: bool,
+    run_files: &[&str],
+    check_resume: impl FnOnce(&Path) -> anyhow::Result<()>,
+) -> anyhow::Result<PathBuf> {
+    if let Some(dir) = resume {
+        if !dir.is_dir() {
+            bail!("--resume {}: no such folder (start a new run with --out instead)", dir.display());
         }
-        None => {
-            let out = &a.out;
-            if holds_run(out) {
-                if !a.overwrite {
-                    let state = train_loop::read_state(out).ok();
-                    let what = match state {
-                        Some(s) if s.epoch > 0 => format!(
-                            "a run trained for {} epochs (best validation loss {:.5} at epoch {})",
-                            s.epoch,
-                            s.best_valid.unwrap_or(f64::NAN),
-                            s.best_epoch
-                        ),
-                        _ => "a run".to_string(),
-                    };
-                    bail!(
-                        "--out {} already holds {what}: continue it with `--resume {0}`, replace it with \
-                         --overwrite, or choose another --out",
-                        out.display()
-                    );
-                }
-                for name in RUN_FILES {
-                    let p = out.join(name);
-                    let removed = if p.is_dir() {
-                        std::fs::remove_dir_all(&p)
-                    } else if p.exists() {
-                        std::fs::remove_file(&p)
-                    } else {
-                        Ok(())
-                    };
-                    removed.with_context(|| format!("--overwrite: cannot delete {}", p.display()))?;
-                }
-                println!("--overwrite: deleted the run in {}", out.display());
-            }
-            crate::cmd::check_output_dir("--out", out)?;
-            Ok(out.clone())
-        }
+        train_loop::read_state(dir)?;
+        check_resume(dir)?;
+        crate::cmd::check_output_dir("--resume", dir)?;
+        return Ok(dir.to_path_buf());
     }
+    if holds_run(out) {
+        if !overwrite {
+            let what = match train_loop::read_state(out).ok() {
+                Some(s) if s.epoch > 0 => format!(
+                    "a run trained for {} epochs (best validation loss {:.5} at epoch {})",
+                    s.epoch,
+                    s.best_valid.unwrap_or(f64::NAN),
+                    s.best_epoch
+                ),
+                _ => "a run".to_string(),
+            };
+            bail!(
+                "--out {} already holds {what}: continue it with `--resume {0}`, replace it with --overwrite, or \
+                 choose another --out",
+                out.display()
+            );
+        }
+        for name in run_files {
+            let p = out.join(name);
+            let removed = if p.is_dir() {
+                std::fs::remove_dir_all(&p)
+            } else if p.exists() {
+                std::fs::remove_file(&p)
+            } else {
+                Ok(())
+            };
+            removed.with_context(|| format!("--overwrite: cannot delete {}", p.display()))?;
+        }
+        println!("--overwrite: deleted the run in {}", out.display());
+    }
+    crate::cmd::check_output_dir("--out", out)?;
+    Ok(out.to_path_buf())
 }
 
 fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {

@@ -7,7 +7,7 @@ use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Duration;
 use zoo_arnn::eval::CompletionReport;
 use zoo_arnn::{ArnnConfig, ArnnTrainer};
@@ -121,20 +121,9 @@ const RUN_FILES: [&str; 10] = [
     checkpoint::LAST_DIR,
 ];
 
-/// Whether `dir` holds (part of) a run.
-fn holds_run(dir: &Path) -> bool {
-    [checkpoint::CONFIG_FILE, checkpoint::WEIGHTS_FILE, checkpoint::TRAIN_STATE_FILE, checkpoint::LAST_DIR]
-        .iter()
-        .any(|f| dir.join(f).exists())
-}
-
 /// The run folder, checked before any data is generated or loaded (as `zoo train rtn` does).
 fn prepare_run_folder(a: &ArnnArgs) -> anyhow::Result<PathBuf> {
-    if let Some(dir) = &a.resume {
-        if !dir.is_dir() {
-            bail!("--resume {}: no such folder (start a new run with --out instead)", dir.display());
-        }
-        train_loop::read_state(dir)?;
+    crate::cmd::train::prepare_run_folder_for(&a.out, a.resume.as_deref(), a.overwrite, &RUN_FILES, |dir| {
         let kind = crate::registry::model_kind(dir)?;
         if kind != "arnn" {
             bail!(
@@ -142,42 +131,8 @@ fn prepare_run_folder(a: &ArnnArgs) -> anyhow::Result<PathBuf> {
                 dir.display()
             );
         }
-        crate::cmd::check_output_dir("--resume", dir)?;
-        return Ok(dir.clone());
-    }
-    let out = &a.out;
-    if holds_run(out) {
-        if !a.overwrite {
-            let what = match train_loop::read_state(out).ok() {
-                Some(s) if s.epoch > 0 => format!(
-                    "a run trained for {} epochs (best validation loss {:.5} at epoch {})",
-                    s.epoch,
-                    s.best_valid.unwrap_or(f64::NAN),
-                    s.best_epoch
-                ),
-                _ => "a run".to_string(),
-            };
-            bail!(
-                "--out {} already holds {what}: continue it with `--resume {0}`, replace it with --overwrite, or \
-                 choose another --out",
-                out.display()
-            );
-        }
-        for name in RUN_FILES {
-            let p = out.join(name);
-            let removed = if p.is_dir() {
-                std::fs::remove_dir_all(&p)
-            } else if p.exists() {
-                std::fs::remove_file(&p)
-            } else {
-                Ok(())
-            };
-            removed.with_context(|| format!("--overwrite: cannot delete {}", p.display()))?;
-        }
-        println!("--overwrite: deleted the run in {}", out.display());
-    }
-    crate::cmd::check_output_dir("--out", out)?;
-    Ok(out.clone())
+        Ok(())
+    })
 }
 
 /// The raw sequences and the lamp they were simulated with.

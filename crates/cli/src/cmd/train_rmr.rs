@@ -6,7 +6,7 @@
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::{Duration, Instant};
 use zoo_data::stitch::{MotionSet, StitchLayout};
 use zoo_data::synth::SynthConfig;
@@ -124,64 +124,15 @@ const RUN_FILES: [&str; 9] = [
     checkpoint::LAST_DIR,
 ];
 
-/// Whether `dir` holds (part of) a run: a model, a state or a `last/` checkpoint.
-fn holds_run(dir: &Path) -> bool {
-    [checkpoint::CONFIG_FILE, checkpoint::WEIGHTS_FILE, checkpoint::TRAIN_STATE_FILE, checkpoint::LAST_DIR]
-        .iter()
-        .any(|f| dir.join(f).exists())
-}
-
 /// The run folder, checked before any data is loaded: a fresh run never replaces a trained one
 /// unless `--overwrite` says so, a resumed run must be an RMR run folder, and the folder must
 /// be writable.
 fn prepare_run_folder(a: &RmrArgs) -> anyhow::Result<PathBuf> {
-    match &a.resume {
-        Some(dir) => {
-            if !dir.is_dir() {
-                bail!("--resume {}: no such folder (start a new run with --out instead)", dir.display());
-            }
-            train_loop::read_state(dir)?;
-            zoo_rmr::checkpoint::read_meta(&train_loop::resume_dir(dir))
-                .with_context(|| format!("--resume {}", dir.display()))?;
-            crate::cmd::check_output_dir("--resume", dir)?;
-            Ok(dir.clone())
-        }
-        None => {
-            let out = &a.out;
-            if holds_run(out) {
-                if !a.overwrite {
-                    let what = match train_loop::read_state(out).ok() {
-                        Some(s) if s.epoch > 0 => format!(
-                            "a run trained for {} epochs (best validation loss {:.5} at epoch {})",
-                            s.epoch,
-                            s.best_valid.unwrap_or(f64::NAN),
-                            s.best_epoch
-                        ),
-                        _ => "a run".to_string(),
-                    };
-                    bail!(
-                        "--out {} already holds {what}: continue it with `--resume {0}`, replace it with \
-                         --overwrite, or choose another --out",
-                        out.display()
-                    );
-                }
-                for name in RUN_FILES {
-                    let p = out.join(name);
-                    let removed = if p.is_dir() {
-                        std::fs::remove_dir_all(&p)
-                    } else if p.exists() {
-                        std::fs::remove_file(&p)
-                    } else {
-                        Ok(())
-                    };
-                    removed.with_context(|| format!("--overwrite: cannot delete {}", p.display()))?;
-                }
-                println!("--overwrite: deleted the run in {}", out.display());
-            }
-            crate::cmd::check_output_dir("--out", out)?;
-            Ok(out.clone())
-        }
-    }
+    crate::cmd::train::prepare_run_folder_for(&a.out, a.resume.as_deref(), a.overwrite, &RUN_FILES, |dir| {
+        zoo_rmr::checkpoint::read_meta(&train_loop::resume_dir(dir))
+            .with_context(|| format!("--resume {}", dir.display()))?;
+        Ok(())
+    })
 }
 
 /// The configuration of a fresh run: the preset, the data's skeleton and the arguments.
