@@ -295,6 +295,8 @@ pub struct AdversarialTrainer {
     rounds: u64,
     last_d: Option<f64>,
     device: Device,
+    /// Workers of the data-parallel updates ([`AdversarialTrainer::set_threads`]; one by default).
+    parallel: zoo_nn::DataParallel,
 }
 
 fn sorted_vars(varmap: &VarMap) -> Vec<(String, Var)> {
@@ -412,11 +414,32 @@ impl AdversarialTrainer {
             rounds: 0,
             last_d: None,
             device: device.clone(),
+            parallel: zoo_nn::DataParallel::new(1)?,
         };
         // "We generate B fake data in the very beginning": the initial refiner's output.
         let hist: Vec<usize> = (0..t.config.refiner.history).collect();
         t.history = t.refine_windows(&hist)?.flatten_all()?.to_vec1::<f32>()?;
         Ok(t)
+    }
+
+    /// Trains with `threads` data-parallel workers (`zoo_nn::parallel`): each refiner update's
+    /// batch of fakes, and each discriminator update's real and refined windows, are cut into
+    /// contiguous shards whose gradients are summed before the one RMSProp step. The windows of
+    /// an update are drawn before the split, so the draws do not depend on the thread count; a
+    /// fixed thread count gives the same bits run to run.
+    pub fn set_threads(&mut self, threads: usize) -> RnnGmmResult<()> {
+        self.parallel = zoo_nn::DataParallel::new(threads)?;
+        Ok(())
+    }
+
+    /// The number of data-parallel workers.
+    pub fn threads(&self) -> usize {
+        self.parallel.threads()
+    }
+
+    /// The variables of the refiner and of the discriminator.
+    pub fn varmaps(&self) -> (&VarMap, &VarMap) {
+        (&self.r_varmap, &self.d_varmap)
     }
 
     /// The configuration (with the refiner settings in use).
@@ -476,9 +499,12 @@ impl AdversarialTrainer {
         let c = self.config.refiner.clone();
         let idx = self.draw(c.batch, self.fakes.len());
         let x = self.fake_tensor(&idx)?;
-        let (loss, _, _) = self.nets.refiner_loss(&x, c.lambda)?;
-        let value = Self::check(loss.to_scalar::<f32>()? as f64, "refiner", self.opt_r.steps())?;
-        let mut grads = loss.backward()?;
+        let nets = &self.nets;
+        let (value, grads) = self.parallel.backward(idx.len(), &self.r_vars, |r| {
+            Ok(nets.refiner_loss(&x.narrow(0, r.start, r.len())?, c.lambda)?.0)
+        })?;
+        let value = Self::check(value, "refiner", self.opt_r.steps())?;
+        let mut grads = grads.ok_or_else(|| RnnGmmError::Config("the refiner update computed no gradients".into()))?;
         clip_grad_value(&mut grads, &self.r_vars, c.clip)?;
         self.opt_r.step(&grads)?;
         Ok(value)
@@ -500,9 +526,10 @@ impl AdversarialTrainer {
         }
         let old = Tensor::from_vec(old, (half, self.fakes.window, self.fakes.dim), &self.device)?;
         let refined = Tensor::cat(&[&fresh, &old], 0)?;
-        let loss = self.nets.discriminator_loss(real, &refined)?;
-        let value = Self::check(loss.to_scalar::<f32>()? as f64, "discriminator", self.opt_d.steps())?;
-        let mut grads = loss.backward()?;
+        let (value, grads) = self.discriminator_gradients(real, &refined)?;
+        let value = Self::check(value, "discriminator", self.opt_d.steps())?;
+        let mut grads =
+            grads.ok_or_else(|| RnnGmmError::Config("the discriminator update computed no gradients".into()))?;
         clip_grad_value(&mut grads, &self.d_vars, c.clip)?;
         self.opt_d.step(&grads)?;
         let fresh = fresh.flatten_all()?.to_vec1::<f32>()?;
@@ -511,6 +538,28 @@ impl AdversarialTrainer {
             self.history[s * n..(s + 1) * n].copy_from_slice(&fresh[k * n..(k + 1) * n]);
         }
         Ok(value)
+    }
+
+    /// The discriminator's loss (eq. 10) and gradients. Real and refined batches of the same
+    /// size are cut into the same shards (each shard's `mean(real) + mean(refined)` weighted by
+    /// its share is the whole batch's loss); batches of different sizes (an odd batch size) run
+    /// on one worker.
+    fn discriminator_gradients(
+        &self,
+        real: &Tensor,
+        refined: &Tensor,
+    ) -> Result<(f64, Option<candle_core::backprop::GradStore>)> {
+        let (n, m) = (real.dim(0)?, refined.dim(0)?);
+        let nets = &self.nets;
+        if n == m {
+            self.parallel.backward(n, &self.d_vars, |r| {
+                nets.discriminator_loss(&real.narrow(0, r.start, r.len())?, &refined.narrow(0, r.start, r.len())?)
+            })
+        } else {
+            let loss = nets.discriminator_loss(real, refined)?;
+            let value = loss.to_scalar::<f32>()? as f64;
+            Ok((value, if value.is_finite() { Some(loss.backward()?) } else { None }))
+        }
     }
 
     fn real_tensor(&self, windows: &Windows, idx: &[usize]) -> Result<Tensor> {

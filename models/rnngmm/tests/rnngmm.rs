@@ -485,3 +485,50 @@ fn two_thread_generator_step_matches_the_one_thread_step() {
     assert_eq!(again.train_step(&batch).unwrap().to_bits(), l2.to_bits());
     assert_eq!(all_weights(&again), w2);
 }
+
+fn varmap_weights(v: &VarMap) -> Vec<(String, Vec<f32>)> {
+    let data = v.data().lock().unwrap();
+    let mut w: Vec<(String, Vec<f32>)> =
+        data.iter().map(|(n, v)| (n.clone(), v.as_tensor().flatten_all().unwrap().to_vec1::<f32>().unwrap())).collect();
+    w.sort_by(|a, b| a.0.cmp(&b.0));
+    w
+}
+
+/// Data-parallel adversarial training (issue 18): with two workers, a round (warm-up, refiner
+/// updates, a discriminator update) gives the one-worker losses and weights up to float
+/// summation order, and the same bits for the same thread count.
+#[test]
+fn two_thread_adversarial_round_matches_the_one_thread_round() {
+    let dir = tempfile::tempdir().unwrap();
+    let gen_dir = dir.path().join("generator");
+    let (config, data, real) = generator_run(&gen_dir);
+    let make = |threads: usize| {
+        let mut t = AdversarialTrainer::new(&gen_dir, &config.refiner, &real, &data.valid, &Device::Cpu).unwrap();
+        t.set_threads(threads).unwrap();
+        assert_eq!(t.threads(), threads);
+        t
+    };
+    let (mut one, mut two) = (make(1), make(2));
+    let idx: Vec<usize> = (0..config.refiner.batch.min(real.len())).collect();
+    let (l1, l2) = (one.round(&real, &idx).unwrap(), two.round(&real, &idx).unwrap());
+    assert!((l1 - l2).abs() <= 1e-5 * l1.abs(), "refiner loss {l1} vs {l2}");
+    let (d1, d2) = (one.last_discriminator_loss().unwrap(), two.last_discriminator_loss().unwrap());
+    assert!((d1 - d2).abs() <= 1e-5 * d1.abs(), "discriminator loss {d1} vs {d2}");
+    for (m1, m2) in [(one.varmaps().0, two.varmaps().0), (one.varmaps().1, two.varmaps().1)] {
+        let (w1, w2) = (varmap_weights(m1), varmap_weights(m2));
+        let (mut noisy, mut total) = (0, 0);
+        for ((n, a), (_, b)) in w1.iter().zip(&w2) {
+            let scale = a.iter().fold(0f32, |m, v| m.max(v.abs())).max(1e-3);
+            for (x, y) in a.iter().zip(b) {
+                assert!((x - y).abs() <= 0.1 * scale, "{n}: {x} vs {y}");
+                noisy += usize::from((x - y).abs() > 1e-5 * scale);
+                total += 1;
+            }
+        }
+        assert!(noisy * 100 <= total, "{noisy} of {total} weights differ by more than 1e-5 relative");
+    }
+    let mut again = make(2);
+    assert_eq!(again.round(&real, &idx).unwrap().to_bits(), l2.to_bits());
+    assert_eq!(varmap_weights(again.varmaps().0), varmap_weights(two.varmaps().0));
+    assert_eq!(varmap_weights(again.varmaps().1), varmap_weights(two.varmaps().1));
+}

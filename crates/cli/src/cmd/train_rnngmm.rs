@@ -116,8 +116,8 @@ pub struct RnnGmmArgs {
     /// adversarial draws.
     #[arg(long, default_value_t = 1, allow_hyphen_values = true, value_parser = crate::args::seed)]
     pub seed: u64,
-    /// Data-parallel threads of the generator stage (`1..=256`) [default: the cores available];
-    /// the refiner stage runs on one. See `zoo train rtn --help`.
+    /// Data-parallel threads of both stages (`1..=256`) [default: the cores available]. See
+    /// `zoo train rtn --help`.
     #[arg(long, allow_hyphen_values = true, value_parser = crate::cmd::train::training_threads)]
     pub threads: Option<usize>,
 }
@@ -427,8 +427,11 @@ pub fn run(a: RnnGmmArgs) -> anyhow::Result<()> {
             c.warmup_discriminator,
             ref_dir.display()
         );
-        let trainer = AdversarialTrainer::new(&gen_dir, &refiner_config, &tw, &vw, &device)
+        let mut trainer = AdversarialTrainer::new(&gen_dir, &refiner_config, &tw, &vw, &device)
             .with_context(|| format!("building the refiner stage on {}", gen_dir.display()))?;
+        let threads = crate::cmd::train::default_threads(a.threads);
+        trainer.set_threads(threads)?;
+        println!("refiner training threads: {threads} (data-parallel; --threads to change)");
         let mut training = AdversarialTraining::new(trainer, &tw).with_rounds_per_epoch(a.refiner_rounds);
         let opts = TrainOptions {
             time_limit: minutes(a.refiner_time_limit.or(a.time_limit)),
