@@ -21,8 +21,11 @@ pub enum TrainBenchModel {
     Rmr,
     /// ARNN keyframe completion (not data-parallel yet: refused with a message).
     Arnn,
-    /// RNN-GMM and its refiner (not data-parallel yet: refused with a message).
+    /// The RNN-GMM generator (paper sizes, batch 20).
     RnnGmm,
+    /// The RNN-GMM refiner stage: one refiner update and one discriminator update per step
+    /// (paper sizes, batch 32, against an untrained paper-size generator's samples).
+    RnnGmmRefiner,
 }
 
 /// Arguments of `zoo bench train`.
@@ -187,6 +190,60 @@ fn rnn_gmm_bench(threads: &[usize]) -> anyhow::Result<Bench<'static>> {
     })
 }
 
+/// The RNN-GMM refiner stage at the paper's sizes (refiner FC 256 + LSTM 256, discriminator FC
+/// 128 + bidirectional LSTM 128, batch 32, windows of 50 frames): a step is one refiner update
+/// and one discriminator update (half fresh refined windows, half from the history buffer).
+fn rnn_gmm_refiner_bench(threads: &[usize]) -> anyhow::Result<Bench<'static>> {
+    use zoo_rnngmm::prelude::*;
+    let cfg = zoo_data::synth::SynthConfig { minutes: 2.0, seed: 1, terrain: false, ..Default::default() };
+    let clips = zoo_data::synth::generate(&cfg);
+    let refs: Vec<&zoo_motion::Clip> = clips.iter().map(|c| &c.clip).collect();
+    let config = Config::paper();
+    let data = zoo_rnngmm::TrainingData::from_clips(&config, cfg.fps, &refs[1..], &refs[..1])?;
+    let config = config.with_dim(data.spec.dim());
+    let rc = config.refiner.clone();
+    let b = rc.batch;
+    if data.train.len() < b {
+        bail!("the synthetic data gave {} windows, fewer than a batch of {b}", data.train.len());
+    }
+    let dir = tempfile::tempdir().context("a temporary folder for the generator")?;
+    GeneratorTrainer::new(&config, data.spec.clone(), data.norm.clone(), &Device::Cpu)?.save(dir.path())?;
+    let w = config.train.window;
+    let real: Vec<f32> = (0..b).flat_map(|i| data.train.get(i).to_vec()).collect();
+    let real = Tensor::from_vec(real, (b, w, config.dim), &Device::Cpu)?;
+    let mut steps: Vec<Step> = Vec::new();
+    let mut params = 0;
+    for &t in threads {
+        let mut tr = AdversarialTrainer::new(dir.path(), &rc, &data.train, &data.valid, &Device::Cpu)?;
+        tr.set_threads(t)?;
+        let (r, d) = tr.varmaps();
+        params = [r, d].iter().map(|v| v.all_vars().iter().map(|x| x.elem_count()).sum::<usize>()).sum();
+        let real = real.clone();
+        tr.refiner_update()?; // warm-up
+        tr.discriminator_update(&real)?;
+        steps.push(Box::new(move || {
+            tr.refiner_update()?;
+            tr.discriminator_update(&real)?;
+            Ok(())
+        }));
+    }
+    // Per window and frame: the refiner update runs refiner + discriminator forward and
+    // backward; the discriminator update runs the refiner forward once (fresh half) and the
+    // discriminator forward and backward on real and refined windows. Counted as 6 flops per
+    // parameter per frame for each of the two updates (an estimate; the FK of the effector
+    // features is left out).
+    Ok(Bench {
+        what: format!(
+            "RNN-GMM refiner stage, paper sizes ({params} refiner + discriminator parameters, batch {b}, windows of \
+             {w} frames; a step = one refiner update + one discriminator update)"
+        ),
+        batch: b,
+        flops: 2.0 * 6.0 * params as f64 * w as f64,
+        gate: (b, rc.refiner_fc + rc.refiner_lstm, 4 * rc.refiner_lstm),
+        steps,
+    })
+}
+
 /// The RTN at the paper's sizes on deterministic synthetic windows.
 fn rtn_bench<'a>(threads: &[usize], ws: &'a [Vec<f32>]) -> anyhow::Result<Bench<'a>> {
     let parents: Vec<Option<usize>> = (0..22).map(|j| if j == 0 { None } else { Some((j - 1) / 2) }).collect();
@@ -229,9 +286,10 @@ pub fn run(a: TrainBenchArgs) -> anyhow::Result<()> {
     let mut bench = match a.model {
         TrainBenchModel::Rtn => rtn_bench(&a.threads, &ws)?,
         TrainBenchModel::RnnGmm => rnn_gmm_bench(&a.threads)?,
+        TrainBenchModel::RnnGmmRefiner => rnn_gmm_refiner_bench(&a.threads)?,
         other => bail!(
-            "--model {other:?}: rtn and rnn-gmm are data-parallel so far; rmr and arnn train through the shared \
-             loop on one thread (their dropout draws inside the step come next, issue 18)"
+            "--model {other:?}: rtn, rnn-gmm and rnn-gmm-refiner are data-parallel so far; rmr and arnn train \
+             through the shared loop on one thread (their dropout draws inside the step come next, issue 18)"
         ),
     };
     let (b, flops) = (bench.batch, bench.flops);
