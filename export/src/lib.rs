@@ -47,9 +47,9 @@ pub use error::ExportError;
 pub use graph::{Dim, GraphBuilder, Value};
 pub use model::OnnxModel;
 pub use ops::{attr_float, attr_int, attr_ints, attr_string};
+pub use portable::{PortableModel, PortableOptions, to_portable};
 pub use recurrent::{GRU_TORCH_TO_ONNX, LSTM_TORCH_TO_ONNX, RnnDirection, RnnInputs, RnnOutputs, reorder_gates};
 pub use summary::{GraphSummary, summarize};
-pub use portable::{PortableModel, PortableOptions, to_portable};
 
 /// The prost ONNX types (`ModelProto`, `NodeProto`, ...), re-exported from tract-onnx.
 pub use tract_onnx::pb;

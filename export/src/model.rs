@@ -44,9 +44,7 @@ impl OnnxModel {
     pub fn set_metadata(&mut self, key: &str, value: &str) {
         match self.proto.metadata_props.iter_mut().find(|p| p.key == key) {
             Some(p) => p.value = value.to_string(),
-            None => {
-                self.proto.metadata_props.push(pb::StringStringEntryProto { key: key.into(), value: value.into() })
-            }
+            None => self.proto.metadata_props.push(pb::StringStringEntryProto { key: key.into(), value: value.into() }),
         }
     }
 
