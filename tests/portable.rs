@@ -443,3 +443,33 @@ fn cli_exports_an_rmr_run_folder_portably_over_a_fixed_window() {
     let main = OnnxModel::from_bytes(&std::fs::read(&out).unwrap(), "main").unwrap();
     assert!(main.summary().inputs[0].starts_with("x: [7, batch"), "{:?}", main.summary().inputs);
 }
+
+/// The paper-size RMR (2-layer BGRU of 256 units) over its 60-frame runtime window: the size of
+/// the unrolled graph, and parity with the regular graph at that size.
+#[test]
+#[ignore = "paper-size RMR: about a minute in a debug build; run with --ignored"]
+fn paper_size_rmr_lowers_and_matches() {
+    let config = zoo_rmr::Config::paper();
+    let varmap = VarMap::new();
+    zoo_rmr::Rmr::new(&config, zoo_nn::SeededVarMap::builder(&varmap, 7, DType::F32, &Device::Cpu)).unwrap();
+    let d = config.dim();
+    let stats = zoo_rmr::features::FeatureStats { mean: vec![0.0; d], std: vec![1.0; d] };
+    let model = zoo_rmr::export::export_rmr(&config, &stats, &varmap).unwrap();
+    let mut options = PortableOptions::default();
+    options.fixed_dims.insert("frames".into(), config.window);
+    let start = std::time::Instant::now();
+    let portable = to_portable(&model, &options, &embedded()).unwrap();
+    let nodes = portable.main.summary().op_counts.values().sum::<usize>();
+    eprintln!(
+        "paper RMR over {} frames: {nodes} nodes, lowered in {:.2} s (debug build), {} MB",
+        config.window,
+        start.elapsed().as_secs_f64(),
+        portable.main.to_bytes().len() / 1_000_000
+    );
+    assert_listed("paper RMR", &portable.main);
+    let inputs: Inputs = inputs_of(&portable.main, 41);
+    let (or, op, tp) = (ort_run(&model, &inputs), ort_run(&portable.main, &inputs), tract_run(&portable.main, &inputs));
+    let (o, t) = (worst(&or, &op), worst(&or, &tp));
+    eprintln!("paper RMR: portable vs regular (onnxruntime): onnxruntime {o:e}, tract {t:e}");
+    assert!(o <= TOLERANCE && t <= TOLERANCE, "{o:e} {t:e}");
+}

@@ -334,6 +334,17 @@ impl Cell {
         }
     }
 
+    /// Whether an `activations` attribute spells out the defaults (one list per direction).
+    fn activations_are_default(self, given: &[Vec<u8>]) -> bool {
+        let one: &[&[u8]] = match self {
+            Cell::Lstm => &[b"Sigmoid", b"Tanh", b"Tanh"],
+            Cell::Gru => &[b"Sigmoid", b"Tanh"],
+            Cell::Rnn => &[b"Tanh"],
+        };
+        (given.len() == one.len() || given.len() == 2 * one.len())
+            && given.iter().zip(one.iter().cycle()).all(|(g, d)| g.as_slice() == *d)
+    }
+
     fn gates(self) -> usize {
         match self {
             Cell::Lstm => 4,
@@ -404,6 +415,8 @@ impl RecurrentNode {
                 "input_forget" if a.i != 0 => {
                     return Err(format!("{op} `{name}` couples input and forget gates; not lowered"));
                 }
+                // Exporters often spell the defaults out (PyTorch writes Sigmoid, Tanh, Tanh).
+                "activations" if cell.activations_are_default(&a.strings) => {}
                 "activations" | "activation_alpha" | "activation_beta" | "clip" => {
                     return Err(format!(
                         "{op} `{name}` sets `{}`; only default activations without clip are lowered",
@@ -435,7 +448,12 @@ impl RecurrentNode {
             let t = inits.get(v.as_str()).ok_or_else(|| {
                 format!("{op} `{name}`: {label} (`{v}`) is not an initializer; only constant weights are lowered")
             })?;
-            Ok((t.dims.iter().map(|&d| d as usize).collect(), f32_data(t)?))
+            let dims: Vec<usize> = t.dims.iter().map(|&d| d.max(0) as usize).collect();
+            let data = f32_data(t)?;
+            if data.len() != dims.iter().product::<usize>() {
+                return Err(format!("{op} `{name}`: {label} has shape {dims:?} but {} values", data.len()));
+            }
+            Ok((dims, data))
         };
         let (wd, w) = weight(1, "W")?;
         let (rd, r) = weight(2, "R")?;
@@ -713,4 +731,79 @@ fn transpose(m: &[f32], rows: usize, cols: usize) -> Vec<f32> {
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{Dim, RnnDirection, RnnInputs};
+
+    /// A forward LSTM over 3 frames (input 2, hidden 2) with `extra` attributes.
+    fn lstm_model(extra: Vec<pb::AttributeProto>) -> OnnxModel {
+        let mut g = GraphBuilder::new("lstm");
+        let x = g.input("x", &[Dim::Fixed(3), Dim::batch(), Dim::Fixed(2)]);
+        let w = g.initializer_f32("W", &[1, 8, 2], &[0.1; 16]);
+        let r = g.initializer_f32("R", &[1, 8, 2], &[0.2; 16]);
+        let rnn = RnnInputs {
+            x: &x,
+            w: &w,
+            r: &r,
+            b: None,
+            initial_h: None,
+            hidden_size: 2,
+            direction: RnnDirection::Forward,
+        };
+        let o = g.lstm("cell", &rnn, None);
+        g.output("y", &o.y, &[Dim::Fixed(3), Dim::Fixed(1), Dim::batch(), Dim::Fixed(2)]);
+        let mut proto = g.finish().unwrap().proto().clone();
+        proto.graph.as_mut().unwrap().node[0].attribute.extend(extra);
+        OnnxModel::from_proto(proto)
+    }
+
+    fn attr_strings(name: &str, v: &[&str]) -> pb::AttributeProto {
+        pb::AttributeProto {
+            name: name.into(),
+            r#type: pb::attribute_proto::AttributeType::Strings as i32,
+            strings: v.iter().map(|s| s.as_bytes().to_vec()).collect(),
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn an_lstm_becomes_listed_ops_at_opset_15() {
+        let lowered = lower(&lstm_model(vec![]), &PortableOptions::default()).unwrap();
+        check_portable(&lowered).unwrap();
+        let ops = op_types(&lowered);
+        assert!(!ops.contains("LSTM") && ops.contains("Gemm") && ops.contains("Sigmoid"), "{ops:?}");
+        assert_eq!(lowered.proto().opset_import[0].version, 15);
+        let inits: Vec<_> =
+            lowered.proto().graph.as_ref().unwrap().initializer.iter().map(|t| t.name.clone()).collect();
+        assert!(!inits.contains(&"W".to_string()), "the LSTM's own weights are dropped: {inits:?}");
+    }
+
+    #[test]
+    fn spelled_out_default_activations_are_lowered_others_refused() {
+        let defaults = attr_strings("activations", &["Sigmoid", "Tanh", "Tanh"]);
+        lower(&lstm_model(vec![defaults]), &PortableOptions::default()).unwrap();
+        let relu = attr_strings("activations", &["Relu", "Tanh", "Tanh"]);
+        let err = lower(&lstm_model(vec![relu]), &PortableOptions::default()).unwrap_err().to_string();
+        assert!(err.contains("`cell`") && err.contains("activations"), "{err}");
+        let clip = crate::attr_float("clip", 3.0);
+        let err = lower(&lstm_model(vec![clip]), &PortableOptions::default()).unwrap_err().to_string();
+        assert!(err.contains("clip"), "{err}");
+        let layout = attr_int("layout", 1);
+        assert!(lower(&lstm_model(vec![layout]), &PortableOptions::default()).is_err());
+    }
+
+    #[test]
+    fn a_regular_opset_17_file_is_not_portable() {
+        let err = check_portable(&lstm_model(vec![])).unwrap_err().to_string();
+        assert!(err.contains("opset 17") && err.contains("7 to 15"), "{err}");
+    }
+
+    #[test]
+    fn companions_are_named_after_the_main_file() {
+        let p = PortableModel::companion_path(Path::new("out/rtn.onnx"), "start");
+        assert_eq!(p, Path::new("out/rtn.start.onnx"));
+    }
 }
