@@ -539,13 +539,7 @@ impl RecurrentNode {
                 let xt = g.custom_op("Gather", &format!("{s}.x"), &[&xw, &frame[t]], vec![attr_int("axis", 0)]);
                 let (h_new, c_new) = match self.cell {
                     Cell::Lstm => {
-                        let z = match &state_h {
-                            Some(hp) => {
-                                let hr = g.gemm(&format!("{s}.h_gates"), hp, &r, None, true);
-                                g.add(&format!("{s}.gates"), &xt, &hr)
-                            }
-                            None => xt,
-                        };
+                        let z = gates_plus_hidden(g, &s, xt, state_h.as_ref(), &r);
                         // ONNX gate order i, o, f, c.
                         let parts = g.split(&format!("{s}.split"), &z, &[h; 4], 1);
                         let i = g.sigmoid(&format!("{s}.i"), &parts[0]);
@@ -564,13 +558,7 @@ impl RecurrentNode {
                         (g.mul(&format!("{s}.h"), &o, &tc), Some(c))
                     }
                     Cell::Rnn => {
-                        let z = match &state_h {
-                            Some(hp) => {
-                                let hr = g.gemm(&format!("{s}.h_gates"), hp, &r, None, true);
-                                g.add(&format!("{s}.gates"), &xt, &hr)
-                            }
-                            None => xt,
-                        };
+                        let z = gates_plus_hidden(g, &s, xt, state_h.as_ref(), &r);
                         (g.tanh(&format!("{s}.h"), &z), None)
                     }
                     Cell::Gru => (gru.step(g, &s, &xt, state_h.as_ref(), &r, h), None),
@@ -616,6 +604,18 @@ impl RecurrentNode {
                 .collect();
             concat_or_single(g, &format!("{n}.{label}"), &parts, 0, Some(out.as_str()));
         }
+    }
+}
+
+/// The gate pre-activations of a frame: `xt` (input projection with the biases) plus `h R^T`,
+/// or `xt` alone at a zero state.
+fn gates_plus_hidden(g: &mut GraphBuilder, s: &str, xt: Value, h: Option<&Value>, r: &Value) -> Value {
+    match h {
+        Some(hp) => {
+            let hr = g.gemm(&format!("{s}.h_gates"), hp, r, None, true);
+            g.add(&format!("{s}.gates"), &xt, &hr)
+        }
+        None => xt,
     }
 }
 
