@@ -151,6 +151,13 @@ fn check_kind(what: &str, model: &OnnxModel, options: &PortableOptions) -> zoo_e
         pairs.push((format!("{what} {}", c.suffix), regular, c.model.clone()));
     }
     for (name, regular, lowered) in &pairs {
+        // For checks with other tools (e.g. the onnx package's checker): ZOO_PORTABLE_DUMP=DIR
+        // keeps every regular and portable graph there.
+        if let Some(dir) = std::env::var_os("ZOO_PORTABLE_DUMP") {
+            let file = name.replace(' ', "_");
+            regular.write(&std::path::Path::new(&dir).join(format!("{file}.regular.onnx"))).unwrap();
+            lowered.write(&std::path::Path::new(&dir).join(format!("{file}.portable.onnx"))).unwrap();
+        }
         assert_listed(name, lowered);
         check_portable(lowered).unwrap();
         let inputs = inputs_of(regular, 41);
