@@ -364,6 +364,12 @@ fn the_runtime_loads_the_portable_pair_like_the_regular_file() {
     let d = worst(&regular, &portable);
     eprintln!("runtime transition, portable pair vs regular file: {d:e} cm");
     assert!(d <= 1e-4, "{d:e}");
+    // A companion named by a path, not a bare file name beside the main file, is refused.
+    let mut main = OnnxModel::from_bytes(&std::fs::read(&path).unwrap(), "main").unwrap();
+    main.set_metadata(zoo_runtime::portable::START_GRAPH_FILE_KEY, "../rtn.start.onnx");
+    main.write(&dir.path().join("moved.onnx")).unwrap();
+    let err = zoo_runtime::portable::load(dir.path().join("moved.onnx")).unwrap_err().to_string();
+    assert!(err.contains("not a bare file name"), "{err}");
     std::fs::remove_file(dir.path().join("rtn.start.onnx")).unwrap();
     let err = zoo_runtime::portable::load(&path).unwrap_err().to_string();
     assert!(err.contains("rtn.start.onnx") && err.contains("zoo export --portable"), "{err}");
