@@ -4,8 +4,9 @@
 //! tract-onnx ships as [`tract_onnx::pb`], and encodes them with prost. Graphs built this way
 //! load in tract 0.23 and onnxruntime 1.31 (checked by `tests/parity.rs` of the workspace).
 //!
-//! Only the ops that tract, onnxruntime, Unity Sentis and Unreal NNE all run have helpers
-//! (see `export/README.md` for the limits of each runtime). Node, value and initializer names
+//! Typed helpers exist for ops tract and onnxruntime run (see `export/README.md` for the limits
+//! of each runtime); [`portable`] rewrites a finished model into the operators Unity Inference
+//! Engine documents ([`unity`]), recurrent nodes unrolled. Node, value and initializer names
 //! are the readable paths the caller gives (the candle variable paths for weights), so a
 //! graph viewer shows `frame_encoder.linear0.weight`, not `onnx::MatMul_17`.
 //!
