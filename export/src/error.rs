@@ -52,6 +52,14 @@ pub enum ExportError {
         /// What the decoder saw.
         reason: String,
     },
+    /// A graph cannot be written with the portable operator set (`zoo export --portable`).
+    #[error("graph `{graph}` cannot be exported portably: {message}")]
+    NotPortable {
+        /// The graph's name.
+        graph: String,
+        /// What is in the way, and how to fix it.
+        message: String,
+    },
     /// Writing the file failed.
     #[error("cannot write ONNX file {path}: {source}")]
     Io {

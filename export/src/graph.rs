@@ -79,6 +79,42 @@ impl GraphBuilder {
         }
     }
 
+    /// A builder holding the inputs, outputs and initializers of an existing graph, but none of
+    /// its nodes: the portable pass replays them with [`GraphBuilder::push_node`].
+    pub(crate) fn from_graph(graph: &pb::GraphProto) -> Self {
+        let mut g = GraphBuilder::new(&graph.name);
+        g.doc = graph.doc_string.clone();
+        for input in &graph.input {
+            g.new_value(&input.name);
+            g.inputs.push(input.clone());
+        }
+        for init in &graph.initializer {
+            if !g.values.contains(&init.name) {
+                g.new_value(&init.name);
+            }
+            g.init_shapes.insert(init.name.clone(), init.dims.iter().map(|&d| d.max(0) as usize).collect());
+            g.initializers.push(init.clone());
+        }
+        g.outputs = graph.output.clone();
+        g
+    }
+
+    /// Appends an existing node as is (its inputs must exist; its outputs become values).
+    pub(crate) fn push_node(&mut self, node: pb::NodeProto) {
+        if !node.name.is_empty() && !self.node_names.insert(node.name.clone()) {
+            self.fail(ExportError::DuplicateName(node.name.clone()));
+        }
+        for input in node.input.iter().filter(|i| !i.is_empty()) {
+            if !self.values.contains(input) {
+                self.fail(ExportError::UnknownValue { node: node.name.clone(), value: input.clone() });
+            }
+        }
+        for output in node.output.iter().filter(|o| !o.is_empty()) {
+            self.new_value(output);
+        }
+        self.nodes.push(node);
+    }
+
     pub(crate) fn fail(&mut self, e: ExportError) {
         if self.error.is_none() {
             self.error = Some(e);

@@ -4,8 +4,9 @@
 //! tract-onnx ships as [`tract_onnx::pb`], and encodes them with prost. Graphs built this way
 //! load in tract 0.23 and onnxruntime 1.31 (checked by `tests/parity.rs` of the workspace).
 //!
-//! Only the ops that tract, onnxruntime, Unity Sentis and Unreal NNE all run have helpers
-//! (see `export/README.md` for the limits of each runtime). Node, value and initializer names
+//! Typed helpers exist for ops tract and onnxruntime run (see `export/README.md` for the limits
+//! of each runtime); [`portable`] rewrites a finished model into the operators Unity Inference
+//! Engine documents ([`unity`]), recurrent nodes unrolled. Node, value and initializer names
 //! are the readable paths the caller gives (the candle variable paths for weights), so a
 //! graph viewer shows `frame_encoder.linear0.weight`, not `onnx::MatMul_17`.
 //!
@@ -38,13 +39,16 @@ mod error;
 mod graph;
 mod model;
 mod ops;
+pub mod portable;
 mod recurrent;
 mod summary;
+pub mod unity;
 
 pub use error::ExportError;
 pub use graph::{Dim, GraphBuilder, Value};
 pub use model::OnnxModel;
 pub use ops::{attr_float, attr_int, attr_ints, attr_string};
+pub use portable::{PortableModel, PortableOptions, to_portable};
 pub use recurrent::{GRU_TORCH_TO_ONNX, LSTM_TORCH_TO_ONNX, RnnDirection, RnnInputs, RnnOutputs, reorder_gates};
 pub use summary::{GraphSummary, summarize};
 

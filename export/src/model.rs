@@ -40,6 +40,20 @@ impl OnnxModel {
         self.proto.metadata_props.iter().find(|p| p.key == key).map(|p| p.value.as_str())
     }
 
+    /// Sets metadata_props entry `key` to `value` (replacing an entry of the same key).
+    pub fn set_metadata(&mut self, key: &str, value: &str) {
+        match self.proto.metadata_props.iter_mut().find(|p| p.key == key) {
+            Some(p) => p.value = value.to_string(),
+            None => self.proto.metadata_props.push(pb::StringStringEntryProto { key: key.into(), value: value.into() }),
+        }
+    }
+
+    /// Removes metadata_props entry `key`; returns its value, if it was there.
+    pub fn remove_metadata(&mut self, key: &str) -> Option<String> {
+        let i = self.proto.metadata_props.iter().position(|p| p.key == key)?;
+        Some(self.proto.metadata_props.remove(i).value)
+    }
+
     /// The prost model.
     pub fn proto(&self) -> &pb::ModelProto {
         &self.proto
@@ -96,6 +110,13 @@ mod tests {
         assert_eq!(OnnxModel::from_base64(&m.to_base64(), "b64").unwrap().proto(), m.proto());
         assert_eq!(m.metadata_value("k"), Some("v"));
         assert_eq!(m.metadata_value("missing"), None);
+        let mut edited = m.clone();
+        edited.set_metadata("k", "w");
+        edited.set_metadata("k2", "x");
+        assert_eq!((edited.metadata_value("k"), edited.metadata_value("k2")), (Some("w"), Some("x")));
+        assert_eq!(edited.remove_metadata("k").as_deref(), Some("w"));
+        assert_eq!(edited.metadata_value("k"), None);
+        assert_eq!(edited.remove_metadata("k"), None);
         let dir = std::env::temp_dir().join(format!("zoo-export-test-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("tiny.onnx");

@@ -30,6 +30,7 @@ pub mod error;
 pub mod loaded;
 pub mod metadata;
 pub mod model;
+pub mod portable;
 pub mod pose;
 pub mod runner;
 pub mod synthesis;

@@ -2,6 +2,11 @@
 //! (`zoo-runtime`): the per-frame step graph with the transition-start graph and the
 //! metadata (model kind, task section, normalization, skeleton, feature layout, fps) embedded.
 //!
+//! `--portable` writes the portable profile instead (`zoo_export::portable`, docs/portable-export.md):
+//! only operators Unity Inference Engine 2.3 documents, opset 15, recurrent ops unrolled into
+//! their cell equations, and the graphs the regular file embeds in its metadata (start graph,
+//! refiner) as `.onnx` files of their own beside the main file.
+//!
 //! The run folder's `config.json` names its model (`"model"`; folders written before the field
 //! existed are RTN folders); each kind's exporter lives beside its candle model.
 
@@ -9,6 +14,7 @@ use crate::cmd::transition::read_clip;
 use anyhow::{Context, bail};
 use clap::Args;
 use std::path::{Path, PathBuf};
+use zoo_export::OnnxModel;
 use zoo_rtn::export::{RtnExportOptions, export_rtn_dir};
 
 /// Arguments of `zoo export`.
@@ -33,6 +39,16 @@ pub struct ExportArgs {
     /// skeleton.json, else cm, zoo's convention for BVH, which does not say its unit).
     #[arg(long, value_parser = ["cm", "m", "mm", "in"])]
     pub units: Option<String>,
+    /// Write the portable profile: only operators of Unity Inference Engine 2.3's supported
+    /// list (opset 15), recurrent layers unrolled into MatMul/Gemm/Sigmoid/Tanh cells, and the
+    /// start (or refiner) graph as a second file `NAME.start.onnx` (`NAME.refiner.onnx`) beside
+    /// `--out` instead of base64 metadata. See docs/portable-export.md.
+    #[arg(long)]
+    pub portable: bool,
+    /// With --portable: the fixed number of frames of a window graph (RMR), whose recurrent
+    /// layers are unrolled over it (default: the model's runtime window).
+    #[arg(long, requires = "portable", value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    pub frames: Option<u32>,
 }
 
 /// The model kinds `zoo export` writes.
@@ -57,6 +73,58 @@ fn model_kind(config_path: &Path) -> anyhow::Result<Option<String>> {
             EXPORT_KINDS.join(", ")
         ),
     }
+}
+
+/// Lowers `model` to the portable profile and writes it to `a.out` with its companion files;
+/// `frames`: the fixed size of a `frames` dimension (window graphs).
+fn write_portable(a: &ExportArgs, model: &OnnxModel, what: &str, frames: Option<usize>) -> anyhow::Result<()> {
+    use zoo_export::portable::{EmbeddedGraph, PortableOptions, to_portable};
+    use zoo_export::unity::{UNITY_OPERATORS_URL, UNITY_PACKAGE, UNITY_VERSION};
+    use zoo_runtime::portable::{PORTABLE_GRAPHS, PORTABLE_KEY};
+    if a.frames.is_some() && frames.is_none() {
+        bail!("--frames applies to window graphs (RMR); this model's graphs run one frame per call");
+    }
+    let mut options = PortableOptions::default();
+    if let Some(n) = frames {
+        options.fixed_dims.insert("frames".into(), n);
+    }
+    let embedded: Vec<EmbeddedGraph> =
+        PORTABLE_GRAPHS.iter().map(|g| EmbeddedGraph { key: g.key, file_key: g.file_key, suffix: g.suffix }).collect();
+    let mut portable = to_portable(model, &options, &embedded)
+        .with_context(|| format!("writing {} with the portable profile", a.out.display()))?;
+    for c in &portable.companions {
+        crate::cmd::check_output_file(
+            "--out (its portable companion)",
+            &zoo_export::PortableModel::companion_path(&a.out, &c.suffix),
+        )?;
+    }
+    let profile = serde_json::json!({
+        "operators": format!("{UNITY_PACKAGE} {UNITY_VERSION}"),
+        "operators_url": UNITY_OPERATORS_URL,
+        "opset": zoo_export::portable::PORTABLE_OPSET,
+        "fixed_dims": options.fixed_dims,
+    });
+    portable.main.set_metadata(PORTABLE_KEY, &profile.to_string());
+    let written = portable.write(&a.out)?;
+    let nodes = |m: &OnnxModel| m.summary().op_counts.values().sum::<usize>();
+    let ops = portable
+        .graphs()
+        .iter()
+        .flat_map(|(_, m)| zoo_export::portable::op_types(m))
+        .collect::<std::collections::BTreeSet<_>>();
+    println!(
+        "wrote {}: {what} ({} nodes), portable (Unity Inference Engine {UNITY_VERSION} operators, opset {}){}; operators: {}",
+        a.out.display(),
+        nodes(&portable.main),
+        zoo_export::portable::PORTABLE_OPSET,
+        written[1..]
+            .iter()
+            .zip(&portable.companions)
+            .map(|(p, c)| format!(", {} graph in {} ({} nodes)", c.suffix, p.display(), nodes(&c.model)))
+            .collect::<String>(),
+        ops.into_iter().collect::<Vec<_>>().join(", ")
+    );
+    Ok(())
 }
 
 /// Runs `zoo export`.
@@ -85,6 +153,15 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
         Some(zoo_rmr::export::MODEL_KIND) => {
             let model =
                 zoo_rmr::export::export_rmr_dir(&a.onnx).with_context(|| format!("exporting {}", a.onnx.display()))?;
+            if a.portable {
+                let (config, _) = zoo_rmr::checkpoint::read_meta(&a.onnx)
+                    .with_context(|| format!("exporting {}", a.onnx.display()))?;
+                let frames = a.frames.map_or(config.window, |f| f as usize);
+                let source =
+                    if a.frames.is_some() { "--frames" } else { "the model's runtime window; --frames N to change" };
+                println!("fixing the RMR window graph's `frames` dimension to {frames} ({source})");
+                return write_portable(&a, &model, "RMR window refiner", Some(frames));
+            }
             model.write(&a.out)?;
             println!("wrote {}: RMR window refiner with its configuration and statistics", a.out.display());
             return Ok(());
@@ -92,6 +169,9 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
         Some(zoo_rnngmm::export::MODEL_KIND) => {
             let model = zoo_rnngmm::export::export_generator_dir(&a.onnx)
                 .with_context(|| format!("exporting {}", a.onnx.display()))?;
+            if a.portable {
+                return write_portable(&a, &model, "RNN-GMM generator step graph", None);
+            }
             model.write(&a.out)?;
             let summary = model.summary();
             let refiner = model.metadata_value(zoo_rnngmm::export::REFINER_GRAPH_KEY).is_some();
@@ -107,6 +187,9 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
         Some(zoo_arnn::export::MODEL_KIND) => {
             let model = zoo_arnn::export::export_arnn_dir(&a.onnx)
                 .with_context(|| format!("exporting {}", a.onnx.display()))?;
+            if a.portable {
+                return write_portable(&a, &model, "ARNN step graph", None);
+            }
             model.write(&a.out)?;
             let summary = model.summary();
             println!(
@@ -152,6 +235,9 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
         options.frame = Some(zoo_motion::frame::CoordinateFrame::ZOO_CM);
     }
     let model = export_rtn_dir(&a.onnx, &options).with_context(|| format!("exporting {}", a.onnx.display()))?;
+    if a.portable {
+        return write_portable(&a, &model, "RTN step graph", None);
+    }
     model.write(&a.out)?;
     let summary = model.summary();
     println!(
