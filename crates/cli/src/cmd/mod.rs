@@ -9,6 +9,7 @@ pub mod complete;
 pub mod data;
 pub mod data_luxo;
 pub mod decompress;
+pub mod eval_arnn;
 pub mod export;
 pub mod generate;
 pub mod render;
