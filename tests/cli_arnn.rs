@@ -152,6 +152,23 @@ fn train_resume_and_complete() {
     assert!(ok && stdout.contains("ARNN step graph"), "{stdout}\n{stderr}");
     let m = zoo_runtime::MotionModel::load(&onnx).unwrap();
     assert_eq!((m.metadata().model_kind.as_str(), m.states().len()), ("arnn", 2));
+    // The step through tract and onnxruntime and whole completions, timed (figures not checked).
+    let (ok, stdout, stderr) = run(&[
+        "bench",
+        "keyframes",
+        "--model",
+        onnx.to_str().unwrap(),
+        "--batch",
+        "1,3",
+        "--rounds",
+        "1",
+        "--work",
+        "6",
+    ]);
+    assert!(ok, "{stdout}\n{stderr}");
+    for row in ["1      tract step", "1      onnxruntime step", "3      tract completion"] {
+        assert!(stdout.contains(row), "no `{row}` row: {stdout}");
+    }
     let out: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(out["frames"].as_array().unwrap().len(), 25);
     assert_eq!(out["key_misses"].as_array().unwrap().len(), 3);

@@ -166,7 +166,10 @@ fn keyframe_runner_matches_candle() {
     let as_frames = |o: &[f32]| o.chunks(6).map(|f| f.iter().map(|v| *v as f64).collect()).collect::<Vec<Vec<f64>>>();
     for c in 0..2 {
         let diff = max_diff(&candle[c], &as_frames(&out[c]));
-        eprintln!("keyframes runner, character {c} ({} frames): largest difference from candle {diff:e}", out[c].len() / 6);
+        eprintln!(
+            "keyframes runner, character {c} ({} frames): largest difference from candle {diff:e}",
+            out[c].len() / 6
+        );
         assert!(diff <= TOLERANCE, "character {c}: {diff:e}");
     }
     // Alone, the second character gives the same frames as in the batch.

@@ -99,7 +99,11 @@ impl MotionKeys<'_> {
             ));
         }
         if self.poses.len() != n * dofs {
-            return bad(format!("{} pose values for {n} keys of {dofs} values: expected {}", self.poses.len(), n * dofs));
+            return bad(format!(
+                "{} pose values for {n} keys of {dofs} values: expected {}",
+                self.poses.len(),
+                n * dofs
+            ));
         }
         if let Some(i) = self.poses.iter().position(|v| !v.is_finite()) {
             return bad(format!("key {} value {} is {}, not a finite number", i / dofs, i % dofs, self.poses[i]));
@@ -231,7 +235,8 @@ impl KeyframeRunner {
         for t in 1..last {
             for (c, k) in keys.iter().enumerate() {
                 // A character whose keys have ended holds its last interval at t_rel 1.
-                let (a, z, rel) = if t < k.len() { k.interval(t) } else { (k.frames.len() - 2, k.frames.len() - 1, 1.0) };
+                let (a, z, rel) =
+                    if t < k.len() { k.interval(t) } else { (k.frames.len() - 2, k.frames.len() - 1, 1.0) };
                 self.key_a[c * d..(c + 1) * d].copy_from_slice(&k.poses[a * d..(a + 1) * d]);
                 self.key_b[c * d..(c + 1) * d].copy_from_slice(&k.poses[z * d..(z + 1) * d]);
                 self.t_rel[c] = rel;

@@ -1,6 +1,7 @@
 //! One module per subcommand.
 
 pub mod bench;
+pub mod bench_keyframes;
 pub mod bench_runtime;
 pub mod bench_stitch;
 pub mod bench_synthesis;
