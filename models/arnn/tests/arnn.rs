@@ -168,7 +168,8 @@ fn table_2_architectures_step() {
 #[test]
 fn ground_penalty_measures_the_depth_below_the_ground() {
     let seqs = lamp_sequences(2);
-    let t = ArnnTrainer::new(&ArnnConfig::tiny(), seqs, vec![], &Device::Cpu).unwrap();
+    let config = ArnnConfig { ground_weight: 10.0, ..ArnnConfig::tiny() };
+    let t = ArnnTrainer::new(&config, seqs, vec![], &Device::Cpu).unwrap();
     let norm = t.normalization().clone();
     let lamp = t.config().lamp.clone().unwrap();
     let tensor = |poses: &[[f64; 6]]| {
@@ -191,8 +192,8 @@ fn ground_penalty_measures_the_depth_below_the_ground() {
     let depth = -zoo_arnn::eval::base_clearance(&lamp, &tilted);
     let got = penalty(&[tilted]);
     assert!(depth > 0.0 && (got - (depth / norm.std[1]).powi(2)).abs() < 1e-3 * got, "{got}");
-    // Off without a weight.
-    let config = ArnnConfig { ground_weight: 0.0, ..ArnnConfig::tiny() };
-    let t0 = ArnnTrainer::new(&config, lamp_sequences(2), vec![], &Device::Cpu).unwrap();
+    // Off without a weight (the default).
+    assert_eq!(ArnnConfig::paper().ground_weight, 0.0);
+    let t0 = ArnnTrainer::new(&ArnnConfig::tiny(), lamp_sequences(2), vec![], &Device::Cpu).unwrap();
     assert_eq!(t0.ground_penalty(&tensor(&[sunk])).unwrap().to_scalar::<f32>().unwrap(), 0.0);
 }

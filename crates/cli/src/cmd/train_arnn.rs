@@ -102,8 +102,8 @@ pub struct ArnnArgs {
     /// Adam learning rate [default: the preset's; paper: 1e-3].
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::learning_rate)]
     pub lr: Option<f64>,
-    /// Weight of the ground penalty on the base plate sinking below the ground [default: the
-    /// preset's, 10; 0 turns it off] (docs/arnn.md, "The ground").
+    /// Weight of the ground penalty on the base plate sinking below the ground [default: 0,
+    /// off] (docs/arnn.md, "The ground"; `zoo complete` lifts a sunken base onto the ground).
     #[arg(long, allow_hyphen_values = true, value_parser = ground_weight)]
     pub ground_weight: Option<f64>,
     /// Seed of the generated data, the split, the weights and the trainer.
