@@ -3,6 +3,7 @@
 
 use std::path::Path;
 use std::process::Command;
+use std::sync::OnceLock;
 use zoo_tests::zoo_bin;
 
 fn run(args: &[&str]) -> (bool, String, String) {
@@ -72,7 +73,7 @@ fn train_resume_and_complete() {
     for m in ["arnn", "linear", "spline"] {
         assert!(summary["completion"][m]["frame"].as_f64().unwrap().is_finite(), "{summary}");
     }
-    assert!(stdout.contains("ARNN frame error / spline frame error"), "{stdout}");
+    assert!(stdout.contains("network frame error / spline frame error"), "{stdout}");
 
     // A second fresh run into the same folder is refused; resuming continues it.
     let (ok, _, stderr) = train(&runp, 1, false);
@@ -87,6 +88,32 @@ fn train_resume_and_complete() {
         serde_json::from_str(&std::fs::read_to_string(runp.join("train_state.json")).unwrap()).unwrap();
     assert_eq!(state["epoch"], 2);
     assert_eq!(state["data_settings"]["sequences"], 5);
+
+    // The evaluation of the run folder on its test sequence, best and last weights.
+    let jpath = dir.path().join("eval.json");
+    for (checkpoint, epoch) in [("best", None), ("last", Some(2))] {
+        let (ok, stdout, stderr) = run(&[
+            "eval-arnn",
+            "--model",
+            runp.to_str().unwrap(),
+            "--checkpoint",
+            checkpoint,
+            "--json",
+            jpath.to_str().unwrap(),
+        ]);
+        assert!(ok, "{stdout}\n{stderr}");
+        assert!(
+            stdout.contains("1 sequences completed") && stdout.contains("network frame error / spline"),
+            "{stdout}"
+        );
+        let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&jpath).unwrap()).unwrap();
+        assert_eq!(r["checkpoint"], checkpoint);
+        if let Some(e) = epoch {
+            assert_eq!(r["epoch"], e);
+        }
+        // The grounded output never sinks (the lamp's tolerance of rounding only).
+        assert!(r["arnn_grounded"]["lowest_base"].as_f64().unwrap() > -1e-9, "{r}");
+    }
 
     // Completion: a BVH of the lamp with one frame per network frame, starting on the first key.
     let keys = dir.path().join("keys.json");
@@ -125,52 +152,174 @@ fn train_resume_and_complete() {
     assert!(ok && stdout.contains("ARNN step graph"), "{stdout}\n{stderr}");
     let m = zoo_runtime::MotionModel::load(&onnx).unwrap();
     assert_eq!((m.metadata().model_kind.as_str(), m.states().len()), ("arnn", 2));
+    // The step through tract and onnxruntime and whole completions, timed (figures not checked).
+    let (ok, stdout, stderr) = run(&[
+        "bench",
+        "keyframes",
+        "--model",
+        onnx.to_str().unwrap(),
+        "--batch",
+        "1,3",
+        "--rounds",
+        "1",
+        "--work",
+        "6",
+    ]);
+    assert!(ok, "{stdout}\n{stderr}");
+    for row in ["1      tract step", "1      onnxruntime step", "3      tract completion"] {
+        assert!(stdout.contains(row), "no `{row}` row: {stdout}");
+    }
     let out: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(out["frames"].as_array().unwrap().len(), 25);
     assert_eq!(out["key_misses"].as_array().unwrap().len(), 3);
     assert!(out["frames"].as_array().unwrap().iter().flat_map(|f| f.as_array().unwrap()).all(|v| v.is_f64()));
 }
 
+/// A tiny ARNN trained once for the bad-input tests of this file (one epoch).
+fn shared_model() -> &'static Path {
+    static MODEL: OnceLock<tempfile::TempDir> = OnceLock::new();
+    MODEL
+        .get_or_init(|| {
+            let dir = tempfile::tempdir().unwrap();
+            let (ok, stdout, stderr) = train(&dir.path().join("run"), 1, false);
+            assert!(ok, "{stdout}\n{stderr}");
+            dir
+        })
+        .path()
+}
+
+/// Runs `zoo complete` on the shared model with a keys file holding `keys`; it must fail
+/// without a panic and write nothing. Returns stderr.
+fn refused(keys: &str) -> String {
+    let dir = tempfile::tempdir().unwrap();
+    let (path, out) = (dir.path().join("k.json"), dir.path().join("o.bvh"));
+    std::fs::write(&path, keys).unwrap();
+    let model = shared_model().join("run");
+    let (ok, stdout, stderr) = run(&[
+        "complete",
+        "--model",
+        model.to_str().unwrap(),
+        "--keys",
+        path.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!ok, "accepted {keys}: {stdout}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(stderr.contains(path.to_str().unwrap()), "the error does not name the keys file: {stderr}");
+    assert!(!out.exists(), "a refused completion wrote its output");
+    stderr
+}
+
+fn key(frame: usize, pose: &str) -> String {
+    format!(r#"{{"frame": {frame}, "pose": {pose}}}"#)
+}
+
+fn keys_file(keys: &[String]) -> String {
+    format!(r#"{{"format": "zoo-arnn-keys", "version": 1, "keys": [{}]}}"#, keys.join(", "))
+}
+
+#[test]
+fn keys_out_of_order_are_refused() {
+    let rest = pose_json(&REST);
+    let e = refused(&keys_file(&[key(0, &rest), key(20, &rest), key(10, &rest)]));
+    assert!(e.contains("key 2 is at frame 10 but key 1 is at frame 20: keys must be in increasing frame order"), "{e}");
+    // Two keys on one frame.
+    let e = refused(&keys_file(&[key(0, &rest), key(10, &rest), key(10, &rest)]));
+    assert!(e.contains("key 2 is at frame 10 but key 1 is at frame 10") && e.contains("one key per frame"), "{e}");
+}
+
+#[test]
+fn keys_past_the_sequence_are_refused() {
+    let rest = pose_json(&REST);
+    let with_len = |len: usize, keys: &[String]| {
+        format!(r#"{{"format": "zoo-arnn-keys", "version": 1, "frames": {len}, "keys": [{}]}}"#, keys.join(", "))
+    };
+    let e = refused(&with_len(25, &[key(0, &rest), key(12, &rest), key(30, &rest)]));
+    assert!(e.contains("key 2 is at frame 30, past the sequence of 25 frames (frames 0 to 24)"), "{e}");
+    let e = refused(&with_len(40, &[key(0, &rest), key(24, &rest)]));
+    assert!(e.contains("the sequence has 40 frames but its last key is at frame 24") && e.contains("frame 39"), "{e}");
+    // Past what zoo complete generates, and a frame number that is not one.
+    let e = refused(&keys_file(&[key(0, &rest), key(1_000_000, &rest)]));
+    assert!(e.contains("past the 100000 frames zoo complete generates"), "{e}");
+    let e = refused(&keys_file(&[key(0, &rest), r#"{"frame": -3, "pose": [0, 0, 0, 0, 0, 0]}"#.into()]));
+    assert!(e.contains("not a keys file") && e.contains("invalid value: integer `-3`"), "{e}");
+}
+
+#[test]
+fn keys_for_another_skeleton_are_refused() {
+    let other =
+        r#"{"dof_names": ["Hips", "Spine"], "keys": [{"frame": 0, "pose": [0, 0]}, {"frame": 5, "pose": [1, 1]}]}"#;
+    let e = refused(other);
+    assert!(e.contains("this keys file is for another character") && e.contains("base_x"), "{e}");
+    // No names, but poses of another size.
+    let e = refused(&keys_file(&[key(0, &pose_json(&REST)), key(10, "[0.1, 0.02, 0.0]")]));
+    assert!(e.contains("key 1 (frame 10) has 3 values; the model completes 6 degrees of freedom"), "{e}");
+    // Another file format (a lamp sequence).
+    let e = refused(r#"{"format": "zoo-luxo-sequence", "keys": []}"#);
+    assert!(e.contains("format is \"zoo-luxo-sequence\", expected \"zoo-arnn-keys\""), "{e}");
+}
+
+#[test]
+fn nan_in_a_key_is_refused() {
+    let rest = pose_json(&REST);
+    for bad in ["NaN", "nan", "Infinity", "1e999"] {
+        let e = refused(&keys_file(&[key(0, &rest), key(10, &format!("[{bad}, 0.02, 0.0, 0.5, -1.1, -1.2]"))]));
+        assert!(e.contains("not a keys file") && e.contains("every value must be finite"), "{bad}: {e}");
+    }
+    let e = refused(&keys_file(&[key(0, &rest), key(10, "[0.1, null, 0.0, 0.5, -1.1, -1.2]")]));
+    assert!(e.contains("not a keys file") && e.contains("invalid type: null"), "{e}");
+    // A string that parses to NaN is not a number either.
+    let e = refused(&keys_file(&[key(0, &rest), key(10, r#"["NaN", 0.02, 0.0, 0.5, -1.1, -1.2]"#)]));
+    assert!(e.contains("not a keys file") && e.contains("invalid type: string"), "{e}");
+}
+
+/// The Table 2 architectures train, evaluate and complete; they are not exported.
+#[test]
+fn table_2_variants_train_and_evaluate() {
+    let dir = tempfile::tempdir().unwrap();
+    for variant in ["no-memory", "segregated"] {
+        let runp = dir.path().join(variant);
+        let (ok, stdout, stderr) = run(&[
+            "train",
+            "arnn",
+            "--preset",
+            "tiny",
+            "--epochs",
+            "1",
+            "--sequences",
+            "5",
+            "--k-max",
+            "2",
+            "--seed",
+            "3",
+            "--variant",
+            variant,
+            "--out",
+            runp.to_str().unwrap(),
+        ]);
+        assert!(ok, "{stdout}\n{stderr}");
+        let config: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(runp.join("config.json")).unwrap()).unwrap();
+        assert_eq!(config["architecture"], variant);
+        let (ok, stdout, stderr) = run(&["eval-arnn", "--model", runp.to_str().unwrap()]);
+        assert!(
+            ok && stdout
+                .contains(&format!("{} architecture", if variant == "no-memory" { "NoMemory" } else { "Segregated" })),
+            "{stdout}\n{stderr}"
+        );
+        let onnx = dir.path().join("x.onnx");
+        let (ok, _, e) = run(&["export", "--onnx", runp.to_str().unwrap(), "--out", onnx.to_str().unwrap()]);
+        assert!(!ok && e.contains("is a Table 2 comparison, not exported"), "{e}");
+    }
+}
+
 #[test]
 fn bad_keys_and_folders_are_refused_with_clear_errors() {
     let dir = tempfile::tempdir().unwrap();
-    let runp = dir.path().join("run");
-    let (ok, stdout, stderr) = train(&runp, 1, false);
-    assert!(ok, "{stdout}\n{stderr}");
-    let model = runp.to_str().unwrap();
     let out = dir.path().join("o.bvh");
-    let complete = |keys: &str| {
-        let path = dir.path().join("k.json");
-        std::fs::write(&path, keys).unwrap();
-        let (ok, stdout, stderr) =
-            run(&["complete", "--model", model, "--keys", path.to_str().unwrap(), "--out", out.to_str().unwrap()]);
-        assert!(!ok, "accepted {keys}: {stdout}");
-        assert!(!stderr.contains("panicked"), "{stderr}");
-        stderr
-    };
-    let rest = pose_json(&REST);
-    let key = |frame: usize, pose: &str| format!(r#"{{"frame": {frame}, "pose": {pose}}}"#);
-    let file = |keys: &[String]| format!(r#"{{"keys": [{}]}}"#, keys.join(", "));
-
-    let e = complete(&file(&[key(0, &rest), key(20, &rest), key(10, &rest)]));
-    assert!(e.contains("key 2 is at frame 10 but key 1 is at frame 20: keys must be in increasing frame order"), "{e}");
-    let e = complete(&file(&[key(0, &rest), key(10, "[0.1, 0.02, 0.0]")]));
-    assert!(e.contains("key 1 (frame 10) has 3 values; the model completes 6 degrees of freedom"), "{e}");
-    let e = complete(&file(&[key(0, &rest)]));
+    let e = refused(&keys_file(&[key(0, &pose_json(&REST))]));
     assert!(e.contains("1 key(s) given: completion needs at least 2"), "{e}");
-    let e = complete(&file(&[key(0, &rest), key(10, "[NaN, 0.02, 0.0, 0.5, -1.1, -1.2]")]));
-    assert!(e.contains("not a keys file") && e.contains("every value must be finite"), "{e}");
-    let e = complete(&file(&[key(0, &rest), key(10, "[0.1, null, 0.0, 0.5, -1.1, -1.2]")]));
-    assert!(e.contains("not a keys file") && e.contains("invalid type: null"), "{e}");
-    let e = complete(&file(&[key(0, &rest), key(1_000_000, &rest)]));
-    assert!(e.contains("past the 100000 frames zoo complete generates"), "{e}");
-    let other =
-        r#"{"dof_names": ["Hips", "Spine"], "keys": [{"frame": 0, "pose": [0, 0]}, {"frame": 5, "pose": [1, 1]}]}"#;
-    let e = complete(other);
-    assert!(e.contains("this keys file is for another character"), "{e}");
-    let e = complete(r#"{"format": "zoo-luxo-sequence", "keys": []}"#);
-    assert!(e.contains("format is \"zoo-luxo-sequence\", expected \"zoo-arnn-keys\""), "{e}");
-    assert!(!out.exists(), "a refused completion wrote its output");
 
     // A run folder of another model, and a folder that is not a run.
     let rtn = dir.path().join("rtn");
@@ -193,6 +342,8 @@ fn bad_keys_and_folders_are_refused_with_clear_errors() {
     assert!(!ok && e.contains("`zoo complete` runs an ARNN run folder") && e.contains("`rtn` model"), "{e}");
     let (ok, _, e) = args(dir.path());
     assert!(!ok && e.contains("is not a run folder of `zoo train` (no config.json)"), "{e}");
+    let (ok, _, e) = run(&["eval-arnn", "--model", rtn.to_str().unwrap()]);
+    assert!(!ok && e.contains("holds a `rtn` run, not an ARNN"), "{e}");
     // Data options that do not fit are refused before any work.
     let y = dir.path().join("y");
     let (ok, _, e) = run(&["train", "arnn", "--data", dir.path().to_str().unwrap(), "--out", y.to_str().unwrap()]);

@@ -140,3 +140,65 @@ fn candle_tract_and_onnxruntime_complete_the_same_keys() {
         );
     }
 }
+
+/// The runtime's keyframes task (`zoo_runtime::keyframes`, tract) against candle's
+/// `zoo_arnn::complete`: two characters of different lengths in one batch, and one alone.
+#[test]
+fn keyframe_runner_matches_candle() {
+    use zoo_runtime::keyframes::{KeyframeModel, MotionKeys};
+    let (config, varmap, model, norm) = fixture();
+    let onnx = zoo_arnn::export::export_arnn(&config, &norm, &varmap).unwrap();
+    let km = KeyframeModel::new(MotionModel::from_bytes(&onnx.to_bytes()).unwrap()).unwrap();
+    assert_eq!(km.dofs(), 6);
+    // Character 0: every key (40 frames); character 1: its first three keys (25 frames).
+    let frames: [&[usize]; 2] = [&KEY_FRAMES, &KEY_FRAMES[..3]];
+    let poses: Vec<Vec<Vec<f64>>> = (0..2).map(|c| keys(c)[..frames[c].len()].to_vec()).collect();
+    let flat: Vec<Vec<f32>> = poses.iter().map(|p| p.iter().flatten().map(|v| *v as f32).collect()).collect();
+    let candle: Vec<Vec<Vec<f64>>> =
+        (0..2).map(|c| zoo_arnn::complete(&model, &norm, frames[c], &poses[c]).unwrap()).collect();
+    let mut runner = km.runner(2).unwrap();
+    let mut out: Vec<Vec<f32>> = (0..2).map(|c| vec![f32::NAN; (frames[c].last().unwrap() + 1) * 6]).collect();
+    let keys_of = |c: usize| MotionKeys { frames: frames[c], poses: &flat[c] };
+    {
+        let (a, b) = out.split_at_mut(1);
+        runner.complete_batch(&[keys_of(0), keys_of(1)], &mut [&mut a[0], &mut b[0]]).unwrap();
+    }
+    let as_frames = |o: &[f32]| o.chunks(6).map(|f| f.iter().map(|v| *v as f64).collect()).collect::<Vec<Vec<f64>>>();
+    for c in 0..2 {
+        let diff = max_diff(&candle[c], &as_frames(&out[c]));
+        eprintln!(
+            "keyframes runner, character {c} ({} frames): largest difference from candle {diff:e}",
+            out[c].len() / 6
+        );
+        assert!(diff <= TOLERANCE, "character {c}: {diff:e}");
+    }
+    // Alone, the second character gives the same frames as in the batch.
+    let mut alone = vec![0f32; out[1].len()];
+    runner.complete(keys_of(1), &mut alone).unwrap();
+    let diff = alone.iter().zip(&out[1]).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    assert!(diff <= 1e-5, "batch of 2 vs alone: {diff:e}");
+
+    // Bad keys and buffers: clear errors, the output untouched.
+    let mut buf = vec![7f32; 40 * 6];
+    let err = |runner: &mut zoo_runtime::keyframes::KeyframeRunner, k: MotionKeys, buf: &mut [f32]| {
+        runner.complete(k, buf).expect_err("accepted").to_string()
+    };
+    let e = err(&mut runner, MotionKeys { frames: &[0, 24, 9, 39], poses: &flat[0] }, &mut buf);
+    assert!(e.contains("character 0: key 2 is at frame 9 but key 1 is at frame 24"), "{e}");
+    let mut nan = flat[0].clone();
+    nan[8] = f32::NAN;
+    let e = err(&mut runner, MotionKeys { frames: &KEY_FRAMES, poses: &nan }, &mut buf);
+    assert!(e.contains("key 1 value 2 is NaN, not a finite number"), "{e}");
+    let e = err(&mut runner, MotionKeys { frames: &KEY_FRAMES, poses: &flat[0][..18] }, &mut buf);
+    assert!(e.contains("18 pose values for 4 keys of 6 values"), "{e}");
+    let e = err(&mut runner, MotionKeys { frames: &[0, 9, 24, 50], poses: &flat[0] }, &mut buf);
+    assert!(e.contains("expected 306 values (51 x 6), found 240"), "{e}");
+    let e = err(&mut runner, MotionKeys { frames: &[3, 9, 24, 39], poses: &flat[0] }, &mut buf);
+    assert!(e.contains("key frames start at 0"), "{e}");
+    assert!(buf.iter().all(|v| *v == 7.0), "a refused completion wrote its output");
+    let e = runner
+        .complete_batch(&[keys_of(0), keys_of(0), keys_of(0)], &mut [&mut buf[..], &mut [], &mut []])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("3 characters, but the runner was made for at most 2"), "{e}");
+}

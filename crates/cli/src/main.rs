@@ -47,6 +47,8 @@ enum Command {
     BenchSynthesis(cmd::bench_synthesis::BenchSynthesisArgs),
     /// Complete an animator's keys into a whole motion with a trained ARNN (`zoo complete --model DIR --keys K.json --out F.bvh`).
     Complete(cmd::complete::CompleteArgs),
+    /// Evaluate a `zoo train arnn` run on its held-out lamp sequences against interpolation (`zoo eval-arnn --model DIR`).
+    EvalArnn(cmd::eval_arnn::EvalArnnArgs),
 }
 
 /// Environment of the training commands (`zoo train`, `zoo bench train`), which must be in
@@ -118,5 +120,6 @@ fn main() -> anyhow::Result<()> {
         Command::Generate(a) => cmd::generate::run(a),
         Command::BenchSynthesis(a) => cmd::bench_synthesis::run(a),
         Command::Complete(a) => cmd::complete::run(a),
+        Command::EvalArnn(a) => cmd::eval_arnn::run(a),
     }
 }

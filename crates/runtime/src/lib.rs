@@ -27,6 +27,7 @@
 //! ```
 
 pub mod error;
+pub mod keyframes;
 pub mod loaded;
 pub mod metadata;
 pub mod model;

@@ -105,6 +105,26 @@ pub fn base_clearance(lamp: &LampParams, pose: &[f64]) -> f64 {
     pose[1] - lamp.base_half_height * c.abs() - lamp.base_half_width * s.abs()
 }
 
+/// Lifts the base of every pose whose base plate is below the ground by that depth, so that
+/// its lowest point is on the ground (`base_clearance >= 0` afterwards, up to rounding); other
+/// poses and the other degrees of freedom are unchanged. Returns the largest lift (metres, 0 when
+/// no pose was below). The lamp's degrees of freedom ([`zoo_data::luxo::DOF_NAMES`]) in each
+/// pose.
+///
+/// This is the minimal change that satisfies the ground (raising the base moves every link by
+/// the same amount and keeps the joint angles and the base's tilt, which animators key).
+pub fn project_to_ground(lamp: &LampParams, poses: &mut [Vec<f64>]) -> f64 {
+    let mut lift = 0.0f64;
+    for p in poses.iter_mut() {
+        let c = base_clearance(lamp, p);
+        if c < 0.0 {
+            p[1] -= c;
+            lift = lift.max(-c);
+        }
+    }
+    lift
+}
+
 /// Accumulates [`CompletionError`] over sequences.
 #[derive(Clone, Debug)]
 struct Accumulator {
@@ -173,8 +193,12 @@ impl Accumulator {
 pub struct CompletionReport {
     /// Sequences evaluated.
     pub sequences: usize,
-    /// The ARNN.
+    /// The network (the ARNN or a Table 2 architecture), its output as is.
     pub arnn: CompletionError,
+    /// The network's output with the base lifted out of the ground ([`project_to_ground`]),
+    /// what `zoo complete` writes (absent without the lamp's geometry).
+    #[serde(default)]
+    pub arnn_grounded: Option<CompletionError>,
     /// Linear interpolation of the keys.
     pub linear: CompletionError,
     /// Natural cubic spline through the keys.
@@ -190,13 +214,25 @@ pub fn evaluate(model: &Arnn, norm: &Normalization, seqs: &[KeyedSequence]) -> A
     let d = model.config().dofs;
     let lamp = model.config().lamp.as_ref();
     let (mut a, mut l, mut s) = (Accumulator::new(d), Accumulator::new(d), Accumulator::new(d));
+    let mut g = Accumulator::new(d);
     for seq in seqs {
         let poses: Vec<Vec<f64>> = seq.keys.iter().map(|&k| seq.frames[k].to_vec()).collect();
-        a.add(&complete(model, norm, &seq.keys, &poses)?, seq, norm, lamp);
+        let mut out = complete(model, norm, &seq.keys, &poses)?;
+        a.add(&out, seq, norm, lamp);
+        if let Some(lamp) = lamp {
+            project_to_ground(lamp, &mut out);
+            g.add(&out, seq, norm, Some(lamp));
+        }
         l.add(&linear(&seq.keys, &poses), seq, norm, lamp);
         s.add(&cubic_spline(&seq.keys, &poses), seq, norm, lamp);
     }
-    Ok(CompletionReport { sequences: seqs.len(), arnn: a.finish(), linear: l.finish(), spline: s.finish() })
+    Ok(CompletionReport {
+        sequences: seqs.len(),
+        arnn: a.finish(),
+        arnn_grounded: lamp.map(|_| g.finish()),
+        linear: l.finish(),
+        spline: s.finish(),
+    })
 }
 
 #[cfg(test)]
@@ -232,6 +268,27 @@ mod tests {
         let second: Vec<f64> = out.windows(3).map(|w| w[0][0] - 2.0 * w[1][0] + w[2][0]).collect();
         let jumps = second.windows(2).map(|w| (w[1] - w[0]).abs()).fold(0.0, f64::max);
         assert!(jumps < 0.5, "second difference jumps by {jumps}");
+    }
+
+    #[test]
+    fn projection_lifts_only_sunken_bases_onto_the_ground() {
+        let lamp = LampParams::default();
+        let mut poses = vec![
+            vec![0.1, 0.01, 0.2, 0.5, -1.1, -1.2],                         // tilted and sunk
+            vec![0.2, lamp.base_half_height + 0.05, 0.0, 0.5, -1.1, -1.2], // in the air
+            vec![0.3, -0.04, -0.4, 0.4, -1.0, -1.3],                       // deep, tilted the other way
+        ];
+        let before = poses.clone();
+        let depth = -base_clearance(&lamp, &before[2]);
+        let lift = project_to_ground(&lamp, &mut poses);
+        assert!((lift - depth).abs() < 1e-12, "lift {lift}, deepest {depth}");
+        for (p, b) in poses.iter().zip(&before) {
+            assert!(base_clearance(&lamp, p) > -1e-12, "{p:?} still below the ground");
+            // Only the base height changes.
+            assert!(p.iter().zip(b).enumerate().all(|(j, (x, y))| j == 1 || x == y));
+        }
+        assert_eq!(poses[1], before[1]);
+        assert!(base_clearance(&lamp, &poses[0]).abs() < 1e-12);
     }
 
     #[test]

@@ -194,6 +194,13 @@ pub fn metadata(config: &ArnnConfig, norm: &Normalization) -> Result<MotionModel
 /// [`crate::Arnn::new`]).
 pub fn export_arnn(config: &ArnnConfig, norm: &Normalization, varmap: &VarMap) -> Result<OnnxModel, ExportError> {
     config.validate().map_err(model_err)?;
+    if config.architecture != crate::config::Architecture::Arnn {
+        return Err(model_err(format!(
+            "the {:?} architecture is a Table 2 comparison, not exported: export an ARNN run (`zoo train arnn \
+             --variant arnn`)",
+            config.architecture
+        )));
+    }
     let (d, h) = (config.dofs, config.hidden);
     if norm.mean.len() != d || norm.std.len() != d {
         return Err(model_err(format!("the statistics are for {} values, the model for {d}", norm.mean.len())));

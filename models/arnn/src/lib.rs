@@ -13,7 +13,7 @@ pub mod export;
 pub mod model;
 pub mod train;
 
-pub use config::{ArnnConfig, Curriculum};
+pub use config::{Architecture, ArnnConfig, Curriculum};
 pub use eval::{CompletionError, CompletionReport};
 pub use model::{Arnn, ArnnState};
 pub use train::{ArnnTrainer, Normalization, complete};

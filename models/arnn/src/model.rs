@@ -1,45 +1,84 @@
 //! The ARNN of section 6 (Figure 6): pose feature nets, two GRU layers with SELU between, a
-//! two-layer decoder and a residual added to the previous pose.
+//! two-layer decoder and a residual added to the previous pose; and the two architectures of
+//! section 9 it is compared with (Table 2), [`Architecture::NoMemory`] and
+//! [`Architecture::Segregated`].
 
-use crate::config::ArnnConfig;
+use crate::config::{Architecture, ArnnConfig};
 use candle_core::{D, Module, Result, Tensor};
 use candle_nn::VarBuilder;
 use zoo_nn::rng::SplitMix64;
 use zoo_nn::{Activation, Dropout, Gru, GruState, Mlp};
 
-/// The recurrent state: one [`GruState`] per GRU layer, each `(batch, hidden)`.
+/// The recurrent state: one [`GruState`] per GRU layer, each `(batch, hidden)`; empty for the
+/// no-memory net.
 #[derive(Clone, Debug)]
 pub struct ArnnState {
     /// First and second GRU layers.
-    pub gru: [GruState; 2],
+    pub gru: Vec<GruState>,
+}
+
+/// The two recurrent layers (ARNN and the segregated net's motion pattern network).
+#[derive(Clone, Debug)]
+struct Recurrent {
+    gru1: Gru,
+    gru2: Gru,
+}
+
+/// The network's layers per architecture.
+#[derive(Clone, Debug)]
+enum Body {
+    Arnn { prev_features: Mlp, key_a_features: Mlp, key_b_features: Mlp, rnn: Recurrent },
+    NoMemory { key_a_features: Mlp, key_b_features: Mlp, hidden: Mlp },
+    Segregated { prev_features: Mlp, rnn: Recurrent, key_a_features: Mlp, key_b_features: Mlp, correction: Mlp },
 }
 
 /// The network. Poses are normalised degrees of freedom `(batch, dofs)`.
 #[derive(Clone, Debug)]
 pub struct Arnn {
     config: ArnnConfig,
-    prev_features: Mlp,
-    key_a_features: Mlp,
-    key_b_features: Mlp,
-    gru1: Gru,
-    gru2: Gru,
+    body: Body,
     decoder: Mlp,
 }
 
 impl Arnn {
-    /// Builds (or loads) the weights: `prev_features`, `key_a_features`, `key_b_features`,
-    /// `gru1`, `gru2`, `decoder`.
+    /// Builds (or loads) the weights. ARNN: `prev_features`, `key_a_features`,
+    /// `key_b_features`, `gru1`, `gru2`, `decoder`; no-memory net: `key_a_features`,
+    /// `key_b_features`, `hidden`, `decoder`; segregated net: `prev_features`, `gru1`, `gru2`,
+    /// `decoder` (motion pattern network), `key_a_features`, `key_b_features`, `correction`
+    /// (interpolation network).
     pub fn new(config: &ArnnConfig, vb: VarBuilder) -> Result<Self> {
         config.validate().map_err(candle_core::Error::Msg)?;
-        let (d, f, h, w) = (config.dofs, config.feature, config.hidden, config.decoder);
+        let (d, f, h, w, c) = (config.dofs, config.feature, config.hidden, config.decoder, config.correction);
         let features = |name: &str| Mlp::new(d, &[f, f], Activation::Selu, true, vb.pp(name));
+        let rnn = |input: usize| -> Result<Recurrent> {
+            Ok(Recurrent {
+                gru1: Gru::new(input, h, 1, 0.0, vb.pp("gru1"))?,
+                gru2: Gru::new(h, h, 1, 0.0, vb.pp("gru2"))?,
+            })
+        };
+        let body = match config.architecture {
+            Architecture::Arnn => Body::Arnn {
+                prev_features: features("prev_features")?,
+                key_a_features: features("key_a_features")?,
+                key_b_features: features("key_b_features")?,
+                rnn: rnn(3 * f + 1)?,
+            },
+            Architecture::NoMemory => Body::NoMemory {
+                key_a_features: features("key_a_features")?,
+                key_b_features: features("key_b_features")?,
+                hidden: Mlp::new(2 * f + 1, &[h, h], Activation::Selu, true, vb.pp("hidden"))?,
+            },
+            Architecture::Segregated => Body::Segregated {
+                prev_features: features("prev_features")?,
+                rnn: rnn(f)?,
+                key_a_features: features("key_a_features")?,
+                key_b_features: features("key_b_features")?,
+                correction: Mlp::new(2 * f + 1, &[c, c, d], Activation::Selu, false, vb.pp("correction"))?,
+            },
+        };
         Ok(Arnn {
             config: config.clone(),
-            prev_features: features("prev_features")?,
-            key_a_features: features("key_a_features")?,
-            key_b_features: features("key_b_features")?,
-            gru1: Gru::new(3 * f + 1, h, 1, 0.0, vb.pp("gru1"))?,
-            gru2: Gru::new(h, h, 1, 0.0, vb.pp("gru2"))?,
+            body,
             decoder: Mlp::new(h, &[w, w, d], Activation::Selu, false, vb.pp("decoder"))?,
         })
     }
@@ -56,7 +95,13 @@ impl Arnn {
 
     /// The zero state for `batch` sequences.
     pub fn zero_state(&self, batch: usize) -> Result<ArnnState> {
-        Ok(ArnnState { gru: [self.gru1.zero_state(batch)?, self.gru2.zero_state(batch)?] })
+        let gru = match &self.body {
+            Body::Arnn { rnn, .. } | Body::Segregated { rnn, .. } => {
+                vec![rnn.gru1.zero_state(batch)?, rnn.gru2.zero_state(batch)?]
+            }
+            Body::NoMemory { .. } => vec![],
+        };
+        Ok(ArnnState { gru })
     }
 
     /// One frame (section 6): from the previous pose `Y'_{t-1}`, the keys `X_K` and `X_{K+1}`
@@ -71,23 +116,62 @@ impl Arnn {
         state: &ArnnState,
         mut rng: Option<&mut SplitMix64>,
     ) -> Result<(Tensor, ArnnState)> {
-        let x = Tensor::cat(
-            &[
-                self.prev_features.forward(prev)?,
-                self.key_a_features.forward(key_a)?,
-                self.key_b_features.forward(key_b)?,
-                t_rel.clone(),
-            ],
-            D::Minus1,
-        )?;
-        let s1 = self.gru1.step(&x, &state.gru[0])?;
+        let keys =
+            |a: &Mlp, b: &Mlp| -> Result<Vec<Tensor>> { Ok(vec![a.forward(key_a)?, b.forward(key_b)?, t_rel.clone()]) };
+        match &self.body {
+            Body::Arnn { prev_features, key_a_features, key_b_features, rnn } => {
+                let mut x = vec![prev_features.forward(prev)?];
+                x.extend(keys(key_a_features, key_b_features)?);
+                let (h, state) = self.recurrent(rnn, &Tensor::cat(&x, D::Minus1)?, state, rng.as_deref_mut())?;
+                Ok(((prev + self.decode(&h, rng)?)?, state))
+            }
+            Body::NoMemory { key_a_features, key_b_features, hidden } => {
+                let x = Tensor::cat(&keys(key_a_features, key_b_features)?, D::Minus1)?;
+                let drops = self.config.gru_dropout.map(Dropout::new);
+                let mut h = x;
+                for (l, drop) in hidden.layers().iter().zip(drops) {
+                    h = Activation::Selu.apply(&l.forward(&h)?)?;
+                    h = drop.forward(&h, rng.as_deref_mut())?;
+                }
+                Ok((self.decode(&h, rng)?, ArnnState { gru: vec![] }))
+            }
+            Body::Segregated { prev_features, rnn, key_a_features, key_b_features, correction } => {
+                // The motion pattern network sees only the previous pose; the interpolation
+                // network only the keys and t_rel (Figure 14).
+                let (h, state) = self.recurrent(rnn, &prev_features.forward(prev)?, state, rng.as_deref_mut())?;
+                let motion = (prev + self.decode(&h, rng.as_deref_mut())?)?;
+                let x = Tensor::cat(&keys(key_a_features, key_b_features)?, D::Minus1)?;
+                let drop = Dropout::new(self.config.linear_dropout[0]);
+                let fix = correction.forward_dropout(&x, &drop, rng)?;
+                Ok(((motion + fix)?, state))
+            }
+        }
+    }
+
+    /// Two GRU layers with SELU and dropout after each; the second layer's output.
+    fn recurrent(
+        &self,
+        rnn: &Recurrent,
+        x: &Tensor,
+        state: &ArnnState,
+        mut rng: Option<&mut SplitMix64>,
+    ) -> Result<(Tensor, ArnnState)> {
+        if state.gru.len() != 2 {
+            candle_core::bail!("the state has {} GRU layers, the network 2", state.gru.len())
+        }
+        let s1 = rnn.gru1.step(x, &state.gru[0])?;
         let h1 = Activation::Selu.apply(s1.output())?;
         let h1 = Dropout::new(self.config.gru_dropout[0]).forward(&h1, rng.as_deref_mut())?;
-        let s2 = self.gru2.step(&h1, &state.gru[1])?;
+        let s2 = rnn.gru2.step(&h1, &state.gru[1])?;
         let h2 = Activation::Selu.apply(s2.output())?;
-        let h2 = Dropout::new(self.config.gru_dropout[1]).forward(&h2, rng.as_deref_mut())?;
+        let h2 = Dropout::new(self.config.gru_dropout[1]).forward(&h2, rng)?;
+        Ok((h2, ArnnState { gru: vec![s1, s2] }))
+    }
+
+    /// The decoder: two SELU layers with dropout, a linear layer to the pose.
+    fn decode(&self, h: &Tensor, mut rng: Option<&mut SplitMix64>) -> Result<Tensor> {
         let layers = self.decoder.layers();
-        let mut y = h2;
+        let mut y = h.clone();
         for (i, l) in layers.iter().enumerate() {
             y = l.forward(&y)?;
             if i + 1 < layers.len() {
@@ -95,6 +179,6 @@ impl Arnn {
                 y = Dropout::new(self.config.linear_dropout[i.min(1)]).forward(&y, rng.as_deref_mut())?;
             }
         }
-        Ok(((prev + y)?, ArnnState { gru: [s1, s2] }))
+        Ok(y)
     }
 }

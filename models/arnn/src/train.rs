@@ -4,6 +4,8 @@
 //!
 //! The key loss is the mean squared error over the key frames after the first (the first key
 //! is the given start pose), so that it and the frame loss are on one scale, as in Tables 1-2.
+//! Beyond the paper, a ground penalty (`ArnnConfig::ground_weight`) on the depth of the base
+//! plate's lowest point below the ground ([`crate::eval::base_clearance`] in candle ops).
 
 use crate::config::ArnnConfig;
 use crate::model::Arnn;
@@ -49,6 +51,9 @@ pub struct Losses {
     pub frame: Tensor,
     /// Key loss: MSE over the key frames after the first.
     pub key: Tensor,
+    /// Ground penalty: mean over predicted frames of `(max(0, -clearance) / std(base y))^2`,
+    /// with `clearance` the height of the base plate's lowest point (0 without a lamp).
+    pub ground: Tensor,
 }
 
 /// Trains an ARNN on preprocessed lamp sequences.
@@ -148,6 +153,31 @@ impl ArnnTrainer {
         self.varmap.all_vars().iter().map(|v| v.elem_count()).sum()
     }
 
+    /// The lamp's base half height and half width when the ground penalty applies: a lamp in
+    /// the configuration, the lamp's degrees of freedom and a positive weight.
+    fn ground_geometry(&self) -> Option<(f64, f64)> {
+        let lamp = self.config.lamp.as_ref()?;
+        let lamp_dofs = self.config.dofs == zoo_data::luxo::DOFS
+            && (self.config.dof_names.is_empty() || self.config.dof_names == zoo_data::luxo::DOF_NAMES);
+        (lamp_dofs && self.config.ground_weight > 0.0).then_some((lamp.base_half_height, lamp.base_half_width))
+    }
+
+    /// The ground penalty of normalised poses `(.., dofs)` (see [`Losses::ground`]), before its
+    /// weight; 0 when the penalty does not apply (no lamp, other degrees of freedom, weight 0).
+    pub fn ground_penalty(&self, pred: &Tensor) -> ArnnResult<Tensor> {
+        let Some((hh, hw)) = self.ground_geometry() else {
+            return Ok(Tensor::zeros((), DType::F32, &self.device)?);
+        };
+        let last = pred.rank() - 1;
+        let (sy, sa) = (self.norm.std[1], self.norm.std[2]);
+        let y = pred.narrow(last, 1, 1)?.affine(sy, self.norm.mean[1])?;
+        let a = pred.narrow(last, 2, 1)?.affine(sa, self.norm.mean[2])?;
+        // eval::base_clearance: y - hh |cos a| - hw |sin a|.
+        let clearance = ((y - a.cos()?.abs()?.affine(hh, 0.0)?)? - a.sin()?.abs()?.affine(hw, 0.0)?)?;
+        let depth = clearance.neg()?.relu()?.affine(1.0 / sy, 0.0)?;
+        Ok(depth.sqr()?.mean_all()?)
+    }
+
     /// Runs the model over sequences with the given keys (frame 0 is the start pose), feeding
     /// the ground truth back with probability `teacher` per step; dropout when `train`.
     pub fn losses(
@@ -205,12 +235,13 @@ impl ArnnTrainer {
         }
         let pred = Tensor::stack(&outs, 0)?; // (steps, b, d)
         let target = gt.narrow(1, 1, steps)?.transpose(0, 1)?;
-        let sq = (pred - target)?.sqr()?;
+        let sq = (&pred - target)?.sqr()?;
         let frame = sq.mean_all()?;
         let n_keys = mask.sum_all()?.to_scalar::<f32>()?.max(1.0) as f64;
         let key = (sq.broadcast_mul(&mask)?.sum_all()? / (n_keys * d as f64))?;
-        let total = (&frame + (&key * (self.config.key_weight * omega))?)?;
-        Ok(Losses { total, frame, key })
+        let ground = self.ground_penalty(&pred)?;
+        let total = ((&frame + (&key * (self.config.key_weight * omega))?)? + (&ground * self.config.ground_weight)?)?;
+        Ok(Losses { total, frame, key, ground })
     }
 
     /// One Adam step on training sequences `samples`, 0-2 keys dropped from each.

@@ -2,7 +2,7 @@
 
 use candle_core::{DType, Device, Tensor};
 use candle_nn::VarMap;
-use zoo_arnn::{Arnn, ArnnConfig, ArnnTrainer, Curriculum, complete};
+use zoo_arnn::{Architecture, Arnn, ArnnConfig, ArnnTrainer, Curriculum, complete};
 use zoo_data::luxo::preprocess::{KeyedSequence, preprocess};
 use zoo_data::luxo::{GenerateOptions, generate_sequence};
 use zoo_nn::SeededVarMap;
@@ -114,4 +114,86 @@ fn complete_fills_every_frame_and_rejects_bad_keys() {
     assert!(err(&s.keys, &p).contains("6 finite values"));
     // Fewer poses than keys.
     assert!(err(&s.keys, &poses[..3]).contains("one pose per key"));
+}
+
+/// The analytic parameter count is the built model's, for every architecture, and the Table 2
+/// architectures are matched to the ARNN's count (section 9) within 1%.
+#[test]
+fn parameter_counts_are_exact_and_matched() {
+    for base in [ArnnConfig::tiny(), ArnnConfig::paper()] {
+        let target = base.parameter_count();
+        for arch in [Architecture::Arnn, Architecture::NoMemory, Architecture::Segregated] {
+            let config = base.with_matched_architecture(arch);
+            assert_eq!(config.architecture, arch);
+            let varmap = VarMap::new();
+            Arnn::new(&config, SeededVarMap::builder(&varmap, 1, DType::F32, &Device::Cpu)).unwrap();
+            let built: usize = varmap.all_vars().iter().map(|v| v.elem_count()).sum();
+            assert_eq!(built, config.parameter_count(), "{arch:?}");
+            println!("{arch:?}: hidden {}, correction {}, {built} parameters", config.hidden, config.correction);
+            let off = (built as f64 - target as f64).abs() / target as f64;
+            assert!(off < 0.01, "{arch:?}: {built} parameters against the ARNN's {target}");
+        }
+    }
+    assert_eq!(ArnnConfig::paper().parameter_count(), 125_326);
+}
+
+/// Each architecture steps with its own state (none for the no-memory net), and the no-memory
+/// net ignores the previous pose.
+#[test]
+fn table_2_architectures_step() {
+    let dev = Device::Cpu;
+    for arch in [Architecture::NoMemory, Architecture::Segregated] {
+        let config = ArnnConfig::tiny().with_matched_architecture(arch);
+        let varmap = VarMap::new();
+        let model = Arnn::new(&config, SeededVarMap::builder(&varmap, 1, DType::F32, &dev)).unwrap();
+        let a = Tensor::zeros((2, 6), DType::F32, &dev).unwrap();
+        let b = Tensor::ones((2, 6), DType::F32, &dev).unwrap();
+        let t_rel = Tensor::full(0.3f32, (2, 1), &dev).unwrap();
+        let state = model.zero_state(2).unwrap();
+        assert_eq!(state.gru.len(), if arch == Architecture::NoMemory { 0 } else { 2 });
+        let (y0, _) = model.step(&a, &a, &b, &t_rel, &state, None).unwrap();
+        let (y1, _) = model.step(&b, &a, &b, &t_rel, &state, None).unwrap();
+        assert_eq!(y0.dims(), &[2, 6]);
+        let diff = (y0 - y1).unwrap().abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap();
+        if arch == Architecture::NoMemory {
+            assert_eq!(diff, 0.0, "the no-memory net depends on the previous pose");
+        } else {
+            assert!(diff > 0.0);
+        }
+    }
+}
+
+/// The ground penalty is zero for poses on or above the ground and the squared depth of the
+/// base plate's lowest point (in base-height standard deviations) below it.
+#[test]
+fn ground_penalty_measures_the_depth_below_the_ground() {
+    let seqs = lamp_sequences(2);
+    let config = ArnnConfig { ground_weight: 10.0, ..ArnnConfig::tiny() };
+    let t = ArnnTrainer::new(&config, seqs, vec![], &Device::Cpu).unwrap();
+    let norm = t.normalization().clone();
+    let lamp = t.config().lamp.clone().unwrap();
+    let tensor = |poses: &[[f64; 6]]| {
+        let v: Vec<f32> =
+            poses.iter().flat_map(|p| (0..6).map(|j| ((p[j] - norm.mean[j]) / norm.std[j]) as f32)).collect::<Vec<_>>();
+        Tensor::from_vec(v, (poses.len(), 6), &Device::Cpu).unwrap()
+    };
+    let penalty = |poses: &[[f64; 6]]| t.ground_penalty(&tensor(poses)).unwrap().to_scalar::<f32>().unwrap() as f64;
+    let h = lamp.base_half_height;
+    let standing = [0.1, h + 0.001, 0.0, 0.5, -1.1, -1.2];
+    let flying = [0.3, 0.2, 0.3, 0.5, -1.1, -1.2];
+    assert!(penalty(&[standing, flying]) < 1e-9);
+    // Flat, 2 cm into the ground, in one of two poses.
+    let sunk = [0.1, h - 0.02, 0.0, 0.5, -1.1, -1.2];
+    let expected = (0.02 / norm.std[1]).powi(2) / 2.0;
+    let got = penalty(&[standing, sunk]);
+    assert!((got - expected).abs() < 1e-3 * expected, "{got} vs {expected}");
+    // Tilted: its corner is below the ground although its centre is at rest height.
+    let tilted = [0.1, h, 0.2, 0.5, -1.1, -1.2];
+    let depth = -zoo_arnn::eval::base_clearance(&lamp, &tilted);
+    let got = penalty(&[tilted]);
+    assert!(depth > 0.0 && (got - (depth / norm.std[1]).powi(2)).abs() < 1e-3 * got, "{got}");
+    // Off without a weight (the default).
+    assert_eq!(ArnnConfig::paper().ground_weight, 0.0);
+    let t0 = ArnnTrainer::new(&ArnnConfig::tiny(), lamp_sequences(2), vec![], &Device::Cpu).unwrap();
+    assert_eq!(t0.ground_penalty(&tensor(&[sunk])).unwrap().to_scalar::<f32>().unwrap(), 0.0);
 }

@@ -78,6 +78,8 @@ pub enum BenchCommand {
     /// The stitching benchmark (RMR, issue 12): concatenation, inertialization, interpolation
     /// and trained RMRs on section-4 cases with a ground truth and on free multi-clip cases.
     Stitch(crate::cmd::bench_stitch::StitchBenchArgs),
+    /// The exported ARNN's step through tract and onnxruntime (batch 1 latency, batch 64 throughput) and whole keyframe completions.
+    Keyframes(crate::cmd::bench_keyframes::KeyframesBenchArgs),
 }
 
 /// The hierarchy a benchmarked model was trained on, checked against the dataset's.
@@ -116,6 +118,9 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
     }
     if let Some(BenchCommand::Stitch(s)) = a.command {
         return crate::cmd::bench_stitch::run(s);
+    }
+    if let Some(BenchCommand::Keyframes(k)) = a.command {
+        return crate::cmd::bench_keyframes::run(k);
     }
     if let Some(BenchCommand::Runtime(r)) = a.command {
         return crate::cmd::bench_runtime::run(r);

@@ -187,7 +187,7 @@ impl StepBackend for OrtBackend {
 }
 
 /// The onnxruntime library to load.
-fn onnxruntime_library(explicit: &Option<PathBuf>) -> anyhow::Result<PathBuf> {
+pub(crate) fn onnxruntime_library(explicit: &Option<PathBuf>) -> anyhow::Result<PathBuf> {
     let help = "run `bash scripts/onnxruntime.sh` in the zoo workspace (it fetches the onnxruntime wheel from PyPI \
                 into .onnxruntime/), or pass --onnxruntime /path/to/libonnxruntime.so, or set ORT_DYLIB_PATH";
     if let Some(p) = explicit.clone().or_else(|| std::env::var_os("ORT_DYLIB_PATH").map(PathBuf::from)) {

@@ -36,6 +36,10 @@ pub struct CompleteArgs {
     /// PNG, like the paper's Figure 8.
     #[arg(long)]
     pub plot: Option<PathBuf>,
+    /// Write the network's output as is, without lifting a base that sinks below the ground
+    /// onto it (docs/arnn.md, "The ground").
+    #[arg(long)]
+    pub no_ground: bool,
     /// Frames per second of the output [default: the keys file's `fps`, else 50].
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::fps)]
     pub fps: Option<f64>,
@@ -57,6 +61,7 @@ struct KeysFile {
     version: Option<u32>,
     dof_names: Option<Vec<String>>,
     fps: Option<f64>,
+    frames: Option<usize>,
     keys: Vec<KeyEntry>,
 }
 
@@ -134,6 +139,25 @@ pub fn parse_keys(text: &str, dof_names: &[String]) -> Result<Keys, String> {
             ));
         }
     }
+    if let Some(len) = file.frames {
+        let last = file.keys[n - 1].frame;
+        if let Some((i, k)) = file.keys.iter().enumerate().find(|(_, k)| k.frame >= len) {
+            return Err(format!(
+                "key {i} is at frame {}, past the sequence of {len} frames (frames 0 to {}): move it inside or \
+                 raise \"frames\"",
+                k.frame,
+                len.saturating_sub(1)
+            ));
+        }
+        if last + 1 != len {
+            return Err(format!(
+                "the sequence has {len} frames but its last key is at frame {last}: the motion ends on the last key: \
+                 add a key at frame {} (or set \"frames\" to {})",
+                len - 1,
+                last + 1
+            ));
+        }
+    }
     let offset = file.keys[0].frame;
     let span = file.keys[n - 1].frame - offset;
     if span >= crate::args::MAX_FRAMES {
@@ -185,7 +209,9 @@ pub fn run(a: CompleteArgs) -> anyhow::Result<()> {
     };
     let keys = read_keys(&a.keys, &dof_names)?;
     let fps = a.fps.or(keys.fps).unwrap_or(DEFAULT_FPS);
-    let frames = zoo_arnn::complete(&model, &norm, &keys.frames, &keys.poses)?;
+    let mut frames = zoo_arnn::complete(&model, &norm, &keys.frames, &keys.poses)?;
+    let lamp_dofs = config.dofs == zoo_data::luxo::DOFS && dof_names == zoo_data::luxo::DOF_NAMES;
+    let lift = if a.no_ground || !lamp_dofs { 0.0 } else { zoo_arnn::eval::project_to_ground(&lamp, &mut frames) };
     // Misses: the completed pose at each key frame against the key.
     let misses: Vec<Vec<f64>> = keys
         .frames
@@ -210,6 +236,7 @@ pub fn run(a: CompleteArgs) -> anyhow::Result<()> {
             "dof_names": dof_names,
             "key_frames": keys.frames,
             "key_misses": misses,
+            "ground_lift": lift,
             "frames": frames,
         });
         std::fs::write(j, serde_json::to_string_pretty(&v)?).with_context(|| format!("writing {}", j.display()))?;
@@ -227,6 +254,12 @@ pub fn run(a: CompleteArgs) -> anyhow::Result<()> {
     };
     let (pos, pk, pj) = worst(0..2);
     let (ang, ak, aj) = worst(2..config.dofs.max(2));
+    if lift > 0.0 {
+        println!(
+            "the network's base sank up to {:.2} cm below the ground: lifted onto it (--no-ground keeps it)",
+            lift * 100.0
+        );
+    }
     println!(
         "completed {} frames from {} keys ({} fps) into {}{}; largest key miss: {:.2} cm ({} at key {pk}), {:.2} deg \
          ({} at key {ak})",
@@ -344,5 +377,15 @@ mod tests {
         assert!(e.contains("another character"), "{e}");
         let e = err(format!(r#"{{"keys": [{{"frame": 0, "pose": {pose}}}, {{"frame": 300000, "pose": {pose}}}]}}"#));
         assert!(e.contains("past the 100000 frames"), "{e}");
+        let e = err(format!(
+            r#"{{"frames": 10, "keys": [{{"frame": 0, "pose": {pose}}}, {{"frame": 10, "pose": {pose}}}]}}"#
+        ));
+        assert!(e.contains("key 1 is at frame 10, past the sequence of 10 frames (frames 0 to 9)"), "{e}");
+        let k = parse_keys(
+            &format!(r#"{{"frames": 11, "keys": [{{"frame": 0, "pose": {pose}}}, {{"frame": 10, "pose": {pose}}}]}}"#),
+            &names(),
+        )
+        .unwrap();
+        assert_eq!(k.frames, vec![0, 10]);
     }
 }

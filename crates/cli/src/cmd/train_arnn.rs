@@ -9,8 +9,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 use std::time::Duration;
-use zoo_arnn::eval::CompletionReport;
-use zoo_arnn::{ArnnConfig, ArnnTrainer};
+use zoo_arnn::{Architecture, ArnnConfig, ArnnTrainer};
 use zoo_data::luxo::preprocess::{self, KeyedSequence};
 use zoo_data::luxo::{self, DOF_NAMES, GenerateOptions, LampParams, LuxoSequence};
 use zoo_nn::checkpoint;
@@ -24,6 +23,25 @@ pub enum ArnnVariant {
     Arnn,
     /// Table 1's "no curriculum": omega = 1 and no teacher forcing from the start.
     NoCurriculum,
+    /// Table 2's no-memory net: a keyframe-conditioned feed-forward net (keys and t_rel in,
+    /// the pose out), its widths matched to the ARNN's parameter count; the ARNN's curriculum.
+    NoMemory,
+    /// Table 2's segregated net: an RNN with no keyframe input plus a keyframe-conditioned
+    /// feed-forward correction, parameter count matched to the ARNN's; the ARNN's curriculum.
+    Segregated,
+}
+
+impl ArnnVariant {
+    /// The configuration of this variant from the ARNN's.
+    pub fn configure(self, arnn: &ArnnConfig) -> ArnnConfig {
+        let mut c = match self {
+            ArnnVariant::Arnn | ArnnVariant::NoCurriculum => arnn.clone(),
+            ArnnVariant::NoMemory => arnn.with_matched_architecture(Architecture::NoMemory),
+            ArnnVariant::Segregated => arnn.with_matched_architecture(Architecture::Segregated),
+        };
+        c.curriculum.enabled = self != ArnnVariant::NoCurriculum;
+        c
+    }
 }
 
 /// Sizes of the ARNN to train.
@@ -71,7 +89,8 @@ pub struct ArnnArgs {
     /// refused.
     #[arg(long, conflicts_with = "resume")]
     pub overwrite: bool,
-    /// Model variant (Table 1).
+    /// Model variant: the ARNN, or a comparison of Table 1 (no curriculum) or Table 2
+    /// (no-memory, segregated; parameter counts matched to the ARNN's).
     #[arg(long, value_enum, default_value_t = ArnnVariant::Arnn)]
     pub variant: ArnnVariant,
     /// Model sizes.
@@ -83,9 +102,18 @@ pub struct ArnnArgs {
     /// Adam learning rate [default: the preset's; paper: 1e-3].
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::learning_rate)]
     pub lr: Option<f64>,
+    /// Weight of the ground penalty on the base plate sinking below the ground [default: 0,
+    /// off] (docs/arnn.md, "The ground"; `zoo complete` lifts a sunken base onto the ground).
+    #[arg(long, allow_hyphen_values = true, value_parser = ground_weight)]
+    pub ground_weight: Option<f64>,
     /// Seed of the generated data, the split, the weights and the trainer.
     #[arg(long, default_value_t = 1, allow_hyphen_values = true, value_parser = crate::args::seed)]
     pub seed: u64,
+}
+
+/// `--ground-weight`: a weight in [0, 1e6].
+fn ground_weight(s: &str) -> Result<f64, String> {
+    crate::args::real_in(s, crate::args::Interval::closed(0.0, 1e6), "")
 }
 
 /// Where a run's sequences come from, recorded in `train_state.json` so that `--resume`
@@ -213,32 +241,6 @@ pub fn lamp_data(settings: &DataSettings) -> anyhow::Result<LampData> {
     Ok(LampData { train, test, lamp, source })
 }
 
-/// Prints the completion report and returns it as JSON.
-fn report(r: &CompletionReport) -> serde_json::Value {
-    println!("test set, {} sequences completed from all their keys (frame / key error: normalised MSE):", r.sequences);
-    for (name, e) in [("ARNN", &r.arnn), ("linear", &r.linear), ("cubic spline", &r.spline)] {
-        let miss = &e.max_key_miss;
-        println!(
-            "  {name:<13} frame {:.5}  key {:.5}  RMSE base x {:.1} cm, y {:.1} cm, angles {:.1}/{:.1}/{:.1}/{:.1} deg; \
-             largest key miss x {:.1} cm, y {:.1} cm, angle {:.1} deg; lowest base point {}",
-            e.frame,
-            e.key,
-            e.rmse[0] * 100.0,
-            e.rmse[1] * 100.0,
-            e.rmse[2].to_degrees(),
-            e.rmse[3].to_degrees(),
-            e.rmse[4].to_degrees(),
-            e.rmse[5].to_degrees(),
-            miss[0] * 100.0,
-            miss[1] * 100.0,
-            miss[2..].iter().fold(0.0f64, |a, b| a.max(*b)).to_degrees(),
-            e.lowest_base.map_or("-".into(), |l| format!("{:.1} cm", l * 100.0)),
-        );
-    }
-    println!("  ARNN frame error / spline frame error = {:.3}", r.arnn.frame / r.spline.frame.max(1e-30));
-    serde_json::to_value(r).unwrap_or_default()
-}
-
 /// Runs `zoo train arnn`.
 pub fn run(a: ArnnArgs) -> anyhow::Result<()> {
     let device = candle_core::Device::Cpu;
@@ -305,7 +307,10 @@ pub fn run(a: ArnnArgs) -> anyhow::Result<()> {
         config.seed = a.seed;
         let steps_per_epoch = data.train.len().div_ceil(config.batch_size) as u64;
         config.curriculum.total_steps = steps_per_epoch * a.epochs as u64;
-        config.curriculum.enabled = variant == ArnnVariant::Arnn;
+        if let Some(w) = a.ground_weight {
+            config.ground_weight = w;
+        }
+        let config = variant.configure(&config);
         ArnnTrainer::new(&config, data.train.clone(), data.test.clone(), &device)?
     };
     println!(
@@ -343,7 +348,7 @@ pub fn run(a: ArnnArgs) -> anyhow::Result<()> {
     let (model, norm) = zoo_arnn::checkpoint::load(&out, &device)
         .with_context(|| format!("loading the best checkpoint in {}", out.display()))?;
     let r = zoo_arnn::eval::evaluate(&model, &norm, &data.test)?;
-    let completion = report(&r);
+    let completion = crate::cmd::eval_arnn::print_report(&r);
     // Figure 8: the first test sequence, ground truth, spline and ARNN, keys circled.
     let seq = &data.test[0];
     let poses: Vec<Vec<f64>> = seq.keys.iter().map(|&k| seq.frames[k].to_vec()).collect();

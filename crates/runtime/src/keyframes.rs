@@ -1,0 +1,260 @@
+//! Keyframe completion in the engine: an exported ARNN (model kind `arnn`, its per-frame step
+//! graph, see `zoo_arnn::export`) fills in every frame between an animator's keys, into a
+//! buffer the caller owns.
+//!
+//! The keys of a character are frames (strictly increasing, the first one 0) and one pose per
+//! key (`dofs` values each, the units of the export: metres and radians for the lamp). Frame 0
+//! of the output is the first key; every later frame `t` is one step of the graph from the
+//! previous output, the keys around `t` and `t_rel = (t - T_K) / (T_(K+1) - T_K)` (a frame on a
+//! key belongs to the interval that ends there), exactly as `zoo_arnn::complete` and `zoo
+//! complete` run it. A batch of characters runs in one graph call per frame; characters whose
+//! keys end earlier are stepped on (their outputs discarded) until the longest one ends.
+//!
+//! ```no_run
+//! use zoo_runtime::keyframes::{KeyframeModel, MotionKeys};
+//! let model = KeyframeModel::load("arnn.onnx")?;
+//! let mut runner = model.runner(1)?;
+//! let d = model.dofs();
+//! let frames = [0, 12, 24];
+//! let poses = vec![0.0f32; frames.len() * d];
+//! let mut out = vec![0.0f32; (24 + 1) * d];
+//! runner.complete(MotionKeys { frames: &frames, poses: &poses }, &mut out)?;
+//! # Ok::<(), zoo_runtime::keyframes::KeyframeError>(())
+//! ```
+
+use crate::error::MotionError;
+use crate::model::{MotionModel, MotionState};
+use crate::runner::MotionRunner;
+use std::path::Path;
+
+/// `zoo.model_kind` of the exported ARNN.
+pub const MODEL_KIND: &str = "arnn";
+
+/// What went wrong while completing keys.
+#[derive(Debug, thiserror::Error)]
+pub enum KeyframeError {
+    /// The keys of a character cannot be completed.
+    #[error("character {character}: {reason}")]
+    Keys {
+        /// Character (batch row).
+        character: usize,
+        /// What is wrong and how to fix it.
+        reason: String,
+    },
+    /// The model is not an exported ARNN step graph.
+    #[error("{0}: load the file written by `zoo export --onnx` from a `zoo train arnn` run")]
+    NotKeyframeModel(String),
+    /// A buffer, the batch or the graph run failed.
+    #[error(transparent)]
+    Motion(#[from] MotionError),
+}
+
+/// One character's keys: `frames` strictly increasing from 0, `poses` `frames.len() * dofs`
+/// values (key-major).
+#[derive(Clone, Copy, Debug)]
+pub struct MotionKeys<'a> {
+    /// Key frames, strictly increasing, the first 0.
+    pub frames: &'a [usize],
+    /// One pose per key, `dofs` values each.
+    pub poses: &'a [f32],
+}
+
+impl MotionKeys<'_> {
+    /// Frames of the completed motion: the last key frame + 1.
+    pub fn len(&self) -> usize {
+        self.frames.last().map_or(0, |f| f + 1)
+    }
+
+    /// Whether there are no keys.
+    pub fn is_empty(&self) -> bool {
+        self.frames.is_empty()
+    }
+
+    /// The keys around frame `t >= 1` and `t_rel` (`zoo_data::luxo::preprocess::KeyedSequence::interval`).
+    fn interval(&self, t: usize) -> (usize, usize, f32) {
+        let n = self.frames.len();
+        let mut k = 0;
+        while k + 2 < n && self.frames[k + 1] < t {
+            k += 1;
+        }
+        let (a, b) = (self.frames[k], self.frames[k + 1]);
+        (k, k + 1, ((t as f64 - a as f64) / (b - a).max(1) as f64) as f32)
+    }
+
+    fn check(&self, character: usize, dofs: usize) -> Result<(), KeyframeError> {
+        let bad = |reason: String| Err(KeyframeError::Keys { character, reason });
+        let n = self.frames.len();
+        if n < 2 {
+            return bad(format!("{n} key(s): completion needs at least 2"));
+        }
+        if self.frames[0] != 0 {
+            return bad(format!("the first key is at frame {}: key frames start at 0 (subtract it)", self.frames[0]));
+        }
+        if let Some(i) = self.frames.windows(2).position(|w| w[0] >= w[1]) {
+            return bad(format!(
+                "key {} is at frame {} but key {i} is at frame {}: key frames must strictly increase",
+                i + 1,
+                self.frames[i + 1],
+                self.frames[i]
+            ));
+        }
+        if self.poses.len() != n * dofs {
+            return bad(format!(
+                "{} pose values for {n} keys of {dofs} values: expected {}",
+                self.poses.len(),
+                n * dofs
+            ));
+        }
+        if let Some(i) = self.poses.iter().position(|v| !v.is_finite()) {
+            return bad(format!("key {} value {} is {}, not a finite number", i / dofs, i % dofs, self.poses[i]));
+        }
+        Ok(())
+    }
+}
+
+/// An exported ARNN step graph, checked: inputs `prev`, `key_a`, `key_b` (`dofs` each), `t_rel`
+/// (1), outputs `pose` (`dofs`) first. Cheap to clone, `Send + Sync`.
+#[derive(Clone, Debug)]
+pub struct KeyframeModel {
+    model: MotionModel,
+    dofs: usize,
+}
+
+impl KeyframeModel {
+    /// Loads an exported ARNN (`zoo export --onnx RUN --out arnn.onnx`).
+    pub fn load(path: impl AsRef<Path>) -> Result<Self, KeyframeError> {
+        Self::new(MotionModel::load(path)?)
+    }
+
+    /// Checks that `model` is an ARNN step graph.
+    pub fn new(model: MotionModel) -> Result<Self, KeyframeError> {
+        let kind = &model.metadata().model_kind;
+        if kind != MODEL_KIND {
+            return Err(KeyframeError::NotKeyframeModel(format!("the model kind is `{kind}`, not `{MODEL_KIND}`")));
+        }
+        let names: Vec<&str> = model.inputs().iter().map(|i| i.name.as_str()).collect();
+        let dofs = model.inputs().first().map_or(0, |i| i.width);
+        let widths: Vec<usize> = model.inputs().iter().map(|i| i.width).collect();
+        let outputs: Vec<(&str, usize)> = model.outputs().iter().map(|o| (o.name.as_str(), o.width)).collect();
+        if names != ["prev", "key_a", "key_b", "t_rel"]
+            || widths != [dofs, dofs, dofs, 1]
+            || dofs == 0
+            || outputs != [("pose", dofs)]
+        {
+            return Err(KeyframeError::NotKeyframeModel(format!(
+                "the graph's inputs are {names:?} of widths {widths:?} and its outputs {outputs:?}, expected prev, \
+                 key_a, key_b (D each), t_rel (1) and one output `pose` (D) besides the recurrent state"
+            )));
+        }
+        Ok(KeyframeModel { model, dofs })
+    }
+
+    /// Values per pose (6 for the lamp).
+    pub fn dofs(&self) -> usize {
+        self.dofs
+    }
+
+    /// The step graph.
+    pub fn model(&self) -> &MotionModel {
+        &self.model
+    }
+
+    /// A runner for up to `max_batch` characters per call (its buffers sized once here).
+    pub fn runner(&self, max_batch: usize) -> Result<KeyframeRunner, KeyframeError> {
+        if max_batch == 0 {
+            return Err(MotionError::EmptyBatch.into());
+        }
+        let d = self.dofs;
+        Ok(KeyframeRunner {
+            runner: self.model.runner()?,
+            states: (0..max_batch).map(|_| self.model.new_state()).collect(),
+            prev: vec![0.0; max_batch * d],
+            key_a: vec![0.0; max_batch * d],
+            key_b: vec![0.0; max_batch * d],
+            t_rel: vec![0.0; max_batch],
+            pose: vec![0.0; max_batch * d],
+            dofs: d,
+        })
+    }
+}
+
+/// Scratch space to complete keys on one thread (`Send`, not `Sync`); no allocation per call
+/// once the graph sessions for the batch sizes used exist.
+#[derive(Debug)]
+pub struct KeyframeRunner {
+    runner: MotionRunner,
+    states: Vec<MotionState>,
+    prev: Vec<f32>,
+    key_a: Vec<f32>,
+    key_b: Vec<f32>,
+    t_rel: Vec<f32>,
+    pose: Vec<f32>,
+    dofs: usize,
+}
+
+impl KeyframeRunner {
+    /// Most characters per call.
+    pub fn max_batch(&self) -> usize {
+        self.states.len()
+    }
+
+    /// Completes one character's keys into `out` (`keys.len() * dofs` values, frame-major).
+    pub fn complete(&mut self, keys: MotionKeys<'_>, out: &mut [f32]) -> Result<(), KeyframeError> {
+        self.complete_batch(&[keys], &mut [out])
+    }
+
+    /// Completes the keys of `keys.len()` characters in one graph call per frame: `out[c]`
+    /// receives `keys[c].len() * dofs` values. Every buffer and key is checked before anything
+    /// is written (a bad key or buffer leaves `out` unchanged).
+    pub fn complete_batch(&mut self, keys: &[MotionKeys<'_>], out: &mut [&mut [f32]]) -> Result<(), KeyframeError> {
+        let (b, d) = (keys.len(), self.dofs);
+        if b == 0 {
+            return Err(MotionError::EmptyBatch.into());
+        }
+        if b > self.max_batch() {
+            return Err(KeyframeError::Keys {
+                character: b - 1,
+                reason: format!("{b} characters, but the runner was made for at most {}", self.max_batch()),
+            });
+        }
+        if out.len() != b {
+            return Err(MotionError::BufferCount { what: "completion outputs", expected: b, found: out.len() }.into());
+        }
+        for (c, (k, o)) in keys.iter().zip(out.iter()).enumerate() {
+            k.check(c, d)?;
+            crate::runner::check_len(&format!("completion output of character {c}"), o.len(), k.len(), d)?;
+        }
+        let last = keys.iter().map(|k| k.len()).max().unwrap_or(0);
+        for (k, o) in keys.iter().zip(out.iter_mut()) {
+            o[..d].copy_from_slice(&k.poses[..d]);
+        }
+        for (c, k) in keys.iter().enumerate() {
+            self.prev[c * d..(c + 1) * d].copy_from_slice(&k.poses[..d]);
+            self.states[c].reset();
+        }
+        for t in 1..last {
+            for (c, k) in keys.iter().enumerate() {
+                // A character whose keys have ended holds its last interval at t_rel 1.
+                let (a, z, rel) =
+                    if t < k.len() { k.interval(t) } else { (k.frames.len() - 2, k.frames.len() - 1, 1.0) };
+                self.key_a[c * d..(c + 1) * d].copy_from_slice(&k.poses[a * d..(a + 1) * d]);
+                self.key_b[c * d..(c + 1) * d].copy_from_slice(&k.poses[z * d..(z + 1) * d]);
+                self.t_rel[c] = rel;
+            }
+            self.runner.step_batch(
+                &mut self.states[..b],
+                &[&self.prev[..b * d], &self.key_a[..b * d], &self.key_b[..b * d], &self.t_rel[..b]],
+                &mut [&mut self.pose[..b * d]],
+            )?;
+            let pose = &self.pose[..b * d];
+            for (c, k) in keys.iter().enumerate() {
+                let p = &pose[c * d..(c + 1) * d];
+                if t < k.len() {
+                    out[c][t * d..(t + 1) * d].copy_from_slice(p);
+                }
+                self.prev[c * d..(c + 1) * d].copy_from_slice(p);
+            }
+        }
+        Ok(())
+    }
+}
