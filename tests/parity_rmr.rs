@@ -3,7 +3,8 @@
 //!
 //! Where the expected numbers come from: candle's `Rmr::forward` in evaluation mode (no
 //! dropout) on batch-first windows; the ONNX graph takes the same windows time-major (layout 0).
-//! Weights are the seeded initial weights of `Config::tiny()` (`zoo_nn::SeededVarMap`, seed
+//! Weights are the seeded initial weights of `Config::tiny()` (residual decoder; its output
+//! layer is not zeroed here, so the correction is not 0; the absolute decoder is checked too) (`zoo_nn::SeededVarMap`, seed
 //! 7), inputs fixed LCG draws. Every pair of runtimes must agree within 1e-4 (normalised units)
 //! on every value. The snapshots hold the BGRU graph summary and candle's outputs for the
 //! first frames, rounded to 4 decimals.
@@ -32,7 +33,10 @@ struct Fixture {
 }
 
 fn fixture(cell: RefinerCell) -> Fixture {
-    let config = Config::tiny().with_cell(cell);
+    fixture_of(Config::tiny().with_cell(cell))
+}
+
+fn fixture_of(config: Config) -> Fixture {
     let varmap = VarMap::new();
     let vb = zoo_nn::SeededVarMap::builder(&varmap, 7, DType::F32, &Device::Cpu);
     let model = Rmr::new(&config, vb).unwrap();
@@ -95,7 +99,13 @@ fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
 }
 
 fn check(cell: RefinerCell) -> (Fixture, OnnxModel, Vec<f32>) {
-    let f = fixture(cell);
+    check_config(Config::tiny().with_cell(cell))
+}
+
+/// Exports `config`'s seeded model and compares candle, tract and onnxruntime.
+fn check_config(config: Config) -> (Fixture, OnnxModel, Vec<f32>) {
+    let cell = config.cell;
+    let f = fixture_of(config);
     let d = f.config.dim();
     let onnx = export_rmr(&f.config, &f.stats, &f.varmap).unwrap();
     let x = input(d);
@@ -133,6 +143,9 @@ fn rmr_other_cells_parity() {
         let want = if matches!(cell, RefinerCell::Lstm | RefinerCell::Blstm) { "LSTM" } else { "GRU" };
         assert_eq!(ops.get(want), Some(&2), "{cell:?}: {ops:?}");
     }
+    // The paper's absolute decoder: no residual Mul/Add.
+    let (_, onnx, _) = check_config(Config::tiny().with_residual(false));
+    assert_eq!(onnx.summary().op_counts.get("Mul"), None);
 }
 
 #[test]

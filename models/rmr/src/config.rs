@@ -103,6 +103,12 @@ pub struct Config {
     pub dropout: f64,
     /// Hidden sizes of the decoder D before its linear output layer (paper: 256).
     pub decoder: Vec<usize>,
+    /// The decoder predicts a correction added to the input's pose values (`r, p, q, v`;
+    /// contacts stay logits), and its output layer starts at zero, so an untrained model
+    /// returns its input. The paper's decoder predicts the pose itself (`false`, the default of
+    /// configurations saved before the switch existed); see docs/rmr.md for why we add it.
+    #[serde(default)]
+    pub residual: bool,
     /// Frames of the beginning loss (Table 2; paper: 5; 0 disables the loss).
     pub t_begin: usize,
     /// Weight of the pose loss (paper: 1).
@@ -147,6 +153,7 @@ impl Config {
             cell: RefinerCell::Bgru,
             dropout: 0.5,
             decoder: vec![256],
+            residual: true,
             t_begin: 5,
             lambda_pose: 1.0,
             lambda_trajectory: 1.0,
@@ -197,6 +204,12 @@ impl Config {
     /// Sets the refiner cell (Table 1).
     pub fn with_cell(mut self, cell: RefinerCell) -> Self {
         self.cell = cell;
+        self
+    }
+
+    /// Residual decoder (`true`, our default) or the paper's absolute output (`false`).
+    pub fn with_residual(mut self, on: bool) -> Self {
+        self.residual = on;
         self
     }
 

@@ -12,7 +12,7 @@ use crate::config::Config;
 use crate::error::{RmrError, RmrResult};
 use crate::features::{FeatureLayout, FeatureStats, decode, encode_clip};
 use crate::model::Rmr;
-use zoo_data::stitch::{MIN_CLIP_FRAMES, align_clips, ground_roots};
+use zoo_data::stitch::{MIN_CLIP_FRAMES, StitchLayout, align_clips, ground_roots};
 use zoo_motion::Clip;
 
 /// How a sequence is refined.
@@ -55,7 +55,21 @@ pub fn refine_sequence(
     opts: RefineOptions,
 ) -> RmrResult<Vec<f32>> {
     let config = model.config();
-    let d = config.dim();
+    let fl = FeatureLayout::new(config.joints, config.layout.lower_body.len());
+    refine_sequence_with(|w| model.refine(w), fl, stats, features, opts)
+}
+
+/// [`refine_sequence`] with any window refiner: `refine` maps a normalised window
+/// (`window * dim`) to normalised pose vectors of the same size (contacts as logits). The
+/// identity refines a sequence into itself (tests, and the runtime's reference).
+pub fn refine_sequence_with(
+    mut refine: impl FnMut(&[f32]) -> RmrResult<Vec<f32>>,
+    fl: FeatureLayout,
+    stats: &FeatureStats,
+    features: &[f32],
+    opts: RefineOptions,
+) -> RmrResult<Vec<f32>> {
+    let d = fl.dim();
     if stats.dim() != d || features.is_empty() || !features.len().is_multiple_of(d) {
         return Err(RmrError::Size {
             what: "sequence to refine".into(),
@@ -77,13 +91,20 @@ pub fn refine_sequence(
             opts.stride, opts.window
         )));
     }
-    let fl = FeatureLayout::new(config.joints, config.layout.lower_body.len());
     let pose = fl.contacts();
     let mut out = features.to_vec();
     stats.normalize(&mut out);
     for ws in window_starts(frames, opts.window, opts.stride) {
         let span = ws * d..(ws + opts.window) * d;
-        let mut y = model.refine(&out[span.clone()])?;
+        let mut y = refine(&out[span.clone()])?;
+        if y.len() != span.len() {
+            return Err(RmrError::Size {
+                what: "refined window".into(),
+                expected: span.len(),
+                detail: format!("{} frames of {d} values", opts.window),
+                found: y.len(),
+            });
+        }
         if ws > 0 {
             // out[ws] is the previous output at the window's first frame.
             let offset: Vec<f32> = (0..pose).map(|i| out[ws * d + i] - y[i]).collect();
@@ -153,8 +174,20 @@ pub fn refine_clip(
 ) -> RmrResult<(Clip, Vec<[bool; 4]>)> {
     let config = model.config();
     config.check_skeleton(&aligned.skeleton)?;
-    let x = encode_clip(aligned, &config.layout)?;
-    let y = refine_sequence(model, stats, &x, opts)?;
-    let start = ground_roots(aligned, &config.layout)[0];
-    decode(&y, &aligned.skeleton, &config.layout, aligned.frame_time, start)
+    refine_clip_with(|w| model.refine(w), &config.layout, stats, aligned, opts)
+}
+
+/// [`refine_clip`] with any window refiner (see [`refine_sequence_with`]).
+pub fn refine_clip_with(
+    refine: impl FnMut(&[f32]) -> RmrResult<Vec<f32>>,
+    layout: &StitchLayout,
+    stats: &FeatureStats,
+    aligned: &Clip,
+    opts: RefineOptions,
+) -> RmrResult<(Clip, Vec<[bool; 4]>)> {
+    let fl = FeatureLayout::new(aligned.joints(), layout.lower_body.len());
+    let x = encode_clip(aligned, layout)?;
+    let y = refine_sequence_with(refine, fl, stats, &x, opts)?;
+    let start = ground_roots(aligned, layout)[0];
+    decode(&y, &aligned.skeleton, layout, aligned.frame_time, start)
 }

@@ -42,6 +42,9 @@ impl RmrTrainer {
         let varmap = VarMap::new();
         let vb = SeededVarMap::builder(&varmap, config.train.seed, DType::F32, device);
         let model = Rmr::new(config, vb)?;
+        if config.residual {
+            zero_output_layer(&varmap, config)?;
+        }
         let t = &config.train;
         let mut named: Vec<(String, candle_core::Var)> =
             varmap.data().lock().expect("varmap lock").iter().map(|(n, v)| (n.clone(), v.clone())).collect();
@@ -187,6 +190,18 @@ impl RmrTrainer {
         t.load_training_state(dir)?;
         Ok(t)
     }
+}
+
+/// Sets the decoder's output layer (`decoder.{n}.weight` and `.bias`) to zero: a residual
+/// model then starts as the identity on the pose values (contact logits 0).
+fn zero_output_layer(varmap: &VarMap, config: &Config) -> RmrResult<()> {
+    let data = varmap.data().lock().expect("varmap lock");
+    for part in ["weight", "bias"] {
+        let name = format!("decoder.{}.{part}", config.decoder.len());
+        let var = data.get(&name).ok_or_else(|| RmrError::Config(format!("the model has no weight `{name}`")))?;
+        var.set(&var.as_tensor().zeros_like()?)?;
+    }
+    Ok(())
 }
 
 /// An [`RmrTrainer`] with its normalised training and validation pairs, for

@@ -143,6 +143,23 @@ pub fn read_clips(specs: &[ClipSpec]) -> anyhow::Result<Vec<Clip>> {
         .collect()
 }
 
+/// Why a file given as `--model` is refused, naming the model kind of an exported ONNX file.
+fn model_file_message(path: &Path) -> String {
+    let kind = std::fs::read(path)
+        .ok()
+        .and_then(|bytes| zoo_export::OnnxModel::from_bytes(&bytes, &path.display().to_string()).ok())
+        .and_then(|m| m.metadata_value("zoo.model_kind").map(str::to_string));
+    let what = match kind {
+        Some(k) => format!("an exported `{k}` ONNX model"),
+        None => "not a folder".to_string(),
+    };
+    format!(
+        "--model {} is a file ({what}); `zoo stitch` takes the run folder of `zoo train rmr` (the folder holding \
+         config.json and model.safetensors)",
+        path.display()
+    )
+}
+
 /// `OUT.input.bvh` beside `OUT.bvh`.
 fn input_path(out: &Path) -> PathBuf {
     let stem = out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "stitched".into());
@@ -158,6 +175,9 @@ pub fn run(a: StitchArgs) -> anyhow::Result<()> {
     let specs = a.clips.iter().map(|s| parse_clip_spec(s)).collect::<anyhow::Result<Vec<_>>>()?;
     let model = match (&a.model, a.method) {
         (Some(dir), _) => {
+            if dir.is_file() {
+                bail!("{}", model_file_message(dir));
+            }
             let kind = crate::registry::model_kind(dir)?;
             if kind != "rmr" {
                 bail!(

@@ -90,6 +90,10 @@ pub struct RmrArgs {
     /// Train without the root trajectory loss (the Figure 9 ablation).
     #[arg(long)]
     pub no_trajectory_loss: bool,
+    /// The paper's decoder, predicting the pose itself, instead of our default residual
+    /// decoder (a correction added to the input, starting at zero; docs/rmr.md).
+    #[arg(long)]
+    pub no_residual: bool,
     /// Units of each recurrent layer, per direction [default: the preset's; paper: 256].
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::layer_width)]
     pub hidden: Option<usize>,
@@ -153,6 +157,9 @@ fn fresh_config(a: &RmrArgs, skeleton: &zoo_motion::Skeleton) -> anyhow::Result<
     }
     if a.no_trajectory_loss {
         config = config.with_trajectory_loss(false);
+    }
+    if a.no_residual {
+        config = config.with_residual(false);
     }
     if let Some(h) = a.hidden {
         config.hidden = h;
@@ -240,9 +247,10 @@ pub fn run(a: RmrArgs) -> anyhow::Result<()> {
     };
     let c = trainer.config();
     println!(
-        "training RMR ({:?}, T_begin {}, trajectory loss {}) on {source}: {} parameters, batch {}, lr {:e}, run \
+        "training RMR ({:?}, {} decoder, T_begin {}, trajectory loss {}) on {source}: {} parameters, batch {}, lr {:e}, run \
          folder {}",
         c.cell,
+        if c.residual { "residual" } else { "absolute" },
         c.t_begin,
         if c.lambda_trajectory > 0.0 { "on" } else { "off" },
         zoo_rmr::model::parameter_count(trainer.varmap()),
