@@ -32,6 +32,7 @@ pub mod metadata;
 pub mod model;
 pub mod pose;
 pub mod runner;
+pub mod stitch;
 pub mod synthesis;
 pub mod transition;
 
@@ -44,6 +45,7 @@ pub use metadata::{
 pub use model::{MotionModel, MotionState, MotionStateInfo, MotionTensorInfo};
 pub use pose::{Conversion, CoordinateFrame, EnginePose, Handedness, UpAxis};
 pub use runner::MotionRunner;
+pub use stitch::StitchRefiner;
 pub use transition::{TargetMiss, TransitionModel, TransitionRunner, TransitionState};
 
 /// Re-exported so callers use the same glam version as the runtime.
