@@ -20,7 +20,8 @@ use zoo_data::stitch::{MotionSet, PairConfig, StitchDatabases, StitchLayout, bui
 use zoo_motion::Clip;
 use zoo_motion::glam::{DQuat, DVec3};
 use zoo_rmr::features::{FeatureLayout, FeatureStats, decode, encode_clip};
-use zoo_rmr::stitch::{RefineOptions, refine_clip, refine_clip_with};
+use zoo_rmr::footlock::place_ankles;
+use zoo_rmr::stitch::{RefineOptions, refine_clip_full, refine_clip_full_with};
 
 #[derive(Default)]
 struct Acc {
@@ -81,9 +82,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let (model, stats) = zoo_rmr::checkpoint::load(m, &candle_core::Device::Cpu)?;
         loaded.push((m.display().to_string(), model, stats));
     }
-    let mut names = vec!["ground truth".to_string(), "gt->enc->dec".into(), "identity".into(), "concat".into()];
+    let mut names = vec!["ground truth".to_string(), "gt->enc->dec".into(), "identity".into(), "identity+ik".into()];
+    names.push("concat".into());
     names.push("inertialize".into());
-    names.extend(loaded.iter().map(|(n, ..)| n.clone()));
+    names.extend(loaded.iter().flat_map(|(n, ..)| [n.clone(), format!("{n} +ik")]));
     let mut accs: Vec<Acc> = names.iter().map(|_| Acc::default()).collect();
     for p in &pairs {
         let gt = p.target.global();
@@ -91,11 +93,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         outs.push(p.target.clone());
         let y = encode_clip(&p.target, &layout)?;
         outs.push(decode(&y, &p.target.skeleton, &layout, p.target.frame_time, ground_roots(&p.target, &layout)[0])?.0);
-        outs.push(refine_clip_with(|w| Ok(w.to_vec()), &layout, &unit, &p.input, opts)?.0);
+        let id = refine_clip_full_with(|w| Ok(w.to_vec()), &layout, &unit, &p.input, opts)?;
+        outs.push(id.clip.clone());
+        let mut placed = id.clip;
+        place_ankles(&mut placed, &id.ankles, &layout);
+        outs.push(placed);
         outs.push(p.input.clone());
         outs.push(inertialize_seams(&p.input, &p.seams, 10));
         for (_, model, stats) in &loaded {
-            outs.push(refine_clip(model, stats, &p.input, opts)?.0);
+            let r = refine_clip_full(model, stats, &p.input, opts)?;
+            outs.push(r.clip.clone());
+            let mut placed = r.clip;
+            place_ankles(&mut placed, &r.ankles, &layout);
+            outs.push(placed);
         }
         for (acc, out) in accs.iter_mut().zip(&outs) {
             let (gr, gp) = out.global();

@@ -475,3 +475,76 @@ fn a_residual_model_starts_as_the_identity() {
     let old: Config = serde_json::from_value(json).unwrap();
     assert!(!old.residual);
 }
+
+/// The seam weight (docs/rmr.md): the pose loss counts frames within 5 of a seam
+/// `1 + seam_weight` times; 0 is the paper's loss; the pairs carry their seams.
+#[test]
+fn the_seam_weight_weights_the_frames_around_the_seams() {
+    use zoo_rmr::loss::seam_weights;
+    let w = seam_weights(&[vec![3], vec![10, 14]], 16, 4.0, 2);
+    let first: Vec<f32> = w[..16].to_vec();
+    assert_eq!(first, [1., 5., 5., 5., 5., 5., 1., 1., 1., 1., 1., 1., 1., 1., 1., 1.]);
+    let second: Vec<f32> = w[16..].to_vec();
+    assert_eq!(second, [1., 1., 1., 1., 1., 1., 1., 1., 5., 5., 5., 5., 5., 5., 5., 5.]);
+    // Hand-made: frame 2 of 3 off by 3 in v; weights 1, 1, 5 -> 15 / 3.
+    let (loss, _) = one_joint_loss(0, false);
+    let zero = seq(&[[0.0; 17]; 3]);
+    let mut out = [[0.0f32; 17]; 3];
+    out[2][12] = 3.0;
+    let fw = Tensor::from_vec(vec![1.0f32, 1.0, 5.0], (1, 3), &Device::Cpu).unwrap();
+    let t = loss.terms_weighted(&seq(&out), &zero, &zero, Some(&fw)).unwrap();
+    assert!((value(&t.pose) - 5.0).abs() < 1e-6, "{}", value(&t.pose));
+    let t = loss.terms(&seq(&out), &zero, &zero).unwrap();
+    assert!((value(&t.pose) - 1.0).abs() < 1e-6);
+    // Training pairs carry their seams (T_A, T_A + T_B); the trainer weights only when asked.
+    let data = tiny_data();
+    assert_eq!(data.train.seams.len(), data.train.count);
+    for (s, spec) in data.train.seams.iter().zip(&data.train_specs) {
+        assert_eq!(s[0], spec.lengths[0]);
+        assert_eq!(s.len(), if spec.lengths[1] > 0 { 2 } else { 1 });
+    }
+    let idx = [0usize, 1, 2];
+    let plain = RmrTrainer::new(&data.config, data.stats.clone(), &Device::Cpu).unwrap();
+    assert!(plain.batch_weights(&data.train, &idx).unwrap().is_none());
+    let mut config = data.config.clone();
+    config.seam_weight = 4.0;
+    let weighted = RmrTrainer::new(&config, data.stats.clone(), &Device::Cpu).unwrap();
+    let w = weighted.batch_weights(&data.train, &idx).unwrap().unwrap();
+    assert_eq!(w.dims(), &[3, data.train.frames]);
+    config.seam_weight = -1.0;
+    assert!(config.validate().unwrap_err().to_string().contains("seam_weight"));
+}
+
+/// RMR sec. 5's output processing: the ankles placed at the predicted lower-body positions by
+/// IK. On the identity refiner the predicted positions are the input's, so the motion stays.
+#[test]
+fn placing_the_ankles_at_the_predicted_positions_keeps_a_consistent_pose() {
+    use zoo_data::stitch::align_clips;
+    use zoo_rmr::footlock::place_ankles;
+    use zoo_rmr::stitch::{RefineOptions, refine_clip_full_with};
+    let data = tiny_data();
+    let layout = data.config.layout.clone();
+    let clips = synth_clips(0.5, 9);
+    let aligned = align_clips(&[clips[0].slice(0, 40), clips[1].slice(30, 75)], &layout, 10).unwrap().clip;
+    let opts = RefineOptions { window: 30, stride: 15, blend_frames: 10 };
+    let r = refine_clip_full_with(|w| Ok(w.to_vec()), &layout, &data.stats, &aligned, opts).unwrap();
+    assert_eq!(r.ankles.len(), aligned.frames());
+    let (_, gp) = aligned.global();
+    let (l, rt) = (layout.contacts[0], layout.contacts[2]);
+    for (f, a) in r.ankles.iter().enumerate() {
+        assert!((a[0] - gp[f * 21 + l]).length() < 0.05 && (a[1] - gp[f * 21 + rt]).length() < 0.05, "frame {f}");
+    }
+    let mut placed = r.clip.clone();
+    let moved = place_ankles(&mut placed, &r.ankles, &layout);
+    assert!(moved < 0.05, "the ankles move {moved} cm on a consistent pose");
+    // Goals 3 cm above every ankle (within reach): the ankles get there, the hips stay.
+    let goals: Vec<[DVec3; 2]> = r.ankles.iter().map(|a| [a[0] + DVec3::Y * 3.0, a[1] + DVec3::Y * 3.0]).collect();
+    let mut moved_clip = r.clip.clone();
+    place_ankles(&mut moved_clip, &goals, &layout);
+    let ((_, mp), (_, before)) = (moved_clip.global(), r.clip.global());
+    for (f, g) in goals.iter().enumerate() {
+        assert!((mp[f * 21 + l] - g[0]).length() < 0.1, "frame {f}: {:?} vs {:?}", mp[f * 21 + l], g[0]);
+        assert!((mp[f * 21 + rt] - g[1]).length() < 0.1, "frame {f}");
+        assert!((mp[f * 21] - before[f * 21]).length() < 1e-9, "the hips stay");
+    }
+}
