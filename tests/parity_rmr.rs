@@ -207,9 +207,13 @@ fn runtime_stitch_refiner_matches_candle() {
     // Another window.
     let mut wide = refiner.clone();
     wide.set_window(60, 30).unwrap();
-    let offline = refine_sequence(&f.model, &f.stats, &x, RefineOptions { window: 60, stride: 30, blend_frames: 10 }).unwrap();
+    let offline =
+        refine_sequence(&f.model, &f.stats, &x, RefineOptions { window: 60, stride: 30, blend_frames: 10 }).unwrap();
     wide.refine_sequence(&x, &mut runtime).unwrap();
-    let worst = (0..x.len()).filter(|i| i % d < pose).map(|i| (offline[i] - runtime[i]).abs() / f.stats.std[i % d]).fold(0.0, f32::max);
+    let worst = (0..x.len())
+        .filter(|i| i % d < pose)
+        .map(|i| (offline[i] - runtime[i]).abs() / f.stats.std[i % d])
+        .fold(0.0, f32::max);
     assert!(worst <= TOLERANCE, "window 60: max |diff| {worst}");
 }
 

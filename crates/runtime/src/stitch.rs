@@ -107,7 +107,8 @@ impl StitchRefiner {
             config[what].as_u64().filter(|&v| v > 0).map(|v| v as usize).ok_or_else(|| bad_config(what))
         };
         let joints = count("joints")?;
-        let lower = config["layout"]["lower_body"].as_array().map(Vec::len).ok_or_else(|| bad_config("layout.lower_body"))?;
+        let lower =
+            config["layout"]["lower_body"].as_array().map(Vec::len).ok_or_else(|| bad_config("layout.lower_body"))?;
         let (window, stride, blend_frames) = (count("window")?, count("stride")?, count("blend_frames")?);
         let fps = config["fps"].as_f64().filter(|&f| f > 0.0).ok_or_else(|| bad_config("fps"))?;
         let dim = 7 + 6 * lower + 4 * joints;
@@ -119,7 +120,9 @@ impl StitchRefiner {
                 .and_then(|v| v);
             v.filter(|v: &Vec<f32>| v.len() == dim).ok_or_else(|| MotionError::BadMetadata {
                 key: "zoo.rmr.normalization".into(),
-                reason: format!("`{what}` must hold {dim} numbers (the pose vector of {joints} joints, {lower} lower body)"),
+                reason: format!(
+                    "`{what}` must hold {dim} numbers (the pose vector of {joints} joints, {lower} lower body)"
+                ),
             })
         };
         let (mean, std) = (values("mean")?, values("std")?);
@@ -134,19 +137,7 @@ impl StitchRefiner {
             .map_err(|_| not_onnx("tract could not read the graph (it panicked on it)".into()))?
             .map_err(|e| MotionError::Unsupported { reason: chain(&e) })?;
         let plan = plan_for(&model, window, dim)?;
-        Ok(StitchRefiner {
-            model,
-            plan,
-            window,
-            stride,
-            blend_frames,
-            dim,
-            pose: dim - 4,
-            joints,
-            fps,
-            mean,
-            std,
-        })
+        Ok(StitchRefiner { model, plan, window, stride, blend_frames, dim, pose: dim - 4, joints, fps, mean, std })
     }
 
     /// Plans the refiner for another window `w` and stride `s` (`1 <= s <= w`; the paper uses
@@ -232,7 +223,9 @@ impl StitchRefiner {
             .and_then(|t| t.as_slice::<f32>())
             .map_err(|e| MotionError::Run { reason: chain(&e) })?;
         if y.len() != n {
-            return Err(MotionError::Run { reason: format!("the graph returned {} values for a window of {n}", y.len()) });
+            return Err(MotionError::Run {
+                reason: format!("the graph returned {} values for a window of {n}", y.len()),
+            });
         }
         out.copy_from_slice(y);
         Ok(())

@@ -59,8 +59,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         return Err(format!("onnxruntime library not found at {}: set ORT_DYLIB_PATH", lib.display()).into());
     }
     let env = ort::init_from(&lib)?.build()?;
-    let mut ort_session =
-        ort::session::Session::builder(&env)?.with_intra_threads(1)?.commit_from_memory(&bytes)?;
+    let mut ort_session = ort::session::Session::builder(&env)?.with_intra_threads(1)?.commit_from_memory(&bytes)?;
     let x: Vec<f32> = (0..window * d).map(|i| ((i * 7919 % 1000) as f32 / 500.0) - 1.0).collect();
     let mut y = vec![0.0f32; window * d];
     let xs = Tensor::from_slice(&x, (1, window, d), &Device::Cpu)?;

@@ -74,7 +74,8 @@ impl Rmr {
         let residual_mask = config
             .residual
             .then(|| {
-                let pose = crate::features::FeatureLayout::new(config.joints, config.layout.lower_body.len()).contacts();
+                let pose =
+                    crate::features::FeatureLayout::new(config.joints, config.layout.lower_body.len()).contacts();
                 let mask: Vec<f32> = (0..d).map(|i| if i < pose { 1.0 } else { 0.0 }).collect();
                 Tensor::from_vec(mask, (1, 1, d), vb.device())
             })

@@ -13,8 +13,8 @@ use crate::error::{RmrError, RmrResult};
 use crate::features::{FeatureLayout, FeatureStats, accumulate_roots, decode, encode_clip};
 use crate::model::Rmr;
 use zoo_data::stitch::{GroundRoot, MIN_CLIP_FRAMES, StitchLayout, align_clips, ground_roots};
-use zoo_motion::glam::DVec3;
 use zoo_motion::Clip;
+use zoo_motion::glam::DVec3;
 
 /// How a sequence is refined.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -220,12 +220,7 @@ pub fn refine_clip_full_with(
 }
 
 /// [`refine_clip_full_with`] with the model.
-pub fn refine_clip_full(
-    model: &Rmr,
-    stats: &FeatureStats,
-    aligned: &Clip,
-    opts: RefineOptions,
-) -> RmrResult<Refined> {
+pub fn refine_clip_full(model: &Rmr, stats: &FeatureStats, aligned: &Clip, opts: RefineOptions) -> RmrResult<Refined> {
     let config = model.config();
     config.check_skeleton(&aligned.skeleton)?;
     refine_clip_full_with(|w| model.refine(w), &config.layout, stats, aligned, opts)
@@ -234,7 +229,12 @@ pub fn refine_clip_full(
 /// Global positions of the ankles (the heel joints `layout.contacts[0]` and `[2]`) that raw pose
 /// vectors predict: their lower-body positions `p` placed in the ground roots accumulated from
 /// `start`. Empty when a heel joint is not in the lower body.
-pub fn predicted_ankles(features: &[f32], fl: FeatureLayout, layout: &StitchLayout, start: GroundRoot) -> Vec<[DVec3; 2]> {
+pub fn predicted_ankles(
+    features: &[f32],
+    fl: FeatureLayout,
+    layout: &StitchLayout,
+    start: GroundRoot,
+) -> Vec<[DVec3; 2]> {
     let slot = |joint: usize| layout.lower_body.iter().position(|&k| k == joint);
     let (Some(l), Some(r)) = (slot(layout.contacts[0]), slot(layout.contacts[2])) else { return Vec::new() };
     let d = fl.dim();
