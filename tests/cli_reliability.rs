@@ -117,6 +117,8 @@ fn every_numeric_option_of_every_subcommand_refuses_bad_values_with_its_range() 
         ),
         (with(&rmr, ["--t-begin", "100001"]), "--t-begin <T_BEGIN>", "outside the valid range 0..=100000"),
         (with(&rmr, ["--hidden", "0"]), "--hidden <HIDDEN>", "0 units is outside the valid range 1..=65536"),
+        (with(&rmr, ["--seam-weight", "-1"]), "--seam-weight <SEAM_WEIGHT>", "negative (valid range [0, 1000])"),
+        (with(&rmr, ["--seam-weight", "1e4"]), "--seam-weight <SEAM_WEIGHT>", "outside the valid range [0, 1000]"),
         (with(&rmr, ["--batch-size", "65537"]), "--batch-size <BATCH_SIZE>", "valid range 1..=65536"),
         (with(&rmr, ["--lr", "-1"]), "--lr <LR>", "not a positive number (valid range (0, 1000000000])"),
         (with(&rmr, ["--database-stride", "0"]), "--database-stride <DATABASE_STRIDE>", frames),

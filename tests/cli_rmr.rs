@@ -131,52 +131,134 @@ fn train_resume_and_stitch() {
     }
 }
 
+/// An untrained tiny RMR run folder (`dir/untrained`) on the synthetic skeleton at 30 fps, and
+/// synthetic clips: enough for the checks `zoo stitch` makes before refining.
+fn untrained_rmr(dir: &Path) -> (PathBuf, Vec<PathBuf>) {
+    use zoo_rmr::{Config, RmrTrainer, features::FeatureStats};
+    let run_dir = dir.join("untrained");
+    let config = Config::tiny();
+    let d = config.dim();
+    let stats = FeatureStats { mean: vec![0.0; d], std: vec![1.0; d] };
+    RmrTrainer::new(&config, stats, &candle_core::Device::Cpu).unwrap().save(&run_dir).unwrap();
+    let (_, clips) = synth_clips(dir, "0.5");
+    (run_dir, clips)
+}
+
+/// Runs `zoo stitch --model MODEL --out dir/o.bvh ARGS`, which must fail without a panic and
+/// without an output file; returns its stderr.
+fn refused(model: &Path, dir: &Path, args: &[&str]) -> String {
+    let out = dir.join("o.bvh");
+    let mut all = vec!["stitch", "--model", s(model), "--out", s(&out)];
+    all.extend_from_slice(args);
+    let (ok, stdout, stderr) = run(&all);
+    assert!(!ok, "expected a refusal of {args:?}: {stdout}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(!out.exists(), "no output after a refusal");
+    stderr
+}
+
 #[test]
-fn stitch_refuses_bad_input_with_a_message() {
+fn stitch_refuses_clips_shorter_than_10_frames() {
     let dir = tempfile::tempdir().unwrap();
-    let run_dir = train_tiny(dir.path(), "1");
-    let (_, clips) = synth_clips(dir.path(), "0.5");
+    let (model, clips) = untrained_rmr(dir.path());
     let (a, b) = (s(&clips[0]), s(&clips[1]));
-    let out = dir.path().join("o.bvh");
-    let stitch = |extra: &[&str]| {
-        let mut args = vec!["stitch", "--model", s(&run_dir), "--out", s(&out)];
-        args.extend_from_slice(extra);
-        let (ok, stdout, stderr) = run(&args);
-        assert!(!ok, "expected a refusal of {extra:?}: {stdout}");
-        assert!(!stderr.contains("panicked"), "{stderr}");
-        stderr
-    };
-    let e = stitch(&[&format!("{a}:0:8"), b]);
+    let e = refused(&model, dir.path(), &[&format!("{a}:0:8"), b]);
     assert!(e.contains("has 8 frames; stitching needs at least 10 frames per clip"), "{e}");
-    let e = stitch(&[&format!("{a}:0:20"), &format!("{b}:0:20"), "--window", "60"]);
+    // A whole file of 9 frames.
+    let short = dir.path().join("short.bvh");
+    zoo_data::bvh::write_file(&read(&clips[1]).slice(0, 9), &short).unwrap();
+    let e = refused(&model, dir.path(), &[a, s(&short)]);
+    assert!(e.contains("short.bvh") && e.contains("has 9 frames") && e.contains("at least 10"), "{e}");
+    // The same check without a model (the baselines).
+    let (ok, _, e) = run(&["stitch", "--method", "concat", a, s(&short), "--out", s(&dir.path().join("c.bvh"))]);
+    assert!(!ok && e.contains("has 9 frames"), "{e}");
+}
+
+#[test]
+fn stitch_refuses_a_window_longer_than_the_sequence() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, clips) = untrained_rmr(dir.path());
+    let (a, b) = (s(&clips[0]), s(&clips[1]));
+    let e = refused(&model, dir.path(), &[&format!("{a}:0:20"), &format!("{b}:0:20"), "--window", "60"]);
     assert!(e.contains("the window of 60 frames is longer than the stitched sequence (40 frames)"), "{e}");
-    let e = stitch(&[&format!("{a}:0:99999"), b]);
+    assert!(e.contains("--window 30"), "names the fix: {e}");
+    // The model's own window (30 for the tiny preset) on 20 frames.
+    let e = refused(&model, dir.path(), &[&format!("{a}:0:10"), &format!("{b}:0:10")]);
+    assert!(e.contains("longer than the stitched sequence (20 frames)"), "{e}");
+    let e = refused(&model, dir.path(), &[a, b, "--window", "20", "--stride", "30"]);
+    assert!(e.contains("--stride 30 is longer than the window 20"), "{e}");
+    let e = refused(&model, dir.path(), &[&format!("{a}:0:99999"), b]);
     assert!(e.contains("is outside the clip's"), "{e}");
-    // Another skeleton, another frame rate.
+}
+
+#[test]
+fn stitch_refuses_clips_of_another_skeleton() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, clips) = untrained_rmr(dir.path());
+    let a = s(&clips[0]);
     let mut other = read(&clips[1]);
     other.skeleton.names[15] = "LeftFoot".into();
     let other_path = dir.path().join("other.bvh");
     zoo_data::bvh::write_file(&other, &other_path).unwrap();
-    let e = stitch(&[a, s(&other_path)]);
-    assert!(e.contains("another skeleton") && e.contains("LeftFoot"), "{e}");
+    // Against the first clip.
+    let e = refused(&model, dir.path(), &[a, s(&other_path)]);
+    assert!(e.contains("another skeleton") && e.contains("LeftFoot") && e.contains("same rig"), "{e}");
+    // Both clips on the other rig: against the model's.
+    let e = refused(&model, dir.path(), &[s(&other_path), s(&other_path)]);
+    assert!(e.contains("not the model's") && e.contains("found `LeftFoot`") && e.contains("retarget"), "{e}");
+}
+
+#[test]
+fn stitch_refuses_clips_of_another_frame_rate() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, clips) = untrained_rmr(dir.path());
+    let a = s(&clips[0]);
     let mut fast = read(&clips[1]);
     fast.frame_time = 1.0 / 60.0;
     let fast_path = dir.path().join("fast.bvh");
     zoo_data::bvh::write_file(&fast, &fast_path).unwrap();
-    let e = stitch(&[a, s(&fast_path)]);
-    assert!(e.contains("fps") && e.contains("resample"), "{e}");
-    // A run folder of another model.
+    // Against the first clip.
+    let e = refused(&model, dir.path(), &[a, s(&fast_path)]);
+    assert!(e.contains("is 60 fps") && e.contains("is 30 fps") && e.contains("resample"), "{e}");
+    // Both at 60 fps: against the model's 30.
+    let e = refused(&model, dir.path(), &[s(&fast_path), s(&fast_path)]);
+    assert!(e.contains("60 fps but the model was trained at 30 fps") && e.contains("resample"), "{e}");
+}
+
+#[test]
+fn stitch_refuses_an_rtn_where_an_rmr_is_expected() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, clips) = synth_clips(dir.path(), "0.5");
+    let (a, b) = (s(&clips[0]), s(&clips[1]));
     let rtn = dir.path().join("rtn");
-    std::fs::create_dir_all(&rtn).unwrap();
-    std::fs::write(rtn.join("config.json"), r#"{"model": "rtn"}"#).unwrap();
-    let (ok, _, e) = run(&["stitch", "--model", s(&rtn), a, b, "--out", s(&out)]);
-    assert!(!ok && e.contains("holds a `rtn` model") && e.contains("zoo train rmr"), "{e}");
-    // --method rmr without a model; a single clip.
+    let (ok, stdout, stderr) =
+        run(&["train", "rtn", "--preset", "tiny", "--synth-minutes", "1", "--epochs", "1", "--out", s(&rtn)]);
+    assert!(ok, "{stdout}\n{stderr}");
+    // Its run folder.
+    let e = refused(&rtn, dir.path(), &[a, b]);
+    assert!(e.contains("holds a `rtn` model") && e.contains("zoo train rmr"), "{e}");
+    // Its exported ONNX file.
+    let onnx = dir.path().join("rtn.onnx");
+    let (ok, _, stderr) = run(&["export", "--onnx", s(&rtn), "--out", s(&onnx)]);
+    assert!(ok, "{stderr}");
+    let e = refused(&onnx, dir.path(), &[a, b]);
+    assert!(e.contains("rtn.onnx is a file") && e.contains("run folder of `zoo train rmr`"), "{e}");
+    // A folder that is no run at all.
+    let e = refused(&dir.path().join("missing"), dir.path(), &[a, b]);
+    assert!(e.contains("missing") && e.contains("not a run folder"), "{e}");
+}
+
+#[test]
+fn stitch_refuses_a_missing_model_or_a_single_clip() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, clips) = synth_clips(dir.path(), "0.5");
+    let (a, b) = (s(&clips[0]), s(&clips[1]));
+    let out = dir.path().join("o.bvh");
     let (ok, _, e) = run(&["stitch", a, b, "--out", s(&out)]);
     assert!(!ok && e.contains("--method rmr needs --model"), "{e}");
     let (ok, _, e) = run(&["stitch", a, "--out", s(&out)]);
     assert!(!ok && e.contains("CLIP.bvh"), "{e}");
-    assert!(!out.exists(), "no output after a refusal");
+    assert!(!out.exists());
 }
 
 #[test]
@@ -190,7 +272,7 @@ fn the_stitching_benchmark_measures_every_method() {
     let (ok, stdout, stderr) =
         run(&["train", "rtn", "--preset", "tiny", "--synth-minutes", "1", "--epochs", "1", "--out", s(&rtn)]);
     assert!(ok, "{stdout}\n{stderr}");
-    let methods = format!("concat,inertialize,interp,rmr:{0},rmr+lock:{0},rtn:{1}", s(&run_dir), s(&rtn));
+    let methods = format!("concat,inertialize,interp,rmr:{0},rmr+ik:{0},rmr+lock:{0},rtn:{1}", s(&run_dir), s(&rtn));
     let (ok, stdout, stderr) = run(&[
         "bench",
         "stitch",
@@ -214,7 +296,7 @@ fn the_stitching_benchmark_measures_every_method() {
     assert!(cases >= 10, "{cases} cases");
     assert_eq!(r["free_cases"], 6);
     let rows = r["methods"].as_object().unwrap();
-    assert_eq!(rows.len(), 6);
+    assert_eq!(rows.len(), 7);
     for (name, row) in rows {
         assert_eq!(row["cases"].as_u64(), Some(cases), "{name}");
         for key in ["l2p", "l2q", "npss", "foot_sliding", "skate", "root_deviation", "pops_mean"] {

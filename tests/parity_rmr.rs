@@ -3,7 +3,8 @@
 //!
 //! Where the expected numbers come from: candle's `Rmr::forward` in evaluation mode (no
 //! dropout) on batch-first windows; the ONNX graph takes the same windows time-major (layout 0).
-//! Weights are the seeded initial weights of `Config::tiny()` (`zoo_nn::SeededVarMap`, seed
+//! Weights are the seeded initial weights of `Config::tiny()` (residual decoder; its output
+//! layer is not zeroed here, so the correction is not 0; the absolute decoder is checked too) (`zoo_nn::SeededVarMap`, seed
 //! 7), inputs fixed LCG draws. Every pair of runtimes must agree within 1e-4 (normalised units)
 //! on every value. The snapshots hold the BGRU graph summary and candle's outputs for the
 //! first frames, rounded to 4 decimals.
@@ -32,7 +33,10 @@ struct Fixture {
 }
 
 fn fixture(cell: RefinerCell) -> Fixture {
-    let config = Config::tiny().with_cell(cell);
+    fixture_of(Config::tiny().with_cell(cell))
+}
+
+fn fixture_of(config: Config) -> Fixture {
     let varmap = VarMap::new();
     let vb = zoo_nn::SeededVarMap::builder(&varmap, 7, DType::F32, &Device::Cpu);
     let model = Rmr::new(&config, vb).unwrap();
@@ -95,7 +99,13 @@ fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
 }
 
 fn check(cell: RefinerCell) -> (Fixture, OnnxModel, Vec<f32>) {
-    let f = fixture(cell);
+    check_config(Config::tiny().with_cell(cell))
+}
+
+/// Exports `config`'s seeded model and compares candle, tract and onnxruntime.
+fn check_config(config: Config) -> (Fixture, OnnxModel, Vec<f32>) {
+    let cell = config.cell;
+    let f = fixture_of(config);
     let d = f.config.dim();
     let onnx = export_rmr(&f.config, &f.stats, &f.varmap).unwrap();
     let x = input(d);
@@ -133,6 +143,9 @@ fn rmr_other_cells_parity() {
         let want = if matches!(cell, RefinerCell::Lstm | RefinerCell::Blstm) { "LSTM" } else { "GRU" };
         assert_eq!(ops.get(want), Some(&2), "{cell:?}: {ops:?}");
     }
+    // The paper's absolute decoder: no residual Mul/Add.
+    let (_, onnx, _) = check_config(Config::tiny().with_residual(false));
+    assert_eq!(onnx.summary().op_counts.get("Mul"), None);
 }
 
 #[test]
@@ -153,4 +166,93 @@ fn rmr_metadata_and_run_folder_export() {
     assert!(err.contains("statistics have 3 values"), "{err}");
     let err = export_rmr_dir(&dir.path().join("nope")).unwrap_err().to_string();
     assert!(err.contains("nope"), "{err}");
+}
+
+/// The runtime's stitching task (`zoo_runtime::StitchRefiner`, tract) refines a whole sequence
+/// like the offline `zoo_rmr::stitch::refine_sequence` (candle): several windows with the
+/// blend, the same seeded weights and statistics, raw pose vectors in and out.
+#[test]
+fn runtime_stitch_refiner_matches_candle() {
+    use zoo_rmr::stitch::{RefineOptions, refine_sequence};
+    use zoo_runtime::StitchRefiner;
+    let f = fixture(RefinerCell::Bgru);
+    let d = f.config.dim();
+    let onnx = export_rmr(&f.config, &f.stats, &f.varmap).unwrap();
+    let refiner = StitchRefiner::from_bytes(&onnx.to_bytes()).unwrap();
+    assert_eq!((refiner.window(), refiner.stride(), refiner.blend_frames()), (30, 15, 10));
+    assert_eq!((refiner.dim(), refiner.joints(), refiner.fps()), (d, 21, 30.0));
+    let frames = 77; // windows at 0, 15, 30, 45 and 47
+    assert_eq!(refiner.window_starts(frames), vec![0, 15, 30, 45, 47]);
+    let pose = d - 4;
+    let mut x = lcg(21, frames * d, 3.0);
+    for (i, v) in x.iter_mut().enumerate() {
+        if i % d >= pose {
+            *v = (*v > 0.0) as u8 as f32;
+        }
+    }
+    let offline = refine_sequence(&f.model, &f.stats, &x, RefineOptions::of(&f.config)).unwrap();
+    let mut runtime = vec![0.0; x.len()];
+    refiner.refine_sequence(&x, &mut runtime).unwrap();
+    let worst = offline
+        .iter()
+        .zip(&runtime)
+        .enumerate()
+        .filter(|(i, _)| i % d < pose)
+        .map(|(i, (a, b))| (a - b).abs() / f.stats.std[i % d])
+        .fold(0.0, f32::max);
+    println!("runtime stitch vs candle: max |diff| {worst:e} (normalised units, {frames} frames)");
+    assert!(worst <= TOLERANCE, "max |diff| {worst} in normalised units");
+    let flips = (0..x.len()).filter(|i| i % d >= pose && offline[*i] != runtime[*i]).count();
+    assert_eq!(flips, 0, "contacts agree");
+    // Another window.
+    let mut wide = refiner.clone();
+    wide.set_window(60, 30).unwrap();
+    let offline =
+        refine_sequence(&f.model, &f.stats, &x, RefineOptions { window: 60, stride: 30, blend_frames: 10 }).unwrap();
+    wide.refine_sequence(&x, &mut runtime).unwrap();
+    let worst = (0..x.len())
+        .filter(|i| i % d < pose)
+        .map(|i| (offline[i] - runtime[i]).abs() / f.stats.std[i % d])
+        .fold(0.0, f32::max);
+    assert!(worst <= TOLERANCE, "window 60: max |diff| {worst}");
+}
+
+/// Bad input to the runtime's stitching task: clear errors, no panic.
+#[test]
+fn runtime_stitch_refiner_refuses_bad_input() {
+    use zoo_runtime::StitchRefiner;
+    let f = fixture(RefinerCell::Gru);
+    let d = f.config.dim();
+    let onnx = export_rmr(&f.config, &f.stats, &f.varmap).unwrap();
+    let mut refiner = StitchRefiner::from_bytes(&onnx.to_bytes()).unwrap();
+    // An RTN (a `transition` model) where an RMR is expected.
+    let mut g = zoo_export::GraphBuilder::new("rtn_like");
+    let dims = [zoo_export::Dim::batch(), zoo_export::Dim::Fixed(4)];
+    let x = g.input("x", &dims);
+    let y = g.identity("y_id", &x);
+    g.output("y", &y, &dims);
+    g.metadata("zoo.model_kind", "rtn").metadata("zoo.task", "transition");
+    let rtn = g.finish().unwrap();
+    let err = StitchRefiner::from_bytes(&rtn.to_bytes()).unwrap_err().to_string();
+    assert!(err.contains("`transition` model (kind `rtn`), not a `stitch` model"), "{err}");
+    let err = StitchRefiner::from_bytes(b"\x01\x02garbage").unwrap_err().to_string();
+    assert!(err.contains("not an ONNX model"), "{err}");
+    // A sequence shorter than the window, a partial frame, a short output buffer, NaN.
+    let x = vec![0.5f32; 20 * d];
+    let mut out = vec![0.0; x.len()];
+    let err = refiner.refine_sequence(&x, &mut out).unwrap_err().to_string();
+    assert!(err.contains("the window of 30 frames is longer than the sequence (20 frames)"), "{err}");
+    let err = refiner.refine_sequence(&x[..d + 3], &mut out[..d + 3]).unwrap_err().to_string();
+    assert!(err.contains(&format!("{d}")), "{err}");
+    let x = vec![0.5f32; 40 * d];
+    let err = refiner.refine_sequence(&x, &mut out).unwrap_err().to_string();
+    assert!(err.contains("expected"), "{err}");
+    let mut nan = x.clone();
+    nan[7] = f32::NAN;
+    let mut out = vec![0.0; x.len()];
+    let err = refiner.refine_sequence(&nan, &mut out).unwrap_err().to_string();
+    assert!(err.contains("non-finite"), "{err}");
+    let err = refiner.set_window(20, 30).unwrap_err().to_string();
+    assert!(err.contains("stride must be in 1..=window"), "{err}");
+    refiner.refine_sequence(&x, &mut out).unwrap();
 }

@@ -178,6 +178,12 @@ pub enum MotionError {
         /// Transition length the model was trained on.
         trained: usize,
     },
+    /// A stitching call that does not fit the loaded refiner (window, sequence length).
+    #[error("stitching: {reason}")]
+    Stitch {
+        /// What is wrong and how to fix it.
+        reason: String,
+    },
     /// A call that does not fit where a character's transition stands (not started,
     /// finished, or raw and blended stepping mixed).
     #[error("character {character}: {reason}")]

@@ -34,6 +34,7 @@ pub mod model;
 pub mod portable;
 pub mod pose;
 pub mod runner;
+pub mod stitch;
 pub mod synthesis;
 pub mod transition;
 
@@ -46,6 +47,7 @@ pub use metadata::{
 pub use model::{MotionModel, MotionState, MotionStateInfo, MotionTensorInfo};
 pub use pose::{Conversion, CoordinateFrame, EnginePose, Handedness, UpAxis};
 pub use runner::MotionRunner;
+pub use stitch::StitchRefiner;
 pub use transition::{TargetMiss, TransitionModel, TransitionRunner, TransitionState};
 
 /// Re-exported so callers use the same glam version as the runtime.

@@ -130,7 +130,14 @@ pub fn encode_specs(
         })
         .collect::<RmrResult<_>>()?;
     let dim = FeatureLayout::new(gt.joints(), gt.layout.lower_body.len()).dim();
-    let mut out = PairFeatures { count: specs.len(), frames: cfg.window, dim, inputs: vec![], targets: vec![] };
+    let seams = specs
+        .iter()
+        .map(|s| {
+            let [a, b, _] = s.lengths;
+            if b > 0 { vec![a, a + b] } else { vec![a] }
+        })
+        .collect();
+    let mut out = PairFeatures { count: specs.len(), frames: cfg.window, dim, inputs: vec![], targets: vec![], seams };
     out.inputs.reserve(specs.len() * cfg.window * dim);
     out.targets.reserve(specs.len() * cfg.window * dim);
     for (x, y) in encoded {

@@ -7,6 +7,9 @@
 //! |---|---|
 //! | `x`: normalised pose vectors `[frames, batch, dim]` | `y`: refined normalised pose vectors `[frames, batch, dim]` (contacts as logits) |
 //!
+//! With `config.residual`, `y` is the decoder's output plus `x` masked to the pose values
+//! (`Mul` by a 0/1 initializer, `Add`).
+//!
 //! Encoder and decoder are `MatMul` + `Add` (+ `LeakyRelu` with slope 0, i.e. ReLU) with the
 //! candle weights transposed by a `Transpose` node, so initializers keep the candle paths
 //! (`encoder.0.weight`, ...). Each recurrent layer is one ONNX `LSTM` or `GRU` node
@@ -177,7 +180,15 @@ pub fn export_rmr(config: &Config, stats: &FeatureStats, varmap: &VarMap) -> Res
         let y = g.transpose(&format!("{name}.y_t"), &out.y, &[0, 2, 1, 3]);
         h = g.reshape(&format!("{name}.y_cat"), &y, &[0, 0, (dirs * hid) as i64]);
     }
-    let y = mlp(&mut g, &w, "decoder", config.decoder.len() + 1, &h, false)?;
+    let mut y = mlp(&mut g, &w, "decoder", config.decoder.len() + 1, &h, false)?;
+    if config.residual {
+        // y += x * mask (1 on the pose values, 0 on the contacts), as in `Rmr::forward`.
+        let pose = crate::features::FeatureLayout::new(config.joints, config.layout.lower_body.len()).contacts();
+        let mask: Vec<f32> = (0..d).map(|i| if i < pose { 1.0 } else { 0.0 }).collect();
+        let mask = g.initializer_f32("residual_mask", &[d], &mask);
+        let kept = g.mul("residual.mask", &x, &mask);
+        y = g.add("residual.add", &y, &kept);
+    }
     g.output("y", &y, &dims);
     let config_json = serde_json::to_string(config).map_err(|e| model_err(format!("configuration to JSON: {e}")))?;
     let stats_json = serde_json::to_string(stats).map_err(|e| model_err(format!("statistics to JSON: {e}")))?;

@@ -259,6 +259,8 @@ pub struct PairFeatures {
     pub inputs: Vec<f32>,
     /// Ground truths `Y`.
     pub targets: Vec<f32>,
+    /// First frame of each retrieved segment of each pair (the seams; empty when unknown).
+    pub seams: Vec<Vec<usize>>,
 }
 
 impl PairFeatures {
@@ -269,14 +271,16 @@ impl PairFeatures {
         let dim = FeatureLayout::new(first.target.joints(), layout.lower_body.len()).dim();
         let mut inputs = Vec::with_capacity(pairs.len() * frames * dim);
         let mut targets = Vec::with_capacity(pairs.len() * frames * dim);
+        let mut seams = Vec::with_capacity(pairs.len());
         for (i, p) in pairs.iter().enumerate() {
             if p.input.frames() != frames || p.target.frames() != frames {
                 return Err(RmrError::Config(format!("pair {i} has {} frames, pair 0 {frames}", p.input.frames())));
             }
             inputs.extend(encode_clip(&p.input, layout)?);
             targets.extend(encode_clip(&p.target, layout)?);
+            seams.push(p.seams.clone());
         }
-        Ok(PairFeatures { count: pairs.len(), frames, dim, inputs, targets })
+        Ok(PairFeatures { count: pairs.len(), frames, dim, inputs, targets, seams })
     }
 
     /// Sequence `i` of the inputs.

@@ -13,7 +13,7 @@
 
 use zoo_data::stitch::StitchLayout;
 use zoo_motion::Clip;
-use zoo_motion::glam::{DQuat, DVec3, Vec3};
+use zoo_motion::glam::{DQuat, DVec3};
 
 /// One leg of the lock: hip, knee, ankle joints and the contact indices of its heel and toe.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -89,6 +89,63 @@ fn horizontal(v: DVec3) -> DVec3 {
     DVec3::new(v.x, 0.0, v.z)
 }
 
+/// Bends `leg` at frame `f` so that its ankle reaches `goal` by two-bone IK: the hip and knee
+/// rotate (bone lengths kept, the knee in its bend plane), the foot keeps its global orientation.
+/// Updates the local rotations of `clip` and the global rotations `gr`; `gp` are the global
+/// positions before. Returns how far the ankle moved.
+fn bend_leg(clip: &mut Clip, gr: &mut [DQuat], gp: &[DVec3], leg: LockLeg, f: usize, goal: DVec3) -> f64 {
+    let j = clip.joints();
+    let at = |k: usize| gp[f * j + k].as_vec3();
+    let (hip, knee, ankle) = (at(leg.hip), at(leg.knee), at(leg.ankle));
+    let (new_knee, new_ankle) = zoo_motion::footlock::two_bone_ik(hip, knee, ankle, goal.as_vec3());
+    let (hip, knee, ankle, new_knee, new_ankle) =
+        (hip.as_dvec3(), knee.as_dvec3(), ankle.as_dvec3(), new_knee.as_dvec3(), new_ankle.as_dvec3());
+    let arc = |a: DVec3, b: DVec3| {
+        if a.length_squared() < 1e-12 || b.length_squared() < 1e-12 {
+            DQuat::IDENTITY
+        } else {
+            DQuat::from_rotation_arc(a.normalize(), b.normalize())
+        }
+    };
+    let r1 = arc(knee - hip, new_knee - hip);
+    let r2 = arc(r1 * (ankle - knee), new_ankle - new_knee);
+    let parent = clip.skeleton.parents[leg.hip].expect("legs() checked the hip's parent");
+    let g_parent = gr[f * j + parent];
+    let g_hip = (r1 * gr[f * j + leg.hip]).normalize();
+    let g_knee = (r2 * r1 * gr[f * j + leg.knee]).normalize();
+    let g_ankle = gr[f * j + leg.ankle];
+    clip.local_rotations[f * j + leg.hip] = (g_parent.inverse() * g_hip).normalize();
+    clip.local_rotations[f * j + leg.knee] = (g_hip.inverse() * g_knee).normalize();
+    clip.local_rotations[f * j + leg.ankle] = (g_knee.inverse() * g_ankle).normalize();
+    gr[f * j + leg.hip] = g_hip;
+    gr[f * j + leg.knee] = g_knee;
+    (new_ankle - ankle).length()
+}
+
+/// Places the ankles (`layout.contacts[0]` and `[2]`, the heel joints) of every frame at
+/// `goals[f] = [left, right]` (global positions, e.g. the refiner's predicted lower-body
+/// positions) by two-bone IK: RMR sec. 5, "because the forward kinematics accumulates the error
+/// to the joints at ends, we further process the pose by locking both feet in the output
+/// positions using inverse kinematics". Returns the mean ankle displacement (clip units); a
+/// clip without legs to bend or with another number of goals than frames is left unchanged.
+pub fn place_ankles(clip: &mut Clip, goals: &[[DVec3; 2]], layout: &StitchLayout) -> f64 {
+    let frames = clip.frames();
+    if goals.len() != frames || frames == 0 {
+        return 0.0;
+    }
+    let (mut total, mut count) = (0.0, 0usize);
+    for leg in legs(clip, layout) {
+        let side = leg.heel_contact / 2;
+        let (mut gr, gp) = clip.global();
+        for (f, g) in goals.iter().enumerate() {
+            total += bend_leg(clip, &mut gr, &gp, leg, f, g[side]);
+            count += 1;
+        }
+    }
+    clip.remove_sign_flips();
+    if count == 0 { 0.0 } else { total / count as f64 }
+}
+
 /// Locks the feet of `clip` where `contacts` (per frame: heel L, toe L, heel R, toe R) say they
 /// are planted; `layout.contacts` names the heel and toe joints. Returns the mean horizontal
 /// ankle correction applied (clip units). A clip whose contact joints have no grandparent
@@ -126,32 +183,8 @@ pub fn lock_feet(clip: &mut Clip, contacts: &[[bool; 4]], layout: &StitchLayout)
             if c.length_squared() < 1e-12 {
                 continue;
             }
-            let at = |k: usize| gp[f * j + k].as_vec3();
-            let (hip, knee, ankle) = (at(leg.hip), at(leg.knee), at(leg.ankle));
-            let goal = ankle + Vec3::new(c.x as f32, 0.0, c.z as f32);
-            let (new_knee, new_ankle) = zoo_motion::footlock::two_bone_ik(hip, knee, ankle, goal);
-            let (hip, knee, ankle, new_knee, new_ankle) =
-                (hip.as_dvec3(), knee.as_dvec3(), ankle.as_dvec3(), new_knee.as_dvec3(), new_ankle.as_dvec3());
-            let arc = |a: DVec3, b: DVec3| {
-                if a.length_squared() < 1e-12 || b.length_squared() < 1e-12 {
-                    DQuat::IDENTITY
-                } else {
-                    DQuat::from_rotation_arc(a.normalize(), b.normalize())
-                }
-            };
-            let r1 = arc(knee - hip, new_knee - hip);
-            let r2 = arc(r1 * (ankle - knee), new_ankle - new_knee);
-            let parent = clip.skeleton.parents[leg.hip].expect("legs() checked the hip's parent");
-            let g_parent = gr[f * j + parent];
-            let g_hip = (r1 * gr[f * j + leg.hip]).normalize();
-            let g_knee = (r2 * r1 * gr[f * j + leg.knee]).normalize();
-            let g_ankle = gr[f * j + leg.ankle];
-            clip.local_rotations[f * j + leg.hip] = (g_parent.inverse() * g_hip).normalize();
-            clip.local_rotations[f * j + leg.knee] = (g_hip.inverse() * g_knee).normalize();
-            clip.local_rotations[f * j + leg.ankle] = (g_knee.inverse() * g_ankle).normalize();
-            gr[f * j + leg.hip] = g_hip;
-            gr[f * j + leg.knee] = g_knee;
-            total += (new_ankle - ankle).length();
+            let goal = gp[f * j + leg.ankle] + DVec3::new(c.x, 0.0, c.z);
+            total += bend_leg(clip, &mut gr, &gp, leg, f, goal);
             count += 1;
         }
         // Positions of the changed leg for the next leg's reads (the legs do not share joints,

@@ -139,12 +139,30 @@ impl Loss {
     /// The loss of output `out` for input `input` and ground truth `target`, all
     /// `(batch, frames, dim)` normalised.
     pub fn terms(&self, out: &Tensor, input: &Tensor, target: &Tensor) -> RmrResult<LossTerms> {
+        self.terms_weighted(out, input, target, None)
+    }
+
+    /// [`Loss::terms`] with per-frame weights `(batch, frames)` on `L_pose` (e.g. from
+    /// [`seam_weights`]; `None`: every frame 1, the paper's loss).
+    pub fn terms_weighted(
+        &self,
+        out: &Tensor,
+        input: &Tensor,
+        target: &Tensor,
+        frame_weights: Option<&Tensor>,
+    ) -> RmrResult<LossTerms> {
         let n_pose = self.fl.contacts();
         let l1 = |a: &Tensor, b: &Tensor| -> RmrResult<Tensor> {
             // sum over values, mean over frames and batch
             Ok((a - b)?.abs()?.sum(D::Minus1)?.mean_all()?)
         };
-        let pose = l1(&out.narrow(2, 0, n_pose)?, &target.narrow(2, 0, n_pose)?)?;
+        let pose = match frame_weights {
+            None => l1(&out.narrow(2, 0, n_pose)?, &target.narrow(2, 0, n_pose)?)?,
+            Some(w) => {
+                let per_frame = (out.narrow(2, 0, n_pose)? - target.narrow(2, 0, n_pose)?)?.abs()?.sum(D::Minus1)?;
+                (per_frame * w)?.mean_all()?
+            }
+        };
         let trajectory = l1(&self.trajectory(out)?, &self.trajectory(target)?)?;
         let c_out = candle_nn::ops::sigmoid(&out.narrow(2, n_pose, 4)?)?;
         let foot = l1(&c_out, &target.narrow(2, n_pose, 4)?)?;
@@ -163,4 +181,18 @@ impl Loss {
         let total = ((((&pose * lp)? + (&trajectory * lt)?)? + (&foot * lf)?)? + (&begin * lb)?)?;
         Ok(LossTerms { total, pose, trajectory, foot, begin })
     }
+}
+
+/// Per-frame weights `[pair][frame]` of the pose loss: `1 + weight` on the frames within
+/// `around` frames of a seam (`|t - s| <= around`), 1 elsewhere.
+pub fn seam_weights(seams: &[Vec<usize>], frames: usize, weight: f64, around: usize) -> Vec<f32> {
+    let mut w = vec![1.0f32; seams.len() * frames];
+    for (p, ss) in seams.iter().enumerate() {
+        for &s in ss {
+            for t in s.saturating_sub(around)..(s + around + 1).min(frames) {
+                w[p * frames + t] = 1.0 + weight as f32;
+            }
+        }
+    }
+    w
 }

@@ -47,13 +47,16 @@ impl Refiner {
 }
 
 /// The Recurrent Motion Refiner. Weights: `encoder.{0,1}`, `refiner.weight_ih_l0...`,
-/// `decoder.{0,1}`.
+/// `decoder.{0,1}`. With [`Config::residual`] the output is `x + D(R(E(x)))` on the pose
+/// values and `D(R(E(x)))` on the contacts.
 #[derive(Clone, Debug)]
 pub struct Rmr {
     config: Config,
     encoder: Mlp,
     refiner: Refiner,
     decoder: Mlp,
+    /// `(1, 1, dim)`: 1 on the pose values, 0 on the contacts (residual decoder only).
+    residual_mask: Option<Tensor>,
     device: Device,
 }
 
@@ -68,7 +71,16 @@ impl Rmr {
         let mut widths = config.decoder.clone();
         widths.push(d);
         let decoder = Mlp::new(width, &widths, Activation::Relu, false, vb.pp("decoder"))?;
-        Ok(Rmr { config: config.clone(), encoder, refiner, decoder, device: vb.device().clone() })
+        let residual_mask = config
+            .residual
+            .then(|| {
+                let pose =
+                    crate::features::FeatureLayout::new(config.joints, config.layout.lower_body.len()).contacts();
+                let mask: Vec<f32> = (0..d).map(|i| if i < pose { 1.0 } else { 0.0 }).collect();
+                Tensor::from_vec(mask, (1, 1, d), vb.device())
+            })
+            .transpose()?;
+        Ok(Rmr { config: config.clone(), encoder, refiner, decoder, residual_mask, device: vb.device().clone() })
     }
 
     /// The configuration.
@@ -87,7 +99,8 @@ impl Rmr {
     }
 
     /// Refines normalised sequences `(batch, frames, dim)` into `(batch, frames, dim)` (the
-    /// contact values are logits). Dropout is drawn from `rng` when it is `Some` (training).
+    /// contact values are logits; with [`Config::residual`] the pose values are the input's
+    /// plus the decoder's correction). Dropout is drawn from `rng` when it is `Some` (training).
     pub fn forward(&self, xs: &Tensor, rng: Option<&mut SplitMix64>) -> RmrResult<Tensor> {
         let d = self.config.dim();
         let dims = xs.dims();
@@ -98,7 +111,11 @@ impl Rmr {
         }
         let h = self.encoder.forward(xs)?;
         let h = self.refiner.forward(&h, rng)?;
-        Ok(self.decoder.forward(&h)?)
+        let y = self.decoder.forward(&h)?;
+        match &self.residual_mask {
+            Some(mask) => Ok((y + xs.broadcast_mul(mask)?)?),
+            None => Ok(y),
+        }
     }
 
     /// Refines one sequence of normalised pose vectors (`frames * dim`), evaluation mode.

@@ -10,10 +10,11 @@
 
 use crate::config::Config;
 use crate::error::{RmrError, RmrResult};
-use crate::features::{FeatureLayout, FeatureStats, decode, encode_clip};
+use crate::features::{FeatureLayout, FeatureStats, accumulate_roots, decode, encode_clip};
 use crate::model::Rmr;
-use zoo_data::stitch::{MIN_CLIP_FRAMES, align_clips, ground_roots};
+use zoo_data::stitch::{GroundRoot, MIN_CLIP_FRAMES, StitchLayout, align_clips, ground_roots};
 use zoo_motion::Clip;
+use zoo_motion::glam::DVec3;
 
 /// How a sequence is refined.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -55,7 +56,21 @@ pub fn refine_sequence(
     opts: RefineOptions,
 ) -> RmrResult<Vec<f32>> {
     let config = model.config();
-    let d = config.dim();
+    let fl = FeatureLayout::new(config.joints, config.layout.lower_body.len());
+    refine_sequence_with(|w| model.refine(w), fl, stats, features, opts)
+}
+
+/// [`refine_sequence`] with any window refiner: `refine` maps a normalised window
+/// (`window * dim`) to normalised pose vectors of the same size (contacts as logits). The
+/// identity refines a sequence into itself (tests, and the runtime's reference).
+pub fn refine_sequence_with(
+    mut refine: impl FnMut(&[f32]) -> RmrResult<Vec<f32>>,
+    fl: FeatureLayout,
+    stats: &FeatureStats,
+    features: &[f32],
+    opts: RefineOptions,
+) -> RmrResult<Vec<f32>> {
+    let d = fl.dim();
     if stats.dim() != d || features.is_empty() || !features.len().is_multiple_of(d) {
         return Err(RmrError::Size {
             what: "sequence to refine".into(),
@@ -77,13 +92,20 @@ pub fn refine_sequence(
             opts.stride, opts.window
         )));
     }
-    let fl = FeatureLayout::new(config.joints, config.layout.lower_body.len());
     let pose = fl.contacts();
     let mut out = features.to_vec();
     stats.normalize(&mut out);
     for ws in window_starts(frames, opts.window, opts.stride) {
         let span = ws * d..(ws + opts.window) * d;
-        let mut y = model.refine(&out[span.clone()])?;
+        let mut y = refine(&out[span.clone()])?;
+        if y.len() != span.len() {
+            return Err(RmrError::Size {
+                what: "refined window".into(),
+                expected: span.len(),
+                detail: format!("{} frames of {d} values", opts.window),
+                found: y.len(),
+            });
+        }
         if ws > 0 {
             // out[ws] is the previous output at the window's first frame.
             let offset: Vec<f32> = (0..pose).map(|i| out[ws * d + i] - y[i]).collect();
@@ -153,8 +175,79 @@ pub fn refine_clip(
 ) -> RmrResult<(Clip, Vec<[bool; 4]>)> {
     let config = model.config();
     config.check_skeleton(&aligned.skeleton)?;
-    let x = encode_clip(aligned, &config.layout)?;
-    let y = refine_sequence(model, stats, &x, opts)?;
-    let start = ground_roots(aligned, &config.layout)[0];
-    decode(&y, &aligned.skeleton, &config.layout, aligned.frame_time, start)
+    refine_clip_with(|w| model.refine(w), &config.layout, stats, aligned, opts)
+}
+
+/// [`refine_clip`] with any window refiner (see [`refine_sequence_with`]).
+pub fn refine_clip_with(
+    refine: impl FnMut(&[f32]) -> RmrResult<Vec<f32>>,
+    layout: &StitchLayout,
+    stats: &FeatureStats,
+    aligned: &Clip,
+    opts: RefineOptions,
+) -> RmrResult<(Clip, Vec<[bool; 4]>)> {
+    let r = refine_clip_full_with(refine, layout, stats, aligned, opts)?;
+    Ok((r.clip, r.contacts))
+}
+
+/// A refined sequence, decoded.
+#[derive(Clone, Debug)]
+pub struct Refined {
+    /// The decoded motion (rotations `q`, root from `r`, hips position from `p`).
+    pub clip: Clip,
+    /// Predicted contacts per frame (heel L, toe L, heel R, toe R).
+    pub contacts: Vec<[bool; 4]>,
+    /// The ankles' global positions the refiner predicts in `p` (left, right), for
+    /// [`crate::footlock::place_ankles`]; empty when the layout's heel joints are not lower body.
+    pub ankles: Vec<[DVec3; 2]>,
+}
+
+/// [`refine_clip_with`], also returning the predicted ankle positions.
+pub fn refine_clip_full_with(
+    refine: impl FnMut(&[f32]) -> RmrResult<Vec<f32>>,
+    layout: &StitchLayout,
+    stats: &FeatureStats,
+    aligned: &Clip,
+    opts: RefineOptions,
+) -> RmrResult<Refined> {
+    let fl = FeatureLayout::new(aligned.joints(), layout.lower_body.len());
+    let x = encode_clip(aligned, layout)?;
+    let y = refine_sequence_with(refine, fl, stats, &x, opts)?;
+    let start = ground_roots(aligned, layout)[0];
+    let ankles = predicted_ankles(&y, fl, layout, start);
+    let (clip, contacts) = decode(&y, &aligned.skeleton, layout, aligned.frame_time, start)?;
+    Ok(Refined { clip, contacts, ankles })
+}
+
+/// [`refine_clip_full_with`] with the model.
+pub fn refine_clip_full(model: &Rmr, stats: &FeatureStats, aligned: &Clip, opts: RefineOptions) -> RmrResult<Refined> {
+    let config = model.config();
+    config.check_skeleton(&aligned.skeleton)?;
+    refine_clip_full_with(|w| model.refine(w), &config.layout, stats, aligned, opts)
+}
+
+/// Global positions of the ankles (the heel joints `layout.contacts[0]` and `[2]`) that raw pose
+/// vectors predict: their lower-body positions `p` placed in the ground roots accumulated from
+/// `start`. Empty when a heel joint is not in the lower body.
+pub fn predicted_ankles(
+    features: &[f32],
+    fl: FeatureLayout,
+    layout: &StitchLayout,
+    start: GroundRoot,
+) -> Vec<[DVec3; 2]> {
+    let slot = |joint: usize| layout.lower_body.iter().position(|&k| k == joint);
+    let (Some(l), Some(r)) = (slot(layout.contacts[0]), slot(layout.contacts[2])) else { return Vec::new() };
+    let d = fl.dim();
+    let roots = accumulate_roots(features, d, start);
+    features
+        .chunks_exact(d)
+        .zip(&roots)
+        .map(|(x, root)| {
+            let p = |k: usize| {
+                let v = &x[fl.positions() + 3 * k..][..3];
+                root.to_world(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64))
+            };
+            [p(l), p(r)]
+        })
+        .collect()
 }

@@ -42,6 +42,9 @@ impl RmrTrainer {
         let varmap = VarMap::new();
         let vb = SeededVarMap::builder(&varmap, config.train.seed, DType::F32, device);
         let model = Rmr::new(config, vb)?;
+        if config.residual {
+            zero_output_layer(&varmap, config)?;
+        }
         let t = &config.train;
         let mut named: Vec<(String, candle_core::Var)> =
             varmap.data().lock().expect("varmap lock").iter().map(|(n, v)| (n.clone(), v.clone())).collect();
@@ -109,11 +112,27 @@ impl RmrTrainer {
         Ok((Tensor::from_vec(x, shape, dev)?, Tensor::from_vec(y, shape, dev)?))
     }
 
+    /// Per-frame pose-loss weights `(batch, frames)` of pairs `indices` ([`Config::seam_weight`]);
+    /// `None` when the weight is 0 or the pairs carry no seams.
+    pub fn batch_weights(&self, data: &PairFeatures, indices: &[usize]) -> RmrResult<Option<Tensor>> {
+        if self.config.seam_weight == 0.0 || data.seams.len() != data.count {
+            return Ok(None);
+        }
+        let seams: Vec<Vec<usize>> = indices.iter().map(|&i| data.seams[i].clone()).collect();
+        let w = crate::loss::seam_weights(&seams, data.frames, self.config.seam_weight, crate::config::SEAM_FRAMES);
+        Ok(Some(Tensor::from_vec(w, (indices.len(), data.frames), self.model.device())?))
+    }
+
     /// One Adam step on a batch; returns the loss terms before the step. A NaN or infinite loss
     /// leaves the parameters as they were.
     pub fn train_step(&mut self, x: &Tensor, y: &Tensor) -> RmrResult<LossValues> {
+        self.train_step_weighted(x, y, None)
+    }
+
+    /// [`RmrTrainer::train_step`] with per-frame pose-loss weights ([`RmrTrainer::batch_weights`]).
+    pub fn train_step_weighted(&mut self, x: &Tensor, y: &Tensor, w: Option<&Tensor>) -> RmrResult<LossValues> {
         let out = self.model.forward(x, Some(&mut self.rng))?;
-        let terms = self.loss.terms(&out, x, y)?;
+        let terms = self.loss.terms_weighted(&out, x, y, w)?;
         let values = terms.values()?;
         if !values.total.is_finite() {
             return Err(RmrError::NonFiniteLoss { step: self.step, loss: values.total as f32 });
@@ -125,17 +144,23 @@ impl RmrTrainer {
 
     /// The loss terms without dropout and without a step.
     pub fn eval_loss(&self, x: &Tensor, y: &Tensor) -> RmrResult<LossValues> {
-        let out = self.model.forward(x, None)?.detach();
-        self.loss.terms(&out, x, y)?.values()
+        self.eval_loss_weighted(x, y, None)
     }
 
-    /// Mean loss terms over every pair of `data`, in chunks of 64.
+    /// [`RmrTrainer::eval_loss`] with per-frame pose-loss weights.
+    pub fn eval_loss_weighted(&self, x: &Tensor, y: &Tensor, w: Option<&Tensor>) -> RmrResult<LossValues> {
+        let out = self.model.forward(x, None)?.detach();
+        self.loss.terms_weighted(&out, x, y, w)?.values()
+    }
+
+    /// Mean loss terms over every pair of `data`, in chunks of 64 (with the seam weights of
+    /// [`Config::seam_weight`], as in training).
     pub fn eval_all(&self, data: &PairFeatures) -> RmrResult<LossValues> {
         let mut acc = LossValues::default();
         let idx: Vec<usize> = (0..data.count).collect();
         for c in idx.chunks(64) {
             let (x, y) = self.batch(data, c)?;
-            let v = self.eval_loss(&x, &y)?;
+            let v = self.eval_loss_weighted(&x, &y, self.batch_weights(data, c)?.as_ref())?;
             let w = c.len() as f64 / data.count as f64;
             acc.total += v.total * w;
             acc.pose += v.pose * w;
@@ -189,6 +214,18 @@ impl RmrTrainer {
     }
 }
 
+/// Sets the decoder's output layer (`decoder.{n}.weight` and `.bias`) to zero: a residual
+/// model then starts as the identity on the pose values (contact logits 0).
+fn zero_output_layer(varmap: &VarMap, config: &Config) -> RmrResult<()> {
+    let data = varmap.data().lock().expect("varmap lock");
+    for part in ["weight", "bias"] {
+        let name = format!("decoder.{}.{part}", config.decoder.len());
+        let var = data.get(&name).ok_or_else(|| RmrError::Config(format!("the model has no weight `{name}`")))?;
+        var.set(&var.as_tensor().zeros_like()?)?;
+    }
+    Ok(())
+}
+
 /// An [`RmrTrainer`] with its normalised training and validation pairs, for
 /// [`zoo_nn::train_loop::train`].
 pub struct RmrTraining<'a> {
@@ -240,7 +277,8 @@ impl Trainable for RmrTraining<'_> {
 
     fn train_step(&mut self, samples: &[usize]) -> Result<f64, TrainError> {
         let (x, y) = self.trainer.batch(self.train, samples)?;
-        Ok(self.trainer.train_step(&x, &y)?.total)
+        let w = self.trainer.batch_weights(self.train, samples)?;
+        Ok(self.trainer.train_step_weighted(&x, &y, w.as_ref())?.total)
     }
 
     fn steps(&self) -> u64 {

@@ -29,7 +29,7 @@ use zoo_data::stitch::{
 use zoo_motion::Clip;
 use zoo_motion::glam::{DQuat, DVec3};
 use zoo_motion::rng::SplitMix64;
-use zoo_rmr::stitch::{RefineOptions, refine_clip};
+use zoo_rmr::stitch::{RefineOptions, refine_clip_full};
 
 /// Arguments of `zoo bench stitch`.
 #[derive(Args)]
@@ -45,8 +45,9 @@ pub struct StitchBenchArgs {
     #[arg(long)]
     pub test_data: Option<PathBuf>,
     /// Comma-separated methods: `concat` (aligned concatenation), `inertialize`, `interp`,
-    /// `rmr:RUN_DIR` (a `zoo train rmr` folder, no post-process), `rmr+lock:RUN_DIR` (with the
-    /// foot lock by its predicted contacts), `rtn:RUN_DIR` / `rtn+lock:RUN_DIR` (a `zoo train rtn`
+    /// `rmr:RUN_DIR` (a `zoo train rmr` folder, no post-process), `rmr+ik:RUN_DIR` (the ankles
+    /// placed at its predicted lower-body positions by IK, RMR sec. 5), `rmr+lock:RUN_DIR` (with
+    /// the foot lock by its predicted contacts), `rtn:RUN_DIR` / `rtn+lock:RUN_DIR` (a `zoo train rtn`
     /// folder in-betweening across each seam: 10 context frames before, target after).
     #[arg(long, default_value = "concat,inertialize,interp", value_delimiter = ',')]
     pub methods: Vec<String>,
@@ -80,6 +81,8 @@ enum Method {
         model: Box<zoo_rmr::Rmr>,
         stats: zoo_rmr::features::FeatureStats,
         lock: bool,
+        /// Ankles placed at the refiner's predicted positions by IK (RMR sec. 5).
+        ik: bool,
     },
     /// A transition model of the in-betweening benchmark (`rtn:DIR`, `rtn+lock:DIR`) across
     /// each seam.
@@ -97,11 +100,13 @@ impl Method {
             "interp" => return Ok(Method::Interp),
             _ => {}
         }
-        let forms = "concat, inertialize, interp, rmr:RUN_DIR, rmr+lock:RUN_DIR, rtn:RUN_DIR, rtn+lock:RUN_DIR";
+        let forms = "concat, inertialize, interp, rmr:RUN_DIR, rmr+ik:RUN_DIR, rmr+lock:RUN_DIR, rtn:RUN_DIR, \
+                     rtn+lock:RUN_DIR";
         let Some((head, path)) = spec.split_once(':') else { bail!("unknown method `{spec}`: expected {forms}") };
-        let lock = match head {
-            "rmr" => false,
-            "rmr+lock" => true,
+        let (lock, ik) = match head {
+            "rmr" => (false, false),
+            "rmr+ik" => (false, true),
+            "rmr+lock" => (true, false),
             "rtn" | "rtn+lock" => {
                 let method = crate::registry::load_method(&crate::registry::parse_method(spec)?)?;
                 return Ok(Method::Transition { name: spec.to_string(), method });
@@ -115,7 +120,7 @@ impl Method {
         }
         let (model, stats) = zoo_rmr::checkpoint::load(&dir, &candle_core::Device::Cpu)
             .with_context(|| format!("method `{spec}`: loading the RMR in {}", dir.display()))?;
-        Ok(Method::Rmr { name: spec.to_string(), model: Box::new(model), stats, lock })
+        Ok(Method::Rmr { name: spec.to_string(), model: Box::new(model), stats, lock, ik })
     }
 
     fn name(&self) -> String {
@@ -133,15 +138,19 @@ impl Method {
             Method::Concat => aligned.clone(),
             Method::Inertialize => inertialize_seams(aligned, seams, blend),
             Method::Interp => interpolate_seams(aligned, seams, blend),
-            Method::Rmr { model, stats, lock, .. } => {
+            Method::Rmr { model, stats, lock, ik, .. } => {
                 let c = model.config();
                 let frames = aligned.frames();
                 // A sequence shorter than the model's window is refined as one window.
                 let (window, stride) = if c.window <= frames { (c.window, c.stride) } else { (frames, frames) };
                 let opts = RefineOptions { window, stride, blend_frames: blend };
-                let (mut out, contacts) = refine_clip(model, stats, aligned, opts)?;
+                let r = refine_clip_full(model, stats, aligned, opts)?;
+                let mut out = r.clip;
+                if *ik {
+                    zoo_rmr::footlock::place_ankles(&mut out, &r.ankles, &c.layout);
+                }
                 if *lock {
-                    zoo_rmr::footlock::lock_feet(&mut out, &contacts, &c.layout);
+                    zoo_rmr::footlock::lock_feet(&mut out, &r.contacts, &c.layout);
                 }
                 out
             }

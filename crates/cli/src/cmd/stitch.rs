@@ -1,7 +1,7 @@
 //! `zoo stitch`: join locomotion clips into one. The clips are aligned end to start (each
 //! clip's first ground root on the previous clip's last one, RMR sec. 6), then the seams are
-//! smoothed by the chosen method: the RMR refining window by window with the foot lock by its
-//! predicted contacts, inertialization or interpolation at each seam, or nothing (`concat`).
+//! smoothed by the chosen method: the RMR refining window by window, its ankles placed at its
+//! predicted positions and its feet locked by its predicted contacts, inertialization or interpolation at each seam, or nothing (`concat`).
 
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
@@ -11,7 +11,7 @@ use zoo_data::bvh;
 use zoo_data::stitch::baselines::{inertialize_seams, interpolate_seams};
 use zoo_data::stitch::{MIN_CLIP_FRAMES, StitchLayout, align_clips};
 use zoo_motion::Clip;
-use zoo_rmr::stitch::{RefineOptions, refine_clip};
+use zoo_rmr::stitch::{RefineOptions, refine_clip_full};
 
 /// How the seams are smoothed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -57,6 +57,10 @@ pub struct StitchArgs {
     /// Do not lock the feet by the RMR's predicted contacts.
     #[arg(long)]
     pub no_foot_lock: bool,
+    /// Do not place the ankles at the RMR's predicted lower-body positions by IK (RMR sec. 5's
+    /// output processing; done before the foot lock).
+    #[arg(long)]
+    pub no_ankle_ik: bool,
     /// Also write the raw aligned concatenation beside `--out` (`OUT.input.bvh`).
     #[arg(long)]
     pub save_input: bool,
@@ -143,6 +147,23 @@ pub fn read_clips(specs: &[ClipSpec]) -> anyhow::Result<Vec<Clip>> {
         .collect()
 }
 
+/// Why a file given as `--model` is refused, naming the model kind of an exported ONNX file.
+fn model_file_message(path: &Path) -> String {
+    let kind = std::fs::read(path)
+        .ok()
+        .and_then(|bytes| zoo_export::OnnxModel::from_bytes(&bytes, &path.display().to_string()).ok())
+        .and_then(|m| m.metadata_value("zoo.model_kind").map(str::to_string));
+    let what = match kind {
+        Some(k) => format!("an exported `{k}` ONNX model"),
+        None => "not a folder".to_string(),
+    };
+    format!(
+        "--model {} is a file ({what}); `zoo stitch` takes the run folder of `zoo train rmr` (the folder holding \
+         config.json and model.safetensors)",
+        path.display()
+    )
+}
+
 /// `OUT.input.bvh` beside `OUT.bvh`.
 fn input_path(out: &Path) -> PathBuf {
     let stem = out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "stitched".into());
@@ -158,6 +179,9 @@ pub fn run(a: StitchArgs) -> anyhow::Result<()> {
     let specs = a.clips.iter().map(|s| parse_clip_spec(s)).collect::<anyhow::Result<Vec<_>>>()?;
     let model = match (&a.model, a.method) {
         (Some(dir), _) => {
+            if dir.is_file() {
+                bail!("{}", model_file_message(dir));
+            }
             let kind = crate::registry::model_kind(dir)?;
             if kind != "rmr" {
                 bail!(
@@ -239,10 +263,15 @@ pub fn run(a: StitchArgs) -> anyhow::Result<()> {
                 );
             }
             let opts = RefineOptions { window, stride, blend_frames: a.blend_frames };
-            let (mut out, contacts) = refine_clip(m, stats, &aligned.clip, opts)?;
+            let refined = refine_clip_full(m, stats, &aligned.clip, opts)?;
+            let mut out = refined.clip;
+            if !a.no_ankle_ik {
+                let moved = zoo_rmr::footlock::place_ankles(&mut out, &refined.ankles, &c.layout);
+                note = format!(", ankles placed at the predicted positions (mean move {moved:.2} units)");
+            }
             if !a.no_foot_lock {
-                let moved = zoo_rmr::footlock::lock_feet(&mut out, &contacts, &c.layout);
-                note = format!(", feet locked by the predicted contacts (mean ankle correction {moved:.2} units)");
+                let moved = zoo_rmr::footlock::lock_feet(&mut out, &refined.contacts, &c.layout);
+                note += &format!(", feet locked by the predicted contacts (mean ankle correction {moved:.2} units)");
             }
             out
         }

@@ -90,6 +90,14 @@ pub struct RmrArgs {
     /// Train without the root trajectory loss (the Figure 9 ablation).
     #[arg(long)]
     pub no_trajectory_loss: bool,
+    /// The paper's decoder, predicting the pose itself, instead of our default residual
+    /// decoder (a correction added to the input, starting at zero; docs/rmr.md).
+    #[arg(long)]
+    pub no_residual: bool,
+    /// Extra weight of the pose loss within 5 frames of each seam of the training pairs
+    /// (0: the paper's loss) [default: 0].
+    #[arg(long, allow_hyphen_values = true, value_parser = seam_weight)]
+    pub seam_weight: Option<f64>,
     /// Units of each recurrent layer, per direction [default: the preset's; paper: 256].
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::layer_width)]
     pub hidden: Option<usize>,
@@ -109,6 +117,11 @@ pub struct RmrArgs {
     /// Seed of the synthetic data, of the weights, the dropout and the shuffles.
     #[arg(long, default_value_t = 1, allow_hyphen_values = true, value_parser = crate::args::seed)]
     pub seed: u64,
+}
+
+/// `--seam-weight`: a weight in `[0, 1000]`.
+fn seam_weight(s: &str) -> Result<f64, String> {
+    crate::args::real_in(s, crate::args::Interval::closed(0.0, 1000.0), "")
 }
 
 /// The files and folders of a run that `--overwrite` deletes (the ones training writes).
@@ -153,6 +166,12 @@ fn fresh_config(a: &RmrArgs, skeleton: &zoo_motion::Skeleton) -> anyhow::Result<
     }
     if a.no_trajectory_loss {
         config = config.with_trajectory_loss(false);
+    }
+    if a.no_residual {
+        config = config.with_residual(false);
+    }
+    if let Some(w) = a.seam_weight {
+        config.seam_weight = w;
     }
     if let Some(h) = a.hidden {
         config.hidden = h;
@@ -240,11 +259,13 @@ pub fn run(a: RmrArgs) -> anyhow::Result<()> {
     };
     let c = trainer.config();
     println!(
-        "training RMR ({:?}, T_begin {}, trajectory loss {}) on {source}: {} parameters, batch {}, lr {:e}, run \
+        "training RMR ({:?}, {} decoder, T_begin {}, trajectory loss {}, seam weight {}) on {source}: {} parameters, batch {}, lr {:e}, run \
          folder {}",
         c.cell,
+        if c.residual { "residual" } else { "absolute" },
         c.t_begin,
         if c.lambda_trajectory > 0.0 { "on" } else { "off" },
+        c.seam_weight,
         zoo_rmr::model::parameter_count(trainer.varmap()),
         c.train.batch_size,
         c.train.learning_rate,
