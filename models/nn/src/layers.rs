@@ -78,13 +78,26 @@ impl Mlp {
         let n = self.layers.len();
         let mut h = x.clone();
         for (i, l) in self.layers.iter().enumerate() {
-            h = l.forward(&h)?;
+            h = linear_forward(l, &h)?;
             if i + 1 < n || self.activate_last {
                 h = self.activation.apply(&h)?;
                 h = dropout.forward(&h, rng.as_deref_mut())?;
             }
         }
         Ok(h)
+    }
+}
+
+/// A linear layer's forward pass; for a 2-D input the weight goes through
+/// [`crate::tape::matmul_weight`] (taped while a data-parallel worker collects tapes).
+pub fn linear_forward(l: &Linear, x: &Tensor) -> Result<Tensor> {
+    if x.rank() != 2 {
+        return l.forward(x);
+    }
+    let y = crate::tape::matmul_weight(x, l.weight(), true)?;
+    match l.bias() {
+        Some(b) => y.broadcast_add(b),
+        None => Ok(y),
     }
 }
 

@@ -25,6 +25,7 @@ pub mod parallel;
 pub mod plot;
 pub mod recurrent;
 pub mod rng;
+pub mod tape;
 pub mod train_loop;
 
 pub use ema::Ema;

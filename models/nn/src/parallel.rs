@@ -7,6 +7,10 @@
 //! whole batch up to the order of float summation; for a fixed thread count it is the same bit
 //! for bit, run to run.
 //!
+//! Each shard's loss runs with a weight-gradient tape collection active ([`crate::tape`]): the
+//! weights that layers multiply frame by frame get their gradient in one matmul over every
+//! frame after the backward pass, instead of one weight-sized matmul and sum per frame.
+//!
 //! Each worker runs inside its own single-thread rayon pool: candle's matmul (gemm) and its
 //! other parallel kernels run in the pool of the calling thread, so a worker's kernels stay on
 //! its one thread instead of competing with the other worker's for a shared pool. At the
@@ -99,23 +103,33 @@ impl DataParallel {
         let shards = self.shards(n);
         if shards.len() == 1 {
             return self.pools[0].install(|| {
-                let l = loss(0..n)?;
+                let (l, tapes) = crate::tape::collect(|| loss(0..n));
+                let l = l?;
                 let value = l.to_scalar::<f32>()? as f64;
                 if !value.is_finite() {
                     return Ok((value, None));
                 }
-                Ok((value, Some(l.backward()?)))
+                let mut grads = l.backward()?;
+                for t in &tapes {
+                    t.finish(&mut grads, vars)?;
+                }
+                Ok((value, Some(grads)))
             });
         }
         let run = |k: usize, r: Range<usize>| -> Result<(f64, Option<GradStore>)> {
             self.pools[k].install(|| {
                 let w = r.len() as f64 / n as f64;
-                let l = loss(r)?;
+                let (l, tapes) = crate::tape::collect(|| loss(r));
+                let l = l?;
                 let value = l.to_scalar::<f32>()? as f64;
                 if !value.is_finite() {
                     return Ok((value, None));
                 }
-                Ok((w * value, Some(l.affine(w, 0.0)?.backward()?)))
+                let mut grads = l.affine(w, 0.0)?.backward()?;
+                for t in &tapes {
+                    t.finish(&mut grads, vars)?;
+                }
+                Ok((w * value, Some(grads)))
             })
         };
         let results: Vec<Result<(f64, Option<GradStore>)>> = std::thread::scope(|s| {

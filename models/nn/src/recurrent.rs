@@ -64,13 +64,13 @@ impl Layer {
 
     /// Input projection `x W_ih^T + b_ih` of `(batch, in)` or `(batch, time, in)`.
     fn input_proj(&self, x: &Tensor) -> Result<Tensor> {
-        x.broadcast_matmul(&self.w_ih.t()?)?.broadcast_add(&self.b_ih)
+        crate::tape::matmul_weight(x, &self.w_ih, true)?.broadcast_add(&self.b_ih)
     }
 
     /// One step from the projected input `gx` `(batch, G*H)`: the new `h` and, for the LSTM, `c`.
     fn update(&self, gx: &Tensor, h: &Tensor, c: Option<&Tensor>) -> Result<(Tensor, Option<Tensor>)> {
         let hu = self.hidden;
-        let gh = h.matmul(&self.w_hh.t()?)?.broadcast_add(&self.b_hh)?;
+        let gh = crate::tape::matmul_weight(h, &self.w_hh, true)?.broadcast_add(&self.b_hh)?;
         match self.cell {
             Cell::Lstm => {
                 let g = (gx + gh)?;

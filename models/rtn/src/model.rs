@@ -211,7 +211,8 @@ impl Rtn {
             }
             None => Tensor::cat(&[&he, &state.h], 1)?,
         };
-        let z = z_in.matmul(&seq.fused_t)?.broadcast_add(&seq.gate_bias)?;
+        // The fused weight's gradient is taped during data-parallel training (zoo_nn::tape).
+        let z = zoo_nn::tape::matmul_weight(&z_in, &seq.fused_t, false)?.broadcast_add(&seq.gate_bias)?;
         let s = candle_nn::ops::sigmoid(&z)?;
         let i = s.narrow(1, 0, hu)?;
         let f = s.narrow(1, hu, hu)?;

@@ -51,6 +51,10 @@ pub struct TrainBenchArgs {
     /// Write the results as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Windows per step instead of the model's paper batch (RTN only; `1..=4096`): to see how
+    /// the step's cost per window depends on the rows each worker's matmuls get.
+    #[arg(long, allow_hyphen_values = true, value_parser = |v: &str| whole_in(v, 1, 4096))]
+    pub batch: Option<usize>,
 }
 
 /// A whole number in `lo..=hi`.
@@ -245,9 +249,12 @@ fn rnn_gmm_refiner_bench(threads: &[usize]) -> anyhow::Result<Bench<'static>> {
 }
 
 /// The RTN at the paper's sizes on deterministic synthetic windows.
-fn rtn_bench<'a>(threads: &[usize], ws: &'a [Vec<f32>]) -> anyhow::Result<Bench<'a>> {
+fn rtn_bench<'a>(threads: &[usize], ws: &'a [Vec<f32>], batch: Option<usize>) -> anyhow::Result<Bench<'a>> {
     let parents: Vec<Option<usize>> = (0..22).map(|j| if j == 0 { None } else { Some((j - 1) / 2) }).collect();
-    let config = Config::paper().with_parents(&parents);
+    let mut config = Config::paper().with_parents(&parents);
+    if let Some(b) = batch {
+        config.train.batch_size = b;
+    }
     let b = config.train.batch_size;
     let mw: Vec<MotionWindow> = ws.iter().map(|w| MotionWindow::new(w)).collect();
     let stats = fit_stats(&config, &mw)?;
@@ -282,9 +289,12 @@ pub fn run(a: TrainBenchArgs) -> anyhow::Result<()> {
         crate::cmd::check_output_file("--json", j)?;
     }
     let parents_frames = Config::paper().window_frames();
-    let ws: Vec<Vec<f32>> = (0..64).map(|i| window(parents_frames, 22, i)).collect();
+    let ws: Vec<Vec<f32>> = (0..a.batch.unwrap_or(0).max(64)).map(|i| window(parents_frames, 22, i)).collect();
+    if a.batch.is_some() && a.model != TrainBenchModel::Rtn {
+        bail!("--batch: only the RTN bench takes another batch size");
+    }
     let mut bench = match a.model {
-        TrainBenchModel::Rtn => rtn_bench(&a.threads, &ws)?,
+        TrainBenchModel::Rtn => rtn_bench(&a.threads, &ws, a.batch)?,
         TrainBenchModel::RnnGmm => rnn_gmm_bench(&a.threads)?,
         TrainBenchModel::RnnGmmRefiner => rnn_gmm_refiner_bench(&a.threads)?,
         other => bail!(
