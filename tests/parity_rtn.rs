@@ -198,6 +198,12 @@ fn host_offset(stats: &FeatureStats, x: &[f32], root: [f32; 3], target_pose: &[f
     o
 }
 
+/// Named graph inputs of one run.
+type Feed<'a> = HashMap<&'a str, Vec<f32>>;
+
+/// A configuration switch under test and its name.
+type Variant = (&'static str, fn(&mut Config));
+
 /// Normalized interpolation frame `i` of `0..=n` (the `base` input of an interpolation-residual
 /// RTN) on the host, from the last context pose and the target pose.
 fn host_base(stats: &FeatureStats, last: &[f32], target_pose: &[f32], i: usize, n: usize) -> Vec<f32> {
@@ -214,8 +220,8 @@ fn host_loop(
     f: &Fixture,
     chars: &[&Character],
     n_out: usize,
-    start: &mut dyn FnMut(&HashMap<&str, Vec<f32>>),
-    step: &mut dyn FnMut(&HashMap<&str, Vec<f32>>) -> Vec<f32>,
+    start: &mut dyn FnMut(&Feed),
+    step: &mut dyn FnMut(&Feed) -> Vec<f32>,
 ) -> Trace {
     let d = f.config.dim();
     start(&HashMap::from([("target", cat(chars, |c| &c.target)), ("x0", cat(chars, |c| &c.x[0]))]));
@@ -498,7 +504,7 @@ fn rtn_single_step_parity() {
 fn rtn_ablation_variants_parity() {
     // Every config switch the exporter respects: no future conditioning, zero / common initial
     // state, no residual output, the residual on the interpolation (`base` input).
-    let variants: [(&str, fn(&mut Config)); 7] = [
+    let variants: [Variant; 7] = [
         ("interp_residual", |c: &mut Config| c.interp_residual = true),
         ("interp_residual_no_future", |c: &mut Config| {
             c.interp_residual = true;
