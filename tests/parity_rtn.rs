@@ -1120,3 +1120,44 @@ fn import_rtn_reads_back_the_exported_weights() {
     let err = zoo_rtn::export::import_rtn(&toy.to_bytes()).unwrap_err();
     assert!(err.to_string().contains("not an RTN export"), "{err}");
 }
+
+/// The fallback towards interpolation: the runtime's `generate` (thresholds read back from the
+/// exported file) and candle's `Rtn::transition_checked` blend the same way, and a weight of 1
+/// gives the linear interpolation of positions exactly.
+#[test]
+fn runtime_fallback_matches_candle_and_reaches_the_interpolation() {
+    use zoo_rtn::fallback::Fallback;
+    let always = Fallback { start: 0.0, full: 0.0 };
+    let f = fixture(Config { interp_residual: true, fallback: Some(always), ..tiny() });
+    let model = TransitionModel::new(MotionModel::from_bytes(&export(&f).to_bytes()).unwrap()).unwrap();
+    let fb = model.default_fallback().expect("the exported config carries the thresholds");
+    assert_eq!((fb.start, fb.full), (0.0, 0.0));
+    let (d, n) = (f.config.dim(), f.config.transition_frames);
+    let c = &characters(&f.stats)[0];
+    let mut runner = model.runner().unwrap();
+    let mut state = model.new_transition();
+    let mut out = vec![0.0; (n + 1) * d];
+    runner.generate(&mut state, &c.past, &c.target_pose, &c.next_pose, &mut out).unwrap();
+    assert_eq!(state.fallback_weight(), 0.0, "off until set");
+    runner.set_fallback(Some(fb));
+    runner.generate(&mut state, &c.past, &c.target_pose, &c.next_pose, &mut out).unwrap();
+    assert_eq!(state.fallback_weight(), 1.0);
+    let last = &c.past[(PAST - 1) * d..];
+    for (i, frame) in out.chunks_exact(d).enumerate() {
+        let a = (i + 1) as f32 / (n + 1) as f32;
+        for j in 0..d {
+            let want = last[j] + a * (c.target_pose[j] - last[j]);
+            assert!((frame[j] - want).abs() < 1e-3, "frame {i} value {j}: {} vs the interpolation {want}", frame[j]);
+        }
+    }
+    // A weight strictly between 0 and 1: thresholds around candle's own miss.
+    let plain = f.model.transition_checked(&f.stats, &c.past, &c.target_pose, &c.next_pose, n, None).unwrap();
+    let partial = Fallback { start: 0.5 * plain.miss, full: 2.0 * plain.miss };
+    let ours = f.model.transition_checked(&f.stats, &c.past, &c.target_pose, &c.next_pose, n, Some(&partial)).unwrap();
+    assert!((ours.weight - 1.0 / 3.0).abs() < 1e-4, "{}", ours.weight);
+    runner.set_fallback(Some(zoo_runtime::TransitionFallback { start: partial.start, full: partial.full }));
+    runner.generate(&mut state, &c.past, &c.target_pose, &c.next_pose, &mut out).unwrap();
+    assert!((state.fallback_weight() - ours.weight).abs() < 1e-3, "{} vs {}", state.fallback_weight(), ours.weight);
+    let diff = max_abs_diff(&ours.frames, &out);
+    assert!(diff <= 1e-2, "runtime vs candle with the fallback: max abs diff {diff} (clip units)");
+}
