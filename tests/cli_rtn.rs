@@ -132,9 +132,10 @@ fn train_resume_transition_and_decompress() {
     let result: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let rows = result["methods"].as_object().unwrap();
     let mut compared = 0;
+    // The run calibrated its fallback, which both paths apply (names suffixed `+fallback`).
     for (candle, runtime) in [
-        (format!("rtn:{run_dir}"), format!("onnx:{onnx}")),
-        (format!("rtn+lock:{run_dir}"), format!("onnx+lock:{onnx}")),
+        (format!("rtn:{run_dir}+fallback"), format!("onnx:{onnx}+fallback")),
+        (format!("rtn+lock:{run_dir}+fallback"), format!("onnx+lock:{onnx}+fallback")),
     ] {
         let (a, b) = (rows[&candle].as_object().unwrap(), rows[&runtime].as_object().unwrap());
         for (key, value) in a {
