@@ -3,8 +3,9 @@ wheel), written from that page alone: it runs an exported zoo transition model a
 blended transition as JSON. tests/protocol.rs compares it with the Rust runtime.
 
 usage: runtime_protocol.py MODEL.onnx INPUT.json OUTPUT.json
-INPUT.json: {"past": [[D floats] * P], "target": [D], "next": [D], "frames": N}
-OUTPUT.json: {"frames": [[D floats] * (N + 1)], "miss_mean": float, "miss_max": float}
+INPUT.json: {"past": [[D floats] * P], "target": [D], "next": [D], "frames": N, "fallback": bool}
+OUTPUT.json: {"frames": [[D floats] * (N + 1)], "miss_mean": float, "miss_max": float,
+              "fallback_weight": float}
 """
 import base64
 import json
@@ -85,14 +86,28 @@ def main(model_path, input_path, output_path):
             state[name] = value.astype(F)
 
     step_outputs = ["x_next"] + [s["output"] for s in slots]
+    has_base = "base" in inputs
+    y_last = past[-1]
 
-    def step(x, r):
+    def interpolation(i):
+        """Section 3: the interpolation frame i of 0..N (normalised features)."""
+        w = F(i + 1) / F(n + 1)
+        b = np.empty_like(y_t)
+        b[:3] = (y_t[:3] - y_last[:3]) / F(n + 1)
+        rel_last = (y_last[3:].reshape(-1, 3) - y_last[:3]).reshape(-1)
+        rel_t = (y_t[3:].reshape(-1, 3) - y_t[:3]).reshape(-1)
+        b[3:] = (F(1) - w) * rel_last + w * rel_t
+        return normalize(b, "x")
+
+    def step(x, r, base):
         # Section 3: the offset input.
         v = denormalize(x, "x")
         y = v.copy()
         y[:3] = r
         y[3:] = (v[3:].reshape(-1, 3) + r).reshape(-1)
         feed = {"x": x.reshape(1, -1)}
+        if has_base:
+            feed["base"] = base.reshape(1, -1)
         if task["offset_input"]:
             feed["offset"] = normalize(y_t - y, "offset").reshape(1, -1)
         for s in slots:
@@ -105,13 +120,13 @@ def main(model_path, input_path, output_path):
     # 3. The context frames after the first.
     x, r = c[0], past[0][:3].copy()
     for k in range(1, len(past)):
-        step(x, r)
+        step(x, r, c[k])
         x, r = c[k], past[k][:3].copy()
 
     # 4. N + 1 generated frames.
     frames = []
-    for _ in range(n + 1):
-        x = step(x, r)
+    for i in range(n + 1):
+        x = step(x, r, interpolation(i) if has_base else None)
         p, r = decode(denormalize(x, "x"), r)
         frames.append(p)
 
@@ -126,8 +141,22 @@ def main(model_path, input_path, output_path):
             w = 1.0 - (n - i) / b if n - i < b else 0.0
         if w > 0:
             frames[i] = (frames[i] + F(w) * e).astype(F)
+    # 6. The fallback towards interpolation, when asked for and the file carries thresholds.
+    weight = 0.0
+    fallback = json.loads(meta["zoo.config"]).get("fallback")
+    if data.get("fallback") and fallback is not None:
+        start, full = F(fallback["start"]), F(fallback["full"])
+        miss = F(dist.mean())
+        if full <= start:
+            weight = 1.0 if miss >= start else 0.0
+        else:
+            weight = float(np.clip((miss - start) / (full - start), 0.0, 1.0))
+        for i in range(n + 1):
+            a = F(i + 1) / F(n + 1)
+            lerp = y_last + a * (y_t - y_last)
+            frames[i] = (frames[i] + F(weight) * (lerp - frames[i])).astype(F)
     json.dump({"frames": [f.tolist() for f in frames], "miss_mean": float(dist.mean()),
-               "miss_max": float(dist.max())}, open(output_path, "w"))
+               "miss_max": float(dist.max()), "fallback_weight": weight}, open(output_path, "w"))
 
 
 if __name__ == "__main__":

@@ -132,9 +132,10 @@ fn train_resume_transition_and_decompress() {
     let result: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let rows = result["methods"].as_object().unwrap();
     let mut compared = 0;
+    // The run calibrated its fallback, which both paths apply (names suffixed `+fallback`).
     for (candle, runtime) in [
-        (format!("rtn:{run_dir}"), format!("onnx:{onnx}")),
-        (format!("rtn+lock:{run_dir}"), format!("onnx+lock:{onnx}")),
+        (format!("rtn:{run_dir}+fallback"), format!("onnx:{onnx}+fallback")),
+        (format!("rtn+lock:{run_dir}+fallback"), format!("onnx+lock:{onnx}+fallback")),
     ] {
         let (a, b) = (rows[&candle].as_object().unwrap(), rows[&runtime].as_object().unwrap());
         for (key, value) in a {
@@ -523,4 +524,59 @@ fn bench_train_measures_every_thread_count() {
     assert!(v["matmul_gflops_one_thread"].as_f64().unwrap() > 0.0);
     let (ok, _, stderr) = run(&["bench", "train", "--model", "arnn"]);
     assert!(!ok && stderr.contains("rtn and rnn-gmm are data-parallel so far"), "{stderr}");
+}
+
+/// Issue 19's switches end to end on a tiny model: the residual on the interpolation, the
+/// augmentations and the synthetic stepping clips go into the run, the fallback is calibrated
+/// at the end of training, and `zoo transition`, `zoo export` and the runtime use them.
+#[test]
+fn interp_residual_augmented_run_with_fallback() {
+    let dir = tempfile::tempdir().unwrap();
+    let run_dir = dir.path().join("run");
+    let mut args = tiny_run("--out", run_dir.to_str().unwrap(), "1");
+    args.extend(["--interp-residual", "--augment", "reverse,mirror,speed", "--synth-steps", "0.5"]);
+    let out = tiny_command(&args).output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    assert!(stdout.contains("--synth-steps 0.5: 3 clips"), "{stdout}");
+    assert!(stdout.contains("fallback calibrated on"), "{stdout}");
+    let config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run_dir.join("config.json")).unwrap()).unwrap();
+    assert_eq!(config["interp_residual"], true);
+    let aug = &config["train"]["augment"];
+    assert_eq!(
+        (aug["reverse"].as_f64(), aug["mirror"].as_f64(), aug["speed"].as_f64()),
+        (Some(0.3), Some(0.5), Some(0.3))
+    );
+    // bandai2's skeleton: Shoulder_L (5) pairs with Shoulder_R (9), the spine with itself.
+    assert_eq!(aug["mirror_pairs"][5], 9);
+    assert_eq!(aug["mirror_pairs"][2], 2);
+    let (start, full) = (config["fallback"]["start"].as_f64().unwrap(), config["fallback"]["full"].as_f64().unwrap());
+    assert!(start > 0.0 && full > start, "{config}");
+
+    let data = dir.path().join("synth");
+    let (ok, _, stderr) = run(&["data", "synth", "--out", data.to_str().unwrap(), "--minutes", "0.5", "--seed", "3"]);
+    assert!(ok, "{stderr}");
+    let clip = std::fs::read_dir(&data)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "bvh"))
+        .min()
+        .unwrap();
+    let bvh = dir.path().join("t.bvh");
+    let (ok, stdout, stderr) = zoo(&transition_args(&run_dir, &clip, "6", &bvh));
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("target miss") && stdout.contains("interpolation weight"), "{stdout}");
+    let mut no_fb = transition_args(&run_dir, &clip, "6", &dir.path().join("t2.bvh"));
+    no_fb.push("--no-fallback".into());
+    let (ok, stdout, stderr) = zoo(&no_fb);
+    assert!(ok && stdout.contains("(no fallback)"), "{stdout}\n{stderr}");
+
+    let onnx = dir.path().join("m.onnx");
+    let (ok, stdout, stderr) = run(&["export", "--onnx", run_dir.to_str().unwrap(), "--out", onnx.to_str().unwrap()]);
+    assert!(ok, "{stdout}\n{stderr}");
+    let model = zoo_runtime::TransitionModel::load(&onnx).unwrap();
+    assert!(model.model().inputs().iter().any(|i| i.name == "base"), "the step graph takes the interpolation base");
+    let fb = model.default_fallback().expect("the exported file carries the calibrated fallback");
+    assert!((fb.start as f64 - start).abs() < 1e-4 && (fb.full as f64 - full).abs() < 1e-4, "{fb:?}");
 }

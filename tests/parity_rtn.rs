@@ -155,12 +155,23 @@ fn candle_loop(f: &Fixture, chars: &[Character], n_out: usize) -> Trace {
     let mut state = f.model.initial_state(&t(cat(&refs, |c| &c.x[0]), d)).unwrap();
     let target_term =
         f.config.future_conditioning.then(|| offsets.target_term(&t(cat(&refs, |c| &c.target_pose), d)).unwrap());
+    let bases = offsets
+        .interpolation_frames(
+            &t(cat(&refs, |c| &c.x[PAST - 1]), d),
+            &t(cat(&refs, |c| &c.roots[PAST - 1]), 3),
+            &t(cat(&refs, |c| &c.target), 2 * d),
+            &t(cat(&refs, |c| &c.target_pose), d),
+            n_out - 1,
+        )
+        .unwrap();
     let mut x = t(cat(&refs, |c| &c.x[0]), d);
     let mut root = t(cat(&refs, |c| &c.roots[0]), 3);
     let mut trace = Vec::new();
     for step in 0..PAST - 1 + n_out {
         let offset = target_term.as_ref().map(|tt| offsets.offset(tt, &x, &root).unwrap());
-        let inputs = RtnInputs { sequence: &seq, x: &x, offset: offset.as_ref(), terrain: None };
+        let known = (step + 1 < PAST).then(|| t(cat(&refs, |c| &c.x[step + 1]), d));
+        let base = f.config.interp_residual.then(|| known.as_ref().unwrap_or_else(|| &bases[step + 1 - PAST]));
+        let inputs = RtnInputs { sequence: &seq, x: &x, offset: offset.as_ref(), terrain: None, base };
         let (next, st) = f.model.step(&inputs, &state).unwrap();
         state = st;
         trace.push(next.flatten_all().unwrap().to_vec1::<f32>().unwrap());
@@ -187,14 +198,30 @@ fn host_offset(stats: &FeatureStats, x: &[f32], root: [f32; 3], target_pose: &[f
     o
 }
 
+/// Named graph inputs of one run.
+type Feed<'a> = HashMap<&'a str, Vec<f32>>;
+
+/// A configuration switch under test and its name.
+type Variant = (&'static str, fn(&mut Config));
+
+/// Normalized interpolation frame `i` of `0..=n` (the `base` input of an interpolation-residual
+/// RTN) on the host, from the last context pose and the target pose.
+fn host_base(stats: &FeatureStats, last: &[f32], target_pose: &[f32], i: usize, n: usize) -> Vec<f32> {
+    let mut b = vec![0.0; last.len()];
+    features::interpolation_frame(last, target_pose, i, n, &mut b);
+    stats.x.normalize(&mut b);
+    b
+}
+
 /// The generate loop on the host around an exported graph. `start` gets the named start inputs
-/// (`target`, `x0`); `step` gets the named frame inputs (`x`, `offset`) and returns `x_next`.
+/// (`target`, `x0`); `step` gets the named frame inputs (`x`, `offset`, `base`) and returns
+/// `x_next`.
 fn host_loop(
     f: &Fixture,
     chars: &[&Character],
     n_out: usize,
-    start: &mut dyn FnMut(&HashMap<&str, Vec<f32>>),
-    step: &mut dyn FnMut(&HashMap<&str, Vec<f32>>) -> Vec<f32>,
+    start: &mut dyn FnMut(&Feed),
+    step: &mut dyn FnMut(&Feed) -> Vec<f32>,
 ) -> Trace {
     let d = f.config.dim();
     start(&HashMap::from([("target", cat(chars, |c| &c.target)), ("x0", cat(chars, |c| &c.x[0]))]));
@@ -207,9 +234,17 @@ fn host_loop(
             .enumerate()
             .flat_map(|(k, c)| host_offset(&f.stats, &x[k * d..(k + 1) * d], roots[k], &c.target_pose))
             .collect();
-        let next = step(&HashMap::from([("x", x.clone()), ("offset", offset)]));
-        trace.push(next.clone());
         let nt = s + 1;
+        let base: Vec<f32> = if nt < PAST {
+            cat(chars, |c| &c.x[nt])
+        } else {
+            chars
+                .iter()
+                .flat_map(|c| host_base(&f.stats, &c.past[(PAST - 1) * d..], &c.target_pose, nt - PAST, n_out - 1))
+                .collect()
+        };
+        let next = step(&HashMap::from([("x", x.clone()), ("offset", offset), ("base", base)]));
+        trace.push(next.clone());
         if nt < PAST {
             x = cat(chars, |c| &c.x[nt]);
             roots = chars.iter().map(|c| c.roots[nt]).collect();
@@ -420,7 +455,7 @@ fn rtn_single_step_parity() {
     let seq = f.model.begin(&t(&target, 2 * d)).unwrap();
     let state = RtnState { h: t(&h, hu), c: t(&c, hu) };
     let (xt, ot) = (t(&x, d), t(&offset, d));
-    let inputs = RtnInputs { sequence: &seq, x: &xt, offset: Some(&ot), terrain: None };
+    let inputs = RtnInputs { sequence: &seq, x: &xt, offset: Some(&ot), terrain: None, base: None };
     let (next, st) = f.model.step(&inputs, &state).unwrap();
     let flat = |t: &Tensor| t.flatten_all().unwrap().to_vec1::<f32>().unwrap();
     let candle = [flat(&next), flat(&st.h), flat(&st.c)];
@@ -468,8 +503,13 @@ fn rtn_single_step_parity() {
 #[test]
 fn rtn_ablation_variants_parity() {
     // Every config switch the exporter respects: no future conditioning, zero / common initial
-    // state, no residual output.
-    let variants: [(&str, fn(&mut Config)); 5] = [
+    // state, no residual output, the residual on the interpolation (`base` input).
+    let variants: [Variant; 7] = [
+        ("interp_residual", |c: &mut Config| c.interp_residual = true),
+        ("interp_residual_no_future", |c: &mut Config| {
+            c.interp_residual = true;
+            c.future_conditioning = false;
+        }),
         ("no_future", |c: &mut Config| c.future_conditioning = false),
         ("h0", |c: &mut Config| c.init_state = InitState::Zero),
         ("hcommon", |c: &mut Config| c.init_state = InitState::Common),
@@ -608,7 +648,18 @@ fn run_folder_and_cli_export() {
 /// whole target-blended transitions in global positions, one character at a time and batched.
 #[test]
 fn runtime_transition_api_matches_candle() {
-    let f = fixture(tiny());
+    runtime_transition_api_matches_candle_for(tiny());
+}
+
+/// [`runtime_transition_api_matches_candle`] for an interpolation-residual RTN: the runtime
+/// computes the `base` input itself.
+#[test]
+fn runtime_transition_api_matches_candle_interp_residual() {
+    runtime_transition_api_matches_candle_for(Config { interp_residual: true, ..tiny() });
+}
+
+fn runtime_transition_api_matches_candle_for(config: Config) {
+    let f = fixture(config);
     let model = TransitionModel::new(MotionModel::from_bytes(&export(&f).to_bytes()).unwrap()).unwrap();
     assert_eq!(model.joints(), 4);
     assert_eq!(model.target_blend(), f.config.target_blend);
@@ -657,7 +708,7 @@ fn runtime_transition_api_matches_candle() {
     let c = &chars[1];
     let want = f.model.unroll(&f.stats, &c.past, &c.target_pose, &c.next_pose, FRAMES, None).unwrap();
     let mut state = model.new_transition();
-    runner.start(&mut state, &c.past, &c.target_pose, &c.next_pose).unwrap();
+    runner.start_for(&mut state, &c.past, &c.target_pose, &c.next_pose, FRAMES).unwrap();
     let mut pose = vec![0.0; d];
     for (t, frame) in want.chunks_exact(d).enumerate() {
         runner.step_raw(&mut state, &mut pose).unwrap();
@@ -1068,4 +1119,45 @@ fn import_rtn_reads_back_the_exported_weights() {
     let toy = ToyModel::new(Cell::Lstm, 6, 8, 5).cell_graph();
     let err = zoo_rtn::export::import_rtn(&toy.to_bytes()).unwrap_err();
     assert!(err.to_string().contains("not an RTN export"), "{err}");
+}
+
+/// The fallback towards interpolation: the runtime's `generate` (thresholds read back from the
+/// exported file) and candle's `Rtn::transition_checked` blend the same way, and a weight of 1
+/// gives the linear interpolation of positions exactly.
+#[test]
+fn runtime_fallback_matches_candle_and_reaches_the_interpolation() {
+    use zoo_rtn::fallback::Fallback;
+    let always = Fallback { start: 0.0, full: 0.0 };
+    let f = fixture(Config { interp_residual: true, fallback: Some(always), ..tiny() });
+    let model = TransitionModel::new(MotionModel::from_bytes(&export(&f).to_bytes()).unwrap()).unwrap();
+    let fb = model.default_fallback().expect("the exported config carries the thresholds");
+    assert_eq!((fb.start, fb.full), (0.0, 0.0));
+    let (d, n) = (f.config.dim(), f.config.transition_frames);
+    let c = &characters(&f.stats)[0];
+    let mut runner = model.runner().unwrap();
+    let mut state = model.new_transition();
+    let mut out = vec![0.0; (n + 1) * d];
+    runner.generate(&mut state, &c.past, &c.target_pose, &c.next_pose, &mut out).unwrap();
+    assert_eq!(state.fallback_weight(), 0.0, "off until set");
+    runner.set_fallback(Some(fb));
+    runner.generate(&mut state, &c.past, &c.target_pose, &c.next_pose, &mut out).unwrap();
+    assert_eq!(state.fallback_weight(), 1.0);
+    let last = &c.past[(PAST - 1) * d..];
+    for (i, frame) in out.chunks_exact(d).enumerate() {
+        let a = (i + 1) as f32 / (n + 1) as f32;
+        for j in 0..d {
+            let want = last[j] + a * (c.target_pose[j] - last[j]);
+            assert!((frame[j] - want).abs() < 1e-3, "frame {i} value {j}: {} vs the interpolation {want}", frame[j]);
+        }
+    }
+    // A weight strictly between 0 and 1: thresholds around candle's own miss.
+    let plain = f.model.transition_checked(&f.stats, &c.past, &c.target_pose, &c.next_pose, n, None).unwrap();
+    let partial = Fallback { start: 0.5 * plain.miss, full: 2.0 * plain.miss };
+    let ours = f.model.transition_checked(&f.stats, &c.past, &c.target_pose, &c.next_pose, n, Some(&partial)).unwrap();
+    assert!((ours.weight - 1.0 / 3.0).abs() < 1e-4, "{}", ours.weight);
+    runner.set_fallback(Some(zoo_runtime::TransitionFallback { start: partial.start, full: partial.full }));
+    runner.generate(&mut state, &c.past, &c.target_pose, &c.next_pose, &mut out).unwrap();
+    assert!((state.fallback_weight() - ours.weight).abs() < 1e-3, "{} vs {}", state.fallback_weight(), ours.weight);
+    let diff = max_abs_diff(&ours.frames, &out);
+    assert!(diff <= 1e-2, "runtime vs candle with the fallback: max abs diff {diff} (clip units)");
 }

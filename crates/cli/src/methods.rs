@@ -1,6 +1,7 @@
 //! The exported model as a benchmark method (`onnx:FILE.onnx`, `onnx+lock:FILE.onnx`): the
 //! file run by the engine runtime (`zoo-runtime` on tract), with the same inputs, fit and foot
-//! lock as `rtn:DIR` ([`zoo_data::position_method`]).
+//! lock as `rtn:DIR` ([`zoo_data::position_method`]), and the same fallback (the thresholds
+//! calibrated in training, carried by the file; off with `zoo bench --no-fallback`).
 
 use anyhow::Context;
 use std::path::Path;
@@ -11,6 +12,8 @@ use zoo_runtime::{TransitionModel, TransitionRunner, TransitionState};
 /// An exported transition model run by the engine runtime; one runner and state per thread.
 pub struct OnnxGenerator {
     model: TransitionModel,
+    /// The model's calibrated fallback, unless `zoo bench --no-fallback`.
+    fallback: Option<zoo_runtime::TransitionFallback>,
 }
 
 impl PositionGenerator for OnnxGenerator {
@@ -24,6 +27,7 @@ impl PositionGenerator for OnnxGenerator {
         let mut runner = self.model.runner().map_err(|e| e.to_string())?;
         // The benchmark measures transitions beyond the trained length on purpose (n = 45).
         runner.allow_beyond_trained(true);
+        runner.set_fallback(self.fallback);
         Ok((runner, self.model.new_transition()))
     }
 
@@ -57,5 +61,7 @@ pub fn load_onnx_with_skeleton(
     let model =
         TransitionModel::load(path).with_context(|| format!("loading the exported model {}", path.display()))?;
     let skeleton = model.model().metadata().skeleton.clone();
-    Ok((PositionMethod::new(name, OnnxGenerator { model }, foot_lock), skeleton))
+    let fallback = model.default_fallback().filter(|_| zoo_rtn::method::fallback_enabled());
+    let name = if fallback.is_some() { format!("{name}+fallback") } else { name };
+    Ok((PositionMethod::new(name, OnnxGenerator { model, fallback }, foot_lock), skeleton))
 }

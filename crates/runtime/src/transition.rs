@@ -30,6 +30,8 @@ use zoo_motion::footlock::FootLock;
 enum FrameInput {
     X,
     Offset,
+    /// The interpolation frame of an interpolation-residual RTN (`x_next = base + D(h)`).
+    Base,
 }
 
 /// A loaded RTN for transitions: cheap to clone (the graph is shared), `Send + Sync`.
@@ -62,6 +64,10 @@ pub struct TransitionState {
     root: [f32; 3],
     /// Global target pose.
     target: Vec<f32>,
+    /// Global pose of the last context frame (the start of the interpolation base).
+    last: Vec<f32>,
+    /// Raw frames generated since the context (the index of the next interpolation frame).
+    generated: usize,
     started: bool,
     /// Frames returned since the transition started (blended or raw).
     frames: usize,
@@ -75,6 +81,8 @@ pub struct TransitionState {
     /// Whether `step_raw` was used since the start (raw and blended stepping do not mix).
     raw: bool,
     miss: Option<TargetMiss>,
+    /// The interpolation's weight in the frames of the last `generate` (0 without fallback).
+    fallback_weight: f32,
     /// Rotations of a transition started from engine poses.
     posed: PosedState,
 }
@@ -119,6 +127,41 @@ impl TransitionState {
     pub fn target_miss(&self) -> Option<TargetMiss> {
         self.miss
     }
+
+    /// The weight of the interpolation in the frames of the last [`TransitionRunner::generate`]
+    /// (0: the network's transition; 1: the interpolation alone), from the fallback set with
+    /// [`TransitionRunner::set_fallback`]; 0 without one and before `generate`.
+    pub fn fallback_weight(&self) -> f32 {
+        self.fallback_weight
+    }
+}
+
+/// The fallback towards interpolation on a low-confidence transition (issue 19): the
+/// confidence signal is the network's own miss at the target ([`TargetMiss::mean`], computed
+/// from the inputs only); from `start` on, [`TransitionRunner::generate`] blends the transition
+/// towards the linear interpolation of positions between the last context pose and the target,
+/// fully from `full` on. Thresholds in the model's units; a model calibrated by `zoo train rtn`
+/// carries them ([`TransitionModel::default_fallback`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TransitionFallback {
+    /// Miss below which the network's transition is kept.
+    pub start: f32,
+    /// Miss from which the transition is the interpolation.
+    pub full: f32,
+}
+
+impl TransitionFallback {
+    /// The interpolation's weight for a target miss: 0 below `start`, 1 from `full` on, linear
+    /// between (a non-finite miss gives 1).
+    pub fn weight(&self, miss: f32) -> f32 {
+        if !miss.is_finite() {
+            return 1.0;
+        }
+        if self.full <= self.start {
+            return if miss >= self.start { 1.0 } else { 0.0 };
+        }
+        ((miss - self.start) / (self.full - self.start)).clamp(0.0, 1.0)
+    }
 }
 
 /// The distance between the network's predicted target frame and the requested target, per
@@ -143,6 +186,8 @@ pub struct TransitionRunner {
     x0: Vec<f32>,
     xb: Vec<f32>,
     offset: Vec<f32>,
+    /// Interpolation frames of the characters of a graph run (interpolation-residual models).
+    base: Vec<f32>,
     next: Vec<f32>,
     /// Generated poses of a batched `generate`, character-major.
     poses: Vec<f32>,
@@ -156,6 +201,8 @@ pub struct TransitionRunner {
     foot_lock: Option<FootLock>,
     /// Whether transitions longer than the trained length are accepted.
     beyond_trained: bool,
+    /// Fallback towards interpolation of `generate`, off unless set.
+    fallback: Option<TransitionFallback>,
     /// Buffers of posed transitions.
     posed: PosedScratch,
 }
@@ -234,12 +281,13 @@ impl TransitionModel {
             .map(|i| match i.name.as_str() {
                 "x" if i.width == d => Ok(FrameInput::X),
                 "offset" if i.width == d && task.offset_input => Ok(FrameInput::Offset),
+                "base" if i.width == d => Ok(FrameInput::Base),
                 other => Err(MotionError::BadGraphIo {
                     what: "input",
                     name: other.to_string(),
                     reason: format!(
-                        "is not an input of this transition model (`x`{} of {d} values, from `{}`)",
-                        if task.offset_input { " and `offset`" } else { "" },
+                        "is not an input of this transition model (`x`{}, optionally `base`, of {d} values, from `{}`)",
+                        if task.offset_input { ", `offset`" } else { "" },
                         keys::TRANSITION
                     ),
                 }),
@@ -320,6 +368,16 @@ impl TransitionModel {
         FootLock::from_skeleton(&sk.names, &parents)
     }
 
+    /// The fallback thresholds calibrated by `zoo train rtn` (the `fallback` field of the
+    /// exported configuration, `zoo.config`), or `None` for a model without them. Enable them
+    /// on a runner with [`TransitionRunner::set_fallback`].
+    pub fn default_fallback(&self) -> Option<TransitionFallback> {
+        let config: serde_json::Value = serde_json::from_str(&self.model.metadata().config_json).ok()?;
+        let f = config.get("fallback")?;
+        let (start, full) = (f.get("start")?.as_f64()? as f32, f.get("full")?.as_f64()? as f32);
+        (start.is_finite() && full.is_finite() && start >= 0.0).then_some(TransitionFallback { start, full })
+    }
+
     /// A fresh transition state for one character.
     pub fn new_transition(&self) -> TransitionState {
         let d = 3 * self.joints;
@@ -328,6 +386,8 @@ impl TransitionModel {
             x: vec![0.0; d],
             root: [0.0; 3],
             target: vec![0.0; d],
+            last: vec![0.0; d],
+            generated: 0,
             started: false,
             frames: 0,
             length: 0,
@@ -335,6 +395,7 @@ impl TransitionModel {
             ahead_from: 0,
             raw: false,
             miss: None,
+            fallback_weight: 0.0,
             posed: PosedState::new(self.joints),
         }
     }
@@ -349,6 +410,7 @@ impl TransitionModel {
             x0: Vec::new(),
             xb: Vec::new(),
             offset: Vec::new(),
+            base: Vec::new(),
             next: Vec::new(),
             poses: Vec::new(),
             motion: Vec::new(),
@@ -356,6 +418,7 @@ impl TransitionModel {
             ahead_sel: Vec::new(),
             foot_lock: None,
             beyond_trained: false,
+            fallback: None,
             posed: PosedScratch::default(),
         })
     }
@@ -372,6 +435,14 @@ impl TransitionRunner {
     /// the whole transition. See `zoo_motion::footlock`.
     pub fn set_foot_lock(&mut self, lock: Option<FootLock>) {
         self.foot_lock = lock;
+    }
+
+    /// Sets the fallback that [`TransitionRunner::generate`] applies after the target blend
+    /// and before the foot lock (`None`: off, the default). Per-frame stepping does not apply
+    /// it (it needs the target miss, known once the blend window is computed): the engine
+    /// reads [`TransitionState::target_miss`] and decides. See [`TransitionFallback`].
+    pub fn set_fallback(&mut self, fallback: Option<TransitionFallback>) {
+        self.fallback = fallback;
     }
 
     /// Whether this runner accepts transitions longer than the model was trained for
@@ -488,6 +559,8 @@ impl TransitionRunner {
         result?;
         for (c, s) in states.iter_mut().enumerate() {
             s.target.copy_from_slice(&target[c * d..(c + 1) * d]);
+            s.last.copy_from_slice(&past[(c + 1) * per - d..(c + 1) * per]);
+            s.generated = 0;
             s.x.copy_from_slice(&self.feats[c * per..c * per + d]);
             s.root = features::root_of(&past[c * per..]);
             s.started = true;
@@ -497,6 +570,7 @@ impl TransitionRunner {
             s.ahead_from = 0;
             s.raw = false;
             s.miss = None;
+            s.fallback_weight = 0.0;
             s.posed.active = false;
         }
         let mut sel = std::mem::take(&mut self.sel);
@@ -504,7 +578,7 @@ impl TransitionRunner {
         sel.extend(0..n);
         let mut result = Ok(());
         for f in 1..frames {
-            result = self.advance(states, &sel);
+            result = self.advance(states, &sel, Some((per, f)));
             if result.is_err() {
                 break;
             }
@@ -522,13 +596,34 @@ impl TransitionRunner {
     }
 
     /// Runs the step graph on the `x` of the characters in `sel` into `self.next` (row `i` for
-    /// character `sel[i]`) and advances their recurrent states.
-    fn advance(&mut self, states: &mut [TransitionState], sel: &[usize]) -> Result<(), MotionError> {
+    /// character `sel[i]`) and advances their recurrent states. `context`: `(values per
+    /// character, frame)` while feeding the context, whose frame `frame` of `self.feats` is then
+    /// the interpolation base; `None` in the transition, whose base is the interpolation frame.
+    fn advance(
+        &mut self,
+        states: &mut [TransitionState],
+        sel: &[usize],
+        context: Option<(usize, usize)>,
+    ) -> Result<(), MotionError> {
         let m = &self.model;
         let (n, d) = (sel.len(), 3 * m.joints);
         self.xb.resize(n * d, 0.0);
         self.offset.resize(n * d, 0.0);
         self.next.resize(n * d, 0.0);
+        if m.frame_inputs.contains(&FrameInput::Base) {
+            self.base.resize(n * d, 0.0);
+            for (row, &c) in sel.iter().enumerate() {
+                let s = &states[c];
+                let b = &mut self.base[row * d..(row + 1) * d];
+                match context {
+                    Some((per, f)) => b.copy_from_slice(&self.feats[c * per + f * d..c * per + (f + 1) * d]),
+                    None => {
+                        interpolation_frame(&s.last, &s.target, s.generated, s.length, b);
+                        m.x.normalize(b);
+                    }
+                }
+            }
+        }
         for (row, &c) in sel.iter().enumerate() {
             let s = &states[c];
             let (xb, ob) = (&mut self.xb[row * d..(row + 1) * d], &mut self.offset[row * d..(row + 1) * d]);
@@ -541,12 +636,13 @@ impl TransitionRunner {
             }
             m.offset.normalize(ob);
         }
-        let (x, offset) = (&self.xb[..], &self.offset[..]);
-        let mut inputs: [&[f32]; 2] = [&[], &[]];
+        let (x, offset, base) = (&self.xb[..], &self.offset[..], &self.base[..]);
+        let mut inputs: [&[f32]; 3] = [&[], &[], &[]];
         for (slot, which) in inputs.iter_mut().zip(&m.frame_inputs) {
             *slot = match which {
                 FrameInput::X => x,
                 FrameInput::Offset => offset,
+                FrameInput::Base => base,
             };
         }
         let inputs = &inputs[..m.frame_inputs.len()];
@@ -566,6 +662,7 @@ impl TransitionRunner {
         pose.copy_from_slice(next);
         self.model.x.denormalize(pose);
         s.root = features::decode_frame_in_place(s.root, pose);
+        s.generated += 1;
     }
 
     /// The next frame of one character's transition into `pose` (`3K` global positions):
@@ -683,7 +780,7 @@ impl TransitionRunner {
         if sel.is_empty() {
             return Ok(());
         }
-        self.advance(states, sel)?;
+        self.advance(states, sel, None)?;
         for (row, &c) in sel.iter().enumerate() {
             let s = &mut states[c];
             if ahead_sel.contains(&c) {
@@ -707,7 +804,7 @@ impl TransitionRunner {
             if sel.is_empty() {
                 break;
             }
-            self.advance(states, sel)?;
+            self.advance(states, sel, None)?;
             for (row, &c) in sel.iter().enumerate() {
                 let s = &mut states[c];
                 let at = s.ahead.len();
@@ -738,7 +835,7 @@ impl TransitionRunner {
         let mut sel = std::mem::take(&mut self.sel);
         sel.clear();
         sel.extend(0..states.len());
-        let result = self.advance(states, &sel);
+        let result = self.advance(states, &sel, None);
         self.sel = sel;
         result?;
         for (c, (s, pose)) in states.iter_mut().zip(poses.chunks_exact_mut(d)).enumerate() {
@@ -807,13 +904,55 @@ impl TransitionRunner {
         }
         self.poses = poses;
         result?;
+        let past_per = past.len() / n;
+        for (c, s) in states.iter_mut().enumerate() {
+            let w = match (&self.fallback, s.miss) {
+                (Some(f), Some(miss)) => f.weight(miss.mean),
+                _ => 0.0,
+            };
+            s.fallback_weight = w;
+            if w > 0.0 {
+                let last = &past[(c + 1) * past_per - d..(c + 1) * past_per];
+                blend_towards_interpolation(&mut out[c * per..(c + 1) * per], last, &target[c * d..(c + 1) * d], w);
+            }
+        }
         if let Some(lock) = &self.foot_lock {
-            let past_per = past.len() / n;
             for c in 0..n {
                 lock.apply(&past[(c + 1) * past_per - d..(c + 1) * past_per], &mut out[c * per..(c + 1) * per]);
             }
         }
         Ok(())
+    }
+}
+
+/// Unnormalized features of frame `i` (`0..=n`) of the linear interpolation of global
+/// positions from the last context frame `last` to `target` over `n` frames before the target
+/// (weight `(i + 1) / (n + 1)`): the interpolation base of an interpolation-residual RTN, as
+/// `zoo_rtn::features::interpolation_frame` computes it in training (docs/runtime-protocol.md).
+fn interpolation_frame(last: &[f32], target: &[f32], i: usize, n: usize, out: &mut [f32]) {
+    let steps = (n + 1) as f32;
+    let w = (i + 1) as f32 / steps;
+    for a in 0..3 {
+        out[a] = (target[a] - last[a]) / steps;
+    }
+    for j in 3..out.len() {
+        let a = j % 3;
+        out[j] = (1.0 - w) * (last[j] - last[a]) + w * (target[j] - target[a]);
+    }
+}
+
+/// Moves each of the `n + 1` poses of `frames` (the last one the target) a share `w` of the way
+/// to the linear interpolation of positions from `last` to `target`, weight `(i + 1) / (n + 1)`
+/// for frame `i` (the same blend as `zoo_rtn::fallback::blend_towards_interpolation`).
+fn blend_towards_interpolation(frames: &mut [f32], last: &[f32], target: &[f32], w: f32) {
+    let d = target.len();
+    let steps = (frames.len() / d) as f32;
+    for (i, f) in frames.chunks_exact_mut(d).enumerate() {
+        let a = (i + 1) as f32 / steps;
+        for ((y, l), t) in f.iter_mut().zip(last).zip(target) {
+            let lerp = l + a * (t - l);
+            *y += w * (lerp - *y);
+        }
     }
 }
 

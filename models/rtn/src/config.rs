@@ -63,6 +63,11 @@ pub struct TrainConfig {
     /// averaged weights are a second candidate for the best checkpoint (see `RtnTrainer`).
     #[serde(default)]
     pub ema_decay: Option<f64>,
+    /// On-the-fly augmentation of the training windows (time reversal, mirroring, speed;
+    /// [`crate::augment::Augment`]), drawn from the trainer's generator; `None`: none (the
+    /// paper's recipe, and folders written before it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub augment: Option<crate::augment::Augment>,
 }
 
 impl Default for TrainConfig {
@@ -77,6 +82,7 @@ impl Default for TrainConfig {
             random_rotation: true,
             seed: 0x5eed,
             ema_decay: None,
+            augment: None,
         }
     }
 }
@@ -129,6 +135,15 @@ pub struct Config {
     pub init_state: InitState,
     /// Residual output `x_(t+1) = x_t + D(h_t)` (eq. 13; false: ablation `RTN\RESNET`).
     pub residual: bool,
+    /// Predict a correction on top of the interpolation of context and target instead of the
+    /// next frame (not in the paper; the Delta-interpolator of Oreshkin et al. 2022): step `t`
+    /// also takes the normalised interpolation frame `b_(t+1)` (the LERP of the last context
+    /// frame and the target in feature space, see [`crate::features::interpolation_frame`]), the
+    /// frame encoder reads `[x_t, p_t, b_(t+1)]` and the output is `x_(t+1) = b_(t+1) + D(h_t)`
+    /// (replacing eq. 13's `x_t + D(h_t)`). An untrained decoder's near-zero output is the
+    /// interpolation itself. Folders written before the field existed load as `false`.
+    #[serde(default)]
+    pub interp_residual: bool,
     /// Feed a local terrain patch `p_t` to the frame encoder (sec. 3.2, the terrain-aware RTN).
     pub terrain: bool,
     /// Terrain patch side in samples (paper: 13).
@@ -139,6 +154,11 @@ pub struct Config {
     pub target_blend: usize,
     /// Training settings.
     pub train: TrainConfig,
+    /// Thresholds of the fallback towards interpolation on the network's target miss
+    /// ([`crate::fallback`]), calibrated on the validation windows at the end of training;
+    /// `None` (folders trained before it existed, or not calibrated): no fallback.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fallback: Option<crate::fallback::Fallback>,
 }
 
 impl Config {
@@ -161,11 +181,13 @@ impl Config {
             future_conditioning: true,
             init_state: InitState::Learned,
             residual: true,
+            interp_residual: false,
             terrain: false,
             terrain_side: 13,
             terrain_extent: 206.0,
             target_blend: 5,
             train: TrainConfig::default(),
+            fallback: None,
         }
     }
 
@@ -206,6 +228,12 @@ impl Config {
     /// Feature frame size `D = 3K`.
     pub fn dim(&self) -> usize {
         3 * self.joints
+    }
+
+    /// Values the frame encoder reads: the frame, the terrain patch and, with
+    /// [`Config::interp_residual`], the interpolation frame.
+    pub fn frame_encoder_input(&self) -> usize {
+        self.dim() + self.terrain_dim() + if self.interp_residual { self.dim() } else { 0 }
     }
 
     /// Terrain patch size (0 without terrain).

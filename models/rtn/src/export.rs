@@ -13,6 +13,7 @@
 //! | `x`: normalized features `x_t` (D) | always | `x_next`: normalized `x_(t+1)` (D) |
 //! | `offset`: normalized global offset `o_t` (D) | `future_conditioning` | |
 //! | `terrain`: normalized terrain patch (side^2) | `terrain` | |
+//! | `base`: normalized interpolation frame `b_(t+1)` (D) | `interp_residual` | (`x_next = base + D(h)`) |
 //! | `h`, `c`: LSTM state (H) | always | `h_next`, `c_next` |
 //! | `gate_bias`: `C_F h_F + b` (4H), constant over a transition | `future_conditioning` | `gate_bias_next` (= `gate_bias`) |
 //!
@@ -308,15 +309,14 @@ fn step_graph(config: &Config, w: &Weights) -> Result<GraphBuilder, ExportError>
     let x = g.input("x", &batch(d));
     let offset = config.future_conditioning.then(|| g.input("offset", &batch(d)));
     let terrain = config.terrain.then(|| g.input("terrain", &batch(config.terrain_dim())));
+    let base = config.interp_residual.then(|| g.input("base", &batch(d)));
     let h = g.input("h", &batch(hu));
     let c = g.input("c", &batch(hu));
     let gate_bias = config.future_conditioning.then(|| g.input("gate_bias", &batch(4 * hu)));
 
-    // RTN eq. 2: h_E = E([x_t, p_t])
-    let e_in = match &terrain {
-        Some(p) => g.concat("frame_encoder.input", &[&x, p], 1),
-        None => x.clone(),
-    };
+    // RTN eq. 2: h_E = E([x_t, p_t]), with the interpolation frame: E([x_t, p_t, b_(t+1)])
+    let parts: Vec<&Value> = [Some(&x), terrain.as_ref(), base.as_ref()].into_iter().flatten().collect();
+    let e_in = if parts.len() == 1 { x.clone() } else { g.concat("frame_encoder.input", &parts, 1) };
     let he = mlp(&mut g, w, "frame_encoder", config.frame_encoder.len(), &e_in, slope, true)?;
     // RTN eq. 5-8: z = W h_E + U h_(t-1) + C_O h_O + (C_F h_F + b)
     let w_ih = w.init(&mut g, "lstm.weight_ih")?;
@@ -351,7 +351,12 @@ fn step_graph(config: &Config, w: &Weights) -> Result<GraphBuilder, ExportError>
     let h_next = g.mul("lstm.h", &o, &tc);
     // RTN eq. 12-13
     let dx = mlp(&mut g, w, "decoder", config.decoder.len() + 1, &h_next, slope, false)?;
-    let x_next = if config.residual { g.add("residual", &x, &dx) } else { dx };
+    let x_next = match &base {
+        // x_(t+1) = b_(t+1) + D(h_t) (Config::interp_residual)
+        Some(b) => g.add("interpolation_residual", b, &dx),
+        None if config.residual => g.add("residual", &x, &dx),
+        None => dx,
+    };
     g.output("x_next", &x_next, &batch(d));
     g.output("h_next", &h_next, &batch(hu));
     g.output("c_next", &c_next, &batch(hu));

@@ -21,6 +21,27 @@ pub fn global_offset(frame: &[f32], target: &[f32], out: &mut [f32]) {
     }
 }
 
+/// Unnormalised features of frame `i` (`0..=n`) of the linear interpolation of global
+/// positions between the last context frame `last` and the target `target` over a transition
+/// of `n` frames before the target (interpolation weight `(i + 1) / (n + 1)`, so frame `n` is
+/// the target's pose): the root velocity `(r_T - r_last) / (n + 1)` and the interpolated
+/// root-relative positions. The base of the interpolation-residual RTN
+/// ([`crate::Config::interp_residual`]); the runtime computes the same (docs/runtime-protocol.md).
+pub fn interpolation_frame(last: &[f32], target: &[f32], i: usize, n: usize, out: &mut [f32]) {
+    let d = last.len();
+    assert!(target.len() == d && out.len() == d && d >= 3, "frames of the same size");
+    let steps = (n + 1) as f32;
+    let w = (i + 1) as f32 / steps;
+    let (rl, rt) = (root_of(last), root_of(target));
+    for a in 0..3 {
+        out[a] = (rt[a] - rl[a]) / steps;
+    }
+    for j in 3..d {
+        let a = j % 3;
+        out[j] = (1.0 - w) * (last[j] - rl[a]) + w * (target[j] - rt[a]);
+    }
+}
+
 /// Rotates global positions (`... x 3`) by `angle` radians about the vertical (+Y) axis
 /// through `center = (x, z)` (the augmentation of RTN sec. 3.3).
 pub fn rotate_about_y(positions: &mut [f32], angle: f32, center: [f32; 2]) {

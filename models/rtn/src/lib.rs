@@ -19,10 +19,12 @@
 //! # Ok(()) }
 //! ```
 
+pub mod augment;
 pub mod checkpoint;
 pub mod config;
 pub mod error;
 pub mod export;
+pub mod fallback;
 pub mod features;
 pub mod method;
 pub mod model;

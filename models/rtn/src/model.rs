@@ -33,8 +33,9 @@ impl RtnSequence {
 }
 
 /// Inputs of one step, normalised: the sequence constants from [`Rtn::begin`], `x` `(batch, D)`,
-/// the global offset `o_t` `(batch, D)` (ignored without future conditioning) and the terrain
-/// patch `(batch, side^2)` when the model is terrain-aware.
+/// the global offset `o_t` `(batch, D)` (ignored without future conditioning), the terrain
+/// patch `(batch, side^2)` when the model is terrain-aware and the interpolation frame
+/// `(batch, D)` when it predicts a residual on the interpolation.
 #[derive(Clone, Copy, Debug)]
 pub struct RtnInputs<'a> {
     /// Per-sequence constants (encoded target, fused gate weights).
@@ -45,6 +46,9 @@ pub struct RtnInputs<'a> {
     pub offset: Option<&'a Tensor>,
     /// Normalised terrain patch `p_t`.
     pub terrain: Option<&'a Tensor>,
+    /// Normalised interpolation frame `b_(t+1)` `(batch, D)`, required with
+    /// [`Config::interp_residual`] (ignored without).
+    pub base: Option<&'a Tensor>,
 }
 
 /// The Recurrent Transition Network: encoders E, F, O, the conditioned LSTM R, decoder D and
@@ -85,7 +89,7 @@ impl Rtn {
         let phi = Activation::LeakyRelu(config.leaky_slope);
         let hu = config.lstm;
         let frame_encoder =
-            Mlp::new(d + config.terrain_dim(), &config.frame_encoder, phi, true, vb.pp("frame_encoder"))?;
+            Mlp::new(config.frame_encoder_input(), &config.frame_encoder, phi, true, vb.pp("frame_encoder"))?;
         let (target_encoder, offset_encoder) = if config.future_conditioning {
             (
                 Some(Mlp::new(2 * d, &config.target_encoder, phi, true, vb.pp("target_encoder"))?),
@@ -192,13 +196,27 @@ impl Rtn {
     pub fn step(&self, inputs: &RtnInputs, state: &RtnState) -> Result<(Tensor, RtnState)> {
         let hu = self.config.lstm;
         let (x, seq) = (inputs.x, inputs.sequence);
-        // RTN eq. 2: h_E = E([x_t, p_t])
-        let he = match (self.config.terrain, inputs.terrain) {
-            (true, Some(p)) => self.frame_encoder.forward(&Tensor::cat(&[x, p], 1)?)?,
-            (true, None) => {
-                candle_core::bail!("this RTN is terrain-aware: pass a terrain patch to every step")
+        // RTN eq. 2: h_E = E([x_t, p_t]), with the interpolation frame appended: E([x_t, p_t, b_(t+1)])
+        let mut e_in = vec![x];
+        match (self.config.terrain, inputs.terrain) {
+            (true, Some(p)) => e_in.push(p),
+            (true, None) => candle_core::bail!("this RTN is terrain-aware: pass a terrain patch to every step"),
+            (false, _) => {}
+        }
+        let base = match (self.config.interp_residual, inputs.base) {
+            (true, Some(b)) => {
+                e_in.push(b);
+                Some(b)
             }
-            (false, _) => self.frame_encoder.forward(x)?,
+            (true, None) => candle_core::bail!(
+                "this RTN predicts a residual on the interpolation: pass the interpolation frame to every step"
+            ),
+            (false, _) => None,
+        };
+        let he = if e_in.len() == 1 {
+            self.frame_encoder.forward(x)?
+        } else {
+            self.frame_encoder.forward(&Tensor::cat(&e_in, 1)?)?
         };
         // RTN eq. 5-8 with one fused matmul: [h_E, h_(t-1), h_O] [W; U; C_O]^T + (C_F h_F + b)
         let z_in = match &self.offset_encoder {
@@ -221,9 +239,13 @@ impl Rtn {
         // RTN eq. 9-11
         let c = ((f * &state.c)? + (i * g)?)?;
         let h = (o * c.tanh()?)?;
-        // RTN eq. 12-13
+        // RTN eq. 12-13; with the interpolation residual x_(t+1) = b_(t+1) + D(h_t)
         let dx = self.decoder.forward(&h)?;
-        let next = if self.config.residual { (x + dx)? } else { dx };
+        let next = match base {
+            Some(b) => (b + dx)?,
+            None if self.config.residual => (x + dx)?,
+            None => dx,
+        };
         Ok((next, RtnState { h, c }))
     }
 
@@ -330,6 +352,37 @@ impl OffsetTensors {
     /// Global root of a generated frame: previous root plus the denormalised root velocity.
     pub fn next_root(&self, prev_root: &Tensor, x: &Tensor) -> Result<Tensor> {
         prev_root + x.narrow(1, 0, 3)?.broadcast_mul(&self.v_scale)?.broadcast_add(&self.v_shift)?
+    }
+
+    /// The normalised interpolation frames `b_0 .. b_n` `(batch, D)` of a transition of `n`
+    /// frames before the target (`n + 1` of them, the last at the target), from the normalised
+    /// features of the last context frame `x_last`, its global root `root_last` `(batch, 3)`,
+    /// the normalised target vector `target` `(batch, 2D)` and the global target frame
+    /// `target_global` `(batch, D)`: the features of the linear interpolation of positions
+    /// between the last context frame and the target (see
+    /// [`crate::features::interpolation_frame`]; normalisation is affine, so the root-relative
+    /// values are interpolated normalised).
+    pub fn interpolation_frames(
+        &self,
+        x_last: &Tensor,
+        root_last: &Tensor,
+        target: &Tensor,
+        target_global: &Tensor,
+        n: usize,
+    ) -> Result<Vec<Tensor>> {
+        let d = x_last.dim(1)?;
+        let steps = (n + 1) as f64;
+        let v = ((target_global.narrow(1, 0, 3)? - root_last)? / steps)?;
+        let v = v.broadcast_sub(&self.v_shift)?.broadcast_div(&self.v_scale)?;
+        let from = x_last.narrow(1, 3, d - 3)?;
+        let to = target.narrow(1, 3, d - 3)?;
+        let span = (&to - &from)?;
+        (0..=n)
+            .map(|i| {
+                let w = (i + 1) as f64 / steps;
+                Tensor::cat(&[&v, &(&from + (&span * w)?)?], 1)
+            })
+            .collect()
     }
 
     /// Normalised global offset `o_t = ((y_T - y_t) - mu_o) / sigma_o` of the frame with

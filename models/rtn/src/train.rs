@@ -113,6 +113,14 @@ impl RtnTrainer {
         if config.terrain && stats.terrain.is_none() {
             return Err(RtnError::Config("terrain-aware configuration but no terrain statistics".into()));
         }
+        if let Some(aug) = &config.train.augment {
+            aug.check(config.joints)?;
+            if config.terrain && aug.mirror > 0.0 {
+                return Err(RtnError::Config(
+                    "mirroring moves the motion off its terrain: train a terrain-aware RTN without it".into(),
+                ));
+            }
+        }
         let vb = SeededVarMap::builder(&varmap, config.train.seed, DType::F32, device);
         let model = Rtn::new(config, vb)?;
         let t = &config.train;
@@ -185,13 +193,20 @@ impl RtnTrainer {
         windows: &[MotionWindow<'a>],
         rotate: bool,
     ) -> RtnResult<crate::transition::EncodedBatch<'a>> {
-        let items = self.sequence_inputs(windows, rotate)?;
+        let items = self.sequence_inputs(windows, rotate, false)?;
         encode_batch(&self.stats, &items, self.model.device())
     }
 
     /// The sequences of `windows` to encode, each rotated as [`RtnTrainer::encode`] says (one
     /// draw of the trainer's generator per window when `rotate`).
-    fn sequence_inputs<'a>(&mut self, windows: &[MotionWindow<'a>], rotate: bool) -> RtnResult<Vec<SequenceInput<'a>>> {
+    /// `augment`: apply the configured augmentation ([`crate::TrainConfig::augment`]; training
+    /// steps only), drawn before each window's rotation.
+    fn sequence_inputs<'a>(
+        &mut self,
+        windows: &[MotionWindow<'a>],
+        rotate: bool,
+        augment: bool,
+    ) -> RtnResult<Vec<SequenceInput<'a>>> {
         let c = &self.config;
         let d = c.dim();
         let tf = c.target_frame();
@@ -201,7 +216,12 @@ impl RtnTrainer {
             if !w.positions[..(tf + 2) * d].iter().all(|v| v.is_finite()) {
                 return Err(RtnError::Config(format!("training window {i} holds NaN or inf positions")));
             }
-            let mut p = w.positions[..(tf + 2) * d].to_vec();
+            // Augmentation (time reversal, mirroring, speed) before the rotation, in training
+            // steps only, and only when configured, so runs without it draw as before.
+            let mut p = match (&c.train.augment, augment) {
+                (Some(aug), true) => aug.apply(w.positions, c.joints, tf + 2, &mut self.rng),
+                _ => w.positions[..(tf + 2) * d].to_vec(),
+            };
             let rotation = if rotate {
                 let angle = ((self.rng.next_f64() * 2.0 - 1.0) * std::f64::consts::PI) as f32;
                 let r = features::root_of(&p[(c.past_frames - 1) * d..]);
@@ -282,7 +302,7 @@ impl RtnTrainer {
     ) -> RtnResult<(f32, Option<candle_core::backprop::GradStore>)> {
         let p = self.config.train.teacher_forcing.probability(self.step);
         let rotate = self.config.train.random_rotation;
-        let items = self.sequence_inputs(windows, rotate)?;
+        let items = self.sequence_inputs(windows, rotate, true)?;
         let (past, n_out) = (self.config.past_frames, self.config.transition_frames + 1);
         let calls = teacher_calls(past, n_out, self.config.target_frame() + 1);
         let rng = &mut self.rng;

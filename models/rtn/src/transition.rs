@@ -152,16 +152,37 @@ pub(crate) fn generate(
     let seq = model.begin(&batch.target)?;
     let mut state = model.initial_state(&batch.x[0])?;
     let target_term = if config.future_conditioning { Some(offsets.target_term(&batch.target_global)?) } else { None };
+    // Interpolation-residual RTN: the interpolation frames of the transition (constants).
+    let bases = if config.interp_residual {
+        offsets.interpolation_frames(
+            &batch.x[past - 1],
+            &batch.roots[past - 1],
+            &batch.target,
+            &batch.target_global,
+            n_out.saturating_sub(1),
+        )?
+    } else {
+        Vec::new()
+    };
     let mut x = batch.x[0].clone();
     let mut root = batch.roots[0].clone();
     let mut outs = Vec::with_capacity(n_out);
     for t in 0..past - 1 + n_out {
+        // The frame predicted by this step is `t + 1`: within the context its interpolation
+        // base is the known frame itself, after it the interpolation frame.
+        let base = if !config.interp_residual {
+            None
+        } else if t + 1 < past {
+            Some(&batch.x[t + 1])
+        } else {
+            Some(&bases[t + 1 - past])
+        };
         let offset = match &target_term {
             Some(tt) => Some(offsets.offset(tt, &x, &root)?),
             None => None,
         };
         let terrain = if config.terrain { Some(terrain_patches(config, stats, batch, &root)?) } else { None };
-        let inputs = RtnInputs { sequence: &seq, x: &x, offset: offset.as_ref(), terrain: terrain.as_ref() };
+        let inputs = RtnInputs { sequence: &seq, x: &x, offset: offset.as_ref(), terrain: terrain.as_ref(), base };
         let (mut next, mut st) = model.step(&inputs, &state)?;
         if !grad {
             next = next.detach();

@@ -74,7 +74,7 @@ fn output_shapes() {
     let state = model.initial_state(&x).unwrap();
     assert_eq!(state.h.dims(), &[b, c.lstm]);
     let (next, state) =
-        model.step(&RtnInputs { sequence: &seq, x: &x, offset: Some(&x), terrain: None }, &state).unwrap();
+        model.step(&RtnInputs { sequence: &seq, x: &x, offset: Some(&x), terrain: None, base: None }, &state).unwrap();
     assert_eq!(next.dims(), &[b, d]);
     assert_eq!((state.h.dims(), state.c.dims()), (&[b, c.lstm][..], &[b, c.lstm][..]));
     assert_eq!(model.zero_state(b, &dev).unwrap().c.dims(), &[b, c.lstm]);
@@ -160,8 +160,9 @@ fn zeroed_decoder_outputs_the_input_frame() {
         let target = Tensor::randn(0f32, 1.0, (2, 2 * d), &dev).unwrap();
         let seq = model.begin(&target).unwrap();
         let state = model.initial_state(&x).unwrap();
-        let (next, _) =
-            model.step(&RtnInputs { sequence: &seq, x: &x, offset: Some(&x), terrain: None }, &state).unwrap();
+        let (next, _) = model
+            .step(&RtnInputs { sequence: &seq, x: &x, offset: Some(&x), terrain: None, base: None }, &state)
+            .unwrap();
         let (next, x) =
             (next.flatten_all().unwrap().to_vec1::<f32>().unwrap(), x.flatten_all().unwrap().to_vec1::<f32>().unwrap());
         if residual {
@@ -211,8 +212,9 @@ fn teacher_forcing_one_feeds_the_ground_truth() {
     let mut manual = Vec::new();
     for f in 0..tf {
         let (xf, of) = (t(&x[f], d), t(&o[f], d));
-        let (next, s) =
-            model.step(&RtnInputs { sequence: &seq, x: &xf, offset: Some(&of), terrain: None }, &state).unwrap();
+        let (next, s) = model
+            .step(&RtnInputs { sequence: &seq, x: &xf, offset: Some(&of), terrain: None, base: None }, &state)
+            .unwrap();
         state = s;
         if f + 1 >= c.past_frames {
             manual.push(next);

@@ -64,6 +64,16 @@ pub struct BenchArgs {
     /// (e.g. a content type, for the out-of-distribution protocol of docs/ood.md).
     #[arg(long)]
     pub exclude_glob: Option<String>,
+    /// Benchmark RTN run folders and exported files without their fallback towards
+    /// interpolation (the thresholds `zoo train rtn` calibrates; docs/ood.md). With it on (the
+    /// default) such methods are named with a `+fallback` suffix and how often the fallback
+    /// triggered is printed per length.
+    #[arg(long)]
+    pub no_fallback: bool,
+    /// Test every K-th clip of the test split only (in name order: clips 0, K, 2K, ...), for a
+    /// quicker, stated subsample; the statistics still come from the whole training split.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=1000))]
+    pub test_every: u64,
 }
 
 /// Benchmarks other than the in-betweening table.
@@ -125,6 +135,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
     if let Some(BenchCommand::Runtime(r)) = a.command {
         return crate::cmd::bench_runtime::run(r);
     }
+    zoo_rtn::method::set_fallback_enabled(!a.no_fallback);
     let Some(data) = a.data.clone() else {
         bail!("pass --data DATASET (and --valid-glob GLOB) for the in-betweening benchmark, or use `zoo bench runtime`")
     };
@@ -156,6 +167,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
         (None, Some(g)) => dataset::split(clips, g)?,
         (None, None) => bail!("pass --valid-glob GLOB to choose the test split of --data, or --test-data PATH"),
     };
+    let test: Vec<_> = test.into_iter().step_by(a.test_every as usize).collect();
     check_skeletons(&a.methods, &trained_on, &train)?;
     pb.set_message("preparing windows and statistics");
     let bench = Benchmark::new(&train, &test).map_err(anyhow::Error::msg)?;

@@ -96,7 +96,13 @@ impl StepBackend for CandleBackend {
     fn step(&mut self) -> anyhow::Result<()> {
         let (model, sequence, x, offset, state) = (&self.model, &self.sequence, &self.x, &self.offset, &self.state);
         let (next, state) = self.pool.install(|| {
-            let inputs = RtnInputs { sequence, x, offset: offset.as_ref(), terrain: None };
+            let inputs = RtnInputs {
+                sequence,
+                x,
+                offset: offset.as_ref(),
+                terrain: None,
+                base: model.config().interp_residual.then_some(x),
+            };
             model.step(&inputs, state)
         })?;
         self.out = next.flatten_all()?.to_vec1::<f32>()?;

@@ -46,6 +46,31 @@ pub enum RtnVariant {
     TfScheduled,
 }
 
+/// A training-window augmentation of `zoo train rtn --augment` (`zoo_rtn::augment`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum RtnAugment {
+    /// Time reversal (walking backwards).
+    Reverse,
+    /// Left-right mirroring.
+    Mirror,
+    /// Speed changes (factors 0.7-1.2).
+    Speed,
+}
+
+/// Speed factors of `--augment speed`.
+const SPEED_RANGE: (f32, f32) = (0.7, 1.2);
+
+/// Probabilities of `--augment reverse`, `mirror` and `speed` for each training window.
+const AUGMENT_P: (f64, f64, f64) = (0.3, 0.5, 0.3);
+
+/// Minutes of stepping clips: `0..=600`.
+fn synth_steps_minutes(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(m) if (0.0..=600.0).contains(&m) => Ok(m),
+        _ => Err(format!("`{s}` is not a number of minutes: valid range 0..=600")),
+    }
+}
+
 /// Sizes of the RTN to train.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum RtnPreset {
@@ -94,6 +119,24 @@ pub struct RtnArgs {
     /// Model sizes.
     #[arg(long, value_enum, default_value_t = RtnPreset::Paper)]
     pub preset: RtnPreset,
+    /// Predict a correction on top of the interpolation of context and target instead of the
+    /// next frame (the Delta-interpolator idea of Oreshkin et al. 2022; `interp_residual` in
+    /// config.json): an untrained model is the interpolation, and what the network learns is
+    /// added to it. Meant for motion the data lacks (docs/ood.md).
+    #[arg(long)]
+    pub interp_residual: bool,
+    /// Augment the training windows on the fly with motion the data lacks (comma-separated;
+    /// stored in config.json as `train.augment`): `reverse` (time reversal, 30% of the windows:
+    /// forward walks become backward walks), `mirror` (left-right mirroring, 50%, joints
+    /// paired by name: `_L`/`_R`, `.L`/`.R`, `Left`/`Right`), `speed` (30%, resampled at a
+    /// factor drawn from 0.7-1.2). Epochs keep their size; validation is never augmented.
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub augment: Vec<RtnAugment>,
+    /// Minutes of the synthetic generator's stepping clips (walks made mostly of side and back
+    /// steps, `zoo_data::synth::generate_stepping`) mixed into the training split of `--data`;
+    /// its skeleton is bandai2's, so the data must be on it. 0: none.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true, value_parser = synth_steps_minutes)]
+    pub synth_steps: f64,
     /// Mini-batch size [default: the preset's; paper: 32].
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::batch_size)]
     pub batch_size: Option<usize>,
@@ -205,7 +248,12 @@ fn apply_variant(config: &mut Config, v: RtnVariant, total_steps: u64) {
 }
 
 /// The configuration of a fresh run: the preset, the data's skeleton and the arguments.
-fn fresh_config(a: &RtnArgs, parents: &[Option<usize>], train_windows: usize) -> anyhow::Result<Config> {
+fn fresh_config(
+    a: &RtnArgs,
+    names: &[String],
+    parents: &[Option<usize>],
+    train_windows: usize,
+) -> anyhow::Result<Config> {
     let preset = match a.preset {
         RtnPreset::Paper => Config::paper(),
         RtnPreset::Tiny => Config::tiny(),
@@ -221,6 +269,24 @@ fn fresh_config(a: &RtnArgs, parents: &[Option<usize>], train_windows: usize) ->
         bail!("--batch-size must be at least 1");
     }
     config.train.seed = a.seed;
+    config.interp_residual = a.interp_residual;
+    if !a.augment.is_empty() {
+        let has = |x| a.augment.contains(&x);
+        let mirror_pairs = if has(RtnAugment::Mirror) {
+            let pairs = zoo_rtn::augment::mirror_pairs(names)?;
+            zoo_rtn::augment::check_mirror_pairs(&pairs, parents, names)?;
+            pairs
+        } else {
+            Vec::new()
+        };
+        config.train.augment = Some(zoo_rtn::augment::Augment {
+            reverse: if has(RtnAugment::Reverse) { AUGMENT_P.0 } else { 0.0 },
+            mirror: if has(RtnAugment::Mirror) { AUGMENT_P.1 } else { 0.0 },
+            mirror_pairs,
+            speed: if has(RtnAugment::Speed) { AUGMENT_P.2 } else { 0.0 },
+            speed_range: SPEED_RANGE,
+        });
+    }
     if !(0.0..1.0).contains(&a.ema) {
         bail!("--ema {} is not a decay in [0, 1) (0.999 averages over about 1000 steps; 0 turns it off)", a.ema);
     }
@@ -338,12 +404,41 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
     }
     let d = tw.joints() * 3;
     let per = tw.window * d;
-    let train_pos = tw.global_positions_f32();
+    let mut train_pos = tw.global_positions_f32();
     let valid_pos = vw.global_positions_f32();
+    let mut extra = serde_json::Map::new();
+    // Stepping clips: a resumed run keeps what it was started with.
+    let saved = a.resume.as_ref().map(|dir| train_loop::read_state(dir)).transpose()?;
+    let synth_steps = match &saved {
+        Some(state) => state.extra.get("synth_steps").and_then(|v| v.as_f64()).unwrap_or(0.0),
+        None => a.synth_steps,
+    };
+    extra.insert("synth_steps".into(), synth_steps.into());
+    if synth_steps > 0.0 {
+        let names = &tw.skeleton.names;
+        let sk = synth::skeleton();
+        if *names != sk.names || tw.skeleton.parents != sk.parents {
+            bail!(
+                "--synth-steps: the synthetic clips are on bandai2's skeleton ({} joints, `{}` first) but the data's \
+                 differs ({} joints, `{}` first); leave --synth-steps out for this data",
+                sk.names.len(),
+                sk.names[0],
+                names.len(),
+                names.first().map_or("", String::as_str)
+            );
+        }
+        let cfg = SynthConfig { minutes: synth_steps, seed: a.seed, terrain: false, ..SynthConfig::default() };
+        let steps: Vec<NamedClip> = synth::generate_stepping(&cfg)
+            .into_iter()
+            .map(|c| NamedClip { path: PathBuf::from(&c.name), name: c.name, clip: c.clip })
+            .collect();
+        let sw = dataset::windows(&steps, &WindowOptions::TRAIN);
+        println!("--synth-steps {synth_steps}: {} clips, {} windows of side and back steps", steps.len(), sw.count);
+        train_pos.extend(sw.global_positions_f32());
+    }
     let train_windows: Vec<MotionWindow> = train_pos.chunks_exact(per).map(MotionWindow::new).collect();
     let valid_windows: Vec<MotionWindow> = valid_pos.chunks_exact(per).map(MotionWindow::new).collect();
 
-    let mut extra = serde_json::Map::new();
     let (mut trainer, variant) = match &a.resume {
         Some(dir) => {
             let from = train_loop::resume_dir(dir);
@@ -374,7 +469,7 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
             (RtnTrainer::new(&config, stats, &device)?, variant.unwrap_or(a.variant))
         }
         None => {
-            let config = fresh_config(&a, &tw.skeleton.parents, train_windows.len())?;
+            let config = fresh_config(&a, &tw.skeleton.names, &tw.skeleton.parents, train_windows.len())?;
             let stats = fit_stats(&config, &train_windows)?;
             extra.insert("variant".into(), serde_json::to_value(a.variant)?);
             (RtnTrainer::new(&config, stats, &device)?, a.variant)
@@ -416,6 +511,30 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
         state.best_valid.unwrap_or(f64::NAN),
         state.best_epoch,
         out.display()
+    );
+    calibrate_fallback(&out, &valid_windows, &device)
+}
+
+/// Calibrates the fallback of the best model in `out` on the validation windows
+/// (`zoo_rtn::fallback`): its target misses at the trained length set the thresholds, written
+/// into the folder's `config.json` (atomically).
+fn calibrate_fallback(out: &Path, valid: &[MotionWindow], device: &candle_core::Device) -> anyhow::Result<()> {
+    if !out.join(checkpoint::CONFIG_FILE).is_file() {
+        return Ok(());
+    }
+    let (model, stats) = zoo_rtn::checkpoint::load(out, device)?;
+    let misses = zoo_rtn::fallback::target_misses(&model, &stats, valid)?;
+    let Some(fallback) = zoo_rtn::fallback::Fallback::calibrate(&misses) else { return Ok(()) };
+    let mut config = model.config().clone();
+    config.fallback = Some(fallback);
+    checkpoint::write_json(&out.join(checkpoint::CONFIG_FILE), &config)?;
+    let mean = misses.iter().sum::<f32>() / misses.len() as f32;
+    println!(
+        "fallback calibrated on {} validation windows (target miss mean {mean:.2}): towards interpolation from a \
+         miss of {:.2} (95th percentile), fully at {:.2}; stored in config.json",
+        misses.len(),
+        fallback.start,
+        fallback.full
     );
     Ok(())
 }

@@ -29,6 +29,11 @@ pub struct TransitionArgs {
     /// are lifted); legs are found by joints named `foot`.
     #[arg(long)]
     pub foot_lock: bool,
+    /// Keep the network's transition even when its own miss at the target is large. By
+    /// default a run whose config.json holds calibrated fallback thresholds (written by `zoo
+    /// train rtn`) blends towards interpolation on a large miss (docs/ood.md).
+    #[arg(long)]
+    pub no_fallback: bool,
 }
 
 /// Parses `PATH:FRAME`.
@@ -85,9 +90,18 @@ pub fn run(a: TransitionArgs) -> anyhow::Result<()> {
     let (model, stats) = crate::registry::load_transition_model(&a.model, "transition")?;
     check_skeleton(&a.model, model.config(), &ca, &pa)?;
     check_skeleton(&a.model, model.config(), &cb, &pb)?;
-    let y = model
-        .transition(&stats, &inputs.past, &inputs.target, &inputs.next, a.frames, None)
+    let fallback = model.config().fallback.filter(|_| !a.no_fallback);
+    let checked = model
+        .transition_checked(&stats, &inputs.past, &inputs.target, &inputs.next, a.frames, fallback.as_ref())
         .with_context(|| "generating the transition")?;
+    let y = checked.frames;
+    match &fallback {
+        Some(f) => println!(
+            "target miss {:.2} (fallback from {:.2}, fully at {:.2}): interpolation weight {:.2}",
+            checked.miss, f.start, f.full, checked.weight
+        ),
+        None => println!("target miss {:.2} (no fallback)", checked.miss),
+    }
     let out = pipeline::splice_transition(&ca, fa, &cb, fb, &inputs, &y, a.foot_lock);
     bvh::write_file(&out, &a.out).with_context(|| format!("writing {}", a.out.display()))?;
     println!(

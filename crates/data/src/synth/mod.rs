@@ -254,14 +254,45 @@ impl TerrainKind {
 
 /// Generates clip `index` (0-based) of `cfg`; the same (seed, index) gives the same clip.
 pub fn generate_clip(cfg: &SynthConfig, index: usize) -> SynthClip {
-    let mut rng = SplitMix64::with_stream(cfg.seed, index as u64);
-    let gait = Gait::draw(&mut rng);
+    generate_clip_with(cfg, index, None)
+}
+
+/// Share of the segments of a stepping clip ([`generate_stepping_clip`]) that step sideways
+/// (left or right) or backwards; the others stop or walk forwards.
+pub const STEPPING_STRAFE_SHARE: f64 = 0.75;
+
+/// Clip `index` of the stepping data of `cfg`: walks in which most segments
+/// ([`STEPPING_STRAFE_SHARE`]) are side steps or backward steps (0.5 - 0.9 m/s), the content
+/// a forward-only mocap session lacks (issue 19). Named `synth_step_NNNN`; the same
+/// (seed, index) gives the same clip, and a different one from [`generate_clip`]'s.
+pub fn generate_stepping_clip(cfg: &SynthConfig, index: usize) -> SynthClip {
+    let mut c = generate_clip_with(cfg, index, Some(STEPPING_STRAFE_SHARE));
+    c.name = format!("synth_step_{:04}", index + 1);
+    c
+}
+
+/// Every clip of the stepping data of `cfg` ([`generate_stepping_clip`]).
+pub fn generate_stepping(cfg: &SynthConfig) -> Vec<SynthClip> {
+    (0..cfg.clip_count()).into_par_iter().map(|i| generate_stepping_clip(cfg, i)).collect()
+}
+
+/// `stepping`: `Some(share)` plans a walk with that share of side / back step segments from a
+/// stream of its own; `None` draws the gait as the default data does.
+fn generate_clip_with(cfg: &SynthConfig, index: usize, stepping: Option<f64>) -> SynthClip {
+    // The stepping data uses streams above 2^32 so that its clips differ from the default ones.
+    let stream = index as u64 + if stepping.is_some() { 1 << 32 } else { 0 };
+    let mut rng = SplitMix64::with_stream(cfg.seed, stream);
+    let gait = match stepping {
+        Some(_) => Gait::Walk,
+        None => Gait::draw(&mut rng),
+    };
     let style = Style::sample(&mut rng);
     let terrain_kind = if cfg.terrain { TerrainKind::draw(&mut rng) } else { TerrainKind::Flat };
     let fps = cfg.fps;
     let n_out = ((cfg.clip_seconds * fps).round() as usize).max(2);
     let n = n_out + 2 * ROLL;
-    let traj = trajectory::plan_trajectory(&mut rng, gait, &style, n, fps);
+    let strafe_share = stepping.unwrap_or(trajectory::WALK_STRAFE_SHARE);
+    let traj = trajectory::plan_trajectory(&mut rng, gait, &style, n, fps, strafe_share);
     let terrain = cfg.terrain.then(|| terrain::make_terrain(&mut rng, terrain_kind, &traj));
     let ground = |x: f64, z: f64| terrain.as_ref().map_or(0.0, |t| t.height(x, z));
     let cycle = cycle::plan_cycle(&mut rng, &traj, &style, fps);
@@ -427,6 +458,44 @@ mod tests {
         }
         assert!(p.max_foot_penetration <= 1.0, "{p:?}");
         assert!(p.max_bone_length_error < 1e-6, "{p:?}");
+    }
+
+    /// Share of the moving frames (root faster than 0.3 m/s) whose ground velocity points more
+    /// than 60 degrees away from the character's facing (side and back steps).
+    fn off_facing_share(clips: &[SynthClip]) -> f64 {
+        let (mut off, mut moving) = (0usize, 0usize);
+        for c in clips {
+            let j = c.clip.joints();
+            for f in 1..c.clip.frames() {
+                let v = c.clip.root_position(f) - c.clip.root_position(f - 1);
+                let v = DVec3::new(v.x, 0.0, v.z);
+                if v.length() / c.clip.frame_time < 30.0 {
+                    continue;
+                }
+                moving += 1;
+                let fwd = zoo_motion::facing::ground_forward(c.clip.local_rotations[f * j], DVec3::Z);
+                if v.normalize().dot(fwd.normalize()) < 0.5 {
+                    off += 1;
+                }
+            }
+        }
+        off as f64 / moving.max(1) as f64
+    }
+
+    #[test]
+    fn stepping_clips_step_sideways_and_backwards_plausibly() {
+        let c = cfg(2, false, 3.0);
+        let stepping = generate_stepping(&c);
+        assert_eq!(stepping.len(), 18);
+        assert!(stepping.iter().all(|s| s.gait == Gait::Walk && s.name.starts_with("synth_step_")));
+        let (ours, default) = (off_facing_share(&stepping), off_facing_share(&generate(&c)));
+        assert!(ours > 0.3 && ours > 3.0 * default, "side/back share {ours:.3} (default data {default:.3})");
+        let set: Vec<(&Clip, Option<&Heightmap>, &str)> = stepping.iter().map(|c| (&c.clip, None, "walk")).collect();
+        let p = plausibility::measure(&set);
+        assert!(p.foot_skate < 0.3 && p.max_foot_penetration <= 1.0 && p.max_bone_length_error < 1e-6, "{p:?}");
+        // Deterministic, and not the default data's clips.
+        assert_eq!(generate_stepping_clip(&c, 4).clip, stepping[4].clip);
+        assert_ne!(generate_clip(&c, 4).clip.local_rotations, stepping[4].clip.local_rotations);
     }
 
     #[test]

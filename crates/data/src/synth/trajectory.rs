@@ -20,9 +20,22 @@ pub(super) struct Trajectory {
     pub accel: Vec<f64>,
 }
 
+/// Share of a walk's segments that step sideways or backwards in the default data.
+pub(super) const WALK_STRAFE_SHARE: f64 = 0.07;
+
 /// Plans the root trajectory of `frames` frames: per segment of 1.5-4 s a target speed, turn
 /// rate and strafe angle drawn for `gait`, followed with bounded acceleration and smoothing.
-pub(super) fn plan_trajectory(rng: &mut SplitMix64, gait: Gait, style: &Style, frames: usize, fps: f64) -> Trajectory {
+/// `strafe_share`: the share of a walk's segments that step sideways or backwards
+/// ([`WALK_STRAFE_SHARE`] in the default data; the stepping clips of
+/// [`super::generate_stepping`] raise it).
+pub(super) fn plan_trajectory(
+    rng: &mut SplitMix64,
+    gait: Gait,
+    style: &Style,
+    frames: usize,
+    fps: f64,
+    strafe_share: f64,
+) -> Trajectory {
     let dt = 1.0 / fps;
     let total = frames as f64 * dt;
     // Segment targets: (start time, speed m/s, turn rate rad/s, strafe angle rad).
@@ -42,7 +55,7 @@ pub(super) fn plan_trajectory(rng: &mut SplitMix64, gait: Gait, style: &Style, f
             Gait::Walk => {
                 if u < 0.08 {
                     (0.0, 0.0)
-                } else if u < 0.15 {
+                } else if u < 0.08 + strafe_share {
                     let s = [PI / 2.0, -PI / 2.0, PI][(rng.next_f64() * 3.0) as usize % 3];
                     (rng.range(0.5, 0.9), s)
                 } else {
