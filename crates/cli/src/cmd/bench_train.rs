@@ -153,20 +153,32 @@ struct Bench<'a> {
     steps: Vec<Step<'a>>,
 }
 
+/// The paper-size RNN-GMM configuration and its training windows from two minutes of the
+/// embedded synthetic locomotion.
+fn rnn_gmm_data() -> anyhow::Result<(zoo_rnngmm::prelude::Config, zoo_rnngmm::TrainingData)> {
+    let cfg = zoo_data::synth::SynthConfig { minutes: 2.0, seed: 1, terrain: false, ..Default::default() };
+    let clips = zoo_data::synth::generate(&cfg);
+    let refs: Vec<&zoo_motion::Clip> = clips.iter().map(|c| &c.clip).collect();
+    let config = zoo_rnngmm::prelude::Config::paper();
+    let data = zoo_rnngmm::TrainingData::from_clips(&config, cfg.fps, &refs[1..], &refs[..1])?;
+    Ok((config.with_dim(data.spec.dim()), data))
+}
+
+/// Refuses synthetic data with fewer training windows than a batch of `b`.
+fn enough_windows(data: &zoo_rnngmm::TrainingData, b: usize) -> anyhow::Result<()> {
+    if data.train.len() < b {
+        bail!("the synthetic data gave {} windows, fewer than a batch of {b}", data.train.len());
+    }
+    Ok(())
+}
+
 /// The RNN-GMM generator at the paper's sizes (3 x 512 dense, 2 x 512 LSTM, M = 5, windows of
 /// 50 frames, batch 20) on the embedded synthetic locomotion.
 fn rnn_gmm_bench(threads: &[usize]) -> anyhow::Result<Bench<'static>> {
     use zoo_rnngmm::prelude::*;
-    let cfg = zoo_data::synth::SynthConfig { minutes: 2.0, seed: 1, terrain: false, ..Default::default() };
-    let clips = zoo_data::synth::generate(&cfg);
-    let refs: Vec<&zoo_motion::Clip> = clips.iter().map(|c| &c.clip).collect();
-    let config = Config::paper();
-    let data = zoo_rnngmm::TrainingData::from_clips(&config, cfg.fps, &refs[1..], &refs[..1])?;
-    let config = config.with_dim(data.spec.dim());
+    let (config, data) = rnn_gmm_data()?;
     let b = config.train.batch_size;
-    if data.train.len() < b {
-        bail!("the synthetic data gave {} windows, fewer than a batch of {b}", data.train.len());
-    }
+    enough_windows(&data, b)?;
     let windows: Vec<Vec<f32>> = (0..b).map(|i| data.train.get(i).to_vec()).collect();
     let mut steps: Vec<Step> = Vec::new();
     let mut params = 0;
@@ -199,17 +211,10 @@ fn rnn_gmm_bench(threads: &[usize]) -> anyhow::Result<Bench<'static>> {
 /// and one discriminator update (half fresh refined windows, half from the history buffer).
 fn rnn_gmm_refiner_bench(threads: &[usize]) -> anyhow::Result<Bench<'static>> {
     use zoo_rnngmm::prelude::*;
-    let cfg = zoo_data::synth::SynthConfig { minutes: 2.0, seed: 1, terrain: false, ..Default::default() };
-    let clips = zoo_data::synth::generate(&cfg);
-    let refs: Vec<&zoo_motion::Clip> = clips.iter().map(|c| &c.clip).collect();
-    let config = Config::paper();
-    let data = zoo_rnngmm::TrainingData::from_clips(&config, cfg.fps, &refs[1..], &refs[..1])?;
-    let config = config.with_dim(data.spec.dim());
+    let (config, data) = rnn_gmm_data()?;
     let rc = config.refiner.clone();
     let b = rc.batch;
-    if data.train.len() < b {
-        bail!("the synthetic data gave {} windows, fewer than a batch of {b}", data.train.len());
-    }
+    enough_windows(&data, b)?;
     let dir = tempfile::tempdir().context("a temporary folder for the generator")?;
     GeneratorTrainer::new(&config, data.spec.clone(), data.norm.clone(), &Device::Cpu)?.save(dir.path())?;
     let w = config.train.window;
