@@ -522,6 +522,8 @@ fn bench_train_measures_every_thread_count() {
         assert!(row["gflops"].as_f64().unwrap() > 0.0, "{row}");
     }
     assert!(v["matmul_gflops_one_thread"].as_f64().unwrap() > 0.0);
+    let (ok, _, stderr) = run(&["bench", "train", "--model", "rnn-gmm", "--batch", "8"]);
+    assert!(!ok && stderr.contains("--batch: only the RTN bench"), "{stderr}");
     let (ok, _, stderr) = run(&["bench", "train", "--model", "arnn"]);
     assert!(!ok && stderr.contains("data-parallel so far") && stderr.contains("rmr and arnn"), "{stderr}");
 }
