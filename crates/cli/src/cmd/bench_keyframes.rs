@@ -10,52 +10,17 @@
 
 use crate::cmd::bench_runtime::onnxruntime_library;
 use anyhow::{Context, anyhow, bail};
-use clap::Args;
-use serde::Serialize;
 use std::borrow::Cow;
-use std::path::PathBuf;
 use std::time::Instant;
 use zoo_runtime::keyframes::{KeyframeModel, MotionKeys};
 use zoo_runtime::{MotionModel, MotionState};
 
-/// Arguments of `zoo bench keyframes`.
-#[derive(Args)]
-pub struct KeyframesBenchArgs {
-    /// A file written by `zoo export --onnx` from a `zoo train arnn` run.
-    #[arg(long)]
-    pub model: PathBuf,
-    /// Batch sizes to measure (characters per step).
-    #[arg(long, default_value = "1,64", value_delimiter = ',', allow_hyphen_values = true, value_parser = crate::args::runtime_batch)]
-    pub batch: Vec<usize>,
-    /// Rounds per batch size (each backend runs once per round).
-    #[arg(long, default_value_t = 11, allow_hyphen_values = true, value_parser = crate::args::rounds)]
-    pub rounds: usize,
-    /// Character-steps per backend per round (steps = this / batch, at least 5).
-    #[arg(long, default_value_t = 1280, allow_hyphen_values = true, value_parser = crate::args::character_steps)]
-    pub work: usize,
-    /// onnxruntime library (default: `ORT_DYLIB_PATH`, else `.onnxruntime/libonnxruntime.so*`
-    /// in the current folder or one of its parents).
-    #[arg(long)]
-    pub onnxruntime: Option<PathBuf>,
-    /// Write the figures as JSON to this file.
-    #[arg(long)]
-    pub json: Option<PathBuf>,
-}
-
-/// Figures of one backend at one batch size.
-#[derive(Clone, Debug, Serialize)]
-pub struct KeyframesFigure {
-    /// `tract step`, `onnxruntime step` or `tract completion`.
-    pub backend: String,
-    /// Batch size.
-    pub batch: usize,
-    /// Median over rounds of the mean time of one step of the whole batch, milliseconds.
-    pub step_ms: f64,
-    /// Character-frames per second at that median.
-    pub frames_per_second: f64,
-    /// Every round's mean step time, milliseconds.
-    pub rounds_ms: Vec<f64>,
-}
+/// Figures of one backend at one batch size (`backend`: `tract step`, `onnxruntime step` or
+/// `tract completion`).
+pub use crate::cmd::bench_runtime::BackendFigure as KeyframesFigure;
+/// Arguments of `zoo bench keyframes`: those of `zoo bench runtime` (`--model` names an
+/// exported ARNN here).
+pub use crate::cmd::bench_runtime::RuntimeArgs as KeyframesBenchArgs;
 
 /// Rest pose of the lamp (base x, y, angle, three joint angles).
 const REST: [f32; 6] = [0.0, 0.02, 0.0, 0.5, -1.1, -1.2];

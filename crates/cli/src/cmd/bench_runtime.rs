@@ -22,7 +22,8 @@ use zoo_runtime::{MotionModel, MotionState};
 /// Arguments of `zoo bench runtime`.
 #[derive(Args)]
 pub struct RuntimeArgs {
-    /// A file written by `zoo export --onnx` (an RTN).
+    /// A file written by `zoo export --onnx` (an RTN for `zoo bench runtime`, an ARNN for `zoo
+    /// bench keyframes`).
     #[arg(long)]
     pub model: PathBuf,
     /// Batch sizes to measure (characters per step).
@@ -46,7 +47,8 @@ pub struct RuntimeArgs {
 /// Figures of one backend at one batch size.
 #[derive(Clone, Debug, Serialize)]
 pub struct BackendFigure {
-    /// `candle`, `tract` or `onnxruntime`.
+    /// `candle`, `tract` or `onnxruntime` (`zoo bench keyframes`: `tract step`, `onnxruntime
+    /// step`, `tract completion`).
     pub backend: String,
     /// Batch size.
     pub batch: usize,
