@@ -89,3 +89,24 @@ pub fn tiny_rtn_onnx_with_std(std: f32) -> zoo_export::OnnxModel {
     };
     zoo_rtn::export::export_rtn(&config, None, &stats, &varmap, &options).expect("the tiny RTN exports")
 }
+
+/// An untrained RNN-GMM generator trainer of `config`'s sizes on two 6-second clips of the
+/// synthetic locomotion (seed 3; the first clip trains, the second validates), with its data.
+pub fn rnngmm_fixture(
+    config: zoo_rnngmm::prelude::Config,
+) -> (zoo_rnngmm::prelude::Config, zoo_rnngmm::TrainingData, zoo_rnngmm::prelude::GeneratorTrainer) {
+    use zoo_data::synth::{SynthConfig, generate_clip};
+    let cfg = SynthConfig { minutes: 0.2, seed: 3, terrain: false, fps: 30.0, clip_seconds: 6.0 };
+    let clips: Vec<Clip> = (0..2).map(|i| generate_clip(&cfg, i).clip).collect();
+    let refs: Vec<&Clip> = clips.iter().collect();
+    let data = zoo_rnngmm::TrainingData::from_clips(&config, 30.0, &refs[..1], &refs[1..]).unwrap();
+    let config = config.with_dim(data.spec.dim());
+    let trainer = zoo_rnngmm::prelude::GeneratorTrainer::new(
+        &config,
+        data.spec.clone(),
+        data.norm.clone(),
+        &candle_core::Device::Cpu,
+    )
+    .unwrap();
+    (config, data, trainer)
+}

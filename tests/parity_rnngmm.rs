@@ -15,7 +15,6 @@
 
 use candle_core::{Device, Tensor};
 use zoo_data::synth::{SynthConfig, generate_clip};
-use zoo_motion::Clip;
 use zoo_rnngmm::export::{MODEL_KIND, export_generator};
 use zoo_rnngmm::prelude::*;
 use zoo_runtime::metadata::keys;
@@ -32,14 +31,7 @@ const TOLERANCE: f32 = 1e-4;
 type Trace = Vec<[Vec<f32>; 3]>;
 
 fn fixture_with_data() -> (Config, TrainingData, GeneratorTrainer) {
-    let cfg = SynthConfig { minutes: 0.2, seed: 3, terrain: false, fps: 30.0, clip_seconds: 6.0 };
-    let clips: Vec<Clip> = (0..2).map(|i| generate_clip(&cfg, i).clip).collect();
-    let refs: Vec<&Clip> = clips.iter().collect();
-    let config = Config::tiny();
-    let data = TrainingData::from_clips(&config, 30.0, &refs[..1], &refs[1..]).unwrap();
-    let config = config.with_dim(data.spec.dim());
-    let trainer = GeneratorTrainer::new(&config, data.spec.clone(), data.norm.clone(), &Device::Cpu).unwrap();
-    (config, data, trainer)
+    zoo_tests::rnngmm_fixture(Config::tiny())
 }
 
 fn fixture() -> (Config, GeneratorTrainer) {
@@ -322,13 +314,7 @@ fn a_step_model_without_the_synthesis_section_is_refused() {
 #[test]
 #[ignore = "timing of the paper-size generator step; run with --ignored --nocapture"]
 fn paper_size_step_timings() {
-    let cfg = SynthConfig { minutes: 0.2, seed: 3, terrain: false, fps: 30.0, clip_seconds: 6.0 };
-    let clips: Vec<Clip> = (0..2).map(|i| generate_clip(&cfg, i).clip).collect();
-    let refs: Vec<&Clip> = clips.iter().collect();
-    let config = Config::paper();
-    let data = TrainingData::from_clips(&config, 30.0, &refs[..1], &refs[1..]).unwrap();
-    let config = config.with_dim(data.spec.dim());
-    let trainer = GeneratorTrainer::new(&config, data.spec.clone(), data.norm.clone(), &Device::Cpu).unwrap();
+    let (config, _, trainer) = zoo_tests::rnngmm_fixture(Config::paper());
     let onnx = export_generator(&config, None, trainer.spec(), trainer.norm(), trainer.varmap()).unwrap();
     let model = MotionModel::from_bytes(&onnx.to_bytes()).unwrap();
     let (m, d, h) = (config.components, config.dim, config.lstm);

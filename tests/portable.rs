@@ -223,16 +223,8 @@ fn arnn_is_portable_and_matches() {
 
 #[test]
 fn rnngmm_generator_and_refiner_are_portable_and_match() {
-    use zoo_data::synth::{SynthConfig, generate_clip};
-    use zoo_motion::Clip;
     use zoo_rnngmm::prelude::*;
-    let cfg = SynthConfig { minutes: 0.2, seed: 3, terrain: false, fps: 30.0, clip_seconds: 6.0 };
-    let clips: Vec<Clip> = (0..2).map(|i| generate_clip(&cfg, i).clip).collect();
-    let refs: Vec<&Clip> = clips.iter().collect();
-    let config = Config::tiny();
-    let data = TrainingData::from_clips(&config, 30.0, &refs[..1], &refs[1..]).unwrap();
-    let config = config.with_dim(data.spec.dim());
-    let trainer = GeneratorTrainer::new(&config, data.spec.clone(), data.norm.clone(), &Device::Cpu).unwrap();
+    let (config, _, trainer) = zoo_tests::rnngmm_fixture(Config::tiny());
     let generator =
         zoo_rnngmm::export::export_generator(&config, None, trainer.spec(), trainer.norm(), trainer.varmap()).unwrap();
     // The refiner's step graph from seeded weights of its shapes (`refiner.safetensors` names).
