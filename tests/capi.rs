@@ -344,3 +344,25 @@ fn malformed_calls_return_an_error_code_and_a_message() {
         zoo_model_free(model);
     }
 }
+
+/// A `zoo export --portable` pair (main file and start file) loads through the C ABI and
+/// reports the regular file's model; without its start file it is refused with a message.
+#[test]
+fn the_c_abi_loads_a_portable_pair() {
+    use zoo_export::portable::{EmbeddedGraph, PortableOptions, to_portable};
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("rtn.onnx");
+    let embedded: Vec<EmbeddedGraph<'static>> = zoo_runtime::portable::PORTABLE_GRAPHS
+        .iter()
+        .map(|g| EmbeddedGraph { key: g.key, file_key: g.file_key, suffix: g.suffix })
+        .collect();
+    to_portable(&zoo_tests::tiny_rtn_onnx(), &PortableOptions::default(), &embedded).unwrap().write(&path).unwrap();
+    let model = load(&path);
+    assert!(!model.is_null());
+    unsafe { zoo_model_free(model) };
+    std::fs::remove_file(tmp.path().join("rtn.start.onnx")).unwrap();
+    let c_path = CString::new(path.to_str().unwrap()).unwrap();
+    let mut model = ptr::null_mut();
+    unsafe { assert_error(zoo_model_load(c_path.as_ptr(), &mut model), ZooStatus::LoadFailed, "rtn.start.onnx") };
+    assert!(model.is_null());
+}

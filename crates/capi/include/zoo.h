@@ -88,7 +88,8 @@ extern "C" {
 size_t zoo_last_error(char *buffer, size_t capacity);
 
 // Loads a transition model exported by `zoo export --onnx` from the file `path` (UTF-8,
-// NUL-terminated) into `*out`. Free it with [`zoo_model_free`]. Thread-safe.
+// NUL-terminated) into `*out`; a `zoo export --portable` main file is loaded with the
+// companion files beside it. Free it with [`zoo_model_free`]. Thread-safe.
 //
 // # Safety
 // `path` is NULL or a NUL-terminated string; `out` is NULL or valid for a write.

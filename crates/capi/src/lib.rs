@@ -31,7 +31,7 @@ use std::cell::RefCell;
 use std::ffi::{CStr, c_char};
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use zoo_runtime::glam::{Quat, Vec3};
-use zoo_runtime::{EnginePose, LoadedModel, MotionError, TransitionModel, TransitionRunner, TransitionState};
+use zoo_runtime::{EnginePose, MotionError, TransitionModel, TransitionRunner, TransitionState};
 
 /// Result of a call.
 #[repr(C)]
@@ -256,7 +256,8 @@ pub unsafe extern "C" fn zoo_last_error(buffer: *mut c_char, capacity: usize) ->
 }
 
 /// Loads a transition model exported by `zoo export --onnx` from the file `path` (UTF-8,
-/// NUL-terminated) into `*out`. Free it with [`zoo_model_free`]. Thread-safe.
+/// NUL-terminated) into `*out`; a `zoo export --portable` main file is loaded with the
+/// companion files beside it. Free it with [`zoo_model_free`]. Thread-safe.
 ///
 /// # Safety
 /// `path` is NULL or a NUL-terminated string; `out` is NULL or valid for a write.
@@ -273,7 +274,7 @@ pub unsafe extern "C" fn zoo_model_load(path: *const c_char, out: *mut *mut ZooM
         let path = unsafe { CStr::from_ptr(path) }
             .to_str()
             .map_err(|_| (ZooStatus::InvalidArgument, "the model path is not UTF-8".to_string()))?;
-        let loaded = LoadedModel::load(path).map_err(runtime_failure)?;
+        let loaded = zoo_runtime::portable::load(path).map_err(runtime_failure)?;
         let (kind, task) = (loaded.kind().to_string(), loaded.task());
         let model = loaded.as_transition().cloned().ok_or_else(|| {
             (
