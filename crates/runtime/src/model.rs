@@ -180,6 +180,16 @@ struct Parsed {
 }
 
 fn parse(bytes: &[u8], origin: &str) -> Result<Parsed, MotionError> {
+    let (proto, model) = read_graph(bytes, origin)?;
+    let graph = proto.graph.as_ref().expect("read_graph checked the graph");
+    let in_dims = graph.input.iter().map(|v| read_dims(v, "input")).collect::<Result<_, _>>()?;
+    let out_dims = graph.output.iter().map(|v| read_dims(v, "output")).collect::<Result<_, _>>()?;
+    Ok(Parsed { proto, model, in_dims, out_dims })
+}
+
+/// Decodes `bytes` and reads the graph with tract, refusing malformed graphs (and tract's
+/// panics on them) with an error naming `origin`. Every loader of the runtime reads through it.
+pub(crate) fn read_graph(bytes: &[u8], origin: &str) -> Result<(pb::ModelProto, InferenceModel), MotionError> {
     let not_onnx = |reason: String| MotionError::NotOnnx { origin: origin.to_string(), reason };
     let proto = pb::ModelProto::decode(bytes).map_err(|e| not_onnx(format!("protobuf decoding failed: {e}")))?;
     let graph = match &proto.graph {
@@ -192,9 +202,7 @@ fn parse(bytes: &[u8], origin: &str) -> Result<Parsed, MotionError> {
     let model = std::panic::catch_unwind(|| tract_onnx::onnx().model_for_proto_model(&proto))
         .map_err(|_| not_onnx("tract could not read the graph (it panicked on it)".into()))?
         .map_err(|e| MotionError::Unsupported { reason: chain(&e) })?;
-    let in_dims = graph.input.iter().map(|v| read_dims(v, "input")).collect::<Result<_, _>>()?;
-    let out_dims = graph.output.iter().map(|v| read_dims(v, "output")).collect::<Result<_, _>>()?;
-    Ok(Parsed { proto, model, in_dims, out_dims })
+    Ok((proto, model))
 }
 
 /// Refuses a graph whose outputs or node inputs name a value that no graph input,

@@ -18,7 +18,6 @@
 use crate::error::{MotionError, chain};
 use std::path::Path;
 use std::sync::Arc;
-use tract_onnx::pb;
 use tract_onnx::prelude::*;
 
 /// `zoo.model_kind` of an exported RMR.
@@ -73,12 +72,7 @@ impl StitchRefiner {
     }
 
     fn from_bytes_named(bytes: &[u8], origin: &str) -> Result<Self, MotionError> {
-        use prost::Message;
-        let not_onnx = |reason: String| MotionError::NotOnnx { origin: origin.to_string(), reason };
-        let proto = pb::ModelProto::decode(bytes).map_err(|e| not_onnx(format!("protobuf decoding failed: {e}")))?;
-        if proto.graph.as_ref().is_none_or(|g| g.node.is_empty()) {
-            return Err(not_onnx("no graph nodes".into()));
-        }
+        let (proto, model) = crate::model::read_graph(bytes, origin)?;
         let meta = |key: &str| proto.metadata_props.iter().find(|p| p.key == key).map(|p| p.value.clone());
         let kind = meta("zoo.model_kind").ok_or(MotionError::MissingMetadata { key: "zoo.model_kind".into() })?;
         if kind != RMR_KIND {
@@ -132,10 +126,6 @@ impl StitchRefiner {
                 reason: "a standard deviation is not positive".into(),
             });
         }
-        // tract 0.23.9 panics on some malformed graphs (see `model.rs`); report it as an error.
-        let model = std::panic::catch_unwind(|| tract_onnx::onnx().model_for_proto_model(&proto))
-            .map_err(|_| not_onnx("tract could not read the graph (it panicked on it)".into()))?
-            .map_err(|e| MotionError::Unsupported { reason: chain(&e) })?;
         let plan = plan_for(&model, window, dim)?;
         Ok(StitchRefiner { model, plan, window, stride, blend_frames, dim, pose: dim - 4, joints, fps, mean, std })
     }
