@@ -1,4 +1,4 @@
-//! End-to-end tests of `zoo train rnn-gmm`, `zoo generate` and `zoo bench-synthesis` on the
+//! End-to-end tests of `zoo train rnn-gmm`, `zoo generate` and `zoo bench synthesis` on the
 //! embedded synthetic data with the tiny preset (a few seconds each).
 
 use std::path::Path;
@@ -199,21 +199,27 @@ fn generate_is_deterministic_streams_and_refuses_bad_input() {
     let data = out("synth");
     ok(&["data", "synth", "--out", &data, "--minutes", "0.5", "--seed", "9"]);
     let report = out("bench.json");
-    let stdout = ok(&[
-        "bench-synthesis",
-        "--model",
-        &r,
-        "--data",
-        &data,
-        "--glob",
-        "*",
-        "--sequences",
-        "3",
-        "--seconds",
-        "3",
-        "--json",
-        &report,
-    ]);
+    let bench = |threads: &str, report: &str| {
+        ok(&[
+            "bench",
+            "synthesis",
+            "--model",
+            &r,
+            "--data",
+            &data,
+            "--glob",
+            "*",
+            "--sequences",
+            "3",
+            "--seconds",
+            "3",
+            "--threads",
+            threads,
+            "--json",
+            report,
+        ])
+    };
+    let stdout = bench("2", &report);
     assert!(stdout.contains("| rnn+refiner |") && stdout.contains("first-frame jump"), "{stdout}");
     let j = json(Path::new(&report));
     let rows = j["rows"].as_array().unwrap();
@@ -223,6 +229,15 @@ fn generate_is_deterministic_streams_and_refuses_bad_input() {
     assert!(rows[1]["foot_skate"].as_f64().unwrap() > 0.0);
     assert!(rows[2]["contact_accuracy"].as_f64().unwrap() >= 0.0);
     assert!(j["first_frame_jump_eq26"].as_f64().unwrap().is_finite());
+    // The figures do not depend on the number of worker threads.
+    let one = out("bench1.json");
+    bench("1", &one);
+    let mut k = json(Path::new(&one));
+    let mut j = j;
+    for r in [&mut j, &mut k] {
+        r.as_object_mut().unwrap().remove("seconds_per_sequence");
+    }
+    assert_eq!(j, k, "bench synthesis with 1 and 2 threads");
     let e = fails(&["bench-synthesis", "--model", &r, "--data", &data, "--glob", "nothing*"]);
     assert!(e.contains("nothing*") || e.contains("no clip"), "{e}");
 }

@@ -257,6 +257,10 @@ fn runtime_synthesis_refines_like_candle() {
     let refined_rt = runtime_poses(&model, &start, &[9], frames).remove(0);
     let raw_rt = runtime_poses(&model.clone().without_refiner(), &start, &[9], frames).remove(0);
     assert_ne!(refined_rt, raw_rt);
+    // The refiner runs once per step for the whole batch: a character's refined frames do not
+    // depend on the batch.
+    let batch = runtime_poses(&model, &start, &[8, 9, 10], frames);
+    assert_eq!(batch[1], refined_rt, "character 9 refined differently in a batch of 3");
     // candle: the same draws refined by refine_chunk after the start frame.
     let d = config.dim;
     let sampled = candle_samples(&trainer, &start, 9, frames);

@@ -17,8 +17,9 @@
 //! forward kinematics of `zoo_rnngmm::fk`, in f64), runs the refiner step (its LSTM state is the
 //! character's), and decodes the refined frame; the generator still reads its own samples. The
 //! refiner adds no latency in frames (it is causal: frame `t` needs frames up to `t`). The
-//! refiner graph runs per character at batch 1 through tract, which allocates per call (the
-//! generator's batched step does not). Not here yet: the initial state estimation of eq. 26 (a
+//! refiner graph runs once per step for the whole batch (a tract plan per batch size, made on
+//! first use); tract allocates its tensors per call there (the generator's batched step does
+//! not). Not here yet: the initial state estimation of eq. 26 (a
 //! start from the zero state, as the paper's baseline).
 
 use crate::error::MotionError;
@@ -40,12 +41,38 @@ struct EffectorStats {
     std: Vec<f32>,
 }
 
-/// The refiner step graph (batch 1) and what its input needs.
+type Plan = std::sync::Arc<tract_onnx::prelude::TypedRunnableModel>;
+
+/// The refiner step graph and what its input needs. It runs once per step for the whole
+/// batch of characters, with a plan made for that batch size (on first use, shared by clones).
 #[derive(Clone, Debug)]
 struct Refiner {
-    plan: std::sync::Arc<tract_onnx::prelude::TypedRunnableModel>,
+    source: std::sync::Arc<tract_onnx::prelude::InferenceModel>,
+    /// Plans by batch size.
+    plans: std::sync::Arc<std::sync::Mutex<std::collections::HashMap<usize, Plan>>>,
+    /// Widths of the graph's inputs: `x`, `effectors`, `h`, `c`.
+    widths: [usize; 4],
     stats: EffectorStats,
     hidden: usize,
+}
+
+impl Refiner {
+    /// The plan for `batch` characters.
+    fn plan(&self, batch: usize) -> Result<Plan, MotionError> {
+        use tract_onnx::prelude::*;
+        let mut plans = self.plans.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some(p) = plans.get(&batch) {
+            return Ok(p.clone());
+        }
+        let run = |err: TractError| MotionError::Run { reason: format!("{err:#}") };
+        let mut model = (*self.source).clone();
+        for (i, w) in self.widths.iter().enumerate() {
+            model.set_input_fact(i, f32::fact([batch, *w]).into()).map_err(run)?;
+        }
+        let plan = model.into_optimized().and_then(|m| m.into_runnable()).map_err(run)?;
+        plans.insert(batch, plan.clone());
+        Ok(plan)
+    }
 }
 
 /// A loaded synthesis model (the step graph, its `zoo.synthesis` section, and the refiner's
@@ -63,7 +90,6 @@ pub struct SynthesisModel {
 /// The refiner of a file, if it embeds one.
 fn load_refiner(proto: &tract_onnx::pb::ModelProto, d: usize) -> Result<Option<Refiner>, MotionError> {
     use base64::Engine as _;
-    use tract_onnx::prelude::*;
     let prop = |key: &str| proto.metadata_props.iter().find(|p| p.key == key).map(|p| p.value.as_str());
     let (Some(graph), Some(stats)) = (prop(REFINER_GRAPH_KEY), prop(REFINER_KEY)) else { return Ok(None) };
     let stats: EffectorStats = serde_json::from_str(stats).map_err(|e| bad(REFINER_KEY, e.to_string()))?;
@@ -74,9 +100,8 @@ fn load_refiner(proto: &tract_onnx::pb::ModelProto, d: usize) -> Result<Option<R
     let bytes = base64::engine::general_purpose::STANDARD
         .decode(graph)
         .map_err(|err| bad(REFINER_GRAPH_KEY, err.to_string()))?;
-    let run = |err: TractError| MotionError::Run { reason: format!("{err:#}") };
-    let graph_proto =
-        tract_onnx::pb::ModelProto::decode(&bytes[..]).map_err(|err| bad(REFINER_GRAPH_KEY, err.to_string()))?;
+    // Read through the runtime's one graph reader (IR version, dangling names, tract's panics).
+    let (graph_proto, source) = crate::model::read_graph(&bytes, "the embedded refiner graph")?;
     let h = graph_proto
         .graph
         .as_ref()
@@ -91,12 +116,16 @@ fn load_refiner(proto: &tract_onnx::pb::ModelProto, d: usize) -> Result<Option<R
             _ => None,
         })
         .ok_or_else(|| bad(REFINER_GRAPH_KEY, "input 2 (`h`) has no fixed width"))?;
-    let mut model = tract_onnx::onnx().model_for_proto_model(&graph_proto).map_err(run)?;
-    for (i, w) in [d, e, h, h].iter().enumerate() {
-        model.set_input_fact(i, f32::fact([1, *w]).into()).map_err(run)?;
-    }
-    let plan = model.into_optimized().and_then(|m| m.into_runnable()).map_err(run)?;
-    Ok(Some(Refiner { plan, stats, hidden: h }))
+    let refiner = Refiner {
+        source: std::sync::Arc::new(source),
+        plans: Default::default(),
+        widths: [d, e, h, h],
+        stats,
+        hidden: h,
+    };
+    // Plan batch 1 now, so that a graph tract cannot run is refused at load.
+    refiner.plan(1)?;
+    Ok(Some(refiner))
 }
 
 fn bad(key: &str, reason: impl Into<String>) -> MotionError {
@@ -226,6 +255,7 @@ impl SynthesisModel {
     pub fn runner(&self, max_batch: usize) -> Result<SynthesisRunner, MotionError> {
         let n = max_batch.max(1);
         let (d, m) = (self.task.frame_dim, self.task.components);
+        let (hu, e) = self.refiner.as_ref().map_or((0, 0), |r| (r.hidden, 6 * r.stats.effectors.len()));
         Ok(SynthesisRunner {
             model: self.clone(),
             runner: self.model.runner()?,
@@ -235,7 +265,11 @@ impl SynthesisModel {
             stds: vec![0.0; n * m * d],
             states: Vec::with_capacity(n),
             world: vec![Quat::IDENTITY; self.references.len()],
-            refined: vec![0.0; d],
+            refined: vec![0.0; n * d],
+            refiner_x: Vec::with_capacity(n * d),
+            refiner_e: Vec::with_capacity(n * e),
+            refiner_h: Vec::with_capacity(n * hu),
+            refiner_c: Vec::with_capacity(n * hu),
             effectors: vec![DVec3::ZERO; self.refiner.as_ref().map_or(0, |r| r.stats.effectors.len())],
             fk_rot: vec![DQuat::IDENTITY; self.references.len()],
             fk_pos: vec![DVec3::ZERO; self.references.len()],
@@ -296,8 +330,9 @@ impl SynthesisCharacter {
     }
 }
 
-/// Steps characters on one thread; allocates nothing per frame (up to the batch size it was
-/// made for; a larger batch grows the scratch space once).
+/// Steps characters on one thread. The generator's step, the sampling and the decoding
+/// allocate nothing per frame (up to the batch size the runner was made for; a larger batch
+/// grows the scratch space once); with a refiner, tract allocates the refiner step's tensors.
 #[derive(Debug)]
 pub struct SynthesisRunner {
     model: SynthesisModel,
@@ -308,7 +343,13 @@ pub struct SynthesisRunner {
     stds: Vec<f32>,
     states: Vec<MotionState>,
     world: Vec<Quat>,
+    /// Refined frames, one row per character of the batch.
     refined: Vec<f32>,
+    /// The refiner's batched inputs: frames, end-effector features, LSTM states.
+    refiner_x: Vec<f32>,
+    refiner_e: Vec<f32>,
+    refiner_h: Vec<f32>,
+    refiner_c: Vec<f32>,
     effectors: Vec<DVec3>,
     fk_rot: Vec<DQuat>,
     fk_pos: Vec<DVec3>,
@@ -401,56 +442,80 @@ impl SynthesisRunner {
                 let z = ch.rng.normal();
                 ch.x[j] = (mu[k * d + j] as f64 + temperature as f64 * sd[k * d + j] as f64 * z) as f32;
             }
-            let refined = self.refine(ch)?;
-            contacts[c] = self.decode(ch, refined, &mut poses[c]);
+        }
+        let refined = self.refine(characters)?;
+        for (c, ch) in characters.iter_mut().enumerate() {
+            contacts[c] = self.decode(ch, refined.then_some(c), &mut poses[c]);
         }
         Ok(())
     }
 
-    /// Refines the character's new frame into `self.refined` (eq. 11); returns whether it did.
-    fn refine(&mut self, ch: &mut SynthesisCharacter) -> Result<bool, MotionError> {
+    /// Refines every character's new frame into row `c` of `self.refined` (eq. 11), in one run
+    /// of the refiner's step for the batch; returns whether it did (the file has a refiner).
+    fn refine(&mut self, characters: &mut [SynthesisCharacter]) -> Result<bool, MotionError> {
         use tract_onnx::prelude::*;
         let Some(r) = &self.model.refiner else { return Ok(false) };
-        let d = self.model.task.frame_dim;
+        let (n, d, hu) = (characters.len(), self.model.task.frame_dim, r.hidden);
         let s = &r.stats;
-        self.model.effector_positions(&ch.x, s, &mut self.effectors, &mut self.fk_rot, &mut self.fk_pos);
-        // v_t = (dtx, 0, dtz) + yaw(dry) p_t - p_(t-1), in the previous heading frame.
-        let v = |i: usize| (ch.x[i] * self.model.std[i] + self.model.mean[i]) as f64;
-        let step = DVec3::new(v(0), 0.0, v(1));
-        let turn = DQuat::from_rotation_y(v(2));
-        let n = s.effectors.len();
-        let mut e = vec![0f32; 6 * n];
-        for (k, p) in self.effectors.iter().enumerate() {
-            let vel = step + turn * *p - ch.effectors[k];
-            for a in 0..3 {
-                e[3 * k + a] = p[a] as f32;
-                e[3 * n + 3 * k + a] = vel[a] as f32;
+        let ne = s.effectors.len();
+        let e = 6 * ne;
+        for buf in [&mut self.refiner_x, &mut self.refiner_e, &mut self.refiner_h, &mut self.refiner_c] {
+            buf.clear();
+        }
+        for ch in characters.iter_mut() {
+            self.model.effector_positions(&ch.x, s, &mut self.effectors, &mut self.fk_rot, &mut self.fk_pos);
+            // v_t = (dtx, 0, dtz) + yaw(dry) p_t - p_(t-1), in the previous heading frame.
+            let v = |i: usize| (ch.x[i] * self.model.std[i] + self.model.mean[i]) as f64;
+            let step = DVec3::new(v(0), 0.0, v(1));
+            let turn = DQuat::from_rotation_y(v(2));
+            let row = self.refiner_e.len();
+            self.refiner_e.resize(row + e, 0.0);
+            for (k, p) in self.effectors.iter().enumerate() {
+                let vel = step + turn * *p - ch.effectors[k];
+                for a in 0..3 {
+                    self.refiner_e[row + 3 * k + a] = p[a] as f32;
+                    self.refiner_e[row + 3 * ne + 3 * k + a] = vel[a] as f32;
+                }
             }
+            for (i, v) in self.refiner_e[row..].iter_mut().enumerate() {
+                *v = (*v - s.mean[i]) / s.std[i];
+            }
+            ch.effectors.copy_from_slice(&self.effectors);
+            self.refiner_x.extend_from_slice(&ch.x);
+            self.refiner_h.extend_from_slice(&ch.refiner_h);
+            self.refiner_c.extend_from_slice(&ch.refiner_c);
         }
-        for (i, v) in e.iter_mut().enumerate() {
-            *v = (*v - s.mean[i]) / s.std[i];
-        }
-        ch.effectors.copy_from_slice(&self.effectors);
         let run = |err: TractError| MotionError::Run { reason: format!("{err:#}") };
-        let t = |v: &[f32]| -> Result<TValue, MotionError> {
-            Ok(Tensor::from_shape::<f32>(&[1, v.len()], v).map_err(run)?.into_tvalue())
+        let t = |v: &[f32], w: usize| -> Result<TValue, MotionError> {
+            Ok(Tensor::from_shape::<f32>(&[n, w], v).map_err(run)?.into_tvalue())
         };
-        let out = r.plan.run(tvec![t(&ch.x)?, t(&e)?, t(&ch.refiner_h)?, t(&ch.refiner_c)?]).map_err(run)?;
+        let inputs =
+            tvec![t(&self.refiner_x, d)?, t(&self.refiner_e, e)?, t(&self.refiner_h, hu)?, t(&self.refiner_c, hu)?];
+        let out = r.plan(n)?.run(inputs).map_err(run)?;
         let get = |i: usize| -> Result<&[f32], MotionError> {
             out[i].try_as_plain_ram().and_then(|t| t.as_slice::<f32>()).map_err(run)
         };
-        self.refined[..d].copy_from_slice(get(0)?);
-        ch.refiner_h.copy_from_slice(get(1)?);
-        ch.refiner_c.copy_from_slice(get(2)?);
+        let (x, h, c) = (get(0)?, get(1)?, get(2)?);
+        if self.refined.len() < n * d {
+            self.refined.resize(n * d, 0.0);
+        }
+        self.refined[..n * d].copy_from_slice(x);
+        for (k, ch) in characters.iter_mut().enumerate() {
+            ch.refiner_h.copy_from_slice(&h[k * hu..(k + 1) * hu]);
+            ch.refiner_c.copy_from_slice(&c[k * hu..(k + 1) * hu]);
+        }
         Ok(true)
     }
 
-    /// Decodes the character's new frame (refined when `refined`) into `pose`, advancing its
-    /// placement.
-    fn decode(&mut self, ch: &mut SynthesisCharacter, refined: bool, pose: &mut EnginePose) -> [bool; 2] {
+    /// Decodes the character's new frame (row `refined` of the refined frames, else its
+    /// sampled frame) into `pose`, advancing its placement.
+    fn decode(&mut self, ch: &mut SynthesisCharacter, refined: Option<usize>, pose: &mut EnginePose) -> [bool; 2] {
         let model = &self.model;
         let d = model.task.frame_dim;
-        let x: &[f32] = if refined { &self.refined } else { &ch.x };
+        let x: &[f32] = match refined {
+            Some(c) => &self.refined[c * d..(c + 1) * d],
+            None => &ch.x,
+        };
         let v = |i: usize| (x[i] * model.std[i] + model.mean[i]) as f64;
         let [px, pz, yaw] = ch.placement;
         let step = DQuat::from_rotation_y(yaw) * DVec3::new(v(0), 0.0, v(1));

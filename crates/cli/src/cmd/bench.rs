@@ -90,6 +90,9 @@ pub enum BenchCommand {
     Stitch(crate::cmd::bench_stitch::StitchBenchArgs),
     /// The exported ARNN's step through tract and onnxruntime (batch 1 latency, batch 64 throughput) and whole keyframe completions.
     Keyframes(crate::cmd::bench_keyframes::KeyframesBenchArgs),
+    /// The synthesis benchmark (RNN-GMM, issue 14): seeded sequences against held-out real
+    /// motion, with and without the refiner (protocol in docs/rnn-gmm.md).
+    Synthesis(crate::cmd::bench_synthesis::BenchSynthesisArgs),
 }
 
 /// The hierarchy a benchmarked model was trained on, checked against the dataset's.
@@ -131,6 +134,9 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
     }
     if let Some(BenchCommand::Keyframes(k)) = a.command {
         return crate::cmd::bench_keyframes::run(k);
+    }
+    if let Some(BenchCommand::Synthesis(s)) = a.command {
+        return crate::cmd::bench_synthesis::run(s);
     }
     if let Some(BenchCommand::Runtime(r)) = a.command {
         return crate::cmd::bench_runtime::run(r);

@@ -1,6 +1,7 @@
 //! `zoo bench runtime --model FILE.onnx`: per-frame step latency (batch 1) and throughput
 //! (batch 64) of one exported RTN through candle, tract (`zoo-runtime`) and onnxruntime, side by
-//! side in one run.
+//! side in one run; for an exported RNN-GMM, its generator step through tract and onnxruntime
+//! and the runtime's whole synthesis frame (`tract frame`).
 //!
 //! All three run the same step (`x`, `offset`, LSTM state in; `x_next`, state out) with the
 //! same weights: candle's are read back from the file's initializers. Each backend runs on one
@@ -64,8 +65,57 @@ pub struct BackendFigure {
 trait StepBackend {
     fn name(&self) -> &'static str;
     fn step(&mut self) -> anyhow::Result<()>;
-    /// The frame output of the last step (for the agreement check).
+    /// The frame output of the last step (for the agreement check; empty: not compared).
     fn output(&self) -> &[f32];
+}
+
+/// The whole synthesis frame of an RNN-GMM file through the runtime's task
+/// (`zoo_runtime::synthesis::SynthesisRunner`: the generator step, sampling, the refiner step when the
+/// file has one, decoding into poses with global positions).
+struct SynthesisBackend {
+    runner: zoo_runtime::synthesis::SynthesisRunner,
+    characters: Vec<zoo_runtime::synthesis::SynthesisCharacter>,
+    poses: Vec<zoo_runtime::EnginePose>,
+    contacts: Vec<[bool; 2]>,
+}
+
+impl SynthesisBackend {
+    fn new(bytes: &[u8], batch: usize) -> anyhow::Result<Self> {
+        let model = zoo_runtime::synthesis::SynthesisModel::from_bytes(bytes)?;
+        let meta = model.model().metadata();
+        let start = meta
+            .normalization
+            .get("x")
+            .map(|n| n.mean.clone())
+            .ok_or_else(|| anyhow!("the synthesis model has no normalisation of `x`"))?;
+        let mut characters = Vec::with_capacity(batch);
+        for c in 0..batch {
+            let mut ch = model.new_character(c as u64 + 1);
+            ch.start(&model, &start, 0.0, 0.0, 0.0)?;
+            characters.push(ch);
+        }
+        Ok(SynthesisBackend {
+            runner: model.runner(batch)?,
+            characters,
+            poses: (0..batch).map(|_| zoo_runtime::EnginePose::with_global_positions(model.joints())).collect(),
+            contacts: vec![[false; 2]; batch],
+        })
+    }
+}
+
+impl StepBackend for SynthesisBackend {
+    fn name(&self) -> &'static str {
+        "tract frame"
+    }
+
+    fn step(&mut self) -> anyhow::Result<()> {
+        self.runner.step_batch(&mut self.characters, 1.0, &mut self.poses, &mut self.contacts)?;
+        Ok(())
+    }
+
+    fn output(&self) -> &[f32] {
+        &[]
+    }
 }
 
 /// Deterministic inputs in [-1, 1) (normalized units).
@@ -121,7 +171,8 @@ struct TractBackend {
     runner: zoo_runtime::MotionRunner,
     states: Vec<MotionState>,
     frame: Frame,
-    out: Vec<f32>,
+    /// One buffer per graph output; the first is compared.
+    outs: Vec<Vec<f32>>,
 }
 
 impl StepBackend for TractBackend {
@@ -131,12 +182,13 @@ impl StepBackend for TractBackend {
 
     fn step(&mut self) -> anyhow::Result<()> {
         let inputs: Vec<&[f32]> = self.frame.data.iter().map(Vec::as_slice).collect();
-        self.runner.step_batch(&mut self.states, &inputs, &mut [&mut self.out])?;
+        let mut outs: Vec<&mut [f32]> = self.outs.iter_mut().map(Vec::as_mut_slice).collect();
+        self.runner.step_batch(&mut self.states, &inputs, &mut outs)?;
         Ok(())
     }
 
     fn output(&self) -> &[f32] {
-        &self.out
+        &self.outs[0]
     }
 }
 
@@ -229,18 +281,67 @@ fn frame_inputs(model: &MotionModel, batch: usize) -> Frame {
 fn make_backends(
     bytes: &[u8],
     model: &MotionModel,
-    candle: &Rtn,
+    candle: Option<&Rtn>,
     env: &ort::environment::Environment,
     batch: usize,
 ) -> anyhow::Result<Vec<Box<dyn StepBackend>>> {
     let frame = frame_inputs(model, batch);
-    let d = model.outputs()[0].width;
     // Initial recurrent state: small deterministic values, the same for every backend.
     let states: Vec<Vec<f32>> =
         model.states().iter().enumerate().map(|(k, s)| inputs(batch * s.width, 101 + k as u64)).collect();
     let mut states: Vec<Vec<f32>> = states.into_iter().map(|v| v.into_iter().map(|x| 0.5 * x).collect()).collect();
+    let mut backends: Vec<Box<dyn StepBackend>> = Vec::new();
+    if let Some(candle) = candle {
+        backends.push(Box::new(candle_backend(candle, model, &frame, &mut states, batch)?));
+    }
 
-    // candle
+    // tract
+    let mut tract_states: Vec<MotionState> = (0..batch).map(|_| model.new_state()).collect();
+    for (c, s) in tract_states.iter_mut().enumerate() {
+        for (k, info) in model.states().iter().enumerate() {
+            s.slot_mut(k).copy_from_slice(&states[k][c * info.width..(c + 1) * info.width]);
+        }
+    }
+    let tract = TractBackend {
+        runner: model.runner()?,
+        states: tract_states,
+        frame: Frame { names: frame.names.clone(), data: frame.data.clone() },
+        outs: model.outputs().iter().map(|o| vec![0.0; batch * o.width]).collect(),
+    };
+
+    // onnxruntime
+    let opt = |e: ort::Error<_>| anyhow!("onnxruntime session options: {e}");
+    let session = ort::session::Session::builder(env)
+        .map_err(|e| anyhow!("onnxruntime session: {e}"))?
+        .with_intra_threads(1)
+        .map_err(opt)?
+        .with_inter_threads(1)
+        .map_err(|e| anyhow!("onnxruntime session options: {e}"))?
+        .commit_from_memory(bytes)
+        .map_err(|e| anyhow!("onnxruntime cannot load the model: {e}"))?;
+    let ort = OrtBackend {
+        session,
+        batch,
+        frame,
+        states: model.states().iter().zip(states).map(|(s, v)| (s.input.clone(), s.output.clone(), v)).collect(),
+        out_name: model.outputs()[0].name.clone(),
+        out: Vec::new(),
+    };
+    backends.push(Box::new(tract));
+    backends.push(Box::new(ort));
+    Ok(backends)
+}
+
+/// The RTN's step in candle with the weights of the file, from the same inputs and state as
+/// the other backends (the per-sequence gate bias is written into its state slot).
+fn candle_backend(
+    candle: &Rtn,
+    model: &MotionModel,
+    frame: &Frame,
+    states: &mut [Vec<f32>],
+    batch: usize,
+) -> anyhow::Result<CandleBackend> {
+    let d = model.outputs()[0].width;
     let dev = Device::Cpu;
     let hu = candle.config().lstm;
     let get = |name: &str| -> anyhow::Result<Tensor> {
@@ -265,41 +366,7 @@ fn make_backends(
     };
     let state = RtnState { h: slot("h")?, c: slot("c")? };
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
-    let candle = CandleBackend { model: candle.clone(), sequence, x, offset, state, out: Vec::new(), pool };
-
-    // tract
-    let mut tract_states: Vec<MotionState> = (0..batch).map(|_| model.new_state()).collect();
-    for (c, s) in tract_states.iter_mut().enumerate() {
-        for (k, info) in model.states().iter().enumerate() {
-            s.slot_mut(k).copy_from_slice(&states[k][c * info.width..(c + 1) * info.width]);
-        }
-    }
-    let tract = TractBackend {
-        runner: model.runner()?,
-        states: tract_states,
-        frame: Frame { names: frame.names.clone(), data: frame.data.clone() },
-        out: vec![0.0; batch * d],
-    };
-
-    // onnxruntime
-    let opt = |e: ort::Error<_>| anyhow!("onnxruntime session options: {e}");
-    let session = ort::session::Session::builder(env)
-        .map_err(|e| anyhow!("onnxruntime session: {e}"))?
-        .with_intra_threads(1)
-        .map_err(opt)?
-        .with_inter_threads(1)
-        .map_err(|e| anyhow!("onnxruntime session options: {e}"))?
-        .commit_from_memory(bytes)
-        .map_err(|e| anyhow!("onnxruntime cannot load the model: {e}"))?;
-    let ort = OrtBackend {
-        session,
-        batch,
-        frame,
-        states: model.states().iter().zip(states).map(|(s, v)| (s.input.clone(), s.output.clone(), v)).collect(),
-        out_name: model.outputs()[0].name.clone(),
-        out: Vec::new(),
-    };
-    Ok(vec![Box::new(candle), Box::new(tract), Box::new(ort)])
+    Ok(CandleBackend { model: candle.clone(), sequence, x, offset, state, out: Vec::new(), pool })
 }
 
 /// Runs `zoo bench runtime`.
@@ -309,13 +376,27 @@ pub fn run(a: RuntimeArgs) -> anyhow::Result<()> {
     }
     let bytes = std::fs::read(&a.model).with_context(|| format!("reading {}", a.model.display()))?;
     let model = MotionModel::load(&a.model).with_context(|| format!("loading {}", a.model.display()))?;
-    let (config, weights) = zoo_rtn::export::import_rtn(&bytes)
-        .with_context(|| format!("reading the RTN weights of {} for candle", a.model.display()))?;
-    if config.terrain {
-        bail!("{}: terrain-aware RTNs are not supported by `zoo bench runtime` yet", a.model.display());
-    }
-    let candle =
-        Rtn::new(&config, candle_nn::VarBuilder::from_tensors(weights, candle_core::DType::F32, &Device::Cpu))?;
+    let kind = model.metadata().model_kind.clone();
+    // An RTN runs in candle too (its weights read back from the file); an RNN-GMM generator
+    // runs its step in tract and onnxruntime, and its whole synthesis frame in the runtime.
+    let candle = match kind.as_str() {
+        "rtn" => {
+            let (config, weights) = zoo_rtn::export::import_rtn(&bytes)
+                .with_context(|| format!("reading the RTN weights of {} for candle", a.model.display()))?;
+            if config.terrain {
+                bail!("{}: terrain-aware RTNs are not supported by `zoo bench runtime` yet", a.model.display());
+            }
+            Some(Rtn::new(
+                &config,
+                candle_nn::VarBuilder::from_tensors(weights, candle_core::DType::F32, &Device::Cpu),
+            )?)
+        }
+        "rnn-gmm" => None,
+        other => bail!(
+            "{} is a `{other}` model: `zoo bench runtime` measures RTN and RNN-GMM files (an ARNN: `zoo bench keyframes`)",
+            a.model.display()
+        ),
+    };
     let lib = onnxruntime_library(&a.onnxruntime)?;
     let env = ort::init_from(&lib)
         .map_err(|e| anyhow!("cannot load onnxruntime from {}: {e}", lib.display()))?
@@ -324,22 +405,34 @@ pub fn run(a: RuntimeArgs) -> anyhow::Result<()> {
     if a.rounds == 0 || a.batch.is_empty() || a.batch.contains(&0) {
         bail!("--rounds and every --batch must be at least 1");
     }
-    println!(
-        "{}: RTN, {} parameters, LSTM {} units; onnxruntime {}; one thread per backend",
-        a.model.display(),
-        candle.parameter_count(),
-        config.lstm,
-        lib.display()
-    );
+    match &candle {
+        Some(rtn) => println!(
+            "{}: RTN, {} parameters, LSTM {} units; onnxruntime {}; one thread per backend",
+            a.model.display(),
+            rtn.parameter_count(),
+            rtn.config().lstm,
+            lib.display()
+        ),
+        None => println!(
+            "{}: RNN-GMM generator step (tract, onnxruntime) and the runtime's whole synthesis frame (`tract frame`: \
+             step, sampling, refiner, decoding); onnxruntime {}; one thread per backend",
+            a.model.display(),
+            lib.display()
+        ),
+    }
     let mut figures = Vec::new();
     for &batch in &a.batch {
-        let mut backends = make_backends(&bytes, &model, &candle, &env, batch)?;
+        let mut backends = make_backends(&bytes, &model, candle.as_ref(), &env, batch)?;
+        if candle.is_none() {
+            backends.push(Box::new(SynthesisBackend::new(&bytes, batch)?));
+        }
         // Warm-up and agreement: one step from the same state and inputs.
         for b in backends.iter_mut() {
             b.step().with_context(|| format!("{} step", b.name()))?;
         }
-        let reference = backends[1].output().to_vec();
-        for b in &backends {
+        let tract = backends.iter().position(|b| b.name() == "tract").ok_or_else(|| anyhow!("no tract backend"))?;
+        let reference = backends[tract].output().to_vec();
+        for b in backends.iter().filter(|b| !b.output().is_empty()) {
             let diff = b.output().iter().zip(&reference).map(|(p, q)| (p - q).abs()).fold(0.0f32, f32::max);
             if b.output().len() != reference.len() || diff > 1e-3 {
                 bail!(
