@@ -88,6 +88,9 @@ pub struct Row {
     pub npss: f64,
     /// Agreement of the predicted contact bits with contacts detected from the feet (NaN for real).
     pub contact_accuracy: f64,
+    /// The feature values that left the range most often (up to 5): name, fraction of
+    /// sequences, largest excursion beyond the widened range as a fraction of the real span.
+    pub range_exits: Vec<(String, f64, f64)>,
 }
 
 /// What the benchmark measured.
@@ -127,6 +130,9 @@ struct Acc {
     jerk: (f64, usize),
     frozen: usize,
     out_of_range: usize,
+    /// Per feature value: sequences in which it left the range, and its largest excursion
+    /// beyond the widened range as a fraction of the real span.
+    exits: Vec<(usize, f64)>,
     contacts: (usize, usize),
     quats: Vec<DQuat>,
     windows: usize,
@@ -162,9 +168,18 @@ impl Measure<'_> {
             acc.frozen += 1;
         }
         let range = ROOT_DIMS - 2..d - CONTACT_DIMS;
-        if (0..frames).any(|f| range.clone().any(|i| x(f, i) < self.lo[i] || x(f, i) > self.hi[i])) {
-            acc.out_of_range += 1;
+        acc.exits.resize(d, (0, 0.0));
+        let mut out = false;
+        for i in range {
+            let span = (self.hi[i] - self.lo[i]).max(1e-9);
+            let worst = (0..frames).map(|f| (self.lo[i] - x(f, i)).max(x(f, i) - self.hi[i])).fold(f64::MIN, f64::max);
+            if worst > 0.0 {
+                out = true;
+                acc.exits[i].0 += 1;
+                acc.exits[i].1 = acc.exits[i].1.max(worst / span);
+            }
         }
+        acc.out_of_range += usize::from(out);
         let (_, gp) = clip.global();
         let s = self.skate.skate(&gp, frames, joints);
         if s.is_finite() {
@@ -233,7 +248,21 @@ pub fn wasserstein1(a: &[f64], b: &[f64]) -> f64 {
     w
 }
 
-fn row(name: &str, acc: &Acc, real: &Acc, real_jerk: f64, joints: usize) -> Row {
+/// The name of feature value `i` (root tilt `hips.rx`/`hips.rz`, joint rotation vectors
+/// `JOINT.x|y|z`).
+fn value_name(spec: &zoo_rnngmm::FeatureSpec, i: usize) -> String {
+    match i {
+        4 => format!("{}.rx", spec.skeleton.names[0]),
+        5 => format!("{}.rz", spec.skeleton.names[0]),
+        i if i >= ROOT_DIMS => {
+            let k = i - ROOT_DIMS;
+            format!("{}.{}", spec.skeleton.names[1 + k / 3], ["x", "y", "z"][k % 3])
+        }
+        i => format!("value {i}"),
+    }
+}
+
+fn row(name: &str, acc: &Acc, real: &Acc, real_jerk: f64, joints: usize, spec: &zoo_rnngmm::FeatureSpec) -> Row {
     let npss = {
         let k = acc.windows.min(real.windows);
         let per = NPSS_FRAMES * joints;
@@ -259,6 +288,15 @@ fn row(name: &str, acc: &Acc, real: &Acc, real_jerk: f64, joints: usize) -> Row 
         jerk_ratio: jerk / real_jerk,
         npss,
         contact_accuracy: if acc.contacts.1 == 0 { f64::NAN } else { acc.contacts.0 as f64 / acc.contacts.1 as f64 },
+        range_exits: {
+            let mut e: Vec<(usize, (usize, f64))> =
+                acc.exits.iter().copied().enumerate().filter(|(_, (n, _))| *n > 0).collect();
+            e.sort_by(|a, b| b.1.0.cmp(&a.1.0).then(b.1.1.total_cmp(&a.1.1)));
+            e.iter()
+                .take(5)
+                .map(|(i, (n, x))| (value_name(spec, *i), *n as f64 / acc.clips.max(1) as f64, *x))
+                .collect()
+        },
     }
 }
 
@@ -433,10 +471,12 @@ pub fn run(a: BenchSynthesisArgs) -> anyhow::Result<()> {
     let per_seq = started.elapsed().as_secs_f64() / a.sequences as f64;
     let real_jerk = real.jerk.0 / real.jerk.1.max(1) as f64;
     let rot_joints = joints - 1;
-    let mut rows =
-        vec![row("real", &real, &real, real_jerk, rot_joints), row("rnn", &rnn, &real, real_jerk, rot_joints)];
+    let mut rows = vec![
+        row("real", &real, &real, real_jerk, rot_joints, spec),
+        row("rnn", &rnn, &real, real_jerk, rot_joints, spec),
+    ];
     if refiner.is_some() {
-        rows.push(row("rnn+refiner", &refined, &real, real_jerk, rot_joints));
+        rows.push(row("rnn+refiner", &refined, &real, real_jerk, rot_joints, spec));
     }
     let report = Report {
         model: a.model.display().to_string(),
@@ -474,6 +514,14 @@ pub fn run(a: BenchSynthesisArgs) -> anyhow::Result<()> {
             r.npss,
             if r.contact_accuracy.is_nan() { "-".into() } else { format!("{:.1} %", 100.0 * r.contact_accuracy) }
         );
+    }
+    for r in report.rows.iter().filter(|r| !r.range_exits.is_empty()) {
+        let list: Vec<String> = r
+            .range_exits
+            .iter()
+            .map(|(n, f, x)| format!("{n} ({:.0} % of sequences, up to {:.0} % of its span)", 100.0 * f, 100.0 * x))
+            .collect();
+        println!("{}: values leaving the range most often: {}", r.name, list.join(", "));
     }
     println!(
         "first-frame jump (mean joint displacement, last seed frame -> first generated frame): {:.2} cm with eq. 26, \
