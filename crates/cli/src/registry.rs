@@ -51,7 +51,7 @@ pub const MODELS: &[ModelEntry] = &[
     },
     ModelEntry {
         kind: "rnn-gmm",
-        purpose: "random motion synthesis (`zoo generate`, `zoo bench-synthesis`)",
+        purpose: "random motion synthesis (`zoo generate`, `zoo bench synthesis`)",
         bench: None,
         transitions: false,
     },

@@ -21,7 +21,7 @@ use zoo_rnngmm::checkpoint::LoadedGenerator;
 use zoo_rnngmm::features::{CONTACT_DIMS, ROOT_DIMS};
 use zoo_rnngmm::{SynthesisOptions, SynthesisStream};
 
-/// Arguments of `zoo bench-synthesis`.
+/// Arguments of `zoo bench synthesis`.
 #[derive(Args)]
 pub struct BenchSynthesisArgs {
     /// Run folder of `zoo train rnn-gmm` (with its refiner, unless --no-refiner).
