@@ -33,15 +33,10 @@ impl Fallback {
     /// `full` is this multiple of `start`.
     pub const FULL_FACTOR: f32 = 2.0;
 
-    /// The weight of the interpolation for a target miss: 0 below `start`, 1 from `full` on.
+    /// The weight of the interpolation for a target miss: 0 below `start`, 1 from `full` on
+    /// (the runtime's rule, so that candle and the engine blend alike).
     pub fn weight(&self, miss: f32) -> f32 {
-        if !miss.is_finite() {
-            return 1.0;
-        }
-        if self.full <= self.start {
-            return if miss >= self.start { 1.0 } else { 0.0 };
-        }
-        ((miss - self.start) / (self.full - self.start)).clamp(0.0, 1.0)
+        zoo_runtime::transition::TransitionFallback { start: self.start, full: self.full }.weight(miss)
     }
 
     /// Thresholds from the misses of in-distribution transitions: `start` at their
