@@ -53,6 +53,8 @@ pub const MAX_RUNTIME_BATCH: usize = 16_384;
 
 /// The most rounds of `zoo bench runtime`.
 pub const MAX_ROUNDS: usize = 10_000;
+/// Largest weight of a loss term.
+pub const MAX_LOSS_WEIGHT: f64 = 1e6;
 
 /// The most character-steps per backend and round of `zoo bench runtime`.
 pub const MAX_CHARACTER_STEPS: usize = 10_000_000;
@@ -387,6 +389,21 @@ pub fn positive_f32(s: &str) -> Result<f32, String> {
 #[allow(dead_code)] // for subcommands without a ranged parser yet
 pub fn non_negative(s: &str) -> Result<f64, String> {
     real_in(s, Interval::closed(0.0, f64::INFINITY), "")
+}
+
+/// A weight of a loss term in `[0, MAX_LOSS_WEIGHT]` (0 turns the term off).
+pub fn loss_weight(s: &str) -> Result<f64, String> {
+    real_in(s, Interval::closed(0.0, MAX_LOSS_WEIGHT), "")
+}
+
+/// A percentile below the median, `[0, 50)`.
+pub fn range_percentile(s: &str) -> Result<f64, String> {
+    real_in(s, Interval { lo: 0.0, lo_open: false, hi: 50.0, hi_open: true }, "")
+}
+
+/// A count that may be zero (`0` turns the feature off), `0..=MAX_CASES`.
+pub fn count_or_zero(s: &str) -> Result<usize, String> {
+    whole_in(s, 0..=MAX_CASES, "")
 }
 
 /// A decay in `[0, 1)`.

@@ -330,7 +330,7 @@ impl Trainable for ArnnTrainer {
 
     fn validate(&mut self) -> Result<Validation, TrainError> {
         let (frame, key) = self.evaluate()?;
-        Ok(Validation { loss: frame + key, averaged: None })
+        Ok(Validation { loss: frame + key, averaged: None, detail: None })
     }
 
     fn save_model(&mut self, dir: &Path, _averaged: bool) -> Result<(), TrainError> {

@@ -27,12 +27,14 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 /// Validation losses of one epoch.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Validation {
     /// Loss of the trained weights.
     pub loss: f64,
     /// Loss of the averaged weights, for models that keep a moving average.
     pub averaged: Option<f64>,
+    /// The loss's terms in words, printed after it (e.g. `skate 0.41 range 0.00`).
+    pub detail: Option<String>,
 }
 
 /// A model the loop can train. Samples are indices `0..train_len()`; the loop shuffles them
@@ -286,10 +288,11 @@ pub fn train<M: Trainable + ?Sized>(model: &mut M, opts: &TrainOptions) -> Resul
         crate::plot::loss_curve(&out.join(LOSS_CURVE_FILE), &state.train_loss, &state.valid_loss)?;
         if opts.print {
             println!(
-                "epoch {:>3}: train loss {:.5}  valid loss {:.5}{}{}  {:.1} windows/s  {:.0} s",
+                "epoch {:>3}: train loss {:.5}  valid loss {:.5}{}{}{}  {:.1} windows/s  {:.0} s",
                 state.epoch,
                 sum / count as f64,
                 v.loss,
+                v.detail.as_ref().map(|d| format!(" ({d})")).unwrap_or_default(),
                 v.averaged.map(|a| format!("  averaged {a:.5}")).unwrap_or_default(),
                 if best { if use_avg { " (best: averaged)" } else { " (best)" } } else { "" },
                 n as f64 / epoch_secs,
@@ -427,7 +430,7 @@ mod tests {
             let trained = self.ema.swap_in()?;
             let averaged = self.valid_loss();
             self.ema.swap_out(trained)?;
-            Ok(Validation { loss, averaged: Some(averaged) })
+            Ok(Validation { loss, averaged: Some(averaged), detail: None })
         }
         fn save_model(&mut self, dir: &Path, averaged: bool) -> Result<(), TrainError> {
             let trained = if averaged { Some(self.ema.swap_in()?) } else { None };

@@ -286,7 +286,7 @@ impl Trainable for RmrTraining<'_> {
     }
 
     fn validate(&mut self) -> Result<Validation, TrainError> {
-        Ok(Validation { loss: self.trainer.eval_all(self.valid)?.total, averaged: None })
+        Ok(Validation { loss: self.trainer.eval_all(self.valid)?.total, averaged: None, detail: None })
     }
 
     fn save_model(&mut self, dir: &Path, _averaged: bool) -> Result<(), TrainError> {

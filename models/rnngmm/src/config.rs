@@ -112,6 +112,33 @@ pub struct RefinerConfig {
     pub collapse_rounds: usize,
     /// Seed of the refiner's and discriminator's weights and of the sampling and batch draws.
     pub seed: u64,
+    /// Weight of the foot-skate term added to the refiner's loss (not in the paper's eq. 13):
+    /// the benchmark's skate measure (`../shared/BENCHMARK.md`) of the refined feet, in clip
+    /// units per frame, its height weight held constant so that lifting a foot is not a way out.
+    /// 0 in runs written before it existed.
+    #[serde(default)]
+    pub skate_weight: f64,
+    /// Weight of the joint-range term added to the refiner's loss (not in the paper): the
+    /// excess of each refined value `rx, rz` and joint angle beyond its range in the training
+    /// windows (normalised units, summed over values, mean over frames). 0 in runs written
+    /// before it existed.
+    #[serde(default)]
+    pub range_weight: f64,
+    /// The range of the joint-range term: from this percentile to `100 -` it of each value in
+    /// the training windows (0: min to max).
+    #[serde(default)]
+    pub range_percentile: f64,
+    /// Frames the generator runs past its seed before a fake window starts, so that the
+    /// refiner also learns on the generator's own drift (the seed frames plus this many plus a
+    /// window are sampled; the last window is kept). 0 in runs written before it existed.
+    #[serde(default)]
+    pub fake_lead_frames: usize,
+    /// Fake windows sampled afresh from the generator after every round, replacing as many
+    /// random windows of the pool of `fake_windows` (0: the pool sampled at the start is used
+    /// throughout, as in runs written before it existed). A fixed pool of a few hundred windows
+    /// is learnt by heart: the refiner's skate falls on it and rises on fresh samples.
+    #[serde(default)]
+    pub fresh_fakes: usize,
 }
 
 impl Default for RefinerConfig {
@@ -140,6 +167,11 @@ impl Default for RefinerConfig {
             collapse_loss: 1e-3,
             collapse_rounds: 50,
             seed: 0xad5e,
+            skate_weight: 300.0,
+            range_weight: 500.0,
+            range_percentile: 1.0,
+            fake_lead_frames: 0,
+            fresh_fakes: 16,
         }
     }
 }
@@ -187,6 +219,13 @@ impl RefinerConfig {
             return Err(RnnGmmError::Config(format!(
                 "refiner: learning rates ({}, {}) and clip ({}) must be positive, rho ({}) in [0, 1)",
                 self.refiner_lr, self.discriminator_lr, self.clip, self.rho
+            )));
+        }
+        if !(self.skate_weight >= 0.0 && self.range_weight >= 0.0 && (0.0..50.0).contains(&self.range_percentile)) {
+            return Err(RnnGmmError::Config(format!(
+                "refiner: skate_weight ({}) and range_weight ({}) must not be negative, range_percentile ({}) in [0, \
+                 50)",
+                self.skate_weight, self.range_weight, self.range_percentile
             )));
         }
         if !(self.lambda >= 0.0 && self.temperature >= 0.0 && self.low_loss < self.high_loss) {

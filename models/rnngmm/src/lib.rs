@@ -49,7 +49,7 @@ pub use features::{ContactParams, DecodedMotion, EncodedClip, FeatureSpec, Norma
 pub use gmm::Mixture;
 pub use initial_state::{InitialState, estimate_initial_state};
 pub use model::Generator;
-pub use refiner::{AdversarialTrainer, AdversarialTraining, EffectorNorm, RefinerNets};
+pub use refiner::{AdversarialTrainer, AdversarialTraining, EffectorNorm, Priors, RefinerLoss, RefinerNets};
 pub use synthesis::{Synthesis, SynthesisChunk, SynthesisOptions, SynthesisStream, synthesize};
 pub use train::{GeneratorTrainer, GeneratorTraining, TrainingData, Windows};
 

@@ -17,7 +17,7 @@
 use crate::checkpoint as rck;
 use crate::config::{Config, RefinerConfig};
 use crate::error::{RnnGmmError, RnnGmmResult};
-use crate::features::{FeatureSpec, Normalization};
+use crate::features::{FeatureSpec, Normalization, ROOT_DIMS};
 use crate::fk::{TensorFk, end_effectors};
 use crate::model::Generator;
 use crate::train::Windows;
@@ -42,13 +42,17 @@ pub const EFFECTORS_FILE: &str = "effectors.json";
 pub const REFINER_OPTIMIZER_FILE: &str = "refiner_optimizer.safetensors";
 /// The discriminator's optimiser state.
 pub const DISCRIMINATOR_OPTIMIZER_FILE: &str = "discriminator_optimizer.safetensors";
-/// The history buffer of refined motions.
+/// The history buffer of refined motions and the pool of fake windows.
 pub const HISTORY_FILE: &str = "history.safetensors";
 /// Counters and the generator state of adversarial training.
 pub const ADVERSARIAL_FILE: &str = "adversarial.json";
 
 /// Root values of the self-regularisation term: `dtx, dtz, dry, ty`.
 const ROOT_REG_DIMS: usize = 4;
+
+/// Generator windows (at most) sampled once from the validation windows to pick the refiner's
+/// checkpoint.
+const VALID_FAKES: usize = 128;
 
 /// End effectors and the mean / std of their features `[p_end; v_end]` (`6 E` values).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -98,6 +102,148 @@ impl EffectorNorm {
 /// `log(1 + e^x)`, stable for large `|x|`.
 fn softplus(x: &Tensor) -> Result<Tensor> {
     x.relu()? + (x.abs()?.neg()?.exp()? + 1.0)?.log()?
+}
+
+/// The refiner's loss and its terms as numbers.
+#[derive(Clone, Debug)]
+pub struct RefinerLoss {
+    /// The weighted sum (the value to minimise).
+    pub total: Tensor,
+    /// `-log D(R(x))`, mean over frames.
+    pub adversarial: f64,
+    /// The root regularisation of eq. 13 (unweighted).
+    pub regularisation: f64,
+    /// The foot skate of the refined windows (clip units per frame; 0 without priors).
+    pub skate: f64,
+    /// The joint-range excess of the refined windows (0 without priors).
+    pub range: f64,
+}
+
+impl RefinerLoss {
+    /// The measure that picks the refiner checkpoint: `skate + range + lambda * regularisation`,
+    /// the loss without its adversarial term (see [`AdversarialTrainer::validation_loss`]).
+    pub fn measure(&self, lambda: f64) -> f64 {
+        self.skate + self.range + lambda * self.regularisation
+    }
+}
+
+/// What the refiner's added loss terms know about real motion, fitted on the real training
+/// windows: the planted height of each foot joint (the 5th percentile of its height, as the
+/// benchmark fits it) and the range of every `rx, rz` and joint-angle value.
+#[derive(Clone, Debug)]
+pub struct Priors {
+    /// Position of each foot joint in the end-effector list.
+    feet: Vec<usize>,
+    /// Planted height of each foot joint, clip units, `(F)`.
+    planted: Tensor,
+    /// Range of the normalised values `ROOT_DIMS - 2 .. contact`, `(n)` each.
+    lo: Tensor,
+    hi: Tensor,
+    /// First value and count of the ranged values.
+    ranged: (usize, usize),
+}
+
+/// Height scale of the skate weight (BENCHMARK.md: 2.5 cm).
+const SKATE_HEIGHT_SCALE: f64 = 2.5;
+
+impl Priors {
+    /// Fits the priors on the real windows `windows` for the feet of `spec` (those of its foot
+    /// joints that are end effectors of `nets`); the range of each value runs from its
+    /// `percentile`-th to its `(100 - percentile)`-th percentile.
+    pub fn fit(
+        nets: &RefinerNets,
+        spec: &FeatureSpec,
+        effectors: &[usize],
+        windows: &Windows,
+        percentile: f64,
+        device: &Device,
+    ) -> RnnGmmResult<Self> {
+        let feet: Vec<usize> = spec
+            .left_foot
+            .iter()
+            .chain(&spec.right_foot)
+            .filter_map(|j| effectors.iter().position(|e| e == j))
+            .collect();
+        if feet.is_empty() || windows.is_empty() {
+            return Err(RnnGmmError::Config(format!(
+                "the refiner's skate term needs foot joints among the end effectors ({:?}) and real windows ({})",
+                effectors,
+                windows.len()
+            )));
+        }
+        let e = effectors.len();
+        let (first, count) = (ROOT_DIMS - 2, spec.contact_index() - (ROOT_DIMS - 2));
+        let mut heights = vec![Vec::new(); feet.len()];
+        let mut values = vec![Vec::with_capacity(windows.len() * windows.window); count];
+        for frame in windows.data.chunks(windows.dim) {
+            for (v, x) in values.iter_mut().zip(&frame[first..first + count]) {
+                v.push(*x as f64);
+            }
+        }
+        let (lo, hi): (Vec<f32>, Vec<f32>) = values
+            .iter()
+            .map(|v| {
+                let p = |q: f64| zoo_data::plausibility::percentile(v, q) as f32;
+                (p(percentile), p(100.0 - percentile))
+            })
+            .unzip();
+        for start in (0..windows.len()).step_by(64) {
+            let k = (windows.len() - start).min(64);
+            let data = &windows.data[start * windows.window * windows.dim..(start + k) * windows.window * windows.dim];
+            let x = Tensor::from_slice(data, (k, windows.window, windows.dim), device)?;
+            let f = nets.fk.effector_features(&x)?.reshape((k * windows.window, 6 * e))?.to_vec2::<f32>()?;
+            for row in f {
+                for (h, &foot) in heights.iter_mut().zip(&feet) {
+                    h.push(row[3 * foot + 1] as f64);
+                }
+            }
+        }
+        let planted: Vec<f32> = heights.iter().map(|h| zoo_data::plausibility::percentile(h, 5.0) as f32).collect();
+        Ok(Priors {
+            planted: Tensor::from_vec(planted, feet.len(), device)?,
+            feet,
+            lo: Tensor::from_vec(lo, count, device)?,
+            hi: Tensor::from_vec(hi, count, device)?,
+            ranged: (first, count),
+        })
+    }
+
+    /// Position of each foot joint in the end-effector list.
+    pub fn feet(&self) -> &[usize] {
+        &self.feet
+    }
+
+    /// Planted height of each foot joint (clip units).
+    pub fn planted(&self) -> Result<Vec<f32>> {
+        self.planted.to_vec1()
+    }
+
+    /// Foot skate of normalised windows `r` `(batch, time, D)` (BENCHMARK.md): horizontal speed
+    /// of each foot joint times `clamp(2 - 2^(h / 2.5), 0, 1)` of its height `h` above the planted
+    /// height, mean over foot joints and frames `1..`. The height weight is constant for the
+    /// gradient: the term slows planted feet down, it does not lift them.
+    pub fn skate(&self, nets: &RefinerNets, r: &Tensor) -> Result<Tensor> {
+        let (b, t, _) = r.dims3()?;
+        let e = nets.fk.effector_count();
+        let f = nets.fk.effector_features(r)?.narrow(1, 1, t - 1)?.reshape((b, t - 1, 2, e, 3))?;
+        let idx = Tensor::from_vec(self.feet.iter().map(|&i| i as u32).collect(), self.feet.len(), r.device())?;
+        let feet = f.index_select(&idx, 3)?; // (b, t - 1, 2, F, 3)
+        let (pos, vel) = (feet.narrow(2, 0, 1)?.squeeze(2)?, feet.narrow(2, 1, 1)?.squeeze(2)?);
+        let h = pos.narrow(3, 1, 1)?.squeeze(3)?.broadcast_sub(&self.planted)?.detach();
+        let w = ((h * (std::f64::consts::LN_2 / SKATE_HEIGHT_SCALE))?.exp()?.affine(-1.0, 2.0)?).clamp(0f32, 1f32)?;
+        let speed = ((vel.narrow(3, 0, 1)?.sqr()? + vel.narrow(3, 2, 1)?.sqr()?)? + 1e-8)?.sqrt()?.squeeze(3)?;
+        (speed * w)?.mean_all()
+    }
+
+    /// Excess of the normalised values `rx, rz` and joint angles of `r` beyond their range in
+    /// the training windows, summed over values, mean over frames. Linear in the excess, so a
+    /// value just outside is pulled in as firmly as one far outside.
+    pub fn range(&self, r: &Tensor) -> Result<Tensor> {
+        let v = r.narrow(2, self.ranged.0, self.ranged.1)?;
+        let below = v.broadcast_sub(&self.lo)?.neg()?.relu()?;
+        let above = v.broadcast_sub(&self.hi)?.relu()?;
+        (below + above)?.sum(2)?.mean_all()
+    }
 }
 
 fn zero_linear(input: usize, output: usize, vb: VarBuilder) -> Result<Linear> {
@@ -202,14 +348,27 @@ impl RefinerNets {
         self.d_fc2.forward(&self.d_bilstm.forward(&h, None)?)?.squeeze(D::Minus1)
     }
 
-    /// The refiner's loss (eq. 13) on fake windows `x`, and its two terms (adversarial,
-    /// regularisation) as numbers.
-    pub fn refiner_loss(&self, x: &Tensor, lambda: f64) -> Result<(Tensor, f64, f64)> {
+    /// The refiner's loss on fake windows `x`: eq. 13, plus the foot-skate and joint-range terms
+    /// of `priors` weighted by `c.skate_weight` and `c.range_weight` (none without priors).
+    pub fn refiner_loss(&self, x: &Tensor, c: &RefinerConfig, priors: Option<&Priors>) -> Result<RefinerLoss> {
         let r = self.refine(x)?;
         let adv = softplus(&self.logits(&r)?.neg()?)?.mean_all()?;
-        let reg = (r.narrow(2, 0, ROOT_REG_DIMS)? - x.narrow(2, 0, ROOT_REG_DIMS)?)?.sqr()?.sum(2)?.mean_all()?;
-        let (a, g) = (adv.to_scalar::<f32>()? as f64, reg.to_scalar::<f32>()? as f64);
-        Ok(((adv + (reg * lambda)?)?, a, g))
+        let reg = self.root_regularisation(x, &r)?;
+        let mut total = (&adv + (&reg * c.lambda)?)?;
+        let (mut skate, mut range) = (0.0, 0.0);
+        if let Some(p) = priors {
+            let (s, g) = (p.skate(self, &r)?, p.range(&r)?);
+            (skate, range) = (s.to_scalar::<f32>()? as f64, g.to_scalar::<f32>()? as f64);
+            total = ((total + (s * c.skate_weight)?)? + (g * c.range_weight)?)?;
+        }
+        let (adversarial, regularisation) = (adv.to_scalar::<f32>()? as f64, reg.to_scalar::<f32>()? as f64);
+        Ok(RefinerLoss { total, adversarial, regularisation, skate, range })
+    }
+
+    /// `|root(x) - root(R(x))|^2` of eq. 13 on the normalised root values, summed over them and
+    /// averaged over frames.
+    fn root_regularisation(&self, x: &Tensor, r: &Tensor) -> Result<Tensor> {
+        (r.narrow(2, 0, ROOT_REG_DIMS)? - x.narrow(2, 0, ROOT_REG_DIMS)?)?.sqr()?.sum(2)?.mean_all()
     }
 
     /// The discriminator's loss (eq. 10) on real and refined windows.
@@ -275,6 +434,8 @@ pub struct AdversarialTrainer {
     norm: Normalization,
     eff: EffectorNorm,
     gen_varmap: VarMap,
+    /// The frozen generator (fresh fakes).
+    generator: Generator,
     r_varmap: VarMap,
     d_varmap: VarMap,
     nets: RefinerNets,
@@ -288,6 +449,9 @@ pub struct AdversarialTrainer {
     valid_fakes: Windows,
     /// Refined windows of earlier refiners, `history * window * D`.
     history: Vec<f32>,
+    /// Skate heights and joint ranges of the real training windows (the added loss terms and
+    /// the validation measure).
+    priors: Option<Priors>,
     rng: SplitMix64,
     k: usize,
     collapse_count: usize,
@@ -324,7 +488,12 @@ fn sample_fakes(
         for i in start..start + n {
             seeds.extend_from_slice(&real.get(i % real.len())[..seed_len * d]);
         }
-        data.extend(generator.sample_batch(&seeds, n, seed_len, w, rng, c.temperature)?);
+        let lead = c.fake_lead_frames;
+        let sampled = generator.sample_batch(&seeds, n, seed_len, lead + w, rng, c.temperature)?;
+        for i in 0..n {
+            let s = (i * (lead + w) + lead) * d;
+            data.extend_from_slice(&sampled[s..s + w * d]);
+        }
     }
     Ok(Windows { window: w, dim: d, data })
 }
@@ -362,11 +531,14 @@ impl AdversarialTrainer {
         let c = &config.refiner;
         let mut rng = SplitMix64::new(c.seed);
         let fakes = sample_fakes(&generator, train, c.fake_windows, c, &mut rng)?;
-        let valid_fakes = sample_fakes(&generator, valid, valid.len().clamp(1, c.batch.max(8)), c, &mut rng)?;
+        let valid_fakes = sample_fakes(&generator, valid, valid.len().clamp(1, VALID_FAKES.max(c.batch)), c, &mut rng)?;
         let effectors = end_effectors(&spec);
         let fk = TensorFk::new(&spec, &norm, &effectors, device)?;
         let eff = EffectorNorm::fit(&fk, &effectors, train, device)?;
-        Self::build(config, spec, norm, eff, gen_varmap, fakes, valid_fakes, rng, device)
+        let mut t = Self::build(config, spec, norm, eff, (gen_varmap, generator), fakes, valid_fakes, rng, device)?;
+        t.priors =
+            Some(Priors::fit(&t.nets, &t.spec, &t.eff.effectors, train, t.config.refiner.range_percentile, device)?);
+        Ok(t)
     }
 
     fn build(
@@ -374,7 +546,7 @@ impl AdversarialTrainer {
         spec: FeatureSpec,
         norm: Normalization,
         eff: EffectorNorm,
-        gen_varmap: VarMap,
+        (gen_varmap, generator): (VarMap, Generator),
         fakes: Windows,
         valid_fakes: Windows,
         rng: SplitMix64,
@@ -398,6 +570,7 @@ impl AdversarialTrainer {
             norm,
             eff,
             gen_varmap,
+            generator,
             r_varmap,
             d_varmap,
             nets,
@@ -408,6 +581,7 @@ impl AdversarialTrainer {
             fakes,
             valid_fakes,
             history: Vec::new(),
+            priors: None,
             rng,
             collapse_count: 0,
             warmed_up: false,
@@ -445,6 +619,11 @@ impl AdversarialTrainer {
     /// The configuration (with the refiner settings in use).
     pub fn config(&self) -> &Config {
         &self.config
+    }
+
+    /// The skate heights and joint ranges of the real training windows.
+    pub fn priors(&self) -> Option<&Priors> {
+        self.priors.as_ref()
     }
 
     /// The refiner and the discriminator.
@@ -499,9 +678,9 @@ impl AdversarialTrainer {
         let c = self.config.refiner.clone();
         let idx = self.draw(c.batch, self.fakes.len());
         let x = self.fake_tensor(&idx)?;
-        let nets = &self.nets;
+        let (nets, priors) = (&self.nets, self.priors.as_ref());
         let (value, grads) = self.parallel.backward(idx.len(), &self.r_vars, |r| {
-            Ok(nets.refiner_loss(&x.narrow(0, r.start, r.len())?, c.lambda)?.0)
+            Ok(nets.refiner_loss(&x.narrow(0, r.start, r.len())?, &c, priors)?.total)
         })?;
         let value = Self::check(value, "refiner", self.opt_r.steps())?;
         let mut grads = grads.ok_or_else(|| RnnGmmError::Config("the refiner update computed no gradients".into()))?;
@@ -597,6 +776,7 @@ impl AdversarialTrainer {
         let loss = sum / self.k as f64;
         let x = self.real_tensor(real, real_idx)?;
         let d = self.discriminator_update(&x)?;
+        self.refresh_fakes(real)?;
         self.last_d = Some(d);
         self.rounds += 1;
         let at_max = self.k >= c.max_refiner_updates;
@@ -616,16 +796,52 @@ impl AdversarialTrainer {
         Ok(loss)
     }
 
-    /// Mean refiner loss (eq. 13) on the fixed validation fakes, without updating anything.
+    /// Replaces `fresh_fakes` random windows of the fake pool by new generator samples seeded
+    /// with random windows of `real`.
+    fn refresh_fakes(&mut self, real: &Windows) -> RnnGmmResult<()> {
+        let c = self.config.refiner.clone();
+        let n = c.fresh_fakes.min(self.fakes.len());
+        if n == 0 {
+            return Ok(());
+        }
+        let seeds = self.draw(n, real.len());
+        let slots = self.draw(n, self.fakes.len());
+        let picked = Windows {
+            window: real.window,
+            dim: real.dim,
+            data: seeds.iter().flat_map(|&i| real.get(i).iter().copied()).collect(),
+        };
+        let fresh = sample_fakes(&self.generator, &picked, n, &c, &mut self.rng)?;
+        let w = self.fakes.window * self.fakes.dim;
+        for (k, &s) in slots.iter().enumerate() {
+            self.fakes.data[s * w..(s + 1) * w].copy_from_slice(fresh.get(k));
+        }
+        Ok(())
+    }
+
+    /// The refiner's loss on the fixed validation fakes, without updating anything.
+    pub fn validation_terms(&self) -> RnnGmmResult<RefinerLoss> {
+        self.terms_on(&self.valid_fakes, self.valid_fakes.len())
+    }
+
+    /// The refiner's loss on the first [`VALID_FAKES`] training fakes (to compare with the
+    /// validation fakes: a refiner that learns its training fakes by heart does better on them).
+    pub fn training_terms(&self) -> RnnGmmResult<RefinerLoss> {
+        self.terms_on(&self.fakes, self.fakes.len().min(VALID_FAKES))
+    }
+
+    fn terms_on(&self, w: &Windows, n: usize) -> RnnGmmResult<RefinerLoss> {
+        let x = Tensor::from_slice(&w.data[..n * w.window * w.dim], (n, w.window, w.dim), &self.device)?;
+        Ok(self.nets.refiner_loss(&x, &self.config.refiner, self.priors.as_ref())?)
+    }
+
+    /// The measure that picks the refiner checkpoint, on the fixed validation fakes:
+    /// `skate + range + lambda * regularisation` of the refined windows ([`Priors`], eq. 13's
+    /// root term). It leaves out the adversarial term: that one is measured against the
+    /// discriminator of the moment, so it does not compare checkpoints (a refiner early in
+    /// training looks best against a discriminator that has not learnt yet).
     pub fn validation_loss(&self) -> RnnGmmResult<f64> {
-        let n = self.valid_fakes.len();
-        let x = Tensor::from_slice(
-            &self.valid_fakes.data,
-            (n, self.valid_fakes.window, self.valid_fakes.dim),
-            &self.device,
-        )?;
-        let (loss, _, _) = self.nets.refiner_loss(&x, self.config.refiner.lambda)?;
-        Ok(loss.to_scalar::<f32>()? as f64)
+        Ok(self.validation_terms()?.measure(self.config.refiner.lambda))
     }
 
     /// Writes the generator's checkpoint files with this configuration, the refiner's and the
@@ -645,7 +861,12 @@ impl AdversarialTrainer {
         ck::write_tensors(&dir.join(DISCRIMINATOR_OPTIMIZER_FILE), &self.opt_d.state()?)?;
         let n = self.history.len() / (self.fakes.window * self.fakes.dim);
         let hist = Tensor::from_slice(&self.history, (n, self.fakes.window, self.fakes.dim), &Device::Cpu)?;
-        ck::write_tensors(&dir.join(HISTORY_FILE), &HashMap::from([("history".to_string(), hist)]))?;
+        let pool =
+            Tensor::from_slice(&self.fakes.data, (self.fakes.len(), self.fakes.window, self.fakes.dim), &Device::Cpu)?;
+        ck::write_tensors(
+            &dir.join(HISTORY_FILE),
+            &HashMap::from([("history".to_string(), hist), ("fakes".to_string(), pool)]),
+        )?;
         let state = AdversarialState {
             rng: self.rng.state(),
             refiner_updates: self.k,
@@ -683,6 +904,20 @@ impl AdversarialTrainer {
                 ))
             })?;
         self.history = history;
+        // The fake pool changes when fresh fakes are drawn; runs written before it was saved
+        // kept their pool fixed, which the constructor has sampled again.
+        if let Some(pool) = hist.get("fakes") {
+            let pool = pool.flatten_all()?.to_vec1::<f32>()?;
+            if pool.len() != self.fakes.data.len() {
+                return Err(RnnGmmError::Config(format!(
+                    "{}: a fake pool of {} values, this run has {} (another fake_windows?)",
+                    path.display(),
+                    pool.len(),
+                    self.fakes.data.len()
+                )));
+            }
+            self.fakes.data = pool;
+        }
         let s: AdversarialState = ck::read_json(&dir.join(ADVERSARIAL_FILE))?;
         self.rng = SplitMix64::from_state(s.rng);
         self.k = s.refiner_updates.clamp(1, self.config.refiner.max_refiner_updates);
@@ -751,7 +986,15 @@ impl Trainable for AdversarialTraining<'_> {
     }
 
     fn validate(&mut self) -> std::result::Result<Validation, TrainError> {
-        Ok(Validation { loss: self.trainer.validation_loss()?, averaged: None })
+        let (t, f) = (self.trainer.validation_terms()?, self.trainer.training_terms()?);
+        Ok(Validation {
+            loss: t.measure(self.trainer.config.refiner.lambda),
+            averaged: None,
+            detail: Some(format!(
+                "skate {:.3} range {:.4} root {:.4}, adversarial {:.3}; training fakes: skate {:.3} range {:.4}",
+                t.skate, t.range, t.regularisation, t.adversarial, f.skate, f.range
+            )),
+        })
     }
 
     fn save_model(&mut self, dir: &Path, _averaged: bool) -> std::result::Result<(), TrainError> {

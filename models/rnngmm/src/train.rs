@@ -398,7 +398,7 @@ impl Trainable for GeneratorTraining<'_> {
     }
 
     fn validate(&mut self) -> Result<Validation, TrainError> {
-        Ok(Validation { loss: self.trainer.eval_windows(self.valid)?, averaged: None })
+        Ok(Validation { loss: self.trainer.eval_windows(self.valid)?, averaged: None, detail: None })
     }
 
     fn save_model(&mut self, dir: &Path, _averaged: bool) -> Result<(), TrainError> {

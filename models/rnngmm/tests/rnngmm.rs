@@ -284,6 +284,51 @@ fn adversarial_rounds_run_with_finite_losses_and_resume_exactly() {
 }
 
 #[test]
+fn the_refiners_skate_term_is_the_benchmarks_measure_and_its_range_term_counts_excess() {
+    let dir = tempfile::tempdir().unwrap();
+    let gen_dir = dir.path().join("generator");
+    let (config, data, real) = generator_run(&gen_dir);
+    let whole_range = RefinerConfig { range_percentile: 0.0, ..config.refiner.clone() };
+    let t = AdversarialTrainer::new(&gen_dir, &whole_range, &real, &data.valid, &Device::Cpu).unwrap();
+    let priors = t.priors().unwrap();
+    let (w, d) = (real.window, real.dim);
+    // The skate term of a real window against zoo_data's skate measure on the decoded clip.
+    let x = Tensor::from_slice(real.get(5), (1, w, d), &Device::Cpu).unwrap();
+    let term = priors.skate(t.nets(), &x).unwrap().to_scalar::<f32>().unwrap() as f64;
+    let mut values = real.get(5).to_vec();
+    data.norm.denormalize(&mut values);
+    let clip = data.spec.decode(&values, RootPlacement::default()).unwrap().clip;
+    let (_, gp) = clip.global();
+    let effectors = zoo_rnngmm::fk::end_effectors(&data.spec);
+    let joints: Vec<usize> = priors.feet().iter().map(|&k| effectors[k]).collect();
+    assert_eq!(joints.len(), 4, "ankles and toes: {joints:?}");
+    let planted = priors.planted().unwrap().iter().map(|&g| g as f64).collect();
+    let measure = zoo_data::metrics::FootSkate { joints, planted, scale: 2.5 }.skate(&gp, w, clip.joints());
+    assert!(measure > 0.01, "{measure}");
+    assert!((term - measure).abs() < 1e-3 * measure.max(1.0), "term {term} vs measure {measure}");
+    // Range: nothing on a training window, the excess (mean over frames) beyond its min / max.
+    assert_eq!(priors.range(&x).unwrap().to_scalar::<f32>().unwrap(), 0.0);
+    let (lo, hi) = (0..real.len())
+        .flat_map(|i| real.get(i).chunks(d).map(|f| f[8]))
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
+    let mut out = real.get(5).to_vec();
+    out[3 * d + 8] = hi + 2.0;
+    out[4 * d + 8] = lo - 1.0;
+    let y = Tensor::from_vec(out, (1, w, d), &Device::Cpu).unwrap();
+    let excess = priors.range(&y).unwrap().to_scalar::<f32>().unwrap();
+    assert!((excess - 3.0 / w as f32).abs() < 1e-5, "{excess}");
+    // The validation measure leaves the adversarial term out.
+    let v = t.validation_terms().unwrap();
+    let want = v.skate + v.range + whole_range.lambda * v.regularisation;
+    assert!((t.validation_loss().unwrap() - want).abs() < 1e-9 && v.skate > 0.0, "{v:?}");
+    // Fakes that start 6 frames past the seed are other windows of the same generator.
+    let lead = RefinerConfig { fake_lead_frames: 6, ..whole_range.clone() };
+    let led = AdversarialTrainer::new(&gen_dir, &lead, &real, &data.valid, &Device::Cpu).unwrap();
+    let (a, b) = (t.training_terms().unwrap(), led.training_terms().unwrap());
+    assert!(b.skate.is_finite() && b.skate != a.skate, "{a:?} {b:?}");
+}
+
+#[test]
 fn discriminator_collapse_stops_training_and_keeps_the_last_good_checkpoint() {
     let dir = tempfile::tempdir().unwrap();
     let gen_dir = dir.path().join("generator");

@@ -500,7 +500,7 @@ impl Trainable for RtnTraining<'_> {
         } else {
             None
         };
-        Ok(Validation { loss, averaged })
+        Ok(Validation { loss, averaged, detail: None })
     }
 
     fn save_model(&mut self, dir: &Path, averaged: bool) -> Result<(), TrainError> {

@@ -89,6 +89,34 @@ pub struct RnnGmmArgs {
     /// preset's; paper: 75]. Ignored when a refiner stage is resumed (its own setting is kept).
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::rounds)]
     pub refiner_warmup: Option<usize>,
+    /// Weight of the refiner's root regularisation (eq. 13's lambda; paper: 20) [default: the
+    /// generator run's setting]. Ignored when a refiner stage is resumed.
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::loss_weight)]
+    pub refiner_lambda: Option<f64>,
+    /// Weight of the refiner's foot-skate term (not in the paper's eq. 13; see
+    /// `docs/rnn-gmm.md`) [default: the generator run's setting; 300 in new runs, 0 means eq.
+    /// 13 alone]. Ignored when a refiner stage is resumed.
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::loss_weight)]
+    pub refiner_skate_weight: Option<f64>,
+    /// Weight of the refiner's joint-range term (not in the paper) [default: the generator
+    /// run's setting; 500 in new runs]. Ignored when a refiner stage is resumed.
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::loss_weight)]
+    pub refiner_range_weight: Option<f64>,
+    /// Percentile of the joint-range term's bounds: each value's range runs from this
+    /// percentile to 100 minus it in the training windows [default: the generator run's
+    /// setting; 1 in new runs, 0 for min to max]. Ignored when a refiner stage is resumed.
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::range_percentile)]
+    pub refiner_range_percentile: Option<f64>,
+    /// Frames the generator runs past its seed before each of the refiner's training windows
+    /// starts, so the refiner also sees the generator's drift [default: the generator run's
+    /// setting; 0 in new runs]. Ignored when a refiner stage is resumed.
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::frames_or_zero)]
+    pub refiner_fake_lead: Option<usize>,
+    /// Fake windows sampled afresh from the generator after every adversarial round, replacing
+    /// as many in the refiner's pool [default: the generator run's setting; 16 in new runs, 0
+    /// keeps the pool sampled at the start]. Ignored when a refiner stage is resumed.
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::count_or_zero)]
+    pub refiner_fresh_fakes: Option<usize>,
     /// Stop the generator stage after this many minutes (checked between epochs: the epoch in
     /// progress finishes first).
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::time_limit_minutes)]
@@ -415,16 +443,27 @@ pub fn run(a: RnnGmmArgs) -> anyhow::Result<()> {
             if let Some(n) = a.refiner_warmup {
                 (r.warmup_refiner, r.warmup_discriminator) = (n, n);
             }
+            r.lambda = a.refiner_lambda.unwrap_or(r.lambda);
+            r.skate_weight = a.refiner_skate_weight.unwrap_or(r.skate_weight);
+            r.range_weight = a.refiner_range_weight.unwrap_or(r.range_weight);
+            r.range_percentile = a.refiner_range_percentile.unwrap_or(r.range_percentile);
+            r.fake_lead_frames = a.refiner_fake_lead.unwrap_or(r.fake_lead_frames);
+            r.fresh_fakes = a.refiner_fresh_fakes.unwrap_or(r.fresh_fakes);
             r
         };
         let c = &refiner_config;
         println!(
             "training the RNN-GMM refiner on {} real windows against {} generator samples (warm-up: {} refiner + {} \
-             discriminator updates in the first round), run folder {}",
+             discriminator updates in the first round; skate weight {}, range weight {}, {} lead frames, {} fresh fakes per \
+             round), run folder {}",
             tw.len(),
             c.fake_windows,
             c.warmup_refiner,
             c.warmup_discriminator,
+            c.skate_weight,
+            c.range_weight,
+            c.fake_lead_frames,
+            c.fresh_fakes,
             ref_dir.display()
         );
         let mut trainer = AdversarialTrainer::new(&gen_dir, &refiner_config, &tw, &vw, &device)
@@ -455,7 +494,7 @@ pub fn run(a: RnnGmmArgs) -> anyhow::Result<()> {
             Err(e) => return Err(e.into()),
         };
         println!(
-            "refiner: {} epochs ({} rounds) in {:.1} min, best validation refiner loss {:.4} at epoch {}; model in {}",
+            "refiner: {} epochs ({} rounds) in {:.1} min, best validation measure (skate + range + lambda * root term) {:.4} at epoch {}; model in {}",
             state.epoch,
             training.trainer().rounds(),
             state.seconds / 60.0,
