@@ -187,6 +187,9 @@ fn runtime_synthesis_is_seeded_and_does_not_depend_on_the_batch_or_thread() {
     let batch = runtime_poses(&model, &start, &[6, 5, 7], 200);
     assert_eq!(batch[1], alone, "character 5 moved differently in a batch");
     assert_ne!(batch[0], alone);
+    // First of two (the batch a single character is padded to): the same too.
+    let pair = runtime_poses(&model, &start, &[5, 8], 200);
+    assert_eq!(pair[0], alone, "character 5 moved differently in a batch of two");
     let m2 = model.clone();
     let s2 = start.clone();
     let threaded = std::thread::spawn(move || runtime_poses(&m2, &s2, &[5], 200).remove(0)).join().unwrap();

@@ -14,6 +14,8 @@ struct Session {
     state: TypedSimpleState,
     /// One tensor per graph input, reused every call (exclusive again once tract returns).
     inputs: Vec<Arc<Tensor>>,
+    /// Made from the symbolic-batch plan (see [`MotionRunner::step_batch_invariant`]).
+    symbolic: bool,
 }
 
 impl Session {
@@ -25,7 +27,12 @@ impl Session {
             .map(|&w| Tensor::zero::<f32>(&[batch, w]).map(Arc::new))
             .collect::<TractResult<Vec<_>>>()
             .map_err(run)?;
-        Ok(Session { batch, state, inputs })
+        Ok(Session { batch, state, inputs, symbolic: false })
+    }
+
+    fn symbolic(mut self, symbolic: bool) -> Self {
+        self.symbolic = symbolic;
+        self
     }
 }
 
@@ -102,7 +109,7 @@ impl MotionRunner {
         inputs: &[&[f32]],
         outputs: &mut [&mut [f32]],
     ) -> Result<(), MotionError> {
-        self.run(std::slice::from_mut(state), inputs, outputs)
+        self.run(std::slice::from_mut(state), inputs, outputs, false)
     }
 
     /// Advances `states.len()` characters by one frame in one graph run.
@@ -115,7 +122,21 @@ impl MotionRunner {
         inputs: &[&[f32]],
         outputs: &mut [&mut [f32]],
     ) -> Result<(), MotionError> {
-        self.run(states, inputs, outputs)
+        self.run(states, inputs, outputs, false)
+    }
+
+    /// [`MotionRunner::step_batch`] with the symbolic-batch plan for every batch size, so that
+    /// a character's results do not depend on the batch it is in, bit for bit, for batches of
+    /// two or more: the concrete plans pick kernels by batch size (and tract picks a
+    /// matrix-vector kernel for a batch of one), whose float rounding differs on some CPUs
+    /// (AVX-512 ones). Callers that need this pad a single character to two.
+    pub(crate) fn step_batch_invariant(
+        &mut self,
+        states: &mut [MotionState],
+        inputs: &[&[f32]],
+        outputs: &mut [&mut [f32]],
+    ) -> Result<(), MotionError> {
+        self.run(states, inputs, outputs, true)
     }
 
     /// Starts a transition for one character: runs the start graph on `inputs`
@@ -192,6 +213,7 @@ impl MotionRunner {
         states: &mut [MotionState],
         inputs: &[&[f32]],
         outputs: &mut [&mut [f32]],
+        symbolic: bool,
     ) -> Result<(), MotionError> {
         let inner = &*self.model.inner;
         let batch = states.len();
@@ -217,11 +239,12 @@ impl MotionRunner {
         }
         check_states(inner, states)?;
 
-        let session = if batch == 1 {
+        let session = if batch == 1 && !symbolic {
             &mut self.single
         } else {
-            if self.batched.as_ref().is_none_or(|s| s.batch != batch) {
-                self.batched = Some(Session::new(&inner.plan_for(batch), batch, &inner.graph_input_widths)?);
+            if self.batched.as_ref().is_none_or(|s| s.batch != batch || s.symbolic != symbolic) {
+                let plan = if symbolic { inner.batched.clone() } else { inner.plan_for(batch) };
+                self.batched = Some(Session::new(&plan, batch, &inner.graph_input_widths)?.symbolic(symbolic));
             }
             self.batched.as_mut().expect("batched session set above")
         };

@@ -9,7 +9,11 @@
 //! `zoo_rnngmm::Mixture::sample` does), feeds it back, and decodes it into an [`EnginePose`]
 //! (root motion accumulated as in the paper's eq. 4) plus the left / right contact bits. A
 //! character's frames depend only on its seed and start frame: the same in any batch, on any
-//! thread, in any run.
+//! thread, in any run, bit for bit. For that, the generator's and the refiner's steps run with
+//! their symbolic-batch plans at every batch size and a batch of one is padded to two with a
+//! copy of its character: tract picks other kernels for a batch of one (matrix-vector) and for
+//! concrete batch sizes, and on some CPUs (AVX-512) they round differently, which changes the
+//! sampled mixture component and from then on the motion.
 //!
 //! When the file embeds the refiner's step graph (`zoo.rnngmm.refiner_graph`, written by
 //! `zoo_rnngmm::export` for a run folder with a refiner), each sampled frame is refined behind
@@ -17,10 +21,9 @@
 //! forward kinematics of `zoo_rnngmm::fk`, in f64), runs the refiner step (its LSTM state is the
 //! character's), and decodes the refined frame; the generator still reads its own samples. The
 //! refiner adds no latency in frames (it is causal: frame `t` needs frames up to `t`). The
-//! refiner graph runs once per step for the whole batch (a tract plan per batch size, made on
-//! first use); tract allocates its tensors per call there (the generator's batched step does
-//! not). Not here yet: the initial state estimation of eq. 26 (a
-//! start from the zero state, as the paper's baseline).
+//! refiner graph runs once per step for the whole batch; tract allocates its tensors per call
+//! there (the generator's batched step does not). Not here yet: the initial state estimation
+//! of eq. 26 (a start from the zero state, as the paper's baseline).
 
 use crate::error::MotionError;
 use crate::metadata::synthesis::{KEY, REFINER_GRAPH_KEY, REFINER_KEY, SynthesisTask};
@@ -44,35 +47,14 @@ struct EffectorStats {
 type Plan = std::sync::Arc<tract_onnx::prelude::TypedRunnableModel>;
 
 /// The refiner step graph and what its input needs. It runs once per step for the whole
-/// batch of characters, with a plan made for that batch size (on first use, shared by clones).
+/// batch of characters, with one plan for every batch size (the graph's symbolic batch), so
+/// that a character's refined frames do not depend on its batch (see
+/// [`SynthesisRunner::step_batch`]).
 #[derive(Clone, Debug)]
 struct Refiner {
-    source: std::sync::Arc<tract_onnx::prelude::InferenceModel>,
-    /// Plans by batch size.
-    plans: std::sync::Arc<std::sync::Mutex<std::collections::HashMap<usize, Plan>>>,
-    /// Widths of the graph's inputs: `x`, `effectors`, `h`, `c`.
-    widths: [usize; 4],
+    plan: Plan,
     stats: EffectorStats,
     hidden: usize,
-}
-
-impl Refiner {
-    /// The plan for `batch` characters.
-    fn plan(&self, batch: usize) -> Result<Plan, MotionError> {
-        use tract_onnx::prelude::*;
-        let mut plans = self.plans.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-        if let Some(p) = plans.get(&batch) {
-            return Ok(p.clone());
-        }
-        let run = |err: TractError| MotionError::Run { reason: format!("{err:#}") };
-        let mut model = (*self.source).clone();
-        for (i, w) in self.widths.iter().enumerate() {
-            model.set_input_fact(i, f32::fact([batch, *w]).into()).map_err(run)?;
-        }
-        let plan = model.into_optimized().and_then(|m| m.into_runnable()).map_err(run)?;
-        plans.insert(batch, plan.clone());
-        Ok(plan)
-    }
 }
 
 /// A loaded synthesis model (the step graph, its `zoo.synthesis` section, and the refiner's
@@ -102,11 +84,8 @@ fn load_refiner(proto: &tract_onnx::pb::ModelProto, d: usize) -> Result<Option<R
         .map_err(|err| bad(REFINER_GRAPH_KEY, err.to_string()))?;
     // Read through the runtime's one graph reader (IR version, dangling names, tract's panics).
     let (graph_proto, source) = crate::model::read_graph(&bytes, "the embedded refiner graph")?;
-    let h = graph_proto
-        .graph
-        .as_ref()
-        .and_then(|g| g.input.get(2))
-        .and_then(|v| match &v.r#type {
+    let width = |i: usize| {
+        graph_proto.graph.as_ref().and_then(|g| g.input.get(i)).and_then(|v| match &v.r#type {
             Some(tract_onnx::pb::TypeProto {
                 value: Some(tract_onnx::pb::type_proto::Value::TensorType(t)), ..
             }) => t.shape.as_ref().and_then(|s| s.dim.get(1)).and_then(|d| match d.value {
@@ -115,17 +94,20 @@ fn load_refiner(proto: &tract_onnx::pb::ModelProto, d: usize) -> Result<Option<R
             }),
             _ => None,
         })
-        .ok_or_else(|| bad(REFINER_GRAPH_KEY, "input 2 (`h`) has no fixed width"))?;
-    let refiner = Refiner {
-        source: std::sync::Arc::new(source),
-        plans: Default::default(),
-        widths: [d, e, h, h],
-        stats,
-        hidden: h,
     };
-    // Plan batch 1 now, so that a graph tract cannot run is refused at load.
-    refiner.plan(1)?;
-    Ok(Some(refiner))
+    let h = width(2).ok_or_else(|| bad(REFINER_GRAPH_KEY, "input 2 (`h`) has no fixed width"))?;
+    // The inputs' widths, checked here: the plan's batch is symbolic, so tract would only
+    // find a mismatch at the first step.
+    for (i, name, want) in [(0, "x", d), (1, "effectors", e), (3, "c", h)] {
+        if width(i) != Some(want) {
+            return Err(bad(REFINER_GRAPH_KEY, format!("input {i} (`{name}`) must be {want} wide")));
+        }
+    }
+    // Planned now, so that a graph tract cannot run is refused at load.
+    use tract_onnx::prelude::*;
+    let run = |err: TractError| MotionError::Run { reason: format!("{err:#}") };
+    let plan = source.into_optimized().and_then(|m| m.into_runnable()).map_err(run)?;
+    Ok(Some(Refiner { plan, stats, hidden: h }))
 }
 
 fn bad(key: &str, reason: impl Into<String>) -> MotionError {
@@ -259,17 +241,18 @@ impl SynthesisModel {
         Ok(SynthesisRunner {
             model: self.clone(),
             runner: self.model.runner()?,
-            x: vec![0.0; n * d],
-            weights: vec![0.0; n * m],
-            means: vec![0.0; n * m * d],
-            stds: vec![0.0; n * m * d],
-            states: Vec::with_capacity(n),
+            x: vec![0.0; n.max(2) * d],
+            weights: vec![0.0; n.max(2) * m],
+            means: vec![0.0; n.max(2) * m * d],
+            stds: vec![0.0; n.max(2) * m * d],
+            states: Vec::with_capacity(n.max(2)),
+            pad: self.model.new_state(),
             world: vec![Quat::IDENTITY; self.references.len()],
             refined: vec![0.0; n * d],
-            refiner_x: Vec::with_capacity(n * d),
-            refiner_e: Vec::with_capacity(n * e),
-            refiner_h: Vec::with_capacity(n * hu),
-            refiner_c: Vec::with_capacity(n * hu),
+            refiner_x: Vec::with_capacity(n.max(2) * d),
+            refiner_e: Vec::with_capacity(n.max(2) * e),
+            refiner_h: Vec::with_capacity(n.max(2) * hu),
+            refiner_c: Vec::with_capacity(n.max(2) * hu),
             effectors: vec![DVec3::ZERO; self.refiner.as_ref().map_or(0, |r| r.stats.effectors.len())],
             fk_rot: vec![DQuat::IDENTITY; self.references.len()],
             fk_pos: vec![DVec3::ZERO; self.references.len()],
@@ -342,6 +325,8 @@ pub struct SynthesisRunner {
     means: Vec<f32>,
     stds: Vec<f32>,
     states: Vec<MotionState>,
+    /// The generator state of the copy that pads a batch of one to two (see `step_batch`).
+    pad: MotionState,
     world: Vec<Quat>,
     /// Refined frames, one row per character of the batch.
     refined: Vec<f32>,
@@ -402,11 +387,16 @@ impl SynthesisRunner {
             }
             check_len("pose local_rotations", pose.local_rotations.len(), 1, joints)?;
         }
-        if self.x.len() < n * d {
-            self.x.resize(n * d, 0.0);
-            self.weights.resize(n * m, 0.0);
-            self.means.resize(n * m * d, 0.0);
-            self.stds.resize(n * m * d, 0.0);
+        // One plan for every batch size, and a batch of one padded to two with a copy of its
+        // character: tract's kernels for a batch of one (matrix-vector) and for a known batch
+        // size round differently on some CPUs, and a character's sampled frames must not depend
+        // on its batch (a rounding difference changes a mixture component and the motion).
+        let rows = n.max(2);
+        if self.x.len() < rows * d {
+            self.x.resize(rows * d, 0.0);
+            self.weights.resize(rows * m, 0.0);
+            self.means.resize(rows * m * d, 0.0);
+            self.stds.resize(rows * m * d, 0.0);
         }
         for (c, ch) in characters.iter().enumerate() {
             self.x[c * d..(c + 1) * d].copy_from_slice(&ch.x);
@@ -416,11 +406,21 @@ impl SynthesisRunner {
         for ch in characters.iter_mut() {
             self.states.push(std::mem::replace(&mut ch.state, MotionState { slots: Vec::new() }));
         }
-        let run = self.runner.step_batch(
+        if n == 1 {
+            self.x.copy_within(0..d, d);
+            for (pad, slot) in self.pad.slots.iter_mut().zip(&self.states[0].slots) {
+                pad.copy_from_slice(slot);
+            }
+            self.states.push(std::mem::replace(&mut self.pad, MotionState { slots: Vec::new() }));
+        }
+        let run = self.runner.step_batch_invariant(
             &mut self.states,
-            &[&self.x[..n * d]],
-            &mut [&mut self.weights[..n * m], &mut self.means[..n * m * d], &mut self.stds[..n * m * d]],
+            &[&self.x[..rows * d]],
+            &mut [&mut self.weights[..rows * m], &mut self.means[..rows * m * d], &mut self.stds[..rows * m * d]],
         );
+        if n == 1 {
+            self.pad = self.states.pop().expect("the pad pushed above");
+        }
         for (ch, state) in characters.iter_mut().zip(self.states.drain(..)) {
             ch.state = state;
         }
@@ -485,13 +485,25 @@ impl SynthesisRunner {
             self.refiner_h.extend_from_slice(&ch.refiner_h);
             self.refiner_c.extend_from_slice(&ch.refiner_c);
         }
+        // A batch of one padded to two, as for the generator (`step_batch`).
+        let rows = n.max(2);
+        if n == 1 {
+            for (buf, w) in [
+                (&mut self.refiner_x, d),
+                (&mut self.refiner_e, e),
+                (&mut self.refiner_h, hu),
+                (&mut self.refiner_c, hu),
+            ] {
+                buf.extend_from_within(..w);
+            }
+        }
         let run = |err: TractError| MotionError::Run { reason: format!("{err:#}") };
         let t = |v: &[f32], w: usize| -> Result<TValue, MotionError> {
-            Ok(Tensor::from_shape::<f32>(&[n, w], v).map_err(run)?.into_tvalue())
+            Ok(Tensor::from_shape::<f32>(&[rows, w], v).map_err(run)?.into_tvalue())
         };
         let inputs =
             tvec![t(&self.refiner_x, d)?, t(&self.refiner_e, e)?, t(&self.refiner_h, hu)?, t(&self.refiner_c, hu)?];
-        let out = r.plan(n)?.run(inputs).map_err(run)?;
+        let out = r.plan.run(inputs).map_err(run)?;
         let get = |i: usize| -> Result<&[f32], MotionError> {
             out[i].try_as_plain_ram().and_then(|t| t.as_slice::<f32>()).map_err(run)
         };
@@ -499,7 +511,7 @@ impl SynthesisRunner {
         if self.refined.len() < n * d {
             self.refined.resize(n * d, 0.0);
         }
-        self.refined[..n * d].copy_from_slice(x);
+        self.refined[..n * d].copy_from_slice(&x[..n * d]);
         for (k, ch) in characters.iter_mut().enumerate() {
             ch.refiner_h.copy_from_slice(&h[k * hu..(k + 1) * hu]);
             ch.refiner_c.copy_from_slice(&c[k * hu..(k + 1) * hu]);
