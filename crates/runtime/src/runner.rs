@@ -29,11 +29,6 @@ impl Session {
             .map_err(run)?;
         Ok(Session { batch, state, inputs, symbolic: false })
     }
-
-    fn symbolic(mut self, symbolic: bool) -> Self {
-        self.symbolic = symbolic;
-        self
-    }
 }
 
 /// Scratch space for stepping a [`MotionModel`] on one thread (not shared: `Send`, not `Sync`).
@@ -244,7 +239,8 @@ impl MotionRunner {
         } else {
             if self.batched.as_ref().is_none_or(|s| s.batch != batch || s.symbolic != symbolic) {
                 let plan = if symbolic { inner.batched.clone() } else { inner.plan_for(batch) };
-                self.batched = Some(Session::new(&plan, batch, &inner.graph_input_widths)?.symbolic(symbolic));
+                let session = Session::new(&plan, batch, &inner.graph_input_widths)?;
+                self.batched = Some(Session { symbolic, ..session });
             }
             self.batched.as_mut().expect("batched session set above")
         };

@@ -10,8 +10,8 @@
 //! (root motion accumulated as in the paper's eq. 4) plus the left / right contact bits. A
 //! character's frames depend only on its seed and start frame: the same in any batch, on any
 //! thread, in any run, bit for bit. For that, the generator's and the refiner's steps run with
-//! their symbolic-batch plans at every batch size and a batch of one is padded to two with a
-//! copy of its character: tract picks other kernels for a batch of one (matrix-vector) and for
+//! their symbolic-batch plans at every batch size and a batch of one is padded to two rows
+//! (the extra row's outputs are discarded): tract picks other kernels for a batch of one (matrix-vector) and for
 //! concrete batch sizes, and on some CPUs (AVX-512) they round differently, which changes the
 //! sampled mixture component and from then on the motion.
 //!
@@ -325,7 +325,7 @@ pub struct SynthesisRunner {
     means: Vec<f32>,
     stds: Vec<f32>,
     states: Vec<MotionState>,
-    /// The generator state of the copy that pads a batch of one to two (see `step_batch`).
+    /// The generator state of the row that pads a batch of one to two (see `step_batch`).
     pad: MotionState,
     world: Vec<Quat>,
     /// Refined frames, one row per character of the batch.
@@ -387,10 +387,9 @@ impl SynthesisRunner {
             }
             check_len("pose local_rotations", pose.local_rotations.len(), 1, joints)?;
         }
-        // One plan for every batch size, and a batch of one padded to two with a copy of its
-        // character: tract's kernels for a batch of one (matrix-vector) and for a known batch
-        // size round differently on some CPUs, and a character's sampled frames must not depend
-        // on its batch (a rounding difference changes a mixture component and the motion).
+        // A batch of one padded to two, stepped with the plan for every batch size (why: the
+        // module's doc). The pad row reads its character's frame and keeps a state of its own;
+        // its outputs are discarded.
         let rows = n.max(2);
         if self.x.len() < rows * d {
             self.x.resize(rows * d, 0.0);
@@ -408,9 +407,6 @@ impl SynthesisRunner {
         }
         if n == 1 {
             self.x.copy_within(0..d, d);
-            for (pad, slot) in self.pad.slots.iter_mut().zip(&self.states[0].slots) {
-                pad.copy_from_slice(slot);
-            }
             self.states.push(std::mem::replace(&mut self.pad, MotionState { slots: Vec::new() }));
         }
         let run = self.runner.step_batch_invariant(
