@@ -238,6 +238,29 @@ fn generate_is_deterministic_streams_and_refuses_bad_input() {
         r.as_object_mut().unwrap().remove("seconds_per_sequence");
     }
     assert_eq!(j, k, "bench synthesis with 1 and 2 threads");
+    // The range from more clips than the held-out ones: never narrower, so no row leaves it
+    // more often; the other clips are checked against the held-out clips' own range.
+    let range = |extra: &[&str], report: &str| {
+        let mut args = vec![
+            "bench", "synthesis", "--model", &r, "--data", &data, "--glob", "*_0001.bvh", "--sequences", "3",
+            "--seconds", "3", "--json", report,
+        ];
+        args.extend_from_slice(extra);
+        ok(&args);
+        json(Path::new(report))
+    };
+    let held_out = range(&[], &out("held.json"));
+    let wide = range(&["--range-glob", "*"], &out("wide.json"));
+    assert!(held_out["range_clips_outside_held_out_range"].is_null());
+    let [n, of] = [0, 1].map(|i| wide["range_clips_outside_held_out_range"][i].as_u64().unwrap());
+    let all = std::fs::read_dir(&data).unwrap().filter(|e| e.as_ref().unwrap().path().extension().is_some_and(|x| x == "bvh")).count();
+    let held = std::fs::read_dir(&data).unwrap().filter(|e| e.as_ref().unwrap().file_name().to_string_lossy().ends_with("_0001.bvh")).count();
+    assert!(held > 0 && of as usize == all - held && n <= of, "{wide}");
+    for k in 0..3 {
+        let (h, w) = (&held_out["rows"][k], &wide["rows"][k]);
+        assert!(w["out_of_range"].as_f64().unwrap() <= h["out_of_range"].as_f64().unwrap(), "{h} {w}");
+        assert_eq!(h["foot_skate"], w["foot_skate"]);
+    }
     let e = fails(&["bench-synthesis", "--model", &r, "--data", &data, "--glob", "nothing*"]);
     assert!(e.contains("nothing*") || e.contains("no clip"), "{e}");
 }

@@ -49,7 +49,12 @@ pub struct BenchSynthesisArgs {
     /// Benchmark the generator alone (a folder without a refiner).
     #[arg(long)]
     pub no_refiner: bool,
-    /// A sequence leaves the data's range when a joint-angle value falls outside the real
+    /// Glob on file names of --data choosing the clips whose joint-angle range a sequence must
+    /// stay in [default: --glob, the held-out clips]; '*' takes the whole dataset (the training
+    /// and the held-out clips). Each range clip outside the held-out clips' range is counted.
+    #[arg(long)]
+    pub range_glob: Option<String>,
+    /// A sequence leaves the data's range when a joint-angle value falls outside the range
     /// clips' [min, max] widened by this fraction of its span on each side.
     #[arg(long, default_value_t = 0.1, allow_hyphen_values = true, value_parser = crate::args::margin_fraction)]
     pub range_margin: f64,
@@ -108,6 +113,11 @@ pub struct Report {
     pub seed: u64,
     /// Temperature.
     pub temperature: f64,
+    /// The clips defining the joint-angle range (glob and count).
+    pub range_data: String,
+    /// Range clips other than the held-out ones that leave the held-out clips' widened range,
+    /// and how many there are (`None` without --range-glob).
+    pub range_clips_outside_held_out_range: Option<(usize, usize)>,
     /// Rows: real, rnn, rnn+refiner.
     pub rows: Vec<Row>,
     /// Mean joint displacement (cm) from the last seed frame to the first generated frame, with
@@ -167,10 +177,9 @@ impl Measure<'_> {
         if mean(&speeds[frames - w..]) < 0.1 * mean(&speeds[1..=w.min(frames - 1)]) {
             acc.frozen += 1;
         }
-        let range = ROOT_DIMS - 2..d - CONTACT_DIMS;
         acc.exits.resize(d, (0, 0.0));
         let mut out = false;
-        for i in range {
+        for i in range_values(d) {
             let span = (self.hi[i] - self.lo[i]).max(1e-9);
             let worst = (0..frames).map(|f| (self.lo[i] - x(f, i)).max(x(f, i) - self.hi[i])).fold(f64::MIN, f64::max);
             if worst > 0.0 {
@@ -220,6 +229,29 @@ impl Measure<'_> {
         acc.clips += 1;
         Ok(())
     }
+}
+
+/// The feature values whose range is checked: root tilt and every joint's rotation vector.
+fn range_values(d: usize) -> std::ops::Range<usize> {
+    ROOT_DIMS - 2..d - CONTACT_DIMS
+}
+
+/// Every feature value's [min, max] over `clips`, widened by `margin` of its span on each side.
+fn widened_range(clips: &[zoo_rnngmm::features::EncodedClip], d: usize, margin: f64) -> (Vec<f64>, Vec<f64>) {
+    let (mut lo, mut hi) = (vec![f64::INFINITY; d], vec![f64::NEG_INFINITY; d]);
+    for e in clips {
+        for f in 0..e.frames() {
+            for (i, v) in e.frame(f).iter().enumerate() {
+                lo[i] = lo[i].min(*v as f64);
+                hi[i] = hi[i].max(*v as f64);
+            }
+        }
+    }
+    for i in 0..d {
+        let m = margin * (hi[i] - lo[i]);
+        (lo[i], hi[i]) = (lo[i] - m, hi[i] + m);
+    }
+    (lo, hi)
 }
 
 /// 1-D Wasserstein distance between two empirical distributions: the integral of the
@@ -340,24 +372,42 @@ pub fn run(a: BenchSynthesisArgs) -> anyhow::Result<()> {
     let frames = (a.seconds * spec.fps).round().max(4.0) as usize;
     let d = spec.dim();
     let joints = spec.skeleton.len();
-    // The data's range of every feature value, widened by the margin.
-    let encoded: Vec<_> = real_clips
-        .iter()
-        .map(|c| spec.encode(&c.clip).with_context(|| format!("encoding {}", c.path.display())))
-        .collect::<anyhow::Result<_>>()?;
-    let (mut lo, mut hi) = (vec![f64::INFINITY; d], vec![f64::NEG_INFINITY; d]);
-    for e in &encoded {
-        for f in 0..e.frames() {
-            for (i, v) in e.frame(f).iter().enumerate() {
-                lo[i] = lo[i].min(*v as f64);
-                hi[i] = hi[i].max(*v as f64);
+    // The data's range of every feature value, widened by the margin: the held-out clips', and
+    // the range clips' when --range-glob chooses others.
+    let encode = |c: &zoo_data::dataset::NamedClip| {
+        spec.encode(&c.clip).with_context(|| format!("encoding {}", c.path.display()))
+    };
+    let held_out: Vec<_> = real_clips.iter().map(encode).collect::<anyhow::Result<_>>()?;
+    let held_out_range = widened_range(&held_out, d, a.range_margin);
+    let (range_data, outside, (lo, hi)) = match &a.range_glob {
+        None => (format!("the held-out clips ({})", real_clips.len()), None, held_out_range),
+        Some(glob) => {
+            let clips = crate::cmd::load_dataset(&a.data, Some(glob.as_str()), a.skip_invalid)?;
+            let mut encoded = Vec::with_capacity(clips.len());
+            let mut others = (0, 0);
+            for c in &clips {
+                if let Some(diff) = spec.skeleton.topology_difference(&c.clip.skeleton) {
+                    bail!(
+                        "{} (--range-glob) is on another skeleton than the model in {} ({diff}); choose clips of the training skeleton",
+                        c.path.display(),
+                        a.model.display()
+                    );
+                }
+                let e = encode(c)?;
+                if !real_clips.iter().any(|r| r.path == c.path) {
+                    others.1 += 1;
+                    let (lo, hi) = &held_out_range;
+                    others.0 += usize::from(
+                        (0..e.frames()).any(|f| range_values(d).any(|i| !(lo[i]..=hi[i]).contains(&(e.frame(f)[i] as f64)))),
+                    );
+                }
+                encoded.push(e);
             }
+            encoded.extend(held_out);
+            let r = widened_range(&encoded, d, a.range_margin);
+            (format!("{glob} ({} clips) and the held-out clips", clips.len()), Some(others), r)
         }
-    }
-    for i in 0..d {
-        let m = a.range_margin * (hi[i] - lo[i]);
-        (lo[i], hi[i]) = (lo[i] - m, hi[i] + m);
-    }
+    };
     // Planted height of each foot joint: 5th percentile of its height over the real clips.
     let feet = foot_joints(&spec.skeleton.names);
     let mut heights = vec![Vec::new(); feet.len()];
@@ -485,6 +535,8 @@ pub fn run(a: BenchSynthesisArgs) -> anyhow::Result<()> {
         seconds: frames as f64 / spec.fps,
         seed: a.seed,
         temperature: a.temperature,
+        range_data,
+        range_clips_outside_held_out_range: outside,
         rows,
         first_frame_jump_eq26: jump26 / a.sequences as f64,
         first_frame_jump_zero_state: jump0 / a.sequences as f64,
@@ -495,6 +547,10 @@ pub fn run(a: BenchSynthesisArgs) -> anyhow::Result<()> {
         "synthesis benchmark: {} sequences of {:.1} s from {}, seed {}, temperature {}",
         report.sequences, report.seconds, report.data, report.seed, report.temperature
     );
+    println!("joint-angle range: {}, widened by {} of each span", report.range_data, a.range_margin);
+    if let Some((n, of)) = report.range_clips_outside_held_out_range {
+        println!("real range clips (not held out) leaving the held-out clips' widened range: {n} of {of}");
+    }
     println!(
         "| | foot skate (cm/frame) | root speed W1 (cm/s) | mean root speed (cm/s) | turning W1 (rad/s) | frozen | out of \
          range | jerk / real | NPSS | contact accuracy |"
