@@ -495,3 +495,26 @@ mod tests {
         assert!(check_synth_size(("--minutes", 1.0), 0.1, 30.0).is_ok());
     }
 }
+
+/// The most L-BFGS iterations of `zoo denoise`.
+const MAX_DENOISE_ITERATIONS: usize = 100_000;
+
+/// L-BFGS iterations of the denoiser, `1..=MAX_DENOISE_ITERATIONS`.
+pub fn denoise_iterations(s: &str) -> Result<usize, String> {
+    whole_in(s, 1..=MAX_DENOISE_ITERATIONS, "iterations")
+}
+
+/// A noise level in degrees, `(0, 90]`.
+pub fn noise_degrees(s: &str) -> Result<f64, String> {
+    real_in(s, Interval::above(0.0, 90.0), "degrees")
+}
+
+/// A noise level in clip units, `(0, 1000]`.
+pub fn noise_units(s: &str) -> Result<f64, String> {
+    real_in(s, Interval::above(0.0, 1000.0), "clip units")
+}
+
+/// A fraction in `[0, 1)` (0 turns it off).
+pub fn fraction_or_zero(s: &str) -> Result<f64, String> {
+    real_in(s, Interval { lo: 0.0, lo_open: false, hi: 1.0, hi_open: true }, "")
+}

@@ -43,6 +43,8 @@ enum Command {
     Stitch(cmd::stitch::StitchArgs),
     /// Random motion synthesis of any length with a trained RNN-GMM (BVH + contact labels).
     Generate(cmd::generate::GenerateArgs),
+    /// Clean a noisy clip by MAP optimisation through a trained RNN-GMM (`zoo denoise --model DIR IN.bvh --out OUT.bvh`).
+    Denoise(cmd::denoise::DenoiseArgs),
     /// The synthesis benchmark (the same as `zoo bench synthesis`, kept for earlier scripts).
     #[command(hide = true)]
     BenchSynthesis(cmd::bench_synthesis::BenchSynthesisArgs),
@@ -123,6 +125,7 @@ fn main() -> anyhow::Result<()> {
         Command::Render(a) => cmd::render::run(a),
         Command::Stitch(a) => cmd::stitch::run(a),
         Command::Generate(a) => cmd::generate::run(a),
+        Command::Denoise(a) => cmd::denoise::run(a),
         Command::BenchSynthesis(a) => cmd::bench_synthesis::run(a),
         Command::Complete(a) => cmd::complete::run(a),
         Command::EvalArnn(a) => cmd::eval_arnn::run(a),

@@ -4,6 +4,7 @@
 pub mod benchmark;
 pub mod bvh;
 pub mod dataset;
+pub mod denoise;
 pub mod luxo;
 pub mod metrics;
 pub mod plausibility;

@@ -10,6 +10,7 @@
 //! - [`fk`]: differentiable forward kinematics of the features (end effectors, root trajectory);
 //! - [`refiner`]: the refiner and the discriminator (eq. 9-13) and their adversarial training
 //!   ([`AdversarialTraining`] for the shared loop);
+//! - [`denoise`]: motion denoising by MAP optimisation through the generator (sec. 5.4);
 //! - [`synthesis`]: random synthesis continuing a clip (seed, eq. 26, sampling, refiner, decoding);
 //! - [`train`]: the generator's training ([`GeneratorTraining`] for the shared loop);
 //! - [`checkpoint`]: run folders;
@@ -32,6 +33,7 @@
 
 pub mod checkpoint;
 pub mod config;
+pub mod denoise;
 pub mod error;
 pub mod export;
 pub mod features;
@@ -44,6 +46,7 @@ pub mod synthesis;
 pub mod train;
 
 pub use config::{Config, ModelName, RefinerConfig, TrainConfig};
+pub use denoise::{DenoiseOptions, Denoised, EnergyTerms, denoise};
 pub use error::{RnnGmmError, RnnGmmResult};
 pub use features::{ContactParams, DecodedMotion, EncodedClip, FeatureSpec, Normalization, RootPlacement};
 pub use gmm::Mixture;

@@ -93,6 +93,9 @@ pub enum BenchCommand {
     /// The synthesis benchmark (RNN-GMM, issue 14): seeded sequences against held-out real
     /// motion, with and without the refiner (protocol in docs/rnn-gmm.md).
     Synthesis(crate::cmd::bench_synthesis::BenchSynthesisArgs),
+    /// The denoising benchmark (RNN-GMM control, issue 15): held-out clips with seeded noise,
+    /// cleaned by the MAP denoiser and by Savitzky-Golay filters (protocol in docs/rnn-gmm-control.md).
+    Denoise(crate::cmd::bench_denoise::BenchDenoiseArgs),
 }
 
 /// The hierarchy a benchmarked model was trained on, checked against the dataset's.
@@ -134,6 +137,9 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
     }
     if let Some(BenchCommand::Keyframes(k)) = a.command {
         return crate::cmd::bench_keyframes::run(k);
+    }
+    if let Some(BenchCommand::Denoise(d)) = a.command {
+        return crate::cmd::bench_denoise::run(d);
     }
     if let Some(BenchCommand::Synthesis(s)) = a.command {
         return crate::cmd::bench_synthesis::run(s);

@@ -1,6 +1,7 @@
 //! One module per subcommand.
 
 pub mod bench;
+pub mod bench_denoise;
 pub mod bench_keyframes;
 pub mod bench_runtime;
 pub mod bench_stitch;
@@ -10,6 +11,7 @@ pub mod complete;
 pub mod data;
 pub mod data_luxo;
 pub mod decompress;
+pub mod denoise;
 pub mod eval_arnn;
 pub mod export;
 pub mod generate;
