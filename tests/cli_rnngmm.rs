@@ -264,3 +264,49 @@ fn generate_is_deterministic_streams_and_refuses_bad_input() {
     let e = fails(&["bench-synthesis", "--model", &r, "--data", &data, "--glob", "nothing*"]);
     assert!(e.contains("nothing*") || e.contains("no clip"), "{e}");
 }
+
+#[test]
+fn denoise_writes_a_clip_and_refuses_bad_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let r = trained(dir.path());
+    let out = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let start = Path::new(&r).join("start.bvh");
+    let input = zoo_data::bvh::read_file(&start, &Default::default()).unwrap();
+    let stdout = ok(&["denoise", "--model", &r, start.to_str().unwrap(), "--out", &out("d.bvh"), "--iterations", "3"]);
+    assert!(stdout.contains("estimated") && stdout.contains("L-BFGS"), "{stdout}");
+    let clip = zoo_data::bvh::read_file(&dir.path().join("d.bvh"), &Default::default()).unwrap();
+    assert_eq!(clip.frames(), input.frames());
+    assert!(clip.local_rotations.iter().all(|q| q.is_finite()));
+    assert_eq!(json(&dir.path().join("d.contacts.json"))["contacts"].as_array().unwrap().len(), input.frames());
+    // Another skeleton, NaN in the clip, a bad noise level.
+    let toy = dir.path().join("toy.bvh");
+    zoo_data::bvh::write_file(&zoo_tests::toy_clip(40, 0.0), &toy).unwrap();
+    let e = fails(&["denoise", "--model", &r, toy.to_str().unwrap(), "--out", &out("e.bvh")]);
+    assert!(e.contains("another skeleton"), "{e}");
+    let text = std::fs::read_to_string(&start).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let row = lines.iter().position(|l| l.starts_with("Frame Time")).unwrap() + 3;
+    let first = lines[row].split(' ').next().unwrap().len();
+    lines[row].replace_range(..first, "nan");
+    let nan = dir.path().join("nan.bvh");
+    std::fs::write(&nan, lines.join("\n") + "\n").unwrap();
+    let e = fails(&["denoise", "--model", &r, nan.to_str().unwrap(), "--out", &out("e.bvh")]);
+    assert!(e.contains("nan"), "{e}");
+    let e = fails(&["denoise", "--model", &r, start.to_str().unwrap(), "--out", &out("e.bvh"), "--sigma-angle", "-1"]);
+    assert!(e.contains("--sigma-angle"), "{e}");
+    assert!(!dir.path().join("e.bvh").exists());
+    // The benchmark: the Savitzky-Golay baseline removes part of the noise.
+    let report = out("dn.json");
+    let data = start.to_str().unwrap();
+    ok(&[
+        "bench", "denoise", "--model", &r, "--data", data, "--glob", "*", "--clips", "1", "--seconds", "2",
+        "--angle-noise", "3", "--iterations", "2", "--savgol-windows", "5", "--json", &report,
+    ]);
+    let j = json(Path::new(&report));
+    let rows = j["levels"][0]["rows"].as_array().unwrap();
+    let get = |m: &str| rows.iter().find(|r| r["method"] == m).unwrap()["l2q"].as_f64().unwrap();
+    assert!(get("noisy") > 0.0 && get("savgol(5)") < get("noisy"), "{j}");
+    assert!(get("denoised").is_finite());
+    let e = fails(&["bench", "denoise", "--model", &r, "--data", data, "--glob", "*", "--savgol-windows", "8"]);
+    assert!(e.contains("--savgol-windows"), "{e}");
+}

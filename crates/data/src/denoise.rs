@@ -80,7 +80,7 @@ pub fn corrupt(clip: &Clip, noise: &Noise, seed: u64) -> (Clip, Vec<usize>) {
 /// their sign continuous, then normalised. Edges are padded with the nearest value (`sci-rs`).
 pub fn savgol(clip: &Clip, window: usize, order: usize) -> Result<Clip, String> {
     let (frames, joints) = (clip.frames(), clip.joints());
-    if window % 2 == 0 || window < order + 2 {
+    if window.is_multiple_of(2) || window < order + 2 {
         return Err(format!(
             "a Savitzky-Golay window must be odd and at least the order + 2: window {window}, order {order}"
         ));

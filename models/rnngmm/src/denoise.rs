@@ -96,7 +96,7 @@ impl DenoiseOptions {
         positive("the contact height level", self.sigma_plane)?;
         positive("the prior weight", self.prior_weight)?;
         if let Some(w) = self.init_savgol
-            && (w % 2 == 0 || w < 5)
+            && (w.is_multiple_of(2) || w < 5)
         {
             return Err(RnnGmmError::Config(format!("the starting filter's window must be odd and >= 5, found {w}")));
         }
@@ -151,6 +151,9 @@ fn estimate_level(series: &[Vec<f64>]) -> f64 {
     1.4826 * median_abs(diffs) / 6f64.sqrt()
 }
 
+/// A point, its energy and its gradient.
+type Evaluated = (Vec<f64>, f64, Vec<f64>);
+
 /// The denoising energy over a flattened parameter vector `[s; d]` (f64), with cached gradients.
 struct Problem<'a> {
     g: &'a LoadedGenerator,
@@ -175,7 +178,7 @@ struct Problem<'a> {
     ground: Tensor,
     sigma_contact: f64,
     sigma_plane: f64,
-    cache: RefCell<Option<(Vec<f64>, f64, Vec<f64>)>>,
+    cache: RefCell<Option<Evaluated>>,
     evaluations: RefCell<usize>,
     progress: RefCell<&'a mut dyn FnMut(usize)>,
 }

@@ -195,7 +195,7 @@ pub fn run(a: BenchDenoiseArgs) -> anyhow::Result<()> {
         crate::cmd::check_output_file("--json", p)?;
     }
     for &w in &a.savgol_windows {
-        if w % 2 == 0 || w < a.savgol_order + 2 {
+        if w.is_multiple_of(2) || w < a.savgol_order + 2 {
             bail!(
                 "--savgol-windows: {w} is not an odd window of at least the order + 2 ({}); e.g. 5,7,9,11",
                 a.savgol_order + 2
