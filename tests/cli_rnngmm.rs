@@ -105,6 +105,16 @@ fn a_refiner_needs_a_generator_and_options_are_checked() {
     assert!(!ok && stderr.contains("no such folder"), "{stderr}");
 }
 
+/// Copies the BVH file `src` to `dst` with the first value of its third frame replaced by `nan`.
+fn write_with_nan(src: &Path, dst: &Path) {
+    let text = std::fs::read_to_string(src).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let row = lines.iter().position(|l| l.starts_with("Frame Time")).unwrap() + 3;
+    let first = lines[row].split(' ').next().unwrap().len();
+    lines[row].replace_range(..first, "nan");
+    std::fs::write(dst, lines.join("\n") + "\n").unwrap();
+}
+
 #[test]
 fn generate_is_deterministic_streams_and_refuses_bad_input() {
     let dir = tempfile::tempdir().unwrap();
@@ -154,13 +164,8 @@ fn generate_is_deterministic_streams_and_refuses_bad_input() {
     let e = fails(&["generate", "--model", &r, "--frames", "10", "--from", &from, "--out", &out("y.bvh")]);
     assert!(e.contains("another skeleton"), "{e}");
     // NaN in the start clip.
-    let text = std::fs::read_to_string(Path::new(&r).join("start.bvh")).unwrap();
-    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
-    let row = lines.iter().position(|l| l.starts_with("Frame Time")).unwrap() + 3;
-    let first = lines[row].split(' ').next().unwrap().len();
-    lines[row].replace_range(..first, "nan");
     let nan = dir.path().join("nan.bvh");
-    std::fs::write(&nan, lines.join("\n") + "\n").unwrap();
+    write_with_nan(&Path::new(&r).join("start.bvh"), &nan);
     let from = format!("{}:20", nan.display());
     let e = fails(&["generate", "--model", &r, "--frames", "10", "--from", &from, "--out", &out("y.bvh")]);
     assert!(e.contains("expected a number") && e.contains("nan"), "{e}");
@@ -283,13 +288,8 @@ fn denoise_writes_a_clip_and_refuses_bad_input() {
     zoo_data::bvh::write_file(&zoo_tests::toy_clip(40, 0.0), &toy).unwrap();
     let e = fails(&["denoise", "--model", &r, toy.to_str().unwrap(), "--out", &out("e.bvh")]);
     assert!(e.contains("another skeleton"), "{e}");
-    let text = std::fs::read_to_string(&start).unwrap();
-    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
-    let row = lines.iter().position(|l| l.starts_with("Frame Time")).unwrap() + 3;
-    let first = lines[row].split(' ').next().unwrap().len();
-    lines[row].replace_range(..first, "nan");
     let nan = dir.path().join("nan.bvh");
-    std::fs::write(&nan, lines.join("\n") + "\n").unwrap();
+    write_with_nan(&start, &nan);
     let e = fails(&["denoise", "--model", &r, nan.to_str().unwrap(), "--out", &out("e.bvh")]);
     assert!(e.contains("nan"), "{e}");
     let e = fails(&["denoise", "--model", &r, start.to_str().unwrap(), "--out", &out("e.bvh"), "--sigma-angle", "-1"]);
