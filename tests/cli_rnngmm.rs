@@ -247,8 +247,20 @@ fn generate_is_deterministic_streams_and_refuses_bad_input() {
     // more often; the other clips are checked against the held-out clips' own range.
     let range = |extra: &[&str], report: &str| {
         let mut args = vec![
-            "bench", "synthesis", "--model", &r, "--data", &data, "--glob", "*_0001.bvh", "--sequences", "3",
-            "--seconds", "3", "--json", report,
+            "bench",
+            "synthesis",
+            "--model",
+            &r,
+            "--data",
+            &data,
+            "--glob",
+            "*_0001.bvh",
+            "--sequences",
+            "3",
+            "--seconds",
+            "3",
+            "--json",
+            report,
         ];
         args.extend_from_slice(extra);
         ok(&args);
@@ -258,8 +270,14 @@ fn generate_is_deterministic_streams_and_refuses_bad_input() {
     let wide = range(&["--range-glob", "*"], &out("wide.json"));
     assert!(held_out["range_clips_outside_held_out_range"].is_null());
     let [n, of] = [0, 1].map(|i| wide["range_clips_outside_held_out_range"][i].as_u64().unwrap());
-    let all = std::fs::read_dir(&data).unwrap().filter(|e| e.as_ref().unwrap().path().extension().is_some_and(|x| x == "bvh")).count();
-    let held = std::fs::read_dir(&data).unwrap().filter(|e| e.as_ref().unwrap().file_name().to_string_lossy().ends_with("_0001.bvh")).count();
+    let all = std::fs::read_dir(&data)
+        .unwrap()
+        .filter(|e| e.as_ref().unwrap().path().extension().is_some_and(|x| x == "bvh"))
+        .count();
+    let held = std::fs::read_dir(&data)
+        .unwrap()
+        .filter(|e| e.as_ref().unwrap().file_name().to_string_lossy().ends_with("_0001.bvh"))
+        .count();
     assert!(held > 0 && of as usize == all - held && n <= of, "{wide}");
     for k in 0..3 {
         let (h, w) = (&held_out["rows"][k], &wide["rows"][k]);
@@ -299,8 +317,26 @@ fn denoise_writes_a_clip_and_refuses_bad_input() {
     let report = out("dn.json");
     let data = start.to_str().unwrap();
     ok(&[
-        "bench", "denoise", "--model", &r, "--data", data, "--glob", "*", "--clips", "1", "--seconds", "2",
-        "--angle-noise", "3", "--iterations", "2", "--savgol-windows", "5", "--json", &report,
+        "bench",
+        "denoise",
+        "--model",
+        &r,
+        "--data",
+        data,
+        "--glob",
+        "*",
+        "--clips",
+        "1",
+        "--seconds",
+        "2",
+        "--angle-noise",
+        "3",
+        "--iterations",
+        "2",
+        "--savgol-windows",
+        "5",
+        "--json",
+        &report,
     ]);
     let j = json(Path::new(&report));
     let rows = j["levels"][0]["rows"].as_array().unwrap();

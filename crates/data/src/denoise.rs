@@ -29,7 +29,8 @@ pub struct Noise {
 impl Noise {
     /// Checks the values: finite, not negative, the outlier fraction below 1.
     pub fn validate(&self) -> Result<(), String> {
-        for (name, v) in [("angle noise", self.angle_deg), ("root jitter", self.root), ("outlier noise", self.outlier_deg)]
+        for (name, v) in
+            [("angle noise", self.angle_deg), ("root jitter", self.root), ("outlier noise", self.outlier_deg)]
         {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(format!("the {name} must be finite and not negative, found {v}"));
@@ -56,7 +57,8 @@ pub fn corrupt(clip: &Clip, noise: &Noise, seed: u64) -> (Clip, Vec<usize>) {
     let mut out = clip.clone();
     let mut order: Vec<usize> = (0..frames).collect();
     rng.shuffle(&mut order);
-    let mut outliers: Vec<usize> = order[..((noise.outlier_fraction * frames as f64).round() as usize).min(frames)].to_vec();
+    let mut outliers: Vec<usize> =
+        order[..((noise.outlier_fraction * frames as f64).round() as usize).min(frames)].to_vec();
     outliers.sort_unstable();
     let (angle, outlier) = (noise.angle_deg.to_radians(), noise.outlier_deg.to_radians());
     for f in 0..frames {

@@ -312,7 +312,8 @@ pub fn denoise(
     let joints = clip.joints();
     let root_series: Vec<Vec<f64>> = (0..3).map(|a| (0..t).map(|f| gp[f * joints][a]).collect()).collect();
     let angle_range = ROOT_DIMS - 2..dim - CONTACT_DIMS;
-    let angle_series: Vec<Vec<f64>> = angle_range.clone().map(|i| (0..t).map(|f| frame_values(f)[i]).collect()).collect();
+    let angle_series: Vec<Vec<f64>> =
+        angle_range.clone().map(|i| (0..t).map(|f| frame_values(f)[i]).collect()).collect();
     let sigma_root = opts.sigma_root.unwrap_or_else(|| estimate_level(&root_series).max(0.2));
     let sigma_angle = opts.sigma_angle.unwrap_or_else(|| estimate_level(&angle_series).max(0.25f64.to_radians()));
     // Prior windows: the training length every half window, the last one ending at the clip's end.

@@ -281,7 +281,11 @@ pub fn run(a: BenchDenoiseArgs) -> anyhow::Result<()> {
             .savgol_windows
             .iter()
             .map(|&w| {
-                let n = if w <= noisy.frames() { savgol(&noisy, w, a.savgol_order).map_err(anyhow::Error::msg)? } else { noisy.clone() };
+                let n = if w <= noisy.frames() {
+                    savgol(&noisy, w, a.savgol_order).map_err(anyhow::Error::msg)?
+                } else {
+                    noisy.clone()
+                };
                 Ok(m.of(&n, clean))
             })
             .collect::<anyhow::Result<Vec<_>>>()?;
@@ -334,7 +338,10 @@ pub fn run(a: BenchDenoiseArgs) -> anyhow::Result<()> {
                 })
             })
             .collect();
-        handles.into_iter().flat_map(|h| h.join().unwrap_or_else(|_| vec![Err(anyhow::anyhow!("a worker panicked"))])).collect()
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().unwrap_or_else(|_| vec![Err(anyhow::anyhow!("a worker panicked"))]))
+            .collect()
     });
     pb.finish_and_clear();
     let mut done: Vec<Option<Job>> = (0..jobs.len()).map(|_| None).collect();
@@ -358,9 +365,19 @@ pub fn run(a: BenchDenoiseArgs) -> anyhow::Result<()> {
             }
             s
         };
-        let row = |name: String, s: Sum| Scores { method: name, l2p: s.l2p, l2q: s.l2q, position_error: s.pos, foot_skate: s.skate };
+        let row = |name: String, s: Sum| Scores {
+            method: name,
+            l2p: s.l2p,
+            l2q: s.l2q,
+            position_error: s.pos,
+            foot_skate: s.skate,
+        };
         let mut rows = vec![
-            Scores { method: "clean".into(), foot_skate: js.iter().map(|j| j.clean_skate).sum::<f64>() / n, ..Scores::default() },
+            Scores {
+                method: "clean".into(),
+                foot_skate: js.iter().map(|j| j.clean_skate).sum::<f64>() / n,
+                ..Scores::default()
+            },
             row("noisy".into(), mean(&|j| j.noisy.clone())),
         ];
         for (k, w) in a.savgol_windows.iter().enumerate() {
@@ -374,7 +391,8 @@ pub fn run(a: BenchDenoiseArgs) -> anyhow::Result<()> {
             .map(|r| r.method.clone())
             .unwrap_or_default();
         let seconds = js.iter().map(|j| j.seconds).sum::<f64>() / n;
-        let motion_seconds = excerpts.iter().map(|e| e.frames() as f64 / g.spec.fps).sum::<f64>() / excerpts.len() as f64;
+        let motion_seconds =
+            excerpts.iter().map(|e| e.frames() as f64 / g.spec.fps).sum::<f64>() / excerpts.len() as f64;
         levels.push(Level {
             noise: noise_of(l),
             rows,
@@ -454,7 +472,8 @@ pub fn run(a: BenchDenoiseArgs) -> anyhow::Result<()> {
         );
     }
     if let Some(p) = &a.json {
-        std::fs::write(p, serde_json::to_string_pretty(&report)?).with_context(|| format!("writing {}", p.display()))?;
+        std::fs::write(p, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("writing {}", p.display()))?;
         println!("wrote {}", p.display());
     }
     Ok(())

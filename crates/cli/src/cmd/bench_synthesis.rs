@@ -398,7 +398,8 @@ pub fn run(a: BenchSynthesisArgs) -> anyhow::Result<()> {
                     others.1 += 1;
                     let (lo, hi) = &held_out_range;
                     others.0 += usize::from(
-                        (0..e.frames()).any(|f| range_values(d).any(|i| !(lo[i]..=hi[i]).contains(&(e.frame(f)[i] as f64)))),
+                        (0..e.frames())
+                            .any(|f| range_values(d).any(|i| !(lo[i]..=hi[i]).contains(&(e.frame(f)[i] as f64)))),
                     );
                 }
                 encoded.push(e);
