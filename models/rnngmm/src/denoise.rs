@@ -129,7 +129,8 @@ pub struct Denoised {
     pub sigma_root: f64,
     /// The joint-angle noise level used (radians).
     pub sigma_angle: f64,
-    /// Energy terms of the input itself (features `s` = input, `d` = 0) and of the result.
+    /// Energy terms of the starting point (the input, or its smoothed version with
+    /// `init_savgol`; `d` = 0) and of the result.
     pub energy: (EnergyTerms, EnergyTerms),
     /// L-BFGS iterations made.
     pub iterations: u64,
@@ -306,14 +307,13 @@ pub fn denoise(
     let enc = spec.encode(clip)?;
     let (t, dim) = (enc.frames(), spec.dim());
     let dev = Device::Cpu;
-    let frame_values = |f: usize| enc.frame(f).iter().map(|v| *v as f64).collect::<Vec<_>>();
     // Noise levels: given, or estimated from the input's root trajectory and angles.
     let (_, gp) = clip.global();
     let joints = clip.joints();
     let root_series: Vec<Vec<f64>> = (0..3).map(|a| (0..t).map(|f| gp[f * joints][a]).collect()).collect();
     let angle_range = ROOT_DIMS - 2..dim - CONTACT_DIMS;
     let angle_series: Vec<Vec<f64>> =
-        angle_range.clone().map(|i| (0..t).map(|f| frame_values(f)[i]).collect()).collect();
+        angle_range.clone().map(|i| (0..t).map(|f| enc.frame(f)[i] as f64).collect()).collect();
     let sigma_root = opts.sigma_root.unwrap_or_else(|| estimate_level(&root_series).max(0.2));
     let sigma_angle = opts.sigma_angle.unwrap_or_else(|| estimate_level(&angle_series).max(0.25f64.to_radians()));
     // Prior windows: the training length every half window, the last one ending at the clip's end.
@@ -385,15 +385,15 @@ pub fn denoise(
         evaluations: RefCell::new(0),
         progress: RefCell::new(progress),
     };
-    let mut init: Vec<f64> = match opts.init_savgol {
+    // The start: the input, or the input smoothed (a window longer than the clip: the input).
+    let mut init: Vec<f64> = match opts.init_savgol.filter(|&w| w <= t) {
         None => values.iter().map(|v| *v as f64).collect(),
-        Some(w) if w <= t => {
+        Some(w) => {
             let smooth = zoo_data::denoise::savgol(clip, w, 2).map_err(RnnGmmError::Config)?;
             let mut v = spec.encode(&smooth)?.values;
             norm.normalize(&mut v);
             v.iter().map(|x| *x as f64).collect()
         }
-        Some(_) => values.iter().map(|v| *v as f64).collect(),
     };
     init.extend(std::iter::repeat_n(0.0, t * dim));
     let start = problem.term_values(&init)?;

@@ -115,7 +115,7 @@ pub struct Level {
     pub best_savgol: String,
     /// Mean noise levels the denoiser used (root units, degrees).
     pub sigma_used: (f64, f64),
-    /// Mean energy terms (prior, noise, data, contact) of the input and of the result.
+    /// Mean energy terms (prior, noise, data, contact) of the starting point and of the result.
     pub energy_terms: ([f64; 4], [f64; 4]),
     /// Seconds of denoising per excerpt, and per second of motion.
     pub seconds_per_excerpt: f64,
@@ -130,7 +130,7 @@ pub struct Report {
     pub model: String,
     /// Held-out clips.
     pub data: String,
-    /// Excerpts and their length in frames.
+    /// Number of excerpts.
     pub excerpts: usize,
     /// Frames per excerpt (at most).
     pub frames: usize,
@@ -462,7 +462,7 @@ pub fn run(a: BenchDenoiseArgs) -> anyhow::Result<()> {
         }
         let (e0, e1) = lv.energy_terms;
         println!(
-            "energy terms per excerpt (prior / noise / data / contact): input {:.0} / {:.0} / {:.0} / {:.0}, result \
+            "energy terms per excerpt (prior / noise / data / contact): start {:.0} / {:.0} / {:.0} / {:.0}, result \
              {:.0} / {:.0} / {:.0} / {:.0}",
             e0[0], e0[1], e0[2], e0[3], e1[0], e1[1], e1[2], e1[3]
         );
