@@ -503,7 +503,7 @@ fn decompress_with_a_5000_frame_gap_completes() {
 }
 
 /// `zoo bench train` (issue 18): one timed step per thread count at the paper's sizes, in the
-/// training environment, with its JSON; models that are not data-parallel yet are refused.
+/// training environment, with its JSON; RMR and ARNN (data-parallel since issue 18) measured too.
 #[test]
 fn bench_train_measures_every_thread_count() {
     let dir = tempfile::tempdir().unwrap();
@@ -524,8 +524,12 @@ fn bench_train_measures_every_thread_count() {
     assert!(v["matmul_gflops_one_thread"].as_f64().unwrap() > 0.0);
     let (ok, _, stderr) = run(&["bench", "train", "--model", "rnn-gmm", "--batch", "8"]);
     assert!(!ok && stderr.contains("--batch: only the RTN bench"), "{stderr}");
-    let (ok, _, stderr) = run(&["bench", "train", "--model", "arnn"]);
-    assert!(!ok && stderr.contains("data-parallel so far") && stderr.contains("rmr and arnn"), "{stderr}");
+    for model in ["rmr", "arnn"] {
+        let (ok, stdout, stderr) =
+            run(&["bench", "train", "--model", model, "--threads", "2", "--steps", "1", "--repeats", "1"]);
+        assert!(ok, "{model}: {stdout}\n{stderr}");
+        assert!(stdout.contains("zoo   2 thread(s):") && stdout.contains("paper sizes"), "{model}: {stdout}");
+    }
 }
 
 /// Issue 19's switches end to end on a tiny model: the residual on the interpolation, the

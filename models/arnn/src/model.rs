@@ -6,7 +6,7 @@
 use crate::config::{Architecture, ArnnConfig};
 use candle_core::{D, Module, Result, Tensor};
 use candle_nn::VarBuilder;
-use zoo_nn::rng::SplitMix64;
+use zoo_nn::RowRngs;
 use zoo_nn::{Activation, Dropout, Gru, GruState, Mlp};
 
 /// The recurrent state: one [`GruState`] per GRU layer, each `(batch, hidden)`; empty for the
@@ -114,33 +114,70 @@ impl Arnn {
         key_b: &Tensor,
         t_rel: &Tensor,
         state: &ArnnState,
-        mut rng: Option<&mut SplitMix64>,
+        rng: Option<&mut RowRngs>,
     ) -> Result<(Tensor, ArnnState)> {
-        let keys =
-            |a: &Mlp, b: &Mlp| -> Result<Vec<Tensor>> { Ok(vec![a.forward(key_a)?, b.forward(key_b)?, t_rel.clone()]) };
+        let (fa, fb) = self.key_features(key_a, key_b)?;
+        self.step_with_key_features(prev, &fa, &fb, t_rel, state, rng)
+    }
+
+    /// The feature nets of the keys, `(X_K, X_{K+1})` -> their features; any leading shape
+    /// (`(batch, dofs)`, or `(frames, batch, dofs)` to compute a whole sequence's at once: the
+    /// keys do not depend on the recurrence).
+    pub fn key_features(&self, key_a: &Tensor, key_b: &Tensor) -> Result<(Tensor, Tensor)> {
+        let (a, b) = match &self.body {
+            Body::Arnn { key_a_features, key_b_features, .. }
+            | Body::NoMemory { key_a_features, key_b_features, .. }
+            | Body::Segregated { key_a_features, key_b_features, .. } => (key_a_features, key_b_features),
+        };
+        let apply = |net: &Mlp, x: &Tensor| -> Result<Tensor> {
+            let dims = x.dims().to_vec();
+            let d = *dims.last().unwrap_or(&0);
+            let rows = x.elem_count() / d.max(1);
+            // As one 2-D batch of rows (one matmul per layer, taped in training).
+            let y = net.forward(&x.reshape((rows, d))?)?;
+            let mut out = dims;
+            if let Some(last) = out.last_mut() {
+                *last = y.dim(1)?;
+            }
+            y.reshape(out)
+        };
+        Ok((apply(a, key_a)?, apply(b, key_b)?))
+    }
+
+    /// [`Arnn::step`] with the key features already computed ([`Arnn::key_features`]).
+    pub fn step_with_key_features(
+        &self,
+        prev: &Tensor,
+        fa: &Tensor,
+        fb: &Tensor,
+        t_rel: &Tensor,
+        state: &ArnnState,
+        mut rng: Option<&mut RowRngs>,
+    ) -> Result<(Tensor, ArnnState)> {
+        let keys = || vec![fa.clone(), fb.clone(), t_rel.clone()];
         match &self.body {
-            Body::Arnn { prev_features, key_a_features, key_b_features, rnn } => {
+            Body::Arnn { prev_features, rnn, .. } => {
                 let mut x = vec![prev_features.forward(prev)?];
-                x.extend(keys(key_a_features, key_b_features)?);
+                x.extend(keys());
                 let (h, state) = self.recurrent(rnn, &Tensor::cat(&x, D::Minus1)?, state, rng.as_deref_mut())?;
                 Ok(((prev + self.decode(&h, rng)?)?, state))
             }
-            Body::NoMemory { key_a_features, key_b_features, hidden } => {
-                let x = Tensor::cat(&keys(key_a_features, key_b_features)?, D::Minus1)?;
+            Body::NoMemory { hidden, .. } => {
+                let x = Tensor::cat(&keys(), D::Minus1)?;
                 let drops = self.config.gru_dropout.map(Dropout::new);
                 let mut h = x;
                 for (l, drop) in hidden.layers().iter().zip(drops) {
-                    h = Activation::Selu.apply(&l.forward(&h)?)?;
+                    h = Activation::Selu.apply(&zoo_nn::layers::linear_forward(l, &h)?)?;
                     h = drop.forward(&h, rng.as_deref_mut())?;
                 }
                 Ok((self.decode(&h, rng)?, ArnnState { gru: vec![] }))
             }
-            Body::Segregated { prev_features, rnn, key_a_features, key_b_features, correction } => {
+            Body::Segregated { prev_features, rnn, correction, .. } => {
                 // The motion pattern network sees only the previous pose; the interpolation
                 // network only the keys and t_rel (Figure 14).
                 let (h, state) = self.recurrent(rnn, &prev_features.forward(prev)?, state, rng.as_deref_mut())?;
                 let motion = (prev + self.decode(&h, rng.as_deref_mut())?)?;
-                let x = Tensor::cat(&keys(key_a_features, key_b_features)?, D::Minus1)?;
+                let x = Tensor::cat(&keys(), D::Minus1)?;
                 let drop = Dropout::new(self.config.linear_dropout[0]);
                 let fix = correction.forward_dropout(&x, &drop, rng)?;
                 Ok(((motion + fix)?, state))
@@ -154,7 +191,7 @@ impl Arnn {
         rnn: &Recurrent,
         x: &Tensor,
         state: &ArnnState,
-        mut rng: Option<&mut SplitMix64>,
+        mut rng: Option<&mut RowRngs>,
     ) -> Result<(Tensor, ArnnState)> {
         if state.gru.len() != 2 {
             candle_core::bail!("the state has {} GRU layers, the network 2", state.gru.len())
@@ -169,11 +206,11 @@ impl Arnn {
     }
 
     /// The decoder: two SELU layers with dropout, a linear layer to the pose.
-    fn decode(&self, h: &Tensor, mut rng: Option<&mut SplitMix64>) -> Result<Tensor> {
+    fn decode(&self, h: &Tensor, mut rng: Option<&mut RowRngs>) -> Result<Tensor> {
         let layers = self.decoder.layers();
         let mut y = h.clone();
         for (i, l) in layers.iter().enumerate() {
-            y = l.forward(&y)?;
+            y = zoo_nn::layers::linear_forward(l, &y)?;
             if i + 1 < layers.len() {
                 y = Activation::Selu.apply(&y)?;
                 y = Dropout::new(self.config.linear_dropout[i.min(1)]).forward(&y, rng.as_deref_mut())?;

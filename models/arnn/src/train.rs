@@ -19,7 +19,7 @@ use zoo_nn::checkpoint as ck;
 use zoo_nn::optim::{Adam, ParamsAdam, StatefulOptimizer};
 use zoo_nn::rng::SplitMix64;
 use zoo_nn::train_loop::{Trainable, Validation};
-use zoo_nn::{SeededVarMap, TrainError};
+use zoo_nn::{DataParallel, RowRngs, SeededVarMap, TrainError};
 
 /// Mean and standard deviation of each degree of freedom; the network sees `(x - mean) / std`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -63,12 +63,16 @@ pub struct ArnnTrainer {
     varmap: VarMap,
     model: Arnn,
     opt: Adam,
-    /// Key drops, teacher-forcing draws and dropout masks, in that order per step.
+    /// Key drops, teacher-forcing draws and the dropout seed, in that order per step.
     rng: SplitMix64,
     step: u64,
     train: Vec<KeyedSequence>,
     valid: Vec<KeyedSequence>,
     device: Device,
+    /// The variables sorted by name (the gradients of data-parallel steps are summed over them).
+    vars: Vec<candle_core::Var>,
+    /// Workers of the data-parallel training step ([`ArnnTrainer::set_threads`]; one by default).
+    parallel: DataParallel,
 }
 
 const RNG_KEY: &str = "trainer";
@@ -113,6 +117,7 @@ impl ArnnTrainer {
         let mut named: Vec<(String, candle_core::Var)> =
             varmap.data().lock().expect("varmap lock").iter().map(|(n, v)| (n.clone(), v.clone())).collect();
         named.sort_by(|a, b| a.0.cmp(&b.0));
+        let vars = named.iter().map(|(_, v)| v.clone()).collect();
         let opt = Adam::new_named(named, ParamsAdam { lr: config.learning_rate, ..ParamsAdam::default() })?;
         Ok(ArnnTrainer {
             config: config.clone(),
@@ -125,6 +130,8 @@ impl ArnnTrainer {
             train,
             valid,
             device: device.clone(),
+            vars,
+            parallel: DataParallel::new(1).map_err(|e| ArnnError::Config(e.to_string()))?,
         })
     }
 
@@ -188,6 +195,27 @@ impl ArnnTrainer {
         omega: f64,
         train: bool,
     ) -> ArnnResult<Losses> {
+        let steps = seqs.first().map_or(0, |s| s.frames.len().saturating_sub(1));
+        let draws: Vec<bool> = (0..steps).map(|_| train && self.rng.next_f64() < teacher).collect();
+        let mut rngs = train.then(|| RowRngs::new(self.rng.next_u64(), 0..seqs.len()));
+        self.batch_losses(seqs, keys, &draws, omega, rngs.as_mut(), None)
+    }
+
+    /// The losses of sequences `seqs` (a batch, or one data-parallel shard of it) with the
+    /// given keys: `teacher[t - 1]` feeds the ground truth back after step `t`, `rngs` (one
+    /// stream per sequence) applies dropout. `share` `(keys, fraction)`: this is a shard holding
+    /// `fraction` of a batch with `keys` key frames in all; its key loss is then the share of
+    /// the batch's key loss (over all of the batch's key frames) divided by `fraction`, so that
+    /// the shards' losses weighted by their fractions sum to the batch's loss.
+    fn batch_losses(
+        &self,
+        seqs: &[&KeyedSequence],
+        keys: &[Vec<usize>],
+        teacher: &[bool],
+        omega: f64,
+        mut rngs: Option<&mut RowRngs>,
+        share: Option<(f64, f64)>,
+    ) -> ArnnResult<Losses> {
         let (b, d) = (seqs.len(), self.config.dofs);
         let t_len = seqs.first().map_or(0, |s| s.frames.len());
         if b == 0 || t_len < 2 || seqs.iter().any(|s| s.frames.len() != t_len) {
@@ -225,11 +253,19 @@ impl ArnnTrainer {
         let mut state = self.model.zero_state(b)?;
         let mut prev = gt.narrow(1, 0, 1)?.squeeze(1)?;
         let mut outs = Vec::with_capacity(steps);
+        // The keys' features of every step at once (they do not depend on the recurrence).
+        let (fa, fb) = self.model.key_features(&ka, &kb)?;
         for t in 1..t_len {
-            let rng = if train { Some(&mut self.rng) } else { None };
-            let (y, s) = self.model.step(&prev, &ka.get(t - 1)?, &kb.get(t - 1)?, &tr.get(t - 1)?, &state, rng)?;
+            let (y, s) = self.model.step_with_key_features(
+                &prev,
+                &fa.get(t - 1)?,
+                &fb.get(t - 1)?,
+                &tr.get(t - 1)?,
+                &state,
+                rngs.as_deref_mut(),
+            )?;
             state = s;
-            let use_truth = train && self.rng.next_f64() < teacher;
+            let use_truth = teacher.get(t - 1).copied().unwrap_or(false);
             prev = if use_truth { gt.narrow(1, t, 1)?.squeeze(1)? } else { y.clone() };
             outs.push(y);
         }
@@ -237,28 +273,65 @@ impl ArnnTrainer {
         let target = gt.narrow(1, 1, steps)?.transpose(0, 1)?;
         let sq = (&pred - target)?.sqr()?;
         let frame = sq.mean_all()?;
-        let n_keys = mask.sum_all()?.to_scalar::<f32>()?.max(1.0) as f64;
-        let key = (sq.broadcast_mul(&mask)?.sum_all()? / (n_keys * d as f64))?;
+        let key = match share {
+            Some((batch_keys, fraction)) => {
+                (sq.broadcast_mul(&mask)?.sum_all()? / (batch_keys.max(1.0) * d as f64 * fraction))?
+            }
+            None => {
+                let n_keys = mask.sum_all()?.to_scalar::<f32>()?.max(1.0) as f64;
+                (sq.broadcast_mul(&mask)?.sum_all()? / (n_keys * d as f64))?
+            }
+        };
         let ground = self.ground_penalty(&pred)?;
         let total = ((&frame + (&key * (self.config.key_weight * omega))?)? + (&ground * self.config.ground_weight)?)?;
         Ok(Losses { total, frame, key, ground })
     }
 
-    /// One Adam step on training sequences `samples`, 0-2 keys dropped from each.
+    /// One Adam step on training sequences `samples`, 0-2 keys dropped from each, over the
+    /// data-parallel workers ([`ArnnTrainer::set_threads`]). The step's random draws (dropped
+    /// keys, teacher forcing per frame, the dropout seed; per sequence streams) are made before
+    /// the batch is shared out, so they do not depend on the thread count.
     pub fn train_on(&mut self, samples: &[usize]) -> ArnnResult<f64> {
         let seqs: Vec<KeyedSequence> = samples.iter().map(|&i| self.train[i].clone()).collect();
         let keys: Vec<Vec<usize>> = seqs.iter().map(|s| drop_keys(&s.keys, &mut self.rng)).collect();
         let c = self.config.curriculum;
         let (teacher, omega) = (c.teacher_forcing(self.step), c.omega(self.step));
-        let refs: Vec<&KeyedSequence> = seqs.iter().collect();
-        let losses = self.losses(&refs, &keys, teacher, omega, true)?;
-        let value = losses.total.to_scalar::<f32>()? as f64;
-        if !value.is_finite() {
-            return Err(ArnnError::NonFiniteLoss { step: self.step, loss: value });
+        let steps = seqs.first().map_or(0, |s| s.frames.len().saturating_sub(1));
+        let draws: Vec<bool> = (0..steps).map(|_| self.rng.next_f64() < teacher).collect();
+        let seed = self.rng.next_u64();
+        // Key frames after the first of the whole batch (the key loss's denominator).
+        let batch_keys = keys.iter().map(|k| k.len().saturating_sub(1)).sum::<usize>() as f64;
+        let n = seqs.len();
+        let this = &*self;
+        let shard_loss = |r: std::ops::Range<usize>| -> candle_core::Result<Tensor> {
+            let refs: Vec<&KeyedSequence> = seqs[r.clone()].iter().collect();
+            let mut rngs = RowRngs::new(seed, r.clone());
+            let fraction = r.len() as f64 / n as f64;
+            let l = this
+                .batch_losses(&refs, &keys[r], &draws, omega, Some(&mut rngs), Some((batch_keys, fraction)))
+                .map_err(candle_core::Error::wrap)?;
+            Ok(l.total)
+        };
+        let (value, grads) = this.parallel.backward(n, &this.vars, shard_loss)?;
+        match grads {
+            Some(grads) if value.is_finite() => self.opt.step(&grads)?,
+            _ => return Err(ArnnError::NonFiniteLoss { step: self.step, loss: value }),
         }
-        self.opt.backward_step(&losses.total)?;
         self.step += 1;
         Ok(value)
+    }
+
+    /// Shares each training step's batch out among `threads` workers (data-parallel training,
+    /// [`zoo_nn::parallel`]); the update equals the one-worker update up to float summation
+    /// order, and runs are bit-identical for a fixed seed and thread count.
+    pub fn set_threads(&mut self, threads: usize) -> ArnnResult<()> {
+        self.parallel = DataParallel::new(threads).map_err(|e| ArnnError::Config(e.to_string()))?;
+        Ok(())
+    }
+
+    /// The number of data-parallel workers.
+    pub fn threads(&self) -> usize {
+        self.parallel.threads()
     }
 
     /// Frame and key losses on the validation sequences with all their keys, no teacher
@@ -452,6 +525,62 @@ mod tests {
         let diff = a.iter().flatten().zip(b.iter().flatten()).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
         assert!(diff < 1e-9, "the reloaded model differs by {diff}");
         assert_eq!(a[0], poses[0]);
+    }
+
+    /// Issue 18: a data-parallel step over two workers gives the one-worker step (the same key
+    /// drops, teacher-forcing draws and per-sequence dropout masks; the key loss normalised by
+    /// the whole batch's keys) up to float summation order, and the same bits for the same
+    /// thread count.
+    #[test]
+    fn two_thread_step_matches_the_one_thread_step() {
+        let config = ArnnConfig {
+            learning_rate: 1e-2,
+            gru_dropout: [0.1, 0.05],
+            linear_dropout: [0.2, 0.1],
+            ..ArnnConfig::tiny()
+        };
+        assert!(config.gru_dropout[0] > 0.0 && config.linear_dropout[0] > 0.0, "the test must exercise dropout");
+        let trainer = |threads: usize| {
+            let mut t = ArnnTrainer::new(&config, sequences(5), sequences(2), &Device::Cpu).unwrap();
+            t.set_threads(threads).unwrap();
+            t
+        };
+        let weights = |t: &ArnnTrainer| -> Vec<(String, Vec<f32>)> {
+            let mut w: Vec<(String, Vec<f32>)> = t
+                .varmap
+                .data()
+                .lock()
+                .unwrap()
+                .iter()
+                .map(|(n, v)| (n.clone(), v.as_tensor().flatten_all().unwrap().to_vec1::<f32>().unwrap()))
+                .collect();
+            w.sort_by(|a, b| a.0.cmp(&b.0));
+            w
+        };
+        let (mut one, mut two) = (trainer(1), trainer(2));
+        assert_eq!(two.threads(), 2);
+        let before = weights(&one);
+        let batch = [0, 1, 2, 3, 4]; // shards of 3 and 2 sequences
+        let (l1, l2) = (one.train_on(&batch).unwrap(), two.train_on(&batch).unwrap());
+        assert!((l1 - l2).abs() <= 1e-5 * l1.abs(), "loss {l1} vs {l2}");
+        let lr = config.learning_rate as f32;
+        let (w1, w2) = (weights(&one), weights(&two));
+        let (mut moved, mut noisy, mut total) = (0usize, 0usize, 0usize);
+        for (((n, a), (_, b)), (_, w0)) in w1.iter().zip(&w2).zip(&before) {
+            let scale = w0.iter().fold(0f32, |m, v| m.max(v.abs())).max(1e-3);
+            for ((p, q), z) in a.iter().zip(b).zip(w0) {
+                let d = (p - q).abs();
+                assert!(d <= 2.0 * lr, "{n}: {p} (1 thread) vs {q} (2 threads)");
+                noisy += usize::from(d > 1e-5 * scale);
+                moved += usize::from(p != z);
+                total += 1;
+            }
+        }
+        assert!(moved > 0, "the step changed no weight");
+        assert!(noisy * 1000 <= total, "{noisy} of {total} weights differ by more than 1e-5 relative");
+        let mut again = trainer(2);
+        assert_eq!(again.train_on(&batch).unwrap().to_bits(), l2.to_bits());
+        assert_eq!(weights(&again), w2);
     }
 
     #[test]

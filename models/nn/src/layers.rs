@@ -74,7 +74,7 @@ impl Mlp {
 
     /// The forward pass with dropout after each activated layer: `rng` `Some` in training,
     /// `None` at evaluation (then equal to [`Module::forward`]).
-    pub fn forward_dropout(&self, x: &Tensor, dropout: &Dropout, mut rng: Option<&mut SplitMix64>) -> Result<Tensor> {
+    pub fn forward_dropout(&self, x: &Tensor, dropout: &Dropout, mut rng: Option<&mut RowRngs>) -> Result<Tensor> {
         let n = self.layers.len();
         let mut h = x.clone();
         for (i, l) in self.layers.iter().enumerate() {
@@ -107,9 +107,31 @@ impl Module for Mlp {
     }
 }
 
+/// The dropout generators of one training step: one stream per sample of the batch, sample `i`
+/// (its index in the whole batch) drawing from `SplitMix64::with_stream(seed, i)`. A sample's
+/// masks therefore do not depend on the data-parallel shard it lands in, so a step over two
+/// workers draws what one worker would ([`crate::parallel`]).
+#[derive(Clone, Debug)]
+pub struct RowRngs {
+    streams: Vec<SplitMix64>,
+}
+
+impl RowRngs {
+    /// The streams of the samples `rows` of a batch whose step drew `seed`.
+    pub fn new(seed: u64, rows: std::ops::Range<usize>) -> Self {
+        RowRngs { streams: rows.map(|i| SplitMix64::with_stream(seed, i as u64)).collect() }
+    }
+
+    /// The number of samples (rows).
+    pub fn rows(&self) -> usize {
+        self.streams.len()
+    }
+}
+
 /// Inverted dropout: in training each value is zeroed with probability `p` and the others are
 /// scaled by `1 / (1 - p)`; at evaluation it is the identity. The masks are drawn from the
-/// caller's generator, so a seeded run is reproducible and a resumed run draws the same masks.
+/// step's per-sample generators, so a seeded run is reproducible, a resumed run draws the same
+/// masks and the thread count does not change them.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Dropout {
     p: f64,
@@ -126,16 +148,24 @@ impl Dropout {
         self.p
     }
 
-    /// Applies dropout: training when `rng` is `Some` (one draw per value, row-major),
-    /// identity when `None` or `p == 0`.
-    pub fn forward(&self, x: &Tensor, rng: Option<&mut SplitMix64>) -> Result<Tensor> {
+    /// Applies dropout to a batch-first `x` (`(batch, ...)`): training when `rng` is `Some`
+    /// (sample `i` draws its values, row-major, from its own stream), identity when `None` or
+    /// `p == 0`.
+    pub fn forward(&self, x: &Tensor, rng: Option<&mut RowRngs>) -> Result<Tensor> {
         let Some(rng) = rng else { return Ok(x.clone()) };
         if self.p == 0.0 {
             return Ok(x.clone());
         }
-        let keep = 1.0 / (1.0 - self.p);
-        let mask: Vec<f32> =
-            (0..x.elem_count()).map(|_| if rng.next_f64() < self.p { 0.0 } else { keep as f32 }).collect();
+        let rows = x.dim(0)?;
+        if rows != rng.rows() {
+            candle_core::bail!("dropout: {rows} samples in the batch, {} generators", rng.rows());
+        }
+        let per_row = x.elem_count() / rows.max(1);
+        let keep = (1.0 / (1.0 - self.p)) as f32;
+        let mut mask = Vec::with_capacity(x.elem_count());
+        for s in rng.streams.iter_mut() {
+            mask.extend((0..per_row).map(|_| if s.next_f64() < self.p { 0.0 } else { keep }));
+        }
         let mask = Tensor::from_vec(mask, x.shape(), x.device())?.to_dtype(x.dtype())?;
         x.mul(&mask)
     }
@@ -188,11 +218,16 @@ mod tests {
         let x = Tensor::ones((100, 100), DType::F32, &Device::Cpu)?;
         let d = Dropout::new(0.25);
         assert_eq!(d.forward(&x, None)?.to_vec2::<f32>()?, x.to_vec2::<f32>()?);
-        let a = d.forward(&x, Some(&mut SplitMix64::new(3)))?.flatten_all()?.to_vec1::<f32>()?;
-        let b = d.forward(&x, Some(&mut SplitMix64::new(3)))?.flatten_all()?.to_vec1::<f32>()?;
-        let c = d.forward(&x, Some(&mut SplitMix64::new(4)))?.flatten_all()?.to_vec1::<f32>()?;
+        let a = d.forward(&x, Some(&mut RowRngs::new(3, 0..100)))?.flatten_all()?.to_vec1::<f32>()?;
+        let b = d.forward(&x, Some(&mut RowRngs::new(3, 0..100)))?.flatten_all()?.to_vec1::<f32>()?;
+        let c = d.forward(&x, Some(&mut RowRngs::new(4, 0..100)))?.flatten_all()?.to_vec1::<f32>()?;
         assert_eq!(a, b);
         assert_ne!(a, c);
+        // A shard of the batch draws its samples' masks: the same as the whole batch's rows.
+        let tail =
+            d.forward(&x.narrow(0, 60, 40)?, Some(&mut RowRngs::new(3, 60..100)))?.flatten_all()?.to_vec1::<f32>()?;
+        assert_eq!(tail, a[60 * 100..]);
+        assert!(d.forward(&x, Some(&mut RowRngs::new(3, 0..99))).unwrap_err().to_string().contains("99 generators"));
         let dropped = a.iter().filter(|&&v| v == 0.0).count() as f64 / a.len() as f64;
         assert!((dropped - 0.25).abs() < 0.02, "dropped {dropped}");
         assert!(a.iter().all(|&v| v == 0.0 || (v - 4.0 / 3.0).abs() < 1e-6));

@@ -14,6 +14,7 @@
 //! - [`train_loop`]: the one training loop, driving any model that implements [`Trainable`];
 //! - [`plot`]: the loss-curve PNG.
 
+pub mod cells;
 pub mod checkpoint;
 pub mod ema;
 pub mod error;
@@ -31,7 +32,7 @@ pub mod train_loop;
 pub use ema::Ema;
 pub use error::{NnError, NnResult, TrainError};
 pub use init::SeededVarMap;
-pub use layers::{Activation, Dropout, Mlp};
+pub use layers::{Activation, Dropout, Mlp, RowRngs};
 pub use optim::{Adam, AmsGrad, ParamsAdam, ParamsAmsGrad, ParamsRmsProp, RmsProp, StatefulOptimizer};
 pub use parallel::DataParallel;
 pub use recurrent::{BiGru, BiLstm, Gru, GruState, Lstm, LstmState};

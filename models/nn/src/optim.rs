@@ -103,9 +103,27 @@ fn unnamed(vars: Vec<Var>) -> Vec<(String, Var)> {
     vars.into_iter().map(|v| (String::new(), v)).collect()
 }
 
+/// The f32 values of a contiguous CPU tensor's storage (`None` for any other tensor).
+pub(crate) fn f32_slice<'a>(storage: &'a candle_core::Storage, layout: &candle_core::Layout) -> Option<&'a [f32]> {
+    match (storage, layout.contiguous_offsets()) {
+        (candle_core::Storage::Cpu(cpu), Some((a, b))) => cpu.as_slice::<f32>().ok().map(|v| &v[a..b]),
+        _ => None,
+    }
+}
+
+/// Sets `var` to `values` (its shape).
+fn set_values(var: &Var, values: Vec<f32>) -> Result<()> {
+    var.set(&Tensor::from_vec(values, var.shape(), var.device())?)
+}
+
 /// The step of [`Adam`] and, with `amsgrad` (the slots then also hold `v_max`), of [`AmsGrad`]:
 /// `m = b1 m + (1 - b1) g`, `v = b2 v + (1 - b2) g^2`, (`v_max = max(v_max, v)`),
 /// `theta -= lr / (1 - b1^t) * m / (sqrt(v or v_max) / sqrt(1 - b2^t) + eps)`.
+///
+/// f32 variables on the CPU are updated by one loop over each variable (one read of the
+/// gradient, weights and moments, one write of each), performing the same f32 operations in
+/// the same order as the tensor ops of [`adam_step_ops`], so the result is the same bit for bit
+/// (test `fused_steps_equal_the_tensor_op_steps`) without a dozen weight-sized temporaries.
 #[allow(clippy::too_many_arguments)]
 fn adam_step(
     slots: &Slots,
@@ -117,23 +135,99 @@ fn adam_step(
     eps: f64,
     amsgrad: bool,
 ) -> Result<()> {
+    let ti = t as i32;
+    let step_size = lr / (1.0 - beta1.powi(ti));
+    let inv_sqrt_bc2 = 1.0 / (1.0 - beta2.powi(ti)).sqrt();
+    // The constants as candle's affine ops see them (`T::from_f64`).
+    let (b1, ob1, b2, ob2) = (beta1 as f32, (1.0 - beta1) as f32, beta2 as f32, (1.0 - beta2) as f32);
+    let (isb, epsf, ss) = (inv_sqrt_bc2 as f32, eps as f32, step_size as f32);
+    for (i, var) in slots.vars.iter().enumerate() {
+        let Some(g) = grads.get(var) else { continue };
+        let n = var.elem_count();
+        let (mut m2, mut v2, mut w2) = (vec![0f32; n], vec![0f32; n], vec![0f32; n]);
+        let mut vm2 = if amsgrad { vec![0f32; n] } else { Vec::new() };
+        let done = {
+            let (gs, gl) = g.storage_and_layout();
+            let (ms, ml) = slots.moments[0][i].storage_and_layout();
+            let (vs, vl) = slots.moments[1][i].storage_and_layout();
+            let (ws, wl) = var.storage_and_layout();
+            let vmax = amsgrad.then(|| slots.moments[2][i].storage_and_layout());
+            let slices = (
+                f32_slice(&gs, gl),
+                f32_slice(&ms, ml),
+                f32_slice(&vs, vl),
+                f32_slice(&ws, wl),
+                vmax.as_ref().map(|(s, l)| f32_slice(s, l)),
+            );
+            match slices {
+                (Some(g), Some(m), Some(v), Some(w), vmax) if g.len() == n && vmax != Some(None) => {
+                    let vmax = vmax.flatten();
+                    for k in 0..n {
+                        let gk = g[k];
+                        let mk = (m[k] * b1 + 0.0) + (gk * ob1 + 0.0);
+                        let vk = (v[k] * b2 + 0.0) + ((gk * gk) * ob2 + 0.0);
+                        let d = match vmax {
+                            Some(vm) => {
+                                // candle's `maximum`
+                                let x = if vm[k] < vk { vk } else { vm[k] };
+                                vm2[k] = x;
+                                x
+                            }
+                            None => vk,
+                        };
+                        let denom = (d.sqrt() * isb + 0.0) * 1.0 + epsf;
+                        w2[k] = w[k] - ((mk / denom) * ss + 0.0);
+                        m2[k] = mk;
+                        v2[k] = vk;
+                    }
+                    true
+                }
+                _ => false,
+            }
+        };
+        if !done {
+            adam_step_ops(slots, i, g, t, lr, beta1, beta2, eps, amsgrad)?;
+            continue;
+        }
+        set_values(var, w2)?;
+        set_values(&slots.moments[0][i], m2)?;
+        set_values(&slots.moments[1][i], v2)?;
+        if amsgrad {
+            set_values(&slots.moments[2][i], vm2)?;
+        }
+    }
+    Ok(())
+}
+
+/// [`adam_step`] for one variable with tensor ops (any dtype and device; the reference of the
+/// fused loop).
+#[allow(clippy::too_many_arguments)]
+fn adam_step_ops(
+    slots: &Slots,
+    i: usize,
+    g: &Tensor,
+    t: u64,
+    lr: f64,
+    beta1: f64,
+    beta2: f64,
+    eps: f64,
+    amsgrad: bool,
+) -> Result<()> {
     let t = t as i32;
     let step_size = lr / (1.0 - beta1.powi(t));
     let inv_sqrt_bc2 = 1.0 / (1.0 - beta2.powi(t)).sqrt();
-    for (i, var) in slots.vars.iter().enumerate() {
-        let Some(g) = grads.get(var) else { continue };
-        let (sm, sv) = (&slots.moments[0][i], &slots.moments[1][i]);
-        let m = ((sm.as_tensor() * beta1)? + (g * (1.0 - beta1))?)?;
-        let v = ((sv.as_tensor() * beta2)? + (g.sqr()? * (1.0 - beta2))?)?;
-        let v_max = if amsgrad { Some(slots.moments[2][i].as_tensor().maximum(&v)?) } else { None };
-        let denom = ((v_max.as_ref().unwrap_or(&v).sqrt()? * inv_sqrt_bc2)? + eps)?;
-        let update = ((&m / denom)? * step_size)?;
-        var.set(&var.as_tensor().sub(&update)?)?;
-        sm.set(&m)?;
-        sv.set(&v)?;
-        if let Some(v_max) = v_max {
-            slots.moments[2][i].set(&v_max)?;
-        }
+    let var = &slots.vars[i];
+    let (sm, sv) = (&slots.moments[0][i], &slots.moments[1][i]);
+    let m = ((sm.as_tensor() * beta1)? + (g * (1.0 - beta1))?)?;
+    let v = ((sv.as_tensor() * beta2)? + (g.sqr()? * (1.0 - beta2))?)?;
+    let v_max = if amsgrad { Some(slots.moments[2][i].as_tensor().maximum(&v)?) } else { None };
+    let denom = ((v_max.as_ref().unwrap_or(&v).sqrt()? * inv_sqrt_bc2)? + eps)?;
+    let update = ((&m / denom)? * step_size)?;
+    var.set(&var.as_tensor().sub(&update)?)?;
+    sm.set(&m)?;
+    sv.set(&v)?;
+    if let Some(v_max) = v_max {
+        slots.moments[2][i].set(&v_max)?;
     }
     Ok(())
 }
@@ -328,13 +422,42 @@ impl Optimizer for RmsProp {
         self.t += 1;
         let p = self.params;
         let s = &self.slots;
+        let (rho, orho, epsf, lr) = (p.rho as f32, (1.0 - p.rho) as f32, p.eps as f32, p.lr as f32);
         for (i, var) in s.vars.iter().enumerate() {
             let Some(g) = grads.get(var) else { continue };
             let sv = &s.moments[0][i];
-            let v = ((sv.as_tensor() * p.rho)? + (g.sqr()? * (1.0 - p.rho))?)?;
-            let update = ((g / (v.sqrt()? + p.eps)?)? * p.lr)?;
-            var.set(&var.as_tensor().sub(&update)?)?;
-            sv.set(&v)?;
+            // One loop doing the f32 operations of the tensor ops below, in their order (the
+            // same bits; see `adam_step`).
+            let n = var.elem_count();
+            let fused = {
+                let (gs, gl) = g.storage_and_layout();
+                let (vs, vl) = sv.storage_and_layout();
+                let (ws, wl) = var.storage_and_layout();
+                match (f32_slice(&gs, gl), f32_slice(&vs, vl), f32_slice(&ws, wl)) {
+                    (Some(g), Some(v), Some(w)) if g.len() == n => {
+                        let (mut v2, mut w2) = (vec![0f32; n], vec![0f32; n]);
+                        for k in 0..n {
+                            let vk = (v[k] * rho + 0.0) + ((g[k] * g[k]) * orho + 0.0);
+                            w2[k] = w[k] - ((g[k] / (vk.sqrt() * 1.0 + epsf)) * lr + 0.0);
+                            v2[k] = vk;
+                        }
+                        Some((v2, w2))
+                    }
+                    _ => None,
+                }
+            };
+            match fused {
+                Some((v2, w2)) => {
+                    set_values(var, w2)?;
+                    set_values(sv, v2)?;
+                }
+                None => {
+                    let v = ((sv.as_tensor() * p.rho)? + (g.sqr()? * (1.0 - p.rho))?)?;
+                    let update = ((g / (v.sqrt()? + p.eps)?)? * p.lr)?;
+                    var.set(&var.as_tensor().sub(&update)?)?;
+                    sv.set(&v)?;
+                }
+            }
         }
         Ok(())
     }
@@ -495,6 +618,58 @@ mod tests {
         }
         close(&got, &th);
         assert!((opt.learning_rate() - 0.095).abs() < 1e-15);
+    }
+
+    /// The fused f32 loops give the bits of the tensor-op formulas they replace.
+    #[test]
+    fn fused_steps_equal_the_tensor_op_steps() {
+        let dev = Device::Cpu;
+        let init = Tensor::arange(0f32, 997.0, &dev).unwrap().affine(0.37, -11.0).unwrap().sin().unwrap();
+        let grad_at = |step: usize| {
+            Tensor::arange(0f32, 997.0, &dev).unwrap().affine(0.011 * (step + 1) as f64, 0.3).unwrap().cos().unwrap()
+        };
+        for amsgrad in [false, true] {
+            let (a, b) = (Var::from_tensor(&init).unwrap(), Var::from_tensor(&init).unwrap());
+            let kinds: &'static [&'static str] = if amsgrad { &["m", "v", "v_max"] } else { &["m", "v"] };
+            let fused_slots = Slots::new(vec![("w".into(), a.clone())], kinds).unwrap();
+            let ops_slots = Slots::new(vec![("w".into(), b.clone())], kinds).unwrap();
+            for step in 0..4 {
+                let g = grad_at(step);
+                let mut ga = GradStore::default();
+                ga.insert(a.as_tensor(), g.clone());
+                adam_step(&fused_slots, &ga, step as u64 + 1, 5e-3, 0.9, 0.999, 1e-8, amsgrad).unwrap();
+                adam_step_ops(&ops_slots, 0, &g, step as u64 + 1, 5e-3, 0.9, 0.999, 1e-8, amsgrad).unwrap();
+            }
+            let bits = |t: &Tensor| t.to_vec1::<f32>().unwrap().iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(a.as_tensor()), bits(b.as_tensor()), "weights, amsgrad {amsgrad}");
+            for k in 0..kinds.len() {
+                assert_eq!(
+                    bits(fused_slots.moments[k][0].as_tensor()),
+                    bits(ops_slots.moments[k][0].as_tensor()),
+                    "moment {}",
+                    kinds[k]
+                );
+            }
+        }
+        // RMSProp against its tensor-op formula.
+        let w = Var::from_tensor(&init).unwrap();
+        let mut opt = RmsProp::new_named(
+            vec![("w".into(), w.clone())],
+            ParamsRmsProp { lr: 2e-3, rho: 0.9, ..Default::default() },
+        )
+        .unwrap();
+        let (mut wr, mut vr) = (init.clone(), init.zeros_like().unwrap());
+        for step in 0..3 {
+            let g = grad_at(step);
+            let mut gs = GradStore::default();
+            gs.insert(w.as_tensor(), g.clone());
+            opt.step(&gs).unwrap();
+            vr = ((&vr * 0.9).unwrap() + (g.sqr().unwrap() * (1.0 - 0.9)).unwrap()).unwrap();
+            let update = ((&g / (vr.sqrt().unwrap() + 1e-8).unwrap()).unwrap() * 2e-3).unwrap();
+            wr = wr.sub(&update).unwrap();
+        }
+        let bits = |t: &Tensor| t.to_vec1::<f32>().unwrap().iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(w.as_tensor()), bits(&wr));
     }
 
     /// A state saved after one step and loaded into a fresh optimiser continues exactly.

@@ -101,9 +101,10 @@ impl DataParallel {
             candle_core::bail!("a training step needs at least one sample");
         }
         let shards = self.shards(n);
+        let shared = std::sync::Arc::new(crate::tape::SharedCopies::default());
         if shards.len() == 1 {
             return self.pools[0].install(|| {
-                let (l, tapes) = crate::tape::collect(|| loss(0..n));
+                let (l, tapes) = crate::tape::collect_shared(&shared, || loss(0..n));
                 let l = l?;
                 let value = l.to_scalar::<f32>()? as f64;
                 if !value.is_finite() {
@@ -119,7 +120,7 @@ impl DataParallel {
         let run = |k: usize, r: Range<usize>| -> Result<(f64, Option<GradStore>)> {
             self.pools[k].install(|| {
                 let w = r.len() as f64 / n as f64;
-                let (l, tapes) = crate::tape::collect(|| loss(r));
+                let (l, tapes) = crate::tape::collect_shared(&shared, || loss(r));
                 let l = l?;
                 let value = l.to_scalar::<f32>()? as f64;
                 if !value.is_finite() {

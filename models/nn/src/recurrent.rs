@@ -16,8 +16,7 @@
 //! Each step is one matmul for all gates; over a sequence the input projection of every frame is
 //! one matmul. Sequences are batch-first: `(batch, time, features)`.
 
-use crate::layers::Dropout;
-use crate::rng::SplitMix64;
+use crate::layers::{Dropout, RowRngs};
 use candle_core::{D, Result, Tensor};
 use candle_nn::{Init, VarBuilder};
 
@@ -64,32 +63,24 @@ impl Layer {
 
     /// Input projection `x W_ih^T + b_ih` of `(batch, in)` or `(batch, time, in)`.
     fn input_proj(&self, x: &Tensor) -> Result<Tensor> {
+        if let [b, t, i] = *x.dims() {
+            // Every frame at once as the rows of one matmul (taped in training).
+            let y = crate::tape::matmul_weight(&x.reshape((b * t, i))?, &self.w_ih, true)?;
+            return y.broadcast_add(&self.b_ih)?.reshape((b, t, ()));
+        }
         crate::tape::matmul_weight(x, &self.w_ih, true)?.broadcast_add(&self.b_ih)
     }
 
     /// One step from the projected input `gx` `(batch, G*H)`: the new `h` and, for the LSTM, `c`.
     fn update(&self, gx: &Tensor, h: &Tensor, c: Option<&Tensor>) -> Result<(Tensor, Option<Tensor>)> {
-        let hu = self.hidden;
         let gh = crate::tape::matmul_weight(h, &self.w_hh, true)?.broadcast_add(&self.b_hh)?;
         match self.cell {
             Cell::Lstm => {
-                let g = (gx + gh)?;
-                let i = candle_nn::ops::sigmoid(&g.narrow(1, 0, hu)?)?;
-                let f = candle_nn::ops::sigmoid(&g.narrow(1, hu, hu)?)?;
-                let gg = g.narrow(1, 2 * hu, hu)?.tanh()?;
-                let o = candle_nn::ops::sigmoid(&g.narrow(1, 3 * hu, hu)?)?;
                 let c = c.ok_or_else(|| candle_core::Error::Msg("an LSTM step needs the cell state".into()))?;
-                let c = ((f * c)? + (i * gg)?)?;
-                let h = (o * c.tanh()?)?;
+                let (h, c) = crate::cells::lstm_cell(&(gx + gh)?, c)?;
                 Ok((h, Some(c)))
             }
-            Cell::Gru => {
-                let r = candle_nn::ops::sigmoid(&(gx.narrow(1, 0, hu)? + gh.narrow(1, 0, hu)?)?)?;
-                let z = candle_nn::ops::sigmoid(&(gx.narrow(1, hu, hu)? + gh.narrow(1, hu, hu)?)?)?;
-                let n = (gx.narrow(1, 2 * hu, hu)? + (r * gh.narrow(1, 2 * hu, hu)?)?)?.tanh()?;
-                let h = ((z.ones_like()? - &z)? * n)?.add(&(z * h)?)?;
-                Ok((h, None))
-            }
+            Cell::Gru => Ok((crate::cells::gru_cell(gx, &gh, h)?, None)),
         }
     }
 
@@ -172,7 +163,7 @@ impl Stack {
         x: &Tensor,
         h: &[Tensor],
         c: Option<&[Tensor]>,
-        mut rng: Option<&mut SplitMix64>,
+        mut rng: Option<&mut RowRngs>,
     ) -> Result<(Vec<Tensor>, Option<Vec<Tensor>>)> {
         if h.len() != self.layers.len() {
             candle_core::bail!("the state has {} layers, the recurrent layer {}", h.len(), self.layers.len())
@@ -198,7 +189,7 @@ impl Stack {
         xs: &Tensor,
         h: &[Tensor],
         c: Option<&[Tensor]>,
-        mut rng: Option<&mut SplitMix64>,
+        mut rng: Option<&mut RowRngs>,
     ) -> Result<(Tensor, Vec<Tensor>, Option<Vec<Tensor>>)> {
         if h.len() != self.layers.len() {
             candle_core::bail!("the state has {} layers, the recurrent layer {}", h.len(), self.layers.len())
@@ -246,7 +237,7 @@ impl Lstm {
     }
 
     /// One step with inter-layer dropout drawn from `rng` when it is `Some` (training).
-    pub fn step_train(&self, x: &Tensor, state: &LstmState, rng: Option<&mut SplitMix64>) -> Result<LstmState> {
+    pub fn step_train(&self, x: &Tensor, state: &LstmState, rng: Option<&mut RowRngs>) -> Result<LstmState> {
         let (h, c) = self.stack.step(x, &state.h, Some(&state.c), rng)?;
         Ok(LstmState { h, c: c.unwrap_or_default() })
     }
@@ -257,7 +248,7 @@ impl Lstm {
         &self,
         xs: &Tensor,
         state: &LstmState,
-        rng: Option<&mut SplitMix64>,
+        rng: Option<&mut RowRngs>,
     ) -> Result<(Tensor, LstmState)> {
         let (out, h, c) = self.stack.sequence(xs, &state.h, Some(&state.c), rng)?;
         Ok((out, LstmState { h, c: c.unwrap_or_default() }))
@@ -288,18 +279,13 @@ impl Gru {
     }
 
     /// One step with inter-layer dropout drawn from `rng` when it is `Some` (training).
-    pub fn step_train(&self, x: &Tensor, state: &GruState, rng: Option<&mut SplitMix64>) -> Result<GruState> {
+    pub fn step_train(&self, x: &Tensor, state: &GruState, rng: Option<&mut RowRngs>) -> Result<GruState> {
         Ok(GruState { h: self.stack.step(x, &state.h, None, rng)?.0 })
     }
 
     /// Runs `(batch, time, input)` from `state`: the last layer's outputs `(batch, time, hidden)`
     /// and the last state. Dropout masks (when `rng` is `Some`) are drawn layer by layer.
-    pub fn forward_seq(
-        &self,
-        xs: &Tensor,
-        state: &GruState,
-        rng: Option<&mut SplitMix64>,
-    ) -> Result<(Tensor, GruState)> {
+    pub fn forward_seq(&self, xs: &Tensor, state: &GruState, rng: Option<&mut RowRngs>) -> Result<(Tensor, GruState)> {
         let (out, h, _) = self.stack.sequence(xs, &state.h, None, rng)?;
         Ok((out, GruState { h }))
     }
@@ -329,7 +315,7 @@ impl BiStack {
         Ok(BiStack { layers, dropout: Dropout::new(dropout) })
     }
 
-    fn forward(&self, xs: &Tensor, mut rng: Option<&mut SplitMix64>) -> Result<Tensor> {
+    fn forward(&self, xs: &Tensor, mut rng: Option<&mut RowRngs>) -> Result<Tensor> {
         let batch = xs.dim(0)?;
         let mut inp = xs.clone();
         for (k, (fwd, bwd)) in self.layers.iter().enumerate() {
@@ -362,7 +348,7 @@ impl BiLstm {
     }
 
     /// Runs the sequence; inter-layer dropout when `rng` is `Some` (training).
-    pub fn forward(&self, xs: &Tensor, rng: Option<&mut SplitMix64>) -> Result<Tensor> {
+    pub fn forward(&self, xs: &Tensor, rng: Option<&mut RowRngs>) -> Result<Tensor> {
         self.stack.forward(xs, rng)
     }
 }
@@ -382,7 +368,7 @@ impl BiGru {
     }
 
     /// Runs the sequence; inter-layer dropout when `rng` is `Some` (training).
-    pub fn forward(&self, xs: &Tensor, rng: Option<&mut SplitMix64>) -> Result<Tensor> {
+    pub fn forward(&self, xs: &Tensor, rng: Option<&mut RowRngs>) -> Result<Tensor> {
         self.stack.forward(xs, rng)
     }
 }
@@ -391,6 +377,7 @@ impl BiGru {
 mod tests {
     use super::*;
     use crate::init::SeededVarMap;
+    use crate::rng::SplitMix64;
     use candle_core::{DType, Device, Var};
     use candle_nn::VarMap;
     use std::collections::HashMap;
@@ -576,8 +563,8 @@ mod tests {
             assert!(max_diff(g.output(), &gseq.narrow(1, t, 1)?.squeeze(1)?) < 1e-6);
         }
         assert!(max_diff(&s.c[1], &last.c[1]) < 1e-6 && max_diff(&g.h[2], &glast.h[2]) < 1e-6);
-        let (a, _) = lstm.forward_seq(&xs, &lstm.zero_state(B)?, Some(&mut SplitMix64::new(1)))?;
-        let (b, _) = lstm.forward_seq(&xs, &lstm.zero_state(B)?, Some(&mut SplitMix64::new(1)))?;
+        let (a, _) = lstm.forward_seq(&xs, &lstm.zero_state(B)?, Some(&mut crate::layers::RowRngs::new(1, 0..B)))?;
+        let (b, _) = lstm.forward_seq(&xs, &lstm.zero_state(B)?, Some(&mut crate::layers::RowRngs::new(1, 0..B)))?;
         assert_eq!(a.flatten_all()?.to_vec1::<f32>()?, b.flatten_all()?.to_vec1::<f32>()?);
         assert!(max_diff(&a, &seq) > 1e-4, "dropout between layers changes the output in training");
         let err = lstm.step(&xs.narrow(1, 0, 1)?.squeeze(1)?, &LstmState { h: vec![], c: vec![] }).unwrap_err();

@@ -24,6 +24,7 @@ use candle_core::backend::BackendStorage;
 use candle_core::backprop::GradStore;
 use candle_core::{CpuStorage, CustomOp2, Layout, Result, Shape, Tensor, TensorId, Var};
 use std::cell::RefCell;
+use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
 #[derive(Default)]
@@ -37,8 +38,11 @@ struct Entries {
 pub struct WeightTape {
     /// The weight as the model holds it (a variable or a tensor computed from variables).
     weight: Tensor,
-    /// The custom op's second argument: a leaf variable with the weight's values.
-    leaf: Tensor,
+    /// The custom op's second argument: a leaf variable holding the matrix the forward pass
+    /// multiplies by, `(k, n)` and contiguous (the weight itself, or a copy of its transpose).
+    forward: Tensor,
+    /// The `(n, k)` contiguous matrix the input gradient multiplies by (detached).
+    backward: Tensor,
     /// Whether frames compute `x W^T` (a weight stored `(out, in)`) rather than `x W`.
     transposed: bool,
     entries: Arc<Mutex<Entries>>,
@@ -54,7 +58,7 @@ impl std::fmt::Debug for WeightTape {
 struct TapedMatMul {
     entries: Arc<Mutex<Entries>>,
     index: usize,
-    transposed: bool,
+    backward: Tensor,
 }
 
 impl CustomOp2 for TapedMatMul {
@@ -63,25 +67,18 @@ impl CustomOp2 for TapedMatMul {
     }
 
     fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
-        let l2 = if self.transposed { l2.transpose(0, 1)? } else { l2.clone() };
         let (m, k) = l1.shape().dims2()?;
         let (k2, n) = l2.shape().dims2()?;
         if k != k2 {
             candle_core::bail!("taped matmul: ({m}, {k}) x ({k2}, {n}) do not match");
         }
-        Ok((s1.matmul(s2, (1, m, n, k), l1, &l2)?, Shape::from((m, n))))
+        Ok((s1.matmul(s2, (1, m, n, k), l1, l2)?, Shape::from((m, n))))
     }
 
-    fn bwd(&self, x: &Tensor, w: &Tensor, _res: &Tensor, grad: &Tensor) -> Result<(Option<Tensor>, Option<Tensor>)> {
+    fn bwd(&self, x: &Tensor, _w: &Tensor, _res: &Tensor, grad: &Tensor) -> Result<(Option<Tensor>, Option<Tensor>)> {
         // The weight's own gradient is left to `WeightTape::finish` (None here); the input's is
         // needed only where the input depends on something trained.
-        let dx = if !x.track_op() {
-            None
-        } else if self.transposed {
-            Some(grad.matmul(w)?)
-        } else {
-            Some(grad.matmul(&w.t()?)?)
-        };
+        let dx = if x.track_op() { Some(grad.matmul(&self.backward)?) } else { None };
         let mut e = self.entries.lock().map_err(|_| candle_core::Error::Msg("a weight tape was poisoned".into()))?;
         if let Some(slot) = e.grads.get_mut(self.index) {
             *slot = Some(grad.detach());
@@ -90,16 +87,64 @@ impl CustomOp2 for TapedMatMul {
     }
 }
 
+/// A contiguous copy of the transpose of a 2-D tensor, detached: blocked, so that both the reads
+/// and the writes stay within a few cache lines (candle's strided copy walks one of them a
+/// whole row apart per element).
+fn transposed_copy(w: &Tensor) -> Result<Tensor> {
+    let (r, c) = w.dims2()?;
+    let src = w.flatten_all()?.to_vec1::<f32>()?;
+    let mut dst = vec![0f32; r * c];
+    const B: usize = 32;
+    for i0 in (0..r).step_by(B) {
+        let i1 = (i0 + B).min(r);
+        for j0 in (0..c).step_by(B) {
+            let j1 = (j0 + B).min(c);
+            for i in i0..i1 {
+                let row = &src[i * c..i * c + c];
+                for j in j0..j1 {
+                    dst[j * r + i] = row[j];
+                }
+            }
+        }
+    }
+    Tensor::from_vec(dst, (c, r), w.device())
+}
+
 impl WeightTape {
     /// A tape for `weight`, `(k, n)` used as `x W`, or `(n, k)` used as `x W^T` when
     /// `transposed`.
+    ///
+    /// Both products of a frame (the forward `x W` and the input gradient `dy W^T`) multiply by
+    /// a contiguous row-major right-hand side, the layout gemm runs fastest on (a transposed
+    /// view makes it pack the whole weight at every frame, several times slower at the zoo's
+    /// 16-64 rows): the tape keeps the weight in both orientations, one of them a copy made
+    /// once per tape (per training step and worker).
     pub fn new(weight: &Tensor, transposed: bool) -> Result<Self> {
         weight.dims2()?;
+        if weight.dtype() != candle_core::DType::F32 {
+            candle_core::bail!("weight tapes take f32 weights, got {:?}", weight.dtype());
+        }
         // The op's second argument must be a leaf that candle's backward walks through but
-        // never asks a gradient of: the variable itself, or a variable copy of a computed
-        // weight (one copy per tape, that is per training step and worker).
-        let leaf = if weight.is_variable() { weight.clone() } else { Var::from_tensor(weight)?.as_tensor().clone() };
-        Ok(WeightTape { weight: weight.clone(), leaf, transposed, entries: Arc::new(Mutex::new(Entries::default())) })
+        // never asks a gradient of: the variable itself when it is already the forward matrix,
+        // else a variable copy (one per tape).
+        let (forward, backward) = if transposed {
+            let t = shared_copy(weight, || Ok(Var::from_tensor(&transposed_copy(weight)?)?.as_tensor().clone()))?;
+            (t, weight.detach().contiguous()?)
+        } else {
+            let f = if weight.is_variable() && weight.is_contiguous() {
+                weight.clone()
+            } else {
+                Var::from_tensor(&weight.contiguous()?)?.as_tensor().clone()
+            };
+            (f, shared_copy(weight, || transposed_copy(weight))?)
+        };
+        Ok(WeightTape {
+            weight: weight.clone(),
+            forward,
+            backward,
+            transposed,
+            entries: Arc::new(Mutex::new(Entries::default())),
+        })
     }
 
     /// `x (m, k)` times the weight, its weight gradient left to [`WeightTape::finish`].
@@ -111,8 +156,8 @@ impl WeightTape {
             e.grads.push(None);
             e.inputs.len() - 1
         };
-        let op = TapedMatMul { entries: self.entries.clone(), index, transposed: self.transposed };
-        x.apply_op2_arc(&self.leaf, Arc::new(Box::new(op)))
+        let op = TapedMatMul { entries: self.entries.clone(), index, backward: self.backward.clone() };
+        x.apply_op2_arc(&self.forward, Arc::new(Box::new(op)))
     }
 
     /// After the backward pass that produced `grads`: the weight's gradient over every frame
@@ -162,6 +207,55 @@ fn add_grad(grads: &mut GradStore, t: &Tensor, g: Tensor) -> Result<()> {
 
 thread_local! {
     static ACTIVE: RefCell<Option<Vec<(TensorId, WeightTape)>>> = const { RefCell::new(None) };
+    static SHARED: RefCell<Option<Arc<SharedCopies>>> = const { RefCell::new(None) };
+}
+
+/// The transposed copies of variable weights made during one data-parallel step, shared by its
+/// workers: the variables do not change within a step, so each copy is made once (by the first
+/// worker that needs it) and every worker's gemm reads the same memory, which keeps the two
+/// orientations of the weights of both workers within the shared cache.
+#[derive(Default)]
+pub struct SharedCopies(Mutex<HashMap<TensorId, Arc<Mutex<Option<Tensor>>>>>);
+
+impl std::fmt::Debug for SharedCopies {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let n = self.0.lock().map(|m| m.len()).unwrap_or(0);
+        f.debug_struct("SharedCopies").field("weights", &n).finish()
+    }
+}
+
+/// The copy of `weight` that `make` computes, made once per [`SharedCopies`] for a variable
+/// weight while one is active on this thread ([`collect_shared`]); computed weights (a new
+/// tensor per worker) get their own copy.
+fn shared_copy(weight: &Tensor, make: impl FnOnce() -> Result<Tensor>) -> Result<Tensor> {
+    let shared = SHARED.with(|s| s.borrow().clone());
+    let Some(shared) = shared.filter(|_| weight.is_variable()) else { return make() };
+    let slot = {
+        let mut m =
+            shared.0.lock().map_err(|_| candle_core::Error::Msg("shared weight copies were poisoned".into()))?;
+        m.entry(weight.id()).or_default().clone()
+    };
+    let mut slot = slot.lock().map_err(|_| candle_core::Error::Msg("a shared weight copy was poisoned".into()))?;
+    if let Some(t) = slot.as_ref() {
+        return Ok(t.clone());
+    }
+    let t = make()?;
+    *slot = Some(t.clone());
+    Ok(t)
+}
+
+/// Whether a tape collection is active on this thread (inside a data-parallel training step).
+pub fn active() -> bool {
+    ACTIVE.with(|a| a.borrow().is_some())
+}
+
+/// [`collect`] with the weight copies of `shared` (one data-parallel step's, see
+/// [`SharedCopies`]) available to the tapes made on this thread.
+pub fn collect_shared<R>(shared: &Arc<SharedCopies>, f: impl FnOnce() -> R) -> (R, Vec<WeightTape>) {
+    let outer = SHARED.with(|s| s.borrow_mut().replace(shared.clone()));
+    let r = collect(f);
+    SHARED.with(|s| *s.borrow_mut() = outer);
+    r
 }
 
 /// Runs `f` with a tape collection active on this thread; returns its result and the tapes

@@ -6,7 +6,7 @@ use crate::config::{Config, RefinerCell};
 use crate::error::{RmrError, RmrResult};
 use candle_core::{Device, Module, Tensor};
 use candle_nn::VarBuilder;
-use zoo_nn::rng::SplitMix64;
+use zoo_nn::RowRngs;
 use zoo_nn::{Activation, BiGru, BiLstm, Gru, Lstm, Mlp};
 
 /// The recurrent refiner R.
@@ -35,7 +35,7 @@ impl Refiner {
 
     /// `(batch, frames, in)` -> `(batch, frames, H)` or `(batch, frames, 2H)` (bidirectional:
     /// forward then backward hidden state of the last layer, concatenated).
-    pub fn forward(&self, xs: &Tensor, rng: Option<&mut SplitMix64>) -> candle_core::Result<Tensor> {
+    pub fn forward(&self, xs: &Tensor, rng: Option<&mut RowRngs>) -> candle_core::Result<Tensor> {
         let batch = xs.dim(0)?;
         match self {
             Refiner::Lstm(r) => Ok(r.forward_seq(xs, &r.zero_state(batch)?, rng)?.0),
@@ -101,7 +101,7 @@ impl Rmr {
     /// Refines normalised sequences `(batch, frames, dim)` into `(batch, frames, dim)` (the
     /// contact values are logits; with [`Config::residual`] the pose values are the input's
     /// plus the decoder's correction). Dropout is drawn from `rng` when it is `Some` (training).
-    pub fn forward(&self, xs: &Tensor, rng: Option<&mut SplitMix64>) -> RmrResult<Tensor> {
+    pub fn forward(&self, xs: &Tensor, rng: Option<&mut RowRngs>) -> RmrResult<Tensor> {
         let d = self.config.dim();
         let dims = xs.dims();
         if dims.len() != 3 || dims[2] != d || dims[1] == 0 {

@@ -13,7 +13,7 @@ use zoo_nn::checkpoint as ck;
 use zoo_nn::optim::{Adam, ParamsAdam, StatefulOptimizer};
 use zoo_nn::rng::SplitMix64;
 use zoo_nn::train_loop::{Trainable, Validation};
-use zoo_nn::{SeededVarMap, TrainError};
+use zoo_nn::{DataParallel, RowRngs, SeededVarMap, TrainError};
 
 const RNG_KEY: &str = "trainer";
 
@@ -27,6 +27,10 @@ pub struct RmrTrainer {
     loss: Loss,
     rng: SplitMix64,
     step: u64,
+    /// The variables sorted by name (the gradients of data-parallel steps are summed over them).
+    vars: Vec<candle_core::Var>,
+    /// Workers of the data-parallel training step ([`RmrTrainer::set_threads`]; one by default).
+    parallel: DataParallel,
 }
 
 impl RmrTrainer {
@@ -49,6 +53,7 @@ impl RmrTrainer {
         let mut named: Vec<(String, candle_core::Var)> =
             varmap.data().lock().expect("varmap lock").iter().map(|(n, v)| (n.clone(), v.clone())).collect();
         named.sort_by(|a, b| a.0.cmp(&b.0));
+        let vars = named.iter().map(|(_, v)| v.clone()).collect();
         let opt =
             Adam::new_named(named, ParamsAdam { lr: t.learning_rate, beta1: t.beta1, beta2: t.beta2, eps: t.eps })?;
         let loss = Loss::new(config, &stats, device)?;
@@ -61,7 +66,23 @@ impl RmrTrainer {
             loss,
             rng: SplitMix64::new(t.seed),
             step: 0,
+            vars,
+            parallel: DataParallel::new(1)?,
         })
+    }
+
+    /// Shares each training step's batch out among `threads` workers (data-parallel training,
+    /// [`zoo_nn::parallel`]) whose gradients are summed before the one Adam step. Dropout masks
+    /// are drawn per sample, so the update equals the one-worker update up to float summation
+    /// order; runs are bit-identical for a fixed seed and thread count.
+    pub fn set_threads(&mut self, threads: usize) -> RmrResult<()> {
+        self.parallel = DataParallel::new(threads)?;
+        Ok(())
+    }
+
+    /// The number of data-parallel workers.
+    pub fn threads(&self) -> usize {
+        self.parallel.threads()
     }
 
     /// The model.
@@ -131,15 +152,51 @@ impl RmrTrainer {
 
     /// [`RmrTrainer::train_step`] with per-frame pose-loss weights ([`RmrTrainer::batch_weights`]).
     pub fn train_step_weighted(&mut self, x: &Tensor, y: &Tensor, w: Option<&Tensor>) -> RmrResult<LossValues> {
-        let out = self.model.forward(x, Some(&mut self.rng))?;
-        let terms = self.loss.terms_weighted(&out, x, y, w)?;
-        let values = terms.values()?;
-        if !values.total.is_finite() {
-            return Err(RmrError::NonFiniteLoss { step: self.step, loss: values.total as f32 });
+        let (values, grads) = self.loss_and_gradients(x, y, w)?;
+        match grads {
+            Some(grads) if values.total.is_finite() => self.opt.step(&grads)?,
+            _ => return Err(RmrError::NonFiniteLoss { step: self.step, loss: values.total as f32 }),
         }
-        self.opt.backward_step(&terms.total)?;
         self.step += 1;
         Ok(values)
+    }
+
+    /// The loss terms of a training step over the data-parallel workers and the gradients of
+    /// their total (`None` for a non-finite loss). The step's dropout seed is drawn first, so
+    /// each sample's masks do not depend on the thread count.
+    fn loss_and_gradients(
+        &mut self,
+        x: &Tensor,
+        y: &Tensor,
+        w: Option<&Tensor>,
+    ) -> RmrResult<(LossValues, Option<candle_core::backprop::GradStore>)> {
+        let seed = self.rng.next_u64();
+        let n = x.dim(0)?;
+        let (model, loss) = (&self.model, &self.loss);
+        let shards = std::sync::Mutex::new(Vec::new());
+        let shard_loss = |r: std::ops::Range<usize>| -> candle_core::Result<Tensor> {
+            let (xs, ys) = (x.narrow(0, r.start, r.len())?, y.narrow(0, r.start, r.len())?);
+            let ws = w.map(|w| w.narrow(0, r.start, r.len())).transpose()?;
+            let mut rngs = RowRngs::new(seed, r.clone());
+            let out = model.forward(&xs, Some(&mut rngs)).map_err(candle_core::Error::wrap)?;
+            let terms = loss.terms_weighted(&out, &xs, &ys, ws.as_ref()).map_err(candle_core::Error::wrap)?;
+            let v = terms.values().map_err(candle_core::Error::wrap)?;
+            shards.lock().map_err(|_| candle_core::Error::Msg("a training thread panicked".into()))?.push((r, v));
+            Ok(terms.total)
+        };
+        let (_, grads) = self.parallel.backward(n, &self.vars, shard_loss)?;
+        let mut parts = shards.into_inner().map_err(|_| RmrError::Config("a training thread panicked".into()))?;
+        parts.sort_by_key(|(r, _)| r.start);
+        let mut acc = LossValues::default();
+        for (r, v) in parts {
+            let f = r.len() as f64 / n as f64;
+            acc.total += v.total * f;
+            acc.pose += v.pose * f;
+            acc.trajectory += v.trajectory * f;
+            acc.foot += v.foot * f;
+            acc.begin += v.begin * f;
+        }
+        Ok((acc, grads))
     }
 
     /// The loss terms without dropout and without a step.

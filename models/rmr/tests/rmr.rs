@@ -548,3 +548,57 @@ fn placing_the_ankles_at_the_predicted_positions_keeps_a_consistent_pose() {
         assert!((mp[f * 21] - before[f * 21]).length() < 1e-9, "the hips stay");
     }
 }
+
+/// Issue 18: a data-parallel step over two workers gives the one-worker step (dropout drawn per
+/// pair, so both draw the same masks) up to float summation order, and the same bits for the
+/// same thread count.
+#[test]
+fn two_thread_step_matches_the_one_thread_step() {
+    let data = tiny_data();
+    assert!(data.config.dropout > 0.0, "the test must exercise the dropout draws");
+    let trainer = |threads: usize| {
+        let mut t = RmrTrainer::new(&data.config, data.stats.clone(), &Device::Cpu).unwrap();
+        t.set_threads(threads).unwrap();
+        t
+    };
+    let weights = |t: &RmrTrainer| -> Vec<(String, Vec<f32>)> {
+        let mut w: Vec<(String, Vec<f32>)> = t
+            .varmap()
+            .data()
+            .lock()
+            .unwrap()
+            .iter()
+            .map(|(n, v)| (n.clone(), v.as_tensor().flatten_all().unwrap().to_vec1::<f32>().unwrap()))
+            .collect();
+        w.sort_by(|a, b| a.0.cmp(&b.0));
+        w
+    };
+    let (mut one, mut two) = (trainer(1), trainer(2));
+    assert_eq!(two.threads(), 2);
+    let idx: Vec<usize> = (0..7).collect(); // an odd batch: shards of 4 and 3 pairs
+    let (x, y) = one.batch(&data.train, &idx).unwrap();
+    let before = weights(&one);
+    let l1 = one.train_step(&x, &y).unwrap();
+    let l2 = two.train_step(&x, &y).unwrap();
+    for (a, b) in [(l1.total, l2.total), (l1.pose, l2.pose), (l1.foot, l2.foot), (l1.begin, l2.begin)] {
+        assert!((a - b).abs() <= 1e-5 * a.abs().max(1e-6), "loss terms {l1:?} vs {l2:?}");
+    }
+    let lr = data.config.train.learning_rate as f32;
+    let (w1, w2) = (weights(&one), weights(&two));
+    let (mut moved, mut noisy, mut total) = (0usize, 0usize, 0usize);
+    for (((n, a), (_, b)), (_, w0)) in w1.iter().zip(&w2).zip(&before) {
+        let scale = w0.iter().fold(0f32, |m, v| m.max(v.abs())).max(1e-3);
+        for ((p, q), z) in a.iter().zip(b).zip(w0) {
+            let d = (p - q).abs();
+            assert!(d <= 2.0 * lr, "{n}: {p} (1 thread) vs {q} (2 threads)");
+            noisy += usize::from(d > 1e-5 * scale);
+            moved += usize::from(p != z);
+            total += 1;
+        }
+    }
+    assert!(moved > 0, "the step changed no weight");
+    assert!(noisy * 1000 <= total, "{noisy} of {total} weights differ by more than 1e-5 relative");
+    let mut again = trainer(2);
+    assert_eq!(again.train_step(&x, &y).unwrap().total.to_bits(), l2.total.to_bits());
+    assert_eq!(weights(&again), w2);
+}

@@ -18,8 +18,10 @@ pub struct RtnState {
 /// weights. Built once per transition by [`Rtn::begin`] (the target is constant, RTN sec. 4.3).
 #[derive(Clone, Debug)]
 pub struct RtnSequence {
-    /// `[W; U; C_O]^T`, `(E + H + O, 4H)`, so each step is one matmul for the four gates.
-    fused_t: Tensor,
+    /// `[W; U; C_O]^T`, `(E + H + O, 4H)`, so each step is one matmul for the four gates; `None`
+    /// inside a data-parallel training step, where each gate weight is taped on its own
+    /// (`zoo_nn::tape`: the workers share the variables' copies, not a fused matrix per worker).
+    fused_t: Option<Tensor>,
     /// `C_F h_F + b`, `(batch, 4H)` (or `(1, 4H)` without conditioning).
     gate_bias: Tensor,
 }
@@ -176,11 +178,15 @@ impl Rtn {
     /// Per-sequence constants from the normalised target vector `(batch, 2D)` (ignored without
     /// future conditioning): encodes the target once (eq. 3) and fuses the gate weights.
     pub fn begin(&self, target: &Tensor) -> Result<RtnSequence> {
-        let mut w = vec![&self.weight_ih, &self.weight_hh];
-        if let Some(wo) = &self.weight_offset {
-            w.push(wo);
-        }
-        let fused_t = Tensor::cat(&w, 1)?.t()?.contiguous()?;
+        let fused_t = if zoo_nn::tape::active() {
+            None
+        } else {
+            let mut w = vec![&self.weight_ih, &self.weight_hh];
+            if let Some(wo) = &self.weight_offset {
+                w.push(wo);
+            }
+            Some(Tensor::cat(&w, 1)?.t()?.contiguous()?)
+        };
         let gate_bias = match (&self.target_encoder, &self.weight_target) {
             (Some(f), Some(wt)) => {
                 let hf = f.forward(target)?; // RTN eq. 3
@@ -194,7 +200,6 @@ impl Rtn {
     /// One step: from the current frame `x_t` (and offset, terrain) and the state, the next frame
     /// `x_(t+1)` `(batch, D)` and the new state.
     pub fn step(&self, inputs: &RtnInputs, state: &RtnState) -> Result<(Tensor, RtnState)> {
-        let hu = self.config.lstm;
         let (x, seq) = (inputs.x, inputs.sequence);
         // RTN eq. 2: h_E = E([x_t, p_t]), with the interpolation frame appended: E([x_t, p_t, b_(t+1)])
         let mut e_in = vec![x];
@@ -219,26 +224,36 @@ impl Rtn {
             self.frame_encoder.forward(&Tensor::cat(&e_in, 1)?)?
         };
         // RTN eq. 5-8 with one fused matmul: [h_E, h_(t-1), h_O] [W; U; C_O]^T + (C_F h_F + b)
-        let z_in = match &self.offset_encoder {
+        let ho = match &self.offset_encoder {
             Some(o) => {
                 let Some(off) = inputs.offset else {
                     candle_core::bail!("this RTN is conditioned on the future: pass the global offset to every step")
                 };
-                let ho = o.forward(off)?; // RTN eq. 4
-                Tensor::cat(&[&he, &state.h, &ho], 1)?
+                Some(o.forward(off)?) // RTN eq. 4
             }
-            None => Tensor::cat(&[&he, &state.h], 1)?,
+            None => None,
         };
-        // The fused weight's gradient is taped during data-parallel training (zoo_nn::tape).
-        let z = zoo_nn::tape::matmul_weight(&z_in, &seq.fused_t, false)?.broadcast_add(&seq.gate_bias)?;
-        let s = candle_nn::ops::sigmoid(&z)?;
-        let i = s.narrow(1, 0, hu)?;
-        let f = s.narrow(1, hu, hu)?;
-        let g = z.narrow(1, 2 * hu, hu)?.tanh()?;
-        let o = s.narrow(1, 3 * hu, hu)?;
-        // RTN eq. 9-11
-        let c = ((f * &state.c)? + (i * g)?)?;
-        let h = (o * c.tanh()?)?;
+        let z = match &seq.fused_t {
+            Some(fused_t) => {
+                let z_in = match &ho {
+                    Some(ho) => Tensor::cat(&[&he, &state.h, ho], 1)?,
+                    None => Tensor::cat(&[&he, &state.h], 1)?,
+                };
+                z_in.matmul(fused_t)?
+            }
+            None => {
+                // Training: each weight's gradient taped (zoo_nn::tape), the same sum of products.
+                let mut z = (zoo_nn::tape::matmul_weight(&he, &self.weight_ih, true)?
+                    + zoo_nn::tape::matmul_weight(&state.h, &self.weight_hh, true)?)?;
+                if let (Some(ho), Some(wo)) = (&ho, &self.weight_offset) {
+                    z = (z + zoo_nn::tape::matmul_weight(ho, wo, true)?)?;
+                }
+                z
+            }
+        }
+        .broadcast_add(&seq.gate_bias)?;
+        // RTN eq. 5-11 after the gate sums: one fused cell step (zoo_nn::cells).
+        let (h, c) = zoo_nn::cells::lstm_cell(&z, &state.c)?;
         // RTN eq. 12-13; with the interpolation residual x_(t+1) = b_(t+1) + D(h_t)
         let dx = self.decoder.forward(&h)?;
         let next = match base {

@@ -17,9 +17,11 @@ use zoo_rtn::prelude::*;
 pub enum TrainBenchModel {
     /// The Recurrent Transition Network at the paper's sizes (K = 22, batch 32, 10 + 30 frames).
     Rtn,
-    /// The Recurrent Motion Refiner (not data-parallel yet: refused with a message).
+    /// The Recurrent Motion Refiner at the paper's sizes (BGRU 2 x 256, batch 32 pairs of 60
+    /// frames, bandai2's 145-value pose vector) on random normalised pairs.
     Rmr,
-    /// ARNN keyframe completion (not data-parallel yet: refused with a message).
+    /// ARNN keyframe completion at the paper's sizes (GRU 2 x 100, batch 16) on simulated lamp
+    /// sequences.
     Arnn,
     /// The RNN-GMM generator (paper sizes, batch 20).
     RnnGmm,
@@ -253,6 +255,74 @@ fn rnn_gmm_refiner_bench(threads: &[usize]) -> anyhow::Result<Bench<'static>> {
     })
 }
 
+/// The paper-size RMR (BGRU 2 x 256, batch 32 pairs of 60 frames, 145 values per frame) on
+/// seeded random normalised pairs (the step's cost does not depend on the values).
+fn rmr_bench(threads: &[usize]) -> anyhow::Result<Bench<'static>> {
+    use zoo_rmr::{Config, RmrTrainer, features::FeatureStats};
+    let config = Config::paper();
+    let d = config.dim();
+    let (b, frames) = (config.train.batch_size, config.pairs.window);
+    let stats = FeatureStats { mean: vec![0.0; d], std: vec![1.0; d] };
+    let dev = Device::Cpu;
+    let x = Tensor::randn(0f32, 1.0, (b, frames, d), &dev)?;
+    let y = Tensor::randn(0f32, 1.0, (b, frames, d), &dev)?;
+    let mut steps: Vec<Step> = Vec::new();
+    let mut params = 0;
+    for &t in threads {
+        let mut tr = RmrTrainer::new(&config, stats.clone(), &dev)?;
+        tr.set_threads(t)?;
+        params = zoo_rmr::model::parameter_count(tr.varmap());
+        tr.train_step(&x, &y)?; // warm-up
+        let (x, y) = (x.clone(), y.clone());
+        steps.push(Box::new(move || {
+            tr.train_step(&x, &y)?;
+            Ok(())
+        }));
+    }
+    Ok(Bench {
+        what: format!("RMR paper sizes ({params} parameters, BGRU 2 x {}, batch {b}, {frames} frames)", config.hidden),
+        batch: b,
+        // Every weight is used once per frame: forward 2 flops per weight, backward twice that.
+        flops: 6.0 * params as f64 * frames as f64,
+        gate: (b, config.hidden, 3 * config.hidden),
+        steps,
+    })
+}
+
+/// The paper-size ARNN (GRU 2 x 100, batch 16) on simulated lamp sequences (a small annealing
+/// budget: the step's cost does not depend on how good the hops are).
+fn arnn_bench(threads: &[usize]) -> anyhow::Result<Bench<'static>> {
+    use zoo_arnn::{ArnnConfig, ArnnTrainer};
+    use zoo_data::luxo::{GenerateOptions, generate_sequence, preprocess::preprocess};
+    let config = ArnnConfig::paper();
+    let b = config.batch_size;
+    let mut o = GenerateOptions::new(b, 17);
+    o.anneal.k_max = 2;
+    let seqs = (0..b).map(|i| Ok(preprocess(&generate_sequence(&o, i)?)?)).collect::<anyhow::Result<Vec<_>>>()?;
+    let frames = seqs[0].frames.len();
+    let samples: Vec<usize> = (0..b).collect();
+    let mut steps: Vec<Step> = Vec::new();
+    let mut params = 0;
+    for &t in threads {
+        let mut tr = ArnnTrainer::new(&config, seqs.clone(), seqs[..2].to_vec(), &Device::Cpu)?;
+        tr.set_threads(t)?;
+        params = tr.parameter_count();
+        tr.train_on(&samples)?; // warm-up
+        let samples = samples.clone();
+        steps.push(Box::new(move || {
+            tr.train_on(&samples)?;
+            Ok(())
+        }));
+    }
+    Ok(Bench {
+        what: format!("ARNN paper sizes ({params} parameters, GRU 2 x {}, batch {b}, {frames} frames)", config.hidden),
+        batch: b,
+        flops: 6.0 * params as f64 * (frames - 1) as f64,
+        gate: (b, config.hidden, 3 * config.hidden),
+        steps,
+    })
+}
+
 /// The RTN at the paper's sizes on deterministic synthetic windows.
 fn rtn_bench<'a>(threads: &[usize], ws: &'a [Vec<f32>], batch: Option<usize>) -> anyhow::Result<Bench<'a>> {
     let parents: Vec<Option<usize>> = (0..22).map(|j| if j == 0 { None } else { Some((j - 1) / 2) }).collect();
@@ -302,10 +372,8 @@ pub fn run(a: TrainBenchArgs) -> anyhow::Result<()> {
         TrainBenchModel::Rtn => rtn_bench(&a.threads, &ws, a.batch)?,
         TrainBenchModel::RnnGmm => rnn_gmm_bench(&a.threads)?,
         TrainBenchModel::RnnGmmRefiner => rnn_gmm_refiner_bench(&a.threads)?,
-        other => bail!(
-            "--model {other:?}: rtn, rnn-gmm and rnn-gmm-refiner are data-parallel so far; rmr and arnn train \
-             through the shared loop on one thread (their dropout draws inside the step come next, issue 18)"
-        ),
+        TrainBenchModel::Rmr => rmr_bench(&a.threads)?,
+        TrainBenchModel::Arnn => arnn_bench(&a.threads)?,
     };
     let (b, flops) = (bench.batch, bench.flops);
     println!("{}: {:.2} GFLOP per window; {} repeats of {} steps", bench.what, flops / 1e9, a.repeats, a.steps);

@@ -109,6 +109,11 @@ pub struct ArnnArgs {
     /// Seed of the generated data, the split, the weights and the trainer.
     #[arg(long, default_value_t = 1, allow_hyphen_values = true, value_parser = crate::args::seed)]
     pub seed: u64,
+    /// Data-parallel training threads (`1..=256`) [default: the cores available]: the same
+    /// update as one thread up to float summation order; reproducible for a fixed seed and
+    /// thread count.
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::cmd::train::training_threads)]
+    pub threads: Option<usize>,
 }
 
 /// `--ground-weight`: a weight in [0, 1e6].
@@ -326,6 +331,11 @@ pub fn run(a: ArnnArgs) -> anyhow::Result<()> {
     );
     let seed = trainer.config().seed;
     let mut trainer = trainer;
+    let threads = crate::cmd::train::default_threads(a.threads);
+    trainer.set_threads(threads)?;
+    println!("training threads: {threads} (data-parallel; --threads to change)");
+    let mut extra = extra;
+    extra.insert("threads".into(), threads.into());
     let opts = TrainOptions {
         // A limit too large for a Duration is no limit.
         time_limit: a.time_limit.and_then(|m| Duration::try_from_secs_f64(m * 60.0).ok()),

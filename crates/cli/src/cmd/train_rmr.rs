@@ -117,6 +117,11 @@ pub struct RmrArgs {
     /// Seed of the synthetic data, of the weights, the dropout and the shuffles.
     #[arg(long, default_value_t = 1, allow_hyphen_values = true, value_parser = crate::args::seed)]
     pub seed: u64,
+    /// Data-parallel training threads (`1..=256`) [default: the cores available]: the same
+    /// update as one thread up to float summation order (dropout masks are drawn per pair);
+    /// reproducible for a fixed seed and thread count.
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::cmd::train::training_threads)]
+    pub threads: Option<usize>,
 }
 
 /// `--seam-weight`: a weight in `[0, 1000]`.
@@ -272,7 +277,12 @@ pub fn run(a: RmrArgs) -> anyhow::Result<()> {
         out.display()
     );
     let seed = c.train.seed;
+    let mut trainer = trainer;
+    let threads = crate::cmd::train::default_threads(a.threads);
+    trainer.set_threads(threads)?;
+    println!("training threads: {threads} (data-parallel; --threads to change)");
     let mut extra = serde_json::Map::new();
+    extra.insert("threads".into(), threads.into());
     extra.insert("train_pairs".into(), data.train.count.into());
     extra.insert("valid_pairs".into(), data.valid.count.into());
     let mut training = RmrTraining::new(trainer, &data.train, &data.valid)?;
