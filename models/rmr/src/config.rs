@@ -90,6 +90,11 @@ pub struct Config {
     pub names: Vec<String>,
     /// Parent of each joint (-1 for the root).
     pub parents: Vec<i32>,
+    /// Rest offset of each joint from its parent (clip units; the root's is unused): the
+    /// bone vectors of the forward kinematics in the loss's `L_fk` and `L_slide` and in the
+    /// runtime's decoding. Empty in configurations saved before it was recorded.
+    #[serde(default)]
+    pub offsets: Vec<[f64; 3]>,
     /// Lower body, contact joints and thresholds, planted heights, forward axis.
     pub layout: StitchLayout,
     /// Frames per second of the training clips (clips to stitch must have it).
@@ -123,6 +128,17 @@ pub struct Config {
     pub lambda_foot: f64,
     /// Weight of the beginning loss (paper: 1).
     pub lambda_begin: f64,
+    /// Weight of the forward-kinematics term (ours, 0 in the paper's loss): the lower-body
+    /// positions that the output's rotations and hips position give by forward kinematics,
+    /// against the ground truth's (normalised like `p`); it ties the rotations, which the
+    /// decoded motion is made of, to the positions. See docs/rmr.md.
+    #[serde(default)]
+    pub lambda_fk: f64,
+    /// Weight of the foot-slide term (ours, 0 in the paper's loss): the horizontal displacement
+    /// (cm per frame) of each contact joint, by forward kinematics and the output's root
+    /// displacement, on the frames where the ground truth has that contact.
+    #[serde(default)]
+    pub lambda_slide: f64,
     /// Extra weight of the pose loss on the frames within [`SEAM_FRAMES`] of a seam of the
     /// training pair (their per-frame L1 counts `1 + seam_weight` times). 0: the paper's loss
     /// (the default, and that of configurations saved before the switch); see docs/rmr.md.
@@ -154,6 +170,7 @@ impl Config {
             joints: skeleton.len(),
             names: skeleton.names.clone(),
             parents: skeleton.parents_i32(),
+            offsets: skeleton.offsets.iter().map(|o| [o.x, o.y, o.z]).collect(),
             layout,
             fps: 30.0,
             encoder: vec![256, 256],
@@ -168,6 +185,8 @@ impl Config {
             lambda_trajectory: 1.0,
             lambda_foot: 0.5,
             lambda_begin: 1.0,
+            lambda_fk: 0.0,
+            lambda_slide: 0.0,
             seam_weight: 0.0,
             trajectory_unit: 100.0,
             window: 60,
@@ -207,6 +226,7 @@ impl Config {
         self.joints = skeleton.len();
         self.names = skeleton.names.clone();
         self.parents = skeleton.parents_i32();
+        self.offsets = skeleton.offsets.iter().map(|o| [o.x, o.y, o.z]).collect();
         self.layout = layout;
         Ok(self)
     }
@@ -295,6 +315,19 @@ impl Config {
         }
         if !(0.0..=1000.0).contains(&self.seam_weight) {
             return bad(format!("seam_weight must be in 0..=1000, got {}", self.seam_weight));
+        }
+        for (name, w) in [("lambda_fk", self.lambda_fk), ("lambda_slide", self.lambda_slide)] {
+            if !(0.0..=1000.0).contains(&w) {
+                return bad(format!("{name} must be in 0..=1000, got {w}"));
+            }
+        }
+        if (self.lambda_fk > 0.0 || self.lambda_slide > 0.0) && self.offsets.len() != self.joints {
+            return bad(format!(
+                "the forward-kinematics loss terms need the skeleton's {} offsets, the configuration has {}: \
+                 set the skeleton with Config::with_skeleton",
+                self.joints,
+                self.offsets.len()
+            ));
         }
         if self.trajectory_unit <= 0.0 {
             return bad("trajectory_unit must be positive".into());

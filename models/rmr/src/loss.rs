@@ -11,6 +11,17 @@
 //! - `L_foot`: `|sigmoid(c_out) - c_gt|_1`;
 //! - `L_begin`: `1/T_begin sum_{t=1..T_begin} sig(t / T_begin) |x_out,t - x_t|_1` over `r, p, q, v`,
 //!   against the input, with `sig(x) = 1 - 1 / (1 + exp(5 - 10 x))` (frames counted from 1).
+//!
+//! Two terms of ours, off in the paper's loss (weights [`Config::lambda_fk`],
+//! [`Config::lambda_slide`]), on the motion the decoded output is made of (its rotations):
+//! - `L_fk`: `|norm(FK(q_out, p_out,hips)) - p_gt|_1` over the lower-body joints but the hips:
+//!   their positions in the frame's ground root by forward kinematics of the output's
+//!   (normalised) local rotations from its hips position, normalised like `p`, against the
+//!   ground truth's `p`;
+//! - `L_slide`: on the frames `t >= 1` where the ground truth has a contact at `t - 1` and `t`,
+//!   the horizontal displacement (cm) of that contact joint from `t - 1` to `t`, by forward
+//!   kinematics and the output's root displacement `r_t`, summed over the four contacts and
+//!   averaged over frames and the batch.
 
 use crate::config::Config;
 use crate::error::RmrResult;
@@ -40,6 +51,10 @@ pub struct LossTerms {
     pub foot: Tensor,
     /// `L_begin` (0 when `T_begin = 0`).
     pub begin: Tensor,
+    /// `L_fk` (0 unless its weight is positive).
+    pub fk: Tensor,
+    /// `L_slide` (0 unless its weight is positive).
+    pub slide: Tensor,
 }
 
 /// The loss terms as numbers.
@@ -55,6 +70,10 @@ pub struct LossValues {
     pub foot: f64,
     /// `L_begin`.
     pub begin: f64,
+    /// `L_fk`.
+    pub fk: f64,
+    /// `L_slide`.
+    pub slide: f64,
 }
 
 impl LossTerms {
@@ -67,6 +86,8 @@ impl LossTerms {
             trajectory: v(&self.trajectory)?,
             foot: v(&self.foot)?,
             begin: v(&self.begin)?,
+            fk: v(&self.fk)?,
+            slide: v(&self.slide)?,
         })
     }
 }
@@ -82,6 +103,20 @@ pub struct Loss {
     root_mean: Tensor,
     root_std: Tensor,
     begin_w: Option<Tensor>,
+    kinematics: Option<Kinematics>,
+}
+
+/// What `L_fk` and `L_slide` need: the lower body's chain and bone vectors, where each joint's
+/// values sit in the pose vector, and the statistics to denormalise them.
+#[derive(Clone, Debug)]
+struct Kinematics {
+    lambda: [f64; 2],
+    /// Lower-body joints, parents first: (joint, its `p` slot, parent joint, bone vector `(3)`).
+    chain: Vec<(usize, usize, Option<usize>, Tensor)>,
+    /// `p` slot of each contact joint.
+    contacts: [usize; 4],
+    mean: Tensor,
+    std: Tensor,
 }
 
 impl Loss {
@@ -96,6 +131,9 @@ impl Loss {
                 Tensor::from_vec(w, (1, config.t_begin, 1), device)
             })
             .transpose()?;
+        let kinematics = (config.lambda_fk > 0.0 || config.lambda_slide > 0.0)
+            .then(|| Kinematics::new(config, stats, device))
+            .transpose()?;
         Ok(Loss {
             fl,
             lambda: [config.lambda_pose, config.lambda_trajectory, config.lambda_foot, config.lambda_begin],
@@ -104,6 +142,7 @@ impl Loss {
             root_mean,
             root_std,
             begin_w,
+            kinematics,
         })
     }
 
@@ -178,8 +217,163 @@ impl Loss {
             None => pose.zeros_like()?,
         };
         let [lp, lt, lf, lb] = self.lambda;
-        let total = ((((&pose * lp)? + (&trajectory * lt)?)? + (&foot * lf)?)? + (&begin * lb)?)?;
-        Ok(LossTerms { total, pose, trajectory, foot, begin })
+        let mut total = ((((&pose * lp)? + (&trajectory * lt)?)? + (&foot * lf)?)? + (&begin * lb)?)?;
+        let (fk, slide) = match &self.kinematics {
+            Some(k) => {
+                let (fk, slide) = k.terms(out, target, self.fl)?;
+                total = ((total + (&fk * k.lambda[0])?)? + (&slide * k.lambda[1])?)?;
+                (fk, slide)
+            }
+            None => (pose.zeros_like()?, pose.zeros_like()?),
+        };
+        Ok(LossTerms { total, pose, trajectory, foot, begin, fk, slide })
+    }
+}
+
+/// Hamilton product of quaternions `(.., 4)` stored `x, y, z, w`.
+fn quat_mul(a: &Tensor, b: &Tensor) -> RmrResult<Tensor> {
+    let c = |q: &Tensor, i: usize| q.narrow(D::Minus1, i, 1);
+    let (ax, ay, az, aw) = (c(a, 0)?, c(a, 1)?, c(a, 2)?, c(a, 3)?);
+    let (bx, by, bz, bw) = (c(b, 0)?, c(b, 1)?, c(b, 2)?, c(b, 3)?);
+    let x = ((((&aw * &bx)? + (&ax * &bw)?)? + (&ay * &bz)?)? - (&az * &by)?)?;
+    let y = ((((&aw * &by)? - (&ax * &bz)?)? + (&ay * &bw)?)? + (&az * &bx)?)?;
+    let z = ((((&aw * &bz)? + (&ax * &by)?)? - (&ay * &bx)?)? + (&az * &bw)?)?;
+    let w = ((((&aw * &bw)? - (&ax * &bx)?)? - (&ay * &by)?)? - (&az * &bz)?)?;
+    Ok(Tensor::cat(&[x, y, z, w], D::Minus1)?)
+}
+
+/// A constant vector `v` `(3)` rotated by unit quaternions `q` `(.., 4)`: `(.., 3)`.
+fn rotate(q: &Tensor, v: &Tensor) -> RmrResult<Tensor> {
+    let u = q.narrow(D::Minus1, 0, 3)?;
+    let w = q.narrow(D::Minus1, 3, 1)?;
+    let cross = |a: &Tensor, b: &Tensor| -> RmrResult<Tensor> {
+        let c = |t: &Tensor, i: usize| t.narrow(D::Minus1, i, 1);
+        let (a0, a1, a2, b0, b1, b2) = (c(a, 0)?, c(a, 1)?, c(a, 2)?, c(b, 0)?, c(b, 1)?, c(b, 2)?);
+        Ok(Tensor::cat(
+            &[((&a1 * &b2)? - (&a2 * &b1)?)?, ((&a2 * &b0)? - (&a0 * &b2)?)?, ((&a0 * &b1)? - (&a1 * &b0)?)?],
+            D::Minus1,
+        )?)
+    };
+    let v = v.broadcast_as(u.shape())?.contiguous()?;
+    // v' = v + w t + u x t, t = 2 u x v
+    let t = (cross(&u, &v)? * 2.0)?;
+    Ok(((&v + t.broadcast_mul(&w)?)? + cross(&u, &t)?)?)
+}
+
+impl Kinematics {
+    fn new(config: &Config, stats: &FeatureStats, device: &Device) -> RmrResult<Kinematics> {
+        let lower = &config.layout.lower_body;
+        if config.offsets.len() != config.joints {
+            return Err(crate::RmrError::Config(format!(
+                "the forward-kinematics loss terms need the skeleton's {} offsets, the configuration has {}",
+                config.joints,
+                config.offsets.len()
+            )));
+        }
+        let slot = |j: usize| lower.iter().position(|&k| k == j);
+        // Parents first: the root, then each joint once its parent is placed.
+        let mut order: Vec<usize> = Vec::new();
+        while order.len() < lower.len() {
+            let before = order.len();
+            for &j in lower {
+                let parent = (config.parents[j] >= 0).then(|| config.parents[j] as usize);
+                let ready = match parent {
+                    None => true,
+                    Some(p) => order.contains(&p),
+                };
+                if !order.contains(&j) && ready && (parent.is_none() || slot(parent.unwrap_or(0)).is_some()) {
+                    order.push(j);
+                }
+            }
+            if order.len() == before {
+                return Err(crate::RmrError::Config(
+                    "every lower-body joint's parent must be in the lower body (the forward-kinematics loss walks it from the hips)".into(),
+                ));
+            }
+        }
+        let chain = order
+            .iter()
+            .map(|&j| {
+                let o = config.offsets[j];
+                let bone = Tensor::from_vec(vec![o[0] as f32, o[1] as f32, o[2] as f32], 3, device)?;
+                let parent = (config.parents[j] >= 0).then(|| config.parents[j] as usize);
+                Ok((j, slot(j).unwrap_or(0), parent, bone))
+            })
+            .collect::<RmrResult<Vec<_>>>()?;
+        let mut contacts = [0; 4];
+        for (c, &j) in contacts.iter_mut().zip(&config.layout.contacts) {
+            *c = slot(j).ok_or_else(|| {
+                crate::RmrError::Config(format!(
+                    "contact joint {j} is not in the lower body (L_slide needs its position)"
+                ))
+            })?;
+        }
+        let d = stats.dim();
+        Ok(Kinematics {
+            lambda: [config.lambda_fk, config.lambda_slide],
+            chain,
+            contacts,
+            mean: Tensor::from_slice(&stats.mean, d, device)?,
+            std: Tensor::from_slice(&stats.std, d, device)?,
+        })
+    }
+
+    /// `(L_fk, L_slide)` of output `out` against ground truth `target` (normalised).
+    fn terms(&self, out: &Tensor, target: &Tensor, fl: FeatureLayout) -> RmrResult<(Tensor, Tensor)> {
+        let raw = out.broadcast_mul(&self.std)?.broadcast_add(&self.mean)?;
+        // Forward kinematics in each frame's ground root: global rotation and position per joint.
+        let mut placed: Vec<(usize, Tensor, Tensor)> = Vec::with_capacity(self.chain.len());
+        for (j, s, parent, bone) in &self.chain {
+            let q = raw.narrow(D::Minus1, fl.rotations() + 4 * j, 4)?;
+            let q = q.broadcast_div(&(q.sqr()?.sum_keepdim(D::Minus1)? + 1e-12)?.sqrt()?)?;
+            let found = parent.and_then(|p| placed.iter().find(|(k, _, _)| *k == p));
+            let (rot, pos) = match found {
+                None => (q, raw.narrow(D::Minus1, fl.positions() + 3 * s, 3)?),
+                Some((_, prot, ppos)) => (quat_mul(prot, &q)?, (ppos + rotate(prot, bone)?)?),
+            };
+            placed.push((*j, rot, pos));
+        }
+        let pos_of = |s: usize| -> RmrResult<&Tensor> {
+            let j = self.chain.iter().find(|(_, k, _, _)| *k == s).map(|c| c.0).unwrap_or(usize::MAX);
+            placed
+                .iter()
+                .find(|(k, _, _)| *k == j)
+                .map(|(_, _, p)| p)
+                .ok_or_else(|| crate::RmrError::Config("internal: joint not placed".into()))
+        };
+        // L_fk over every lower-body joint but the root, in p's normalisation.
+        let mut fk_parts = Vec::new();
+        for (_, s, parent, _) in &self.chain {
+            if parent.is_none() {
+                continue;
+            }
+            let off = fl.positions() + 3 * s;
+            let p = pos_of(*s)?;
+            let pn = p.broadcast_sub(&self.mean.narrow(0, off, 3)?)?.broadcast_div(&self.std.narrow(0, off, 3)?)?;
+            fk_parts.push((pn - target.narrow(D::Minus1, off, 3)?)?.abs()?.sum(D::Minus1)?);
+        }
+        let fk = Tensor::stack(&fk_parts, D::Minus1)?.sum(D::Minus1)?.mean_all()?;
+        // L_slide: a contact joint's horizontal move from t - 1 to t in root t - 1's frame.
+        let frames = out.dim(1)?;
+        let r = raw.narrow(D::Minus1, 0, 3)?.narrow(1, 1, frames - 1)?;
+        let (dx, dth, dz) = (r.narrow(D::Minus1, 0, 1)?, r.narrow(D::Minus1, 1, 1)?, r.narrow(D::Minus1, 2, 1)?);
+        let (c, sn) = (dth.cos()?, dth.sin()?);
+        let mut slides = Vec::new();
+        for (k, &s) in self.contacts.iter().enumerate() {
+            let p = pos_of(s)?;
+            let (now, before) = (p.narrow(1, 1, frames - 1)?, p.narrow(1, 0, frames - 1)?);
+            let (x, z) = (now.narrow(D::Minus1, 0, 1)?, now.narrow(D::Minus1, 2, 1)?);
+            // R(dtheta) p_t + (dx, dz) - p_(t-1), horizontal components
+            let mx = ((((&c * &x)? + (&sn * &z)?)? + &dx)? - before.narrow(D::Minus1, 0, 1)?)?;
+            let mz = ((((&c * &z)? - (&sn * &x)?)? + &dz)? - before.narrow(D::Minus1, 2, 1)?)?;
+            let dist = ((mx.sqr()? + mz.sqr()?)? + 1e-6)?.sqrt()?;
+            let ci = fl.contacts() + k;
+            let on = (target.narrow(D::Minus1, ci, 1)?.narrow(1, 1, frames - 1)?
+                * target.narrow(D::Minus1, ci, 1)?.narrow(1, 0, frames - 1)?)?;
+            slides.push((dist * on)?);
+        }
+        let slide = Tensor::cat(&slides, D::Minus1)?.sum(D::Minus1)?.mean_all()?;
+        Ok((fk, slide))
     }
 }
 

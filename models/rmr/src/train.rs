@@ -195,6 +195,8 @@ impl RmrTrainer {
             acc.trajectory += v.trajectory * f;
             acc.foot += v.foot * f;
             acc.begin += v.begin * f;
+            acc.fk += v.fk * f;
+            acc.slide += v.slide * f;
         }
         Ok((acc, grads))
     }
@@ -224,6 +226,8 @@ impl RmrTrainer {
             acc.trajectory += v.trajectory * w;
             acc.foot += v.foot * w;
             acc.begin += v.begin * w;
+            acc.fk += v.fk * w;
+            acc.slide += v.slide * w;
         }
         Ok(acc)
     }

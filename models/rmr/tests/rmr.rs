@@ -602,3 +602,42 @@ fn two_thread_step_matches_the_one_thread_step() {
     assert_eq!(again.train_step(&x, &y).unwrap().total.to_bits(), l2.total.to_bits());
     assert_eq!(weights(&again), w2);
 }
+
+/// Our forward-kinematics terms: the ground truth's own rotations give back its positions
+/// (`L_fk` ~ 0) and its feet barely move on its contact frames, while the aligned input (other
+/// clips' rotations) misses the truth's positions and a shifted root displacement slides.
+#[test]
+fn the_forward_kinematics_terms_vanish_on_the_ground_truth() {
+    let data = tiny_data();
+    let mut config = data.config.clone();
+    config.lambda_fk = 1.0;
+    config.lambda_slide = 1.0;
+    config.validate().unwrap();
+    assert_eq!(config.offsets.len(), config.joints);
+    let loss = Loss::new(&config, &data.stats, &Device::Cpu).unwrap();
+    let trainer = RmrTrainer::new(&config, data.stats.clone(), &Device::Cpu).unwrap();
+    let (x, y) = trainer.batch(&data.train, &(0..8).collect::<Vec<_>>()).unwrap();
+    let truth = loss.terms(&y, &x, &y).unwrap().values().unwrap();
+    let input = loss.terms(&x, &x, &y).unwrap().values().unwrap();
+    assert!(truth.fk < 0.05, "the truth's own rotations: L_fk {}", truth.fk);
+    assert!(input.fk > 10.0 * truth.fk.max(1e-3), "input {} vs truth {}", input.fk, truth.fk);
+    // The truth's planted feet move little; moving every root displacement by 3 cm slides them.
+    assert!(truth.slide < 3.0, "truth slide {}", truth.slide);
+    let d = y.dim(2).unwrap();
+    let shift: Vec<f32> = (0..d).map(|k| if k == 0 { 3.0 / data.stats.std[0] } else { 0.0 }).collect();
+    let shifted = y.broadcast_add(&Tensor::from_vec(shift, d, &Device::Cpu).unwrap()).unwrap();
+    let slid = loss.terms(&shifted, &x, &y).unwrap().values().unwrap();
+    assert!(slid.slide > truth.slide + 1.0, "shifted root: slide {} vs {}", slid.slide, truth.slide);
+    // The terms enter the total with their weights, and train.
+    assert!(
+        (truth.total - (truth.pose + truth.trajectory + 0.5 * truth.foot + truth.begin + truth.fk + truth.slide)).abs()
+            < 1e-3 * truth.total.abs().max(1.0)
+    );
+    let mut t = RmrTrainer::new(&config, data.stats.clone(), &Device::Cpu).unwrap();
+    let first = t.train_step(&x, &y).unwrap();
+    assert!(first.fk > 0.0 && first.slide > 0.0 && first.total.is_finite(), "{first:?}");
+    // Without offsets the terms are refused with the fix.
+    let mut bare = config.clone();
+    bare.offsets.clear();
+    assert!(bare.validate().unwrap_err().to_string().contains("Config::with_skeleton"));
+}

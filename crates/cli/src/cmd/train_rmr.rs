@@ -98,6 +98,14 @@ pub struct RmrArgs {
     /// (0: the paper's loss) [default: 0].
     #[arg(long, allow_hyphen_values = true, value_parser = seam_weight)]
     pub seam_weight: Option<f64>,
+    /// Weight of our forward-kinematics term: the lower-body positions the output's rotations
+    /// give, against the ground truth's (0: the paper's loss) [default: 0; docs/rmr.md].
+    #[arg(long, allow_hyphen_values = true, value_parser = seam_weight)]
+    pub fk_weight: Option<f64>,
+    /// Weight of our foot-slide term: the contact joints' horizontal motion (cm per frame) on
+    /// the ground truth's contact frames, by forward kinematics (0: the paper's loss) [default: 0].
+    #[arg(long, allow_hyphen_values = true, value_parser = seam_weight)]
+    pub slide_weight: Option<f64>,
     /// Units of each recurrent layer, per direction [default: the preset's; paper: 256].
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::layer_width)]
     pub hidden: Option<usize>,
@@ -124,7 +132,7 @@ pub struct RmrArgs {
     pub threads: Option<usize>,
 }
 
-/// `--seam-weight`: a weight in `[0, 1000]`.
+/// `--seam-weight`, `--fk-weight`, `--slide-weight`: a weight in `[0, 1000]`.
 fn seam_weight(s: &str) -> Result<f64, String> {
     crate::args::real_in(s, crate::args::Interval::closed(0.0, 1000.0), "")
 }
@@ -177,6 +185,12 @@ fn fresh_config(a: &RmrArgs, skeleton: &zoo_motion::Skeleton) -> anyhow::Result<
     }
     if let Some(w) = a.seam_weight {
         config.seam_weight = w;
+    }
+    if let Some(w) = a.fk_weight {
+        config.lambda_fk = w;
+    }
+    if let Some(w) = a.slide_weight {
+        config.lambda_slide = w;
     }
     if let Some(h) = a.hidden {
         config.hidden = h;
@@ -264,13 +278,15 @@ pub fn run(a: RmrArgs) -> anyhow::Result<()> {
     };
     let c = trainer.config();
     println!(
-        "training RMR ({:?}, {} decoder, T_begin {}, trajectory loss {}, seam weight {}) on {source}: {} parameters, batch {}, lr {:e}, run \
-         folder {}",
+        "training RMR ({:?}, {} decoder, T_begin {}, trajectory loss {}, seam weight {}, fk weight {}, slide weight {}) on {source}: \
+         {} parameters, batch {}, lr {:e}, run folder {}",
         c.cell,
         if c.residual { "residual" } else { "absolute" },
         c.t_begin,
         if c.lambda_trajectory > 0.0 { "on" } else { "off" },
         c.seam_weight,
+        c.lambda_fk,
+        c.lambda_slide,
         zoo_rmr::model::parameter_count(trainer.varmap()),
         c.train.batch_size,
         c.train.learning_rate,
