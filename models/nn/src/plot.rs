@@ -1,4 +1,4 @@
-//! The loss-curve PNG of a run, rasterised with tiny-skia.
+//! PNG plots rasterised with tiny-skia: a run's loss curve, and plain line plots.
 
 use crate::checkpoint::io;
 use crate::error::{NnError, NnResult};
@@ -46,6 +46,62 @@ pub fn loss_curve(path: &Path, train: &[f64], valid: &[f64]) -> NnResult<()> {
             pm.stroke_path(&p, &paint, &stroke, Transform::identity(), None);
         }
     }
+    save_png(path, &pm)
+}
+
+/// Plots `series` (each `(values, rgb)`, x = index) as lines on a linear scale from 0 to the
+/// largest value, with a light grey line at every multiple of `grid` on the y axis, 800 x 360
+/// pixels; writes `path` atomically. Non-finite values break a line.
+pub fn lines(path: &Path, series: &[(&[f64], (u8, u8, u8))], grid: f64) -> NnResult<()> {
+    let (w, h, m) = (800.0f32, 360.0f32, 20.0f32);
+    let mut pm = Pixmap::new(w as u32, h as u32).ok_or_else(|| NnError::Config("cannot allocate the plot".into()))?;
+    pm.fill(Color::WHITE);
+    let hi = series.iter().flat_map(|(v, _)| v.iter()).copied().filter(|v| v.is_finite()).fold(0.0, f64::max);
+    let hi = if hi > 0.0 { hi } else { 1.0 };
+    let n = series.iter().map(|(v, _)| v.len()).max().unwrap_or(0).max(2);
+    let x = |i: usize| m + (w - 2.0 * m) * i as f32 / (n - 1) as f32;
+    let y = |v: f64| h - m - (h - 2.0 * m) * (v / hi) as f32;
+    let mut stroke = Stroke { width: 1.0, ..Stroke::default() };
+    let mut paint = Paint::default();
+    paint.set_color_rgba8(210, 210, 210, 255);
+    if grid > 0.0 && hi / grid < 100.0 {
+        let mut g = 0.0;
+        while g <= hi {
+            let mut pb = PathBuilder::new();
+            pb.move_to(m, y(g));
+            pb.line_to(w - m, y(g));
+            if let Some(p) = pb.finish() {
+                pm.stroke_path(&p, &paint, &stroke, Transform::identity(), None);
+            }
+            g += grid;
+        }
+    }
+    stroke.width = 2.0;
+    for (values, rgb) in series {
+        let mut pb = PathBuilder::new();
+        let mut pen_down = false;
+        for (i, v) in values.iter().enumerate() {
+            if !v.is_finite() {
+                pen_down = false;
+                continue;
+            }
+            if pen_down {
+                pb.line_to(x(i), y(*v))
+            } else {
+                pb.move_to(x(i), y(*v))
+            }
+            pen_down = true;
+        }
+        paint.set_color_rgba8(rgb.0, rgb.1, rgb.2, 255);
+        if let Some(p) = pb.finish() {
+            pm.stroke_path(&p, &paint, &stroke, Transform::identity(), None);
+        }
+    }
+    save_png(path, &pm)
+}
+
+/// Encodes `pm` and writes it to `path` atomically.
+fn save_png(path: &Path, pm: &Pixmap) -> NnResult<()> {
     let png =
         pm.encode_png().map_err(|e| NnError::Config(format!("{}: cannot encode the PNG: {e}", path.display())))?;
     crate::checkpoint::commit([crate::checkpoint::stage(path, |tmp| std::fs::write(tmp, &png).map_err(io(tmp)))?])
