@@ -523,7 +523,7 @@ fn bench_train_measures_every_thread_count() {
     }
     assert!(v["matmul_gflops_one_thread"].as_f64().unwrap() > 0.0);
     let (ok, _, stderr) = run(&["bench", "train", "--model", "rnn-gmm", "--batch", "8"]);
-    assert!(!ok && stderr.contains("--batch: only the RTN bench"), "{stderr}");
+    assert!(!ok && stderr.contains("--batch: only the RTN and ARNN benches"), "{stderr}");
     for model in ["rmr", "arnn"] {
         let (ok, stdout, stderr) =
             run(&["bench", "train", "--model", model, "--threads", "2", "--steps", "1", "--repeats", "1"]);

@@ -152,23 +152,34 @@ impl Arnn {
         fb: &Tensor,
         t_rel: &Tensor,
         state: &ArnnState,
+        rng: Option<&mut RowRngs>,
+    ) -> Result<(Tensor, ArnnState)> {
+        let keys = Tensor::cat(&[fa, fb, t_rel], D::Minus1)?;
+        self.step_with_keys(prev, &keys, state, rng)
+    }
+
+    /// [`Arnn::step`] from the keys' part of the input, `[features(X_K), features(X_{K+1}),
+    /// t_rel]` concatenated `(batch, 2 * feature + 1)` (training computes it for every frame at
+    /// once).
+    pub fn step_with_keys(
+        &self,
+        prev: &Tensor,
+        keys: &Tensor,
+        state: &ArnnState,
         mut rng: Option<&mut RowRngs>,
     ) -> Result<(Tensor, ArnnState)> {
-        let keys = || vec![fa.clone(), fb.clone(), t_rel.clone()];
         match &self.body {
             Body::Arnn { prev_features, rnn, .. } => {
-                let mut x = vec![prev_features.forward(prev)?];
-                x.extend(keys());
-                let (h, state) = self.recurrent(rnn, &Tensor::cat(&x, D::Minus1)?, state, rng.as_deref_mut())?;
+                let x = Tensor::cat(&[&prev_features.forward(prev)?, keys], D::Minus1)?;
+                let (h, state) = self.recurrent(rnn, &x, state, rng.as_deref_mut())?;
                 Ok(((prev + self.decode(&h, rng)?)?, state))
             }
             Body::NoMemory { hidden, .. } => {
-                let x = Tensor::cat(&keys(), D::Minus1)?;
+                let x = keys.clone();
                 let drops = self.config.gru_dropout.map(Dropout::new);
                 let mut h = x;
                 for (l, drop) in hidden.layers().iter().zip(drops) {
-                    h = Activation::Selu.apply(&zoo_nn::layers::linear_forward(l, &h)?)?;
-                    h = drop.forward(&h, rng.as_deref_mut())?;
+                    h = zoo_nn::layers::linear_act(l, &h, Activation::Selu, &drop, rng.as_deref_mut())?;
                 }
                 Ok((self.decode(&h, rng)?, ArnnState { gru: vec![] }))
             }
@@ -177,7 +188,7 @@ impl Arnn {
                 // network only the keys and t_rel (Figure 14).
                 let (h, state) = self.recurrent(rnn, &prev_features.forward(prev)?, state, rng.as_deref_mut())?;
                 let motion = (prev + self.decode(&h, rng.as_deref_mut())?)?;
-                let x = Tensor::cat(&keys(), D::Minus1)?;
+                let x = keys.clone();
                 let drop = Dropout::new(self.config.linear_dropout[0]);
                 let fix = correction.forward_dropout(&x, &drop, rng)?;
                 Ok(((motion + fix)?, state))
@@ -196,12 +207,14 @@ impl Arnn {
         if state.gru.len() != 2 {
             candle_core::bail!("the state has {} GRU layers, the network 2", state.gru.len())
         }
+        // SELU and dropout after each layer, one fused op each.
+        let selu_dropout = |h: &Tensor, p: f64, rng: Option<&mut RowRngs>| -> Result<Tensor> {
+            zoo_nn::act::bias_act(h, None, Activation::Selu, Dropout::new(p).mask(h, rng)?)
+        };
         let s1 = rnn.gru1.step(x, &state.gru[0])?;
-        let h1 = Activation::Selu.apply(s1.output())?;
-        let h1 = Dropout::new(self.config.gru_dropout[0]).forward(&h1, rng.as_deref_mut())?;
+        let h1 = selu_dropout(s1.output(), self.config.gru_dropout[0], rng.as_deref_mut())?;
         let s2 = rnn.gru2.step(&h1, &state.gru[1])?;
-        let h2 = Activation::Selu.apply(s2.output())?;
-        let h2 = Dropout::new(self.config.gru_dropout[1]).forward(&h2, rng)?;
+        let h2 = selu_dropout(s2.output(), self.config.gru_dropout[1], rng)?;
         Ok((h2, ArnnState { gru: vec![s1, s2] }))
     }
 
@@ -210,11 +223,12 @@ impl Arnn {
         let layers = self.decoder.layers();
         let mut y = h.clone();
         for (i, l) in layers.iter().enumerate() {
-            y = zoo_nn::layers::linear_forward(l, &y)?;
-            if i + 1 < layers.len() {
-                y = Activation::Selu.apply(&y)?;
-                y = Dropout::new(self.config.linear_dropout[i.min(1)]).forward(&y, rng.as_deref_mut())?;
-            }
+            y = if i + 1 < layers.len() {
+                let drop = Dropout::new(self.config.linear_dropout[i.min(1)]);
+                zoo_nn::layers::linear_act(l, &y, Activation::Selu, &drop, rng.as_deref_mut())?
+            } else {
+                zoo_nn::layers::linear_forward(l, &y)?
+            };
         }
         Ok(y)
     }

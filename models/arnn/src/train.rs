@@ -10,7 +10,7 @@
 use crate::config::ArnnConfig;
 use crate::model::Arnn;
 use crate::{ArnnError, ArnnResult};
-use candle_core::{DType, Device, Tensor};
+use candle_core::{D, DType, Device, Tensor};
 use candle_nn::{Optimizer, VarMap};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -18,6 +18,7 @@ use zoo_data::luxo::preprocess::{KeyedSequence, drop_keys};
 use zoo_nn::checkpoint as ck;
 use zoo_nn::optim::{Adam, ParamsAdam, StatefulOptimizer};
 use zoo_nn::rng::SplitMix64;
+use zoo_nn::tape::frame_leaves;
 use zoo_nn::train_loop::{Trainable, Validation};
 use zoo_nn::{DataParallel, RowRngs, SeededVarMap, TrainError};
 
@@ -254,16 +255,12 @@ impl ArnnTrainer {
         let mut prev = gt.narrow(1, 0, 1)?.squeeze(1)?;
         let mut outs = Vec::with_capacity(steps);
         // The keys' features of every step at once (they do not depend on the recurrence).
+        // The keys' part of every step's input at once (it does not depend on the recurrence),
+        // read frame by frame through a sequence tape in training (`frame_leaves`).
         let (fa, fb) = self.model.key_features(&ka, &kb)?;
+        let keys = frame_leaves(&Tensor::cat(&[&fa, &fb, &tr], D::Minus1)?)?;
         for t in 1..t_len {
-            let (y, s) = self.model.step_with_key_features(
-                &prev,
-                &fa.get(t - 1)?,
-                &fb.get(t - 1)?,
-                &tr.get(t - 1)?,
-                &state,
-                rngs.as_deref_mut(),
-            )?;
+            let (y, s) = self.model.step_with_keys(&prev, &keys[t - 1], &state, rngs.as_deref_mut())?;
             state = s;
             let use_truth = teacher.get(t - 1).copied().unwrap_or(false);
             prev = if use_truth { gt.narrow(1, t, 1)?.squeeze(1)? } else { y.clone() };

@@ -210,17 +210,19 @@ fn gru_ops(gx: &Tensor, gh: &Tensor, h: &Tensor) -> Result<Tensor> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use candle_core::{Device, Var};
 
-    fn var(shape: (usize, usize), phase: f64) -> Var {
+    /// A variable of `shape` holding `2.5 sin(0.37 i + phase)`.
+    pub(crate) fn var(shape: (usize, usize), phase: f64) -> Var {
         let n = shape.0 * shape.1;
         let t = Tensor::arange(0f32, n as f32, &Device::Cpu).unwrap().affine(0.37, phase).unwrap().sin().unwrap();
         Var::from_tensor(&(t * 2.5).unwrap().reshape(shape).unwrap()).unwrap()
     }
 
-    fn close(a: &Tensor, b: &Tensor, what: &str) {
+    /// `a` and `b` agree within 1e-5 of `a`'s largest value.
+    pub(crate) fn close(a: &Tensor, b: &Tensor, what: &str) {
         let a = a.flatten_all().unwrap().to_vec1::<f32>().unwrap();
         let b = b.flatten_all().unwrap().to_vec1::<f32>().unwrap();
         let scale = a.iter().fold(1e-3f32, |m, v| m.max(v.abs()));

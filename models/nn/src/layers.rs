@@ -78,11 +78,11 @@ impl Mlp {
         let n = self.layers.len();
         let mut h = x.clone();
         for (i, l) in self.layers.iter().enumerate() {
-            h = linear_forward(l, &h)?;
-            if i + 1 < n || self.activate_last {
-                h = self.activation.apply(&h)?;
-                h = dropout.forward(&h, rng.as_deref_mut())?;
-            }
+            h = if i + 1 < n || self.activate_last {
+                linear_act(l, &h, self.activation, dropout, rng.as_deref_mut())?
+            } else {
+                linear_forward(l, &h)?
+            };
         }
         Ok(h)
     }
@@ -94,10 +94,29 @@ pub fn linear_forward(l: &Linear, x: &Tensor) -> Result<Tensor> {
     if x.rank() != 2 {
         return l.forward(x);
     }
-    let y = crate::tape::matmul_weight(x, l.weight(), true)?;
     match l.bias() {
-        Some(b) => y.broadcast_add(b),
-        None => Ok(y),
+        Some(b) => crate::tape::linear(x, l.weight(), b, None, None),
+        None => crate::tape::matmul_weight(x, l.weight(), true),
+    }
+}
+
+/// `dropout(act(linear(x)))`: for a 2-D input the bias, activation and dropout are one fused op
+/// ([`crate::act::bias_act`]) after the taped matmul.
+pub fn linear_act(
+    l: &Linear,
+    x: &Tensor,
+    act: Activation,
+    dropout: &Dropout,
+    rng: Option<&mut RowRngs>,
+) -> Result<Tensor> {
+    if x.rank() != 2 {
+        return dropout.forward(&act.apply(&l.forward(x)?)?, rng);
+    }
+    let rows = x.dim(0)?;
+    let mask = dropout.mask_of(rows, rows * l.weight().dim(0)?, rng)?;
+    match l.bias() {
+        Some(b) => crate::tape::linear(x, l.weight(), b, Some(act), mask),
+        None => crate::act::bias_act(&crate::tape::matmul_weight(x, l.weight(), true)?, None, act, mask),
     }
 }
 
@@ -152,22 +171,34 @@ impl Dropout {
     /// (sample `i` draws its values, row-major, from its own stream), identity when `None` or
     /// `p == 0`.
     pub fn forward(&self, x: &Tensor, rng: Option<&mut RowRngs>) -> Result<Tensor> {
-        let Some(rng) = rng else { return Ok(x.clone()) };
-        if self.p == 0.0 {
-            return Ok(x.clone());
+        match self.mask(x, rng)? {
+            Some(mask) => x.mul(&Tensor::from_vec(mask, x.shape(), x.device())?.to_dtype(x.dtype())?),
+            None => Ok(x.clone()),
         }
-        let rows = x.dim(0)?;
+    }
+
+    /// The mask [`Dropout::forward`] multiplies `x` by (0 or `1 / (1 - p)` per value, row-major),
+    /// drawn from the generators; `None` at evaluation or when `p == 0` (nothing is drawn).
+    pub fn mask(&self, x: &Tensor, rng: Option<&mut RowRngs>) -> Result<Option<Vec<f32>>> {
+        self.mask_of(x.dim(0)?, x.elem_count(), rng)
+    }
+
+    /// [`Dropout::mask`] for a batch-first tensor of `rows` samples and `count` values.
+    pub fn mask_of(&self, rows: usize, count: usize, rng: Option<&mut RowRngs>) -> Result<Option<Vec<f32>>> {
+        let Some(rng) = rng else { return Ok(None) };
+        if self.p == 0.0 {
+            return Ok(None);
+        }
         if rows != rng.rows() {
             candle_core::bail!("dropout: {rows} samples in the batch, {} generators", rng.rows());
         }
-        let per_row = x.elem_count() / rows.max(1);
+        let per_row = count / rows.max(1);
         let keep = (1.0 / (1.0 - self.p)) as f32;
-        let mut mask = Vec::with_capacity(x.elem_count());
+        let mut mask = Vec::with_capacity(count);
         for s in rng.streams.iter_mut() {
             mask.extend((0..per_row).map(|_| if s.next_f64() < self.p { 0.0 } else { keep }));
         }
-        let mask = Tensor::from_vec(mask, x.shape(), x.device())?.to_dtype(x.dtype())?;
-        x.mul(&mask)
+        Ok(Some(mask))
     }
 }
 

@@ -4,6 +4,7 @@
 //! - [`init`]: seeded weight initialisation (weights depend on the seed and the variable name only);
 //! - [`layers`]: [`Mlp`] with a chosen activation, seeded [`Dropout`];
 //! - [`ops`]: fused CPU kernels (the leaky ReLU);
+//! - [`act`]: a layer's bias, activation and dropout as one fused op;
 //! - [`recurrent`]: multi-layer [`Gru`] and [`Lstm`] with the state outside the layer, and
 //!   bidirectional [`BiGru`] / [`BiLstm`] over a sequence;
 //! - [`optim`]: [`AmsGrad`], [`Adam`], [`RmsProp`] with their state saved by name, gradient clipping;
@@ -14,6 +15,7 @@
 //! - [`train_loop`]: the one training loop, driving any model that implements [`Trainable`];
 //! - [`plot`]: the loss-curve PNG.
 
+pub mod act;
 pub mod cells;
 pub mod checkpoint;
 pub mod ema;

@@ -66,14 +66,14 @@ impl Layer {
         if let [b, t, i] = *x.dims() {
             // Every frame at once as the rows of one matmul (taped in training).
             let y = crate::tape::matmul_weight(&x.reshape((b * t, i))?, &self.w_ih, true)?;
-            return y.broadcast_add(&self.b_ih)?.reshape((b, t, ()));
+            return crate::act::bias_add(&y, &self.b_ih)?.reshape((b, t, ()));
         }
-        crate::tape::matmul_weight(x, &self.w_ih, true)?.broadcast_add(&self.b_ih)
+        crate::tape::linear(x, &self.w_ih, &self.b_ih, None, None)
     }
 
     /// One step from the projected input `gx` `(batch, G*H)`: the new `h` and, for the LSTM, `c`.
     fn update(&self, gx: &Tensor, h: &Tensor, c: Option<&Tensor>) -> Result<(Tensor, Option<Tensor>)> {
-        let gh = crate::tape::matmul_weight(h, &self.w_hh, true)?.broadcast_add(&self.b_hh)?;
+        let gh = crate::tape::linear(h, &self.w_hh, &self.b_hh, None, None)?;
         match self.cell {
             Cell::Lstm => {
                 let c = c.ok_or_else(|| candle_core::Error::Msg("an LSTM step needs the cell state".into()))?;
@@ -90,8 +90,8 @@ impl Layer {
         let gx = self.input_proj(xs)?;
         let (mut h, mut c) = (h.clone(), c.cloned());
         let mut outs = Vec::with_capacity(xs.dim(1)?);
-        for t in 0..xs.dim(1)? {
-            let (h2, c2) = self.update(&gx.narrow(1, t, 1)?.squeeze(1)?, &h, c.as_ref())?;
+        for gx in frames(&gx, 1)? {
+            let (h2, c2) = self.update(&gx, &h, c.as_ref())?;
             outs.push(h2.clone());
             (h, c) = (h2, c2);
         }
@@ -101,6 +101,29 @@ impl Layer {
 
 fn zeros(batch: usize, layer: &Layer) -> Result<Tensor> {
     Tensor::zeros((batch, layer.hidden), layer.w_hh.dtype(), layer.w_hh.device())
+}
+
+/// The slices of `x` along `dim`, each with `dim` removed: `x.narrow(dim, i, 1).squeeze(dim)`
+/// for every `i`, the same values.
+///
+/// The backward pass of a narrow builds a gradient of its whole input (zeros around the slice)
+/// and adds it to the input's: slicing every frame of a `(.., T, ..)` tensor that needs a
+/// gradient one by one costs `T` whole-tensor gradients (quadratic in the sequence length). Here
+/// the slices are taken from about `sqrt(T)` blocks of about `sqrt(T)` frames, so the backward
+/// pass writes about `2 sqrt(T)` whole-tensor gradients; the gradient values are the same
+/// (the padding adds exact zeros).
+pub fn frames(x: &Tensor, dim: usize) -> Result<Vec<Tensor>> {
+    let n = x.dim(dim)?;
+    let block = ((n as f64).sqrt().ceil() as usize).max(1);
+    let mut out = Vec::with_capacity(n);
+    for start in (0..n).step_by(block) {
+        let len = block.min(n - start);
+        let b = if len == n { x.clone() } else { x.narrow(dim, start, len)? };
+        for i in 0..len {
+            out.push(b.narrow(dim, i, 1)?.squeeze(dim)?);
+        }
+    }
+    Ok(out)
 }
 
 /// Reverses a `(batch, time, ...)` sequence along time.

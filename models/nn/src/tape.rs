@@ -22,7 +22,7 @@
 
 use candle_core::backend::BackendStorage;
 use candle_core::backprop::GradStore;
-use candle_core::{CpuStorage, CustomOp2, Layout, Result, Shape, Tensor, TensorId, Var};
+use candle_core::{CpuStorage, CustomOp2, CustomOp3, Layout, Result, Shape, Tensor, TensorId, Var};
 use std::cell::RefCell;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
@@ -31,6 +31,11 @@ use std::sync::{Arc, Mutex};
 struct Entries {
     inputs: Vec<Tensor>,
     grads: Vec<Option<Tensor>>,
+    /// Per frame: whether the tape's bias variable was added ([`WeightTape::linear`]), so that
+    /// [`WeightTape::finish`] adds the column sums of that frame's gradient to the bias's.
+    biased: Vec<bool>,
+    /// The bias variable the tape's frames add (the first one seen).
+    bias: Option<Tensor>,
 }
 
 /// The frames' inputs and output gradients of one weight (see the module documentation).
@@ -46,6 +51,9 @@ pub struct WeightTape {
     /// Whether frames compute `x W^T` (a weight stored `(out, in)`) rather than `x W`.
     transposed: bool,
     entries: Arc<Mutex<Entries>>,
+    /// A sequence tape ([`frame_leaves`]): the leaf variables holding each frame of `weight`
+    /// (then the sequence `(T, ..)`, not a weight).
+    frames: Option<Vec<Var>>,
 }
 
 impl std::fmt::Debug for WeightTape {
@@ -84,6 +92,119 @@ impl CustomOp2 for TapedMatMul {
             *slot = Some(grad.detach());
         }
         Ok((dx, None))
+    }
+}
+
+/// A taped linear layer in one op: `mask * act(x W + b)` (the activation and the dropout mask
+/// optional), its weight gradient left to the tape like [`TapedMatMul`]'s, the bias and input
+/// gradients computed in its backward pass. One graph node per layer and frame instead of a
+/// matmul, a bias broadcast (whose backward is a strided reduction) and an activation.
+struct TapedLinear {
+    entries: Arc<Mutex<Entries>>,
+    index: usize,
+    backward: Tensor,
+    act: Option<crate::Activation>,
+    mask: Option<Vec<f32>>,
+    /// Whether the bias's gradient is left to the tape (`WeightTape::finish`).
+    bias_taped: bool,
+    /// The pre-activation `x W + b`, kept by the forward pass when there is an activation.
+    pre: Mutex<Option<Vec<f32>>>,
+}
+
+/// The sums over the rows of a 2-D f32 tensor of `n` columns, rows in order.
+fn column_sums(t: &Tensor, n: usize) -> Result<Vec<f32>> {
+    let mut sums = vec![0f32; n];
+    for row in t.flatten_all()?.to_vec1::<f32>()?.chunks(n.max(1)) {
+        for (s, v) in sums.iter_mut().zip(row) {
+            *s += v;
+        }
+    }
+    Ok(sums)
+}
+
+fn contiguous_f32<'a>(s: &'a CpuStorage, l: &Layout, what: &str) -> Result<&'a [f32]> {
+    match l.contiguous_offsets() {
+        Some((a, b)) => Ok(&s.as_slice::<f32>()?[a..b]),
+        None => candle_core::bail!("taped linear: a non-contiguous {what} {:?}", l.dims()),
+    }
+}
+
+impl CustomOp3 for TapedLinear {
+    fn name(&self) -> &'static str {
+        "zoo-taped-linear"
+    }
+
+    fn cpu_fwd(
+        &self,
+        s1: &CpuStorage,
+        l1: &Layout,
+        s2: &CpuStorage,
+        l2: &Layout,
+        s3: &CpuStorage,
+        l3: &Layout,
+    ) -> Result<(CpuStorage, Shape)> {
+        let (m, k) = l1.shape().dims2()?;
+        let (k2, n) = l2.shape().dims2()?;
+        if k != k2 || l3.dims() != [n] {
+            candle_core::bail!("taped linear: ({m}, {k}) x ({k2}, {n}) + {:?} do not match", l3.dims());
+        }
+        if self.mask.as_ref().is_some_and(|v| v.len() != m * n) {
+            candle_core::bail!("taped linear: a dropout mask for another shape than ({m}, {n})");
+        }
+        let mut y = match s1.matmul(s2, (1, m, n, k), l1, l2)? {
+            CpuStorage::F32(v) => v,
+            _ => candle_core::bail!("taped linear: f32 only"),
+        };
+        let b = contiguous_f32(s3, l3, "bias")?;
+        for row in y.chunks_mut(n.max(1)) {
+            for (v, b) in row.iter_mut().zip(b) {
+                *v += b;
+            }
+        }
+        if self.act.is_some() || self.mask.is_some() {
+            if self.act.is_some() {
+                *self.pre.lock().map_err(|_| candle_core::Error::Msg("a taped linear op was poisoned".into()))? =
+                    Some(y.clone());
+            }
+            for (i, v) in y.iter_mut().enumerate() {
+                let a = crate::act::act(self.act, *v).0;
+                *v = self.mask.as_ref().map_or(a, |m| a * m[i]);
+            }
+        }
+        Ok((CpuStorage::F32(y), Shape::from((m, n))))
+    }
+
+    fn bwd(
+        &self,
+        x: &Tensor,
+        _w: &Tensor,
+        b: &Tensor,
+        _res: &Tensor,
+        grad: &Tensor,
+    ) -> Result<(Option<Tensor>, Option<Tensor>, Option<Tensor>)> {
+        let n = b.dim(0)?;
+        let dz = if self.act.is_none() && self.mask.is_none() {
+            grad.detach()
+        } else {
+            let mut g = grad.flatten_all()?.to_vec1::<f32>()?;
+            let pre = self.pre.lock().map_err(|_| candle_core::Error::Msg("a taped linear op was poisoned".into()))?;
+            for (i, v) in g.iter_mut().enumerate() {
+                if let Some(m) = &self.mask {
+                    *v *= m[i];
+                }
+                if let Some(z) = pre.as_ref() {
+                    *v *= crate::act::act(self.act, z[i]).1;
+                }
+            }
+            Tensor::from_vec(g, grad.shape(), grad.device())?
+        };
+        let db = if self.bias_taped { None } else { Some(Tensor::from_vec(column_sums(&dz, n)?, n, b.device())?) };
+        let dx = if x.track_op() { Some(dz.matmul(&self.backward)?) } else { None };
+        let mut e = self.entries.lock().map_err(|_| candle_core::Error::Msg("a weight tape was poisoned".into()))?;
+        if let Some(slot) = e.grads.get_mut(self.index) {
+            *slot = Some(dz);
+        }
+        Ok((dx, None, db))
     }
 }
 
@@ -144,6 +265,7 @@ impl WeightTape {
             backward,
             transposed,
             entries: Arc::new(Mutex::new(Entries::default())),
+            frames: None,
         })
     }
 
@@ -154,10 +276,46 @@ impl WeightTape {
                 self.entries.lock().map_err(|_| candle_core::Error::Msg("a weight tape was poisoned".into()))?;
             e.inputs.push(x.detach());
             e.grads.push(None);
+            e.biased.push(false);
             e.inputs.len() - 1
         };
         let op = TapedMatMul { entries: self.entries.clone(), index, backward: self.backward.clone() };
         x.apply_op2_arc(&self.forward, Arc::new(Box::new(op)))
+    }
+
+    /// `mask * act(x W + b)` for `x (m, k)` in one op ([`TapedLinear`]), the weight gradient
+    /// left to [`WeightTape::finish`]; `bias` `(n)` f32.
+    pub fn linear(
+        &self,
+        x: &Tensor,
+        bias: &Tensor,
+        act: Option<crate::Activation>,
+        mask: Option<Vec<f32>>,
+    ) -> Result<Tensor> {
+        let (index, bias_taped) = {
+            let mut e =
+                self.entries.lock().map_err(|_| candle_core::Error::Msg("a weight tape was poisoned".into()))?;
+            // A bias variable's gradient is summed by `finish` over all frames (one edge less
+            // per frame in candle's backward pass); any other bias gets it from the op.
+            if e.bias.is_none() && bias.is_variable() {
+                e.bias = Some(bias.clone());
+            }
+            let taped = e.bias.as_ref().is_some_and(|b| b.id() == bias.id());
+            e.inputs.push(x.detach());
+            e.grads.push(None);
+            e.biased.push(taped);
+            (e.inputs.len() - 1, taped)
+        };
+        let op = TapedLinear {
+            entries: self.entries.clone(),
+            index,
+            backward: self.backward.clone(),
+            act,
+            mask,
+            bias_taped,
+            pre: Mutex::new(None),
+        };
+        x.contiguous()?.apply_op3_arc(&self.forward, &bias.contiguous()?, Arc::new(Box::new(op)))
     }
 
     /// After the backward pass that produced `grads`: the weight's gradient over every frame
@@ -166,14 +324,30 @@ impl WeightTape {
     /// that computes the weight from them). Frames whose output did not reach the loss are
     /// skipped. Returns whether anything was added.
     pub fn finish(&self, grads: &mut GradStore, vars: &[Var]) -> Result<bool> {
-        let (xs, dys): (Vec<Tensor>, Vec<Tensor>) = {
+        if let Some(frames) = &self.frames {
+            return self.finish_sequence(frames, grads, vars);
+        }
+        let (xs, dys, bias_rows, bias): (Vec<Tensor>, Vec<Tensor>, Vec<Tensor>, Option<Tensor>) = {
             let e = self.entries.lock().map_err(|_| candle_core::Error::Msg("a weight tape was poisoned".into()))?;
-            e.inputs.iter().zip(&e.grads).filter_map(|(x, g)| g.as_ref().map(|g| (x.clone(), g.clone()))).unzip()
+            let (xs, dys) =
+                e.inputs.iter().zip(&e.grads).filter_map(|(x, g)| g.as_ref().map(|g| (x.clone(), g.clone()))).unzip();
+            let rows = e.grads.iter().zip(&e.biased).filter_map(|(g, b)| g.clone().filter(|_| *b)).collect();
+            (xs, dys, rows, e.bias.clone())
         };
+        let mut any = false;
+        if let Some(b) = bias.filter(|_| !bias_rows.is_empty()) {
+            // The tape's bias variable: its gradient is the column sums of its frames' gradients.
+            if let Some(v) = vars.iter().find(|v| v.as_tensor().id() == b.id()) {
+                let n = b.dim(0)?;
+                let sums = column_sums(&Tensor::cat(&bias_rows, 0)?, n)?;
+                add_grad(grads, v.as_tensor(), Tensor::from_vec(sums, n, b.device())?)?;
+                any = true;
+            }
+        }
         let direct = vars.iter().find(|v| v.as_tensor().id() == self.weight.id());
         if xs.is_empty() || (direct.is_none() && self.weight.is_variable()) {
             // Nothing recorded, or a variable that is not being trained by this step.
-            return Ok(false);
+            return Ok(any);
         }
         let x = Tensor::cat(&xs, 0)?;
         let dy = Tensor::cat(&dys, 0)?;
@@ -185,7 +359,6 @@ impl WeightTape {
         }
         // Through the weight's own graph: d/dvars of sum(weight * g) is J^T g.
         let through = (&self.weight * g)?.sum_all()?.backward()?;
-        let mut any = false;
         for v in vars {
             if let Some(gv) = through.get(v.as_tensor()) {
                 add_grad(grads, v.as_tensor(), gv.clone())?;
@@ -194,6 +367,72 @@ impl WeightTape {
         }
         Ok(any)
     }
+}
+
+impl WeightTape {
+    /// A sequence tape's `finish`: the frames' gradients stacked into the sequence's, then one
+    /// backward pass through the graph that computed the sequence. Taped weights in that graph
+    /// record their frames' gradients meanwhile, so sequence tapes finish first ([`collect`]
+    /// returns them first).
+    fn finish_sequence(&self, frames: &[Var], grads: &mut GradStore, vars: &[Var]) -> Result<bool> {
+        if !self.weight.track_op() {
+            return Ok(false);
+        }
+        let per_frame: Vec<Tensor> = frames
+            .iter()
+            .map(|f| match grads.get(f.as_tensor()) {
+                Some(g) => Ok(g.detach()),
+                None => f.as_tensor().zeros_like(),
+            })
+            .collect::<Result<_>>()?;
+        let g = Tensor::stack(&per_frame, 0)?;
+        let through = (&self.weight * g)?.sum_all()?.backward()?;
+        let mut any = false;
+        for v in vars {
+            if let Some(gv) = through.get(v.as_tensor()) {
+                add_grad(grads, v.as_tensor(), gv.clone())?;
+                any = true;
+            }
+        }
+        for f in frames {
+            grads.remove(f.as_tensor());
+        }
+        Ok(any)
+    }
+}
+
+/// The frames of a sequence `(T, ..)` along its first dimension (`T` tensors of its other
+/// dimensions), for a recurrent loop that reads one frame per step.
+///
+/// While a [`collect`] is active and the sequence needs a gradient, each frame is a leaf
+/// variable holding a copy of its values, and a sequence tape (returned by `collect` with the
+/// weight tapes) gathers the frames' gradients after the backward pass and sends them through
+/// the graph that computed the sequence in one pass: slicing frame by frame would otherwise
+/// cost candle's backward pass a whole-sequence gradient per frame (or, through
+/// [`crate::recurrent::frames`], a few), and two graph nodes per frame. Otherwise
+/// [`crate::recurrent::frames`].
+pub fn frame_leaves(seq: &Tensor) -> Result<Vec<Tensor>> {
+    if !active() || !seq.track_op() {
+        return crate::recurrent::frames(seq, 0);
+    }
+    let n = seq.dim(0)?;
+    let values = seq.detach();
+    let frames: Vec<Var> = (0..n).map(|t| Var::from_tensor(&values.get(t)?)).collect::<Result<_>>()?;
+    let out = frames.iter().map(|v| v.as_tensor().clone()).collect();
+    let tape = WeightTape {
+        weight: seq.clone(),
+        forward: values.clone(),
+        backward: values,
+        transposed: false,
+        entries: Arc::new(Mutex::new(Entries::default())),
+        frames: Some(frames),
+    };
+    ACTIVE.with(|a| {
+        if let Some(list) = a.borrow_mut().as_mut() {
+            list.push((seq.id(), tape));
+        }
+    });
+    Ok(out)
 }
 
 fn add_grad(grads: &mut GradStore, t: &Tensor, g: Tensor) -> Result<()> {
@@ -265,24 +504,59 @@ pub fn collect<R>(f: impl FnOnce() -> R) -> (R, Vec<WeightTape>) {
     let outer = ACTIVE.with(|a| a.borrow_mut().replace(Vec::new()));
     let r = f();
     let tapes = ACTIVE.with(|a| std::mem::replace(&mut *a.borrow_mut(), outer)).unwrap_or_default();
-    (r, tapes.into_iter().map(|(_, t)| t).collect())
+    // Sequence tapes first: their `finish` feeds the weight tapes of the graph behind them.
+    let (seqs, weights): (Vec<WeightTape>, Vec<WeightTape>) =
+        tapes.into_iter().map(|(_, t)| t).partition(|t| t.frames.is_some());
+    (r, seqs.into_iter().chain(weights).collect())
+}
+
+/// `mask * act(x W^T + b)` for a 2-D `x` and a weight stored `(out, in)`: while a [`collect`]
+/// is active on this thread one taped op ([`WeightTape::linear`]) when everything is f32;
+/// otherwise [`matmul_weight`] and [`crate::act`]'s ops.
+pub fn linear(
+    x: &Tensor,
+    w: &Tensor,
+    bias: &Tensor,
+    act: Option<crate::Activation>,
+    mask: Option<Vec<f32>>,
+) -> Result<Tensor> {
+    let f32s = [x, w, bias].iter().all(|t| t.dtype() == candle_core::DType::F32) && bias.rank() == 1;
+    if x.rank() == 2
+        && f32s
+        && let Some(t) = tape_of(w, true)?
+    {
+        return t.linear(x, bias, act, mask);
+    }
+    let y = matmul_weight(x, w, true)?;
+    match (act, mask) {
+        (Some(a), mask) => crate::act::bias_act(&y, Some(bias), a, mask),
+        (None, None) => crate::act::bias_add(&y, bias),
+        (None, Some(m)) => crate::act::bias_add(&y, bias)?.mul(&Tensor::from_vec(m, y.shape(), y.device())?),
+    }
+}
+
+/// The tape of `w` in this thread's active collection (made on first use), `None` when no
+/// collection is active.
+fn tape_of(w: &Tensor, transposed: bool) -> Result<Option<WeightTape>> {
+    ACTIVE.with(|a| -> Result<Option<WeightTape>> {
+        let mut a = a.borrow_mut();
+        let Some(list) = a.as_mut() else { return Ok(None) };
+        if let Some((_, t)) =
+            list.iter().find(|(id, t)| *id == w.id() && t.transposed == transposed && t.frames.is_none())
+        {
+            return Ok(Some(t.clone()));
+        }
+        let t = WeightTape::new(w, transposed)?;
+        list.push((w.id(), t.clone()));
+        Ok(Some(t))
+    })
 }
 
 /// `x W` (or `x W^T` when `transposed`, for a weight stored `(out, in)`) for a 2-D `x`. While a
 /// [`collect`] is active on this thread the weight's gradient is taped (one tape per weight
 /// tensor); otherwise a plain matmul.
 pub fn matmul_weight(x: &Tensor, w: &Tensor, transposed: bool) -> Result<Tensor> {
-    let tape = ACTIVE.with(|a| -> Result<Option<WeightTape>> {
-        let mut a = a.borrow_mut();
-        let Some(list) = a.as_mut() else { return Ok(None) };
-        if let Some((_, t)) = list.iter().find(|(id, t)| *id == w.id() && t.transposed == transposed) {
-            return Ok(Some(t.clone()));
-        }
-        let t = WeightTape::new(w, transposed)?;
-        list.push((w.id(), t.clone()));
-        Ok(Some(t))
-    })?;
-    match tape {
+    match tape_of(w, transposed)? {
         Some(t) if x.rank() == 2 => t.matmul(x),
         _ if transposed => x.broadcast_matmul(&w.t()?),
         _ => x.broadcast_matmul(w),
@@ -360,5 +634,88 @@ mod tests {
         // Outside a collection, matmul_weight is a plain matmul (candle's own gradients).
         let again = run(&a, &w, &xs).unwrap().backward().unwrap();
         assert!(again.get(w.as_tensor()).is_some());
+    }
+
+    /// A variable of `shape` holding `sin(0.37 i + phase)`.
+    fn wave(shape: (usize, usize), phase: f64) -> Var {
+        let n = (shape.0 * shape.1) as f32;
+        let t = Tensor::arange(0f32, n, &Device::Cpu).unwrap().affine(0.37, phase).unwrap().sin().unwrap();
+        Var::from_tensor(&t.reshape(shape).unwrap()).unwrap()
+    }
+
+    /// The gradients of `vars` in `a` and `b` agree within 1e-5 of each one's largest.
+    fn assert_same_grads(a: &GradStore, b: &GradStore, vars: &[Var], what: &str) {
+        for v in vars {
+            let p = a.get(v.as_tensor()).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+            let q = b.get(v.as_tensor()).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+            let scale = p.iter().fold(1e-3f32, |m, x| m.max(x.abs()));
+            for (x, y) in p.iter().zip(&q) {
+                assert!((x - y).abs() <= 1e-5 * scale, "{what}: {x} vs {y}");
+            }
+        }
+    }
+
+    /// A loop reading the frames of a sequence computed by a taped layer (`frame_leaves`), with
+    /// a recurrent taped weight: the gradients equal candle's own (no tapes, sliced frames).
+    #[test]
+    fn sequence_tape_gradients_equal_candles() {
+        let dev = Device::Cpu;
+        let (a, w) = (wave((4, 3), 0.4), wave((4, 4), -0.2));
+        let b = Var::from_tensor(&Tensor::new(&[0.1f32, -0.2, 0.05, 0.3], &dev).unwrap()).unwrap();
+        let xs = Tensor::arange(0f32, 5.0 * 2.0 * 3.0, &dev).unwrap().affine(0.1, -1.0).unwrap().cos().unwrap();
+        let xs = xs.reshape((5, 2, 3)).unwrap();
+        let vars = [a.clone(), w.clone(), b.clone()];
+        let run = || -> Result<Tensor> {
+            // The sequence: a SELU layer over every frame at once, (5, 2, 4).
+            let seq = linear(&xs.reshape((10, 3))?, a.as_tensor(), b.as_tensor(), Some(crate::Activation::Selu), None)?
+                .reshape((5, 2, 4))?;
+            let mut h = Tensor::zeros((2, 4), DType::F32, &dev)?;
+            let mut loss = Tensor::zeros((), DType::F32, &dev)?;
+            for x in frame_leaves(&seq)? {
+                h = (x + matmul_weight(&h, w.as_tensor(), true)?)?.tanh()?;
+                loss = (loss + h.sqr()?.mean_all()?)?;
+            }
+            Ok(loss)
+        };
+        let plain = run().unwrap().backward().unwrap();
+        let (loss, tapes) = collect(run);
+        assert!(tapes[0].frames.is_some(), "the sequence tape comes first");
+        let mut taped = loss.unwrap().backward().unwrap();
+        for t in &tapes {
+            t.finish(&mut taped, &vars).unwrap();
+        }
+        assert_same_grads(&plain, &taped, &vars, "sequence tape");
+    }
+
+    /// The taped linear op (bias, activation, dropout mask in one op) against candle's ops:
+    /// the loss, and the gradients of the weight, the bias and the input.
+    #[test]
+    fn taped_linear_equals_candles_ops() {
+        let dev = Device::Cpu;
+        let (w, x) = (wave((5, 3), 0.3), wave((4, 3), -1.0));
+        let b = Var::from_tensor(&Tensor::new(&[0.1f32, -0.3, 0.2, 0.0, -0.05], &dev).unwrap()).unwrap();
+        let m: Vec<f32> = (0..20).map(|i| if i % 4 == 1 { 0.0 } else { 1.25 }).collect();
+        let vars = [w.clone(), b.clone(), x.clone()];
+        for act in [None, Some(crate::Activation::Selu), Some(crate::Activation::LeakyRelu(0.2))] {
+            for mask in [None, Some(m.clone())] {
+                // Two frames through the same weight (so that the tape sums them).
+                let run = || -> Result<Tensor> {
+                    let h = linear(x.as_tensor(), w.as_tensor(), b.as_tensor(), act, mask.clone())?;
+                    let h2 = linear(&(x.as_tensor() * 0.5)?, w.as_tensor(), b.as_tensor(), act, None)?;
+                    ((h.sqr()?.sum_all()? + (h2 * 0.7)?.sum_all()?)? * 0.5)
+                };
+                let plain_loss = run().unwrap();
+                let plain = plain_loss.backward().unwrap();
+                let (loss, tapes) = collect(run);
+                let loss = loss.unwrap();
+                let what = format!("{act:?}, mask {}", mask.is_some());
+                assert_eq!(tapes.len(), 1, "{what}: one tape");
+                let diff = (loss.to_scalar::<f32>().unwrap() - plain_loss.to_scalar::<f32>().unwrap()).abs();
+                assert!(diff <= 1e-5, "{what}: loss differs by {diff}");
+                let mut taped = loss.backward().unwrap();
+                tapes[0].finish(&mut taped, &vars).unwrap();
+                assert_same_grads(&plain, &taped, &vars, &what);
+            }
+        }
     }
 }

@@ -53,7 +53,7 @@ pub struct TrainBenchArgs {
     /// Write the results as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
-    /// Windows per step instead of the model's paper batch (RTN only; `1..=4096`): to see how
+    /// Windows per step instead of the model's paper batch (RTN and ARNN; `1..=4096`): to see how
     /// the step's cost per window depends on the rows each worker's matmuls get.
     #[arg(long, allow_hyphen_values = true, value_parser = |v: &str| whole_in(v, 1, 4096))]
     pub batch: Option<usize>,
@@ -291,10 +291,11 @@ fn rmr_bench(threads: &[usize]) -> anyhow::Result<Bench<'static>> {
 
 /// The paper-size ARNN (GRU 2 x 100, batch 16) on simulated lamp sequences (a small annealing
 /// budget: the step's cost does not depend on how good the hops are).
-fn arnn_bench(threads: &[usize]) -> anyhow::Result<Bench<'static>> {
+fn arnn_bench(threads: &[usize], batch: Option<usize>) -> anyhow::Result<Bench<'static>> {
     use zoo_arnn::{ArnnConfig, ArnnTrainer};
     use zoo_data::luxo::{GenerateOptions, generate_sequence, preprocess::preprocess};
-    let config = ArnnConfig::paper();
+    let mut config = ArnnConfig::paper();
+    config.batch_size = batch.unwrap_or(config.batch_size);
     let b = config.batch_size;
     let mut o = GenerateOptions::new(b, 17);
     o.anneal.k_max = 2;
@@ -365,15 +366,15 @@ pub fn run(a: TrainBenchArgs) -> anyhow::Result<()> {
     }
     let parents_frames = Config::paper().window_frames();
     let ws: Vec<Vec<f32>> = (0..a.batch.unwrap_or(0).max(64)).map(|i| window(parents_frames, 22, i)).collect();
-    if a.batch.is_some() && a.model != TrainBenchModel::Rtn {
-        bail!("--batch: only the RTN bench takes another batch size");
+    if a.batch.is_some() && !matches!(a.model, TrainBenchModel::Rtn | TrainBenchModel::Arnn) {
+        bail!("--batch: only the RTN and ARNN benches take another batch size");
     }
     let mut bench = match a.model {
         TrainBenchModel::Rtn => rtn_bench(&a.threads, &ws, a.batch)?,
         TrainBenchModel::RnnGmm => rnn_gmm_bench(&a.threads)?,
         TrainBenchModel::RnnGmmRefiner => rnn_gmm_refiner_bench(&a.threads)?,
         TrainBenchModel::Rmr => rmr_bench(&a.threads)?,
-        TrainBenchModel::Arnn => arnn_bench(&a.threads)?,
+        TrainBenchModel::Arnn => arnn_bench(&a.threads, a.batch)?,
     };
     let (b, flops) = (bench.batch, bench.flops);
     println!("{}: {:.2} GFLOP per window; {} repeats of {} steps", bench.what, flops / 1e9, a.repeats, a.steps);
