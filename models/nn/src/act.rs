@@ -154,7 +154,8 @@ impl CustomOp2 for BiasAct {
 /// otherwise. `mask` is the dropout's (scale included, [`crate::Dropout::mask`]), `None` when
 /// no value is dropped.
 pub fn bias_act(x: &Tensor, bias: Option<&Tensor>, a: Activation, mask: Option<Vec<f32>>) -> Result<Tensor> {
-    let fused = x.dtype() == DType::F32 && x.device().is_cpu() && bias.is_none_or(|b| b.dtype() == DType::F32);
+    let fused =
+        x.dtype() == DType::F32 && x.device().is_cpu() && bias.is_none_or(|b| b.dtype() == DType::F32 && b.rank() == 1);
     if !fused {
         let z = match bias {
             Some(b) => x.broadcast_add(b)?,

@@ -504,10 +504,11 @@ pub fn collect<R>(f: impl FnOnce() -> R) -> (R, Vec<WeightTape>) {
     let outer = ACTIVE.with(|a| a.borrow_mut().replace(Vec::new()));
     let r = f();
     let tapes = ACTIVE.with(|a| std::mem::replace(&mut *a.borrow_mut(), outer)).unwrap_or_default();
-    // Sequence tapes first: their `finish` feeds the weight tapes of the graph behind them.
+    // Sequence tapes first, the last made first: a sequence tape's `finish` feeds the tapes of
+    // the graph behind its sequence (weights, or the frames of an earlier sequence).
     let (seqs, weights): (Vec<WeightTape>, Vec<WeightTape>) =
         tapes.into_iter().map(|(_, t)| t).partition(|t| t.frames.is_some());
-    (r, seqs.into_iter().chain(weights).collect())
+    (r, seqs.into_iter().rev().chain(weights).collect())
 }
 
 /// `mask * act(x W^T + b)` for a 2-D `x` and a weight stored `(out, in)`: while a [`collect`]
