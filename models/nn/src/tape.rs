@@ -111,6 +111,124 @@ struct TapedLinear {
     pre: Mutex<Option<Vec<f32>>>,
 }
 
+/// The most rows, and the most values of the right-hand side, for [`small_matmul`]: a few rows
+/// against a matrix that stays in the core's L2 cache (the ARNN's layers), where gemm's fixed
+/// cost per call (packing, dispatch: about 2 us, a third of an 8 x 100 x 300 product) is
+/// most of the work.
+const SMALL_ROWS: usize = 16;
+const SMALL_RHS: usize = 1 << 16;
+
+/// `x (m, k) b (k, n)` for contiguous row-major `x` and `b` when `m` and `b` are small
+/// ([`SMALL_ROWS`], [`SMALL_RHS`]) and the CPU has AVX2 and FMA; `None` otherwise (use gemm).
+/// Each output row is accumulated over `k` in order, whatever the other rows, so a row's
+/// values do not depend on the batch it is in. The loops are compiled for the CPU's vector
+/// instructions through `pulp`'s dispatch (the one gemm uses).
+fn small_matmul(x: &[f32], m: usize, k: usize, b: &[f32], n: usize) -> Option<Vec<f32>> {
+    if m == 0 || m > SMALL_ROWS || k * n > SMALL_RHS || x.len() != m * k || b.len() != k * n {
+        return None;
+    }
+    #[cfg(target_arch = "x86_64")]
+    {
+        if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
+            let mut y = vec![0f32; m * n];
+            pulp::Arch::new().dispatch(SmallMatMul { x, m, k, b, n, y: &mut y });
+            return Some(y);
+        }
+    }
+    None
+}
+
+/// The loops of [`small_matmul`], run by `pulp::Arch::dispatch`.
+struct SmallMatMul<'a> {
+    x: &'a [f32],
+    m: usize,
+    k: usize,
+    b: &'a [f32],
+    n: usize,
+    y: &'a mut [f32],
+}
+
+impl pulp::WithSimd for SmallMatMul<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, simd: S) {
+        let SmallMatMul { x, m, k, b, n, y } = self;
+        // Two vectors of output columns at a time, for up to eight rows, accumulated in
+        // registers over `k`; the column block of `b` stays in L1 across the row blocks.
+        let cols = 2 * S::F32_LANES;
+        let mut j0 = 0;
+        while j0 < n {
+            let w = cols.min(n - j0);
+            let mut r = 0;
+            while r + 8 <= m {
+                block::<S, 8>(simd, x, k, b, n, y, r, j0, w);
+                r += 8;
+            }
+            while r + 4 <= m {
+                block::<S, 4>(simd, x, k, b, n, y, r, j0, w);
+                r += 4;
+            }
+            while r < m {
+                block::<S, 1>(simd, x, k, b, n, y, r, j0, w);
+                r += 1;
+            }
+            j0 += cols;
+        }
+    }
+}
+
+/// Rows `r..r + R`, columns `j0..j0 + w` (`w` up to two vectors) of [`SmallMatMul`].
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn block<S: pulp::Simd, const R: usize>(
+    simd: S,
+    x: &[f32],
+    k: usize,
+    b: &[f32],
+    n: usize,
+    y: &mut [f32],
+    r: usize,
+    j0: usize,
+    w: usize,
+) {
+    let lanes = S::F32_LANES;
+    let (w0, w1) = (w.min(lanes), w.saturating_sub(lanes));
+    let mut acc0 = [simd.splat_f32s(0.0); R];
+    let mut acc1 = [simd.splat_f32s(0.0); R];
+    for kk in 0..k {
+        let row = &b[kk * n + j0..kk * n + j0 + w];
+        let (b0, b1) = (simd.partial_load_f32s(&row[..w0]), simd.partial_load_f32s(&row[w0..w0 + w1]));
+        for i in 0..R {
+            let a = simd.splat_f32s(x[(r + i) * k + kk]);
+            acc0[i] = simd.mul_add_f32s(a, b0, acc0[i]);
+            acc1[i] = simd.mul_add_f32s(a, b1, acc1[i]);
+        }
+    }
+    for i in 0..R {
+        let out = &mut y[(r + i) * n + j0..(r + i) * n + j0 + w];
+        let (o0, o1) = out.split_at_mut(w0);
+        simd.partial_store_f32s(o0, acc0[i]);
+        simd.partial_store_f32s(o1, acc1[i]);
+    }
+}
+
+/// `a (m, k) b (k, n)` for an f32 `a` and a contiguous f32 `b`: [`small_matmul`] when it
+/// applies, candle's matmul (gemm) otherwise.
+fn matmul_small_or_gemm(a: &Tensor, b: &Tensor) -> Result<Tensor> {
+    let ((m, k), (k2, n)) = (a.dims2()?, b.dims2()?);
+    if k == k2 && m <= SMALL_ROWS && k * n <= SMALL_RHS && b.is_contiguous() {
+        let av = a.flatten_all()?.to_vec1::<f32>()?;
+        let (s, l) = b.storage_and_layout();
+        if let (candle_core::Storage::Cpu(s), Some((o0, o1))) = (&*s, l.contiguous_offsets())
+            && let Some(y) = small_matmul(&av, m, k, &s.as_slice::<f32>()?[o0..o1], n)
+        {
+            return Tensor::from_vec(y, (m, n), a.device());
+        }
+    }
+    a.matmul(b)
+}
+
 /// The sums over the rows of a 2-D f32 tensor of `n` columns, rows in order.
 fn column_sums(t: &Tensor, n: usize) -> Result<Vec<f32>> {
     let mut sums = vec![0f32; n];
@@ -151,9 +269,18 @@ impl CustomOp3 for TapedLinear {
         if self.mask.as_ref().is_some_and(|v| v.len() != m * n) {
             candle_core::bail!("taped linear: a dropout mask for another shape than ({m}, {n})");
         }
-        let mut y = match s1.matmul(s2, (1, m, n, k), l1, l2)? {
-            CpuStorage::F32(v) => v,
-            _ => candle_core::bail!("taped linear: f32 only"),
+        let small = match (l1.contiguous_offsets(), l2.contiguous_offsets()) {
+            (Some(_), Some(_)) => {
+                small_matmul(contiguous_f32(s1, l1, "input")?, m, k, contiguous_f32(s2, l2, "weight")?, n)
+            }
+            _ => None,
+        };
+        let mut y = match small {
+            Some(y) => y,
+            None => match s1.matmul(s2, (1, m, n, k), l1, l2)? {
+                CpuStorage::F32(v) => v,
+                _ => candle_core::bail!("taped linear: f32 only"),
+            },
         };
         let b = contiguous_f32(s3, l3, "bias")?;
         for row in y.chunks_mut(n.max(1)) {
@@ -199,7 +326,7 @@ impl CustomOp3 for TapedLinear {
             Tensor::from_vec(g, grad.shape(), grad.device())?
         };
         let db = if self.bias_taped { None } else { Some(Tensor::from_vec(column_sums(&dz, n)?, n, b.device())?) };
-        let dx = if x.track_op() { Some(dz.matmul(&self.backward)?) } else { None };
+        let dx = if x.track_op() { Some(matmul_small_or_gemm(&dz, &self.backward)?) } else { None };
         let mut e = self.entries.lock().map_err(|_| candle_core::Error::Msg("a weight tape was poisoned".into()))?;
         if let Some(slot) = e.grads.get_mut(self.index) {
             *slot = Some(dz);
@@ -686,6 +813,26 @@ mod tests {
             t.finish(&mut taped, &vars).unwrap();
         }
         assert_same_grads(&plain, &taped, &vars, "sequence tape");
+    }
+
+    /// The small-matmul kernel against candle's matmul, for every row count it takes (blocks of
+    /// 8, 4 and single rows) and column counts with partial vectors.
+    #[test]
+    fn small_matmul_equals_candles() {
+        for (k, n) in [(37, 70), (100, 300), (3, 5), (64, 33)] {
+            let b = wave((k, n), 0.3);
+            for m in 1..=SMALL_ROWS {
+                let x = wave((m, k), -0.7 + m as f64);
+                let want = x.as_tensor().matmul(b.as_tensor()).unwrap();
+                let got = matmul_small_or_gemm(x.as_tensor(), b.as_tensor()).unwrap();
+                let (w, g) = (want.flatten_all().unwrap().to_vec1::<f32>().unwrap(), got.flatten_all().unwrap());
+                let g = g.to_vec1::<f32>().unwrap();
+                let scale = w.iter().fold(1e-3f32, |s, v| s.max(v.abs()));
+                for (p, q) in w.iter().zip(&g) {
+                    assert!((p - q).abs() <= 1e-5 * scale, "{m} x {k} x {n}: {p} vs {q}");
+                }
+            }
+        }
     }
 
     /// The taped linear op (bias, activation, dropout mask in one op) against candle's ops:
