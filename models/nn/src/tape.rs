@@ -774,12 +774,18 @@ mod tests {
     /// The gradients of `vars` in `a` and `b` agree within 1e-5 of each one's largest.
     fn assert_same_grads(a: &GradStore, b: &GradStore, vars: &[Var], what: &str) {
         for v in vars {
-            let p = a.get(v.as_tensor()).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
-            let q = b.get(v.as_tensor()).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
-            let scale = p.iter().fold(1e-3f32, |m, x| m.max(x.abs()));
-            for (x, y) in p.iter().zip(&q) {
-                assert!((x - y).abs() <= 1e-5 * scale, "{what}: {x} vs {y}");
-            }
+            assert_close(a.get(v.as_tensor()).unwrap(), b.get(v.as_tensor()).unwrap(), what);
+        }
+    }
+
+    /// `got` equals `want` within 1e-5 of `want`'s largest value.
+    fn assert_close(want: &Tensor, got: &Tensor, what: &str) {
+        let p = want.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        let q = got.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        assert_eq!(p.len(), q.len(), "{what}");
+        let scale = p.iter().fold(1e-3f32, |m, x| m.max(x.abs()));
+        for (x, y) in p.iter().zip(&q) {
+            assert!((x - y).abs() <= 1e-5 * scale, "{what}: {x} vs {y}");
         }
     }
 
@@ -825,12 +831,7 @@ mod tests {
                 let x = wave((m, k), -0.7 + m as f64);
                 let want = x.as_tensor().matmul(b.as_tensor()).unwrap();
                 let got = matmul_small_or_gemm(x.as_tensor(), b.as_tensor()).unwrap();
-                let (w, g) = (want.flatten_all().unwrap().to_vec1::<f32>().unwrap(), got.flatten_all().unwrap());
-                let g = g.to_vec1::<f32>().unwrap();
-                let scale = w.iter().fold(1e-3f32, |s, v| s.max(v.abs()));
-                for (p, q) in w.iter().zip(&g) {
-                    assert!((p - q).abs() <= 1e-5 * scale, "{m} x {k} x {n}: {p} vs {q}");
-                }
+                assert_close(&want, &got, &format!("{m} x {k} x {n}"));
             }
         }
     }
