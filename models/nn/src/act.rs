@@ -43,41 +43,68 @@ pub(crate) fn act(a: Option<Activation>, z: f32) -> (f32, f32) {
     }
 }
 
-/// The values of a contiguous f32 CPU storage ([`bias_act`] makes its inputs contiguous).
-fn values<'a>(s: &'a CpuStorage, l: &Layout) -> Result<&'a [f32]> {
+/// The values of a contiguous f32 CPU storage (the fused ops make their inputs contiguous);
+/// `what` names the input in the error.
+pub(crate) fn values<'a>(s: &'a CpuStorage, l: &Layout, what: &str) -> Result<&'a [f32]> {
     let v = s.as_slice::<f32>()?;
     match l.contiguous_offsets() {
         Some((a, b)) => Ok(&v[a..b]),
-        None => candle_core::bail!("fused activation: a non-contiguous input {:?}", l.dims()),
+        None => candle_core::bail!("fused op: a non-contiguous {what} {:?}", l.dims()),
     }
 }
 
 /// The values of an f32 tensor in row-major order.
-fn tensor_values(t: &Tensor) -> Result<Vec<f32>> {
+pub(crate) fn tensor_values(t: &Tensor) -> Result<Vec<f32>> {
     t.flatten_all()?.to_vec1::<f32>()
+}
+
+/// The sums over the rows of `values` (rows of `n`), rows in order: a broadcast bias's gradient.
+pub(crate) fn column_sums(values: &[f32], n: usize) -> Vec<f32> {
+    let mut sums = vec![0f32; n];
+    for row in values.chunks(n.max(1)) {
+        for (s, v) in sums.iter_mut().zip(row) {
+            *s += v;
+        }
+    }
+    sums
+}
+
+/// `y * mask` with the mask's values in `y`'s shape (the dropout product).
+pub(crate) fn apply_mask(y: &Tensor, mask: Vec<f32>) -> Result<Tensor> {
+    y.mul(&Tensor::from_vec(mask, y.shape(), y.device())?.to_dtype(y.dtype())?)
 }
 
 /// `mask * act(x + bias)`; `bias` broadcast over the rows (the last dimension), the mask (the
 /// dropout's, scale included) over every value.
-struct BiasAct {
-    act: Option<Activation>,
-    mask: Option<Vec<f32>>,
+pub(crate) struct BiasAct {
+    pub(crate) act: Option<Activation>,
+    pub(crate) mask: Option<Vec<f32>>,
 }
 
 impl BiasAct {
-    fn forward(&self, x: &[f32], bias: Option<&[f32]>) -> Vec<f32> {
-        let n = bias.map_or(1, |b| b.len().max(1));
-        let mut out = Vec::with_capacity(x.len());
-        for (i, &v) in x.iter().enumerate() {
-            let z = bias.map_or(v, |b| v + b[i % n]);
-            let y = act(self.act, z).0;
-            out.push(self.mask.as_ref().map_or(y, |m| y * m[i]));
-        }
+    /// Whether the op only adds the bias (no activation, no mask).
+    pub(crate) fn is_bias_only(&self) -> bool {
+        self.act.is_none() && self.mask.is_none()
+    }
+
+    pub(crate) fn forward(&self, x: &[f32], bias: Option<&[f32]>) -> Vec<f32> {
+        let mut out = x.to_vec();
+        self.forward_in_place(&mut out, bias);
         out
     }
 
+    /// [`BiasAct::forward`] over `x` itself.
+    pub(crate) fn forward_in_place(&self, x: &mut [f32], bias: Option<&[f32]>) {
+        let n = bias.map_or(1, |b| b.len().max(1));
+        for (i, v) in x.iter_mut().enumerate() {
+            let z = bias.map_or(*v, |b| *v + b[i % n]);
+            let y = act(self.act, z).0;
+            *v = self.mask.as_ref().map_or(y, |m| y * m[i]);
+        }
+    }
+
     /// The gradient of the pre-activation `x + bias` from the output's.
-    fn backward(&self, x: &[f32], bias: Option<&[f32]>, dy: &[f32]) -> Vec<f32> {
+    pub(crate) fn backward(&self, x: &[f32], bias: Option<&[f32]>, dy: &[f32]) -> Vec<f32> {
         let n = bias.map_or(1, |b| b.len().max(1));
         x.iter()
             .zip(dy)
@@ -90,10 +117,11 @@ impl BiasAct {
             .collect()
     }
 
-    fn check(&self, l: &Layout) -> Result<()> {
+    /// Refuses a mask whose length is not the output's `count` values.
+    pub(crate) fn check(&self, count: usize) -> Result<()> {
         match &self.mask {
-            Some(m) if m.len() != l.shape().elem_count() => {
-                candle_core::bail!("fused activation: a mask of {} values for {:?}", m.len(), l.dims())
+            Some(m) if m.len() != count => {
+                candle_core::bail!("fused activation: a dropout mask of {} values for {count}", m.len())
             }
             _ => Ok(()),
         }
@@ -106,8 +134,8 @@ impl CustomOp1 for BiasAct {
     }
 
     fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
-        self.check(l)?;
-        Ok((CpuStorage::F32(self.forward(values(s, l)?, None)), l.shape().clone()))
+        self.check(l.shape().elem_count())?;
+        Ok((CpuStorage::F32(self.forward(values(s, l, "input")?, None)), l.shape().clone()))
     }
 
     fn bwd(&self, arg: &Tensor, _res: &Tensor, grad_res: &Tensor) -> Result<Option<Tensor>> {
@@ -122,11 +150,12 @@ impl CustomOp2 for BiasAct {
     }
 
     fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
-        self.check(l1)?;
+        self.check(l1.shape().elem_count())?;
         if l2.dims() != [*l1.dims().last().unwrap_or(&0)] {
             candle_core::bail!("fused activation: bias {:?} for values {:?}", l2.dims(), l1.dims())
         }
-        Ok((CpuStorage::F32(self.forward(values(s1, l1)?, Some(values(s2, l2)?))), l1.shape().clone()))
+        let (x, b) = (values(s1, l1, "input")?, values(s2, l2, "bias")?);
+        Ok((CpuStorage::F32(self.forward(x, Some(b))), l1.shape().clone()))
     }
 
     fn bwd(
@@ -138,14 +167,7 @@ impl CustomOp2 for BiasAct {
     ) -> Result<(Option<Tensor>, Option<Tensor>)> {
         let bias = tensor_values(b)?;
         let dz = self.backward(&tensor_values(x)?, Some(&bias), &tensor_values(grad_res)?);
-        let n = bias.len().max(1);
-        // The bias gradient sums the rows in order (as candle's sum over the broadcast rows).
-        let mut db = vec![0f32; bias.len()];
-        for row in dz.chunks(n) {
-            for (d, g) in db.iter_mut().zip(row) {
-                *d += g;
-            }
-        }
+        let db = column_sums(&dz, bias.len());
         Ok((Some(Tensor::from_vec(dz, x.shape(), x.device())?), Some(Tensor::from_vec(db, b.shape(), b.device())?)))
     }
 }
@@ -163,7 +185,7 @@ pub fn bias_act(x: &Tensor, bias: Option<&Tensor>, a: Activation, mask: Option<V
         };
         let y = a.apply(&z)?;
         return match mask {
-            Some(m) => y.mul(&Tensor::from_vec(m, x.shape(), x.device())?.to_dtype(x.dtype())?),
+            Some(m) => apply_mask(&y, m),
             None => Ok(y),
         };
     }

@@ -100,8 +100,8 @@ pub fn linear_forward(l: &Linear, x: &Tensor) -> Result<Tensor> {
     }
 }
 
-/// `dropout(act(linear(x)))`: for a 2-D input the bias, activation and dropout are one fused op
-/// ([`crate::act::bias_act`]) after the taped matmul.
+/// `dropout(act(linear(x)))`: for a 2-D input one op in training ([`crate::tape::linear`]), the
+/// matmul and one fused bias, activation and dropout op otherwise.
 pub fn linear_act(
     l: &Linear,
     x: &Tensor,
@@ -172,7 +172,7 @@ impl Dropout {
     /// `p == 0`.
     pub fn forward(&self, x: &Tensor, rng: Option<&mut RowRngs>) -> Result<Tensor> {
         match self.mask(x, rng)? {
-            Some(mask) => x.mul(&Tensor::from_vec(mask, x.shape(), x.device())?.to_dtype(x.dtype())?),
+            Some(mask) => crate::act::apply_mask(x, mask),
             None => Ok(x.clone()),
         }
     }

@@ -20,6 +20,7 @@
 //! loss), and [`matmul_weight`] tapes a weight only while a collection is active; elsewhere
 //! (inference, validation, export) it is a plain matmul.
 
+use crate::act::{BiasAct, column_sums, tensor_values, values};
 use candle_core::backend::BackendStorage;
 use candle_core::backprop::GradStore;
 use candle_core::{CpuStorage, CustomOp2, CustomOp3, Layout, Result, Shape, Tensor, TensorId, Var};
@@ -103,12 +104,12 @@ struct TapedLinear {
     entries: Arc<Mutex<Entries>>,
     index: usize,
     backward: Tensor,
-    act: Option<crate::Activation>,
-    mask: Option<Vec<f32>>,
+    /// The bias, activation and dropout mask after the product.
+    act: BiasAct,
     /// Whether the bias's gradient is left to the tape (`WeightTape::finish`).
     bias_taped: bool,
-    /// The pre-activation `x W + b`, kept by the forward pass when there is an activation.
-    pre: Mutex<Option<Vec<f32>>>,
+    /// The product `x W`, kept by the forward pass when there is an activation or a mask.
+    product: Mutex<Option<Vec<f32>>>,
 }
 
 /// The most rows, and the most values of the right-hand side, for [`small_matmul`]: a few rows
@@ -229,24 +230,6 @@ fn matmul_small_or_gemm(a: &Tensor, b: &Tensor) -> Result<Tensor> {
     a.matmul(b)
 }
 
-/// The sums over the rows of a 2-D f32 tensor of `n` columns, rows in order.
-fn column_sums(t: &Tensor, n: usize) -> Result<Vec<f32>> {
-    let mut sums = vec![0f32; n];
-    for row in t.flatten_all()?.to_vec1::<f32>()?.chunks(n.max(1)) {
-        for (s, v) in sums.iter_mut().zip(row) {
-            *s += v;
-        }
-    }
-    Ok(sums)
-}
-
-fn contiguous_f32<'a>(s: &'a CpuStorage, l: &Layout, what: &str) -> Result<&'a [f32]> {
-    match l.contiguous_offsets() {
-        Some((a, b)) => Ok(&s.as_slice::<f32>()?[a..b]),
-        None => candle_core::bail!("taped linear: a non-contiguous {what} {:?}", l.dims()),
-    }
-}
-
 impl CustomOp3 for TapedLinear {
     fn name(&self) -> &'static str {
         "zoo-taped-linear"
@@ -266,39 +249,28 @@ impl CustomOp3 for TapedLinear {
         if k != k2 || l3.dims() != [n] {
             candle_core::bail!("taped linear: ({m}, {k}) x ({k2}, {n}) + {:?} do not match", l3.dims());
         }
-        if self.mask.as_ref().is_some_and(|v| v.len() != m * n) {
-            candle_core::bail!("taped linear: a dropout mask for another shape than ({m}, {n})");
-        }
+        self.act.check(m * n)?;
         let small = match (l1.contiguous_offsets(), l2.contiguous_offsets()) {
-            (Some(_), Some(_)) => {
-                small_matmul(contiguous_f32(s1, l1, "input")?, m, k, contiguous_f32(s2, l2, "weight")?, n)
-            }
+            (Some(_), Some(_)) => small_matmul(values(s1, l1, "input")?, m, k, values(s2, l2, "weight")?, n),
             _ => None,
         };
-        let mut y = match small {
+        let y = match small {
             Some(y) => y,
             None => match s1.matmul(s2, (1, m, n, k), l1, l2)? {
                 CpuStorage::F32(v) => v,
                 _ => candle_core::bail!("taped linear: f32 only"),
             },
         };
-        let b = contiguous_f32(s3, l3, "bias")?;
-        for row in y.chunks_mut(n.max(1)) {
-            for (v, b) in row.iter_mut().zip(b) {
-                *v += b;
-            }
+        let bias = values(s3, l3, "bias")?;
+        if self.act.is_bias_only() {
+            let mut y = y;
+            self.act.forward_in_place(&mut y, Some(bias));
+            return Ok((CpuStorage::F32(y), Shape::from((m, n))));
         }
-        if self.act.is_some() || self.mask.is_some() {
-            if self.act.is_some() {
-                *self.pre.lock().map_err(|_| candle_core::Error::Msg("a taped linear op was poisoned".into()))? =
-                    Some(y.clone());
-            }
-            for (i, v) in y.iter_mut().enumerate() {
-                let a = crate::act::act(self.act, *v).0;
-                *v = self.mask.as_ref().map_or(a, |m| a * m[i]);
-            }
-        }
-        Ok((CpuStorage::F32(y), Shape::from((m, n))))
+        // The backward pass needs the product (the activation's derivative at `x W + b`).
+        let out = self.act.forward(&y, Some(bias));
+        *self.product.lock().map_err(|_| candle_core::Error::Msg("a taped linear op was poisoned".into()))? = Some(y);
+        Ok((CpuStorage::F32(out), Shape::from((m, n))))
     }
 
     fn bwd(
@@ -310,22 +282,20 @@ impl CustomOp3 for TapedLinear {
         grad: &Tensor,
     ) -> Result<(Option<Tensor>, Option<Tensor>, Option<Tensor>)> {
         let n = b.dim(0)?;
-        let dz = if self.act.is_none() && self.mask.is_none() {
+        let dz = if self.act.is_bias_only() {
             grad.detach()
         } else {
-            let mut g = grad.flatten_all()?.to_vec1::<f32>()?;
-            let pre = self.pre.lock().map_err(|_| candle_core::Error::Msg("a taped linear op was poisoned".into()))?;
-            for (i, v) in g.iter_mut().enumerate() {
-                if let Some(m) = &self.mask {
-                    *v *= m[i];
-                }
-                if let Some(z) = pre.as_ref() {
-                    *v *= crate::act::act(self.act, z[i]).1;
-                }
-            }
+            let product =
+                self.product.lock().map_err(|_| candle_core::Error::Msg("a taped linear op was poisoned".into()))?;
+            let Some(product) = product.as_ref() else { candle_core::bail!("taped linear: backward before forward") };
+            let g = self.act.backward(product, Some(&tensor_values(b)?), &tensor_values(grad)?);
             Tensor::from_vec(g, grad.shape(), grad.device())?
         };
-        let db = if self.bias_taped { None } else { Some(Tensor::from_vec(column_sums(&dz, n)?, n, b.device())?) };
+        let db = if self.bias_taped {
+            None
+        } else {
+            Some(Tensor::from_vec(column_sums(&tensor_values(&dz)?, n), n, b.device())?)
+        };
         let dx = if x.track_op() { Some(matmul_small_or_gemm(&dz, &self.backward)?) } else { None };
         let mut e = self.entries.lock().map_err(|_| candle_core::Error::Msg("a weight tape was poisoned".into()))?;
         if let Some(slot) = e.grads.get_mut(self.index) {
@@ -437,10 +407,9 @@ impl WeightTape {
             entries: self.entries.clone(),
             index,
             backward: self.backward.clone(),
-            act,
-            mask,
+            act: BiasAct { act, mask },
             bias_taped,
-            pre: Mutex::new(None),
+            product: Mutex::new(None),
         };
         x.contiguous()?.apply_op3_arc(&self.forward, &bias.contiguous()?, Arc::new(Box::new(op)))
     }
@@ -466,7 +435,7 @@ impl WeightTape {
             // The tape's bias variable: its gradient is the column sums of its frames' gradients.
             if let Some(v) = vars.iter().find(|v| v.as_tensor().id() == b.id()) {
                 let n = b.dim(0)?;
-                let sums = column_sums(&Tensor::cat(&bias_rows, 0)?, n)?;
+                let sums = column_sums(&tensor_values(&Tensor::cat(&bias_rows, 0)?)?, n);
                 add_grad(grads, v.as_tensor(), Tensor::from_vec(sums, n, b.device())?)?;
                 any = true;
             }
@@ -659,7 +628,7 @@ pub fn linear(
     match (act, mask) {
         (Some(a), mask) => crate::act::bias_act(&y, Some(bias), a, mask),
         (None, None) => crate::act::bias_add(&y, bias),
-        (None, Some(m)) => crate::act::bias_add(&y, bias)?.mul(&Tensor::from_vec(m, y.shape(), y.device())?),
+        (None, Some(m)) => crate::act::apply_mask(&crate::act::bias_add(&y, bias)?, m),
     }
 }
 
@@ -851,7 +820,7 @@ mod tests {
                 let run = || -> Result<Tensor> {
                     let h = linear(x.as_tensor(), w.as_tensor(), b.as_tensor(), act, mask.clone())?;
                     let h2 = linear(&(x.as_tensor() * 0.5)?, w.as_tensor(), b.as_tensor(), act, None)?;
-                    ((h.sqr()?.sum_all()? + (h2 * 0.7)?.sum_all()?)? * 0.5)
+                    (h.sqr()?.sum_all()? + (h2 * 0.7)?.sum_all()?)? * 0.5
                 };
                 let plain_loss = run().unwrap();
                 let plain = plain_loss.backward().unwrap();
