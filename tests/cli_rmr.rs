@@ -272,7 +272,11 @@ fn the_stitching_benchmark_measures_every_method() {
     let (ok, stdout, stderr) =
         run(&["train", "rtn", "--preset", "tiny", "--synth-minutes", "1", "--epochs", "1", "--out", s(&rtn)]);
     assert!(ok, "{stdout}\n{stderr}");
-    let methods = format!("concat,inertialize,interp,rmr:{0},rmr+ik:{0},rmr+lock:{0},rtn:{1}", s(&run_dir), s(&rtn));
+    let methods = format!(
+        "concat,inertialize,interp,rmr:{0},rmr+ik:{0},rmr+lock:{0},rmr+ik+lock:{0},rtn:{1}",
+        s(&run_dir),
+        s(&rtn)
+    );
     let (ok, stdout, stderr) = run(&[
         "bench",
         "stitch",
@@ -296,7 +300,7 @@ fn the_stitching_benchmark_measures_every_method() {
     assert!(cases >= 10, "{cases} cases");
     assert_eq!(r["free_cases"], 6);
     let rows = r["methods"].as_object().unwrap();
-    assert_eq!(rows.len(), 7);
+    assert_eq!(rows.len(), 8);
     for (name, row) in rows {
         assert_eq!(row["cases"].as_u64(), Some(cases), "{name}");
         for key in ["l2p", "l2q", "npss", "foot_sliding", "skate", "root_deviation", "pops_mean"] {

@@ -28,6 +28,16 @@ use crate::error::RmrResult;
 use crate::features::{FeatureLayout, FeatureStats};
 use candle_core::{D, Device, Tensor};
 
+/// `|x|` whose gradient at `x = 0` is 0 (the subgradient PyTorch's `abs` takes), where
+/// candle's `abs` takes +1. A residual model starts with its output equal to the input, so
+/// exactly equal to the ground truth on the copied segment A, on the root displacements copied
+/// from the ground truth, and to the input in `L_begin`: with candle's `abs` every such value
+/// pushes its output down at every step, with this one the identity is a stationary point
+/// there. (`sign` has no gradient in candle, so the product's gradient is `sign(x)`.)
+pub fn abs0(x: &Tensor) -> candle_core::Result<Tensor> {
+    x * x.sign()?.detach()
+}
+
 /// The transformed sigmoid of the beginning loss: `sig(x) = -1 / (1 + exp(5 - 10 x)) + 1`.
 pub fn begin_sigmoid(x: f64) -> f64 {
     1.0 - 1.0 / (1.0 + (5.0 - 10.0 * x).exp())
@@ -193,12 +203,12 @@ impl Loss {
         let n_pose = self.fl.contacts();
         let l1 = |a: &Tensor, b: &Tensor| -> RmrResult<Tensor> {
             // sum over values, mean over frames and batch
-            Ok((a - b)?.abs()?.sum(D::Minus1)?.mean_all()?)
+            Ok(abs0(&(a - b)?)?.sum(D::Minus1)?.mean_all()?)
         };
         let pose = match frame_weights {
             None => l1(&out.narrow(2, 0, n_pose)?, &target.narrow(2, 0, n_pose)?)?,
             Some(w) => {
-                let per_frame = (out.narrow(2, 0, n_pose)? - target.narrow(2, 0, n_pose)?)?.abs()?.sum(D::Minus1)?;
+                let per_frame = abs0(&(out.narrow(2, 0, n_pose)? - target.narrow(2, 0, n_pose)?)?)?.sum(D::Minus1)?;
                 (per_frame * w)?.mean_all()?
             }
         };
@@ -210,7 +220,7 @@ impl Loss {
                 let tb = self.t_begin.min(out.dim(1)?);
                 let diff =
                     (out.narrow(1, 0, tb)?.narrow(2, 0, n_pose)? - input.narrow(1, 0, tb)?.narrow(2, 0, n_pose)?)?;
-                let per_frame = diff.abs()?.sum_keepdim(D::Minus1)?.broadcast_mul(&w.narrow(1, 0, tb)?)?;
+                let per_frame = abs0(&diff)?.sum_keepdim(D::Minus1)?.broadcast_mul(&w.narrow(1, 0, tb)?)?;
                 // (1 / T_begin) sum over frames, mean over the batch
                 (per_frame.sum(1)?.mean_all()? / self.t_begin as f64)?
             }
@@ -350,7 +360,7 @@ impl Kinematics {
             let off = fl.positions() + 3 * s;
             let p = pos_of(*s)?;
             let pn = p.broadcast_sub(&self.mean.narrow(0, off, 3)?)?.broadcast_div(&self.std.narrow(0, off, 3)?)?;
-            fk_parts.push((pn - target.narrow(D::Minus1, off, 3)?)?.abs()?.sum(D::Minus1)?);
+            fk_parts.push(abs0(&(pn - target.narrow(D::Minus1, off, 3)?)?)?.sum(D::Minus1)?);
         }
         let fk = Tensor::stack(&fk_parts, D::Minus1)?.sum(D::Minus1)?.mean_all()?;
         // L_slide: a contact joint's horizontal move from t - 1 to t in root t - 1's frame.

@@ -118,6 +118,19 @@ impl Rmr {
         }
     }
 
+    /// How many of the decoder's first hidden ReLU units are active (output > 0) on at least
+    /// one frame of `xs` `(batch, frames, dim)`, evaluation mode, and how many there are. A
+    /// unit that is inactive on every frame gets no gradient again: when all are, the model is
+    /// stuck at its output layer's bias (docs/rmr.md, "Dead decoder units").
+    pub fn active_decoder_units(&self, xs: &Tensor) -> RmrResult<(usize, usize)> {
+        let first = self.decoder.layers().first().ok_or_else(|| RmrError::Config("the decoder has no layer".into()))?;
+        let h = self.refiner.forward(&self.encoder.forward(xs)?, None)?;
+        let pre = first.forward(&h)?;
+        let units = pre.dim(2)?;
+        let max = pre.flatten_to(1)?.max(0)?.to_vec1::<f32>()?;
+        Ok((max.iter().filter(|&&m| m > 0.0).count(), units))
+    }
+
     /// Refines one sequence of normalised pose vectors (`frames * dim`), evaluation mode.
     pub fn refine(&self, x: &[f32]) -> RmrResult<Vec<f32>> {
         let d = self.config.dim();

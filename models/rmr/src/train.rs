@@ -347,7 +347,16 @@ impl Trainable for RmrTraining<'_> {
     }
 
     fn validate(&mut self) -> Result<Validation, TrainError> {
-        Ok(Validation { loss: self.trainer.eval_all(self.valid)?.total, averaged: None, detail: None })
+        let loss = self.trainer.eval_all(self.valid)?.total;
+        let n = self.valid.count.min(64);
+        let (x, _) = self.trainer.batch(self.valid, &(0..n).collect::<Vec<_>>())?;
+        let (active, units) = self.trainer.model.active_decoder_units(&x)?;
+        let mut detail = format!("decoder units active {active}/{units}");
+        if active == 0 {
+            // Dead ReLUs get no gradient again: the model is stuck at its output bias.
+            detail += ": none left, the model can no longer learn; start again with a lower --lr (the paper's 1e-4)";
+        }
+        Ok(Validation { loss, averaged: None, detail: Some(detail) })
     }
 
     fn save_model(&mut self, dir: &Path, _averaged: bool) -> Result<(), TrainError> {

@@ -476,6 +476,43 @@ fn a_residual_model_starts_as_the_identity() {
     assert!(!old.residual);
 }
 
+/// The loss's L1 has gradient 0 where output and target agree (PyTorch's subgradient; candle's
+/// `abs` takes +1 there), so a residual model at the identity gets no push from the values it
+/// already matches, and the value of `|x|` is candle's.
+#[test]
+fn the_l1_gradient_is_zero_where_the_values_agree() {
+    let x = candle_core::Var::from_slice(&[-2f32, 0.0, 0.5], 3, &Device::Cpu).unwrap();
+    let y = zoo_rmr::loss::abs0(x.as_tensor()).unwrap();
+    assert_eq!(y.to_vec1::<f32>().unwrap(), vec![2.0, 0.0, 0.5]);
+    let g = y.sum_all().unwrap().backward().unwrap();
+    assert_eq!(g.get(x.as_tensor()).unwrap().to_vec1::<f32>().unwrap(), vec![-1.0, 0.0, 1.0]);
+    // candle's own abs, for the record: +1 at 0.
+    let g = x.as_tensor().abs().unwrap().sum_all().unwrap().backward().unwrap();
+    assert_eq!(g.get(x.as_tensor()).unwrap().to_vec1::<f32>().unwrap(), vec![-1.0, 1.0, 1.0]);
+}
+
+/// The dead-unit probe that validation reports (docs/rmr.md, "Dead decoder units"): a fresh
+/// model has active decoder units; with the first decoder layer's bias far below what its
+/// inputs can reach, none is active.
+#[test]
+fn the_decoder_unit_probe_counts_active_units() {
+    let config = Config::tiny();
+    let d = config.dim();
+    let x = Tensor::from_vec(
+        (0..2 * 12 * d).map(|i| ((i * 37 % 101) as f32 / 50.0) - 1.0).collect(),
+        (2, 12, d),
+        &Device::Cpu,
+    )
+    .unwrap();
+    let (model, vm) = build(&config);
+    let (active, units) = model.active_decoder_units(&x).unwrap();
+    assert_eq!(units, config.decoder[0]);
+    assert!(active > units / 4, "{active} of {units} active at initialisation");
+    let bias = vm.data().lock().unwrap().get("decoder.0.bias").unwrap().clone();
+    bias.set(&(bias.as_tensor().ones_like().unwrap() * -1e3).unwrap()).unwrap();
+    assert_eq!(model.active_decoder_units(&x).unwrap(), (0, units));
+}
+
 /// The seam weight (docs/rmr.md): the pose loss counts frames within 5 of a seam
 /// `1 + seam_weight` times; 0 is the paper's loss; the pairs carry their seams.
 #[test]

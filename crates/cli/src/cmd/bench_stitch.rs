@@ -47,7 +47,8 @@ pub struct StitchBenchArgs {
     /// Comma-separated methods: `concat` (aligned concatenation), `inertialize`, `interp`,
     /// `rmr:RUN_DIR` (a `zoo train rmr` folder, no post-process), `rmr+ik:RUN_DIR` (the ankles
     /// placed at its predicted lower-body positions by IK, RMR sec. 5), `rmr+lock:RUN_DIR` (with
-    /// the foot lock by its predicted contacts), `rtn:RUN_DIR` / `rtn+lock:RUN_DIR` (a `zoo train rtn`
+    /// the foot lock by its predicted contacts), `rmr+ik+lock:RUN_DIR` (both, in that order: what
+    /// `zoo stitch` writes by default), `rtn:RUN_DIR` / `rtn+lock:RUN_DIR` (a `zoo train rtn`
     /// folder in-betweening across each seam: 10 context frames before, target after).
     #[arg(long, default_value = "concat,inertialize,interp", value_delimiter = ',')]
     pub methods: Vec<String>,
@@ -100,13 +101,15 @@ impl Method {
             "interp" => return Ok(Method::Interp),
             _ => {}
         }
-        let forms = "concat, inertialize, interp, rmr:RUN_DIR, rmr+ik:RUN_DIR, rmr+lock:RUN_DIR, rtn:RUN_DIR, \
-                     rtn+lock:RUN_DIR";
+        let forms = "concat, inertialize, interp, rmr:RUN_DIR, rmr+ik:RUN_DIR, rmr+lock:RUN_DIR, \
+                     rmr+ik+lock:RUN_DIR, rtn:RUN_DIR, rtn+lock:RUN_DIR";
         let Some((head, path)) = spec.split_once(':') else { bail!("unknown method `{spec}`: expected {forms}") };
         let (lock, ik) = match head {
             "rmr" => (false, false),
             "rmr+ik" => (false, true),
             "rmr+lock" => (true, false),
+            // What `zoo stitch` writes by default: ankles by IK, then the foot lock.
+            "rmr+ik+lock" => (true, true),
             "rtn" | "rtn+lock" => {
                 let method = crate::registry::load_method(&crate::registry::parse_method(spec)?)?;
                 return Ok(Method::Transition { name: spec.to_string(), method });
