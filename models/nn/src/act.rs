@@ -11,6 +11,7 @@
 
 use crate::layers::{Activation, SELU_ALPHA, SELU_SCALE};
 use candle_core::{CpuStorage, CustomOp1, CustomOp2, DType, Layout, Result, Shape, Tensor};
+use std::borrow::Cow;
 
 /// The activation of `z` and its derivative (`None`: the identity).
 #[inline]
@@ -43,14 +44,17 @@ pub(crate) fn act(a: Option<Activation>, z: f32) -> (f32, f32) {
     }
 }
 
-/// The values of a contiguous f32 CPU storage (the fused ops make their inputs contiguous);
-/// `what` names the input in the error.
-pub(crate) fn values<'a>(s: &'a CpuStorage, l: &Layout, what: &str) -> Result<&'a [f32]> {
+/// The values of an f32 CPU storage in row-major order: borrowed when contiguous, gathered
+/// when a 2-D layout is strided (a transposed view); `what` names the input in the error for
+/// other layouts.
+pub(crate) fn values<'a>(s: &'a CpuStorage, l: &Layout, what: &str) -> Result<Cow<'a, [f32]>> {
     let v = s.as_slice::<f32>()?;
-    match l.contiguous_offsets() {
-        Some((a, b)) => Ok(&v[a..b]),
-        None => candle_core::bail!("fused op: a non-contiguous {what} {:?}", l.dims()),
+    if let Some((a, b)) = l.contiguous_offsets() {
+        return Ok(Cow::Borrowed(&v[a..b]));
     }
+    let Ok((r, c)) = l.shape().dims2() else { candle_core::bail!("fused op: a non-contiguous {what} {:?}", l.dims()) };
+    let (rs, cs, o) = (l.stride()[0], l.stride()[1], l.start_offset());
+    Ok(Cow::Owned((0..r).flat_map(|i| (0..c).map(move |j| v[o + i * rs + j * cs])).collect()))
 }
 
 /// The values of an f32 tensor in row-major order.
@@ -135,7 +139,7 @@ impl CustomOp1 for BiasAct {
 
     fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
         self.check(l.shape().elem_count())?;
-        Ok((CpuStorage::F32(self.forward(values(s, l, "input")?, None)), l.shape().clone()))
+        Ok((CpuStorage::F32(self.forward(&values(s, l, "input")?, None)), l.shape().clone()))
     }
 
     fn bwd(&self, arg: &Tensor, _res: &Tensor, grad_res: &Tensor) -> Result<Option<Tensor>> {
@@ -155,7 +159,7 @@ impl CustomOp2 for BiasAct {
             candle_core::bail!("fused activation: bias {:?} for values {:?}", l2.dims(), l1.dims())
         }
         let (x, b) = (values(s1, l1, "input")?, values(s2, l2, "bias")?);
-        Ok((CpuStorage::F32(self.forward(x, Some(b))), l1.shape().clone()))
+        Ok((CpuStorage::F32(self.forward(&x, Some(&b))), l1.shape().clone()))
     }
 
     fn bwd(

@@ -9,28 +9,11 @@
 //! `fused_cells_equal_the_tensor_op_cells` (values and gradients within 1e-5 of the candle-op
 //! cells).
 
+use crate::act::{tensor_values, values};
 use candle_core::{CpuStorage, CustomOp2, CustomOp3, Layout, Result, Shape, Tensor};
-use std::borrow::Cow;
 
 fn sigmoid(x: f32) -> f32 {
     1.0 / (1.0 + (-x).exp())
-}
-
-/// The values of a 2-D f32 CPU storage in row-major order (borrowed when contiguous).
-fn rows<'a>(s: &'a CpuStorage, l: &Layout) -> Result<Cow<'a, [f32]>> {
-    let v = s.as_slice::<f32>()?;
-    if let Some((a, b)) = l.contiguous_offsets() {
-        return Ok(Cow::Borrowed(&v[a..b]));
-    }
-    let (r, c) = l.shape().dims2()?;
-    let (rs, cs) = (l.stride()[0], l.stride()[1]);
-    let o = l.start_offset();
-    Ok(Cow::Owned((0..r).flat_map(|i| (0..c).map(move |j| v[o + i * rs + j * cs])).collect()))
-}
-
-/// The values of a 2-D f32 tensor in row-major order.
-fn tensor_rows(t: &Tensor) -> Result<Vec<f32>> {
-    t.contiguous()?.flatten_all()?.to_vec1::<f32>()
 }
 
 struct LstmCell;
@@ -48,7 +31,7 @@ impl CustomOp2 for LstmCell {
         if b != b2 || g4 != 4 * hu {
             candle_core::bail!("LSTM cell: gates {:?} and cell state {:?} do not match", l1.dims(), l2.dims());
         }
-        let (g, c) = (rows(s1, l1)?, rows(s2, l2)?);
+        let (g, c) = (values(s1, l1, "cell input")?, values(s2, l2, "cell input")?);
         let mut out = vec![0f32; 2 * b * hu];
         let (hs, cs) = out.split_at_mut(b * hu);
         for r in 0..b {
@@ -67,7 +50,7 @@ impl CustomOp2 for LstmCell {
         let (b, hu) = c.dims2()?;
         let dev = res.device().clone();
         // `res` and `grad` are `(2, B, H)`: h' then c'.
-        let (g, c, res, grad) = (tensor_rows(g)?, tensor_rows(c)?, tensor_rows(res)?, tensor_rows(grad)?);
+        let (g, c, res, grad) = (tensor_values(g)?, tensor_values(c)?, tensor_values(res)?, tensor_values(grad)?);
         let (mut dg, mut dc) = (vec![0f32; b * 4 * hu], vec![0f32; b * hu]);
         for r in 0..b {
             let gr = &g[r * 4 * hu..(r + 1) * 4 * hu];
@@ -135,7 +118,7 @@ impl CustomOp3 for GruCell {
         if l2.dims() != l1.dims() || b3 != b || g3 != 3 * hu {
             candle_core::bail!("GRU cell: {:?}, {:?} and {:?} do not match", l1.dims(), l2.dims(), l3.dims());
         }
-        let (gx, gh, h) = (rows(s1, l1)?, rows(s2, l2)?, rows(s3, l3)?);
+        let (gx, gh, h) = (values(s1, l1, "cell input")?, values(s2, l2, "cell input")?, values(s3, l3, "cell input")?);
         let mut out = vec![0f32; b * hu];
         for r in 0..b {
             let (x, y, hr) = (&gx[r * g3..(r + 1) * g3], &gh[r * g3..(r + 1) * g3], &h[r * hu..(r + 1) * hu]);
@@ -159,7 +142,7 @@ impl CustomOp3 for GruCell {
     ) -> Result<(Option<Tensor>, Option<Tensor>, Option<Tensor>)> {
         let (b, hu) = h.dims2()?;
         let g3 = 3 * hu;
-        let (x, y, hv, d) = (tensor_rows(gx)?, tensor_rows(gh)?, tensor_rows(h)?, tensor_rows(grad)?);
+        let (x, y, hv, d) = (tensor_values(gx)?, tensor_values(gh)?, tensor_values(h)?, tensor_values(grad)?);
         let (mut dx, mut dy, mut dh) = (vec![0f32; b * g3], vec![0f32; b * g3], vec![0f32; b * hu]);
         for r in 0..b {
             let (xr, yr) = (&x[r * g3..(r + 1) * g3], &y[r * g3..(r + 1) * g3]);

@@ -251,7 +251,7 @@ impl CustomOp3 for TapedLinear {
         }
         self.act.check(m * n)?;
         let small = match (l1.contiguous_offsets(), l2.contiguous_offsets()) {
-            (Some(_), Some(_)) => small_matmul(values(s1, l1, "input")?, m, k, values(s2, l2, "weight")?, n),
+            (Some(_), Some(_)) => small_matmul(&values(s1, l1, "input")?, m, k, &values(s2, l2, "weight")?, n),
             _ => None,
         };
         let y = match small {
@@ -264,11 +264,11 @@ impl CustomOp3 for TapedLinear {
         let bias = values(s3, l3, "bias")?;
         if self.act.is_bias_only() {
             let mut y = y;
-            self.act.forward_in_place(&mut y, Some(bias));
+            self.act.forward_in_place(&mut y, Some(&bias));
             return Ok((CpuStorage::F32(y), Shape::from((m, n))));
         }
         // The backward pass needs the product (the activation's derivative at `x W + b`).
-        let out = self.act.forward(&y, Some(bias));
+        let out = self.act.forward(&y, Some(&bias));
         *self.product.lock().map_err(|_| candle_core::Error::Msg("a taped linear op was poisoned".into()))? = Some(y);
         Ok((CpuStorage::F32(out), Shape::from((m, n))))
     }
