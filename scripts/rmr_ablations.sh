@@ -7,8 +7,11 @@
 #
 #   scripts/rmr_ablations.sh [EPOCHS] [OUT]        # defaults: 20 epochs, runs/rmr-ablations
 #
-# DATA (default ../shared/data/bandai2) and EXTRA (more `zoo train rmr` flags for every run,
-# e.g. EXTRA='--seam-weight 4') can be set in the environment. An interrupted script resumes:
+# DATA (default ../shared/data/bandai2), EXTRA (more `zoo train rmr` flags for every run,
+# e.g. EXTRA='--seam-weight 4 --threads 1') and ZOO (a zoo binary to use instead of building
+# target/release/zoo, e.g. a copy that a rebuild cannot replace mid-run; the Figure 9 example
+# is then taken from TRAJECTORY, default target/release/examples/trajectory_ablation) can be
+# set in the environment. An interrupted script resumes:
 # finished runs are kept, an unfinished one continues from its last checkpoint.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -21,9 +24,12 @@ if [ ! -d "$DATA" ]; then
   echo "error: $DATA not found: the ablations train on bandai2 (set DATA to its folder)" >&2
   exit 1
 fi
-cargo build --release --bin zoo
-cargo build --release -p zoo-rmr --example trajectory_ablation
-ZOO=target/release/zoo
+if [ -z "${ZOO:-}" ]; then
+  cargo build --release --bin zoo
+  cargo build --release -p zoo-rmr --example trajectory_ablation
+  ZOO=target/release/zoo
+fi
+TRAJECTORY=${TRAJECTORY:-target/release/examples/trajectory_ablation}
 mkdir -p "$OUT"
 
 # train NAME FLAGS...: trains (or resumes) one run unless it has finished.
@@ -61,5 +67,5 @@ for r in bgru-tb5 lstm gru blstm bgru-tb3 bgru-tb10 bgru-no-trajectory; do
   methods="$methods,rmr:$OUT/$r,rmr+ik:$OUT/$r"
 done
 $ZOO bench stitch --data "$DATA" --valid-glob "$GLOB" --methods "$methods" --json "$OUT/stitch.json" | tee "$OUT/stitch.txt"
-target/release/examples/trajectory_ablation --data "$DATA" --valid-glob "$GLOB" \
+$TRAJECTORY --data "$DATA" --valid-glob "$GLOB" \
   --model "$OUT/bgru-tb5" --model "$OUT/bgru-no-trajectory" --png "$OUT/trajectory.png" | tee "$OUT/trajectory.txt"

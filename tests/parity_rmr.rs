@@ -256,3 +256,228 @@ fn runtime_stitch_refiner_refuses_bad_input() {
     assert!(err.contains("stride must be in 1..=window"), "{err}");
     refiner.refine_sequence(&x, &mut out).unwrap();
 }
+
+/// Two synthetic clips (walk and run of the default synthetic data) aligned end to start, as
+/// engine poses, and the same motion as a clip rebuilt from those `f32` poses (so that the
+/// offline path and the runtime read identical input).
+fn aligned_poses(frames: usize) -> (Vec<zoo_runtime::EnginePose>, zoo_motion::Clip) {
+    use zoo_data::stitch::{StitchLayout, align_clips};
+    let cfg = zoo_data::synth::SynthConfig { minutes: 0.5, seed: 5, clip_seconds: 4.0, ..Default::default() };
+    let clips: Vec<zoo_motion::Clip> = zoo_data::synth::generate(&cfg).into_iter().map(|c| c.clip).collect();
+    let layout = StitchLayout::bandai2(&clips[0].skeleton).unwrap();
+    let aligned = align_clips(&[clips[0].slice(10, 70), clips[3].slice(20, 90)], &layout, 10).unwrap().clip;
+    let clip = aligned.slice(0, frames);
+    let j = clip.joints();
+    let poses: Vec<zoo_runtime::EnginePose> = (0..frames)
+        .map(|f| {
+            let rotations: Vec<glam::Quat> = clip.rotations_at(f).iter().map(|q| q.as_quat()).collect();
+            zoo_runtime::EnginePose::from_world(clip.root_position(f).as_vec3(), &rotations)
+        })
+        .collect();
+    let mut rebuilt = clip.clone();
+    for (f, p) in poses.iter().enumerate() {
+        rebuilt.local_rotations[f * j] = p.hips_world_rotation().as_dquat();
+        for k in 1..j {
+            rebuilt.local_rotations[f * j + k] = p.local_rotations[k].normalize().as_dquat();
+        }
+        rebuilt.local_positions[f * j] = p.hips_world().as_dvec3();
+    }
+    (poses, rebuilt)
+}
+
+/// Global joint positions of engine poses on `skeleton`.
+fn world_positions(poses: &[zoo_runtime::EnginePose], skeleton: &zoo_motion::Skeleton) -> Vec<glam::DVec3> {
+    let j = skeleton.len();
+    let mut clip = zoo_motion::Clip {
+        skeleton: skeleton.clone(),
+        frame_time: 1.0 / 30.0,
+        local_rotations: Vec::new(),
+        local_positions: Vec::new(),
+    };
+    for p in poses {
+        clip.local_rotations.push(p.hips_world_rotation().as_dquat());
+        clip.local_rotations.extend(p.local_rotations[1..].iter().map(|q| q.normalize().as_dquat()));
+        clip.local_positions.push(p.hips_world().as_dvec3());
+        clip.local_positions.extend_from_slice(&skeleton.offsets[1..j]);
+    }
+    clip.global().1
+}
+
+fn max_distance(a: &[glam::DVec3], b: &[glam::DVec3]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    a.iter().zip(b).map(|(p, q)| (*p - *q).length()).fold(0.0, f64::max)
+}
+
+/// The runtime's pose path (`StitchRefiner::encode_poses`, `refine_poses`: encoding, tract,
+/// decoding, ankles placed and feet locked) against the offline one (`zoo_rmr::features`,
+/// candle's `refine_clip_full`, `place_ankles`, `lock_feet`: what `zoo stitch` writes).
+#[test]
+fn runtime_refines_engine_poses_like_zoo_stitch() {
+    use zoo_rmr::footlock::{lock_feet, place_ankles};
+    use zoo_rmr::stitch::{RefineOptions, refine_clip_full};
+    use zoo_runtime::stitch::FootCleanup;
+    use zoo_runtime::{EnginePose, StitchRefiner};
+    let mut f = fixture(RefinerCell::Bgru);
+    let (poses, clip) = aligned_poses(100);
+    let layout = &f.config.layout;
+    // Statistics of real pose vectors (the fixture's random ones decode to quaternions far
+    // from unit length, whose normalisation magnifies float differences).
+    let offline_x = zoo_rmr::features::encode_clip(&clip, layout).unwrap();
+    f.stats = FeatureStats::fit([offline_x.as_slice()], zoo_rmr::features::FeatureLayout::new(21, 9));
+    let refiner = StitchRefiner::from_bytes(&export_rmr(&f.config, &f.stats, &f.varmap).unwrap().to_bytes()).unwrap();
+    // Encoding.
+    let d = refiner.dim();
+    let mut x = vec![0.0f32; poses.len() * d];
+    refiner.encode_poses(&poses, &mut x).unwrap();
+    let worst = x.iter().zip(&offline_x).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
+    println!("encode_poses vs zoo_rmr encode_clip: max |diff| {worst:e}");
+    assert!(worst <= 1e-4, "encoding differs by {worst}");
+    // Refinement alone, then with the foot cleanup of `zoo stitch`.
+    let mut refined = refine_clip_full(&f.model, &f.stats, &clip, RefineOptions::of(&f.config)).unwrap();
+    let mut out = vec![EnginePose::new(refiner.joints()); poses.len()];
+    let mut contacts = vec![[false; 4]; poses.len()];
+    refiner.refine_poses(&poses, FootCleanup::NONE, &mut out, &mut contacts).unwrap();
+    let worst = max_distance(&world_positions(&out, refiner.skeleton()), &refined.clip.global().1);
+    println!("refine_poses vs zoo_rmr (candle, no cleanup): max joint distance {worst:e} cm over 100 frames");
+    assert!(worst <= 1e-3, "joint positions differ by {worst} cm");
+    let plain = world_positions(&out, refiner.skeleton());
+    place_ankles(&mut refined.clip, &refined.ankles, layout);
+    lock_feet(&mut refined.clip, &refined.contacts, layout);
+    refiner.refine_poses(&poses, FootCleanup::default(), &mut out, &mut contacts).unwrap();
+    let worst = max_distance(&world_positions(&out, refiner.skeleton()), &refined.clip.global().1);
+    let moved = max_distance(&world_positions(&out, refiner.skeleton()), &plain);
+    println!(
+        "refine_poses vs zoo_rmr (candle, ankles and lock): max joint distance {worst:e} cm over 100 frames (the \
+         cleanup moved joints by up to {moved:.2} cm)"
+    );
+    // Two-bone IK of a nearly straight leg (in f32) magnifies the 1e-4 cm above: 0.1 cm, far
+    // below what the cleanup itself moves.
+    assert!(worst <= 0.1, "joint positions differ by {worst} cm");
+    assert!(moved > 1.0, "the cleanup moved joints by only {moved} cm");
+    assert_eq!(contacts, refined.contacts, "predicted contacts agree");
+    // Root deltas chain the root transforms.
+    for w in out.windows(2) {
+        let (p, yaw) = zoo_runtime::pose::root_delta(
+            w[0].root_position,
+            w[0].root_rotation,
+            w[1].root_position,
+            w[1].root_rotation,
+        );
+        assert!((p - w[1].root_delta_position).length() < 1e-4 && (yaw - w[1].root_delta_yaw).abs() < 1e-5);
+    }
+}
+
+/// The streaming form gives the whole-sequence form's poses with a fixed latency of `w - 1`
+/// frames: exactly when the windows line up with the end, and on every frame the last window
+/// did not revisit otherwise.
+#[test]
+fn stitch_stream_matches_the_whole_sequence_with_fixed_latency() {
+    use zoo_runtime::stitch::FootCleanup;
+    use zoo_runtime::{EnginePose, StitchRefiner};
+    let f = fixture(RefinerCell::Bgru);
+    let refiner = StitchRefiner::from_bytes(&export_rmr(&f.config, &f.stats, &f.varmap).unwrap().to_bytes()).unwrap();
+    let (w, s) = (refiner.window(), refiner.stride());
+    for frames in [w + 4 * s, w + 4 * s + 7] {
+        let (poses, _) = aligned_poses(frames);
+        let mut whole = vec![EnginePose::new(refiner.joints()); frames];
+        let mut whole_contacts = vec![[false; 4]; frames];
+        refiner.refine_poses(&poses, FootCleanup::NONE, &mut whole, &mut whole_contacts).unwrap();
+        let mut stream = refiner.stream();
+        assert_eq!(stream.latency(), w - 1);
+        let mut got = Vec::new();
+        let mut pose = EnginePose::new(refiner.joints());
+        for (t, p) in poses.iter().enumerate() {
+            stream.push(p).unwrap();
+            // Ready exactly `latency` frames after: frame t - (w - 1) once frame t is pushed.
+            let expected = (t + 1).saturating_sub(w - 1);
+            while let Some(c) = stream.pop(&mut pose).unwrap() {
+                got.push((pose.clone(), c));
+            }
+            assert_eq!(got.len(), expected, "after pushing frame {t}");
+        }
+        let before_finish = got.len();
+        stream.finish().unwrap();
+        while let Some(c) = stream.pop(&mut pose).unwrap() {
+            got.push((pose.clone(), c));
+        }
+        assert_eq!(got.len(), frames);
+        let last_window = frames - w;
+        let skeleton = refiner.skeleton();
+        let streamed: Vec<EnginePose> = got.iter().map(|(p, _)| p.clone()).collect();
+        let a = world_positions(&streamed, skeleton);
+        let b = world_positions(&whole, skeleton);
+        let j = refiner.joints();
+        let aligned = last_window % s == 0;
+        let same: Vec<usize> = (0..frames).filter(|&t| aligned || t < last_window || t >= before_finish).collect();
+        let worst =
+            same.iter().map(|&t| max_distance(&a[t * j..(t + 1) * j], &b[t * j..(t + 1) * j])).fold(0.0, f64::max);
+        println!(
+            "stream vs whole sequence, {frames} frames: max joint distance {worst:e} cm on {} frames ({} revisited by \
+             the last window)",
+            same.len(),
+            frames - same.len()
+        );
+        assert!(worst <= 1e-4, "{frames} frames: the stream differs by {worst} cm");
+        assert!(same.iter().all(|&t| got[t].1 == whole_contacts[t]), "contacts agree");
+        if aligned {
+            assert_eq!(same.len(), frames);
+        }
+    }
+}
+
+/// Bad input to the pose and streaming forms: clear errors, no panic.
+#[test]
+fn runtime_stitch_poses_and_stream_refuse_bad_input() {
+    use zoo_runtime::stitch::FootCleanup;
+    use zoo_runtime::{EnginePose, StitchRefiner};
+    let f = fixture(RefinerCell::Gru);
+    let refiner = StitchRefiner::from_bytes(&export_rmr(&f.config, &f.stats, &f.varmap).unwrap().to_bytes()).unwrap();
+    let (poses, _) = aligned_poses(40);
+    let j = refiner.joints();
+    // Another skeleton (fewer joints).
+    let wrong = vec![EnginePose::new(j - 2); 40];
+    let mut out = vec![EnginePose::new(j); 40];
+    let mut contacts = vec![[false; 4]; 40];
+    let err = refiner.refine_poses(&wrong, FootCleanup::default(), &mut out, &mut contacts).unwrap_err().to_string();
+    assert!(err.contains("pose 0 has 19 joint rotations but the model's skeleton has 21 joints"), "{err}");
+    // Fewer poses than the window, mismatched buffers, NaN.
+    let err = refiner
+        .refine_poses(&poses[..20], FootCleanup::default(), &mut out[..20], &mut contacts[..20])
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("the window of 30 frames is longer than the sequence (20 frames)"), "{err}");
+    let err =
+        refiner.refine_poses(&poses, FootCleanup::default(), &mut out[..39], &mut contacts).unwrap_err().to_string();
+    assert!(err.contains("40 input poses but 39 output poses"), "{err}");
+    let mut nan = poses.clone();
+    nan[3].local_rotations[5].x = f32::NAN;
+    let err = refiner.refine_poses(&nan, FootCleanup::default(), &mut out, &mut contacts).unwrap_err().to_string();
+    assert!(err.contains("pose 3") && err.contains("non-finite"), "{err}");
+    let err = refiner.encode_poses(&poses[..1], &mut [0.0; 1000]).unwrap_err().to_string();
+    assert!(err.contains("at least 2 frames"), "{err}");
+    // The stream: a wrong pose, NaN, too short a motion, a wrong output pose, push after finish.
+    let mut stream = refiner.stream();
+    let err = stream.push(&EnginePose::new(j + 1)).unwrap_err().to_string();
+    assert!(err.contains("22 joint rotations"), "{err}");
+    let err = stream.push(&nan[3]).unwrap_err().to_string();
+    assert!(err.contains("non-finite"), "{err}");
+    for p in &poses[..10] {
+        stream.push(p).unwrap();
+    }
+    let err = stream.finish().unwrap_err().to_string();
+    assert!(err.contains("ends after 10 frames, fewer than the window of 30"), "{err}");
+    for p in &poses[10..] {
+        stream.push(p).unwrap();
+    }
+    let err = stream.pop(&mut EnginePose::new(3)).unwrap_err().to_string();
+    assert!(err.contains("the output pose has 3 joints"), "{err}");
+    stream.finish().unwrap();
+    let err = stream.push(&poses[0]).unwrap_err().to_string();
+    assert!(err.contains("the stream is finished"), "{err}");
+    let mut pose = EnginePose::new(j);
+    let mut n = 0;
+    while stream.pop(&mut pose).unwrap().is_some() {
+        n += 1;
+    }
+    assert_eq!(n, 40);
+}

@@ -110,6 +110,61 @@ fn allocations_per_step() {
         assert!((a1000 - a100).abs() < 0.5, "allocations per step should not grow with frames played");
     }
     transition_allocations();
+    stitch_allocations();
+}
+
+/// The stitching task (issue 12): heap allocations per window of
+/// `StitchRefiner::refine_window_normalized` (tract's per-run tensors) and of a `StitchStream`
+/// (pushes, pops and the window they trigger), on the tiny seeded RMR. The stream's own work
+/// (encoding, normalising, blending, decoding) must add nothing to tract's.
+fn stitch_allocations() {
+    use candle_core::{DType, Device};
+    let config = zoo_rmr::Config::tiny();
+    let varmap = candle_nn::VarMap::new();
+    zoo_rmr::Rmr::new(&config, zoo_nn::SeededVarMap::builder(&varmap, 7, DType::F32, &Device::Cpu)).unwrap();
+    let d = config.dim();
+    let stats = zoo_rmr::features::FeatureStats { mean: vec![0.0; d], std: vec![1.0; d] };
+    let onnx = zoo_rmr::export::export_rmr(&config, &stats, &varmap).unwrap();
+    let refiner = zoo_runtime::StitchRefiner::from_bytes(&onnx.to_bytes()).unwrap();
+    let (w, s) = (refiner.window(), refiner.stride());
+    let x = vec![0.1f32; w * d];
+    let mut y = vec![0.0f32; w * d];
+    let per_window = per_frame(20, || refiner.refine_window_normalized(&x, &mut y).unwrap());
+    // Synthetic walking and running, aligned, as engine poses.
+    let synth = zoo_data::synth::SynthConfig { minutes: 0.5, seed: 3, clip_seconds: 10.0, ..Default::default() };
+    let clips: Vec<zoo_motion::Clip> = zoo_data::synth::generate(&synth).into_iter().map(|c| c.clip).collect();
+    let aligned = zoo_data::stitch::align_clips(&clips, &config.layout, 10).unwrap().clip;
+    let poses: Vec<EnginePose> = (0..aligned.frames())
+        .map(|f| {
+            let r: Vec<glam::Quat> = aligned.rotations_at(f).iter().map(|q| q.as_quat()).collect();
+            EnginePose::from_world(aligned.root_position(f).as_vec3(), &r)
+        })
+        .collect();
+    let mut stream = refiner.stream();
+    let mut out = EnginePose::new(refiner.joints());
+    let mut frames = poses.iter();
+    // Up to the first window: the stream sizes its buffers.
+    for p in frames.by_ref().take(w) {
+        stream.push(p).unwrap();
+        while stream.pop(&mut out).unwrap().is_some() {}
+    }
+    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    let mut pushed = 0;
+    for p in frames.by_ref().take(20 * s) {
+        stream.push(p).unwrap();
+        while stream.pop(&mut out).unwrap().is_some() {}
+        pushed += 1;
+    }
+    assert_eq!(pushed, 20 * s, "the synthetic motion is long enough for 20 more windows");
+    let stream_per_window = (ALLOCATIONS.load(Ordering::Relaxed) - before) as f64 / 20.0;
+    eprintln!(
+        "tiny RMR (window {w}, stride {s}): {per_window:.1} allocations per refine_window_normalized, \
+         {stream_per_window:.1} per window of a StitchStream (its {s} pushes and pops included)"
+    );
+    assert!(
+        (stream_per_window - per_window).abs() < 0.5,
+        "the stream's own work allocates: {stream_per_window} per window vs {per_window} for the window alone"
+    );
 }
 
 /// `TransitionRunner::step_raw` (feature decoding, offsets, root integration around the graph

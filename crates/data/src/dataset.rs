@@ -469,17 +469,7 @@ pub fn position_stats(global_pos: &[DVec3], joints: usize) -> PositionStats {
     PositionStats { mean, std }
 }
 
-/// Linear-interpolation percentile (numpy's default) of `values`, `q` in [0, 100].
-pub fn percentile(values: &mut [f64], q: f64) -> f64 {
-    if values.is_empty() {
-        return f64::NAN;
-    }
-    values.sort_by(|a, b| a.total_cmp(b));
-    let pos = q / 100.0 * (values.len() - 1) as f64;
-    let lo = pos.floor() as usize;
-    let hi = pos.ceil() as usize;
-    values[lo] + (values[hi] - values[lo]) * (pos - lo as f64)
-}
+pub use zoo_motion::stitch::percentile;
 
 #[cfg(test)]
 mod tests {

@@ -25,6 +25,7 @@ pub mod pipeline;
 pub mod quat;
 pub mod rng;
 pub mod skeleton;
+pub mod stitch;
 pub mod terrain;
 
 pub use clip::Clip;

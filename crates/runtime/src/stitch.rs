@@ -11,14 +11,31 @@
 //! the difference at each window's first frame blended away over `blend_frames` frames,
 //! contacts returned as 0/1.
 //!
-//! Not here yet: encoding clips into pose vectors and decoding them back (forward kinematics
-//! and ground roots live in the offline `zoo_data::stitch` and `zoo_rmr::features`), and the
-//! streaming form for motion matching.
+//!
+//! Poses in and out: [`StitchRefiner::refine_poses`] takes a whole aligned sequence of
+//! [`EnginePose`]s (root transform plus local joint rotations), encodes it with the motion
+//! core's pose vector ([`zoo_motion::stitch`], the code the offline tools use), refines it,
+//! decodes it from the input's first ground root and, as `zoo stitch` does by default, puts the
+//! ankles where the refiner predicts them and locks the planted feet by the predicted contacts
+//! ([`zoo_motion::stitch::lock`]), writing into the caller's poses.
+//!
+//! Streaming for motion matching: [`StitchStream`] (from [`StitchRefiner::stream`]) takes one
+//! pose per frame as the engine decides it and gives refined poses back with a fixed latency of
+//! `w - 1` frames ([`StitchStream::latency`]): the refined pose of frame `t` is ready once frame
+//! `t + w - 1` is pushed. It runs the same windows as [`StitchRefiner::refine_sequence`] (one
+//! every `s` frames; at [`StitchStream::finish`] one ending on the last frame), so up to the
+//! last `w` frames of a finished stream its output is the whole-sequence form's, value for
+//! value. The foot lock needs whole contact runs, so the stream returns the predicted contacts
+//! with each pose for the engine's own foot IK instead of locking.
 
 use crate::error::{MotionError, chain};
+use crate::pose::{EnginePose, root_delta};
+use glam::{DQuat, DVec3, Quat, Vec3};
 use std::path::Path;
 use std::sync::Arc;
 use tract_onnx::prelude::*;
+use zoo_motion::stitch::{GroundRoot, PoseFrame, StitchLayout, decode_pose, encode_pose, next_root};
+use zoo_motion::{Clip, Skeleton};
 
 /// `zoo.model_kind` of an exported RMR.
 pub const RMR_KIND: &str = "rmr";
@@ -42,6 +59,8 @@ pub struct StitchRefiner {
     fps: f64,
     mean: Vec<f32>,
     std: Vec<f32>,
+    skeleton: Skeleton,
+    layout: StitchLayout,
 }
 
 fn stitch_err(reason: impl Into<String>) -> MotionError {
@@ -55,6 +74,58 @@ fn plan_for(model: &InferenceModel, window: usize, dim: usize) -> Result<Plan, M
         m.into_optimized()?.into_runnable()
     })();
     planned.map_err(|e| MotionError::Unsupported { reason: chain(&e) })
+}
+
+/// The model's skeleton (names, parents, offsets) and stitching layout from `zoo.rmr.config`.
+fn skeleton_and_layout(config: &serde_json::Value, joints: usize) -> Result<(Skeleton, StitchLayout), MotionError> {
+    let bad = |reason: String| MotionError::BadMetadata { key: "zoo.rmr.config".into(), reason };
+    let names: Vec<String> = serde_json::from_value(config["names"].clone())
+        .map_err(|e| bad(format!("`names` must list the joint names: {e}")))?;
+    let parents: Vec<i64> = serde_json::from_value(config["parents"].clone())
+        .map_err(|e| bad(format!("`parents` must list a parent index (-1 for the root) per joint: {e}")))?;
+    let offsets: Vec<[f64; 3]> = serde_json::from_value(config["offsets"].clone())
+        .map_err(|e| bad(format!("`offsets` must list an offset per joint: {e}")))?;
+    if names.len() != joints || parents.len() != joints || offsets.len() != joints {
+        return Err(bad(format!(
+            "{joints} joints but {} names, {} parents and {} offsets",
+            names.len(),
+            parents.len(),
+            offsets.len()
+        )));
+    }
+    let skeleton = Skeleton {
+        names,
+        parents: parents.iter().map(|&p| usize::try_from(p).ok()).collect(),
+        offsets: offsets.iter().map(|o| DVec3::from_array(*o)).collect(),
+        end_sites: vec![None; joints],
+        channels: vec![Default::default(); joints],
+    };
+    skeleton.validate().map_err(|e| bad(format!("the skeleton is not well formed: {}", e.0)))?;
+    let layout: StitchLayout = serde_json::from_value(config["layout"].clone())
+        .map_err(|e| bad(format!("`layout` is not a stitching layout: {e}")))?;
+    layout.validate(&skeleton).map_err(|e| bad(format!("`layout` does not fit the skeleton: {e}")))?;
+    Ok((skeleton, layout))
+}
+
+/// What follows the refiner in [`StitchRefiner::refine_poses`] (RMR secs. 5 and 6). `zoo stitch`
+/// does both by default, and so does [`FootCleanup::default`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FootCleanup {
+    /// Put the ankles where the refiner predicts them (its lower-body positions) by two-bone IK.
+    pub place_ankles: bool,
+    /// Lock the feet by the predicted contacts (two-bone IK towards each contact's pin).
+    pub lock_feet: bool,
+}
+
+impl Default for FootCleanup {
+    fn default() -> Self {
+        FootCleanup { place_ankles: true, lock_feet: true }
+    }
+}
+
+impl FootCleanup {
+    /// The refiner's output as it is.
+    pub const NONE: FootCleanup = FootCleanup { place_ankles: false, lock_feet: false };
 }
 
 impl StitchRefiner {
@@ -126,8 +197,23 @@ impl StitchRefiner {
                 reason: "a standard deviation is not positive".into(),
             });
         }
+        let (skeleton, layout) = skeleton_and_layout(&config, joints)?;
         let plan = plan_for(&model, window, dim)?;
-        Ok(StitchRefiner { model, plan, window, stride, blend_frames, dim, pose: dim - 4, joints, fps, mean, std })
+        Ok(StitchRefiner {
+            model,
+            plan,
+            window,
+            stride,
+            blend_frames,
+            dim,
+            pose: dim - 4,
+            joints,
+            fps,
+            mean,
+            std,
+            skeleton,
+            layout,
+        })
     }
 
     /// Plans the refiner for another window `w` and stride `s` (`1 <= s <= w`; the paper uses
@@ -172,6 +258,17 @@ impl StitchRefiner {
     /// Frames per second of the training clips (sequences must have it).
     pub fn fps(&self) -> f64 {
         self.fps
+    }
+
+    /// The model's skeleton: poses must have its joints, in its order, and the bone lengths of
+    /// its offsets.
+    pub fn skeleton(&self) -> &Skeleton {
+        &self.skeleton
+    }
+
+    /// Which joints are the lower body and the feet, and the contact thresholds.
+    pub fn layout(&self) -> &StitchLayout {
+        &self.layout
     }
 
     /// Window starts over `frames` frames: every stride while the window fits, plus one ending
@@ -248,43 +345,442 @@ impl StitchRefiner {
         }
         out.copy_from_slice(features);
         for f in out.chunks_exact_mut(d) {
-            for ((v, m), s) in f.iter_mut().zip(&self.mean).zip(&self.std) {
-                *v = (*v - m) / s;
-            }
+            self.normalize_frame(f);
         }
-        let pose = self.pose;
         let mut y = vec![0.0f32; self.window * d];
-        let mut offset = vec![0.0f32; pose];
+        let mut offset = vec![0.0f32; self.pose];
         for ws in self.window_starts(frames) {
-            let span = ws * d..(ws + self.window) * d;
-            self.refine_window_normalized(&out[span.clone()], &mut y)?;
-            if ws > 0 {
-                // out[ws] is the previous output at the window's first frame (RMR sec. 6).
-                for (i, o) in offset.iter_mut().enumerate() {
-                    *o = out[ws * d + i] - y[i];
-                }
-                for k in 0..self.blend_frames.min(self.window) {
-                    let w = 1.0 - k as f32 / self.blend_frames as f32;
-                    for (v, o) in y[k * d..k * d + pose].iter_mut().zip(&offset) {
-                        *v += w * o;
-                    }
-                }
-            }
-            for f in y.chunks_exact_mut(d) {
-                for c in &mut f[pose..] {
-                    *c = if *c > 0.0 { 1.0 } else { 0.0 }; // sigmoid(logit) > 0.5
-                }
-            }
-            out[span].copy_from_slice(&y);
+            self.refine_window_in_place(&mut out[ws * d..(ws + self.window) * d], ws == 0, &mut y, &mut offset)?;
         }
         for f in out.chunks_exact_mut(d) {
-            for ((v, m), s) in f.iter_mut().zip(&self.mean).zip(&self.std) {
-                *v = *v * s + m;
+            self.denormalize_frame(f);
+        }
+        Ok(())
+    }
+
+    fn normalize_frame(&self, f: &mut [f32]) {
+        for ((v, m), s) in f.iter_mut().zip(&self.mean).zip(&self.std) {
+            *v = (*v - m) / s;
+        }
+    }
+
+    /// Raw values and contacts 0/1 of a refined normalised frame.
+    fn denormalize_frame(&self, f: &mut [f32]) {
+        for ((v, m), s) in f.iter_mut().zip(&self.mean).zip(&self.std) {
+            *v = *v * s + m;
+        }
+        for c in &mut f[self.pose..] {
+            *c = if *c > 0.5 { 1.0 } else { 0.0 };
+        }
+    }
+
+    /// Refines one window of normalised frames in place (RMR sec. 6): the model over the
+    /// window (whose first frames hold the previous window's output), then, unless it is the
+    /// sequence's first window, the difference between the previous output at the window's
+    /// first frame and the new one blended away over `blend_frames` frames; contacts to 0/1.
+    /// `y` (`w * dim`) and `offset` (`dim - 4`) are scratch.
+    fn refine_window_in_place(
+        &self,
+        frames: &mut [f32],
+        first: bool,
+        y: &mut [f32],
+        offset: &mut [f32],
+    ) -> Result<(), MotionError> {
+        let (d, pose) = (self.dim, self.pose);
+        self.refine_window_normalized(frames, y)?;
+        if !first {
+            // frames[0] is the previous output at the window's first frame (RMR sec. 6).
+            for (i, o) in offset.iter_mut().enumerate() {
+                *o = frames[i] - y[i];
             }
-            for c in &mut f[pose..] {
-                *c = if *c > 0.5 { 1.0 } else { 0.0 };
+            for k in 0..self.blend_frames.min(self.window) {
+                let w = 1.0 - k as f32 / self.blend_frames as f32;
+                for (v, o) in y[k * d..k * d + pose].iter_mut().zip(offset.iter()) {
+                    *v += w * o;
+                }
             }
         }
+        for f in y.chunks_exact_mut(d) {
+            for c in &mut f[pose..] {
+                *c = if *c > 0.0 { 1.0 } else { 0.0 }; // sigmoid(logit) > 0.5
+            }
+        }
+        frames.copy_from_slice(y);
+        Ok(())
+    }
+
+    /// Checks that pose `index` fits the model (its joint count, finite values).
+    fn check_pose(&self, pose: &EnginePose, index: usize) -> Result<(), MotionError> {
+        if pose.joints() != self.joints {
+            return Err(stitch_err(format!(
+                "pose {index} has {} joint rotations but the model's skeleton has {} joints; retarget the motion to the \
+                 model's rig (StitchRefiner::skeleton) or export a model trained on this rig",
+                pose.joints(),
+                self.joints
+            )));
+        }
+        let values = pose.root_position.to_array().into_iter().chain(pose.root_rotation.to_array()).chain(
+            pose.hips_position.to_array().into_iter().chain(pose.local_rotations.iter().flat_map(|q| q.to_array())),
+        );
+        for (i, value) in values.enumerate() {
+            if !value.is_finite() {
+                return Err(MotionError::NonFinite { name: format!("pose {index}"), index: i, character: 0, value });
+            }
+        }
+        Ok(())
+    }
+
+    /// The model-space rotations of `pose` (joint 0: the hips' world rotation) into `out`, and
+    /// the hips' world position.
+    fn model_space(pose: &EnginePose, out: &mut Vec<DQuat>) -> DVec3 {
+        out.clear();
+        out.push(pose.hips_world_rotation().as_dquat());
+        out.extend(pose.local_rotations[1..].iter().map(|q| q.normalize().as_dquat()));
+        pose.hips_world().as_dvec3()
+    }
+
+    /// Encodes a whole sequence of poses (at least 2, at the model's frame rate, on its
+    /// skeleton) into raw pose vectors (`frames * dim`, the input of
+    /// [`StitchRefiner::refine_sequence`]).
+    pub fn encode_poses(&self, poses: &[EnginePose], out: &mut [f32]) -> Result<(), MotionError> {
+        if poses.len() < 2 {
+            return Err(stitch_err(format!(
+                "{} pose(s): a sequence needs at least 2 frames (the root motion is a difference of frames)",
+                poses.len()
+            )));
+        }
+        let d = self.dim;
+        if out.len() != poses.len() * d {
+            return Err(MotionError::BufferLength {
+                name: "pose vectors".into(),
+                expected: poses.len() * d,
+                batch: poses.len(),
+                width: d,
+                found: out.len(),
+            });
+        }
+        let mut rotations = Vec::with_capacity(self.joints);
+        let frames: Vec<PoseFrame> = poses
+            .iter()
+            .enumerate()
+            .map(|(f, p)| {
+                self.check_pose(p, f)?;
+                let hips = Self::model_space(p, &mut rotations);
+                let mut frame = PoseFrame::default();
+                frame.set(&self.skeleton, &self.layout, &rotations, hips);
+                Ok(frame)
+            })
+            .collect::<Result<_, MotionError>>()?;
+        let mut continuity = None;
+        for (f, x) in out.chunks_exact_mut(d).enumerate() {
+            let (a, b) = if f == 0 { (0, 1) } else { (f - 1, f) };
+            encode_pose(&self.layout, &frames[f], &frames[a], &frames[b], &mut continuity, x);
+        }
+        Ok(())
+    }
+
+    /// Refines a whole aligned sequence of poses (the clips already put end to start, at the
+    /// model's frame rate, on its skeleton, at least `w` frames) into `out` (one pose per input
+    /// pose, each of the model's joint count) and the predicted contacts per frame (heel L, toe
+    /// L, heel R, toe R) into `contacts`: encoding, [`StitchRefiner::refine_sequence`],
+    /// decoding from the input's first ground root, then `cleanup` (RMR secs. 5-6; what
+    /// `zoo stitch` writes with [`FootCleanup::default`]). Root deltas are filled (zero on the
+    /// first frame).
+    pub fn refine_poses(
+        &self,
+        input: &[EnginePose],
+        cleanup: FootCleanup,
+        out: &mut [EnginePose],
+        contacts: &mut [[bool; 4]],
+    ) -> Result<(), MotionError> {
+        let frames = input.len();
+        if out.len() != frames || contacts.len() != frames {
+            return Err(stitch_err(format!(
+                "{frames} input poses but {} output poses and {} contact slots: give one of each per input pose",
+                out.len(),
+                contacts.len()
+            )));
+        }
+        if let Some(f) = out.iter().position(|p| p.joints() != self.joints) {
+            return Err(stitch_err(format!(
+                "output pose {f} has {} joints, the model {}: allocate the poses with EnginePose::new(refiner.joints())",
+                out[f].joints(),
+                self.joints
+            )));
+        }
+        let d = self.dim;
+        let mut x = vec![0.0f32; frames * d];
+        self.encode_poses(input, &mut x)?;
+        let mut y = vec![0.0f32; x.len()];
+        self.refine_sequence(&x, &mut y)?;
+        let mut rotations = Vec::with_capacity(self.joints);
+        let hips = Self::model_space(&input[0], &mut rotations);
+        let start = self.layout.root_of(rotations[0], hips);
+        let frame_time = 1.0 / self.fps;
+        let (mut clip, predicted) = zoo_motion::stitch::decode(&y, &self.skeleton, &self.layout, frame_time, start)
+            .map_err(|e| stitch_err(e.to_string()))?;
+        if cleanup.place_ankles {
+            let ankles =
+                zoo_motion::stitch::predicted_ankles(&y, self.layout.pose_layout(self.joints), &self.layout, start);
+            zoo_motion::stitch::lock::place_ankles(&mut clip, &ankles, &self.layout);
+        }
+        if cleanup.lock_feet {
+            zoo_motion::stitch::lock::lock_feet(&mut clip, &predicted, &self.layout);
+        }
+        contacts.copy_from_slice(&predicted);
+        write_poses(&clip, out);
+        Ok(())
+    }
+
+    /// A stream over this refiner for motion matching: push poses as they are decided, pop
+    /// refined ones `w - 1` frames later (see [`StitchStream`]).
+    pub fn stream(&self) -> StitchStream<'_> {
+        StitchStream::new(self)
+    }
+}
+
+/// Writes the frames of `clip` (hips' world transform in joint 0) into engine poses, with root
+/// deltas from frame to frame.
+fn write_poses(clip: &Clip, out: &mut [EnginePose]) {
+    let j = clip.joints();
+    let mut rotations = vec![Quat::IDENTITY; j];
+    for f in 0..clip.frames() {
+        for (r, q) in rotations.iter_mut().zip(clip.rotations_at(f)) {
+            *r = q.as_quat();
+        }
+        let (before, rest) = out.split_at_mut(f);
+        let pose = &mut rest[0];
+        pose.set_world(clip.root_position(f).as_vec3(), &rotations);
+        (pose.root_delta_position, pose.root_delta_yaw) = match before.last() {
+            Some(prev) => root_delta(prev.root_position, prev.root_rotation, pose.root_position, pose.root_rotation),
+            None => (Vec3::ZERO, 0.0),
+        };
+    }
+}
+
+/// Stitching as a stream, for motion matching (RMR sec. 6 online): the engine pushes the aligned
+/// motion one pose per frame as it decides it ([`StitchStream::push`]) and pops the refined
+/// motion ([`StitchStream::pop`]) with a fixed latency of [`StitchStream::latency`] = `w - 1`
+/// frames: the refined pose of frame `t` is ready once frame `t + w - 1` has been pushed (59
+/// frames, about 2 s at 30 fps, for `w` = 60; plan a shorter window with
+/// [`StitchRefiner::set_window`] for less, at the quality the benchmark measures for it).
+///
+/// Every `s` frames the stream runs one window over the last `w` frames, exactly as
+/// [`StitchRefiner::refine_sequence`] does; [`StitchStream::finish`] runs the last window, the
+/// one ending on the last frame, and makes the remaining frames ready. Poses popped before the
+/// finish are final: where that last window overlaps them (at most its first `w - s` frames)
+/// the whole-sequence form would have refined them once more, so the two agree on every frame
+/// except those. Each pose comes with the predicted contacts (heel L, toe L, heel R, toe R) for
+/// the engine's foot IK; the stream does not lock feet (the lock pins each contact at its mean
+/// over the whole contact, which a stream does not know yet).
+///
+/// After its first window, pushing and popping allocate nothing on our side as long as the
+/// engine pops every frame it can (the buffer then holds at most `w` frames); what tract
+/// allocates per window is counted by `examples/rmr_window_latency` (docs/rmr.md).
+#[derive(Debug)]
+pub struct StitchStream<'a> {
+    refiner: &'a StitchRefiner,
+    /// Normalised pose vectors of frames `base..pushed` (refined where a window covered them).
+    buf: Vec<f32>,
+    base: usize,
+    /// Frames encoded so far (frame 0 is encoded when frame 1 arrives).
+    encoded: usize,
+    /// Poses pushed so far.
+    pushed: usize,
+    /// Start of the next regular window.
+    next_window: usize,
+    /// Frames popped so far.
+    read: usize,
+    finished: bool,
+    prev: PoseFrame,
+    cur: PoseFrame,
+    continuity: Option<Vec<DQuat>>,
+    rotations: Vec<DQuat>,
+    rotations_f32: Vec<Quat>,
+    x: Vec<f32>,
+    y: Vec<f32>,
+    offset: Vec<f32>,
+    /// Ground root of the last popped frame (the first: the input's).
+    root: GroundRoot,
+    start_root: GroundRoot,
+    last_out: Option<(Vec3, Quat)>,
+}
+
+impl<'a> StitchStream<'a> {
+    fn new(refiner: &'a StitchRefiner) -> Self {
+        let (w, d, j) = (refiner.window, refiner.dim, refiner.joints);
+        StitchStream {
+            refiner,
+            buf: Vec::with_capacity((w + 2) * d),
+            base: 0,
+            encoded: 0,
+            pushed: 0,
+            next_window: 0,
+            read: 0,
+            finished: false,
+            prev: PoseFrame::default(),
+            cur: PoseFrame::default(),
+            continuity: None,
+            rotations: Vec::with_capacity(j),
+            rotations_f32: vec![Quat::IDENTITY; j],
+            x: vec![0.0; d],
+            y: vec![0.0; w * d],
+            offset: vec![0.0; d - 4],
+            root: GroundRoot::IDENTITY,
+            start_root: GroundRoot::IDENTITY,
+            last_out: None,
+        }
+    }
+
+    /// Frames between pushing frame `t` and popping its refined pose: the refined pose of frame
+    /// `t` is ready right after frame `t + latency()` is pushed.
+    pub fn latency(&self) -> usize {
+        self.refiner.window.max(2) - 1
+    }
+
+    /// Poses pushed so far.
+    pub fn pushed(&self) -> usize {
+        self.pushed
+    }
+
+    /// Refined poses popped so far (the index of the next one).
+    pub fn popped(&self) -> usize {
+        self.read
+    }
+
+    /// Pushes the next frame of the aligned motion (at the model's frame rate, on its
+    /// skeleton). Runs a window when one is due.
+    pub fn push(&mut self, pose: &EnginePose) -> Result<(), MotionError> {
+        if self.finished {
+            return Err(stitch_err("the stream is finished: start another with StitchRefiner::stream"));
+        }
+        let r = self.refiner;
+        r.check_pose(pose, self.pushed)?;
+        let hips = StitchRefiner::model_space(pose, &mut self.rotations);
+        std::mem::swap(&mut self.prev, &mut self.cur);
+        self.cur.set(&r.skeleton, &r.layout, &self.rotations, hips);
+        self.pushed += 1;
+        if self.pushed == 1 {
+            self.start_root = self.cur.root;
+            self.root = self.cur.root;
+            return Ok(());
+        }
+        if self.pushed == 2 {
+            // Frame 0 takes frame 1's root motion and velocities.
+            self.encode(true);
+        }
+        self.encode(false);
+        while self.next_window + r.window <= self.encoded {
+            let ws = self.next_window;
+            self.run_window(ws)?;
+            self.next_window += r.stride;
+        }
+        self.compact();
+        Ok(())
+    }
+
+    /// Appends the normalised pose vector of `prev` (frame 0, `first`) or `cur`.
+    fn encode(&mut self, first: bool) {
+        let r = self.refiner;
+        let d = r.dim;
+        let at = self.buf.len();
+        self.buf.resize(at + d, 0.0);
+        let frame = if first { &self.prev } else { &self.cur };
+        encode_pose(&r.layout, frame, &self.prev, &self.cur, &mut self.continuity, &mut self.buf[at..]);
+        r.normalize_frame(&mut self.buf[at..]);
+        self.encoded += 1;
+    }
+
+    fn run_window(&mut self, ws: usize) -> Result<(), MotionError> {
+        let r = self.refiner;
+        let d = r.dim;
+        let from = (ws - self.base) * d;
+        r.refine_window_in_place(&mut self.buf[from..from + r.window * d], ws == 0, &mut self.y, &mut self.offset)
+    }
+
+    /// Drops frames no later window and no pop needs.
+    fn compact(&mut self) {
+        let keep = self.read.min(self.pushed.saturating_sub(self.refiner.window)).min(self.next_window);
+        if keep > self.base {
+            let d = self.refiner.dim;
+            let n = (keep - self.base) * d;
+            self.buf.copy_within(n.., 0);
+            self.buf.truncate(self.buf.len() - n);
+            self.base = keep;
+        }
+    }
+
+    /// Whether the next refined pose is ready.
+    pub fn ready(&self) -> bool {
+        self.read < self.encoded && (self.finished || self.read + self.refiner.window <= self.pushed)
+    }
+
+    /// The next refined pose (frame [`StitchStream::popped`]) into `pose` (the model's joint
+    /// count: `EnginePose::new(refiner.joints())`) with its predicted contacts, or `None` while
+    /// it is not ready (fewer than `latency()` frames pushed after it, and not finished).
+    pub fn pop(&mut self, pose: &mut EnginePose) -> Result<Option<[bool; 4]>, MotionError> {
+        let r = self.refiner;
+        if pose.joints() != r.joints {
+            return Err(stitch_err(format!(
+                "the output pose has {} joints, the model {}: allocate it with EnginePose::new(refiner.joints())",
+                pose.joints(),
+                r.joints
+            )));
+        }
+        if !self.ready() {
+            return Ok(None);
+        }
+        let d = r.dim;
+        let from = (self.read - self.base) * d;
+        self.x.copy_from_slice(&self.buf[from..from + d]);
+        r.denormalize_frame(&mut self.x);
+        if self.read > 0 {
+            self.root = next_root(&self.root, &self.x);
+        }
+        self.rotations.resize(r.joints, DQuat::IDENTITY);
+        let (hips, contacts) = decode_pose(&r.layout, &self.x, &self.root, &mut self.rotations);
+        for (o, q) in self.rotations_f32.iter_mut().zip(&self.rotations) {
+            *o = q.as_quat();
+        }
+        pose.set_world(hips.as_vec3(), &self.rotations_f32);
+        (pose.root_delta_position, pose.root_delta_yaw) = match self.last_out {
+            Some((p, q)) => root_delta(p, q, pose.root_position, pose.root_rotation),
+            None => (Vec3::ZERO, 0.0),
+        };
+        self.last_out = Some((pose.root_position, pose.root_rotation));
+        self.read += 1;
+        self.compact();
+        Ok(Some(contacts))
+    }
+
+    /// Ends the motion: runs the window ending on the last frame (unless a regular window
+    /// ended there) and makes every remaining frame ready. Needs at least `w` frames pushed.
+    pub fn finish(&mut self) -> Result<(), MotionError> {
+        if self.finished {
+            return Ok(());
+        }
+        let (w, s) = (self.refiner.window, self.refiner.stride);
+        if self.pushed < w.max(2) {
+            return Err(stitch_err(format!(
+                "the stream ends after {} frames, fewer than the window of {w}: push at least {w} frames, or plan a \
+                 shorter window with StitchRefiner::set_window",
+                self.pushed
+            )));
+        }
+        let last = self.pushed - w;
+        // The regular windows ran at 0, s, ..., next_window - s; the last of them ends on the
+        // last frame exactly when next_window - s == last.
+        if self.next_window == 0 || self.next_window - s != last {
+            if last < self.base {
+                return Err(stitch_err(format!(
+                    "frame {last} was dropped before finish (the buffer starts at frame {}); this is a bug, please \
+                     report it",
+                    self.base
+                )));
+            }
+            self.run_window(last)?;
+        }
+        self.finished = true;
         Ok(())
     }
 }

@@ -9,6 +9,11 @@
 //! ```
 //! Without `RUN_DIR`, the seeded paper-size model (BGRU 2 x 256) is used: latency does not
 //! depend on the weights. onnxruntime: `ORT_DYLIB_PATH`, else `.onnxruntime/libonnxruntime.so.1.31.1`.
+//!
+//! Then the runtime's streaming form (`zoo_runtime::StitchStream`) over synthetic walking and
+//! running (`--stream-frames`, default 600): its latency in frames, the median cost per frame
+//! (push and pop, a window every `s` frames included) and of the pushes that run a window. The
+//! heap allocations per window are counted by `cargo test --workspace --test runtime_alloc`.
 
 use candle_core::{DType, Device, Tensor};
 use candle_nn::VarMap;
@@ -103,5 +108,77 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (a, b, c) = (median(t_tract), median(t_ort), median(t_candle));
     println!("median ms per window over {rounds} rounds of {reps}: tract {a:.3}, onnxruntime {b:.3}, candle {c:.3}");
     println!("tract / onnxruntime = {:.2}x (target <= 1.25x)", a / b);
+    stream(&tract, &config, opt("--stream-frames").transpose()?.unwrap_or(600), rounds)
+}
+
+/// The streaming form over synthetic walking and running on the model's skeleton.
+fn stream(
+    refiner: &zoo_runtime::StitchRefiner,
+    config: &Config,
+    frames: usize,
+    rounds: usize,
+) -> Result<(), Box<dyn std::error::Error>> {
+    use zoo_runtime::EnginePose;
+    use zoo_runtime::glam::Quat;
+    let synth = zoo_data::synth::SynthConfig { minutes: 1.0, seed: 3, clip_seconds: 10.0, ..Default::default() };
+    let clips: Vec<zoo_motion::Clip> = zoo_data::synth::generate(&synth).into_iter().map(|c| c.clip).collect();
+    config.check_skeleton(&clips[0].skeleton)?;
+    let aligned = zoo_data::stitch::align_clips(&clips, &config.layout, 10)?.clip;
+    if aligned.frames() < frames {
+        return Err(format!("--stream-frames {frames}: the synthetic motion has {} frames", aligned.frames()).into());
+    }
+    let poses: Vec<EnginePose> = (0..frames)
+        .map(|f| {
+            let r: Vec<Quat> = aligned.rotations_at(f).iter().map(|q| q.as_quat()).collect();
+            EnginePose::from_world(aligned.root_position(f).as_vec3(), &r)
+        })
+        .collect();
+    let mut out = EnginePose::new(refiner.joints());
+    let (mut per_frame, mut window_push) = (Vec::new(), Vec::new());
+    let mut latency = 0;
+    for _ in 0..rounds {
+        let mut s = refiner.stream();
+        latency = s.latency();
+        let (mut windows, mut popped) = (0usize, 0usize);
+        let (mut total, mut spikes) = (0.0f64, Vec::new());
+        for p in &poses {
+            let t0 = Instant::now();
+            s.push(p)?;
+            let ran =
+                s.pushed() >= refiner.window() && (s.pushed() - refiner.window()).is_multiple_of(refiner.stride());
+            while s.pop(&mut out)?.is_some() {
+                popped += 1;
+            }
+            let dt = t0.elapsed().as_secs_f64() * 1e3;
+            total += dt;
+            if ran {
+                windows += 1;
+                spikes.push(dt);
+            }
+        }
+        if windows == 0 {
+            return Err("the motion is shorter than one window".into());
+        }
+        s.finish()?;
+        while s.pop(&mut out)?.is_some() {
+            popped += 1;
+        }
+        assert_eq!(popped, frames);
+        per_frame.push(total / frames as f64);
+        window_push.push(median(spikes));
+    }
+    println!(
+        "stream: window {} stride {}, latency {latency} frames ({:.2} s at {} fps), {frames} frames per round",
+        refiner.window(),
+        refiner.stride(),
+        latency as f64 / config.fps,
+        config.fps
+    );
+    println!(
+        "stream: median over {rounds} rounds: {:.3} ms per frame (push + pop, windows included), {:.3} ms for a push \
+         that runs a window",
+        median(per_frame),
+        median(window_push)
+    );
     Ok(())
 }

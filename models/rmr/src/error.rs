@@ -46,6 +46,12 @@ impl From<zoo_nn::NnError> for RmrError {
     }
 }
 
+impl From<zoo_motion::stitch::LayoutError> for RmrError {
+    fn from(e: zoo_motion::stitch::LayoutError) -> Self {
+        RmrError::Stitch(e.into())
+    }
+}
+
 impl From<candle_core::Error> for RmrError {
     fn from(e: candle_core::Error) -> Self {
         RmrError::Nn(zoo_nn::NnError::Candle(e))

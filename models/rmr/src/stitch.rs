@@ -10,11 +10,13 @@
 
 use crate::config::Config;
 use crate::error::{RmrError, RmrResult};
-use crate::features::{FeatureLayout, FeatureStats, accumulate_roots, decode, encode_clip};
+use crate::features::{FeatureLayout, FeatureStats, decode, encode_clip};
 use crate::model::Rmr;
-use zoo_data::stitch::{GroundRoot, MIN_CLIP_FRAMES, StitchLayout, align_clips, ground_roots};
+use zoo_data::stitch::{MIN_CLIP_FRAMES, StitchLayout, align_clips, ground_roots};
 use zoo_motion::Clip;
 use zoo_motion::glam::DVec3;
+
+pub use zoo_motion::stitch::predicted_ankles;
 
 /// How a sequence is refined.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -224,30 +226,4 @@ pub fn refine_clip_full(model: &Rmr, stats: &FeatureStats, aligned: &Clip, opts:
     let config = model.config();
     config.check_skeleton(&aligned.skeleton)?;
     refine_clip_full_with(|w| model.refine(w), &config.layout, stats, aligned, opts)
-}
-
-/// Global positions of the ankles (the heel joints `layout.contacts[0]` and `[2]`) that raw pose
-/// vectors predict: their lower-body positions `p` placed in the ground roots accumulated from
-/// `start`. Empty when a heel joint is not in the lower body.
-pub fn predicted_ankles(
-    features: &[f32],
-    fl: FeatureLayout,
-    layout: &StitchLayout,
-    start: GroundRoot,
-) -> Vec<[DVec3; 2]> {
-    let slot = |joint: usize| layout.lower_body.iter().position(|&k| k == joint);
-    let (Some(l), Some(r)) = (slot(layout.contacts[0]), slot(layout.contacts[2])) else { return Vec::new() };
-    let d = fl.dim();
-    let roots = accumulate_roots(features, d, start);
-    features
-        .chunks_exact(d)
-        .zip(&roots)
-        .map(|(x, root)| {
-            let p = |k: usize| {
-                let v = &x[fl.positions() + 3 * k..][..3];
-                root.to_world(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64))
-            };
-            [p(l), p(r)]
-        })
-        .collect()
 }

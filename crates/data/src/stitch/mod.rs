@@ -29,7 +29,7 @@ pub mod segments;
 
 pub use align::{AlignedClips, MIN_CLIP_FRAMES, align_clips};
 pub use cache::{PairPlan, SetFingerprint};
-pub use layout::{GroundRoot, StitchLayout, ground_roots};
+pub use layout::{GroundRoot, LayoutError, StitchLayout, ground_roots};
 pub use pairs::{PairConfig, PairSpec, Retrieved, StitchPair, build_pair, make_pairs, plan_pairs};
 pub use segments::{MotionSet, SegmentDatabase, SegmentRef, StitchDatabases};
 
@@ -38,27 +38,9 @@ use std::path::PathBuf;
 /// Why stitching data could not be made. Each message names the problem and the fix.
 #[derive(Debug, thiserror::Error)]
 pub enum StitchError {
-    /// A joint the layout needs is missing from the skeleton.
-    #[error(
-        "the skeleton has no joint `{joint}` (needed as {role}); pass a StitchLayout with explicit joint \
-         indices for this rig"
-    )]
-    MissingJoint {
-        /// Joint name looked for.
-        joint: String,
-        /// What it is needed for.
-        role: &'static str,
-    },
-    /// A joint index is out of range.
-    #[error("joint index {index} ({role}) is out of range for a skeleton of {joints} joints")]
-    JointIndex {
-        /// The index.
-        index: usize,
-        /// What it is used for.
-        role: &'static str,
-        /// Joints of the skeleton.
-        joints: usize,
-    },
+    /// The layout does not fit the skeleton (see [`LayoutError`]).
+    #[error(transparent)]
+    Layout(#[from] LayoutError),
     /// Two clips of one set use different rigs.
     #[error(
         "clip {index}{name}: skeleton differs from clip 0's ({why}); every clip must use the same rig \

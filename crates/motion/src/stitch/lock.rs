@@ -1,0 +1,277 @@
+//! Foot lock by the predicted contacts (RMR sec. 6: "we lock the foot joints in contact with
+//! the ground using inverse kinematics"): the refiner outputs four contacts per frame (heel and
+//! toe, left and right); each run of frames with a contact pins that joint horizontally at its
+//! mean position over the run, and the leg reaches the pinned foot by two-bone IK
+//! ([`zoo_motion::footlock::two_bone_ik`]).
+//!
+//! Per leg and frame, the horizontal correction of the ankle is the one that puts the heel
+//! (the ankle joint) on its pin when the heel is in contact, else the toe on its pin when the
+//! toe is; between contacts it is interpolated linearly, and held before the first and after the
+//! last contact. The hip and knee rotate to reach the corrected ankle (bone lengths are kept,
+//! the knee stays in its bend plane) and the foot keeps its global orientation. Heights are not
+//! changed.
+//!
+//! The correction may change by at most [`LOCK_MAX_STEP`] per frame (clip units; applied
+//! forwards and backwards and averaged, so it leads a pin as much as it lags it): without the
+//! limit, the switch from one pin to the next and from the heel's pin to the toe's moved the
+//! ankle by several centimetres in one frame, which the stitching benchmark counts as pops at the
+//! seams (session 14, docs/rmr.md).
+//!
+//! In the motion core so that the engine's runtime (`zoo_runtime::StitchRefiner`) applies the
+//! same lock as the offline `zoo stitch`.
+
+use super::StitchLayout;
+use crate::Clip;
+use glam::{DQuat, DVec3};
+
+/// The largest change of a foot's horizontal correction from one frame to the next (clip
+/// units per frame: 1 cm at bandai2's scale). Chosen on the bandai2 validation stitching cases
+/// among 0.5, 1 and 2 and a moving average of radius 2 or 4 (docs/rmr.md, "The foot lock's
+/// pops").
+pub const LOCK_MAX_STEP: f64 = 1.0;
+
+/// `corrections` with no step between neighbouring frames longer than `max_step`: the
+/// forward-limited and the backward-limited sequences, averaged. `max_step <= 0` or not finite
+/// leaves them unchanged.
+fn limit_rate(corrections: &mut [DVec3], max_step: f64) {
+    if !(max_step > 0.0 && max_step.is_finite()) || corrections.len() < 2 {
+        return;
+    }
+    let clamp = |from: DVec3, to: DVec3| {
+        let d = to - from;
+        if d.length() > max_step { from + d.normalize() * max_step } else { to }
+    };
+    let mut forward = corrections.to_vec();
+    for f in 1..forward.len() {
+        forward[f] = clamp(forward[f - 1], forward[f]);
+    }
+    let n = corrections.len();
+    for f in (0..n - 1).rev() {
+        corrections[f] = clamp(corrections[f + 1], corrections[f]);
+    }
+    for (c, fw) in corrections.iter_mut().zip(&forward) {
+        *c = (*c + *fw) * 0.5;
+    }
+}
+
+/// One leg of the lock: hip, knee, ankle joints and the contact indices of its heel and toe.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct LockLeg {
+    hip: usize,
+    knee: usize,
+    ankle: usize,
+    toe: usize,
+    heel_contact: usize,
+    toe_contact: usize,
+}
+
+fn legs(clip: &Clip, layout: &StitchLayout) -> Vec<LockLeg> {
+    let parents = &clip.skeleton.parents;
+    [(0, 1), (2, 3)]
+        .iter()
+        .filter_map(|&(h, t)| {
+            let ankle = layout.contacts[h];
+            let knee = parents.get(ankle).copied().flatten()?;
+            let hip = parents.get(knee).copied().flatten()?;
+            parents.get(hip).copied().flatten()?;
+            Some(LockLeg { hip, knee, ankle, toe: layout.contacts[t], heel_contact: h, toe_contact: t })
+        })
+        .collect()
+}
+
+/// Horizontal corrections `(x, z)` per frame from the corrections known on contact frames
+/// (`None` elsewhere): linear in between, held at both ends, zero without any contact.
+fn fill_gaps(known: &[Option<DVec3>]) -> Vec<DVec3> {
+    let mut out = vec![DVec3::ZERO; known.len()];
+    let idx: Vec<usize> = (0..known.len()).filter(|&f| known[f].is_some()).collect();
+    let (Some(&first), Some(&last)) = (idx.first(), idx.last()) else { return out };
+    for (f, o) in out.iter_mut().enumerate() {
+        *o = if f <= first {
+            known[first].unwrap_or_default()
+        } else if f >= last {
+            known[last].unwrap_or_default()
+        } else if let Some(k) = known[f] {
+            k
+        } else {
+            let prev = idx[idx.partition_point(|&i| i < f) - 1];
+            let next = idx[idx.partition_point(|&i| i < f)];
+            let a = (f - prev) as f64 / (next - prev) as f64;
+            known[prev].unwrap_or_default().lerp(known[next].unwrap_or_default(), a)
+        };
+    }
+    out
+}
+
+/// Runs of `true` in `flags`: `(first, end)` half-open.
+fn runs(flags: impl Iterator<Item = bool>) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    let mut start = None;
+    let mut n = 0;
+    for (f, on) in flags.enumerate() {
+        match (on, start) {
+            (true, None) => start = Some(f),
+            (false, Some(s)) => {
+                out.push((s, f));
+                start = None;
+            }
+            _ => {}
+        }
+        n = f + 1;
+    }
+    if let Some(s) = start {
+        out.push((s, n));
+    }
+    out
+}
+
+fn horizontal(v: DVec3) -> DVec3 {
+    DVec3::new(v.x, 0.0, v.z)
+}
+
+/// Bends `leg` at frame `f` so that its ankle reaches `goal` by two-bone IK: the hip and knee
+/// rotate (bone lengths kept, the knee in its bend plane), the foot keeps its global orientation.
+/// Updates the local rotations of `clip` and the global rotations `gr`; `gp` are the global
+/// positions before. Returns how far the ankle moved.
+fn bend_leg(clip: &mut Clip, gr: &mut [DQuat], gp: &[DVec3], leg: LockLeg, f: usize, goal: DVec3) -> f64 {
+    let j = clip.joints();
+    let at = |k: usize| gp[f * j + k].as_vec3();
+    let (hip, knee, ankle) = (at(leg.hip), at(leg.knee), at(leg.ankle));
+    let (new_knee, new_ankle) = crate::footlock::two_bone_ik(hip, knee, ankle, goal.as_vec3());
+    let (hip, knee, ankle, new_knee, new_ankle) =
+        (hip.as_dvec3(), knee.as_dvec3(), ankle.as_dvec3(), new_knee.as_dvec3(), new_ankle.as_dvec3());
+    let arc = |a: DVec3, b: DVec3| {
+        if a.length_squared() < 1e-12 || b.length_squared() < 1e-12 {
+            DQuat::IDENTITY
+        } else {
+            DQuat::from_rotation_arc(a.normalize(), b.normalize())
+        }
+    };
+    let r1 = arc(knee - hip, new_knee - hip);
+    let r2 = arc(r1 * (ankle - knee), new_ankle - new_knee);
+    let parent = clip.skeleton.parents[leg.hip].expect("legs() checked the hip's parent");
+    let g_parent = gr[f * j + parent];
+    let g_hip = (r1 * gr[f * j + leg.hip]).normalize();
+    let g_knee = (r2 * r1 * gr[f * j + leg.knee]).normalize();
+    let g_ankle = gr[f * j + leg.ankle];
+    clip.local_rotations[f * j + leg.hip] = (g_parent.inverse() * g_hip).normalize();
+    clip.local_rotations[f * j + leg.knee] = (g_hip.inverse() * g_knee).normalize();
+    clip.local_rotations[f * j + leg.ankle] = (g_knee.inverse() * g_ankle).normalize();
+    gr[f * j + leg.hip] = g_hip;
+    gr[f * j + leg.knee] = g_knee;
+    (new_ankle - ankle).length()
+}
+
+/// Places the ankles (`layout.contacts[0]` and `[2]`, the heel joints) of every frame at
+/// `goals[f] = [left, right]` (global positions, e.g. the refiner's predicted lower-body
+/// positions) by two-bone IK: RMR sec. 5, "because the forward kinematics accumulates the error
+/// to the joints at ends, we further process the pose by locking both feet in the output
+/// positions using inverse kinematics". Returns the mean ankle displacement (clip units); a
+/// clip without legs to bend or with another number of goals than frames is left unchanged.
+pub fn place_ankles(clip: &mut Clip, goals: &[[DVec3; 2]], layout: &StitchLayout) -> f64 {
+    let frames = clip.frames();
+    if goals.len() != frames || frames == 0 {
+        return 0.0;
+    }
+    let (mut total, mut count) = (0.0, 0usize);
+    for leg in legs(clip, layout) {
+        let side = leg.heel_contact / 2;
+        let (mut gr, gp) = clip.global();
+        for (f, g) in goals.iter().enumerate() {
+            total += bend_leg(clip, &mut gr, &gp, leg, f, g[side]);
+            count += 1;
+        }
+    }
+    clip.remove_sign_flips();
+    if count == 0 { 0.0 } else { total / count as f64 }
+}
+
+/// Locks the feet of `clip` where `contacts` (per frame: heel L, toe L, heel R, toe R) say they
+/// are planted; `layout.contacts` names the heel and toe joints. Returns the mean horizontal
+/// ankle correction applied (clip units). A clip whose contact joints have no grandparent
+/// (no leg to bend) or whose contact count differs from its frames is left unchanged. The
+/// correction changes by at most [`LOCK_MAX_STEP`] per frame.
+pub fn lock_feet(clip: &mut Clip, contacts: &[[bool; 4]], layout: &StitchLayout) -> f64 {
+    lock_feet_with(clip, contacts, layout, LOCK_MAX_STEP)
+}
+
+/// [`lock_feet`] with another limit on the correction's change per frame (`f64::INFINITY`:
+/// none, the lock of sessions 7 to 13).
+pub fn lock_feet_with(clip: &mut Clip, contacts: &[[bool; 4]], layout: &StitchLayout, max_step: f64) -> f64 {
+    let (frames, j) = (clip.frames(), clip.joints());
+    if contacts.len() != frames || frames == 0 {
+        return 0.0;
+    }
+    let legs = legs(clip, layout);
+    let (mut gr, mut gp) = clip.global();
+    let mut total = 0.0;
+    let mut count = 0usize;
+    for leg in legs {
+        // Pins: the mean horizontal position of the joint over each contact run.
+        let mut known: Vec<Option<DVec3>> = vec![None; frames];
+        let mut toe_known: Vec<Option<DVec3>> = vec![None; frames];
+        for (joint, contact, target) in
+            [(leg.ankle, leg.heel_contact, &mut known), (leg.toe, leg.toe_contact, &mut toe_known)]
+        {
+            for (s, e) in runs(contacts.iter().map(|c| c[contact])) {
+                let pin = (s..e).map(|f| horizontal(gp[f * j + joint])).sum::<DVec3>() / (e - s) as f64;
+                for f in s..e {
+                    target[f] = Some(pin - horizontal(gp[f * j + joint]));
+                }
+            }
+        }
+        for f in 0..frames {
+            if known[f].is_none() {
+                known[f] = toe_known[f];
+            }
+        }
+        let mut corrections = fill_gaps(&known);
+        limit_rate(&mut corrections, max_step);
+        for (f, c) in corrections.iter().enumerate() {
+            if c.length_squared() < 1e-12 {
+                continue;
+            }
+            let goal = gp[f * j + leg.ankle] + DVec3::new(c.x, 0.0, c.z);
+            total += bend_leg(clip, &mut gr, &gp, leg, f, goal);
+            count += 1;
+        }
+        // Positions of the changed leg for the next leg's reads (the legs do not share joints,
+        // but the toes and ankles of this one moved).
+        let (r, p) = clip.global();
+        gr = r;
+        gp = p;
+    }
+    clip.remove_sign_flips();
+    if count == 0 { 0.0 } else { total / count as f64 }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn gaps_are_filled_linearly_and_held_at_the_ends() {
+        let x = |v: f64| Some(DVec3::new(v, 0.0, 0.0));
+        let got = fill_gaps(&[None, x(1.0), None, None, x(4.0), None]);
+        let xs: Vec<f64> = got.iter().map(|v| v.x).collect();
+        assert_eq!(xs, vec![1.0, 1.0, 2.0, 3.0, 4.0, 4.0]);
+        assert!(fill_gaps(&[None, None]).iter().all(|v| *v == DVec3::ZERO));
+        assert_eq!(runs([true, true, false, true].into_iter()), vec![(0, 2), (3, 4)]);
+        assert_eq!(runs([false, true, true].into_iter()), vec![(1, 3)]);
+    }
+
+    #[test]
+    fn the_correction_rate_is_limited_symmetrically() {
+        let x = |v: f64| DVec3::new(v, 0.0, 0.0);
+        // A jump of 4 between frames 2 and 3, limited to 1 per frame.
+        let mut c = vec![x(0.0), x(0.0), x(0.0), x(4.0), x(4.0), x(4.0)];
+        limit_rate(&mut c, 1.0);
+        let xs: Vec<f64> = c.iter().map(|v| v.x).collect();
+        assert_eq!(xs, vec![0.5, 1.0, 1.5, 2.5, 3.0, 3.5]);
+        // The average of two 1-limited sequences moves by at most 1 per frame.
+        assert!(c.windows(2).all(|w| (w[1] - w[0]).length() <= 1.0 + 1e-12));
+        // No limit: unchanged.
+        let mut d = vec![x(0.0), x(4.0)];
+        limit_rate(&mut d, f64::INFINITY);
+        assert_eq!(d, vec![x(0.0), x(4.0)]);
+    }
+}
