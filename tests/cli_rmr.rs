@@ -120,6 +120,17 @@ fn train_resume_and_stitch() {
     for f in [0, 25, 49] {
         assert!((input.root_position(f) - la.root_position(f)).length() < 1e-3, "frame {f}");
     }
+    // --pre-blend: the seams inertialized before refining; the first clip's frames before the
+    // first seam's blend are refined from the same input, frames after it from another one.
+    let pre = dir.path().join("pre.bvh");
+    let (ok, stdout, stderr) =
+        run(&["stitch", "--model", s(&run_dir), &ranges[0], &ranges[1], &ranges[2], "--out", s(&pre), "--pre-blend"]);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("seams inertialized over 10 frames first"), "{stdout}");
+    let pre = read(&pre);
+    assert_eq!(pre.frames(), frames);
+    let moved = (50..60).map(|f| (pre.root_position(f) - stitched.root_position(f)).length()).fold(0.0, f64::max);
+    assert!(moved > 1e-3, "--pre-blend changed nothing after the seam ({moved})");
     for method in ["inertialize", "interp", "concat"] {
         let o = dir.path().join(format!("{method}.bvh"));
         let (ok, stdout, stderr) = run(&["stitch", &ranges[0], &ranges[1], "--method", method, "--out", s(&o)]);
@@ -273,7 +284,7 @@ fn the_stitching_benchmark_measures_every_method() {
         run(&["train", "rtn", "--preset", "tiny", "--synth-minutes", "1", "--epochs", "1", "--out", s(&rtn)]);
     assert!(ok, "{stdout}\n{stderr}");
     let methods = format!(
-        "concat,inertialize,interp,rmr:{0},rmr+ik:{0},rmr+lock:{0},rmr+ik+lock:{0},rtn:{1}",
+        "concat,inertialize,interp,rmr:{0},rmr+ik:{0},rmr+lock:{0},rmr+ik+lock:{0},inert+rmr+ik+lock:{0},rtn:{1}",
         s(&run_dir),
         s(&rtn)
     );
@@ -300,7 +311,7 @@ fn the_stitching_benchmark_measures_every_method() {
     assert!(cases >= 10, "{cases} cases");
     assert_eq!(r["free_cases"], 6);
     let rows = r["methods"].as_object().unwrap();
-    assert_eq!(rows.len(), 8);
+    assert_eq!(rows.len(), 9);
     for (name, row) in rows {
         assert_eq!(row["cases"].as_u64(), Some(cases), "{name}");
         for key in ["l2p", "l2q", "npss", "foot_sliding", "skate", "root_deviation", "pops_mean"] {

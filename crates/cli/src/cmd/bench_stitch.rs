@@ -48,7 +48,8 @@ pub struct StitchBenchArgs {
     /// `rmr:RUN_DIR` (a `zoo train rmr` folder, no post-process), `rmr+ik:RUN_DIR` (the ankles
     /// placed at its predicted lower-body positions by IK, RMR sec. 5), `rmr+lock:RUN_DIR` (with
     /// the foot lock by its predicted contacts), `rmr+ik+lock:RUN_DIR` (both, in that order: what
-    /// `zoo stitch` writes by default), `rtn:RUN_DIR` / `rtn+lock:RUN_DIR` (a `zoo train rtn`
+    /// `zoo stitch` writes by default), each RMR form also as `inert+rmr...:RUN_DIR` (the seams
+    /// inertialized before refining: `zoo stitch --pre-blend`), `rtn:RUN_DIR` / `rtn+lock:RUN_DIR` (a `zoo train rtn`
     /// folder in-betweening across each seam: 10 context frames before, target after).
     #[arg(long, default_value = "concat,inertialize,interp", value_delimiter = ',')]
     pub methods: Vec<String>,
@@ -84,6 +85,8 @@ enum Method {
         lock: bool,
         /// Ankles placed at the refiner's predicted positions by IK (RMR sec. 5).
         ik: bool,
+        /// The seams inertialized before refining (`inert+rmr...`, `zoo stitch --pre-blend`).
+        pre_blend: bool,
     },
     /// A transition model of the in-betweening benchmark (`rtn:DIR`, `rtn+lock:DIR`) across
     /// each seam.
@@ -102,8 +105,13 @@ impl Method {
             _ => {}
         }
         let forms = "concat, inertialize, interp, rmr:RUN_DIR, rmr+ik:RUN_DIR, rmr+lock:RUN_DIR, \
-                     rmr+ik+lock:RUN_DIR, rtn:RUN_DIR, rtn+lock:RUN_DIR";
+                     rmr+ik+lock:RUN_DIR (each also as inert+rmr...), rtn:RUN_DIR, rtn+lock:RUN_DIR";
         let Some((head, path)) = spec.split_once(':') else { bail!("unknown method `{spec}`: expected {forms}") };
+        // `inert+rmr...`: the seams inertialized before the RMR refines (`zoo stitch --pre-blend`).
+        let (pre_blend, head) = match head.strip_prefix("inert+") {
+            Some(rest) if rest.starts_with("rmr") => (true, rest),
+            _ => (false, head),
+        };
         let (lock, ik) = match head {
             "rmr" => (false, false),
             "rmr+ik" => (false, true),
@@ -123,7 +131,7 @@ impl Method {
         }
         let (model, stats) = zoo_rmr::checkpoint::load(&dir, &candle_core::Device::Cpu)
             .with_context(|| format!("method `{spec}`: loading the RMR in {}", dir.display()))?;
-        Ok(Method::Rmr { name: spec.to_string(), model: Box::new(model), stats, lock, ik })
+        Ok(Method::Rmr { name: spec.to_string(), model: Box::new(model), stats, lock, ik, pre_blend })
     }
 
     fn name(&self) -> String {
@@ -141,13 +149,17 @@ impl Method {
             Method::Concat => aligned.clone(),
             Method::Inertialize => inertialize_seams(aligned, seams, blend),
             Method::Interp => interpolate_seams(aligned, seams, blend),
-            Method::Rmr { model, stats, lock, ik, .. } => {
+            Method::Rmr { model, stats, lock, ik, pre_blend, .. } => {
                 let c = model.config();
                 let frames = aligned.frames();
                 // A sequence shorter than the model's window is refined as one window.
                 let (window, stride) = if c.window <= frames { (c.window, c.stride) } else { (frames, frames) };
                 let opts = RefineOptions { window, stride, blend_frames: blend };
-                let r = refine_clip_full(model, stats, aligned, opts)?;
+                let r = if *pre_blend {
+                    refine_clip_full(model, stats, &inertialize_seams(aligned, seams, blend), opts)?
+                } else {
+                    refine_clip_full(model, stats, aligned, opts)?
+                };
                 let mut out = r.clip;
                 if *ik {
                     zoo_rmr::footlock::place_ankles(&mut out, &r.ankles, &c.layout);
