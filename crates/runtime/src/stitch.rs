@@ -11,7 +11,6 @@
 //! the difference at each window's first frame blended away over `blend_frames` frames,
 //! contacts returned as 0/1.
 //!
-//!
 //! Poses in and out: [`StitchRefiner::refine_poses`] takes a whole aligned sequence of
 //! [`EnginePose`]s (root transform plus local joint rotations), encodes it with the motion
 //! core's pose vector ([`zoo_motion::stitch`], the code the offline tools use), refines it,
