@@ -4,26 +4,9 @@
 
 use crate::error::{RmrError, RmrResult};
 use serde::{Deserialize, Serialize};
-use zoo_data::stitch::{GroundRoot, StitchLayout};
-use zoo_motion::{Clip, Skeleton};
+use zoo_data::stitch::StitchLayout;
 
-pub use zoo_motion::stitch::{PoseLayout as FeatureLayout, accumulate_roots};
-
-/// Encodes every frame of `clip` (at least 2 frames) into pose vectors (`frames * dim`).
-pub fn encode_clip(clip: &Clip, layout: &StitchLayout) -> RmrResult<Vec<f32>> {
-    Ok(zoo_motion::stitch::encode_clip(clip, layout)?)
-}
-
-/// [`zoo_motion::stitch::decode`]: the clip and contacts of raw pose vectors, from `start`.
-pub fn decode(
-    features: &[f32],
-    skeleton: &Skeleton,
-    layout: &StitchLayout,
-    frame_time: f64,
-    start: GroundRoot,
-) -> RmrResult<(Clip, Vec<[bool; 4]>)> {
-    Ok(zoo_motion::stitch::decode(features, skeleton, layout, frame_time, start)?)
-}
+pub use zoo_motion::stitch::{PoseLayout as FeatureLayout, accumulate_roots, decode, encode_clip};
 
 /// Per-value mean and standard deviation of the pose vector over the generated training data
 /// (RMR sec. 5). Contacts are left as they are (mean 0, std 1) so that the sigmoid of the
