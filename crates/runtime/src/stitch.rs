@@ -470,11 +470,7 @@ impl StitchRefiner {
                 Ok(frame)
             })
             .collect::<Result<_, MotionError>>()?;
-        let mut continuity = None;
-        for (f, x) in out.chunks_exact_mut(d).enumerate() {
-            let (a, b) = if f == 0 { (0, 1) } else { (f - 1, f) };
-            encode_pose(&self.layout, &frames[f], &frames[a], &frames[b], &mut continuity, x);
-        }
+        zoo_motion::stitch::encode_frames(&self.layout, &frames, out);
         Ok(())
     }
 
@@ -574,7 +570,7 @@ fn write_poses(clip: &Clip, out: &mut [EnginePose]) {
 /// over the whole contact, which a stream does not know yet).
 ///
 /// After its first window, pushing and popping allocate nothing on our side as long as the
-/// engine pops every frame it can (the buffer then holds at most `w` frames); what tract
+/// engine pops every frame it can (the buffer then holds at most `2 w + 1` frames); what tract
 /// allocates per window is counted by `examples/rmr_window_latency` (docs/rmr.md).
 #[derive(Debug)]
 pub struct StitchStream<'a> {
@@ -610,7 +606,8 @@ impl<'a> StitchStream<'a> {
         let (w, d, j) = (refiner.window, refiner.dim, refiner.joints);
         StitchStream {
             refiner,
-            buf: Vec::with_capacity((w + 2) * d),
+            // At most w frames waiting to be dropped, w + 1 still needed.
+            buf: Vec::with_capacity((2 * w + 2) * d),
             base: 0,
             encoded: 0,
             pushed: 0,
@@ -697,10 +694,11 @@ impl<'a> StitchStream<'a> {
         r.refine_window_in_place(&mut self.buf[from..from + r.window * d], ws == 0, &mut self.y, &mut self.offset)
     }
 
-    /// Drops frames no later window and no pop needs.
+    /// Drops the frames no later window and no pop needs, once a window's worth of them has
+    /// piled up (one move of at most `w` frames every `w` frames, not one per frame).
     fn compact(&mut self) {
         let keep = self.read.min(self.pushed.saturating_sub(self.refiner.window)).min(self.next_window);
-        if keep > self.base {
+        if keep >= self.base + self.refiner.window {
             let d = self.refiner.dim;
             let n = (keep - self.base) * d;
             self.buf.copy_within(n.., 0);

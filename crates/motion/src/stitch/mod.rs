@@ -409,12 +409,19 @@ pub fn encode_clip(clip: &Clip, layout: &StitchLayout) -> Result<Vec<f32>, Layou
         })
         .collect();
     let mut out = vec![0.0f32; frames * d];
+    encode_frames(layout, &poses, &mut out);
+    Ok(out)
+}
+
+/// Encodes consecutive frames (at least 2) into `out` (`frames.len() * dim` values, the caller
+/// checks): frame 0 takes frame 1's root motion and velocities.
+pub fn encode_frames(layout: &StitchLayout, frames: &[PoseFrame], out: &mut [f32]) {
+    let d = out.len() / frames.len().max(1);
     let mut continuity = None;
     for (f, x) in out.chunks_exact_mut(d).enumerate() {
         let (a, b) = if f == 0 { (0, 1) } else { (f - 1, f) };
-        encode_pose(layout, &poses[f], &poses[a], &poses[b], &mut continuity, x);
+        encode_pose(layout, &frames[f], &frames[a], &frames[b], &mut continuity, x);
     }
-    Ok(out)
 }
 
 /// The ground root of a pose vector's frame: `prev` moved by its `r_t` (RMR sec. 5.1:
