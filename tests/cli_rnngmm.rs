@@ -346,3 +346,63 @@ fn denoise_writes_a_clip_and_refuses_bad_input() {
     let e = fails(&["bench", "denoise", "--model", &r, "--data", data, "--glob", "*", "--savgol-windows", "8"]);
     assert!(e.contains("--savgol-windows"), "{e}");
 }
+
+#[test]
+fn follow_walks_a_path_writes_a_plot_and_refuses_bad_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let r = trained(dir.path());
+    let out = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let write = |name: &str, text: &str| {
+        std::fs::write(dir.path().join(name), text).unwrap();
+        out(name)
+    };
+    let path = write("p.json", r#"{"units": "m", "points": [[0, 0], [0, 1.5]]}"#);
+    let fast = ["--particles", "3", "--swarm-iterations", "1", "--iterations", "2"];
+    let (f_bvh, f_png, g_bvh) = (out("f.bvh"), out("f.png"), out("g.bvh"));
+    let mut args = vec!["follow", "--model", &r, "--path", &path, "--out", &f_bvh, "--plot", &f_png];
+    args.extend_from_slice(&fast);
+    let stdout = ok(&args);
+    assert!(stdout.contains("root to path: mean") && stdout.contains("per generated second"), "{stdout}");
+    let clip = zoo_data::bvh::read_file(&dir.path().join("f.bvh"), &Default::default()).unwrap();
+    assert!(clip.frames() > 0 && clip.local_rotations.iter().all(|q| q.is_finite()));
+    assert_eq!(json(&dir.path().join("f.contacts.json"))["contacts"].as_array().unwrap().len(), clip.frames());
+    assert_eq!(&std::fs::read(dir.path().join("f.png")).unwrap()[1..4], b"PNG");
+    // SVG path data are read too.
+    let svg = write("p.svg", r#"<svg xmlns="http://www.w3.org/2000/svg"><path d="M 0 0 C 0 50 20 100 0 150"/></svg>"#);
+    let mut args = vec!["follow", "--model", &r, "--path", &svg, "--out", &g_bvh];
+    args.extend_from_slice(&fast);
+    ok(&args);
+    // Bad input: one point, a point off the ground plane, another skeleton, a bad option.
+    let e = fails(&[
+        "follow",
+        "--model",
+        &r,
+        "--path",
+        &write("one.json", r#"{"points": [[0, 0]]}"#),
+        "--out",
+        &out("e.bvh"),
+    ]);
+    assert!(e.contains("at least 2 distinct points"), "{e}");
+    let up = write("up.json", r#"{"points": [[0, 0, 0], [0, 1, 2]]}"#);
+    let e = fails(&["follow", "--model", &r, "--path", &up, "--out", &out("e.bvh")]);
+    assert!(e.contains("ground plane"), "{e}");
+    let toy = dir.path().join("toy.bvh");
+    zoo_data::bvh::write_file(&zoo_tests::toy_clip(40, 0.0), &toy).unwrap();
+    let from = format!("{}:10", toy.display());
+    let e = fails(&["follow", "--model", &r, "--path", &path, "--from", &from, "--out", &out("e.bvh")]);
+    assert!(e.contains("another skeleton"), "{e}");
+    let e = fails(&["follow", "--model", &r, "--path", &path, "--out", &out("e.bvh"), "--particles", "1"]);
+    assert!(e.contains("--particles"), "{e}");
+    let e = fails(&["follow", "--model", &r, "--path", &out("missing.json"), "--out", &out("e.bvh")]);
+    assert!(e.contains("missing.json"), "{e}");
+    assert!(!dir.path().join("e.bvh").exists());
+    // The benchmark on one test path.
+    let report = out("bf.json");
+    let mut args = vec!["bench", "follow", "--model", &r, "--paths", "straight", "--json", &report];
+    args.extend_from_slice(&fast);
+    let stdout = ok(&args);
+    assert!(stdout.contains("| straight |"), "{stdout}");
+    let j = json(Path::new(&report));
+    assert_eq!(j["rows"].as_array().unwrap().len(), 1);
+    assert!(j["rows"][0]["mean_distance"].as_f64().unwrap().is_finite());
+}

@@ -518,3 +518,23 @@ pub fn noise_units(s: &str) -> Result<f64, String> {
 pub fn fraction_or_zero(s: &str) -> Result<f64, String> {
     real_in(s, Interval { lo: 0.0, lo_open: false, hi: 1.0, hi_open: true }, "")
 }
+
+/// A path-following or control weight's standard deviation in clip units, `(0, 10000]`.
+pub fn sigma_units(s: &str) -> Result<f64, String> {
+    real_in(s, Interval::above(0.0, 10_000.0), "clip units")
+}
+
+/// Centimetres per SVG user unit, `(0, 10000]`.
+pub fn svg_scale(s: &str) -> Result<f64, String> {
+    real_in(s, Interval::above(0.0, 10_000.0), "cm per unit")
+}
+
+/// Particles of a swarm, `2..=1024`.
+pub fn particles(s: &str) -> Result<usize, String> {
+    whole_in(s, 2..=1024, "particles")
+}
+
+/// Iterations of an optimiser per window, `0..=10000`.
+pub fn optimiser_iterations(s: &str) -> Result<u64, String> {
+    whole_in(s, 0..=10_000, "iterations").map(|n| n as u64)
+}

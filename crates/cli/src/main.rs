@@ -45,6 +45,8 @@ enum Command {
     Generate(cmd::generate::GenerateArgs),
     /// Clean a noisy clip by MAP optimisation through a trained RNN-GMM (`zoo denoise --model DIR IN.bvh --out OUT.bvh`).
     Denoise(cmd::denoise::DenoiseArgs),
+    /// Walk a ground path (JSON or SVG) with a trained RNN-GMM by MAP optimisation (`zoo follow --model DIR --path PATH.json --out OUT.bvh`).
+    Follow(cmd::follow::FollowArgs),
     /// The synthesis benchmark (the same as `zoo bench synthesis`, kept for earlier scripts).
     #[command(hide = true)]
     BenchSynthesis(cmd::bench_synthesis::BenchSynthesisArgs),
@@ -81,7 +83,9 @@ fn training_environment() {
         || sub == ["bench", "train"]
         || sub == ["bench", "synthesis"]
         || sub.first() == Some(&"bench-synthesis");
-    if !training || std::env::var_os("ZOO_TRAINING_ENV").is_some() {
+    // Path following runs on one core (its benchmark reports the time per generated second on one).
+    let one_core = sub.first() == Some(&"follow") || sub == ["bench", "follow"];
+    if !(training || one_core) || std::env::var_os("ZOO_TRAINING_ENV").is_some() {
         return;
     }
     #[cfg(unix)]
@@ -90,7 +94,7 @@ fn training_environment() {
         let Ok(exe) = std::env::current_exe() else { return };
         let mut cmd = std::process::Command::new(exe);
         cmd.args(&args[1..]).env("ZOO_TRAINING_ENV", "1");
-        let cores = std::thread::available_parallelism().map_or(1, |n| n.get()).to_string();
+        let cores = if one_core { 1 } else { std::thread::available_parallelism().map_or(1, |n| n.get()) }.to_string();
         for (key, value) in [("CANDLE_NUM_THREADS", "1"), ("MIMALLOC_PURGE_DELAY", "-1"), ("RAYON_NUM_THREADS", &cores)]
         {
             if std::env::var_os(key).is_none() {
@@ -132,6 +136,7 @@ fn main() -> anyhow::Result<()> {
         Command::Stitch(a) => cmd::stitch::run(a),
         Command::Generate(a) => cmd::generate::run(a),
         Command::Denoise(a) => cmd::denoise::run(a),
+        Command::Follow(a) => cmd::follow::run(a),
         Command::BenchSynthesis(a) => cmd::bench_synthesis::run(a),
         Command::Complete(a) => cmd::complete::run(a),
         Command::EvalArnn(a) => cmd::eval_arnn::run(a),

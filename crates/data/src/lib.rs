@@ -7,6 +7,7 @@ pub mod dataset;
 pub mod denoise;
 pub mod luxo;
 pub mod metrics;
+pub mod path;
 pub mod plausibility;
 pub mod position_method;
 pub mod stitch;

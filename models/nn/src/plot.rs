@@ -100,6 +100,80 @@ pub fn lines(path: &Path, series: &[(&[f64], (u8, u8, u8))], grid: f64) -> NnRes
     save_png(path, &pm)
 }
 
+/// Plots 2-D polylines `series` (each `(points, rgb, width)`) seen from above with equal scales
+/// on both axes (a top view: the first coordinate to the right, the second down the image), a
+/// light grey grid every `grid` units, `size` pixels square; writes `path` atomically.
+/// Non-finite points break a line.
+pub fn top_view(path: &Path, series: &[(&[[f64; 2]], (u8, u8, u8), f32)], grid: f64, size: u32) -> NnResult<()> {
+    let (w, m) = (size as f32, 20.0f32);
+    let mut pm = Pixmap::new(size, size).ok_or_else(|| NnError::Config("cannot allocate the plot".into()))?;
+    pm.fill(Color::WHITE);
+    let finite = || series.iter().flat_map(|(p, _, _)| p.iter()).filter(|p| p[0].is_finite() && p[1].is_finite());
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in finite() {
+        for k in 0..2 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    if !lo[0].is_finite() {
+        (lo, hi) = ([0.0; 2], [1.0; 2]);
+    }
+    let span = (hi[0] - lo[0]).max(hi[1] - lo[1]).max(1e-9);
+    let centre = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
+    let scale = (w - 2.0 * m) as f64 / span;
+    let px = |p: [f64; 2]| -> (f32, f32) {
+        (w / 2.0 + ((p[0] - centre[0]) * scale) as f32, w / 2.0 + ((p[1] - centre[1]) * scale) as f32)
+    };
+    let mut paint = Paint::default();
+    let mut stroke = Stroke { width: 1.0, ..Stroke::default() };
+    paint.set_color_rgba8(225, 225, 225, 255);
+    if grid > 0.0 && span / grid < 200.0 {
+        let half = span / 2.0 + (m as f64) / scale;
+        for k in 0..2 {
+            let mut g = ((centre[k] - half) / grid).floor() * grid;
+            while g <= centre[k] + half {
+                let mut pb = PathBuilder::new();
+                let (a, b) = if k == 0 {
+                    ([g, centre[1] - half], [g, centre[1] + half])
+                } else {
+                    ([centre[0] - half, g], [centre[0] + half, g])
+                };
+                let (a, b) = (px(a), px(b));
+                pb.move_to(a.0, a.1);
+                pb.line_to(b.0, b.1);
+                if let Some(p) = pb.finish() {
+                    pm.stroke_path(&p, &paint, &stroke, Transform::identity(), None);
+                }
+                g += grid;
+            }
+        }
+    }
+    for (points, rgb, width) in series {
+        stroke.width = *width;
+        paint.set_color_rgba8(rgb.0, rgb.1, rgb.2, 255);
+        let mut pb = PathBuilder::new();
+        let mut pen_down = false;
+        for p in points.iter() {
+            if !(p[0].is_finite() && p[1].is_finite()) {
+                pen_down = false;
+                continue;
+            }
+            let (x, y) = px(*p);
+            if pen_down {
+                pb.line_to(x, y)
+            } else {
+                pb.move_to(x, y)
+            }
+            pen_down = true;
+        }
+        if let Some(p) = pb.finish() {
+            pm.stroke_path(&p, &paint, &stroke, Transform::identity(), None);
+        }
+    }
+    save_png(path, &pm)
+}
+
 /// Encodes `pm` and writes it to `path` atomically.
 fn save_png(path: &Path, pm: &Pixmap) -> NnResult<()> {
     let png =
@@ -115,5 +189,9 @@ mod tests {
         let p = dir.path().join("loss.png");
         super::loss_curve(&p, &[1.0, 0.5, 0.2], &[1.2, f64::NAN, 0.3]).unwrap();
         assert_eq!(&std::fs::read(&p).unwrap()[1..4], b"PNG");
+        let q = dir.path().join("top.png");
+        let pts = [[0.0, 0.0], [100.0, 50.0], [f64::NAN, 0.0], [20.0, 300.0]];
+        super::top_view(&q, &[(&pts, (200, 0, 0), 2.0)], 100.0, 300).unwrap();
+        assert_eq!(&std::fs::read(&q).unwrap()[1..4], b"PNG");
     }
 }

@@ -87,11 +87,18 @@ pub struct LoadedGenerator {
     pub norm: Normalization,
 }
 
-/// Loads a generator for inference from a checkpoint folder.
+/// Loads a generator for inference from a checkpoint folder. Its weights are constants, not
+/// variables: a backward pass through it (control, denoising, the initial state) computes the
+/// gradients of its inputs only, not of its 5 million weights at every frame.
 pub fn load(dir: &Path, device: &Device) -> RnnGmmResult<LoadedGenerator> {
     let (config, spec, norm) = read_meta(dir)?;
     let varmap = VarMap::new();
-    let generator = Generator::new(&config, VarBuilder::from_varmap(&varmap, DType::F32, device))?;
+    Generator::new(&config, VarBuilder::from_varmap(&varmap, DType::F32, device))?;
     load_weights(dir, &varmap)?;
+    let frozen: std::collections::HashMap<String, candle_core::Tensor> = {
+        let data = varmap.data().lock().map_err(|_| RnnGmmError::Config("the weight map's lock is poisoned".into()))?;
+        data.iter().map(|(name, var)| (name.clone(), var.as_tensor().detach())).collect()
+    };
+    let generator = Generator::new(&config, VarBuilder::from_tensors(frozen, DType::F32, device))?;
     Ok(LoadedGenerator { generator, spec, norm })
 }

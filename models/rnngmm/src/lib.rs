@@ -10,6 +10,7 @@
 //! - [`fk`]: differentiable forward kinematics of the features (end effectors, root trajectory);
 //! - [`refiner`]: the refiner and the discriminator (eq. 9-13) and their adversarial training
 //!   ([`AdversarialTraining`] for the shared loop);
+//! - [`control`], [`follow`]: path following by MAP optimisation through the generator (sec. 5.2);
 //! - [`denoise`]: motion denoising by MAP optimisation through the generator (sec. 5.4);
 //! - [`synthesis`]: random synthesis continuing a clip (seed, eq. 26, sampling, refiner, decoding);
 //! - [`train`]: the generator's training ([`GeneratorTraining`] for the shared loop);
@@ -33,11 +34,13 @@
 
 pub mod checkpoint;
 pub mod config;
+pub mod control;
 pub mod denoise;
 pub mod error;
 pub mod export;
 pub mod features;
 pub mod fk;
+pub mod follow;
 pub mod gmm;
 pub mod initial_state;
 pub mod model;
@@ -49,6 +52,7 @@ pub use config::{Config, ModelName, RefinerConfig, TrainConfig};
 pub use denoise::{DenoiseOptions, Denoised, EnergyTerms, denoise};
 pub use error::{RnnGmmError, RnnGmmResult};
 pub use features::{ContactParams, DecodedMotion, EncodedClip, FeatureSpec, Normalization, RootPlacement};
+pub use follow::{FollowOptions, Followed, follow};
 pub use gmm::Mixture;
 pub use initial_state::{InitialState, estimate_initial_state};
 pub use model::Generator;

@@ -96,6 +96,9 @@ pub enum BenchCommand {
     /// The denoising benchmark (RNN-GMM control, issue 15): held-out clips with seeded noise,
     /// cleaned by the MAP denoiser and by Savitzky-Golay filters (protocol in docs/rnn-gmm-control.md).
     Denoise(crate::cmd::bench_denoise::BenchDenoiseArgs),
+    /// The path-following benchmark (RNN-GMM control, issue 15): five test paths from each start
+    /// clip, root-to-path distance, foot skate and time (protocol in docs/rnn-gmm-control.md).
+    Follow(crate::cmd::bench_follow::BenchFollowArgs),
 }
 
 /// The hierarchy a benchmarked model was trained on, checked against the dataset's.
@@ -137,6 +140,9 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
     }
     if let Some(BenchCommand::Keyframes(k)) = a.command {
         return crate::cmd::bench_keyframes::run(k);
+    }
+    if let Some(BenchCommand::Follow(f)) = a.command {
+        return crate::cmd::bench_follow::run(f);
     }
     if let Some(BenchCommand::Denoise(d)) = a.command {
         return crate::cmd::bench_denoise::run(d);

@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod bench_denoise;
+pub mod bench_follow;
 pub mod bench_keyframes;
 pub mod bench_runtime;
 pub mod bench_stitch;
@@ -14,6 +15,7 @@ pub mod decompress;
 pub mod denoise;
 pub mod eval_arnn;
 pub mod export;
+pub mod follow;
 pub mod generate;
 pub mod render;
 pub mod stitch;

@@ -1,0 +1,237 @@
+//! `zoo bench follow`: the path-following benchmark (RNN-GMM control, issue 15): the five test
+//! paths (straight 10 m, circle of radius 2 m, S-curve, a hand-drawn polyline with a 120-degree
+//! corner, a 20 m spiral) from each start clip (walking, running), with the root's distance to
+//! the path, foot skate beside the real clips' own, and the time per generated second.
+
+use crate::cmd::follow::{follow_with_progress, plot, root_track};
+use crate::cmd::generate::{load_model, start_clip};
+use anyhow::{Context, bail};
+use clap::Args;
+use serde::Serialize;
+use std::path::PathBuf;
+use std::time::Instant;
+use zoo_data::metrics::{FootSkate, foot_joints};
+use zoo_data::path::{GroundPath, TEST_PATHS};
+use zoo_data::plausibility::percentile;
+use zoo_motion::Clip;
+use zoo_rnngmm::FollowOptions;
+
+/// Arguments of `zoo bench follow`.
+#[derive(Args)]
+pub struct BenchFollowArgs {
+    /// Run folder of `zoo train rnn-gmm`.
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Start clips and frames, `CLIP.bvh:FRAME`, one per gait (repeat the option) [default: the
+    /// run folder's start.bvh, frame 29].
+    #[arg(long)]
+    pub from: Vec<String>,
+    /// Test paths, comma-separated, of straight, circle, s-curve, corner, spiral.
+    #[arg(long, value_delimiter = ',', default_values_t = TEST_PATHS.map(String::from))]
+    pub paths: Vec<String>,
+    /// Real clips whose foot skate is the reference (a folder or file of BVH); with --glob.
+    #[arg(long)]
+    pub data: Option<PathBuf>,
+    /// Clip-name pattern within --data.
+    #[arg(long, default_value = "*")]
+    pub glob: String,
+    /// Folder that receives a top-view PNG and the BVH of every run.
+    #[arg(long)]
+    pub plots: Option<PathBuf>,
+    /// Standard deviation of the curve term (eq. 17) in clip units.
+    #[arg(long, default_value_t = FollowOptions::default().sigma_fit, allow_hyphen_values = true, value_parser = crate::args::sigma_units)]
+    pub sigma_fit: f64,
+    /// Particles of each window's swarm.
+    #[arg(long, default_value_t = FollowOptions::default().particles, allow_hyphen_values = true, value_parser = crate::args::particles)]
+    pub particles: usize,
+    /// Swarm iterations per window.
+    #[arg(long, default_value_t = FollowOptions::default().swarm_iterations, allow_hyphen_values = true, value_parser = crate::args::optimiser_iterations)]
+    pub swarm_iterations: u64,
+    /// L-BFGS iterations per window at most.
+    #[arg(long, default_value_t = FollowOptions::default().iterations, allow_hyphen_values = true, value_parser = crate::args::optimiser_iterations)]
+    pub iterations: u64,
+    /// Seed of the swarms.
+    #[arg(long, default_value_t = 1, allow_hyphen_values = true, value_parser = crate::args::seed)]
+    pub seed: u64,
+    /// Write the results as JSON to this file.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+/// One path from one start.
+#[derive(Serialize)]
+struct Row {
+    start: String,
+    path: String,
+    path_length_cm: f64,
+    frames: usize,
+    reached_end: bool,
+    mean_distance: f64,
+    max_distance: f64,
+    foot_skate: f64,
+    seconds: f64,
+    seconds_per_generated_second: f64,
+}
+
+#[derive(Serialize)]
+struct Report {
+    model: String,
+    options: String,
+    real_foot_skate: Option<f64>,
+    real: Option<String>,
+    rows: Vec<Row>,
+}
+
+/// Planted heights of the foot joints (5th percentile of each one's height over `clips`).
+fn planted(clips: &[&Clip], feet: &[usize]) -> Vec<f64> {
+    let mut heights = vec![Vec::new(); feet.len()];
+    for c in clips {
+        let (_, gp) = c.global();
+        for f in 0..c.frames() {
+            for (k, &j) in feet.iter().enumerate() {
+                heights[k].push(gp[f * c.joints() + j].y);
+            }
+        }
+    }
+    heights.iter().map(|h| percentile(h, 5.0)).collect()
+}
+
+fn skate_of(s: &FootSkate, clips: &[&Clip]) -> f64 {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for c in clips {
+        if c.frames() < 2 {
+            continue;
+        }
+        let (_, gp) = c.global();
+        sum += s.skate(&gp, c.frames(), c.joints()) * (c.frames() - 1) as f64;
+        n += c.frames() - 1;
+    }
+    sum / n.max(1) as f64
+}
+
+/// Runs the benchmark.
+pub fn run(a: BenchFollowArgs) -> anyhow::Result<()> {
+    if let Some(p) = &a.json {
+        crate::cmd::check_output_file("--json", p)?;
+    }
+    if let Some(d) = &a.plots {
+        std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
+    }
+    let paths: Vec<(String, GroundPath)> = a
+        .paths
+        .iter()
+        .map(|n| Ok((n.clone(), GroundPath::test_path(n).with_context(|| format!("--paths {n}"))?)))
+        .collect::<anyhow::Result<_>>()?;
+    let (g, _) = load_model(&a.model, true)?;
+    let froms: Vec<Option<&str>> =
+        if a.from.is_empty() { vec![None] } else { a.from.iter().map(|s| Some(s.as_str())).collect() };
+    let starts = froms.iter().map(|f| start_clip(&a.model, *f, &g)).collect::<anyhow::Result<Vec<_>>>()?;
+    let feet = foot_joints(&g.spec.skeleton.names);
+    if feet.is_empty() {
+        bail!("the model's skeleton has no joint named like a foot or toe: the skate cannot be measured");
+    }
+    let real = match &a.data {
+        Some(d) => {
+            let clips = crate::cmd::load_dataset(d, Some(a.glob.as_str()), false)?;
+            if clips.is_empty() {
+                bail!("no clip of {} matches `{}`", d.display(), a.glob);
+            }
+            Some((format!("{} ({}: {} clips)", d.display(), a.glob, clips.len()), clips))
+        }
+        None => None,
+    };
+    // The skate's planted heights: the real clips', else the start clips'.
+    let reference: Vec<&Clip> = match &real {
+        Some((_, clips)) => clips.iter().map(|c| &c.clip).collect(),
+        None => starts.iter().map(|s| &s.0).collect(),
+    };
+    let skate = FootSkate { joints: feet.clone(), planted: planted(&reference, &feet), scale: 2.5 };
+    let real_skate = real.as_ref().map(|_| skate_of(&skate, &reference));
+    let opts = FollowOptions {
+        sigma_fit: a.sigma_fit,
+        particles: a.particles,
+        swarm_iterations: a.swarm_iterations,
+        iterations: a.iterations,
+        seed: a.seed,
+        ..FollowOptions::default()
+    };
+    let mut rows = Vec::new();
+    for (clip, frame, label) in &starts {
+        for (name, path) in &paths {
+            let t = Instant::now();
+            let f = follow_with_progress(&g, clip, *frame, path, &opts, &format!("{name} from {label}"))
+                .with_context(|| format!("following {name} from {label}"))?;
+            let seconds = t.elapsed().as_secs_f64();
+            let n = f.distance.len().max(1) as f64;
+            let frames = f.motion.clip.frames();
+            let motion_s = frames as f64 / g.spec.fps;
+            let row = Row {
+                start: label.clone(),
+                path: name.clone(),
+                path_length_cm: path.length(),
+                frames,
+                reached_end: f.reached_end,
+                mean_distance: f.distance.iter().sum::<f64>() / n,
+                max_distance: f.distance.iter().copied().fold(0.0, f64::max),
+                foot_skate: skate_of(&skate, &[&f.motion.clip]),
+                seconds,
+                seconds_per_generated_second: seconds / motion_s.max(1e-9),
+            };
+            println!(
+                "{name:>8} from {label}: {frames} frames, root to path mean {:.2} max {:.2}, skate {:.3}, {:.1} s per \
+                 generated second{}",
+                row.mean_distance,
+                row.max_distance,
+                row.foot_skate,
+                row.seconds_per_generated_second,
+                if f.reached_end { "" } else { " (did not reach the end)" }
+            );
+            if let Some(dir) = &a.plots {
+                let k = rows.len() / paths.len();
+                let stem = format!("{name}-start{k}");
+                plot(&dir.join(format!("{stem}.png")), path, &root_track(&f))?;
+                let mut out = f.motion.clip.clone();
+                out.skeleton = clip.skeleton.clone();
+                zoo_data::bvh::write_file(&out, &dir.join(format!("{stem}.bvh")))
+                    .with_context(|| format!("writing {stem}.bvh"))?;
+            }
+            rows.push(row);
+        }
+    }
+    println!();
+    println!(
+        "| start | path | frames | reached end | root to path, mean (cm) | max (cm) | foot skate (cm/frame) | s per generated \
+         second |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
+    for r in &rows {
+        println!(
+            "| {} | {} | {} | {} | {:.2} | {:.2} | {:.3} | {:.1} |",
+            r.start,
+            r.path,
+            r.frames,
+            if r.reached_end { "yes" } else { "no" },
+            r.mean_distance,
+            r.max_distance,
+            r.foot_skate,
+            r.seconds_per_generated_second
+        );
+    }
+    if let (Some(s), Some((what, _))) = (real_skate, &real) {
+        println!("real foot skate: {s:.3} cm/frame ({what})");
+    }
+    if let Some(p) = &a.json {
+        let report = Report {
+            model: a.model.display().to_string(),
+            options: format!("{opts:?}"),
+            real_foot_skate: real_skate,
+            real: real.as_ref().map(|(w, _)| w.clone()),
+            rows,
+        };
+        let tmp = p.with_extension("json.tmp");
+        std::fs::write(&tmp, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("writing {}", tmp.display()))?;
+        std::fs::rename(&tmp, p).with_context(|| format!("writing {}", p.display()))?;
+    }
+    Ok(())
+}

@@ -1,0 +1,410 @@
+//! Ground paths for path following (RNN-GMM control, paper sec. 5.2): a polyline on the ground
+//! plane (x, z) in centimetres, read from JSON points or SVG path data (curves are flattened by
+//! `kurbo`), with arc length, nearest-point queries and the built-in test paths of the
+//! path-following benchmark.
+//!
+//! Axes: y is up, so a path lies in the x-z plane. An SVG drawing maps its x to x and its y (down
+//! the page) to z: seen from above (+y), with x to the right, z points down the page, so the
+//! drawing is not mirrored.
+//!
+//! JSON: `{"units": "cm" | "m", "points": [[x, z], ...]}` (points may also be `[x, y, z]` with
+//! y = 0), or `{"units": ..., "svg": "M 0 0 C ..."}` (SVG path data in those units). Units
+//! default to metres.
+
+use std::path::Path;
+use thiserror::Error;
+
+/// A path that cannot be used, with what to do about it.
+#[derive(Debug, Error)]
+pub enum PathError {
+    /// The file could not be read.
+    #[error("cannot read the path file {path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The description is malformed or unusable.
+    #[error("{0}")]
+    Invalid(String),
+}
+
+fn invalid(message: impl Into<String>) -> PathError {
+    PathError::Invalid(message.into())
+}
+
+/// A polyline on the ground plane, in centimetres, with its cumulative arc length.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GroundPath {
+    points: Vec<[f64; 2]>,
+    /// Arc length at each point (`cum[0]` = 0).
+    cum: Vec<f64>,
+}
+
+/// The nearest point of a path to a query point.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Nearest {
+    /// The point (cm).
+    pub point: [f64; 2],
+    /// Its arc length (cm; below 0 or beyond [`GroundPath::length`] on the straight extensions).
+    pub s: f64,
+    /// Distance from the query point (cm).
+    pub distance: f64,
+}
+
+/// The closest point of segment `a`-`b` to `p`: (point, fraction along the segment).
+fn closest_on_segment(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> ([f64; 2], f64) {
+    let (dx, dz) = (b[0] - a[0], b[1] - a[1]);
+    let len2 = dx * dx + dz * dz;
+    let t = if len2 > 0.0 { (((p[0] - a[0]) * dx + (p[1] - a[1]) * dz) / len2).clamp(0.0, 1.0) } else { 0.0 };
+    ([a[0] + t * dx, a[1] + t * dz], t)
+}
+
+fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
+    (a[0] - b[0]).hypot(a[1] - b[1])
+}
+
+impl GroundPath {
+    /// A path through `points` (cm). Consecutive duplicates are dropped; at least 2 distinct
+    /// finite points are needed.
+    pub fn new(points: Vec<[f64; 2]>) -> Result<Self, PathError> {
+        if let Some(i) = points.iter().position(|p| !(p[0].is_finite() && p[1].is_finite())) {
+            return Err(invalid(format!(
+                "path point {i} is not a finite number ({:?}): give finite coordinates",
+                points[i]
+            )));
+        }
+        let mut pts: Vec<[f64; 2]> = Vec::with_capacity(points.len());
+        for p in points {
+            if pts.last().is_none_or(|q| dist(*q, p) > 1e-9) {
+                pts.push(p);
+            }
+        }
+        if pts.len() < 2 {
+            return Err(invalid(format!(
+                "a path needs at least 2 distinct points, found {}: give the start and at least one more point",
+                pts.len()
+            )));
+        }
+        let mut cum = vec![0.0; pts.len()];
+        for i in 1..pts.len() {
+            cum[i] = cum[i - 1] + dist(pts[i - 1], pts[i]);
+        }
+        Ok(GroundPath { points: pts, cum })
+    }
+
+    /// The path of a JSON description (see the module docs).
+    pub fn from_json(text: &str) -> Result<Self, PathError> {
+        let v: serde_json::Value =
+            serde_json::from_str(text).map_err(|e| invalid(format!("the path JSON does not parse: {e}")))?;
+        let scale = match v.get("units").and_then(|u| u.as_str()).unwrap_or("m") {
+            "m" => 100.0,
+            "cm" => 1.0,
+            other => return Err(invalid(format!("unknown path units `{other}`: use \"m\" or \"cm\""))),
+        };
+        if let Some(d) = v.get("svg") {
+            let d = d.as_str().ok_or_else(|| invalid("`svg` must be a string of SVG path data"))?;
+            return Self::from_svg_data(d, scale);
+        }
+        let points = v.get("points").and_then(|p| p.as_array()).ok_or_else(|| {
+            invalid("the path JSON needs `points` (a list of [x, z] or [x, y, z]) or `svg` (path data)")
+        })?;
+        let mut out = Vec::with_capacity(points.len());
+        for (i, p) in points.iter().enumerate() {
+            let c: Vec<f64> = p
+                .as_array()
+                .map(|a| a.iter().filter_map(|x| x.as_f64()).collect())
+                .filter(|c: &Vec<f64>| c.len() == p.as_array().map_or(0, Vec::len))
+                .ok_or_else(|| invalid(format!("path point {i} is not a list of numbers: {p}")))?;
+            match c.as_slice() {
+                [x, z] => out.push([x * scale, z * scale]),
+                [x, y, z] => {
+                    if y.abs() > 1e-6 {
+                        return Err(invalid(format!(
+                            "path point {i} is at height y = {y}: a path lies on the ground plane (y = 0); give [x, z] \
+                             or [x, 0, z]"
+                        )));
+                    }
+                    out.push([x * scale, z * scale])
+                }
+                _ => {
+                    return Err(invalid(format!(
+                        "path point {i} has {} coordinates: give [x, z] or [x, 0, z]",
+                        c.len()
+                    )));
+                }
+            }
+        }
+        Self::new(out)
+    }
+
+    /// The path of SVG path data (`d`), `cm_per_unit` centimetres per SVG unit; curves are
+    /// flattened to within 0.5 cm. Only the first subpath is used.
+    pub fn from_svg_data(d: &str, cm_per_unit: f64) -> Result<Self, PathError> {
+        if !(cm_per_unit.is_finite() && cm_per_unit > 0.0) {
+            return Err(invalid(format!("the SVG scale must be positive, found {cm_per_unit}")));
+        }
+        let bez = kurbo::BezPath::from_svg(d).map_err(|e| invalid(format!("the SVG path data does not parse: {e}")))?;
+        let mut pts: Vec<[f64; 2]> = Vec::new();
+        let mut subpaths = 0;
+        let mut start = None;
+        kurbo::flatten(&bez, 0.5 / cm_per_unit, |el| match el {
+            kurbo::PathEl::MoveTo(p) => {
+                subpaths += 1;
+                if subpaths == 1 {
+                    pts.push([p.x * cm_per_unit, p.y * cm_per_unit]);
+                    start = Some([p.x * cm_per_unit, p.y * cm_per_unit]);
+                }
+            }
+            kurbo::PathEl::LineTo(p) if subpaths == 1 => pts.push([p.x * cm_per_unit, p.y * cm_per_unit]),
+            kurbo::PathEl::ClosePath if subpaths == 1 => {
+                if let Some(s) = start {
+                    pts.push(s)
+                }
+            }
+            _ => {}
+        });
+        Self::new(pts)
+    }
+
+    /// The path of the first `<path d="...">` of an SVG document, `cm_per_unit` centimetres per
+    /// user unit (transforms are not applied).
+    pub fn from_svg_document(text: &str, cm_per_unit: f64) -> Result<Self, PathError> {
+        let doc = roxmltree::Document::parse(text).map_err(|e| invalid(format!("the SVG file does not parse: {e}")))?;
+        let d = doc
+            .descendants()
+            .find(|n| n.has_tag_name("path") && n.attribute("d").is_some())
+            .and_then(|n| n.attribute("d"))
+            .ok_or_else(|| invalid("the SVG file has no <path d=\"...\"> element: draw the path as an SVG path"))?;
+        Self::from_svg_data(d, cm_per_unit)
+    }
+
+    /// Reads a `.json` or `.svg` file (`svg_cm_per_unit` for SVG files).
+    pub fn load(path: &Path, svg_cm_per_unit: f64) -> Result<Self, PathError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| PathError::Io { path: path.display().to_string(), source })?;
+        match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
+            Some("json") => Self::from_json(&text),
+            Some("svg") => Self::from_svg_document(&text, svg_cm_per_unit),
+            _ => Err(invalid(format!("{}: a path file is .json or .svg", path.display()))),
+        }
+    }
+
+    /// The points (cm).
+    pub fn points(&self) -> &[[f64; 2]] {
+        &self.points
+    }
+
+    /// Total arc length (cm).
+    pub fn length(&self) -> f64 {
+        *self.cum.last().unwrap_or(&0.0)
+    }
+
+    /// The point at arc length `s`, on the straight extensions beyond either end.
+    pub fn point_at(&self, s: f64) -> [f64; 2] {
+        let n = self.points.len();
+        let (i, t) = if s <= 0.0 {
+            (0, s / self.cum[1])
+        } else if s >= self.length() {
+            (n - 2, (s - self.cum[n - 2]) / (self.cum[n - 1] - self.cum[n - 2]))
+        } else {
+            let i = self.cum.partition_point(|&c| c <= s).saturating_sub(1).min(n - 2);
+            (i, (s - self.cum[i]) / (self.cum[i + 1] - self.cum[i]))
+        };
+        let (a, b) = (self.points[i], self.points[i + 1]);
+        [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]
+    }
+
+    /// The unit tangent at arc length `s` (the segment's direction).
+    pub fn tangent_at(&self, s: f64) -> [f64; 2] {
+        let n = self.points.len();
+        let i = self.cum.partition_point(|&c| c <= s).saturating_sub(1).min(n - 2);
+        let (a, b) = (self.points[i], self.points[i + 1]);
+        let l = dist(a, b);
+        [(b[0] - a[0]) / l, (b[1] - a[1]) / l]
+    }
+
+    /// The nearest point to `p` among the path's points with arc length in `[s_lo, s_hi]`,
+    /// the path extended straight beyond both ends (so a query past the end is pulled along the
+    /// end's direction, not back to the end point).
+    pub fn nearest(&self, p: [f64; 2], s_lo: f64, s_hi: f64) -> Nearest {
+        let n = self.points.len();
+        let mut best = Nearest { point: self.point_at(s_lo), s: s_lo, distance: f64::INFINITY };
+        let mut consider = |a: [f64; 2], sa: f64, b: [f64; 2], sb: f64| {
+            let (q, t) = closest_on_segment(p, a, b);
+            let d = dist(p, q);
+            if d < best.distance {
+                best = Nearest { point: q, s: sa + t * (sb - sa), distance: d };
+            }
+        };
+        let len = self.length();
+        if s_lo < 0.0 {
+            consider(self.point_at(s_lo), s_lo, self.points[0], 0.0);
+        }
+        for i in 0..n - 1 {
+            let (sa, sb) = (self.cum[i], self.cum[i + 1]);
+            if sb < s_lo || sa > s_hi {
+                continue;
+            }
+            let (ca, cb) = (sa.max(s_lo), sb.min(s_hi));
+            consider(self.point_at(ca), ca, self.point_at(cb), cb);
+        }
+        if s_hi > len {
+            consider(self.points[n - 1], len, self.point_at(s_hi), s_hi);
+        }
+        best
+    }
+
+    /// The benchmark's test paths by name (cm): `straight` (10 m), `circle` (radius 2 m, one
+    /// loop), `s-curve` (two opposite half circles of radius 2 m), `corner` (a hand-drawn
+    /// polyline: 5 m, a 120-degree turn, 4 m) and `spiral` (20 m of an Archimedean spiral
+    /// opening from a radius of 1.5 m).
+    pub fn test_path(name: &str) -> Result<Self, PathError> {
+        let arc = |cx: f64, cz: f64, r: f64, a0: f64, a1: f64, out: &mut Vec<[f64; 2]>| {
+            let steps = ((a1 - a0).abs() * r / 5.0).ceil().max(2.0) as usize;
+            for k in 0..=steps {
+                let a = a0 + (a1 - a0) * k as f64 / steps as f64;
+                out.push([cx + r * a.cos(), cz + r * a.sin()]);
+            }
+        };
+        let pi = std::f64::consts::PI;
+        let pts = match name {
+            "straight" => vec![[0.0, 0.0], [0.0, 1000.0]],
+            "circle" => {
+                let mut v = Vec::new();
+                arc(-200.0, 0.0, 200.0, 0.0, 2.0 * pi, &mut v);
+                v
+            }
+            "s-curve" => {
+                let mut v = Vec::new();
+                arc(-200.0, 0.0, 200.0, 0.0, pi, &mut v);
+                arc(-600.0, 0.0, 200.0, 0.0, -pi, &mut v);
+                v
+            }
+            "corner" => {
+                // Drawn by hand (slightly uneven spacing and wobble), turning by 120 degrees at (0, 500).
+                let t = 120f64.to_radians();
+                let (dx, dz) = (t.sin(), t.cos());
+                vec![
+                    [0.0, 0.0],
+                    [3.0, 118.0],
+                    [-4.0, 251.0],
+                    [2.0, 379.0],
+                    [0.0, 500.0],
+                    [dx * 97.0 + 4.0, 500.0 + dz * 97.0],
+                    [dx * 215.0 - 3.0, 500.0 + dz * 215.0 + 2.0],
+                    [dx * 300.0 + 2.0, 500.0 + dz * 300.0],
+                    [dx * 400.0, 500.0 + dz * 400.0],
+                ]
+            }
+            "spiral" => {
+                // r = r0 + b a: from 1.5 m, arms 60 cm apart, until 20 m of arc.
+                let (r0, b) = (150.0, 60.0 / (2.0 * pi));
+                let mut v = vec![[r0, 0.0]];
+                let (mut a, mut len) = (0.0f64, 0.0);
+                while len < 2000.0 {
+                    a += 0.01;
+                    let r = r0 + b * a;
+                    let p = [r * a.cos(), r * a.sin()];
+                    len += dist(v[v.len() - 1], p);
+                    v.push(p);
+                }
+                v
+            }
+            other => {
+                return Err(invalid(format!("unknown test path `{other}`: one of {}", TEST_PATHS.join(", "))));
+            }
+        };
+        Self::new(pts)
+    }
+}
+
+/// The names of [`GroundPath::test_path`].
+pub const TEST_PATHS: [&str; 5] = ["straight", "circle", "s-curve", "corner", "spiral"];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn json_points_and_svg_data_give_the_same_polyline() {
+        let a = GroundPath::from_json(r#"{"units": "m", "points": [[0, 0], [0, 2], [1, 2]]}"#).unwrap();
+        let b = GroundPath::from_json(r#"{"units": "cm", "svg": "M 0 0 L 0 200 L 100 200"}"#).unwrap();
+        assert_eq!(a, b);
+        assert!((a.length() - 300.0).abs() < 1e-9);
+        let svg = r#"<svg xmlns="http://www.w3.org/2000/svg"><g><path d="M0,0 L0,2 L1,2"/></g></svg>"#;
+        assert_eq!(GroundPath::from_svg_document(svg, 100.0).unwrap(), a);
+    }
+
+    #[test]
+    fn curves_are_flattened_close_to_the_curve() {
+        // A quarter circle of radius 100 as one cubic: every flattened point within 0.5 cm (+ the
+        // cubic's own 0.03 % error) of the circle.
+        let k = 0.5522847498 * 100.0;
+        let p = GroundPath::from_svg_data(&format!("M 100 0 C 100 {k} {k} 100 0 100"), 1.0).unwrap();
+        assert!(p.points().len() > 5);
+        for q in p.points() {
+            assert!((q[0].hypot(q[1]) - 100.0).abs() < 0.6, "{q:?}");
+        }
+        assert!((p.length() - 50.0 * std::f64::consts::PI).abs() < 1.0);
+    }
+
+    #[test]
+    fn nearest_points_respect_the_arc_length_range_and_the_extensions() {
+        let p = GroundPath::new(vec![[0.0, 0.0], [0.0, 100.0], [100.0, 100.0]]).unwrap();
+        let n = p.nearest([10.0, 50.0], 0.0, 200.0);
+        assert!((n.distance - 10.0).abs() < 1e-9 && (n.s - 50.0).abs() < 1e-9);
+        // Restricted to the second segment.
+        let n = p.nearest([10.0, 50.0], 100.0, 200.0);
+        assert!((n.s - 110.0).abs() < 1e-9 && (n.distance - 50.0).abs() < 1e-9);
+        // Past the end, along the end's direction.
+        let n = p.nearest([150.0, 103.0], 0.0, 300.0);
+        assert!((n.s - 250.0).abs() < 1e-9 && (n.distance - 3.0).abs() < 1e-9);
+        assert_eq!(p.point_at(-10.0), [0.0, -10.0]);
+        assert_eq!(p.tangent_at(150.0), [1.0, 0.0]);
+    }
+
+    #[test]
+    fn bad_paths_are_refused_with_the_fix() {
+        let e = GroundPath::from_json(r#"{"points": [[0, 0]]}"#).unwrap_err().to_string();
+        assert!(e.contains("at least 2 distinct points"), "{e}");
+        let e = GroundPath::from_json(r#"{"points": [[0, 0], [0, 0]]}"#).unwrap_err().to_string();
+        assert!(e.contains("at least 2 distinct points"), "{e}");
+        let e = GroundPath::from_json(r#"{"points": [[0, 0, 0], [1, 0.5, 1]]}"#).unwrap_err().to_string();
+        assert!(e.contains("ground plane"), "{e}");
+        let e = GroundPath::from_json(r#"{"points": [[0, 0], [1, "a"]]}"#).unwrap_err().to_string();
+        assert!(e.contains("point 1"), "{e}");
+        let e = GroundPath::from_json(r#"{"units": "ft", "points": [[0, 0], [1, 1]]}"#).unwrap_err().to_string();
+        assert!(e.contains("units"), "{e}");
+        let e = GroundPath::from_svg_document("<svg/>", 1.0).unwrap_err().to_string();
+        assert!(e.contains("no <path"), "{e}");
+        let e = GroundPath::new(vec![[0.0, f64::NAN], [1.0, 1.0]]).unwrap_err().to_string();
+        assert!(e.contains("finite"), "{e}");
+    }
+
+    #[test]
+    fn the_example_files_in_docs_are_the_test_paths() {
+        let corner = GroundPath::from_json(include_str!("../../../docs/paths/corner.json")).unwrap();
+        let want = GroundPath::test_path("corner").unwrap();
+        assert_eq!(corner.points().len(), want.points().len());
+        for (a, b) in corner.points().iter().zip(want.points()) {
+            assert!(dist(*a, *b) < 0.1, "{a:?} vs {b:?}");
+        }
+        let s = GroundPath::from_svg_document(include_str!("../../../docs/paths/s-curve.svg"), 1.0).unwrap();
+        assert!((s.length() - GroundPath::test_path("s-curve").unwrap().length()).abs() < 3.0, "{}", s.length());
+    }
+
+    #[test]
+    fn test_paths_have_their_lengths() {
+        let len = |n: &str| GroundPath::test_path(n).unwrap().length();
+        assert!((len("straight") - 1000.0).abs() < 1e-9);
+        assert!((len("circle") - 400.0 * std::f64::consts::PI).abs() < 2.0);
+        assert!((len("s-curve") - 400.0 * std::f64::consts::PI).abs() < 4.0);
+        assert!((len("spiral") - 2000.0).abs() < 5.0);
+        let c = GroundPath::test_path("corner").unwrap();
+        let (a, b) = (c.tangent_at(450.0), c.tangent_at(560.0));
+        let turn = (a[0] * b[0] + a[1] * b[1]).acos().to_degrees();
+        assert!((turn - 120.0).abs() < 5.0, "{turn}");
+    }
+}
