@@ -3,7 +3,7 @@
 //! corner, a 20 m spiral) from each start clip (walking, running), with the root's distance to
 //! the path, foot skate beside the real clips' own, and the time per generated second.
 
-use crate::cmd::follow::{follow_with_progress, plot, root_track};
+use crate::cmd::follow::{OptimiserArgs, follow_with_progress, plot, root_track};
 use crate::cmd::generate::{load_model, start_clip};
 use anyhow::{Context, bail};
 use clap::Args;
@@ -14,7 +14,6 @@ use zoo_data::metrics::{FootSkate, foot_joints};
 use zoo_data::path::{GroundPath, TEST_PATHS};
 use zoo_data::plausibility::percentile;
 use zoo_motion::Clip;
-use zoo_rnngmm::FollowOptions;
 
 /// Arguments of `zoo bench follow`.
 #[derive(Args)]
@@ -38,21 +37,9 @@ pub struct BenchFollowArgs {
     /// Folder that receives a top-view PNG and the BVH of every run.
     #[arg(long)]
     pub plots: Option<PathBuf>,
-    /// Standard deviation of the curve term (eq. 17) in clip units.
-    #[arg(long, default_value_t = FollowOptions::default().sigma_fit, allow_hyphen_values = true, value_parser = crate::args::sigma_units)]
-    pub sigma_fit: f64,
-    /// Particles of each window's swarm.
-    #[arg(long, default_value_t = FollowOptions::default().particles, allow_hyphen_values = true, value_parser = crate::args::particles)]
-    pub particles: usize,
-    /// Swarm iterations per window.
-    #[arg(long, default_value_t = FollowOptions::default().swarm_iterations, allow_hyphen_values = true, value_parser = crate::args::optimiser_iterations)]
-    pub swarm_iterations: u64,
-    /// L-BFGS iterations per window at most.
-    #[arg(long, default_value_t = FollowOptions::default().iterations, allow_hyphen_values = true, value_parser = crate::args::optimiser_iterations)]
-    pub iterations: u64,
-    /// Seed of the swarms.
-    #[arg(long, default_value_t = 1, allow_hyphen_values = true, value_parser = crate::args::seed)]
-    pub seed: u64,
+    /// The optimiser's settings.
+    #[command(flatten)]
+    pub optimiser: OptimiserArgs,
     /// Write the results as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -147,14 +134,7 @@ pub fn run(a: BenchFollowArgs) -> anyhow::Result<()> {
     };
     let skate = FootSkate { joints: feet.clone(), planted: planted(&reference, &feet), scale: 2.5 };
     let real_skate = real.as_ref().map(|_| skate_of(&skate, &reference));
-    let opts = FollowOptions {
-        sigma_fit: a.sigma_fit,
-        particles: a.particles,
-        swarm_iterations: a.swarm_iterations,
-        iterations: a.iterations,
-        seed: a.seed,
-        ..FollowOptions::default()
-    };
+    let opts = a.optimiser.options();
     let mut rows = Vec::new();
     for (clip, frame, label) in &starts {
         for (name, path) in &paths {

@@ -34,6 +34,14 @@ pub struct FollowArgs {
     /// Top-view PNG of the path (grey) and the generated root trajectory (red).
     #[arg(long)]
     pub plot: Option<PathBuf>,
+    /// The optimiser's settings.
+    #[command(flatten)]
+    pub optimiser: OptimiserArgs,
+}
+
+/// The path-following optimiser's options (`zoo follow`, `zoo bench follow`).
+#[derive(Args)]
+pub struct OptimiserArgs {
     /// Standard deviation of the curve term (eq. 17) in clip units (cm for bandai2).
     #[arg(long, default_value_t = FollowOptions::default().sigma_fit, allow_hyphen_values = true, value_parser = crate::args::sigma_units)]
     pub sigma_fit: f64,
@@ -51,7 +59,7 @@ pub struct FollowArgs {
     pub seed: u64,
 }
 
-impl FollowArgs {
+impl OptimiserArgs {
     /// The optimiser's settings.
     pub fn options(&self) -> FollowOptions {
         FollowOptions {
@@ -110,7 +118,7 @@ pub fn run(a: FollowArgs) -> anyhow::Result<()> {
     let path = read_path(&a.path, a.svg_scale)?;
     let (g, _) = load_model(&a.model, true)?;
     let (clip, frame, from) = start_clip(&a.model, a.from.as_deref(), &g)?;
-    let opts = a.options();
+    let opts = a.optimiser.options();
     let started = std::time::Instant::now();
     let f = follow_with_progress(&g, &clip, frame, &path, &opts, "following")
         .with_context(|| format!("following {} from {from}", a.path.display()))?;
