@@ -397,12 +397,15 @@ fn follow_walks_a_path_writes_a_plot_and_refuses_bad_input() {
     assert!(e.contains("missing.json"), "{e}");
     assert!(!dir.path().join("e.bvh").exists());
     // The benchmark on one test path.
-    let report = out("bf.json");
-    let mut args = vec!["bench", "follow", "--model", &r, "--paths", "straight", "--json", &report];
+    let (report, plots) = (out("bf.json"), out("plots"));
+    let mut args = vec!["bench", "follow", "--model", &r, "--paths", "straight", "--json", &report, "--plots", &plots];
     args.extend_from_slice(&fast);
     let stdout = ok(&args);
     assert!(stdout.contains("| straight |"), "{stdout}");
     let j = json(Path::new(&report));
     assert_eq!(j["rows"].as_array().unwrap().len(), 1);
     assert!(j["rows"][0]["mean_distance"].as_f64().unwrap().is_finite());
+    for f in ["all.png", "straight-start0.png", "straight-start0.bvh"] {
+        assert!(Path::new(&plots).join(f).is_file(), "{f}");
+    }
 }

@@ -100,14 +100,35 @@ pub fn lines(path: &Path, series: &[(&[f64], (u8, u8, u8))], grid: f64) -> NnRes
     save_png(path, &pm)
 }
 
-/// Plots 2-D polylines `series` (each `(points, rgb, width)`) seen from above with equal scales
-/// on both axes (a top view: the first coordinate to the right, the second down the image), a
-/// light grey grid every `grid` units, `size` pixels square; writes `path` atomically.
-/// Non-finite points break a line.
-pub fn top_view(path: &Path, series: &[(&[[f64; 2]], (u8, u8, u8), f32)], grid: f64, size: u32) -> NnResult<()> {
-    let (w, m) = (size as f32, 20.0f32);
-    let mut pm = Pixmap::new(size, size).ok_or_else(|| NnError::Config("cannot allocate the plot".into()))?;
+/// One polyline of a top view: points, colour, width in pixels.
+pub type TopSeries<'a> = (&'a [[f64; 2]], (u8, u8, u8), f32);
+
+/// Plots 2-D polylines `series` seen from above with equal scales on both axes (a top view: the
+/// first coordinate to the right, the second down the image), a light grey grid every `grid`
+/// units, `size` pixels square; writes `path` atomically. Non-finite points break a line.
+pub fn top_view(path: &Path, series: &[TopSeries], grid: f64, size: u32) -> NnResult<()> {
+    top_view_grid(path, &[vec![series.to_vec()]], grid, size)
+}
+
+/// Several top views (see [`top_view`]) in a grid: `cells[row][column]` are the series of one
+/// view, each view `size` pixels square, each scaled on its own.
+pub fn top_view_grid(path: &Path, cells: &[Vec<Vec<TopSeries>>], grid: f64, size: u32) -> NnResult<()> {
+    let rows = cells.len().max(1) as u32;
+    let cols = cells.iter().map(Vec::len).max().unwrap_or(1).max(1) as u32;
+    let mut pm =
+        Pixmap::new(cols * size, rows * size).ok_or_else(|| NnError::Config("cannot allocate the plot".into()))?;
     pm.fill(Color::WHITE);
+    for (r, row) in cells.iter().enumerate() {
+        for (c, series) in row.iter().enumerate() {
+            draw_top_view(&mut pm, series, grid, size as f32, (c as f32 * size as f32, r as f32 * size as f32));
+        }
+    }
+    save_png(path, &pm)
+}
+
+/// Draws one top view into the `size`-pixel square of `pm` at `origin`.
+fn draw_top_view(pm: &mut Pixmap, series: &[TopSeries], grid: f64, w: f32, origin: (f32, f32)) {
+    let m = 20.0f32;
     let finite = || series.iter().flat_map(|(p, _, _)| p.iter()).filter(|p| p[0].is_finite() && p[1].is_finite());
     let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
     for p in finite() {
@@ -123,11 +144,19 @@ pub fn top_view(path: &Path, series: &[(&[[f64; 2]], (u8, u8, u8), f32)], grid: 
     let centre = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
     let scale = (w - 2.0 * m) as f64 / span;
     let px = |p: [f64; 2]| -> (f32, f32) {
-        (w / 2.0 + ((p[0] - centre[0]) * scale) as f32, w / 2.0 + ((p[1] - centre[1]) * scale) as f32)
+        (
+            origin.0 + w / 2.0 + ((p[0] - centre[0]) * scale) as f32,
+            origin.1 + w / 2.0 + ((p[1] - centre[1]) * scale) as f32,
+        )
     };
     let mut paint = Paint::default();
     let mut stroke = Stroke { width: 1.0, ..Stroke::default() };
     paint.set_color_rgba8(225, 225, 225, 255);
+    let clip = tiny_skia::Rect::from_xywh(origin.0, origin.1, w, w).and_then(|r| {
+        let mut mask = tiny_skia::Mask::new(pm.width(), pm.height())?;
+        mask.fill_path(&PathBuilder::from_rect(r), tiny_skia::FillRule::Winding, false, Transform::identity());
+        Some(mask)
+    });
     if grid > 0.0 && span / grid < 200.0 {
         let half = span / 2.0 + (m as f64) / scale;
         for k in 0..2 {
@@ -143,7 +172,7 @@ pub fn top_view(path: &Path, series: &[(&[[f64; 2]], (u8, u8, u8), f32)], grid: 
                 pb.move_to(a.0, a.1);
                 pb.line_to(b.0, b.1);
                 if let Some(p) = pb.finish() {
-                    pm.stroke_path(&p, &paint, &stroke, Transform::identity(), None);
+                    pm.stroke_path(&p, &paint, &stroke, Transform::identity(), clip.as_ref());
                 }
                 g += grid;
             }
@@ -168,10 +197,9 @@ pub fn top_view(path: &Path, series: &[(&[[f64; 2]], (u8, u8, u8), f32)], grid: 
             pen_down = true;
         }
         if let Some(p) = pb.finish() {
-            pm.stroke_path(&p, &paint, &stroke, Transform::identity(), None);
+            pm.stroke_path(&p, &paint, &stroke, Transform::identity(), clip.as_ref());
         }
     }
-    save_png(path, &pm)
 }
 
 /// Encodes `pm` and writes it to `path` atomically.
@@ -192,6 +220,9 @@ mod tests {
         let q = dir.path().join("top.png");
         let pts = [[0.0, 0.0], [100.0, 50.0], [f64::NAN, 0.0], [20.0, 300.0]];
         super::top_view(&q, &[(&pts, (200, 0, 0), 2.0)], 100.0, 300).unwrap();
+        assert_eq!(&std::fs::read(&q).unwrap()[1..4], b"PNG");
+        let cell: Vec<super::TopSeries> = vec![(&pts, (0, 0, 200), 1.0)];
+        super::top_view_grid(&q, &[vec![cell.clone(), cell.clone()], vec![cell]], 100.0, 100).unwrap();
         assert_eq!(&std::fs::read(&q).unwrap()[1..4], b"PNG");
     }
 }

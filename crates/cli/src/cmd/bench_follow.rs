@@ -34,7 +34,8 @@ pub struct BenchFollowArgs {
     /// Clip-name pattern within --data.
     #[arg(long, default_value = "*")]
     pub glob: String,
-    /// Folder that receives a top-view PNG and the BVH of every run.
+    /// Folder that receives a top-view PNG and the BVH of every run, and all the top views in one
+    /// sheet (`all.png`: a row per start, a column per path).
     #[arg(long)]
     pub plots: Option<PathBuf>,
     /// The optimiser's settings.
@@ -136,7 +137,9 @@ pub fn run(a: BenchFollowArgs) -> anyhow::Result<()> {
     let real_skate = real.as_ref().map(|_| skate_of(&skate, &reference));
     let opts = a.optimiser.options();
     let mut rows = Vec::new();
+    let mut tracks: Vec<Vec<Vec<[f64; 2]>>> = Vec::new();
     for (clip, frame, label) in &starts {
+        tracks.push(Vec::new());
         for (name, path) in &paths {
             let t = Instant::now();
             let f = follow_with_progress(&g, clip, *frame, path, &opts, &format!("{name} from {label}"))
@@ -166,17 +169,34 @@ pub fn run(a: BenchFollowArgs) -> anyhow::Result<()> {
                 row.seconds_per_generated_second,
                 if f.reached_end { "" } else { " (did not reach the end)" }
             );
+            let track = root_track(&f);
             if let Some(dir) = &a.plots {
                 let k = rows.len() / paths.len();
                 let stem = format!("{name}-start{k}");
-                plot(&dir.join(format!("{stem}.png")), path, &root_track(&f))?;
+                plot(&dir.join(format!("{stem}.png")), path, &track)?;
                 let mut out = f.motion.clip.clone();
                 out.skeleton = clip.skeleton.clone();
                 zoo_data::bvh::write_file(&out, &dir.join(format!("{stem}.bvh")))
                     .with_context(|| format!("writing {stem}.bvh"))?;
             }
             rows.push(row);
+            tracks.last_mut().expect("one list per start").push(track);
         }
+    }
+    if let Some(dir) = &a.plots {
+        // Every run in one sheet: a row per start, a column per path.
+        let cells: Vec<Vec<Vec<zoo_nn::plot::TopSeries>>> = tracks
+            .iter()
+            .map(|row| {
+                row.iter()
+                    .zip(&paths)
+                    .map(|(t, (_, p))| vec![(p.points(), (150, 150, 150), 4.0), (t.as_slice(), (200, 30, 30), 1.2)])
+                    .collect()
+            })
+            .collect();
+        let sheet = dir.join("all.png");
+        zoo_nn::plot::top_view_grid(&sheet, &cells, 100.0, 240)
+            .with_context(|| format!("writing {}", sheet.display()))?;
     }
     println!();
     println!(
