@@ -56,8 +56,9 @@ enum Command {
     EvalArnn(cmd::eval_arnn::EvalArnnArgs),
 }
 
-/// Environment of the training commands (`zoo train`, `zoo bench train`), which must be in
-/// place before candle and mimalloc read it, at their first use:
+/// Environment of the training commands (`zoo train`, `zoo bench train`) and of path following
+/// (`zoo follow`, `zoo bench follow`: one core, `RAYON_NUM_THREADS=1`), which must be in place
+/// before candle and mimalloc read it, at their first use:
 ///
 /// - `CANDLE_NUM_THREADS=1`: candle runs large elementwise ops on its own pool of threads
 ///   sized from this variable; data-parallel training already gives every core a worker of its
