@@ -111,6 +111,34 @@ pub struct FootSkate {
 }
 
 impl FootSkate {
+    /// Skate parameters for foot `joints` with their planted heights measured on `clips` (the
+    /// 5th percentile of each joint's height over every frame), scale 2.5 (cm).
+    pub fn fit(joints: Vec<usize>, clips: &[&zoo_motion::Clip]) -> FootSkate {
+        let mut heights = vec![Vec::new(); joints.len()];
+        for c in clips {
+            let (_, gp) = c.global();
+            for f in 0..c.frames() {
+                for (k, &j) in joints.iter().enumerate() {
+                    heights[k].push(gp[f * c.joints() + j].y);
+                }
+            }
+        }
+        let planted = heights.iter().map(|h| crate::plausibility::percentile(h, 5.0)).collect();
+        FootSkate { joints, planted, scale: 2.5 }
+    }
+
+    /// Mean skate over whole clips (frames 1.. of each, weighted by their frame count; clips of
+    /// fewer than 2 frames are skipped; NaN when none is left).
+    pub fn mean_over(&self, clips: &[&zoo_motion::Clip]) -> f64 {
+        let (mut sum, mut n) = (0.0, 0usize);
+        for c in clips.iter().filter(|c| c.frames() >= 2) {
+            let (_, gp) = c.global();
+            sum += self.skate(&gp, c.frames(), c.joints()) * (c.frames() - 1) as f64;
+            n += c.frames() - 1;
+        }
+        if n == 0 { f64::NAN } else { sum / n as f64 }
+    }
+
     /// Mean skate (units per frame) over foot joints and frames `1..` of each sequence, where
     /// frame 0 of each sequence only provides the previous position.
     ///

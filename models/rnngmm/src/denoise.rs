@@ -352,13 +352,7 @@ pub fn denoise(
         planted.extend(spec.left_foot.iter().map(|_| f32::from(u8::from(bits[0]))));
         planted.extend(spec.right_foot.iter().map(|_| f32::from(u8::from(bits[1]))));
     }
-    let ground: Vec<f32> = feet
-        .iter()
-        .map(|&j| {
-            let mut h: Vec<f64> = (0..t).map(|f| gp[f * joints + j].y).collect();
-            zoo_data::dataset::percentile(&mut h, spec.contact.ground_percentile) as f32
-        })
-        .collect();
+    let ground = crate::control::ground_heights(g, clip, &feet, &dev)?;
     let windows = starts.len();
     let in_n = in_index.len();
     let problem = Problem {
@@ -378,7 +372,7 @@ pub fn denoise(
         sigma_noise: opts.sigma_noise,
         prior_weight: opts.prior_weight,
         planted: Tensor::from_vec(planted, (1, t, feet.len()), &dev)?,
-        ground: Tensor::from_vec(ground, feet.len(), &dev)?,
+        ground,
         sigma_contact: opts.sigma_contact,
         sigma_plane: opts.sigma_plane,
         cache: RefCell::new(None),

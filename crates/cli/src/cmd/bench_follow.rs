@@ -12,7 +12,6 @@ use std::path::PathBuf;
 use std::time::Instant;
 use zoo_data::metrics::{FootSkate, foot_joints};
 use zoo_data::path::{GroundPath, TEST_PATHS};
-use zoo_data::plausibility::percentile;
 use zoo_motion::Clip;
 
 /// Arguments of `zoo bench follow`.
@@ -70,33 +69,6 @@ struct Report {
     rows: Vec<Row>,
 }
 
-/// Planted heights of the foot joints (5th percentile of each one's height over `clips`).
-fn planted(clips: &[&Clip], feet: &[usize]) -> Vec<f64> {
-    let mut heights = vec![Vec::new(); feet.len()];
-    for c in clips {
-        let (_, gp) = c.global();
-        for f in 0..c.frames() {
-            for (k, &j) in feet.iter().enumerate() {
-                heights[k].push(gp[f * c.joints() + j].y);
-            }
-        }
-    }
-    heights.iter().map(|h| percentile(h, 5.0)).collect()
-}
-
-fn skate_of(s: &FootSkate, clips: &[&Clip]) -> f64 {
-    let (mut sum, mut n) = (0.0, 0usize);
-    for c in clips {
-        if c.frames() < 2 {
-            continue;
-        }
-        let (_, gp) = c.global();
-        sum += s.skate(&gp, c.frames(), c.joints()) * (c.frames() - 1) as f64;
-        n += c.frames() - 1;
-    }
-    sum / n.max(1) as f64
-}
-
 /// Runs the benchmark.
 pub fn run(a: BenchFollowArgs) -> anyhow::Result<()> {
     if let Some(p) = &a.json {
@@ -133,8 +105,8 @@ pub fn run(a: BenchFollowArgs) -> anyhow::Result<()> {
         Some((_, clips)) => clips.iter().map(|c| &c.clip).collect(),
         None => starts.iter().map(|s| &s.0).collect(),
     };
-    let skate = FootSkate { joints: feet.clone(), planted: planted(&reference, &feet), scale: 2.5 };
-    let real_skate = real.as_ref().map(|_| skate_of(&skate, &reference));
+    let skate = FootSkate::fit(feet, &reference);
+    let real_skate = real.as_ref().map(|_| skate.mean_over(&reference));
     let opts = a.optimiser.options();
     let mut rows = Vec::new();
     let mut tracks: Vec<Vec<Vec<[f64; 2]>>> = Vec::new();
@@ -156,7 +128,7 @@ pub fn run(a: BenchFollowArgs) -> anyhow::Result<()> {
                 reached_end: f.reached_end,
                 mean_distance: f.distance.iter().sum::<f64>() / n,
                 max_distance: f.distance.iter().copied().fold(0.0, f64::max),
-                foot_skate: skate_of(&skate, &[&f.motion.clip]),
+                foot_skate: skate.mean_over(&[&f.motion.clip]),
                 seconds,
                 seconds_per_generated_second: seconds / motion_s.max(1e-9),
             };

@@ -14,7 +14,6 @@ use serde::Serialize;
 use std::path::PathBuf;
 use std::time::Instant;
 use zoo_data::metrics::{FootSkate, foot_joints, npss};
-use zoo_data::plausibility::percentile;
 use zoo_motion::Clip;
 use zoo_motion::rng::SplitMix64;
 use zoo_rnngmm::checkpoint::LoadedGenerator;
@@ -411,17 +410,8 @@ pub fn run(a: BenchSynthesisArgs) -> anyhow::Result<()> {
     };
     // Planted height of each foot joint: 5th percentile of its height over the real clips.
     let feet = foot_joints(&spec.skeleton.names);
-    let mut heights = vec![Vec::new(); feet.len()];
-    for c in &real_clips {
-        let (_, gp) = c.clip.global();
-        for f in 0..c.clip.frames() {
-            for (k, &j) in feet.iter().enumerate() {
-                heights[k].push(gp[f * joints + j].y);
-            }
-        }
-    }
-    let planted = heights.iter().map(|h| percentile(h, 5.0)).collect();
-    let m = Measure { g: &g, skate: FootSkate { joints: feet, planted, scale: 2.5 }, lo, hi };
+    let reals: Vec<&Clip> = real_clips.iter().map(|c| &c.clip).collect();
+    let m = Measure { g: &g, skate: FootSkate::fit(feet, &reals), lo, hi };
 
     let mut real = Acc::default();
     let mut real_step = (0.0, 0usize);
