@@ -409,3 +409,70 @@ fn follow_walks_a_path_writes_a_plot_and_refuses_bad_input() {
         assert!(Path::new(&plots).join(f).is_file(), "{f}");
     }
 }
+
+#[test]
+fn control_follows_a_script_in_candle_and_the_runtime_and_refuses_bad_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let r = trained(dir.path());
+    let out = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let write = |name: &str, text: &str| {
+        std::fs::write(dir.path().join(name), text).unwrap();
+        out(name)
+    };
+    let script = write(
+        "s.json",
+        r#"{"units": "m", "duration": 3, "keys": [{"time": 0, "speed": 1.2, "heading": 0}, {"time": 1.5, "heading": 120}]}"#,
+    );
+    let (c_bvh, c_png) = (out("c.bvh"), out("c.png"));
+    let stdout = ok(&["control", "--model", &r, "--script", &script, "--out", &c_bvh, "--plot", &c_png]);
+    assert!(stdout.contains("ms per frame") && stdout.contains("0.0 s: speed"), "{stdout}");
+    let clip = zoo_data::bvh::read_file(Path::new(&c_bvh), &Default::default()).unwrap();
+    assert_eq!(clip.frames(), 90);
+    assert!(clip.local_rotations.iter().all(|q| q.is_finite()));
+    assert_eq!(json(&dir.path().join("c.contacts.json"))["contacts"].as_array().unwrap().len(), 90);
+    assert_eq!(&std::fs::read(&c_png).unwrap()[1..4], b"PNG");
+    // Bad input: a negative speed, a speed that is not a number, a heading that is not finite,
+    // another skeleton, a bad option, a missing script; nothing is written.
+    for (text, want) in [
+        (r#"{"duration": 2, "keys": [{"time": 0, "speed": -1, "heading": 0}]}"#, "from 0 to"),
+        (r#"{"duration": 2, "keys": [{"time": 0, "speed": "NaN", "heading": 0}]}"#, "must be a number"),
+        (r#"{"duration": 2, "keys": [{"time": 0, "speed": 1, "heading": 1e999}]}"#, "does not parse"),
+    ] {
+        let bad = write("bad.json", text);
+        let e = fails(&["control", "--model", &r, "--script", &bad, "--out", &out("e.bvh")]);
+        assert!(e.contains(want), "{text}: {e}");
+    }
+    let toy = dir.path().join("toy.bvh");
+    zoo_data::bvh::write_file(&zoo_tests::toy_clip(40, 0.0), &toy).unwrap();
+    let from = format!("{}:10", toy.display());
+    let e = fails(&["control", "--model", &r, "--script", &script, "--from", &from, "--out", &out("e.bvh")]);
+    assert!(e.contains("another skeleton"), "{e}");
+    let e = fails(&["control", "--model", &r, "--script", &script, "--out", &out("e.bvh"), "--batch", "0"]);
+    assert!(e.contains("--batch"), "{e}");
+    let e = fails(&["control", "--model", &r, "--script", &out("missing.json"), "--out", &out("e.bvh")]);
+    assert!(e.contains("missing.json"), "{e}");
+    assert!(!dir.path().join("e.bvh").exists());
+    // The benchmark: the candle and the runtime controller on the same script.
+    let onnx = out("g.onnx");
+    ok(&["export", "--onnx", &r, "--out", &onnx]);
+    let (report, plots) = (out("bc.json"), out("plots"));
+    let stdout = ok(&[
+        "bench", "control", "--model", &r, "--onnx", &onnx, "--script", &script, "--seeds", "1", "--json", &report,
+        "--plots", &plots,
+    ]);
+    assert!(stdout.contains("| candle | 1 |") && stdout.contains("| runtime | 1 |"), "{stdout}");
+    let j = json(Path::new(&report));
+    let runs = j["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 2);
+    for run in runs {
+        assert_eq!(run["frames"].as_u64(), Some(90));
+        // Each key measured from 1 s after it to the next.
+        assert_eq!(run["segments"].as_array().unwrap().len(), 2);
+        assert!(run["ms_per_frame_median"].as_f64().unwrap() > 0.0);
+    }
+    for f in ["candle-seed1.png", "candle-seed1.bvh", "runtime-seed1.png"] {
+        assert!(Path::new(&plots).join(f).is_file(), "{f}");
+    }
+    let e = fails(&["bench", "control", "--model", &r, "--controllers", "runtime", "--script", &script]);
+    assert!(e.contains("--onnx"), "{e}");
+}

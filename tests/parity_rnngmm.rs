@@ -468,3 +468,199 @@ fn runtime_synthesis_timings() {
         }
     }
 }
+
+// Online speed / direction control (`zoo_runtime::control`, sec. 5.3) on the fixture's
+// generator: its seeded initial weights, so the checks are about the controller, not the model.
+
+use zoo_runtime::control::{Control, ControlRunner, ControlSettings, ControlledCharacter};
+
+/// The fixture's generator as a runtime synthesis model, and three seed frames (clip units)
+/// of a synthetic clip, oldest first.
+fn control_fixture() -> (SynthesisModel, Vec<f32>) {
+    let (config, trainer) = fixture();
+    let bytes = export_generator(&config, None, trainer.spec(), trainer.norm(), trainer.varmap()).unwrap().to_bytes();
+    let cfg = SynthConfig { minutes: 0.2, seed: 4, terrain: false, fps: 30.0, clip_seconds: 6.0 };
+    let features = trainer.spec().encode(&generate_clip(&cfg, 0).clip).unwrap();
+    let seeds = (8..=10).flat_map(|f| features.frame(f).to_vec()).collect();
+    (SynthesisModel::from_bytes(&bytes).unwrap(), seeds)
+}
+
+/// `frames` controlled poses of character `seed` started at the origin facing +Z, the control
+/// of frame `f` being `script(f)`; and the character afterwards.
+fn controlled_poses(
+    model: &SynthesisModel,
+    seeds: &[f32],
+    seed: u64,
+    settings: ControlSettings,
+    frames: usize,
+    script: impl Fn(usize) -> Control,
+) -> (Vec<(EnginePose, [bool; 2])>, ControlledCharacter) {
+    let mut runner = ControlRunner::new(model).unwrap();
+    let mut ch = ControlledCharacter::new(model, seed, settings).unwrap();
+    ch.start(model, seeds, 0.0, 0.0, 0.0).unwrap();
+    let mut pose = EnginePose::with_global_positions(model.joints());
+    let out = (0..frames)
+        .map(|f| {
+            let contacts = runner.step(&mut ch, script(f), &mut pose).unwrap();
+            (pose.clone(), contacts)
+        })
+        .collect();
+    (out, ch)
+}
+
+/// Mean root speed over the ground, clip units per second (the fixture's 30 fps).
+fn mean_speed(poses: &[(EnginePose, [bool; 2])]) -> f32 {
+    poses.iter().map(|(p, _)| p.root_delta_position.length() * 30.0).sum::<f32>() / poses.len() as f32
+}
+
+fn wrapped(a: f32) -> f32 {
+    (a + std::f32::consts::PI).rem_euclid(std::f32::consts::TAU) - std::f32::consts::PI
+}
+
+#[test]
+fn control_is_seeded_and_deterministic() {
+    let (model, seeds) = control_fixture();
+    let script = |f: usize| if f < 50 { Control::new(50.0, 0.0) } else { Control::new(150.0, -1.2) };
+    let (a, ca) = controlled_poses(&model, &seeds, 3, ControlSettings::default(), 100, script);
+    let (b, cb) = controlled_poses(&model, &seeds, 3, ControlSettings::default(), 100, script);
+    assert!(a == b, "same seed, settings and controls, other poses");
+    assert_eq!(ca.last_selection(), cb.last_selection());
+    assert_eq!(ca.rng_state(), cb.rng_state());
+    assert_eq!(ca.frames_played(), 100);
+    // The placement is the last pose's root.
+    let [x, z, yaw] = ca.placement();
+    let root = a[99].0.root_position;
+    assert!((root.x - x as f32).abs() < 1e-4 && (root.z - z as f32).abs() < 1e-4);
+    assert!(a[99].0.root_rotation.angle_between(glam::Quat::from_rotation_y(yaw as f32)) < 1e-4);
+    assert!(a.iter().all(|(p, _)| p.global_positions.iter().all(|g| g.is_finite())));
+    let (other, _) = controlled_poses(&model, &seeds, 4, ControlSettings::default(), 100, script);
+    assert!(other != a, "another seed, the same poses");
+    // On another thread: the same.
+    let (m2, s2) = (model.clone(), seeds.clone());
+    let threaded = std::thread::spawn(move || controlled_poses(&m2, &s2, 3, ControlSettings::default(), 100, script).0)
+        .join()
+        .unwrap();
+    assert!(threaded == a, "another thread, other poses");
+}
+
+#[test]
+fn control_steers_the_heading_and_the_speed() {
+    let (model, seeds) = control_fixture();
+    let half_pi = std::f32::consts::FRAC_PI_2;
+    let final_yaw = |heading: f32| {
+        let (poses, ch) =
+            controlled_poses(&model, &seeds, 11, ControlSettings::default(), 60, |_| Control::new(60.0, heading));
+        let yaw = wrapped(ch.placement()[2] as f32);
+        assert!((yaw - wrapped(poses[59].0.root_rotation.to_euler(glam::EulerRot::YXZ).0)).abs() < 1e-3);
+        yaw
+    };
+    let (left, right) = (final_yaw(half_pi), final_yaw(-half_pi));
+    println!("facing after 60 frames: target +90 deg -> {left:.3} rad, target -90 deg -> {right:.3} rad");
+    assert!(left > 0.0 && right < 0.0, "left {left}, right {right}");
+    assert!((left - half_pi).abs() < (right - half_pi).abs(), "left {left}, right {right}");
+    assert!((right + half_pi).abs() < (left + half_pi).abs(), "left {left}, right {right}");
+    let speed = |target: f32| {
+        let (poses, ch) =
+            controlled_poses(&model, &seeds, 12, ControlSettings::default(), 60, |_| Control::new(target, 0.0));
+        println!("target {target}: mean speed {:.1}, last selection {:?}", mean_speed(&poses), ch.last_selection());
+        mean_speed(&poses[10..])
+    };
+    let (fast, still) = (speed(400.0), speed(0.0));
+    println!("mean root speed after the first batch: target 400 -> {fast:.1}, target 0 -> {still:.1} clip units/s");
+    assert!(fast > still, "fast {fast}, still {still}");
+}
+
+#[test]
+fn control_selects_the_cheapest_candidate() {
+    let (model, seeds) = control_fixture();
+    // Explicit settings (not the defaults, which are tuned on real data).
+    let settings = ControlSettings {
+        batch: 10,
+        speed_offsets: vec![-1.0, 0.0, 1.0],
+        turn_offsets: vec![-2.0, -1.0, 0.0, 1.0, 2.0],
+        sigma_speed: 20.0,
+        sigma_heading: 0.01,
+        temperature: 1.0,
+    };
+    let mut runner = ControlRunner::new(&model).unwrap();
+    let mut pose = EnginePose::new(model.joints());
+    for (heading, turn) in [(2.0f32, 2.0f32), (-2.0, -2.0)] {
+        let mut ch = ControlledCharacter::new(&model, 5, settings.clone()).unwrap();
+        ch.start(&model, &seeds, 0.0, 0.0, 0.0).unwrap();
+        assert_eq!(ch.last_selection(), None);
+        runner.step(&mut ch, Control::new(50.0, heading), &mut pose).unwrap();
+        let first = ch.last_selection().unwrap();
+        // The heading term (its error over 0.01 rad, squared) outweighs the rest: the batch
+        // that turns most towards the target wins.
+        assert_eq!(first.turn_offset, turn, "{first:?}");
+        assert!(first.heading.signum() == heading.signum() as f64, "{first:?}");
+        assert_eq!(settings.offsets(first.candidate), Some((first.speed_offset, first.turn_offset)));
+        assert!(first.cost().is_finite() && first.prior.is_finite());
+        // The first step planned the first batch and played its first frame; the next
+        // selection comes in the step that plays its last (the 10th).
+        for _ in 0..8 {
+            runner.step(&mut ch, Control::new(50.0, heading), &mut pose).unwrap();
+            assert_eq!(ch.last_selection(), Some(first));
+        }
+        runner.step(&mut ch, Control::new(50.0, heading), &mut pose).unwrap();
+        assert_ne!(ch.last_selection(), Some(first));
+        // The batch played is the one selected: it ends facing the yaw it was judged by.
+        assert_eq!(ch.placement()[2], first.heading, "{first:?}");
+        // Its terms are eq. 22 and 23 of the target.
+        assert!((first.speed_cost - ((first.speed - 50.0) / 20.0).powi(2)).abs() < 1e-9, "{first:?}");
+        assert!(
+            (first.heading_cost - ((first.heading - heading as f64) / 0.01f32 as f64).powi(2)).abs() < 1e-6,
+            "{first:?}"
+        );
+    }
+}
+
+#[test]
+fn control_refuses_bad_input() {
+    let (model, seeds) = control_fixture();
+    let mut runner = ControlRunner::new(&model).unwrap();
+    let mut pose = EnginePose::new(model.joints());
+    let mut ch = ControlledCharacter::new(&model, 1, ControlSettings::default()).unwrap();
+    let err = runner.step(&mut ch, Control::new(50.0, 0.0), &mut pose).unwrap_err().to_string();
+    assert!(err.contains("not started") && err.contains("ControlledCharacter::start"), "{err}");
+    let d = model.frame_dim();
+    for bad in [&seeds[..d - 1], &seeds[..d + 3], &[][..]] {
+        let err = ch.start(&model, bad, 0.0, 0.0, 0.0).unwrap_err().to_string();
+        assert!(err.contains("seed frames") && err.contains(&format!("found {}", bad.len())), "{err}");
+    }
+    let mut nan = seeds.clone();
+    nan[d + 2] = f32::NAN;
+    let err = ch.start(&model, &nan, 0.0, 0.0, 0.0).unwrap_err().to_string();
+    assert!(err.contains("seed frames") && err.contains("NaN") && err.contains("character 1"), "{err}");
+    ch.start(&model, &seeds, 0.0, 0.0, 0.0).unwrap();
+    for (control, words) in [
+        (Control::new(f32::NAN, 0.0), ["target speed is NaN", ">= 0"]),
+        (Control::new(-1.0, 0.0), ["target speed is -1", ">= 0"]),
+        (Control::new(50.0, f32::INFINITY), ["target heading is inf", "finite facing yaw"]),
+    ] {
+        let err = runner.step(&mut ch, control, &mut pose).unwrap_err().to_string();
+        assert!(words.iter().all(|w| err.contains(w)), "{err}");
+    }
+    // Refused before anything changed: the character starts planning on a good control.
+    assert_eq!(ch.frames_played(), 0);
+    runner.step(&mut ch, Control::new(50.0, 0.0), &mut pose).unwrap();
+    let settings = |f: fn(&mut ControlSettings)| {
+        let mut s = ControlSettings::default();
+        f(&mut s);
+        ControlledCharacter::new(&model, 1, s).unwrap_err().to_string()
+    };
+    let err = settings(|s| s.batch = 0);
+    assert!(err.contains("batch is 0"), "{err}");
+    let err = settings(|s| (s.speed_offsets, s.turn_offsets) = (vec![0.0], vec![0.0]));
+    assert!(err.contains("make 1 candidates") && err.contains("at least 2"), "{err}");
+    let err = settings(|s| s.turn_offsets.clear());
+    assert!(err.contains("make 0 candidates"), "{err}");
+    let err = settings(|s| s.sigma_speed = 0.0);
+    assert!(err.contains("sigma_speed is 0") && err.contains("positive"), "{err}");
+    let err = settings(|s| s.sigma_heading = -0.1);
+    assert!(err.contains("sigma_heading is -0.1") && err.contains("positive"), "{err}");
+    let err = settings(|s| s.turn_offsets[1] = f32::NAN);
+    assert!(err.contains("turn_offsets holds NaN"), "{err}");
+    let err = settings(|s| s.temperature = -1.0);
+    assert!(err.contains("temperature is -1"), "{err}");
+}

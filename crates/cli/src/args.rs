@@ -524,6 +524,26 @@ pub fn sigma_units(s: &str) -> Result<f64, String> {
     real_in(s, Interval::above(0.0, 10_000.0), "clip units")
 }
 
+/// Frames per batch of online control, `1..=120`.
+pub fn control_batch(s: &str) -> Result<usize, String> {
+    whole_in(s, 1..=120, "frames")
+}
+
+/// Gradient steps per batch of online control, `0..=100`.
+pub fn gradient_steps(s: &str) -> Result<usize, String> {
+    whole_in(s, 0..=100, "steps")
+}
+
+/// A standard deviation in radians, `(0, 10]`.
+pub fn sigma_radians(s: &str) -> Result<f64, String> {
+    real_in(s, Interval::above(0.0, 10.0), "rad")
+}
+
+/// A proposal offset in normalised units, `[-10, 10]`.
+pub fn proposal_offset(s: &str) -> Result<f64, String> {
+    real_in(s, Interval::closed(-10.0, 10.0), "standard deviations")
+}
+
 /// Centimetres per SVG user unit, `(0, 10000]`.
 pub fn svg_scale(s: &str) -> Result<f64, String> {
     real_in(s, Interval::above(0.0, 10_000.0), "cm per unit")

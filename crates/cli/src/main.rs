@@ -47,6 +47,8 @@ enum Command {
     Denoise(cmd::denoise::DenoiseArgs),
     /// Walk a ground path (JSON or SVG) with a trained RNN-GMM by MAP optimisation (`zoo follow --model DIR --path PATH.json --out OUT.bvh`).
     Follow(cmd::follow::FollowArgs),
+    /// Steer speed and heading over time with a trained RNN-GMM, batch by batch (`zoo control --model DIR --script CONTROLS.json --out OUT.bvh`).
+    Control(cmd::control::ControlArgs),
     /// The synthesis benchmark (the same as `zoo bench synthesis`, kept for earlier scripts).
     #[command(hide = true)]
     BenchSynthesis(cmd::bench_synthesis::BenchSynthesisArgs),
@@ -57,7 +59,8 @@ enum Command {
 }
 
 /// Environment of the training commands (`zoo train`, `zoo bench train`) and of path following
-/// (`zoo follow`, `zoo bench follow`: one core, `RAYON_NUM_THREADS=1`), which must be in place
+/// and online control (`zoo follow`, `zoo control` and their benchmarks: one core,
+/// `RAYON_NUM_THREADS=1`), which must be in place
 /// before candle and mimalloc read it, at their first use:
 ///
 /// - `CANDLE_NUM_THREADS=1`: candle runs large elementwise ops on its own pool of threads
@@ -84,8 +87,10 @@ fn training_environment() {
         || sub == ["bench", "train"]
         || sub == ["bench", "synthesis"]
         || sub.first() == Some(&"bench-synthesis");
-    // Path following runs on one core (its benchmark reports the time per generated second on one).
-    let one_core = sub.first() == Some(&"follow") || sub == ["bench", "follow"];
+    // Path following and online control run on one core (their benchmarks report time on one).
+    let one_core = matches!(sub.first(), Some(&"follow") | Some(&"control"))
+        || sub == ["bench", "follow"]
+        || sub == ["bench", "control"];
     if !(training || one_core) || std::env::var_os("ZOO_TRAINING_ENV").is_some() {
         return;
     }
@@ -138,6 +143,7 @@ fn main() -> anyhow::Result<()> {
         Command::Generate(a) => cmd::generate::run(a),
         Command::Denoise(a) => cmd::denoise::run(a),
         Command::Follow(a) => cmd::follow::run(a),
+        Command::Control(a) => cmd::control::run(a),
         Command::BenchSynthesis(a) => cmd::bench_synthesis::run(a),
         Command::Complete(a) => cmd::complete::run(a),
         Command::EvalArnn(a) => cmd::eval_arnn::run(a),

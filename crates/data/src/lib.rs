@@ -3,6 +3,7 @@
 
 pub mod benchmark;
 pub mod bvh;
+pub mod controls;
 pub mod dataset;
 pub mod denoise;
 pub mod luxo;

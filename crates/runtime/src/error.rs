@@ -193,6 +193,13 @@ pub enum MotionError {
         /// What is wrong and what to do.
         reason: String,
     },
+    /// A speed / direction control target or controller setting out of range, or a call that
+    /// does not fit where a controlled character stands (see [`crate::control`]).
+    #[error("control: {reason}")]
+    Control {
+        /// What is wrong (the value) and how to fix it.
+        reason: String,
+    },
 }
 
 /// Formats an anyhow-style error chain on one line.

@@ -26,6 +26,7 @@
 //! # Ok::<(), MotionError>(())
 //! ```
 
+pub mod control;
 pub mod error;
 pub mod keyframes;
 pub mod loaded;

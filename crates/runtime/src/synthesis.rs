@@ -62,10 +62,10 @@ struct Refiner {
 #[derive(Clone, Debug)]
 pub struct SynthesisModel {
     model: MotionModel,
-    task: SynthesisTask,
+    pub(crate) task: SynthesisTask,
     references: Vec<DQuat>,
-    mean: Vec<f32>,
-    std: Vec<f32>,
+    pub(crate) mean: Vec<f32>,
+    pub(crate) std: Vec<f32>,
     refiner: Option<Refiner>,
 }
 
@@ -518,37 +518,51 @@ impl SynthesisRunner {
     /// Decodes the character's new frame (row `refined` of the refined frames, else its
     /// sampled frame) into `pose`, advancing its placement.
     fn decode(&mut self, ch: &mut SynthesisCharacter, refined: Option<usize>, pose: &mut EnginePose) -> [bool; 2] {
-        let model = &self.model;
-        let d = model.task.frame_dim;
+        let d = self.model.task.frame_dim;
         let x: &[f32] = match refined {
             Some(c) => &self.refined[c * d..(c + 1) * d],
             None => &ch.x,
         };
-        let v = |i: usize| (x[i] * model.std[i] + model.mean[i]) as f64;
-        let [px, pz, yaw] = ch.placement;
-        let step = DQuat::from_rotation_y(yaw) * DVec3::new(v(0), 0.0, v(1));
-        ch.placement = [px + step.x, pz + step.z, yaw + v(2)];
-        pose.root_position = Vec3::new(ch.placement[0] as f32, 0.0, ch.placement[1] as f32);
-        pose.root_rotation = Quat::from_rotation_y(ch.placement[2] as f32);
-        pose.root_delta_position = Vec3::new(v(0) as f32, 0.0, v(1) as f32);
-        pose.root_delta_yaw = v(2) as f32;
-        pose.hips_position = Vec3::new(0.0, v(3) as f32, 0.0);
-        pose.local_rotations[0] = from_scaled_axis(DVec3::new(v(4), 0.0, v(5))).as_quat();
-        for j in 1..model.joints() {
-            let i = 6 + 3 * (j - 1);
-            let q = model.references[j] * from_scaled_axis(DVec3::new(v(i), v(i + 1), v(i + 2)));
-            pose.local_rotations[j] = q.normalize().as_quat();
-        }
-        let skeleton = &model.model.metadata().skeleton;
-        if pose.global_positions.len() == model.joints() {
-            self.world[0] = pose.root_rotation * pose.local_rotations[0];
-            pose.global_positions[0] = pose.root_position + pose.root_rotation * pose.hips_position;
-            for j in 1..model.joints() {
-                let p = skeleton.parents[j] as usize;
-                pose.global_positions[j] = pose.global_positions[p] + self.world[p] * skeleton.offset(j);
-                self.world[j] = self.world[p] * pose.local_rotations[j];
-            }
-        }
-        [v(d - 2) > 0.5, v(d - 1) > 0.5]
+        decode_frame(&self.model, x, &mut ch.placement, &mut self.world, pose)
     }
+}
+
+/// Decodes a normalised feature frame `x` (`frame_dim` values) into `pose` and returns its
+/// contact bits `[left, right]`: `placement` (ground x, z and heading of the root) advances by
+/// the frame's root step (eq. 4); `world` is scratch space of one rotation per joint. Global
+/// positions are written when `pose` has them.
+pub(crate) fn decode_frame(
+    model: &SynthesisModel,
+    x: &[f32],
+    placement: &mut [f64; 3],
+    world: &mut [Quat],
+    pose: &mut EnginePose,
+) -> [bool; 2] {
+    let d = model.task.frame_dim;
+    let v = |i: usize| (x[i] * model.std[i] + model.mean[i]) as f64;
+    let [px, pz, yaw] = *placement;
+    let step = DQuat::from_rotation_y(yaw) * DVec3::new(v(0), 0.0, v(1));
+    *placement = [px + step.x, pz + step.z, yaw + v(2)];
+    pose.root_position = Vec3::new(placement[0] as f32, 0.0, placement[1] as f32);
+    pose.root_rotation = Quat::from_rotation_y(placement[2] as f32);
+    pose.root_delta_position = Vec3::new(v(0) as f32, 0.0, v(1) as f32);
+    pose.root_delta_yaw = v(2) as f32;
+    pose.hips_position = Vec3::new(0.0, v(3) as f32, 0.0);
+    pose.local_rotations[0] = from_scaled_axis(DVec3::new(v(4), 0.0, v(5))).as_quat();
+    for j in 1..model.joints() {
+        let i = 6 + 3 * (j - 1);
+        let q = model.references[j] * from_scaled_axis(DVec3::new(v(i), v(i + 1), v(i + 2)));
+        pose.local_rotations[j] = q.normalize().as_quat();
+    }
+    let skeleton = &model.model.metadata().skeleton;
+    if pose.global_positions.len() == model.joints() {
+        world[0] = pose.root_rotation * pose.local_rotations[0];
+        pose.global_positions[0] = pose.root_position + pose.root_rotation * pose.hips_position;
+        for j in 1..model.joints() {
+            let p = skeleton.parents[j] as usize;
+            pose.global_positions[j] = pose.global_positions[p] + world[p] * skeleton.offset(j);
+            world[j] = world[p] * pose.local_rotations[j];
+        }
+    }
+    [v(d - 2) > 0.5, v(d - 1) > 0.5]
 }

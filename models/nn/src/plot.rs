@@ -49,24 +49,48 @@ pub fn loss_curve(path: &Path, train: &[f64], valid: &[f64]) -> NnResult<()> {
     save_png(path, &pm)
 }
 
+/// One line of a line plot: values (x = index) and colour.
+pub type LineSeries<'a> = (&'a [f64], (u8, u8, u8));
+
 /// Plots `series` (each `(values, rgb)`, x = index) as lines on a linear scale from 0 to the
 /// largest value, with a light grey line at every multiple of `grid` on the y axis, 800 x 360
 /// pixels; writes `path` atomically. Non-finite values break a line.
-pub fn lines(path: &Path, series: &[(&[f64], (u8, u8, u8))], grid: f64) -> NnResult<()> {
-    let (w, h, m) = (800.0f32, 360.0f32, 20.0f32);
-    let mut pm = Pixmap::new(w as u32, h as u32).ok_or_else(|| NnError::Config("cannot allocate the plot".into()))?;
-    pm.fill(Color::WHITE);
+pub fn lines(path: &Path, series: &[LineSeries], grid: f64) -> NnResult<()> {
     let hi = series.iter().flat_map(|(v, _)| v.iter()).copied().filter(|v| v.is_finite()).fold(0.0, f64::max);
-    let hi = if hi > 0.0 { hi } else { 1.0 };
+    line_panels(path, &[(series.to_vec(), 0.0, if hi > 0.0 { hi } else { 1.0 }, grid)])
+}
+
+/// One panel of [`line_panels`]: its series, the y range `lo..hi` and the grid step.
+pub type LinePanel<'a> = (Vec<LineSeries<'a>>, f64, f64, f64);
+
+/// Line plots stacked top to bottom, each 800 x 360 pixels with its own y range (values outside
+/// it are clamped) and a light grey line at every multiple of its grid step; writes `path`
+/// atomically. Non-finite values break a line.
+pub fn line_panels(path: &Path, panels: &[LinePanel]) -> NnResult<()> {
+    let (w, h) = (800.0f32, 360.0f32);
+    let rows = panels.len().max(1) as u32;
+    let mut pm =
+        Pixmap::new(w as u32, rows * h as u32).ok_or_else(|| NnError::Config("cannot allocate the plot".into()))?;
+    pm.fill(Color::WHITE);
+    for (r, (series, lo, hi, grid)) in panels.iter().enumerate() {
+        draw_lines(&mut pm, series, *lo, *hi, *grid, (w, h), r as f32 * h);
+    }
+    save_png(path, &pm)
+}
+
+/// Draws one line panel (`size` pixels) at height `top` of `pm`.
+fn draw_lines(pm: &mut Pixmap, series: &[LineSeries], lo: f64, hi: f64, grid: f64, size: (f32, f32), top: f32) {
+    let ((w, h), m) = (size, 20.0f32);
+    let span = if hi > lo { hi - lo } else { 1.0 };
     let n = series.iter().map(|(v, _)| v.len()).max().unwrap_or(0).max(2);
     let x = |i: usize| m + (w - 2.0 * m) * i as f32 / (n - 1) as f32;
-    let y = |v: f64| h - m - (h - 2.0 * m) * (v / hi) as f32;
+    let y = |v: f64| top + h - m - (h - 2.0 * m) * ((v.clamp(lo, lo + span) - lo) / span) as f32;
     let mut stroke = Stroke { width: 1.0, ..Stroke::default() };
     let mut paint = Paint::default();
     paint.set_color_rgba8(210, 210, 210, 255);
-    if grid > 0.0 && hi / grid < 100.0 {
-        let mut g = 0.0;
-        while g <= hi {
+    if grid > 0.0 && span / grid < 100.0 {
+        let mut g = (lo / grid).ceil() * grid;
+        while g <= lo + span {
             let mut pb = PathBuilder::new();
             pb.move_to(m, y(g));
             pb.line_to(w - m, y(g));
@@ -97,7 +121,6 @@ pub fn lines(path: &Path, series: &[(&[f64], (u8, u8, u8))], grid: f64) -> NnRes
             pm.stroke_path(&p, &paint, &stroke, Transform::identity(), None);
         }
     }
-    save_png(path, &pm)
 }
 
 /// One polyline of a top view: points, colour, width in pixels.

@@ -21,7 +21,11 @@ use crate::features::{CONTACT_DIMS, RootPlacement};
 use crate::fk::TensorFk;
 use crate::gmm;
 use crate::initial_state::estimate_initial_state;
-use candle_core::{D, DType, Device, Tensor};
+use argmin::core::{CostFunction, Executor, Gradient, State};
+use argmin::solver::linesearch::MoreThuenteLineSearch;
+use argmin::solver::quasinewton::LBFGS;
+use candle_core::{D, DType, Device, Tensor, Var};
+use std::cell::RefCell;
 use zoo_motion::Clip;
 use zoo_nn::LstmState;
 
@@ -140,6 +144,20 @@ pub fn rollout(
     d: &Tensor,
     components: Option<&Tensor>,
 ) -> RnnGmmResult<Rollout> {
+    rollout_shifted(model, start, eps, d, components, None)
+}
+
+/// [`rollout`] with each state moved by a constant `shift` `(B, T, D)` (normalised units):
+/// `s_i = mu_k + sigma_k e_i + shift_i`, the online controller's proposals (its prior is still
+/// the exact mixture NLL of the shifted state).
+pub fn rollout_shifted(
+    model: &LoadedGenerator,
+    start: &ControlStart,
+    eps: &Tensor,
+    d: &Tensor,
+    components: Option<&Tensor>,
+    shift: Option<&Tensor>,
+) -> RnnGmmResult<Rollout> {
     let g = &model.generator;
     let (b, t, dim) = eps.dims3()?;
     let m = g.config().components;
@@ -162,7 +180,10 @@ pub fn rollout(
         let mu = mix.means.broadcast_mul(&onehot)?.sum(1)?; // (B, D)
         let sigma = mix.log_stds.exp()?.broadcast_mul(&onehot)?.sum(1)?;
         let e = eps.narrow(1, i, 1)?.squeeze(1)?;
-        let s = (mu + (sigma * e)?)?;
+        let mut s = (mu + (sigma * e)?)?;
+        if let Some(shift) = shift {
+            s = (s + shift.narrow(1, i, 1)?.squeeze(1)?)?;
+        }
         nlls.push(gmm::nll(&mix, &s)?); // (B)
         let input = (&s + d.narrow(1, i, 1)?.squeeze(1)?)?;
         if i + 1 < t {
@@ -251,4 +272,99 @@ pub fn ground_heights(model: &LoadedGenerator, clip: &Clip, feet: &[usize], devi
         })
         .collect();
     Ok(Tensor::from_vec(ground, feet.len(), device)?)
+}
+
+/// Draws and noise `(1, T, D)` each from the flat unknowns `[e; d]`.
+pub(crate) fn split(p: &[f64], t: usize, dim: usize, dev: &Device) -> RnnGmmResult<(Tensor, Tensor)> {
+    let to = |v: &[f64]| -> RnnGmmResult<Tensor> {
+        let v: Vec<f32> = v.iter().map(|x| *x as f32).collect();
+        Ok(Tensor::from_vec(v, (1, t, dim), dev)?)
+    };
+    Ok((to(&p[..t * dim])?, to(&p[t * dim..])?))
+}
+
+/// An energy over the flat unknowns `[e; d]` of `t` frames, with its gradient by
+/// backpropagation, for argmin (the last evaluation is cached: L-BFGS asks for the cost and
+/// the gradient of the same point).
+/// An energy of draws and noise.
+type Energy<'a> = &'a dyn Fn(&Tensor, &Tensor) -> RnnGmmResult<Tensor>;
+
+/// The last point evaluated: unknowns, energy, gradient.
+type Evaluated = Option<(Vec<f64>, f64, Vec<f64>)>;
+
+struct Problem<'a> {
+    energy: Energy<'a>,
+    t: usize,
+    dim: usize,
+    device: Device,
+    what: &'a str,
+    cache: RefCell<Evaluated>,
+}
+
+impl Problem<'_> {
+    fn evaluate(&self, p: &[f64]) -> Result<(f64, Vec<f64>), argmin::core::Error> {
+        if let Some((q, e, g)) = self.cache.borrow().as_ref()
+            && q.as_slice() == p
+        {
+            return Ok((*e, g.clone()));
+        }
+        let (e, d) = split(p, self.t, self.dim, &self.device)?;
+        let (ev, dv) = (Var::from_tensor(&e)?, Var::from_tensor(&d)?);
+        let energy = (self.energy)(ev.as_tensor(), dv.as_tensor())?.sum_all()?;
+        let grads = energy.backward()?;
+        let value = energy.to_dtype(DType::F64)?.to_scalar::<f64>()?;
+        let mut grad = Vec::with_capacity(p.len());
+        for v in [&ev, &dv] {
+            match grads.get(v) {
+                Some(g) => grad.extend(g.flatten_all()?.to_dtype(DType::F64)?.to_vec1::<f64>()?),
+                None => grad.extend(std::iter::repeat_n(0.0, p.len() / 2)),
+            }
+        }
+        if grad.iter().any(|v| !v.is_finite()) {
+            return Err(argmin::core::Error::msg(format!("the {} gradient is not finite", self.what)));
+        }
+        *self.cache.borrow_mut() = Some((p.to_vec(), value, grad.clone()));
+        Ok((value, grad))
+    }
+}
+
+impl CostFunction for Problem<'_> {
+    type Param = Vec<f64>;
+    type Output = f64;
+    fn cost(&self, p: &Vec<f64>) -> Result<f64, argmin::core::Error> {
+        Ok(self.evaluate(p)?.0)
+    }
+}
+
+impl Gradient for Problem<'_> {
+    type Param = Vec<f64>;
+    type Gradient = Vec<f64>;
+    fn gradient(&self, p: &Vec<f64>) -> Result<Vec<f64>, argmin::core::Error> {
+        Ok(self.evaluate(p)?.1)
+    }
+}
+
+/// Minimises `energy(e, d)` (draws and noise `(1, t, dim)` each) by L-BFGS (argmin, memory 7,
+/// More-Thuente line search) from the flat unknowns `init` (`[e; d]`), `iterations` at most;
+/// returns the best point. `what` names the problem in errors.
+pub(crate) fn minimise(
+    energy: &dyn Fn(&Tensor, &Tensor) -> RnnGmmResult<Tensor>,
+    init: Vec<f64>,
+    t: usize,
+    dim: usize,
+    device: &Device,
+    iterations: u64,
+    what: &str,
+) -> RnnGmmResult<Vec<f64>> {
+    let failed = |e: argmin::core::Error| RnnGmmError::Config(format!("{what}: L-BFGS failed: {e}"));
+    let problem = Problem { energy, t, dim, device: device.clone(), what, cache: RefCell::new(None) };
+    let solver = LBFGS::new(MoreThuenteLineSearch::new(), 7)
+        .with_tolerance_grad(1e-6)
+        .and_then(|s| s.with_tolerance_cost(1e-9))
+        .map_err(failed)?;
+    let res = Executor::new(problem, solver)
+        .configure(|s| s.param(init.clone()).max_iters(iterations))
+        .run()
+        .map_err(failed)?;
+    Ok(res.state().get_best_param().cloned().unwrap_or(init))
 }

@@ -28,17 +28,16 @@
 //! end (or after `max_frames`).
 
 use crate::checkpoint::LoadedGenerator;
-use crate::control::{ControlStart, contact_bits, contact_energy, ground_heights, rollout, world_root};
+use crate::control::{
+    ControlStart, contact_bits, contact_energy, ground_heights, minimise, rollout, split, world_root,
+};
 use crate::error::{RnnGmmError, RnnGmmResult};
 use crate::features::{DecodedMotion, RootPlacement};
 use crate::fk::TensorFk;
-use argmin::core::{CostFunction, Executor, Gradient, State};
-use argmin::solver::linesearch::MoreThuenteLineSearch;
+use argmin::core::{CostFunction, Executor, State};
 use argmin::solver::particleswarm::ParticleSwarm;
-use argmin::solver::quasinewton::LBFGS;
-use candle_core::{DType, Device, Tensor, Var};
+use candle_core::{DType, Device, Tensor};
 use rand::SeedableRng;
-use std::cell::RefCell;
 use zoo_data::path::GroundPath;
 use zoo_motion::Clip;
 
@@ -152,9 +151,6 @@ struct Window<'a> {
     ground: &'a Tensor,
     /// Arc-length range searched for nearest points.
     s_range: (f64, f64),
-    /// The components `(1, T)` and contact bits `(1, T, 2)` of L-BFGS, fixed at its start.
-    fixed: Option<(Tensor, Tensor)>,
-    cache: RefCell<Option<(Vec<f64>, f64, Vec<f64>)>>,
 }
 
 impl Window<'_> {
@@ -216,40 +212,6 @@ impl Window<'_> {
         }
         Ok(Tensor::from_vec(e, (particles.len(), t, dim), self.device())?)
     }
-
-    fn evaluate(&self, p: &[f64]) -> Result<(f64, Vec<f64>), argmin::core::Error> {
-        if let Some((q, e, g)) = self.cache.borrow().as_ref()
-            && q.as_slice() == p
-        {
-            return Ok((*e, g.clone()));
-        }
-        let (e, d) = split(p, self.frames(), self.dim(), self.device())?;
-        let (ev, dv) = (Var::from_tensor(&e)?, Var::from_tensor(&d)?);
-        let energy = self.energy(ev.as_tensor(), dv.as_tensor(), self.fixed.as_ref())?.sum_all()?;
-        let grads = energy.backward()?;
-        let value = energy.to_dtype(DType::F64)?.to_scalar::<f64>()?;
-        let mut grad = Vec::with_capacity(p.len());
-        for v in [&ev, &dv] {
-            match grads.get(v) {
-                Some(g) => grad.extend(g.flatten_all()?.to_dtype(DType::F64)?.to_vec1::<f64>()?),
-                None => grad.extend(std::iter::repeat_n(0.0, p.len() / 2)),
-            }
-        }
-        if grad.iter().any(|v| !v.is_finite()) {
-            return Err(argmin::core::Error::msg("the path-following gradient is not finite"));
-        }
-        *self.cache.borrow_mut() = Some((p.to_vec(), value, grad.clone()));
-        Ok((value, grad))
-    }
-}
-
-/// Draws and noise `(1, T, D)` each from the flat unknowns `[e; d]`.
-fn split(p: &[f64], t: usize, dim: usize, dev: &Device) -> RnnGmmResult<(Tensor, Tensor)> {
-    let to = |v: &[f64]| -> RnnGmmResult<Tensor> {
-        let v: Vec<f32> = v.iter().map(|x| *x as f32).collect();
-        Ok(Tensor::from_vec(v, (1, t, dim), dev)?)
-    };
-    Ok((to(&p[..t * dim])?, to(&p[t * dim..])?))
 }
 
 /// The swarm's view of a window: root draws only, evaluated in one batch.
@@ -272,22 +234,6 @@ impl CostFunction for Swarm<'_, '_> {
         let energy = w.energy(&e, &d, None)?.to_dtype(DType::F64)?.to_vec1::<f64>()?;
         // A non-finite energy ranks last.
         Ok(energy.into_iter().map(|v| if v.is_finite() { v } else { f64::MAX }).collect())
-    }
-}
-
-impl CostFunction for Window<'_> {
-    type Param = Vec<f64>;
-    type Output = f64;
-    fn cost(&self, p: &Vec<f64>) -> Result<f64, argmin::core::Error> {
-        Ok(self.evaluate(p)?.0)
-    }
-}
-
-impl Gradient for Window<'_> {
-    type Param = Vec<f64>;
-    type Gradient = Vec<f64>;
-    fn gradient(&self, p: &Vec<f64>) -> Result<Vec<f64>, argmin::core::Error> {
-        Ok(self.evaluate(p)?.1)
     }
 }
 
@@ -337,18 +283,8 @@ pub fn follow(
     let (mut s_now, mut reached_end, mut windows) = (0.0f64, false, 0usize);
     while kept.len() / dim < max_frames && !reached_end {
         let s_range = (s_now - 100.0, s_now + 600.0);
-        let window = Window {
-            model,
-            fk: &fk,
-            start: &start,
-            path,
-            opts,
-            left: spec.left_foot.len(),
-            ground: &ground,
-            s_range,
-            fixed: None,
-            cache: RefCell::new(None),
-        };
+        let window =
+            Window { model, fk: &fk, start: &start, path, opts, left: spec.left_foot.len(), ground: &ground, s_range };
         // Particle swarm over the root draws.
         let n = 3 * t;
         let bounds = (vec![-opts.swarm_bound; n], vec![opts.swarm_bound; n]);
@@ -374,16 +310,8 @@ pub fn follow(
         let r0 = rollout(model, &start, &e0, &(d0 * opts.sigma_noise)?, None)?;
         let fixed = (r0.components, contact_bits(&fk, &r0.states)?);
         let components = fixed.0.clone();
-        let window = Window { fixed: Some(fixed), ..window };
-        let solver = LBFGS::new(MoreThuenteLineSearch::new(), 7)
-            .with_tolerance_grad(1e-6)
-            .and_then(|s| s.with_tolerance_cost(1e-9))
-            .map_err(|e| opt_err("L-BFGS", e))?;
-        let res = Executor::new(window, solver)
-            .configure(|s| s.param(init.clone()).max_iters(opts.iterations))
-            .run()
-            .map_err(|e| opt_err("L-BFGS", e))?;
-        let best = res.state().get_best_param().cloned().unwrap_or(init);
+        let energy = |e: &Tensor, d: &Tensor| window.energy(e, d, Some(&fixed));
+        let best = minimise(&energy, init, t, dim, &dev, opts.iterations, "path following")?;
         let (e, d) = split(&best, t, dim, &dev)?;
         let r = rollout(model, &start, &e, &(d * opts.sigma_noise)?, Some(&components))?;
         let root =

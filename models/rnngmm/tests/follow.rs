@@ -1,8 +1,10 @@
-//! Path following (sec. 5.2) on a tiny generator trained on synthetic locomotion: the unrolled
-//! generator is the generator, its root trajectory is where the decoded clip's root goes, and
-//! following is seeded and reports distances that match the decoded motion.
+//! Path following (sec. 5.2) and online control (sec. 5.3) on a tiny generator trained on
+//! synthetic locomotion: the unrolled generator is the generator, its root trajectory is where
+//! the decoded clip's root goes, following is seeded and reports distances that match the decoded
+//! motion, and online control is seeded, steers and refuses bad settings.
 
 use candle_core::{DType, Device, Tensor};
+use zoo_data::controls::{ControlKey, ControlScript};
 use zoo_data::path::GroundPath;
 use zoo_data::synth::{SynthConfig, generate_clip};
 use zoo_motion::Clip;
@@ -10,7 +12,7 @@ use zoo_rnngmm::checkpoint::LoadedGenerator;
 use zoo_rnngmm::control::{ControlStart, rollout, world_root};
 use zoo_rnngmm::fk::TensorFk;
 use zoo_rnngmm::prelude::*;
-use zoo_rnngmm::{FollowOptions, TrainingData, follow};
+use zoo_rnngmm::{FollowOptions, OnlineOptions, TrainingData, follow};
 
 fn clips(n: usize) -> Vec<Clip> {
     let cfg = SynthConfig { minutes: 1.0, seed: 3, terrain: false, fps: 30.0, clip_seconds: 6.0 };
@@ -134,4 +136,76 @@ fn the_rollouts_gradient_matches_finite_differences() {
             "unknown {i}: finite differences {fd}, gradient {g}"
         );
     }
+}
+
+/// A script of `seconds` at `speed` (cm/s) facing `heading` (radians) from 0.5 s on (0 before).
+fn turn_script(speed: f64, heading: f64, seconds: f64) -> ControlScript {
+    ControlScript::new(
+        vec![ControlKey { time: 0.0, speed, heading: 0.0 }, ControlKey { time: 0.5, speed, heading }],
+        seconds,
+    )
+    .unwrap()
+}
+
+#[test]
+fn online_control_is_seeded_and_turns_towards_the_heading() {
+    let (m, clips) = model();
+    let opts = OnlineOptions { init_steps: 0, ..OnlineOptions::default() };
+    let run = |heading: f64, opts: &OnlineOptions| {
+        let mut batches = 0;
+        let c = zoo_rnngmm::online::control(&m, &clips[0], 29, &turn_script(100.0, heading, 2.5), opts, &mut |_| {
+            batches += 1
+        })
+        .unwrap();
+        (c, batches)
+    };
+    let (left, batches) = run(1.2, &opts);
+    // 2.5 s at 30 fps in batches of 3: every frame, one progress call per batch.
+    assert_eq!(left.speed.len(), 75);
+    assert_eq!(left.yaw.len(), 75);
+    assert_eq!(left.motion.clip.frames(), 75);
+    assert_eq!(batches, 25);
+    assert_eq!(left.batch_seconds.len(), 25);
+    assert!(left.seconds_per_frame() > 0.0);
+    // The same seed gives the same motion; another seed another.
+    let (again, _) = run(1.2, &opts);
+    assert_eq!(left.speed, again.speed);
+    assert_eq!(left.yaw, again.yaw);
+    let (other, _) = run(1.2, &OnlineOptions { seed: 9, ..opts.clone() });
+    assert_ne!(left.yaw, other.yaw);
+    // Turning left and right: each run ends closer to its own heading than the other does.
+    let (right, _) = run(-1.2, &opts);
+    let (l, r) = (*left.yaw.last().unwrap(), *right.yaw.last().unwrap());
+    assert!(l > r + 0.5, "left {l}, right {r}");
+    assert!((l - 1.2).abs() < (r - 1.2).abs() && (r + 1.2).abs() < (l + 1.2).abs(), "left {l}, right {r}");
+    // The yaw reported is the decoded root's facing: the last frame's turn accumulated.
+    let d = m.spec.dim();
+    let enc = m.spec.encode(&left.motion.clip).unwrap();
+    let total: f64 = (1..75).map(|f| enc.values[f * d + 2] as f64).sum();
+    assert!((total - (left.yaw[74] - left.yaw[0])).abs() < 1e-3, "{total} vs {}", left.yaw[74] - left.yaw[0]);
+    // Without gradient steps the proposals alone steer too.
+    let (plain, _) = run(1.2, &OnlineOptions { steps: 0, ..opts.clone() });
+    assert!(*plain.yaw.last().unwrap() > r + 0.5);
+}
+
+#[test]
+fn online_control_refuses_bad_settings() {
+    let (m, clips) = model();
+    let script = turn_script(100.0, 0.0, 1.0);
+    for (opts, want) in [
+        (OnlineOptions { batch: 0, ..OnlineOptions::default() }, "at least 1 frame"),
+        (OnlineOptions { sigma_speed: f64::NAN, ..OnlineOptions::default() }, "sigma_speed"),
+        (OnlineOptions { sigma_heading: 0.0, ..OnlineOptions::default() }, "sigma_heading"),
+        (OnlineOptions { temperature: -1.0, ..OnlineOptions::default() }, "temperature"),
+        (OnlineOptions { turn_offsets: vec![], ..OnlineOptions::default() }, "at least one"),
+        (OnlineOptions { speed_offsets: vec![f64::INFINITY], ..OnlineOptions::default() }, "finite"),
+    ] {
+        let e = zoo_rnngmm::online::control(&m, &clips[0], 29, &script, &opts, &mut |_| {}).unwrap_err().to_string();
+        assert!(e.contains(want), "{opts:?}: {e}");
+    }
+    // A start frame outside the clip.
+    let e = zoo_rnngmm::online::control(&m, &clips[0], 10_000, &script, &OnlineOptions::default(), &mut |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("seed frames"), "{e}");
 }

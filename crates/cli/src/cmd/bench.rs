@@ -99,6 +99,9 @@ pub enum BenchCommand {
     /// The path-following benchmark (RNN-GMM control, issue 15): five test paths from each start
     /// clip, root-to-path distance, foot skate and time (protocol in docs/rnn-gmm-control.md).
     Follow(crate::cmd::bench_follow::BenchFollowArgs),
+    /// The online control benchmark (RNN-GMM control, issue 15): a script of speed and heading
+    /// changes followed by the candle and the runtime controllers (protocol in docs/rnn-gmm-control.md).
+    Control(Box<crate::cmd::bench_control::BenchControlArgs>),
 }
 
 /// The hierarchy a benchmarked model was trained on, checked against the dataset's.
@@ -143,6 +146,9 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
     }
     if let Some(BenchCommand::Follow(f)) = a.command {
         return crate::cmd::bench_follow::run(f);
+    }
+    if let Some(BenchCommand::Control(c)) = a.command {
+        return crate::cmd::bench_control::run(*c);
     }
     if let Some(BenchCommand::Denoise(d)) = a.command {
         return crate::cmd::bench_denoise::run(d);

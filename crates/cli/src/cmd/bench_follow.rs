@@ -86,27 +86,9 @@ pub fn run(a: BenchFollowArgs) -> anyhow::Result<()> {
     let froms: Vec<Option<&str>> =
         if a.from.is_empty() { vec![None] } else { a.from.iter().map(|s| Some(s.as_str())).collect() };
     let starts = froms.iter().map(|f| start_clip(&a.model, *f, &g)).collect::<anyhow::Result<Vec<_>>>()?;
-    let feet = foot_joints(&g.spec.skeleton.names);
-    if feet.is_empty() {
-        bail!("the model's skeleton has no joint named like a foot or toe: the skate cannot be measured");
-    }
-    let real = match &a.data {
-        Some(d) => {
-            let clips = crate::cmd::load_dataset(d, Some(a.glob.as_str()), false)?;
-            if clips.is_empty() {
-                bail!("no clip of {} matches `{}`", d.display(), a.glob);
-            }
-            Some((format!("{} ({}: {} clips)", d.display(), a.glob, clips.len()), clips))
-        }
-        None => None,
-    };
-    // The skate's planted heights: the real clips', else the start clips'.
-    let reference: Vec<&Clip> = match &real {
-        Some((_, clips)) => clips.iter().map(|c| &c.clip).collect(),
-        None => starts.iter().map(|s| &s.0).collect(),
-    };
-    let skate = FootSkate::fit(feet, &reference);
-    let real_skate = real.as_ref().map(|_| skate.mean_over(&reference));
+    let starts_clips: Vec<&Clip> = starts.iter().map(|s| &s.0).collect();
+    let (skate, real) = skate_reference(&g, a.data.as_deref(), &a.glob, &starts_clips)?;
+    let real_skate = real.as_ref().map(|r| r.1);
     let opts = a.optimiser.options();
     let mut rows = Vec::new();
     let mut tracks: Vec<Vec<Vec<[f64; 2]>>> = Vec::new();
@@ -189,7 +171,7 @@ pub fn run(a: BenchFollowArgs) -> anyhow::Result<()> {
             r.seconds_per_generated_second
         );
     }
-    if let (Some(s), Some((what, _))) = (real_skate, &real) {
+    if let Some((what, s)) = &real {
         println!("real foot skate: {s:.3} cm/frame ({what})");
     }
     if let Some(p) = &a.json {
@@ -206,4 +188,28 @@ pub fn run(a: BenchFollowArgs) -> anyhow::Result<()> {
         std::fs::rename(&tmp, p).with_context(|| format!("writing {}", p.display()))?;
     }
     Ok(())
+}
+
+/// The foot-skate measure of a benchmark of generated motion: the model's foot joints with the
+/// planted heights of the real clips of `data` (matching `glob`), or of `fallback` (the start
+/// clips) without data; and, with data, what they are and their own skate.
+pub fn skate_reference(
+    g: &zoo_rnngmm::checkpoint::LoadedGenerator,
+    data: Option<&std::path::Path>,
+    glob: &str,
+    fallback: &[&Clip],
+) -> anyhow::Result<(FootSkate, Option<(String, f64)>)> {
+    let feet = foot_joints(&g.spec.skeleton.names);
+    if feet.is_empty() {
+        bail!("the model's skeleton has no joint named like a foot or toe: the skate cannot be measured");
+    }
+    let Some(d) = data else { return Ok((FootSkate::fit(feet, fallback), None)) };
+    let clips = crate::cmd::load_dataset(d, Some(glob), false)?;
+    if clips.is_empty() {
+        bail!("no clip of {} matches `{glob}`", d.display());
+    }
+    let reference: Vec<&Clip> = clips.iter().map(|c| &c.clip).collect();
+    let skate = FootSkate::fit(feet, &reference);
+    let real = skate.mean_over(&reference);
+    Ok((skate, Some((format!("{} ({glob}: {} clips)", d.display(), clips.len()), real))))
 }

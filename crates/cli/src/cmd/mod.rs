@@ -1,6 +1,7 @@
 //! One module per subcommand.
 
 pub mod bench;
+pub mod bench_control;
 pub mod bench_denoise;
 pub mod bench_follow;
 pub mod bench_keyframes;
@@ -9,6 +10,7 @@ pub mod bench_stitch;
 pub mod bench_synthesis;
 pub mod bench_train;
 pub mod complete;
+pub mod control;
 pub mod data;
 pub mod data_luxo;
 pub mod decompress;

@@ -1,0 +1,186 @@
+//! `zoo control`: online speed and direction control with a trained RNN-GMM (issue 15, paper
+//! sec. 5.3): a control script (speed and heading over time) in, a BVH that follows it out, with
+//! its contact labels and a plot of speed and heading against the controls.
+
+use crate::cmd::denoise::write_contacts;
+use crate::cmd::generate::{load_model, start_clip};
+use anyhow::{Context, bail};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use std::path::{Path, PathBuf};
+use zoo_data::controls::{ControlScript, angle_difference};
+use zoo_rnngmm::{Controlled, OnlineOptions};
+
+/// Arguments of `zoo control`.
+#[derive(Args)]
+pub struct ControlArgs {
+    /// Run folder of `zoo train rnn-gmm` (the generator is the prior).
+    #[arg(long)]
+    pub model: PathBuf,
+    /// The control script (`.json`: `{"units": "m", "duration": 20, "keys": [{"time": 0,
+    /// "speed": 1.2, "heading": 0}, {"time": 4, "heading": 180}, ...]}`, speeds per second,
+    /// headings in degrees, 0 facing +z, 90 facing +x).
+    #[arg(long)]
+    pub script: PathBuf,
+    /// Start clip and frame, `CLIP.bvh:FRAME`: its gait and pose start the motion [default: the
+    /// run folder's start.bvh, frame 29].
+    #[arg(long)]
+    pub from: Option<String>,
+    /// Output BVH; the contact labels go to `<name>.contacts.json` beside it.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// PNG of speed (top) and heading (bottom) over time: the motion's (red) against the
+    /// controls (grey).
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+    /// The controller's settings.
+    #[command(flatten)]
+    pub online: OnlineArgs,
+}
+
+/// The online controller's options (`zoo control`, `zoo bench control`).
+#[derive(Args)]
+pub struct OnlineArgs {
+    /// Frames per optimised batch (the paper's n); the controls reach the motion 1 to 2 batches later.
+    #[arg(long, default_value_t = OnlineOptions::default().batch, value_parser = crate::args::control_batch)]
+    pub batch: usize,
+    /// Standard deviation of the speed term (eq. 22) in clip units per second (cm/s for bandai2).
+    #[arg(long, default_value_t = OnlineOptions::default().sigma_speed, allow_hyphen_values = true, value_parser = crate::args::sigma_units)]
+    pub sigma_speed: f64,
+    /// Standard deviation of the direction term (eq. 23) in radians.
+    #[arg(long, default_value_t = OnlineOptions::default().sigma_heading, allow_hyphen_values = true, value_parser = crate::args::sigma_radians)]
+    pub sigma_heading: f64,
+    /// Offsets of the proposals' forward step (normalised units), comma-separated.
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, default_values_t = OnlineOptions::default().speed_offsets, value_parser = crate::args::proposal_offset)]
+    pub speed_offsets: Vec<f64>,
+    /// Offsets of the proposals' turn (normalised units), comma-separated.
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, default_values_t = OnlineOptions::default().turn_offsets, value_parser = crate::args::proposal_offset)]
+    pub turn_offsets: Vec<f64>,
+    /// Scale of the proposals' draws (1: the model's spread, 0: each component's mean).
+    #[arg(long, default_value_t = OnlineOptions::default().temperature, allow_hyphen_values = true, value_parser = crate::args::temperature)]
+    pub temperature: f64,
+    /// Gradient steps per batch at most (0: the best proposal as it is).
+    #[arg(long, default_value_t = OnlineOptions::default().steps, allow_hyphen_values = true, value_parser = crate::args::gradient_steps)]
+    pub steps: usize,
+    /// Seed of the proposals: the same seed (and thread count) gives the same file.
+    #[arg(long, default_value_t = 1, allow_hyphen_values = true, value_parser = crate::args::seed)]
+    pub seed: u64,
+}
+
+impl OnlineArgs {
+    /// The controller's settings.
+    pub fn options(&self) -> OnlineOptions {
+        OnlineOptions {
+            batch: self.batch,
+            sigma_speed: self.sigma_speed,
+            sigma_heading: self.sigma_heading,
+            speed_offsets: self.speed_offsets.clone(),
+            turn_offsets: self.turn_offsets.clone(),
+            temperature: self.temperature,
+            steps: self.steps,
+            seed: self.seed,
+            ..OnlineOptions::default()
+        }
+    }
+}
+
+/// Reads a control script with its error as the message.
+pub fn read_script(path: &Path) -> anyhow::Result<ControlScript> {
+    ControlScript::load(path).with_context(|| format!("reading the control script {}", path.display()))
+}
+
+/// Runs the candle controller over `script` with a progress bar.
+pub fn control_with_progress(
+    g: &zoo_rnngmm::checkpoint::LoadedGenerator,
+    clip: &zoo_motion::Clip,
+    frame: usize,
+    script: &ControlScript,
+    opts: &OnlineOptions,
+    label: &str,
+) -> anyhow::Result<Controlled> {
+    let pb = ProgressBar::new((script.duration() * g.spec.fps).round() as u64);
+    pb.set_style(ProgressStyle::with_template(&format!("{label} [{{bar:30}}] {{pos}}/{{len}} frames  {{elapsed}}"))?);
+    let mut tick = |f: usize| pb.set_position(f as u64);
+    let c = zoo_rnngmm::online::control(g, clip, frame, script, opts, &mut tick)?;
+    pb.finish_and_clear();
+    Ok(c)
+}
+
+/// Plots speed (top, 0 to the largest) and heading (bottom, degrees, unwrapped near the
+/// controls) of a motion against the script's controls.
+pub fn plot(png: &Path, script: &ControlScript, fps: f64, speed: &[f64], yaw: &[f64]) -> anyhow::Result<()> {
+    let n = speed.len();
+    let at = |f: usize| script.at(f as f64 / fps);
+    let target_speed: Vec<f64> = (0..n).map(|f| at(f).speed).collect();
+    let target_heading: Vec<f64> = (0..n).map(|f| at(f).heading.to_degrees()).collect();
+    // Each frame's facing shown within 180 degrees of its control, so that a wrap is not a jump.
+    let heading: Vec<f64> =
+        (0..n).map(|f| target_heading[f] + angle_difference(yaw[f], at(f).heading).to_degrees()).collect();
+    let top = speed.iter().chain(&target_speed).copied().fold(1.0, f64::max) * 1.1;
+    let (lo, hi) = heading
+        .iter()
+        .chain(&target_heading)
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(*v), b.max(*v)));
+    let grey = (150, 150, 150);
+    let red = (200, 30, 30);
+    zoo_nn::plot::line_panels(
+        png,
+        &[
+            (vec![(&target_speed, grey), (speed, red)], 0.0, top, 50.0),
+            (vec![(&target_heading, grey), (&heading, red)], lo - 10.0, hi + 10.0, 45.0),
+        ],
+    )
+    .with_context(|| format!("writing {}", png.display()))
+}
+
+/// Runs `zoo control`.
+pub fn run(a: ControlArgs) -> anyhow::Result<()> {
+    crate::cmd::check_output_file("--out", &a.out)?;
+    if let Some(p) = &a.plot {
+        crate::cmd::check_output_file("--plot", p)?;
+    }
+    let script = read_script(&a.script)?;
+    let (g, _) = load_model(&a.model, true)?;
+    let (clip, frame, from) = start_clip(&a.model, a.from.as_deref(), &g)?;
+    let opts = a.online.options();
+    let c = control_with_progress(&g, &clip, frame, &script, &opts, "controlling")
+        .with_context(|| format!("following the controls of {} from {from}", a.script.display()))?;
+    let mut out = c.motion.clip.clone();
+    out.skeleton = clip.skeleton.clone();
+    zoo_data::bvh::write_file(&out, &a.out).with_context(|| format!("writing {}", a.out.display()))?;
+    let stem = a.out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    let json = a.out.with_file_name(format!("{stem}.contacts.json"));
+    write_contacts(&json, g.spec.fps, &c.motion.contacts)?;
+    if let Some(p) = &a.plot {
+        plot(p, &script, g.spec.fps, &c.speed, &c.yaw)?;
+    }
+    let scores = zoo_data::controls::score(&script, g.spec.fps, &c.speed, &c.yaw, 1.0);
+    for s in &scores {
+        println!(
+            "{:>5.1} s: speed {:>5.0} -> {:>5.0} ({:>4.1}% off), heading {:>5.0} deg: {:>5.1} deg off 1 s after, mean {:.1}",
+            s.time,
+            s.target_speed,
+            s.speed_after,
+            100.0 * s.speed_error,
+            s.target_heading_deg,
+            s.heading_at_settle_deg,
+            s.heading_mean_deg
+        );
+    }
+    println!(
+        "{} frames ({:.1} s of motion, batches of {}) in {:.1} s: {:.1} ms per frame",
+        out.frames(),
+        out.frames() as f64 / g.spec.fps,
+        opts.batch,
+        c.batch_seconds.iter().sum::<f64>(),
+        1e3 * c.seconds_per_frame()
+    );
+    println!("wrote {} and {}", a.out.display(), json.display());
+    if let Some(p) = &a.plot {
+        println!("wrote {}", p.display());
+    }
+    if out.frames() == 0 {
+        bail!("no frame was generated");
+    }
+    Ok(())
+}
