@@ -63,7 +63,7 @@ use crate::error::MotionError;
 use crate::model::MotionState;
 use crate::pose::EnginePose;
 use crate::runner::{MotionRunner, check_finite, check_len};
-use crate::synthesis::{SynthesisModel, decode_frame};
+use crate::synthesis::{SynthesisModel, decode_frame, draw_frame};
 use glam::Quat;
 use std::f64::consts::{PI, TAU};
 use zoo_motion::rng::SplitMix64;
@@ -540,19 +540,7 @@ impl ControlRunner {
             let w = &self.weights[c * m..(c + 1) * m];
             let (mu, sd) = (&self.means[c * m * d..(c + 1) * m * d], &self.stds[c * m * d..(c + 1) * m * d]);
             // A component by its weight, then mu + temperature * sigma * n (as synthesis draws).
-            let u = ch.rng.next_f64();
-            let (mut acc, mut pick) = (0.0, m - 1);
-            for (i, wi) in w.iter().enumerate() {
-                acc += *wi as f64;
-                if u < acc {
-                    pick = i;
-                    break;
-                }
-            }
-            for j in 0..d {
-                let z = ch.rng.normal();
-                x[j] = (mu[pick * d + j] as f64 + temperature * sd[pick * d + j] as f64 * z) as f32;
-            }
+            draw_frame(&mut ch.rng, w, mu, sd, temperature, x);
             let [so, to] = ch.offsets[c];
             x[1] += so;
             x[2] += to;

@@ -313,6 +313,26 @@ impl SynthesisCharacter {
     }
 }
 
+/// Draws a frame `x` (`D` values) from a mixture (`w`: `M` weights, `mu`, `sd`: `M D` each) as
+/// `zoo_rnngmm::Mixture::sample` does: a component by its weight (one uniform draw), then
+/// `mu + temperature * sigma * n` per value (one normal draw each).
+pub(crate) fn draw_frame(rng: &mut SplitMix64, w: &[f32], mu: &[f32], sd: &[f32], temperature: f64, x: &mut [f32]) {
+    let (m, d) = (w.len(), x.len());
+    let u = rng.next_f64();
+    let (mut acc, mut k) = (0.0, m - 1);
+    for (i, wi) in w.iter().enumerate() {
+        acc += *wi as f64;
+        if u < acc {
+            k = i;
+            break;
+        }
+    }
+    for j in 0..d {
+        let z = rng.normal();
+        x[j] = (mu[k * d + j] as f64 + temperature * sd[k * d + j] as f64 * z) as f32;
+    }
+}
+
 /// Steps characters on one thread. The generator's step, the sampling and the decoding
 /// allocate nothing per frame (up to the batch size the runner was made for; a larger batch
 /// grows the scratch space once); with a refiner, tract allocates the refiner step's tensors.
@@ -424,20 +444,7 @@ impl SynthesisRunner {
         for (c, ch) in characters.iter_mut().enumerate() {
             let w = &self.weights[c * m..(c + 1) * m];
             let (mu, sd) = (&self.means[c * m * d..(c + 1) * m * d], &self.stds[c * m * d..(c + 1) * m * d]);
-            // A component by its weight, then mu + temperature * sigma * n (Mixture::sample).
-            let u = ch.rng.next_f64();
-            let (mut acc, mut k) = (0.0, m - 1);
-            for (i, wi) in w.iter().enumerate() {
-                acc += *wi as f64;
-                if u < acc {
-                    k = i;
-                    break;
-                }
-            }
-            for j in 0..d {
-                let z = ch.rng.normal();
-                ch.x[j] = (mu[k * d + j] as f64 + temperature as f64 * sd[k * d + j] as f64 * z) as f32;
-            }
+            draw_frame(&mut ch.rng, w, mu, sd, temperature as f64, &mut ch.x);
         }
         let refined = self.refine(characters)?;
         for (c, ch) in characters.iter_mut().enumerate() {
