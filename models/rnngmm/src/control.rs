@@ -346,7 +346,7 @@ impl Gradient for Problem<'_> {
 
 /// Minimises `energy(e, d)` (draws and noise `(1, t, dim)` each) by L-BFGS (argmin, memory 7,
 /// More-Thuente line search) from the flat unknowns `init` (`[e; d]`), `iterations` at most;
-/// returns the best point. `what` names the problem in errors.
+/// returns the best point and the iterations made. `what` names the problem in errors.
 pub(crate) fn minimise(
     energy: &dyn Fn(&Tensor, &Tensor) -> RnnGmmResult<Tensor>,
     init: Vec<f64>,
@@ -355,7 +355,7 @@ pub(crate) fn minimise(
     device: &Device,
     iterations: u64,
     what: &str,
-) -> RnnGmmResult<Vec<f64>> {
+) -> RnnGmmResult<(Vec<f64>, u64)> {
     let failed = |e: argmin::core::Error| RnnGmmError::Config(format!("{what}: L-BFGS failed: {e}"));
     let problem = Problem { energy, t, dim, device: device.clone(), what, cache: RefCell::new(None) };
     let solver = LBFGS::new(MoreThuenteLineSearch::new(), 7)
@@ -366,5 +366,6 @@ pub(crate) fn minimise(
         .configure(|s| s.param(init.clone()).max_iters(iterations))
         .run()
         .map_err(failed)?;
-    Ok(res.state().get_best_param().cloned().unwrap_or(init))
+    let iterations = res.state().get_iter();
+    Ok((res.state().get_best_param().cloned().unwrap_or(init), iterations))
 }

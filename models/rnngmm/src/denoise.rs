@@ -31,10 +31,7 @@ use crate::error::{RnnGmmError, RnnGmmResult};
 use crate::features::{CONTACT_DIMS, DecodedMotion, ROOT_DIMS};
 use crate::fk::TensorFk;
 use crate::gmm;
-use argmin::core::{CostFunction, Executor, Gradient, State};
-use argmin::solver::linesearch::MoreThuenteLineSearch;
-use argmin::solver::quasinewton::LBFGS;
-use candle_core::{DType, Device, Tensor, Var};
+use candle_core::{DType, Device, Tensor};
 use std::cell::RefCell;
 use zoo_motion::Clip;
 
@@ -152,10 +149,7 @@ fn estimate_level(series: &[Vec<f64>]) -> f64 {
     1.4826 * median_abs(diffs) / 6f64.sqrt()
 }
 
-/// A point, its energy and its gradient.
-type Evaluated = (Vec<f64>, f64, Vec<f64>);
-
-/// The denoising energy over a flattened parameter vector `[s; d]` (f64), with cached gradients.
+/// The denoising energy of the states `s` and the network noise `d`.
 struct Problem<'a> {
     g: &'a LoadedGenerator,
     fk: TensorFk,
@@ -179,9 +173,6 @@ struct Problem<'a> {
     ground: Tensor,
     sigma_contact: f64,
     sigma_plane: f64,
-    cache: RefCell<Option<Evaluated>>,
-    evaluations: RefCell<usize>,
-    progress: RefCell<&'a mut dyn FnMut(usize)>,
 }
 
 /// Pseudo-Huber of per-frame squared norms `q` `(1, T)` with `n` values per frame: `2n (sqrt(1 +
@@ -245,52 +236,6 @@ impl Problem<'_> {
         let s: Vec<f32> = p[..n].iter().map(|v| *v as f32).collect();
         let d: Vec<f32> = p[n..].iter().map(|v| *v as f32).collect();
         Ok((Tensor::from_vec(s, (self.frames, self.dim), dev)?, Tensor::from_vec(d, (self.frames, self.dim), dev)?))
-    }
-
-    /// Energy and gradient at `p`, cached for the last point.
-    fn evaluate(&self, p: &[f64]) -> Result<(f64, Vec<f64>), argmin::core::Error> {
-        if let Some((q, e, g)) = self.cache.borrow().as_ref()
-            && q.as_slice() == p
-        {
-            return Ok((*e, g.clone()));
-        }
-        let (s, d) = self.split(p)?;
-        let (sv, dv) = (Var::from_tensor(&s)?, Var::from_tensor(&d)?);
-        let e = self.energy(sv.as_tensor(), dv.as_tensor())?;
-        let grads = e.backward()?;
-        let value = e.to_dtype(DType::F64)?.to_scalar::<f64>()?;
-        let mut grad = Vec::with_capacity(p.len());
-        for v in [&sv, &dv] {
-            match grads.get(v) {
-                Some(g) => grad.extend(g.flatten_all()?.to_dtype(DType::F64)?.to_vec1::<f64>()?),
-                None => grad.extend(std::iter::repeat_n(0.0, self.frames * self.dim)),
-            }
-        }
-        // A non-finite energy makes the line search step back; a non-finite gradient cannot be used.
-        if grad.iter().any(|v| !v.is_finite()) {
-            return Err(argmin::core::Error::msg("the denoising gradient is not finite"));
-        }
-        *self.cache.borrow_mut() = Some((p.to_vec(), value, grad.clone()));
-        let mut n = self.evaluations.borrow_mut();
-        *n += 1;
-        (self.progress.borrow_mut())(*n);
-        Ok((value, grad))
-    }
-}
-
-impl CostFunction for Problem<'_> {
-    type Param = Vec<f64>;
-    type Output = f64;
-    fn cost(&self, p: &Vec<f64>) -> Result<f64, argmin::core::Error> {
-        Ok(self.evaluate(p)?.0)
-    }
-}
-
-impl Gradient for Problem<'_> {
-    type Param = Vec<f64>;
-    type Gradient = Vec<f64>;
-    fn gradient(&self, p: &Vec<f64>) -> Result<Vec<f64>, argmin::core::Error> {
-        Ok(self.evaluate(p)?.1)
     }
 }
 
@@ -375,9 +320,6 @@ pub fn denoise(
         ground,
         sigma_contact: opts.sigma_contact,
         sigma_plane: opts.sigma_plane,
-        cache: RefCell::new(None),
-        evaluations: RefCell::new(0),
-        progress: RefCell::new(progress),
     };
     // The start: the input, or the input smoothed (a window longer than the clip: the input).
     let mut init: Vec<f64> = match opts.init_savgol.filter(|&w| w <= t) {
@@ -395,20 +337,17 @@ pub fn denoise(
     if !total.is_finite() {
         return Err(RnnGmmError::Motion(format!("the denoising energy of the input is not finite: {start:?}")));
     }
-    let solver = LBFGS::new(MoreThuenteLineSearch::new(), 7)
-        .with_tolerance_grad(1e-6)
-        .and_then(|s| s.with_tolerance_cost(1e-9))
-        .map_err(|e| RnnGmmError::Config(format!("L-BFGS: {e}")))?;
-    let result = Executor::new(problem, solver)
-        .configure(|state| state.param(init.clone()).max_iters(opts.iterations as u64))
-        .run()
-        .map_err(|e| RnnGmmError::Config(format!("denoising optimisation failed: {e}")))?;
-    let iterations = result.state().get_iter();
-    let best = result.state().get_best_param().cloned().unwrap_or(init);
-    let problem = result
-        .problem
-        .problem
-        .ok_or_else(|| RnnGmmError::Config("the optimiser did not give the problem back".into()))?;
+    // L-BFGS (`control::minimise`) over `[s; d]`, `progress` told the evaluations so far.
+    let evaluations = std::cell::Cell::new(0usize);
+    let progress = RefCell::new(progress);
+    let energy = |s: &Tensor, d: &Tensor| -> RnnGmmResult<Tensor> {
+        let e = problem.energy(&s.squeeze(0)?, &d.squeeze(0)?)?;
+        evaluations.set(evaluations.get() + 1);
+        (progress.borrow_mut())(evaluations.get());
+        Ok(e)
+    };
+    let (best, iterations) =
+        crate::control::minimise(&energy, init, t, dim, &dev, opts.iterations as u64, "denoising")?;
     let end = problem.term_values(&best)?;
     let out: Vec<f32> = best[..t * dim].iter().map(|v| *v as f32).collect();
     let mut out = out;

@@ -311,7 +311,7 @@ pub fn follow(
         let fixed = (r0.components, contact_bits(&fk, &r0.states)?);
         let components = fixed.0.clone();
         let energy = |e: &Tensor, d: &Tensor| window.energy(e, d, Some(&fixed));
-        let best = minimise(&energy, init, t, dim, &dev, opts.iterations, "path following")?;
+        let (best, _) = minimise(&energy, init, t, dim, &dev, opts.iterations, "path following")?;
         let (e, d) = split(&best, t, dim, &dev)?;
         let r = rollout(model, &start, &e, &(d * opts.sigma_noise)?, Some(&components))?;
         let root =
