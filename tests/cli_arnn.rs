@@ -351,3 +351,76 @@ fn bad_keys_and_folders_are_refused_with_clear_errors() {
     let (ok, _, e) = run(&["train", "arnn", "--test-fraction", "1", "--out", dir.path().join("x").to_str().unwrap()]);
     assert!(!ok && e.contains("--test-fraction <TEST_FRACTION>': 1 is outside the valid range (0, 1)"), "{e}");
 }
+
+/// Issue 13, the humanoid: a tiny ARNN trained on synthetic BVH clips with `--valid-glob`, then
+/// scored by the in-betweening benchmark beside interpolation (`zoo bench --methods
+/// interp,arnn:DIR`); a lamp run is refused there with a message saying why.
+#[test]
+fn humanoid_arnn_trains_on_bvh_and_runs_in_the_benchmark() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("synth");
+    let d = data.to_str().unwrap();
+    let (ok, _, stderr) = run(&["data", "synth", "--out", d, "--minutes", "1", "--seed", "3"]);
+    assert!(ok, "{stderr}");
+    let runp = dir.path().join("h");
+    let r = runp.to_str().unwrap();
+    let base = ["train", "arnn", "--data", d, "--valid-glob", "*_0005.bvh", "--preset", "tiny", "--threads", "1"];
+    let (ok, stdout, stderr) = run(&[&base[..], &["--epochs", "1", "--seed", "2", "--out", r]].concat());
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("training the humanoid ARNN") && stdout.contains("windows of 66 frames"), "{stdout}");
+    let config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(runp.join("config.json")).unwrap()).unwrap();
+    let joints = config["skeleton"]["names"].as_array().unwrap().len();
+    assert_eq!(config["dofs"].as_u64().unwrap() as usize, 3 + 4 * joints);
+    assert_eq!(config["key_groups"].as_array().unwrap().len(), 3 + 4 * joints);
+    // Resuming continues the humanoid run (its data recorded in train_state.json).
+    let (ok, stdout, stderr) = run(&["train", "arnn", "--epochs", "2", "--threads", "1", "--resume", r]);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("epoch   2"), "{stdout}");
+    let method = format!("arnn:{r}");
+    let bench = ["bench", "--data", d, "--valid-glob", "*_0005.bvh", "--lengths", "5,15"];
+    let (ok, stdout, stderr) = run(&[&bench[..], &["--methods", &format!("interp,{method}")]].concat());
+    assert!(ok, "{stdout}\n{stderr}");
+    let row = stdout.lines().find(|l| l.trim_start().starts_with(&method)).unwrap_or_else(|| panic!("{stdout}"));
+    let values: Vec<f64> = row.split_whitespace().skip(1).map(|v| v.parse().unwrap()).collect();
+    assert!(values.len() == 2 && values.iter().all(|v| v.is_finite() && *v >= 0.0), "{row}");
+    // Completion of humanoid keys taken from a clip, one of them partial (the root and one
+    // joint), written as a BVH on the clip's skeleton.
+    let names: Vec<String> =
+        config["skeleton"]["names"].as_array().unwrap().iter().map(|v| v.as_str().unwrap().to_string()).collect();
+    let clip = std::fs::read_dir(&data)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.to_str().unwrap().ends_with("_0005.bvh"))
+        .unwrap();
+    let keys_path = dir.path().join("keys.json");
+    let write_keys = |joint: &str| {
+        let text = format!(
+            r#"{{"format": "zoo-arnn-keys", "version": 1, "bvh": "{}",
+                "keys": [{{"frame": 0, "source_frame": 30}}, {{"frame": 12, "source_frame": 42, "joints": ["root", "{joint}"]}},
+                         {{"frame": 30, "source_frame": 60}}]}}"#,
+            clip.display()
+        );
+        std::fs::write(&keys_path, text).unwrap();
+    };
+    write_keys(&names[3]);
+    let out = dir.path().join("done.bvh");
+    let complete = |out: &Path| {
+        run(&["complete", "--model", r, "--keys", keys_path.to_str().unwrap(), "--out", out.to_str().unwrap()])
+    };
+    let (ok, stdout, stderr) = complete(&out);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("completed 31 frames from 3 keys (1 partial)"), "{stdout}");
+    let bvh = std::fs::read_to_string(&out).unwrap();
+    assert!(bvh.contains(&names[3]) && bvh.contains("Frames: 31"), "{}", &bvh[..200.min(bvh.len())]);
+    // A joint the skeleton does not have: refused, nothing written.
+    write_keys("Tail");
+    let refused_out = dir.path().join("refused.bvh");
+    let (ok, _, stderr) = complete(&refused_out);
+    assert!(!ok && stderr.contains("\"Tail\", which the model's skeleton does not have"), "{stderr}");
+    assert!(!stderr.contains("panicked") && !refused_out.exists(), "{stderr}");
+    // A lamp ARNN has no humanoid skeleton.
+    let lamp = shared_model().join("run");
+    let (ok, _, stderr) = run(&[&bench[..], &["--methods", &format!("arnn:{}", lamp.display())]].concat());
+    assert!(!ok && stderr.contains("holds a lamp ARNN"), "{stderr}");
+}

@@ -158,7 +158,7 @@ fn keyframe_runner_matches_candle() {
         (0..2).map(|c| zoo_arnn::complete(&model, &norm, frames[c], &poses[c]).unwrap()).collect();
     let mut runner = km.runner(2).unwrap();
     let mut out: Vec<Vec<f32>> = (0..2).map(|c| vec![f32::NAN; (frames[c].last().unwrap() + 1) * 6]).collect();
-    let keys_of = |c: usize| MotionKeys { frames: frames[c], poses: &flat[c] };
+    let keys_of = |c: usize| MotionKeys::whole(frames[c], &flat[c]);
     {
         let (a, b) = out.split_at_mut(1);
         runner.complete_batch(&[keys_of(0), keys_of(1)], &mut [&mut a[0], &mut b[0]]).unwrap();
@@ -183,17 +183,17 @@ fn keyframe_runner_matches_candle() {
     let err = |runner: &mut zoo_runtime::keyframes::KeyframeRunner, k: MotionKeys, buf: &mut [f32]| {
         runner.complete(k, buf).expect_err("accepted").to_string()
     };
-    let e = err(&mut runner, MotionKeys { frames: &[0, 24, 9, 39], poses: &flat[0] }, &mut buf);
+    let e = err(&mut runner, MotionKeys::whole(&[0, 24, 9, 39], &flat[0]), &mut buf);
     assert!(e.contains("character 0: key 2 is at frame 9 but key 1 is at frame 24"), "{e}");
     let mut nan = flat[0].clone();
     nan[8] = f32::NAN;
-    let e = err(&mut runner, MotionKeys { frames: &KEY_FRAMES, poses: &nan }, &mut buf);
+    let e = err(&mut runner, MotionKeys::whole(&KEY_FRAMES, &nan), &mut buf);
     assert!(e.contains("key 1 value 2 is NaN, not a finite number"), "{e}");
-    let e = err(&mut runner, MotionKeys { frames: &KEY_FRAMES, poses: &flat[0][..18] }, &mut buf);
+    let e = err(&mut runner, MotionKeys::whole(&KEY_FRAMES, &flat[0][..18]), &mut buf);
     assert!(e.contains("18 pose values for 4 keys of 6 values"), "{e}");
-    let e = err(&mut runner, MotionKeys { frames: &[0, 9, 24, 50], poses: &flat[0] }, &mut buf);
+    let e = err(&mut runner, MotionKeys::whole(&[0, 9, 24, 50], &flat[0]), &mut buf);
     assert!(e.contains("expected 306 values (51 x 6), found 240"), "{e}");
-    let e = err(&mut runner, MotionKeys { frames: &[3, 9, 24, 39], poses: &flat[0] }, &mut buf);
+    let e = err(&mut runner, MotionKeys::whole(&[3, 9, 24, 39], &flat[0]), &mut buf);
     assert!(e.contains("key frames start at 0"), "{e}");
     assert!(buf.iter().all(|v| *v == 7.0), "a refused completion wrote its output");
     let e = runner
@@ -201,4 +201,126 @@ fn keyframe_runner_matches_candle() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("3 characters, but the runner was made for at most 2"), "{e}");
+}
+
+/// Issue 13, the humanoid: an ARNN with key groups (partial keys) exported with its `fixed_a`,
+/// `fixed_b` inputs; candle's `complete_partial`, the runtime's keyframes task (tract) and
+/// onnxruntime complete the same partial keys (two of four keys partial).
+#[test]
+fn partial_keys_complete_the_same_in_candle_tract_and_onnxruntime() {
+    use zoo_runtime::keyframes::{KeyframeModel, MotionKeys};
+    let names: Vec<String> = ["Hips", "Spine", "Head"].iter().map(|s| s.to_string()).collect();
+    let skeleton = zoo_arnn::HumanoidSkeleton {
+        names: names.clone(),
+        parents: vec![-1, 0, 1],
+        offsets: vec![[0.0; 3], [0.0, 10.0, 0.0], [0.0, 20.0, 0.0]],
+        fps: 30.0,
+    };
+    let (dof_names, groups) = zoo_arnn::humanoid::pose_layout(&names);
+    let tiny = ArnnConfig::tiny();
+    let config = ArnnConfig {
+        feature: tiny.feature,
+        hidden: tiny.hidden,
+        decoder: tiny.decoder,
+        gru_dropout: tiny.gru_dropout,
+        linear_dropout: tiny.linear_dropout,
+        ..ArnnConfig::humanoid(skeleton, dof_names, groups)
+    };
+    let (d, g) = (config.dofs, config.groups());
+    assert_eq!((d, g, config.key_width()), (15, 4, 19));
+    let mut varmap = VarMap::new();
+    let model = Arnn::new(&config, VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu)).unwrap();
+    let mut vars: Vec<(String, Vec<usize>)> =
+        varmap.data().lock().unwrap().iter().map(|(n, v)| (n.clone(), v.dims().to_vec())).collect();
+    vars.sort();
+    for (k, (name, dims)) in vars.iter().enumerate() {
+        let fan_in = if dims.len() == 2 { dims[1] } else { config.hidden };
+        let t = Tensor::from_vec(
+            lcg(900 + k as u64, dims.iter().product(), 1.5 / (fan_in as f32).sqrt()),
+            dims.as_slice(),
+            &Device::Cpu,
+        )
+        .unwrap();
+        varmap.set_one(name, &t).unwrap();
+    }
+    let mut mean = vec![0.0, 90.0, 0.0];
+    mean.extend([0.9, 0.1, 0.0, 0.0].repeat(3));
+    let mut std = vec![40.0, 5.0, 40.0];
+    std.extend([0.1, 0.2, 0.3, 0.2].repeat(3));
+    let norm = Normalization { mean, std };
+    let r = lcg(77, KEY_FRAMES.len() * d, 1.0);
+    let poses: Vec<Vec<f64>> = (0..KEY_FRAMES.len())
+        .map(|k| (0..d).map(|i| norm.mean[i] + norm.std[i] * r[k * d + i] as f64).collect())
+        .collect();
+    let fixed: Vec<Vec<bool>> =
+        vec![vec![true; 4], vec![true, false, true, false], vec![false, true, false, false], vec![true; 4]];
+    let candle = zoo_arnn::complete_partial(&model, &norm, &KEY_FRAMES, &poses, &fixed).unwrap();
+    // The flags matter: whole keys complete differently.
+    let whole = zoo_arnn::complete(&model, &norm, &KEY_FRAMES, &poses).unwrap();
+    assert!(max_diff(&candle, &whole) > 1e-3, "partial keys changed nothing");
+
+    let onnx = zoo_arnn::export::export_arnn(&config, &norm, &varmap).unwrap();
+    let km = KeyframeModel::new(MotionModel::from_bytes(&onnx.to_bytes()).unwrap()).unwrap();
+    assert_eq!((km.dofs(), km.groups()), (d, g));
+    assert_eq!(km.model().metadata().skeleton.names, names);
+    let flat: Vec<f32> = poses.iter().flatten().map(|v| *v as f32).collect();
+    let flags: Vec<f32> = fixed.iter().flatten().map(|&f| if f { 1.0 } else { 0.0 }).collect();
+    let mut runner = km.runner(1).unwrap();
+    let mut out = vec![0f32; (KEY_FRAMES[3] + 1) * d];
+    runner.complete(MotionKeys { frames: &KEY_FRAMES, poses: &flat, fixed: &flags }, &mut out).unwrap();
+    let tract: Vec<Vec<f64>> = out.chunks(d).map(|f| f.iter().map(|v| *v as f64).collect()).collect();
+    // onnxruntime, stepped by hand.
+    let mut ort = OrtSession::new(&onnx);
+    let h = config.hidden;
+    let (mut h1, mut h2) = (vec![0f32; h], vec![0f32; h]);
+    let mut ort_out = vec![poses[0].clone()];
+    for t in 1..=KEY_FRAMES[3] {
+        let (a, b, rel) = KeyedSequence::interval(&KEY_FRAMES, t);
+        let prev: Vec<f32> = ort_out[t - 1].iter().map(|v| *v as f32).collect();
+        let out = ort.run(
+            &[
+                ("prev", 1, &prev),
+                ("key_a", 1, &flat[a * d..(a + 1) * d]),
+                ("key_b", 1, &flat[b * d..(b + 1) * d]),
+                ("t_rel", 1, &[rel as f32]),
+                ("fixed_a", 1, &flags[a * g..(a + 1) * g]),
+                ("fixed_b", 1, &flags[b * g..(b + 1) * g]),
+                ("h1", 1, &h1),
+                ("h2", 1, &h2),
+            ],
+            &["pose", "h1_next", "h2_next"],
+        );
+        (h1, h2) = (out[1].clone(), out[2].clone());
+        ort_out.push(out[0].iter().map(|v| *v as f64).collect());
+    }
+    let (ct, co, to) = (max_diff(&candle, &tract), max_diff(&candle, &ort_out), max_diff(&tract, &ort_out));
+    eprintln!("partial keys: largest difference candle-tract {ct:e}, candle-ort {co:e}, tract-ort {to:e}");
+    // Root positions are in centimetres here: the tolerance is relative to the values' scale.
+    let scale = 1.0 + candle.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+    assert!(ct <= TOLERANCE * scale && co <= TOLERANCE * scale && to <= TOLERANCE * scale, "{ct:e} {co:e} {to:e}");
+    // Bad flags: clear errors.
+    let mut bad = flags.clone();
+    bad[0] = 0.0;
+    let e = runner
+        .complete(MotionKeys { frames: &KEY_FRAMES, poses: &flat, fixed: &bad }, &mut out)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("the first key is the start pose"), "{e}");
+    let e = runner
+        .complete(MotionKeys { frames: &KEY_FRAMES, poses: &flat, fixed: &flags[..5] }, &mut out)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("5 key flags for 4 keys of 4 groups"), "{e}");
+    // The lamp's model has no groups: flags are refused.
+    let (lc, lv, _, ln) = fixture();
+    let lamp = KeyframeModel::new(
+        MotionModel::from_bytes(&zoo_arnn::export::export_arnn(&lc, &ln, &lv).unwrap().to_bytes()).unwrap(),
+    )
+    .unwrap();
+    let mut lr = lamp.runner(1).unwrap();
+    let lamp_keys = vec![0f32; 4 * 6];
+    let e = lr
+        .complete(MotionKeys { frames: &KEY_FRAMES, poses: &lamp_keys, fixed: &[1.0; 4] }, &mut vec![0f32; 40 * 6])
+        .unwrap_err();
+    assert!(e.to_string().contains("trained on whole keys only"), "{e}");
 }

@@ -111,6 +111,70 @@ fn allocations_per_step() {
     }
     transition_allocations();
     stitch_allocations();
+    keyframes_allocations();
+}
+
+/// The keyframes task (issue 13): a completion of `KeyframeRunner::complete` (picking the keys
+/// around each frame, copies in and out) allocates what its graph runs do, for whole keys and
+/// for partial keys (a humanoid-shaped ARNN with key groups).
+fn keyframes_allocations() {
+    use candle_core::{DType, Device};
+    use zoo_runtime::keyframes::{KeyframeModel, MotionKeys};
+    let names: Vec<String> = ["Hips", "Spine"].iter().map(|s| s.to_string()).collect();
+    let skeleton = zoo_arnn::HumanoidSkeleton {
+        names: names.clone(),
+        parents: vec![-1, 0],
+        offsets: vec![[0.0; 3], [0.0, 10.0, 0.0]],
+        fps: 30.0,
+    };
+    let (dof_names, groups) = zoo_arnn::humanoid::pose_layout(&names);
+    let tiny = zoo_arnn::ArnnConfig::tiny();
+    for config in [
+        tiny.clone(),
+        zoo_arnn::ArnnConfig {
+            feature: tiny.feature,
+            hidden: tiny.hidden,
+            decoder: tiny.decoder,
+            ..zoo_arnn::ArnnConfig::humanoid(skeleton, dof_names, groups)
+        },
+    ] {
+        let varmap = candle_nn::VarMap::new();
+        zoo_arnn::Arnn::new(&config, zoo_nn::SeededVarMap::builder(&varmap, 5, DType::F32, &Device::Cpu)).unwrap();
+        let d = config.dofs;
+        let norm = zoo_arnn::Normalization { mean: vec![0.0; d], std: vec![1.0; d] };
+        let onnx = zoo_arnn::export::export_arnn(&config, &norm, &varmap).unwrap();
+        let model = KeyframeModel::new(MotionModel::from_bytes(&onnx.to_bytes()).unwrap()).unwrap();
+        let g = model.groups();
+        let frames = [0usize, 9, 24, 39];
+        let poses: Vec<f32> = (0..4 * d).map(|i| (i as f32 * 0.37).sin()).collect();
+        let mut fixed = vec![1.0f32; 4 * g];
+        if g > 0 {
+            fixed[g + 1] = 0.0;
+        }
+        let mut runner = model.runner(1).unwrap();
+        let mut out = vec![0.0f32; 40 * d];
+        let per_completion = per_frame(10, || {
+            runner.complete(MotionKeys { frames: &frames, poses: &poses, fixed: &fixed }, &mut out).unwrap()
+        });
+        // The same 39 graph runs through the bare runner.
+        let raw = model.model();
+        let mut raw_runner = raw.runner().unwrap();
+        let mut state = raw.new_state();
+        let inputs: Vec<Vec<f32>> = raw.inputs().iter().map(|i| vec![0.5; i.width]).collect();
+        let refs: Vec<&[f32]> = inputs.iter().map(|v| v.as_slice()).collect();
+        let mut y = vec![0.0f32; d];
+        let per_run = per_frame(100, || raw_runner.step(&mut state, &refs, &mut [&mut y]).unwrap());
+        eprintln!(
+            "tiny ARNN ({d} values, {g} key groups): {per_completion:.1} allocations per completion of 40 frames, \
+             {per_run:.1} per graph run (x 39 = {:.1})",
+            39.0 * per_run
+        );
+        assert!(
+            per_completion <= 39.0 * per_run + 0.5,
+            "a completion allocates {per_completion}, its 39 graph runs {}",
+            39.0 * per_run
+        );
+    }
 }
 
 /// The stitching task (issue 12): heap allocations per window of

@@ -31,6 +31,8 @@ pub struct ModelEntry {
     pub purpose: &'static str,
     /// Its benchmark method, for models that generate transitions.
     pub bench: Option<BenchLoader>,
+    /// Whether its benchmark method takes the foot lock (`KIND+lock:RUN_DIR`).
+    pub foot_lock: bool,
     /// Whether `zoo transition` and `zoo decompress` can run it.
     pub transitions: bool,
 }
@@ -41,27 +43,44 @@ pub const MODELS: &[ModelEntry] = &[
         kind: "rtn",
         purpose: "transitions between a context and a target pose (Recurrent Transition Network)",
         bench: Some(load_rtn_method),
+        foot_lock: true,
         transitions: true,
     },
     ModelEntry {
         kind: "rmr",
         purpose: "stitching locomotion clips (Recurrent Motion Refiner; `zoo stitch`, `zoo bench stitch`)",
         bench: None,
+        foot_lock: false,
         transitions: false,
     },
     ModelEntry {
         kind: "rnn-gmm",
         purpose: "random motion synthesis (`zoo generate`, `zoo bench synthesis`)",
         bench: None,
+        foot_lock: false,
         transitions: false,
     },
     ModelEntry {
         kind: "arnn",
-        purpose: "completing an animator's keys of the lamp (`zoo complete`, keyframe autocompletion ARNN)",
-        bench: None,
+        purpose: "completing an animator's keys (`zoo complete`, keyframe autocompletion ARNN; humanoid runs also in \
+                  `zoo bench`)",
+        bench: Some(load_arnn_method),
+        foot_lock: false,
         transitions: false,
     },
 ];
+
+fn load_arnn_method(dir: &Path, name: String, foot_lock: bool) -> anyhow::Result<Box<dyn TransitionMethod>> {
+    if foot_lock {
+        bail!(
+            "`arnn+lock`: the foot lock is applied to RTN and exported transition models; use `arnn:{}`",
+            dir.display()
+        );
+    }
+    let m = zoo_arnn::humanoid::ArnnMethod::load(dir, name)
+        .with_context(|| format!("loading the ARNN in {}", dir.display()))?;
+    Ok(Box::new(m))
+}
 
 fn load_rtn_method(dir: &Path, name: String, foot_lock: bool) -> anyhow::Result<Box<dyn TransitionMethod>> {
     let m =
@@ -126,7 +145,11 @@ pub enum MethodSpec {
 fn method_forms(models: &[ModelEntry]) -> String {
     let mut forms = vec!["zerovel".to_string(), "interp".to_string()];
     for m in models.iter().filter(|m| m.bench.is_some()) {
-        forms.push(format!("{0}:RUN_DIR, {0}+lock:RUN_DIR", m.kind));
+        forms.push(if m.foot_lock {
+            format!("{0}:RUN_DIR, {0}+lock:RUN_DIR", m.kind)
+        } else {
+            format!("{}:RUN_DIR", m.kind)
+        });
     }
     forms.push(format!("{ONNX_KIND}:FILE.onnx, {ONNX_KIND}+lock:FILE.onnx"));
     forms.join(", ")
@@ -233,9 +256,15 @@ mod tests {
     /// RTN plus two made-up kinds: one for something else, one benchmarked but not a
     /// `zoo transition` model.
     const TEST_MODELS: &[ModelEntry] = &[
-        ModelEntry { kind: "rtn", purpose: "transitions", bench: Some(no_bench), transitions: true },
-        ModelEntry { kind: "gmm", purpose: "sampling poses", bench: None, transitions: false },
-        ModelEntry { kind: "arnn", purpose: "long in-betweens", bench: Some(no_bench), transitions: false },
+        ModelEntry { kind: "rtn", purpose: "transitions", bench: Some(no_bench), foot_lock: true, transitions: true },
+        ModelEntry { kind: "gmm", purpose: "sampling poses", bench: None, foot_lock: true, transitions: false },
+        ModelEntry {
+            kind: "arnn",
+            purpose: "long in-betweens",
+            bench: Some(no_bench),
+            foot_lock: true,
+            transitions: false,
+        },
     ];
 
     fn err<T>(r: anyhow::Result<T>) -> String {

@@ -18,7 +18,7 @@
 //! let frames = [0, 12, 24];
 //! let poses = vec![0.0f32; frames.len() * d];
 //! let mut out = vec![0.0f32; (24 + 1) * d];
-//! runner.complete(MotionKeys { frames: &frames, poses: &poses }, &mut out)?;
+//! runner.complete(MotionKeys::whole(&frames, &poses), &mut out)?;
 //! # Ok::<(), zoo_runtime::keyframes::KeyframeError>(())
 //! ```
 
@@ -50,13 +50,25 @@ pub enum KeyframeError {
 }
 
 /// One character's keys: `frames` strictly increasing from 0, `poses` `frames.len() * dofs`
-/// values (key-major).
+/// values (key-major); for a model with key groups (a humanoid ARNN), optionally which groups
+/// each key fixes.
 #[derive(Clone, Copy, Debug)]
 pub struct MotionKeys<'a> {
     /// Key frames, strictly increasing, the first 0.
     pub frames: &'a [usize],
-    /// One pose per key, `dofs` values each.
+    /// One pose per key, `dofs` values each (a free group's values are ignored).
     pub poses: &'a [f32],
+    /// Partial keys: `frames.len() * groups` flags (key-major), 1 where the key fixes the group
+    /// (a humanoid's group 0 is the root position, group `1 + j` joint `j`'s rotation), 0 where
+    /// it leaves it free; the first key fixes every group. Empty: every key is a whole pose.
+    pub fixed: &'a [f32],
+}
+
+impl<'a> MotionKeys<'a> {
+    /// Keys that are whole poses.
+    pub fn whole(frames: &'a [usize], poses: &'a [f32]) -> Self {
+        MotionKeys { frames, poses, fixed: &[] }
+    }
 }
 
 impl MotionKeys<'_> {
@@ -81,7 +93,7 @@ impl MotionKeys<'_> {
         (k, k + 1, ((t as f64 - a as f64) / (b - a).max(1) as f64) as f32)
     }
 
-    fn check(&self, character: usize, dofs: usize) -> Result<(), KeyframeError> {
+    fn check(&self, character: usize, dofs: usize, groups: usize) -> Result<(), KeyframeError> {
         let bad = |reason: String| Err(KeyframeError::Keys { character, reason });
         let n = self.frames.len();
         if n < 2 {
@@ -108,6 +120,34 @@ impl MotionKeys<'_> {
         if let Some(i) = self.poses.iter().position(|v| !v.is_finite()) {
             return bad(format!("key {} value {} is {}, not a finite number", i / dofs, i % dofs, self.poses[i]));
         }
+        if !self.fixed.is_empty() {
+            if groups == 0 {
+                return bad(
+                    "partial keys given, but the model was trained on whole keys only: pass `fixed: &[]`".into()
+                );
+            }
+            if self.fixed.len() != n * groups {
+                return bad(format!(
+                    "{} key flags for {n} keys of {groups} groups: expected {}",
+                    self.fixed.len(),
+                    n * groups
+                ));
+            }
+            if let Some(i) = self.fixed.iter().position(|v| *v != 0.0 && *v != 1.0) {
+                return bad(format!(
+                    "key {} group {} flag is {}: flags are 0 (free) or 1 (fixed)",
+                    i / groups,
+                    i % groups,
+                    self.fixed[i]
+                ));
+            }
+            if self.fixed[..groups].contains(&0.0) {
+                return bad("the first key is the start pose: it must fix every group".into());
+            }
+            if let Some(k) = (0..n).find(|k| !self.fixed[k * groups..(k + 1) * groups].contains(&1.0)) {
+                return bad(format!("key {k} fixes no group: fix at least one, or drop the key"));
+            }
+        }
         Ok(())
     }
 }
@@ -118,6 +158,7 @@ impl MotionKeys<'_> {
 pub struct KeyframeModel {
     model: MotionModel,
     dofs: usize,
+    groups: usize,
 }
 
 impl KeyframeModel {
@@ -136,22 +177,30 @@ impl KeyframeModel {
         let dofs = model.inputs().first().map_or(0, |i| i.width);
         let widths: Vec<usize> = model.inputs().iter().map(|i| i.width).collect();
         let outputs: Vec<(&str, usize)> = model.outputs().iter().map(|o| (o.name.as_str(), o.width)).collect();
-        if names != ["prev", "key_a", "key_b", "t_rel"]
-            || widths != [dofs, dofs, dofs, 1]
-            || dofs == 0
-            || outputs != [("pose", dofs)]
-        {
+        // Key groups (partial keys): two more inputs of G flags.
+        let groups = widths.get(4).copied().unwrap_or(0);
+        let whole = names == ["prev", "key_a", "key_b", "t_rel"] && widths == [dofs, dofs, dofs, 1];
+        let partial = names == ["prev", "key_a", "key_b", "t_rel", "fixed_a", "fixed_b"]
+            && widths == [dofs, dofs, dofs, 1, groups, groups]
+            && groups > 0;
+        if !(whole || partial) || dofs == 0 || outputs != [("pose", dofs)] {
             return Err(KeyframeError::NotKeyframeModel(format!(
                 "the graph's inputs are {names:?} of widths {widths:?} and its outputs {outputs:?}, expected prev, \
-                 key_a, key_b (D each), t_rel (1) and one output `pose` (D) besides the recurrent state"
+                 key_a, key_b (D each), t_rel (1), optionally fixed_a and fixed_b (G each), and one output `pose` (D) \
+                 besides the recurrent state"
             )));
         }
-        Ok(KeyframeModel { model, dofs })
+        Ok(KeyframeModel { model, dofs, groups: if partial { groups } else { 0 } })
     }
 
     /// Values per pose (6 for the lamp).
     pub fn dofs(&self) -> usize {
         self.dofs
+    }
+
+    /// Key groups a partial key can fix or leave free (0: keys are whole poses).
+    pub fn groups(&self) -> usize {
+        self.groups
     }
 
     /// The step graph.
@@ -172,8 +221,11 @@ impl KeyframeModel {
             key_a: vec![0.0; max_batch * d],
             key_b: vec![0.0; max_batch * d],
             t_rel: vec![0.0; max_batch],
+            fixed_a: vec![1.0; max_batch * self.groups],
+            fixed_b: vec![1.0; max_batch * self.groups],
             pose: vec![0.0; max_batch * d],
             dofs: d,
+            groups: self.groups,
         })
     }
 }
@@ -188,8 +240,11 @@ pub struct KeyframeRunner {
     key_a: Vec<f32>,
     key_b: Vec<f32>,
     t_rel: Vec<f32>,
+    fixed_a: Vec<f32>,
+    fixed_b: Vec<f32>,
     pose: Vec<f32>,
     dofs: usize,
+    groups: usize,
 }
 
 impl KeyframeRunner {
@@ -207,7 +262,7 @@ impl KeyframeRunner {
     /// receives `keys[c].len() * dofs` values. Every buffer and key is checked before anything
     /// is written (a bad key or buffer leaves `out` unchanged).
     pub fn complete_batch(&mut self, keys: &[MotionKeys<'_>], out: &mut [&mut [f32]]) -> Result<(), KeyframeError> {
-        let (b, d) = (keys.len(), self.dofs);
+        let (b, d, g) = (keys.len(), self.dofs, self.groups);
         if b == 0 {
             return Err(MotionError::EmptyBatch.into());
         }
@@ -221,8 +276,11 @@ impl KeyframeRunner {
             return Err(MotionError::BufferCount { what: "completion outputs", expected: b, found: out.len() }.into());
         }
         for (c, (k, o)) in keys.iter().zip(out.iter()).enumerate() {
-            k.check(c, d)?;
-            crate::runner::check_len(&format!("completion output of character {c}"), o.len(), k.len(), d)?;
+            k.check(c, d, g)?;
+            // The name is formatted only on a mismatch: no allocation per call.
+            if o.len() != k.len() * d {
+                crate::runner::check_len(&format!("completion output of character {c}"), o.len(), k.len(), d)?;
+            }
         }
         let last = keys.iter().map(|k| k.len()).max().unwrap_or(0);
         for (k, o) in keys.iter().zip(out.iter_mut()) {
@@ -240,12 +298,24 @@ impl KeyframeRunner {
                 self.key_a[c * d..(c + 1) * d].copy_from_slice(&k.poses[a * d..(a + 1) * d]);
                 self.key_b[c * d..(c + 1) * d].copy_from_slice(&k.poses[z * d..(z + 1) * d]);
                 self.t_rel[c] = rel;
+                if g > 0 {
+                    let (fa, fb) = (&mut self.fixed_a[c * g..(c + 1) * g], &mut self.fixed_b[c * g..(c + 1) * g]);
+                    if k.fixed.is_empty() {
+                        fa.fill(1.0);
+                        fb.fill(1.0);
+                    } else {
+                        fa.copy_from_slice(&k.fixed[a * g..(a + 1) * g]);
+                        fb.copy_from_slice(&k.fixed[z * g..(z + 1) * g]);
+                    }
+                }
             }
-            self.runner.step_batch(
-                &mut self.states[..b],
-                &[&self.prev[..b * d], &self.key_a[..b * d], &self.key_b[..b * d], &self.t_rel[..b]],
-                &mut [&mut self.pose[..b * d]],
-            )?;
+            let (prev, ka, kb, tr) =
+                (&self.prev[..b * d], &self.key_a[..b * d], &self.key_b[..b * d], &self.t_rel[..b]);
+            let (fa, fb) = (&self.fixed_a[..b * g], &self.fixed_b[..b * g]);
+            let whole: [&[f32]; 4] = [prev, ka, kb, tr];
+            let partial: [&[f32]; 6] = [prev, ka, kb, tr, fa, fb];
+            let inputs: &[&[f32]] = if g > 0 { &partial } else { &whole };
+            self.runner.step_batch(&mut self.states[..b], inputs, &mut [&mut self.pose[..b * d]])?;
             let pose = &self.pose[..b * d];
             for (c, k) in keys.iter().enumerate() {
                 let p = &pose[c * d..(c + 1) * d];

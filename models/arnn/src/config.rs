@@ -70,6 +70,55 @@ pub enum Architecture {
     Segregated,
 }
 
+/// How training chooses the keys of a sequence each time it feeds it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", tag = "kind")]
+pub enum KeySampling {
+    /// The sequence's own keys with 0-2 interior keys dropped at random (the paper's lamp,
+    /// section 5).
+    #[default]
+    Given,
+    /// Keys drawn afresh from the sequence's frames (humanoid motion, which has no keys of its
+    /// own): frame 0; with probability `context_probability` the in-betweening benchmark's
+    /// layout first (frames `1..context` are keys too, then a gap of `min_gap + 1 ..=
+    /// max_first_gap + 1` frames to the next key, so `min_gap..=max_first_gap` frames between
+    /// them); then gaps of `min_gap..=max_gap` frames up to the last frame, always a key (a
+    /// remainder shorter than `min_gap` joins the gap before it).
+    Sampled {
+        /// Shortest gap between keys (frames).
+        min_gap: usize,
+        /// Longest gap between keys after the first (frames).
+        max_gap: usize,
+        /// Keys at frames `0..context` in the benchmark's layout (its 10 context frames).
+        context: usize,
+        /// Longest number of frames between the last context key and the next one (the
+        /// benchmark's longest transition, 45).
+        max_first_gap: usize,
+        /// Probability of the benchmark's layout.
+        context_probability: f64,
+    },
+}
+
+/// The skeleton of a humanoid ARNN (BVH joint order, the dataset's units): the network's pose
+/// is `[root x, y, z, then each joint's local rotation quaternion (w, x, y, z)]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HumanoidSkeleton {
+    /// Joint names.
+    pub names: Vec<String>,
+    /// Parent of each joint, -1 for the root.
+    pub parents: Vec<i32>,
+    /// Bone offsets from the parent, `[x, y, z]` per joint.
+    pub offsets: Vec<[f64; 3]>,
+    /// Frames per second of the training clips (runs written before the field existed trained
+    /// on bandai2, 30 fps).
+    #[serde(default = "thirty")]
+    pub fps: f64,
+}
+
+fn thirty() -> f64 {
+    30.0
+}
+
 /// Sizes and training settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ArnnConfig {
@@ -87,6 +136,23 @@ pub struct ArnnConfig {
     /// The lamp the training data came from: its geometry draws the completed motion as BVH.
     #[serde(default)]
     pub lamp: Option<LampParams>,
+    /// The skeleton of a humanoid ARNN (`None` for the lamp).
+    #[serde(default)]
+    pub skeleton: Option<HumanoidSkeleton>,
+    /// Partial keys: the group of each degree of freedom (a key fixes whole groups, e.g. the
+    /// root position or one joint's rotation). Empty: keys are whole poses and the key feature
+    /// nets see the pose only (the paper, the lamp); otherwise they see the normalised pose with
+    /// the free groups' values set to 0 followed by one 0/1 flag per group.
+    #[serde(default)]
+    pub key_groups: Vec<usize>,
+    /// Probability that training makes a key after the first partial (with `key_groups`): each
+    /// group is then kept with probability 1/2, at least one; the key loss counts only kept
+    /// groups.
+    #[serde(default)]
+    pub partial_keys: f64,
+    /// How training chooses keys.
+    #[serde(default)]
+    pub key_sampling: KeySampling,
     /// Width of the two layers of each pose feature net (the paper does not give it).
     pub feature: usize,
     /// Hidden units of each of the two GRU layers (paper: 100); for
@@ -113,6 +179,10 @@ pub struct ArnnConfig {
     pub ground_weight: f64,
     /// Adam learning rate (paper: 1e-3).
     pub learning_rate: f64,
+    /// Largest global L2 norm of a step's gradient (PyTorch's `clip_grad_norm_`); 0: no
+    /// clipping (the paper, the lamp).
+    #[serde(default)]
+    pub max_grad_norm: f64,
     /// Sequences per batch.
     pub batch_size: usize,
     /// Curriculum.
@@ -130,6 +200,10 @@ impl ArnnConfig {
             dofs: 6,
             dof_names: DOF_NAMES.iter().map(|s| s.to_string()).collect(),
             lamp: Some(LampParams::default()),
+            skeleton: None,
+            key_groups: vec![],
+            partial_keys: 0.0,
+            key_sampling: KeySampling::Given,
             feature: 32,
             hidden: 100,
             correction: 0,
@@ -139,10 +213,51 @@ impl ArnnConfig {
             key_weight: 100.0,
             ground_weight: 0.0,
             learning_rate: 1e-3,
+            max_grad_norm: 0.0,
             batch_size: 16,
             curriculum: Curriculum { total_steps: 10_000, width: 0.05, enabled: true },
             seed: 0,
         }
+    }
+
+    /// Sizes for humanoid motion (not in the paper, whose 6 degrees of freedom fit through a
+    /// decoder of 10): `dofs` values per frame in `key_groups`' groups, feature nets of 128, GRUs
+    /// of 256 and a decoder of 256; keys sampled every 5-30 frames, half the time in the
+    /// in-betweening benchmark's layout (10 context keys, then 5-45 frames to the target); a
+    /// fifth of the keys after the first partial; gradients clipped to norm 1 (the free-running
+    /// humanoid net diverged without it when the key weight ramped up).
+    pub fn humanoid(skeleton: HumanoidSkeleton, dof_names: Vec<String>, key_groups: Vec<usize>) -> Self {
+        ArnnConfig {
+            dofs: key_groups.len(),
+            dof_names,
+            lamp: None,
+            skeleton: Some(skeleton),
+            key_groups,
+            partial_keys: 0.2,
+            key_sampling: KeySampling::Sampled {
+                min_gap: 5,
+                max_gap: 30,
+                context: 10,
+                max_first_gap: 45,
+                context_probability: 0.5,
+            },
+            feature: 128,
+            hidden: 256,
+            decoder: 256,
+            batch_size: 32,
+            max_grad_norm: 1.0,
+            ..Self::paper()
+        }
+    }
+
+    /// Number of key groups (0 without partial keys).
+    pub fn groups(&self) -> usize {
+        self.key_groups.iter().max().map_or(0, |g| g + 1)
+    }
+
+    /// Width of a key's input to its feature net: the pose, then one flag per group.
+    pub fn key_width(&self) -> usize {
+        self.dofs + self.groups()
     }
 
     /// A small model for tests.
@@ -200,14 +315,15 @@ impl ArnnConfig {
     pub fn parameter_count(&self) -> usize {
         let (d, f, h, w, c) = (self.dofs, self.feature, self.hidden, self.decoder, self.correction);
         let linear = |i: usize, o: usize| i * o + o;
-        let features = linear(d, f) + linear(f, f);
+        let pose_features = linear(d, f) + linear(f, f);
+        let features = linear(self.key_width(), f) + linear(f, f);
         let gru = |i: usize, h: usize| 3 * h * (i + h + 2);
         let decoder = linear(h, w) + linear(w, w) + linear(w, d);
         match self.architecture {
-            Architecture::Arnn => 3 * features + gru(3 * f + 1, h) + gru(h, h) + decoder,
+            Architecture::Arnn => pose_features + 2 * features + gru(3 * f + 1, h) + gru(h, h) + decoder,
             Architecture::NoMemory => 2 * features + linear(2 * f + 1, h) + linear(h, h) + decoder,
             Architecture::Segregated => {
-                features
+                pose_features
                     + gru(f, h)
                     + gru(h, h)
                     + decoder
@@ -237,6 +353,53 @@ impl ArnnConfig {
                 self.correction, self.architecture
             ));
         }
+        if !self.key_groups.is_empty() {
+            if self.key_groups.len() != self.dofs {
+                return Err(format!(
+                    "key_groups has {} entries for {} degrees of freedom",
+                    self.key_groups.len(),
+                    self.dofs
+                ));
+            }
+            if let Some(g) = (0..self.groups()).find(|g| !self.key_groups.contains(g)) {
+                return Err(format!("key group {g} holds no degree of freedom (number the groups 0, 1, 2, ...)"));
+            }
+        }
+        if !(0.0..=1.0).contains(&self.partial_keys) || (self.partial_keys > 0.0 && self.key_groups.is_empty()) {
+            return Err(format!("partial_keys {} must be in [0, 1], and 0 without key_groups", self.partial_keys));
+        }
+        if let KeySampling::Sampled { min_gap, max_gap, context, max_first_gap, context_probability } =
+            self.key_sampling
+        {
+            if min_gap == 0
+                || max_gap < min_gap
+                || max_first_gap < min_gap
+                || !(0.0..=1.0).contains(&context_probability)
+            {
+                return Err(format!(
+                    "key sampling needs 1 <= min_gap <= max_gap, min_gap <= max_first_gap and a probability in [0, 1], \
+                     found {:?}",
+                    self.key_sampling
+                ));
+            }
+            if context > MAX_WIDTH {
+                return Err(format!("key sampling context {context} is larger than {MAX_WIDTH}"));
+            }
+        }
+        if let Some(s) = &self.skeleton {
+            let j = s.names.len();
+            if !(s.fps.is_finite() && s.fps > 0.0) {
+                return Err(format!("the skeleton's fps {} must be a positive number", s.fps));
+            }
+            if s.parents.len() != j || s.offsets.len() != j || self.dofs != 3 + 4 * j {
+                return Err(format!(
+                    "the skeleton has {j} names, {} parents and {} offsets for {} degrees of freedom (3 + 4 per joint)",
+                    s.parents.len(),
+                    s.offsets.len(),
+                    self.dofs
+                ));
+            }
+        }
         if !self.dof_names.is_empty() && self.dof_names.len() != self.dofs {
             return Err(format!("dof_names has {} names for {} degrees of freedom", self.dof_names.len(), self.dofs));
         }
@@ -246,6 +409,9 @@ impl ArnnConfig {
         }
         if !(self.learning_rate > 0.0 && self.key_weight >= 0.0 && self.curriculum.width > 0.0) {
             return Err("learning_rate and curriculum width must be > 0, key_weight >= 0".into());
+        }
+        if !(self.max_grad_norm >= 0.0 && self.max_grad_norm.is_finite()) {
+            return Err(format!("max_grad_norm {} must be a finite number >= 0 (0: no clipping)", self.max_grad_norm));
         }
         if !(self.ground_weight >= 0.0 && self.ground_weight.is_finite()) {
             return Err(format!("ground_weight {} must be a finite number >= 0", self.ground_weight));

@@ -11,6 +11,7 @@
 //! | `prev`: the previous pose `Y'_(t-1)` (D) | `pose`: `Y'_t` (D) |
 //! | `key_a`, `key_b`: the keys `X_K`, `X_(K+1)` around frame t (D each) | |
 //! | `t_rel`: `(t - T_K) / (T_(K+1) - T_K)` (1) | |
+//! | `fixed_a`, `fixed_b`: with key groups only (a humanoid), 1 for each group the key fixes, 0 for a free one (G each) | |
 //! | `h1`, `h2`: the GRU states (H each), zero at frame 0 | `h1_next`, `h2_next` |
 //!
 //! Completing keys: frame 0 is the first key; for t = 1..=last key, pick the keys around t
@@ -154,12 +155,27 @@ fn gru_cell(
     Ok(g.add(&format!("{prefix}.h"), &n, &zd))
 }
 
-/// The metadata of an exported ARNN of the lamp.
+/// The metadata of an exported ARNN: of the lamp (its skeleton, degrees of freedom in metres
+/// and radians) or of a humanoid (its skeleton, the pose of `zoo_arnn::humanoid` in the clips'
+/// centimetres, Y up).
 pub fn metadata(config: &ArnnConfig, norm: &Normalization) -> Result<MotionModelMetadata, ExportError> {
     let d = config.dofs;
-    let lamp =
-        config.lamp.as_ref().ok_or_else(|| model_err("config.json has no lamp: retrain with `zoo train arnn`"))?;
-    let skeleton = MotionSkeletonInfo::from_skeleton(&zoo_data::luxo::sequence::lamp_skeleton(lamp));
+    let (skeleton, fps) = match (&config.skeleton, &config.lamp) {
+        (Some(s), _) => (
+            MotionSkeletonInfo {
+                names: s.names.clone(),
+                parents: s.parents.clone(),
+                offsets: s.offsets.iter().map(|o| o.map(|v| v as f32)).collect(),
+            },
+            s.fps as f32,
+        ),
+        (None, Some(lamp)) => (MotionSkeletonInfo::from_skeleton(&zoo_data::luxo::sequence::lamp_skeleton(lamp)), FPS),
+        (None, None) => {
+            return Err(model_err(
+                "config.json has neither a lamp nor a humanoid skeleton: retrain with `zoo train arnn`",
+            ));
+        }
+    };
     let f32s = |v: &[f64]| v.iter().map(|x| *x as f32).collect::<Vec<_>>();
     let mut normalization = BTreeMap::new();
     normalization.insert("pose".to_string(), MotionMeanStd { mean: f32s(&norm.mean), std: f32s(&norm.std) });
@@ -180,7 +196,7 @@ pub fn metadata(config: &ArnnConfig, norm: &Normalization) -> Result<MotionModel
         normalization,
         skeleton,
         feature_layout,
-        fps: FPS,
+        fps,
         // The lamp's skeleton (its BVH) is in centimetres, Y up, right-handed; the step graph's
         // degrees of freedom are metres and radians (feature_layout names them).
         frame: zoo_runtime::metadata::CoordinateFrame::ZOO_CM,
@@ -212,6 +228,9 @@ pub fn export_arnn(config: &ArnnConfig, norm: &Normalization, varmap: &VarMap) -
     let key_a = g.input("key_a", &batch(d));
     let key_b = g.input("key_b", &batch(d));
     let t_rel = g.input("t_rel", &batch(1));
+    // Partial keys: one 0/1 flag per group and key (`Normalization::key_input`).
+    let groups = config.groups();
+    let fixed = (groups > 0).then(|| (g.input("fixed_a", &batch(groups)), g.input("fixed_b", &batch(groups))));
     let h1 = g.input("h1", &batch(h));
     let h2 = g.input("h2", &batch(h));
     let mean = g.initializer_f32("normalization.mean", &[d], &norm.mean.iter().map(|v| *v as f32).collect::<Vec<_>>());
@@ -221,10 +240,30 @@ pub fn export_arnn(config: &ArnnConfig, norm: &Normalization, varmap: &VarMap) -
         let c = g.sub(&format!("{name}.centre"), x, &mean);
         normalized.push(g.div(&format!("{name}.normalize"), &c, &std));
     }
+    // With key groups, a key's input is its normalised pose with the free groups' values set to
+    // 0 (the flags expanded to the degrees of freedom by a 0/1 matrix), then the flags.
+    let (key_a_in, key_b_in) = match &fixed {
+        None => (normalized[1].clone(), normalized[2].clone()),
+        Some((fa, fb)) => {
+            let mut expand = vec![0f32; groups * d];
+            for (i, &grp) in config.key_groups.iter().enumerate() {
+                expand[grp * d + i] = 1.0;
+            }
+            let e = g.initializer_f32("key_groups.expand", &[groups, d], &expand);
+            let mut inputs = Vec::new();
+            for (name, key, flags) in [("key_a", &normalized[1], fa), ("key_b", &normalized[2], fb)] {
+                let m = g.matmul(&format!("{name}.mask"), flags, &e);
+                let masked = g.mul(&format!("{name}.masked"), key, &m);
+                inputs.push(g.concat(&format!("{name}.with_flags"), &[&masked, flags], 1));
+            }
+            let b = inputs.pop().expect("two keys");
+            (inputs.pop().expect("two keys"), b)
+        }
+    };
     // Section 6: feature nets of Y'_(t-1), X_K, X_(K+1), concatenated with t_rel.
     let fp = mlp(&mut g, &w, "prev_features", 2, &normalized[0], true)?;
-    let fa = mlp(&mut g, &w, "key_a_features", 2, &normalized[1], true)?;
-    let fb = mlp(&mut g, &w, "key_b_features", 2, &normalized[2], true)?;
+    let fa = mlp(&mut g, &w, "key_a_features", 2, &key_a_in, true)?;
+    let fb = mlp(&mut g, &w, "key_b_features", 2, &key_b_in, true)?;
     let x = g.concat("features", &[&fp, &fa, &fb, &t_rel], 1);
     let h1_next = gru_cell(&mut g, &w, "gru1", h, &x, &h1)?;
     let o1 = selu(&mut g, "gru1.selu", &h1_next);

@@ -10,13 +10,15 @@ pub mod checkpoint;
 pub mod config;
 pub mod eval;
 pub mod export;
+pub mod humanoid;
+pub mod keys;
 pub mod model;
 pub mod train;
 
-pub use config::{Architecture, ArnnConfig, Curriculum};
+pub use config::{Architecture, ArnnConfig, Curriculum, HumanoidSkeleton, KeySampling};
 pub use eval::{CompletionError, CompletionReport};
 pub use model::{Arnn, ArnnState};
-pub use train::{ArnnTrainer, Normalization, complete};
+pub use train::{ArnnTrainer, Normalization, complete, complete_partial};
 
 /// What went wrong while building, training or saving an ARNN.
 #[derive(Debug, thiserror::Error)]

@@ -50,6 +50,8 @@ impl Arnn {
         config.validate().map_err(candle_core::Error::Msg)?;
         let (d, f, h, w, c) = (config.dofs, config.feature, config.hidden, config.decoder, config.correction);
         let features = |name: &str| Mlp::new(d, &[f, f], Activation::Selu, true, vb.pp(name));
+        // Keys carry one flag per group after the pose when partial keys are on.
+        let key_features = |name: &str| Mlp::new(config.key_width(), &[f, f], Activation::Selu, true, vb.pp(name));
         let rnn = |input: usize| -> Result<Recurrent> {
             Ok(Recurrent {
                 gru1: Gru::new(input, h, 1, 0.0, vb.pp("gru1"))?,
@@ -59,20 +61,20 @@ impl Arnn {
         let body = match config.architecture {
             Architecture::Arnn => Body::Arnn {
                 prev_features: features("prev_features")?,
-                key_a_features: features("key_a_features")?,
-                key_b_features: features("key_b_features")?,
+                key_a_features: key_features("key_a_features")?,
+                key_b_features: key_features("key_b_features")?,
                 rnn: rnn(3 * f + 1)?,
             },
             Architecture::NoMemory => Body::NoMemory {
-                key_a_features: features("key_a_features")?,
-                key_b_features: features("key_b_features")?,
+                key_a_features: key_features("key_a_features")?,
+                key_b_features: key_features("key_b_features")?,
                 hidden: Mlp::new(2 * f + 1, &[h, h], Activation::Selu, true, vb.pp("hidden"))?,
             },
             Architecture::Segregated => Body::Segregated {
                 prev_features: features("prev_features")?,
                 rnn: rnn(f)?,
-                key_a_features: features("key_a_features")?,
-                key_b_features: features("key_b_features")?,
+                key_a_features: key_features("key_a_features")?,
+                key_b_features: key_features("key_b_features")?,
                 correction: Mlp::new(2 * f + 1, &[c, c, d], Activation::Selu, false, vb.pp("correction"))?,
             },
         };
@@ -104,8 +106,10 @@ impl Arnn {
         Ok(ArnnState { gru })
     }
 
-    /// One frame (section 6): from the previous pose `Y'_{t-1}`, the keys `X_K` and `X_{K+1}`
-    /// (each `(batch, dofs)`) and `t_rel` `(batch, 1)`, the pose `Y'_t` and the next state.
+    /// One frame (section 6): from the previous pose `Y'_{t-1}` `(batch, dofs)`, the keys `X_K`
+    /// and `X_{K+1}` (each `(batch, key_width)`: the pose, then with partial keys one flag per
+    /// group, [`crate::train::Normalization::key_input`]) and `t_rel` `(batch, 1)`, the pose
+    /// `Y'_t` and the next state.
     /// `rng` `Some` applies dropout (training).
     pub fn step(
         &self,

@@ -8,13 +8,14 @@
 //! plate's lowest point below the ground ([`crate::eval::base_clearance`] in candle ops).
 
 use crate::config::ArnnConfig;
+use crate::keys::{choose_keys, choose_masks};
 use crate::model::Arnn;
 use crate::{ArnnError, ArnnResult};
 use candle_core::{D, DType, Device, Tensor};
 use candle_nn::{Optimizer, VarMap};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
-use zoo_data::luxo::preprocess::{KeyedSequence, drop_keys};
+use zoo_data::luxo::preprocess::KeyedSequence;
 use zoo_nn::checkpoint as ck;
 use zoo_nn::optim::{Adam, ParamsAdam, StatefulOptimizer};
 use zoo_nn::rng::SplitMix64;
@@ -35,11 +36,37 @@ impl Normalization {
     /// Fits the statistics of a training set.
     pub fn fit(seqs: &[KeyedSequence]) -> Self {
         let (mean, std) = zoo_data::luxo::preprocess::dof_statistics(seqs);
-        Normalization { mean: mean.to_vec(), std: std.to_vec() }
+        Normalization { mean, std }
     }
 
     fn apply<'a>(&'a self, pose: &'a [f64]) -> impl Iterator<Item = f32> + 'a {
         pose.iter().zip(&self.mean).zip(&self.std).map(|((v, m), s)| ((v - m) / s) as f32)
+    }
+
+    /// A key's input to its feature net ([`ArnnConfig::key_width`] values): the normalised
+    /// pose; with key groups (`groups[d]` per degree of freedom), the values of the groups the
+    /// key does not fix (`fixed[g]` false) set to 0, then one 0/1 flag per group. `fixed` empty
+    /// or `None`: every group fixed.
+    pub fn key_input(&self, pose: &[f64], groups: &[usize], fixed: Option<&[bool]>) -> Vec<f32> {
+        let mut out = Vec::with_capacity(pose.len() + groups.len());
+        self.extend_key_input(&mut out, pose, groups, fixed);
+        out
+    }
+
+    /// [`Normalization::key_input`] appended to `out`.
+    pub fn extend_key_input(&self, out: &mut Vec<f32>, pose: &[f64], groups: &[usize], fixed: Option<&[bool]>) {
+        let n_groups = groups.iter().max().map_or(0, |g| g + 1);
+        let keep = |g: usize| fixed.is_none_or(|f| f.is_empty() || f[g]);
+        let start = out.len();
+        out.extend(self.apply(pose));
+        if n_groups > 0 {
+            for (v, &g) in out[start..].iter_mut().zip(groups) {
+                if !keep(g) {
+                    *v = 0.0;
+                }
+            }
+            out.extend((0..n_groups).map(|g| if keep(g) { 1.0 } else { 0.0 }));
+        }
     }
 }
 
@@ -199,19 +226,22 @@ impl ArnnTrainer {
         let steps = seqs.first().map_or(0, |s| s.frames.len().saturating_sub(1));
         let draws: Vec<bool> = (0..steps).map(|_| train && self.rng.next_f64() < teacher).collect();
         let mut rngs = train.then(|| RowRngs::new(self.rng.next_u64(), 0..seqs.len()));
-        self.batch_losses(seqs, keys, &draws, omega, rngs.as_mut(), None)
+        self.batch_losses(seqs, keys, &[], &draws, omega, rngs.as_mut(), None)
     }
 
     /// The losses of sequences `seqs` (a batch, or one data-parallel shard of it) with the
-    /// given keys: `teacher[t - 1]` feeds the ground truth back after step `t`, `rngs` (one
+    /// given keys and the groups each key fixes (`masks[i][k]`; `masks` or `masks[i]` empty:
+    /// whole keys; the key loss counts the fixed groups only): `teacher[t - 1]` feeds the ground truth back after step `t`, `rngs` (one
     /// stream per sequence) applies dropout. `share` `(keys, fraction)`: this is a shard holding
     /// `fraction` of a batch with `keys` key frames in all; its key loss is then the share of
     /// the batch's key loss (over all of the batch's key frames) divided by `fraction`, so that
     /// the shards' losses weighted by their fractions sum to the batch's loss.
+    #[allow(clippy::too_many_arguments)]
     fn batch_losses(
         &self,
         seqs: &[&KeyedSequence],
         keys: &[Vec<usize>],
+        masks: &[Vec<Vec<bool>>],
         teacher: &[bool],
         omega: f64,
         mut rngs: Option<&mut RowRngs>,
@@ -232,25 +262,38 @@ impl ArnnTrainer {
             }
         }
         let gt = Tensor::from_vec(gt, (b, t_len, d), &self.device)?;
-        // Inputs per step t = 1..T: X_K, X_{K+1}, t_rel; and the key-frame mask of the outputs.
+        // Inputs per step t = 1..T: X_K, X_{K+1}, t_rel; and the key mask of the outputs (per
+        // degree of freedom: a partial key counts for its fixed groups only).
         let steps = t_len - 1;
-        let (mut ka, mut kb, mut tr, mut mask) = (vec![], vec![], vec![], vec![0f32; steps * b]);
+        let kw = self.config.key_width();
+        let groups = &self.config.key_groups;
+        let (mut ka, mut kb) = (Vec::with_capacity(steps * b * kw), Vec::with_capacity(steps * b * kw));
+        let (mut tr, mut mask) = (Vec::with_capacity(steps * b), vec![0f32; steps * b * d]);
+        let fixed = |i: usize, k: usize| masks.get(i).and_then(|m| m.get(k)).map(|m| m.as_slice());
         for t in 1..t_len {
             for (i, s) in seqs.iter().enumerate() {
                 let k = &keys[i];
                 let (a, c, rel) = KeyedSequence::interval(k, t);
-                ka.extend(self.norm.apply(&s.frames[k[a]]));
-                kb.extend(self.norm.apply(&s.frames[k[c]]));
+                self.norm.extend_key_input(&mut ka, &s.frames[k[a]], groups, fixed(i, a));
+                self.norm.extend_key_input(&mut kb, &s.frames[k[c]], groups, fixed(i, c));
                 tr.push(rel as f32);
-                if k[1..].contains(&t) {
-                    mask[(t - 1) * b + i] = 1.0;
+                if let Some(ki) = k[1..].iter().position(|&f| f == t) {
+                    let row = &mut mask[((t - 1) * b + i) * d..((t - 1) * b + i + 1) * d];
+                    match fixed(i, ki + 1) {
+                        Some(f) if !f.is_empty() && !groups.is_empty() => {
+                            for (m, &g) in row.iter_mut().zip(groups) {
+                                *m = if f[g] { 1.0 } else { 0.0 };
+                            }
+                        }
+                        _ => row.fill(1.0),
+                    }
                 }
             }
         }
-        let ka = Tensor::from_vec(ka, (steps, b, d), &self.device)?;
-        let kb = Tensor::from_vec(kb, (steps, b, d), &self.device)?;
+        let ka = Tensor::from_vec(ka, (steps, b, kw), &self.device)?;
+        let kb = Tensor::from_vec(kb, (steps, b, kw), &self.device)?;
         let tr = Tensor::from_vec(tr, (steps, b, 1), &self.device)?;
-        let mask = Tensor::from_vec(mask, (steps, b, 1), &self.device)?;
+        let mask = Tensor::from_vec(mask, (steps, b, d), &self.device)?;
         let mut state = self.model.zero_state(b)?;
         let mut prev = gt.narrow(1, 0, 1)?.squeeze(1)?;
         let mut outs = Vec::with_capacity(steps);
@@ -270,13 +313,12 @@ impl ArnnTrainer {
         let target = gt.narrow(1, 1, steps)?.transpose(0, 1)?;
         let sq = (&pred - target)?.sqr()?;
         let frame = sq.mean_all()?;
+        // Normalised by the fixed key values (whole keys: key frames times `d`).
         let key = match share {
-            Some((batch_keys, fraction)) => {
-                (sq.broadcast_mul(&mask)?.sum_all()? / (batch_keys.max(1.0) * d as f64 * fraction))?
-            }
+            Some((batch_key_values, fraction)) => (sq.mul(&mask)?.sum_all()? / (batch_key_values.max(1.0) * fraction))?,
             None => {
-                let n_keys = mask.sum_all()?.to_scalar::<f32>()?.max(1.0) as f64;
-                (sq.broadcast_mul(&mask)?.sum_all()? / (n_keys * d as f64))?
+                let n_values = mask.sum_all()?.to_scalar::<f32>()?.max(1.0) as f64;
+                (sq.mul(&mask)?.sum_all()? / n_values)?
             }
         };
         let ground = self.ground_penalty(&pred)?;
@@ -290,14 +332,30 @@ impl ArnnTrainer {
     /// the batch is shared out, so they do not depend on the thread count.
     pub fn train_on(&mut self, samples: &[usize]) -> ArnnResult<f64> {
         let seqs: Vec<KeyedSequence> = samples.iter().map(|&i| self.train[i].clone()).collect();
-        let keys: Vec<Vec<usize>> = seqs.iter().map(|s| drop_keys(&s.keys, &mut self.rng)).collect();
+        let sampling = self.config.key_sampling;
+        let keys: Vec<Vec<usize>> =
+            seqs.iter().map(|s| choose_keys(&sampling, &s.keys, s.frames.len(), &mut self.rng)).collect();
+        let (groups, partial) = (self.config.groups(), self.config.partial_keys);
+        let masks: Vec<Vec<Vec<bool>>> =
+            keys.iter().map(|k| choose_masks(k.len(), groups, partial, &mut self.rng)).collect();
         let c = self.config.curriculum;
         let (teacher, omega) = (c.teacher_forcing(self.step), c.omega(self.step));
         let steps = seqs.first().map_or(0, |s| s.frames.len().saturating_sub(1));
         let draws: Vec<bool> = (0..steps).map(|_| self.rng.next_f64() < teacher).collect();
         let seed = self.rng.next_u64();
-        // Key frames after the first of the whole batch (the key loss's denominator).
-        let batch_keys = keys.iter().map(|k| k.len().saturating_sub(1)).sum::<usize>() as f64;
+        // Fixed key values after the first key of the whole batch (the key loss's denominator).
+        let d = self.config.dofs;
+        let group_size: Vec<usize> =
+            (0..groups).map(|g| self.config.key_groups.iter().filter(|&&x| x == g).count()).collect();
+        let fixed_values = |i: usize, k: usize| -> usize {
+            match masks[i].get(k) {
+                Some(m) => m.iter().zip(&group_size).filter(|(f, _)| **f).map(|(_, n)| n).sum(),
+                None => d,
+            }
+        };
+        let batch_keys = (0..keys.len())
+            .map(|i| (1..keys[i].len()).map(|k| fixed_values(i, k)).sum::<usize>())
+            .sum::<usize>() as f64;
         let n = seqs.len();
         let this = &*self;
         let shard_loss = |r: std::ops::Range<usize>| -> candle_core::Result<Tensor> {
@@ -305,13 +363,26 @@ impl ArnnTrainer {
             let mut rngs = RowRngs::new(seed, r.clone());
             let fraction = r.len() as f64 / n as f64;
             let l = this
-                .batch_losses(&refs, &keys[r], &draws, omega, Some(&mut rngs), Some((batch_keys, fraction)))
+                .batch_losses(
+                    &refs,
+                    &keys[r.clone()],
+                    &masks[r],
+                    &draws,
+                    omega,
+                    Some(&mut rngs),
+                    Some((batch_keys, fraction)),
+                )
                 .map_err(candle_core::Error::wrap)?;
             Ok(l.total)
         };
         let (value, grads) = this.parallel.backward(n, &this.vars, shard_loss)?;
         match grads {
-            Some(grads) if value.is_finite() => self.opt.step(&grads)?,
+            Some(mut grads) if value.is_finite() => {
+                if self.config.max_grad_norm > 0.0 {
+                    zoo_nn::optim::clip_grad_norm(&mut grads, &self.vars, self.config.max_grad_norm)?;
+                }
+                self.opt.step(&grads)?
+            }
             _ => return Err(ArnnError::NonFiniteLoss { step: self.step, loss: value }),
         }
         self.step += 1;
@@ -363,6 +434,9 @@ impl ArnnTrainer {
 
 fn check_sequence(config: &ArnnConfig, s: &KeyedSequence) -> ArnnResult<()> {
     let n = s.frames.len();
+    if n < 2 {
+        return Err(ArnnError::Config(format!("{}: {n} frame(s), a sequence needs at least 2", s.name)));
+    }
     let ok_keys = s.keys.len() >= 2
         && s.keys[0] == 0
         && *s.keys.last().unwrap_or(&0) == n - 1
@@ -442,7 +516,38 @@ pub fn complete(
     key_frames: &[usize],
     key_poses: &[Vec<f64>],
 ) -> ArnnResult<Vec<Vec<f64>>> {
+    complete_partial(model, norm, key_frames, key_poses, &[])
+}
+
+/// [`complete`] with partial keys: `fixed[k][g]` says whether key `k` fixes group `g` of the
+/// model's key groups (`fixed` empty: whole keys; a model without key groups refuses partial
+/// keys). The free values of a partial key's pose are ignored (any finite value).
+pub fn complete_partial(
+    model: &Arnn,
+    norm: &Normalization,
+    key_frames: &[usize],
+    key_poses: &[Vec<f64>],
+    fixed: &[Vec<bool>],
+) -> ArnnResult<Vec<Vec<f64>>> {
     let d = model.config().dofs;
+    let groups = model.config().groups();
+    if !fixed.is_empty() {
+        if groups == 0 {
+            return Err(ArnnError::Config(
+                "this model was trained on whole keys only: give every key a whole pose (no mask)".into(),
+            ));
+        }
+        if fixed.len() != key_frames.len() || fixed.iter().any(|m| m.len() != groups) {
+            return Err(ArnnError::Config(format!(
+                "need one mask of {groups} groups per key, found {} masks for {} keys",
+                fixed.len(),
+                key_frames.len()
+            )));
+        }
+        if fixed[0].contains(&false) {
+            return Err(ArnnError::Config("the first key is the start pose: it must fix every group".into()));
+        }
+    }
     if key_frames.len() < 2 || key_frames.len() != key_poses.len() {
         return Err(ArnnError::Config(format!(
             "need at least two keys and one pose per key, found {} key frames and {} poses",
@@ -462,11 +567,20 @@ pub fn complete(
         return Err(ArnnError::Config(format!("normalization is for {} values, the model for {d}", norm.mean.len())));
     }
     let device = model.device();
-    let to_tensor = |p: &[f64]| Tensor::from_vec(norm.apply(p).collect::<Vec<f32>>(), (1, d), device);
-    let keys: Vec<Tensor> = key_poses.iter().map(|p| to_tensor(p)).collect::<candle_core::Result<_>>()?;
+    let kw = model.config().key_width();
+    let key_groups = &model.config().key_groups;
+    let keys: Vec<Tensor> = key_poses
+        .iter()
+        .enumerate()
+        .map(|(k, p)| {
+            let x = norm.key_input(p, key_groups, fixed.get(k).map(|m| m.as_slice()));
+            Tensor::from_vec(x, (1, kw), device)
+        })
+        .collect::<candle_core::Result<_>>()?;
+    let prev0 = Tensor::from_vec(norm.apply(&key_poses[0]).collect::<Vec<f32>>(), (1, d), device)?;
     let last = *key_frames.last().unwrap_or(&0);
     let mut out = vec![key_poses[0].clone()];
-    let mut prev = keys[0].clone();
+    let mut prev = prev0;
     let mut state = model.zero_state(1)?;
     for t in 1..=last {
         let (a, b, rel) = KeyedSequence::interval(key_frames, t);
@@ -492,7 +606,7 @@ mod tests {
                 frames: (0..31)
                     .map(|t| {
                         let u = t as f64 / 30.0 + 0.1 * i as f64;
-                        [u, 0.1 * (3.0 * u).sin(), 0.0, 0.5 + 0.2 * u, -1.0 - 0.3 * (2.0 * u).cos(), -1.2]
+                        vec![u, 0.1 * (3.0 * u).sin(), 0.0, 0.5 + 0.2 * u, -1.0 - 0.3 * (2.0 * u).cos(), -1.2]
                     })
                     .collect(),
                 keys: vec![0, 10, 20, 30],

@@ -115,7 +115,7 @@ struct Completion {
 
 impl Completion {
     fn run(&mut self) -> anyhow::Result<()> {
-        let keys: Vec<MotionKeys> = self.keys.iter().map(|p| MotionKeys { frames: &KEY_FRAMES, poses: p }).collect();
+        let keys: Vec<MotionKeys> = self.keys.iter().map(|p| MotionKeys::whole(&KEY_FRAMES, p)).collect();
         let mut outs: Vec<&mut [f32]> = self.out.iter_mut().map(|o| o.as_mut_slice()).collect();
         self.runner.complete_batch(&keys, &mut outs)?;
         Ok(())

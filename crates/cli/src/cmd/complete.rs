@@ -45,12 +45,16 @@ pub struct CompleteArgs {
     pub fps: Option<f64>,
 }
 
-/// One key as written in the file.
+/// One key as written in the file: a lamp key gives its `pose`; a humanoid key takes its pose
+/// from frame `source_frame` (default: `frame`) of the file's `bvh` and may fix only some
+/// `joints` (`"root"`: the root position).
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct KeyEntry {
     frame: usize,
-    pose: Vec<f64>,
+    pose: Option<Vec<f64>>,
+    source_frame: Option<usize>,
+    joints: Option<Vec<String>>,
 }
 
 /// A keys file as written.
@@ -62,6 +66,7 @@ struct KeysFile {
     dof_names: Option<Vec<String>>,
     fps: Option<f64>,
     frames: Option<usize>,
+    bvh: Option<PathBuf>,
     keys: Vec<KeyEntry>,
 }
 
@@ -81,6 +86,131 @@ pub struct Keys {
 /// Parses and checks the text of a keys file for a model of `dof_names` degrees of freedom.
 /// Errors say what is wrong and how to fix it (without the file name).
 pub fn parse_keys(text: &str, dof_names: &[String]) -> Result<Keys, String> {
+    let file = parse_file(text)?;
+    if file.bvh.is_some() || file.keys.iter().any(|k| k.joints.is_some() || k.source_frame.is_some()) {
+        return Err(
+            "\"bvh\", \"source_frame\" and \"joints\" are for humanoid models; this model completes the lamp's \
+                    degrees of freedom: give each key a \"pose\""
+                .into(),
+        );
+    }
+    let d = dof_names.len();
+    if let Some(names) = &file.dof_names
+        && names != dof_names
+    {
+        return Err(format!(
+            "the keys are for the degrees of freedom {names:?}, but the model was trained on {dof_names:?}: this \
+             keys file is for another character"
+        ));
+    }
+    for (i, k) in file.keys.iter().enumerate() {
+        let Some(pose) = &k.pose else {
+            return Err(format!(
+                "key {i} (frame {}) has no \"pose\": give its {d} values ({})",
+                k.frame,
+                dof_names.join(", ")
+            ));
+        };
+        if pose.len() != d {
+            return Err(format!(
+                "key {i} (frame {}) has {} values; the model completes {d} degrees of freedom: {}",
+                k.frame,
+                pose.len(),
+                dof_names.join(", ")
+            ));
+        }
+        if let Some(j) = pose.iter().position(|v| !v.is_finite()) {
+            return Err(format!("key {i} (frame {}): {} is {}, not a finite number", k.frame, dof_names[j], pose[j]));
+        }
+    }
+    let offset = file.keys[0].frame;
+    Ok(Keys {
+        frames: file.keys.iter().map(|k| k.frame - offset).collect(),
+        offset,
+        poses: file.keys.into_iter().map(|k| k.pose.unwrap_or_default()).collect(),
+        fps: file.fps,
+    })
+}
+
+/// Checked humanoid keys ([`parse_humanoid_keys`]).
+#[derive(Debug, PartialEq)]
+pub struct HumanoidKeys {
+    /// The BVH holding the key poses, as the file names it (relative to the keys file).
+    pub bvh: PathBuf,
+    /// Frame of the first key in the file (the output starts there).
+    pub offset: usize,
+    /// The keys, frames relative to the first.
+    pub keys: Vec<zoo_arnn::humanoid::HumanoidKey>,
+    /// Frames per second, if the file gives it.
+    pub fps: Option<f64>,
+}
+
+/// Parses and checks a humanoid keys file for a model of joints `joint_names`: the poses come
+/// from the file's `bvh`, a key's `joints` (names, `"root"` for the root position) fix only
+/// those parts of its pose.
+pub fn parse_humanoid_keys(text: &str, joint_names: &[String]) -> Result<HumanoidKeys, String> {
+    let file = parse_file(text)?;
+    let Some(bvh) = file.bvh.clone() else {
+        return Err(
+            "a humanoid model takes its key poses from a BVH: add \"bvh\": \"POSES.bvh\" (relative to the keys \
+                    file) and give each key the \"frame\" (and \"source_frame\") of its pose there"
+                .into(),
+        );
+    };
+    if file.dof_names.is_some() || file.keys.iter().any(|k| k.pose.is_some()) {
+        return Err("\"pose\" and \"dof_names\" are for the lamp; a humanoid key's pose comes from the \"bvh\" (its \
+                    \"source_frame\")"
+            .into());
+    }
+    let offset = file.keys[0].frame;
+    let groups = 1 + joint_names.len();
+    let mut keys = Vec::with_capacity(file.keys.len());
+    for (i, k) in file.keys.iter().enumerate() {
+        let fixed = match &k.joints {
+            None => None,
+            Some(names) => {
+                let mut m = vec![false; groups];
+                for n in names {
+                    let g = if n == "root" {
+                        0
+                    } else {
+                        1 + joint_names.iter().position(|j| j == n).ok_or_else(|| {
+                            format!(
+                                "key {i} (frame {}) fixes joint \"{n}\", which the model's skeleton does not have \
+                                 (joints: root, {}): this keys file is for another skeleton",
+                                k.frame,
+                                joint_names.join(", ")
+                            )
+                        })?
+                    };
+                    m[g] = true;
+                }
+                if !m.contains(&true) {
+                    return Err(format!(
+                        "key {i} (frame {}) fixes no joint: list at least one, or drop the key",
+                        k.frame
+                    ));
+                }
+                if i == 0 && m.contains(&false) {
+                    return Err(
+                        "the first key is the start pose: it must fix the whole pose (leave out \"joints\")".into()
+                    );
+                }
+                Some(m)
+            }
+        };
+        keys.push(zoo_arnn::humanoid::HumanoidKey {
+            frame: k.frame - offset,
+            source: k.source_frame.unwrap_or(k.frame),
+            fixed,
+        });
+    }
+    Ok(HumanoidKeys { bvh, offset, keys, fps: file.fps })
+}
+
+/// Parses a keys file and checks what every model needs: format, version, fps, at least two
+/// keys in increasing frame order, `frames` consistent with the last key, the span.
+fn parse_file(text: &str) -> Result<KeysFile, String> {
     let file: KeysFile = serde_json::from_str(text).map_err(|e| {
         format!(
             "not a keys file: {e} (expected {{\"format\": \"{KEYS_FORMAT}\", \"version\": 1, \"keys\": [{{\"frame\": 0, \
@@ -97,15 +227,6 @@ pub fn parse_keys(text: &str, dof_names: &[String]) -> Result<Keys, String> {
     {
         return Err(format!("keys file version {v} is not known to this zoo (it reads version 1): update zoo"));
     }
-    let d = dof_names.len();
-    if let Some(names) = &file.dof_names
-        && names != dof_names
-    {
-        return Err(format!(
-            "the keys are for the degrees of freedom {names:?}, but the model was trained on {dof_names:?}: this \
-             keys file is for another character"
-        ));
-    }
     if let Some(fps) = file.fps
         && !(fps.is_finite() && fps > 0.0)
     {
@@ -118,17 +239,6 @@ pub fn parse_keys(text: &str, dof_names: &[String]) -> Result<Keys, String> {
         ));
     }
     for (i, k) in file.keys.iter().enumerate() {
-        if k.pose.len() != d {
-            return Err(format!(
-                "key {i} (frame {}) has {} values; the model completes {d} degrees of freedom: {}",
-                k.frame,
-                k.pose.len(),
-                dof_names.join(", ")
-            ));
-        }
-        if let Some(j) = k.pose.iter().position(|v| !v.is_finite()) {
-            return Err(format!("key {i} (frame {}): {} is {}, not a finite number", k.frame, dof_names[j], k.pose[j]));
-        }
         if i > 0 && k.frame <= file.keys[i - 1].frame {
             return Err(format!(
                 "key {i} is at frame {} but key {} is at frame {}: keys must be in increasing frame order, one key per \
@@ -167,12 +277,7 @@ pub fn parse_keys(text: &str, dof_names: &[String]) -> Result<Keys, String> {
             crate::args::MAX_FRAMES
         ));
     }
-    Ok(Keys {
-        frames: file.keys.iter().map(|k| k.frame - offset).collect(),
-        offset,
-        poses: file.keys.into_iter().map(|k| k.pose).collect(),
-        fps: file.fps,
-    })
+    Ok(file)
 }
 
 fn read_keys(path: &Path, dof_names: &[String]) -> anyhow::Result<Keys> {
@@ -199,6 +304,9 @@ pub fn run(a: CompleteArgs) -> anyhow::Result<()> {
     let (model, norm) = zoo_arnn::checkpoint::load(&a.model, &candle_core::Device::Cpu)
         .with_context(|| format!("loading the ARNN in {}", a.model.display()))?;
     let config = model.config();
+    if let Some(skeleton) = &config.skeleton {
+        return complete_humanoid(&a, &model, &norm, &skeleton.names);
+    }
     let Some(lamp) = config.lamp.clone() else {
         bail!("{}: the model has no lamp geometry in config.json (retrain it with `zoo train arnn`)", a.model.display())
     };
@@ -272,6 +380,62 @@ pub fn run(a: CompleteArgs) -> anyhow::Result<()> {
         dof_names[pj],
         ang.to_degrees(),
         dof_names.get(aj).map_or("-", |s| s.as_str()),
+    );
+    Ok(())
+}
+
+/// `zoo complete` with a humanoid ARNN: key poses from a BVH, partial keys, a BVH out.
+fn complete_humanoid(
+    a: &CompleteArgs,
+    model: &zoo_arnn::Arnn,
+    norm: &zoo_arnn::Normalization,
+    joint_names: &[String],
+) -> anyhow::Result<()> {
+    if a.plot.is_some() || a.no_ground {
+        bail!(
+            "--plot and --no-ground are for the lamp; look at a humanoid completion with `zoo render {}`",
+            a.out.display()
+        );
+    }
+    let text =
+        std::fs::read_to_string(&a.keys).with_context(|| format!("--keys {}: cannot read it", a.keys.display()))?;
+    let keys =
+        parse_humanoid_keys(&text, joint_names).map_err(|e| anyhow::anyhow!("--keys {}: {e}", a.keys.display()))?;
+    let bvh = a.keys.parent().unwrap_or(Path::new(".")).join(&keys.bvh);
+    let source = zoo_data::bvh::read_model_clip(&bvh)
+        .with_context(|| format!("--keys {}: reading its bvh {}", a.keys.display(), bvh.display()))?;
+    let mut done = zoo_arnn::humanoid::complete_clip(model, norm, &source, &keys.keys)
+        .with_context(|| format!("--keys {}", a.keys.display()))?;
+    if let Some(fps) = a.fps.or(keys.fps) {
+        done.clip.frame_time = 1.0 / fps;
+    }
+    zoo_data::bvh::write_file(&done.clip, &a.out).with_context(|| format!("writing {}", a.out.display()))?;
+    let (deg, key, joint) = done.angle_miss;
+    if let Some(j) = &a.json {
+        let v = serde_json::json!({
+            "format": COMPLETION_FORMAT,
+            "version": 1,
+            "model": a.model,
+            "fps": 1.0 / done.clip.frame_time,
+            "first_frame": keys.offset,
+            "key_frames": keys.keys.iter().map(|k| k.frame).collect::<Vec<_>>(),
+            "root_miss": done.root_miss,
+            "angle_miss_degrees": deg,
+            "frames": done.clip.frames(),
+        });
+        std::fs::write(j, serde_json::to_string_pretty(&v)?).with_context(|| format!("writing {}", j.display()))?;
+    }
+    println!(
+        "completed {} frames from {} keys ({} partial) into {}{}; largest key miss: root {:.2} (clip units), {:.2} deg \
+         ({} at key {key})",
+        done.clip.frames(),
+        keys.keys.len(),
+        keys.keys.iter().filter(|k| k.fixed.as_ref().is_some_and(|f| f.contains(&false))).count(),
+        a.out.display(),
+        a.json.as_ref().map(|j| format!(" and {}", j.display())).unwrap_or_default(),
+        done.root_miss,
+        deg,
+        joint_names.get(joint).map_or("-", |s| s.as_str()),
     );
     Ok(())
 }
@@ -360,6 +524,39 @@ mod tests {
     }
 
     #[test]
+    fn humanoid_keys_name_joints_and_refuse_lamp_fields() {
+        let joints: Vec<String> = ["Hips", "Spine", "Head"].iter().map(|s| s.to_string()).collect();
+        let k = parse_humanoid_keys(
+            r#"{"bvh": "a.bvh", "keys": [{"frame": 4}, {"frame": 10, "source_frame": 50, "joints": ["root", "Head"]},
+                {"frame": 20}]}"#,
+            &joints,
+        )
+        .unwrap();
+        assert_eq!((k.bvh, k.offset), (PathBuf::from("a.bvh"), 4));
+        assert_eq!(k.keys.iter().map(|k| (k.frame, k.source)).collect::<Vec<_>>(), [(0, 4), (6, 50), (16, 20)]);
+        assert_eq!(k.keys[1].fixed, Some(vec![true, false, false, true]));
+        assert_eq!((k.keys[0].fixed.clone(), k.keys[2].fixed.clone()), (None, None));
+        let err = |t: &str| parse_humanoid_keys(t, &joints).unwrap_err();
+        assert!(err(r#"{"keys": [{"frame": 0}, {"frame": 5}]}"#).contains("add \"bvh\""));
+        assert!(
+            err(r#"{"bvh": "a.bvh", "keys": [{"frame": 0, "pose": [1]}, {"frame": 5}]}"#).contains("are for the lamp")
+        );
+        assert!(
+            err(r#"{"bvh": "a.bvh", "keys": [{"frame": 0}, {"frame": 5, "joints": []}]}"#).contains("fixes no joint")
+        );
+        assert!(
+            err(r#"{"bvh": "a.bvh", "keys": [{"frame": 0, "joints": ["Hips"]}, {"frame": 5}]}"#).contains("start pose")
+        );
+        assert!(
+            err(r#"{"bvh": "a.bvh", "keys": [{"frame": 0}, {"frame": 5, "joints": ["Tail"]}]}"#)
+                .contains("another skeleton")
+        );
+        // The lamp refuses humanoid fields.
+        let e = parse_keys(r#"{"bvh": "a.bvh", "keys": [{"frame": 0}, {"frame": 5}]}"#, &names()).unwrap_err();
+        assert!(e.contains("are for humanoid models"), "{e}");
+    }
+
+    #[test]
     fn bad_keys_are_named() {
         let pose = "[0, 0.02, 0, 0.5, -1.1, -1.2]";
         let err = |t: String| parse_keys(&t, &names()).unwrap_err();
@@ -373,7 +570,9 @@ mod tests {
             r#"{{"keys": [{{"frame": 0, "pose": {pose}}}, {{"frame": 3, "pose": [NaN, 0, 0, 0, 0, 0]}}]}}"#
         ));
         assert!(e.contains("not a keys file") && e.contains("finite"), "{e}");
-        let e = err(format!(r#"{{"dof_names": ["a"], "keys": [{{"frame": 0, "pose": {pose}}}]}}"#));
+        let e = err(format!(
+            r#"{{"dof_names": ["a"], "keys": [{{"frame": 0, "pose": {pose}}}, {{"frame": 5, "pose": {pose}}}]}}"#
+        ));
         assert!(e.contains("another character"), "{e}");
         let e = err(format!(r#"{{"keys": [{{"frame": 0, "pose": {pose}}}, {{"frame": 300000, "pose": {pose}}}]}}"#));
         assert!(e.contains("past the 100000 frames"), "{e}");

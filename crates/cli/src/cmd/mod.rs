@@ -23,6 +23,7 @@ pub mod render;
 pub mod stitch;
 pub mod train;
 pub mod train_arnn;
+pub mod train_arnn_humanoid;
 pub mod train_rmr;
 pub mod train_rnngmm;
 pub mod transition;

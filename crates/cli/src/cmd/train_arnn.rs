@@ -57,9 +57,15 @@ pub enum ArnnPreset {
 #[derive(Args)]
 pub struct ArnnArgs {
     /// Folder written by `zoo data luxo`; without it, lamp hops are generated in memory
-    /// (`--sequences`, `--k-max`, deterministic for `--seed`).
+    /// (`--sequences`, `--k-max`, deterministic for `--seed`). With `--valid-glob`: a folder
+    /// (or file) of humanoid BVH clips instead (docs/arnn.md, "Humanoid keys").
     #[arg(long)]
     pub data: Option<PathBuf>,
+    /// Train on humanoid BVH clips in `--data` (not the lamp): clips whose file name matches
+    /// this glob are the validation split (bandai2: `'*_youthful_*'`), the others the training
+    /// split; keys are drawn every 5-30 frames and in the in-betweening benchmark's layout.
+    #[arg(long, requires = "data")]
+    pub valid_glob: Option<String>,
     /// Sequences generated when `--data` is not given.
     #[arg(long, default_value_t = 24, conflicts_with = "data", allow_hyphen_values = true, value_parser = crate::args::sequences)]
     pub sequences: usize,
@@ -69,7 +75,7 @@ pub struct ArnnArgs {
     pub k_max: usize,
     /// Fraction of the sequences held out as the test set (whole sequences, fixed by `--seed`;
     /// 0.2 gives the paper's 240/60 of 300). The test set also picks the best checkpoint.
-    #[arg(long, default_value_t = 0.2, allow_hyphen_values = true, value_parser = crate::args::unit_fraction)]
+    #[arg(long, default_value_t = 0.2, allow_hyphen_values = true, value_parser = crate::args::unit_fraction, conflicts_with = "valid_glob")]
     pub test_fraction: f64,
     /// Epochs to train (an epoch visits every training sequence once). The curriculum spans
     /// this many epochs: with `--time-limit`, choose epochs that fit in it.
@@ -155,7 +161,7 @@ const RUN_FILES: [&str; 10] = [
 ];
 
 /// The run folder, checked before any data is generated or loaded (as `zoo train rtn` does).
-fn prepare_run_folder(a: &ArnnArgs) -> anyhow::Result<PathBuf> {
+pub(crate) fn prepare_run_folder(a: &ArnnArgs) -> anyhow::Result<PathBuf> {
     crate::cmd::train::prepare_run_folder_for(&a.out, a.resume.as_deref(), a.overwrite, &RUN_FILES, |dir| {
         let kind = crate::registry::model_kind(dir)?;
         if kind != "arnn" {
@@ -248,6 +254,9 @@ pub fn lamp_data(settings: &DataSettings) -> anyhow::Result<LampData> {
 
 /// Runs `zoo train arnn`.
 pub fn run(a: ArnnArgs) -> anyhow::Result<()> {
+    if a.valid_glob.is_some() || a.resume.as_deref().is_some_and(crate::cmd::train_arnn_humanoid::is_humanoid_run) {
+        return crate::cmd::train_arnn_humanoid::run(a);
+    }
     let device = candle_core::Device::Cpu;
     if a.test_fraction >= 1.0 {
         bail!("--test-fraction {} must be below 1 (0.2 holds out a fifth of the sequences)", a.test_fraction);

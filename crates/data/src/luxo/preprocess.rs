@@ -9,7 +9,6 @@
 //! the first and last keys are never removed, so every frame lies between two keys.
 
 use super::LuxoError;
-use super::lamp::{DOFS, LampPose};
 pub use super::sequence::HOP_SAMPLES;
 use super::sequence::LuxoSequence;
 use serde::{Deserialize, Serialize};
@@ -23,8 +22,9 @@ pub const STILL_SAMPLES: usize = 6;
 pub struct KeyedSequence {
     /// Name of the source sequence.
     pub name: String,
-    /// The degrees of freedom at every frame (the paper's `Y`).
-    pub frames: Vec<LampPose>,
+    /// The degrees of freedom at every frame (the paper's `Y`): the lamp's six
+    /// ([`LampPose`](super::LampPose) order), or any fixed number (the humanoid's root and joint rotations).
+    pub frames: Vec<Vec<f64>>,
     /// Frame indices of the keys (the paper's `T`), increasing; the first is 0 and the last
     /// is `frames.len() - 1`.
     pub keys: Vec<usize>,
@@ -32,8 +32,8 @@ pub struct KeyedSequence {
 
 impl KeyedSequence {
     /// The key poses (the paper's `X`).
-    pub fn key_poses(&self) -> Vec<LampPose> {
-        self.keys.iter().map(|&k| self.frames[k]).collect()
+    pub fn key_poses(&self) -> Vec<Vec<f64>> {
+        self.keys.iter().map(|&k| self.frames[k].clone()).collect()
     }
 
     /// For frame `t`, the keys `K` and `K + 1` around it (indices into `keys`) and
@@ -66,13 +66,13 @@ pub fn preprocess(seq: &LuxoSequence) -> Result<KeyedSequence, LuxoError> {
         if h > 0 {
             let (a, b) = (seq.hops[h - 1].hop.landing_s, e.hop.liftoff_s);
             for i in 0..STILL_SAMPLES {
-                frames.push(seq.pose_at(a + (b - a) * (i + 1) as f64 / (STILL_SAMPLES + 1) as f64));
+                frames.push(seq.pose_at(a + (b - a) * (i + 1) as f64 / (STILL_SAMPLES + 1) as f64).to_vec());
             }
         }
         let start = frames.len();
         let (a, b) = (e.hop.liftoff_s, e.hop.landing_s);
         for i in 0..HOP_SAMPLES {
-            frames.push(seq.pose_at(a + (b - a) * i as f64 / (HOP_SAMPLES - 1) as f64));
+            frames.push(seq.pose_at(a + (b - a) * i as f64 / (HOP_SAMPLES - 1) as f64).to_vec());
         }
         keys.extend([start, start + e.in_air_sample, start + HOP_SAMPLES - 1]);
     }
@@ -121,22 +121,24 @@ pub fn split(n: usize, test_fraction: f64, seed: u64) -> Result<Split, LuxoError
 }
 
 /// Mean and standard deviation of each degree of freedom over all frames (for normalising
-/// network inputs); a standard deviation below 1e-6 is reported as 1.
-pub fn dof_statistics(seqs: &[KeyedSequence]) -> ([f64; DOFS], [f64; DOFS]) {
+/// network inputs); a standard deviation below 1e-6 is reported as 1. The number of degrees
+/// of freedom is the first frame's (sequences holding other numbers are the caller's error).
+pub fn dof_statistics(seqs: &[KeyedSequence]) -> (Vec<f64>, Vec<f64>) {
+    let d = seqs.iter().flat_map(|s| s.frames.first()).next().map_or(0, |f| f.len());
     let n = seqs.iter().map(|s| s.frames.len()).sum::<usize>().max(1) as f64;
-    let mut mean = [0.0; DOFS];
+    let mut mean = vec![0.0; d];
     for f in seqs.iter().flat_map(|s| &s.frames) {
-        for d in 0..DOFS {
-            mean[d] += f[d] / n;
+        for (m, v) in mean.iter_mut().zip(f) {
+            *m += v / n;
         }
     }
-    let mut var = [0.0; DOFS];
+    let mut var = vec![0.0; d];
     for f in seqs.iter().flat_map(|s| &s.frames) {
-        for d in 0..DOFS {
-            var[d] += (f[d] - mean[d]).powi(2) / n;
+        for ((q, v), m) in var.iter_mut().zip(f).zip(&mean) {
+            *q += (v - m).powi(2) / n;
         }
     }
-    (mean, var.map(|v| if v.sqrt() < 1e-6 { 1.0 } else { v.sqrt() }))
+    (mean, var.into_iter().map(|v: f64| if v.sqrt() < 1e-6 { 1.0 } else { v.sqrt() }).collect())
 }
 
 #[cfg(test)]

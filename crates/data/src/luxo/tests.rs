@@ -136,7 +136,7 @@ fn preprocessing_resamples_hops_and_keeps_the_keys() {
     assert_eq!((k.keys[0], k.keys[2], k.keys[8]), (0, HOP_SAMPLES - 1, k.frames.len() - 1));
     // The keys of the preprocessed sequence are the generated keys, exactly.
     for (key, pose) in seq.keys.iter().zip(k.key_poses()) {
-        assert_eq!(key.pose, pose);
+        assert_eq!(key.pose.to_vec(), pose);
     }
 }
 
