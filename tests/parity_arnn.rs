@@ -22,23 +22,29 @@ use zoo_tests::toy_onnx::lcg;
 const TOLERANCE: f64 = 1e-4;
 const KEY_FRAMES: [usize; 4] = [0, 9, 24, 39];
 
-fn fixture() -> (ArnnConfig, VarMap, Arnn, Normalization) {
-    let config = ArnnConfig::tiny();
+/// A model of `config` with fixed LCG weights (stream `seed + k` for the k-th variable by name).
+fn lcg_model(config: &ArnnConfig, seed: u64) -> (VarMap, Arnn) {
     let mut varmap = VarMap::new();
-    let model = Arnn::new(&config, VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu)).unwrap();
+    let model = Arnn::new(config, VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu)).unwrap();
     let mut vars: Vec<(String, Vec<usize>)> =
         varmap.data().lock().unwrap().iter().map(|(n, v)| (n.clone(), v.dims().to_vec())).collect();
     vars.sort();
     for (k, (name, dims)) in vars.iter().enumerate() {
         let fan_in = if dims.len() == 2 { dims[1] } else { config.hidden };
         let t = Tensor::from_vec(
-            lcg(500 + k as u64, dims.iter().product(), 1.5 / (fan_in as f32).sqrt()),
+            lcg(seed + k as u64, dims.iter().product(), 1.5 / (fan_in as f32).sqrt()),
             dims.as_slice(),
             &Device::Cpu,
         )
         .unwrap();
         varmap.set_one(name, &t).unwrap();
     }
+    (varmap, model)
+}
+
+fn fixture() -> (ArnnConfig, VarMap, Arnn, Normalization) {
+    let config = ArnnConfig::tiny();
+    let (varmap, model) = lcg_model(&config, 500);
     let norm = Normalization { mean: vec![0.5, 0.1, 0.0, 0.5, -1.1, -1.2], std: vec![0.4, 0.06, 0.3, 0.2, 0.5, 0.3] };
     (config, varmap, model, norm)
 }
@@ -217,32 +223,10 @@ fn partial_keys_complete_the_same_in_candle_tract_and_onnxruntime() {
         fps: 30.0,
     };
     let (dof_names, groups) = zoo_arnn::humanoid::pose_layout(&names);
-    let tiny = ArnnConfig::tiny();
-    let config = ArnnConfig {
-        feature: tiny.feature,
-        hidden: tiny.hidden,
-        decoder: tiny.decoder,
-        gru_dropout: tiny.gru_dropout,
-        linear_dropout: tiny.linear_dropout,
-        ..ArnnConfig::humanoid(skeleton, dof_names, groups)
-    };
+    let config = ArnnConfig::humanoid(skeleton, dof_names, groups).sized_like(&ArnnConfig::tiny());
     let (d, g) = (config.dofs, config.groups());
     assert_eq!((d, g, config.key_width()), (15, 4, 19));
-    let mut varmap = VarMap::new();
-    let model = Arnn::new(&config, VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu)).unwrap();
-    let mut vars: Vec<(String, Vec<usize>)> =
-        varmap.data().lock().unwrap().iter().map(|(n, v)| (n.clone(), v.dims().to_vec())).collect();
-    vars.sort();
-    for (k, (name, dims)) in vars.iter().enumerate() {
-        let fan_in = if dims.len() == 2 { dims[1] } else { config.hidden };
-        let t = Tensor::from_vec(
-            lcg(900 + k as u64, dims.iter().product(), 1.5 / (fan_in as f32).sqrt()),
-            dims.as_slice(),
-            &Device::Cpu,
-        )
-        .unwrap();
-        varmap.set_one(name, &t).unwrap();
-    }
+    let (varmap, model) = lcg_model(&config, 900);
     let mut mean = vec![0.0, 90.0, 0.0];
     mean.extend([0.9, 0.1, 0.0, 0.0].repeat(3));
     let mut std = vec![40.0, 5.0, 40.0];

@@ -129,15 +129,7 @@ fn keyframes_allocations() {
     };
     let (dof_names, groups) = zoo_arnn::humanoid::pose_layout(&names);
     let tiny = zoo_arnn::ArnnConfig::tiny();
-    for config in [
-        tiny.clone(),
-        zoo_arnn::ArnnConfig {
-            feature: tiny.feature,
-            hidden: tiny.hidden,
-            decoder: tiny.decoder,
-            ..zoo_arnn::ArnnConfig::humanoid(skeleton, dof_names, groups)
-        },
-    ] {
+    for config in [tiny.clone(), zoo_arnn::ArnnConfig::humanoid(skeleton, dof_names, groups).sized_like(&tiny)] {
         let varmap = candle_nn::VarMap::new();
         zoo_arnn::Arnn::new(&config, zoo_nn::SeededVarMap::builder(&varmap, 5, DType::F32, &Device::Cpu)).unwrap();
         let d = config.dofs;

@@ -224,8 +224,8 @@ impl ArnnConfig {
     /// decoder of 10): `dofs` values per frame in `key_groups`' groups, feature nets of 128, GRUs
     /// of 256 and a decoder of 256; keys sampled every 5-30 frames, half the time in the
     /// in-betweening benchmark's layout (10 context keys, then 5-45 frames to the target); a
-    /// fifth of the keys after the first partial; gradients clipped to norm 1 (the free-running
-    /// humanoid net diverged without it when the key weight ramped up).
+    /// fifth of the keys after the first partial; Adam 5e-4 with gradients clipped to norm 1 (the
+    /// free-running humanoid net diverged at 1e-3, with and without clipping: docs/arnn.md).
     pub fn humanoid(skeleton: HumanoidSkeleton, dof_names: Vec<String>, key_groups: Vec<usize>) -> Self {
         ArnnConfig {
             dofs: key_groups.len(),
@@ -245,8 +245,23 @@ impl ArnnConfig {
             hidden: 256,
             decoder: 256,
             batch_size: 32,
+            learning_rate: 5e-4,
             max_grad_norm: 1.0,
             ..Self::paper()
+        }
+    }
+
+    /// This configuration with the layer widths, batch size and dropout of `sizes` (e.g. a
+    /// humanoid configuration at [`ArnnConfig::tiny`]'s sizes for tests).
+    pub fn sized_like(self, sizes: &ArnnConfig) -> Self {
+        ArnnConfig {
+            feature: sizes.feature,
+            hidden: sizes.hidden,
+            decoder: sizes.decoder,
+            batch_size: sizes.batch_size,
+            gru_dropout: sizes.gru_dropout,
+            linear_dropout: sizes.linear_dropout,
+            ..self
         }
     }
 

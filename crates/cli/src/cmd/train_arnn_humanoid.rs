@@ -98,16 +98,7 @@ pub fn run(a: ArnnArgs) -> anyhow::Result<()> {
     } else {
         let mut config = humanoid::config_for(&skeleton, 1.0 / train_clips[0].clip.frame_time);
         if a.preset == ArnnPreset::Tiny {
-            let tiny = ArnnConfig::tiny();
-            config = ArnnConfig {
-                feature: tiny.feature,
-                hidden: tiny.hidden,
-                decoder: tiny.decoder,
-                batch_size: tiny.batch_size,
-                gru_dropout: tiny.gru_dropout,
-                linear_dropout: tiny.linear_dropout,
-                ..config
-            };
+            config = config.sized_like(&ArnnConfig::tiny());
         }
         if let Some(b) = a.batch_size {
             config.batch_size = b;
