@@ -76,6 +76,17 @@ fn push_pose(root: DVec3, rot: &[DQuat], prev: Option<&[f64]>, out: &mut Vec<f64
     }
 }
 
+/// Flips each rotation of a frame to the sign nearest the previous frame's (`last`, updated to
+/// this frame's): the pose is the same, the components continue (L2Q and BVH curves compare them).
+fn continue_signs(rot: &mut [DQuat], last: &mut [DQuat]) {
+    for (q, l) in rot.iter_mut().zip(last) {
+        if q.dot(*l) < 0.0 {
+            *q = -*q;
+        }
+        *l = *q;
+    }
+}
+
 /// Poses of consecutive frames: `rot` frames x joints, `root` one per frame.
 pub fn poses(root: &[DVec3], rot: &[DQuat], joints: usize) -> Vec<Vec<f64>> {
     let mut out: Vec<Vec<f64>> = Vec::with_capacity(root.len());
@@ -206,7 +217,7 @@ impl ArnnMethod {
         };
         let keys: Vec<Tensor> = (0..key_frames.len()).map(key_tensor).collect::<candle_core::Result<_>>()?;
         let pose_tensor = |k: usize| -> candle_core::Result<Tensor> {
-            let v: Vec<f32> = key_poses.iter().flat_map(|p| self.norm_apply(&p[k])).collect();
+            let v: Vec<f32> = key_poses.iter().flat_map(|p| self.norm.apply(&p[k])).collect();
             Tensor::from_vec(v, (b, d), dev)
         };
         let mut prev = pose_tensor(0)?;
@@ -224,9 +235,7 @@ impl ArnnMethod {
             }
             let rows: Vec<Vec<f32>> = y.to_vec2()?;
             for (o, r) in out.iter_mut().zip(&rows) {
-                o.push(
-                    r.iter().zip(&self.norm.mean).zip(&self.norm.std).map(|((x, m), s)| *x as f64 * s + m).collect(),
-                );
+                o.push(self.norm.restore(r));
             }
             prev = y;
         }
@@ -240,21 +249,14 @@ impl ArnnMethod {
                     Transition { root: Vec::with_capacity(n), rot: Vec::with_capacity(n * j), raw_positions: None };
                 let mut last = task.past_rot[(N_PAST - 1) * j..N_PAST * j].to_vec();
                 for p in &frames {
-                    let (root, rot) = decode(p, j);
+                    let (root, mut rot) = decode(p, j);
+                    continue_signs(&mut rot, &mut last);
                     tr.root.push(root);
-                    for (q, l) in rot.into_iter().zip(&mut last) {
-                        let q = if q.dot(*l) < 0.0 { -q } else { q };
-                        *l = q;
-                        tr.rot.push(q);
-                    }
+                    tr.rot.extend(rot);
                 }
                 tr
             })
             .collect())
-    }
-
-    fn norm_apply<'a>(&'a self, pose: &'a [f64]) -> impl Iterator<Item = f32> + 'a {
-        pose.iter().zip(&self.norm.mean).zip(&self.norm.std).map(|((v, m), s)| ((v - m) / s) as f32)
     }
 }
 
@@ -379,12 +381,7 @@ pub fn complete_clip(
     for p in &out {
         let (root, mut r) = decode(p, j);
         r[0] = from_canon * r[0];
-        for (q, l) in r.iter_mut().zip(&mut last) {
-            if q.dot(*l) < 0.0 {
-                *q = -*q;
-            }
-            *l = *q;
-        }
+        continue_signs(&mut r, &mut last);
         clip.local_rotations.extend(r);
         clip.local_positions.push(from_canon * root + centre);
         clip.local_positions.extend_from_slice(&source.skeleton.offsets[1..]);

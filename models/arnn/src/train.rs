@@ -39,8 +39,14 @@ impl Normalization {
         Normalization { mean, std }
     }
 
-    fn apply<'a>(&'a self, pose: &'a [f64]) -> impl Iterator<Item = f32> + 'a {
+    /// A pose in network units, `(x - mean) / std`.
+    pub(crate) fn apply<'a>(&'a self, pose: &'a [f64]) -> impl Iterator<Item = f32> + 'a {
         pose.iter().zip(&self.mean).zip(&self.std).map(|((v, m), s)| ((v - m) / s) as f32)
+    }
+
+    /// A network output back in physical units, `y * std + mean`.
+    pub(crate) fn restore(&self, y: &[f32]) -> Vec<f64> {
+        y.iter().zip(&self.mean).zip(&self.std).map(|((x, m), s)| *x as f64 * s + m).collect()
     }
 
     /// A key's input to its feature net ([`ArnnConfig::key_width`] values): the normalised
@@ -588,7 +594,7 @@ pub fn complete_partial(
         let (y, s) = model.step(&prev, &keys[a], &keys[b], &t_rel, &state, None)?;
         state = s;
         let v: Vec<f32> = y.flatten_all()?.to_vec1()?;
-        out.push(v.iter().zip(&norm.mean).zip(&norm.std).map(|((x, m), s)| *x as f64 * s + m).collect());
+        out.push(norm.restore(&v));
         prev = y;
     }
     Ok(out)
