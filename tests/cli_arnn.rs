@@ -302,10 +302,14 @@ fn table_2_variants_train_and_evaluate() {
         let config: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(runp.join("config.json")).unwrap()).unwrap();
         assert_eq!(config["architecture"], variant);
+        assert_eq!(config["no_memory_output"], "interpolation");
         let (ok, stdout, stderr) = run(&["eval-arnn", "--model", runp.to_str().unwrap()]);
         assert!(
-            ok && stdout
-                .contains(&format!("{} architecture", if variant == "no-memory" { "NoMemory" } else { "Segregated" })),
+            ok && stdout.contains(if variant == "no-memory" {
+                "NoMemory architecture (Interpolation output)"
+            } else {
+                "Segregated architecture"
+            }),
             "{stdout}\n{stderr}"
         );
         let onnx = dir.path().join("x.onnx");
@@ -350,6 +354,9 @@ fn bad_keys_and_folders_are_refused_with_clear_errors() {
     assert!(!ok && e.contains("no luxo_*.json sequence found"), "{e}");
     let (ok, _, e) = run(&["train", "arnn", "--test-fraction", "1", "--out", dir.path().join("x").to_str().unwrap()]);
     assert!(!ok && e.contains("--test-fraction <TEST_FRACTION>': 1 is outside the valid range (0, 1)"), "{e}");
+    let (ok, _, e) =
+        run(&["train", "arnn", "--no-memory-output", "pose", "--out", dir.path().join("z").to_str().unwrap()]);
+    assert!(!ok && e.contains("--no-memory-output is a setting of a new `--variant no-memory` run"), "{e}");
 }
 
 /// Issue 13, the humanoid: a tiny ARNN trained on synthetic BVH clips with `--valid-glob`, then

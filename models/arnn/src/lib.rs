@@ -15,7 +15,7 @@ pub mod keys;
 pub mod model;
 pub mod train;
 
-pub use config::{Architecture, ArnnConfig, Curriculum, HumanoidSkeleton, KeySampling};
+pub use config::{Architecture, ArnnConfig, Curriculum, HumanoidSkeleton, KeySampling, NoMemoryOutput};
 pub use eval::{CompletionError, CompletionReport};
 pub use model::{Arnn, ArnnState};
 pub use train::{ArnnTrainer, Normalization, complete, complete_partial};

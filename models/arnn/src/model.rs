@@ -3,7 +3,7 @@
 //! section 9 it is compared with (Table 2), [`Architecture::NoMemory`] and
 //! [`Architecture::Segregated`].
 
-use crate::config::{Architecture, ArnnConfig};
+use crate::config::{Architecture, ArnnConfig, NoMemoryOutput};
 use candle_core::{D, Module, Result, Tensor};
 use candle_nn::VarBuilder;
 use zoo_nn::RowRngs;
@@ -121,7 +121,7 @@ impl Arnn {
         rng: Option<&mut RowRngs>,
     ) -> Result<(Tensor, ArnnState)> {
         let (fa, fb) = self.key_features(key_a, key_b)?;
-        self.step_with_key_features(prev, &fa, &fb, t_rel, state, rng)
+        self.step_with_key_features(prev, (key_a, key_b), &fa, &fb, t_rel, state, rng)
     }
 
     /// The feature nets of the keys, `(X_K, X_{K+1})` -> their features; any leading shape
@@ -148,10 +148,13 @@ impl Arnn {
         Ok((apply(a, key_a)?, apply(b, key_b)?))
     }
 
-    /// [`Arnn::step`] with the key features already computed ([`Arnn::key_features`]).
+    /// [`Arnn::step`] with the key features already computed ([`Arnn::key_features`]); `key_poses`
+    /// are `X_K` and `X_{K+1}` as given to them.
+    #[allow(clippy::too_many_arguments)]
     pub fn step_with_key_features(
         &self,
         prev: &Tensor,
+        key_poses: (&Tensor, &Tensor),
         fa: &Tensor,
         fb: &Tensor,
         t_rel: &Tensor,
@@ -159,15 +162,17 @@ impl Arnn {
         rng: Option<&mut RowRngs>,
     ) -> Result<(Tensor, ArnnState)> {
         let keys = Tensor::cat(&[fa, fb, t_rel], D::Minus1)?;
-        self.step_with_keys(prev, &keys, state, rng)
+        self.step_with_keys(prev, key_poses, &keys, state, rng)
     }
 
     /// [`Arnn::step`] from the keys' part of the input, `[features(X_K), features(X_{K+1}),
     /// t_rel]` concatenated `(batch, 2 * feature + 1)` (training computes it for every frame at
-    /// once).
+    /// once), and `X_K`, `X_{K+1}` (each `(batch, key_width)`; only the no-memory net reads them:
+    /// its residual is on their interpolation).
     pub fn step_with_keys(
         &self,
         prev: &Tensor,
+        key_poses: (&Tensor, &Tensor),
         keys: &Tensor,
         state: &ArnnState,
         mut rng: Option<&mut RowRngs>,
@@ -185,7 +190,21 @@ impl Arnn {
                 for (l, drop) in hidden.layers().iter().zip(drops) {
                     h = zoo_nn::layers::linear_act(l, &h, Activation::Selu, &drop, rng.as_deref_mut())?;
                 }
-                Ok((self.decode(&h, rng)?, ArnnState { gru: vec![] }))
+                let y = self.decode(&h, rng)?;
+                let d = self.config.dofs;
+                let a = || key_poses.0.narrow(D::Minus1, 0, d);
+                let y = match self.config.no_memory_output {
+                    NoMemoryOutput::Pose => y,
+                    NoMemoryOutput::KeyResidual => (a()? + y)?,
+                    // Small wherever the keys pin the motion down, so the dropout on the
+                    // decoder perturbs the keys little.
+                    NoMemoryOutput::Interpolation => {
+                        let t_rel = keys.narrow(D::Minus1, keys.dim(D::Minus1)? - 1, 1)?;
+                        let (a, b) = (a()?, key_poses.1.narrow(D::Minus1, 0, d)?);
+                        ((&a + (b - &a)?.broadcast_mul(&t_rel)?)? + y)?
+                    }
+                };
+                Ok((y, ArnnState { gru: vec![] }))
             }
             Body::Segregated { prev_features, rnn, correction, .. } => {
                 // The motion pattern network sees only the previous pose; the interpolation

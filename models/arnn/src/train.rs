@@ -309,7 +309,13 @@ impl ArnnTrainer {
         let (fa, fb) = self.model.key_features(&ka, &kb)?;
         let keys = frame_leaves(&Tensor::cat(&[&fa, &fb, &tr], D::Minus1)?)?;
         for t in 1..t_len {
-            let (y, s) = self.model.step_with_keys(&prev, &keys[t - 1], &state, rngs.as_deref_mut())?;
+            let (y, s) = self.model.step_with_keys(
+                &prev,
+                (&ka.get(t - 1)?, &kb.get(t - 1)?),
+                &keys[t - 1],
+                &state,
+                rngs.as_deref_mut(),
+            )?;
             state = s;
             let use_truth = teacher.get(t - 1).copied().unwrap_or(false);
             prev = if use_truth { gt.narrow(1, t, 1)?.squeeze(1)? } else { y.clone() };

@@ -2,7 +2,7 @@
 
 use candle_core::{DType, Device, Tensor};
 use candle_nn::VarMap;
-use zoo_arnn::{Architecture, Arnn, ArnnConfig, ArnnTrainer, Curriculum, complete};
+use zoo_arnn::{Architecture, Arnn, ArnnConfig, ArnnTrainer, Curriculum, NoMemoryOutput, complete};
 use zoo_data::luxo::preprocess::{KeyedSequence, preprocess};
 use zoo_data::luxo::{GenerateOptions, generate_sequence};
 use zoo_nn::SeededVarMap;
@@ -160,6 +160,39 @@ fn table_2_architectures_step() {
         } else {
             assert!(diff > 0.0);
         }
+    }
+}
+
+/// The no-memory net's output is added to what its configuration says: with the decoder's last
+/// layer zeroed, nothing (the pose is 0), the last key, or the keys' interpolation at t_rel.
+/// A configuration file without the setting is read as the first design (pose output).
+#[test]
+fn no_memory_output_is_added_to_what_the_config_says() {
+    let dev = Device::Cpu;
+    assert_eq!(ArnnConfig::paper().no_memory_output, NoMemoryOutput::Interpolation);
+    let mut json = serde_json::to_value(ArnnConfig::paper()).unwrap();
+    json.as_object_mut().unwrap().remove("no_memory_output");
+    let old: ArnnConfig = serde_json::from_value(json).unwrap();
+    assert_eq!(old.no_memory_output, NoMemoryOutput::Pose);
+    let a = Tensor::full(0.5f32, (2, 6), &dev).unwrap();
+    let b = Tensor::ones((2, 6), DType::F32, &dev).unwrap();
+    let t_rel = Tensor::full(0.3f32, (2, 1), &dev).unwrap();
+    for (output, want) in
+        [(NoMemoryOutput::Pose, 0.0), (NoMemoryOutput::KeyResidual, 0.5), (NoMemoryOutput::Interpolation, 0.65)]
+    {
+        let config = ArnnConfig { no_memory_output: output, ..ArnnConfig::tiny() }
+            .with_matched_architecture(Architecture::NoMemory);
+        let varmap = VarMap::new();
+        let model = Arnn::new(&config, SeededVarMap::builder(&varmap, 1, DType::F32, &dev)).unwrap();
+        let data = varmap.data().lock().unwrap();
+        for name in ["decoder.2.weight", "decoder.2.bias"] {
+            let v = data.get(name).expect("the decoder's last layer");
+            v.set(&v.zeros_like().unwrap()).unwrap();
+        }
+        drop(data);
+        let (y, _) = model.step(&b, &a, &b, &t_rel, &model.zero_state(2).unwrap(), None).unwrap();
+        let got: Vec<f32> = y.flatten_all().unwrap().to_vec1().unwrap();
+        assert!(got.iter().all(|v| (v - want).abs() < 1e-6), "{output:?}: {got:?}");
     }
 }
 

@@ -127,11 +127,16 @@ pub fn run(a: EvalArnnArgs) -> anyhow::Result<()> {
         }
     }
     let config = model.config();
+    let architecture = match config.architecture {
+        zoo_arnn::Architecture::NoMemory => {
+            format!("{:?} architecture ({:?} output)", config.architecture, config.no_memory_output)
+        }
+        other => format!("{other:?} architecture"),
+    };
     println!(
-        "{}: {} ({:?} architecture, {} parameters, ground weight {}), {:?} checkpoint (epoch {epoch} of {}), data {}",
+        "{}: {} ({architecture}, {} parameters, ground weight {}), {:?} checkpoint (epoch {epoch} of {}), data {}",
         a.model.display(),
         variant.map_or("arnn".into(), |v| format!("{v:?}")),
-        config.architecture,
         config.parameter_count(),
         config.ground_weight,
         a.checkpoint,

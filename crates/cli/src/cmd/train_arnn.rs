@@ -9,7 +9,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 use std::time::Duration;
-use zoo_arnn::{Architecture, ArnnConfig, ArnnTrainer};
+use zoo_arnn::{Architecture, ArnnConfig, ArnnTrainer, NoMemoryOutput};
 use zoo_data::luxo::preprocess::{self, KeyedSequence};
 use zoo_data::luxo::{self, DOF_NAMES, GenerateOptions, LampParams, LuxoSequence};
 use zoo_nn::checkpoint;
@@ -23,8 +23,9 @@ pub enum ArnnVariant {
     Arnn,
     /// Table 1's "no curriculum": omega = 1 and no teacher forcing from the start.
     NoCurriculum,
-    /// Table 2's no-memory net: a keyframe-conditioned feed-forward net (keys and t_rel in,
-    /// the pose out), its widths matched to the ARNN's parameter count; the ARNN's curriculum.
+    /// Table 2's no-memory net: a keyframe-conditioned feed-forward net (keys and t_rel in, a
+    /// residual on the keys' linear interpolation out), its widths matched to the ARNN's
+    /// parameter count; the ARNN's curriculum.
     NoMemory,
     /// Table 2's segregated net: an RNN with no keyframe input plus a keyframe-conditioned
     /// feed-forward correction, parameter count matched to the ARNN's; the ARNN's curriculum.
@@ -41,6 +42,27 @@ impl ArnnVariant {
         };
         c.curriculum.enabled = self != ArnnVariant::NoCurriculum;
         c
+    }
+}
+
+/// What the no-memory net's output is added to ([`NoMemoryOutput`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum NoMemoryOutputArg {
+    /// Nothing: the output is the pose (the first design).
+    Pose,
+    /// A residual on the pose of the last key.
+    KeyResidual,
+    /// A residual on the keys' linear interpolation.
+    Interpolation,
+}
+
+impl From<NoMemoryOutputArg> for NoMemoryOutput {
+    fn from(a: NoMemoryOutputArg) -> Self {
+        match a {
+            NoMemoryOutputArg::Pose => NoMemoryOutput::Pose,
+            NoMemoryOutputArg::KeyResidual => NoMemoryOutput::KeyResidual,
+            NoMemoryOutputArg::Interpolation => NoMemoryOutput::Interpolation,
+        }
     }
 }
 
@@ -99,6 +121,10 @@ pub struct ArnnArgs {
     /// (no-memory, segregated; parameter counts matched to the ARNN's).
     #[arg(long, value_enum, default_value_t = ArnnVariant::Arnn)]
     pub variant: ArnnVariant,
+    /// With `--variant no-memory`: what the net's output is added to [default: interpolation]
+    /// (docs/arnn.md, "Table 2 and the no-memory net's output")
+    #[arg(long, value_enum)]
+    pub no_memory_output: Option<NoMemoryOutputArg>,
     /// Model sizes.
     #[arg(long, value_enum, default_value_t = ArnnPreset::Paper)]
     pub preset: ArnnPreset,
@@ -258,6 +284,12 @@ pub fn run(a: ArnnArgs) -> anyhow::Result<()> {
         return crate::cmd::train_arnn_humanoid::run(a);
     }
     let device = candle_core::Device::Cpu;
+    if a.no_memory_output.is_some() && (a.variant != ArnnVariant::NoMemory || a.resume.is_some()) {
+        bail!(
+            "--no-memory-output is a setting of a new `--variant no-memory` run (a resumed run keeps its own); \
+             drop it or add --variant no-memory"
+        );
+    }
     if a.test_fraction >= 1.0 {
         bail!("--test-fraction {} must be below 1 (0.2 holds out a fifth of the sequences)", a.test_fraction);
     }
@@ -324,7 +356,10 @@ pub fn run(a: ArnnArgs) -> anyhow::Result<()> {
         if let Some(w) = a.ground_weight {
             config.ground_weight = w;
         }
-        let config = variant.configure(&config);
+        let mut config = variant.configure(&config);
+        if let Some(o) = a.no_memory_output {
+            config.no_memory_output = o.into();
+        }
         ArnnTrainer::new(&config, data.train.clone(), data.test.clone(), &device)?
     };
     println!(
