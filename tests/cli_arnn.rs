@@ -356,7 +356,7 @@ fn bad_keys_and_folders_are_refused_with_clear_errors() {
     assert!(!ok && e.contains("--test-fraction <TEST_FRACTION>': 1 is outside the valid range (0, 1)"), "{e}");
     let (ok, _, e) =
         run(&["train", "arnn", "--no-memory-output", "pose", "--out", dir.path().join("z").to_str().unwrap()]);
-    assert!(!ok && e.contains("--no-memory-output is a setting of a new `--variant no-memory` run"), "{e}");
+    assert!(!ok && e.contains("--no-memory-output is a setting of a new `--variant no-memory` lamp run"), "{e}");
 }
 
 /// Issue 13, the humanoid: a tiny ARNN trained on synthetic BVH clips with `--valid-glob`, then

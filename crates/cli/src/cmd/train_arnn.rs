@@ -280,16 +280,16 @@ pub fn lamp_data(settings: &DataSettings) -> anyhow::Result<LampData> {
 
 /// Runs `zoo train arnn`.
 pub fn run(a: ArnnArgs) -> anyhow::Result<()> {
+    if a.no_memory_output.is_some() && (a.variant != ArnnVariant::NoMemory || a.resume.is_some()) {
+        bail!(
+            "--no-memory-output is a setting of a new `--variant no-memory` lamp run (a resumed run keeps its own); \
+             drop it or add --variant no-memory"
+        );
+    }
     if a.valid_glob.is_some() || a.resume.as_deref().is_some_and(crate::cmd::train_arnn_humanoid::is_humanoid_run) {
         return crate::cmd::train_arnn_humanoid::run(a);
     }
     let device = candle_core::Device::Cpu;
-    if a.no_memory_output.is_some() && (a.variant != ArnnVariant::NoMemory || a.resume.is_some()) {
-        bail!(
-            "--no-memory-output is a setting of a new `--variant no-memory` run (a resumed run keeps its own); \
-             drop it or add --variant no-memory"
-        );
-    }
     if a.test_fraction >= 1.0 {
         bail!("--test-fraction {} must be below 1 (0.2 holds out a fifth of the sequences)", a.test_fraction);
     }
