@@ -12,10 +12,7 @@ use std::ptr;
 use zoo_capi::*;
 use zoo_runtime::glam::{Quat, Vec3};
 use zoo_runtime::{EnginePose, TransitionModel};
-
-fn capi_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../crates/capi")
-}
+use zoo_tests::capi::{assert_error, capi_dir, compile_example, last_error, pose_values};
 
 /// The model file of these tests: a tiny RTN on a 4-joint skeleton.
 fn model_file(dir: &Path) -> PathBuf {
@@ -24,25 +21,11 @@ fn model_file(dir: &Path) -> PathBuf {
     path
 }
 
-fn last_error() -> String {
-    let len = unsafe { zoo_last_error(ptr::null_mut(), 0) };
-    let mut buf = vec![0u8; len + 1];
-    unsafe { zoo_last_error(buf.as_mut_ptr().cast::<c_char>(), buf.len()) };
-    String::from_utf8_lossy(&buf[..len]).into_owned()
-}
-
-/// Asserts `status` and that the thread's last error mentions `needle`.
-#[track_caller]
-fn assert_error(status: ZooStatus, expected: ZooStatus, needle: &str) {
-    assert_eq!(status, expected, "status (message: {})", last_error());
-    let message = last_error();
-    assert!(message.contains(needle), "message `{message}` should mention `{needle}`");
-}
-
 #[test]
 fn header_is_up_to_date() {
     let dir = capi_dir();
     let config = cbindgen::Config::from_file(dir.join("cbindgen.toml")).unwrap();
+    // cbindgen follows lib.rs's `mod` declarations into the task modules.
     let bindings = cbindgen::Builder::new()
         .with_config(config)
         .with_src(dir.join("src/lib.rs"))
@@ -57,29 +40,9 @@ fn header_is_up_to_date() {
     let committed = std::fs::read(&header).unwrap_or_default();
     assert!(
         committed == generated,
-        "crates/capi/include/zoo.h is not what cbindgen generates from crates/capi/src/lib.rs; regenerate it with \
+        "crates/capi/include/zoo.h is not what cbindgen generates from crates/capi/src; regenerate it with \
          `ZOO_BLESS_HEADER=1 cargo test --workspace --test capi header_is_up_to_date` and commit it"
     );
-}
-
-/// The static library cargo built for these tests.
-fn static_lib() -> PathBuf {
-    let exe = std::env::current_exe().unwrap();
-    let deps = exe.parent().unwrap();
-    let mut candidates: Vec<PathBuf> = std::fs::read_dir(deps)
-        .unwrap()
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            let name = p.file_name().unwrap().to_string_lossy();
-            name.starts_with("libzoo_capi") && name.ends_with(".a")
-        })
-        .collect();
-    candidates.push(deps.parent().unwrap().join("libzoo_capi.a"));
-    candidates
-        .into_iter()
-        .filter(|p| p.exists())
-        .max_by_key(|p| p.metadata().and_then(|m| m.modified()).ok())
-        .expect("libzoo_capi.a: build the workspace first (`cargo build --workspace`)")
 }
 
 /// The C example's walk pose of character `c` at frame `f`, built exactly as in C.
@@ -99,19 +62,7 @@ fn walk_pose(k: usize, hips_height: f64, speed: f64, c: usize, f: usize) -> Engi
 fn c_example_matches_the_rust_api() {
     let tmp = tempfile::tempdir().unwrap();
     let model_path = model_file(tmp.path());
-    let exe = tmp.path().join("transition");
-    let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
-    let dir = capi_dir();
-    let out = Command::new(&cc)
-        .args(["-std=c99", "-Wall", "-Wextra", "-Werror", "-I"])
-        .arg(dir.join("include"))
-        .arg(dir.join("examples/transition.c"))
-        .arg(static_lib())
-        .args(["-lm", "-lpthread", "-ldl", "-lrt", "-lgcc_s", "-lc", "-o"])
-        .arg(&exe)
-        .output()
-        .unwrap_or_else(|e| panic!("cannot run the C compiler `{cc}` ({e}); install gcc or set CC"));
-    assert!(out.status.success(), "the C example does not compile:\n{}", String::from_utf8_lossy(&out.stderr));
+    let exe = compile_example("transition", tmp.path());
     let (n, total) = (3usize, 300usize);
     let run = Command::new(&exe).arg(&model_path).arg(n.to_string()).arg(total.to_string()).output().unwrap();
     assert!(run.status.success(), "the C example failed:\n{}", String::from_utf8_lossy(&run.stderr));
@@ -151,13 +102,7 @@ fn c_example_matches_the_rust_api() {
             let line = lines.next().unwrap_or_else(|| panic!("the C example printed no line for frame {tick}"));
             let values: Vec<f32> = line.split_whitespace().map(|v| v.parse().unwrap()).collect();
             assert_eq!((values[0] as usize, values[1] as usize), (tick, c));
-            let mut want = Vec::new();
-            want.extend(p.root_position.to_array());
-            want.extend(p.root_rotation.to_array());
-            want.extend(p.root_delta_position.to_array());
-            want.push(p.root_delta_yaw);
-            want.extend(p.hips_position.to_array());
-            want.extend(p.local_rotations.iter().flat_map(|q| q.to_array()));
+            let want = pose_values(p);
             assert_eq!(values.len() - 2, want.len(), "frame {tick} character {c}: values per line");
             for (a, b) in values[2..].iter().zip(&want) {
                 worst = worst.max((a - b).abs() / b.abs().max(1.0));

@@ -110,3 +110,142 @@ pub fn rnngmm_fixture(
     .unwrap();
     (config, data, trainer)
 }
+
+/// A tiny ARNN (`zoo_arnn::ArnnConfig::tiny`, the lamp's 6 values per pose) with seeded weights
+/// ([`zoo_nn::SeededVarMap`], seed 7) and fixed statistics, exported as `zoo export --onnx`
+/// would: the keyframes task's test model.
+pub fn tiny_arnn_onnx() -> zoo_export::OnnxModel {
+    use candle_core::{DType, Device};
+    let config = zoo_arnn::ArnnConfig::tiny();
+    let varmap = candle_nn::VarMap::new();
+    zoo_arnn::Arnn::new(&config, zoo_nn::SeededVarMap::builder(&varmap, 7, DType::F32, &Device::Cpu))
+        .expect("tiny ARNN");
+    let norm = zoo_arnn::Normalization {
+        mean: vec![0.5, 0.1, 0.0, 0.5, -1.1, -1.2],
+        std: vec![0.4, 0.06, 0.3, 0.2, 0.5, 0.3],
+    };
+    zoo_arnn::export::export_arnn(&config, &norm, &varmap).expect("the tiny ARNN exports")
+}
+
+/// A tiny RMR (`zoo_rmr::Config::tiny`, the synthetic data's 21-joint skeleton, a window of
+/// 30 frames every 15) with seeded weights (seed 7) and the statistics of a synthetic clip's
+/// pose vectors, exported as `zoo export --onnx` would: the stitching task's test model.
+pub fn tiny_rmr_onnx() -> zoo_export::OnnxModel {
+    use candle_core::{DType, Device};
+    use zoo_rmr::features::{FeatureLayout, FeatureStats, encode_clip};
+    let config = zoo_rmr::Config::tiny();
+    let varmap = candle_nn::VarMap::new();
+    zoo_rmr::Rmr::new(&config, zoo_nn::SeededVarMap::builder(&varmap, 7, DType::F32, &Device::Cpu)).expect("tiny RMR");
+    let synth = zoo_data::synth::SynthConfig { minutes: 0.2, seed: 5, clip_seconds: 4.0, ..Default::default() };
+    let clip = zoo_data::synth::generate_clip(&synth, 0).clip;
+    let x = encode_clip(&clip, &config.layout).expect("the synthetic clip encodes");
+    let stats = FeatureStats::fit([x.as_slice()], FeatureLayout::new(config.joints, config.layout.lower_body.len()));
+    zoo_rmr::export::export_rmr(&config, &stats, &varmap).expect("the tiny RMR exports")
+}
+
+/// An untrained RNN-GMM generator (`zoo_rnngmm::prelude::Config::tiny`, [`rnngmm_fixture`])
+/// exported as `zoo export --onnx` would: the synthesis task's test model.
+pub fn tiny_rnngmm_onnx() -> zoo_export::OnnxModel {
+    let (config, _, trainer) = rnngmm_fixture(zoo_rnngmm::prelude::Config::tiny());
+    zoo_rnngmm::export::export_generator(&config, None, trainer.spec(), trainer.norm(), trainer.varmap())
+        .expect("the tiny RNN-GMM exports")
+}
+
+/// Helpers of the C ABI tests (`tests/capi.rs`, `tests/capi_tasks.rs`): the calling thread's
+/// last error, status assertions, C paths, and C examples compiled against the static library.
+// Calling the C ABI needs raw pointers, as a C caller has.
+#[allow(unsafe_code)]
+pub mod capi {
+    use std::ffi::{CString, c_char};
+    use std::path::{Path, PathBuf};
+    use std::process::Command;
+    use zoo_capi::{ZooStatus, zoo_last_error};
+
+    /// The C ABI crate's folder.
+    pub fn capi_dir() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../crates/capi")
+    }
+
+    /// The calling thread's last error message.
+    pub fn last_error() -> String {
+        let len = unsafe { zoo_last_error(std::ptr::null_mut(), 0) };
+        let mut buf = vec![0u8; len + 1];
+        unsafe { zoo_last_error(buf.as_mut_ptr().cast::<c_char>(), buf.len()) };
+        String::from_utf8_lossy(&buf[..len]).into_owned()
+    }
+
+    /// Asserts `status` and that the thread's last error mentions `needle`.
+    #[track_caller]
+    pub fn assert_error(status: ZooStatus, expected: ZooStatus, needle: &str) {
+        assert_eq!(status, expected, "status (message: {})", last_error());
+        let message = last_error();
+        assert!(message.contains(needle), "message `{message}` should mention `{needle}`");
+    }
+
+    /// Asserts `ZOO_STATUS_OK`, showing the last error otherwise.
+    #[track_caller]
+    pub fn assert_ok(status: ZooStatus) {
+        assert_eq!(status, ZooStatus::Ok, "{}", last_error());
+    }
+
+    /// The values of an engine pose in the C examples' order: root position, root rotation, root
+    /// delta, delta yaw, hips position, local rotations.
+    pub fn pose_values(p: &zoo_runtime::EnginePose) -> Vec<f32> {
+        let mut v = Vec::new();
+        v.extend(p.root_position.to_array());
+        v.extend(p.root_rotation.to_array());
+        v.extend(p.root_delta_position.to_array());
+        v.push(p.root_delta_yaw);
+        v.extend(p.hips_position.to_array());
+        v.extend(p.local_rotations.iter().flat_map(|q| q.to_array()));
+        v
+    }
+
+    /// `path` as a C string.
+    pub fn c_path(path: &Path) -> CString {
+        CString::new(path.to_str().expect("a UTF-8 path")).expect("no NUL in the path")
+    }
+
+    /// The static library cargo built for these tests.
+    pub fn static_lib() -> PathBuf {
+        let exe = std::env::current_exe().unwrap();
+        let deps = exe.parent().unwrap();
+        let mut candidates: Vec<PathBuf> = std::fs::read_dir(deps)
+            .unwrap()
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| {
+                let name = p.file_name().unwrap().to_string_lossy();
+                name.starts_with("libzoo_capi") && name.ends_with(".a")
+            })
+            .collect();
+        candidates.push(deps.parent().unwrap().join("libzoo_capi.a"));
+        candidates
+            .into_iter()
+            .filter(|p| p.exists())
+            .max_by_key(|p| p.metadata().and_then(|m| m.modified()).ok())
+            .expect("libzoo_capi.a: build the workspace first (`cargo build --workspace`)")
+    }
+
+    /// Compiles `examples/NAME.c` with the system C compiler (`CC`, else `cc`; C99, every
+    /// warning an error) against the static library into `dir/NAME`.
+    pub fn compile_example(name: &str, dir: &Path) -> PathBuf {
+        let exe = dir.join(name);
+        let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
+        let capi = capi_dir();
+        let out = Command::new(&cc)
+            .args(["-std=c99", "-Wall", "-Wextra", "-Werror", "-I"])
+            .arg(capi.join("include"))
+            .arg(capi.join(format!("examples/{name}.c")))
+            .arg(static_lib())
+            .args(["-lm", "-lpthread", "-ldl", "-lrt", "-lgcc_s", "-lc", "-o"])
+            .arg(&exe)
+            .output()
+            .unwrap_or_else(|e| panic!("cannot run the C compiler `{cc}` ({e}); install gcc or set CC"));
+        assert!(
+            out.status.success(),
+            "the C example {name}.c does not compile:\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        exe
+    }
+}

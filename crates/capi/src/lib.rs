@@ -1,37 +1,67 @@
 //! The C ABI of the zoo engine runtime (`zoo-runtime`), for engines that cannot link Rust:
 //! Unity (P/Invoke), Unreal and Godot (C/C++), or any language with a C FFI.
 //!
-//! The header `include/zoo.h` is generated from this file by cbindgen (`crates/capi/cbindgen.toml`)
-//! and checked up to date by `tests/capi.rs`; `examples/transition.c` is a complete program.
+//! Every task of the runtime has its loader and its calls, each model kind its own handle:
+//! - transitions (RTN, kind `rtn`): [`ZooModel`], [`ZooRunner`], [`ZooCharacters`] (this file);
+//! - keyframe completion (ARNN, kind `arnn`): [`ZooKeyframeModel`], [`ZooKeyframeRunner`]
+//!   (`keyframes.rs`);
+//! - locomotion stitching (RMR, kind `rmr`): [`ZooStitchModel`], the whole-sequence
+//!   [`zoo_stitch_refine`] and the streaming [`ZooStitchStream`] (`stitch.rs`);
+//! - random synthesis (RNN-GMM, kind `rnn-gmm`): [`ZooSynthesisModel`], [`ZooSynthesisRunner`],
+//!   [`ZooSynthesisCharacters`] (`synthesis.rs`), and its speed / facing controller
+//!   [`ZooControlRunner`], [`ZooControlCharacters`] (`control.rs`).
+//!
+//! A loader given a file of another kind refuses it with `ZOO_STATUS_WRONG_MODEL` and names the
+//! function that loads it.
+//!
+//! The header `include/zoo.h` is generated from these files by cbindgen
+//! (`crates/capi/cbindgen.toml`) and checked up to date by `tests/capi.rs`;
+//! `examples/transition.c` and `examples/tasks.c` are complete programs.
 //!
 //! # Conventions
 //! - Every fallible function returns a [`ZooStatus`]; `ZOO_STATUS_OK` is 0. On any other status,
 //!   [`zoo_last_error`] gives a readable message naming the problem and the fix (per thread).
-//! - Handles are opaque: [`ZooModel`] (a loaded model), [`ZooRunner`] (per-thread scratch space),
-//!   [`ZooCharacters`] (the transition states of a batch of characters). Each has a `_free`
-//!   function that accepts NULL.
+//! - Handles are opaque (models, runners, characters, streams). Each has a `_free` function
+//!   that accepts NULL.
 //! - Buffers are passed as a pointer and a length in elements; the length is checked against what
-//!   the call needs, and a mismatch is an error, not a read past the buffer.
+//!   the call needs, and a mismatch is an error, not a read past the buffer. An optional buffer
+//!   is NULL with a length of 0.
 //! - No panic crosses the boundary: one is caught and reported as `ZOO_STATUS_PANIC`.
 //! - Poses in positions are global joint positions, joint-major (`x0 y0 z0 x1 ...`), character-major
 //!   across a batch. Rotations are quaternions `x y z w`, joint-major, the model skeleton's order.
+//!   An engine pose is a [`ZooRootMotion`] and `4K` local rotations (`K` joints); a batch or a
+//!   sequence of them is an array of roots and one rotation buffer of `4K` values per root.
+//!   Contacts are bytes, 1 for a foot on the ground and 0 otherwise.
 //!
 //! # Thread safety
-//! - A [`ZooModel`] is immutable after loading: any number of threads may use it at once (create
-//!   runners and characters from it, read its info). Free it after everything made from it.
-//! - A [`ZooRunner`] and a [`ZooCharacters`] may be used by one thread at a time (move them between
-//!   threads freely); a call takes one runner and one characters handle, so threads each with their
-//!   own pair run in parallel.
+//! - A loaded model is immutable after loading: any number of threads may use it at once (create
+//!   runners, characters and streams from it, read its info, refine a whole stitching
+//!   sequence). Free it after everything made from it, or before: what is made from a model
+//!   keeps what it needs. (One exception: [`zoo_stitch_model_set_window`] changes a stitching
+//!   model and needs it to itself.)
+//! - Runners, characters and streams may be used by one thread at a time (move them between
+//!   threads freely); a call takes one runner and one characters handle, so threads each with
+//!   their own pair run in parallel.
 //! - [`zoo_last_error`] reports the last error of the calling thread.
 
 // The boundary itself needs raw pointers; every other crate of the workspace denies unsafe code.
 #![allow(unsafe_code)]
 
+mod control;
+mod keyframes;
+mod stitch;
+mod synthesis;
+
+pub use control::*;
+pub use keyframes::*;
+pub use stitch::*;
+pub use synthesis::*;
+
 use std::cell::RefCell;
 use std::ffi::{CStr, c_char};
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use zoo_runtime::glam::{Quat, Vec3};
-use zoo_runtime::{EnginePose, MotionError, TransitionModel, TransitionRunner, TransitionState};
+use zoo_runtime::{EnginePose, LoadedModel, MotionError, TransitionModel, TransitionRunner, TransitionState};
 
 /// Result of a call.
 #[repr(C)]
@@ -46,14 +76,17 @@ pub enum ZooStatus {
     InvalidArgument = 2,
     /// The model file cannot be read or is not an exported zoo model.
     LoadFailed = 3,
-    /// The model is of another task (this ABI runs transition models).
+    /// The model file is of another task than the loader's (the message names the function
+    /// that loads it).
     WrongModel = 4,
-    /// The call does not fit where the transition stands (not started, already finished,
-    /// longer than the model was trained for).
+    /// The call does not fit where the handle stands (a transition not started, already
+    /// finished or longer than the model was trained for; characters not started; a stitching
+    /// stream finished or too short to finish; a model still in use).
     InvalidState = 5,
     /// The graph failed to run.
     RunFailed = 6,
-    /// The requested value is not known yet (e.g. the target miss before the blend window).
+    /// The requested value is not known yet (e.g. the target miss before the blend window, a
+    /// stitching stream's next pose before it is ready).
     NotAvailable = 7,
     /// An internal error (a caught panic): please report it with the message.
     Panic = 8,
@@ -117,14 +150,15 @@ thread_local! {
     static LAST_ERROR: RefCell<String> = const { RefCell::new(String::new()) };
 }
 
-type Failure = (ZooStatus, String);
+/// An error status and its message.
+pub(crate) type Failure = (ZooStatus, String);
 
 fn set_error(message: String) {
     LAST_ERROR.with(|e| *e.borrow_mut() = message);
 }
 
 /// Runs `f`, records its error message, and turns a panic into `ZooStatus::Panic`.
-fn guard(f: impl FnOnce() -> Result<(), Failure>) -> ZooStatus {
+pub(crate) fn guard(f: impl FnOnce() -> Result<(), Failure>) -> ZooStatus {
     match catch_unwind(AssertUnwindSafe(f)) {
         Ok(Ok(())) => ZooStatus::Ok,
         Ok(Err((status, message))) => {
@@ -144,7 +178,7 @@ fn guard(f: impl FnOnce() -> Result<(), Failure>) -> ZooStatus {
 }
 
 /// The status of a runtime error.
-fn runtime_failure(e: MotionError) -> Failure {
+pub(crate) fn runtime_failure(e: MotionError) -> Failure {
     let status = match &e {
         MotionError::Io { .. }
         | MotionError::NotOnnx { .. }
@@ -161,14 +195,16 @@ fn runtime_failure(e: MotionError) -> Failure {
         | MotionError::BufferCount { .. }
         | MotionError::NonFinite { .. }
         | MotionError::StateMismatch { .. }
-        | MotionError::EmptyBatch => ZooStatus::InvalidArgument,
+        | MotionError::EmptyBatch
+        | MotionError::Stitch { .. }
+        | MotionError::Control { .. } => ZooStatus::InvalidArgument,
         MotionError::TransitionSequence { .. } | MotionError::BeyondTrainedLength { .. } => ZooStatus::InvalidState,
         _ => ZooStatus::RunFailed,
     };
     (status, e.to_string())
 }
 
-fn null(what: &str) -> Failure {
+pub(crate) fn null(what: &str) -> Failure {
     (ZooStatus::NullPointer, format!("`{what}` is NULL; pass a valid pointer"))
 }
 
@@ -176,7 +212,7 @@ fn null(what: &str) -> Failure {
 ///
 /// # Safety
 /// `ptr` is NULL or a valid pointer to a live `T`.
-unsafe fn handle<'a, T>(ptr: *const T, what: &str) -> Result<&'a T, Failure> {
+pub(crate) unsafe fn handle<'a, T>(ptr: *const T, what: &str) -> Result<&'a T, Failure> {
     unsafe { ptr.as_ref() }.ok_or_else(|| null(what))
 }
 
@@ -184,7 +220,7 @@ unsafe fn handle<'a, T>(ptr: *const T, what: &str) -> Result<&'a T, Failure> {
 ///
 /// # Safety
 /// `ptr` is NULL or a valid, exclusively used pointer to a live `T`.
-unsafe fn handle_mut<'a, T>(ptr: *mut T, what: &str) -> Result<&'a mut T, Failure> {
+pub(crate) unsafe fn handle_mut<'a, T>(ptr: *mut T, what: &str) -> Result<&'a mut T, Failure> {
     unsafe { ptr.as_mut() }.ok_or_else(|| null(what))
 }
 
@@ -192,7 +228,7 @@ unsafe fn handle_mut<'a, T>(ptr: *mut T, what: &str) -> Result<&'a mut T, Failur
 ///
 /// # Safety
 /// `ptr` is NULL or points to `len` readable values.
-unsafe fn slice<'a, T>(ptr: *const T, len: usize, what: &str) -> Result<&'a [T], Failure> {
+pub(crate) unsafe fn slice<'a, T>(ptr: *const T, len: usize, what: &str) -> Result<&'a [T], Failure> {
     if ptr.is_null() {
         return Err(null(what));
     }
@@ -203,19 +239,148 @@ unsafe fn slice<'a, T>(ptr: *const T, len: usize, what: &str) -> Result<&'a [T],
 ///
 /// # Safety
 /// `ptr` is NULL or points to `len` writable values not aliased elsewhere during the call.
-unsafe fn slice_mut<'a, T>(ptr: *mut T, len: usize, what: &str) -> Result<&'a mut [T], Failure> {
+pub(crate) unsafe fn slice_mut<'a, T>(ptr: *mut T, len: usize, what: &str) -> Result<&'a mut [T], Failure> {
     if ptr.is_null() {
         return Err(null(what));
     }
     Ok(unsafe { std::slice::from_raw_parts_mut(ptr, len) })
 }
 
-fn check_len(what: &str, found: usize, expected: usize, unit: &str) -> Result<(), Failure> {
+pub(crate) fn check_len(what: &str, found: usize, expected: usize, unit: &str) -> Result<(), Failure> {
+    check_size(what, found, expected, unit, "zoo_model_info")
+}
+
+/// [`check_len`] for a buffer sized from what `info` reports.
+pub(crate) fn check_size(what: &str, found: usize, expected: usize, unit: &str, info: &str) -> Result<(), Failure> {
     if found != expected {
         return Err((
             ZooStatus::InvalidArgument,
-            format!("`{what}` holds {found} {unit}, this call needs {expected}; size it from zoo_model_info"),
+            format!("`{what}` holds {found} {unit}, this call needs {expected}; size it from {info}"),
         ));
+    }
+    Ok(())
+}
+
+/// Refuses a batch of no characters.
+pub(crate) fn check_count(count: usize) -> Result<(), Failure> {
+    if count == 0 {
+        return Err((ZooStatus::InvalidArgument, "`count` is 0; a batch needs at least one character".into()));
+    }
+    Ok(())
+}
+
+/// An optional buffer: NULL with a length of 0 is empty.
+///
+/// # Safety
+/// As [`slice`].
+pub(crate) unsafe fn optional_slice<'a, T>(ptr: *const T, len: usize, what: &str) -> Result<&'a [T], Failure> {
+    if ptr.is_null() && len == 0 {
+        return Ok(&[]);
+    }
+    unsafe { slice(ptr, len, what) }
+}
+
+/// A UTF-8 string from a NUL-terminated C string.
+///
+/// # Safety
+/// `ptr` is NULL or a NUL-terminated string.
+pub(crate) unsafe fn c_str<'a>(ptr: *const c_char, what: &str) -> Result<&'a str, Failure> {
+    if ptr.is_null() {
+        return Err(null(what));
+    }
+    // SAFETY: the caller gives a NUL-terminated string.
+    unsafe { CStr::from_ptr(ptr) }
+        .to_str()
+        .map_err(|_| (ZooStatus::InvalidArgument, format!("the {what} is not UTF-8")))
+}
+
+/// Makes a handle with `make` and writes it through `out` (checked before `make` runs).
+///
+/// # Safety
+/// `out` is NULL or valid for a write.
+pub(crate) unsafe fn new_handle<T>(out: *mut *mut T, make: impl FnOnce() -> Result<T, Failure>) -> Result<(), Failure> {
+    if out.is_null() {
+        return Err(null("out"));
+    }
+    let boxed = Box::into_raw(Box::new(make()?));
+    // SAFETY: checked non-NULL above.
+    unsafe { out.write(boxed) };
+    Ok(())
+}
+
+/// Frees a handle made by [`new_handle`] (NULL is ignored).
+///
+/// # Safety
+/// `ptr` is NULL or a pointer from [`new_handle`] not freed before and not in use.
+pub(crate) unsafe fn free_handle<T>(ptr: *mut T) {
+    if !ptr.is_null() {
+        // SAFETY: a pointer from Box::into_raw in new_handle, freed once.
+        drop(unsafe { Box::from_raw(ptr) });
+    }
+}
+
+/// The model kinds this C ABI loads: kind, task, and the function that loads it.
+const LOADERS: [(&str, &str, &str); 4] = [
+    ("rtn", "transition", "zoo_model_load"),
+    ("arnn", "keyframes", "zoo_keyframe_model_load"),
+    ("rmr", "stitch", "zoo_stitch_model_load"),
+    ("rnn-gmm", "synthesis", "zoo_synthesis_model_load"),
+];
+
+/// The bytes of the model file `path` (a portable export's companion files put back) for the
+/// loader of model kind `kind`. A file of another kind this C ABI loads is refused with the
+/// function that loads it, one of a kind it does not know with the list; a file without a kind
+/// goes to the loader, which says what is missing.
+pub(crate) fn read_model(path: &str, kind: &str) -> Result<Vec<u8>, Failure> {
+    let bytes = zoo_runtime::portable::assemble(path).map_err(runtime_failure)?;
+    let found = zoo_runtime::metadata::model_kind(&bytes);
+    let Some(found) = found.filter(|f| f != kind) else { return Ok(bytes) };
+    let task = LOADERS.iter().find(|l| l.0 == kind).map_or("", |l| l.1);
+    match LOADERS.iter().find(|l| l.0 == found) {
+        Some((_, other, function)) => Err((
+            ZooStatus::WrongModel,
+            format!(
+                "{path} is a `{other}` model (kind `{found}`), not a `{task}` model (kind `{kind}`): load it with {function}"
+            ),
+        )),
+        None => {
+            let known: Vec<String> = LOADERS.iter().map(|(k, _, f)| format!("`{k}` ({f})")).collect();
+            Err((
+                ZooStatus::LoadFailed,
+                format!(
+                    "{path}: unknown model kind `{found}`; this C ABI loads the kinds {} written by `zoo export --onnx`",
+                    known.join(", ")
+                ),
+            ))
+        }
+    }
+}
+
+/// Prefixes a loader's error message with the file it read.
+pub(crate) fn in_file(path: &str) -> impl Fn(Failure) -> Failure + '_ {
+    move |(status, message)| (status, format!("{path}: {message}"))
+}
+
+/// Writes a skeleton: `K` parent indices (-1 for the root) into `parents` and `3K` rest offsets
+/// into `offsets`, both checked against `K`.
+///
+/// # Safety
+/// Each buffer is NULL or holds its given length of writable values.
+pub(crate) unsafe fn write_skeleton(
+    skeleton: (&[i32], &[[f32; 3]]),
+    parents: *mut i32,
+    parents_len: usize,
+    offsets: *mut f32,
+    offsets_len: usize,
+) -> Result<(), Failure> {
+    let k = skeleton.0.len();
+    let parents = unsafe { slice_mut(parents, parents_len, "parents") }?;
+    let offsets = unsafe { slice_mut(offsets, offsets_len, "offsets") }?;
+    check_size("parents", parents.len(), k, "values", "the model's info (`joints`)")?;
+    check_size("offsets", offsets.len(), 3 * k, "floats", "the model's info (`joints`)")?;
+    parents.copy_from_slice(skeleton.0);
+    for (out, o) in offsets.chunks_exact_mut(3).zip(skeleton.1) {
+        out.copy_from_slice(o);
     }
     Ok(())
 }
@@ -224,7 +389,7 @@ fn check_len(what: &str, found: usize, expected: usize, unit: &str) -> Result<()
 ///
 /// # Safety
 /// `out` is NULL or valid for writes.
-unsafe fn write_out<T>(out: *mut T, value: T, what: &str) -> Result<(), Failure> {
+pub(crate) unsafe fn write_out<T>(out: *mut T, value: T, what: &str) -> Result<(), Failure> {
     if out.is_null() {
         return Err(null(what));
     }
@@ -257,37 +422,30 @@ pub unsafe extern "C" fn zoo_last_error(buffer: *mut c_char, capacity: usize) ->
 
 /// Loads a transition model exported by `zoo export --onnx` from the file `path` (UTF-8,
 /// NUL-terminated) into `*out`; a `zoo export --portable` main file is loaded with the
-/// companion files beside it. Free it with [`zoo_model_free`]. Thread-safe.
+/// companion files beside it. Free it with [`zoo_model_free`]. A model of another task is
+/// refused with `ZOO_STATUS_WRONG_MODEL` and the function that loads it. Thread-safe.
 ///
 /// # Safety
 /// `path` is NULL or a NUL-terminated string; `out` is NULL or valid for a write.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_model_load(path: *const c_char, out: *mut *mut ZooModel) -> ZooStatus {
     guard(|| {
-        if path.is_null() {
-            return Err(null("path"));
+        let path = unsafe { c_str(path, "path") }?;
+        unsafe {
+            new_handle(out, || {
+                let loaded = LoadedModel::from_bytes(&read_model(path, "rtn")?).map_err(runtime_failure)?;
+                let (kind, task) = (loaded.kind().to_string(), loaded.task());
+                let model = loaded.as_transition().cloned().ok_or_else(|| {
+                    (
+                        ZooStatus::WrongModel,
+                        format!(
+                            "{path} is a `{task}` model (kind `{kind}`); this C ABI runs transition models (kind rtn): export one with `zoo export --onnx RUN_DIR`"
+                        ),
+                    )
+                })?;
+                Ok(ZooModel { model })
+            })
         }
-        if out.is_null() {
-            return Err(null("out"));
-        }
-        // SAFETY: the caller gives a NUL-terminated string.
-        let path = unsafe { CStr::from_ptr(path) }
-            .to_str()
-            .map_err(|_| (ZooStatus::InvalidArgument, "the model path is not UTF-8".to_string()))?;
-        let loaded = zoo_runtime::portable::load(path).map_err(runtime_failure)?;
-        let (kind, task) = (loaded.kind().to_string(), loaded.task());
-        let model = loaded.as_transition().cloned().ok_or_else(|| {
-            (
-                ZooStatus::WrongModel,
-                format!(
-                    "{path} is a `{task}` model (kind `{kind}`); this C ABI runs transition models (kind rtn): export one with `zoo export --onnx RUN_DIR`"
-                ),
-            )
-        })?;
-        let boxed = Box::into_raw(Box::new(ZooModel { model }));
-        // SAFETY: checked non-NULL above.
-        unsafe { out.write(boxed) };
-        Ok(())
     })
 }
 
@@ -298,10 +456,7 @@ pub unsafe extern "C" fn zoo_model_load(path: *const c_char, out: *mut *mut ZooM
 /// `model` is NULL or a pointer from [`zoo_model_load`] not freed before.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_model_free(model: *mut ZooModel) {
-    if !model.is_null() {
-        // SAFETY: a pointer from Box::into_raw in zoo_model_load, freed once.
-        drop(unsafe { Box::from_raw(model) });
-    }
+    unsafe { free_handle(model) }
 }
 
 /// Writes what `model` expects into `*out`. Thread-safe.
@@ -338,18 +493,8 @@ pub unsafe extern "C" fn zoo_model_skeleton(
     offsets_len: usize,
 ) -> ZooStatus {
     guard(|| {
-        let m = &unsafe { handle(model, "model") }?.model;
-        let skeleton = &m.model().metadata().skeleton;
-        let k = m.joints();
-        let parents = unsafe { slice_mut(parents, parents_len, "parents") }?;
-        let offsets = unsafe { slice_mut(offsets, offsets_len, "offsets") }?;
-        check_len("parents", parents.len(), k, "values")?;
-        check_len("offsets", offsets.len(), 3 * k, "floats")?;
-        parents.copy_from_slice(&skeleton.parents);
-        for (out, o) in offsets.chunks_exact_mut(3).zip(&skeleton.offsets) {
-            out.copy_from_slice(o);
-        }
-        Ok(())
+        let skeleton = &unsafe { handle(model, "model") }?.model.model().metadata().skeleton;
+        unsafe { write_skeleton((&skeleton.parents, &skeleton.offsets), parents, parents_len, offsets, offsets_len) }
     })
 }
 
@@ -363,13 +508,7 @@ pub unsafe extern "C" fn zoo_model_skeleton(
 pub unsafe extern "C" fn zoo_runner_new(model: *const ZooModel, out: *mut *mut ZooRunner) -> ZooStatus {
     guard(|| {
         let m = &unsafe { handle(model, "model") }?.model;
-        if out.is_null() {
-            return Err(null("out"));
-        }
-        let runner = m.runner().map_err(runtime_failure)?;
-        let boxed = Box::into_raw(Box::new(ZooRunner { runner }));
-        unsafe { out.write(boxed) };
-        Ok(())
+        unsafe { new_handle(out, || Ok(ZooRunner { runner: m.runner().map_err(runtime_failure)? })) }
     })
 }
 
@@ -379,10 +518,7 @@ pub unsafe extern "C" fn zoo_runner_new(model: *const ZooModel, out: *mut *mut Z
 /// `runner` is NULL or a pointer from [`zoo_runner_new`] not freed before and not in use.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_runner_free(runner: *mut ZooRunner) {
-    if !runner.is_null() {
-        // SAFETY: a pointer from Box::into_raw in zoo_runner_new, freed once.
-        drop(unsafe { Box::from_raw(runner) });
-    }
+    unsafe { free_handle(runner) }
 }
 
 /// Whether `runner` accepts transitions longer than the model was trained for (off by default:
@@ -411,22 +547,18 @@ pub unsafe extern "C" fn zoo_characters_new(
 ) -> ZooStatus {
     guard(|| {
         let m = &unsafe { handle(model, "model") }?.model;
-        if out.is_null() {
-            return Err(null("out"));
+        unsafe {
+            new_handle(out, || {
+                check_count(count)?;
+                let k = m.joints();
+                Ok(ZooCharacters {
+                    states: (0..count).map(|_| m.new_transition()).collect(),
+                    poses: (0..count).map(|_| EnginePose::new(k)).collect(),
+                    inputs: Vec::new(),
+                    joints: k,
+                })
+            })
         }
-        if count == 0 {
-            return Err((ZooStatus::InvalidArgument, "`count` is 0; a batch needs at least one character".into()));
-        }
-        let k = m.joints();
-        let chars = ZooCharacters {
-            states: (0..count).map(|_| m.new_transition()).collect(),
-            poses: (0..count).map(|_| EnginePose::new(k)).collect(),
-            inputs: Vec::new(),
-            joints: k,
-        };
-        let boxed = Box::into_raw(Box::new(chars));
-        unsafe { out.write(boxed) };
-        Ok(())
     })
 }
 
@@ -436,10 +568,7 @@ pub unsafe extern "C" fn zoo_characters_new(
 /// `characters` is NULL or a pointer from [`zoo_characters_new`] not freed before and not in use.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_characters_free(characters: *mut ZooCharacters) {
-    if !characters.is_null() {
-        // SAFETY: a pointer from Box::into_raw in zoo_characters_new, freed once.
-        drop(unsafe { Box::from_raw(characters) });
-    }
+    unsafe { free_handle(characters) }
 }
 
 /// Starts a transition of `length` frames for every character from global joint positions:
@@ -495,12 +624,93 @@ pub unsafe extern "C" fn zoo_step(
     })
 }
 
-fn read_pose(root: &ZooRootMotion, rotations: &[f32], pose: &mut EnginePose) {
+/// Reads an engine pose from its root and `4K` rotation values (the deltas are not read).
+pub(crate) fn read_pose(root: &ZooRootMotion, rotations: &[f32], pose: &mut EnginePose) {
     pose.root_position = Vec3::from_array(root.root_position);
     pose.root_rotation = Quat::from_array(root.root_rotation);
     pose.hips_position = Vec3::from_array(root.hips_position);
     for (q, r) in pose.local_rotations.iter_mut().zip(rotations.chunks_exact(4)) {
         *q = Quat::from_xyzw(r[0], r[1], r[2], r[3]);
+    }
+}
+
+/// Writes an engine pose as its root and `4K` rotation values.
+pub(crate) fn write_pose(pose: &EnginePose, root: &mut ZooRootMotion, rotations: &mut [f32]) {
+    *root = ZooRootMotion {
+        root_position: pose.root_position.to_array(),
+        root_rotation: pose.root_rotation.to_array(),
+        delta_position: pose.root_delta_position.to_array(),
+        delta_yaw: pose.root_delta_yaw,
+        hips_position: pose.hips_position.to_array(),
+    };
+    for (out, q) in rotations.chunks_exact_mut(4).zip(&pose.local_rotations) {
+        out.copy_from_slice(&q.to_array());
+    }
+}
+
+/// Reads engine poses from `roots` (one per pose) and `rotations` (`4K` values per root, its
+/// length checked) into `poses`, resized to one per root.
+pub(crate) fn read_poses(
+    roots: &[ZooRootMotion],
+    rotations: &[f32],
+    k: usize,
+    poses: &mut Vec<EnginePose>,
+    info: &str,
+) -> Result<(), Failure> {
+    check_size("rotations", rotations.len(), roots.len() * 4 * k, "floats", info)?;
+    poses.resize_with(roots.len(), || EnginePose::new(k));
+    for ((root, rotations), pose) in roots.iter().zip(rotations.chunks_exact(4 * k)).zip(poses.iter_mut()) {
+        read_pose(root, rotations, pose);
+    }
+    Ok(())
+}
+
+/// The output buffers of a call that writes engine poses: a root, `4K` rotation values and
+/// some contact bytes per pose.
+pub(crate) struct PoseOut<'a> {
+    roots: &'a mut [ZooRootMotion],
+    rotations: &'a mut [f32],
+    contacts: &'a mut [u8],
+    names: [&'a str; 3],
+}
+
+/// A buffer argument: pointer, length and name.
+pub(crate) type Buffer<'a, T> = (*mut T, usize, &'a str);
+
+impl<'a> PoseOut<'a> {
+    /// The buffers, each non-NULL.
+    ///
+    /// # Safety
+    /// Each pointer is NULL or holds its given length of writable values.
+    pub(crate) unsafe fn new(
+        roots: Buffer<'a, ZooRootMotion>,
+        rotations: Buffer<'a, f32>,
+        contacts: Buffer<'a, u8>,
+    ) -> Result<Self, Failure> {
+        Ok(PoseOut {
+            roots: unsafe { slice_mut(roots.0, roots.1, roots.2) }?,
+            rotations: unsafe { slice_mut(rotations.0, rotations.1, rotations.2) }?,
+            contacts: unsafe { slice_mut(contacts.0, contacts.1, contacts.2) }?,
+            names: [roots.2, rotations.2, contacts.2],
+        })
+    }
+
+    /// Checks that the buffers hold `n` poses of `k` joints and `per` contacts each (`each`:
+    /// what there is one pose per, for the message; `info`: where `K` comes from).
+    pub(crate) fn check(&self, n: usize, k: usize, per: usize, each: &str, info: &str) -> Result<(), Failure> {
+        let [roots, rotations, contacts] = self.names;
+        check_size(roots, self.roots.len(), n, "roots", &format!("one per {each}"))?;
+        check_size(rotations, self.rotations.len(), n * 4 * k, "floats", &format!("4 `joints` per {each}, {info}"))?;
+        check_size(contacts, self.contacts.len(), n * per, "bytes", &format!("{per} per {each}"))
+    }
+
+    /// Writes pose `i` and its contacts (checked sizes).
+    pub(crate) fn write(&mut self, i: usize, pose: &EnginePose, contacts: &[bool]) {
+        let (k, per) = (pose.joints(), contacts.len());
+        write_pose(pose, &mut self.roots[i], &mut self.rotations[i * 4 * k..(i + 1) * 4 * k]);
+        for (o, c) in self.contacts[i * per..(i + 1) * per].iter_mut().zip(contacts) {
+            *o = u8::from(*c);
+        }
     }
 }
 
@@ -593,17 +803,8 @@ pub unsafe extern "C" fn zoo_step_posed(
         check_len("roots", roots.len(), n, "roots")?;
         check_len("rotations", rotations.len(), n * 4 * k, "floats")?;
         runner.step_posed_batch(&mut chars.states, &mut chars.poses).map_err(runtime_failure)?;
-        for (c, pose) in chars.poses.iter().enumerate() {
-            roots[c] = ZooRootMotion {
-                root_position: pose.root_position.to_array(),
-                root_rotation: pose.root_rotation.to_array(),
-                delta_position: pose.root_delta_position.to_array(),
-                delta_yaw: pose.root_delta_yaw,
-                hips_position: pose.hips_position.to_array(),
-            };
-            for (out, q) in rotations[c * 4 * k..(c + 1) * 4 * k].chunks_exact_mut(4).zip(&pose.local_rotations) {
-                out.copy_from_slice(&q.to_array());
-            }
+        for ((pose, root), rotations) in chars.poses.iter().zip(roots).zip(rotations.chunks_exact_mut(4 * k)) {
+            write_pose(pose, root, rotations);
         }
         Ok(())
     })

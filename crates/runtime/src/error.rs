@@ -184,8 +184,8 @@ pub enum MotionError {
         /// What is wrong and how to fix it.
         reason: String,
     },
-    /// A call that does not fit where a character's transition stands (not started,
-    /// finished, or raw and blended stepping mixed).
+    /// A call that does not fit where a character's transition or synthesised sequence stands
+    /// (not started, finished, or raw and blended stepping mixed).
     #[error("character {character}: {reason}")]
     TransitionSequence {
         /// Character (batch row).

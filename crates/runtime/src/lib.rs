@@ -48,7 +48,7 @@ pub use metadata::{
 pub use model::{MotionModel, MotionState, MotionStateInfo, MotionTensorInfo};
 pub use pose::{Conversion, CoordinateFrame, EnginePose, Handedness, UpAxis};
 pub use runner::MotionRunner;
-pub use stitch::{FootCleanup, StitchRefiner, StitchStream};
+pub use stitch::{FootCleanup, StitchRefiner, StitchStream, StitchStreamOf};
 pub use transition::{TargetMiss, TransitionFallback, TransitionModel, TransitionRunner, TransitionState};
 
 /// Re-exported so callers use the same glam version as the runtime.

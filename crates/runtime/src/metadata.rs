@@ -426,6 +426,29 @@ fn json<T: Serialize>(v: &T) -> String {
     serde_json::to_string(v).unwrap_or_default()
 }
 
+/// The model kind (`zoo.model_kind`) of an ONNX file's bytes, read without decoding its graph
+/// (`None`: not ONNX, or no kind), so that a loader can name the right one for another kind.
+pub fn model_kind(bytes: &[u8]) -> Option<String> {
+    use prost::Message as _;
+    ModelProps::decode(bytes).ok()?.metadata_props.into_iter().find(|p| p.key == keys::MODEL_KIND).map(|p| p.value)
+}
+
+/// The `metadata_props` of an ONNX model (field 14 of `ModelProto`; the graph is skipped).
+#[derive(Clone, PartialEq, prost::Message)]
+struct ModelProps {
+    #[prost(message, repeated, tag = "14")]
+    metadata_props: Vec<ModelProp>,
+}
+
+/// A `StringStringEntryProto`.
+#[derive(Clone, PartialEq, prost::Message)]
+struct ModelProp {
+    #[prost(string, tag = "1")]
+    key: String,
+    #[prost(string, tag = "2")]
+    value: String,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -472,6 +495,22 @@ mod tests {
 
     fn set(props: &mut [(String, String)], key: &str, value: &str) {
         props.iter_mut().find(|(k, _)| k == key).unwrap().1 = value.to_string();
+    }
+
+    #[test]
+    fn model_kind_is_read_without_the_graph() {
+        use prost::Message as _;
+        let entry =
+            |key: &str, value: &str| tract_onnx::pb::StringStringEntryProto { key: key.into(), value: value.into() };
+        let proto = tract_onnx::pb::ModelProto {
+            metadata_props: vec![entry(keys::TASK, "stitch"), entry(keys::MODEL_KIND, "rmr")],
+            ..Default::default()
+        };
+        assert_eq!(model_kind(&proto.encode_to_vec()).as_deref(), Some("rmr"));
+        let bare =
+            tract_onnx::pb::ModelProto { metadata_props: vec![entry(keys::TASK, "stitch")], ..Default::default() };
+        assert_eq!(model_kind(&bare.encode_to_vec()), None);
+        assert_eq!(model_kind(b"not an onnx file \xff\xff"), None);
     }
 
     #[test]

@@ -30,6 +30,7 @@
 use crate::error::{MotionError, chain};
 use crate::pose::{EnginePose, root_delta};
 use glam::{DQuat, DVec3, Quat, Vec3};
+use std::ops::Deref;
 use std::path::Path;
 use std::sync::Arc;
 use tract_onnx::prelude::*;
@@ -530,7 +531,13 @@ impl StitchRefiner {
     /// A stream over this refiner for motion matching: push poses as they are decided, pop
     /// refined ones `w - 1` frames later (see [`StitchStream`]).
     pub fn stream(&self) -> StitchStream<'_> {
-        StitchStream::new(self)
+        StitchStreamOf::new(self)
+    }
+
+    /// [`StitchRefiner::stream`] over a shared refiner: the stream holds the `Arc` (no borrow),
+    /// so it can live as long as the caller needs.
+    pub fn shared_stream(self: Arc<Self>) -> StitchStreamOf<Arc<StitchRefiner>> {
+        StitchStreamOf::new(self)
     }
 }
 
@@ -572,9 +579,16 @@ fn write_poses(clip: &Clip, out: &mut [EnginePose]) {
 /// After its first window, pushing and popping allocate nothing on our side as long as the
 /// engine pops every frame it can (the buffer then holds at most `2 w + 1` frames); what tract
 /// allocates per window is counted by `examples/rmr_window_latency` (docs/rmr.md).
+///
+/// The stream borrows its refiner ([`StitchRefiner::stream`]) or shares it through an `Arc`
+/// ([`StitchRefiner::shared_stream`], for a stream that must own what it runs, such as a handle
+/// held by a C caller): [`StitchStreamOf`] is the same stream over either.
+pub type StitchStream<'a> = StitchStreamOf<&'a StitchRefiner>;
+
+/// A [`StitchStream`] over any shared handle `R` of its refiner (a reference or an `Arc`).
 #[derive(Debug)]
-pub struct StitchStream<'a> {
-    refiner: &'a StitchRefiner,
+pub struct StitchStreamOf<R> {
+    refiner: R,
     /// Normalised pose vectors of frames `base..pushed` (refined where a window covered them).
     buf: Vec<f32>,
     base: usize,
@@ -601,10 +615,10 @@ pub struct StitchStream<'a> {
     last_out: Option<(Vec3, Quat)>,
 }
 
-impl<'a> StitchStream<'a> {
-    fn new(refiner: &'a StitchRefiner) -> Self {
+impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
+    fn new(refiner: R) -> Self {
         let (w, d, j) = (refiner.window, refiner.dim, refiner.joints);
-        StitchStream {
+        StitchStreamOf {
             refiner,
             // At most w frames waiting to be dropped, w + 1 still needed.
             buf: Vec::with_capacity((2 * w + 2) * d),
@@ -650,7 +664,7 @@ impl<'a> StitchStream<'a> {
         if self.finished {
             return Err(stitch_err("the stream is finished: start another with StitchRefiner::stream"));
         }
-        let r = self.refiner;
+        let r = self.refiner.clone();
         r.check_pose(pose, self.pushed)?;
         let hips = StitchRefiner::model_space(pose, &mut self.rotations);
         std::mem::swap(&mut self.prev, &mut self.cur);
@@ -677,7 +691,7 @@ impl<'a> StitchStream<'a> {
 
     /// Appends the normalised pose vector of `prev` (frame 0, `first`) or `cur`.
     fn encode(&mut self, first: bool) {
-        let r = self.refiner;
+        let r = self.refiner.clone();
         let d = r.dim;
         let at = self.buf.len();
         self.buf.resize(at + d, 0.0);
@@ -688,7 +702,7 @@ impl<'a> StitchStream<'a> {
     }
 
     fn run_window(&mut self, ws: usize) -> Result<(), MotionError> {
-        let r = self.refiner;
+        let r = self.refiner.clone();
         let d = r.dim;
         let from = (ws - self.base) * d;
         r.refine_window_in_place(&mut self.buf[from..from + r.window * d], ws == 0, &mut self.y, &mut self.offset)
@@ -707,6 +721,11 @@ impl<'a> StitchStream<'a> {
         }
     }
 
+    /// Whether [`StitchStream::finish`] has run (pushing is then refused; the rest can be popped).
+    pub fn is_finished(&self) -> bool {
+        self.finished
+    }
+
     /// Whether the next refined pose is ready.
     pub fn ready(&self) -> bool {
         self.read < self.encoded && (self.finished || self.read + self.refiner.window <= self.pushed)
@@ -716,7 +735,7 @@ impl<'a> StitchStream<'a> {
     /// count: `EnginePose::new(refiner.joints())`) with its predicted contacts, or `None` while
     /// it is not ready (fewer than `latency()` frames pushed after it, and not finished).
     pub fn pop(&mut self, pose: &mut EnginePose) -> Result<Option<[bool; 4]>, MotionError> {
-        let r = self.refiner;
+        let r = self.refiner.clone();
         if pose.joints() != r.joints {
             return Err(stitch_err(format!(
                 "the output pose has {} joints, the model {}: allocate it with EnginePose::new(refiner.joints())",

@@ -403,7 +403,10 @@ impl SynthesisRunner {
         }
         for (c, (ch, pose)) in characters.iter().zip(poses.iter()).enumerate() {
             if !ch.started {
-                return Err(bad(KEY, format!("character {c} was not started: call SynthesisCharacter::start first")));
+                return Err(MotionError::TransitionSequence {
+                    character: c,
+                    reason: "it was not started: call SynthesisCharacter::start first".into(),
+                });
             }
             check_len("pose local_rotations", pose.local_rotations.len(), 1, joints)?;
         }

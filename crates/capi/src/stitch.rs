@@ -1,0 +1,335 @@
+//! Locomotion stitching (RMR, model kind `rmr`, `zoo_runtime::stitch`): a [`ZooStitchModel`]
+//! refines motion put together from clips (aligned end to start, at the model's frame rate, on
+//! its skeleton), either a whole sequence at once ([`zoo_stitch_refine`]) or as a stream for
+//! motion matching ([`ZooStitchStream`]: one pose pushed per frame, refined poses popped with a
+//! fixed latency of `window - 1` frames).
+//!
+//! Poses are engine poses: a [`ZooRootMotion`] and `4K` local rotations each. Contacts are 4
+//! bytes per frame, heel left, toe left, heel right, toe right (1: on the ground).
+
+use crate::{
+    Failure, PoseOut, ZooRootMotion, ZooStatus, c_str, check_size, free_handle, guard, handle, handle_mut, in_file,
+    new_handle, read_model, read_pose, read_poses, runtime_failure, slice, write_out, write_skeleton,
+};
+use std::ffi::c_char;
+use std::sync::Arc;
+use zoo_runtime::stitch::{FootCleanup, RMR_KIND, StitchRefiner, StitchStreamOf};
+use zoo_runtime::{EnginePose, MotionError};
+
+/// A loaded stitching model (opaque). Thread-safe: share it between threads (except
+/// [`zoo_stitch_model_set_window`]).
+pub struct ZooStitchModel {
+    refiner: Arc<StitchRefiner>,
+}
+
+/// A stitching stream (opaque): poses pushed one per frame, refined poses popped `latency`
+/// frames later. One thread at a time.
+pub struct ZooStitchStream {
+    /// Holds the model's refiner (an `Arc`), so the stream outlives nothing it needs, and
+    /// [`zoo_stitch_model_set_window`] refuses to change that refiner while this handle lives.
+    stream: StitchStreamOf<Arc<StitchRefiner>>,
+    pose: EnginePose,
+}
+
+/// What a stitching model expects.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ZooStitchInfo {
+    /// Number of joints K of the model's skeleton: a pose is a root and `4K` rotation values.
+    pub joints: usize,
+    /// Frames per refined window `w`: a sequence needs at least this many frames.
+    pub window: usize,
+    /// Frames between windows `s`.
+    pub stride: usize,
+    /// Frames over which each window's first-frame difference is blended away.
+    pub blend_frames: usize,
+    /// Latency of a stream in frames (`w - 1`): the refined pose of frame `t` is ready once frame
+    /// `t + latency` is pushed.
+    pub latency: usize,
+    /// Frames per second the motion must have.
+    pub fps: f32,
+}
+
+const INFO: &str = "zoo_stitch_model_info";
+
+/// Loads a stitching model exported by `zoo export --onnx` from a `zoo train rmr` run (model
+/// kind `rmr`) from the file `path` (UTF-8, NUL-terminated) into `*out`, planned for its
+/// training window. Free it with [`zoo_stitch_model_free`]. A model of another task is refused
+/// with `ZOO_STATUS_WRONG_MODEL` and the function that loads it. Thread-safe.
+///
+/// # Safety
+/// `path` is NULL or a NUL-terminated string; `out` is NULL or valid for a write.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_stitch_model_load(path: *const c_char, out: *mut *mut ZooStitchModel) -> ZooStatus {
+    guard(|| {
+        let path = unsafe { c_str(path, "path") }?;
+        unsafe {
+            new_handle(out, || {
+                let bytes = read_model(path, RMR_KIND)?;
+                let refiner = StitchRefiner::from_bytes(&bytes).map_err(runtime_failure).map_err(in_file(path))?;
+                Ok(ZooStitchModel { refiner: Arc::new(refiner) })
+            })
+        }
+    })
+}
+
+/// Frees a model from [`zoo_stitch_model_load`] (NULL is ignored). Streams made from it keep
+/// what they need, so they may be freed before or after it.
+///
+/// # Safety
+/// `model` is NULL or a pointer from [`zoo_stitch_model_load`] not freed before and not in use.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_stitch_model_free(model: *mut ZooStitchModel) {
+    unsafe { free_handle(model) }
+}
+
+/// Writes what `model` expects into `*out`. Thread-safe.
+///
+/// # Safety
+/// `model` is NULL or a live model; `out` is NULL or valid for a write.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_stitch_model_info(model: *const ZooStitchModel, out: *mut ZooStitchInfo) -> ZooStatus {
+    guard(|| {
+        let r = &unsafe { handle(model, "model") }?.refiner;
+        let info = ZooStitchInfo {
+            joints: r.joints(),
+            window: r.window(),
+            stride: r.stride(),
+            blend_frames: r.blend_frames(),
+            latency: r.stream().latency(),
+            fps: r.fps() as f32,
+        };
+        unsafe { write_out(out, info, "out") }
+    })
+}
+
+/// Writes the model's skeleton as `zoo_model_skeleton` does (`K` parents, `3K`
+/// offsets, the joint order of every pose). Poses must have these bone lengths. Thread-safe.
+///
+/// # Safety
+/// As `zoo_model_skeleton`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_stitch_model_skeleton(
+    model: *const ZooStitchModel,
+    parents: *mut i32,
+    parents_len: usize,
+    offsets: *mut f32,
+    offsets_len: usize,
+) -> ZooStatus {
+    guard(|| {
+        let skeleton = unsafe { handle(model, "model") }?.refiner.skeleton();
+        let p: Vec<i32> = skeleton.parents.iter().map(|p| p.map_or(-1, |p| p as i32)).collect();
+        let o: Vec<[f32; 3]> = skeleton.offsets.iter().map(|o| o.as_vec3().to_array()).collect();
+        unsafe { write_skeleton((&p, &o), parents, parents_len, offsets, offsets_len) }
+    })
+}
+
+/// Plans the model for another window `w` and stride `s` (`1 <= s <= w`; shorter windows give
+/// streams less latency, at the quality the stitching benchmark measures for them). Not
+/// thread-safe: no other thread may use the model during the call, and streams made from it
+/// must be freed first (`ZOO_STATUS_INVALID_STATE` otherwise).
+///
+/// # Safety
+/// `model` is NULL or a live model used by no other thread during the call.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_stitch_model_set_window(
+    model: *mut ZooStitchModel,
+    window: usize,
+    stride: usize,
+) -> ZooStatus {
+    guard(|| {
+        let m = unsafe { handle_mut(model, "model") }?;
+        let refiner = Arc::get_mut(&mut m.refiner).ok_or_else(|| {
+            (
+                ZooStatus::InvalidState,
+                "streams made from this model are alive; free them (zoo_stitch_stream_free) before planning another window"
+                    .to_string(),
+            )
+        })?;
+        refiner.set_window(window, stride).map_err(runtime_failure)
+    })
+}
+
+/// Refines a whole aligned sequence of `frames` poses (`roots` holds `frames` roots, `rotations`
+/// `frames * 4K` floats; at least `window` frames) into `out_roots` / `out_rotations` (the same
+/// sizes, root deltas filled, zero on the first frame) and the predicted contacts into
+/// `contacts` (`frames * 4` bytes). `place_ankles` puts the ankles where the refiner predicts
+/// them and `lock_feet` locks the planted feet by the predicted contacts (both on: what
+/// `zoo stitch` writes). Allocates the sequence's scratch space per call. Thread-safe: threads may
+/// refine with one model at once.
+///
+/// # Safety
+/// `model` is NULL or a live model; each buffer is NULL or holds its given length.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_stitch_refine(
+    model: *const ZooStitchModel,
+    roots: *const ZooRootMotion,
+    frames: usize,
+    rotations: *const f32,
+    rotations_len: usize,
+    place_ankles: bool,
+    lock_feet: bool,
+    out_roots: *mut ZooRootMotion,
+    out_roots_len: usize,
+    out_rotations: *mut f32,
+    out_rotations_len: usize,
+    contacts: *mut u8,
+    contacts_len: usize,
+) -> ZooStatus {
+    guard(|| {
+        let r = &unsafe { handle(model, "model") }?.refiner;
+        let k = r.joints();
+        let roots = unsafe { slice(roots, frames, "roots") }?;
+        let rotations = unsafe { slice(rotations, rotations_len, "rotations") }?;
+        let mut out = unsafe {
+            PoseOut::new(
+                (out_roots, out_roots_len, "out_roots"),
+                (out_rotations, out_rotations_len, "out_rotations"),
+                (contacts, contacts_len, "contacts"),
+            )
+        }?;
+        out.check(frames, k, 4, "input pose", INFO)?;
+        let mut input = Vec::new();
+        read_poses(roots, rotations, k, &mut input, INFO)?;
+        let mut refined = vec![EnginePose::new(k); frames];
+        let mut predicted = vec![[false; 4]; frames];
+        let cleanup = FootCleanup { place_ankles, lock_feet };
+        r.refine_poses(&input, cleanup, &mut refined, &mut predicted).map_err(runtime_failure)?;
+        for (f, (pose, c)) in refined.iter().zip(&predicted).enumerate() {
+            out.write(f, pose, c);
+        }
+        Ok(())
+    })
+}
+
+/// Creates a stitching stream over `model` into `*out`; free it with
+/// [`zoo_stitch_stream_free`]. Thread-safe (the model is shared); the stream: one thread at a
+/// time.
+///
+/// # Safety
+/// `model` is NULL or a live model; `out` is NULL or valid for a write.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_stitch_stream_new(
+    model: *const ZooStitchModel,
+    out: *mut *mut ZooStitchStream,
+) -> ZooStatus {
+    guard(|| {
+        let refiner = Arc::clone(&unsafe { handle(model, "model") }?.refiner);
+        let pose = EnginePose::new(refiner.joints());
+        unsafe { new_handle(out, || Ok(ZooStitchStream { stream: refiner.shared_stream(), pose })) }
+    })
+}
+
+/// Frees a stream (NULL is ignored).
+///
+/// # Safety
+/// `stream` is NULL or a pointer from [`zoo_stitch_stream_new`] not freed before and not in use.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_stitch_stream_free(stream: *mut ZooStitchStream) {
+    unsafe { free_handle(stream) }
+}
+
+/// A stream's refusal: a call that does not fit where the stream stands (finished, too short to
+/// finish) is `ZOO_STATUS_INVALID_STATE`.
+fn stream_failure(e: MotionError) -> Failure {
+    match e {
+        MotionError::Stitch { .. } => (ZooStatus::InvalidState, e.to_string()),
+        e => runtime_failure(e),
+    }
+}
+
+/// Pushes the next frame of the aligned motion: one pose, `root` and `4K` floats of
+/// `rotations`. Runs a window when one is due. Pushing after [`zoo_stitch_stream_finish`] is
+/// `ZOO_STATUS_INVALID_STATE`. One thread at a time.
+///
+/// # Safety
+/// `stream` is NULL or live and used by this thread only; `root` is NULL or readable; `rotations`
+/// is NULL or holds `rotations_len` floats.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_stitch_stream_push(
+    stream: *mut ZooStitchStream,
+    root: *const ZooRootMotion,
+    rotations: *const f32,
+    rotations_len: usize,
+) -> ZooStatus {
+    guard(|| {
+        let s = unsafe { handle_mut(stream, "stream") }?;
+        let root = unsafe { handle(root, "root") }?;
+        let rotations = unsafe { slice(rotations, rotations_len, "rotations") }?;
+        check_size("rotations", rotations.len(), 4 * s.pose.joints(), "floats", INFO)?;
+        read_pose(root, rotations, &mut s.pose);
+        s.stream.push(&s.pose).map_err(stream_failure)
+    })
+}
+
+/// Writes into `*ready` whether the next refined pose can be popped. One thread at a time.
+///
+/// # Safety
+/// `stream` is NULL or live and used by this thread only; `ready` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_stitch_stream_ready(stream: *const ZooStitchStream, ready: *mut bool) -> ZooStatus {
+    guard(|| {
+        let s = unsafe { handle(stream, "stream") }?;
+        unsafe { write_out(ready, s.stream.ready(), "ready") }
+    })
+}
+
+/// Pops the next refined pose into `root` and `rotations` (`4K` floats; root deltas from the
+/// previous popped pose) and its predicted contacts into `contacts` (4 bytes). Before it is
+/// ready (fewer than `latency` frames pushed after it, and not finished) the call is
+/// `ZOO_STATUS_NOT_AVAILABLE` and writes nothing. The stream does not lock feet: use the contacts
+/// for the engine's foot IK. One thread at a time.
+///
+/// # Safety
+/// `stream` is NULL or live and used by this thread only; `root` is NULL or writable; each buffer
+/// is NULL or holds its given length.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_stitch_stream_pop(
+    stream: *mut ZooStitchStream,
+    root: *mut ZooRootMotion,
+    rotations: *mut f32,
+    rotations_len: usize,
+    contacts: *mut u8,
+    contacts_len: usize,
+) -> ZooStatus {
+    guard(|| {
+        let s = unsafe { handle_mut(stream, "stream") }?;
+        let mut out = unsafe {
+            PoseOut::new(
+                (root, 1, "root"),
+                (rotations, rotations_len, "rotations"),
+                (contacts, contacts_len, "contacts"),
+            )
+        }?;
+        out.check(1, s.pose.joints(), 4, "pop", INFO)?;
+        let Some(predicted) = s.stream.pop(&mut s.pose).map_err(stream_failure)? else {
+            let next = s.stream.popped();
+            let message = if s.stream.is_finished() {
+                format!("no refined pose left: the finished stream's {next} frames were all popped")
+            } else {
+                format!(
+                    "the refined pose of frame {next} is not ready: it is once frame {} is pushed, or after \
+                     zoo_stitch_stream_finish; ask zoo_stitch_stream_ready first",
+                    next + s.stream.latency()
+                )
+            };
+            return Err((ZooStatus::NotAvailable, message));
+        };
+        out.write(0, &s.pose, &predicted);
+        Ok(())
+    })
+}
+
+/// Ends the motion: runs the window ending on the last frame and makes every remaining frame
+/// ready to pop. Needs at least `window` frames pushed (`ZOO_STATUS_INVALID_STATE` before);
+/// finishing twice does nothing. One thread at a time.
+///
+/// # Safety
+/// `stream` is NULL or live and used by this thread only.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_stitch_stream_finish(stream: *mut ZooStitchStream) -> ZooStatus {
+    guard(|| {
+        let s = unsafe { handle_mut(stream, "stream") }?;
+        s.stream.finish().map_err(stream_failure)
+    })
+}
