@@ -54,6 +54,7 @@ fn train_resume_and_complete() {
     let (ok, stdout, stderr) = train(&runp, 1, false);
     assert!(ok, "{stdout}\n{stderr}");
     assert!(stdout.contains("4 training / 1 test sequences of 87 frames"), "{stdout}");
+    assert!(stdout.contains("(the last 25% a frame phase with omega 0.01)"), "{stdout}");
     for f in [
         "config.json",
         "model.safetensors",
@@ -67,6 +68,9 @@ fn train_resume_and_complete() {
     let config: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(runp.join("config.json")).unwrap()).unwrap();
     assert_eq!(config["model"], "arnn");
+    // A lamp run with the curriculum ends in the frame phase by default.
+    let phase = (config["curriculum"]["frame_phase"].as_f64(), config["curriculum"]["frame_phase_omega"].as_f64());
+    assert_eq!(phase, (Some(0.25), Some(0.01)), "{config}");
     // The test-set comparison with interpolation is in the summary.
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(runp.join("summary.json")).unwrap()).unwrap();
@@ -295,6 +299,10 @@ fn table_2_variants_train_and_evaluate() {
             "3",
             "--variant",
             variant,
+            "--frame-phase",
+            "0.5",
+            "--frame-phase-omega",
+            "0.2",
             "--out",
             runp.to_str().unwrap(),
         ]);
@@ -303,6 +311,10 @@ fn table_2_variants_train_and_evaluate() {
             serde_json::from_str(&std::fs::read_to_string(runp.join("config.json")).unwrap()).unwrap();
         assert_eq!(config["architecture"], variant);
         assert_eq!(config["no_memory_output"], "interpolation");
+        assert_eq!(
+            (config["curriculum"]["frame_phase"].as_f64(), config["curriculum"]["frame_phase_omega"].as_f64()),
+            (Some(0.5), Some(0.2))
+        );
         let (ok, stdout, stderr) = run(&["eval-arnn", "--model", runp.to_str().unwrap()]);
         assert!(
             ok && stdout.contains(if variant == "no-memory" {
@@ -316,6 +328,17 @@ fn table_2_variants_train_and_evaluate() {
         let (ok, _, e) = run(&["export", "--onnx", runp.to_str().unwrap(), "--out", onnx.to_str().unwrap()]);
         assert!(!ok && e.contains("is a Table 2 comparison, not exported"), "{e}");
     }
+    // Table 1's run without the curriculum has no frame phase; `--frame-phase 0` says so.
+    let runp = dir.path().join("no-curriculum");
+    let r = runp.to_str().unwrap();
+    let tiny = ["train", "arnn", "--preset", "tiny", "--epochs", "1", "--sequences", "5", "--k-max", "2"];
+    let (ok, stdout, stderr) =
+        run(&[&tiny[..], &["--variant", "no-curriculum", "--frame-phase", "0", "--out", r]].concat());
+    assert!(ok, "{stdout}\n{stderr}");
+    let config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(runp.join("config.json")).unwrap()).unwrap();
+    let c = &config["curriculum"];
+    assert_eq!((c["enabled"].as_bool(), c["frame_phase"].as_f64()), (Some(false), Some(0.0)), "{config}");
 }
 
 #[test]
@@ -357,6 +380,17 @@ fn bad_keys_and_folders_are_refused_with_clear_errors() {
     let (ok, _, e) =
         run(&["train", "arnn", "--no-memory-output", "pose", "--out", dir.path().join("z").to_str().unwrap()]);
     assert!(!ok && e.contains("--no-memory-output is a setting of a new `--variant no-memory` lamp run"), "{e}");
+    let z = dir.path().join("z");
+    let (ok, _, e) =
+        run(&["train", "arnn", "--frame-phase", "0.2", "--variant", "no-curriculum", "--out", z.to_str().unwrap()]);
+    assert!(!ok && e.contains("--frame-phase and --frame-phase-omega are settings of a new run's curriculum"), "{e}");
+    let (ok, _, e) = run(&["train", "arnn", "--frame-phase", "0.2", "--resume", dir.path().to_str().unwrap()]);
+    assert!(!ok && e.contains("--frame-phase and --frame-phase-omega are settings of a new run's curriculum"), "{e}");
+    let (ok, _, e) = run(&["train", "arnn", "--frame-phase", "1", "--out", z.to_str().unwrap()]);
+    assert!(!ok && e.contains("1 is outside the valid range [0, 1)"), "{e}");
+    let (ok, _, e) =
+        run(&["train", "arnn", "--frame-phase", "0", "--frame-phase-omega", "0.5", "--out", z.to_str().unwrap()]);
+    assert!(!ok && e.contains("--frame-phase-omega sets omega in the frame phase, and this run has none"), "{e}");
 }
 
 /// Issue 13, the humanoid: a tiny ARNN trained on synthetic BVH clips with `--valid-glob`, then
@@ -380,6 +414,8 @@ fn humanoid_arnn_trains_on_bvh_and_runs_in_the_benchmark() {
     let joints = config["skeleton"]["names"].as_array().unwrap().len();
     assert_eq!(config["dofs"].as_u64().unwrap() as usize, 3 + 4 * joints);
     assert_eq!(config["key_groups"].as_array().unwrap().len(), 3 + 4 * joints);
+    // No frame phase by default on humanoid clips (not measured there).
+    assert_eq!(config["curriculum"]["frame_phase"].as_f64(), Some(0.0), "{config}");
     // Resuming continues the humanoid run (its data recorded in train_state.json).
     let (ok, stdout, stderr) = run(&["train", "arnn", "--epochs", "2", "--threads", "1", "--resume", r]);
     assert!(ok, "{stdout}\n{stderr}");

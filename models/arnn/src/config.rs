@@ -14,6 +14,12 @@ pub const MAX_WIDTH: usize = 4096;
 /// `1 / (1 + exp((u - 0.25) / width))`, from about 1 to about 0; it is 0 in the second half.
 /// Key importance `omega`: 0 in the first half, then a sigmoid ramp
 /// `1 / (1 + exp(-(u - 0.75) / width))` from about 0 to about 1 (Figure 7's curves).
+///
+/// An optional frame phase (`frame_phase > 0`, not in the paper's schedule) follows the ramps:
+/// they then run over the first `1 - frame_phase` of the steps, and in the last `frame_phase`
+/// of them `omega` is `frame_phase_omega` (below 1: the frame loss weighs more against the
+/// keys), section 9's "additional training that further weights the frame prediction loss
+/// after omega has been annealed".
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Curriculum {
     /// Optimiser steps over which the schedules run (the whole training run).
@@ -22,11 +28,37 @@ pub struct Curriculum {
     pub width: f64,
     /// Off: no teacher forcing and `omega = 1` from the start (Table 1's "no omega annealing").
     pub enabled: bool,
+    /// Fraction of `total_steps`, at the end, spent in the frame phase (0: none, the paper's
+    /// schedule and what a file without the field reads as).
+    #[serde(default)]
+    pub frame_phase: f64,
+    /// `omega` during the frame phase.
+    #[serde(default = "one")]
+    pub frame_phase_omega: f64,
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 impl Curriculum {
+    /// The paper's curriculum over `total_steps` (ramp width 0.05, no frame phase).
+    pub fn paper(total_steps: u64) -> Self {
+        Curriculum { total_steps, width: 0.05, enabled: true, frame_phase: 0.0, frame_phase_omega: 1.0 }
+    }
+
+    /// The steps over which the ramps run (all of them without a frame phase).
+    fn ramp_steps(&self) -> f64 {
+        (self.total_steps.max(1) as f64 * (1.0 - self.frame_phase)).max(1.0)
+    }
+
+    /// Whether `step` is in the frame phase.
+    pub fn in_frame_phase(&self, step: u64) -> bool {
+        self.enabled && self.frame_phase > 0.0 && step as f64 >= self.ramp_steps()
+    }
+
     fn progress(&self, step: u64) -> f64 {
-        (step as f64 / self.total_steps.max(1) as f64).min(1.0)
+        (step as f64 / self.ramp_steps()).min(1.0)
     }
 
     /// Probability of feeding the ground truth at `step`.
@@ -40,6 +72,8 @@ impl Curriculum {
         let u = self.progress(step);
         if !self.enabled {
             1.0
+        } else if self.in_frame_phase(step) {
+            self.frame_phase_omega
         } else if u < 0.5 {
             0.0
         } else {
@@ -245,7 +279,7 @@ impl ArnnConfig {
             learning_rate: 1e-3,
             max_grad_norm: 0.0,
             batch_size: 16,
-            curriculum: Curriculum { total_steps: 10_000, width: 0.05, enabled: true },
+            curriculum: Curriculum::paper(10_000),
             seed: 0,
         }
     }
@@ -454,6 +488,13 @@ impl ArnnConfig {
         }
         if !(self.learning_rate > 0.0 && self.key_weight >= 0.0 && self.curriculum.width > 0.0) {
             return Err("learning_rate and curriculum width must be > 0, key_weight >= 0".into());
+        }
+        let c = &self.curriculum;
+        if !((0.0..1.0).contains(&c.frame_phase) && (0.0..=1.0).contains(&c.frame_phase_omega)) {
+            return Err(format!(
+                "curriculum frame_phase {} must be in [0, 1) and frame_phase_omega {} in [0, 1]",
+                c.frame_phase, c.frame_phase_omega
+            ));
         }
         if !(self.max_grad_norm >= 0.0 && self.max_grad_norm.is_finite()) {
             return Err(format!("max_grad_norm {} must be a finite number >= 0 (0: no clipping)", self.max_grad_norm));

@@ -34,7 +34,7 @@ fn step_shapes_and_residual() {
 
 #[test]
 fn curriculum_follows_section_7_2() {
-    let c = Curriculum { total_steps: 1000, width: 0.05, enabled: true };
+    let c = Curriculum::paper(1000);
     assert!(c.teacher_forcing(0) > 0.99 && c.teacher_forcing(499) < 0.01 && c.teacher_forcing(700) == 0.0);
     assert!(c.teacher_forcing(100) > c.teacher_forcing(300));
     assert_eq!(c.omega(0), 0.0);
@@ -44,13 +44,41 @@ fn curriculum_follows_section_7_2() {
     assert_eq!((off.teacher_forcing(0), off.omega(0)), (0.0, 1.0));
 }
 
+/// A frame phase of a quarter: the paper's ramps over the first 750 steps, then `omega` at
+/// `frame_phase_omega`; a file without the fields reads as the paper's schedule.
+#[test]
+fn frame_phase_follows_the_ramps() {
+    let c = Curriculum { frame_phase: 0.25, frame_phase_omega: 0.1, ..Curriculum::paper(1000) };
+    let ramps = Curriculum::paper(750);
+    for step in [0, 100, 300, 374, 375, 500, 600, 700, 749] {
+        assert_eq!(
+            (c.teacher_forcing(step), c.omega(step)),
+            (ramps.teacher_forcing(step), ramps.omega(step)),
+            "{step}"
+        );
+        assert!(!c.in_frame_phase(step));
+    }
+    assert!(c.omega(749) > 0.99);
+    for step in [750, 900, 1000, 5000] {
+        assert!(c.in_frame_phase(step));
+        assert_eq!((c.teacher_forcing(step), c.omega(step)), (0.0, 0.1), "{step}");
+    }
+    let old: Curriculum = serde_json::from_str(r#"{"total_steps": 1000, "width": 0.05, "enabled": true}"#).unwrap();
+    assert_eq!(old, Curriculum::paper(1000));
+    let mut bad = ArnnConfig::paper();
+    bad.curriculum.frame_phase = 1.0;
+    assert!(bad.validate().unwrap_err().contains("frame_phase"));
+    bad.curriculum = Curriculum { frame_phase_omega: 2.0, ..Curriculum::paper(10) };
+    assert!(bad.validate().unwrap_err().contains("frame_phase_omega"));
+}
+
 #[test]
 fn loss_falls_on_lamp_sequences() {
     let seqs = lamp_sequences(4);
     assert!(seqs.iter().all(|s| s.frames.len() == 87 && s.keys.len() == 9));
     let mut config = ArnnConfig::tiny();
     config.learning_rate = 3e-3;
-    config.curriculum = Curriculum { total_steps: 60, width: 0.05, enabled: false };
+    config.curriculum = Curriculum { enabled: false, ..Curriculum::paper(60) };
     let mut t = ArnnTrainer::new(&config, seqs.clone(), seqs[..2].to_vec(), &Device::Cpu).unwrap();
     let before = t.evaluate().unwrap();
     let mut losses = vec![];

@@ -138,6 +138,16 @@ pub struct ArnnArgs {
     /// off] (docs/arnn.md, "The ground"; `zoo complete` lifts a sunken base onto the ground).
     #[arg(long, allow_hyphen_values = true, value_parser = ground_weight)]
     pub ground_weight: Option<f64>,
+    /// Fraction of the epochs, at the end, trained after the curriculum with the key weight at
+    /// `--frame-phase-omega` (section 9's extra training that weights the frame loss more; the
+    /// curriculum's ramps then run over the other epochs; 0: the paper's schedule alone)
+    /// [default: 0.25 for lamp runs, 0 for humanoid clips] (docs/arnn.md, "The frame phase")
+    #[arg(long, allow_hyphen_values = true, value_parser = frame_phase)]
+    pub frame_phase: Option<f64>,
+    /// Key importance omega in the frame phase (the key loss weighs `100 omega` there)
+    /// [default: 0.01]
+    #[arg(long, allow_hyphen_values = true, value_parser = frame_phase_omega)]
+    pub frame_phase_omega: Option<f64>,
     /// Seed of the generated data, the split, the weights and the trainer.
     #[arg(long, default_value_t = 1, allow_hyphen_values = true, value_parser = crate::args::seed)]
     pub seed: u64,
@@ -146,6 +156,16 @@ pub struct ArnnArgs {
     /// thread count.
     #[arg(long, allow_hyphen_values = true, value_parser = crate::cmd::train::training_threads)]
     pub threads: Option<usize>,
+}
+
+/// `--frame-phase`: a fraction in [0, 1).
+fn frame_phase(s: &str) -> Result<f64, String> {
+    crate::args::real_in(s, crate::args::Interval { lo: 0.0, lo_open: false, hi: 1.0, hi_open: true }, "")
+}
+
+/// `--frame-phase-omega`: a weight in [0, 1].
+fn frame_phase_omega(s: &str) -> Result<f64, String> {
+    crate::args::real_in(s, crate::args::Interval::closed(0.0, 1.0), "")
 }
 
 /// `--ground-weight`: a weight in [0, 1e6].
@@ -278,13 +298,62 @@ pub fn lamp_data(settings: &DataSettings) -> anyhow::Result<LampData> {
     Ok(LampData { train, test, lamp, source })
 }
 
+/// The frame phase of a new lamp run with the curriculum when `--frame-phase` is not given.
+pub const DEFAULT_FRAME_PHASE: f64 = 0.25;
+/// Omega in the frame phase when `--frame-phase-omega` is not given.
+pub const DEFAULT_FRAME_PHASE_OMEGA: f64 = 0.01;
+
+/// `--frame-phase` and `--frame-phase-omega` into a new run's curriculum: without
+/// `--frame-phase`, [`DEFAULT_FRAME_PHASE`] where `default_on` (a lamp run with the curriculum),
+/// none elsewhere (humanoid clips: not measured there). Refuses `--frame-phase-omega` for a
+/// run without a frame phase, where it would do nothing.
+pub(crate) fn set_frame_phase(a: &ArnnArgs, config: &mut ArnnConfig, default_on: bool) -> anyhow::Result<()> {
+    (config.curriculum.frame_phase, config.curriculum.frame_phase_omega) = frame_phase_of(a, default_on)?;
+    Ok(())
+}
+
+/// The frame phase and its omega that [`set_frame_phase`] sets.
+fn frame_phase_of(a: &ArnnArgs, default_on: bool) -> anyhow::Result<(f64, f64)> {
+    let f = a.frame_phase.unwrap_or(if default_on { DEFAULT_FRAME_PHASE } else { 0.0 });
+    if f == 0.0 && a.frame_phase_omega.is_some() {
+        bail!(
+            "--frame-phase-omega sets omega in the frame phase, and this run has none: add --frame-phase 0.25 or drop it"
+        );
+    }
+    Ok((f, if f > 0.0 { a.frame_phase_omega.unwrap_or(DEFAULT_FRAME_PHASE_OMEGA) } else { 1.0 }))
+}
+
+/// How a curriculum ends, for the start-up line: its frame phase, if any.
+fn phase_note(c: &zoo_arnn::Curriculum) -> String {
+    if c.enabled && c.frame_phase > 0.0 {
+        format!(" (the last {}% a frame phase with omega {})", c.frame_phase * 100.0, c.frame_phase_omega)
+    } else {
+        String::new()
+    }
+}
+
 /// Runs `zoo train arnn`.
 pub fn run(a: ArnnArgs) -> anyhow::Result<()> {
+    // `--frame-phase 0` (none) fits a run without a curriculum.
+    let phase_args = a.frame_phase.is_some_and(|f| f > 0.0) || a.frame_phase_omega.is_some();
+    if (phase_args && a.variant == ArnnVariant::NoCurriculum)
+        || ((a.frame_phase.is_some() || a.frame_phase_omega.is_some()) && a.resume.is_some())
+    {
+        bail!(
+            "--frame-phase and --frame-phase-omega are settings of a new run's curriculum (a resumed run keeps its \
+             own; `--variant no-curriculum` has no curriculum to follow): drop them, or start a new run with another \
+             variant"
+        );
+    }
     if a.no_memory_output.is_some() && (a.variant != ArnnVariant::NoMemory || a.resume.is_some()) {
         bail!(
             "--no-memory-output is a setting of a new `--variant no-memory` lamp run (a resumed run keeps its own); \
              drop it or add --variant no-memory"
         );
+    }
+    if a.resume.is_none() {
+        // Checked before any data is read or generated.
+        frame_phase_of(&a, a.valid_glob.is_none() && a.variant != ArnnVariant::NoCurriculum)?;
     }
     if a.valid_glob.is_some() || a.resume.as_deref().is_some_and(crate::cmd::train_arnn_humanoid::is_humanoid_run) {
         return crate::cmd::train_arnn_humanoid::run(a);
@@ -356,6 +425,7 @@ pub fn run(a: ArnnArgs) -> anyhow::Result<()> {
         if let Some(w) = a.ground_weight {
             config.ground_weight = w;
         }
+        set_frame_phase(&a, &mut config, variant != ArnnVariant::NoCurriculum)?;
         let mut config = variant.configure(&config);
         if let Some(o) = a.no_memory_output {
             config.no_memory_output = o.into();
@@ -364,13 +434,14 @@ pub fn run(a: ArnnArgs) -> anyhow::Result<()> {
     };
     println!(
         "training ARNN ({variant:?}) on {}: {} training / {} test sequences of {} frames, {} parameters, curriculum \
-         over {} steps, run folder {}",
+         over {} steps{}, run folder {}",
         data.source,
         data.train.len(),
         data.test.len(),
         data.train[0].frames.len(),
         trainer.parameter_count(),
         trainer.config().curriculum.total_steps,
+        phase_note(&trainer.config().curriculum),
         out.display()
     );
     let seed = trainer.config().seed;

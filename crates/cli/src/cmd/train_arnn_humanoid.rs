@@ -111,6 +111,7 @@ pub fn run(a: ArnnArgs) -> anyhow::Result<()> {
         }
         config.seed = a.seed;
         config.curriculum.total_steps = train_w.count.div_ceil(config.batch_size) as u64 * a.epochs as u64;
+        crate::cmd::train_arnn::set_frame_phase(&a, &mut config, false)?;
         let train = humanoid::sequences(&train_w, &config.key_sampling, settings.seed);
         let valid = humanoid::sequences(&valid_w, &config.key_sampling, settings.seed ^ 0x5EED);
         let norm = humanoid::normalization(&train);
