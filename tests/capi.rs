@@ -311,3 +311,125 @@ fn the_c_abi_loads_a_portable_pair() {
     unsafe { assert_error(zoo_model_load(c_path.as_ptr(), &mut model), ZooStatus::LoadFailed, "rtn.start.onnx") };
     assert!(model.is_null());
 }
+
+/// A terrain-aware RTN through the C ABI: `zoo_model_terrain` says so, a character needs its
+/// ground before starting (`zoo_characters_set_heightmap`, named in the message), and the
+/// transition over a slope equals the Rust runtime's; bad heightmaps are refused.
+#[test]
+fn terrain_models_take_a_heightmap_through_the_c_abi() {
+    use std::sync::Arc;
+    use zoo_runtime::Heightmap;
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("terrain.onnx");
+    zoo_tests::tiny_terrain_rtn_onnx().write(&path).unwrap();
+    let rust = TransitionModel::load(&path).unwrap();
+    let (side, extent) = rust.terrain().expect("a terrain-aware model");
+    // A slope along x, 20 cm per metre, on a 5 cm grid.
+    let (cols, rows, cell, origin) = (81usize, 81usize, 5.0f32, (-200.0f32, -200.0f32));
+    let heights: Vec<f32> =
+        (0..rows).flat_map(|_| (0..cols).map(move |i| 0.2 * (origin.0 + i as f32 * cell))).collect();
+    let map = Heightmap {
+        cols,
+        rows,
+        cell: cell as f64,
+        origin: [origin.0 as f64, origin.1 as f64],
+        heights: heights.clone(),
+    };
+    unsafe {
+        let model = load(&path);
+        let (mut s, mut e) = (0usize, 0f32);
+        assert_eq!(zoo_model_terrain(model, &mut s, &mut e), ZooStatus::Ok, "{}", last_error());
+        assert_eq!((s, e), (side, extent));
+        let flat = load(&model_file(tmp.path()));
+        assert_error(zoo_model_terrain(flat, &mut s, &mut e), ZooStatus::NotAvailable, "no terrain input");
+        zoo_model_free(flat);
+
+        let mut info = ZooModelInfo::default();
+        assert_eq!(zoo_model_info(model, &mut info), ZooStatus::Ok);
+        let d = 3 * info.joints;
+        let pose = |f: usize| -> Vec<f32> { (0..d).map(|i| ((i * 7 + f * 3) as f32).sin() * 20.0 + 90.0).collect() };
+        let past: Vec<f32> = (0..info.past_frames).flat_map(pose).collect();
+        let (target, next) = (pose(40), pose(41));
+        let length = info.transition_frames;
+        let (mut runner, mut chars) = (ptr::null_mut(), ptr::null_mut());
+        assert_eq!(zoo_runner_new(model, &mut runner), ZooStatus::Ok);
+        assert_eq!(zoo_characters_new(model, 1, &mut chars), ZooStatus::Ok);
+        let start = |chars| {
+            zoo_start(
+                runner,
+                chars,
+                past.as_ptr(),
+                past.len(),
+                target.as_ptr(),
+                target.len(),
+                next.as_ptr(),
+                next.len(),
+                length,
+            )
+        };
+        assert_error(start(chars), ZooStatus::InvalidState, "zoo_characters_set_heightmap");
+
+        // Bad heightmaps.
+        let set = |index, cols, rows, cell, heights: &[f32]| {
+            zoo_characters_set_heightmap(
+                chars,
+                index,
+                cols,
+                rows,
+                cell,
+                origin.0,
+                origin.1,
+                heights.as_ptr(),
+                heights.len(),
+            )
+        };
+        assert_error(set(0, 0, rows, cell, &heights), ZooStatus::InvalidArgument, "at least 1 x 1");
+        assert_error(set(0, cols, rows, cell, &heights[1..]), ZooStatus::InvalidArgument, "`heights`");
+        assert_error(set(0, cols, rows, 0.0, &heights), ZooStatus::InvalidArgument, "`cell`");
+        let mut nan = heights.clone();
+        nan[7] = f32::NAN;
+        assert_error(set(0, cols, rows, cell, &nan), ZooStatus::InvalidArgument, "height 7");
+        assert_error(set(1, cols, rows, cell, &heights), ZooStatus::InvalidArgument, "character 1 does not exist");
+        assert_error(
+            zoo_characters_set_heightmap(
+                ptr::null_mut(),
+                0,
+                cols,
+                rows,
+                cell,
+                0.0,
+                0.0,
+                heights.as_ptr(),
+                heights.len(),
+            ),
+            ZooStatus::NullPointer,
+            "`characters` is NULL",
+        );
+        assert_error(
+            zoo_characters_set_heightmap(chars, 0, cols, rows, cell, 0.0, 0.0, ptr::null(), 5),
+            ZooStatus::NullPointer,
+            "`heights` is NULL",
+        );
+
+        // The ground set: the transition equals the Rust runtime's with the same map.
+        assert_eq!(set(0, cols, rows, cell, &heights), ZooStatus::Ok, "{}", last_error());
+        assert_eq!(start(chars), ZooStatus::Ok, "{}", last_error());
+        let mut got = Vec::new();
+        let mut frame = vec![0.0f32; d];
+        for _ in 0..=length {
+            assert_eq!(zoo_step(runner, chars, frame.as_mut_ptr(), frame.len()), ZooStatus::Ok, "{}", last_error());
+            got.extend_from_slice(&frame);
+        }
+        let mut state = rust.new_transition();
+        state.set_heightmap(Some(Arc::new(map)));
+        let mut want = vec![0.0f32; (length + 1) * d];
+        rust.runner().unwrap().generate(&mut state, &past, &target, &next, &mut want).unwrap();
+        assert_eq!(got, want, "the C ABI's terrain transition differs from the Rust runtime's");
+        // Removing the ground makes the next start fail again.
+        assert_eq!(zoo_characters_set_heightmap(chars, 0, 0, 0, 0.0, 0.0, 0.0, ptr::null(), 0), ZooStatus::Ok);
+        assert_error(start(chars), ZooStatus::InvalidState, "zoo_characters_set_heightmap");
+        zoo_characters_free(chars);
+        zoo_runner_free(runner);
+        zoo_model_free(model);
+    }
+}

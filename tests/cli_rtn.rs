@@ -54,14 +54,7 @@ fn train_resume_transition_and_decompress() {
 
     // Transition and super-resolution on synthetic BVH clips.
     let data = dir.path().join("synth");
-    let (ok, _, stderr) = run(&["data", "synth", "--out", data.to_str().unwrap(), "--minutes", "1", "--seed", "3"]);
-    assert!(ok, "{stderr}");
-    let mut clips: Vec<_> = std::fs::read_dir(&data)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "bvh"))
-        .collect();
-    clips.sort();
+    let clips = synth_clips(&data, &["--minutes", "1", "--seed", "3"]);
     let (a, b) = (clips[0].to_str().unwrap(), clips[1].to_str().unwrap());
     let out = dir.path().join("t.bvh");
     let (ok, stdout, stderr) = run(&[
@@ -195,6 +188,21 @@ fn tiny_run<'a>(folder_flag: &'a str, folder: &'a str, epochs: &'a str) -> Vec<&
     args
 }
 
+/// `zoo data synth --out DIR ARGS`: the BVH clips it wrote, sorted.
+fn synth_clips(dir: &std::path::Path, args: &[&str]) -> Vec<std::path::PathBuf> {
+    let mut all = vec!["data", "synth", "--out", dir.to_str().unwrap()];
+    all.extend(args);
+    let (ok, _, stderr) = run(&all);
+    assert!(ok, "{stderr}");
+    let mut clips: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "bvh"))
+        .collect();
+    clips.sort();
+    clips
+}
+
 fn tiny_command(args: &[&str]) -> Command {
     let mut c = Command::new(zoo_bin());
     // One thread: the same arithmetic in every process, and no barrier spinning on a busy machine.
@@ -270,15 +278,7 @@ fn tiny_model(dir: &std::path::Path) -> (std::path::PathBuf, std::path::PathBuf)
     let run_dir = dir.join("run");
     let out = tiny_command(&tiny_run("--out", run_dir.to_str().unwrap(), "1")).output().unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let data = dir.join("synth");
-    let (ok, _, stderr) = run(&["data", "synth", "--out", data.to_str().unwrap(), "--minutes", "0.5", "--seed", "3"]);
-    assert!(ok, "{stderr}");
-    let clip = std::fs::read_dir(&data)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "bvh"))
-        .min()
-        .unwrap();
+    let clip = synth_clips(&dir.join("synth"), &["--minutes", "0.5", "--seed", "3"]).swap_remove(0);
     (run_dir, clip)
 }
 
@@ -562,15 +562,7 @@ fn interp_residual_augmented_run_with_fallback() {
     let (start, full) = (config["fallback"]["start"].as_f64().unwrap(), config["fallback"]["full"].as_f64().unwrap());
     assert!(start > 0.0 && full > start, "{config}");
 
-    let data = dir.path().join("synth");
-    let (ok, _, stderr) = run(&["data", "synth", "--out", data.to_str().unwrap(), "--minutes", "0.5", "--seed", "3"]);
-    assert!(ok, "{stderr}");
-    let clip = std::fs::read_dir(&data)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "bvh"))
-        .min()
-        .unwrap();
+    let clip = synth_clips(&dir.path().join("synth"), &["--minutes", "0.5", "--seed", "3"]).swap_remove(0);
     let bvh = dir.path().join("t.bvh");
     let (ok, stdout, stderr) = zoo(&transition_args(&run_dir, &clip, "6", &bvh));
     assert!(ok, "{stdout}\n{stderr}");
@@ -587,4 +579,98 @@ fn interp_residual_augmented_run_with_fallback() {
     assert!(model.model().inputs().iter().any(|i| i.name == "base"), "the step graph takes the interpolation base");
     let fb = model.default_fallback().expect("the exported file carries the calibrated fallback");
     assert!((fb.start as f64 - start).abs() < 1e-4 && (fb.full as f64 - full).abs() < 1e-4, "{fb:?}");
+}
+
+/// `zoo train rtn --terrain` end to end: a tiny terrain-aware RTN trained for one epoch on
+/// `zoo data synth --terrain` clips, `zoo transition --heightmap` (required by the model,
+/// refused by a flat one), and `zoo export --onnx` giving a file whose transitions in the
+/// runtime, on the clip's heightmap, are candle's (`Rtn::transition` of the run folder; the
+/// tolerance of `parity_rtn::runtime_transition_api_matches_candle`).
+#[test]
+fn terrain_run_trains_transitions_and_exports_for_the_runtime() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("synth");
+    let data_s = data.to_str().unwrap();
+    let clips = synth_clips(&data, &["--minutes", "1.5", "--seed", "3", "--terrain"]);
+    let clip = clips.last().unwrap().clone();
+    let valid_glob = format!("*{}", clip.file_name().unwrap().to_str().unwrap());
+    let run_dir = dir.path().join("run");
+    let mut args = tiny_run("--out", run_dir.to_str().unwrap(), "1");
+    args.extend(["--terrain", "--data", data_s, "--valid-glob", &valid_glob]);
+    let out = tiny_command(&args).output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    assert!(stdout.contains("with terrain"), "{stdout}");
+    let config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run_dir.join("config.json")).unwrap()).unwrap();
+    assert_eq!(config["terrain"], true);
+
+    let heightmap = zoo_data::terrain::sibling_of(&clip).expect("zoo data synth --terrain writes the heightmap");
+    let bvh = dir.path().join("t.bvh");
+    let (ok, stdout, stderr) = zoo(&transition_args(&run_dir, &clip, "6", &bvh));
+    assert!(!ok && stderr.contains("terrain-aware") && stderr.contains("--heightmap"), "{stdout}\n{stderr}");
+    assert!(stderr.contains(heightmap.to_str().unwrap()), "the error names the clip's heightmap: {stderr}");
+    let mut with_map = transition_args(&run_dir, &clip, "6", &bvh);
+    with_map.extend(["--heightmap".into(), heightmap.display().to_string()]);
+    let (ok, stdout, stderr) = zoo(&with_map);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("wrote") && bvh.is_file(), "{stdout}");
+
+    let onnx = dir.path().join("m.onnx");
+    let (ok, stdout, stderr) = run(&["export", "--onnx", run_dir.to_str().unwrap(), "--out", onnx.to_str().unwrap()]);
+    assert!(ok, "{stdout}\n{stderr}");
+    let model = zoo_runtime::TransitionModel::load(&onnx).unwrap();
+    assert_eq!(model.terrain(), Some((5, 206.0)));
+    let map = zoo_data::terrain::read(&heightmap).unwrap();
+    let c = zoo_data::bvh::read_model_clip(&clip).unwrap();
+    let (_, gp) = c.global();
+    let j = c.joints();
+    let frame = |f: usize| -> Vec<f32> { gp[f * j..(f + 1) * j].iter().flat_map(|p| p.as_vec3().to_array()).collect() };
+    let past: Vec<f32> = (16..20).flat_map(frame).collect();
+    let (target, next) = (frame(27), frame(28));
+    let (candle, stats) = zoo_rtn::checkpoint::load(&run_dir, &candle_core::Device::Cpu).unwrap();
+    let want = candle.transition(&stats, &past, &target, &next, 6, Some(&map)).unwrap();
+    let mut runner = model.runner().unwrap();
+    let mut state = model.new_transition();
+    let mut got = vec![0.0; want.len()];
+    let err = runner.generate(&mut state, &past, &target, &next, &mut got).unwrap_err();
+    assert!(err.to_string().contains("set_heightmap"), "{err}");
+    state.set_heightmap(Some(std::sync::Arc::new(map)));
+    runner.generate(&mut state, &past, &target, &next, &mut got).unwrap();
+    let diff = want.iter().zip(&got).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
+    assert!(diff <= 1e-2, "runtime vs candle on the trained terrain run: max abs diff {diff} (cm)");
+
+    // Without --data: synthetic locomotion over terrain generated in memory.
+    let r4 = dir.path().join("r4");
+    let mut args = tiny_run("--out", r4.to_str().unwrap(), "1");
+    args.push("--terrain");
+    let out = tiny_command(&args).output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success() && stdout.contains("synthetic locomotion over terrain"), "{stdout}");
+
+    // A flat model refuses --heightmap; --terrain refuses data without heightmaps.
+    let flat_dir = dir.path().join("flat");
+    let out = tiny_command(&tiny_run("--out", flat_dir.to_str().unwrap(), "1")).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let mut flat_args = transition_args(&flat_dir, &clip, "6", &dir.path().join("f.bvh"));
+    flat_args.extend(["--heightmap".into(), heightmap.display().to_string()]);
+    let (ok, _, stderr) = zoo(&flat_args);
+    assert!(!ok && stderr.contains("no terrain input") && stderr.contains("drop --heightmap"), "{stderr}");
+    let bare = dir.path().join("bare");
+    std::fs::create_dir(&bare).unwrap();
+    for c in &clips {
+        std::fs::copy(c, bare.join(c.file_name().unwrap())).unwrap();
+    }
+    let (r2, r3) = (dir.path().join("r2"), dir.path().join("r3"));
+    let mut args = tiny_run("--out", r2.to_str().unwrap(), "1");
+    args.extend(["--terrain", "--data", bare.to_str().unwrap(), "--valid-glob", &valid_glob]);
+    let (ok, _, stderr) = run(&args);
+    assert!(
+        !ok && stderr.contains("has no heightmap beside it") && stderr.contains("zoo data synth --terrain"),
+        "{stderr}"
+    );
+    let mut args = tiny_run("--out", r3.to_str().unwrap(), "1");
+    args.extend(["--terrain", "--augment", "mirror"]);
+    let (ok, _, stderr) = run(&args);
+    assert!(!ok && stderr.contains("leave mirror out of --augment"), "{stderr}");
 }

@@ -70,16 +70,28 @@ pub fn tiny_rtn_onnx() -> zoo_export::OnnxModel {
 /// outputs become motion of about `std` cm per frame (1: a walk; 10: metres per second). The
 /// weights are seeded ([`zoo_nn::SeededVarMap`], seed 7): the same model every run.
 pub fn tiny_rtn_onnx_with_std(std: f32) -> zoo_export::OnnxModel {
+    tiny_rtn_export(std, false)
+}
+
+/// [`tiny_rtn_onnx`] made terrain-aware (`Config::tiny`'s 5 x 5 patch, `terrain` statistics
+/// mean -90, std 10: the patch under a root about 90 cm above the ground).
+pub fn tiny_terrain_rtn_onnx() -> zoo_export::OnnxModel {
+    tiny_rtn_export(10.0, true)
+}
+
+fn tiny_rtn_export(std: f32, terrain: bool) -> zoo_export::OnnxModel {
     use candle_core::{DType, Device};
     use candle_nn::VarMap;
     use zoo_rtn::features::{FeatureStats, MeanStd};
     let skeleton = toy_skeleton();
-    let config = zoo_rtn::Config::tiny().with_parents(&skeleton.parents);
+    let config = zoo_rtn::Config::tiny().with_parents(&skeleton.parents).with_terrain(terrain);
     let varmap = VarMap::new();
     zoo_rtn::Rtn::new(&config, zoo_nn::SeededVarMap::builder(&varmap, 7, DType::F32, &Device::Cpu)).expect("tiny RTN");
     let d = config.dim();
     let unit = || MeanStd { mean: vec![0.0; d], std: vec![std; d] };
-    let stats = FeatureStats { joints: skeleton.len(), x: unit(), velocity: unit(), offset: unit(), terrain: None };
+    let n = config.terrain_dim();
+    let terrain = terrain.then(|| MeanStd { mean: vec![-90.0; n], std: vec![10.0; n] });
+    let stats = FeatureStats { joints: skeleton.len(), x: unit(), velocity: unit(), offset: unit(), terrain };
     let options = zoo_rtn::export::RtnExportOptions {
         names: Some(skeleton.names.clone()),
         offsets: Some(skeleton.offsets.iter().map(|o| o.as_vec3().to_array()).collect()),

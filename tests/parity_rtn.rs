@@ -15,11 +15,13 @@
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{VarBuilder, VarMap};
 use std::collections::HashMap;
+use std::sync::Arc;
 use zoo_export::OnnxModel;
 use zoo_rtn::export::{RtnExportOptions, export_rtn, export_rtn_dir};
 use zoo_rtn::features::{self, FeatureStats, MeanStd};
 use zoo_rtn::model::{OffsetTensors, RtnInputs, RtnState};
 use zoo_rtn::{Config, InitState, Rtn};
+use zoo_runtime::Heightmap;
 use zoo_runtime::glam::{Quat, Vec3};
 use zoo_runtime::metadata::{TransitionTask, keys};
 use zoo_runtime::{EnginePose, LoadedModel, MotionError, MotionModel, MotionState, MotionTask, TransitionModel};
@@ -40,6 +42,29 @@ struct Fixture {
     varmap: VarMap,
     model: Rtn,
     stats: FeatureStats,
+    /// The ground of every character (read only by a terrain-aware config).
+    ground: Heightmap,
+}
+
+/// Rolling ground under the characters' paths (bumps of about 10 clip units, several per
+/// terrain patch).
+fn ground() -> Heightmap {
+    Heightmap::from_fn(-300.0, -300.0, 400.0, 400.0, 7.0, |x, z| {
+        8.0 * (0.05 * x).sin() + 6.0 * (0.07 * z + 0.3 * x).cos()
+    })
+}
+
+/// Normalized terrain patches `p_t` of every character under `roots` (empty without terrain):
+/// the host side of the `terrain` input, as `zoo_rtn` samples it in training.
+fn host_patches(f: &Fixture, roots: &[[f32; 3]]) -> Vec<f32> {
+    let (Some(ts), true) = (&f.stats.terrain, f.config.terrain) else { return Vec::new() };
+    let n = f.config.terrain_dim();
+    let mut out = vec![0.0; roots.len() * n];
+    for (r, p) in roots.iter().zip(out.chunks_exact_mut(n)) {
+        features::terrain_patch(&f.ground, *r, f.config.terrain_extent, f.config.terrain_side, None, p);
+        ts.normalize(p);
+    }
+    out
 }
 
 fn fixture(config: Config) -> Fixture {
@@ -69,9 +94,11 @@ fn fixture(config: Config) -> Fixture {
         x: ms(1, 5.0, 20.0, 2.0),
         velocity: ms(3, 0.5, 2.0, 2.0),
         offset: ms(5, 20.0, 60.0, 60.0),
-        terrain: None,
+        terrain: config
+            .terrain
+            .then(|| MeanStd { mean: vec![-85.0; config.terrain_dim()], std: vec![7.0; config.terrain_dim()] }),
     };
-    Fixture { config, varmap, model, stats }
+    Fixture { config, varmap, model, stats, ground: ground() }
 }
 
 fn tiny() -> Config {
@@ -171,7 +198,9 @@ fn candle_loop(f: &Fixture, chars: &[Character], n_out: usize) -> Trace {
         let offset = target_term.as_ref().map(|tt| offsets.offset(tt, &x, &root).unwrap());
         let known = (step + 1 < PAST).then(|| t(cat(&refs, |c| &c.x[step + 1]), d));
         let base = f.config.interp_residual.then(|| known.as_ref().unwrap_or_else(|| &bases[step + 1 - PAST]));
-        let inputs = RtnInputs { sequence: &seq, x: &x, offset: offset.as_ref(), terrain: None, base };
+        let roots: Vec<[f32; 3]> = root.to_vec2::<f32>().unwrap().iter().map(|r| [r[0], r[1], r[2]]).collect();
+        let patches = f.config.terrain.then(|| t(host_patches(f, &roots), f.config.terrain_dim()));
+        let inputs = RtnInputs { sequence: &seq, x: &x, offset: offset.as_ref(), terrain: patches.as_ref(), base };
         let (next, st) = f.model.step(&inputs, &state).unwrap();
         state = st;
         trace.push(next.flatten_all().unwrap().to_vec1::<f32>().unwrap());
@@ -214,7 +243,7 @@ fn host_base(stats: &FeatureStats, last: &[f32], target_pose: &[f32], i: usize, 
 }
 
 /// The generate loop on the host around an exported graph. `start` gets the named start inputs
-/// (`target`, `x0`); `step` gets the named frame inputs (`x`, `offset`, `base`) and returns
+/// (`target`, `x0`); `step` gets the named frame inputs (`x`, `offset`, `base`, `terrain`) and returns
 /// `x_next`.
 fn host_loop(
     f: &Fixture,
@@ -243,7 +272,8 @@ fn host_loop(
                 .flat_map(|c| host_base(&f.stats, &c.past[(PAST - 1) * d..], &c.target_pose, nt - PAST, n_out - 1))
                 .collect()
         };
-        let next = step(&HashMap::from([("x", x.clone()), ("offset", offset), ("base", base)]));
+        let terrain = host_patches(f, &roots);
+        let next = step(&HashMap::from([("x", x.clone()), ("offset", offset), ("base", base), ("terrain", terrain)]));
         trace.push(next.clone());
         if nt < PAST {
             x = cat(chars, |c| &c.x[nt]);
@@ -503,8 +533,10 @@ fn rtn_single_step_parity() {
 #[test]
 fn rtn_ablation_variants_parity() {
     // Every config switch the exporter respects: no future conditioning, zero / common initial
-    // state, no residual output, the residual on the interpolation (`base` input).
-    let variants: [Variant; 7] = [
+    // state, no residual output, the residual on the interpolation (`base` input), the
+    // terrain-aware RTN (`terrain` input, patches sampled on the host under each root).
+    let variants: [Variant; 8] = [
+        ("terrain", |c: &mut Config| c.terrain = true),
         ("interp_residual", |c: &mut Config| c.interp_residual = true),
         ("interp_residual_no_future", |c: &mut Config| {
             c.interp_residual = true;
@@ -1151,13 +1183,115 @@ fn runtime_fallback_matches_candle_and_reaches_the_interpolation() {
         }
     }
     // A weight strictly between 0 and 1: thresholds around candle's own miss.
-    let plain = f.model.transition_checked(&f.stats, &c.past, &c.target_pose, &c.next_pose, n, None).unwrap();
+    let plain = f.model.transition_checked(&f.stats, &c.past, &c.target_pose, &c.next_pose, n, None, None).unwrap();
     let partial = Fallback { start: 0.5 * plain.miss, full: 2.0 * plain.miss };
-    let ours = f.model.transition_checked(&f.stats, &c.past, &c.target_pose, &c.next_pose, n, Some(&partial)).unwrap();
+    let ours =
+        f.model.transition_checked(&f.stats, &c.past, &c.target_pose, &c.next_pose, n, None, Some(&partial)).unwrap();
     assert!((ours.weight - 1.0 / 3.0).abs() < 1e-4, "{}", ours.weight);
     runner.set_fallback(Some(zoo_runtime::TransitionFallback { start: partial.start, full: partial.full }));
     runner.generate(&mut state, &c.past, &c.target_pose, &c.next_pose, &mut out).unwrap();
     assert!((state.fallback_weight() - ours.weight).abs() < 1e-3, "{} vs {}", state.fallback_weight(), ours.weight);
     let diff = max_abs_diff(&ours.frames, &out);
     assert!(diff <= 1e-2, "runtime vs candle with the fallback: max abs diff {diff} (clip units)");
+}
+
+/// A terrain-aware RTN through the engine-facing API: each character's heightmap
+/// (`TransitionState::set_heightmap`) gives the same transitions as candle's `Rtn::transition`
+/// with that map (same tolerance as [`runtime_transition_api_matches_candle`]), one by one and
+/// batched with a different ground per character; the ground changes the transition.
+#[test]
+fn runtime_terrain_transition_matches_candle() {
+    let f = fixture(tiny().with_terrain(true));
+    let model = TransitionModel::new(MotionModel::from_bytes(&export(&f).to_bytes()).unwrap()).unwrap();
+    assert_eq!(model.terrain(), Some((5, f.config.terrain_extent)));
+    let names: Vec<&str> = model.model().inputs().iter().map(|i| i.name.as_str()).collect();
+    assert_eq!(names, ["x", "offset", "terrain"]);
+    let chars = characters(&f.stats);
+    let d = f.config.dim();
+    let mut runner = model.runner().unwrap();
+    runner.allow_beyond_trained(true);
+    let rolling = Arc::new(f.ground.clone());
+    let flat = Arc::new(Heightmap::flat(0.0));
+    let grounds = [&rolling, &flat, &rolling];
+    let mut want_all = Vec::new();
+    for (c, ground) in chars.iter().zip(grounds) {
+        let want = f.model.transition(&f.stats, &c.past, &c.target_pose, &c.next_pose, FRAMES, Some(ground)).unwrap();
+        let mut state = model.new_transition();
+        state.set_heightmap(Some(Arc::clone(ground)));
+        let mut out = vec![0.0; want.len()];
+        runner.generate(&mut state, &c.past, &c.target_pose, &c.next_pose, &mut out).unwrap();
+        let diff = max_abs_diff(&want, &out);
+        assert!(diff <= 1e-2, "runtime vs candle terrain transition: max abs diff {diff} (clip units)");
+        want_all.extend(want);
+    }
+    let c = &chars[0];
+    let on_flat = f.model.transition(&f.stats, &c.past, &c.target_pose, &c.next_pose, FRAMES, Some(&flat)).unwrap();
+    let moved = max_abs_diff(&on_flat, &want_all[..on_flat.len()]);
+    assert!(moved > 1e-1, "the ground should change the transition (max abs diff {moved})");
+    let refs: Vec<&Character> = chars.iter().collect();
+    let mut states: Vec<_> = grounds
+        .iter()
+        .map(|g| {
+            let mut s = model.new_transition();
+            s.set_heightmap(Some(Arc::clone(g)));
+            s
+        })
+        .collect();
+    let mut out = vec![0.0; BATCH * (FRAMES + 1) * d];
+    let (past, target, next) = (cat(&refs, |c| &c.past), cat(&refs, |c| &c.target_pose), cat(&refs, |c| &c.next_pose));
+    runner.generate_batch(&mut states, &past, &target, &next, &mut out).unwrap();
+    let diff = max_abs_diff(&want_all, &out);
+    assert!(diff <= 1e-2, "batched terrain transitions vs candle: max abs diff {diff}");
+}
+
+/// A terrain-aware model refuses to start a character without a heightmap and names the fix;
+/// a model without terrain input ignores one.
+#[test]
+fn runtime_terrain_model_without_heightmap_is_refused() {
+    let f = fixture(tiny().with_terrain(true));
+    let model = TransitionModel::new(MotionModel::from_bytes(&export(&f).to_bytes()).unwrap()).unwrap();
+    let mut runner = model.runner().unwrap();
+    let c = character(&f.stats, 0);
+    let mut states = [model.new_transition(), model.new_transition()];
+    states[0].set_heightmap(Some(Arc::new(f.ground.clone())));
+    let two = |v: &[f32]| [v, v].concat();
+    let err = runner.start_batch(&mut states, &two(&c.past), &two(&c.target_pose), &two(&c.next_pose)).unwrap_err();
+    assert!(matches!(err, MotionError::TransitionSequence { character: 1, .. }), "{err}");
+    assert!(err.to_string().contains("terrain-aware") && err.to_string().contains("set_heightmap"), "{err}");
+    assert!(!states[0].is_started() && !states[1].is_started());
+    // The model without terrain input: a heightmap changes nothing.
+    let flat_model = fixture(tiny());
+    let flat = TransitionModel::new(MotionModel::from_bytes(&export(&flat_model).to_bytes()).unwrap()).unwrap();
+    assert_eq!(flat.terrain(), None);
+    let mut runner = flat.runner().unwrap();
+    let d = f.config.dim();
+    let (mut a, mut b) = (vec![0.0; 7 * d], vec![0.0; 7 * d]);
+    let mut state = flat.new_transition();
+    runner.generate(&mut state, &c.past, &c.target_pose, &c.next_pose, &mut a).unwrap();
+    state.set_heightmap(Some(Arc::new(f.ground.clone())));
+    runner.generate(&mut state, &c.past, &c.target_pose, &c.next_pose, &mut b).unwrap();
+    assert_eq!(a, b);
+}
+
+/// A terrain-aware file whose metadata does not fit its `terrain` input is refused with the
+/// reason: no `terrain` normalization group, a patch side that is not the graph's, an empty patch.
+#[test]
+fn a_terrain_section_that_does_not_match_the_graph_is_refused() {
+    let f = fixture(tiny().with_terrain(true));
+    let onnx = export(&f);
+    let norm = &onnx.proto().metadata_props.iter().find(|p| p.key == keys::NORMALIZATION).unwrap().value;
+    let mut groups: serde_json::Value = serde_json::from_str(norm).unwrap();
+    groups.as_object_mut().unwrap().remove("terrain");
+    let bytes = with_prop(&f, keys::NORMALIZATION, Some(&groups.to_string()));
+    let err = TransitionModel::new(MotionModel::from_bytes(&bytes).unwrap()).unwrap_err();
+    assert!(err.to_string().contains("no group `terrain`"), "{err}");
+    let mut task = zoo_rtn::export::transition_task(&f.config);
+    task.terrain.as_mut().unwrap().side = 4;
+    let bytes = with_prop(&f, keys::TRANSITION, Some(&serde_json::to_string(&task).unwrap()));
+    let err = TransitionModel::new(MotionModel::from_bytes(&bytes).unwrap()).unwrap_err();
+    assert!(err.to_string().contains("group `terrain` has 25 means and 25 deviations, expected 16"), "{err}");
+    task.terrain.as_mut().unwrap().side = 0;
+    let bytes = with_prop(&f, keys::TRANSITION, Some(&serde_json::to_string(&task).unwrap()));
+    let err = LoadedModel::from_bytes(&bytes).unwrap_err();
+    assert!(err.to_string().contains("terrain patch of side 0 (1..=1024)"), "{err}");
 }

@@ -110,6 +110,7 @@ fn allocations_per_step() {
         assert!((a1000 - a100).abs() < 0.5, "allocations per step should not grow with frames played");
     }
     transition_allocations();
+    terrain_transition_allocations();
     stitch_allocations();
     keyframes_allocations();
 }
@@ -286,4 +287,32 @@ fn transition_allocations() {
     let g = per_frame(100, || raw_runner.step(&mut raw_state, &[&x, &x], &mut [&mut y]).unwrap());
     eprintln!("tiny RTN: {t:.1} allocations per TransitionRunner::step_raw, {g:.1} per raw graph step");
     assert!(t <= g + 0.01, "TransitionRunner::step_raw allocates {t} per frame, the graph run alone {g}");
+}
+
+/// A terrain-aware RTN: sampling and normalizing the terrain patch of every step (from the
+/// character's shared heightmap) adds no allocation to the graph run itself.
+fn terrain_transition_allocations() {
+    let d = 3 * 4;
+    let onnx = zoo_tests::tiny_terrain_rtn_onnx();
+    let model = TransitionModel::new(MotionModel::from_bytes(&onnx.to_bytes()).unwrap()).unwrap();
+    let (side, _) = model.terrain().expect("a terrain-aware model");
+    let pose = |f: usize| -> Vec<f32> { (0..d).map(|i| (i as f32 * 7.0 + f as f32 * 3.0).sin() * 20.0).collect() };
+    let past: Vec<f32> = (0..4).flat_map(pose).collect();
+    let (target, next) = (pose(40), pose(41));
+    let ground =
+        zoo_runtime::Heightmap::from_fn(-500.0, -500.0, 500.0, 500.0, 10.0, |x, z| 5.0 * (0.03 * x + 0.02 * z).sin());
+    let mut runner = model.runner().unwrap();
+    let mut state = model.new_transition();
+    state.set_heightmap(Some(std::sync::Arc::new(ground)));
+    runner.start(&mut state, &past, &target, &next).unwrap();
+    let mut out = vec![0.0; d];
+    let t = per_frame(100, || runner.step_raw(&mut state, &mut out).unwrap());
+    let raw = model.model();
+    let mut raw_runner = raw.runner().unwrap();
+    let mut raw_state = raw.new_state();
+    let (x, patch) = (vec![0.1; d], vec![0.1; side * side]);
+    let mut y = vec![0.0; d];
+    let g = per_frame(100, || raw_runner.step(&mut raw_state, &[&x, &x, &patch], &mut [&mut y]).unwrap());
+    eprintln!("tiny terrain RTN: {t:.1} allocations per TransitionRunner::step_raw, {g:.1} per raw graph step");
+    assert!(t <= g + 0.01, "terrain step_raw allocates {t} per frame, the graph run alone {g}");
 }

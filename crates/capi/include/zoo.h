@@ -327,6 +327,35 @@ enum ZooStatus zoo_step_posed(struct ZooRunner *runner,
                               float *rotations,
                               size_t rotations_len);
 
+// The terrain patch of a terrain-aware transition model: `*side` samples per side on a square
+// of `*extent` model units around the root. `ZOO_STATUS_NOT_AVAILABLE` for a model without
+// terrain input (a flat-ground model). Thread-safe.
+//
+// # Safety
+// `model` is NULL or a live model; `side` and `extent` are NULL or writable.
+enum ZooStatus zoo_model_terrain(const struct ZooModel *model, size_t *side, float *extent);
+
+// Sets the ground under character `index`: a heightmap of `cols * rows` heights (model units,
+// Y up) on a regular grid in the XZ plane, sample `(i, k)` at `(origin_x + i * cell, origin_z +
+// k * cell)` stored at `heights[k * cols + i]`, bilinear between samples and extended beyond
+// the border (the `zoo-heightfield` layout of `zoo data synth --terrain`). The map is copied.
+// A terrain-aware model ([`zoo_model_terrain`]) needs it before [`zoo_start`] or
+// [`zoo_start_posed`]; a flat-ground model ignores it. `heights` NULL with `heights_len` 0
+// removes the ground. Takes effect at the next step. One thread at a time.
+//
+// # Safety
+// `characters` is NULL or live and used by this thread only; `heights` is NULL or holds
+// `heights_len` floats.
+enum ZooStatus zoo_characters_set_heightmap(struct ZooCharacters *characters,
+                                            size_t index,
+                                            size_t cols,
+                                            size_t rows,
+                                            float cell,
+                                            float origin_x,
+                                            float origin_z,
+                                            const float *heights,
+                                            size_t heights_len);
+
 // Frames character `index`'s transition still returns (0 once it returned its target frame).
 //
 // # Safety

@@ -204,6 +204,13 @@ pub(crate) fn runtime_failure(e: MotionError) -> Failure {
     (status, e.to_string())
 }
 
+/// [`runtime_failure`] of starting transitions, naming the C call that gives a character its
+/// ground where the runtime names its Rust method.
+fn start_failure(e: MotionError) -> Failure {
+    let (status, message) = runtime_failure(e);
+    (status, message.replace("TransitionState::set_heightmap", "zoo_characters_set_heightmap"))
+}
+
 pub(crate) fn null(what: &str) -> Failure {
     (ZooStatus::NullPointer, format!("`{what}` is NULL; pass a valid pointer"))
 }
@@ -598,7 +605,7 @@ pub unsafe extern "C" fn zoo_start(
         let past = unsafe { slice(past, past_len, "past") }?;
         let target = unsafe { slice(target, target_len, "target") }?;
         let next = unsafe { slice(next, next_len, "next") }?;
-        runner.start_batch_for(&mut chars.states, past, target, next, length).map_err(runtime_failure)
+        runner.start_batch_for(&mut chars.states, past, target, next, length).map_err(start_failure)
     })
 }
 
@@ -774,7 +781,7 @@ pub unsafe extern "C" fn zoo_start_posed(
         debug_assert_eq!(past.len(), n * frames);
         let result = runner.start_posed_batch_for(&mut chars.states, past, target, next, length);
         chars.inputs = inputs;
-        result.map_err(runtime_failure)
+        result.map_err(start_failure)
     })
 }
 
@@ -806,6 +813,85 @@ pub unsafe extern "C" fn zoo_step_posed(
         for ((pose, root), rotations) in chars.poses.iter().zip(roots).zip(rotations.chunks_exact_mut(4 * k)) {
             write_pose(pose, root, rotations);
         }
+        Ok(())
+    })
+}
+
+/// The terrain patch of a terrain-aware transition model: `*side` samples per side on a square
+/// of `*extent` model units around the root. `ZOO_STATUS_NOT_AVAILABLE` for a model without
+/// terrain input (a flat-ground model). Thread-safe.
+///
+/// # Safety
+/// `model` is NULL or a live model; `side` and `extent` are NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_model_terrain(model: *const ZooModel, side: *mut usize, extent: *mut f32) -> ZooStatus {
+    guard(|| {
+        let m = &unsafe { handle(model, "model") }?.model;
+        let Some((s, e)) = m.terrain() else {
+            return Err((
+                ZooStatus::NotAvailable,
+                "the model has no terrain input (it was trained without `zoo train rtn --terrain`)".into(),
+            ));
+        };
+        unsafe { write_out(side, s, "side") }?;
+        unsafe { write_out(extent, e, "extent") }
+    })
+}
+
+/// Sets the ground under character `index`: a heightmap of `cols * rows` heights (model units,
+/// Y up) on a regular grid in the XZ plane, sample `(i, k)` at `(origin_x + i * cell, origin_z +
+/// k * cell)` stored at `heights[k * cols + i]`, bilinear between samples and extended beyond
+/// the border (the `zoo-heightfield` layout of `zoo data synth --terrain`). The map is copied.
+/// A terrain-aware model ([`zoo_model_terrain`]) needs it before [`zoo_start`] or
+/// [`zoo_start_posed`]; a flat-ground model ignores it. `heights` NULL with `heights_len` 0
+/// removes the ground. Takes effect at the next step. One thread at a time.
+///
+/// # Safety
+/// `characters` is NULL or live and used by this thread only; `heights` is NULL or holds
+/// `heights_len` floats.
+#[unsafe(no_mangle)]
+#[allow(clippy::too_many_arguments)]
+pub unsafe extern "C" fn zoo_characters_set_heightmap(
+    characters: *mut ZooCharacters,
+    index: usize,
+    cols: usize,
+    rows: usize,
+    cell: f32,
+    origin_x: f32,
+    origin_z: f32,
+    heights: *const f32,
+    heights_len: usize,
+) -> ZooStatus {
+    guard(|| {
+        let chars = unsafe { handle_mut(characters, "characters") }?;
+        let heights = unsafe { optional_slice(heights, heights_len, "heights") }?;
+        character(chars, index)?;
+        if heights.is_empty() {
+            chars.states[index].set_heightmap(None);
+            return Ok(());
+        }
+        let invalid = |m: String| (ZooStatus::InvalidArgument, m);
+        if cols == 0 || rows == 0 {
+            return Err(invalid(format!("the heightmap is {cols} x {rows} samples; it needs at least 1 x 1")));
+        }
+        check_size("heights", heights.len(), cols.saturating_mul(rows), "floats (cols * rows)", "its cols and rows")?;
+        if !(cell.is_finite() && cell > 0.0) {
+            return Err(invalid(format!("`cell` is {cell}; the distance between samples must be a positive number")));
+        }
+        if !(origin_x.is_finite() && origin_z.is_finite()) {
+            return Err(invalid(format!("the origin ({origin_x}, {origin_z}) must be finite")));
+        }
+        if let Some(i) = heights.iter().position(|h| !h.is_finite()) {
+            return Err(invalid(format!("height {i} is {}; every height must be finite", heights[i])));
+        }
+        let map = zoo_runtime::Heightmap {
+            cols,
+            rows,
+            cell: cell as f64,
+            origin: [origin_x as f64, origin_z as f64],
+            heights: heights.to_vec(),
+        };
+        chars.states[index].set_heightmap(Some(std::sync::Arc::new(map)));
         Ok(())
     })
 }

@@ -1,5 +1,5 @@
-//! Terrain as a heightmap: the ground under a clip, read by synthetic data, rendering, RTN's
-//! terrain patches and, later, a runtime terrain input.
+//! Terrain as a heightmap: the ground under a clip, read by synthetic data, rendering, and the
+//! terrain patches RTN reads in training and in the engine runtime ([`terrain_patch`]).
 //!
 //! Units are the clip's (cm for bandai2 and the synthetic data), Y up. A [`Heightmap`] stores
 //! `cols * rows` heights on a regular grid in the XZ plane: sample `(i, k)` lies at
@@ -97,6 +97,55 @@ impl Heightmap {
     }
 }
 
+/// Rotates global positions (`... x 3`) by `angle` radians about the vertical (+Y) axis
+/// through `center = (x, z)` (the augmentation of RTN sec. 3.3).
+pub fn rotate_about_y(positions: &mut [f32], angle: f32, center: [f32; 2]) {
+    let (s, c) = angle.sin_cos();
+    for p in positions.chunks_exact_mut(3) {
+        let (x, z) = (p[0] - center[0], p[2] - center[1]);
+        p[0] = c * x + s * z + center[0];
+        p[2] = -s * x + c * z + center[1];
+    }
+}
+
+/// A rotation of the world about the vertical axis through `center` (x, z), applied to the
+/// positions of a training window; terrain is sampled through its inverse (RTN sec. 3.3).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct YawAbout {
+    /// Angle in radians (as in [`rotate_about_y`]).
+    pub angle: f32,
+    /// Vertical axis position (x, z).
+    pub center: [f32; 2],
+}
+
+/// Local terrain patch `p_t` (RTN sec. 3.2): a `side x side` grid spanning `extent` around the
+/// root's (x, z), world-axis aligned, holding terrain height minus root height (`f32`
+/// sampling, [`Heightmap::sample`]); `rotation` is the augmentation applied to the positions
+/// (the terrain is rotated with them; `None` outside training). Entry `[i * side + j]` lies at
+/// `(root.x - extent / 2 + j * step, root.z - extent / 2 + i * step)`, `step = extent / (side - 1)`.
+/// Training (`zoo_rtn`) and the engine runtime both call this function. Allocates nothing.
+pub fn terrain_patch(
+    map: &Heightmap,
+    root: [f32; 3],
+    extent: f32,
+    side: usize,
+    rotation: Option<YawAbout>,
+    out: &mut [f32],
+) {
+    assert_eq!(out.len(), side * side, "a terrain patch has side * side values");
+    let step = if side > 1 { extent / (side - 1) as f32 } else { 0.0 };
+    let half = extent * 0.5;
+    for i in 0..side {
+        for j in 0..side {
+            let mut p = [root[0] - half + j as f32 * step, 0.0, root[2] - half + i as f32 * step];
+            if let Some(r) = rotation {
+                rotate_about_y(&mut p, -r.angle, r.center);
+            }
+            out[i * side + j] = map.sample(p[0], p[2]) - root[1];
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -125,5 +174,17 @@ mod tests {
         let m = Heightmap::flat_area(-10.0, 0.0, 10.0, 5.0, 2.0, 1.0);
         assert_eq!((m.cols, m.rows), (11, 4));
         assert_eq!(m.height(3.3, 2.2), 1.0);
+    }
+
+    #[test]
+    fn terrain_patch_is_relative_to_the_root_and_world_aligned() {
+        // A ramp rising 0.5 per unit along +X.
+        let map = Heightmap::from_fn(-50.0, -50.0, 50.0, 50.0, 5.0, |x, _| 0.5 * x);
+        let mut patch = [0.0; 9];
+        terrain_patch(&map, [10.0, 30.0, -5.0], 20.0, 3, None, &mut patch);
+        // Row 1, column 0 lies at x = 0; column 2 at x = 20; rows run along +Z (flat here).
+        assert!((patch[3] - (0.0 - 30.0)).abs() < 1e-5, "{patch:?}");
+        assert!((patch[5] - (10.0 - 30.0)).abs() < 1e-5, "{patch:?}");
+        assert!((patch[0] - patch[6]).abs() < 1e-5, "{patch:?}");
     }
 }

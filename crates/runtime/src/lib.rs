@@ -49,7 +49,7 @@ pub use model::{MotionModel, MotionState, MotionStateInfo, MotionTensorInfo};
 pub use pose::{Conversion, CoordinateFrame, EnginePose, Handedness, UpAxis};
 pub use runner::MotionRunner;
 pub use stitch::{FootCleanup, StitchRefiner, StitchStream, StitchStreamOf};
-pub use transition::{TargetMiss, TransitionFallback, TransitionModel, TransitionRunner, TransitionState};
+pub use transition::{Heightmap, TargetMiss, TransitionFallback, TransitionModel, TransitionRunner, TransitionState};
 
 /// Re-exported so callers use the same glam version as the runtime.
 pub use glam;

@@ -9,6 +9,12 @@
 //! them (context length, blend length, which inputs exist) comes from the typed task section
 //! [`crate::metadata::TransitionTask`], never from the model's config.
 //!
+//! A terrain-aware RTN (`zoo train rtn --terrain`, `zoo.transition`'s `terrain` section) also
+//! takes the step input `terrain`: the local patch under the root of the frame fed, sampled from
+//! the character's heightmap ([`TransitionState::set_heightmap`]) by
+//! [`zoo_motion::terrain::terrain_patch`], the function training calls, and normalized with the
+//! file's `terrain` group (docs/runtime-protocol.md).
+//!
 //! Poses are flat `f32` buffers of global joint positions, joint-major (`[x0, y0, z0, x1, ...]`,
 //! `3K` values for `K` joints, the model's skeleton order); [`crate::pose`] converts glam
 //! vectors. Batched calls take character-major buffers (character `c` at `c * 3K`).
@@ -22,8 +28,11 @@ use crate::runner::{MotionRunner, check_finite, check_len};
 use glam::DVec3;
 use posed::{PosedScratch, PosedState};
 use std::path::Path;
+use std::sync::Arc;
 use zoo_motion::features;
 use zoo_motion::footlock::FootLock;
+pub use zoo_motion::terrain::Heightmap;
+use zoo_motion::terrain::terrain_patch;
 
 /// What a frame input of the step graph is fed from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -32,6 +41,19 @@ enum FrameInput {
     Offset,
     /// The interpolation frame of an interpolation-residual RTN (`x_next = base + D(h)`).
     Base,
+    /// The normalized terrain patch under the root of `x` (terrain-aware RTN).
+    Terrain,
+}
+
+/// The terrain input of a terrain-aware RTN: patch geometry and normalization.
+#[derive(Clone, Debug)]
+struct TerrainInput {
+    /// Samples per side (the patch has `side * side` values).
+    side: usize,
+    /// Side length of the patch in model units.
+    extent: f32,
+    /// The file's `terrain` normalization group (`side * side` values).
+    norm: MotionMeanStd,
 }
 
 /// A loaded RTN for transitions: cheap to clone (the graph is shared), `Send + Sync`.
@@ -45,6 +67,8 @@ pub struct TransitionModel {
     velocity: MotionMeanStd,
     offset: MotionMeanStd,
     frame_inputs: Vec<FrameInput>,
+    /// The terrain input of a terrain-aware model.
+    terrain: Option<TerrainInput>,
     /// For each start-graph input: `true` for the target vector, `false` for `x0`.
     start_target: Vec<bool>,
     target_blend: usize,
@@ -85,9 +109,28 @@ pub struct TransitionState {
     fallback_weight: f32,
     /// Rotations of a transition started from engine poses.
     posed: PosedState,
+    /// The ground under this character (terrain-aware models).
+    heightmap: Option<Arc<Heightmap>>,
 }
 
 impl TransitionState {
+    /// Sets the ground under this character: the heightmap a terrain-aware model
+    /// ([`TransitionModel::terrain`]) samples its terrain patch from at every step, in the
+    /// model's units and coordinate frame (Y up, the frame of the poses given to the runner).
+    /// Shared, not copied: many characters may hold the same map. Required before
+    /// [`TransitionRunner::start`] for a terrain-aware model (starting without one is a
+    /// [`MotionError::TransitionSequence`] error); a model without terrain input ignores it, so an
+    /// engine may give every character its ground whatever model it runs. Changing it during a
+    /// transition takes effect at the next step.
+    pub fn set_heightmap(&mut self, heightmap: Option<Arc<Heightmap>>) {
+        self.heightmap = heightmap;
+    }
+
+    /// The heightmap set with [`TransitionState::set_heightmap`].
+    pub fn heightmap(&self) -> Option<&Arc<Heightmap>> {
+        self.heightmap.as_ref()
+    }
+
     /// Whether [`TransitionRunner::start`] was called for this state.
     pub fn is_started(&self) -> bool {
         self.started
@@ -205,6 +248,8 @@ pub struct TransitionRunner {
     fallback: Option<TransitionFallback>,
     /// Buffers of posed transitions.
     posed: PosedScratch,
+    /// Normalized terrain patches of the characters of a graph run (terrain-aware models).
+    patch: Vec<f32>,
 }
 
 fn bad(key: &str, reason: String) -> MotionError {
@@ -258,23 +303,24 @@ impl TransitionModel {
                 format!("frame_dim is {} but the skeleton has {joints} joints ({d} values)", task.frame_dim),
             ));
         }
-        if task.terrain.is_some() {
-            return Err(MotionError::BadGraphIo {
-                what: "input",
-                name: "terrain".into(),
-                reason: "is not supported by TransitionModel (terrain-aware RTNs need the raw MotionRunner)".into(),
-            });
-        }
-        let group = |name: &str| -> Result<MotionMeanStd, MotionError> {
+        let group_of = |name: &str, len: usize| -> Result<MotionMeanStd, MotionError> {
             let g = m.normalization.get(name).ok_or_else(|| bad(keys::NORMALIZATION, format!("no group `{name}`")))?;
-            if g.mean.len() != d || g.std.len() != d {
+            if g.mean.len() != len || g.std.len() != len {
                 return Err(bad(
                     keys::NORMALIZATION,
-                    format!("group `{name}` has {} means and {} deviations, expected {d}", g.mean.len(), g.std.len()),
+                    format!("group `{name}` has {} means and {} deviations, expected {len}", g.mean.len(), g.std.len()),
                 ));
             }
             Ok(g.clone())
         };
+        let group = |name: &str| group_of(name, d);
+        let terrain = match &task.terrain {
+            Some(t) => {
+                Some(TerrainInput { side: t.side, extent: t.extent, norm: group_of("terrain", t.side * t.side)? })
+            }
+            None => None,
+        };
+        let patch_dim = terrain.as_ref().map_or(0, |t| t.side * t.side);
         let frame_inputs = model
             .inputs()
             .iter()
@@ -282,23 +328,35 @@ impl TransitionModel {
                 "x" if i.width == d => Ok(FrameInput::X),
                 "offset" if i.width == d && task.offset_input => Ok(FrameInput::Offset),
                 "base" if i.width == d => Ok(FrameInput::Base),
+                "terrain" if terrain.is_some() && i.width == patch_dim => Ok(FrameInput::Terrain),
                 other => Err(MotionError::BadGraphIo {
                     what: "input",
                     name: other.to_string(),
                     reason: format!(
-                        "is not an input of this transition model (`x`{}, optionally `base`, of {d} values, from `{}`)",
+                        "is not an input of this transition model (`x`{}, optionally `base`, of {d} values{}, from `{}`)",
                         if task.offset_input { ", `offset`" } else { "" },
+                        if terrain.is_some() { format!(", `terrain` of {patch_dim} values") } else { String::new() },
                         keys::TRANSITION
                     ),
                 }),
             })
             .collect::<Result<Vec<_>, _>>()?;
-        for (name, want) in [("x", FrameInput::X), ("offset", FrameInput::Offset)] {
-            if (want == FrameInput::X || task.offset_input) && !frame_inputs.contains(&want) {
+        for (name, want, width) in
+            [("x", FrameInput::X, d), ("offset", FrameInput::Offset, d), ("terrain", FrameInput::Terrain, patch_dim)]
+        {
+            let required = match want {
+                FrameInput::Offset => task.offset_input,
+                FrameInput::Terrain => terrain.is_some(),
+                _ => true,
+            };
+            if required && !frame_inputs.contains(&want) {
                 return Err(MotionError::BadGraphIo {
                     what: "input",
                     name: name.into(),
-                    reason: format!("a transition step graph takes `{name}` of {d} values (`{}`)", keys::TRANSITION),
+                    reason: format!(
+                        "a transition step graph takes `{name}` of {width} values (`{}`)",
+                        keys::TRANSITION
+                    ),
                 });
             }
         }
@@ -326,6 +384,7 @@ impl TransitionModel {
             velocity: group("velocity")?,
             offset: group("offset")?,
             frame_inputs,
+            terrain,
             start_target,
             target_blend: task.target_blend,
             parents: m.skeleton.parents.iter().map(|&p| usize::try_from(p).ok()).collect(),
@@ -357,6 +416,14 @@ impl TransitionModel {
     /// Target-blend length of the post-process (RTN eq. 15-16), from `zoo.transition`.
     pub fn target_blend(&self) -> usize {
         self.target_blend
+    }
+
+    /// The terrain patch of a terrain-aware model, `(side, extent)`: `side * side` heights on
+    /// a square of `extent` model units around the root; `None` for a model without terrain
+    /// input. A terrain-aware model needs a heightmap per character
+    /// ([`TransitionState::set_heightmap`]).
+    pub fn terrain(&self) -> Option<(usize, f32)> {
+        self.terrain.as_ref().map(|t| (t.side, t.extent))
     }
 
     /// The foot-lock post-process for this model's skeleton (legs found by joint name, defaults
@@ -397,6 +464,7 @@ impl TransitionModel {
             miss: None,
             fallback_weight: 0.0,
             posed: PosedState::new(self.joints),
+            heightmap: None,
         }
     }
 
@@ -420,6 +488,7 @@ impl TransitionModel {
             beyond_trained: false,
             fallback: None,
             posed: PosedScratch::default(),
+            patch: Vec::new(),
         })
     }
 }
@@ -532,6 +601,16 @@ impl TransitionRunner {
         check_rows("past", past, n, per)?;
         check_rows("target", target, n, d)?;
         check_rows("next", next, n, d)?;
+        if self.model.terrain.is_some()
+            && let Some(c) = states.iter().position(|s| s.heightmap.is_none())
+        {
+            return Err(MotionError::TransitionSequence {
+                character: c,
+                reason: "this model is terrain-aware: give the character the ground it stands on \
+                         (TransitionState::set_heightmap) before starting the transition"
+                    .into(),
+            });
+        }
         let frames = per / d;
         let m = &self.model;
         // Context features and target vectors, normalized like in training.
@@ -624,6 +703,25 @@ impl TransitionRunner {
                 }
             }
         }
+        if let Some(t) = &m.terrain {
+            let p = t.side * t.side;
+            self.patch.resize(n * p, 0.0);
+            for (row, &c) in sel.iter().enumerate() {
+                let s = &states[c];
+                let out = &mut self.patch[row * p..(row + 1) * p];
+                let Some(map) = &s.heightmap else {
+                    return Err(MotionError::TransitionSequence {
+                        character: c,
+                        reason: "this model is terrain-aware and the character's heightmap was removed \
+                                 (TransitionState::set_heightmap(None)) during the transition"
+                            .into(),
+                    });
+                };
+                // RTN sec. 3.2: p_t under the root of the frame fed, as `zoo_rtn` trains it.
+                terrain_patch(map, s.root, t.extent, t.side, None, out);
+                t.norm.normalize(out);
+            }
+        }
         for (row, &c) in sel.iter().enumerate() {
             let s = &states[c];
             let (xb, ob) = (&mut self.xb[row * d..(row + 1) * d], &mut self.offset[row * d..(row + 1) * d]);
@@ -636,13 +734,14 @@ impl TransitionRunner {
             }
             m.offset.normalize(ob);
         }
-        let (x, offset, base) = (&self.xb[..], &self.offset[..], &self.base[..]);
-        let mut inputs: [&[f32]; 3] = [&[], &[], &[]];
+        let (x, offset, base, patch) = (&self.xb[..], &self.offset[..], &self.base[..], &self.patch[..]);
+        let mut inputs: [&[f32]; 4] = [&[], &[], &[], &[]];
         for (slot, which) in inputs.iter_mut().zip(&m.frame_inputs) {
             *slot = match which {
                 FrameInput::X => x,
                 FrameInput::Offset => offset,
                 FrameInput::Base => base,
+                FrameInput::Terrain => patch,
             };
         }
         let inputs = &inputs[..m.frame_inputs.len()];

@@ -12,7 +12,14 @@
 //! - MPJPE: mean joint position error over the transition frames (cm);
 //! - foot clearance error: mean |(foot height - terrain height under it) - the same for the
 //!   ground truth| over the foot joints and transition frames (cm): feet should neither float
-//!   above the terrain nor sink into it.
+//!   above the terrain nor sink into it;
+//! - L2P (the benchmark's, `zoo_data::metrics::l2p`): global positions of the transition
+//!   frames in the window's benchmark frame (facing unified at the last context frame, as
+//!   `zoo_data::dataset::prepare_window` does), normalized with the position statistics of
+//!   the training windows prepared the same way (`dataset::position_stats`);
+//! - foot penetration: depth of the foot joints (`foot`, `toe`) below the terrain surface,
+//!   `max(0, terrain - y)`, over the foot joints and transition frames (cm): mean and 99th
+//!   percentile, the model's and the ground truth's (the data's own floor).
 //!
 //! Run both variants with the same `STEPS` for an equal budget.
 
@@ -20,25 +27,49 @@
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 use candle_core::Device;
+use zoo_data::dataset::{self, NamedClip, WindowOptions};
 use zoo_data::synth::{self, SynthConfig};
+use zoo_motion::glam::{DQuat, DVec3};
 use zoo_rtn::features::Heightmap;
 use zoo_rtn::prelude::*;
+
+/// Global positions of frames `frames` of a flat window (`3K` per frame) rotated by `rot`.
+fn rotated(w: &[f32], frames: std::ops::Range<usize>, k: usize, rot: DQuat) -> Vec<DVec3> {
+    w[frames.start * 3 * k..frames.end * 3 * k]
+        .chunks_exact(3)
+        .map(|p| rot * DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64))
+        .collect()
+}
+
+/// Mean and 99th percentile of `v` (0 for an empty `v`).
+fn mean_p99(v: &mut [f64]) -> (f64, f64) {
+    if v.is_empty() {
+        return (0.0, 0.0);
+    }
+    v.sort_by(f64::total_cmp);
+    let p99 = v[((v.len() - 1) as f64 * 0.99).round() as usize];
+    (v.iter().sum::<f64>() / v.len() as f64, p99)
+}
 
 struct Sequence {
     positions: Vec<f32>,
     frames: usize,
     map: Heightmap,
+    /// Global root rotation of each frame (for the benchmark frame of L2P).
+    root_rot: Vec<DQuat>,
 }
 
 fn sequences(clips: &[synth::SynthClip]) -> Vec<Sequence> {
     clips
         .iter()
         .map(|c| {
-            let (_, gp) = c.clip.global();
+            let (gr, gp) = c.clip.global();
+            let j = c.clip.joints();
             Sequence {
                 positions: gp.iter().flat_map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect(),
                 frames: c.clip.frames(),
                 map: c.terrain.as_ref().expect("terrain clips").clone(),
+                root_rot: gr.iter().step_by(j).copied().collect(),
             }
         })
         .collect()
@@ -58,7 +89,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let skeleton = clips[0].clip.skeleton.clone();
     let feet = zoo_data::metrics::foot_joints(&skeleton.names);
     let (train_clips, test_clips): (Vec<_>, Vec<_>) = clips.into_iter().enumerate().partition(|(i, _)| i % 10 != 9);
-    let train = sequences(&train_clips.into_iter().map(|(_, c)| c).collect::<Vec<_>>());
+    let train_clips: Vec<_> = train_clips.into_iter().map(|(_, c)| c).collect();
+    // L2P's statistics: the benchmark's, on the training clips' prepared windows.
+    let named: Vec<NamedClip> = train_clips
+        .iter()
+        .map(|c| NamedClip { name: c.name.clone(), path: c.name.clone().into(), clip: c.clip.clone() })
+        .collect();
+    let tw = dataset::windows(&named, &WindowOptions::TRAIN);
+    let position_std = dataset::position_stats(&tw.global().1, tw.joints()).std;
+    drop((named, tw));
+    let train = sequences(&train_clips);
     let test = sequences(&test_clips.into_iter().map(|(_, c)| c).collect::<Vec<_>>());
 
     let mut config = Config::paper().with_parents(&skeleton.parents);
@@ -110,6 +150,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for n in [30usize, 60] {
         let (mut err, mut count) = (0f64, 0usize);
         let (mut ground, mut gcount) = (0f64, 0usize);
+        let (mut l2p, mut windows) = (0f64, 0usize);
+        let (mut pen, mut pen_gt) = (Vec::new(), Vec::new());
         for s in &test {
             let mut f = 0;
             while f + 10 + n + 2 <= s.frames {
@@ -117,6 +159,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 let past = &w[..10 * d];
                 let (target, next) = (&w[(10 + n) * d..(11 + n) * d], &w[(11 + n) * d..(12 + n) * d]);
                 let y = model.transition(stats, past, target, next, n, aware.then_some(&s.map))?;
+                let fwd = s.root_rot[f + 9] * WindowOptions::TRAIN.forward_axis;
+                let inv =
+                    zoo_motion::facing::yaw_between(DVec3::X, DVec3::new(fwd.x, 0.0, fwd.z).normalize()).inverse();
+                l2p += zoo_data::metrics::l2p(
+                    &rotated(&y, 0..n, k, inv),
+                    &rotated(w, 10..10 + n, k, inv),
+                    k,
+                    &position_std,
+                );
+                windows += 1;
                 for t in 0..n {
                     let (p, g) = (&y[t * d..(t + 1) * d], &w[(10 + t) * d..(11 + t) * d]);
                     for j in 0..k {
@@ -129,14 +181,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         let clear_p = p[3 * j + 1] - s.map.sample(p[3 * j], p[3 * j + 2]);
                         ground += (clear_p - clear_g).abs() as f64;
                         gcount += 1;
+                        pen.push((-clear_p).max(0.0) as f64);
+                        pen_gt.push((-clear_g).max(0.0) as f64);
                     }
                 }
                 f += 40;
             }
         }
+        let ((pm, p99), (gm, g99)) = (mean_p99(&mut pen), mean_p99(&mut pen_gt));
         println!(
-            "n = {n}: MPJPE {:.2} cm, foot clearance error {:.2} cm ({} frames)",
+            "n = {n}: MPJPE {:.2} cm, L2P {:.4}, foot clearance error {:.2} cm, foot penetration mean {pm:.2} cm, \
+             p99 {p99:.2} cm (ground truth {gm:.2}, {g99:.2}) ({} frames, {windows} windows)",
             err / count.max(1) as f64,
+            l2p / windows.max(1) as f64,
             ground / gcount.max(1) as f64,
             count / k.max(1)
         );

@@ -96,7 +96,9 @@ pub struct CheckedTransition {
 
 impl Rtn {
     /// [`Rtn::transition`] with the confidence signal: the miss of the unroll's target frame,
-    /// and with `fallback` the blend towards interpolation it calls for.
+    /// and with `fallback` the blend towards interpolation it calls for. `terrain`: the ground
+    /// of a terrain-aware model (required by one, ignored otherwise).
+    #[allow(clippy::too_many_arguments)]
     pub fn transition_checked(
         &self,
         stats: &FeatureStats,
@@ -104,9 +106,10 @@ impl Rtn {
         target: &[f32],
         next: &[f32],
         n_frames: usize,
+        terrain: Option<&crate::features::Heightmap>,
         fallback: Option<&Fallback>,
     ) -> RtnResult<CheckedTransition> {
-        let mut frames = self.unroll(stats, past, target, next, n_frames, None)?;
+        let mut frames = self.unroll(stats, past, target, next, n_frames, terrain)?;
         let d = target.len();
         let miss = mean_joint_distance(&frames[frames.len() - d..], target);
         crate::features::target_blend(&mut frames, target, self.config().target_blend);

@@ -12,7 +12,7 @@ pub use zoo_motion::features::{
     decode_features, decode_frame, decode_frame_in_place, encode_frame, encode_positions, feature_dim, root_of,
     target_blend, target_vector,
 };
-pub use zoo_motion::terrain::Heightmap;
+pub use zoo_motion::terrain::{Heightmap, YawAbout, rotate_about_y, terrain_patch};
 
 /// Global offset `o_t = y_T - y_t` of every joint from the target frame (RTN sec. 3.2).
 pub fn global_offset(frame: &[f32], target: &[f32], out: &mut [f32]) {
@@ -39,52 +39,6 @@ pub fn interpolation_frame(last: &[f32], target: &[f32], i: usize, n: usize, out
     for j in 3..d {
         let a = j % 3;
         out[j] = (1.0 - w) * (last[j] - rl[a]) + w * (target[j] - rt[a]);
-    }
-}
-
-/// Rotates global positions (`... x 3`) by `angle` radians about the vertical (+Y) axis
-/// through `center = (x, z)` (the augmentation of RTN sec. 3.3).
-pub fn rotate_about_y(positions: &mut [f32], angle: f32, center: [f32; 2]) {
-    let (s, c) = angle.sin_cos();
-    for p in positions.chunks_exact_mut(3) {
-        let (x, z) = (p[0] - center[0], p[2] - center[1]);
-        p[0] = c * x + s * z + center[0];
-        p[2] = -s * x + c * z + center[1];
-    }
-}
-
-/// A rotation of the world about the vertical axis through `center` (x, z), applied to the
-/// positions of a training window; terrain is sampled through its inverse (RTN sec. 3.3).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct YawAbout {
-    /// Angle in radians (as in [`rotate_about_y`]).
-    pub angle: f32,
-    /// Vertical axis position (x, z).
-    pub center: [f32; 2],
-}
-
-/// Local terrain patch `p_t` (RTN sec. 3.2): a `side x side` grid spanning `extent` around the
-/// root's (x, z), world-axis aligned, holding terrain height minus root height; `rotation`
-/// is the augmentation applied to the positions (the terrain is rotated with them).
-pub fn terrain_patch(
-    map: &Heightmap,
-    root: [f32; 3],
-    extent: f32,
-    side: usize,
-    rotation: Option<YawAbout>,
-    out: &mut [f32],
-) {
-    assert_eq!(out.len(), side * side, "a terrain patch has side * side values");
-    let step = if side > 1 { extent / (side - 1) as f32 } else { 0.0 };
-    let half = extent * 0.5;
-    for i in 0..side {
-        for j in 0..side {
-            let mut p = [root[0] - half + j as f32 * step, 0.0, root[2] - half + i as f32 * step];
-            if let Some(r) = rotation {
-                rotate_about_y(&mut p, -r.angle, r.center);
-            }
-            out[i * side + j] = map.sample(p[0], p[2]) - root[1];
-        }
     }
 }
 

@@ -81,7 +81,7 @@ impl PositionGenerator for RtnGenerator {
     ) -> Result<Vec<f32>, String> {
         let t = self
             .model
-            .transition_checked(&self.stats, past, target, next, frames, self.fallback.as_ref())
+            .transition_checked(&self.stats, past, target, next, frames, None, self.fallback.as_ref())
             .map_err(|e| e.to_string())?;
         if self.fallback.is_some()
             && let Ok(mut counts) = self.counts.lock()

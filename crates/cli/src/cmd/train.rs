@@ -125,6 +125,14 @@ pub struct RtnArgs {
     /// added to it. Meant for motion the data lacks (docs/ood.md).
     #[arg(long)]
     pub interp_residual: bool,
+    /// Train the terrain-aware RTN (RTN sec. 3.2: the local terrain patch under the root feeds
+    /// the frame encoder; `terrain` in config.json). Every clip needs its heightmap: `--data`
+    /// written by `zoo data synth --terrain` (`NAME.terrain.json` beside each clip), or without
+    /// `--data` synthetic locomotion over uneven terrain generated in memory. The windows stay
+    /// in the clips' world frame, the heightmaps'. Run the model with `zoo transition
+    /// --heightmap` or the runtime's `TransitionState::set_heightmap`.
+    #[arg(long)]
+    pub terrain: bool,
     /// Augment the training windows on the fly with motion the data lacks (comma-separated;
     /// stored in config.json as `train.augment`): `reverse` (time reversal, 30% of the windows:
     /// forward walks become backward walks), `mirror` (left-right mirroring, 50%, joints
@@ -221,17 +229,100 @@ pub fn load_clips_excluding(
         }
         None => {
             let cfg = SynthConfig { minutes, seed, terrain: false, ..SynthConfig::default() };
-            let clips = synth::generate(&cfg);
-            // Every tenth clip validates; with fewer than ten clips, the last one does.
-            let n = clips.len();
-            let (mut train, mut valid) = (Vec::new(), Vec::new());
-            for (i, c) in clips.into_iter().enumerate() {
-                let named = NamedClip { path: PathBuf::from(&c.name), name: c.name, clip: c.clip };
-                if i % 10 == 9 || (n < 10 && i + 1 == n) { valid.push(named) } else { train.push(named) }
-            }
+            let (train, valid) = split_synth(synth::generate(&cfg).into_iter().map(named_synth).collect());
             Ok((train, valid, format!("synthetic locomotion, {minutes} min, seed {seed}")))
         }
     }
+}
+
+fn named_synth(c: synth::SynthClip) -> NamedClip {
+    NamedClip { path: PathBuf::from(&c.name), name: c.name, clip: c.clip }
+}
+
+/// The split of synthetic clips: every tenth clip validates; with fewer than ten, the last one.
+fn split_synth<T>(clips: Vec<T>) -> (Vec<T>, Vec<T>) {
+    let n = clips.len();
+    let (mut train, mut valid) = (Vec::new(), Vec::new());
+    for (i, c) in clips.into_iter().enumerate() {
+        if i % 10 == 9 || (n < 10 && i + 1 == n) { valid.push(c) } else { train.push(c) }
+    }
+    (train, valid)
+}
+
+/// The clips of `zoo train rtn` ([`load_clips_excluding`] with its arguments).
+fn load_rtn_clips(a: &RtnArgs) -> anyhow::Result<(Vec<NamedClip>, Vec<NamedClip>, String)> {
+    load_clips_excluding(&a.data, &a.valid_glob, a.exclude_glob.as_deref(), a.synth_minutes, a.seed, a.skip_invalid)
+}
+
+/// Clips with their heightmaps for `zoo train rtn --terrain`.
+struct TerrainClips {
+    train: Vec<(NamedClip, Heightmap)>,
+    valid: Vec<(NamedClip, Heightmap)>,
+    source: String,
+}
+
+/// [`load_clips_excluding`] for `--terrain`: each clip of `--data` with the heightmap beside it
+/// (`zoo_data::terrain::sibling_of`; a clip without one is refused with the fix), or synthetic
+/// locomotion over uneven terrain (flat-floor clips get a flat map at height 0).
+fn load_terrain_clips(a: &RtnArgs) -> anyhow::Result<TerrainClips> {
+    if a.data.is_none() {
+        let cfg = SynthConfig { minutes: a.synth_minutes, seed: a.seed, terrain: true, ..SynthConfig::default() };
+        let clips = synth::generate(&cfg)
+            .into_iter()
+            .map(|mut c| {
+                let map = c.terrain.take().unwrap_or_else(|| Heightmap::flat(0.0));
+                (named_synth(c), map)
+            })
+            .collect();
+        let (train, valid) = split_synth(clips);
+        let source = format!("synthetic locomotion over terrain, {} min, seed {}", a.synth_minutes, a.seed);
+        return Ok(TerrainClips { train, valid, source });
+    }
+    let (train, valid, source) = load_rtn_clips(a)?;
+    let with_maps = |clips: Vec<NamedClip>| -> anyhow::Result<Vec<(NamedClip, Heightmap)>> {
+        clips
+            .into_iter()
+            .map(|c| {
+                let Some(path) = zoo_data::terrain::sibling_of(&c.path) else {
+                    bail!(
+                        "--terrain: {} has no heightmap beside it (NAME.terrain.json, as `zoo data synth --terrain` \
+                         writes): train on such data, or leave --terrain out for data without terrain",
+                        c.path.display()
+                    )
+                };
+                let map = zoo_data::terrain::read(&path).with_context(|| format!("--terrain: {}", c.path.display()))?;
+                Ok((c, map))
+            })
+            .collect()
+    };
+    Ok(TerrainClips { train: with_maps(train)?, valid: with_maps(valid)?, source: format!("{source}, with terrain") })
+}
+
+/// The training windows of `pos` (`per` values each), each with the heightmap of its clip in
+/// `maps` when there is one (windows past `w`'s, the stepping clips', have none).
+fn motion_windows<'a>(
+    pos: &'a [f32],
+    per: usize,
+    w: &dataset::Windows,
+    maps: &'a [Heightmap],
+) -> Vec<MotionWindow<'a>> {
+    pos.chunks_exact(per)
+        .enumerate()
+        .map(|(i, p)| MotionWindow { positions: p, terrain: w.source.get(i).and_then(|&(c, _)| maps.get(c)) })
+        .collect()
+}
+
+/// The global positions of `w`'s windows in their clips' world frame (cut as `w` was, without
+/// its centring and facing unification, so that the terrain under them stays where the
+/// heightmap has it), `w.count * w.window * 3K` values.
+fn world_positions(clips: &[NamedClip], w: &dataset::Windows) -> Vec<f32> {
+    let j = w.skeleton.len();
+    let globals: Vec<Vec<glam::DVec3>> = clips.iter().map(|c| c.clip.global().1).collect();
+    w.source
+        .iter()
+        .flat_map(|&(ci, start)| &globals[ci][start * j..(start + w.window) * j])
+        .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
+        .collect()
 }
 
 fn apply_variant(config: &mut Config, v: RtnVariant, total_steps: u64) {
@@ -245,6 +336,23 @@ fn apply_variant(config: &mut Config, v: RtnVariant, total_steps: u64) {
         RtnVariant::Tf1 => config.train.teacher_forcing = TeacherForcing::Fixed(1.0),
         RtnVariant::TfScheduled => config.train.teacher_forcing = TeacherForcing::Scheduled { steps: total_steps },
     }
+}
+
+/// Refuses options that cannot work with a terrain-aware run (`terrain`), naming the fix.
+fn check_terrain_options(a: &RtnArgs, terrain: bool) -> anyhow::Result<()> {
+    if a.terrain && !terrain {
+        bail!("--terrain: the run in --resume was trained without terrain; resume it without --terrain");
+    }
+    if !terrain {
+        return Ok(());
+    }
+    if a.augment.contains(&RtnAugment::Mirror) {
+        bail!("--augment mirror moves the motion off its terrain: leave mirror out of --augment with --terrain");
+    }
+    if a.synth_steps > 0.0 {
+        bail!("--synth-steps adds clips without terrain: leave it out with --terrain");
+    }
+    Ok(())
 }
 
 /// The configuration of a fresh run: the preset, the data's skeleton and the arguments.
@@ -270,6 +378,7 @@ fn fresh_config(
     }
     config.train.seed = a.seed;
     config.interp_residual = a.interp_residual;
+    config.terrain = a.terrain;
     if !a.augment.is_empty() {
         let has = |x| a.augment.contains(&x);
         let mirror_pairs = if has(RtnAugment::Mirror) {
@@ -389,14 +498,21 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
     if a.exclude_glob.is_some() && a.data.is_none() {
         bail!("--exclude-glob leaves clips of --data out: pass --data too");
     }
-    let (train, valid, source) = load_clips_excluding(
-        &a.data,
-        &a.valid_glob,
-        a.exclude_glob.as_deref(),
-        a.synth_minutes,
-        a.seed,
-        a.skip_invalid,
-    )?;
+    // A resumed run keeps its configuration, terrain included.
+    let terrain = match &a.resume {
+        Some(dir) => zoo_rtn::checkpoint::read_meta(&train_loop::resume_dir(dir)).map_or(a.terrain, |(c, _)| c.terrain),
+        None => a.terrain,
+    };
+    check_terrain_options(&a, terrain)?;
+    let (train, valid, train_maps, valid_maps, source) = if terrain {
+        let t = load_terrain_clips(&a)?;
+        let (train, train_maps): (Vec<_>, Vec<_>) = t.train.into_iter().unzip();
+        let (valid, valid_maps): (Vec<_>, Vec<_>) = t.valid.into_iter().unzip();
+        (train, valid, train_maps, valid_maps, t.source)
+    } else {
+        let (train, valid, source) = load_rtn_clips(&a)?;
+        (train, valid, Vec::new(), Vec::new(), source)
+    };
     let tw = dataset::windows(&train, &WindowOptions::TRAIN);
     let vw = dataset::windows(&valid, &WindowOptions::TRAIN);
     if tw.count == 0 || vw.count == 0 {
@@ -404,8 +520,11 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
     }
     let d = tw.joints() * 3;
     let per = tw.window * d;
-    let mut train_pos = tw.global_positions_f32();
-    let valid_pos = vw.global_positions_f32();
+    let (mut train_pos, valid_pos) = if terrain {
+        (world_positions(&train, &tw), world_positions(&valid, &vw))
+    } else {
+        (tw.global_positions_f32(), vw.global_positions_f32())
+    };
     let mut extra = serde_json::Map::new();
     // Stepping clips: a resumed run keeps what it was started with.
     let saved = a.resume.as_ref().map(|dir| train_loop::read_state(dir)).transpose()?;
@@ -436,8 +555,8 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
         println!("--synth-steps {synth_steps}: {} clips, {} windows of side and back steps", steps.len(), sw.count);
         train_pos.extend(sw.global_positions_f32());
     }
-    let train_windows: Vec<MotionWindow> = train_pos.chunks_exact(per).map(MotionWindow::new).collect();
-    let valid_windows: Vec<MotionWindow> = valid_pos.chunks_exact(per).map(MotionWindow::new).collect();
+    let train_windows = motion_windows(&train_pos, per, &tw, &train_maps);
+    let valid_windows = motion_windows(&valid_pos, per, &vw, &valid_maps);
 
     let (mut trainer, variant) = match &a.resume {
         Some(dir) => {

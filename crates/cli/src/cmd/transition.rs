@@ -34,6 +34,45 @@ pub struct TransitionArgs {
     /// train rtn`) blends towards interpolation on a large miss (docs/ood.md).
     #[arg(long)]
     pub no_fallback: bool,
+    /// The ground for a terrain-aware model (`zoo train rtn --terrain`): a heightmap header
+    /// (`NAME.terrain.json`, as `zoo data synth --terrain` writes beside each clip) in the
+    /// --from clip's units and world frame. Required by a terrain-aware model, refused by one
+    /// without terrain input.
+    #[arg(long)]
+    pub heightmap: Option<PathBuf>,
+}
+
+/// The heightmap of `zoo transition` and `--heightmap`'s checks against the model: required by
+/// a terrain-aware model (the error names the --from clip's sibling heightmap when there is
+/// one), refused by a model without terrain input.
+pub fn read_heightmap(
+    heightmap: Option<&Path>,
+    model_dir: &Path,
+    config: &zoo_rtn::Config,
+    from_clip: &Path,
+) -> anyhow::Result<Option<zoo_data::terrain::Heightmap>> {
+    match (heightmap, config.terrain) {
+        (Some(p), true) => {
+            Ok(Some(zoo_data::terrain::read(p).with_context(|| format!("--heightmap {}", p.display()))?))
+        }
+        (None, true) => {
+            let hint = zoo_data::terrain::sibling_of(from_clip).map_or(String::new(), |t| {
+                format!(" (the --from clip has one beside it: --heightmap {})", t.display())
+            });
+            bail!(
+                "the model in {} is terrain-aware (trained with --terrain): pass the ground under the --from clip \
+                 with --heightmap FILE.terrain.json{hint}",
+                model_dir.display()
+            )
+        }
+        (Some(p), false) => bail!(
+            "--heightmap {}: the model in {} has no terrain input (trained without --terrain); drop --heightmap \
+             or use a model trained with `zoo train rtn --terrain`",
+            p.display(),
+            model_dir.display()
+        ),
+        (None, false) => Ok(None),
+    }
 }
 
 /// Parses `PATH:FRAME`.
@@ -90,9 +129,18 @@ pub fn run(a: TransitionArgs) -> anyhow::Result<()> {
     let (model, stats) = crate::registry::load_transition_model(&a.model, "transition")?;
     check_skeleton(&a.model, model.config(), &ca, &pa)?;
     check_skeleton(&a.model, model.config(), &cb, &pb)?;
+    let terrain = read_heightmap(a.heightmap.as_deref(), &a.model, model.config(), &pa)?;
     let fallback = model.config().fallback.filter(|_| !a.no_fallback);
     let checked = model
-        .transition_checked(&stats, &inputs.past, &inputs.target, &inputs.next, a.frames, fallback.as_ref())
+        .transition_checked(
+            &stats,
+            &inputs.past,
+            &inputs.target,
+            &inputs.next,
+            a.frames,
+            terrain.as_ref(),
+            fallback.as_ref(),
+        )
         .with_context(|| "generating the transition")?;
     let y = checked.frames;
     match &fallback {

@@ -6,6 +6,9 @@ use serde::{Deserialize, Serialize};
 /// metadata_props key of the [`TransitionTask`] section.
 pub const KEY: &str = "zoo.transition";
 
+/// Largest terrain patch side the runtime accepts (the training side's limit too).
+const MAX_TERRAIN_SIDE: usize = 1024;
+
 /// How a `transition` model is driven: written by the RTN exporter from its config, parsed
 /// strictly by the runtime (every field required, no unknown field).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -48,9 +51,12 @@ impl TransitionTask {
             return Err("past_frames is 0; a transition needs at least one context frame".into());
         }
         if let Some(t) = &self.terrain
-            && (t.side == 0 || !(t.extent.is_finite() && t.extent > 0.0))
+            && !((1..=MAX_TERRAIN_SIDE).contains(&t.side) && t.extent.is_finite() && t.extent > 0.0)
         {
-            return Err(format!("terrain patch of side {} and extent {} is empty", t.side, t.extent));
+            return Err(format!(
+                "terrain patch of side {} (1..={MAX_TERRAIN_SIDE}) and extent {} (> 0) is not a patch",
+                t.side, t.extent
+            ));
         }
         Ok(())
     }
