@@ -615,6 +615,13 @@ fn terrain_run_trains_transitions_and_exports_for_the_runtime() {
     let (ok, stdout, stderr) = zoo(&with_map);
     assert!(ok, "{stdout}\n{stderr}");
     assert!(stdout.contains("wrote") && bvh.is_file(), "{stdout}");
+    // On terrain the --to clip is not moved: after the transition (frames 20..26) the output is
+    // the clip from frame 60 on, where it stands on its heightmap.
+    let (_, spliced) = zoo_data::bvh::read_model_clip(&bvh).unwrap().global();
+    let (_, source) = zoo_data::bvh::read_model_clip(&clip).unwrap().global();
+    let joints = spliced.len() / zoo_data::bvh::read_model_clip(&bvh).unwrap().frames();
+    let moved = (0..joints).map(|k| (spliced[26 * joints + k] - source[60 * joints + k]).length()).fold(0.0, f64::max);
+    assert!(moved < 1e-2, "the target clip moved by {moved} cm on terrain");
 
     let onnx = dir.path().join("m.onnx");
     let (ok, stdout, stderr) = run(&["export", "--onnx", run_dir.to_str().unwrap(), "--out", onnx.to_str().unwrap()]);

@@ -181,6 +181,31 @@ pub fn transition_inputs(
     to_frame: usize,
     frames: usize,
 ) -> Result<TransitionInputs, PipelineError> {
+    prepare_transition(from, from_frame, to, to_frame, frames, true)
+}
+
+/// [`transition_inputs`] with `to` left where it is: both clips already share one world frame
+/// (the transition of a terrain-aware model, whose target stands on the terrain of that frame;
+/// moving it would lift it off its ground or sink it into it).
+pub fn transition_inputs_in_place(
+    from: &Clip,
+    from_frame: usize,
+    to: &Clip,
+    to_frame: usize,
+    frames: usize,
+) -> Result<TransitionInputs, PipelineError> {
+    let mut to = to.clone();
+    prepare_transition(from, from_frame, &mut to, to_frame, frames, false)
+}
+
+fn prepare_transition(
+    from: &Clip,
+    from_frame: usize,
+    to: &mut Clip,
+    to_frame: usize,
+    frames: usize,
+    align: bool,
+) -> Result<TransitionInputs, PipelineError> {
     if let Some(why) = from.skeleton.topology_difference(&to.skeleton) {
         return Err(PipelineError::Skeletons(why));
     }
@@ -194,11 +219,13 @@ pub fn transition_inputs(
         return Err(PipelineError::NoFrames);
     }
     let j = from.joints();
-    let last = from.root_position(from_frame - 1);
-    let vel = last - from.root_position(from_frame - 2);
-    let dest = last + DVec3::new(vel.x, 0.0, vel.z) * (frames + 1) as f64;
-    let heading = heading_angle(ground_forward(from.local_rotations[(from_frame - 1) * j], DVec3::Y));
-    align_on_ground(to, to_frame, dest, DVec3::Y, heading);
+    if align {
+        let last = from.root_position(from_frame - 1);
+        let vel = last - from.root_position(from_frame - 2);
+        let dest = last + DVec3::new(vel.x, 0.0, vel.z) * (frames + 1) as f64;
+        let heading = heading_angle(ground_forward(from.local_rotations[(from_frame - 1) * j], DVec3::Y));
+        align_on_ground(to, to_frame, dest, DVec3::Y, heading);
+    }
     let past = clip_positions_f32(from, from_frame - CONTEXT_FRAMES, from_frame);
     let tgt = clip_positions_f32(to, to_frame, to_frame + 2);
     let d = 3 * j;
@@ -386,6 +413,17 @@ mod tests {
         let mut short = chain_clip(40, 0.0);
         short.skeleton.parents[3] = Some(0);
         assert!(matches!(transition_inputs(&a, 20, &mut short, 10, 5), Err(PipelineError::Skeletons(_))));
+    }
+
+    #[test]
+    fn in_place_inputs_leave_the_target_where_it_is() {
+        let a = chain_clip(40, 0.0);
+        let b = chain_clip(40, 500.0);
+        let inputs = transition_inputs_in_place(&a, 20, &b, 10, 3).unwrap();
+        assert_eq!(inputs.target, clip_positions_f32(&b, 10, 11));
+        assert_eq!(inputs.next, clip_positions_f32(&b, 11, 12));
+        assert_eq!(inputs.past, clip_positions_f32(&a, 10, 20));
+        assert_eq!(transition_inputs_in_place(&a, 20, &b, 10, 0).unwrap_err(), PipelineError::NoFrames);
     }
 
     #[test]

@@ -22,7 +22,8 @@ pub struct TransitionArgs {
     /// Transition length in frames.
     #[arg(long, default_value_t = 30, allow_hyphen_values = true, value_parser = crate::args::frame_count)]
     pub frames: usize,
-    /// Output BVH: A up to FRAME, the transition, then B from its FRAME on, aligned in space.
+    /// Output BVH: A up to FRAME, the transition, then B from its FRAME on, aligned in space (with
+    /// --heightmap: B where it is, both clips in the heightmap's world frame).
     #[arg(long)]
     pub out: PathBuf,
     /// Foot-lock the transition (`zoo_motion::footlock`: planted feet slide less, dragged feet
@@ -36,8 +37,8 @@ pub struct TransitionArgs {
     pub no_fallback: bool,
     /// The ground for a terrain-aware model (`zoo train rtn --terrain`): a heightmap header
     /// (`NAME.terrain.json`, as `zoo data synth --terrain` writes beside each clip) in the
-    /// --from clip's units and world frame. Required by a terrain-aware model, refused by one
-    /// without terrain input.
+    /// --from clip's units and world frame, which the --to clip shares (it is not moved).
+    /// Required by a terrain-aware model, refused by one without terrain input.
     #[arg(long)]
     pub heightmap: Option<PathBuf>,
 }
@@ -124,12 +125,17 @@ pub fn run(a: TransitionArgs) -> anyhow::Result<()> {
     let (pb, fb) = clip_and_frame(&a.to)?;
     let ca = read_clip(&pa)?;
     let mut cb = read_clip(&pb)?;
-    let inputs = pipeline::transition_inputs(&ca, fa, &mut cb, fb, a.frames)
-        .with_context(|| format!("--from {} --to {} --frames {}", a.from, a.to, a.frames))?;
     let (model, stats) = crate::registry::load_transition_model(&a.model, "transition")?;
+    let terrain = read_heightmap(a.heightmap.as_deref(), &a.model, model.config(), &pa)?;
+    // On terrain both clips stand in the heightmap's world frame: the target stays on its
+    // ground instead of being moved to where the source's last speed would take it.
+    let inputs = match terrain {
+        Some(_) => pipeline::transition_inputs_in_place(&ca, fa, &cb, fb, a.frames),
+        None => pipeline::transition_inputs(&ca, fa, &mut cb, fb, a.frames),
+    }
+    .with_context(|| format!("--from {} --to {} --frames {}", a.from, a.to, a.frames))?;
     check_skeleton(&a.model, model.config(), &ca, &pa)?;
     check_skeleton(&a.model, model.config(), &cb, &pb)?;
-    let terrain = read_heightmap(a.heightmap.as_deref(), &a.model, model.config(), &pa)?;
     let fallback = model.config().fallback.filter(|_| !a.no_fallback);
     let checked = model
         .transition_checked(
