@@ -125,17 +125,17 @@ pub fn run(a: TransitionArgs) -> anyhow::Result<()> {
     let (pb, fb) = clip_and_frame(&a.to)?;
     let ca = read_clip(&pa)?;
     let mut cb = read_clip(&pb)?;
-    let (model, stats) = crate::registry::load_transition_model(&a.model, "transition")?;
-    let terrain = read_heightmap(a.heightmap.as_deref(), &a.model, model.config(), &pa)?;
     // On terrain both clips stand in the heightmap's world frame: the target stays on its
     // ground instead of being moved to where the source's last speed would take it.
-    let inputs = match terrain {
+    let inputs = match a.heightmap {
         Some(_) => pipeline::transition_inputs_in_place(&ca, fa, &cb, fb, a.frames),
         None => pipeline::transition_inputs(&ca, fa, &mut cb, fb, a.frames),
     }
     .with_context(|| format!("--from {} --to {} --frames {}", a.from, a.to, a.frames))?;
+    let (model, stats) = crate::registry::load_transition_model(&a.model, "transition")?;
     check_skeleton(&a.model, model.config(), &ca, &pa)?;
     check_skeleton(&a.model, model.config(), &cb, &pb)?;
+    let terrain = read_heightmap(a.heightmap.as_deref(), &a.model, model.config(), &pa)?;
     let fallback = model.config().fallback.filter(|_| !a.no_fallback);
     let checked = model
         .transition_checked(
