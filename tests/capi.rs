@@ -114,6 +114,33 @@ fn c_example_matches_the_rust_api() {
     assert!(worst <= 1e-5, "C example vs Rust API: worst relative difference {worst}");
 }
 
+/// `zoo_start` with whole buffers.
+///
+/// # Safety
+/// As `zoo_start`.
+unsafe fn start_with(
+    runner: *mut ZooRunner,
+    chars: *mut ZooCharacters,
+    past: &[f32],
+    target: &[f32],
+    next: &[f32],
+    length: usize,
+) -> ZooStatus {
+    unsafe {
+        zoo_start(
+            runner,
+            chars,
+            past.as_ptr(),
+            past.len(),
+            target.as_ptr(),
+            target.len(),
+            next.as_ptr(),
+            next.len(),
+            length,
+        )
+    }
+}
+
 /// Loads the test model through the C ABI.
 fn load(path: &Path) -> *mut ZooModel {
     let c_path = CString::new(path.to_str().unwrap()).unwrap();
@@ -184,19 +211,8 @@ fn malformed_calls_return_an_error_code_and_a_message() {
         let pose = |f: usize| -> Vec<f32> { (0..d).map(|i| ((i * 7 + f * 3) as f32).sin() * 20.0).collect() };
         let past: Vec<f32> = (0..2).flat_map(|_| (0..info.past_frames).flat_map(pose)).collect();
         let (target, next): (Vec<f32>, Vec<f32>) = ([pose(40), pose(40)].concat(), [pose(41), pose(41)].concat());
-        let start = |past: &[f32], target: &[f32], length: usize| {
-            zoo_start(
-                runner,
-                chars,
-                past.as_ptr(),
-                past.len(),
-                target.as_ptr(),
-                target.len(),
-                next.as_ptr(),
-                next.len(),
-                length,
-            )
-        };
+        let start =
+            |past: &[f32], target: &[f32], length: usize| start_with(runner, chars, past, target, &next, length);
         assert_error(start(&past[..past.len() - 1], &target, p), ZooStatus::InvalidArgument, "`past`");
         assert_error(start(&past, &target[..d], p), ZooStatus::InvalidArgument, "`target`");
         let mut with_nan = past.clone();
@@ -354,19 +370,7 @@ fn terrain_models_take_a_heightmap_through_the_c_abi() {
         let (mut runner, mut chars) = (ptr::null_mut(), ptr::null_mut());
         assert_eq!(zoo_runner_new(model, &mut runner), ZooStatus::Ok);
         assert_eq!(zoo_characters_new(model, 1, &mut chars), ZooStatus::Ok);
-        let start = |chars| {
-            zoo_start(
-                runner,
-                chars,
-                past.as_ptr(),
-                past.len(),
-                target.as_ptr(),
-                target.len(),
-                next.as_ptr(),
-                next.len(),
-                length,
-            )
-        };
+        let start = |chars| start_with(runner, chars, &past, &target, &next, length);
         assert_error(start(chars), ZooStatus::InvalidState, "zoo_characters_set_heightmap");
 
         // Bad heightmaps.
