@@ -181,7 +181,14 @@ pub fn transition_inputs(
     to_frame: usize,
     frames: usize,
 ) -> Result<TransitionInputs, PipelineError> {
-    prepare_transition(from, from_frame, to, to_frame, frames, true)
+    check_transition(from, from_frame, to, to_frame, frames)?;
+    let j = from.joints();
+    let last = from.root_position(from_frame - 1);
+    let vel = last - from.root_position(from_frame - 2);
+    let dest = last + DVec3::new(vel.x, 0.0, vel.z) * (frames + 1) as f64;
+    let heading = heading_angle(ground_forward(from.local_rotations[(from_frame - 1) * j], DVec3::Y));
+    align_on_ground(to, to_frame, dest, DVec3::Y, heading);
+    Ok(inputs_of(from, from_frame, to, to_frame))
 }
 
 /// [`transition_inputs`] with `to` left where it is: both clips already share one world frame
@@ -194,18 +201,18 @@ pub fn transition_inputs_in_place(
     to_frame: usize,
     frames: usize,
 ) -> Result<TransitionInputs, PipelineError> {
-    let mut to = to.clone();
-    prepare_transition(from, from_frame, &mut to, to_frame, frames, false)
+    check_transition(from, from_frame, to, to_frame, frames)?;
+    Ok(inputs_of(from, from_frame, to, to_frame))
 }
 
-fn prepare_transition(
+/// Refuses clips and frames a transition cannot be made from.
+fn check_transition(
     from: &Clip,
     from_frame: usize,
-    to: &mut Clip,
+    to: &Clip,
     to_frame: usize,
     frames: usize,
-    align: bool,
-) -> Result<TransitionInputs, PipelineError> {
+) -> Result<(), PipelineError> {
     if let Some(why) = from.skeleton.topology_difference(&to.skeleton) {
         return Err(PipelineError::Skeletons(why));
     }
@@ -218,18 +225,15 @@ fn prepare_transition(
     if frames == 0 {
         return Err(PipelineError::NoFrames);
     }
-    let j = from.joints();
-    if align {
-        let last = from.root_position(from_frame - 1);
-        let vel = last - from.root_position(from_frame - 2);
-        let dest = last + DVec3::new(vel.x, 0.0, vel.z) * (frames + 1) as f64;
-        let heading = heading_angle(ground_forward(from.local_rotations[(from_frame - 1) * j], DVec3::Y));
-        align_on_ground(to, to_frame, dest, DVec3::Y, heading);
-    }
+    Ok(())
+}
+
+/// The model's inputs: the context frames before `from_frame`, `to`'s target frame and the next.
+fn inputs_of(from: &Clip, from_frame: usize, to: &Clip, to_frame: usize) -> TransitionInputs {
     let past = clip_positions_f32(from, from_frame - CONTEXT_FRAMES, from_frame);
     let tgt = clip_positions_f32(to, to_frame, to_frame + 2);
-    let d = 3 * j;
-    Ok(TransitionInputs { past, target: tgt[..d].to_vec(), next: tgt[d..].to_vec() })
+    let d = 3 * from.joints();
+    TransitionInputs { past, target: tgt[..d].to_vec(), next: tgt[d..].to_vec() }
 }
 
 /// The clip `from` up to `from_frame`, the generated transition, then `to` (as aligned by
