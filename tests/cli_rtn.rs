@@ -33,6 +33,15 @@ fn train_resume_transition_and_decompress() {
     }
     let size = std::fs::metadata(runp.join("model.safetensors")).unwrap().len();
     assert!(size <= 15 * 1024 * 1024, "parameter file is {size} bytes");
+    // Resuming on other data (here more synthetic minutes) is refused and changes nothing.
+    let state_before = std::fs::read(runp.join("train_state.json")).unwrap();
+    let (ok, stdout, stderr) = run(&["train", "rtn", "--synth-minutes", "3", "--epochs", "2", "--resume", run_dir]);
+    assert!(
+        !ok && stderr.contains("was trained on other data (synthetic locomotion, 2 min, seed 1"),
+        "{stdout}\n{stderr}"
+    );
+    assert!(stderr.contains("--synth-minutes"), "{stderr}");
+    assert_eq!(std::fs::read(runp.join("train_state.json")).unwrap(), state_before);
     let (ok, stdout, stderr) = run(&["train", "rtn", "--synth-minutes", "2", "--epochs", "2", "--resume", run_dir]);
     assert!(ok, "{stdout}\n{stderr}");
     assert!(stdout.contains("epoch   2:") && !stdout.contains("epoch   1:"), "{stdout}");
@@ -579,6 +588,30 @@ fn interp_residual_augmented_run_with_fallback() {
     assert!(model.model().inputs().iter().any(|i| i.name == "base"), "the step graph takes the interpolation base");
     let fb = model.default_fallback().expect("the exported file carries the calibrated fallback");
     assert!((fb.start as f64 - start).abs() < 1e-4 && (fb.full as f64 - full).abs() < 1e-4, "{fb:?}");
+}
+
+/// The residual on the interpolation is the default (issue 19's chosen configuration);
+/// `--interp-residual false` trains the paper's RTN.
+#[test]
+fn interp_residual_is_the_default_and_can_be_turned_off() {
+    let dir = tempfile::tempdir().unwrap();
+    for (extra, expect) in [(None, true), (Some("false"), false)] {
+        let run_dir = dir.path().join(format!("run-{expect}"));
+        let mut args = tiny_run("--out", run_dir.to_str().unwrap(), "1");
+        if let Some(v) = extra {
+            args.extend(["--interp-residual", v]);
+        }
+        let out = tiny_command(&args).output().unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let config: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(run_dir.join("config.json")).unwrap()).unwrap();
+        assert_eq!(config["interp_residual"], expect, "{extra:?}");
+    }
+    let mut args = tiny_run("--out", dir.path().to_str().unwrap(), "1");
+    args.extend(["--interp-residual", "maybe"]);
+    let out = tiny_command(&args).output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && stderr.contains("--interp-residual"), "{stderr}");
 }
 
 /// `zoo train rtn --terrain` end to end: a tiny terrain-aware RTN trained for one epoch on

@@ -535,8 +535,12 @@ fn rtn_ablation_variants_parity() {
     // Every config switch the exporter respects: no future conditioning, zero / common initial
     // state, no residual output, the residual on the interpolation (`base` input), the
     // terrain-aware RTN (`terrain` input, patches sampled on the host under each root).
-    let variants: [Variant; 8] = [
+    let variants: [Variant; 9] = [
         ("terrain", |c: &mut Config| c.terrain = true),
+        ("terrain_interp_residual", |c: &mut Config| {
+            c.terrain = true;
+            c.interp_residual = true;
+        }),
         ("interp_residual", |c: &mut Config| c.interp_residual = true),
         ("interp_residual_no_future", |c: &mut Config| {
             c.interp_residual = true;

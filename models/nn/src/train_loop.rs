@@ -87,6 +87,10 @@ pub struct TrainOptions {
     pub resume: bool,
     /// Where the data came from (recorded in `train_state.json` and `summary.json`).
     pub data: String,
+    /// A digest of the training data (e.g. [`data_fingerprint`] of its values), recorded in
+    /// `train_state.json`: a resume whose data digests differently is refused, so that a run
+    /// never silently continues on other data. `None`: only the sample count is checked.
+    pub data_fingerprint: Option<u64>,
     /// Extra fields recorded in `train_state.json` and `summary.json` of a fresh run.
     pub extra: Map<String, Value>,
     /// Show a progress bar (on stderr, hidden when it is not a terminal).
@@ -105,6 +109,7 @@ impl TrainOptions {
             seed,
             resume: false,
             data: String::new(),
+            data_fingerprint: None,
             extra: Map::new(),
             progress: true,
             print: true,
@@ -140,6 +145,12 @@ pub struct TrainState {
     /// Where the data came from.
     #[serde(default)]
     pub data: String,
+    /// Training samples per epoch (absent in runs written before it was recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub train_samples: Option<usize>,
+    /// [`TrainOptions::data_fingerprint`] of the data the run started on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub data_fingerprint: Option<u64>,
     /// State of the shuffle generator after the last completed epoch (absent in runs written
     /// before it was saved: those resume with a generator reseeded from the epoch).
     #[serde(default)]
@@ -169,6 +180,42 @@ pub fn read_state(out: &Path) -> Result<TrainState, TrainError> {
     Ok(checkpoint::read_json(&path)?)
 }
 
+/// A digest of training values (FNV-1a over their bits): the same data gives the same digest
+/// on every run and machine, wherever its files are.
+pub fn data_fingerprint(values: &[f32]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for v in values {
+        h ^= u64::from(v.to_bits());
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h ^ values.len() as u64
+}
+
+/// Refuses to resume a run on data other than its own: another number of training samples,
+/// or another [`TrainOptions::data_fingerprint`] (each checked where the run recorded it).
+/// Runs written before the check record their sample count and digest from this resume on.
+fn check_same_data(state: &mut TrainState, opts: &TrainOptions, n: usize) -> Result<(), TrainError> {
+    let other_count = state.train_samples.is_some_and(|saved| saved != n);
+    let other_digest = matches!((state.data_fingerprint, opts.data_fingerprint), (Some(a), Some(b)) if a != b);
+    if other_count || other_digest {
+        let saved = state.train_samples.map_or(String::new(), |s| format!(", {s} training samples"));
+        return Err(TrainError::Config(format!(
+            "{} was trained on other data ({}{saved}) than this resume loads ({}, {n} training samples{}): resume \
+             with the data and options it was started with (the same --data, --valid-glob and --exclude-glob, or \
+             the same --synth-minutes and --seed), or start a new run with --out",
+            opts.out.display(),
+            if state.data.is_empty() { "not recorded" } else { &state.data },
+            if opts.data.is_empty() { "not described" } else { &opts.data },
+            if other_digest && !other_count { ", the same count but other values" } else { "" },
+        )));
+    }
+    state.train_samples.get_or_insert(n);
+    if state.data_fingerprint.is_none() {
+        state.data_fingerprint = opts.data_fingerprint;
+    }
+    Ok(())
+}
+
 fn kept(state: &TrainState, out: &Path) -> String {
     if state.epoch == 0 {
         "no checkpoint had been written yet".into()
@@ -193,7 +240,8 @@ pub fn train<M: Trainable + ?Sized>(model: &mut M, opts: &TrainOptions) -> Resul
         return Err(TrainError::Config(format!("nothing to train on: {n} training samples, batch size {batch}")));
     }
     let (mut state, mut rng) = if opts.resume {
-        let state = read_state(out)?;
+        let mut state = read_state(out)?;
+        check_same_data(&mut state, opts, n)?;
         model.load_training_state(&resume_dir(out))?;
         let rng = match state.shuffle_rng {
             Some(s) => SplitMix64::from_state(s),
@@ -201,7 +249,13 @@ pub fn train<M: Trainable + ?Sized>(model: &mut M, opts: &TrainOptions) -> Resul
         };
         (state, rng)
     } else {
-        let state = TrainState { data: opts.data.clone(), extra: opts.extra.clone(), ..TrainState::default() };
+        let state = TrainState {
+            data: opts.data.clone(),
+            train_samples: Some(n),
+            data_fingerprint: opts.data_fingerprint,
+            extra: opts.extra.clone(),
+            ..TrainState::default()
+        };
         (state, SplitMix64::new(opts.seed))
     };
     let started = Instant::now();
@@ -356,6 +410,7 @@ mod tests {
         nan_at_step: Option<u64>,
         bad_validation: Option<f64>,
         sleep: Duration,
+        train_len: usize,
     }
 
     impl Toy {
@@ -386,6 +441,7 @@ mod tests {
                 nan_at_step: None,
                 bad_validation: None,
                 sleep: Duration::ZERO,
+                train_len: 30,
             }
         }
 
@@ -406,7 +462,7 @@ mod tests {
 
     impl Trainable for Toy {
         fn train_len(&self) -> usize {
-            30
+            self.train_len
         }
         fn batch_size(&self) -> usize {
             7
@@ -496,6 +552,50 @@ mod tests {
         let names: Vec<String> =
             std::fs::read_dir(&a).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
         assert!(names.iter().all(|n| !n.starts_with('.')), "temporary files left: {names:?}");
+    }
+
+    #[test]
+    fn a_resume_on_other_data_is_refused_and_touches_nothing() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("run");
+        let with = |fp: u64, epochs: usize| TrainOptions {
+            data: format!("data {fp}"),
+            data_fingerprint: Some(fp),
+            ..opts(&out, epochs)
+        };
+        train(&mut Toy::new(1), &with(7, 1)).unwrap();
+        let state = bytes(out.join(TRAIN_STATE_FILE));
+        let fewer = Toy { train_len: 20, ..Toy::new(1) };
+        let err = train(&mut { fewer }, &TrainOptions { resume: true, ..with(7, 2) }).unwrap_err().to_string();
+        assert!(err.contains("trained on other data (data 7, 30 training samples)"), "{err}");
+        assert!(err.contains("(data 7, 20 training samples)") && err.contains("--synth-minutes"), "{err}");
+        let err = train(&mut Toy::new(1), &TrainOptions { resume: true, ..with(8, 2) }).unwrap_err().to_string();
+        assert!(err.contains("the same count but other values"), "{err}");
+        assert_eq!(bytes(out.join(TRAIN_STATE_FILE)), state, "a refused resume writes nothing");
+        let resumed = train(&mut Toy::new(1), &TrainOptions { resume: true, ..with(7, 2) }).unwrap();
+        assert_eq!((resumed.epoch, resumed.train_samples, resumed.data_fingerprint), (2, Some(30), Some(7)));
+
+        // A run written before the check records its count on the first resume, then holds to it.
+        let mut old: Value = checkpoint::read_json(&out.join("last").join(TRAIN_STATE_FILE)).unwrap();
+        let o = old.as_object_mut().unwrap();
+        o.remove("train_samples");
+        o.remove("data_fingerprint");
+        checkpoint::write_json(&out.join("last").join(TRAIN_STATE_FILE), &old).unwrap();
+        let fewer = Toy { train_len: 20, ..Toy::new(1) };
+        let resumed =
+            train(&mut { fewer }, &TrainOptions { resume: true, data_fingerprint: None, ..with(7, 3) }).unwrap();
+        assert_eq!((resumed.epoch, resumed.train_samples, resumed.data_fingerprint), (3, Some(20), None));
+        let err = train(&mut Toy::new(1), &TrainOptions { resume: true, ..with(7, 4) }).unwrap_err().to_string();
+        assert!(err.contains("20 training samples") && err.contains("30 training samples"), "{err}");
+    }
+
+    #[test]
+    fn data_fingerprints_tell_values_and_lengths_apart() {
+        let a = data_fingerprint(&[1.0, 2.0, 3.0]);
+        assert_eq!(a, data_fingerprint(&[1.0, 2.0, 3.0]));
+        assert_ne!(a, data_fingerprint(&[1.0, 2.0, 3.5]));
+        assert_ne!(a, data_fingerprint(&[1.0, 3.0, 2.0]));
+        assert_ne!(data_fingerprint(&[]), data_fingerprint(&[0.0]));
     }
 
     #[test]

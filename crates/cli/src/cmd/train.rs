@@ -97,8 +97,9 @@ pub struct RtnArgs {
     /// skeleton or frame rate) and list them, instead of refusing the dataset.
     #[arg(long)]
     pub skip_invalid: bool,
-    /// Epochs to train (an epoch visits every training window once).
-    #[arg(long, default_value_t = 10, allow_hyphen_values = true, value_parser = crate::args::epochs)]
+    /// Epochs to train (an epoch visits every training window once). The default, with the
+    /// default 30 synthetic minutes, is the README's quick model (docs/rtn.md).
+    #[arg(long, default_value_t = 20, allow_hyphen_values = true, value_parser = crate::args::epochs)]
     pub epochs: usize,
     /// Stop after this many minutes of training (the epoch in progress finishes first).
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::time_limit_minutes)]
@@ -122,8 +123,10 @@ pub struct RtnArgs {
     /// Predict a correction on top of the interpolation of context and target instead of the
     /// next frame (the Delta-interpolator idea of Oreshkin et al. 2022; `interp_residual` in
     /// config.json): an untrained model is the interpolation, and what the network learns is
-    /// added to it. Meant for motion the data lacks (docs/ood.md).
-    #[arg(long)]
+    /// added to it. On by default: it learns faster and stays near interpolation on motion the
+    /// data lacks (docs/ood.md). `--interp-residual false` trains the paper's RTN, which
+    /// predicts the next frame itself.
+    #[arg(long, default_value_t = true, num_args = 0..=1, default_missing_value = "true", action = clap::ArgAction::Set)]
     pub interp_residual: bool,
     /// Train the terrain-aware RTN (RTN sec. 3.2: the local terrain patch under the root feeds
     /// the frame encoder; `terrain` in config.json). Every clip needs its heightmap: `--data`
@@ -151,8 +154,8 @@ pub struct RtnArgs {
     /// AMSGrad learning rate [default: the preset's; paper: 5e-4].
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::learning_rate)]
     pub lr: Option<f64>,
-    /// Minutes of synthetic motion when `--data` is not given.
-    #[arg(long, default_value_t = 10.0, allow_hyphen_values = true, value_parser = crate::args::synth_minutes)]
+    /// Minutes of synthetic motion when `--data` is not given (every tenth clip validates).
+    #[arg(long, default_value_t = 30.0, allow_hyphen_values = true, value_parser = crate::args::synth_minutes)]
     pub synth_minutes: f64,
     /// Seed of the synthetic data and of the trainer.
     #[arg(long, default_value_t = 1, allow_hyphen_values = true, value_parser = crate::args::seed)]
@@ -557,6 +560,9 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
     }
     let train_windows = motion_windows(&train_pos, per, &tw, &train_maps);
     let valid_windows = motion_windows(&valid_pos, per, &vw, &valid_maps);
+    // A resume on other data (another --synth-minutes, --data or split) is refused.
+    let fingerprint =
+        train_loop::data_fingerprint(&train_pos) ^ train_loop::data_fingerprint(&valid_pos).rotate_left(1);
 
     let (mut trainer, variant) = match &a.resume {
         Some(dir) => {
@@ -619,6 +625,7 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
         time_limit: a.time_limit.and_then(|m| Duration::try_from_secs_f64(m * 60.0).ok()),
         resume: a.resume.is_some(),
         data: source,
+        data_fingerprint: Some(fingerprint),
         extra,
         ..TrainOptions::new(&out, a.epochs, seed)
     };
