@@ -661,6 +661,10 @@ fn terrain_run_trains_transitions_and_exports_for_the_runtime() {
     assert!(ok, "{stdout}\n{stderr}");
     let model = zoo_runtime::TransitionModel::load(&onnx).unwrap();
     assert_eq!(model.terrain(), Some((5, 206.0)));
+    // `zoo bench runtime` feeds candle the graph's own terrain and base inputs: the backends agree.
+    let (ok, stdout, stderr) =
+        run(&["bench", "runtime", "--model", onnx.to_str().unwrap(), "--rounds", "1", "--work", "2", "--batch", "1"]);
+    assert!(ok && stdout.lines().any(|l| l.split_whitespace().nth(1) == Some("candle")), "{stdout}\n{stderr}");
     let map = zoo_data::terrain::read(&heightmap).unwrap();
     let c = zoo_data::bvh::read_model_clip(&clip).unwrap();
     let (_, gp) = c.global();

@@ -135,6 +135,9 @@ struct CandleBackend {
     sequence: zoo_rtn::RtnSequence,
     x: Tensor,
     offset: Option<Tensor>,
+    /// The step graph's `terrain` and `base` inputs, for the models that take them.
+    terrain: Option<Tensor>,
+    base: Option<Tensor>,
     state: RtnState,
     out: Vec<f32>,
     pool: rayon::ThreadPool,
@@ -147,14 +150,9 @@ impl StepBackend for CandleBackend {
 
     fn step(&mut self) -> anyhow::Result<()> {
         let (model, sequence, x, offset, state) = (&self.model, &self.sequence, &self.x, &self.offset, &self.state);
+        let (terrain, base) = (self.terrain.as_ref(), self.base.as_ref());
         let (next, state) = self.pool.install(|| {
-            let inputs = RtnInputs {
-                sequence,
-                x,
-                offset: offset.as_ref(),
-                terrain: None,
-                base: model.config().interp_residual.then_some(x),
-            };
+            let inputs = RtnInputs { sequence, x, offset: offset.as_ref(), terrain, base };
             model.step(&inputs, state)
         })?;
         self.out = next.flatten_all()?.to_vec1::<f32>()?;
@@ -350,6 +348,9 @@ fn candle_backend(
     };
     let x = get("x")?;
     let offset = if candle.config().future_conditioning { Some(get("offset")?) } else { None };
+    // The same values as the graph's inputs, so that the backends compute the same step.
+    let terrain = if candle.config().terrain { Some(get("terrain")?) } else { None };
+    let base = if candle.config().interp_residual { Some(get("base")?) } else { None };
     let target = Tensor::from_vec(inputs(batch * 2 * d, 55), (batch, 2 * d), &dev)?;
     let sequence = candle.begin(&target)?;
     // The exported step graph carries the per-sequence gate bias as a state slot.
@@ -366,7 +367,7 @@ fn candle_backend(
     };
     let state = RtnState { h: slot("h")?, c: slot("c")? };
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
-    Ok(CandleBackend { model: candle.clone(), sequence, x, offset, state, out: Vec::new(), pool })
+    Ok(CandleBackend { model: candle.clone(), sequence, x, offset, terrain, base, state, out: Vec::new(), pool })
 }
 
 /// Runs `zoo bench runtime`.
@@ -383,9 +384,6 @@ pub fn run(a: RuntimeArgs) -> anyhow::Result<()> {
         "rtn" => {
             let (config, weights) = zoo_rtn::export::import_rtn(&bytes)
                 .with_context(|| format!("reading the RTN weights of {} for candle", a.model.display()))?;
-            if config.terrain {
-                bail!("{}: terrain-aware RTNs are not supported by `zoo bench runtime` yet", a.model.display());
-            }
             Some(Rtn::new(
                 &config,
                 candle_nn::VarBuilder::from_tensors(weights, candle_core::DType::F32, &Device::Cpu),
