@@ -77,6 +77,14 @@ fn two_stages_train_resume_and_refuse_to_overwrite() {
     for f in ["refiner.safetensors", "discriminator.safetensors", "effectors.json"] {
         assert!(runp.join(f).is_file(), "{f} missing in the run folder");
     }
+    // New refiners have joint limits (min <= max over the training windows); eq. 13 holds their
+    // root to the RNN's unsmoothed.
+    let refiner = &json(&runp.join("config.json"))["refiner"];
+    assert_eq!((refiner["joint_limits"].as_bool(), refiner["root_smoothing"].as_f64()), (Some(true), Some(0.0)));
+    let limits = &json(&runp.join("effectors.json"))["limits"];
+    let (lo, hi) = (limits["lo"].as_array().unwrap(), limits["hi"].as_array().unwrap());
+    assert_eq!((limits["first"].as_u64(), lo.len()), (Some(4), hi.len()));
+    assert!(lo.iter().zip(hi).all(|(l, h)| l.as_f64().unwrap() <= h.as_f64().unwrap()), "{limits}");
     let (ok, _, stderr) = train(&["--stage", "refiner", "--out", r]);
     assert!(!ok && stderr.contains("already holds a refiner stage"), "{stderr}");
     let (ok, stdout, stderr) = train(&["--stage", "refiner", "--refiner-epochs", "2", "--resume", r]);
@@ -103,6 +111,10 @@ fn a_refiner_needs_a_generator_and_options_are_checked() {
     assert!(!ok && stderr.contains("give --data PATH"), "{stderr}");
     let (ok, _, stderr) = train(&["--resume", dir.path().join("nothing").to_str().unwrap()]);
     assert!(!ok && stderr.contains("no such folder"), "{stderr}");
+    let (ok, _, stderr) = train(&["--refiner-root-smoothing", "-1", "--out", empty.to_str().unwrap()]);
+    assert!(!ok && stderr.contains("--refiner-root-smoothing") && stderr.contains("negative"), "{stderr}");
+    let (ok, _, stderr) = train(&["--refiner-joint-limits", "maybe", "--out", empty.to_str().unwrap()]);
+    assert!(!ok && stderr.contains("--refiner-joint-limits"), "{stderr}");
 }
 
 /// Copies the BVH file `src` to `dst` with the first value of its third frame replaced by `nan`.

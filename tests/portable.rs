@@ -247,7 +247,10 @@ fn rnngmm_generator_and_refiner_are_portable_and_match() {
             (name.to_string(), Tensor::from_vec(lcg(900 + k as u64, n, 0.3), dims.as_slice(), &Device::Cpu).unwrap())
         })
         .collect();
-    let eff = zoo_rnngmm::EffectorNorm { effectors: vec![1, 2], mean: vec![0.0; e], std: vec![1.0; e] };
+    // Joint limits on every value between the root's first four and the contacts.
+    let limits = zoo_rnngmm::JointLimits { first: 4, lo: vec![-0.5; d - 6], hi: vec![0.5; d - 6] };
+    let eff =
+        zoo_rnngmm::EffectorNorm { effectors: vec![1, 2], mean: vec![0.0; e], std: vec![1.0; e], limits: Some(limits) };
     let refiner = zoo_rnngmm::export::export_refiner(&config, &eff, &tensors).unwrap();
     let mut model = generator.clone();
     model.set_metadata(zoo_rnngmm::export::REFINER_GRAPH_KEY, &refiner.to_base64());

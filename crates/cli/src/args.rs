@@ -401,6 +401,11 @@ pub fn range_percentile(s: &str) -> Result<f64, String> {
     real_in(s, Interval { lo: 0.0, lo_open: false, hi: 50.0, hi_open: true }, "")
 }
 
+/// A filter width in frames, `[0, 50]` (`0` turns the smoothing off).
+pub fn smoothing_frames(s: &str) -> Result<f64, String> {
+    real_in(s, Interval::closed(0.0, 50.0), "frames")
+}
+
 /// A count that may be zero (`0` turns the feature off), `0..=MAX_CASES`.
 pub fn count_or_zero(s: &str) -> Result<usize, String> {
     whole_in(s, 0..=MAX_CASES, "")

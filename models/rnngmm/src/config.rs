@@ -139,6 +139,19 @@ pub struct RefinerConfig {
     /// is learnt by heart: the refiner's skate falls on it and rises on fresh samples.
     #[serde(default)]
     pub fresh_fakes: usize,
+    /// Joint limits on the refiner's output: every refined `rx, rz` and joint-angle value is
+    /// clamped to its [min, max] over the real training windows (saved in `effectors.json`,
+    /// exported in the refiner's step graph). Not in the paper. `false` in runs written before it
+    /// existed (their refiners have no limits).
+    #[serde(default)]
+    pub joint_limits: bool,
+    /// Standard deviation, in frames, of the Gaussian that smooths the generator's root values
+    /// before eq. 13 compares the refined root with them: the refined root is held to the RNN's
+    /// trajectory but not to its frame-to-frame jitter. 0 (the default): eq. 13 as in the paper.
+    /// Smoothing brings the RNN's root roughness to real motion's but moves its root-speed
+    /// distribution away from real (docs/rnn-gmm.md, session 21), so it is off by default.
+    #[serde(default)]
+    pub root_smoothing: f64,
 }
 
 impl Default for RefinerConfig {
@@ -172,6 +185,8 @@ impl Default for RefinerConfig {
             range_percentile: 1.0,
             fake_lead_frames: 0,
             fresh_fakes: 16,
+            joint_limits: true,
+            root_smoothing: 0.0,
         }
     }
 }
@@ -226,6 +241,12 @@ impl RefinerConfig {
                 "refiner: skate_weight ({}) and range_weight ({}) must not be negative, range_percentile ({}) in [0, \
                  50)",
                 self.skate_weight, self.range_weight, self.range_percentile
+            )));
+        }
+        if !(0.0..=50.0).contains(&self.root_smoothing) {
+            return Err(RnnGmmError::Config(format!(
+                "refiner: root_smoothing ({}) must be in [0, 50] frames (0: eq. 13 without smoothing)",
+                self.root_smoothing
             )));
         }
         if !(self.lambda >= 0.0 && self.temperature >= 0.0 && self.low_loss < self.high_loss) {

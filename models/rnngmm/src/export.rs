@@ -25,7 +25,8 @@
 //! (the generator's normalised frame, D), `effectors` (the normalised end-effector positions and
 //! velocities of that frame, 6 E, computed by the caller with the forward kinematics of
 //! [`crate::fk`]: the previous frame is needed for the velocities), `h`, `c` (its LSTM state);
-//! outputs `x_refined` (D, eq. 11: `W2 lstm(relu(W1 [x; e] + b1)) + b2 + x`), `h_next`, `c_next`.
+//! outputs `x_refined` (D, eq. 11: `W2 lstm(relu(W1 [x; e] + b1)) + b2 + x`, then clamped to the
+//! joint limits by `Max`/`Min` when the refiner has them), `h_next`, `c_next`.
 //! `zoo_runtime::synthesis` runs it behind the generator (with its own forward kinematics);
 //! the discriminator is training-only.
 
@@ -116,7 +117,14 @@ pub fn export_refiner(
     let (h_next, c_next) = lstm_cell(&mut g, &w, 0, &z, &h, &c, hu)?;
     let (w2, b2) = (w.init(&mut g, "fc2.weight")?, w.init(&mut g, "fc2.bias")?);
     let dx = g.gemm("fc2", &h_next, &w2, Some(&b2), true);
-    let refined = g.add("residual", &x, &dx);
+    let mut refined = g.add("residual", &x, &dx);
+    if let Some(limits) = &eff.limits {
+        let (lo, hi) = limits.full(d).map_err(|e| model_err(e.to_string()))?;
+        let lo = g.initializer_f32("joint_limits.lo", &[d], &lo);
+        let hi = g.initializer_f32("joint_limits.hi", &[d], &hi);
+        let floor = g.custom_op("Max", "joint_limits.floor", &[&refined, &lo], vec![]);
+        refined = g.custom_op("Min", "joint_limits.ceiling", &[&floor, &hi], vec![]);
+    }
     g.output("x_refined", &refined, &batch(d));
     g.output("h_next", &h_next, &batch(hu));
     g.output("c_next", &c_next, &batch(hu));

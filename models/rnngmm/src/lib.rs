@@ -58,7 +58,9 @@ pub use gmm::Mixture;
 pub use initial_state::{InitialState, estimate_initial_state};
 pub use model::Generator;
 pub use online::{Controlled, OnlineOptions};
-pub use refiner::{AdversarialTrainer, AdversarialTraining, EffectorNorm, Priors, RefinerLoss, RefinerNets};
+pub use refiner::{
+    AdversarialTrainer, AdversarialTraining, EffectorNorm, JointLimits, Priors, RefinerLoss, RefinerNets,
+};
 pub use synthesis::{Synthesis, SynthesisChunk, SynthesisOptions, SynthesisStream, synthesize};
 pub use train::{GeneratorTrainer, GeneratorTraining, TrainingData, Windows};
 

@@ -63,6 +63,63 @@ pub struct EffectorNorm {
     pub mean: Vec<f32>,
     /// Standard deviation of each feature (1 where it does not vary).
     pub std: Vec<f32>,
+    /// The refiner's joint limits ([`crate::RefinerConfig::joint_limits`]); absent in runs
+    /// written before they existed or trained without them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub limits: Option<JointLimits>,
+}
+
+/// Joint limits of the refiner's output: the normalised feature values `first .. first +
+/// lo.len()` (`rx, rz` and the joint angles) are clamped to `[lo, hi]`, their min and max over
+/// the real training windows.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct JointLimits {
+    /// First limited feature value.
+    pub first: usize,
+    /// Lower limit of each value (normalised).
+    pub lo: Vec<f32>,
+    /// Upper limit of each value (normalised).
+    pub hi: Vec<f32>,
+}
+
+impl JointLimits {
+    /// The min and max of the values `ROOT_DIMS - 2 .. contact` over every frame of `windows`.
+    pub fn fit(windows: &Windows, contact: usize) -> RnnGmmResult<Self> {
+        let first = ROOT_DIMS - 2;
+        if windows.is_empty() || contact <= first || contact > windows.dim {
+            return Err(RnnGmmError::Config(format!(
+                "joint limits need real windows ({}) of more than {first} values before the contacts (at {contact} of {})",
+                windows.len(),
+                windows.dim
+            )));
+        }
+        let n = contact - first;
+        let (mut lo, mut hi) = (vec![f32::INFINITY; n], vec![f32::NEG_INFINITY; n]);
+        for frame in windows.data.chunks(windows.dim) {
+            for ((l, h), v) in lo.iter_mut().zip(hi.iter_mut()).zip(&frame[first..contact]) {
+                (*l, *h) = (l.min(*v), h.max(*v));
+            }
+        }
+        Ok(JointLimits { first, lo, hi })
+    }
+
+    /// Lower and upper bounds over all `d` values of a frame (`-f32::MAX` / `f32::MAX` for the
+    /// unlimited ones), as the refiner applies them and its step graph exports them.
+    pub fn full(&self, d: usize) -> RnnGmmResult<(Vec<f32>, Vec<f32>)> {
+        let n = self.lo.len();
+        if self.hi.len() != n || self.first + n > d || self.lo.iter().zip(&self.hi).any(|(l, h)| !(l <= h)) {
+            return Err(RnnGmmError::Config(format!(
+                "joint limits of {} / {} values from value {} do not fit frames of {d} values with lo <= hi",
+                n,
+                self.hi.len(),
+                self.first
+            )));
+        }
+        let (mut lo, mut hi) = (vec![-f32::MAX; d], vec![f32::MAX; d]);
+        lo[self.first..self.first + n].copy_from_slice(&self.lo);
+        hi[self.first..self.first + n].copy_from_slice(&self.hi);
+        Ok((lo, hi))
+    }
 }
 
 impl EffectorNorm {
@@ -95,8 +152,30 @@ impl EffectorNorm {
                 if s < Normalization::MIN_STD { 1.0 } else { s as f32 }
             })
             .collect();
-        Ok(EffectorNorm { effectors: effectors.to_vec(), mean: mean.iter().map(|&m| m as f32).collect(), std })
+        Ok(EffectorNorm {
+            effectors: effectors.to_vec(),
+            mean: mean.iter().map(|&m| m as f32).collect(),
+            std,
+            limits: None,
+        })
     }
+}
+
+/// The `(t, t)` row-major matrix of a centred Gaussian filter of standard deviation `sigma`
+/// frames, cut at 3 sigma and renormalised where it meets the window's ends: row `i` holds the
+/// weights of frame `i`'s smoothed value.
+pub fn smoothing_matrix(t: usize, sigma: f64) -> Vec<f32> {
+    let reach = (3.0 * sigma).ceil() as usize;
+    let mut m = vec![0f32; t * t];
+    for i in 0..t {
+        let (a, b) = (i.saturating_sub(reach), (i + reach + 1).min(t));
+        let w: Vec<f64> = (a..b).map(|j| (-0.5 * ((j as f64 - i as f64) / sigma).powi(2)).exp()).collect();
+        let sum: f64 = w.iter().sum();
+        for (j, wj) in (a..b).zip(&w) {
+            m[i * t + j] = (wj / sum) as f32;
+        }
+    }
+    m
 }
 
 /// `log(1 + e^x)`, stable for large `|x|`.
@@ -265,6 +344,8 @@ pub struct RefinerNets {
     d_bilstm: BiLstm,
     d_fc2: Linear,
     contact: usize,
+    /// Joint limits over whole frames `(D)`, lower and upper.
+    limits: Option<(Tensor, Tensor)>,
 }
 
 impl RefinerNets {
@@ -291,7 +372,15 @@ impl RefinerNets {
             )));
         }
         let d = config.dim;
+        let limits = match &eff.limits {
+            Some(l) => {
+                let (lo, hi) = l.full(d)?;
+                Some((Tensor::from_vec(lo, d, &device)?, Tensor::from_vec(hi, d, &device)?))
+            }
+            None => None,
+        };
         Ok(RefinerNets {
+            limits,
             eff_mean: Tensor::from_slice(&eff.mean, e, &device)?,
             eff_std: Tensor::from_slice(&eff.std, e, &device)?,
             r_fc1: candle_nn::linear(d + e, c.refiner_fc, rvb.pp("fc1"))?,
@@ -315,7 +404,15 @@ impl RefinerNets {
         let e = self.effector_input(x)?.detach();
         let h = self.r_fc1.forward(&Tensor::cat(&[x, &e], 2)?)?.relu()?;
         let (h, _) = self.r_lstm.forward_seq(&h, &self.r_lstm.zero_state(x.dim(0)?)?, None)?;
-        self.r_fc2.forward(&h)? + x
+        self.limit((self.r_fc2.forward(&h)? + x)?)
+    }
+
+    /// The joint limits applied to refined frames (none without limits).
+    fn limit(&self, r: Tensor) -> Result<Tensor> {
+        match &self.limits {
+            Some((lo, hi)) => r.broadcast_maximum(lo)?.broadcast_minimum(hi),
+            None => Ok(r),
+        }
     }
 
     /// `R(x)` over a long sequence in chunks (streaming synthesis): refines the chunk `x`
@@ -333,7 +430,7 @@ impl RefinerNets {
         };
         let h = self.r_fc1.forward(&Tensor::cat(&[x, &e.detach()], 2)?)?.relu()?;
         let (h, state) = self.r_lstm.forward_seq(&h, state, None)?;
-        Ok(((self.r_fc2.forward(&h)? + x)?, state))
+        Ok((self.limit((self.r_fc2.forward(&h)? + x)?)?, state))
     }
 
     /// The refiner LSTM's zero state for `batch` sequences.
@@ -353,7 +450,7 @@ impl RefinerNets {
     pub fn refiner_loss(&self, x: &Tensor, c: &RefinerConfig, priors: Option<&Priors>) -> Result<RefinerLoss> {
         let r = self.refine(x)?;
         let adv = softplus(&self.logits(&r)?.neg()?)?.mean_all()?;
-        let reg = self.root_regularisation(x, &r)?;
+        let reg = self.root_regularisation(x, &r, c.root_smoothing)?;
         let mut total = (&adv + (&reg * c.lambda)?)?;
         let (mut skate, mut range) = (0.0, 0.0);
         if let Some(p) = priors {
@@ -367,8 +464,17 @@ impl RefinerNets {
 
     /// `|root(x) - root(R(x))|^2` of eq. 13 on the normalised root values, summed over them and
     /// averaged over frames.
-    fn root_regularisation(&self, x: &Tensor, r: &Tensor) -> Result<Tensor> {
-        (r.narrow(2, 0, ROOT_REG_DIMS)? - x.narrow(2, 0, ROOT_REG_DIMS)?)?.sqr()?.sum(2)?.mean_all()
+    /// With `smoothing` (frames, [`crate::RefinerConfig::root_smoothing`]) the generator's root
+    /// values are first smoothed along time by a Gaussian of that standard deviation.
+    fn root_regularisation(&self, x: &Tensor, r: &Tensor, smoothing: f64) -> Result<Tensor> {
+        let target = x.narrow(2, 0, ROOT_REG_DIMS)?;
+        let target = if smoothing > 0.0 {
+            let t = x.dim(1)?;
+            Tensor::from_vec(smoothing_matrix(t, smoothing), (t, t), x.device())?.broadcast_matmul(&target)?
+        } else {
+            target
+        };
+        (r.narrow(2, 0, ROOT_REG_DIMS)? - target.detach())?.sqr()?.sum(2)?.mean_all()
     }
 
     /// The discriminator's loss (eq. 10) on real and refined windows.
@@ -534,7 +640,10 @@ impl AdversarialTrainer {
         let valid_fakes = sample_fakes(&generator, valid, valid.len().clamp(1, VALID_FAKES.max(c.batch)), c, &mut rng)?;
         let effectors = end_effectors(&spec);
         let fk = TensorFk::new(&spec, &norm, &effectors, device)?;
-        let eff = EffectorNorm::fit(&fk, &effectors, train, device)?;
+        let mut eff = EffectorNorm::fit(&fk, &effectors, train, device)?;
+        if c.joint_limits {
+            eff.limits = Some(JointLimits::fit(train, spec.contact_index())?);
+        }
         let mut t = Self::build(config, spec, norm, eff, (gen_varmap, generator), fakes, valid_fakes, rng, device)?;
         t.priors =
             Some(Priors::fit(&t.nets, &t.spec, &t.eff.effectors, train, t.config.refiner.range_percentile, device)?);

@@ -329,6 +329,58 @@ fn the_refiners_skate_term_is_the_benchmarks_measure_and_its_range_term_counts_e
 }
 
 #[test]
+fn joint_limits_clamp_the_refined_frames_and_root_smoothing_frees_the_jitter() {
+    let dir = tempfile::tempdir().unwrap();
+    let gen_dir = dir.path().join("generator");
+    let (config, data, real) = generator_run(&gen_dir);
+    let (w, d) = (real.window, real.dim);
+    let (lo, hi) = (0..real.len())
+        .flat_map(|i| real.get(i).chunks(d).map(|f| f[8]))
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
+    let mut out = real.get(5).to_vec();
+    (out[3 * d + 8], out[4 * d + 8], out[5 * d]) = (hi + 2.0, lo - 1.0, 1e3);
+    let x = Tensor::from_vec(out.clone(), (1, w, d), &Device::Cpu).unwrap();
+    // The new refiner is the identity (eq. 11's W2, b2 start at zero), so it returns its input
+    // clamped to the limits: the training windows' min and max; dtx is not limited.
+    let limited = AdversarialTrainer::new(&gen_dir, &config.refiner, &real, &data.valid, &Device::Cpu).unwrap();
+    let r = limited.nets().refine(&x).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+    assert_eq!((r[3 * d + 8], r[4 * d + 8], r[5 * d]), (hi, lo, 1e3));
+    assert!(r.iter().zip(&out).enumerate().all(|(i, (a, b))| a == b || [3 * d + 8, 4 * d + 8].contains(&i)));
+    // Streaming in chunks clamps the same way.
+    let state = limited.nets().refiner_zero_state(1).unwrap();
+    let (chunk, _) = limited.nets().refine_chunk(&x.narrow(1, 0, 4).unwrap(), None, &state).unwrap();
+    assert_eq!(chunk.flatten_all().unwrap().to_vec1::<f32>().unwrap()[3 * d + 8], hi);
+    let free = RefinerConfig { joint_limits: false, root_smoothing: 0.0, ..config.refiner.clone() };
+    let unlimited = AdversarialTrainer::new(&gen_dir, &free, &real, &data.valid, &Device::Cpu).unwrap();
+    let r = unlimited.nets().refine(&x).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+    assert_eq!(r, out);
+    // Eq. 13 holds the identity refiner to an unsmoothed root exactly, and to the smoothed one
+    // only where the root is not steady: the jittered dtx of frame 5 costs.
+    let reg = |c: &RefinerConfig, x: &Tensor| unlimited.nets().refiner_loss(x, c, None).unwrap().regularisation;
+    assert_eq!(reg(&free, &x), 0.0);
+    let smooth = RefinerConfig { root_smoothing: 2.0, ..free.clone() };
+    assert!(reg(&smooth, &x) > 1.0, "{}", reg(&smooth, &x));
+    let steady =
+        Tensor::from_vec((0..w).flat_map(|_| real.get(5)[..d].to_vec()).collect::<Vec<f32>>(), (1, w, d), &Device::Cpu)
+            .unwrap();
+    assert!(reg(&smooth, &steady) < 1e-9, "{}", reg(&smooth, &steady));
+}
+
+#[test]
+fn the_smoothing_matrix_keeps_constants_and_lines_and_damps_jitter() {
+    let t = 30;
+    let m = zoo_rnngmm::refiner::smoothing_matrix(t, 2.0);
+    let apply = |v: &[f64]| -> Vec<f64> { (0..t).map(|i| (0..t).map(|j| m[i * t + j] as f64 * v[j]).sum()).collect() };
+    assert!(apply(&vec![3.0; t]).iter().all(|v| (v - 3.0).abs() < 1e-5));
+    // A line is kept where the filter is whole (6 frames from either end).
+    let line: Vec<f64> = (0..t).map(|i| 0.5 * i as f64).collect();
+    let l = apply(&line);
+    assert!((6..t - 6).all(|i| (l[i] - line[i]).abs() < 1e-4), "{l:?}");
+    let jitter: Vec<f64> = (0..t).map(|i| if i % 2 == 0 { 1.0 } else { -1.0 }).collect();
+    assert!(apply(&jitter)[6..t - 6].iter().all(|v| v.abs() < 1e-3));
+}
+
+#[test]
 fn discriminator_collapse_stops_training_and_keeps_the_last_good_checkpoint() {
     let dir = tempfile::tempdir().unwrap();
     let gen_dir = dir.path().join("generator");

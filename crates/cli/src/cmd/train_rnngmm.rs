@@ -117,6 +117,17 @@ pub struct RnnGmmArgs {
     /// keeps the pool sampled at the start]. Ignored when a refiner stage is resumed.
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::count_or_zero)]
     pub refiner_fresh_fakes: Option<usize>,
+    /// Clamp the refiner's output joint angles (and root tilt) to their min and max over the
+    /// real training windows (not in the paper; `false` for the paper's refiner) [default: true
+    /// in new runs]. Ignored when a refiner stage is resumed.
+    #[arg(long, num_args = 0..=1, default_missing_value = "true", action = clap::ArgAction::Set)]
+    pub refiner_joint_limits: Option<bool>,
+    /// Standard deviation, in frames, of the Gaussian that smooths the generator's root before
+    /// eq. 13 holds the refined root to it, so the refiner may remove the root's frame-to-frame
+    /// jitter (not in the paper) [default: 0, eq. 13 as written]. Ignored when a refiner stage
+    /// is resumed.
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::smoothing_frames)]
+    pub refiner_root_smoothing: Option<f64>,
     /// Stop the generator stage after this many minutes (checked between epochs: the epoch in
     /// progress finishes first).
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::time_limit_minutes)]
@@ -449,13 +460,17 @@ pub fn run(a: RnnGmmArgs) -> anyhow::Result<()> {
             r.range_percentile = a.refiner_range_percentile.unwrap_or(r.range_percentile);
             r.fake_lead_frames = a.refiner_fake_lead.unwrap_or(r.fake_lead_frames);
             r.fresh_fakes = a.refiner_fresh_fakes.unwrap_or(r.fresh_fakes);
+            // Settings newer than the generator's config.json take this version's defaults.
+            let new = zoo_rnngmm::RefinerConfig::default();
+            r.joint_limits = a.refiner_joint_limits.unwrap_or(new.joint_limits);
+            r.root_smoothing = a.refiner_root_smoothing.unwrap_or(new.root_smoothing);
             r
         };
         let c = &refiner_config;
         println!(
             "training the RNN-GMM refiner on {} real windows against {} generator samples (warm-up: {} refiner + {} \
              discriminator updates in the first round; skate weight {}, range weight {}, {} lead frames, {} fresh fakes per \
-             round), run folder {}",
+             round, joint limits {}, root smoothing {} frames), run folder {}",
             tw.len(),
             c.fake_windows,
             c.warmup_refiner,
@@ -464,6 +479,8 @@ pub fn run(a: RnnGmmArgs) -> anyhow::Result<()> {
             c.range_weight,
             c.fake_lead_frames,
             c.fresh_fakes,
+            if c.joint_limits { "on" } else { "off" },
+            c.root_smoothing,
             ref_dir.display()
         );
         let mut trainer = AdversarialTrainer::new(&gen_dir, &refiner_config, &tw, &vw, &device)
