@@ -1,7 +1,10 @@
-//! Datasets: folders of BVH clips, name-glob splits, sliding windows with the benchmark's
+//! Datasets: folders of clips (BVH, glTF, FBX: [`crate::clip_io`]), name-glob splits, sliding windows with the benchmark's
 //! centring and facing unification, and normalization statistics.
 
-use crate::bvh::{self, BvhError, ReadOptions};
+use crate::bvh::BvhError;
+#[cfg(test)]
+use crate::bvh::{self, ReadOptions};
+use crate::clip_io::{self, ClipError, ClipFormat};
 use glam::{DQuat, DVec3};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
@@ -15,8 +18,13 @@ pub enum DataError {
     /// A BVH file could not be read or parsed.
     #[error(transparent)]
     Bvh(#[from] BvhError),
-    /// The path does not exist or holds no BVH files.
-    #[error("{0}: no .bvh or .bvh.gz files found (pass a BVH file or a folder that contains some)")]
+    /// A glTF or FBX file could not be read, or holds no usable clip.
+    #[error(transparent)]
+    Clip(ClipError),
+    /// The path does not exist or holds no clip files.
+    #[error(
+        "{0}: no clip files found (.bvh, .bvh.gz, .glb, .gltf or .fbx); pass a clip file or a folder that contains some"
+    )]
     Empty(PathBuf),
     /// Walking the folder failed.
     #[error("{path}: cannot list folder: {source}")]
@@ -86,14 +94,29 @@ pub struct NamedClip {
     pub clip: Clip,
 }
 
-/// Whether a path names a BVH file (`.bvh` or `.bvh.gz`, any case).
-pub fn is_bvh_path(p: &Path) -> bool {
-    let n = p.file_name().and_then(|n| n.to_str()).unwrap_or("").to_ascii_lowercase();
-    n.ends_with(".bvh") || n.ends_with(".bvh.gz")
+impl From<ClipError> for DataError {
+    fn from(e: ClipError) -> Self {
+        match e {
+            ClipError::Bvh(b) => DataError::Bvh(b),
+            other => DataError::Clip(other),
+        }
+    }
 }
 
-/// Every BVH file under `path` (recursively), sorted; `path` itself if it is a file.
+/// Whether a path names a BVH file (`.bvh` or `.bvh.gz`, any case).
+pub fn is_bvh_path(p: &Path) -> bool {
+    ClipFormat::of(p) == Some(ClipFormat::Bvh)
+}
+
+/// Every clip file (BVH, glTF, FBX: [`clip_io::is_clip_path`]) under `path` (recursively),
+/// sorted; `path` itself if it is a file.
 pub fn find_bvh_files(path: &Path) -> Result<Vec<PathBuf>, DataError> {
+    find_clip_files(path)
+}
+
+/// Every clip file (BVH, glTF, FBX: [`clip_io::is_clip_path`]) under `path` (recursively),
+/// sorted; `path` itself if it is a file.
+pub fn find_clip_files(path: &Path) -> Result<Vec<PathBuf>, DataError> {
     if path.is_file() {
         return Ok(vec![path.to_path_buf()]);
     }
@@ -109,7 +132,7 @@ pub fn find_bvh_files(path: &Path) -> Result<Vec<PathBuf>, DataError> {
             let p = entry.path();
             if p.is_dir() {
                 stack.push(p);
-            } else if is_bvh_path(&p) {
+            } else if clip_io::is_clip_path(&p) {
                 out.push(p);
             }
         }
@@ -130,7 +153,7 @@ pub fn load(path: &Path) -> Result<Vec<NamedClip>, DataError> {
 
 /// [`load`], keeping only files whose name matches `name_glob` (when given).
 pub fn load_matching(path: &Path, name_glob: Option<&str>) -> Result<Vec<NamedClip>, DataError> {
-    Ok(load_with(path, &LoadOptions { name_glob, skip_invalid: false })?.clips)
+    Ok(load_with(path, &LoadOptions { name_glob, skip_invalid: false, take: None })?.clips)
 }
 
 /// How [`load_with`] loads a dataset.
@@ -141,6 +164,8 @@ pub struct LoadOptions<'a> {
     /// Leave out the clips that cannot join the dataset (unreadable, another skeleton, another
     /// frame rate) and list them in [`Dataset::skipped`], instead of refusing the dataset.
     pub skip_invalid: bool,
+    /// The FBX take (animation stack) or glTF animation to read by name (default: the first).
+    pub take: Option<&'a str>,
 }
 
 /// A clip left out by `skip_invalid`, and why.
@@ -166,8 +191,12 @@ pub struct Dataset {
 /// Two frame times are the same rate when their frame rates differ by less than this (fps).
 const FPS_TOLERANCE: f64 = 1e-3;
 
-/// Loads a dataset: every BVH file under `path` in parallel (sorted by path).
+/// Loads a dataset: every clip file under `path` in parallel (sorted by path), BVH, glTF and
+/// FBX mixed (glTF and FBX converted to centimetres, Y up, right-handed: see
+/// [`crate::clip_io`]; a notice says which units and axes each format came in).
 ///
+/// - A clip whose joints are the reference's (same names and parents) in another order (an
+///   FBX or glTF exporter's order) is reordered to the reference's order.
 /// - A dummy root (a first joint with a single child and a zero offset, like bandai2's
 ///   `joint_Root`) that is zero in every frame is dropped. One that carries motion while the
 ///   dataset's other clips have it zero is folded into its child (the child's global motion
@@ -177,7 +206,7 @@ const FPS_TOLERANCE: f64 = 1e-3;
 ///   no such moving dummy root, and its frame rate: another one is refused (they are not
 ///   resampled), or left out with `skip_invalid`, like a file that does not parse.
 pub fn load_with(path: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> {
-    let mut files = find_bvh_files(path)?;
+    let mut files = find_clip_files(path)?;
     if let Some(pattern) = opts.name_glob {
         let m = glob(pattern)?;
         files.retain(|p| p.file_name().is_some_and(|n| m.is_match(n)));
@@ -185,23 +214,32 @@ pub fn load_with(path: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> 
             return Err(DataError::Split(format!("no file name under {} matches `{pattern}`", path.display())));
         }
     }
-    let read = ReadOptions { drop_dummy_root: true };
-    let read: Vec<Result<NamedClip, DataError>> = files
+    let read = clip_io::ReadOptions { drop_dummy_root: true, take: opts.take.map(str::to_string) };
+    let read: Vec<Result<(NamedClip, clip_io::ClipSource), DataError>> = files
         .par_iter()
         .map(|p| {
-            let clip = bvh::read_file(p, &read)?;
+            let (clip, source) = clip_io::read_with_source(p, &read)?;
             let name = p.file_name().and_then(|n| n.to_str()).unwrap_or_default().to_string();
-            Ok(NamedClip { path: p.clone(), name, clip })
+            Ok((NamedClip { path: p.clone(), name, clip }, source))
         })
         .collect();
     let mut out = Dataset::default();
     let mut clips = Vec::with_capacity(read.len());
+    let mut sources: std::collections::BTreeMap<String, usize> = Default::default();
     for (r, p) in read.into_iter().zip(&files) {
         match r {
-            Ok(c) => clips.push(c),
+            Ok((c, source)) => {
+                if source.format != ClipFormat::Bvh {
+                    *sources.entry(source.describe()).or_default() += 1;
+                }
+                clips.push(c)
+            }
             Err(e) if opts.skip_invalid => out.skipped.push(SkippedClip { path: p.clone(), reason: e.to_string() }),
             Err(e) => return Err(e),
         }
+    }
+    for (what, n) in sources {
+        out.notices.push(format!("{n} clip(s) read from {what}, converted to centimetres, Y up, right-handed"));
     }
     let Some(reference) = reference_clip(&clips) else {
         return Err(DataError::AllSkipped { path: path.to_path_buf(), skipped: out.skipped.len() });
@@ -210,6 +248,12 @@ pub fn load_with(path: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> 
         (clips[reference].path.clone(), clips[reference].clip.skeleton.clone(), clips[reference].clip.fps());
     for mut c in clips {
         let mut why = first_skeleton.topology_difference(&c.clip.skeleton);
+        if why.is_some()
+            && let Some(reordered) = crate::retarget::reorder_like(&c.clip, &first_skeleton)
+        {
+            c.clip = reordered;
+            why = None;
+        }
         if why.is_some() && has_dummy_shaped_root(&c.clip) {
             let mut folded = c.clip.clone();
             let dummy = folded.skeleton.names[0].clone();

@@ -76,7 +76,7 @@ pub fn load_dataset(
     name_glob: Option<&str>,
     skip_invalid: bool,
 ) -> anyhow::Result<Vec<zoo_data::dataset::NamedClip>> {
-    let opts = zoo_data::dataset::LoadOptions { name_glob, skip_invalid };
+    let opts = zoo_data::dataset::LoadOptions { name_glob, skip_invalid, take: None };
     let d = zoo_data::dataset::load_with(path, &opts).with_context(|| format!("loading {}", path.display()))?;
     for n in &d.notices {
         eprintln!("note: {n}");

@@ -1,0 +1,241 @@
+//! One reader and one writer for clips in every format zoo knows, chosen by the file name.
+//!
+//! | extension            | read | write | units and axes                                         |
+//! |----------------------|------|-------|--------------------------------------------------------|
+//! | `.bvh`, `.bvh.gz`    | yes  | yes   | taken as zoo's: centimetres, Y up, right-handed        |
+//! | `.glb`, `.gltf`      | yes  | yes   | glTF's: metres, Y up, right-handed (converted)         |
+//! | `.fbx` (binary 7.x)  | yes  | no    | the file's global settings (converted)                 |
+//!
+//! Every clip read is in zoo's frame ([`CoordinateFrame::ZOO_CM`]); [`ClipSource`] records the
+//! file's own units and axes. glTF and FBX rotations are expressed relative to the rig's rest
+//! pose (see [`crate::scene`]), so that, as in BVH, the rest pose is the identity on every joint.
+
+use crate::bvh::{self, BvhError};
+use std::path::{Path, PathBuf};
+use zoo_motion::Clip;
+use zoo_motion::frame::{CoordinateFrame, Handedness, UpAxis};
+
+/// A clip file format.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ClipFormat {
+    /// BVH text (`.bvh`, or gzip-compressed `.bvh.gz`).
+    Bvh,
+    /// glTF 2.0 (`.glb` binary or `.gltf` JSON).
+    Gltf,
+    /// FBX (binary 7.x; `.fbx`), read only.
+    Fbx,
+}
+
+impl ClipFormat {
+    /// The format's name.
+    pub fn name(self) -> &'static str {
+        match self {
+            ClipFormat::Bvh => "BVH",
+            ClipFormat::Gltf => "glTF",
+            ClipFormat::Fbx => "FBX",
+        }
+    }
+
+    /// The format a file name says (`.bvh`, `.bvh.gz`, `.glb`, `.gltf`, `.fbx`, any case).
+    pub fn of(path: &Path) -> Option<ClipFormat> {
+        let n = path.file_name().and_then(|n| n.to_str()).unwrap_or("").to_ascii_lowercase();
+        if n.ends_with(".bvh") || n.ends_with(".bvh.gz") {
+            Some(ClipFormat::Bvh)
+        } else if n.ends_with(".glb") || n.ends_with(".gltf") {
+            Some(ClipFormat::Gltf)
+        } else if n.ends_with(".fbx") {
+            Some(ClipFormat::Fbx)
+        } else {
+            None
+        }
+    }
+}
+
+/// The extensions [`read`] accepts, for messages.
+pub const READ_EXTENSIONS: &str = ".bvh, .bvh.gz, .glb, .gltf or .fbx";
+/// The extensions [`write`] accepts, for messages.
+pub const WRITE_EXTENSIONS: &str = ".bvh, .bvh.gz, .glb or .gltf";
+
+/// Whether a path names a clip file zoo reads.
+pub fn is_clip_path(p: &Path) -> bool {
+    ClipFormat::of(p).is_some()
+}
+
+/// How to read a clip.
+#[derive(Clone, Debug, Default)]
+pub struct ReadOptions {
+    /// Drop a dummy root (one child, zero offset, no motion), as for BVH
+    /// ([`bvh::ReadOptions::drop_dummy_root`]).
+    pub drop_dummy_root: bool,
+    /// The animation to read by name: an FBX animation stack (take) or a glTF animation
+    /// (default: the first). BVH files hold one and ignore it.
+    pub take: Option<String>,
+}
+
+/// Where a clip came from: its format and its file's units and axes before conversion.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ClipSource {
+    /// The format.
+    pub format: ClipFormat,
+    /// The file's units and axes (BVH says none: zoo's, centimetres, Y up, right-handed).
+    pub frame: CoordinateFrame,
+    /// The animation read (glTF animation or FBX take name; empty for BVH or an unnamed one).
+    pub take: String,
+    /// What was left out or repaired on the way, one line each (end-site bones, other takes).
+    pub notes: Vec<String>,
+}
+
+impl ClipSource {
+    /// The source of a BVH file (zoo's frame).
+    pub fn bvh() -> Self {
+        ClipSource { format: ClipFormat::Bvh, frame: CoordinateFrame::ZOO_CM, take: String::new(), notes: vec![] }
+    }
+
+    /// "glTF, metres, Y up, right-handed": for notes and messages.
+    pub fn describe(&self) -> String {
+        format!("{}, {}", self.format.name(), describe_frame(&self.frame))
+    }
+}
+
+/// "metres, Y up, right-handed".
+pub fn describe_frame(f: &CoordinateFrame) -> String {
+    let unit = match f.unit_name() {
+        Some("cm") => "centimetres".to_string(),
+        Some("m") => "metres".to_string(),
+        Some("mm") => "millimetres".to_string(),
+        Some("in") => "inches".to_string(),
+        _ => format!("units of {} m", f.metres_per_unit),
+    };
+    let up = match f.up_axis {
+        UpAxis::Y => "Y up",
+        UpAxis::Z => "Z up",
+    };
+    let hand = match f.handedness {
+        Handedness::Right => "right-handed",
+        Handedness::Left => "left-handed",
+    };
+    format!("{unit}, {up}, {hand}")
+}
+
+/// Why a clip could not be read or written.
+#[derive(Debug, thiserror::Error)]
+pub enum ClipError {
+    /// A BVH file could not be read or parsed.
+    #[error(transparent)]
+    Bvh(#[from] BvhError),
+    /// A glTF or FBX file could not be read, or holds no clip zoo can use.
+    #[error("{path}: {format}: {message}")]
+    Format {
+        /// File.
+        path: PathBuf,
+        /// `glTF` or `FBX`.
+        format: &'static str,
+        /// What is wrong and what to do.
+        message: String,
+    },
+    /// The file name has no extension zoo knows.
+    #[error("{path}: unknown clip format: expected a file name ending in {expected}")]
+    Extension {
+        /// File.
+        path: PathBuf,
+        /// The accepted extensions.
+        expected: &'static str,
+    },
+    /// The file could not be read or written.
+    #[error("{path}: {action}: {source}")]
+    Io {
+        /// File.
+        path: PathBuf,
+        /// `cannot read` or `cannot write`.
+        action: &'static str,
+        /// Cause.
+        source: std::io::Error,
+    },
+}
+
+/// Reads a clip in the format its name says, converted to zoo's frame (centimetres, Y up,
+/// right-handed), with where it came from.
+pub fn read_with_source(path: &Path, opts: &ReadOptions) -> Result<(Clip, ClipSource), ClipError> {
+    match ClipFormat::of(path) {
+        Some(ClipFormat::Bvh) => {
+            let clip = bvh::read_file(path, &bvh::ReadOptions { drop_dummy_root: opts.drop_dummy_root })?;
+            Ok((clip, ClipSource::bvh()))
+        }
+        Some(ClipFormat::Gltf) => crate::gltf::read_file(path, opts),
+        Some(ClipFormat::Fbx) => crate::fbx::read_file(path, opts),
+        None => Err(ClipError::Extension { path: path.to_path_buf(), expected: READ_EXTENSIONS }),
+    }
+}
+
+/// [`read_with_source`] without the source.
+pub fn read(path: &Path, opts: &ReadOptions) -> Result<Clip, ClipError> {
+    Ok(read_with_source(path, opts)?.0)
+}
+
+/// Reads a clip the way the models see it (any format): the dummy root dropped and
+/// quaternion sign flips removed (as [`bvh::read_model_clip`]).
+pub fn read_model_clip(path: &Path) -> Result<Clip, ClipError> {
+    read_model_clip_with(path, &ReadOptions { drop_dummy_root: true, take: None })
+}
+
+/// [`read_model_clip`] with options (a take name); the dummy root is always dropped.
+pub fn read_model_clip_with(path: &Path, opts: &ReadOptions) -> Result<Clip, ClipError> {
+    let opts = ReadOptions { drop_dummy_root: true, ..opts.clone() };
+    let mut clip = read(path, &opts)?;
+    clip.remove_sign_flips();
+    Ok(clip)
+}
+
+/// Writes a clip (in zoo's frame) in the format its name says: `.bvh` / `.bvh.gz` (BVH) or
+/// `.glb` / `.gltf` (glTF 2.0 in metres, with a skin and a stick-figure mesh). The file is
+/// written to a temporary name and renamed into place.
+pub fn write(clip: &Clip, path: &Path) -> Result<(), ClipError> {
+    let io = |source| ClipError::Io { path: path.to_path_buf(), action: "cannot write", source };
+    match ClipFormat::of(path) {
+        Some(ClipFormat::Bvh) => bvh::write_file(clip, path).map_err(io),
+        Some(ClipFormat::Gltf) => crate::gltf::write_file(clip, path).map_err(io),
+        _ => Err(ClipError::Extension { path: path.to_path_buf(), expected: WRITE_EXTENSIONS }),
+    }
+}
+
+/// Writes `bytes` to `path` through a temporary file in the same folder and a rename.
+pub(crate) fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    use std::io::Write;
+    let name = path.file_name().ok_or_else(|| {
+        std::io::Error::new(std::io::ErrorKind::InvalidInput, format!("{}: not a file name", path.display()))
+    })?;
+    let tmp = path.with_file_name(format!(".{}.{}.tmp", name.to_string_lossy(), std::process::id()));
+    let result = (|| {
+        let mut file = std::fs::File::create(&tmp)?;
+        file.write_all(bytes)?;
+        file.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn formats_by_extension() {
+        for (name, f) in [
+            ("a.bvh", Some(ClipFormat::Bvh)),
+            ("A.BVH.GZ", Some(ClipFormat::Bvh)),
+            ("a.glb", Some(ClipFormat::Gltf)),
+            ("a.gltf", Some(ClipFormat::Gltf)),
+            ("dir/a.FBX", Some(ClipFormat::Fbx)),
+            ("a.obj", None),
+            ("a.gz", None),
+        ] {
+            assert_eq!(ClipFormat::of(Path::new(name)), f, "{name}");
+        }
+        let e = read(Path::new("walk.obj"), &ReadOptions::default()).unwrap_err().to_string();
+        assert!(e.contains("walk.obj: unknown clip format") && e.contains(".fbx"), "{e}");
+        assert_eq!(describe_frame(&CoordinateFrame::ZOO_CM), "centimetres, Y up, right-handed");
+    }
+}
