@@ -10,7 +10,6 @@
 //! orientations, pre-rotations) are not.
 
 use glam::{DMat3, DQuat, DVec3};
-use zoo_motion::frame::{CoordinateFrame, Handedness, UpAxis};
 use zoo_motion::{Clip, JointChannels, Skeleton};
 
 /// A world transform with a uniform scale: `x -> t + s * (r * x)`.
@@ -99,7 +98,8 @@ impl AxisConversion {
 
     /// zoo's `frame` to zoo's centimetres (the module table of [`zoo_motion::frame`]).
     #[cfg(test)]
-    pub fn from_frame(frame: &CoordinateFrame) -> Result<Self, String> {
+    pub fn from_frame(frame: &zoo_motion::frame::CoordinateFrame) -> Result<Self, String> {
+        use zoo_motion::frame::{Handedness, UpAxis};
         // Images of zoo's x, y, z in `frame` (columns), inverted below.
         let to = match (frame.up_axis, frame.handedness) {
             (UpAxis::Y, Handedness::Right) => DMat3::IDENTITY,
@@ -238,6 +238,7 @@ pub(crate) fn drop_still_dummy_root(clip: &mut Clip) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use zoo_motion::frame::{CoordinateFrame, Handedness, UpAxis};
 
     #[test]
     fn axis_conversions_match_zoo_frames() {
