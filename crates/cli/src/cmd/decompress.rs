@@ -5,7 +5,6 @@ use crate::cmd::transition::read_clip;
 use anyhow::Context;
 use clap::Args;
 use std::path::PathBuf;
-use zoo_data::bvh;
 use zoo_motion::pipeline;
 
 /// Arguments of `zoo decompress`.
@@ -19,7 +18,7 @@ pub struct DecompressArgs {
     /// Frames between keyframes (default: one keyframe per second).
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::frame_count)]
     pub interval: Option<usize>,
-    /// Output BVH of the rebuilt clip.
+    /// Output clip of the rebuilt motion (`.bvh`, `.bvh.gz`, `.glb` or `.gltf`).
     #[arg(long)]
     pub out: PathBuf,
 }
@@ -36,7 +35,7 @@ pub fn run(a: DecompressArgs) -> anyhow::Result<()> {
     let y = model.super_resolve(&stats, &keys.context, &keys.keys, interval).context("rebuilding the clip")?;
     let frames = y.len() / (3 * j);
     let out = pipeline::rebuild_from_keyframes(&clip, interval, &y);
-    bvh::write_file(&out, &a.out).with_context(|| format!("writing {}", a.out.display()))?;
+    zoo_data::clip_io::write(&out, &a.out)?;
     let err = pipeline::mean_position_error(&clip, &y);
     println!(
         "rebuilt {frames} frames of {} from {} context frames and {} keyframes (every {interval}); \

@@ -83,7 +83,7 @@ pub fn run(a: DenoiseArgs) -> anyhow::Result<()> {
     pb.finish_and_clear();
     let mut out = d.motion.clip.clone();
     out.skeleton = clip.skeleton.clone();
-    zoo_data::bvh::write_file(&out, &a.out).with_context(|| format!("writing {}", a.out.display()))?;
+    zoo_data::clip_io::write(&out, &a.out)?;
     let stem = a.out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
     let json = a.out.with_file_name(format!("{stem}.contacts.json"));
     write_contacts(&json, g.spec.fps, &d.motion.contacts)?;

@@ -128,7 +128,8 @@ pub fn read_clips(specs: &[ClipSpec]) -> anyhow::Result<Vec<Clip>> {
     specs
         .iter()
         .map(|spec| {
-            let clip = bvh::read_model_clip(&spec.path).with_context(|| format!("reading {}", spec.path.display()))?;
+            let clip = zoo_data::clip_io::read_model_clip(&spec.path)
+                .with_context(|| format!("reading {}", spec.path.display()))?;
             let frames = clip.frames();
             let to = spec.to.unwrap_or(frames);
             if to > frames || spec.from >= to {
@@ -289,7 +290,7 @@ pub fn run(a: StitchArgs) -> anyhow::Result<()> {
         }
     };
     let seconds = t0.elapsed().as_secs_f64();
-    bvh::write_file(&output, &a.out).with_context(|| format!("writing {}", a.out.display()))?;
+    zoo_data::clip_io::write(&output, &a.out)?;
     if a.save_input {
         let p = input_path(&a.out);
         bvh::write_file(&aligned.clip, &p).with_context(|| format!("writing {}", p.display()))?;

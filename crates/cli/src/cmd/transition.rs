@@ -3,7 +3,7 @@
 use anyhow::{Context, bail};
 use clap::Args;
 use std::path::{Path, PathBuf};
-use zoo_data::bvh;
+use zoo_data::clip_io;
 use zoo_motion::Clip;
 use zoo_motion::pipeline;
 
@@ -22,10 +22,21 @@ pub struct TransitionArgs {
     /// Transition length in frames.
     #[arg(long, default_value_t = 30, allow_hyphen_values = true, value_parser = crate::args::frame_count)]
     pub frames: usize,
-    /// Output BVH: A up to FRAME, the transition, then B from its FRAME on, aligned in space (with
-    /// --heightmap: B where it is, both clips in the heightmap's world frame).
+    /// Output clip (`.bvh`, `.bvh.gz`, `.glb` or `.gltf`): A up to FRAME, the transition, then B
+    /// from its FRAME on, aligned in space (with --heightmap: B where it is, both clips in the
+    /// heightmap's world frame).
     #[arg(long)]
     pub out: PathBuf,
+    /// The FBX take (animation stack) or glTF animation of the --from and --to clips (default:
+    /// the first).
+    #[arg(long)]
+    pub take: Option<String>,
+    /// Clips of another rig of the same kind: a joint-name map (JSON, docs/formats.md) from the
+    /// clips' joints to the model's (same names under a `mixamorig:`-style prefix need `{}`);
+    /// the clips are mapped onto the run folder's skeleton.json, and the output is written back
+    /// on the --from clip's rig.
+    #[arg(long)]
+    pub rig_map: Option<PathBuf>,
     /// Foot-lock the transition (`zoo_motion::footlock`: planted feet slide less, dragged feet
     /// are lifted); legs are found by joints named `foot`.
     #[arg(long)]
@@ -84,9 +95,67 @@ pub fn clip_and_frame(s: &str) -> anyhow::Result<(PathBuf, usize)> {
     Ok((PathBuf::from(path), frame))
 }
 
-/// Reads a clip for the models: dummy root dropped, sign flips removed.
+/// Reads a clip for the models (BVH, glTF or FBX): dummy root dropped, sign flips removed.
 pub fn read_clip(path: &Path) -> anyhow::Result<Clip> {
-    Ok(bvh::read_model_clip(path)?)
+    Ok(clip_io::read_model_clip(path)?)
+}
+
+/// The model's skeleton from its run folder's skeleton.json (what --rig-map maps onto).
+fn run_skeleton(model_dir: &Path) -> anyhow::Result<zoo_motion::Skeleton> {
+    let s = zoo_nn::checkpoint::RunSkeleton::read(model_dir)?.with_context(|| {
+        format!(
+            "--rig-map: the run folder {} has no skeleton.json (trained by an older zoo), so the model's joint names \
+             are unknown; retrain, or rename the clips' joints to the training skeleton's",
+            model_dir.display()
+        )
+    })?;
+    let n = s.names.len();
+    Ok(zoo_motion::Skeleton {
+        names: s.names,
+        parents: s.parents.iter().map(|&p| usize::try_from(p).ok()).collect(),
+        offsets: s.offsets.iter().map(|o| glam::DVec3::new(o[0] as f64, o[1] as f64, o[2] as f64)).collect(),
+        end_sites: vec![None; n],
+        channels: vec![Default::default(); n],
+    })
+}
+
+/// Says so (on standard error) when the clip's joint names are not the model's: another rig
+/// with the model's hierarchy runs, but `--rig-map` maps it onto the model's proportions.
+fn note_other_names(model_dir: &Path, clip: &Clip) {
+    if let Ok(Some(run)) = zoo_nn::checkpoint::RunSkeleton::read(model_dir)
+        && run.names != clip.skeleton.names
+    {
+        let (k, (model, theirs)) = run
+            .names
+            .iter()
+            .zip(&clip.skeleton.names)
+            .enumerate()
+            .find(|(_, (m, c))| m != c)
+            .unwrap_or((0, (&run.names[0], &clip.skeleton.names[0])));
+        eprintln!(
+            "note: the clip's joint names differ from the model's (joint {k}: `{theirs}`, the model's `{model}`); \
+             if it is another rig, pass --rig-map MAP.json to map it onto the model's skeleton (docs/formats.md)"
+        );
+    }
+}
+
+/// The --from and --to clips on the model's skeleton (with --rig-map), and what maps the
+/// result back onto the --from clip's rig.
+type RigBack = Option<(zoo_motion::Skeleton, zoo_data::retarget::RigMatch)>;
+fn map_rig(a: &TransitionArgs, ca: Clip, cb: Clip) -> anyhow::Result<(Clip, Clip, RigBack)> {
+    let Some(map_path) = &a.rig_map else { return Ok((ca, cb, None)) };
+    let map = zoo_data::retarget::RigMap::read(map_path)?;
+    let target = run_skeleton(&a.model)?;
+    let ma = map.match_rigs(&ca.skeleton, &target, true).with_context(|| format!("--rig-map --from {}", a.from))?;
+    let mb = map.match_rigs(&cb.skeleton, &target, true).with_context(|| format!("--rig-map --to {}", a.to))?;
+    let (ra, rb) = (zoo_data::retarget::retarget(&ca, &target, &ma), zoo_data::retarget::retarget(&cb, &target, &mb));
+    println!(
+        "--rig-map: {} joints mapped onto the model's skeleton, root translation x{:.4}",
+        target.len(),
+        ma.root_scale
+    );
+    let back = ma.inverse(ca.joints());
+    Ok((ra, rb, Some((ca.skeleton, back))))
 }
 
 /// Refuses a clip whose skeleton is not the model's: another joint count, or the same count
@@ -123,8 +192,10 @@ pub fn run(a: TransitionArgs) -> anyhow::Result<()> {
     crate::cmd::check_output_file("--out", &a.out)?;
     let (pa, fa) = clip_and_frame(&a.from)?;
     let (pb, fb) = clip_and_frame(&a.to)?;
-    let ca = read_clip(&pa)?;
-    let mut cb = read_clip(&pb)?;
+    let opts = clip_io::ReadOptions { drop_dummy_root: true, take: a.take.clone() };
+    let ca = clip_io::read_model_clip_with(&pa, &opts)?;
+    let cb = clip_io::read_model_clip_with(&pb, &opts)?;
+    let (ca, mut cb, rig_back) = map_rig(&a, ca, cb)?;
     // On terrain both clips stand in the heightmap's world frame: the target stays on its
     // ground instead of being moved to where the source's last speed would take it.
     let inputs = match a.heightmap {
@@ -134,6 +205,9 @@ pub fn run(a: TransitionArgs) -> anyhow::Result<()> {
     .with_context(|| format!("--from {} --to {} --frames {}", a.from, a.to, a.frames))?;
     let (model, stats) = crate::registry::load_transition_model(&a.model, "transition")?;
     check_skeleton(&a.model, model.config(), &ca, &pa)?;
+    if rig_back.is_none() {
+        note_other_names(&a.model, &ca);
+    }
     check_skeleton(&a.model, model.config(), &cb, &pb)?;
     let terrain = read_heightmap(a.heightmap.as_deref(), &a.model, model.config(), &pa)?;
     let fallback = model.config().fallback.filter(|_| !a.no_fallback);
@@ -156,8 +230,11 @@ pub fn run(a: TransitionArgs) -> anyhow::Result<()> {
         ),
         None => println!("target miss {:.2} (no fallback)", checked.miss),
     }
-    let out = pipeline::splice_transition(&ca, fa, &cb, fb, &inputs, &y, a.foot_lock);
-    bvh::write_file(&out, &a.out).with_context(|| format!("writing {}", a.out.display()))?;
+    let mut out = pipeline::splice_transition(&ca, fa, &cb, fb, &inputs, &y, a.foot_lock);
+    if let Some((rig, back)) = &rig_back {
+        out = zoo_data::retarget::retarget(&out, rig, back);
+    }
+    clip_io::write(&out, &a.out)?;
     println!(
         "wrote {}: {} frames of {}, {} generated, {} of {} (transition frames {}..{})",
         a.out.display(),
