@@ -37,7 +37,7 @@ def decode(f, r_prev):
 def main(model_path, input_path, output_path):
     sess = ort.InferenceSession(model_path, providers=["CPUExecutionProvider"])
     meta = sess.get_modelmeta().custom_metadata_map
-    assert meta["zoo.format_version"] == "3", meta["zoo.format_version"]
+    assert meta["zoo.format_version"] == "4", meta["zoo.format_version"]
     norm = {k: {m: np.array(v[m], dtype=F) for m in ("mean", "std")}
             for k, v in json.loads(meta["zoo.normalization"]).items()}
     task = json.loads(meta["zoo.transition"])
@@ -143,7 +143,7 @@ def main(model_path, input_path, output_path):
             frames[i] = (frames[i] + F(w) * e).astype(F)
     # 6. The fallback towards interpolation, when asked for and the file carries thresholds.
     weight = 0.0
-    fallback = json.loads(meta["zoo.config"]).get("fallback")
+    fallback = json.loads(meta["zoo.transition"])["fallback"]
     if data.get("fallback") and fallback is not None:
         start, full = F(fallback["start"]), F(fallback["full"])
         miss = F(dist.mean())

@@ -100,7 +100,8 @@ fn train_resume_and_stitch() {
     assert!(ok, "{stdout}\n{stderr}");
     let exported = zoo_export::OnnxModel::from_bytes(&std::fs::read(&onnx).unwrap(), "rmr.onnx").unwrap();
     assert_eq!(exported.metadata_value("zoo.model_kind"), Some("rmr"));
-    assert!(exported.metadata_value(zoo_rmr::export::CONFIG_KEY).is_some_and(|c| c.contains("\"bgru\"")));
+    assert_eq!(exported.metadata_value("zoo.task"), Some("stitch"));
+    assert!(exported.metadata_value("zoo.config").is_some_and(|c| c.contains("\"bgru\"")));
 
     // Stitch three ranges of synthetic clips with every method.
     let (_, clips) = synth_clips(dir.path(), "1");

@@ -96,7 +96,10 @@ fn candle_tract_and_onnxruntime_complete_the_same_keys() {
     // tract through the runtime: both characters in one batch.
     let tract_model = MotionModel::from_bytes(&onnx.to_bytes()).unwrap();
     assert_eq!(tract_model.metadata().model_kind, "arnn");
-    assert_eq!(tract_model.metadata().task, MotionTask::Step);
+    assert_eq!(
+        tract_model.metadata().task,
+        MotionTask::Keyframes(zoo_format::KeyframesTask { dofs: config.dofs, groups: 0, key_groups: vec![] })
+    );
     let names: Vec<&str> = tract_model.inputs().iter().map(|i| i.name.as_str()).collect();
     assert_eq!(names, ["prev", "key_a", "key_b", "t_rel"]);
     let mut runner = tract_model.runner().unwrap();

@@ -15,7 +15,7 @@ use candle_core::{DType, Device, Tensor};
 use candle_nn::VarMap;
 use std::borrow::Cow;
 use zoo_export::OnnxModel;
-use zoo_rmr::export::{CONFIG_KEY, MODEL_KIND, NORMALIZATION_KEY, export_rmr, export_rmr_dir};
+use zoo_rmr::export::{MODEL_KIND, export_rmr, export_rmr_dir};
 use zoo_rmr::features::FeatureStats;
 use zoo_rmr::{Config, RefinerCell, Rmr};
 use zoo_tests::onnxruntime::ort_environment;
@@ -71,7 +71,8 @@ fn candle_run(f: &Fixture, x: &[f32]) -> Vec<f32> {
 
 fn tract_run(exported: &OnnxModel, x_tm: &[f32], d: usize) -> Vec<f32> {
     use tract_onnx::prelude::*;
-    let mut model = tract_onnx::onnx().model_for_proto_model(exported.proto()).expect("tract reads the RMR graph");
+    let mut model =
+        tract_onnx::onnx().model_for_read(&mut exported.to_bytes().as_slice()).expect("tract reads the RMR graph");
     model.set_input_fact(0, f32::fact([FRAMES, BATCH, d]).into()).unwrap();
     let plan = model.into_optimized().expect("tract optimises the RMR graph").into_runnable().unwrap();
     let x = Tensor::from_shape::<f32>(&[FRAMES, BATCH, d], x_tm).unwrap();
@@ -153,10 +154,22 @@ fn rmr_metadata_and_run_folder_export() {
     let f = fixture(RefinerCell::Bgru);
     let onnx = export_rmr(&f.config, &f.stats, &f.varmap).unwrap();
     assert_eq!(onnx.metadata_value("zoo.model_kind"), Some(MODEL_KIND));
-    let config: Config = serde_json::from_str(onnx.metadata_value(CONFIG_KEY).unwrap()).unwrap();
+    let config: Config = serde_json::from_str(onnx.metadata_value("zoo.config").unwrap()).unwrap();
     assert_eq!(config, f.config);
-    let stats: FeatureStats = serde_json::from_str(onnx.metadata_value(NORMALIZATION_KEY).unwrap()).unwrap();
-    assert_eq!(stats, f.stats);
+    // The runtime reads the typed stitch section, never the training config.
+    let m = zoo_format::MotionModelMetadata::read(&onnx.to_bytes(), "rmr.onnx").unwrap();
+    let task = m.task.as_stitch().expect("an RMR is a stitch model");
+    assert_eq!(
+        (task.window, task.stride, task.blend_frames),
+        (f.config.window, f.config.stride, f.config.blend_frames)
+    );
+    assert_eq!(task.layout, f.config.layout);
+    assert_eq!(
+        m.normalization["x"],
+        zoo_format::MotionMeanStd { mean: f.stats.mean.clone(), std: f.stats.std.clone() }
+    );
+    assert_eq!(m.skeleton.offsets, f.config.offsets);
+    assert!(m.state.is_empty());
     let dir = tempfile::tempdir().unwrap();
     zoo_rmr::checkpoint::save(dir.path(), &f.config, &f.varmap, &f.stats).unwrap();
     let from_dir = export_rmr_dir(dir.path()).unwrap();
@@ -226,15 +239,10 @@ fn runtime_stitch_refiner_refuses_bad_input() {
     let onnx = export_rmr(&f.config, &f.stats, &f.varmap).unwrap();
     let mut refiner = StitchRefiner::from_bytes(&onnx.to_bytes()).unwrap();
     // An RTN (a `transition` model) where an RMR is expected.
-    let mut g = zoo_export::GraphBuilder::new("rtn_like");
-    let dims = [zoo_export::Dim::batch(), zoo_export::Dim::Fixed(4)];
-    let x = g.input("x", &dims);
-    let y = g.identity("y_id", &x);
-    g.output("y", &y, &dims);
-    g.metadata("zoo.model_kind", "rtn").metadata("zoo.task", "transition");
-    let rtn = g.finish().unwrap();
+    let rtn = zoo_tests::tiny_rtn_onnx();
     let err = StitchRefiner::from_bytes(&rtn.to_bytes()).unwrap_err().to_string();
     assert!(err.contains("`transition` model (kind `rtn`), not a `stitch` model"), "{err}");
+    assert!(err.contains("runs with TransitionModel"), "{err}");
     let err = StitchRefiner::from_bytes(b"\x01\x02garbage").unwrap_err().to_string();
     assert!(err.contains("not an ONNX model"), "{err}");
     // A sequence shorter than the window, a partial frame, a short output buffer, NaN.

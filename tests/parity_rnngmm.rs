@@ -112,7 +112,7 @@ fn the_exported_generator_step_matches_candle_in_tract_and_onnxruntime() {
     let (config, trainer) = fixture();
     let onnx = export_generator(&config, None, trainer.spec(), trainer.norm(), trainer.varmap()).unwrap();
     assert_eq!(onnx.metadata_value(keys::MODEL_KIND), Some(MODEL_KIND));
-    assert_eq!(onnx.metadata_value(keys::TASK), Some("step"));
+    assert_eq!(onnx.metadata_value(keys::TASK), Some("synthesis"));
     let xs = inputs(config.dim);
     let candle = candle_trace(&config, trainer.model(), &xs);
     // The mixture weights of each character sum to 1 and the states carry over (later steps differ).
@@ -299,13 +299,13 @@ fn runtime_synthesis_decodes_like_candle() {
 }
 
 #[test]
-fn a_step_model_without_the_synthesis_section_is_refused() {
+fn a_synthesis_model_without_its_section_is_refused() {
     let (config, trainer) = fixture();
     let onnx = export_generator(&config, None, trainer.spec(), trainer.norm(), trainer.varmap()).unwrap();
     let mut proto = onnx.proto().clone();
     proto.metadata_props.retain(|p| p.key != zoo_runtime::metadata::synthesis::KEY);
     let err = SynthesisModel::from_bytes(&zoo_export::OnnxModel::from_proto(proto).to_bytes()).unwrap_err().to_string();
-    assert!(err.contains("not a `synthesis` model") && err.contains("rnn-gmm"), "{err}");
+    assert!(err.contains("no metadata_props entry `zoo.synthesis`") && err.contains("zoo export --onnx"), "{err}");
     let model = SynthesisModel::from_bytes(&onnx.to_bytes()).unwrap();
     let mut ch = model.new_character(1);
     let err = ch.start(&model, &[0.0; 3], 0.0, 0.0, 0.0).unwrap_err().to_string();
@@ -365,7 +365,7 @@ fn paper_size_step_timings() {
 /// A tract plan of `graph` for inputs `[BATCH, widths[i]]`, run on flat buffers.
 fn tract_runner(graph: &zoo_export::OnnxModel, widths: &[usize]) -> impl FnMut(&[&[f32]]) -> Vec<Vec<f32>> + use<> {
     use tract_onnx::prelude::*;
-    let mut model = tract_onnx::onnx().model_for_proto_model(graph.proto()).expect("tract reads the graph");
+    let mut model = tract_onnx::onnx().model_for_read(&mut graph.to_bytes().as_slice()).expect("tract reads the graph");
     for (i, w) in widths.iter().enumerate() {
         model.set_input_fact(i, f32::fact([BATCH, *w]).into()).unwrap();
     }

@@ -23,8 +23,10 @@ use zoo_rtn::model::{OffsetTensors, RtnInputs, RtnState};
 use zoo_rtn::{Config, InitState, Rtn};
 use zoo_runtime::Heightmap;
 use zoo_runtime::glam::{Quat, Vec3};
-use zoo_runtime::metadata::{TransitionTask, keys};
-use zoo_runtime::{EnginePose, LoadedModel, MotionError, MotionModel, MotionState, MotionTask, TransitionModel};
+use zoo_runtime::metadata::{FormatError, TransitionTask, keys};
+use zoo_runtime::{
+    EnginePose, LoadedModel, MotionError, MotionModel, MotionState, MotionTask, MotionTaskKind, TransitionModel,
+};
 use zoo_tests::onnxruntime::OrtSession;
 use zoo_tests::toy_onnx::{Cell, ToyModel, lcg};
 
@@ -584,6 +586,7 @@ fn exported_metadata_reaches_the_runtime() {
         frame_dim: f.config.dim(),
         offset_input: true,
         terrain: None,
+        fallback: f.config.fallback.map(|b| zoo_runtime::TransitionFallback { start: b.start, full: b.full }),
     };
     assert_eq!(m.task, MotionTask::Transition(task));
     // The config travels as an informational copy (read back by `import_rtn`, not the runtime).
@@ -1093,7 +1096,7 @@ fn loaded_model_dispatches_an_rtn_to_the_transition_loader() {
     let path = dir.path().join("rtn.onnx");
     export(&f).write(&path).unwrap();
     let loaded = LoadedModel::load(&path).unwrap();
-    assert_eq!((loaded.kind(), loaded.task()), ("rtn", "transition"));
+    assert_eq!((loaded.kind(), loaded.task()), ("rtn", MotionTaskKind::Transition));
     let LoadedModel::Transition(model) = loaded else { panic!("an RTN loads as a transition model") };
     assert_eq!(model.past_frames(), f.config.past_frames);
     assert_eq!(model.transition_frames(), f.config.transition_frames);
@@ -1103,7 +1106,10 @@ fn loaded_model_dispatches_an_rtn_to_the_transition_loader() {
 fn a_missing_transition_section_is_refused() {
     let f = fixture(tiny());
     let err = LoadedModel::from_bytes(&with_prop(&f, keys::TRANSITION, None)).unwrap_err();
-    assert!(matches!(&err, MotionError::MissingMetadata { key } if key == keys::TRANSITION), "{err}");
+    assert!(
+        matches!(&err, MotionError::Format(FormatError::MissingMetadata { key }) if key == keys::TRANSITION),
+        "{err}"
+    );
     assert!(err.to_string().contains("re-export"), "{err}");
 }
 
@@ -1112,7 +1118,10 @@ fn a_malformed_transition_section_is_refused() {
     let f = fixture(tiny());
     for bad in ["{\"past_frames\": 4", "{\"past_frames\": 4}", "[]"] {
         let err = MotionModel::from_bytes(&with_prop(&f, keys::TRANSITION, Some(bad))).unwrap_err();
-        assert!(matches!(&err, MotionError::BadMetadata { key, .. } if key == keys::TRANSITION), "{bad}: {err}");
+        assert!(
+            matches!(&err, MotionError::Format(FormatError::BadMetadata { key, .. }) if key == keys::TRANSITION),
+            "{bad}: {err}"
+        );
     }
 }
 
@@ -1135,9 +1144,13 @@ fn a_transition_section_that_does_not_match_the_graph_is_refused() {
 #[test]
 fn an_rtn_file_of_another_task_is_refused_by_the_transition_loader() {
     let f = fixture(tiny());
-    let err = LoadedModel::from_bytes(&with_prop(&f, keys::TASK, Some("step"))).unwrap_err();
+    let step = with_prop(&f, keys::TASK, Some("step"));
+    let err = TransitionModel::new(MotionModel::from_bytes(&step).unwrap()).unwrap_err();
     assert!(matches!(err, MotionError::WrongTask { expected: "transition", .. }), "{err}");
     assert!(err.to_string().contains("`step` model (kind `rtn`)"), "{err}");
+    // The one loader has no task to give a bare step graph.
+    let err = LoadedModel::from_bytes(&step).unwrap_err();
+    assert!(matches!(&err, MotionError::NoTask { kind } if kind == "rtn"), "{err}");
 }
 
 #[test]

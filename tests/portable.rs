@@ -77,7 +77,7 @@ fn output_names(model: &OnnxModel) -> Vec<String> {
 
 fn tract_run(model: &OnnxModel, inputs: &Inputs) -> Vec<Vec<f32>> {
     use tract_onnx::prelude::*;
-    let mut m = tract_onnx::onnx().model_for_proto_model(model.proto()).expect("tract reads the graph");
+    let mut m = tract_onnx::onnx().model_for_read(&mut model.to_bytes().as_slice()).expect("tract reads the graph");
     for (i, (_, shape, _)) in inputs.iter().enumerate() {
         m.set_input_fact(i, f32::fact(shape).into()).unwrap();
     }
@@ -254,7 +254,14 @@ fn rnngmm_generator_and_refiner_are_portable_and_match() {
     let refiner = zoo_rnngmm::export::export_refiner(&config, &eff, &tensors).unwrap();
     let mut model = generator.clone();
     model.set_metadata(zoo_rnngmm::export::REFINER_GRAPH_KEY, &refiner.to_base64());
-    model.set_metadata(zoo_rnngmm::export::REFINER_KEY, &serde_json::to_string(&eff).unwrap());
+    let mut task: zoo_format::SynthesisTask =
+        serde_json::from_str(model.metadata_value(zoo_format::keys::SYNTHESIS).unwrap()).unwrap();
+    task.refiner = Some(zoo_format::SynthesisRefiner {
+        effectors: eff.effectors.clone(),
+        mean: eff.mean.clone(),
+        std: eff.std.clone(),
+    });
+    model.set_metadata(zoo_format::keys::SYNTHESIS, &serde_json::to_string(&task).unwrap());
     let portable = check_kind("RNN-GMM", &model, &PortableOptions::default());
     assert_eq!(portable.companions.len(), 1, "the refiner is a file of its own");
     assert_eq!(portable.companions[0].suffix, "refiner");

@@ -69,3 +69,10 @@ pub enum ExportError {
         source: std::io::Error,
     },
 }
+
+impl ExportError {
+    /// An [`ExportError::Model`]: the model cannot be exported, for the reason given.
+    pub fn model(message: impl Into<String>) -> Self {
+        ExportError::Model(message.into())
+    }
+}

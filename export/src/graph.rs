@@ -81,6 +81,7 @@ impl GraphBuilder {
 
     /// A builder holding the inputs, outputs and initializers of an existing graph, but none of
     /// its nodes: the portable pass replays them with [`GraphBuilder::push_node`].
+    #[cfg_attr(not(feature = "portable"), allow(dead_code))]
     pub(crate) fn from_graph(graph: &pb::GraphProto) -> Self {
         let mut g = GraphBuilder::new(&graph.name);
         g.doc = graph.doc_string.clone();
@@ -100,6 +101,7 @@ impl GraphBuilder {
     }
 
     /// Appends an existing node as is (its inputs must exist; its outputs become values).
+    #[cfg_attr(not(feature = "portable"), allow(dead_code))]
     pub(crate) fn push_node(&mut self, node: pb::NodeProto) {
         if !node.name.is_empty() && !self.node_names.insert(node.name.clone()) {
             self.fail(ExportError::DuplicateName(node.name.clone()));

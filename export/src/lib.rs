@@ -1,7 +1,7 @@
 //! ONNX writer of zoo.
 //!
-//! Builds ONNX models (IR 8, default-domain opset 17) from Rust on the prost types that
-//! tract-onnx ships as [`tract_onnx::pb`], and encodes them with prost. Graphs built this way
+//! Builds ONNX models (IR 8, default-domain opset 17) from Rust on the prost ONNX types of
+//! [`zoo_format::pb`], and encodes them with prost (no tract: the model crates export without it). Graphs built this way
 //! load in tract 0.23 and onnxruntime 1.31 (checked by `tests/parity.rs` of the workspace).
 //!
 //! Typed helpers exist for ops tract and onnxruntime run (see `export/README.md` for the limits
@@ -33,12 +33,13 @@
 //!
 //! The crate knows no model and no candle: each model's graph definition lives beside its
 //! candle forward pass (RTN's in `zoo_rtn::export`) and writes its metadata through the
-//! runtime's format types (`zoo_runtime::metadata`).
+//! format crate's types (`zoo_format`).
 
 mod error;
 mod graph;
 mod model;
 mod ops;
+#[cfg(feature = "portable")]
 pub mod portable;
 mod recurrent;
 mod summary;
@@ -48,12 +49,13 @@ pub use error::ExportError;
 pub use graph::{Dim, GraphBuilder, Value};
 pub use model::OnnxModel;
 pub use ops::{attr_float, attr_int, attr_ints, attr_string};
+#[cfg(feature = "portable")]
 pub use portable::{PortableModel, PortableOptions, to_portable};
 pub use recurrent::{GRU_TORCH_TO_ONNX, LSTM_TORCH_TO_ONNX, RnnDirection, RnnInputs, RnnOutputs, reorder_gates};
 pub use summary::{GraphSummary, summarize};
 
-/// The prost ONNX types (`ModelProto`, `NodeProto`, ...), re-exported from tract-onnx.
-pub use tract_onnx::pb;
+/// The prost ONNX types (`ModelProto`, `NodeProto`, ...), re-exported from zoo-format.
+pub use zoo_format::pb;
 
 /// ONNX IR version written into every model.
 pub const IR_VERSION: i64 = 8;

@@ -2,6 +2,7 @@
 
 mod args;
 mod cmd;
+mod exported;
 mod methods;
 mod registry;
 mod render;

@@ -3,11 +3,10 @@
 //! lock as `rtn:DIR` ([`zoo_data::position_method`]), and the same fallback (the thresholds
 //! calibrated in training, carried by the file; off with `zoo bench --no-fallback`).
 
-use anyhow::Context;
 use std::path::Path;
 use zoo_data::position_method::{PositionGenerator, PositionMethod};
 use zoo_runtime::metadata::MotionSkeletonInfo;
-use zoo_runtime::{TransitionModel, TransitionRunner, TransitionState};
+use zoo_runtime::{MotionTaskKind, TransitionModel, TransitionRunner, TransitionState};
 
 /// An exported transition model run by the engine runtime; one runner and state per thread.
 pub struct OnnxGenerator {
@@ -58,8 +57,8 @@ pub fn load_onnx_with_skeleton(
     name: String,
     foot_lock: bool,
 ) -> anyhow::Result<(PositionMethod<OnnxGenerator>, MotionSkeletonInfo)> {
-    let model =
-        TransitionModel::load(path).with_context(|| format!("loading the exported model {}", path.display()))?;
+    let model = crate::exported::load(path, &[MotionTaskKind::Transition], "`zoo bench --methods onnx:FILE`")?
+        .into_transition()?;
     let skeleton = model.model().metadata().skeleton.clone();
     let fallback = model.default_fallback().filter(|_| zoo_rtn::method::fallback_enabled());
     let name = if fallback.is_some() { format!("{name}+fallback") } else { name };

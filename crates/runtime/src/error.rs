@@ -11,7 +11,11 @@ pub enum MotionError {
         /// The I/O error.
         source: std::io::Error,
     },
-    /// The bytes are not an ONNX model.
+    /// The file's metadata is missing, of another format version, or malformed (the format
+    /// crate's check, naming the key and the fix).
+    #[error(transparent)]
+    Format(#[from] zoo_format::FormatError),
+    /// The bytes are not an ONNX graph tract can read.
     #[error("{origin} is not an ONNX model ({reason}); pass the .onnx file written by `zoo export --onnx`")]
     NotOnnx {
         /// File path or "bytes".
@@ -19,61 +23,9 @@ pub enum MotionError {
         /// What the decoder saw.
         reason: String,
     },
-    /// A metadata_props entry the runtime needs is absent.
+    /// A task's loader, or a function of one task, was given a model of another task.
     #[error(
-        "the model has no metadata_props entry `{key}`; it was not written by `zoo export` (or by an older exporter): re-export it with `zoo export --onnx MODEL_DIR --out FILE.onnx`"
-    )]
-    MissingMetadata {
-        /// The key.
-        key: String,
-    },
-    /// The model's format version is not one this runtime reads.
-    #[error(
-        "model format version {found} is not supported by this runtime (it reads version {supported}); re-export the model with the `zoo export` of this release, or upgrade the runtime"
-    )]
-    UnknownFormatVersion {
-        /// Version in the file.
-        found: String,
-        /// Version this runtime reads.
-        supported: u32,
-    },
-    /// The model was written in an older format version, before this runtime's.
-    #[error(
-        "the model has format version {found}, written by an older `zoo export`; this runtime reads version {supported}: re-export it with `zoo export --onnx MODEL_DIR --out FILE.onnx` of this release"
-    )]
-    FormatTooOld {
-        /// Version in the file.
-        found: u32,
-        /// Version this runtime reads.
-        supported: u32,
-    },
-    /// The model's task (`zoo.task`) is not one this runtime knows.
-    #[error(
-        "the model (kind `{kind}`) has task `{task}`, which this runtime does not know (it knows: {known}); upgrade the runtime or re-export the model with the `zoo export` of this release"
-    )]
-    UnknownTask {
-        /// Task in the file.
-        task: String,
-        /// Model kind in the file.
-        kind: String,
-        /// The tasks this runtime knows, comma-separated.
-        known: String,
-    },
-    /// The model's kind (`zoo.model_kind`) has no loader in this runtime.
-    #[error(
-        "unknown model kind `{kind}` (task `{task}`): this runtime loads {known}; upgrade the runtime, or drive the raw step graph with `MotionModel::load`"
-    )]
-    UnknownModelKind {
-        /// Kind in the file.
-        kind: String,
-        /// Task in the file.
-        task: String,
-        /// The kinds this runtime loads, with their tasks.
-        known: String,
-    },
-    /// A task's loader was given a file of another task.
-    #[error(
-        "this file is a `{task}` model (kind `{kind}`), not a `{expected}` model: {loader} loads only `{expected}` models; load the file with `zoo_runtime::LoadedModel::load`, which picks the loader of its kind"
+        "this file is a `{task}` model (kind `{kind}`), not a `{expected}` model: {loader} takes only `{expected}` models; load any file with `zoo_runtime::LoadedModel::load` and run it with its task's type ({hint})"
     )]
     WrongTask {
         /// Task in the file.
@@ -84,14 +36,16 @@ pub enum MotionError {
         expected: &'static str,
         /// The loader (e.g. `TransitionModel`).
         loader: &'static str,
+        /// The type that runs the file's task.
+        hint: &'static str,
     },
-    /// A metadata entry is present but malformed.
-    #[error("metadata_props entry `{key}` is malformed: {reason}; re-export the model")]
-    BadMetadata {
-        /// The key.
-        key: String,
-        /// What is wrong.
-        reason: String,
+    /// A bare step graph (`zoo.task` = `step`) has no task to run.
+    #[error(
+        "the model (kind `{kind}`) is a bare step graph with no task: drive it with `zoo_runtime::MotionModel::load` and a `MotionRunner`, or export a trained model with `zoo export --onnx RUN_DIR`"
+    )]
+    NoTask {
+        /// Model kind in the file.
+        kind: String,
     },
     /// The graph's inputs or outputs do not follow the step-graph convention.
     #[error("graph {what} `{name}`: {reason}")]
@@ -178,6 +132,14 @@ pub enum MotionError {
         /// Transition length the model was trained on.
         trained: usize,
     },
+    /// Keys that cannot be completed (see [`crate::keyframes::MotionKeys`]).
+    #[error("character {character}: {reason}")]
+    Keys {
+        /// Character (batch row).
+        character: usize,
+        /// What is wrong and how to fix it.
+        reason: String,
+    },
     /// A stitching call that does not fit the loaded refiner (window, sequence length).
     #[error("stitching: {reason}")]
     Stitch {
@@ -205,4 +167,21 @@ pub enum MotionError {
 /// Formats an anyhow-style error chain on one line.
 pub(crate) fn chain(e: &tract_onnx::prelude::TractError) -> String {
     format!("{e:#}")
+}
+
+impl MotionError {
+    /// The [`MotionError::WrongTask`] of a model of task `task` given to `loader` of `expected`.
+    pub(crate) fn wrong_task(
+        metadata: &crate::metadata::MotionModelMetadata,
+        expected: &'static str,
+        loader: &'static str,
+    ) -> Self {
+        MotionError::WrongTask {
+            task: metadata.task.name().to_string(),
+            kind: metadata.model_kind.clone(),
+            expected,
+            loader,
+            hint: crate::loaded::runner_of(metadata.task.kind()),
+        }
+    }
 }

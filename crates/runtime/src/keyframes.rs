@@ -19,35 +19,13 @@
 //! let poses = vec![0.0f32; frames.len() * d];
 //! let mut out = vec![0.0f32; (24 + 1) * d];
 //! runner.complete(MotionKeys::whole(&frames, &poses), &mut out)?;
-//! # Ok::<(), zoo_runtime::keyframes::KeyframeError>(())
+//! # Ok::<(), zoo_runtime::MotionError>(())
 //! ```
 
 use crate::error::MotionError;
 use crate::model::{MotionModel, MotionState};
 use crate::runner::MotionRunner;
 use std::path::Path;
-
-/// `zoo.model_kind` of the exported ARNN.
-pub const MODEL_KIND: &str = "arnn";
-
-/// What went wrong while completing keys.
-#[derive(Debug, thiserror::Error)]
-pub enum KeyframeError {
-    /// The keys of a character cannot be completed.
-    #[error("character {character}: {reason}")]
-    Keys {
-        /// Character (batch row).
-        character: usize,
-        /// What is wrong and how to fix it.
-        reason: String,
-    },
-    /// The model is not an exported ARNN step graph.
-    #[error("{0}: load the file written by `zoo export --onnx` from a `zoo train arnn` run")]
-    NotKeyframeModel(String),
-    /// A buffer, the batch or the graph run failed.
-    #[error(transparent)]
-    Motion(#[from] MotionError),
-}
 
 /// One character's keys: `frames` strictly increasing from 0, `poses` `frames.len() * dofs`
 /// values (key-major); for a model with key groups (a humanoid ARNN), optionally which groups
@@ -93,8 +71,8 @@ impl MotionKeys<'_> {
         (k, k + 1, ((t as f64 - a as f64) / (b - a).max(1) as f64) as f32)
     }
 
-    fn check(&self, character: usize, dofs: usize, groups: usize) -> Result<(), KeyframeError> {
-        let bad = |reason: String| Err(KeyframeError::Keys { character, reason });
+    fn check(&self, character: usize, dofs: usize, groups: usize) -> Result<(), MotionError> {
+        let bad = |reason: String| Err(MotionError::Keys { character, reason });
         let n = self.frames.len();
         if n < 2 {
             return bad(format!("{n} key(s): completion needs at least 2"));
@@ -162,35 +140,44 @@ pub struct KeyframeModel {
 }
 
 impl KeyframeModel {
-    /// Loads an exported ARNN (`zoo export --onnx RUN --out arnn.onnx`).
-    pub fn load(path: impl AsRef<Path>) -> Result<Self, KeyframeError> {
-        Self::new(MotionModel::load(path)?)
+    /// Loads an exported ARNN (`zoo export --onnx RUN --out arnn.onnx`); a file of another
+    /// task is refused ([`MotionError::WrongTask`]).
+    pub fn load(path: impl AsRef<Path>) -> Result<Self, MotionError> {
+        crate::LoadedModel::load(path)?.into_keyframes()
     }
 
-    /// Checks that `model` is an ARNN step graph.
-    pub fn new(model: MotionModel) -> Result<Self, KeyframeError> {
-        let kind = &model.metadata().model_kind;
-        if kind != MODEL_KIND {
-            return Err(KeyframeError::NotKeyframeModel(format!("the model kind is `{kind}`, not `{MODEL_KIND}`")));
-        }
+    /// [`KeyframeModel::load`] from the file's bytes.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, MotionError> {
+        crate::LoadedModel::from_bytes(bytes)?.into_keyframes()
+    }
+
+    /// Checks that `model` is a `keyframes` model whose step graph matches its section.
+    pub fn new(model: MotionModel) -> Result<Self, MotionError> {
+        let m = model.metadata();
+        let Some(task) = m.task.as_keyframes() else {
+            return Err(MotionError::wrong_task(m, "keyframes", "KeyframeModel"));
+        };
+        let (dofs, groups) = (task.dofs, task.groups);
         let names: Vec<&str> = model.inputs().iter().map(|i| i.name.as_str()).collect();
-        let dofs = model.inputs().first().map_or(0, |i| i.width);
         let widths: Vec<usize> = model.inputs().iter().map(|i| i.width).collect();
         let outputs: Vec<(&str, usize)> = model.outputs().iter().map(|o| (o.name.as_str(), o.width)).collect();
-        // Key groups (partial keys): two more inputs of G flags.
-        let groups = widths.get(4).copied().unwrap_or(0);
-        let whole = names == ["prev", "key_a", "key_b", "t_rel"] && widths == [dofs, dofs, dofs, 1];
-        let partial = names == ["prev", "key_a", "key_b", "t_rel", "fixed_a", "fixed_b"]
-            && widths == [dofs, dofs, dofs, 1, groups, groups]
-            && groups > 0;
-        if !(whole || partial) || dofs == 0 || outputs != [("pose", dofs)] {
-            return Err(KeyframeError::NotKeyframeModel(format!(
-                "the graph's inputs are {names:?} of widths {widths:?} and its outputs {outputs:?}, expected prev, \
-                 key_a, key_b (D each), t_rel (1), optionally fixed_a and fixed_b (G each), and one output `pose` (D) \
-                 besides the recurrent state"
-            )));
+        let (want_names, want_widths): (&[&str], Vec<usize>) = if groups == 0 {
+            (&["prev", "key_a", "key_b", "t_rel"], vec![dofs, dofs, dofs, 1])
+        } else {
+            (&["prev", "key_a", "key_b", "t_rel", "fixed_a", "fixed_b"], vec![dofs, dofs, dofs, 1, groups, groups])
+        };
+        if names != want_names || widths != want_widths || outputs != [("pose", dofs)] {
+            return Err(MotionError::BadGraphIo {
+                what: "input",
+                name: names.first().unwrap_or(&"").to_string(),
+                reason: format!(
+                    "the keyframes step graph takes {names:?} of widths {widths:?} and gives {outputs:?}; its section \
+                     (dofs {dofs}, groups {groups}) needs {want_names:?} of widths {want_widths:?} and one output \
+                     `pose` ({dofs}) besides the recurrent state: re-export the model"
+                ),
+            });
         }
-        Ok(KeyframeModel { model, dofs, groups: if partial { groups } else { 0 } })
+        Ok(KeyframeModel { model, dofs, groups })
     }
 
     /// Values per pose (6 for the lamp).
@@ -209,9 +196,9 @@ impl KeyframeModel {
     }
 
     /// A runner for up to `max_batch` characters per call (its buffers sized once here).
-    pub fn runner(&self, max_batch: usize) -> Result<KeyframeRunner, KeyframeError> {
+    pub fn runner(&self, max_batch: usize) -> Result<KeyframeRunner, MotionError> {
         if max_batch == 0 {
-            return Err(MotionError::EmptyBatch.into());
+            return Err(MotionError::EmptyBatch);
         }
         let d = self.dofs;
         Ok(KeyframeRunner {
@@ -254,20 +241,20 @@ impl KeyframeRunner {
     }
 
     /// Completes one character's keys into `out` (`keys.len() * dofs` values, frame-major).
-    pub fn complete(&mut self, keys: MotionKeys<'_>, out: &mut [f32]) -> Result<(), KeyframeError> {
+    pub fn complete(&mut self, keys: MotionKeys<'_>, out: &mut [f32]) -> Result<(), MotionError> {
         self.complete_batch(&[keys], &mut [out])
     }
 
     /// Completes the keys of `keys.len()` characters in one graph call per frame: `out[c]`
     /// receives `keys[c].len() * dofs` values. Every buffer and key is checked before anything
     /// is written (a bad key or buffer leaves `out` unchanged).
-    pub fn complete_batch(&mut self, keys: &[MotionKeys<'_>], out: &mut [&mut [f32]]) -> Result<(), KeyframeError> {
+    pub fn complete_batch(&mut self, keys: &[MotionKeys<'_>], out: &mut [&mut [f32]]) -> Result<(), MotionError> {
         let (b, d, g) = (keys.len(), self.dofs, self.groups);
         if b == 0 {
-            return Err(MotionError::EmptyBatch.into());
+            return Err(MotionError::EmptyBatch);
         }
         if b > self.max_batch() {
-            return Err(KeyframeError::Keys {
+            return Err(MotionError::Keys {
                 character: b - 1,
                 reason: format!("{b} characters, but the runner was made for at most {}", self.max_batch()),
             });

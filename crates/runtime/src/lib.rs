@@ -1,9 +1,11 @@
-//! Engine-side runtime of zoo, and the owner of the exported file format.
+//! Engine-side runtime of zoo.
 //!
-//! [`metadata`] defines the format (version, keys, typed metadata and per-task sections);
-//! exporters write through it. [`LoadedModel::load`] loads any exported file and dispatches on
-//! its model kind to the loader of its task (today [`TransitionModel`] for `rtn`); each task's
-//! loader refuses files of another task. Underneath, [`MotionModel`] is the raw step graph
+//! The file format (version, keys, a typed section per task) is the `zoo-format` crate's,
+//! re-exported here as [`metadata`]; exporters write through it. [`LoadedModel::load`] is the one
+//! loader: it loads any exported file and returns its task, each with its typed API:
+//! [`TransitionModel`] (transitions, RTN), [`KeyframeModel`] (keyframe completion, ARNN),
+//! [`StitchRefiner`] (stitching, RMR), [`SynthesisModel`] (synthesis and its speed / facing
+//! control, RNN-GMM). Every error is a [`MotionError`]. Underneath, [`MotionModel`] is the raw step graph
 //! (loaded once, `Send + Sync`), one small [`MotionState`] per character, advanced one frame
 //! per call by a per-thread [`MotionRunner`] (state in, state out, preallocated buffers). The
 //! graph runs on tract; the public API takes and returns plain `f32` slices and glam types only.
@@ -13,8 +15,7 @@
 //!
 //! ```no_run
 //! use zoo_runtime::prelude::*;
-//! let loaded = LoadedModel::load("rtn.onnx")?;
-//! let Some(model) = loaded.as_transition() else { return Ok(()) };
+//! let model = LoadedModel::load("rtn.onnx")?.into_transition()?;
 //! let mut runner = model.runner()?;
 //! let mut state = model.new_transition();
 //! let k = model.joints();
@@ -30,7 +31,8 @@ pub mod control;
 pub mod error;
 pub mod keyframes;
 pub mod loaded;
-pub mod metadata;
+/// The exported file format: the `zoo-format` crate.
+pub use zoo_format as metadata;
 pub mod model;
 pub mod portable;
 pub mod pose;
@@ -40,16 +42,18 @@ pub mod synthesis;
 pub mod transition;
 
 pub use error::MotionError;
-pub use loaded::{LoadedModel, MODEL_KINDS};
+pub use keyframes::{KeyframeModel, KeyframeRunner, MotionKeys};
+pub use loaded::LoadedModel;
 pub use metadata::{
     FORMAT_VERSION, MotionFeatureSegment, MotionMeanStd, MotionModelMetadata, MotionSkeletonInfo, MotionStatePair,
-    MotionTask, TransitionTask, TransitionTerrain,
+    MotionTask, MotionTaskKind, TransitionFallback, TransitionTask, TransitionTerrain,
 };
 pub use model::{MotionModel, MotionState, MotionStateInfo, MotionTensorInfo};
 pub use pose::{Conversion, CoordinateFrame, EnginePose, Handedness, UpAxis};
 pub use runner::MotionRunner;
 pub use stitch::{FootCleanup, StitchRefiner, StitchStream, StitchStreamOf};
-pub use transition::{Heightmap, TargetMiss, TransitionFallback, TransitionModel, TransitionRunner, TransitionState};
+pub use synthesis::{SynthesisCharacter, SynthesisModel, SynthesisRunner};
+pub use transition::{Heightmap, TargetMiss, TransitionModel, TransitionRunner, TransitionState};
 
 /// Re-exported so callers use the same glam version as the runtime.
 pub use glam;
@@ -57,10 +61,13 @@ pub use glam;
 /// The common imports of engine code.
 pub mod prelude {
     pub use crate::error::MotionError;
+    pub use crate::keyframes::{KeyframeModel, MotionKeys};
     pub use crate::loaded::LoadedModel;
-    pub use crate::metadata::{MotionModelMetadata, MotionSkeletonInfo, MotionTask};
+    pub use crate::metadata::{MotionModelMetadata, MotionSkeletonInfo, MotionTask, MotionTaskKind};
     pub use crate::model::{MotionModel, MotionState};
     pub use crate::pose::{Conversion, CoordinateFrame, EnginePose, Handedness, UpAxis};
     pub use crate::runner::MotionRunner;
+    pub use crate::stitch::StitchRefiner;
+    pub use crate::synthesis::SynthesisModel;
     pub use crate::transition::{TransitionModel, TransitionRunner, TransitionState};
 }

@@ -243,7 +243,7 @@ fn plans(p: &Parsed) -> Result<(Plan, Plan), MotionError> {
 
 fn start_graph(encoded: &str, states: &[MotionStateInfo]) -> Result<StartGraph, MotionError> {
     use base64::Engine;
-    let bad = |reason: String| MotionError::BadMetadata { key: keys::START_GRAPH.into(), reason };
+    let bad = |reason: String| MotionError::from(zoo_format::FormatError::bad(keys::START_GRAPH, reason));
     let bytes = base64::engine::general_purpose::STANDARD
         .decode(encoded.trim())
         .map_err(|e| bad(format!("not base64: {e}")))?;
@@ -282,9 +282,7 @@ impl MotionModel {
     /// Loads an exported `.onnx` file.
     pub fn load(path: impl AsRef<Path>) -> Result<Self, MotionError> {
         let path = path.as_ref();
-        let bytes =
-            std::fs::read(path).map_err(|source| MotionError::Io { path: path.display().to_string(), source })?;
-        Self::from_bytes_named(&bytes, &path.display().to_string())
+        Self::from_bytes_named(&crate::loaded::read_file(path)?, &path.display().to_string())
     }
 
     /// Loads an exported model from its bytes.
@@ -293,16 +291,19 @@ impl MotionModel {
     }
 
     fn from_bytes_named(bytes: &[u8], origin: &str) -> Result<Self, MotionError> {
+        Self::from_parts(bytes, origin, MotionModelMetadata::read(bytes, origin)?)
+    }
+
+    /// Loads the step graph of a file whose metadata was read and checked. A `stitch` model is
+    /// a window graph, not a step graph: refused with the type that runs it.
+    pub(crate) fn from_parts(bytes: &[u8], origin: &str, metadata: MotionModelMetadata) -> Result<Self, MotionError> {
+        if metadata.task.kind() == crate::metadata::MotionTaskKind::Stitch {
+            return Err(MotionError::wrong_task(&metadata, "step-graph", "MotionModel"));
+        }
         let parsed = parse(bytes, origin)?;
         let Parsed { proto, model, in_dims, out_dims } = &parsed;
         let graph = proto.graph.as_ref().expect("parse checked the graph");
-        // DEPENDENCY-FACTS (tract 0.23.9): metadata_props appear in `model.properties` as
-        // "onnx.metadata_props.<key>" string scalars.
-        let get = |key: &str| {
-            let t = model.properties.get(&format!("onnx.metadata_props.{key}"))?;
-            t.try_as_plain_ram().ok()?.to_scalar::<String>().ok().cloned()
-        };
-        let metadata = MotionModelMetadata::from_props(get)?;
+        let get = |key: &str| proto.metadata_props.iter().find(|p| p.key == key).map(|p| p.value.clone());
 
         let in_pos = |name: &str| graph.input.iter().position(|v| v.name == name);
         let out_pos = |name: &str| graph.output.iter().position(|v| v.name == name);
@@ -447,11 +448,12 @@ mod tests {
 
     #[test]
     fn garbage_is_not_onnx() {
+        let not_onnx = |e: &MotionError| matches!(e, MotionError::Format(zoo_format::FormatError::NotOnnx { .. }));
         let err = MotionModel::from_bytes(b"BVH HIERARCHY ROOT Hips { OFFSET 0 0 0 }").unwrap_err();
-        assert!(matches!(err, MotionError::NotOnnx { .. }), "{err}");
+        assert!(not_onnx(&err), "{err}");
         assert!(err.to_string().contains("zoo export"), "{err}");
         let err = MotionModel::from_bytes(&[]).unwrap_err();
-        assert!(matches!(err, MotionError::NotOnnx { .. }), "{err}");
+        assert!(not_onnx(&err) && err.to_string().contains("empty"), "{err}");
     }
 
     #[test]

@@ -59,7 +59,7 @@ pub fn assemble(path: impl AsRef<Path>) -> Result<Vec<u8>, MotionError> {
     for g in PORTABLE_GRAPHS {
         let Some(i) = proto.metadata_props.iter().position(|p| p.key == g.file_key) else { continue };
         let name = proto.metadata_props.remove(i).value;
-        let bad = |reason: String| MotionError::BadMetadata { key: g.file_key.to_string(), reason };
+        let bad = |reason: String| MotionError::from(crate::metadata::FormatError::bad(g.file_key, reason));
         if Path::new(&name).file_name().is_none_or(|n| n != name.as_str()) {
             return Err(bad(format!("`{name}` is not a bare file name beside the main file")));
         }

@@ -3,8 +3,8 @@
 //!
 //! The file is what `zoo export --onnx RMR_DIR` writes: the refiner over one window
 //! (`x [frames, batch, dim] -> y [frames, batch, dim]`, normalised, contacts as logits) with
-//! its configuration (`zoo.rmr.config`) and normalisation (`zoo.rmr.normalization`) in
-//! `metadata_props`. [`StitchRefiner`] plans the graph once for a window of `w` frames at batch 1
+//! its `stitch` section (window, stride, blend, layout; `zoo_format::StitchTask`), skeleton,
+//! fps and normalisation (group `x`) in `metadata_props`. [`StitchRefiner`] plans the graph once for a window of `w` frames at batch 1
 //! and refines raw pose vectors (the layout of `zoo_rmr::features`: `r, p, q, v, c` per frame)
 //! exactly as the offline `zoo_rmr::stitch::refine_sequence` does: windows every `s` frames
 //! plus one ending on the last frame, each window's input holding the frames already refined,
@@ -28,6 +28,7 @@
 //! with each pose for the engine's own foot IK instead of locking.
 
 use crate::error::{MotionError, chain};
+use crate::metadata::MotionModelMetadata;
 use crate::pose::{EnginePose, root_delta};
 use glam::{DQuat, DVec3, Quat, Vec3};
 use std::ops::Deref;
@@ -37,17 +38,13 @@ use tract_onnx::prelude::*;
 use zoo_motion::stitch::{GroundRoot, PoseFrame, StitchLayout, decode_pose, encode_pose, next_root};
 use zoo_motion::{Clip, Skeleton};
 
-/// `zoo.model_kind` of an exported RMR.
-pub const RMR_KIND: &str = "rmr";
-/// The version of the `zoo.rmr.*` metadata this runtime reads.
-pub const RMR_FORMAT_VERSION: u32 = 1;
-
 type Plan = Arc<TypedRunnableModel>;
 
 /// An exported RMR, planned for one window size, ready to refine sequences. `Send + Sync`: one
 /// loaded refiner serves every thread.
 #[derive(Clone, Debug)]
 pub struct StitchRefiner {
+    metadata: Arc<MotionModelMetadata>,
     model: InferenceModel,
     plan: Plan,
     window: usize,
@@ -76,37 +73,6 @@ fn plan_for(model: &InferenceModel, window: usize, dim: usize) -> Result<Plan, M
     planned.map_err(|e| MotionError::Unsupported { reason: chain(&e) })
 }
 
-/// The model's skeleton (names, parents, offsets) and stitching layout from `zoo.rmr.config`.
-fn skeleton_and_layout(config: &serde_json::Value, joints: usize) -> Result<(Skeleton, StitchLayout), MotionError> {
-    let bad = |reason: String| MotionError::BadMetadata { key: "zoo.rmr.config".into(), reason };
-    let names: Vec<String> = serde_json::from_value(config["names"].clone())
-        .map_err(|e| bad(format!("`names` must list the joint names: {e}")))?;
-    let parents: Vec<i64> = serde_json::from_value(config["parents"].clone())
-        .map_err(|e| bad(format!("`parents` must list a parent index (-1 for the root) per joint: {e}")))?;
-    let offsets: Vec<[f64; 3]> = serde_json::from_value(config["offsets"].clone())
-        .map_err(|e| bad(format!("`offsets` must list an offset per joint: {e}")))?;
-    if names.len() != joints || parents.len() != joints || offsets.len() != joints {
-        return Err(bad(format!(
-            "{joints} joints but {} names, {} parents and {} offsets",
-            names.len(),
-            parents.len(),
-            offsets.len()
-        )));
-    }
-    let skeleton = Skeleton {
-        names,
-        parents: parents.iter().map(|&p| usize::try_from(p).ok()).collect(),
-        offsets: offsets.iter().map(|o| DVec3::from_array(*o)).collect(),
-        end_sites: vec![None; joints],
-        channels: vec![Default::default(); joints],
-    };
-    skeleton.validate().map_err(|e| bad(format!("the skeleton is not well formed: {}", e.0)))?;
-    let layout: StitchLayout = serde_json::from_value(config["layout"].clone())
-        .map_err(|e| bad(format!("`layout` is not a stitching layout: {e}")))?;
-    layout.validate(&skeleton).map_err(|e| bad(format!("`layout` does not fit the skeleton: {e}")))?;
-    Ok((skeleton, layout))
-}
-
 /// What follows the refiner in [`StitchRefiner::refine_poses`] (RMR secs. 5 and 6). `zoo stitch`
 /// does both by default, and so does [`FootCleanup::default`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -129,77 +95,34 @@ impl FootCleanup {
 }
 
 impl StitchRefiner {
-    /// Loads an exported RMR (`.onnx`), planned for its configuration's window.
+    /// Loads an exported RMR (`.onnx`), planned for its section's window; a file of another
+    /// task is refused ([`MotionError::WrongTask`]).
     pub fn load(path: impl AsRef<Path>) -> Result<Self, MotionError> {
-        let path = path.as_ref();
-        let bytes =
-            std::fs::read(path).map_err(|source| MotionError::Io { path: path.display().to_string(), source })?;
-        Self::from_bytes_named(&bytes, &path.display().to_string())
+        crate::LoadedModel::load(path)?.into_stitch()
     }
 
     /// [`StitchRefiner::load`] from the file's bytes.
     pub fn from_bytes(bytes: &[u8]) -> Result<Self, MotionError> {
-        Self::from_bytes_named(bytes, "the given bytes")
+        crate::LoadedModel::from_bytes(bytes)?.into_stitch()
     }
 
-    fn from_bytes_named(bytes: &[u8], origin: &str) -> Result<Self, MotionError> {
-        let (proto, model) = crate::model::read_graph(bytes, origin)?;
-        let meta = |key: &str| proto.metadata_props.iter().find(|p| p.key == key).map(|p| p.value.clone());
-        let kind = meta("zoo.model_kind").ok_or(MotionError::MissingMetadata { key: "zoo.model_kind".into() })?;
-        if kind != RMR_KIND {
-            return Err(MotionError::WrongTask {
-                task: meta("zoo.task").unwrap_or_else(|| "unknown".into()),
-                kind,
-                expected: "stitch",
-                loader: "StitchRefiner",
-            });
-        }
-        let version_key = "zoo.rmr.format_version";
-        let version = meta(version_key).ok_or(MotionError::MissingMetadata { key: version_key.into() })?;
-        if version.trim() != RMR_FORMAT_VERSION.to_string() {
-            return Err(MotionError::UnknownFormatVersion { found: version, supported: RMR_FORMAT_VERSION });
-        }
-        let json = |key: &str| -> Result<serde_json::Value, MotionError> {
-            let text = meta(key).ok_or(MotionError::MissingMetadata { key: key.into() })?;
-            serde_json::from_str(&text).map_err(|e| MotionError::BadMetadata { key: key.into(), reason: e.to_string() })
+    /// Loads the window graph of a `stitch` file whose metadata was read and checked.
+    pub(crate) fn from_parts(bytes: &[u8], origin: &str, metadata: MotionModelMetadata) -> Result<Self, MotionError> {
+        let Some(task) = metadata.task.as_stitch() else {
+            return Err(MotionError::wrong_task(&metadata, "stitch", "StitchRefiner"));
         };
-        let config = json("zoo.rmr.config")?;
-        let bad_config = |what: &str| MotionError::BadMetadata {
-            key: "zoo.rmr.config".into(),
-            reason: format!("`{what}` is missing or not a positive number"),
-        };
-        let count = |what: &str| -> Result<usize, MotionError> {
-            config[what].as_u64().filter(|&v| v > 0).map(|v| v as usize).ok_or_else(|| bad_config(what))
-        };
-        let joints = count("joints")?;
-        let lower =
-            config["layout"]["lower_body"].as_array().map(Vec::len).ok_or_else(|| bad_config("layout.lower_body"))?;
-        let (window, stride, blend_frames) = (count("window")?, count("stride")?, count("blend_frames")?);
-        let fps = config["fps"].as_f64().filter(|&f| f > 0.0).ok_or_else(|| bad_config("fps"))?;
-        let dim = 7 + 6 * lower + 4 * joints;
-        let stats = json("zoo.rmr.normalization")?;
-        let values = |what: &str| -> Result<Vec<f32>, MotionError> {
-            let v: Option<Vec<f32>> = stats[what]
-                .as_array()
-                .map(|a| a.iter().map(|x| x.as_f64().map(|x| x as f32)).collect::<Option<_>>())
-                .and_then(|v| v);
-            v.filter(|v: &Vec<f32>| v.len() == dim).ok_or_else(|| MotionError::BadMetadata {
-                key: "zoo.rmr.normalization".into(),
-                reason: format!(
-                    "`{what}` must hold {dim} numbers (the pose vector of {joints} joints, {lower} lower body)"
-                ),
-            })
-        };
-        let (mean, std) = (values("mean")?, values("std")?);
-        if std.iter().any(|&s| s.is_nan() || s <= 0.0) {
-            return Err(MotionError::BadMetadata {
-                key: "zoo.rmr.normalization".into(),
-                reason: "a standard deviation is not positive".into(),
-            });
-        }
-        let (skeleton, layout) = skeleton_and_layout(&config, joints)?;
+        let (_, model) = crate::model::read_graph(bytes, origin)?;
+        let skeleton = metadata.skeleton.to_skeleton();
+        let joints = skeleton.len();
+        let dim = task.dim(joints);
+        // The format crate checked the group's width and values.
+        let stats = metadata.group("x", dim)?;
+        let (mean, std) = (stats.mean.clone(), stats.std.clone());
+        let (window, stride, blend_frames, layout) = (task.window, task.stride, task.blend_frames, task.layout.clone());
+        let fps = metadata.fps as f64;
         let plan = plan_for(&model, window, dim)?;
         Ok(StitchRefiner {
+            metadata: Arc::new(metadata),
             model,
             plan,
             window,
@@ -214,6 +137,11 @@ impl StitchRefiner {
             skeleton,
             layout,
         })
+    }
+
+    /// The file's metadata (its `stitch` section, skeleton, frame and statistics).
+    pub fn metadata(&self) -> &MotionModelMetadata {
+        &self.metadata
     }
 
     /// Plans the refiner for another window `w` and stride `s` (`1 <= s <= w`; the paper uses

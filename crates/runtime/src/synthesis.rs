@@ -26,23 +26,18 @@
 //! of eq. 26 (a start from the zero state, as the paper's baseline).
 
 use crate::error::MotionError;
-use crate::metadata::synthesis::{KEY, REFINER_GRAPH_KEY, REFINER_KEY, SynthesisTask};
+use crate::metadata::MotionModelMetadata;
+use crate::metadata::synthesis::{KEY, REFINER_GRAPH_KEY, SynthesisTask};
 use crate::model::{MotionModel, MotionState};
 use crate::pose::EnginePose;
 use crate::runner::{MotionRunner, check_finite, check_len};
 use glam::{DQuat, DVec3, Quat, Vec3};
-use prost::Message;
 use std::path::Path;
 use zoo_motion::quat::from_scaled_axis;
 use zoo_motion::rng::SplitMix64;
 
-/// The refiner's end-effector statistics as the exporter writes them.
-#[derive(Clone, Debug, serde::Deserialize)]
-struct EffectorStats {
-    effectors: Vec<usize>,
-    mean: Vec<f32>,
-    std: Vec<f32>,
-}
+/// The refiner's end effectors and their statistics (the section's `refiner`).
+type EffectorStats = crate::metadata::SynthesisRefiner;
 
 type Plan = std::sync::Arc<tract_onnx::prelude::TypedRunnableModel>;
 
@@ -70,15 +65,16 @@ pub struct SynthesisModel {
 }
 
 /// The refiner of a file, if it embeds one.
-fn load_refiner(proto: &tract_onnx::pb::ModelProto, d: usize) -> Result<Option<Refiner>, MotionError> {
+fn load_refiner(bytes: &[u8], origin: &str, task: &SynthesisTask) -> Result<Option<Refiner>, MotionError> {
     use base64::Engine as _;
-    let prop = |key: &str| proto.metadata_props.iter().find(|p| p.key == key).map(|p| p.value.as_str());
-    let (Some(graph), Some(stats)) = (prop(REFINER_GRAPH_KEY), prop(REFINER_KEY)) else { return Ok(None) };
-    let stats: EffectorStats = serde_json::from_str(stats).map_err(|e| bad(REFINER_KEY, e.to_string()))?;
+    let Some(stats) = task.refiner.clone() else { return Ok(None) };
+    let props = crate::metadata::read_props(bytes, origin)?;
+    // The format crate checked that the graph is there exactly when the section has a refiner.
+    let Some((_, graph)) = props.iter().find(|(k, _)| k == REFINER_GRAPH_KEY) else {
+        return Err(bad(REFINER_GRAPH_KEY, "missing: the `refiner` of the synthesis section has no graph"));
+    };
+    let d = task.frame_dim;
     let e = 6 * stats.effectors.len();
-    if stats.mean.len() != e || stats.std.len() != e || stats.std.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
-        return Err(bad(REFINER_KEY, format!("{} effectors need {e} means and positive stds", stats.effectors.len())));
-    }
     let bytes = base64::engine::general_purpose::STANDARD
         .decode(graph)
         .map_err(|err| bad(REFINER_GRAPH_KEY, err.to_string()))?;
@@ -111,34 +107,29 @@ fn load_refiner(proto: &tract_onnx::pb::ModelProto, d: usize) -> Result<Option<R
 }
 
 fn bad(key: &str, reason: impl Into<String>) -> MotionError {
-    MotionError::BadMetadata { key: key.to_string(), reason: reason.into() }
+    crate::metadata::FormatError::bad(key, reason).into()
 }
 
 impl SynthesisModel {
-    /// Loads an exported RNN-GMM generator (`zoo export --onnx RUN_DIR --out FILE.onnx`).
+    /// Loads an exported RNN-GMM generator (`zoo export --onnx RUN_DIR --out FILE.onnx`); a
+    /// file of another task is refused ([`MotionError::WrongTask`]).
     pub fn load(path: impl AsRef<Path>) -> Result<Self, MotionError> {
-        let path = path.as_ref();
-        let bytes =
-            std::fs::read(path).map_err(|source| MotionError::Io { path: path.display().to_string(), source })?;
-        Self::from_bytes(&bytes)
+        crate::LoadedModel::load(path)?.into_synthesis()
     }
 
     /// Loads an exported RNN-GMM generator from the bytes of its file.
     pub fn from_bytes(bytes: &[u8]) -> Result<Self, MotionError> {
-        let model = MotionModel::from_bytes(bytes)?;
-        let proto = tract_onnx::pb::ModelProto::decode(bytes)
-            .map_err(|e| MotionError::NotOnnx { origin: "the model bytes".into(), reason: e.to_string() })?;
-        let meta = model.metadata();
-        let Some(section) = proto.metadata_props.iter().find(|p| p.key == KEY) else {
-            return Err(MotionError::WrongTask {
-                task: meta.task.name().to_string(),
-                kind: meta.model_kind.clone(),
-                expected: "synthesis",
-                loader: "SynthesisModel",
-            });
+        crate::LoadedModel::from_bytes(bytes)?.into_synthesis()
+    }
+
+    /// Loads the step graph (and the refiner's) of a `synthesis` file whose metadata was read
+    /// and checked.
+    pub(crate) fn from_parts(bytes: &[u8], origin: &str, metadata: MotionModelMetadata) -> Result<Self, MotionError> {
+        let Some(task) = metadata.task.as_synthesis().cloned() else {
+            return Err(MotionError::wrong_task(&metadata, "synthesis", "SynthesisModel"));
         };
-        let task: SynthesisTask = serde_json::from_str(&section.value).map_err(|e| bad(KEY, e.to_string()))?;
-        task.check(meta.skeleton.len()).map_err(|r| bad(KEY, r))?;
+        let model = MotionModel::from_parts(bytes, origin, metadata)?;
+        let meta = model.metadata();
         let (d, m) = (task.frame_dim, task.components);
         let widths = |infos: &[crate::model::MotionTensorInfo]| -> Vec<(String, usize)> {
             infos.iter().map(|i| (i.name.clone(), i.width)).collect()
@@ -155,12 +146,10 @@ impl SynthesisModel {
                 ),
             ));
         }
-        let Some(norm) = meta.normalization.get("x").filter(|n| n.mean.len() == d) else {
-            return Err(bad(crate::metadata::keys::NORMALIZATION, format!("no group `x` of {d} values")));
-        };
+        let norm = meta.group("x", d)?;
         let (mean, std) = (norm.mean.clone(), norm.std.clone());
         let references = task.references.iter().map(|q| DQuat::from_xyzw(q[0], q[1], q[2], q[3]).normalize()).collect();
-        let refiner = load_refiner(&proto, d)?;
+        let refiner = load_refiner(bytes, origin, &task)?;
         Ok(SynthesisModel { model, task, references, mean, std, refiner })
     }
 

@@ -22,7 +22,7 @@
 mod posed;
 
 use crate::error::MotionError;
-use crate::metadata::{MotionMeanStd, MotionTask, keys};
+use crate::metadata::{MotionMeanStd, MotionTask, TransitionFallback, keys};
 use crate::model::{MotionModel, MotionState};
 use crate::runner::{MotionRunner, check_finite, check_len};
 use glam::DVec3;
@@ -179,34 +179,6 @@ impl TransitionState {
     }
 }
 
-/// The fallback towards interpolation on a low-confidence transition (issue 19): the
-/// confidence signal is the network's own miss at the target ([`TargetMiss::mean`], computed
-/// from the inputs only); from `start` on, [`TransitionRunner::generate`] blends the transition
-/// towards the linear interpolation of positions between the last context pose and the target,
-/// fully from `full` on. Thresholds in the model's units; a model calibrated by `zoo train rtn`
-/// carries them ([`TransitionModel::default_fallback`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TransitionFallback {
-    /// Miss below which the network's transition is kept.
-    pub start: f32,
-    /// Miss from which the transition is the interpolation.
-    pub full: f32,
-}
-
-impl TransitionFallback {
-    /// The interpolation's weight for a target miss: 0 below `start`, 1 from `full` on, linear
-    /// between (a non-finite miss gives 1).
-    pub fn weight(&self, miss: f32) -> f32 {
-        if !miss.is_finite() {
-            return 1.0;
-        }
-        if self.full <= self.start {
-            return if miss >= self.start { 1.0 } else { 0.0 };
-        }
-        ((miss - self.start) / (self.full - self.start)).clamp(0.0, 1.0)
-    }
-}
-
 /// The distance between the network's predicted target frame and the requested target, per
 /// joint, in the model's units (see [`TransitionState::target_miss`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -253,7 +225,7 @@ pub struct TransitionRunner {
 }
 
 fn bad(key: &str, reason: String) -> MotionError {
-    MotionError::BadMetadata { key: key.to_string(), reason }
+    crate::metadata::FormatError::bad(key, reason).into()
 }
 
 fn wrong_len(name: &str, width: usize, batch: usize, found: usize) -> MotionError {
@@ -266,35 +238,25 @@ fn check_rows(name: &str, data: &[f32], batch: usize, width: usize) -> Result<()
     check_finite(name, data, width)
 }
 
-/// The model kinds that run the `transition` task with [`TransitionModel`].
-pub const TRANSITION_KINDS: [&str; 1] = ["rtn"];
-
 impl TransitionModel {
     /// Loads an RTN exported by `zoo export --onnx`; refuses a file of another task or kind
     /// (load any exported file with [`crate::LoadedModel::load`]).
     pub fn load(path: impl AsRef<Path>) -> Result<Self, MotionError> {
-        Self::new(MotionModel::load(path)?)
+        crate::LoadedModel::load(path)?.into_transition()
     }
 
-    /// Wraps a loaded model; refuses models of another task or kind, and step graphs that do
-    /// not match their `zoo.transition` section.
+    /// [`TransitionModel::load`] from the file's bytes.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, MotionError> {
+        crate::LoadedModel::from_bytes(bytes)?.into_transition()
+    }
+
+    /// Wraps a loaded model; refuses models of another task, and step graphs that do not match
+    /// their `zoo.transition` section.
     pub fn new(model: MotionModel) -> Result<Self, MotionError> {
         let m = model.metadata();
         let MotionTask::Transition(task) = &m.task else {
-            return Err(MotionError::WrongTask {
-                task: m.task.name().to_string(),
-                kind: m.model_kind.clone(),
-                expected: "transition",
-                loader: "TransitionModel",
-            });
+            return Err(MotionError::wrong_task(m, "transition", "TransitionModel"));
         };
-        if !TRANSITION_KINDS.contains(&m.model_kind.as_str()) {
-            return Err(MotionError::UnknownModelKind {
-                kind: m.model_kind.clone(),
-                task: m.task.name().to_string(),
-                known: format!("transition models of kind {}", TRANSITION_KINDS.join(", ")),
-            });
-        }
         let joints = m.skeleton.parents.len();
         let d = 3 * joints;
         if task.frame_dim != d {
@@ -388,7 +350,7 @@ impl TransitionModel {
             start_target,
             target_blend: task.target_blend,
             parents: m.skeleton.parents.iter().map(|&p| usize::try_from(p).ok()).collect(),
-            offsets: m.skeleton.offsets.iter().map(|o| glam::Vec3::from_array(*o).as_dvec3()).collect(),
+            offsets: m.skeleton.offsets.iter().map(|o| glam::DVec3::from_array(*o)).collect(),
             model,
         })
     }
@@ -435,14 +397,11 @@ impl TransitionModel {
         FootLock::from_skeleton(&sk.names, &parents)
     }
 
-    /// The fallback thresholds calibrated by `zoo train rtn` (the `fallback` field of the
-    /// exported configuration, `zoo.config`), or `None` for a model without them. Enable them
-    /// on a runner with [`TransitionRunner::set_fallback`].
+    /// The fallback thresholds calibrated by `zoo train rtn` (the `fallback` of the
+    /// `transition` section), or `None` for a model without them. Enable them on a runner with
+    /// [`TransitionRunner::set_fallback`].
     pub fn default_fallback(&self) -> Option<TransitionFallback> {
-        let config: serde_json::Value = serde_json::from_str(&self.model.metadata().config_json).ok()?;
-        let f = config.get("fallback")?;
-        let (start, full) = (f.get("start")?.as_f64()? as f32, f.get("full")?.as_f64()? as f32);
-        (start.is_finite() && full.is_finite() && start >= 0.0).then_some(TransitionFallback { start, full })
+        self.model.metadata().task.as_transition()?.fallback
     }
 
     /// A fresh transition state for one character.

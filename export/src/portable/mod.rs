@@ -283,8 +283,14 @@ fn sequence_lengths(
     use tract_onnx::prelude::*;
     use tract_onnx::tract_hir::infer::{Factoid, InferenceModelExt};
     let fail = |message: String| ExportError::NotPortable { graph: graph.to_string(), message };
+    // tract has its own copy of the ONNX messages: hand it the encoded bytes.
+    let tract_proto = {
+        use prost::Message as _;
+        tract_onnx::pb::ModelProto::decode(proto.encode_to_vec().as_slice())
+            .map_err(|e| fail(format!("the graph does not re-decode as ONNX: {e}")))?
+    };
     let mut model = tract_onnx::onnx()
-        .model_for_proto_model(proto)
+        .model_for_proto_model(&tract_proto)
         .map_err(|e| fail(format!("tract cannot read the graph to infer its shapes: {e}")))?;
     // Obstinate: a node tract cannot type (none in zoo's graphs) must not hide the others' shapes.
     let _ = model.analyse(true);

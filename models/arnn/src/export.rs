@@ -1,7 +1,7 @@
 //! Export of a trained ARNN to one ONNX file: the per-frame step graph of section 6 (the same
 //! equations as [`crate::Arnn::step`]), written with the generic `zoo-export` writer; metadata
-//! through `zoo_runtime::metadata` (model kind `arnn`, task `step`: the engine drives the graph
-//! through `zoo_runtime::MotionRunner`; a keyframes task section is future work).
+//! through the format crate `zoo_format` (model kind `arnn`, task `keyframes`, its section
+//! `zoo.keyframes` with the pose width and the key groups; the runtime's `KeyframeModel` runs it).
 //!
 //! Step graph (one call per frame; every tensor `[batch, n]` f32, poses in physical units,
 //! metres and radians, the normalisation inside the graph):
@@ -25,13 +25,14 @@ use crate::checkpoint;
 use crate::config::ArnnConfig;
 use crate::train::Normalization;
 use candle_nn::VarMap;
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 use std::path::Path;
 use zoo_export::{Dim, ExportError, GraphBuilder, OnnxModel, Value};
-use zoo_runtime::metadata::{
-    FORMAT_VERSION, MotionFeatureSegment, MotionMeanStd, MotionModelMetadata, MotionSkeletonInfo, MotionStatePair,
-    MotionTask,
+use zoo_format::{
+    CoordinateFrame, FORMAT_VERSION, KeyframesTask, MotionFeatureSegment, MotionMeanStd, MotionModelMetadata,
+    MotionSkeletonInfo, MotionStatePair, MotionTask,
 };
+use zoo_nn::ExportWeights as Weights;
 
 /// `zoo.model_kind` of an exported ARNN.
 pub const MODEL_KIND: &str = "arnn";
@@ -39,48 +40,17 @@ pub const MODEL_KIND: &str = "arnn";
 /// Frames per second recorded in the metadata: the rate `zoo complete` plays completions at.
 pub const FPS: f32 = 50.0;
 
-fn model_err(message: impl Into<String>) -> ExportError {
-    ExportError::Model(message.into())
-}
-
 /// Loads a `zoo train arnn` run folder and exports it (see [`export_arnn`]).
 pub fn export_arnn_dir(dir: &Path) -> Result<OnnxModel, ExportError> {
-    let (config, norm) = checkpoint::read_meta(dir).map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
+    let (config, norm) =
+        checkpoint::read_meta(dir).map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
     let varmap = VarMap::new();
     let vb = candle_nn::VarBuilder::from_varmap(&varmap, candle_core::DType::F32, &candle_core::Device::Cpu);
-    crate::Arnn::new(&config, vb).map_err(|e| model_err(format!("building the ARNN of {}: {e}", dir.display())))?;
+    crate::Arnn::new(&config, vb)
+        .map_err(|e| ExportError::model(format!("building the ARNN of {}: {e}", dir.display())))?;
     zoo_nn::checkpoint::read_varmap(&dir.join(zoo_nn::checkpoint::WEIGHTS_FILE), &varmap)
-        .map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
+        .map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
     export_arnn(&config, &norm, &varmap)
-}
-
-/// Weights by candle variable path, row-major f32 with their shapes.
-struct Weights(HashMap<String, (Vec<usize>, Vec<f32>)>);
-
-impl Weights {
-    fn from_varmap(varmap: &VarMap) -> Result<Self, ExportError> {
-        let data = varmap.data().lock().map_err(|_| model_err("the VarMap lock is poisoned"))?;
-        let mut out = HashMap::new();
-        for (name, var) in data.iter() {
-            let t = var.as_tensor();
-            let values = t
-                .to_dtype(candle_core::DType::F32)
-                .and_then(|t| t.flatten_all())
-                .and_then(|t| t.to_vec1::<f32>())
-                .map_err(|e| model_err(format!("reading weight `{name}`: {e}")))?;
-            if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-                return Err(model_err(format!("weight `{name}` holds {} at index {i}", values[i])));
-            }
-            out.insert(name.clone(), (t.dims().to_vec(), values));
-        }
-        Ok(Weights(out))
-    }
-
-    fn init(&self, g: &mut GraphBuilder, name: &str) -> Result<Value, ExportError> {
-        let (dims, data) =
-            self.0.get(name).ok_or_else(|| model_err(format!("the checkpoint has no weight `{name}`")))?;
-        Ok(g.initializer_f32(name, dims, data))
-    }
 }
 
 fn batch(n: usize) -> [Dim; 2] {
@@ -162,16 +132,12 @@ pub fn metadata(config: &ArnnConfig, norm: &Normalization) -> Result<MotionModel
     let d = config.dofs;
     let (skeleton, fps) = match (&config.skeleton, &config.lamp) {
         (Some(s), _) => (
-            MotionSkeletonInfo {
-                names: s.names.clone(),
-                parents: s.parents.clone(),
-                offsets: s.offsets.iter().map(|o| o.map(|v| v as f32)).collect(),
-            },
+            MotionSkeletonInfo { names: s.names.clone(), parents: s.parents.clone(), offsets: s.offsets.clone() },
             s.fps as f32,
         ),
         (None, Some(lamp)) => (MotionSkeletonInfo::from_skeleton(&zoo_data::luxo::sequence::lamp_skeleton(lamp)), FPS),
         (None, None) => {
-            return Err(model_err(
+            return Err(ExportError::model(
                 "config.json has neither a lamp nor a humanoid skeleton: retrain with `zoo train arnn`",
             ));
         }
@@ -187,11 +153,15 @@ pub fn metadata(config: &ArnnConfig, norm: &Normalization) -> Result<MotionModel
     let feature_layout =
         names.iter().enumerate().map(|(i, n)| MotionFeatureSegment { name: n.clone(), start: i, len: 1 }).collect();
     let pair = |input: &str, output: &str| MotionStatePair { input: input.to_string(), output: output.to_string() };
-    let config_json = serde_json::to_string_pretty(config).map_err(|e| model_err(e.to_string()))?;
+    let config_json = serde_json::to_string_pretty(config).map_err(|e| ExportError::model(e.to_string()))?;
     let metadata = MotionModelMetadata {
         format_version: FORMAT_VERSION,
         model_kind: MODEL_KIND.to_string(),
-        task: MotionTask::Step,
+        task: MotionTask::Keyframes(KeyframesTask {
+            dofs: d,
+            groups: config.groups(),
+            key_groups: config.key_groups.clone(),
+        }),
         config_json,
         normalization,
         skeleton,
@@ -199,19 +169,19 @@ pub fn metadata(config: &ArnnConfig, norm: &Normalization) -> Result<MotionModel
         fps,
         // The lamp's skeleton (its BVH) is in centimetres, Y up, right-handed; the step graph's
         // degrees of freedom are metres and radians (feature_layout names them).
-        frame: zoo_runtime::metadata::CoordinateFrame::ZOO_CM,
+        frame: CoordinateFrame::ZOO_CM,
         state: vec![pair("h1", "h1_next"), pair("h2", "h2_next")],
     };
-    metadata.check().map_err(|e| model_err(format!("the metadata would not load: {e}")))?;
+    metadata.check().map_err(|e| ExportError::model(format!("the metadata would not load: {e}")))?;
     Ok(metadata)
 }
 
 /// Exports an ARNN from its configuration, statistics and weights (a VarMap filled by
 /// [`crate::Arnn::new`]).
 pub fn export_arnn(config: &ArnnConfig, norm: &Normalization, varmap: &VarMap) -> Result<OnnxModel, ExportError> {
-    config.validate().map_err(model_err)?;
+    config.validate().map_err(ExportError::model)?;
     if config.architecture != crate::config::Architecture::Arnn {
-        return Err(model_err(format!(
+        return Err(ExportError::model(format!(
             "the {:?} architecture is a Table 2 comparison, not exported: export an ARNN run (`zoo train arnn \
              --variant arnn`)",
             config.architecture
@@ -219,7 +189,10 @@ pub fn export_arnn(config: &ArnnConfig, norm: &Normalization, varmap: &VarMap) -
     }
     let (d, h) = (config.dofs, config.hidden);
     if norm.mean.len() != d || norm.std.len() != d {
-        return Err(model_err(format!("the statistics are for {} values, the model for {d}", norm.mean.len())));
+        return Err(ExportError::model(format!(
+            "the statistics are for {} values, the model for {d}",
+            norm.mean.len()
+        )));
     }
     let w = Weights::from_varmap(varmap)?;
     let mut g = GraphBuilder::new("arnn_step");

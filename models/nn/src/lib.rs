@@ -10,6 +10,7 @@
 //! - [`optim`]: [`AmsGrad`], [`Adam`], [`RmsProp`] with their state saved by name, gradient clipping;
 //! - [`ema`]: the moving average of the weights;
 //! - [`checkpoint`]: atomic writes of JSON, weights and named tensors;
+//! - [`export`]: the trained weights as ONNX initializers, for every model's exporter;
 //! - [`parallel`]: data-parallel training steps ([`DataParallel`]: one worker thread per
 //!   share of the batch, gradients summed before the one optimiser step);
 //! - [`train_loop`]: the one training loop, driving any model that implements [`Trainable`];
@@ -20,6 +21,7 @@ pub mod cells;
 pub mod checkpoint;
 pub mod ema;
 pub mod error;
+pub mod export;
 pub mod init;
 pub mod layers;
 pub mod ops;
@@ -33,6 +35,7 @@ pub mod train_loop;
 
 pub use ema::Ema;
 pub use error::{NnError, NnResult, TrainError};
+pub use export::ExportWeights;
 pub use init::SeededVarMap;
 pub use layers::{Activation, Dropout, Mlp, RowRngs};
 pub use optim::{Adam, AmsGrad, ParamsAdam, ParamsAmsGrad, ParamsRmsProp, RmsProp, StatefulOptimizer};

@@ -18,69 +18,39 @@
 //! `Y [frames, 2, batch, H]` becomes `[frames, batch, 2H]` (forward then backward, as candle
 //! concatenates) by `Transpose` + `Reshape`.
 //!
-//! Metadata (`metadata_props`): `zoo.model_kind` = `rmr`, `zoo.rmr.format_version`,
-//! `zoo.rmr.config` (the run's `config.json`), `zoo.rmr.normalization` (mean and std).
-//! The runtime's typed stitching task section is not written yet (the runtime owns the format).
+//! Metadata (`metadata_props`, the format crate `zoo_format`): model kind `rmr`, task `stitch`
+//! with its section `zoo.stitch` (window, stride, blend, the stitching layout), the skeleton,
+//! fps, the statistics as normalization group `x`, the pose vector's parts as the feature layout,
+//! no recurrent state (the graph is a whole window); the run's `config.json` rides along in
+//! `zoo.config`, which the runtime never reads.
 
 use crate::config::{Config, RefinerCell};
 use crate::features::FeatureStats;
 use candle_nn::VarMap;
-use std::collections::HashMap;
 use std::path::Path;
 use zoo_export::{
     Dim, ExportError, GRU_TORCH_TO_ONNX, GraphBuilder, LSTM_TORCH_TO_ONNX, OnnxModel, RnnDirection, RnnInputs, Value,
     reorder_gates,
 };
+use zoo_format::{
+    CoordinateFrame, FORMAT_VERSION, MotionFeatureSegment, MotionMeanStd, MotionModelMetadata, MotionSkeletonInfo,
+    MotionTask, StitchTask,
+};
+use zoo_nn::ExportWeights as Weights;
 
 /// `zoo.model_kind` of an exported RMR.
 pub const MODEL_KIND: &str = "rmr";
-/// Version of the RMR metadata written here.
-pub const FORMAT_VERSION: u32 = 1;
-/// Metadata key of the configuration JSON.
-pub const CONFIG_KEY: &str = "zoo.rmr.config";
-/// Metadata key of the normalisation statistics JSON.
-pub const NORMALIZATION_KEY: &str = "zoo.rmr.normalization";
-
-fn model_err(message: impl Into<String>) -> ExportError {
-    ExportError::Model(message.into())
-}
 
 /// Loads a `zoo train rmr` run folder and exports it (see [`export_rmr`]).
 pub fn export_rmr_dir(dir: &Path) -> Result<OnnxModel, ExportError> {
     let (config, stats) =
-        crate::checkpoint::read_meta(dir).map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
+        crate::checkpoint::read_meta(dir).map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
     let varmap = VarMap::new();
     let vb = candle_nn::VarBuilder::from_varmap(&varmap, candle_core::DType::F32, &candle_core::Device::Cpu);
-    crate::Rmr::new(&config, vb).map_err(|e| model_err(format!("building the RMR of {}: {e}", dir.display())))?;
-    crate::checkpoint::load_weights(dir, &varmap).map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
+    crate::Rmr::new(&config, vb)
+        .map_err(|e| ExportError::model(format!("building the RMR of {}: {e}", dir.display())))?;
+    crate::checkpoint::load_weights(dir, &varmap).map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
     export_rmr(&config, &stats, &varmap)
-}
-
-/// Weights by candle variable path, row-major f32 with their shapes.
-struct Weights(HashMap<String, (Vec<usize>, Vec<f32>)>);
-
-impl Weights {
-    fn from_varmap(varmap: &VarMap) -> Result<Self, ExportError> {
-        let data = varmap.data().lock().map_err(|_| model_err("the VarMap lock is poisoned"))?;
-        let mut out = HashMap::new();
-        for (name, var) in data.iter() {
-            let t = var.as_tensor();
-            let values = t
-                .to_dtype(candle_core::DType::F32)
-                .and_then(|t| t.flatten_all())
-                .and_then(|t| t.to_vec1::<f32>())
-                .map_err(|e| model_err(format!("reading weight `{name}`: {e}")))?;
-            if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-                return Err(model_err(format!("weight `{name}` holds {} at index {i}", values[i])));
-            }
-            out.insert(name.clone(), (t.dims().to_vec(), values));
-        }
-        Ok(Weights(out))
-    }
-
-    fn get(&self, name: &str) -> Result<&(Vec<usize>, Vec<f32>), ExportError> {
-        self.0.get(name).ok_or_else(|| model_err(format!("the checkpoint has no weight `{name}`")))
-    }
 }
 
 /// An MLP over the last axis: `h = relu(h W^T + b)` per layer, the last one linear unless
@@ -130,7 +100,7 @@ fn rnn_weights(
         let (_, bih) = w.get(&format!("refiner.bias_ih_{suffix}"))?;
         let (_, bhh) = w.get(&format!("refiner.bias_hh_{suffix}"))?;
         if wdims.first() != Some(&(gates * hidden)) {
-            return Err(model_err(format!(
+            return Err(ExportError::model(format!(
                 "refiner.weight_ih_{suffix} has shape {wdims:?}, expected [{}, in]",
                 gates * hidden
             )));
@@ -151,10 +121,10 @@ fn rnn_weights(
 
 /// Exports the refiner of `config` with the weights in `varmap` (as built by [`crate::Rmr::new`]).
 pub fn export_rmr(config: &Config, stats: &FeatureStats, varmap: &VarMap) -> Result<OnnxModel, ExportError> {
-    config.validate().map_err(|e| model_err(e.to_string()))?;
+    config.validate().map_err(|e| ExportError::model(e.to_string()))?;
     let d = config.dim();
     if stats.dim() != d {
-        return Err(model_err(format!("statistics have {} values per frame, the model {d}", stats.dim())));
+        return Err(ExportError::model(format!("statistics have {} values per frame, the model {d}", stats.dim())));
     }
     let w = Weights::from_varmap(varmap)?;
     let mut g = GraphBuilder::new("rmr_refiner");
@@ -190,11 +160,46 @@ pub fn export_rmr(config: &Config, stats: &FeatureStats, varmap: &VarMap) -> Res
         y = g.add("residual.add", &y, &kept);
     }
     g.output("y", &y, &dims);
-    let config_json = serde_json::to_string(config).map_err(|e| model_err(format!("configuration to JSON: {e}")))?;
-    let stats_json = serde_json::to_string(stats).map_err(|e| model_err(format!("statistics to JSON: {e}")))?;
-    g.metadata("zoo.model_kind", MODEL_KIND)
-        .metadata("zoo.rmr.format_version", &FORMAT_VERSION.to_string())
-        .metadata(CONFIG_KEY, &config_json)
-        .metadata(NORMALIZATION_KEY, &stats_json);
+    for (k, v) in metadata(config, stats)?.to_props() {
+        g.metadata(&k, &v);
+    }
     g.finish()
+}
+
+/// The metadata of an exported RMR, checked like the runtime checks it on load.
+pub fn metadata(config: &Config, stats: &FeatureStats) -> Result<MotionModelMetadata, ExportError> {
+    let config_json =
+        serde_json::to_string(config).map_err(|e| ExportError::model(format!("configuration to JSON: {e}")))?;
+    let pl = crate::features::FeatureLayout::new(config.joints, config.layout.lower_body.len());
+    let segment =
+        |name: &str, start: usize, end: usize| MotionFeatureSegment { name: name.into(), start, len: end - start };
+    let metadata = MotionModelMetadata {
+        format_version: FORMAT_VERSION,
+        model_kind: MODEL_KIND.to_string(),
+        task: MotionTask::Stitch(StitchTask {
+            window: config.window,
+            stride: config.stride,
+            blend_frames: config.blend_frames,
+            layout: config.layout.clone(),
+        }),
+        config_json,
+        normalization: [("x".to_string(), MotionMeanStd { mean: stats.mean.clone(), std: stats.std.clone() })].into(),
+        skeleton: MotionSkeletonInfo {
+            names: config.names.clone(),
+            parents: config.parents.clone(),
+            offsets: config.offsets.clone(),
+        },
+        feature_layout: vec![
+            segment("root_motion_r", 0, pl.positions()),
+            segment("lower_body_positions_p", pl.positions(), pl.rotations()),
+            segment("local_rotations_q", pl.rotations(), pl.velocities()),
+            segment("lower_body_velocities_v", pl.velocities(), pl.contacts()),
+            segment("contacts_c", pl.contacts(), pl.dim()),
+        ],
+        fps: config.fps as f32,
+        frame: CoordinateFrame::ZOO_CM,
+        state: vec![],
+    };
+    metadata.check().map_err(|e| ExportError::model(format!("the metadata would not load: {e}")))?;
+    Ok(metadata)
 }

@@ -1,8 +1,8 @@
 //! Export of a trained RNN-GMM generator to one ONNX file: its per-frame step graph (sec. 4.1.2,
 //! eq. 5-7), state in and state out, written with the generic `zoo-export` writer beside the
-//! candle forward pass of [`crate::model`] (same equations), metadata through
-//! `zoo_runtime::metadata` (model kind `rnn-gmm`, task `step`: the engine drives it with
-//! `zoo_runtime::MotionRunner` and samples the mixture itself).
+//! candle forward pass of [`crate::model`] (same equations), metadata through the format crate
+//! `zoo_format` (model kind `rnn-gmm`, task `synthesis`: the runtime's `SynthesisModel` samples
+//! the mixture and decodes poses).
 //!
 //! Step graph (all tensors `[batch, n]` f32, normalised units):
 //!
@@ -13,15 +13,16 @@
 //! | | `stds`: `sigma = exp(clamp(sigma^))` (M D) |
 //! | `h{k}`, `c{k}`: LSTM state of layer `k` (H each) | `h{k}_next`, `c{k}_next` |
 //!
-//! The `zoo.synthesis` section ([`zoo_runtime::metadata::synthesis`]) holds the mixture size and
-//! the reference rotations, so `zoo_runtime::synthesis::SynthesisModel` samples and decodes poses.
+//! The `zoo.synthesis` section ([`zoo_format::SynthesisTask`]) holds the mixture size, the
+//! reference rotations and the refiner's end effectors, so `zoo_runtime::SynthesisModel` samples,
+//! refines and decodes poses.
 //!
 //! Initializers keep the candle variable paths (`fc.0.weight`, `lstm.weight_ih_l0`,
 //! `head.weight`, ...); the LSTM is written with Gemm/Split/Sigmoid/Tanh/Mul/Add in candle's gate
 //! order i, f, g, o; ReLU is `LeakyRelu` with slope 0 (the same function, in every runtime).
 //!
 //! With a refiner in the run folder, its step graph is embedded in the metadata (base64 ONNX
-//! under [`REFINER_GRAPH_KEY`], its end-effector statistics under [`REFINER_KEY`]): inputs `x`
+//! under [`REFINER_GRAPH_KEY`], its end-effector statistics in the section's `refiner`): inputs `x`
 //! (the generator's normalised frame, D), `effectors` (the normalised end-effector positions and
 //! velocities of that frame, 6 E, computed by the caller with the forward kinematics of
 //! [`crate::fk`]: the previous frame is needed for the velocities), `h`, `c` (its LSTM state);
@@ -36,50 +37,54 @@ use candle_nn::VarMap;
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 use zoo_export::{Dim, ExportError, GraphBuilder, OnnxModel, Value, attr_int};
-use zoo_runtime::metadata::synthesis::{self, SynthesisTask};
-use zoo_runtime::metadata::{
-    FORMAT_VERSION, MotionFeatureSegment, MotionMeanStd, MotionModelMetadata, MotionSkeletonInfo, MotionStatePair,
-    MotionTask,
+pub use zoo_format::synthesis::REFINER_GRAPH_KEY;
+use zoo_format::{
+    CoordinateFrame, FORMAT_VERSION, MotionFeatureSegment, MotionMeanStd, MotionModelMetadata, MotionSkeletonInfo,
+    MotionStatePair, MotionTask, SynthesisRefiner, SynthesisTask, keys,
 };
+use zoo_nn::ExportWeights as Weights;
 
 /// `zoo.model_kind` of an exported RNN-GMM.
 pub const MODEL_KIND: &str = "rnn-gmm";
-pub use zoo_runtime::metadata::synthesis::{REFINER_GRAPH_KEY, REFINER_KEY};
-
-fn model_err(message: impl Into<String>) -> ExportError {
-    ExportError::Model(message.into())
-}
 
 /// Loads the generator of a run folder (`config.json`, `model.safetensors`, `features.json`,
 /// `normalization.json`) and exports its step graph (see [`export_generator`]).
 pub fn export_generator_dir(dir: &Path) -> Result<OnnxModel, ExportError> {
     let (config, spec, norm) =
-        crate::checkpoint::read_meta(dir).map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
+        crate::checkpoint::read_meta(dir).map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
     let config_path = dir.join(crate::checkpoint::CONFIG_FILE);
     let config_json = std::fs::read_to_string(&config_path)
         .map_err(|source| ExportError::Io { path: config_path.display().to_string(), source })?;
     let varmap = VarMap::new();
     let vb = candle_nn::VarBuilder::from_varmap(&varmap, candle_core::DType::F32, &candle_core::Device::Cpu);
     crate::Generator::new(&config, vb)
-        .map_err(|e| model_err(format!("building the generator of {}: {e}", dir.display())))?;
-    crate::checkpoint::load_weights(dir, &varmap).map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
+        .map_err(|e| ExportError::model(format!("building the generator of {}: {e}", dir.display())))?;
+    crate::checkpoint::load_weights(dir, &varmap).map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
     let generator = export_generator(&config, Some(&config_json), &spec, &norm, &varmap)?;
     if !dir.join(crate::refiner::REFINER_FILE).is_file() {
         return Ok(generator);
     }
     let eff: crate::EffectorNorm = zoo_nn::checkpoint::read_json(&dir.join(crate::refiner::EFFECTORS_FILE))
-        .map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
+        .map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
     let path = dir.join(crate::refiner::REFINER_FILE);
     let tensors = candle_core::safetensors::load(&path, &candle_core::Device::Cpu)
-        .map_err(|e| model_err(format!("{}: {e}", path.display())))?;
+        .map_err(|e| ExportError::model(format!("{}: {e}", path.display())))?;
     let refiner = export_refiner(&config, &eff, &tensors)?;
+    // The generator's file with the refiner in its section and its graph beside it.
+    let mut task = synthesis_task(&config, &spec)?;
+    task.refiner =
+        Some(SynthesisRefiner { effectors: eff.effectors.clone(), mean: eff.mean.clone(), std: eff.std.clone() });
+    task.check(spec.skeleton.len())
+        .map_err(|e| ExportError::model(format!("the synthesis section would not load: {e}")))?;
     let mut proto = generator.proto().clone();
-    for (key, value) in [
-        (REFINER_GRAPH_KEY, refiner.to_base64()),
-        (REFINER_KEY, serde_json::to_string(&eff).map_err(|e| model_err(e.to_string()))?),
-    ] {
-        proto.metadata_props.push(zoo_export::pb::StringStringEntryProto { key: key.into(), value });
+    let section = serde_json::to_string(&task).map_err(|e| ExportError::model(e.to_string()))?;
+    match proto.metadata_props.iter_mut().find(|p| p.key == keys::SYNTHESIS) {
+        Some(p) => p.value = section,
+        None => return Err(ExportError::model("the generator's file has no synthesis section")),
     }
+    proto
+        .metadata_props
+        .push(zoo_export::pb::StringStringEntryProto { key: REFINER_GRAPH_KEY.into(), value: refiner.to_base64() });
     Ok(OnnxModel::from_proto(proto))
 }
 
@@ -90,19 +95,7 @@ pub fn export_refiner(
     eff: &crate::EffectorNorm,
     tensors: &HashMap<String, candle_core::Tensor>,
 ) -> Result<OnnxModel, ExportError> {
-    let mut weights = HashMap::new();
-    for (name, t) in tensors {
-        let values = t
-            .to_dtype(candle_core::DType::F32)
-            .and_then(|t| t.flatten_all())
-            .and_then(|t| t.to_vec1::<f32>())
-            .map_err(|e| model_err(format!("reading refiner weight `{name}`: {e}")))?;
-        if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-            return Err(model_err(format!("refiner weight `{name}` holds {} at index {i}", values[i])));
-        }
-        weights.insert(name.clone(), (t.dims().to_vec(), values));
-    }
-    let w = Weights(weights);
+    let w = Weights::from_tensors(tensors)?;
     let (d, e, hu) = (config.dim, 6 * eff.effectors.len(), config.refiner.refiner_lstm);
     let mut g = GraphBuilder::new("rnngmm_refiner_step");
     g.doc("RNN-GMM refiner (eq. 11), per-frame step graph; see zoo_rnngmm::export");
@@ -119,7 +112,7 @@ pub fn export_refiner(
     let dx = g.gemm("fc2", &h_next, &w2, Some(&b2), true);
     let mut refined = g.add("residual", &x, &dx);
     if let Some(limits) = &eff.limits {
-        let (lo, hi) = limits.full(d).map_err(|e| model_err(e.to_string()))?;
+        let (lo, hi) = limits.full(d).map_err(|e| ExportError::model(e.to_string()))?;
         let lo = g.initializer_f32("joint_limits.lo", &[d], &lo);
         let hi = g.initializer_f32("joint_limits.hi", &[d], &hi);
         let floor = g.custom_op("Max", "joint_limits.floor", &[&refined, &lo], vec![]);
@@ -161,35 +154,6 @@ fn lstm_cell(
     Ok((h_next, c_next))
 }
 
-/// Weights by candle variable path, as row-major f32 with their shapes.
-struct Weights(HashMap<String, (Vec<usize>, Vec<f32>)>);
-
-impl Weights {
-    fn from_varmap(varmap: &VarMap) -> Result<Self, ExportError> {
-        let data = varmap.data().lock().map_err(|_| model_err("the VarMap lock is poisoned"))?;
-        let mut out = HashMap::new();
-        for (name, var) in data.iter() {
-            let t = var.as_tensor();
-            let values = t
-                .to_dtype(candle_core::DType::F32)
-                .and_then(|t| t.flatten_all())
-                .and_then(|t| t.to_vec1::<f32>())
-                .map_err(|e| model_err(format!("reading weight `{name}`: {e}")))?;
-            if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-                return Err(model_err(format!("weight `{name}` holds {} at index {i}", values[i])));
-            }
-            out.insert(name.clone(), (t.dims().to_vec(), values));
-        }
-        Ok(Weights(out))
-    }
-
-    fn init(&self, g: &mut GraphBuilder, name: &str) -> Result<Value, ExportError> {
-        let (dims, data) =
-            self.0.get(name).ok_or_else(|| model_err(format!("the checkpoint has no weight `{name}`")))?;
-        Ok(g.initializer_f32(name, dims, data))
-    }
-}
-
 fn batch(n: usize) -> [Dim; 2] {
     [Dim::batch(), Dim::Fixed(n)]
 }
@@ -212,7 +176,7 @@ pub fn metadata(
     let metadata = MotionModelMetadata {
         format_version: FORMAT_VERSION,
         model_kind: MODEL_KIND.to_string(),
-        task: MotionTask::Step,
+        task: MotionTask::Synthesis(synthesis_task(config, spec)?),
         config_json: config_json.to_string(),
         normalization,
         skeleton: MotionSkeletonInfo::from_skeleton(&spec.skeleton),
@@ -222,10 +186,10 @@ pub fn metadata(
             segment("contacts_left_right", d - CONTACT_DIMS, CONTACT_DIMS),
         ],
         fps: spec.fps as f32,
-        frame: zoo_runtime::metadata::CoordinateFrame::ZOO_CM,
+        frame: CoordinateFrame::ZOO_CM,
         state,
     };
-    metadata.check().map_err(|e| model_err(format!("the metadata would not load: {e}")))?;
+    metadata.check().map_err(|e| ExportError::model(format!("the metadata would not load: {e}")))?;
     Ok(metadata)
 }
 
@@ -235,8 +199,10 @@ pub fn synthesis_task(config: &Config, spec: &FeatureSpec) -> Result<SynthesisTa
         frame_dim: config.dim,
         components: config.components,
         references: spec.reference.iter().map(|q| [q.x, q.y, q.z, q.w]).collect(),
+        refiner: None,
     };
-    task.check(spec.skeleton.len()).map_err(|e| model_err(format!("the synthesis section would not load: {e}")))?;
+    task.check(spec.skeleton.len())
+        .map_err(|e| ExportError::model(format!("the synthesis section would not load: {e}")))?;
     Ok(task)
 }
 
@@ -250,13 +216,13 @@ pub fn export_generator(
     norm: &Normalization,
     varmap: &VarMap,
 ) -> Result<OnnxModel, ExportError> {
-    crate::checkpoint::check_agree(config, spec, norm).map_err(|e| model_err(e.to_string()))?;
+    crate::checkpoint::check_agree(config, spec, norm).map_err(|e| ExportError::model(e.to_string()))?;
     let w = Weights::from_varmap(varmap)?;
     let serialized;
     let config_json = match config_json {
         Some(s) => s,
         None => {
-            serialized = serde_json::to_string_pretty(config).map_err(|e| model_err(e.to_string()))?;
+            serialized = serde_json::to_string_pretty(config).map_err(|e| ExportError::model(e.to_string()))?;
             &serialized
         }
     };
@@ -265,8 +231,6 @@ pub fn export_generator(
     for (k, v) in metadata(config, config_json, spec, norm)?.to_props() {
         g.metadata(&k, &v);
     }
-    let task = synthesis_task(config, spec)?;
-    g.metadata(synthesis::KEY, &serde_json::to_string(&task).map_err(|e| model_err(e.to_string()))?);
     g.finish()
 }
 

@@ -13,8 +13,8 @@ use crate::model::Rtn;
 use candle_core::{DType, Device};
 use candle_nn::{VarBuilder, VarMap};
 use std::path::Path;
+use zoo_format::{MotionMeanStd, check_parents};
 use zoo_nn::checkpoint as ck;
-use zoo_runtime::metadata::{MotionMeanStd, check_parents};
 
 pub use zoo_nn::checkpoint::{CONFIG_FILE, EMA_FILE, OPTIMIZER_FILE, RNG_FILE, STATS_FILE, WEIGHTS_FILE, check_finite};
 
@@ -66,7 +66,7 @@ fn parameter_estimate(c: &Config) -> f64 {
 }
 
 /// Checks that a configuration and its statistics describe one usable model, with the checks
-/// the runtime applies to an exported file (`zoo_runtime::metadata`): sizes >= 1, a valid
+/// the runtime applies to an exported file (`zoo_format`): sizes >= 1, a valid
 /// skeleton of `joints` joints, finite training settings, and statistics of the config's sizes
 /// with finite means and positive, finite deviations.
 pub fn check_meta(config: &Config, stats: &FeatureStats) -> Result<(), String> {

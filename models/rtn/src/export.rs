@@ -1,7 +1,7 @@
 //! Export of a trained Recurrent Transition Network (Harvey & Pal 2018) to one ONNX file: the
 //! graph definition beside the candle forward pass of [`crate::model`] (same equations), written
-//! with the generic `zoo-export` writer, metadata through `zoo_runtime::metadata` (the format's
-//! owner; model kind `rtn`, task `transition`).
+//! with the generic `zoo-export` writer, metadata through the format crate `zoo_format` (model kind `rtn`, task
+//! `transition`).
 //!
 //! The file holds the per-frame **step graph** and, in its metadata_props
 //! (`zoo.start_graph`, base64), the **transition-start graph**, the way `zoo-runtime` loads them.
@@ -36,12 +36,12 @@ use candle_nn::VarMap;
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 use zoo_export::{Dim, ExportError, GraphBuilder, OnnxModel, Value};
-use zoo_nn::checkpoint::RunSkeleton;
-use zoo_runtime::metadata::CoordinateFrame;
-use zoo_runtime::metadata::{
-    FORMAT_VERSION, MotionFeatureSegment, MotionMeanStd, MotionModelMetadata, MotionSkeletonInfo, MotionStatePair,
-    MotionTask, TransitionTask, TransitionTerrain, keys,
+use zoo_format::{
+    CoordinateFrame, FORMAT_VERSION, MotionFeatureSegment, MotionMeanStd, MotionModelMetadata, MotionSkeletonInfo,
+    MotionStatePair, MotionTask, TransitionFallback, TransitionTask, TransitionTerrain, keys,
 };
+use zoo_nn::ExportWeights as Weights;
+use zoo_nn::checkpoint::RunSkeleton;
 
 /// `zoo.model_kind` of an exported RTN.
 pub const MODEL_KIND: &str = "rtn";
@@ -86,64 +86,27 @@ impl RtnExportOptions {
     }
 }
 
-fn model_err(message: impl Into<String>) -> ExportError {
-    ExportError::Model(message.into())
-}
-
 /// Loads a `zoo train rtn` run folder (`config.json`, `model.safetensors`,
 /// `normalization.json`, and `skeleton.json` for what `options` leave out) and exports it (see
 /// [`export_rtn`]).
 pub fn export_rtn_dir(dir: &Path, options: &RtnExportOptions) -> Result<OnnxModel, ExportError> {
-    let run_skeleton = RunSkeleton::read(dir).map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
+    let run_skeleton = RunSkeleton::read(dir).map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
     let options = match run_skeleton {
         Some(s) => options.clone().or(RtnExportOptions::from_run_skeleton(&s)),
         None => options.clone(),
     };
     let options = &options;
     let (config, stats) =
-        crate::checkpoint::read_meta(dir).map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
+        crate::checkpoint::read_meta(dir).map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
     let config_path = dir.join(crate::checkpoint::CONFIG_FILE);
     let config_json = std::fs::read_to_string(&config_path)
         .map_err(|source| ExportError::Io { path: config_path.display().to_string(), source })?;
     let varmap = VarMap::new();
     let vb = candle_nn::VarBuilder::from_varmap(&varmap, candle_core::DType::F32, &candle_core::Device::Cpu);
-    crate::Rtn::new(&config, vb).map_err(|e| model_err(format!("building the RTN of {}: {e}", dir.display())))?;
-    crate::checkpoint::load_weights(dir, &varmap).map_err(|e| model_err(format!("{}: {e}", dir.display())))?;
+    crate::Rtn::new(&config, vb)
+        .map_err(|e| ExportError::model(format!("building the RTN of {}: {e}", dir.display())))?;
+    crate::checkpoint::load_weights(dir, &varmap).map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
     export_rtn(&config, Some(&config_json), &stats, &varmap, options)
-}
-
-/// Weights by candle variable path, as row-major f32 with their shapes.
-struct Weights(HashMap<String, (Vec<usize>, Vec<f32>)>);
-
-impl Weights {
-    fn from_varmap(varmap: &VarMap) -> Result<Self, ExportError> {
-        let data = varmap.data().lock().map_err(|_| model_err("the VarMap lock is poisoned"))?;
-        let mut out = HashMap::new();
-        for (name, var) in data.iter() {
-            let t = var.as_tensor();
-            let dims = t.dims().to_vec();
-            let values = t
-                .to_dtype(candle_core::DType::F32)
-                .and_then(|t| t.flatten_all())
-                .and_then(|t| t.to_vec1::<f32>())
-                .map_err(|e| model_err(format!("reading weight `{name}`: {e}")))?;
-            if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-                return Err(model_err(format!("weight `{name}` holds {} at index {i}", values[i])));
-            }
-            out.insert(name.clone(), (dims, values));
-        }
-        Ok(Weights(out))
-    }
-
-    fn get(&self, name: &str) -> Result<&(Vec<usize>, Vec<f32>), ExportError> {
-        self.0.get(name).ok_or_else(|| model_err(format!("the checkpoint has no weight `{name}`")))
-    }
-
-    /// Adds the weight `name` as an initializer of the same name.
-    fn init(&self, g: &mut GraphBuilder, name: &str) -> Result<Value, ExportError> {
-        let (dims, data) = self.get(name)?;
-        Ok(g.initializer_f32(name, dims, data))
-    }
 }
 
 /// A candle MLP (`prefix.{i}.weight`, `prefix.{i}.bias`, PyTorch `[out, in]` weights): leaky
@@ -188,10 +151,11 @@ pub fn transition_task(config: &Config) -> TransitionTask {
         terrain: config
             .terrain
             .then_some(TransitionTerrain { side: config.terrain_side, extent: config.terrain_extent }),
+        fallback: config.fallback.map(|f| TransitionFallback { start: f.start, full: f.full }),
     }
 }
 
-/// The metadata of an exported RTN (format of `zoo_runtime::metadata`), checked like the
+/// The metadata of an exported RTN (format of `zoo_format`), checked like the
 /// runtime checks it on load.
 pub fn metadata(
     config: &Config,
@@ -205,13 +169,13 @@ pub fn metadata(
         (Some(p), _) => p.clone(),
         (None, false) => config.parents.clone(),
         (None, true) => {
-            return Err(model_err(
+            return Err(ExportError::model(
                 "the config has no skeleton parents: pass them as an export option (e.g. --skeleton FILE.bvh)",
             ));
         }
     };
     let missing = |what: &str| {
-        model_err(format!(
+        ExportError::model(format!(
             "the skeleton's {what} is required in the model file: pass --skeleton FILE.bvh (a clip of the \
              training skeleton) to `zoo export`; run folders trained by this zoo keep it in skeleton.json"
         ))
@@ -220,7 +184,7 @@ pub fn metadata(
     let offsets = options.offsets.clone().ok_or_else(|| missing("rest offsets"))?;
     let frame = options.frame.ok_or_else(|| missing("unit and axes (CoordinateFrame)"))?;
     if parents.len() != k || names.len() != k || offsets.len() != k {
-        return Err(model_err(format!(
+        return Err(ExportError::model(format!(
             "the model has {k} joints but the skeleton has {} parents, {} names and {} offsets",
             parents.len(),
             names.len(),
@@ -229,7 +193,7 @@ pub fn metadata(
     }
     let fps = options.fps.ok_or_else(|| missing("frame rate"))?;
     if !(fps.is_finite() && fps > 0.0) {
-        return Err(model_err(format!("fps must be a positive number, got {fps}")));
+        return Err(ExportError::model(format!("fps must be a positive number, got {fps}")));
     }
     let mut normalization = BTreeMap::new();
     normalization.insert("x".to_string(), mean_std(&stats.x));
@@ -250,13 +214,13 @@ pub fn metadata(
         task: MotionTask::Transition(transition_task(config)),
         config_json: config_json.to_string(),
         normalization,
-        skeleton: MotionSkeletonInfo { names, parents, offsets },
+        skeleton: MotionSkeletonInfo { names, parents, offsets: offsets.iter().map(|o| o.map(f64::from)).collect() },
         feature_layout: vec![segment("root_velocity", 0, 3), segment("joint_positions_root_relative", 3, d - 3)],
         fps,
         frame,
         state,
     };
-    metadata.check().map_err(|e| model_err(format!("the metadata would not load: {e}")))?;
+    metadata.check().map_err(|e| ExportError::model(format!("the metadata would not load: {e}")))?;
     Ok(metadata)
 }
 
@@ -271,20 +235,20 @@ pub fn export_rtn(
     options: &RtnExportOptions,
 ) -> Result<OnnxModel, ExportError> {
     if stats.joints != config.joints {
-        return Err(model_err(format!(
+        return Err(ExportError::model(format!(
             "the statistics are for {} joints, the model for {}",
             stats.joints, config.joints
         )));
     }
     if config.terrain && stats.terrain.is_none() {
-        return Err(model_err("a terrain-aware RTN needs terrain statistics in normalization.json"));
+        return Err(ExportError::model("a terrain-aware RTN needs terrain statistics in normalization.json"));
     }
     let w = Weights::from_varmap(varmap)?;
     let serialized;
     let config_json = match config_json {
         Some(s) => s,
         None => {
-            serialized = serde_json::to_string_pretty(config).map_err(|e| model_err(e.to_string()))?;
+            serialized = serde_json::to_string_pretty(config).map_err(|e| ExportError::model(e.to_string()))?;
             &serialized
         }
     };
@@ -421,16 +385,17 @@ pub fn import_rtn(bytes: &[u8]) -> Result<(Config, HashMap<String, candle_core::
     match step.metadata_value(keys::MODEL_KIND) {
         Some(MODEL_KIND) => {}
         other => {
-            return Err(model_err(format!(
+            return Err(ExportError::model(format!(
                 "not an RTN export ({} = {other:?}); write one with `zoo export --onnx RUN_DIR --out FILE.onnx`",
                 keys::MODEL_KIND
             )));
         }
     }
-    let config_json =
-        step.metadata_value(keys::CONFIG).ok_or_else(|| model_err(format!("the file has no {}", keys::CONFIG)))?;
+    let config_json = step
+        .metadata_value(keys::CONFIG)
+        .ok_or_else(|| ExportError::model(format!("the file has no {}", keys::CONFIG)))?;
     let config: Config = serde_json::from_str(config_json)
-        .map_err(|e| model_err(format!("{} is not an RTN config: {e}", keys::CONFIG)))?;
+        .map_err(|e| ExportError::model(format!("{} is not an RTN config: {e}", keys::CONFIG)))?;
     let mut graphs = vec![step.proto().graph.clone()];
     if let Some(encoded) = step.metadata_value(keys::START_GRAPH) {
         graphs.push(OnnxModel::from_base64(encoded, keys::START_GRAPH)?.proto().graph.clone());
@@ -441,11 +406,11 @@ pub fn import_rtn(bytes: &[u8]) -> Result<(Config, HashMap<String, candle_core::
         &config,
         candle_nn::VarBuilder::from_varmap(&varmap, candle_core::DType::F32, &candle_core::Device::Cpu),
     )
-    .map_err(|e| model_err(format!("building the RTN of {}: {e}", keys::CONFIG)))?;
+    .map_err(|e| ExportError::model(format!("building the RTN of {}: {e}", keys::CONFIG)))?;
     let wanted: HashMap<String, Vec<usize>> = varmap
         .data()
         .lock()
-        .map_err(|_| model_err("the VarMap lock is poisoned"))?
+        .map_err(|_| ExportError::model("the VarMap lock is poisoned"))?
         .iter()
         .map(|(n, v)| (n.clone(), v.dims().to_vec()))
         .collect();
@@ -462,14 +427,18 @@ pub fn import_rtn(bytes: &[u8]) -> Result<(Config, HashMap<String, candle_core::
         };
         let n: usize = dims.iter().product();
         if data.len() != n {
-            return Err(model_err(format!("initializer `{}` has {} values, the RTN needs {n}", init.name, data.len())));
+            return Err(ExportError::model(format!(
+                "initializer `{}` has {} values, the RTN needs {n}",
+                init.name,
+                data.len()
+            )));
         }
         let t = candle_core::Tensor::from_vec(data, dims.as_slice(), &candle_core::Device::Cpu)
-            .map_err(|e| model_err(e.to_string()))?;
+            .map_err(|e| ExportError::model(e.to_string()))?;
         weights.insert(init.name.clone(), t);
     }
     if let Some(missing) = wanted.keys().find(|k| !weights.contains_key(*k)) {
-        return Err(model_err(format!("the file has no initializer `{missing}` of the RTN")));
+        return Err(ExportError::model(format!("the file has no initializer `{missing}` of the RTN")));
     }
     Ok((config, weights))
 }

@@ -9,8 +9,8 @@
 //! transition becomes `(1 - w) * RTN + w * interpolation` (the linear interpolation of
 //! positions between the last context frame and the target). The thresholds are calibrated on
 //! the validation windows at the end of `zoo train rtn` and stored in `config.json` (field
-//! `fallback`), which the exported file carries; the runtime reads them from there
-//! (`TransitionModel::default_fallback`).
+//! `fallback`), which the exported file's `transition` section carries; the runtime reads
+//! them from there (`TransitionModel::default_fallback`).
 
 use crate::error::RtnResult;
 use crate::features::FeatureStats;
@@ -36,7 +36,7 @@ impl Fallback {
     /// The weight of the interpolation for a target miss: 0 below `start`, 1 from `full` on
     /// (the runtime's rule, so that candle and the engine blend alike).
     pub fn weight(&self, miss: f32) -> f32 {
-        zoo_runtime::transition::TransitionFallback { start: self.start, full: self.full }.weight(miss)
+        zoo_format::TransitionFallback { start: self.start, full: self.full }.weight(miss)
     }
 
     /// Thresholds from the misses of in-distribution transitions: `start` at their

@@ -163,7 +163,11 @@ pub fn run(a: BenchControlArgs) -> anyhow::Result<()> {
     let (g, _) = load_model(&a.model, true)?;
     let (clip, frame, label) = start_clip(&a.model, a.from.as_deref(), &g)?;
     let runtime = match &a.onnx {
-        Some(p) => Some(SynthesisModel::load(p).with_context(|| format!("loading {}", p.display()))?.without_refiner()),
+        Some(p) => Some(
+            crate::exported::load(p, &[zoo_runtime::MotionTaskKind::Synthesis], "`zoo bench control --onnx`")?
+                .into_synthesis()?
+                .without_refiner(),
+        ),
         None => None,
     };
     if let Some(m) = &runtime

@@ -12,8 +12,8 @@ use crate::cmd::bench_runtime::onnxruntime_library;
 use anyhow::{Context, anyhow, bail};
 use std::borrow::Cow;
 use std::time::Instant;
-use zoo_runtime::keyframes::{KeyframeModel, MotionKeys};
-use zoo_runtime::{MotionModel, MotionState};
+use zoo_runtime::keyframes::MotionKeys;
+use zoo_runtime::{MotionState, MotionTaskKind};
 
 /// Figures of one backend at one batch size (`backend`: `tract step`, `onnxruntime step` or
 /// `tract completion`).
@@ -132,8 +132,9 @@ pub fn run(a: KeyframesBenchArgs) -> anyhow::Result<()> {
         crate::cmd::check_output_file("--json", path)?;
     }
     let bytes = std::fs::read(&a.model).with_context(|| format!("reading {}", a.model.display()))?;
-    let model = MotionModel::load(&a.model).with_context(|| format!("loading {}", a.model.display()))?;
-    let km = KeyframeModel::new(model.clone()).with_context(|| format!("{}", a.model.display()))?;
+    let km =
+        crate::exported::load(&a.model, &[MotionTaskKind::Keyframes], "`zoo bench keyframes`")?.into_keyframes()?;
+    let model = km.model().clone();
     let d = km.dofs();
     let lib = onnxruntime_library(&a.onnxruntime)?;
     let env = ort::init_from(&lib)

@@ -18,7 +18,7 @@ use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use zoo_rtn::{Rtn, RtnInputs, RtnState};
-use zoo_runtime::{MotionModel, MotionState};
+use zoo_runtime::{LoadedModel, MotionModel, MotionState, MotionTaskKind};
 
 /// Arguments of `zoo bench runtime`.
 #[derive(Args)]
@@ -376,24 +376,25 @@ pub fn run(a: RuntimeArgs) -> anyhow::Result<()> {
         crate::cmd::check_output_file("--json", path)?;
     }
     let bytes = std::fs::read(&a.model).with_context(|| format!("reading {}", a.model.display()))?;
-    let model = MotionModel::load(&a.model).with_context(|| format!("loading {}", a.model.display()))?;
-    let kind = model.metadata().model_kind.clone();
+    let loaded = crate::exported::load(
+        &a.model,
+        &[MotionTaskKind::Transition, MotionTaskKind::Synthesis],
+        "`zoo bench runtime`",
+    )?;
     // An RTN runs in candle too (its weights read back from the file); an RNN-GMM generator
     // runs its step in tract and onnxruntime, and its whole synthesis frame in the runtime.
-    let candle = match kind.as_str() {
-        "rtn" => {
+    let (model, candle) = match &loaded {
+        LoadedModel::Transition(t) => {
             let (config, weights) = zoo_rtn::export::import_rtn(&bytes)
                 .with_context(|| format!("reading the RTN weights of {} for candle", a.model.display()))?;
-            Some(Rtn::new(
-                &config,
-                candle_nn::VarBuilder::from_tensors(weights, candle_core::DType::F32, &Device::Cpu),
-            )?)
+            let rtn =
+                Rtn::new(&config, candle_nn::VarBuilder::from_tensors(weights, candle_core::DType::F32, &Device::Cpu))?;
+            (t.model().clone(), Some(rtn))
         }
-        "rnn-gmm" => None,
-        other => bail!(
-            "{} is a `{other}` model: `zoo bench runtime` measures RTN and RNN-GMM files (an ARNN: `zoo bench keyframes`)",
-            a.model.display()
-        ),
+        LoadedModel::Synthesis(s) => (s.model().clone(), None),
+        other => {
+            bail!("{} is a `{}` model, which `zoo bench runtime` does not measure", a.model.display(), other.task())
+        }
     };
     let lib = onnxruntime_library(&a.onnxruntime)?;
     let env = ort::init_from(&lib)

@@ -1,0 +1,352 @@
+//! Tests of the metadata: round trips, and every refusal naming its key and fix.
+
+use super::*;
+
+fn transition() -> TransitionTask {
+    TransitionTask {
+        past_frames: 10,
+        transition_frames: 30,
+        target_blend: 5,
+        frame_dim: 6,
+        offset_input: true,
+        terrain: None,
+        fallback: None,
+    }
+}
+
+fn sample() -> MotionModelMetadata {
+    MotionModelMetadata {
+        format_version: FORMAT_VERSION,
+        model_kind: "toy".into(),
+        task: MotionTask::Transition(transition()),
+        config_json: "{\"hidden\": 4}".into(),
+        normalization: [("x".to_string(), MotionMeanStd { mean: vec![0.0, 1.0], std: vec![1.0, 2.0] })].into(),
+        skeleton: MotionSkeletonInfo {
+            names: vec!["Hips".into(), "Spine".into()],
+            parents: vec![-1, 0],
+            offsets: vec![[0.0; 3], [0.0, 10.0, 0.0]],
+        },
+        feature_layout: vec![MotionFeatureSegment { name: "x".into(), start: 0, len: 2 }],
+        fps: 30.0,
+        frame: CoordinateFrame::ZOO_CM,
+        state: vec![MotionStatePair { input: "h".into(), output: "h_next".into() }],
+    }
+}
+
+fn lookup(props: &[(String, String)]) -> impl Fn(&str) -> Option<String> + '_ {
+    |k| props.iter().find(|(key, _)| key == k).map(|(_, v)| v.clone())
+}
+
+fn edited(edit: impl FnOnce(&mut Vec<(String, String)>)) -> Result<MotionModelMetadata, FormatError> {
+    let mut props = sample().to_props();
+    edit(&mut props);
+    MotionModelMetadata::from_props(lookup(&props))
+}
+
+fn set(props: &mut [(String, String)], key: &str, value: &str) {
+    props.iter_mut().find(|(k, _)| k == key).unwrap().1 = value.to_string();
+}
+
+#[test]
+fn model_kind_is_read_without_the_graph() {
+    use prost::Message as _;
+    let entry = |key: &str, value: &str| pb::StringStringEntryProto { key: key.into(), value: value.into() };
+    let proto = pb::ModelProto {
+        metadata_props: vec![entry(keys::TASK, "stitch"), entry(keys::MODEL_KIND, "rmr")],
+        ..Default::default()
+    };
+    assert_eq!(model_kind(&proto.encode_to_vec()).as_deref(), Some("rmr"));
+    let bare = pb::ModelProto { metadata_props: vec![entry(keys::TASK, "stitch")], ..Default::default() };
+    assert_eq!(model_kind(&bare.encode_to_vec()), None);
+    assert_eq!(model_kind(b"not an onnx file \xff\xff"), None);
+}
+
+#[test]
+fn the_frame_is_required_and_checked() {
+    let err = edited(|p| p.retain(|(k, _)| k != keys::FRAME)).unwrap_err();
+    assert!(matches!(&err, FormatError::MissingMetadata { key } if key == keys::FRAME), "{err}");
+    let err = edited(|p| set(p, keys::FRAME, r#"{"metres_per_unit": 0, "up_axis": "y", "handedness": "right"}"#))
+        .unwrap_err();
+    assert!(err.to_string().contains("metres_per_unit must be a positive number"), "{err}");
+    let err = edited(|p| set(p, keys::FRAME, r#"{"metres_per_unit": 1, "up_axis": "x", "handedness": "right"}"#))
+        .unwrap_err();
+    assert!(err.to_string().contains(keys::FRAME), "{err}");
+}
+
+#[test]
+fn round_trip() {
+    let m = sample();
+    let props = m.to_props();
+    assert_eq!(props.last().unwrap().0, keys::TRANSITION);
+    assert_eq!(MotionModelMetadata::from_props(lookup(&props)).unwrap(), m);
+    let step = MotionModelMetadata { task: MotionTask::Step, ..sample() };
+    let props = step.to_props();
+    assert!(props.iter().all(|(k, _)| k != keys::TRANSITION), "a step model has no section");
+    assert_eq!(MotionModelMetadata::from_props(lookup(&props)).unwrap(), step);
+}
+
+#[test]
+fn unknown_version_is_refused_before_other_keys() {
+    let props = vec![(keys::FORMAT_VERSION.to_string(), "7".to_string())];
+    let err = MotionModelMetadata::from_props(lookup(&props)).unwrap_err();
+    assert!(matches!(err, FormatError::UnknownFormatVersion { .. }), "{err}");
+    assert!(err.to_string().contains("version 7"), "{err}");
+}
+
+#[test]
+fn a_version_1_file_is_asked_to_re_export() {
+    let props = vec![(keys::FORMAT_VERSION.to_string(), "1".to_string())];
+    let err = MotionModelMetadata::from_props(lookup(&props)).unwrap_err();
+    assert!(matches!(&err, FormatError::FormatTooOld { found, supported: FORMAT_VERSION } if found == "1"), "{err}");
+    assert!(err.to_string().contains("re-export") && err.to_string().contains("zoo export --onnx"), "{err}");
+}
+
+#[test]
+fn missing_key_is_named() {
+    let err = edited(|p| p.retain(|(k, _)| k != keys::SKELETON)).unwrap_err();
+    assert!(err.to_string().contains("zoo.skeleton"), "{err}");
+}
+
+#[test]
+fn a_missing_task_section_is_named() {
+    let err = edited(|p| p.retain(|(k, _)| k != keys::TRANSITION)).unwrap_err();
+    assert!(matches!(&err, FormatError::MissingMetadata { key } if key == keys::TRANSITION), "{err}");
+    assert!(err.to_string().contains("re-export"), "{err}");
+}
+
+#[test]
+fn a_task_section_missing_a_field_is_refused() {
+    let err = edited(|p| set(p, keys::TRANSITION, r#"{"past_frames": 10, "target_blend": 5}"#)).unwrap_err();
+    assert!(matches!(&err, FormatError::BadMetadata { key, .. } if key == keys::TRANSITION), "{err}");
+    assert!(err.to_string().contains("transition_frames"), "{err}");
+}
+
+#[test]
+fn a_malformed_task_section_is_refused() {
+    let err = edited(|p| set(p, keys::TRANSITION, "{past_frames: 10")).unwrap_err();
+    assert!(matches!(&err, FormatError::BadMetadata { key, .. } if key == keys::TRANSITION), "{err}");
+    let err = edited(|p| {
+        let t = json(&transition()).replace("\"past_frames\":10", "\"past_frames\":\"ten\"");
+        set(p, keys::TRANSITION, &t)
+    })
+    .unwrap_err();
+    assert!(err.to_string().contains("zoo.transition"), "{err}");
+    let err = edited(|p| {
+        let t = json(&transition()).replace("}", ",\"blend\":3}");
+        set(p, keys::TRANSITION, &t)
+    })
+    .unwrap_err();
+    assert!(err.to_string().contains("unknown field `blend`"), "{err}");
+}
+
+#[test]
+fn a_bad_task_section_value_is_refused() {
+    let err = edited(|p| {
+        let t = json(&TransitionTask { frame_dim: 7, ..transition() });
+        set(p, keys::TRANSITION, &t)
+    })
+    .unwrap_err();
+    assert!(err.to_string().contains("frame_dim 7"), "{err}");
+}
+
+#[test]
+fn an_unknown_task_is_refused_with_the_known_ones() {
+    let err = edited(|p| set(p, keys::TASK, "dance")).unwrap_err();
+    assert!(matches!(&err, FormatError::UnknownTask { task, .. } if task == "dance"), "{err}");
+    assert!(
+        err.to_string().contains("transition, keyframes, stitch, synthesis, step") && err.to_string().contains("`toy`"),
+        "{err}"
+    );
+}
+
+#[test]
+fn bad_skeleton_and_std_are_refused() {
+    let mut m = sample();
+    m.skeleton.parents = vec![-1, 5];
+    let err = MotionModelMetadata::from_props(lookup(&m.to_props())).unwrap_err();
+    assert!(err.to_string().contains("`Spine`"), "{err}");
+    assert!(m.check().is_err(), "exporters run the same check");
+    let mut m = sample();
+    m.normalization.get_mut("x").unwrap().std[1] = 0.0;
+    let err = MotionModelMetadata::from_props(lookup(&m.to_props())).unwrap_err();
+    assert!(err.to_string().contains("std 0"), "{err}");
+    let mut m = sample();
+    m.normalization.get_mut("x").unwrap().mean[0] = f32::NAN;
+    let err = m.check().unwrap_err();
+    assert!(err.to_string().contains("group `x` has mean NaN at index 0"), "{err}");
+    // The skeleton must be the one the transition section's frames are for.
+    let mut m = sample();
+    m.skeleton.names.push("Head".into());
+    m.skeleton.parents.push(1);
+    m.skeleton.offsets.push([0.0, 5.0, 0.0]);
+    let err = MotionModelMetadata::from_props(lookup(&m.to_props())).unwrap_err();
+    assert!(err.to_string().contains("frame_dim is 6 but the skeleton has 3 joints (9 values)"), "{err}");
+}
+
+#[test]
+fn bad_fps_and_config_are_refused() {
+    let err = edited(|p| set(p, keys::FPS, "fast")).unwrap_err();
+    assert!(matches!(&err, FormatError::BadMetadata { key, .. } if key == keys::FPS), "{err}");
+    let err = edited(|p| set(p, keys::FPS, "-30")).unwrap_err();
+    assert!(matches!(&err, FormatError::BadMetadata { key, .. } if key == keys::FPS), "{err}");
+    let err = edited(|p| set(p, keys::CONFIG, "{oops")).unwrap_err();
+    assert!(matches!(&err, FormatError::BadMetadata { key, .. } if key == keys::CONFIG), "{err}");
+}
+
+#[test]
+fn normalize_round_trip_and_skeleton_conversion() {
+    let m = sample();
+    let g = &m.normalization["x"];
+    let mut v = [3.0, 5.0];
+    g.normalize(&mut v);
+    assert_eq!(v, [3.0, 2.0]);
+    g.denormalize(&mut v);
+    assert_eq!(v, [3.0, 5.0]);
+    let s = m.skeleton.to_skeleton();
+    assert_eq!(s.parents, vec![None, Some(0)]);
+    assert_eq!(MotionSkeletonInfo::from_skeleton(&s), m.skeleton);
+}
+
+fn stitch_sample() -> MotionModelMetadata {
+    // A 3-joint chain: hips (lower body), two "feet" as the contact joints.
+    let skeleton = MotionSkeletonInfo {
+        names: vec!["Hips".into(), "LeftFoot".into(), "RightFoot".into()],
+        parents: vec![-1, 0, 0],
+        offsets: vec![[0.0; 3], [10.0, -40.0, 0.0], [-10.0, -40.0, 0.0]],
+    };
+    let task = StitchTask {
+        window: 8,
+        stride: 4,
+        blend_frames: 3,
+        layout: StitchLayout {
+            lower_body: vec![0, 1, 2],
+            contacts: [1, 1, 2, 2],
+            contact_thresholds: [2.0; 4],
+            planted: [4.0; 4],
+            forward_axis: glam::DVec3::Z,
+        },
+    };
+    let dim = task.dim(3);
+    assert_eq!(dim, 7 + 6 * 3 + 4 * 3);
+    MotionModelMetadata {
+        model_kind: "rmr".into(),
+        task: MotionTask::Stitch(task),
+        normalization: [("x".to_string(), MotionMeanStd { mean: vec![0.0; dim], std: vec![1.0; dim] })].into(),
+        skeleton,
+        feature_layout: vec![MotionFeatureSegment { name: "pose".into(), start: 0, len: dim }],
+        state: vec![],
+        ..sample()
+    }
+}
+
+#[test]
+fn every_task_round_trips_through_its_section() {
+    let stitch = stitch_sample();
+    let keyframes = MotionModelMetadata {
+        model_kind: "arnn".into(),
+        task: MotionTask::Keyframes(KeyframesTask { dofs: 2, groups: 2, key_groups: vec![0, 1] }),
+        ..sample()
+    };
+    let synthesis = MotionModelMetadata {
+        model_kind: "rnn-gmm".into(),
+        task: MotionTask::Synthesis(SynthesisTask {
+            frame_dim: 11,
+            components: 2,
+            references: vec![[0.0, 0.0, 0.0, 1.0]; 2],
+            refiner: Some(SynthesisRefiner { effectors: vec![1], mean: vec![0.0; 6], std: vec![1.0; 6] }),
+        }),
+        normalization: [("x".to_string(), MotionMeanStd { mean: vec![0.0; 11], std: vec![1.0; 11] })].into(),
+        ..sample()
+    };
+    for m in [sample(), stitch, keyframes, synthesis.clone()] {
+        let mut props = m.to_props();
+        assert_eq!(props.last().unwrap().0, m.task.section_key().unwrap());
+        if m.task.kind() == MotionTaskKind::Synthesis {
+            props.push((keys::SYNTHESIS_REFINER_GRAPH.into(), "AAAA".into()));
+        }
+        assert_eq!(MotionModelMetadata::from_props(lookup(&props)).unwrap(), m, "{}", m.task.name());
+        assert_eq!(MotionTaskKind::from_name(m.task.name()), Some(m.task.kind()));
+    }
+    // A refiner section without its graph (or the reverse) is refused.
+    let err = MotionModelMetadata::from_props(lookup(&synthesis.to_props())).unwrap_err();
+    assert!(err.to_string().contains(keys::SYNTHESIS_REFINER_GRAPH), "{err}");
+}
+
+#[test]
+fn a_stitch_section_missing_a_field_is_refused_with_the_fix() {
+    let m = stitch_sample();
+    let mut props = m.to_props();
+    let mut section: serde_json::Value = serde_json::from_str(&props.last().unwrap().1).unwrap();
+    section.as_object_mut().unwrap().remove("blend_frames");
+    props.last_mut().unwrap().1 = section.to_string();
+    let err = MotionModelMetadata::from_props(lookup(&props)).unwrap_err();
+    assert!(matches!(&err, FormatError::BadMetadata { key, .. } if key == keys::STITCH), "{err}");
+    let text = err.to_string();
+    assert!(text.contains("missing field `blend_frames`") && text.contains("zoo export --onnx RUN_DIR"), "{text}");
+    // A layout that does not fit the skeleton, and statistics of the wrong width.
+    let mut bad = stitch_sample();
+    if let MotionTask::Stitch(t) = &mut bad.task {
+        t.layout.contacts[0] = 9;
+    }
+    assert!(bad.check().unwrap_err().to_string().contains("out of range"));
+    let mut bad = stitch_sample();
+    bad.normalization.get_mut("x").unwrap().mean.pop();
+    assert!(bad.check().unwrap_err().to_string().contains("group `x`"));
+}
+
+#[test]
+fn a_required_optional_field_must_be_written_as_null() {
+    // `terrain: null` and `fallback: null` are the way to say "none": a missing field is refused.
+    let err = edited(|p| {
+        let t = json(&transition()).replace(",\"fallback\":null", "");
+        set(p, keys::TRANSITION, &t)
+    })
+    .unwrap_err();
+    assert!(err.to_string().contains("missing field `fallback`"), "{err}");
+    let with = TransitionTask { fallback: Some(TransitionFallback { start: 1.0, full: 3.0 }), ..transition() };
+    let m = MotionModelMetadata { task: MotionTask::Transition(with), ..sample() };
+    assert_eq!(MotionModelMetadata::from_props(lookup(&m.to_props())).unwrap(), m);
+    let bad = TransitionTask { fallback: Some(TransitionFallback { start: 3.0, full: 1.0 }), ..transition() };
+    let err = MotionModelMetadata { task: MotionTask::Transition(bad), ..sample() }.check().unwrap_err();
+    assert!(err.to_string().contains("start <= full"), "{err}");
+}
+
+#[test]
+fn an_rmr_file_of_the_old_format_is_asked_to_re_export() {
+    let props = vec![
+        (keys::MODEL_KIND.to_string(), "rmr".to_string()),
+        (keys::OLD_RMR_FORMAT_VERSION.to_string(), "1".to_string()),
+        ("zoo.rmr.config".to_string(), "{}".to_string()),
+    ];
+    let err = MotionModelMetadata::from_props(lookup(&props)).unwrap_err();
+    assert!(matches!(&err, FormatError::FormatTooOld { found, .. } if found == "rmr 1"), "{err}");
+    assert!(err.to_string().contains("zoo export --onnx RUN_DIR"), "{err}");
+}
+
+#[test]
+fn the_fallback_weight_ramps_between_its_thresholds() {
+    let f = TransitionFallback { start: 1.0, full: 3.0 };
+    assert_eq!(f.weight(0.5), 0.0);
+    assert_eq!(f.weight(2.0), 0.5);
+    assert_eq!(f.weight(4.0), 1.0);
+    assert_eq!(f.weight(f32::NAN), 1.0);
+}
+
+#[test]
+fn metadata_is_read_from_onnx_bytes_without_the_graph() {
+    use prost::Message as _;
+    let m = sample();
+    let proto = pb::ModelProto {
+        ir_version: 8,
+        metadata_props: m
+            .to_props()
+            .into_iter()
+            .map(|(key, value)| pb::StringStringEntryProto { key, value })
+            .collect(),
+        graph: Some(pb::GraphProto { name: "g".into(), ..Default::default() }),
+        ..Default::default()
+    };
+    assert_eq!(MotionModelMetadata::read(&proto.encode_to_vec(), "toy.onnx").unwrap(), m);
+    let err = MotionModelMetadata::read(b"\xff\xff\xff not onnx", "junk.onnx").unwrap_err();
+    assert!(matches!(&err, FormatError::NotOnnx { origin, .. } if origin == "junk.onnx"), "{err}");
+}

@@ -1,0 +1,122 @@
+//! The `transition` section (`zoo.transition`): what the runtime needs to run an RTN
+//! transition (Harvey & Pal 2018) beyond the step graph itself.
+
+use serde::{Deserialize, Serialize};
+
+/// metadata_props key of the [`TransitionTask`] section.
+pub const KEY: &str = "zoo.transition";
+
+/// Largest terrain patch side the runtime accepts (the training side's limit too).
+pub const MAX_TERRAIN_SIDE: usize = 1024;
+
+/// How a `transition` model is driven: written by the RTN exporter from its config, parsed
+/// strictly (every field required, `null` where a feature is off; no unknown field).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TransitionTask {
+    /// Context frames fed before the transition, as in training (the paper's 10).
+    pub past_frames: usize,
+    /// Transition length P the model was trained on, in frames (the paper's 30); the model
+    /// then predicts P + 1 frames, the last one the target.
+    pub transition_frames: usize,
+    /// Target-blend length of the post-process in frames (RTN eq. 15-16); 0 disables it.
+    pub target_blend: usize,
+    /// Values of one feature frame, `D = 3K` for `K` joints: the width of the step graph's
+    /// `x`, `offset` and `x_next`; the start graph's `target` has `2D`.
+    pub frame_dim: usize,
+    /// Whether the step graph takes the offset to the target, `offset` (RTN eq. 4; false for
+    /// the `RTN\FUTURE` ablation).
+    pub offset_input: bool,
+    /// The local terrain patch input `terrain` of a terrain-aware RTN (RTN sec. 3.2); `null`
+    /// for a model without terrain.
+    #[serde(deserialize_with = "Option::deserialize")]
+    pub terrain: Option<TransitionTerrain>,
+    /// The fallback towards interpolation calibrated by `zoo train rtn`; `null` when the run
+    /// has none (the runtime then applies none unless the engine sets one).
+    #[serde(deserialize_with = "Option::deserialize")]
+    pub fallback: Option<TransitionFallback>,
+}
+
+/// The terrain patch of a terrain-aware RTN: `side * side` heights sampled on a square of
+/// `extent` clip units around the root, fed as the step graph's `terrain` input.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TransitionTerrain {
+    /// Samples per side (the paper's 13).
+    pub side: usize,
+    /// Side length of the patch in clip units (the paper's 2.06 m).
+    pub extent: f32,
+}
+
+/// The fallback towards interpolation on a low-confidence transition: the confidence signal is
+/// the network's own miss at the target (the mean over joints of the distance between the
+/// predicted target frame and the requested one, computed from the inputs only); from `start`
+/// on, the transition is blended towards the linear interpolation of positions between the last
+/// context pose and the target, fully from `full` on. Thresholds in the model's units.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TransitionFallback {
+    /// Miss below which the network's transition is kept.
+    pub start: f32,
+    /// Miss from which the transition is the interpolation.
+    pub full: f32,
+}
+
+impl TransitionFallback {
+    /// The interpolation's weight for a target miss: 0 below `start`, 1 from `full` on, linear
+    /// between (a non-finite miss gives 1).
+    pub fn weight(&self, miss: f32) -> f32 {
+        if !miss.is_finite() {
+            return 1.0;
+        }
+        if self.full <= self.start {
+            return if miss >= self.start { 1.0 } else { 0.0 };
+        }
+        ((miss - self.start) / (self.full - self.start)).clamp(0.0, 1.0)
+    }
+
+    /// Checks the thresholds: finite, `0 <= start`, `start <= full`.
+    pub fn check(&self) -> Result<(), String> {
+        if !(self.start.is_finite() && self.full.is_finite() && self.start >= 0.0 && self.full >= self.start) {
+            return Err(format!(
+                "fallback thresholds start {} and full {}: they must be finite with 0 <= start <= full",
+                self.start, self.full
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl TransitionTask {
+    /// Checks the section against a skeleton of `joints` joints.
+    pub fn check(&self, joints: usize) -> Result<(), String> {
+        if self.frame_dim == 0 || !self.frame_dim.is_multiple_of(3) {
+            return Err(format!("frame_dim {} is not 3 values per joint", self.frame_dim));
+        }
+        if self.frame_dim != 3 * joints {
+            return Err(format!(
+                "frame_dim is {} but the skeleton has {joints} joints ({} values)",
+                self.frame_dim,
+                3 * joints
+            ));
+        }
+        if self.past_frames == 0 {
+            return Err("past_frames is 0; a transition needs at least one context frame".into());
+        }
+        if self.transition_frames == 0 {
+            return Err("transition_frames is 0; a model is trained for at least one frame".into());
+        }
+        if let Some(t) = &self.terrain
+            && !((1..=MAX_TERRAIN_SIDE).contains(&t.side) && t.extent.is_finite() && t.extent > 0.0)
+        {
+            return Err(format!(
+                "terrain patch of side {} (1..={MAX_TERRAIN_SIDE}) and extent {} (> 0) is not a patch",
+                t.side, t.extent
+            ));
+        }
+        if let Some(f) = &self.fallback {
+            f.check()?;
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,72 @@
+//! What every model's exporter (`export.rs`) shares: the trained weights read out of a candle
+//! `VarMap` by variable path, checked finite, and written as ONNX initializers of the same
+//! name, so a graph viewer shows `frame_encoder.linear0.weight`.
+
+use candle_nn::VarMap;
+use std::collections::HashMap;
+use zoo_export::{ExportError, GraphBuilder, Value};
+
+/// Weights by candle variable path: shape and row-major f32 values.
+#[derive(Clone, Debug, Default)]
+pub struct ExportWeights(HashMap<String, (Vec<usize>, Vec<f32>)>);
+
+impl ExportWeights {
+    /// Reads every variable of `varmap`; refuses a weight holding NaN or infinity (naming it).
+    pub fn from_varmap(varmap: &VarMap) -> Result<Self, ExportError> {
+        let data = varmap.data().lock().map_err(|_| ExportError::model("the VarMap lock is poisoned"))?;
+        Self::from_tensors(data.iter().map(|(name, var)| (name, var.as_tensor())))
+    }
+
+    /// Reads named tensors (e.g. a safetensors file's); refuses non-finite values like
+    /// [`ExportWeights::from_varmap`].
+    pub fn from_tensors<'a>(
+        tensors: impl IntoIterator<Item = (&'a String, &'a candle_core::Tensor)>,
+    ) -> Result<Self, ExportError> {
+        let mut out = HashMap::new();
+        for (name, t) in tensors {
+            let values = t
+                .to_dtype(candle_core::DType::F32)
+                .and_then(|t| t.flatten_all())
+                .and_then(|t| t.to_vec1::<f32>())
+                .map_err(|e| ExportError::model(format!("reading weight `{name}`: {e}")))?;
+            if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+                return Err(ExportError::model(format!("weight `{name}` holds {} at index {i}", values[i])));
+            }
+            out.insert(name.clone(), (t.dims().to_vec(), values));
+        }
+        Ok(ExportWeights(out))
+    }
+
+    /// The shape and values of weight `name`, or an error naming it.
+    pub fn get(&self, name: &str) -> Result<&(Vec<usize>, Vec<f32>), ExportError> {
+        self.0.get(name).ok_or_else(|| ExportError::model(format!("the checkpoint has no weight `{name}`")))
+    }
+
+    /// Adds weight `name` to `g` as an initializer of the same name.
+    pub fn init(&self, g: &mut GraphBuilder, name: &str) -> Result<Value, ExportError> {
+        let (dims, data) = self.get(name)?;
+        Ok(g.initializer_f32(name, dims, data))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use candle_core::{DType, Device, Tensor};
+
+    #[test]
+    fn weights_are_read_by_path_and_non_finite_ones_refused() {
+        let varmap = VarMap::new();
+        let vb = candle_nn::VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
+        vb.pp("layer").get_with_hints((2, 3), "weight", candle_nn::Init::Const(0.5)).unwrap();
+        let w = ExportWeights::from_varmap(&varmap).unwrap();
+        assert_eq!(w.get("layer.weight").unwrap(), &(vec![2, 3], vec![0.5; 6]));
+        assert!(w.get("layer.bias").unwrap_err().to_string().contains("no weight `layer.bias`"));
+        let mut g = GraphBuilder::new("g");
+        let v = w.init(&mut g, "layer.weight").unwrap();
+        assert_eq!(v.name(), "layer.weight");
+        varmap.set_one("layer.weight", Tensor::new(&[[f32::NAN, 0.0, 0.0], [0.0; 3]], &Device::Cpu).unwrap()).unwrap();
+        let err = ExportWeights::from_varmap(&varmap).unwrap_err().to_string();
+        assert!(err.contains("weight `layer.weight` holds NaN at index 0"), "{err}");
+    }
+}
