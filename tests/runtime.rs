@@ -77,6 +77,25 @@ fn set(props: &mut [zoo_export::pb::StringStringEntryProto], key: &str, value: &
 }
 
 #[test]
+fn files_of_the_previous_format_are_asked_to_re_export() {
+    // A format-3 file (before one format served every task), and an RMR file of the format
+    // RMR had of its own (`zoo.rmr.*`, no `zoo.format_version`), through the one loader.
+    let v3 = with_props(|p| set(p, keys::FORMAT_VERSION, "3"));
+    let old_rmr = with_props(|p| {
+        p.retain(|e| e.key != keys::FORMAT_VERSION);
+        p.push(zoo_export::pb::StringStringEntryProto { key: "zoo.rmr.format_version".into(), value: "1".into() });
+    });
+    for (bytes, found) in [(v3, "3"), (old_rmr, "rmr 1")] {
+        let err = LoadedModel::from_bytes(&bytes).unwrap_err();
+        assert!(
+            matches!(&err, MotionError::Format(FormatError::FormatTooOld { found: f, supported: 4 }) if f == found),
+            "{err}"
+        );
+        assert!(err.to_string().contains("re-export it with `zoo export --onnx RUN_DIR"), "{err}");
+    }
+}
+
+#[test]
 fn an_unknown_format_version_is_refused() {
     let bytes = with_props(|p| set(p, keys::FORMAT_VERSION, "7"));
     let err = MotionModel::from_bytes(&bytes).unwrap_err();

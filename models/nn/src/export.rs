@@ -56,7 +56,7 @@ mod tests {
 
     #[test]
     fn weights_are_read_by_path_and_non_finite_ones_refused() {
-        let varmap = VarMap::new();
+        let mut varmap = VarMap::new();
         let vb = candle_nn::VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
         vb.pp("layer").get_with_hints((2, 3), "weight", candle_nn::Init::Const(0.5)).unwrap();
         let w = ExportWeights::from_varmap(&varmap).unwrap();
