@@ -153,8 +153,42 @@ pub fn read_bytes(bytes: &[u8], path: &Path, opts: &ReadOptions) -> Result<(Clip
         }
         Ok(())
     };
+    // The rest pose: the bind pose where the file has one (the bones' world matrices the
+    // mesh was bound at), else the nodes' default transforms.
+    let mut bind: Vec<Option<Xform>> = vec![None; nn];
+    for pose in scene.poses.iter().filter(|p| p.is_bind_pose) {
+        for bp in pose.bone_poses.iter() {
+            let i = bp.bone_node.element.typed_id as usize;
+            if i < nn && needed[i] && bind[i].is_none() {
+                bind[i] = Some(
+                    matrix_xform(&bp.bone_to_world)
+                        .map_err(|m| err(path, format!("bind pose of `{}`: {m}", name(i))))?,
+                );
+            }
+        }
+    }
+    let bound = joints.iter().filter(|&&j| bind[j].is_some()).count();
+    if bound == 0 {
+        notes.push(
+            "no bind pose: the rest pose is the bones' default transforms (for an armature exported without its \
+             mesh, often the pose at the export frame), so rotations are relative to it"
+                .into(),
+        );
+    }
     let mut rest_world = vec![Xform::IDENTITY; nn];
     compose(&|i| trs(&nodes[i].local_transform), &mut rest_world).map_err(|m| err(path, m))?;
+    for &i in &topo {
+        match (bind[i], parent[i]) {
+            (Some(b), _) => rest_world[i] = b,
+            (None, Some(p)) if needed[p] => {
+                let local = trs(&nodes[i].local_transform)
+                    .uniform()
+                    .map_err(|m| err(path, format!("node `{}`: {m}", name(i))))?;
+                rest_world[i] = rest_world[p].then(&local);
+            }
+            _ => {}
+        }
+    }
 
     // The take.
     let stacks = &scene.anim_stacks;
@@ -238,6 +272,22 @@ pub fn read_bytes(bytes: &[u8], path: &Path, opts: &ReadOptions) -> Result<(Clip
     }
     let frame = file_frame(right, up, front, unit);
     Ok((clip, ClipSource { format: ClipFormat::Fbx, frame, take: stack.element.name.to_string(), notes }))
+}
+
+/// A bind matrix as a rotation, translation and uniform scale.
+fn matrix_xform(m: &ufbx::Matrix) -> Result<Xform, String> {
+    let c = [DVec3::new(m.m00, m.m10, m.m20), DVec3::new(m.m01, m.m11, m.m21), DVec3::new(m.m02, m.m12, m.m22)];
+    let s = c[0].length();
+    let uniform = c.iter().all(|v| (v.length() - s).abs() <= 1e-4 * s);
+    let orthogonal = c[0].dot(c[1]).abs() + c[1].dot(c[2]).abs() + c[0].dot(c[2]).abs() <= 1e-4 * s * s;
+    if !(s.is_finite() && s > 0.0 && uniform && orthogonal) {
+        return Err("not a rotation with a uniform scale".into());
+    }
+    let r = DQuat::from_mat3(&glam::DMat3::from_cols(c[0] / s, c[1] / s, c[2] / s));
+    if !(glam::DMat3::from_cols(c[0], c[1], c[2]).determinant() > 0.0) {
+        return Err("a mirrored (negative-scale) matrix".into());
+    }
+    Ok(Xform { r: r.normalize(), t: DVec3::new(m.m03, m.m13, m.m23), s })
 }
 
 /// The file's frame as a [`CoordinateFrame`] (the nearest: up axis Y or Z, handedness).
