@@ -230,7 +230,12 @@ pub fn load_with(path: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> 
         match r {
             Ok((c, source)) => {
                 if source.format != ClipFormat::Bvh {
-                    *sources.entry(source.describe()).or_default() += 1;
+                    let how = if source.frame == zoo_motion::frame::CoordinateFrame::ZOO_CM {
+                        "already in zoo's centimetres, Y up, right-handed"
+                    } else {
+                        "converted to centimetres, Y up, right-handed"
+                    };
+                    *sources.entry(format!("{}; {how}", source.describe())).or_default() += 1;
                 }
                 clips.push(c)
             }
@@ -239,7 +244,7 @@ pub fn load_with(path: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> 
         }
     }
     for (what, n) in sources {
-        out.notices.push(format!("{n} clip(s) read from {what}, converted to centimetres, Y up, right-handed"));
+        out.notices.push(format!("{n} clip(s) read from {what}"));
     }
     let Some(reference) = reference_clip(&clips) else {
         return Err(DataError::AllSkipped { path: path.to_path_buf(), skipped: out.skipped.len() });
