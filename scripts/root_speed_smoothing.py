@@ -4,8 +4,8 @@ the root displacements unsmoothed and smoothed by a centred Gaussian of 1-5 fram
 refiner's `--refiner-root-smoothing` would ask of it). The root is the first joint whose
 position channels move. Needs numpy.
 
-Session 21's measurement (docs/rnn-gmm.md, "Root smoothing"), RNN-only sequences from eight
-validation takes:
+The measurement of 2026-11-26, commit 12bb67a (docs/rnn-gmm.md, "Root smoothing"), RNN-only
+sequences from eight validation takes:
 
     D=../shared/data/bandai2; M=RUN_DIR_OF_THE_GENERATOR; k=0
     for c in run_active_001 run_normal_002 walk_elderly_001 walk_masculine_002 \

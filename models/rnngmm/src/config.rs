@@ -149,7 +149,8 @@ pub struct RefinerConfig {
     /// before eq. 13 compares the refined root with them: the refined root is held to the RNN's
     /// trajectory but not to its frame-to-frame jitter. 0 (the default): eq. 13 as in the paper.
     /// Smoothing brings the RNN's root roughness to real motion's but moves its root-speed
-    /// distribution away from real (docs/rnn-gmm.md, session 21), so it is off by default.
+    /// distribution away from real (docs/rnn-gmm.md, "Root smoothing": measured 2026-11-26,
+    /// commit 12bb67a), so it is off by default.
     #[serde(default)]
     pub root_smoothing: f64,
 }

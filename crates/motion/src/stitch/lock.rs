@@ -15,7 +15,7 @@
 //! forwards and backwards and averaged, so it leads a pin as much as it lags it): without the
 //! limit, the switch from one pin to the next and from the heel's pin to the toe's moved the
 //! ankle by several centimetres in one frame, which the stitching benchmark counts as pops at the
-//! seams (session 14, docs/rmr.md).
+//! seams (measured 2026-11-25, commit 91c7c30: docs/rmr.md, "The foot lock's pops").
 //!
 //! In the motion core so that the engine's runtime (`zoo_runtime::StitchRefiner`) applies the
 //! same lock as the offline `zoo stitch`.
@@ -195,7 +195,7 @@ pub fn lock_feet(clip: &mut Clip, contacts: &[[bool; 4]], layout: &StitchLayout)
 }
 
 /// [`lock_feet`] with another limit on the correction's change per frame (`f64::INFINITY`:
-/// none, the lock of sessions 7 to 13).
+/// none, the lock before commit f0394c3 of 2026-11-25).
 pub fn lock_feet_with(clip: &mut Clip, contacts: &[[bool; 4]], layout: &StitchLayout, max_step: f64) -> f64 {
     let (frames, j) = (clip.frames(), clip.joints());
     if contacts.len() != frames || frames == 0 {
