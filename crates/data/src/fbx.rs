@@ -230,6 +230,16 @@ pub fn read_bytes(bytes: &[u8], path: &Path, opts: &ReadOptions) -> Result<(Clip
         return Err(err(path, format!("take `{}` runs from {t0} s to {t1} s: not a time range", stack.element.name)));
     }
     let frames = span.round() as usize + 1;
+    if frames.saturating_mul(joints.len()) > crate::gltf::MAX_JOINT_FRAMES {
+        return Err(err(
+            path,
+            format!(
+                "take `{}`: {frames} frames of {} joints is more than zoo reads in one clip",
+                stack.element.name,
+                joints.len()
+            ),
+        ));
+    }
     let (right, up, front) = (axis(settings.axes.right), axis(settings.axes.up), axis(settings.axes.front));
     let (right, up, front) = match (right, up, front) {
         (Some(r), Some(u), Some(f)) => (r, u, f),

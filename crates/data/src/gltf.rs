@@ -33,6 +33,11 @@ use zoo_motion::Clip;
 use zoo_motion::frame::{CoordinateFrame, Handedness, UpAxis};
 
 const GLB_MAGIC: &[u8; 4] = b"glTF";
+/// Most elements an accessor without data may declare.
+const MAX_KEYS: usize = 1 << 24;
+/// Most joint-frames a clip may have (a bound on what a damaged file can make zoo allocate:
+/// 100 joints at 120 fps for 2.3 hours).
+pub(crate) const MAX_JOINT_FRAMES: usize = 100_000_000;
 const CHUNK_JSON: u32 = 0x4E4F_534A;
 const CHUNK_BIN: u32 = 0x004E_4942;
 
@@ -188,16 +193,24 @@ fn read_accessor(
     }
     let count = acc.count();
     let Some(view) = acc.view() else {
+        if count > MAX_KEYS {
+            return Err(err(path, format!("{} declares {count} elements without data: the file is damaged", what())));
+        }
         return Ok(vec![0.0; count * comps]); // no view: all zeros (glTF 2.0, 3.6.2.3)
     };
     let buf = &buffers[view.buffer().index()];
     let elem = size * comps;
     let stride = view.stride().unwrap_or(elem).max(elem);
-    let end = |n: usize| acc.offset() + stride * n.saturating_sub(1) + elem;
+    let end = |n: usize| {
+        stride
+            .checked_mul(n.saturating_sub(1))
+            .and_then(|x| x.checked_add(acc.offset()))
+            .and_then(|x| x.checked_add(elem))
+    };
     let view_bytes = buf.get(view.offset()..view.offset().saturating_add(view.length())).ok_or_else(|| {
         err(path, format!("buffer view {} runs past the end of its buffer: the file is damaged", view.index()))
     })?;
-    if count > 0 && end(count) > view_bytes.len() {
+    if count > 0 && end(count).is_none_or(|e| e > view_bytes.len()) {
         return Err(err(path, format!("{} runs past the end of its buffer view: the file is damaged", what())));
     }
     let mut out = Vec::with_capacity(count * comps);
@@ -541,6 +554,15 @@ fn read_document(
         return Err(err(path, format!("animation spans {:.3} s at {frame_time} s a frame: too many frames", t1 - t0)));
     }
     let frames = span.round() as usize + 1;
+    if frames.saturating_mul(joints.len()) > MAX_JOINT_FRAMES {
+        return Err(err(
+            path,
+            format!(
+                "{frames} frames of {} joints is more than zoo reads in one clip ({MAX_JOINT_FRAMES} joint-frames)",
+                joints.len()
+            ),
+        ));
+    }
     let eps = (1e-4 * frame_time).max(4.0 * f32::EPSILON as f64 * t1.abs());
 
     let mut by_node: Vec<Vec<usize>> = vec![Vec::new(); nn];

@@ -286,6 +286,11 @@ fn malformed_glb_truncated_empty_or_not_gltf() {
     .unwrap();
     assert!(read_err(&dir.path().join("bad.gltf")).contains("bad.gltf: glTF: not a valid glTF 2.0 document"));
     assert!(read_err(&dir.path().join("missing.glb")).contains("missing.glb: cannot read"));
+    // A forged element count: refused, not allocated.
+    let forged = two_joint_gltf("LINEAR", (0.0, 0.0), "")
+        .replace(r#""count": 2, "type": "SCALAR""#, r#""count": 4611686018427387904, "type": "SCALAR""#);
+    let e = read_err(&write_text(dir.path(), "count.gltf", &forged));
+    assert!(e.contains("count.gltf: glTF: accessor 0 runs past the end of its buffer view"), "{e}");
 }
 
 // ---- hand-written FBX (ASCII FBX 7.4, read by the same ufbx path as binary) ----

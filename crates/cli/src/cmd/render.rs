@@ -4,7 +4,7 @@ use crate::render::{RenderClip, RenderOptions, render_gif, render_sheet};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use std::path::{Path, PathBuf};
-use zoo_data::bvh::{ReadOptions, read_file};
+use zoo_data::clip_io::{ReadOptions, read as read_file};
 
 /// Arguments of `zoo render`.
 #[derive(Args)]
@@ -56,7 +56,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         Some(p) => Some(zoo_data::terrain::read(p)?),
         None => None,
     };
-    let read = ReadOptions { drop_dummy_root: true };
+    let read = ReadOptions { drop_dummy_root: true, take: None };
     let mut clips = Vec::new();
     for path in std::iter::once(&a.clip).chain(&a.compare) {
         let clip = read_file(path, &read).with_context(|| format!("reading {}", path.display()))?;
