@@ -1,11 +1,15 @@
-/* The zoo C ABI's other tasks in one engine-side program: complete an animator's keys with an
- * ARNN, stitch a walk with an RMR (the whole sequence at once, then as a stream), synthesise
- * motion for a batch of characters with an RNN-GMM, and steer them with its controller.
+/* The zoo C ABI's tasks besides transitions (examples/transition.c) in one engine-side program:
+ * every model file given is loaded with zoo_model_load and run by its task (zoo_model_task):
+ * complete an animator's keys with a keyframes model (ARNN), stitch a walk with a stitch model
+ * (RMR: the whole sequence at once, then as a stream), synthesise motion for a batch of
+ * characters with a synthesis model (RNN-GMM) and steer them with its controller.
  *
- * Build (from the repository root, after `cargo build --workspace`):
+ * Build (from the repository root, after `cargo build -p zoo-capi`), as C99 or as C++17:
  *   cc -std=c99 -Wall -Wextra -Werror -Icrates/capi/include crates/capi/examples/tasks.c \
  *      target/debug/libzoo_capi.a -lm -lpthread -ldl -o tasks
- * Run: ./tasks arnn.onnx rmr.onnx rnngmm.onnx [CHARACTERS] [FRAMES]
+ *   c++ -std=c++17 -x c++ -Wall -Wextra -Werror -Icrates/capi/include crates/capi/examples/tasks.c \
+ *      -x none target/debug/libzoo_capi.a -lm -lpthread -ldl -o tasks
+ * Run: ./tasks CHARACTERS FRAMES MODEL.onnx... (e.g. arnn.onnx rmr.onnx rnngmm.onnx)
  *
  * Prints one line per frame (and character), tagged by task:
  *   keys C T: character C's completed frame T (D values);
@@ -21,6 +25,9 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include "zoo.h"
+
+/* malloc of `count` values of `type`, cast for C++. */
+#define NEW(type, count) ((type *)malloc((count) * sizeof(type)))
 
 static int fail(const char *what, ZooStatus status) {
     char message[512];
@@ -54,33 +61,30 @@ static float key_value(size_t c, size_t k, size_t j, size_t frame) {
     return (float)(0.3 * sin(0.7 * (double)k + 1.3 * (double)j + 0.5 * (double)c) + 0.01 * (double)frame);
 }
 
-static int keyframes(const char *path) {
-    ZooKeyframeModel *model = NULL;
-    CHECK(zoo_keyframe_model_load(path, &model));
-    ZooKeyframeInfo info;
-    CHECK(zoo_keyframe_model_info(model, &info));
+static int keyframes(const ZooModel *model) {
+    ZooKeyframesInfo info;
+    CHECK(zoo_keyframes_info(model, &info));
     size_t d = info.dofs;
     /* Character 0: keys at 0, 9, 24, 39; character 1: at 0, 12, 30. */
     const size_t counts[2] = {4, 3};
     const size_t frames[7] = {0, 9, 24, 39, 0, 12, 30};
-    float *poses = malloc(7 * d * sizeof *poses);
+    float *poses = NEW(float, 7 * d);
     for (size_t c = 0, at = 0; c < 2; c++)
         for (size_t k = 0; k < counts[c]; k++, at++)
             for (size_t j = 0; j < d; j++) poses[at * d + j] = key_value(c, k, j, frames[at]);
     size_t lengths[2] = {40, 31};
-    float *out = malloc((lengths[0] + lengths[1]) * d * sizeof *out);
-    ZooKeyframeRunner *runner = NULL;
-    CHECK(zoo_keyframe_runner_new(model, 2, &runner));
-    CHECK(zoo_keyframe_complete_batch(runner, counts, 2, frames, 7, poses, 7 * d, NULL, 0, out,
-                                      (lengths[0] + lengths[1]) * d));
+    float *out = NEW(float, (lengths[0] + lengths[1]) * d);
+    ZooKeyframesRunner *runner = NULL;
+    CHECK(zoo_keyframes_runner_new(model, 2, &runner));
+    CHECK(zoo_keyframes_complete_batch(runner, counts, 2, frames, 7, poses, 7 * d, NULL, 0, out,
+                                       (lengths[0] + lengths[1]) * d));
     for (size_t c = 0, at = 0; c < 2; c++)
         for (size_t t = 0; t < lengths[c]; t++, at++) {
             printf("keys %zu %zu", c, t);
             for (size_t j = 0; j < d; j++) printf(" %.9g", (double)out[at * d + j]);
             printf("\n");
         }
-    zoo_keyframe_runner_free(runner);
-    zoo_keyframe_model_free(model);
+    zoo_keyframes_runner_free(runner);
     free(poses);
     free(out);
     return 0;
@@ -88,7 +92,7 @@ static int keyframes(const char *path) {
 
 /* The hips height of a skeleton's rest pose: minus its lowest joint. */
 static double hips_height(const int32_t *parents, const float *offsets, size_t joints) {
-    double *rest_y = malloc(joints * sizeof *rest_y);
+    double *rest_y = NEW(double, joints);
     double lowest = 0.0;
     for (size_t j = 0; j < joints; j++) {
         rest_y[j] = parents[j] < 0 ? 0.0 : rest_y[parents[j]] + offsets[3 * j + 1];
@@ -121,25 +125,25 @@ static void walk_pose(size_t joints, double height, double speed, size_t f, ZooR
     }
 }
 
-static int stitch(const char *path) {
-    ZooStitchModel *model = NULL;
-    CHECK(zoo_stitch_model_load(path, &model));
+static int stitch(const ZooModel *model) {
+    ZooModelInfo model_info;
     ZooStitchInfo info;
-    CHECK(zoo_stitch_model_info(model, &info));
-    size_t k = info.joints;
-    int32_t *parents = malloc(k * sizeof *parents);
-    float *offsets = malloc(3 * k * sizeof *offsets);
-    CHECK(zoo_stitch_model_skeleton(model, parents, k, offsets, 3 * k));
-    double height = hips_height(parents, offsets, k), speed = 120.0 / (double)info.fps;
+    CHECK(zoo_model_info(model, &model_info));
+    CHECK(zoo_stitch_info(model, &info));
+    size_t k = model_info.joints;
+    int32_t *parents = NEW(int32_t, k);
+    float *offsets = NEW(float, 3 * k);
+    CHECK(zoo_model_skeleton(model, parents, k, offsets, 3 * k));
+    double height = hips_height(parents, offsets, k), speed = 120.0 / (double)model_info.fps;
     /* Windows at 0, s, 2s and one ending on the last frame. */
     size_t frames = info.window + 2 * info.stride + 5;
-    ZooRootMotion *roots = malloc(frames * sizeof *roots);
-    float *rotations = malloc(frames * 4 * k * sizeof *rotations);
+    ZooRootMotion *roots = NEW(ZooRootMotion, frames);
+    float *rotations = NEW(float, frames * 4 * k);
     for (size_t f = 0; f < frames; f++) walk_pose(k, height, speed, f, &roots[f], &rotations[f * 4 * k]);
 
-    ZooRootMotion *out_roots = malloc(frames * sizeof *out_roots);
-    float *out_rotations = malloc(frames * 4 * k * sizeof *out_rotations);
-    uint8_t *contacts = malloc(frames * 4);
+    ZooRootMotion *out_roots = NEW(ZooRootMotion, frames);
+    float *out_rotations = NEW(float, frames * 4 * k);
+    uint8_t *contacts = NEW(uint8_t, frames * 4);
     CHECK(zoo_stitch_refine(model, roots, frames, rotations, frames * 4 * k, true, true, out_roots,
                             frames, out_rotations, frames * 4 * k, contacts, frames * 4));
     for (size_t f = 0; f < frames; f++) {
@@ -170,7 +174,6 @@ static int stitch(const char *path) {
     }
     fprintf(stderr, "stitched %zu frames; the stream's latency is %zu frames\n", frames, info.latency);
     zoo_stitch_stream_free(stream);
-    zoo_stitch_model_free(model);
     free(parents);
     free(offsets);
     free(roots);
@@ -181,26 +184,26 @@ static int stitch(const char *path) {
     return 0;
 }
 
-static int synthesis(const char *path, size_t n, size_t total) {
-    ZooSynthesisModel *model = NULL;
-    CHECK(zoo_synthesis_model_load(path, true, &model));
+static int synthesis(const ZooModel *model, size_t n, size_t total) {
+    ZooModelInfo model_info;
     ZooSynthesisInfo info;
-    CHECK(zoo_synthesis_model_info(model, &info));
-    size_t k = info.joints, d = info.frame_dim;
+    CHECK(zoo_model_info(model, &model_info));
+    CHECK(zoo_synthesis_info(model, &info));
+    size_t k = model_info.joints, d = info.frame_dim;
     /* Every character starts from the data's mean frame, side by side, seeds 100, 101, ... */
-    uint64_t *seeds = malloc(n * sizeof *seeds);
-    float *frames = malloc(n * d * sizeof *frames);
-    float *placements = malloc(n * 3 * sizeof *placements);
+    uint64_t *seeds = NEW(uint64_t, n);
+    float *frames = NEW(float, n * d);
+    float *placements = NEW(float, n * 3);
     for (size_t c = 0; c < n; c++) {
         seeds[c] = 100 + c;
-        CHECK(zoo_synthesis_model_mean_frame(model, &frames[c * d], d));
+        CHECK(zoo_synthesis_mean_frame(model, &frames[c * d], d));
         placements[3 * c + 0] = (float)(200.0 * (double)c);
         placements[3 * c + 1] = 0.0f;
         placements[3 * c + 2] = (float)(0.1 * (double)c);
     }
-    ZooRootMotion *roots = malloc(n * sizeof *roots);
-    float *rotations = malloc(n * 4 * k * sizeof *rotations);
-    uint8_t *contacts = malloc(n * 2);
+    ZooRootMotion *roots = NEW(ZooRootMotion, n);
+    float *rotations = NEW(float, n * 4 * k);
+    uint8_t *contacts = NEW(uint8_t, n * 2);
 
     ZooSynthesisRunner *runner = NULL;
     ZooSynthesisCharacters *characters = NULL;
@@ -224,7 +227,7 @@ static int synthesis(const char *path, size_t n, size_t total) {
     CHECK(zoo_control_runner_new(model, &control_runner));
     CHECK(zoo_control_characters_new(model, seeds, n, &settings, &controlled));
     CHECK(zoo_control_start(controlled, frames, n * d, placements, n * 3));
-    ZooControl *controls = malloc(n * sizeof *controls);
+    ZooControl *controls = NEW(ZooControl, n);
     size_t control_frames = total < 60 ? total : 60;
     for (size_t t = 0; t < control_frames; t++) {
         for (size_t c = 0; c < n; c++) {
@@ -245,7 +248,6 @@ static int synthesis(const char *path, size_t n, size_t total) {
     zoo_control_runner_free(control_runner);
     zoo_synthesis_characters_free(characters);
     zoo_synthesis_runner_free(runner);
-    zoo_synthesis_model_free(model);
     free(seeds);
     free(frames);
     free(placements);
@@ -258,13 +260,40 @@ static int synthesis(const char *path, size_t n, size_t total) {
 
 int main(int argc, char **argv) {
     if (argc < 4) {
-        fprintf(stderr, "usage: %s ARNN.onnx RMR.onnx RNNGMM.onnx [CHARACTERS] [FRAMES]\n", argv[0]);
+        fprintf(stderr, "usage: %s CHARACTERS FRAMES MODEL.onnx...\n", argv[0]);
         return 2;
     }
-    size_t n = argc > 4 ? (size_t)strtoul(argv[4], NULL, 10) : 3;
-    size_t total = argc > 5 ? (size_t)strtoul(argv[5], NULL, 10) : 300;
-    if (keyframes(argv[1]) != 0) return 1;
-    if (stitch(argv[2]) != 0) return 1;
-    if (synthesis(argv[3], n, total) != 0) return 1;
+    if (zoo_abi_version() != ZOO_ABI_VERSION) {
+        fprintf(stderr, "the zoo library has C ABI version %u, this program was built for %d\n",
+                (unsigned)zoo_abi_version(), ZOO_ABI_VERSION);
+        return 1;
+    }
+    size_t n = (size_t)strtoul(argv[1], NULL, 10);
+    size_t total = (size_t)strtoul(argv[2], NULL, 10);
+    for (int i = 3; i < argc; i++) {
+        /* One loader for every task; the task says which functions run the model. */
+        ZooModel *model = NULL;
+        CHECK(zoo_model_load(argv[i], &model));
+        int failed = 0;
+        switch (zoo_model_task(model)) {
+        case ZOO_TASK_KEYFRAMES:
+            failed = keyframes(model);
+            break;
+        case ZOO_TASK_STITCH:
+            failed = stitch(model);
+            break;
+        case ZOO_TASK_SYNTHESIS:
+            failed = synthesis(model, n, total);
+            break;
+        case ZOO_TASK_TRANSITION:
+            fprintf(stderr, "%s is a transition model: run it with examples/transition.c\n", argv[i]);
+            break;
+        case ZOO_TASK_NONE:
+            failed = 1;
+            break;
+        }
+        zoo_model_free(model);
+        if (failed) return 1;
+    }
     return 0;
 }

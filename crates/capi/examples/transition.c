@@ -2,9 +2,11 @@
  * characters forward and, every transition length, start a transition to a pose further ahead,
  * then step it one frame per tick as engine poses (root motion + local joint rotations).
  *
- * Build (from the repository root, after `cargo build --workspace`):
+ * Build (from the repository root, after `cargo build -p zoo-capi`), as C99 or as C++17:
  *   cc -std=c99 -Wall -Wextra -Werror -Icrates/capi/include crates/capi/examples/transition.c \
  *      target/debug/libzoo_capi.a -lm -lpthread -ldl -o transition
+ *   c++ -std=c++17 -x c++ -Wall -Wextra -Werror -Icrates/capi/include crates/capi/examples/transition.c \
+ *      -x none target/debug/libzoo_capi.a -lm -lpthread -ldl -o transition
  * Run: ./transition rtn.onnx [CHARACTERS] [FRAMES]
  *
  * Prints one line per character and frame: frame, character, root position (3), root rotation
@@ -15,6 +17,9 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include "zoo.h"
+
+/* malloc of `count` values of `type`, cast for C++. */
+#define NEW(type, count) ((type *)malloc((count) * sizeof(type)))
 
 static int fail(const char *what, ZooStatus status) {
     char message[512];
@@ -54,19 +59,31 @@ int main(int argc, char **argv) {
     size_t n = argc > 2 ? (size_t)strtoul(argv[2], NULL, 10) : 3;
     size_t total = argc > 3 ? (size_t)strtoul(argv[3], NULL, 10) : 300;
 
+    if (zoo_abi_version() != ZOO_ABI_VERSION) {
+        fprintf(stderr, "the zoo library has C ABI version %u, this program was built for %d\n",
+                (unsigned)zoo_abi_version(), ZOO_ABI_VERSION);
+        return 1;
+    }
     ZooModel *model = NULL;
     ZooStatus s = zoo_model_load(argv[1], &model);
     if (s != ZOO_STATUS_OK) return fail("zoo_model_load", s);
-    ZooModelInfo info;
-    if ((s = zoo_model_info(model, &info)) != ZOO_STATUS_OK) return fail("zoo_model_info", s);
-    size_t k = info.joints;
-    fprintf(stderr, "%zu joints, %zu context frames, transitions of %zu frames at %g fps\n", k,
-            info.past_frames, info.transition_frames, (double)info.fps);
+    if (zoo_model_task(model) != ZOO_TASK_TRANSITION) {
+        fprintf(stderr, "%s is not a transition model (task %d)\n", argv[1], (int)zoo_model_task(model));
+        zoo_model_free(model);
+        return 1;
+    }
+    ZooModelInfo model_info;
+    ZooTransitionInfo info;
+    if ((s = zoo_model_info(model, &model_info)) != ZOO_STATUS_OK) return fail("zoo_model_info", s);
+    if ((s = zoo_transition_info(model, &info)) != ZOO_STATUS_OK) return fail("zoo_transition_info", s);
+    size_t k = model_info.joints;
+    fprintf(stderr, "%zu joints, %zu context frames, transitions of %zu frames at %g fps, %g m per unit\n", k,
+            info.past_frames, info.transition_frames, (double)model_info.fps, (double)model_info.metres_per_unit);
 
     /* The hips height of the rest pose: minus the lowest joint of the skeleton's rest pose. */
-    int32_t *parents = malloc(k * sizeof *parents);
-    float *offsets = malloc(3 * k * sizeof *offsets);
-    double *rest_y = malloc(k * sizeof *rest_y);
+    int32_t *parents = NEW(int32_t, k);
+    float *offsets = NEW(float, 3 * k);
+    double *rest_y = NEW(double, k);
     if ((s = zoo_model_skeleton(model, parents, k, offsets, 3 * k)) != ZOO_STATUS_OK)
         return fail("zoo_model_skeleton", s);
     double lowest = 0.0;
@@ -75,23 +92,24 @@ int main(int argc, char **argv) {
         if (rest_y[j] < lowest) lowest = rest_y[j];
     }
     double hips_height = -lowest;
-    double speed = 120.0 / (double)info.fps;
+    double speed = 120.0 / (double)model_info.fps;
 
-    ZooRunner *runner = NULL;
-    ZooCharacters *characters = NULL;
-    if ((s = zoo_runner_new(model, &runner)) != ZOO_STATUS_OK) return fail("zoo_runner_new", s);
-    if ((s = zoo_characters_new(model, n, &characters)) != ZOO_STATUS_OK)
-        return fail("zoo_characters_new", s);
+    ZooTransitionRunner *runner = NULL;
+    ZooTransitionCharacters *characters = NULL;
+    if ((s = zoo_transition_runner_new(model, &runner)) != ZOO_STATUS_OK)
+        return fail("zoo_transition_runner_new", s);
+    if ((s = zoo_transition_characters_new(model, n, &characters)) != ZOO_STATUS_OK)
+        return fail("zoo_transition_characters_new", s);
 
     size_t past_frames = info.past_frames, length = info.transition_frames;
-    ZooRootMotion *past_roots = malloc(n * past_frames * sizeof *past_roots);
-    float *past_rotations = malloc(n * past_frames * 4 * k * sizeof *past_rotations);
-    ZooRootMotion *target_roots = malloc(n * sizeof *target_roots);
-    ZooRootMotion *next_roots = malloc(n * sizeof *next_roots);
-    float *target_rotations = malloc(n * 4 * k * sizeof *target_rotations);
-    float *next_rotations = malloc(n * 4 * k * sizeof *next_rotations);
-    ZooRootMotion *roots = malloc(n * sizeof *roots);
-    float *rotations = malloc(n * 4 * k * sizeof *rotations);
+    ZooRootMotion *past_roots = NEW(ZooRootMotion, n * past_frames);
+    float *past_rotations = NEW(float, n * past_frames * 4 * k);
+    ZooRootMotion *target_roots = NEW(ZooRootMotion, n);
+    ZooRootMotion *next_roots = NEW(ZooRootMotion, n);
+    float *target_rotations = NEW(float, n * 4 * k);
+    float *next_rotations = NEW(float, n * 4 * k);
+    ZooRootMotion *roots = NEW(ZooRootMotion, n);
+    float *rotations = NEW(float, n * 4 * k);
 
     for (size_t tick = 0; tick < total; tick++) {
         if (tick % (length + 1) == 0) {
@@ -106,13 +124,13 @@ int main(int argc, char **argv) {
                 walk_pose(k, hips_height, speed, c, t, &target_roots[c], &target_rotations[c * 4 * k]);
                 walk_pose(k, hips_height, speed, c, t + 1, &next_roots[c], &next_rotations[c * 4 * k]);
             }
-            s = zoo_start_posed(runner, characters, past_roots, n * past_frames, past_rotations,
-                                n * past_frames * 4 * k, target_roots, target_rotations, next_roots,
-                                next_rotations, n * 4 * k, length);
-            if (s != ZOO_STATUS_OK) return fail("zoo_start_posed", s);
+            s = zoo_transition_start_posed(runner, characters, past_roots, n * past_frames, past_rotations,
+                                           n * past_frames * 4 * k, target_roots, target_rotations, next_roots,
+                                           next_rotations, n * 4 * k, length);
+            if (s != ZOO_STATUS_OK) return fail("zoo_transition_start_posed", s);
         }
-        s = zoo_step_posed(runner, characters, roots, n, rotations, n * 4 * k);
-        if (s != ZOO_STATUS_OK) return fail("zoo_step_posed", s);
+        s = zoo_transition_step_posed(runner, characters, roots, n, rotations, n * 4 * k);
+        if (s != ZOO_STATUS_OK) return fail("zoo_transition_step_posed", s);
         for (size_t c = 0; c < n; c++) {
             const ZooRootMotion *r = &roots[c];
             printf("%zu %zu", tick, c);
@@ -126,12 +144,12 @@ int main(int argc, char **argv) {
         }
     }
     float mean = 0.0f, max = 0.0f;
-    if ((s = zoo_target_miss(characters, 0, &mean, &max)) == ZOO_STATUS_OK)
+    if ((s = zoo_transition_target_miss(characters, 0, &mean, &max)) == ZOO_STATUS_OK)
         fprintf(stderr, "character 0: the network's last target frame missed by %.3f (mean) / %.3f (max)\n",
                 (double)mean, (double)max);
 
-    zoo_characters_free(characters);
-    zoo_runner_free(runner);
+    zoo_transition_characters_free(characters);
+    zoo_transition_runner_free(runner);
     zoo_model_free(model);
     free(parents);
     free(offsets);

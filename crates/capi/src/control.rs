@@ -1,20 +1,21 @@
-//! Speed and facing control of a synthesis model (`zoo_runtime::control`): characters of a
-//! [`crate::ZooSynthesisModel`] that walk at a target speed and turn to a target facing
+//! Speed and facing control of a `synthesis` model (`zoo_runtime::control`): characters of a
+//! synthesis model that walk at a target speed and turn to a target facing
 //! ([`ZooControl`], one per character and frame), stepped one frame per [`zoo_control_step`] of a
 //! [`ZooControlRunner`]. A control shows in the motion 1 to `batch` frames after it is given
 //! (see `zoo_runtime::control`). A character's frames depend only on its model, settings, seed,
 //! seed frames, placement and controls, bit for bit.
 
+use crate::model::{Family, model};
 use crate::synthesis::{Shape, check_shape, not_started, shape, start_all, step_out};
 use crate::{
-    Failure, ZooRootMotion, ZooStatus, ZooSynthesisModel, check_count, check_size, free_handle, guard, handle,
-    handle_mut, new_handle, optional_slice, runtime_failure, slice, write_out,
+    Failure, ZooModel, ZooRootMotion, ZooStatus, check_count, check_size, free_handle, guard, handle_mut, new_handle,
+    optional_slice, runtime_failure, slice, write_out,
 };
 use zoo_runtime::EnginePose;
 use zoo_runtime::control::{Control, ControlRunner, ControlSettings, ControlledCharacter};
 use zoo_runtime::synthesis::SynthesisModel;
 
-/// How controlled characters plan (see `zoo_runtime::control::ControlSettings`);
+/// How controlled characters plan (docs/rnn-gmm-control.md);
 /// [`zoo_control_settings_default`] fills the defaults.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -69,7 +70,7 @@ pub struct ZooControlCharacters {
 /// `out` is NULL or valid for a write.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_control_settings_default(out: *mut ZooControlSettings) -> ZooStatus {
-    guard(|| {
+    guard("zoo_control_settings_default", || {
         let d = ControlSettings::default();
         let settings = ZooControlSettings {
             batch: d.batch,
@@ -91,12 +92,9 @@ pub unsafe extern "C" fn zoo_control_settings_default(out: *mut ZooControlSettin
 /// # Safety
 /// `model` is NULL or a live model; `out` is NULL or valid for a write.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_control_runner_new(
-    model: *const ZooSynthesisModel,
-    out: *mut *mut ZooControlRunner,
-) -> ZooStatus {
-    guard(|| {
-        let m = &unsafe { handle(model, "model") }?.model;
+pub unsafe extern "C" fn zoo_control_runner_new(model: *const ZooModel, out: *mut *mut ZooControlRunner) -> ZooStatus {
+    guard("zoo_control_runner_new", || {
+        let m = unsafe { self::model(model) }?.synthesis(Family::Control)?;
         unsafe {
             new_handle(out, || {
                 Ok(ZooControlRunner { runner: ControlRunner::new(m).map_err(runtime_failure)?, shape: shape(m) })
@@ -144,14 +142,14 @@ unsafe fn settings_of(s: &ZooControlSettings) -> Result<ControlSettings, Failure
 /// or readable (its offsets NULL or holding their lengths); `out` is NULL or valid for a write.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_control_characters_new(
-    model: *const ZooSynthesisModel,
+    model: *const ZooModel,
     seeds: *const u64,
     count: usize,
     settings: *const ZooControlSettings,
     out: *mut *mut ZooControlCharacters,
 ) -> ZooStatus {
-    guard(|| {
-        let m = &unsafe { handle(model, "model") }?.model;
+    guard("zoo_control_characters_new", || {
+        let m = unsafe { self::model(model) }?.synthesis(Family::Control)?;
         let seeds = unsafe { slice(seeds, count, "seeds") }?;
         let settings = match unsafe { settings.as_ref() } {
             Some(s) => unsafe { settings_of(s) }?,
@@ -203,7 +201,7 @@ pub unsafe extern "C" fn zoo_control_start(
     placements: *const f32,
     placements_len: usize,
 ) -> ZooStatus {
-    guard(|| {
+    guard("zoo_control_start", || {
         let chars = unsafe { handle_mut(characters, "characters") }?;
         let frames = unsafe { slice(frames, frames_len, "frames") }?;
         let placements = unsafe { slice(placements, placements_len, "placements") }?;
@@ -212,7 +210,7 @@ pub unsafe extern "C" fn zoo_control_start(
             return Err((
                 ZooStatus::InvalidArgument,
                 format!(
-                    "`frames` holds {} floats; it needs the same number of seed frames (at least one) of {d} floats (zoo_synthesis_model_info's `frame_dim`) for each of the {n} characters",
+                    "`frames` holds {} floats; it needs the same number of seed frames (at least one) of {d} floats (zoo_synthesis_info's `frame_dim`) for each of the {n} characters",
                     frames.len()
                 ),
             ));
@@ -246,7 +244,7 @@ pub unsafe extern "C" fn zoo_control_step(
     contacts: *mut u8,
     contacts_len: usize,
 ) -> ZooStatus {
-    guard(|| {
+    guard("zoo_control_step", || {
         let r = unsafe { handle_mut(runner, "runner") }?;
         let chars = unsafe { handle_mut(characters, "characters") }?;
         let controls = unsafe { slice(controls, controls_len, "controls") }?;
@@ -254,7 +252,7 @@ pub unsafe extern "C" fn zoo_control_step(
         check_shape(r.shape, shape(&chars.model))?;
         let n = chars.characters.len();
         check_size("controls", controls.len(), n, "controls", "the batch, one per character")?;
-        out.check(n, chars.model.joints(), 2, "character", "zoo_synthesis_model_info")?;
+        out.check(n, chars.model.joints(), 2, "character")?;
         let control = |c: &ZooControl| Control::new(c.speed, c.heading);
         for (c, z) in controls.iter().enumerate() {
             control(z).check().map_err(runtime_failure).map_err(|(s, m)| (s, format!("character {c}: {m}")))?;

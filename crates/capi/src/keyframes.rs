@@ -1,6 +1,6 @@
-//! Keyframe completion (ARNN, model kind `arnn`, `zoo_runtime::keyframes`): a
-//! [`ZooKeyframeModel`] fills in every frame between an animator's keys with a
-//! [`ZooKeyframeRunner`], one character or a batch in one graph call per frame.
+//! Keyframe completion (ARNN, task `keyframes`, `zoo_runtime::keyframes`): a `keyframes` model
+//! fills in every frame between an animator's keys with a [`ZooKeyframesRunner`], one character
+//! or a batch in one graph call per frame.
 //!
 //! Keys of a character: key frames (`size_t`, strictly increasing, the first 0) and one pose of
 //! `D` floats per key (the export's units: metres and radians for the lamp). The completion has
@@ -8,118 +8,68 @@
 //! key groups (a humanoid ARNN) also takes partial keys: `G` flags per key, 1 where the key
 //! fixes the group and 0 where it leaves it free.
 
+use crate::model::model;
 use crate::{
-    Failure, ZooStatus, c_str, check_count, check_size, free_handle, guard, handle, handle_mut, in_file, new_handle,
-    optional_slice, read_model, runtime_failure, slice, slice_mut, write_out,
+    Failure, ZooModel, ZooStatus, check_count, check_size, free_handle, guard, handle_mut, new_handle, optional_slice,
+    runtime_failure, slice, slice_mut, write_out,
 };
-use std::ffi::c_char;
-use zoo_runtime::MotionModel;
-use zoo_runtime::keyframes::{KeyframeError, KeyframeModel, KeyframeRunner, MODEL_KIND, MotionKeys};
-
-/// A loaded keyframe-completion model (opaque). Thread-safe: share it between threads.
-pub struct ZooKeyframeModel {
-    model: KeyframeModel,
-}
+use zoo_runtime::keyframes::{KeyframeRunner, MotionKeys};
 
 /// Scratch space for completing keys (opaque), for up to the batch size it was made for. One
 /// thread at a time.
-pub struct ZooKeyframeRunner {
+pub struct ZooKeyframesRunner {
     runner: KeyframeRunner,
     dofs: usize,
     groups: usize,
 }
 
-/// What a keyframe model expects.
+/// What a keyframes model expects besides `ZooModelInfo` (whose `fps` the completed
+/// frames play at).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct ZooKeyframeInfo {
+pub struct ZooKeyframesInfo {
     /// Values per pose `D`: a key and a completed frame are `D` floats (6 for the lamp).
     pub dofs: usize,
     /// Key groups `G` a partial key fixes or leaves free (a humanoid's group 0 is the root
     /// position, group `1 + j` joint `j`'s rotation); 0: keys are whole poses.
     pub groups: usize,
-    /// Frames per second the completed frames play at.
-    pub fps: f32,
 }
 
-fn keyframe_failure(e: KeyframeError) -> Failure {
-    match e {
-        KeyframeError::Motion(e) => runtime_failure(e),
-        KeyframeError::Keys { .. } => (ZooStatus::InvalidArgument, e.to_string()),
-        // The kind was checked by `read_model`: the file is a malformed ARNN export.
-        KeyframeError::NotKeyframeModel(_) => (ZooStatus::LoadFailed, e.to_string()),
-    }
-}
+const INFO: &str = "zoo_keyframes_info";
 
-/// Loads a keyframe-completion model exported by `zoo export --onnx` from a `zoo train arnn`
-/// run (model kind `arnn`) from the file `path` (UTF-8, NUL-terminated) into `*out`. Free it
-/// with [`zoo_keyframe_model_free`]. A model of another task is refused with
-/// `ZOO_STATUS_WRONG_MODEL` and the function that loads it. Thread-safe.
-///
-/// # Safety
-/// `path` is NULL or a NUL-terminated string; `out` is NULL or valid for a write.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_keyframe_model_load(path: *const c_char, out: *mut *mut ZooKeyframeModel) -> ZooStatus {
-    guard(|| {
-        let path = unsafe { c_str(path, "path") }?;
-        unsafe {
-            new_handle(out, || {
-                let bytes = read_model(path, MODEL_KIND)?;
-                let graph = MotionModel::from_bytes(&bytes).map_err(runtime_failure).map_err(in_file(path))?;
-                let model = KeyframeModel::new(graph).map_err(keyframe_failure).map_err(in_file(path))?;
-                Ok(ZooKeyframeModel { model })
-            })
-        }
-    })
-}
-
-/// Frees a model from [`zoo_keyframe_model_load`] (NULL is ignored). Runners made from it keep
-/// what they need, so they may be freed before or after it.
-///
-/// # Safety
-/// `model` is NULL or a pointer from [`zoo_keyframe_model_load`] not freed before.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_keyframe_model_free(model: *mut ZooKeyframeModel) {
-    unsafe { free_handle(model) }
-}
-
-/// Writes what `model` expects into `*out`. Thread-safe.
+/// Writes what a keyframes model expects into `*out`. Thread-safe.
 ///
 /// # Safety
 /// `model` is NULL or a live model; `out` is NULL or valid for a write.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_keyframe_model_info(
-    model: *const ZooKeyframeModel,
-    out: *mut ZooKeyframeInfo,
-) -> ZooStatus {
-    guard(|| {
-        let m = &unsafe { handle(model, "model") }?.model;
-        let info = ZooKeyframeInfo { dofs: m.dofs(), groups: m.groups(), fps: m.model().metadata().fps };
-        unsafe { write_out(out, info, "out") }
+pub unsafe extern "C" fn zoo_keyframes_info(model: *const ZooModel, out: *mut ZooKeyframesInfo) -> ZooStatus {
+    guard("zoo_keyframes_info", || {
+        let m = unsafe { self::model(model) }?.keyframes()?;
+        unsafe { write_out(out, ZooKeyframesInfo { dofs: m.dofs(), groups: m.groups() }, "out") }
     })
 }
 
 /// Creates scratch space for completing the keys of up to `max_batch` characters per call, on
-/// one thread at a time, into `*out`; free it with [`zoo_keyframe_runner_free`]. Thread-safe
-/// (the model is shared).
+/// one thread at a time, into `*out`; free it with [`zoo_keyframes_runner_free`]. Thread-safe
+/// (the model is shared); the runner keeps what it needs of the model.
 ///
 /// # Safety
 /// `model` is NULL or a live model; `out` is NULL or valid for a write.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_keyframe_runner_new(
-    model: *const ZooKeyframeModel,
+pub unsafe extern "C" fn zoo_keyframes_runner_new(
+    model: *const ZooModel,
     max_batch: usize,
-    out: *mut *mut ZooKeyframeRunner,
+    out: *mut *mut ZooKeyframesRunner,
 ) -> ZooStatus {
-    guard(|| {
-        let m = &unsafe { handle(model, "model") }?.model;
+    guard("zoo_keyframes_runner_new", || {
+        let m = unsafe { self::model(model) }?.keyframes()?;
         unsafe {
             new_handle(out, || {
                 check_count(max_batch).map_err(|_| {
                     (ZooStatus::InvalidArgument, "`max_batch` is 0; a runner completes at least one character".into())
                 })?;
-                let runner = m.runner(max_batch).map_err(keyframe_failure)?;
-                Ok(ZooKeyframeRunner { runner, dofs: m.dofs(), groups: m.groups() })
+                let runner = m.runner(max_batch).map_err(runtime_failure)?;
+                Ok(ZooKeyframesRunner { runner, dofs: m.dofs(), groups: m.groups() })
             })
         }
     })
@@ -128,9 +78,10 @@ pub unsafe extern "C" fn zoo_keyframe_runner_new(
 /// Frees a runner (NULL is ignored).
 ///
 /// # Safety
-/// `runner` is NULL or a pointer from [`zoo_keyframe_runner_new`] not freed before and not in use.
+/// `runner` is NULL or a pointer from [`zoo_keyframes_runner_new`] not freed before and not in
+/// use.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_keyframe_runner_free(runner: *mut ZooKeyframeRunner) {
+pub unsafe extern "C" fn zoo_keyframes_runner_free(runner: *mut ZooKeyframesRunner) {
     unsafe { free_handle(runner) }
 }
 
@@ -144,8 +95,8 @@ pub unsafe extern "C" fn zoo_keyframe_runner_free(runner: *mut ZooKeyframeRunner
 /// `runner` is NULL or live and used by this thread only; each buffer is NULL or holds its given
 /// length.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_keyframe_complete(
-    runner: *mut ZooKeyframeRunner,
+pub unsafe extern "C" fn zoo_keyframes_complete(
+    runner: *mut ZooKeyframesRunner,
     frames: *const usize,
     frames_len: usize,
     poses: *const f32,
@@ -155,14 +106,14 @@ pub unsafe extern "C" fn zoo_keyframe_complete(
     out: *mut f32,
     out_len: usize,
 ) -> ZooStatus {
-    guard(|| unsafe {
+    guard("zoo_keyframes_complete", || unsafe {
         complete(runner, &[frames_len], frames, frames_len, poses, poses_len, fixed, fixed_len, out, out_len)
     })
 }
 
 /// Completes the keys of `count` characters in one graph call per frame (at most the runner's
 /// `max_batch`): character `c` has `key_counts[c]` keys, and `frames`, `poses`, `fixed` and
-/// `out` hold the characters' buffers of [`zoo_keyframe_complete`] one after the other
+/// `out` hold the characters' buffers of [`zoo_keyframes_complete`] one after the other
 /// (character-major; `fixed` NULL and 0 when every key is whole). A character's frames are
 /// those it gets alone. The runner: one thread at a time.
 ///
@@ -170,8 +121,8 @@ pub unsafe extern "C" fn zoo_keyframe_complete(
 /// `runner` is NULL or live and used by this thread only; each buffer is NULL or holds its given
 /// length.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_keyframe_complete_batch(
-    runner: *mut ZooKeyframeRunner,
+pub unsafe extern "C" fn zoo_keyframes_complete_batch(
+    runner: *mut ZooKeyframesRunner,
     key_counts: *const usize,
     count: usize,
     frames: *const usize,
@@ -183,19 +134,19 @@ pub unsafe extern "C" fn zoo_keyframe_complete_batch(
     out: *mut f32,
     out_len: usize,
 ) -> ZooStatus {
-    guard(|| {
+    guard("zoo_keyframes_complete_batch", || {
         let counts = unsafe { slice(key_counts, count, "key_counts") }?;
         check_count(count)?;
         unsafe { complete(runner, counts, frames, frames_len, poses, poses_len, fixed, fixed_len, out, out_len) }
     })
 }
 
-/// The completion of [`zoo_keyframe_complete_batch`], `counts` keys per character.
+/// The completion of [`zoo_keyframes_complete_batch`], `counts` keys per character.
 ///
 /// # Safety
-/// As [`zoo_keyframe_complete_batch`].
+/// As [`zoo_keyframes_complete_batch`].
 unsafe fn complete(
-    runner: *mut ZooKeyframeRunner,
+    runner: *mut ZooKeyframesRunner,
     counts: &[usize],
     frames: *const usize,
     frames_len: usize,
@@ -212,7 +163,7 @@ unsafe fn complete(
     let fixed = unsafe { optional_slice(fixed, fixed_len, "fixed") }?;
     let out = unsafe { slice_mut(out, out_len, "out") }?;
     let (d, g, n) = (r.dofs, r.groups, frames.len());
-    let info = "zoo_keyframe_model_info";
+    let info = INFO;
     let keys = counts.iter().try_fold(0usize, |a, c| a.checked_add(*c));
     if keys != Some(n) {
         return Err((
@@ -223,7 +174,7 @@ unsafe fn complete(
             ),
         ));
     }
-    check_size("poses", poses.len(), n * d, "floats", &format!("{info} (`dofs` floats per key)"))?;
+    check_size("poses", poses.len(), n * d, "floats", format_args!("{info} (`dofs` floats per key)"))?;
     if !fixed.is_empty() {
         if g == 0 {
             return Err((
@@ -234,7 +185,7 @@ unsafe fn complete(
                 ),
             ));
         }
-        check_size("fixed", fixed.len(), n * g, "flags", &format!("{info} (`groups` flags per key)"))?;
+        check_size("fixed", fixed.len(), n * g, "flags", format_args!("{info} (`groups` flags per key)"))?;
     }
     let mut keys = Vec::with_capacity(counts.len());
     let (mut at, mut total) = (0, 0usize);
@@ -261,7 +212,7 @@ unsafe fn complete(
         out.len(),
         total,
         "floats",
-        &format!("each character's last key frame + 1, times `dofs` ({info})"),
+        format_args!("each character's last key frame + 1, times `dofs` ({info})"),
     )?;
     let mut outs = Vec::with_capacity(keys.len());
     let mut rest = out;
@@ -270,5 +221,5 @@ unsafe fn complete(
         outs.push(head);
         rest = tail;
     }
-    r.runner.complete_batch(&keys, &mut outs).map_err(keyframe_failure)
+    r.runner.complete_batch(&keys, &mut outs).map_err(runtime_failure)
 }

@@ -1,44 +1,59 @@
 //! The C ABI of the zoo engine runtime (`zoo-runtime`), for engines that cannot link Rust:
 //! Unity (P/Invoke), Unreal and Godot (C/C++), or any language with a C FFI.
 //!
-//! Every task of the runtime has its loader and its calls, each model kind its own handle:
-//! - transitions (RTN, kind `rtn`): [`ZooModel`], [`ZooRunner`], [`ZooCharacters`] (this file);
-//! - keyframe completion (ARNN, kind `arnn`): [`ZooKeyframeModel`], [`ZooKeyframeRunner`]
-//!   (`keyframes.rs`);
-//! - locomotion stitching (RMR, kind `rmr`): [`ZooStitchModel`], the whole-sequence
-//!   [`zoo_stitch_refine`] and the streaming [`ZooStitchStream`] (`stitch.rs`);
-//! - random synthesis (RNN-GMM, kind `rnn-gmm`): [`ZooSynthesisModel`], [`ZooSynthesisRunner`],
-//!   [`ZooSynthesisCharacters`] (`synthesis.rs`), and its speed / facing controller
-//!   [`ZooControlRunner`], [`ZooControlCharacters`] (`control.rs`).
+//! One loader, one model handle, one naming pattern per task:
+//! - [`zoo_model_load`] loads any file written by `zoo export --onnx` (or a `--portable` main
+//!   file with its companions) into a [`ZooModel`]; [`zoo_model_task`] says its task
+//!   ([`ZooTask`]); [`zoo_model_info`] and [`zoo_model_skeleton`] describe every model (joints,
+//!   frame rate, units and axes, skeleton); [`zoo_model_free`] frees it (`model.rs`).
+//! - Each task's functions take that handle and share a prefix:
+//!   - `zoo_transition_*`: transitions (RTN, task `transition`): [`ZooTransitionRunner`],
+//!     [`ZooTransitionCharacters`], start from positions or engine poses, one step per frame
+//!     (`transition.rs`);
+//!   - `zoo_keyframes_*`: keyframe completion (ARNN, task `keyframes`): [`ZooKeyframesRunner`]
+//!     (`keyframes.rs`);
+//!   - `zoo_stitch_*`: locomotion stitching (RMR, task `stitch`): the whole-sequence
+//!     [`zoo_stitch_refine`] and the streaming [`ZooStitchStream`] (`stitch.rs`);
+//!   - `zoo_synthesis_*`: random synthesis (RNN-GMM, task `synthesis`):
+//!     [`ZooSynthesisRunner`], [`ZooSynthesisCharacters`] (`synthesis.rs`);
+//!   - `zoo_control_*`: speed / facing control of a `synthesis` model: [`ZooControlRunner`],
+//!     [`ZooControlCharacters`] (`control.rs`).
 //!
-//! A loader given a file of another kind refuses it with `ZOO_STATUS_WRONG_MODEL` and names the
-//! function that loads it.
+//!   A function given a model of another task returns `ZOO_STATUS_WRONG_MODEL`, and its message
+//!   names the task of the model and the functions that run it.
+//! - [`zoo_abi_version`] is the version of this ABI ([`ZOO_ABI_VERSION`] in the header an engine
+//!   compiled against); it goes up whenever the ABI changes incompatibly.
 //!
 //! The header `include/zoo.h` is generated from these files by cbindgen
 //! (`crates/capi/cbindgen.toml`) and checked up to date by `tests/capi.rs`;
-//! `examples/transition.c` and `examples/tasks.c` are complete programs.
+//! `examples/transition.c` (a transition engine loop) and `examples/tasks.c` (keyframes,
+//! stitching, synthesis and control, dispatched on [`zoo_model_task`]) are complete programs
+//! that compile as C99 and as C++17.
 //!
 //! # Conventions
 //! - Every fallible function returns a [`ZooStatus`]; `ZOO_STATUS_OK` is 0. On any other status,
-//!   [`zoo_last_error`] gives a readable message naming the problem and the fix (per thread).
+//!   [`zoo_last_error`] gives a readable message (per thread) that starts with the function's
+//!   name and names the problem and the fix in C terms: C functions and C argument names.
 //! - Handles are opaque (models, runners, characters, streams). Each has a `_free` function
 //!   that accepts NULL.
 //! - Buffers are passed as a pointer and a length in elements; the length is checked against what
 //!   the call needs, and a mismatch is an error, not a read past the buffer. An optional buffer
 //!   is NULL with a length of 0.
 //! - No panic crosses the boundary: one is caught and reported as `ZOO_STATUS_PANIC`.
+//! - A per-frame call (a step, a stream push or pop) allocates nothing once its handles exist.
 //! - Poses in positions are global joint positions, joint-major (`x0 y0 z0 x1 ...`), character-major
 //!   across a batch. Rotations are quaternions `x y z w`, joint-major, the model skeleton's order.
 //!   An engine pose is a [`ZooRootMotion`] and `4K` local rotations (`K` joints); a batch or a
 //!   sequence of them is an array of roots and one rotation buffer of `4K` values per root.
-//!   Contacts are bytes, 1 for a foot on the ground and 0 otherwise.
+//!   Contacts are bytes, 1 for a foot on the ground and 0 otherwise. Units and axes are the
+//!   model's ([`ZooModelInfo`]).
 //!
 //! # Thread safety
 //! - A loaded model is immutable after loading: any number of threads may use it at once (create
 //!   runners, characters and streams from it, read its info, refine a whole stitching
 //!   sequence). Free it after everything made from it, or before: what is made from a model
-//!   keeps what it needs. (One exception: [`zoo_stitch_model_set_window`] changes a stitching
-//!   model and needs it to itself.)
+//!   keeps what it needs. Two calls change a model and need it to themselves:
+//!   [`zoo_stitch_set_window`] and [`zoo_synthesis_set_refine`].
 //! - Runners, characters and streams may be used by one thread at a time (move them between
 //!   threads freely); a call takes one runner and one characters handle, so threads each with
 //!   their own pair run in parallel.
@@ -48,20 +63,31 @@
 #![allow(unsafe_code)]
 
 mod control;
+mod error;
 mod keyframes;
+mod model;
 mod stitch;
 mod synthesis;
+mod transition;
 
 pub use control::*;
 pub use keyframes::*;
+pub use model::*;
 pub use stitch::*;
 pub use synthesis::*;
+pub use transition::*;
 
-use std::cell::RefCell;
+pub(crate) use error::{Failure, guard, runtime_failure};
+
 use std::ffi::{CStr, c_char};
-use std::panic::{AssertUnwindSafe, catch_unwind};
+use zoo_runtime::EnginePose;
 use zoo_runtime::glam::{Quat, Vec3};
-use zoo_runtime::{EnginePose, LoadedModel, MotionError, TransitionModel, TransitionRunner, TransitionState};
+
+/// The version of this C ABI. [`zoo_abi_version`] returns the library's; an engine compares it
+/// with the value of the header it was compiled against and refuses to run on a mismatch.
+/// Version 2: one loader and one model handle for every task, `zoo_<task>_*` functions (version
+/// 1 had a loader and a model type per task, and unprefixed transition functions).
+pub const ZOO_ABI_VERSION: u32 = 2;
 
 /// Result of a call.
 #[repr(C)]
@@ -74,10 +100,11 @@ pub enum ZooStatus {
     /// An argument is wrong: a buffer of the wrong length, a non-finite value, a count of zero,
     /// a path that is not UTF-8.
     InvalidArgument = 2,
-    /// The model file cannot be read or is not an exported zoo model.
+    /// The model file cannot be read or is not an exported zoo model of a task this library
+    /// runs.
     LoadFailed = 3,
-    /// The model file is of another task than the loader's (the message names the function
-    /// that loads it).
+    /// The model is of another task than the function's (the message names the functions that
+    /// run it).
     WrongModel = 4,
     /// The call does not fit where the handle stands (a transition not started, already
     /// finished or longer than the model was trained for; characters not started; a stitching
@@ -86,48 +113,14 @@ pub enum ZooStatus {
     /// The graph failed to run.
     RunFailed = 6,
     /// The requested value is not known yet (e.g. the target miss before the blend window, a
-    /// stitching stream's next pose before it is ready).
+    /// stitching stream's next pose before it is ready) or the model has no such thing (the
+    /// terrain patch of a flat-ground transition model).
     NotAvailable = 7,
     /// An internal error (a caught panic): please report it with the message.
     Panic = 8,
 }
 
-/// A loaded transition model (opaque). Thread-safe: share it between threads.
-pub struct ZooModel {
-    model: TransitionModel,
-}
-
-/// Per-thread scratch space for running a model (opaque). One thread at a time.
-pub struct ZooRunner {
-    runner: TransitionRunner,
-}
-
-/// The transitions of a batch of characters (opaque). One thread at a time.
-pub struct ZooCharacters {
-    states: Vec<TransitionState>,
-    poses: Vec<EnginePose>,
-    inputs: Vec<EnginePose>,
-    joints: usize,
-}
-
-/// What a model expects.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct ZooModelInfo {
-    /// Number of joints K: a pose is `3K` positions or `4K` rotation values.
-    pub joints: usize,
-    /// Context frames the model was trained with (the paper's 10).
-    pub past_frames: usize,
-    /// Transition length the model was trained on (the paper's 30): a transition returns this
-    /// many frames and then the target frame.
-    pub transition_frames: usize,
-    /// Frames of the target blend at the end of a transition.
-    pub target_blend: usize,
-    /// Frames per second of the training data.
-    pub fps: f32,
-}
-
-/// The root of an engine pose (see `zoo_runtime::EnginePose`): the hips projected on the ground
+/// The root of an engine pose (the runtime's `EnginePose`): the hips projected on the ground
 /// and their facing, the root motion since the previous frame, and the hips in root space. The
 /// joints' local rotations travel in a separate `4K` float buffer per pose (the hips' relative to
 /// the root). On input only `root_position`, `root_rotation` and `hips_position` are read.
@@ -146,69 +139,33 @@ pub struct ZooRootMotion {
     pub hips_position: [f32; 3],
 }
 
-thread_local! {
-    static LAST_ERROR: RefCell<String> = const { RefCell::new(String::new()) };
+/// The version of this library's C ABI: [`ZOO_ABI_VERSION`] of the header it was built with.
+/// Thread-safe.
+#[unsafe(no_mangle)]
+pub extern "C" fn zoo_abi_version() -> u32 {
+    ZOO_ABI_VERSION
 }
 
-/// An error status and its message.
-pub(crate) type Failure = (ZooStatus, String);
-
-fn set_error(message: String) {
-    LAST_ERROR.with(|e| *e.borrow_mut() = message);
-}
-
-/// Runs `f`, records its error message, and turns a panic into `ZooStatus::Panic`.
-pub(crate) fn guard(f: impl FnOnce() -> Result<(), Failure>) -> ZooStatus {
-    match catch_unwind(AssertUnwindSafe(f)) {
-        Ok(Ok(())) => ZooStatus::Ok,
-        Ok(Err((status, message))) => {
-            set_error(message);
-            status
+/// Copies the calling thread's last error message into `buffer` (at most `capacity` bytes,
+/// NUL-terminated, truncated if needed) and returns the message's full length in bytes without
+/// the NUL (0 when the thread has no error). `buffer` may be NULL to ask for the length.
+/// Thread-safe.
+///
+/// # Safety
+/// `buffer` is NULL or valid for `capacity` bytes of writes.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_last_error(buffer: *mut c_char, capacity: usize) -> usize {
+    error::with_last_error(|message| {
+        if !buffer.is_null() && capacity > 0 {
+            let n = message.len().min(capacity - 1);
+            // SAFETY: the caller gives `capacity` writable bytes; n + 1 <= capacity.
+            unsafe {
+                std::ptr::copy_nonoverlapping(message.as_ptr(), buffer.cast::<u8>(), n);
+                buffer.add(n).write(0);
+            }
         }
-        Err(panic) => {
-            let what = panic
-                .downcast_ref::<&str>()
-                .map(|s| s.to_string())
-                .or_else(|| panic.downcast_ref::<String>().cloned())
-                .unwrap_or_else(|| "unknown panic".into());
-            set_error(format!("internal error in the zoo runtime ({what}); please report it"));
-            ZooStatus::Panic
-        }
-    }
-}
-
-/// The status of a runtime error.
-pub(crate) fn runtime_failure(e: MotionError) -> Failure {
-    let status = match &e {
-        MotionError::Io { .. }
-        | MotionError::NotOnnx { .. }
-        | MotionError::UnknownFormatVersion { .. }
-        | MotionError::BadGraphIo { .. }
-        | MotionError::Unsupported { .. }
-        | MotionError::FormatTooOld { .. }
-        | MotionError::MissingMetadata { .. }
-        | MotionError::BadMetadata { .. }
-        | MotionError::UnknownTask { .. }
-        | MotionError::UnknownModelKind { .. } => ZooStatus::LoadFailed,
-        MotionError::WrongTask { .. } => ZooStatus::WrongModel,
-        MotionError::BufferLength { .. }
-        | MotionError::BufferCount { .. }
-        | MotionError::NonFinite { .. }
-        | MotionError::StateMismatch { .. }
-        | MotionError::EmptyBatch
-        | MotionError::Stitch { .. }
-        | MotionError::Control { .. } => ZooStatus::InvalidArgument,
-        MotionError::TransitionSequence { .. } | MotionError::BeyondTrainedLength { .. } => ZooStatus::InvalidState,
-        _ => ZooStatus::RunFailed,
-    };
-    (status, e.to_string())
-}
-
-/// [`runtime_failure`] of starting transitions, naming the C call that gives a character its
-/// ground where the runtime names its Rust method.
-fn start_failure(e: MotionError) -> Failure {
-    let (status, message) = runtime_failure(e);
-    (status, message.replace("TransitionState::set_heightmap", "zoo_characters_set_heightmap"))
+        message.len()
+    })
 }
 
 pub(crate) fn null(what: &str) -> Failure {
@@ -253,29 +210,6 @@ pub(crate) unsafe fn slice_mut<'a, T>(ptr: *mut T, len: usize, what: &str) -> Re
     Ok(unsafe { std::slice::from_raw_parts_mut(ptr, len) })
 }
 
-pub(crate) fn check_len(what: &str, found: usize, expected: usize, unit: &str) -> Result<(), Failure> {
-    check_size(what, found, expected, unit, "zoo_model_info")
-}
-
-/// [`check_len`] for a buffer sized from what `info` reports.
-pub(crate) fn check_size(what: &str, found: usize, expected: usize, unit: &str, info: &str) -> Result<(), Failure> {
-    if found != expected {
-        return Err((
-            ZooStatus::InvalidArgument,
-            format!("`{what}` holds {found} {unit}, this call needs {expected}; size it from {info}"),
-        ));
-    }
-    Ok(())
-}
-
-/// Refuses a batch of no characters.
-pub(crate) fn check_count(count: usize) -> Result<(), Failure> {
-    if count == 0 {
-        return Err((ZooStatus::InvalidArgument, "`count` is 0; a batch needs at least one character".into()));
-    }
-    Ok(())
-}
-
 /// An optional buffer: NULL with a length of 0 is empty.
 ///
 /// # Safety
@@ -285,6 +219,36 @@ pub(crate) unsafe fn optional_slice<'a, T>(ptr: *const T, len: usize, what: &str
         return Ok(&[]);
     }
     unsafe { slice(ptr, len, what) }
+}
+
+/// Refuses a buffer `what` of `found` `unit` where the call needs `expected`; `info` says where
+/// its size comes from (formatted only on a refusal: pass `format_args!`, not `format!`, so that a
+/// per-frame call allocates nothing).
+pub(crate) fn check_size(
+    what: &str,
+    found: usize,
+    expected: usize,
+    unit: &str,
+    info: impl std::fmt::Display,
+) -> Result<(), Failure> {
+    if found != expected {
+        return Err((
+            ZooStatus::InvalidArgument,
+            format!("`{what}` holds {found} {unit}, this call needs {expected}; size it from {info}"),
+        ));
+    }
+    Ok(())
+}
+
+/// Where the joint count `K` of every pose buffer comes from.
+pub(crate) const JOINTS: &str = "zoo_model_info's `joints`";
+
+/// Refuses a batch of no characters.
+pub(crate) fn check_count(count: usize) -> Result<(), Failure> {
+    if count == 0 {
+        return Err((ZooStatus::InvalidArgument, "`count` is 0; a batch needs at least one character".into()));
+    }
+    Ok(())
 }
 
 /// A UTF-8 string from a NUL-terminated C string.
@@ -326,72 +290,6 @@ pub(crate) unsafe fn free_handle<T>(ptr: *mut T) {
     }
 }
 
-/// The model kinds this C ABI loads: kind, task, and the function that loads it.
-const LOADERS: [(&str, &str, &str); 4] = [
-    ("rtn", "transition", "zoo_model_load"),
-    ("arnn", "keyframes", "zoo_keyframe_model_load"),
-    ("rmr", "stitch", "zoo_stitch_model_load"),
-    ("rnn-gmm", "synthesis", "zoo_synthesis_model_load"),
-];
-
-/// The bytes of the model file `path` (a portable export's companion files put back) for the
-/// loader of model kind `kind`. A file of another kind this C ABI loads is refused with the
-/// function that loads it, one of a kind it does not know with the list; a file without a kind
-/// goes to the loader, which says what is missing.
-pub(crate) fn read_model(path: &str, kind: &str) -> Result<Vec<u8>, Failure> {
-    let bytes = zoo_runtime::portable::assemble(path).map_err(runtime_failure)?;
-    let found = zoo_runtime::metadata::model_kind(&bytes);
-    let Some(found) = found.filter(|f| f != kind) else { return Ok(bytes) };
-    let task = LOADERS.iter().find(|l| l.0 == kind).map_or("", |l| l.1);
-    match LOADERS.iter().find(|l| l.0 == found) {
-        Some((_, other, function)) => Err((
-            ZooStatus::WrongModel,
-            format!(
-                "{path} is a `{other}` model (kind `{found}`), not a `{task}` model (kind `{kind}`): load it with {function}"
-            ),
-        )),
-        None => {
-            let known: Vec<String> = LOADERS.iter().map(|(k, _, f)| format!("`{k}` ({f})")).collect();
-            Err((
-                ZooStatus::LoadFailed,
-                format!(
-                    "{path}: unknown model kind `{found}`; this C ABI loads the kinds {} written by `zoo export --onnx`",
-                    known.join(", ")
-                ),
-            ))
-        }
-    }
-}
-
-/// Prefixes a loader's error message with the file it read.
-pub(crate) fn in_file(path: &str) -> impl Fn(Failure) -> Failure + '_ {
-    move |(status, message)| (status, format!("{path}: {message}"))
-}
-
-/// Writes a skeleton: `K` parent indices (-1 for the root) into `parents` and `3K` rest offsets
-/// into `offsets`, both checked against `K`.
-///
-/// # Safety
-/// Each buffer is NULL or holds its given length of writable values.
-pub(crate) unsafe fn write_skeleton(
-    skeleton: (&[i32], &[[f32; 3]]),
-    parents: *mut i32,
-    parents_len: usize,
-    offsets: *mut f32,
-    offsets_len: usize,
-) -> Result<(), Failure> {
-    let k = skeleton.0.len();
-    let parents = unsafe { slice_mut(parents, parents_len, "parents") }?;
-    let offsets = unsafe { slice_mut(offsets, offsets_len, "offsets") }?;
-    check_size("parents", parents.len(), k, "values", "the model's info (`joints`)")?;
-    check_size("offsets", offsets.len(), 3 * k, "floats", "the model's info (`joints`)")?;
-    parents.copy_from_slice(skeleton.0);
-    for (out, o) in offsets.chunks_exact_mut(3).zip(skeleton.1) {
-        out.copy_from_slice(o);
-    }
-    Ok(())
-}
-
 /// Writes `value` through the output pointer `out`.
 ///
 /// # Safety
@@ -402,233 +300,6 @@ pub(crate) unsafe fn write_out<T>(out: *mut T, value: T, what: &str) -> Result<(
     }
     unsafe { out.write(value) };
     Ok(())
-}
-
-/// Copies the calling thread's last error message into `buffer` (at most `capacity` bytes,
-/// NUL-terminated, truncated if needed) and returns the message's full length in bytes without
-/// the NUL (0 when the thread has no error). `buffer` may be NULL to ask for the length.
-/// Thread-safe.
-///
-/// # Safety
-/// `buffer` is NULL or valid for `capacity` bytes of writes.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_last_error(buffer: *mut c_char, capacity: usize) -> usize {
-    LAST_ERROR.with(|e| {
-        let message = e.borrow();
-        if !buffer.is_null() && capacity > 0 {
-            let n = message.len().min(capacity - 1);
-            // SAFETY: the caller gives `capacity` writable bytes; n + 1 <= capacity.
-            unsafe {
-                std::ptr::copy_nonoverlapping(message.as_ptr(), buffer.cast::<u8>(), n);
-                buffer.add(n).write(0);
-            }
-        }
-        message.len()
-    })
-}
-
-/// Loads a transition model exported by `zoo export --onnx` from the file `path` (UTF-8,
-/// NUL-terminated) into `*out`; a `zoo export --portable` main file is loaded with the
-/// companion files beside it. Free it with [`zoo_model_free`]. A model of another task is
-/// refused with `ZOO_STATUS_WRONG_MODEL` and the function that loads it. Thread-safe.
-///
-/// # Safety
-/// `path` is NULL or a NUL-terminated string; `out` is NULL or valid for a write.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_model_load(path: *const c_char, out: *mut *mut ZooModel) -> ZooStatus {
-    guard(|| {
-        let path = unsafe { c_str(path, "path") }?;
-        unsafe {
-            new_handle(out, || {
-                let loaded = LoadedModel::from_bytes(&read_model(path, "rtn")?).map_err(runtime_failure)?;
-                let (kind, task) = (loaded.kind().to_string(), loaded.task());
-                let model = loaded.as_transition().cloned().ok_or_else(|| {
-                    (
-                        ZooStatus::WrongModel,
-                        format!(
-                            "{path} is a `{task}` model (kind `{kind}`); this C ABI runs transition models (kind rtn): export one with `zoo export --onnx RUN_DIR`"
-                        ),
-                    )
-                })?;
-                Ok(ZooModel { model })
-            })
-        }
-    })
-}
-
-/// Frees a model from [`zoo_model_load`] (NULL is ignored). Runners and characters made from it
-/// keep what they need, so they may be freed before or after it.
-///
-/// # Safety
-/// `model` is NULL or a pointer from [`zoo_model_load`] not freed before.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_model_free(model: *mut ZooModel) {
-    unsafe { free_handle(model) }
-}
-
-/// Writes what `model` expects into `*out`. Thread-safe.
-///
-/// # Safety
-/// `model` is NULL or a live model; `out` is NULL or valid for a write.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_model_info(model: *const ZooModel, out: *mut ZooModelInfo) -> ZooStatus {
-    guard(|| {
-        let m = &unsafe { handle(model, "model") }?.model;
-        let info = ZooModelInfo {
-            joints: m.joints(),
-            past_frames: m.past_frames(),
-            transition_frames: m.transition_frames(),
-            target_blend: m.target_blend(),
-            fps: m.model().metadata().fps,
-        };
-        unsafe { write_out(out, info, "out") }
-    })
-}
-
-/// Writes the model's skeleton: `parents` receives `K` parent indices (-1 for the root, every
-/// parent before its child) and `offsets` `3K` rest offsets from the parent (model units), both
-/// in the joint order of every pose. Thread-safe.
-///
-/// # Safety
-/// `model` is NULL or a live model; each buffer is NULL or holds its given length.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_model_skeleton(
-    model: *const ZooModel,
-    parents: *mut i32,
-    parents_len: usize,
-    offsets: *mut f32,
-    offsets_len: usize,
-) -> ZooStatus {
-    guard(|| {
-        let skeleton = &unsafe { handle(model, "model") }?.model.model().metadata().skeleton;
-        unsafe { write_skeleton((&skeleton.parents, &skeleton.offsets), parents, parents_len, offsets, offsets_len) }
-    })
-}
-
-/// Creates scratch space for running `model` on one thread at a time into `*out`; free it with
-/// [`zoo_runner_free`]. Transitions longer than the trained length are refused unless
-/// [`zoo_runner_allow_beyond_trained`].
-///
-/// # Safety
-/// `model` is NULL or a live model; `out` is NULL or valid for a write.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_runner_new(model: *const ZooModel, out: *mut *mut ZooRunner) -> ZooStatus {
-    guard(|| {
-        let m = &unsafe { handle(model, "model") }?.model;
-        unsafe { new_handle(out, || Ok(ZooRunner { runner: m.runner().map_err(runtime_failure)? })) }
-    })
-}
-
-/// Frees a runner (NULL is ignored).
-///
-/// # Safety
-/// `runner` is NULL or a pointer from [`zoo_runner_new`] not freed before and not in use.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_runner_free(runner: *mut ZooRunner) {
-    unsafe { free_handle(runner) }
-}
-
-/// Whether `runner` accepts transitions longer than the model was trained for (off by default:
-/// beyond its training length the network drifts from the target).
-///
-/// # Safety
-/// `runner` is NULL or a live runner used by this thread only.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_runner_allow_beyond_trained(runner: *mut ZooRunner, allow: bool) -> ZooStatus {
-    guard(|| {
-        unsafe { handle_mut(runner, "runner") }?.runner.allow_beyond_trained(allow);
-        Ok(())
-    })
-}
-
-/// Creates the transition states of `count` characters of `model` into `*out`; free them with
-/// [`zoo_characters_free`].
-///
-/// # Safety
-/// `model` is NULL or a live model; `out` is NULL or valid for a write.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_characters_new(
-    model: *const ZooModel,
-    count: usize,
-    out: *mut *mut ZooCharacters,
-) -> ZooStatus {
-    guard(|| {
-        let m = &unsafe { handle(model, "model") }?.model;
-        unsafe {
-            new_handle(out, || {
-                check_count(count)?;
-                let k = m.joints();
-                Ok(ZooCharacters {
-                    states: (0..count).map(|_| m.new_transition()).collect(),
-                    poses: (0..count).map(|_| EnginePose::new(k)).collect(),
-                    inputs: Vec::new(),
-                    joints: k,
-                })
-            })
-        }
-    })
-}
-
-/// Frees characters (NULL is ignored).
-///
-/// # Safety
-/// `characters` is NULL or a pointer from [`zoo_characters_new`] not freed before and not in use.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_characters_free(characters: *mut ZooCharacters) {
-    unsafe { free_handle(characters) }
-}
-
-/// Starts a transition of `length` frames for every character from global joint positions:
-/// `past` holds `N * frames * 3K` values (the same number of context frames per character),
-/// `target` and `next` `N * 3K` each (the target pose and the pose after it). `length` is the
-/// number of frames before the target frame; pass the model's `transition_frames` for the
-/// trained length. Then step it with [`zoo_step`].
-///
-/// # Safety
-/// Handles are NULL or live and used by this thread only; each buffer is NULL or holds its
-/// given length.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_start(
-    runner: *mut ZooRunner,
-    characters: *mut ZooCharacters,
-    past: *const f32,
-    past_len: usize,
-    target: *const f32,
-    target_len: usize,
-    next: *const f32,
-    next_len: usize,
-    length: usize,
-) -> ZooStatus {
-    guard(|| {
-        let runner = &mut unsafe { handle_mut(runner, "runner") }?.runner;
-        let chars = unsafe { handle_mut(characters, "characters") }?;
-        let past = unsafe { slice(past, past_len, "past") }?;
-        let target = unsafe { slice(target, target_len, "target") }?;
-        let next = unsafe { slice(next, next_len, "next") }?;
-        runner.start_batch_for(&mut chars.states, past, target, next, length).map_err(start_failure)
-    })
-}
-
-/// The next frame of every character's transition into `poses` (`N * 3K` global positions): the
-/// target-blended frames, the last one the target. Stepping past the target frame is
-/// `ZOO_STATUS_INVALID_STATE`.
-///
-/// # Safety
-/// Handles are NULL or live and used by this thread only; `poses` is NULL or holds `poses_len`
-/// writable floats.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_step(
-    runner: *mut ZooRunner,
-    characters: *mut ZooCharacters,
-    poses: *mut f32,
-    poses_len: usize,
-) -> ZooStatus {
-    guard(|| {
-        let runner = &mut unsafe { handle_mut(runner, "runner") }?.runner;
-        let chars = unsafe { handle_mut(characters, "characters") }?;
-        let poses = unsafe { slice_mut(poses, poses_len, "poses") }?;
-        runner.step_batch(&mut chars.states, poses).map_err(runtime_failure)
-    })
 }
 
 /// Reads an engine pose from its root and `4K` rotation values (the deltas are not read).
@@ -662,9 +333,8 @@ pub(crate) fn read_poses(
     rotations: &[f32],
     k: usize,
     poses: &mut Vec<EnginePose>,
-    info: &str,
 ) -> Result<(), Failure> {
-    check_size("rotations", rotations.len(), roots.len() * 4 * k, "floats", info)?;
+    check_size("rotations", rotations.len(), roots.len() * 4 * k, "floats", format_args!("4 * {JOINTS} per root"))?;
     poses.resize_with(roots.len(), || EnginePose::new(k));
     for ((root, rotations), pose) in roots.iter().zip(rotations.chunks_exact(4 * k)).zip(poses.iter_mut()) {
         read_pose(root, rotations, pose);
@@ -703,12 +373,12 @@ impl<'a> PoseOut<'a> {
     }
 
     /// Checks that the buffers hold `n` poses of `k` joints and `per` contacts each (`each`:
-    /// what there is one pose per, for the message; `info`: where `K` comes from).
-    pub(crate) fn check(&self, n: usize, k: usize, per: usize, each: &str, info: &str) -> Result<(), Failure> {
+    /// what there is one pose per, for the message).
+    pub(crate) fn check(&self, n: usize, k: usize, per: usize, each: &str) -> Result<(), Failure> {
         let [roots, rotations, contacts] = self.names;
-        check_size(roots, self.roots.len(), n, "roots", &format!("one per {each}"))?;
-        check_size(rotations, self.rotations.len(), n * 4 * k, "floats", &format!("4 `joints` per {each}, {info}"))?;
-        check_size(contacts, self.contacts.len(), n * per, "bytes", &format!("{per} per {each}"))
+        check_size(roots, self.roots.len(), n, "roots", format_args!("one per {each}"))?;
+        check_size(rotations, self.rotations.len(), n * 4 * k, "floats", format_args!("4 * {JOINTS} per {each}"))?;
+        check_size(contacts, self.contacts.len(), n * per, "bytes", format_args!("{per} per {each}"))
     }
 
     /// Writes pose `i` and its contacts (checked sizes).
@@ -719,228 +389,4 @@ impl<'a> PoseOut<'a> {
             *o = u8::from(*c);
         }
     }
-}
-
-/// Starts a transition of `length` frames for every character from engine poses: each pose is a
-/// [`ZooRootMotion`] and `4K` rotation values. `past_roots` holds `N * frames` roots (the same
-/// number of context frames per character, character-major) and `past_rotations` `4K` values
-/// per root; `target_*` and `next_*` one pose per character. Then [`zoo_step_posed`].
-///
-/// # Safety
-/// Handles are NULL or live and used by this thread only; each buffer is NULL or holds its
-/// given length.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_start_posed(
-    runner: *mut ZooRunner,
-    characters: *mut ZooCharacters,
-    past_roots: *const ZooRootMotion,
-    past_roots_len: usize,
-    past_rotations: *const f32,
-    past_rotations_len: usize,
-    target_roots: *const ZooRootMotion,
-    target_rotations: *const f32,
-    next_roots: *const ZooRootMotion,
-    next_rotations: *const f32,
-    rotations_len: usize,
-    length: usize,
-) -> ZooStatus {
-    guard(|| {
-        let runner = &mut unsafe { handle_mut(runner, "runner") }?.runner;
-        let chars = unsafe { handle_mut(characters, "characters") }?;
-        let (n, k) = (chars.states.len(), chars.joints);
-        let past_roots = unsafe { slice(past_roots, past_roots_len, "past_roots") }?;
-        let past_rotations = unsafe { slice(past_rotations, past_rotations_len, "past_rotations") }?;
-        let target_roots = unsafe { slice(target_roots, n, "target_roots") }?;
-        let next_roots = unsafe { slice(next_roots, n, "next_roots") }?;
-        check_len("target_rotations / next_rotations (rotations_len)", rotations_len, n * 4 * k, "floats")?;
-        let target_rotations = unsafe { slice(target_rotations, rotations_len, "target_rotations") }?;
-        let next_rotations = unsafe { slice(next_rotations, rotations_len, "next_rotations") }?;
-        if past_roots.is_empty() || !past_roots.len().is_multiple_of(n) {
-            return Err((
-                ZooStatus::InvalidArgument,
-                format!(
-                    "`past_roots` holds {} roots; it needs the same number of context frames (at least one) for each of the {n} characters",
-                    past_roots.len()
-                ),
-            ));
-        }
-        check_len("past_rotations", past_rotations.len(), past_roots.len() * 4 * k, "floats")?;
-        let frames = past_roots.len() / n;
-        let mut inputs = std::mem::take(&mut chars.inputs);
-        inputs.resize_with(past_roots.len() + 2 * n, || EnginePose::new(k));
-        for (i, root) in past_roots.iter().enumerate() {
-            read_pose(root, &past_rotations[i * 4 * k..(i + 1) * 4 * k], &mut inputs[i]);
-        }
-        let at = past_roots.len();
-        for c in 0..n {
-            read_pose(&target_roots[c], &target_rotations[c * 4 * k..(c + 1) * 4 * k], &mut inputs[at + c]);
-            read_pose(&next_roots[c], &next_rotations[c * 4 * k..(c + 1) * 4 * k], &mut inputs[at + n + c]);
-        }
-        let (past, rest) = inputs.split_at(at);
-        let (target, next) = rest.split_at(n);
-        debug_assert_eq!(past.len(), n * frames);
-        let result = runner.start_posed_batch_for(&mut chars.states, past, target, next, length);
-        chars.inputs = inputs;
-        result.map_err(start_failure)
-    })
-}
-
-/// The next frame of every character's transition (started with [`zoo_start_posed`]) as engine
-/// poses: `roots` receives `N` [`ZooRootMotion`] and `rotations` `N * 4K` local rotations (the
-/// hips' relative to the root), fitted to the network's frame inside the runtime.
-///
-/// # Safety
-/// Handles are NULL or live and used by this thread only; each buffer is NULL or holds its
-/// given length of writable values.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_step_posed(
-    runner: *mut ZooRunner,
-    characters: *mut ZooCharacters,
-    roots: *mut ZooRootMotion,
-    roots_len: usize,
-    rotations: *mut f32,
-    rotations_len: usize,
-) -> ZooStatus {
-    guard(|| {
-        let runner = &mut unsafe { handle_mut(runner, "runner") }?.runner;
-        let chars = unsafe { handle_mut(characters, "characters") }?;
-        let (n, k) = (chars.states.len(), chars.joints);
-        let roots = unsafe { slice_mut(roots, roots_len, "roots") }?;
-        let rotations = unsafe { slice_mut(rotations, rotations_len, "rotations") }?;
-        check_len("roots", roots.len(), n, "roots")?;
-        check_len("rotations", rotations.len(), n * 4 * k, "floats")?;
-        runner.step_posed_batch(&mut chars.states, &mut chars.poses).map_err(runtime_failure)?;
-        for ((pose, root), rotations) in chars.poses.iter().zip(roots).zip(rotations.chunks_exact_mut(4 * k)) {
-            write_pose(pose, root, rotations);
-        }
-        Ok(())
-    })
-}
-
-/// The terrain patch of a terrain-aware transition model: `*side` samples per side on a square
-/// of `*extent` model units around the root. `ZOO_STATUS_NOT_AVAILABLE` for a model without
-/// terrain input (a flat-ground model). Thread-safe.
-///
-/// # Safety
-/// `model` is NULL or a live model; `side` and `extent` are NULL or writable.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_model_terrain(model: *const ZooModel, side: *mut usize, extent: *mut f32) -> ZooStatus {
-    guard(|| {
-        let m = &unsafe { handle(model, "model") }?.model;
-        let Some((s, e)) = m.terrain() else {
-            return Err((
-                ZooStatus::NotAvailable,
-                "the model has no terrain input (it was trained without `zoo train rtn --terrain`)".into(),
-            ));
-        };
-        unsafe { write_out(side, s, "side") }?;
-        unsafe { write_out(extent, e, "extent") }
-    })
-}
-
-/// Sets the ground under character `index`: a heightmap of `cols * rows` heights (model units,
-/// Y up) on a regular grid in the XZ plane, sample `(i, k)` at `(origin_x + i * cell, origin_z +
-/// k * cell)` stored at `heights[k * cols + i]`, bilinear between samples and extended beyond
-/// the border (the `zoo-heightfield` layout of `zoo data synth --terrain`). The map is copied.
-/// A terrain-aware model ([`zoo_model_terrain`]) needs it before [`zoo_start`] or
-/// [`zoo_start_posed`]; a flat-ground model ignores it. `heights` NULL with `heights_len` 0
-/// removes the ground. Takes effect at the next step. One thread at a time.
-///
-/// # Safety
-/// `characters` is NULL or live and used by this thread only; `heights` is NULL or holds
-/// `heights_len` floats.
-#[unsafe(no_mangle)]
-#[allow(clippy::too_many_arguments)]
-pub unsafe extern "C" fn zoo_characters_set_heightmap(
-    characters: *mut ZooCharacters,
-    index: usize,
-    cols: usize,
-    rows: usize,
-    cell: f32,
-    origin_x: f32,
-    origin_z: f32,
-    heights: *const f32,
-    heights_len: usize,
-) -> ZooStatus {
-    guard(|| {
-        let chars = unsafe { handle_mut(characters, "characters") }?;
-        let heights = unsafe { optional_slice(heights, heights_len, "heights") }?;
-        character(chars, index)?;
-        if heights.is_empty() {
-            chars.states[index].set_heightmap(None);
-            return Ok(());
-        }
-        let invalid = |m: String| (ZooStatus::InvalidArgument, m);
-        if cols == 0 || rows == 0 {
-            return Err(invalid(format!("the heightmap is {cols} x {rows} samples; it needs at least 1 x 1")));
-        }
-        check_size("heights", heights.len(), cols.saturating_mul(rows), "floats (cols * rows)", "its cols and rows")?;
-        if !(cell.is_finite() && cell > 0.0) {
-            return Err(invalid(format!("`cell` is {cell}; the distance between samples must be a positive number")));
-        }
-        if !(origin_x.is_finite() && origin_z.is_finite()) {
-            return Err(invalid(format!("the origin ({origin_x}, {origin_z}) must be finite")));
-        }
-        if let Some(i) = heights.iter().position(|h| !h.is_finite()) {
-            return Err(invalid(format!("height {i} is {}; every height must be finite", heights[i])));
-        }
-        let map = zoo_runtime::Heightmap {
-            cols,
-            rows,
-            cell: cell as f64,
-            origin: [origin_x as f64, origin_z as f64],
-            heights: heights.to_vec(),
-        };
-        chars.states[index].set_heightmap(Some(std::sync::Arc::new(map)));
-        Ok(())
-    })
-}
-
-/// Frames character `index`'s transition still returns (0 once it returned its target frame).
-///
-/// # Safety
-/// `characters` is NULL or live and used by this thread only; `out` is NULL or writable.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_frames_left(characters: *const ZooCharacters, index: usize, out: *mut usize) -> ZooStatus {
-    guard(|| {
-        let chars = unsafe { handle(characters, "characters") }?;
-        let s = character(chars, index)?;
-        unsafe { write_out(out, s.frames_left(), "out") }
-    })
-}
-
-/// How far the network's own target frame for character `index` lay from the requested target
-/// before the blend hid it (mean and largest joint distance, model units): a cue to fall back
-/// to inertialization. `ZOO_STATUS_NOT_AVAILABLE` before stepping reaches the blend window.
-///
-/// # Safety
-/// `characters` is NULL or live and used by this thread only; `mean` and `max` are NULL or
-/// writable.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_target_miss(
-    characters: *const ZooCharacters,
-    index: usize,
-    mean: *mut f32,
-    max: *mut f32,
-) -> ZooStatus {
-    guard(|| {
-        let chars = unsafe { handle(characters, "characters") }?;
-        let miss = character(chars, index)?.target_miss().ok_or_else(|| {
-            (
-                ZooStatus::NotAvailable,
-                format!("character {index}: the target miss is known once stepping reaches the blend window"),
-            )
-        })?;
-        unsafe { write_out(mean, miss.mean, "mean") }?;
-        unsafe { write_out(max, miss.max, "max") }
-    })
-}
-
-fn character(chars: &ZooCharacters, index: usize) -> Result<&TransitionState, Failure> {
-    chars.states.get(index).ok_or_else(|| {
-        (
-            ZooStatus::InvalidArgument,
-            format!("character {index} does not exist: the batch has {} (0-based)", chars.states.len()),
-        )
-    })
 }

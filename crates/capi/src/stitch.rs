@@ -1,42 +1,35 @@
-//! Locomotion stitching (RMR, model kind `rmr`, `zoo_runtime::stitch`): a [`ZooStitchModel`]
-//! refines motion put together from clips (aligned end to start, at the model's frame rate, on
-//! its skeleton), either a whole sequence at once ([`zoo_stitch_refine`]) or as a stream for
-//! motion matching ([`ZooStitchStream`]: one pose pushed per frame, refined poses popped with a
-//! fixed latency of `window - 1` frames).
+//! Locomotion stitching (RMR, task `stitch`, `zoo_runtime::stitch`): a `stitch` model refines
+//! motion put together from clips (aligned end to start, at the model's frame rate, on its
+//! skeleton: [`crate::zoo_model_skeleton`]), either a whole sequence at once
+//! ([`zoo_stitch_refine`]) or as a stream for motion matching ([`ZooStitchStream`]: one pose
+//! pushed per frame, refined poses popped with a fixed latency of `window - 1` frames).
 //!
 //! Poses are engine poses: a [`ZooRootMotion`] and `4K` local rotations each. Contacts are 4
 //! bytes per frame, heel left, toe left, heel right, toe right (1: on the ground).
 
+use crate::model::model;
 use crate::{
-    Failure, PoseOut, ZooRootMotion, ZooStatus, c_str, check_size, free_handle, guard, handle, handle_mut, in_file,
-    new_handle, read_model, read_pose, read_poses, runtime_failure, slice, write_out, write_skeleton,
+    Failure, JOINTS, PoseOut, ZooModel, ZooRootMotion, ZooStatus, check_size, free_handle, guard, handle, handle_mut,
+    new_handle, read_pose, read_poses, runtime_failure, slice, write_out,
 };
-use std::ffi::c_char;
 use std::sync::Arc;
-use zoo_runtime::stitch::{FootCleanup, RMR_KIND, StitchRefiner, StitchStreamOf};
+use zoo_runtime::stitch::{FootCleanup, StitchRefiner, StitchStreamOf};
 use zoo_runtime::{EnginePose, MotionError};
-
-/// A loaded stitching model (opaque). Thread-safe: share it between threads (except
-/// [`zoo_stitch_model_set_window`]).
-pub struct ZooStitchModel {
-    refiner: Arc<StitchRefiner>,
-}
 
 /// A stitching stream (opaque): poses pushed one per frame, refined poses popped `latency`
 /// frames later. One thread at a time.
 pub struct ZooStitchStream {
     /// Holds the model's refiner (an `Arc`), so the stream outlives nothing it needs, and
-    /// [`zoo_stitch_model_set_window`] refuses to change that refiner while this handle lives.
+    /// [`zoo_stitch_set_window`] refuses to change that refiner while this handle lives.
     stream: StitchStreamOf<Arc<StitchRefiner>>,
     pose: EnginePose,
 }
 
-/// What a stitching model expects.
+/// What a stitching model expects besides `ZooModelInfo` (whose `fps` the motion must
+/// have, and whose `joints` every pose).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ZooStitchInfo {
-    /// Number of joints K of the model's skeleton: a pose is a root and `4K` rotation values.
-    pub joints: usize,
     /// Frames per refined window `w`: a sequence needs at least this many frames.
     pub window: usize,
     /// Frames between windows `s`.
@@ -46,81 +39,24 @@ pub struct ZooStitchInfo {
     /// Latency of a stream in frames (`w - 1`): the refined pose of frame `t` is ready once frame
     /// `t + latency` is pushed.
     pub latency: usize,
-    /// Frames per second the motion must have.
-    pub fps: f32,
 }
 
-const INFO: &str = "zoo_stitch_model_info";
-
-/// Loads a stitching model exported by `zoo export --onnx` from a `zoo train rmr` run (model
-/// kind `rmr`) from the file `path` (UTF-8, NUL-terminated) into `*out`, planned for its
-/// training window. Free it with [`zoo_stitch_model_free`]. A model of another task is refused
-/// with `ZOO_STATUS_WRONG_MODEL` and the function that loads it. Thread-safe.
-///
-/// # Safety
-/// `path` is NULL or a NUL-terminated string; `out` is NULL or valid for a write.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_stitch_model_load(path: *const c_char, out: *mut *mut ZooStitchModel) -> ZooStatus {
-    guard(|| {
-        let path = unsafe { c_str(path, "path") }?;
-        unsafe {
-            new_handle(out, || {
-                let bytes = read_model(path, RMR_KIND)?;
-                let refiner = StitchRefiner::from_bytes(&bytes).map_err(runtime_failure).map_err(in_file(path))?;
-                Ok(ZooStitchModel { refiner: Arc::new(refiner) })
-            })
-        }
-    })
-}
-
-/// Frees a model from [`zoo_stitch_model_load`] (NULL is ignored). Streams made from it keep
-/// what they need, so they may be freed before or after it.
-///
-/// # Safety
-/// `model` is NULL or a pointer from [`zoo_stitch_model_load`] not freed before and not in use.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_stitch_model_free(model: *mut ZooStitchModel) {
-    unsafe { free_handle(model) }
-}
-
-/// Writes what `model` expects into `*out`. Thread-safe.
+/// Writes what a stitching model expects into `*out` (for the window it is planned for).
+/// Thread-safe.
 ///
 /// # Safety
 /// `model` is NULL or a live model; `out` is NULL or valid for a write.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_stitch_model_info(model: *const ZooStitchModel, out: *mut ZooStitchInfo) -> ZooStatus {
-    guard(|| {
-        let r = &unsafe { handle(model, "model") }?.refiner;
+pub unsafe extern "C" fn zoo_stitch_info(model: *const ZooModel, out: *mut ZooStitchInfo) -> ZooStatus {
+    guard("zoo_stitch_info", || {
+        let r = unsafe { self::model(model) }?.stitch()?;
         let info = ZooStitchInfo {
-            joints: r.joints(),
             window: r.window(),
             stride: r.stride(),
             blend_frames: r.blend_frames(),
             latency: r.stream().latency(),
-            fps: r.fps() as f32,
         };
         unsafe { write_out(out, info, "out") }
-    })
-}
-
-/// Writes the model's skeleton as `zoo_model_skeleton` does (`K` parents, `3K`
-/// offsets, the joint order of every pose). Poses must have these bone lengths. Thread-safe.
-///
-/// # Safety
-/// As `zoo_model_skeleton`.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_stitch_model_skeleton(
-    model: *const ZooStitchModel,
-    parents: *mut i32,
-    parents_len: usize,
-    offsets: *mut f32,
-    offsets_len: usize,
-) -> ZooStatus {
-    guard(|| {
-        let skeleton = unsafe { handle(model, "model") }?.refiner.skeleton();
-        let p: Vec<i32> = skeleton.parents.iter().map(|p| p.map_or(-1, |p| p as i32)).collect();
-        let o: Vec<[f32; 3]> = skeleton.offsets.iter().map(|o| o.as_vec3().to_array()).collect();
-        unsafe { write_skeleton((&p, &o), parents, parents_len, offsets, offsets_len) }
     })
 }
 
@@ -132,14 +68,10 @@ pub unsafe extern "C" fn zoo_stitch_model_skeleton(
 /// # Safety
 /// `model` is NULL or a live model used by no other thread during the call.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_stitch_model_set_window(
-    model: *mut ZooStitchModel,
-    window: usize,
-    stride: usize,
-) -> ZooStatus {
-    guard(|| {
-        let m = unsafe { handle_mut(model, "model") }?;
-        let refiner = Arc::get_mut(&mut m.refiner).ok_or_else(|| {
+pub unsafe extern "C" fn zoo_stitch_set_window(model: *mut ZooModel, window: usize, stride: usize) -> ZooStatus {
+    guard("zoo_stitch_set_window", || {
+        let m = unsafe { handle_mut(model, "model") }?.stitch_mut()?;
+        let refiner = Arc::get_mut(m).ok_or_else(|| {
             (
                 ZooStatus::InvalidState,
                 "streams made from this model are alive; free them (zoo_stitch_stream_free) before planning another window"
@@ -162,7 +94,7 @@ pub unsafe extern "C" fn zoo_stitch_model_set_window(
 /// `model` is NULL or a live model; each buffer is NULL or holds its given length.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_stitch_refine(
-    model: *const ZooStitchModel,
+    model: *const ZooModel,
     roots: *const ZooRootMotion,
     frames: usize,
     rotations: *const f32,
@@ -176,8 +108,8 @@ pub unsafe extern "C" fn zoo_stitch_refine(
     contacts: *mut u8,
     contacts_len: usize,
 ) -> ZooStatus {
-    guard(|| {
-        let r = &unsafe { handle(model, "model") }?.refiner;
+    guard("zoo_stitch_refine", || {
+        let r = unsafe { self::model(model) }?.stitch()?;
         let k = r.joints();
         let roots = unsafe { slice(roots, frames, "roots") }?;
         let rotations = unsafe { slice(rotations, rotations_len, "rotations") }?;
@@ -188,9 +120,9 @@ pub unsafe extern "C" fn zoo_stitch_refine(
                 (contacts, contacts_len, "contacts"),
             )
         }?;
-        out.check(frames, k, 4, "input pose", INFO)?;
+        out.check(frames, k, 4, "input pose")?;
         let mut input = Vec::new();
-        read_poses(roots, rotations, k, &mut input, INFO)?;
+        read_poses(roots, rotations, k, &mut input)?;
         let mut refined = vec![EnginePose::new(k); frames];
         let mut predicted = vec![[false; 4]; frames];
         let cleanup = FootCleanup { place_ankles, lock_feet };
@@ -209,12 +141,9 @@ pub unsafe extern "C" fn zoo_stitch_refine(
 /// # Safety
 /// `model` is NULL or a live model; `out` is NULL or valid for a write.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_stitch_stream_new(
-    model: *const ZooStitchModel,
-    out: *mut *mut ZooStitchStream,
-) -> ZooStatus {
-    guard(|| {
-        let refiner = Arc::clone(&unsafe { handle(model, "model") }?.refiner);
+pub unsafe extern "C" fn zoo_stitch_stream_new(model: *const ZooModel, out: *mut *mut ZooStitchStream) -> ZooStatus {
+    guard("zoo_stitch_stream_new", || {
+        let refiner = Arc::clone(unsafe { self::model(model) }?.stitch()?);
         let pose = EnginePose::new(refiner.joints());
         unsafe { new_handle(out, || Ok(ZooStitchStream { stream: refiner.shared_stream(), pose })) }
     })
@@ -232,10 +161,9 @@ pub unsafe extern "C" fn zoo_stitch_stream_free(stream: *mut ZooStitchStream) {
 /// A stream's refusal: a call that does not fit where the stream stands (finished, too short to
 /// finish) is `ZOO_STATUS_INVALID_STATE`.
 fn stream_failure(e: MotionError) -> Failure {
-    match e {
-        MotionError::Stitch { .. } => (ZooStatus::InvalidState, e.to_string()),
-        e => runtime_failure(e),
-    }
+    let out_of_order = matches!(e, MotionError::Stitch { .. });
+    let (status, message) = runtime_failure(e);
+    (if out_of_order { ZooStatus::InvalidState } else { status }, message)
 }
 
 /// Pushes the next frame of the aligned motion: one pose, `root` and `4K` floats of
@@ -252,11 +180,11 @@ pub unsafe extern "C" fn zoo_stitch_stream_push(
     rotations: *const f32,
     rotations_len: usize,
 ) -> ZooStatus {
-    guard(|| {
+    guard("zoo_stitch_stream_push", || {
         let s = unsafe { handle_mut(stream, "stream") }?;
         let root = unsafe { handle(root, "root") }?;
         let rotations = unsafe { slice(rotations, rotations_len, "rotations") }?;
-        check_size("rotations", rotations.len(), 4 * s.pose.joints(), "floats", INFO)?;
+        check_size("rotations", rotations.len(), 4 * s.pose.joints(), "floats", format_args!("4 * {JOINTS}"))?;
         read_pose(root, rotations, &mut s.pose);
         s.stream.push(&s.pose).map_err(stream_failure)
     })
@@ -268,7 +196,7 @@ pub unsafe extern "C" fn zoo_stitch_stream_push(
 /// `stream` is NULL or live and used by this thread only; `ready` is NULL or writable.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_stitch_stream_ready(stream: *const ZooStitchStream, ready: *mut bool) -> ZooStatus {
-    guard(|| {
+    guard("zoo_stitch_stream_ready", || {
         let s = unsafe { handle(stream, "stream") }?;
         unsafe { write_out(ready, s.stream.ready(), "ready") }
     })
@@ -292,7 +220,7 @@ pub unsafe extern "C" fn zoo_stitch_stream_pop(
     contacts: *mut u8,
     contacts_len: usize,
 ) -> ZooStatus {
-    guard(|| {
+    guard("zoo_stitch_stream_pop", || {
         let s = unsafe { handle_mut(stream, "stream") }?;
         let mut out = unsafe {
             PoseOut::new(
@@ -301,7 +229,7 @@ pub unsafe extern "C" fn zoo_stitch_stream_pop(
                 (contacts, contacts_len, "contacts"),
             )
         }?;
-        out.check(1, s.pose.joints(), 4, "pop", INFO)?;
+        out.check(1, s.pose.joints(), 4, "pop")?;
         let Some(predicted) = s.stream.pop(&mut s.pose).map_err(stream_failure)? else {
             let next = s.stream.popped();
             let message = if s.stream.is_finished() {
@@ -328,7 +256,7 @@ pub unsafe extern "C" fn zoo_stitch_stream_pop(
 /// `stream` is NULL or live and used by this thread only.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_stitch_stream_finish(stream: *mut ZooStitchStream) -> ZooStatus {
-    guard(|| {
+    guard("zoo_stitch_stream_finish", || {
         let s = unsafe { handle_mut(stream, "stream") }?;
         s.stream.finish().map_err(stream_failure)
     })

@@ -1,25 +1,20 @@
-//! Random motion synthesis (RNN-GMM, model kind `rnn-gmm`, `zoo_runtime::synthesis`): a
-//! [`ZooSynthesisModel`] generates motion for a batch of seeded characters
-//! ([`ZooSynthesisCharacters`]), one frame per [`zoo_synthesis_step`] of a
-//! [`ZooSynthesisRunner`], as engine poses and left / right foot contacts.
+//! Random motion synthesis (RNN-GMM, task `synthesis`, `zoo_runtime::synthesis`): a `synthesis`
+//! model generates motion for a batch of seeded characters ([`ZooSynthesisCharacters`]), one
+//! frame per [`zoo_synthesis_step`] of a [`ZooSynthesisRunner`], as engine poses and left /
+//! right foot contacts. Its speed / facing controller is `control.rs` (`zoo_control_*`).
 //!
 //! A character's frames depend only on its seed, its start frame and placement: the same in
 //! any batch, on any thread, in any run, bit for bit. A feature frame (`D` floats, clip units)
 //! is the model's own encoding of a pose (`zoo_rnngmm::FeatureSpec::encode`); engines without
-//! one start from the data's mean frame ([`zoo_synthesis_model_mean_frame`]).
+//! one start from the data's mean frame ([`zoo_synthesis_mean_frame`]).
 
+use crate::model::{Family, model};
 use crate::{
-    Failure, PoseOut, ZooRootMotion, ZooStatus, c_str, check_count, check_size, free_handle, guard, handle, handle_mut,
-    in_file, new_handle, read_model, runtime_failure, slice, slice_mut, write_out, write_skeleton,
+    Failure, PoseOut, ZooModel, ZooRootMotion, ZooStatus, check_count, check_size, free_handle, guard, handle_mut,
+    new_handle, runtime_failure, slice, slice_mut, write_out,
 };
-use std::ffi::c_char;
 use zoo_runtime::synthesis::{SynthesisCharacter, SynthesisModel, SynthesisRunner};
 use zoo_runtime::{EnginePose, MotionError};
-
-/// A loaded synthesis model (opaque). Thread-safe: share it between threads.
-pub struct ZooSynthesisModel {
-    pub(crate) model: SynthesisModel,
-}
 
 /// Scratch space for stepping characters (opaque). One thread at a time.
 pub struct ZooSynthesisRunner {
@@ -36,22 +31,19 @@ pub struct ZooSynthesisCharacters {
     started: bool,
 }
 
-/// What a synthesis model expects.
+/// What a synthesis model expects besides `ZooModelInfo` (whose `joints` every pose
+/// has, and whose `fps` the generated motion).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ZooSynthesisInfo {
-    /// Number of joints K: a pose is a root and `4K` rotation values.
-    pub joints: usize,
     /// Values `D` of a feature frame (a start frame): `6 + 3 (K - 1) + 2`.
     pub frame_dim: usize,
-    /// Whether each generated frame is refined (the file embeds the refiner and the model was
-    /// loaded with `refine`).
+    /// Whether runners and characters made now refine each generated frame (the file embeds the
+    /// refiner and [`zoo_synthesis_set_refine`] did not turn it off).
     pub has_refiner: bool,
-    /// Frames per second of the generated motion.
-    pub fps: f32,
 }
 
-const INFO: &str = "zoo_synthesis_model_info";
+const INFO: &str = "zoo_synthesis_info";
 
 /// What must agree between a runner and the characters it steps (`frame_dim`, joints,
 /// refiner).
@@ -66,88 +58,36 @@ pub(crate) fn check_shape(runner: Shape, characters: Shape) -> Result<(), Failur
     if runner != characters {
         return Err((
             ZooStatus::InvalidArgument,
-            "the characters were made from another model than the runner: step characters with a runner of their model"
+            "the characters were made from another model than the runner (or on the other side of \
+             zoo_synthesis_set_refine): step characters with a runner made from the same model"
                 .into(),
         ));
     }
     Ok(())
 }
 
-/// Loads a synthesis model exported by `zoo export --onnx` from a `zoo train rnn-gmm` run (model
-/// kind `rnn-gmm`) from the file `path` (UTF-8, NUL-terminated; a `zoo export --portable` main
-/// file with its companion files) into `*out`. `refine`: run the file's refiner behind the
-/// generator when it has one (false: the generator's own frames). Free it with
-/// [`zoo_synthesis_model_free`]. A model of another task is refused with
-/// `ZOO_STATUS_WRONG_MODEL` and the function that loads it. Thread-safe.
-///
-/// # Safety
-/// `path` is NULL or a NUL-terminated string; `out` is NULL or valid for a write.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_synthesis_model_load(
-    path: *const c_char,
-    refine: bool,
-    out: *mut *mut ZooSynthesisModel,
-) -> ZooStatus {
-    guard(|| {
-        let path = unsafe { c_str(path, "path") }?;
-        unsafe {
-            new_handle(out, || {
-                let bytes = read_model(path, "rnn-gmm")?;
-                let model = SynthesisModel::from_bytes(&bytes).map_err(runtime_failure).map_err(in_file(path))?;
-                Ok(ZooSynthesisModel { model: if refine { model } else { model.without_refiner() } })
-            })
-        }
-    })
-}
-
-/// Frees a model from [`zoo_synthesis_model_load`] (NULL is ignored). Runners and characters
-/// made from it keep what they need, so they may be freed before or after it.
-///
-/// # Safety
-/// `model` is NULL or a pointer from [`zoo_synthesis_model_load`] not freed before.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_synthesis_model_free(model: *mut ZooSynthesisModel) {
-    unsafe { free_handle(model) }
-}
-
-/// Writes what `model` expects into `*out`. Thread-safe.
+/// Writes what a synthesis model expects into `*out`. Thread-safe.
 ///
 /// # Safety
 /// `model` is NULL or a live model; `out` is NULL or valid for a write.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_synthesis_model_info(
-    model: *const ZooSynthesisModel,
-    out: *mut ZooSynthesisInfo,
-) -> ZooStatus {
-    guard(|| {
-        let m = &unsafe { handle(model, "model") }?.model;
-        let info = ZooSynthesisInfo {
-            joints: m.joints(),
-            frame_dim: m.frame_dim(),
-            has_refiner: m.has_refiner(),
-            fps: m.model().metadata().fps,
-        };
-        unsafe { write_out(out, info, "out") }
+pub unsafe extern "C" fn zoo_synthesis_info(model: *const ZooModel, out: *mut ZooSynthesisInfo) -> ZooStatus {
+    guard("zoo_synthesis_info", || {
+        let m = unsafe { self::model(model) }?.synthesis(Family::Synthesis)?;
+        unsafe { write_out(out, ZooSynthesisInfo { frame_dim: m.frame_dim(), has_refiner: m.has_refiner() }, "out") }
     })
 }
 
-/// Writes the model's skeleton as `zoo_model_skeleton` does (`K` parents, `3K`
-/// offsets, the joint order of every pose). Thread-safe.
+/// Whether runners and characters made from `model` from now on (synthesis and control) run
+/// the file's refiner behind the generator when it has one (`refine`, the default after
+/// loading) or the generator's own frames. Those made before keep theirs. Not thread-safe: no
+/// other thread may use the model during the call.
 ///
 /// # Safety
-/// As `zoo_model_skeleton`.
+/// `model` is NULL or a live model used by no other thread during the call.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_synthesis_model_skeleton(
-    model: *const ZooSynthesisModel,
-    parents: *mut i32,
-    parents_len: usize,
-    offsets: *mut f32,
-    offsets_len: usize,
-) -> ZooStatus {
-    guard(|| {
-        let skeleton = &unsafe { handle(model, "model") }?.model.model().metadata().skeleton;
-        unsafe { write_skeleton((&skeleton.parents, &skeleton.offsets), parents, parents_len, offsets, offsets_len) }
-    })
+pub unsafe extern "C" fn zoo_synthesis_set_refine(model: *mut ZooModel, refine: bool) -> ZooStatus {
+    guard("zoo_synthesis_set_refine", || unsafe { handle_mut(model, "model") }?.set_refine(refine))
 }
 
 /// Writes the training data's mean feature frame (`D` floats, clip units) into `frame`: a
@@ -156,15 +96,15 @@ pub unsafe extern "C" fn zoo_synthesis_model_skeleton(
 /// # Safety
 /// `model` is NULL or a live model; `frame` is NULL or holds `frame_len` writable floats.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_synthesis_model_mean_frame(
-    model: *const ZooSynthesisModel,
+pub unsafe extern "C" fn zoo_synthesis_mean_frame(
+    model: *const ZooModel,
     frame: *mut f32,
     frame_len: usize,
 ) -> ZooStatus {
-    guard(|| {
-        let m = &unsafe { handle(model, "model") }?.model;
+    guard("zoo_synthesis_mean_frame", || {
+        let m = unsafe { self::model(model) }?.synthesis(Family::Synthesis)?;
         let frame = unsafe { slice_mut(frame, frame_len, "frame") }?;
-        check_size("frame", frame.len(), m.frame_dim(), "floats", &format!("{INFO} (`frame_dim`)"))?;
+        check_size("frame", frame.len(), m.frame_dim(), "floats", format_args!("{INFO} (`frame_dim`)"))?;
         let mean = m.model().metadata().normalization.get("x").map(|n| n.mean.as_slice()).unwrap_or_default();
         if mean.len() != frame.len() {
             return Err((ZooStatus::RunFailed, "the model has no mean frame; re-export it".into()));
@@ -182,12 +122,12 @@ pub unsafe extern "C" fn zoo_synthesis_model_mean_frame(
 /// `model` is NULL or a live model; `out` is NULL or valid for a write.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_synthesis_runner_new(
-    model: *const ZooSynthesisModel,
+    model: *const ZooModel,
     max_batch: usize,
     out: *mut *mut ZooSynthesisRunner,
 ) -> ZooStatus {
-    guard(|| {
-        let m = &unsafe { handle(model, "model") }?.model;
+    guard("zoo_synthesis_runner_new", || {
+        let m = unsafe { self::model(model) }?.synthesis(Family::Synthesis)?;
         unsafe {
             new_handle(out, || {
                 Ok(ZooSynthesisRunner { runner: m.runner(max_batch).map_err(runtime_failure)?, shape: shape(m) })
@@ -214,13 +154,13 @@ pub unsafe extern "C" fn zoo_synthesis_runner_free(runner: *mut ZooSynthesisRunn
 /// valid for a write.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_synthesis_characters_new(
-    model: *const ZooSynthesisModel,
+    model: *const ZooModel,
     seeds: *const u64,
     count: usize,
     out: *mut *mut ZooSynthesisCharacters,
 ) -> ZooStatus {
-    guard(|| {
-        let m = &unsafe { handle(model, "model") }?.model;
+    guard("zoo_synthesis_characters_new", || {
+        let m = unsafe { self::model(model) }?.synthesis(Family::Synthesis)?;
         let seeds = unsafe { slice(seeds, count, "seeds") }?;
         unsafe {
             new_handle(out, || {
@@ -293,12 +233,12 @@ pub unsafe extern "C" fn zoo_synthesis_start(
     placements: *const f32,
     placements_len: usize,
 ) -> ZooStatus {
-    guard(|| {
+    guard("zoo_synthesis_start", || {
         let chars = unsafe { handle_mut(characters, "characters") }?;
         let frames = unsafe { slice(frames, frames_len, "frames") }?;
         let placements = unsafe { slice(placements, placements_len, "placements") }?;
         let (n, d) = (chars.characters.len(), chars.model.frame_dim());
-        check_size("frames", frames.len(), n * d, "floats", &format!("{INFO} (`frame_dim` per character)"))?;
+        check_size("frames", frames.len(), n * d, "floats", format_args!("{INFO} (`frame_dim` per character)"))?;
         let model = &chars.model;
         start_all(&mut chars.characters, frames, d, placements, |ch, f, [x, z, yaw]| ch.start(model, f, x, z, yaw))?;
         chars.started = true;
@@ -327,12 +267,12 @@ pub unsafe extern "C" fn zoo_synthesis_step(
     contacts: *mut u8,
     contacts_len: usize,
 ) -> ZooStatus {
-    guard(|| {
+    guard("zoo_synthesis_step", || {
         let r = unsafe { handle_mut(runner, "runner") }?;
         let chars = unsafe { handle_mut(characters, "characters") }?;
         let mut out = unsafe { step_out(roots, roots_len, rotations, rotations_len, contacts, contacts_len) }?;
         check_shape(r.shape, shape(&chars.model))?;
-        out.check(chars.characters.len(), chars.model.joints(), 2, "character", INFO)?;
+        out.check(chars.characters.len(), chars.model.joints(), 2, "character")?;
         if !chars.started {
             return Err(not_started("zoo_synthesis_start"));
         }
