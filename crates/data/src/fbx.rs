@@ -226,7 +226,7 @@ pub fn read_bytes(bytes: &[u8], path: &Path, opts: &ReadOptions) -> Result<(Clip
     }
     let (t0, t1) = (stack.time_begin, stack.time_end);
     let span = (t1 - t0) * fps;
-    if !(span.is_finite() && span >= 0.0 && span < 1e7) {
+    if !(0.0..1e7).contains(&span) {
         return Err(err(path, format!("take `{}` runs from {t0} s to {t1} s: not a time range", stack.element.name)));
     }
     let frames = span.round() as usize + 1;
@@ -294,7 +294,7 @@ fn matrix_xform(m: &ufbx::Matrix) -> Result<Xform, String> {
         return Err("not a rotation with a uniform scale".into());
     }
     let r = DQuat::from_mat3(&glam::DMat3::from_cols(c[0] / s, c[1] / s, c[2] / s));
-    if !(glam::DMat3::from_cols(c[0], c[1], c[2]).determinant() > 0.0) {
+    if glam::DMat3::from_cols(c[0], c[1], c[2]).determinant() <= 0.0 {
         return Err("a mirrored (negative-scale) matrix".into());
     }
     Ok(Xform { r: r.normalize(), t: DVec3::new(m.m03, m.m13, m.m23), s })
