@@ -489,3 +489,37 @@ fn unwritable_outputs_are_refused_before_the_work() {
     let err = failure(Command::new(zoo_bin()).args(["data", "stats", "none", "--json"]).arg(missing.join("s.json")));
     assert!(err.contains("--json") && err.contains("does not exist"), "{err}");
 }
+
+#[test]
+fn commands_that_take_an_exported_file_refuse_another_task_with_the_command_to_use() {
+    let dir = tempfile::tempdir().unwrap();
+    toy_dataset(dir.path());
+    let files = [
+        ("rtn.onnx", zoo_tests::tiny_rtn_onnx()),
+        ("arnn.onnx", zoo_tests::tiny_arnn_onnx()),
+        ("rmr.onnx", zoo_tests::tiny_rmr_onnx()),
+    ];
+    for (name, model) in &files {
+        model.write(&dir.path().join(name)).unwrap();
+    }
+    let path = |name: &str| dir.path().join(name);
+    // An ARNN in the in-betweening benchmark's `onnx:` method.
+    let err = failure(Command::new(zoo_bin()).args(["bench", "--data"]).arg(dir.path()).args([
+        "--valid-glob",
+        "*_youthful_*",
+        "--methods",
+        &format!("onnx:{}", path("arnn.onnx").display()),
+    ]));
+    assert!(
+        err.contains("is a `keyframes` model (kind `arnn`)") && err.contains("`zoo bench keyframes --model FILE`"),
+        "{err}"
+    );
+    // An RMR in `zoo bench runtime`, an RTN in `zoo bench keyframes`.
+    let err = failure(Command::new(zoo_bin()).args(["bench", "runtime", "--model"]).arg(path("rmr.onnx")));
+    assert!(err.contains("is a `stitch` model (kind `rmr`)") && err.contains("zoo_runtime::StitchRefiner"), "{err}");
+    let err = failure(Command::new(zoo_bin()).args(["bench", "keyframes", "--model"]).arg(path("rtn.onnx")));
+    assert!(
+        err.contains("is a `transition` model (kind `rtn`)") && err.contains("`zoo bench runtime --model FILE`"),
+        "{err}"
+    );
+}
