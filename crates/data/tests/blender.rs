@@ -44,10 +44,16 @@ if args[0] == "glb2json":
     arm = [o for o in bpy.context.scene.objects if o.type == "ARMATURE"][0]
     action = arm.animation_data.action
     first, last = [int(round(f)) for f in action.frame_range]
-    out = {"first": first, "frames": []}
+    mesh = [o for o in bpy.context.scene.objects if o.type == "MESH"][0]
+    out = {"first": first, "frames": [], "mesh": {}}
     for f in range(first, last + 1):
         bpy.context.scene.frame_set(f)
         out["frames"].append({pb.name: list(arm.matrix_world @ pb.head) for pb in arm.pose.bones})
+        if (f - first) % 20 == 0:
+            ev = mesh.evaluated_get(bpy.context.evaluated_depsgraph_get())
+            me = ev.to_mesh()
+            out["mesh"][f - first] = [list(ev.matrix_world @ v.co) for v in me.vertices]
+            ev.to_mesh_clear()
     json.dump(out, open(args[2], "w"))
 elif args[0] == "glb2fbx":
     for path in args[2:]:
@@ -134,6 +140,24 @@ fn blender_imports_the_written_glb_at_the_same_joint_positions() {
     }
     println!("Blender glTF import of zoo's glb: largest joint position difference {worst:.2e} cm");
     assert!(worst < 0.1, "{worst} cm");
+    // The stick figure follows the skeleton: each bone's double pyramid has its tips at the two
+    // joints, so every joint but the root has a deformed mesh vertex on it.
+    let blender_to_zoo = |b: &serde_json::Value| {
+        let b: Vec<f64> = b.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+        glam::DVec3::new(b[0], b[2], -b[1]) * 100.0
+    };
+    let mut mesh_worst = 0.0f64;
+    for (f, verts) in v["mesh"].as_object().unwrap() {
+        let f: usize = f.parse().unwrap();
+        let verts: Vec<glam::DVec3> = verts.as_array().unwrap().iter().map(blender_to_zoo).collect();
+        for j in 1..nj {
+            let p = gp[f * nj + j];
+            let d = verts.iter().map(|v| (*v - p).length()).fold(f64::INFINITY, f64::min);
+            mesh_worst = mesh_worst.max(d);
+        }
+    }
+    println!("Blender's skinned stick figure: every joint within {mesh_worst:.2e} cm of a mesh vertex");
+    assert!(mesh_worst < 0.1, "{mesh_worst} cm");
 }
 
 #[test]
