@@ -26,7 +26,8 @@ pub enum DataCommand {
 /// Arguments of `zoo data stats`.
 #[derive(Args)]
 pub struct StatsArgs {
-    /// A `.bvh`/`.bvh.gz` file or a folder searched recursively.
+    /// A clip file (`.bvh`, `.bvh.gz`, `.glb`, `.gltf`, `.fbx`) or a folder searched recursively (formats
+    /// may be mixed when the skeletons agree; docs/formats.md).
     pub path: PathBuf,
     /// Also write the statistics as JSON to this file.
     #[arg(long)]
