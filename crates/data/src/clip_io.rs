@@ -8,7 +8,7 @@
 //!
 //! Every clip read is in zoo's frame ([`CoordinateFrame::ZOO_CM`]); [`ClipSource`] records the
 //! file's own units and axes. glTF and FBX rotations are expressed relative to the rig's rest
-//! pose (see [`crate::scene`]), so that, as in BVH, the rest pose is the identity on every joint.
+//! pose (see `scene.rs`), so that, as in BVH, the rest pose is the identity on every joint.
 
 use crate::bvh::{self, BvhError};
 use std::path::{Path, PathBuf};
@@ -51,9 +51,9 @@ impl ClipFormat {
     }
 }
 
-/// The extensions [`read`] accepts, for messages.
+/// The extensions [`read()`] accepts, for messages.
 pub const READ_EXTENSIONS: &str = ".bvh, .bvh.gz, .glb, .gltf or .fbx";
-/// The extensions [`write`] accepts, for messages.
+/// The extensions [`write()`] accepts, for messages.
 pub const WRITE_EXTENSIONS: &str = ".bvh, .bvh.gz, .glb or .gltf";
 
 /// Whether a path names a clip file zoo reads.

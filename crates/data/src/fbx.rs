@@ -8,7 +8,7 @@
 //! orders included) and composed with every node above it. The file's units and axes (its
 //! global settings: `UnitScaleFactor`, up/front/coord axes) are converted to zoo's centimetres,
 //! Y up, right-handed, and rotations are expressed relative to the bind (rest) pose of the
-//! nodes, as for glTF ([`crate::scene`]). Leaf bones named `*_end` (Blender's leaf bones),
+//! nodes, as for glTF (`scene.rs`). Leaf bones named `*_end` (Blender's leaf bones),
 //! `*End` or `*Nub` become their parent's end site. Scale must be uniform and positive on
 //! every bone and above it.
 

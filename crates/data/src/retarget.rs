@@ -8,7 +8,7 @@
 //!
 //! [`retarget`] moves a clip onto the target skeleton: every target joint takes the *global*
 //! rotation of its rig joint relative to the rig's rest pose (zoo's rest pose: identity
-//! rotations, see [`crate::scene`]), turned by the rest-pose difference of the two rigs (the
+//! rotations, see `scene.rs`), turned by the rest-pose difference of the two rigs (the
 //! rotation that takes the target's rest bone directions onto the rig's: T-pose against
 //! A-pose); local rotations follow from the target's hierarchy, bone lengths are the target's,
 //! and the root's translation is scaled by the ratio of the rigs' leg lengths. Supported: the
