@@ -7,7 +7,8 @@
 //! is sampled at the clip's frame rate with each channel's interpolation (`STEP`, `LINEAR`:
 //! lerp and slerp, `CUBICSPLINE`: Hermite), before its first key at its first value, after its
 //! last at its last. The frame rate is the one zoo wrote (`extras.zoo.frame_time` of the
-//! animation), else the key spacing of the channel with the most keys. Scale channels whose
+//! animation), else the key spacing of the channel with the most keys (a whole number of frames
+//! per second when it is one within float rounding). Scale channels whose
 //! values are not 1 are refused; a static uniform scale on a node is folded in. glTF is
 //! metres, Y up, right-handed: positions are converted to centimetres. Leaf joints named
 //! `*_end` / `*End` / `*Nub` become their parent's end site.
@@ -547,7 +548,13 @@ fn read_document(
     let frame_time = zoo_frame_time(anim).unwrap_or_else(|| {
         let c = channels.iter().max_by_key(|c| c.times.len()).expect("channels is not empty");
         let n = c.times.len();
-        if n >= 2 { (c.times[n - 1] as f64 - c.times[0] as f64) / (n - 1) as f64 } else { 1.0 / 30.0 }
+        if n < 2 {
+            return 1.0 / 30.0;
+        }
+        let dt = (c.times[n - 1] as f64 - c.times[0] as f64) / (n - 1) as f64;
+        // f32 key times: a whole frame rate within float rounding is that rate.
+        let fps = 1.0 / dt;
+        if (fps - fps.round()).abs() < 1e-5 * fps { 1.0 / fps.round() } else { dt }
     });
     let span = (t1 - t0) / frame_time;
     if !(span.is_finite() && span < 1e7) {
