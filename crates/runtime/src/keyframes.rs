@@ -61,7 +61,7 @@ impl MotionKeys<'_> {
     }
 
     /// The keys around frame `t >= 1` and `t_rel` (`zoo_data::luxo::preprocess::KeyedSequence::interval`).
-    fn interval(&self, t: usize) -> (usize, usize, f32) {
+    pub(crate) fn interval(&self, t: usize) -> (usize, usize, f32) {
         let n = self.frames.len();
         let mut k = 0;
         while k + 2 < n && self.frames[k + 1] < t {

@@ -36,6 +36,7 @@ pub use zoo_format as metadata;
 pub mod model;
 pub mod portable;
 pub mod pose;
+pub mod reference;
 pub mod runner;
 pub mod stitch;
 pub mod synthesis;

@@ -300,6 +300,12 @@ impl SynthesisCharacter {
     pub fn rng_state(&self) -> u64 {
         self.rng.state()
     }
+
+    /// The current frame, normalised: the start frame, then the last sampled frame (the next
+    /// step's input). For reference vectors ([`crate::reference`]).
+    pub(crate) fn frame(&self) -> &[f32] {
+        &self.x
+    }
 }
 
 /// Draws a frame `x` (`D` values) from a mixture (`w`: `M` weights, `mu`, `sd`: `M D` each) as
@@ -320,6 +326,18 @@ pub(crate) fn draw_frame(rng: &mut SplitMix64, w: &[f32], mu: &[f32], sd: &[f32]
         let z = rng.normal();
         x[j] = (mu[k * d + j] as f64 + temperature * sd[k * d + j] as f64 * z) as f32;
     }
+}
+
+/// One character's view of the last step of a [`SynthesisRunner`].
+pub(crate) struct LastStep<'a> {
+    /// The mixture's weights (`M`).
+    pub(crate) weights: &'a [f32],
+    /// Its means (`M D`, normalised).
+    pub(crate) means: &'a [f32],
+    /// Its standard deviations (`M D`, normalised).
+    pub(crate) stds: &'a [f32],
+    /// The refined frame (`D`, normalised; `None` without a refiner).
+    pub(crate) refined: Option<&'a [f32]>,
 }
 
 /// Steps characters on one thread. The generator's step, the sampling and the decoding
@@ -443,6 +461,18 @@ impl SynthesisRunner {
             contacts[c] = self.decode(ch, refined.then_some(c), &mut poses[c]);
         }
         Ok(())
+    }
+
+    /// The last step of character `c` (its row of the batch). For reference vectors
+    /// ([`crate::reference`]).
+    pub(crate) fn last_step(&self, c: usize) -> LastStep<'_> {
+        let (d, m) = (self.model.task.frame_dim, self.model.task.components);
+        LastStep {
+            weights: &self.weights[c * m..(c + 1) * m],
+            means: &self.means[c * m * d..(c + 1) * m * d],
+            stds: &self.stds[c * m * d..(c + 1) * m * d],
+            refined: self.model.refiner.as_ref().map(|_| &self.refined[c * d..(c + 1) * d]),
+        }
     }
 
     /// Refines every character's new frame into row `c` of `self.refined` (eq. 11), in one run

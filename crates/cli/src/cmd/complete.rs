@@ -43,6 +43,21 @@ pub struct CompleteArgs {
     /// Frames per second of the output [default: the keys file's `fps`, else 50].
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::fps)]
     pub fps: Option<f64>,
+    /// Also write the global joint positions of every completed frame (forward kinematics of
+    /// the written BVH's skeleton, its units) to this JSON file (docs/runtime-protocol.md,
+    /// "Positions files").
+    #[arg(long, value_name = "FILE.json")]
+    pub positions: Option<PathBuf>,
+}
+
+/// Writes `--positions` for the clip `zoo complete` wrote, if asked.
+fn write_positions(a: &CompleteArgs, clip: &zoo_motion::Clip, first_frame: usize) -> anyhow::Result<()> {
+    let Some(p) = &a.positions else { return Ok(()) };
+    let extra = serde_json::json!({ "first_frame": first_frame });
+    crate::cmd::transition::write_json_atomically(
+        p,
+        &crate::cmd::transition::clip_positions_json("complete", clip, extra),
+    )
 }
 
 /// One key as written in the file: a lamp key gives its `pose`; a humanoid key takes its pose
@@ -301,6 +316,9 @@ pub fn run(a: CompleteArgs) -> anyhow::Result<()> {
     if let Some(p) = &a.plot {
         crate::cmd::check_output_file("--plot", p)?;
     }
+    if let Some(p) = &a.positions {
+        crate::cmd::check_output_file("--positions", p)?;
+    }
     let (model, norm) = zoo_arnn::checkpoint::load(&a.model, &candle_core::Device::Cpu)
         .with_context(|| format!("loading the ARNN in {}", a.model.display()))?;
     let config = model.config();
@@ -332,8 +350,9 @@ pub fn run(a: CompleteArgs) -> anyhow::Result<()> {
         .map(|f| <LampPose>::try_from(f.as_slice()))
         .collect::<Result<_, _>>()
         .map_err(|_| anyhow::anyhow!("the model completes {} values per frame, not the lamp's 6", config.dofs))?;
-    zoo_data::bvh::write_file(&poses_to_clip(&poses, fps, &lamp), &a.out)
-        .with_context(|| format!("writing {}", a.out.display()))?;
+    let clip = poses_to_clip(&poses, fps, &lamp);
+    zoo_data::bvh::write_file(&clip, &a.out).with_context(|| format!("writing {}", a.out.display()))?;
+    write_positions(&a, &clip, keys.offset)?;
     if let Some(j) = &a.json {
         let v = serde_json::json!({
             "format": COMPLETION_FORMAT,
@@ -410,6 +429,7 @@ fn complete_humanoid(
         done.clip.frame_time = 1.0 / fps;
     }
     zoo_data::bvh::write_file(&done.clip, &a.out).with_context(|| format!("writing {}", a.out.display()))?;
+    write_positions(a, &done.clip, keys.offset)?;
     let (deg, key, joint) = done.angle_miss;
     if let Some(j) = &a.json {
         let v = serde_json::json!({

@@ -49,6 +49,43 @@ pub struct ExportArgs {
     /// layers are unrolled over it (default: the model's runtime window).
     #[arg(long, requires = "portable", value_parser = clap::value_parser!(u32).range(1..=100_000))]
     pub frames: Option<u32>,
+    /// Also write reference vectors of the exported model to this JSON file: deterministic
+    /// inputs and the runtime's outputs step by step (raw network outputs and engine poses),
+    /// for checking an implementation of docs/runtime-protocol.md on another engine.
+    #[arg(long, value_name = "FILE.json")]
+    pub reference: Option<PathBuf>,
+}
+
+/// Writes the reference vectors of `model` (`zoo_runtime::reference`) to `--reference`, if
+/// given: the file as the runtime loads it, written to a temporary name and renamed.
+fn write_reference(a: &ExportArgs, model: &OnnxModel) -> anyhow::Result<()> {
+    use zoo_runtime::reference::{REFERENCE_SEED, reference_vectors};
+    let Some(path) = &a.reference else { return Ok(()) };
+    let loaded = zoo_runtime::LoadedModel::from_bytes(&model.to_bytes())
+        .context("--reference: the runtime cannot load the exported model")?;
+    let vectors = reference_vectors(&loaded, REFERENCE_SEED)
+        .with_context(|| format!("--reference {}: computing the reference vectors", path.display()))?;
+    let cases = vectors.transition.len() + vectors.keyframes.len() + vectors.stitch.len() + vectors.synthesis.len();
+    let tmp = path.with_file_name(format!(".{}.tmp", path.file_name().unwrap_or_default().to_string_lossy()));
+    std::fs::write(&tmp, serde_json::to_string(&vectors)?).with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))?;
+    let check = if a.portable {
+        String::new()
+    } else {
+        format!(
+            "; check an implementation with `python3 scripts/runtime_protocol.py {} {}`",
+            a.out.display(),
+            path.display()
+        )
+    };
+    println!(
+        "wrote {}: reference vectors of the `{}` model, {cases} {} case(s) (seed {REFERENCE_SEED}, \
+         docs/runtime-protocol.md){check}",
+        path.display(),
+        vectors.model_kind,
+        vectors.task,
+    );
+    Ok(())
 }
 
 /// The model kinds `zoo export` writes.
@@ -130,6 +167,9 @@ fn write_portable(a: &ExportArgs, model: &OnnxModel, what: &str, frames: Option<
 /// Runs `zoo export`.
 pub fn run(a: ExportArgs) -> anyhow::Result<()> {
     crate::cmd::check_output_file("--out", &a.out)?;
+    if let Some(r) = &a.reference {
+        crate::cmd::check_output_file("--reference", r)?;
+    }
     let mut options = RtnExportOptions { fps: a.fps, ..RtnExportOptions::default() };
     if let Some(u) = &a.units {
         let metres_per_unit = zoo_motion::frame::CoordinateFrame::metres_per(u).context("--units: cm, m, mm or in")?;
@@ -160,17 +200,19 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
                 let source =
                     if a.frames.is_some() { "--frames" } else { "the model's runtime window; --frames N to change" };
                 println!("fixing the RMR window graph's `frames` dimension to {frames} ({source})");
-                return write_portable(&a, &model, "RMR window refiner", Some(frames));
+                write_portable(&a, &model, "RMR window refiner", Some(frames))?;
+                return write_reference(&a, &model);
             }
             model.write(&a.out)?;
             println!("wrote {}: RMR window refiner with its configuration and statistics", a.out.display());
-            return Ok(());
+            return write_reference(&a, &model);
         }
         Some(zoo_rnngmm::export::MODEL_KIND) => {
             let model = zoo_rnngmm::export::export_generator_dir(&a.onnx)
                 .with_context(|| format!("exporting {}", a.onnx.display()))?;
             if a.portable {
-                return write_portable(&a, &model, "RNN-GMM generator step graph", None);
+                write_portable(&a, &model, "RNN-GMM generator step graph", None)?;
+                return write_reference(&a, &model);
             }
             model.write(&a.out)?;
             let summary = model.summary();
@@ -182,13 +224,14 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
                 summary.parameters,
                 if refiner { "and the refiner's step graph" } else { "without a refiner (generator stage only)" }
             );
-            return Ok(());
+            return write_reference(&a, &model);
         }
         Some(zoo_arnn::export::MODEL_KIND) => {
             let model = zoo_arnn::export::export_arnn_dir(&a.onnx)
                 .with_context(|| format!("exporting {}", a.onnx.display()))?;
             if a.portable {
-                return write_portable(&a, &model, "ARNN step graph", None);
+                write_portable(&a, &model, "ARNN step graph", None)?;
+                return write_reference(&a, &model);
             }
             model.write(&a.out)?;
             let summary = model.summary();
@@ -198,7 +241,7 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
                 summary.op_counts.values().sum::<usize>(),
                 summary.parameters
             );
-            return Ok(());
+            return write_reference(&a, &model);
         }
         Some(other) => bail!(
             "{}: `zoo export` does not know model `{other}` (config.json \"model\"); it exports: {}",
@@ -236,7 +279,8 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
     }
     let model = export_rtn_dir(&a.onnx, &options).with_context(|| format!("exporting {}", a.onnx.display()))?;
     if a.portable {
-        return write_portable(&a, &model, "RTN step graph", None);
+        write_portable(&a, &model, "RTN step graph", None)?;
+        return write_reference(&a, &model);
     }
     model.write(&a.out)?;
     let summary = model.summary();
@@ -246,5 +290,5 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
         summary.op_counts.values().sum::<usize>(),
         summary.parameters
     );
-    Ok(())
+    write_reference(&a, &model)
 }

@@ -51,6 +51,11 @@ pub struct GenerateArgs {
     /// Steps of the initial state estimation (eq. 26, `0..=10000`); 0 starts from the zero state.
     #[arg(long, default_value_t = 50, value_parser = init_steps)]
     pub init_steps: usize,
+    /// Also write the global joint positions of every generated frame (forward kinematics of
+    /// the decoded frames) to this JSON file (docs/runtime-protocol.md, "Positions files"); for
+    /// one sequence (`--count 1`).
+    #[arg(long, value_name = "FILE.json")]
+    pub positions: Option<PathBuf>,
 }
 
 /// The most Adam steps `--init-steps` takes (each is a forward and backward pass over the seed).
@@ -184,6 +189,7 @@ fn generate_one(
     frame: usize,
     opts: &SynthesisOptions,
     (bvh, json): (&Path, &Path),
+    positions: Option<&Path>,
     pb: &ProgressBar,
 ) -> anyhow::Result<()> {
     let tmp = |p: &Path| p.with_file_name(format!(".{}.tmp", p.file_name().unwrap_or_default().to_string_lossy()));
@@ -201,11 +207,15 @@ fn generate_one(
             g.spec.fps, opts.frames
         )?;
         let mut done = 0;
+        let mut frames_xyz = Vec::new();
         while done < opts.frames {
             let n = CHUNK.min(opts.frames - done);
             let mut chunk = stream.next_chunk(n)?;
             chunk.motion.clip.skeleton.channels[0].position = true;
             out.write(&chunk.motion.clip, opts.frames)?;
+            if positions.is_some() {
+                frames_xyz.extend(crate::cmd::transition::clip_positions(&chunk.motion.clip));
+            }
             for (i, c) in chunk.motion.contacts.iter().enumerate() {
                 let sep = if done + i == 0 { "\n" } else { ",\n" };
                 write!(cj, "{sep}[{}, {}]", c[0] as u8, c[1] as u8)?;
@@ -218,6 +228,18 @@ fn generate_one(
         cj.into_inner().map_err(|e| e.into_error())?.sync_all()?;
         std::fs::rename(&bvh_tmp, bvh).with_context(|| format!("writing {}", bvh.display()))?;
         std::fs::rename(&json_tmp, json).with_context(|| format!("writing {}", json.display()))?;
+        if let Some(p) = positions {
+            let v = serde_json::json!({
+                "format": crate::cmd::transition::POSITIONS_FORMAT,
+                "version": 1,
+                "command": "generate",
+                "joints": clip.skeleton.names,
+                "fps": g.spec.fps,
+                "seed": opts.seed,
+                "frames": frames_xyz,
+            });
+            crate::cmd::transition::write_json_atomically(p, &v)?;
+        }
         Ok(())
     })();
     if result.is_err() {
@@ -236,6 +258,16 @@ pub fn run(a: GenerateArgs) -> anyhow::Result<()> {
             a.out.display(),
             a.count
         );
+    }
+    if let Some(p) = &a.positions {
+        if a.count > 1 {
+            bail!(
+                "--positions {} is one file but --count {} asks for several sequences: generate them one at a time",
+                p.display(),
+                a.count
+            );
+        }
+        crate::cmd::check_output_file("--positions", p)?;
     }
     if single {
         crate::cmd::check_output_file("--out", &a.out)?;
@@ -270,7 +302,7 @@ pub fn run(a: GenerateArgs) -> anyhow::Result<()> {
             ..SynthesisOptions::default()
         };
         let (bvh, json) = outputs(&a.out, single, seed);
-        generate_one(&g, refiner.as_ref(), &clip, frame, &opts, (&bvh, &json), &pb)
+        generate_one(&g, refiner.as_ref(), &clip, frame, &opts, (&bvh, &json), a.positions.as_deref(), &pb)
             .with_context(|| format!("generating sequence {} (seed {seed})", i + 1))?;
     }
     pb.finish_and_clear();

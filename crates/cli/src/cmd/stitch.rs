@@ -71,6 +71,12 @@ pub struct StitchArgs {
     /// Also write the raw aligned concatenation beside `--out` (`OUT.input.bvh`).
     #[arg(long)]
     pub save_input: bool,
+    /// Also write the global joint positions of every output frame (forward kinematics) to this
+    /// JSON file, with the RMR's predicted ankle positions (its raw lower-body positions placed
+    /// in its accumulated ground roots) for `--method rmr` (docs/runtime-protocol.md, "Positions
+    /// files").
+    #[arg(long, value_name = "FILE.json")]
+    pub positions: Option<PathBuf>,
 }
 
 /// A clip argument: path and optional frame range.
@@ -184,6 +190,9 @@ pub fn run(a: StitchArgs) -> anyhow::Result<()> {
     if a.save_input {
         crate::cmd::check_output_file("--save-input", &input_path(&a.out))?;
     }
+    if let Some(p) = &a.positions {
+        crate::cmd::check_output_file("--positions", p)?;
+    }
     let specs = a.clips.iter().map(|s| parse_clip_spec(s)).collect::<anyhow::Result<Vec<_>>>()?;
     let model = match (&a.model, a.method) {
         (Some(dir), _) => {
@@ -250,6 +259,7 @@ pub fn run(a: StitchArgs) -> anyhow::Result<()> {
     let seams = aligned.starts[1..].to_vec();
     let t0 = Instant::now();
     let mut note = String::new();
+    let mut predicted_ankles = None;
     let output = match a.method {
         StitchMethod::Concat => aligned.clip.clone(),
         StitchMethod::Inertialize => inertialize_seams(&aligned.clip, &seams, a.blend_frames),
@@ -277,6 +287,7 @@ pub fn run(a: StitchArgs) -> anyhow::Result<()> {
             } else {
                 refine_clip_full(m, stats, &aligned.clip, opts)?
             };
+            predicted_ankles = Some(refined.ankles.clone());
             let mut out = refined.clip;
             if !a.no_ankle_ik {
                 let moved = zoo_rmr::footlock::place_ankles(&mut out, &refined.ankles, &c.layout);
@@ -291,6 +302,17 @@ pub fn run(a: StitchArgs) -> anyhow::Result<()> {
     };
     let seconds = t0.elapsed().as_secs_f64();
     zoo_data::clip_io::write(&output, &a.out)?;
+    if let Some(p) = &a.positions {
+        let ankles = predicted_ankles.map(|v: Vec<[glam::DVec3; 2]>| {
+            v.iter().map(|f| f.map(|p| [p.x as f32, p.y as f32, p.z as f32])).collect::<Vec<_>>()
+        });
+        let extra = serde_json::json!({ "seams": seams, "method": format!("{:?}", a.method).to_lowercase(),
+            "predicted_ankles": ankles });
+        crate::cmd::transition::write_json_atomically(
+            p,
+            &crate::cmd::transition::clip_positions_json("stitch", &output, extra),
+        )?;
+    }
     if a.save_input {
         let p = input_path(&a.out);
         bvh::write_file(&aligned.clip, &p).with_context(|| format!("writing {}", p.display()))?;

@@ -52,6 +52,50 @@ pub struct TransitionArgs {
     /// Required by a terrain-aware model, refused by one without terrain input.
     #[arg(long)]
     pub heightmap: Option<PathBuf>,
+    /// Also write the network's global joint positions to this JSON file (docs/runtime-protocol.md,
+    /// "Positions files"): the inputs it was given (context, target, next), its raw frames before
+    /// the target blend and the blended frames (with the fallback) that the output's rotations
+    /// are fitted to, in the model's units, on the model's skeleton.
+    #[arg(long, value_name = "FILE.json")]
+    pub positions: Option<PathBuf>,
+}
+
+/// `format` of the files `--positions` writes.
+pub const POSITIONS_FORMAT: &str = "zoo-positions";
+
+/// Writes `value` as JSON to `path` through a temporary file renamed at the end (a reader
+/// never sees half a file).
+pub fn write_json_atomically(path: &Path, value: &serde_json::Value) -> anyhow::Result<()> {
+    let tmp = path.with_file_name(format!(".{}.tmp", path.file_name().unwrap_or_default().to_string_lossy()));
+    std::fs::write(&tmp, serde_json::to_string(value)?).with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))
+}
+
+/// Global joint positions of every frame of `clip` (forward kinematics), `[x, y, z]` per
+/// joint: the `frames` of a `--positions` file of the commands whose networks give rotations.
+pub fn clip_positions(clip: &Clip) -> Vec<Vec<[f32; 3]>> {
+    let (_, positions) = clip.global();
+    positions
+        .chunks_exact(clip.joints().max(1))
+        .map(|frame| frame.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect())
+        .collect()
+}
+
+/// The `--positions` file of a clip a command wrote: its joints, frame rate and every frame's
+/// global joint positions (`extra` fields added).
+pub fn clip_positions_json(command: &str, clip: &Clip, extra: serde_json::Value) -> serde_json::Value {
+    let mut v = serde_json::json!({
+        "format": POSITIONS_FORMAT,
+        "version": 1,
+        "command": command,
+        "joints": clip.skeleton.names,
+        "fps": clip.fps(),
+        "frames": clip_positions(clip),
+    });
+    if let (Some(v), serde_json::Value::Object(extra)) = (v.as_object_mut(), extra) {
+        v.extend(extra);
+    }
+    v
 }
 
 /// The heightmap of `zoo transition` and `--heightmap`'s checks against the model: required by
@@ -187,9 +231,53 @@ pub fn check_skeleton(model_dir: &Path, config: &zoo_rtn::Config, clip: &Clip, p
     Ok(())
 }
 
+/// Writes the `--positions` file of a transition: inputs, raw and blended frames (`3K` global
+/// positions each, joint-major, model units).
+#[allow(clippy::too_many_arguments)]
+fn write_transition_positions(
+    path: &Path,
+    a: &TransitionArgs,
+    from: &Clip,
+    from_frame: usize,
+    inputs: &pipeline::TransitionInputs,
+    raw: &[f32],
+    blended: &[f32],
+    miss: f32,
+    weight: f32,
+) -> anyhow::Result<()> {
+    let d = inputs.target.len();
+    let rows = |v: &[f32]| v.chunks_exact(d).map(<[f32]>::to_vec).collect::<Vec<_>>();
+    if let Some(i) = raw.iter().chain(blended).position(|v| !v.is_finite()) {
+        bail!("--positions {}: the network gave a non-finite position (value {i}); nothing written", path.display());
+    }
+    let joints = match zoo_nn::checkpoint::RunSkeleton::read(&a.model)? {
+        Some(s) => s.names,
+        None => from.skeleton.names.clone(),
+    };
+    let v = serde_json::json!({
+        "format": POSITIONS_FORMAT,
+        "version": 1,
+        "command": "transition",
+        "joints": joints,
+        "fps": from.fps(),
+        "first_frame": from_frame,
+        "past": rows(&inputs.past),
+        "target": inputs.target,
+        "next": inputs.next,
+        "raw": rows(raw),
+        "frames": rows(blended),
+        "miss": miss,
+        "fallback_weight": weight,
+    });
+    write_json_atomically(path, &v)
+}
+
 /// Runs `zoo transition`.
 pub fn run(a: TransitionArgs) -> anyhow::Result<()> {
     crate::cmd::check_output_file("--out", &a.out)?;
+    if let Some(p) = &a.positions {
+        crate::cmd::check_output_file("--positions", p)?;
+    }
     let (pa, fa) = clip_and_frame(&a.from)?;
     let (pb, fb) = clip_and_frame(&a.to)?;
     let opts = clip_io::ReadOptions { drop_dummy_root: true, take: a.take.clone() };
@@ -223,6 +311,12 @@ pub fn run(a: TransitionArgs) -> anyhow::Result<()> {
         )
         .with_context(|| "generating the transition")?;
     let y = checked.frames;
+    if let Some(p) = &a.positions {
+        let raw = model
+            .unroll(&stats, &inputs.past, &inputs.target, &inputs.next, a.frames, terrain.as_ref())
+            .with_context(|| "generating the raw transition for --positions")?;
+        write_transition_positions(p, &a, &ca, fa, &inputs, &raw, &y, checked.miss, checked.weight)?;
+    }
     match &fallback {
         Some(f) => println!(
             "target miss {:.2} (fallback from {:.2}, fully at {:.2}): interpolation weight {:.2}",
@@ -235,6 +329,9 @@ pub fn run(a: TransitionArgs) -> anyhow::Result<()> {
         out = zoo_data::retarget::retarget(&out, rig, back);
     }
     clip_io::write(&out, &a.out)?;
+    if let Some(p) = &a.positions {
+        println!("positions: {} (raw and blended network frames, model units)", p.display());
+    }
     println!(
         "wrote {}: {} frames of {}, {} generated, {} of {} (transition frames {}..{})",
         a.out.display(),
