@@ -260,3 +260,26 @@ fn bandai2_transition_on_a_renamed_scaled_rig_matches_the_plain_run() {
     );
     assert!(worst < 1.0, "{worst} cm");
 }
+
+#[test]
+fn data_convert_round_trips_a_clip_through_glb_and_refuses_fbx_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("synth");
+    let (ok, _, err) = zoo(&["data", "synth", "--out", s(&data), "--minutes", "1", "--seed", "4"]);
+    assert!(ok, "{err}");
+    let bvh = data.join("synth_walk_0002.bvh");
+    let (glb, back) = (dir.path().join("walk.glb"), dir.path().join("back.bvh"));
+    let (ok, out, err) = zoo(&["data", "convert", s(&bvh), s(&glb)]);
+    assert!(ok && out.contains("wrote"), "{out}\n{err}");
+    let (ok, _, err) = zoo(&["data", "convert", s(&glb), s(&back)]);
+    assert!(ok, "{err}");
+    let (a, b) = (read(&bvh).global().1, read(&back).global().1);
+    assert_eq!(a.len(), b.len());
+    let worst = a.iter().zip(&b).map(|(p, q)| p.distance(*q)).fold(0.0, f64::max);
+    assert!(worst < 0.01, "BVH -> glb -> BVH moved a joint by {worst} cm");
+    let (ok, _, err) = zoo(&["data", "convert", s(&bvh), s(&dir.path().join("walk.fbx"))]);
+    assert!(!ok && err.contains("must be .bvh, .bvh.gz, .glb or .gltf"), "{err}");
+    // `zoo generate` streams BVH: a glTF output is refused before any work, with the way round.
+    let (ok, _, err) = zoo(&["generate", "--model", s(dir.path()), "--frames", "10", "--out", s(&glb)]);
+    assert!(!ok && err.contains("zoo data convert"), "{err}");
+}

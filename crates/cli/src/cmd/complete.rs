@@ -351,7 +351,7 @@ pub fn run(a: CompleteArgs) -> anyhow::Result<()> {
         .collect::<Result<_, _>>()
         .map_err(|_| anyhow::anyhow!("the model completes {} values per frame, not the lamp's 6", config.dofs))?;
     let clip = poses_to_clip(&poses, fps, &lamp);
-    zoo_data::bvh::write_file(&clip, &a.out).with_context(|| format!("writing {}", a.out.display()))?;
+    zoo_data::clip_io::write(&clip, &a.out).with_context(|| format!("writing {}", a.out.display()))?;
     write_positions(&a, &clip, keys.offset)?;
     if let Some(j) = &a.json {
         let v = serde_json::json!({
@@ -421,14 +421,14 @@ fn complete_humanoid(
     let keys =
         parse_humanoid_keys(&text, joint_names).map_err(|e| anyhow::anyhow!("--keys {}: {e}", a.keys.display()))?;
     let bvh = a.keys.parent().unwrap_or(Path::new(".")).join(&keys.bvh);
-    let source = zoo_data::bvh::read_model_clip(&bvh)
+    let source = zoo_data::clip_io::read_model_clip(&bvh)
         .with_context(|| format!("--keys {}: reading its bvh {}", a.keys.display(), bvh.display()))?;
     let mut done = zoo_arnn::humanoid::complete_clip(model, norm, &source, &keys.keys)
         .with_context(|| format!("--keys {}", a.keys.display()))?;
     if let Some(fps) = a.fps.or(keys.fps) {
         done.clip.frame_time = 1.0 / fps;
     }
-    zoo_data::bvh::write_file(&done.clip, &a.out).with_context(|| format!("writing {}", a.out.display()))?;
+    zoo_data::clip_io::write(&done.clip, &a.out).with_context(|| format!("writing {}", a.out.display()))?;
     write_positions(a, &done.clip, keys.offset)?;
     let (deg, key, joint) = done.angle_miss;
     if let Some(j) = &a.json {

@@ -21,6 +21,21 @@ pub enum DataCommand {
     Synth(SynthArgs),
     /// Simulate hop sequences of the planar lamp (ARNN): BVH + JSON per sequence.
     Luxo(super::data_luxo::LuxoArgs),
+    /// Convert a clip between formats: BVH, glTF or FBX in; the output's extension picks BVH
+    /// (`.bvh`, `.bvh.gz`) or glTF (`.glb`, `.gltf`) (`zoo data convert take.fbx take.glb`).
+    Convert(ConvertArgs),
+}
+
+/// Arguments of `zoo data convert`.
+#[derive(Args)]
+pub struct ConvertArgs {
+    /// The clip to read (`.bvh`, `.bvh.gz`, `.glb`, `.gltf`, `.fbx`).
+    pub input: PathBuf,
+    /// The file to write: `.bvh`, `.bvh.gz`, `.glb` or `.gltf`.
+    pub output: PathBuf,
+    /// The animation to read: an FBX take or a glTF animation, by name (default: the first).
+    #[arg(long)]
+    pub take: Option<String>,
 }
 
 /// Arguments of `zoo data stats`.
@@ -70,7 +85,34 @@ pub fn run(cmd: DataCommand) -> anyhow::Result<()> {
         DataCommand::Stats(a) => stats(a),
         DataCommand::Synth(a) => run_synth(a),
         DataCommand::Luxo(a) => super::data_luxo::run(a),
+        DataCommand::Convert(a) => convert(a),
     }
+}
+
+/// `zoo data convert`: one clip read and written through `zoo_data::clip_io` (units and axes
+/// converted to zoo's on reading and to the output format's on writing).
+fn convert(a: ConvertArgs) -> anyhow::Result<()> {
+    use zoo_data::clip_io;
+    if clip_io::ClipFormat::of(&a.output).is_none_or(|f| f == clip_io::ClipFormat::Fbx) {
+        anyhow::bail!(
+            "{}: the output's extension must be .bvh, .bvh.gz, .glb or .gltf (zoo writes BVH and glTF)",
+            a.output.display()
+        );
+    }
+    crate::cmd::check_output_file("output", &a.output)?;
+    let opts = clip_io::ReadOptions { drop_dummy_root: false, take: a.take.clone() };
+    let (clip, source) = clip_io::read_with_source(&a.input, &opts)?;
+    clip_io::write(&clip, &a.output)?;
+    println!(
+        "wrote {}: {} frames of {} joints at {:.3} fps, read from {} ({})",
+        a.output.display(),
+        clip.frames(),
+        clip.joints(),
+        1.0 / clip.frame_time,
+        a.input.display(),
+        source.describe()
+    );
+    Ok(())
 }
 
 /// Statistics printed by `zoo data stats` (and written with `--json`).

@@ -251,6 +251,13 @@ fn generate_one(
 
 /// Runs `zoo generate`.
 pub fn run(a: GenerateArgs) -> anyhow::Result<()> {
+    if zoo_data::clip_io::ClipFormat::of(&a.out).is_some_and(|f| f != zoo_data::clip_io::ClipFormat::Bvh) {
+        bail!(
+            "--out {}: `zoo generate` streams BVH of any length (a glTF file is written whole, at the end); write \
+             a .bvh and convert it with `zoo data convert OUT.bvh OUT.glb`",
+            a.out.display()
+        );
+    }
     let single = a.out.extension().is_some_and(|e| e.eq_ignore_ascii_case("bvh"));
     if single && a.count > 1 {
         bail!(
