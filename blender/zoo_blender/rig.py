@@ -1,0 +1,327 @@
+"""An armature matched to a model's skeleton, and its keyframes to and from the model's poses.
+
+Matching: each joint of the model's skeleton is the bone of the same name (or the name a JSON
+map gives it; case is ignored when the exact name is absent), and the bone of each joint's
+parent must be that bone's parent. Bones above the model's root (bandai2's `joint_Root`) are
+taken at rest; other bones are left alone.
+
+Conversion: the model's poses are BVH style (the hips' world position and rotation, local
+rotations of the other joints, rest orientations the identity) in its frame (`zoo.frame`:
+centimetres, Y up). They are converted to Blender's axes and metres with the runtime's
+conversion (`zoo.Poses.convert`), to the armature's units by the ratio of its bone lengths to
+the model's, and to each pose bone's rest frame:
+
+    basis_j = rest_j^-1 * q_j * rest_j             (q_j in the armature's axes)
+    location_root = rest_root^-1 * (hips - rest_head_root)
+
+which is what Blender's own BVH importer writes, so a clip imported with it reads back to the
+poses of the file. Keys are written in each bone's rotation mode (quaternion, Euler of any
+order, axis-angle), Euler angles continuous from the previous key.
+
+Quaternions are `(x, y, z, w)` in numpy arrays, as in `zoo`.
+"""
+
+import json
+import os
+
+import numpy as np
+
+from .runtime import Refusal, zoo
+
+def qmul(a, b):
+    ax, ay, az, aw = np.moveaxis(a, -1, 0)
+    bx, by, bz, bw = np.moveaxis(b, -1, 0)
+    return np.stack(
+        [
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        ],
+        -1,
+    )
+
+
+def qinv(q):
+    return q * np.array([-1.0, -1.0, -1.0, 1.0])
+
+
+def qrot(q, v):
+    u, w = q[..., :3], q[..., 3:4]
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+def read_bone_map(path):
+    """The JSON bone map at `path` (`{"model joint": "bone", ...}`), `{}` without one."""
+    if not path:
+        return {}
+    import bpy
+
+    full = bpy.path.abspath(path)
+    try:
+        with open(full) as f:
+            m = json.load(f)
+    except (OSError, ValueError) as e:
+        raise Refusal(f"bone map {os.path.basename(full)}: {e}") from None
+    if not isinstance(m, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in m.items()):
+        raise Refusal(f'bone map {os.path.basename(full)}: give a JSON object {{"model joint": "bone name", ...}}')
+    return m
+
+
+def rotation_channel(pose_bone):
+    """The data path and size of a pose bone's rotation in its mode."""
+    mode = pose_bone.rotation_mode
+    if mode == "QUATERNION":
+        return "rotation_quaternion", 4
+    if mode == "AXIS_ANGLE":
+        return "rotation_axis_angle", 4
+    return "rotation_euler", 3
+
+
+class Rig:
+    """The armature object `arm` matched to `model`'s skeleton (raises `Refusal` listing the
+    joints it cannot match; nothing is changed)."""
+
+    def __init__(self, arm, model, bone_map=None):
+        if arm is None or arm.type != "ARMATURE":
+            raise Refusal("select an armature (the active object is not one)")
+        self.arm = arm
+        self.model = model
+        z = zoo()
+        sk = model.skeleton
+        bones = arm.data.bones
+        lower = {}
+        for b in bones:
+            lower.setdefault(b.name.lower(), []).append(b.name)
+        bone_map = bone_map or {}
+        names, missing = [], []
+        for n in sk.names:
+            want = bone_map.get(n, n)
+            if want in bones:
+                names.append(want)
+            elif len(lower.get(want.lower(), [])) == 1:
+                names.append(lower[want.lower()][0])
+            else:
+                missing.append(n if want == n else f"{n} (mapped to {want})")
+                names.append(None)
+        if missing:
+            raise Refusal(
+                f"armature '{arm.name}' has no bone for {len(missing)} of the model's {len(sk.names)} joints: "
+                f"{', '.join(missing)}. Rename the bones or give a bone map (JSON {{\"joint\": \"bone\"}}); nothing changed"
+            )
+        if len(set(names)) != len(names):
+            dup = sorted({b for b in names if names.count(b) > 1})
+            raise Refusal(f"bones {', '.join(dup)} stand for more than one joint of the model: fix the bone map")
+        for j in range(1, len(names)):
+            p = names[int(sk.parents[j])]
+            parent = bones[names[j]].parent
+            if parent is None or parent.name != p:
+                raise Refusal(
+                    f"bone '{names[j]}' (joint {sk.names[j]}) has parent "
+                    f"'{parent.name if parent else 'none'}' but the model's parent joint is bone '{p}': the armature's "
+                    "hierarchy must be the model's"
+                )
+        self.bones = names
+        k = len(names)
+        rest = np.empty((k, 4))
+        heads = np.empty((k, 3))
+        for j, n in enumerate(names):
+            b = bones[n]
+            q = b.matrix_local.to_quaternion()
+            rest[j] = (q.x, q.y, q.z, q.w)
+            heads[j] = tuple(b.head_local)
+        self.rest = rest / np.linalg.norm(rest, axis=1, keepdims=True)
+        self.rest_head = heads[0].copy()
+        # Armature units per metre: the median ratio of the bones' rest lengths to the model's.
+        mpu = float(model.frame.metres_per_unit)
+        par = sk.parents.astype(int)
+        arm_len = np.linalg.norm(heads[1:] - heads[par[1:]], axis=1)
+        model_len = np.linalg.norm(sk.offsets[1:].astype(np.float64), axis=1) * mpu
+        ok = model_len > 1e-4
+        if not ok.any():
+            raise Refusal("the model's skeleton has no bone of non-zero length")
+        ratios = arm_len[ok] / model_len[ok]
+        self.units_per_metre = float(np.median(ratios))
+        if not self.units_per_metre > 0:
+            raise Refusal(f"armature '{arm.name}' has zero-length bones where the model has bones")
+        self.proportion_error = float(np.max(np.abs(ratios / self.units_per_metre - 1.0)))
+        # The rest pose: the model's rest offsets in the armature's axes against the bones'.
+        off = z.convert_positions(sk.offsets, model.frame, z.BLENDER).astype(np.float64)
+        d_arm = heads[1:] - heads[par[1:]]
+        d_mod = off[1:]
+        n = np.linalg.norm(d_arm, axis=1) * np.linalg.norm(d_mod, axis=1)
+        cos = np.sum(d_arm * d_mod, axis=1) / np.where(n > 0, n, 1)
+        self.rest_angle = float(np.degrees(np.arccos(np.clip(cos[n > 0], -1, 1))).max()) if (n > 0).any() else 0.0
+
+    @property
+    def joints(self):
+        return len(self.bones)
+
+    def warnings(self):
+        """What may make the result differ from the model's (bone lengths, rest pose)."""
+        w = []
+        if self.proportion_error > 0.05:
+            w.append(f"the armature's proportions differ from the model's by up to {100 * self.proportion_error:.0f}%")
+        if self.rest_angle > 10:
+            w.append(f"the armature's rest pose differs from the model's (bones up to {self.rest_angle:.0f} deg apart)")
+        return w
+
+    # --- reading ------------------------------------------------------------------------------
+
+    def sample(self, action, frames):
+        """The action's poses at `frames`, BVH style in the model's frame: `(hips (T, 3),
+        rotations (T, K, 4))`, float32. Channels without an F-curve hold the pose bone's value."""
+        import mathutils
+
+        z = zoo()
+        frames = [float(f) for f in frames]
+        t, k = len(frames), self.joints
+        basis = np.empty((t, k, 4))
+        pose = self.arm.pose.bones
+        for j, name in enumerate(self.bones):
+            pb = pose[name]
+            path, size = rotation_channel(pb)
+            values = self._channel_values(action, pb, path, size, frames)
+            mode = pb.rotation_mode
+            for i in range(t):
+                if mode == "QUATERNION":
+                    q = mathutils.Quaternion(values[i]).normalized()
+                elif mode == "AXIS_ANGLE":
+                    q = mathutils.Quaternion(values[i][1:], values[i][0])
+                else:
+                    q = mathutils.Euler(values[i], mode).to_quaternion()
+                basis[i, j] = (q.x, q.y, q.z, q.w)
+        loc = self._channel_values(action, pose[self.bones[0]], "location", 3, frames)
+        q = qmul(qmul(self.rest, basis), qinv(self.rest))
+        hips = (self.rest_head + qrot(self.rest[0], loc)) / self.units_per_metre
+        return z.convert_world(hips, q, z.BLENDER, self.model.frame)
+
+    @staticmethod
+    def _channel_values(action, pose_bone, path, size, frames):
+        data_path = pose_bone.path_from_id(path)
+        out = np.empty((len(frames), size))
+        current = getattr(pose_bone, path)
+        for i in range(size):
+            fc = action.fcurves.find(data_path, index=i) if action else None
+            if fc is None:
+                out[:, i] = current[i]
+            else:
+                out[:, i] = [fc.evaluate(f) for f in frames]
+        return out
+
+    # --- writing ------------------------------------------------------------------------------
+
+    def channels(self, hips, rotations):
+        """Pose-bone values of BVH-style poses in the model's frame: `(basis (T, K, 4),
+        location (T, 3))` (the root's location; rotations in the bones' rest frames)."""
+        z = zoo()
+        h, q = z.convert_world(hips, rotations, self.model.frame, z.BLENDER)
+        q = q.astype(np.float64)
+        basis = qmul(qmul(qinv(self.rest), q), self.rest)
+        h = h.astype(np.float64) * self.units_per_metre
+        loc = qrot(qinv(self.rest[0]), h - self.rest_head)
+        return basis, loc
+
+    def write(self, action, frames, hips, rotations, drop=None, previous=None):
+        """Keys the poses (BVH style, the model's frame) at `frames` on every matched bone's
+        rotation and the root's location. Existing keys at frames where `drop(frame)` is true
+        are removed first (default: those at `frames`). `previous`: the frame whose value the
+        first key continues from (quaternion signs, Euler angles); none for a new action."""
+        import mathutils
+
+        basis, loc = self.channels(hips, rotations)
+        frames = np.asarray(frames, dtype=np.float64)
+        keyed = set(np.round(frames).astype(int).tolist())
+        if drop is None:
+            drop = lambda x: int(round(x)) in keyed  # noqa: E731
+        pose = self.arm.pose.bones
+        for j, name in enumerate(self.bones):
+            pb = pose[name]
+            path, size = rotation_channel(pb)
+            mode = pb.rotation_mode
+            prev = None
+            if previous is not None:
+                prev = self._channel_values(action, pb, path, size, [float(previous)])[0]
+            values = np.empty((len(frames), size))
+            for i, b in enumerate(basis[:, j]):
+                q = mathutils.Quaternion((b[3], b[0], b[1], b[2]))
+                if mode == "QUATERNION":
+                    v = np.array([q.w, q.x, q.y, q.z])
+                    if prev is not None and np.dot(v, prev) < 0:
+                        v = -v
+                elif mode == "AXIS_ANGLE":
+                    axis, angle = q.to_axis_angle()
+                    v = np.array([angle, axis.x, axis.y, axis.z])
+                else:
+                    e = q.to_euler(mode, mathutils.Euler(prev, mode)) if prev is not None else q.to_euler(mode)
+                    v = np.array(e)
+                values[i] = v
+                prev = v
+            data_path = pb.path_from_id(path)
+            for c in range(size):
+                write_channel(action, data_path, c, name, frames, values[:, c], drop)
+        root = pose[self.bones[0]]
+        data_path = root.path_from_id("location")
+        for c in range(3):
+            write_channel(action, data_path, c, self.bones[0], frames, loc[:, c], drop)
+
+
+def write_channel(action, data_path, index, group, frames, values, drop):
+    """Keys `values` at `frames` on one F-curve (made when absent), after removing its keys at
+    frames where `drop(frame)` is true. The other keys stay as they were, handles included (the
+    F-curve's update recomputes automatic handles; theirs are put back)."""
+    fc = action.fcurves.find(data_path, index=index)
+    if fc is None:
+        fc = action.fcurves.new(data_path, index=index, action_group=group)
+    points = fc.keyframe_points
+    n_old = len(points)
+    interpolation = "LINEAR"
+    if n_old:
+        co = np.empty(2 * n_old, dtype=np.float32)
+        points.foreach_get("co", co)
+        xs = co[0::2]
+        gone = [i for i in range(n_old) if drop(float(xs[i]))]
+        gone_set = set(gone)
+        kept = [i for i in range(n_old) if i not in gone_set]
+        if kept:
+            before = [i for i in kept if xs[i] < frames[0]]
+            interpolation = points[before[-1] if before else kept[0]].interpolation
+        for i in reversed(gone):
+            points.remove(points[i], fast=True)
+    nk = len(points)
+    kept_co = np.empty(2 * nk, dtype=np.float32)
+    kept_left = np.empty(2 * nk, dtype=np.float32)
+    kept_right = np.empty(2 * nk, dtype=np.float32)
+    if nk:
+        points.foreach_get("co", kept_co)
+        points.foreach_get("handle_left", kept_left)
+        points.foreach_get("handle_right", kept_right)
+    n = len(frames)
+    points.add(n)
+    co = np.empty(2 * (nk + n), dtype=np.float32)
+    points.foreach_get("co", co)
+    co[2 * nk :: 2] = frames
+    co[2 * nk + 1 :: 2] = values
+    points.foreach_set("co", co)
+    for i in range(nk, nk + n):
+        p = points[i]
+        p.interpolation = interpolation
+        p.handle_left_type = "AUTO_CLAMPED"
+        p.handle_right_type = "AUTO_CLAMPED"
+    fc.update()
+    if nk:
+        co = np.empty(2 * (nk + n), dtype=np.float32)
+        points.foreach_get("co", co)
+        xs = co[0::2]
+        at = np.searchsorted(xs, kept_co[0::2])
+        if np.all(at < len(xs)) and np.array_equal(xs[np.minimum(at, len(xs) - 1)], kept_co[0::2]):
+            left = np.empty(2 * (nk + n), dtype=np.float32)
+            right = np.empty(2 * (nk + n), dtype=np.float32)
+            points.foreach_get("handle_left", left)
+            points.foreach_get("handle_right", right)
+            for c in range(2):
+                left[2 * at + c] = kept_left[c::2]
+                right[2 * at + c] = kept_right[c::2]
+            points.foreach_set("handle_left", left)
+            points.foreach_set("handle_right", right)

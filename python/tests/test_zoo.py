@@ -1,0 +1,381 @@
+"""The `zoo` package against the Rust runtime it wraps: every task on the same inputs as
+`tests/python.rs` gave the runtime (its outputs in `reference.json`), the package's own
+conveniences, BVH read/write, and the errors (each bad input a named test with its message)."""
+
+import os
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import zoo
+from conftest import arr
+
+K = 21  # the synthetic skeleton's joints
+
+
+def max_diff(a, b):
+    return float(np.max(np.abs(np.asarray(a, np.float64) - np.asarray(b, np.float64))))
+
+
+def quat_diff(a, b):
+    """Largest difference of unit quaternions up to sign."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    s = np.sign(np.sum(a * b, axis=-1, keepdims=True))
+    s[s == 0] = 1
+    return float(np.max(np.abs(a - s * b)))
+
+
+# --- loading -----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "name, cls, task, kind, fps",
+    [
+        ("transition.onnx", zoo.TransitionModel, "transition", "rtn", 30),
+        ("keyframes.onnx", zoo.KeyframeModel, "keyframes", "arnn", 30),
+        ("keyframes_lamp.onnx", zoo.KeyframeModel, "keyframes", "arnn", 50),
+        ("stitch.onnx", zoo.StitchModel, "stitch", "rmr", 30),
+        ("synthesis.onnx", zoo.SynthesisModel, "synthesis", "rnn-gmm", 30),
+    ],
+)
+def test_load_returns_the_type_of_the_task(data, name, cls, task, kind, fps):
+    m = zoo.load(data / name)
+    assert type(m) is cls and m.task == task and m.kind == kind
+    assert m.format_version == zoo.FORMAT_VERSION == 4
+    assert m.frame == zoo.CoordinateFrame(0.01, "y", "right")
+    assert m.fps == fps
+    sk = m.skeleton
+    assert sk.parents.dtype == np.int32 and sk.parents[0] == -1
+    assert sk.offsets.shape == (len(sk), 3) and sk.offsets.dtype == np.float32
+    assert kind in repr(m)
+
+
+def test_the_skeleton_is_the_clips(data, clip):
+    m = zoo.load(data / "transition.onnx")
+    assert m.skeleton.names == clip.names
+    assert np.array_equal(m.skeleton.parents, clip.parents)
+    assert max_diff(m.skeleton.offsets, clip.offsets) < 1e-5
+
+
+# --- transition --------------------------------------------------------------------------------
+
+
+def test_transition_poses_match_the_runtime(data, ref, clip):
+    m = zoo.load(data / "transition.onnx")
+    r = ref["transition"]
+    a, b = r["past"]
+    t, n = r["target"], r["next"]
+    h, q = clip.hips, clip.rotations
+    out = m.transition((h[a:b], q[a:b]), (h[t], q[t]), (h[n], q[n]))
+    assert out.shape == (31,)
+    assert out.global_positions.shape == (31, K, 3) and out.local_rotations.shape == (31, K, 4)
+    assert all(isinstance(getattr(out, f), np.ndarray) for f in zoo._POSE_FIELDS)
+    # The same inputs as the runtime's (the clip's frames as float32, rotations normalised): the
+    # same outputs.
+    assert max_diff(out.global_positions, arr(r["global_positions"], 31, K, 3)) == 0.0
+    assert max_diff(out.hips, arr(r["hips"], 31, 3)) == 0.0
+    assert max_diff(out.rotations, arr(r["rotations"], 31, K, 4)) == 0.0
+    # The same frames as zoo.Poses (their rotations normalised once more): the same up to rounding.
+    p = clip.poses()
+    again = m.transition(p[a:b], p[t], p[n])
+    assert max_diff(again.global_positions, out.global_positions) < 1e-3
+    # The last frame is the target.
+    assert max_diff(out.global_positions[-1], p.global_positions[t]) < 0.05
+
+
+def test_transition_positions_match_the_runtime(data, ref, clip):
+    m = zoo.load(data / "transition.onnx")
+    r = ref["transition"]
+    out = m.transition_positions(
+        arr(r["past_positions"], 10, K, 3), arr(r["target_positions"], K, 3), arr(r["next_positions"], K, 3)
+    )
+    assert out.shape == (31, K, 3) and out.dtype == np.float32
+    # The same input bits as the runtime got: the same output bits.
+    assert max_diff(out, arr(r["positions"], 31, K, 3)) == 0.0
+    # The clip's own positions (forward kinematics in float32 here, float64 there): the same
+    # transition up to float rounding.
+    g = clip.poses().global_positions
+    a, b = r["past"]
+    near = m.transition_positions(g[a:b], g[r["target"]], g[r["next"]])
+    assert max_diff(near, out) < 1e-2
+
+
+def test_a_batch_of_transitions_is_each_transition(data, clip):
+    m = zoo.load(data / "transition.onnx")
+    p = clip.poses()
+    one = m.transition(p[20:30], p[60], p[61])
+    two = m.transition(p[40:50], p[80], p[81])
+    both = m.transition(
+        zoo.Poses.concatenate([p[None, 20:30], p[None, 40:50]]),
+        zoo.Poses.concatenate([p[None, 60], p[None, 80]]),
+        zoo.Poses.concatenate([p[None, 61], p[None, 81]]),
+    )
+    assert both.shape == (2, 31)
+    assert max_diff(both.global_positions[0], one.global_positions) < 1e-2
+    assert max_diff(both.global_positions[1], two.global_positions) < 1e-2
+
+
+def test_transition_length_and_the_trained_limit(data, clip):
+    m = zoo.load(data / "transition.onnx")
+    p = clip.poses()
+    assert m.past_frames == 10 and m.transition_frames == 30
+    assert m.transition(p[20:30], p[50], p[51], frames=20).shape == (21,)
+    with pytest.raises(zoo.MotionError) as e:
+        m.transition(p[20:30], p[80], p[81], frames=50)
+    assert e.value.kind == "BeyondTrainedLength"
+    assert "longer than the 30 frames" in str(e.value) and "allow_beyond_trained" in str(e.value)
+    assert m.transition(p[20:30], p[80], p[81], frames=50, allow_beyond_trained=True).shape == (51,)
+
+
+# --- keyframes ---------------------------------------------------------------------------------
+
+
+def test_lamp_completion_matches_the_runtime(data, ref):
+    m = zoo.load(data / "keyframes_lamp.onnx")
+    r = ref["keyframes_lamp"]
+    assert m.dofs == 6 and m.groups == 0 and not m.humanoid
+    out = m.complete(r["frames"], arr(r["poses"], 3, 6))
+    assert out.shape == (25, 6)
+    assert max_diff(out, arr(r["completed"], 25, 6)) < 1e-5
+    # Frames relative to the first key.
+    assert max_diff(m.complete(np.array(r["frames"]) + 100, arr(r["poses"], 3, 6)), out) == 0.0
+
+
+def test_humanoid_completion_matches_candle(data, ref, clip):
+    """`complete_poses` (the runtime, with the canonical frame done in the package) against
+    `zoo_arnn::humanoid::complete_clip` (candle): the same keys give the same motion."""
+    m = zoo.load(data / "keyframes.onnx")
+    r = ref["keyframes"]
+    assert m.humanoid and m.groups == 1 + K
+    p = clip.poses()
+    hips, rot = m.complete_poses(r["frames"], p[r["source_frames"]])
+    assert hips.shape == (31, 3) and rot.shape == (31, K, 4)
+    # candle and tract round differently (relative 1e-6 over the sequence); the untrained model
+    # walks the root hundreds of metres away, hence the relative tolerance.
+    assert np.allclose(hips, arr(r["hips"], 31, 3), rtol=1e-5, atol=1e-2)
+    assert quat_diff(rot, arr(r["rotations"], 31, K, 4)) < 1e-3
+
+
+def test_a_lamp_model_refuses_humanoid_keys(data, clip):
+    m = zoo.load(data / "keyframes_lamp.onnx")
+    with pytest.raises(zoo.ShapeError, match="not the humanoid poses"):
+        m.complete_poses([0, 10], clip.poses()[[0, 10]])
+
+
+def test_bad_keys_are_refused_with_the_runtime_message(data):
+    m = zoo.load(data / "keyframes_lamp.onnx")
+    with pytest.raises(zoo.MotionError) as e:
+        m.complete([0], np.zeros((1, 6)))
+    assert e.value.kind == "Keys" and "at least 2" in str(e.value)
+    with pytest.raises(zoo.ShapeError, match="strictly increase"):
+        m.complete([0, 5, 5], np.zeros((3, 6)))
+
+
+# --- stitch ------------------------------------------------------------------------------------
+
+
+def test_stitch_matches_the_runtime_and_zoo_datas_alignment(data, ref, clip):
+    m = zoo.load(data / "stitch.onnx")
+    r = ref["stitch"]
+    other = zoo.read_bvh(data / "clip2.bvh")
+    a, b = clip.poses()[slice(*r["a"])], other.poses()[slice(*r["b"])]
+    hips, rot, starts = m.align([a, b])
+    t = len(hips)
+    assert starts == r["starts"] == [0, 45] and t == 95
+    assert max_diff(hips, arr(r["aligned_hips"], t, 3)) < 1e-3
+    assert quat_diff(rot, arr(r["aligned_rotations"], t, K, 4)) < 1e-5
+    poses, contacts, starts = m.stitch([a, b])
+    assert poses.shape == (t,) and contacts.shape == (t, 4) and contacts.dtype == bool
+    assert max_diff(poses.hips, arr(r["hips"], t, 3)) < 1e-2
+    assert quat_diff(poses.rotations, arr(r["rotations"], t, K, 4)) < 1e-3
+    assert np.array_equal(contacts, np.asarray(r["contacts"]).reshape(t, 4))
+
+
+def test_stitch_refuses_short_clips(data, clip):
+    m = zoo.load(data / "stitch.onnx")
+    p = clip.poses()
+    with pytest.raises(zoo.ShapeError, match="at least 10 per clip"):
+        m.stitch([p[0:40], p[50:55]])
+    with pytest.raises(zoo.MotionError):
+        m.refine_poses(p[0:12])  # shorter than the window
+
+
+# --- synthesis and control ---------------------------------------------------------------------
+
+
+def test_synthesis_matches_the_runtime(data, ref):
+    m = zoo.load(data / "synthesis.onnx")
+    r = ref["synthesis"]
+    poses, contacts = m.generate(r["frames"], seeds=r["seeds"])
+    assert poses.shape == (2, 20) and contacts.shape == (2, 20, 2)
+    for c in range(2):
+        assert max_diff(poses.hips[c], arr(r["hips"][c], 20, 3)) < 1e-3
+        assert quat_diff(poses.rotations[c], arr(r["rotations"][c], 20, K, 4)) < 1e-4
+    # A character's motion depends on its seed only.
+    alone, _ = m.generate(20, seeds=2)
+    assert max_diff(alone.hips, poses.hips[1]) == 0.0
+
+
+def test_control_matches_the_runtime(data, ref):
+    m = zoo.load(data / "synthesis.onnx")
+    r = ref["synthesis"]["control"]
+    ctl = m.controller(seeds=[r["seed"]])
+    ctl.start(placements=[r["placement"]])
+    hips, rot = [], []
+    for _ in range(12):
+        p, c = ctl.step(r["speed"], r["heading"])
+        assert p.shape == (1,) and c.shape == (1, 2)
+        hips.append(p.hips[0])
+        rot.append(p.rotations[0])
+    assert max_diff(hips, arr(r["hips"], 12, 3)) < 1e-3
+    assert quat_diff(rot, arr(r["rotations"], 12, K, 4)) < 1e-4
+    assert ctl.placements.shape == (1, 3)
+
+
+def test_control_refuses_a_negative_speed(data):
+    m = zoo.load(data / "synthesis.onnx")
+    ctl = m.controller(seeds=[1, 2])
+    ctl.start()
+    with pytest.raises(zoo.MotionError) as e:
+        ctl.step([100.0, -5.0], 0.0)
+    assert e.value.kind == "Control" and "speed >= 0" in str(e.value)
+
+
+def test_encode_matches_zoo_rnngmm(data, ref):
+    m = zoo.load(data / "synthesis.onnx")
+    r = ref["synthesis"]["encode"]
+    d = m.frame_dim
+    feats, placements = m.encode((arr(r["hips"], 10, 3), arr(r["rotations"], 10, K, 4)), arr(r["contacts"], 10, 2))
+    assert feats.shape == (10, d) and placements.shape == (10, 3)
+    assert max_diff(feats, arr(r["features"], 10, d)) < 1e-4
+    # Started from its encoded frames, a character continues from the clip's last placement.
+    ctl = m.controller(seeds=[3])
+    ctl.start(feats[None], placements[-1:])
+    assert max_diff(ctl.placements, placements[-1:]) < 1e-5
+
+
+# --- poses and frames --------------------------------------------------------------------------
+
+
+def test_poses_from_world_are_the_clips_frames(clip):
+    p = clip.poses()
+    assert p.shape == (clip.frames,)
+    # The BVH-style fields are the arrays given (float32, rotations normalised).
+    assert np.array_equal(p.hips, clip.hips.astype(np.float32))
+    r32 = clip.rotations.astype(np.float32)
+    assert max_diff(p.rotations, r32 / np.linalg.norm(r32, axis=-1, keepdims=True)) < 1e-7
+    # Global positions: forward kinematics over the skeleton; the hips on the ground project.
+    assert max_diff(p.global_positions[:, 0], clip.hips) < 1e-4
+    assert np.all(p.root_position[:, 1] == 0.0)
+    # Root deltas integrate to the root positions.
+    yaw = np.arctan2(p.root_rotation[:, 1], p.root_rotation[:, 3]) * 2
+    c, s = np.cos(yaw[:-1]), np.sin(yaw[:-1])
+    d = p.root_delta_position[1:]
+    step = np.stack([c * d[:, 0] + s * d[:, 2], np.zeros(len(d)), -s * d[:, 0] + c * d[:, 2]], -1)
+    assert max_diff(p.root_position[:-1] + step, p.root_position[1:]) < 1e-3
+
+
+def test_conversion_to_blender_and_back(clip):
+    p = clip.poses()[:5]
+    b = p.convert(zoo.ZOO_CM, zoo.BLENDER)
+    # Blender: metres, Z up, right-handed: (x, y, z) cm -> (x, -z, y) / 100.
+    g = p.global_positions
+    assert max_diff(b.global_positions, np.stack([g[..., 0], -g[..., 2], g[..., 1]], -1) / 100) < 1e-6
+    back = b.convert(zoo.BLENDER, zoo.ZOO_CM)
+    assert max_diff(back.global_positions, g) < 1e-4
+    assert quat_diff(back.local_rotations, p.local_rotations) < 1e-6
+    assert max_diff(zoo.convert_positions(g, zoo.ZOO_CM, zoo.BLENDER), b.global_positions) < 1e-6
+
+
+# --- BVH ---------------------------------------------------------------------------------------
+
+
+def test_bvh_round_trip(tmp_path, clip):
+    assert clip.frames == 240 and len(clip.names) == K and clip.fps == pytest.approx(30.0)
+    assert clip.rotations.shape == (240, K, 4) and clip.rotations.dtype == np.float64
+    out = tmp_path / "out.bvh.gz"
+    zoo.write_bvh(out, clip)
+    back = zoo.read_bvh(out)
+    assert back.names == clip.names and back.euler_orders == clip.euler_orders
+    assert max_diff(back.positions, clip.positions) < 1e-5
+    assert quat_diff(back.rotations, clip.rotations) < 1e-7
+
+
+def test_a_bad_bvh_names_its_line(tmp_path):
+    f = tmp_path / "bad.bvh"
+    f.write_text("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0\n}\n")
+    with pytest.raises(zoo.BvhError, match=r"bad\.bvh:\d+: "):
+        zoo.read_bvh(f)
+    with pytest.raises(zoo.BvhError, match="cannot read"):
+        zoo.read_bvh(tmp_path / "missing.bvh")
+
+
+def test_clip_poses_on_a_model_skeleton(data, clip):
+    m = zoo.load(data / "transition.onnx")
+    p = clip.poses(m.skeleton.names)
+    assert max_diff(p.global_positions, clip.poses().global_positions) < 1e-4
+    with pytest.raises(zoo.ShapeError, match="no joint named Tail"):
+        clip.poses(m.skeleton.names + ["Tail"])
+
+
+# --- errors ------------------------------------------------------------------------------------
+
+
+def test_a_missing_file_is_a_model_file_error(tmp_path):
+    with pytest.raises(zoo.ModelFileError) as e:
+        zoo.load(tmp_path / "none.onnx")
+    assert "cannot read model file" in str(e.value) and e.value.kind == "Io"
+    assert isinstance(e.value, zoo.MotionError) and isinstance(e.value, zoo.ZooError)
+
+
+def test_a_file_that_is_not_a_model_says_how_to_make_one(tmp_path):
+    f = tmp_path / "clip.onnx"
+    f.write_text("HIERARCHY\nROOT Hips\n")
+    with pytest.raises(zoo.ModelFileError, match="zoo export"):
+        zoo.load(f)
+
+
+def test_wrong_shapes_are_shape_errors(data, clip):
+    m = zoo.load(data / "transition.onnx")
+    p = clip.poses()
+    with pytest.raises(zoo.ShapeError, match=r"`past_rotations` must have shape \(N=1, P=10, K=21, 4\), found \(1, 10, 20, 4\)"):
+        m.transition((p.hips[0:10], p.rotations[0:10, :20]), p[60], p[61])
+    with pytest.raises(zoo.ShapeError, match="every value must be finite"):
+        m.transition_positions(np.full((10, K, 3), np.nan), np.zeros((K, 3)), np.zeros((K, 3)))
+    with pytest.raises(zoo.ShapeError, match="zero quaternion"):
+        m.transition((p.hips[0:10], np.zeros((10, K, 4))), p[60], p[61])
+    with pytest.raises(zoo.ShapeError, match="must be zoo.Poses"):
+        m.transition("walk", p[60], p[61])
+
+
+# --- the package itself ------------------------------------------------------------------------
+
+
+def test_the_stubs_name_what_the_module_has():
+    """Every public name of `_native.pyi` exists in the module, and the other way round."""
+    import ast
+
+    stub = ast.parse((Path(zoo.__file__).parent / "_native.pyi").read_text())
+    names = {n.name for n in stub.body if isinstance(n, (ast.FunctionDef, ast.ClassDef))}
+    names |= {t.id for n in stub.body if isinstance(n, ast.AnnAssign) for t in [n.target]}
+    names -= {"F32", "PoseDict", "Frame"}
+    have = {n for n in dir(zoo._native) if not n.startswith("_")} | {"__version__"}
+    assert names - have == set(), f"stubbed but missing: {names - have}"
+    assert have - names - {"__version__"} == set(), f"not stubbed: {have - names}"
+    assert (Path(zoo.__file__).parent / "py.typed").exists()
+
+
+def test_the_wheel_depends_on_numpy_only():
+    wheel = os.environ.get("ZOO_TEST_WHEEL")
+    if not wheel:
+        pytest.skip("ZOO_TEST_WHEEL is not set (tests/python.rs sets it)")
+    with zipfile.ZipFile(wheel) as z:
+        meta = next(n for n in z.namelist() if n.endswith(".dist-info/METADATA"))
+        text = z.read(meta).decode()
+        wheel_tags = z.read(meta.replace("METADATA", "WHEEL")).decode()
+    requires = [line.split(":", 1)[1].strip() for line in text.splitlines() if line.startswith("Requires-Dist:")]
+    assert requires == ["numpy>=1.17"], requires
+    assert "Requires-Python: >=3.9" in text
+    assert "cp39-abi3" in wheel_tags
