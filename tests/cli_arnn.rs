@@ -146,7 +146,7 @@ fn train_resume_and_complete() {
     assert_eq!(clip.frames(), 25);
     assert_eq!(clip.skeleton.names, ["base", "leg", "neck", "head"]);
     assert!((clip.frame_time - 1.0 / 40.0).abs() < 1e-6);
-    let poses = zoo_data::luxo::sequence::clip_to_poses(&clip).unwrap();
+    let poses = zoo_arnn::luxo::sequence::clip_to_poses(&clip).unwrap();
     for d in 0..6 {
         assert!((poses[0][d] - REST[d]).abs() < 1e-4, "frame 0 is not the first key: {:?}", poses[0]);
     }

@@ -13,8 +13,8 @@
 
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{VarBuilder, VarMap};
+use zoo_arnn::luxo::preprocess::KeyedSequence;
 use zoo_arnn::{Arnn, ArnnConfig, Normalization};
-use zoo_data::luxo::preprocess::KeyedSequence;
 use zoo_runtime::{MotionModel, MotionTask};
 use zoo_tests::onnxruntime::OrtSession;
 use zoo_tests::toy_onnx::lcg;

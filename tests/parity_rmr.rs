@@ -269,7 +269,7 @@ fn runtime_stitch_refiner_refuses_bad_input() {
 /// engine poses, and the same motion as a clip rebuilt from those `f32` poses (so that the
 /// offline path and the runtime read identical input).
 fn aligned_poses(frames: usize) -> (Vec<zoo_runtime::EnginePose>, zoo_motion::Clip) {
-    use zoo_data::stitch::{StitchLayout, align_clips};
+    use zoo_rmr::pairs::{StitchLayout, align_clips};
     let cfg = zoo_data::synth::SynthConfig { minutes: 0.5, seed: 5, clip_seconds: 4.0, ..Default::default() };
     let clips: Vec<zoo_motion::Clip> = zoo_data::synth::generate(&cfg).into_iter().map(|c| c.clip).collect();
     let layout = StitchLayout::bandai2(&clips[0].skeleton).unwrap();

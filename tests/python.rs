@@ -287,7 +287,7 @@ fn write_models_and_references(data: &Path) {
     std::fs::write(data.join("stitch.onnx"), &rmr).unwrap();
     let refiner = LoadedModel::from_bytes(&rmr).unwrap().into_stitch().unwrap();
     let (a, b) = (clip.slice(0, 45), other.slice(100, 150));
-    let aligned = zoo_data::stitch::align_clips(&[a, b], refiner.layout(), zoo_data::stitch::MIN_CLIP_FRAMES).unwrap();
+    let aligned = zoo_rmr::pairs::align_clips(&[a, b], refiner.layout(), zoo_rmr::pairs::MIN_CLIP_FRAMES).unwrap();
     let t = aligned.clip.frames();
     let input: Vec<EnginePose> = (0..t).map(|f| engine_pose(&aligned.clip, f)).collect();
     let mut out_poses: Vec<EnginePose> = (0..t).map(|_| EnginePose::new(k)).collect();

@@ -190,7 +190,7 @@ fn stitch_allocations() {
     // Synthetic walking and running, aligned, as engine poses.
     let synth = zoo_data::synth::SynthConfig { minutes: 0.5, seed: 3, clip_seconds: 10.0, ..Default::default() };
     let clips: Vec<zoo_motion::Clip> = zoo_data::synth::generate(&synth).into_iter().map(|c| c.clip).collect();
-    let aligned = zoo_data::stitch::align_clips(&clips, &config.layout, 10).unwrap().clip;
+    let aligned = zoo_rmr::pairs::align_clips(&clips, &config.layout, 10).unwrap().clip;
     let poses: Vec<EnginePose> = (0..aligned.frames())
         .map(|f| {
             let r: Vec<glam::Quat> = aligned.rotations_at(f).iter().map(|q| q.as_quat()).collect();

@@ -1,22 +1,21 @@
-//! Dataset tooling of zoo: clip reading and writing (BVH, glTF, FBX; [`clip_io`]), rig
-//! mapping ([`retarget`]), datasets and windows, the in-betweening
-//! benchmark's metrics and baselines, and synthetic motion.
+//! Dataset tooling every model of zoo shares: clip reading and writing (BVH, glTF, FBX;
+//! [`clip_io`]), rig mapping ([`retarget`]), datasets, splits and windows, the benchmark
+//! protocol with its metrics and baselines, terrain heightmaps and the synthetic biped.
+//!
+//! What serves one model lives with it: the stitching pairs in `zoo_rmr::pairs`, the simulated
+//! lamp in `zoo_arnn::luxo`, control scripts, ground paths and the denoising noise in
+//! `zoo_rnngmm`.
 
 pub mod benchmark;
 pub mod bvh;
 pub mod clip_io;
-pub mod controls;
 pub mod dataset;
-pub mod denoise;
 pub mod fbx;
 pub mod gltf;
-pub mod luxo;
 pub mod metrics;
-pub mod path;
 pub mod plausibility;
 pub mod position_method;
 pub mod retarget;
 pub(crate) mod scene;
-pub mod stitch;
 pub mod synth;
 pub mod terrain;

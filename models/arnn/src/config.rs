@@ -1,7 +1,7 @@
 //! Configuration of the ARNN: sizes of section 6, training settings of section 7.
 
+use crate::luxo::{DOF_NAMES, LampParams};
 use serde::{Deserialize, Serialize};
-use zoo_data::luxo::{DOF_NAMES, LampParams};
 
 /// The largest layer width or number of degrees of freedom a configuration may name, so that
 /// a corrupt `config.json` is refused instead of aborting on an allocation.
@@ -190,7 +190,7 @@ pub struct ArnnConfig {
     /// Degrees of freedom per frame (6 for the lamp).
     pub dofs: usize,
     /// Names of the degrees of freedom, in pose order (the lamp's
-    /// [`zoo_data::luxo::DOF_NAMES`]); a keys file naming others is refused.
+    /// [`crate::luxo::DOF_NAMES`]); a keys file naming others is refused.
     #[serde(default)]
     pub dof_names: Vec<String>,
     /// The lamp the training data came from: its geometry draws the completed motion as BVH.

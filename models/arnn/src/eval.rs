@@ -7,11 +7,11 @@
 //! frame loss; the key error is the same over the key frames after the first; the RMSE per
 //! degree of freedom is in physical units (metres, radians).
 
+use crate::luxo::LampParams;
+use crate::luxo::preprocess::KeyedSequence;
 use crate::train::{Normalization, complete};
 use crate::{Arnn, ArnnError, ArnnResult};
 use serde::{Deserialize, Serialize};
-use zoo_data::luxo::LampParams;
-use zoo_data::luxo::preprocess::KeyedSequence;
 
 /// Linear interpolation of each degree of freedom between the keys: one pose per frame from
 /// the first key to the last (`key_frames` strictly increasing).
@@ -108,7 +108,7 @@ pub fn base_clearance(lamp: &LampParams, pose: &[f64]) -> f64 {
 /// Lifts the base of every pose whose base plate is below the ground by that depth, so that
 /// its lowest point is on the ground (`base_clearance >= 0` afterwards, up to rounding); other
 /// poses and the other degrees of freedom are unchanged. Returns the largest lift (metres, 0 when
-/// no pose was below). The lamp's degrees of freedom ([`zoo_data::luxo::DOF_NAMES`]) in each
+/// no pose was below). The lamp's degrees of freedom ([`crate::luxo::DOF_NAMES`]) in each
 /// pose.
 ///
 /// This is the minimal change that satisfies the ground (raising the base moves every link by

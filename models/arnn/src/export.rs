@@ -15,7 +15,7 @@
 //! | `h1`, `h2`: the GRU states (H each), zero at frame 0 | `h1_next`, `h2_next` |
 //!
 //! Completing keys: frame 0 is the first key; for t = 1..=last key, pick the keys around t
-//! (`zoo_data::luxo::preprocess::KeyedSequence::interval`), feed the previous output as `prev`.
+//! (`crate::luxo::preprocess::KeyedSequence::interval`), feed the previous output as `prev`.
 //! The GRUs are written as cells (Gemm, Sigmoid, Tanh, Mul, Add) in candle's gate order r, z, n
 //! with the reset gate applied after the hidden projection (ONNX `linear_before_reset = 1`),
 //! so no gate reordering is needed; SELU is the ONNX `Selu` op with its default constants,
@@ -135,7 +135,7 @@ pub fn metadata(config: &ArnnConfig, norm: &Normalization) -> Result<MotionModel
             MotionSkeletonInfo { names: s.names.clone(), parents: s.parents.clone(), offsets: s.offsets.clone() },
             s.fps as f32,
         ),
-        (None, Some(lamp)) => (MotionSkeletonInfo::from_skeleton(&zoo_data::luxo::sequence::lamp_skeleton(lamp)), FPS),
+        (None, Some(lamp)) => (MotionSkeletonInfo::from_skeleton(&crate::luxo::sequence::lamp_skeleton(lamp)), FPS),
         (None, None) => {
             return Err(ExportError::model(
                 "config.json has neither a lamp nor a humanoid skeleton: retrain with `zoo train arnn`",

@@ -10,6 +10,7 @@
 
 use crate::config::{ArnnConfig, HumanoidSkeleton, KeySampling};
 use crate::keys::choose_keys;
+use crate::luxo::preprocess::KeyedSequence;
 use crate::model::Arnn;
 use crate::train::Normalization;
 use crate::{ArnnError, ArnnResult};
@@ -18,7 +19,6 @@ use glam::{DQuat, DVec3};
 use std::path::Path;
 use zoo_data::benchmark::{N_PAST, Transition, TransitionMethod, TransitionTask};
 use zoo_data::dataset::{WindowOptions, Windows};
-use zoo_data::luxo::preprocess::KeyedSequence;
 use zoo_motion::Skeleton;
 use zoo_nn::rng::SplitMix64;
 

@@ -4,7 +4,7 @@
 //! their absence) fix only some groups of degrees of freedom.
 
 use crate::config::KeySampling;
-use zoo_data::luxo::preprocess::drop_keys;
+use crate::luxo::preprocess::drop_keys;
 use zoo_nn::rng::SplitMix64;
 
 /// Key frames for a sequence of `len >= 2` frames whose own keys are `given`.

@@ -3,7 +3,7 @@
 //! (section 6), the loss with its curriculum and scheduled sampling (section 7) and a
 //! [`zoo_nn::Trainable`] for the shared training loop.
 //!
-//! Data are the lamp's preprocessed sequences ([`zoo_data::luxo::preprocess::KeyedSequence`]):
+//! Data are the lamp's preprocessed sequences ([`crate::luxo::preprocess::KeyedSequence`]):
 //! six degrees of freedom per frame and the frames that are keys.
 
 pub mod checkpoint;
@@ -12,6 +12,7 @@ pub mod eval;
 pub mod export;
 pub mod humanoid;
 pub mod keys;
+pub mod luxo;
 pub mod model;
 pub mod train;
 

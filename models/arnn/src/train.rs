@@ -9,13 +9,13 @@
 
 use crate::config::ArnnConfig;
 use crate::keys::{choose_keys, choose_masks};
+use crate::luxo::preprocess::KeyedSequence;
 use crate::model::Arnn;
 use crate::{ArnnError, ArnnResult};
 use candle_core::{D, DType, Device, Tensor};
 use candle_nn::{Optimizer, VarMap};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
-use zoo_data::luxo::preprocess::KeyedSequence;
 use zoo_nn::checkpoint as ck;
 use zoo_nn::optim::{Adam, ParamsAdam, StatefulOptimizer};
 use zoo_nn::rng::SplitMix64;
@@ -35,7 +35,7 @@ pub struct Normalization {
 impl Normalization {
     /// Fits the statistics of a training set.
     pub fn fit(seqs: &[KeyedSequence]) -> Self {
-        let (mean, std) = zoo_data::luxo::preprocess::dof_statistics(seqs);
+        let (mean, std) = crate::luxo::preprocess::dof_statistics(seqs);
         Normalization { mean, std }
     }
 
@@ -198,8 +198,8 @@ impl ArnnTrainer {
     /// the configuration, the lamp's degrees of freedom and a positive weight.
     fn ground_geometry(&self) -> Option<(f64, f64)> {
         let lamp = self.config.lamp.as_ref()?;
-        let lamp_dofs = self.config.dofs == zoo_data::luxo::DOFS
-            && (self.config.dof_names.is_empty() || self.config.dof_names == zoo_data::luxo::DOF_NAMES);
+        let lamp_dofs = self.config.dofs == crate::luxo::DOFS
+            && (self.config.dof_names.is_empty() || self.config.dof_names == crate::luxo::DOF_NAMES);
         (lamp_dofs && self.config.ground_weight > 0.0).then_some((lamp.base_half_height, lamp.base_half_width))
     }
 

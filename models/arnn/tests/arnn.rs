@@ -2,9 +2,9 @@
 
 use candle_core::{DType, Device, Tensor};
 use candle_nn::VarMap;
+use zoo_arnn::luxo::preprocess::{KeyedSequence, preprocess};
+use zoo_arnn::luxo::{GenerateOptions, generate_sequence};
 use zoo_arnn::{Architecture, Arnn, ArnnConfig, ArnnTrainer, Curriculum, NoMemoryOutput, complete};
-use zoo_data::luxo::preprocess::{KeyedSequence, preprocess};
-use zoo_data::luxo::{GenerateOptions, generate_sequence};
 use zoo_nn::SeededVarMap;
 use zoo_nn::train_loop::Trainable;
 

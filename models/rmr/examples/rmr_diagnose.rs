@@ -14,13 +14,13 @@
 
 use std::path::PathBuf;
 use zoo_data::metrics::npss;
-use zoo_data::stitch::baselines::inertialize_seams;
-use zoo_data::stitch::eval::{StitchMeasures, hemisphere};
-use zoo_data::stitch::{MotionSet, PairConfig, StitchDatabases, StitchLayout, build_pair, ground_roots, plan_pairs};
 use zoo_motion::Clip;
 use zoo_motion::glam::{DQuat, DVec3};
 use zoo_rmr::features::{FeatureLayout, FeatureStats, decode, encode_clip};
 use zoo_rmr::footlock::place_ankles;
+use zoo_rmr::pairs::baselines::inertialize_seams;
+use zoo_rmr::pairs::eval::{StitchMeasures, hemisphere};
+use zoo_rmr::pairs::{MotionSet, PairConfig, StitchDatabases, StitchLayout, build_pair, ground_roots, plan_pairs};
 use zoo_rmr::stitch::{RefineOptions, refine_clip_full, refine_clip_full_with};
 
 #[derive(Default)]

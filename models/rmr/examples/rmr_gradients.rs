@@ -14,8 +14,8 @@
 
 use candle_core::{DType, Device, Tensor};
 use std::path::PathBuf;
-use zoo_data::stitch::MotionSet;
 use zoo_rmr::features::FeatureLayout;
+use zoo_rmr::pairs::MotionSet;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();

@@ -123,7 +123,7 @@ fn stream(
     let synth = zoo_data::synth::SynthConfig { minutes: 1.0, seed: 3, clip_seconds: 10.0, ..Default::default() };
     let clips: Vec<zoo_motion::Clip> = zoo_data::synth::generate(&synth).into_iter().map(|c| c.clip).collect();
     config.check_skeleton(&clips[0].skeleton)?;
-    let aligned = zoo_data::stitch::align_clips(&clips, &config.layout, 10)?.clip;
+    let aligned = zoo_rmr::pairs::align_clips(&clips, &config.layout, 10)?.clip;
     if aligned.frames() < frames {
         return Err(format!("--stream-frames {frames}: the synthetic motion has {} frames", aligned.frames()).into());
     }

@@ -13,7 +13,7 @@
 //! ```
 
 use std::path::{Path, PathBuf};
-use zoo_data::stitch::ground_roots;
+use zoo_rmr::pairs::ground_roots;
 use zoo_rmr::stitch::{RefineOptions, stitch_clips};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

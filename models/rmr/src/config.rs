@@ -3,8 +3,8 @@
 //! (sec. 4) and training (sec. 7.1).
 
 use crate::error::{RmrError, RmrResult};
+use crate::pairs::{PairConfig, StitchLayout};
 use serde::{Deserialize, Serialize};
-use zoo_data::stitch::{PairConfig, StitchLayout};
 use zoo_motion::Skeleton;
 
 /// The model a configuration is for: `config.json`'s top-level `"model"` field.

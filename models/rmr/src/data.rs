@@ -1,4 +1,4 @@
-//! From clips to encoded training pairs (RMR sec. 4 via [`zoo_data::stitch`]).
+//! From clips to encoded training pairs (RMR sec. 4 via [`pairs`]).
 //!
 //! Training pairs come from the training clips' windows with B and C retrieved from the
 //! training clips' databases (never from the window's own clip); validation pairs come from
@@ -9,9 +9,9 @@
 use crate::config::Config;
 use crate::error::RmrResult;
 use crate::features::{FeatureLayout, FeatureStats, PairFeatures, encode_clip};
+use crate::pairs::{MotionSet, PairConfig, PairPlan, PairSpec, StitchDatabases, build_pair, plan_pairs};
 use rayon::prelude::*;
 use std::time::Instant;
-use zoo_data::stitch::{MotionSet, PairConfig, PairPlan, PairSpec, StitchDatabases, build_pair, plan_pairs};
 use zoo_motion::Clip;
 
 /// Encoded pairs ready for training, with what made them.

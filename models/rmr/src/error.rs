@@ -20,7 +20,7 @@ pub enum RmrError {
     Config(String),
     /// Making the stitching pairs failed (rig, frame rate, clip lengths, databases).
     #[error(transparent)]
-    Stitch(#[from] zoo_data::stitch::StitchError),
+    Stitch(#[from] crate::pairs::StitchError),
     /// The loss was NaN or infinite; the step was not applied.
     #[error(
         "training loss became {loss} at step {step}; the parameters were not updated and the last good \

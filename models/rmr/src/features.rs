@@ -3,8 +3,8 @@
 //! its normalisation statistics.
 
 use crate::error::{RmrError, RmrResult};
+use crate::pairs::StitchLayout;
 use serde::{Deserialize, Serialize};
-use zoo_data::stitch::StitchLayout;
 
 pub use zoo_motion::stitch::{PoseLayout as FeatureLayout, accumulate_roots, decode, encode_clip};
 
@@ -97,7 +97,7 @@ pub struct PairFeatures {
 
 impl PairFeatures {
     /// Encodes stitching pairs (all the same length).
-    pub fn encode(pairs: &[zoo_data::stitch::StitchPair], layout: &StitchLayout) -> RmrResult<PairFeatures> {
+    pub fn encode(pairs: &[crate::pairs::StitchPair], layout: &StitchLayout) -> RmrResult<PairFeatures> {
         let first = pairs.first().ok_or_else(|| RmrError::Config("no stitching pairs to encode".into()))?;
         let frames = first.target.frames();
         let dim = FeatureLayout::new(first.target.joints(), layout.lower_body.len()).dim();

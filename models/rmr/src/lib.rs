@@ -4,7 +4,7 @@
 //! and 2 and Figure 9, the loss of sec. 5.1, and a training core for the shared loop
 //! ([`zoo_nn::train_loop`]) via [`RmrTraining`].
 //!
-//! Training pairs come from [`zoo_data::stitch`] (sec. 4); [`data::make_pairs`] turns clips into
+//! Training pairs come from [`pairs`] (sec. 4); [`data::make_pairs`] turns clips into
 //! encoded pairs.
 //!
 //! ```no_run
@@ -29,6 +29,7 @@ pub mod features;
 pub mod footlock;
 pub mod loss;
 pub mod model;
+pub mod pairs;
 pub mod stitch;
 pub mod train;
 

@@ -12,7 +12,7 @@ use crate::config::Config;
 use crate::error::{RmrError, RmrResult};
 use crate::features::{FeatureLayout, FeatureStats, decode, encode_clip};
 use crate::model::Rmr;
-use zoo_data::stitch::{MIN_CLIP_FRAMES, StitchLayout, align_clips, ground_roots};
+use crate::pairs::{MIN_CLIP_FRAMES, StitchLayout, align_clips, ground_roots};
 use zoo_motion::Clip;
 use zoo_motion::glam::DVec3;
 

@@ -4,13 +4,13 @@
 
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{VarBuilder, VarMap};
-use zoo_data::stitch::{GroundRoot, StitchLayout};
 use zoo_data::synth::{SynthConfig, generate};
 use zoo_motion::Clip;
 use zoo_motion::glam::DVec3;
 use zoo_rmr::data::{RmrData, make_pairs};
 use zoo_rmr::features::{FeatureLayout, FeatureStats, decode, encode_clip};
 use zoo_rmr::loss::{Loss, begin_sigmoid};
+use zoo_rmr::pairs::{GroundRoot, StitchLayout};
 use zoo_rmr::prelude::*;
 
 fn synth_clips(minutes: f64, seed: u64) -> Vec<Clip> {
@@ -41,7 +41,7 @@ fn pose_vectors_round_trip_to_the_clip() {
     let d = fl.dim();
     assert_eq!(&x[..3], &x[d..d + 3], "frame 0 repeats frame 1's displacement");
     assert!(x.chunks_exact(d).all(|f| f[fl.contacts()..].iter().all(|&c| c == 0.0 || c == 1.0)));
-    let roots = zoo_data::stitch::ground_roots(&clip, &layout);
+    let roots = zoo_rmr::pairs::ground_roots(&clip, &layout);
     let (back, contacts) = decode(&x, &clip.skeleton, &layout, clip.frame_time, roots[0]).unwrap();
     let ((_, a), (_, b)) = (clip.global(), back.global());
     let worst = a.iter().zip(&b).map(|(p, q)| (*p - *q).length()).fold(0.0, f64::max);
@@ -313,8 +313,8 @@ fn planned_pairs_are_cached_in_the_run_folder() {
     let sets = || {
         let layout = config.layout.clone();
         (
-            zoo_data::stitch::MotionSet::new(clips[..4].to_vec(), vec![], layout.clone()).unwrap(),
-            zoo_data::stitch::MotionSet::new(clips[4..].to_vec(), vec![], layout).unwrap(),
+            zoo_rmr::pairs::MotionSet::new(clips[..4].to_vec(), vec![], layout.clone()).unwrap(),
+            zoo_rmr::pairs::MotionSet::new(clips[4..].to_vec(), vec![], layout).unwrap(),
         )
     };
     let dir = tempfile::tempdir().unwrap();
@@ -424,8 +424,8 @@ fn the_foot_lock_pins_the_predicted_contacts() {
 /// plain concatenation on the benchmark's measures.
 #[test]
 fn the_identity_refiner_reproduces_the_aligned_input() {
-    use zoo_data::stitch::eval::StitchMeasures;
-    use zoo_data::stitch::{MotionSet, align_clips};
+    use zoo_rmr::pairs::eval::StitchMeasures;
+    use zoo_rmr::pairs::{MotionSet, align_clips};
     use zoo_rmr::stitch::{RefineOptions, refine_clip_with};
     let data = tiny_data(); // non-trivial statistics
     let layout = data.config.layout.clone();
@@ -556,8 +556,8 @@ fn the_seam_weight_weights_the_frames_around_the_seams() {
 /// IK. On the identity refiner the predicted positions are the input's, so the motion stays.
 #[test]
 fn placing_the_ankles_at_the_predicted_positions_keeps_a_consistent_pose() {
-    use zoo_data::stitch::align_clips;
     use zoo_rmr::footlock::place_ankles;
+    use zoo_rmr::pairs::align_clips;
     use zoo_rmr::stitch::{RefineOptions, refine_clip_full_with};
     let data = tiny_data();
     let layout = data.config.layout.clone();

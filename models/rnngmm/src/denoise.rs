@@ -325,7 +325,7 @@ pub fn denoise(
     let mut init: Vec<f64> = match opts.init_savgol.filter(|&w| w <= t) {
         None => values.iter().map(|v| *v as f64).collect(),
         Some(w) => {
-            let smooth = zoo_data::denoise::savgol(clip, w, 2).map_err(RnnGmmError::Config)?;
+            let smooth = crate::noise::savgol(clip, w, 2).map_err(RnnGmmError::Config)?;
             let mut v = spec.encode(&smooth)?.values;
             norm.normalize(&mut v);
             v.iter().map(|x| *x as f64).collect()

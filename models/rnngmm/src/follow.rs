@@ -34,11 +34,11 @@ use crate::control::{
 use crate::error::{RnnGmmError, RnnGmmResult};
 use crate::features::{DecodedMotion, RootPlacement};
 use crate::fk::TensorFk;
+use crate::path::GroundPath;
 use argmin::core::{CostFunction, Executor, State};
 use argmin::solver::particleswarm::ParticleSwarm;
 use candle_core::{DType, Device, Tensor};
 use rand::SeedableRng;
-use zoo_data::path::GroundPath;
 use zoo_motion::Clip;
 
 /// Settings of [`follow`].

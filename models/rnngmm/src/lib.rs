@@ -10,8 +10,10 @@
 //! - [`fk`]: differentiable forward kinematics of the features (end effectors, root trajectory);
 //! - [`refiner`]: the refiner and the discriminator (eq. 9-13) and their adversarial training
 //!   ([`AdversarialTraining`] for the shared loop);
-//! - [`control`], [`follow`]: path following by MAP optimisation through the generator (sec. 5.2);
-//! - [`denoise`]: motion denoising by MAP optimisation through the generator (sec. 5.4);
+//! - [`control`], [`follow`]: path following by MAP optimisation through the generator (sec. 5.2),
+//!   on the ground paths of [`path`]; online control by the scripts of [`controls`] (sec. 5.3);
+//! - [`denoise`]: motion denoising by MAP optimisation through the generator (sec. 5.4), and
+//!   [`noise`], the denoising benchmark's seeded noise and its Savitzky-Golay baseline;
 //! - [`synthesis`]: random synthesis continuing a clip (seed, eq. 26, sampling, refiner, decoding);
 //! - [`train`]: the generator's training ([`GeneratorTraining`] for the shared loop);
 //! - [`checkpoint`]: run folders;
@@ -35,6 +37,7 @@
 pub mod checkpoint;
 pub mod config;
 pub mod control;
+pub mod controls;
 pub mod denoise;
 pub mod error;
 pub mod export;
@@ -44,7 +47,9 @@ pub mod follow;
 pub mod gmm;
 pub mod initial_state;
 pub mod model;
+pub mod noise;
 pub mod online;
+pub mod path;
 pub mod refiner;
 pub mod synthesis;
 pub mod train;

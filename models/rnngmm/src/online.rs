@@ -36,12 +36,12 @@
 
 use crate::checkpoint::LoadedGenerator;
 use crate::control::{ControlStart, contact_bits, contact_energy, ground_heights, rollout_shifted};
+use crate::controls::{ControlKey, ControlScript};
 use crate::error::{RnnGmmError, RnnGmmResult};
 use crate::features::{DecodedMotion, RootPlacement};
 use crate::fk::TensorFk;
 use candle_core::{DType, Device, IndexOp, Tensor, Var};
 use std::time::Instant;
-use zoo_data::controls::{ControlKey, ControlScript};
 use zoo_motion::Clip;
 use zoo_motion::rng::SplitMix64;
 

@@ -4,13 +4,13 @@
 //! motion, and online control is seeded, steers and refuses bad settings.
 
 use candle_core::{DType, Device, Tensor};
-use zoo_data::controls::{ControlKey, ControlScript};
-use zoo_data::path::GroundPath;
 use zoo_data::synth::{SynthConfig, generate_clip};
 use zoo_motion::Clip;
 use zoo_rnngmm::checkpoint::LoadedGenerator;
 use zoo_rnngmm::control::{ControlStart, rollout, world_root};
+use zoo_rnngmm::controls::{ControlKey, ControlScript};
 use zoo_rnngmm::fk::TensorFk;
+use zoo_rnngmm::path::GroundPath;
 use zoo_rnngmm::prelude::*;
 use zoo_rnngmm::{FollowOptions, OnlineOptions, TrainingData, follow};
 

@@ -2,7 +2,7 @@
 //! `docs/rnn-gmm-control.md`).
 //!
 //! N excerpts of held-out clean clips get seeded noise (joint angles at each `--angle-noise`
-//! level, root jitter, outlier poses; [`zoo_data::denoise::corrupt`]); the noisy input, the
+//! level, root jitter, outlier poses; [`zoo_rnngmm::noise::corrupt`]); the noisy input, the
 //! Savitzky-Golay filter at every `--savgol-windows` width and the MAP denoiser are each
 //! compared with the clean excerpt: L2P and L2Q (`BENCHMARK.md`; L2P normalised with the clean
 //! excerpts' per-coordinate standard deviation), mean joint position error (clip units) and foot
@@ -16,12 +16,12 @@ use serde::Serialize;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
-use zoo_data::denoise::{Noise, corrupt, savgol};
 use zoo_data::metrics::{FootSkate, foot_joints, l2p, l2q};
 use zoo_data::plausibility::percentile;
 use zoo_motion::Clip;
 use zoo_motion::rng::SplitMix64;
 use zoo_rnngmm::DenoiseOptions;
+use zoo_rnngmm::noise::{Noise, corrupt, savgol};
 
 /// Arguments of `zoo bench denoise`.
 #[derive(Args)]

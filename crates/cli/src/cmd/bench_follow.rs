@@ -11,8 +11,8 @@ use serde::Serialize;
 use std::path::PathBuf;
 use std::time::Instant;
 use zoo_data::metrics::{FootSkate, foot_joints};
-use zoo_data::path::{GroundPath, TEST_PATHS};
 use zoo_motion::Clip;
+use zoo_rnngmm::path::{GroundPath, TEST_PATHS};
 
 /// Arguments of `zoo bench follow`.
 #[derive(Args)]

@@ -1,12 +1,12 @@
 //! `zoo bench stitch`: the stitching benchmark of issue 12 (protocol in docs/rmr.md).
 //!
-//! - Cases with a ground truth: the section-4 generator ([`zoo_data::stitch::plan_pairs`]) on
+//! - Cases with a ground truth: the section-4 generator ([`zoo_rmr::pairs::plan_pairs`]) on
 //!   the windows of the validation split (or `--test-data`), B and C retrieved from the
 //!   training split's databases, fixed seed: every method stitches the same aligned inputs and
 //!   is compared with the same ground truth.
 //! - Free cases: two and three different validation clips cut at random points, aligned end to
 //!   start (no ground truth).
-//! - Measures ([`zoo_data::stitch::eval`]): L2P, L2Q, NPSS against the ground truth; RMR's foot
+//! - Measures ([`zoo_rmr::pairs::eval`]): L2P, L2Q, NPSS against the ground truth; RMR's foot
 //!   sliding; the benchmark's foot skate (the ground truth's beside it); root trajectory
 //!   deviation from the input; pops (largest joint speed within 5 frames of a seam over the
 //!   training data's 99th percentile); wall time per stitched second.
@@ -21,14 +21,14 @@ use std::time::{Duration, Instant};
 use zoo_data::benchmark::{N_PAST, TransitionMethod, TransitionTask};
 use zoo_data::dataset;
 use zoo_data::metrics::npss;
-use zoo_data::stitch::baselines::{inertialize_seams, interpolate_seams};
-use zoo_data::stitch::eval::{StitchMeasures, hemisphere};
-use zoo_data::stitch::{
-    MIN_CLIP_FRAMES, MotionSet, PairConfig, StitchDatabases, StitchLayout, align_clips, build_pair, plan_pairs,
-};
 use zoo_motion::Clip;
 use zoo_motion::glam::{DQuat, DVec3};
 use zoo_motion::rng::SplitMix64;
+use zoo_rmr::pairs::baselines::{inertialize_seams, interpolate_seams};
+use zoo_rmr::pairs::eval::{StitchMeasures, hemisphere};
+use zoo_rmr::pairs::{
+    MIN_CLIP_FRAMES, MotionSet, PairConfig, StitchDatabases, StitchLayout, align_clips, build_pair, plan_pairs,
+};
 use zoo_rmr::stitch::{RefineOptions, refine_clip_full};
 
 /// Arguments of `zoo bench stitch`.

@@ -292,8 +292,8 @@ fn rmr_bench(threads: &[usize]) -> anyhow::Result<Bench<'static>> {
 /// The paper-size ARNN (GRU 2 x 100, batch 16) on simulated lamp sequences (a small annealing
 /// budget: the step's cost does not depend on how good the hops are).
 fn arnn_bench(threads: &[usize], batch: Option<usize>) -> anyhow::Result<Bench<'static>> {
+    use zoo_arnn::luxo::{GenerateOptions, generate_sequence, preprocess::preprocess};
     use zoo_arnn::{ArnnConfig, ArnnTrainer};
-    use zoo_data::luxo::{GenerateOptions, generate_sequence, preprocess::preprocess};
     let mut config = ArnnConfig::paper();
     config.batch_size = batch.unwrap_or(config.batch_size);
     let b = config.batch_size;

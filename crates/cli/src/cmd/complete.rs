@@ -6,8 +6,8 @@ use anyhow::{Context, bail};
 use clap::Args;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
-use zoo_data::luxo::LampPose;
-use zoo_data::luxo::sequence::poses_to_clip;
+use zoo_arnn::luxo::LampPose;
+use zoo_arnn::luxo::sequence::poses_to_clip;
 
 /// Format name of a keys file.
 pub const KEYS_FORMAT: &str = "zoo-arnn-keys";
@@ -336,7 +336,7 @@ pub fn run(a: CompleteArgs) -> anyhow::Result<()> {
     let keys = read_keys(&a.keys, &dof_names)?;
     let fps = a.fps.or(keys.fps).unwrap_or(DEFAULT_FPS);
     let mut frames = zoo_arnn::complete(&model, &norm, &keys.frames, &keys.poses)?;
-    let lamp_dofs = config.dofs == zoo_data::luxo::DOFS && dof_names == zoo_data::luxo::DOF_NAMES;
+    let lamp_dofs = config.dofs == zoo_arnn::luxo::DOFS && dof_names == zoo_arnn::luxo::DOF_NAMES;
     let lift = if a.no_ground || !lamp_dofs { 0.0 } else { zoo_arnn::eval::project_to_ground(&lamp, &mut frames) };
     // Misses: the completed pose at each key frame against the key.
     let misses: Vec<Vec<f64>> = keys
@@ -532,7 +532,7 @@ mod tests {
     use super::*;
 
     fn names() -> Vec<String> {
-        zoo_data::luxo::DOF_NAMES.iter().map(|s| s.to_string()).collect()
+        zoo_arnn::luxo::DOF_NAMES.iter().map(|s| s.to_string()).collect()
     }
 
     #[test]

@@ -8,7 +8,7 @@ use anyhow::{Context, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
-use zoo_data::controls::{ControlScript, angle_difference};
+use zoo_rnngmm::controls::{ControlScript, angle_difference};
 use zoo_rnngmm::{Controlled, OnlineOptions};
 
 /// Arguments of `zoo control`.
@@ -154,7 +154,7 @@ pub fn run(a: ControlArgs) -> anyhow::Result<()> {
     if let Some(p) = &a.plot {
         plot(p, &script, g.spec.fps, &c.speed, &c.yaw)?;
     }
-    let scores = zoo_data::controls::score(&script, g.spec.fps, &c.speed, &c.yaw, 1.0);
+    let scores = zoo_rnngmm::controls::score(&script, g.spec.fps, &c.speed, &c.yaw, 1.0);
     for s in &scores {
         println!(
             "{:>5.1} s: speed {:>5.0} -> {:>5.0} ({:>4.1}% off), heading {:>5.0} deg: {:>5.1} deg off 1 s after, mean {:.1}",

@@ -4,7 +4,7 @@ use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
-use zoo_data::luxo::{self, GenerateOptions};
+use zoo_arnn::luxo::{self, GenerateOptions};
 
 /// Arguments of `zoo data luxo`.
 #[derive(Args)]
@@ -25,7 +25,7 @@ pub struct LuxoArgs {
     /// Annealing runs tried per sequence before giving up.
     #[arg(long, default_value_t = 20, allow_hyphen_values = true, value_parser = crate::args::attempts)]
     pub max_attempts: usize,
-    /// Lamp parameters (JSON object of `zoo_data::luxo::LampParams` fields; the fields not
+    /// Lamp parameters (JSON object of `zoo_arnn::luxo::LampParams` fields; the fields not
     /// given keep their defaults), e.g. `{"base_mass": 1.5}`.
     #[arg(long)]
     pub lamp: Option<PathBuf>,

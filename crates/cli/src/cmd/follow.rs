@@ -8,7 +8,7 @@ use anyhow::{Context, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
-use zoo_data::path::GroundPath;
+use zoo_rnngmm::path::GroundPath;
 use zoo_rnngmm::{FollowOptions, Followed};
 
 /// Arguments of `zoo follow`.

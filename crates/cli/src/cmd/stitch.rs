@@ -8,9 +8,9 @@ use clap::{Args, ValueEnum};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use zoo_data::bvh;
-use zoo_data::stitch::baselines::{inertialize_seams, interpolate_seams};
-use zoo_data::stitch::{MIN_CLIP_FRAMES, StitchLayout, align_clips};
 use zoo_motion::Clip;
+use zoo_rmr::pairs::baselines::{inertialize_seams, interpolate_seams};
+use zoo_rmr::pairs::{MIN_CLIP_FRAMES, StitchLayout, align_clips};
 use zoo_rmr::stitch::{RefineOptions, refine_clip_full};
 
 /// How the seams are smoothed.

@@ -9,9 +9,9 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 use std::time::Duration;
+use zoo_arnn::luxo::preprocess::{self, KeyedSequence};
+use zoo_arnn::luxo::{self, DOF_NAMES, GenerateOptions, LampParams, LuxoSequence};
 use zoo_arnn::{Architecture, ArnnConfig, ArnnTrainer, NoMemoryOutput};
-use zoo_data::luxo::preprocess::{self, KeyedSequence};
-use zoo_data::luxo::{self, DOF_NAMES, GenerateOptions, LampParams, LuxoSequence};
 use zoo_nn::checkpoint;
 use zoo_nn::train_loop::{self, TrainOptions};
 

@@ -8,10 +8,10 @@ use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
-use zoo_data::stitch::{MotionSet, StitchLayout};
 use zoo_data::synth::SynthConfig;
 use zoo_nn::checkpoint;
 use zoo_nn::train_loop::{self, TrainOptions};
+use zoo_rmr::pairs::{MotionSet, StitchLayout};
 use zoo_rmr::prelude::*;
 
 /// Sizes of the RMR to train.

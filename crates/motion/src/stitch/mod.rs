@@ -4,7 +4,7 @@
 //! poses into pose vectors and back ([`encode_pose`], [`decode_pose`]).
 //!
 //! It lives in the motion core because three sides share it: the offline pair generator and
-//! benchmark (`zoo_data::stitch`), the candle model (`zoo_rmr`) and the engine's runtime, which
+//! benchmark (`zoo_rmr::pairs`), the candle model (`zoo_rmr`) and the engine's runtime, which
 //! turns the poses it is given (root transform plus local joint rotations) into pose vectors
 //! and the refined pose vectors back into poses, frame by frame. [`lock`] is the foot lock by
 //! the predicted contacts that follows the refiner offline and in the runtime.

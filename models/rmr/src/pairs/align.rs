@@ -68,8 +68,8 @@ pub fn align_clips(clips: &[Clip], layout: &StitchLayout, min_frames: usize) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::stitch::ground_roots;
-    use crate::synth::{SynthConfig, generate};
+    use crate::pairs::ground_roots;
+    use zoo_data::synth::{SynthConfig, generate};
 
     fn clips() -> Vec<Clip> {
         let cfg = SynthConfig { minutes: 0.3, seed: 9, clip_seconds: 6.0, ..SynthConfig::default() };

@@ -312,7 +312,7 @@ pub fn make_pairs(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::synth::{SynthConfig, generate};
+    use zoo_data::synth::{SynthConfig, generate};
 
     fn synth_set(minutes: f64, seed: u64) -> MotionSet {
         let cfg = SynthConfig { minutes, seed, clip_seconds: 6.0, ..SynthConfig::default() };

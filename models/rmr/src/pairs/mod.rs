@@ -11,26 +11,26 @@
 //! - [`baselines`]: inertialization and interpolation at the seams of an aligned sequence;
 //! - [`eval`]: the stitching benchmark's measures (pose error, foot sliding, skate, pops);
 //! - [`cache`]: planned pairs saved as JSON and reused for the same clips and configuration;
-//! - [`pairs`]: ground-truth windows, random segment lengths, retrieval of B and C, alignment,
+//! - [`generate`]: ground-truth windows, random segment lengths, retrieval of B and C, alignment,
 //!   and the input clip `X` beside the ground truth `Y`.
 //!
-//! The generation is split in two so that its expensive part can be cached: [`pairs::plan_pairs`]
-//! runs the searches and returns small [`pairs::PairSpec`]s (serde), and [`pairs::build_pair`]
+//! The generation is split in two so that its expensive part can be cached: [`generate::plan_pairs`]
+//! runs the searches and returns small [`generate::PairSpec`]s (serde), and [`generate::build_pair`]
 //! turns one spec into its two clips in microseconds.
 
 pub mod align;
 pub mod baselines;
 pub mod cache;
 pub mod eval;
+pub mod generate;
 pub mod knn;
 pub mod layout;
-pub mod pairs;
 pub mod segments;
 
 pub use align::{AlignedClips, MIN_CLIP_FRAMES, align_clips};
 pub use cache::{PairPlan, SetFingerprint};
+pub use generate::{PairConfig, PairSpec, Retrieved, StitchPair, build_pair, make_pairs, plan_pairs};
 pub use layout::{GroundRoot, LayoutError, StitchLayout, ground_roots};
-pub use pairs::{PairConfig, PairSpec, Retrieved, StitchPair, build_pair, make_pairs, plan_pairs};
 pub use segments::{MotionSet, SegmentDatabase, SegmentRef, StitchDatabases};
 
 use std::path::PathBuf;

@@ -71,8 +71,8 @@ pub fn interpolate_seams(aligned: &Clip, seams: &[usize], blend_frames: usize) -
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::stitch::{MIN_CLIP_FRAMES, StitchLayout, align_clips};
-    use crate::synth::{SynthConfig, generate};
+    use crate::pairs::{MIN_CLIP_FRAMES, StitchLayout, align_clips};
+    use zoo_data::synth::{SynthConfig, generate};
 
     fn aligned() -> (Clip, Vec<usize>) {
         let cfg = SynthConfig { minutes: 0.2, seed: 5, clip_seconds: 4.0, ..SynthConfig::default() };

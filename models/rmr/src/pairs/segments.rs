@@ -70,7 +70,10 @@ impl MotionSet {
     }
 
     /// [`MotionSet::new`] on named clips of a dataset.
-    pub fn from_named(clips: Vec<crate::dataset::NamedClip>, layout: StitchLayout) -> Result<MotionSet, StitchError> {
+    pub fn from_named(
+        clips: Vec<zoo_data::dataset::NamedClip>,
+        layout: StitchLayout,
+    ) -> Result<MotionSet, StitchError> {
         let names = clips.iter().map(|c| c.name.clone()).collect();
         MotionSet::new(clips.into_iter().map(|c| c.clip).collect(), names, layout)
     }

@@ -86,8 +86,8 @@ fn sequence_has_events_and_keys_in_order() {
 fn bvh_rereads_with_the_project_reader() {
     let params = LampParams::default();
     let seq = generate_sequence(&quick(1, 5), 0).unwrap();
-    let text = crate::bvh::to_string(&seq.to_clip(&params));
-    let clip = crate::bvh::parse(&text, std::path::Path::new("luxo.bvh"), &Default::default()).unwrap();
+    let text = zoo_data::bvh::to_string(&seq.to_clip(&params));
+    let clip = zoo_data::bvh::parse(&text, std::path::Path::new("luxo.bvh"), &Default::default()).unwrap();
     assert_eq!(clip.frames(), seq.frames.len());
     assert!((clip.fps() - seq.fps).abs() < 1e-9);
     let back = clip_to_poses(&clip).unwrap();

@@ -235,7 +235,7 @@ pub fn generate_with(
         .map(|i| {
             let seq = generate_sequence(options, i)?;
             let bvh = out_dir.join(format!("{}.bvh", seq.name));
-            crate::bvh::write_file(&seq.to_clip(&options.lamp), &bvh)
+            zoo_data::bvh::write_file(&seq.to_clip(&options.lamp), &bvh)
                 .map_err(|source| LuxoError::Io { path: bvh, source })?;
             seq.write_json(&out_dir.join(format!("{}.json", seq.name)))?;
             progress();

@@ -11,7 +11,7 @@ use rayon::prelude::*;
 use std::path::PathBuf;
 use std::time::Instant;
 use zoo_data::dataset;
-use zoo_data::stitch::{MotionSet, PairConfig, StitchDatabases, StitchLayout, build_pair, plan_pairs};
+use zoo_rmr::pairs::{MotionSet, PairConfig, StitchDatabases, StitchLayout, build_pair, plan_pairs};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);

@@ -3,7 +3,7 @@
 //! configuration are the same.
 
 use super::StitchError;
-use super::pairs::{PairConfig, PairSpec};
+use super::generate::{PairConfig, PairSpec};
 use super::segments::MotionSet;
 use std::path::Path;
 
@@ -122,8 +122,8 @@ impl PairPlan {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::stitch::{StitchDatabases, StitchLayout, plan_pairs};
-    use crate::synth::{SynthConfig, generate};
+    use crate::pairs::{StitchDatabases, StitchLayout, plan_pairs};
+    use zoo_data::synth::{SynthConfig, generate};
 
     #[test]
     fn plans_are_reused_only_for_the_same_clips_and_configuration() {

@@ -25,7 +25,7 @@ mod tests {
 
     #[test]
     fn root_of_hips_projects_and_takes_the_heading() {
-        let skeleton = crate::synth::skeleton();
+        let skeleton = zoo_data::synth::skeleton();
         let layout = StitchLayout::bandai2(&skeleton).unwrap();
         // Synthetic rest frame of the hips (local X up, local Z forward), turned by 0.4 rad.
         let hips = DQuat::from_rotation_y(0.4) * DQuat::from_rotation_z(std::f64::consts::FRAC_PI_2);
@@ -36,7 +36,7 @@ mod tests {
 
     #[test]
     fn bandai2_layout_names_and_bad_rigs() {
-        let mut skeleton = crate::synth::skeleton();
+        let mut skeleton = zoo_data::synth::skeleton();
         let layout = StitchLayout::bandai2(&skeleton).unwrap();
         assert_eq!(layout.lower_body.len(), 9);
         assert_eq!(layout.upper_body(21).len(), 12);
@@ -45,14 +45,14 @@ mod tests {
         let err = StitchLayout::bandai2(&skeleton).unwrap_err().to_string();
         assert!(err.contains("Toes_L"), "{err}");
         let bad = StitchLayout { lower_body: vec![1, 2], ..layout.clone() };
-        assert!(bad.validate(&crate::synth::skeleton()).unwrap_err().to_string().contains("joint 0"));
+        assert!(bad.validate(&zoo_data::synth::skeleton()).unwrap_err().to_string().contains("joint 0"));
         let bad = StitchLayout { contacts: [15, 16, 19, 40], ..layout };
-        assert!(bad.validate(&crate::synth::skeleton()).unwrap_err().to_string().contains("40"));
+        assert!(bad.validate(&zoo_data::synth::skeleton()).unwrap_err().to_string().contains("40"));
     }
 
     #[test]
     fn contacts_use_each_joints_threshold() {
-        let layout = StitchLayout::bandai2(&crate::synth::skeleton()).unwrap();
+        let layout = StitchLayout::bandai2(&zoo_data::synth::skeleton()).unwrap();
         let mut frame = vec![DVec3::ZERO; 21];
         frame[15].y = 11.7 + 2.4; // heel below 2.5
         frame[16].y = 4.3 + 1.7; // toe above 1.6

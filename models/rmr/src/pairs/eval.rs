@@ -4,8 +4,8 @@
 
 use super::layout::{StitchLayout, ground_roots};
 use super::segments::MotionSet;
-use crate::metrics::{FootSkate, l2p, l2q};
 use glam::{DQuat, DVec3};
+use zoo_data::metrics::{FootSkate, l2p, l2q};
 use zoo_motion::Clip;
 
 /// Height above a foot joint's planted height under which RMR's foot sliding counts its
@@ -67,7 +67,7 @@ impl StitchMeasures {
                 if v > 1e-9 { v } else { 1.0 }
             })
             .collect();
-        let speed_p99 = crate::dataset::percentile(&mut speeds, 99.0);
+        let speed_p99 = zoo_data::dataset::percentile(&mut speeds, 99.0);
         StitchMeasures { layout: train.layout.clone(), position_std, speed_p99 }
     }
 
