@@ -308,6 +308,22 @@ def test_stitch(zoo, arm_name, other_name):
         f"stitch of the frames read, {err_files:.3f} cm from its stitch of the files' frames; {ms:.0f} ms"
     )
     check(err < 0.5, f"the stitched action is {err:.3f} cm from the package's")
+    # The same two actions as NLA strips of the armature, selected, with no actions chosen.
+    track = arm.animation_data.nla_tracks.new()
+    strips = [track.strips.new("walk A", 1, first), track.strips.new("walk B", n1 + 20, second)]
+    for st in strips:
+        st.select = True
+    sc.zoo.stitch_first = sc.zoo.stitch_second = None
+    bpy.ops.zoo.stitch()
+    nla = bpy.data.objects[arm_name].animation_data.action
+    nla_length = int(nla.frame_range[1] - nla.frame_range[0]) + 1
+    want = f"{strips[0].name}+{strips[1].name}"  # Blender names a new strip after its action
+    check(nla.name.startswith(want) and nla_length == n1 + n2, f"stitching the NLA strips gave '{nla.name}' of {nla_length} frames")
+    got = to_model_cm(zoo, world_positions(arm_name, names, frames))
+    err_nla = float(np.max(np.linalg.norm(got - expected.global_positions[idx], axis=-1)))
+    check(err_nla < 0.5, f"stitching the NLA strips is {err_nla:.3f} cm from stitching the actions")
+    log(f"stitch: the two selected NLA strips give '{nla.name}', {nla_length} frames, {err_nla:.4f} cm from the actions' stitch")
+    arm.animation_data.nla_tracks.remove(track)
     REPORT["stitch"] = {"frames": length, "expected": n1 + n2, "max_joint_error_cm": err, "max_joint_error_vs_files_cm": err_files, "ms": ms}
 
 
