@@ -11,6 +11,9 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use zoo_runtime::EnginePose;
 
+/// A numpy array of any shape, as the package returns them.
+pub type Array<'py, T> = Bound<'py, PyArrayDyn<T>>;
+
 /// One dimension of an expected shape: its name in messages and its size, `None` when any
 /// size (at least 1) is accepted.
 pub type Dim = (&'static str, Option<usize>);

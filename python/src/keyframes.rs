@@ -1,7 +1,7 @@
 //! Keyframe completion (ARNN): raw pose vectors, and humanoid keys given as BVH-style poses
 //! (the canonical frame the humanoid ARNN was trained in is handled here).
 
-use crate::arrays::{array, values};
+use crate::arrays::{Array, array, values};
 use crate::error::{OrPy, shape};
 use glam::{DQuat, DVec3};
 use numpy::{PyArrayDyn, PyReadonlyArrayDyn, PyUntypedArrayMethods};
@@ -144,7 +144,7 @@ impl Keyframes {
         hips: PyReadonlyArrayDyn<'py, f32>,
         rotations: PyReadonlyArrayDyn<'py, f32>,
         fixed: Option<PyReadonlyArrayDyn<'py, f32>>,
-    ) -> PyResult<(Bound<'py, PyArrayDyn<f32>>, Bound<'py, PyArrayDyn<f32>>)> {
+    ) -> PyResult<(Array<'py, f32>, Array<'py, f32>)> {
         let k = self.joints();
         if !self.is_humanoid() {
             return Err(shape(format!(

@@ -1,6 +1,6 @@
 //! Stitching (RMR): clips aligned end to start and refined into one motion.
 
-use crate::arrays::{PoseArrays, array, forward_kinematics, poses_from_world, values};
+use crate::arrays::{Array, PoseArrays, array, forward_kinematics, poses_from_world, values};
 use crate::error::{OrPy, shape};
 use glam::{DQuat, DVec3, Vec3};
 use numpy::{PyArrayDyn, PyReadonlyArrayDyn};
@@ -111,7 +111,7 @@ impl Stitch {
         &self,
         py: Python<'py>,
         clips: Vec<(PyReadonlyArrayDyn<'py, f32>, PyReadonlyArrayDyn<'py, f32>)>,
-    ) -> PyResult<(Bound<'py, PyArrayDyn<f32>>, Bound<'py, PyArrayDyn<f32>>, Vec<usize>)> {
+    ) -> PyResult<(Array<'py, f32>, Array<'py, f32>, Vec<usize>)> {
         let k = self.model.joints();
         if clips.is_empty() {
             return Err(shape("no clips given; stitching joins at least one clip"));

@@ -1,7 +1,7 @@
 //! Synthesis (RNN-GMM): random motion of seeded characters, the feature frames that start
 //! them, and speed / heading control.
 
-use crate::arrays::{PoseArrays, array, check_shape, values};
+use crate::arrays::{Array, PoseArrays, array, check_shape, values};
 use crate::error::{OrPy, shape};
 use glam::{DQuat, DVec3};
 use numpy::{PyArrayDyn, PyReadonlyArrayDyn, PyUntypedArrayMethods};
@@ -97,7 +97,7 @@ impl Synthesis {
         hips: PyReadonlyArrayDyn<'py, f32>,
         rotations: PyReadonlyArrayDyn<'py, f32>,
         contacts: Option<PyReadonlyArrayDyn<'py, f32>>,
-    ) -> PyResult<(Bound<'py, PyArrayDyn<f32>>, Bound<'py, PyArrayDyn<f32>>)> {
+    ) -> PyResult<(Array<'py, f32>, Array<'py, f32>)> {
         let meta = self.model.model().metadata();
         let k = meta.skeleton.len();
         let d = self.model.frame_dim();
