@@ -6,9 +6,8 @@
 //!
 //! No candle and no CLI: the runtime (tract), the motion core and the BVH module only.
 
-// pyo3's `#[pymodule]`, `#[pyclass]`, `#[pymethods]` and `create_exception!` expand to unsafe
-// FFI code (the CPython C API); this crate writes no `unsafe` of its own.
-#![allow(unsafe_code)]
+// No `unsafe` here: the workspace's `unsafe_code = "deny"` holds (pyo3's macros allow their own
+// FFI code).
 
 mod arrays;
 mod bvh;
