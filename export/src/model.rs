@@ -74,14 +74,8 @@ impl OnnxModel {
     /// Writes the encoded model to `path` atomically: to a temporary file in the same folder,
     /// then renamed into place, so an interrupted write never leaves a truncated model.
     pub fn write(&self, path: &Path) -> Result<(), ExportError> {
-        let io = |source| ExportError::Io { path: path.display().to_string(), source };
-        let name = path.file_name().map_or_else(|| "model.onnx".into(), |n| n.to_string_lossy().into_owned());
-        let tmp = path.with_file_name(format!(".{name}.tmp"));
-        std::fs::write(&tmp, self.to_bytes()).map_err(io)?;
-        std::fs::rename(&tmp, path).map_err(|source| {
-            let _ = std::fs::remove_file(&tmp);
-            io(source)
-        })
+        zoo_motion::atomic::write(path, self.to_bytes())
+            .map_err(|source| ExportError::Io { path: path.display().to_string(), source })
     }
 
     /// Inputs, outputs and op counts, for snapshots and logs.

@@ -4,6 +4,7 @@ mod args;
 mod cmd;
 mod exported;
 mod methods;
+mod progress;
 mod registry;
 mod render;
 

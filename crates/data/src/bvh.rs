@@ -730,13 +730,8 @@ fn joint_name(name: &str) -> String {
 /// reader never sees a half-written file.
 pub fn write_file(clip: &Clip, path: &Path) -> std::io::Result<()> {
     let text = to_string(clip);
-    let name = path.file_name().ok_or_else(|| {
-        std::io::Error::new(std::io::ErrorKind::InvalidInput, format!("{}: not a file name", path.display()))
-    })?;
-    let tmp = path.with_file_name(format!(".{}.{}.tmp", name.to_string_lossy(), std::process::id()));
-    let gz = name.to_string_lossy().ends_with(".gz");
-    let result = (|| {
-        let file = std::fs::File::create(&tmp)?;
+    let gz = path.file_name().is_some_and(|n| n.to_string_lossy().ends_with(".gz"));
+    zoo_motion::atomic::write_with(path, |file| {
         let mut w = std::io::BufWriter::new(file);
         if gz {
             let mut enc = flate2::write::GzEncoder::new(w, flate2::Compression::default());
@@ -745,14 +740,8 @@ pub fn write_file(clip: &Clip, path: &Path) -> std::io::Result<()> {
         } else {
             w.write_all(text.as_bytes())?;
         }
-        let file = w.into_inner().map_err(|e| e.into_error())?;
-        file.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
+        w.flush()
+    })
 }
 
 #[cfg(test)]

@@ -15,7 +15,11 @@ pub mod gltf;
 pub mod metrics;
 pub mod plausibility;
 pub mod position_method;
+pub mod positions;
+pub mod report;
 pub mod retarget;
 pub(crate) mod scene;
 pub mod synth;
 pub mod terrain;
+
+pub use report::{Context, Message, Progress, Quiet};

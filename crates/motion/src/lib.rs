@@ -6,12 +6,15 @@
 //! motion pipeline around a model (fitting rotations to generated positions, the foot lock,
 //! splicing clips). Offline data tools, the candle models and the engine-side runtime all read
 //! motion through these types, so they share one implementation of every convention (units,
-//! frames, rotation orders). Nothing here reads files or depends on candle.
+//! frames, rotation orders). Nothing here reads files or depends on candle; the one way files are
+//! written in the workspace ([`atomic`]: a temporary file renamed into place) lives here so
+//! that every crate, the BVH writer the Python package compiles in included, shares it.
 //!
 //! Conventions: quaternions are glam `DQuat` (stored x, y, z, w; the benchmark prints w first),
 //! positions are `DVec3` in the clip's own units (bandai2 and the synthetic data: cm, Y up).
 //! Per-frame arrays are laid out frame-major: `index = frame * joints + joint`.
 
+pub mod atomic;
 pub mod blend;
 pub mod clip;
 pub mod euler;

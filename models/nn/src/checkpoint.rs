@@ -77,6 +77,38 @@ impl RunSkeleton {
     }
 }
 
+/// The kind assumed when `config.json` has no `"model"` field (folders written before the
+/// field existed hold an RTN).
+pub const DEFAULT_KIND: &str = "rtn";
+
+/// The model kind named by the `"model"` field of `config` (the text of a run folder's
+/// `config.json` at `path`); [`DEFAULT_KIND`] when the field is absent.
+pub fn kind_of_config(config: &str, path: &Path) -> NnResult<String> {
+    let v: serde_json::Value = serde_json::from_str(config)
+        .map_err(|e| NnError::Config(format!("{}: not valid JSON ({e})", path.display())))?;
+    match v.get("model") {
+        None => Ok(DEFAULT_KIND.to_string()),
+        Some(serde_json::Value::String(s)) => Ok(s.clone()),
+        Some(other) => Err(NnError::Config(format!(
+            "{}: `\"model\"` must be a model kind such as \"rtn\", found {other}",
+            path.display()
+        ))),
+    }
+}
+
+/// The model kind of the run folder `dir` (see [`kind_of_config`]).
+pub fn model_kind(dir: &Path) -> NnResult<String> {
+    let path = dir.join(CONFIG_FILE);
+    if !path.is_file() {
+        return Err(NnError::Config(format!(
+            "{} is not a run folder of `zoo train` (no {CONFIG_FILE})",
+            dir.display()
+        )));
+    }
+    let text = std::fs::read_to_string(&path).map_err(io(&path))?;
+    kind_of_config(&text, &path)
+}
+
 /// An error mapper for I/O on `path`.
 pub fn io(path: &Path) -> impl FnOnce(std::io::Error) -> NnError + '_ {
     move |source| NnError::Io { path: path.to_path_buf(), source }
@@ -94,8 +126,7 @@ pub struct Staged {
 pub fn stage(dst: &Path, write: impl FnOnce(&Path) -> NnResult<()>) -> NnResult<Staged> {
     let dir = dst.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir).map_err(io(dir))?;
-    let name = dst.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let tmp = dir.join(format!(".{name}.tmp"));
+    let tmp = zoo_motion::atomic::temp_path(dst).map_err(io(dst))?;
     write(&tmp)?;
     Ok(Staged { tmp, dst: dst.to_path_buf() })
 }

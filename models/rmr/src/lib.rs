@@ -20,6 +20,7 @@
 //! # Ok(()) }
 //! ```
 
+pub mod bench;
 pub mod checkpoint;
 pub mod config;
 pub mod data;

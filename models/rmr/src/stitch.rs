@@ -227,3 +227,227 @@ pub fn refine_clip_full(model: &Rmr, stats: &FeatureStats, aligned: &Clip, opts:
     config.check_skeleton(&aligned.skeleton)?;
     refine_clip_full_with(|w| model.refine(w), &config.layout, stats, aligned, opts)
 }
+
+/// What follows the refiner (`zoo stitch` by default: both, in this order) and what comes
+/// before it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PostProcess {
+    /// The ankles placed at the refiner's predicted positions by IK (RMR sec. 5's output
+    /// processing; before the foot lock).
+    pub ankle_ik: bool,
+    /// The feet locked by the predicted contacts.
+    pub foot_lock: bool,
+    /// The seams inertialized over the blend before the RMR refines (not in the paper; `zoo
+    /// stitch --pre-blend`, `inert+rmr...` in the benchmark).
+    pub pre_blend: bool,
+}
+
+/// An RMR's stitch of an aligned sequence, with what the post-processing did.
+#[derive(Clone, Debug)]
+pub struct RefinedSeams {
+    /// The stitched motion.
+    pub clip: Clip,
+    /// The ankles' global positions the refiner predicted (left, right) per frame.
+    pub ankles: Vec<[DVec3; 2]>,
+    /// Mean move of the ankles by the IK (clip units), when it ran.
+    pub ankle_move: Option<f64>,
+    /// Mean ankle correction of the foot lock (clip units), when it ran.
+    pub lock_move: Option<f64>,
+}
+
+/// Refines the aligned sequence `aligned` (seams at `seams`) with `model`, then applies `post`;
+/// `opts.blend_frames` is also the pre-blend's length.
+pub fn refine_seams(
+    model: &Rmr,
+    stats: &FeatureStats,
+    aligned: &Clip,
+    seams: &[usize],
+    opts: RefineOptions,
+    post: PostProcess,
+) -> RmrResult<RefinedSeams> {
+    let layout = &model.config().layout;
+    let refined = if post.pre_blend {
+        let blended = crate::pairs::baselines::inertialize_seams(aligned, seams, opts.blend_frames);
+        refine_clip_full(model, stats, &blended, opts)?
+    } else {
+        refine_clip_full(model, stats, aligned, opts)?
+    };
+    let mut clip = refined.clip;
+    let ankle_move = post.ankle_ik.then(|| crate::footlock::place_ankles(&mut clip, &refined.ankles, layout));
+    let lock_move = post.foot_lock.then(|| crate::footlock::lock_feet(&mut clip, &refined.contacts, layout));
+    Ok(RefinedSeams { clip, ankles: refined.ankles, ankle_move, lock_move })
+}
+
+/// How `zoo stitch` smooths the seams of the aligned clips.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SeamMethod {
+    /// The RMR, with its post-processing.
+    Rmr(PostProcess),
+    /// Inertialization at each seam over the blend.
+    Inertialize,
+    /// Interpolation across each seam over the blend.
+    Interp,
+    /// The aligned concatenation as it is.
+    Concat,
+}
+
+/// The options of `zoo stitch`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StitchOptions {
+    /// How the seams are smoothed.
+    pub method: SeamMethod,
+    /// RMR window `w` in frames (default: the model's).
+    pub window: Option<usize>,
+    /// RMR window step in frames (default: the model's; half the window when `window` is given).
+    pub stride: Option<usize>,
+    /// Frames of the blend at each seam (inertialize, interp) or after each RMR window.
+    pub blend_frames: usize,
+}
+
+/// What `zoo stitch` made.
+#[derive(Clone, Debug)]
+pub struct StitchOutcome {
+    /// The aligned concatenation.
+    pub aligned: Clip,
+    /// The stitched motion.
+    pub output: Clip,
+    /// First frame of each clip after the first.
+    pub seams: Vec<usize>,
+    /// The RMR's predicted ankle positions (`SeamMethod::Rmr` only).
+    pub predicted_ankles: Option<Vec<[DVec3; 2]>>,
+    /// What the method did beyond the refinement (`, feet locked by ...`), for the summary line.
+    pub note: String,
+    /// Seconds the method took.
+    pub seconds: f64,
+}
+
+/// A clip argument of `zoo stitch`: a file and a frame range.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ClipRange {
+    /// The clip file.
+    pub path: std::path::PathBuf,
+    /// First frame (0 when not given).
+    pub from: usize,
+    /// End frame, excluded (`None`: the clip's end).
+    pub to: Option<usize>,
+}
+
+/// Reads the clips of `ranges` (dummy root dropped, sign flips removed) and cuts their ranges;
+/// a range outside its clip or shorter than [`MIN_CLIP_FRAMES`] is refused.
+pub fn read_clips(ranges: &[ClipRange]) -> RmrResult<Vec<Clip>> {
+    use zoo_data::{Context, bail};
+    let read = |spec: &ClipRange| -> RmrResult<Clip> {
+        let clip = zoo_data::clip_io::read_model_clip(&spec.path)
+            .with_context(|| format!("reading {}", spec.path.display()))?;
+        let frames = clip.frames();
+        let to = spec.to.unwrap_or(frames);
+        if to > frames || spec.from >= to {
+            bail!(
+                "{}: the range {}:{} is outside the clip's {frames} frames (frames are 0..{frames})",
+                spec.path.display(),
+                spec.from,
+                to
+            );
+        }
+        let clip = clip.slice(spec.from, to);
+        if clip.frames() < MIN_CLIP_FRAMES {
+            bail!(
+                "{} ({}..{to}) has {} frames; stitching needs at least {MIN_CLIP_FRAMES} frames per clip: give a \
+                 longer range",
+                spec.path.display(),
+                spec.from,
+                clip.frames()
+            );
+        }
+        Ok(clip)
+    };
+    ranges.iter().map(read).collect()
+}
+
+/// Refuses clips on another rig or at another frame rate than the first (`names` name them),
+/// and, with a model, clips its configuration does not fit.
+pub fn check_clips(clips: &[Clip], names: &[String], config: Option<&Config>) -> RmrResult<()> {
+    use zoo_data::{Context, bail};
+    for (i, (c, name)) in clips.iter().zip(names).enumerate().skip(1) {
+        if let Some(why) = clips[0].skeleton.topology_difference(&c.skeleton) {
+            bail!("{name} has another skeleton than {} ({why}): every clip must use the same rig", names[0]);
+        }
+        if (c.fps() - clips[0].fps()).abs() > 1e-6 * clips[0].fps() {
+            bail!("{name} is {} fps, {} is {} fps: resample clip {i} first", c.fps(), names[0], clips[0].fps());
+        }
+    }
+    let Some(config) = config else { return Ok(()) };
+    for (c, name) in clips.iter().zip(names) {
+        config.check_skeleton(&c.skeleton).context(name)?;
+        if (c.fps() - config.fps).abs() > 1e-6 * config.fps {
+            bail!("{name} is {} fps but the model was trained at {} fps: resample it first", c.fps(), config.fps);
+        }
+    }
+    Ok(())
+}
+
+/// `zoo stitch`: aligns `clips` end to start and smooths the seams by `opts.method`, which
+/// needs `model` for the RMR (with another method its layout is used when given). `names`
+/// name the clips in messages.
+pub fn stitch_command(
+    model: Option<&(Rmr, FeatureStats)>,
+    clips: &[Clip],
+    names: &[String],
+    opts: StitchOptions,
+) -> RmrResult<StitchOutcome> {
+    use zoo_data::{Context, bail};
+    check_clips(clips, names, model.map(|(m, _)| m.config()))?;
+    let layout = match model {
+        Some((m, _)) => m.config().layout.clone(),
+        None => StitchLayout::bandai2(&clips[0].skeleton)
+            .with_context(|| format!("{}: a joint stitching reads is missing", names[0]))?,
+    };
+    let aligned = align_clips(clips, &layout, MIN_CLIP_FRAMES)?;
+    let seams = aligned.starts[1..].to_vec();
+    let t0 = std::time::Instant::now();
+    let (mut note, mut predicted_ankles) = (String::new(), None);
+    let blend = opts.blend_frames;
+    let output = match opts.method {
+        SeamMethod::Concat => aligned.clip.clone(),
+        SeamMethod::Inertialize => crate::pairs::baselines::inertialize_seams(&aligned.clip, &seams, blend),
+        SeamMethod::Interp => crate::pairs::baselines::interpolate_seams(&aligned.clip, &seams, blend),
+        SeamMethod::Rmr(post) => {
+            let Some((m, stats)) = model else {
+                bail!("--method rmr needs --model RUN_DIR (a folder of `zoo train rmr`); or use --method inertialize")
+            };
+            let refine = command_refine_options(m.config(), aligned.clip.frames(), &opts)?;
+            let r = refine_seams(m, stats, &aligned.clip, &seams, refine, post)?;
+            if post.pre_blend {
+                note = format!(", seams inertialized over {blend} frames first");
+            }
+            if let Some(moved) = r.ankle_move {
+                note += &format!(", ankles placed at the predicted positions (mean move {moved:.2} units)");
+            }
+            if let Some(moved) = r.lock_move {
+                note += &format!(", feet locked by the predicted contacts (mean ankle correction {moved:.2} units)");
+            }
+            predicted_ankles = Some(r.ankles);
+            r.clip
+        }
+    };
+    let seconds = t0.elapsed().as_secs_f64();
+    Ok(StitchOutcome { aligned: aligned.clip, output, seams, predicted_ankles, note, seconds })
+}
+
+/// The window and stride of `zoo stitch --window --stride` on a sequence of `frames` frames.
+fn command_refine_options(c: &Config, frames: usize, opts: &StitchOptions) -> RmrResult<RefineOptions> {
+    use zoo_data::bail;
+    let window = opts.window.unwrap_or(c.window);
+    let stride = opts.stride.unwrap_or(if opts.window.is_some() { window / 2 } else { c.stride }).max(1);
+    if stride > window {
+        bail!("--stride {stride} is longer than the window {window}: use a stride of at most {window}");
+    }
+    if window > frames {
+        bail!(
+            "the window of {window} frames is longer than the stitched sequence ({frames} frames): pass --window {} or \
+             longer clips",
+            frames.min(c.window)
+        );
+    }
+    Ok(RefineOptions { window, stride, blend_frames: opts.blend_frames })
+}

@@ -54,10 +54,7 @@ pub struct CompleteArgs {
 fn write_positions(a: &CompleteArgs, clip: &zoo_motion::Clip, first_frame: usize) -> anyhow::Result<()> {
     let Some(p) = &a.positions else { return Ok(()) };
     let extra = serde_json::json!({ "first_frame": first_frame });
-    crate::cmd::transition::write_json_atomically(
-        p,
-        &crate::cmd::transition::clip_positions_json("complete", clip, extra),
-    )
+    crate::cmd::write_positions(p, &zoo_data::positions::clip_positions_json("complete", clip, extra))
 }
 
 /// One key as written in the file: a lamp key gives its `pose`; a humanoid key takes its pose

@@ -214,7 +214,7 @@ fn generate_one(
             chunk.motion.clip.skeleton.channels[0].position = true;
             out.write(&chunk.motion.clip, opts.frames)?;
             if positions.is_some() {
-                frames_xyz.extend(crate::cmd::transition::clip_positions(&chunk.motion.clip));
+                frames_xyz.extend(zoo_data::positions::clip_positions(&chunk.motion.clip));
             }
             for (i, c) in chunk.motion.contacts.iter().enumerate() {
                 let sep = if done + i == 0 { "\n" } else { ",\n" };
@@ -230,7 +230,7 @@ fn generate_one(
         std::fs::rename(&json_tmp, json).with_context(|| format!("writing {}", json.display()))?;
         if let Some(p) = positions {
             let v = serde_json::json!({
-                "format": crate::cmd::transition::POSITIONS_FORMAT,
+                "format": zoo_data::positions::POSITIONS_FORMAT,
                 "version": 1,
                 "command": "generate",
                 "joints": clip.skeleton.names,
@@ -238,7 +238,7 @@ fn generate_one(
                 "seed": opts.seed,
                 "frames": frames_xyz,
             });
-            crate::cmd::transition::write_json_atomically(p, &v)?;
+            crate::cmd::write_positions(p, &v)?;
         }
         Ok(())
     })();

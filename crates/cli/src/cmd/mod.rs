@@ -106,3 +106,55 @@ pub fn exclude_clips(
     eprintln!("--exclude-glob {pattern}: left out {} of {before} clips", before - kept.len());
     Ok(kept)
 }
+
+/// How a benchmark's test clips are chosen: by a glob on `--data`, or from another dataset.
+pub struct Split<'a> {
+    /// `--valid-glob`: the test split of `--data`.
+    pub valid_glob: Option<&'a str>,
+    /// `--test-data`: a held-out dataset tested instead.
+    pub test_data: Option<&'a Path>,
+    /// `--exclude-glob`: clips left out of `--data` before the split.
+    pub exclude_glob: Option<&'a str>,
+}
+
+/// The training and test clips of a benchmark: `data` split by `--valid-glob`, or `data` (its
+/// training split when a glob is given) and every clip of `--test-data`.
+pub fn load_split(
+    data: &Path,
+    split: &Split,
+    skip_invalid: bool,
+    progress: &dyn zoo_data::Progress,
+) -> anyhow::Result<(Vec<zoo_data::dataset::NamedClip>, Vec<zoo_data::dataset::NamedClip>)> {
+    use zoo_data::dataset;
+    progress.stage(&format!("loading {}", data.display()));
+    let clips = load_dataset(data, None, skip_invalid)?;
+    let clips = exclude_clips(clips, split.exclude_glob)?;
+    Ok(match (split.test_data, split.valid_glob) {
+        (Some(test_path), glob) => {
+            let train = match glob {
+                Some(g) => dataset::split(clips, g)?.0,
+                None => clips,
+            };
+            progress.stage(&format!("loading {}", test_path.display()));
+            (train, load_dataset(test_path, None, skip_invalid)?)
+        }
+        (None, Some(g)) => dataset::split(clips, g)?,
+        (None, None) => bail!("pass --valid-glob GLOB to choose the test split of --data, or --test-data PATH"),
+    })
+}
+
+/// Writes `value` as pretty JSON to `path` (atomically).
+pub fn write_json(path: &Path, value: &impl serde::Serialize) -> anyhow::Result<()> {
+    let text = serde_json::to_string_pretty(value)?;
+    zoo_motion::atomic::write(path, text).with_context(|| format!("writing {}", path.display()))
+}
+
+/// A command-line error as a library message (for callbacks the libraries call).
+pub fn message(e: anyhow::Error) -> zoo_data::Message {
+    zoo_data::Message(format!("{e:#}"))
+}
+
+/// Writes a `--positions` file ([`zoo_data::positions`]).
+pub fn write_positions(path: &Path, value: &serde_json::Value) -> anyhow::Result<()> {
+    zoo_data::positions::write(path, value).with_context(|| format!("writing {}", path.display()))
+}

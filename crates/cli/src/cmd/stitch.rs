@@ -1,17 +1,12 @@
-//! `zoo stitch`: join locomotion clips into one. The clips are aligned end to start (each
-//! clip's first ground root on the previous clip's last one, RMR sec. 6), then the seams are
-//! smoothed by the chosen method: the RMR refining window by window, its ankles placed at its
-//! predicted positions and its feet locked by its predicted contacts, inertialization or interpolation at each seam, or nothing (`concat`).
+//! `zoo stitch`: join locomotion clips into one ([`zoo_rmr::stitch::stitch_command`]): the
+//! clips aligned end to start (RMR sec. 6), the seams smoothed by the RMR (ankles placed at its
+//! predicted positions, feet locked by its predicted contacts), inertialization, interpolation,
+//! or nothing (`concat`).
 
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
 use std::path::{Path, PathBuf};
-use std::time::Instant;
-use zoo_data::bvh;
-use zoo_motion::Clip;
-use zoo_rmr::pairs::baselines::{inertialize_seams, interpolate_seams};
-use zoo_rmr::pairs::{MIN_CLIP_FRAMES, StitchLayout, align_clips};
-use zoo_rmr::stitch::{RefineOptions, refine_clip_full};
+use zoo_rmr::stitch::{ClipRange, PostProcess, SeamMethod, StitchOptions};
 
 /// How the seams are smoothed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -79,19 +74,8 @@ pub struct StitchArgs {
     pub positions: Option<PathBuf>,
 }
 
-/// A clip argument: path and optional frame range.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct ClipSpec {
-    /// The BVH file.
-    pub path: PathBuf,
-    /// First frame (0 when not given).
-    pub from: usize,
-    /// End frame, excluded (`None`: the clip's end).
-    pub to: Option<usize>,
-}
-
 /// Parses `CLIP.bvh` or `CLIP.bvh:FROM:TO` (`TO` may be empty).
-pub fn parse_clip_spec(s: &str) -> anyhow::Result<ClipSpec> {
+pub fn parse_clip_spec(s: &str) -> anyhow::Result<ClipRange> {
     let mut parts = s.rsplitn(3, ':');
     let (last, mid, head) = (parts.next(), parts.next(), parts.next());
     let frame = |v: &str| v.trim().parse::<usize>().ok();
@@ -108,7 +92,7 @@ pub fn parse_clip_spec(s: &str) -> anyhow::Result<ClipSpec> {
         {
             bail!("`{s}`: the range {from}:{t} is empty (write CLIP.bvh:FROM:TO with FROM < TO)");
         }
-        return Ok(ClipSpec { path: PathBuf::from(path), from, to });
+        return Ok(ClipRange { path: PathBuf::from(path), from, to });
     }
     if s.is_empty() {
         bail!("an empty clip argument: expected CLIP.bvh or CLIP.bvh:FROM:TO");
@@ -126,39 +110,7 @@ pub fn parse_clip_spec(s: &str) -> anyhow::Result<ClipSpec> {
             crate::args::MAX_FRAME_INDEX
         );
     }
-    Ok(ClipSpec { path: PathBuf::from(s), from: 0, to: None })
-}
-
-/// Reads the clips of `specs` (dummy root dropped, sign flips removed) and cuts their ranges.
-pub fn read_clips(specs: &[ClipSpec]) -> anyhow::Result<Vec<Clip>> {
-    specs
-        .iter()
-        .map(|spec| {
-            let clip = zoo_data::clip_io::read_model_clip(&spec.path)
-                .with_context(|| format!("reading {}", spec.path.display()))?;
-            let frames = clip.frames();
-            let to = spec.to.unwrap_or(frames);
-            if to > frames || spec.from >= to {
-                bail!(
-                    "{}: the range {}:{} is outside the clip's {frames} frames (frames are 0..{frames})",
-                    spec.path.display(),
-                    spec.from,
-                    to
-                );
-            }
-            let clip = clip.slice(spec.from, to);
-            if clip.frames() < MIN_CLIP_FRAMES {
-                bail!(
-                    "{} ({}..{to}) has {} frames; stitching needs at least {MIN_CLIP_FRAMES} frames per clip: give a \
-                     longer range",
-                    spec.path.display(),
-                    spec.from,
-                    clip.frames()
-                );
-            }
-            Ok(clip)
-        })
-        .collect()
+    Ok(ClipRange { path: PathBuf::from(s), from: 0, to: None })
 }
 
 /// Why a file given as `--model` is refused, naming the model kind of an exported ONNX file.
@@ -184,6 +136,22 @@ fn input_path(out: &Path) -> PathBuf {
     out.with_file_name(format!("{stem}.input.bvh"))
 }
 
+/// The RMR of `--model` (refusing a file or another kind of run folder).
+fn load_model(dir: &Path) -> anyhow::Result<(zoo_rmr::Rmr, zoo_rmr::features::FeatureStats)> {
+    if dir.is_file() {
+        bail!("{}", model_file_message(dir));
+    }
+    let kind = zoo_nn::checkpoint::model_kind(dir)?;
+    if kind != "rmr" {
+        bail!(
+            "--model {}: the folder holds a `{kind}` model; `zoo stitch` runs an RMR run folder of `zoo train rmr`",
+            dir.display()
+        );
+    }
+    zoo_rmr::checkpoint::load(dir, &candle_core::Device::Cpu)
+        .with_context(|| format!("loading the RMR in {}", dir.display()))
+}
+
 /// Runs `zoo stitch`.
 pub fn run(a: StitchArgs) -> anyhow::Result<()> {
     crate::cmd::check_output_file("--out", &a.out)?;
@@ -194,137 +162,44 @@ pub fn run(a: StitchArgs) -> anyhow::Result<()> {
         crate::cmd::check_output_file("--positions", p)?;
     }
     let specs = a.clips.iter().map(|s| parse_clip_spec(s)).collect::<anyhow::Result<Vec<_>>>()?;
-    let model = match (&a.model, a.method) {
-        (Some(dir), _) => {
-            if dir.is_file() {
-                bail!("{}", model_file_message(dir));
-            }
-            let kind = crate::registry::model_kind(dir)?;
-            if kind != "rmr" {
-                bail!(
-                    "--model {}: the folder holds a `{kind}` model; `zoo stitch` runs an RMR run folder of `zoo train \
-                     rmr`",
-                    dir.display()
-                );
-            }
-            Some(
-                zoo_rmr::checkpoint::load(dir, &candle_core::Device::Cpu)
-                    .with_context(|| format!("loading the RMR in {}", dir.display()))?,
-            )
-        }
-        (None, StitchMethod::Rmr) => {
-            bail!("--method rmr needs --model RUN_DIR (a folder of `zoo train rmr`); or use --method inertialize")
-        }
-        (None, _) => None,
+    let model = a.model.as_deref().map(load_model).transpose()?;
+    let clips = zoo_rmr::stitch::read_clips(&specs)?;
+    let names: Vec<String> = specs.iter().map(|s| s.path.display().to_string()).collect();
+    let method = match a.method {
+        StitchMethod::Rmr => SeamMethod::Rmr(PostProcess {
+            ankle_ik: !a.no_ankle_ik,
+            foot_lock: !a.no_foot_lock,
+            pre_blend: a.pre_blend,
+        }),
+        StitchMethod::Inertialize => SeamMethod::Inertialize,
+        StitchMethod::Interp => SeamMethod::Interp,
+        StitchMethod::Concat => SeamMethod::Concat,
     };
-    let clips = read_clips(&specs)?;
-    for (i, (c, spec)) in clips.iter().zip(&specs).enumerate().skip(1) {
-        if let Some(why) = clips[0].skeleton.topology_difference(&c.skeleton) {
-            bail!(
-                "{} has another skeleton than {} ({why}): every clip must use the same rig",
-                spec.path.display(),
-                specs[0].path.display()
-            );
-        }
-        if (c.fps() - clips[0].fps()).abs() > 1e-6 * clips[0].fps() {
-            bail!(
-                "{} is {} fps, {} is {} fps: resample clip {i} first",
-                spec.path.display(),
-                c.fps(),
-                specs[0].path.display(),
-                clips[0].fps()
-            );
-        }
-    }
-    let layout = match &model {
-        Some((m, _)) => {
-            let config = m.config();
-            for (c, spec) in clips.iter().zip(&specs) {
-                config.check_skeleton(&c.skeleton).with_context(|| format!("{}", spec.path.display()))?;
-                if (c.fps() - config.fps).abs() > 1e-6 * config.fps {
-                    bail!(
-                        "{} is {} fps but the model was trained at {} fps: resample it first",
-                        spec.path.display(),
-                        c.fps(),
-                        config.fps
-                    );
-                }
-            }
-            config.layout.clone()
-        }
-        None => StitchLayout::bandai2(&clips[0].skeleton)
-            .with_context(|| format!("{}: a joint stitching reads is missing", specs[0].path.display()))?,
-    };
-    let aligned = align_clips(&clips, &layout, MIN_CLIP_FRAMES)?;
-    let seams = aligned.starts[1..].to_vec();
-    let t0 = Instant::now();
-    let mut note = String::new();
-    let mut predicted_ankles = None;
-    let output = match a.method {
-        StitchMethod::Concat => aligned.clip.clone(),
-        StitchMethod::Inertialize => inertialize_seams(&aligned.clip, &seams, a.blend_frames),
-        StitchMethod::Interp => interpolate_seams(&aligned.clip, &seams, a.blend_frames),
-        StitchMethod::Rmr => {
-            let (m, stats) = model.as_ref().expect("checked above: --method rmr has a model");
-            let c = m.config();
-            let window = a.window.unwrap_or(c.window);
-            let stride = a.stride.unwrap_or(if a.window.is_some() { window / 2 } else { c.stride }).max(1);
-            if stride > window {
-                bail!("--stride {stride} is longer than the window {window}: use a stride of at most {window}");
-            }
-            let frames = aligned.clip.frames();
-            if window > frames {
-                bail!(
-                    "the window of {window} frames is longer than the stitched sequence ({frames} frames): pass \
-                     --window {} or longer clips",
-                    frames.min(c.window)
-                );
-            }
-            let opts = RefineOptions { window, stride, blend_frames: a.blend_frames };
-            let refined = if a.pre_blend {
-                note = format!(", seams inertialized over {} frames first", a.blend_frames);
-                refine_clip_full(m, stats, &inertialize_seams(&aligned.clip, &seams, a.blend_frames), opts)?
-            } else {
-                refine_clip_full(m, stats, &aligned.clip, opts)?
-            };
-            predicted_ankles = Some(refined.ankles.clone());
-            let mut out = refined.clip;
-            if !a.no_ankle_ik {
-                let moved = zoo_rmr::footlock::place_ankles(&mut out, &refined.ankles, &c.layout);
-                note += &format!(", ankles placed at the predicted positions (mean move {moved:.2} units)");
-            }
-            if !a.no_foot_lock {
-                let moved = zoo_rmr::footlock::lock_feet(&mut out, &refined.contacts, &c.layout);
-                note += &format!(", feet locked by the predicted contacts (mean ankle correction {moved:.2} units)");
-            }
-            out
-        }
-    };
-    let seconds = t0.elapsed().as_secs_f64();
-    zoo_data::clip_io::write(&output, &a.out)?;
+    let opts = StitchOptions { method, window: a.window, stride: a.stride, blend_frames: a.blend_frames };
+    let done = zoo_rmr::stitch::stitch_command(model.as_ref(), &clips, &names, opts)?;
+    zoo_data::clip_io::write(&done.output, &a.out)?;
     if let Some(p) = &a.positions {
-        let ankles = predicted_ankles.map(|v: Vec<[glam::DVec3; 2]>| {
-            v.iter().map(|f| f.map(|p| [p.x as f32, p.y as f32, p.z as f32])).collect::<Vec<_>>()
-        });
-        let extra = serde_json::json!({ "seams": seams, "method": format!("{:?}", a.method).to_lowercase(),
+        let ankles = done
+            .predicted_ankles
+            .as_ref()
+            .map(|v| v.iter().map(|f| f.map(|p| [p.x as f32, p.y as f32, p.z as f32])).collect::<Vec<_>>());
+        let extra = serde_json::json!({ "seams": done.seams, "method": format!("{:?}", a.method).to_lowercase(),
             "predicted_ankles": ankles });
-        crate::cmd::transition::write_json_atomically(
-            p,
-            &crate::cmd::transition::clip_positions_json("stitch", &output, extra),
-        )?;
+        crate::cmd::write_positions(p, &zoo_data::positions::clip_positions_json("stitch", &done.output, extra))?;
     }
     if a.save_input {
         let p = input_path(&a.out);
-        bvh::write_file(&aligned.clip, &p).with_context(|| format!("writing {}", p.display()))?;
+        zoo_data::bvh::write_file(&done.aligned, &p).with_context(|| format!("writing {}", p.display()))?;
         println!("aligned input: {}", p.display());
     }
     println!(
-        "stitched {} clips ({} frames, seams at {:?}) with {:?} in {:.3} s{note}: {}",
+        "stitched {} clips ({} frames, seams at {:?}) with {:?} in {:.3} s{}: {}",
         clips.len(),
-        output.frames(),
-        seams,
+        done.output.frames(),
+        done.seams,
         a.method,
-        seconds,
+        done.seconds,
+        done.note,
         a.out.display()
     );
     Ok(())

@@ -60,44 +60,6 @@ pub struct TransitionArgs {
     pub positions: Option<PathBuf>,
 }
 
-/// `format` of the files `--positions` writes.
-pub const POSITIONS_FORMAT: &str = "zoo-positions";
-
-/// Writes `value` as JSON to `path` through a temporary file renamed at the end (a reader
-/// never sees half a file).
-pub fn write_json_atomically(path: &Path, value: &serde_json::Value) -> anyhow::Result<()> {
-    let tmp = path.with_file_name(format!(".{}.tmp", path.file_name().unwrap_or_default().to_string_lossy()));
-    std::fs::write(&tmp, serde_json::to_string(value)?).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))
-}
-
-/// Global joint positions of every frame of `clip` (forward kinematics), `[x, y, z]` per
-/// joint: the `frames` of a `--positions` file of the commands whose networks give rotations.
-pub fn clip_positions(clip: &Clip) -> Vec<Vec<[f32; 3]>> {
-    let (_, positions) = clip.global();
-    positions
-        .chunks_exact(clip.joints().max(1))
-        .map(|frame| frame.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect())
-        .collect()
-}
-
-/// The `--positions` file of a clip a command wrote: its joints, frame rate and every frame's
-/// global joint positions (`extra` fields added).
-pub fn clip_positions_json(command: &str, clip: &Clip, extra: serde_json::Value) -> serde_json::Value {
-    let mut v = serde_json::json!({
-        "format": POSITIONS_FORMAT,
-        "version": 1,
-        "command": command,
-        "joints": clip.skeleton.names,
-        "fps": clip.fps(),
-        "frames": clip_positions(clip),
-    });
-    if let (Some(v), serde_json::Value::Object(extra)) = (v.as_object_mut(), extra) {
-        v.extend(extra);
-    }
-    v
-}
-
 /// The heightmap of `zoo transition` and `--heightmap`'s checks against the model: required by
 /// a terrain-aware model (the error names the --from clip's sibling heightmap when there is
 /// one), refused by a model without terrain input.
@@ -255,7 +217,7 @@ fn write_transition_positions(
         None => from.skeleton.names.clone(),
     };
     let v = serde_json::json!({
-        "format": POSITIONS_FORMAT,
+        "format": zoo_data::positions::POSITIONS_FORMAT,
         "version": 1,
         "command": "transition",
         "joints": joints,
@@ -269,7 +231,7 @@ fn write_transition_positions(
         "miss": miss,
         "fallback_weight": weight,
     });
-    write_json_atomically(path, &v)
+    crate::cmd::write_positions(path, &v)
 }
 
 /// Runs `zoo transition`.

@@ -264,14 +264,7 @@ impl LuxoSequence {
 
 /// Writes bytes to `path` through a temporary file in the same folder.
 pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), LuxoError> {
-    let io = |source| LuxoError::Io { path: path.to_path_buf(), source };
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let tmp = path.with_file_name(format!(".{name}.{}.tmp", std::process::id()));
-    std::fs::write(&tmp, bytes).map_err(io)?;
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        io(e)
-    })
+    zoo_motion::atomic::write(path, bytes).map_err(|source| LuxoError::Io { path: path.to_path_buf(), source })
 }
 
 /// The lamp as a BVH skeleton: `base` (root, with position channels), `leg`, `neck`, `head`

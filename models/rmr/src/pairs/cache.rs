@@ -86,9 +86,7 @@ impl PairPlan {
     pub fn save(&self, path: &Path) -> Result<(), StitchError> {
         let io = |e: &dyn std::fmt::Display| StitchError::Io { path: path.to_path_buf(), message: e.to_string() };
         let text = serde_json::to_string(self).map_err(|e| io(&e))?;
-        let tmp = path.with_extension("json.tmp");
-        std::fs::write(&tmp, text).map_err(|e| io(&e))?;
-        std::fs::rename(&tmp, path).map_err(|e| io(&e))
+        zoo_motion::atomic::write(path, text).map_err(|e| io(&e))
     }
 
     /// Reads a plan written by [`PairPlan::save`].

@@ -1,0 +1,41 @@
+//! Positions files (`--positions FILE.json` of `zoo transition`, `complete`, `stitch` and
+//! `generate`; docs/runtime-protocol.md, "Positions files"): a clip's global joint positions per
+//! frame, beside what each command adds, for checking an engine's runtime against zoo.
+
+use std::path::Path;
+use zoo_motion::Clip;
+
+/// `format` of a positions file.
+pub const POSITIONS_FORMAT: &str = "zoo-positions";
+
+/// Global joint positions of every frame of `clip` (forward kinematics), `[x, y, z]` per
+/// joint: the `frames` of a positions file of the commands whose networks give rotations.
+pub fn clip_positions(clip: &Clip) -> Vec<Vec<[f32; 3]>> {
+    let (_, positions) = clip.global();
+    positions
+        .chunks_exact(clip.joints().max(1))
+        .map(|frame| frame.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect())
+        .collect()
+}
+
+/// The positions file of a clip `command` wrote: its joints, frame rate and every frame's
+/// global joint positions (`extra` fields added).
+pub fn clip_positions_json(command: &str, clip: &Clip, extra: serde_json::Value) -> serde_json::Value {
+    let mut v = serde_json::json!({
+        "format": POSITIONS_FORMAT,
+        "version": 1,
+        "command": command,
+        "joints": clip.skeleton.names,
+        "fps": clip.fps(),
+        "frames": clip_positions(clip),
+    });
+    if let (Some(v), serde_json::Value::Object(extra)) = (v.as_object_mut(), extra) {
+        v.extend(extra);
+    }
+    v
+}
+
+/// Writes a positions file (compact JSON, atomically).
+pub fn write(path: &Path, value: &serde_json::Value) -> std::io::Result<()> {
+    zoo_motion::atomic::write(path, serde_json::to_string(value)?)
+}
