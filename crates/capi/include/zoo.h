@@ -44,21 +44,6 @@ typedef enum ZooStatus {
   ZOO_STATUS_PANIC = 8,
 } ZooStatus;
 
-// What a model does: the `zoo.task` of its file.
-typedef enum ZooTask {
-  // No model (what [`zoo_model_task`] returns for a NULL handle).
-  ZOO_TASK_NONE = 0,
-  // Transitions between poses (RTN): `zoo_transition_*`.
-  ZOO_TASK_TRANSITION = 1,
-  // Keyframe completion (ARNN): `zoo_keyframes_*`.
-  ZOO_TASK_KEYFRAMES = 2,
-  // Refining stitched locomotion (RMR): `zoo_stitch_*`.
-  ZOO_TASK_STITCH = 3,
-  // Random motion synthesis (RNN-GMM): `zoo_synthesis_*`, and its speed / facing control
-  // `zoo_control_*`.
-  ZOO_TASK_SYNTHESIS = 4,
-} ZooTask;
-
 // The up axis of a model's positions and rotations.
 typedef enum ZooUpAxis {
   // +Y up (zoo, BVH, Unity, Maya).
@@ -74,6 +59,21 @@ typedef enum ZooHandedness {
   // Left-handed (Unity, Unreal).
   ZOO_HANDEDNESS_LEFT = 1,
 } ZooHandedness;
+
+// What a model does: the `zoo.task` of its file.
+typedef enum ZooTask {
+  // No model (what [`zoo_model_task`] returns for a NULL handle).
+  ZOO_TASK_NONE = 0,
+  // Transitions between poses (RTN): `zoo_transition_*`.
+  ZOO_TASK_TRANSITION = 1,
+  // Keyframe completion (ARNN): `zoo_keyframes_*`.
+  ZOO_TASK_KEYFRAMES = 2,
+  // Refining stitched locomotion (RMR): `zoo_stitch_*`.
+  ZOO_TASK_STITCH = 3,
+  // Random motion synthesis (RNN-GMM): `zoo_synthesis_*`, and its speed / facing control
+  // `zoo_control_*`.
+  ZOO_TASK_SYNTHESIS = 4,
+} ZooTask;
 
 // A batch of controlled characters (opaque). One thread at a time.
 typedef struct ZooControlCharacters ZooControlCharacters;
@@ -151,6 +151,19 @@ typedef struct ZooRootMotion {
   // The hips' position in root space.
   float hips_position[3];
 } ZooRootMotion;
+
+// A coordinate frame: the length unit, the up axis and the handedness in which positions and
+// rotations are expressed. A model's is in `ZooModelInfo`; Unity's is `{1, ZOO_UP_AXIS_Y,
+// ZOO_HANDEDNESS_LEFT}` (metres, Y up, left-handed), Unreal's `{0.01, ZOO_UP_AXIS_Z,
+// ZOO_HANDEDNESS_LEFT}`, Godot's `{1, ZOO_UP_AXIS_Y, ZOO_HANDEDNESS_RIGHT}`.
+typedef struct ZooCoordinateFrame {
+  // Metres per length unit (0.01: centimetres, 1: metres); finite and positive.
+  float metres_per_unit;
+  // The up axis.
+  enum ZooUpAxis up_axis;
+  // The handedness of the axes.
+  enum ZooHandedness handedness;
+} ZooCoordinateFrame;
 
 // What a keyframes model expects besides `ZooModelInfo` (whose `fps` the completed
 // frames play at).
@@ -310,6 +323,40 @@ enum ZooStatus zoo_control_step(struct ZooControlRunner *runner,
                                 uint8_t *contacts,
                                 size_t contacts_len);
 
+// Converts engine poses in place from frame `from` to frame `to`, as the runtime's
+// `EnginePose::convert` does: in each of the `roots_len` roots, `root_position`,
+// `delta_position` and `hips_position` are scaled and re-axed, `root_rotation` is conjugated by
+// the change of axes and `delta_yaw` is reversed by a change of handedness; each rotation of
+// `rotations` (`x y z w`, `rotations_len` a multiple of 4: `4K` per root) is conjugated too.
+// `roots` NULL with `roots_len` 0 converts rotations only, `rotations` NULL with
+// `rotations_len` 0 roots only. Convert a model's poses to the engine's after a call that
+// writes them (`from`: the model's frame from `zoo_model_info`) and the engine's to the model's
+// before a call that reads them. Allocates nothing. Thread-safe.
+//
+// # Safety
+// `from` and `to` are NULL or readable; each buffer is NULL or holds its given length of
+// writable values.
+enum ZooStatus zoo_pose_convert(const struct ZooCoordinateFrame *from,
+                                const struct ZooCoordinateFrame *to,
+                                struct ZooRootMotion *roots,
+                                size_t roots_len,
+                                float *rotations,
+                                size_t rotations_len);
+
+// Converts positions in place from frame `from` to frame `to`: `positions` holds `x y z`
+// triples (`positions_len` a multiple of 3), each scaled and re-axed as the runtime's
+// `Conversion::position` does: global joint positions of `zoo_transition_start` /
+// `zoo_transition_step`, the rest offsets of `zoo_model_skeleton`. Allocates nothing.
+// Thread-safe.
+//
+// # Safety
+// `from` and `to` are NULL or readable; `positions` is NULL or holds `positions_len` writable
+// floats.
+enum ZooStatus zoo_positions_convert(const struct ZooCoordinateFrame *from,
+                                     const struct ZooCoordinateFrame *to,
+                                     float *positions,
+                                     size_t positions_len);
+
 // Writes what a keyframes model expects into `*out`. Thread-safe.
 //
 // # Safety
@@ -417,6 +464,21 @@ enum ZooStatus zoo_model_skeleton(const struct ZooModel *model,
                                   size_t parents_len,
                                   float *offsets,
                                   size_t offsets_len);
+
+// Copies the name of joint `joint` of the model's skeleton (UTF-8, the training clips' joint
+// name) into `buffer` (at most `capacity` bytes, NUL-terminated, truncated if needed) and writes
+// its full length in bytes without the NUL into `*length`; `buffer` NULL with `capacity` 0 asks
+// for the length. Joints are in the order of every pose (`joint` < [`zoo_model_info`]'s
+// `joints`): an engine maps its bones to them by name. Thread-safe.
+//
+// # Safety
+// `model` is NULL or a live model; `buffer` is NULL or valid for `capacity` bytes of writes;
+// `length` is NULL or writable.
+enum ZooStatus zoo_model_joint_name(const struct ZooModel *model,
+                                    size_t joint,
+                                    char *buffer,
+                                    size_t capacity,
+                                    size_t *length);
 
 // Writes what a stitching model expects into `*out` (for the window it is planned for).
 // Thread-safe.

@@ -4,8 +4,8 @@
 //! One loader, one model handle, one naming pattern per task:
 //! - [`zoo_model_load`] loads any file written by `zoo export --onnx` (or a `--portable` main
 //!   file with its companions) into a [`ZooModel`]; [`zoo_model_task`] says its task
-//!   ([`ZooTask`]); [`zoo_model_info`] and [`zoo_model_skeleton`] describe every model (joints,
-//!   frame rate, units and axes, skeleton); [`zoo_model_free`] frees it (`model.rs`).
+//!   ([`ZooTask`]); [`zoo_model_info`], [`zoo_model_skeleton`] and [`zoo_model_joint_name`]
+//!   describe every model (joints, frame rate, units and axes, skeleton, joint names); [`zoo_model_free`] frees it (`model.rs`).
 //! - Each task's functions take that handle and share a prefix:
 //!   - `zoo_transition_*`: transitions (RTN, task `transition`): [`ZooTransitionRunner`],
 //!     [`ZooTransitionCharacters`], start from positions or engine poses, one step per frame
@@ -21,6 +21,10 @@
 //!
 //!   A function given a model of another task returns `ZOO_STATUS_WRONG_MODEL`, and its message
 //!   names the task of the model and the functions that run it.
+//! - [`zoo_pose_convert`] and [`zoo_positions_convert`] convert poses and positions in place
+//!   between the model's units and axes and an engine's ([`ZooCoordinateFrame`]: Unity's metres,
+//!   left-handed, Y up; Unreal's centimetres, left-handed, Z up), with the runtime's conversion
+//!   (`frame.rs`).
 //! - [`zoo_abi_version`] is the version of this ABI ([`ZOO_ABI_VERSION`] in the header an engine
 //!   compiled against); it goes up whenever the ABI changes incompatibly.
 //!
@@ -46,7 +50,7 @@
 //!   An engine pose is a [`ZooRootMotion`] and `4K` local rotations (`K` joints); a batch or a
 //!   sequence of them is an array of roots and one rotation buffer of `4K` values per root.
 //!   Contacts are bytes, 1 for a foot on the ground and 0 otherwise. Units and axes are the
-//!   model's ([`ZooModelInfo`]).
+//!   model's ([`ZooModelInfo`]); [`zoo_pose_convert`] converts them to an engine's.
 //!
 //! # Thread safety
 //! - A loaded model is immutable after loading: any number of threads may use it at once (create
@@ -57,6 +61,7 @@
 //! - Runners, characters and streams may be used by one thread at a time (move them between
 //!   threads freely); a call takes one runner and one characters handle, so threads each with
 //!   their own pair run in parallel.
+//! - The conversions ([`zoo_pose_convert`], [`zoo_positions_convert`]) are thread-safe.
 //! - [`zoo_last_error`] reports the last error of the calling thread.
 
 // The boundary itself needs raw pointers; every other crate of the workspace denies unsafe code.
@@ -64,6 +69,7 @@
 
 mod control;
 mod error;
+mod frame;
 mod keyframes;
 mod model;
 mod stitch;
@@ -71,6 +77,7 @@ mod synthesis;
 mod transition;
 
 pub use control::*;
+pub use frame::*;
 pub use keyframes::*;
 pub use model::*;
 pub use stitch::*;
@@ -219,6 +226,17 @@ pub(crate) unsafe fn optional_slice<'a, T>(ptr: *const T, len: usize, what: &str
         return Ok(&[]);
     }
     unsafe { slice(ptr, len, what) }
+}
+
+/// An optional mutable buffer: NULL with a length of 0 is empty.
+///
+/// # Safety
+/// As [`slice_mut`].
+pub(crate) unsafe fn optional_slice_mut<'a, T>(ptr: *mut T, len: usize, what: &str) -> Result<&'a mut [T], Failure> {
+    if ptr.is_null() && len == 0 {
+        return Ok(&mut []);
+    }
+    unsafe { slice_mut(ptr, len, what) }
 }
 
 /// Refuses a buffer `what` of `found` `unit` where the call needs `expected`; `info` says where

@@ -1,6 +1,7 @@
 //! The one model handle: [`zoo_model_load`] loads any exported file (through
 //! `zoo_runtime::LoadedModel`) into a [`ZooModel`], [`zoo_model_task`] says its task, and
-//! [`zoo_model_info`] / [`zoo_model_skeleton`] describe it, whatever its task. The task's own
+//! [`zoo_model_info`] / [`zoo_model_skeleton`] / [`zoo_model_joint_name`] describe it, whatever
+//! its task. The task's own
 //! functions (`zoo_transition_*`, `zoo_keyframes_*`, `zoo_stitch_*`, `zoo_synthesis_*`,
 //! `zoo_control_*`) take the handle and refuse a model of another task with
 //! `ZOO_STATUS_WRONG_MODEL`.
@@ -358,6 +359,52 @@ pub unsafe extern "C" fn zoo_model_skeleton(
             out.copy_from_slice(&skeleton.offset(j).to_array());
         }
         Ok(())
+    })
+}
+
+/// Copies the name of joint `joint` of the model's skeleton (UTF-8, the training clips' joint
+/// name) into `buffer` (at most `capacity` bytes, NUL-terminated, truncated if needed) and writes
+/// its full length in bytes without the NUL into `*length`; `buffer` NULL with `capacity` 0 asks
+/// for the length. Joints are in the order of every pose (`joint` < [`zoo_model_info`]'s
+/// `joints`): an engine maps its bones to them by name. Thread-safe.
+///
+/// # Safety
+/// `model` is NULL or a live model; `buffer` is NULL or valid for `capacity` bytes of writes;
+/// `length` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_model_joint_name(
+    model: *const ZooModel,
+    joint: usize,
+    buffer: *mut c_char,
+    capacity: usize,
+    length: *mut usize,
+) -> ZooStatus {
+    guard("zoo_model_joint_name", || {
+        let names = &unsafe { self::model(model) }?.metadata().skeleton.names;
+        let name = names.get(joint).ok_or_else(|| {
+            (
+                ZooStatus::InvalidArgument,
+                format!(
+                    "joint {joint} (`joint`) does not exist: the skeleton has {} joints (0-based; {})",
+                    names.len(),
+                    crate::JOINTS
+                ),
+            )
+        })?;
+        let bytes = unsafe { crate::optional_slice_mut(buffer.cast::<u8>(), capacity, "buffer") }?;
+        if length.is_null() {
+            return Err(crate::null("length"));
+        }
+        if let Some((nul, text)) = bytes.split_last_mut() {
+            let n = name.len().min(text.len());
+            text[..n].copy_from_slice(&name.as_bytes()[..n]);
+            if n < text.len() {
+                text[n] = 0;
+            } else {
+                *nul = 0;
+            }
+        }
+        unsafe { write_out(length, name.len(), "length") }
     })
 }
 
