@@ -6,6 +6,11 @@ cd "$(dirname "$0")/.."
 # The parity tests in tests/ load onnxruntime (ort, load-dynamic): provision the library
 # from the PyPI wheel into .onnxruntime/ (a no-op when it is there).
 bash scripts/onnxruntime.sh >/dev/null
+# The Unity package's tests (tests/unity.rs) compile its C# with Mono: Debian's mono-complete,
+# installed when missing and apt-get can (as root); without it those tests fail and say so.
+if ! command -v mcs >/dev/null && command -v apt-get >/dev/null && [ "$(id -u)" = 0 ]; then
+  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq mono-complete >/dev/null
+fi
 # The CLI tests in tests/ run the `zoo` binary itself.
 cargo build --workspace --bins
 cargo test --workspace --all-targets "$@"

@@ -1,0 +1,269 @@
+// Transitions (RTN): zoo_transition_runner_*, zoo_transition_characters_*, start and step from
+// global positions or from engine poses, heightmaps, frames left, target miss.
+using System;
+using System.Runtime.InteropServices;
+using Zoo.Native;
+
+namespace Zoo
+{
+    /// <summary>Scratch space for running a transition model, on one thread at a time (<c>ZooTransitionRunner</c>).</summary>
+    public sealed unsafe class TransitionRunner : ZooObject
+    {
+        TransitionRunner(ZooSafeHandle handle) : base(handle) { }
+
+        /// <summary>A runner for <paramref name="model"/> (<c>zoo_transition_runner_new</c>); a model of another task is refused.</summary>
+        public TransitionRunner(Model model) : this(Create(model)) { }
+
+        static ZooSafeHandle Create(Model model)
+        {
+            bool e = false;
+            try
+            {
+                IntPtr p = IntPtr.Zero;
+                Errors.Check(ZooNative.zoo_transition_runner_new((Native.ZooModel*)Enter(model, ref e), (Native.ZooTransitionRunner**)&p), model);
+                return Wrap(HandleKind.TransitionRunner, p);
+            }
+            finally { Exit(model, e); }
+        }
+
+        /// <summary>Whether transitions longer than the model was trained for are accepted (<c>zoo_transition_allow_beyond_trained</c>).</summary>
+        public void AllowBeyondTrained(bool allow)
+        {
+            bool e = false;
+            try { Errors.Check(ZooNative.zoo_transition_allow_beyond_trained((Native.ZooTransitionRunner*)Enter(this, ref e), allow), this); }
+            finally { Exit(this, e); }
+        }
+    }
+
+    /// <summary>
+    /// The transitions of a batch of characters, on one thread at a time
+    /// (<c>ZooTransitionCharacters</c>). Made with an engine frame (e.g.
+    /// <see cref="ZooCoordinateFrame.Unity"/>), every pose and position in and out is in that frame,
+    /// converted by the runtime; without one, in the model's. Steps allocate nothing.
+    /// </summary>
+    public sealed unsafe class TransitionCharacters : ZooObject
+    {
+        readonly int count;
+        readonly int joints;
+        readonly PoseConversion toModel;
+        readonly PoseConversion toEngine;
+        ZooRootMotion[] roots;
+        float[] floats;
+
+        TransitionCharacters(ZooSafeHandle handle, Model model, int count, ZooCoordinateFrame? engine) : base(handle)
+        {
+            this.count = count;
+            joints = model.Joints;
+            if (engine.HasValue)
+            {
+                toModel = new PoseConversion(engine.Value, model.Frame);
+                toEngine = toModel.Inverse;
+            }
+        }
+
+        /// <summary><paramref name="count"/> characters of <paramref name="model"/> (<c>zoo_transition_characters_new</c>); poses in <paramref name="engine"/>'s frame when given.</summary>
+        public TransitionCharacters(Model model, int count, ZooCoordinateFrame? engine = null) : this(Create(model, count), model, count, engine) { }
+
+        static ZooSafeHandle Create(Model model, int count)
+        {
+            bool e = false;
+            try
+            {
+                IntPtr p = IntPtr.Zero;
+                Errors.Check(ZooNative.zoo_transition_characters_new((Native.ZooModel*)Enter(model, ref e), Size.Of(count), (Native.ZooTransitionCharacters**)&p), model);
+                return Wrap(HandleKind.TransitionCharacters, p);
+            }
+            finally { Exit(model, e); }
+        }
+
+        /// <summary>Characters N in the batch.</summary>
+        public int Count { get { return count; } }
+
+        /// <summary>Joints K of every pose.</summary>
+        public int Joints { get { return joints; } }
+
+        /// <summary>
+        /// Starts a transition of <paramref name="length"/> frames from global joint positions
+        /// (<c>zoo_transition_start</c>): <paramref name="past"/> N * frames * 3K, <paramref name="target"/>
+        /// and <paramref name="next"/> N * 3K each.
+        /// </summary>
+        public void Start(TransitionRunner runner, ReadOnlySpan<float> past, ReadOnlySpan<float> target, ReadOnlySpan<float> next, int length)
+        {
+            if (toModel != null)
+            {
+                var all = Size.Fit(ref floats, past.Length + target.Length + next.Length);
+                var p = new Span<float>(all, 0, past.Length);
+                var t = new Span<float>(all, past.Length, target.Length);
+                var n = new Span<float>(all, past.Length + target.Length, next.Length);
+                past.CopyTo(p);
+                target.CopyTo(t);
+                next.CopyTo(n);
+                toModel.PositionsLenient(p);
+                toModel.PositionsLenient(t);
+                toModel.PositionsLenient(n);
+                past = p;
+                target = t;
+                next = n;
+            }
+            bool r = false, c = false;
+            try
+            {
+                var rp = (Native.ZooTransitionRunner*)Enter(runner, ref r);
+                var cp = (Native.ZooTransitionCharacters*)Enter(this, ref c);
+                ZooStatus s;
+                fixed (float* p = &MemoryMarshal.GetReference(past))
+                fixed (float* t = &MemoryMarshal.GetReference(target))
+                fixed (float* n = &MemoryMarshal.GetReference(next))
+                    s = ZooNative.zoo_transition_start(rp, cp, p, Size.Of(past.Length), t, Size.Of(target.Length), n, Size.Of(next.Length), Size.Of(length));
+                Errors.Check(s, runner, this);
+            }
+            finally { Exit(runner, r); Exit(this, c); }
+        }
+
+        /// <summary>The next frame of every character's transition as global positions (<c>zoo_transition_step</c>; <paramref name="poses"/> N * 3K).</summary>
+        public void Step(TransitionRunner runner, Span<float> poses)
+        {
+            bool r = false, c = false;
+            try
+            {
+                var rp = (Native.ZooTransitionRunner*)Enter(runner, ref r);
+                var cp = (Native.ZooTransitionCharacters*)Enter(this, ref c);
+                ZooStatus s;
+                fixed (float* p = &MemoryMarshal.GetReference(poses))
+                    s = ZooNative.zoo_transition_step(rp, cp, p, Size.Of(poses.Length));
+                Errors.Check(s, runner, this);
+            }
+            finally { Exit(runner, r); Exit(this, c); }
+            if (toEngine != null) toEngine.Positions(poses);
+        }
+
+        /// <summary>
+        /// Starts a transition of <paramref name="length"/> frames from engine poses
+        /// (<c>zoo_transition_start_posed</c>): <paramref name="pastRoots"/> holds the same number of
+        /// context frames per character (character-major) and <paramref name="pastRotations"/> 4K per
+        /// root; the target and next poses one per character (N roots, N * 4K rotations each).
+        /// </summary>
+        public void StartPosed(TransitionRunner runner, ReadOnlySpan<ZooRootMotion> pastRoots, ReadOnlySpan<float> pastRotations,
+            ReadOnlySpan<ZooRootMotion> targetRoots, ReadOnlySpan<float> targetRotations,
+            ReadOnlySpan<ZooRootMotion> nextRoots, ReadOnlySpan<float> nextRotations, int length)
+        {
+            const string function = "zoo_transition_start_posed";
+            // The C function reads N target and next roots and one rotations_len for both rotation
+            // buffers: sizes it cannot check, so checked here.
+            if (targetRoots.Length != count || nextRoots.Length != count)
+                throw Errors.Invalid(function, "`target_roots` holds " + targetRoots.Length + " roots and `next_roots` " + nextRoots.Length
+                    + ", this call needs " + count + " each; size them from the batch, one per character");
+            if (targetRotations.Length != nextRotations.Length)
+                throw Errors.Invalid(function, "`target_rotations` holds " + targetRotations.Length + " floats and `next_rotations` "
+                    + nextRotations.Length + "; both need 4 * zoo_model_info's `joints` per character (`rotations_len`)");
+            if (toModel != null)
+            {
+                int np = pastRoots.Length;
+                var rs = Size.Fit(ref roots, np + 2 * count);
+                var fs = Size.Fit(ref floats, pastRotations.Length + 2 * targetRotations.Length);
+                var pr = new Span<ZooRootMotion>(rs, 0, np);
+                var tr = new Span<ZooRootMotion>(rs, np, count);
+                var nr = new Span<ZooRootMotion>(rs, np + count, count);
+                var pq = new Span<float>(fs, 0, pastRotations.Length);
+                var tq = new Span<float>(fs, pastRotations.Length, targetRotations.Length);
+                var nq = new Span<float>(fs, pastRotations.Length + targetRotations.Length, nextRotations.Length);
+                pastRoots.CopyTo(pr);
+                targetRoots.CopyTo(tr);
+                nextRoots.CopyTo(nr);
+                pastRotations.CopyTo(pq);
+                targetRotations.CopyTo(tq);
+                nextRotations.CopyTo(nq);
+                toModel.Poses(new Span<ZooRootMotion>(rs, 0, np + 2 * count), Span<float>.Empty);
+                toModel.RotationsLenient(pq);
+                toModel.RotationsLenient(tq);
+                toModel.RotationsLenient(nq);
+                pastRoots = pr;
+                targetRoots = tr;
+                nextRoots = nr;
+                pastRotations = pq;
+                targetRotations = tq;
+                nextRotations = nq;
+            }
+            bool r = false, c = false;
+            try
+            {
+                var rp = (Native.ZooTransitionRunner*)Enter(runner, ref r);
+                var cp = (Native.ZooTransitionCharacters*)Enter(this, ref c);
+                ZooStatus s;
+                fixed (ZooRootMotion* pr = &MemoryMarshal.GetReference(pastRoots))
+                fixed (float* pq = &MemoryMarshal.GetReference(pastRotations))
+                fixed (ZooRootMotion* tr = &MemoryMarshal.GetReference(targetRoots))
+                fixed (float* tq = &MemoryMarshal.GetReference(targetRotations))
+                fixed (ZooRootMotion* nr = &MemoryMarshal.GetReference(nextRoots))
+                fixed (float* nq = &MemoryMarshal.GetReference(nextRotations))
+                    s = ZooNative.zoo_transition_start_posed(rp, cp, pr, Size.Of(pastRoots.Length), pq, Size.Of(pastRotations.Length),
+                        tr, tq, nr, nq, Size.Of(targetRotations.Length), Size.Of(length));
+                Errors.Check(s, runner, this);
+            }
+            finally { Exit(runner, r); Exit(this, c); }
+        }
+
+        /// <summary>The next frame of every character's transition as engine poses (<c>zoo_transition_step_posed</c>): <paramref name="roots"/> N, <paramref name="rotations"/> N * 4K local rotations.</summary>
+        public void StepPosed(TransitionRunner runner, Span<ZooRootMotion> roots, Span<float> rotations)
+        {
+            bool r = false, c = false;
+            try
+            {
+                var rp = (Native.ZooTransitionRunner*)Enter(runner, ref r);
+                var cp = (Native.ZooTransitionCharacters*)Enter(this, ref c);
+                ZooStatus s;
+                fixed (ZooRootMotion* o = &MemoryMarshal.GetReference(roots))
+                fixed (float* q = &MemoryMarshal.GetReference(rotations))
+                    s = ZooNative.zoo_transition_step_posed(rp, cp, o, Size.Of(roots.Length), q, Size.Of(rotations.Length));
+                Errors.Check(s, runner, this);
+            }
+            finally { Exit(runner, r); Exit(this, c); }
+            if (toEngine != null) toEngine.Poses(roots, rotations);
+        }
+
+        /// <summary>Sets the ground under character <paramref name="index"/> (<c>zoo_transition_set_heightmap</c>; heights, cell and origin in model units and axes); empty heights remove it.</summary>
+        public void SetHeightmap(int index, int cols, int rows, float cell, float originX, float originZ, ReadOnlySpan<float> heights)
+        {
+            bool c = false;
+            try
+            {
+                ZooStatus s;
+                fixed (float* h = &MemoryMarshal.GetReference(heights))
+                    s = ZooNative.zoo_transition_set_heightmap((Native.ZooTransitionCharacters*)Enter(this, ref c), Size.Of(index), Size.Of(cols), Size.Of(rows),
+                        cell, originX, originZ, h, Size.Of(heights.Length));
+                Errors.Check(s, this);
+            }
+            finally { Exit(this, c); }
+        }
+
+        /// <summary>Frames character <paramref name="index"/>'s transition still returns (<c>zoo_transition_frames_left</c>; 0 once it returned its target frame).</summary>
+        public int FramesLeft(int index)
+        {
+            bool c = false;
+            try
+            {
+                UIntPtr left = UIntPtr.Zero;
+                Errors.Check(ZooNative.zoo_transition_frames_left((Native.ZooTransitionCharacters*)Enter(this, ref c), Size.Of(index), &left), this);
+                return Size.Int(left);
+            }
+            finally { Exit(this, c); }
+        }
+
+        /// <summary>How far the network's own target frame lay from the requested target (<c>zoo_transition_target_miss</c>, model units); false before stepping reaches the blend window.</summary>
+        public bool TryGetTargetMiss(int index, out float mean, out float max)
+        {
+            bool c = false;
+            try
+            {
+                float a = 0f, b = 0f;
+                var s = ZooNative.zoo_transition_target_miss((Native.ZooTransitionCharacters*)Enter(this, ref c), Size.Of(index), &a, &b);
+                mean = a;
+                max = b;
+                if (s == ZooStatus.NotAvailable) return false;
+                Errors.Check(s, this);
+                return true;
+            }
+            finally { Exit(this, c); }
+        }
+    }
+}

@@ -1,0 +1,191 @@
+// Handles, lifetimes and errors of the safe wrappers: every wrapper object owns one ZooSafeHandle
+// (freed exactly once, by Dispose or by the finalizer), enters it for the length of each native
+// call (so another thread's Dispose cannot free it during the call), and turns a status other
+// than ZOO_STATUS_OK into an exception carrying zoo_last_error's message. A disposed handle is
+// passed to the runtime as NULL, which refuses it with its own message; the wrapper then throws
+// ZooDisposedException (an ObjectDisposedException) with that message.
+using System;
+using System.Runtime.InteropServices;
+using System.Text;
+using Zoo.Native;
+
+namespace Zoo
+{
+    /// <summary>A call the runtime refused: <see cref="Status"/> and the runtime's message (<c>zoo_last_error</c>), which starts with the C function's name.</summary>
+    public class ZooException : Exception
+    {
+        /// <summary>The status the C function returned.</summary>
+        public ZooStatus Status { get; private set; }
+
+        /// <summary>An exception with the runtime's status and message.</summary>
+        public ZooException(ZooStatus status, string message) : base(message)
+        {
+            Status = status;
+        }
+    }
+
+    /// <summary>A call on a disposed wrapper: the runtime refused its NULL handle with <see cref="Status"/> (<c>ZOO_STATUS_NULL_POINTER</c>) and the message in <see cref="Exception.Message"/>.</summary>
+    public sealed class ZooDisposedException : ObjectDisposedException
+    {
+        /// <summary>The status the C function returned.</summary>
+        public ZooStatus Status { get; private set; }
+
+        /// <summary>An exception naming the disposed object, with the runtime's status and message.</summary>
+        public ZooDisposedException(string objectName, ZooStatus status, string message) : base(objectName, message)
+        {
+            Status = status;
+        }
+    }
+
+    /// <summary>What a <see cref="ZooSafeHandle"/> holds, and so which <c>zoo_*_free</c> frees it.</summary>
+    internal enum HandleKind
+    {
+        Model,
+        TransitionRunner,
+        TransitionCharacters,
+        KeyframesRunner,
+        StitchStream,
+        SynthesisRunner,
+        SynthesisCharacters,
+        ControlRunner,
+        ControlCharacters,
+    }
+
+    /// <summary>A pointer from a <c>zoo_*_new</c> or <c>zoo_model_load</c>, freed once with its <c>zoo_*_free</c>.</summary>
+    internal sealed unsafe class ZooSafeHandle : SafeHandle
+    {
+        readonly HandleKind kind;
+
+        internal ZooSafeHandle(HandleKind kind) : base(IntPtr.Zero, true)
+        {
+            this.kind = kind;
+        }
+
+        public override bool IsInvalid { get { return handle == IntPtr.Zero; } }
+
+        internal void Set(IntPtr pointer)
+        {
+            SetHandle(pointer);
+        }
+
+        protected override bool ReleaseHandle()
+        {
+            switch (kind)
+            {
+                case HandleKind.Model: ZooNative.zoo_model_free((Native.ZooModel*)handle); break;
+                case HandleKind.TransitionRunner: ZooNative.zoo_transition_runner_free((Native.ZooTransitionRunner*)handle); break;
+                case HandleKind.TransitionCharacters: ZooNative.zoo_transition_characters_free((Native.ZooTransitionCharacters*)handle); break;
+                case HandleKind.KeyframesRunner: ZooNative.zoo_keyframes_runner_free((Native.ZooKeyframesRunner*)handle); break;
+                case HandleKind.StitchStream: ZooNative.zoo_stitch_stream_free((Native.ZooStitchStream*)handle); break;
+                case HandleKind.SynthesisRunner: ZooNative.zoo_synthesis_runner_free((Native.ZooSynthesisRunner*)handle); break;
+                case HandleKind.SynthesisCharacters: ZooNative.zoo_synthesis_characters_free((Native.ZooSynthesisCharacters*)handle); break;
+                case HandleKind.ControlRunner: ZooNative.zoo_control_runner_free((Native.ZooControlRunner*)handle); break;
+                case HandleKind.ControlCharacters: ZooNative.zoo_control_characters_free((Native.ZooControlCharacters*)handle); break;
+            }
+            return true;
+        }
+    }
+
+    /// <summary>
+    /// A wrapper of one native handle. <see cref="Dispose"/> frees it (a second Dispose does
+    /// nothing, as IDisposable requires); any other call after that throws
+    /// <see cref="ZooDisposedException"/>. Undisposed handles are freed by the finalizer.
+    /// </summary>
+    public abstract class ZooObject : IDisposable
+    {
+        readonly ZooSafeHandle handle;
+
+        internal ZooObject(ZooSafeHandle handle)
+        {
+            this.handle = handle;
+        }
+
+        /// <summary>Whether <see cref="Dispose"/> was called.</summary>
+        public bool IsDisposed { get { return handle.IsClosed; } }
+
+        /// <summary>Frees the native handle (once; later calls do nothing).</summary>
+        public void Dispose()
+        {
+            handle.Dispose();
+        }
+
+        /// <summary>The native pointer for one call (NULL once disposed or for a null wrapper); pair with <see cref="Exit"/> in a finally block.</summary>
+        internal static IntPtr Enter(ZooObject o, ref bool entered)
+        {
+            if (o == null || o.handle.IsClosed) return IntPtr.Zero;
+            o.handle.DangerousAddRef(ref entered);
+            return o.handle.DangerousGetHandle();
+        }
+
+        internal static void Exit(ZooObject o, bool entered)
+        {
+            if (entered) o.handle.DangerousRelease();
+        }
+
+        /// <summary>Creates a handle of <paramref name="kind"/> from the pointer a <c>zoo_*_new</c> call wrote.</summary>
+        internal static ZooSafeHandle Wrap(HandleKind kind, IntPtr pointer)
+        {
+            var h = new ZooSafeHandle(kind);
+            h.Set(pointer);
+            return h;
+        }
+    }
+
+    /// <summary>Statuses to exceptions.</summary>
+    internal static unsafe class Errors
+    {
+        /// <summary>The calling thread's last error message (allocates: only on a refusal).</summary>
+        internal static string LastError()
+        {
+            var n = (int)ZooNative.zoo_last_error(null, UIntPtr.Zero).ToUInt64();
+            if (n == 0) return "(the runtime left no message)";
+            var bytes = new byte[n + 1];
+            fixed (byte* b = bytes) ZooNative.zoo_last_error(b, (UIntPtr)(ulong)bytes.Length);
+            return Encoding.UTF8.GetString(bytes, 0, n);
+        }
+
+        /// <summary>Throws for a status other than OK (nothing allocated when it is OK).</summary>
+        internal static void Check(ZooStatus status, ZooObject a = null, ZooObject b = null)
+        {
+            if (status != ZooStatus.Ok) throw Fail(status, a, b);
+        }
+
+        /// <summary>The exception of a refused call on handles <paramref name="a"/> and <paramref name="b"/>.</summary>
+        internal static Exception Fail(ZooStatus status, ZooObject a = null, ZooObject b = null)
+        {
+            var message = LastError();
+            var disposed = a != null && a.IsDisposed ? a : b != null && b.IsDisposed ? b : null;
+            if (disposed != null && status == ZooStatus.NullPointer)
+                return new ZooDisposedException(disposed.GetType().Name, status, disposed.GetType().Name + " is disposed: " + message);
+            return new ZooException(status, message);
+        }
+
+        /// <summary>A refusal by the wrapper itself, where the C function cannot check (a buffer the C ABI takes without a length), worded as the runtime words its own.</summary>
+        internal static ZooException Invalid(string function, string message)
+        {
+            return new ZooException(ZooStatus.InvalidArgument, function + ": " + message);
+        }
+    }
+
+    /// <summary>Conversions between C# and C sizes.</summary>
+    internal static class Size
+    {
+        /// <summary>An int as a size_t (a negative value becomes a huge one, which the runtime refuses).</summary>
+        internal static UIntPtr Of(int value)
+        {
+            return (UIntPtr)(ulong)(long)value;
+        }
+
+        internal static int Int(UIntPtr value)
+        {
+            return (int)value.ToUInt64();
+        }
+
+        /// <summary><paramref name="array"/>, grown to hold at least <paramref name="n"/> values (allocates only when it grows).</summary>
+        internal static T[] Fit<T>(ref T[] array, int n)
+        {
+            if (array == null || array.Length < n) array = new T[Math.Max(n, 1)];
+            return array;
+        }
+    }
+}

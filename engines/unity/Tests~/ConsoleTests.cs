@@ -1,0 +1,891 @@
+// The console test: every task through the safe wrappers on the tiny models tests/unity.rs
+// exported, against the outputs the Rust runtime wrote for the same inputs; the bad calls; the
+// managed allocation of every per-frame call; the per-frame cost against C. Prints one summary line
+// per figure (tests/unity.rs reads them) and returns 1 when anything failed.
+using System;
+using System.Collections.Generic;
+using System.Diagnostics;
+using System.IO;
+using System.Linq;
+using System.Runtime.InteropServices;
+using System.Text;
+using Zoo.Native;
+
+namespace Zoo.Tests
+{
+    static unsafe class ConsoleTests
+    {
+        const float Tolerance = 1e-5f;
+        static int failures;
+
+        static void Fail(string message)
+        {
+            failures++;
+            Console.WriteLine("FAIL: " + message);
+        }
+
+        static void Expect(bool ok, string message)
+        {
+            if (!ok) Fail(message);
+        }
+
+        /// <summary>The largest |got - want|; a length mismatch fails.</summary>
+        static float Worst(ReadOnlySpan<float> got, ReadOnlySpan<float> want, string what)
+        {
+            if (got.Length != want.Length)
+            {
+                Fail(what + ": " + got.Length + " values, the Rust runtime's " + want.Length);
+                return float.PositiveInfinity;
+            }
+            float worst = 0f;
+            for (int i = 0; i < got.Length; i++)
+            {
+                var d = Math.Abs(got[i] - want[i]);
+                if (!(d <= worst)) worst = float.IsNaN(d) ? float.PositiveInfinity : d;
+            }
+            if (worst > Tolerance) Fail(what + ": differs from the Rust runtime by " + worst);
+            return worst;
+        }
+
+        static ReadOnlySpan<float> Floats(ZooRootMotion[] roots)
+        {
+            return MemoryMarshal.Cast<ZooRootMotion, float>(new ReadOnlySpan<ZooRootMotion>(roots));
+        }
+
+        static float WorstBytes(byte[] got, long[] want, string what)
+        {
+            if (got.Length != want.Length) { Fail(what + ": " + got.Length + " contacts, the Rust runtime's " + want.Length); return float.PositiveInfinity; }
+            for (int i = 0; i < got.Length; i++)
+                if (got[i] != want[i]) { Fail(what + ": contact " + i + " is " + got[i] + ", the Rust runtime's " + want[i]); return 1f; }
+            return 0f;
+        }
+
+        /// <summary>Appends the poses of a step to the recording.</summary>
+        static void Record(PoseBuffer b, List<ZooRootMotion> roots, List<float> rotations, List<byte> contacts)
+        {
+            roots.AddRange(b.Roots);
+            rotations.AddRange(b.Rotations);
+            if (contacts != null) contacts.AddRange(b.Contacts);
+        }
+
+        public static int Run(Vectors v, string dir)
+        {
+            Model.CheckLibrary();
+            Console.WriteLine("native library: C ABI version " + ZooNative.zoo_abi_version());
+            using (var rtn = Model.Load(Path.Combine(dir, "rtn.onnx")))
+            using (var arnn = Model.Load(Path.Combine(dir, "arnn.onnx")))
+            using (var rmr = Model.Load(Path.Combine(dir, "rmr.onnx")))
+            using (var syn = Model.Load(Path.Combine(dir, "rnngmm.onnx")))
+            {
+                Expect(rtn.Task == ZooTask.Transition && arnn.Task == ZooTask.Keyframes && rmr.Task == ZooTask.Stitch && syn.Task == ZooTask.Synthesis,
+                    "tasks: " + rtn.Task + " " + arnn.Task + " " + rmr.Task + " " + syn.Task);
+                Expect(rtn.QueryTask() == ZooTask.Transition, "zoo_model_task");
+                Transition(v, rtn);
+                Keyframes(v, arnn);
+                Stitch(v, rmr);
+                Synthesis(v, syn);
+                BadCalls(v, dir, rtn, arnn, rmr, syn);
+                Allocation(v, rtn, arnn, rmr, syn);
+                Timing(v, Path.Combine(dir, "rtn.onnx"), rtn);
+            }
+            Console.WriteLine(failures == 0 ? "console test: passed" : "console test: " + failures + " failure(s)");
+            return failures == 0 ? 0 : 1;
+        }
+
+        // Parity with the Rust runtime.
+
+        static void Transition(Vectors v, Model rtn)
+        {
+            int n = v.Int("tr.n"), length = v.Int("tr.length"), k = rtn.Joints;
+            var info = rtn.TransitionInfo;
+            Expect(info.PastFrameCount == 10 && info.TransitionFrameCount == length, "zoo_transition_info: " + info.PastFrameCount + ", " + info.TransitionFrameCount);
+            Expect(rtn.JointNames().SequenceEqual(v.S("tr.names")), "joint names: " + string.Join(",", rtn.JointNames()));
+            var parents = new int[k];
+            var offsets = new float[3 * k];
+            rtn.GetSkeleton(parents, offsets);
+            Expect(parents.SequenceEqual(v.I("tr.parents")), "parents");
+            float worst = Worst(offsets, v.F("tr.offsets"), "skeleton offsets");
+            rtn.GetSkeleton(parents, offsets, rtn.ToEngine(ZooCoordinateFrame.Unity));
+            worst = Math.Max(worst, Worst(offsets, v.F("tr.offsets.unity"), "skeleton offsets in Unity's frame"));
+            int values = 0;
+            float lastFrame = 0f, lastRelative = 0f;
+            var lastPosed = new float[4];
+            foreach (var frame in new[] { "posed", "unity" })
+            {
+                ZooCoordinateFrame? engine = null;
+                if (frame == "unity") engine = ZooCoordinateFrame.Unity;
+                using (var runner = new TransitionRunner(rtn))
+                using (var chars = new TransitionCharacters(rtn, n, engine))
+                {
+                    var p = "tr." + frame;
+                    chars.StartPosed(runner, v.Roots(p + ".past"), v.Rotations(p + ".past"), v.Roots(p + ".target"), v.Rotations(p + ".target"),
+                        v.Roots(p + ".next"), v.Rotations(p + ".next"), length);
+                    var b = new PoseBuffer(n, k);
+                    var roots = new List<ZooRootMotion>();
+                    var rotations = new List<float>();
+                    for (int s = 0; s <= length; s++)
+                    {
+                        Expect(chars.FramesLeft(0) == length + 1 - s, "frames left before step " + s + ": " + chars.FramesLeft(0));
+                        chars.StepPosed(runner, b.Roots, b.Rotations);
+                        Record(b, roots, rotations, null);
+                    }
+                    Expect(chars.FramesLeft(1) == 0, "frames left at the end: " + chars.FramesLeft(1));
+                    worst = Math.Max(worst, Worst(Floats(roots.ToArray()), Floats(v.Roots(p + ".out")), "transition " + frame + " roots"));
+                    worst = Math.Max(worst, Worst(rotations.ToArray(), v.Rotations(p + ".out"), "transition " + frame + " rotations"));
+                    values += roots.Count * 14 + rotations.Count;
+                    if (frame == "posed")
+                    {
+                        var miss = v.F("tr.miss");
+                        for (int c = 0; c < n; c++)
+                        {
+                            float mean, max;
+                            Expect(chars.TryGetTargetMiss(c, out mean, out max), "target miss known at the end");
+                            worst = Math.Max(worst, Worst(new[] { mean, max }, new[] { miss[2 * c], miss[2 * c + 1] }, "target miss"));
+                        }
+                        lastPosed = LastFrameIsTarget(b, v.Roots(p + ".target"), v.Rotations(p + ".target"), k);
+                    }
+                }
+            }
+            foreach (var frame in new[] { "pos", "unity.pos" })
+            {
+                ZooCoordinateFrame? engine = null;
+                if (frame == "unity.pos") engine = ZooCoordinateFrame.Unity;
+                using (var runner = new TransitionRunner(rtn))
+                using (var chars = new TransitionCharacters(rtn, n, engine))
+                {
+                    var p = "tr." + frame;
+                    var target = v.F(p + ".target");
+                    chars.Start(runner, v.F(p + ".past"), target, v.F(p + ".next"), length);
+                    var poses = new float[n * 3 * k];
+                    var all = new List<float>();
+                    for (int s = 0; s <= length; s++)
+                    {
+                        chars.Step(runner, poses);
+                        all.AddRange(poses);
+                    }
+                    worst = Math.Max(worst, Worst(all.ToArray(), v.F(p + ".out"), "transition positions (" + frame + ")"));
+                    values += all.Count;
+                    if (frame == "pos")
+                        for (int i = 0; i < poses.Length; i++)
+                        {
+                            lastFrame = Math.Max(lastFrame, Math.Abs(poses[i] - target[i]));
+                            lastRelative = Math.Max(lastRelative, Math.Abs(poses[i] - target[i]) / Math.Max(1f, Math.Abs(target[i])));
+                        }
+                }
+            }
+            // The hips' world transform to an engine pose (what the character sample reads from
+            // its Transforms), in Unity's frame.
+            var hips = MemoryMarshal.Cast<float, ZooFloat3>(v.F("world.hips").AsSpan());
+            var hipsRot = MemoryMarshal.Cast<float, ZooFloat4>(v.F("world.hipsrot").AsSpan());
+            var want = v.Roots("world.want");
+            var wantRot = v.Rotations("world.want");
+            for (int i = 0; i < hips.Length; i++)
+            {
+                var root = new ZooRootMotion();
+                var r = new float[4 * k];
+                PoseMath.SetWorld(hips[i], hipsRot[i], ref root, r);
+                var w = want[i];
+                worst = Math.Max(worst, Worst(new[] { root.RootPosition.X, root.RootPosition.Y, root.RootPosition.Z, root.RootRotation.X, root.RootRotation.Y, root.RootRotation.Z, root.RootRotation.W, root.HipsPosition.X, root.HipsPosition.Y, root.HipsPosition.Z, r[0], r[1], r[2], r[3] },
+                    new[] { w.RootPosition.X, w.RootPosition.Y, w.RootPosition.Z, w.RootRotation.X, w.RootRotation.Y, w.RootRotation.Z, w.RootRotation.W, w.HipsPosition.X, w.HipsPosition.Y, w.HipsPosition.Z, wantRot[4 * k * i], wantRot[4 * k * i + 1], wantRot[4 * k * i + 2], wantRot[4 * k * i + 3] },
+                    "PoseMath.SetWorld vs EnginePose::from_world, case " + i));
+                var back = PoseMath.HipsWorld(root);
+                worst = Math.Max(worst, Worst(new[] { back.X, back.Y, back.Z }, new[] { hips[i].X, hips[i].Y, hips[i].Z }, "PoseMath.HipsWorld"));
+            }
+            Console.WriteLine("parity transition: worst=" + worst.ToString("G3") + " values=" + values + " (posed and positions, model frame and Unity's, " + n + " characters x " + (length + 1) + " frames; skeleton, names, target miss, frames left, SetWorld)");
+            Console.WriteLine("last frame: target=" + lastFrame.ToString("G3") + " relative=" + lastRelative.ToString("G3") + " (largest |got - target| of the 30-frame transition's last frame, global positions, model units; relative: / max(1, |target|)) posed: root position " + lastPosed[0].ToString("G3")
+                + ", root rotation " + lastPosed[1].ToString("G3") + ", hips " + lastPosed[2].ToString("G3") + ", local rotations " + lastPosed[3].ToString("G3") + " (quaternion components, up to sign)");
+        }
+
+        static float MaxDiff(ReadOnlySpan<float> a, ReadOnlySpan<float> b)
+        {
+            float worst = 0f;
+            for (int i = 0; i < a.Length; i++) worst = Math.Max(worst, Math.Abs(a[i] - b[i]));
+            return worst;
+        }
+
+        /// <summary>The largest differences between the last stepped poses and the targets: root position, root rotation (up to sign), hips position, local rotations (up to sign).</summary>
+        static float[] LastFrameIsTarget(PoseBuffer b, ZooRootMotion[] target, float[] targetRotations, int k)
+        {
+            var worst = new float[4];
+            for (int c = 0; c < b.Count; c++)
+            {
+                var got = b.Roots[c];
+                var want = target[c];
+                worst[0] = Math.Max(worst[0], MaxDiff(new[] { got.RootPosition.X, got.RootPosition.Y, got.RootPosition.Z }, new[] { want.RootPosition.X, want.RootPosition.Y, want.RootPosition.Z }));
+                worst[1] = Math.Max(worst[1], QuatDiff(got.RootRotation, want.RootRotation));
+                worst[2] = Math.Max(worst[2], MaxDiff(new[] { got.HipsPosition.X, got.HipsPosition.Y, got.HipsPosition.Z }, new[] { want.HipsPosition.X, want.HipsPosition.Y, want.HipsPosition.Z }));
+                for (int j = 0; j < k; j++)
+                {
+                    int at = (c * k + j) * 4;
+                    worst[3] = Math.Max(worst[3], QuatDiff(b.Rotation(c, j), new ZooFloat4(targetRotations[at], targetRotations[at + 1], targetRotations[at + 2], targetRotations[at + 3])));
+                }
+            }
+            return worst;
+        }
+
+        static float QuatDiff(ZooFloat4 a, ZooFloat4 b)
+        {
+            float plus = MaxDiff(new[] { a.X, a.Y, a.Z, a.W }, new[] { b.X, b.Y, b.Z, b.W });
+            float minus = MaxDiff(new[] { a.X, a.Y, a.Z, a.W }, new[] { -b.X, -b.Y, -b.Z, -b.W });
+            return Math.Min(plus, minus);
+        }
+
+        static void Keyframes(Vectors v, Model arnn)
+        {
+            var info = arnn.KeyframesInfo;
+            int d = info.DofCount;
+            var counts = v.I("kf.counts");
+            var frames = v.I("kf.frames");
+            var poses = v.F("kf.poses");
+            float worst;
+            using (var runner = new KeyframesRunner(arnn, 2))
+            {
+                var batch = new float[(frames[counts[0] - 1] + 1 + frames[frames.Length - 1] + 1) * d];
+                runner.CompleteBatch(counts, frames, poses, ReadOnlySpan<float>.Empty, batch);
+                worst = Worst(batch, v.F("kf.batch"), "keyframes batch");
+                var single = new float[(frames[counts[0] - 1] + 1) * d];
+                runner.Complete(new ReadOnlySpan<int>(frames, 0, counts[0]), new ReadOnlySpan<float>(poses, 0, counts[0] * d), ReadOnlySpan<float>.Empty, single);
+                worst = Math.Max(worst, Worst(single, v.F("kf.single"), "keyframes single"));
+                Expect(arnn.JointNames().SequenceEqual(v.S("kf.names")), "keyframes joint names");
+                Console.WriteLine("parity keyframes: worst=" + worst.ToString("G3") + " values=" + (batch.Length + single.Length) + " (2 characters in one batch and one alone, D=" + d + ")");
+            }
+        }
+
+        static void Stitch(Vectors v, Model rmr)
+        {
+            int k = rmr.Joints;
+            var roots = v.Roots("st.in");
+            var rotations = v.Rotations("st.in");
+            int frames = roots.Length;
+            var outRoots = new ZooRootMotion[frames];
+            var outRotations = new float[frames * 4 * k];
+            var contacts = new byte[frames * 4];
+            rmr.StitchRefine(roots, rotations, true, true, outRoots, outRotations, contacts);
+            float worst = Worst(Floats(outRoots), Floats(v.Roots("st.refine")), "stitch refine roots");
+            worst = Math.Max(worst, Worst(outRotations, v.Rotations("st.refine"), "stitch refine rotations"));
+            worst = Math.Max(worst, WorstBytes(contacts, v.L("st.refine.contacts"), "stitch refine contacts"));
+            int values = outRoots.Length * 14 + outRotations.Length;
+            using (var stream = new StitchStream(rmr))
+            {
+                var popped = new List<ZooRootMotion>();
+                var poppedRotations = new List<float>();
+                var poppedContacts = new List<byte>();
+                var root = new ZooRootMotion();
+                var q = new float[4 * k];
+                var c = new byte[4];
+                Expect(!stream.TryPop(ref root, q, c), "nothing to pop before the first push");
+                for (int f = 0; f <= frames; f++)
+                {
+                    if (f < frames) stream.Push(roots[f], new ReadOnlySpan<float>(rotations, f * 4 * k, 4 * k));
+                    else stream.Finish();
+                    while (stream.Ready)
+                    {
+                        Expect(stream.TryPop(ref root, q, c), "a ready pose pops");
+                        popped.Add(root);
+                        poppedRotations.AddRange(q);
+                        poppedContacts.AddRange(c);
+                    }
+                }
+                worst = Math.Max(worst, Worst(Floats(popped.ToArray()), Floats(v.Roots("st.stream")), "stitch stream roots"));
+                worst = Math.Max(worst, Worst(poppedRotations.ToArray(), v.Rotations("st.stream"), "stitch stream rotations"));
+                worst = Math.Max(worst, WorstBytes(poppedContacts.ToArray(), v.L("st.stream.contacts"), "stitch stream contacts"));
+                values += popped.Count * 14 + poppedRotations.Count;
+            }
+            Expect(rmr.JointNames().SequenceEqual(v.S("st.names")), "stitch joint names");
+            Console.WriteLine("parity stitch: worst=" + worst.ToString("G3") + " values=" + values + " (whole sequence of " + frames + " frames with ankles and foot lock, and the stream; latency " + rmr.StitchInfo.LatencyFrames + ")");
+        }
+
+        static void Synthesis(Vectors v, Model syn)
+        {
+            int k = syn.Joints, steps = v.Int("sy.steps");
+            var seeds = Array.ConvertAll(v.L("sy.seeds"), s => (ulong)s);
+            int n = seeds.Length;
+            var frames = v.F("sy.frames");
+            var placements = v.F("sy.placements");
+            var mean = new float[syn.SynthesisInfo.FrameDimension];
+            syn.SynthesisMeanFrame(mean);
+            float worst = Worst(mean, new ReadOnlySpan<float>(frames, 0, mean.Length), "synthesis mean frame");
+            int values = 0;
+            foreach (var frame in new[] { "out", "unity" })
+            {
+                ZooCoordinateFrame? engine = null;
+                if (frame == "unity") engine = ZooCoordinateFrame.Unity;
+                using (var runner = new SynthesisRunner(syn, n))
+                using (var chars = new SynthesisCharacters(syn, seeds, engine))
+                {
+                    chars.Start(frames, placements);
+                    var b = new PoseBuffer(n, k, 2);
+                    var roots = new List<ZooRootMotion>();
+                    var rotations = new List<float>();
+                    var contacts = new List<byte>();
+                    for (int s = 0; s < steps; s++)
+                    {
+                        chars.Step(runner, 1f, b.Roots, b.Rotations, b.Contacts);
+                        Record(b, roots, rotations, contacts);
+                    }
+                    worst = Math.Max(worst, Worst(Floats(roots.ToArray()), Floats(v.Roots("sy." + frame)), "synthesis " + frame + " roots"));
+                    worst = Math.Max(worst, Worst(rotations.ToArray(), v.Rotations("sy." + frame), "synthesis " + frame + " rotations"));
+                    worst = Math.Max(worst, WorstBytes(contacts.ToArray(), v.L("sy.out.contacts"), "synthesis contacts"));
+                    values += roots.Count * 14 + rotations.Count;
+                }
+            }
+            Console.WriteLine("parity synthesis: worst=" + worst.ToString("G3") + " values=" + values + " (" + n + " characters x " + steps + " frames, model frame and Unity's)");
+            var controls = MemoryMarshal.Cast<float, ZooControl>(v.F("ct.controls").AsSpan()).ToArray();
+            using (var runner = new ControlRunner(syn))
+            using (var chars = new ControlCharacters(syn, seeds))
+            {
+                chars.Start(frames, placements);
+                var b = new PoseBuffer(n, k, 2);
+                var z = new ZooControl[n];
+                var roots = new List<ZooRootMotion>();
+                var rotations = new List<float>();
+                var contacts = new List<byte>();
+                for (int s = 0; s < steps; s++)
+                {
+                    for (int c = 0; c < n; c++) z[c] = controls[s];
+                    chars.Step(runner, z, b.Roots, b.Rotations, b.Contacts);
+                    Record(b, roots, rotations, contacts);
+                }
+                worst = Worst(Floats(roots.ToArray()), Floats(v.Roots("ct.out")), "control roots");
+                worst = Math.Max(worst, Worst(rotations.ToArray(), v.Rotations("ct.out"), "control rotations"));
+                worst = Math.Max(worst, WorstBytes(contacts.ToArray(), v.L("ct.out.contacts"), "control contacts"));
+                Console.WriteLine("parity control: worst=" + worst.ToString("G3") + " values=" + (roots.Count * 14 + rotations.Count) + " (" + n + " characters x " + steps + " frames, a turn half way)");
+            }
+            Expect(syn.JointNames().SequenceEqual(v.S("sy.names")), "synthesis joint names");
+        }
+
+        // Bad calls.
+
+        static int refused, unexpected, wrapperChecked, disposedTwice;
+
+        /// <summary>Runs a call that must be refused with <typeparamref name="T"/>, status <paramref name="status"/> and a message starting with <paramref name="function"/> and containing <paramref name="needle"/>.</summary>
+        static void Refused<T>(string name, ZooStatus status, string function, string needle, Action call) where T : Exception
+        {
+            try
+            {
+                call();
+                unexpected++;
+                Fail("bad call `" + name + "` was not refused");
+            }
+            catch (T e)
+            {
+                var z = e as ZooException;
+                var d = e as ZooDisposedException;
+                var s = z != null ? z.Status : d != null ? d.Status : (ZooStatus)(-1);
+                var message = e.Message;
+                bool fromRuntime = message.StartsWith(function + ": ", StringComparison.Ordinal) || message.Contains(" is disposed: " + function + ": ");
+                if (s != status || !fromRuntime || !message.Contains(needle))
+                {
+                    unexpected++;
+                    Fail("bad call `" + name + "`: " + typeof(T).Name + " " + s + " `" + message + "`, expected " + status + " from " + function + " mentioning `" + needle + "`");
+                }
+                else refused++;
+            }
+            catch (Exception e)
+            {
+                unexpected++;
+                Fail("bad call `" + name + "` raised " + e.GetType().Name + ": " + e.Message + " (expected " + typeof(T).Name + ")");
+            }
+        }
+
+        static void Wrong(string name, string function, string needle, Action call)
+        {
+            Refused<ZooException>(name, ZooStatus.InvalidArgument, function, needle, call);
+        }
+
+        static void Disposed(string name, string function, string needle, Action call)
+        {
+            Refused<ZooDisposedException>(name, ZooStatus.NullPointer, function, needle, call);
+        }
+
+        static void BadCalls(Vectors v, string dir, Model rtn, Model arnn, Model rmr, Model syn)
+        {
+            const ZooStatus Null = ZooStatus.NullPointer, Load = ZooStatus.LoadFailed, WrongModel = ZooStatus.WrongModel, State = ZooStatus.InvalidState;
+            int k = rtn.Joints, n = v.Int("tr.n"), length = v.Int("tr.length");
+            var pastRoots = v.Roots("tr.posed.past");
+            var pastRot = v.Rotations("tr.posed.past");
+            var targetRoots = v.Roots("tr.posed.target");
+            var targetRot = v.Rotations("tr.posed.target");
+            var nextRoots = v.Roots("tr.posed.next");
+            var nextRot = v.Rotations("tr.posed.next");
+            var past = v.F("tr.pos.past");
+            var target = v.F("tr.pos.target");
+            var next = v.F("tr.pos.next");
+            var nan = (float[])target.Clone();
+            nan[5] = float.NaN;
+
+            // Loading.
+            var garbage = Path.Combine(dir, "garbage.onnx");
+            File.WriteAllText(garbage, "not a model");
+            Refused<ZooException>("load a garbage file", Load, "zoo_model_load", "not an ONNX model", () => Model.Load(garbage));
+            Refused<ZooException>("load a missing file", Load, "zoo_model_load", "missing.onnx", () => Model.Load(Path.Combine(dir, "missing.onnx")));
+            Refused<ZooException>("load a null path", Null, "zoo_model_load", "`path` is NULL", () => Model.Load(null));
+
+            // A model of another task.
+            Refused<ZooException>("transition runner on a keyframes model", WrongModel, "zoo_transition_runner_new", "use zoo_keyframes_*", () => new TransitionRunner(arnn));
+            Refused<ZooException>("transition characters on a synthesis model", WrongModel, "zoo_transition_characters_new", "`synthesis` model", () => new TransitionCharacters(syn, 1));
+            Refused<ZooException>("keyframes runner on a transition model", WrongModel, "zoo_keyframes_runner_new", "use zoo_transition_*", () => new KeyframesRunner(rtn, 1));
+            Refused<ZooException>("stitch stream on a synthesis model", WrongModel, "zoo_stitch_stream_new", "`synthesis` model", () => new StitchStream(syn));
+            Refused<ZooException>("synthesis runner on a stitch model", WrongModel, "zoo_synthesis_runner_new", "`stitch` model", () => new SynthesisRunner(rmr, 1));
+            Refused<ZooException>("synthesis characters on a transition model", WrongModel, "zoo_synthesis_characters_new", "`transition` model", () => new SynthesisCharacters(rtn, new ulong[] { 1 }));
+            Refused<ZooException>("control runner on a transition model", WrongModel, "zoo_control_runner_new", "`transition` model", () => new ControlRunner(rtn));
+            Refused<ZooException>("control characters on a keyframes model", WrongModel, "zoo_control_characters_new", "`keyframes` model", () => new ControlCharacters(arnn, new ulong[] { 1 }));
+            Refused<ZooException>("transition info of a keyframes model", WrongModel, "zoo_transition_info", "zoo_keyframes_*", () => { var i = arnn.TransitionInfo; });
+            Refused<ZooException>("keyframes info of a stitch model", WrongModel, "zoo_keyframes_info", "zoo_stitch_*", () => { var i = rmr.KeyframesInfo; });
+            Refused<ZooException>("stitch info of a transition model", WrongModel, "zoo_stitch_info", "zoo_transition_*", () => { var i = rtn.StitchInfo; });
+            Refused<ZooException>("synthesis info of a stitch model", WrongModel, "zoo_synthesis_info", "zoo_stitch_*", () => { var i = rmr.SynthesisInfo; });
+            Refused<ZooException>("terrain of a synthesis model", WrongModel, "zoo_transition_terrain", "`synthesis` model", () => { int a; float b; rtn.TryGetTerrain(out a, out b); syn.TryGetTerrain(out a, out b); });
+            Refused<ZooException>("stitch window of a transition model", WrongModel, "zoo_stitch_set_window", "zoo_transition_*", () => rtn.SetStitchWindow(10, 5));
+            Refused<ZooException>("set refine of a stitch model", WrongModel, "zoo_synthesis_set_refine", "zoo_stitch_*", () => rmr.SetSynthesisRefine(false));
+            Refused<ZooException>("mean frame of a transition model", WrongModel, "zoo_synthesis_mean_frame", "zoo_transition_*", () => rtn.SynthesisMeanFrame(new float[4]));
+            Refused<ZooException>("stitch refine with a transition model", WrongModel, "zoo_stitch_refine", "zoo_transition_*", () => rtn.StitchRefine(new ZooRootMotion[1], new float[4 * k], true, true, new ZooRootMotion[1], new float[4 * k], new byte[4]));
+
+            // Wrong lengths and indices, every buffer of every call.
+            using (var runner = new TransitionRunner(rtn))
+            using (var chars = new TransitionCharacters(rtn, n))
+            using (var other = new TransitionCharacters(rtn, n, ZooCoordinateFrame.Unity))
+            {
+                var b = new PoseBuffer(n, k);
+                var poses = new float[n * 3 * k];
+                Refused<ZooException>("step before the start", State, "zoo_transition_step_posed", "", () => chars.StepPosed(runner, b.Roots, b.Rotations));
+                Wrong("start: past short", "zoo_transition_start", "`past`", () => chars.Start(runner, new ReadOnlySpan<float>(past, 0, past.Length - 1), target, next, length));
+                Wrong("start: target short", "zoo_transition_start", "`target`", () => chars.Start(runner, past, new ReadOnlySpan<float>(target, 1, target.Length - 1), next, length));
+                Wrong("start: next long", "zoo_transition_start", "`next`", () => chars.Start(runner, past, target, new float[next.Length + 3], length));
+                Wrong("start (Unity): target short", "zoo_transition_start", "`target`", () => other.Start(runner, past, new ReadOnlySpan<float>(target, 1, target.Length - 1), next, length));
+                Wrong("start: NaN target", "zoo_transition_start", "NaN", () => chars.Start(runner, past, nan, next, length));
+                Refused<ZooException>("start: longer than trained", State, "zoo_transition_start", "zoo_transition_allow_beyond_trained", () => chars.Start(runner, past, target, next, length + 1));
+                chars.Start(runner, past, target, next, length);
+                Wrong("step: poses short", "zoo_transition_step", "`poses`", () => chars.Step(runner, new float[poses.Length - 1]));
+                Wrong("step: poses empty", "zoo_transition_step", "`poses`", () => chars.Step(runner, new float[0]));
+                Refused<ZooException>("step: poses null", Null, "zoo_transition_step", "`poses` is NULL", () => chars.Step(runner, null));
+                Wrong("start posed: past roots not whole frames", "zoo_transition_start_posed", "`past_roots`", () => chars.StartPosed(runner, new ReadOnlySpan<ZooRootMotion>(pastRoots, 0, pastRoots.Length - 1), pastRot, targetRoots, targetRot, nextRoots, nextRot, length));
+                Wrong("start posed: past rotations short", "zoo_transition_start_posed", "`past_rotations`", () => chars.StartPosed(runner, pastRoots, new ReadOnlySpan<float>(pastRot, 0, pastRot.Length - 4), targetRoots, targetRot, nextRoots, nextRot, length));
+                Wrong("start posed: target rotations short", "zoo_transition_start_posed", "rotations_len", () => chars.StartPosed(runner, pastRoots, pastRot, targetRoots, new ReadOnlySpan<float>(targetRot, 0, targetRot.Length - 4), nextRoots, new ReadOnlySpan<float>(nextRot, 0, nextRot.Length - 4), length));
+                Wrong("start posed (Unity): past rotations not whole", "zoo_transition_start_posed", "`past_rotations`", () => other.StartPosed(runner, pastRoots, new ReadOnlySpan<float>(pastRot, 0, pastRot.Length - 2), targetRoots, targetRot, nextRoots, nextRot, length));
+                wrapperChecked += 3;
+                Wrong("start posed: target roots short (checked by the wrapper)", "zoo_transition_start_posed", "`target_roots`", () => chars.StartPosed(runner, pastRoots, pastRot, new ReadOnlySpan<ZooRootMotion>(targetRoots, 0, n - 1), targetRot, nextRoots, nextRot, length));
+                Wrong("start posed: next roots long (checked by the wrapper)", "zoo_transition_start_posed", "`next_roots`", () => chars.StartPosed(runner, pastRoots, pastRot, targetRoots, targetRot, new ZooRootMotion[n + 1], nextRot, length));
+                Wrong("start posed: next rotations differ from target's (checked by the wrapper)", "zoo_transition_start_posed", "`next_rotations`", () => chars.StartPosed(runner, pastRoots, pastRot, targetRoots, targetRot, nextRoots, new ReadOnlySpan<float>(nextRot, 0, nextRot.Length - 4), length));
+                var nanRot = (float[])targetRot.Clone();
+                nanRot[2] = float.NaN;
+                Wrong("start posed: NaN rotation", "zoo_transition_start_posed", "NaN", () => chars.StartPosed(runner, pastRoots, pastRot, targetRoots, nanRot, nextRoots, nextRot, length));
+                chars.StartPosed(runner, pastRoots, pastRot, targetRoots, targetRot, nextRoots, nextRot, length);
+                Wrong("step posed: roots short", "zoo_transition_step_posed", "`roots`", () => chars.StepPosed(runner, new ZooRootMotion[n - 1], b.Rotations));
+                Wrong("step posed: rotations long", "zoo_transition_step_posed", "`rotations`", () => chars.StepPosed(runner, b.Roots, new float[b.Rotations.Length + 4]));
+                Wrong("heightmap: heights short", "zoo_transition_set_heightmap", "`heights`", () => chars.SetHeightmap(0, 3, 3, 10f, 0f, 0f, new float[8]));
+                Wrong("heightmap: NaN height", "zoo_transition_set_heightmap", "NaN", () => chars.SetHeightmap(0, 2, 1, 10f, 0f, 0f, new[] { 0f, float.NaN }));
+                Wrong("heightmap: index out of range", "zoo_transition_set_heightmap", "does not exist", () => chars.SetHeightmap(n, 1, 1, 10f, 0f, 0f, new[] { 0f }));
+                Wrong("frames left: index out of range", "zoo_transition_frames_left", "does not exist", () => chars.FramesLeft(n));
+                Wrong("frames left: negative index", "zoo_transition_frames_left", "does not exist", () => chars.FramesLeft(-1));
+                Wrong("target miss: index out of range", "zoo_transition_target_miss", "does not exist", () => { float a, c; chars.TryGetTargetMiss(7, out a, out c); });
+                Wrong("transition characters: count 0", "zoo_transition_characters_new", "`count` is 0", () => new TransitionCharacters(rtn, 0));
+                var parents = new int[k];
+                var offsets = new float[3 * k];
+                Wrong("skeleton: parents short", "zoo_model_skeleton", "`parents`", () => rtn.GetSkeleton(new int[k - 1], offsets));
+                Wrong("skeleton: offsets long", "zoo_model_skeleton", "`offsets`", () => rtn.GetSkeleton(parents, new float[3 * k + 1]));
+                Wrong("joint name: index out of range", "zoo_model_joint_name", "does not exist", () => rtn.JointName(k));
+                Wrong("conversion: rotations not whole", "zoo_pose_convert", "`rotations`", () => rtn.ToEngine(ZooCoordinateFrame.Unity).Poses(b.Roots, new float[6]));
+                Wrong("conversion: positions not whole", "zoo_positions_convert", "`positions`", () => rtn.ToEngine(ZooCoordinateFrame.Unity).Positions(new float[4]));
+                Wrong("conversion: a frame of 0 metres per unit", "zoo_pose_convert", "metres_per_unit", () => new PoseConversion(rtn.Frame, new ZooCoordinateFrame(0f, ZooUpAxis.Y, ZooHandedness.Left)).Poses(b.Roots, b.Rotations));
+            }
+
+            using (var runner = new KeyframesRunner(arnn, 2))
+            {
+                int d = arnn.KeyframesInfo.DofCount;
+                var frames = v.I("kf.frames");
+                var counts = v.I("kf.counts");
+                var kposes = v.F("kf.poses");
+                var outA = new float[40 * d];
+                var f4 = frames.Take(4).ToArray();
+                var p4 = kposes.Take(4 * d).ToArray();
+                Wrong("keyframes: poses short", "zoo_keyframes_complete", "`poses`", () => runner.Complete(f4, new ReadOnlySpan<float>(kposes, 0, 4 * d - 1), ReadOnlySpan<float>.Empty, outA));
+                Wrong("keyframes: out short", "zoo_keyframes_complete", "`out`", () => runner.Complete(f4, p4, ReadOnlySpan<float>.Empty, new float[39 * d]));
+                Wrong("keyframes: fixed of a model without groups", "zoo_keyframes_complete", "fixed", () => runner.Complete(f4, p4, new float[4], outA));
+                Wrong("keyframes: NaN key", "zoo_keyframes_complete", "NaN", () => { var p = (float[])p4.Clone(); p[3] = float.NaN; runner.Complete(f4, p, ReadOnlySpan<float>.Empty, outA); });
+                Wrong("keyframes: frames out of order", "zoo_keyframes_complete", "strictly increase", () => runner.Complete(new[] { 0, 9, 9, 39 }, p4, ReadOnlySpan<float>.Empty, outA));
+                Wrong("keyframes: negative frame", "zoo_keyframes_complete", "", () => runner.Complete(new[] { 0, -9, 24, 39 }, p4, ReadOnlySpan<float>.Empty, outA));
+                var batchOut = new float[71 * d];
+                Wrong("keyframes batch: counts do not add up", "zoo_keyframes_complete_batch", "key_counts", () => runner.CompleteBatch(new[] { 4, 2 }, frames, kposes, ReadOnlySpan<float>.Empty, batchOut));
+                Wrong("keyframes batch: out short", "zoo_keyframes_complete_batch", "`out`", () => runner.CompleteBatch(counts, frames, kposes, ReadOnlySpan<float>.Empty, new float[70 * d]));
+                Wrong("keyframes batch: more characters than the runner's batch", "zoo_keyframes_complete_batch", "made for at most 2", () => runner.CompleteBatch(new[] { 4, 3, 4 }, frames.Concat(frames.Take(4)).ToArray(), kposes.Concat(kposes.Take(4 * d)).ToArray(), ReadOnlySpan<float>.Empty, new float[111 * d]));
+            }
+
+            int kr = rmr.Joints;
+            var sRoots = v.Roots("st.in");
+            var sRot = v.Rotations("st.in");
+            int sf = sRoots.Length;
+            Wrong("stitch refine: rotations short", "zoo_stitch_refine", "`rotations`", () => rmr.StitchRefine(sRoots, new ReadOnlySpan<float>(sRot, 0, sRot.Length - 4), true, true, new ZooRootMotion[sf], new float[sRot.Length], new byte[4 * sf]));
+            Wrong("stitch refine: out roots short", "zoo_stitch_refine", "`out_roots`", () => rmr.StitchRefine(sRoots, sRot, true, true, new ZooRootMotion[sf - 1], new float[sRot.Length], new byte[4 * sf]));
+            Wrong("stitch refine: out rotations short", "zoo_stitch_refine", "`out_rotations`", () => rmr.StitchRefine(sRoots, sRot, true, true, new ZooRootMotion[sf], new float[sRot.Length - 1], new byte[4 * sf]));
+            Wrong("stitch refine: contacts short", "zoo_stitch_refine", "`contacts`", () => rmr.StitchRefine(sRoots, sRot, true, true, new ZooRootMotion[sf], new float[sRot.Length], new byte[4 * sf - 1]));
+            Wrong("stitch refine (Unity): rotations not whole", "zoo_stitch_refine", "`rotations`", () => rmr.StitchRefine(sRoots, new ReadOnlySpan<float>(sRot, 0, sRot.Length - 3), true, true, new ZooRootMotion[sf], new float[sRot.Length], new byte[4 * sf], ZooCoordinateFrame.Unity));
+            Wrong("stitch refine: shorter than a window", "zoo_stitch_refine", "window", () => rmr.StitchRefine(new ReadOnlySpan<ZooRootMotion>(sRoots, 0, 3), new ReadOnlySpan<float>(sRot, 0, 12 * kr), true, true, new ZooRootMotion[3], new float[12 * kr], new byte[12]));
+            using (var stream = new StitchStream(rmr))
+            using (var other = new StitchStream(rmr, ZooCoordinateFrame.Unity))
+            {
+                var root = new ZooRootMotion();
+                Wrong("stream push: rotations short", "zoo_stitch_stream_push", "`rotations`", () => stream.Push(sRoots[0], new float[4 * kr - 4]));
+                Wrong("stream push (Unity): rotations not whole", "zoo_stitch_stream_push", "`rotations`", () => other.Push(sRoots[0], new float[4 * kr - 1]));
+                Wrong("stream push: NaN", "zoo_stitch_stream_push", "NaN", () => { var q = new float[4 * kr]; q[0] = float.NaN; stream.Push(sRoots[0], q); });
+                Refused<ZooException>("stream finish: too short", State, "zoo_stitch_stream_finish", "window", () => stream.Finish());
+                for (int f = 0; f < sf; f++) stream.Push(sRoots[f], new ReadOnlySpan<float>(sRot, f * 4 * kr, 4 * kr));
+                Wrong("stream pop: rotations short", "zoo_stitch_stream_pop", "`rotations`", () => stream.TryPop(ref root, new float[4 * kr - 1], new byte[4]));
+                Wrong("stream pop: contacts short", "zoo_stitch_stream_pop", "`contacts`", () => stream.TryPop(ref root, new float[4 * kr], new byte[3]));
+                stream.Finish();
+                Refused<ZooException>("stream push after finish", State, "zoo_stitch_stream_push", "", () => stream.Push(sRoots[0], new ReadOnlySpan<float>(sRot, 0, 4 * kr)));
+                Refused<ZooException>("stitch window while a stream lives", State, "zoo_stitch_set_window", "", () => rmr.SetStitchWindow(10, 5));
+            }
+
+            var seeds = Array.ConvertAll(v.L("sy.seeds"), s => (ulong)s);
+            int ns = seeds.Length, ks = syn.Joints;
+            var sframes = v.F("sy.frames");
+            var splace = v.F("sy.placements");
+            using (var runner = new SynthesisRunner(syn, ns))
+            using (var chars = new SynthesisCharacters(syn, seeds))
+            using (var crunner = new ControlRunner(syn))
+            using (var cchars = new ControlCharacters(syn, seeds))
+            {
+                var b = new PoseBuffer(ns, ks, 2);
+                Refused<ZooException>("synthesis step before the start", State, "zoo_synthesis_step", "", () => chars.Step(runner, 1f, b.Roots, b.Rotations, b.Contacts));
+                Refused<ZooException>("control step before the start", State, "zoo_control_step", "", () => cchars.Step(crunner, new ZooControl[ns], b.Roots, b.Rotations, b.Contacts));
+                Wrong("synthesis start: frames short", "zoo_synthesis_start", "`frames`", () => chars.Start(new ReadOnlySpan<float>(sframes, 0, sframes.Length - 1), splace));
+                Wrong("synthesis start: placements short", "zoo_synthesis_start", "`placements`", () => chars.Start(sframes, new float[3 * ns - 1]));
+                Wrong("synthesis start: NaN frame", "zoo_synthesis_start", "NaN", () => { var f = (float[])sframes.Clone(); f[1] = float.NaN; chars.Start(f, splace); });
+                chars.Start(sframes, splace);
+                Wrong("synthesis step: roots short", "zoo_synthesis_step", "`roots`", () => chars.Step(runner, 1f, new ZooRootMotion[ns - 1], b.Rotations, b.Contacts));
+                Wrong("synthesis step: rotations short", "zoo_synthesis_step", "`rotations`", () => chars.Step(runner, 1f, b.Roots, new float[b.Rotations.Length - 1], b.Contacts));
+                Wrong("synthesis step: contacts short", "zoo_synthesis_step", "`contacts`", () => chars.Step(runner, 1f, b.Roots, b.Rotations, new byte[2 * ns - 1]));
+                Wrong("synthesis step: NaN temperature", "zoo_synthesis_step", "temperature", () => chars.Step(runner, float.NaN, b.Roots, b.Rotations, b.Contacts));
+                Wrong("synthesis characters: no seeds", "zoo_synthesis_characters_new", "`count` is 0", () => new SynthesisCharacters(syn, new ulong[0]));
+                Wrong("mean frame: short", "zoo_synthesis_mean_frame", "`frame`", () => syn.SynthesisMeanFrame(new float[3]));
+                Wrong("control start: frames not whole", "zoo_control_start", "`frames`", () => cchars.Start(new ReadOnlySpan<float>(sframes, 0, sframes.Length - 1), splace));
+                Wrong("control start: placements long", "zoo_control_start", "`placements`", () => cchars.Start(sframes, new float[3 * ns + 3]));
+                cchars.Start(sframes, splace);
+                var z = new ZooControl[ns];
+                Wrong("control step: controls short", "zoo_control_step", "`controls`", () => cchars.Step(crunner, new ZooControl[ns - 1], b.Roots, b.Rotations, b.Contacts));
+                Wrong("control step: roots long", "zoo_control_step", "`roots`", () => cchars.Step(crunner, z, new ZooRootMotion[ns + 1], b.Rotations, b.Contacts));
+                Wrong("control step: rotations short", "zoo_control_step", "`rotations`", () => cchars.Step(crunner, z, b.Roots, new float[4], b.Contacts));
+                Wrong("control step: contacts short", "zoo_control_step", "`contacts`", () => cchars.Step(crunner, z, b.Roots, b.Rotations, new byte[1]));
+                Wrong("control step: NaN speed", "zoo_control_step", "speed", () => { var bad = new ZooControl[ns]; bad[1].Speed = float.NaN; cchars.Step(crunner, bad, b.Roots, b.Rotations, b.Contacts); });
+                Wrong("control characters: bad settings", "zoo_control_characters_new", "batch", () => { var s = ControlSettings.Default(); s.Batch = 0; new ControlCharacters(syn, seeds, s); });
+                Wrong("control characters: empty offsets", "zoo_control_characters_new", "offsets", () => { var s = ControlSettings.Default(); s.SpeedOffsets = new[] { float.NaN }; new ControlCharacters(syn, seeds, s); });
+            }
+
+            // Missing bones: refused by the mapping with the list.
+            var joints = rtn.JointNames();
+            Refused<ZooException>("bone mapping with missing bones", ZooStatus.InvalidArgument, "BoneMapping.Map",
+                "no bone for " + (joints.Length - 1) + " of the model's " + joints.Length + " joints: `" + joints[1] + "`, `" + joints[2] + "`",
+                () => BoneMapping.Map(joints, new[] { joints[0], "Unrelated" }));
+            var renamed = joints.Select(j => "mixamorig:" + j).Reverse().ToArray();
+            var renames = joints.ToDictionary(j => j, j => "mixamorig:" + j);
+            var mapped = BoneMapping.Map(joints, renamed, renames);
+            Expect(mapped.SequenceEqual(Enumerable.Range(0, joints.Length).Select(j => joints.Length - 1 - j)), "a bone map renames: " + string.Join(",", mapped));
+
+            // Disposal: every wrapper disposed twice (a no-op the second time, as IDisposable
+            // requires), then used: refused with the runtime's NULL message.
+            var model = Model.Load(Path.Combine(dir, "rtn.onnx"));
+            var tr = new TransitionRunner(model);
+            var tc = new TransitionCharacters(model, n);
+            var kfModel = Model.Load(Path.Combine(dir, "arnn.onnx"));
+            var kr2 = new KeyframesRunner(kfModel, 1);
+            var stModel = Model.Load(Path.Combine(dir, "rmr.onnx"));
+            var ss = new StitchStream(stModel);
+            var syModel = Model.Load(Path.Combine(dir, "rnngmm.onnx"));
+            var sr = new SynthesisRunner(syModel, 1);
+            var sc = new SynthesisCharacters(syModel, new ulong[] { 1 });
+            var cr = new ControlRunner(syModel);
+            var cc = new ControlCharacters(syModel, new ulong[] { 1 });
+            var all = new ZooObject[] { tr, tc, kr2, ss, sr, sc, cr, cc, model, kfModel, stModel, syModel };
+            foreach (var o in all)
+            {
+                o.Dispose();
+                try
+                {
+                    o.Dispose();
+                    disposedTwice++;
+                }
+                catch (Exception e)
+                {
+                    unexpected++;
+                    Fail("a second Dispose of " + o.GetType().Name + " raised " + e.GetType().Name + ": " + e.Message);
+                }
+                Expect(o.IsDisposed, o.GetType().Name + ".IsDisposed");
+            }
+            using (var liveRunner = new TransitionRunner(rtn))
+            using (var liveChars = new TransitionCharacters(rtn, n))
+            using (var liveSr = new SynthesisRunner(syn, 1))
+            using (var liveSc = new SynthesisCharacters(syn, new ulong[] { 1 }))
+            using (var liveCr = new ControlRunner(syn))
+            using (var liveCc = new ControlCharacters(syn, new ulong[] { 1 }))
+            {
+                var b = new PoseBuffer(n, k);
+                var one = new PoseBuffer(1, syn.Joints, 2);
+                Disposed("disposed model: runner", "zoo_transition_runner_new", "`model` is NULL", () => new TransitionRunner(model));
+                Disposed("disposed model: characters", "zoo_transition_characters_new", "`model` is NULL", () => new TransitionCharacters(model, 1));
+                Disposed("disposed model: info", "zoo_transition_info", "`model` is NULL", () => { var i = model.TransitionInfo; });
+                Disposed("disposed model: task", "zoo_model_task", "`model` is NULL", () => model.QueryTask());
+                Disposed("disposed model: skeleton", "zoo_model_skeleton", "`model` is NULL", () => model.GetSkeleton(new int[k], new float[3 * k]));
+                Disposed("disposed model: joint name", "zoo_model_joint_name", "`model` is NULL", () => model.JointName(0));
+                Disposed("disposed model: terrain", "zoo_transition_terrain", "`model` is NULL", () => { int a; float c; model.TryGetTerrain(out a, out c); });
+                Disposed("disposed model: keyframes info", "zoo_keyframes_info", "`model` is NULL", () => { var i = kfModel.KeyframesInfo; });
+                Disposed("disposed model: keyframes runner", "zoo_keyframes_runner_new", "`model` is NULL", () => new KeyframesRunner(kfModel, 1));
+                Disposed("disposed model: stitch info", "zoo_stitch_info", "`model` is NULL", () => { var i = stModel.StitchInfo; });
+                Disposed("disposed model: stitch window", "zoo_stitch_set_window", "`model` is NULL", () => stModel.SetStitchWindow(10, 5));
+                Disposed("disposed model: stitch refine", "zoo_stitch_refine", "`model` is NULL", () => stModel.StitchRefine(sRoots, sRot, true, true, new ZooRootMotion[sf], new float[sRot.Length], new byte[4 * sf]));
+                Disposed("disposed model: stitch stream", "zoo_stitch_stream_new", "`model` is NULL", () => new StitchStream(stModel));
+                Disposed("disposed model: synthesis info", "zoo_synthesis_info", "`model` is NULL", () => { var i = syModel.SynthesisInfo; });
+                Disposed("disposed model: set refine", "zoo_synthesis_set_refine", "`model` is NULL", () => syModel.SetSynthesisRefine(true));
+                Disposed("disposed model: mean frame", "zoo_synthesis_mean_frame", "`model` is NULL", () => syModel.SynthesisMeanFrame(new float[4]));
+                Disposed("disposed model: synthesis runner", "zoo_synthesis_runner_new", "`model` is NULL", () => new SynthesisRunner(syModel, 1));
+                Disposed("disposed model: synthesis characters", "zoo_synthesis_characters_new", "`model` is NULL", () => new SynthesisCharacters(syModel, new ulong[] { 1 }));
+                Disposed("disposed model: control runner", "zoo_control_runner_new", "`model` is NULL", () => new ControlRunner(syModel));
+                Disposed("disposed model: control characters", "zoo_control_characters_new", "`model` is NULL", () => new ControlCharacters(syModel, new ulong[] { 1 }));
+                Disposed("disposed runner: allow beyond trained", "zoo_transition_allow_beyond_trained", "`runner` is NULL", () => tr.AllowBeyondTrained(true));
+                Disposed("disposed runner: start", "zoo_transition_start", "`runner` is NULL", () => liveChars.Start(tr, past, target, next, length));
+                Disposed("disposed runner: step posed", "zoo_transition_step_posed", "`runner` is NULL", () => liveChars.StepPosed(tr, b.Roots, b.Rotations));
+                Disposed("disposed characters: start posed", "zoo_transition_start_posed", "`characters` is NULL", () => tc.StartPosed(liveRunner, pastRoots, pastRot, targetRoots, targetRot, nextRoots, nextRot, length));
+                Disposed("disposed characters: step", "zoo_transition_step", "`characters` is NULL", () => tc.Step(liveRunner, new float[n * 3 * k]));
+                Disposed("disposed characters: step posed", "zoo_transition_step_posed", "`characters` is NULL", () => tc.StepPosed(liveRunner, b.Roots, b.Rotations));
+                Disposed("disposed characters: heightmap", "zoo_transition_set_heightmap", "`characters` is NULL", () => tc.SetHeightmap(0, 1, 1, 1f, 0f, 0f, new[] { 0f }));
+                Disposed("disposed characters: frames left", "zoo_transition_frames_left", "`characters` is NULL", () => tc.FramesLeft(0));
+                Disposed("disposed characters: target miss", "zoo_transition_target_miss", "`characters` is NULL", () => { float a, c; tc.TryGetTargetMiss(0, out a, out c); });
+                Disposed("disposed keyframes runner: complete", "zoo_keyframes_complete", "`runner` is NULL", () => kr2.Complete(new[] { 0, 5 }, new float[12], ReadOnlySpan<float>.Empty, new float[36]));
+                Disposed("disposed keyframes runner: batch", "zoo_keyframes_complete_batch", "`runner` is NULL", () => kr2.CompleteBatch(new[] { 2 }, new[] { 0, 5 }, new float[12], ReadOnlySpan<float>.Empty, new float[36]));
+                Disposed("disposed stream: push", "zoo_stitch_stream_push", "`stream` is NULL", () => ss.Push(sRoots[0], new ReadOnlySpan<float>(sRot, 0, 4 * kr)));
+                Disposed("disposed stream: ready", "zoo_stitch_stream_ready", "`stream` is NULL", () => { var r = ss.Ready; });
+                Disposed("disposed stream: pop", "zoo_stitch_stream_pop", "`stream` is NULL", () => { var root = new ZooRootMotion(); ss.TryPop(ref root, new float[4 * kr], new byte[4]); });
+                Disposed("disposed stream: finish", "zoo_stitch_stream_finish", "`stream` is NULL", () => ss.Finish());
+                Disposed("disposed synthesis characters: start", "zoo_synthesis_start", "`characters` is NULL", () => sc.Start(new ReadOnlySpan<float>(sframes, 0, sframes.Length / ns), new float[3]));
+                Disposed("disposed synthesis runner: step", "zoo_synthesis_step", "`runner` is NULL", () => liveSc.Step(sr, 1f, one.Roots, one.Rotations, one.Contacts));
+                Disposed("disposed synthesis characters: step", "zoo_synthesis_step", "`characters` is NULL", () => sc.Step(liveSr, 1f, one.Roots, one.Rotations, one.Contacts));
+                Disposed("disposed control characters: start", "zoo_control_start", "`characters` is NULL", () => cc.Start(new ReadOnlySpan<float>(sframes, 0, sframes.Length / ns), new float[3]));
+                Disposed("disposed control runner: step", "zoo_control_step", "`runner` is NULL", () => liveCc.Step(cr, new ZooControl[1], one.Roots, one.Rotations, one.Contacts));
+                Disposed("disposed control characters: step", "zoo_control_step", "`characters` is NULL", () => cc.Step(liveCr, new ZooControl[1], one.Roots, one.Rotations, one.Contacts));
+            }
+
+            // Everything still works after the refusals.
+            using (var runner = new TransitionRunner(rtn))
+            using (var chars = new TransitionCharacters(rtn, n))
+            {
+                var b = new PoseBuffer(n, k);
+                chars.StartPosed(runner, pastRoots, pastRot, targetRoots, targetRot, nextRoots, nextRot, length);
+                chars.StepPosed(runner, b.Roots, b.Rotations);
+            }
+            Console.WriteLine("bad calls: refused=" + refused + " unexpected=" + unexpected + " (each a managed exception with the runtime's status and message, the process alive; "
+                + wrapperChecked + " of them refused by the wrapper where the C ABI takes a buffer without its length; disposed twice: " + disposedTwice + " wrappers, the second Dispose a no-op)");
+        }
+
+        // Managed allocation per step.
+
+        static long Measure(string what, int steps, Action<int> step, StringBuilder report)
+        {
+            for (int i = 0; i < 20; i++) step(i);
+            long before = GC.GetAllocatedBytesForCurrentThread();
+            for (int i = 0; i < steps; i++) step(i);
+            long bytes = GC.GetAllocatedBytesForCurrentThread() - before;
+            report.Append(what).Append(' ').Append(bytes).Append(", ");
+            if (bytes != 0) Fail(what + ": " + bytes + " managed bytes allocated over " + steps + " steps");
+            return bytes;
+        }
+
+        static void Allocation(Vectors v, Model rtn, Model arnn, Model rmr, Model syn)
+        {
+            const int Steps = 1000;
+            long total = 0;
+            var report = new StringBuilder();
+            int k = rtn.Joints, n = v.Int("tr.n"), length = v.Int("tr.length");
+            var pastRoots = v.Roots("tr.unity.past");
+            var pastRot = v.Rotations("tr.unity.past");
+            var targetRoots = v.Roots("tr.unity.target");
+            var targetRot = v.Rotations("tr.unity.target");
+            var nextRoots = v.Roots("tr.unity.next");
+            var nextRot = v.Rotations("tr.unity.next");
+            using (var runner = new TransitionRunner(rtn))
+            using (var chars = new TransitionCharacters(rtn, n, ZooCoordinateFrame.Unity))
+            {
+                var b = new PoseBuffer(n, k);
+                total += Measure("transition step posed (Unity frame, restarted when done)", Steps, i =>
+                {
+                    if (i == 0 || chars.FramesLeft(0) == 0) chars.StartPosed(runner, pastRoots, pastRot, targetRoots, targetRot, nextRoots, nextRot, length);
+                    chars.StepPosed(runner, b.Roots, b.Rotations);
+                }, report);
+                var past = v.F("tr.unity.pos.past");
+                var target = v.F("tr.unity.pos.target");
+                var next = v.F("tr.unity.pos.next");
+                var poses = new float[n * 3 * k];
+                total += Measure("transition step positions (Unity frame)", Steps, i =>
+                {
+                    if (i == 0 || chars.FramesLeft(0) == 0) chars.Start(runner, past, target, next, length);
+                    chars.Step(runner, poses);
+                }, report);
+            }
+            var seeds = Array.ConvertAll(v.L("sy.seeds"), s => (ulong)s);
+            var frames = v.F("sy.frames");
+            var placements = v.F("sy.placements");
+            using (var runner = new SynthesisRunner(syn, seeds.Length))
+            using (var chars = new SynthesisCharacters(syn, seeds, ZooCoordinateFrame.Unity))
+            using (var crunner = new ControlRunner(syn))
+            using (var cchars = new ControlCharacters(syn, seeds, null, ZooCoordinateFrame.Unity))
+            {
+                chars.Start(frames, placements);
+                cchars.Start(frames, placements);
+                var b = new PoseBuffer(seeds.Length, syn.Joints, 2);
+                var z = new ZooControl[seeds.Length];
+                for (int c = 0; c < z.Length; c++) z[c] = new ZooControl(150f, 0.5f * c);
+                total += Measure("synthesis step (Unity frame)", Steps, i => chars.Step(runner, 1f, b.Roots, b.Rotations, b.Contacts), report);
+                total += Measure("control step (Unity frame)", Steps, i => cchars.Step(crunner, z, b.Roots, b.Rotations, b.Contacts), report);
+            }
+            var sRoots = v.Roots("st.in");
+            var sRot = v.Rotations("st.in");
+            int kr = rmr.Joints;
+            using (var stream = new StitchStream(rmr, ZooCoordinateFrame.Unity))
+            {
+                var root = new ZooRootMotion();
+                var q = new float[4 * kr];
+                var c = new byte[4];
+                total += Measure("stitch stream push + pop (Unity frame)", Steps, i =>
+                {
+                    int f = i % sRoots.Length;
+                    stream.Push(sRoots[f], new ReadOnlySpan<float>(sRot, f * 4 * kr, 4 * kr));
+                    while (stream.Ready) stream.TryPop(ref root, q, c);
+                }, report);
+            }
+            using (var runner = new KeyframesRunner(arnn, 2))
+            {
+                int d = arnn.KeyframesInfo.DofCount;
+                var counts = v.I("kf.counts");
+                var kf = v.I("kf.frames");
+                var kp = v.F("kf.poses");
+                var output = new float[71 * d];
+                total += Measure("keyframes complete batch", Steps, i => runner.CompleteBatch(counts, kf, kp, ReadOnlySpan<float>.Empty, output), report);
+            }
+            Console.WriteLine("allocation: bytes=" + total + " (GC.GetAllocatedBytesForCurrentThread over " + Steps + " calls each: " + report.ToString().TrimEnd(',', ' ') + ")");
+        }
+
+        // Per-frame cost: C# wrappers against the C ABI called from C, same process, interleaved.
+
+        [DllImport("zoo_cbench", CallingConvention = CallingConvention.Cdecl)]
+        static extern IntPtr zoo_cbench_new(byte* path, UIntPtr batch, ZooRootMotion* pastRoots, UIntPtr pastRootsLen, float* pastRotations, UIntPtr pastRotationsLen,
+            ZooRootMotion* targetRoots, float* targetRotations, ZooRootMotion* nextRoots, float* nextRotations, UIntPtr rotationsLen, UIntPtr length, ZooCoordinateFrame* engine);
+
+        [DllImport("zoo_cbench", CallingConvention = CallingConvention.Cdecl)]
+        static extern double zoo_cbench_transition(IntPtr bench);
+
+        [DllImport("zoo_cbench", CallingConvention = CallingConvention.Cdecl)]
+        static extern void zoo_cbench_free(IntPtr bench);
+
+        /// <summary>Inputs of <paramref name="batch"/> characters, character c taking character c % 2's poses of the vectors.</summary>
+        static void Tile(ZooRootMotion[] roots, float[] rotations, int perCharacter, int have, int batch, int k, out ZooRootMotion[] outRoots, out float[] outRotations)
+        {
+            outRoots = new ZooRootMotion[batch * perCharacter];
+            outRotations = new float[batch * perCharacter * 4 * k];
+            for (int c = 0; c < batch; c++)
+            {
+                Array.Copy(roots, (c % have) * perCharacter, outRoots, c * perCharacter, perCharacter);
+                Array.Copy(rotations, (c % have) * perCharacter * 4 * k, outRotations, c * perCharacter * 4 * k, perCharacter * 4 * k);
+            }
+        }
+
+        static double Median(List<double> values)
+        {
+            var s = values.OrderBy(x => x).ToList();
+            return s[s.Count / 2];
+        }
+
+        /// <summary>
+        /// The per-frame cost of posed transitions through the C# wrappers and through the C ABI
+        /// called from C (cbench.c), batch 1 and 64, in Unity's frame (the C side converting with
+        /// zoo_pose_convert as the wrapper does) and in the model's: 11 rounds, each alternating C and
+        /// C# transition by transition (who goes first alternates too), timing only the step calls;
+        /// the ratio of the medians of the rounds' per-frame times.
+        /// </summary>
+        static void Timing(Vectors v, string path, Model rtn)
+        {
+            const int Rounds = 11;
+            int k = rtn.Joints, have = v.Int("tr.n"), length = v.Int("tr.length");
+            int pastFrames = v.Roots("tr.posed.past").Length / have;
+            var utf8 = Encoding.UTF8.GetBytes(path + "\0");
+            foreach (var batch in new[] { 1, 64 })
+            {
+                int transitions = batch == 1 ? 12 : 5;
+                var line = new StringBuilder("timing batch " + batch + ": ");
+                foreach (var inUnity in new[] { true, false })
+                {
+                    var p = inUnity ? "tr.unity" : "tr.posed";
+                    ZooRootMotion[] pr, tr, nr;
+                    float[] pq, tq, nq;
+                    // Both sides get the same inputs, in the engine frame timed (C converting them
+                    // to the model's at its start as the wrapper does).
+                    Tile(v.Roots(p + ".past"), v.Rotations(p + ".past"), pastFrames, have, batch, k, out pr, out pq);
+                    Tile(v.Roots(p + ".target"), v.Rotations(p + ".target"), 1, have, batch, k, out tr, out tq);
+                    Tile(v.Roots(p + ".next"), v.Rotations(p + ".next"), 1, have, batch, k, out nr, out nq);
+                    ZooCoordinateFrame? engine = null;
+                    if (inUnity) engine = ZooCoordinateFrame.Unity;
+                    var unity = ZooCoordinateFrame.Unity;
+                    IntPtr bench;
+                    fixed (byte* pp = utf8)
+                    fixed (ZooRootMotion* a = pr)
+                    fixed (float* aq = pq)
+                    fixed (ZooRootMotion* t = tr)
+                    fixed (float* tqq = tq)
+                    fixed (ZooRootMotion* x = nr)
+                    fixed (float* xq = nq)
+                        bench = zoo_cbench_new(pp, (UIntPtr)batch, a, (UIntPtr)pr.Length, aq, (UIntPtr)pq.Length, t, tqq, x, xq, (UIntPtr)tq.Length, (UIntPtr)length, inUnity ? &unity : null);
+                    if (bench == IntPtr.Zero) throw new InvalidOperationException("zoo_cbench_new failed: " + Errors());
+                    var cTimes = new List<double>();
+                    var csTimes = new List<double>();
+                    try
+                    {
+                        using (var runner = new TransitionRunner(rtn))
+                        using (var chars = new TransitionCharacters(rtn, batch, engine))
+                        {
+                            var b = new PoseBuffer(batch, k);
+                            Func<double> csharp = () =>
+                            {
+                                chars.StartPosed(runner, pr, pq, tr, tq, nr, nq, length);
+                                long start = Stopwatch.GetTimestamp();
+                                for (int s = 0; s <= length; s++) chars.StepPosed(runner, b.Roots, b.Rotations);
+                                return (double)(Stopwatch.GetTimestamp() - start) / Stopwatch.Frequency;
+                            };
+                            Func<double> c = () =>
+                            {
+                                var seconds = zoo_cbench_transition(bench);
+                                if (seconds < 0) throw new InvalidOperationException("the C timing failed with status " + (-seconds - 1) + ": " + Errors());
+                                return seconds;
+                            };
+                            csharp();
+                            c();
+                            for (int r = 0; r < Rounds; r++)
+                            {
+                                double sc = 0, scs = 0;
+                                for (int i = 0; i < transitions; i++)
+                                {
+                                    if ((r + i) % 2 == 0) { sc += c(); scs += csharp(); }
+                                    else { scs += csharp(); sc += c(); }
+                                }
+                                cTimes.Add(sc / (transitions * (length + 1)));
+                                csTimes.Add(scs / (transitions * (length + 1)));
+                            }
+                        }
+                    }
+                    finally { zoo_cbench_free(bench); }
+                    double mc = Median(cTimes), mcs = Median(csTimes);
+                    line.Append(string.Format(System.Globalization.CultureInfo.InvariantCulture, "{0}={1:F3} (C# {2:F1} us, C {3:F1} us per frame) ",
+                        inUnity ? "ratio" : "model_frame_ratio", mcs / mc, mcs * 1e6, mc * 1e6));
+                }
+                line.Append("; C# / C per frame, " + TimingNote + ", medians of " + Rounds + " rounds of " + transitions + " interleaved transitions of " + (length + 1) + " frames each side");
+                Console.WriteLine(line.ToString());
+            }
+        }
+
+        const string TimingNote = "ratio: poses in Unity's frame (C converting with zoo_pose_convert), model_frame_ratio: in the model's";
+
+        static string Errors()
+        {
+            var n = (int)ZooNative.zoo_last_error(null, UIntPtr.Zero).ToUInt64();
+            var bytes = new byte[n + 1];
+            fixed (byte* b = bytes) ZooNative.zoo_last_error(b, (UIntPtr)(ulong)bytes.Length);
+            return Encoding.UTF8.GetString(bytes, 0, n);
+        }
+    }
+}
