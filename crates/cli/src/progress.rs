@@ -57,6 +57,10 @@ impl Progress for Bar {
     fn finish(&self) {
         self.current().finish_and_clear();
     }
+
+    fn notice(&self, message: &str) {
+        self.current().suspend(|| eprintln!("{message}"));
+    }
 }
 
 impl Drop for Bar {

@@ -327,6 +327,34 @@ pub fn check_same_skeleton(clips: &[NamedClip]) -> Result<(), DataError> {
     Ok(())
 }
 
+/// Loads a dataset for a command (`name_glob` choosing clips by file name): with
+/// `skip_invalid`, the clips that cannot join it are left out and listed with the reason;
+/// repaired differences (a folded dummy root) are noted. Both go to `progress` as notices,
+/// before the long work.
+pub fn load_reporting(
+    path: &Path,
+    name_glob: Option<&str>,
+    skip_invalid: bool,
+    progress: &dyn crate::Progress,
+) -> Result<Vec<NamedClip>, crate::Message> {
+    let opts = LoadOptions { name_glob, skip_invalid, take: None };
+    let d = load_with(path, &opts).map_err(|e| crate::Message(format!("loading {}: {e}", path.display())))?;
+    for n in &d.notices {
+        progress.notice(&format!("note: {n}"));
+    }
+    if !d.skipped.is_empty() {
+        progress.notice(&format!(
+            "--skip-invalid: skipped {} of {} clips:",
+            d.skipped.len(),
+            d.skipped.len() + d.clips.len()
+        ));
+        for s in &d.skipped {
+            progress.notice(&format!("  {}", s.reason));
+        }
+    }
+    Ok(d.clips)
+}
+
 /// Compiles a file-name glob (`*` matches any run of characters, including `/`).
 pub fn glob(pattern: &str) -> Result<globset::GlobMatcher, DataError> {
     globset::Glob::new(pattern)

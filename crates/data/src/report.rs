@@ -67,6 +67,9 @@ pub trait Progress: Sync {
     fn note(&self, _message: &str) {}
     /// The task is over: the display is cleared.
     fn finish(&self) {}
+    /// Something the user should read (a repaired or skipped input): a command line prints it
+    /// on standard error.
+    fn notice(&self, _message: &str) {}
 }
 
 /// No progress shown.

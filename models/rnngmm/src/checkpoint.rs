@@ -17,6 +17,9 @@ pub use zoo_nn::checkpoint::{CONFIG_FILE, OPTIMIZER_FILE, RNG_FILE, STATS_FILE, 
 /// The feature definition of a run folder.
 pub const FEATURES_FILE: &str = "features.json";
 
+/// The run folder's start clip (`zoo generate` without `--from` continues it).
+pub const START_FILE: &str = "start.bvh";
+
 /// Writes a checkpoint folder atomically (created if missing): weights (refused when one holds
 /// NaN/inf), feature definition, statistics, then the configuration.
 pub fn save(

@@ -41,6 +41,13 @@ pub enum RnnGmmError {
     /// (a checkpoint file, an optimiser state) failed.
     #[error(transparent)]
     Nn(zoo_nn::NnError),
+    /// A command's input was refused or one of its steps failed (a clip, a dataset, an option),
+    /// said in words with the fix.
+    #[error(transparent)]
+    Message(#[from] zoo_data::Message),
+    /// The training loop stopped.
+    #[error(transparent)]
+    Train(#[from] zoo_nn::TrainError),
 }
 
 impl From<zoo_nn::NnError> for RnnGmmError {

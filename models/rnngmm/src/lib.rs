@@ -34,6 +34,7 @@
 //! # Ok(()) }
 //! ```
 
+pub mod bench;
 pub mod checkpoint;
 pub mod config;
 pub mod control;
@@ -51,6 +52,7 @@ pub mod noise;
 pub mod online;
 pub mod path;
 pub mod refiner;
+pub mod run;
 pub mod synthesis;
 pub mod train;
 

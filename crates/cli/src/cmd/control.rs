@@ -1,15 +1,13 @@
-//! `zoo control`: online speed and direction control with a trained RNN-GMM (issue 15, paper
-//! sec. 5.3): a control script (speed and heading over time) in, a BVH that follows it out, with
-//! its contact labels and a plot of speed and heading against the controls.
+//! `zoo control`: online speed and direction control with a trained RNN-GMM (paper sec. 5.3): a
+//! control script (speed and heading over time) in, a BVH that follows it out, with its contact
+//! labels and a plot of speed and heading against the controls.
 
-use crate::cmd::denoise::write_contacts;
-use crate::cmd::generate::{load_model, start_clip};
 use anyhow::{Context, bail};
 use clap::Args;
-use indicatif::{ProgressBar, ProgressStyle};
-use std::path::{Path, PathBuf};
-use zoo_rnngmm::controls::{ControlScript, angle_difference};
-use zoo_rnngmm::{Controlled, OnlineOptions};
+use std::path::PathBuf;
+use zoo_rnngmm::OnlineOptions;
+use zoo_rnngmm::controls::ControlScript;
+use zoo_rnngmm::run::{control_with_progress, load_run, plot_controls, start_clip, write_motion};
 
 /// Arguments of `zoo control`.
 #[derive(Args)]
@@ -85,52 +83,8 @@ impl OnlineArgs {
 }
 
 /// Reads a control script with its error as the message.
-pub fn read_script(path: &Path) -> anyhow::Result<ControlScript> {
+pub fn read_script(path: &std::path::Path) -> anyhow::Result<ControlScript> {
     ControlScript::load(path).with_context(|| format!("reading the control script {}", path.display()))
-}
-
-/// Runs the candle controller over `script` with a progress bar.
-pub fn control_with_progress(
-    g: &zoo_rnngmm::checkpoint::LoadedGenerator,
-    clip: &zoo_motion::Clip,
-    frame: usize,
-    script: &ControlScript,
-    opts: &OnlineOptions,
-    label: &str,
-) -> anyhow::Result<Controlled> {
-    let pb = ProgressBar::new((script.duration() * g.spec.fps).round() as u64);
-    pb.set_style(ProgressStyle::with_template(&format!("{label} [{{bar:30}}] {{pos}}/{{len}} frames  {{elapsed}}"))?);
-    let mut tick = |f: usize| pb.set_position(f as u64);
-    let c = zoo_rnngmm::online::control(g, clip, frame, script, opts, &mut tick)?;
-    pb.finish_and_clear();
-    Ok(c)
-}
-
-/// Plots speed (top, 0 to the largest) and heading (bottom, degrees, unwrapped near the
-/// controls) of a motion against the script's controls.
-pub fn plot(png: &Path, script: &ControlScript, fps: f64, speed: &[f64], yaw: &[f64]) -> anyhow::Result<()> {
-    let n = speed.len();
-    let at = |f: usize| script.at(f as f64 / fps);
-    let target_speed: Vec<f64> = (0..n).map(|f| at(f).speed).collect();
-    let target_heading: Vec<f64> = (0..n).map(|f| at(f).heading.to_degrees()).collect();
-    // Each frame's facing shown within 180 degrees of its control, so that a wrap is not a jump.
-    let heading: Vec<f64> =
-        (0..n).map(|f| target_heading[f] + angle_difference(yaw[f], at(f).heading).to_degrees()).collect();
-    let top = speed.iter().chain(&target_speed).copied().fold(1.0, f64::max) * 1.1;
-    let (lo, hi) = heading
-        .iter()
-        .chain(&target_heading)
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(*v), b.max(*v)));
-    let grey = (150, 150, 150);
-    let red = (200, 30, 30);
-    zoo_nn::plot::line_panels(
-        png,
-        &[
-            (vec![(&target_speed, grey), (speed, red)], 0.0, top, 50.0),
-            (vec![(&target_heading, grey), (&heading, red)], lo - 10.0, hi + 10.0, 45.0),
-        ],
-    )
-    .with_context(|| format!("writing {}", png.display()))
 }
 
 /// Runs `zoo control`.
@@ -140,22 +94,17 @@ pub fn run(a: ControlArgs) -> anyhow::Result<()> {
         crate::cmd::check_output_file("--plot", p)?;
     }
     let script = read_script(&a.script)?;
-    let (g, _) = load_model(&a.model, true)?;
-    let (clip, frame, from) = start_clip(&a.model, a.from.as_deref(), &g)?;
+    let (g, _) = load_run(&a.model, true)?;
+    let from = a.from.as_deref().map(crate::cmd::transition::clip_and_frame).transpose()?;
+    let (clip, frame, from) = start_clip(&a.model, from.as_ref().map(|(p, f)| (p.as_path(), *f)), &g)?;
     let opts = a.online.options();
-    let c = control_with_progress(&g, &clip, frame, &script, &opts, "controlling")
+    let c = control_with_progress(&g, &clip, frame, &script, &opts, "controlling", &crate::progress::Bar::new())
         .with_context(|| format!("following the controls of {} from {from}", a.script.display()))?;
-    let mut out = c.motion.clip.clone();
-    out.skeleton = clip.skeleton.clone();
-    zoo_data::clip_io::write(&out, &a.out)?;
-    let stem = a.out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-    let json = a.out.with_file_name(format!("{stem}.contacts.json"));
-    write_contacts(&json, g.spec.fps, &c.motion.contacts)?;
+    let json = write_motion(&a.out, &c.motion, &clip.skeleton, g.spec.fps)?;
     if let Some(p) = &a.plot {
-        plot(p, &script, g.spec.fps, &c.speed, &c.yaw)?;
+        plot_controls(p, &script, g.spec.fps, &c.speed, &c.yaw)?;
     }
-    let scores = zoo_rnngmm::controls::score(&script, g.spec.fps, &c.speed, &c.yaw, 1.0);
-    for s in &scores {
+    for s in &zoo_rnngmm::controls::score(&script, g.spec.fps, &c.speed, &c.yaw, 1.0) {
         println!(
             "{:>5.1} s: speed {:>5.0} -> {:>5.0} ({:>4.1}% off), heading {:>5.0} deg: {:>5.1} deg off 1 s after, mean {:.1}",
             s.time,
@@ -167,19 +116,16 @@ pub fn run(a: ControlArgs) -> anyhow::Result<()> {
             s.heading_mean_deg
         );
     }
+    let frames = c.motion.clip.frames();
     println!(
-        "{} frames ({:.1} s of motion, batches of {}) in {:.1} s: {:.1} ms per frame",
-        out.frames(),
-        out.frames() as f64 / g.spec.fps,
+        "{frames} frames ({:.1} s of motion, batches of {}) in {:.1} s: {:.1} ms per frame",
+        frames as f64 / g.spec.fps,
         opts.batch,
         c.batch_seconds.iter().sum::<f64>(),
         1e3 * c.seconds_per_frame()
     );
-    println!("wrote {} and {}", a.out.display(), json.display());
-    if let Some(p) = &a.plot {
-        println!("wrote {}", p.display());
-    }
-    if out.frames() == 0 {
+    crate::cmd::say_written(&a.out, &json, a.plot.as_deref());
+    if frames == 0 {
         bail!("no frame was generated");
     }
     Ok(())

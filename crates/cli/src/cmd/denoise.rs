@@ -1,12 +1,11 @@
-//! `zoo denoise`: motion denoising by MAP optimisation through a trained RNN-GMM (issue 15,
-//! paper sec. 5.4): a noisy BVH in, a clean one (and its contact labels) out.
+//! `zoo denoise`: motion denoising by MAP optimisation through a trained RNN-GMM (paper sec.
+//! 5.4): a noisy BVH in, a clean one (and its contact labels) out.
 
-use crate::cmd::generate::load_model;
 use anyhow::{Context, bail};
 use clap::Args;
-use indicatif::{ProgressBar, ProgressStyle};
-use std::path::{Path, PathBuf};
-use zoo_rnngmm::{DenoiseOptions, Denoised};
+use std::path::PathBuf;
+use zoo_data::Progress;
+use zoo_rnngmm::DenoiseOptions;
 
 /// Arguments of `zoo denoise`.
 #[derive(Args)]
@@ -43,31 +42,11 @@ impl DenoiseArgs {
     }
 }
 
-/// Denoises `clip` with a progress bar counting energy evaluations.
-pub fn denoise_with_progress(
-    g: &zoo_rnngmm::checkpoint::LoadedGenerator,
-    clip: &zoo_motion::Clip,
-    opts: &DenoiseOptions,
-    pb: &ProgressBar,
-) -> anyhow::Result<Denoised> {
-    let mut tick = |n: usize| pb.set_position(n as u64);
-    Ok(zoo_rnngmm::denoise(g, clip, opts, &mut tick)?)
-}
-
-/// Writes the contact labels of `d` as JSON to `path` (atomically).
-pub fn write_contacts(path: &Path, fps: f64, contacts: &[[bool; 2]]) -> anyhow::Result<()> {
-    let rows: Vec<[u8; 2]> = contacts.iter().map(|c| [u8::from(c[0]), u8::from(c[1])]).collect();
-    let json = serde_json::json!({ "fps": fps, "frames": contacts.len(), "feet": ["left", "right"], "contacts": rows });
-    let tmp = path.with_file_name(format!(".{}.tmp", path.file_name().unwrap_or_default().to_string_lossy()));
-    std::fs::write(&tmp, serde_json::to_string(&json)?).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))
-}
-
 /// Runs `zoo denoise`.
 pub fn run(a: DenoiseArgs) -> anyhow::Result<()> {
     crate::cmd::check_output_file("--out", &a.out)?;
-    let (g, _) = load_model(&a.model, true)?;
-    let clip = crate::cmd::transition::read_clip(&a.input)?;
+    let (g, _) = zoo_rnngmm::run::load_run(&a.model, true)?;
+    let clip = zoo_data::clip_io::read_model_clip(&a.input)?;
     if let Some(d) = g.spec.skeleton.topology_difference(&clip.skeleton) {
         bail!(
             "{} is on another skeleton than the model in {} ({d}); denoise clips of the training skeleton",
@@ -76,36 +55,38 @@ pub fn run(a: DenoiseArgs) -> anyhow::Result<()> {
         );
     }
     let opts = a.options();
-    let pb = ProgressBar::new(opts.iterations as u64);
-    pb.set_style(ProgressStyle::with_template("denoising [{bar:30}] {pos} energy evaluations  {elapsed}")?);
+    let bar = crate::progress::Bar::new();
+    bar.start(opts.iterations as u64, "denoising (energy evaluations)");
     let started = std::time::Instant::now();
-    let d = denoise_with_progress(&g, &clip, &opts, &pb).with_context(|| format!("denoising {}", a.input.display()))?;
-    pb.finish_and_clear();
-    let mut out = d.motion.clip.clone();
-    out.skeleton = clip.skeleton.clone();
-    zoo_data::clip_io::write(&out, &a.out)?;
-    let stem = a.out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-    let json = a.out.with_file_name(format!("{stem}.contacts.json"));
-    write_contacts(&json, g.spec.fps, &d.motion.contacts)?;
+    let mut done = 0;
+    let mut tick = |n: usize| {
+        bar.advance((n as u64).saturating_sub(done));
+        done = done.max(n as u64);
+    };
+    let d =
+        zoo_rnngmm::denoise(&g, &clip, &opts, &mut tick).with_context(|| format!("denoising {}", a.input.display()))?;
+    bar.finish();
+    let json = zoo_rnngmm::run::write_motion(&a.out, &d.motion, &clip.skeleton, g.spec.fps)?;
+    let (e0, e1) = &d.energy;
     println!(
         "denoised {} frames in {:.1} s ({} L-BFGS iterations; energy terms prior/noise/data/contact {:.0}/{:.0}/{:.0}/{:.0} \
          -> {:.0}/{:.0}/{:.0}/{:.0}); noise levels: root {:.2} units{}, joint angles {:.2} degrees{}",
-        out.frames(),
+        d.motion.clip.frames(),
         started.elapsed().as_secs_f64(),
         d.iterations,
-        d.energy.0.prior,
-        d.energy.0.noise,
-        d.energy.0.data,
-        d.energy.0.contact,
-        d.energy.1.prior,
-        d.energy.1.noise,
-        d.energy.1.data,
-        d.energy.1.contact,
+        e0.prior,
+        e0.noise,
+        e0.data,
+        e0.contact,
+        e1.prior,
+        e1.noise,
+        e1.data,
+        e1.contact,
         d.sigma_root,
         if a.sigma_root.is_some() { "" } else { " (estimated)" },
         d.sigma_angle.to_degrees(),
         if a.sigma_angle.is_some() { "" } else { " (estimated)" },
     );
-    println!("wrote {} and {}", a.out.display(), json.display());
+    crate::cmd::say_written(&a.out, &json, None);
     Ok(())
 }

@@ -68,26 +68,23 @@ pub fn check_output_dir(option: &str, dir: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Loads a dataset for a command: with `skip_invalid`, the clips that cannot join it are left
-/// out and listed with the reason; repaired differences (a folded dummy root) are noted. Both
-/// go to standard error, before the long work.
+/// Loads a dataset for a command ([`zoo_data::dataset::load_reporting`], its notices on
+/// standard error).
 pub fn load_dataset(
     path: &Path,
     name_glob: Option<&str>,
     skip_invalid: bool,
 ) -> anyhow::Result<Vec<zoo_data::dataset::NamedClip>> {
-    let opts = zoo_data::dataset::LoadOptions { name_glob, skip_invalid, take: None };
-    let d = zoo_data::dataset::load_with(path, &opts).with_context(|| format!("loading {}", path.display()))?;
-    for n in &d.notices {
-        eprintln!("note: {n}");
+    Ok(zoo_data::dataset::load_reporting(path, name_glob, skip_invalid, &Stderr)?)
+}
+
+/// Notices on standard error, no progress shown.
+pub struct Stderr;
+
+impl zoo_data::Progress for Stderr {
+    fn notice(&self, message: &str) {
+        eprintln!("{message}");
     }
-    if !d.skipped.is_empty() {
-        eprintln!("--skip-invalid: skipped {} of {} clips:", d.skipped.len(), d.skipped.len() + d.clips.len());
-        for s in &d.skipped {
-            eprintln!("  {}", s.reason);
-        }
-    }
-    Ok(d.clips)
 }
 
 /// Leaves out the clips whose file name matches `exclude` (`--exclude-glob`: e.g. a content
@@ -157,4 +154,21 @@ pub fn message(e: anyhow::Error) -> zoo_data::Message {
 /// Writes a `--positions` file ([`zoo_data::positions`]).
 pub fn write_positions(path: &Path, value: &serde_json::Value) -> anyhow::Result<()> {
     zoo_data::positions::write(path, value).with_context(|| format!("writing {}", path.display()))
+}
+
+/// Writes a benchmark's report as JSON to `path`, when given, and says so.
+pub fn write_report(path: Option<&Path>, report: &impl serde::Serialize) -> anyhow::Result<()> {
+    if let Some(p) = path {
+        write_json(p, report)?;
+        println!("wrote {}", p.display());
+    }
+    Ok(())
+}
+
+/// Says which files a command wrote: the clip and its contact labels, and a plot.
+pub fn say_written(out: &Path, contacts: &Path, plot: Option<&Path>) {
+    println!("wrote {} and {}", out.display(), contacts.display());
+    if let Some(p) = plot {
+        println!("wrote {}", p.display());
+    }
 }
