@@ -32,6 +32,7 @@ fn valid() -> &'static (pb::ModelProto, Vec<(String, String)>) {
                 frame_dim: D,
                 offset_input: false,
                 terrain: None,
+                fallback: None,
             }),
             config_json: "{}".into(),
             normalization: [
