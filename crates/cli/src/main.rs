@@ -2,10 +2,7 @@
 
 mod args;
 mod cmd;
-mod exported;
-mod methods;
 mod progress;
-mod registry;
 mod render;
 
 use clap::{Parser, Subcommand};

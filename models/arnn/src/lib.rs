@@ -14,6 +14,7 @@ pub mod humanoid;
 pub mod keys;
 pub mod luxo;
 pub mod model;
+pub mod speed;
 pub mod train;
 
 pub use config::{Architecture, ArnnConfig, Curriculum, HumanoidSkeleton, KeySampling, NoMemoryOutput};
@@ -38,6 +39,16 @@ pub enum ArnnError {
     /// A tensor operation, a file or the toolkit failed.
     #[error(transparent)]
     Nn(#[from] zoo_nn::NnError),
+    /// The simulated lamp's data could not be made or read.
+    #[error(transparent)]
+    Lamp(#[from] luxo::LuxoError),
+    /// A command's input was refused or one of its steps failed (a file, an option), said in
+    /// words with the fix.
+    #[error(transparent)]
+    Message(#[from] zoo_data::Message),
+    /// The training loop stopped.
+    #[error(transparent)]
+    Train(#[from] zoo_nn::TrainError),
 }
 
 impl From<candle_core::Error> for ArnnError {

@@ -31,6 +31,7 @@ pub mod footlock;
 pub mod loss;
 pub mod model;
 pub mod pairs;
+pub mod speed;
 pub mod stitch;
 pub mod train;
 

@@ -53,6 +53,7 @@ pub mod online;
 pub mod path;
 pub mod refiner;
 pub mod run;
+pub mod speed;
 pub mod synthesis;
 pub mod train;
 

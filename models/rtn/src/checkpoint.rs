@@ -174,6 +174,13 @@ pub fn load(dir: &Path, device: &Device) -> RtnResult<(Rtn, FeatureStats)> {
     Ok((model, stats))
 }
 
+/// The RTN of run folder `dir` for `zoo COMMAND` (`transition`, `decompress`); a folder of
+/// another kind is refused with what that kind is for.
+pub fn load_run(dir: &Path, command: &str) -> RtnResult<(Rtn, FeatureStats)> {
+    zoo_nn::checkpoint::require_kind(dir, "rtn", "an RTN", command).map_err(|e| zoo_data::Message::new(e))?;
+    load(dir, &Device::Cpu).map_err(|e| zoo_data::Message(format!("loading the RTN in {}: {e}", dir.display())).into())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -33,6 +33,13 @@ pub enum RtnError {
     /// (a checkpoint file, an optimiser or moving-average state) failed.
     #[error(transparent)]
     Nn(zoo_nn::NnError),
+    /// A command's input was refused or one of its steps failed (a clip, a dataset, an option),
+    /// said in words with the fix.
+    #[error(transparent)]
+    Message(#[from] zoo_data::Message),
+    /// The training loop stopped.
+    #[error(transparent)]
+    Train(#[from] zoo_nn::TrainError),
 }
 
 impl From<zoo_nn::NnError> for RtnError {

@@ -28,6 +28,7 @@ pub mod fallback;
 pub mod features;
 pub mod method;
 pub mod model;
+pub mod speed;
 pub mod train;
 pub mod transition;
 

@@ -52,7 +52,8 @@ pub struct BenchControlArgs {
 
 /// The exported generator of `--onnx`, without its refiner.
 fn runtime_model(path: &std::path::Path) -> anyhow::Result<zoo_runtime::synthesis::SynthesisModel> {
-    let model = crate::exported::load(path, &[zoo_runtime::MotionTaskKind::Synthesis], "`zoo bench control --onnx`")?;
+    let model =
+        zoo_bench::exported::load(path, &[zoo_runtime::MotionTaskKind::Synthesis], "`zoo bench control --onnx`")?;
     Ok(model.into_synthesis()?.without_refiner())
 }
 

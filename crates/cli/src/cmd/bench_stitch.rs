@@ -51,7 +51,7 @@ pub fn run(a: StitchBenchArgs) -> anyhow::Result<()> {
     if let Some(path) = &a.json {
         crate::cmd::check_output_file("--json", path)?;
     }
-    let load = |spec: &str| crate::registry::load_method(&crate::registry::parse_method(spec)?);
+    let load = |spec: &str| Ok(zoo_bench::registry::load_method(&zoo_bench::registry::parse_method(spec)?)?);
     let methods = a
         .methods
         .iter()

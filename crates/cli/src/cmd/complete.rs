@@ -299,7 +299,7 @@ fn read_keys(path: &Path, dof_names: &[String]) -> anyhow::Result<Keys> {
 
 /// Runs `zoo complete`.
 pub fn run(a: CompleteArgs) -> anyhow::Result<()> {
-    let kind = crate::registry::model_kind(&a.model)?;
+    let kind = zoo_nn::checkpoint::model_kind(&a.model)?;
     if kind != "arnn" {
         bail!(
             "--model {}: `zoo complete` runs an ARNN run folder (`zoo train arnn`), this one holds a `{kind}` model",

@@ -30,7 +30,7 @@ pub fn run(a: DecompressArgs) -> anyhow::Result<()> {
     let interval = a.interval.unwrap_or_else(|| clip.fps().round() as usize).max(1);
     let j = clip.joints();
     let keys = pipeline::keyframe_inputs(&clip, interval).with_context(|| format!("{}", a.input.display()))?;
-    let (model, stats) = crate::registry::load_transition_model(&a.model, "decompress")?;
+    let (model, stats) = zoo_rtn::checkpoint::load_run(&a.model, "decompress")?;
     crate::cmd::transition::check_skeleton(&a.model, model.config(), &clip, &a.input)?;
     let y = model.super_resolve(&stats, &keys.context, &keys.keys, interval).context("rebuilding the clip")?;
     let frames = y.len() / (3 * j);

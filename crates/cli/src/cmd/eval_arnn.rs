@@ -82,7 +82,7 @@ pub fn print_report(r: &CompletionReport) -> serde_json::Value {
 
 /// Runs `zoo eval-arnn`.
 pub fn run(a: EvalArnnArgs) -> anyhow::Result<()> {
-    let kind = crate::registry::model_kind(&a.model)?;
+    let kind = zoo_nn::checkpoint::model_kind(&a.model)?;
     if kind != "arnn" {
         bail!("--model {}: the folder holds a `{kind}` run, not an ARNN (`zoo train arnn`)", a.model.display());
     }

@@ -209,7 +209,7 @@ const RUN_FILES: [&str; 10] = [
 /// The run folder, checked before any data is generated or loaded (as `zoo train rtn` does).
 pub(crate) fn prepare_run_folder(a: &ArnnArgs) -> anyhow::Result<PathBuf> {
     crate::cmd::train::prepare_run_folder_for(&a.out, a.resume.as_deref(), a.overwrite, &RUN_FILES, |dir| {
-        let kind = crate::registry::model_kind(dir)?;
+        let kind = zoo_nn::checkpoint::model_kind(dir)?;
         if kind != "arnn" {
             bail!(
                 "--resume {}: the folder holds a `{kind}` run, not an ARNN (train it with `zoo train {kind}`)",

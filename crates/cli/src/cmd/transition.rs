@@ -253,7 +253,7 @@ pub fn run(a: TransitionArgs) -> anyhow::Result<()> {
         None => pipeline::transition_inputs(&ca, fa, &mut cb, fb, a.frames),
     }
     .with_context(|| format!("--from {} --to {} --frames {}", a.from, a.to, a.frames))?;
-    let (model, stats) = crate::registry::load_transition_model(&a.model, "transition")?;
+    let (model, stats) = zoo_rtn::checkpoint::load_run(&a.model, "transition")?;
     check_skeleton(&a.model, model.config(), &ca, &pa)?;
     if rig_back.is_none() {
         note_other_names(&a.model, &ca);

@@ -1,29 +1,28 @@
-//! The CLI's model registry: which model a run folder holds and what the CLI does with it.
+//! The model registry of the benchmarks: which model a run folder holds and which benchmark
+//! method it gives.
 //!
 //! Every run folder's `config.json` names its model in a top-level `"model"` field (folders
-//! written before the field existed hold an RTN: a missing field means `rtn`). A kind maps to
-//! its benchmark method (`zoo bench --methods KIND:DIR`, `KIND+lock:DIR` with the foot lock)
-//! and, for transition models, to the loader of `zoo transition` / `zoo decompress`. An
-//! exported file is benchmarked as `onnx:FILE.onnx` (`onnx+lock:FILE.onnx`), run by the engine
-//! runtime, which checks the file's own model kind.
+//! written before the field existed hold an RTN: a missing field means `rtn`;
+//! [`zoo_nn::checkpoint::model_kind`]). A kind maps to its benchmark method (`zoo bench
+//! --methods KIND:DIR`, `KIND+lock:DIR` with the foot lock). An exported file is benchmarked as
+//! `onnx:FILE.onnx` (`onnx+lock:FILE.onnx`), run by the engine runtime, which checks the file's
+//! own model kind.
 
-use anyhow::{Context, bail};
+use crate::Result;
 use std::path::{Path, PathBuf};
 use zoo_data::benchmark::{Interpolation, TransitionMethod, ZeroVelocity};
+use zoo_data::{Context, bail};
 
-/// The run folder's configuration file, holding the `"model"` field.
-pub const CONFIG_FILE: &str = "config.json";
-
-/// The kind assumed when `config.json` has no `"model"` field.
-pub const DEFAULT_KIND: &str = "rtn";
+use zoo_nn::checkpoint::MODEL_KINDS;
+pub use zoo_nn::checkpoint::{CONFIG_FILE, DEFAULT_KIND, kind_of_config};
 
 /// The method kind of exported ONNX files (`onnx:FILE.onnx`).
 pub const ONNX_KIND: &str = "onnx";
 
 /// Loads a benchmark method from a run folder: `(folder, method name, foot lock)`.
-type BenchLoader = fn(&Path, String, bool) -> anyhow::Result<Box<dyn TransitionMethod>>;
+type BenchLoader = fn(&Path, String, bool) -> Result<Box<dyn TransitionMethod>>;
 
-/// What the CLI does with one kind of model.
+/// What the benchmarks do with one kind of model.
 pub struct ModelEntry {
     /// The kind's name, as in `config.json` and `--methods KIND:DIR`.
     pub kind: &'static str,
@@ -33,44 +32,17 @@ pub struct ModelEntry {
     pub bench: Option<BenchLoader>,
     /// Whether its benchmark method takes the foot lock (`KIND+lock:RUN_DIR`).
     pub foot_lock: bool,
-    /// Whether `zoo transition` and `zoo decompress` can run it.
-    pub transitions: bool,
 }
 
-/// The models the CLI knows.
+/// The models the benchmarks know.
 pub const MODELS: &[ModelEntry] = &[
-    ModelEntry {
-        kind: "rtn",
-        purpose: "transitions between a context and a target pose (Recurrent Transition Network)",
-        bench: Some(load_rtn_method),
-        foot_lock: true,
-        transitions: true,
-    },
-    ModelEntry {
-        kind: "rmr",
-        purpose: "stitching locomotion clips (Recurrent Motion Refiner; `zoo stitch`, `zoo bench stitch`)",
-        bench: None,
-        foot_lock: false,
-        transitions: false,
-    },
-    ModelEntry {
-        kind: "rnn-gmm",
-        purpose: "random motion synthesis (`zoo generate`, `zoo bench synthesis`)",
-        bench: None,
-        foot_lock: false,
-        transitions: false,
-    },
-    ModelEntry {
-        kind: "arnn",
-        purpose: "completing an animator's keys (`zoo complete`, keyframe autocompletion ARNN; humanoid runs also in \
-                  `zoo bench`)",
-        bench: Some(load_arnn_method),
-        foot_lock: false,
-        transitions: false,
-    },
+    ModelEntry { kind: "rtn", purpose: MODEL_KINDS[0].1, bench: Some(load_rtn_method), foot_lock: true },
+    ModelEntry { kind: "rmr", purpose: MODEL_KINDS[1].1, bench: None, foot_lock: false },
+    ModelEntry { kind: "rnn-gmm", purpose: MODEL_KINDS[2].1, bench: None, foot_lock: false },
+    ModelEntry { kind: "arnn", purpose: MODEL_KINDS[3].1, bench: Some(load_arnn_method), foot_lock: false },
 ];
 
-fn load_arnn_method(dir: &Path, name: String, foot_lock: bool) -> anyhow::Result<Box<dyn TransitionMethod>> {
+fn load_arnn_method(dir: &Path, name: String, foot_lock: bool) -> Result<Box<dyn TransitionMethod>> {
     if foot_lock {
         bail!(
             "`arnn+lock`: the foot lock is applied to RTN and exported transition models; use `arnn:{}`",
@@ -82,7 +54,7 @@ fn load_arnn_method(dir: &Path, name: String, foot_lock: bool) -> anyhow::Result
     Ok(Box::new(m))
 }
 
-fn load_rtn_method(dir: &Path, name: String, foot_lock: bool) -> anyhow::Result<Box<dyn TransitionMethod>> {
+fn load_rtn_method(dir: &Path, name: String, foot_lock: bool) -> Result<Box<dyn TransitionMethod>> {
     let m =
         zoo_rtn::method::load(dir, name, foot_lock).with_context(|| format!("loading the RTN in {}", dir.display()))?;
     Ok(Box::new(m))
@@ -93,32 +65,15 @@ fn known_kinds(models: &[ModelEntry]) -> String {
 }
 
 /// The entry of `kind` in `models`; an unknown kind is refused with the list of known ones.
-fn entry_in<'a>(models: &'a [ModelEntry], kind: &str) -> anyhow::Result<&'a ModelEntry> {
-    models.iter().find(|m| m.kind == kind).with_context(|| {
+fn entry_in<'a>(models: &'a [ModelEntry], kind: &str) -> Result<&'a ModelEntry> {
+    Ok(models.iter().find(|m| m.kind == kind).with_context(|| {
         format!("unknown model kind `{kind}`: this zoo knows {} (update zoo for newer models)", known_kinds(models))
-    })
+    })?)
 }
 
-/// The model kind named by the `"model"` field of `config` (the text of a run folder's
-/// `config.json`); [`DEFAULT_KIND`] when the field is absent.
-pub fn kind_of_config(config: &str, path: &Path) -> anyhow::Result<String> {
-    let v: serde_json::Value =
-        serde_json::from_str(config).with_context(|| format!("{}: not valid JSON", path.display()))?;
-    match v.get("model") {
-        None => Ok(DEFAULT_KIND.to_string()),
-        Some(serde_json::Value::String(s)) => Ok(s.clone()),
-        Some(other) => bail!("{}: `\"model\"` must be a model kind such as \"rtn\", found {other}", path.display()),
-    }
-}
-
-/// The model kind of run folder `dir` (see [`kind_of_config`]).
-pub fn model_kind(dir: &Path) -> anyhow::Result<String> {
-    let path = dir.join(CONFIG_FILE);
-    if !path.is_file() {
-        bail!("{} is not a run folder of `zoo train` (no {CONFIG_FILE})", dir.display());
-    }
-    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-    kind_of_config(&text, &path)
+/// The model kind of run folder `dir` ([`zoo_nn::checkpoint::model_kind`]).
+pub fn model_kind(dir: &Path) -> Result<String> {
+    Ok(zoo_nn::checkpoint::model_kind(dir)?)
 }
 
 /// A parsed `--methods` entry.
@@ -155,7 +110,7 @@ fn method_forms(models: &[ModelEntry]) -> String {
     forms.join(", ")
 }
 
-fn parse_method_in(models: &[ModelEntry], spec: &str) -> anyhow::Result<MethodSpec> {
+fn parse_method_in(models: &[ModelEntry], spec: &str) -> Result<MethodSpec> {
     match spec {
         "zerovel" => return Ok(MethodSpec::ZeroVelocity),
         "interp" => return Ok(MethodSpec::Interpolation),
@@ -182,12 +137,12 @@ fn parse_method_in(models: &[ModelEntry], spec: &str) -> anyhow::Result<MethodSp
 }
 
 /// Parses one `--methods` entry (`zerovel`, `interp`, `KIND:PATH`, `KIND+lock:PATH`).
-pub fn parse_method(spec: &str) -> anyhow::Result<MethodSpec> {
+pub fn parse_method(spec: &str) -> Result<MethodSpec> {
     parse_method_in(MODELS, spec)
 }
 
 /// Refuses a method spec whose kind is not the one the folder's `config.json` names.
-fn check_folder_kind(spec: &str, kind: &str, dir: &Path, found: &str) -> anyhow::Result<()> {
+fn check_folder_kind(spec: &str, kind: &str, dir: &Path, found: &str) -> Result<()> {
     if found != kind {
         bail!(
             "method `{spec}`: {} names model `{found}`, not `{kind}`: write `{found}:{}`",
@@ -198,12 +153,12 @@ fn check_folder_kind(spec: &str, kind: &str, dir: &Path, found: &str) -> anyhow:
     Ok(())
 }
 
-fn load_method_in(models: &[ModelEntry], spec: &MethodSpec) -> anyhow::Result<Box<dyn TransitionMethod>> {
+fn load_method_in(models: &[ModelEntry], spec: &MethodSpec) -> Result<Box<dyn TransitionMethod>> {
     Ok(match spec {
         MethodSpec::ZeroVelocity => Box::new(ZeroVelocity),
         MethodSpec::Interpolation => Box::new(Interpolation),
         MethodSpec::Model { name, kind, path, foot_lock } if kind == ONNX_KIND => {
-            Box::new(crate::methods::load_onnx(path, name.clone(), *foot_lock)?)
+            Box::new(crate::onnx::load_onnx(path, name.clone(), *foot_lock)?)
         }
         MethodSpec::Model { name, kind, path, foot_lock } => {
             check_folder_kind(name, kind, path, &model_kind(path)?)?;
@@ -217,57 +172,27 @@ fn load_method_in(models: &[ModelEntry], spec: &MethodSpec) -> anyhow::Result<Bo
 }
 
 /// Loads a parsed `--methods` entry.
-pub fn load_method(spec: &MethodSpec) -> anyhow::Result<Box<dyn TransitionMethod>> {
+pub fn load_method(spec: &MethodSpec) -> Result<Box<dyn TransitionMethod>> {
     load_method_in(MODELS, spec)
-}
-
-/// Checks that `kind` is a transition model for `zoo COMMAND`.
-fn check_transition_kind(models: &[ModelEntry], kind: &str, dir: &Path, command: &str) -> anyhow::Result<()> {
-    let entry = entry_in(models, kind).with_context(|| format!("{}", dir.display()))?;
-    if !entry.transitions {
-        bail!(
-            "`zoo {command}` runs an RTN run folder; {} holds a `{kind}` model, which is for {}",
-            dir.display(),
-            entry.purpose
-        );
-    }
-    Ok(())
-}
-
-/// The RTN of run folder `dir` and its statistics, for `zoo COMMAND` (`transition`,
-/// `decompress`); a folder of another kind is refused with what that kind is for.
-pub fn load_transition_model(
-    dir: &Path,
-    command: &str,
-) -> anyhow::Result<(zoo_rtn::Rtn, zoo_rtn::features::FeatureStats)> {
-    check_transition_kind(MODELS, &model_kind(dir)?, dir, command)?;
-    zoo_rtn::checkpoint::load(dir, &candle_core::Device::Cpu)
-        .with_context(|| format!("loading the RTN in {}", dir.display()))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn no_bench(_: &Path, _: String, _: bool) -> anyhow::Result<Box<dyn TransitionMethod>> {
+    fn no_bench(_: &Path, _: String, _: bool) -> Result<Box<dyn TransitionMethod>> {
         unreachable!("the test registry's loader is never called")
     }
 
     /// RTN plus two made-up kinds: one for something else, one benchmarked but not a
     /// `zoo transition` model.
     const TEST_MODELS: &[ModelEntry] = &[
-        ModelEntry { kind: "rtn", purpose: "transitions", bench: Some(no_bench), foot_lock: true, transitions: true },
-        ModelEntry { kind: "gmm", purpose: "sampling poses", bench: None, foot_lock: true, transitions: false },
-        ModelEntry {
-            kind: "arnn",
-            purpose: "long in-betweens",
-            bench: Some(no_bench),
-            foot_lock: true,
-            transitions: false,
-        },
+        ModelEntry { kind: "rtn", purpose: "transitions", bench: Some(no_bench), foot_lock: true },
+        ModelEntry { kind: "gmm", purpose: "sampling poses", bench: None, foot_lock: true },
+        ModelEntry { kind: "arnn", purpose: "long in-betweens", bench: Some(no_bench), foot_lock: true },
     ];
 
-    fn err<T>(r: anyhow::Result<T>) -> String {
+    fn err<T, E: std::fmt::Display>(r: std::result::Result<T, E>) -> String {
         match r {
             Ok(_) => panic!("expected an error"),
             Err(e) => format!("{e:#}"),
@@ -331,20 +256,5 @@ mod tests {
         assert!(e.contains("names model `arnn`, not `rtn`: write `arnn:"), "{e}");
         let e = err(model_kind(&dir.path().join("missing")));
         assert!(e.contains("is not a run folder of `zoo train` (no config.json)"), "{e}");
-    }
-
-    #[test]
-    fn transitions_refuse_other_kinds_with_their_purpose() {
-        let dir = Path::new("runs/x");
-        assert!(check_transition_kind(TEST_MODELS, "rtn", dir, "transition").is_ok());
-        let e = err(check_transition_kind(TEST_MODELS, "gmm", dir, "decompress"));
-        assert!(
-            e.contains(
-                "`zoo decompress` runs an RTN run folder; runs/x holds a `gmm` model, which is for sampling poses"
-            ),
-            "{e}"
-        );
-        let e = err(check_transition_kind(TEST_MODELS, "rmr", dir, "transition"));
-        assert!(e.contains("unknown model kind `rmr`"), "{e}");
     }
 }

@@ -1,7 +1,7 @@
-//! `zoo bench runtime --model FILE.onnx`: per-frame step latency (batch 1) and throughput
-//! (batch 64) of one exported RTN through candle, tract (`zoo-runtime`) and onnxruntime, side by
-//! side in one run; for an exported RNN-GMM, its generator step through tract and onnxruntime
-//! and the runtime's whole synthesis frame (`tract frame`).
+//! A step's latency (batch 1) and throughput (batch 64) through candle, tract (`zoo-runtime`)
+//! and onnxruntime, side by side in one run (`zoo bench runtime --model FILE.onnx`): an
+//! exported RTN through all three; an exported RNN-GMM's generator step through tract and
+//! onnxruntime and the runtime's whole synthesis frame (`tract frame`).
 //!
 //! All three run the same step (`x`, `offset`, LSTM state in; `x_next`, state out) with the
 //! same weights: candle's are read back from the file's initializers. Each backend runs on one
@@ -9,40 +9,30 @@
 //! single-threaded), and the backends take turns round by round so that machine noise hits
 //! them alike. The figure per backend is the median over rounds of the mean step time.
 
-use anyhow::{Context, anyhow, bail};
+use crate::{Result, msg};
 use candle_core::{Device, Tensor};
-use clap::Args;
-use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+use zoo_data::{Context, Progress, bail};
 use zoo_rtn::{Rtn, RtnInputs, RtnState};
 use zoo_runtime::{LoadedModel, MotionModel, MotionState, MotionTaskKind};
 
-/// Arguments of `zoo bench runtime`.
-#[derive(Args)]
-pub struct RuntimeArgs {
-    /// A file written by `zoo export --onnx` (an RTN for `zoo bench runtime`, an ARNN for `zoo
-    /// bench keyframes`).
-    #[arg(long)]
+/// The benchmark's settings (also those of [`crate::keyframes`]).
+#[derive(Clone, Debug)]
+pub struct RuntimeOptions {
+    /// A file written by `zoo export --onnx`.
     pub model: PathBuf,
     /// Batch sizes to measure (characters per step).
-    #[arg(long, default_value = "1,64", value_delimiter = ',', allow_hyphen_values = true, value_parser = crate::args::runtime_batch)]
     pub batch: Vec<usize>,
     /// Rounds per batch size (each backend runs once per round).
-    #[arg(long, default_value_t = 11, allow_hyphen_values = true, value_parser = crate::args::rounds)]
     pub rounds: usize,
     /// Character-steps per backend per round (steps = this / batch, at least 5).
-    #[arg(long, default_value_t = 1280, allow_hyphen_values = true, value_parser = crate::args::character_steps)]
     pub work: usize,
-    /// onnxruntime library (default: `ORT_DYLIB_PATH`, else `.onnxruntime/libonnxruntime.so*`
-    /// in the current folder or one of its parents).
-    #[arg(long)]
+    /// The onnxruntime library (`None`: `ORT_DYLIB_PATH`, else `.onnxruntime/` of the current
+    /// folder or one of its parents).
     pub onnxruntime: Option<PathBuf>,
-    /// Write the figures as JSON to this file.
-    #[arg(long)]
-    pub json: Option<PathBuf>,
 }
 
 /// Figures of one backend at one batch size.
@@ -64,7 +54,7 @@ pub struct BackendFigure {
 /// A backend under test: one step of the whole batch per call.
 trait StepBackend {
     fn name(&self) -> &'static str;
-    fn step(&mut self) -> anyhow::Result<()>;
+    fn step(&mut self) -> Result<()>;
     /// The frame output of the last step (for the agreement check; empty: not compared).
     fn output(&self) -> &[f32];
 }
@@ -80,14 +70,14 @@ struct SynthesisBackend {
 }
 
 impl SynthesisBackend {
-    fn new(bytes: &[u8], batch: usize) -> anyhow::Result<Self> {
+    fn new(bytes: &[u8], batch: usize) -> Result<Self> {
         let model = zoo_runtime::synthesis::SynthesisModel::from_bytes(bytes)?;
         let meta = model.model().metadata();
         let start = meta
             .normalization
             .get("x")
             .map(|n| n.mean.clone())
-            .ok_or_else(|| anyhow!("the synthesis model has no normalisation of `x`"))?;
+            .ok_or_else(|| msg!("the synthesis model has no normalisation of `x`"))?;
         let mut characters = Vec::with_capacity(batch);
         for c in 0..batch {
             let mut ch = model.new_character(c as u64 + 1);
@@ -108,7 +98,7 @@ impl StepBackend for SynthesisBackend {
         "tract frame"
     }
 
-    fn step(&mut self) -> anyhow::Result<()> {
+    fn step(&mut self) -> Result<()> {
         self.runner.step_batch(&mut self.characters, 1.0, &mut self.poses, &mut self.contacts)?;
         Ok(())
     }
@@ -148,7 +138,7 @@ impl StepBackend for CandleBackend {
         "candle"
     }
 
-    fn step(&mut self) -> anyhow::Result<()> {
+    fn step(&mut self) -> Result<()> {
         let (model, sequence, x, offset, state) = (&self.model, &self.sequence, &self.x, &self.offset, &self.state);
         let (terrain, base) = (self.terrain.as_ref(), self.base.as_ref());
         let (next, state) = self.pool.install(|| {
@@ -178,7 +168,7 @@ impl StepBackend for TractBackend {
         "tract"
     }
 
-    fn step(&mut self) -> anyhow::Result<()> {
+    fn step(&mut self) -> Result<()> {
         let inputs: Vec<&[f32]> = self.frame.data.iter().map(Vec::as_slice).collect();
         let mut outs: Vec<&mut [f32]> = self.outs.iter_mut().map(Vec::as_mut_slice).collect();
         self.runner.step_batch(&mut self.states, &inputs, &mut outs)?;
@@ -205,11 +195,11 @@ impl StepBackend for OrtBackend {
         "onnxruntime"
     }
 
-    fn step(&mut self) -> anyhow::Result<()> {
+    fn step(&mut self) -> Result<()> {
         let b = self.batch;
         let tensor = |data: &[f32]| {
             ort::value::Tensor::from_array((vec![b as i64, (data.len() / b) as i64], data.to_vec()))
-                .map_err(|e| anyhow!("onnxruntime tensor: {e}"))
+                .map_err(|e| msg!("onnxruntime tensor: {e}"))
         };
         let mut values: Vec<(Cow<'_, str>, ort::session::SessionInputValue<'_>)> = Vec::new();
         for (name, data) in self.frame.names.iter().zip(&self.frame.data) {
@@ -218,13 +208,9 @@ impl StepBackend for OrtBackend {
         for (input, _, data) in &self.states {
             values.push((Cow::Owned(input.clone()), tensor(data)?.into()));
         }
-        let out = self.session.run(values).map_err(|e| anyhow!("onnxruntime run: {e}"))?;
-        let extract = |name: &str| -> anyhow::Result<Vec<f32>> {
-            Ok(out[name]
-                .try_extract_tensor::<f32>()
-                .map_err(|e| anyhow!("onnxruntime output `{name}`: {e}"))?
-                .1
-                .to_vec())
+        let out = self.session.run(values).map_err(|e| msg!("onnxruntime run: {e}"))?;
+        let extract = |name: &str| -> Result<Vec<f32>> {
+            Ok(out[name].try_extract_tensor::<f32>().map_err(|e| msg!("onnxruntime output `{name}`: {e}"))?.1.to_vec())
         };
         let next = extract(&self.out_name)?;
         let mut new_states = Vec::with_capacity(self.states.len());
@@ -245,16 +231,16 @@ impl StepBackend for OrtBackend {
 }
 
 /// The onnxruntime library to load.
-pub(crate) fn onnxruntime_library(explicit: &Option<PathBuf>) -> anyhow::Result<PathBuf> {
+pub fn onnxruntime_library(explicit: Option<&Path>) -> Result<PathBuf> {
     let help = "run `bash scripts/onnxruntime.sh` in the zoo workspace (it fetches the onnxruntime wheel from PyPI \
                 into .onnxruntime/), or pass --onnxruntime /path/to/libonnxruntime.so, or set ORT_DYLIB_PATH";
-    if let Some(p) = explicit.clone().or_else(|| std::env::var_os("ORT_DYLIB_PATH").map(PathBuf::from)) {
+    if let Some(p) = explicit.map(Path::to_path_buf).or_else(|| std::env::var_os("ORT_DYLIB_PATH").map(PathBuf::from)) {
         if p.is_file() {
             return Ok(p);
         }
         bail!("onnxruntime library {} does not exist: {help}", p.display());
     }
-    let cwd = std::env::current_dir()?;
+    let cwd = std::env::current_dir().context("the current folder")?;
     for dir in cwd.ancestors() {
         let folder = dir.join(".onnxruntime");
         let Ok(entries) = std::fs::read_dir(&folder) else { continue };
@@ -282,7 +268,7 @@ fn make_backends(
     candle: Option<&Rtn>,
     env: &ort::environment::Environment,
     batch: usize,
-) -> anyhow::Result<Vec<Box<dyn StepBackend>>> {
+) -> Result<Vec<Box<dyn StepBackend>>> {
     let frame = frame_inputs(model, batch);
     // Initial recurrent state: small deterministic values, the same for every backend.
     let states: Vec<Vec<f32>> =
@@ -308,15 +294,15 @@ fn make_backends(
     };
 
     // onnxruntime
-    let opt = |e: ort::Error<_>| anyhow!("onnxruntime session options: {e}");
+    let opt = |e: ort::Error<_>| msg!("onnxruntime session options: {e}");
     let session = ort::session::Session::builder(env)
-        .map_err(|e| anyhow!("onnxruntime session: {e}"))?
+        .map_err(|e| msg!("onnxruntime session: {e}"))?
         .with_intra_threads(1)
         .map_err(opt)?
         .with_inter_threads(1)
-        .map_err(|e| anyhow!("onnxruntime session options: {e}"))?
+        .map_err(|e| msg!("onnxruntime session options: {e}"))?
         .commit_from_memory(bytes)
-        .map_err(|e| anyhow!("onnxruntime cannot load the model: {e}"))?;
+        .map_err(|e| msg!("onnxruntime cannot load the model: {e}"))?;
     let ort = OrtBackend {
         session,
         batch,
@@ -338,12 +324,12 @@ fn candle_backend(
     frame: &Frame,
     states: &mut [Vec<f32>],
     batch: usize,
-) -> anyhow::Result<CandleBackend> {
+) -> Result<CandleBackend> {
     let d = model.outputs()[0].width;
     let dev = Device::Cpu;
     let hu = candle.config().lstm;
-    let get = |name: &str| -> anyhow::Result<Tensor> {
-        let k = frame.names.iter().position(|n| n == name).ok_or_else(|| anyhow!("the step graph has no `{name}`"))?;
+    let get = |name: &str| -> Result<Tensor> {
+        let k = frame.names.iter().position(|n| n == name).ok_or_else(|| msg!("the step graph has no `{name}`"))?;
         Ok(Tensor::from_slice(&frame.data[k], (batch, frame.data[k].len() / batch), &dev)?)
     };
     let x = get("x")?;
@@ -357,134 +343,160 @@ fn candle_backend(
     if let Some(k) = model.states().iter().position(|s| s.input == "gate_bias") {
         states[k] = sequence.gate_bias().flatten_all()?.to_vec1::<f32>()?;
     }
-    let slot = |name: &str| -> anyhow::Result<Tensor> {
+    let slot = |name: &str| -> Result<Tensor> {
         let k = model
             .states()
             .iter()
             .position(|s| s.input == name)
-            .ok_or_else(|| anyhow!("the step graph has no state `{name}`"))?;
+            .ok_or_else(|| msg!("the step graph has no state `{name}`"))?;
         Ok(Tensor::from_slice(&states[k], (batch, hu), &dev)?)
     };
     let state = RtnState { h: slot("h")?, c: slot("c")? };
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().map_err(|e| msg!("a one-thread pool: {e}"))?;
     Ok(CandleBackend { model: candle.clone(), sequence, x, offset, terrain, base, state, out: Vec::new(), pool })
 }
 
-/// Runs `zoo bench runtime`.
-pub fn run(a: RuntimeArgs) -> anyhow::Result<()> {
-    if let Some(path) = &a.json {
-        crate::cmd::check_output_file("--json", path)?;
-    }
-    let bytes = std::fs::read(&a.model).with_context(|| format!("reading {}", a.model.display()))?;
+/// The onnxruntime environment from `lib`.
+pub fn onnxruntime_env(lib: &Path) -> Result<ort::environment::Environment> {
+    Ok(ort::init_from(lib)
+        .map_err(|e| msg!("cannot load onnxruntime from {}: {e}", lib.display()))?
+        .build()
+        .map_err(|e| msg!("onnxruntime environment: {e}"))?)
+}
+
+/// The file's step graph, and the RTN in candle with the file's weights for a transition model.
+fn models(o: &RuntimeOptions, bytes: &[u8]) -> Result<(MotionModel, Option<Rtn>)> {
     let loaded = crate::exported::load(
-        &a.model,
+        &o.model,
         &[MotionTaskKind::Transition, MotionTaskKind::Synthesis],
         "`zoo bench runtime`",
     )?;
     // An RTN runs in candle too (its weights read back from the file); an RNN-GMM generator
     // runs its step in tract and onnxruntime, and its whole synthesis frame in the runtime.
-    let (model, candle) = match &loaded {
+    Ok(match &loaded {
         LoadedModel::Transition(t) => {
-            let (config, weights) = zoo_rtn::export::import_rtn(&bytes)
-                .with_context(|| format!("reading the RTN weights of {} for candle", a.model.display()))?;
+            let (config, weights) = zoo_rtn::export::import_rtn(bytes)
+                .with_context(|| format!("reading the RTN weights of {} for candle", o.model.display()))?;
             let rtn =
                 Rtn::new(&config, candle_nn::VarBuilder::from_tensors(weights, candle_core::DType::F32, &Device::Cpu))?;
             (t.model().clone(), Some(rtn))
         }
         LoadedModel::Synthesis(s) => (s.model().clone(), None),
         other => {
-            bail!("{} is a `{}` model, which `zoo bench runtime` does not measure", a.model.display(), other.task())
+            bail!("{} is a `{}` model, which `zoo bench runtime` does not measure", o.model.display(), other.task())
         }
-    };
-    let lib = onnxruntime_library(&a.onnxruntime)?;
-    let env = ort::init_from(&lib)
-        .map_err(|e| anyhow!("cannot load onnxruntime from {}: {e}", lib.display()))?
-        .build()
-        .map_err(|e| anyhow!("onnxruntime environment: {e}"))?;
-    if a.rounds == 0 || a.batch.is_empty() || a.batch.contains(&0) {
-        bail!("--rounds and every --batch must be at least 1");
+    })
+}
+
+/// One step of every backend from the same state and inputs: they must agree with tract.
+fn check_agreement(backends: &mut [Box<dyn StepBackend>]) -> Result<()> {
+    for b in backends.iter_mut() {
+        b.step().with_context(|| format!("{} step", b.name()))?;
     }
-    match &candle {
-        Some(rtn) => println!(
-            "{}: RTN, {} parameters, LSTM {} units; onnxruntime {}; one thread per backend",
-            a.model.display(),
-            rtn.parameter_count(),
-            rtn.config().lstm,
-            lib.display()
-        ),
-        None => println!(
-            "{}: RNN-GMM generator step (tract, onnxruntime) and the runtime's whole synthesis frame (`tract frame`: \
-             step, sampling, refiner, decoding); onnxruntime {}; one thread per backend",
-            a.model.display(),
-            lib.display()
-        ),
-    }
-    let mut figures = Vec::new();
-    for &batch in &a.batch {
-        let mut backends = make_backends(&bytes, &model, candle.as_ref(), &env, batch)?;
-        if candle.is_none() {
-            backends.push(Box::new(SynthesisBackend::new(&bytes, batch)?));
+    let tract = backends.iter().position(|b| b.name() == "tract").ok_or_else(|| msg!("no tract backend"))?;
+    let reference = backends[tract].output().to_vec();
+    for b in backends.iter().filter(|b| !b.output().is_empty()) {
+        let diff = b.output().iter().zip(&reference).map(|(p, q)| (p - q).abs()).fold(0.0f32, f32::max);
+        if b.output().len() != reference.len() || diff > 1e-3 {
+            bail!(
+                "{} disagrees with tract on the first step (max abs diff {diff}): the benchmark would compare different computations",
+                b.name()
+            );
         }
-        // Warm-up and agreement: one step from the same state and inputs.
-        for b in backends.iter_mut() {
-            b.step().with_context(|| format!("{} step", b.name()))?;
-        }
-        let tract = backends.iter().position(|b| b.name() == "tract").ok_or_else(|| anyhow!("no tract backend"))?;
-        let reference = backends[tract].output().to_vec();
-        for b in backends.iter().filter(|b| !b.output().is_empty()) {
-            let diff = b.output().iter().zip(&reference).map(|(p, q)| (p - q).abs()).fold(0.0f32, f32::max);
-            if b.output().len() != reference.len() || diff > 1e-3 {
-                bail!(
-                    "{} disagrees with tract on the first step (max abs diff {diff}): the benchmark would compare different computations",
-                    b.name()
-                );
-            }
-        }
-        for b in backends.iter_mut() {
-            for _ in 0..5 {
-                b.step()?;
-            }
-        }
-        let steps = (a.work / batch).max(5);
-        let pb = ProgressBar::new((a.rounds * backends.len()) as u64);
-        pb.set_style(ProgressStyle::with_template("batch {prefix}: [{bar:30}] {pos}/{len} backend rounds {elapsed}")?);
-        pb.set_prefix(batch.to_string());
-        let mut times = vec![Vec::with_capacity(a.rounds); backends.len()];
-        for _ in 0..a.rounds {
-            for (k, b) in backends.iter_mut().enumerate() {
-                let t = Instant::now();
-                for _ in 0..steps {
-                    b.step()?;
-                }
-                times[k].push(t.elapsed().as_secs_f64() * 1e3 / steps as f64);
-                pb.inc(1);
-            }
-        }
-        pb.finish_and_clear();
-        for (b, t) in backends.iter().zip(times) {
-            let step_ms = zoo_data::dataset::percentile(&mut t.clone(), 50.0);
-            figures.push(BackendFigure {
-                backend: b.name().to_string(),
-                batch,
-                step_ms,
-                frames_per_second: batch as f64 * 1e3 / step_ms,
-                rounds_ms: t,
-            });
-        }
-    }
-    println!("{}", table(&figures, a.rounds, a.work));
-    if let Some(path) = &a.json {
-        write_json(path, &figures)?;
     }
     Ok(())
 }
 
-fn write_json(path: &Path, figures: &[BackendFigure]) -> anyhow::Result<()> {
-    std::fs::write(path, serde_json::to_string_pretty(figures)?).with_context(|| format!("writing {}", path.display()))
+/// Times `rounds` rounds of every backend at batch `batch` (after a warm-up).
+fn time_backends(
+    o: &RuntimeOptions,
+    backends: &mut [Box<dyn StepBackend>],
+    batch: usize,
+    p: &dyn Progress,
+) -> Result<Vec<BackendFigure>> {
+    for b in backends.iter_mut() {
+        for _ in 0..5 {
+            b.step()?;
+        }
+    }
+    let steps = (o.work / batch).max(5);
+    p.start((o.rounds * backends.len()) as u64, &format!("batch {batch}: backend rounds"));
+    let mut times = vec![Vec::with_capacity(o.rounds); backends.len()];
+    for _ in 0..o.rounds {
+        for (k, b) in backends.iter_mut().enumerate() {
+            let t = Instant::now();
+            for _ in 0..steps {
+                b.step()?;
+            }
+            times[k].push(t.elapsed().as_secs_f64() * 1e3 / steps as f64);
+            p.advance(1);
+        }
+    }
+    p.finish();
+    Ok(backends.iter().zip(times).map(|(b, t)| BackendFigure::new(b.name(), batch, t)).collect())
+}
+
+impl BackendFigure {
+    /// The figure of `backend` at `batch` from every round's mean step time (ms).
+    pub fn new(backend: &str, batch: usize, rounds_ms: Vec<f64>) -> BackendFigure {
+        let step_ms = zoo_data::dataset::percentile(&mut rounds_ms.clone(), 50.0);
+        BackendFigure {
+            backend: backend.to_string(),
+            batch,
+            step_ms,
+            frames_per_second: batch as f64 * 1e3 / step_ms,
+            rounds_ms,
+        }
+    }
+}
+
+/// What `zoo bench runtime` measured.
+#[derive(Clone, Debug)]
+pub struct RuntimeReport {
+    /// What ran, in one line (the model, the onnxruntime library).
+    pub header: String,
+    /// The figures, one per backend and batch size (the JSON of the command).
+    pub figures: Vec<BackendFigure>,
+}
+
+/// Runs the benchmark.
+pub fn run(o: &RuntimeOptions, p: &dyn Progress) -> Result<RuntimeReport> {
+    let bytes = std::fs::read(&o.model).with_context(|| format!("reading {}", o.model.display()))?;
+    let (model, candle) = models(o, &bytes)?;
+    let lib = onnxruntime_library(o.onnxruntime.as_deref())?;
+    let env = onnxruntime_env(&lib)?;
+    if o.rounds == 0 || o.batch.is_empty() || o.batch.contains(&0) {
+        bail!("--rounds and every --batch must be at least 1");
+    }
+    let header = match &candle {
+        Some(rtn) => format!(
+            "{}: RTN, {} parameters, LSTM {} units; onnxruntime {}; one thread per backend",
+            o.model.display(),
+            rtn.parameter_count(),
+            rtn.config().lstm,
+            lib.display()
+        ),
+        None => format!(
+            "{}: RNN-GMM generator step (tract, onnxruntime) and the runtime's whole synthesis frame (`tract frame`: \
+             step, sampling, refiner, decoding); onnxruntime {}; one thread per backend",
+            o.model.display(),
+            lib.display()
+        ),
+    };
+    let mut figures = Vec::new();
+    for &batch in &o.batch {
+        let mut backends = make_backends(&bytes, &model, candle.as_ref(), &env, batch)?;
+        if candle.is_none() {
+            backends.push(Box::new(SynthesisBackend::new(&bytes, batch)?));
+        }
+        check_agreement(&mut backends)?;
+        figures.extend(time_backends(o, &mut backends, batch, p)?);
+    }
+    Ok(RuntimeReport { header, figures })
 }
 
 /// The figures as a text table with ratios to onnxruntime.
-fn table(figures: &[BackendFigure], rounds: usize, work: usize) -> String {
+pub fn table(figures: &[BackendFigure], rounds: usize, work: usize) -> String {
     let mut s = format!(
         "median of {rounds} rounds, ~{work} character-steps per backend per round\n\
          {:<6} {:<12} {:>12} {:>16} {:>12} {:>14}\n",

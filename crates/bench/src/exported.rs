@@ -1,8 +1,9 @@
 //! Every command that takes a file written by `zoo export --onnx` loads it here, through the
 //! runtime's one loader, and refuses a file of another task with the command that runs it.
 
-use anyhow::{Context, bail};
+use crate::Result;
 use std::path::Path;
+use zoo_data::{Context, bail};
 use zoo_runtime::{LoadedModel, MotionTaskKind};
 
 /// The commands that take an exported file of `task`, for messages.
@@ -20,7 +21,7 @@ pub fn commands_for(task: MotionTaskKind) -> &'static str {
 
 /// Loads the exported file `path` for `command` (e.g. "`zoo bench runtime`"), which runs the
 /// tasks `accepted`; a file of another task is refused with what runs it.
-pub fn load(path: &Path, accepted: &[MotionTaskKind], command: &str) -> anyhow::Result<LoadedModel> {
+pub fn load(path: &Path, accepted: &[MotionTaskKind], command: &str) -> Result<LoadedModel> {
     let model = LoadedModel::load(path).with_context(|| format!("loading the exported model {}", path.display()))?;
     let task = model.task();
     if !accepted.contains(&task) {

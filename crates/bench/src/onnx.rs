@@ -46,7 +46,7 @@ impl PositionGenerator for OnnxGenerator {
 
 /// The benchmark method `onnx:FILE` (or `onnx+lock:FILE` with `foot_lock`) named `name`, from a
 /// file written by `zoo export --onnx`.
-pub fn load_onnx(path: &Path, name: String, foot_lock: bool) -> anyhow::Result<PositionMethod<OnnxGenerator>> {
+pub fn load_onnx(path: &Path, name: String, foot_lock: bool) -> crate::Result<PositionMethod<OnnxGenerator>> {
     Ok(load_onnx_with_skeleton(path, name, foot_lock)?.0)
 }
 
@@ -56,7 +56,7 @@ pub fn load_onnx_with_skeleton(
     path: &Path,
     name: String,
     foot_lock: bool,
-) -> anyhow::Result<(PositionMethod<OnnxGenerator>, MotionSkeletonInfo)> {
+) -> crate::Result<(PositionMethod<OnnxGenerator>, MotionSkeletonInfo)> {
     let model = crate::exported::load(path, &[MotionTaskKind::Transition], "`zoo bench --methods onnx:FILE`")?
         .into_transition()?;
     let skeleton = model.model().metadata().skeleton.clone();

@@ -1,0 +1,249 @@
+//! The exported ARNN's per-frame step through tract (`zoo-runtime`) and onnxruntime, latency
+//! at batch 1 and throughput at batch 64, side by side in one run; and whole completions
+//! through the runtime's keyframes task (`zoo_runtime::keyframes::KeyframeRunner`, tract):
+//! `zoo bench keyframes --model arnn.onnx`.
+//!
+//! Each backend runs on one thread (onnxruntime with one intra-op thread; tract is
+//! single-threaded); the backends take turns round by round so that machine noise hits them
+//! alike. The figure per backend is the median over rounds of the mean step time. Inputs are
+//! the lamp's rest pose with small deterministic offsets, keys a hop apart.
+
+use crate::runtime::{BackendFigure, RuntimeOptions, onnxruntime_env, onnxruntime_library};
+use crate::{Result, msg};
+use std::borrow::Cow;
+use std::time::Instant;
+use zoo_data::{Context, bail};
+use zoo_runtime::keyframes::{KeyframeModel, MotionKeys};
+use zoo_runtime::{MotionModel, MotionState, MotionTaskKind};
+
+/// Rest pose of the lamp (base x, y, angle, three joint angles).
+const REST: [f32; 6] = [0.0, 0.02, 0.0, 0.5, -1.1, -1.2];
+/// Key frames of the whole-completion figure: three hops of the training data's layout.
+const KEY_FRAMES: [usize; 9] = [0, 12, 24, 31, 43, 55, 62, 74, 86];
+
+fn offsets(n: usize, seed: u64, scale: f32) -> Vec<f32> {
+    let mut rng = zoo_motion::rng::SplitMix64::new(seed);
+    (0..n).map(|_| scale * (2.0 * rng.next_f64() - 1.0) as f32).collect()
+}
+
+/// Poses around the rest pose, `batch` rows of `d`.
+fn poses(batch: usize, d: usize, seed: u64) -> Vec<f32> {
+    offsets(batch * d, seed, 0.1).iter().enumerate().map(|(i, o)| REST.get(i % d).copied().unwrap_or(0.0) + o).collect()
+}
+
+trait Backend {
+    fn step(&mut self) -> Result<()>;
+    fn output(&self) -> &[f32];
+}
+
+struct Tract {
+    runner: zoo_runtime::MotionRunner,
+    states: Vec<MotionState>,
+    inputs: Vec<Vec<f32>>,
+    out: Vec<f32>,
+}
+
+impl Backend for Tract {
+    fn step(&mut self) -> Result<()> {
+        let inputs: Vec<&[f32]> = self.inputs.iter().map(Vec::as_slice).collect();
+        self.runner.step_batch(&mut self.states, &inputs, &mut [&mut self.out])?;
+        Ok(())
+    }
+    fn output(&self) -> &[f32] {
+        &self.out
+    }
+}
+
+struct Ort {
+    session: ort::session::Session,
+    batch: usize,
+    names: Vec<String>,
+    inputs: Vec<Vec<f32>>,
+    states: Vec<(String, String, Vec<f32>)>,
+    out: Vec<f32>,
+}
+
+impl Backend for Ort {
+    fn step(&mut self) -> Result<()> {
+        let b = self.batch;
+        let tensor = |data: &[f32]| {
+            ort::value::Tensor::from_array((vec![b as i64, (data.len() / b) as i64], data.to_vec()))
+                .map_err(|e| msg!("onnxruntime tensor: {e}"))
+        };
+        let mut values: Vec<(Cow<'_, str>, ort::session::SessionInputValue<'_>)> = Vec::new();
+        for (name, data) in self.names.iter().zip(&self.inputs) {
+            values.push((Cow::Owned(name.clone()), tensor(data)?.into()));
+        }
+        for (input, _, data) in &self.states {
+            values.push((Cow::Owned(input.clone()), tensor(data)?.into()));
+        }
+        let out = self.session.run(values).map_err(|e| msg!("onnxruntime run: {e}"))?;
+        let extract = |name: &str| -> Result<Vec<f32>> {
+            Ok(out[name].try_extract_tensor::<f32>().map_err(|e| msg!("onnxruntime output `{name}`: {e}"))?.1.to_vec())
+        };
+        let pose = extract("pose")?;
+        let next: Vec<Vec<f32>> = self.states.iter().map(|(_, o, _)| extract(o)).collect::<Result<_>>()?;
+        drop(out);
+        self.out = pose;
+        for (slot, v) in self.states.iter_mut().zip(next) {
+            slot.2 = v;
+        }
+        Ok(())
+    }
+    fn output(&self) -> &[f32] {
+        &self.out
+    }
+}
+
+/// Whole completions of [`KEY_FRAMES`] through the keyframes runner; one "step" is one frame of
+/// every character (the completion's time divided by its frames).
+struct Completion {
+    runner: zoo_runtime::keyframes::KeyframeRunner,
+    keys: Vec<Vec<f32>>,
+    out: Vec<Vec<f32>>,
+}
+
+impl Completion {
+    fn run(&mut self) -> Result<()> {
+        let keys: Vec<MotionKeys> = self.keys.iter().map(|p| MotionKeys::whole(&KEY_FRAMES, p)).collect();
+        let mut outs: Vec<&mut [f32]> = self.out.iter_mut().map(|o| o.as_mut_slice()).collect();
+        self.runner.complete_batch(&keys, &mut outs)?;
+        Ok(())
+    }
+}
+
+/// The step backends at batch `batch`, from the same inputs and state.
+fn backends(
+    model: &MotionModel,
+    d: usize,
+    bytes: &[u8],
+    env: &ort::environment::Environment,
+    batch: usize,
+) -> Result<Vec<(&'static str, Box<dyn Backend>)>> {
+    let names: Vec<String> = model.inputs().iter().map(|i| i.name.clone()).collect();
+    let t_rel: Vec<f32> = offsets(batch, 9, 0.5).iter().map(|v| v + 0.5).collect();
+    let inputs = vec![poses(batch, d, 1), poses(batch, d, 2), poses(batch, d, 3), t_rel];
+    let states: Vec<Vec<f32>> =
+        model.states().iter().enumerate().map(|(k, s)| offsets(batch * s.width, 20 + k as u64, 0.3)).collect();
+    let mut tract_states: Vec<MotionState> = (0..batch).map(|_| model.new_state()).collect();
+    for (c, s) in tract_states.iter_mut().enumerate() {
+        for (k, info) in model.states().iter().enumerate() {
+            s.slot_mut(k).copy_from_slice(&states[k][c * info.width..(c + 1) * info.width]);
+        }
+    }
+    let session = ort::session::Session::builder(env)
+        .map_err(|e| msg!("onnxruntime session: {e}"))?
+        .with_intra_threads(1)
+        .map_err(|e| msg!("onnxruntime session options: {e}"))?
+        .with_inter_threads(1)
+        .map_err(|e| msg!("onnxruntime session options: {e}"))?
+        .commit_from_memory(bytes)
+        .map_err(|e| msg!("onnxruntime cannot load the model: {e}"))?;
+    let tract =
+        Tract { runner: model.runner()?, states: tract_states, inputs: inputs.clone(), out: vec![0.0; batch * d] };
+    let states = model.states().iter().zip(states).map(|(s, v)| (s.input.clone(), s.output.clone(), v)).collect();
+    let ort = Ort { session, batch, names, inputs, states, out: vec![] };
+    Ok(vec![("tract step", Box::new(tract)), ("onnxruntime step", Box::new(ort))])
+}
+
+/// Agreement on the first step (same inputs and state), then a warm-up.
+fn check_agreement(backends: &mut [(&'static str, Box<dyn Backend>)]) -> Result<()> {
+    for (name, b) in backends.iter_mut() {
+        b.step().context(name.to_string())?;
+    }
+    let (a, b) = (backends[0].1.output(), backends[1].1.output());
+    let diff = a.iter().zip(b).map(|(p, q)| (p - q).abs()).fold(0.0f32, f32::max);
+    if a.len() != b.len() || diff > 1e-3 {
+        bail!("onnxruntime disagrees with tract on the first step (max abs diff {diff})");
+    }
+    for (_, b) in backends.iter_mut() {
+        for _ in 0..5 {
+            b.step()?;
+        }
+    }
+    Ok(())
+}
+
+/// The figures of the step backends and the whole completions at batch `batch`.
+fn measure(
+    o: &RuntimeOptions,
+    km: &KeyframeModel,
+    bytes: &[u8],
+    env: &ort::environment::Environment,
+    batch: usize,
+) -> Result<Vec<BackendFigure>> {
+    let d = km.dofs();
+    let mut backends = backends(km.model(), d, bytes, env, batch)?;
+    check_agreement(&mut backends)?;
+    let mut completion = Completion {
+        runner: km.runner(batch)?,
+        keys: (0..batch).map(|c| poses(KEY_FRAMES.len(), d, 100 + c as u64)).collect(),
+        out: vec![vec![0.0; (KEY_FRAMES[8] + 1) * d]; batch],
+    };
+    completion.run()?;
+    let steps = (o.work / batch).max(5);
+    let completions = (o.work / (batch * KEY_FRAMES[8])).max(1);
+    let mut times: Vec<Vec<f64>> = (0..3).map(|_| Vec::with_capacity(o.rounds)).collect();
+    for _ in 0..o.rounds {
+        for (k, (_, b)) in backends.iter_mut().enumerate() {
+            let t = Instant::now();
+            for _ in 0..steps {
+                b.step()?;
+            }
+            times[k].push(t.elapsed().as_secs_f64() * 1e3 / steps as f64);
+        }
+        let t = Instant::now();
+        for _ in 0..completions {
+            completion.run()?;
+        }
+        times[2].push(t.elapsed().as_secs_f64() * 1e3 / (completions * KEY_FRAMES[8]) as f64);
+    }
+    Ok(["tract step", "onnxruntime step", "tract completion"]
+        .iter()
+        .zip(times)
+        .map(|(name, t)| BackendFigure::new(name, batch, t))
+        .collect())
+}
+
+/// Runs `zoo bench keyframes`: the header line and the figures.
+pub fn run(o: &RuntimeOptions) -> Result<(String, Vec<BackendFigure>)> {
+    let bytes = std::fs::read(&o.model).with_context(|| format!("reading {}", o.model.display()))?;
+    let km =
+        crate::exported::load(&o.model, &[MotionTaskKind::Keyframes], "`zoo bench keyframes`")?.into_keyframes()?;
+    let lib = onnxruntime_library(o.onnxruntime.as_deref())?;
+    let env = onnxruntime_env(&lib)?;
+    let header = format!(
+        "{}: ARNN step graph, {} degrees of freedom; onnxruntime {}; one thread per backend",
+        o.model.display(),
+        km.dofs(),
+        lib.display()
+    );
+    let mut figures = Vec::new();
+    for &batch in &o.batch {
+        figures.extend(measure(o, &km, &bytes, &env, batch)?);
+    }
+    Ok((header, figures))
+}
+
+/// The figures as a text table with the time ratio to onnxruntime's step.
+pub fn table(figures: &[BackendFigure], rounds: usize, work: usize) -> String {
+    let mut s = format!(
+        "median of {rounds} rounds, ~{work} character-steps per backend per round (completion: 86 frames per call)\n"
+    );
+    s += &format!("{:<6} {:<18} {:>12} {:>16} {:>10}\n", "batch", "backend", "step (ms)", "frames/s", "time/ort");
+    for f in figures {
+        let ort = figures
+            .iter()
+            .find(|g| g.batch == f.batch && g.backend == "onnxruntime step")
+            .map_or(f64::NAN, |o| o.step_ms);
+        s += &format!(
+            "{:<6} {:<18} {:>12.4} {:>16.0} {:>9.2}x\n",
+            f.batch,
+            f.backend,
+            f.step_ms,
+            f.frames_per_second,
+            f.step_ms / ort
+        );
+    }
+    s.trim_end().to_string()
+}
