@@ -3,7 +3,6 @@
 mod args;
 mod cmd;
 mod progress;
-mod render;
 
 use clap::{Parser, Subcommand};
 

@@ -2,6 +2,76 @@
 //! centring and facing unification, and normalization statistics.
 
 use crate::bvh::BvhError;
+
+/// Where a training command's clips come from: `data` split by `valid_glob`, or synthetic
+/// locomotion generated in memory with every tenth clip held out.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrainingClips {
+    /// BVH file or folder (`None`: synthetic locomotion generated in memory).
+    pub data: Option<PathBuf>,
+    /// Glob on file names selecting the validation split of `data`.
+    pub valid_glob: Option<String>,
+    /// Clips of `data` left out (their file names match).
+    pub exclude_glob: Option<String>,
+    /// Leave out the clips of `data` that cannot join the dataset, and list them.
+    pub skip_invalid: bool,
+    /// Minutes of synthetic motion without `data`.
+    pub synth_minutes: f64,
+    /// Seed of the synthetic motion.
+    pub seed: u64,
+}
+
+/// The split of synthetic clips: every tenth clip validates; with fewer than ten, the last one.
+pub fn split_synth<T>(clips: Vec<T>) -> (Vec<T>, Vec<T>) {
+    let n = clips.len();
+    let (mut train, mut valid) = (Vec::new(), Vec::new());
+    for (i, c) in clips.into_iter().enumerate() {
+        if i % 10 == 9 || (n < 10 && i + 1 == n) { valid.push(c) } else { train.push(c) }
+    }
+    (train, valid)
+}
+
+/// A synthetic clip as a named clip (its name as its path).
+pub fn named_synth(c: crate::synth::SynthClip) -> NamedClip {
+    NamedClip { path: PathBuf::from(&c.name), name: c.name, clip: c.clip }
+}
+
+/// Training and validation clips and where they came from, in words: `data` split by
+/// `valid_glob` (after leaving out `exclude_glob`), or synthetic clips with every tenth clip
+/// held out. Notices go to `progress`.
+pub fn training_clips(
+    t: &TrainingClips,
+    progress: &dyn crate::Progress,
+) -> Result<(Vec<NamedClip>, Vec<NamedClip>, String), crate::Message> {
+    let Some(path) = &t.data else {
+        let (minutes, seed) = (t.synth_minutes, t.seed);
+        let cfg = crate::synth::SynthConfig { minutes, seed, terrain: false, ..Default::default() };
+        let (train, valid) = split_synth(crate::synth::generate(&cfg).into_iter().map(named_synth).collect());
+        return Ok((train, valid, format!("synthetic locomotion, {minutes} min, seed {seed}")));
+    };
+    let Some(glob_text) = &t.valid_glob else {
+        return Err(crate::Message::new(
+            "--data needs --valid-glob GLOB to choose the validation clips (bandai2: '*_youthful_*')",
+        ));
+    };
+    glob(glob_text).map_err(crate::Message::new)?;
+    let mut clips = load_reporting(path, None, t.skip_invalid, progress)?;
+    if let Some(pattern) = &t.exclude_glob {
+        let m = glob(pattern).map_err(crate::Message::new)?;
+        let before = clips.len();
+        clips.retain(|c| !m.is_match(&c.name));
+        if clips.is_empty() {
+            return Err(crate::Message(format!(
+                "--exclude-glob {pattern}: every one of the {before} clips matches; nothing is left"
+            )));
+        }
+        progress.notice(&format!("--exclude-glob {pattern}: left out {} of {before} clips", before - clips.len()));
+    }
+    let (train, valid) = split(clips, glob_text).map_err(crate::Message::new)?;
+    let without = t.exclude_glob.as_ref().map_or(String::new(), |e| format!(", without {e}"));
+    Ok((train, valid, format!("{} (validation: {glob_text}{without})", path.display())))
+}
+
 #[cfg(test)]
 use crate::bvh::{self, ReadOptions};
 use crate::clip_io::{self, ClipError, ClipFormat};

@@ -16,6 +16,7 @@ pub mod metrics;
 pub mod plausibility;
 pub mod position_method;
 pub mod positions;
+pub mod render;
 pub mod report;
 pub mod retarget;
 pub(crate) mod scene;

@@ -7,6 +7,7 @@
 //! six degrees of freedom per frame and the frames that are keys.
 
 pub mod checkpoint;
+pub mod completion;
 pub mod config;
 pub mod eval;
 pub mod export;
@@ -16,6 +17,7 @@ pub mod luxo;
 pub mod model;
 pub mod speed;
 pub mod train;
+pub mod train_run;
 
 pub use config::{Architecture, ArnnConfig, Curriculum, HumanoidSkeleton, KeySampling, NoMemoryOutput};
 pub use eval::{CompletionError, CompletionReport};

@@ -30,6 +30,7 @@ pub mod parallel;
 pub mod plot;
 pub mod recurrent;
 pub mod rng;
+pub mod run_folder;
 pub mod speed;
 pub mod tape;
 pub mod train_loop;

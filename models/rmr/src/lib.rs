@@ -34,6 +34,7 @@ pub mod pairs;
 pub mod speed;
 pub mod stitch;
 pub mod train;
+pub mod train_run;
 
 pub use config::{Config, ModelName, RefinerCell, TrainConfig};
 pub use error::{RmrError, RmrResult};

@@ -56,6 +56,7 @@ pub mod run;
 pub mod speed;
 pub mod synthesis;
 pub mod train;
+pub mod train_run;
 
 pub use config::{Config, ModelName, RefinerConfig, TrainConfig};
 pub use denoise::{DenoiseOptions, Denoised, EnergyTerms, denoise};

@@ -30,6 +30,7 @@ pub mod method;
 pub mod model;
 pub mod speed;
 pub mod train;
+pub mod train_run;
 pub mod transition;
 
 pub use config::{Config, InitState, ModelName, TeacherForcing, TrainConfig};

@@ -21,7 +21,6 @@ pub mod render;
 pub mod stitch;
 pub mod train;
 pub mod train_arnn;
-pub mod train_arnn_humanoid;
 pub mod train_rmr;
 pub mod train_rnngmm;
 pub mod transition;
@@ -55,15 +54,7 @@ pub fn check_output_file(option: &str, path: &Path) -> anyhow::Result<()> {
 /// Creates `dir` (an option's output folder) if needed and checks, before the long work, that
 /// files can be written in it.
 pub fn check_output_dir(option: &str, dir: &Path) -> anyhow::Result<()> {
-    if dir.exists() && !dir.is_dir() {
-        bail!("{option} {}: is a file, not a folder", dir.display());
-    }
-    std::fs::create_dir_all(dir).with_context(|| format!("{option} {}: cannot create the folder", dir.display()))?;
-    let probe = dir.join(format!(".zoo-write-test-{}", std::process::id()));
-    std::fs::write(&probe, b"").with_context(|| format!("{option} {}: cannot write in this folder", dir.display()))?;
-    std::fs::remove_file(&probe)
-        .with_context(|| format!("{option} {}: cannot remove {}", dir.display(), probe.display()))?;
-    Ok(())
+    Ok(zoo_nn::run_folder::writable_dir(option, dir)?)
 }
 
 /// Loads a dataset for a command ([`zoo_data::dataset::load_reporting`], its notices on

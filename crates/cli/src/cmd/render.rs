@@ -1,10 +1,10 @@
 //! `zoo render`: stick-figure GIFs and PNG contact sheets of BVH clips.
 
-use crate::render::{RenderClip, RenderOptions, render_gif, render_sheet};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use std::path::{Path, PathBuf};
 use zoo_data::clip_io::{ReadOptions, read as read_file};
+use zoo_data::render::{RenderClip, RenderOptions, render_gif, render_sheet};
 
 /// Arguments of `zoo render`.
 #[derive(Args)]

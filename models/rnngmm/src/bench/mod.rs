@@ -41,9 +41,7 @@ pub fn skate_reference(
 }
 
 /// The worker threads of a benchmark: `threads`, else the cores available to the process.
-pub fn worker_threads(threads: Option<usize>) -> usize {
-    threads.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1))
-}
+pub use zoo_nn::run_folder::default_threads as worker_threads;
 
 /// A one-thread rayon pool for a worker (candle runs on the worker's thread alone).
 fn one_thread_pool() -> RnnGmmResult<rayon::ThreadPool> {

@@ -6,10 +6,10 @@
 //! and named in a legend; the camera follows the first clip's root. Rasterised with tiny-skia;
 //! text uses a tiny embedded 3x5 bitmap font drawn as rectangles.
 
-use anyhow::{Context, Result, bail};
+use crate::terrain::Heightmap;
+use crate::{Context, Message, bail};
 use std::path::Path;
 use tiny_skia::{Color, FillRule, Paint, PathBuilder, Pixmap, PixmapPaint, Rect, Stroke, Transform};
-use zoo_data::terrain::Heightmap;
 use zoo_motion::Clip;
 use zoo_motion::glam::DVec3;
 
@@ -334,7 +334,7 @@ struct Prepared {
     view: View,
 }
 
-fn prepare(clips: &[RenderClip], opts: &RenderOptions) -> Result<Prepared> {
+fn prepare(clips: &[RenderClip], opts: &RenderOptions) -> Result<Prepared, Message> {
     if clips.is_empty() {
         bail!("nothing to render");
     }
@@ -349,37 +349,41 @@ fn prepare(clips: &[RenderClip], opts: &RenderOptions) -> Result<Prepared> {
 }
 
 /// Writes an animated GIF (320 x 240: side view above, top view below, legend top-left).
-pub fn render_gif(clips: &[RenderClip], opts: &RenderOptions, path: &Path) -> Result<usize> {
+pub fn render_gif(clips: &[RenderClip], opts: &RenderOptions, path: &Path) -> Result<usize, Message> {
     let p = prepare(clips, opts)?;
     let fps = clips[0].clip.fps();
     let every = opts.every.unwrap_or(((fps / 15.0).round() as usize).max(1));
     let (w, h, side_h) = (320u16, 240u16, 160.0f32);
-    let file = std::fs::File::create(path).with_context(|| format!("{}: cannot create", path.display()))?;
-    let mut enc = gif::Encoder::new(std::io::BufWriter::new(file), w, h, &[])?;
-    enc.set_repeat(gif::Repeat::Infinite)?;
     let delay = ((every as f64 / fps) * 100.0).round() as u16;
     let mut count = 0;
-    for f in (p.from..p.to).step_by(every) {
-        let mut pm = Pixmap::new(w as u32, h as u32).context("pixmap")?;
-        pm.fill(Color::WHITE);
-        draw_frame(&mut pm, clips, &p.globals, &p.view, f, (0.0, 0.0, w as f32, h as f32), side_h);
-        legend(&mut pm, clips, 6.0, 6.0);
-        if opts.frame_numbers {
-            let s = format!("F{f}");
-            text(&mut pm, w as f32 - 6.0 - s.len() as f32 * 8.0, 6.0, 2.0, &s, rgb(TEXT));
+    let mut encode = |file: &mut std::fs::File| -> Result<(), gif::EncodingError> {
+        let mut enc = gif::Encoder::new(std::io::BufWriter::new(file), w, h, &[])?;
+        enc.set_repeat(gif::Repeat::Infinite)?;
+        for f in (p.from..p.to).step_by(every) {
+            let mut pm = Pixmap::new(w as u32, h as u32).ok_or_else(|| std::io::Error::other("pixmap"))?;
+            pm.fill(Color::WHITE);
+            draw_frame(&mut pm, clips, &p.globals, &p.view, f, (0.0, 0.0, w as f32, h as f32), side_h);
+            legend(&mut pm, clips, 6.0, 6.0);
+            if opts.frame_numbers {
+                let s = format!("F{f}");
+                text(&mut pm, w as f32 - 6.0 - s.len() as f32 * 8.0, 6.0, 2.0, &s, rgb(TEXT));
+            }
+            let mut rgba = pm.take();
+            let mut frame = gif::Frame::from_rgba_speed(w, h, &mut rgba, 20);
+            frame.delay = delay;
+            enc.write_frame(&frame)?;
+            count += 1;
         }
-        let mut rgba = pm.take();
-        let mut frame = gif::Frame::from_rgba_speed(w, h, &mut rgba, 20);
-        frame.delay = delay;
-        enc.write_frame(&frame)?;
-        count += 1;
-    }
+        Ok(())
+    };
+    zoo_motion::atomic::write_with(path, |file| encode(file).map_err(std::io::Error::other))
+        .with_context(|| format!("{}: cannot write", path.display()))?;
     Ok(count)
 }
 
 /// Writes a PNG contact sheet: every k-th frame (default: about 2 per second) in a grid of
 /// cells (side view above top view), frame numbers when asked, legend on top.
-pub fn render_sheet(clips: &[RenderClip], opts: &RenderOptions, path: &Path) -> Result<usize> {
+pub fn render_sheet(clips: &[RenderClip], opts: &RenderOptions, path: &Path) -> Result<usize, Message> {
     let p = prepare(clips, opts)?;
     let fps = clips[0].clip.fps();
     let every = opts.every.unwrap_or(((fps / 2.0).round() as usize).max(1));
@@ -401,7 +405,8 @@ pub fn render_sheet(clips: &[RenderClip], opts: &RenderOptions, path: &Path) -> 
             text(&mut pm, x0 + 4.0, y0 + 4.0, 2.0, &format!("F{f}"), rgb(TEXT));
         }
     }
-    pm.save_png(path).with_context(|| format!("{}: cannot write PNG", path.display()))?;
+    let png = pm.encode_png().with_context(|| format!("{}: cannot encode PNG", path.display()))?;
+    zoo_motion::atomic::write(path, png).with_context(|| format!("{}: cannot write PNG", path.display()))?;
     Ok(frames.len())
 }
 

@@ -1,0 +1,606 @@
+//! Completing an animator's keys into a whole motion (`zoo complete`): the keys file (format in
+//! docs/arnn.md, "Keys file"; lamp poses, or humanoid poses from a BVH with partial keys), the
+//! completion written as a clip (and as JSON, positions and a plot of every degree of freedom,
+//! like the paper's Figure 8).
+
+use crate::luxo::LampPose;
+use crate::luxo::sequence::poses_to_clip;
+use crate::{Arnn, ArnnResult, Normalization};
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+use zoo_data::{Context, Message, bail};
+
+/// The longest span of keys completed, in frames.
+pub const MAX_FRAMES: usize = 100_000;
+
+/// Format name of a keys file.
+pub const KEYS_FORMAT: &str = "zoo-arnn-keys";
+/// Format name of the JSON written by `--json`.
+pub const COMPLETION_FORMAT: &str = "zoo-arnn-completion";
+/// Frames per second of the BVH when neither the keys file nor `--fps` gives one: the lamp's
+/// hops (25 network frames from liftoff to landing, about 0.45 s) play near their simulated speed.
+pub const DEFAULT_FPS: f64 = 50.0;
+
+/// One key as written in the file: a lamp key gives its `pose`; a humanoid key takes its pose
+/// from frame `source_frame` (default: `frame`) of the file's `bvh` and may fix only some
+/// `joints` (`"root"`: the root position).
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct KeyEntry {
+    frame: usize,
+    pose: Option<Vec<f64>>,
+    source_frame: Option<usize>,
+    joints: Option<Vec<String>>,
+}
+
+/// A keys file as written.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct KeysFile {
+    format: Option<String>,
+    version: Option<u32>,
+    dof_names: Option<Vec<String>>,
+    fps: Option<f64>,
+    frames: Option<usize>,
+    bvh: Option<PathBuf>,
+    keys: Vec<KeyEntry>,
+}
+
+/// Checked keys: frames relative to the first key (which is frame 0), one pose per key.
+#[derive(Debug, PartialEq)]
+pub struct Keys {
+    /// Key frames, strictly increasing, the first 0.
+    pub frames: Vec<usize>,
+    /// Frame of the first key in the file (the output starts there).
+    pub offset: usize,
+    /// One pose per key.
+    pub poses: Vec<Vec<f64>>,
+    /// Frames per second, if the file gives it.
+    pub fps: Option<f64>,
+}
+
+/// Parses and checks the text of a keys file for a model of `dof_names` degrees of freedom.
+/// Errors say what is wrong and how to fix it (without the file name).
+pub fn parse_keys(text: &str, dof_names: &[String]) -> Result<Keys, String> {
+    let file = parse_file(text)?;
+    if file.bvh.is_some() || file.keys.iter().any(|k| k.joints.is_some() || k.source_frame.is_some()) {
+        return Err(
+            "\"bvh\", \"source_frame\" and \"joints\" are for humanoid models; this model completes the lamp's \
+                    degrees of freedom: give each key a \"pose\""
+                .into(),
+        );
+    }
+    let d = dof_names.len();
+    if let Some(names) = &file.dof_names
+        && names != dof_names
+    {
+        return Err(format!(
+            "the keys are for the degrees of freedom {names:?}, but the model was trained on {dof_names:?}: this \
+             keys file is for another character"
+        ));
+    }
+    for (i, k) in file.keys.iter().enumerate() {
+        let Some(pose) = &k.pose else {
+            return Err(format!(
+                "key {i} (frame {}) has no \"pose\": give its {d} values ({})",
+                k.frame,
+                dof_names.join(", ")
+            ));
+        };
+        if pose.len() != d {
+            return Err(format!(
+                "key {i} (frame {}) has {} values; the model completes {d} degrees of freedom: {}",
+                k.frame,
+                pose.len(),
+                dof_names.join(", ")
+            ));
+        }
+        if let Some(j) = pose.iter().position(|v| !v.is_finite()) {
+            return Err(format!("key {i} (frame {}): {} is {}, not a finite number", k.frame, dof_names[j], pose[j]));
+        }
+    }
+    let offset = file.keys[0].frame;
+    Ok(Keys {
+        frames: file.keys.iter().map(|k| k.frame - offset).collect(),
+        offset,
+        poses: file.keys.into_iter().map(|k| k.pose.unwrap_or_default()).collect(),
+        fps: file.fps,
+    })
+}
+
+/// Checked humanoid keys ([`parse_humanoid_keys`]).
+#[derive(Debug, PartialEq)]
+pub struct HumanoidKeys {
+    /// The BVH holding the key poses, as the file names it (relative to the keys file).
+    pub bvh: PathBuf,
+    /// Frame of the first key in the file (the output starts there).
+    pub offset: usize,
+    /// The keys, frames relative to the first.
+    pub keys: Vec<crate::humanoid::HumanoidKey>,
+    /// Frames per second, if the file gives it.
+    pub fps: Option<f64>,
+}
+
+/// Parses and checks a humanoid keys file for a model of joints `joint_names`: the poses come
+/// from the file's `bvh`, a key's `joints` (names, `"root"` for the root position) fix only
+/// those parts of its pose.
+pub fn parse_humanoid_keys(text: &str, joint_names: &[String]) -> Result<HumanoidKeys, String> {
+    let file = parse_file(text)?;
+    let Some(bvh) = file.bvh.clone() else {
+        return Err(
+            "a humanoid model takes its key poses from a BVH: add \"bvh\": \"POSES.bvh\" (relative to the keys \
+                    file) and give each key the \"frame\" (and \"source_frame\") of its pose there"
+                .into(),
+        );
+    };
+    if file.dof_names.is_some() || file.keys.iter().any(|k| k.pose.is_some()) {
+        return Err("\"pose\" and \"dof_names\" are for the lamp; a humanoid key's pose comes from the \"bvh\" (its \
+                    \"source_frame\")"
+            .into());
+    }
+    let offset = file.keys[0].frame;
+    let groups = 1 + joint_names.len();
+    let mut keys = Vec::with_capacity(file.keys.len());
+    for (i, k) in file.keys.iter().enumerate() {
+        let fixed = match &k.joints {
+            None => None,
+            Some(names) => {
+                let mut m = vec![false; groups];
+                for n in names {
+                    let g = if n == "root" {
+                        0
+                    } else {
+                        1 + joint_names.iter().position(|j| j == n).ok_or_else(|| {
+                            format!(
+                                "key {i} (frame {}) fixes joint \"{n}\", which the model's skeleton does not have \
+                                 (joints: root, {}): this keys file is for another skeleton",
+                                k.frame,
+                                joint_names.join(", ")
+                            )
+                        })?
+                    };
+                    m[g] = true;
+                }
+                if !m.contains(&true) {
+                    return Err(format!(
+                        "key {i} (frame {}) fixes no joint: list at least one, or drop the key",
+                        k.frame
+                    ));
+                }
+                if i == 0 && m.contains(&false) {
+                    return Err(
+                        "the first key is the start pose: it must fix the whole pose (leave out \"joints\")".into()
+                    );
+                }
+                Some(m)
+            }
+        };
+        keys.push(crate::humanoid::HumanoidKey {
+            frame: k.frame - offset,
+            source: k.source_frame.unwrap_or(k.frame),
+            fixed,
+        });
+    }
+    Ok(HumanoidKeys { bvh, offset, keys, fps: file.fps })
+}
+
+/// Parses a keys file and checks what every model needs: format, version, fps, at least two
+/// keys in increasing frame order, `frames` consistent with the last key, the span.
+fn parse_file(text: &str) -> Result<KeysFile, String> {
+    let file: KeysFile = serde_json::from_str(text).map_err(|e| {
+        format!(
+            "not a keys file: {e} (expected {{\"format\": \"{KEYS_FORMAT}\", \"version\": 1, \"keys\": [{{\"frame\": 0, \
+             \"pose\": [...]}}, ...]}}; NaN and infinity are not JSON numbers, every value must be finite)"
+        )
+    })?;
+    if let Some(f) = &file.format
+        && f != KEYS_FORMAT
+    {
+        return Err(format!("format is \"{f}\", expected \"{KEYS_FORMAT}\""));
+    }
+    if let Some(v) = file.version
+        && v != 1
+    {
+        return Err(format!("keys file version {v} is not known to this zoo (it reads version 1): update zoo"));
+    }
+    if let Some(fps) = file.fps
+        && !(fps.is_finite() && fps > 0.0)
+    {
+        return Err(format!("fps {fps} must be a positive number"));
+    }
+    let n = file.keys.len();
+    if n < 2 {
+        return Err(format!(
+            "{n} key(s) given: completion needs at least 2 (the motion is filled in between the first and the last key)"
+        ));
+    }
+    for (i, k) in file.keys.iter().enumerate() {
+        if i > 0 && k.frame <= file.keys[i - 1].frame {
+            return Err(format!(
+                "key {i} is at frame {} but key {} is at frame {}: keys must be in increasing frame order, one key per \
+                 frame",
+                k.frame,
+                i - 1,
+                file.keys[i - 1].frame
+            ));
+        }
+    }
+    if let Some(len) = file.frames {
+        let last = file.keys[n - 1].frame;
+        if let Some((i, k)) = file.keys.iter().enumerate().find(|(_, k)| k.frame >= len) {
+            return Err(format!(
+                "key {i} is at frame {}, past the sequence of {len} frames (frames 0 to {}): move it inside or \
+                 raise \"frames\"",
+                k.frame,
+                len.saturating_sub(1)
+            ));
+        }
+        if last + 1 != len {
+            return Err(format!(
+                "the sequence has {len} frames but its last key is at frame {last}: the motion ends on the last key: \
+                 add a key at frame {} (or set \"frames\" to {})",
+                len - 1,
+                last + 1
+            ));
+        }
+    }
+    let offset = file.keys[0].frame;
+    let span = file.keys[n - 1].frame - offset;
+    if span >= MAX_FRAMES {
+        return Err(format!(
+            "the keys span {span} frames (frame {offset} to {}), past the {} frames zoo complete generates",
+            file.keys[n - 1].frame,
+            MAX_FRAMES
+        ));
+    }
+    Ok(file)
+}
+
+/// What `zoo complete` writes: the completion as a clip (`out`), and optionally as JSON, as
+/// global joint positions, and as a plot of every degree of freedom (lamp only).
+#[derive(Clone, Debug)]
+pub struct CompleteOptions {
+    /// Run folder of `zoo train arnn`.
+    pub model: PathBuf,
+    /// The keys file.
+    pub keys: PathBuf,
+    /// Output clip.
+    pub out: PathBuf,
+    /// Every completed pose (and the key misses) as JSON.
+    pub json: Option<PathBuf>,
+    /// Each degree of freedom over the frames with the keys, as a PNG (lamp only).
+    pub plot: Option<PathBuf>,
+    /// Keep a base that sinks below the ground where the network put it (lamp only).
+    pub no_ground: bool,
+    /// Frames per second of the output (`None`: the keys file's, else [`DEFAULT_FPS`]).
+    pub fps: Option<f64>,
+    /// The global joint positions of every completed frame (a positions file).
+    pub positions: Option<PathBuf>,
+}
+
+fn read_keys(path: &Path, dof_names: &[String]) -> ArnnResult<Keys> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("--keys {}: cannot read it", path.display()))?;
+    Ok(parse_keys(&text, dof_names).map_err(|e| Message(format!("--keys {}: {e}", path.display())))?)
+}
+
+/// Writes the positions file of the completed clip, when asked.
+fn write_positions(o: &CompleteOptions, clip: &zoo_motion::Clip, first_frame: usize) -> ArnnResult<()> {
+    let Some(p) = &o.positions else { return Ok(()) };
+    let extra = serde_json::json!({ "first_frame": first_frame });
+    let v = zoo_data::positions::clip_positions_json("complete", clip, extra);
+    zoo_data::positions::write(p, &v).with_context(|| format!("writing {}", p.display()))?;
+    Ok(())
+}
+
+/// Writes `value` as pretty JSON to `path` (atomically).
+fn write_json(path: &Path, value: &serde_json::Value) -> ArnnResult<()> {
+    let text = serde_json::to_string_pretty(value).context("JSON")?;
+    zoo_motion::atomic::write(path, text).with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+/// Completes the keys of `o` with the ARNN of its run folder and writes what `o` asks for;
+/// returns the summary the command prints.
+pub fn complete_command(o: &CompleteOptions) -> ArnnResult<String> {
+    let (model, norm) = crate::checkpoint::load(&o.model, &candle_core::Device::Cpu)
+        .with_context(|| format!("loading the ARNN in {}", o.model.display()))?;
+    match &model.config().skeleton {
+        Some(skeleton) => complete_humanoid(o, &model, &norm, &skeleton.names.clone()),
+        None => complete_lamp(o, &model, &norm),
+    }
+}
+
+/// The key misses of a lamp completion: the largest in position and in angle.
+fn lamp_misses(misses: &[Vec<f64>], dofs: usize) -> ((f64, usize, usize), (f64, usize, usize)) {
+    let worst = |range: std::ops::Range<usize>| {
+        misses
+            .iter()
+            .enumerate()
+            .flat_map(|(k, m)| range.clone().map(move |j| (m[j].abs(), k, j)))
+            .fold((0.0, 0, 0), |a, b| if b.0 > a.0 { b } else { a })
+    };
+    (worst(0..2), worst(2..dofs.max(2)))
+}
+
+/// `zoo complete` with the lamp's ARNN.
+fn complete_lamp(o: &CompleteOptions, model: &Arnn, norm: &Normalization) -> ArnnResult<String> {
+    let config = model.config();
+    let Some(lamp) = config.lamp.clone() else {
+        bail!("{}: the model has no lamp geometry in config.json (retrain it with `zoo train arnn`)", o.model.display())
+    };
+    let dof_names: Vec<String> = if config.dof_names.is_empty() {
+        (0..config.dofs).map(|i| format!("dof{i}")).collect()
+    } else {
+        config.dof_names.clone()
+    };
+    let keys = read_keys(&o.keys, &dof_names)?;
+    let fps = o.fps.or(keys.fps).unwrap_or(DEFAULT_FPS);
+    let mut frames = crate::complete(model, norm, &keys.frames, &keys.poses)?;
+    let lamp_dofs = config.dofs == crate::luxo::DOFS && dof_names == crate::luxo::DOF_NAMES;
+    let lift = if o.no_ground || !lamp_dofs { 0.0 } else { crate::eval::project_to_ground(&lamp, &mut frames) };
+    // Misses: the completed pose at each key frame against the key.
+    let misses: Vec<Vec<f64>> = keys
+        .frames
+        .iter()
+        .zip(&keys.poses)
+        .map(|(&f, p)| frames[f].iter().zip(p).map(|(y, x)| y - x).collect())
+        .collect();
+    let poses: Vec<LampPose> = frames
+        .iter()
+        .map(|f| <LampPose>::try_from(f.as_slice()))
+        .collect::<Result<_, _>>()
+        .map_err(|_| Message(format!("the model completes {} values per frame, not the lamp's 6", config.dofs)))?;
+    let clip = poses_to_clip(&poses, fps, &lamp);
+    zoo_data::clip_io::write(&clip, &o.out).with_context(|| format!("writing {}", o.out.display()))?;
+    write_positions(o, &clip, keys.offset)?;
+    if let Some(j) = &o.json {
+        write_json(
+            j,
+            &serde_json::json!({
+                "format": COMPLETION_FORMAT,
+                "version": 1,
+                "model": o.model,
+                "fps": fps,
+                "first_frame": keys.offset,
+                "dof_names": dof_names,
+                "key_frames": keys.frames,
+                "key_misses": misses,
+                "ground_lift": lift,
+                "frames": frames,
+            }),
+        )?;
+    }
+    if let Some(p) = &o.plot {
+        let keyed: Vec<(usize, Vec<f64>)> = keys.frames.iter().copied().zip(keys.poses.iter().cloned()).collect();
+        plot_dofs(p, &[DofSeries { frames: &frames, rgb: (31, 80, 180), width: 2.0 }], &keyed)?;
+    }
+    let ((pos, pk, pj), (ang, ak, aj)) = lamp_misses(&misses, config.dofs);
+    let mut s = String::new();
+    if lift > 0.0 {
+        s += &format!(
+            "the network's base sank up to {:.2} cm below the ground: lifted onto it (--no-ground keeps it)\n",
+            lift * 100.0
+        );
+    }
+    Ok(s + &format!(
+        "completed {} frames from {} keys ({} fps) into {}{}; largest key miss: {:.2} cm ({} at key {pk}), {:.2} deg \
+         ({} at key {ak})",
+        frames.len(),
+        keys.frames.len(),
+        fps,
+        o.out.display(),
+        o.json.as_ref().map(|j| format!(" and {}", j.display())).unwrap_or_default(),
+        pos * 100.0,
+        dof_names[pj],
+        ang.to_degrees(),
+        dof_names.get(aj).map_or("-", |s| s.as_str()),
+    ))
+}
+
+/// `zoo complete` with a humanoid ARNN: key poses from a BVH, partial keys, a clip out.
+fn complete_humanoid(
+    o: &CompleteOptions,
+    model: &Arnn,
+    norm: &Normalization,
+    joint_names: &[String],
+) -> ArnnResult<String> {
+    if o.plot.is_some() || o.no_ground {
+        bail!(
+            "--plot and --no-ground are for the lamp; look at a humanoid completion with `zoo render {}`",
+            o.out.display()
+        );
+    }
+    let text =
+        std::fs::read_to_string(&o.keys).with_context(|| format!("--keys {}: cannot read it", o.keys.display()))?;
+    let keys =
+        parse_humanoid_keys(&text, joint_names).map_err(|e| Message(format!("--keys {}: {e}", o.keys.display())))?;
+    let bvh = o.keys.parent().unwrap_or(Path::new(".")).join(&keys.bvh);
+    let source = zoo_data::clip_io::read_model_clip(&bvh)
+        .with_context(|| format!("--keys {}: reading its bvh {}", o.keys.display(), bvh.display()))?;
+    let mut done = crate::humanoid::complete_clip(model, norm, &source, &keys.keys)
+        .with_context(|| format!("--keys {}", o.keys.display()))?;
+    if let Some(fps) = o.fps.or(keys.fps) {
+        done.clip.frame_time = 1.0 / fps;
+    }
+    zoo_data::clip_io::write(&done.clip, &o.out).with_context(|| format!("writing {}", o.out.display()))?;
+    write_positions(o, &done.clip, keys.offset)?;
+    let (deg, key, joint) = done.angle_miss;
+    if let Some(j) = &o.json {
+        write_json(
+            j,
+            &serde_json::json!({
+                "format": COMPLETION_FORMAT,
+                "version": 1,
+                "model": o.model,
+                "fps": 1.0 / done.clip.frame_time,
+                "first_frame": keys.offset,
+                "key_frames": keys.keys.iter().map(|k| k.frame).collect::<Vec<_>>(),
+                "root_miss": done.root_miss,
+                "angle_miss_degrees": deg,
+                "frames": done.clip.frames(),
+            }),
+        )?;
+    }
+    Ok(format!(
+        "completed {} frames from {} keys ({} partial) into {}{}; largest key miss: root {:.2} (clip units), {:.2} deg \
+         ({} at key {key})",
+        done.clip.frames(),
+        keys.keys.len(),
+        keys.keys.iter().filter(|k| k.fixed.as_ref().is_some_and(|f| f.contains(&false))).count(),
+        o.out.display(),
+        o.json.as_ref().map(|j| format!(" and {}", j.display())).unwrap_or_default(),
+        done.root_miss,
+        deg,
+        joint_names.get(joint).map_or("-", |s| s.as_str()),
+    ))
+}
+
+/// One curve of [`plot_dofs`]: a pose per frame and its colour.
+pub struct DofSeries<'a> {
+    /// Poses, one per frame from frame 0.
+    pub frames: &'a [Vec<f64>],
+    /// Colour (red, green, blue).
+    pub rgb: (u8, u8, u8),
+    /// Line width in pixels.
+    pub width: f32,
+}
+
+/// Plots each degree of freedom over the frames, one panel per degree of freedom (two columns,
+/// in pose order, each scaled to its own range), like the paper's Figure 8: the curves of
+/// `series` in order (later ones on top) and the keys as circles. 960 x 720 pixels.
+pub fn plot_dofs(path: &Path, series: &[DofSeries], keys: &[(usize, Vec<f64>)]) -> ArnnResult<()> {
+    use tiny_skia::{Color, Paint, PathBuilder, Pixmap, Stroke, Transform};
+    let d = series.first().and_then(|s| s.frames.first()).map_or(0, |f| f.len());
+    let frames = series.iter().map(|s| s.frames.len()).max().unwrap_or(0);
+    if d == 0 || frames < 2 {
+        bail!("{}: nothing to plot", path.display());
+    }
+    let (w, h, cols) = (960u32, 720u32, 2usize);
+    let rows = d.div_ceil(cols);
+    let (pw, ph, m) = (w as f32 / cols as f32, h as f32 / rows as f32, 14.0f32);
+    let mut pm = Pixmap::new(w, h).context("cannot allocate the plot")?;
+    pm.fill(Color::WHITE);
+    let mut paint = Paint { anti_alias: true, ..Paint::default() };
+    for j in 0..d {
+        let (x0, y0) = ((j % cols) as f32 * pw, (j / cols) as f32 * ph);
+        let values = series.iter().flat_map(|s| s.frames.iter().map(|f| f[j])).chain(keys.iter().map(|k| k.1[j]));
+        let (lo, hi) =
+            values.filter(|v| v.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
+        let (lo, hi) = if hi - lo < 1e-9 { (lo - 0.5, hi + 0.5) } else { (lo, hi) };
+        let x = |t: usize| x0 + m + (pw - 2.0 * m) * t as f32 / (frames - 1) as f32;
+        let y = |v: f64| y0 + ph - m - (ph - 2.0 * m) * ((v - lo) / (hi - lo)) as f32;
+        // Panel frame.
+        paint.set_color_rgba8(190, 190, 190, 255);
+        if let Some(r) = tiny_skia::Rect::from_xywh(x0 + m, y0 + m, pw - 2.0 * m, ph - 2.0 * m) {
+            let p = PathBuilder::from_rect(r);
+            pm.stroke_path(&p, &paint, &Stroke::default(), Transform::identity(), None);
+        }
+        for s in series {
+            let mut pb = PathBuilder::new();
+            for (t, f) in s.frames.iter().enumerate().filter(|(_, f)| f[j].is_finite()) {
+                if pb.is_empty() { pb.move_to(x(t), y(f[j])) } else { pb.line_to(x(t), y(f[j])) }
+            }
+            paint.set_color_rgba8(s.rgb.0, s.rgb.1, s.rgb.2, 255);
+            if let Some(p) = pb.finish() {
+                pm.stroke_path(
+                    &p,
+                    &paint,
+                    &Stroke { width: s.width, ..Stroke::default() },
+                    Transform::identity(),
+                    None,
+                );
+            }
+        }
+        paint.set_color_rgba8(0, 110, 40, 255);
+        for (t, pose) in keys {
+            if let Some(c) = PathBuilder::from_circle(x(*t), y(pose[j]), 5.0) {
+                pm.stroke_path(&c, &paint, &Stroke { width: 2.0, ..Stroke::default() }, Transform::identity(), None);
+            }
+        }
+    }
+    let png = pm.encode_png().map_err(|e| Message(format!("{}: cannot encode the PNG: {e}", path.display())))?;
+    zoo_motion::atomic::write(path, png).with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn names() -> Vec<String> {
+        crate::luxo::DOF_NAMES.iter().map(|s| s.to_string()).collect()
+    }
+
+    #[test]
+    fn keys_parse_and_start_at_frame_zero() {
+        let text = r#"{"format": "zoo-arnn-keys", "version": 1, "fps": 30,
+            "keys": [{"frame": 5, "pose": [0, 0.02, 0, 0.5, -1.1, -1.2]}, {"frame": 29, "pose": [0.4, 0.02, 0, 0.5, -1.1, -1.2]}]}"#;
+        let k = parse_keys(text, &names()).unwrap();
+        assert_eq!((k.frames, k.offset, k.fps), (vec![0, 24], 5, Some(30.0)));
+    }
+
+    #[test]
+    fn humanoid_keys_name_joints_and_refuse_lamp_fields() {
+        let joints: Vec<String> = ["Hips", "Spine", "Head"].iter().map(|s| s.to_string()).collect();
+        let k = parse_humanoid_keys(
+            r#"{"bvh": "a.bvh", "keys": [{"frame": 4}, {"frame": 10, "source_frame": 50, "joints": ["root", "Head"]},
+                {"frame": 20}]}"#,
+            &joints,
+        )
+        .unwrap();
+        assert_eq!((k.bvh, k.offset), (PathBuf::from("a.bvh"), 4));
+        assert_eq!(k.keys.iter().map(|k| (k.frame, k.source)).collect::<Vec<_>>(), [(0, 4), (6, 50), (16, 20)]);
+        assert_eq!(k.keys[1].fixed, Some(vec![true, false, false, true]));
+        assert_eq!((k.keys[0].fixed.clone(), k.keys[2].fixed.clone()), (None, None));
+        let err = |t: &str| parse_humanoid_keys(t, &joints).unwrap_err();
+        assert!(err(r#"{"keys": [{"frame": 0}, {"frame": 5}]}"#).contains("add \"bvh\""));
+        assert!(
+            err(r#"{"bvh": "a.bvh", "keys": [{"frame": 0, "pose": [1]}, {"frame": 5}]}"#).contains("are for the lamp")
+        );
+        assert!(
+            err(r#"{"bvh": "a.bvh", "keys": [{"frame": 0}, {"frame": 5, "joints": []}]}"#).contains("fixes no joint")
+        );
+        assert!(
+            err(r#"{"bvh": "a.bvh", "keys": [{"frame": 0, "joints": ["Hips"]}, {"frame": 5}]}"#).contains("start pose")
+        );
+        assert!(
+            err(r#"{"bvh": "a.bvh", "keys": [{"frame": 0}, {"frame": 5, "joints": ["Tail"]}]}"#)
+                .contains("another skeleton")
+        );
+        // The lamp refuses humanoid fields.
+        let e = parse_keys(r#"{"bvh": "a.bvh", "keys": [{"frame": 0}, {"frame": 5}]}"#, &names()).unwrap_err();
+        assert!(e.contains("are for humanoid models"), "{e}");
+    }
+
+    #[test]
+    fn bad_keys_are_named() {
+        let pose = "[0, 0.02, 0, 0.5, -1.1, -1.2]";
+        let err = |t: String| parse_keys(&t, &names()).unwrap_err();
+        let e = err(format!(r#"{{"keys": [{{"frame": 0, "pose": {pose}}}]}}"#));
+        assert!(e.contains("1 key(s) given: completion needs at least 2"), "{e}");
+        let e = err(format!(r#"{{"keys": [{{"frame": 9, "pose": {pose}}}, {{"frame": 3, "pose": {pose}}}]}}"#));
+        assert!(e.contains("key 1 is at frame 3 but key 0 is at frame 9"), "{e}");
+        let e = err(format!(r#"{{"keys": [{{"frame": 0, "pose": {pose}}}, {{"frame": 3, "pose": [1, 2]}}]}}"#));
+        assert!(e.contains("key 1 (frame 3) has 2 values; the model completes 6"), "{e}");
+        let e = err(format!(
+            r#"{{"keys": [{{"frame": 0, "pose": {pose}}}, {{"frame": 3, "pose": [NaN, 0, 0, 0, 0, 0]}}]}}"#
+        ));
+        assert!(e.contains("not a keys file") && e.contains("finite"), "{e}");
+        let e = err(format!(
+            r#"{{"dof_names": ["a"], "keys": [{{"frame": 0, "pose": {pose}}}, {{"frame": 5, "pose": {pose}}}]}}"#
+        ));
+        assert!(e.contains("another character"), "{e}");
+        let e = err(format!(r#"{{"keys": [{{"frame": 0, "pose": {pose}}}, {{"frame": 300000, "pose": {pose}}}]}}"#));
+        assert!(e.contains("past the 100000 frames"), "{e}");
+        let e = err(format!(
+            r#"{{"frames": 10, "keys": [{{"frame": 0, "pose": {pose}}}, {{"frame": 10, "pose": {pose}}}]}}"#
+        ));
+        assert!(e.contains("key 1 is at frame 10, past the sequence of 10 frames (frames 0 to 9)"), "{e}");
+        let k = parse_keys(
+            &format!(r#"{{"frames": 11, "keys": [{{"frame": 0, "pose": {pose}}}, {{"frame": 10, "pose": {pose}}}]}}"#),
+            &names(),
+        )
+        .unwrap();
+        assert_eq!(k.frames, vec![0, 10]);
+    }
+}

@@ -1,0 +1,144 @@
+//! What every training command shares (`zoo train rtn|rmr|rnn-gmm|arnn`): the run folder
+//! checked before any data is loaded, the thread count, and the closing line.
+
+use crate::checkpoint;
+use crate::error::TrainError;
+use crate::train_loop::{self, TrainState};
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// The options every training command takes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunSpec {
+    /// Run folder of a fresh run.
+    pub out: PathBuf,
+    /// Continue the run in this folder instead (its config is kept; `epochs` is the new total).
+    pub resume: Option<PathBuf>,
+    /// Replace the run already in `out` (its files are deleted before training).
+    pub overwrite: bool,
+    /// Epochs to train (the total of a resumed run).
+    pub epochs: usize,
+    /// Stop after this many minutes (the epoch in progress finishes first).
+    pub time_limit_minutes: Option<f64>,
+    /// Seed of the data made in memory and of the trainer.
+    pub seed: u64,
+    /// Data-parallel training threads (`None`: the cores available).
+    pub threads: Option<usize>,
+}
+
+impl RunSpec {
+    /// The time limit as a duration (a limit too large for a `Duration` is no limit).
+    pub fn time_limit(&self) -> Option<Duration> {
+        self.time_limit_minutes.and_then(|m| Duration::try_from_secs_f64(m * 60.0).ok())
+    }
+
+    /// The thread count of the run: `threads`, else the cores available to the process.
+    pub fn thread_count(&self) -> usize {
+        default_threads(self.threads)
+    }
+}
+
+/// `threads`, else the cores available to the process.
+pub fn default_threads(threads: Option<usize>) -> usize {
+    threads.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1))
+}
+
+/// The files and folders every run writes (what `--overwrite` deletes), before a model's own.
+pub const COMMON_RUN_FILES: [&str; 9] = [
+    checkpoint::CONFIG_FILE,
+    checkpoint::WEIGHTS_FILE,
+    checkpoint::STATS_FILE,
+    checkpoint::OPTIMIZER_FILE,
+    checkpoint::RNG_FILE,
+    checkpoint::TRAIN_STATE_FILE,
+    checkpoint::SUMMARY_FILE,
+    checkpoint::LOSS_CURVE_FILE,
+    checkpoint::LAST_DIR,
+];
+
+/// Whether `dir` holds (part of) a run: a model, a state or a `last/` checkpoint.
+fn holds_run(dir: &Path) -> bool {
+    [checkpoint::CONFIG_FILE, checkpoint::WEIGHTS_FILE, checkpoint::TRAIN_STATE_FILE, checkpoint::LAST_DIR]
+        .iter()
+        .any(|f| dir.join(f).exists())
+}
+
+/// Creates `dir` (an option's output folder) if needed and checks, before the long work, that
+/// files can be written in it.
+pub fn writable_dir(option: &str, dir: &Path) -> Result<(), TrainError> {
+    let fail = |what: &str, e: std::io::Error| TrainError::Config(format!("{option} {}: {what}: {e}", dir.display()));
+    if dir.exists() && !dir.is_dir() {
+        return Err(TrainError::Config(format!("{option} {}: is a file, not a folder", dir.display())));
+    }
+    std::fs::create_dir_all(dir).map_err(|e| fail("cannot create the folder", e))?;
+    let probe = dir.join(format!(".zoo-write-test-{}", std::process::id()));
+    std::fs::write(&probe, b"").map_err(|e| fail("cannot write in this folder", e))?;
+    std::fs::remove_file(&probe).map_err(|e| fail(&format!("cannot remove {}", probe.display()), e))
+}
+
+/// The run folder, checked before any data is loaded: a fresh run never replaces a trained one
+/// unless `overwrite` says so (then the files and folders `run_files` are deleted), a resumed
+/// run must be a run folder that `check_resume` accepts, and the folder must be writable.
+pub fn prepare(
+    spec: &RunSpec,
+    run_files: &[&str],
+    check_resume: impl FnOnce(&Path) -> Result<(), TrainError>,
+) -> Result<PathBuf, TrainError> {
+    if let Some(dir) = &spec.resume {
+        if !dir.is_dir() {
+            return Err(TrainError::Config(format!(
+                "--resume {}: no such folder (start a new run with --out instead)",
+                dir.display()
+            )));
+        }
+        train_loop::read_state(dir)?;
+        check_resume(dir)?;
+        writable_dir("--resume", dir)?;
+        return Ok(dir.clone());
+    }
+    let out = &spec.out;
+    if holds_run(out) {
+        if !spec.overwrite {
+            let what = match train_loop::read_state(out).ok() {
+                Some(s) if s.epoch > 0 => format!(
+                    "a run trained for {} epochs (best validation loss {:.5} at epoch {})",
+                    s.epoch,
+                    s.best_valid.unwrap_or(f64::NAN),
+                    s.best_epoch
+                ),
+                _ => "a run".to_string(),
+            };
+            return Err(TrainError::Config(format!(
+                "--out {} already holds {what}: continue it with `--resume {0}`, replace it with --overwrite, or \
+                 choose another --out",
+                out.display()
+            )));
+        }
+        for name in run_files {
+            let p = out.join(name);
+            let removed = if p.is_dir() {
+                std::fs::remove_dir_all(&p)
+            } else if p.exists() {
+                std::fs::remove_file(&p)
+            } else {
+                Ok(())
+            };
+            removed.map_err(|e| TrainError::Config(format!("--overwrite: cannot delete {}: {e}", p.display())))?;
+        }
+        println!("--overwrite: deleted the run in {}", out.display());
+    }
+    writable_dir("--out", out)?;
+    Ok(out.clone())
+}
+
+/// The closing line of a training stage: epochs, time, the best validation loss, the folder.
+pub fn done_line(state: &TrainState, out: &Path) -> String {
+    format!(
+        "done: {} epochs in {:.1} min, best valid loss {:.5} at epoch {}; model in {}",
+        state.epoch,
+        state.seconds / 60.0,
+        state.best_valid.unwrap_or(f64::NAN),
+        state.best_epoch,
+        out.display()
+    )
+}
