@@ -20,6 +20,7 @@ pub mod render;
 pub mod report;
 pub mod retarget;
 pub(crate) mod scene;
+pub mod stats;
 pub mod synth;
 pub mod terrain;
 

@@ -105,12 +105,13 @@ pub fn write(map: &Heightmap, path: &Path) -> Result<(), TerrainFileError> {
         data: data_path.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
     };
     let text = serde_json::to_string_pretty(&header).expect("header serialises");
-    std::fs::write(path, text).map_err(io_err(path))?;
     let mut bytes = Vec::with_capacity(map.heights.len() * 4);
     for h in &map.heights {
         bytes.extend_from_slice(&h.to_le_bytes());
     }
-    std::fs::write(&data_path, bytes).map_err(io_err(&data_path))
+    // The heights before the header that names them: a reader never finds a header without them.
+    zoo_motion::atomic::write(&data_path, bytes).map_err(io_err(&data_path))?;
+    zoo_motion::atomic::write(path, text).map_err(io_err(path))
 }
 
 /// Reads a heightmap written by [`write`] (give the `.json` header).

@@ -21,6 +21,7 @@
 
 pub mod augment;
 pub mod checkpoint;
+pub mod command;
 pub mod config;
 pub mod error;
 pub mod export;

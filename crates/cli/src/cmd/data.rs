@@ -1,16 +1,9 @@
 //! `zoo data ...`: dataset statistics and synthetic data.
 
-use anyhow::Context;
 use clap::{Args, Subcommand};
-use glam::DVec3;
 use indicatif::{ProgressBar, ProgressStyle};
-use rayon::prelude::*;
-use serde::Serialize;
 use std::path::PathBuf;
-use std::time::Instant;
 use zoo_data::synth::{self, SynthConfig};
-use zoo_data::{dataset, metrics};
-use zoo_motion::Skeleton;
 
 /// `zoo data` subcommands.
 #[derive(Subcommand)]
@@ -115,194 +108,18 @@ fn convert(a: ConvertArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Statistics printed by `zoo data stats` (and written with `--json`).
-#[derive(Serialize)]
-pub struct DataStats {
-    /// Number of clips.
-    pub clips: usize,
-    /// Total frames.
-    pub frames: usize,
-    /// Total duration in seconds.
-    pub duration_s: f64,
-    /// Distinct frame rates found.
-    pub fps: Vec<f64>,
-    /// Joints per frame (after dropping a dummy root).
-    pub joints: usize,
-    /// Joint names.
-    pub joint_names: Vec<String>,
-    /// Parent index per joint (-1 for the root).
-    pub parents: Vec<i32>,
-    /// Horizontal root speed percentiles over all frames (units/s): p5, p25, p50, p75, p95;
-    /// `null` when no clip has two frames.
-    pub root_speed: Option<RootSpeed>,
-    /// Foot joints used for the skate measure (empty: none found, no foot figures).
-    pub foot_joints: Vec<String>,
-    /// Planted height of each foot joint (5th percentile of its height).
-    pub planted_heights: Vec<f64>,
-    /// The data's own foot skate (units per frame, `BENCHMARK.md` definition, all frames; heights
-    /// above the clip's terrain when a `NAME.terrain.json` lies beside it); `null` without feet
-    /// or without two consecutive frames.
-    pub foot_skate: Option<f64>,
-    /// Lowest foot-joint height over all frames (above the terrain when there is one): how far
-    /// feet sink below the ground if negative; `null` without feet or frames.
-    pub min_foot_height: Option<f64>,
-    /// Largest change of a bone's length within a clip (0 for rigid skeletons).
-    pub max_bone_length_change: f64,
-    /// Seconds taken.
-    pub seconds: f64,
-}
-
-/// Percentiles of the horizontal root speed.
-#[derive(Serialize)]
-pub struct RootSpeed {
-    /// 5th percentile.
-    pub p5: f64,
-    /// 25th percentile.
-    pub p25: f64,
-    /// Median.
-    pub p50: f64,
-    /// 75th percentile.
-    pub p75: f64,
-    /// 95th percentile.
-    pub p95: f64,
-}
-
+/// `zoo data stats` ([`zoo_data::stats`]).
 fn stats(a: StatsArgs) -> anyhow::Result<()> {
     if let Some(path) = &a.json {
         crate::cmd::check_output_file("--json", path)?;
     }
-    let start = Instant::now();
     let clips = crate::cmd::load_dataset(&a.path, a.glob.as_deref(), a.skip_invalid)?;
-    let skeleton = clips[0].clip.skeleton.clone();
-    let j = skeleton.len();
-    let feet = metrics::foot_joints(&skeleton.names);
-    // Per clip: global positions of the feet and the root's horizontal speed.
-    struct PerClip {
-        feet: Vec<DVec3>,
-        speed: Vec<f64>,
-        bone_drift: f64,
-    }
-    let per: Vec<PerClip> = clips
-        .par_iter()
-        .map(|c| {
-            let (_, gp) = c.clip.global();
-            let frames = c.clip.frames();
-            // Heights are measured above the clip's own terrain when it has a heightmap.
-            let ground = match zoo_data::terrain::sibling_of(&c.path) {
-                Some(t) => Some(zoo_data::terrain::read(&t)?),
-                None => None,
-            };
-            let mut fp = Vec::with_capacity(frames * feet.len());
-            for f in 0..frames {
-                fp.extend(feet.iter().map(|&k| {
-                    let p = gp[f * j + k];
-                    DVec3::new(p.x, p.y - ground.as_ref().map_or(0.0, |g| g.height(p.x, p.z)), p.z)
-                }));
-            }
-            let speed = (1..frames)
-                .map(|f| {
-                    let d = gp[f * j] - gp[(f - 1) * j];
-                    (d.x * d.x + d.z * d.z).sqrt() / c.clip.frame_time
-                })
-                .collect();
-            // Largest change of any bone's length (global joint distance) from frame 0.
-            let mut bone_drift: f64 = 0.0;
-            for k in (1..j).filter(|_| frames > 0) {
-                let p = c.clip.skeleton.parents[k].unwrap_or(0);
-                let len0 = (gp[k] - gp[p]).length();
-                for f in 1..frames {
-                    bone_drift = bone_drift.max(((gp[f * j + k] - gp[f * j + p]).length() - len0).abs());
-                }
-            }
-            Ok(PerClip { feet: fp, speed, bone_drift })
-        })
-        .collect::<anyhow::Result<_>>()?;
-    let planted: Vec<f64> = (0..feet.len())
-        .map(|k| {
-            let mut h: Vec<f64> =
-                per.iter().flat_map(|p| p.feet.iter().skip(k).step_by(feet.len()).map(|v| v.y)).collect();
-            dataset::percentile(&mut h, 5.0)
-        })
-        .collect();
-    let fs = metrics::FootSkate { joints: (0..feet.len()).collect(), planted: planted.clone(), scale: 2.5 };
-    let (mut skate_sum, mut skate_n) = (0.0, 0usize);
-    for (p, c) in per.iter().zip(&clips) {
-        let frames = c.clip.frames();
-        if frames > 1 && !feet.is_empty() {
-            skate_sum += fs.skate(&p.feet, frames, feet.len()) * ((frames - 1) * feet.len()) as f64;
-            skate_n += (frames - 1) * feet.len();
-        }
-    }
-    let mut speeds: Vec<f64> = per.iter().flat_map(|p| p.speed.iter().copied()).collect();
-    let root_speed = (!speeds.is_empty()).then(|| {
-        let mut pct = |q| dataset::percentile(&mut speeds, q);
-        RootSpeed { p5: pct(5.0), p25: pct(25.0), p50: pct(50.0), p75: pct(75.0), p95: pct(95.0) }
-    });
-    let mut fps: Vec<f64> = clips.iter().map(|c| (c.clip.fps() * 1000.0).round() / 1000.0).collect();
-    fps.sort_by(f64::total_cmp);
-    fps.dedup();
-    let frames: usize = clips.iter().map(|c| c.clip.frames()).sum();
-    let out = DataStats {
-        clips: clips.len(),
-        frames,
-        duration_s: clips.iter().map(|c| c.clip.duration()).sum(),
-        fps,
-        joints: j,
-        joint_names: skeleton.names.clone(),
-        parents: skeleton.parents_i32(),
-        root_speed,
-        foot_joints: feet.iter().map(|&k| skeleton.names[k].clone()).collect(),
-        planted_heights: planted,
-        foot_skate: (skate_n > 0).then(|| skate_sum / skate_n as f64),
-        min_foot_height: per.iter().flat_map(|p| p.feet.iter().map(|v| v.y)).reduce(f64::min),
-        max_bone_length_change: per.iter().map(|p| p.bone_drift).fold(0.0, f64::max),
-        seconds: start.elapsed().as_secs_f64(),
-    };
-    print_stats(&out, &skeleton);
+    let out = zoo_data::stats::stats(&clips)?;
+    print!("{}", out.text(&clips[0].clip.skeleton));
     if let Some(path) = &a.json {
-        std::fs::write(path, serde_json::to_string_pretty(&out)?)
-            .with_context(|| format!("writing {}", path.display()))?;
+        crate::cmd::write_json(path, &out)?;
     }
     Ok(())
-}
-
-fn print_stats(s: &DataStats, skeleton: &Skeleton) {
-    println!("clips      {}", s.clips);
-    println!("frames     {}", s.frames);
-    println!("duration   {:.1} s ({:.1} min)", s.duration_s, s.duration_s / 60.0);
-    println!("fps        {}", s.fps.iter().map(|f| format!("{f}")).collect::<Vec<_>>().join(", "));
-    println!("joints     {}", s.joints);
-    print_tree(skeleton, 0, 1);
-    match &s.root_speed {
-        Some(r) => println!(
-            "root speed (units/s)  p5 {:.1}  p25 {:.1}  median {:.1}  p75 {:.1}  p95 {:.1}",
-            r.p5, r.p25, r.p50, r.p75, r.p95
-        ),
-        None => println!("root speed            not measured: no clip has two frames"),
-    }
-    for (n, h) in s.foot_joints.iter().zip(&s.planted_heights) {
-        println!("planted height  {n:<10} {h:.2}");
-    }
-    if s.foot_joints.is_empty() {
-        println!("foot skate            not measured: no joint name contains `foot` or `toe`");
-    } else {
-        match s.foot_skate {
-            Some(v) => println!("foot skate (units/frame, all frames)  {v:.4}"),
-            None => println!("foot skate            not measured: no clip has two frames"),
-        }
-        if let Some(h) = s.min_foot_height {
-            println!("lowest foot joint height              {h:.2}");
-        }
-    }
-    println!("largest bone length change            {:.2e}", s.max_bone_length_change);
-    println!("done in {:.2} s", s.seconds);
-}
-
-fn print_tree(s: &Skeleton, j: usize, depth: usize) {
-    println!("{}{}", "  ".repeat(depth), s.names[j]);
-    for c in s.children(j) {
-        print_tree(s, c, depth + 1);
-    }
 }
 
 fn run_synth(a: SynthArgs) -> anyhow::Result<()> {

@@ -1,7 +1,6 @@
 //! `zoo decompress`: temporal super-resolution (RTN sec. 7.4), rebuilding a clip from its
 //! first 10 frames and one keyframe per interval by chaining RTN transitions.
 
-use crate::cmd::transition::read_clip;
 use anyhow::Context;
 use clap::Args;
 use std::path::PathBuf;
@@ -26,12 +25,12 @@ pub struct DecompressArgs {
 /// Runs `zoo decompress`.
 pub fn run(a: DecompressArgs) -> anyhow::Result<()> {
     crate::cmd::check_output_file("--out", &a.out)?;
-    let clip = read_clip(&a.input)?;
+    let clip = zoo_data::clip_io::read_model_clip(&a.input)?;
     let interval = a.interval.unwrap_or_else(|| clip.fps().round() as usize).max(1);
     let j = clip.joints();
     let keys = pipeline::keyframe_inputs(&clip, interval).with_context(|| format!("{}", a.input.display()))?;
     let (model, stats) = zoo_rtn::checkpoint::load_run(&a.model, "decompress")?;
-    crate::cmd::transition::check_skeleton(&a.model, model.config(), &clip, &a.input)?;
+    zoo_rtn::command::check_skeleton(&a.model, model.config(), &clip, &a.input)?;
     let y = model.super_resolve(&stats, &keys.context, &keys.keys, interval).context("rebuilding the clip")?;
     let frames = y.len() / (3 * j);
     let out = pipeline::rebuild_from_keyframes(&clip, interval, &y);

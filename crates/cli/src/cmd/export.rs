@@ -10,10 +10,9 @@
 //! The run folder's `config.json` names its model (`"model"`; folders written before the field
 //! existed are RTN folders); each kind's exporter lives beside its candle model.
 
-use crate::cmd::transition::read_clip;
 use anyhow::{Context, bail};
 use clap::Args;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use zoo_export::OnnxModel;
 use zoo_rtn::export::{RtnExportOptions, export_rtn_dir};
 
@@ -57,7 +56,7 @@ pub struct ExportArgs {
 }
 
 /// Writes the reference vectors of `model` (`zoo_runtime::reference`) to `--reference`, if
-/// given: the file as the runtime loads it, written to a temporary name and renamed.
+/// given: the file as the runtime loads it.
 fn write_reference(a: &ExportArgs, model: &OnnxModel) -> anyhow::Result<()> {
     use zoo_runtime::reference::{REFERENCE_SEED, reference_vectors};
     let Some(path) = &a.reference else { return Ok(()) };
@@ -66,9 +65,8 @@ fn write_reference(a: &ExportArgs, model: &OnnxModel) -> anyhow::Result<()> {
     let vectors = reference_vectors(&loaded, REFERENCE_SEED)
         .with_context(|| format!("--reference {}: computing the reference vectors", path.display()))?;
     let cases = vectors.transition.len() + vectors.keyframes.len() + vectors.stitch.len() + vectors.synthesis.len();
-    let tmp = path.with_file_name(format!(".{}.tmp", path.file_name().unwrap_or_default().to_string_lossy()));
-    std::fs::write(&tmp, serde_json::to_string(&vectors)?).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))?;
+    zoo_motion::atomic::write(path, serde_json::to_string(&vectors)?)
+        .with_context(|| format!("writing {}", path.display()))?;
     let check = if a.portable {
         String::new()
     } else {
@@ -95,22 +93,6 @@ const EXPORT_KINDS: [&str; 4] = [
     zoo_rnngmm::export::MODEL_KIND,
     zoo_arnn::export::MODEL_KIND,
 ];
-
-/// The `"model"` field of a run folder's `config.json` (`None` when absent: an RTN folder).
-fn model_kind(config_path: &Path) -> anyhow::Result<Option<String>> {
-    let text = std::fs::read_to_string(config_path).with_context(|| format!("reading {}", config_path.display()))?;
-    let config: serde_json::Value =
-        serde_json::from_str(&text).with_context(|| format!("{} is not JSON", config_path.display()))?;
-    match config.get("model") {
-        None => Ok(None),
-        Some(serde_json::Value::String(kind)) => Ok(Some(kind.clone())),
-        Some(other) => bail!(
-            "{}: \"model\" must be a model kind string (one of {}), found {other}",
-            config_path.display(),
-            EXPORT_KINDS.join(", ")
-        ),
-    }
-}
 
 /// Lowers `model` to the portable profile and writes it to `a.out` with its companion files;
 /// `frames`: the fixed size of a `frames` dimension (window graphs).
@@ -164,12 +146,66 @@ fn write_portable(a: &ExportArgs, model: &OnnxModel, what: &str, frames: Option<
     Ok(())
 }
 
-/// Runs `zoo export`.
-pub fn run(a: ExportArgs) -> anyhow::Result<()> {
-    crate::cmd::check_output_file("--out", &a.out)?;
-    if let Some(r) = &a.reference {
-        crate::cmd::check_output_file("--reference", r)?;
-    }
+/// The exported model of a run folder of `kind`, what it is in words (the portable profile's
+/// line), what the regular file's line adds after the file name, and the fixed frames of its
+/// window graph (RMR, with `--portable`).
+fn export_kind(a: &ExportArgs, kind: &str) -> anyhow::Result<(OnnxModel, &'static str, String, Option<usize>)> {
+    let context = || format!("exporting {}", a.onnx.display());
+    let counts = |m: &OnnxModel| {
+        let summary = m.summary();
+        format!("{} nodes, {} parameters", summary.op_counts.values().sum::<usize>(), summary.parameters)
+    };
+    Ok(match kind {
+        zoo_rmr::export::MODEL_KIND => {
+            let model = zoo_rmr::export::export_rmr_dir(&a.onnx).with_context(context)?;
+            let frames = match a.portable {
+                true => {
+                    let (config, _) = zoo_rmr::checkpoint::read_meta(&a.onnx).with_context(context)?;
+                    let frames = a.frames.map_or(config.window, |f| f as usize);
+                    let source = if a.frames.is_some() {
+                        "--frames"
+                    } else {
+                        "the model's runtime window; --frames N to change"
+                    };
+                    println!("fixing the RMR window graph's `frames` dimension to {frames} ({source})");
+                    Some(frames)
+                }
+                false => None,
+            };
+            let what = "RMR window refiner";
+            (model, what, format!("{what} with its configuration and statistics"), frames)
+        }
+        zoo_rnngmm::export::MODEL_KIND => {
+            let model = zoo_rnngmm::export::export_generator_dir(&a.onnx).with_context(context)?;
+            let refiner = model.metadata_value(zoo_rnngmm::export::REFINER_GRAPH_KEY).is_some();
+            let what = "RNN-GMM generator step graph";
+            let with =
+                if refiner { "and the refiner's step graph" } else { "without a refiner (generator stage only)" };
+            let line = format!("{what} ({}) with its metadata, {with}", counts(&model));
+            (model, what, line, None)
+        }
+        zoo_arnn::export::MODEL_KIND => {
+            let model = zoo_arnn::export::export_arnn_dir(&a.onnx).with_context(context)?;
+            let what = "ARNN step graph";
+            let line = format!("{what} ({}) with its metadata", counts(&model));
+            (model, what, line, None)
+        }
+        zoo_rtn::export::MODEL_KIND => {
+            let model = export_rtn(a)?;
+            let what = "RTN step graph";
+            let line = format!("{what} ({}) with its start graph and metadata", counts(&model));
+            (model, what, line, None)
+        }
+        other => bail!(
+            "{}: `zoo export` does not know model `{other}` (config.json \"model\"); it exports: {}",
+            a.onnx.display(),
+            EXPORT_KINDS.join(", ")
+        ),
+    })
+}
+
+/// The RTN of the run folder with the skeleton, fps and units of the options.
+fn export_rtn(a: &ExportArgs) -> anyhow::Result<OnnxModel> {
     let mut options = RtnExportOptions { fps: a.fps, ..RtnExportOptions::default() };
     if let Some(u) = &a.units {
         let metres_per_unit = zoo_motion::frame::CoordinateFrame::metres_per(u).context("--units: cm, m, mm or in")?;
@@ -177,79 +213,16 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
             Some(zoo_motion::frame::CoordinateFrame { metres_per_unit, ..zoo_motion::frame::CoordinateFrame::ZOO_CM });
     }
     if let Some(path) = &a.skeleton {
-        let clip = read_clip(path).with_context(|| format!("reading the skeleton of {}", path.display()))?;
+        let clip = zoo_data::clip_io::read_model_clip(path)
+            .with_context(|| format!("reading the skeleton of {}", path.display()))?;
         let s = &clip.skeleton;
         options.names = Some(s.names.clone());
         options.offsets = Some(s.offsets.iter().map(|o| o.as_vec3().to_array()).collect());
         options.parents = Some(s.parents.iter().map(|p| p.map_or(-1, |p| p as i32)).collect());
         options.fps = options.fps.or(Some(clip.fps() as f32));
     }
-    let config_path = a.onnx.join(zoo_rtn::checkpoint::CONFIG_FILE);
-    if !config_path.is_file() {
-        bail!("{} is not a run folder of `zoo train` (no config.json)", a.onnx.display());
-    }
-    match model_kind(&config_path)?.as_deref() {
-        None | Some(zoo_rtn::export::MODEL_KIND) => {}
-        Some(zoo_rmr::export::MODEL_KIND) => {
-            let model =
-                zoo_rmr::export::export_rmr_dir(&a.onnx).with_context(|| format!("exporting {}", a.onnx.display()))?;
-            if a.portable {
-                let (config, _) = zoo_rmr::checkpoint::read_meta(&a.onnx)
-                    .with_context(|| format!("exporting {}", a.onnx.display()))?;
-                let frames = a.frames.map_or(config.window, |f| f as usize);
-                let source =
-                    if a.frames.is_some() { "--frames" } else { "the model's runtime window; --frames N to change" };
-                println!("fixing the RMR window graph's `frames` dimension to {frames} ({source})");
-                write_portable(&a, &model, "RMR window refiner", Some(frames))?;
-                return write_reference(&a, &model);
-            }
-            model.write(&a.out)?;
-            println!("wrote {}: RMR window refiner with its configuration and statistics", a.out.display());
-            return write_reference(&a, &model);
-        }
-        Some(zoo_rnngmm::export::MODEL_KIND) => {
-            let model = zoo_rnngmm::export::export_generator_dir(&a.onnx)
-                .with_context(|| format!("exporting {}", a.onnx.display()))?;
-            if a.portable {
-                write_portable(&a, &model, "RNN-GMM generator step graph", None)?;
-                return write_reference(&a, &model);
-            }
-            model.write(&a.out)?;
-            let summary = model.summary();
-            let refiner = model.metadata_value(zoo_rnngmm::export::REFINER_GRAPH_KEY).is_some();
-            println!(
-                "wrote {}: RNN-GMM generator step graph ({} nodes, {} parameters) with its metadata, {}",
-                a.out.display(),
-                summary.op_counts.values().sum::<usize>(),
-                summary.parameters,
-                if refiner { "and the refiner's step graph" } else { "without a refiner (generator stage only)" }
-            );
-            return write_reference(&a, &model);
-        }
-        Some(zoo_arnn::export::MODEL_KIND) => {
-            let model = zoo_arnn::export::export_arnn_dir(&a.onnx)
-                .with_context(|| format!("exporting {}", a.onnx.display()))?;
-            if a.portable {
-                write_portable(&a, &model, "ARNN step graph", None)?;
-                return write_reference(&a, &model);
-            }
-            model.write(&a.out)?;
-            let summary = model.summary();
-            println!(
-                "wrote {}: ARNN step graph ({} nodes, {} parameters) with its metadata",
-                a.out.display(),
-                summary.op_counts.values().sum::<usize>(),
-                summary.parameters
-            );
-            return write_reference(&a, &model);
-        }
-        Some(other) => bail!(
-            "{}: `zoo export` does not know model `{other}` (config.json \"model\"); it exports: {}",
-            a.onnx.display(),
-            EXPORT_KINDS.join(", ")
-        ),
-    }
-    if a.skeleton.is_none() && zoo_nn::checkpoint::RunSkeleton::read(&a.onnx)?.is_none() {
+    let run_skeleton = zoo_nn::checkpoint::RunSkeleton::read(&a.onnx)?;
+    if a.skeleton.is_none() && run_skeleton.is_none() {
         bail!(
             "{} has no skeleton.json (trained by an older zoo): pass --skeleton FILE.bvh, a clip of the training \
              skeleton, so the model file carries joint names, rest offsets and the frame rate",
@@ -273,22 +246,31 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
             config.parents
         );
     }
-    if options.frame.is_none() && zoo_nn::checkpoint::RunSkeleton::read(&a.onnx)?.is_none() {
+    if options.frame.is_none() && run_skeleton.is_none() {
         // BVH does not say its unit: zoo's convention is centimetres, Y up, right-handed.
         options.frame = Some(zoo_motion::frame::CoordinateFrame::ZOO_CM);
     }
-    let model = export_rtn_dir(&a.onnx, &options).with_context(|| format!("exporting {}", a.onnx.display()))?;
-    if a.portable {
-        write_portable(&a, &model, "RTN step graph", None)?;
-        return write_reference(&a, &model);
+    export_rtn_dir(&a.onnx, &options).with_context(|| format!("exporting {}", a.onnx.display()))
+}
+
+/// Runs `zoo export`.
+pub fn run(a: ExportArgs) -> anyhow::Result<()> {
+    crate::cmd::check_output_file("--out", &a.out)?;
+    if let Some(r) = &a.reference {
+        crate::cmd::check_output_file("--reference", r)?;
     }
-    model.write(&a.out)?;
-    let summary = model.summary();
-    println!(
-        "wrote {}: RTN step graph ({} nodes, {} parameters) with its start graph and metadata",
-        a.out.display(),
-        summary.op_counts.values().sum::<usize>(),
-        summary.parameters
-    );
+    let config_path = a.onnx.join(zoo_rtn::checkpoint::CONFIG_FILE);
+    if !config_path.is_file() {
+        bail!("{} is not a run folder of `zoo train` (no config.json)", a.onnx.display());
+    }
+    let text = std::fs::read_to_string(&config_path).with_context(|| format!("reading {}", config_path.display()))?;
+    let kind = zoo_nn::checkpoint::kind_of_config(&text, &config_path)?;
+    let (model, what, line, frames) = export_kind(&a, &kind)?;
+    if a.portable {
+        write_portable(&a, &model, what, frames)?;
+    } else {
+        model.write(&a.out)?;
+        println!("wrote {}: {line}", a.out.display());
+    }
     write_reference(&a, &model)
 }

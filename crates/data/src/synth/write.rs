@@ -70,7 +70,7 @@ pub fn write_dir(
     };
     let path = dir.join("synth.json");
     let text = serde_json::to_string(&manifest).expect("manifest serialises");
-    std::fs::write(&path, text).map_err(|source| SynthWriteError::Io { path, source })
+    zoo_motion::atomic::write(&path, text).map_err(|source| SynthWriteError::Io { path, source })
 }
 
 /// Why synthetic data could not be written.
