@@ -38,8 +38,8 @@ use crate::path::GroundPath;
 use argmin::core::{CostFunction, Executor, State};
 use argmin::solver::particleswarm::ParticleSwarm;
 use candle_core::{DType, Device, Tensor};
-use rand::SeedableRng;
 use zoo_motion::Clip;
+use zoo_motion::rng::SplitMix64;
 
 /// Settings of [`follow`].
 #[derive(Clone, Debug, PartialEq)]
@@ -237,6 +237,27 @@ impl CostFunction for Swarm<'_, '_> {
     }
 }
 
+/// The project's one generator ([`SplitMix64`]) behind the `rand::Rng` that argmin's particle
+/// swarm takes: its API is generic over rand's trait (the one reason the crate keeps `rand`), and
+/// every draw of the swarm comes from SplitMix64.
+struct SwarmRng(SplitMix64);
+
+impl rand::RngCore for SwarmRng {
+    fn next_u32(&mut self) -> u32 {
+        (self.0.next_u64() >> 32) as u32
+    }
+
+    fn next_u64(&mut self) -> u64 {
+        self.0.next_u64()
+    }
+
+    fn fill_bytes(&mut self, dst: &mut [u8]) {
+        for chunk in dst.chunks_mut(8) {
+            chunk.copy_from_slice(&self.0.next_u64().to_le_bytes()[..chunk.len()]);
+        }
+    }
+}
+
 fn opt_err(what: &str, e: argmin::core::Error) -> RnnGmmError {
     RnnGmmError::Config(format!("path following: {what} failed: {e}"))
 }
@@ -278,7 +299,7 @@ pub fn follow(
     let fps = spec.fps;
     let max_frames = opts.max_frames.unwrap_or_else(|| ((path.length() / 20.0) * fps).ceil() as usize + opts.window);
     let (t, keep) = (opts.window, opts.window - opts.overlap);
-    let mut rng = rand::rngs::StdRng::seed_from_u64(opts.seed);
+    let mut rng = SplitMix64::new(opts.seed);
     let (mut kept, mut distance, mut progress_s) = (Vec::<f32>::new(), Vec::new(), Vec::new());
     let (mut s_now, mut reached_end, mut windows) = (0.0f64, false, 0usize);
     while kept.len() / dim < max_frames && !reached_end {
@@ -288,8 +309,8 @@ pub fn follow(
         // Particle swarm over the root draws.
         let n = 3 * t;
         let bounds = (vec![-opts.swarm_bound; n], vec![opts.swarm_bound; n]);
-        let swarm = ParticleSwarm::new(bounds, opts.particles)
-            .with_rng_generator(rand::rngs::StdRng::seed_from_u64(rand::RngCore::next_u64(&mut rng)));
+        let swarm =
+            ParticleSwarm::new(bounds, opts.particles).with_rng_generator(SwarmRng(SplitMix64::new(rng.next_u64())));
         let res = Executor::new(Swarm(&window), swarm)
             .configure(|s| s.max_iters(opts.swarm_iterations))
             .run()

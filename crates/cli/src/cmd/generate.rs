@@ -70,8 +70,8 @@ fn outputs(out: &Path, single: bool, seed: u64) -> (PathBuf, PathBuf) {
     (bvh, json)
 }
 
-/// Runs `zoo generate`.
-pub fn run(a: GenerateArgs) -> anyhow::Result<()> {
+/// Checks the outputs before the long work; whether `--out` is one BVH file (else a folder).
+fn check_outputs(a: &GenerateArgs) -> anyhow::Result<bool> {
     if zoo_data::clip_io::ClipFormat::of(&a.out).is_some_and(|f| f != zoo_data::clip_io::ClipFormat::Bvh) {
         bail!(
             "--out {}: `zoo generate` streams BVH of any length (a glTF file is written whole, at the end); write \
@@ -102,18 +102,29 @@ pub fn run(a: GenerateArgs) -> anyhow::Result<()> {
     } else {
         crate::cmd::check_output_dir("--out", &a.out)?;
     }
-    let (g, refiner) = load_run(&a.model, a.no_refiner)?;
-    let frames = match (a.frames, a.seconds) {
+    Ok(single)
+}
+
+/// Frames to generate: `--frames`, or `--seconds` at the model's frame rate.
+fn frame_count(a: &GenerateArgs, fps: f64) -> anyhow::Result<usize> {
+    Ok(match (a.frames, a.seconds) {
         (Some(f), _) => f,
         (None, Some(s)) => {
-            let f = (s * g.spec.fps).round();
+            let f = (s * fps).round();
             if !(1.0..=u32::MAX as f64).contains(&f) {
-                bail!("--seconds {s} is {f} frames at {} fps: give at least one frame", g.spec.fps);
+                bail!("--seconds {s} is {f} frames at {fps} fps: give at least one frame");
             }
             f as usize
         }
         (None, None) => bail!("say how long: --frames N or --seconds S"),
-    };
+    })
+}
+
+/// Runs `zoo generate`.
+pub fn run(a: GenerateArgs) -> anyhow::Result<()> {
+    let single = check_outputs(&a)?;
+    let (g, refiner) = load_run(&a.model, a.no_refiner)?;
+    let frames = frame_count(&a, g.spec.fps)?;
     let from = a.from.as_deref().map(crate::cmd::transition::clip_and_frame).transpose()?;
     let (clip, frame, from) = start_clip(&a.model, from.as_ref().map(|(p, f)| (p.as_path(), *f)), &g)?;
     let bar = crate::progress::Bar::new();
@@ -129,8 +140,9 @@ pub fn run(a: GenerateArgs) -> anyhow::Result<()> {
         };
         let (bvh, json) = outputs(&a.out, single, seed);
         let positions = a.positions.is_some();
+        let context = || format!("generating sequence {} (seed {seed})", i + 1);
         let xyz = generate_files(&g, refiner.as_ref(), (&clip, frame), &opts, (&bvh, &json), positions, &bar)
-            .with_context(|| format!("generating sequence {} (seed {seed})", i + 1))?;
+            .with_context(context)?;
         if let Some(p) = &a.positions {
             let v = serde_json::json!({
                 "format": zoo_data::positions::POSITIONS_FORMAT,
@@ -141,8 +153,7 @@ pub fn run(a: GenerateArgs) -> anyhow::Result<()> {
                 "seed": opts.seed,
                 "frames": xyz,
             });
-            crate::cmd::write_positions(p, &v)
-                .with_context(|| format!("generating sequence {} (seed {seed})", i + 1))?;
+            crate::cmd::write_positions(p, &v).with_context(context)?;
         }
     }
     bar.finish();
