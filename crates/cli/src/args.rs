@@ -423,6 +423,24 @@ pub fn decay(s: &str) -> Result<f64, String> {
     }
 }
 
+/// A training thread count in `1..=MAX_THREADS`.
+pub fn training_threads(s: &str) -> Result<usize, String> {
+    let max = zoo_nn::parallel::MAX_THREADS;
+    match s.trim().parse::<usize>() {
+        Ok(n @ 1..) if n <= max => Ok(n),
+        _ => Err(format!("`{s}` is not a thread count: valid range 1..={max}")),
+    }
+}
+
+/// Parses a clip argument `PATH:FRAME`.
+pub fn clip_and_frame(s: &str) -> anyhow::Result<(std::path::PathBuf, usize)> {
+    use anyhow::Context;
+    let (path, frame) =
+        s.rsplit_once(':').with_context(|| format!("`{s}`: expected CLIP.bvh:FRAME, e.g. walk.bvh:120"))?;
+    let frame = frame.parse().with_context(|| format!("`{s}`: `{frame}` is not a frame number"))?;
+    Ok((std::path::PathBuf::from(path), frame))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -77,7 +77,7 @@ pub fn run(a: BenchControlArgs) -> anyhow::Result<()> {
     };
     let o = ControlBenchOptions {
         onnx: a.onnx.map(|p| anyhow::Ok((runtime_model(&p)?, p))).transpose()?,
-        from: a.from.as_deref().map(crate::cmd::transition::clip_and_frame).transpose()?,
+        from: a.from.as_deref().map(crate::args::clip_and_frame).transpose()?,
         model: a.model,
         script,
         candle: a.controllers.iter().any(|c| c == "candle"),

@@ -62,7 +62,7 @@ pub struct BenchDenoiseArgs {
     pub known_noise: bool,
     /// Worker threads (each denoises its excerpts with candle on one thread) [default: the
     /// cores available]. The figures do not depend on it.
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::cmd::train::training_threads)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::training_threads)]
     pub threads: Option<usize>,
     /// Leave out the clips of --data that cannot be read or do not join the dataset.
     #[arg(long)]

@@ -45,7 +45,7 @@ pub fn run(a: BenchFollowArgs) -> anyhow::Result<()> {
     }
     let o = FollowBenchOptions {
         model: a.model,
-        from: a.from.iter().map(|s| crate::cmd::transition::clip_and_frame(s)).collect::<anyhow::Result<_>>()?,
+        from: a.from.iter().map(|s| crate::args::clip_and_frame(s)).collect::<anyhow::Result<_>>()?,
         paths: a.paths,
         data: a.data,
         glob: a.glob,

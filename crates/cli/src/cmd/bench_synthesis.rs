@@ -50,7 +50,7 @@ pub struct BenchSynthesisArgs {
     pub json: Option<PathBuf>,
     /// Worker threads generating sequences (each runs candle on its own thread) [default: the
     /// cores available]. The figures do not depend on it.
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::cmd::train::training_threads)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::training_threads)]
     pub threads: Option<usize>,
 }
 

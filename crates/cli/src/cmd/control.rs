@@ -95,7 +95,7 @@ pub fn run(a: ControlArgs) -> anyhow::Result<()> {
     }
     let script = read_script(&a.script)?;
     let (g, _) = load_run(&a.model, true)?;
-    let from = a.from.as_deref().map(crate::cmd::transition::clip_and_frame).transpose()?;
+    let from = a.from.as_deref().map(crate::args::clip_and_frame).transpose()?;
     let (clip, frame, from) = start_clip(&a.model, from.as_ref().map(|(p, f)| (p.as_path(), *f)), &g)?;
     let opts = a.online.options();
     let c = control_with_progress(&g, &clip, frame, &script, &opts, "controlling", &crate::progress::Bar::new())

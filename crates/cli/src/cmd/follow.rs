@@ -80,7 +80,7 @@ pub fn run(a: FollowArgs) -> anyhow::Result<()> {
     let path =
         GroundPath::load(&a.path, a.svg_scale).with_context(|| format!("reading the path {}", a.path.display()))?;
     let (g, _) = load_run(&a.model, true)?;
-    let from = a.from.as_deref().map(crate::cmd::transition::clip_and_frame).transpose()?;
+    let from = a.from.as_deref().map(crate::args::clip_and_frame).transpose()?;
     let (clip, frame, from) = start_clip(&a.model, from.as_ref().map(|(p, f)| (p.as_path(), *f)), &g)?;
     let started = std::time::Instant::now();
     let bar = crate::progress::Bar::new();

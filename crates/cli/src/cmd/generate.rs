@@ -125,7 +125,7 @@ pub fn run(a: GenerateArgs) -> anyhow::Result<()> {
     let single = check_outputs(&a)?;
     let (g, refiner) = load_run(&a.model, a.no_refiner)?;
     let frames = frame_count(&a, g.spec.fps)?;
-    let from = a.from.as_deref().map(crate::cmd::transition::clip_and_frame).transpose()?;
+    let from = a.from.as_deref().map(crate::args::clip_and_frame).transpose()?;
     let (clip, frame, from) = start_clip(&a.model, from.as_ref().map(|(p, f)| (p.as_path(), *f)), &g)?;
     let bar = crate::progress::Bar::new();
     bar.start((frames as u64).saturating_mul(a.count as u64), "generating (frames)");

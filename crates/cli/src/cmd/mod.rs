@@ -20,6 +20,7 @@ pub mod generate;
 pub mod render;
 pub mod stitch;
 pub mod train;
+pub mod train_args;
 pub mod train_arnn;
 pub mod train_rmr;
 pub mod train_rnngmm;

@@ -2,7 +2,7 @@
 //! sequences of the simulated lamp, or on humanoid BVH clips with `--valid-glob`
 //! ([`zoo_arnn::train_run`]).
 
-use crate::cmd::train::{RunArgs, TrainDefaults};
+use crate::cmd::train_args::{RunArgs, TrainDefaults};
 use clap::Args;
 use std::path::PathBuf;
 use zoo_arnn::train_run::{ArnnPreset, ArnnRunOptions, ArnnVariant, NoMemoryOutputArg};

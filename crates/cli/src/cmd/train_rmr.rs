@@ -2,7 +2,7 @@
 //! embedded synthetic locomotion ([`zoo_rmr::train_run`]; the pair plans are cached in the run
 //! folder).
 
-use crate::cmd::train::{DataArgs, RunArgs, TrainDefaults};
+use crate::cmd::train_args::{DataArgs, RunArgs, TrainDefaults};
 use clap::Args;
 use zoo_rmr::train_run::{CellArg, RmrPreset, RmrRunOptions};
 

@@ -2,7 +2,7 @@
 //! the refiner against a discriminator ([`zoo_rnngmm::train_run`]; run folder layout in
 //! docs/rnn-gmm.md).
 
-use crate::cmd::train::{DataArgs, RunArgs, TrainDefaults};
+use crate::cmd::train_args::{DataArgs, RunArgs, TrainDefaults};
 use clap::Args;
 use zoo_rnngmm::train_run::{RefinerOverrides, RnnGmmPreset, RnnGmmRunOptions, Stage};
 

@@ -1,7 +1,6 @@
 //! `zoo transition`: generate a transition between two clips with a trained RTN
 //! ([`zoo_rtn::command`]).
 
-use anyhow::Context;
 use clap::Args;
 use std::path::PathBuf;
 
@@ -58,14 +57,6 @@ pub struct TransitionArgs {
     pub positions: Option<PathBuf>,
 }
 
-/// Parses `PATH:FRAME`.
-pub fn clip_and_frame(s: &str) -> anyhow::Result<(PathBuf, usize)> {
-    let (path, frame) =
-        s.rsplit_once(':').with_context(|| format!("`{s}`: expected CLIP.bvh:FRAME, e.g. walk.bvh:120"))?;
-    let frame = frame.parse().with_context(|| format!("`{s}`: `{frame}` is not a frame number"))?;
-    Ok((PathBuf::from(path), frame))
-}
-
 /// Runs `zoo transition`.
 pub fn run(a: TransitionArgs) -> anyhow::Result<()> {
     crate::cmd::check_output_file("--out", &a.out)?;
@@ -73,8 +64,8 @@ pub fn run(a: TransitionArgs) -> anyhow::Result<()> {
         crate::cmd::check_output_file("--positions", p)?;
     }
     let o = zoo_rtn::command::TransitionOptions {
-        from: clip_and_frame(&a.from)?,
-        to: clip_and_frame(&a.to)?,
+        from: crate::args::clip_and_frame(&a.from)?,
+        to: crate::args::clip_and_frame(&a.to)?,
         from_label: a.from,
         to_label: a.to,
         model: a.model,
