@@ -184,10 +184,6 @@ fn draw_frame(
     side_h: f32,
 ) {
     let (px0, py0, w, h) = panel;
-    // Px per cm: 2.4 m visible in the side view, 0.6 of that scale in the top view.
-    let side_scale = side_h as f64 / 240.0;
-    let top_scale = 0.6 * side_scale;
-    let (x0, y0) = (0.0f32, 0.0f32);
     let (Some(mut side), Some(mut topv)) =
         (Pixmap::new(w as u32, side_h as u32), Pixmap::new(w as u32, (h - side_h) as u32))
     else {
@@ -195,8 +191,33 @@ fn draw_frame(
     };
     side.fill(Color::WHITE);
     topv.fill(Color::WHITE);
+    let frame = Frame { clips, globals, view, f, root: clips[0].clip.root_position(f), w };
+    // Px per cm: 2.4 m visible in the side view, 0.6 of that scale in the top view.
+    let side_scale = side_h as f64 / 240.0;
+    draw_side(&mut side, &frame, side_h, side_scale);
+    draw_top(&mut topv, &frame, h - side_h, 0.6 * side_scale);
+    let pp = PixmapPaint::default();
+    pm.draw_pixmap(px0 as i32, py0 as i32, side.as_ref(), &pp, Transform::identity(), None);
+    pm.draw_pixmap(px0 as i32, (py0 + side_h) as i32, topv.as_ref(), &pp, Transform::identity(), None);
+    line(pm, (px0, py0 + side_h), (px0 + w, py0 + side_h), rgb(TEXT), 1.0);
+}
+
+/// What one frame of a panel draws: the clips at frame `f`, seen around the first clip's root.
+struct Frame<'a> {
+    clips: &'a [RenderClip],
+    globals: &'a [Vec<DVec3>],
+    view: &'a View,
+    f: usize,
+    root: DVec3,
+    w: f32,
+}
+
+/// The side view (`side_h` pixels high, `side_scale` px per cm): grid, terrain profile through
+/// the root, the skeletons.
+fn draw_side(side: &mut Pixmap, fr: &Frame, side_h: f32, side_scale: f64) {
+    let (clips, globals, view, f, root, w) = (fr.clips, fr.globals, fr.view, fr.f, fr.root, fr.w);
+    let (x0, y0) = (0.0f32, 0.0f32);
     let main = &clips[0];
-    let root = main.clip.root_position(f);
     let ref_y = root.y - 95.0;
     // --- side view
     let cx = x0 + w * 0.5;
@@ -211,7 +232,7 @@ fn draw_frame(
     let mut s = ((s0 - half) / 50.0).floor() * 50.0;
     while s <= s0 + half {
         let x = cx + ((s - s0) * side_scale) as f32;
-        line(&mut side, (x, y0), (x, y0 + side_h), rgb(GRID), 1.0);
+        line(side, (x, y0), (x, y0 + side_h), rgb(GRID), 1.0);
         s += 50.0;
     }
     // terrain profile along the line through the root
@@ -223,19 +244,26 @@ fn draw_frame(
         let gy = ground(&main.terrain, p.x, p.z);
         let q = sx(DVec3::new(p.x, gy, p.z));
         let q = (q.0, q.1.min(y0 + side_h));
-        rect(&mut side, q.0 - 2.0, q.1, 4.0, (y0 + side_h - q.1).max(0.0), Color::from_rgba8(225, 215, 195, 255));
+        rect(side, q.0 - 2.0, q.1, 4.0, (y0 + side_h - q.1).max(0.0), Color::from_rgba8(225, 215, 195, 255));
         if let Some(pq) = prev {
-            line(&mut side, pq, q, rgb(GROUND), 2.0);
+            line(side, pq, q, rgb(GROUND), 2.0);
         }
         prev = Some(q);
     }
     for (ci, c) in clips.iter().enumerate() {
-        draw_skeleton(&mut side, &c.clip, &globals[ci], f, ci, &sx, |p| (p - root).dot(view.left), 2.0);
+        draw_skeleton(side, &c.clip, &globals[ci], f, ci, &sx, |p| (p - root).dot(view.left), 2.0);
     }
-    line(&mut side, (x0, y0 + side_h), (x0 + w, y0 + side_h), rgb(TEXT), 1.0);
+    line(side, (x0, y0 + side_h), (x0 + w, y0 + side_h), rgb(TEXT), 1.0);
+}
+
+/// The top view (`th` pixels high, `top_scale` px per cm): terrain shaded by height, grid, each
+/// clip's root path and skeleton.
+fn draw_top(topv: &mut Pixmap, fr: &Frame, th: f32, top_scale: f64) {
+    let (clips, globals, view, f, root, w) = (fr.clips, fr.globals, fr.view, fr.f, fr.root, fr.w);
+    let x0 = 0.0f32;
+    let main = &clips[0];
     // --- top view
     let ty0 = 0.0f32;
-    let th = h - side_h;
     let tcx = x0 + w * 0.5;
     let tcy = ty0 + th * 0.5;
     let tx = |p: DVec3| -> (f32, f32) {
@@ -259,7 +287,7 @@ fn draw_frame(
                 let sz = (cell * top_scale) as f32;
                 if q.0 > x0 - sz && q.0 < x0 + w + sz && q.1 > ty0 - sz && q.1 < ty0 + th + sz {
                     let col = Color::from_rgba8(r as u8, g as u8, bl as u8, 255);
-                    rect(&mut topv, q.0 - sz * 0.5, q.1 - sz * 0.5, sz + 0.5, sz + 0.5, col);
+                    rect(topv, q.0 - sz * 0.5, q.1 - sz * 0.5, sz + 0.5, sz + 0.5, col);
                 }
             }
         }
@@ -272,7 +300,7 @@ fn draw_frame(
         while s <= c0 + half_t {
             let a = axis * s + other * (root.dot(other) - half_t);
             let b = axis * s + other * (root.dot(other) + half_t);
-            line(&mut topv, tx(a), tx(b), rgb(GRID), 1.0);
+            line(topv, tx(a), tx(b), rgb(GRID), 1.0);
             s += 50.0;
         }
     }
@@ -282,16 +310,12 @@ fn draw_frame(
         for k in (0..c.clip.frames()).step_by(2) {
             let q = tx(c.clip.root_position(k));
             if let Some(pq) = prev {
-                line(&mut topv, pq, q, colour(ci, true), 1.0);
+                line(topv, pq, q, colour(ci, true), 1.0);
             }
             prev = Some(q);
         }
-        draw_skeleton(&mut topv, &c.clip, &globals[ci], f, ci, &tx, |p| p.y, 1.5);
+        draw_skeleton(topv, &c.clip, &globals[ci], f, ci, &tx, |p| p.y, 1.5);
     }
-    let pp = PixmapPaint::default();
-    pm.draw_pixmap(px0 as i32, py0 as i32, side.as_ref(), &pp, Transform::identity(), None);
-    pm.draw_pixmap(px0 as i32, (py0 + side_h) as i32, topv.as_ref(), &pp, Transform::identity(), None);
-    line(pm, (px0, py0 + side_h), (px0 + w, py0 + side_h), rgb(TEXT), 1.0);
 }
 
 /// Bones as lines, joints as dots; `depth` orders drawing (far first), left limbs lighter.
