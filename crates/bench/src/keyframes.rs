@@ -8,13 +8,14 @@
 //! alike. The figure per backend is the median over rounds of the mean step time. Inputs are
 //! the lamp's rest pose with small deterministic offsets, keys a hop apart.
 
-use crate::runtime::{BackendFigure, RuntimeOptions, onnxruntime_env, onnxruntime_library};
-use crate::{Result, msg};
-use std::borrow::Cow;
+use crate::Result;
+use crate::runtime::{
+    BackendFigure, Frame, RuntimeOptions, StepBackend, onnxruntime_env, onnxruntime_library, ort_backend, tract_backend,
+};
 use std::time::Instant;
 use zoo_data::{Context, bail};
 use zoo_runtime::keyframes::{KeyframeModel, MotionKeys};
-use zoo_runtime::{MotionModel, MotionState, MotionTaskKind};
+use zoo_runtime::{MotionModel, MotionTaskKind};
 
 /// Rest pose of the lamp (base x, y, angle, three joint angles).
 const REST: [f32; 6] = [0.0, 0.02, 0.0, 0.5, -1.1, -1.2];
@@ -29,70 +30,6 @@ fn offsets(n: usize, seed: u64, scale: f32) -> Vec<f32> {
 /// Poses around the rest pose, `batch` rows of `d`.
 fn poses(batch: usize, d: usize, seed: u64) -> Vec<f32> {
     offsets(batch * d, seed, 0.1).iter().enumerate().map(|(i, o)| REST.get(i % d).copied().unwrap_or(0.0) + o).collect()
-}
-
-trait Backend {
-    fn step(&mut self) -> Result<()>;
-    fn output(&self) -> &[f32];
-}
-
-struct Tract {
-    runner: zoo_runtime::MotionRunner,
-    states: Vec<MotionState>,
-    inputs: Vec<Vec<f32>>,
-    out: Vec<f32>,
-}
-
-impl Backend for Tract {
-    fn step(&mut self) -> Result<()> {
-        let inputs: Vec<&[f32]> = self.inputs.iter().map(Vec::as_slice).collect();
-        self.runner.step_batch(&mut self.states, &inputs, &mut [&mut self.out])?;
-        Ok(())
-    }
-    fn output(&self) -> &[f32] {
-        &self.out
-    }
-}
-
-struct Ort {
-    session: ort::session::Session,
-    batch: usize,
-    names: Vec<String>,
-    inputs: Vec<Vec<f32>>,
-    states: Vec<(String, String, Vec<f32>)>,
-    out: Vec<f32>,
-}
-
-impl Backend for Ort {
-    fn step(&mut self) -> Result<()> {
-        let b = self.batch;
-        let tensor = |data: &[f32]| {
-            ort::value::Tensor::from_array((vec![b as i64, (data.len() / b) as i64], data.to_vec()))
-                .map_err(|e| msg!("onnxruntime tensor: {e}"))
-        };
-        let mut values: Vec<(Cow<'_, str>, ort::session::SessionInputValue<'_>)> = Vec::new();
-        for (name, data) in self.names.iter().zip(&self.inputs) {
-            values.push((Cow::Owned(name.clone()), tensor(data)?.into()));
-        }
-        for (input, _, data) in &self.states {
-            values.push((Cow::Owned(input.clone()), tensor(data)?.into()));
-        }
-        let out = self.session.run(values).map_err(|e| msg!("onnxruntime run: {e}"))?;
-        let extract = |name: &str| -> Result<Vec<f32>> {
-            Ok(out[name].try_extract_tensor::<f32>().map_err(|e| msg!("onnxruntime output `{name}`: {e}"))?.1.to_vec())
-        };
-        let pose = extract("pose")?;
-        let next: Vec<Vec<f32>> = self.states.iter().map(|(_, o, _)| extract(o)).collect::<Result<_>>()?;
-        drop(out);
-        self.out = pose;
-        for (slot, v) in self.states.iter_mut().zip(next) {
-            slot.2 = v;
-        }
-        Ok(())
-    }
-    fn output(&self) -> &[f32] {
-        &self.out
-    }
 }
 
 /// Whole completions of [`KEY_FRAMES`] through the keyframes runner; one "step" is one frame of
@@ -119,35 +56,19 @@ fn backends(
     bytes: &[u8],
     env: &ort::environment::Environment,
     batch: usize,
-) -> Result<Vec<(&'static str, Box<dyn Backend>)>> {
+) -> Result<Vec<(&'static str, Box<dyn StepBackend>)>> {
     let names: Vec<String> = model.inputs().iter().map(|i| i.name.clone()).collect();
     let t_rel: Vec<f32> = offsets(batch, 9, 0.5).iter().map(|v| v + 0.5).collect();
-    let inputs = vec![poses(batch, d, 1), poses(batch, d, 2), poses(batch, d, 3), t_rel];
+    let frame = Frame { names, data: vec![poses(batch, d, 1), poses(batch, d, 2), poses(batch, d, 3), t_rel] };
     let states: Vec<Vec<f32>> =
         model.states().iter().enumerate().map(|(k, s)| offsets(batch * s.width, 20 + k as u64, 0.3)).collect();
-    let mut tract_states: Vec<MotionState> = (0..batch).map(|_| model.new_state()).collect();
-    for (c, s) in tract_states.iter_mut().enumerate() {
-        for (k, info) in model.states().iter().enumerate() {
-            s.slot_mut(k).copy_from_slice(&states[k][c * info.width..(c + 1) * info.width]);
-        }
-    }
-    let session = ort::session::Session::builder(env)
-        .map_err(|e| msg!("onnxruntime session: {e}"))?
-        .with_intra_threads(1)
-        .map_err(|e| msg!("onnxruntime session options: {e}"))?
-        .with_inter_threads(1)
-        .map_err(|e| msg!("onnxruntime session options: {e}"))?
-        .commit_from_memory(bytes)
-        .map_err(|e| msg!("onnxruntime cannot load the model: {e}"))?;
-    let tract =
-        Tract { runner: model.runner()?, states: tract_states, inputs: inputs.clone(), out: vec![0.0; batch * d] };
-    let states = model.states().iter().zip(states).map(|(s, v)| (s.input.clone(), s.output.clone(), v)).collect();
-    let ort = Ort { session, batch, names, inputs, states, out: vec![] };
+    let tract = tract_backend(model, &frame, &states, batch)?;
+    let ort = ort_backend(env, bytes, model, frame, states, batch)?;
     Ok(vec![("tract step", Box::new(tract)), ("onnxruntime step", Box::new(ort))])
 }
 
 /// Agreement on the first step (same inputs and state), then a warm-up.
-fn check_agreement(backends: &mut [(&'static str, Box<dyn Backend>)]) -> Result<()> {
+fn check_agreement(backends: &mut [(&'static str, Box<dyn StepBackend>)]) -> Result<()> {
     for (name, b) in backends.iter_mut() {
         b.step().context(name.to_string())?;
     }

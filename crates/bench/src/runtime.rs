@@ -52,7 +52,7 @@ pub struct BackendFigure {
 }
 
 /// A backend under test: one step of the whole batch per call.
-trait StepBackend {
+pub(crate) trait StepBackend {
     fn name(&self) -> &'static str;
     fn step(&mut self) -> Result<()>;
     /// The frame output of the last step (for the agreement check; empty: not compared).
@@ -115,9 +115,9 @@ fn inputs(n: usize, seed: u64) -> Vec<f32> {
 }
 
 /// The frame inputs of the step graph, by name.
-struct Frame {
-    names: Vec<String>,
-    data: Vec<Vec<f32>>,
+pub(crate) struct Frame {
+    pub(crate) names: Vec<String>,
+    pub(crate) data: Vec<Vec<f32>>,
 }
 
 struct CandleBackend {
@@ -155,7 +155,7 @@ impl StepBackend for CandleBackend {
     }
 }
 
-struct TractBackend {
+pub(crate) struct TractBackend {
     runner: zoo_runtime::MotionRunner,
     states: Vec<MotionState>,
     frame: Frame,
@@ -180,7 +180,7 @@ impl StepBackend for TractBackend {
     }
 }
 
-struct OrtBackend {
+pub(crate) struct OrtBackend {
     session: ort::session::Session,
     batch: usize,
     frame: Frame,
@@ -279,21 +279,43 @@ fn make_backends(
         backends.push(Box::new(candle_backend(candle, model, &frame, &mut states, batch)?));
     }
 
-    // tract
+    backends.push(Box::new(tract_backend(model, &frame, &states, batch)?));
+    backends.push(Box::new(ort_backend(env, bytes, model, frame, states, batch)?));
+    Ok(backends)
+}
+
+/// The step graph through tract from the frame inputs `frame` and the initial states `states`
+/// (per slot, `batch` rows each).
+pub(crate) fn tract_backend(
+    model: &MotionModel,
+    frame: &Frame,
+    states: &[Vec<f32>],
+    batch: usize,
+) -> Result<TractBackend> {
     let mut tract_states: Vec<MotionState> = (0..batch).map(|_| model.new_state()).collect();
     for (c, s) in tract_states.iter_mut().enumerate() {
         for (k, info) in model.states().iter().enumerate() {
             s.slot_mut(k).copy_from_slice(&states[k][c * info.width..(c + 1) * info.width]);
         }
     }
-    let tract = TractBackend {
+    Ok(TractBackend {
         runner: model.runner()?,
         states: tract_states,
         frame: Frame { names: frame.names.clone(), data: frame.data.clone() },
         outs: model.outputs().iter().map(|o| vec![0.0; batch * o.width]).collect(),
-    };
+    })
+}
 
-    // onnxruntime
+/// The step graph of the file `bytes` through onnxruntime (one thread), from the same inputs
+/// and states.
+pub(crate) fn ort_backend(
+    env: &ort::environment::Environment,
+    bytes: &[u8],
+    model: &MotionModel,
+    frame: Frame,
+    states: Vec<Vec<f32>>,
+    batch: usize,
+) -> Result<OrtBackend> {
     let opt = |e: ort::Error<_>| msg!("onnxruntime session options: {e}");
     let session = ort::session::Session::builder(env)
         .map_err(|e| msg!("onnxruntime session: {e}"))?
@@ -303,17 +325,14 @@ fn make_backends(
         .map_err(|e| msg!("onnxruntime session options: {e}"))?
         .commit_from_memory(bytes)
         .map_err(|e| msg!("onnxruntime cannot load the model: {e}"))?;
-    let ort = OrtBackend {
+    Ok(OrtBackend {
         session,
         batch,
         frame,
         states: model.states().iter().zip(states).map(|(s, v)| (s.input.clone(), s.output.clone(), v)).collect(),
         out_name: model.outputs()[0].name.clone(),
         out: Vec::new(),
-    };
-    backends.push(Box::new(tract));
-    backends.push(Box::new(ort));
-    Ok(backends)
+    })
 }
 
 /// The RTN's step in candle with the weights of the file, from the same inputs and state as

@@ -44,12 +44,7 @@ pub const FPS: f32 = 50.0;
 pub fn export_arnn_dir(dir: &Path) -> Result<OnnxModel, ExportError> {
     let (config, norm) =
         checkpoint::read_meta(dir).map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
-    let varmap = VarMap::new();
-    let vb = candle_nn::VarBuilder::from_varmap(&varmap, candle_core::DType::F32, &candle_core::Device::Cpu);
-    crate::Arnn::new(&config, vb)
-        .map_err(|e| ExportError::model(format!("building the ARNN of {}: {e}", dir.display())))?;
-    zoo_nn::checkpoint::read_varmap(&dir.join(zoo_nn::checkpoint::WEIGHTS_FILE), &varmap)
-        .map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
+    let varmap = zoo_nn::export::load_run_varmap(dir, "ARNN", |vb| crate::Arnn::new(&config, vb))?;
     export_arnn(&config, &norm, &varmap)
 }
 
@@ -73,26 +68,9 @@ fn selu(g: &mut GraphBuilder, name: &str, x: &Value) -> Value {
     g.mul(&format!("{name}.scale_mul"), &sum, &scale)
 }
 
-/// A `zoo_nn::Mlp` of `layers` linear layers with SELU after each but the last, and after the
-/// last when `activate_last`.
-fn mlp(
-    g: &mut GraphBuilder,
-    w: &Weights,
-    prefix: &str,
-    layers: usize,
-    x: &Value,
-    activate_last: bool,
-) -> Result<Value, ExportError> {
-    let mut h = x.clone();
-    for i in 0..layers {
-        let wt = w.init(g, &format!("{prefix}.{i}.weight"))?;
-        let b = w.init(g, &format!("{prefix}.{i}.bias"))?;
-        h = g.gemm(&format!("{prefix}.{i}"), &h, &wt, Some(&b), true);
-        if i + 1 < layers || activate_last {
-            h = selu(g, &format!("{prefix}.{i}.selu"), &h);
-        }
-    }
-    Ok(h)
+/// SELU after a layer of [`zoo_nn::export::mlp`] (node `LAYER.selu`).
+fn selu_after(g: &mut GraphBuilder, layer: &str, h: &Value) -> Value {
+    selu(g, &format!("{layer}.selu"), h)
 }
 
 /// One step of a 1-layer `zoo_nn::Gru` (`prefix.weight_ih_l0`, ...): the next `h`.
@@ -234,15 +212,15 @@ pub fn export_arnn(config: &ArnnConfig, norm: &Normalization, varmap: &VarMap) -
         }
     };
     // Section 6: feature nets of Y'_(t-1), X_K, X_(K+1), concatenated with t_rel.
-    let fp = mlp(&mut g, &w, "prev_features", 2, &normalized[0], true)?;
-    let fa = mlp(&mut g, &w, "key_a_features", 2, &key_a_in, true)?;
-    let fb = mlp(&mut g, &w, "key_b_features", 2, &key_b_in, true)?;
+    let fp = zoo_nn::export::mlp(&mut g, &w, ("prev_features", 2), &normalized[0], true, selu_after)?;
+    let fa = zoo_nn::export::mlp(&mut g, &w, ("key_a_features", 2), &key_a_in, true, selu_after)?;
+    let fb = zoo_nn::export::mlp(&mut g, &w, ("key_b_features", 2), &key_b_in, true, selu_after)?;
     let x = g.concat("features", &[&fp, &fa, &fb, &t_rel], 1);
     let h1_next = gru_cell(&mut g, &w, "gru1", h, &x, &h1)?;
     let o1 = selu(&mut g, "gru1.selu", &h1_next);
     let h2_next = gru_cell(&mut g, &w, "gru2", h, &o1, &h2)?;
     let o2 = selu(&mut g, "gru2.selu", &h2_next);
-    let dy = mlp(&mut g, &w, "decoder", 3, &o2, false)?;
+    let dy = zoo_nn::export::mlp(&mut g, &w, ("decoder", 3), &o2, false, selu_after)?;
     // The residual on the normalised previous pose, then back to physical units.
     let y = g.add("residual", &normalized[0], &dy);
     let ys = g.mul("denormalize.scale", &y, &std);

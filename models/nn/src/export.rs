@@ -49,6 +49,63 @@ impl ExportWeights {
     }
 }
 
+/// The variables of a run folder's model for its exporter: `build` declares them (the model's
+/// constructor on a fresh `VarMap`, `what` naming it in errors), then they are filled from the
+/// folder's weights (`model.safetensors`). Errors name the folder.
+pub fn load_run_varmap<T, E: std::fmt::Display>(
+    dir: &std::path::Path,
+    what: &str,
+    build: impl FnOnce(candle_nn::VarBuilder) -> Result<T, E>,
+) -> Result<VarMap, ExportError> {
+    let varmap = VarMap::new();
+    let vb = candle_nn::VarBuilder::from_varmap(&varmap, candle_core::DType::F32, &candle_core::Device::Cpu);
+    build(vb).map_err(|e| ExportError::model(format!("building the {what} of {}: {e}", dir.display())))?;
+    crate::checkpoint::read_varmap(&dir.join(crate::checkpoint::WEIGHTS_FILE), &varmap)
+        .map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
+    Ok(varmap)
+}
+
+/// The text of a run folder's `config.json`, which the exported file embeds.
+pub fn config_text(dir: &std::path::Path) -> Result<String, ExportError> {
+    let path = dir.join(crate::checkpoint::CONFIG_FILE);
+    std::fs::read_to_string(&path).map_err(|source| ExportError::Io { path: path.display().to_string(), source })
+}
+
+/// The configuration text an exported file embeds: the run folder's `config.json` when given,
+/// else `config` serialised.
+pub fn config_json<'a>(
+    given: Option<&'a str>,
+    config: &impl serde::Serialize,
+) -> Result<std::borrow::Cow<'a, str>, ExportError> {
+    Ok(match given {
+        Some(s) => std::borrow::Cow::Borrowed(s),
+        None => serde_json::to_string_pretty(config).map_err(|e| ExportError::model(e.to_string()))?.into(),
+    })
+}
+
+/// An MLP of `layers` linear layers named `prefix.{i}` (candle `[out, in]` weights as Gemm with
+/// the weight transposed): `activation(g, "prefix.{i}", h)` after every layer but the last, and
+/// after the last when `activate_last`.
+pub fn mlp(
+    g: &mut GraphBuilder,
+    w: &ExportWeights,
+    (prefix, layers): (&str, usize),
+    x: &Value,
+    activate_last: bool,
+    activation: impl Fn(&mut GraphBuilder, &str, &Value) -> Value,
+) -> Result<Value, ExportError> {
+    let mut h = x.clone();
+    for i in 0..layers {
+        let wt = w.init(g, &format!("{prefix}.{i}.weight"))?;
+        let b = w.init(g, &format!("{prefix}.{i}.bias"))?;
+        h = g.gemm(&format!("{prefix}.{i}"), &h, &wt, Some(&b), true);
+        if i + 1 < layers || activate_last {
+            h = activation(g, &format!("{prefix}.{i}"), &h);
+        }
+    }
+    Ok(h)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -45,11 +45,7 @@ pub const MODEL_KIND: &str = "rmr";
 pub fn export_rmr_dir(dir: &Path) -> Result<OnnxModel, ExportError> {
     let (config, stats) =
         crate::checkpoint::read_meta(dir).map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
-    let varmap = VarMap::new();
-    let vb = candle_nn::VarBuilder::from_varmap(&varmap, candle_core::DType::F32, &candle_core::Device::Cpu);
-    crate::Rmr::new(&config, vb)
-        .map_err(|e| ExportError::model(format!("building the RMR of {}: {e}", dir.display())))?;
-    crate::checkpoint::load_weights(dir, &varmap).map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
+    let varmap = zoo_nn::export::load_run_varmap(dir, "RMR", |vb| crate::Rmr::new(&config, vb))?;
     export_rmr(&config, &stats, &varmap)
 }
 

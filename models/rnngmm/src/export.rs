@@ -52,14 +52,8 @@ pub const MODEL_KIND: &str = "rnn-gmm";
 pub fn export_generator_dir(dir: &Path) -> Result<OnnxModel, ExportError> {
     let (config, spec, norm) =
         crate::checkpoint::read_meta(dir).map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
-    let config_path = dir.join(crate::checkpoint::CONFIG_FILE);
-    let config_json = std::fs::read_to_string(&config_path)
-        .map_err(|source| ExportError::Io { path: config_path.display().to_string(), source })?;
-    let varmap = VarMap::new();
-    let vb = candle_nn::VarBuilder::from_varmap(&varmap, candle_core::DType::F32, &candle_core::Device::Cpu);
-    crate::Generator::new(&config, vb)
-        .map_err(|e| ExportError::model(format!("building the generator of {}: {e}", dir.display())))?;
-    crate::checkpoint::load_weights(dir, &varmap).map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
+    let config_json = zoo_nn::export::config_text(dir)?;
+    let varmap = zoo_nn::export::load_run_varmap(dir, "generator", |vb| crate::Generator::new(&config, vb))?;
     let generator = export_generator(&config, Some(&config_json), &spec, &norm, &varmap)?;
     if !dir.join(crate::refiner::REFINER_FILE).is_file() {
         return Ok(generator);
@@ -218,14 +212,8 @@ pub fn export_generator(
 ) -> Result<OnnxModel, ExportError> {
     crate::checkpoint::check_agree(config, spec, norm).map_err(|e| ExportError::model(e.to_string()))?;
     let w = Weights::from_varmap(varmap)?;
-    let serialized;
-    let config_json = match config_json {
-        Some(s) => s,
-        None => {
-            serialized = serde_json::to_string_pretty(config).map_err(|e| ExportError::model(e.to_string()))?;
-            &serialized
-        }
-    };
+    let config_json = zoo_nn::export::config_json(config_json, config)?;
+    let config_json = config_json.as_ref();
     let mut g = step_graph(config, &w)?;
     g.doc("RNN-GMM generator (Wang, Chai & Xia 2019), per-frame step graph; see zoo_rnngmm::export");
     for (k, v) in metadata(config, config_json, spec, norm)?.to_props() {

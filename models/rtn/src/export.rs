@@ -98,38 +98,14 @@ pub fn export_rtn_dir(dir: &Path, options: &RtnExportOptions) -> Result<OnnxMode
     let options = &options;
     let (config, stats) =
         crate::checkpoint::read_meta(dir).map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
-    let config_path = dir.join(crate::checkpoint::CONFIG_FILE);
-    let config_json = std::fs::read_to_string(&config_path)
-        .map_err(|source| ExportError::Io { path: config_path.display().to_string(), source })?;
-    let varmap = VarMap::new();
-    let vb = candle_nn::VarBuilder::from_varmap(&varmap, candle_core::DType::F32, &candle_core::Device::Cpu);
-    crate::Rtn::new(&config, vb)
-        .map_err(|e| ExportError::model(format!("building the RTN of {}: {e}", dir.display())))?;
-    crate::checkpoint::load_weights(dir, &varmap).map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
+    let config_json = zoo_nn::export::config_text(dir)?;
+    let varmap = zoo_nn::export::load_run_varmap(dir, "RTN", |vb| crate::Rtn::new(&config, vb))?;
     export_rtn(&config, Some(&config_json), &stats, &varmap, options)
 }
 
-/// A candle MLP (`prefix.{i}.weight`, `prefix.{i}.bias`, PyTorch `[out, in]` weights): leaky
-/// ReLU after every layer but the last, and after the last when `activate_last`.
-fn mlp(
-    g: &mut GraphBuilder,
-    w: &Weights,
-    prefix: &str,
-    layers: usize,
-    x: &Value,
-    slope: f32,
-    activate_last: bool,
-) -> Result<Value, ExportError> {
-    let mut h = x.clone();
-    for i in 0..layers {
-        let wt = w.init(g, &format!("{prefix}.{i}.weight"))?;
-        let b = w.init(g, &format!("{prefix}.{i}.bias"))?;
-        h = g.gemm(&format!("{prefix}.{i}"), &h, &wt, Some(&b), true);
-        if i + 1 < layers || activate_last {
-            h = g.leaky_relu(&format!("{prefix}.{i}.act"), &h, slope);
-        }
-    }
-    Ok(h)
+/// Leaky ReLU of `slope` after a layer of [`zoo_nn::export::mlp`] (node `LAYER.act`).
+fn leaky(slope: f32) -> impl Fn(&mut GraphBuilder, &str, &Value) -> Value {
+    move |g, layer, h| g.leaky_relu(&format!("{layer}.act"), h, slope)
 }
 
 fn batch(n: usize) -> [Dim; 2] {
@@ -244,14 +220,8 @@ pub fn export_rtn(
         return Err(ExportError::model("a terrain-aware RTN needs terrain statistics in normalization.json"));
     }
     let w = Weights::from_varmap(varmap)?;
-    let serialized;
-    let config_json = match config_json {
-        Some(s) => s,
-        None => {
-            serialized = serde_json::to_string_pretty(config).map_err(|e| ExportError::model(e.to_string()))?;
-            &serialized
-        }
-    };
+    let config_json = zoo_nn::export::config_json(config_json, config)?;
+    let config_json = config_json.as_ref();
     let start = start_graph(config, &w)?;
     let mut g = step_graph(config, &w)?;
     g.doc("Recurrent Transition Network (Harvey & Pal 2018), per-frame step graph; see zoo_rtn::export");
@@ -281,7 +251,7 @@ fn step_graph(config: &Config, w: &Weights) -> Result<GraphBuilder, ExportError>
     // RTN eq. 2: h_E = E([x_t, p_t]), with the interpolation frame: E([x_t, p_t, b_(t+1)])
     let parts: Vec<&Value> = [Some(&x), terrain.as_ref(), base.as_ref()].into_iter().flatten().collect();
     let e_in = if parts.len() == 1 { x.clone() } else { g.concat("frame_encoder.input", &parts, 1) };
-    let he = mlp(&mut g, w, "frame_encoder", config.frame_encoder.len(), &e_in, slope, true)?;
+    let he = zoo_nn::export::mlp(&mut g, w, ("frame_encoder", config.frame_encoder.len()), &e_in, true, leaky(slope))?;
     // RTN eq. 5-8: z = W h_E + U h_(t-1) + C_O h_O + (C_F h_F + b)
     let w_ih = w.init(&mut g, "lstm.weight_ih")?;
     let w_hh = w.init(&mut g, "lstm.weight_hh")?;
@@ -291,7 +261,14 @@ fn step_graph(config: &Config, w: &Weights) -> Result<GraphBuilder, ExportError>
     z = match (&offset, &gate_bias) {
         (Some(off), Some(gb)) => {
             // RTN eq. 4: h_O = O(o_t)
-            let ho = mlp(&mut g, w, "offset_encoder", config.offset_encoder.len(), off, slope, true)?;
+            let ho = zoo_nn::export::mlp(
+                &mut g,
+                w,
+                ("offset_encoder", config.offset_encoder.len()),
+                off,
+                true,
+                leaky(slope),
+            )?;
             let w_o = w.init(&mut g, "lstm.weight_offset")?;
             let zo = g.gemm("lstm.offset_gates", &ho, &w_o, Some(gb), true);
             g.add("lstm.gates", &z, &zo)
@@ -314,7 +291,7 @@ fn step_graph(config: &Config, w: &Weights) -> Result<GraphBuilder, ExportError>
     let tc = g.tanh("lstm.tanh_c", &c_next);
     let h_next = g.mul("lstm.h", &o, &tc);
     // RTN eq. 12-13
-    let dx = mlp(&mut g, w, "decoder", config.decoder.len() + 1, &h_next, slope, false)?;
+    let dx = zoo_nn::export::mlp(&mut g, w, ("decoder", config.decoder.len() + 1), &h_next, false, leaky(slope))?;
     let x_next = match &base {
         // x_(t+1) = b_(t+1) + D(h_t) (Config::interp_residual)
         Some(b) => g.add("interpolation_residual", b, &dx),
@@ -343,7 +320,14 @@ fn start_graph(config: &Config, w: &Weights) -> Result<Option<OnnxModel>, Export
     if config.future_conditioning {
         let target = g.input("target", &batch(2 * d));
         // RTN eq. 3: h_F = F(t); the gates' per-sequence term C_F h_F + b
-        let hf = mlp(&mut g, w, "target_encoder", config.target_encoder.len(), &target, slope, true)?;
+        let hf = zoo_nn::export::mlp(
+            &mut g,
+            w,
+            ("target_encoder", config.target_encoder.len()),
+            &target,
+            true,
+            leaky(slope),
+        )?;
         let wt = w.init(&mut g, "lstm.weight_target")?;
         let b = w.init(&mut g, "lstm.bias")?;
         let gb = g.gemm("lstm.target_gates", &hf, &wt, Some(&b), true);
@@ -354,7 +338,7 @@ fn start_graph(config: &Config, w: &Weights) -> Result<Option<OnnxModel>, Export
         InitState::Learned => {
             let x0 = g.input("x0", &batch(d));
             // RTN eq. 14: (h_0, c_0) = H(x_0), one hidden layer, linear output
-            let hc = mlp(&mut g, w, "state_init", 2, &x0, slope, false)?;
+            let hc = zoo_nn::export::mlp(&mut g, w, ("state_init", 2), &x0, false, leaky(slope))?;
             let parts = g.split("state_init.split", &hc, &[hu, hu], 1);
             g.output("h", &parts[0], &batch(hu));
             g.output("c", &parts[1], &batch(hu));
