@@ -219,6 +219,8 @@ impl<'a> Parser<'a> {
         ))
     }
 
+    // One function: a single pass of the parser over the HIERARCHY tokens, the joint stack its
+    // state; this file is also compiled alone into the Python package (python/src/bvh.rs).
     fn hierarchy(&mut self) -> Result<Hierarchy, BvhError> {
         let t = self.next();
         match t {
@@ -517,6 +519,8 @@ impl<'a> Parser<'a> {
 
     /// Reads `frames` rows of `h.columns` numbers each. `pos` is at the end of the
     /// `Frame Time:` line.
+    // One function: the hot loop of the reader (one pass over the MOTION numbers, the fast path
+    // and its error reporting side by side, measured in examples/bvh_read_bench.rs).
     fn frames(&mut self, h: Hierarchy, frames: usize, frame_time: f64) -> Result<Parsed, BvhError> {
         let Hierarchy { skeleton, layouts, columns } = h;
         let nj = skeleton.len();

@@ -56,6 +56,8 @@ pub fn read_file(path: &Path, opts: &ReadOptions) -> Result<(Clip, ClipSource), 
 }
 
 /// Reads an FBX clip from bytes; `path` names it in messages.
+// One function: the ufbx scene is borrowed from its loader for the whole read (skeleton, take,
+// sampled frames); split, every piece would carry the scene's lifetime and the same tables.
 pub fn read_bytes(bytes: &[u8], path: &Path, opts: &ReadOptions) -> Result<(Clip, ClipSource), ClipError> {
     if bytes.is_empty() {
         return Err(err(path, "empty file: expected a binary FBX (`Kaydara FBX Binary` header)"));

@@ -328,6 +328,8 @@ fn node_name(n: &::gltf::Node) -> String {
     n.name().map_or_else(|| format!("node{}", n.index()), str::to_string)
 }
 
+// One function: every step (the skin's joint order, the tips, the nodes that matter, the
+// sampled animation) reads and refines the same node tables; split, each would take them all.
 fn read_document(
     doc: &::gltf::Document,
     buffers: &[Cow<[u8]>],
@@ -645,6 +647,8 @@ fn tip_name(name: &str, names: &std::collections::HashSet<String>) -> String {
 }
 
 /// The document of a clip: JSON and the binary buffer (see the module documentation).
+// One function: the JSON document and its binary buffer are built together, each accessor
+// pointing at the bytes just appended; split, both would travel through every piece.
 fn document(clip: &Clip) -> (serde_json::Value, Vec<u8>) {
     let sk = &clip.skeleton;
     let nj = sk.len();

@@ -86,6 +86,8 @@ fn f32_data(t: &pb::TensorProto) -> Result<Vec<f32>, String> {
 }
 
 impl RecurrentNode {
+    // One function: the checks of one ONNX recurrent node's attributes and inputs, each refusal
+    // naming what is unsupported; they read the same node, one after the other.
     pub(super) fn read(
         node: &pb::NodeProto,
         cell: Cell,
@@ -194,6 +196,8 @@ impl RecurrentNode {
     }
 
     /// Writes the unrolled cell; the outputs keep the node's output names (only those read).
+    // One function: the cell equations of one unrolled step, written in the order of the
+    // LSTM/GRU definitions (ONNX operator docs) so that they can be read side by side.
     pub(super) fn emit(&self, g: &mut GraphBuilder, used: &HashSet<String>) {
         let (n, h) = (&self.name, self.hidden);
         let x = Value(self.x.clone());

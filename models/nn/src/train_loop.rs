@@ -230,6 +230,144 @@ fn kept(state: &TrainState, out: &Path) -> String {
     }
 }
 
+/// The state and shuffle generator a run starts from: a resumed run's (its data checked, the
+/// model's training state loaded), or a fresh one's.
+fn start<M: Trainable + ?Sized>(
+    model: &mut M,
+    opts: &TrainOptions,
+    n: usize,
+) -> Result<(TrainState, SplitMix64), TrainError> {
+    let out = &opts.out;
+    if !opts.resume {
+        let state = TrainState {
+            data: opts.data.clone(),
+            train_samples: Some(n),
+            data_fingerprint: opts.data_fingerprint,
+            extra: opts.extra.clone(),
+            ..TrainState::default()
+        };
+        return Ok((state, SplitMix64::new(opts.seed)));
+    }
+    let mut state = read_state(out)?;
+    check_same_data(&mut state, opts, n)?;
+    model.load_training_state(&resume_dir(out))?;
+    let rng = match state.shuffle_rng {
+        Some(s) => SplitMix64::from_state(s),
+        None => SplitMix64::new(opts.seed ^ (state.epoch as u64).wrapping_mul(0x9e37_79b9)),
+    };
+    Ok((state, rng))
+}
+
+/// One epoch's training steps over the shuffled samples; the summed loss and the samples seen.
+fn train_epoch<M: Trainable + ?Sized>(
+    model: &mut M,
+    opts: &TrainOptions,
+    state: &TrainState,
+    order: &[usize],
+    style: &ProgressStyle,
+) -> Result<(f64, usize), TrainError> {
+    let pb = if opts.progress { ProgressBar::new(order.len() as u64) } else { ProgressBar::hidden() };
+    pb.set_style(style.clone());
+    pb.set_prefix(format!("{}/{}", state.epoch + 1, opts.epochs));
+    let epoch_start = Instant::now();
+    let (mut sum, mut count) = (0.0, 0usize);
+    for idx in order.chunks(model.batch_size()) {
+        let loss = match model.train_step(idx) {
+            Ok(l) if l.is_finite() => l,
+            failed => {
+                pb.abandon();
+                let reason = match failed {
+                    Ok(l) => format!("the training loss became {l}"),
+                    Err(e) => e.to_string(),
+                };
+                let kept = kept(state, &opts.out);
+                return Err(TrainError::Stopped { epoch: state.epoch + 1, step: model.steps(), reason, kept });
+            }
+        };
+        sum += loss * idx.len() as f64;
+        count += idx.len();
+        pb.inc(idx.len() as u64);
+        let wps = count as f64 / epoch_start.elapsed().as_secs_f64();
+        pb.set_message(format!("loss {:.4}  {wps:.1} windows/s", sum / count as f64));
+    }
+    pb.finish_and_clear();
+    Ok((sum, count))
+}
+
+/// Validates after an epoch, records it in `state` and writes the checkpoints: the best model
+/// when it improved, `last/`, the state and the loss curve. Returns the validation and whether
+/// the epoch is the best (and its averaged weights are).
+fn end_epoch<M: Trainable + ?Sized>(
+    model: &mut M,
+    out: &Path,
+    state: &mut TrainState,
+    train_loss: f64,
+) -> Result<(Validation, bool, bool), TrainError> {
+    model.end_epoch()?;
+    let v = model.validate()?;
+    if !v.loss.is_finite() || v.averaged.is_some_and(|a| !a.is_finite()) {
+        let averaged = v.averaged.map(|a| format!(", averaged weights {a}")).unwrap_or_default();
+        return Err(TrainError::Stopped {
+            epoch: state.epoch + 1,
+            step: model.steps(),
+            reason: format!("the validation loss became {}{averaged}", v.loss),
+            kept: kept(state, out),
+        });
+    }
+    let use_avg = v.averaged.is_some_and(|a| a < v.loss);
+    let vbest = v.averaged.filter(|_| use_avg).unwrap_or(v.loss);
+    state.epoch += 1;
+    state.steps = model.steps();
+    state.train_loss.push(train_loss);
+    state.valid_loss.push(v.loss);
+    if let Some(a) = v.averaged {
+        state.valid_loss_ema.push(a);
+    }
+    let best = state.best_valid.is_none_or(|b| vbest < b);
+    if best {
+        model.save_model(out, use_avg)?;
+        state.best_valid = Some(vbest);
+        state.best_epoch = state.epoch;
+        state.best_is_ema = use_avg;
+    }
+    Ok((v, best, use_avg))
+}
+
+/// Writes `last/` (the model and its training state) and the run's state and loss curve.
+fn write_epoch<M: Trainable + ?Sized>(model: &mut M, out: &Path, state: &TrainState) -> Result<(), TrainError> {
+    checkpoint::replace_dir(&out.join(LAST_DIR), |dir| -> Result<(), TrainError> {
+        model.save_model(dir, false)?;
+        model.save_training_state(dir)?;
+        Ok(checkpoint::write_json(&dir.join(TRAIN_STATE_FILE), state)?)
+    })?;
+    checkpoint::write_json(&out.join(TRAIN_STATE_FILE), state)?;
+    crate::plot::loss_curve(&out.join(LOSS_CURVE_FILE), &state.train_loss, &state.valid_loss)?;
+    Ok(())
+}
+
+/// `summary.json`: the model's fields, the run's extra fields and the loop's.
+fn write_summary<M: Trainable + ?Sized>(model: &M, out: &Path, state: &TrainState) -> Result<(), TrainError> {
+    let mut summary = model.summary();
+    for (k, v) in &state.extra {
+        summary.entry(k.clone()).or_insert_with(|| v.clone());
+    }
+    let loop_fields = serde_json::json!({
+        "data": state.data,
+        "epochs": state.epoch,
+        "steps": state.steps,
+        "best_epoch": state.best_epoch,
+        "best_valid_loss": state.best_valid,
+        "best_is_moving_average": state.best_is_ema,
+        "final_train_loss": state.train_loss.last(),
+        "seconds": state.seconds,
+        "windows_per_second": state.windows_per_second,
+    });
+    if let Value::Object(fields) = loop_fields {
+        summary.extend(fields);
+    }
+    Ok(checkpoint::write_json(&out.join(SUMMARY_FILE), &summary)?)
+}
+
 /// Trains `model` as `opts` says; returns the run's final state. See the module docs.
 pub fn train<M: Trainable + ?Sized>(model: &mut M, opts: &TrainOptions) -> Result<TrainState, TrainError> {
     let out = &opts.out;
@@ -239,107 +377,30 @@ pub fn train<M: Trainable + ?Sized>(model: &mut M, opts: &TrainOptions) -> Resul
     if n == 0 || batch == 0 {
         return Err(TrainError::Config(format!("nothing to train on: {n} training samples, batch size {batch}")));
     }
-    let (mut state, mut rng) = if opts.resume {
-        let mut state = read_state(out)?;
-        check_same_data(&mut state, opts, n)?;
-        model.load_training_state(&resume_dir(out))?;
-        let rng = match state.shuffle_rng {
-            Some(s) => SplitMix64::from_state(s),
-            None => SplitMix64::new(opts.seed ^ (state.epoch as u64).wrapping_mul(0x9e37_79b9)),
-        };
-        (state, rng)
-    } else {
-        let state = TrainState {
-            data: opts.data.clone(),
-            train_samples: Some(n),
-            data_fingerprint: opts.data_fingerprint,
-            extra: opts.extra.clone(),
-            ..TrainState::default()
-        };
-        (state, SplitMix64::new(opts.seed))
-    };
+    let (mut state, mut rng) = start(model, opts, n)?;
     let started = Instant::now();
     let seconds_before = state.seconds;
     let style = ProgressStyle::with_template("epoch {prefix} [{bar:30}] {pos}/{len} windows  {msg}  {elapsed}<{eta}")
         .map_err(|e| TrainError::Config(format!("progress bar template: {e}")))?;
     while state.epoch < opts.epochs {
-        if let Some(limit) = opts.time_limit {
-            if started.elapsed() >= limit {
-                if opts.print {
-                    println!("time limit of {} min reached after {} epochs", limit.as_secs_f64() / 60.0, state.epoch);
-                }
-                break;
+        if let Some(limit) = opts.time_limit
+            && started.elapsed() >= limit
+        {
+            if opts.print {
+                println!("time limit of {} min reached after {} epochs", limit.as_secs_f64() / 60.0, state.epoch);
             }
+            break;
         }
         let mut order: Vec<usize> = (0..n).collect();
         rng.shuffle(&mut order);
-        let pb = if opts.progress { ProgressBar::new(n as u64) } else { ProgressBar::hidden() };
-        pb.set_style(style.clone());
-        pb.set_prefix(format!("{}/{}", state.epoch + 1, opts.epochs));
         let epoch_start = Instant::now();
-        let (mut sum, mut count) = (0.0, 0usize);
-        for idx in order.chunks(batch) {
-            let loss = match model.train_step(idx) {
-                Ok(l) if l.is_finite() => l,
-                failed => {
-                    pb.abandon();
-                    let reason = match failed {
-                        Ok(l) => format!("the training loss became {l}"),
-                        Err(e) => e.to_string(),
-                    };
-                    return Err(TrainError::Stopped {
-                        epoch: state.epoch + 1,
-                        step: model.steps(),
-                        reason,
-                        kept: kept(&state, out),
-                    });
-                }
-            };
-            sum += loss * idx.len() as f64;
-            count += idx.len();
-            pb.inc(idx.len() as u64);
-            let wps = count as f64 / epoch_start.elapsed().as_secs_f64();
-            pb.set_message(format!("loss {:.4}  {wps:.1} windows/s", sum / count as f64));
-        }
-        pb.finish_and_clear();
+        let (sum, count) = train_epoch(model, opts, &state, &order, &style)?;
         let epoch_secs = epoch_start.elapsed().as_secs_f64();
-        model.end_epoch()?;
-        let v = model.validate()?;
-        if !v.loss.is_finite() || v.averaged.is_some_and(|a| !a.is_finite()) {
-            let averaged = v.averaged.map(|a| format!(", averaged weights {a}")).unwrap_or_default();
-            return Err(TrainError::Stopped {
-                epoch: state.epoch + 1,
-                step: model.steps(),
-                reason: format!("the validation loss became {}{averaged}", v.loss),
-                kept: kept(&state, out),
-            });
-        }
-        let use_avg = v.averaged.is_some_and(|a| a < v.loss);
-        let vbest = v.averaged.filter(|_| use_avg).unwrap_or(v.loss);
-        state.epoch += 1;
-        state.steps = model.steps();
-        state.train_loss.push(sum / count as f64);
-        state.valid_loss.push(v.loss);
-        if let Some(a) = v.averaged {
-            state.valid_loss_ema.push(a);
-        }
+        let (v, best, use_avg) = end_epoch(model, out, &mut state, sum / count as f64)?;
         state.seconds = seconds_before + started.elapsed().as_secs_f64();
         state.windows_per_second = (state.epoch * n) as f64 / state.seconds;
-        let best = state.best_valid.is_none_or(|b| vbest < b);
-        if best {
-            model.save_model(out, use_avg)?;
-            state.best_valid = Some(vbest);
-            state.best_epoch = state.epoch;
-            state.best_is_ema = use_avg;
-        }
         state.shuffle_rng = Some(rng.state());
-        checkpoint::replace_dir(&out.join(LAST_DIR), |dir| -> Result<(), TrainError> {
-            model.save_model(dir, false)?;
-            model.save_training_state(dir)?;
-            Ok(checkpoint::write_json(&dir.join(TRAIN_STATE_FILE), &state)?)
-        })?;
-        checkpoint::write_json(&out.join(TRAIN_STATE_FILE), &state)?;
-        crate::plot::loss_curve(&out.join(LOSS_CURVE_FILE), &state.train_loss, &state.valid_loss)?;
+        write_epoch(model, out, &state)?;
         if opts.print {
             println!(
                 "epoch {:>3}: train loss {:.5}  valid loss {:.5}{}{}{}  {:.1} windows/s  {:.0} s",
@@ -363,25 +424,7 @@ pub fn train<M: Trainable + ?Sized>(model: &mut M, opts: &TrainOptions) -> Resul
             out.display()
         )));
     }
-    let mut summary = model.summary();
-    for (k, v) in &state.extra {
-        summary.entry(k.clone()).or_insert_with(|| v.clone());
-    }
-    let loop_fields = serde_json::json!({
-        "data": state.data,
-        "epochs": state.epoch,
-        "steps": state.steps,
-        "best_epoch": state.best_epoch,
-        "best_valid_loss": state.best_valid,
-        "best_is_moving_average": state.best_is_ema,
-        "final_train_loss": state.train_loss.last(),
-        "seconds": state.seconds,
-        "windows_per_second": state.windows_per_second,
-    });
-    if let Value::Object(fields) = loop_fields {
-        summary.extend(fields);
-    }
-    checkpoint::write_json(&out.join(SUMMARY_FILE), &summary)?;
+    write_summary(model, out, &state)?;
     Ok(state)
 }
 

@@ -239,6 +239,49 @@ impl Problem<'_> {
     }
 }
 
+/// The prior's windows over `t` frames: the training length `w` every half window, the last one
+/// ending at the clip's end; per window frame the input and target frame indices, and a mask
+/// that scores each frame's NLL once (with enough history).
+fn prior_windows(t: usize, w: usize) -> (Vec<usize>, Vec<u32>, Vec<u32>, Vec<f32>) {
+    let half = (w / 2).max(1);
+    let mut starts: Vec<usize> = (0..).map(|k| k * half).take_while(|s| s + w < t).collect();
+    if starts.last().is_none_or(|s| s + w < t) {
+        starts.push(t - w);
+    }
+    let (mut in_index, mut target_index, mut mask) = (Vec::new(), Vec::new(), Vec::new());
+    let mut scored = 0usize; // frames 1..=scored have their NLL
+    for &s in &starts {
+        for k in 0..w - 1 {
+            in_index.push((s + k) as u32);
+            let f = s + k + 1;
+            target_index.push(f as u32);
+            let history_ok = s == 0 || k + 1 >= half;
+            let new = f > scored && history_ok;
+            mask.push(if new { 1f32 } else { 0.0 });
+        }
+        scored = s + w - 1;
+    }
+    (starts, in_index, target_index, mask)
+}
+
+/// The optimisation's start `[s; d]`: the normalised input `values` (or the input smoothed by
+/// the Savitzky-Golay filter of `opts.init_savgol`; a window longer than the clip: the input),
+/// and zero noise.
+fn initial_values(g: &LoadedGenerator, clip: &Clip, opts: &DenoiseOptions, values: &[f32]) -> RnnGmmResult<Vec<f64>> {
+    let (t, dim) = (values.len() / g.spec.dim(), g.spec.dim());
+    let mut init: Vec<f64> = match opts.init_savgol.filter(|&w| w <= t) {
+        None => values.iter().map(|v| *v as f64).collect(),
+        Some(w) => {
+            let smooth = crate::noise::savgol(clip, w, 2).map_err(RnnGmmError::Config)?;
+            let mut v = g.spec.encode(&smooth)?.values;
+            g.norm.normalize(&mut v);
+            v.iter().map(|x| *x as f64).collect()
+        }
+    };
+    init.extend(std::iter::repeat_n(0.0, t * dim));
+    Ok(init)
+}
+
 /// Denoises `clip` (on the model's skeleton, at its frame rate, at least 2 frames) with the
 /// trained generator `g`. `progress` is called with the number of energy evaluations so far.
 pub fn denoise(
@@ -261,26 +304,8 @@ pub fn denoise(
         angle_range.clone().map(|i| (0..t).map(|f| enc.frame(f)[i] as f64).collect()).collect();
     let sigma_root = opts.sigma_root.unwrap_or_else(|| estimate_level(&root_series).max(0.2));
     let sigma_angle = opts.sigma_angle.unwrap_or_else(|| estimate_level(&angle_series).max(0.25f64.to_radians()));
-    // Prior windows: the training length every half window, the last one ending at the clip's end.
     let w = opts.window.min(t);
-    let half = (w / 2).max(1);
-    let mut starts: Vec<usize> = (0..).map(|k| k * half).take_while(|s| s + w < t).collect();
-    if starts.last().is_none_or(|s| s + w < t) {
-        starts.push(t - w);
-    }
-    let (mut in_index, mut target_index, mut mask) = (Vec::new(), Vec::new(), Vec::new());
-    let mut scored = 0usize; // frames 1..=scored have their NLL
-    for &s in &starts {
-        for k in 0..w - 1 {
-            in_index.push((s + k) as u32);
-            let f = s + k + 1;
-            target_index.push(f as u32);
-            let history_ok = s == 0 || k + 1 >= half;
-            let new = f > scored && history_ok;
-            mask.push(if new { 1f32 } else { 0.0 });
-        }
-        scored = s + w - 1;
-    }
+    let (starts, in_index, target_index, mask) = prior_windows(t, w);
     // Input trajectory and angles (clip units).
     let mut values = enc.values.clone();
     norm.normalize(&mut values);
@@ -321,17 +346,7 @@ pub fn denoise(
         sigma_contact: opts.sigma_contact,
         sigma_plane: opts.sigma_plane,
     };
-    // The start: the input, or the input smoothed (a window longer than the clip: the input).
-    let mut init: Vec<f64> = match opts.init_savgol.filter(|&w| w <= t) {
-        None => values.iter().map(|v| *v as f64).collect(),
-        Some(w) => {
-            let smooth = crate::noise::savgol(clip, w, 2).map_err(RnnGmmError::Config)?;
-            let mut v = spec.encode(&smooth)?.values;
-            norm.normalize(&mut v);
-            v.iter().map(|x| *x as f64).collect()
-        }
-    };
-    init.extend(std::iter::repeat_n(0.0, t * dim));
+    let init = initial_values(g, clip, opts, &values)?;
     let start = problem.term_values(&init)?;
     let total = start.prior + start.noise + start.data + start.contact;
     if !total.is_finite() {

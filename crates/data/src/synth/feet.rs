@@ -81,6 +81,8 @@ pub(super) fn plan_feet(
 }
 
 /// The pose of one foot (`side` 0: left, 1: right) on every frame.
+// One function: a frame-by-frame walk of the foot's gait cycle (stance, lift, swing, landing)
+// whose state carries from one frame to the next; its steps are that loop's body.
 fn plan_foot(
     side: usize,
     traj: &Trajectory,

@@ -14,6 +14,8 @@ use std::ops::Range;
 
 /// Local rotations and positions (`frames * joints`, on [`skeleton()`]) and the contacts
 /// (left, right) of the trajectory frames `frames`.
+// One function: the pose of each frame from its phase and the feet planned before it, one
+// loop whose body is the pose's parts in the skeleton's order.
 pub(super) fn pose_frames(
     traj: &Trajectory,
     cycle: &Cycle,

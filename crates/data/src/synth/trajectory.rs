@@ -28,6 +28,8 @@ pub(super) const WALK_STRAFE_SHARE: f64 = 0.07;
 /// `strafe_share`: the share of a walk's segments that step sideways or backwards
 /// ([`WALK_STRAFE_SHARE`] in the default data; the stepping clips of
 /// [`super::generate_stepping`] raise it).
+// One function: a frame-by-frame integration of the root (segment targets, bounded
+// acceleration, smoothing) whose state carries from one frame to the next.
 pub(super) fn plan_trajectory(
     rng: &mut SplitMix64,
     gait: Gait,
