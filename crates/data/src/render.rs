@@ -437,7 +437,7 @@ pub fn render_sheet(clips: &[RenderClip], opts: &RenderOptions, path: &Path) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use zoo_data::synth::{SynthConfig, generate_clip};
+    use crate::synth::{SynthConfig, generate_clip};
 
     fn synth(seed: u64, terrain: bool) -> RenderClip {
         let c = generate_clip(&SynthConfig { seed, terrain, clip_seconds: 2.0, ..SynthConfig::default() }, 0);
@@ -472,7 +472,7 @@ mod tests {
     #[test]
     #[ignore = "writes the documentation pictures, not a check: ZOO_PREVIEW_DIR=docs cargo test -p zoo-cli -- --ignored docs_previews"]
     fn docs_previews() {
-        use zoo_data::synth::{Gait, TerrainKind};
+        use crate::synth::{Gait, TerrainKind};
         let dir = std::path::PathBuf::from(std::env::var("ZOO_PREVIEW_DIR").expect("set ZOO_PREVIEW_DIR"));
         std::fs::create_dir_all(&dir).unwrap();
         let find = |terrain: bool, kind: TerrainKind, gait: Gait| {
