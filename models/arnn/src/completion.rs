@@ -299,6 +299,31 @@ fn write_json(path: &Path, value: &serde_json::Value) -> ArnnResult<()> {
     Ok(())
 }
 
+/// Writes the completed clip to `o.out`, its positions file and its JSON (the completion's
+/// header and `fields`) when asked.
+fn write_outputs(
+    o: &CompleteOptions,
+    clip: &zoo_motion::Clip,
+    first_frame: usize,
+    fps: f64,
+    fields: serde_json::Value,
+) -> ArnnResult<()> {
+    zoo_data::clip_io::write(clip, &o.out).with_context(|| format!("writing {}", o.out.display()))?;
+    write_positions(o, clip, first_frame)?;
+    let Some(j) = &o.json else { return Ok(()) };
+    let mut v = serde_json::json!({
+        "format": COMPLETION_FORMAT,
+        "version": 1,
+        "model": o.model,
+        "fps": fps,
+        "first_frame": first_frame,
+    });
+    if let (Some(v), serde_json::Value::Object(fields)) = (v.as_object_mut(), fields) {
+        v.extend(fields);
+    }
+    write_json(j, &v)
+}
+
 /// Completes the keys of `o` with the ARNN of its run folder and writes what `o` asks for;
 /// returns the summary the command prints.
 pub fn complete_command(o: &CompleteOptions) -> ArnnResult<String> {
@@ -351,25 +376,14 @@ fn complete_lamp(o: &CompleteOptions, model: &Arnn, norm: &Normalization) -> Arn
         .collect::<Result<_, _>>()
         .map_err(|_| Message(format!("the model completes {} values per frame, not the lamp's 6", config.dofs)))?;
     let clip = poses_to_clip(&poses, fps, &lamp);
-    zoo_data::clip_io::write(&clip, &o.out).with_context(|| format!("writing {}", o.out.display()))?;
-    write_positions(o, &clip, keys.offset)?;
-    if let Some(j) = &o.json {
-        write_json(
-            j,
-            &serde_json::json!({
-                "format": COMPLETION_FORMAT,
-                "version": 1,
-                "model": o.model,
-                "fps": fps,
-                "first_frame": keys.offset,
-                "dof_names": dof_names,
+    let fields = serde_json::json!({
+        "dof_names": dof_names,
                 "key_frames": keys.frames,
                 "key_misses": misses,
                 "ground_lift": lift,
                 "frames": frames,
-            }),
-        )?;
-    }
+    });
+    write_outputs(o, &clip, keys.offset, fps, fields)?;
     if let Some(p) = &o.plot {
         let keyed: Vec<(usize, Vec<f64>)> = keys.frames.iter().copied().zip(keys.poses.iter().cloned()).collect();
         plot_dofs(p, &[DofSeries { frames: &frames, rgb: (31, 80, 180), width: 2.0 }], &keyed)?;
@@ -422,25 +436,14 @@ fn complete_humanoid(
     if let Some(fps) = o.fps.or(keys.fps) {
         done.clip.frame_time = 1.0 / fps;
     }
-    zoo_data::clip_io::write(&done.clip, &o.out).with_context(|| format!("writing {}", o.out.display()))?;
-    write_positions(o, &done.clip, keys.offset)?;
     let (deg, key, joint) = done.angle_miss;
-    if let Some(j) = &o.json {
-        write_json(
-            j,
-            &serde_json::json!({
-                "format": COMPLETION_FORMAT,
-                "version": 1,
-                "model": o.model,
-                "fps": 1.0 / done.clip.frame_time,
-                "first_frame": keys.offset,
-                "key_frames": keys.keys.iter().map(|k| k.frame).collect::<Vec<_>>(),
+    let fields = serde_json::json!({
+        "key_frames": keys.keys.iter().map(|k| k.frame).collect::<Vec<_>>(),
                 "root_miss": done.root_miss,
                 "angle_miss_degrees": deg,
                 "frames": done.clip.frames(),
-            }),
-        )?;
-    }
+    });
+    write_outputs(o, &done.clip, keys.offset, 1.0 / done.clip.frame_time, fields)?;
     Ok(format!(
         "completed {} frames from {} keys ({} partial) into {}{}; largest key miss: root {:.2} (clip units), {:.2} deg \
          ({} at key {key})",

@@ -108,3 +108,13 @@ impl<M: TrainDefaults> DataArgs<M> {
         })
     }
 }
+
+/// The library's run and data options of a trainer that reads clips (`exclude_glob`: the RTN's
+/// `--exclude-glob`).
+pub fn specs<M: TrainDefaults>(
+    run: &RunArgs<M>,
+    data: &DataArgs<M>,
+    exclude_glob: Option<String>,
+) -> anyhow::Result<(RunSpec, TrainingClips)> {
+    Ok((run.spec(), data.spec(exclude_glob, run.seed)?))
+}

@@ -74,9 +74,8 @@ fn seam_weight(s: &str) -> Result<f64, String> {
 
 /// Runs `zoo train rmr`.
 pub fn run(a: RmrArgs) -> anyhow::Result<()> {
+    let (run, data) = crate::cmd::train_args::specs(&a.run, &a.data, None)?;
     let o = RmrRunOptions {
-        data: a.data.spec(None, a.run.seed)?,
-        run: a.run.spec(),
         preset: a.preset,
         cell: a.cell,
         t_begin: a.t_begin,
@@ -89,6 +88,8 @@ pub fn run(a: RmrArgs) -> anyhow::Result<()> {
         batch_size: a.batch_size,
         lr: a.lr,
         database_stride: a.database_stride,
+        run,
+        data,
     };
     Ok(zoo_rmr::train_run::run(&o, &crate::progress::Bar::new())?)
 }

@@ -103,9 +103,10 @@ pub fn run(a: RnnGmmArgs) -> anyhow::Result<()> {
         joint_limits: a.refiner_joint_limits,
         root_smoothing: a.refiner_root_smoothing,
     };
+    let (run, data) = crate::cmd::train_args::specs(&a.run, &a.data, None)?;
     let o = RnnGmmRunOptions {
-        data: a.data.spec(None, a.run.seed)?,
-        run: a.run.spec(),
+        run,
+        data,
         glob: a.glob,
         stage: a.stage,
         refiner_epochs: a.refiner_epochs,
