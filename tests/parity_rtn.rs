@@ -1306,7 +1306,7 @@ fn a_terrain_section_that_does_not_match_the_graph_is_refused() {
     task.terrain.as_mut().unwrap().side = 4;
     let bytes = with_prop(&f, keys::TRANSITION, Some(&serde_json::to_string(&task).unwrap()));
     let err = TransitionModel::new(MotionModel::from_bytes(&bytes).unwrap()).unwrap_err();
-    assert!(err.to_string().contains("group `terrain` has 25 means and 25 deviations, expected 16"), "{err}");
+    assert!(err.to_string().contains("group `terrain` has 25 values, expected 16"), "{err}");
     task.terrain.as_mut().unwrap().side = 0;
     let bytes = with_prop(&f, keys::TRANSITION, Some(&serde_json::to_string(&task).unwrap()));
     let err = LoadedModel::from_bytes(&bytes).unwrap_err();

@@ -238,6 +238,52 @@ fn check_rows(name: &str, data: &[f32], batch: usize, width: usize) -> Result<()
     check_finite(name, data, width)
 }
 
+/// What each frame input of a transition step graph is, checked against its section: `x`,
+/// `offset` (when the section says so), `base` (optional) of `D` values, `terrain` of `S^2`
+/// values (`patch_dim`, when the section has terrain); the required ones must be there.
+fn frame_inputs(
+    model: &MotionModel,
+    task: &crate::metadata::TransitionTask,
+    patch_dim: Option<usize>,
+) -> Result<Vec<FrameInput>, MotionError> {
+    let d = task.frame_dim;
+    let patch = patch_dim.unwrap_or(0);
+    let frame_inputs = model
+        .inputs()
+        .iter()
+        .map(|i| match i.name.as_str() {
+            "x" if i.width == d => Ok(FrameInput::X),
+            "offset" if i.width == d && task.offset_input => Ok(FrameInput::Offset),
+            "base" if i.width == d => Ok(FrameInput::Base),
+            "terrain" if patch_dim.is_some() && i.width == patch => Ok(FrameInput::Terrain),
+            other => Err(MotionError::BadGraphIo {
+                what: "input",
+                name: other.to_string(),
+                reason: format!(
+                    "is not an input of this transition model (`x`{}, optionally `base`, of {d} values{}, from `{}`)",
+                    if task.offset_input { ", `offset`" } else { "" },
+                    if patch_dim.is_some() { format!(", `terrain` of {patch} values") } else { String::new() },
+                    keys::TRANSITION
+                ),
+            }),
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    for (name, want, width, required) in [
+        ("x", FrameInput::X, d, true),
+        ("offset", FrameInput::Offset, d, task.offset_input),
+        ("terrain", FrameInput::Terrain, patch, patch_dim.is_some()),
+    ] {
+        if required && !frame_inputs.contains(&want) {
+            return Err(MotionError::BadGraphIo {
+                what: "input",
+                name: name.into(),
+                reason: format!("a transition step graph takes `{name}` of {width} values (`{}`)", keys::TRANSITION),
+            });
+        }
+    }
+    Ok(frame_inputs)
+}
+
 impl TransitionModel {
     /// Loads an RTN exported by `zoo export --onnx`; refuses a file of another task or kind
     /// (load any exported file with [`crate::LoadedModel::load`]).
@@ -257,71 +303,15 @@ impl TransitionModel {
         let MotionTask::Transition(task) = &m.task else {
             return Err(MotionError::wrong_task(m, "transition", "TransitionModel"));
         };
+        // The format crate checked `frame_dim` against the skeleton and every group's values.
         let joints = m.skeleton.parents.len();
         let d = 3 * joints;
-        if task.frame_dim != d {
-            return Err(bad(
-                keys::TRANSITION,
-                format!("frame_dim is {} but the skeleton has {joints} joints ({d} values)", task.frame_dim),
-            ));
-        }
-        let group_of = |name: &str, len: usize| -> Result<MotionMeanStd, MotionError> {
-            let g = m.normalization.get(name).ok_or_else(|| bad(keys::NORMALIZATION, format!("no group `{name}`")))?;
-            if g.mean.len() != len || g.std.len() != len {
-                return Err(bad(
-                    keys::NORMALIZATION,
-                    format!("group `{name}` has {} means and {} deviations, expected {len}", g.mean.len(), g.std.len()),
-                ));
-            }
-            Ok(g.clone())
-        };
-        let group = |name: &str| group_of(name, d);
+        let group = |name: &str, len: usize| -> Result<MotionMeanStd, MotionError> { Ok(m.group(name, len)?.clone()) };
         let terrain = match &task.terrain {
-            Some(t) => {
-                Some(TerrainInput { side: t.side, extent: t.extent, norm: group_of("terrain", t.side * t.side)? })
-            }
+            Some(t) => Some(TerrainInput { side: t.side, extent: t.extent, norm: group("terrain", t.side * t.side)? }),
             None => None,
         };
-        let patch_dim = terrain.as_ref().map_or(0, |t| t.side * t.side);
-        let frame_inputs = model
-            .inputs()
-            .iter()
-            .map(|i| match i.name.as_str() {
-                "x" if i.width == d => Ok(FrameInput::X),
-                "offset" if i.width == d && task.offset_input => Ok(FrameInput::Offset),
-                "base" if i.width == d => Ok(FrameInput::Base),
-                "terrain" if terrain.is_some() && i.width == patch_dim => Ok(FrameInput::Terrain),
-                other => Err(MotionError::BadGraphIo {
-                    what: "input",
-                    name: other.to_string(),
-                    reason: format!(
-                        "is not an input of this transition model (`x`{}, optionally `base`, of {d} values{}, from `{}`)",
-                        if task.offset_input { ", `offset`" } else { "" },
-                        if terrain.is_some() { format!(", `terrain` of {patch_dim} values") } else { String::new() },
-                        keys::TRANSITION
-                    ),
-                }),
-            })
-            .collect::<Result<Vec<_>, _>>()?;
-        for (name, want, width) in
-            [("x", FrameInput::X, d), ("offset", FrameInput::Offset, d), ("terrain", FrameInput::Terrain, patch_dim)]
-        {
-            let required = match want {
-                FrameInput::Offset => task.offset_input,
-                FrameInput::Terrain => terrain.is_some(),
-                _ => true,
-            };
-            if required && !frame_inputs.contains(&want) {
-                return Err(MotionError::BadGraphIo {
-                    what: "input",
-                    name: name.into(),
-                    reason: format!(
-                        "a transition step graph takes `{name}` of {width} values (`{}`)",
-                        keys::TRANSITION
-                    ),
-                });
-            }
-        }
+        let frame_inputs = frame_inputs(&model, task, terrain.as_ref().map(|t| t.side * t.side))?;
         if model.outputs().len() != 1 || model.outputs()[0].width != d {
             return Err(MotionError::BadGraphIo {
                 what: "output",
@@ -342,9 +332,9 @@ impl TransitionModel {
             joints,
             past_frames: task.past_frames,
             transition_frames: task.transition_frames,
-            x: group("x")?,
-            velocity: group("velocity")?,
-            offset: group("offset")?,
+            x: group("x", d)?,
+            velocity: group("velocity", d)?,
+            offset: group("offset", d)?,
             frame_inputs,
             terrain,
             start_target,
@@ -538,38 +528,9 @@ impl TransitionRunner {
         next: &[f32],
         length: usize,
     ) -> Result<(), MotionError> {
+        let per = self.check_start(states, past, target, next, length)?;
         let n = states.len();
-        if n == 0 {
-            return Err(MotionError::EmptyBatch);
-        }
-        let trained = self.model.transition_frames;
-        if length > trained && !self.beyond_trained {
-            return Err(MotionError::BeyondTrainedLength { requested: length, trained });
-        }
         let (k, d) = (self.model.joints, 3 * self.model.joints);
-        let per = past.len() / n;
-        if past.is_empty() || !past.len().is_multiple_of(n) || per == 0 || !per.is_multiple_of(d) {
-            return Err(MotionError::BufferLength {
-                name: "past".into(),
-                expected: n * d * self.model.past_frames,
-                batch: n,
-                width: d * self.model.past_frames,
-                found: past.len(),
-            });
-        }
-        check_rows("past", past, n, per)?;
-        check_rows("target", target, n, d)?;
-        check_rows("next", next, n, d)?;
-        if self.model.terrain.is_some()
-            && let Some(c) = states.iter().position(|s| s.heightmap.is_none())
-        {
-            return Err(MotionError::TransitionSequence {
-                character: c,
-                reason: "this model is terrain-aware: give the character the ground it stands on \
-                         (TransitionState::set_heightmap) before starting the transition"
-                    .into(),
-            });
-        }
         let frames = per / d;
         let m = &self.model;
         // Context features and target vectors, normalized like in training.
@@ -631,6 +592,52 @@ impl TransitionRunner {
             states.iter_mut().for_each(|s| s.started = false);
         }
         result
+    }
+
+    /// The checks of [`TransitionRunner::start_batch_for`] before any work: a batch, a length the
+    /// runner allows, buffers of the right lengths with finite values, a heightmap per
+    /// character for a terrain-aware model. Returns the values of context per character.
+    fn check_start(
+        &self,
+        states: &[TransitionState],
+        past: &[f32],
+        target: &[f32],
+        next: &[f32],
+        length: usize,
+    ) -> Result<usize, MotionError> {
+        let n = states.len();
+        if n == 0 {
+            return Err(MotionError::EmptyBatch);
+        }
+        let trained = self.model.transition_frames;
+        if length > trained && !self.beyond_trained {
+            return Err(MotionError::BeyondTrainedLength { requested: length, trained });
+        }
+        let d = 3 * self.model.joints;
+        let per = past.len() / n;
+        if past.is_empty() || !past.len().is_multiple_of(n) || per == 0 || !per.is_multiple_of(d) {
+            return Err(MotionError::BufferLength {
+                name: "past".into(),
+                expected: n * d * self.model.past_frames,
+                batch: n,
+                width: d * self.model.past_frames,
+                found: past.len(),
+            });
+        }
+        check_rows("past", past, n, per)?;
+        check_rows("target", target, n, d)?;
+        check_rows("next", next, n, d)?;
+        if self.model.terrain.is_some()
+            && let Some(c) = states.iter().position(|s| s.heightmap.is_none())
+        {
+            return Err(MotionError::TransitionSequence {
+                character: c,
+                reason: "this model is terrain-aware: give the character the ground it stands on \
+                         (TransitionState::set_heightmap) before starting the transition"
+                    .into(),
+            });
+        }
+        Ok(per)
     }
 
     /// Runs the step graph on the `x` of the characters in `sel` into `self.next` (row `i` for

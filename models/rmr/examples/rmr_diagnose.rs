@@ -35,6 +35,8 @@ struct Acc {
     gt_rot: Vec<DQuat>,
 }
 
+// Kept whole: a diagnostic script whose steps print in the order they run, read top to bottom
+// beside its output; split, each piece would take the same model, data and statistics.
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let get = |k: &str| args.iter().position(|a| a == k).map(|i| args[i + 1].clone());

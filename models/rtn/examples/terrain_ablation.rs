@@ -75,6 +75,8 @@ fn sequences(clips: &[synth::SynthClip]) -> Vec<Sequence> {
         .collect()
 }
 
+// Kept whole: an experiment script whose steps print in the order they run (data, the runs,
+// the table), read top to bottom beside its output.
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     let aware = match args.get(1).map(String::as_str) {
