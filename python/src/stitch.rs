@@ -9,7 +9,7 @@ use pyo3::types::PyDict;
 use zoo_runtime::{EnginePose, FootCleanup, StitchRefiner};
 
 /// Shortest clip the refiner stitches: the shortest segment of its training data (RMR sec. 6;
-/// `zoo_data::stitch::MIN_CLIP_FRAMES`, what `zoo stitch` requires).
+/// `zoo_rmr::pairs::MIN_CLIP_FRAMES`, what `zoo stitch` requires).
 pub const MIN_CLIP_FRAMES: usize = 10;
 
 /// A loaded stitching model (the refiner is `Send + Sync`: no runner to lock).
@@ -105,7 +105,7 @@ impl Stitch {
     /// Aligns clips end to start (`clips`: a list of `(hips (T_i, 3), rotations (T_i, K, 4))`):
     /// each clip is moved on the ground (translation and turn about +Y) so that its first
     /// ground root is the previous clip's last one, as `zoo stitch` aligns
-    /// (`zoo_data::stitch::align_clips`). Returns `(hips, rotations, starts)`: the aligned
+    /// (`zoo_rmr::pairs::align_clips`). Returns `(hips, rotations, starts)`: the aligned
     /// sequence and the first frame of each clip in it.
     fn align<'py>(
         &self,

@@ -60,7 +60,7 @@ impl MotionKeys<'_> {
         self.frames.is_empty()
     }
 
-    /// The keys around frame `t >= 1` and `t_rel` (`zoo_data::luxo::preprocess::KeyedSequence::interval`).
+    /// The keys around frame `t >= 1` and `t_rel` (`zoo_arnn::luxo::preprocess::KeyedSequence::interval`).
     pub(crate) fn interval(&self, t: usize) -> (usize, usize, f32) {
         let n = self.frames.len();
         let mut k = 0;
