@@ -87,9 +87,12 @@ namespace Zoo
     }
 
     /// <summary>
-    /// A wrapper of one native handle. <see cref="Dispose"/> frees it (a second Dispose does
-    /// nothing, as IDisposable requires); any other call after that throws
-    /// <see cref="ZooDisposedException"/>. Undisposed handles are freed by the finalizer.
+    /// A wrapper of one native handle. <see cref="Dispose"/> frees it; a second Dispose and any
+    /// other call after that throw <see cref="ZooDisposedException"/> (a handle has one owner:
+    /// a second Dispose means two parts of the program think they own it, which in C would be a
+    /// double free, so it is reported rather than ignored; code that may legitimately see a
+    /// disposed object checks <see cref="IsDisposed"/> first). The native handle is freed
+    /// exactly once whatever happens. Undisposed handles are freed by the finalizer.
     /// </summary>
     public abstract class ZooObject : IDisposable
     {
@@ -103,9 +106,15 @@ namespace Zoo
         /// <summary>Whether <see cref="Dispose"/> was called.</summary>
         public bool IsDisposed { get { return handle.IsClosed; } }
 
-        /// <summary>Frees the native handle (once; later calls do nothing).</summary>
+        /// <summary>Frees the native handle. Throws <see cref="ZooDisposedException"/> when it was already disposed (nothing is freed twice).</summary>
         public void Dispose()
         {
+            if (handle.IsClosed)
+            {
+                var name = GetType().Name;
+                throw new ZooDisposedException(name, ZooStatus.NullPointer,
+                    name + ".Dispose: this " + name + " is already disposed (it was disposed twice: give it one owner that disposes it, or check IsDisposed before disposing)");
+            }
             handle.Dispose();
         }
 

@@ -581,8 +581,9 @@ namespace Zoo.Tests
             var mapped = BoneMapping.Map(joints, renamed, renames);
             Expect(mapped.SequenceEqual(Enumerable.Range(0, joints.Length).Select(j => joints.Length - 1 - j)), "a bone map renames: " + string.Join(",", mapped));
 
-            // Disposal: every wrapper disposed twice (a no-op the second time, as IDisposable
-            // requires), then used: refused with the runtime's NULL message.
+            // Disposal: every wrapper disposed twice (the second time refused with a
+            // ZooDisposedException naming the wrapper, nothing freed twice), then used: refused
+            // with the runtime's NULL message.
             var model = Model.Load(Path.Combine(dir, "rtn.onnx"));
             var tr = new TransitionRunner(model);
             var tc = new TransitionCharacters(model, n);
@@ -599,16 +600,10 @@ namespace Zoo.Tests
             foreach (var o in all)
             {
                 o.Dispose();
-                try
-                {
-                    o.Dispose();
-                    disposedTwice++;
-                }
-                catch (Exception e)
-                {
-                    unexpected++;
-                    Fail("a second Dispose of " + o.GetType().Name + " raised " + e.GetType().Name + ": " + e.Message);
-                }
+                var before = refused;
+                Refused<ZooDisposedException>("dispose twice: " + o.GetType().Name, ZooStatus.NullPointer, o.GetType().Name + ".Dispose",
+                    "is already disposed (it was disposed twice", () => o.Dispose());
+                if (refused > before) disposedTwice++;
                 Expect(o.IsDisposed, o.GetType().Name + ".IsDisposed");
             }
             using (var liveRunner = new TransitionRunner(rtn))
@@ -672,7 +667,7 @@ namespace Zoo.Tests
                 chars.StepPosed(runner, b.Roots, b.Rotations);
             }
             Console.WriteLine("bad calls: refused=" + refused + " unexpected=" + unexpected + " (each a managed exception with the runtime's status and message, the process alive; "
-                + wrapperChecked + " of them refused by the wrapper where the C ABI takes a buffer without its length; disposed twice: " + disposedTwice + " wrappers, the second Dispose a no-op)");
+                + wrapperChecked + " of them refused by the wrapper where the C ABI takes a buffer without its length; disposed twice: " + disposedTwice + " wrappers, each second Dispose refused)");
         }
 
         // Managed allocation per step.
