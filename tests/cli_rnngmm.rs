@@ -420,6 +420,27 @@ fn follow_walks_a_path_writes_a_plot_and_refuses_bad_input() {
     for f in ["all.png", "straight-start0.png", "straight-start0.bvh"] {
         assert!(Path::new(&plots).join(f).is_file(), "{f}");
     }
+    // The runtime's real-time follower on the exported generator: to the path's end, close to
+    // it, measured as the offline follower is.
+    let onnx = out("g.onnx");
+    ok(&["export", "--onnx", &r, "--out", &onnx]);
+    let rt = out("bf-runtime.json");
+    let args =
+        ["bench", "follow", "--model", &r, "--onnx", &onnx, "--followers", "runtime", "--paths", "straight,corner"];
+    let stdout = ok(&[&args[..], &["--json", rt.as_str()]].concat());
+    assert!(stdout.contains("| runtime |"), "{stdout}");
+    let j = json(Path::new(&rt));
+    let rows = j["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 2);
+    for row in rows {
+        assert_eq!(row["follower"], "runtime");
+        let (mean, max) = (row["mean_distance"].as_f64().unwrap(), row["max_distance"].as_f64().unwrap());
+        assert!(mean.is_finite() && max >= mean && row["foot_skate"].as_f64().unwrap().is_finite(), "{row}");
+    }
+    let e = fails(&["bench", "follow", "--model", &r, "--followers", "runtime"]);
+    assert!(e.contains("--followers runtime needs --onnx FILE"), "{e}");
+    let e = fails(&["bench", "follow", "--model", &r, "--followers", "walk"]);
+    assert!(e.contains("unknown follower `walk`"), "{e}");
 }
 
 #[test]

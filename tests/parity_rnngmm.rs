@@ -578,6 +578,7 @@ fn control_selects_the_cheapest_candidate() {
         batch: 10,
         speed_offsets: vec![-1.0, 0.0, 1.0],
         turn_offsets: vec![-2.0, -1.0, 0.0, 1.0, 2.0],
+        side_offsets: vec![0.0],
         sigma_speed: 20.0,
         sigma_heading: 0.01,
         temperature: 1.0,

@@ -26,6 +26,7 @@ use std::sync::OnceLock;
 use zoo_data::synth::{SynthConfig, generate_clip};
 use zoo_motion::Clip;
 use zoo_runtime::control::{Control, ControlRunner, ControlSettings, ControlledCharacter};
+use zoo_runtime::follow::{PathGoal, PathSettings};
 use zoo_runtime::{EnginePose, FootCleanup, LoadedModel, MotionKeys};
 
 /// Everything the Python and Blender tests share, made once per test process.
@@ -340,6 +341,21 @@ fn write_models_and_references(data: &Path) {
         crunner.step(&mut ch, Control::new(150.0, 0.5), &mut cpose).unwrap();
         push_world(&cpose, &mut chips, &mut crot);
     }
+    // Path following: the runtime's follower along a bend, 30 frames.
+    let bend = [[0.0, 0.0], [0.0, 100.0], [80.0, 160.0]];
+    let mut goal = PathGoal::new(&bend, 120.0, PathSettings::default()).unwrap();
+    let mut fch = ControlledCharacter::new(&synth, 7, PathSettings::control()).unwrap();
+    let [fx, fz, fyaw] = goal.start_placement();
+    fch.start(&synth, &mean, fx as f32, fz as f32, fyaw as f32).unwrap();
+    let (mut fhips, mut frot) = (Vec::new(), Vec::new());
+    let mut frames = 0;
+    while frames < 30 && !goal.reached_end() {
+        crunner.step_along(&mut fch, &mut goal, &mut cpose).unwrap();
+        push_world(&cpose, &mut fhips, &mut frot);
+        frames += 1;
+    }
+    let follow = json!({"points": bend, "speed": 120.0, "seed": 7, "max_frames": 30, "frames": frames,
+                        "reached_end": goal.reached_end(), "hips": fhips, "rotations": frot});
     // A tiny generator trained for 30 epochs on 3 synthetic minutes (about 12 s on one core),
     // as a user would make one: the model the Blender test walks along a curve with.
     let run_dir = data.join("rnngmm_run");
@@ -367,6 +383,7 @@ fn write_models_and_references(data: &Path) {
         json!({"seeds": [1, 2], "frames": 20, "hips": [per[0].0, per[1].0], "rotations": [per[0].1, per[1].1],
                "control": {"seed": 5, "placement": [10.0, -20.0, 0.3], "speed": 150.0, "heading": 0.5,
                            "hips": chips, "rotations": crot},
+               "follow": follow,
                "encode": {"hips": eh, "rotations": er,
                           "contacts": contacts10.iter().flat_map(|c| c.map(|b| if b { 1.0 } else { 0.0 })).collect::<Vec<f32>>(),
                           "features": enc.values}}),
@@ -402,6 +419,104 @@ fn blender() -> Option<PathBuf> {
     std::env::split_paths(&path).map(|d| d.join("blender")).find(|p| p.is_file())
 }
 
+/// The add-on zip made by `blender/make_addon.py` with the test's wheel inside (made once).
+fn addon_zip() -> &'static Path {
+    static Z: OnceLock<PathBuf> = OnceLock::new();
+    Z.get_or_init(|| {
+        let f = fixture();
+        let zip = f.data.join("zoo_blender.zip");
+        run(
+            Command::new(&f.python)
+                .arg(repo().join("blender/make_addon.py"))
+                .arg("--wheel")
+                .arg(&f.wheel)
+                .arg("--out")
+                .arg(&zip),
+            "making the add-on zip (blender/make_addon.py)",
+        );
+        zip
+    })
+}
+
+/// Blender 4.2 as a Python module (`bpy` from PyPI, CPython 3.11 only) in its own venv, made
+/// on first use: the add-on installed as an extension, as Blender 4.2+ installs it.
+fn bpy_venv() -> PathBuf {
+    let dir = profile_dir().parent().expect("target dir").join("bpy-venv");
+    let python = dir.join("bin/python");
+    let ready = dir.join(".zoo-test-ready");
+    if !ready.is_file() {
+        let version = run(Command::new("python3").args(["-c", "import sys; print(sys.version_info[:2])"]), "python3");
+        assert!(
+            version.trim() == "(3, 11)",
+            "Blender 4.2's bpy module needs CPython 3.11, python3 is {}: install python3.11",
+            version.trim()
+        );
+        if !python.is_file() {
+            run(Command::new("python3").args(["-m", "venv"]).arg(&dir), "making the bpy venv (python3 -m venv)");
+        }
+        run(
+            Command::new(&python).args(["-m", "pip", "install", "-q", "bpy==4.2.0", "numpy"]),
+            "installing Blender 4.2 as a module into the bpy venv (pip install bpy==4.2.0; needs PyPI, 350 MB)",
+        );
+        std::fs::write(&ready, "bpy==4.2.0 numpy\n").expect("venv marker");
+    }
+    python
+}
+
+/// With the real data beside the checkout: a bandai2 clip (its dummy root `joint_Root` kept in
+/// the file Blender imports, dropped from the model's skeleton) and an RTN on its skeleton
+/// (made once).
+fn bandai2_inputs() -> &'static Option<(PathBuf, PathBuf)> {
+    static B: OnceLock<Option<(PathBuf, PathBuf)>> = OnceLock::new();
+    B.get_or_init(|| {
+        let f = fixture();
+        zoo_tests::bandai2().map(|dir| {
+            let src = dir.join("dataset-2_walk_normal_001.bvh.gz");
+            let opts = zoo_data::bvh::ReadOptions { drop_dummy_root: false };
+            let file = zoo_data::bvh::read_file(&src, &opts).expect("the bandai2 clip").slice(0, 150);
+            let bvh = f.data.join("bandai2_walk.bvh");
+            zoo_data::bvh::write_file(&file, &bvh).unwrap();
+            let mut model_clip = file.clone();
+            assert!(model_clip.drop_root(), "bandai2's clip has its dummy root");
+            let model = f.data.join("transition_bandai2.onnx");
+            std::fs::write(&model, rtn_onnx(&model_clip, false)).unwrap();
+            (bvh, model)
+        })
+    })
+}
+
+/// Runs `blender/tests/test_addon.py` with `cmd` (Blender, or Python with `bpy`) on the test's
+/// models and clips, its user folders under `user`, and prints the figures it reports.
+fn run_addon_test(mut cmd: Command, user: &str, report: &str) {
+    let f = fixture();
+    let zip = addon_zip();
+    let report = f.data.join(report);
+    let bandai2 = bandai2_inputs();
+    cmd.arg(repo().join("blender/tests/test_addon.py"))
+        .arg("--")
+        .arg("--addon-zip")
+        .arg(zip)
+        .arg("--data")
+        .arg(&f.data)
+        .arg("--report")
+        .arg(&report)
+        .env("PYTHONNOUSERSITE", "1")
+        .env("PYTHONDONTWRITEBYTECODE", "1")
+        // The add-on installs into a temporary user folder, not the user's own.
+        .env("BLENDER_USER_RESOURCES", f.data.join(user))
+        .env("BLENDER_USER_SCRIPTS", f.data.join(user).join("scripts"))
+        .env("BLENDER_USER_CONFIG", f.data.join(user).join("config"));
+    if let Some((bvh, model)) = bandai2 {
+        cmd.arg("--bandai2-clip").arg(bvh).arg("--bandai2-model").arg(model);
+    }
+    let out = cmd.output().expect("running Blender");
+    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    let figures = std::fs::read_to_string(&report).unwrap_or_default();
+    println!("{text}\nfigures: {figures}");
+    assert!(out.status.success(), "the Blender tests failed ({}):\n{text}", out.status);
+    assert!(!figures.is_empty(), "the Blender tests wrote no report:\n{text}");
+}
+
 #[test]
 fn blender_addon() {
     let Some(blender) = blender() else {
@@ -414,55 +529,17 @@ fn blender_addon() {
         );
         return;
     };
-    let f = fixture();
-    let zip = f.data.join("zoo_blender.zip");
-    run(
-        Command::new(&f.python)
-            .arg(repo().join("blender/make_addon.py"))
-            .arg("--wheel")
-            .arg(&f.wheel)
-            .arg("--out")
-            .arg(&zip),
-        "making the add-on zip (blender/make_addon.py)",
-    );
-    let report = f.data.join("blender_report.json");
-    // With the real data beside the checkout: a bandai2 clip (its dummy root `joint_Root` kept in
-    // the file Blender imports, dropped from the model's skeleton) and an RTN on its skeleton.
-    let bandai2 = zoo_tests::bandai2().map(|dir| {
-        let src = dir.join("dataset-2_walk_normal_001.bvh.gz");
-        let opts = zoo_data::bvh::ReadOptions { drop_dummy_root: false };
-        let file = zoo_data::bvh::read_file(&src, &opts).expect("the bandai2 clip").slice(0, 150);
-        let bvh = f.data.join("bandai2_walk.bvh");
-        zoo_data::bvh::write_file(&file, &bvh).unwrap();
-        let mut model_clip = file.clone();
-        assert!(model_clip.drop_root(), "bandai2's clip has its dummy root");
-        let model = f.data.join("transition_bandai2.onnx");
-        std::fs::write(&model, rtn_onnx(&model_clip, false)).unwrap();
-        (bvh, model)
-    });
     let mut cmd = Command::new(&blender);
     // One thread: the speed figure is for one core.
-    cmd.args(["-b", "--factory-startup", "-noaudio", "-t", "1", "--python-exit-code", "1", "--python"])
-        .arg(repo().join("blender/tests/test_addon.py"))
-        .arg("--")
-        .arg("--addon-zip")
-        .arg(&zip)
-        .arg("--data")
-        .arg(&f.data)
-        .arg("--report")
-        .arg(&report)
-        .env("PYTHONNOUSERSITE", "1")
-        .env("PYTHONDONTWRITEBYTECODE", "1")
-        // The add-on installs into a temporary user folder, not the user's own.
-        .env("BLENDER_USER_SCRIPTS", f.data.join("blender-user/scripts"))
-        .env("BLENDER_USER_CONFIG", f.data.join("blender-user/config"));
-    if let Some((bvh, model)) = &bandai2 {
-        cmd.arg("--bandai2-clip").arg(bvh).arg("--bandai2-model").arg(model);
-    }
-    let out = cmd.output().expect("running Blender");
-    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
-    let figures = std::fs::read_to_string(&report).unwrap_or_default();
-    println!("{text}\nfigures: {figures}");
-    assert!(out.status.success(), "the Blender tests failed ({}):\n{text}", out.status);
-    assert!(!figures.is_empty(), "the Blender tests wrote no report:\n{text}");
+    cmd.args(["-b", "--factory-startup", "-noaudio", "-t", "1", "--python-exit-code", "1", "--python"]);
+    run_addon_test(cmd, "blender-user", "blender_report.json");
+}
+
+/// The add-on as a Blender 4.2+ extension (`blender_manifest.toml`, the wheel installed by
+/// Blender), in Blender 4.2 as a Python module.
+#[test]
+fn blender_extension() {
+    let mut cmd = Command::new(bpy_venv());
+    cmd.env("OMP_NUM_THREADS", "1");
+    run_addon_test(cmd, "blender42-user", "blender42_report.json");
 }

@@ -275,7 +275,7 @@ def curve_points(context, curve, arm):
 
 
 class ZOO_OT_walk(bpy.types.Operator):
-    """Generate locomotion with a synthesis model that follows the chosen curve, steering speed and heading, into a new action"""
+    """Generate locomotion with a synthesis model that follows the chosen curve to its end, into a new action"""
 
     bl_idname = "zoo.walk"
     bl_label = "Walk along curve"
@@ -306,10 +306,11 @@ class ZOO_OT_walk(bpy.types.Operator):
         if len(ground) < 2:
             raise Refusal(f"curve '{curve.name}' has no length")
         speed = s.walk_speed / model.frame.metres_per_unit if s.walk_speed > 0 else walkmod.natural_speed(model)
-        frames = walkmod.walk_frames(ground, speed, model.fps)
-        progress = Progress(context, frames)
+        most = 3 * walkmod.walk_frames(ground, speed, model.fps) + int(model.fps)
+        progress = Progress(context, most)
         try:
-            poses, dist = walkmod.follow(model, ground, speed, seed=s.seed, frames=frames, progress=progress)
+            poses, dist, reached = walkmod.follow(model, ground, speed, seed=s.seed, max_frames=most, progress=progress)
+            frames = len(dist)
             action = bpy.data.actions.new(f"walk along {curve.name}")
             f0 = context.scene.frame_current
             r.write(action, list(range(f0, f0 + frames)), poses.hips, poses.rotations)
@@ -323,7 +324,8 @@ class ZOO_OT_walk(bpy.types.Operator):
         self.report(
             {"INFO"},
             f"zoo: '{action.name}': {frames} frames; root to curve {dist.mean() * mpu * 100:.1f} cm mean, "
-            f"{dist.max() * mpu * 100:.1f} cm max ({ms:.0f} ms)",
+            f"{dist.max() * mpu * 100:.1f} cm max ({ms:.0f} ms)"
+            + ("" if reached else f"; stopped after {frames} frames before the curve's end (the model could not follow it further)"),
         )
         return {"FINISHED"}
 

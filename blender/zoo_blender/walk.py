@@ -1,9 +1,10 @@
-"""Walking along a path with a synthesis model's speed / heading control, in the model's frame
-(no Blender here: the add-on and its tests call the same function).
+"""Walking along a path with a synthesis model, in the model's frame (no Blender here: the
+add-on and its tests call the same function).
 
-Each frame, the heading steered to is the direction from the character's ground position to
-the point of the path `lookahead` further along than the point nearest to it (pure pursuit,
-0.35 s of walking ahead by default); the speed is the walking speed, lowered near the end.
+The runtime's path follower (`zoo_runtime::follow`, through `SynthesisModel.follow_path`) plans
+every few frames among candidates that walk faster or slower, turn and step sideways, and keeps
+the one whose root stays closest to the path while making progress along it and facing the
+point a little further on.
 """
 
 import math
@@ -15,16 +16,6 @@ def arc_lengths(path):
     """Cumulative length along a polyline `(M, 2)`."""
     seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
     return np.concatenate([[0.0], np.cumsum(seg)])
-
-
-def point_at(path, s_along, s):
-    """The point of the polyline at arc length `s` (clamped to its ends)."""
-    s = min(max(s, 0.0), s_along[-1])
-    i = int(np.searchsorted(s_along, s, side="right")) - 1
-    i = min(max(i, 0), len(path) - 2)
-    seg = s_along[i + 1] - s_along[i]
-    w = 0.0 if seg <= 0 else (s - s_along[i]) / seg
-    return path[i] + w * (path[i + 1] - path[i])
 
 
 def nearest(path, s_along, p, from_index=0, window=60):
@@ -51,8 +42,7 @@ def distances_to_path(path, points):
 
 def natural_speed(model):
     """The speed of the model's mean feature frame (model units per second): its data's walking
-    speed. The runtime's controller cannot slow a character much below it without walking it
-    backwards (the speed term counts speed, not direction; docs/blender.md)."""
+    speed."""
     mf = model.mean_frame
     return float(math.hypot(mf[0], mf[1]) * model.fps)
 
@@ -62,37 +52,16 @@ def walk_frames(path, speed, fps):
     return max(2, int(math.ceil(arc_lengths(path)[-1] / speed * fps)) + 1)
 
 
-def follow(model, path, speed, seed=0, frames=None, lookahead=None, progress=None):
+def follow(model, path, speed=None, seed=0, max_frames=None, progress=None):
     """Walks a character of the synthesis `model` along `path` (`(M, 2)` ground points `(x, z)`
-    in the model's units, `M >= 2`) at `speed` (model units per second), starting on the first
-    point facing along the first segment. Returns `(poses, distances)`: `zoo.Poses` with prefix
-    `(frames,)` (default `walk_frames`) and each frame's root distance to the path."""
-    import zoo
-
+    in the model's units, `M >= 2`) at `speed` (model units per second; default
+    `natural_speed`), starting on the first point facing along the first segment, until the
+    path's end (or `max_frames`, default three times the frames the path takes at `speed`).
+    Returns `(poses, distances, reached_end)`: `zoo.Poses` with prefix `(frames,)`, each frame's
+    root distance to the path, and whether the end was reached."""
     path = np.asarray(path, dtype=np.float64)
-    s_along = arc_lengths(path)
-    total = s_along[-1]
-    fps = model.fps
-    if frames is None:
-        frames = walk_frames(path, speed, fps)
-    if lookahead is None:
-        lookahead = max(speed * 0.35, 0.3 / model.frame.metres_per_unit)
-    d0 = path[1] - path[0]
-    ctl = model.controller(seeds=[seed])
-    ctl.start(placements=[[path[0, 0], path[0, 1], math.atan2(d0[0], d0[1])]])
-    index, parts, dist = 0, [], []
-    for t in range(frames):
-        x, z, _ = ctl.placements[0]
-        p = np.array([x, z])
-        s, index, _ = nearest(path, s_along, p, index)
-        target = point_at(path, s_along, s + lookahead)
-        d = target - p
-        heading = math.atan2(d[0], d[1]) if np.linalg.norm(d) > 1e-6 else float(ctl.placements[0][2])
-        left = max(total - s, 0.0)
-        poses, _ = ctl.step(min(speed, left * fps / 10.0 + 0.1 * speed), heading)
-        parts.append(poses)
-        root = poses.root_position[0]
-        dist.append(nearest(path, s_along, np.array([root[0], root[2]]), max(index - 5, 0))[2])
-        if progress is not None:
-            progress(t + 1, frames)
-    return zoo.Poses.concatenate(parts), np.asarray(dist)
+    if speed is None:
+        speed = natural_speed(model)
+    poses, _, reached = model.follow_path(path, speed, seed=seed, max_frames=max_frames, progress=progress)
+    root = poses.root_position
+    return poses, model.path_distances(path, root[:, [0, 2]]), reached

@@ -143,5 +143,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<stitch::Stitch>()?;
     m.add_class::<synthesis::Synthesis>()?;
     m.add_class::<synthesis::Controller>()?;
+    m.add_class::<synthesis::PathFollower>()?;
     Ok(())
 }

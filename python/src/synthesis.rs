@@ -10,6 +10,7 @@ use pyo3::types::PyDict;
 use std::sync::Mutex;
 use zoo_motion::quat::to_scaled_axis;
 use zoo_runtime::control::{Control, ControlRunner, ControlSettings, ControlledCharacter};
+use zoo_runtime::follow::{PathGoal, PathSettings};
 use zoo_runtime::{EnginePose, MotionError, SynthesisModel};
 
 /// A loaded synthesis model.
@@ -234,6 +235,7 @@ impl Controller {
             batch: batch.unwrap_or(d.batch),
             speed_offsets: speed_offsets.unwrap_or(d.speed_offsets),
             turn_offsets: turn_offsets.unwrap_or(d.turn_offsets),
+            side_offsets: d.side_offsets,
             sigma_speed: sigma_speed.unwrap_or(d.sigma_speed),
             sigma_heading: sigma_heading.unwrap_or(d.sigma_heading),
             temperature: temperature.unwrap_or(d.temperature),
@@ -308,6 +310,134 @@ impl Controller {
 
 impl Controller {
     fn lock(&self) -> std::sync::MutexGuard<'_, (ControlRunner, Vec<ControlledCharacter>)> {
+        self.inner.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+}
+
+/// One character of a synthesis model following a ground path (`zoo_runtime::follow`: the
+/// online controller planning towards the path instead of a speed and a heading).
+#[pyclass(module = "zoo._native", name = "PathFollower")]
+pub struct PathFollower {
+    model: SynthesisModel,
+    inner: Mutex<(ControlRunner, ControlledCharacter, PathGoal)>,
+}
+
+#[pymethods]
+impl PathFollower {
+    /// A character of `model` seeded with `seed` to walk along `points` `(M, 2)` (ground `x`,
+    /// `z`, clip units) at `speed` clip units per second; the path's weights default to
+    /// `zoo_runtime::follow::PathSettings::default()`, the planner's to
+    /// `PathSettings::control()`.
+    #[new]
+    #[pyo3(signature = (model, points, speed, seed=0, sigma_fit=None, sigma_progress=None, sigma_heading=None, lookahead=None, batch=None, speed_offsets=None, turn_offsets=None, side_offsets=None, temperature=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        model: &Synthesis,
+        points: PyReadonlyArrayDyn<'_, f32>,
+        speed: f64,
+        seed: u64,
+        sigma_fit: Option<f64>,
+        sigma_progress: Option<f64>,
+        sigma_heading: Option<f64>,
+        lookahead: Option<f64>,
+        batch: Option<usize>,
+        speed_offsets: Option<Vec<f32>>,
+        turn_offsets: Option<Vec<f32>>,
+        side_offsets: Option<Vec<f32>>,
+        temperature: Option<f32>,
+    ) -> PyResult<Self> {
+        let (p, _) = values("points", &points, &[("M", None), ("", Some(2))])?;
+        let points: Vec<[f64; 2]> = p.chunks_exact(2).map(|q| [q[0] as f64, q[1] as f64]).collect();
+        let d = PathSettings::default();
+        let settings = PathSettings {
+            sigma_fit: sigma_fit.unwrap_or(d.sigma_fit),
+            sigma_progress: sigma_progress.unwrap_or(d.sigma_progress),
+            sigma_heading: sigma_heading.unwrap_or(d.sigma_heading),
+            lookahead: lookahead.unwrap_or(d.lookahead),
+        };
+        let goal = PathGoal::new(&points, speed, settings).or_py()?;
+        let m = model.model.clone();
+        let c = PathSettings::control();
+        let control = ControlSettings {
+            batch: batch.unwrap_or(c.batch),
+            speed_offsets: speed_offsets.unwrap_or(c.speed_offsets),
+            turn_offsets: turn_offsets.unwrap_or(c.turn_offsets),
+            side_offsets: side_offsets.unwrap_or(c.side_offsets),
+            temperature: temperature.unwrap_or(c.temperature),
+            ..c
+        };
+        let character = ControlledCharacter::new(&m, seed, control).or_py()?;
+        let runner = ControlRunner::new(&m).or_py()?;
+        Ok(PathFollower { model: m, inner: Mutex::new((runner, character, goal)) })
+    }
+
+    /// Starts the character from seed feature frames `(S, D)` (clip units, oldest first), the
+    /// last one placed on the path's first point facing along its first segment.
+    fn start(&self, frames: PyReadonlyArrayDyn<'_, f32>) -> PyResult<()> {
+        let d = self.model.frame_dim();
+        let (f, _) = values("frames", &frames, &[("S", None), ("D", Some(d))])?;
+        let mut inner = self.lock();
+        let (_, character, goal) = &mut *inner;
+        let [x, z, yaw] = goal.start_placement();
+        character.start(&self.model, &f, x as f32, z as f32, yaw as f32).or_py()
+    }
+
+    /// Plays up to `frames` frames, fewer when the path's end is reached. Returns `(poses,
+    /// contacts)`: the fields of `zoo.Poses` with prefix `(T,)` and `(T, 2)` bits.
+    fn step<'py>(
+        &self,
+        py: Python<'py>,
+        frames: usize,
+    ) -> PyResult<(Bound<'py, PyDict>, Bound<'py, PyArrayDyn<bool>>)> {
+        let k = self.model.joints();
+        let mut inner = self.lock();
+        let (runner, character, goal) = &mut *inner;
+        let mut arrays = PoseArrays::new(k, frames);
+        let mut bits = Vec::with_capacity(2 * frames);
+        let mut pose = EnginePose::with_global_positions(k);
+        let mut played = 0;
+        while played < frames && !goal.reached_end() {
+            bits.extend(runner.step_along(character, goal, &mut pose).or_py()?);
+            arrays.push(&pose);
+            played += 1;
+        }
+        Ok((arrays.into_dict(py, &[played])?, array(py, bits, &[played, 2])?))
+    }
+
+    /// Arc length of the path point nearest to the planned motion's end, clip units.
+    #[getter]
+    fn progress(&self) -> f64 {
+        self.lock().2.progress()
+    }
+
+    /// The path's length, clip units.
+    #[getter]
+    fn length(&self) -> f64 {
+        self.lock().2.length()
+    }
+
+    /// Whether the planned motion has reached the path's end.
+    #[getter]
+    fn reached_end(&self) -> bool {
+        self.lock().2.reached_end()
+    }
+
+    /// The distance of each ground point `(T, 2)` to the path, clip units.
+    fn distances<'py>(
+        &self,
+        py: Python<'py>,
+        points: PyReadonlyArrayDyn<'py, f32>,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let (p, _) = values("points", &points, &[("T", None), ("", Some(2))])?;
+        let inner = self.lock();
+        let d: Vec<f64> = p.chunks_exact(2).map(|q| inner.2.distance([q[0] as f64, q[1] as f64])).collect();
+        let t = d.len();
+        array(py, d, &[t])
+    }
+}
+
+impl PathFollower {
+    fn lock(&self) -> std::sync::MutexGuard<'_, (ControlRunner, ControlledCharacter, PathGoal)> {
         self.inner.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
     }
 }

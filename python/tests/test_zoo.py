@@ -243,6 +243,39 @@ def test_control_refuses_a_negative_speed(data):
     assert e.value.kind == "Control" and "speed >= 0" in str(e.value)
 
 
+def test_path_following_matches_the_runtime(data, ref):
+    m = zoo.load(data / "synthesis.onnx")
+    r = ref["synthesis"]["follow"]
+    poses, contacts, reached = m.follow_path(r["points"], r["speed"], seed=r["seed"], max_frames=r["max_frames"])
+    n = r["frames"]
+    assert poses.shape == (n,) and contacts.shape == (n, 2) and reached == r["reached_end"]
+    assert max_diff(poses.hips, arr(r["hips"], n, 3)) < 1e-3
+    assert quat_diff(poses.rotations, arr(r["rotations"], n, K, 4)) < 1e-4
+
+
+def test_a_trained_generator_follows_a_bend_to_its_end(data):
+    """The generator trained in the test along the benchmark's `corner` path (docs/paths): to the
+    end, close to the curve, and the same frames for the same seed."""
+    m = zoo.load(data / "synthesis_trained.onnx")
+    corner = np.array([[0, 0], [3, 118], [-4, 251], [2, 379], [0, 500], [88, 451.5], [183.2, 394.5], [261.8, 350], [346.4, 300]])
+    poses, _, reached = m.follow_path(corner, seed=1)
+    d = m.path_distances(corner, poses.root_position[:, [0, 2]])
+    assert reached, f"stopped after {len(d)} frames"
+    assert d.mean() < 3.0 and d.max() < 15.0, (d.mean(), d.max())
+    assert np.linalg.norm(poses.root_position[-1, [0, 2]] - corner[-1]) < 50
+    again, _, _ = m.follow_path(corner, seed=1)
+    assert np.array_equal(again.hips, poses.hips)
+
+
+def test_a_path_of_one_point_is_refused(data):
+    m = zoo.load(data / "synthesis.onnx")
+    with pytest.raises(zoo.MotionError) as e:
+        m.follow_path([[0.0, 0.0], [0.0, 0.0]], 100.0)
+    assert e.value.kind == "Control" and "a path needs at least 2" in str(e.value)
+    with pytest.raises(ValueError, match="max_frames is 0"):
+        m.follow_path([[0.0, 0.0], [0.0, 100.0]], 100.0, max_frames=0)
+
+
 def test_encode_matches_zoo_rnngmm(data, ref):
     m = zoo.load(data / "synthesis.onnx")
     r = ref["synthesis"]["encode"]

@@ -514,6 +514,56 @@ class SynthesisModel(Model):
         defaults otherwise)."""
         return Controller(self, seeds, **settings)
 
+    def follow_path(
+        self,
+        points,
+        speed: Optional[float] = None,
+        seed: int = 0,
+        start=None,
+        max_frames: Optional[int] = None,
+        progress=None,
+        **settings,
+    ) -> Tuple[Poses, np.ndarray, bool]:
+        """Walks one character along a ground path in real time (``zoo_runtime::follow``: the
+        online controller planning towards the path). ``points`` ``(M, 2)``: the path's ground
+        ``x``, ``z`` in model units; ``speed`` in model units per second (default: the data's
+        mean speed, ``mean_frame``'s step times ``fps``); the character starts on the first
+        point facing along the first segment from ``start`` seed feature frames ``(S,
+        frame_dim)`` (default the mean frame) and walks until the path's end, or ``max_frames``
+        (default: three times the frames the path takes at ``speed``, plus a second).
+        ``progress(done, total)`` is called every 10 frames. ``settings``: ``sigma_fit``,
+        ``sigma_progress``, ``sigma_heading``, ``lookahead``, ``batch``, ``speed_offsets``,
+        ``turn_offsets``, ``side_offsets``, ``temperature`` (the runtime's defaults otherwise).
+        Returns ``(poses, contacts, reached_end)``: prefix ``(T,)``."""
+        pts = np.atleast_2d(np.asarray(points, dtype=np.float32))
+        if speed is None:
+            mf = self.mean_frame
+            speed = float(np.hypot(mf[0], mf[1]) * self.fps)
+        native = _native.PathFollower(self._native, _f32(pts, "points"), float(speed), int(seed), **settings)
+        x0 = np.atleast_2d(self.mean_frame if start is None else np.asarray(start))
+        native.start(_f32(x0, "start"))
+        if max_frames is None:
+            max_frames = int(3 * native.length / speed * self.fps) + int(self.fps)
+        if max_frames < 1:
+            raise ValueError(f"follow_path: max_frames is {max_frames}; give at least 1 frame")
+        parts, bits = [], []
+        done = 0
+        while done < max_frames and not native.reached_end:
+            d, c = native.step(min(10, max_frames - done))
+            parts.append(Poses._from_dict(d))
+            bits.append(c)
+            done += len(c)
+            if progress is not None:
+                progress(done, max_frames)
+        return Poses.concatenate(parts), np.concatenate(bits), bool(native.reached_end)
+
+    def path_distances(self, points, positions) -> np.ndarray:
+        """The distance of each ground point ``positions`` ``(T, 2)`` (``x``, ``z``) to the
+        path through ``points`` ``(M, 2)``, model units."""
+        pts = np.atleast_2d(np.asarray(points, dtype=np.float32))
+        native = _native.PathFollower(self._native, _f32(pts, "points"), 1.0, 0)
+        return native.distances(_f32(np.atleast_2d(positions), "positions"))
+
 
 class Controller:
     """Speed and heading control of ``N`` characters of a synthesis model

@@ -129,3 +129,27 @@ class Controller:
     ) -> None: ...
     def start(self, frames: F32, placements: F32) -> None: ...
     def step(self, speeds: F32, headings: F32) -> Tuple[PoseDict, npt.NDArray[np.bool_]]: ...
+
+class PathFollower:
+    progress: float
+    length: float
+    reached_end: bool
+    def __init__(
+        self,
+        model: Synthesis,
+        points: F32,
+        speed: float,
+        seed: int = 0,
+        sigma_fit: Optional[float] = None,
+        sigma_progress: Optional[float] = None,
+        sigma_heading: Optional[float] = None,
+        lookahead: Optional[float] = None,
+        batch: Optional[int] = None,
+        speed_offsets: Optional[List[float]] = None,
+        turn_offsets: Optional[List[float]] = None,
+        side_offsets: Optional[List[float]] = None,
+        temperature: Optional[float] = None,
+    ) -> None: ...
+    def start(self, frames: F32) -> None: ...
+    def step(self, frames: int) -> Tuple[PoseDict, npt.NDArray[np.bool_]]: ...
+    def distances(self, points: F32) -> npt.NDArray[np.float64]: ...

@@ -1,15 +1,19 @@
-//! The benchmarks of zoo that span models, each a function with a typed result that serialises
-//! to the JSON of its command (the models' own benchmarks live with them: `zoo_rmr::bench`,
-//! `zoo_rnngmm::bench`):
+//! The benchmarks of zoo that span models or run the engine runtime, each a function with a
+//! typed result that serialises to the JSON of its command (the models' own benchmarks live
+//! with them: `zoo_rmr::bench`, `zoo_rnngmm::bench`):
 //!
 //! - [`inbetween`]: the in-betweening benchmark (`zoo bench`, LaFAN1 protocol) over the
 //!   baselines, run folders of every kind that generates transitions ([`registry`]) and
 //!   exported files run by the engine runtime ([`onnx`]);
 //! - [`runtime`]: a step's latency and throughput through candle, tract and onnxruntime (`zoo
 //!   bench runtime`), and [`keyframes`], the exported ARNN's (`zoo bench keyframes`);
-//! - [`train`]: the training step's speed per thread count (`zoo bench train`).
+//! - [`train`]: the training step's speed per thread count (`zoo bench train`);
+//! - [`control`] and [`follow`]: RNN-GMM online control (`zoo bench control`) and path
+//!   following (`zoo bench follow`) by the candle controllers and the runtime's.
 
+pub mod control;
 pub mod exported;
+pub mod follow;
 pub mod inbetween;
 pub mod keyframes;
 pub mod onnx;

@@ -126,6 +126,7 @@ unsafe fn settings_of(s: &ZooControlSettings) -> Result<ControlSettings, Failure
         batch: s.batch,
         speed_offsets: offsets(s.speed_offsets, s.speed_offsets_len, "settings.speed_offsets", d.speed_offsets)?,
         turn_offsets: offsets(s.turn_offsets, s.turn_offsets_len, "settings.turn_offsets", d.turn_offsets)?,
+        side_offsets: d.side_offsets,
         sigma_speed: s.sigma_speed,
         sigma_heading: s.sigma_heading,
         temperature: s.temperature,

@@ -547,6 +547,11 @@ pub fn sigma_units(s: &str) -> Result<f64, String> {
     real_in(s, Interval::above(0.0, 10_000.0), "clip units")
 }
 
+/// A walking or running speed in clip units per second, `(0, 10000]` (100 m/s in cm).
+pub fn speed_units(s: &str) -> Result<f64, String> {
+    real_in(s, Interval::above(0.0, 10_000.0), "clip units per second")
+}
+
 /// Frames per batch of online control, `1..=120`.
 pub fn control_batch(s: &str) -> Result<usize, String> {
     whole_in(s, 1..=120, "frames")

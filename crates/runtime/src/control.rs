@@ -121,6 +121,10 @@ pub struct ControlSettings {
     pub speed_offsets: Vec<f32>,
     /// Offsets added to every frame's `dry` (dim 2) of a candidate, in normalised units.
     pub turn_offsets: Vec<f32>,
+    /// Offsets added to every frame's `dtx` (dim 0, the sideways step) of a candidate, in
+    /// normalised units: `[0]` (none) for speed / heading control; the path follower of
+    /// [`crate::follow`] steps sideways onto its path with them.
+    pub side_offsets: Vec<f32>,
     /// Standard deviation of the speed term (eq. 22), clip units per second.
     pub sigma_speed: f32,
     /// Standard deviation of the direction term (eq. 23), radians.
@@ -139,6 +143,7 @@ impl Default for ControlSettings {
             batch: 3,
             speed_offsets: vec![-3.0, -1.5, 0.0, 1.5, 3.0],
             turn_offsets: vec![-3.0, -1.5, 0.0, 1.5, 3.0],
+            side_offsets: vec![0.0],
             sigma_speed: 2.0,
             sigma_heading: 0.02,
             temperature: 0.3,
@@ -147,15 +152,17 @@ impl Default for ControlSettings {
 }
 
 impl ControlSettings {
-    /// Candidates per batch: speed offsets x turn offsets.
+    /// Candidates per batch: speed offsets x turn offsets x side offsets.
     pub fn candidates(&self) -> usize {
-        self.speed_offsets.len() * self.turn_offsets.len()
+        self.speed_offsets.len() * self.turn_offsets.len() * self.side_offsets.len()
     }
 
-    /// The offsets `(speed, turn)` of candidate `k` (`k = s * turn_offsets.len() + t`).
-    pub fn offsets(&self, k: usize) -> Option<(f32, f32)> {
-        let t = self.turn_offsets.len();
-        (k < self.candidates()).then(|| (self.speed_offsets[k / t], self.turn_offsets[k % t]))
+    /// The offsets `(speed, turn, side)` of candidate `k` (`k = (s * turn_offsets.len() + t)
+    /// * side_offsets.len() + l`).
+    pub fn offsets(&self, k: usize) -> Option<(f32, f32, f32)> {
+        let (t, l) = (self.turn_offsets.len(), self.side_offsets.len());
+        (k < self.candidates())
+            .then(|| (self.speed_offsets[k / (t * l)], self.turn_offsets[k / l % t], self.side_offsets[k % l]))
     }
 
     /// Checks the settings: `batch >= 1`, at least 2 candidates, finite offsets, positive
@@ -166,13 +173,18 @@ impl ControlSettings {
         }
         if self.candidates() < 2 {
             return Err(control_error(format!(
-                "settings: {} speed offsets x {} turn offsets make {} candidates; give at least 2 to choose from (default 5 x 5)",
+                "settings: {} speed offsets x {} turn offsets x {} side offsets make {} candidates; give at least 2 to choose from (default 5 x 5 x 1)",
                 self.speed_offsets.len(),
                 self.turn_offsets.len(),
+                self.side_offsets.len(),
                 self.candidates()
             )));
         }
-        for (name, offsets) in [("speed_offsets", &self.speed_offsets), ("turn_offsets", &self.turn_offsets)] {
+        for (name, offsets) in [
+            ("speed_offsets", &self.speed_offsets),
+            ("turn_offsets", &self.turn_offsets),
+            ("side_offsets", &self.side_offsets),
+        ] {
             if let Some(v) = offsets.iter().find(|v| !v.is_finite()) {
                 return Err(control_error(format!(
                     "settings: {name} holds {v}; give finite offsets in data standard deviations"
@@ -200,12 +212,14 @@ impl ControlSettings {
 /// The candidate chosen at a selection and its cost terms.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ControlSelection {
-    /// Its index, `s * turn_offsets.len() + t`.
+    /// Its index, `(s * turn_offsets.len() + t) * side_offsets.len() + l`.
     pub candidate: usize,
     /// Its offset of `dtz`, normalised units.
     pub speed_offset: f32,
     /// Its offset of `dry`, normalised units.
     pub turn_offset: f32,
+    /// Its offset of `dtx`, normalised units.
+    pub side_offset: f32,
     /// Its mean root speed over the batch, clip units per second.
     pub speed: f64,
     /// Its facing yaw after the batch, radians (not wrapped).
@@ -216,13 +230,21 @@ pub struct ControlSelection {
     pub speed_cost: f64,
     /// Direction term (eq. 23).
     pub heading_cost: f64,
+    /// Path term of [`crate::follow`] (its frames' distances to the path); 0 under a [`Control`].
+    pub path_cost: f64,
 }
 
 impl ControlSelection {
     /// The total cost it was chosen by.
     pub fn cost(&self) -> f64 {
-        self.prior + self.speed_cost + self.heading_cost
+        self.prior + self.speed_cost + self.heading_cost + self.path_cost
     }
+}
+
+/// What a selection aims at: a speed and heading, or a path to follow ([`crate::follow`]).
+pub(crate) enum Goal<'a> {
+    Control(Control),
+    Path(&'a mut crate::follow::PathGoal),
 }
 
 /// One controlled character: its plan, its candidates being rolled out, its random numbers and
@@ -232,7 +254,7 @@ impl ControlSelection {
 pub struct ControlledCharacter {
     settings: ControlSettings,
     /// `(speed, turn)` offset of every candidate.
-    offsets: Vec<[f32; 2]>,
+    offsets: Vec<[f32; 3]>,
     fps: f64,
     d: usize,
     rng: SplitMix64,
@@ -251,14 +273,19 @@ pub struct ControlledCharacter {
     end_state: MotionState,
     end_x: Vec<f32>,
     end_yaw: f64,
+    /// Ground position x, z of the root after the plan (clip units).
+    end_pos: [f64; 2],
     /// Candidates: generator states, current frames (`K D`), frames so far (`K n D`), prior
-    /// costs, summed ground distances (clip units) and yaws after their frames.
+    /// costs, summed ground distances (clip units), yaws after their frames, ground positions
+    /// after their frames (`K`) and after each of their frames (`K n`).
     states: Vec<MotionState>,
     x: Vec<f32>,
     frames: Vec<f32>,
     prior: Vec<f64>,
     distance: Vec<f64>,
     yaw: Vec<f64>,
+    pos: Vec<[f64; 2]>,
+    ground: Vec<[f64; 2]>,
     /// Frames the candidates have rolled out.
     rolled: usize,
     last: Option<ControlSelection>,
@@ -273,8 +300,8 @@ impl ControlledCharacter {
         let (d, n, k) = (model.frame_dim(), settings.batch, settings.candidates());
         let offsets = (0..k)
             .map(|c| {
-                let (s, t) = settings.offsets(c).expect("c < candidates");
-                [s, t]
+                let (s, t, l) = settings.offsets(c).expect("c < candidates");
+                [s, t, l]
             })
             .collect();
         Ok(ControlledCharacter {
@@ -291,12 +318,15 @@ impl ControlledCharacter {
             end_state: model.model().new_state(),
             end_x: vec![0.0; d],
             end_yaw: 0.0,
+            end_pos: [0.0; 2],
             states: (0..k).map(|_| model.model().new_state()).collect(),
             x: vec![0.0; k * d],
             frames: vec![0.0; k * n * d],
             prior: vec![0.0; k],
             distance: vec![0.0; k],
             yaw: vec![0.0; k],
+            pos: vec![[0.0; 2]; k],
+            ground: vec![[0.0; 2]; k * n],
             rolled: 0,
             last: None,
             played_total: 0,
@@ -384,6 +414,7 @@ impl ControlledCharacter {
         self.prior.fill(0.0);
         self.distance.fill(0.0);
         self.yaw.fill(self.end_yaw);
+        self.pos.fill(self.end_pos);
         self.rolled = 0;
     }
 }
@@ -419,7 +450,7 @@ fn mixture_nll(w: &[f32], mu: &[f32], sd: &[f32], x: &[f32]) -> f64 {
 }
 
 /// `a` wrapped to `[-pi, pi)`.
-fn wrap(a: f64) -> f64 {
+pub(crate) fn wrap(a: f64) -> f64 {
     (a + PI).rem_euclid(TAU) - PI
 }
 
@@ -462,6 +493,16 @@ impl ControlRunner {
         pose: &mut EnginePose,
     ) -> Result<[bool; 2], MotionError> {
         control.check()?;
+        self.step_goal(character, Goal::Control(control), pose)
+    }
+
+    /// [`ControlRunner::step`] towards `goal`.
+    pub(crate) fn step_goal(
+        &mut self,
+        character: &mut ControlledCharacter,
+        mut goal: Goal<'_>,
+        pose: &mut EnginePose,
+    ) -> Result<[bool; 2], MotionError> {
         let ch = character;
         if !ch.started {
             return Err(control_error(
@@ -477,7 +518,7 @@ impl ControlRunner {
         }
         check_len("pose local_rotations", pose.local_rotations.len(), 1, self.model.joints())?;
         if !ch.planned {
-            self.plan_first(ch, control)?;
+            self.plan_first(ch, &mut goal)?;
         }
         self.roll(ch)?;
         let x = &ch.plan[ch.played * d..(ch.played + 1) * d];
@@ -485,13 +526,13 @@ impl ControlRunner {
         ch.played += 1;
         ch.played_total += 1;
         if ch.played == ch.settings.batch {
-            self.select(ch, control);
+            self.select(ch, &mut goal);
         }
         Ok(contacts)
     }
 
     /// Feeds the seed frames, rolls the first candidates out and selects the first plan.
-    fn plan_first(&mut self, ch: &mut ControlledCharacter, control: Control) -> Result<(), MotionError> {
+    fn plan_first(&mut self, ch: &mut ControlledCharacter, goal: &mut Goal<'_>) -> Result<(), MotionError> {
         let d = ch.d;
         let seeds = ch.seed.len() / d;
         // Every row reads the seed frames (one batch size for the runner's session).
@@ -505,11 +546,12 @@ impl ControlRunner {
         copy_state(&mut ch.end_state, &ch.states[0]);
         ch.end_x.copy_from_slice(&ch.seed[(seeds - 1) * d..]);
         ch.end_yaw = ch.placement[2];
+        ch.end_pos = [ch.placement[0], ch.placement[1]];
         ch.restart_candidates();
         for _ in 0..ch.settings.batch {
             self.roll(ch)?;
         }
-        self.select(ch, control);
+        self.select(ch, goal);
         ch.planned = true;
         Ok(())
     }
@@ -541,12 +583,20 @@ impl ControlRunner {
             let (mu, sd) = (&self.means[c * m * d..(c + 1) * m * d], &self.stds[c * m * d..(c + 1) * m * d]);
             // A component by its weight, then mu + temperature * sigma * n (as synthesis draws).
             draw_frame(&mut ch.rng, w, mu, sd, temperature, x);
-            let [so, to] = ch.offsets[c];
+            let [so, to, lo] = ch.offsets[c];
             x[1] += so;
             x[2] += to;
+            if lo != 0.0 {
+                x[0] += lo;
+            }
             ch.prior[c] += mixture_nll(w, mu, sd, x);
             let v = |i: usize| (x[i] * std[i] + mean[i]) as f64;
             ch.distance[c] += v(0).hypot(v(1));
+            // The ground step turned by the yaw before the frame, as `decode_frame` places it.
+            let (sin, cos) = ch.yaw[c].sin_cos();
+            let p = &mut ch.pos[c];
+            *p = [p[0] + v(0) * cos + v(1) * sin, p[1] - v(0) * sin + v(1) * cos];
+            ch.ground[c * n + t] = *p;
             ch.yaw[c] += v(2);
             let at = (c * n + t) * d;
             ch.frames[at..at + d].copy_from_slice(x);
@@ -555,26 +605,34 @@ impl ControlRunner {
         Ok(())
     }
 
-    /// Makes the candidate of least cost under `control` the plan and restarts the candidates
+    /// Makes the candidate of least cost under `goal` the plan and restarts the candidates
     /// from its end.
-    fn select(&mut self, ch: &mut ControlledCharacter, control: Control) {
+    fn select(&mut self, ch: &mut ControlledCharacter, goal: &mut Goal<'_>) {
         let (d, n) = (ch.d, ch.settings.batch);
         let (sigma_speed, sigma_heading) = (ch.settings.sigma_speed as f64, ch.settings.sigma_heading as f64);
         let mut best: Option<ControlSelection> = None;
         for c in 0..ch.states.len() {
             let speed = ch.distance[c] / n as f64 * ch.fps;
-            let speed_cost = ((speed - control.speed as f64) / sigma_speed).powi(2);
-            let heading_cost = (wrap(ch.yaw[c] - control.heading as f64) / sigma_heading).powi(2);
-            let [speed_offset, turn_offset] = ch.offsets[c];
+            let (speed_cost, heading_cost, path_cost) = match goal {
+                Goal::Control(control) => (
+                    ((speed - control.speed as f64) / sigma_speed).powi(2),
+                    (wrap(ch.yaw[c] - control.heading as f64) / sigma_heading).powi(2),
+                    0.0,
+                ),
+                Goal::Path(path) => path.costs(&ch.ground[c * n..(c + 1) * n], ch.yaw[c], n as f64 / ch.fps),
+            };
+            let [speed_offset, turn_offset, side_offset] = ch.offsets[c];
             let candidate = ControlSelection {
                 candidate: c,
                 speed_offset,
                 turn_offset,
+                side_offset,
                 speed,
                 heading: ch.yaw[c],
                 prior: ch.prior[c],
                 speed_cost,
                 heading_cost,
+                path_cost,
             };
             // NaN costs lose to everything; ties go to the first.
             let cost = candidate.cost();
@@ -588,6 +646,10 @@ impl ControlRunner {
         copy_state(&mut ch.end_state, &ch.states[c]);
         ch.end_x.copy_from_slice(&ch.plan[(n - 1) * d..]);
         ch.end_yaw = ch.yaw[c];
+        ch.end_pos = ch.ground[c * n + n - 1];
+        if let Goal::Path(path) = goal {
+            path.advance(ch.end_pos);
+        }
         ch.last = Some(chosen);
         ch.played = 0;
         ch.restart_candidates();

@@ -29,6 +29,7 @@
 
 pub mod control;
 pub mod error;
+pub mod follow;
 pub mod keyframes;
 pub mod loaded;
 /// The exported file format: the `zoo-format` crate.

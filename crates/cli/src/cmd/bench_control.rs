@@ -1,11 +1,11 @@
-//! `zoo bench control`: the online control benchmark ([`zoo_rnngmm::bench::control`], protocol
+//! `zoo bench control`: the online control benchmark ([`zoo_bench::control`], protocol
 //! in docs/rnn-gmm-control.md).
 
 use crate::cmd::control::OnlineArgs;
 use anyhow::bail;
 use clap::Args;
 use std::path::PathBuf;
-use zoo_rnngmm::bench::control::ControlBenchOptions;
+use zoo_bench::control::ControlBenchOptions;
 
 /// Arguments of `zoo bench control`.
 #[derive(Args)]
@@ -50,10 +50,9 @@ pub struct BenchControlArgs {
     pub json: Option<PathBuf>,
 }
 
-/// The exported generator of `--onnx`, without its refiner.
-fn runtime_model(path: &std::path::Path) -> anyhow::Result<zoo_runtime::synthesis::SynthesisModel> {
-    let model =
-        zoo_bench::exported::load(path, &[zoo_runtime::MotionTaskKind::Synthesis], "`zoo bench control --onnx`")?;
+/// The exported generator of `--onnx` (for `command`), without its refiner.
+pub fn runtime_model(path: &std::path::Path, command: &str) -> anyhow::Result<zoo_runtime::synthesis::SynthesisModel> {
+    let model = zoo_bench::exported::load(path, &[zoo_runtime::MotionTaskKind::Synthesis], command)?;
     Ok(model.into_synthesis()?.without_refiner())
 }
 
@@ -76,7 +75,7 @@ pub fn run(a: BenchControlArgs) -> anyhow::Result<()> {
         None => None,
     };
     let o = ControlBenchOptions {
-        onnx: a.onnx.map(|p| anyhow::Ok((runtime_model(&p)?, p))).transpose()?,
+        onnx: a.onnx.map(|p| anyhow::Ok((runtime_model(&p, "`zoo bench control --onnx`")?, p))).transpose()?,
         from: a.from.as_deref().map(crate::args::clip_and_frame).transpose()?,
         model: a.model,
         script,
@@ -89,7 +88,7 @@ pub fn run(a: BenchControlArgs) -> anyhow::Result<()> {
         plots: a.plots,
         online: a.online.options(),
     };
-    let report = zoo_rnngmm::bench::control::run(&o, &crate::progress::Bar::new())?;
+    let report = zoo_bench::control::run(&o, &crate::progress::Bar::new())?;
     println!("{}", report.text());
     crate::cmd::write_report(a.json.as_deref(), &report)
 }

@@ -1,10 +1,10 @@
-//! `zoo bench follow`: the path-following benchmark ([`zoo_rnngmm::bench::follow`], protocol
+//! `zoo bench follow`: the path-following benchmark ([`zoo_bench::follow`], protocol
 //! in docs/rnn-gmm-control.md).
 
 use crate::cmd::follow::OptimiserArgs;
 use clap::Args;
 use std::path::PathBuf;
-use zoo_rnngmm::bench::follow::FollowBenchOptions;
+use zoo_bench::follow::FollowBenchOptions;
 use zoo_rnngmm::path::TEST_PATHS;
 
 /// Arguments of `zoo bench follow`.
@@ -30,6 +30,20 @@ pub struct BenchFollowArgs {
     /// sheet (`all.png`: a row per start, a column per path).
     #[arg(long)]
     pub plots: Option<PathBuf>,
+    /// The same generator exported for the runtime (`zoo export --onnx DIR --out FILE.onnx`):
+    /// the runtime's real-time follower runs with it.
+    #[arg(long)]
+    pub onnx: Option<PathBuf>,
+    /// Followers to run, comma-separated: offline (candle), runtime (needs --onnx).
+    #[arg(long, value_delimiter = ',', default_values_t = vec!["offline".to_string(), "runtime".to_string()])]
+    pub followers: Vec<String>,
+    /// Speed the runtime's follower walks at, in clip units per second (cm/s for the zoo's
+    /// data) [default: the data's mean speed].
+    #[arg(long, value_parser = crate::args::speed_units)]
+    pub speed: Option<f64>,
+    /// Seed frames the runtime's follower warms its generator with.
+    #[arg(long, default_value_t = 30, value_parser = crate::args::frame_count)]
+    pub runtime_seed_frames: usize,
     /// The optimiser's settings.
     #[command(flatten)]
     pub optimiser: OptimiserArgs,
@@ -43,6 +57,19 @@ pub fn run(a: BenchFollowArgs) -> anyhow::Result<()> {
     if let Some(p) = &a.json {
         crate::cmd::check_output_file("--json", p)?;
     }
+    if let Some(f) = a.followers.iter().find(|f| !matches!(f.as_str(), "offline" | "runtime")) {
+        anyhow::bail!("unknown follower `{f}` in --followers: use offline, runtime or both");
+    }
+    let runtime = a.followers.iter().any(|f| f == "runtime");
+    if runtime && a.onnx.is_none() && a.followers.len() == 1 {
+        anyhow::bail!(
+            "--followers runtime needs --onnx FILE (the generator exported with `zoo export --onnx DIR --out FILE.onnx`)"
+        );
+    }
+    let onnx = match a.onnx.filter(|_| runtime) {
+        Some(p) => Some((crate::cmd::bench_control::runtime_model(&p, "`zoo bench follow --onnx`")?, p)),
+        None => None,
+    };
     let o = FollowBenchOptions {
         model: a.model,
         from: a.from.iter().map(|s| crate::args::clip_and_frame(s)).collect::<anyhow::Result<_>>()?,
@@ -51,8 +78,12 @@ pub fn run(a: BenchFollowArgs) -> anyhow::Result<()> {
         glob: a.glob,
         plots: a.plots,
         optimiser: a.optimiser.options(),
+        offline: a.followers.iter().any(|f| f == "offline"),
+        onnx,
+        speed: a.speed,
+        runtime_seed_frames: a.runtime_seed_frames,
     };
-    let report = zoo_rnngmm::bench::follow::run(&o, &crate::progress::Bar::new())?;
+    let report = zoo_bench::follow::run(&o, &crate::progress::Bar::new())?;
     println!("{}", report.text());
     if let Some(p) = &a.json {
         crate::cmd::write_json(p, &report)?;

@@ -1,11 +1,11 @@
 //! The benchmarks of a trained RNN-GMM, each a function with a typed result that serialises to
 //! the JSON of its command: random synthesis against held-out real motion ([`synthesis`], `zoo
-//! bench synthesis`), denoising ([`denoise`]), path following ([`follow`]) and online control
-//! ([`control`]); protocols in docs/rnn-gmm.md and docs/rnn-gmm-control.md.
+//! bench synthesis`) and denoising ([`denoise`]); protocols in docs/rnn-gmm.md and
+//! docs/rnn-gmm-control.md. Path following and online control, which also run the exported
+//! generator through the runtime, are `zoo_bench::follow` and `zoo_bench::control` (no crate
+//! under `models/` links the runtime's tract).
 
-pub mod control;
 pub mod denoise;
-pub mod follow;
 pub mod synthesis;
 
 use crate::checkpoint::LoadedGenerator;

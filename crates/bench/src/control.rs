@@ -5,16 +5,16 @@
 //! proposals only), with each key's speed and heading error from 1 s after it, foot skate
 //! beside the real clips', and the compute per frame on one core.
 
-use crate::OnlineOptions;
-use crate::controls::{ControlScript, SegmentScore, score};
-use crate::error::RnnGmmResult;
-use crate::run::{control_with_progress, plot_controls};
 use glam::DVec3;
 use serde::Serialize;
 use std::path::PathBuf;
 use std::time::Instant;
 use zoo_data::{Context, Message, Progress, bail};
 use zoo_motion::Clip;
+use zoo_rnngmm::OnlineOptions;
+use zoo_rnngmm::controls::{ControlScript, SegmentScore, score};
+use zoo_rnngmm::error::RnnGmmResult;
+use zoo_rnngmm::run::{control_with_progress, plot_controls};
 use zoo_runtime::control::{Control, ControlRunner, ControlSettings, ControlledCharacter};
 use zoo_runtime::pose::EnginePose;
 use zoo_runtime::synthesis::SynthesisModel;
@@ -188,6 +188,7 @@ fn runtime_settings(opts: &OnlineOptions) -> ControlSettings {
         batch: opts.batch,
         speed_offsets: opts.speed_offsets.iter().map(|v| *v as f32).collect(),
         turn_offsets: opts.turn_offsets.iter().map(|v| *v as f32).collect(),
+        side_offsets: vec![0.0],
         sigma_speed: opts.sigma_speed as f32,
         sigma_heading: opts.sigma_heading as f32,
         temperature: opts.temperature as f32,
@@ -203,9 +204,9 @@ pub fn run(o: &ControlBenchOptions, p: &dyn Progress) -> RnnGmmResult<Report> {
         bail!("--seeds is empty: give at least one seed");
     }
     let script = o.script.as_ref().map_or_else(ControlScript::benchmark, |(s, _)| s.clone());
-    let (g, _) = crate::run::load_run(&o.model, true)?;
+    let (g, _) = zoo_rnngmm::run::load_run(&o.model, true)?;
     let from = o.from.as_ref().map(|(p, f)| (p.as_path(), *f));
-    let (clip, frame, label) = crate::run::start_clip(&o.model, from, &g)?;
+    let (clip, frame, label) = zoo_rnngmm::run::start_clip(&o.model, from, &g)?;
     let runtime = o.onnx.as_ref().map(|(m, _)| m);
     if let Some(m) = runtime
         && (m.frame_dim() != g.spec.dim() || m.joints() != g.spec.skeleton.len())
@@ -220,7 +221,7 @@ pub fn run(o: &ControlBenchOptions, p: &dyn Progress) -> RnnGmmResult<Report> {
             o.model.display()
         );
     }
-    let (skate, real) = super::skate_reference(&g, o.data.as_deref(), &o.glob, &[&clip], p)?;
+    let (skate, real) = zoo_rnngmm::bench::skate_reference(&g, o.data.as_deref(), &o.glob, &[&clip], p)?;
     let settings = runtime_settings(&o.online);
     // The runtime's warm-up frames (clip units), ending at the start frame.
     let enc = g.spec.encode(&clip)?;
