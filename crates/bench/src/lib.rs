@@ -7,11 +7,15 @@
 //!   exported files run by the engine runtime ([`onnx`]);
 //! - [`runtime`]: a step's latency and throughput through candle, tract and onnxruntime (`zoo
 //!   bench runtime`), and [`keyframes`], the exported ARNN's (`zoo bench keyframes`);
+//! - [`keys`]: the keys-only in-betweening benchmark (`zoo bench --layout keys`): key poses
+//!   every K frames, the linear and Blender Bezier ([`fcurve`]) baselines and keyframe models;
 //! - [`train`]: the training step's speed per thread count (`zoo bench train`).
 
 pub mod exported;
+pub mod fcurve;
 pub mod inbetween;
 pub mod keyframes;
+pub mod keys;
 pub mod onnx;
 pub mod registry;
 pub mod runtime;

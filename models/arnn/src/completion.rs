@@ -347,6 +347,11 @@ fn lamp_misses(misses: &[Vec<f64>], dofs: usize) -> ((f64, usize, usize), (f64, 
     (worst(0..2), worst(2..dofs.max(2)))
 }
 
+/// The completed pose at each key frame minus the key.
+fn misses_at_keys(frames: &[Vec<f64>], key_frames: &[usize], key_poses: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    key_frames.iter().zip(key_poses).map(|(&f, p)| frames[f].iter().zip(p).map(|(y, x)| y - x).collect()).collect()
+}
+
 /// `zoo complete` with the lamp's ARNN.
 fn complete_lamp(o: &CompleteOptions, model: &Arnn, norm: &Normalization) -> ArnnResult<String> {
     let config = model.config();
@@ -360,16 +365,13 @@ fn complete_lamp(o: &CompleteOptions, model: &Arnn, norm: &Normalization) -> Arn
     };
     let keys = read_keys(&o.keys, &dof_names)?;
     let fps = o.fps.or(keys.fps).unwrap_or(DEFAULT_FPS);
-    let mut frames = crate::complete(model, norm, &keys.frames, &keys.poses)?;
+    let mut frames = crate::complete_raw(model, norm, &keys.frames, &keys.poses)?;
+    // The network's own misses, before the keys are hit.
+    let raw_misses = misses_at_keys(&frames, &keys.frames, &keys.poses);
+    crate::hit_keys(config, &keys.frames, &keys.poses, &[], &mut frames);
     let lamp_dofs = config.dofs == crate::luxo::DOFS && dof_names == crate::luxo::DOF_NAMES;
     let lift = if o.no_ground || !lamp_dofs { 0.0 } else { crate::eval::project_to_ground(&lamp, &mut frames) };
-    // Misses: the completed pose at each key frame against the key.
-    let misses: Vec<Vec<f64>> = keys
-        .frames
-        .iter()
-        .zip(&keys.poses)
-        .map(|(&f, p)| frames[f].iter().zip(p).map(|(y, x)| y - x).collect())
-        .collect();
+    let misses = misses_at_keys(&frames, &keys.frames, &keys.poses);
     let poses: Vec<LampPose> = frames
         .iter()
         .map(|f| <LampPose>::try_from(f.as_slice()))
@@ -380,6 +382,7 @@ fn complete_lamp(o: &CompleteOptions, model: &Arnn, norm: &Normalization) -> Arn
         "dof_names": dof_names,
                 "key_frames": keys.frames,
                 "key_misses": misses,
+                "network_key_misses": raw_misses,
                 "ground_lift": lift,
                 "frames": frames,
     });
@@ -388,7 +391,8 @@ fn complete_lamp(o: &CompleteOptions, model: &Arnn, norm: &Normalization) -> Arn
         let keyed: Vec<(usize, Vec<f64>)> = keys.frames.iter().copied().zip(keys.poses.iter().cloned()).collect();
         plot_dofs(p, &[DofSeries { frames: &frames, rgb: (31, 80, 180), width: 2.0 }], &keyed)?;
     }
-    let ((pos, pk, pj), (ang, ak, aj)) = lamp_misses(&misses, config.dofs);
+    let ((pos, pk, pj), (ang, ak, aj)) = lamp_misses(&raw_misses, config.dofs);
+    let ((hit_pos, _, _), (hit_ang, _, _)) = lamp_misses(&misses, config.dofs);
     let mut s = String::new();
     if lift > 0.0 {
         s += &format!(
@@ -397,8 +401,8 @@ fn complete_lamp(o: &CompleteOptions, model: &Arnn, norm: &Normalization) -> Arn
         );
     }
     Ok(s + &format!(
-        "completed {} frames from {} keys ({} fps) into {}{}; largest key miss: {:.2} cm ({} at key {pk}), {:.2} deg \
-         ({} at key {ak})",
+        "completed {} frames from {} keys ({} fps) into {}{}; the network's largest key miss: {:.2} cm ({} at key \
+         {pk}), {:.2} deg ({} at key {ak}); corrected towards the keys, largest miss {:.1e} cm, {:.1e} deg",
         frames.len(),
         keys.frames.len(),
         fps,
@@ -408,6 +412,8 @@ fn complete_lamp(o: &CompleteOptions, model: &Arnn, norm: &Normalization) -> Arn
         dof_names[pj],
         ang.to_degrees(),
         dof_names.get(aj).map_or("-", |s| s.as_str()),
+        hit_pos * 100.0,
+        hit_ang.to_degrees(),
     ))
 }
 
@@ -436,25 +442,29 @@ fn complete_humanoid(
     if let Some(fps) = o.fps.or(keys.fps) {
         done.clip.frame_time = 1.0 / fps;
     }
-    let (deg, key, joint) = done.angle_miss;
+    let (raw_root, (deg, key, joint)) = done.raw_miss;
     let fields = serde_json::json!({
         "key_frames": keys.keys.iter().map(|k| k.frame).collect::<Vec<_>>(),
                 "root_miss": done.root_miss,
-                "angle_miss_degrees": deg,
+                "angle_miss_degrees": done.angle_miss.0,
+                "network_root_miss": raw_root,
+                "network_angle_miss_degrees": deg,
                 "frames": done.clip.frames(),
     });
     write_outputs(o, &done.clip, keys.offset, 1.0 / done.clip.frame_time, fields)?;
     Ok(format!(
-        "completed {} frames from {} keys ({} partial) into {}{}; largest key miss: root {:.2} (clip units), {:.2} deg \
-         ({} at key {key})",
+        "completed {} frames from {} keys ({} partial) into {}{}; the network's largest key miss: root {:.2} (clip \
+         units), {:.2} deg ({} at key {key}); corrected towards the keys, largest miss {:.1e}, {:.1e} deg",
         done.clip.frames(),
         keys.keys.len(),
         keys.keys.iter().filter(|k| k.fixed.as_ref().is_some_and(|f| f.contains(&false))).count(),
         o.out.display(),
         o.json.as_ref().map(|j| format!(" and {}", j.display())).unwrap_or_default(),
-        done.root_miss,
+        raw_root,
         deg,
         joint_names.get(joint).map_or("-", |s| s.as_str()),
+        done.root_miss,
+        done.angle_miss.0,
     ))
 }
 
