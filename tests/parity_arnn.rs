@@ -189,11 +189,12 @@ fn keyframe_runner_matches_candle() {
 
     // Every key is hit to float precision; the network's own output (no correction) misses
     // them, and is candle's `complete_raw`.
+    let flat_ref = &flat;
     let miss = |o: &[f32], c: usize| {
         frames[c]
             .iter()
             .enumerate()
-            .flat_map(|(k, &f)| (0..6).map(move |i| (o[f * 6 + i] - flat[c][k * 6 + i]).abs()))
+            .flat_map(|(k, &f)| (0..6).map(move |i| (o[f * 6 + i] - flat_ref[c][k * 6 + i]).abs()))
             .fold(0.0f32, f32::max)
     };
     for c in 0..2 {

@@ -276,6 +276,61 @@ pub struct CompleteOptions {
     pub fps: Option<f64>,
     /// The global joint positions of every completed frame (a positions file).
     pub positions: Option<PathBuf>,
+    /// Humanoid keys without a keys file: a clip (BVH, glTF, FBX) and where its keys are.
+    pub poses: Option<PoseKeys>,
+}
+
+/// Humanoid keys read from a clip instead of a keys file (`zoo complete --poses CLIP`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PoseKeys {
+    /// The clip (any format `zoo` reads).
+    pub clip: PathBuf,
+    /// The keys' frames in the output; `None` with [`Self::every`].
+    pub frames: Option<Vec<usize>>,
+    /// Keys every this many frames (instead of [`Self::frames`]).
+    pub every: Option<usize>,
+    /// `false`: the clip holds only the key poses, one per frame, in order. `true`: the clip is
+    /// a whole motion and the keys are its poses at the key frames.
+    pub sample: bool,
+}
+
+impl PoseKeys {
+    /// The keys for a clip of `n` frames: output frame and clip frame of each.
+    pub fn keys(&self, n: usize) -> Result<Vec<crate::humanoid::HumanoidKey>, String> {
+        let frames: Vec<usize> = match (&self.frames, self.every) {
+            (Some(f), None) => f.clone(),
+            (None, Some(k)) if k > 0 && self.sample => (0..n).step_by(k).collect(),
+            (None, Some(k)) if k > 0 => (0..n).map(|i| i * k).collect(),
+            _ => return Err("give the key frames with either --key-frames LIST or --every K (K > 0)".into()),
+        };
+        if frames.len() < 2 {
+            return Err(format!("{} key(s): completion needs at least two", frames.len()));
+        }
+        if let Some(i) = frames.windows(2).position(|w| w[0] >= w[1]) {
+            return Err(format!("--key-frames must strictly increase: {} then {}", frames[i], frames[i + 1]));
+        }
+        if self.sample {
+            if let Some(&f) = frames.iter().find(|&&f| f >= n) {
+                return Err(format!("key frame {f} is past the clip's {n} frames (0 to {})", n.saturating_sub(1)));
+            }
+        } else if frames.len() != n {
+            return Err(format!(
+                "{} key frames for a clip of {n} poses: the clip holds one key pose per frame, give one key frame per \
+                 pose (or --sample to take the key frames out of a whole motion)",
+                frames.len()
+            ));
+        }
+        let first = frames[0];
+        Ok(frames
+            .iter()
+            .enumerate()
+            .map(|(i, &f)| crate::humanoid::HumanoidKey {
+                frame: f - first,
+                source: if self.sample { f } else { i },
+                fixed: None,
+            })
+            .collect())
+    }
 }
 
 fn read_keys(path: &Path, dof_names: &[String]) -> ArnnResult<Keys> {
@@ -363,6 +418,9 @@ fn complete_lamp(o: &CompleteOptions, model: &Arnn, norm: &Normalization) -> Arn
     } else {
         config.dof_names.clone()
     };
+    if o.poses.is_some() {
+        bail!("--poses is for humanoid models; the lamp's keys come from a keys file (--keys)");
+    }
     let keys = read_keys(&o.keys, &dof_names)?;
     let fps = o.fps.or(keys.fps).unwrap_or(DEFAULT_FPS);
     let mut frames = crate::complete_raw(model, norm, &keys.frames, &keys.poses)?;
@@ -430,15 +488,30 @@ fn complete_humanoid(
             o.out.display()
         );
     }
-    let text =
-        std::fs::read_to_string(&o.keys).with_context(|| format!("--keys {}: cannot read it", o.keys.display()))?;
-    let keys =
-        parse_humanoid_keys(&text, joint_names).map_err(|e| Message(format!("--keys {}: {e}", o.keys.display())))?;
-    let bvh = o.keys.parent().unwrap_or(Path::new(".")).join(&keys.bvh);
-    let source = zoo_data::clip_io::read_model_clip(&bvh)
-        .with_context(|| format!("--keys {}: reading its bvh {}", o.keys.display(), bvh.display()))?;
-    let mut done = crate::humanoid::complete_clip(model, norm, &source, &keys.keys)
-        .with_context(|| format!("--keys {}", o.keys.display()))?;
+    let (keys, source, what) = match &o.poses {
+        Some(p) => {
+            let source = zoo_data::clip_io::read_model_clip(&p.clip)
+                .with_context(|| format!("--poses {}: reading it", p.clip.display()))?;
+            let keys = p.keys(source.frames()).map_err(|e| Message(format!("--poses {}: {e}", p.clip.display())))?;
+            let offset = if p.sample { keys[0].source } else { 0 };
+            (
+                HumanoidKeys { bvh: p.clip.clone(), offset, keys, fps: None },
+                source,
+                format!("--poses {}", p.clip.display()),
+            )
+        }
+        None => {
+            let text = std::fs::read_to_string(&o.keys)
+                .with_context(|| format!("--keys {}: cannot read it", o.keys.display()))?;
+            let keys = parse_humanoid_keys(&text, joint_names)
+                .map_err(|e| Message(format!("--keys {}: {e}", o.keys.display())))?;
+            let bvh = o.keys.parent().unwrap_or(Path::new(".")).join(&keys.bvh);
+            let source = zoo_data::clip_io::read_model_clip(&bvh)
+                .with_context(|| format!("--keys {}: reading its bvh {}", o.keys.display(), bvh.display()))?;
+            (keys, source, format!("--keys {}", o.keys.display()))
+        }
+    };
+    let mut done = crate::humanoid::complete_clip(model, norm, &source, &keys.keys).context(what)?;
     if let Some(fps) = o.fps.or(keys.fps) {
         done.clip.frame_time = 1.0 / fps;
     }
@@ -583,6 +656,28 @@ mod tests {
         // The lamp refuses humanoid fields.
         let e = parse_keys(r#"{"bvh": "a.bvh", "keys": [{"frame": 0}, {"frame": 5}]}"#, &names()).unwrap_err();
         assert!(e.contains("are for humanoid models"), "{e}");
+    }
+
+    #[test]
+    fn pose_clips_give_keys_by_frame_list_spacing_or_sampling() {
+        let p = |frames: Option<Vec<usize>>, every: Option<usize>, sample: bool| PoseKeys {
+            clip: "k.bvh".into(),
+            frames,
+            every,
+            sample,
+        };
+        let pairs = |k: Vec<crate::humanoid::HumanoidKey>| k.iter().map(|k| (k.frame, k.source)).collect::<Vec<_>>();
+        assert_eq!(pairs(p(Some(vec![5, 17, 35]), None, false).keys(3).unwrap()), [(0, 0), (12, 1), (30, 2)]);
+        assert_eq!(pairs(p(None, Some(15), false).keys(3).unwrap()), [(0, 0), (15, 1), (30, 2)]);
+        assert_eq!(pairs(p(None, Some(20), true).keys(50).unwrap()), [(0, 0), (20, 20), (40, 40)]);
+        assert_eq!(pairs(p(Some(vec![10, 40]), None, true).keys(50).unwrap()), [(0, 10), (30, 40)]);
+        let e = p(Some(vec![0, 12]), None, false).keys(3).unwrap_err();
+        assert!(e.contains("2 key frames for a clip of 3 poses"), "{e}");
+        let e = p(Some(vec![0, 12, 12]), None, false).keys(3).unwrap_err();
+        assert!(e.contains("must strictly increase: 12 then 12"), "{e}");
+        let e = p(Some(vec![0, 60]), None, true).keys(50).unwrap_err();
+        assert!(e.contains("key frame 60 is past the clip's 50 frames"), "{e}");
+        assert!(p(None, None, false).keys(3).unwrap_err().contains("--key-frames LIST or --every K"));
     }
 
     #[test]
