@@ -155,28 +155,13 @@ fn inbetween(a: BenchArgs) -> anyhow::Result<()> {
     let start = Instant::now();
     let (methods, trained_on) = zoo_bench::inbetween::load_methods(&a.methods)?;
     let bar = crate::progress::Bar::new();
-    let split = crate::cmd::Split {
-        valid_glob: a.valid_glob.as_deref(),
-        test_data: a.test_data.as_deref(),
-        exclude_glob: a.exclude_glob.as_deref(),
-    };
-    let (train, test) = crate::cmd::load_split(&data, &split, a.skip_invalid, &bar)?;
-    let test: Vec<_> = test.into_iter().step_by(a.test_every as usize).collect();
+    let (train, test) = load(&a, &data, &bar)?;
     zoo_bench::inbetween::check_skeletons(&a.methods, &trained_on, &train)?;
     let o = InbetweenOptions { lengths: a.lengths.clone(), save_bvh: a.save_bvh.clone(), save_count: a.save_count };
     let result = zoo_bench::inbetween::run(&train, &test, &methods, &o, &bar)?;
     bar.finish();
     println!("{}", result.table(&a.lengths));
-    if let Some(path) = &a.json {
-        crate::cmd::write_json(path, &result)?;
-    }
-    println!(
-        "{} training clips, {} test clips, {} test windows, {:.2} s",
-        train.len(),
-        test.len(),
-        result.windows,
-        start.elapsed().as_secs_f64()
-    );
+    summary(&a, &result, (train.len(), test.len()), start)?;
     if let Some(r) = &a.reference {
         let check = zoo_bench::inbetween::check_reference(&result, r, a.tolerance)?;
         for line in &check.lines {
@@ -203,25 +188,43 @@ fn keys(a: BenchArgs, data: &std::path::Path) -> anyhow::Result<()> {
     let methods = specs.iter().map(|m| zoo_bench::keys::method(m)).collect::<Result<Vec<_>, _>>()?;
     let start = Instant::now();
     let bar = crate::progress::Bar::new();
-    let split = crate::cmd::Split {
-        valid_glob: a.valid_glob.as_deref(),
-        test_data: a.test_data.as_deref(),
-        exclude_glob: a.exclude_glob.as_deref(),
-    };
-    let (train, test) = crate::cmd::load_split(data, &split, a.skip_invalid, &bar)?;
-    let test: Vec<_> = test.into_iter().step_by(a.test_every as usize).collect();
+    let (train, test) = load(&a, data, &bar)?;
     bar.stage("preparing windows and statistics");
     let bench = KeysBench::new(&train, &test)?;
     let result = bench.run(&methods, &a.every, layout, &bar)?;
     bar.finish();
     println!("{}", zoo_bench::keys::table(&result, &a.every, layout));
+    summary(&a, &result, (train.len(), test.len()), start)
+}
+
+/// The training and test clips of `--data` (`--valid-glob`, `--test-data`, `--exclude-glob`),
+/// every `--test-every`-th test clip kept.
+fn load(
+    a: &BenchArgs,
+    data: &std::path::Path,
+    bar: &crate::progress::Bar,
+) -> anyhow::Result<(Vec<zoo_data::dataset::NamedClip>, Vec<zoo_data::dataset::NamedClip>)> {
+    let split = crate::cmd::Split {
+        valid_glob: a.valid_glob.as_deref(),
+        test_data: a.test_data.as_deref(),
+        exclude_glob: a.exclude_glob.as_deref(),
+    };
+    let (train, test) = crate::cmd::load_split(data, &split, a.skip_invalid, bar)?;
+    Ok((train, test.into_iter().step_by(a.test_every as usize).collect()))
+}
+
+/// Writes `--json` and prints the closing line.
+fn summary(
+    a: &BenchArgs,
+    result: &zoo_data::benchmark::BenchResult,
+    (train, test): (usize, usize),
+    start: Instant,
+) -> anyhow::Result<()> {
     if let Some(path) = &a.json {
-        crate::cmd::write_json(path, &result)?;
+        crate::cmd::write_json(path, result)?;
     }
     println!(
-        "{} training clips, {} test clips, {} test windows, {:.2} s",
-        train.len(),
-        test.len(),
+        "{train} training clips, {test} test clips, {} test windows, {:.2} s",
         result.windows,
         start.elapsed().as_secs_f64()
     );
