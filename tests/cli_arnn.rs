@@ -456,6 +456,53 @@ fn humanoid_arnn_trains_on_bvh_and_runs_in_the_benchmark() {
     assert!(stdout.contains("completed 31 frames from 3 keys (1 partial)"), "{stdout}");
     let bvh = std::fs::read_to_string(&out).unwrap();
     assert!(bvh.contains(&names[3]) && bvh.contains("Frames: 31"), "{}", &bvh[..200.min(bvh.len())]);
+    // Issue 46: the keys hit, the network's own miss reported beside.
+    assert!(
+        stdout.contains("the network's largest key miss") && stdout.contains("corrected towards the keys"),
+        "{stdout}"
+    );
+    // A clip holding only the key poses (frames 30, 42, 60 of the clip), their frames given.
+    let text = std::fs::read_to_string(&clip).unwrap();
+    let (head, motion) = text.split_once("MOTION").unwrap();
+    let lines: Vec<&str> = motion.lines().filter(|l| !l.trim().is_empty()).collect();
+    let poses = [30, 42, 60].map(|f| lines[2 + f]).join("\n");
+    let keys_bvh = dir.path().join("key_poses.bvh");
+    std::fs::write(&keys_bvh, format!("{head}MOTION\nFrames: 3\n{}\n{poses}\n", lines[1])).unwrap();
+    let kb = keys_bvh.to_str().unwrap();
+    let from_poses = dir.path().join("from_poses.bvh");
+    let fp = from_poses.to_str().unwrap();
+    let (ok, stdout, stderr) = run(&["complete", "--model", r, "--poses", kb, "--key-frames", "0,12,30", "--out", fp]);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("completed 31 frames from 3 keys (0 partial)"), "{stdout}");
+    // The same keys sampled from the whole clip give the same motion.
+    let sampled = dir.path().join("sampled.bvh");
+    let args = ["complete", "--model", r, "--poses", clip.to_str().unwrap(), "--key-frames", "30,42,60", "--sample"];
+    let (ok, stdout, stderr) = run(&[&args[..], &["--out", sampled.to_str().unwrap()]].concat());
+    assert!(ok && stdout.contains("completed 31 frames from 3 keys"), "{stdout}\n{stderr}");
+    let motion_of = |p: &Path| std::fs::read_to_string(p).unwrap().split_once("MOTION").unwrap().1.to_string();
+    assert_eq!(motion_of(&from_poses), motion_of(&sampled));
+    let (ok, _, stderr) = run(&["complete", "--model", r, "--poses", kb, "--key-frames", "0,12", "--out", fp]);
+    assert!(!ok && stderr.contains("2 key frames for a clip of 3 poses"), "{stderr}");
+    let (ok, _, stderr) = run(&["complete", "--model", r, "--poses", kb, "--out", fp]);
+    assert!(!ok && stderr.contains("--poses needs the key frames"), "{stderr}");
+    // The keys-only benchmark: the baselines and the run, whose keys are hit after its own misses.
+    let json = dir.path().join("keys.json");
+    let keys_bench = ["bench", "--data", d, "--valid-glob", "*_0005.bvh", "--layout", "keys", "--every", "10,30"];
+    let methods = format!("linear,bezier,{method}");
+    let (ok, stdout, stderr) =
+        run(&[&keys_bench[..], &["--methods", &methods, "--json", json.to_str().unwrap()]].concat());
+    assert!(ok && stdout.contains("keys every K frames (whole keys)"), "{stdout}\n{stderr}");
+    let result: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    for m in ["linear", "bezier", method.as_str()] {
+        let row = &result["methods"][m];
+        for k in [10, 30] {
+            let l2p = row[format!("l2p@{k}")].as_f64().unwrap();
+            assert!(l2p.is_finite() && l2p > 0.0, "{m} {k}: {row}");
+            assert!(row[format!("keymiss_cm@{k}")].as_f64().unwrap() < 1e-3, "{m} {k}: {row}");
+            assert!(row[format!("keymiss_deg@{k}")].as_f64().unwrap() < 1e-2, "{m} {k}: {row}");
+        }
+    }
+    assert!(result["methods"][&method]["keymiss_raw_cm@30"].as_f64().unwrap() > 1e-3, "{result}");
     // A joint the skeleton does not have: refused, nothing written.
     write_keys("Tail");
     let refused_out = dir.path().join("refused.bvh");

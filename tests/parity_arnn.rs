@@ -81,7 +81,7 @@ fn candle_tract_and_onnxruntime_complete_the_same_keys() {
     let last = *KEY_FRAMES.last().unwrap();
     let all_keys: Vec<Vec<Vec<f64>>> = (0..chars).map(keys).collect();
     let candle: Vec<Vec<Vec<f64>>> =
-        all_keys.iter().map(|k| zoo_arnn::complete(&model, &norm, &KEY_FRAMES, k).unwrap()).collect();
+        all_keys.iter().map(|k| zoo_arnn::complete_raw(&model, &norm, &KEY_FRAMES, k).unwrap()).collect();
     assert_eq!(candle[0].len(), last + 1);
     // The completion moves: not the keys held still.
     assert!(max_diff(&candle[0][..1], &candle[0][20..21]) > 0.05);
@@ -187,6 +187,29 @@ fn keyframe_runner_matches_candle() {
     let diff = alone.iter().zip(&out[1]).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
     assert!(diff <= 1e-5, "batch of 2 vs alone: {diff:e}");
 
+    // Every key is hit to float precision; the network's own output (no correction) misses
+    // them, and is candle's `complete_raw`.
+    let flat_ref = &flat;
+    let miss = |o: &[f32], c: usize| {
+        frames[c]
+            .iter()
+            .enumerate()
+            .flat_map(|(k, &f)| (0..6).map(move |i| (o[f * 6 + i] - flat_ref[c][k * 6 + i]).abs()))
+            .fold(0.0f32, f32::max)
+    };
+    for c in 0..2 {
+        assert!(miss(&out[c], c) <= 1e-6, "character {c}: a key missed by {:e}", miss(&out[c], c));
+    }
+    runner.set_hit_keys(false);
+    let mut raw = vec![0f32; out[0].len()];
+    runner.complete(keys_of(0), &mut raw).unwrap();
+    runner.set_hit_keys(true);
+    let raw_candle = zoo_arnn::complete_raw(&model, &norm, frames[0], &poses[0]).unwrap();
+    let diff = max_diff(&raw_candle, &as_frames(&raw));
+    eprintln!("network's own key miss {:e}, after the correction {:e}", miss(&raw, 0), miss(&out[0], 0));
+    assert!(diff <= TOLERANCE, "raw: {diff:e}");
+    assert!(miss(&raw, 0) > 1e-3, "the tiny network hits every key by itself: the correction is not tested");
+
     // Bad keys and buffers: clear errors, the output untouched.
     let mut buf = vec![7f32; 40 * 6];
     let err = |runner: &mut zoo_runtime::keyframes::KeyframeRunner, k: MotionKeys, buf: &mut [f32]| {
@@ -241,9 +264,9 @@ fn partial_keys_complete_the_same_in_candle_tract_and_onnxruntime() {
         .collect();
     let fixed: Vec<Vec<bool>> =
         vec![vec![true; 4], vec![true, false, true, false], vec![false, true, false, false], vec![true; 4]];
-    let candle = zoo_arnn::complete_partial(&model, &norm, &KEY_FRAMES, &poses, &fixed).unwrap();
+    let candle = zoo_arnn::complete_partial_raw(&model, &norm, &KEY_FRAMES, &poses, &fixed).unwrap();
     // The flags matter: whole keys complete differently.
-    let whole = zoo_arnn::complete(&model, &norm, &KEY_FRAMES, &poses).unwrap();
+    let whole = zoo_arnn::complete_raw(&model, &norm, &KEY_FRAMES, &poses).unwrap();
     assert!(max_diff(&candle, &whole) > 1e-3, "partial keys changed nothing");
 
     let onnx = zoo_arnn::export::export_arnn(&config, &norm, &varmap).unwrap();
@@ -254,7 +277,9 @@ fn partial_keys_complete_the_same_in_candle_tract_and_onnxruntime() {
     let flags: Vec<f32> = fixed.iter().flatten().map(|&f| if f { 1.0 } else { 0.0 }).collect();
     let mut runner = km.runner(1).unwrap();
     let mut out = vec![0f32; (KEY_FRAMES[3] + 1) * d];
+    runner.set_hit_keys(false);
     runner.complete(MotionKeys { frames: &KEY_FRAMES, poses: &flat, fixed: &flags }, &mut out).unwrap();
+    runner.set_hit_keys(true);
     let tract: Vec<Vec<f64>> = out.chunks(d).map(|f| f.iter().map(|v| *v as f64).collect()).collect();
     // onnxruntime, stepped by hand.
     let mut ort = OrtSession::new(&onnx);
@@ -285,6 +310,27 @@ fn partial_keys_complete_the_same_in_candle_tract_and_onnxruntime() {
     // Root positions are in centimetres here: the tolerance is relative to the values' scale.
     let scale = 1.0 + candle.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
     assert!(ct <= TOLERANCE * scale && co <= TOLERANCE * scale && to <= TOLERANCE * scale, "{ct:e} {co:e} {to:e}");
+    // With the keys hit: candle and tract agree, and every fixed group of every key is its key
+    // (a rotation up to its sign).
+    let hit = zoo_arnn::complete_partial(&model, &norm, &KEY_FRAMES, &poses, &fixed).unwrap();
+    let mut hit_tract = vec![0f32; out.len()];
+    runner.complete(MotionKeys { frames: &KEY_FRAMES, poses: &flat, fixed: &flags }, &mut hit_tract).unwrap();
+    let hit_tract: Vec<Vec<f64>> = hit_tract.chunks(d).map(|f| f.iter().map(|v| *v as f64).collect()).collect();
+    assert!(max_diff(&hit, &hit_tract) <= TOLERANCE * scale, "{:e}", max_diff(&hit, &hit_tract));
+    let group_miss = |o: &[Vec<f64>], k: usize, gr: usize| {
+        let dofs: Vec<usize> = (0..d).filter(|&i| config.key_groups[i] == gr).collect();
+        let err = |s: f64| dofs.iter().map(|&i| (o[KEY_FRAMES[k]][i] - s * poses[k][i]).abs()).fold(0.0, f64::max);
+        if gr == 0 { err(1.0) } else { err(1.0).min(err(-1.0)) }
+    };
+    let (mut raw_miss, mut hit_miss) = (0.0f64, 0.0f64);
+    for k in 0..KEY_FRAMES.len() {
+        for gr in (0..g).filter(|&gr| fixed[k][gr]) {
+            raw_miss = raw_miss.max(group_miss(&candle, k, gr));
+            hit_miss = hit_miss.max(group_miss(&hit, k, gr).max(group_miss(&hit_tract, k, gr)));
+        }
+    }
+    eprintln!("partial keys: network's own key miss {raw_miss:e}, after the correction {hit_miss:e}");
+    assert!(raw_miss > 1e-3 && hit_miss <= 1e-5 * scale, "{raw_miss:e} {hit_miss:e}");
     // Bad flags: clear errors.
     let mut bad = flags.clone();
     bad[0] = 0.0;

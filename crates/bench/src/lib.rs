@@ -7,15 +7,19 @@
 //!   exported files run by the engine runtime ([`onnx`]);
 //! - [`runtime`]: a step's latency and throughput through candle, tract and onnxruntime (`zoo
 //!   bench runtime`), and [`keyframes`], the exported ARNN's (`zoo bench keyframes`);
+//! - [`keys`]: the keys-only in-betweening benchmark (`zoo bench --layout keys`): key poses
+//!   every K frames, the linear and Blender Bezier ([`fcurve`]) baselines and keyframe models;
 //! - [`train`]: the training step's speed per thread count (`zoo bench train`);
 //! - [`control`] and [`follow`]: RNN-GMM online control (`zoo bench control`) and path
 //!   following (`zoo bench follow`) by the candle controllers and the runtime's.
 
 pub mod control;
 pub mod exported;
+pub mod fcurve;
 pub mod follow;
 pub mod inbetween;
 pub mod keyframes;
+pub mod keys;
 pub mod onnx;
 pub mod registry;
 pub mod runtime;

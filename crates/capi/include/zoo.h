@@ -384,7 +384,9 @@ void zoo_keyframes_runner_free(struct ZooKeyframesRunner *runner);
 // increasing, the first 0), `poses` `frames_len * D` floats (one pose per key), `fixed` NULL
 // and 0 for whole keys or `frames_len * G` flags for partial keys (a model with key groups
 // only; the first key fixes every group), `out` `(frames[frames_len - 1] + 1) * D` floats. Keys
-// and buffers are checked before anything is written. The runner: one thread at a time.
+// and buffers are checked before anything is written. Every key frame of `out` equals its key
+// (in the groups it fixes): the network's miss is spread over the frames before it. The
+// runner: one thread at a time.
 //
 // # Safety
 // `runner` is NULL or live and used by this thread only; each buffer is NULL or holds its given

@@ -24,6 +24,7 @@ pub mod fit;
 pub mod fk;
 pub mod footlock;
 pub mod frame;
+pub mod keyhit;
 pub mod pipeline;
 pub mod quat;
 pub mod rng;

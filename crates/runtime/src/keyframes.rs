@@ -10,6 +10,12 @@
 //! complete` run it. A batch of characters runs in one graph call per frame; characters whose
 //! keys end earlier are stepped on (their outputs discarded) until the longest one ends.
 //!
+//! Every key is hit: after the network has run, each key frame is set to its key (in the
+//! groups it fixes) and the network's miss is spread over the frames before it
+//! ([`zoo_motion::keyhit`], like RTN's target blend), so the motion stays continuous. A
+//! humanoid's rotations are compared up to sign. [`KeyframeRunner::set_hit_keys`] turns this
+//! off to read the network's own output.
+//!
 //! ```no_run
 //! use zoo_runtime::keyframes::{KeyframeModel, MotionKeys};
 //! let model = KeyframeModel::load("arnn.onnx")?;
@@ -137,6 +143,7 @@ pub struct KeyframeModel {
     model: MotionModel,
     dofs: usize,
     groups: usize,
+    key_groups: Vec<usize>,
 }
 
 impl KeyframeModel {
@@ -157,7 +164,7 @@ impl KeyframeModel {
         let Some(task) = m.task.as_keyframes() else {
             return Err(MotionError::wrong_task(m, "keyframes", "KeyframeModel"));
         };
-        let (dofs, groups) = (task.dofs, task.groups);
+        let (dofs, groups, key_groups) = (task.dofs, task.groups, task.key_groups.clone());
         let names: Vec<&str> = model.inputs().iter().map(|i| i.name.as_str()).collect();
         let widths: Vec<usize> = model.inputs().iter().map(|i| i.width).collect();
         let outputs: Vec<(&str, usize)> = model.outputs().iter().map(|o| (o.name.as_str(), o.width)).collect();
@@ -177,7 +184,7 @@ impl KeyframeModel {
                 ),
             });
         }
-        Ok(KeyframeModel { model, dofs, groups })
+        Ok(KeyframeModel { model, dofs, groups, key_groups })
     }
 
     /// Values per pose (6 for the lamp).
@@ -211,8 +218,11 @@ impl KeyframeModel {
             fixed_a: vec![1.0; max_batch * self.groups],
             fixed_b: vec![1.0; max_batch * self.groups],
             pose: vec![0.0; max_batch * d],
+            scratch: vec![0.0; d],
             dofs: d,
             groups: self.groups,
+            key_groups: self.key_groups.clone(),
+            hit_keys: true,
         })
     }
 }
@@ -230,14 +240,37 @@ pub struct KeyframeRunner {
     fixed_a: Vec<f32>,
     fixed_b: Vec<f32>,
     pose: Vec<f32>,
+    scratch: Vec<f32>,
     dofs: usize,
     groups: usize,
+    key_groups: Vec<usize>,
+    hit_keys: bool,
 }
 
 impl KeyframeRunner {
     /// Most characters per call.
     pub fn max_batch(&self) -> usize {
         self.states.len()
+    }
+
+    /// Whether completions are corrected to hit every key exactly (the default) or are the
+    /// network's own output (`false`: its key misses measure the network).
+    pub fn set_hit_keys(&mut self, on: bool) {
+        self.hit_keys = on;
+    }
+
+    /// Sets each key frame of a completion to its key and spreads the network's miss over the
+    /// frames before it ([`zoo_motion::keyhit::hit_keys`]).
+    fn hit(&mut self, keys: &MotionKeys<'_>, out: &mut [f32]) {
+        let g = self.groups;
+        let layout = zoo_motion::keyhit::KeyLayout {
+            dofs: self.dofs,
+            frames: keys.frames,
+            key_groups: &self.key_groups,
+            quaternions: g > 0,
+        };
+        let fixes = |k: usize, group: usize| keys.fixed.is_empty() || keys.fixed[k * g + group] == 1.0;
+        zoo_motion::keyhit::hit_keys(layout, keys.poses, fixes, out, &mut self.scratch);
     }
 
     /// Completes one character's keys into `out` (`keys.len() * dofs` values, frame-major).
@@ -310,6 +343,11 @@ impl KeyframeRunner {
                     out[c][t * d..(t + 1) * d].copy_from_slice(p);
                 }
                 self.prev[c * d..(c + 1) * d].copy_from_slice(p);
+            }
+        }
+        if self.hit_keys {
+            for (k, o) in keys.iter().zip(out.iter_mut()) {
+                self.hit(k, o);
             }
         }
         Ok(())

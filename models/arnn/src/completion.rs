@@ -276,6 +276,61 @@ pub struct CompleteOptions {
     pub fps: Option<f64>,
     /// The global joint positions of every completed frame (a positions file).
     pub positions: Option<PathBuf>,
+    /// Humanoid keys without a keys file: a clip (BVH, glTF, FBX) and where its keys are.
+    pub poses: Option<PoseKeys>,
+}
+
+/// Humanoid keys read from a clip instead of a keys file (`zoo complete --poses CLIP`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PoseKeys {
+    /// The clip (any format `zoo` reads).
+    pub clip: PathBuf,
+    /// The keys' frames in the output; `None` with [`Self::every`].
+    pub frames: Option<Vec<usize>>,
+    /// Keys every this many frames (instead of [`Self::frames`]).
+    pub every: Option<usize>,
+    /// `false`: the clip holds only the key poses, one per frame, in order. `true`: the clip is
+    /// a whole motion and the keys are its poses at the key frames.
+    pub sample: bool,
+}
+
+impl PoseKeys {
+    /// The keys for a clip of `n` frames: output frame and clip frame of each.
+    pub fn keys(&self, n: usize) -> Result<Vec<crate::humanoid::HumanoidKey>, String> {
+        let frames: Vec<usize> = match (&self.frames, self.every) {
+            (Some(f), None) => f.clone(),
+            (None, Some(k)) if k > 0 && self.sample => (0..n).step_by(k).collect(),
+            (None, Some(k)) if k > 0 => (0..n).map(|i| i * k).collect(),
+            _ => return Err("give the key frames with either --key-frames LIST or --every K (K > 0)".into()),
+        };
+        if frames.len() < 2 {
+            return Err(format!("{} key(s): completion needs at least two", frames.len()));
+        }
+        if let Some(i) = frames.windows(2).position(|w| w[0] >= w[1]) {
+            return Err(format!("--key-frames must strictly increase: {} then {}", frames[i], frames[i + 1]));
+        }
+        if self.sample {
+            if let Some(&f) = frames.iter().find(|&&f| f >= n) {
+                return Err(format!("key frame {f} is past the clip's {n} frames (0 to {})", n.saturating_sub(1)));
+            }
+        } else if frames.len() != n {
+            return Err(format!(
+                "{} key frames for a clip of {n} poses: the clip holds one key pose per frame, give one key frame per \
+                 pose (or --sample to take the key frames out of a whole motion)",
+                frames.len()
+            ));
+        }
+        let first = frames[0];
+        Ok(frames
+            .iter()
+            .enumerate()
+            .map(|(i, &f)| crate::humanoid::HumanoidKey {
+                frame: f - first,
+                source: if self.sample { f } else { i },
+                fixed: None,
+            })
+            .collect())
+    }
 }
 
 fn read_keys(path: &Path, dof_names: &[String]) -> ArnnResult<Keys> {
@@ -347,6 +402,11 @@ fn lamp_misses(misses: &[Vec<f64>], dofs: usize) -> ((f64, usize, usize), (f64, 
     (worst(0..2), worst(2..dofs.max(2)))
 }
 
+/// The completed pose at each key frame minus the key.
+fn misses_at_keys(frames: &[Vec<f64>], key_frames: &[usize], key_poses: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    key_frames.iter().zip(key_poses).map(|(&f, p)| frames[f].iter().zip(p).map(|(y, x)| y - x).collect()).collect()
+}
+
 /// `zoo complete` with the lamp's ARNN.
 fn complete_lamp(o: &CompleteOptions, model: &Arnn, norm: &Normalization) -> ArnnResult<String> {
     let config = model.config();
@@ -358,18 +418,18 @@ fn complete_lamp(o: &CompleteOptions, model: &Arnn, norm: &Normalization) -> Arn
     } else {
         config.dof_names.clone()
     };
+    if o.poses.is_some() {
+        bail!("--poses is for humanoid models; the lamp's keys come from a keys file (--keys)");
+    }
     let keys = read_keys(&o.keys, &dof_names)?;
     let fps = o.fps.or(keys.fps).unwrap_or(DEFAULT_FPS);
-    let mut frames = crate::complete(model, norm, &keys.frames, &keys.poses)?;
+    let mut frames = crate::complete_raw(model, norm, &keys.frames, &keys.poses)?;
+    // The network's own misses, before the keys are hit.
+    let raw_misses = misses_at_keys(&frames, &keys.frames, &keys.poses);
+    crate::hit_keys(config, &keys.frames, &keys.poses, &[], &mut frames);
     let lamp_dofs = config.dofs == crate::luxo::DOFS && dof_names == crate::luxo::DOF_NAMES;
     let lift = if o.no_ground || !lamp_dofs { 0.0 } else { crate::eval::project_to_ground(&lamp, &mut frames) };
-    // Misses: the completed pose at each key frame against the key.
-    let misses: Vec<Vec<f64>> = keys
-        .frames
-        .iter()
-        .zip(&keys.poses)
-        .map(|(&f, p)| frames[f].iter().zip(p).map(|(y, x)| y - x).collect())
-        .collect();
+    let misses = misses_at_keys(&frames, &keys.frames, &keys.poses);
     let poses: Vec<LampPose> = frames
         .iter()
         .map(|f| <LampPose>::try_from(f.as_slice()))
@@ -380,6 +440,7 @@ fn complete_lamp(o: &CompleteOptions, model: &Arnn, norm: &Normalization) -> Arn
         "dof_names": dof_names,
                 "key_frames": keys.frames,
                 "key_misses": misses,
+                "network_key_misses": raw_misses,
                 "ground_lift": lift,
                 "frames": frames,
     });
@@ -388,7 +449,8 @@ fn complete_lamp(o: &CompleteOptions, model: &Arnn, norm: &Normalization) -> Arn
         let keyed: Vec<(usize, Vec<f64>)> = keys.frames.iter().copied().zip(keys.poses.iter().cloned()).collect();
         plot_dofs(p, &[DofSeries { frames: &frames, rgb: (31, 80, 180), width: 2.0 }], &keyed)?;
     }
-    let ((pos, pk, pj), (ang, ak, aj)) = lamp_misses(&misses, config.dofs);
+    let ((pos, pk, pj), (ang, ak, aj)) = lamp_misses(&raw_misses, config.dofs);
+    let ((hit_pos, _, _), (hit_ang, _, _)) = lamp_misses(&misses, config.dofs);
     let mut s = String::new();
     if lift > 0.0 {
         s += &format!(
@@ -397,8 +459,8 @@ fn complete_lamp(o: &CompleteOptions, model: &Arnn, norm: &Normalization) -> Arn
         );
     }
     Ok(s + &format!(
-        "completed {} frames from {} keys ({} fps) into {}{}; largest key miss: {:.2} cm ({} at key {pk}), {:.2} deg \
-         ({} at key {ak})",
+        "completed {} frames from {} keys ({} fps) into {}{}; the network's largest key miss: {:.2} cm ({} at key \
+         {pk}), {:.2} deg ({} at key {ak}); corrected towards the keys, largest miss {:.1e} cm, {:.1e} deg",
         frames.len(),
         keys.frames.len(),
         fps,
@@ -408,6 +470,8 @@ fn complete_lamp(o: &CompleteOptions, model: &Arnn, norm: &Normalization) -> Arn
         dof_names[pj],
         ang.to_degrees(),
         dof_names.get(aj).map_or("-", |s| s.as_str()),
+        hit_pos * 100.0,
+        hit_ang.to_degrees(),
     ))
 }
 
@@ -424,37 +488,56 @@ fn complete_humanoid(
             o.out.display()
         );
     }
-    let text =
-        std::fs::read_to_string(&o.keys).with_context(|| format!("--keys {}: cannot read it", o.keys.display()))?;
-    let keys =
-        parse_humanoid_keys(&text, joint_names).map_err(|e| Message(format!("--keys {}: {e}", o.keys.display())))?;
-    let bvh = o.keys.parent().unwrap_or(Path::new(".")).join(&keys.bvh);
-    let source = zoo_data::clip_io::read_model_clip(&bvh)
-        .with_context(|| format!("--keys {}: reading its bvh {}", o.keys.display(), bvh.display()))?;
-    let mut done = crate::humanoid::complete_clip(model, norm, &source, &keys.keys)
-        .with_context(|| format!("--keys {}", o.keys.display()))?;
+    let (keys, source, what) = match &o.poses {
+        Some(p) => {
+            let source = zoo_data::clip_io::read_model_clip(&p.clip)
+                .with_context(|| format!("--poses {}: reading it", p.clip.display()))?;
+            let keys = p.keys(source.frames()).map_err(|e| Message(format!("--poses {}: {e}", p.clip.display())))?;
+            let offset = if p.sample { keys[0].source } else { 0 };
+            (
+                HumanoidKeys { bvh: p.clip.clone(), offset, keys, fps: None },
+                source,
+                format!("--poses {}", p.clip.display()),
+            )
+        }
+        None => {
+            let text = std::fs::read_to_string(&o.keys)
+                .with_context(|| format!("--keys {}: cannot read it", o.keys.display()))?;
+            let keys = parse_humanoid_keys(&text, joint_names)
+                .map_err(|e| Message(format!("--keys {}: {e}", o.keys.display())))?;
+            let bvh = o.keys.parent().unwrap_or(Path::new(".")).join(&keys.bvh);
+            let source = zoo_data::clip_io::read_model_clip(&bvh)
+                .with_context(|| format!("--keys {}: reading its bvh {}", o.keys.display(), bvh.display()))?;
+            (keys, source, format!("--keys {}", o.keys.display()))
+        }
+    };
+    let mut done = crate::humanoid::complete_clip(model, norm, &source, &keys.keys).context(what)?;
     if let Some(fps) = o.fps.or(keys.fps) {
         done.clip.frame_time = 1.0 / fps;
     }
-    let (deg, key, joint) = done.angle_miss;
+    let (raw_root, (deg, key, joint)) = done.raw_miss;
     let fields = serde_json::json!({
         "key_frames": keys.keys.iter().map(|k| k.frame).collect::<Vec<_>>(),
                 "root_miss": done.root_miss,
-                "angle_miss_degrees": deg,
+                "angle_miss_degrees": done.angle_miss.0,
+                "network_root_miss": raw_root,
+                "network_angle_miss_degrees": deg,
                 "frames": done.clip.frames(),
     });
     write_outputs(o, &done.clip, keys.offset, 1.0 / done.clip.frame_time, fields)?;
     Ok(format!(
-        "completed {} frames from {} keys ({} partial) into {}{}; largest key miss: root {:.2} (clip units), {:.2} deg \
-         ({} at key {key})",
+        "completed {} frames from {} keys ({} partial) into {}{}; the network's largest key miss: root {:.2} (clip \
+         units), {:.2} deg ({} at key {key}); corrected towards the keys, largest miss {:.1e}, {:.1e} deg",
         done.clip.frames(),
         keys.keys.len(),
         keys.keys.iter().filter(|k| k.fixed.as_ref().is_some_and(|f| f.contains(&false))).count(),
         o.out.display(),
         o.json.as_ref().map(|j| format!(" and {}", j.display())).unwrap_or_default(),
-        done.root_miss,
+        raw_root,
         deg,
         joint_names.get(joint).map_or("-", |s| s.as_str()),
+        done.root_miss,
+        done.angle_miss.0,
     ))
 }
 
@@ -573,6 +656,28 @@ mod tests {
         // The lamp refuses humanoid fields.
         let e = parse_keys(r#"{"bvh": "a.bvh", "keys": [{"frame": 0}, {"frame": 5}]}"#, &names()).unwrap_err();
         assert!(e.contains("are for humanoid models"), "{e}");
+    }
+
+    #[test]
+    fn pose_clips_give_keys_by_frame_list_spacing_or_sampling() {
+        let p = |frames: Option<Vec<usize>>, every: Option<usize>, sample: bool| PoseKeys {
+            clip: "k.bvh".into(),
+            frames,
+            every,
+            sample,
+        };
+        let pairs = |k: Vec<crate::humanoid::HumanoidKey>| k.iter().map(|k| (k.frame, k.source)).collect::<Vec<_>>();
+        assert_eq!(pairs(p(Some(vec![5, 17, 35]), None, false).keys(3).unwrap()), [(0, 0), (12, 1), (30, 2)]);
+        assert_eq!(pairs(p(None, Some(15), false).keys(3).unwrap()), [(0, 0), (15, 1), (30, 2)]);
+        assert_eq!(pairs(p(None, Some(20), true).keys(50).unwrap()), [(0, 0), (20, 20), (40, 40)]);
+        assert_eq!(pairs(p(Some(vec![10, 40]), None, true).keys(50).unwrap()), [(0, 10), (30, 40)]);
+        let e = p(Some(vec![0, 12]), None, false).keys(3).unwrap_err();
+        assert!(e.contains("2 key frames for a clip of 3 poses"), "{e}");
+        let e = p(Some(vec![0, 12, 12]), None, false).keys(3).unwrap_err();
+        assert!(e.contains("must strictly increase: 12 then 12"), "{e}");
+        let e = p(Some(vec![0, 60]), None, true).keys(50).unwrap_err();
+        assert!(e.contains("key frame 60 is past the clip's 50 frames"), "{e}");
+        assert!(p(None, None, false).keys(3).unwrap_err().contains("--key-frames LIST or --every K"));
     }
 
     #[test]

@@ -9,7 +9,7 @@
 
 use crate::luxo::LampParams;
 use crate::luxo::preprocess::KeyedSequence;
-use crate::train::{Normalization, complete};
+use crate::train::{Normalization, complete_raw};
 use crate::{Arnn, ArnnError, ArnnResult};
 use serde::{Deserialize, Serialize};
 
@@ -217,7 +217,8 @@ pub fn evaluate(model: &Arnn, norm: &Normalization, seqs: &[KeyedSequence]) -> A
     let mut g = Accumulator::new(d);
     for seq in seqs {
         let poses: Vec<Vec<f64>> = seq.keys.iter().map(|&k| seq.frames[k].to_vec()).collect();
-        let mut out = complete(model, norm, &seq.keys, &poses)?;
+        // The network's own output: its key misses are its quality figure (`zoo complete` hits them).
+        let mut out = complete_raw(model, norm, &seq.keys, &poses)?;
         a.add(&out, seq, norm, lamp);
         if let Some(lamp) = lamp {
             project_to_ground(lamp, &mut out);

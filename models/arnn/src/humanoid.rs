@@ -301,11 +301,43 @@ pub struct HumanoidKey {
 pub struct HumanoidCompletion {
     /// The motion on the source clip's skeleton, frames `0..=last key`.
     pub clip: zoo_motion::Clip,
-    /// Largest distance between a completed root and a key fixing it (clip units).
+    /// Largest distance between a completed root and a key fixing it (clip units): 0 up to
+    /// float precision, the keys being hit ([`crate::train::hit_keys`]).
     pub root_miss: f64,
     /// Largest angle between a completed joint rotation and a key fixing it (degrees), with the
     /// key's index and the joint's.
     pub angle_miss: (f64, usize, usize),
+    /// [`Self::root_miss`] and [`Self::angle_miss`] of the network's own output, before the
+    /// keys are hit: the network's quality figure.
+    pub raw_miss: (f64, (f64, usize, usize)),
+}
+
+/// The largest key misses of completed poses (`frames` from frame 0): the root distance (clip
+/// units) over the keys fixing the root, and the rotation angle (degrees, with the key's and
+/// the joint's index) over the keys fixing each joint. `fixed` empty: whole keys.
+pub fn key_misses(
+    out: &[Vec<f64>],
+    key_frames: &[usize],
+    key_poses: &[Vec<f64>],
+    fixed: &[Vec<bool>],
+    joints: usize,
+) -> (f64, (f64, usize, usize)) {
+    let (mut root_miss, mut angle_miss) = (0.0f64, (0.0f64, 0, 0));
+    for (i, (&f, key)) in key_frames.iter().zip(key_poses).enumerate() {
+        let fixes = |g: usize| fixed.get(i).is_none_or(|m| m[g]);
+        let (root, rot) = decode(&out[f], joints);
+        let (key_root, key_rot) = decode(key, joints);
+        if fixes(0) {
+            root_miss = root_miss.max((root - key_root).length());
+        }
+        for j in (0..joints).filter(|&j| fixes(1 + j)) {
+            let deg = (2.0 * rot[j].dot(key_rot[j]).abs().min(1.0).acos()).to_degrees();
+            if deg > angle_miss.0 {
+                angle_miss = (deg, i, j);
+            }
+        }
+    }
+    (root_miss, angle_miss)
 }
 
 /// Completes keys taken from the poses of `source` (a clip on the model's skeleton, read as the
@@ -368,7 +400,10 @@ pub fn complete_clip(
     } else {
         keys.iter().map(|k| k.fixed.clone().unwrap_or_else(|| vec![true; groups])).collect()
     };
-    let out = crate::train::complete_partial(model, norm, &frames, &key_poses, &fixed)?;
+    let mut out = crate::train::complete_partial_raw(model, norm, &frames, &key_poses, &fixed)?;
+    let raw_miss = key_misses(&out, &frames, &key_poses, &fixed, j);
+    crate::train::hit_keys(model.config(), &frames, &key_poses, &fixed, &mut out);
+    let (root_miss, angle_miss) = key_misses(&out, &frames, &key_poses, &fixed, j);
     // Back to the clip's frame; rotation signs continuous from the first key's.
     let from_canon = to_canon.inverse();
     let mut clip = zoo_motion::Clip {
@@ -386,25 +421,7 @@ pub fn complete_clip(
         clip.local_positions.push(from_canon * root + centre);
         clip.local_positions.extend_from_slice(&source.skeleton.offsets[1..]);
     }
-    let (mut root_miss, mut angle_miss) = (0.0f64, (0.0f64, 0, 0));
-    for (i, k) in keys.iter().enumerate() {
-        let fixes = |g: usize| k.fixed.as_ref().is_none_or(|f| f[g]);
-        if fixes(0) {
-            root_miss =
-                root_miss.max((clip.local_positions[k.frame * j] - source.local_positions[k.source * j]).length());
-        }
-        for jj in 0..j {
-            if fixes(1 + jj) {
-                let a = clip.local_rotations[k.frame * j + jj];
-                let b = source.local_rotations[k.source * j + jj];
-                let deg = (2.0 * a.dot(b).abs().min(1.0).acos()).to_degrees();
-                if deg > angle_miss.0 {
-                    angle_miss = (deg, i, jj);
-                }
-            }
-        }
-    }
-    Ok(HumanoidCompletion { clip, root_miss, angle_miss })
+    Ok(HumanoidCompletion { clip, root_miss, angle_miss, raw_miss })
 }
 
 #[cfg(test)]

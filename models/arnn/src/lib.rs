@@ -22,7 +22,7 @@ pub mod train_run;
 pub use config::{Architecture, ArnnConfig, Curriculum, HumanoidSkeleton, KeySampling, NoMemoryOutput};
 pub use eval::{CompletionError, CompletionReport};
 pub use model::{Arnn, ArnnState};
-pub use train::{ArnnTrainer, Normalization, complete, complete_partial};
+pub use train::{ArnnTrainer, Normalization, complete, complete_partial, complete_partial_raw, complete_raw, hit_keys};
 
 /// What went wrong while building, training or saving an ARNN.
 #[derive(Debug, thiserror::Error)]

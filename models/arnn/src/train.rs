@@ -531,10 +531,63 @@ pub fn complete(
     complete_partial(model, norm, key_frames, key_poses, &[])
 }
 
+/// [`complete`] without hitting the keys: the network's own output ([`complete_partial_raw`]).
+pub fn complete_raw(
+    model: &Arnn,
+    norm: &Normalization,
+    key_frames: &[usize],
+    key_poses: &[Vec<f64>],
+) -> ArnnResult<Vec<Vec<f64>>> {
+    complete_partial_raw(model, norm, key_frames, key_poses, &[])
+}
+
 /// [`complete`] with partial keys: `fixed[k][g]` says whether key `k` fixes group `g` of the
 /// model's key groups (`fixed` empty: whole keys; a model without key groups refuses partial
 /// keys). The free values of a partial key's pose are ignored (any finite value).
+///
+/// The network's output is corrected so that every key frame equals its key
+/// ([`hit_keys`]); [`complete_partial_raw`] is the network's own output.
 pub fn complete_partial(
+    model: &Arnn,
+    norm: &Normalization,
+    key_frames: &[usize],
+    key_poses: &[Vec<f64>],
+    fixed: &[Vec<bool>],
+) -> ArnnResult<Vec<Vec<f64>>> {
+    let mut out = complete_partial_raw(model, norm, key_frames, key_poses, fixed)?;
+    hit_keys(model.config(), key_frames, key_poses, fixed, &mut out);
+    Ok(out)
+}
+
+/// Corrects a completion (`key_frames.last() + 1` poses) so that each key frame equals its key
+/// in the groups the key fixes, the miss spread over the frames before it
+/// ([`zoo_motion::keyhit`]; a humanoid's rotations are compared up to sign).
+pub fn hit_keys(
+    config: &ArnnConfig,
+    key_frames: &[usize],
+    key_poses: &[Vec<f64>],
+    fixed: &[Vec<bool>],
+    out: &mut [Vec<f64>],
+) {
+    let d = config.dofs;
+    let keys = zoo_motion::keyhit::KeyLayout {
+        dofs: d,
+        frames: key_frames,
+        key_groups: &config.key_groups,
+        quaternions: config.skeleton.is_some(),
+    };
+    let poses: Vec<f64> = key_poses.iter().flatten().copied().collect();
+    let mut flat: Vec<f64> = out.iter().flatten().copied().collect();
+    let fixes = |k: usize, g: usize| fixed.get(k).is_none_or(|m| m.get(g).copied().unwrap_or(true));
+    zoo_motion::keyhit::hit_keys(keys, &poses, fixes, &mut flat, &mut vec![0.0; d]);
+    for (o, f) in out.iter_mut().zip(flat.chunks_exact(d)) {
+        o.copy_from_slice(f);
+    }
+}
+
+/// The network's own completion of the keys ([`complete_partial`] before the keys are hit):
+/// the key misses of this output are the network's quality figure.
+pub fn complete_partial_raw(
     model: &Arnn,
     norm: &Normalization,
     key_frames: &[usize],

@@ -72,6 +72,26 @@ pub struct BenchArgs {
     /// quicker, stated subsample; the statistics still come from the whole training split.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=1000))]
     pub test_every: u64,
+    /// What a method is given: `context` (the LaFAN1 protocol: 10 context frames and a target),
+    /// `keys` (key poses every K frames and nothing else; methods `linear`, `bezier`,
+    /// `arnn:RUN_DIR`) or `keys-partial` (the keys between the first and the last fix the root
+    /// and the limbs' end joints only).
+    #[arg(long, value_enum, default_value_t = Layout::Context)]
+    pub layout: Layout,
+    /// With `--layout keys` / `keys-partial`: the key spacings K in frames (the table's columns).
+    #[arg(long, default_value = "5,10,15,20,30", value_delimiter = ',', allow_hyphen_values = true, value_parser = crate::args::frame_count)]
+    pub every: Vec<usize>,
+}
+
+/// What the in-betweening benchmark gives its methods.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Layout {
+    /// 10 context frames and a target (LaFAN1).
+    Context,
+    /// Whole key poses every K frames.
+    Keys,
+    /// Key poses every K frames, the ones between the first and the last partial.
+    KeysPartial,
 }
 
 /// Benchmarks other than the in-betweening table.
@@ -129,31 +149,19 @@ fn inbetween(a: BenchArgs) -> anyhow::Result<()> {
     if let Some(dir) = &a.save_bvh {
         crate::cmd::check_output_dir("--save-bvh", dir)?;
     }
+    if a.layout != Layout::Context {
+        return keys(a, &data);
+    }
     let start = Instant::now();
     let (methods, trained_on) = zoo_bench::inbetween::load_methods(&a.methods)?;
     let bar = crate::progress::Bar::new();
-    let split = crate::cmd::Split {
-        valid_glob: a.valid_glob.as_deref(),
-        test_data: a.test_data.as_deref(),
-        exclude_glob: a.exclude_glob.as_deref(),
-    };
-    let (train, test) = crate::cmd::load_split(&data, &split, a.skip_invalid, &bar)?;
-    let test: Vec<_> = test.into_iter().step_by(a.test_every as usize).collect();
+    let (train, test) = load(&a, &data, &bar)?;
     zoo_bench::inbetween::check_skeletons(&a.methods, &trained_on, &train)?;
     let o = InbetweenOptions { lengths: a.lengths.clone(), save_bvh: a.save_bvh.clone(), save_count: a.save_count };
     let result = zoo_bench::inbetween::run(&train, &test, &methods, &o, &bar)?;
     bar.finish();
     println!("{}", result.table(&a.lengths));
-    if let Some(path) = &a.json {
-        crate::cmd::write_json(path, &result)?;
-    }
-    println!(
-        "{} training clips, {} test clips, {} test windows, {:.2} s",
-        train.len(),
-        test.len(),
-        result.windows,
-        start.elapsed().as_secs_f64()
-    );
+    summary(&a, &result, (train.len(), test.len()), start)?;
     if let Some(r) = &a.reference {
         let check = zoo_bench::inbetween::check_reference(&result, r, a.tolerance)?;
         for line in &check.lines {
@@ -161,5 +169,64 @@ fn inbetween(a: BenchArgs) -> anyhow::Result<()> {
         }
         println!("{}", check.verdict(a.tolerance)?);
     }
+    Ok(())
+}
+
+/// Runs the keys-only benchmark (`--layout keys` / `keys-partial`).
+fn keys(a: BenchArgs, data: &std::path::Path) -> anyhow::Result<()> {
+    use zoo_bench::keys::{KeyLayout, KeysBench};
+    if a.reference.is_some() || a.save_bvh.is_some() {
+        bail!("--reference and --save-bvh are for `--layout context`");
+    }
+    let layout = if a.layout == Layout::Keys { KeyLayout::Whole } else { KeyLayout::Partial };
+    // The context layout's default methods are not key methods: the baselines instead.
+    let specs: Vec<String> = if a.methods == ["zerovel", "interp"] {
+        vec!["linear".into(), "bezier".into()]
+    } else {
+        a.methods.iter().map(|m| m.trim().to_string()).collect()
+    };
+    let methods = specs.iter().map(|m| zoo_bench::keys::method(m)).collect::<Result<Vec<_>, _>>()?;
+    let start = Instant::now();
+    let bar = crate::progress::Bar::new();
+    let (train, test) = load(&a, data, &bar)?;
+    bar.stage("preparing windows and statistics");
+    let bench = KeysBench::new(&train, &test)?;
+    let result = bench.run(&methods, &a.every, layout, &bar)?;
+    bar.finish();
+    println!("{}", zoo_bench::keys::table(&result, &a.every, layout));
+    summary(&a, &result, (train.len(), test.len()), start)
+}
+
+/// The training and test clips of `--data` (`--valid-glob`, `--test-data`, `--exclude-glob`),
+/// every `--test-every`-th test clip kept.
+fn load(
+    a: &BenchArgs,
+    data: &std::path::Path,
+    bar: &crate::progress::Bar,
+) -> anyhow::Result<(Vec<zoo_data::dataset::NamedClip>, Vec<zoo_data::dataset::NamedClip>)> {
+    let split = crate::cmd::Split {
+        valid_glob: a.valid_glob.as_deref(),
+        test_data: a.test_data.as_deref(),
+        exclude_glob: a.exclude_glob.as_deref(),
+    };
+    let (train, test) = crate::cmd::load_split(data, &split, a.skip_invalid, bar)?;
+    Ok((train, test.into_iter().step_by(a.test_every as usize).collect()))
+}
+
+/// Writes `--json` and prints the closing line.
+fn summary(
+    a: &BenchArgs,
+    result: &zoo_data::benchmark::BenchResult,
+    (train, test): (usize, usize),
+    start: Instant,
+) -> anyhow::Result<()> {
+    if let Some(path) = &a.json {
+        crate::cmd::write_json(path, result)?;
+    }
+    println!(
+        "{train} training clips, {test} test clips, {} test windows, {:.2} s",
+        result.windows,
+        start.elapsed().as_secs_f64()
+    );
     Ok(())
 }

@@ -12,8 +12,22 @@ pub struct CompleteArgs {
     #[arg(long)]
     pub model: PathBuf,
     /// Keys file: frames and poses (format in docs/arnn.md, example in docs/arnn-keys-example.json).
-    #[arg(long)]
-    pub keys: PathBuf,
+    #[arg(long, required_unless_present = "poses", conflicts_with = "poses")]
+    pub keys: Option<PathBuf>,
+    /// Humanoid models: a clip (BVH, glTF, FBX) holding only the key poses, one per frame, in
+    /// order (exported from Blender, say); their frames come from `--key-frames` or `--every`.
+    #[arg(long, value_name = "CLIP")]
+    pub poses: Option<PathBuf>,
+    /// With `--poses`: the output frame of each key pose (comma-separated, increasing).
+    #[arg(long, value_delimiter = ',', requires = "poses", conflicts_with = "every")]
+    pub key_frames: Option<Vec<usize>>,
+    /// With `--poses`: a key every K frames.
+    #[arg(long, requires = "poses", value_parser = clap::value_parser!(u64).range(1..=100_000))]
+    pub every: Option<u64>,
+    /// With `--poses`: the clip is a whole motion; the keys are its poses at `--key-frames` (or
+    /// every `--every` frames), the frames between completed anew.
+    #[arg(long, requires = "poses")]
+    pub sample: bool,
     /// Output BVH of the lamp (Blender opens it).
     #[arg(long)]
     pub out: PathBuf,
@@ -53,9 +67,19 @@ pub fn run(a: CompleteArgs) -> anyhow::Result<()> {
             crate::cmd::check_output_file(option, p)?;
         }
     }
+    if a.poses.is_some() && a.key_frames.is_none() && a.every.is_none() {
+        bail!("--poses needs the key frames: --key-frames 0,15,40 (one per pose) or --every K");
+    }
+    let poses = a.poses.map(|clip| zoo_arnn::completion::PoseKeys {
+        clip,
+        frames: a.key_frames,
+        every: a.every.map(|k| k as usize),
+        sample: a.sample,
+    });
     let o = zoo_arnn::completion::CompleteOptions {
         model: a.model,
-        keys: a.keys,
+        keys: a.keys.unwrap_or_default(),
+        poses,
         out: a.out,
         json: a.json,
         plot: a.plot,
