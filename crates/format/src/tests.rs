@@ -30,6 +30,7 @@ fn sample() -> MotionModelMetadata {
         fps: 30.0,
         frame: CoordinateFrame::ZOO_CM,
         state: vec![MotionStatePair { input: "h".into(), output: "h_next".into() }],
+        weights: crate::WeightWidth::F32,
     }
 }
 
