@@ -14,9 +14,10 @@
 //!   half the bytes on disk).
 //! - `int8`: weight `N` becomes the signed-byte initializer `N.int8` (same layout) and the f32
 //!   scales `N.scale`, one per output channel (symmetric: `w = q * scale`, `q` in -127..=127).
-//!   A `Gemm`/`MatMul` that uses it runs as `DynamicQuantizeLinear` on its input (u8, one
-//!   scale and zero point per call over the whole input tensor), `MatMulInteger`, a `Cast` to
-//!   f32 and a `Mul` by the input scale times the channel scales (then the `Gemm`'s bias).
+//!   A `Gemm`/`MatMul` that uses it runs as a symmetric int8 quantization of its input (one
+//!   scale per call over the whole input tensor, `max|x| / 127`, in elementwise ops),
+//!   `MatMulInteger`, a `Cast` to f32 and a `Mul` by the input scale times the channel scales
+//!   (then the `Gemm`'s bias).
 //!   The recurrent ops' `W`/`R` are widened by `DequantizeLinear` (per channel, axis 1) and
 //!   run in f32. Dynamic quantization is per tensor: at batch > 1 one character's activations
 //!   set the input scale of every character of the call.
@@ -180,27 +181,79 @@ fn node(
     }
 }
 
-/// The nodes that compute `Gemm`/`MatMul` `consumer` with its weight `q` (int8, `[in, out]`
-/// after `weight_t` when that is given) and channel scales `scale`.
-fn integer_matmul(consumer: &pb::NodeProto, q: &str, scale: &str) -> Vec<pb::NodeProto> {
+/// The nodes that compute `Gemm`/`MatMul` `consumer` with its int8 weight `q` (`[in, out]`)
+/// and channel scales `scale`. The input is quantized per call, symmetrically:
+/// `s = max|x| / 127` (at least [`MIN_INPUT_SCALE`]), `x / s` in -127..=127 rounded half up
+/// and stored as u8 with zero point 128: `Cast(x / s + 128.5)` (`Cast` to an integer
+/// truncates, and the value lies in 1.5..=255.5, so no `Round` and no `Clip` are needed), in
+/// elementwise ops rather than `DynamicQuantizeLinear`: tract 0.23.9 runs that op element by
+/// element in scalar code, slower than the whole integer product it feeds at batch 64
+/// (docs/runtime.md). The input scale is a true scalar (`keepdims = 0`): onnxruntime 1.31's
+/// `MatMulIntegerToFloat` fusion computes wrong products (0.15 off here) with a `[1, 1]` one.
+fn integer_matmul(consumer: &pb::NodeProto, q: &str, scale: &str, shared: &SharedConstants) -> Vec<pb::NodeProto> {
     let p = &consumer.name;
     let out = &consumer.output[0];
-    let (xq, xs, xz) = (format!("{p}.input_q"), format!("{p}.input_scale"), format!("{p}.input_zero_point"));
-    let (acc, accf, s) = (format!("{p}.accumulated"), format!("{p}.accumulated_f32"), format!("{p}.int8_scales"));
-    let scaled =
-        if consumer.op_type == "Gemm" && consumer.input.len() > 2 { format!("{p}.scaled") } else { out.clone() };
+    let v = |suffix: &str| format!("{p}.{suffix}");
+    let scaled = if consumer.op_type == "Gemm" && consumer.input.len() > 2 { v("scaled") } else { out.clone() };
+    let x = consumer.input[0].as_str();
+    let reduce = vec![attr_int("keepdims", 0)];
+    let to = |dt: DataType| vec![attr_int("to", dt as i64)];
     let mut nodes = vec![
-        node("DynamicQuantizeLinear", format!("{p}.quantize_input"), &[&consumer.input[0]], &[&xq, &xs, &xz], vec![]),
-        node("MatMulInteger", format!("{p}.matmul_integer"), &[&xq, q, &xz], &[&acc], vec![]),
-        node("Cast", format!("{p}.to_f32"), &[&acc], &[&accf], vec![attr_int("to", DataType::Float as i64)]),
-        node("Mul", format!("{p}.scales"), &[&xs, scale], &[&s], vec![]),
-        node("Mul", format!("{p}.rescale"), &[&accf, &s], &[&scaled], vec![]),
+        node("Abs", v("input_abs"), &[x], &[&v("input_abs")], vec![]),
+        node("ReduceMax", v("input_max"), &[&v("input_abs")], &[&v("input_max")], reduce),
+        node("Div", v("input_range"), &[&v("input_max"), &shared.q_max], &[&v("input_range")], vec![]),
+        node("Max", v("input_scale"), &[&v("input_range"), &shared.min_scale], &[&v("input_scale")], vec![]),
+        node("Div", v("input_scaled"), &[x, &v("input_scale")], &[&v("input_scaled")], vec![]),
+        node("Add", v("input_offset"), &[&v("input_scaled"), &shared.offset], &[&v("input_offset")], vec![]),
+        node("Cast", v("input_q"), &[&v("input_offset")], &[&v("input_q")], to(DataType::Uint8)),
+        node(
+            "MatMulInteger",
+            v("matmul_integer"),
+            &[&v("input_q"), q, &shared.zero_point],
+            &[&v("accumulated")],
+            vec![],
+        ),
+        node("Cast", v("to_f32"), &[&v("accumulated")], &[&v("accumulated_f32")], to(DataType::Float)),
+        node("Mul", v("int8_scales"), &[&v("input_scale"), scale], &[&v("int8_scales")], vec![]),
+        node("Mul", v("rescale"), &[&v("accumulated_f32"), &v("int8_scales")], &[&scaled], vec![]),
     ];
     if scaled != *out {
         // `use_of` takes only Gemms with alpha and beta 1: the bias is added as it is.
-        nodes.push(node("Add", format!("{p}.bias"), &[&scaled, &consumer.input[2]], &[out], vec![]));
+        nodes.push(node("Add", v("bias"), &[&scaled, &consumer.input[2]], &[out], vec![]));
     }
     nodes
+}
+
+/// The smallest input scale of [`integer_matmul`]: an all-zero input quantizes to zeros instead
+/// of dividing by zero.
+pub const MIN_INPUT_SCALE: f32 = 1e-30;
+
+/// The scalar constants the integer products of one graph share.
+struct SharedConstants {
+    /// 127: `max|x|` maps to it.
+    q_max: String,
+    /// 128.5: the zero point plus the half that turns `Cast`'s truncation into rounding.
+    offset: String,
+    /// 128, the activations' zero point (`MatMulInteger`'s `a_zero_point`, u8).
+    zero_point: String,
+    min_scale: String,
+}
+
+impl SharedConstants {
+    fn add(graph: &mut pb::GraphProto) -> Self {
+        let c = SharedConstants {
+            q_max: "int8.q_max".into(),
+            offset: "int8.offset".into(),
+            zero_point: "int8.zero_point".into(),
+            min_scale: "int8.min_scale".into(),
+        };
+        let floats = [(&c.q_max, 127.0f32), (&c.offset, 128.5), (&c.min_scale, MIN_INPUT_SCALE)];
+        for (name, v) in floats {
+            graph.initializer.push(tensor(name.clone(), &[], DataType::Float, v.to_le_bytes().to_vec()));
+        }
+        graph.initializer.push(tensor(c.zero_point.clone(), &[], DataType::Uint8, vec![128]));
+        c
+    }
 }
 
 /// `graph` with its weights stored at `width`.
@@ -210,6 +263,8 @@ fn rewrite_graph(graph: &pb::GraphProto, width: WeightWidth) -> Result<pb::Graph
     let mut front = Vec::new();
     let mut replaced: HashMap<usize, Vec<pb::NodeProto>> = HashMap::new();
     out.initializer.clear();
+    let linear = weights.values().any(|(u, _)| *u != Use::Recurrent);
+    let shared = (width == WeightWidth::Int8 && linear).then(|| SharedConstants::add(&mut out));
     for init in &graph.initializer {
         let Some(&(u, consumer)) = weights.get(&init.name) else {
             out.initializer.push(init.clone());
@@ -239,19 +294,20 @@ fn rewrite_graph(graph: &pb::GraphProto, width: WeightWidth) -> Result<pb::Graph
                 let scale_raw = scales.iter().flat_map(|v| v.to_le_bytes()).collect();
                 out.initializer.push(tensor(sn.clone(), &[scales.len() as i64], DataType::Float, scale_raw));
                 let c = &graph.node[consumer];
+                let shared = shared.as_ref().ok_or_else(|| ExportError::model("no shared int8 constants"))?;
                 match u {
                     Use::Recurrent => {
                         let a = vec![attr_int("axis", axis as i64)];
                         front.push(node("DequantizeLinear", format!("{name}.dequantize"), &[&qn, &sn], &[name], a));
                     }
                     Use::Linear => {
-                        replaced.insert(consumer, integer_matmul(c, &qn, &sn));
+                        replaced.insert(consumer, integer_matmul(c, &qn, &sn, shared));
                     }
                     Use::LinearTransposed => {
                         let t = format!("{name}.int8_t");
                         let mut nodes =
                             vec![node("Transpose", t.clone(), &[&qn], &[&t], vec![attr_ints("perm", &[1, 0])])];
-                        nodes.extend(integer_matmul(c, &t, &sn));
+                        nodes.extend(integer_matmul(c, &t, &sn, shared));
                         replaced.insert(consumer, nodes);
                     }
                     Use::ThroughTranspose => {
@@ -263,7 +319,7 @@ fn rewrite_graph(graph: &pb::GraphProto, width: WeightWidth) -> Result<pb::Graph
                         let mut transpose = c.clone();
                         transpose.input[0] = qn.clone();
                         replaced.insert(consumer, vec![transpose]);
-                        replaced.insert(matmul, integer_matmul(&graph.node[matmul], t, &sn));
+                        replaced.insert(matmul, integer_matmul(&graph.node[matmul], t, &sn, shared));
                     }
                 }
             }

@@ -110,9 +110,9 @@ pub mod keys {
 /// Every graph input and output is f32 at every width; only the weight matrices change:
 /// `f16` stores them as IEEE half floats widened by a `Cast` when the model loads, `int8` as
 /// signed bytes with one f32 scale per output channel (symmetric, zero point 0), the matrix
-/// products of fully-connected layers run as `DynamicQuantizeLinear` + `MatMulInteger`
-/// (activations quantized per call to u8) and recurrent ops' weights widened by
-/// `DequantizeLinear` (zoo_export's `with_weights` writes both).
+/// products of fully-connected layers run as `MatMulInteger` on activations quantized per call
+/// to int8, and recurrent ops' weights widened by `DequantizeLinear` (zoo_export's
+/// `with_weights` writes both).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum WeightWidth {
