@@ -460,13 +460,17 @@ fn rtn_transition_parity() {
 /// Parity tolerances per weight width (`zoo export --weights`; normalized units, every pair of
 /// candle f32, tract and onnxruntime at that width, batched and one by one, over the 30-frame
 /// transitions of [`rtn_transition_parity`]). f32: the exact graph (1e-4 above). f16 and
-/// int8: twice the largest difference measured on this fixture (2026-11-27: f16 1.9e-3, int8
-/// 2.7e-2), so that a change of the quantization or of the graphs it writes fails here; what
-/// the widths cost in quality on a trained model is measured by `zoo bench` (docs/runtime.md).
+/// int8: twice the largest difference measured on this fixture, rounded up (2026-11-27,
+/// commit c6c0716: f16 1.96e-3 candle against both runtimes; int8 1.11e-1 candle against
+/// onnxruntime, 1.05e-1 against tract, 3.5e-2 tract batched against one by one, 2.4e-2 tract
+/// against onnxruntime), so that a change of the quantization or of the graphs it writes fails
+/// here. The fixture's tiny LCG weights quantize coarsely and the 30 steps feed their errors
+/// back; what the widths cost on a trained model is measured by `zoo bench` (docs/runtime.md:
+/// at most 0.9 % on L2Q, L2P and NPSS for int8).
 const WIDTH_TOLERANCE: [(zoo_export::WeightWidth, f32); 3] = [
     (zoo_export::WeightWidth::F32, TOLERANCE),
     (zoo_export::WeightWidth::F16, 4e-3),
-    (zoo_export::WeightWidth::Int8, 6e-2),
+    (zoo_export::WeightWidth::Int8, 0.25),
 ];
 
 #[test]

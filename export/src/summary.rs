@@ -21,8 +21,8 @@ pub struct GraphSummary {
     pub op_counts: BTreeMap<String, usize>,
     /// Number of initializers.
     pub initializers: usize,
-    /// Number of weights over all f32, f16 and int8 initializers (an int8 weight's scales not
-    /// counted).
+    /// Number of weights over all f32, f16 and int8 initializers (an int8 weight's scales and
+    /// the int8 products' shared constants not counted).
     pub parameters: usize,
     /// metadata_props keys.
     pub metadata_keys: Vec<String>,
@@ -63,7 +63,9 @@ pub fn summarize(proto: &pb::ModelProto) -> GraphSummary {
         .initializer
         .iter()
         .filter(|t| widths.contains(&t.data_type))
-        .filter(|t| !t.name.strip_suffix(".scale").is_some_and(int8))
+        .filter(|t| {
+            !t.name.strip_suffix(".scale").is_some_and(int8) && !t.name.starts_with(crate::width::SHARED_PREFIX)
+        })
         .map(|t| t.dims.iter().product::<i64>() as usize)
         .sum();
     GraphSummary {

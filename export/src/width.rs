@@ -193,7 +193,7 @@ fn node(
 fn integer_matmul(consumer: &pb::NodeProto, q: &str, scale: &str, shared: &SharedConstants) -> Vec<pb::NodeProto> {
     let p = &consumer.name;
     let out = &consumer.output[0];
-    let v = |suffix: &str| format!("{p}.{suffix}");
+    let v = |suffix: &str| format!("{p}.int8_{suffix}");
     let scaled = if consumer.op_type == "Gemm" && consumer.input.len() > 2 { v("scaled") } else { out.clone() };
     let x = consumer.input[0].as_str();
     let reduce = vec![attr_int("keepdims", 0)];
@@ -228,6 +228,10 @@ fn integer_matmul(consumer: &pb::NodeProto, q: &str, scale: &str, shared: &Share
 /// of dividing by zero.
 pub const MIN_INPUT_SCALE: f32 = 1e-30;
 
+/// The name prefix of the scalar constants of [`SharedConstants`] (not weights: graph
+/// summaries leave them out of the parameter count).
+pub const SHARED_PREFIX: &str = "int8.";
+
 /// The scalar constants the integer products of one graph share.
 struct SharedConstants {
     /// 127: `max|x|` maps to it.
@@ -242,10 +246,10 @@ struct SharedConstants {
 impl SharedConstants {
     fn add(graph: &mut pb::GraphProto) -> Self {
         let c = SharedConstants {
-            q_max: "int8.q_max".into(),
-            offset: "int8.offset".into(),
-            zero_point: "int8.zero_point".into(),
-            min_scale: "int8.min_scale".into(),
+            q_max: format!("{SHARED_PREFIX}q_max"),
+            offset: format!("{SHARED_PREFIX}offset"),
+            zero_point: format!("{SHARED_PREFIX}zero_point"),
+            min_scale: format!("{SHARED_PREFIX}min_scale"),
         };
         let floats = [(&c.q_max, 127.0f32), (&c.offset, 128.5), (&c.min_scale, MIN_INPUT_SCALE)];
         for (name, v) in floats {
@@ -294,20 +298,20 @@ fn rewrite_graph(graph: &pb::GraphProto, width: WeightWidth) -> Result<pb::Graph
                 let scale_raw = scales.iter().flat_map(|v| v.to_le_bytes()).collect();
                 out.initializer.push(tensor(sn.clone(), &[scales.len() as i64], DataType::Float, scale_raw));
                 let c = &graph.node[consumer];
-                let shared = shared.as_ref().ok_or_else(|| ExportError::model("no shared int8 constants"))?;
+                let shared = || shared.as_ref().ok_or_else(|| ExportError::model("no shared int8 constants"));
                 match u {
                     Use::Recurrent => {
                         let a = vec![attr_int("axis", axis as i64)];
                         front.push(node("DequantizeLinear", format!("{name}.dequantize"), &[&qn, &sn], &[name], a));
                     }
                     Use::Linear => {
-                        replaced.insert(consumer, integer_matmul(c, &qn, &sn, shared));
+                        replaced.insert(consumer, integer_matmul(c, &qn, &sn, shared()?));
                     }
                     Use::LinearTransposed => {
                         let t = format!("{name}.int8_t");
                         let mut nodes =
                             vec![node("Transpose", t.clone(), &[&qn], &[&t], vec![attr_ints("perm", &[1, 0])])];
-                        nodes.extend(integer_matmul(c, &t, &sn, shared));
+                        nodes.extend(integer_matmul(c, &t, &sn, shared()?));
                         replaced.insert(consumer, nodes);
                     }
                     Use::ThroughTranspose => {
@@ -319,7 +323,7 @@ fn rewrite_graph(graph: &pb::GraphProto, width: WeightWidth) -> Result<pb::Graph
                         let mut transpose = c.clone();
                         transpose.input[0] = qn.clone();
                         replaced.insert(consumer, vec![transpose]);
-                        replaced.insert(matmul, integer_matmul(&graph.node[matmul], t, &sn, shared));
+                        replaced.insert(matmul, integer_matmul(&graph.node[matmul], t, &sn, shared()?));
                     }
                 }
             }
@@ -465,7 +469,8 @@ mod tests {
         assert_eq!(int8.summary().op_counts["MatMul"], 1, "the 0/1 selector stays an exact f32 MatMul");
         let f16 = with_weights(&f32_model, WeightWidth::F16).unwrap();
         assert_eq!(f16.summary().op_counts["Cast"], 2);
-        assert!(f16.to_bytes().len() < f32_model.to_bytes().len());
+        let half = f16.proto().graph.as_ref().unwrap().initializer.iter().find(|t| t.name == "l0.weight.f16").unwrap();
+        assert_eq!((half.data_type, half.raw_data.len()), (DataType::Float16 as i32, 12), "2 bytes a weight");
     }
 
     #[test]
