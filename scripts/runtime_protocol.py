@@ -178,8 +178,8 @@ class Model:
     def __init__(self, path):
         self.sess = ort.InferenceSession(path, providers=["CPUExecutionProvider"])
         self.meta = self.sess.get_modelmeta().custom_metadata_map
-        if self.meta.get("zoo.format_version") != "4":
-            sys.exit(f"{path}: zoo.format_version is {self.meta.get('zoo.format_version')}, this script reads 4")
+        if self.meta.get("zoo.format_version") != "5":
+            sys.exit(f"{path}: zoo.format_version is {self.meta.get('zoo.format_version')}, this script reads 5")
         self.task = self.meta["zoo.task"]
         self.norm = {k: {m: np.array(v[m], dtype=F) for m in ("mean", "std")}
                      for k, v in json.loads(self.meta["zoo.normalization"]).items()}

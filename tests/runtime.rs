@@ -88,7 +88,7 @@ fn files_of_the_previous_format_are_asked_to_re_export() {
     for (bytes, found) in [(v3, "3"), (old_rmr, "rmr 1")] {
         let err = LoadedModel::from_bytes(&bytes).unwrap_err();
         assert!(
-            matches!(&err, MotionError::Format(FormatError::FormatTooOld { found: f, supported: 4 }) if f == found),
+            matches!(&err, MotionError::Format(FormatError::FormatTooOld { found: f, supported: zoo_runtime::FORMAT_VERSION }) if f == found),
             "{err}"
         );
         assert!(err.to_string().contains("re-export it with `zoo export --onnx RUN_DIR"), "{err}");
@@ -100,7 +100,7 @@ fn an_unknown_format_version_is_refused() {
     let bytes = with_props(|p| set(p, keys::FORMAT_VERSION, "7"));
     let err = MotionModel::from_bytes(&bytes).unwrap_err();
     assert!(matches!(err, MotionError::Format(FormatError::UnknownFormatVersion { .. })), "{err}");
-    assert!(err.to_string().contains("version 7") && err.to_string().contains("reads version 4"), "{err}");
+    assert!(err.to_string().contains("version 7") && err.to_string().contains("reads version 5"), "{err}");
 }
 
 #[test]
@@ -113,7 +113,7 @@ fn a_version_1_file_is_asked_to_re_export() {
     });
     for err in [MotionModel::from_bytes(&bytes).unwrap_err(), LoadedModel::from_bytes(&bytes).unwrap_err()] {
         assert!(
-            matches!(&err, MotionError::Format(FormatError::FormatTooOld { found, supported: 4 }) if found == "1"),
+            matches!(&err, MotionError::Format(FormatError::FormatTooOld { found, supported: zoo_runtime::FORMAT_VERSION }) if found == "1"),
             "{err}"
         );
         assert!(err.to_string().contains("re-export it with `zoo export --onnx"), "{err}");
@@ -129,7 +129,7 @@ fn a_version_2_file_without_units_is_asked_to_re_export() {
     });
     for err in [MotionModel::from_bytes(&bytes).unwrap_err(), LoadedModel::from_bytes(&bytes).unwrap_err()] {
         assert!(
-            matches!(&err, MotionError::Format(FormatError::FormatTooOld { found, supported: 4 }) if found == "2"),
+            matches!(&err, MotionError::Format(FormatError::FormatTooOld { found, supported: zoo_runtime::FORMAT_VERSION }) if found == "2"),
             "{err}"
         );
         assert!(err.to_string().contains("re-export it with `zoo export --onnx"), "{err}");

@@ -110,6 +110,7 @@ fn allocations_per_step() {
         assert!((a1000 - a100).abs() < 0.5, "allocations per step should not grow with frames played");
     }
     transition_allocations();
+    width_allocations();
     terrain_transition_allocations();
     stitch_allocations();
     keyframes_allocations();
@@ -287,6 +288,37 @@ fn transition_allocations() {
     let g = per_frame(100, || raw_runner.step(&mut raw_state, &[&x, &x], &mut [&mut y]).unwrap());
     eprintln!("tiny RTN: {t:.1} allocations per TransitionRunner::step_raw, {g:.1} per raw graph step");
     assert!(t <= g + 0.01, "TransitionRunner::step_raw allocates {t} per frame, the graph run alone {g}");
+}
+
+/// The tiny RTN's step graph at every weight width (`zoo export --weights`): what a step
+/// allocates (tract's outputs; the int8 graph's activation quantization adds its own) does not
+/// grow with the frames played, at batch 1 and 64.
+fn width_allocations() {
+    let d = 3 * 4;
+    let onnx = zoo_tests::tiny_rtn_onnx();
+    for width in zoo_export::WeightWidth::ALL {
+        let model = MotionModel::from_bytes(&zoo_export::with_weights(&onnx, width).unwrap().to_bytes()).unwrap();
+        assert_eq!(model.metadata().weights, width);
+        let mut runner = model.runner().unwrap();
+        let mut state = model.new_state();
+        let x = vec![0.1; d];
+        let mut y = vec![0.0; d];
+        let mut step = || runner.step(&mut state, &[&x, &x], &mut [&mut y]).unwrap();
+        let a100 = per_frame(100, &mut step);
+        let a1000 = per_frame(1000, &mut step);
+        let mut states = vec![model.new_state(); 64];
+        let xb = vec![0.1; 64 * d];
+        let mut yb = vec![0.0; 64 * d];
+        let mut batch = || runner.step_batch(&mut states, &[&xb, &xb], &mut [&mut yb]).unwrap();
+        let b100 = per_frame(100, &mut batch);
+        let b1000 = per_frame(1000, &mut batch);
+        eprintln!(
+            "tiny RTN, {width} weights: {a100:.1} allocations per step at batch 1 (over 100 frames), {a1000:.1} \
+             (over 1000); {b100:.1} / {b1000:.1} per batch-64 step"
+        );
+        assert!((a1000 - a100).abs() < 0.5, "{width}: allocations per step should not grow with frames played");
+        assert!((b1000 - b100).abs() < 0.5, "{width}: allocations per batch step should not grow with frames");
+    }
 }
 
 /// A terrain-aware RTN: sampling and normalizing the terrain patch of every step (from the

@@ -234,6 +234,7 @@ impl ToyModel {
             fps: 30.0,
             frame: zoo_runtime::metadata::CoordinateFrame::ZOO_CM,
             state,
+            weights: zoo_runtime::metadata::WeightWidth::F32,
         }
     }
 

@@ -44,6 +44,7 @@ pub mod portable;
 mod recurrent;
 mod summary;
 pub mod unity;
+mod width;
 
 pub use error::ExportError;
 pub use graph::{Dim, GraphBuilder, Value};
@@ -53,6 +54,9 @@ pub use ops::{attr_float, attr_int, attr_ints, attr_string};
 pub use portable::{PortableModel, PortableOptions, to_portable};
 pub use recurrent::{GRU_TORCH_TO_ONNX, LSTM_TORCH_TO_ONNX, RnnDirection, RnnInputs, RnnOutputs, reorder_gates};
 pub use summary::{GraphSummary, summarize};
+pub use width::{quantize_per_channel, weight_values, with_weights};
+/// The widths [`with_weights`] writes (re-exported from zoo-format).
+pub use zoo_format::WeightWidth;
 
 /// The prost ONNX types (`ModelProto`, `NodeProto`, ...), re-exported from zoo-format.
 pub use zoo_format::pb;

@@ -21,7 +21,8 @@ pub struct GraphSummary {
     pub op_counts: BTreeMap<String, usize>,
     /// Number of initializers.
     pub initializers: usize,
-    /// Number of f32 weights over all f32 initializers.
+    /// Number of weights over all f32, f16 and int8 initializers (an int8 weight's scales and
+    /// the int8 products' shared constants not counted).
     pub parameters: usize,
     /// metadata_props keys.
     pub metadata_keys: Vec<String>,
@@ -55,10 +56,16 @@ pub fn summarize(proto: &pb::ModelProto) -> GraphSummary {
     for n in &graph.node {
         *op_counts.entry(n.op_type.clone()).or_insert(0) += 1;
     }
+    use pb::tensor_proto::DataType;
+    let widths = [DataType::Float as i32, DataType::Float16 as i32, DataType::Int8 as i32];
+    let int8 = |name: &str| graph.initializer.iter().any(|t| t.name == format!("{name}.int8"));
     let parameters = graph
         .initializer
         .iter()
-        .filter(|t| t.data_type == pb::tensor_proto::DataType::Float as i32)
+        .filter(|t| widths.contains(&t.data_type))
+        .filter(|t| {
+            !t.name.strip_suffix(".scale").is_some_and(int8) && !t.name.starts_with(crate::width::SHARED_PREFIX)
+        })
         .map(|t| t.dims.iter().product::<i64>() as usize)
         .sum();
     GraphSummary {

@@ -43,7 +43,7 @@ def quat_diff(a, b):
 def test_load_returns_the_type_of_the_task(data, name, cls, task, kind, fps):
     m = zoo.load(data / name)
     assert type(m) is cls and m.task == task and m.kind == kind
-    assert m.format_version == zoo.FORMAT_VERSION == 4
+    assert m.format_version == zoo.FORMAT_VERSION == 5
     assert m.frame == zoo.CoordinateFrame(0.01, "y", "right")
     assert m.fps == fps
     sk = m.skeleton

@@ -16,6 +16,7 @@ use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use zoo_data::{Context, Progress, bail};
+use zoo_export::WeightWidth;
 use zoo_rtn::{Rtn, RtnInputs, RtnState};
 use zoo_runtime::{LoadedModel, MotionModel, MotionState, MotionTaskKind};
 
@@ -33,6 +34,10 @@ pub struct RuntimeOptions {
     /// The onnxruntime library (`None`: `ORT_DYLIB_PATH`, else `.onnxruntime/` of the current
     /// folder or one of its parents).
     pub onnxruntime: Option<PathBuf>,
+    /// The weight widths to measure tract and onnxruntime at (`zoo bench runtime`; the file's
+    /// own width when empty): the file's f32 weights rewritten at each
+    /// (`zoo_export::with_weights`, what `zoo export --weights` writes).
+    pub widths: Vec<WeightWidth>,
 }
 
 /// Figures of one backend at one batch size.
@@ -53,7 +58,7 @@ pub struct BackendFigure {
 
 /// A backend under test: one step of the whole batch per call.
 pub(crate) trait StepBackend {
-    fn name(&self) -> &'static str;
+    fn name(&self) -> &str;
     fn step(&mut self) -> Result<()>;
     /// The frame output of the last step (for the agreement check; empty: not compared).
     fn output(&self) -> &[f32];
@@ -156,6 +161,8 @@ impl StepBackend for CandleBackend {
 }
 
 pub(crate) struct TractBackend {
+    /// `tract`, or `tract WIDTH` when several widths are measured.
+    pub(crate) label: String,
     runner: zoo_runtime::MotionRunner,
     states: Vec<MotionState>,
     frame: Frame,
@@ -164,8 +171,8 @@ pub(crate) struct TractBackend {
 }
 
 impl StepBackend for TractBackend {
-    fn name(&self) -> &'static str {
-        "tract"
+    fn name(&self) -> &str {
+        &self.label
     }
 
     fn step(&mut self) -> Result<()> {
@@ -181,6 +188,8 @@ impl StepBackend for TractBackend {
 }
 
 pub(crate) struct OrtBackend {
+    /// `onnxruntime`, or `onnxruntime WIDTH` when several widths are measured.
+    pub(crate) label: String,
     session: ort::session::Session,
     batch: usize,
     frame: Frame,
@@ -191,8 +200,8 @@ pub(crate) struct OrtBackend {
 }
 
 impl StepBackend for OrtBackend {
-    fn name(&self) -> &'static str {
-        "onnxruntime"
+    fn name(&self) -> &str {
+        &self.label
     }
 
     fn step(&mut self) -> Result<()> {
@@ -262,8 +271,10 @@ fn frame_inputs(model: &MotionModel, batch: usize) -> Frame {
     Frame { names, data }
 }
 
+/// The candle (f32), tract and onnxruntime backends at `batch`, tract and onnxruntime once per
+/// width of `files` (the file at that width), labelled with the width when there are several.
 fn make_backends(
-    bytes: &[u8],
+    files: &[(WeightWidth, Vec<u8>)],
     model: &MotionModel,
     candle: Option<&Rtn>,
     env: &ort::environment::Environment,
@@ -279,9 +290,75 @@ fn make_backends(
         backends.push(Box::new(candle_backend(candle, model, &frame, &mut states, batch)?));
     }
 
-    backends.push(Box::new(tract_backend(model, &frame, &states, batch)?));
-    backends.push(Box::new(ort_backend(env, bytes, model, frame, states, batch)?));
+    let label = |backend: &str, width: WeightWidth| match files.len() {
+        1 => backend.to_string(),
+        _ => format!("{backend} {width}"),
+    };
+    for (width, bytes) in files {
+        let at_width = MotionModel::from_bytes(bytes)?;
+        let mut tract = tract_backend(&at_width, &frame, &states, batch)?;
+        tract.label = label("tract", *width);
+        backends.push(Box::new(tract));
+        let mut ort = ort_backend(
+            env,
+            bytes,
+            &at_width,
+            Frame { names: frame.names.clone(), data: frame.data.clone() },
+            states.clone(),
+            batch,
+        )?;
+        ort.label = label("onnxruntime", *width);
+        backends.push(Box::new(ort));
+    }
     Ok(backends)
+}
+
+/// The file's bytes at each width asked (the file as it is when none is asked, or when the one
+/// asked is its own); other widths are rewritten from an f32 file.
+fn files_at_widths(o: &RuntimeOptions, bytes: &[u8]) -> Result<Vec<(WeightWidth, Vec<u8>)>> {
+    let origin = o.model.display().to_string();
+    let own = zoo_runtime::metadata::MotionModelMetadata::read(bytes, &origin).map_err(|e| msg!("{e}"))?.weights;
+    if o.widths.is_empty() || o.widths == [own] {
+        return Ok(vec![(own, bytes.to_vec())]);
+    }
+    if own != WeightWidth::F32 {
+        bail!(
+            "{} stores {own} weights; `--weights` rewrites an f32 file at each width: pass the file of \
+             `zoo export --onnx RUN --weights f32`",
+            o.model.display()
+        );
+    }
+    let model = zoo_export::OnnxModel::from_bytes(bytes, &origin).map_err(|e| msg!("{e}"))?;
+    let at = |w: WeightWidth| zoo_export::with_weights(&model, w).map_err(|e| msg!("{origin} at {w}: {e}"));
+    o.widths.iter().map(|w| Ok((*w, at(*w)?.to_bytes()))).collect()
+}
+
+/// The CPU features that decide which matrix kernels tract and onnxruntime pick, as found in
+/// `/proc/cpuinfo` (Linux; `None` elsewhere).
+pub fn cpu_features() -> Option<String> {
+    const FLAGS: [(&str, &str); 11] = [
+        ("avx2", "AVX2"),
+        ("fma", "FMA"),
+        ("f16c", "F16C"),
+        ("avx512f", "AVX-512F"),
+        ("avx512bw", "AVX-512BW"),
+        ("avx512_vnni", "AVX-512 VNNI"),
+        ("avx_vnni", "AVX-VNNI"),
+        ("avx512_bf16", "AVX-512 BF16"),
+        ("amx_tile", "AMX"),
+        ("amx_int8", "AMX-INT8"),
+        ("amx_bf16", "AMX-BF16"),
+    ];
+    let info = std::fs::read_to_string("/proc/cpuinfo").ok()?;
+    let flags: Vec<&str> = info.lines().find(|l| l.starts_with("flags"))?.split_whitespace().collect();
+    let found = |f: &str| flags.contains(&f);
+    let have: Vec<&str> = FLAGS.iter().filter(|(f, _)| found(f)).map(|(_, n)| *n).collect();
+    let lack: Vec<&str> = FLAGS.iter().filter(|(f, _)| !found(f)).map(|(_, n)| *n).collect();
+    Some(format!(
+        "CPU features: {}; absent: {}",
+        have.join(", "),
+        if lack.is_empty() { "none".into() } else { lack.join(", ") }
+    ))
 }
 
 /// The step graph through tract from the frame inputs `frame` and the initial states `states`
@@ -299,6 +376,7 @@ pub(crate) fn tract_backend(
         }
     }
     Ok(TractBackend {
+        label: "tract".into(),
         runner: model.runner()?,
         states: tract_states,
         frame: Frame { names: frame.names.clone(), data: frame.data.clone() },
@@ -326,6 +404,7 @@ pub(crate) fn ort_backend(
         .commit_from_memory(bytes)
         .map_err(|e| msg!("onnxruntime cannot load the model: {e}"))?;
     Ok(OrtBackend {
+        label: "onnxruntime".into(),
         session,
         batch,
         frame,
@@ -407,24 +486,47 @@ fn models(o: &RuntimeOptions, bytes: &[u8]) -> Result<(MotionModel, Option<Rtn>)
     })
 }
 
-/// One step of every backend from the same state and inputs: they must agree with tract.
-fn check_agreement(backends: &mut [Box<dyn StepBackend>]) -> Result<()> {
+/// One step of every backend from the same state and inputs: the f32 ones must agree with
+/// tract f32 (1e-3), and onnxruntime at each other width with tract at that width (the
+/// tolerance of that width: [`AGREEMENT`]). Returns the largest difference per backend.
+fn check_agreement(backends: &mut [Box<dyn StepBackend>]) -> Result<Vec<(String, f32)>> {
     for b in backends.iter_mut() {
         b.step().with_context(|| format!("{} step", b.name()))?;
     }
-    let tract = backends.iter().position(|b| b.name() == "tract").ok_or_else(|| msg!("no tract backend"))?;
-    let reference = backends[tract].output().to_vec();
+    let width_of = |name: &str| name.split(' ').nth(1).map(str::to_string);
+    let mut diffs = Vec::new();
     for b in backends.iter().filter(|b| !b.output().is_empty()) {
-        let diff = b.output().iter().zip(&reference).map(|(p, q)| (p - q).abs()).fold(0.0f32, f32::max);
-        if b.output().len() != reference.len() || diff > 1e-3 {
+        let width = width_of(b.name());
+        let reference_name = match (&width, b.name().starts_with("candle")) {
+            (Some(w), false) => format!("tract {w}"),
+            (Some(_), true) | (None, _) => "tract".to_string(),
+        };
+        let reference = backends
+            .iter()
+            .find(|r| r.name() == reference_name || (width.is_none() && r.name() == "tract f32"))
+            .or_else(|| backends.iter().find(|r| r.name().starts_with("tract")))
+            .ok_or_else(|| msg!("no tract backend"))?;
+        let diff = b.output().iter().zip(reference.output()).map(|(p, q)| (p - q).abs()).fold(0.0f32, f32::max);
+        let tolerance = AGREEMENT.iter().find(|(w, _)| width.as_deref() == Some(w.name())).map_or(1e-3, |(_, t)| *t);
+        if b.output().len() != reference.output().len() || diff > tolerance {
             bail!(
-                "{} disagrees with tract on the first step (max abs diff {diff}): the benchmark would compare different computations",
-                b.name()
+                "{} disagrees with {} on the first step (max abs diff {diff}, tolerance {tolerance}): the benchmark \
+                 would compare different computations",
+                b.name(),
+                reference.name()
             );
         }
+        diffs.push((b.name().to_string(), diff));
     }
-    Ok(())
+    Ok(diffs)
 }
+
+/// How far onnxruntime may be from tract on one step at each width (normalized units): f32
+/// and f16 compute in f32 in both (their kernels sum in different orders); at int8 the
+/// dynamic quantization of the activations rounds in each runtime's own way, and one step
+/// of the u8 input a value rounds to can differ.
+pub const AGREEMENT: [(WeightWidth, f32); 3] =
+    [(WeightWidth::F32, 1e-3), (WeightWidth::F16, 1e-3), (WeightWidth::Int8, 5e-2)];
 
 /// Times `rounds` rounds of every backend at batch `batch` (after a warm-up).
 fn time_backends(
@@ -502,15 +604,23 @@ pub fn run(o: &RuntimeOptions, p: &dyn Progress) -> Result<RuntimeReport> {
             lib.display()
         ),
     };
+    let files = files_at_widths(o, &bytes)?;
+    let header = match cpu_features() {
+        Some(cpu) => format!("{header}\n{cpu}"),
+        None => header,
+    };
     let mut figures = Vec::new();
+    let mut agreement = Vec::new();
     for &batch in &o.batch {
-        let mut backends = make_backends(&bytes, &model, candle.as_ref(), &env, batch)?;
+        let mut backends = make_backends(&files, &model, candle.as_ref(), &env, batch)?;
         if candle.is_none() {
             backends.push(Box::new(SynthesisBackend::new(&bytes, batch)?));
         }
-        check_agreement(&mut backends)?;
+        agreement.extend(check_agreement(&mut backends)?.into_iter().map(|(b, d)| (batch, b, d)));
         figures.extend(time_backends(o, &mut backends, batch, p)?);
     }
+    let agreement: Vec<String> = agreement.iter().map(|(b, n, d)| format!("{n} at batch {b}: {d:.1e}")).collect();
+    let header = format!("{header}\nfirst step, max abs difference from tract (same width): {}", agreement.join(", "));
     Ok(RuntimeReport { header, figures })
 }
 
@@ -518,15 +628,18 @@ pub fn run(o: &RuntimeOptions, p: &dyn Progress) -> Result<RuntimeReport> {
 pub fn table(figures: &[BackendFigure], rounds: usize, work: usize) -> String {
     let mut s = format!(
         "median of {rounds} rounds, ~{work} character-steps per backend per round\n\
-         {:<6} {:<12} {:>12} {:>16} {:>12} {:>14}\n",
+         {:<6} {:<18} {:>12} {:>16} {:>12} {:>14}\n",
         "batch", "backend", "step (ms)", "frames/s", "time/ort", "throughput/ort"
     );
     for f in figures {
-        let ort = figures.iter().find(|g| g.batch == f.batch && g.backend == "onnxruntime");
+        let ort = figures
+            .iter()
+            .find(|g| g.batch == f.batch && (g.backend == "onnxruntime" || g.backend == "onnxruntime f32"))
+            .or_else(|| figures.iter().find(|g| g.batch == f.batch && g.backend.starts_with("onnxruntime")));
         let (rt, rf) =
             ort.map_or((f64::NAN, f64::NAN), |o| (f.step_ms / o.step_ms, f.frames_per_second / o.frames_per_second));
         s += &format!(
-            "{:<6} {:<12} {:>12.4} {:>16.0} {:>11.2}x {:>13.2}x\n",
+            "{:<6} {:<18} {:>12.4} {:>16.0} {:>11.2}x {:>13.2}x\n",
             f.batch, f.backend, f.step_ms, f.frames_per_second, rt, rf
         );
     }

@@ -1,5 +1,5 @@
 //! The exported model file of zoo: what a model carries in its ONNX `metadata_props` (format
-//! version 4), one format for every task. This crate is its one owner: exporters build a
+//! version 5), one format for every task. This crate is its one owner: exporters build a
 //! [`MotionModelMetadata`] and write [`MotionModelMetadata::to_props`]; the runtime reads it back
 //! with [`MotionModelMetadata::read`] (or [`MotionModelMetadata::from_props`]) and refuses files
 //! without it. No tract, no candle: [`pb`] holds the ONNX protobuf messages.
@@ -9,7 +9,7 @@
 //!
 //! | key                   | value                                                        |
 //! |-----------------------|--------------------------------------------------------------|
-//! | `zoo.format_version`  | `"4"`                                                        |
+//! | `zoo.format_version`  | `"5"`                                                        |
 //! | `zoo.model_kind`      | the model: `"rtn"`, `"arnn"`, `"rmr"`, `"rnn-gmm"`           |
 //! | `zoo.task`            | what the model does, [`MotionTask`]: `"transition"`, `"keyframes"`, `"stitch"`, `"synthesis"` (`"step"`: a bare step graph) |
 //! | `zoo.config`          | the run's `config.json`, verbatim: informational, for tools that rebuild the candle model; the runtime never reads it |
@@ -18,6 +18,7 @@
 //! | `zoo.feature_layout`  | `[{"name": "..", "start": 0, "len": 3}, ..]`: the named ranges of the model's frame vector |
 //! | `zoo.fps`             | frames per second of the training data, e.g. `"30"`          |
 //! | `zoo.frame`           | units and axes of positions and rotations: `{"metres_per_unit": 0.01, "up_axis": "y", "handedness": "right"}` ([`CoordinateFrame`]) |
+//! | `zoo.weights`         | the width the weights are stored in: `"f32"`, `"f16"` or `"int8"` ([`WeightWidth`]) |
 //! | `zoo.state`           | `[{"input": "h", "output": "h_next"}, ..]`: the step graph's recurrent state (empty for `stitch`) |
 //! | `zoo.transition`      | task `transition`: [`TransitionTask`]                        |
 //! | `zoo.start_graph`     | task `transition`, optional: base64 ONNX of the transition-start graph (below) |
@@ -30,7 +31,8 @@
 //! initializer). Its inputs are `[batch, ...]` f32; each of its outputs is named like a state
 //! *input* of the step graph and sets that state slot; slots it does not produce start at zero.
 //!
-//! Older files are refused with the command that re-exports them: version 3 (RMR files had a
+//! Older files are refused with the command that re-exports them: version 4 (no `zoo.weights`:
+//! every weight was f32), version 3 (RMR files had a
 //! format of their own, `zoo.rmr.*`, and ARNN and RNN-GMM files were bare `step` tasks),
 //! version 2 (no `zoo.frame`) and version 1.
 //!
@@ -56,7 +58,7 @@ pub use transition::{TransitionFallback, TransitionTask, TransitionTerrain};
 pub use zoo_motion::frame::CoordinateFrame;
 
 /// The format version this release reads and writes.
-pub const FORMAT_VERSION: u32 = 4;
+pub const FORMAT_VERSION: u32 = 5;
 
 /// metadata_props keys.
 pub mod keys {
@@ -92,11 +94,63 @@ pub mod keys {
     pub const SYNTHESIS: &str = super::synthesis::KEY;
     /// Base64 ONNX of a synthesis model's refiner step graph.
     pub const SYNTHESIS_REFINER_GRAPH: &str = super::synthesis::REFINER_GRAPH_KEY;
+    /// The width the weights are stored in ([`super::WeightWidth`]).
+    pub const WEIGHTS: &str = "zoo.weights";
     /// All keys every model carries (its task requires its section besides).
-    pub const REQUIRED: [&str; 10] =
-        [FORMAT_VERSION, MODEL_KIND, TASK, CONFIG, NORMALIZATION, SKELETON, FEATURE_LAYOUT, FPS, FRAME, STATE];
+    pub const REQUIRED: [&str; 11] =
+        [FORMAT_VERSION, MODEL_KIND, TASK, CONFIG, NORMALIZATION, SKELETON, FEATURE_LAYOUT, FPS, FRAME, STATE, WEIGHTS];
+    /// The keys whose value is a whole ONNX model (base64) embedded beside the main graph.
+    pub const EMBEDDED_GRAPHS: [&str; 2] = [START_GRAPH, SYNTHESIS_REFINER_GRAPH];
     /// The version key of the RMR files written before one format served every task.
     pub const OLD_RMR_FORMAT_VERSION: &str = "zoo.rmr.format_version";
+}
+
+/// The width a model file's weights are stored in (`zoo.weights`; `zoo export --weights`).
+///
+/// Every graph input and output is f32 at every width; only the weight matrices change:
+/// `f16` stores them as IEEE half floats widened by a `Cast` when the model loads, `int8` as
+/// signed bytes with one f32 scale per output channel (symmetric, zero point 0), the matrix
+/// products of fully-connected layers run as `MatMulInteger` on activations quantized per call
+/// to int8, and recurrent ops' weights widened by `DequantizeLinear` (zoo_export's
+/// `with_weights` writes both).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum WeightWidth {
+    /// 32-bit floats (the default).
+    #[default]
+    F32,
+    /// 16-bit floats.
+    F16,
+    /// 8-bit integers with per-output-channel scales.
+    Int8,
+}
+
+impl WeightWidth {
+    /// Every width, narrowest last.
+    pub const ALL: [WeightWidth; 3] = [WeightWidth::F32, WeightWidth::F16, WeightWidth::Int8];
+
+    /// The name written in `zoo.weights` and taken by `zoo export --weights`.
+    pub fn name(self) -> &'static str {
+        match self {
+            WeightWidth::F32 => "f32",
+            WeightWidth::F16 => "f16",
+            WeightWidth::Int8 => "int8",
+        }
+    }
+
+    /// The width called `name` (`f32`, `f16`, `int8`), or an error listing them.
+    pub fn parse(name: &str) -> Result<Self, String> {
+        Self::ALL
+            .into_iter()
+            .find(|w| w.name() == name.trim())
+            .ok_or_else(|| format!("`{name}` is not a weight width (f32, f16, int8)"))
+    }
+}
+
+impl std::fmt::Display for WeightWidth {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
 }
 
 /// Mean and standard deviation of a group of features (normalized = (x - mean) / std).
@@ -438,6 +492,8 @@ pub struct MotionModelMetadata {
     pub frame: CoordinateFrame,
     /// Recurrent state pairs of the step graph (empty for a `stitch` window graph).
     pub state: Vec<MotionStatePair>,
+    /// The width the file's weights are stored in.
+    pub weights: WeightWidth,
 }
 
 fn parse<T: serde::de::DeserializeOwned>(key: &str, s: &str) -> Result<T, FormatError> {
@@ -460,6 +516,7 @@ impl MotionModelMetadata {
             (keys::FPS.into(), self.fps.to_string()),
             (keys::FRAME.into(), json(&self.frame)),
             (keys::STATE.into(), json(&self.state)),
+            (keys::WEIGHTS.into(), self.weights.name().to_string()),
         ];
         if let (Some(key), Some(section)) = (self.task.section_key(), self.task.section_json()) {
             props.push((key.to_string(), section));
@@ -561,6 +618,7 @@ impl MotionModelMetadata {
             fps,
             frame: parse(keys::FRAME, &req(keys::FRAME)?)?,
             state: parse(keys::STATE, &req(keys::STATE)?)?,
+            weights: WeightWidth::parse(&req(keys::WEIGHTS)?).map_err(|r| FormatError::bad(keys::WEIGHTS, r))?,
         };
         metadata.check()?;
         if let MotionTask::Synthesis(t) = &metadata.task

@@ -30,6 +30,7 @@ fn sample() -> MotionModelMetadata {
         fps: 30.0,
         frame: CoordinateFrame::ZOO_CM,
         state: vec![MotionStatePair { input: "h".into(), output: "h_next".into() }],
+        weights: crate::WeightWidth::F32,
     }
 }
 
@@ -71,6 +72,26 @@ fn the_frame_is_required_and_checked() {
     let err = edited(|p| set(p, keys::FRAME, r#"{"metres_per_unit": 1, "up_axis": "x", "handedness": "right"}"#))
         .unwrap_err();
     assert!(err.to_string().contains(keys::FRAME), "{err}");
+}
+
+#[test]
+fn the_weight_width_is_required_and_checked() {
+    for width in crate::WeightWidth::ALL {
+        let m = edited(|p| set(p, keys::WEIGHTS, width.name())).unwrap();
+        assert_eq!(m.weights, width);
+    }
+    let err = edited(|p| p.retain(|(k, _)| k != keys::WEIGHTS)).unwrap_err();
+    assert!(matches!(&err, FormatError::MissingMetadata { key } if key == keys::WEIGHTS), "{err}");
+    let err = edited(|p| set(p, keys::WEIGHTS, "int4")).unwrap_err();
+    assert!(err.to_string().contains("`int4` is not a weight width (f32, f16, int8)"), "{err}");
+    // A version-4 file (every weight f32, no `zoo.weights`) is asked to re-export.
+    let err = edited(|p| {
+        p.retain(|(k, _)| k != keys::WEIGHTS);
+        set(p, keys::FORMAT_VERSION, "4");
+    })
+    .unwrap_err();
+    assert!(matches!(&err, FormatError::FormatTooOld { found, .. } if found == "4"), "{err}");
+    assert!(err.to_string().contains("zoo export --onnx RUN_DIR"), "{err}");
 }
 
 #[test]

@@ -40,6 +40,7 @@ fn toy_model(path: &std::path::Path) -> Result<(), Box<dyn std::error::Error>> {
         fps: 30.0,
         frame: zoo_runtime::metadata::CoordinateFrame::ZOO_CM,
         state: vec![MotionStatePair { input: "h".into(), output: "h_next".into() }],
+        weights: zoo_runtime::metadata::WeightWidth::F32,
     };
     for (k, v) in meta.to_props() {
         g.metadata(&k, &v);

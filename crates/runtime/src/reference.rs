@@ -833,6 +833,7 @@ mod tests {
             fps: 30.0,
             frame: crate::pose::CoordinateFrame::ZOO_CM,
             state: Vec::new(),
+            weights: crate::metadata::WeightWidth::F32,
         }
     }
 

@@ -149,6 +149,7 @@ pub fn metadata(config: &ArnnConfig, norm: &Normalization) -> Result<MotionModel
         // degrees of freedom are metres and radians (feature_layout names them).
         frame: CoordinateFrame::ZOO_CM,
         state: vec![pair("h1", "h1_next"), pair("h2", "h2_next")],
+        weights: zoo_format::WeightWidth::F32,
     };
     metadata.check().map_err(|e| ExportError::model(format!("the metadata would not load: {e}")))?;
     Ok(metadata)

@@ -5,7 +5,7 @@
 //!
 //! ```text
 //! cargo build --workspace --examples
-//! RAYON_NUM_THREADS=1 target/debug/examples/rmr_window_latency [RUN_DIR] [--window 60] [--rounds 11] [--reps 10]
+//! RAYON_NUM_THREADS=1 target/debug/examples/rmr_window_latency [RUN_DIR] [--window 60] [--rounds 11] [--reps 10] [--weights f32|f16|int8]
 //! ```
 //! Without `RUN_DIR`, the seeded paper-size model (BGRU 2 x 256) is used: latency does not
 //! depend on the weights. onnxruntime: `ORT_DYLIB_PATH`, else `.onnxruntime/libonnxruntime.so.1.31.1`.
@@ -53,8 +53,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let model = Rmr::new(&config, candle_nn::VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu))?;
     let d = config.dim();
-    let onnx = zoo_rmr::export::export_rmr(&config, &stats, &varmap)?;
+    let width = args.iter().position(|a| a == "--weights").and_then(|i| args.get(i + 1));
+    let width = zoo_export::WeightWidth::parse(width.map_or("f32", String::as_str))?;
+    let onnx = zoo_export::with_weights(&zoo_rmr::export::export_rmr(&config, &stats, &varmap)?, width)?;
     let bytes = onnx.to_bytes();
+    println!("weights: {width} ({} bytes)", bytes.len());
     let mut tract = zoo_runtime::StitchRefiner::from_bytes(&bytes)?;
     tract.set_window(window, window / 2)?;
     let lib = std::env::var_os("ORT_DYLIB_PATH")

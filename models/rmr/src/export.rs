@@ -195,6 +195,7 @@ pub fn metadata(config: &Config, stats: &FeatureStats) -> Result<MotionModelMeta
         fps: config.fps as f32,
         frame: CoordinateFrame::ZOO_CM,
         state: vec![],
+        weights: zoo_format::WeightWidth::F32,
     };
     metadata.check().map_err(|e| ExportError::model(format!("the metadata would not load: {e}")))?;
     Ok(metadata)

@@ -182,6 +182,7 @@ pub fn metadata(
         fps: spec.fps as f32,
         frame: CoordinateFrame::ZOO_CM,
         state,
+        weights: zoo_format::WeightWidth::F32,
     };
     metadata.check().map_err(|e| ExportError::model(format!("the metadata would not load: {e}")))?;
     Ok(metadata)

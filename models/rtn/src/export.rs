@@ -195,6 +195,7 @@ pub fn metadata(
         fps,
         frame,
         state,
+        weights: zoo_format::WeightWidth::F32,
     };
     metadata.check().map_err(|e| ExportError::model(format!("the metadata would not load: {e}")))?;
     Ok(metadata)
@@ -398,28 +399,25 @@ pub fn import_rtn(bytes: &[u8]) -> Result<(Config, HashMap<String, candle_core::
         .iter()
         .map(|(n, v)| (n.clone(), v.dims().to_vec()))
         .collect();
+    // The weights at whatever width the file stores them (`zoo export --weights`), widened.
     let mut weights = HashMap::new();
-    for init in graphs.iter().flatten().flat_map(|g| &g.initializer) {
-        let Some(dims) = wanted.get(&init.name) else { continue };
-        if weights.contains_key(&init.name) {
-            continue;
+    for graph in graphs.iter().flatten() {
+        for (name, (_, data)) in zoo_export::weight_values(graph)? {
+            let Some(dims) = wanted.get(&name) else { continue };
+            if weights.contains_key(&name) {
+                continue;
+            }
+            let n: usize = dims.iter().product();
+            if data.len() != n {
+                return Err(ExportError::model(format!(
+                    "initializer `{name}` has {} values, the RTN needs {n}",
+                    data.len()
+                )));
+            }
+            let t = candle_core::Tensor::from_vec(data, dims.as_slice(), &candle_core::Device::Cpu)
+                .map_err(|e| ExportError::model(e.to_string()))?;
+            weights.insert(name, t);
         }
-        let data: Vec<f32> = if !init.raw_data.is_empty() {
-            init.raw_data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
-        } else {
-            init.float_data.clone()
-        };
-        let n: usize = dims.iter().product();
-        if data.len() != n {
-            return Err(ExportError::model(format!(
-                "initializer `{}` has {} values, the RTN needs {n}",
-                init.name,
-                data.len()
-            )));
-        }
-        let t = candle_core::Tensor::from_vec(data, dims.as_slice(), &candle_core::Device::Cpu)
-            .map_err(|e| ExportError::model(e.to_string()))?;
-        weights.insert(init.name.clone(), t);
     }
     if let Some(missing) = wanted.keys().find(|k| !weights.contains_key(*k)) {
         return Err(ExportError::model(format!("the file has no initializer `{missing}` of the RTN")));

@@ -29,6 +29,11 @@ pub struct RuntimeArgs {
     /// Write the figures as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// `zoo bench runtime`: weight widths to measure tract and onnxruntime at, comma-separated
+    /// (f32, f16, int8; default: the file's own). The file must be f32 to measure other widths:
+    /// it is rewritten at each, as `zoo export --weights` writes it.
+    #[arg(long, value_delimiter = ',', value_parser = ["f32", "f16", "int8"])]
+    pub weights: Vec<String>,
 }
 
 /// Models `zoo bench train` can measure.
@@ -93,6 +98,7 @@ impl RuntimeArgs {
     /// The benchmark's settings.
     fn options(&self) -> RuntimeOptions {
         RuntimeOptions {
+            widths: self.weights.iter().filter_map(|w| zoo_export::WeightWidth::parse(w).ok()).collect(),
             model: self.model.clone(),
             batch: self.batch.clone(),
             rounds: self.rounds,
@@ -121,6 +127,9 @@ pub fn runtime(a: RuntimeArgs) -> anyhow::Result<()> {
 pub fn keyframes(a: RuntimeArgs) -> anyhow::Result<()> {
     if let Some(path) = &a.json {
         crate::cmd::check_output_file("--json", path)?;
+    }
+    if !a.weights.is_empty() {
+        anyhow::bail!("--weights applies to `zoo bench runtime`; `zoo bench keyframes` measures the file as it is");
     }
     let (header, figures) = zoo_bench::keyframes::run(&a.options())?;
     println!("{header}");

@@ -53,6 +53,13 @@ pub struct ExportArgs {
     /// for checking an implementation of docs/runtime-protocol.md on another engine.
     #[arg(long, value_name = "FILE.json")]
     pub reference: Option<PathBuf>,
+    /// The width the weights are stored in: f32 (default), f16 (half the bytes; the runtimes
+    /// widen them when they load the file) or int8 (a quarter; per-channel scales, the
+    /// fully-connected products run in 8-bit integers with activations quantized per call).
+    /// The file records it (`zoo.weights`); docs/runtime.md measures each width's speed and
+    /// quality cost.
+    #[arg(long, default_value = "f32", value_parser = ["f32", "f16", "int8"])]
+    pub weights: String,
 }
 
 /// Writes the reference vectors of `model` (`zoo_runtime::reference`) to `--reference`, if
@@ -265,7 +272,16 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
     }
     let text = std::fs::read_to_string(&config_path).with_context(|| format!("reading {}", config_path.display()))?;
     let kind = zoo_nn::checkpoint::kind_of_config(&text, &config_path)?;
+    let width = zoo_export::WeightWidth::parse(&a.weights).map_err(anyhow::Error::msg)?;
+    if a.portable && width != zoo_export::WeightWidth::F32 {
+        bail!(
+            "--portable writes f32 weights only (Unity Inference Engine runs no integer matrix products); \
+             drop --weights {width} or --portable"
+        );
+    }
     let (model, what, line, frames) = export_kind(&a, &kind)?;
+    let model = zoo_export::with_weights(&model, width).with_context(|| format!("storing the weights as {width}"))?;
+    let line = format!("{line}, {width} weights ({} bytes)", model.to_bytes().len());
     if a.portable {
         write_portable(&a, &model, what, frames)?;
     } else {
