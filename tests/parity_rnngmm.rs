@@ -595,7 +595,7 @@ fn control_selects_the_cheapest_candidate() {
         // that turns most towards the target wins.
         assert_eq!(first.turn_offset, turn, "{first:?}");
         assert!(first.heading.signum() == heading.signum() as f64, "{first:?}");
-        assert_eq!(settings.offsets(first.candidate), Some((first.speed_offset, first.turn_offset)));
+        assert_eq!(settings.offsets(first.candidate), Some((first.speed_offset, first.turn_offset, first.side_offset)));
         assert!(first.cost().is_finite() && first.prior.is_finite());
         // The first step planned the first batch and played its first frame; the next
         // selection comes in the step that plays its last (the 10th).

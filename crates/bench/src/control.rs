@@ -12,6 +12,7 @@ use std::time::Instant;
 use zoo_data::{Context, Message, Progress, bail};
 use zoo_motion::Clip;
 use zoo_rnngmm::OnlineOptions;
+use zoo_rnngmm::checkpoint::LoadedGenerator;
 use zoo_rnngmm::controls::{ControlScript, SegmentScore, score};
 use zoo_rnngmm::error::RnnGmmResult;
 use zoo_rnngmm::run::{control_with_progress, plot_controls};
@@ -182,6 +183,32 @@ fn record(
     })
 }
 
+/// Refuses an exported generator `m` that is not the export of the run folder `dir` (`g`).
+pub(crate) fn check_export(m: &SynthesisModel, g: &LoadedGenerator, dir: &std::path::Path) -> RnnGmmResult<()> {
+    if m.frame_dim() != g.spec.dim() || m.joints() != g.spec.skeleton.len() {
+        bail!(
+            "--onnx is not the export of --model: its frames have {} values on {} joints, the model's {} on {}; export \
+             the run folder with `zoo export --onnx {} --out FILE.onnx`",
+            m.frame_dim(),
+            m.joints(),
+            g.spec.dim(),
+            g.spec.skeleton.len(),
+            dir.display()
+        );
+    }
+    Ok(())
+}
+
+/// The runtime's warm-up frames (clip units): up to `count` feature frames of `clip` ending at
+/// `frame` (its last frame when beyond).
+pub(crate) fn seed_frames(g: &LoadedGenerator, clip: &Clip, frame: usize, count: usize) -> RnnGmmResult<Vec<f32>> {
+    let enc = g.spec.encode(clip)?;
+    let dim = g.spec.dim();
+    let frame = frame.min(enc.values.len() / dim - 1);
+    let first = (frame + 1).saturating_sub(count);
+    Ok(enc.values[first * dim..(frame + 1) * dim].to_vec())
+}
+
 /// The runtime's settings from the candle controller's.
 fn runtime_settings(opts: &OnlineOptions) -> ControlSettings {
     ControlSettings {
@@ -208,26 +235,12 @@ pub fn run(o: &ControlBenchOptions, p: &dyn Progress) -> RnnGmmResult<Report> {
     let from = o.from.as_ref().map(|(p, f)| (p.as_path(), *f));
     let (clip, frame, label) = zoo_rnngmm::run::start_clip(&o.model, from, &g)?;
     let runtime = o.onnx.as_ref().map(|(m, _)| m);
-    if let Some(m) = runtime
-        && (m.frame_dim() != g.spec.dim() || m.joints() != g.spec.skeleton.len())
-    {
-        bail!(
-            "--onnx is not the export of --model: its frames have {} values on {} joints, the model's {} on {}; export \
-             the run folder with `zoo export --onnx {} --out FILE.onnx`",
-            m.frame_dim(),
-            m.joints(),
-            g.spec.dim(),
-            g.spec.skeleton.len(),
-            o.model.display()
-        );
+    if let Some(m) = runtime {
+        check_export(m, &g, &o.model)?;
     }
     let (skate, real) = zoo_rnngmm::bench::skate_reference(&g, o.data.as_deref(), &o.glob, &[&clip], p)?;
     let settings = runtime_settings(&o.online);
-    // The runtime's warm-up frames (clip units), ending at the start frame.
-    let enc = g.spec.encode(&clip)?;
-    let dim = g.spec.dim();
-    let first = (frame + 1).saturating_sub(o.runtime_seed_frames);
-    let seed_frames = &enc.values[first * dim..(frame + 1) * dim];
+    let seed_frames = &seed_frames(&g, &clip, frame, o.runtime_seed_frames)?;
     let fps = g.spec.fps;
     let mut runs = Vec::new();
     for &seed in &o.seeds {

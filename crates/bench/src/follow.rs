@@ -113,18 +113,8 @@ pub fn run(o: &FollowBenchOptions, p: &dyn Progress) -> RnnGmmResult<Report> {
     if !o.offline && o.onnx.is_none() {
         bail!("no follower to run: the runtime's follower needs the exported generator (--onnx FILE.onnx)");
     }
-    if let Some((m, _)) = &o.onnx
-        && (m.frame_dim() != g.spec.dim() || m.joints() != g.spec.skeleton.len())
-    {
-        bail!(
-            "--onnx is not the export of --model: its frames have {} values on {} joints, the model's {} on {}; export \
-             the run folder with `zoo export --onnx {} --out FILE.onnx`",
-            m.frame_dim(),
-            m.joints(),
-            g.spec.dim(),
-            g.spec.skeleton.len(),
-            o.model.display()
-        );
+    if let Some((m, _)) = &o.onnx {
+        crate::control::check_export(m, &g, &o.model)?;
     }
     let mut rows = Vec::new();
     let mut tracks: Vec<Vec<Vec<[f64; 2]>>> = Vec::new();
@@ -163,13 +153,9 @@ pub fn run(o: &FollowBenchOptions, p: &dyn Progress) -> RnnGmmResult<Report> {
                 tracks.last_mut().expect("one list per start").push(track);
             }
             if let Some((model, _)) = &o.onnx {
-                let enc = g.spec.encode(clip)?;
-                let dim = g.spec.dim();
-                let frame = (*frame).min(enc.values.len() / dim - 1);
-                let first = (frame + 1).saturating_sub(o.runtime_seed_frames);
-                let seed_frames = &enc.values[first * dim..(frame + 1) * dim];
+                let seed_frames = crate::control::seed_frames(&g, clip, *frame, o.runtime_seed_frames)?;
                 let t = Instant::now();
-                let r = runtime_follow(model, seed_frames, path, o.speed, opts.seed)
+                let r = runtime_follow(model, &seed_frames, path, o.speed, opts.seed)
                     .with_context(|| format!("the runtime's follower on {name} from {label}"))?;
                 let seconds = t.elapsed().as_secs_f64();
                 let frames = r.roots.len();
