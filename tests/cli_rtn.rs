@@ -370,7 +370,7 @@ fn broken_run_folders_are_refused_by_transition_export_and_resume() {
     let mut stats: serde_json::Value = serde_json::from_str(&good_stats).unwrap();
     stats["x"]["std"][4] = 0.0.into();
     put(&stats_path, stats.to_string());
-    check("zero std", "normalization.json: group `x` has std 0 at index 4; every std must be > 0");
+    check("zero std", "normalization.json: group `x` has std 0.0 at index 4; every std must be at least 1e-6");
     let mut stats: serde_json::Value = serde_json::from_str(&good_stats).unwrap();
     stats["velocity"]["mean"].as_array_mut().unwrap().truncate(5);
     stats["velocity"]["std"].as_array_mut().unwrap().truncate(5);

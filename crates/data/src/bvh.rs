@@ -732,7 +732,9 @@ fn joint_name(name: &str) -> String {
 ///
 /// The file is written to a temporary file in the same folder and renamed into place, so a
 /// reader never sees a half-written file.
+/// A clip holding NaN or infinity is refused ([`zoo_motion::finite::check_clip`]).
 pub fn write_file(clip: &Clip, path: &Path) -> std::io::Result<()> {
+    zoo_motion::finite::check_clip(&path.display().to_string(), clip)?;
     let text = to_string(clip);
     let gz = path.file_name().is_some_and(|n| n.to_string_lossy().ends_with(".gz"));
     zoo_motion::atomic::write_with(path, |file| {
