@@ -335,7 +335,7 @@ fn train_refuses_to_replace_a_trained_run_without_overwrite() {
     let out = tiny_command(&args).output().unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    assert!(stdout.contains("--overwrite: deleted the run in"), "{stdout}");
+    assert!(stdout.contains("the new run finished its first epoch; the old run is deleted"), "{stdout}");
     assert_eq!(read_state(&run_dir)["epoch"], 1);
 }
 
