@@ -145,7 +145,7 @@ pub fn stats(clips: &[NamedClip]) -> Result<DataStats, Message> {
     let mut not_computed = Vec::new();
     let mut figure = |name: &str, v: Option<f64>| match v {
         Some(x) if !x.is_finite() => {
-            not_computed.push(format!("{name}: cannot be computed ({x}: {OVERFLOW})"));
+            not_computed.push(format!("{name}: cannot be computed ({OVERFLOW})"));
             None
         }
         v => v,
