@@ -298,3 +298,157 @@ fn bench_refuses_an_exported_model_of_another_hierarchy() {
     let (ok, _, stderr) = bench(&renamed);
     assert!(!ok && stderr.contains("its joint 3 is `Foot_L`, the dataset's is `Foot_R`"), "{stderr}");
 }
+
+/// Runs `zoo ARGS` (no panic, no abort); returns (success, stdout, stderr).
+fn zoo(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(zoo_bin()).args(args).env("RAYON_NUM_THREADS", "1").output().unwrap();
+    let (stdout, stderr) = (String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.code().is_some(), "`zoo {}` was killed by a signal: {stderr}", args.join(" "));
+    assert!(!stderr.contains("panicked") && !stderr.contains("overflow"), "{stderr}");
+    (out.status.success(), stdout.into_owned(), stderr.into_owned())
+}
+
+/// Class 2: `zoo data stats` of a clip whose root jumps by 2e308 cm a frame (speeds beyond
+/// the range of numbers) says in words which figures cannot be computed, prints no NaN or inf,
+/// and writes `null` for them in `--json`; the other figures are still there.
+#[test]
+fn data_stats_says_in_words_which_figures_cannot_be_computed() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut clip = toy_clip(10, 0.0);
+    let j = clip.joints();
+    for f in 0..clip.frames() {
+        clip.local_positions[f * j].x = if f % 2 == 0 { 1e308 } else { -1e308 };
+    }
+    let path = dir.path().join("huge.bvh");
+    bvh::write_file(&clip, &path).unwrap();
+    let json = dir.path().join("stats.json");
+    let (ok, stdout, stderr) = zoo(&["data", "stats", path.to_str().unwrap(), "--json", json.to_str().unwrap()]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("root speed: cannot be computed (the clips' positions"), "{stdout}");
+    assert!(stdout.contains("foot skate: cannot be computed"), "{stdout}");
+    assert!(stdout.contains("frames     10"), "{stdout}");
+    for bad in ["NaN", " inf ", "inf\n"] {
+        assert!(!stdout.contains(bad), "{bad} printed: {stdout}");
+    }
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert!(v["root_speed"].is_null(), "{v}");
+    assert!(v["not_computed"][0].as_str().unwrap().starts_with("root speed"), "{v}");
+}
+
+/// Class 1 and 4: a hierarchy nested deeper than the limit and a frame time out of range are
+/// refused at parse time, with the file, the line and the limit (a 100,000-level hierarchy
+/// overflowed the stack of `zoo data stats` before, after printing gigabytes of indentation).
+#[test]
+fn deep_hierarchies_and_frame_times_out_of_range_are_refused_at_parse_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 100_000;
+    let mut text = String::from("HIERARCHY\n");
+    for i in 0..n {
+        let kw = if i == 0 { "ROOT" } else { "JOINT" };
+        text += &format!("{kw} J{i}\n{{\nOFFSET 0 1 0\nCHANNELS 3 Zrotation Xrotation Yrotation\n");
+    }
+    text += &"}\n".repeat(n);
+    text += &format!("MOTION\nFrames: 1\nFrame Time: 0.033\n{}\n", vec!["0"; 3 * n].join(" "));
+    let deep = dir.path().join("deep.bvh");
+    std::fs::write(&deep, text).unwrap();
+    let (ok, stdout, stderr) = zoo(&["data", "stats", deep.to_str().unwrap()]);
+    assert!(!ok && stdout.len() < 1000, "{}", &stdout[..stdout.len().min(1000)]);
+    assert!(stderr.contains("deep.bvh:") && stderr.contains("nested 1001 levels below the root"), "{stderr}");
+
+    let mut clip = toy_clip(10, 0.0);
+    for (t, says) in [(1e-30, "frame time 1e-30 s is outside"), (1e30, "frame time 1e30 s is outside")] {
+        clip.frame_time = t;
+        let p = dir.path().join("t.bvh");
+        bvh::write_file(&clip, &p).unwrap();
+        let (ok, _, stderr) = zoo(&["data", "stats", p.to_str().unwrap()]);
+        assert!(!ok && stderr.contains(says) && stderr.contains("[0.0001, 10] s"), "{stderr}");
+    }
+}
+
+/// Class 2: a model whose normalization std underflows (1e-45 passes "finite and positive")
+/// is refused when loaded, so `zoo bench` writes no report of NaN (`null`) and exits 1.
+#[test]
+fn a_model_with_an_underflowing_std_is_refused_not_benchmarked_as_nan() {
+    let dir = tempfile::tempdir().unwrap();
+    let onnx = dir.path().join("tiny.onnx");
+    // The exporter refuses such statistics itself, so the file is edited after export.
+    let mut model = zoo_tests::tiny_rtn_onnx();
+    let mut stats: serde_json::Value =
+        serde_json::from_str(model.metadata_value("zoo.normalization").unwrap()).unwrap();
+    stats["offset"]["std"][0] = 1e-45.into();
+    model.set_metadata("zoo.normalization", &stats.to_string());
+    model.write(&onnx).unwrap();
+    let data = dir.path().join("data");
+    toy_dataset(&data, &zoo_tests::toy_skeleton());
+    let report = dir.path().join("report.json");
+    let method = format!("onnx:{}", onnx.display());
+    let (ok, _, stderr) = zoo(&[
+        "bench",
+        "--data",
+        data.to_str().unwrap(),
+        "--valid-glob",
+        "*_youthful_*",
+        "--lengths",
+        "5",
+        "--methods",
+        &method,
+        "--json",
+        report.to_str().unwrap(),
+    ]);
+    assert!(!ok && stderr.contains("every std must be at least 1e-6"), "{stderr}");
+    assert!(!report.exists(), "a report was written");
+}
+
+/// The arguments of a tiny RTN run into `folder` (`flag`: `--out` or `--resume`).
+fn tiny_rtn<'a>(flag: &'a str, folder: &'a str, epochs: &'a str) -> Vec<&'a str> {
+    vec!["train", "rtn", "--preset", "tiny", "--synth-minutes", "0.5", "--seed", "5", "--epochs", epochs, flag, folder]
+}
+
+/// Class 3: `--overwrite` keeps the old run until the new one has finished its first epoch (a
+/// new run that fails first, here on a data folder that does not exist, puts it back); a lock
+/// file refuses a second training into the folder with the first one's pid and start time, the
+/// lock of a process that no longer runs is taken over, and the leftovers of an interrupted
+/// write (a zero-byte temporary file, a `.last.tmp/` folder) do not block the next command.
+#[test]
+fn overwrite_locks_and_interrupted_writes_never_lose_a_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let s = run.to_str().unwrap();
+    let (ok, _, stderr) = zoo(&tiny_rtn("--out", s, "1"));
+    assert!(ok, "{stderr}");
+    assert!(!run.join(zoo_nn::run_folder::LOCK_FILE).exists(), "the lock outlived the command");
+    let weights = std::fs::read(run.join("model.safetensors")).unwrap();
+
+    let missing = dir.path().join("no-such-data");
+    let mut args = vec!["train", "rtn", "--preset", "tiny", "--data", missing.to_str().unwrap()];
+    args.extend(["--valid-glob", "*x*", "--epochs", "1", "--out", s, "--overwrite"]);
+    let (ok, _, stderr) = zoo(&args);
+    assert!(!ok && stderr.contains("the new run failed before its first epoch; the old run in"), "{stderr}");
+    assert_eq!(std::fs::read(run.join("model.safetensors")).unwrap(), weights, "the old run was lost");
+    assert!(!run.join(zoo_nn::run_folder::ASIDE_DIR).exists());
+
+    // Process 1 always runs: its lock refuses.
+    let lock = run.join(zoo_nn::run_folder::LOCK_FILE);
+    std::fs::write(&lock, "pid 1\nstarted 2026-11-27 05:00:00 UTC\n").unwrap();
+    let (ok, _, stderr) = zoo(&tiny_rtn("--resume", s, "2"));
+    assert!(
+        !ok && stderr.contains("is in use by another training: process 1, started 2026-11-27 05:00:00 UTC"),
+        "{stderr}"
+    );
+    // A pid above the kernel's limit never runs: taken over, and the leftovers are cleared.
+    std::fs::write(&lock, "pid 4294967\nstarted 2026-11-27 05:00:00 UTC\n").unwrap();
+    std::fs::write(run.join(".train_state.json.4294967.tmp"), "").unwrap();
+    std::fs::create_dir_all(run.join(".last.tmp")).unwrap();
+    let (ok, _, stderr) = zoo(&tiny_rtn("--resume", s, "2"));
+    assert!(ok, "{stderr}");
+    assert!(stderr.contains("taking over the lock of process 4294967"), "{stderr}");
+    assert!(stderr.contains("removed 2 leftover(s) of an interrupted write"), "{stderr}");
+    assert!(!run.join(".last.tmp").exists() && !lock.exists());
+
+    let mut args = tiny_rtn("--out", s, "1");
+    args.push("--overwrite");
+    let (ok, stdout, stderr) = zoo(&args);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("the new run finished its first epoch; the old run is deleted"), "{stdout}");
+    assert!(!run.join(zoo_nn::run_folder::ASIDE_DIR).exists());
+}

@@ -9,7 +9,12 @@ use zoo_motion::{Clip, EulerOrder, JointChannels, Skeleton};
 
 /// Path of the `zoo` binary built for these tests (the CLI crate's binary, built by cargo
 /// before the tests run because the `zoo-cli` package is a workspace member).
+/// `ZOO_BIN`, when set, names another build of the binary (a copy taken right after building,
+/// where several checkouts share one target folder).
 pub fn zoo_bin() -> PathBuf {
+    if let Some(bin) = std::env::var_os("ZOO_BIN") {
+        return PathBuf::from(bin);
+    }
     let exe = std::env::current_exe().expect("test executable path");
     let dir = exe.parent().and_then(|d| d.parent()).expect("target dir");
     let bin = dir.join(format!("zoo{}", std::env::consts::EXE_SUFFIX));

@@ -72,16 +72,35 @@ impl OnnxModel {
     }
 
     /// Writes the encoded model to `path` atomically: to a temporary file in the same folder,
-    /// then renamed into place, so an interrupted write never leaves a truncated model.
+    /// then renamed into place, so an interrupted write never leaves a truncated model. A float
+    /// initializer holding NaN or infinity (any graph, subgraphs included) is refused.
     pub fn write(&self, path: &Path) -> Result<(), ExportError> {
-        zoo_motion::atomic::write(path, self.to_bytes())
-            .map_err(|source| ExportError::Io { path: path.display().to_string(), source })
+        let io = |source| ExportError::Io { path: path.display().to_string(), source };
+        if let Some(g) = &self.proto.graph {
+            check_initializers(g).map_err(|e| io(e.into()))?;
+        }
+        zoo_motion::atomic::write(path, self.to_bytes()).map_err(io)
     }
 
     /// Inputs, outputs and op counts, for snapshots and logs.
     pub fn summary(&self) -> GraphSummary {
         summarize(&self.proto)
     }
+}
+
+/// The float initializers of `graph` and of its subgraphs (Scan bodies) are finite.
+fn check_initializers(graph: &pb::GraphProto) -> Result<(), zoo_motion::finite::NonFinite> {
+    for t in graph.initializer.iter().filter(|t| t.data_type == pb::tensor_proto::DataType::Float as i32) {
+        let raw = t.raw_data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+        let values: Vec<f32> = t.float_data.iter().copied().chain(raw).collect();
+        zoo_motion::finite::check_values("the exported model", &format!("initializer `{}`", t.name), &values)?;
+    }
+    for a in graph.node.iter().flat_map(|n| &n.attribute) {
+        for g in a.g.iter().chain(&a.graphs) {
+            check_initializers(g)?;
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]

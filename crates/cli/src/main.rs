@@ -129,7 +129,7 @@ fn main() -> anyhow::Result<()> {
     }));
     training_environment();
     let cli = Cli::parse();
-    match cli.command {
+    let result = match cli.command {
         Command::Data(c) => cmd::data::run(c),
         Command::Bench(a) => cmd::bench::run(a),
         Command::Train(c) => cmd::train::run(c),
@@ -145,5 +145,8 @@ fn main() -> anyhow::Result<()> {
         Command::BenchSynthesis(a) => cmd::bench_synthesis::run(a),
         Command::Complete(a) => cmd::complete::run(a),
         Command::EvalArnn(a) => cmd::eval_arnn::run(a),
-    }
+    };
+    // A training that failed puts back the run its --overwrite kept aside; locks are released.
+    zoo_nn::run_folder::end_of_command(result.is_ok());
+    result
 }

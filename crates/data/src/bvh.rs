@@ -271,6 +271,18 @@ impl<'a> Parser<'a> {
             sk.channels.push(JointChannels::default());
             layouts.push(Layout { start: columns, count: 0, pos: None, rot: [0, 1, 2], order: EulerOrder::Zxy });
             stack.push((j, open.line));
+            if stack.len() > Skeleton::MAX_DEPTH + 1 {
+                return Err(self.err(
+                    open.line,
+                    format!(
+                        "joint `{}` is nested {} levels below the root; zoo reads at most {} levels (real skeletons \
+                         have under 100)",
+                        sk.names[j],
+                        stack.len() - 1,
+                        Skeleton::MAX_DEPTH
+                    ),
+                ));
+            }
             let mut have_offset = false;
             // Body items of joint `j` until its `}` or a child joint.
             let mut descended = false;
@@ -497,6 +509,7 @@ impl<'a> Parser<'a> {
                     format!("expected the frame time (a positive number of seconds), found {}", show(t)),
                 )
             })?;
+        Clip::check_frame_time(frame_time).map_err(|e| self.err(self.line_of(t), format!("`Frame Time:` {e}")))?;
         // Rest of the `Frame Time:` line must be empty.
         self.skip_blank();
         if self.pos < self.b.len() && self.b[self.pos] != b'\n' {
@@ -689,6 +702,9 @@ pub fn to_string(clip: &Clip) -> String {
     out
 }
 
+/// Writes the hierarchy below joint `j` (depth first, children in index order; `order` gets
+/// the joints in the order their channels are written). A stack, not recursion: a skeleton can
+/// be as deep as its source made it.
 fn write_joint(
     out: &mut String,
     sk: &Skeleton,
@@ -699,25 +715,31 @@ fn write_joint(
     order: &mut Vec<usize>,
 ) {
     use std::fmt::Write as _;
-    order.push(j);
-    let ind = "\t".repeat(depth);
-    let kw = if depth == 0 { "ROOT" } else { "JOINT" };
-    let o = sk.offsets[j];
-    let _ = writeln!(out, "{ind}{kw} {}\n{ind}{{\n{ind}\tOFFSET {} {} {}", joint_name(&sk.names[j]), o.x, o.y, o.z);
-    let axes = sk.channels[j].order.axes().map(|a| ["Xrotation", "Yrotation", "Zrotation"][a]);
-    let rot = axes.join(" ");
-    if with_pos[j] {
-        let _ = writeln!(out, "{ind}\tCHANNELS 6 Xposition Yposition Zposition {rot}");
-    } else {
-        let _ = writeln!(out, "{ind}\tCHANNELS 3 {rot}");
+    // (joint, depth, opening: false when only its End Site and closing brace are left).
+    let mut stack = vec![(j, depth, true)];
+    while let Some((j, depth, opening)) = stack.pop() {
+        let ind = "\t".repeat(depth);
+        if !opening {
+            if let Some(e) = sk.end_sites[j] {
+                let _ = writeln!(out, "{ind}\tEnd Site\n{ind}\t{{\n{ind}\t\tOFFSET {} {} {}\n{ind}\t}}", e.x, e.y, e.z);
+            }
+            let _ = writeln!(out, "{ind}}}");
+            continue;
+        }
+        order.push(j);
+        let kw = if depth == 0 { "ROOT" } else { "JOINT" };
+        let o = sk.offsets[j];
+        let _ = writeln!(out, "{ind}{kw} {}\n{ind}{{\n{ind}\tOFFSET {} {} {}", joint_name(&sk.names[j]), o.x, o.y, o.z);
+        let axes = sk.channels[j].order.axes().map(|a| ["Xrotation", "Yrotation", "Zrotation"][a]);
+        let rot = axes.join(" ");
+        if with_pos[j] {
+            let _ = writeln!(out, "{ind}\tCHANNELS 6 Xposition Yposition Zposition {rot}");
+        } else {
+            let _ = writeln!(out, "{ind}\tCHANNELS 3 {rot}");
+        }
+        stack.push((j, depth, false));
+        stack.extend(children[j].iter().rev().map(|&c| (c, depth + 1, true)));
     }
-    for &c in &children[j] {
-        write_joint(out, sk, children, with_pos, c, depth + 1, order);
-    }
-    if let Some(e) = sk.end_sites[j] {
-        let _ = writeln!(out, "{ind}\tEnd Site\n{ind}\t{{\n{ind}\t\tOFFSET {} {} {}\n{ind}\t}}", e.x, e.y, e.z);
-    }
-    let _ = writeln!(out, "{ind}}}");
 }
 
 /// A joint name as one BVH token: whitespace becomes `_`, an empty name `_`.
@@ -732,7 +754,9 @@ fn joint_name(name: &str) -> String {
 ///
 /// The file is written to a temporary file in the same folder and renamed into place, so a
 /// reader never sees a half-written file.
+/// A clip holding NaN or infinity is refused ([`zoo_motion::finite::check_clip`]).
 pub fn write_file(clip: &Clip, path: &Path) -> std::io::Result<()> {
+    zoo_motion::finite::check_clip(&path.display().to_string(), clip)?;
     let text = to_string(clip);
     let gz = path.file_name().is_some_and(|n| n.to_string_lossy().ends_with(".gz"));
     zoo_motion::atomic::write_with(path, |file| {
@@ -843,6 +867,38 @@ Frame Time: 0.0333333
     fn malformed_bad_frame_time() {
         assert_fails(&VALID.replace("0.0333333", "0"), 18, "expected the frame time (a positive number");
         assert_fails(&VALID.replace("0.0333333", "fast"), 18, "expected the frame time");
+    }
+
+    #[test]
+    fn frame_times_outside_the_range_are_refused() {
+        for t in ["1e-30", "1e30", "0.00001", "11"] {
+            assert_fails(&VALID.replace("0.0333333", t), 18, "is outside the valid range [0.0001, 10] s");
+        }
+        assert!(read(&VALID.replace("0.0333333", "0.0001")).is_ok());
+    }
+
+    /// A chain of `n` joints, one frame.
+    fn chain(n: usize) -> String {
+        let mut t = String::from("HIERARCHY\n");
+        for i in 0..n {
+            let kw = if i == 0 { "ROOT" } else { "JOINT" };
+            t += &format!("{kw} J{i}\n{{\nOFFSET 0 1 0\nCHANNELS 3 Zrotation Xrotation Yrotation\n");
+        }
+        t += &"}\n".repeat(n);
+        t + &format!("MOTION\nFrames: 1\nFrame Time: 0.033\n{}\n", vec!["0"; 3 * n].join(" "))
+    }
+
+    #[test]
+    fn a_hierarchy_deeper_than_the_limit_is_refused_at_parse_time() {
+        let deepest = read(&chain(Skeleton::MAX_DEPTH + 1)).unwrap();
+        assert_eq!(deepest.skeleton.depth(), Skeleton::MAX_DEPTH);
+        // Written without recursion and read back the same.
+        let again = read(&to_string(&deepest)).unwrap();
+        assert_eq!(again.skeleton.parents, deepest.skeleton.parents);
+        let e = read(&chain(Skeleton::MAX_DEPTH + 2)).unwrap_err().to_string();
+        assert!(e.contains("joint `J1001` is nested 1001 levels below the root; zoo reads at most 1000"), "{e}");
+        // 100,000 levels stop at the limit too (this overflowed the stack before).
+        assert!(read(&chain(100_000)).is_err());
     }
 
     #[test]

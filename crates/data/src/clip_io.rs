@@ -161,10 +161,25 @@ pub fn read_with_source(path: &Path, opts: &ReadOptions) -> Result<(Clip, ClipSo
             let clip = bvh::read_file(path, &bvh::ReadOptions { drop_dummy_root: opts.drop_dummy_root })?;
             Ok((clip, ClipSource::bvh()))
         }
-        Some(ClipFormat::Gltf) => crate::gltf::read_file(path, opts),
-        Some(ClipFormat::Fbx) => crate::fbx::read_file(path, opts),
+        Some(ClipFormat::Gltf) => checked(path, "glTF", crate::gltf::read_file(path, opts)?),
+        Some(ClipFormat::Fbx) => checked(path, "FBX", crate::fbx::read_file(path, opts)?),
         None => Err(ClipError::Extension { path: path.to_path_buf(), expected: READ_EXTENSIONS }),
     }
+}
+
+/// The range checks the BVH reader makes at parse time, for the other formats: the frame time
+/// ([`Clip::check_frame_time`]) and the hierarchy's depth ([`zoo_motion::Skeleton::MAX_DEPTH`]).
+fn checked(path: &Path, format: &'static str, read: (Clip, ClipSource)) -> Result<(Clip, ClipSource), ClipError> {
+    let fail = |message: String| ClipError::Format { path: path.to_path_buf(), format, message };
+    Clip::check_frame_time(read.0.frame_time).map_err(fail)?;
+    let depth = read.0.skeleton.depth();
+    if depth > zoo_motion::Skeleton::MAX_DEPTH {
+        return Err(fail(format!(
+            "the joint hierarchy is {depth} levels deep; zoo reads at most {} levels",
+            zoo_motion::Skeleton::MAX_DEPTH
+        )));
+    }
+    Ok(read)
 }
 
 /// [`read_with_source`] without the source.

@@ -869,7 +869,9 @@ pub fn to_gltf_json(clip: &Clip) -> String {
 
 /// Writes a clip as `.glb` (binary) or, for any other name, `.gltf` JSON (see the module
 /// documentation), through a temporary file and a rename.
+/// A clip holding NaN or infinity is refused ([`zoo_motion::finite::check_clip`]).
 pub fn write_file(clip: &Clip, path: &Path) -> std::io::Result<()> {
+    zoo_motion::finite::check_clip(&path.display().to_string(), clip)?;
     let glb = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("glb"));
     let bytes = if glb { to_glb(clip) } else { to_gltf_json(clip).into_bytes() };
     zoo_motion::atomic::write(path, &bytes)

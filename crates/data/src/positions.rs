@@ -19,8 +19,14 @@ pub fn clip_positions(clip: &Clip) -> Vec<Vec<[f32; 3]>> {
 }
 
 /// The positions file of a clip `command` wrote: its joints, frame rate and every frame's
-/// global joint positions (`extra` fields added).
-pub fn clip_positions_json(command: &str, clip: &Clip, extra: serde_json::Value) -> serde_json::Value {
+/// global joint positions (`extra` fields added). A clip holding NaN or infinity is refused
+/// here, since JSON would write those values as `null`.
+pub fn clip_positions_json(
+    command: &str,
+    clip: &Clip,
+    extra: serde_json::Value,
+) -> Result<serde_json::Value, zoo_motion::finite::NonFinite> {
+    zoo_motion::finite::check_clip(&format!("the clip of `zoo {command}`"), clip)?;
     let mut v = serde_json::json!({
         "format": POSITIONS_FORMAT,
         "version": 1,
@@ -32,7 +38,7 @@ pub fn clip_positions_json(command: &str, clip: &Clip, extra: serde_json::Value)
     if let (Some(v), serde_json::Value::Object(extra)) = (v.as_object_mut(), extra) {
         v.extend(extra);
     }
-    v
+    Ok(v)
 }
 
 /// Writes a positions file (compact JSON, atomically).

@@ -33,8 +33,9 @@ pub struct DataStats {
     pub root_speed: Option<RootSpeed>,
     /// Foot joints used for the skate measure (empty: none found, no foot figures).
     pub foot_joints: Vec<String>,
-    /// Planted height of each foot joint (5th percentile of its height).
-    pub planted_heights: Vec<f64>,
+    /// Planted height of each foot joint (5th percentile of its height); `null` where it cannot
+    /// be computed (listed in `not_computed`).
+    pub planted_heights: Vec<Option<f64>>,
     /// The data's own foot skate (units per frame, `BENCHMARK.md` definition, all frames; heights
     /// above the clip's terrain when a `NAME.terrain.json` lies beside it); `null` without feet
     /// or without two consecutive frames.
@@ -42,8 +43,13 @@ pub struct DataStats {
     /// Lowest foot-joint height over all frames (above the terrain when there is one): how far
     /// feet sink below the ground if negative; `null` without feet or frames.
     pub min_foot_height: Option<f64>,
-    /// Largest change of a bone's length within a clip (0 for rigid skeletons).
-    pub max_bone_length_change: f64,
+    /// Largest change of a bone's length within a clip (0 for rigid skeletons); `null` when it
+    /// cannot be computed.
+    pub max_bone_length_change: Option<f64>,
+    /// The figures that cannot be computed for these clips (their values would be NaN or
+    /// infinite: coordinates beyond the range of numbers, a frame time too small), each with
+    /// the reason in words. Such a figure is `null` in the JSON, never NaN.
+    pub not_computed: Vec<String>,
     /// Seconds taken.
     pub seconds: f64,
 }
@@ -104,6 +110,10 @@ fn per_clip(c: &NamedClip, feet: &[usize]) -> Result<PerClip, Message> {
     Ok(PerClip { feet: fp, speed, bone_drift })
 }
 
+/// Why a figure is not finite.
+const OVERFLOW: &str = "the clips' positions or frame times are beyond the range this figure can be computed in; \
+check the file's OFFSET and channel values and its Frame Time";
+
 /// The statistics of `clips` (at least one).
 pub fn stats(clips: &[NamedClip]) -> Result<DataStats, Message> {
     let start = Instant::now();
@@ -132,6 +142,28 @@ pub fn stats(clips: &[NamedClip]) -> Result<DataStats, Message> {
         let mut pct = |q| dataset::percentile(&mut speeds, q);
         RootSpeed { p5: pct(5.0), p25: pct(25.0), p50: pct(50.0), p75: pct(75.0), p95: pct(95.0) }
     });
+    let mut not_computed = Vec::new();
+    let mut figure = |name: &str, v: Option<f64>| match v {
+        Some(x) if !x.is_finite() => {
+            not_computed.push(format!("{name}: cannot be computed ({OVERFLOW})"));
+            None
+        }
+        v => v,
+    };
+    let root_speed = root_speed.filter(|r| {
+        let ok = [r.p5, r.p25, r.p50, r.p75, r.p95].iter().all(|v| v.is_finite());
+        ok || figure("root speed", Some(f64::INFINITY)).is_some()
+    });
+    let planted_heights: Vec<Option<f64>> = planted
+        .iter()
+        .zip(&feet)
+        .map(|(&h, &k)| figure(&format!("planted height of {}", skeleton.names[k]), Some(h)))
+        .collect();
+    let foot_skate = figure("foot skate", (skate_n > 0).then(|| skate_sum / skate_n as f64));
+    let min_foot_height =
+        figure("lowest foot height", per.iter().flat_map(|p| p.feet.iter().map(|v| v.y)).reduce(f64::min));
+    let max_bone_length_change =
+        figure("largest bone length change", Some(per.iter().map(|p| p.bone_drift).fold(0.0, f64::max)));
     let mut fps: Vec<f64> = clips.iter().map(|c| (c.clip.fps() * 1000.0).round() / 1000.0).collect();
     fps.sort_by(f64::total_cmp);
     fps.dedup();
@@ -146,10 +178,11 @@ pub fn stats(clips: &[NamedClip]) -> Result<DataStats, Message> {
         parents: skeleton.parents_i32(),
         root_speed,
         foot_joints: feet.iter().map(|&k| skeleton.names[k].clone()).collect(),
-        planted_heights: planted,
-        foot_skate: (skate_n > 0).then(|| skate_sum / skate_n as f64),
-        min_foot_height: per.iter().flat_map(|p| p.feet.iter().map(|v| v.y)).reduce(f64::min),
-        max_bone_length_change: per.iter().map(|p| p.bone_drift).fold(0.0, f64::max),
+        planted_heights,
+        foot_skate,
+        min_foot_height,
+        max_bone_length_change,
+        not_computed,
         seconds: start.elapsed().as_secs_f64(),
     })
 }
@@ -171,31 +204,56 @@ impl DataStats {
                 "root speed (units/s)  p5 {:.1}  p25 {:.1}  median {:.1}  p75 {:.1}  p95 {:.1}",
                 r.p5, r.p25, r.p50, r.p75, r.p95
             ),
+            None if s.frames > s.clips => writeln!(t, "root speed            not computed (below)"),
             None => writeln!(t, "root speed            not measured: no clip has two frames"),
         };
         for (n, h) in s.foot_joints.iter().zip(&s.planted_heights) {
-            let _ = writeln!(t, "planted height  {n:<10} {h:.2}");
+            if let Some(h) = h {
+                let _ = writeln!(t, "planted height  {n:<10} {h:.2}");
+            }
         }
         if s.foot_joints.is_empty() {
             let _ = writeln!(t, "foot skate            not measured: no joint name contains `foot` or `toe`");
         } else {
             let _ = match s.foot_skate {
                 Some(v) => writeln!(t, "foot skate (units/frame, all frames)  {v:.4}"),
+                None if s.frames > s.clips => writeln!(t, "foot skate            not computed (below)"),
                 None => writeln!(t, "foot skate            not measured: no clip has two frames"),
             };
             if let Some(h) = s.min_foot_height {
                 let _ = writeln!(t, "lowest foot joint height              {h:.2}");
             }
         }
-        let _ = writeln!(t, "largest bone length change            {:.2e}", s.max_bone_length_change);
+        if let Some(v) = s.max_bone_length_change {
+            let _ = writeln!(t, "largest bone length change            {v:.2e}");
+        }
+        for n in &s.not_computed {
+            let _ = writeln!(t, "{n}");
+        }
         let _ = writeln!(t, "done in {:.2} s", s.seconds);
         t
     }
 }
 
-fn tree(s: &Skeleton, j: usize, depth: usize, t: &mut String) {
-    let _ = writeln!(t, "{}{}", "  ".repeat(depth), s.names[j]);
-    for c in s.children(j) {
-        tree(s, c, depth + 1, t);
+/// Indentation levels printed before the depth is written as a number instead.
+const TREE_INDENT_LEVELS: usize = 32;
+
+/// The joint tree below `root`, one joint a line indented by its depth (a stack, not
+/// recursion: a file can nest joints as deep as it likes; past [`TREE_INDENT_LEVELS`] levels the
+/// depth is written as a number, so the text grows with the joint count only).
+fn tree(s: &Skeleton, root: usize, depth: usize, t: &mut String) {
+    let mut children: Vec<Vec<usize>> = vec![Vec::new(); s.len()];
+    for (c, p) in s.parents.iter().enumerate() {
+        if let Some(p) = *p {
+            children[p].push(c);
+        }
+    }
+    let mut stack = vec![(root, depth)];
+    while let Some((j, d)) = stack.pop() {
+        let _ = match d {
+            d if d <= TREE_INDENT_LEVELS => writeln!(t, "{}{}", "  ".repeat(d), s.names[j]),
+            d => writeln!(t, "{}[depth {d}] {}", "  ".repeat(TREE_INDENT_LEVELS), s.names[j]),
+        };
+        stack.extend(children[j].iter().rev().map(|&c| (c, d + 1)));
     }
 }

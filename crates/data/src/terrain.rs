@@ -105,6 +105,8 @@ pub fn write(map: &Heightmap, path: &Path) -> Result<(), TerrainFileError> {
         data: data_path.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
     };
     let text = serde_json::to_string_pretty(&header).expect("header serialises");
+    zoo_motion::finite::check_values(&path.display().to_string(), "heights", &map.heights)
+        .map_err(|e| io_err(path)(e.into()))?;
     let mut bytes = Vec::with_capacity(map.heights.len() * 4);
     for h in &map.heights {
         bytes.extend_from_slice(&h.to_le_bytes());

@@ -158,11 +158,15 @@ impl std::fmt::Display for WeightWidth {
 pub struct MotionMeanStd {
     /// Per-feature mean.
     pub mean: Vec<f32>,
-    /// Per-feature standard deviation (> 0).
+    /// Per-feature standard deviation (>= [`MotionMeanStd::MIN_STD`]).
     pub std: Vec<f32>,
 }
 
 impl MotionMeanStd {
+    /// The smallest standard deviation [`MotionMeanStd::check`] accepts: every trainer floors
+    /// its deviations at or above it (1e-6 .. 1e-4, or 1 for a constant feature).
+    pub const MIN_STD: f32 = 1e-6;
+
     /// Normalizes `v` in place. `v.len()` must equal the number of features.
     pub fn normalize(&self, v: &mut [f32]) {
         for ((x, m), s) in v.iter_mut().zip(&self.mean).zip(&self.std) {
@@ -179,7 +183,8 @@ impl MotionMeanStd {
 
     /// The one check of a normalization group, shared by the runtime loader, the exporters and
     /// the candle models' run-folder loaders: as many means as deviations (`len` of each when
-    /// given), every mean finite, every deviation finite and > 0. The error names `group` and
+    /// given), every mean finite, every deviation finite and at least
+    /// [`MotionMeanStd::MIN_STD`]. The error names `group` and
     /// the first bad index.
     pub fn check(&self, group: &str, len: Option<usize>) -> Result<(), String> {
         if self.mean.len() != self.std.len() {
@@ -193,8 +198,13 @@ impl MotionMeanStd {
         if let Some(i) = self.mean.iter().position(|m| !m.is_finite()) {
             return Err(format!("group `{group}` has mean {} at index {i}; every mean must be finite", self.mean[i]));
         }
-        if let Some(i) = self.std.iter().position(|s| !(s.is_finite() && *s > 0.0)) {
-            return Err(format!("group `{group}` has std {} at index {i}; every std must be > 0", self.std[i]));
+        if let Some(i) = self.std.iter().position(|s| !(s.is_finite() && *s >= Self::MIN_STD)) {
+            return Err(format!(
+                "group `{group}` has std {:?} at index {i}; every std must be at least {:e} (a smaller one \
+                 turns normalized values into inf and NaN; training writes 1 for a constant feature)",
+                self.std[i],
+                Self::MIN_STD
+            ));
         }
         Ok(())
     }

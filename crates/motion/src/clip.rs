@@ -24,6 +24,23 @@ pub struct Clip {
 }
 
 impl Clip {
+    /// The frame times a clip file may declare, in seconds: 10,000 fps to 0.1 fps. Outside it,
+    /// speeds and durations overflow or mean nothing; readers refuse such a file.
+    pub const FRAME_TIME_RANGE: (f64, f64) = (1e-4, 10.0);
+
+    /// Checks a frame time read from a file against [`Clip::FRAME_TIME_RANGE`].
+    pub fn check_frame_time(frame_time: f64) -> Result<(), String> {
+        let (lo, hi) = Self::FRAME_TIME_RANGE;
+        if frame_time.is_finite() && (lo..=hi).contains(&frame_time) {
+            return Ok(());
+        }
+        Err(format!(
+            "frame time {frame_time:?} s is outside the valid range [{lo}, {hi}] s ({} to {} fps)",
+            1.0 / hi,
+            1.0 / lo
+        ))
+    }
+
     /// Number of frames.
     pub fn frames(&self) -> usize {
         self.local_rotations.len() / self.skeleton.len().max(1)

@@ -20,6 +20,7 @@ pub mod clip;
 pub mod euler;
 pub mod facing;
 pub mod features;
+pub mod finite;
 pub mod fit;
 pub mod fk;
 pub mod footlock;

@@ -46,6 +46,23 @@ impl std::fmt::Display for SkeletonError {
 impl std::error::Error for SkeletonError {}
 
 impl Skeleton {
+    /// The deepest joint hierarchy a file may define (levels below the root). Real skeletons
+    /// have under 100; readers refuse a deeper one at parse time, so no walk over a hierarchy
+    /// (printing, writing, fitting) meets an unbounded depth.
+    pub const MAX_DEPTH: usize = 1000;
+
+    /// The number of levels below the root (0 for a lone root); parents come before children,
+    /// so one pass suffices.
+    pub fn depth(&self) -> usize {
+        let mut depth = vec![0usize; self.len()];
+        for j in 0..self.len() {
+            if let Some(p) = self.parents[j].filter(|&p| p < j) {
+                depth[j] = depth[p] + 1;
+            }
+        }
+        depth.into_iter().max().unwrap_or(0)
+    }
+
     /// Number of joints.
     pub fn len(&self) -> usize {
         self.names.len()

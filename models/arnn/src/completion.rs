@@ -342,7 +342,7 @@ fn read_keys(path: &Path, dof_names: &[String]) -> ArnnResult<Keys> {
 fn write_positions(o: &CompleteOptions, clip: &zoo_motion::Clip, first_frame: usize) -> ArnnResult<()> {
     let Some(p) = &o.positions else { return Ok(()) };
     let extra = serde_json::json!({ "first_frame": first_frame });
-    let v = zoo_data::positions::clip_positions_json("complete", clip, extra);
+    let v = zoo_data::positions::clip_positions_json("complete", clip, extra).map_err(zoo_data::Message::new)?;
     zoo_data::positions::write(p, &v).with_context(|| format!("writing {}", p.display()))?;
     Ok(())
 }

@@ -175,8 +175,9 @@ pub fn commit(staged: impl IntoIterator<Item = Staged>) -> NnResult<()> {
     Ok(())
 }
 
-/// Stages `value` as pretty JSON.
+/// Stages `value` as pretty JSON, after checking that its numbers are finite.
 pub fn stage_json<T: serde::Serialize + ?Sized>(dst: &Path, value: &T) -> NnResult<Staged> {
+    zoo_motion::finite::check_serialize(&dst.display().to_string(), value)?;
     stage(dst, |tmp| {
         let text = serde_json::to_string_pretty(value).map_err(|source| NnError::Json { path: tmp.into(), source })?;
         std::fs::write(tmp, text).map_err(io(tmp))
@@ -189,8 +190,11 @@ pub fn stage_varmap(dst: &Path, varmap: &VarMap) -> NnResult<Staged> {
     stage(dst, |tmp| varmap.save(tmp).map_err(|e| NnError::Tensors { path: tmp.into(), message: e.to_string() }))
 }
 
-/// Stages named tensors as safetensors.
+/// Stages named tensors as safetensors, after checking that they are finite.
 pub fn stage_tensors(dst: &Path, tensors: &HashMap<String, Tensor>) -> NnResult<Staged> {
+    for (name, t) in tensors {
+        check_tensor(name, t)?;
+    }
     stage(dst, |tmp| {
         candle_core::safetensors::save(tensors, tmp)
             .map_err(|e| NnError::Tensors { path: tmp.into(), message: e.to_string() })
@@ -252,10 +256,16 @@ pub fn check_finite(varmap: &VarMap) -> NnResult<()> {
     let mut names: Vec<&String> = data.keys().collect();
     names.sort();
     for name in names {
-        let s = data[name].as_tensor().abs()?.sum_all()?.to_dtype(DType::F32)?.to_scalar::<f32>()?;
-        if !s.is_finite() {
-            return Err(NnError::NonFiniteParameter { name: name.clone() });
-        }
+        check_tensor(name, data[name].as_tensor())?;
+    }
+    Ok(())
+}
+
+/// Checks that tensor `name` holds no NaN or infinity (the sum of its absolute values is finite).
+pub fn check_tensor(name: &str, t: &Tensor) -> NnResult<()> {
+    let s = t.abs()?.sum_all()?.to_dtype(DType::F32)?.to_scalar::<f32>()?;
+    if !s.is_finite() {
+        return Err(NnError::NonFiniteParameter { name: name.to_string() });
     }
     Ok(())
 }

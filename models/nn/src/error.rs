@@ -38,6 +38,9 @@ pub enum NnError {
     /// A setting is out of range.
     #[error("{0}")]
     Config(String),
+    /// A value to write is NaN or infinite (the file is not written).
+    #[error(transparent)]
+    NonFinite(#[from] zoo_motion::finite::NonFinite),
     /// A parameter holds NaN or inf, so it is not saved.
     #[error("parameter `{name}` holds NaN or inf; refusing to overwrite the last good checkpoint")]
     NonFiniteParameter {

@@ -7,6 +7,9 @@ use crate::train_loop::{self, TrainState};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+mod guard;
+pub use guard::{ASIDE_DIR, LOCK_FILE, end_of_command, epoch_done, lock, set_aside};
+
 /// The options every training command takes.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RunSpec {
@@ -14,7 +17,8 @@ pub struct RunSpec {
     pub out: PathBuf,
     /// Continue the run in this folder instead (its config is kept; `epochs` is the new total).
     pub resume: Option<PathBuf>,
-    /// Replace the run already in `out` (its files are deleted before training).
+    /// Replace the run already in `out` (its files are set aside, deleted after the new run's
+    /// first epoch).
     pub overwrite: bool,
     /// Epochs to train (the total of a resumed run).
     pub epochs: usize,
@@ -77,8 +81,11 @@ pub fn writable_dir(option: &str, dir: &Path) -> Result<(), TrainError> {
 }
 
 /// The run folder, checked before any data is loaded: a fresh run never replaces a trained one
-/// unless `overwrite` says so (then the files and folders `run_files` are deleted), a resumed
-/// run must be a run folder that `check_resume` accepts, and the folder must be writable.
+/// unless `overwrite` says so (then the files and folders `run_files` are set aside in
+/// [`ASIDE_DIR`], deleted only when the new run has finished its first epoch, put back if it
+/// fails before: [`set_aside`]), a resumed run must be a run folder that `check_resume`
+/// accepts, and the folder must be writable. The folder is locked for this process
+/// ([`lock`]): a second training into it is refused while this one runs.
 pub fn prepare(
     spec: &RunSpec,
     run_files: &[&str],
@@ -91,12 +98,16 @@ pub fn prepare(
                 dir.display()
             )));
         }
+        guard::lock(dir)?;
         train_loop::read_state(dir)?;
         check_resume(dir)?;
         writable_dir("--resume", dir)?;
         return Ok(dir.clone());
     }
     let out = &spec.out;
+    if out.is_dir() {
+        guard::lock(out)?;
+    }
     if holds_run(out) {
         if !spec.overwrite {
             let what = match train_loop::read_state(out).ok() {
@@ -114,20 +125,11 @@ pub fn prepare(
                 out.display()
             )));
         }
-        for name in run_files {
-            let p = out.join(name);
-            let removed = if p.is_dir() {
-                std::fs::remove_dir_all(&p)
-            } else if p.exists() {
-                std::fs::remove_file(&p)
-            } else {
-                Ok(())
-            };
-            removed.map_err(|e| TrainError::Config(format!("--overwrite: cannot delete {}: {e}", p.display())))?;
-        }
-        println!("--overwrite: deleted the run in {}", out.display());
+        guard::lock(out)?;
+        guard::set_aside(out, run_files)?;
     }
     writable_dir("--out", out)?;
+    guard::lock(out)?;
     Ok(out.clone())
 }
 

@@ -342,6 +342,7 @@ fn write_epoch<M: Trainable + ?Sized>(model: &mut M, out: &Path, state: &TrainSt
     })?;
     checkpoint::write_json(&out.join(TRAIN_STATE_FILE), state)?;
     crate::plot::loss_curve(&out.join(LOSS_CURVE_FILE), &state.train_loss, &state.valid_loss)?;
+    crate::run_folder::epoch_done(out);
     Ok(())
 }
 

@@ -213,6 +213,7 @@ impl<W: std::io::Write> BvhStream<W> {
     /// Appends `clip`'s frames (`total`: the frame count of the whole file, written with the
     /// first chunk).
     fn write(&mut self, clip: &Clip, total: usize) -> RnnGmmResult<()> {
+        zoo_motion::finite::check_clip("the generated motion", clip).map_err(zoo_data::Message::new)?;
         let text = zoo_data::bvh::to_string(clip);
         let (hierarchy, motion) = text.split_once("MOTION\n").context("BVH text without MOTION")?;
         // "Frames: N\nFrame Time: T\n" then one line per frame.

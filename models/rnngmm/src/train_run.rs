@@ -158,6 +158,7 @@ fn plan(a: &RnnGmmRunOptions) -> RnnGmmResult<Plan> {
                 );
             }
             zoo_nn::run_folder::writable_dir("--resume", dir)?;
+            zoo_nn::run_folder::lock(dir)?;
             let ref_dir = dir.join(REFINER_DIR);
             let refiner_started = ref_dir.join("train_state.json").is_file();
             if wants_gen {
@@ -193,12 +194,10 @@ fn plan(a: &RnnGmmRunOptions) -> RnnGmmResult<Plan> {
                             out.display()
                         );
                     }
-                    remove(&out.join(GENERATOR_DIR))?;
-                    remove(&out.join(REFINER_DIR))?;
-                    for f in MODEL_FILES.iter().chain(&REFINER_FILES) {
-                        remove(&out.join(f))?;
-                    }
-                    println!("--overwrite: deleted the run in {}", out.display());
+                    zoo_nn::run_folder::lock(out)?;
+                    let names: Vec<&str> =
+                        [GENERATOR_DIR, REFINER_DIR].into_iter().chain(MODEL_FILES).chain(REFINER_FILES).collect();
+                    zoo_nn::run_folder::set_aside(out, &names)?;
                 }
             } else {
                 let gen_dir = out.join(GENERATOR_DIR);
@@ -221,11 +220,12 @@ fn plan(a: &RnnGmmRunOptions) -> RnnGmmResult<Plan> {
                             ref_dir.display()
                         );
                     }
-                    remove(&ref_dir)?;
-                    println!("--overwrite: deleted the refiner stage in {}", ref_dir.display());
+                    zoo_nn::run_folder::lock(out)?;
+                    zoo_nn::run_folder::set_aside(out, &[REFINER_DIR])?;
                 }
             }
             zoo_nn::run_folder::writable_dir("--out", out)?;
+            zoo_nn::run_folder::lock(out)?;
             Ok(Plan {
                 out: out.clone(),
                 generator: wants_gen,

@@ -239,6 +239,12 @@ pub fn run(a: &TransitionOptions, p: &dyn Progress) -> RtnResult<String> {
         )
         .context("generating the transition")?;
     let y = checked.frames;
+    zoo_motion::finite::check_values(
+        "the RTN transition network (check the run folder's normalization.json)",
+        "frames",
+        &y,
+    )
+    .map_err(Message::new)?;
     if let Some(path) = &a.positions {
         let raw = model
             .unroll(&stats, &inputs.past, &inputs.target, &inputs.next, a.frames, terrain.as_ref())

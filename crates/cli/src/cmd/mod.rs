@@ -130,8 +130,10 @@ pub fn load_split(
     })
 }
 
-/// Writes `value` as pretty JSON to `path` (atomically).
+/// Writes `value` as pretty JSON to `path` (atomically), after checking that its numbers are
+/// finite ([`zoo_motion::finite::check_serialize`]).
 pub fn write_json(path: &Path, value: &impl serde::Serialize) -> anyhow::Result<()> {
+    zoo_motion::finite::check_serialize(&path.display().to_string(), value)?;
     let text = serde_json::to_string_pretty(value)?;
     zoo_motion::atomic::write(path, text).with_context(|| format!("writing {}", path.display()))
 }

@@ -185,7 +185,7 @@ pub fn run(a: StitchArgs) -> anyhow::Result<()> {
             .map(|v| v.iter().map(|f| f.map(|p| [p.x as f32, p.y as f32, p.z as f32])).collect::<Vec<_>>());
         let extra = serde_json::json!({ "seams": done.seams, "method": format!("{:?}", a.method).to_lowercase(),
             "predicted_ankles": ankles });
-        crate::cmd::write_positions(p, &zoo_data::positions::clip_positions_json("stitch", &done.output, extra))?;
+        crate::cmd::write_positions(p, &zoo_data::positions::clip_positions_json("stitch", &done.output, extra)?)?;
     }
     if a.save_input {
         let p = input_path(&a.out);
