@@ -440,7 +440,7 @@ fn follow_walks_a_path_writes_a_plot_and_refuses_bad_input() {
     let e = fails(&["bench", "follow", "--model", &r, "--followers", "runtime"]);
     assert!(e.contains("--followers runtime needs --onnx FILE"), "{e}");
     let e = fails(&["bench", "follow", "--model", &r, "--followers", "walk"]);
-    assert!(e.contains("unknown follower `walk`"), "{e}");
+    assert!(e.contains("unknown method `walk` in --followers"), "{e}");
 }
 
 #[test]

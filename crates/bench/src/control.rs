@@ -183,6 +183,24 @@ fn record(
     })
 }
 
+/// Which of two methods a comma-separated `option` list asks for, `[candle or offline,
+/// runtime]`, given whether an exported generator (`--onnx`) was given: the runtime alone needs
+/// one; both without one run the first only. `--controllers` of `zoo bench control` and
+/// `--followers` of `zoo bench follow`.
+pub fn methods_of(list: &[String], names: [&str; 2], option: &str, onnx: bool) -> RnnGmmResult<[bool; 2]> {
+    if let Some(m) = list.iter().find(|m| !names.contains(&m.as_str())) {
+        bail!("unknown method `{m}` in {option}: use {}, {} or both", names[0], names[1]);
+    }
+    let asked = names.map(|n| list.iter().any(|m| m == n));
+    if asked == [false, true] && !onnx {
+        bail!(
+            "{option} {} needs --onnx FILE (the generator exported with `zoo export --onnx DIR --out FILE.onnx`)",
+            names[1]
+        );
+    }
+    Ok(asked)
+}
+
 /// Refuses an exported generator `m` that is not the export of the run folder `dir` (`g`).
 pub(crate) fn check_export(m: &SynthesisModel, g: &LoadedGenerator, dir: &std::path::Path) -> RnnGmmResult<()> {
     if m.frame_dim() != g.spec.dim() || m.joints() != g.spec.skeleton.len() {

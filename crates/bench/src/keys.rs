@@ -301,6 +301,15 @@ pub fn angle_deg(a: DQuat, b: DQuat) -> f64 {
     (2.0 * a.dot(b).abs().min(1.0).acos()).to_degrees()
 }
 
+/// The methods of `--methods` in the keys layouts: the context layout's defaults (`zerovel`,
+/// `interp`) stand for the keys layouts' baselines (`linear`, `bezier`).
+pub fn methods(specs: &[String]) -> Result<Vec<Box<dyn KeyMethod>>> {
+    if specs == ["zerovel", "interp"] {
+        return ["linear", "bezier"].iter().map(|m| method(m)).collect();
+    }
+    specs.iter().map(|m| method(m.trim())).collect()
+}
+
 /// A `--methods` entry of the keys-only benchmark: `linear`, `bezier` or `arnn:RUN_DIR`.
 pub fn method(spec: &str) -> Result<Box<dyn KeyMethod>> {
     match spec.split_once(':') {

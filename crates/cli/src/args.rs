@@ -194,12 +194,6 @@ pub fn check_synth_size(minutes: (&str, f64), clip_seconds: f64, fps: f64) -> Re
     Ok(())
 }
 
-/// A whole number >= 1, without an upper bound: prefer a parser with a range.
-#[allow(dead_code)] // for subcommands without a ranged parser yet
-pub fn at_least_one(s: &str) -> Result<usize, String> {
-    whole_in(s, 1..=usize::MAX, "")
-}
-
 /// A frame count or interval in `1..=MAX_FRAMES` (`--frames`, `--interval`, `--lengths`,
 /// `--every`).
 pub fn frame_count(s: &str) -> Result<usize, String> {
@@ -378,19 +372,6 @@ pub fn positive(s: &str) -> Result<f64, String> {
     real_in(s, Interval::above(0.0, f64::INFINITY), "")
 }
 
-/// A finite number > 0 that is finite as f32, without an upper bound: prefer a parser with a
-/// range.
-#[allow(dead_code)] // for subcommands without a ranged parser yet
-pub fn positive_f32(s: &str) -> Result<f32, String> {
-    real_in(s, Interval::above(0.0, f32::MAX as f64), "").map(|v| v as f32)
-}
-
-/// A finite number >= 0, without an upper bound: prefer a parser with a range.
-#[allow(dead_code)] // for subcommands without a ranged parser yet
-pub fn non_negative(s: &str) -> Result<f64, String> {
-    real_in(s, Interval::closed(0.0, f64::INFINITY), "")
-}
-
 /// A weight of a loss term in `[0, MAX_LOSS_WEIGHT]` (0 turns the term off).
 pub fn loss_weight(s: &str) -> Result<f64, String> {
     real_in(s, Interval::closed(0.0, MAX_LOSS_WEIGHT), "")
@@ -447,6 +428,7 @@ mod tests {
 
     #[test]
     fn whole_numbers_outside_their_range_say_the_range() {
+        let at_least_one = |s| whole_in(s, 1..=usize::MAX, "");
         assert_eq!(at_least_one("3"), Ok(3));
         assert!(at_least_one("0").unwrap_err().contains(">= 1"));
         assert!(at_least_one("-2").unwrap_err().contains("not a whole number"));
@@ -489,9 +471,14 @@ mod tests {
         assert_eq!(fps("0.5").unwrap_err(), "0.5 fps is outside the valid range [1, 1000]");
         assert_eq!(fps("0").unwrap_err(), "0 is not a positive number (valid range [1, 1000])");
         assert_eq!(fps_f32("1000"), Ok(1000.0));
+        let non_negative = |s| real_in(s, Interval::closed(0.0, f64::INFINITY), "");
         assert_eq!(non_negative("0"), Ok(0.0));
         assert!(non_negative("-0.5").unwrap_err().contains("negative"));
-        assert!(positive_f32("1e300").unwrap_err().contains("outside the valid range"));
+        assert!(
+            real_in("1e300", Interval::above(0.0, f32::MAX as f64), "")
+                .unwrap_err()
+                .contains("outside the valid range")
+        );
         assert_eq!(relative_tolerance("-1").unwrap_err(), "-1 is negative (valid range [0, 100])");
         assert_eq!(time_limit_minutes("1e9").unwrap_err(), "1000000000 minutes is outside the valid range (0, 43200]");
         assert_eq!(decay("0"), Ok(0.0));

@@ -41,6 +41,17 @@ use zoo_nn::ExportWeights as Weights;
 /// `zoo.model_kind` of an exported RMR.
 pub const MODEL_KIND: &str = "rmr";
 
+/// The frames the portable profile fixes the window graph of run folder `dir` to: `frames`
+/// when given, else the model's runtime window; and where the number comes from, in words.
+pub fn portable_window(dir: &Path, frames: Option<u32>) -> Result<(usize, &'static str), ExportError> {
+    let (config, _) = crate::checkpoint::read_meta(dir)
+        .map_err(|e| ExportError::model(format!("exporting {}: {e}", dir.display())))?;
+    Ok(match frames {
+        Some(f) => (f as usize, "--frames"),
+        None => (config.window, "the model's runtime window; --frames N to change"),
+    })
+}
+
 /// Loads a `zoo train rmr` run folder and exports it (see [`export_rmr`]).
 pub fn export_rmr_dir(dir: &Path) -> Result<OnnxModel, ExportError> {
     let (config, stats) =

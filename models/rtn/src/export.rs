@@ -86,6 +86,70 @@ impl RtnExportOptions {
     }
 }
 
+/// What `zoo export` takes for an RTN run folder besides the folder.
+#[derive(Clone, Debug, Default)]
+pub struct RunExportInputs<'a> {
+    /// A clip of the training skeleton (joint names, parents, rest offsets, fps), for run
+    /// folders without `skeleton.json`.
+    pub skeleton: Option<&'a Path>,
+    /// Frames per second of the training data.
+    pub fps: Option<f32>,
+    /// Units of the training data (`cm`, `m`, `mm`, `in`).
+    pub units: Option<&'a str>,
+}
+
+/// The RTN of run folder `dir` with the skeleton, fps and units of `inputs` (`zoo export`): a
+/// skeleton clip must have the training hierarchy; without one, the run folder's
+/// `skeleton.json` is required; BVH does not say its unit, so without `units` or a
+/// `skeleton.json` the data is taken as zoo's centimetres, Y up.
+pub fn export_rtn_run(dir: &Path, inputs: &RunExportInputs<'_>) -> Result<OnnxModel, ExportError> {
+    let err = |m: String| ExportError::model(m);
+    let mut options = RtnExportOptions { fps: inputs.fps, ..RtnExportOptions::default() };
+    if let Some(u) = inputs.units {
+        let metres_per_unit =
+            CoordinateFrame::metres_per(u).ok_or_else(|| err(format!("--units {u}: cm, m, mm or in")))?;
+        options.frame = Some(CoordinateFrame { metres_per_unit, ..CoordinateFrame::ZOO_CM });
+    }
+    if let Some(path) = inputs.skeleton {
+        let clip = zoo_data::clip_io::read_model_clip(path)
+            .map_err(|e| err(format!("reading the skeleton of {}: {e}", path.display())))?;
+        let s = &clip.skeleton;
+        options.names = Some(s.names.clone());
+        options.offsets = Some(s.offsets.iter().map(|o| o.as_vec3().to_array()).collect());
+        options.parents = Some(s.parents.iter().map(|p| p.map_or(-1, |p| p as i32)).collect());
+        options.fps = options.fps.or(Some(clip.fps() as f32));
+    }
+    let run_skeleton = RunSkeleton::read(dir).map_err(|e| err(format!("{}: {e}", dir.display())))?;
+    if inputs.skeleton.is_none() && run_skeleton.is_none() {
+        return Err(err(format!(
+            "{} has no skeleton.json (trained by an older zoo): pass --skeleton FILE.bvh, a clip of the training \
+             skeleton, so the model file carries joint names, rest offsets and the frame rate",
+            dir.display()
+        )));
+    }
+    let (config, _) =
+        crate::checkpoint::read_meta(dir).map_err(|e| err(format!("exporting {}: {e}", dir.display())))?;
+    if let (Some(path), Some(parents)) = (inputs.skeleton, &options.parents)
+        && !config.parents.is_empty()
+        && &config.parents != parents
+    {
+        return Err(err(format!(
+            "--skeleton {}: its hierarchy ({} joints, parents {:?}) is not the one the model in {} was trained on \
+             ({} joints, parents {:?}); pass a clip of the training skeleton",
+            path.display(),
+            parents.len(),
+            parents,
+            dir.display(),
+            config.joints,
+            config.parents
+        )));
+    }
+    if options.frame.is_none() && run_skeleton.is_none() {
+        options.frame = Some(CoordinateFrame::ZOO_CM);
+    }
+    export_rtn_dir(dir, &options)
+}
+
 /// Loads a `zoo train rtn` run folder (`config.json`, `model.safetensors`,
 /// `normalization.json`, and `skeleton.json` for what `options` leave out) and exports it (see
 /// [`export_rtn`]).

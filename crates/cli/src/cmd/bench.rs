@@ -179,13 +179,7 @@ fn keys(a: BenchArgs, data: &std::path::Path) -> anyhow::Result<()> {
         bail!("--reference and --save-bvh are for `--layout context`");
     }
     let layout = if a.layout == Layout::Keys { KeyLayout::Whole } else { KeyLayout::Partial };
-    // The context layout's default methods are not key methods: the baselines instead.
-    let specs: Vec<String> = if a.methods == ["zerovel", "interp"] {
-        vec!["linear".into(), "bezier".into()]
-    } else {
-        a.methods.iter().map(|m| m.trim().to_string()).collect()
-    };
-    let methods = specs.iter().map(|m| zoo_bench::keys::method(m)).collect::<Result<Vec<_>, _>>()?;
+    let methods = zoo_bench::keys::methods(&a.methods)?;
     let start = Instant::now();
     let bar = crate::progress::Bar::new();
     let (train, test) = load(&a, data, &bar)?;

@@ -2,7 +2,6 @@
 //! in docs/rnn-gmm-control.md).
 
 use crate::cmd::control::OnlineArgs;
-use anyhow::bail;
 use clap::Args;
 use std::path::PathBuf;
 use zoo_bench::control::ControlBenchOptions;
@@ -61,15 +60,8 @@ pub fn run(a: BenchControlArgs) -> anyhow::Result<()> {
     if let Some(p) = &a.json {
         crate::cmd::check_output_file("--json", p)?;
     }
-    if let Some(c) = a.controllers.iter().find(|c| !matches!(c.as_str(), "candle" | "runtime")) {
-        bail!("unknown controller `{c}` in --controllers: use candle, runtime or both");
-    }
-    let runtime = a.controllers.iter().any(|c| c == "runtime");
-    if runtime && a.onnx.is_none() && a.controllers.len() == 1 {
-        bail!(
-            "--controllers runtime needs --onnx FILE (the generator exported with `zoo export --onnx DIR --out FILE.onnx`)"
-        );
-    }
+    let [candle, runtime] =
+        zoo_bench::control::methods_of(&a.controllers, ["candle", "runtime"], "--controllers", a.onnx.is_some())?;
     let script = match &a.script {
         Some(p) => Some((crate::cmd::control::read_script(p)?, p.clone())),
         None => None,
@@ -79,7 +71,7 @@ pub fn run(a: BenchControlArgs) -> anyhow::Result<()> {
         from: a.from.as_deref().map(crate::args::clip_and_frame).transpose()?,
         model: a.model,
         script,
-        candle: a.controllers.iter().any(|c| c == "candle"),
+        candle,
         runtime,
         seeds: a.seeds,
         data: a.data,

@@ -57,15 +57,8 @@ pub fn run(a: BenchFollowArgs) -> anyhow::Result<()> {
     if let Some(p) = &a.json {
         crate::cmd::check_output_file("--json", p)?;
     }
-    if let Some(f) = a.followers.iter().find(|f| !matches!(f.as_str(), "offline" | "runtime")) {
-        anyhow::bail!("unknown follower `{f}` in --followers: use offline, runtime or both");
-    }
-    let runtime = a.followers.iter().any(|f| f == "runtime");
-    if runtime && a.onnx.is_none() && a.followers.len() == 1 {
-        anyhow::bail!(
-            "--followers runtime needs --onnx FILE (the generator exported with `zoo export --onnx DIR --out FILE.onnx`)"
-        );
-    }
+    let [offline, runtime] =
+        zoo_bench::control::methods_of(&a.followers, ["offline", "runtime"], "--followers", a.onnx.is_some())?;
     let onnx = match a.onnx.filter(|_| runtime) {
         Some(p) => Some((crate::cmd::bench_control::runtime_model(&p, "`zoo bench follow --onnx`")?, p)),
         None => None,
@@ -78,7 +71,7 @@ pub fn run(a: BenchFollowArgs) -> anyhow::Result<()> {
         glob: a.glob,
         plots: a.plots,
         optimiser: a.optimiser.options(),
-        offline: a.followers.iter().any(|f| f == "offline"),
+        offline,
         onnx,
         speed: a.speed,
         runtime_seed_frames: a.runtime_seed_frames,

@@ -14,7 +14,6 @@ use anyhow::{Context, bail};
 use clap::Args;
 use std::path::PathBuf;
 use zoo_export::OnnxModel;
-use zoo_rtn::export::{RtnExportOptions, export_rtn_dir};
 
 /// Arguments of `zoo export`.
 #[derive(Args)]
@@ -168,13 +167,7 @@ fn export_kind(a: &ExportArgs, kind: &str) -> anyhow::Result<(OnnxModel, &'stati
             let model = zoo_rmr::export::export_rmr_dir(&a.onnx).with_context(context)?;
             let frames = match a.portable {
                 true => {
-                    let (config, _) = zoo_rmr::checkpoint::read_meta(&a.onnx).with_context(context)?;
-                    let frames = a.frames.map_or(config.window, |f| f as usize);
-                    let source = if a.frames.is_some() {
-                        "--frames"
-                    } else {
-                        "the model's runtime window; --frames N to change"
-                    };
+                    let (frames, source) = zoo_rmr::export::portable_window(&a.onnx, a.frames)?;
                     println!("fixing the RMR window graph's `frames` dimension to {frames} ({source})");
                     Some(frames)
                 }
@@ -214,51 +207,9 @@ fn export_kind(a: &ExportArgs, kind: &str) -> anyhow::Result<(OnnxModel, &'stati
 
 /// The RTN of the run folder with the skeleton, fps and units of the options.
 fn export_rtn(a: &ExportArgs) -> anyhow::Result<OnnxModel> {
-    let mut options = RtnExportOptions { fps: a.fps, ..RtnExportOptions::default() };
-    if let Some(u) = &a.units {
-        let metres_per_unit = zoo_motion::frame::CoordinateFrame::metres_per(u).context("--units: cm, m, mm or in")?;
-        options.frame =
-            Some(zoo_motion::frame::CoordinateFrame { metres_per_unit, ..zoo_motion::frame::CoordinateFrame::ZOO_CM });
-    }
-    if let Some(path) = &a.skeleton {
-        let clip = zoo_data::clip_io::read_model_clip(path)
-            .with_context(|| format!("reading the skeleton of {}", path.display()))?;
-        let s = &clip.skeleton;
-        options.names = Some(s.names.clone());
-        options.offsets = Some(s.offsets.iter().map(|o| o.as_vec3().to_array()).collect());
-        options.parents = Some(s.parents.iter().map(|p| p.map_or(-1, |p| p as i32)).collect());
-        options.fps = options.fps.or(Some(clip.fps() as f32));
-    }
-    let run_skeleton = zoo_nn::checkpoint::RunSkeleton::read(&a.onnx)?;
-    if a.skeleton.is_none() && run_skeleton.is_none() {
-        bail!(
-            "{} has no skeleton.json (trained by an older zoo): pass --skeleton FILE.bvh, a clip of the training \
-             skeleton, so the model file carries joint names, rest offsets and the frame rate",
-            a.onnx.display()
-        );
-    }
-    let (config, _) =
-        zoo_rtn::checkpoint::read_meta(&a.onnx).with_context(|| format!("exporting {}", a.onnx.display()))?;
-    if let (Some(path), Some(parents)) = (&a.skeleton, &options.parents)
-        && !config.parents.is_empty()
-        && &config.parents != parents
-    {
-        bail!(
-            "--skeleton {}: its hierarchy ({} joints, parents {:?}) is not the one the model in {} was trained on \
-             ({} joints, parents {:?}); pass a clip of the training skeleton",
-            path.display(),
-            parents.len(),
-            parents,
-            a.onnx.display(),
-            config.joints,
-            config.parents
-        );
-    }
-    if options.frame.is_none() && run_skeleton.is_none() {
-        // BVH does not say its unit: zoo's convention is centimetres, Y up, right-handed.
-        options.frame = Some(zoo_motion::frame::CoordinateFrame::ZOO_CM);
-    }
-    export_rtn_dir(&a.onnx, &options).with_context(|| format!("exporting {}", a.onnx.display()))
+    let inputs =
+        zoo_rtn::export::RunExportInputs { skeleton: a.skeleton.as_deref(), fps: a.fps, units: a.units.as_deref() };
+    Ok(zoo_rtn::export::export_rtn_run(&a.onnx, &inputs)?)
 }
 
 /// Runs `zoo export`.
