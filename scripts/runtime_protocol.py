@@ -537,6 +537,39 @@ def interval(frames, t):
     return k, k + 1, F((t - a) / max(b - a, 1))
 
 
+def hit_keys(poses, keys, frames, key_groups, fixed):
+    """Step 4 of the keyframes loop: every key frame set to its key, the miss spread over the
+    frames before it (per value, per group; quaternion groups taken on the output's hemisphere).
+    The runtime keeps poses and offsets in float32, computing each update in float64."""
+    out = np.array(poses, dtype=F)
+    n, d = out.shape
+    grp = np.array(key_groups, dtype=int) if key_groups else np.zeros(d, dtype=int)
+    scratch = np.zeros(d, dtype=F)
+    for g in range(int(grp.max()) + 1):
+        idx = np.where(grp == g)[0]
+        quaternion = len(key_groups) > 0 and len(idx) == 4
+        prev = None
+        for k, fb in enumerate(frames):
+            if fb >= n or (fixed and fixed[k][g] != 1.0):
+                continue
+            key = keys[k][idx].astype(np.float64)
+            dot = float(np.sum(key * out[fb, idx].astype(np.float64)))
+            target = (-key if quaternion and dot < 0.0 else key)
+            eb = target - out[fb, idx].astype(np.float64)
+            ea = eb if prev is None else scratch[idx].astype(np.float64)
+            span = max(fb - (prev or 0), 1)
+            for f in range(0 if prev is None else prev + 1, fb):
+                w = 1.0 if prev is None else (f - prev) / span
+                out[f, idx] = (out[f, idx].astype(np.float64) + (1.0 - w) * ea + w * eb).astype(F)
+            out[fb, idx] = target.astype(F)
+            scratch[idx] = eb.astype(F)
+            prev = fb
+        if prev is not None:
+            for f in range(prev + 1, n):
+                out[f, idx] = (out[f, idx].astype(np.float64) + scratch[idx].astype(np.float64)).astype(F)
+    return out
+
+
 def check_keyframes(model, ref, cmp):
     groups = model.section["groups"]
     for case in ref["keyframes"]:
@@ -557,6 +590,7 @@ def check_keyframes(model, ref, cmp):
                 feed["fixed_b"] = fixed[b] if fixed else np.ones(groups, dtype=F)
             prev = model.step(state, feed, ["pose"])[0]
             poses.append(prev)
+        poses = hit_keys(np.array(poses), keys, frames, model.section["key_groups"] if groups > 0 else [], fixed)
         cmp.values(c, "poses", poses, case["poses"])
 
 

@@ -189,7 +189,9 @@ namespace Zoo.Native
         /// increasing, the first 0), <c>poses</c> <c>frames_len * D</c> floats (one pose per key), <c>fixed</c> NULL
         /// and 0 for whole keys or <c>frames_len * G</c> flags for partial keys (a model with key groups
         /// only; the first key fixes every group), <c>out</c> <c>(frames[frames_len - 1] + 1) * D</c> floats. Keys
-        /// and buffers are checked before anything is written. The runner: one thread at a time.
+        /// and buffers are checked before anything is written. Every key frame of <c>out</c> equals its key
+        /// (in the groups it fixes): the network's miss is spread over the frames before it. The
+        /// runner: one thread at a time.
         /// </summary>
         /// <remarks>
         /// Safety:

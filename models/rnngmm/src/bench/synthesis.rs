@@ -72,8 +72,8 @@ pub struct Row {
     pub jerk_ratio: f64,
     /// NPSS of local joint rotations against real windows.
     pub npss: f64,
-    /// Agreement of the predicted contact bits with contacts detected from the feet (NaN for real).
-    pub contact_accuracy: f64,
+    /// Agreement of the predicted contact bits with contacts detected from the feet (none for real).
+    pub contact_accuracy: Option<f64>,
     /// The feature values that left the range most often (up to 5): name, fraction of
     /// sequences, largest excursion beyond the widened range as a fraction of the real span.
     pub range_exits: Vec<(String, f64, f64)>,
@@ -300,7 +300,7 @@ fn row(name: &str, acc: &Acc, real: &Acc, real_jerk: f64, joints: usize, spec: &
         out_of_range: acc.out_of_range as f64 / acc.clips.max(1) as f64,
         jerk_ratio: jerk / real_jerk,
         npss,
-        contact_accuracy: if acc.contacts.1 == 0 { f64::NAN } else { acc.contacts.0 as f64 / acc.contacts.1 as f64 },
+        contact_accuracy: (acc.contacts.1 > 0).then(|| acc.contacts.0 as f64 / acc.contacts.1 as f64),
         range_exits: {
             let mut e: Vec<(usize, (usize, f64))> =
                 acc.exits.iter().copied().enumerate().filter(|(_, (n, _))| *n > 0).collect();
@@ -568,8 +568,7 @@ impl Report {
               out of range | jerk / real | NPSS | contact accuracy |\n";
         s += "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n";
         for r in &self.rows {
-            let contact =
-                if r.contact_accuracy.is_nan() { "-".into() } else { format!("{:.1} %", 100.0 * r.contact_accuracy) };
+            let contact = r.contact_accuracy.map_or_else(|| "-".into(), |a| format!("{:.1} %", 100.0 * a));
             s += &format!(
                 "| {} | {:.3} | {:.2} | {:.1} | {:.4} | {:.0} % | {:.0} % | {:.3} | {:.4} | {contact} |\n",
                 r.name,
