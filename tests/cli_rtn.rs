@@ -101,6 +101,22 @@ fn train_resume_transition_and_decompress() {
     for f in (0..60).chain(80..tl.frames()) {
         assert!((tl.root_position(f) - t.root_position(f)).length() < 1e-3, "frame {f}");
     }
+    // A skeleton without foot joints has nothing to lock: --foot-lock is refused, not ignored.
+    let mut footless = ca.clone();
+    for n in &mut footless.skeleton.names {
+        *n = n.replace("Foot", "Ankle");
+    }
+    let footless_path = dir.path().join("footless.bvh");
+    zoo_data::bvh::write_file(&footless, &footless_path).unwrap();
+    let nolock = dir.path().join("t_nolock.bvh");
+    let from = format!("{}:60", footless_path.display());
+    let args = ["transition", "--model", run_dir, "--from", &from, "--to", &format!("{b}:40"), "--foot-lock"];
+    let (ok, stdout, stderr) = run(&[&args[..], &["--out", nolock.to_str().unwrap()]].concat());
+    assert!(
+        !ok && stderr.contains("--foot-lock: the skeleton of") && stderr.contains("has no foot joint"),
+        "{stdout}\n{stderr}"
+    );
+    assert!(!nolock.exists());
     let rebuilt = dir.path().join("r.bvh");
     let (ok, stdout, stderr) = run(&["decompress", "--model", run_dir, a, "--out", rebuilt.to_str().unwrap()]);
     assert!(ok, "{stdout}\n{stderr}");

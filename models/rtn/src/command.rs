@@ -212,6 +212,14 @@ pub fn run(a: &TransitionOptions, p: &dyn Progress) -> RtnResult<String> {
     let ca = clip_io::read_model_clip_with(&pa, &opts).map_err(Message::new)?;
     let cb = clip_io::read_model_clip_with(&pb, &opts).map_err(Message::new)?;
     let (ca, mut cb, rig_back) = map_rig(a, ca, cb)?;
+    if a.foot_lock && zoo_motion::footlock::FootLock::from_skeleton(&ca.skeleton.names, &ca.skeleton.parents).is_none()
+    {
+        bail!(
+            "--foot-lock: the skeleton of {} has no foot joint (a joint named like `foot` with a parent and a \
+             grandparent), so there is nothing to lock; drop --foot-lock, or rename the ankles (e.g. LeftFoot)",
+            pa.display()
+        );
+    }
     // On terrain both clips stand in the heightmap's world frame: the target stays on its
     // ground instead of being moved to where the source's last speed would take it.
     let inputs = match a.heightmap {
