@@ -116,7 +116,14 @@ pub fn write(map: &Heightmap, path: &Path) -> Result<(), TerrainFileError> {
     zoo_motion::atomic::write(path, text).map_err(io_err(path))
 }
 
-/// Reads a heightmap written by [`write`] (give the `.json` header).
+/// The largest sample spacing of a heightmap file, clip units (10 km in cm).
+pub const MAX_CELL: f64 = 1e6;
+/// The most samples of a heightmap file (1 GB of heights).
+pub const MAX_SAMPLES: usize = 1 << 28;
+
+/// Reads a heightmap written by [`write`] (give the `.json` header): the cell, origin and
+/// heights range-checked (finite, a positive cell of at most [`MAX_CELL`], at most
+/// [`MAX_SAMPLES`] samples).
 pub fn read(path: &Path) -> Result<Heightmap, TerrainFileError> {
     let text = std::fs::read_to_string(path).map_err(io_err(path))?;
     let header: Header = serde_json::from_str(&text)
@@ -130,9 +137,24 @@ pub fn read(path: &Path) -> Result<Heightmap, TerrainFileError> {
             ),
         });
     }
+    let bad = |message: String| TerrainFileError::Header { path: path.to_path_buf(), message };
+    // Range checks like the command line's: a cell of 0 or NaN makes every lookup NaN or
+    // infinite, a huge grid asks for terabytes.
+    if !(header.cell.is_finite() && header.cell > 0.0 && header.cell <= MAX_CELL) {
+        return Err(bad(format!(
+            "`cell` is {}; give the sample spacing in clip units, in (0, {MAX_CELL}]",
+            header.cell
+        )));
+    }
+    if !(header.origin_x.is_finite() && header.origin_z.is_finite()) {
+        return Err(bad(format!("the origin ({}, {}) is not finite", header.origin_x, header.origin_z)));
+    }
+    let expected =
+        header.nx.checked_mul(header.nz).filter(|n| *n <= MAX_SAMPLES).map(|n| n * 4).ok_or_else(|| {
+            bad(format!("{} x {} samples: at most {MAX_SAMPLES} samples in all", header.nx, header.nz))
+        })?;
     let data_path = path.with_file_name(&header.data);
     let bytes = std::fs::read(&data_path).map_err(io_err(&data_path))?;
-    let expected = header.nx * header.nz * 4;
     if bytes.len() != expected || expected == 0 {
         return Err(TerrainFileError::Size {
             path: data_path,
@@ -142,7 +164,18 @@ pub fn read(path: &Path) -> Result<Heightmap, TerrainFileError> {
             nz: header.nz,
         });
     }
-    let heights = bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+    let heights: Vec<f32> = bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+    if let Some(i) = heights.iter().position(|h| !h.is_finite()) {
+        return Err(TerrainFileError::Header {
+            path: data_path,
+            message: format!(
+                "height {i} (column {}, row {}) is {}; every height must be a finite number",
+                i % header.nx,
+                i / header.nx,
+                heights[i]
+            ),
+        });
+    }
     Ok(Heightmap {
         cols: header.nx,
         rows: header.nz,
@@ -177,6 +210,31 @@ mod tests {
         let path = dir.path().join("t.json");
         write(&map, &path).unwrap();
         assert_eq!(read(&path).unwrap(), map);
+    }
+
+    #[test]
+    fn bad_cells_grids_and_heights_are_refused_with_the_range() {
+        let dir = tempfile::tempdir().unwrap();
+        let map = Heightmap::flat_area(0.0, 0.0, 20.0, 10.0, 10.0, 1.0);
+        let path = dir.path().join("t.json");
+        write(&map, &path).unwrap();
+        let header = std::fs::read_to_string(&path).unwrap();
+        let with = |from: &str, to: &str| {
+            let p = dir.path().join("bad.json");
+            let text = header.replace(from, to);
+            assert_ne!(text, header, "{from}");
+            std::fs::write(&p, text).unwrap();
+            read(&p).unwrap_err().to_string()
+        };
+        for cell in ["0.0", "-10.0", "1e300"] {
+            assert!(with("\"cell\": 10.0", &format!("\"cell\": {cell}")).contains("give the sample spacing"), "{cell}");
+        }
+        assert!(with("\"nx\": 3", "\"nx\": 18446744073709551615").contains("at most 268435456 samples"));
+        let mut heights = vec![0u8; 24];
+        heights[8..12].copy_from_slice(&f32::NAN.to_le_bytes());
+        std::fs::write(path.with_extension("f32"), heights).unwrap();
+        let e = read(&path).unwrap_err().to_string();
+        assert!(e.contains("height 2 (column 2, row 0) is NaN"), "{e}");
     }
 
     #[test]
