@@ -203,10 +203,11 @@ fn parse_file(text: &str) -> Result<KeysFile, String> {
     {
         return Err(format!("keys file version {v} is not known to this zoo (it reads version 1): update zoo"));
     }
+    // The command line's range of frame rates (`zoo complete --fps`): 1e-30 or 1e30 fps is a typo.
     if let Some(fps) = file.fps
-        && !(fps.is_finite() && fps > 0.0)
+        && !(1.0..=1000.0).contains(&fps)
     {
-        return Err(format!("fps {fps} must be a positive number"));
+        return Err(format!("fps {fps} is outside the valid range [1, 1000] frames per second"));
     }
     let n = file.keys.len();
     if n < 2 {
@@ -623,6 +624,18 @@ mod tests {
             "keys": [{"frame": 5, "pose": [0, 0.02, 0, 0.5, -1.1, -1.2]}, {"frame": 29, "pose": [0.4, 0.02, 0, 0.5, -1.1, -1.2]}]}"#;
         let k = parse_keys(text, &names()).unwrap();
         assert_eq!((k.frames, k.offset, k.fps), (vec![0, 24], 5, Some(30.0)));
+    }
+
+    #[test]
+    fn a_keys_files_frame_rate_outside_the_command_lines_range_is_refused() {
+        for fps in ["1e-30", "1e30", "0", "-30"] {
+            let text = format!(
+                r#"{{"format": "zoo-arnn-keys", "version": 1, "fps": {fps},
+                "keys": [{{"frame": 0, "pose": [0, 0.02, 0, 0.5, -1.1, -1.2]}}, {{"frame": 9, "pose": [0, 0.02, 0, 0.5, -1.1, -1.2]}}]}}"#
+            );
+            let e = parse_keys(&text, &names()).unwrap_err();
+            assert!(e.contains("is outside the valid range [1, 1000] frames per second"), "{fps}: {e}");
+        }
     }
 
     #[test]
