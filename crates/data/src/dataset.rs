@@ -316,9 +316,18 @@ pub fn load_with(path: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> 
     for (what, n) in sources {
         out.notices.push(format!("{n} clip(s) read from {what}"));
     }
-    let Some(reference) = reference_clip(&clips) else {
+    let Some((reference, shared, pool)) = reference_clip(&clips) else {
         return Err(DataError::AllSkipped { path: path.to_path_buf(), skipped: out.skipped.len() });
     };
+    if shared < pool {
+        out.notices.push(format!(
+            "the clips disagree on the skeleton or the frame rate: the reference is what most share, {shared} of \
+             {pool} clips ({}: {} joints, {:.2} fps); the others are checked against it",
+            clips[reference].path.display(),
+            clips[reference].clip.joints(),
+            clips[reference].clip.fps()
+        ));
+    }
     let (first, first_skeleton, first_fps) =
         (clips[reference].path.clone(), clips[reference].clip.skeleton.clone(), clips[reference].clip.fps());
     for mut c in clips {
@@ -365,17 +374,23 @@ pub fn load_with(path: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> 
 
 /// The clip whose skeleton and frame rate the others must have: among the clips without a
 /// moving dummy root (its dummy was dropped, or it never had one; all clips when every one has
-/// it), the first of those whose hierarchy most clips share.
-fn reference_clip(clips: &[NamedClip]) -> Option<usize> {
+/// it), the first of those whose hierarchy and frame rate most clips share (a stray clip that
+/// sorts first does not make the others invalid). Returns it, how many clips share it and how
+/// many voted.
+fn reference_clip(clips: &[NamedClip]) -> Option<(usize, usize, usize)> {
     let plain: Vec<usize> = (0..clips.len()).filter(|&i| !has_dummy_shaped_root(&clips[i].clip)).collect();
     let pool = if plain.is_empty() { (0..clips.len()).collect() } else { plain };
-    let key = |i: usize| (&clips[i].clip.skeleton.names, &clips[i].clip.skeleton.parents);
+    let key = |i: usize| {
+        let c = &clips[i].clip;
+        (&c.skeleton.names, &c.skeleton.parents, (c.fps() / FPS_TOLERANCE).round() as i64)
+    };
     let mut votes = std::collections::HashMap::new();
     for &i in &pool {
         *votes.entry(key(i)).or_insert(0usize) += 1;
     }
     // max_by_key keeps the last of equal maxima: scan in reverse to keep the first.
-    pool.iter().rev().copied().max_by_key(|&i| votes[&key(i)])
+    let best = pool.iter().rev().copied().max_by_key(|&i| votes[&key(i)])?;
+    Some((best, votes[&key(best)], pool.len()))
 }
 
 /// Whether the root is shaped like a dummy root: one child and a zero offset (it was kept
@@ -666,6 +681,21 @@ mod tests {
         std::fs::write(alone.path().join("b_moving.bvh"), &moving).unwrap();
         let d = load_with(alone.path(), &LoadOptions::default()).unwrap();
         assert_eq!((d.clips[0].clip.joints(), d.notices.len()), (4, 0));
+    }
+
+    #[test]
+    fn the_reference_is_what_most_clips_share_and_a_stray_clip_is_the_one_left_out() {
+        let dir = tempfile::tempdir().unwrap();
+        let still = dummy_rooted("0 0 0 0 0 0");
+        // Sorts first, at another frame rate: the two others must not be the invalid ones.
+        std::fs::write(dir.path().join("a_stray.bvh"), still.replace("0.0333333", "0.0166667")).unwrap();
+        std::fs::write(dir.path().join("b.bvh"), &still).unwrap();
+        std::fs::write(dir.path().join("c.bvh"), &still).unwrap();
+        let d = load_with(dir.path(), &LoadOptions { skip_invalid: true, ..LoadOptions::default() }).unwrap();
+        let names: Vec<&str> = d.clips.iter().map(|c| c.name.as_str()).collect();
+        assert_eq!(names, ["b.bvh", "c.bvh"]);
+        assert!(d.skipped.len() == 1 && d.skipped[0].path.ends_with("a_stray.bvh"), "{:?}", d.skipped);
+        assert!(d.notices.iter().any(|n| n.contains("what most share, 2 of 3 clips")), "{:?}", d.notices);
     }
 
     #[test]
