@@ -276,15 +276,14 @@ pub struct ControlledCharacter {
     /// Ground position x, z of the root after the plan (clip units).
     end_pos: [f64; 2],
     /// Candidates: generator states, current frames (`K D`), frames so far (`K n D`), prior
-    /// costs, summed ground distances (clip units), yaws after their frames, ground positions
-    /// after their frames (`K`) and after each of their frames (`K n`).
+    /// costs, summed ground distances (clip units), yaws after their frames; scratch for one
+    /// candidate's ground positions after each of its frames (`n`, see [`ControlRunner::ground_track`]).
     states: Vec<MotionState>,
     x: Vec<f32>,
     frames: Vec<f32>,
     prior: Vec<f64>,
     distance: Vec<f64>,
     yaw: Vec<f64>,
-    pos: Vec<[f64; 2]>,
     ground: Vec<[f64; 2]>,
     /// Frames the candidates have rolled out.
     rolled: usize,
@@ -325,8 +324,7 @@ impl ControlledCharacter {
             prior: vec![0.0; k],
             distance: vec![0.0; k],
             yaw: vec![0.0; k],
-            pos: vec![[0.0; 2]; k],
-            ground: vec![[0.0; 2]; k * n],
+            ground: vec![[0.0; 2]; n],
             rolled: 0,
             last: None,
             played_total: 0,
@@ -414,7 +412,6 @@ impl ControlledCharacter {
         self.prior.fill(0.0);
         self.distance.fill(0.0);
         self.yaw.fill(self.end_yaw);
-        self.pos.fill(self.end_pos);
         self.rolled = 0;
     }
 }
@@ -592,17 +589,29 @@ impl ControlRunner {
             ch.prior[c] += mixture_nll(w, mu, sd, x);
             let v = |i: usize| (x[i] * std[i] + mean[i]) as f64;
             ch.distance[c] += v(0).hypot(v(1));
-            // The ground step turned by the yaw before the frame, as `decode_frame` places it.
-            let (sin, cos) = ch.yaw[c].sin_cos();
-            let p = &mut ch.pos[c];
-            *p = [p[0] + v(0) * cos + v(1) * sin, p[1] - v(0) * sin + v(1) * cos];
-            ch.ground[c * n + t] = *p;
             ch.yaw[c] += v(2);
             let at = (c * n + t) * d;
             ch.frames[at..at + d].copy_from_slice(x);
         }
         ch.rolled += 1;
         Ok(())
+    }
+
+    /// The ground position of candidate `c`'s root after each of its frames, into `ch.ground`:
+    /// from the plan's end, each step turned by the yaw before its frame, as `decode_frame`
+    /// places it (only a path goal and the plan's end need it; rolling out does not).
+    fn ground_track(&self, ch: &mut ControlledCharacter, c: usize) {
+        let (d, n) = (ch.d, ch.settings.batch);
+        let (mean, std) = (&self.model.mean, &self.model.std);
+        let (mut p, mut yaw) = (ch.end_pos, ch.end_yaw);
+        for t in 0..n {
+            let x = &ch.frames[(c * n + t) * d..];
+            let v = |i: usize| (x[i] * std[i] + mean[i]) as f64;
+            let (sin, cos) = yaw.sin_cos();
+            p = [p[0] + v(0) * cos + v(1) * sin, p[1] - v(0) * sin + v(1) * cos];
+            ch.ground[t] = p;
+            yaw += v(2);
+        }
     }
 
     /// Makes the candidate of least cost under `goal` the plan and restarts the candidates
@@ -619,7 +628,10 @@ impl ControlRunner {
                     (wrap(ch.yaw[c] - control.heading as f64) / sigma_heading).powi(2),
                     0.0,
                 ),
-                Goal::Path(path) => path.costs(&ch.ground[c * n..(c + 1) * n], ch.yaw[c], n as f64 / ch.fps),
+                Goal::Path(path) => {
+                    self.ground_track(ch, c);
+                    path.costs(&ch.ground, ch.yaw[c], n as f64 / ch.fps)
+                }
             };
             let [speed_offset, turn_offset, side_offset] = ch.offsets[c];
             let candidate = ControlSelection {
@@ -645,8 +657,9 @@ impl ControlRunner {
         ch.plan.copy_from_slice(&ch.frames[c * n * d..(c + 1) * n * d]);
         copy_state(&mut ch.end_state, &ch.states[c]);
         ch.end_x.copy_from_slice(&ch.plan[(n - 1) * d..]);
+        self.ground_track(ch, c);
+        ch.end_pos = ch.ground[n - 1];
         ch.end_yaw = ch.yaw[c];
-        ch.end_pos = ch.ground[c * n + n - 1];
         if let Goal::Path(path) = goal {
             path.advance(ch.end_pos);
         }

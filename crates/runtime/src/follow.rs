@@ -183,11 +183,10 @@ impl PathGoal {
     fn project(&self, p: [f64; 2]) -> (f64, f64) {
         let (from, to) = (self.progress - self.speed, self.progress + 4.0 * self.speed);
         let mut best = (self.progress, f64::INFINITY);
-        for i in 0..self.points.len() - 1 {
-            let last = i + 2 == self.points.len();
-            if self.lengths[i + 1] < from && !last {
-                continue;
-            }
+        let segments = self.points.len() - 1;
+        // The first segment that reaches `from` (the last one at least: it runs on past the end).
+        let first = self.lengths[1..].partition_point(|&l| l < from).min(segments - 1);
+        for i in first..segments {
             if self.lengths[i] > to {
                 break;
             }
