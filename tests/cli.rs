@@ -2,7 +2,7 @@
 
 use std::process::Command;
 use zoo_data::bvh;
-use zoo_tests::{toy_clip, zoo_bin};
+use zoo_tests::{toy_clip, under_dummy_root, zoo_bin};
 
 fn toy_dataset(dir: &std::path::Path) {
     for (i, style) in ["normal", "normal", "youthful", "active"].iter().enumerate() {
@@ -421,30 +421,6 @@ fn skip_invalid_leaves_out_unreadable_and_foreign_clips_and_says_why() {
     assert!(stderr.contains("skipped 2 of 6 clips"), "{stderr}");
     assert!(stderr.contains("broken.bvh:") && stderr.contains("other_rig.bvh: skeleton differs"), "{stderr}");
     assert!(stdout.contains("clips      4"), "{stdout}");
-}
-
-/// The toy clip under a bandai2-style dummy root `joint_Root` (zero offset, six channels),
-/// whose channels are zero, or carry a translation and a yaw when `moving`.
-fn under_dummy_root(clip: &zoo_motion::Clip, moving: bool) -> String {
-    let text = bvh::to_string(clip);
-    let (head, motion) = text.split_once("MOTION\n").unwrap();
-    let body = head.strip_prefix("HIERARCHY\nROOT ").unwrap();
-    let mut out = String::from(
-        "HIERARCHY\nROOT joint_Root\n{\n\tOFFSET 0 0 0\n\tCHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n\tJOINT ",
-    );
-    out.push_str(body);
-    out.push_str("}\nMOTION\n");
-    for (i, line) in motion.lines().enumerate() {
-        if i < 2 {
-            out.push_str(line);
-        } else if moving {
-            out.push_str(&format!("{} 0 -7 0 0 {} {line}", 3.0 + i as f64, 20.0 + i as f64));
-        } else {
-            out.push_str(&format!("0 0 0 0 0 0 {line}"));
-        }
-        out.push('\n');
-    }
-    out
 }
 
 #[test]

@@ -159,7 +159,11 @@ fn every_numeric_option_of_every_subcommand_refuses_bad_values_with_its_range() 
         (with(&ge, ["--temperature", "-1"]), "--temperature <TEMPERATURE>", "valid range [0, 100]"),
         (with(&ge, ["--init-steps", "10001"]), "--init-steps <INIT_STEPS>", "valid range 0..=10000"),
         (with(&bsy, ["--sequences", "0"]), "--sequences <SEQUENCES>", "valid range 1..=100000"),
-        (with(&bsy, ["--seconds", "1e9"]), "--seconds <SECONDS>", "valid range (0, 360000]"),
+        (
+            with(&bsy, ["--seconds", "1e9"]),
+            "--seconds <SECONDS>",
+            "valid range (0, 3600]: the benchmark holds each sequence whole",
+        ),
         (with(&bsy, ["--seed", "x"]), "--seed <SEED>", "not a seed"),
         (with(&bsy, ["--temperature", "101"]), "--temperature <TEMPERATURE>", "valid range [0, 100]"),
         (with(&bsy, ["--range-margin", "11"]), "--range-margin <RANGE_MARGIN>", "valid range [0, 10]"),
@@ -451,4 +455,93 @@ fn overwrite_locks_and_interrupted_writes_never_lose_a_run() {
     assert!(ok, "{stderr}");
     assert!(stdout.contains("the new run finished its first epoch; the old run is deleted"), "{stdout}");
     assert!(!run.join(zoo_nn::run_folder::ASIDE_DIR).exists());
+}
+
+/// Class 4: `--resume DIR` continues with the options the run was started with (recorded in its
+/// folder): the docs' `zoo train rtn --resume runs/rtn-b2 --epochs 500` runs as written, with
+/// no data option repeated; an option given with another value than the run's (here `--lr`,
+/// `--batch-size`, the data) is refused with both values instead of being ignored.
+#[test]
+fn resume_keeps_the_runs_options_and_refuses_others() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let s = run.to_str().unwrap();
+    let mut args = tiny_rtn("--out", s, "1");
+    args.extend(["--lr", "0.002", "--batch-size", "8"]);
+    let (ok, _, stderr) = zoo(&args);
+    assert!(ok, "{stderr}");
+    let recorded = std::fs::read_to_string(run.join(zoo_nn::run_folder::COMMAND_FILE)).unwrap();
+    assert!(recorded.contains("\"synth-minutes\"") && recorded.contains("\"0.002\""), "{recorded}");
+    let state = std::fs::read(run.join("train_state.json")).unwrap();
+    for (flag, value, was) in [
+        ("--lr", "0.01", "--lr 0.002"),
+        ("--batch-size", "16", "--batch-size 8"),
+        ("--synth-minutes", "1", "--synth-minutes 0.5"),
+    ] {
+        let (ok, _, stderr) = zoo(&["train", "rtn", "--resume", s, "--epochs", "2", flag, value]);
+        assert!(!ok && stderr.contains(&format!("{flag} {value}: the run in {s} was started with {was}")), "{stderr}");
+        assert!(stderr.contains("a resumed run keeps the options it was started with"), "{stderr}");
+    }
+    assert_eq!(std::fs::read(run.join("train_state.json")).unwrap(), state, "a refused resume changed the run");
+    // As the docs write it: the folder and the new total only (and the same values are fine).
+    let (ok, stdout, stderr) = zoo(&["train", "rtn", "--resume", s, "--epochs", "2"]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("epoch   2:") && !stdout.contains("epoch   1:"), "{stdout}");
+    let (ok, stdout, stderr) = zoo(&["train", "rtn", "--resume", s, "--epochs", "3", "--lr", "2e-3", "--seed", "5"]);
+    assert!(ok && stdout.contains("epoch   3:"), "{stderr}");
+    let docs =
+        std::fs::read_to_string(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/rtn.md")).unwrap();
+    assert!(docs.contains("zoo train rtn --resume runs/rtn-b2 --epochs 500"), "the docs' resume example changed");
+}
+
+/// The README's commands run as written: every `zoo ...` line of its shell blocks, with its
+/// data folders (bandai2, LaFAN1, your own capture) replaced by one minute of synthetic clips
+/// named so that the line's globs choose some, and `runs/rtn` by a tiny model; the main job
+/// (`cargo run --release --bin zoo -- train rtn`) runs with tiny settings added.
+#[test]
+fn the_readmes_commands_run_as_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let (ok, _, stderr) = zoo(&["data", "synth", "--out", data.to_str().unwrap(), "--minutes", "1", "--seed", "2"]);
+    assert!(ok, "{stderr}");
+    let mut clips: Vec<_> = std::fs::read_dir(&data).unwrap().map(|e| e.unwrap().path()).collect();
+    clips.retain(|p| p.extension().is_some_and(|e| e == "bvh"));
+    clips.sort();
+    for (i, c) in clips.iter().enumerate().filter(|(i, _)| i % 3 == 2) {
+        std::fs::rename(c, data.join(format!("clip_youthful_subject5_{i}.bvh"))).unwrap();
+    }
+    let run = dir.path().join("runs/rtn");
+    let readme =
+        std::fs::read_to_string(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../README.md")).unwrap();
+    let mut blocks = readme.split("```");
+    blocks.next();
+    let lines: Vec<String> = blocks
+        .step_by(2)
+        .filter_map(|b| b.strip_prefix("sh\n"))
+        .flat_map(|b| b.lines())
+        .map(|l| l.split(" #").next().unwrap().trim().to_string())
+        .filter(|l| l.starts_with("zoo ") || l.starts_with("cargo run"))
+        .collect();
+    assert!(lines.len() >= 4, "{lines:?}");
+    // The main job first: it makes the model the others use.
+    let main = lines.iter().find(|l| l.starts_with("cargo run")).expect("the README's main job");
+    let words = main.split_once(" -- ").unwrap().1;
+    let mut args: Vec<&str> = words.split_whitespace().collect();
+    args.extend(["--preset", "tiny", "--synth-minutes", "0.5", "--epochs", "1", "--out", run.to_str().unwrap()]);
+    let (ok, _, stderr) = zoo(&args);
+    assert!(ok, "{main}: {stderr}");
+    let d = data.to_str().unwrap();
+    for line in lines.iter().filter(|l| l.starts_with("zoo ")) {
+        let line = line
+            .replace("../shared/data/bandai2", d)
+            .replace("~/data/lafan1", d)
+            .replace("~/mocap/train", d)
+            .replace("~/mocap/heldout", d)
+            .replace("runs/rtn", run.to_str().unwrap())
+            .replace("out.json", dir.path().join("out.json").to_str().unwrap());
+        let args: Vec<String> = line[4..].split_whitespace().map(|w| w.trim_matches('\'').to_string()).collect();
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let (ok, _, stderr) = zoo(&args);
+        assert!(ok, "`{line}` failed: {stderr}");
+    }
 }

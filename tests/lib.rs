@@ -266,3 +266,27 @@ pub mod capi {
         exe
     }
 }
+
+/// The toy clip under a bandai2-style dummy root `joint_Root` (zero offset, six channels),
+/// whose channels are zero, or carry a translation and a yaw when `moving`.
+pub fn under_dummy_root(clip: &Clip, moving: bool) -> String {
+    let text = zoo_data::bvh::to_string(clip);
+    let (head, motion) = text.split_once("MOTION\n").unwrap();
+    let body = head.strip_prefix("HIERARCHY\nROOT ").unwrap();
+    let mut out = String::from(
+        "HIERARCHY\nROOT joint_Root\n{\n\tOFFSET 0 0 0\n\tCHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n\tJOINT ",
+    );
+    out.push_str(body);
+    out.push_str("}\nMOTION\n");
+    for (i, line) in motion.lines().enumerate() {
+        if i < 2 {
+            out.push_str(line);
+        } else if moving {
+            out.push_str(&format!("{} 0 -7 0 0 {} {line}", 3.0 + i as f64, 20.0 + i as f64));
+        } else {
+            out.push_str(&format!("0 0 0 0 0 0 {line}"));
+        }
+        out.push('\n');
+    }
+    out
+}

@@ -275,6 +275,18 @@ pub fn duration_seconds(s: &str) -> Result<f64, String> {
     real_in(s, Interval::above(0.0, MAX_SYNTHESIS_SECONDS), "seconds")
 }
 
+/// The longest sequence `zoo bench synthesis` measures, seconds (1 hour): unlike `zoo generate`
+/// it holds each sequence whole while measuring it (about 9 KB per frame of a 22-joint skeleton,
+/// so about 1 GB per worker thread at this limit).
+pub const MAX_BENCH_SYNTHESIS_SECONDS: f64 = 3600.0;
+
+/// The length of one benchmarked sequence in seconds, `(0, MAX_BENCH_SYNTHESIS_SECONDS]`.
+pub fn bench_sequence_seconds(s: &str) -> Result<f64, String> {
+    real_in(s, Interval::above(0.0, MAX_BENCH_SYNTHESIS_SECONDS), "seconds").map_err(|e| {
+        format!("{e}: the benchmark holds each sequence whole while it measures it; measure more sequences instead")
+    })
+}
+
 /// A sampling temperature, `[0, MAX_TEMPERATURE]` (0: the most likely component's mean).
 pub fn temperature(s: &str) -> Result<f64, String> {
     real_in(s, Interval::closed(0.0, MAX_TEMPERATURE), "")
@@ -455,6 +467,17 @@ mod tests {
             clip_frame("b.bvh:18446744073709551615").unwrap_err(),
             "frame 18446744073709551615 is outside the valid range 0..=10000000 (must be <= 10000000)"
         );
+    }
+
+    #[test]
+    fn a_benchmarked_sequence_is_at_most_an_hour_and_says_why() {
+        assert_eq!(bench_sequence_seconds("3600"), Ok(3600.0));
+        let e = bench_sequence_seconds("3601").unwrap_err();
+        assert!(
+            e.contains("3601 seconds is outside the valid range (0, 3600]") && e.contains("holds each sequence whole"),
+            "{e}"
+        );
+        assert_eq!(duration_seconds("3601"), Ok(3601.0));
     }
 
     #[test]

@@ -128,8 +128,37 @@ fn main() -> anyhow::Result<()> {
         default_hook(info)
     }));
     training_environment();
-    let cli = Cli::parse();
-    let result = match cli.command {
+    let result = parse().and_then(run);
+    // A training that failed puts back the run its --overwrite kept aside; locks are released.
+    zoo_nn::run_folder::end_of_command(result.is_ok());
+    result
+}
+
+/// The command line; `zoo train ... --resume DIR` with the options the run was started with
+/// (`cmd::train_resume`).
+fn parse() -> anyhow::Result<Cli> {
+    use clap::{CommandFactory, FromArgMatches};
+    let matches = Cli::command().get_matches();
+    let mut cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    let (Some(train), Some(def)) =
+        (matches.subcommand_matches("train"), Cli::command().find_subcommand("train").cloned())
+    else {
+        return Ok(cli);
+    };
+    match cmd::train_resume::resolve(train, &def)? {
+        cmd::train_resume::Resolved::Fresh(command) => {
+            if let Command::Train(t) = &mut cli.command {
+                t.record(command);
+            }
+        }
+        cmd::train_resume::Resolved::Resume(argv) => cli = Cli::try_parse_from(argv)?,
+        cmd::train_resume::Resolved::AsGiven => {}
+    }
+    Ok(cli)
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
         Command::Data(c) => cmd::data::run(c),
         Command::Bench(a) => cmd::bench::run(a),
         Command::Train(c) => cmd::train::run(c),
@@ -145,8 +174,5 @@ fn main() -> anyhow::Result<()> {
         Command::BenchSynthesis(a) => cmd::bench_synthesis::run(a),
         Command::Complete(a) => cmd::complete::run(a),
         Command::EvalArnn(a) => cmd::eval_arnn::run(a),
-    };
-    // A training that failed puts back the run its --overwrite kept aside; locks are released.
-    zoo_nn::run_folder::end_of_command(result.is_ok());
-    result
+    }
 }

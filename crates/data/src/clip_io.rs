@@ -201,6 +201,65 @@ pub fn read_model_clip_with(path: &Path, opts: &ReadOptions) -> Result<Clip, Cli
     Ok(clip)
 }
 
+/// How [`conform`] brought a clip to the skeleton a command needs.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Conformed {
+    /// The clip was on it already.
+    AsIs,
+    /// The same joints (names and parents) in another order, put in the skeleton's order.
+    Reordered,
+    /// A dummy root that carries motion was folded into its child; the sentence says so.
+    Folded(String),
+}
+
+/// The one rule by which every command brings a clip it has read to the skeleton it needs (a
+/// model's, or a dataset's reference clip's): `fits` says whether a skeleton is that one, and
+/// `reference` gives its joint names when they are known. A clip that fits is taken as it is; one
+/// with the same joints in another order (an FBX or glTF exporter's order) is reordered; one whose
+/// dummy-shaped root (one child, zero offset, like bandai2's `joint_Root`) carries motion is
+/// folded into its child (the same global motion, see `Clip::drop_root`) when that makes it fit.
+/// Returns `None`, leaving the clip as it was, when none of these makes it fit: the caller
+/// refuses it with the difference.
+pub fn conform(
+    clip: &mut Clip,
+    fits: &dyn Fn(&zoo_motion::Skeleton) -> bool,
+    reference: Option<&zoo_motion::Skeleton>,
+) -> Option<Conformed> {
+    if fits(&clip.skeleton) {
+        return Some(Conformed::AsIs);
+    }
+    if let Some(reordered) = reference.and_then(|r| crate::retarget::reorder_like(clip, r))
+        && fits(&reordered.skeleton)
+    {
+        *clip = reordered;
+        return Some(Conformed::Reordered);
+    }
+    if has_dummy_shaped_root(clip) {
+        let mut folded = clip.clone();
+        let dummy = folded.skeleton.names[0].clone();
+        if folded.drop_root() && fits(&folded.skeleton) {
+            let into = folded.skeleton.names[0].clone();
+            *clip = folded;
+            return Some(Conformed::Folded(format!(
+                "its dummy root `{dummy}` carries motion; folded into `{into}` (the same global motion)"
+            )));
+        }
+    }
+    None
+}
+
+/// [`conform`] to a known skeleton (same joint names and parents).
+pub fn conform_to(clip: &mut Clip, skeleton: &zoo_motion::Skeleton) -> Option<Conformed> {
+    conform(clip, &|s| skeleton.topology_difference(s).is_none(), Some(skeleton))
+}
+
+/// Whether the root is shaped like a dummy root: one child and a zero offset (a reader keeps
+/// it when its channels carry motion).
+pub fn has_dummy_shaped_root(clip: &Clip) -> bool {
+    let s = &clip.skeleton;
+    s.len() >= 2 && s.offsets[0] == zoo_motion::glam::DVec3::ZERO && s.children(0) == [1]
+}
+
 /// Writes a clip (in zoo's frame) in the format its name says: `.bvh` / `.bvh.gz` (BVH) or
 /// `.glb` / `.gltf` (glTF 2.0 in metres, with a skin and a stick-figure mesh). The file is
 /// written to a temporary name and renamed into place.

@@ -331,26 +331,14 @@ pub fn load_with(path: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> 
     let (first, first_skeleton, first_fps) =
         (clips[reference].path.clone(), clips[reference].clip.skeleton.clone(), clips[reference].clip.fps());
     for mut c in clips {
-        let mut why = first_skeleton.topology_difference(&c.clip.skeleton);
-        if why.is_some()
-            && let Some(reordered) = crate::retarget::reorder_like(&c.clip, &first_skeleton)
-        {
-            c.clip = reordered;
-            why = None;
-        }
-        if why.is_some() && has_dummy_shaped_root(&c.clip) {
-            let mut folded = c.clip.clone();
-            let dummy = folded.skeleton.names[0].clone();
-            if folded.drop_root() && first_skeleton.topology_difference(&folded.skeleton).is_none() {
-                out.notices.push(format!(
-                    "{}: its dummy root `{dummy}` carries motion; folded into `{}` (the same global motion)",
-                    c.path.display(),
-                    folded.skeleton.names[0]
-                ));
-                c.clip = folded;
-                why = None;
+        let why = match clip_io::conform_to(&mut c.clip, &first_skeleton) {
+            Some(clip_io::Conformed::Folded(how)) => {
+                out.notices.push(format!("{}: {how}", c.path.display()));
+                None
             }
-        }
+            Some(_) => None,
+            None => first_skeleton.topology_difference(&c.clip.skeleton),
+        };
         let err = match why {
             Some(why) => Some(DataError::Skeleton { path: c.path.clone(), first: first.clone(), why }),
             None if (c.clip.fps() - first_fps).abs() > FPS_TOLERANCE => {
@@ -378,7 +366,7 @@ pub fn load_with(path: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> 
 /// sorts first does not make the others invalid). Returns it, how many clips share it and how
 /// many voted.
 fn reference_clip(clips: &[NamedClip]) -> Option<(usize, usize, usize)> {
-    let plain: Vec<usize> = (0..clips.len()).filter(|&i| !has_dummy_shaped_root(&clips[i].clip)).collect();
+    let plain: Vec<usize> = (0..clips.len()).filter(|&i| !clip_io::has_dummy_shaped_root(&clips[i].clip)).collect();
     let pool = if plain.is_empty() { (0..clips.len()).collect() } else { plain };
     let key = |i: usize| {
         let c = &clips[i].clip;
@@ -391,13 +379,6 @@ fn reference_clip(clips: &[NamedClip]) -> Option<(usize, usize, usize)> {
     // max_by_key keeps the last of equal maxima: scan in reverse to keep the first.
     let best = pool.iter().rev().copied().max_by_key(|&i| votes[&key(i)])?;
     Some((best, votes[&key(best)], pool.len()))
-}
-
-/// Whether the root is shaped like a dummy root: one child and a zero offset (it was kept
-/// because its channels carry motion).
-fn has_dummy_shaped_root(clip: &Clip) -> bool {
-    let s = &clip.skeleton;
-    s.len() >= 2 && s.offsets[0] == DVec3::ZERO && s.children(0) == [1]
 }
 
 /// Errors unless every clip has the first clip's joint names and parents.

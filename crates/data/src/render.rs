@@ -49,6 +49,9 @@ struct View {
     left: DVec3,
 }
 
+/// The most grid lines of one direction in a view (one every 50 cm).
+const MAX_GRID_LINES: usize = 1000;
+
 fn ground(t: &Option<Heightmap>, x: f64, z: f64) -> f64 {
     t.as_ref().map_or(0.0, |t| t.height(x, z))
 }
@@ -229,11 +232,9 @@ fn draw_side(side: &mut Pixmap, fr: &Frame, side_h: f32, side_scale: f64) {
     // grid ticks every 50 cm along the travel direction
     let s0 = root.dot(view.dir);
     let half = (w as f64 * 0.5) / side_scale;
-    let mut s = ((s0 - half) / 50.0).floor() * 50.0;
-    while s <= s0 + half {
+    for s in zoo_motion::ticks::multiples(s0 - half, s0 + half, 50.0, MAX_GRID_LINES) {
         let x = cx + ((s - s0) * side_scale) as f32;
         line(side, (x, y0), (x, y0 + side_h), rgb(GRID), 1.0);
-        s += 50.0;
     }
     // terrain profile along the line through the root
     let steps = (w / 4.0) as usize;
@@ -296,12 +297,10 @@ fn draw_top(topv: &mut Pixmap, fr: &Frame, th: f32, top_scale: f64) {
     for axis in [DVec3::X, DVec3::Z] {
         let other = if axis == DVec3::X { DVec3::Z } else { DVec3::X };
         let c0 = root.dot(axis);
-        let mut s = ((c0 - half_t) / 50.0).floor() * 50.0;
-        while s <= c0 + half_t {
+        for s in zoo_motion::ticks::multiples(c0 - half_t, c0 + half_t, 50.0, MAX_GRID_LINES) {
             let a = axis * s + other * (root.dot(other) - half_t);
             let b = axis * s + other * (root.dot(other) + half_t);
             line(topv, tx(a), tx(b), rgb(GRID), 1.0);
-            s += 50.0;
         }
     }
     for (ci, c) in clips.iter().enumerate() {

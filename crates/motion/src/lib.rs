@@ -32,6 +32,7 @@ pub mod rng;
 pub mod skeleton;
 pub mod stitch;
 pub mod terrain;
+pub mod ticks;
 
 pub use clip::Clip;
 pub use euler::EulerOrder;

@@ -206,7 +206,7 @@ pub fn transition_inputs_in_place(
 }
 
 /// Refuses clips and frames a transition cannot be made from.
-fn check_transition(
+pub fn check_transition(
     from: &Clip,
     from_frame: usize,
     to: &Clip,
@@ -344,6 +344,29 @@ pub fn rebuild_from_keyframes(clip: &Clip, interval: usize, generated: &[f32]) -
     }
     out.remove_sign_flips();
     out
+}
+
+/// Completes `rebuilt` (the first frames of `clip`, rebuilt from keyframes) to `clip`'s length:
+/// the frames after the last keyframe, which no keyframe pair spans, are in-betweened from the
+/// rebuilt last frame to `clip`'s last frame (kept as a final key, as a compressed stream keeps
+/// its last pose): rotations slerped, the root lerped. Nothing is dropped; returns how many
+/// frames were filled this way.
+pub fn fill_tail(rebuilt: &mut Clip, clip: &Clip) -> usize {
+    let (have, want, j) = (rebuilt.frames(), clip.frames(), clip.joints());
+    if have == 0 || have >= want || rebuilt.joints() != j {
+        return 0;
+    }
+    let (q0, p0) = (rebuilt.rotations_at(have - 1).to_vec(), rebuilt.positions_at(have - 1).to_vec());
+    let (q1, p1) = (clip.rotations_at(want - 1), clip.positions_at(want - 1));
+    let span = (want - have) as f64;
+    for f in have..want {
+        let w = (f + 1 - have) as f64 / span;
+        rebuilt.local_rotations.extend((0..j).map(|i| slerp(q0[i], q1[i], w)));
+        rebuilt.local_positions.push(p0[0].lerp(p1[0], w));
+        rebuilt.local_positions.extend_from_slice(&p0[1..]);
+    }
+    rebuilt.remove_sign_flips();
+    want - have
 }
 
 /// Mean distance (clip units) between the joints of `clip`'s first frames and global

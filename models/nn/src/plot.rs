@@ -89,15 +89,13 @@ fn draw_lines(pm: &mut Pixmap, series: &[LineSeries], lo: f64, hi: f64, grid: f6
     let mut paint = Paint::default();
     paint.set_color_rgba8(210, 210, 210, 255);
     if grid > 0.0 && span / grid < 100.0 {
-        let mut g = (lo / grid).ceil() * grid;
-        while g <= lo + span {
+        for g in zoo_motion::ticks::multiples(lo, lo + span, grid, 100) {
             let mut pb = PathBuilder::new();
             pb.move_to(m, y(g));
             pb.line_to(w - m, y(g));
             if let Some(p) = pb.finish() {
                 pm.stroke_path(&p, &paint, &stroke, Transform::identity(), None);
             }
-            g += grid;
         }
     }
     stroke.width = 2.0;
@@ -183,8 +181,7 @@ fn draw_top_view(pm: &mut Pixmap, series: &[TopSeries], grid: f64, w: f32, origi
     if grid > 0.0 && span / grid < 200.0 {
         let half = span / 2.0 + (m as f64) / scale;
         for k in 0..2 {
-            let mut g = ((centre[k] - half) / grid).floor() * grid;
-            while g <= centre[k] + half {
+            for g in zoo_motion::ticks::multiples(centre[k] - half, centre[k] + half, grid, 200) {
                 let mut pb = PathBuilder::new();
                 let (a, b) = if k == 0 {
                     ([g, centre[1] - half], [g, centre[1] + half])
@@ -197,7 +194,6 @@ fn draw_top_view(pm: &mut Pixmap, series: &[TopSeries], grid: f64, w: f32, origi
                 if let Some(p) = pb.finish() {
                     pm.stroke_path(&p, &paint, &stroke, Transform::identity(), clip.as_ref());
                 }
-                g += grid;
             }
         }
     }

@@ -28,6 +28,10 @@ pub struct RunSpec {
     pub seed: u64,
     /// Data-parallel training threads (`None`: the cores available).
     pub threads: Option<usize>,
+    /// The options of the command that starts a fresh run, as the command line spells them
+    /// (`(name, values)`, defaults included), recorded in the run folder's [`COMMAND_FILE`] so
+    /// that `--resume DIR` continues with exactly them (empty: nothing to record).
+    pub command: Vec<(String, Vec<String>)>,
 }
 
 impl RunSpec {
@@ -59,6 +63,52 @@ pub const COMMON_RUN_FILES: [&str; 9] = [
     checkpoint::LOSS_CURVE_FILE,
     checkpoint::LAST_DIR,
 ];
+
+/// The options a run was started with ([`RunSpec::command`]), in its folder.
+pub const COMMAND_FILE: &str = "command.json";
+
+/// The `format` of [`COMMAND_FILE`].
+const COMMAND_FORMAT: &str = "zoo.train-command";
+
+/// Records `spec`'s command in `out` (atomically): a fresh run's options, merged over those
+/// already recorded there (a later stage of the same run adds its own). Nothing when the
+/// command is empty.
+pub fn record_command(out: &Path, spec: &RunSpec) -> Result<(), TrainError> {
+    if spec.command.is_empty() {
+        return Ok(());
+    }
+    let mut options = read_command(out)?.unwrap_or_default();
+    for (name, values) in &spec.command {
+        options.insert(name.clone(), values.clone());
+    }
+    let v = serde_json::json!({"format": COMMAND_FORMAT, "version": 1, "options": options});
+    let path = out.join(COMMAND_FILE);
+    let text = serde_json::to_string_pretty(&v).map_err(|e| TrainError::Config(format!("{}: {e}", path.display())))?;
+    zoo_motion::atomic::write(&path, text.as_bytes())
+        .map_err(|e| TrainError::Config(format!("cannot write {}: {e}", path.display())))
+}
+
+/// The options recorded in `dir` by [`record_command`] (`None`: a run started before they were
+/// recorded, or by a library call).
+pub fn read_command(dir: &Path) -> Result<Option<std::collections::BTreeMap<String, Vec<String>>>, TrainError> {
+    let path = dir.join(COMMAND_FILE);
+    if !path.is_file() {
+        return Ok(None);
+    }
+    let bad = |why: String| {
+        TrainError::Config(format!(
+            "{}: {why}; delete it to resume with the options given on the command line",
+            path.display()
+        ))
+    };
+    let text = std::fs::read_to_string(&path).map_err(|e| bad(e.to_string()))?;
+    let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| bad(format!("does not parse: {e}")))?;
+    if v.get("format").and_then(|f| f.as_str()) != Some(COMMAND_FORMAT) {
+        return Err(bad(format!("not a {COMMAND_FORMAT} file")));
+    }
+    let options = v.get("options").cloned().unwrap_or_default();
+    serde_json::from_value(options).map(Some).map_err(|e| bad(format!("its `options` are not name: [values]: {e}")))
+}
 
 /// Whether `dir` holds (part of) a run: a model, a state or a `last/` checkpoint.
 fn holds_run(dir: &Path) -> bool {
@@ -126,10 +176,11 @@ pub fn prepare(
             )));
         }
         guard::lock(out)?;
-        guard::set_aside(out, run_files)?;
+        guard::set_aside(out, &[run_files, &[COMMAND_FILE]].concat())?;
     }
     writable_dir("--out", out)?;
     guard::lock(out)?;
+    record_command(out, spec)?;
     Ok(out.clone())
 }
 

@@ -333,12 +333,28 @@ pub struct ClipRange {
 }
 
 /// Reads the clips of `ranges` (dummy root dropped, sign flips removed) and cuts their ranges;
-/// a range outside its clip or shorter than [`MIN_CLIP_FRAMES`] is refused.
-pub fn read_clips(ranges: &[ClipRange]) -> RmrResult<Vec<Clip>> {
+/// a range outside its clip or shorter than [`MIN_CLIP_FRAMES`] is refused. Each clip is brought
+/// to `config`'s skeleton (a model's) or else to the first clip's by the one rule of
+/// [`zoo_data::clip_io::conform`] (reordered joints, a moving dummy root folded), said on stderr.
+pub fn read_clips(ranges: &[ClipRange], config: Option<&Config>) -> RmrResult<Vec<Clip>> {
     use zoo_data::{Context, bail};
-    let read = |spec: &ClipRange| -> RmrResult<Clip> {
-        let clip = zoo_data::clip_io::read_model_clip(&spec.path)
+    let mut first: Option<zoo_motion::Skeleton> = None;
+    let mut read = |spec: &ClipRange| -> RmrResult<Clip> {
+        let mut clip = zoo_data::clip_io::read_model_clip(&spec.path)
             .with_context(|| format!("reading {}", spec.path.display()))?;
+        let how = match (config, &first) {
+            (Some(c), _) => zoo_data::clip_io::conform(
+                &mut clip,
+                &|s: &zoo_motion::Skeleton| s.names == c.names && s.parents_i32() == c.parents,
+                None,
+            ),
+            (None, Some(f)) => zoo_data::clip_io::conform_to(&mut clip, f),
+            (None, None) => None,
+        };
+        if let Some(zoo_data::clip_io::Conformed::Folded(how)) = how {
+            eprintln!("{}: {how}", spec.path.display());
+        }
+        first.get_or_insert_with(|| clip.skeleton.clone());
         let frames = clip.frames();
         let to = spec.to.unwrap_or(frames);
         if to > frames || spec.from >= to {
@@ -361,7 +377,7 @@ pub fn read_clips(ranges: &[ClipRange]) -> RmrResult<Vec<Clip>> {
         }
         Ok(clip)
     };
-    ranges.iter().map(read).collect()
+    ranges.iter().map(&mut read).collect()
 }
 
 /// Refuses clips on another rig or at another frame rate than the first (`names` name them),

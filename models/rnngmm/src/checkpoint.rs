@@ -98,10 +98,16 @@ pub fn load(dir: &Path, device: &Device) -> RnnGmmResult<LoadedGenerator> {
     let varmap = VarMap::new();
     Generator::new(&config, VarBuilder::from_varmap(&varmap, DType::F32, device))?;
     load_weights(dir, &varmap)?;
-    let frozen: std::collections::HashMap<String, candle_core::Tensor> = {
-        let data = varmap.data().lock().map_err(|_| RnnGmmError::Config("the weight map's lock is poisoned".into()))?;
-        data.iter().map(|(name, var)| (name.clone(), var.as_tensor().detach())).collect()
-    };
-    let generator = Generator::new(&config, VarBuilder::from_tensors(frozen, DType::F32, device))?;
+    let generator = Generator::new(&config, frozen(&varmap, device)?)?;
     Ok(LoadedGenerator { generator, spec, norm })
+}
+
+/// A builder of `varmap`'s weights as constants (detached tensors): networks built from it
+/// record no operation for backpropagation, so a forward pass over any number of frames keeps
+/// no graph alive (memory independent of the length, no recursive drop of a long graph).
+pub fn frozen(varmap: &VarMap, device: &Device) -> RnnGmmResult<VarBuilder<'static>> {
+    let data = varmap.data().lock().map_err(|_| RnnGmmError::Config("the weight map's lock is poisoned".into()))?;
+    let tensors: std::collections::HashMap<String, candle_core::Tensor> =
+        data.iter().map(|(name, var)| (name.clone(), var.as_tensor().detach())).collect();
+    Ok(VarBuilder::from_tensors(tensors, DType::F32, device))
 }

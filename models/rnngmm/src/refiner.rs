@@ -509,16 +509,16 @@ pub fn load(dir: &Path, device: &Device) -> RnnGmmResult<LoadedModel> {
     let config = generator.generator.config().clone();
     let effectors: EffectorNorm = ck::read_json(&dir.join(EFFECTORS_FILE))?;
     let (r_varmap, d_varmap) = (VarMap::new(), VarMap::new());
-    let nets = RefinerNets::new(
-        &config,
-        &generator.spec,
-        &generator.norm,
-        &effectors,
+    let build =
+        |r: VarBuilder, d: VarBuilder| RefinerNets::new(&config, &generator.spec, &generator.norm, &effectors, r, d);
+    build(
         VarBuilder::from_varmap(&r_varmap, DType::F32, device),
         VarBuilder::from_varmap(&d_varmap, DType::F32, device),
     )?;
     ck::read_varmap(&dir.join(REFINER_FILE), &r_varmap)?;
     ck::read_varmap(&dir.join(DISCRIMINATOR_FILE), &d_varmap)?;
+    // Inference only: the weights as constants (see `rck::frozen`).
+    let nets = build(rck::frozen(&r_varmap, device)?, rck::frozen(&d_varmap, device)?)?;
     Ok(LoadedModel { generator, nets, effectors })
 }
 

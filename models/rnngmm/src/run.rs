@@ -69,7 +69,11 @@ pub fn start_clip(
             (p, usize::MAX)
         }
     };
-    let clip = zoo_data::clip_io::read_model_clip(&path).map_err(zoo_data::Message::new)?;
+    let mut clip = zoo_data::clip_io::read_model_clip(&path).map_err(zoo_data::Message::new)?;
+    if let Some(zoo_data::clip_io::Conformed::Folded(how)) = zoo_data::clip_io::conform_to(&mut clip, &g.spec.skeleton)
+    {
+        eprintln!("{}: {how}", path.display());
+    }
     let frame = if frame == usize::MAX { clip.frames().saturating_sub(1).min(29) } else { frame };
     if let Some(d) = g.spec.skeleton.topology_difference(&clip.skeleton) {
         bail!(
@@ -91,6 +95,9 @@ pub fn contacts_path(out: &Path) -> PathBuf {
 
 /// Writes the contact labels as JSON to `path` (atomically).
 pub fn write_contacts(path: &Path, fps: f64, contacts: &[[bool; 2]]) -> RnnGmmResult<()> {
+    if !fps.is_finite() {
+        bail!("the contact labels' frame rate is {fps}: nothing was written to {}", path.display());
+    }
     let rows: Vec<[u8; 2]> = contacts.iter().map(|c| [u8::from(c[0]), u8::from(c[1])]).collect();
     let json = serde_json::json!({ "fps": fps, "frames": contacts.len(), "feet": ["left", "right"], "contacts": rows });
     let text = serde_json::to_string(&json).context("contact labels")?;
@@ -255,6 +262,11 @@ pub fn generate_files(
             // The root always carries position channels, so every chunk has the same hierarchy.
             let mut out = BvhStream { w: std::io::BufWriter::new(&mut *bvh_file), header: None };
             let mut cj = std::io::BufWriter::new(json_file);
+            if !g.spec.fps.is_finite() {
+                failure =
+                    Some(zoo_data::Message(format!("the model's frame rate is {}: re-export it", g.spec.fps)).into());
+                return Err(std::io::Error::other("generation failed"));
+            }
             write!(
                 cj,
                 "{{\n\"fps\": {},\n\"frames\": {},\n\"feet\": [\"left\", \"right\"],\n\"contacts\": [",

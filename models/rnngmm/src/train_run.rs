@@ -195,8 +195,11 @@ fn plan(a: &RnnGmmRunOptions) -> RnnGmmResult<Plan> {
                         );
                     }
                     zoo_nn::run_folder::lock(out)?;
-                    let names: Vec<&str> =
-                        [GENERATOR_DIR, REFINER_DIR].into_iter().chain(MODEL_FILES).chain(REFINER_FILES).collect();
+                    let names: Vec<&str> = [GENERATOR_DIR, REFINER_DIR, zoo_nn::run_folder::COMMAND_FILE]
+                        .into_iter()
+                        .chain(MODEL_FILES)
+                        .chain(REFINER_FILES)
+                        .collect();
                     zoo_nn::run_folder::set_aside(out, &names)?;
                 }
             } else {
@@ -226,6 +229,7 @@ fn plan(a: &RnnGmmRunOptions) -> RnnGmmResult<Plan> {
             }
             zoo_nn::run_folder::writable_dir("--out", out)?;
             zoo_nn::run_folder::lock(out)?;
+            zoo_nn::run_folder::record_command(out, &a.run)?;
             Ok(Plan {
                 out: out.clone(),
                 generator: wants_gen,

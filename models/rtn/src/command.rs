@@ -135,7 +135,16 @@ fn map_rig(a: &TransitionOptions, ca: Clip, cb: Clip) -> RtnResult<(Clip, Clip, 
 
 /// Refuses a clip whose skeleton is not the model's: another joint count, or the same count
 /// in another hierarchy (the parents the run folder's `config.json` records).
-pub fn check_skeleton(model_dir: &Path, config: &crate::Config, clip: &Clip, path: &Path) -> RtnResult<()> {
+/// Brings `clip` (read from `path`) to the skeleton of the model in `model_dir` by the one rule of
+/// [`zoo_data::clip_io::conform`] (a moving dummy root folded, said on stderr), then refuses it
+/// when it is still on another one.
+pub fn check_skeleton(model_dir: &Path, config: &crate::Config, clip: &mut Clip, path: &Path) -> RtnResult<()> {
+    let fits = |s: &zoo_motion::Skeleton| {
+        s.len() == config.joints && (config.parents.is_empty() || s.parents_i32() == config.parents)
+    };
+    if let Some(clip_io::Conformed::Folded(how)) = clip_io::conform(clip, &fits, None) {
+        eprintln!("{}: {how}", path.display());
+    }
     if config.joints != clip.joints() {
         bail!(
             "the model in {} was trained on {} joints, {} has {}",
@@ -211,7 +220,7 @@ pub fn run(a: &TransitionOptions, p: &dyn Progress) -> RtnResult<String> {
     let opts = clip_io::ReadOptions { drop_dummy_root: true, take: a.take.clone() };
     let ca = clip_io::read_model_clip_with(&pa, &opts).map_err(Message::new)?;
     let cb = clip_io::read_model_clip_with(&pb, &opts).map_err(Message::new)?;
-    let (ca, mut cb, rig_back) = map_rig(a, ca, cb)?;
+    let (mut ca, mut cb, rig_back) = map_rig(a, ca, cb)?;
     if a.foot_lock && zoo_motion::footlock::FootLock::from_skeleton(&ca.skeleton.names, &ca.skeleton.parents).is_none()
     {
         bail!(
@@ -220,6 +229,24 @@ pub fn run(a: &TransitionOptions, p: &dyn Progress) -> RtnResult<String> {
             pa.display()
         );
     }
+    // A clip whose dummy root moves while the other's does not is folded to the other's
+    // skeleton (as in a dataset); then the frames asked for, before any model is read.
+    let (sa, sb) = (ca.skeleton.clone(), cb.skeleton.clone());
+    for (clip, other, path) in [(&mut ca, &sb, &pa), (&mut cb, &sa, &pb)] {
+        if let Some(clip_io::Conformed::Folded(how)) =
+            clip_io::conform(clip, &|s| other.topology_difference(s).is_none(), None)
+        {
+            eprintln!("{}: {how}", path.display());
+        }
+    }
+    pipeline::check_transition(&ca, fa, &cb, fb, a.frames)
+        .with_context(|| format!("--from {} --to {} --frames {}", a.from_label, a.to_label, a.frames))?;
+    let (model, stats) = crate::checkpoint::load_run(&a.model, "transition")?;
+    check_skeleton(&a.model, model.config(), &mut ca, &pa)?;
+    if rig_back.is_none() {
+        note_other_names(&a.model, &ca, p);
+    }
+    check_skeleton(&a.model, model.config(), &mut cb, &pb)?;
     // On terrain both clips stand in the heightmap's world frame: the target stays on its
     // ground instead of being moved to where the source's last speed would take it.
     let inputs = match a.heightmap {
@@ -227,12 +254,6 @@ pub fn run(a: &TransitionOptions, p: &dyn Progress) -> RtnResult<String> {
         None => pipeline::transition_inputs(&ca, fa, &mut cb, fb, a.frames),
     }
     .with_context(|| format!("--from {} --to {} --frames {}", a.from_label, a.to_label, a.frames))?;
-    let (model, stats) = crate::checkpoint::load_run(&a.model, "transition")?;
-    check_skeleton(&a.model, model.config(), &ca, &pa)?;
-    if rig_back.is_none() {
-        note_other_names(&a.model, &ca, p);
-    }
-    check_skeleton(&a.model, model.config(), &cb, &pb)?;
     let terrain = read_heightmap(a.heightmap.as_deref(), &a.model, model.config(), &pa)?;
     let fallback = model.config().fallback.filter(|_| !a.no_fallback);
     let checked = model

@@ -21,8 +21,8 @@ pub struct BenchSynthesisArgs {
     /// Sequences to generate.
     #[arg(long, default_value_t = 100, allow_hyphen_values = true, value_parser = crate::args::sequences)]
     pub sequences: usize,
-    /// Length of each sequence in seconds.
-    #[arg(long, default_value_t = 60.0, allow_hyphen_values = true, value_parser = crate::args::duration_seconds)]
+    /// Length of each sequence in seconds, at most 3600 (each sequence is held whole while it is measured).
+    #[arg(long, default_value_t = 60.0, allow_hyphen_values = true, value_parser = crate::args::bench_sequence_seconds)]
     pub seconds: f64,
     /// Seed: sequence i uses seed + i for its sampling; the start frames are drawn with the seed.
     #[arg(long, default_value_t = 1, allow_hyphen_values = true, value_parser = crate::args::seed)]

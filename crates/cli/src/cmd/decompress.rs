@@ -25,24 +25,30 @@ pub struct DecompressArgs {
 /// Runs `zoo decompress`.
 pub fn run(a: DecompressArgs) -> anyhow::Result<()> {
     crate::cmd::check_output_file("--out", &a.out)?;
-    let clip = zoo_data::clip_io::read_model_clip(&a.input)?;
+    let mut clip = zoo_data::clip_io::read_model_clip(&a.input)?;
+    let (model, stats) = zoo_rtn::checkpoint::load_run(&a.model, "decompress")?;
+    zoo_rtn::command::check_skeleton(&a.model, model.config(), &mut clip, &a.input)?;
     let interval = a.interval.unwrap_or_else(|| clip.fps().round() as usize).max(1);
     let j = clip.joints();
     let keys = pipeline::keyframe_inputs(&clip, interval).with_context(|| format!("{}", a.input.display()))?;
-    let (model, stats) = zoo_rtn::checkpoint::load_run(&a.model, "decompress")?;
-    zoo_rtn::command::check_skeleton(&a.model, model.config(), &clip, &a.input)?;
     let y = model.super_resolve(&stats, &keys.context, &keys.keys, interval).context("rebuilding the clip")?;
     let frames = y.len() / (3 * j);
-    let out = pipeline::rebuild_from_keyframes(&clip, interval, &y);
+    let mut out = pipeline::rebuild_from_keyframes(&clip, interval, &y);
+    let tail = pipeline::fill_tail(&mut out, &clip);
     zoo_data::clip_io::write(&out, &a.out)?;
     let err = pipeline::mean_position_error(&clip, &y);
+    let tail = match tail {
+        0 => String::new(),
+        n => format!(", and the last {n} frame(s) after the last keyframe in-betweened to the clip's last frame"),
+    };
     println!(
-        "rebuilt {frames} frames of {} from {} context frames and {} keyframes (every {interval}); \
-         mean joint position error {err:.2} (clip units); wrote {}",
+        "rebuilt {frames} frames of {} from {} context frames and {} keyframes (every {interval}){tail}; \
+         mean joint position error {err:.2} (clip units, network frames); wrote {} ({} frames)",
         a.input.display(),
         pipeline::CONTEXT_FRAMES,
         keys.key_count,
-        a.out.display()
+        a.out.display(),
+        out.frames()
     );
     Ok(())
 }

@@ -46,7 +46,11 @@ impl DenoiseArgs {
 pub fn run(a: DenoiseArgs) -> anyhow::Result<()> {
     crate::cmd::check_output_file("--out", &a.out)?;
     let (g, _) = zoo_rnngmm::run::load_run(&a.model, true)?;
-    let clip = zoo_data::clip_io::read_model_clip(&a.input)?;
+    let mut clip = zoo_data::clip_io::read_model_clip(&a.input)?;
+    if let Some(zoo_data::clip_io::Conformed::Folded(how)) = zoo_data::clip_io::conform_to(&mut clip, &g.spec.skeleton)
+    {
+        eprintln!("{}: {how}", a.input.display());
+    }
     if let Some(d) = g.spec.skeleton.topology_difference(&clip.skeleton) {
         bail!(
             "{} is on another skeleton than the model in {} ({d}); denoise clips of the training skeleton",

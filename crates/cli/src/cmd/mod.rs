@@ -22,6 +22,7 @@ pub mod stitch;
 pub mod train;
 pub mod train_args;
 pub mod train_arnn;
+pub mod train_resume;
 pub mod train_rmr;
 pub mod train_rnngmm;
 pub mod transition;

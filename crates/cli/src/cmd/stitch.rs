@@ -163,7 +163,7 @@ pub fn run(a: StitchArgs) -> anyhow::Result<()> {
     }
     let specs = a.clips.iter().map(|s| parse_clip_spec(s)).collect::<anyhow::Result<Vec<_>>>()?;
     let model = a.model.as_deref().map(load_model).transpose()?;
-    let clips = zoo_rmr::stitch::read_clips(&specs)?;
+    let clips = zoo_rmr::stitch::read_clips(&specs, model.as_ref().map(|(m, _)| m.config()))?;
     let names: Vec<String> = specs.iter().map(|s| s.path.display().to_string()).collect();
     let method = match a.method {
         StitchMethod::Rmr => SeamMethod::Rmr(PostProcess {

@@ -97,6 +97,18 @@ pub struct RtnArgs {
     pub ema: f64,
 }
 
+impl TrainCommand {
+    /// Records `command` (the options of a fresh run) to be written in its run folder.
+    pub fn record(&mut self, command: Vec<(String, Vec<String>)>) {
+        match self {
+            TrainCommand::Rtn(a) => a.run.command = command,
+            TrainCommand::Rmr(a) => a.run.command = command,
+            TrainCommand::RnnGmm(a) => a.run.command = command,
+            TrainCommand::Arnn(a) => a.run.command = command,
+        }
+    }
+}
+
 /// Runs a `zoo train` subcommand.
 pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
     match cmd {

@@ -49,6 +49,9 @@ pub struct RunArgs<M: TrainDefaults> {
     /// for a fixed seed and thread count, not across thread counts.
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::training_threads)]
     pub threads: Option<usize>,
+    /// The command's options, recorded in a fresh run's folder (`cmd::train_resume`).
+    #[arg(skip)]
+    pub command: Vec<(String, Vec<String>)>,
     #[arg(skip)]
     _model: PhantomData<M>,
 }
@@ -64,6 +67,7 @@ impl<M: TrainDefaults> RunArgs<M> {
             time_limit_minutes: self.time_limit,
             seed: self.seed,
             threads: self.threads,
+            command: self.command.clone(),
         }
     }
 }

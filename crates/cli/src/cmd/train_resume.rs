@@ -1,0 +1,126 @@
+//! `zoo train ... --resume DIR` continues a run with the options it was started with: a fresh
+//! run records its options (every option, defaults included, as the command line spells them)
+//! in the run folder (`zoo_nn::run_folder::COMMAND_FILE`); a resume takes them from there, so
+//! `zoo train rtn --resume runs/rtn --epochs 80` needs no data options repeated, and refuses an
+//! option given on its command line that differs from the recorded one (it could not be
+//! honoured: the run's configuration, data and statistics are kept), naming both values.
+//! The run's length and threads (`--epochs`, `--time-limit`, `--threads`, and RNN-GMM's stage
+//! options) are the resumed command's own.
+
+use clap::parser::ValueSource;
+use clap::{ArgAction, ArgMatches};
+use std::collections::BTreeMap;
+use std::ffi::OsString;
+use std::path::PathBuf;
+use zoo_nn::run_folder::COMMAND_FILE;
+
+/// Options a resumed command sets itself (never taken from the record, never compared).
+const OWN_OPTIONS: [&str; 9] =
+    ["resume", "out", "overwrite", "epochs", "time-limit", "threads", "stage", "refiner-epochs", "refiner-time-limit"];
+
+/// What `zoo train MODEL ...` runs with.
+pub enum Resolved {
+    /// A fresh run: its options, to record in the run folder.
+    Fresh(Vec<(String, Vec<String>)>),
+    /// A resume of a run that recorded its options: the command line to run instead
+    /// (`zoo train MODEL` and the options).
+    Resume(Vec<OsString>),
+    /// A resume of a run that recorded nothing (started by an older zoo): as given.
+    AsGiven,
+}
+
+/// One option of the subcommand: its long name, values, whether the command line gave it, and
+/// whether it is a flag.
+struct Given {
+    name: String,
+    values: Vec<String>,
+    from_command_line: bool,
+    flag: bool,
+}
+
+fn options(sub: &ArgMatches, def: &clap::Command) -> Vec<Given> {
+    let mut out = Vec::new();
+    for arg in def.get_arguments() {
+        let (Some(long), id) = (arg.get_long(), arg.get_id().as_str()) else { continue };
+        if matches!(arg.get_action(), ArgAction::Help | ArgAction::Version) || !sub.contains_id(id) {
+            continue;
+        }
+        let Ok(Some(raw)) = sub.try_get_raw(id) else { continue };
+        let values: Vec<String> = raw.map(|v| v.to_string_lossy().into_owned()).collect();
+        let flag = matches!(arg.get_action(), ArgAction::SetTrue | ArgAction::SetFalse);
+        out.push(Given {
+            name: long.to_string(),
+            values,
+            from_command_line: sub.value_source(id) == Some(ValueSource::CommandLine),
+            flag,
+        });
+    }
+    out
+}
+
+/// The same values: equal text, or equal numbers (`0.001` and `1e-3`).
+fn same(a: &[String], b: &[String]) -> bool {
+    a.len() == b.len()
+        && a.iter()
+            .zip(b)
+            .all(|(x, y)| x == y || matches!((x.parse::<f64>(), y.parse::<f64>()), (Ok(p), Ok(q)) if p == q))
+}
+
+/// Resolves `zoo train MODEL ...` (`train`: the `train` subcommand's matches, `def`: its
+/// definition).
+pub fn resolve(train: &ArgMatches, def: &clap::Command) -> anyhow::Result<Resolved> {
+    let Some((model, sub)) = train.subcommand() else { return Ok(Resolved::AsGiven) };
+    let Some(model_def) = def.find_subcommand(model) else { return Ok(Resolved::AsGiven) };
+    let given = options(sub, model_def);
+    let Some(dir) = sub.try_get_one::<PathBuf>("resume").ok().flatten() else {
+        let own = |n: &str| matches!(n, "resume" | "out" | "overwrite");
+        return Ok(Resolved::Fresh(given.into_iter().filter(|g| !own(&g.name)).map(|g| (g.name, g.values)).collect()));
+    };
+    let Some(recorded) = zoo_nn::run_folder::read_command(dir)? else { return Ok(Resolved::AsGiven) };
+    let mut merged: BTreeMap<String, (Vec<String>, bool)> = BTreeMap::new();
+    for (name, values) in &recorded {
+        if !OWN_OPTIONS.contains(&name.as_str()) {
+            merged.insert(name.clone(), (values.clone(), false));
+        }
+    }
+    for g in given {
+        let own = OWN_OPTIONS.contains(&g.name.as_str());
+        if own && g.name != "out" && g.name != "overwrite" && (g.from_command_line || g.name == "resume") {
+            merged.insert(g.name, (g.values, g.flag));
+            continue;
+        }
+        if own || !g.from_command_line {
+            continue;
+        }
+        match recorded.get(&g.name) {
+            Some(was) if !same(was, &g.values) => anyhow::bail!(
+                "--{0} {1}: the run in {2} was started with --{0} {3}, and a resumed run keeps the options it was \
+                 started with (recorded in {2}/{COMMAND_FILE}); drop --{0}, or start a new run with --out (or \
+                 --overwrite to replace this one)",
+                g.name,
+                g.values.join(","),
+                dir.display(),
+                was.join(",")
+            ),
+            _ => {
+                merged.insert(g.name, (g.values, g.flag));
+            }
+        }
+    }
+    let flags: Vec<String> = model_def
+        .get_arguments()
+        .filter(|a| matches!(a.get_action(), ArgAction::SetTrue))
+        .filter_map(|a| a.get_long().map(str::to_string))
+        .collect();
+    let mut argv: Vec<OsString> = vec!["zoo".into(), "train".into(), model.into()];
+    for (name, (values, _)) in merged {
+        if flags.contains(&name) {
+            if values.iter().any(|v| v == "true") {
+                argv.push(format!("--{name}").into());
+            }
+        } else if !values.is_empty() {
+            argv.push(format!("--{name}={}", values.join(",")).into());
+        }
+    }
+    Ok(Resolved::Resume(argv))
+}
