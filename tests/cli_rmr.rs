@@ -220,6 +220,29 @@ fn stitch_refuses_clips_of_another_skeleton() {
     assert!(e.contains("not the model's") && e.contains("found `LeftFoot`") && e.contains("retarget"), "{e}");
 }
 
+/// A clip whose dummy root carries motion is folded into its child by `zoo stitch` as by a
+/// dataset (the same file given alone was refused as another skeleton), with and without a model.
+#[test]
+fn stitch_folds_a_moving_dummy_root() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, clips) = untrained_rmr(dir.path());
+    let moving = dir.path().join("moving.bvh");
+    std::fs::write(&moving, zoo_tests::under_dummy_root(&read(&clips[1]), true)).unwrap();
+    for with_model in [false, true] {
+        let out = dir.path().join(format!("o{with_model}.bvh"));
+        let mut args = vec!["stitch", s(&clips[0]), s(&moving), "--out", s(&out)];
+        if with_model {
+            args.extend(["--model", s(&model)]);
+        } else {
+            args.extend(["--method", "inertialize"]);
+        }
+        let (ok, stdout, stderr) = run(&args);
+        assert!(ok, "{stdout}\n{stderr}");
+        assert!(stderr.contains("its dummy root `joint_Root` carries motion; folded into"), "{stderr}");
+        assert_eq!(read(&out).joints(), read(&clips[0]).joints());
+    }
+}
+
 #[test]
 fn stitch_refuses_clips_of_another_frame_rate() {
     let dir = tempfile::tempdir().unwrap();

@@ -175,6 +175,13 @@ fn generate_is_deterministic_streams_and_refuses_bad_input() {
     let from = format!("{}:20", toy.display());
     let e = fails(&["generate", "--model", &r, "--frames", "10", "--from", &from, "--out", &out("y.bvh")]);
     assert!(e.contains("another skeleton"), "{e}");
+    // A start clip whose dummy root carries motion is folded into its child, as a dataset's.
+    let moving = dir.path().join("moving.bvh");
+    let start = zoo_data::bvh::read_file(&Path::new(&r).join("start.bvh"), &Default::default()).unwrap();
+    std::fs::write(&moving, zoo_tests::under_dummy_root(&start, true)).unwrap();
+    let from = format!("{}:20", moving.display());
+    let (okay, _, e) = run(&["generate", "--model", &r, "--frames", "10", "--from", &from, "--out", &out("m.bvh")]);
+    assert!(okay && e.contains("its dummy root `joint_Root` carries motion; folded into"), "{e}");
     // NaN in the start clip.
     let nan = dir.path().join("nan.bvh");
     write_with_nan(&Path::new(&r).join("start.bvh"), &nan);

@@ -258,6 +258,13 @@ fn adversarial_rounds_run_with_finite_losses_and_resume_exactly() {
     let x = Tensor::from_slice(data.valid.get(0), (1, config.train.window, config.dim), &Device::Cpu).unwrap();
     let r = model.nets.refine(&x).unwrap();
     assert_eq!(r.dims(), x.dims());
+    // Loaded for inference the weights are constants: refining records no operation for
+    // backpropagation, so a stream of chunks keeps no graph of the motion alive (memory
+    // independent of the length, no recursive drop of a long graph).
+    assert!(!r.track_op(), "the refiner's output records its operations: its weights are variables");
+    let state = model.nets.refiner_zero_state(1).unwrap();
+    let (chunk, state) = model.nets.refine_chunk(&x, None, &state).unwrap();
+    assert!(!chunk.track_op() && state.h.iter().chain(&state.c).all(|t| !t.track_op()));
     let moved = (r - &x).unwrap().abs().unwrap().max_all().unwrap().to_scalar::<f32>().unwrap();
     assert!(moved > 0.0 && moved.is_finite(), "{moved}");
     let err = zoo_rnngmm::refiner::load(&gen_dir, &Device::Cpu).unwrap_err().to_string();
