@@ -118,15 +118,41 @@ pub fn write(map: &Heightmap, path: &Path) -> Result<(), TerrainFileError> {
 
 /// The largest sample spacing of a heightmap file, clip units (10 km in cm).
 pub const MAX_CELL: f64 = 1e6;
+/// The smallest sample spacing of a heightmap file, clip units (0.01 mm in cm): below it a
+/// lookup's cell index overflows and the height is NaN.
+pub const MIN_CELL: f64 = 1e-3;
+/// The largest origin coordinate of a heightmap file, clip units either way (10,000 km in cm).
+pub const MAX_ORIGIN: f64 = 1e9;
 /// The most samples of a heightmap file (1 GB of heights).
 pub const MAX_SAMPLES: usize = 1 << 28;
 
 /// Reads a heightmap written by [`write`] (give the `.json` header): the cell, origin and
-/// heights range-checked (finite, a positive cell of at most [`MAX_CELL`], at most
-/// [`MAX_SAMPLES`] samples).
+/// heights range-checked (finite, a cell in [[`MIN_CELL`], [`MAX_CELL`]], an origin within
+/// +-[`MAX_ORIGIN`], at most [`MAX_SAMPLES`] samples); the data file's size is checked before
+/// it is read.
 pub fn read(path: &Path) -> Result<Heightmap, TerrainFileError> {
     let text = std::fs::read_to_string(path).map_err(io_err(path))?;
-    let header: Header = serde_json::from_str(&text)
+    let (header, expected) = parse_header(path, &text)?;
+    let data_path = path.with_file_name(&header.data);
+    let found = std::fs::metadata(&data_path).map_err(io_err(&data_path))?.len();
+    if found != expected as u64 {
+        return Err(size_error(&header, data_path, expected, usize::try_from(found).unwrap_or(usize::MAX)));
+    }
+    let bytes = std::fs::read(&data_path).map_err(io_err(&data_path))?;
+    heightmap(header, expected, data_path, &bytes)
+}
+
+/// A heightmap from the text of its `.json` header (`path`, named in errors) and the bytes of
+/// its data file, with the checks of [`read`].
+pub fn parse(path: &Path, header: &str, data: &[u8]) -> Result<Heightmap, TerrainFileError> {
+    let (header, expected) = parse_header(path, header)?;
+    let data_path = path.with_file_name(&header.data);
+    heightmap(header, expected, data_path, data)
+}
+
+/// The checked header and the size of its data file in bytes.
+fn parse_header(path: &Path, text: &str) -> Result<(Header, usize), TerrainFileError> {
+    let header: Header = serde_json::from_str(text)
         .map_err(|e| TerrainFileError::Header { path: path.to_path_buf(), message: e.to_string() })?;
     if header.format != "zoo-heightfield" || header.version != 1 {
         return Err(TerrainFileError::Header {
@@ -140,29 +166,34 @@ pub fn read(path: &Path) -> Result<Heightmap, TerrainFileError> {
     let bad = |message: String| TerrainFileError::Header { path: path.to_path_buf(), message };
     // Range checks like the command line's: a cell of 0 or NaN makes every lookup NaN or
     // infinite, a huge grid asks for terabytes.
-    if !(header.cell.is_finite() && header.cell > 0.0 && header.cell <= MAX_CELL) {
+    if !(header.cell.is_finite() && (MIN_CELL..=MAX_CELL).contains(&header.cell)) {
         return Err(bad(format!(
-            "`cell` is {}; give the sample spacing in clip units, in (0, {MAX_CELL}]",
+            "`cell` is {:?}; give the sample spacing in clip units, in [{MIN_CELL}, {MAX_CELL}]",
             header.cell
         )));
     }
-    if !(header.origin_x.is_finite() && header.origin_z.is_finite()) {
-        return Err(bad(format!("the origin ({}, {}) is not finite", header.origin_x, header.origin_z)));
+    for (key, v) in [("origin_x", header.origin_x), ("origin_z", header.origin_z)] {
+        if !(v.is_finite() && v.abs() <= MAX_ORIGIN) {
+            return Err(bad(format!(
+                "`{key}` is {v:?}; give the origin in clip units, in [-{MAX_ORIGIN}, {MAX_ORIGIN}]"
+            )));
+        }
     }
     let expected =
         header.nx.checked_mul(header.nz).filter(|n| *n <= MAX_SAMPLES).map(|n| n * 4).ok_or_else(|| {
             bad(format!("{} x {} samples: at most {MAX_SAMPLES} samples in all", header.nx, header.nz))
         })?;
-    let data_path = path.with_file_name(&header.data);
-    let bytes = std::fs::read(&data_path).map_err(io_err(&data_path))?;
+    Ok((header, expected))
+}
+
+fn size_error(header: &Header, path: PathBuf, expected: usize, found: usize) -> TerrainFileError {
+    TerrainFileError::Size { path, expected, found, nx: header.nx, nz: header.nz }
+}
+
+/// The heights of a checked header from its data file's bytes.
+fn heightmap(header: Header, expected: usize, data_path: PathBuf, bytes: &[u8]) -> Result<Heightmap, TerrainFileError> {
     if bytes.len() != expected || expected == 0 {
-        return Err(TerrainFileError::Size {
-            path: data_path,
-            expected,
-            found: bytes.len(),
-            nx: header.nx,
-            nz: header.nz,
-        });
+        return Err(size_error(&header, data_path, expected, bytes.len()));
     }
     let heights: Vec<f32> = bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
     if let Some(i) = heights.iter().position(|h| !h.is_finite()) {
@@ -226,15 +257,46 @@ mod tests {
             std::fs::write(&p, text).unwrap();
             read(&p).unwrap_err().to_string()
         };
-        for cell in ["0.0", "-10.0", "1e300"] {
+        for cell in ["0.0", "-10.0", "1e300", "1e-300", "0.0009"] {
             assert!(with("\"cell\": 10.0", &format!("\"cell\": {cell}")).contains("give the sample spacing"), "{cell}");
         }
         assert!(with("\"nx\": 3", "\"nx\": 18446744073709551615").contains("at most 268435456 samples"));
+        let e = with("\"cell\": 10.0", "\"cell\": 1e-300");
+        assert!(e.contains("`cell` is 1e-300; give the sample spacing in clip units, in [0.001, 1000000]"), "{e}");
+        let e = with("\"origin_x\": 0.0", "\"origin_x\": -1e300");
+        assert!(e.contains("`origin_x` is -1e300; give the origin in clip units, in [-1000000000, 1000000000]"), "{e}");
+        let e = with("\"origin_z\": 0.0", "\"origin_z\": 2e9");
+        assert!(e.contains("`origin_z` is 2000000000.0"), "{e}");
+        // At the bounds: reads, and a lookup anywhere within the origin's range is finite.
+        let p = dir.path().join("edge.json");
+        std::fs::write(
+            &p,
+            header.replace("\"cell\": 10.0", "\"cell\": 0.001").replace("\"origin_x\": 0.0", "\"origin_x\": 1e9"),
+        )
+        .unwrap();
+        std::fs::copy(path.with_extension("f32"), p.with_extension("f32")).unwrap();
+        let m = read(&p).unwrap();
+        for x in [-1e9, 0.0, 1e9, 3e9] {
+            assert!(m.height(x, -1e9).is_finite() && m.sample(x as f32, 1e9).is_finite(), "{x}");
+        }
         let mut heights = vec![0u8; 24];
         heights[8..12].copy_from_slice(&f32::NAN.to_le_bytes());
         std::fs::write(path.with_extension("f32"), heights).unwrap();
         let e = read(&path).unwrap_err().to_string();
         assert!(e.contains("height 2 (column 2, row 0) is NaN"), "{e}");
+    }
+
+    #[test]
+    fn parse_reads_a_header_and_its_bytes_with_the_checks_of_read() {
+        let dir = tempfile::tempdir().unwrap();
+        let map = Heightmap::from_fn(-20.0, 10.0, 30.0, 40.0, 10.0, |x, z| x * z * 0.01);
+        let path = dir.path().join("t.json");
+        write(&map, &path).unwrap();
+        let (header, data) =
+            (std::fs::read_to_string(&path).unwrap(), std::fs::read(path.with_extension("f32")).unwrap());
+        assert_eq!(parse(&path, &header, &data).unwrap(), map);
+        let e = parse(&path, &header, &data[..data.len() - 1]).unwrap_err().to_string();
+        assert!(e.contains("t.f32: expected 96 bytes (6 x 4 little-endian f32), found 95"), "{e}");
     }
 
     #[test]

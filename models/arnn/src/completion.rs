@@ -13,6 +13,16 @@ use zoo_data::{Context, Message, bail};
 /// The longest span of keys completed, in frames.
 pub const MAX_FRAMES: usize = 100_000;
 
+/// The largest frame number of a keys file (`frame`, `source_frame`, `frames`): the command
+/// line's frame index range (about 92 hours at 30 fps).
+pub const MAX_KEY_FRAME: usize = 10_000_000;
+
+/// The largest value of a lamp key's pose, either way: metres for the base's position (10 km),
+/// radians for the angles. The network works in f32 on normalised values: far beyond the
+/// training data it gives no useful motion, and past f32's range (about 3.4e38) its rows are
+/// NaN.
+pub const MAX_KEY_VALUE: f64 = 10_000.0;
+
 /// Format name of a keys file.
 pub const KEYS_FORMAT: &str = "zoo-arnn-keys";
 /// Format name of the JSON written by `--json`.
@@ -97,6 +107,13 @@ pub fn parse_keys(text: &str, dof_names: &[String]) -> Result<Keys, String> {
         }
         if let Some(j) = pose.iter().position(|v| !v.is_finite()) {
             return Err(format!("key {i} (frame {}): {} is {}, not a finite number", k.frame, dof_names[j], pose[j]));
+        }
+        if let Some(j) = pose.iter().position(|v| v.abs() > MAX_KEY_VALUE) {
+            return Err(format!(
+                "key {i} (frame {}): {} is {:?}, outside the valid range [-{MAX_KEY_VALUE}, {MAX_KEY_VALUE}] (metres \
+                 or radians)",
+                k.frame, dof_names[j], pose[j]
+            ));
         }
     }
     let offset = file.keys[0].frame;
@@ -210,12 +227,27 @@ fn parse_file(text: &str) -> Result<KeysFile, String> {
         return Err(format!("fps {fps} is outside the valid range [1, 1000] frames per second"));
     }
     let n = file.keys.len();
+    if n > MAX_FRAMES {
+        return Err(format!(
+            "{n} keys given: at most {MAX_FRAMES} (one per frame of the longest completion, {MAX_FRAMES} frames)"
+        ));
+    }
     if n < 2 {
         return Err(format!(
             "{n} key(s) given: completion needs at least 2 (the motion is filled in between the first and the last key)"
         ));
     }
     for (i, k) in file.keys.iter().enumerate() {
+        for (name, f) in [("frame", Some(k.frame)), ("source_frame", k.source_frame)] {
+            if let Some(f) = f
+                && f > MAX_KEY_FRAME
+            {
+                return Err(format!(
+                    "key {i} has \"{name}\": {f}, outside the valid range 0..={MAX_KEY_FRAME} (the command line's frame \
+                     numbers)"
+                ));
+            }
+        }
         if i > 0 && k.frame <= file.keys[i - 1].frame {
             return Err(format!(
                 "key {i} is at frame {} but key {} is at frame {}: keys must be in increasing frame order, one key per \
@@ -225,6 +257,11 @@ fn parse_file(text: &str) -> Result<KeysFile, String> {
                 file.keys[i - 1].frame
             ));
         }
+    }
+    if let Some(len) = file.frames
+        && len > MAX_KEY_FRAME + 1
+    {
+        return Err(format!("\"frames\" is {len}, outside the valid range 0..={} frames", MAX_KEY_FRAME + 1));
     }
     if let Some(len) = file.frames {
         let last = file.keys[n - 1].frame;
@@ -723,5 +760,68 @@ mod tests {
         )
         .unwrap();
         assert_eq!(k.frames, vec![0, 10]);
+    }
+
+    #[test]
+    fn key_values_frame_numbers_and_key_counts_past_their_bounds_are_refused_with_the_range() {
+        let pose = "[0, 0.02, 0, 0.5, -1.1, -1.2]";
+        let lamp = |a: &str, b: &str| parse_keys(&format!(r#"{{"keys": [{a}, {b}]}}"#), &names());
+        // At the bounds: loads.
+        let k = lamp(
+            &format!(r#"{{"frame": 10000000, "pose": [10000, -10000, 0, 0, 0, 0]}}"#),
+            &format!(r#"{{"frame": 10000005, "pose": {pose}}}"#),
+        );
+        assert!(k.is_err(), "frame 10000005 is past the bound");
+        let k = lamp(
+            &format!(r#"{{"frame": 9999990, "pose": [10000, -10000, 0, 0, 0, 0]}}"#),
+            &format!(r#"{{"frame": 10000000, "pose": {pose}}}"#),
+        )
+        .unwrap();
+        assert_eq!((k.offset, k.frames.clone()), (9_999_990, vec![0, 10]));
+        for (a, b, want) in [
+            // The huge value that gave a completion of NaN rows.
+            (
+                format!(r#"{{"frame": 0, "pose": {pose}}}"#),
+                r#"{"frame": 5, "pose": [1e300, 0, 0, 0, 0, 0]}"#.to_string(),
+                "key 1 (frame 5): base_x is 1e300, outside the valid range [-10000, 10000]",
+            ),
+            (
+                format!(r#"{{"frame": 0, "pose": {pose}}}"#),
+                r#"{"frame": 5, "pose": [0, 0, 0, 0, 0, -10000.5]}"#.to_string(),
+                "theta3 is -10000.5",
+            ),
+            (
+                format!(r#"{{"frame": 18446744073709551610, "pose": {pose}}}"#),
+                format!(r#"{{"frame": 18446744073709551615, "pose": {pose}}}"#),
+                "key 0 has \"frame\": 18446744073709551610, outside the valid range 0..=10000000",
+            ),
+        ] {
+            let e = lamp(&a, &b).unwrap_err();
+            assert!(e.contains(want), "{a} {b}: {e}");
+        }
+        let e = parse_keys(
+            &format!(r#"{{"frames": 18446744073709551615, "keys": [{{"frame": 0, "pose": {pose}}}, {{"frame": 1, "pose": {pose}}}]}}"#),
+            &names(),
+        )
+        .unwrap_err();
+        assert!(e.contains("\"frames\" is 18446744073709551615, outside the valid range 0..=10000001"), "{e}");
+        let many: Vec<String> = (0..=MAX_FRAMES).map(|f| format!(r#"{{"frame": {f}, "pose": {pose}}}"#)).collect();
+        let e = parse_keys(&format!(r#"{{"keys": [{}]}}"#, many.join(",")), &names()).unwrap_err();
+        assert!(e.contains("100001 keys given: at most 100000"), "{e}");
+        // Humanoid keys: the source frame too.
+        let joints = vec!["hips".to_string()];
+        let e = parse_humanoid_keys(
+            r#"{"bvh": "p.bvh", "keys": [{"frame": 0}, {"frame": 4, "source_frame": 99999999999}]}"#,
+            &joints,
+        )
+        .unwrap_err();
+        assert!(e.contains("key 1 has \"source_frame\": 99999999999, outside the valid range 0..=10000000"), "{e}");
+        assert!(
+            parse_humanoid_keys(
+                r#"{"bvh": "p.bvh", "keys": [{"frame": 0}, {"frame": 4, "source_frame": 10000000}]}"#,
+                &joints
+            )
+            .is_ok()
+        );
     }
 }

@@ -9,6 +9,12 @@
 //! key without `speed` or `heading` keeps the previous value. `duration` (seconds, after the
 //! last key) is where the script ends.
 //!
+//! Every value is range-checked like the command line's options: `duration` in (last key,
+//! [`MAX_DURATION`] = 3600] seconds, at most [`MAX_KEYS`] keys, speeds from 0 to 10 m/s,
+//! headings within +-[`MAX_HEADING_DEG`] degrees. A script is replayed in memory (`zoo control`
+//! keeps the whole motion and writes it as one BVH), so its length is bounded like the other
+//! in-memory outputs: one hour is 108,000 frames at 30 fps, about `zoo transition`'s 100,000.
+//!
 //! Internally speeds are in centimetres per second and headings in radians.
 
 use std::path::Path;
@@ -16,6 +22,15 @@ use thiserror::Error;
 
 /// Speeds above this (cm/s, 10 m/s) are refused: no locomotion data goes there.
 pub const MAX_SPEED: f64 = 1000.0;
+
+/// The longest script, seconds (one hour; the longest synthetic clip is as long).
+pub const MAX_DURATION: f64 = 3600.0;
+
+/// The most keys of a script (one every 36 ms over an hour).
+pub const MAX_KEYS: usize = 100_000;
+
+/// The largest heading, degrees either way (about 2,800 turns: headings may wind up).
+pub const MAX_HEADING_DEG: f64 = 1e6;
 
 /// A script that cannot be used, with what to do about it.
 #[derive(Debug, Error)]
@@ -71,6 +86,12 @@ impl ControlScript {
                 "a control script needs at least one key: give {\"time\": 0, \"speed\": ..., \"heading\": ...}",
             ));
         };
+        if keys.len() > MAX_KEYS {
+            return Err(invalid(format!(
+                "the control script has {} keys, more than the {MAX_KEYS} zoo reads: give at most one key per change",
+                keys.len()
+            )));
+        }
         if first.time != 0.0 {
             return Err(invalid(format!("the first control key must be at time 0, found {}", first.time)));
         }
@@ -81,6 +102,13 @@ impl ControlScript {
                     k.time
                 )));
             }
+            if k.time >= MAX_DURATION {
+                return Err(invalid(format!(
+                    "control key {i} is at time {:?} s: key times are in [0, {MAX_DURATION}) seconds (a script lasts \
+                     at most one hour)",
+                    k.time
+                )));
+            }
             if !(k.speed.is_finite() && (0.0..=MAX_SPEED).contains(&k.speed)) {
                 return Err(invalid(format!(
                     "control key {i} has speed {} cm/s: a speed is a finite number from 0 to {} m/s",
@@ -88,14 +116,19 @@ impl ControlScript {
                     MAX_SPEED / 100.0
                 )));
             }
-            if !k.heading.is_finite() {
-                return Err(invalid(format!("control key {i} has heading {}: give a finite angle", k.heading)));
+            if !(k.heading.is_finite() && k.heading.to_degrees().abs() <= MAX_HEADING_DEG) {
+                return Err(invalid(format!(
+                    "control key {i} has heading {:?} degrees: give a finite angle in [-{MAX_HEADING_DEG}, \
+                     {MAX_HEADING_DEG}] degrees",
+                    k.heading.to_degrees()
+                )));
             }
         }
         let last = keys[keys.len() - 1].time;
-        if !(duration.is_finite() && duration > last) {
+        if !(duration.is_finite() && duration > last && duration <= MAX_DURATION) {
             return Err(invalid(format!(
-                "the script's duration {duration} s must be finite and after its last key ({last} s)"
+                "`duration` is {duration:?} s: a script ends after its last key ({last} s) and lasts at most \
+                 {MAX_DURATION} s (one hour), valid range ({last}, {MAX_DURATION}]"
             )));
         }
         Ok(ControlScript { keys, duration })
@@ -125,6 +158,12 @@ impl ControlScript {
                 }),
             }
         };
+        if keys.len() > MAX_KEYS {
+            return Err(invalid(format!(
+                "the control script has {} keys, more than the {MAX_KEYS} zoo reads: give at most one key per change",
+                keys.len()
+            )));
+        }
         let mut out: Vec<ControlKey> = Vec::with_capacity(keys.len());
         for (i, k) in keys.iter().enumerate() {
             if !k.is_object() {
@@ -309,6 +348,36 @@ mod tests {
         }
         let e = ControlScript::new(vec![ControlKey { time: 0.0, speed: 1.0, heading: f64::NAN }], 2.0).unwrap_err();
         assert!(e.to_string().contains("finite angle"), "{e}");
+    }
+
+    #[test]
+    fn durations_key_times_headings_and_key_counts_past_their_bounds_are_refused_with_the_range() {
+        let key = |t: f64| format!(r#"{{"time": {t}, "speed": 1, "heading": 0}}"#);
+        let script = |duration: &str, keys: &str| format!(r#"{{"duration": {duration}, "keys": [{keys}]}}"#);
+        // At the bounds: loads.
+        let s = ControlScript::from_json(&script("3600", &format!("{}, {}", key(0.0), key(3599.5)))).unwrap();
+        assert_eq!(s.duration(), MAX_DURATION);
+        let s = ControlScript::from_json(r#"{"duration": 5, "keys": [{"time": 0, "speed": 1, "heading": 1e6}]}"#);
+        assert!(s.is_ok(), "{s:?}");
+        for (text, want) in [
+            (script("3600.5", &key(0.0)), "`duration` is 3600.5 s"),
+            (script("1e300", &key(0.0)), "valid range (0, 3600]"),
+            (script("1e9", &format!("{}, {}", key(0.0), key(5000.0))), "control key 1 is at time 5000.0 s"),
+            (script("5", &format!("{}, {}", key(0.0), key(1e300))), "[0, 3600) seconds"),
+            (
+                r#"{"duration": 5, "keys": [{"time": 0, "speed": 1, "heading": 1.5e6}]}"#.to_string(),
+                "heading 1500000.0 degrees",
+            ),
+        ] {
+            let e = ControlScript::from_json(&text).unwrap_err().to_string();
+            assert!(e.contains(want), "{text}: {e}");
+        }
+        let many: Vec<String> = (0..=MAX_KEYS).map(|i| key(i as f64 * 0.01)).collect();
+        let e = ControlScript::from_json(&script("3599", &many.join(","))).unwrap_err().to_string();
+        assert!(e.contains("100001 keys, more than the 100000"), "{e}");
+        let keys: Vec<ControlKey> =
+            (0..=MAX_KEYS).map(|i| ControlKey { time: i as f64 * 0.01, speed: 1.0, heading: 0.0 }).collect();
+        assert!(ControlScript::new(keys, 3599.0).unwrap_err().to_string().contains("more than the 100000"));
     }
 
     #[test]

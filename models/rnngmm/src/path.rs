@@ -10,6 +10,13 @@
 //! JSON: `{"units": "cm" | "m", "points": [[x, z], ...]}` (points may also be `[x, y, z]` with
 //! y = 0), or `{"units": ..., "svg": "M 0 0 C ..."}` (SVG path data in those units). Units
 //! default to metres.
+//!
+//! Every value is range-checked like the command line's options: coordinates finite and within
+//! +-[`MAX_COORD`] cm (10 km) of the origin, at most [`MAX_POINTS`] points, at most
+//! [`MAX_LENGTH`] cm (10 km) long. SVG path data is checked before its curves are flattened: its
+//! coordinates within +-[`MAX_SVG_UNITS`] user units and, scaled, within +-10 km, and its control
+//! polygon (which is at least as long as the curve) at most 10 km, so that no drawing makes the
+//! flattening emit more than a bounded number of points.
 
 use std::path::Path;
 use thiserror::Error;
@@ -29,6 +36,17 @@ pub enum PathError {
     #[error("{0}")]
     Invalid(String),
 }
+
+/// The largest coordinate of a path point, cm either way (10 km).
+pub const MAX_COORD: f64 = 1e6;
+/// The longest path, cm (10 km).
+pub const MAX_LENGTH: f64 = 1e6;
+/// The most points of a path, given or flattened from curves (10 km at one point per 10 cm).
+pub const MAX_POINTS: usize = 100_000;
+/// The largest coordinate of SVG path data, user units either way (before the scale).
+pub const MAX_SVG_UNITS: f64 = 1e9;
+/// The largest SVG scale, centimetres per user unit (the command line's `--svg-scale` range).
+pub const MAX_SVG_SCALE: f64 = 10_000.0;
 
 fn invalid(message: impl Into<String>) -> PathError {
     PathError::Invalid(message.into())
@@ -67,12 +85,21 @@ fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
 
 impl GroundPath {
     /// A path through `points` (cm). Consecutive duplicates are dropped; at least 2 distinct
-    /// finite points are needed.
+    /// finite points are needed, at most [`MAX_POINTS`], each coordinate within
+    /// +-[`MAX_COORD`], the whole at most [`MAX_LENGTH`] long.
     pub fn new(points: Vec<[f64; 2]>) -> Result<Self, PathError> {
+        check_point_count(points.len())?;
         if let Some(i) = points.iter().position(|p| !(p[0].is_finite() && p[1].is_finite())) {
             return Err(invalid(format!(
                 "path point {i} is not a finite number ({:?}): give finite coordinates",
                 points[i]
+            )));
+        }
+        if let Some(i) = points.iter().position(|p| p[0].abs() > MAX_COORD || p[1].abs() > MAX_COORD) {
+            return Err(invalid(format!(
+                "path point {i} is at ({:?} cm, {:?} cm): coordinates are in [-{MAX_COORD}, {MAX_COORD}] cm (10 km \
+                 from the origin); move the path closer to the origin",
+                points[i][0], points[i][1]
             )));
         }
         let mut pts: Vec<[f64; 2]> = Vec::with_capacity(points.len());
@@ -90,6 +117,12 @@ impl GroundPath {
         let mut cum = vec![0.0; pts.len()];
         for i in 1..pts.len() {
             cum[i] = cum[i - 1] + dist(pts[i - 1], pts[i]);
+        }
+        let length = cum[pts.len() - 1];
+        if length > MAX_LENGTH {
+            return Err(invalid(format!(
+                "the path is {length:.0} cm long: a path is at most {MAX_LENGTH} cm (10 km) long; shorten it"
+            )));
         }
         Ok(GroundPath { points: pts, cum })
     }
@@ -110,6 +143,7 @@ impl GroundPath {
         let points = v.get("points").and_then(|p| p.as_array()).ok_or_else(|| {
             invalid("the path JSON needs `points` (a list of [x, z] or [x, y, z]) or `svg` (path data)")
         })?;
+        check_point_count(points.len())?;
         let mut out = Vec::with_capacity(points.len());
         for (i, p) in points.iter().enumerate() {
             let c: Vec<f64> = p
@@ -139,32 +173,95 @@ impl GroundPath {
         Self::new(out)
     }
 
-    /// The path of SVG path data (`d`), `cm_per_unit` centimetres per SVG unit; curves are
-    /// flattened to within 0.5 cm. Only the first subpath is used.
+    /// The path of SVG path data (`d`), `cm_per_unit` centimetres per SVG unit (in
+    /// (0, [`MAX_SVG_SCALE`]]); curves are flattened to within 0.5 cm. Only the first subpath
+    /// is used. The coordinates and the control polygon's length are checked before flattening.
     pub fn from_svg_data(d: &str, cm_per_unit: f64) -> Result<Self, PathError> {
-        if !(cm_per_unit.is_finite() && cm_per_unit > 0.0) {
-            return Err(invalid(format!("the SVG scale must be positive, found {cm_per_unit}")));
+        use kurbo::PathEl;
+        if !(cm_per_unit.is_finite() && cm_per_unit > 0.0 && cm_per_unit <= MAX_SVG_SCALE) {
+            return Err(invalid(format!(
+                "the SVG scale is {cm_per_unit:?} cm per unit: give a number in (0, {MAX_SVG_SCALE}]"
+            )));
+        }
+        // Every number before kurbo reads them: an arc's radius sets how many curves kurbo makes
+        // of it (about radius^(1/6): 1e300 units would be 1e50 curves).
+        for n in svg_numbers(d) {
+            if let Ok(v) = n.parse::<f64>()
+                && !(v.is_finite() && v.abs() <= MAX_SVG_UNITS)
+            {
+                return Err(invalid(format!(
+                    "the SVG path data has the number {n}: coordinates and radii are finite and in \
+                     [-{MAX_SVG_UNITS}, {MAX_SVG_UNITS}] units"
+                )));
+            }
         }
         let bez = kurbo::BezPath::from_svg(d).map_err(|e| invalid(format!("the SVG path data does not parse: {e}")))?;
+        let els = bez.elements();
+        if !matches!(els.first(), Some(PathEl::MoveTo(_))) {
+            return Err(invalid("the SVG path data must start with a move-to (`M x y`)"));
+        }
+        // The first subpath, the only one used: the others are not flattened either.
+        let end = els.iter().skip(1).position(|e| matches!(e, PathEl::MoveTo(_))).map_or(els.len(), |i| i + 1);
+        let first: kurbo::BezPath = els[..end].iter().copied().collect();
+        // Range checks before flattening: flattening a curve of huge coordinates or length (or
+        // at a tiny scale, where 0.5 cm is a tiny fraction of a unit) emits that many points.
+        let (mut polygon, mut prev, mut start) = (0.0, kurbo::Point::ZERO, kurbo::Point::ZERO);
+        for (i, el) in first.elements().iter().enumerate() {
+            let points: &[kurbo::Point] = match el {
+                PathEl::MoveTo(p) | PathEl::LineTo(p) => std::slice::from_ref(p),
+                PathEl::QuadTo(a, b) => &[*a, *b],
+                PathEl::CurveTo(a, b, c) => &[*a, *b, *c],
+                PathEl::ClosePath => std::slice::from_ref(&start),
+            };
+            for p in points {
+                if !(p.x.is_finite() && p.y.is_finite() && p.x.abs() <= MAX_SVG_UNITS && p.y.abs() <= MAX_SVG_UNITS) {
+                    return Err(invalid(format!(
+                        "SVG path element {i} has the point ({:?}, {:?}): coordinates are finite and in \
+                         [-{MAX_SVG_UNITS}, {MAX_SVG_UNITS}] units",
+                        p.x, p.y
+                    )));
+                }
+                let (x, z) = (p.x * cm_per_unit, p.y * cm_per_unit);
+                if x.abs() > MAX_COORD || z.abs() > MAX_COORD {
+                    return Err(invalid(format!(
+                        "SVG path element {i} has the point ({:?}, {:?}), ({x:?} cm, {z:?} cm) at {cm_per_unit:?} cm per unit: \
+                         coordinates are in [-{MAX_COORD}, {MAX_COORD}] cm (10 km from the origin); move the path or \
+                         lower the scale",
+                        p.x, p.y
+                    )));
+                }
+                if !matches!(el, PathEl::MoveTo(_)) {
+                    polygon += (*p - prev).hypot() * cm_per_unit;
+                }
+                prev = *p;
+            }
+            if let PathEl::MoveTo(p) = el {
+                start = *p;
+            }
+        }
+        if polygon > MAX_LENGTH {
+            return Err(invalid(format!(
+                "the SVG path's control polygon is {polygon:.0} cm long at {cm_per_unit:?} cm per unit: a path is at \
+                 most {MAX_LENGTH} cm (10 km) long; shorten it or lower the scale"
+            )));
+        }
         let mut pts: Vec<[f64; 2]> = Vec::new();
-        let mut subpaths = 0;
-        let mut start = None;
-        kurbo::flatten(&bez, 0.5 / cm_per_unit, |el| match el {
-            kurbo::PathEl::MoveTo(p) => {
-                subpaths += 1;
-                if subpaths == 1 {
-                    pts.push([p.x * cm_per_unit, p.y * cm_per_unit]);
-                    start = Some([p.x * cm_per_unit, p.y * cm_per_unit]);
-                }
+        let mut emitted = 0usize;
+        kurbo::flatten(&first, 0.5 / cm_per_unit, |el| {
+            // Counted, not kept, past the limit: `new` refuses the count.
+            emitted += 1;
+            if emitted > MAX_POINTS + 1 {
+                return;
             }
-            kurbo::PathEl::LineTo(p) if subpaths == 1 => pts.push([p.x * cm_per_unit, p.y * cm_per_unit]),
-            kurbo::PathEl::ClosePath if subpaths == 1 => {
-                if let Some(s) = start {
-                    pts.push(s)
-                }
+            match el {
+                PathEl::MoveTo(p) | PathEl::LineTo(p) => pts.push([p.x * cm_per_unit, p.y * cm_per_unit]),
+                PathEl::ClosePath => pts.push([start.x * cm_per_unit, start.y * cm_per_unit]),
+                _ => {}
             }
-            _ => {}
         });
+        if emitted > MAX_POINTS {
+            check_point_count(emitted)?;
+        }
         Self::new(pts)
     }
 
@@ -320,6 +417,60 @@ impl GroundPath {
     }
 }
 
+/// The numbers of SVG path data, as kurbo's lexer reads them: a sign, digits with at most one
+/// period, an exponent (`1.5.5` is `1.5` and `.5`, `1-2` is `1` and `-2`).
+fn svg_numbers(d: &str) -> impl Iterator<Item = &str> {
+    let b = d.as_bytes();
+    let mut i = 0;
+    std::iter::from_fn(move || {
+        while i < b.len() {
+            let start = i;
+            let mut j = i;
+            if b[j] == b'-' || b[j] == b'+' {
+                j += 1;
+            }
+            let (mut digits, mut period) = (0, false);
+            while j < b.len() && (b[j].is_ascii_digit() || (b[j] == b'.' && !period)) {
+                if b[j] == b'.' {
+                    period = true;
+                } else {
+                    digits += 1;
+                }
+                j += 1;
+            }
+            if digits == 0 {
+                i = start + 1;
+                continue;
+            }
+            if j < b.len() && (b[j] == b'e' || b[j] == b'E') {
+                let mut k = j + 1;
+                if k < b.len() && (b[k] == b'-' || b[k] == b'+') {
+                    k += 1;
+                }
+                if k < b.len() && b[k].is_ascii_digit() {
+                    while k < b.len() && b[k].is_ascii_digit() {
+                        k += 1;
+                    }
+                    j = k;
+                }
+            }
+            i = j;
+            return Some(&d[start..j]);
+        }
+        None
+    })
+}
+
+fn check_point_count(n: usize) -> Result<(), PathError> {
+    if n > MAX_POINTS {
+        return Err(invalid(format!(
+            "the path has {n} points, more than the {MAX_POINTS} zoo reads: give fewer points (one every 10 cm or \
+             more is plenty)"
+        )));
+    }
+    Ok(())
+}
+
 /// The names of [`GroundPath::test_path`].
 pub const TEST_PATHS: [&str; 5] = ["straight", "circle", "s-curve", "corner", "spiral"];
 
@@ -381,6 +532,54 @@ mod tests {
         assert!(e.contains("no <path"), "{e}");
         let e = GroundPath::new(vec![[0.0, f64::NAN], [1.0, 1.0]]).unwrap_err().to_string();
         assert!(e.contains("finite"), "{e}");
+    }
+
+    #[test]
+    fn coordinates_lengths_point_counts_and_svg_scales_past_their_bounds_are_refused_with_the_range() {
+        // At the bounds: loads (10 km straight, from -5 km to +5 km; 100,000 points).
+        let p = GroundPath::from_json(r#"{"units": "m", "points": [[0, -5000], [0, 5000]]}"#).unwrap();
+        assert_eq!(p.length(), MAX_LENGTH);
+        let pts: Vec<[f64; 2]> = (0..MAX_POINTS).map(|i| [0.0, i as f64 * 0.01]).collect();
+        assert_eq!(GroundPath::new(pts).unwrap().points().len(), MAX_POINTS);
+        let b = GroundPath::from_svg_data("M 0 0 L 1e6 0", 1.0).unwrap();
+        assert_eq!(b.length(), MAX_LENGTH);
+        for (json, want) in [
+            (r#"{"units": "m", "points": [[0, 0], [10001, 0]]}"#, "path point 1 is at (1000100.0 cm, 0.0 cm)"),
+            (r#"{"units": "cm", "points": [[0, 0], [0, 1e300]]}"#, "in [-1000000, 1000000] cm"),
+            (r#"{"units": "m", "points": [[-5000, 0], [5000, 0], [5000, 1]]}"#, "at most 1000000 cm (10 km) long"),
+            (r#"{"units": "m", "svg": "M 0 0 L 0 1e7"}"#, "(0.0 cm, 1000000000.0 cm) at 100.0 cm per unit"),
+            (r#"{"units": "cm", "svg": "M 0 0 L 1e300 0"}"#, "in [-1000000000, 1000000000] units"),
+        ] {
+            let e = GroundPath::from_json(json).unwrap_err().to_string();
+            assert!(e.contains(want), "{json}: {e}");
+        }
+        let many: Vec<String> = (0..=MAX_POINTS).map(|i| format!("[0, {i}]")).collect();
+        let e = GroundPath::from_json(&format!(r#"{{"units": "cm", "points": [{}]}}"#, many.join(",")))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("100001 points, more than the 100000"), "{e}");
+        // A curve whose control polygon is long: refused before flattening.
+        let e = GroundPath::from_svg_data("M 0 0 C 0 400000 0 -400000 0 0", 1.0).unwrap_err().to_string();
+        assert!(e.contains("control polygon is 1600000 cm long"), "{e}");
+        // Tight loops within 10 km that would flatten to more than 100,000 points: counted, refused.
+        let loops: String = (0..15_000).map(|_| "c 0 10 10 10 10 0 c 0 -10 -10 -10 -10 0 ").collect();
+        let e = GroundPath::from_svg_data(&format!("M 0 0 {loops}"), 1.0).unwrap_err().to_string();
+        assert!(e.contains("more than the 100000"), "{e}");
+        // A huge second subpath is neither used nor flattened; a huge first one is refused.
+        let p = GroundPath::from_svg_data("M 0 0 L 0 100 M 0 0 C 1e9 0 0 1e9 1 1", 1.0).unwrap();
+        assert_eq!(p.length(), 100.0);
+        for (scale, want) in [(0.0, "(0, 10000]"), (1e5, "100000.0 cm per unit"), (f64::NAN, "NaN cm per unit")] {
+            let e = GroundPath::from_svg_data("M 0 0 L 0 1", scale).unwrap_err().to_string();
+            assert!(e.contains(want), "{scale}: {e}");
+        }
+        // An arc of a huge radius: refused before kurbo turns it into 1e50 curves.
+        let e = GroundPath::from_svg_data("M 0 0 A 1e300 1e300 0 1 1 1 0", 1.0).unwrap_err().to_string();
+        assert!(e.contains("has the number 1e300"), "{e}");
+        let e = GroundPath::from_svg_data("M0,0L1.5.5-2e999", 1.0).unwrap_err().to_string();
+        assert!(e.contains("has the number -2e999"), "{e}");
+        assert_eq!(svg_numbers("M1.5.5-2e3,+4E-1 e5 1e").collect::<Vec<_>>(), ["1.5", ".5", "-2e3", "+4E-1", "5", "1"]);
+        let e = GroundPath::from_svg_data("M 0 0 L 0 1e9", 1e-300).unwrap_err().to_string();
+        assert!(e.contains("at least 2 distinct points"), "{e}");
     }
 
     #[test]

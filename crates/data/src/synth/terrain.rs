@@ -8,6 +8,28 @@ use glam::DVec3;
 use std::f64::consts::{PI, TAU};
 use zoo_motion::rng::SplitMix64;
 
+/// The step edges between `s_min` and `s_max` along the steps' direction (cm): (position,
+/// height change), 90-320 cm apart, the level kept within 60 cm of the start.
+fn step_edges(rng: &mut SplitMix64, s_min: f64, s_max: f64) -> Vec<(f64, f64)> {
+    let mut edges: Vec<(f64, f64)> = Vec::new();
+    let mut level = 0.0;
+    let mut s = s_min + rng.range(50.0, 250.0);
+    // Edges are at least 90 cm apart: the count is bounded up front (and by 90,000 km of
+    // terrain), so a huge coordinate, where adding 90 cm no longer changes `s`, cannot loop for
+    // ever.
+    let most_edges = (((s_max - s_min) / 90.0).ceil().max(0.0) as usize).min(1_000_000) + 1;
+    while s < s_max && edges.len() < most_edges {
+        let mut jump = rng.sign() * rng.range(8.0, 18.0);
+        if (level + jump).abs() > 60.0 {
+            jump = -jump;
+        }
+        level += jump;
+        edges.push((s, jump));
+        s += rng.range(90.0, 320.0);
+    }
+    edges
+}
+
 /// The ground around a trajectory (180 cm margin, 10 cm cells) for a terrain kind: slope with
 /// waves, Gaussian bumps along the path, step edges, or all three.
 pub(super) fn make_terrain(rng: &mut SplitMix64, kind: TerrainKind, traj: &Trajectory) -> Heightmap {
@@ -44,18 +66,7 @@ pub(super) fn make_terrain(rng: &mut SplitMix64, kind: TerrainKind, traj: &Traje
         s_min = s_min.min(s);
         s_max = s_max.max(s);
     }
-    let mut edges: Vec<(f64, f64)> = Vec::new();
-    let mut level = 0.0;
-    let mut s = s_min + rng.range(50.0, 250.0);
-    while s < s_max {
-        let mut jump = rng.sign() * rng.range(8.0, 18.0);
-        if (level + jump).abs() > 60.0 {
-            jump = -jump;
-        }
-        level += jump;
-        edges.push((s, jump));
-        s += rng.range(90.0, 320.0);
-    }
+    let edges = step_edges(rng, s_min, s_max);
     let use_slope = matches!(kind, TerrainKind::Slope | TerrainKind::Mixed);
     let use_bumps = matches!(kind, TerrainKind::Bumps | TerrainKind::Mixed);
     let use_steps = matches!(kind, TerrainKind::Steps | TerrainKind::Mixed);
@@ -86,5 +97,23 @@ pub(super) fn make_terrain(rng: &mut SplitMix64, kind: TerrainKind, traj: &Traje
     match kind {
         TerrainKind::Flat => Heightmap::flat_area(x0, z0, x1, z1, cell, 0.0),
         _ => Heightmap::from_fn(x0, z0, x1, z1, cell, height),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn step_edges_end_at_huge_coordinates_where_a_step_no_longer_moves() {
+        let mut rng = SplitMix64::new(3);
+        let e = step_edges(&mut rng, 0.0, 1000.0);
+        assert!(!e.is_empty() && e.len() <= 12 && e.windows(2).all(|w| w[1].0 - w[0].0 >= 90.0), "{e:?}");
+        // At 1e20 cm adding 320 cm leaves `s` unchanged: a loop on `s < s_max` never ended.
+        let e = step_edges(&mut rng, 1e20, 1e20 + 1e6);
+        assert!(e.len() <= 12_000, "{}", e.len());
+        // No span: no edge past one.
+        assert!(step_edges(&mut rng, f64::NAN, f64::NAN).is_empty());
+        assert!(step_edges(&mut rng, -f64::MAX, f64::MAX).len() <= 1_000_001);
     }
 }

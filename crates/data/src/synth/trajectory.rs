@@ -43,7 +43,10 @@ pub(super) fn plan_trajectory(
     // Segment targets: (start time, speed m/s, turn rate rad/s, strafe angle rad).
     let mut segs: Vec<(f64, f64, f64, f64)> = Vec::new();
     let mut t = 0.0;
-    while t < total {
+    // Each segment lasts at least 1.5 s: the count is bounded up front (no loop whose end
+    // depends on floating-point progress).
+    let most_segments = (total / 1.5).ceil().max(0.0) as usize + 1;
+    while t < total && segs.len() < most_segments {
         let u = rng.next_f64();
         let (speed, strafe) = match gait {
             Gait::Idle => {

@@ -13,11 +13,16 @@
 //! [`SplitMix64`] (so runs are reproducible and independent of thread scheduling) would each
 //! have to be worked around in argmin, for a loop of a few lines.
 
-use super::controller::{HopPolicy, Rollout, RolloutOptions, simulate};
+use super::controller::{
+    HopPolicy, MAX_CYCLES, MAX_SETTLE_SECONDS, MAX_STATE_SECONDS, Rollout, RolloutOptions, simulate,
+};
 use super::lamp::LampParams;
 use super::sequence::{Hop, detect_hops};
 use serde::{Deserialize, Serialize};
 use zoo_motion::rng::SplitMix64;
+
+/// The most annealing iterations per run (the command line's `--k-max` range).
+pub const MAX_K: usize = 1_000_000;
 
 /// Energy of a policy that falls over or does not hop the requested number of times.
 pub const INVALID_ENERGY: f64 = 1.0e6;
@@ -70,30 +75,46 @@ impl AnnealConfig {
         self.t_max * self.cooling.powi(k as i32)
     }
 
-    /// Checks the settings.
+    /// Checks the settings, each in its range (the message names it, its value and the range):
+    /// `k_max` in 1..=[`MAX_K`], `t_max` in (0, 1e6], `cooling` in (0, 1], `duration_step` in
+    /// [0, 10] s, `angle_step` in [0, 2 pi], `duration_range` with 0 < min < max <=
+    /// [`MAX_STATE_SECONDS`], `rollout.cycles` in 1..=[`MAX_CYCLES`], `rollout.settle_s` in
+    /// [0, [`MAX_SETTLE_SECONDS`]], `min_air_s` in [0, 10] s, `min_distance` and `min_height` in
+    /// [0, 1000] m.
     pub fn validate(&self) -> Result<(), String> {
-        if !(self.t_max > 0.0 && self.cooling > 0.0 && self.cooling <= 1.0) {
-            return Err(format!("t_max must be > 0 and cooling in (0, 1], found {} and {}", self.t_max, self.cooling));
+        if !(1..=MAX_K).contains(&self.k_max) {
+            return Err(format!("anneal k_max is {}: give a whole number of iterations in 1..={MAX_K}", self.k_max));
+        }
+        if !(self.t_max.is_finite() && self.t_max > 0.0 && self.t_max <= 1e6) {
+            return Err(format!("anneal t_max is {:?}: give a temperature in (0, 1000000]", self.t_max));
+        }
+        if !(self.cooling > 0.0 && self.cooling <= 1.0) {
+            return Err(format!("anneal cooling is {:?}: give a factor in (0, 1]", self.cooling));
         }
         let [lo, hi] = self.duration_range;
-        if !(lo > 0.0 && lo < hi && hi.is_finite()) {
-            return Err(format!("duration_range must satisfy 0 < min < max, found [{lo}, {hi}]"));
+        if !(lo > 0.0 && lo < hi && hi <= MAX_STATE_SECONDS) {
+            return Err(format!(
+                "anneal duration_range is [{lo:?}, {hi:?}]: give 0 < min < max <= {MAX_STATE_SECONDS} seconds"
+            ));
         }
-        if self.rollout.cycles == 0 {
-            return Err("the rollout needs at least one hop cycle".into());
+        if !(1..=MAX_CYCLES).contains(&self.rollout.cycles) {
+            return Err(format!(
+                "rollout cycles is {}: give a whole number of hops in 1..={MAX_CYCLES}",
+                self.rollout.cycles
+            ));
         }
-        if ![
-            self.duration_step,
-            self.angle_step,
-            self.min_air_s,
-            self.min_distance,
-            self.min_height,
-            self.rollout.settle_s,
-        ]
-        .iter()
-        .all(|v| v.is_finite() && *v >= 0.0)
-        {
-            return Err("steps, minimum air time, distance, height and settle time must be >= 0".into());
+        let tau = std::f64::consts::TAU;
+        for (name, v, most, unit) in [
+            ("duration_step", self.duration_step, 10.0, "s"),
+            ("angle_step", self.angle_step, tau, "rad"),
+            ("min_air_s", self.min_air_s, 10.0, "s"),
+            ("min_distance", self.min_distance, 1000.0, "m"),
+            ("min_height", self.min_height, 1000.0, "m"),
+            ("rollout.settle_s", self.rollout.settle_s, MAX_SETTLE_SECONDS, "s"),
+        ] {
+            if !(v.is_finite() && (0.0..=most).contains(&v)) {
+                return Err(format!("anneal {name} is {v:?} {unit}: give a number in [0, {most}] {unit}"));
+            }
         }
         Ok(())
     }

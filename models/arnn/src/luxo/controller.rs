@@ -49,16 +49,48 @@ impl HopPolicy {
         3
     }
 
-    /// Checks that durations are positive and angles finite.
+    /// Checks that durations are in (0, [`MAX_STATE_SECONDS`]] seconds and angles finite and
+    /// within +-2 pi.
     pub fn validate(&self) -> Result<(), String> {
-        if self.durations.iter().any(|d| !(d.is_finite() && *d > 0.0)) {
-            return Err(format!("hop durations must be positive seconds, found {:?}", self.durations));
+        if let Some(i) = self.durations.iter().position(|d| !(d.is_finite() && *d > 0.0 && *d <= MAX_STATE_SECONDS)) {
+            return Err(format!(
+                "hop duration t{} is {:?} s: give durations in (0, {MAX_STATE_SECONDS}] seconds, found {:?}",
+                i + 1,
+                self.durations[i],
+                self.durations
+            ));
         }
-        if self.poses.iter().flatten().any(|a| !a.is_finite()) {
-            return Err("hop target poses must be finite angles".into());
+        let tau = std::f64::consts::TAU;
+        if let Some(a) = self.poses.iter().flatten().find(|a| !(a.is_finite() && a.abs() <= tau)) {
+            return Err(format!("hop target poses must be finite angles within [-2 pi, 2 pi] radians, found {a:?}"));
         }
         Ok(())
     }
+}
+
+/// The longest state of a hop policy, seconds (the paper's are 0.04 to 0.6 s).
+pub const MAX_STATE_SECONDS: f64 = 10.0;
+/// The most hop cycles of a rollout (the paper's three).
+pub const MAX_CYCLES: usize = 100;
+/// The longest settling time after the last cycle, seconds.
+pub const MAX_SETTLE_SECONDS: f64 = 60.0;
+/// The most integration steps of one rollout (its poses, contacts and clearances are kept:
+/// about 60 MB; at the default 480 steps per second, 35 minutes of simulated time).
+pub const MAX_ROLLOUT_STEPS: usize = 1_000_000;
+
+/// The integration steps of a rollout of `run_s` seconds of cycles and `settle_s` seconds of
+/// settling at step `dt`, refused past [`MAX_ROLLOUT_STEPS`] before anything is simulated or
+/// allocated.
+pub fn rollout_steps(run_s: f64, settle_s: f64, dt: f64) -> Result<usize, String> {
+    let steps = ((run_s + settle_s) / dt).round();
+    if !(steps.is_finite() && steps >= 0.0 && steps <= MAX_ROLLOUT_STEPS as f64) {
+        return Err(format!(
+            "a rollout of {run_s:?} s of hop cycles and {settle_s:?} s of settling at dt = {dt:?} s is {steps:.0} integration \
+             steps, more than the {MAX_ROLLOUT_STEPS} zoo simulates: raise dt or shorten the hop durations, cycles \
+             or settle_s"
+        ));
+    }
+    Ok(steps as usize)
 }
 
 /// How long to run a policy.
@@ -122,7 +154,7 @@ pub fn simulate(params: &LampParams, policy: &HopPolicy, options: &RolloutOption
     let mut lamp = Lamp::new(params, REST_ANGLES)?;
     let dt = params.dt;
     let run_s = policy.cycle_duration() * options.cycles as f64;
-    let steps = ((run_s + options.settle_s) / dt).round() as usize;
+    let steps = rollout_steps(run_s, options.settle_s, dt)?;
     let mut rollout = Rollout {
         dt,
         initial: lamp.pose(),

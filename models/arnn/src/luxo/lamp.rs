@@ -25,6 +25,23 @@ pub const DOFS: usize = 6;
 /// joint angles base-leg, leg-neck, neck-head (radians).
 pub type LampPose = [f64; DOFS];
 
+/// The largest length of a lamp part, metres.
+pub const MAX_LENGTH: f64 = 10.0;
+/// The largest mass of a lamp part, kilograms.
+pub const MAX_MASS: f64 = 1000.0;
+/// The largest PD gain or torque limit (N m/rad, N m s/rad, N m).
+pub const MAX_GAIN: f64 = 1e6;
+/// The largest friction coefficient.
+pub const MAX_FRICTION: f64 = 100.0;
+/// The largest gravity, m/s^2 either way.
+pub const MAX_GRAVITY: f64 = 1000.0;
+/// The finest integration step, seconds (100 kHz; the default is 1/480 s).
+pub const MIN_DT: f64 = 1e-5;
+/// The coarsest integration step the hop controller works with, seconds.
+pub const MAX_DT: f64 = 0.01;
+/// The most solver iterations per step.
+pub const MAX_SOLVER_ITERATIONS: usize = 100;
+
 /// Geometry, masses, controller gains and simulation settings of the lamp.
 ///
 /// Lengths in metres, masses in kilograms, gains in N m/rad and N m s/rad. The defaults
@@ -103,50 +120,93 @@ impl Default for LampParams {
 }
 
 impl LampParams {
-    /// Checks that every length, mass, gain and setting is finite and in range.
+    /// Checks that every length, mass, gain and setting is finite and in range: lengths in
+    /// (0, [`MAX_LENGTH`]] m, masses in (0, [`MAX_MASS`]] kg, gains and torques in
+    /// [0, [`MAX_GAIN`]], joint limits within +-2 pi, friction in [0, [`MAX_FRICTION`]],
+    /// gravity within +-[`MAX_GRAVITY`] m/s^2, `dt` in [[`MIN_DT`], [`MAX_DT`]] s, solver
+    /// iterations in 1..=[`MAX_SOLVER_ITERATIONS`], the contact tolerance in (0, 1] m. Each
+    /// message names the parameter, the value and the range.
     pub fn validate(&self) -> Result<(), String> {
-        let positive = [
+        let lengths = [
             ("base_half_width", self.base_half_width),
             ("base_half_height", self.base_half_height),
-            ("base_mass", self.base_mass),
             ("leg_length", self.leg_length),
             ("neck_length", self.neck_length),
             ("link_radius", self.link_radius),
-            ("leg_mass", self.leg_mass),
-            ("neck_mass", self.neck_mass),
             ("head_length", self.head_length),
             ("head_half_width", self.head_half_width),
-            ("head_mass", self.head_mass),
-            ("dt", self.dt),
-            ("contact_tolerance", self.contact_tolerance),
         ];
-        for (name, v) in positive {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(format!("lamp parameter {name} must be a positive number, found {v}"));
+        for (name, v) in lengths {
+            if !(v.is_finite() && v > 0.0 && v <= MAX_LENGTH) {
+                return Err(format!("lamp parameter {name} is {v:?} m: give a length in (0, {MAX_LENGTH}] metres"));
+            }
+        }
+        let masses = [
+            ("base_mass", self.base_mass),
+            ("leg_mass", self.leg_mass),
+            ("neck_mass", self.neck_mass),
+            ("head_mass", self.head_mass),
+        ];
+        for (name, v) in masses {
+            if !(v.is_finite() && v > 0.0 && v <= MAX_MASS) {
+                return Err(format!("lamp parameter {name} is {v:?} kg: give a mass in (0, {MAX_MASS}] kg"));
             }
         }
         for j in 0..3 {
             for (name, v) in [("kp", self.kp[j]), ("kd", self.kd[j]), ("max_torque", self.max_torque[j])] {
-                if !(v.is_finite() && v >= 0.0) {
-                    return Err(format!("lamp parameter {name}[{j}] must be >= 0, found {v}"));
+                if !(v.is_finite() && (0.0..=MAX_GAIN).contains(&v)) {
+                    return Err(format!("lamp parameter {name}[{j}] is {v:?}: give a number in [0, {MAX_GAIN}]"));
                 }
             }
             let [lo, hi] = self.joint_limits[j];
-            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
-                return Err(format!("joint_limits[{j}] must be finite with lower < upper, found [{lo}, {hi}]"));
+            let tau = std::f64::consts::TAU;
+            if !(lo.is_finite() && hi.is_finite() && lo < hi && lo >= -tau && hi <= tau) {
+                return Err(format!(
+                    "joint_limits[{j}] is [{lo:?}, {hi:?}]: give finite angles with lower < upper, within [-2 pi, 2 pi] \
+                     radians"
+                ));
             }
         }
         if 2.0 * self.link_radius >= self.leg_length.min(self.neck_length) {
             return Err("link_radius must be less than half the leg and neck lengths".into());
         }
-        if !(self.friction.is_finite() && self.friction >= 0.0 && self.gravity.is_finite()) {
-            return Err("friction must be >= 0 and gravity finite".into());
+        if !(self.friction.is_finite() && (0.0..=MAX_FRICTION).contains(&self.friction)) {
+            return Err(format!(
+                "lamp parameter friction is {:?}: give a coefficient in [0, {MAX_FRICTION}]",
+                self.friction
+            ));
         }
-        if self.dt > 0.01 {
-            return Err(format!("dt {} s is too coarse for the hop controller: use at most 0.01 s", self.dt));
+        if !(self.gravity.is_finite() && self.gravity.abs() <= MAX_GRAVITY) {
+            return Err(format!(
+                "lamp parameter gravity is {:?} m/s^2: give a number in [-{MAX_GRAVITY}, {MAX_GRAVITY}]",
+                self.gravity
+            ));
         }
-        if self.solver_iterations == 0 {
-            return Err("solver_iterations must be at least 1".into());
+        if !(self.dt.is_finite() && self.dt >= MIN_DT) {
+            return Err(format!(
+                "lamp parameter dt is {:?} s: give an integration step in [{MIN_DT}, {MAX_DT}] seconds (the default is \
+                 1/480 s)",
+                self.dt
+            ));
+        }
+        if self.dt > MAX_DT {
+            return Err(format!(
+                "dt {:?} s is too coarse for the hop controller: give an integration step in [{MIN_DT}, {MAX_DT}] \
+                 seconds",
+                self.dt
+            ));
+        }
+        if !(1..=MAX_SOLVER_ITERATIONS).contains(&self.solver_iterations) {
+            return Err(format!(
+                "lamp parameter solver_iterations is {}: give a whole number in 1..={MAX_SOLVER_ITERATIONS}",
+                self.solver_iterations
+            ));
+        }
+        if !(self.contact_tolerance.is_finite() && self.contact_tolerance > 0.0 && self.contact_tolerance <= 1.0) {
+            return Err(format!(
+                "lamp parameter contact_tolerance is {:?} m: give a distance in (0, 1] metres",
+                self.contact_tolerance
+            ));
         }
         Ok(())
     }

@@ -82,6 +82,16 @@ pub enum LuxoError {
     Empty(PathBuf),
 }
 
+/// The most sequences of a data set (the command line's `--sequences` range; the paper uses 300).
+pub const MAX_SEQUENCES: usize = 100_000;
+/// The most annealing runs per sequence (the command line's `--max-attempts` range).
+pub const MAX_ATTEMPTS: usize = 1_000;
+/// The most integration steps per recorded frame.
+pub const MAX_RECORD_EVERY: usize = 1_000;
+/// The most frames of all sequences of a data set together (training keeps them in memory;
+/// 100,000 sequences of the paper's settings are 45 million).
+pub const MAX_TOTAL_FRAMES: usize = 50_000_000;
+
 /// Settings of a generated data set (written to the manifest).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct GenerateOptions {
@@ -121,16 +131,41 @@ impl GenerateOptions {
         1.0 / (self.lamp.dt * self.record_every as f64)
     }
 
-    /// Checks every setting.
+    /// Checks every setting, each in its range like the command line's options (`sequences` in
+    /// 1..=[`MAX_SEQUENCES`], `max_attempts` in 1..=[`MAX_ATTEMPTS`], `record_every` in
+    /// 1..=[`MAX_RECORD_EVERY`], the lamp's, the annealing's and the initial policy's own
+    /// checks), and what they ask for together before any work: the longest rollout annealing
+    /// can simulate at most [`controller::MAX_ROLLOUT_STEPS`] integration steps, the frames
+    /// of all sequences at most [`MAX_TOTAL_FRAMES`].
     pub fn validate(&self) -> Result<(), LuxoError> {
         self.lamp.validate().map_err(LuxoError::Config)?;
         self.anneal.validate().map_err(LuxoError::Config)?;
         self.init.validate().map_err(LuxoError::Config)?;
-        if self.sequences == 0 {
-            return Err(LuxoError::Config("--sequences must be at least 1".into()));
+        for (name, v, most) in [
+            ("sequences", self.sequences, MAX_SEQUENCES),
+            ("max_attempts", self.max_attempts, MAX_ATTEMPTS),
+            ("record_every", self.record_every, MAX_RECORD_EVERY),
+        ] {
+            if !(1..=most).contains(&v) {
+                return Err(LuxoError::Config(format!("{name} is {v}: give a whole number in 1..={most}")));
+            }
         }
-        if self.max_attempts == 0 || self.record_every == 0 {
-            return Err(LuxoError::Config("max_attempts and record_every must be at least 1".into()));
+        // Annealing moves each duration within `duration_range`; the start may lie outside it.
+        let longest_cycle = self.init.cycle_duration().max(4.0 * self.anneal.duration_range[1]);
+        let run_s = longest_cycle * self.anneal.rollout.cycles as f64;
+        let steps = controller::rollout_steps(run_s, self.anneal.rollout.settle_s, self.lamp.dt).map_err(|e| {
+            LuxoError::Config(format!("{e} (the longest cycle annealing may try is {longest_cycle:?} s)"))
+        })?;
+        let frames = (steps / self.record_every + 1).saturating_mul(self.sequences);
+        if frames > MAX_TOTAL_FRAMES {
+            return Err(LuxoError::Config(format!(
+                "{} sequences of up to {} frames (one every {} steps of {} s) are up to {frames} frames, more than the \
+                 {MAX_TOTAL_FRAMES} zoo keeps in memory: lower sequences or raise record_every",
+                self.sequences,
+                steps / self.record_every + 1,
+                self.record_every,
+                self.lamp.dt
+            )));
         }
         Ok(())
     }
@@ -277,7 +312,11 @@ pub fn read_options(dir: &Path) -> Result<GenerateOptions, LuxoError> {
             message: format!("not a {MANIFEST_FORMAT} manifest (format {:?})", manifest.format),
         });
     }
-    manifest.options.validate()?;
+    // The settings' errors name the manifest: its values are range-checked like the options.
+    manifest.options.validate().map_err(|e| match e {
+        LuxoError::Config(message) => LuxoError::BadSequence { path, message: format!("invalid settings: {message}") },
+        e => e,
+    })?;
     Ok(manifest.options)
 }
 

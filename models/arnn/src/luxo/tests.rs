@@ -169,3 +169,71 @@ fn bad_files_are_named() {
     seq.write_json(&path).unwrap();
     assert!(LuxoSequence::read_json(&path).is_err());
 }
+
+#[test]
+fn manifest_values_past_their_ranges_are_refused_with_the_key_the_value_and_the_range() {
+    let dir = tempfile::tempdir().unwrap();
+    let options = GenerateOptions::new(3, 1);
+    let manifest = Manifest {
+        format: MANIFEST_FORMAT.into(),
+        version: sequence::VERSION,
+        options: options.clone(),
+        sequences: (0..3).map(sequence_name).collect(),
+    };
+    let good = serde_json::to_value(&manifest).unwrap();
+    std::fs::write(dir.path().join(MANIFEST_FILE), good.to_string()).unwrap();
+    assert_eq!(read_options(dir.path()).unwrap(), options);
+    let with = |edits: &[(&str, serde_json::Value)]| -> String {
+        let mut v = good.clone();
+        for (pointer, value) in edits {
+            *v.pointer_mut(pointer).unwrap_or_else(|| panic!("{pointer}")) = value.clone();
+        }
+        std::fs::write(dir.path().join(MANIFEST_FILE), v.to_string()).unwrap();
+        read_options(dir.path()).unwrap_err().to_string()
+    };
+    use serde_json::json;
+    for (edits, want) in [
+        // The physics step: 1e-300 s would be 1e300 steps per rollout.
+        (vec![("/options/lamp/dt", json!(1e-300))], "dt is 1e-300 s: give an integration step in [0.00001, 0.01]"),
+        (vec![("/options/lamp/dt", json!(0.05))], "too coarse"),
+        (vec![("/options/lamp/solver_iterations", json!(1_000_000_000u64))], "solver_iterations is 1000000000"),
+        (vec![("/options/lamp/leg_mass", json!(1e300))], "leg_mass is 1e300 kg: give a mass in (0, 1000]"),
+        (vec![("/options/lamp/leg_length", json!(1e9))], "leg_length is 1000000000.0 m"),
+        (vec![("/options/lamp/kp", json!([1e300, 20.0, 5.0]))], "kp[0] is 1e300"),
+        (vec![("/options/lamp/gravity", json!(-1e300))], "gravity is -1e300 m/s^2"),
+        (vec![("/options/lamp/friction", json!(1e9))], "friction is 1000000000.0"),
+        (vec![("/options/lamp/contact_tolerance", json!(5.0))], "contact_tolerance is 5.0 m"),
+        (vec![("/options/lamp/joint_limits", json!([[-100.0, 1.6], [-2.7, 2.7], [-2.7, 2.7]]))], "joint_limits[0]"),
+        // Phase durations, cycles, settle time: each bounded, and their product too.
+        (vec![("/options/init/durations", json!([1e300, 0.09, 0.2, 0.57]))], "hop duration t1 is 1e300 s"),
+        (vec![("/options/anneal/duration_range", json!([0.04, 1e300]))], "duration_range is [0.04, 1e300]"),
+        (vec![("/options/anneal/rollout/settle_s", json!(1e300))], "rollout.settle_s is 1e300 s"),
+        (vec![("/options/anneal/rollout/cycles", json!(1_000_000u64))], "rollout cycles is 1000000"),
+        (vec![("/options/anneal/k_max", json!(1_000_000_000_000u64))], "k_max is 1000000000000"),
+        (vec![("/options/anneal/t_max", json!(0.0))], "t_max is 0.0"),
+        (vec![("/options/anneal/min_air_s", json!(-1.0))], "min_air_s is -1.0 s"),
+        (
+            vec![
+                ("/options/lamp/dt", json!(0.0001)),
+                ("/options/anneal/duration_range", json!([0.04, 10.0])),
+                ("/options/anneal/rollout/cycles", json!(100)),
+            ],
+            "integration steps, more than the 1000000",
+        ),
+        (vec![("/options/sequences", json!(0))], "sequences is 0: give a whole number in 1..=100000"),
+        (vec![("/options/max_attempts", json!(5000))], "max_attempts is 5000"),
+        (vec![("/options/record_every", json!(0))], "record_every is 0"),
+        (
+            vec![("/options/sequences", json!(100_000)), ("/options/record_every", json!(1))],
+            "more than the 50000000 zoo keeps in memory",
+        ),
+    ] {
+        let e = with(&edits);
+        assert!(e.contains(want) && e.contains("luxo.json: invalid settings: "), "{edits:?}: {e}");
+    }
+    // The rollout itself refuses a step count past the limit before allocating.
+    let params = LampParams { dt: 1e-5, ..LampParams::default() };
+    let long = HopPolicy { durations: [10.0; 4], ..HopPolicy::hand_set() };
+    let e = simulate(&params, &long, &RolloutOptions { cycles: 100, settle_s: 0.0, stop_on_fall: true }).unwrap_err();
+    assert!(e.contains("400000000 integration steps"), "{e}");
+}
