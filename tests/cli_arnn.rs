@@ -484,7 +484,24 @@ fn humanoid_arnn_trains_on_bvh_and_runs_in_the_benchmark() {
     let (ok, _, stderr) = run(&["complete", "--model", r, "--poses", kb, "--key-frames", "0,12", "--out", fp]);
     assert!(!ok && stderr.contains("2 key frames for a clip of 3 poses"), "{stderr}");
     let (ok, _, stderr) = run(&["complete", "--model", r, "--poses", kb, "--out", fp]);
-    assert!(!ok && stderr.contains("--poses needs the key frames"), "{stderr}");
+    assert!(!ok && stderr.contains("give the key frames") && stderr.contains("only a glTF file"), "{stderr}");
+    // A glTF file holding only the keys, at 0, 0.4 and 1 s: its key times give frames 0, 12, 30
+    // at 30 fps, so it completes as the BVH of the same poses with --key-frames 0,12,30 does.
+    let key_clip = zoo_data::clip_io::read_model_clip(&keys_bvh).unwrap();
+    let gltf = keys_only_gltf(&key_clip, &[0.0, 0.4, 1.0]);
+    let kg = dir.path().join("key_poses.gltf");
+    std::fs::write(&kg, gltf).unwrap();
+    let from_gltf = dir.path().join("from_gltf.bvh");
+    let (ok, stdout, stderr) =
+        run(&["complete", "--model", r, "--poses", kg.to_str().unwrap(), "--out", from_gltf.to_str().unwrap()]);
+    assert!(ok && stdout.contains("completed 31 frames from 3 keys (0 partial)"), "{stdout}\n{stderr}");
+    let (a, b) = (
+        zoo_data::bvh::read_file(&from_gltf, &Default::default()).unwrap(),
+        zoo_data::bvh::read_file(&from_poses, &Default::default()).unwrap(),
+    );
+    for f in [0, 12, 30] {
+        assert!((a.root_position(f) - b.root_position(f)).length() < 1e-2, "frame {f}");
+    }
     // The keys-only benchmark: the baselines and the run, whose keys are hit after its own misses.
     let json = dir.path().join("keys.json");
     let keys_bench = ["bench", "--data", d, "--valid-glob", "*_0005.bvh", "--layout", "keys", "--every", "10,30"];
@@ -513,4 +530,34 @@ fn humanoid_arnn_trains_on_bvh_and_runs_in_the_benchmark() {
     let lamp = shared_model().join("run");
     let (ok, _, stderr) = run(&[&bench[..], &["--methods", &format!("arnn:{}", lamp.display())]].concat());
     assert!(!ok && stderr.contains("holds a lamp ARNN"), "{stderr}");
+}
+
+/// `clip` (one pose per key) as a glTF file whose animation keys the poses at `times` (seconds):
+/// zoo's glTF writer with its key times replaced, as an animator's blocking pass exports them.
+fn keys_only_gltf(clip: &zoo_motion::Clip, times: &[f32]) -> String {
+    use base64::Engine;
+    let text = zoo_data::gltf::to_gltf_json(clip);
+    let mut doc: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let engine = base64::engine::general_purpose::STANDARD;
+    let uri = doc["buffers"][0]["uri"].as_str().unwrap().to_string();
+    let (prefix, data) = uri.split_once("base64,").unwrap();
+    let mut bytes = engine.decode(data).unwrap();
+    let inputs: std::collections::BTreeSet<u64> =
+        doc["animations"][0]["samplers"].as_array().unwrap().iter().map(|s| s["input"].as_u64().unwrap()).collect();
+    for a in inputs {
+        let acc = doc["accessors"][a as usize].clone();
+        let view = &doc["bufferViews"][acc["bufferView"].as_u64().unwrap() as usize];
+        let start = (view["byteOffset"].as_u64().unwrap_or(0) + acc["byteOffset"].as_u64().unwrap_or(0)) as usize;
+        assert_eq!(acc["count"].as_u64(), Some(times.len() as u64));
+        for (i, t) in times.iter().enumerate() {
+            bytes[start + 4 * i..start + 4 * i + 4].copy_from_slice(&t.to_le_bytes());
+        }
+        doc["accessors"][a as usize]["min"] = serde_json::json!([times[0]]);
+        doc["accessors"][a as usize]["max"] = serde_json::json!([times[times.len() - 1]]);
+    }
+    doc["buffers"][0]["uri"] = serde_json::Value::String(format!("{prefix}base64,{}", engine.encode(&bytes)));
+    if let Some(extras) = doc["animations"][0].get_mut("extras") {
+        *extras = serde_json::json!({});
+    }
+    serde_json::to_string(&doc).unwrap()
 }

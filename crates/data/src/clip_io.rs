@@ -182,6 +182,41 @@ fn checked(path: &Path, format: &'static str, read: (Clip, ClipSource)) -> Resul
     Ok(read)
 }
 
+/// The key poses of a clip file that stores only its keys, and their times in seconds from the
+/// first key, the way the models see clips (dummy root dropped, sign flips removed): glTF keys
+/// each joint at its own times, and a pose is read at every time any joint is keyed
+/// ([`crate::gltf::read_key_poses`]). BVH and FBX files are refused: a BVH file has a pose in
+/// every frame, and zoo reads an FBX take frame by frame.
+pub fn read_key_poses(path: &Path, opts: &ReadOptions) -> Result<(Clip, Vec<f64>), ClipError> {
+    match ClipFormat::of(path) {
+        Some(ClipFormat::Gltf) => {
+            let opts = ReadOptions { drop_dummy_root: true, ..opts.clone() };
+            let (mut clip, times) = crate::gltf::read_key_poses(path, &opts)?;
+            let depth = clip.skeleton.depth();
+            if depth > zoo_motion::Skeleton::MAX_DEPTH {
+                return Err(ClipError::Format {
+                    path: path.to_path_buf(),
+                    format: "glTF",
+                    message: format!(
+                        "the joint hierarchy is {depth} levels deep; zoo reads at most {} levels",
+                        zoo_motion::Skeleton::MAX_DEPTH
+                    ),
+                });
+            }
+            clip.remove_sign_flips();
+            Ok((clip, times))
+        }
+        Some(f) => Err(ClipError::Format {
+            path: path.to_path_buf(),
+            format: f.name(),
+            message: "only a glTF file (.glb, .gltf) stores its keys' times: give the key frames of this one \
+                      (--key-frames 0,15,40 or --every K)"
+                .into(),
+        }),
+        None => Err(ClipError::Extension { path: path.to_path_buf(), expected: READ_EXTENSIONS }),
+    }
+}
+
 /// [`read_with_source`] without the source.
 pub fn read(path: &Path, opts: &ReadOptions) -> Result<Clip, ClipError> {
     Ok(read_with_source(path, opts)?.0)

@@ -58,11 +58,30 @@ pub fn read_file(path: &Path, opts: &ReadOptions) -> Result<(Clip, ClipSource), 
 
 /// Reads a glTF clip from bytes; `path` names it in messages and locates external buffers.
 pub fn read_bytes(bytes: &[u8], path: &Path, opts: &ReadOptions) -> Result<(Clip, ClipSource), ClipError> {
-    let (json, bin) = split_glb(bytes).map_err(|m| err(path, m))?;
-    let doc =
-        ::gltf::Gltf::from_slice(json).map_err(|e| err(path, format!("not a valid glTF 2.0 document: {e}")))?.document;
-    let buffers = load_buffers(&doc, bin, path)?;
-    read_document(&doc, &buffers, path, opts)
+    Ok(read_document(bytes, path, opts, Sampling::Frames)?.0)
+}
+
+/// Reads the key poses of a glTF clip: one frame per time at which any joint is keyed (the
+/// union of the animation's key times), not a resampling at a frame rate, and those times in
+/// seconds from the first key. What an animator's blocking pass exported with only its keys
+/// holds: `zoo complete --poses FILE.glb` in-betweens them at the frames of these times.
+pub fn read_key_poses(path: &Path, opts: &ReadOptions) -> Result<(Clip, Vec<f64>), ClipError> {
+    let bytes = std::fs::read(path).map_err(|source| ClipError::Io {
+        path: path.to_path_buf(),
+        action: "cannot read",
+        source,
+    })?;
+    let ((clip, _), times) = read_document(&bytes, path, opts, Sampling::Keys)?;
+    Ok((clip, times))
+}
+
+/// Where an animation is sampled.
+#[derive(Clone, Copy, PartialEq)]
+enum Sampling {
+    /// Every frame at the clip's frame rate from the first key to the last.
+    Frames,
+    /// At the union of the channels' key times.
+    Keys,
 }
 
 /// The JSON and the BIN chunk of a `.glb`, or the whole file as JSON.
@@ -331,11 +350,16 @@ fn node_name(n: &::gltf::Node) -> String {
 // One function: every step (the skin's joint order, the tips, the nodes that matter, the
 // sampled animation) reads and refines the same node tables; split, each would take them all.
 fn read_document(
-    doc: &::gltf::Document,
-    buffers: &[Cow<[u8]>],
+    bytes: &[u8],
     path: &Path,
     opts: &ReadOptions,
-) -> Result<(Clip, ClipSource), ClipError> {
+    sampling: Sampling,
+) -> Result<((Clip, ClipSource), Vec<f64>), ClipError> {
+    let (json, bin) = split_glb(bytes).map_err(|m| err(path, m))?;
+    let doc =
+        ::gltf::Gltf::from_slice(json).map_err(|e| err(path, format!("not a valid glTF 2.0 document: {e}")))?.document;
+    let buffers = load_buffers(&doc, bin, path)?;
+    let (doc, buffers) = (&doc, &buffers[..]);
     let nodes: Vec<::gltf::Node> = doc.nodes().collect();
     let nn = nodes.len();
     let mut parent = vec![None; nn];
@@ -573,6 +597,17 @@ fn read_document(
         ));
     }
     let eps = (1e-4 * frame_time).max(4.0 * f32::EPSILON as f64 * t1.abs());
+    // The times sampled, from the first key.
+    let times: Vec<f64> = match sampling {
+        Sampling::Frames => (0..frames).map(|f| f as f64 * frame_time).collect(),
+        Sampling::Keys => {
+            let mut all: Vec<f64> = channels.iter().flat_map(|c| c.times.iter().map(|&t| t as f64 - t0)).collect();
+            all.sort_by(f64::total_cmp);
+            all.dedup_by(|b, a| *b - *a <= eps);
+            all
+        }
+    };
+    let frames = times.len();
 
     let mut by_node: Vec<Vec<usize>> = vec![Vec::new(); nn];
     for (k, c) in channels.iter().enumerate() {
@@ -582,8 +617,8 @@ fn read_document(
     let mut world_now = vec![Xform::IDENTITY; nn];
     let mut samples = vec![Xform::IDENTITY; frames * joints.len()];
     let mut local = rest_local.clone();
-    for f in 0..frames {
-        let t = t0 + f as f64 * frame_time;
+    for (f, dt) in times.iter().enumerate() {
+        let t = t0 + dt;
         for &i in &topo {
             let mut trs = rest_local[i];
             for &k in &by_node[i] {
@@ -623,7 +658,7 @@ fn read_document(
         take: anim.name().unwrap_or("").to_string(),
         notes,
     };
-    Ok((clip, source))
+    Ok(((clip, source), times))
 }
 
 // ---- writing ----

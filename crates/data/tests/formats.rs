@@ -193,6 +193,30 @@ fn gltf_step_linear_and_cubicspline_are_sampled_at_the_frame_rate() {
     assert!((linear.skeleton.offsets[1] - DVec3::new(0.0, -40.0, 0.0)).length() < 1e-5);
 }
 
+/// A file that stores only its keys: `read_key_poses` gives one pose per key time (here 2, at 0
+/// and 1 s) where the clip reader samples 5 frames at the 0.25 s frame time; BVH is refused
+/// with the options that give its keys.
+#[test]
+fn gltf_key_poses_are_read_at_their_key_times() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_text(dir.path(), "keys.gltf", &two_joint_gltf("LINEAR", (0.0, 0.0), ""));
+    let (keys, times) = clip_io::read_key_poses(&path, &ReadOptions::default()).unwrap();
+    assert_eq!(times, vec![0.0, 1.0]);
+    assert_eq!(keys.frames(), 2);
+    let sampled = read(&path);
+    assert_eq!(sampled.frames(), 5);
+    for (k, f) in [(0, 0), (1, 4)] {
+        for j in 0..2 {
+            assert!(keys.rotations_at(k)[j].abs_diff_eq(sampled.rotations_at(f)[j], 1e-9), "key {k} joint {j}");
+        }
+        assert!((keys.root_position(k) - sampled.root_position(f)).length() < 1e-9);
+    }
+    let bvh = dir.path().join("k.bvh");
+    zoo_data::bvh::write_file(&sampled, &bvh).unwrap();
+    let e = clip_io::read_key_poses(&bvh, &ReadOptions::default()).unwrap_err().to_string();
+    assert!(e.contains("only a glTF file") && e.contains("--key-frames"), "{e}");
+}
+
 #[test]
 fn malformed_gltf_non_unit_scale_keys() {
     let dir = tempfile::tempdir().unwrap();

@@ -401,6 +401,9 @@ fn write_outputs(
     fps: f64,
     fields: serde_json::Value,
 ) -> ArnnResult<()> {
+    if !fps.is_finite() {
+        bail!("the completion's frame rate is {fps}: give --fps");
+    }
     zoo_data::clip_io::write(clip, &o.out).with_context(|| format!("writing {}", o.out.display()))?;
     write_positions(o, clip, first_frame)?;
     let Some(j) = &o.json else { return Ok(()) };
@@ -474,6 +477,12 @@ fn complete_lamp(o: &CompleteOptions, model: &Arnn, norm: &Normalization) -> Arn
         .collect::<Result<_, _>>()
         .map_err(|_| Message(format!("the model completes {} values per frame, not the lamp's 6", config.dofs)))?;
     let clip = poses_to_clip(&poses, fps, &lamp);
+    // Checked before `json!`, which would turn a NaN into `null`.
+    zoo_motion::finite::check_serialize(
+        "the lamp completion (.0: key misses, .1: the network's, .2: ground lift, .3: frames)",
+        &(&misses, &raw_misses, lift, &frames),
+    )
+    .map_err(zoo_data::Message::new)?;
     let fields = serde_json::json!({
         "dof_names": dof_names,
                 "key_frames": keys.frames,
@@ -513,6 +522,27 @@ fn complete_lamp(o: &CompleteOptions, model: &Arnn, norm: &Normalization) -> Arn
     ))
 }
 
+/// The frame rate at which a glTF file's key times become frames when `--fps` is not given.
+pub const KEY_TIMES_FPS: f64 = 30.0;
+
+/// The key poses of a glTF file read at its own key times, and their frames at `fps` (the
+/// first key at frame 0); refused when two keys fall on one frame.
+pub fn key_poses(path: &Path, fps: f64) -> Result<(zoo_motion::Clip, Vec<usize>), String> {
+    let (mut clip, times) = zoo_data::clip_io::read_key_poses(path, &Default::default()).map_err(|e| e.to_string())?;
+    // Its poses stand at those frames of a clip at `fps`.
+    clip.frame_time = 1.0 / fps;
+    let frames: Vec<usize> = times.iter().map(|t| (t * fps).round() as usize).collect();
+    if let Some(i) = frames.windows(2).position(|w| w[0] == w[1]) {
+        return Err(format!(
+            "its keys at {:.4} s and {:.4} s fall on the same frame at {fps} fps: give a higher --fps, or the key \
+             frames with --key-frames",
+            times[i],
+            times[i + 1]
+        ));
+    }
+    Ok((clip, frames))
+}
+
 /// `zoo complete` with a humanoid ARNN: key poses from a BVH, partial keys, a clip out.
 fn complete_humanoid(
     o: &CompleteOptions,
@@ -527,6 +557,18 @@ fn complete_humanoid(
         );
     }
     let (keys, source, what) = match &o.poses {
+        Some(p) if p.frames.is_none() && p.every.is_none() => {
+            // A glTF file's own key times give the frames.
+            let (source, frames) = key_poses(&p.clip, o.fps.unwrap_or(KEY_TIMES_FPS))
+                .map_err(|e| Message(format!("--poses {}: {e}", p.clip.display())))?;
+            let p = PoseKeys { frames: Some(frames), ..p.clone() };
+            let keys = p.keys(source.frames()).map_err(|e| Message(format!("--poses {}: {e}", p.clip.display())))?;
+            (
+                HumanoidKeys { bvh: p.clip.clone(), offset: 0, keys, fps: Some(o.fps.unwrap_or(KEY_TIMES_FPS)) },
+                source,
+                format!("--poses {} (its key times)", p.clip.display()),
+            )
+        }
         Some(p) => {
             let source = zoo_data::clip_io::read_model_clip(&p.clip)
                 .with_context(|| format!("--poses {}: reading it", p.clip.display()))?;
@@ -554,6 +596,11 @@ fn complete_humanoid(
         done.clip.frame_time = 1.0 / fps;
     }
     let (raw_root, (deg, key, joint)) = done.raw_miss;
+    zoo_motion::finite::check_serialize(
+        "the completion's key misses (root, angle, the network's root and angle)",
+        &(done.root_miss, done.angle_miss.0, raw_root, deg),
+    )
+    .map_err(zoo_data::Message::new)?;
     let fields = serde_json::json!({
         "key_frames": keys.keys.iter().map(|k| k.frame).collect::<Vec<_>>(),
                 "root_miss": done.root_miss,

@@ -15,7 +15,8 @@ pub struct CompleteArgs {
     #[arg(long, required_unless_present = "poses", conflicts_with = "poses")]
     pub keys: Option<PathBuf>,
     /// Humanoid models: a clip (BVH, glTF, FBX) holding only the key poses, one per frame, in
-    /// order (exported from Blender, say); their frames come from `--key-frames` or `--every`.
+    /// order (exported from Blender, say); their frames come from `--key-frames` or `--every`,
+    /// or, for a glTF file given without them, from its own key times (at `--fps`, default 30).
     #[arg(long, value_name = "CLIP")]
     pub poses: Option<PathBuf>,
     /// With `--poses`: the output frame of each key pose (comma-separated, increasing).
@@ -67,8 +68,18 @@ pub fn run(a: CompleteArgs) -> anyhow::Result<()> {
             crate::cmd::check_output_file(option, p)?;
         }
     }
-    if a.poses.is_some() && a.key_frames.is_none() && a.every.is_none() {
-        bail!("--poses needs the key frames: --key-frames 0,15,40 (one per pose) or --every K");
+    let key_times = a.key_frames.is_none() && a.every.is_none();
+    if let Some(p) = a.poses.as_ref().filter(|_| key_times)
+        && zoo_data::clip_io::ClipFormat::of(p) != Some(zoo_data::clip_io::ClipFormat::Gltf)
+    {
+        bail!(
+            "--poses {}: give the key frames (--key-frames 0,15,40, one per pose, or --every K); only a glTF file \
+             stores its keys' times",
+            p.display()
+        );
+    }
+    if key_times && a.sample {
+        bail!("--sample takes the key poses out of a whole motion at --key-frames or --every: give one of them");
     }
     let poses = a.poses.map(|clip| zoo_arnn::completion::PoseKeys {
         clip,

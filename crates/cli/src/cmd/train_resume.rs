@@ -1,9 +1,10 @@
 //! `zoo train ... --resume DIR` continues a run with the options it was started with: a fresh
-//! run records its options (every option, defaults included, as the command line spells them)
-//! in the run folder (`zoo_nn::run_folder::COMMAND_FILE`); a resume takes them from there, so
-//! `zoo train rtn --resume runs/rtn --epochs 80` needs no data options repeated, and refuses an
-//! option given on its command line that differs from the recorded one (it could not be
-//! honoured: the run's configuration, data and statistics are kept), naming both values.
+//! run records the options its command line gave (as it spelled them) in the run folder
+//! (`zoo_nn::run_folder::COMMAND_FILE`), the others being their defaults; a resume takes them
+//! from there, so `zoo train rtn --resume runs/rtn --epochs 80` needs no data options repeated,
+//! and refuses an option given on its command line with another value than the run's (the
+//! recorded one, else the default): it could not be honoured (the run's configuration, data and
+//! statistics are kept), and the message names both values.
 //! The run's length and threads (`--epochs`, `--time-limit`, `--threads`, and RNN-GMM's stage
 //! options) are the resumed command's own.
 
@@ -36,6 +37,7 @@ struct Given {
     values: Vec<String>,
     from_command_line: bool,
     flag: bool,
+    default: Vec<String>,
 }
 
 fn options(sub: &ArgMatches, def: &clap::Command) -> Vec<Given> {
@@ -48,11 +50,13 @@ fn options(sub: &ArgMatches, def: &clap::Command) -> Vec<Given> {
         let Ok(Some(raw)) = sub.try_get_raw(id) else { continue };
         let values: Vec<String> = raw.map(|v| v.to_string_lossy().into_owned()).collect();
         let flag = matches!(arg.get_action(), ArgAction::SetTrue | ArgAction::SetFalse);
+        let default = arg.get_default_values().iter().map(|v| v.to_string_lossy().into_owned()).collect();
         out.push(Given {
             name: long.to_string(),
             values,
             from_command_line: sub.value_source(id) == Some(ValueSource::CommandLine),
             flag,
+            default,
         });
     }
     out
@@ -74,7 +78,8 @@ pub fn resolve(train: &ArgMatches, def: &clap::Command) -> anyhow::Result<Resolv
     let given = options(sub, model_def);
     let Some(dir) = sub.try_get_one::<PathBuf>("resume").ok().flatten() else {
         let own = |n: &str| matches!(n, "resume" | "out" | "overwrite");
-        return Ok(Resolved::Fresh(given.into_iter().filter(|g| !own(&g.name)).map(|g| (g.name, g.values)).collect()));
+        let recorded = given.into_iter().filter(|g| g.from_command_line && !own(&g.name));
+        return Ok(Resolved::Fresh(recorded.map(|g| (g.name, g.values)).collect()));
     };
     let Some(recorded) = zoo_nn::run_folder::read_command(dir)? else { return Ok(Resolved::AsGiven) };
     let mut merged: BTreeMap<String, (Vec<String>, bool)> = BTreeMap::new();
@@ -92,20 +97,22 @@ pub fn resolve(train: &ArgMatches, def: &clap::Command) -> anyhow::Result<Resolv
         if own || !g.from_command_line {
             continue;
         }
-        match recorded.get(&g.name) {
-            Some(was) if !same(was, &g.values) => anyhow::bail!(
-                "--{0} {1}: the run in {2} was started with --{0} {3}, and a resumed run keeps the options it was \
-                 started with (recorded in {2}/{COMMAND_FILE}); drop --{0}, or start a new run with --out (or \
-                 --overwrite to replace this one)",
+        let was = match recorded.get(&g.name) {
+            Some(was) => format!("--{} {}", g.name, was.join(",")),
+            None if g.default.is_empty() => format!("no --{}", g.name),
+            None => format!("--{} {} (the default)", g.name, g.default.join(",")),
+        };
+        if !same(recorded.get(&g.name).unwrap_or(&g.default), &g.values) {
+            anyhow::bail!(
+                "--{0} {1}: the run in {2} was started with {was}, and a resumed run keeps the options it was started \
+                 with (recorded in {2}/{COMMAND_FILE}); drop --{0}, or start a new run with --out (or --overwrite to \
+                 replace this one)",
                 g.name,
                 g.values.join(","),
                 dir.display(),
-                was.join(",")
-            ),
-            _ => {
-                merged.insert(g.name, (g.values, g.flag));
-            }
+            );
         }
+        merged.insert(g.name, (g.values, g.flag));
     }
     let flags: Vec<String> = model_def
         .get_arguments()

@@ -69,7 +69,11 @@ pub fn write_dir(
             .collect(),
     };
     let path = dir.join("synth.json");
-    let text = serde_json::to_string(&manifest).expect("manifest serialises");
+    let invalid =
+        |path: &Path, e: String| SynthWriteError::Io { path: path.to_path_buf(), source: std::io::Error::other(e) };
+    zoo_motion::finite::check_serialize("the synthetic data's manifest", &manifest)
+        .map_err(|e| invalid(&path, e.to_string()))?;
+    let text = serde_json::to_string(&manifest).map_err(|e| invalid(&path, e.to_string()))?;
     zoo_motion::atomic::write(&path, text).map_err(|source| SynthWriteError::Io { path, source })
 }
 

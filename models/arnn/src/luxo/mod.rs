@@ -288,6 +288,8 @@ pub fn generate_with(
         sequences: (0..options.sequences).map(sequence_name).collect(),
     };
     let path = out_dir.join(MANIFEST_FILE);
+    zoo_motion::finite::check_serialize("the lamp data's manifest", &manifest)
+        .map_err(|e| LuxoError::Json { path: path.clone(), message: e.to_string() })?;
     let text = serde_json::to_string_pretty(&manifest)
         .map_err(|e| LuxoError::Json { path: path.clone(), message: e.to_string() })?;
     sequence::write_atomic(&path, text.as_bytes())?;

@@ -240,6 +240,8 @@ impl LuxoSequence {
 
     /// Writes the sequence as JSON (atomically: a temporary file renamed into place).
     pub fn write_json(&self, path: &Path) -> Result<(), LuxoError> {
+        zoo_motion::finite::check_serialize("the lamp sequence", self)
+            .map_err(|e| LuxoError::Json { path: path.to_path_buf(), message: e.to_string() })?;
         let text = serde_json::to_string(self)
             .map_err(|e| LuxoError::Json { path: path.to_path_buf(), message: e.to_string() })?;
         write_atomic(path, text.as_bytes())
