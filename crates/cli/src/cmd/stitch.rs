@@ -183,6 +183,8 @@ pub fn run(a: StitchArgs) -> anyhow::Result<()> {
             .predicted_ankles
             .as_ref()
             .map(|v| v.iter().map(|f| f.map(|p| [p.x as f32, p.y as f32, p.z as f32])).collect::<Vec<_>>());
+        // Checked before `json!`, which would write a NaN as `null`.
+        zoo_motion::finite::check_serialize("the RMR's predicted ankles", &ankles)?;
         let extra = serde_json::json!({ "seams": done.seams, "method": format!("{:?}", a.method).to_lowercase(),
             "predicted_ankles": ankles });
         crate::cmd::write_positions(p, &zoo_data::positions::clip_positions_json("stitch", &done.output, extra)?)?;
