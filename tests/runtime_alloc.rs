@@ -1,5 +1,7 @@
 //! Allocations per frame of `MotionRunner::step` and `step_batch`, counted by a global
-//! allocator wrapper in this test binary (its own process, so other tests cannot interfere).
+//! allocator wrapper in this test binary (its own process, so other tests cannot interfere), on
+//! the measuring thread only (the test harness's own thread allocates now and then while it
+//! waits; tract runs a step on the calling thread).
 //!
 //! Our side (validation, copies into the preallocated input tensors, copies out) allocates
 //! nothing (checked on an identity graph); what remains is tract's: the output tensors of the
@@ -16,22 +18,34 @@ struct Counting;
 
 static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
 
+thread_local! {
+    /// Whether this thread's allocations are counted (a const initialiser: reading it never
+    /// allocates, as the allocator needs).
+    static COUNTED: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+fn count() {
+    if COUNTED.with(|c| c.get()) {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
 // SAFETY: forwards every call to the system allocator unchanged; only counts.
 #[allow(unsafe_code)]
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        count();
         unsafe { System.alloc(layout) }
     }
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
         unsafe { System.dealloc(ptr, layout) }
     }
     unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        count();
         unsafe { System.alloc_zeroed(layout) }
     }
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        count();
         unsafe { System.realloc(ptr, layout, new_size) }
     }
 }
@@ -45,9 +59,11 @@ fn per_frame(frames: usize, mut step: impl FnMut()) -> f64 {
         step();
     }
     let before = ALLOCATIONS.load(Ordering::Relaxed);
+    COUNTED.with(|c| c.set(true));
     for _ in 0..frames {
         step();
     }
+    COUNTED.with(|c| c.set(false));
     (ALLOCATIONS.load(Ordering::Relaxed) - before) as f64 / frames as f64
 }
 
@@ -208,11 +224,13 @@ fn stitch_allocations() {
     }
     let before = ALLOCATIONS.load(Ordering::Relaxed);
     let mut pushed = 0;
+    COUNTED.with(|c| c.set(true));
     for p in frames.by_ref().take(20 * s) {
         stream.push(p).unwrap();
         while stream.pop(&mut out).unwrap().is_some() {}
         pushed += 1;
     }
+    COUNTED.with(|c| c.set(false));
     assert_eq!(pushed, 20 * s, "the synthetic motion is long enough for 20 more windows");
     let stream_per_window = (ALLOCATIONS.load(Ordering::Relaxed) - before) as f64 / 20.0;
     eprintln!(

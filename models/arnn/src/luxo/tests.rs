@@ -165,9 +165,9 @@ fn bad_files_are_named() {
     assert!(e.contains("keys are not in increasing time order"), "{e}");
     seq.keys.swap(0, 1);
     seq.frames[3][1] = f64::NAN;
-    // NaN is written as null by serde_json, which does not read back as a number.
-    seq.write_json(&path).unwrap();
-    assert!(LuxoSequence::read_json(&path).is_err());
+    // Never written (serde_json would write `null`): refused with where the NaN is.
+    let e = seq.write_json(&path).unwrap_err().to_string();
+    assert!(e.contains("NaN at .frames[3][1]") && e.contains("nothing was written"), "{e}");
 }
 
 #[test]
