@@ -810,6 +810,25 @@ mod tests {
     }
 
     #[test]
+    fn keys_at_the_value_bound_complete_to_finite_frames() {
+        // A lamp model (seeded random weights) with the smallest std the statistics allow: a key
+        // of 10,000 normalises to 1e10, far from f32's limit, so every completed value is finite.
+        let config = crate::ArnnConfig::tiny();
+        let varmap = candle_nn::VarMap::new();
+        let vb = zoo_nn::SeededVarMap::builder(&varmap, 1, candle_core::DType::F32, &candle_core::Device::Cpu);
+        let model = crate::Arnn::new(&config, vb).unwrap();
+        let norm = crate::Normalization { mean: vec![0.0; 6], std: vec![1e-6; 6] };
+        let b = MAX_KEY_VALUE;
+        let text = format!(
+            r#"{{"keys": [{{"frame": 0, "pose": [{b}, -{b}, {b}, -{b}, {b}, -{b}]}}, {{"frame": 20, "pose": [-{b}, {b}, 0, 0, 0, {b}]}}]}}"#
+        );
+        let keys = parse_keys(&text, &names()).unwrap();
+        let frames = crate::complete(&model, &norm, &keys.frames, &keys.poses).unwrap();
+        assert_eq!(frames.len(), 21);
+        assert!(frames.iter().flatten().all(|v| v.is_finite()), "{frames:?}");
+    }
+
+    #[test]
     fn key_values_frame_numbers_and_key_counts_past_their_bounds_are_refused_with_the_range() {
         let pose = "[0, 0.02, 0, 0.5, -1.1, -1.2]";
         let lamp = |a: &str, b: &str| parse_keys(&format!(r#"{{"keys": [{a}, {b}]}}"#), &names());

@@ -245,22 +245,46 @@ impl GroundPath {
                  most {MAX_LENGTH} cm (10 km) long; shorten it or lower the scale"
             )));
         }
-        let mut pts: Vec<[f64; 2]> = Vec::new();
-        let mut emitted = 0usize;
-        kurbo::flatten(&first, 0.5 / cm_per_unit, |el| {
-            // Counted, not kept, past the limit: `new` refuses the count.
-            emitted += 1;
-            if emitted > MAX_POINTS + 1 {
-                return;
+        // Flattening: each curve into chords of equal parameter steps, as many as keep every chord
+        // within 0.5 cm of the curve (a chord over a parameter step h is within h^2/8 max|B''| of
+        // it), counted up front from the control points, so the point count is refused before
+        // any point is made. (kurbo's adaptive `flatten` loops for ever on some curves when the
+        // tolerance is huge, as at a tiny scale: its subdivision count overflows.)
+        let tolerance = 0.5 / cm_per_unit;
+        let chords = |second_derivative: f64| -> usize {
+            ((second_derivative / (8.0 * tolerance)).sqrt().ceil().min(MAX_POINTS as f64) as usize).max(1)
+        };
+        let segments: Vec<(kurbo::PathSeg, usize)> = first
+            .segments()
+            .map(|seg| {
+                let n = match seg {
+                    kurbo::PathSeg::Line(_) => 1,
+                    kurbo::PathSeg::Quad(q) => {
+                        chords(2.0 * (q.p0 - 2.0 * q.p1.to_vec2() + q.p2.to_vec2()).to_vec2().hypot())
+                    }
+                    kurbo::PathSeg::Cubic(c) => {
+                        let a = (c.p0 - 2.0 * c.p1.to_vec2() + c.p2.to_vec2()).to_vec2().hypot();
+                        let b = (c.p1 - 2.0 * c.p2.to_vec2() + c.p3.to_vec2()).to_vec2().hypot();
+                        chords(6.0 * a.max(b))
+                    }
+                };
+                (seg, n)
+            })
+            .collect();
+        let count = 1 + segments.iter().map(|(_, n)| n).sum::<usize>();
+        if count > MAX_POINTS {
+            return Err(invalid(format!(
+                "the SVG path flattens to {count} points (its curves in chords within 0.5 cm), more than the \
+                 {MAX_POINTS} zoo reads: simplify the drawing or lower the scale"
+            )));
+        }
+        let mut pts: Vec<[f64; 2]> = Vec::with_capacity(count);
+        pts.push([start.x * cm_per_unit, start.y * cm_per_unit]);
+        for (seg, n) in segments {
+            for k in 1..=n {
+                let p = kurbo::ParamCurve::eval(&seg, k as f64 / n as f64);
+                pts.push([p.x * cm_per_unit, p.y * cm_per_unit]);
             }
-            match el {
-                PathEl::MoveTo(p) | PathEl::LineTo(p) => pts.push([p.x * cm_per_unit, p.y * cm_per_unit]),
-                PathEl::ClosePath => pts.push([start.x * cm_per_unit, start.y * cm_per_unit]),
-                _ => {}
-            }
-        });
-        if emitted > MAX_POINTS {
-            check_point_count(emitted)?;
         }
         Self::new(pts)
     }
@@ -564,7 +588,25 @@ mod tests {
         // Tight loops within 10 km that would flatten to more than 100,000 points: counted, refused.
         let loops: String = (0..15_000).map(|_| "c 0 10 10 10 10 0 c 0 -10 -10 -10 -10 0 ").collect();
         let e = GroundPath::from_svg_data(&format!("M 0 0 {loops}"), 1.0).unwrap_err().to_string();
-        assert!(e.contains("more than the 100000"), "{e}");
+        assert!(
+            e.contains("flattens to 150001 points (its curves in chords within 0.5 cm), more than the 100000"),
+            "{e}"
+        );
+        // Arcs and a smooth quadratic at a tiny scale (a tolerance of 5e299 units): kurbo's
+        // `flatten` never ended on this drawing (found by the `ground_path` fuzz target).
+        let e = GroundPath::from_svg_data(
+            "M0,0 A 2 1 0 0 1 0 2 T0,4 A 2 1 2 1 0 0 1 02 1 0 0 1 0,4A 2 1 21  0 1 0 2777",
+            1e-300,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("at least 2 distinct points"), "{e}");
+        let p = GroundPath::from_svg_data(
+            "M0,0 A 2 1 0 0 1 0 2 T0,4 A 2 1 2 1 0 0 1 02 1 0 0 1 0,4A 2 1 21  0 1 0 2777",
+            1.0,
+        )
+        .unwrap();
+        assert!(p.points().len() > 20 && p.length() > 2777.0, "{} {}", p.points().len(), p.length());
         // A huge second subpath is neither used nor flattened; a huge first one is refused.
         let p = GroundPath::from_svg_data("M 0 0 L 0 100 M 0 0 C 1e9 0 0 1e9 1 1", 1.0).unwrap();
         assert_eq!(p.length(), 100.0);
