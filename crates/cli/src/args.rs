@@ -275,6 +275,21 @@ pub fn duration_seconds(s: &str) -> Result<f64, String> {
     real_in(s, Interval::above(0.0, MAX_SYNTHESIS_SECONDS), "seconds")
 }
 
+/// A range of transition lengths `SHORTEST-LONGEST` (`zoo train rtn --lengths 5-45`), each in
+/// `1..=MAX_TRANSITION_FRAMES`, the shortest first.
+pub fn length_range(s: &str) -> Result<[usize; 2], String> {
+    let (a, b) = s.split_once('-').ok_or_else(|| format!("`{s}` is not a range SHORTEST-LONGEST, e.g. 5-45"))?;
+    let lo = whole_in(a, 1..=MAX_TRANSITION_FRAMES, "frames")?;
+    let hi = whole_in(b, 1..=MAX_TRANSITION_FRAMES, "frames")?;
+    if lo > hi {
+        return Err(format!("{s}: the shortest length comes first, e.g. {hi}-{lo}"));
+    }
+    Ok([lo, hi])
+}
+
+/// The longest transition a training range may ask for (frames).
+pub const MAX_TRANSITION_FRAMES: usize = 1000;
+
 /// The longest sequence `zoo bench synthesis` measures, seconds (1 hour): unlike `zoo generate`
 /// it holds each sequence whole while measuring it (about 9 KB per frame of a 22-joint skeleton,
 /// so about 1 GB per worker thread at this limit).
@@ -467,6 +482,16 @@ mod tests {
             clip_frame("b.bvh:18446744073709551615").unwrap_err(),
             "frame 18446744073709551615 is outside the valid range 0..=10000000 (must be <= 10000000)"
         );
+    }
+
+    #[test]
+    fn length_ranges_are_two_lengths_shortest_first() {
+        assert_eq!(length_range("5-45"), Ok([5, 45]));
+        assert_eq!(length_range("30-30"), Ok([30, 30]));
+        assert!(length_range("45-5").unwrap_err().contains("shortest length comes first"));
+        assert!(length_range("0-45").unwrap_err().contains("1..=1000"));
+        assert!(length_range("5-1001").unwrap_err().contains("1..=1000"));
+        assert!(length_range("30").unwrap_err().contains("SHORTEST-LONGEST"));
     }
 
     #[test]

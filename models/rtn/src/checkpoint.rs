@@ -93,6 +93,14 @@ pub fn check_meta(config: &Config, stats: &FeatureStats) -> Result<(), String> {
             return Err(format!("{CONFIG_FILE}: {what} is 0; it must be >= 1"));
         }
     }
+    if let Some([lo, hi]) = config.train.lengths
+        && !(1 <= lo && lo <= hi && hi <= config.transition_frames)
+    {
+        return Err(format!(
+            "{CONFIG_FILE}: train.lengths [{lo}, {hi}] must satisfy 1 <= shortest <= longest <= transition_frames ({})",
+            config.transition_frames
+        ));
+    }
     positive_sizes("frame_encoder", &config.frame_encoder)?;
     positive_sizes("target_encoder", &config.target_encoder)?;
     positive_sizes("offset_encoder", &config.offset_encoder)?;

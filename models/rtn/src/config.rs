@@ -68,6 +68,13 @@ pub struct TrainConfig {
     /// paper's recipe, and folders written before it existed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub augment: Option<crate::augment::Augment>,
+    /// Transition lengths drawn in training, `[shortest, longest]` frames (one length per
+    /// mini-batch, uniform; the longest is the window's `transition_frames`), as Harvey et al.
+    /// 2020 train for every length the benchmark asks for; validation averages the lengths 5,
+    /// 15, 30 and 45 within the range. `None`: every window at `transition_frames` (the paper's
+    /// RTN, and folders written before it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lengths: Option<[usize; 2]>,
 }
 
 impl Default for TrainConfig {
@@ -83,6 +90,7 @@ impl Default for TrainConfig {
             seed: 0x5eed,
             ema_decay: None,
             augment: None,
+            lengths: None,
         }
     }
 }

@@ -192,9 +192,31 @@ impl RtnTrainer {
         &mut self,
         windows: &[MotionWindow<'a>],
         rotate: bool,
+        n: usize,
     ) -> RtnResult<crate::transition::EncodedBatch<'a>> {
-        let items = self.sequence_inputs(windows, rotate, false)?;
+        let items = self.sequence_inputs(windows, rotate, false, n)?;
         encode_batch(&self.stats, &items, self.model.device())
+    }
+
+    /// The transition length of the next training batch: drawn in
+    /// [`crate::TrainConfig::lengths`] (one draw of the trainer's generator), else the window's.
+    fn draw_length(&mut self) -> usize {
+        match self.config.train.lengths {
+            Some([lo, hi]) if lo < hi => lo + self.rng.below((hi - lo + 1) as u64) as usize,
+            _ => self.config.transition_frames,
+        }
+    }
+
+    /// The lengths validation averages: 5, 15, 30 and 45 frames within
+    /// [`crate::TrainConfig::lengths`] (its longest when none is), else the window's.
+    pub fn validation_lengths(&self) -> Vec<usize> {
+        match self.config.train.lengths {
+            Some([lo, hi]) => {
+                let v: Vec<usize> = [5, 15, 30, 45].into_iter().filter(|n| (lo..=hi).contains(n)).collect();
+                if v.is_empty() { vec![hi] } else { v }
+            }
+            None => vec![self.config.transition_frames],
+        }
     }
 
     /// The sequences of `windows` to encode, each rotated as [`RtnTrainer::encode`] says (one
@@ -206,10 +228,11 @@ impl RtnTrainer {
         windows: &[MotionWindow<'a>],
         rotate: bool,
         augment: bool,
+        n: usize,
     ) -> RtnResult<Vec<SequenceInput<'a>>> {
         let c = &self.config;
         let d = c.dim();
-        let tf = c.target_frame();
+        let tf = c.past_frames + n.min(c.transition_frames);
         let mut items = Vec::with_capacity(windows.len());
         for (i, w) in windows.iter().enumerate() {
             check_frames(&format!("training window {i}"), w.positions.len(), c.window_frames(), c.joints, true)?;
@@ -246,9 +269,15 @@ impl RtnTrainer {
     }
 
     /// Generated and ground-truth frames `(batch, P + 1, D)` of a batch.
-    fn predict(&mut self, windows: &[MotionWindow], rotate: bool, p_teacher: f64) -> RtnResult<(Tensor, Tensor)> {
-        let batch = self.encode(windows, rotate)?;
-        let (past, n_out) = (self.config.past_frames, self.config.transition_frames + 1);
+    fn predict(
+        &mut self,
+        windows: &[MotionWindow],
+        rotate: bool,
+        p_teacher: f64,
+        n: usize,
+    ) -> RtnResult<(Tensor, Tensor)> {
+        let batch = self.encode(windows, rotate, n)?;
+        let (past, n_out) = (self.config.past_frames, n + 1);
         let rng = &mut self.rng;
         let mut teacher = || p_teacher > 0.0 && (p_teacher >= 1.0 || rng.next_f64() < p_teacher);
         let outs = generate(&self.model, &self.stats, &self.offsets, &batch, past, n_out, true, &mut teacher)?;
@@ -302,9 +331,10 @@ impl RtnTrainer {
     ) -> RtnResult<(f32, Option<candle_core::backprop::GradStore>)> {
         let p = self.config.train.teacher_forcing.probability(self.step);
         let rotate = self.config.train.random_rotation;
-        let items = self.sequence_inputs(windows, rotate, true)?;
-        let (past, n_out) = (self.config.past_frames, self.config.transition_frames + 1);
-        let calls = teacher_calls(past, n_out, self.config.target_frame() + 1);
+        let n = self.draw_length();
+        let items = self.sequence_inputs(windows, rotate, true, n)?;
+        let (past, n_out) = (self.config.past_frames, n + 1);
+        let calls = teacher_calls(past, n_out, past + n + 1);
         let rng = &mut self.rng;
         let draws: Vec<bool> = (0..calls).map(|_| p > 0.0 && (p >= 1.0 || rng.next_f64() < p)).collect();
         let (model, stats, offsets) = (&self.model, &self.stats, &self.offsets);
@@ -347,8 +377,13 @@ impl RtnTrainer {
 
     /// Validation loss: the same MSE without teacher forcing and without rotation.
     pub fn eval_loss(&mut self, windows: &[MotionWindow]) -> RtnResult<f32> {
-        let (pred, truth) = self.predict(windows, false, 0.0)?;
-        Ok((pred.detach() - truth)?.sqr()?.mean_all()?.to_scalar::<f32>()?)
+        let lengths = self.validation_lengths();
+        let mut sum = 0.0;
+        for &n in &lengths {
+            let (pred, truth) = self.predict(windows, false, 0.0, n)?;
+            sum += (pred.detach() - truth)?.sqr()?.mean_all()?.to_scalar::<f32>()?;
+        }
+        Ok(sum / lengths.len() as f32)
     }
 
     /// Saves `config.json`, `model.safetensors` and `normalization.json` into `dir` (see

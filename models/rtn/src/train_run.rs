@@ -90,6 +90,15 @@ pub struct RtnRunOptions {
     pub lr: Option<f64>,
     /// Decay of the moving average of the weights (0: none).
     pub ema: f64,
+    /// Transition lengths to train over, `[shortest, longest]` (`None`: the preset's one length).
+    pub lengths: Option<[usize; 2]>,
+}
+
+/// The training windows of a run: the standard 50 frames, longer when the longest transition
+/// to train needs more (10 context frames, the transition, the target and the frame after).
+fn window_options(o: &RtnRunOptions) -> WindowOptions {
+    let need = o.lengths.map_or(0, |[_, hi]| WindowOptions::TRAIN.n_past + hi + 2);
+    WindowOptions { window: WindowOptions::TRAIN.window.max(need), ..WindowOptions::TRAIN }
 }
 
 /// The files and folders of a run that `--overwrite` deletes (the ones training writes).
@@ -230,6 +239,13 @@ fn fresh_config(
     if config.train.batch_size == 0 {
         bail!("--batch-size must be at least 1");
     }
+    if let Some([lo, hi]) = a.lengths {
+        if !(1 <= lo && lo <= hi) {
+            bail!("--lengths {lo}-{hi}: give the shortest and the longest transition, 1 <= shortest <= longest");
+        }
+        config.transition_frames = hi;
+        config.train.lengths = Some([lo, hi]);
+    }
     config.train.seed = a.run.seed;
     config.interp_residual = a.interp_residual;
     config.terrain = a.terrain;
@@ -285,10 +301,16 @@ fn data(o: &RtnRunOptions, terrain: bool, p: &dyn Progress) -> RtnResult<Data> {
         let (train, valid, source) = dataset::training_clips(&o.data, p)?;
         (train, valid, Vec::new(), Vec::new(), source)
     };
-    let tw = dataset::windows(&train, &WindowOptions::TRAIN);
-    let vw = dataset::windows(&valid, &WindowOptions::TRAIN);
+    let wo = window_options(o);
+    let tw = dataset::windows(&train, &wo);
+    let vw = dataset::windows(&valid, &wo);
     if tw.count == 0 || vw.count == 0 {
-        bail!("need at least one 50-frame window in both splits (training {}, validation {})", tw.count, vw.count);
+        bail!(
+            "need at least one {}-frame window in both splits (training {}, validation {})",
+            wo.window,
+            tw.count,
+            vw.count
+        );
     }
     let (mut train_pos, valid_pos) = if terrain {
         (world_positions(&train, &tw), world_positions(&valid, &vw))
@@ -327,7 +349,7 @@ fn stepping_windows(o: &RtnRunOptions, tw: &dataset::Windows, minutes: f64) -> R
     }
     let cfg = SynthConfig { minutes, seed: o.run.seed, terrain: false, ..SynthConfig::default() };
     let steps: Vec<NamedClip> = synth::generate_stepping(&cfg).into_iter().map(dataset::named_synth).collect();
-    let sw = dataset::windows(&steps, &WindowOptions::TRAIN);
+    let sw = dataset::windows(&steps, &window_options(o));
     println!("--synth-steps {minutes}: {} clips, {} windows of side and back steps", steps.len(), sw.count);
     Ok(sw.global_positions_f32())
 }

@@ -251,6 +251,38 @@ fn short_training_run_reduces_the_loss() {
     assert_eq!(trainer.steps(), 30);
 }
 
+/// Training over a range of lengths (`TrainConfig::lengths`): each step draws its length, a step
+/// at another length gives another loss on the same windows, validation averages 5, 15, 30
+/// and 45 within the range, and the same seed gives the same steps.
+#[test]
+fn training_over_a_range_of_lengths_draws_one_per_step() {
+    let base = tiny();
+    let c = Config {
+        transition_frames: 12,
+        train: TrainConfig { lengths: Some([3, 12]), ..base.train.clone() },
+        ..base.clone()
+    };
+    let ws = windows(&c, 8);
+    let mw: Vec<MotionWindow> = ws.iter().map(|w| MotionWindow::new(w)).collect();
+    let run = || {
+        let mut t = RtnTrainer::new(&c, stats_for(&c, &ws), &Device::Cpu).unwrap();
+        assert_eq!(t.validation_lengths(), vec![5]);
+        (0..6).map(|_| t.train_step(&mw).unwrap()).collect::<Vec<f32>>()
+    };
+    let (a, b) = (run(), run());
+    assert_eq!(a, b, "the same seed draws the same lengths");
+    assert!(a.iter().all(|l| l.is_finite() && *l > 0.0), "{a:?}");
+    let wide =
+        Config { transition_frames: 45, train: TrainConfig { lengths: Some([5, 45]), ..c.train.clone() }, ..c.clone() };
+    let t = RtnTrainer::new(&wide, stats_for(&wide, &windows(&wide, 2)), &Device::Cpu).unwrap();
+    assert_eq!(t.validation_lengths(), vec![5, 15, 30, 45]);
+    // One length for every window: the same first step as without a range at that length.
+    let fixed = Config { train: TrainConfig { lengths: Some([12, 12]), ..c.train.clone() }, ..c.clone() };
+    let plain = Config { train: TrainConfig { lengths: None, ..c.train.clone() }, ..c.clone() };
+    let step = |c: &Config| RtnTrainer::new(c, stats_for(c, &ws), &Device::Cpu).unwrap().train_step(&mw).unwrap();
+    assert_eq!(step(&fixed), step(&plain));
+}
+
 #[test]
 fn every_ablation_trains_a_step() {
     let base = tiny();

@@ -55,7 +55,14 @@ pub fn run(a: LuxoArgs) -> anyhow::Result<()> {
         options.init = serde_json::from_str(&text)
             .with_context(|| format!("--init {}: not a hop policy (durations and poses)", path.display()))?;
     }
-    options.validate()?;
+    let files: Vec<String> = [("--lamp", &a.lamp), ("--init", &a.init)]
+        .into_iter()
+        .filter_map(|(o, p)| p.as_ref().map(|p| format!("{o} {}", p.display())))
+        .collect();
+    options.validate().with_context(|| match files.is_empty() {
+        true => "the lamp data settings".to_string(),
+        false => format!("the lamp data settings with {}", files.join(" and ")),
+    })?;
     let bar = ProgressBar::new(a.sequences as u64);
     bar.set_style(
         ProgressStyle::with_template("luxo [{bar:40}] {pos}/{len} sequences {elapsed} (eta {eta})").expect("template"),

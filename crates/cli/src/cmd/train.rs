@@ -95,6 +95,11 @@ pub struct RtnArgs {
     /// 0 keeps no average (the paper's recipe exactly).
     #[arg(long, default_value_t = 0.999, allow_hyphen_values = true, value_parser = crate::args::decay)]
     pub ema: f64,
+    /// Train over every transition length from SHORTEST to LONGEST frames (e.g. `5-45`, the
+    /// benchmark's lengths), one drawn per mini-batch, validated at 5, 15, 30 and 45 within the
+    /// range; the windows hold the longest [default: the preset's one length, 30].
+    #[arg(long, value_name = "SHORTEST-LONGEST", value_parser = crate::args::length_range)]
+    pub lengths: Option<[usize; 2]>,
 }
 
 impl TrainCommand {
@@ -133,6 +138,7 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
         batch_size: a.batch_size,
         lr: a.lr,
         ema: a.ema,
+        lengths: a.lengths,
     };
     Ok(zoo_rtn::train_run::run(&o, &crate::cmd::Stderr)?)
 }
