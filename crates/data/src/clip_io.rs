@@ -172,14 +172,24 @@ pub fn read_with_source(path: &Path, opts: &ReadOptions) -> Result<(Clip, ClipSo
 fn checked(path: &Path, format: &'static str, read: (Clip, ClipSource)) -> Result<(Clip, ClipSource), ClipError> {
     let fail = |message: String| ClipError::Format { path: path.to_path_buf(), format, message };
     Clip::check_frame_time(read.0.frame_time).map_err(fail)?;
-    let depth = read.0.skeleton.depth();
-    if depth > zoo_motion::Skeleton::MAX_DEPTH {
-        return Err(fail(format!(
-            "the joint hierarchy is {depth} levels deep; zoo reads at most {} levels",
-            zoo_motion::Skeleton::MAX_DEPTH
-        )));
-    }
+    check_depth(path, format, &read.0)?;
     Ok(read)
+}
+
+/// Refuses a hierarchy deeper than [`zoo_motion::Skeleton::MAX_DEPTH`].
+fn check_depth(path: &Path, format: &'static str, clip: &Clip) -> Result<(), ClipError> {
+    let depth = clip.skeleton.depth();
+    if depth > zoo_motion::Skeleton::MAX_DEPTH {
+        return Err(ClipError::Format {
+            path: path.to_path_buf(),
+            format,
+            message: format!(
+                "the joint hierarchy is {depth} levels deep; zoo reads at most {} levels",
+                zoo_motion::Skeleton::MAX_DEPTH
+            ),
+        });
+    }
+    Ok(())
 }
 
 /// The key poses of a clip file that stores only its keys, and their times in seconds from the
@@ -192,17 +202,7 @@ pub fn read_key_poses(path: &Path, opts: &ReadOptions) -> Result<(Clip, Vec<f64>
         Some(ClipFormat::Gltf) => {
             let opts = ReadOptions { drop_dummy_root: true, ..opts.clone() };
             let (mut clip, times) = crate::gltf::read_key_poses(path, &opts)?;
-            let depth = clip.skeleton.depth();
-            if depth > zoo_motion::Skeleton::MAX_DEPTH {
-                return Err(ClipError::Format {
-                    path: path.to_path_buf(),
-                    format: "glTF",
-                    message: format!(
-                        "the joint hierarchy is {depth} levels deep; zoo reads at most {} levels",
-                        zoo_motion::Skeleton::MAX_DEPTH
-                    ),
-                });
-            }
+            check_depth(path, "glTF", &clip)?;
             clip.remove_sign_flips();
             Ok((clip, times))
         }

@@ -48,12 +48,12 @@ fn err(path: &Path, message: impl Into<String>) -> ClipError {
 
 /// Reads a `.glb` or `.gltf` clip (see the module documentation).
 pub fn read_file(path: &Path, opts: &ReadOptions) -> Result<(Clip, ClipSource), ClipError> {
-    let bytes = std::fs::read(path).map_err(|source| ClipError::Io {
-        path: path.to_path_buf(),
-        action: "cannot read",
-        source,
-    })?;
-    read_bytes(&bytes, path, opts)
+    read_bytes(&file_bytes(path)?, path, opts)
+}
+
+/// The bytes of the file at `path`.
+fn file_bytes(path: &Path) -> Result<Vec<u8>, ClipError> {
+    std::fs::read(path).map_err(|source| ClipError::Io { path: path.to_path_buf(), action: "cannot read", source })
 }
 
 /// Reads a glTF clip from bytes; `path` names it in messages and locates external buffers.
@@ -66,12 +66,7 @@ pub fn read_bytes(bytes: &[u8], path: &Path, opts: &ReadOptions) -> Result<(Clip
 /// seconds from the first key. What an animator's blocking pass exported with only its keys
 /// holds: `zoo complete --poses FILE.glb` in-betweens them at the frames of these times.
 pub fn read_key_poses(path: &Path, opts: &ReadOptions) -> Result<(Clip, Vec<f64>), ClipError> {
-    let bytes = std::fs::read(path).map_err(|source| ClipError::Io {
-        path: path.to_path_buf(),
-        action: "cannot read",
-        source,
-    })?;
-    let ((clip, _), times) = read_document(&bytes, path, opts, Sampling::Keys)?;
+    let ((clip, _), times) = read_document(&file_bytes(path)?, path, opts, Sampling::Keys)?;
     Ok((clip, times))
 }
 
