@@ -31,12 +31,11 @@ pub enum Resolved {
 }
 
 /// One option of the subcommand: its long name, values, whether the command line gave it, and
-/// whether it is a flag.
+/// its default.
 struct Given {
     name: String,
     values: Vec<String>,
     from_command_line: bool,
-    flag: bool,
     default: Vec<String>,
 }
 
@@ -49,13 +48,11 @@ fn options(sub: &ArgMatches, def: &clap::Command) -> Vec<Given> {
         }
         let Ok(Some(raw)) = sub.try_get_raw(id) else { continue };
         let values: Vec<String> = raw.map(|v| v.to_string_lossy().into_owned()).collect();
-        let flag = matches!(arg.get_action(), ArgAction::SetTrue | ArgAction::SetFalse);
         let default = arg.get_default_values().iter().map(|v| v.to_string_lossy().into_owned()).collect();
         out.push(Given {
             name: long.to_string(),
             values,
             from_command_line: sub.value_source(id) == Some(ValueSource::CommandLine),
-            flag,
             default,
         });
     }
@@ -82,16 +79,16 @@ pub fn resolve(train: &ArgMatches, def: &clap::Command) -> anyhow::Result<Resolv
         return Ok(Resolved::Fresh(recorded.map(|g| (g.name, g.values)).collect()));
     };
     let Some(recorded) = zoo_nn::run_folder::read_command(dir)? else { return Ok(Resolved::AsGiven) };
-    let mut merged: BTreeMap<String, (Vec<String>, bool)> = BTreeMap::new();
+    let mut merged: BTreeMap<String, Vec<String>> = BTreeMap::new();
     for (name, values) in &recorded {
         if !OWN_OPTIONS.contains(&name.as_str()) {
-            merged.insert(name.clone(), (values.clone(), false));
+            merged.insert(name.clone(), values.clone());
         }
     }
     for g in given {
         let own = OWN_OPTIONS.contains(&g.name.as_str());
         if own && g.name != "out" && g.name != "overwrite" && (g.from_command_line || g.name == "resume") {
-            merged.insert(g.name, (g.values, g.flag));
+            merged.insert(g.name, g.values);
             continue;
         }
         if own || !g.from_command_line {
@@ -112,7 +109,7 @@ pub fn resolve(train: &ArgMatches, def: &clap::Command) -> anyhow::Result<Resolv
                 dir.display(),
             );
         }
-        merged.insert(g.name, (g.values, g.flag));
+        merged.insert(g.name, g.values);
     }
     let flags: Vec<String> = model_def
         .get_arguments()
@@ -120,7 +117,7 @@ pub fn resolve(train: &ArgMatches, def: &clap::Command) -> anyhow::Result<Resolv
         .filter_map(|a| a.get_long().map(str::to_string))
         .collect();
     let mut argv: Vec<OsString> = vec!["zoo".into(), "train".into(), model.into()];
-    for (name, (values, _)) in merged {
+    for (name, values) in merged {
         if flags.contains(&name) {
             if values.iter().any(|v| v == "true") {
                 argv.push(format!("--{name}").into());
