@@ -365,7 +365,21 @@ class Transition:
             b[3:] = (F(1) - w) * rel_last + w * rel_t
             return m.normalize(b, "x")
 
-        def step(x, r, base):
+        tta = self.task.get("time_to_arrival")
+
+        def embed(left):
+            # Section 6: the time to arrival, pairs of sin and cos from a quarter turn over
+            # `max` frames to one radian a frame, geometric (computed in f64, fed as f32).
+            dims, top = int(tta["dims"]), max(int(tta["max"]), 1)
+            t, pairs, slow = float(min(left, top)), dims // 2, (np.pi / 2) / top
+            out = np.empty(dims, dtype=F)
+            for i in range(pairs):
+                a = i / (pairs - 1) if pairs > 1 else 0.0
+                w = slow * (1.0 / slow) ** a
+                out[2 * i], out[2 * i + 1] = np.sin(t * w), np.cos(t * w)
+            return out
+
+        def step(x, r, base, left):
             v = m.denormalize(x, "x")
             y = v.copy()
             y[:3] = r
@@ -373,6 +387,8 @@ class Transition:
             feed = {"x": x}
             if has_base:
                 feed["base"] = base
+            if tta is not None:
+                feed["tta"] = embed(left)
             if self.task["offset_input"]:
                 feed["offset"] = m.normalize(y_t - y, "offset")
             if terrain is not None:
@@ -382,11 +398,11 @@ class Transition:
 
         x, r = c[0], past[0][:3].copy()
         for k in range(1, len(past)):
-            step(x, r, c[k])
+            step(x, r, c[k], len(past) + n - k)
             x, r = c[k], past[k][:3].copy()
         raw = []
         for i in range(n + 1):
-            x = step(x, r, interpolation(i) if has_base else None)
+            x = step(x, r, interpolation(i) if has_base else None, n - i)
             p, r = decode(m.denormalize(x, "x"), r)
             raw.append(p)
         return raw

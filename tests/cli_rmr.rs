@@ -352,3 +352,39 @@ fn the_stitching_benchmark_measures_every_method() {
         run(&["bench", "stitch", "--data", s(&data), "--valid-glob", "*_0010.bvh", "--methods", "gmm:runs/x"]);
     assert!(!ok && e.contains("unknown method `gmm:runs/x`"), "{e}");
 }
+
+/// `--exclude-glob` (a content held out, as docs/ood.md does for the RTN): training and the
+/// stitching benchmark leave the matching clips out before the split and say how many.
+#[test]
+fn training_and_the_benchmark_leave_out_excluded_clips() {
+    let dir = tempfile::tempdir().unwrap();
+    let (data, clips) = synth_clips(dir.path(), "2");
+    let run_dir = dir.path().join("run");
+    let mut args = vec!["train", "rmr", "--preset", "tiny", "--epochs", "1", "--data", s(&data)];
+    args.extend(["--valid-glob", "*_001[0-2].bvh", "--exclude-glob", "*_000[1-4].bvh", "--out", s(&run_dir)]);
+    let (ok, stdout, stderr) = run(&args);
+    assert!(ok, "{stdout}\n{stderr}");
+    let left = format!("--exclude-glob *_000[1-4].bvh: left out 4 of {} clips", clips.len());
+    assert!(stderr.contains(&left), "{stderr}");
+    let (ok, stdout, stderr) = run(&[
+        "bench",
+        "stitch",
+        "--data",
+        s(&data),
+        "--valid-glob",
+        "*_001[0-2].bvh",
+        "--exclude-glob",
+        "*_000[1-4].bvh",
+        "--methods",
+        "concat,inertialize",
+        "--free-cases",
+        "2",
+        "--database-stride",
+        "2",
+    ]);
+    assert!(ok && stderr.contains(&left), "{stdout}\n{stderr}");
+    // Without --data there is nothing to leave out.
+    let other = dir.path().join("other");
+    let (ok, _, stderr) = run(&["train", "rmr", "--preset", "tiny", "--exclude-glob", "*_run_*", "--out", s(&other)]);
+    assert!(!ok && stderr.contains("--exclude-glob leaves clips of --data out: pass --data too"), "{stderr}");
+}

@@ -205,6 +205,43 @@ fn train_resume_transition_and_decompress() {
     }
 }
 
+/// `--lengths` trains with the time-to-arrival input unless `--time-to-arrival 0` says otherwise;
+/// its size is checked before any training.
+#[test]
+fn training_over_lengths_reads_the_time_to_arrival() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = |name: &str, extra: &[&str]| {
+        let out = dir.path().join(name);
+        let mut args = vec!["train", "rtn", "--preset", "tiny", "--synth-minutes", "0.5", "--epochs", "1"];
+        args.extend(["--lengths", "3-8", "--out", out.to_str().unwrap()]);
+        args.extend(extra);
+        let (ok, stdout, stderr) = run(&args);
+        assert!(ok, "{stdout}\n{stderr}");
+        let c: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("config.json")).unwrap()).unwrap();
+        c["time_to_arrival"].clone()
+    };
+    assert_eq!(config("default", &[]), serde_json::json!({"dims": 16, "max": 8}));
+    assert_eq!(config("off", &["--time-to-arrival", "0"]), serde_json::Value::Null);
+    assert_eq!(config("four", &["--time-to-arrival", "4"]), serde_json::json!({"dims": 4, "max": 8}));
+    let out = dir.path().join("odd");
+    let (ok, _, stderr) = run(&[
+        "train",
+        "rtn",
+        "--preset",
+        "tiny",
+        "--synth-minutes",
+        "0.5",
+        "--lengths",
+        "3-8",
+        "--time-to-arrival",
+        "7",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!ok && stderr.contains("--time-to-arrival 7") && stderr.contains("even number"), "{stderr}");
+}
+
 #[test]
 fn diverging_training_stops_with_a_message() {
     let dir = tempfile::tempdir().unwrap();

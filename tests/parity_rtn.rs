@@ -202,7 +202,20 @@ fn candle_loop(f: &Fixture, chars: &[Character], n_out: usize) -> Trace {
         let base = f.config.interp_residual.then(|| known.as_ref().unwrap_or_else(|| &bases[step + 1 - PAST]));
         let roots: Vec<[f32; 3]> = root.to_vec2::<f32>().unwrap().iter().map(|r| [r[0], r[1], r[2]]).collect();
         let patches = f.config.terrain.then(|| t(host_patches(f, &roots), f.config.terrain_dim()));
-        let inputs = RtnInputs { sequence: &seq, x: &x, offset: offset.as_ref(), terrain: patches.as_ref(), base };
+        // The time to arrival of the frame this step predicts (`step + 1`; the target is `PAST + n_out - 1`).
+        let tta = f.config.time_to_arrival.map(|z| {
+            let mut e = vec![0f32; z.dims];
+            z.embed(PAST + n_out - 2 - step, &mut e);
+            t(e.repeat(b), z.dims)
+        });
+        let inputs = RtnInputs {
+            sequence: &seq,
+            x: &x,
+            offset: offset.as_ref(),
+            terrain: patches.as_ref(),
+            base,
+            tta: tta.as_ref(),
+        };
         let (next, st) = f.model.step(&inputs, &state).unwrap();
         state = st;
         trace.push(next.flatten_all().unwrap().to_vec1::<f32>().unwrap());
@@ -245,8 +258,8 @@ fn host_base(stats: &FeatureStats, last: &[f32], target_pose: &[f32], i: usize, 
 }
 
 /// The generate loop on the host around an exported graph. `start` gets the named start inputs
-/// (`target`, `x0`); `step` gets the named frame inputs (`x`, `offset`, `base`, `terrain`) and returns
-/// `x_next`.
+/// (`target`, `x0`); `step` gets the named frame inputs (`x`, `offset`, `base`, `terrain`, `tta`) and
+/// returns `x_next`.
 fn host_loop(
     f: &Fixture,
     chars: &[&Character],
@@ -275,7 +288,20 @@ fn host_loop(
                 .collect()
         };
         let terrain = host_patches(f, &roots);
-        let next = step(&HashMap::from([("x", x.clone()), ("offset", offset), ("base", base), ("terrain", terrain)]));
+        // The time to arrival as docs/runtime-protocol-transition.md 5e says: frames from the
+        // predicted frame `nt` to the target `PAST + n_out - 1`.
+        let tta = f.config.time_to_arrival.map_or(Vec::new(), |z| {
+            let mut e = vec![0f32; z.dims];
+            z.embed(PAST + n_out - 1 - nt, &mut e);
+            e.repeat(chars.len())
+        });
+        let next = step(&HashMap::from([
+            ("x", x.clone()),
+            ("offset", offset),
+            ("base", base),
+            ("terrain", terrain),
+            ("tta", tta),
+        ]));
         trace.push(next.clone());
         if nt < PAST {
             x = cat(chars, |c| &c.x[nt]);
@@ -523,7 +549,7 @@ fn rtn_single_step_parity() {
     let seq = f.model.begin(&t(&target, 2 * d)).unwrap();
     let state = RtnState { h: t(&h, hu), c: t(&c, hu) };
     let (xt, ot) = (t(&x, d), t(&offset, d));
-    let inputs = RtnInputs { sequence: &seq, x: &xt, offset: Some(&ot), terrain: None, base: None };
+    let inputs = RtnInputs { sequence: &seq, x: &xt, offset: Some(&ot), terrain: None, base: None, tta: None };
     let (next, st) = f.model.step(&inputs, &state).unwrap();
     let flat = |t: &Tensor| t.flatten_all().unwrap().to_vec1::<f32>().unwrap();
     let candle = [flat(&next), flat(&st.h), flat(&st.c)];
@@ -573,7 +599,15 @@ fn rtn_ablation_variants_parity() {
     // Every config switch the exporter respects: no future conditioning, zero / common initial
     // state, no residual output, the residual on the interpolation (`base` input), the
     // terrain-aware RTN (`terrain` input, patches sampled on the host under each root).
-    let variants: [Variant; 9] = [
+    let variants: [Variant; 11] = [
+        ("interp_residual_tta", |c: &mut Config| {
+            c.interp_residual = true;
+            c.time_to_arrival = Some(zoo_runtime::TimeToArrival { dims: 6, max: 9 });
+        }),
+        ("terrain_tta", |c: &mut Config| {
+            c.terrain = true;
+            c.time_to_arrival = Some(zoo_runtime::TimeToArrival { dims: 2, max: 40 });
+        }),
         ("terrain", |c: &mut Config| c.terrain = true),
         ("terrain_interp_residual", |c: &mut Config| {
             c.terrain = true;
@@ -623,6 +657,7 @@ fn exported_metadata_reaches_the_runtime() {
         offset_input: true,
         terrain: None,
         fallback: f.config.fallback.map(|b| zoo_runtime::TransitionFallback { start: b.start, full: b.full }),
+        time_to_arrival: None,
     };
     assert_eq!(m.task, MotionTask::Transition(task));
     // The config travels as an informational copy (read back by `import_rtn`, not the runtime).
@@ -731,6 +766,13 @@ fn runtime_transition_api_matches_candle() {
 #[test]
 fn runtime_transition_api_matches_candle_interp_residual() {
     runtime_transition_api_matches_candle_for(Config { interp_residual: true, ..tiny() });
+}
+
+#[test]
+fn runtime_transition_api_matches_candle_time_to_arrival() {
+    // `max` below the transition: the first frames' embeddings are clamped, the last count down.
+    let tta = Some(zoo_runtime::TimeToArrival { dims: 8, max: 4 });
+    runtime_transition_api_matches_candle_for(Config { interp_residual: true, time_to_arrival: tta, ..tiny() });
 }
 
 fn runtime_transition_api_matches_candle_for(config: Config) {

@@ -164,6 +164,16 @@ fn transitions_reproduce_from_the_page() {
     assert_eq!(residual.transition[0].fallback.map(|f| (f.start, f.full)), Some((0.5, 1.0)));
     report.assert_compared(&["past", "raw", "blended", "miss", "fallback_weight", "frames", "posed"]);
     assert!(residual.transition.iter().all(|c| c.posed.len() == c.length + 1));
+    // An RTN trained over several lengths (the `tta` input, section 5e), clamped before the end.
+    let (_, report) = check(
+        &dir,
+        "rtn_tta",
+        &tiny_rtn(|c| {
+            c.interp_residual = true;
+            c.time_to_arrival = Some(zoo_runtime::TimeToArrival { dims: 6, max: 4 });
+        }),
+    );
+    report.assert_compared(&["past", "raw", "blended", "miss", "fallback_weight", "frames"]);
     // A terrain-aware RTN: its heightmap travels in the reference.
     let (terrain, report) = check(&dir, "rtn_terrain", &zoo_tests::tiny_terrain_rtn_onnx());
     assert!(terrain.transition.iter().all(|c| c.heightmap.is_some()));

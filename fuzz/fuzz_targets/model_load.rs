@@ -33,6 +33,7 @@ fn valid() -> &'static (pb::ModelProto, Vec<(String, String)>) {
                 offset_input: false,
                 terrain: None,
                 fallback: None,
+                time_to_arrival: None,
             }),
             config_json: "{}".into(),
             normalization: [

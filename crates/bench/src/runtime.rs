@@ -130,9 +130,10 @@ struct CandleBackend {
     sequence: zoo_rtn::RtnSequence,
     x: Tensor,
     offset: Option<Tensor>,
-    /// The step graph's `terrain` and `base` inputs, for the models that take them.
+    /// The step graph's `terrain`, `base` and `tta` inputs, for the models that take them.
     terrain: Option<Tensor>,
     base: Option<Tensor>,
+    tta: Option<Tensor>,
     state: RtnState,
     out: Vec<f32>,
     pool: rayon::ThreadPool,
@@ -145,9 +146,9 @@ impl StepBackend for CandleBackend {
 
     fn step(&mut self) -> Result<()> {
         let (model, sequence, x, offset, state) = (&self.model, &self.sequence, &self.x, &self.offset, &self.state);
-        let (terrain, base) = (self.terrain.as_ref(), self.base.as_ref());
+        let (terrain, base, tta) = (self.terrain.as_ref(), self.base.as_ref(), self.tta.as_ref());
         let (next, state) = self.pool.install(|| {
-            let inputs = RtnInputs { sequence, x, offset: offset.as_ref(), terrain, base };
+            let inputs = RtnInputs { sequence, x, offset: offset.as_ref(), terrain, base, tta };
             model.step(&inputs, state)
         })?;
         self.out = next.flatten_all()?.to_vec1::<f32>()?;
@@ -435,6 +436,7 @@ fn candle_backend(
     // The same values as the graph's inputs, so that the backends compute the same step.
     let terrain = if candle.config().terrain { Some(get("terrain")?) } else { None };
     let base = if candle.config().interp_residual { Some(get("base")?) } else { None };
+    let tta = if candle.config().time_to_arrival.is_some() { Some(get("tta")?) } else { None };
     let target = Tensor::from_vec(inputs(batch * 2 * d, 55), (batch, 2 * d), &dev)?;
     let sequence = candle.begin(&target)?;
     // The exported step graph carries the per-sequence gate bias as a state slot.
@@ -451,7 +453,7 @@ fn candle_backend(
     };
     let state = RtnState { h: slot("h")?, c: slot("c")? };
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().map_err(|e| msg!("a one-thread pool: {e}"))?;
-    Ok(CandleBackend { model: candle.clone(), sequence, x, offset, terrain, base, state, out: Vec::new(), pool })
+    Ok(CandleBackend { model: candle.clone(), sequence, x, offset, terrain, base, tta, state, out: Vec::new(), pool })
 }
 
 /// The onnxruntime environment from `lib`.

@@ -44,6 +44,9 @@ pub fn training_clips(
     progress: &dyn crate::Progress,
 ) -> Result<(Vec<NamedClip>, Vec<NamedClip>, String), crate::Message> {
     let Some(path) = &t.data else {
+        if t.exclude_glob.is_some() {
+            return Err(crate::Message::new("--exclude-glob leaves clips of --data out: pass --data too"));
+        }
         let (minutes, seed) = (t.synth_minutes, t.seed);
         let cfg = crate::synth::SynthConfig { minutes, seed, terrain: false, ..Default::default() };
         let (train, valid) = split_synth(crate::synth::generate(&cfg).into_iter().map(named_synth).collect());

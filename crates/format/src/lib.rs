@@ -54,7 +54,7 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 pub use stitch::{StitchLayout, StitchTask};
 pub use synthesis::{SynthesisRefiner, SynthesisTask};
-pub use transition::{TransitionFallback, TransitionTask, TransitionTerrain};
+pub use transition::{TimeToArrival, TransitionFallback, TransitionTask, TransitionTerrain};
 pub use zoo_motion::frame::CoordinateFrame;
 
 /// The format version this release reads and writes.

@@ -11,6 +11,7 @@ fn transition() -> TransitionTask {
         offset_input: true,
         terrain: None,
         fallback: None,
+        time_to_arrival: None,
     }
 }
 
@@ -330,6 +331,50 @@ fn a_required_optional_field_must_be_written_as_null() {
     let bad = TransitionTask { fallback: Some(TransitionFallback { start: 3.0, full: 1.0 }), ..transition() };
     let err = MotionModelMetadata { task: MotionTask::Transition(bad), ..sample() }.check().unwrap_err();
     assert!(err.to_string().contains("start <= full"), "{err}");
+}
+
+#[test]
+fn time_to_arrival_round_trips_defaults_to_none_and_is_checked() {
+    let tta = TimeToArrival { dims: 8, max: 45 };
+    let with = TransitionTask { time_to_arrival: Some(tta), ..transition() };
+    let m = MotionModelMetadata { task: MotionTask::Transition(with), ..sample() };
+    assert_eq!(MotionModelMetadata::from_props(lookup(&m.to_props())).unwrap(), m);
+    // A file written before the field existed loads without it.
+    let old = edited(|p| {
+        let t = json(&transition()).replace(",\"time_to_arrival\":null", "");
+        assert!(!t.contains("time_to_arrival"));
+        set(p, keys::TRANSITION, &t)
+    })
+    .unwrap();
+    assert!(matches!(old.task, MotionTask::Transition(TransitionTask { time_to_arrival: None, .. })));
+    for (bad, what) in [((7, 45), "even"), ((0, 45), "even"), ((8, 0), "max 0")] {
+        let t = TimeToArrival { dims: bad.0, max: bad.1 };
+        let task = TransitionTask { time_to_arrival: Some(t), ..transition() };
+        let err = MotionModelMetadata { task: MotionTask::Transition(task), ..sample() }.check().unwrap_err();
+        assert!(err.to_string().contains(what), "{err}");
+    }
+}
+
+#[test]
+fn time_to_arrival_embedding_counts_down_and_stays_constant_past_max() {
+    let tta = TimeToArrival { dims: 8, max: 45 };
+    let e = |t: usize| {
+        let mut out = [0f32; 8];
+        tta.embed(t, &mut out);
+        out
+    };
+    // The target (0 frames left): every sine 0 and every cosine 1.
+    assert_eq!(e(0), [0.0, 1.0, 0.0, 1.0, 0.0, 1.0, 0.0, 1.0]);
+    // The slowest pair is a quarter turn over `max`: sin rises monotonically to 1 at 45.
+    let slow: Vec<f32> = (0..=45).map(|t| e(t)[0]).collect();
+    assert!(slow.windows(2).all(|w| w[1] > w[0]), "{slow:?}");
+    assert!((slow[45] - 1.0).abs() < 1e-6);
+    // The fastest pair turns one radian a frame.
+    assert!((e(1)[6] - 1f32.sin()).abs() < 1e-6 && (e(1)[7] - 1f32.cos()).abs() < 1e-6);
+    // Clamped: every length past `max` looks like `max`; distinct frames within it differ.
+    assert_eq!(e(45), e(46));
+    assert_eq!(e(45), e(1000));
+    assert_ne!(e(29), e(30));
 }
 
 #[test]

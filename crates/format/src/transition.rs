@@ -35,6 +35,59 @@ pub struct TransitionTask {
     /// has none (the runtime then applies none unless the engine sets one).
     #[serde(deserialize_with = "Option::deserialize")]
     pub fallback: Option<TransitionFallback>,
+    /// The time-to-arrival input `tta` of a model trained over several transition lengths
+    /// (Harvey et al. 2020's embedding of the frames left to the target); `null` for a model
+    /// without it. Files written before the field existed load as `null`.
+    #[serde(default)]
+    pub time_to_arrival: Option<TimeToArrival>,
+}
+
+/// The time-to-arrival embedding fed to the step graph as `tta` (`dims` values): the frames
+/// left from the predicted frame to the target (0 at the target), clamped at `max`, as pairs of
+/// sines and cosines of geometrically spaced frequencies, from a quarter turn over `max` frames
+/// (the slowest, monotonic over the range) to one radian a frame (the fastest). Training and the
+/// runtime compute it with [`TimeToArrival::embed`], so both feed the same values.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TimeToArrival {
+    /// Values of the embedding (even, at least 2).
+    pub dims: usize,
+    /// Frames from which the embedding stays constant (at least 1).
+    pub max: usize,
+}
+
+impl TimeToArrival {
+    /// Largest `dims` accepted.
+    pub const MAX_DIMS: usize = 256;
+    /// Largest `max` accepted (frames).
+    pub const MAX_FRAMES: usize = 100_000;
+
+    /// Writes the embedding of `frames_left` (frames from the predicted frame to the target)
+    /// into `out` (`dims` values).
+    pub fn embed(&self, frames_left: usize, out: &mut [f32]) {
+        let max = self.max.max(1);
+        let t = frames_left.min(max) as f64;
+        let pairs = out.len() / 2;
+        let slow = std::f64::consts::FRAC_PI_2 / max as f64;
+        for (i, pair) in out.chunks_exact_mut(2).enumerate() {
+            // Frequencies from `slow` (i = 0) to 1 rad/frame (the last pair), geometric.
+            let a = if pairs > 1 { i as f64 / (pairs - 1) as f64 } else { 0.0 };
+            let w = slow * (1.0 / slow).powf(a);
+            pair[0] = (t * w).sin() as f32;
+            pair[1] = (t * w).cos() as f32;
+        }
+    }
+
+    /// Checks the sizes: `dims` even in `2..=MAX_DIMS`, `max` in `1..=MAX_FRAMES`.
+    pub fn check(&self) -> Result<(), String> {
+        if !(2..=Self::MAX_DIMS).contains(&self.dims) || !self.dims.is_multiple_of(2) {
+            return Err(format!("time_to_arrival.dims {} must be an even number in 2..={}", self.dims, Self::MAX_DIMS));
+        }
+        if !(1..=Self::MAX_FRAMES).contains(&self.max) {
+            return Err(format!("time_to_arrival.max {} must be in 1..={} frames", self.max, Self::MAX_FRAMES));
+        }
+        Ok(())
+    }
 }
 
 /// The terrain patch of a terrain-aware RTN: `side * side` heights sampled on a square of
@@ -116,6 +169,9 @@ impl TransitionTask {
         }
         if let Some(f) = &self.fallback {
             f.check()?;
+        }
+        if let Some(t) = &self.time_to_arrival {
+            t.check()?;
         }
         Ok(())
     }

@@ -48,7 +48,7 @@ pub use keyframes::{KeyframeModel, KeyframeRunner, MotionKeys};
 pub use loaded::LoadedModel;
 pub use metadata::{
     FORMAT_VERSION, MotionFeatureSegment, MotionMeanStd, MotionModelMetadata, MotionSkeletonInfo, MotionStatePair,
-    MotionTask, MotionTaskKind, TransitionFallback, TransitionTask, TransitionTerrain, WeightWidth,
+    MotionTask, MotionTaskKind, TimeToArrival, TransitionFallback, TransitionTask, TransitionTerrain, WeightWidth,
 };
 pub use model::{MotionModel, MotionState, MotionStateInfo, MotionTensorInfo};
 pub use pose::{Conversion, CoordinateFrame, EnginePose, Handedness, UpAxis};

@@ -43,6 +43,8 @@ enum FrameInput {
     Base,
     /// The normalized terrain patch under the root of `x` (terrain-aware RTN).
     Terrain,
+    /// The time-to-arrival embedding of the frame the step predicts.
+    Tta,
 }
 
 /// The terrain input of a terrain-aware RTN: patch geometry and normalization.
@@ -69,6 +71,8 @@ pub struct TransitionModel {
     frame_inputs: Vec<FrameInput>,
     /// The terrain input of a terrain-aware model.
     terrain: Option<TerrainInput>,
+    /// The time-to-arrival input of a model trained over several lengths.
+    time_to_arrival: Option<crate::metadata::TimeToArrival>,
     /// For each start-graph input: `true` for the target vector, `false` for `x0`.
     start_target: Vec<bool>,
     target_blend: usize,
@@ -203,6 +207,8 @@ pub struct TransitionRunner {
     offset: Vec<f32>,
     /// Interpolation frames of the characters of a graph run (interpolation-residual models).
     base: Vec<f32>,
+    /// Time-to-arrival embeddings of the characters of a graph run.
+    tta: Vec<f32>,
     next: Vec<f32>,
     /// Generated poses of a batched `generate`, character-major.
     poses: Vec<f32>,
@@ -240,7 +246,8 @@ fn check_rows(name: &str, data: &[f32], batch: usize, width: usize) -> Result<()
 
 /// What each frame input of a transition step graph is, checked against its section: `x`,
 /// `offset` (when the section says so), `base` (optional) of `D` values, `terrain` of `S^2`
-/// values (`patch_dim`, when the section has terrain); the required ones must be there.
+/// values (`patch_dim`, when the section has terrain), `tta` of the embedding's values (when the
+/// section has a time to arrival); the required ones must be there.
 fn frame_inputs(
     model: &MotionModel,
     task: &crate::metadata::TransitionTask,
@@ -248,6 +255,7 @@ fn frame_inputs(
 ) -> Result<Vec<FrameInput>, MotionError> {
     let d = task.frame_dim;
     let patch = patch_dim.unwrap_or(0);
+    let tta = task.time_to_arrival.map_or(0, |t| t.dims);
     let frame_inputs = model
         .inputs()
         .iter()
@@ -256,13 +264,15 @@ fn frame_inputs(
             "offset" if i.width == d && task.offset_input => Ok(FrameInput::Offset),
             "base" if i.width == d => Ok(FrameInput::Base),
             "terrain" if patch_dim.is_some() && i.width == patch => Ok(FrameInput::Terrain),
+            "tta" if task.time_to_arrival.is_some() && i.width == tta => Ok(FrameInput::Tta),
             other => Err(MotionError::BadGraphIo {
                 what: "input",
                 name: other.to_string(),
                 reason: format!(
-                    "is not an input of this transition model (`x`{}, optionally `base`, of {d} values{}, from `{}`)",
+                    "is not an input of this transition model (`x`{}, optionally `base`, of {d} values{}{}, from `{}`)",
                     if task.offset_input { ", `offset`" } else { "" },
                     if patch_dim.is_some() { format!(", `terrain` of {patch} values") } else { String::new() },
+                    if tta > 0 { format!(", `tta` of {tta} values") } else { String::new() },
                     keys::TRANSITION
                 ),
             }),
@@ -272,6 +282,7 @@ fn frame_inputs(
         ("x", FrameInput::X, d, true),
         ("offset", FrameInput::Offset, d, task.offset_input),
         ("terrain", FrameInput::Terrain, patch, patch_dim.is_some()),
+        ("tta", FrameInput::Tta, tta, task.time_to_arrival.is_some()),
     ] {
         if required && !frame_inputs.contains(&want) {
             return Err(MotionError::BadGraphIo {
@@ -337,6 +348,7 @@ impl TransitionModel {
             offset: group("offset", d)?,
             frame_inputs,
             terrain,
+            time_to_arrival: task.time_to_arrival,
             start_target,
             target_blend: task.target_blend,
             parents: m.skeleton.parents.iter().map(|&p| usize::try_from(p).ok()).collect(),
@@ -428,6 +440,7 @@ impl TransitionModel {
             xb: Vec::new(),
             offset: Vec::new(),
             base: Vec::new(),
+            tta: Vec::new(),
             next: Vec::new(),
             poses: Vec::new(),
             motion: Vec::new(),
@@ -669,6 +682,19 @@ impl TransitionRunner {
                 }
             }
         }
+        if let Some(z) = &m.time_to_arrival {
+            self.tta.resize(n * z.dims, 0.0);
+            for (row, &c) in sel.iter().enumerate() {
+                let s = &states[c];
+                // Frames from the predicted frame to the target: context frame `f` of `per / d`
+                // predicts frame `f`, the target is `length` frames after the context.
+                let left = match context {
+                    Some((per, f)) => per / d + s.length - f,
+                    None => s.length.saturating_sub(s.generated),
+                };
+                z.embed(left, &mut self.tta[row * z.dims..(row + 1) * z.dims]);
+            }
+        }
         if let Some(t) = &m.terrain {
             let p = t.side * t.side;
             self.patch.resize(n * p, 0.0);
@@ -701,13 +727,15 @@ impl TransitionRunner {
             m.offset.normalize(ob);
         }
         let (x, offset, base, patch) = (&self.xb[..], &self.offset[..], &self.base[..], &self.patch[..]);
-        let mut inputs: [&[f32]; 4] = [&[], &[], &[], &[]];
+        let tta = &self.tta[..];
+        let mut inputs: [&[f32]; 5] = [&[], &[], &[], &[], &[]];
         for (slot, which) in inputs.iter_mut().zip(&m.frame_inputs) {
             *slot = match which {
                 FrameInput::X => x,
                 FrameInput::Offset => offset,
                 FrameInput::Base => base,
                 FrameInput::Terrain => patch,
+                FrameInput::Tta => tta,
             };
         }
         let inputs = &inputs[..m.frame_inputs.len()];

@@ -31,6 +31,7 @@ fn sample() -> MotionModelMetadata {
             offset_input: true,
             terrain: None,
             fallback: None,
+            time_to_arrival: None,
         }),
         config_json: "{\"hidden\": 4}".into(),
         normalization: [("x".to_string(), MotionMeanStd { mean: vec![0.0, 1.0], std: vec![1.0, 2.0] })].into(),

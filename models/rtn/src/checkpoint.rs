@@ -101,6 +101,9 @@ pub fn check_meta(config: &Config, stats: &FeatureStats) -> Result<(), String> {
             config.transition_frames
         ));
     }
+    if let Some(t) = &config.time_to_arrival {
+        t.check().map_err(|e| format!("{CONFIG_FILE}: {e}"))?;
+    }
     positive_sizes("frame_encoder", &config.frame_encoder)?;
     positive_sizes("target_encoder", &config.target_encoder)?;
     positive_sizes("offset_encoder", &config.offset_encoder)?;

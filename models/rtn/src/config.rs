@@ -152,6 +152,14 @@ pub struct Config {
     /// interpolation itself. Folders written before the field existed load as `false`.
     #[serde(default)]
     pub interp_residual: bool,
+    /// Feed the frames left to the target (the time to arrival, Harvey et al. 2020) to the frame
+    /// encoder as an embedding of `dims` values, constant from `max` frames on
+    /// ([`zoo_format::TimeToArrival::embed`]): the frame encoder reads `[x_t, p_t, b_(t+1),
+    /// z_tta]`. What lets one network place its motion in time for every transition length of
+    /// [`TrainConfig::lengths`]. `None` (the paper's RTN, and folders written before it
+    /// existed): no time input.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time_to_arrival: Option<zoo_format::TimeToArrival>,
     /// Feed a local terrain patch `p_t` to the frame encoder (sec. 3.2, the terrain-aware RTN).
     pub terrain: bool,
     /// Terrain patch side in samples (paper: 13).
@@ -190,6 +198,7 @@ impl Config {
             init_state: InitState::Learned,
             residual: true,
             interp_residual: false,
+            time_to_arrival: None,
             terrain: false,
             terrain_side: 13,
             terrain_extent: 206.0,
@@ -238,10 +247,16 @@ impl Config {
         3 * self.joints
     }
 
-    /// Values the frame encoder reads: the frame, the terrain patch and, with
-    /// [`Config::interp_residual`], the interpolation frame.
+    /// Values the frame encoder reads: the frame, the terrain patch, with
+    /// [`Config::interp_residual`] the interpolation frame and with [`Config::time_to_arrival`]
+    /// its embedding.
     pub fn frame_encoder_input(&self) -> usize {
-        self.dim() + self.terrain_dim() + if self.interp_residual { self.dim() } else { 0 }
+        self.dim() + self.terrain_dim() + if self.interp_residual { self.dim() } else { 0 } + self.tta_dim()
+    }
+
+    /// Values of the time-to-arrival embedding (0 without it).
+    pub fn tta_dim(&self) -> usize {
+        self.time_to_arrival.map_or(0, |t| t.dims)
     }
 
     /// Terrain patch size (0 without terrain).

@@ -14,6 +14,7 @@
 //! | `offset`: normalized global offset `o_t` (D) | `future_conditioning` | |
 //! | `terrain`: normalized terrain patch (side^2) | `terrain` | |
 //! | `base`: normalized interpolation frame `b_(t+1)` (D) | `interp_residual` | (`x_next = base + D(h)`) |
+//! | `tta`: time-to-arrival embedding of the predicted frame (dims) | `time_to_arrival` | |
 //! | `h`, `c`: LSTM state (H) | always | `h_next`, `c_next` |
 //! | `gate_bias`: `C_F h_F + b` (4H), constant over a transition | `future_conditioning` | `gate_bias_next` (= `gate_bias`) |
 //!
@@ -192,6 +193,7 @@ pub fn transition_task(config: &Config) -> TransitionTask {
             .terrain
             .then_some(TransitionTerrain { side: config.terrain_side, extent: config.terrain_extent }),
         fallback: config.fallback.map(|f| TransitionFallback { start: f.start, full: f.full }),
+        time_to_arrival: config.time_to_arrival,
     }
 }
 
@@ -309,12 +311,14 @@ fn step_graph(config: &Config, w: &Weights) -> Result<GraphBuilder, ExportError>
     let offset = config.future_conditioning.then(|| g.input("offset", &batch(d)));
     let terrain = config.terrain.then(|| g.input("terrain", &batch(config.terrain_dim())));
     let base = config.interp_residual.then(|| g.input("base", &batch(d)));
+    let tta = config.time_to_arrival.map(|z| g.input("tta", &batch(z.dims)));
     let h = g.input("h", &batch(hu));
     let c = g.input("c", &batch(hu));
     let gate_bias = config.future_conditioning.then(|| g.input("gate_bias", &batch(4 * hu)));
 
-    // RTN eq. 2: h_E = E([x_t, p_t]), with the interpolation frame: E([x_t, p_t, b_(t+1)])
-    let parts: Vec<&Value> = [Some(&x), terrain.as_ref(), base.as_ref()].into_iter().flatten().collect();
+    // RTN eq. 2: h_E = E([x_t, p_t]), with the interpolation frame and the time to arrival:
+    // E([x_t, p_t, b_(t+1), z_tta])
+    let parts: Vec<&Value> = [Some(&x), terrain.as_ref(), base.as_ref(), tta.as_ref()].into_iter().flatten().collect();
     let e_in = if parts.len() == 1 { x.clone() } else { g.concat("frame_encoder.input", &parts, 1) };
     let he = zoo_nn::export::mlp(&mut g, w, ("frame_encoder", config.frame_encoder.len()), &e_in, true, leaky(slope))?;
     // RTN eq. 5-8: z = W h_E + U h_(t-1) + C_O h_O + (C_F h_F + b)

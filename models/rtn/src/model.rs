@@ -51,6 +51,9 @@ pub struct RtnInputs<'a> {
     /// Normalised interpolation frame `b_(t+1)` `(batch, D)`, required with
     /// [`Config::interp_residual`] (ignored without).
     pub base: Option<&'a Tensor>,
+    /// The time-to-arrival embedding `(batch, dims)` of the frame this step predicts, required
+    /// with [`Config::time_to_arrival`] (ignored without).
+    pub tta: Option<&'a Tensor>,
 }
 
 /// The Recurrent Transition Network: encoders E, F, O, the conditioned LSTM R, decoder D and
@@ -218,6 +221,13 @@ impl Rtn {
             ),
             (false, _) => None,
         };
+        match (self.config.time_to_arrival.is_some(), inputs.tta) {
+            (true, Some(z)) => e_in.push(z),
+            (true, None) => candle_core::bail!(
+                "this RTN reads the time to arrival: pass its embedding of the frames left to every step"
+            ),
+            (false, _) => {}
+        }
         let he = if e_in.len() == 1 {
             self.frame_encoder.forward(x)?
         } else {

@@ -92,7 +92,13 @@ pub struct RtnRunOptions {
     pub ema: f64,
     /// Transition lengths to train over, `[shortest, longest]` (`None`: the preset's one length).
     pub lengths: Option<[usize; 2]>,
+    /// Values of the time-to-arrival embedding (`None`: [`DEFAULT_TTA_DIMS`] with `lengths`, none
+    /// without; `Some(0)`: none).
+    pub time_to_arrival: Option<usize>,
 }
+
+/// Values of the time-to-arrival embedding of a run over several lengths unless told otherwise.
+pub const DEFAULT_TTA_DIMS: usize = 16;
 
 /// The training windows of a run: the standard 50 frames, longer when the longest transition
 /// to train needs more (10 context frames, the transition, the target and the frame after).
@@ -246,6 +252,15 @@ fn fresh_config(
         config.transition_frames = hi;
         config.train.lengths = Some([lo, hi]);
     }
+    let dims = a.time_to_arrival.unwrap_or(if a.lengths.is_some() { DEFAULT_TTA_DIMS } else { 0 });
+    if dims > 0 {
+        // Constant from the longest transition trained on: the context frames before it look alike.
+        let z = zoo_format::TimeToArrival { dims, max: config.transition_frames };
+        if let Err(e) = z.check() {
+            bail!("--time-to-arrival {dims}: {e}");
+        }
+        config.time_to_arrival = Some(z);
+    }
     config.train.seed = a.run.seed;
     config.interp_residual = a.interp_residual;
     config.terrain = a.terrain;
@@ -395,9 +410,6 @@ fn trainer(o: &RtnRunOptions, d: &mut Data, train: &[MotionWindow]) -> RtnResult
 /// model.
 pub fn run(o: &RtnRunOptions, p: &dyn Progress) -> RtnResult<()> {
     let out = zoo_nn::run_folder::prepare(&o.run, &RUN_FILES, |_| Ok(()))?;
-    if o.data.exclude_glob.is_some() && o.data.data.is_none() {
-        bail!("--exclude-glob leaves clips of --data out: pass --data too");
-    }
     // A resumed run keeps its configuration, terrain included.
     let terrain = match &o.run.resume {
         Some(dir) => crate::checkpoint::read_meta(&train_loop::resume_dir(dir)).map_or(o.terrain, |(c, _)| c.terrain),

@@ -164,6 +164,15 @@ pub(crate) fn generate(
     } else {
         Vec::new()
     };
+    // Time to arrival of the frame step `t` predicts (`t + 1`): the target is frame
+    // `past + n_out - 1`.
+    let tta = |t: usize| -> RtnResult<Option<Tensor>> {
+        let Some(z) = config.time_to_arrival else { return Ok(None) };
+        let mut e = vec![0f32; z.dims];
+        z.embed((past + n_out - 1).saturating_sub(t + 1), &mut e);
+        let row = Tensor::from_vec(e, (1, z.dims), batch.x[0].device())?;
+        Ok(Some(row.broadcast_as((batch.batch, z.dims))?.contiguous()?))
+    };
     let mut x = batch.x[0].clone();
     let mut root = batch.roots[0].clone();
     let mut outs = Vec::with_capacity(n_out);
@@ -182,7 +191,15 @@ pub(crate) fn generate(
             None => None,
         };
         let terrain = if config.terrain { Some(terrain_patches(config, stats, batch, &root)?) } else { None };
-        let inputs = RtnInputs { sequence: &seq, x: &x, offset: offset.as_ref(), terrain: terrain.as_ref(), base };
+        let tta = tta(t)?;
+        let inputs = RtnInputs {
+            sequence: &seq,
+            x: &x,
+            offset: offset.as_ref(),
+            terrain: terrain.as_ref(),
+            base,
+            tta: tta.as_ref(),
+        };
         let (mut next, mut st) = model.step(&inputs, &state)?;
         if !grad {
             next = next.detach();

@@ -73,8 +73,9 @@ fn output_shapes() {
     let seq = model.begin(&target).unwrap();
     let state = model.initial_state(&x).unwrap();
     assert_eq!(state.h.dims(), &[b, c.lstm]);
-    let (next, state) =
-        model.step(&RtnInputs { sequence: &seq, x: &x, offset: Some(&x), terrain: None, base: None }, &state).unwrap();
+    let (next, state) = model
+        .step(&RtnInputs { sequence: &seq, x: &x, offset: Some(&x), terrain: None, base: None, tta: None }, &state)
+        .unwrap();
     assert_eq!(next.dims(), &[b, d]);
     assert_eq!((state.h.dims(), state.c.dims()), (&[b, c.lstm][..], &[b, c.lstm][..]));
     assert_eq!(model.zero_state(b, &dev).unwrap().c.dims(), &[b, c.lstm]);
@@ -161,7 +162,7 @@ fn zeroed_decoder_outputs_the_input_frame() {
         let seq = model.begin(&target).unwrap();
         let state = model.initial_state(&x).unwrap();
         let (next, _) = model
-            .step(&RtnInputs { sequence: &seq, x: &x, offset: Some(&x), terrain: None, base: None }, &state)
+            .step(&RtnInputs { sequence: &seq, x: &x, offset: Some(&x), terrain: None, base: None, tta: None }, &state)
             .unwrap();
         let (next, x) =
             (next.flatten_all().unwrap().to_vec1::<f32>().unwrap(), x.flatten_all().unwrap().to_vec1::<f32>().unwrap());
@@ -213,7 +214,10 @@ fn teacher_forcing_one_feeds_the_ground_truth() {
     for f in 0..tf {
         let (xf, of) = (t(&x[f], d), t(&o[f], d));
         let (next, s) = model
-            .step(&RtnInputs { sequence: &seq, x: &xf, offset: Some(&of), terrain: None, base: None }, &state)
+            .step(
+                &RtnInputs { sequence: &seq, x: &xf, offset: Some(&of), terrain: None, base: None, tta: None },
+                &state,
+            )
             .unwrap();
         state = s;
         if f + 1 >= c.past_frames {
@@ -291,6 +295,11 @@ fn every_ablation_trains_a_step() {
         Config { init_state: InitState::Zero, ..base.clone() },
         Config { init_state: InitState::Common, ..base.clone() },
         Config { residual: false, ..base.clone() },
+        Config {
+            interp_residual: true,
+            time_to_arrival: Some(zoo_format::TimeToArrival { dims: 4, max: 6 }),
+            ..base.clone()
+        },
         Config {
             train: TrainConfig { teacher_forcing: TeacherForcing::Fixed(0.0), ..base.train.clone() },
             ..base.clone()

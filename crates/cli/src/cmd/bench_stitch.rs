@@ -44,6 +44,9 @@ pub struct StitchBenchArgs {
     /// Leave out the clips that cannot join the dataset and list them, instead of refusing it.
     #[arg(long)]
     pub skip_invalid: bool,
+    /// Leave out of `--data` every clip whose file name matches this glob, before the split.
+    #[arg(long)]
+    pub exclude_glob: Option<String>,
 }
 
 /// Runs the benchmark.
@@ -61,7 +64,7 @@ pub fn run(a: StitchBenchArgs) -> anyhow::Result<()> {
     let split = crate::cmd::Split {
         valid_glob: a.valid_glob.as_deref(),
         test_data: a.test_data.as_deref(),
-        exclude_glob: None,
+        exclude_glob: a.exclude_glob.as_deref(),
     };
     let (train, test) = crate::cmd::load_split(&a.data, &split, a.skip_invalid, &bar)?;
     let opts = StitchBenchOptions {

@@ -100,6 +100,11 @@ pub struct RtnArgs {
     /// range; the windows hold the longest [default: the preset's one length, 30].
     #[arg(long, value_name = "SHORTEST-LONGEST", value_parser = crate::args::length_range)]
     pub lengths: Option<[usize; 2]>,
+    /// Values of the time-to-arrival embedding the frame encoder reads (the frames left to the
+    /// target, Harvey et al. 2020), an even number up to 256; 0 for none [default: 16 with
+    /// `--lengths`, none without].
+    #[arg(long, value_name = "DIMS", value_parser = clap::value_parser!(u16).range(0..=256))]
+    pub time_to_arrival: Option<u16>,
 }
 
 impl TrainCommand {
@@ -139,6 +144,7 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
         lr: a.lr,
         ema: a.ema,
         lengths: a.lengths,
+        time_to_arrival: a.time_to_arrival.map(usize::from),
     };
     Ok(zoo_rtn::train_run::run(&o, &crate::cmd::Stderr)?)
 }

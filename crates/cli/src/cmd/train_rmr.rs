@@ -24,6 +24,10 @@ pub struct RmrArgs {
     /// The clips.
     #[command(flatten)]
     pub data: DataArgs<RmrDefaults>,
+    /// Leave out of `--data` every clip whose file name matches this glob (e.g. a content type
+    /// held out to test stitching on moves the model never saw, as docs/ood.md does for the RTN).
+    #[arg(long)]
+    pub exclude_glob: Option<String>,
     /// Model sizes.
     #[arg(long, value_enum, default_value_t = RmrPreset::Paper)]
     pub preset: RmrPreset,
@@ -74,7 +78,7 @@ fn seam_weight(s: &str) -> Result<f64, String> {
 
 /// Runs `zoo train rmr`.
 pub fn run(a: RmrArgs) -> anyhow::Result<()> {
-    let (run, data) = crate::cmd::train_args::specs(&a.run, &a.data, None)?;
+    let (run, data) = crate::cmd::train_args::specs(&a.run, &a.data, a.exclude_glob.clone())?;
     let o = RmrRunOptions {
         preset: a.preset,
         cell: a.cell,
