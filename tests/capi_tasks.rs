@@ -1058,18 +1058,36 @@ fn as_roots(poses: &[EnginePose]) -> (Vec<ZooRootMotion>, Vec<f32>) {
 
 /// The Rust API's whole-sequence refinement: pose values and contacts per frame.
 fn rust_refine(refiner: &StitchRefiner, poses: &[EnginePose], cleanup: FootCleanup) -> Vec<(Vec<f32>, Vec<u8>)> {
+    rust_refine_at(refiner, poses, &[], cleanup)
+}
+
+/// [`rust_refine`] inertialized at `seams` first.
+fn rust_refine_at(
+    refiner: &StitchRefiner,
+    poses: &[EnginePose],
+    seams: &[usize],
+    cleanup: FootCleanup,
+) -> Vec<(Vec<f32>, Vec<u8>)> {
     let mut out = vec![EnginePose::new(refiner.joints()); poses.len()];
     let mut contacts = vec![[false; 4]; poses.len()];
-    refiner.refine_poses(poses, cleanup, &mut out, &mut contacts).unwrap();
+    refiner.refine_poses_at_seams(poses, seams, cleanup, &mut out, &mut contacts).unwrap();
     out.iter().zip(&contacts).map(|(p, c)| (pose_values(p), bytes(c))).collect()
 }
 
 /// The Rust API's stream over `poses`: pushing each, popping what is ready, then finishing.
 fn rust_stream(refiner: &StitchRefiner, poses: &[EnginePose]) -> Vec<(Vec<f32>, Vec<u8>)> {
+    rust_stream_at(refiner, poses, &[])
+}
+
+/// [`rust_stream`] with `seams` marked before their frames.
+fn rust_stream_at(refiner: &StitchRefiner, poses: &[EnginePose], seams: &[usize]) -> Vec<(Vec<f32>, Vec<u8>)> {
     let mut stream = refiner.stream();
     let mut pose = EnginePose::new(refiner.joints());
     let mut got = Vec::new();
     for f in 0..=poses.len() {
+        if seams.contains(&f) {
+            stream.mark_seam();
+        }
         match poses.get(f) {
             Some(p) => stream.push(p).unwrap(),
             None => stream.finish().unwrap(),
@@ -1202,6 +1220,74 @@ fn stitching_through_the_c_abi_matches_the_rust_api() {
         pop_ready(stream, k, &mut got);
         assert!(got == rust_stream(&refiner, &poses), "the C ABI's stream differs from the Rust API's");
         zoo_stitch_stream_free(stream);
+    }
+}
+
+/// The seams inertialized first (`zoo stitch --pre-blend`): `zoo_stitch_refine_at_seams` and a
+/// stream with `zoo_stitch_stream_mark_seam` give the Rust API's poses, and differ from the
+/// plain ones; bad seams are refused.
+#[test]
+fn stitching_at_seams_through_the_c_abi_matches_the_rust_api() {
+    let refiner = StitchRefiner::load(&files().rmr).unwrap();
+    let poses = example_walk(&refiner);
+    let (roots, rotations) = as_roots(&poses);
+    let (n, k) = (poses.len(), refiner.joints());
+    let seams = [n / 3, n / 3 + 1, 2 * n / 3];
+    let cleanup = FootCleanup::default();
+    unsafe {
+        let model = stitch_model();
+        let mut out = Refined::new(n, k);
+        let call = |out: &mut Refined, seams: *const usize, seams_len: usize| {
+            zoo_stitch_refine_at_seams(
+                model,
+                roots.as_ptr(),
+                n,
+                rotations.as_ptr(),
+                rotations.len(),
+                seams,
+                seams_len,
+                cleanup.place_ankles,
+                cleanup.lock_feet,
+                out.roots.as_mut_ptr(),
+                out.roots.len(),
+                out.rotations.as_mut_ptr(),
+                out.rotations.len(),
+                out.contacts.as_mut_ptr(),
+                out.contacts.len(),
+            )
+        };
+        assert_ok(call(&mut out, seams.as_ptr(), seams.len()));
+        let want = rust_refine_at(&refiner, &poses, &seams, cleanup);
+        assert!(out.frames(k) == want, "the C ABI differs from the Rust API");
+        assert!(want != rust_refine(&refiner, &poses, cleanup), "the seams changed nothing");
+        // No seams (NULL, 0) is zoo_stitch_refine.
+        assert_ok(call(&mut out, null(), 0));
+        assert!(out.frames(k) == rust_refine(&refiner, &poses, cleanup));
+        assert_error(call(&mut out, null(), 2), ZooStatus::NullPointer, "zoo_stitch_refine_at_seams: `seams` is NULL");
+        let past = [n];
+        let status = call(&mut out, past.as_ptr(), 1);
+        assert_error(status, ZooStatus::InvalidArgument, &format!("seam at frame {n} of a sequence of {n} poses"));
+
+        let stream = stitch_stream(model);
+        let mut got = Vec::new();
+        for f in 0..n {
+            if seams.contains(&f) {
+                assert_ok(zoo_stitch_stream_mark_seam(stream));
+            }
+            assert_ok(zoo_stitch_stream_push(stream, &roots[f], rotations[f * 4 * k..].as_ptr(), 4 * k));
+            pop_ready(stream, k, &mut got);
+        }
+        assert_ok(zoo_stitch_stream_finish(stream));
+        pop_ready(stream, k, &mut got);
+        assert!(got == rust_stream_at(&refiner, &poses, &seams), "the C ABI's stream differs from the Rust API's");
+        assert_error(
+            zoo_stitch_stream_mark_seam(stream),
+            ZooStatus::InvalidState,
+            "zoo_stitch_stream_mark_seam: the stream is finished",
+        );
+        assert_error(zoo_stitch_stream_mark_seam(null_mut()), ZooStatus::NullPointer, "`stream` is NULL");
+        zoo_stitch_stream_free(stream);
+        zoo_model_free(model);
     }
 }
 

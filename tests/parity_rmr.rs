@@ -433,6 +433,76 @@ fn stitch_stream_matches_the_whole_sequence_with_fixed_latency() {
     }
 }
 
+/// `zoo stitch --pre-blend`: the runtime inertializes the seams it is given before refining,
+/// as the offline tools do, in the whole-sequence form and in the stream (`mark_seam`). The
+/// seams: the real one at frame 60 where the second clip starts, two adjacent ones and one
+/// near the end.
+#[test]
+fn runtime_inertializes_the_seams_like_zoo_stitch_pre_blend() {
+    use zoo_rmr::stitch::{PostProcess, RefineOptions, refine_seams};
+    use zoo_runtime::stitch::FootCleanup;
+    use zoo_runtime::{EnginePose, StitchRefiner};
+    let mut f = fixture(RefinerCell::Bgru);
+    let (poses, clip) = aligned_poses(100);
+    let offline_x = zoo_rmr::features::encode_clip(&clip, &f.config.layout).unwrap();
+    f.stats = FeatureStats::fit([offline_x.as_slice()], zoo_rmr::features::FeatureLayout::new(21, 9));
+    let refiner = StitchRefiner::from_bytes(&export_rmr(&f.config, &f.stats, &f.varmap).unwrap().to_bytes()).unwrap();
+    let seams = [30, 31, 60, 97];
+    let post = PostProcess { ankle_ik: false, foot_lock: false, pre_blend: true };
+    let want = refine_seams(&f.model, &f.stats, &clip, &seams, RefineOptions::of(&f.config), post).unwrap();
+    let (n, j) = (poses.len(), refiner.joints());
+    let mut out = vec![EnginePose::new(j); n];
+    let mut contacts = vec![[false; 4]; n];
+    refiner.refine_poses_at_seams(&poses, &seams, FootCleanup::NONE, &mut out, &mut contacts).unwrap();
+    let skeleton = refiner.skeleton();
+    let whole = world_positions(&out, skeleton);
+    let worst = max_distance(&whole, &want.clip.global().1);
+    println!("refine_poses_at_seams vs zoo_rmr refine_seams (pre-blend): max joint distance {worst:e} cm");
+    assert!(worst <= 1e-3, "joint positions differ by {worst} cm");
+    // The seams took effect: without them the refined motion is another.
+    let mut plain = vec![EnginePose::new(j); n];
+    refiner.refine_poses(&poses, FootCleanup::NONE, &mut plain, &mut contacts).unwrap();
+    let moved = max_distance(&world_positions(&plain, skeleton), &whole);
+    assert!(moved > 0.1, "the pre-blend moved joints by only {moved} cm");
+    // A seam out of the sequence is refused.
+    let err = refiner.refine_poses_at_seams(&poses, &[100], FootCleanup::NONE, &mut out, &mut contacts).unwrap_err();
+    assert!(err.to_string().contains("seam at frame 100 of a sequence of 100 poses"), "{err}");
+
+    // The stream with the same seams marked: the whole sequence's poses on every frame the last
+    // window did not revisit.
+    let (w, s) = (refiner.window(), refiner.stride());
+    let mut stream = refiner.stream();
+    let mut got = Vec::new();
+    let mut pose = EnginePose::new(j);
+    for (t, p) in poses.iter().enumerate() {
+        if seams.contains(&t) {
+            stream.mark_seam();
+        }
+        stream.push(p).unwrap();
+        while stream.pop(&mut pose).unwrap().is_some() {
+            got.push(pose.clone());
+        }
+    }
+    let before_finish = got.len();
+    stream.finish().unwrap();
+    while stream.pop(&mut pose).unwrap().is_some() {
+        got.push(pose.clone());
+    }
+    assert_eq!(got.len(), n);
+    let streamed = world_positions(&got, skeleton);
+    let last_window = n - w;
+    let same: Vec<usize> = (0..n).filter(|&t| last_window % s == 0 || t < last_window || t >= before_finish).collect();
+    let worst = same
+        .iter()
+        .map(|&t| max_distance(&streamed[t * j..(t + 1) * j], &whole[t * j..(t + 1) * j]))
+        .fold(0.0, f64::max);
+    println!(
+        "stream with marked seams vs the whole sequence: max joint distance {worst:e} cm on {} frames",
+        same.len()
+    );
+    assert!(worst <= 1e-4, "the stream differs by {worst} cm");
+}
+
 /// Bad input to the pose and streaming forms: clear errors, no panic.
 #[test]
 fn runtime_stitch_poses_and_stream_refuse_bad_input() {

@@ -300,10 +300,19 @@ fn write_models_and_references(data: &Path) {
         push_world(p, &mut sh, &mut sr);
     }
     let contacts: Vec<bool> = contacts.iter().flatten().copied().collect();
+    // With the seam inertialized first (`zoo stitch --pre-blend`).
+    let mut seam_contacts = vec![[false; 4]; t];
+    refiner
+        .refine_poses_at_seams(&input, &aligned.starts[1..], FootCleanup::default(), &mut out_poses, &mut seam_contacts)
+        .unwrap();
+    let (mut bh, mut br) = (Vec::new(), Vec::new());
+    for p in &out_poses {
+        push_world(p, &mut bh, &mut br);
+    }
     refs.insert(
         "stitch".into(),
         json!({"a": [0, 45], "b": [100, 150], "starts": aligned.starts, "aligned_hips": ah, "aligned_rotations": ar,
-               "hips": sh, "rotations": sr, "contacts": contacts}),
+               "hips": sh, "rotations": sr, "contacts": contacts, "pre_blend_hips": bh, "pre_blend_rotations": br}),
     );
 
     // Synthesis: two seeded characters from the mean frame; control of one; the encoding of

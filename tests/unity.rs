@@ -630,6 +630,28 @@ fn stitch_vectors(v: &mut Vectors, path: &Path) {
     v.poses("st.stream", &popped);
     v.contacts("st.stream.contacts", &popped_contacts);
     v.s("st.names", &refiner.metadata().skeleton.names);
+    // The same sequence inertialized at two seams first (`zoo stitch --pre-blend`), whole and
+    // streamed with the seams marked.
+    let seams = [frames / 3, frames / 3 + 1];
+    v.i("st.seams", &seams.map(|s| s as i64));
+    let cleanup = FootCleanup { place_ankles: true, lock_feet: true };
+    refiner.refine_poses_at_seams(&poses, &seams, cleanup, &mut refined, &mut contacts).unwrap();
+    v.poses("st.seams.refine", &refined);
+    let mut stream = refiner.stream();
+    let mut popped = Vec::new();
+    for f in 0..=frames {
+        if seams.contains(&f) {
+            stream.mark_seam();
+        }
+        match poses.get(f) {
+            Some(p) => stream.push(p).unwrap(),
+            None => stream.finish().unwrap(),
+        }
+        while stream.pop(&mut pose).unwrap().is_some() {
+            popped.push(pose.clone());
+        }
+    }
+    v.poses("st.seams.stream", &popped);
 }
 
 const SEEDS: [u64; 3] = [100, 101, 102];

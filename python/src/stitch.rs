@@ -169,8 +169,9 @@ impl Stitch {
     /// the first ground root, then the ankles placed where the refiner predicts them and the
     /// planted feet locked (each step optional). Returns `(poses, contacts)`: the fields of
     /// `zoo.Poses` with prefix `(T,)` and the predicted contacts `(T, 4)` (heel L, toe L,
-    /// heel R, toe R).
-    #[pyo3(signature = (hips, rotations, place_ankles=true, lock_feet=true))]
+    /// heel R, toe R). `seams`: frames where a clip starts, inertialized before refining
+    /// (`zoo stitch --pre-blend`).
+    #[pyo3(signature = (hips, rotations, place_ankles=true, lock_feet=true, seams=Vec::new()))]
     fn refine_poses<'py>(
         &self,
         py: Python<'py>,
@@ -178,12 +179,14 @@ impl Stitch {
         rotations: PyReadonlyArrayDyn<'py, f32>,
         place_ankles: bool,
         lock_feet: bool,
+        seams: Vec<usize>,
     ) -> PyResult<(Bound<'py, PyDict>, Bound<'py, PyArrayDyn<bool>>)> {
         let input = self.read_poses(&hips, &rotations, "sequence")?;
         let (t, k) = (input.len(), self.model.joints());
         let mut out: Vec<EnginePose> = (0..t).map(|_| EnginePose::new(k)).collect();
         let mut contacts = vec![[false; 4]; t];
-        self.model.refine_poses(&input, FootCleanup { place_ankles, lock_feet }, &mut out, &mut contacts).or_py()?;
+        let cleanup = FootCleanup { place_ankles, lock_feet };
+        self.model.refine_poses_at_seams(&input, &seams, cleanup, &mut out, &mut contacts).or_py()?;
         let mut arrays = PoseArrays::new(k, t);
         for pose in &mut out {
             forward_kinematics(pose, &self.parents, &self.offsets);

@@ -191,6 +191,13 @@ def test_stitch_matches_the_runtime_and_zoo_datas_alignment(data, ref, clip):
     assert max_diff(poses.hips, arr(r["hips"], t, 3)) < 1e-2
     assert quat_diff(poses.rotations, arr(r["rotations"], t, K, 4)) < 1e-3
     assert np.array_equal(contacts, np.asarray(r["contacts"]).reshape(t, 4))
+    # The seam inertialized first (`zoo stitch --pre-blend`): the runtime's figures, not the plain ones.
+    blended, _, _ = m.stitch([a, b], pre_blend=True)
+    assert max_diff(blended.hips, arr(r["pre_blend_hips"], t, 3)) < 1e-2
+    assert quat_diff(blended.rotations, arr(r["pre_blend_rotations"], t, K, 4)) < 1e-3
+    assert quat_diff(blended.rotations, poses.rotations) > 1e-3
+    with pytest.raises(zoo.MotionError, match="seam at frame 95"):
+        m.refine_poses((hips, rot), seams=[95])
 
 
 def test_stitch_refuses_short_clips(data, clip):

@@ -428,13 +428,16 @@ class StitchModel(Model):
         clips: Sequence[Union[Poses, Tuple[np.ndarray, np.ndarray]]],
         place_ankles: bool = True,
         lock_feet: bool = True,
+        pre_blend: bool = False,
     ) -> Tuple[Poses, np.ndarray, List[int]]:
-        """Aligns ``clips`` end to start and refines the whole (``zoo stitch``'s default).
+        """Aligns ``clips`` end to start and refines the whole (``zoo stitch``'s default; with
+        ``pre_blend`` the seams are inertialized first, ``zoo stitch --pre-blend``).
         Returns ``(poses, contacts, starts)``: the refined ``Poses`` (prefix ``(T,)``), the
         predicted contacts ``(T, 4)`` (heel L, toe L, heel R, toe R) and the first frame of each
         clip in the result."""
         h, r, starts = self.align(clips)
-        poses, contacts = self.refine_poses((h, r), place_ankles, lock_feet)
+        seams = starts[1:] if pre_blend else ()
+        poses, contacts = self.refine_poses((h, r), place_ankles, lock_feet, seams)
         return poses, contacts, starts
 
     def refine_poses(
@@ -442,10 +445,13 @@ class StitchModel(Model):
         sequence: Union[Poses, Tuple[np.ndarray, np.ndarray]],
         place_ankles: bool = True,
         lock_feet: bool = True,
+        seams: Sequence[int] = (),
     ) -> Tuple[Poses, np.ndarray]:
-        """Refines an aligned sequence (at least ``window`` frames). Returns ``(poses, contacts)``."""
+        """Refines an aligned sequence (at least ``window`` frames); ``seams``: the frames where a
+        clip starts, inertialized before refining (``zoo stitch --pre-blend``). Returns
+        ``(poses, contacts)``."""
         h, r = _bvh_style(sequence, "sequence")
-        d, contacts = self._native.refine_poses(h, r, place_ankles, lock_feet)
+        d, contacts = self._native.refine_poses(h, r, place_ankles, lock_feet, [int(s) for s in seams])
         return Poses._from_dict(d), contacts
 
     def encode(self, sequence: Union[Poses, Tuple[np.ndarray, np.ndarray]]) -> np.ndarray:

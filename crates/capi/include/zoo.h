@@ -522,6 +522,29 @@ enum ZooStatus zoo_stitch_refine(const struct ZooModel *model,
                                  uint8_t *contacts,
                                  size_t contacts_len);
 
+// [`zoo_stitch_refine`] of the sequence inertialized at `seams` first (`seams_len` frame
+// indices where a clip starts, each below `frames`): from each seam on, the jump to the
+// previous clip decays over `blend_frames` frames before the refiner runs (`zoo stitch
+// --pre-blend`). Seams on frames 0, 1 and the last change nothing. Thread-safe.
+//
+// # Safety
+// `model` is NULL or a live model; each buffer is NULL or holds its given length.
+enum ZooStatus zoo_stitch_refine_at_seams(const struct ZooModel *model,
+                                          const struct ZooRootMotion *roots,
+                                          size_t frames,
+                                          const float *rotations,
+                                          size_t rotations_len,
+                                          const size_t *seams,
+                                          size_t seams_len,
+                                          bool place_ankles,
+                                          bool lock_feet,
+                                          struct ZooRootMotion *out_roots,
+                                          size_t out_roots_len,
+                                          float *out_rotations,
+                                          size_t out_rotations_len,
+                                          uint8_t *contacts,
+                                          size_t contacts_len);
+
 // Creates a stitching stream over `model` into `*out`; free it with
 // [`zoo_stitch_stream_free`]. Thread-safe (the model is shared); the stream: one thread at a
 // time.
@@ -569,6 +592,14 @@ enum ZooStatus zoo_stitch_stream_pop(struct ZooStitchStream *stream,
                                      size_t rotations_len,
                                      uint8_t *contacts,
                                      size_t contacts_len);
+
+// Marks the next pushed pose as the first frame of a new clip: the stream inertializes the seam
+// before refining, as [`zoo_stitch_refine_at_seams`] does (the seam frame is encoded once the
+// frame after it is pushed). A seam on frame 0 or 1 changes nothing. One thread at a time.
+//
+// # Safety
+// `stream` is NULL or live and used by this thread only.
+enum ZooStatus zoo_stitch_stream_mark_seam(struct ZooStitchStream *stream);
 
 // Ends the motion: runs the window ending on the last frame and makes every remaining frame
 // ready to pop. Needs at least `window` frames pushed (`ZOO_STATUS_INVALID_STATE` before);

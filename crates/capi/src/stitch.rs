@@ -110,28 +110,97 @@ pub unsafe extern "C" fn zoo_stitch_refine(
 ) -> ZooStatus {
     guard("zoo_stitch_refine", || {
         let r = unsafe { self::model(model) }?.stitch()?;
-        let k = r.joints();
-        let roots = unsafe { slice(roots, frames, "roots") }?;
-        let rotations = unsafe { slice(rotations, rotations_len, "rotations") }?;
-        let mut out = unsafe {
+        let input = unsafe { RefineInput::read(roots, frames, rotations, rotations_len, std::ptr::null(), 0) }?;
+        let out = unsafe {
             PoseOut::new(
                 (out_roots, out_roots_len, "out_roots"),
                 (out_rotations, out_rotations_len, "out_rotations"),
                 (contacts, contacts_len, "contacts"),
             )
         }?;
-        out.check(frames, k, 4, "input pose")?;
-        let mut input = Vec::new();
-        read_poses(roots, rotations, k, &mut input)?;
-        let mut refined = vec![EnginePose::new(k); frames];
-        let mut predicted = vec![[false; 4]; frames];
-        let cleanup = FootCleanup { place_ankles, lock_feet };
-        r.refine_poses(&input, cleanup, &mut refined, &mut predicted).map_err(runtime_failure)?;
-        for (f, (pose, c)) in refined.iter().zip(&predicted).enumerate() {
-            out.write(f, pose, c);
-        }
-        Ok(())
+        refine(r, input, FootCleanup { place_ankles, lock_feet }, out)
     })
+}
+
+/// [`zoo_stitch_refine`] of the sequence inertialized at `seams` first (`seams_len` frame
+/// indices where a clip starts, each below `frames`): from each seam on, the jump to the
+/// previous clip decays over `blend_frames` frames before the refiner runs (`zoo stitch
+/// --pre-blend`). Seams on frames 0, 1 and the last change nothing. Thread-safe.
+///
+/// # Safety
+/// `model` is NULL or a live model; each buffer is NULL or holds its given length.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_stitch_refine_at_seams(
+    model: *const ZooModel,
+    roots: *const ZooRootMotion,
+    frames: usize,
+    rotations: *const f32,
+    rotations_len: usize,
+    seams: *const usize,
+    seams_len: usize,
+    place_ankles: bool,
+    lock_feet: bool,
+    out_roots: *mut ZooRootMotion,
+    out_roots_len: usize,
+    out_rotations: *mut f32,
+    out_rotations_len: usize,
+    contacts: *mut u8,
+    contacts_len: usize,
+) -> ZooStatus {
+    guard("zoo_stitch_refine_at_seams", || {
+        let r = unsafe { self::model(model) }?.stitch()?;
+        let input = unsafe { RefineInput::read(roots, frames, rotations, rotations_len, seams, seams_len) }?;
+        let out = unsafe {
+            PoseOut::new(
+                (out_roots, out_roots_len, "out_roots"),
+                (out_rotations, out_rotations_len, "out_rotations"),
+                (contacts, contacts_len, "contacts"),
+            )
+        }?;
+        refine(r, input, FootCleanup { place_ankles, lock_feet }, out)
+    })
+}
+
+/// The input buffers of a whole-sequence refinement.
+struct RefineInput<'a> {
+    roots: &'a [ZooRootMotion],
+    rotations: &'a [f32],
+    seams: &'a [usize],
+}
+
+impl RefineInput<'_> {
+    /// # Safety
+    /// Each pointer is NULL or holds its given length (`seams` may be NULL when `seams_len` is 0).
+    unsafe fn read<'a>(
+        roots: *const ZooRootMotion,
+        frames: usize,
+        rotations: *const f32,
+        rotations_len: usize,
+        seams: *const usize,
+        seams_len: usize,
+    ) -> Result<RefineInput<'a>, Failure> {
+        Ok(RefineInput {
+            roots: unsafe { slice(roots, frames, "roots") }?,
+            rotations: unsafe { slice(rotations, rotations_len, "rotations") }?,
+            seams: if seams_len == 0 { &[] } else { unsafe { slice(seams, seams_len, "seams") }? },
+        })
+    }
+}
+
+/// Refines `input` with `r` into `out` (what [`zoo_stitch_refine`] and
+/// [`zoo_stitch_refine_at_seams`] do).
+fn refine(r: &StitchRefiner, input: RefineInput, cleanup: FootCleanup, mut out: PoseOut) -> Result<(), Failure> {
+    let (frames, k) = (input.roots.len(), r.joints());
+    out.check(frames, k, 4, "input pose")?;
+    let mut poses = Vec::new();
+    read_poses(input.roots, input.rotations, k, &mut poses)?;
+    let mut refined = vec![EnginePose::new(k); frames];
+    let mut predicted = vec![[false; 4]; frames];
+    r.refine_poses_at_seams(&poses, input.seams, cleanup, &mut refined, &mut predicted).map_err(runtime_failure)?;
+    for (f, (pose, c)) in refined.iter().zip(&predicted).enumerate() {
+        out.write(f, pose, c);
+    }
+    Ok(())
 }
 
 /// Creates a stitching stream over `model` into `*out`; free it with
@@ -244,6 +313,27 @@ pub unsafe extern "C" fn zoo_stitch_stream_pop(
             return Err((ZooStatus::NotAvailable, message));
         };
         out.write(0, &s.pose, &predicted);
+        Ok(())
+    })
+}
+
+/// Marks the next pushed pose as the first frame of a new clip: the stream inertializes the seam
+/// before refining, as [`zoo_stitch_refine_at_seams`] does (the seam frame is encoded once the
+/// frame after it is pushed). A seam on frame 0 or 1 changes nothing. One thread at a time.
+///
+/// # Safety
+/// `stream` is NULL or live and used by this thread only.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_stitch_stream_mark_seam(stream: *mut ZooStitchStream) -> ZooStatus {
+    guard("zoo_stitch_stream_mark_seam", || {
+        let s = unsafe { handle_mut(stream, "stream") }?;
+        if s.stream.is_finished() {
+            return Err((
+                ZooStatus::InvalidState,
+                "the stream is finished: start another with zoo_stitch_stream_new".into(),
+            ));
+        }
+        s.stream.mark_seam();
         Ok(())
     })
 }

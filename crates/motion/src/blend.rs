@@ -108,6 +108,136 @@ impl Inertializer {
     }
 }
 
+/// Inertialization at the seams of a sequence, one frame at a time (the offline stitching tools
+/// run it over a whole clip, the runtime's stitch stream as frames arrive, so both give the same
+/// frames): from each seam `s` (the first frame of a clip) on, the offset between the frames
+/// before the seam and the frames from it (local rotations of every joint and the root joint's
+/// position, with their velocities) decays to zero over `blend_frames` frames ([`Inertializer`]);
+/// frame `s + k` receives the offset at `(k + 1)` frame times, so the motion continues the
+/// previous clip's. Seams are treated in order, each on the frames the earlier ones already
+/// blended; a seam without two frames on each side is left as it is.
+///
+/// [`SeamInertializer::push`] takes frame after frame and releases each one once it is final: a
+/// seam frame one push later (its offsets need the frame after it), every other frame at once.
+/// Allocates when a seam's blend starts, never per frame.
+#[derive(Clone, Debug)]
+pub struct SeamInertializer {
+    joints: usize,
+    blend_frames: usize,
+    dt: f64,
+    /// Blends still running: the seam's frame and its offsets.
+    active: Vec<(usize, Inertializer)>,
+    /// The last two released frames, the older first.
+    last: [(Vec<DQuat>, DVec3); 2],
+    /// Frames pushed so far.
+    pushed: usize,
+    /// The frame being pushed.
+    cur: Vec<DQuat>,
+    /// A seam frame waiting for the frame after it (when `has_held`).
+    held: (Vec<DQuat>, DVec3),
+    has_held: bool,
+    /// The frames released by the last call, in order (`released` of them).
+    out: [(Vec<DQuat>, DVec3); 2],
+    released: usize,
+}
+
+impl SeamInertializer {
+    /// For frames of `joints` rotations, blends of `blend_frames` frames (0: none) at `dt`
+    /// seconds per frame.
+    pub fn new(joints: usize, blend_frames: usize, dt: f64) -> Self {
+        let frame = || (vec![DQuat::IDENTITY; joints], DVec3::ZERO);
+        SeamInertializer {
+            joints,
+            blend_frames,
+            dt,
+            active: Vec::new(),
+            last: [frame(), frame()],
+            pushed: 0,
+            cur: vec![DQuat::IDENTITY; joints],
+            held: frame(),
+            has_held: false,
+            out: [frame(), frame()],
+            released: 0,
+        }
+    }
+
+    /// Frames pushed so far (the index of the next one).
+    pub fn pushed(&self) -> usize {
+        self.pushed
+    }
+
+    /// Pushes the next frame (`joints` local rotations and the root position); `seam`: a new
+    /// clip starts at it. Returns how many frames became final (0, 1 or 2), read in order with
+    /// [`SeamInertializer::released`].
+    pub fn push(&mut self, rotations: &[DQuat], root: DVec3, seam: bool) -> usize {
+        assert_eq!(rotations.len(), self.joints, "a frame of {} rotations", self.joints);
+        let (f, dt, blend) = (self.pushed, self.dt, self.blend_frames);
+        self.pushed += 1;
+        self.released = 0;
+        self.cur.copy_from_slice(rotations);
+        let mut root = root;
+        // The blends of the earlier seams, in order.
+        for (s, inert) in &self.active {
+            inert.apply((f - s + 1) as f64 * dt, &mut self.cur, &mut root);
+        }
+        if self.has_held {
+            // The seam at f - 1: offsets from the two frames before it and the two from it.
+            let [(p, pp), (l, lp)] = &self.last;
+            let (h, hroot) = &self.held;
+            let inert = Inertializer::new((p, *pp), (l, *lp), (h, *hroot), (&self.cur, root), dt, blend as f64 * dt);
+            inert.apply(dt, &mut self.held.0, &mut self.held.1);
+            if blend > 1 {
+                inert.apply(2.0 * dt, &mut self.cur, &mut root);
+            }
+            self.active.push((f - 1, inert));
+            self.has_held = false;
+            self.out[0].0.copy_from_slice(&self.held.0);
+            self.out[0].1 = self.held.1;
+            self.release(0);
+        }
+        self.active.retain(|(s, _)| f + 1 - s < blend);
+        if seam && f >= 2 && blend > 0 {
+            self.held.0.copy_from_slice(&self.cur);
+            self.held.1 = root;
+            self.has_held = true;
+        } else {
+            let i = self.released;
+            self.out[i].0.copy_from_slice(&self.cur);
+            self.out[i].1 = root;
+            self.release(i);
+        }
+        self.released
+    }
+
+    /// Ends the sequence: a seam frame still waiting (the last frame) is released as it is.
+    /// Returns how many frames became final (0 or 1).
+    pub fn finish(&mut self) -> usize {
+        self.released = 0;
+        if self.has_held {
+            self.has_held = false;
+            self.out[0].0.copy_from_slice(&self.held.0);
+            self.out[0].1 = self.held.1;
+            self.release(0);
+        }
+        self.released
+    }
+
+    /// Final frame `i` (`0..` the count the last [`SeamInertializer::push`] or
+    /// [`SeamInertializer::finish`] returned): rotations and root position.
+    pub fn released(&self, i: usize) -> (&[DQuat], DVec3) {
+        assert!(i < self.released, "frame {i} of {} released", self.released);
+        (&self.out[i].0, self.out[i].1)
+    }
+
+    /// Releases output slot `i` and keeps it as the newest of the last two frames.
+    fn release(&mut self, i: usize) {
+        self.last.swap(0, 1);
+        self.last[1].0.copy_from_slice(&self.out[i].0);
+        self.last[1].1 = self.out[i].1;
+        self.released = i + 1;
+    }
+}
+
 /// Target-blend weight of RTN (Harvey & Pal 2018, eq. 15-16): the weight of the generated
 /// frame at transition step `t` (0-based) of a blend covering the last `blend_len` steps of a
 /// `len`-step transition; 1 before the blend, falling linearly towards 0 at the target.

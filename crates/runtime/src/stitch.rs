@@ -35,6 +35,7 @@ use std::ops::Deref;
 use std::path::Path;
 use std::sync::Arc;
 use tract_onnx::prelude::*;
+use zoo_motion::blend::SeamInertializer;
 use zoo_motion::stitch::{GroundRoot, PoseFrame, StitchLayout, decode_pose, encode_pose, next_root};
 use zoo_motion::{Clip, Skeleton};
 
@@ -371,6 +372,20 @@ impl StitchRefiner {
     /// skeleton) into raw pose vectors (`frames * dim`, the input of
     /// [`StitchRefiner::refine_sequence`]).
     pub fn encode_poses(&self, poses: &[EnginePose], out: &mut [f32]) -> Result<(), MotionError> {
+        self.encode_poses_at_seams(poses, &[], out)
+    }
+
+    /// [`StitchRefiner::encode_poses`] with the sequence inertialized at `seams` first (the
+    /// frames where a clip starts, `zoo stitch --pre-blend`): from each seam on, the jump to the
+    /// previous clip decays over [`StitchRefiner::blend_frames`] frames
+    /// ([`zoo_motion::blend::SeamInertializer`], what the offline tools run). Seams out of
+    /// `2..frames - 1` change nothing.
+    pub fn encode_poses_at_seams(
+        &self,
+        poses: &[EnginePose],
+        seams: &[usize],
+        out: &mut [f32],
+    ) -> Result<(), MotionError> {
         if poses.len() < 2 {
             return Err(stitch_err(format!(
                 "{} pose(s): a sequence needs at least 2 frames (the root motion is a difference of frames)",
@@ -387,18 +402,35 @@ impl StitchRefiner {
                 found: out.len(),
             });
         }
+        if let Some(&s) = seams.iter().find(|&&s| s >= poses.len()) {
+            return Err(stitch_err(format!(
+                "seam at frame {s} of a sequence of {} poses: give the frames where a clip starts, within the sequence",
+                poses.len()
+            )));
+        }
+        let mut seam = vec![false; poses.len()];
+        for &s in seams {
+            seam[s] = true;
+        }
+        let mut blend = SeamInertializer::new(self.joints, self.blend_frames, 1.0 / self.fps);
         let mut rotations = Vec::with_capacity(self.joints);
-        let frames: Vec<PoseFrame> = poses
-            .iter()
-            .enumerate()
-            .map(|(f, p)| {
-                self.check_pose(p, f)?;
-                let hips = Self::model_space(p, &mut rotations);
+        let mut frames: Vec<PoseFrame> = Vec::with_capacity(poses.len());
+        let mut take = |blend: &SeamInertializer, n: usize| {
+            for i in 0..n {
+                let (r, hips) = blend.released(i);
                 let mut frame = PoseFrame::default();
-                frame.set(&self.skeleton, &self.layout, &rotations, hips);
-                Ok(frame)
-            })
-            .collect::<Result<_, MotionError>>()?;
+                frame.set(&self.skeleton, &self.layout, r, hips);
+                frames.push(frame);
+            }
+        };
+        for (f, p) in poses.iter().enumerate() {
+            self.check_pose(p, f)?;
+            let hips = Self::model_space(p, &mut rotations);
+            let n = blend.push(&rotations, hips, seam[f]);
+            take(&blend, n);
+        }
+        let n = blend.finish();
+        take(&blend, n);
         zoo_motion::stitch::encode_frames(&self.layout, &frames, out);
         Ok(())
     }
@@ -413,6 +445,19 @@ impl StitchRefiner {
     pub fn refine_poses(
         &self,
         input: &[EnginePose],
+        cleanup: FootCleanup,
+        out: &mut [EnginePose],
+        contacts: &mut [[bool; 4]],
+    ) -> Result<(), MotionError> {
+        self.refine_poses_at_seams(input, &[], cleanup, out, contacts)
+    }
+
+    /// [`StitchRefiner::refine_poses`] of the sequence inertialized at `seams` (the frames where
+    /// a clip starts; [`StitchRefiner::encode_poses_at_seams`]): `zoo stitch --pre-blend`.
+    pub fn refine_poses_at_seams(
+        &self,
+        input: &[EnginePose],
+        seams: &[usize],
         cleanup: FootCleanup,
         out: &mut [EnginePose],
         contacts: &mut [[bool; 4]],
@@ -434,7 +479,7 @@ impl StitchRefiner {
         }
         let d = self.dim;
         let mut x = vec![0.0f32; frames * d];
-        self.encode_poses(input, &mut x)?;
+        self.encode_poses_at_seams(input, seams, &mut x)?;
         let mut y = vec![0.0f32; x.len()];
         self.refine_sequence(&x, &mut y)?;
         let mut rotations = Vec::with_capacity(self.joints);
@@ -524,6 +569,11 @@ pub struct StitchStreamOf<R> {
     encoded: usize,
     /// Poses pushed so far.
     pushed: usize,
+    /// Frames final after the seam blend (all pushed ones but a seam frame waiting for the next).
+    finals: usize,
+    /// The seam blend (`mark_seam`), and whether the next pushed pose starts a clip.
+    blend: SeamInertializer,
+    seam_next: bool,
     /// Start of the next regular window.
     next_window: usize,
     /// Frames popped so far.
@@ -546,6 +596,7 @@ pub struct StitchStreamOf<R> {
 impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
     fn new(refiner: R) -> Self {
         let (w, d, j) = (refiner.window, refiner.dim, refiner.joints);
+        let blend = SeamInertializer::new(j, refiner.blend_frames, 1.0 / refiner.fps);
         StitchStreamOf {
             refiner,
             // At most w frames waiting to be dropped, w + 1 still needed.
@@ -553,6 +604,9 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             base: 0,
             encoded: 0,
             pushed: 0,
+            finals: 0,
+            blend,
+            seam_next: false,
             next_window: 0,
             read: 0,
             finished: false,
@@ -586,6 +640,15 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         self.read
     }
 
+    /// Marks the next pushed pose as the first frame of a new clip: the stream inertializes the
+    /// seam before refining ([`zoo_motion::blend::SeamInertializer`] over the model's
+    /// [`StitchRefiner::blend_frames`]), as [`StitchRefiner::refine_poses_at_seams`] and `zoo
+    /// stitch --pre-blend` do. The seam frame is encoded once the frame after it is pushed, so
+    /// the windows over it run one push later. A seam on frame 0 or 1 changes nothing.
+    pub fn mark_seam(&mut self) {
+        self.seam_next = true;
+    }
+
     /// Pushes the next frame of the aligned motion (at the model's frame rate, on its
     /// skeleton). Runs a window when one is due.
     pub fn push(&mut self, pose: &EnginePose) -> Result<(), MotionError> {
@@ -595,25 +658,44 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         let r = self.refiner.clone();
         r.check_pose(pose, self.pushed)?;
         let hips = StitchRefiner::model_space(pose, &mut self.rotations);
-        std::mem::swap(&mut self.prev, &mut self.cur);
-        self.cur.set(&r.skeleton, &r.layout, &self.rotations, hips);
+        let seam = std::mem::take(&mut self.seam_next);
         self.pushed += 1;
-        if self.pushed == 1 {
+        let n = self.blend.push(&self.rotations, hips, seam);
+        for i in 0..n {
+            self.take_final(i);
+        }
+        self.run_due_windows()?;
+        self.compact();
+        Ok(())
+    }
+
+    /// Encodes final frame `i` of the seam blend's last release.
+    fn take_final(&mut self, i: usize) {
+        let r = self.refiner.clone();
+        let (rotations, hips) = self.blend.released(i);
+        std::mem::swap(&mut self.prev, &mut self.cur);
+        self.cur.set(&r.skeleton, &r.layout, rotations, hips);
+        self.finals += 1;
+        if self.finals == 1 {
             self.start_root = self.cur.root;
             self.root = self.cur.root;
-            return Ok(());
+            return;
         }
-        if self.pushed == 2 {
+        if self.finals == 2 {
             // Frame 0 takes frame 1's root motion and velocities.
             self.encode(true);
         }
         self.encode(false);
-        while self.next_window + r.window <= self.encoded {
+    }
+
+    /// Runs the regular windows that the encoded frames cover.
+    fn run_due_windows(&mut self) -> Result<(), MotionError> {
+        let (w, s) = (self.refiner.window, self.refiner.stride);
+        while self.next_window + w <= self.encoded {
             let ws = self.next_window;
             self.run_window(ws)?;
-            self.next_window += r.stride;
+            self.next_window += s;
         }
-        self.compact();
         Ok(())
     }
 
@@ -711,6 +793,12 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
                 self.pushed
             )));
         }
+        // A seam on the last frame has no frame after it: it stays as it is.
+        let n = self.blend.finish();
+        for i in 0..n {
+            self.take_final(i);
+        }
+        self.run_due_windows()?;
         let last = self.pushed - w;
         // The regular windows ran at 0, s, ..., next_window - s; the last of them ends on the
         // last frame exactly when next_window - s == last.

@@ -1,6 +1,6 @@
 // The model: zoo_model_load, zoo_model_task, zoo_model_info, zoo_model_skeleton,
 // zoo_model_joint_name, each task's info, and the calls on a model itself (zoo_transition_terrain,
-// zoo_stitch_set_window, zoo_stitch_refine, zoo_synthesis_set_refine, zoo_synthesis_mean_frame).
+// zoo_stitch_set_window, zoo_stitch_refine, zoo_stitch_refine_at_seams, zoo_synthesis_set_refine, zoo_synthesis_mean_frame).
 using System;
 using System.Runtime.InteropServices;
 using System.Text;
@@ -262,6 +262,25 @@ namespace Zoo
         /// </summary>
         public void StitchRefine(ReadOnlySpan<ZooRootMotion> roots, ReadOnlySpan<float> rotations, bool placeAnkles, bool lockFeet,
             Span<ZooRootMotion> outRoots, Span<float> outRotations, Span<byte> contacts, ZooCoordinateFrame? engine = null)
+            => Refine(roots, rotations, null, placeAnkles, lockFeet, outRoots, outRotations, contacts, engine);
+
+        /// <summary>
+        /// <see cref="StitchRefine"/> of the sequence inertialized at <paramref name="seams"/> first
+        /// (<c>zoo_stitch_refine_at_seams</c>; the frames where a clip starts): the jump at each seam
+        /// decays over the model's blend frames before the refiner runs (<c>zoo stitch --pre-blend</c>).
+        /// Thread-safe.
+        /// </summary>
+        public void StitchRefineAtSeams(ReadOnlySpan<ZooRootMotion> roots, ReadOnlySpan<float> rotations, ReadOnlySpan<int> seams,
+            bool placeAnkles, bool lockFeet, Span<ZooRootMotion> outRoots, Span<float> outRotations, Span<byte> contacts,
+            ZooCoordinateFrame? engine = null)
+        {
+            var at = new UIntPtr[seams.Length];
+            for (int i = 0; i < seams.Length; i++) at[i] = Size.Of(seams[i]);
+            Refine(roots, rotations, at, placeAnkles, lockFeet, outRoots, outRotations, contacts, engine);
+        }
+
+        void Refine(ReadOnlySpan<ZooRootMotion> roots, ReadOnlySpan<float> rotations, UIntPtr[] seams, bool placeAnkles, bool lockFeet,
+            Span<ZooRootMotion> outRoots, Span<float> outRotations, Span<byte> contacts, ZooCoordinateFrame? engine)
         {
             if (engine.HasValue)
             {
@@ -282,8 +301,13 @@ namespace Zoo
                 fixed (ZooRootMotion* outR = &MemoryMarshal.GetReference(outRoots))
                 fixed (float* outQ = &MemoryMarshal.GetReference(outRotations))
                 fixed (byte* c = &MemoryMarshal.GetReference(contacts))
-                    s = ZooNative.zoo_stitch_refine((Native.ZooModel*)Enter(this, ref e), r, Size.Of(roots.Length), q, Size.Of(rotations.Length),
-                        placeAnkles, lockFeet, outR, Size.Of(outRoots.Length), outQ, Size.Of(outRotations.Length), c, Size.Of(contacts.Length));
+                fixed (UIntPtr* at = seams)
+                    s = seams == null
+                        ? ZooNative.zoo_stitch_refine((Native.ZooModel*)Enter(this, ref e), r, Size.Of(roots.Length), q, Size.Of(rotations.Length),
+                            placeAnkles, lockFeet, outR, Size.Of(outRoots.Length), outQ, Size.Of(outRotations.Length), c, Size.Of(contacts.Length))
+                        : ZooNative.zoo_stitch_refine_at_seams((Native.ZooModel*)Enter(this, ref e), r, Size.Of(roots.Length), q, Size.Of(rotations.Length),
+                            at, Size.Of(seams.Length), placeAnkles, lockFeet, outR, Size.Of(outRoots.Length), outQ, Size.Of(outRotations.Length), c,
+                            Size.Of(contacts.Length));
                 Errors.Check(s, this);
             }
             finally { Exit(this, e); }

@@ -1,4 +1,5 @@
-// Stitching streams (RMR): zoo_stitch_stream_* (the whole sequence is Model.StitchRefine).
+// Stitching streams (RMR): zoo_stitch_stream_*, seams marked by zoo_stitch_stream_mark_seam (the whole
+// sequence is Model.StitchRefine / StitchRefineAtSeams).
 using System;
 using System.Runtime.InteropServices;
 using Zoo.Native;
@@ -104,6 +105,17 @@ namespace Zoo
                 toEngine.Poses(Span<ZooRootMotion>.Empty, poseRotations);
             }
             return true;
+        }
+
+        /// <summary>
+        /// Marks the next pushed pose as the first of a new clip (<c>zoo_stitch_stream_mark_seam</c>): the stream
+        /// inertializes the seam before refining, as <see cref="Model.StitchRefineAtSeams"/> does.
+        /// </summary>
+        public void MarkSeam()
+        {
+            bool e = false;
+            try { Errors.Check(ZooNative.zoo_stitch_stream_mark_seam((Native.ZooStitchStream*)Enter(this, ref e)), this); }
+            finally { Exit(this, e); }
         }
 
         /// <summary>Ends the motion (<c>zoo_stitch_stream_finish</c>): every remaining pose becomes ready to pop.</summary>

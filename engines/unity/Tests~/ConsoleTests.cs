@@ -291,6 +291,33 @@ namespace Zoo.Tests
                 worst = Math.Max(worst, WorstBytes(poppedContacts.ToArray(), v.L("st.stream.contacts"), "stitch stream contacts"));
                 values += popped.Count * 14 + poppedRotations.Count;
             }
+            // Inertialized at seams first: whole, and streamed with the seams marked.
+            var seams = v.I("st.seams");
+            rmr.StitchRefineAtSeams(roots, rotations, seams, true, true, outRoots, outRotations, contacts);
+            worst = Math.Max(worst, Worst(Floats(outRoots), Floats(v.Roots("st.seams.refine")), "stitch refine at seams roots"));
+            worst = Math.Max(worst, Worst(outRotations, v.Rotations("st.seams.refine"), "stitch refine at seams rotations"));
+            using (var stream = new StitchStream(rmr))
+            {
+                var popped = new List<ZooRootMotion>();
+                var poppedRotations = new List<float>();
+                var root = new ZooRootMotion();
+                var q = new float[4 * k];
+                var c = new byte[4];
+                for (int f = 0; f <= frames; f++)
+                {
+                    if (Array.IndexOf(seams, f) >= 0) stream.MarkSeam();
+                    if (f < frames) stream.Push(roots[f], new ReadOnlySpan<float>(rotations, f * 4 * k, 4 * k));
+                    else stream.Finish();
+                    while (stream.TryPop(ref root, q, c))
+                    {
+                        popped.Add(root);
+                        poppedRotations.AddRange(q);
+                    }
+                }
+                worst = Math.Max(worst, Worst(Floats(popped.ToArray()), Floats(v.Roots("st.seams.stream")), "stitch stream at seams roots"));
+                worst = Math.Max(worst, Worst(poppedRotations.ToArray(), v.Rotations("st.seams.stream"), "stitch stream at seams rotations"));
+                values += 2 * (outRoots.Length * 14 + outRotations.Length);
+            }
             Expect(rmr.JointNames().SequenceEqual(v.S("st.names")), "stitch joint names");
             Console.WriteLine("parity stitch: worst=" + worst.ToString("G3") + " values=" + values + " (whole sequence of " + frames + " frames with ankles and foot lock, and the stream; latency " + rmr.StitchInfo.LatencyFrames + ")");
         }
@@ -519,6 +546,7 @@ namespace Zoo.Tests
             Wrong("stitch refine: out rotations short", "zoo_stitch_refine", "`out_rotations`", () => rmr.StitchRefine(sRoots, sRot, true, true, new ZooRootMotion[sf], new float[sRot.Length - 1], new byte[4 * sf]));
             Wrong("stitch refine: contacts short", "zoo_stitch_refine", "`contacts`", () => rmr.StitchRefine(sRoots, sRot, true, true, new ZooRootMotion[sf], new float[sRot.Length], new byte[4 * sf - 1]));
             Wrong("stitch refine (Unity): rotations not whole", "zoo_stitch_refine", "`rotations`", () => rmr.StitchRefine(sRoots, new ReadOnlySpan<float>(sRot, 0, sRot.Length - 3), true, true, new ZooRootMotion[sf], new float[sRot.Length], new byte[4 * sf], ZooCoordinateFrame.Unity));
+            Wrong("stitch refine at seams: seam past the end", "zoo_stitch_refine_at_seams", "seam at frame", () => rmr.StitchRefineAtSeams(sRoots, sRot, new[] { sf }, true, true, new ZooRootMotion[sf], new float[sRot.Length], new byte[4 * sf]));
             Wrong("stitch refine: shorter than a window", "zoo_stitch_refine", "window", () => rmr.StitchRefine(new ReadOnlySpan<ZooRootMotion>(sRoots, 0, 3), new ReadOnlySpan<float>(sRot, 0, 12 * kr), true, true, new ZooRootMotion[3], new float[12 * kr], new byte[12]));
             using (var stream = new StitchStream(rmr))
             using (var other = new StitchStream(rmr, ZooCoordinateFrame.Unity))
@@ -533,6 +561,7 @@ namespace Zoo.Tests
                 Wrong("stream pop: contacts short", "zoo_stitch_stream_pop", "`contacts`", () => stream.TryPop(ref root, new float[4 * kr], new byte[3]));
                 stream.Finish();
                 Refused<ZooException>("stream push after finish", State, "zoo_stitch_stream_push", "", () => stream.Push(sRoots[0], new ReadOnlySpan<float>(sRot, 0, 4 * kr)));
+                Refused<ZooException>("stream mark seam after finish", State, "zoo_stitch_stream_mark_seam", "finished", () => stream.MarkSeam());
                 Refused<ZooException>("stitch window while a stream lives", State, "zoo_stitch_set_window", "", () => rmr.SetStitchWindow(10, 5));
             }
 

@@ -333,6 +333,19 @@ namespace Zoo.Native
         public static extern ZooStatus zoo_stitch_refine(ZooModel* model, ZooRootMotion* roots, UIntPtr frames, float* rotations, UIntPtr rotations_len, [MarshalAs(UnmanagedType.U1)] bool place_ankles, [MarshalAs(UnmanagedType.U1)] bool lock_feet, ZooRootMotion* out_roots, UIntPtr out_roots_len, float* out_rotations, UIntPtr out_rotations_len, byte* contacts, UIntPtr contacts_len);
 
         /// <summary>
+        /// <c>zoo_stitch_refine</c> of the sequence inertialized at <c>seams</c> first (<c>seams_len</c> frame
+        /// indices where a clip starts, each below <c>frames</c>): from each seam on, the jump to the
+        /// previous clip decays over <c>blend_frames</c> frames before the refiner runs (`zoo stitch
+        /// --pre-blend`). Seams on frames 0, 1 and the last change nothing. Thread-safe.
+        /// </summary>
+        /// <remarks>
+        /// Safety:
+        /// <c>model</c> is NULL or a live model; each buffer is NULL or holds its given length.
+        /// </remarks>
+        [DllImport(Library, EntryPoint = "zoo_stitch_refine_at_seams", CallingConvention = CallingConvention.Cdecl, ExactSpelling = true)]
+        public static extern ZooStatus zoo_stitch_refine_at_seams(ZooModel* model, ZooRootMotion* roots, UIntPtr frames, float* rotations, UIntPtr rotations_len, UIntPtr* seams, UIntPtr seams_len, [MarshalAs(UnmanagedType.U1)] bool place_ankles, [MarshalAs(UnmanagedType.U1)] bool lock_feet, ZooRootMotion* out_roots, UIntPtr out_roots_len, float* out_rotations, UIntPtr out_rotations_len, byte* contacts, UIntPtr contacts_len);
+
+        /// <summary>
         /// Creates a stitching stream over <c>model</c> into <c>*out</c>; free it with
         /// <c>zoo_stitch_stream_free</c>. Thread-safe (the model is shared); the stream: one thread at a
         /// time.
@@ -391,6 +404,18 @@ namespace Zoo.Native
         /// </remarks>
         [DllImport(Library, EntryPoint = "zoo_stitch_stream_pop", CallingConvention = CallingConvention.Cdecl, ExactSpelling = true)]
         public static extern ZooStatus zoo_stitch_stream_pop(ZooStitchStream* stream, ZooRootMotion* root, float* rotations, UIntPtr rotations_len, byte* contacts, UIntPtr contacts_len);
+
+        /// <summary>
+        /// Marks the next pushed pose as the first frame of a new clip: the stream inertializes the seam
+        /// before refining, as <c>zoo_stitch_refine_at_seams</c> does (the seam frame is encoded once the
+        /// frame after it is pushed). A seam on frame 0 or 1 changes nothing. One thread at a time.
+        /// </summary>
+        /// <remarks>
+        /// Safety:
+        /// <c>stream</c> is NULL or live and used by this thread only.
+        /// </remarks>
+        [DllImport(Library, EntryPoint = "zoo_stitch_stream_mark_seam", CallingConvention = CallingConvention.Cdecl, ExactSpelling = true)]
+        public static extern ZooStatus zoo_stitch_stream_mark_seam(ZooStitchStream* stream);
 
         /// <summary>
         /// Ends the motion: runs the window ending on the last frame and makes every remaining frame

@@ -3,7 +3,7 @@
 //! itself.
 
 use zoo_motion::Clip;
-use zoo_motion::blend::Inertializer;
+use zoo_motion::blend::SeamInertializer;
 use zoo_motion::quat::slerp;
 
 /// Inertialization at each seam (Bollo, GDC 2018; [`zoo_motion::blend::Inertializer`]): from
@@ -16,24 +16,27 @@ use zoo_motion::quat::slerp;
 pub fn inertialize_seams(aligned: &Clip, seams: &[usize], blend_frames: usize) -> Clip {
     let mut out = aligned.clone();
     let (frames, j) = (out.frames(), out.joints());
-    let dt = out.frame_time;
-    for &s in seams {
-        if s < 2 || s + 2 > frames || blend_frames == 0 {
-            continue;
-        }
-        let frame = |c: &Clip, f: usize| (c.local_rotations[f * j..(f + 1) * j].to_vec(), c.local_positions[f * j]);
-        let (rp, pp) = frame(&out, s - 2);
-        let (rl, pl) = frame(&out, s - 1);
-        let (rf, pf) = frame(&out, s);
-        let (rn, pn) = frame(&out, s + 1);
-        let inert = Inertializer::new((&rp, pp), (&rl, pl), (&rf, pf), (&rn, pn), dt, blend_frames as f64 * dt);
-        for k in 0..blend_frames.min(frames - s) {
-            let f = s + k;
-            let mut root = out.local_positions[f * j];
-            inert.apply((k + 1) as f64 * dt, &mut out.local_rotations[f * j..(f + 1) * j], &mut root);
-            out.local_positions[f * j] = root;
-        }
+    let mut seam = vec![false; frames];
+    for &s in seams.iter().filter(|&&s| s < frames) {
+        seam[s] = true;
     }
+    // The motion core's frame-by-frame form, which the runtime's stitch stream runs too.
+    let mut blend = SeamInertializer::new(j, blend_frames, out.frame_time);
+    let mut next = 0;
+    let mut take = |blend: &SeamInertializer, n: usize, out: &mut Clip| {
+        for i in 0..n {
+            let (r, p) = blend.released(i);
+            out.local_rotations[next * j..(next + 1) * j].copy_from_slice(r);
+            out.local_positions[next * j] = p;
+            next += 1;
+        }
+    };
+    for (f, &s) in seam.iter().enumerate() {
+        let n = blend.push(&aligned.local_rotations[f * j..(f + 1) * j], aligned.local_positions[f * j], s);
+        take(&blend, n, &mut out);
+    }
+    let n = blend.finish();
+    take(&blend, n, &mut out);
     out.remove_sign_flips();
     out
 }
@@ -104,5 +107,51 @@ mod tests {
         assert_eq!(interp.local_positions[..(s - 6) * j], clip.local_positions[..(s - 6) * j]);
         assert_eq!(interp.local_positions[(s + 5) * j..], clip.local_positions[(s + 5) * j..]);
         assert_eq!(inert.frames(), clip.frames());
+    }
+
+    /// The definition, seam after seam over the whole clip, that the frame-by-frame form must
+    /// reproduce.
+    fn seam_by_seam(aligned: &Clip, seams: &[usize], blend_frames: usize) -> Clip {
+        use zoo_motion::blend::Inertializer;
+        let mut out = aligned.clone();
+        let (frames, j) = (out.frames(), out.joints());
+        let dt = out.frame_time;
+        for &s in seams {
+            if s < 2 || s + 2 > frames || blend_frames == 0 {
+                continue;
+            }
+            let frame = |c: &Clip, f: usize| (c.local_rotations[f * j..(f + 1) * j].to_vec(), c.local_positions[f * j]);
+            let (rp, pp) = frame(&out, s - 2);
+            let (rl, pl) = frame(&out, s - 1);
+            let (rf, pf) = frame(&out, s);
+            let (rn, pn) = frame(&out, s + 1);
+            let inert = Inertializer::new((&rp, pp), (&rl, pl), (&rf, pf), (&rn, pn), dt, blend_frames as f64 * dt);
+            for k in 0..blend_frames.min(frames - s) {
+                let f = s + k;
+                let mut root = out.local_positions[f * j];
+                inert.apply((k + 1) as f64 * dt, &mut out.local_rotations[f * j..(f + 1) * j], &mut root);
+                out.local_positions[f * j] = root;
+            }
+        }
+        out.remove_sign_flips();
+        out
+    }
+
+    /// Adjacent seams, seams within each other's blend, seams near both ends, one blend frame
+    /// or none: frame by frame gives the seam-by-seam frames exactly.
+    #[test]
+    fn frame_by_frame_inertialization_is_the_seam_by_seam_definition() {
+        let (clip, _) = aligned();
+        let n = clip.frames();
+        let cases: [&[usize]; 6] =
+            [&[30], &[30, 31], &[12, 16, 20, 50], &[0, 1, 2, n - 2, n - 1], &[2, 3, 4, 5, 6, 7], &[]];
+        for seams in cases {
+            for blend in [0, 1, 2, 10] {
+                let a = inertialize_seams(&clip, seams, blend);
+                let b = seam_by_seam(&clip, seams, blend);
+                assert_eq!(a.local_rotations, b.local_rotations, "seams {seams:?}, blend {blend}");
+                assert_eq!(a.local_positions, b.local_positions, "seams {seams:?}, blend {blend}");
+            }
+        }
     }
 }
