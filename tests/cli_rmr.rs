@@ -388,3 +388,32 @@ fn training_and_the_benchmark_leave_out_excluded_clips() {
     let (ok, _, stderr) = run(&["train", "rmr", "--preset", "tiny", "--exclude-glob", "*_run_*", "--out", s(&other)]);
     assert!(!ok && stderr.contains("--exclude-glob leaves clips of --data out: pass --data too"), "{stderr}");
 }
+
+/// `zoo train rmr --pre-blend`: the run trains on inertialized seams, says so in its
+/// configuration, and `zoo stitch` inertializes the seams of what it refines without being told.
+#[test]
+fn a_model_trained_on_inertialized_seams_stitches_them_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let run_dir = dir.path().join("pre");
+    let mut args = vec!["train", "rmr", "--preset", "tiny", "--synth-minutes", "1.5", "--epochs", "1", "--seed", "3"];
+    args.extend(["--pre-blend", "--out", s(&run_dir)]);
+    let (ok, stdout, stderr) = run(&args);
+    assert!(ok, "{stdout}\n{stderr}");
+    let config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run_dir.join("config.json")).unwrap()).unwrap();
+    assert_eq!(config["pre_blend"], true);
+    // The same run without it trains on other inputs: another validation loss.
+    let plain = train_tiny(dir.path(), "1");
+    let loss = |d: &Path| {
+        let s: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(d.join("summary.json")).unwrap()).unwrap();
+        s["best_valid_loss"].as_f64().unwrap()
+    };
+    assert_ne!(loss(&run_dir), loss(&plain), "--pre-blend changed nothing in training");
+    let (_, clips) = synth_clips(dir.path(), "1");
+    let ranges = [format!("{}:0:50", s(&clips[0])), format!("{}:10:80", s(&clips[1]))];
+    let out = dir.path().join("stitched.bvh");
+    let (ok, stdout, stderr) = run(&["stitch", "--model", s(&run_dir), &ranges[0], &ranges[1], "--out", s(&out)]);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("seams inertialized over 10 frames first"), "{stdout}");
+}

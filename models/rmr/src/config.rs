@@ -118,6 +118,14 @@ pub struct Config {
     /// configurations saved before the switch existed); see docs/rmr.md for why we add it.
     #[serde(default)]
     pub residual: bool,
+    /// Train on, and refine, the sequence inertialized at its seams over `blend_frames` (not in
+    /// the paper): each training pair's input is inertialized at its seams before encoding, and
+    /// `zoo stitch`, the benchmark and [`crate::stitch::refine_seams`] inertialize the seams of
+    /// what such a model refines (`--pre-blend`, which any model takes at inference, then always
+    /// applies). `false` (the paper's input, and configurations saved before it existed): the
+    /// raw aligned concatenation.
+    #[serde(default)]
+    pub pre_blend: bool,
     /// Frames of the beginning loss (Table 2; paper: 5; 0 disables the loss).
     pub t_begin: usize,
     /// Weight of the pose loss (paper: 1).
@@ -187,6 +195,7 @@ impl Config {
             lambda_begin: 1.0,
             lambda_fk: 0.0,
             lambda_slide: 0.0,
+            pre_blend: false,
             seam_weight: 0.0,
             trajectory_unit: 100.0,
             window: 60,

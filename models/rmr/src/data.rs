@@ -99,8 +99,10 @@ pub fn make_pairs_cached(
     let train_specs = plan(&train, &train_cfg, TRAIN_PLAN_FILE)?;
     let valid_specs = plan(&valid, &valid_cfg, VALID_PLAN_FILE)?;
     let database_segments = dbs.as_ref().map_or(0, StitchDatabases::total_segments);
-    let train_raw = encode_specs(&train_specs, &train, &train, &train_cfg)?;
-    let valid_raw = encode_specs(&valid_specs, &valid, &train, &valid_cfg)?;
+    // A model trained on inertialized seams ([`Config::pre_blend`]) sees its inputs so blended.
+    let blend = config.pre_blend.then_some(config.blend_frames);
+    let train_raw = encode_specs(&train_specs, &train, &train, &train_cfg, blend)?;
+    let valid_raw = encode_specs(&valid_specs, &valid, &train, &valid_cfg, blend)?;
     let fl = FeatureLayout::new(config.joints, config.layout.lower_body.len());
     let stats = FeatureStats::fit((0..train_raw.count).flat_map(|i| [train_raw.input(i), train_raw.target(i)]), fl);
     Ok(RmrData {
@@ -115,28 +117,32 @@ pub fn make_pairs_cached(
     })
 }
 
-/// Builds and encodes planned pairs (in parallel; the clips of each pair are dropped once encoded).
+/// Builds and encodes planned pairs (in parallel; the clips of each pair are dropped once
+/// encoded); `pre_blend`: the inputs inertialized at their seams over that many frames first.
 pub fn encode_specs(
     specs: &[PairSpec],
     gt: &MotionSet,
     db_set: &MotionSet,
     cfg: &PairConfig,
+    pre_blend: Option<usize>,
 ) -> RmrResult<PairFeatures> {
+    let seams_of = |s: &PairSpec| {
+        let [a, b, _] = s.lengths;
+        if b > 0 { vec![a, a + b] } else { vec![a] }
+    };
     let encoded: Vec<(Vec<f32>, Vec<f32>)> = specs
         .par_iter()
         .map(|s| {
             let pair = build_pair(s, gt, db_set, cfg)?;
-            Ok((encode_clip(&pair.input, &gt.layout)?, encode_clip(&pair.target, &gt.layout)?))
+            let input = match pre_blend {
+                Some(blend) => crate::pairs::baselines::inertialize_seams(&pair.input, &seams_of(s), blend),
+                None => pair.input,
+            };
+            Ok((encode_clip(&input, &gt.layout)?, encode_clip(&pair.target, &gt.layout)?))
         })
         .collect::<RmrResult<_>>()?;
     let dim = FeatureLayout::new(gt.joints(), gt.layout.lower_body.len()).dim();
-    let seams = specs
-        .iter()
-        .map(|s| {
-            let [a, b, _] = s.lengths;
-            if b > 0 { vec![a, a + b] } else { vec![a] }
-        })
-        .collect();
+    let seams = specs.iter().map(seams_of).collect();
     let mut out = PairFeatures { count: specs.len(), frames: cfg.window, dim, inputs: vec![], targets: vec![], seams };
     out.inputs.reserve(specs.len() * cfg.window * dim);
     out.targets.reserve(specs.len() * cfg.window * dim);

@@ -266,7 +266,7 @@ pub fn refine_seams(
     post: PostProcess,
 ) -> RmrResult<RefinedSeams> {
     let layout = &model.config().layout;
-    let refined = if post.pre_blend {
+    let refined = if post.pre_blend || model.config().pre_blend {
         let blended = crate::pairs::baselines::inertialize_seams(aligned, seams, opts.blend_frames);
         refine_clip_full(model, stats, &blended, opts)?
     } else {
@@ -433,7 +433,7 @@ pub fn stitch_command(
             };
             let refine = command_refine_options(m.config(), aligned.clip.frames(), &opts)?;
             let r = refine_seams(m, stats, &aligned.clip, &seams, refine, post)?;
-            if post.pre_blend {
+            if post.pre_blend || m.config().pre_blend {
                 note = format!(", seams inertialized over {blend} frames first");
             }
             if let Some(moved) = r.ankle_move {

@@ -64,6 +64,8 @@ pub struct RmrRunOptions {
     pub no_trajectory_loss: bool,
     /// The paper's decoder (the pose itself) instead of the residual one.
     pub no_residual: bool,
+    /// Train on the inputs inertialized at their seams ([`crate::Config::pre_blend`]).
+    pub pre_blend: bool,
     /// Extra weight of the pose loss within 5 frames of each seam.
     pub seam_weight: Option<f64>,
     /// Weight of the forward-kinematics term.
@@ -110,6 +112,7 @@ fn fresh_config(a: &RmrRunOptions, skeleton: &zoo_motion::Skeleton) -> RmrResult
     if a.no_trajectory_loss {
         config = config.with_trajectory_loss(false);
     }
+    config.pre_blend = a.pre_blend;
     if a.no_residual {
         config = config.with_residual(false);
     }

@@ -44,6 +44,11 @@ pub struct RmrArgs {
     /// decoder (a correction added to the input, starting at zero; docs/rmr.md).
     #[arg(long)]
     pub no_residual: bool,
+    /// Train on the aligned clips inertialized at their seams, as `zoo stitch --pre-blend`
+    /// refines them (not in the paper); `zoo stitch` and the benchmark then always inertialize
+    /// the seams of what this model refines.
+    #[arg(long)]
+    pub pre_blend: bool,
     /// Extra weight of the pose loss within 5 frames of each seam of the training pairs
     /// (0: the paper's loss) [default: 0].
     #[arg(long, allow_hyphen_values = true, value_parser = seam_weight)]
@@ -85,6 +90,7 @@ pub fn run(a: RmrArgs) -> anyhow::Result<()> {
         t_begin: a.t_begin,
         no_trajectory_loss: a.no_trajectory_loss,
         no_residual: a.no_residual,
+        pre_blend: a.pre_blend,
         seam_weight: a.seam_weight,
         fk_weight: a.fk_weight,
         slide_weight: a.slide_weight,
