@@ -108,18 +108,9 @@ pub unsafe extern "C" fn zoo_stitch_refine(
     contacts: *mut u8,
     contacts_len: usize,
 ) -> ZooStatus {
-    guard("zoo_stitch_refine", || {
-        let r = unsafe { self::model(model) }?.stitch()?;
-        let input = unsafe { RefineInput::read(roots, frames, rotations, rotations_len, std::ptr::null(), 0) }?;
-        let out = unsafe {
-            PoseOut::new(
-                (out_roots, out_roots_len, "out_roots"),
-                (out_rotations, out_rotations_len, "out_rotations"),
-                (contacts, contacts_len, "contacts"),
-            )
-        }?;
-        refine(r, input, FootCleanup { place_ankles, lock_feet }, out)
-    })
+    let input = (roots, frames, rotations, rotations_len, std::ptr::null(), 0);
+    let outs = (out_roots, out_roots_len, out_rotations, out_rotations_len, contacts, contacts_len);
+    unsafe { refine_guarded("zoo_stitch_refine", model, input, FootCleanup { place_ankles, lock_feet }, outs) }
 }
 
 /// [`zoo_stitch_refine`] of the sequence inertialized at `seams` first (`seams_len` frame
@@ -147,60 +138,55 @@ pub unsafe extern "C" fn zoo_stitch_refine_at_seams(
     contacts: *mut u8,
     contacts_len: usize,
 ) -> ZooStatus {
-    guard("zoo_stitch_refine_at_seams", || {
+    let input = (roots, frames, rotations, rotations_len, seams, seams_len);
+    let outs = (out_roots, out_roots_len, out_rotations, out_rotations_len, contacts, contacts_len);
+    unsafe { refine_guarded("zoo_stitch_refine_at_seams", model, input, FootCleanup { place_ankles, lock_feet }, outs) }
+}
+
+/// The input buffers of [`zoo_stitch_refine_at_seams`]: roots (`frames` of them), rotations,
+/// seams (NULL when there are none).
+type RefineInput = (*const ZooRootMotion, usize, *const f32, usize, *const usize, usize);
+
+/// The output buffers of [`zoo_stitch_refine`]: roots, rotations and contacts with their lengths.
+type RefineOutput = (*mut ZooRootMotion, usize, *mut f32, usize, *mut u8, usize);
+
+/// What [`zoo_stitch_refine`] and [`zoo_stitch_refine_at_seams`] do, errors named `function`.
+///
+/// # Safety
+/// As for [`zoo_stitch_refine_at_seams`].
+unsafe fn refine_guarded(
+    function: &'static str,
+    model: *const ZooModel,
+    input: RefineInput,
+    cleanup: FootCleanup,
+    output: RefineOutput,
+) -> ZooStatus {
+    guard(function, || {
         let r = unsafe { self::model(model) }?.stitch()?;
-        let input = unsafe { RefineInput::read(roots, frames, rotations, rotations_len, seams, seams_len) }?;
-        let out = unsafe {
+        let (roots, frames, rotations, rotations_len, seams, seams_len) = input;
+        let roots = unsafe { slice(roots, frames, "roots") }?;
+        let rotations = unsafe { slice(rotations, rotations_len, "rotations") }?;
+        let seams = if seams_len == 0 { &[][..] } else { unsafe { slice(seams, seams_len, "seams") }? };
+        let (out_roots, out_roots_len, out_rotations, out_rotations_len, contacts, contacts_len) = output;
+        let mut out = unsafe {
             PoseOut::new(
                 (out_roots, out_roots_len, "out_roots"),
                 (out_rotations, out_rotations_len, "out_rotations"),
                 (contacts, contacts_len, "contacts"),
             )
         }?;
-        refine(r, input, FootCleanup { place_ankles, lock_feet }, out)
+        let k = r.joints();
+        out.check(frames, k, 4, "input pose")?;
+        let mut poses = Vec::new();
+        read_poses(roots, rotations, k, &mut poses)?;
+        let mut refined = vec![EnginePose::new(k); frames];
+        let mut predicted = vec![[false; 4]; frames];
+        r.refine_poses_at_seams(&poses, seams, cleanup, &mut refined, &mut predicted).map_err(runtime_failure)?;
+        for (f, (pose, c)) in refined.iter().zip(&predicted).enumerate() {
+            out.write(f, pose, c);
+        }
+        Ok(())
     })
-}
-
-/// The input buffers of a whole-sequence refinement.
-struct RefineInput<'a> {
-    roots: &'a [ZooRootMotion],
-    rotations: &'a [f32],
-    seams: &'a [usize],
-}
-
-impl RefineInput<'_> {
-    /// # Safety
-    /// Each pointer is NULL or holds its given length (`seams` may be NULL when `seams_len` is 0).
-    unsafe fn read<'a>(
-        roots: *const ZooRootMotion,
-        frames: usize,
-        rotations: *const f32,
-        rotations_len: usize,
-        seams: *const usize,
-        seams_len: usize,
-    ) -> Result<RefineInput<'a>, Failure> {
-        Ok(RefineInput {
-            roots: unsafe { slice(roots, frames, "roots") }?,
-            rotations: unsafe { slice(rotations, rotations_len, "rotations") }?,
-            seams: if seams_len == 0 { &[] } else { unsafe { slice(seams, seams_len, "seams") }? },
-        })
-    }
-}
-
-/// Refines `input` with `r` into `out` (what [`zoo_stitch_refine`] and
-/// [`zoo_stitch_refine_at_seams`] do).
-fn refine(r: &StitchRefiner, input: RefineInput, cleanup: FootCleanup, mut out: PoseOut) -> Result<(), Failure> {
-    let (frames, k) = (input.roots.len(), r.joints());
-    out.check(frames, k, 4, "input pose")?;
-    let mut poses = Vec::new();
-    read_poses(input.roots, input.rotations, k, &mut poses)?;
-    let mut refined = vec![EnginePose::new(k); frames];
-    let mut predicted = vec![[false; 4]; frames];
-    r.refine_poses_at_seams(&poses, input.seams, cleanup, &mut refined, &mut predicted).map_err(runtime_failure)?;
-    for (f, (pose, c)) in refined.iter().zip(&predicted).enumerate() {
-        out.write(f, pose, c);
-    }
-    Ok(())
 }
 
 /// Creates a stitching stream over `model` into `*out`; free it with
