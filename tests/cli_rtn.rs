@@ -224,6 +224,17 @@ fn training_over_lengths_reads_the_time_to_arrival() {
     assert_eq!(config("default", &[]), serde_json::json!({"dims": 16, "max": 8}));
     assert_eq!(config("off", &["--time-to-arrival", "0"]), serde_json::Value::Null);
     assert_eq!(config("four", &["--time-to-arrival", "4"]), serde_json::json!({"dims": 4, "max": 8}));
+    // Over lengths that hold two validation lengths (5 and 15) the fallback is calibrated at each.
+    let out = dir.path().join("wide");
+    let args = ["train", "rtn", "--preset", "tiny", "--synth-minutes", "0.5", "--epochs", "1", "--lengths", "3-16"];
+    let (ok, stdout, stderr) = run(&[&args[..], &["--out", out.to_str().unwrap()]].concat());
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("fallback at 5 frames") && stdout.contains("fallback at 15 frames"), "{stdout}");
+    let c: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("config.json")).unwrap()).unwrap();
+    let table = c["fallback_lengths"].as_array().unwrap();
+    assert_eq!(table.iter().map(|e| e["length"].as_u64().unwrap()).collect::<Vec<_>>(), [5, 15]);
+    assert!(table.iter().all(|e| e["start"].as_f64().unwrap() > 0.0 && e["full"].as_f64() > e["start"].as_f64()));
     let out = dir.path().join("odd");
     let (ok, _, stderr) = run(&[
         "train",

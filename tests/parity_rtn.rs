@@ -658,6 +658,7 @@ fn exported_metadata_reaches_the_runtime() {
         terrain: None,
         fallback: f.config.fallback.map(|b| zoo_runtime::TransitionFallback { start: b.start, full: b.full }),
         time_to_arrival: None,
+        fallback_lengths: Vec::new(),
     };
     assert_eq!(m.task, MotionTask::Transition(task));
     // The config travels as an informational copy (read back by `import_rtn`, not the runtime).
@@ -1288,6 +1289,58 @@ fn runtime_fallback_matches_candle_and_reaches_the_interpolation() {
     assert!((state.fallback_weight() - ours.weight).abs() < 1e-3, "{} vs {}", state.fallback_weight(), ours.weight);
     let diff = max_abs_diff(&ours.frames, &out);
     assert!(diff <= 1e-2, "runtime vs candle with the fallback: max abs diff {diff} (clip units)");
+}
+
+/// Thresholds calibrated per length travel in the exported file, and the runtime's
+/// `set_model_fallback` applies the ones candle's `Config::fallback_for` gives at each length:
+/// the same weight at the trained length, and a weight strictly between 0 and 1 at a shorter
+/// one where the interpolated thresholds straddle the miss.
+#[test]
+fn runtime_applies_the_fallback_calibrated_for_each_length() {
+    use zoo_runtime::metadata::TransitionFallbackAt;
+    let base = fixture(Config { interp_residual: true, ..tiny() });
+    let c = &characters(&base.stats)[0];
+    let n = base.config.transition_frames;
+    let miss = |len: usize| {
+        base.model.transition_checked(&base.stats, &c.past, &c.target_pose, &c.next_pose, len, None, None).unwrap().miss
+    };
+    let (short, long) = (miss(2), miss(n));
+    // At 2 frames the table straddles the miss (weight 1/3); at the trained length it is far above it.
+    let table = vec![
+        TransitionFallbackAt { length: 2, start: 0.5 * short, full: 2.0 * short },
+        TransitionFallbackAt { length: n, start: 10.0 * long, full: 20.0 * long },
+    ];
+    let fallback = zoo_rtn::fallback::Fallback { start: 0.0, full: 0.0 };
+    let f =
+        Fixture { config: Config { fallback: Some(fallback), fallback_lengths: table, ..base.config.clone() }, ..base };
+    let model = TransitionModel::new(MotionModel::from_bytes(&export(&f).to_bytes()).unwrap()).unwrap();
+    let mut runner = model.runner().unwrap();
+    runner.set_model_fallback();
+    for len in [2, n] {
+        let want = f.config.fallback_for(len).unwrap();
+        let got = model.default_fallback_for(len).unwrap();
+        assert_eq!((got.start, got.full), (want.start, want.full), "thresholds at {len} frames");
+        let ours = f
+            .model
+            .transition_checked(&f.stats, &c.past, &c.target_pose, &c.next_pose, len, None, Some(&want))
+            .unwrap();
+        let mut state = model.new_transition();
+        let mut out = vec![0.0; (len + 1) * f.config.dim()];
+        runner.generate(&mut state, &c.past, &c.target_pose, &c.next_pose, &mut out).unwrap();
+        assert!(
+            (state.fallback_weight() - ours.weight).abs() < 1e-3,
+            "{len}: {} vs {}",
+            state.fallback_weight(),
+            ours.weight
+        );
+        let diff = max_abs_diff(&ours.frames, &out);
+        assert!(diff <= 1e-2, "{len} frames: runtime vs candle with the fallback: max abs diff {diff}");
+    }
+    let ours = f.config.fallback_for(2).unwrap();
+    let w = f.model.transition_checked(&f.stats, &c.past, &c.target_pose, &c.next_pose, 2, None, Some(&ours)).unwrap();
+    assert!((w.weight - 1.0 / 3.0).abs() < 1e-4, "{}", w.weight);
+    // The file's single `fallback` (always) would give 1 at every length: the table replaced it.
+    assert_eq!(model.default_fallback().map(|f| f.start), Some(0.0));
 }
 
 /// A terrain-aware RTN through the engine-facing API: each character's heightmap

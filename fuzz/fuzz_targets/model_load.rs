@@ -34,6 +34,7 @@ fn valid() -> &'static (pb::ModelProto, Vec<(String, String)>) {
                 terrain: None,
                 fallback: None,
                 time_to_arrival: None,
+                fallback_lengths: Vec::new(),
             }),
             config_json: "{}".into(),
             normalization: [

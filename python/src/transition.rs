@@ -99,7 +99,9 @@ impl Transition {
         let mut runner = self.runner();
         runner.allow_beyond_trained(allow_beyond_trained);
         runner.set_foot_lock(if foot_lock { self.model.default_foot_lock() } else { None });
-        runner.set_fallback(if fallback { self.model.default_fallback() } else { None });
+        if fallback {
+            runner.set_model_fallback();
+        }
         runner.generate_batch(&mut states, past, target, next, &mut out).or_py()?;
         drop(runner);
         array(py, out, &[n, length + 1, k, 3])

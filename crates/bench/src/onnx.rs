@@ -11,8 +11,9 @@ use zoo_runtime::{MotionTaskKind, TransitionModel, TransitionRunner, TransitionS
 /// An exported transition model run by the engine runtime; one runner and state per thread.
 pub struct OnnxGenerator {
     model: TransitionModel,
-    /// The model's calibrated fallback, unless `zoo bench --no-fallback`.
-    fallback: Option<zoo_runtime::TransitionFallback>,
+    /// Whether the model's calibrated fallback applies (its thresholds for each transition's
+    /// length), unless `zoo bench --no-fallback`.
+    fallback: bool,
 }
 
 impl PositionGenerator for OnnxGenerator {
@@ -26,7 +27,9 @@ impl PositionGenerator for OnnxGenerator {
         let mut runner = self.model.runner().map_err(|e| e.to_string())?;
         // The benchmark measures transitions beyond the trained length on purpose (n = 45).
         runner.allow_beyond_trained(true);
-        runner.set_fallback(self.fallback);
+        if self.fallback {
+            runner.set_model_fallback();
+        }
         Ok((runner, self.model.new_transition()))
     }
 
@@ -60,7 +63,7 @@ pub fn load_onnx_with_skeleton(
     let model = crate::exported::load(path, &[MotionTaskKind::Transition], "`zoo bench --methods onnx:FILE`")?
         .into_transition()?;
     let skeleton = model.model().metadata().skeleton.clone();
-    let fallback = model.default_fallback().filter(|_| zoo_rtn::method::fallback_enabled());
-    let name = if fallback.is_some() { format!("{name}+fallback") } else { name };
+    let fallback = model.default_fallback().is_some() && zoo_rtn::method::fallback_enabled();
+    let name = if fallback { format!("{name}+fallback") } else { name };
     Ok((PositionMethod::new(name, OnnxGenerator { model, fallback }, foot_lock), skeleton))
 }

@@ -54,7 +54,9 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 pub use stitch::{StitchLayout, StitchTask};
 pub use synthesis::{SynthesisRefiner, SynthesisTask};
-pub use transition::{TimeToArrival, TransitionFallback, TransitionTask, TransitionTerrain};
+pub use transition::{
+    TimeToArrival, TransitionFallback, TransitionFallbackAt, TransitionTask, TransitionTerrain, fallback_for,
+};
 pub use zoo_motion::frame::CoordinateFrame;
 
 /// The format version this release reads and writes.

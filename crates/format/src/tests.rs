@@ -12,6 +12,7 @@ fn transition() -> TransitionTask {
         terrain: None,
         fallback: None,
         time_to_arrival: None,
+        fallback_lengths: Vec::new(),
     }
 }
 
@@ -353,6 +354,34 @@ fn time_to_arrival_round_trips_defaults_to_none_and_is_checked() {
         let err = MotionModelMetadata { task: MotionTask::Transition(task), ..sample() }.check().unwrap_err();
         assert!(err.to_string().contains(what), "{err}");
     }
+}
+
+#[test]
+fn fallback_thresholds_per_length_interpolate_and_are_checked() {
+    let at = |length, start| TransitionFallbackAt { length, start, full: 2.0 * start };
+    let task = TransitionTask {
+        fallback: Some(TransitionFallback { start: 9.0, full: 18.0 }),
+        fallback_lengths: vec![at(5, 1.0), at(15, 3.0), at(45, 6.0)],
+        ..transition()
+    };
+    let start = |n| task.fallback_for(n).unwrap().start;
+    assert_eq!(
+        (start(1), start(5), start(10), start(15), start(30), start(45), start(90)),
+        (1.0, 1.0, 2.0, 3.0, 4.5, 6.0, 6.0)
+    );
+    assert_eq!(task.fallback_for(10).unwrap().full, 4.0);
+    // Without a table every length gets `fallback`.
+    let plain = TransitionTask { fallback_lengths: Vec::new(), ..task.clone() };
+    assert_eq!(plain.fallback_for(10), plain.fallback);
+    let m = MotionModelMetadata { task: MotionTask::Transition(task.clone()), ..sample() };
+    assert_eq!(MotionModelMetadata::from_props(lookup(&m.to_props())).unwrap(), m);
+    let unsorted = TransitionTask { fallback_lengths: vec![at(15, 1.0), at(5, 1.0)], ..task.clone() };
+    let err = MotionModelMetadata { task: MotionTask::Transition(unsorted), ..sample() }.check().unwrap_err();
+    assert!(err.to_string().contains("strictly increase"), "{err}");
+    let bad =
+        TransitionTask { fallback_lengths: vec![TransitionFallbackAt { length: 5, start: 2.0, full: 1.0 }], ..task };
+    let err = MotionModelMetadata { task: MotionTask::Transition(bad), ..sample() }.check().unwrap_err();
+    assert!(err.to_string().contains("start <= full"), "{err}");
 }
 
 #[test]

@@ -40,6 +40,45 @@ pub struct TransitionTask {
     /// without it. Files written before the field existed load as `null`.
     #[serde(default)]
     pub time_to_arrival: Option<TimeToArrival>,
+    /// Fallback thresholds calibrated at several transition lengths, shortest first, for a model
+    /// trained over several lengths (empty: `fallback` for every length). Files written before
+    /// the field existed load with none.
+    #[serde(default)]
+    pub fallback_lengths: Vec<TransitionFallbackAt>,
+}
+
+/// Fallback thresholds calibrated at one transition length (see [`TransitionFallback`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TransitionFallbackAt {
+    /// The transition length, frames.
+    pub length: usize,
+    /// Miss below which the network's transition is kept.
+    pub start: f32,
+    /// Miss from which the transition is the interpolation.
+    pub full: f32,
+}
+
+/// The fallback thresholds for a transition of `length` frames: with a table calibrated at
+/// several lengths (shortest first), interpolated linearly in the length between the two
+/// calibrated lengths around it (the nearest one outside their range); without one, `fallback`.
+pub fn fallback_for(
+    fallback: Option<TransitionFallback>,
+    table: &[TransitionFallbackAt],
+    length: usize,
+) -> Option<TransitionFallback> {
+    let (Some(first), Some(last)) = (table.first(), table.last()) else { return fallback };
+    let at = |e: &TransitionFallbackAt| TransitionFallback { start: e.start, full: e.full };
+    if length <= first.length {
+        return Some(at(first));
+    }
+    if length >= last.length {
+        return Some(at(last));
+    }
+    let i = table.iter().position(|e| e.length >= length).expect("length is below the last entry's");
+    let (a, b) = (&table[i - 1], &table[i]);
+    let w = (length - a.length) as f32 / (b.length - a.length) as f32;
+    Some(TransitionFallback { start: a.start + w * (b.start - a.start), full: a.full + w * (b.full - a.full) })
 }
 
 /// The time-to-arrival embedding fed to the step graph as `tta` (`dims` values): the frames
@@ -141,6 +180,12 @@ impl TransitionFallback {
 }
 
 impl TransitionTask {
+    /// The fallback thresholds for a transition of `length` frames ([`fallback_for`] of
+    /// `fallback` and `fallback_lengths`).
+    pub fn fallback_for(&self, length: usize) -> Option<TransitionFallback> {
+        fallback_for(self.fallback, &self.fallback_lengths, length)
+    }
+
     /// Checks the section against a skeleton of `joints` joints.
     pub fn check(&self, joints: usize) -> Result<(), String> {
         if self.frame_dim == 0 || !self.frame_dim.is_multiple_of(3) {
@@ -172,6 +217,15 @@ impl TransitionTask {
         }
         if let Some(t) = &self.time_to_arrival {
             t.check()?;
+        }
+        for (i, e) in self.fallback_lengths.iter().enumerate() {
+            TransitionFallback { start: e.start, full: e.full }.check()?;
+            if e.length == 0 || (i > 0 && e.length <= self.fallback_lengths[i - 1].length) {
+                return Err(format!(
+                    "fallback_lengths: length {} at entry {i}: the lengths must be at least 1 and strictly increase",
+                    e.length
+                ));
+            }
         }
         Ok(())
     }

@@ -609,7 +609,7 @@ fn transition_case(
     let fallback = if thresholds_around_miss {
         Some(TransitionFallback { start: 0.5 * miss.mean, full: 2.0 * miss.mean })
     } else {
-        model.default_fallback()
+        model.default_fallback_for(length)
     };
     runner.set_fallback(fallback);
     let mut state = new_state();

@@ -224,6 +224,8 @@ pub struct TransitionRunner {
     beyond_trained: bool,
     /// Fallback towards interpolation of `generate`, off unless set.
     fallback: Option<TransitionFallback>,
+    /// Fallback from the model's thresholds for each transition's length (`set_model_fallback`).
+    model_fallback: bool,
     /// Buffers of posed transitions.
     posed: PosedScratch,
     /// Normalized terrain patches of the characters of a graph run (terrain-aware models).
@@ -406,6 +408,14 @@ impl TransitionModel {
         self.model.metadata().task.as_transition()?.fallback
     }
 
+    /// The calibrated thresholds for a transition of `length` frames: for a model trained over
+    /// several lengths, those calibrated at each validation length interpolated at `length`
+    /// (`fallback_lengths` of the section), else [`TransitionModel::default_fallback`]. A runner
+    /// applies them per transition with [`TransitionRunner::set_model_fallback`].
+    pub fn default_fallback_for(&self, length: usize) -> Option<TransitionFallback> {
+        self.model.metadata().task.as_transition()?.fallback_for(length)
+    }
+
     /// A fresh transition state for one character.
     pub fn new_transition(&self) -> TransitionState {
         let d = 3 * self.joints;
@@ -449,6 +459,7 @@ impl TransitionModel {
             foot_lock: None,
             beyond_trained: false,
             fallback: None,
+            model_fallback: false,
             posed: PosedScratch::default(),
             patch: Vec::new(),
         })
@@ -474,6 +485,15 @@ impl TransitionRunner {
     /// reads [`TransitionState::target_miss`] and decides. See [`TransitionFallback`].
     pub fn set_fallback(&mut self, fallback: Option<TransitionFallback>) {
         self.fallback = fallback;
+        self.model_fallback = false;
+    }
+
+    /// Applies the model's calibrated fallback in [`TransitionRunner::generate`], with the
+    /// thresholds for each transition's length ([`TransitionModel::default_fallback_for`]); a
+    /// model without calibrated thresholds gets none. [`TransitionRunner::set_fallback`] replaces it.
+    pub fn set_model_fallback(&mut self) {
+        self.fallback = None;
+        self.model_fallback = true;
     }
 
     /// Whether this runner accepts transitions longer than the model was trained for
@@ -999,7 +1019,8 @@ impl TransitionRunner {
         result?;
         let past_per = past.len() / n;
         for (c, s) in states.iter_mut().enumerate() {
-            let w = match (&self.fallback, s.miss) {
+            let fallback = if self.model_fallback { self.model.default_fallback_for(s.length) } else { self.fallback };
+            let w = match (fallback, s.miss) {
                 (Some(f), Some(miss)) => f.weight(miss.mean),
                 _ => 0.0,
             };

@@ -32,6 +32,7 @@ fn sample() -> MotionModelMetadata {
             terrain: None,
             fallback: None,
             time_to_arrival: None,
+            fallback_lengths: Vec::new(),
         }),
         config_json: "{\"hidden\": 4}".into(),
         normalization: [("x".to_string(), MotionMeanStd { mean: vec![0.0, 1.0], std: vec![1.0, 2.0] })].into(),

@@ -255,7 +255,7 @@ pub fn run(a: &TransitionOptions, p: &dyn Progress) -> RtnResult<String> {
     }
     .with_context(|| format!("--from {} --to {} --frames {}", a.from_label, a.to_label, a.frames))?;
     let terrain = read_heightmap(a.heightmap.as_deref(), &a.model, model.config(), &pa)?;
-    let fallback = model.config().fallback.filter(|_| !a.no_fallback);
+    let fallback = model.config().fallback_for(a.frames).filter(|_| !a.no_fallback);
     let checked = model
         .transition_checked(
             &stats,

@@ -175,6 +175,12 @@ pub struct Config {
     /// `None` (folders trained before it existed, or not calibrated): no fallback.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fallback: Option<crate::fallback::Fallback>,
+    /// The fallback's thresholds calibrated at each validation length of a run over several
+    /// lengths ([`TrainConfig::lengths`]), shortest first: a transition of `n` frames uses them
+    /// interpolated at `n` ([`Config::fallback_for`]). Empty: [`Config::fallback`] for every
+    /// length (runs over one length, and folders written before it existed).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub fallback_lengths: Vec<zoo_format::TransitionFallbackAt>,
 }
 
 impl Config {
@@ -205,6 +211,7 @@ impl Config {
             target_blend: 5,
             train: TrainConfig::default(),
             fallback: None,
+            fallback_lengths: Vec::new(),
         }
     }
 
@@ -240,6 +247,26 @@ impl Config {
     pub fn with_terrain(mut self, terrain: bool) -> Self {
         self.terrain = terrain;
         self
+    }
+
+    /// The fallback's thresholds for a transition of `n` frames: [`Config::fallback_lengths`]
+    /// interpolated at `n` when the run calibrated them, else [`Config::fallback`].
+    pub fn fallback_for(&self, n: usize) -> Option<crate::fallback::Fallback> {
+        let at_longest = self.fallback.map(|f| zoo_format::TransitionFallback { start: f.start, full: f.full });
+        zoo_format::fallback_for(at_longest, &self.fallback_lengths, n)
+            .map(|f| crate::fallback::Fallback { start: f.start, full: f.full })
+    }
+
+    /// The transition lengths a run validates at: 5, 15, 30 and 45 frames within
+    /// [`TrainConfig::lengths`] (its longest when none is), else [`Config::transition_frames`].
+    pub fn validation_lengths(&self) -> Vec<usize> {
+        match self.train.lengths {
+            Some([lo, hi]) => {
+                let v: Vec<usize> = [5, 15, 30, 45].into_iter().filter(|n| (lo..=hi).contains(n)).collect();
+                if v.is_empty() { vec![hi] } else { v }
+            }
+            None => vec![self.transition_frames],
+        }
     }
 
     /// Feature frame size `D = 3K`.

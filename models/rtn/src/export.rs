@@ -194,6 +194,7 @@ pub fn transition_task(config: &Config) -> TransitionTask {
             .then_some(TransitionTerrain { side: config.terrain_side, extent: config.terrain_extent }),
         fallback: config.fallback.map(|f| TransitionFallback { start: f.start, full: f.full }),
         time_to_arrival: config.time_to_arrival,
+        fallback_lengths: config.fallback_lengths.clone(),
     }
 }
 

@@ -18,7 +18,7 @@ use crate::model::Rtn;
 use serde::{Deserialize, Serialize};
 
 /// Thresholds on the target miss (mean per-joint distance, clip units) of the fallback.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Fallback {
     /// Below this miss the RTN's transition is kept as it is.
     pub start: f32,
@@ -122,9 +122,26 @@ impl Rtn {
 /// The target misses of the model's transitions of its trained length on `windows` (no
 /// teacher forcing, no rotation), in batches of 64: what [`Fallback::calibrate`] reads.
 pub fn target_misses(model: &Rtn, stats: &FeatureStats, windows: &[crate::MotionWindow]) -> RtnResult<Vec<f32>> {
+    target_misses_at(model, stats, windows, model.config().transition_frames)
+}
+
+/// [`target_misses`] of transitions of `n` frames (at most the trained length: the target is
+/// frame `past + n` of each window).
+pub fn target_misses_at(
+    model: &Rtn,
+    stats: &FeatureStats,
+    windows: &[crate::MotionWindow],
+    n: usize,
+) -> RtnResult<Vec<f32>> {
     use crate::transition::{SequenceInput, encode_batch, generate};
     let c = model.config();
-    let (d, past, tf) = (c.dim(), c.past_frames, c.target_frame());
+    if n == 0 || n > c.transition_frames {
+        return Err(crate::error::RtnError::Config(format!(
+            "target misses at {n} frames: between 1 and the trained length {}",
+            c.transition_frames
+        )));
+    }
+    let (d, past, tf) = (c.dim(), c.past_frames, c.past_frames + n);
     let device = model.device();
     let offsets = crate::model::OffsetTensors::new(stats, device)?;
     let mut out = Vec::with_capacity(windows.len());
@@ -140,7 +157,7 @@ pub fn target_misses(model: &Rtn, stats: &FeatureStats, windows: &[crate::Motion
             })
             .collect();
         let batch = encode_batch(stats, &items, device)?;
-        let outs = generate(model, stats, &offsets, &batch, past, c.transition_frames + 1, false, &mut || false)?;
+        let outs = generate(model, stats, &offsets, &batch, past, n + 1, false, &mut || false)?;
         // Integrate the root velocities to the predicted target frame, then decode it.
         let mut roots: Vec<[f32; 3]> =
             items.iter().map(|it| crate::features::root_of(&it.known[(past - 1) * d..])).collect();

@@ -38,6 +38,8 @@ pub struct FallbackCount {
     pub full: usize,
     /// Sum of the weights.
     pub weight_sum: f64,
+    /// The thresholds applied at this length.
+    pub thresholds: Fallback,
 }
 
 /// A trained RTN and its normalization statistics, generating transitions on the CPU
@@ -47,8 +49,9 @@ pub struct RtnGenerator {
     pub model: Rtn,
     /// Its normalization statistics.
     pub stats: FeatureStats,
-    /// The fallback applied, if any.
-    pub fallback: Option<Fallback>,
+    /// Whether the run's fallback applies (its thresholds for each transition's length,
+    /// [`crate::Config::fallback_for`]).
+    pub fallback: bool,
     /// Counts per transition length.
     pub counts: Mutex<BTreeMap<usize, FallbackCount>>,
 }
@@ -79,14 +82,16 @@ impl PositionGenerator for RtnGenerator {
         next: &[f32],
         frames: usize,
     ) -> Result<Vec<f32>, String> {
+        let fallback = self.model.config().fallback_for(frames).filter(|_| self.fallback);
         let t = self
             .model
-            .transition_checked(&self.stats, past, target, next, frames, None, self.fallback.as_ref())
+            .transition_checked(&self.stats, past, target, next, frames, None, fallback.as_ref())
             .map_err(|e| e.to_string())?;
-        if self.fallback.is_some()
+        if let Some(f) = fallback
             && let Ok(mut counts) = self.counts.lock()
         {
             let c = counts.entry(frames).or_default();
+            c.thresholds = f;
             c.transitions += 1;
             c.triggered += usize::from(t.weight > 0.0);
             c.full += usize::from(t.weight >= 1.0);
@@ -98,8 +103,9 @@ impl PositionGenerator for RtnGenerator {
 
 impl Drop for RtnGenerator {
     fn drop(&mut self) {
-        if let Some(f) = &self.fallback {
+        if self.fallback {
             for (n, c) in self.counts() {
+                let f = c.thresholds;
                 eprintln!(
                     "fallback (start {:.2}, full {:.2}) at n = {n}: triggered on {} of {} transitions ({:.1}%), \
                      full on {}, mean weight {:.3}",
@@ -120,7 +126,7 @@ impl Drop for RtnGenerator {
 /// run folder written by `zoo train rtn`; `name + "+fallback"` when the run's fallback applies.
 pub fn load(dir: &Path, name: String, foot_lock: bool) -> RtnResult<PositionMethod<RtnGenerator>> {
     let (model, stats) = crate::checkpoint::load(dir, &candle_core::Device::Cpu)?;
-    let fallback = model.config().fallback.filter(|_| FALLBACK_ENABLED.load(Ordering::Relaxed));
-    let name = if fallback.is_some() { format!("{name}+fallback") } else { name };
+    let fallback = model.config().fallback.is_some() && FALLBACK_ENABLED.load(Ordering::Relaxed);
+    let name = if fallback { format!("{name}+fallback") } else { name };
     Ok(PositionMethod::new(name, RtnGenerator { model, stats, fallback, counts: Mutex::default() }, foot_lock))
 }

@@ -210,13 +210,7 @@ impl RtnTrainer {
     /// The lengths validation averages: 5, 15, 30 and 45 frames within
     /// [`crate::TrainConfig::lengths`] (its longest when none is), else the window's.
     pub fn validation_lengths(&self) -> Vec<usize> {
-        match self.config.train.lengths {
-            Some([lo, hi]) => {
-                let v: Vec<usize> = [5, 15, 30, 45].into_iter().filter(|n| (lo..=hi).contains(n)).collect();
-                if v.is_empty() { vec![hi] } else { v }
-            }
-            None => vec![self.config.transition_frames],
-        }
+        self.config.validation_lengths()
     }
 
     /// The sequences of `windows` to encode, each rotated as [`RtnTrainer::encode`] says (one

@@ -460,7 +460,8 @@ pub fn run(o: &RtnRunOptions, p: &dyn Progress) -> RtnResult<()> {
 }
 
 /// Calibrates the fallback of the best model in `out` on the validation windows
-/// (`zoo_rtn::fallback`): its target misses at the trained length set the thresholds, written
+/// (`zoo_rtn::fallback`): its target misses at the trained length set the thresholds, and for a
+/// run over several lengths its misses at each validation length set them per length; written
 /// into the folder's `config.json` (atomically).
 fn calibrate_fallback(out: &Path, valid: &[MotionWindow], device: &candle_core::Device) -> RtnResult<()> {
     if !out.join(checkpoint::CONFIG_FILE).is_file() {
@@ -471,6 +472,21 @@ fn calibrate_fallback(out: &Path, valid: &[MotionWindow], device: &candle_core::
     let Some(fallback) = crate::fallback::Fallback::calibrate(&misses) else { return Ok(()) };
     let mut config = model.config().clone();
     config.fallback = Some(fallback);
+    config.fallback_lengths.clear();
+    let lengths = config.validation_lengths();
+    if config.train.lengths.is_some() && lengths.len() > 1 {
+        for n in lengths {
+            let at = crate::fallback::target_misses_at(&model, &stats, valid, n)?;
+            if let Some(f) = crate::fallback::Fallback::calibrate(&at) {
+                config.fallback_lengths.push(zoo_format::TransitionFallbackAt {
+                    length: n,
+                    start: f.start,
+                    full: f.full,
+                });
+                println!("fallback at {n} frames: from a miss of {:.2}, fully at {:.2}", f.start, f.full);
+            }
+        }
+    }
     checkpoint::write_json(&out.join(checkpoint::CONFIG_FILE), &config)?;
     let mean = misses.iter().sum::<f32>() / misses.len() as f32;
     println!(
