@@ -190,7 +190,8 @@ fn keyframes_allocations() {
 /// The stitching task (issue 12): heap allocations per window of
 /// `StitchRefiner::refine_window_normalized` (tract's per-run tensors) and of a `StitchStream`
 /// (pushes, pops and the window they trigger), on the tiny seeded RMR. The stream's own work
-/// (encoding, normalising, blending, decoding) must add nothing to tract's.
+/// (encoding, normalising, blending, decoding, inertializing marked seams) must add nothing to
+/// tract's.
 fn stitch_allocations() {
     use candle_core::{DType, Device};
     let config = zoo_rmr::Config::tiny();
@@ -217,8 +218,11 @@ fn stitch_allocations() {
     let mut stream = refiner.stream();
     let mut out = EnginePose::new(refiner.joints());
     let mut frames = poses.iter();
-    // Up to the first window: the stream sizes its buffers.
-    for p in frames.by_ref().take(w) {
+    // Up to the first window: the stream sizes its buffers, and a first marked seam its blend's.
+    for (f, p) in frames.by_ref().take(w).enumerate() {
+        if f == w / 2 {
+            stream.mark_seam();
+        }
         stream.push(p).unwrap();
         while stream.pop(&mut out).unwrap().is_some() {}
     }
@@ -226,6 +230,10 @@ fn stitch_allocations() {
     let mut pushed = 0;
     COUNTED.with(|c| c.set(true));
     for p in frames.by_ref().take(20 * s) {
+        // A seam every 25 frames (`zoo stitch --pre-blend` in a stream): no allocation either.
+        if pushed % 25 == 7 {
+            stream.mark_seam();
+        }
         stream.push(p).unwrap();
         while stream.pop(&mut out).unwrap().is_some() {}
         pushed += 1;

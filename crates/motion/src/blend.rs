@@ -80,22 +80,43 @@ impl Inertializer {
         dt: f64,
         blend_time: f64,
     ) -> Self {
-        let n = src_last.0.len();
-        let mut rot_offset = Vec::with_capacity(n);
-        let mut rot_velocity = Vec::with_capacity(n);
-        for j in 0..n {
+        let mut inert = Inertializer {
+            rot_offset: Vec::new(),
+            rot_velocity: Vec::new(),
+            pos_offset: DVec3::ZERO,
+            pos_velocity: DVec3::ZERO,
+            blend_time,
+        };
+        inert.reset(src_prev, src_last, dst_first, dst_next, dt, blend_time);
+        inert
+    }
+
+    /// [`Inertializer::new`] in place: records the offsets of another switch, reusing the
+    /// storage (no allocation once it has held as many joints).
+    pub fn reset(
+        &mut self,
+        src_prev: (&[DQuat], DVec3),
+        src_last: (&[DQuat], DVec3),
+        dst_first: (&[DQuat], DVec3),
+        dst_next: (&[DQuat], DVec3),
+        dt: f64,
+        blend_time: f64,
+    ) {
+        self.rot_offset.clear();
+        self.rot_velocity.clear();
+        for j in 0..src_last.0.len() {
             // offset at the switch and one frame before, both against the target stream
             let o1 = (src_last.0[j] * dst_first.0[j].inverse()).normalize();
             let o0 =
                 (src_prev.0[j] * (dst_first.0[j] * dst_next.0[j].inverse() * dst_first.0[j]).inverse()).normalize();
             let o0 = if o0.dot(o1) < 0.0 { -o0 } else { o0 };
             let dv = to_scaled_axis((o1 * o0.inverse()).normalize()) / dt;
-            rot_offset.push(o1);
-            rot_velocity.push(dv);
+            self.rot_offset.push(o1);
+            self.rot_velocity.push(dv);
         }
         let p1 = src_last.1 - dst_first.1;
         let p0 = src_prev.1 - (dst_first.1 - (dst_next.1 - dst_first.1));
-        Inertializer { rot_offset, rot_velocity, pos_offset: p1, pos_velocity: (p1 - p0) / dt, blend_time }
+        (self.pos_offset, self.pos_velocity, self.blend_time) = (p1, (p1 - p0) / dt, blend_time);
     }
 
     /// Applies the decayed offsets at time `t` (seconds since the switch) to a target frame.
@@ -119,7 +140,7 @@ impl Inertializer {
 ///
 /// [`SeamInertializer::push`] takes frame after frame and releases each one once it is final: a
 /// seam frame one push later (its offsets need the frame after it), every other frame at once.
-/// Allocates when a seam's blend starts, never per frame.
+/// Allocates only when more blends run at once than ever before (their offsets are reused).
 #[derive(Clone, Debug)]
 pub struct SeamInertializer {
     joints: usize,
@@ -127,6 +148,8 @@ pub struct SeamInertializer {
     dt: f64,
     /// Blends still running: the seam's frame and its offsets.
     active: Vec<(usize, Inertializer)>,
+    /// Offsets of finished blends, reused by the next seams.
+    spare: Vec<Inertializer>,
     /// The last two released frames, the older first.
     last: [(Vec<DQuat>, DVec3); 2],
     /// Frames pushed so far.
@@ -151,6 +174,7 @@ impl SeamInertializer {
             blend_frames,
             dt,
             active: Vec::new(),
+            spare: Vec::new(),
             last: [frame(), frame()],
             pushed: 0,
             cur: vec![DQuat::IDENTITY; joints],
@@ -184,7 +208,15 @@ impl SeamInertializer {
             // The seam at f - 1: offsets from the two frames before it and the two from it.
             let [(p, pp), (l, lp)] = &self.last;
             let (h, hroot) = &self.held;
-            let inert = Inertializer::new((p, *pp), (l, *lp), (h, *hroot), (&self.cur, root), dt, blend as f64 * dt);
+            let frames = ((&p[..], *pp), (&l[..], *lp), (&h[..], *hroot), (&self.cur[..], root));
+            let blend_time = blend as f64 * dt;
+            let inert = match self.spare.pop() {
+                Some(mut inert) => {
+                    inert.reset(frames.0, frames.1, frames.2, frames.3, dt, blend_time);
+                    inert
+                }
+                None => Inertializer::new(frames.0, frames.1, frames.2, frames.3, dt, blend_time),
+            };
             inert.apply(dt, &mut self.held.0, &mut self.held.1);
             if blend > 1 {
                 inert.apply(2.0 * dt, &mut self.cur, &mut root);
@@ -195,7 +227,11 @@ impl SeamInertializer {
             self.out[0].1 = self.held.1;
             self.release(0);
         }
-        self.active.retain(|(s, _)| f + 1 - s < blend);
+        // Blends that end with this frame (the oldest seams come first) give their storage back.
+        while self.active.first().is_some_and(|(s, _)| f + 1 - s >= blend) {
+            let (_, inert) = self.active.remove(0);
+            self.spare.push(inert);
+        }
         if seam && f >= 2 && blend > 0 {
             self.held.0.copy_from_slice(&self.cur);
             self.held.1 = root;

@@ -549,8 +549,8 @@ fn write_poses(clip: &Clip, out: &mut [EnginePose]) {
 /// the engine's foot IK; the stream does not lock feet (the lock pins each contact at its mean
 /// over the whole contact, which a stream does not know yet).
 ///
-/// After its first window, pushing and popping allocate nothing on our side as long as the
-/// engine pops every frame it can (the buffer then holds at most `2 w + 1` frames); what tract
+/// After its first window (and its first marked seam), pushing and popping allocate nothing on
+/// our side as long as the engine pops every frame it can (the buffer then holds at most `2 w + 1` frames); what tract
 /// allocates per window is counted by `examples/rmr_window_latency` (docs/rmr.md).
 ///
 /// The stream borrows its refiner ([`StitchRefiner::stream`]) or shares it through an `Arc`
