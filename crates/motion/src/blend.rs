@@ -185,11 +185,6 @@ impl SeamInertializer {
         }
     }
 
-    /// Frames pushed so far (the index of the next one).
-    pub fn pushed(&self) -> usize {
-        self.pushed
-    }
-
     /// Pushes the next frame (`joints` local rotations and the root position); `seam`: a new
     /// clip starts at it. Returns how many frames became final (0, 1 or 2), read in order with
     /// [`SeamInertializer::released`].

@@ -476,8 +476,13 @@ fn calibrate_fallback(out: &Path, valid: &[MotionWindow], device: &candle_core::
     let lengths = config.validation_lengths();
     if config.train.lengths.is_some() && lengths.len() > 1 {
         for n in lengths {
-            let at = crate::fallback::target_misses_at(&model, &stats, valid, n)?;
-            if let Some(f) = crate::fallback::Fallback::calibrate(&at) {
+            // The longest length's misses are the ones measured above.
+            let at = if n == config.transition_frames {
+                None
+            } else {
+                Some(crate::fallback::target_misses_at(&model, &stats, valid, n)?)
+            };
+            if let Some(f) = crate::fallback::Fallback::calibrate(at.as_deref().unwrap_or(&misses)) {
                 config.fallback_lengths.push(zoo_format::TransitionFallbackAt {
                     length: n,
                     start: f.start,
