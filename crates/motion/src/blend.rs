@@ -185,6 +185,33 @@ impl SeamInertializer {
         }
     }
 
+    /// A whole sequence of `frames` frames with clips starting at `seams` (indices of at least
+    /// `frames` are the caller's to refuse first; they are ignored here): `frame(f, rotations)`
+    /// fills frame `f`'s rotations and returns its root position (or the caller's error), and
+    /// `put` receives every final frame in order.
+    pub fn run<E>(
+        &mut self,
+        frames: usize,
+        seams: &[usize],
+        mut frame: impl FnMut(usize, &mut Vec<DQuat>) -> Result<DVec3, E>,
+        mut put: impl FnMut(&[DQuat], DVec3),
+    ) -> Result<(), E> {
+        let mut rotations = Vec::with_capacity(self.joints);
+        for f in 0..frames {
+            let root = frame(f, &mut rotations)?;
+            let n = self.push(&rotations, root, seams.contains(&f));
+            for i in 0..n {
+                let (r, p) = self.released(i);
+                put(r, p);
+            }
+        }
+        for i in 0..self.finish() {
+            let (r, p) = self.released(i);
+            put(r, p);
+        }
+        Ok(())
+    }
+
     /// Pushes the next frame (`joints` local rotations and the root position); `seam`: a new
     /// clip starts at it. Returns how many frames became final (0, 1 or 2), read in order with
     /// [`SeamInertializer::released`].

@@ -408,29 +408,18 @@ impl StitchRefiner {
                 poses.len()
             )));
         }
-        let mut seam = vec![false; poses.len()];
-        for &s in seams {
-            seam[s] = true;
-        }
         let mut blend = SeamInertializer::new(self.joints, self.blend_frames, 1.0 / self.fps);
-        let mut rotations = Vec::with_capacity(self.joints);
         let mut frames: Vec<PoseFrame> = Vec::with_capacity(poses.len());
-        let mut take = |blend: &SeamInertializer, n: usize| {
-            for i in 0..n {
-                let (r, hips) = blend.released(i);
-                let mut frame = PoseFrame::default();
-                frame.set(&self.skeleton, &self.layout, r, hips);
-                frames.push(frame);
-            }
+        let read = |f: usize, rotations: &mut Vec<DQuat>| {
+            self.check_pose(&poses[f], f)?;
+            Ok::<_, MotionError>(Self::model_space(&poses[f], rotations))
         };
-        for (f, p) in poses.iter().enumerate() {
-            self.check_pose(p, f)?;
-            let hips = Self::model_space(p, &mut rotations);
-            let n = blend.push(&rotations, hips, seam[f]);
-            take(&blend, n);
-        }
-        let n = blend.finish();
-        take(&blend, n);
+        let put = |r: &[DQuat], hips: DVec3| {
+            let mut frame = PoseFrame::default();
+            frame.set(&self.skeleton, &self.layout, r, hips);
+            frames.push(frame);
+        };
+        blend.run(poses.len(), seams, read, put)?;
         zoo_motion::stitch::encode_frames(&self.layout, &frames, out);
         Ok(())
     }

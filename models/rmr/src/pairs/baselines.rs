@@ -4,6 +4,7 @@
 
 use zoo_motion::Clip;
 use zoo_motion::blend::SeamInertializer;
+use zoo_motion::glam::{DQuat, DVec3};
 use zoo_motion::quat::slerp;
 
 /// Inertialization at each seam (Bollo, GDC 2018; [`zoo_motion::blend::Inertializer`]): from
@@ -16,27 +17,19 @@ use zoo_motion::quat::slerp;
 pub fn inertialize_seams(aligned: &Clip, seams: &[usize], blend_frames: usize) -> Clip {
     let mut out = aligned.clone();
     let (frames, j) = (out.frames(), out.joints());
-    let mut seam = vec![false; frames];
-    for &s in seams.iter().filter(|&&s| s < frames) {
-        seam[s] = true;
-    }
     // The motion core's frame-by-frame form, which the runtime's stitch stream runs too.
-    let mut blend = SeamInertializer::new(j, blend_frames, out.frame_time);
     let mut next = 0;
-    let mut take = |blend: &SeamInertializer, n: usize, out: &mut Clip| {
-        for i in 0..n {
-            let (r, p) = blend.released(i);
-            out.local_rotations[next * j..(next + 1) * j].copy_from_slice(r);
-            out.local_positions[next * j] = p;
-            next += 1;
-        }
+    let read = |f: usize, r: &mut Vec<DQuat>| {
+        r.clear();
+        r.extend_from_slice(&aligned.local_rotations[f * j..(f + 1) * j]);
+        Ok::<_, std::convert::Infallible>(aligned.local_positions[f * j])
     };
-    for (f, &s) in seam.iter().enumerate() {
-        let n = blend.push(&aligned.local_rotations[f * j..(f + 1) * j], aligned.local_positions[f * j], s);
-        take(&blend, n, &mut out);
-    }
-    let n = blend.finish();
-    take(&blend, n, &mut out);
+    let write = |r: &[DQuat], p: DVec3| {
+        out.local_rotations[next * j..(next + 1) * j].copy_from_slice(r);
+        out.local_positions[next * j] = p;
+        next += 1;
+    };
+    let Ok(()) = SeamInertializer::new(j, blend_frames, aligned.frame_time).run(frames, seams, read, write);
     out.remove_sign_flips();
     out
 }
