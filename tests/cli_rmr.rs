@@ -67,6 +67,9 @@ fn train_resume_and_stitch() {
     let config: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(run_dir.join("config.json")).unwrap()).unwrap();
     assert_eq!(config["model"], "rmr");
+    // The fallback is calibrated on the validation pairs at the end of training.
+    let (start, full) = (config["fallback"]["start"].as_f64().unwrap(), config["fallback"]["full"].as_f64().unwrap());
+    assert!(start > 0.0 && (full - 2.0 * start).abs() < 1e-6 * full, "{}", config["fallback"]);
     // Resume: the cached pair plans are reused and only epoch 2 runs.
     let (ok, stdout, stderr) = run(&[
         "train",
@@ -85,6 +88,7 @@ fn train_resume_and_stitch() {
     assert!(ok, "{stdout}\n{stderr}");
     assert!(stdout.contains("pair plans reused"), "{stdout}");
     assert!(stdout.contains("epoch   2:") && !stdout.contains("epoch   1:"), "{stdout}");
+    assert!(stdout.contains("fallback calibrated on") && stdout.contains("stored in config.json"), "{stdout}");
     let state: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(run_dir.join("train_state.json")).unwrap()).unwrap();
     assert_eq!(state["epoch"], 2);
@@ -330,6 +334,9 @@ fn the_stitching_benchmark_measures_every_method() {
     ]);
     assert!(ok, "{stdout}\n{stderr}");
     assert!(stdout.contains("cases with ground truth") && stdout.contains("free cases"), "{stdout}");
+    // Each RMR method applies the run's calibrated fallback and says how often it acted.
+    let acted = |out: &str| out.matches("the fallback towards the refiner's input acted on").count();
+    assert_eq!(acted(&stdout), 5, "{stdout}");
     let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let cases = r["cases"].as_u64().unwrap();
     assert!(cases >= 10, "{cases} cases");
@@ -347,6 +354,24 @@ fn the_stitching_benchmark_measures_every_method() {
     assert_eq!(rows["concat"]["root_deviation"].as_f64(), Some(0.0));
     assert!(rows["concat"]["l2p"].as_f64().unwrap() > 0.0);
     assert!(r["ground_truth"]["l2p"].is_null());
+    // --no-fallback: the network alone.
+    let rmr = format!("rmr:{}", s(&run_dir));
+    let (ok, stdout, stderr) = run(&[
+        "bench",
+        "stitch",
+        "--data",
+        s(&data),
+        "--valid-glob",
+        "*_0010.bvh",
+        "--methods",
+        &rmr,
+        "--free-cases",
+        "1",
+        "--database-stride",
+        "2",
+        "--no-fallback",
+    ]);
+    assert!(ok && acted(&stdout) == 0, "{stdout}\n{stderr}");
     // Unknown and non-stitching methods are refused.
     let (ok, _, e) =
         run(&["bench", "stitch", "--data", s(&data), "--valid-glob", "*_0010.bvh", "--methods", "gmm:runs/x"]);

@@ -230,6 +230,61 @@ fn runtime_stitch_refiner_matches_candle() {
     assert!(worst <= TOLERANCE, "window 60: max |diff| {worst}");
 }
 
+/// The fallback towards the refiner's input (`stitch.fallback`, calibrated by `zoo train rmr`)
+/// acts in the runtime as in candle's `refine_sequence`: thresholds around the seeded model's
+/// own correction sizes so that windows are partly blended back, whole sequence and without it.
+#[test]
+fn runtime_stitch_fallback_matches_candle() {
+    use zoo_rmr::fallback::{Fallback, correction_size};
+    use zoo_rmr::features::FeatureLayout;
+    use zoo_rmr::stitch::{RefineOptions, refine_sequence};
+    use zoo_runtime::StitchRefiner;
+    let plain = fixture(RefinerCell::Bgru);
+    let d = plain.config.dim();
+    let fl = FeatureLayout::new(plain.config.joints, plain.config.layout.lower_body.len());
+    let frames = 77;
+    let pose = d - 4;
+    let mut x = lcg(23, frames * d, 3.0);
+    for (i, v) in x.iter_mut().enumerate() {
+        if i % d >= pose {
+            *v = (*v > 0.0) as u8 as f32;
+        }
+    }
+    // The correction size of the first window (normalised), and thresholds around it.
+    let mut first = x[..30 * d].to_vec();
+    plain.stats.normalize(&mut first);
+    let size = correction_size(&first, &plain.model.refine(&first).unwrap(), fl);
+    assert!(size > 0.0);
+    let fallback = Fallback { start: 0.5 * size, full: 1.5 * size };
+    let mut config = plain.config.clone();
+    config.fallback = Some(fallback);
+    let f = fixture_of(config);
+    let refiner = StitchRefiner::from_bytes(&export_rmr(&f.config, &f.stats, &f.varmap).unwrap().to_bytes()).unwrap();
+    assert_eq!(refiner.fallback(), Some(fallback));
+    assert!(!refiner.pre_blend());
+    let worst = |a: &[f32], b: &[f32]| {
+        (0..a.len()).filter(|i| i % d < pose).map(|i| (a[i] - b[i]).abs() / f.stats.std[i % d]).fold(0.0, f32::max)
+    };
+    let offline = refine_sequence(&f.model, &f.stats, &x, RefineOptions::of(&f.config)).unwrap();
+    let mut runtime = vec![0.0; x.len()];
+    refiner.refine_sequence(&x, &mut runtime).unwrap();
+    let diff = worst(&offline, &runtime);
+    println!("runtime stitch with the fallback vs candle: max |diff| {diff:e}");
+    assert!(diff <= TOLERANCE, "max |diff| {diff}");
+    // The fallback changed the output, and without it both are the network alone again.
+    let mut alone = f.model.clone();
+    alone.set_fallback(None);
+    let offline_alone = refine_sequence(&alone, &f.stats, &x, RefineOptions::of(&f.config)).unwrap();
+    assert!(worst(&offline, &offline_alone) > 1e-2, "the fallback acted");
+    let mut runtime_alone = refiner.clone();
+    runtime_alone.set_fallback(None).unwrap();
+    runtime_alone.refine_sequence(&x, &mut runtime).unwrap();
+    assert!(worst(&offline_alone, &runtime) <= TOLERANCE);
+    // Thresholds that are not thresholds are refused.
+    let err = runtime_alone.set_fallback(Some(Fallback { start: 2.0, full: 1.0 })).unwrap_err().to_string();
+    assert!(err.contains("start <= full"), "{err}");
+}
+
 /// Bad input to the runtime's stitching task: clear errors, no panic.
 #[test]
 fn runtime_stitch_refiner_refuses_bad_input() {

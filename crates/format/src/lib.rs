@@ -52,7 +52,7 @@ use glam::Vec3;
 pub use keyframes::KeyframesTask;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-pub use stitch::{StitchLayout, StitchTask};
+pub use stitch::{StitchFallback, StitchLayout, StitchTask};
 pub use synthesis::{SynthesisRefiner, SynthesisTask};
 pub use transition::{
     TimeToArrival, TransitionFallback, TransitionFallbackAt, TransitionTask, TransitionTerrain, fallback_for,

@@ -241,6 +241,8 @@ fn stitch_sample() -> MotionModelMetadata {
         window: 8,
         stride: 4,
         blend_frames: 3,
+        pre_blend: false,
+        fallback: None,
         layout: StitchLayout {
             lower_body: vec![0, 1, 2],
             contacts: [1, 1, 2, 2],
@@ -315,6 +317,45 @@ fn a_stitch_section_missing_a_field_is_refused_with_the_fix() {
     let mut bad = stitch_sample();
     bad.normalization.get_mut("x").unwrap().mean.pop();
     assert!(bad.check().unwrap_err().to_string().contains("group `x`"));
+}
+
+#[test]
+fn the_stitch_fallback_and_pre_blend_round_trip_default_to_off_and_are_checked() {
+    // Files written before the fields existed load with neither.
+    let m = stitch_sample();
+    let mut props = m.to_props();
+    let mut section: serde_json::Value = serde_json::from_str(&props.last().unwrap().1).unwrap();
+    let fields = section.as_object_mut().unwrap();
+    assert!(fields.remove("pre_blend").is_some() && fields.remove("fallback").is_some());
+    props.last_mut().unwrap().1 = section.to_string();
+    assert_eq!(MotionModelMetadata::from_props(lookup(&props)).unwrap(), m);
+    let mut with = stitch_sample();
+    if let MotionTask::Stitch(t) = &mut with.task {
+        t.pre_blend = true;
+        t.fallback = Some(StitchFallback { start: 0.5, full: 1.0 });
+    }
+    assert_eq!(MotionModelMetadata::from_props(lookup(&with.to_props())).unwrap(), with);
+    if let MotionTask::Stitch(t) = &mut with.task {
+        t.fallback = Some(StitchFallback { start: 1.0, full: f32::NAN });
+    }
+    assert!(with.check().unwrap_err().to_string().contains("start <= full"));
+}
+
+#[test]
+fn the_stitch_fallback_blends_pose_values_towards_the_input() {
+    // Frames of 3 values: 2 pose values, 1 contact.
+    let input = [0.0, 0.0, 1.0, 0.0, 0.0, 1.0];
+    let output = [3.0, 4.0, 0.0, 3.0, 4.0, 0.0];
+    assert_eq!(crate::stitch::correction_size(&input, &output, 3, 2), (12.5f32).sqrt());
+    let f = StitchFallback { start: 2.0, full: 5.0 };
+    let mut y = output;
+    let w = f.apply(&input, &mut y, 3, 2);
+    let expected = ((12.5f32).sqrt() - 2.0) / 3.0;
+    assert!((w - expected).abs() < 1e-6, "{w}");
+    assert!((y[0] - 3.0 * (1.0 - w)).abs() < 1e-6 && y[2] == 0.0 && y[5] == 0.0);
+    let mut small = [0.1, 0.0, 0.0, 0.1, 0.0, 0.0];
+    assert_eq!(f.apply(&[0.0; 6], &mut small, 3, 2), 0.0);
+    assert_eq!(small, [0.1, 0.0, 0.0, 0.1, 0.0, 0.0]);
 }
 
 #[test]

@@ -35,6 +35,7 @@ use std::ops::Deref;
 use std::path::Path;
 use std::sync::Arc;
 use tract_onnx::prelude::*;
+use zoo_format::StitchFallback;
 use zoo_motion::blend::SeamInertializer;
 use zoo_motion::stitch::{GroundRoot, PoseFrame, StitchLayout, decode_pose, encode_pose, next_root};
 use zoo_motion::{Clip, Skeleton};
@@ -59,6 +60,8 @@ pub struct StitchRefiner {
     std: Vec<f32>,
     skeleton: Skeleton,
     layout: StitchLayout,
+    pre_blend: bool,
+    fallback: Option<StitchFallback>,
 }
 
 fn stitch_err(reason: impl Into<String>) -> MotionError {
@@ -120,6 +123,7 @@ impl StitchRefiner {
         let stats = metadata.group("x", dim)?;
         let (mean, std) = (stats.mean.clone(), stats.std.clone());
         let (window, stride, blend_frames, layout) = (task.window, task.stride, task.blend_frames, task.layout.clone());
+        let (pre_blend, fallback) = (task.pre_blend, task.fallback);
         let fps = metadata.fps as f64;
         let plan = plan_for(&model, window, dim)?;
         Ok(StitchRefiner {
@@ -137,6 +141,8 @@ impl StitchRefiner {
             std,
             skeleton,
             layout,
+            pre_blend,
+            fallback,
         })
     }
 
@@ -198,6 +204,31 @@ impl StitchRefiner {
     /// Which joints are the lower body and the feet, and the contact thresholds.
     pub fn layout(&self) -> &StitchLayout {
         &self.layout
+    }
+
+    /// Whether the model was trained on sequences inertialized at their seams (`zoo train rmr
+    /// --pre-blend`; the file's `stitch.pre_blend`): give it the seams
+    /// ([`StitchRefiner::refine_poses_at_seams`], [`StitchStream::mark_seam`]) as `zoo stitch`
+    /// does.
+    pub fn pre_blend(&self) -> bool {
+        self.pre_blend
+    }
+
+    /// The fallback towards the refiner's input that every window gets (the file's calibrated
+    /// `stitch.fallback`, as `zoo stitch` applies it; `None`: the network alone).
+    pub fn fallback(&self) -> Option<StitchFallback> {
+        self.fallback
+    }
+
+    /// Sets the fallback of [`StitchRefiner::fallback`]: `None` for the network alone (`zoo
+    /// bench stitch --no-fallback`), or thresholds of your own (checked: finite, `0 <= start <=
+    /// full`).
+    pub fn set_fallback(&mut self, fallback: Option<StitchFallback>) -> Result<(), MotionError> {
+        if let Some(f) = &fallback {
+            f.check().map_err(stitch_err)?;
+        }
+        self.fallback = fallback;
+        Ok(())
     }
 
     /// Window starts over `frames` frames: every stride while the window fits, plus one ending
@@ -304,7 +335,8 @@ impl StitchRefiner {
     }
 
     /// Refines one window of normalised frames in place (RMR sec. 6): the model over the
-    /// window (whose first frames hold the previous window's output), then, unless it is the
+    /// window (whose first frames hold the previous window's output) and the fallback towards
+    /// that input ([`StitchRefiner::fallback`]), then, unless it is the
     /// sequence's first window, the difference between the previous output at the window's
     /// first frame and the new one blended away over `blend_frames` frames; contacts to 0/1.
     /// `y` (`w * dim`) and `offset` (`dim - 4`) are scratch.
@@ -317,6 +349,9 @@ impl StitchRefiner {
     ) -> Result<(), MotionError> {
         let (d, pose) = (self.dim, self.pose);
         self.refine_window_normalized(frames, y)?;
+        if let Some(f) = &self.fallback {
+            f.apply(frames, y, d, pose);
+        }
         if !first {
             // frames[0] is the previous output at the window's first frame (RMR sec. 6).
             for (i, o) in offset.iter_mut().enumerate() {

@@ -126,6 +126,11 @@ pub struct Config {
     /// raw aligned concatenation.
     #[serde(default)]
     pub pre_blend: bool,
+    /// The fallback towards the refiner's input on windows it corrects far more than the
+    /// validation pairs ([`crate::fallback`]), calibrated at the end of `zoo train rmr`; `None`
+    /// for runs calibrated before it existed and before training ends.
+    #[serde(default)]
+    pub fallback: Option<crate::fallback::Fallback>,
     /// Frames of the beginning loss (Table 2; paper: 5; 0 disables the loss).
     pub t_begin: usize,
     /// Weight of the pose loss (paper: 1).
@@ -196,6 +201,7 @@ impl Config {
             lambda_fk: 0.0,
             lambda_slide: 0.0,
             pre_blend: false,
+            fallback: None,
             seam_weight: 0.0,
             trajectory_unit: 100.0,
             window: 60,

@@ -188,6 +188,8 @@ pub fn metadata(config: &Config, stats: &FeatureStats) -> Result<MotionModelMeta
             stride: config.stride,
             blend_frames: config.blend_frames,
             layout: config.layout.clone(),
+            pre_blend: config.pre_blend,
+            fallback: config.fallback,
         }),
         config_json,
         normalization: [("x".to_string(), MotionMeanStd { mean: stats.mean.clone(), std: stats.std.clone() })].into(),

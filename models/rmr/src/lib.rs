@@ -26,6 +26,7 @@ pub mod config;
 pub mod data;
 pub mod error;
 pub mod export;
+pub mod fallback;
 pub mod features;
 pub mod footlock;
 pub mod loss;

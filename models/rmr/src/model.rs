@@ -58,6 +58,7 @@ pub struct Rmr {
     /// `(1, 1, dim)`: 1 on the pose values, 0 on the contacts (residual decoder only).
     residual_mask: Option<Tensor>,
     device: Device,
+    fallback_counts: std::sync::Arc<crate::fallback::FallbackCounts>,
 }
 
 impl Rmr {
@@ -80,7 +81,15 @@ impl Rmr {
                 Tensor::from_vec(mask, (1, 1, d), vb.device())
             })
             .transpose()?;
-        Ok(Rmr { config: config.clone(), encoder, refiner, decoder, residual_mask, device: vb.device().clone() })
+        Ok(Rmr {
+            config: config.clone(),
+            encoder,
+            refiner,
+            decoder,
+            residual_mask,
+            device: vb.device().clone(),
+            fallback_counts: Default::default(),
+        })
     }
 
     /// The configuration.
@@ -129,6 +138,29 @@ impl Rmr {
         let units = pre.dim(2)?;
         let max = pre.flatten_to(1)?.max(0)?.to_vec1::<f32>()?;
         Ok((max.iter().filter(|&&m| m > 0.0).count(), units))
+    }
+
+    /// Sets the fallback [`Rmr::refine_window`] applies (`None`: the network alone, as
+    /// `--no-fallback` asks); a loaded model has its configuration's.
+    pub fn set_fallback(&mut self, fallback: Option<crate::fallback::Fallback>) {
+        self.config.fallback = fallback;
+    }
+
+    /// [`Rmr::refine`] followed by the configuration's fallback ([`crate::fallback`]): the
+    /// window refiner of `zoo stitch` and the benchmark.
+    pub fn refine_window(&self, x: &[f32]) -> RmrResult<Vec<f32>> {
+        let mut y = self.refine(x)?;
+        if let Some(f) = &self.config.fallback {
+            let fl = crate::features::FeatureLayout::new(self.config.joints, self.config.layout.lower_body.len());
+            self.fallback_counts.count(f.apply(x, &mut y, fl.dim(), fl.contacts()));
+        }
+        Ok(y)
+    }
+
+    /// How often [`Rmr::refine_window`]'s fallback acted on this model and its clones
+    /// ([`crate::fallback::FallbackCounts::summary`]); `None` without a fallback.
+    pub fn fallback_summary(&self) -> Option<(u64, f64, f64)> {
+        self.config.fallback.map(|_| self.fallback_counts.summary())
     }
 
     /// Refines one sequence of normalised pose vectors (`frames * dim`), evaluation mode.

@@ -59,7 +59,7 @@ pub fn refine_sequence(
 ) -> RmrResult<Vec<f32>> {
     let config = model.config();
     let fl = FeatureLayout::new(config.joints, config.layout.lower_body.len());
-    refine_sequence_with(|w| model.refine(w), fl, stats, features, opts)
+    refine_sequence_with(|w| model.refine_window(w), fl, stats, features, opts)
 }
 
 /// [`refine_sequence`] with any window refiner: `refine` maps a normalised window
@@ -177,7 +177,7 @@ pub fn refine_clip(
 ) -> RmrResult<(Clip, Vec<[bool; 4]>)> {
     let config = model.config();
     config.check_skeleton(&aligned.skeleton)?;
-    refine_clip_with(|w| model.refine(w), &config.layout, stats, aligned, opts)
+    refine_clip_with(|w| model.refine_window(w), &config.layout, stats, aligned, opts)
 }
 
 /// [`refine_clip`] with any window refiner (see [`refine_sequence_with`]).
@@ -225,7 +225,7 @@ pub fn refine_clip_full_with(
 pub fn refine_clip_full(model: &Rmr, stats: &FeatureStats, aligned: &Clip, opts: RefineOptions) -> RmrResult<Refined> {
     let config = model.config();
     config.check_skeleton(&aligned.skeleton)?;
-    refine_clip_full_with(|w| model.refine(w), &config.layout, stats, aligned, opts)
+    refine_clip_full_with(|w| model.refine_window(w), &config.layout, stats, aligned, opts)
 }
 
 /// What follows the refiner (`zoo stitch` by default: both, in this order) and what comes

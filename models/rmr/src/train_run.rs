@@ -234,5 +234,28 @@ pub fn run(a: &RmrRunOptions, p: &dyn Progress) -> RmrResult<()> {
     };
     let state = train_loop::train(&mut training, &opts)?;
     println!("{}", zoo_nn::run_folder::done_line(&state, &out));
+    calibrate_fallback(&out, &data.valid, &device)
+}
+
+/// Calibrates the fallback of the best model in `out` ([`crate::fallback`]) on the validation
+/// pairs' correction sizes and writes it into the folder's `config.json` (atomically).
+fn calibrate_fallback(out: &std::path::Path, valid: &PairFeatures, device: &candle_core::Device) -> RmrResult<()> {
+    if !out.join(checkpoint::CONFIG_FILE).is_file() || valid.count == 0 {
+        return Ok(());
+    }
+    let (model, _) = checkpoint::load(out, device)?;
+    let sizes = crate::fallback::correction_sizes(&model, valid)?;
+    let Some(fallback) = crate::fallback::calibrate(&sizes) else { return Ok(()) };
+    let mut config = model.config().clone();
+    config.fallback = Some(fallback);
+    zoo_nn::checkpoint::write_json(&out.join(checkpoint::CONFIG_FILE), &config)?;
+    let mean = sizes.iter().sum::<f32>() / sizes.len() as f32;
+    println!(
+        "fallback calibrated on {} validation pairs (correction size mean {mean:.3}): towards the input from a \
+         size of {:.3} (95th percentile), fully at {:.3}; stored in config.json",
+        sizes.len(),
+        fallback.start,
+        fallback.full
+    );
     Ok(())
 }

@@ -47,6 +47,10 @@ pub struct StitchBenchArgs {
     /// Leave out of `--data` every clip whose file name matches this glob, before the split.
     #[arg(long)]
     pub exclude_glob: Option<String>,
+    /// Benchmark RMR run folders without their fallback towards the refiner's input (the
+    /// thresholds `zoo train rmr` calibrates; docs/rmr.md): the network alone.
+    #[arg(long)]
+    pub no_fallback: bool,
 }
 
 /// Runs the benchmark.
@@ -59,6 +63,14 @@ pub fn run(a: StitchBenchArgs) -> anyhow::Result<()> {
         .methods
         .iter()
         .map(|m| StitchMethod::parse(m.trim(), |spec| load(spec).map_err(crate::cmd::message)))
+        .map(|m| {
+            m.map(|mut m| {
+                if let (true, StitchMethod::Rmr { model, .. }) = (a.no_fallback, &mut m) {
+                    model.set_fallback(None);
+                }
+                m
+            })
+        })
         .collect::<Result<Vec<_>, _>>()?;
     let bar = crate::progress::Bar::new();
     let split = crate::cmd::Split {
@@ -76,6 +88,16 @@ pub fn run(a: StitchBenchArgs) -> anyhow::Result<()> {
     let result = zoo_rmr::bench::run(train, test, &a.data, &methods, &opts, &bar)?;
     drop(bar);
     println!("{}", zoo_rmr::bench::table(&result));
+    for m in &methods {
+        if let StitchMethod::Rmr { name, model, .. } = m
+            && let Some((windows, triggered, weight)) = model.fallback_summary()
+        {
+            println!(
+                "{name}: the fallback towards the refiner's input acted on {:.1} % of {windows} windows (mean weight {weight:.3})",
+                100.0 * triggered
+            );
+        }
+    }
     if let Some(path) = &a.json {
         crate::cmd::write_json(path, &result)?;
     }
