@@ -561,3 +561,64 @@ fn keys_only_gltf(clip: &zoo_motion::Clip, times: &[f32]) -> String {
     }
     serde_json::to_string(&doc).unwrap()
 }
+
+/// Issue 46: the in-betweening design trains on BVH clips, resumes, scores in the keys-only
+/// benchmark beside the baselines with every key met by the network itself, completes a keys
+/// file with a partial key, and is refused where only the autoregressive ARNN runs.
+#[test]
+fn inbetween_design_trains_resumes_scores_keys_and_completes() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("synth");
+    let d = data.to_str().unwrap();
+    let (ok, _, stderr) = run(&["data", "synth", "--out", d, "--minutes", "1", "--seed", "3"]);
+    assert!(ok, "{stderr}");
+    let runp = dir.path().join("ib");
+    let r = runp.to_str().unwrap();
+    let base = ["train", "arnn", "--design", "inbetween", "--data", d, "--valid-glob", "*_0005.bvh"];
+    let (ok, stdout, stderr) =
+        run(&[&base[..], &["--preset", "tiny", "--threads", "1", "--epochs", "1", "--seed", "2", "--out", r]].concat());
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("training the in-betweening network"), "{stdout}");
+    let config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(runp.join("config.json")).unwrap()).unwrap();
+    assert_eq!((config["model"].as_str(), config["design"].as_str()), (Some("arnn"), Some("inbetween")));
+    let (ok, stdout, stderr) = run(&["train", "arnn", "--epochs", "2", "--threads", "1", "--resume", r]);
+    assert!(ok && stdout.contains("epoch   2"), "{stdout}\n{stderr}");
+    let method = format!("arnn:{r}");
+    let json = dir.path().join("keys.json");
+    let bench = ["bench", "--data", d, "--valid-glob", "*_0005.bvh", "--layout", "keys", "--every", "10,30"];
+    let methods = format!("bezier,{method}");
+    let (ok, stdout, stderr) = run(&[&bench[..], &["--methods", &methods, "--json", json.to_str().unwrap()]].concat());
+    assert!(ok, "{stdout}\n{stderr}");
+    let result: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let row = &result["methods"][method.as_str()];
+    for k in [10, 30] {
+        assert!(row[format!("l2p@{k}")].as_f64().unwrap().is_finite(), "{row}");
+        // Met by construction: the network's own miss is float rounding.
+        assert!(row[format!("keymiss_raw_cm@{k}")].as_f64().unwrap() < 1e-6, "{row}");
+        assert!(row[format!("keymiss_raw_deg@{k}")].as_f64().unwrap() < 1e-3, "{row}");
+    }
+    let names: Vec<String> =
+        config["skeleton"]["names"].as_array().unwrap().iter().map(|v| v.as_str().unwrap().to_string()).collect();
+    let clip = std::fs::read_dir(&data)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.to_str().unwrap().ends_with("_0005.bvh"))
+        .unwrap();
+    let keys_path = dir.path().join("keys.json");
+    let text = format!(
+        r#"{{"format": "zoo-arnn-keys", "version": 1, "bvh": "{}",
+            "keys": [{{"frame": 0, "source_frame": 30}}, {{"frame": 12, "source_frame": 42, "joints": ["root", "{}"]}},
+                     {{"frame": 30, "source_frame": 60}}]}}"#,
+        clip.display(),
+        names[3]
+    );
+    std::fs::write(&keys_path, text).unwrap();
+    let out = dir.path().join("done.bvh");
+    let (ok, stdout, stderr) =
+        run(&["complete", "--model", r, "--keys", keys_path.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(ok && stdout.contains("completed 31 frames from 3 keys (1 partial)"), "{stdout}\n{stderr}");
+    assert!(stdout.contains("the network's largest key miss: root 0.00"), "{stdout}");
+    let (ok, _, stderr) = run(&["bench", "--data", d, "--valid-glob", "*_0005.bvh", "--methods", &method]);
+    assert!(!ok && stderr.contains("holds the in-betweening design"), "{stderr}");
+}

@@ -25,11 +25,10 @@
 //!   joint in the clip's own channel order (degrees, each key's angles taken nearest the
 //!   previous key's, as Blender's BVH importer keeps them continuous) and the root position.
 //!
-//! Models: `arnn:RUN_DIR` (a humanoid ARNN run folder: the keys are its keys, partial keys its
-//! partial keys).
+//! Models: `arnn:RUN_DIR` (a humanoid ARNN run folder, autoregressive or in-betweening design:
+//! the keys are its keys, partial keys its partial keys).
 
 use crate::Result;
-use crate::fcurve::FCurve;
 use glam::{DQuat, DVec3};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
@@ -170,23 +169,7 @@ pub fn linear(t: &KeyTask<'_>) -> Filled {
     out
 }
 
-/// Euler angles (degrees) of `q` in `order`, the representation nearest `prev`: each angle
-/// moved by whole turns, and of the two triples giving the same rotation the closer one.
-pub fn euler_near(order: EulerOrder, q: DQuat, prev: Option<[f64; 3]>) -> [f64; 3] {
-    let e = order.from_quat_deg(q);
-    let Some(p) = prev else { return e };
-    let unwrap = |v: [f64; 3]| -> [f64; 3] {
-        let mut o = v;
-        for i in 0..3 {
-            o[i] = v[i] + 360.0 * ((p[i] - v[i]) / 360.0).round();
-        }
-        o
-    };
-    let a = unwrap(e);
-    let b = unwrap([e[0] + 180.0, 180.0 - e[1], e[2] + 180.0]);
-    let dist = |v: &[f64; 3]| (0..3).map(|i| (v[i] - p[i]).abs()).sum::<f64>();
-    if dist(&b) < dist(&a) { b } else { a }
-}
+pub use zoo_motion::fcurve::euler_near;
 
 /// The Euler channels (degrees) of joint `jj` at the keys that fix it, continuous along them.
 pub fn euler_keys(t: &KeyTask<'_>, jj: usize) -> Vec<(f64, [f64; 3])> {
@@ -201,38 +184,15 @@ pub fn euler_keys(t: &KeyTask<'_>, jj: usize) -> Vec<(f64, [f64; 3])> {
         .collect()
 }
 
-fn curve(points: &[(f64, f64)]) -> std::result::Result<FCurve, String> {
-    FCurve::auto_clamped(points).ok_or_else(|| format!("keys {points:?} do not make an F-curve"))
-}
-
 /// Blender's default F-curves through the root position channels and each joint's Euler
-/// channels at the keys that fix them, evaluated at every frame.
+/// channels at the keys that fix them, evaluated at every frame
+/// ([`zoo_motion::fcurve::bezier_inbetween`]).
 pub fn bezier(t: &KeyTask<'_>) -> std::result::Result<Filled, String> {
-    let (n, j) = (t.len(), t.skeleton.len());
-    let mut out = Filled { root: vec![DVec3::ZERO; n], rot: vec![DQuat::IDENTITY; n * j], raw_miss: None };
-    for c in 0..3 {
-        let pts: Vec<(f64, f64)> = t.keys_fixing(0).map(|(k, f)| (f as f64, t.root[k][c])).collect();
-        let fc = curve(&pts)?;
-        for f in 0..n {
-            out.root[f][c] = fc.eval(f as f64);
-        }
-    }
-    for jj in 0..j {
-        let keys = euler_keys(t, jj);
-        let curves: Vec<FCurve> = (0..3)
-            .map(|c| curve(&keys.iter().map(|(f, e)| (*f, e[c])).collect::<Vec<_>>()))
-            .collect::<std::result::Result<_, _>>()?;
-        let order = t.skeleton.channels[jj].order;
-        // Signs continuous from the first key's (L2Q compares components).
-        let mut last = t.rot[jj];
-        for f in 0..n {
-            let e = [0, 1, 2].map(|c| curves[c].eval(f as f64));
-            let q = order.to_quat_deg(e);
-            last = if q.dot(last) < 0.0 { -q } else { q };
-            out.rot[f * j + jj] = last;
-        }
-    }
-    Ok(out)
+    let orders: Vec<EulerOrder> = t.skeleton.channels.iter().map(|c| c.order).collect();
+    let keys = zoo_motion::fcurve::ShotKeys { frames: &t.frames, root: &t.root, rot: &t.rot, fixed: &t.fixed };
+    let (root, rot) = zoo_motion::fcurve::bezier_inbetween(&orders, &keys)
+        .ok_or_else(|| format!("keys at frames {:?} do not make F-curves (a joint no key fixes?)", t.frames))?;
+    Ok(Filled { root, rot, raw_miss: None })
 }
 
 /// A humanoid ARNN run folder as a keys-only method (candle, one completion per window).
@@ -296,6 +256,92 @@ impl KeyMethod for ArnnKeys {
     }
 }
 
+/// An in-betweening run folder (`zoo train arnn --design inbetween`) as a keys-only method
+/// (candle; shots of one length as one batch): the network's poses, then the keys hit
+/// ([`zoo_motion::keyhit`]; the network meets them by construction, so this changes nothing
+/// beyond float rounding).
+pub struct InbetweenKeys {
+    name: String,
+    model: zoo_arnn::inbetween::Inbetween,
+    norm: zoo_arnn::Normalization,
+}
+
+impl InbetweenKeys {
+    /// Loads a `zoo train arnn --design inbetween` run folder.
+    pub fn load(dir: &Path, name: String) -> Result<Self> {
+        let (model, norm) = zoo_arnn::inbetween::load(dir, &candle_core::Device::Cpu)?;
+        Ok(InbetweenKeys { name, model, norm })
+    }
+
+    fn all(&self, tasks: &[KeyTask<'_>]) -> zoo_arnn::ArnnResult<Vec<Filled>> {
+        use zoo_arnn::humanoid::{decode, poses};
+        let c = self.model.config();
+        let Some(first) = tasks.first() else { return Ok(vec![]) };
+        let names = &first.skeleton.names;
+        if *names != c.skeleton.names {
+            return Err(zoo_arnn::ArnnError::Config(format!(
+                "the model was trained on a skeleton of {} joints, the data has {}: use a model trained on this skeleton",
+                c.skeleton.names.len(),
+                names.len()
+            )));
+        }
+        let j = c.joints();
+        let key_poses: Vec<Vec<Vec<f64>>> = tasks.iter().map(|t| poses(&t.root, &t.rot, j)).collect();
+        let fixed: Vec<Vec<Vec<bool>>> = tasks
+            .iter()
+            .map(|t| if t.fixed.iter().all(|m| m.iter().all(|&v| v)) { vec![] } else { t.fixed.clone() })
+            .collect();
+        let shots: Vec<zoo_arnn::inbetween::ShotKeyRefs<'_>> = tasks
+            .iter()
+            .zip(&key_poses)
+            .zip(&fixed)
+            .map(|((t, p), f)| (t.frames.as_slice(), p.as_slice(), f.as_slice()))
+            .collect();
+        let raw = zoo_arnn::inbetween::complete_shots(&self.model, &self.norm, &shots)?;
+        let groups = c.key_groups();
+        let mut out = Vec::with_capacity(tasks.len());
+        for (((t, kp), fx), raw) in tasks.iter().zip(&key_poses).zip(&fixed).zip(raw) {
+            let (root_miss, (angle_miss, _, _)) = zoo_arnn::humanoid::key_misses(&raw, &t.frames, kp, fx, j);
+            let d = c.dofs();
+            let mut flat: Vec<f64> = raw.iter().flatten().copied().collect();
+            let layout =
+                zoo_motion::keyhit::KeyLayout { dofs: d, frames: &t.frames, key_groups: &groups, quaternions: true };
+            let key_flat: Vec<f64> = kp.iter().flatten().copied().collect();
+            let fixes = |k: usize, g: usize| fx.get(k).is_none_or(|m| m[g]);
+            zoo_motion::keyhit::hit_keys(layout, &key_flat, fixes, &mut flat, &mut vec![0.0; d]);
+            let mut f = Filled {
+                root: Vec::with_capacity(t.len()),
+                rot: Vec::with_capacity(t.len() * j),
+                raw_miss: Some((root_miss, angle_miss)),
+            };
+            let mut last = t.rot[..j].to_vec();
+            for p in flat.chunks_exact(d) {
+                let (root, mut rot) = decode(p, j);
+                for (q, l) in rot.iter_mut().zip(last.iter_mut()) {
+                    if q.dot(*l) < 0.0 {
+                        *q = -*q;
+                    }
+                    *l = *q;
+                }
+                f.root.push(root);
+                f.rot.extend(rot);
+            }
+            out.push(f);
+        }
+        Ok(out)
+    }
+}
+
+impl KeyMethod for InbetweenKeys {
+    fn name(&self) -> String {
+        self.name.clone()
+    }
+
+    fn fill(&self, tasks: &[KeyTask<'_>]) -> std::result::Result<Vec<Filled>, String> {
+        self.all(tasks).map_err(|e| format!("{}: {e}", self.name))
+    }
+}
+
 /// The angle between two rotations, degrees.
 pub fn angle_deg(a: DQuat, b: DQuat) -> f64 {
     (2.0 * a.dot(b).abs().min(1.0).acos()).to_degrees()
@@ -315,6 +361,9 @@ pub fn method(spec: &str) -> Result<Box<dyn KeyMethod>> {
     match spec.split_once(':') {
         None if spec == "linear" => Ok(Box::new(ChannelBaseline::LINEAR)),
         None if spec == "bezier" => Ok(Box::new(ChannelBaseline::BEZIER)),
+        Some(("arnn", dir)) if zoo_arnn::inbetween::is_inbetween_run(Path::new(dir)) => {
+            Ok(Box::new(InbetweenKeys::load(Path::new(dir), spec.to_string())?))
+        }
         Some(("arnn", dir)) => Ok(Box::new(ArnnKeys::load(Path::new(dir), spec.to_string())?)),
         _ => bail!(
             "method `{spec}` is not one of the keys-only benchmark's: `linear`, `bezier`, `arnn:RUN_DIR` (a humanoid \

@@ -15,7 +15,7 @@
 
 pub mod control;
 pub mod exported;
-pub mod fcurve;
+pub use zoo_motion::fcurve;
 pub mod follow;
 pub mod inbetween;
 pub mod keyframes;

@@ -19,6 +19,7 @@ pub mod blend;
 pub mod clip;
 pub mod euler;
 pub mod facing;
+pub mod fcurve;
 pub mod features;
 pub mod finite;
 pub mod fit;

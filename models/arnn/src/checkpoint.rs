@@ -12,6 +12,13 @@ use zoo_nn::checkpoint as ck;
 
 /// Reads and checks the configuration and the normalisation statistics of a run folder.
 pub fn read_meta(dir: &Path) -> ArnnResult<(ArnnConfig, Normalization)> {
+    if crate::inbetween::is_inbetween_run(dir) {
+        return Err(ArnnError::Config(format!(
+            "{} holds the in-betweening design (`zoo train arnn --design inbetween`), which runs in `zoo complete` and \
+             `zoo bench --layout keys` only (no ONNX export, context layout or lamp evaluation yet)",
+            dir.display()
+        )));
+    }
     let config: ArnnConfig = ck::read_json(&dir.join(ck::CONFIG_FILE))?;
     config.validate().map_err(|e| ArnnError::Config(format!("{}: {e}", dir.join(ck::CONFIG_FILE).display())))?;
     let norm: Normalization = ck::read_json(&dir.join(ck::STATS_FILE))?;

@@ -423,10 +423,18 @@ fn write_outputs(
 /// Completes the keys of `o` with the ARNN of its run folder and writes what `o` asks for;
 /// returns the summary the command prints.
 pub fn complete_command(o: &CompleteOptions) -> ArnnResult<String> {
+    if crate::inbetween::is_inbetween_run(&o.model) {
+        let (model, norm) = crate::inbetween::load(&o.model, &candle_core::Device::Cpu)
+            .with_context(|| format!("loading the in-betweening network in {}", o.model.display()))?;
+        let names = model.config().skeleton.names.clone();
+        return complete_humanoid(o, crate::humanoid::HumanoidNet::Inbetween(&model), &norm, &names);
+    }
     let (model, norm) = crate::checkpoint::load(&o.model, &candle_core::Device::Cpu)
         .with_context(|| format!("loading the ARNN in {}", o.model.display()))?;
     match &model.config().skeleton {
-        Some(skeleton) => complete_humanoid(o, &model, &norm, &skeleton.names.clone()),
+        Some(skeleton) => {
+            complete_humanoid(o, crate::humanoid::HumanoidNet::Arnn(&model), &norm, &skeleton.names.clone())
+        }
         None => complete_lamp(o, &model, &norm),
     }
 }
@@ -546,7 +554,7 @@ pub fn key_poses(path: &Path, fps: f64) -> Result<(zoo_motion::Clip, Vec<usize>)
 /// `zoo complete` with a humanoid ARNN: key poses from a BVH, partial keys, a clip out.
 fn complete_humanoid(
     o: &CompleteOptions,
-    model: &Arnn,
+    model: crate::humanoid::HumanoidNet<'_>,
     norm: &Normalization,
     joint_names: &[String],
 ) -> ArnnResult<String> {

@@ -312,6 +312,66 @@ pub struct HumanoidCompletion {
     pub raw_miss: (f64, (f64, usize, usize)),
 }
 
+/// A humanoid keyframe network: the paper's autoregressive ARNN or the in-betweening design.
+#[derive(Clone, Copy, Debug)]
+pub enum HumanoidNet<'a> {
+    /// The autoregressive ARNN.
+    Arnn(&'a Arnn),
+    /// The in-betweening network ([`crate::inbetween`]).
+    Inbetween(&'a crate::inbetween::Inbetween),
+}
+
+impl HumanoidNet<'_> {
+    /// The skeleton the network was trained on.
+    pub fn skeleton(&self) -> Option<&HumanoidSkeleton> {
+        match self {
+            HumanoidNet::Arnn(m) => m.config().skeleton.as_ref(),
+            HumanoidNet::Inbetween(m) => Some(&m.config().skeleton),
+        }
+    }
+
+    /// Checks that the network was trained on `skeleton` (same joint names and parents).
+    pub fn check_skeleton(&self, skeleton: &Skeleton) -> ArnnResult<()> {
+        match self {
+            HumanoidNet::Arnn(m) => check_skeleton(m.config(), skeleton),
+            HumanoidNet::Inbetween(m) => {
+                let s = &m.config().skeleton;
+                let info = skeleton_info(skeleton, s.fps);
+                if s.names != info.names || s.parents != info.parents {
+                    return Err(ArnnError::Config(format!(
+                        "the network was trained on a skeleton of {} joints, the clip has {}: use a model trained on \
+                         this skeleton",
+                        s.names.len(),
+                        info.names.len()
+                    )));
+                }
+                Ok(())
+            }
+        }
+    }
+}
+
+/// Hits the keys in completed humanoid poses ([`zoo_motion::keyhit`], as [`crate::hit_keys`]):
+/// each key frame equals its key on the groups it fixes, the frames before it blended towards it.
+pub fn hit_humanoid_keys(
+    names: &[String],
+    key_frames: &[usize],
+    key_poses: &[Vec<f64>],
+    fixed: &[Vec<bool>],
+    out: &mut [Vec<f64>],
+) {
+    let (_, groups) = pose_layout(names);
+    let d = groups.len();
+    let layout = zoo_motion::keyhit::KeyLayout { dofs: d, frames: key_frames, key_groups: &groups, quaternions: true };
+    let poses: Vec<f64> = key_poses.iter().flatten().copied().collect();
+    let mut flat: Vec<f64> = out.iter().flatten().copied().collect();
+    let fixes = |k: usize, g: usize| fixed.get(k).is_none_or(|m| m.get(g).copied().unwrap_or(true));
+    zoo_motion::keyhit::hit_keys(layout, &poses, fixes, &mut flat, &mut vec![0.0; d]);
+    for (o, f) in out.iter_mut().zip(flat.chunks_exact(d)) {
+        o.copy_from_slice(f);
+    }
+}
+
 /// The largest key misses of completed poses (`frames` from frame 0): the root distance (clip
 /// units) over the keys fixing the root, and the rotation angle (degrees, with the key's and
 /// the joint's index) over the keys fixing each joint. `fixed` empty: whole keys.
@@ -345,12 +405,12 @@ pub fn key_misses(
 /// training windows are in (root x/z centred on the keys' mean, facing +X at the first key,
 /// about +Y), completed, and brought back.
 pub fn complete_clip(
-    model: &Arnn,
+    model: HumanoidNet<'_>,
     norm: &Normalization,
     source: &zoo_motion::Clip,
     keys: &[HumanoidKey],
 ) -> ArnnResult<HumanoidCompletion> {
-    check_skeleton(model.config(), &source.skeleton)?;
+    model.check_skeleton(&source.skeleton)?;
     let j = source.skeleton.len();
     let n = source.frames();
     if let Some((i, k)) = keys.iter().enumerate().find(|(_, k)| k.source >= n) {
@@ -363,8 +423,8 @@ pub fn complete_clip(
     if keys.is_empty() {
         return Err(ArnnError::Config("no key given".into()));
     }
-    let groups = model.config().groups();
-    if let Some(s) = &model.config().skeleton {
+    let groups = 1 + j;
+    if let Some(s) = model.skeleton() {
         let fps = 1.0 / source.frame_time;
         if (fps / s.fps - 1.0).abs() > 0.01 {
             return Err(ArnnError::Config(format!(
@@ -400,9 +460,14 @@ pub fn complete_clip(
     } else {
         keys.iter().map(|k| k.fixed.clone().unwrap_or_else(|| vec![true; groups])).collect()
     };
-    let mut out = crate::train::complete_partial_raw(model, norm, &frames, &key_poses, &fixed)?;
+    let mut out = match model {
+        HumanoidNet::Arnn(m) => crate::train::complete_partial_raw(m, norm, &frames, &key_poses, &fixed)?,
+        HumanoidNet::Inbetween(m) => {
+            crate::inbetween::complete_shots(m, norm, &[(&frames, &key_poses, &fixed)])?.remove(0)
+        }
+    };
     let raw_miss = key_misses(&out, &frames, &key_poses, &fixed, j);
-    crate::train::hit_keys(model.config(), &frames, &key_poses, &fixed, &mut out);
+    hit_humanoid_keys(&source.skeleton.names, &frames, &key_poses, &fixed, &mut out);
     let (root_miss, angle_miss) = key_misses(&out, &frames, &key_poses, &fixed, j);
     // Back to the clip's frame; rotation signs continuous from the first key's.
     let from_canon = to_canon.inverse();

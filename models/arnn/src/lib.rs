@@ -12,6 +12,8 @@ pub mod config;
 pub mod eval;
 pub mod export;
 pub mod humanoid;
+pub mod inbetween;
+pub mod inbetween_train;
 pub mod keys;
 pub mod luxo;
 pub mod model;

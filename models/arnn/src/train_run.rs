@@ -47,6 +47,19 @@ impl ArnnVariant {
     }
 }
 
+/// Which network `zoo train arnn` trains.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "kebab-case")]
+pub enum ArnnDesign {
+    /// The paper's autoregressive ARNN (lamp or humanoid clips).
+    #[default]
+    Autoregressive,
+    /// Humanoid clips only: the bidirectional GRU over the whole shot that corrects Blender's
+    /// Bezier curves through the keys, the keys met by construction ([`crate::inbetween`]).
+    Inbetween,
+}
+
 /// What the no-memory net's output is added to ([`NoMemoryOutput`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
@@ -96,6 +109,8 @@ pub struct ArnnRunOptions {
     pub test_fraction: f64,
     /// Model variant.
     pub variant: ArnnVariant,
+    /// Which network: the paper's ARNN or the in-betweening design (humanoid clips).
+    pub design: ArnnDesign,
     /// With the no-memory variant: what the net's output is added to.
     pub no_memory_output: Option<NoMemoryOutputArg>,
     /// Model sizes.
@@ -368,6 +383,12 @@ fn fresh_lamp_trainer(a: &ArnnRunOptions, data: &LampData, variant: ArnnVariant)
 
 /// Runs `zoo train arnn` (a humanoid run with `valid_glob` or on a humanoid run folder).
 pub fn run(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
+    let resumed_inbetween = a.run.resume.as_deref().is_some_and(|d| {
+        crate::inbetween::is_inbetween_run(d) || crate::inbetween::is_inbetween_run(&train_loop::resume_dir(d))
+    });
+    if a.design == ArnnDesign::Inbetween || resumed_inbetween {
+        return train_inbetween(a, p);
+    }
     check_options(a)?;
     if a.valid_glob.is_some() || a.run.resume.as_deref().is_some_and(is_humanoid_run) {
         return train_humanoid(a, p);
@@ -608,6 +629,116 @@ pub fn train_humanoid(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
     println!(
         "done: {} epochs ({} steps) in {:.1} min, best validation loss {:.5} at epoch {}; model in {}\nscore it: zoo \
          bench --data {} --valid-glob '{}' --methods interp,arnn:{}",
+        state.epoch,
+        state.steps,
+        state.seconds / 60.0,
+        state.best_valid.unwrap_or(f64::NAN),
+        state.best_epoch,
+        out.display(),
+        s.dir.display(),
+        s.valid_glob,
+        out.display()
+    );
+    Ok(())
+}
+
+/// `zoo train arnn --design inbetween --data BVH_FOLDER --valid-glob GLOB`: the in-betweening
+/// network ([`crate::inbetween`]) on 66-frame windows of the training split, keys drawn afresh
+/// for every batch ([`crate::inbetween_train`]); validated on up to
+/// [`crate::inbetween_train::VALID_MAX`] windows of the validation split keyed as the keys-only
+/// benchmark. Scored afterwards by `zoo bench --layout keys --methods linear,bezier,arnn:DIR`.
+pub fn train_inbetween(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
+    if a.variant != ArnnVariant::Arnn
+        || a.no_memory_output.is_some()
+        || a.frame_phase.is_some()
+        || a.frame_phase_omega.is_some()
+        || a.ground_weight.is_some()
+    {
+        bail!(
+            "--variant, --no-memory-output, --frame-phase, --frame-phase-omega and --ground-weight are settings of the              autoregressive ARNN; the in-betweening design has none of them: drop them"
+        );
+    }
+    if a.run.resume.is_none() && (a.data.is_none() || a.valid_glob.is_none()) {
+        bail!("--design inbetween trains on humanoid clips: pass --data BVH_FOLDER --valid-glob GLOB");
+    }
+    let out = prepare_run_folder(a)?;
+    let mut extra = serde_json::Map::new();
+    extra.insert("design".into(), crate::inbetween::DESIGN.into());
+    let (s, resumed) = humanoid_settings(a, &mut extra)?;
+    let clips = zoo_data::dataset::load_reporting(&s.dir, None, false, p)?;
+    let (train_clips, valid_clips) = zoo_data::dataset::split(clips, &s.valid_glob).map_err(Message::new)?;
+    let train_w = zoo_data::dataset::windows(&train_clips, &humanoid::WINDOW);
+    let valid_w = zoo_data::dataset::windows(&valid_clips, &humanoid::WINDOW);
+    if train_w.count == 0 || valid_w.count == 0 {
+        bail!(
+            "{}: {} training and {} validation windows of {} frames: both splits need clips longer than {} frames",
+            s.dir.display(),
+            train_w.count,
+            valid_w.count,
+            humanoid::WINDOW.window,
+            humanoid::WINDOW.window
+        );
+    }
+    let skeleton = &train_clips[0].clip.skeleton;
+    let (config, norm) = if resumed {
+        let from = train_loop::resume_dir(&out);
+        let (config, norm) = crate::inbetween::read_meta(&from)
+            .with_context(|| format!("resuming from {}: it holds no in-betweening checkpoint", from.display()))?;
+        if config.skeleton.names != skeleton.names {
+            bail!("--resume {}: the run was trained on another skeleton than {}'s", out.display(), s.dir.display());
+        }
+        (config, norm)
+    } else {
+        let fps = 1.0 / train_clips[0].clip.frame_time;
+        let mut config = crate::inbetween::config_for(skeleton, fps);
+        if a.preset == ArnnPreset::Tiny {
+            config = crate::inbetween::InbetweenConfig::tiny(config.skeleton, config.euler_axes);
+        }
+        if let Some(b) = a.batch_size {
+            config.batch_size = b;
+        }
+        if let Some(lr) = a.lr {
+            config.learning_rate = lr;
+        }
+        config.seed = a.run.seed;
+        config.lr_half_life = (train_w.count.div_ceil(config.batch_size) * a.run.epochs).div_ceil(4) as u64;
+        let norm = crate::inbetween_train::window_normalization(&train_w);
+        (config, norm)
+    };
+    let (n_train, n_valid) = (train_w.count, valid_w.count);
+    let mut trainer = crate::inbetween_train::InbetweenTrainer::new(&config, norm, train_w, &valid_w)?;
+    let source = format!(
+        "{} ({} training clips, {} validation clips matching `{}`)",
+        s.dir.display(),
+        train_clips.len(),
+        valid_clips.len(),
+        s.valid_glob
+    );
+    println!(
+        "training the in-betweening network on {source}: {n_train} training / {n_valid} validation windows of {} \
+         frames, {} joints, {} parameters, learning rate {} halved every {} steps, run folder {}",
+        humanoid::WINDOW.window,
+        skeleton.len(),
+        trainer.parameter_count(),
+        config.learning_rate,
+        config.lr_half_life,
+        out.display()
+    );
+    let threads = a.run.thread_count();
+    trainer.set_threads(threads)?;
+    println!("training threads: {threads} (data-parallel; --threads to change)");
+    extra.insert("threads".into(), threads.into());
+    let opts = TrainOptions {
+        time_limit: a.run.time_limit(),
+        resume: resumed,
+        data: source,
+        extra,
+        ..TrainOptions::new(&out, a.run.epochs, config.seed)
+    };
+    let state = train_loop::train(&mut trainer, &opts)?;
+    println!(
+        "done: {} epochs ({} steps) in {:.1} min, best validation loss {:.5} at epoch {}; model in {}\nscore it: zoo \
+         bench --data {} --valid-glob '{}' --layout keys --methods linear,bezier,arnn:{}",
         state.epoch,
         state.steps,
         state.seconds / 60.0,

@@ -5,7 +5,7 @@
 use crate::cmd::train_args::{RunArgs, TrainDefaults};
 use clap::Args;
 use std::path::PathBuf;
-use zoo_arnn::train_run::{ArnnPreset, ArnnRunOptions, ArnnVariant, NoMemoryOutputArg};
+use zoo_arnn::train_run::{ArnnDesign, ArnnPreset, ArnnRunOptions, ArnnVariant, NoMemoryOutputArg};
 
 /// The ARNN's defaults.
 #[derive(Clone)]
@@ -48,6 +48,12 @@ pub struct ArnnArgs {
     /// (no-memory, segregated; parameter counts matched to the ARNN's).
     #[arg(long, value_enum, default_value_t = ArnnVariant::Arnn)]
     pub variant: ArnnVariant,
+    /// Which network: the paper's autoregressive ARNN, or (humanoid clips, with `--data` and
+    /// `--valid-glob`) the in-betweening design, a bidirectional GRU correcting Blender's Bezier
+    /// curves through the keys, every key met by construction (docs/keys-only.md). A resumed
+    /// run keeps its own.
+    #[arg(long, value_enum, default_value_t = ArnnDesign::Autoregressive)]
+    pub design: ArnnDesign,
     /// With `--variant no-memory`: what the net's output is added to [default: interpolation]
     /// (docs/arnn.md, "Table 2 and the no-memory net's output")
     #[arg(long, value_enum)]
@@ -102,6 +108,7 @@ pub fn run(a: ArnnArgs) -> anyhow::Result<()> {
         k_max: a.k_max,
         test_fraction: a.test_fraction,
         variant: a.variant,
+        design: a.design,
         no_memory_output: a.no_memory_output,
         preset: a.preset,
         batch_size: a.batch_size,

@@ -26,6 +26,9 @@
 //!    that the equations pull back into its range is released (at most twice), as Blender does.
 //! 5. Outside the keys the curve holds the first and the last value.
 
+use crate::euler::EulerOrder;
+use glam::{DQuat, DVec3};
+
 /// One key of a curve with its handles (time, value).
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Key {
@@ -346,6 +349,91 @@ fn solve_time(x: f64, x0: f64, x1: f64, x2: f64, x3: f64) -> f64 {
     0.5 * (a + b)
 }
 
+/// Euler angles (degrees) of `q` in `order`, the representation nearest `prev`: each angle
+/// moved by whole turns, and of the two triples giving the same rotation the closer one (as
+/// Blender's BVH importer keeps a joint's curves continuous).
+pub fn euler_near(order: EulerOrder, q: DQuat, prev: Option<[f64; 3]>) -> [f64; 3] {
+    let e = order.from_quat_deg(q);
+    let Some(p) = prev else { return e };
+    let unwrap = |v: [f64; 3]| -> [f64; 3] {
+        let mut o = v;
+        for i in 0..3 {
+            o[i] = v[i] + 360.0 * ((p[i] - v[i]) / 360.0).round();
+        }
+        o
+    };
+    let a = unwrap(e);
+    let b = unwrap([e[0] + 180.0, 180.0 - e[1], e[2] + 180.0]);
+    let dist = |v: &[f64; 3]| (0..3).map(|i| (v[i] - p[i]).abs()).sum::<f64>();
+    if dist(&b) < dist(&a) { b } else { a }
+}
+
+/// Keys of a shot for [`bezier_inbetween`]: frames from 0, strictly increasing; per key the
+/// root position and the local rotations (keys x joints); per key which groups it fixes
+/// (group 0 the root position, `1 + j` joint `j`'s rotation; empty: every key whole).
+#[derive(Clone, Copy, Debug)]
+pub struct ShotKeys<'a> {
+    /// Key frames.
+    pub frames: &'a [usize],
+    /// Root position per key.
+    pub root: &'a [DVec3],
+    /// Local rotations, keys x joints.
+    pub rot: &'a [DQuat],
+    /// Per key, `1 + joints` flags; empty: whole keys.
+    pub fixed: &'a [Vec<bool>],
+}
+
+impl ShotKeys<'_> {
+    fn fixes(&self, k: usize, g: usize) -> bool {
+        self.fixed.get(k).is_none_or(|m| m[g])
+    }
+}
+
+/// Blender's default F-curves ([`FCurve::auto_clamped`]) through the root position channels
+/// and each joint's Euler channels (degrees, in `orders[j]`, continuous along the keys by
+/// [`euler_near`]) at the keys that fix them, evaluated at frames `0..=last key`: root
+/// positions and local rotations (frames x joints), each joint's rotation signs continuous
+/// from its first key's. `None` when a group is fixed by no key, or the frames do not strictly
+/// increase.
+pub fn bezier_inbetween(orders: &[EulerOrder], keys: &ShotKeys<'_>) -> Option<(Vec<DVec3>, Vec<DQuat>)> {
+    let j = orders.len();
+    let n = keys.frames.last()? + 1;
+    if keys.root.len() != keys.frames.len() || keys.rot.len() != keys.frames.len() * j {
+        return None;
+    }
+    let fixing = |g: usize| (0..keys.frames.len()).filter(move |&k| keys.fixes(k, g));
+    let mut root = vec![DVec3::ZERO; n];
+    for c in 0..3 {
+        let pts: Vec<(f64, f64)> = fixing(0).map(|k| (keys.frames[k] as f64, keys.root[k][c])).collect();
+        let fc = FCurve::auto_clamped(&pts)?;
+        for (f, r) in root.iter_mut().enumerate() {
+            r[c] = fc.eval(f as f64);
+        }
+    }
+    let mut rot = vec![DQuat::IDENTITY; n * j];
+    for (jj, &order) in orders.iter().enumerate() {
+        let mut prev: Option<[f64; 3]> = None;
+        let pts: Vec<(f64, [f64; 3])> = fixing(1 + jj)
+            .map(|k| {
+                let e = euler_near(order, keys.rot[k * j + jj], prev);
+                prev = Some(e);
+                (keys.frames[k] as f64, e)
+            })
+            .collect();
+        let first = fixing(1 + jj).next()?;
+        let curves: Vec<FCurve> = (0..3)
+            .map(|c| FCurve::auto_clamped(&pts.iter().map(|(f, e)| (*f, e[c])).collect::<Vec<_>>()))
+            .collect::<Option<_>>()?;
+        let mut last = keys.rot[first * j + jj];
+        for f in 0..n {
+            let q = order.to_quat_deg([0, 1, 2].map(|c| curves[c].eval(f as f64)));
+            last = if q.dot(last) < 0.0 { -q } else { q };
+            rot[f * j + jj] = last;
+        }
+    }
+    Some((root, rot))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -354,6 +442,7 @@ mod tests {
     /// `fcurve.keyframe_points.insert` and `fcurve.evaluate` at frames 0, 3, ..., 30: every
     /// interior key is an extremum here, so every handle is flat.
     #[test]
+    #[allow(clippy::approx_constant)] // 3.14 is a value Blender evaluated, not pi.
     fn matches_blender_on_extrema() {
         let c = FCurve::auto_clamped(&[(0.0, 0.0), (10.0, 5.0), (20.0, 3.0), (30.0, 8.0)]).unwrap();
         let blender = [0.0, 1.08, 3.24, 4.860001, 4.792, 4.0, 3.208, 3.14, 4.76, 6.920001, 8.0];

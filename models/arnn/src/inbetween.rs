@@ -1,0 +1,650 @@
+//! The key-to-key in-betweening network for humanoid keys (issue 46, beyond the ARNN paper): a
+//! bidirectional GRU over a whole shot that predicts a correction of Blender's default F-curves
+//! through the keys ([`zoo_motion::fcurve::bezier_inbetween`]), scaled per value by an envelope
+//! that is zero on the key frames fixing it, so that every key is met by construction. It is
+//! the residual-on-interpolation idea of the RTN (Harvey et al. 2020, sec. 3.3, where it took
+//! the RTN from worse than interpolation to a third of its error) applied to an animator's keys,
+//! with the whole shot seen at once instead of autoregressively (the ARNN of the paper, sec. 6,
+//! drifts 1-2 m away from humanoid keys before its key correction, docs/keys-only.md).
+//!
+//! Poses are the humanoid ARNN's ([`crate::humanoid`]): the root position, then one quaternion
+//! `(w, x, y, z)` per joint, `d = 3 + 4 J` values, in network units `(x - mean) / std`. Key
+//! groups: group 0 is the root position, group `1 + j` joint `j`'s rotation. Per frame `t` of a
+//! shot (frames `0..=last key`) the network reads:
+//! - `b_t`, the Bezier pose;
+//! - `k-_t - b_t` and `k+_t - b_t`: per value, the previous key fixing its group (at or before
+//!   `t`) and the next one (after `t`), minus the Bezier pose (a key's quaternion taken with the
+//!   sign nearest the Bezier one);
+//! - the phase `s_t = (t - t-) / (t+ - t-)` and the gap `(t+ - t-) / gap_unit` of the keys fixing
+//!   the root;
+//! - per group, 1 where a key fixes it at `t`, and its envelope `e_g(t) = 4 s (1 - s)` (`s` the
+//!   phase between the keys fixing the group; 0 on them and outside them).
+//!
+//! Output: `x_t = b_t + e(t) * D(BGRU(E(input_t)))`, `e` per value its group's envelope.
+
+use crate::config::HumanoidSkeleton;
+use crate::train::Normalization;
+use crate::{ArnnError, ArnnResult};
+use candle_core::{Device, Module, Tensor};
+use candle_nn::VarBuilder;
+use glam::{DQuat, DVec3};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+use zoo_motion::EulerOrder;
+use zoo_motion::fcurve::{ShotKeys, bezier_inbetween};
+use zoo_nn::{Activation, BiGru, Mlp, RowRngs};
+
+/// The `design` field of an in-betweening run's `config.json`.
+pub const DESIGN: &str = "inbetween";
+
+/// Sizes, loss weights and key sampling of the in-betweening network.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct InbetweenConfig {
+    /// Always `"arnn"`: the run folder is a `zoo train arnn` run.
+    pub model: String,
+    /// Always [`DESIGN`]: which design of `zoo train arnn` the folder holds.
+    pub design: String,
+    /// The skeleton and the clips' frame rate.
+    pub skeleton: HumanoidSkeleton,
+    /// Each joint's Euler channel order as axis indices (0 = X, 1 = Y, 2 = Z; bandai2: ZXY =
+    /// `[2, 0, 1]`): the Bezier curves are drawn on these channels, as Blender draws them.
+    pub euler_axes: Vec<[usize; 3]>,
+    /// Width of the per-frame encoder E (one ReLU layer).
+    pub encoder: usize,
+    /// GRU units per direction.
+    pub hidden: usize,
+    /// Bidirectional GRU layers.
+    pub layers: usize,
+    /// Hidden width of the decoder D (one ReLU layer, then a linear layer to `d` values).
+    pub decoder: usize,
+    /// Dropout between GRU layers in training.
+    pub dropout: f64,
+    /// Frames the gap input is divided by.
+    pub gap_unit: f64,
+    /// Weight of the global position loss (forward kinematics) beside the pose L1 loss.
+    pub lambda_fk: f64,
+    /// Clip units (bandai2: cm) a global position error is divided by in the loss.
+    pub fk_unit: f64,
+    /// Weight of the global velocity loss: every joint's frame-to-frame displacement by forward
+    /// kinematics against the truth's (0: off; runs written before the field have none).
+    #[serde(default)]
+    pub lambda_vel: f64,
+    /// Clip units a velocity error (per frame) is divided by in the loss.
+    #[serde(default = "one")]
+    pub vel_unit: f64,
+    /// Weight of the feet (joints named `foot` or `toe`) in the velocity loss, the others' 1:
+    /// their displacement while the truth's stands still is the foot skate.
+    #[serde(default = "one")]
+    pub foot_weight: f64,
+    /// Training keys: smallest base spacing in frames.
+    pub min_gap: usize,
+    /// Training keys: largest base spacing in frames.
+    pub max_gap: usize,
+    /// Training keys: fraction of shots keyed exactly every K frames (the rest jittered, each
+    /// gap drawn in `[0.6 K, 1.4 K]`).
+    pub regular_fraction: f64,
+    /// Training keys: fraction of shots whose keys between the first and the last fix the root
+    /// and the limbs' end joints only (the benchmark's partial layout).
+    pub partial_fraction: f64,
+    /// Shots per batch.
+    pub batch_size: usize,
+    /// Adam learning rate.
+    pub learning_rate: f64,
+    /// The learning rate halves every this many steps (0: constant); `zoo train arnn
+    /// --design inbetween` sets a quarter of the run's steps, so that the run ends at a
+    /// sixteenth of it.
+    #[serde(default)]
+    pub lr_half_life: u64,
+    /// Gradient norm clipped to this (0: no clipping).
+    pub max_grad_norm: f64,
+    /// Seed of the weights and of the key draws.
+    pub seed: u64,
+}
+
+impl InbetweenConfig {
+    /// The humanoid sizes: encoder 256, one bidirectional GRU layer of 256 units per direction,
+    /// decoder 256; keys every 5-30 frames, half of them regular, a fifth partial; pose L1 plus
+    /// the global position loss in units of 10 cm (the velocity loss off: with weight 1, feet
+    /// 4, it slowed the position terms without lowering the skate, docs/keys-only.md); Adam
+    /// 1e-3, batches of 32.
+    pub fn humanoid(skeleton: HumanoidSkeleton, euler_axes: Vec<[usize; 3]>) -> Self {
+        InbetweenConfig {
+            model: "arnn".into(),
+            design: DESIGN.into(),
+            skeleton,
+            euler_axes,
+            encoder: 256,
+            hidden: 256,
+            layers: 1,
+            decoder: 256,
+            dropout: 0.0,
+            gap_unit: 30.0,
+            lambda_fk: 1.0,
+            fk_unit: 10.0,
+            lambda_vel: 0.0,
+            vel_unit: 1.0,
+            foot_weight: 4.0,
+            min_gap: 5,
+            max_gap: 30,
+            regular_fraction: 0.5,
+            partial_fraction: 0.2,
+            batch_size: 32,
+            learning_rate: 1e-3,
+            lr_half_life: 0,
+            max_grad_norm: 1.0,
+            seed: 1,
+        }
+    }
+
+    /// The humanoid configuration at test sizes (widths of 16).
+    pub fn tiny(skeleton: HumanoidSkeleton, euler_axes: Vec<[usize; 3]>) -> Self {
+        InbetweenConfig { encoder: 16, hidden: 16, decoder: 16, batch_size: 4, ..Self::humanoid(skeleton, euler_axes) }
+    }
+
+    /// Joints.
+    pub fn joints(&self) -> usize {
+        self.skeleton.names.len()
+    }
+
+    /// Values per pose, `3 + 4 J`.
+    pub fn dofs(&self) -> usize {
+        3 + 4 * self.joints()
+    }
+
+    /// Key groups, `1 + J`.
+    pub fn groups(&self) -> usize {
+        1 + self.joints()
+    }
+
+    /// The group of each pose value.
+    pub fn key_groups(&self) -> Vec<usize> {
+        crate::humanoid::pose_layout(&self.skeleton.names).1
+    }
+
+    /// Values per frame of the network's input, `3 d + 2 + 2 (1 + J)`.
+    pub fn input_width(&self) -> usize {
+        3 * self.dofs() + 2 + 2 * self.groups()
+    }
+
+    /// The Euler orders of the joints.
+    pub fn orders(&self) -> ArnnResult<Vec<EulerOrder>> {
+        self.euler_axes
+            .iter()
+            .enumerate()
+            .map(|(j, a)| {
+                EulerOrder::from_axes(*a).ok_or_else(|| {
+                    ArnnError::Config(format!(
+                        "euler_axes of joint {j} is {a:?}: three different axes 0-2 (0 = X) are needed"
+                    ))
+                })
+            })
+            .collect()
+    }
+
+    /// Checks the sizes and the skeleton.
+    pub fn validate(&self) -> ArnnResult<()> {
+        let bad = |m: String| Err(ArnnError::Config(m));
+        if self.model != "arnn" || self.design != DESIGN {
+            return bad(format!("model `{}` design `{}`: expected `arnn` and `{DESIGN}`", self.model, self.design));
+        }
+        let j = self.joints();
+        let s = &self.skeleton;
+        if j == 0 || s.parents.len() != j || s.offsets.len() != j || self.euler_axes.len() != j {
+            return bad(format!(
+                "the skeleton needs one parent, offset and Euler order per joint: {j} names, {} parents, {} offsets, {} \
+                 orders",
+                s.parents.len(),
+                s.offsets.len(),
+                self.euler_axes.len()
+            ));
+        }
+        if s.parents[0] != -1 || s.parents.iter().enumerate().skip(1).any(|(i, &p)| p < 0 || p as usize >= i) {
+            return bad("joint 0 must be the root and every other joint's parent must come before it".into());
+        }
+        self.orders()?;
+        if [self.encoder, self.hidden, self.layers, self.decoder, self.batch_size].contains(&0) {
+            return bad("encoder, hidden, layers, decoder and batch_size must be positive".into());
+        }
+        if self.min_gap < 2 || self.max_gap < self.min_gap {
+            return bad(format!("key gaps {}-{}: need 2 <= min_gap <= max_gap", self.min_gap, self.max_gap));
+        }
+        let fractions = [self.dropout, self.regular_fraction, self.partial_fraction];
+        if fractions.iter().any(|f| !(0.0..=1.0).contains(f)) {
+            return bad("dropout, regular_fraction and partial_fraction must be in [0, 1]".into());
+        }
+        let positive = [self.gap_unit, self.fk_unit, self.vel_unit, self.learning_rate];
+        let weights = [self.lambda_fk, self.lambda_vel, self.foot_weight];
+        if positive.iter().any(|v| v.is_nan() || *v <= 0.0) || weights.iter().any(|w| w.is_nan() || *w < 0.0) {
+            return bad(
+                "gap_unit, fk_unit, vel_unit and learning_rate must be positive, lambda_fk, lambda_vel and foot_weight \
+                 not negative"
+                    .into(),
+            );
+        }
+        Ok(())
+    }
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+/// The in-betweening network. Weights: `encoder.0`, `bgru.weight_ih_l0` ... (PyTorch's GRU
+/// names, `_reverse` for the backward direction), `decoder.{0,1}`.
+#[derive(Clone, Debug)]
+pub struct Inbetween {
+    config: InbetweenConfig,
+    encoder: Mlp,
+    bgru: BiGru,
+    decoder: Mlp,
+    device: Device,
+}
+
+impl Inbetween {
+    /// Builds (or loads, depending on `vb`) the network.
+    pub fn new(config: &InbetweenConfig, vb: VarBuilder) -> ArnnResult<Self> {
+        config.validate()?;
+        let c = config;
+        let encoder = Mlp::new(c.input_width(), &[c.encoder], Activation::Relu, true, vb.pp("encoder"))?;
+        let bgru = BiGru::new(c.encoder, c.hidden, c.layers, c.dropout, vb.pp("bgru"))?;
+        let decoder = Mlp::new(2 * c.hidden, &[c.decoder, c.dofs()], Activation::Relu, false, vb.pp("decoder"))?;
+        Ok(Inbetween { config: config.clone(), encoder, bgru, decoder, device: vb.device().clone() })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &InbetweenConfig {
+        &self.config
+    }
+
+    /// The device of the weights.
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// The correction `D(BGRU(E(x)))` of input features `(batch, frames, input_width)`:
+    /// `(batch, frames, d)`, normalised units, before the envelope. Dropout from `rng` when it
+    /// is `Some` (training).
+    pub fn correction(&self, features: &Tensor, rng: Option<&mut RowRngs>) -> ArnnResult<Tensor> {
+        let w = self.config.input_width();
+        let dims = features.dims();
+        if dims.len() != 3 || dims[2] != w || dims[1] == 0 {
+            return Err(ArnnError::Config(format!(
+                "the in-betweening network takes (batch, frames >= 1, {w}) features, got shape {dims:?}"
+            )));
+        }
+        let h = self.encoder.forward(features)?;
+        let h = self.bgru.forward(&h, rng)?;
+        Ok(self.decoder.forward(&h)?)
+    }
+
+    /// The completed poses in network units, `b + e * correction`, from a batch of shot
+    /// tensors ([`ShotBatch`]).
+    pub fn forward(&self, batch: &ShotBatch, rng: Option<&mut RowRngs>) -> ArnnResult<Tensor> {
+        let delta = self.correction(&batch.features, rng)?;
+        Ok((&batch.bezier + delta.mul(&batch.envelope)?)?)
+    }
+}
+
+/// One shot's network inputs and its Bezier poses.
+#[derive(Clone, Debug)]
+pub struct ShotInputs {
+    /// Frames of the shot (`0..=last key`).
+    pub frames: usize,
+    /// Input features, frames x [`InbetweenConfig::input_width`].
+    pub features: Vec<f32>,
+    /// The Bezier pose of each frame in clip units, frames x d.
+    pub bezier: Vec<f64>,
+    /// The envelope of each value, frames x d (0 on a key frame fixing its group).
+    pub envelope: Vec<f64>,
+}
+
+/// Tensors of shots of one length: features `(b, T, in)`, Bezier poses (normalised) and
+/// envelopes `(b, T, d)`.
+#[derive(Clone, Debug)]
+pub struct ShotBatch {
+    /// Input features.
+    pub features: Tensor,
+    /// Bezier poses, normalised.
+    pub bezier: Tensor,
+    /// Envelopes.
+    pub envelope: Tensor,
+}
+
+impl ShotBatch {
+    /// Stacks shots of one length.
+    pub fn new(shots: &[&ShotInputs], norm: &Normalization, device: &Device) -> ArnnResult<Self> {
+        let (b, t) = (shots.len(), shots.first().map_or(0, |s| s.frames));
+        if b == 0 || shots.iter().any(|s| s.frames != t) {
+            return Err(ArnnError::Config("a batch needs at least one shot, all of one length".into()));
+        }
+        let (w, d) = (shots[0].features.len() / t, norm.mean.len());
+        let features: Vec<f32> = shots.iter().flat_map(|s| s.features.iter().copied()).collect();
+        let bez: Vec<f32> = shots.iter().flat_map(|s| s.bezier.chunks_exact(d).flat_map(|p| norm.apply(p))).collect();
+        let env: Vec<f32> = shots.iter().flat_map(|s| s.envelope.iter().map(|&e| e as f32)).collect();
+        Ok(ShotBatch {
+            features: Tensor::from_vec(features, (b, t, w), device)?,
+            bezier: Tensor::from_vec(bez, (b, t, d), device)?,
+            envelope: Tensor::from_vec(env, (b, t, d), device)?,
+        })
+    }
+}
+
+/// Per group, the index of the previous key fixing it (at or before `t`) and of the next one
+/// (after `t`; the previous one at or after the last); `None` before the first.
+fn around(keys: &[(usize, usize)], t: usize) -> Option<((usize, usize), (usize, usize))> {
+    let i = keys.partition_point(|(_, f)| *f <= t);
+    if i == 0 {
+        return None;
+    }
+    Some((keys[i - 1], keys.get(i).copied().unwrap_or(keys[i - 1])))
+}
+
+/// The envelope `4 s (1 - s)` at frame `t` between keys at frames `a` and `c` (0 when `a == c`).
+fn envelope(a: usize, c: usize, t: usize) -> f64 {
+    if c <= a {
+        return 0.0;
+    }
+    let s = (t - a) as f64 / (c - a) as f64;
+    4.0 * s * (1.0 - s)
+}
+
+/// A key's value `v` of pose `key` for the value `i` of a frame whose Bezier pose is `bez`:
+/// quaternions take the sign nearest the Bezier one.
+fn key_value(key: &[f64], bez: &[f64], i: usize) -> f64 {
+    if i < 3 {
+        return key[i];
+    }
+    let q = 3 + 4 * ((i - 3) / 4);
+    let dot: f64 = (q..q + 4).map(|k| key[k] * bez[k]).sum();
+    if dot < 0.0 { -key[i] } else { key[i] }
+}
+
+/// Checks a shot's keys: frames from 0 strictly increasing, at least two, one pose of `d`
+/// finite values per key, `fixed` empty or one row of `groups` flags per key, every group fixed
+/// by some key.
+pub fn check_keys(
+    config: &InbetweenConfig,
+    frames: &[usize],
+    poses: &[Vec<f64>],
+    fixed: &[Vec<bool>],
+) -> ArnnResult<()> {
+    let (d, g) = (config.dofs(), config.groups());
+    let bad = |m: String| Err(ArnnError::Config(m));
+    if frames.len() < 2 || frames[0] != 0 || frames.windows(2).any(|w| w[0] >= w[1]) {
+        return bad(format!("key frames {frames:?}: at least two, from frame 0, strictly increasing"));
+    }
+    if poses.len() != frames.len() || poses.iter().any(|p| p.len() != d || p.iter().any(|v| !v.is_finite())) {
+        return bad(format!(
+            "{} key frames need as many poses of {d} finite values, got {}",
+            frames.len(),
+            poses.len()
+        ));
+    }
+    if !fixed.is_empty() {
+        if fixed.len() != frames.len() || fixed.iter().any(|m| m.len() != g) {
+            return bad(format!("partial keys need one row of {g} group flags per key"));
+        }
+        if let Some(missing) = (0..g).find(|&k| !fixed.iter().any(|m| m[k])) {
+            return bad(format!("no key fixes group {missing} (0 is the root, 1 + j joint j): key it at least once"));
+        }
+    }
+    Ok(())
+}
+
+/// The network's inputs and the Bezier poses of a shot: keys at `frames` (from 0) with poses
+/// `poses` (the humanoid pose layout, clip units) fixing the groups `fixed` (empty: whole keys).
+pub fn shot_inputs(
+    config: &InbetweenConfig,
+    norm: &Normalization,
+    frames: &[usize],
+    poses: &[Vec<f64>],
+    fixed: &[Vec<bool>],
+) -> ArnnResult<ShotInputs> {
+    check_keys(config, frames, poses, fixed)?;
+    let (j, d, g) = (config.joints(), config.dofs(), config.groups());
+    let mut roots = Vec::with_capacity(frames.len());
+    let mut rots = Vec::with_capacity(frames.len() * j);
+    for p in poses {
+        let (r, q) = crate::humanoid::decode(p, j);
+        roots.push(r);
+        rots.extend(q);
+    }
+    let keys = ShotKeys { frames, root: &roots, rot: &rots, fixed };
+    let (broot, brot) = bezier_inbetween(&config.orders()?, &keys)
+        .ok_or_else(|| ArnnError::Config(format!("keys at frames {frames:?} do not make F-curves")))?;
+    let n = broot.len();
+    let bezier: Vec<f64> = (0..n).flat_map(|f| pose_values(broot[f], &brot[f * j..(f + 1) * j])).collect();
+    let fixes = |k: usize, gr: usize| fixed.get(k).is_none_or(|m| m[gr]);
+    let per_group: Vec<Vec<(usize, usize)>> =
+        (0..g).map(|gr| (0..frames.len()).filter(|&k| fixes(k, gr)).map(|k| (k, frames[k])).collect()).collect();
+    let groups = config.key_groups();
+    let w = config.input_width();
+    let mut features = Vec::with_capacity(n * w);
+    let mut env = vec![0.0f64; n * d];
+    let mut group_env = vec![0.0f64; g];
+    let mut prev = vec![0.0f64; d];
+    let mut next = vec![0.0f64; d];
+    for t in 0..n {
+        let bez = &bezier[t * d..(t + 1) * d];
+        for (gr, keys) in per_group.iter().enumerate() {
+            group_env[gr] = around(keys, t).map_or(0.0, |((_, a), (_, c))| envelope(a, c, t));
+        }
+        for i in 0..d {
+            let (a, c) = match around(&per_group[groups[i]], t) {
+                Some(((a, _), (c, _))) => (a, c),
+                None => (per_group[groups[i]][0].0, per_group[groups[i]][0].0),
+            };
+            prev[i] = key_value(&poses[a], bez, i) - bez[i];
+            next[i] = key_value(&poses[c], bez, i) - bez[i];
+            env[t * d + i] = group_env[groups[i]];
+        }
+        features.extend(norm.apply(bez));
+        features.extend(prev.iter().zip(&norm.std).map(|(v, s)| (v / s) as f32));
+        features.extend(next.iter().zip(&norm.std).map(|(v, s)| (v / s) as f32));
+        let ((_, a), (_, c)) = around(&per_group[0], t).unwrap_or(((0, 0), (0, 0)));
+        let phase = if c > a { (t - a) as f64 / (c - a) as f64 } else { 0.0 };
+        features.push(phase as f32);
+        features.push(((c - a) as f64 / config.gap_unit) as f32);
+        features.extend((0..g).map(|gr| if per_group[gr].iter().any(|(_, f)| *f == t) { 1.0f32 } else { 0.0 }));
+        features.extend(group_env.iter().map(|&e| e as f32));
+    }
+    Ok(ShotInputs { frames: n, features, bezier, envelope: env })
+}
+
+/// A pose vector (root position, quaternions `w, x, y, z`) of a root and rotations.
+fn pose_values(root: DVec3, rot: &[DQuat]) -> Vec<f64> {
+    let mut v = Vec::with_capacity(3 + 4 * rot.len());
+    v.extend([root.x, root.y, root.z]);
+    for q in rot {
+        v.extend([q.w, q.x, q.y, q.z]);
+    }
+    v
+}
+
+/// Completes shots: per shot its key frames (from 0), key poses and fixed groups (empty: whole
+/// keys); returns each shot's poses of frames `0..=last key` in clip units, composed in f64
+/// (`b + e * correction * std`), so that a value equals its Bezier value, and so its key, on
+/// every key frame fixing it. Shots of one length run as one batch (at most 64 at a time).
+pub fn complete_shots(
+    model: &Inbetween,
+    norm: &Normalization,
+    shots: &[ShotKeyRefs<'_>],
+) -> ArnnResult<Vec<Vec<Vec<f64>>>> {
+    let c = model.config();
+    let d = c.dofs();
+    if norm.mean.len() != d || norm.std.len() != d {
+        return Err(ArnnError::Config(format!("normalization of {} values for a model of {d}", norm.mean.len())));
+    }
+    let inputs: Vec<ShotInputs> =
+        shots.iter().map(|(f, p, m)| shot_inputs(c, norm, f, p, m)).collect::<ArnnResult<_>>()?;
+    let mut out: Vec<Vec<Vec<f64>>> = vec![Vec::new(); shots.len()];
+    let mut lengths: Vec<usize> = inputs.iter().map(|s| s.frames).collect();
+    lengths.sort_unstable();
+    lengths.dedup();
+    for n in lengths {
+        let idx: Vec<usize> = (0..inputs.len()).filter(|&i| inputs[i].frames == n).collect();
+        for chunk in idx.chunks(64) {
+            let group: Vec<&ShotInputs> = chunk.iter().map(|&i| &inputs[i]).collect();
+            let batch = ShotBatch::new(&group, norm, model.device())?;
+            let delta: Vec<f32> = model.correction(&batch.features, None)?.flatten_all()?.to_vec1()?;
+            for (k, &i) in chunk.iter().enumerate() {
+                let s = &inputs[i];
+                let dl = &delta[k * n * d..(k + 1) * n * d];
+                out[i] = (0..n)
+                    .map(|t| {
+                        (0..d)
+                            .map(|v| {
+                                let x = t * d + v;
+                                s.bezier[x] + s.envelope[x] * dl[x] as f64 * norm.std[v]
+                            })
+                            .collect()
+                    })
+                    .collect();
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// One shot's keys for [`complete_shots`]: key frames (from 0), key poses, fixed groups (empty:
+/// whole keys).
+pub type ShotKeyRefs<'a> = (&'a [usize], &'a [Vec<f64>], &'a [Vec<bool>]);
+
+/// Whether the run folder `dir` holds the in-betweening design (its `config.json` says
+/// `"design": "inbetween"`).
+pub fn is_inbetween_run(dir: &Path) -> bool {
+    let path = dir.join(zoo_nn::checkpoint::CONFIG_FILE);
+    std::fs::read_to_string(path)
+        .ok()
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        .is_some_and(|v| v.get("design").and_then(|d| d.as_str()) == Some(DESIGN))
+}
+
+/// Loads an in-betweening run folder (`config.json`, `model.safetensors`,
+/// `normalization.json`) for inference.
+pub fn load(dir: &Path, device: &Device) -> ArnnResult<(Inbetween, Normalization)> {
+    let (config, norm) = read_meta(dir)?;
+    let varmap = candle_nn::VarMap::new();
+    let model = Inbetween::new(&config, VarBuilder::from_varmap(&varmap, candle_core::DType::F32, device))?;
+    zoo_nn::checkpoint::read_varmap(&dir.join(zoo_nn::checkpoint::WEIGHTS_FILE), &varmap)?;
+    zoo_nn::checkpoint::check_finite(&varmap)?;
+    Ok((model, norm))
+}
+
+/// Reads and checks the configuration and the normalisation statistics of an in-betweening
+/// run folder.
+pub fn read_meta(dir: &Path) -> ArnnResult<(InbetweenConfig, Normalization)> {
+    use zoo_nn::checkpoint as ck;
+    let config: InbetweenConfig = ck::read_json(&dir.join(ck::CONFIG_FILE))?;
+    config.validate().map_err(|e| ArnnError::Config(format!("{}: {e}", dir.join(ck::CONFIG_FILE).display())))?;
+    let norm: Normalization = ck::read_json(&dir.join(ck::STATS_FILE))?;
+    let d = config.dofs();
+    if norm.mean.len() != d || norm.std.len() != d || norm.std.iter().any(|s| s.is_nan() || *s <= 0.0) {
+        return Err(ArnnError::Config(format!(
+            "{}: expected {d} means and {d} positive standard deviations",
+            dir.join(ck::STATS_FILE).display()
+        )));
+    }
+    Ok((config, norm))
+}
+
+/// The configuration for a skeleton (its Euler orders) and the clips' frame rate.
+pub fn config_for(skeleton: &zoo_motion::Skeleton, fps: f64) -> InbetweenConfig {
+    let axes = skeleton.channels.iter().map(|c| c.order.axes()).collect();
+    InbetweenConfig::humanoid(crate::humanoid::skeleton_info(skeleton, fps), axes)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::humanoid::poses;
+
+    pub(crate) fn skeleton() -> HumanoidSkeleton {
+        HumanoidSkeleton {
+            names: vec!["Hips".into(), "Spine".into(), "Hand".into()],
+            parents: vec![-1, 0, 1],
+            offsets: vec![[0.0; 3], [0.0, 10.0, 0.0], [0.0, 10.0, 0.0]],
+            fps: 30.0,
+        }
+    }
+
+    fn tiny() -> InbetweenConfig {
+        InbetweenConfig::tiny(skeleton(), vec![[2, 0, 1]; 3])
+    }
+
+    fn keys() -> (Vec<usize>, Vec<Vec<f64>>) {
+        let frames = vec![0, 7, 15, 20];
+        let root: Vec<DVec3> = frames.iter().map(|&f| DVec3::new(f as f64, 90.0, 0.5 * f as f64)).collect();
+        let rot: Vec<DQuat> = frames
+            .iter()
+            .flat_map(|&f| {
+                let a = f as f64 * 0.1;
+                [DQuat::from_rotation_y(a), DQuat::from_rotation_x(-a), DQuat::from_rotation_z(0.5 * a)]
+            })
+            .collect();
+        (frames, poses(&root, &rot, 3))
+    }
+
+    fn unit_norm(d: usize) -> Normalization {
+        Normalization { mean: vec![0.0; d], std: vec![0.5; d] }
+    }
+
+    #[test]
+    fn keys_are_hit_by_construction() {
+        let c = tiny();
+        let varmap = candle_nn::VarMap::new();
+        let vb = zoo_nn::SeededVarMap::builder(&varmap, 3, candle_core::DType::F32, &Device::Cpu);
+        let model = Inbetween::new(&c, vb).unwrap();
+        let (frames, kp) = keys();
+        let norm = unit_norm(c.dofs());
+        let partial: Vec<Vec<bool>> = (0..4).map(|k| vec![true, k != 1, true, k != 2]).collect();
+        for fixed in [vec![], partial] {
+            let out = complete_shots(&model, &norm, &[(&frames, &kp, &fixed)]).unwrap().remove(0);
+            assert_eq!(out.len(), 21);
+            let (root, (deg, _, _)) = crate::humanoid::key_misses(&out, &frames, &kp, &fixed, 3);
+            assert!(root < 1e-9 && deg < 1e-5, "key misses {root} / {deg} degrees");
+            // Between keys the network does move the pose away from the Bezier curve.
+            let inputs = shot_inputs(&c, &norm, &frames, &kp, &fixed).unwrap();
+            let moved =
+                (0..out.len() * c.dofs()).any(|x| (out[x / c.dofs()][x % c.dofs()] - inputs.bezier[x]).abs() > 1e-6);
+            assert!(moved);
+        }
+    }
+
+    #[test]
+    fn inputs_have_the_documented_width_and_envelope() {
+        let c = tiny();
+        let (frames, kp) = keys();
+        let s = shot_inputs(&c, &unit_norm(c.dofs()), &frames, &kp, &[]).unwrap();
+        assert_eq!(s.features.len(), 21 * c.input_width());
+        assert_eq!(s.envelope.len(), 21 * c.dofs());
+        for &f in &frames {
+            assert!(s.envelope[f * c.dofs()..(f + 1) * c.dofs()].iter().all(|&e| e == 0.0));
+        }
+        // Midway between keys 7 and 15 (frame 11) the envelope peaks at 1.
+        assert!((s.envelope[11 * c.dofs()] - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn bad_keys_and_configs_are_refused() {
+        let c = tiny();
+        let norm = unit_norm(c.dofs());
+        let (frames, kp) = keys();
+        let err = |r: ArnnResult<ShotInputs>| r.err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(err(shot_inputs(&c, &norm, &[1, 7, 15, 20], &kp, &[])).contains("from frame 0"));
+        assert!(err(shot_inputs(&c, &norm, &frames, &kp[..3], &[])).contains("poses"));
+        let none_fix_spine: Vec<Vec<bool>> = (0..4).map(|_| vec![true, true, false, true]).collect();
+        assert!(err(shot_inputs(&c, &norm, &frames, &kp, &none_fix_spine)).contains("group 2"));
+        let bad = InbetweenConfig { euler_axes: vec![[0, 0, 1]; 3], ..c.clone() };
+        assert!(bad.validate().unwrap_err().to_string().contains("three different axes"));
+        let bad = InbetweenConfig { min_gap: 1, ..c };
+        assert!(bad.validate().is_err());
+    }
+
+    #[test]
+    fn config_round_trips_through_json() {
+        let c = tiny();
+        let back: InbetweenConfig = serde_json::from_str(&serde_json::to_string(&c).unwrap()).unwrap();
+        assert_eq!(back, c);
+    }
+}
