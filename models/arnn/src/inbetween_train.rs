@@ -30,8 +30,6 @@ use zoo_nn::rng::SplitMix64;
 use zoo_nn::train_loop::{Trainable, Validation};
 use zoo_nn::{DataParallel, RowRngs, SeededVarMap, TrainError};
 
-const RNG_KEY: &str = "trainer";
-
 /// At most this many validation windows (evenly spaced) are scored each epoch.
 pub const VALID_MAX: usize = 600;
 
@@ -478,20 +476,12 @@ impl Trainable for InbetweenTrainer {
     }
 
     fn save_training_state(&self, dir: &Path) -> Result<(), TrainError> {
-        ck::write_tensors(&dir.join(ck::OPTIMIZER_FILE), &self.opt.state()?)?;
-        ck::write_json(&dir.join(ck::RNG_FILE), &serde_json::json!({ RNG_KEY: self.rng.state() }))?;
-        Ok(())
+        crate::train::save_optimizer_and_rng(dir, &self.opt, &self.rng)
     }
 
     fn load_training_state(&mut self, dir: &Path) -> Result<(), TrainError> {
-        ck::read_varmap(&dir.join(ck::WEIGHTS_FILE), &self.varmap)?;
-        self.opt.set_state(&ck::read_tensors(&dir.join(ck::OPTIMIZER_FILE), &self.device)?)?;
+        self.rng = crate::train::load_optimizer_and_rng(dir, &self.varmap, &mut self.opt, &self.device)?;
         self.step = self.opt.steps();
-        let saved: serde_json::Value = ck::read_json(&dir.join(ck::RNG_FILE))?;
-        let state = saved[RNG_KEY].as_u64().ok_or_else(|| {
-            TrainError::Config(format!("{}: no \"{RNG_KEY}\" generator state", dir.join(ck::RNG_FILE).display()))
-        })?;
-        self.rng = SplitMix64::from_state(state);
         Ok(())
     }
 

@@ -494,20 +494,12 @@ impl Trainable for ArnnTrainer {
     }
 
     fn save_training_state(&self, dir: &Path) -> Result<(), TrainError> {
-        ck::write_tensors(&dir.join(ck::OPTIMIZER_FILE), &self.opt.state()?)?;
-        ck::write_json(&dir.join(ck::RNG_FILE), &serde_json::json!({ RNG_KEY: self.rng.state() }))?;
-        Ok(())
+        save_optimizer_and_rng(dir, &self.opt, &self.rng)
     }
 
     fn load_training_state(&mut self, dir: &Path) -> Result<(), TrainError> {
-        ck::read_varmap(&dir.join(ck::WEIGHTS_FILE), &self.varmap)?;
-        self.opt.set_state(&ck::read_tensors(&dir.join(ck::OPTIMIZER_FILE), &self.device)?)?;
+        self.rng = load_optimizer_and_rng(dir, &self.varmap, &mut self.opt, &self.device)?;
         self.step = self.opt.steps();
-        let saved: serde_json::Value = ck::read_json(&dir.join(ck::RNG_FILE))?;
-        let state = saved[RNG_KEY].as_u64().ok_or_else(|| {
-            TrainError::Config(format!("{}: no \"{RNG_KEY}\" generator state", dir.join(ck::RNG_FILE).display()))
-        })?;
-        self.rng = SplitMix64::from_state(state);
         Ok(())
     }
 
@@ -657,6 +649,31 @@ pub fn complete_partial_raw(
         prev = y;
     }
     Ok(out)
+}
+
+/// Writes an ARNN trainer's optimizer state and generator state into a checkpoint folder (both
+/// designs' trainers).
+pub(crate) fn save_optimizer_and_rng(dir: &Path, opt: &Adam, rng: &SplitMix64) -> Result<(), TrainError> {
+    ck::write_tensors(&dir.join(ck::OPTIMIZER_FILE), &opt.state()?)?;
+    ck::write_json(&dir.join(ck::RNG_FILE), &serde_json::json!({ RNG_KEY: rng.state() }))?;
+    Ok(())
+}
+
+/// Reads back what [`save_optimizer_and_rng`] wrote, with the weights into `varmap`; returns the
+/// generator.
+pub(crate) fn load_optimizer_and_rng(
+    dir: &Path,
+    varmap: &VarMap,
+    opt: &mut Adam,
+    device: &Device,
+) -> Result<SplitMix64, TrainError> {
+    ck::read_varmap(&dir.join(ck::WEIGHTS_FILE), varmap)?;
+    opt.set_state(&ck::read_tensors(&dir.join(ck::OPTIMIZER_FILE), device)?)?;
+    let saved: serde_json::Value = ck::read_json(&dir.join(ck::RNG_FILE))?;
+    let state = saved[RNG_KEY].as_u64().ok_or_else(|| {
+        TrainError::Config(format!("{}: no \"{RNG_KEY}\" generator state", dir.join(ck::RNG_FILE).display()))
+    })?;
+    Ok(SplitMix64::from_state(state))
 }
 
 #[cfg(test)]
