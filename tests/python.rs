@@ -276,7 +276,9 @@ fn write_models_and_references(data: &Path) {
         .iter()
         .map(|&(frame, source)| zoo_arnn::humanoid::HumanoidKey { frame, source, fixed: None })
         .collect();
-    let done = zoo_arnn::humanoid::complete_clip(&arnn_model, &arnn_norm, &clip, &keys).expect("candle completes");
+    let done =
+        zoo_arnn::humanoid::complete_clip(zoo_arnn::humanoid::HumanoidNet::Arnn(&arnn_model), &arnn_norm, &clip, &keys)
+            .expect("candle completes");
     let (h, r) = world_arrays(&done.clip, 0..done.clip.frames());
     refs.insert(
         "keyframes".into(),
