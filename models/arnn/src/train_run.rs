@@ -11,6 +11,7 @@ use crate::luxo::{self, DOF_NAMES, GenerateOptions, LampParams, LuxoSequence};
 use crate::{Architecture, ArnnConfig, ArnnResult, ArnnTrainer, NoMemoryOutput, humanoid};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
+use zoo_data::dataset::{NamedClip, Windows};
 use zoo_data::{Context, Message, Progress, bail};
 use zoo_nn::checkpoint;
 use zoo_nn::run_folder::RunSpec;
@@ -499,6 +500,28 @@ fn test_best(out: &Path, test: &[KeyedSequence]) -> ArnnResult<()> {
     Ok(())
 }
 
+impl HumanoidData {
+    /// Loads the clips, splits them by `valid_glob` and cuts both splits into the humanoid
+    /// training windows ([`humanoid::WINDOW`]); refuses a split without a window.
+    fn load(&self, p: &dyn Progress) -> ArnnResult<(Vec<NamedClip>, Vec<NamedClip>, Windows, Windows)> {
+        let clips = zoo_data::dataset::load_reporting(&self.dir, None, false, p)?;
+        let (train_clips, valid_clips) = zoo_data::dataset::split(clips, &self.valid_glob).map_err(Message::new)?;
+        let train_w = zoo_data::dataset::windows(&train_clips, &humanoid::WINDOW);
+        let valid_w = zoo_data::dataset::windows(&valid_clips, &humanoid::WINDOW);
+        if train_w.count == 0 || valid_w.count == 0 {
+            bail!(
+                "{}: {} training and {} validation windows of {} frames: both splits need clips longer than {} frames",
+                self.dir.display(),
+                train_w.count,
+                valid_w.count,
+                humanoid::WINDOW.window,
+                humanoid::WINDOW.window
+            );
+        }
+        Ok((train_clips, valid_clips, train_w, valid_w))
+    }
+}
+
 /// The data of a humanoid run: a resumed run's recorded ones (`--data` replacing its folder),
 /// or the options'; and whether it is resumed.
 fn humanoid_settings(
@@ -591,20 +614,7 @@ pub fn train_humanoid(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
     let out = prepare_run_folder(a)?;
     let mut extra = serde_json::Map::new();
     let (s, resumed) = humanoid_settings(a, &mut extra)?;
-    let clips = zoo_data::dataset::load_reporting(&s.dir, None, false, p)?;
-    let (train_clips, valid_clips) = zoo_data::dataset::split(clips, &s.valid_glob).map_err(Message::new)?;
-    let train_w = zoo_data::dataset::windows(&train_clips, &humanoid::WINDOW);
-    let valid_w = zoo_data::dataset::windows(&valid_clips, &humanoid::WINDOW);
-    if train_w.count == 0 || valid_w.count == 0 {
-        bail!(
-            "{}: {} training and {} validation windows of {} frames: both splits need clips longer than {} frames",
-            s.dir.display(),
-            train_w.count,
-            valid_w.count,
-            humanoid::WINDOW.window,
-            humanoid::WINDOW.window
-        );
-    }
+    let (train_clips, valid_clips, train_w, valid_w) = s.load(p)?;
     let mut trainer = humanoid_trainer(a, &out, resumed, &s, (&train_clips, &train_w, &valid_w))?;
     let source = format!(
         "{} ({} training clips, {} validation clips matching `{}`)",
@@ -655,7 +665,7 @@ pub fn train_inbetween(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
         || a.ground_weight.is_some()
     {
         bail!(
-            "--variant, --no-memory-output, --frame-phase, --frame-phase-omega and --ground-weight are settings of the              autoregressive ARNN; the in-betweening design has none of them: drop them"
+            "--variant, --no-memory-output, --frame-phase, --frame-phase-omega and --ground-weight are settings of the autoregressive ARNN; the in-betweening design has none of them: drop them"
         );
     }
     if a.run.resume.is_none() && (a.data.is_none() || a.valid_glob.is_none()) {
@@ -665,20 +675,7 @@ pub fn train_inbetween(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
     let mut extra = serde_json::Map::new();
     extra.insert("design".into(), crate::inbetween::DESIGN.into());
     let (s, resumed) = humanoid_settings(a, &mut extra)?;
-    let clips = zoo_data::dataset::load_reporting(&s.dir, None, false, p)?;
-    let (train_clips, valid_clips) = zoo_data::dataset::split(clips, &s.valid_glob).map_err(Message::new)?;
-    let train_w = zoo_data::dataset::windows(&train_clips, &humanoid::WINDOW);
-    let valid_w = zoo_data::dataset::windows(&valid_clips, &humanoid::WINDOW);
-    if train_w.count == 0 || valid_w.count == 0 {
-        bail!(
-            "{}: {} training and {} validation windows of {} frames: both splits need clips longer than {} frames",
-            s.dir.display(),
-            train_w.count,
-            valid_w.count,
-            humanoid::WINDOW.window,
-            humanoid::WINDOW.window
-        );
-    }
+    let (train_clips, valid_clips, train_w, valid_w) = s.load(p)?;
     let skeleton = &train_clips[0].clip.skeleton;
     let (config, norm) = if resumed {
         let from = train_loop::resume_dir(&out);

@@ -17,6 +17,7 @@
 //! - [`plot`]: the loss-curve PNG.
 
 pub mod act;
+pub mod calibrate;
 pub mod cells;
 pub mod checkpoint;
 pub mod ema;

@@ -33,14 +33,8 @@ pub const FULL_FACTOR: f32 = 2.0;
 /// Thresholds from the correction sizes of in-distribution windows: `start` at their
 /// [`START_QUANTILE`], `full` at [`FULL_FACTOR`] times it; `None` without a finite size.
 pub fn calibrate(sizes: &[f32]) -> Option<Fallback> {
-    let mut s: Vec<f32> = sizes.iter().copied().filter(|v| v.is_finite()).collect();
-    if s.is_empty() {
-        return None;
-    }
-    s.sort_by(f32::total_cmp);
-    let i = ((s.len() - 1) as f64 * START_QUANTILE).round() as usize;
-    let start = s[i].max(1e-6);
-    Some(Fallback { start, full: start * FULL_FACTOR })
+    zoo_nn::calibrate::fallback_thresholds(sizes, START_QUANTILE, FULL_FACTOR)
+        .map(|(start, full)| Fallback { start, full })
 }
 
 /// A refined window's correction size in `fl`'s layout ([`zoo_format::stitch::correction_size`]).

@@ -43,14 +43,8 @@ impl Fallback {
     /// [`Fallback::START_QUANTILE`], `full` at [`Fallback::FULL_FACTOR`] times it. `None`
     /// without misses.
     pub fn calibrate(misses: &[f32]) -> Option<Fallback> {
-        let mut m: Vec<f32> = misses.iter().copied().filter(|v| v.is_finite()).collect();
-        if m.is_empty() {
-            return None;
-        }
-        m.sort_by(f32::total_cmp);
-        let i = ((m.len() - 1) as f64 * Self::START_QUANTILE).round() as usize;
-        let start = m[i].max(1e-6);
-        Some(Fallback { start, full: start * Self::FULL_FACTOR })
+        zoo_nn::calibrate::fallback_thresholds(misses, Self::START_QUANTILE, Self::FULL_FACTOR)
+            .map(|(start, full)| Fallback { start, full })
     }
 }
 
