@@ -587,7 +587,8 @@ fn inbetween_design_trains_resumes_scores_keys_and_completes() {
     let method = format!("arnn:{r}");
     let json = dir.path().join("keys.json");
     let bench = ["bench", "--data", d, "--valid-glob", "*_0005.bvh", "--layout", "keys", "--every", "10,30"];
-    let methods = format!("bezier,{method}");
+    let locked = format!("arnn+lock:{r}");
+    let methods = format!("bezier,bezier+lock,{method},{locked}");
     let (ok, stdout, stderr) = run(&[&bench[..], &["--methods", &methods, "--json", json.to_str().unwrap()]].concat());
     assert!(ok, "{stdout}\n{stderr}");
     let result: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
@@ -597,7 +598,16 @@ fn inbetween_design_trains_resumes_scores_keys_and_completes() {
         // Met by construction: the network's own miss is float rounding.
         assert!(row[format!("keymiss_raw_cm@{k}")].as_f64().unwrap() < 1e-6, "{row}");
         assert!(row[format!("keymiss_raw_deg@{k}")].as_f64().unwrap() < 1e-3, "{row}");
+        // The foot lock between the keys leaves every key hit.
+        for m in [locked.as_str(), "bezier+lock"] {
+            let row = &result["methods"][m];
+            assert!(row[format!("skate@{k}")].as_f64().unwrap().is_finite(), "{m}: {row}");
+            assert!(row[format!("keymiss_cm@{k}")].as_f64().unwrap() < 1e-6, "{m}: {row}");
+            assert!(row[format!("keymiss_deg@{k}")].as_f64().unwrap() < 1e-3, "{m}: {row}");
+        }
     }
+    let (ok, _, stderr) = run(&[&bench[..], &["--methods", "cubic+lock"]].concat());
+    assert!(!ok && stderr.contains("method `cubic` is not one of"), "{stderr}");
     let names: Vec<String> =
         config["skeleton"]["names"].as_array().unwrap().iter().map(|v| v.as_str().unwrap().to_string()).collect();
     let clip = std::fs::read_dir(&data)
@@ -615,10 +625,51 @@ fn inbetween_design_trains_resumes_scores_keys_and_completes() {
     );
     std::fs::write(&keys_path, text).unwrap();
     let out = dir.path().join("done.bvh");
-    let (ok, stdout, stderr) =
-        run(&["complete", "--model", r, "--keys", keys_path.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let (json, raw_json, raw_out) =
+        (dir.path().join("done.json"), dir.path().join("raw.json"), dir.path().join("raw.bvh"));
+    let kp = keys_path.to_str().unwrap();
+    let (ok, stdout, stderr) = run(&[
+        "complete",
+        "--model",
+        r,
+        "--keys",
+        kp,
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
     assert!(ok && stdout.contains("completed 31 frames from 3 keys (1 partial)"), "{stdout}\n{stderr}");
     assert!(stdout.contains("the network's largest key miss: root 0.00"), "{stdout}");
+    assert!(stdout.contains("feet locked between the keys on 28 frames"), "{stdout}");
+    let args = ["--out", raw_out.to_str().unwrap(), "--json", raw_json.to_str().unwrap(), "--no-foot-lock"];
+    let (ok, stdout, stderr) = run(&[&["complete", "--model", r, "--keys", kp][..], &args].concat());
+    assert!(ok && stdout.contains("no foot lock (--no-foot-lock)"), "{stdout}\n{stderr}");
+    let lock_frames = |p: &Path| {
+        let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap();
+        v["foot_lock_frames"].as_u64()
+    };
+    assert_eq!((lock_frames(&json), lock_frames(&raw_json)), (Some(28), Some(0)));
+    // The lock changes frames between the keys only: the key frames are written alike.
+    let motion = |p: &Path| -> Vec<String> {
+        let text = std::fs::read_to_string(p).unwrap();
+        text.lines().skip_while(|l| !l.starts_with("Frame Time")).skip(1).map(str::to_string).collect()
+    };
+    let (locked_rows, raw_rows) = (motion(&out), motion(&raw_out));
+    assert_eq!(locked_rows.len(), 31);
+    for key in [0, 12, 30] {
+        assert_eq!(locked_rows[key], raw_rows[key], "key frame {key}");
+    }
     let (ok, _, stderr) = run(&["bench", "--data", d, "--valid-glob", "*_0005.bvh", "--methods", &method]);
     assert!(!ok && stderr.contains("holds the in-betweening design"), "{stderr}");
+    // `zoo export` writes its whole-shot graph, which the runtime's keyframes task loads (the
+    // portable profile and reference vectors are refused by name, before anything is written).
+    let onnx = dir.path().join("ib.onnx");
+    let (ok, stdout, stderr) = run(&["export", "--onnx", r, "--out", onnx.to_str().unwrap()]);
+    assert!(ok && stdout.contains("ARNN in-betweening whole-shot graph"), "{stdout}\n{stderr}");
+    let km = zoo_runtime::KeyframeModel::load(&onnx).unwrap();
+    assert!(km.is_inbetween() && km.groups() == names.len() + 1, "{} groups", km.groups());
+    let portable = dir.path().join("ib_portable.onnx");
+    let (ok, _, stderr) = run(&["export", "--onnx", r, "--out", portable.to_str().unwrap(), "--portable"]);
+    assert!(!ok && stderr.contains("does not hold; export it without --portable") && !portable.exists(), "{stderr}");
 }

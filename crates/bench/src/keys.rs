@@ -27,6 +27,9 @@
 //!
 //! Models: `arnn:RUN_DIR` (a humanoid ARNN run folder, autoregressive or in-betweening design:
 //! the keys are its keys, partial keys its partial keys).
+//!
+//! `METHOD+lock` (`bezier+lock`, `arnn+lock:RUN_DIR`, ...) runs the method, then the foot lock
+//! between its keys ([`zoo_motion::keylock`]; key frames unchanged).
 
 use crate::Result;
 use glam::{DQuat, DVec3};
@@ -356,8 +359,38 @@ pub fn methods(specs: &[String]) -> Result<Vec<Box<dyn KeyMethod>>> {
     specs.iter().map(|m| method(m.trim())).collect()
 }
 
-/// A `--methods` entry of the keys-only benchmark: `linear`, `bezier` or `arnn:RUN_DIR`.
+/// A method followed by the foot lock between its keys ([`zoo_motion::keylock::key_foot_lock`],
+/// the skeleton's legs found by name and its rest offsets; key frames unchanged).
+pub struct WithFootLock {
+    name: String,
+    inner: Box<dyn KeyMethod>,
+}
+
+impl KeyMethod for WithFootLock {
+    fn name(&self) -> String {
+        self.name.clone()
+    }
+
+    fn fill(&self, tasks: &[KeyTask<'_>]) -> std::result::Result<Vec<Filled>, String> {
+        let mut filled = self.inner.fill(tasks)?;
+        filled.par_iter_mut().zip(tasks).for_each(|(f, t)| {
+            let s = t.skeleton;
+            if let Some(lock) = zoo_motion::keylock::key_foot_lock(s) {
+                zoo_motion::keylock::lock_feet_between_keys(&lock, s, &s.offsets, &t.frames, &f.root, &mut f.rot);
+            }
+        });
+        Ok(filled)
+    }
+}
+
+/// A `--methods` entry of the keys-only benchmark: `linear`, `bezier` or `arnn:RUN_DIR`, each
+/// optionally with `+lock` after its kind (`bezier+lock`, `arnn+lock:RUN_DIR`).
 pub fn method(spec: &str) -> Result<Box<dyn KeyMethod>> {
+    let (kind, rest) = spec.split_once(':').map_or((spec, None), |(k, r)| (k, Some(r)));
+    if let Some(base) = kind.strip_suffix("+lock") {
+        let inner = method(&rest.map_or(base.to_string(), |r| format!("{base}:{r}")))?;
+        return Ok(Box::new(WithFootLock { name: spec.to_string(), inner }));
+    }
     match spec.split_once(':') {
         None if spec == "linear" => Ok(Box::new(ChannelBaseline::LINEAR)),
         None if spec == "bezier" => Ok(Box::new(ChannelBaseline::BEZIER)),
@@ -367,7 +400,7 @@ pub fn method(spec: &str) -> Result<Box<dyn KeyMethod>> {
         Some(("arnn", dir)) => Ok(Box::new(ArnnKeys::load(Path::new(dir), spec.to_string())?)),
         _ => bail!(
             "method `{spec}` is not one of the keys-only benchmark's: `linear`, `bezier`, `arnn:RUN_DIR` (a humanoid \
-             `zoo train arnn --data` run folder)"
+             `zoo train arnn --data` run folder), each optionally with `+lock` after its kind (`arnn+lock:RUN_DIR`)"
         ),
     }
 }

@@ -27,6 +27,7 @@ pub mod fk;
 pub mod footlock;
 pub mod frame;
 pub mod keyhit;
+pub mod keylock;
 pub mod pipeline;
 pub mod quat;
 pub mod rng;

@@ -310,6 +310,8 @@ pub struct CompleteOptions {
     pub plot: Option<PathBuf>,
     /// Keep a base that sinks below the ground where the network put it (lamp only).
     pub no_ground: bool,
+    /// Humanoid keys: no foot lock between the keys ([`zoo_motion::keylock`]).
+    pub no_foot_lock: bool,
     /// Frames per second of the output (`None`: the keys file's, else [`DEFAULT_FPS`]).
     pub fps: Option<f64>,
     /// The global joint positions of every completed frame (a positions file).
@@ -418,6 +420,24 @@ fn write_outputs(
         v.extend(fields);
     }
     write_json(j, &v)
+}
+
+/// The foot lock between the keys of a completed humanoid clip ([`zoo_motion::keylock`], the
+/// clip's own bone offsets); returns the number of frames it changed (0 without legs).
+fn lock_feet(clip: &mut zoo_motion::Clip, key_frames: &[usize]) -> usize {
+    let Some(lock) = zoo_motion::keylock::key_foot_lock(&clip.skeleton) else { return 0 };
+    let j = clip.joints();
+    let offsets = zoo_motion::pipeline::rest_offsets(clip);
+    let root: Vec<glam::DVec3> = clip.local_positions.iter().step_by(j.max(1)).copied().collect();
+    let skeleton = clip.skeleton.clone();
+    zoo_motion::keylock::lock_feet_between_keys(
+        &lock,
+        &skeleton,
+        &offsets,
+        key_frames,
+        &root,
+        &mut clip.local_rotations,
+    )
 }
 
 /// Completes the keys of `o` with the ARNN of its run folder and writes what `o` asks for;
@@ -600,6 +620,8 @@ fn complete_humanoid(
         }
     };
     let mut done = crate::humanoid::complete_clip(model, norm, &source, &keys.keys).context(what)?;
+    let key_frames: Vec<usize> = keys.keys.iter().map(|k| k.frame).collect();
+    let locked = if o.no_foot_lock { 0 } else { lock_feet(&mut done.clip, &key_frames) };
     if let Some(fps) = o.fps.or(keys.fps) {
         done.clip.frame_time = 1.0 / fps;
     }
@@ -610,7 +632,8 @@ fn complete_humanoid(
     )
     .map_err(zoo_data::Message::new)?;
     let fields = serde_json::json!({
-        "key_frames": keys.keys.iter().map(|k| k.frame).collect::<Vec<_>>(),
+        "key_frames": key_frames,
+                "foot_lock_frames": locked,
                 "root_miss": done.root_miss,
                 "angle_miss_degrees": done.angle_miss.0,
                 "network_root_miss": raw_root,
@@ -620,7 +643,7 @@ fn complete_humanoid(
     write_outputs(o, &done.clip, keys.offset, 1.0 / done.clip.frame_time, fields)?;
     Ok(format!(
         "completed {} frames from {} keys ({} partial) into {}{}; the network's largest key miss: root {:.2} (clip \
-         units), {:.2} deg ({} at key {key}); corrected towards the keys, largest miss {:.1e}, {:.1e} deg",
+         units), {:.2} deg ({} at key {key}); corrected towards the keys, largest miss {:.1e}, {:.1e} deg; {}",
         done.clip.frames(),
         keys.keys.len(),
         keys.keys.iter().filter(|k| k.fixed.as_ref().is_some_and(|f| f.contains(&false))).count(),
@@ -631,6 +654,11 @@ fn complete_humanoid(
         joint_names.get(joint).map_or("-", |s| s.as_str()),
         done.root_miss,
         done.angle_miss.0,
+        if o.no_foot_lock {
+            "no foot lock (--no-foot-lock)".to_string()
+        } else {
+            format!("feet locked between the keys on {locked} frames (--no-foot-lock: off)")
+        },
     ))
 }
 

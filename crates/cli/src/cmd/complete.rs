@@ -43,6 +43,10 @@ pub struct CompleteArgs {
     /// onto it (docs/arnn.md, "The ground").
     #[arg(long)]
     pub no_ground: bool,
+    /// Humanoid keys: write the network's motion as is, without the foot lock between the keys
+    /// (planted feet held, legs refitted; key frames unchanged; docs/keys-only.md).
+    #[arg(long)]
+    pub no_foot_lock: bool,
     /// Frames per second of the output [default: the keys file's `fps`, else 50].
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::fps)]
     pub fps: Option<f64>,
@@ -95,6 +99,7 @@ pub fn run(a: CompleteArgs) -> anyhow::Result<()> {
         json: a.json,
         plot: a.plot,
         no_ground: a.no_ground,
+        no_foot_lock: a.no_foot_lock,
         fps: a.fps,
         positions: a.positions,
     };
