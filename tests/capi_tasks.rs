@@ -38,6 +38,8 @@ use zoo_tests::capi::{assert_error, assert_ok, c_path, last_error, pose_values};
 struct Files {
     rtn: PathBuf,
     arnn: PathBuf,
+    /// The in-betweening design of the keyframes task ([`zoo_tests::tiny_inbetween_onnx`]).
+    inbetween: PathBuf,
     rmr: PathBuf,
     rnngmm: PathBuf,
     /// An RNN-GMM exported from a refiner-stage run (3 refiner updates): the file embeds the
@@ -81,6 +83,7 @@ fn files() -> &'static Files {
         Files {
             rtn: write("rtn.onnx", zoo_tests::tiny_rtn_onnx()),
             arnn: write("arnn.onnx", zoo_tests::tiny_arnn_onnx()),
+            inbetween: write("inbetween.onnx", zoo_tests::tiny_inbetween_onnx()),
             rmr: write("rmr.onnx", zoo_tests::tiny_rmr_onnx()),
             rnngmm: write("rnngmm.onnx", zoo_tests::tiny_rnngmm_onnx()),
             rnngmm_refined: write("rnngmm_refined.onnx", tiny_rnngmm_refined_onnx(&dir)),
@@ -1004,6 +1007,90 @@ fn keyframes_refuse_keys_out_of_order() {
         assert_error(status, ZooStatus::InvalidArgument, "too large");
     }
     assert!(h.untouched(), "a refused call writes nothing");
+}
+
+/// Issue 46: the in-betweening design runs through the same functions. `zoo_keyframes_info`
+/// reports its humanoid pose (3 joints: 15 values, 4 groups); whole and partial keys of two
+/// characters complete as the Rust API completes them, bit for bit, in a batch and alone; bad
+/// partial keys are refused with their C message, the output untouched.
+#[test]
+fn inbetween_keyframes_through_the_c_abi_match_the_rust_api() {
+    let (d, g) = (15, 4);
+    let path = &files().inbetween;
+    let rust = LoadedModel::load(path).unwrap().into_keyframes().unwrap();
+    assert!(rust.is_inbetween());
+    let frames = [0usize, 9, 24, 39, 0, 8, 17, 30];
+    let poses = [zoo_tests::humanoid_keys(&frames[..4], 0.0), zoo_tests::humanoid_keys(&frames[4..], 0.7)].concat();
+    // Character 0's keys are whole, character 1's middle keys partial.
+    let fixed = [[1.0f32; 16].as_slice(), &[1.0; 4], &[1.0, 0.0, 1.0, 0.0], &[0.0, 1.0, 0.0, 0.0], &[1.0; 4]].concat();
+    let keys = [
+        MotionKeys { frames: &frames[..4], poses: &poses[..4 * d], fixed: &fixed[..4 * g] },
+        MotionKeys { frames: &frames[4..], poses: &poses[4 * d..], fixed: &fixed[4 * g..] },
+    ];
+    let (mut a, mut b) = (vec![0.0; 40 * d], vec![0.0; 31 * d]);
+    rust.runner(2).unwrap().complete_batch(&keys, &mut [&mut a, &mut b]).unwrap();
+    let expected = [a, b].concat();
+    unsafe {
+        let model = load(path);
+        let mut info = ZooKeyframesInfo::default();
+        assert_ok(zoo_keyframes_info(model, &mut info));
+        assert_eq!(info, ZooKeyframesInfo { dofs: d, groups: g });
+        let mut common = ZooModelInfo::default();
+        assert_ok(zoo_model_info(model, &mut common));
+        assert_eq!((common.task, common.fps, common.joints), (ZooTask::Keyframes, 30.0, 3));
+        let runner = keyframe_runner(model, 2);
+        zoo_model_free(model); // the runner keeps what it needs
+        let counts = [4usize, 4];
+        let mut out = vec![f32::NAN; 71 * d];
+        let (f, p, m) = (frames.as_ptr(), poses.as_ptr(), fixed.as_ptr());
+        let status = zoo_keyframes_complete_batch(
+            runner,
+            counts.as_ptr(),
+            2,
+            f,
+            8,
+            p,
+            8 * d,
+            m,
+            8 * g,
+            out.as_mut_ptr(),
+            71 * d,
+        );
+        assert_ok(status);
+        assert!(out == expected, "the C ABI's completion differs from the Rust API's");
+        let mut alone = vec![f32::NAN; 31 * d];
+        let status = zoo_keyframes_complete(
+            runner,
+            f.add(4),
+            4,
+            p.add(4 * d),
+            4 * d,
+            m.add(4 * g),
+            4 * g,
+            alone.as_mut_ptr(),
+            31 * d,
+        );
+        assert_ok(status);
+        assert!(alone[..] == expected[40 * d..], "alone vs in a batch");
+        // The first key must fix every group; the output is left as it was.
+        let mut bad = fixed[16..].to_vec();
+        bad[0] = 0.0;
+        let mut untouched = vec![7.0f32; 31 * d];
+        let status = zoo_keyframes_complete(
+            runner,
+            f.add(4),
+            4,
+            p.add(4 * d),
+            4 * d,
+            bad.as_ptr(),
+            4 * g,
+            untouched.as_mut_ptr(),
+            31 * d,
+        );
+        assert_error(status, ZooStatus::InvalidArgument, "the first key is the start pose");
+        assert!(untouched.iter().all(|v| *v == 7.0), "a refused call writes nothing");
+        zoo_keyframes_runner_free(runner);
+    }
 }
 
 // Stitching.

@@ -144,6 +144,57 @@ pub fn tiny_arnn_onnx() -> zoo_export::OnnxModel {
     zoo_arnn::export::export_arnn(&config, &norm, &varmap).expect("the tiny ARNN exports")
 }
 
+/// The skeleton of the in-betweening tests: hips, spine and hand in a chain, Euler channels
+/// ZXY (bandai2's), 30 fps.
+pub fn inbetween_skeleton() -> zoo_arnn::HumanoidSkeleton {
+    zoo_arnn::HumanoidSkeleton {
+        names: ["Hips", "Spine", "Hand"].iter().map(|s| s.to_string()).collect(),
+        parents: vec![-1, 0, 1],
+        offsets: vec![[0.0; 3], [0.0, 10.0, 0.0], [0.0, 10.0, 0.0]],
+        fps: 30.0,
+    }
+}
+
+/// A tiny in-betweening network (`zoo_arnn::inbetween::InbetweenConfig::tiny` on
+/// [`inbetween_skeleton`]) with seeded weights ([`zoo_nn::SeededVarMap`], seed 7) and fixed
+/// statistics (cm and quaternion components), exported as `zoo export --onnx` would: the
+/// keyframes task's in-betweening test model.
+pub fn tiny_inbetween_onnx() -> zoo_export::OnnxModel {
+    use candle_core::{DType, Device};
+    use zoo_arnn::inbetween::{Inbetween, InbetweenConfig};
+    let config = InbetweenConfig::tiny(inbetween_skeleton(), vec![[2, 0, 1]; 3]);
+    let varmap = candle_nn::VarMap::new();
+    Inbetween::new(&config, zoo_nn::SeededVarMap::builder(&varmap, 7, DType::F32, &Device::Cpu))
+        .expect("tiny in-betweening network");
+    let mut mean = vec![0.0, 90.0, 0.0];
+    mean.extend([0.9, 0.1, 0.0, 0.0].repeat(3));
+    let mut std = vec![40.0, 5.0, 40.0];
+    std.extend([0.1, 0.2, 0.3, 0.2].repeat(3));
+    let norm = zoo_arnn::Normalization { mean, std };
+    zoo_arnn::inbetween_export::export_inbetween(&config, &norm, &varmap)
+        .expect("the tiny in-betweening network exports")
+}
+
+/// Humanoid key poses on [`inbetween_skeleton`] at `frames` (f32, key-major, `3 + 4 * 3`
+/// values each): the root walking forward at 1 cm a frame with a bounce, the joints swinging
+/// (`phase` shifts the swing).
+pub fn humanoid_keys(frames: &[usize], phase: f64) -> Vec<f32> {
+    frames
+        .iter()
+        .flat_map(|&f| {
+            let a = 0.08 * f as f64 + phase;
+            let rot = [
+                DQuat::from_rotation_y(0.6 * a.sin()),
+                DQuat::from_rotation_x(0.5 * (1.3 * a).cos()) * DQuat::from_rotation_z(0.2 * a.sin()),
+                DQuat::from_rotation_z(0.8 * (0.7 * a).sin()),
+            ];
+            let root = DVec3::new(f as f64, 90.0 + 3.0 * (2.0 * a).sin(), 0.3 * f as f64);
+            let pose = zoo_motion::inbetween::pose_values(root, &rot);
+            pose.into_iter().map(|v| v as f32).collect::<Vec<f32>>()
+        })
+        .collect()
+}
+
 /// A tiny RMR (`zoo_rmr::Config::tiny`, the synthetic data's 21-joint skeleton, a window of
 /// 30 frames every 15) with seeded weights (seed 7) and the statistics of a synthetic clip's
 /// pose vectors, exported as `zoo export --onnx` would: the stitching task's test model.

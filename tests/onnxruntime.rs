@@ -53,15 +53,24 @@ impl OrtSession {
 
     /// Runs with named `[batch, width]` inputs; returns the named outputs, flattened.
     pub fn run(&mut self, inputs: &[(&str, usize, &[f32])], outputs: &[&str]) -> Vec<Vec<f32>> {
+        let shapes: Vec<[usize; 2]> = inputs.iter().map(|(_, batch, data)| [*batch, data.len() / batch]).collect();
+        let shaped: Vec<(&str, &[usize], &[f32])> =
+            inputs.iter().zip(&shapes).map(|((name, _, data), shape)| (*name, &shape[..], *data)).collect();
+        self.run_shaped(&shaped, outputs)
+    }
+
+    /// Runs with named inputs of any shape (`dims`, row-major values); returns the named
+    /// outputs, flattened.
+    pub fn run_shaped(&mut self, inputs: &[(&str, &[usize], &[f32])], outputs: &[&str]) -> Vec<Vec<f32>> {
         let values: Vec<(Cow<'_, str>, ort::session::SessionInputValue<'_>)> = inputs
             .iter()
-            .map(|(name, batch, data)| {
-                let shape = vec![*batch as i64, (data.len() / batch) as i64];
+            .map(|(name, dims, data)| {
+                let shape: Vec<i64> = dims.iter().map(|d| *d as i64).collect();
                 let t = ort::value::Tensor::from_array((shape, data.to_vec())).expect("tensor");
                 (Cow::Owned(name.to_string()), t.into())
             })
             .collect();
-        let out = self.0.run(values).expect("onnxruntime runs the step");
+        let out = self.0.run(values).expect("onnxruntime runs the graph");
         outputs.iter().map(|name| out[*name].try_extract_tensor::<f32>().expect("f32 output").1.to_vec()).collect()
     }
 

@@ -98,7 +98,12 @@ fn candle_tract_and_onnxruntime_complete_the_same_keys() {
     assert_eq!(tract_model.metadata().model_kind, "arnn");
     assert_eq!(
         tract_model.metadata().task,
-        MotionTask::Keyframes(zoo_format::KeyframesTask { dofs: config.dofs, groups: 0, key_groups: vec![] })
+        MotionTask::Keyframes(zoo_format::KeyframesTask {
+            dofs: config.dofs,
+            groups: 0,
+            key_groups: vec![],
+            inbetween: None
+        })
     );
     let names: Vec<&str> = tract_model.inputs().iter().map(|i| i.name.as_str()).collect();
     assert_eq!(names, ["prev", "key_a", "key_b", "t_rel"]);
@@ -272,7 +277,7 @@ fn partial_keys_complete_the_same_in_candle_tract_and_onnxruntime() {
     let onnx = zoo_arnn::export::export_arnn(&config, &norm, &varmap).unwrap();
     let km = KeyframeModel::new(MotionModel::from_bytes(&onnx.to_bytes()).unwrap()).unwrap();
     assert_eq!((km.dofs(), km.groups()), (d, g));
-    assert_eq!(km.model().metadata().skeleton.names, names);
+    assert_eq!(km.metadata().skeleton.names, names);
     let flat: Vec<f32> = poses.iter().flatten().map(|v| *v as f32).collect();
     let flags: Vec<f32> = fixed.iter().flatten().map(|&f| if f { 1.0 } else { 0.0 }).collect();
     let mut runner = km.runner(1).unwrap();

@@ -167,7 +167,7 @@ fn keyframes_allocations() {
             runner.complete(MotionKeys { frames: &frames, poses: &poses, fixed: &fixed }, &mut out).unwrap()
         });
         // The same 39 graph runs through the bare runner.
-        let raw = model.model();
+        let raw = model.step_model().expect("an ARNN step graph");
         let mut raw_runner = raw.runner().unwrap();
         let mut state = raw.new_state();
         let inputs: Vec<Vec<f32>> = raw.inputs().iter().map(|i| vec![0.5; i.width]).collect();

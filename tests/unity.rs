@@ -578,7 +578,7 @@ fn keyframes_vectors(v: &mut Vectors, path: &Path) {
     v.f("kf.poses", &poses);
     v.f("kf.single", &single);
     v.f("kf.batch", &[a, b].concat());
-    v.s("kf.names", &model.model().metadata().skeleton.names);
+    v.s("kf.names", &model.metadata().skeleton.names);
 }
 
 fn stitch_vectors(v: &mut Vectors, path: &Path) {

@@ -30,7 +30,7 @@ impl Keyframes {
     }
 
     fn joints(&self) -> usize {
-        self.model.model().metadata().skeleton.len()
+        self.model.metadata().skeleton.len()
     }
 
     /// Whether the pose vector is the humanoid one (`zoo_arnn::humanoid`): the root position,
@@ -84,7 +84,7 @@ impl Keyframes {
     /// The model's metadata.
     #[getter]
     fn metadata<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        crate::info::metadata_dict(py, self.model.model().metadata())
+        crate::info::metadata_dict(py, self.model.metadata())
     }
 
     /// Values per pose vector.

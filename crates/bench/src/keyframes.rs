@@ -94,7 +94,8 @@ fn measure(
     batch: usize,
 ) -> Result<Vec<BackendFigure>> {
     let d = km.dofs();
-    let mut backends = backends(km.model(), d, bytes, env, batch)?;
+    let Some(step) = km.step_model() else { bail!("{}: no per-frame step graph", o.model.display()) };
+    let mut backends = backends(step, d, bytes, env, batch)?;
     check_agreement(&mut backends)?;
     let mut completion = Completion {
         runner: km.runner(batch)?,
@@ -131,6 +132,13 @@ pub fn run(o: &RuntimeOptions) -> Result<(String, Vec<BackendFigure>)> {
     let bytes = std::fs::read(&o.model).with_context(|| format!("reading {}", o.model.display()))?;
     let km =
         crate::exported::load(&o.model, &[MotionTaskKind::Keyframes], "`zoo bench keyframes`")?.into_keyframes()?;
+    if km.is_inbetween() {
+        bail!(
+            "{}: the in-betweening design has no per-frame step graph; `zoo bench keyframes` times the ARNN's step \
+             graph (tract against onnxruntime): pass an ARNN step-graph export",
+            o.model.display()
+        );
+    }
     let lib = onnxruntime_library(o.onnxruntime.as_deref())?;
     let env = onnxruntime_env(&lib)?;
     let header = format!(

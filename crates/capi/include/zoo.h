@@ -401,8 +401,9 @@ enum ZooStatus zoo_keyframes_complete(struct ZooKeyframesRunner *runner,
                                       float *out,
                                       size_t out_len);
 
-// Completes the keys of `count` characters in one graph call per frame (at most the runner's
-// `max_batch`): character `c` has `key_counts[c]` keys, and `frames`, `poses`, `fixed` and
+// Completes the keys of `count` characters together (at most the runner's `max_batch`; an
+// ARNN step graph runs one graph call per frame, the in-betweening design one call per
+// character): character `c` has `key_counts[c]` keys, and `frames`, `poses`, `fixed` and
 // `out` hold the characters' buffers of [`zoo_keyframes_complete`] one after the other
 // (character-major; `fixed` NULL and 0 when every key is whole). A character's frames are
 // those it gets alone. The runner: one thread at a time.

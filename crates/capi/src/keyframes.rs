@@ -1,12 +1,16 @@
-//! Keyframe completion (ARNN, task `keyframes`, `zoo_runtime::keyframes`): a `keyframes` model
-//! fills in every frame between an animator's keys with a [`ZooKeyframesRunner`], one character
-//! or a batch in one graph call per frame.
+//! Keyframe completion (task `keyframes`, `zoo_runtime::keyframes`): a `keyframes` model fills
+//! in every frame between an animator's keys with a [`ZooKeyframesRunner`], one character or a
+//! batch per call. Both designs `zoo export` writes for `zoo train arnn` run through the same
+//! functions: the ARNN's step graph (one graph call per frame for the whole batch) and the
+//! in-betweening design's whole-shot graph (`--design inbetween`: one graph call per
+//! character, correcting Blender's default curves through the keys).
 //!
 //! Keys of a character: key frames (`size_t`, strictly increasing, the first 0) and one pose of
-//! `D` floats per key (the export's units: metres and radians for the lamp). The completion has
-//! `last key frame + 1` frames of `D` floats, frame-major; frame 0 is the first key. A model with
-//! key groups (a humanoid ARNN) also takes partial keys: `G` flags per key, 1 where the key
-//! fixes the group and 0 where it leaves it free.
+//! `D` floats per key (the export's units: metres and radians for the lamp; for a humanoid the
+//! root position, then a `w, x, y, z` quaternion per joint, in the clips' units). The completion
+//! has `last key frame + 1` frames of `D` floats, frame-major; frame 0 is the first key. A model
+//! with key groups (a humanoid) also takes partial keys: `G` flags per key, 1 where the key fixes
+//! the group and 0 where it leaves it free.
 
 use crate::model::model;
 use crate::{
@@ -113,8 +117,9 @@ pub unsafe extern "C" fn zoo_keyframes_complete(
     })
 }
 
-/// Completes the keys of `count` characters in one graph call per frame (at most the runner's
-/// `max_batch`): character `c` has `key_counts[c]` keys, and `frames`, `poses`, `fixed` and
+/// Completes the keys of `count` characters together (at most the runner's `max_batch`; an
+/// ARNN step graph runs one graph call per frame, the in-betweening design one call per
+/// character): character `c` has `key_counts[c]` keys, and `frames`, `poses`, `fixed` and
 /// `out` hold the characters' buffers of [`zoo_keyframes_complete`] one after the other
 /// (character-major; `fixed` NULL and 0 when every key is whole). A character's frames are
 /// those it gets alone. The runner: one thread at a time.

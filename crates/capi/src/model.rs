@@ -163,7 +163,7 @@ impl ZooModel {
     pub(crate) fn metadata(&self) -> &MotionModelMetadata {
         match &self.model {
             TaskModel::Transition(t) => t.model().metadata(),
-            TaskModel::Keyframes(k) => k.model().metadata(),
+            TaskModel::Keyframes(k) => k.metadata(),
             TaskModel::Stitch(s) => s.metadata(),
             TaskModel::Synthesis { file, .. } => file.model().metadata(),
         }

@@ -49,7 +49,7 @@ pub mod transition;
 
 pub use error::{FormatError, REEXPORT};
 use glam::Vec3;
-pub use keyframes::KeyframesTask;
+pub use keyframes::{InbetweenSection, KeyframesTask};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 pub use stitch::{StitchFallback, StitchLayout, StitchTask};
@@ -571,7 +571,7 @@ impl MotionModelMetadata {
         let joints = self.skeleton.len();
         match &self.task {
             MotionTask::Transition(t) => t.check(joints).map_err(|r| bad(keys::TRANSITION, r))?,
-            MotionTask::Keyframes(t) => t.check().map_err(|r| bad(keys::KEYFRAMES, r))?,
+            MotionTask::Keyframes(t) => t.check(joints).map_err(|r| bad(keys::KEYFRAMES, r))?,
             MotionTask::Stitch(t) => {
                 t.check(&self.skeleton.to_skeleton()).map_err(|r| bad(keys::STITCH, r))?;
                 self.group("x", t.dim(joints))?;

@@ -269,7 +269,7 @@ fn every_task_round_trips_through_its_section() {
     let stitch = stitch_sample();
     let keyframes = MotionModelMetadata {
         model_kind: "arnn".into(),
-        task: MotionTask::Keyframes(KeyframesTask { dofs: 2, groups: 2, key_groups: vec![0, 1] }),
+        task: MotionTask::Keyframes(KeyframesTask { dofs: 2, groups: 2, key_groups: vec![0, 1], inbetween: None }),
         ..sample()
     };
     let synthesis = MotionModelMetadata {
@@ -295,6 +295,75 @@ fn every_task_round_trips_through_its_section() {
     // A refiner section without its graph (or the reverse) is refused.
     let err = MotionModelMetadata::from_props(lookup(&synthesis.to_props())).unwrap_err();
     assert!(err.to_string().contains(keys::SYNTHESIS_REFINER_GRAPH), "{err}");
+}
+
+/// An in-betweening keyframes model on `sample()`'s skeleton of 2 joints: poses of 11 values in
+/// 3 groups, 3 * 11 + 2 + 2 * 3 = 41 features per frame.
+fn inbetween_sample() -> MotionModelMetadata {
+    let section = InbetweenSection {
+        euler_axes: vec![[2, 0, 1]; 2],
+        gap_unit: 30.0,
+        mean: vec![0.25; 11],
+        std: vec![0.5; 11],
+        input_width: 41,
+    };
+    MotionModelMetadata {
+        model_kind: "arnn".into(),
+        task: MotionTask::Keyframes(KeyframesTask {
+            dofs: 11,
+            groups: 3,
+            key_groups: zoo_motion::inbetween::key_groups(2),
+            inbetween: Some(section),
+        }),
+        state: vec![],
+        ..sample()
+    }
+}
+
+#[test]
+fn an_inbetween_keyframes_section_round_trips_and_is_checked() {
+    let m = inbetween_sample();
+    let props = m.to_props();
+    assert!(props.last().unwrap().1.contains("\"inbetween\":{\"euler_axes\":[[2,0,1],[2,0,1]]"));
+    assert_eq!(MotionModelMetadata::from_props(lookup(&props)).unwrap(), m);
+    let edit = |f: &dyn Fn(&mut KeyframesTask)| {
+        let mut m = inbetween_sample();
+        if let MotionTask::Keyframes(t) = &mut m.task {
+            f(t);
+        }
+        m.check().unwrap_err().to_string()
+    };
+    let section = |f: &dyn Fn(&mut InbetweenSection)| edit(&|t| f(t.inbetween.as_mut().unwrap()));
+    let err = section(&|s| s.input_width = 40);
+    assert!(err.contains("inbetween.input_width is 40 but 2 joints make 41"), "{err}");
+    let err = section(&|s| s.std[3] = 0.0);
+    assert!(err.contains(keys::KEYFRAMES) && err.contains("standard deviation 3 is 0"), "{err}");
+    let err = section(&|s| s.euler_axes[1] = [0, 0, 2]);
+    assert!(err.contains("euler_axes of joint 1 is [0, 0, 2]"), "{err}");
+    let err = section(&|s| s.euler_axes.push([2, 0, 1]));
+    assert!(err.contains("inbetween.euler_axes has 3 joints but the skeleton has 2"), "{err}");
+    let err = edit(&|t| t.groups = 2);
+    assert!(err.contains("the section says dofs 11 and groups 2"), "{err}");
+    let err = section(&|s| {
+        s.mean.pop();
+    });
+    assert!(err.contains("10 means and 11 standard deviations"), "{err}");
+}
+
+#[test]
+fn a_keyframes_section_written_before_the_inbetween_design_loads_as_a_step_graph() {
+    // The section of a file exported before the field existed, verbatim.
+    let old = r#"{"dofs":2,"groups":2,"key_groups":[0,1]}"#;
+    let m = edited(|p| {
+        set(p, keys::TASK, "keyframes");
+        p.retain(|(k, _)| k != keys::TRANSITION);
+        p.push((keys::KEYFRAMES.to_string(), old.to_string()));
+    })
+    .unwrap();
+    let want = KeyframesTask { dofs: 2, groups: 2, key_groups: vec![0, 1], inbetween: None };
+    assert_eq!(m.task, MotionTask::Keyframes(want));
+    // And a step graph's section is written as before: no `inbetween` field.
+    assert_eq!(m.to_props().last().unwrap().1, old);
 }
 
 #[test]

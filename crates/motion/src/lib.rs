@@ -26,6 +26,7 @@ pub mod fit;
 pub mod fk;
 pub mod footlock;
 pub mod frame;
+pub mod inbetween;
 pub mod keyhit;
 pub mod keylock;
 pub mod pipeline;

@@ -1,20 +1,30 @@
-//! Keyframe completion in the engine: an exported ARNN (model kind `arnn`, its per-frame step
-//! graph, see `zoo_arnn::export`) fills in every frame between an animator's keys, into a
-//! buffer the caller owns.
+//! Keyframe completion in the engine: an exported keyframe model (model kind `arnn`) fills in
+//! every frame between an animator's keys, into a buffer the caller owns. Two designs share the
+//! task and this API; the file's `zoo.keyframes` section says which one it holds:
+//!
+//! - the ARNN's per-frame step graph (`zoo_arnn::export`): frame 0 of the output is the first
+//!   key; every later frame `t` is one step of the graph from the previous output, the keys
+//!   around `t` and `t_rel = (t - T_K) / (T_(K+1) - T_K)` (a frame on a key belongs to the
+//!   interval that ends there), exactly as `zoo_arnn::complete` and `zoo complete` run it. A
+//!   batch of characters runs in one graph call per frame; characters whose keys end earlier
+//!   are stepped on (their outputs discarded) until the longest one ends;
+//! - the in-betweening network's whole-shot graph (`zoo train arnn --design inbetween`,
+//!   `zoo_arnn::inbetween_export`): the features of each character's keys are built by
+//!   [`zoo_motion::inbetween`] (the code training uses), the graph corrects the keys' Bezier
+//!   curves over the whole shot in one call per character, and the completion is `bezier +
+//!   envelope * correction * std`, composed in f64 as `zoo_arnn::inbetween::complete_shots`
+//!   does. Its poses are the humanoid pose vector (root
+//!   position, then a `(w, x, y, z)` quaternion per joint, the clips' units).
 //!
 //! The keys of a character are frames (strictly increasing, the first one 0) and one pose per
-//! key (`dofs` values each, the units of the export: metres and radians for the lamp). Frame 0
-//! of the output is the first key; every later frame `t` is one step of the graph from the
-//! previous output, the keys around `t` and `t_rel = (t - T_K) / (T_(K+1) - T_K)` (a frame on a
-//! key belongs to the interval that ends there), exactly as `zoo_arnn::complete` and `zoo
-//! complete` run it. A batch of characters runs in one graph call per frame; characters whose
-//! keys end earlier are stepped on (their outputs discarded) until the longest one ends.
+//! key (`dofs` values each, the units of the export: metres and radians for the lamp).
 //!
 //! Every key is hit: after the network has run, each key frame is set to its key (in the
 //! groups it fixes) and the network's miss is spread over the frames before it
 //! ([`zoo_motion::keyhit`], like RTN's target blend), so the motion stays continuous. A
 //! humanoid's rotations are compared up to sign. [`KeyframeRunner::set_hit_keys`] turns this
-//! off to read the network's own output.
+//! off to read the network's own output (the in-betweening design meets its keys by
+//! construction, to float rounding).
 //!
 //! ```no_run
 //! use zoo_runtime::keyframes::{KeyframeModel, MotionKeys};
@@ -28,14 +38,19 @@
 //! # Ok::<(), zoo_runtime::MotionError>(())
 //! ```
 
+mod shot;
+
 use crate::error::MotionError;
+use crate::metadata::MotionModelMetadata;
 use crate::model::{MotionModel, MotionState};
 use crate::runner::MotionRunner;
+use shot::ShotGraph;
 use std::path::Path;
+use std::sync::Arc;
 
 /// One character's keys: `frames` strictly increasing from 0, `poses` `frames.len() * dofs`
-/// values (key-major); for a model with key groups (a humanoid ARNN), optionally which groups
-/// each key fixes.
+/// values (key-major); for a model with key groups (a humanoid model, either design), optionally
+/// which groups each key fixes.
 #[derive(Clone, Copy, Debug)]
 pub struct MotionKeys<'a> {
     /// Key frames, strictly increasing, the first 0.
@@ -136,19 +151,31 @@ impl MotionKeys<'_> {
     }
 }
 
-/// An exported ARNN step graph, checked: inputs `prev`, `key_a`, `key_b` (`dofs` each), `t_rel`
-/// (1), outputs `pose` (`dofs`) first. Cheap to clone, `Send + Sync`.
+/// The graph of a keyframe model.
+#[derive(Clone, Debug)]
+enum KeyframeGraph {
+    /// The ARNN's per-frame step graph.
+    Step(MotionModel),
+    /// The in-betweening design's whole-shot graph.
+    Shot(Arc<ShotGraph>),
+}
+
+/// An exported keyframe model, checked: an ARNN step graph (inputs `prev`, `key_a`, `key_b`
+/// (`dofs` each), `t_rel` (1), with key groups `fixed_a` and `fixed_b` (`groups` each); output
+/// `pose` (`dofs`) besides the recurrent state), or the in-betweening design's whole-shot graph
+/// (input `features` `[batch, frames, width]`, output `correction` `[batch, frames, dofs]`).
+/// Cheap to clone, `Send + Sync`.
 #[derive(Clone, Debug)]
 pub struct KeyframeModel {
-    model: MotionModel,
+    graph: KeyframeGraph,
     dofs: usize,
     groups: usize,
     key_groups: Vec<usize>,
 }
 
 impl KeyframeModel {
-    /// Loads an exported ARNN (`zoo export --onnx RUN --out arnn.onnx`); a file of another
-    /// task is refused ([`MotionError::WrongTask`]).
+    /// Loads an exported keyframe model (`zoo export --onnx RUN --out model.onnx` of a `zoo train
+    /// arnn` run, either design); a file of another task is refused ([`MotionError::WrongTask`]).
     pub fn load(path: impl AsRef<Path>) -> Result<Self, MotionError> {
         crate::LoadedModel::load(path)?.into_keyframes()
     }
@@ -158,7 +185,22 @@ impl KeyframeModel {
         crate::LoadedModel::from_bytes(bytes)?.into_keyframes()
     }
 
-    /// Checks that `model` is a `keyframes` model whose step graph matches its section.
+    /// Loads the graph of a `keyframes` file whose metadata was read and checked, by its design.
+    pub(crate) fn from_parts(bytes: &[u8], origin: &str, metadata: MotionModelMetadata) -> Result<Self, MotionError> {
+        let Some(task) = metadata.task.as_keyframes() else {
+            return Err(MotionError::wrong_task(&metadata, "keyframes", "KeyframeModel"));
+        };
+        if task.inbetween.is_none() {
+            return Self::new(MotionModel::from_parts(bytes, origin, metadata)?);
+        }
+        let (dofs, groups, key_groups) = (task.dofs, task.groups, task.key_groups.clone());
+        let graph = ShotGraph::load(bytes, origin, metadata)?;
+        Ok(KeyframeModel { graph: KeyframeGraph::Shot(Arc::new(graph)), dofs, groups, key_groups })
+    }
+
+    /// Checks that `model` is a `keyframes` ARNN step graph matching its section (an
+    /// in-betweening file is a whole-shot graph, which [`MotionModel`] does not load: load it
+    /// with [`KeyframeModel::load`] or [`crate::LoadedModel::load`]).
     pub fn new(model: MotionModel) -> Result<Self, MotionError> {
         let m = model.metadata();
         let Some(task) = m.task.as_keyframes() else {
@@ -173,7 +215,7 @@ impl KeyframeModel {
         } else {
             (&["prev", "key_a", "key_b", "t_rel", "fixed_a", "fixed_b"], vec![dofs, dofs, dofs, 1, groups, groups])
         };
-        if names != want_names || widths != want_widths || outputs != [("pose", dofs)] {
+        if task.inbetween.is_some() || names != want_names || widths != want_widths || outputs != [("pose", dofs)] {
             return Err(MotionError::BadGraphIo {
                 what: "input",
                 name: names.first().unwrap_or(&"").to_string(),
@@ -184,10 +226,10 @@ impl KeyframeModel {
                 ),
             });
         }
-        Ok(KeyframeModel { model, dofs, groups, key_groups })
+        Ok(KeyframeModel { graph: KeyframeGraph::Step(model), dofs, groups, key_groups })
     }
 
-    /// Values per pose (6 for the lamp).
+    /// Values per pose (6 for the lamp; `3 + 4 J` for a humanoid).
     pub fn dofs(&self) -> usize {
         self.dofs
     }
@@ -197,27 +239,52 @@ impl KeyframeModel {
         self.groups
     }
 
-    /// The step graph.
-    pub fn model(&self) -> &MotionModel {
-        &self.model
+    /// The file's metadata (its `keyframes` section, skeleton, frame, fps and statistics).
+    pub fn metadata(&self) -> &MotionModelMetadata {
+        match &self.graph {
+            KeyframeGraph::Step(m) => m.metadata(),
+            KeyframeGraph::Shot(s) => &s.metadata,
+        }
     }
 
-    /// A runner for up to `max_batch` characters per call (its buffers sized once here).
+    /// Whether the file holds the in-betweening design's whole-shot graph (else the ARNN's
+    /// step graph).
+    pub fn is_inbetween(&self) -> bool {
+        matches!(self.graph, KeyframeGraph::Shot(_))
+    }
+
+    /// The ARNN's step graph (`None` for the in-betweening design, which has none).
+    pub fn step_model(&self) -> Option<&MotionModel> {
+        match &self.graph {
+            KeyframeGraph::Step(m) => Some(m),
+            KeyframeGraph::Shot(_) => None,
+        }
+    }
+
+    /// A runner for up to `max_batch` characters per call (the step graph's buffers sized once
+    /// here).
     pub fn runner(&self, max_batch: usize) -> Result<KeyframeRunner, MotionError> {
         if max_batch == 0 {
             return Err(MotionError::EmptyBatch);
         }
         let d = self.dofs;
+        let graph = match &self.graph {
+            KeyframeGraph::Step(model) => RunnerGraph::Step(Box::new(StepBuffers {
+                runner: model.runner()?,
+                states: (0..max_batch).map(|_| model.new_state()).collect(),
+                prev: vec![0.0; max_batch * d],
+                key_a: vec![0.0; max_batch * d],
+                key_b: vec![0.0; max_batch * d],
+                t_rel: vec![0.0; max_batch],
+                fixed_a: vec![1.0; max_batch * self.groups],
+                fixed_b: vec![1.0; max_batch * self.groups],
+                pose: vec![0.0; max_batch * d],
+            })),
+            KeyframeGraph::Shot(shot) => RunnerGraph::Shot(shot.clone()),
+        };
         Ok(KeyframeRunner {
-            runner: self.model.runner()?,
-            states: (0..max_batch).map(|_| self.model.new_state()).collect(),
-            prev: vec![0.0; max_batch * d],
-            key_a: vec![0.0; max_batch * d],
-            key_b: vec![0.0; max_batch * d],
-            t_rel: vec![0.0; max_batch],
-            fixed_a: vec![1.0; max_batch * self.groups],
-            fixed_b: vec![1.0; max_batch * self.groups],
-            pose: vec![0.0; max_batch * d],
+            graph,
+            max_batch,
             scratch: vec![0.0; d],
             dofs: d,
             groups: self.groups,
@@ -227,10 +294,16 @@ impl KeyframeModel {
     }
 }
 
-/// Scratch space to complete keys on one thread (`Send`, not `Sync`); no allocation per call
-/// once the graph sessions for the batch sizes used exist.
+/// What a runner runs: the step graph with its per-character buffers, or the whole-shot graph.
 #[derive(Debug)]
-pub struct KeyframeRunner {
+enum RunnerGraph {
+    Step(Box<StepBuffers>),
+    Shot(Arc<ShotGraph>),
+}
+
+/// The step graph's runner and its buffers for `max_batch` characters.
+#[derive(Debug)]
+struct StepBuffers {
     runner: MotionRunner,
     states: Vec<MotionState>,
     prev: Vec<f32>,
@@ -240,68 +313,19 @@ pub struct KeyframeRunner {
     fixed_a: Vec<f32>,
     fixed_b: Vec<f32>,
     pose: Vec<f32>,
-    scratch: Vec<f32>,
-    dofs: usize,
-    groups: usize,
-    key_groups: Vec<usize>,
-    hit_keys: bool,
 }
 
-impl KeyframeRunner {
-    /// Most characters per call.
-    pub fn max_batch(&self) -> usize {
-        self.states.len()
-    }
-
-    /// Whether completions are corrected to hit every key exactly (the default) or are the
-    /// network's own output (`false`: its key misses measure the network).
-    pub fn set_hit_keys(&mut self, on: bool) {
-        self.hit_keys = on;
-    }
-
-    /// Sets each key frame of a completion to its key and spreads the network's miss over the
-    /// frames before it ([`zoo_motion::keyhit::hit_keys`]).
-    fn hit(&mut self, keys: &MotionKeys<'_>, out: &mut [f32]) {
-        let g = self.groups;
-        let layout = zoo_motion::keyhit::KeyLayout {
-            dofs: self.dofs,
-            frames: keys.frames,
-            key_groups: &self.key_groups,
-            quaternions: g > 0,
-        };
-        let fixes = |k: usize, group: usize| keys.fixed.is_empty() || keys.fixed[k * g + group] == 1.0;
-        zoo_motion::keyhit::hit_keys(layout, keys.poses, fixes, out, &mut self.scratch);
-    }
-
-    /// Completes one character's keys into `out` (`keys.len() * dofs` values, frame-major).
-    pub fn complete(&mut self, keys: MotionKeys<'_>, out: &mut [f32]) -> Result<(), MotionError> {
-        self.complete_batch(&[keys], &mut [out])
-    }
-
-    /// Completes the keys of `keys.len()` characters in one graph call per frame: `out[c]`
-    /// receives `keys[c].len() * dofs` values. Every buffer and key is checked before anything
-    /// is written (a bad key or buffer leaves `out` unchanged).
-    pub fn complete_batch(&mut self, keys: &[MotionKeys<'_>], out: &mut [&mut [f32]]) -> Result<(), MotionError> {
-        let (b, d, g) = (keys.len(), self.dofs, self.groups);
-        if b == 0 {
-            return Err(MotionError::EmptyBatch);
-        }
-        if b > self.max_batch() {
-            return Err(MotionError::Keys {
-                character: b - 1,
-                reason: format!("{b} characters, but the runner was made for at most {}", self.max_batch()),
-            });
-        }
-        if out.len() != b {
-            return Err(MotionError::BufferCount { what: "completion outputs", expected: b, found: out.len() }.into());
-        }
-        for (c, (k, o)) in keys.iter().zip(out.iter()).enumerate() {
-            k.check(c, d, g)?;
-            // The name is formatted only on a mismatch: no allocation per call.
-            if o.len() != k.len() * d {
-                crate::runner::check_len(&format!("completion output of character {c}"), o.len(), k.len(), d)?;
-            }
-        }
+impl StepBuffers {
+    /// Steps checked keys into checked buffers, one graph call per frame (`d` values per pose,
+    /// `g` groups).
+    fn complete(
+        &mut self,
+        keys: &[MotionKeys<'_>],
+        out: &mut [&mut [f32]],
+        d: usize,
+        g: usize,
+    ) -> Result<(), MotionError> {
+        let b = keys.len();
         let last = keys.iter().map(|k| k.len()).max().unwrap_or(0);
         for (k, o) in keys.iter().zip(out.iter_mut()) {
             o[..d].copy_from_slice(&k.poses[..d]);
@@ -344,6 +368,84 @@ impl KeyframeRunner {
                 }
                 self.prev[c * d..(c + 1) * d].copy_from_slice(p);
             }
+        }
+        Ok(())
+    }
+}
+
+/// Scratch space to complete keys on one thread (`Send`, not `Sync`). With the ARNN's step
+/// graph no allocation per call once the graph sessions for the batch sizes used exist; the
+/// in-betweening design allocates each shot's features and tensors per call.
+#[derive(Debug)]
+pub struct KeyframeRunner {
+    graph: RunnerGraph,
+    max_batch: usize,
+    scratch: Vec<f32>,
+    dofs: usize,
+    groups: usize,
+    key_groups: Vec<usize>,
+    hit_keys: bool,
+}
+
+impl KeyframeRunner {
+    /// Most characters per call.
+    pub fn max_batch(&self) -> usize {
+        self.max_batch
+    }
+
+    /// Whether completions are corrected to hit every key exactly (the default) or are the
+    /// network's own output (`false`: its key misses measure the network).
+    pub fn set_hit_keys(&mut self, on: bool) {
+        self.hit_keys = on;
+    }
+
+    /// Sets each key frame of a completion to its key and spreads the network's miss over the
+    /// frames before it ([`zoo_motion::keyhit::hit_keys`]).
+    fn hit(&mut self, keys: &MotionKeys<'_>, out: &mut [f32]) {
+        let g = self.groups;
+        let layout = zoo_motion::keyhit::KeyLayout {
+            dofs: self.dofs,
+            frames: keys.frames,
+            key_groups: &self.key_groups,
+            quaternions: g > 0,
+        };
+        let fixes = |k: usize, group: usize| keys.fixed.is_empty() || keys.fixed[k * g + group] == 1.0;
+        zoo_motion::keyhit::hit_keys(layout, keys.poses, fixes, out, &mut self.scratch);
+    }
+
+    /// Completes one character's keys into `out` (`keys.len() * dofs` values, frame-major).
+    pub fn complete(&mut self, keys: MotionKeys<'_>, out: &mut [f32]) -> Result<(), MotionError> {
+        self.complete_batch(&[keys], &mut [out])
+    }
+
+    /// Completes the keys of `keys.len()` characters: `out[c]` receives `keys[c].len() * dofs`
+    /// values. The step graph runs one graph call per frame for the whole batch; the
+    /// in-betweening design one call per character. Every buffer and key is checked before
+    /// anything is written (a bad key or buffer leaves `out` unchanged).
+    pub fn complete_batch(&mut self, keys: &[MotionKeys<'_>], out: &mut [&mut [f32]]) -> Result<(), MotionError> {
+        let (b, d, g) = (keys.len(), self.dofs, self.groups);
+        if b == 0 {
+            return Err(MotionError::EmptyBatch);
+        }
+        if b > self.max_batch() {
+            return Err(MotionError::Keys {
+                character: b - 1,
+                reason: format!("{b} characters, but the runner was made for at most {}", self.max_batch()),
+            });
+        }
+        if out.len() != b {
+            return Err(MotionError::BufferCount { what: "completion outputs", expected: b, found: out.len() });
+        }
+        for (c, (k, o)) in keys.iter().zip(out.iter()).enumerate() {
+            k.check(c, d, g)?;
+            // The name is formatted only on a mismatch: no allocation per call.
+            if o.len() != k.len() * d {
+                crate::runner::check_len(&format!("completion output of character {c}"), o.len(), k.len(), d)?;
+            }
+        }
+        match &mut self.graph {
+            RunnerGraph::Step(step) => step.complete(keys, out, d, g)?,
+            RunnerGraph::Shot(shot) => shot.complete(keys, out)?,
         }
         if self.hit_keys {
             for (k, o) in keys.iter().zip(out.iter_mut()) {

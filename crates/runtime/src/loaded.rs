@@ -21,7 +21,7 @@ use std::path::Path;
 pub enum LoadedModel {
     /// A `transition` model (RTN).
     Transition(TransitionModel),
-    /// A `keyframes` model (ARNN).
+    /// A `keyframes` model (ARNN step graph, or the in-betweening design's whole-shot graph).
     Keyframes(KeyframeModel),
     /// A `stitch` model (RMR).
     Stitch(StitchRefiner),
@@ -66,9 +66,7 @@ impl LoadedModel {
             MotionTaskKind::Transition => {
                 TransitionModel::new(MotionModel::from_parts(bytes, origin, metadata)?).map(LoadedModel::Transition)
             }
-            MotionTaskKind::Keyframes => {
-                KeyframeModel::new(MotionModel::from_parts(bytes, origin, metadata)?).map(LoadedModel::Keyframes)
-            }
+            MotionTaskKind::Keyframes => KeyframeModel::from_parts(bytes, origin, metadata).map(LoadedModel::Keyframes),
             MotionTaskKind::Synthesis => {
                 SynthesisModel::from_parts(bytes, origin, metadata).map(LoadedModel::Synthesis)
             }
@@ -81,7 +79,7 @@ impl LoadedModel {
     pub fn metadata(&self) -> &MotionModelMetadata {
         match self {
             LoadedModel::Transition(t) => t.model().metadata(),
-            LoadedModel::Keyframes(k) => k.model().metadata(),
+            LoadedModel::Keyframes(k) => k.metadata(),
             LoadedModel::Stitch(s) => s.metadata(),
             LoadedModel::Synthesis(s) => s.model().metadata(),
         }

@@ -295,10 +295,20 @@ impl MotionModel {
     }
 
     /// Loads the step graph of a file whose metadata was read and checked. A `stitch` model is
-    /// a window graph, not a step graph: refused with the type that runs it.
+    /// a window graph, and an in-betweening `keyframes` model a whole-shot graph, not step
+    /// graphs: refused with the type that runs them.
     pub(crate) fn from_parts(bytes: &[u8], origin: &str, metadata: MotionModelMetadata) -> Result<Self, MotionError> {
         if metadata.task.kind() == crate::metadata::MotionTaskKind::Stitch {
             return Err(MotionError::wrong_task(&metadata, "step-graph", "MotionModel"));
+        }
+        if metadata.task.as_keyframes().is_some_and(|t| t.inbetween.is_some()) {
+            return Err(MotionError::BadGraphIo {
+                what: "input",
+                name: "features".into(),
+                reason: "the file holds the in-betweening keyframes design, whose whole-shot graph is not a step \
+                         graph: load it as a keyframes model"
+                    .into(),
+            });
         }
         let parsed = parse(bytes, origin)?;
         let Parsed { proto, model, in_dims, out_dims } = &parsed;

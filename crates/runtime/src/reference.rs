@@ -17,8 +17,9 @@
 //!   frames the network's raw frame (before the target blend), the target-blended frame, the
 //!   target miss, the frames of `generate` with a fallback and its weight, and the engine poses
 //!   of `step_posed`;
-//! - keyframes: key sets (whole keys; partial keys when the model has groups), the key interval
-//!   and `t_rel` of every frame, and the completed poses;
+//! - keyframes (the ARNN's step graph; the in-betweening design has no reference vectors yet):
+//!   key sets (whole keys; partial keys when the model has groups), the key interval and
+//!   `t_rel` of every frame, and the completed poses;
 //! - stitch: an aligned sequence of engine poses with a pop in its middle, its pose vectors, the
 //!   windows, the first window's normalised input and raw graph output, the refined pose vectors
 //!   and the refined engine poses without foot cleanup;
@@ -656,7 +657,16 @@ fn transition_case(
 }
 
 fn keyframes_cases(model: &KeyframeModel, rng: &mut SplitMix64) -> Result<Vec<KeyframesCase>, MotionError> {
-    let m = model.model().metadata();
+    if model.is_inbetween() {
+        return Err(MotionError::BadGraphIo {
+            what: "input",
+            name: "features".into(),
+            reason: "reference vectors cover the ARNN's per-frame step graph (docs/runtime-protocol.md); the \
+                     in-betweening design's whole-shot graph has none yet"
+                .into(),
+        });
+    }
+    let m = model.metadata();
     let (d, g) = (model.dofs(), model.groups());
     // Keys around the poses the model was trained on: the `pose` group's means and deviations
     // (0 and 1 for a file without the group).

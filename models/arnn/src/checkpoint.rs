@@ -14,8 +14,8 @@ use zoo_nn::checkpoint as ck;
 pub fn read_meta(dir: &Path) -> ArnnResult<(ArnnConfig, Normalization)> {
     if crate::inbetween::is_inbetween_run(dir) {
         return Err(ArnnError::Config(format!(
-            "{} holds the in-betweening design (`zoo train arnn --design inbetween`), which runs in `zoo complete` and \
-             `zoo bench --layout keys` only (no ONNX export, context layout or lamp evaluation yet)",
+            "{} holds the in-betweening design (`zoo train arnn --design inbetween`), which runs in `zoo complete`, \
+             `zoo bench --layout keys` and `zoo export` only (no context layout or lamp evaluation yet)",
             dir.display()
         )));
     }

@@ -2,6 +2,8 @@
 //! equations as [`crate::Arnn::step`]), written with the generic `zoo-export` writer; metadata
 //! through the format crate `zoo_format` (model kind `arnn`, task `keyframes`, its section
 //! `zoo.keyframes` with the pose width and the key groups; the runtime's `KeyframeModel` runs it).
+//! A run folder of the in-betweening design exports its whole-shot graph instead
+//! ([`crate::inbetween_export`]).
 //!
 //! Step graph (one call per frame; every tensor `[batch, n]` f32, poses in physical units,
 //! metres and radians, the normalisation inside the graph):
@@ -40,8 +42,13 @@ pub const MODEL_KIND: &str = "arnn";
 /// Frames per second recorded in the metadata: the rate `zoo complete` plays completions at.
 pub const FPS: f32 = 50.0;
 
-/// Loads a `zoo train arnn` run folder and exports it (see [`export_arnn`]).
+/// Loads a `zoo train arnn` run folder and exports it: the step graph of [`export_arnn`], or
+/// for the in-betweening design (`--design inbetween`) its whole-shot graph
+/// ([`crate::inbetween_export`]).
 pub fn export_arnn_dir(dir: &Path) -> Result<OnnxModel, ExportError> {
+    if crate::inbetween::is_inbetween_run(dir) {
+        return crate::inbetween_export::export_inbetween_dir(dir);
+    }
     let (config, norm) =
         checkpoint::read_meta(dir).map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
     let varmap = zoo_nn::export::load_run_varmap(dir, "ARNN", |vb| crate::Arnn::new(&config, vb))?;
@@ -139,6 +146,7 @@ pub fn metadata(config: &ArnnConfig, norm: &Normalization) -> Result<MotionModel
             dofs: d,
             groups: config.groups(),
             key_groups: config.key_groups.clone(),
+            inbetween: None,
         }),
         config_json,
         normalization,

@@ -43,14 +43,10 @@ pub fn skeleton_info(s: &Skeleton, fps: f64) -> HumanoidSkeleton {
 /// Names of the pose values and their key groups for a skeleton's joint names.
 pub fn pose_layout(names: &[String]) -> (Vec<String>, Vec<usize>) {
     let mut dof_names: Vec<String> = ["root_x", "root_y", "root_z"].iter().map(|s| s.to_string()).collect();
-    let mut groups = vec![0, 0, 0];
-    for (j, n) in names.iter().enumerate() {
-        for c in ["qw", "qx", "qy", "qz"] {
-            dof_names.push(format!("{n}_{c}"));
-            groups.push(1 + j);
-        }
+    for n in names {
+        dof_names.extend(["qw", "qx", "qy", "qz"].map(|c| format!("{n}_{c}")));
     }
-    (dof_names, groups)
+    (dof_names, zoo_motion::inbetween::key_groups(names.len()))
 }
 
 /// The humanoid configuration for a skeleton and the clips' frame rate ([`ArnnConfig::humanoid`]).
@@ -99,17 +95,7 @@ pub fn poses(root: &[DVec3], rot: &[DQuat], joints: usize) -> Vec<Vec<f64>> {
 }
 
 /// The root position and unit rotations of a pose.
-pub fn decode(pose: &[f64], joints: usize) -> (DVec3, Vec<DQuat>) {
-    let root = DVec3::new(pose[0], pose[1], pose[2]);
-    let rot = (0..joints)
-        .map(|j| {
-            let v = &pose[3 + 4 * j..7 + 4 * j];
-            let q = DQuat::from_xyzw(v[1], v[2], v[3], v[0]);
-            if q.length_squared() > 1e-12 { q.normalize() } else { DQuat::IDENTITY }
-        })
-        .collect();
-    (root, rot)
-}
+pub use zoo_motion::inbetween::decode_pose as decode;
 
 /// Training or validation sequences from prepared windows; each gets keys drawn once with
 /// `sampling` and `seed` (the fixed keys validation uses; training draws new ones each time).

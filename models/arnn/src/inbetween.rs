@@ -10,7 +10,8 @@
 //! Poses are the humanoid ARNN's ([`crate::humanoid`]): the root position, then one quaternion
 //! `(w, x, y, z)` per joint, `d = 3 + 4 J` values, in network units `(x - mean) / std`. Key
 //! groups: group 0 is the root position, group `1 + j` joint `j`'s rotation. Per frame `t` of a
-//! shot (frames `0..=last key`) the network reads:
+//! shot (frames `0..=last key`) the network reads ([`zoo_motion::inbetween`] builds them, for
+//! training and for the runtime alike):
 //! - `b_t`, the Bezier pose;
 //! - `k-_t - b_t` and `k+_t - b_t`: per value, the previous key fixing its group (at or before
 //!   `t`) and the next one (after `t`), minus the Bezier pose (a key's quaternion taken with the
@@ -27,11 +28,10 @@ use crate::train::Normalization;
 use crate::{ArnnError, ArnnResult};
 use candle_core::{Device, Module, Tensor};
 use candle_nn::VarBuilder;
-use glam::{DQuat, DVec3};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use zoo_motion::EulerOrder;
-use zoo_motion::fcurve::{ShotKeys, bezier_inbetween};
+use zoo_motion::inbetween::InbetweenFeatures;
 use zoo_nn::{Activation, BiGru, Mlp, RowRngs};
 
 /// The `design` field of an in-betweening run's `config.json`.
@@ -285,18 +285,8 @@ impl Inbetween {
     }
 }
 
-/// One shot's network inputs and its Bezier poses.
-#[derive(Clone, Debug)]
-pub struct ShotInputs {
-    /// Frames of the shot (`0..=last key`).
-    pub frames: usize,
-    /// Input features, frames x [`InbetweenConfig::input_width`].
-    pub features: Vec<f32>,
-    /// The Bezier pose of each frame in clip units, frames x d.
-    pub bezier: Vec<f64>,
-    /// The envelope of each value, frames x d (0 on a key frame fixing its group).
-    pub envelope: Vec<f64>,
-}
+/// One shot's network inputs and its Bezier poses (built by [`zoo_motion::inbetween`]).
+pub use zoo_motion::inbetween::ShotInputs;
 
 /// Tensors of shots of one length: features `(b, T, in)`, Bezier poses (normalised) and
 /// envelopes `(b, T, d)`.
@@ -329,70 +319,42 @@ impl ShotBatch {
     }
 }
 
-/// Per group, the index of the previous key fixing it (at or before `t`) and of the next one
-/// (after `t`; the previous one at or after the last); `None` before the first.
-fn around(keys: &[(usize, usize)], t: usize) -> Option<((usize, usize), (usize, usize))> {
-    let i = keys.partition_point(|(_, f)| *f <= t);
-    if i == 0 {
-        return None;
-    }
-    Some((keys[i - 1], keys.get(i).copied().unwrap_or(keys[i - 1])))
+/// The feature settings of `config` with the statistics `norm`, checked.
+pub fn features(config: &InbetweenConfig, norm: &Normalization) -> ArnnResult<InbetweenFeatures> {
+    let f = InbetweenFeatures {
+        orders: config.orders()?,
+        gap_unit: config.gap_unit,
+        mean: norm.mean.clone(),
+        std: norm.std.clone(),
+    };
+    f.check().map_err(|e| ArnnError::Config(e.to_string()))?;
+    Ok(f)
 }
 
-/// The envelope `4 s (1 - s)` at frame `t` between keys at frames `a` and `c` (0 when `a == c`).
-fn envelope(a: usize, c: usize, t: usize) -> f64 {
-    if c <= a {
-        return 0.0;
-    }
-    let s = (t - a) as f64 / (c - a) as f64;
-    4.0 * s * (1.0 - s)
-}
-
-/// A key's value `v` of pose `key` for the value `i` of a frame whose Bezier pose is `bez`:
-/// quaternions take the sign nearest the Bezier one.
-fn key_value(key: &[f64], bez: &[f64], i: usize) -> f64 {
-    if i < 3 {
-        return key[i];
-    }
-    let q = 3 + 4 * ((i - 3) / 4);
-    let dot: f64 = (q..q + 4).map(|k| key[k] * bez[k]).sum();
-    if dot < 0.0 { -key[i] } else { key[i] }
-}
-
-/// Checks a shot's keys: frames from 0 strictly increasing, at least two, one pose of `d`
-/// finite values per key, `fixed` empty or one row of `groups` flags per key, every group fixed
-/// by some key.
-pub fn check_keys(
-    config: &InbetweenConfig,
+/// Key poses and flags flattened key-major for [`zoo_motion::inbetween`], each pose's `d`
+/// values and each row's `g` flags counted first.
+fn flatten(
     frames: &[usize],
     poses: &[Vec<f64>],
     fixed: &[Vec<bool>],
-) -> ArnnResult<()> {
-    let (d, g) = (config.dofs(), config.groups());
-    let bad = |m: String| Err(ArnnError::Config(m));
-    if frames.len() < 2 || frames[0] != 0 || frames.windows(2).any(|w| w[0] >= w[1]) {
-        return bad(format!("key frames {frames:?}: at least two, from frame 0, strictly increasing"));
-    }
-    if poses.len() != frames.len() || poses.iter().any(|p| p.len() != d || p.iter().any(|v| !v.is_finite())) {
-        return bad(format!(
+    (d, g): (usize, usize),
+) -> ArnnResult<(Vec<f64>, Vec<bool>)> {
+    if poses.len() != frames.len() || poses.iter().any(|p| p.len() != d) {
+        return Err(ArnnError::Config(format!(
             "{} key frames need as many poses of {d} finite values, got {}",
             frames.len(),
             poses.len()
-        ));
+        )));
     }
-    if !fixed.is_empty() {
-        if fixed.len() != frames.len() || fixed.iter().any(|m| m.len() != g) {
-            return bad(format!("partial keys need one row of {g} group flags per key"));
-        }
-        if let Some(missing) = (0..g).find(|&k| !fixed.iter().any(|m| m[k])) {
-            return bad(format!("no key fixes group {missing} (0 is the root, 1 + j joint j): key it at least once"));
-        }
+    if !fixed.is_empty() && (fixed.len() != frames.len() || fixed.iter().any(|m| m.len() != g)) {
+        return Err(ArnnError::Config(format!("partial keys need one row of {g} group flags per key")));
     }
-    Ok(())
+    Ok((poses.concat(), fixed.concat()))
 }
 
 /// The network's inputs and the Bezier poses of a shot: keys at `frames` (from 0) with poses
-/// `poses` (the humanoid pose layout, clip units) fixing the groups `fixed` (empty: whole keys).
+/// `poses` (the humanoid pose layout, clip units) fixing the groups `fixed` (empty: whole keys),
+/// built by [`InbetweenFeatures::shot`].
 pub fn shot_inputs(
     config: &InbetweenConfig,
     norm: &Normalization,
@@ -400,65 +362,8 @@ pub fn shot_inputs(
     poses: &[Vec<f64>],
     fixed: &[Vec<bool>],
 ) -> ArnnResult<ShotInputs> {
-    check_keys(config, frames, poses, fixed)?;
-    let (j, d, g) = (config.joints(), config.dofs(), config.groups());
-    let mut roots = Vec::with_capacity(frames.len());
-    let mut rots = Vec::with_capacity(frames.len() * j);
-    for p in poses {
-        let (r, q) = crate::humanoid::decode(p, j);
-        roots.push(r);
-        rots.extend(q);
-    }
-    let keys = ShotKeys { frames, root: &roots, rot: &rots, fixed };
-    let (broot, brot) = bezier_inbetween(&config.orders()?, &keys)
-        .ok_or_else(|| ArnnError::Config(format!("keys at frames {frames:?} do not make F-curves")))?;
-    let n = broot.len();
-    let bezier: Vec<f64> = (0..n).flat_map(|f| pose_values(broot[f], &brot[f * j..(f + 1) * j])).collect();
-    let fixes = |k: usize, gr: usize| fixed.get(k).is_none_or(|m| m[gr]);
-    let per_group: Vec<Vec<(usize, usize)>> =
-        (0..g).map(|gr| (0..frames.len()).filter(|&k| fixes(k, gr)).map(|k| (k, frames[k])).collect()).collect();
-    let groups = config.key_groups();
-    let w = config.input_width();
-    let mut features = Vec::with_capacity(n * w);
-    let mut env = vec![0.0f64; n * d];
-    let mut group_env = vec![0.0f64; g];
-    let mut prev = vec![0.0f64; d];
-    let mut next = vec![0.0f64; d];
-    for t in 0..n {
-        let bez = &bezier[t * d..(t + 1) * d];
-        for (gr, keys) in per_group.iter().enumerate() {
-            group_env[gr] = around(keys, t).map_or(0.0, |((_, a), (_, c))| envelope(a, c, t));
-        }
-        for i in 0..d {
-            let (a, c) = match around(&per_group[groups[i]], t) {
-                Some(((a, _), (c, _))) => (a, c),
-                None => (per_group[groups[i]][0].0, per_group[groups[i]][0].0),
-            };
-            prev[i] = key_value(&poses[a], bez, i) - bez[i];
-            next[i] = key_value(&poses[c], bez, i) - bez[i];
-            env[t * d + i] = group_env[groups[i]];
-        }
-        features.extend(norm.apply(bez));
-        features.extend(prev.iter().zip(&norm.std).map(|(v, s)| (v / s) as f32));
-        features.extend(next.iter().zip(&norm.std).map(|(v, s)| (v / s) as f32));
-        let ((_, a), (_, c)) = around(&per_group[0], t).unwrap_or(((0, 0), (0, 0)));
-        let phase = if c > a { (t - a) as f64 / (c - a) as f64 } else { 0.0 };
-        features.push(phase as f32);
-        features.push(((c - a) as f64 / config.gap_unit) as f32);
-        features.extend((0..g).map(|gr| if per_group[gr].iter().any(|(_, f)| *f == t) { 1.0f32 } else { 0.0 }));
-        features.extend(group_env.iter().map(|&e| e as f32));
-    }
-    Ok(ShotInputs { frames: n, features, bezier, envelope: env })
-}
-
-/// A pose vector (root position, quaternions `w, x, y, z`) of a root and rotations.
-fn pose_values(root: DVec3, rot: &[DQuat]) -> Vec<f64> {
-    let mut v = Vec::with_capacity(3 + 4 * rot.len());
-    v.extend([root.x, root.y, root.z]);
-    for q in rot {
-        v.extend([q.w, q.x, q.y, q.z]);
-    }
-    v
+    let (p, m) = flatten(frames, poses, fixed, (config.dofs(), config.groups()))?;
+    features(config, norm)?.shot(frames, &p, &m).map_err(|e| ArnnError::Config(e.to_string()))
 }
 
 /// Completes shots: per shot its key frames (from 0), key poses and fixed groups (empty: whole
@@ -475,8 +380,12 @@ pub fn complete_shots(
     if norm.mean.len() != d || norm.std.len() != d {
         return Err(ArnnError::Config(format!("normalization of {} values for a model of {d}", norm.mean.len())));
     }
-    let inputs: Vec<ShotInputs> =
-        shots.iter().map(|(f, p, m)| shot_inputs(c, norm, f, p, m)).collect::<ArnnResult<_>>()?;
+    let features = features(c, norm)?;
+    let shot = |(f, p, m): &ShotKeyRefs<'_>| {
+        let (p, m) = flatten(f, p, m, (d, c.groups()))?;
+        features.shot(f, &p, &m).map_err(|e| ArnnError::Config(e.to_string()))
+    };
+    let inputs: Vec<ShotInputs> = shots.iter().map(shot).collect::<ArnnResult<_>>()?;
     let mut out: Vec<Vec<Vec<f64>>> = vec![Vec::new(); shots.len()];
     let mut lengths: Vec<usize> = inputs.iter().map(|s| s.frames).collect();
     lengths.sort_unstable();
@@ -490,16 +399,7 @@ pub fn complete_shots(
             for (k, &i) in chunk.iter().enumerate() {
                 let s = &inputs[i];
                 let dl = &delta[k * n * d..(k + 1) * n * d];
-                out[i] = (0..n)
-                    .map(|t| {
-                        (0..d)
-                            .map(|v| {
-                                let x = t * d + v;
-                                s.bezier[x] + s.envelope[x] * dl[x] as f64 * norm.std[v]
-                            })
-                            .collect()
-                    })
-                    .collect();
+                out[i] = (0..n).map(|t| (t * d..(t + 1) * d).map(|x| features.compose(s, dl, x)).collect()).collect();
             }
         }
     }
@@ -558,6 +458,7 @@ pub fn config_for(skeleton: &zoo_motion::Skeleton, fps: f64) -> InbetweenConfig 
 mod tests {
     use super::*;
     use crate::humanoid::poses;
+    use glam::{DQuat, DVec3};
 
     pub(crate) fn skeleton() -> HumanoidSkeleton {
         HumanoidSkeleton {

@@ -13,6 +13,7 @@ pub mod eval;
 pub mod export;
 pub mod humanoid;
 pub mod inbetween;
+pub mod inbetween_export;
 pub mod inbetween_train;
 pub mod keys;
 pub mod luxo;

@@ -4,7 +4,9 @@
 
 use candle_nn::VarMap;
 use std::collections::HashMap;
-use zoo_export::{ExportError, GraphBuilder, Value};
+use zoo_export::{
+    ExportError, GRU_TORCH_TO_ONNX, GraphBuilder, LSTM_TORCH_TO_ONNX, RnnDirection, RnnInputs, Value, reorder_gates,
+};
 
 /// Weights by candle variable path: shape and row-major f32 values.
 #[derive(Clone, Debug, Default)]
@@ -102,6 +104,115 @@ pub fn mlp(
         if i + 1 < layers || activate_last {
             h = activation(g, &format!("{prefix}.{i}"), &h);
         }
+    }
+    Ok(h)
+}
+
+/// An MLP over the last axis of a tensor of any rank (`[frames, batch, n]` of a whole-sequence
+/// graph): `h = relu(h W^T + b)` per layer named `prefix.{i}`, as `MatMul` + `Add` with the candle
+/// `[out, in]` weight transposed by a `Transpose` node (so initializers keep the candle paths)
+/// and ReLU as `LeakyRelu` with slope 0; the last layer linear unless `activate_last`.
+pub fn mlp_matmul(
+    g: &mut GraphBuilder,
+    w: &ExportWeights,
+    (prefix, layers): (&str, usize),
+    x: &Value,
+    activate_last: bool,
+) -> Result<Value, ExportError> {
+    let mut h = x.clone();
+    for i in 0..layers {
+        let p = format!("{prefix}.{i}");
+        let wt = w.init(g, &format!("{p}.weight"))?;
+        let b = w.init(g, &format!("{p}.bias"))?;
+        let wt = g.transpose(&format!("{p}.weight_t"), &wt, &[1, 0]);
+        h = g.matmul(&format!("{p}.matmul"), &h, &wt);
+        h = g.add(&format!("{p}.add"), &h, &b);
+        if i + 1 < layers || activate_last {
+            h = g.leaky_relu(&format!("{p}.relu"), &h, 0.0);
+        }
+    }
+    Ok(h)
+}
+
+/// A stack of recurrent layers of `zoo_nn` (`crate::Lstm`, `crate::Gru`, `crate::BiLstm`,
+/// `crate::BiGru`: PyTorch's names under `prefix`) for [`recurrent_layers`].
+#[derive(Clone, Copy, Debug)]
+pub struct RecurrentStack<'a> {
+    /// The candle variable path of the layers (`prefix.weight_ih_l0`, ...).
+    pub prefix: &'a str,
+    /// LSTM (true) or GRU (false).
+    pub lstm: bool,
+    /// Forward, or bidirectional (`_reverse` weights).
+    pub direction: RnnDirection,
+    /// Layers.
+    pub layers: usize,
+    /// Units per direction.
+    pub hidden: usize,
+}
+
+/// Stacks the candle weights of layer `layer`'s directions in ONNX gate order (`order`):
+/// `W [dirs, G*H, in]`, `R [dirs, G*H, H]`, `B [dirs, 2*G*H]`, named `prefix.l{layer}.W`, ...
+fn rnn_weights(
+    g: &mut GraphBuilder,
+    w: &ExportWeights,
+    stack: &RecurrentStack<'_>,
+    layer: usize,
+    order: &[usize],
+) -> Result<(Value, Value, Value), ExportError> {
+    let (prefix, hidden, dirs) = (stack.prefix, stack.hidden, stack.direction.num_directions());
+    let gates = order.len();
+    let (mut wd, mut rd, mut bd) = (Vec::new(), Vec::new(), Vec::new());
+    let mut input = 0;
+    for d in 0..dirs {
+        let suffix = if d == 0 { format!("l{layer}") } else { format!("l{layer}_reverse") };
+        let (wdims, wih) = w.get(&format!("{prefix}.weight_ih_{suffix}"))?;
+        let (_, whh) = w.get(&format!("{prefix}.weight_hh_{suffix}"))?;
+        let (_, bih) = w.get(&format!("{prefix}.bias_ih_{suffix}"))?;
+        let (_, bhh) = w.get(&format!("{prefix}.bias_hh_{suffix}"))?;
+        if wdims.first() != Some(&(gates * hidden)) {
+            return Err(ExportError::model(format!(
+                "{prefix}.weight_ih_{suffix} has shape {wdims:?}, expected [{}, in]",
+                gates * hidden
+            )));
+        }
+        input = wdims[1];
+        wd.extend(reorder_gates(wih, hidden, input, order));
+        rd.extend(reorder_gates(whh, hidden, hidden, order));
+        bd.extend(reorder_gates(bih, hidden, 1, order));
+        bd.extend(reorder_gates(bhh, hidden, 1, order));
+    }
+    let name = format!("{prefix}.l{layer}");
+    Ok((
+        g.initializer_f32(&format!("{name}.W"), &[dirs, gates * hidden, input], &wd),
+        g.initializer_f32(&format!("{name}.R"), &[dirs, gates * hidden, hidden], &rd),
+        g.initializer_f32(&format!("{name}.B"), &[dirs, 2 * gates * hidden], &bd),
+    ))
+}
+
+/// Recurrent layers over a time-major sequence `x [frames, batch, in]` from zero states: one
+/// ONNX `LSTM` or `GRU` node per layer (layout 0; `bidirectional` for a bidirectional stack;
+/// `linear_before_reset = 1` for the GRU, which is candle's GRU), gates reordered from candle's
+/// order (LSTM i,f,g,o -> i,o,f,c; GRU r,z,n -> z,r,h). Each layer's `Y [frames, dirs, batch, H]`
+/// becomes `[frames, batch, dirs * H]` (forward then backward, as candle concatenates) by
+/// `Transpose` + `Reshape`; the last layer's is returned.
+pub fn recurrent_layers(
+    g: &mut GraphBuilder,
+    w: &ExportWeights,
+    stack: &RecurrentStack<'_>,
+    x: &Value,
+) -> Result<Value, ExportError> {
+    let (dirs, hid) = (stack.direction.num_directions(), stack.hidden);
+    let order: &[usize] = if stack.lstm { &LSTM_TORCH_TO_ONNX } else { &GRU_TORCH_TO_ONNX };
+    let mut h = x.clone();
+    for layer in 0..stack.layers {
+        let (wv, rv, bv) = rnn_weights(g, w, stack, layer, order)?;
+        let direction = stack.direction;
+        let rnn = RnnInputs { x: &h, w: &wv, r: &rv, b: Some(&bv), initial_h: None, hidden_size: hid, direction };
+        let name = format!("{}.l{layer}", stack.prefix);
+        let out = if stack.lstm { g.lstm(&name, &rnn, None) } else { g.gru(&name, &rnn, true) };
+        // Y [frames, dirs, batch, H] -> [frames, batch, dirs * H]
+        let y = g.transpose(&format!("{name}.y_t"), &out.y, &[0, 2, 1, 3]);
+        h = g.reshape(&format!("{name}.y_cat"), &y, &[0, 0, (dirs * hid) as i64]);
     }
     Ok(h)
 }

@@ -12,7 +12,8 @@
 //!
 //! Encoder and decoder are `MatMul` + `Add` (+ `LeakyRelu` with slope 0, i.e. ReLU) with the
 //! candle weights transposed by a `Transpose` node, so initializers keep the candle paths
-//! (`encoder.0.weight`, ...). Each recurrent layer is one ONNX `LSTM` or `GRU` node
+//! (`encoder.0.weight`, ...; [`zoo_nn::export::mlp_matmul`]). Each recurrent layer is one ONNX
+//! `LSTM` or `GRU` node ([`zoo_nn::export::recurrent_layers`])
 //! (`bidirectional` for BLSTM/BGRU, `linear_before_reset = 1` for the GRU), gates reordered from
 //! candle's order (LSTM i,f,g,o -> i,o,f,c; GRU r,z,n -> z,r,h); a bidirectional layer's
 //! `Y [frames, 2, batch, H]` becomes `[frames, batch, 2H]` (forward then backward, as candle
@@ -28,15 +29,13 @@ use crate::config::{Config, RefinerCell};
 use crate::features::FeatureStats;
 use candle_nn::VarMap;
 use std::path::Path;
-use zoo_export::{
-    Dim, ExportError, GRU_TORCH_TO_ONNX, GraphBuilder, LSTM_TORCH_TO_ONNX, OnnxModel, RnnDirection, RnnInputs, Value,
-    reorder_gates,
-};
+use zoo_export::{Dim, ExportError, GraphBuilder, OnnxModel, RnnDirection};
 use zoo_format::{
     CoordinateFrame, FORMAT_VERSION, MotionFeatureSegment, MotionMeanStd, MotionModelMetadata, MotionSkeletonInfo,
     MotionTask, StitchTask,
 };
 use zoo_nn::ExportWeights as Weights;
+use zoo_nn::export::{RecurrentStack, mlp_matmul, recurrent_layers};
 
 /// `zoo.model_kind` of an exported RMR.
 pub const MODEL_KIND: &str = "rmr";
@@ -60,72 +59,6 @@ pub fn export_rmr_dir(dir: &Path) -> Result<OnnxModel, ExportError> {
     export_rmr(&config, &stats, &varmap)
 }
 
-/// An MLP over the last axis: `h = relu(h W^T + b)` per layer, the last one linear unless
-/// `activate_last`.
-fn mlp(
-    g: &mut GraphBuilder,
-    w: &Weights,
-    prefix: &str,
-    layers: usize,
-    x: &Value,
-    activate_last: bool,
-) -> Result<Value, ExportError> {
-    let mut h = x.clone();
-    for i in 0..layers {
-        let p = format!("{prefix}.{i}");
-        let (dims, data) = w.get(&format!("{p}.weight"))?;
-        let wt = g.initializer_f32(&format!("{p}.weight"), dims, data);
-        let (bd, bias) = w.get(&format!("{p}.bias"))?;
-        let b = g.initializer_f32(&format!("{p}.bias"), bd, bias);
-        let wt = g.transpose(&format!("{p}.weight_t"), &wt, &[1, 0]);
-        h = g.matmul(&format!("{p}.matmul"), &h, &wt);
-        h = g.add(&format!("{p}.add"), &h, &b);
-        if i + 1 < layers || activate_last {
-            h = g.leaky_relu(&format!("{p}.relu"), &h, 0.0);
-        }
-    }
-    Ok(h)
-}
-
-/// Stacks the candle weights of one layer's directions in ONNX gate order:
-/// `W [dirs, G*H, in]`, `R [dirs, G*H, H]`, `B [dirs, 2*G*H]`.
-fn rnn_weights(
-    g: &mut GraphBuilder,
-    w: &Weights,
-    layer: usize,
-    dirs: usize,
-    hidden: usize,
-    order: &[usize],
-) -> Result<(Value, Value, Value), ExportError> {
-    let gates = order.len();
-    let (mut wd, mut rd, mut bd) = (Vec::new(), Vec::new(), Vec::new());
-    let mut input = 0;
-    for d in 0..dirs {
-        let suffix = if d == 0 { format!("l{layer}") } else { format!("l{layer}_reverse") };
-        let (wdims, wih) = w.get(&format!("refiner.weight_ih_{suffix}"))?;
-        let (_, whh) = w.get(&format!("refiner.weight_hh_{suffix}"))?;
-        let (_, bih) = w.get(&format!("refiner.bias_ih_{suffix}"))?;
-        let (_, bhh) = w.get(&format!("refiner.bias_hh_{suffix}"))?;
-        if wdims.first() != Some(&(gates * hidden)) {
-            return Err(ExportError::model(format!(
-                "refiner.weight_ih_{suffix} has shape {wdims:?}, expected [{}, in]",
-                gates * hidden
-            )));
-        }
-        input = wdims[1];
-        wd.extend(reorder_gates(wih, hidden, input, order));
-        rd.extend(reorder_gates(whh, hidden, hidden, order));
-        bd.extend(reorder_gates(bih, hidden, 1, order));
-        bd.extend(reorder_gates(bhh, hidden, 1, order));
-    }
-    let name = format!("refiner.l{layer}");
-    Ok((
-        g.initializer_f32(&format!("{name}.W"), &[dirs, gates * hidden, input], &wd),
-        g.initializer_f32(&format!("{name}.R"), &[dirs, gates * hidden, hidden], &rd),
-        g.initializer_f32(&format!("{name}.B"), &[dirs, 2 * gates * hidden], &bd),
-    ))
-}
-
 /// Exports the refiner of `config` with the weights in `varmap` (as built by [`crate::Rmr::new`]).
 pub fn export_rmr(config: &Config, stats: &FeatureStats, varmap: &VarMap) -> Result<OnnxModel, ExportError> {
     config.validate().map_err(|e| ExportError::model(e.to_string()))?;
@@ -138,26 +71,16 @@ pub fn export_rmr(config: &Config, stats: &FeatureStats, varmap: &VarMap) -> Res
     g.doc("Recurrent Motion Refiner (Kim et al. 2023): refines one window of normalised pose vectors.");
     let dims = [Dim::Symbol("frames".into()), Dim::batch(), Dim::Fixed(d)];
     let x = g.input("x", &dims);
-    let mut h = mlp(&mut g, &w, "encoder", config.encoder.len(), &x, true)?;
+    let h = mlp_matmul(&mut g, &w, ("encoder", config.encoder.len()), &x, true)?;
     let (lstm, direction) = match config.cell {
         RefinerCell::Lstm => (true, RnnDirection::Forward),
         RefinerCell::Gru => (false, RnnDirection::Forward),
         RefinerCell::Blstm => (true, RnnDirection::Bidirectional),
         RefinerCell::Bgru => (false, RnnDirection::Bidirectional),
     };
-    let dirs = direction.num_directions();
-    let hid = config.hidden;
-    for layer in 0..config.layers {
-        let order: &[usize] = if lstm { &LSTM_TORCH_TO_ONNX } else { &GRU_TORCH_TO_ONNX };
-        let (wv, rv, bv) = rnn_weights(&mut g, &w, layer, dirs, hid, order)?;
-        let rnn = RnnInputs { x: &h, w: &wv, r: &rv, b: Some(&bv), initial_h: None, hidden_size: hid, direction };
-        let name = format!("refiner.l{layer}");
-        let out = if lstm { g.lstm(&name, &rnn, None) } else { g.gru(&name, &rnn, true) };
-        // Y [frames, dirs, batch, H] -> [frames, batch, dirs * H]
-        let y = g.transpose(&format!("{name}.y_t"), &out.y, &[0, 2, 1, 3]);
-        h = g.reshape(&format!("{name}.y_cat"), &y, &[0, 0, (dirs * hid) as i64]);
-    }
-    let mut y = mlp(&mut g, &w, "decoder", config.decoder.len() + 1, &h, false)?;
+    let stack = RecurrentStack { prefix: "refiner", lstm, direction, layers: config.layers, hidden: config.hidden };
+    let h = recurrent_layers(&mut g, &w, &stack, &h)?;
+    let mut y = mlp_matmul(&mut g, &w, ("decoder", config.decoder.len() + 1), &h, false)?;
     if config.residual {
         // y += x * mask (1 on the pose values, 0 on the contacts), as in `Rmr::forward`.
         let pose = crate::features::FeatureLayout::new(config.joints, config.layout.lower_body.len()).contacts();

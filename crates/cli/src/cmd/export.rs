@@ -185,6 +185,25 @@ fn export_kind(a: &ExportArgs, kind: &str) -> anyhow::Result<(OnnxModel, &'stati
             let line = format!("{what} ({}) with its metadata, {with}", counts(&model));
             (model, what, line, None)
         }
+        zoo_arnn::export::MODEL_KIND if zoo_arnn::inbetween::is_inbetween_run(&a.onnx) => {
+            if a.portable {
+                bail!(
+                    "--portable: the in-betweening design's graph runs whole shots of any length through a \
+                     bidirectional GRU, which the portable profile (recurrent layers unrolled over a fixed number of \
+                     frames) does not hold; export it without --portable"
+                );
+            }
+            if a.reference.is_some() {
+                bail!(
+                    "--reference: reference vectors (docs/runtime-protocol.md) cover the ARNN's step graph, not the \
+                     in-betweening design's whole-shot graph; export it without --reference"
+                );
+            }
+            let model = zoo_arnn::export::export_arnn_dir(&a.onnx).with_context(context)?;
+            let what = "ARNN in-betweening whole-shot graph";
+            let line = format!("{what} ({}) with its metadata", counts(&model));
+            (model, what, line, None)
+        }
         zoo_arnn::export::MODEL_KIND => {
             let model = zoo_arnn::export::export_arnn_dir(&a.onnx).with_context(context)?;
             let what = "ARNN step graph";

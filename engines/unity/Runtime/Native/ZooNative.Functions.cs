@@ -202,8 +202,9 @@ namespace Zoo.Native
         public static extern ZooStatus zoo_keyframes_complete(ZooKeyframesRunner* runner, UIntPtr* frames, UIntPtr frames_len, float* poses, UIntPtr poses_len, float* @fixed, UIntPtr fixed_len, float* @out, UIntPtr out_len);
 
         /// <summary>
-        /// Completes the keys of <c>count</c> characters in one graph call per frame (at most the runner's
-        /// <c>max_batch</c>): character <c>c</c> has <c>key_counts[c]</c> keys, and <c>frames</c>, <c>poses</c>, <c>fixed</c> and
+        /// Completes the keys of <c>count</c> characters together (at most the runner's <c>max_batch</c>; an
+        /// ARNN step graph runs one graph call per frame, the in-betweening design one call per
+        /// character): character <c>c</c> has <c>key_counts[c]</c> keys, and <c>frames</c>, <c>poses</c>, <c>fixed</c> and
         /// <c>out</c> hold the characters' buffers of <c>zoo_keyframes_complete</c> one after the other
         /// (character-major; <c>fixed</c> NULL and 0 when every key is whole). A character's frames are
         /// those it gets alone. The runner: one thread at a time.

@@ -1,0 +1,373 @@
+//! The inputs of the key-to-key in-betweening network (issue 46; the candle model is
+//! `zoo_arnn::inbetween`, the exported graph runs in the runtime's keyframes task): per frame of
+//! a shot, features built from an animator's keys around Blender's default F-curves through them
+//! ([`crate::fcurve::bezier_inbetween`]), and the envelope that scales the network's correction
+//! so that every key is met by construction. Training, `zoo complete`, the keys-only benchmark
+//! and the engine runtime all build them here, so they agree value for value.
+//!
+//! Poses are the humanoid pose vector: the root position, then one quaternion `(w, x, y, z)`
+//! per joint, `d = 3 + 4 J` values. Key groups: group 0 is the root position, group `1 + j`
+//! joint `j`'s rotation. Per frame `t` of a shot (frames `0..=last key`) the features are, in
+//! order (`3 d + 2 + 2 (1 + J)` values, f32):
+//! - `(b_t - mean) / std`, the Bezier pose normalised;
+//! - `(k-_t - b_t) / std` and `(k+_t - b_t) / std`: per value, the previous key fixing its
+//!   group (at or before `t`) and the next one (after `t`), minus the Bezier pose (a key's
+//!   quaternion taken with the sign nearest the Bezier one);
+//! - the phase `s_t = (t - t-) / (t+ - t-)` and the gap `(t+ - t-) / gap_unit` of the keys
+//!   fixing the root;
+//! - per group, 1 where a key fixes it at `t`, and its envelope `e_g(t) = 4 s (1 - s)` (`s` the
+//!   phase between the keys fixing the group; 0 on them and outside them).
+//!
+//! The completed pose is `b_t + e(t) * correction_t * std` ([`InbetweenFeatures::compose`],
+//! f64), `e` per value its group's envelope, `correction` the network's output.
+
+use crate::euler::EulerOrder;
+use crate::fcurve::{ShotKeys, bezier_inbetween};
+use glam::{DQuat, DVec3};
+
+/// Keys or settings the features cannot be built from, said in words with the fix.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct InbetweenError(pub String);
+
+/// What a shot's features depend on besides its keys: the skeleton's Euler orders (the F-curves
+/// are drawn on these channels, as Blender draws them), the gap unit and the pose statistics.
+#[derive(Clone, Debug, PartialEq)]
+pub struct InbetweenFeatures {
+    /// Each joint's Euler channel order.
+    pub orders: Vec<EulerOrder>,
+    /// Frames the gap feature is divided by.
+    pub gap_unit: f64,
+    /// Mean per pose value (`d` values).
+    pub mean: Vec<f64>,
+    /// Standard deviation per pose value (`d` values, positive).
+    pub std: Vec<f64>,
+}
+
+/// One shot's features and its Bezier poses.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShotInputs {
+    /// Frames of the shot (`0..=last key`).
+    pub frames: usize,
+    /// Features, frames x [`InbetweenFeatures::input_width`].
+    pub features: Vec<f32>,
+    /// The Bezier pose of each frame in clip units, frames x d.
+    pub bezier: Vec<f64>,
+    /// The envelope of each value, frames x d (0 on a key frame fixing its group).
+    pub envelope: Vec<f64>,
+}
+
+/// Values per pose of `joints` joints, `3 + 4 J`.
+pub fn dofs(joints: usize) -> usize {
+    3 + 4 * joints
+}
+
+/// The key group of each pose value of `joints` joints: 0 for the root position, `1 + j` for
+/// joint `j`'s quaternion.
+pub fn key_groups(joints: usize) -> Vec<usize> {
+    let mut groups = vec![0, 0, 0];
+    groups.extend((0..joints).flat_map(|j| [1 + j; 4]));
+    groups
+}
+
+/// The root position and unit rotations of a pose (a quaternion of length 0 is the identity).
+pub fn decode_pose(pose: &[f64], joints: usize) -> (DVec3, Vec<DQuat>) {
+    let root = DVec3::new(pose[0], pose[1], pose[2]);
+    let rot = (0..joints)
+        .map(|j| {
+            let v = &pose[3 + 4 * j..7 + 4 * j];
+            let q = DQuat::from_xyzw(v[1], v[2], v[3], v[0]);
+            if q.length_squared() > 1e-12 { q.normalize() } else { DQuat::IDENTITY }
+        })
+        .collect();
+    (root, rot)
+}
+
+/// A pose vector (root position, quaternions `w, x, y, z`) of a root and rotations.
+pub fn pose_values(root: DVec3, rot: &[DQuat]) -> Vec<f64> {
+    let mut v = Vec::with_capacity(dofs(rot.len()));
+    v.extend([root.x, root.y, root.z]);
+    for q in rot {
+        v.extend([q.w, q.x, q.y, q.z]);
+    }
+    v
+}
+
+/// The index of the previous key fixing a group (at or before `t`) and of the next one (after
+/// `t`; the previous one at or after the last), of the group's keys `(index, frame)`; `None`
+/// before the first.
+fn around(keys: &[(usize, usize)], t: usize) -> Option<((usize, usize), (usize, usize))> {
+    let i = keys.partition_point(|(_, f)| *f <= t);
+    if i == 0 {
+        return None;
+    }
+    Some((keys[i - 1], keys.get(i).copied().unwrap_or(keys[i - 1])))
+}
+
+/// The envelope `4 s (1 - s)` at frame `t` between keys at frames `a` and `c` (0 when `a == c`).
+fn envelope(a: usize, c: usize, t: usize) -> f64 {
+    if c <= a {
+        return 0.0;
+    }
+    let s = (t - a) as f64 / (c - a) as f64;
+    4.0 * s * (1.0 - s)
+}
+
+/// A key's value `i` (of pose `key`) for a frame whose Bezier pose is `bez`: quaternions take
+/// the sign nearest the Bezier one.
+fn key_value(key: &[f64], bez: &[f64], i: usize) -> f64 {
+    if i < 3 {
+        return key[i];
+    }
+    let q = 3 + 4 * ((i - 3) / 4);
+    let dot: f64 = (q..q + 4).map(|k| key[k] * bez[k]).sum();
+    if dot < 0.0 { -key[i] } else { key[i] }
+}
+
+impl InbetweenFeatures {
+    /// Joints.
+    pub fn joints(&self) -> usize {
+        self.orders.len()
+    }
+
+    /// Values per pose, `3 + 4 J`.
+    pub fn dofs(&self) -> usize {
+        dofs(self.joints())
+    }
+
+    /// Key groups, `1 + J`.
+    pub fn groups(&self) -> usize {
+        1 + self.joints()
+    }
+
+    /// Values per frame of the features, `3 d + 2 + 2 (1 + J)`.
+    pub fn input_width(&self) -> usize {
+        3 * self.dofs() + 2 + 2 * self.groups()
+    }
+
+    /// Checks the settings: at least one joint, a positive gap unit, `d` finite means and `d`
+    /// positive standard deviations.
+    pub fn check(&self) -> Result<(), InbetweenError> {
+        let d = self.dofs();
+        let bad = |m: String| Err(InbetweenError(m));
+        if self.orders.is_empty() {
+            return bad("the in-betweening features need at least one joint (one Euler order)".into());
+        }
+        if !(self.gap_unit.is_finite() && self.gap_unit > 0.0) {
+            return bad(format!("gap_unit is {}: a positive number of frames is needed", self.gap_unit));
+        }
+        if self.mean.len() != d || self.std.len() != d {
+            return bad(format!(
+                "{} means and {} standard deviations for poses of {d} values ({} joints): one of each per value",
+                self.mean.len(),
+                self.std.len(),
+                self.joints()
+            ));
+        }
+        if let Some(i) = self.mean.iter().position(|m| !m.is_finite()) {
+            return bad(format!("mean {i} is {}: every mean must be finite", self.mean[i]));
+        }
+        if let Some(i) = self.std.iter().position(|s| !(s.is_finite() && *s > 0.0)) {
+            return bad(format!("standard deviation {i} is {}: every one must be positive", self.std[i]));
+        }
+        Ok(())
+    }
+
+    /// Checks a shot's keys: frames from 0 strictly increasing, at least two; `poses` one pose
+    /// of `d` finite values per key (key-major); `fixed` empty (whole keys) or one row of
+    /// `1 + J` group flags per key, every group fixed by some key.
+    pub fn check_keys(&self, frames: &[usize], poses: &[f64], fixed: &[bool]) -> Result<(), InbetweenError> {
+        let (d, g, n) = (self.dofs(), self.groups(), frames.len());
+        let bad = |m: String| Err(InbetweenError(m));
+        if n < 2 || frames[0] != 0 || frames.windows(2).any(|w| w[0] >= w[1]) {
+            return bad(format!("key frames {frames:?}: at least two, from frame 0, strictly increasing"));
+        }
+        if poses.len() != n * d {
+            return bad(format!(
+                "{n} key frames need as many poses of {d} values ({} values), got {} values",
+                n * d,
+                poses.len()
+            ));
+        }
+        if let Some(i) = poses.iter().position(|v| !v.is_finite()) {
+            return bad(format!("key {} value {} is {}: every key value must be finite", i / d, i % d, poses[i]));
+        }
+        if !fixed.is_empty() {
+            if fixed.len() != n * g {
+                return bad(format!("partial keys need one row of {g} group flags per key ({} flags)", n * g));
+            }
+            if let Some(missing) = (0..g).find(|&k| !(0..n).any(|key| fixed[key * g + k])) {
+                return bad(format!(
+                    "no key fixes group {missing} (0 is the root, 1 + j joint j): key it at least once"
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The features and the Bezier poses of a shot: keys at `frames` (from 0) with poses
+    /// `poses` (key-major, the humanoid pose layout, clip units) fixing the groups `fixed`
+    /// (key-major, `1 + J` per key; empty: whole keys). The settings are assumed checked
+    /// ([`InbetweenFeatures::check`]).
+    pub fn shot(&self, frames: &[usize], poses: &[f64], fixed: &[bool]) -> Result<ShotInputs, InbetweenError> {
+        self.check_keys(frames, poses, fixed)?;
+        let (j, d, g) = (self.joints(), self.dofs(), self.groups());
+        let key = |k: usize| &poses[k * d..(k + 1) * d];
+        let mut roots = Vec::with_capacity(frames.len());
+        let mut rots = Vec::with_capacity(frames.len() * j);
+        for k in 0..frames.len() {
+            let (r, q) = decode_pose(key(k), j);
+            roots.push(r);
+            rots.extend(q);
+        }
+        let rows: Vec<Vec<bool>> = fixed.chunks(g).map(<[bool]>::to_vec).collect();
+        let keys = ShotKeys { frames, root: &roots, rot: &rots, fixed: &rows };
+        let (broot, brot) = bezier_inbetween(&self.orders, &keys)
+            .ok_or_else(|| InbetweenError(format!("keys at frames {frames:?} do not make F-curves")))?;
+        let n = broot.len();
+        let bezier: Vec<f64> = (0..n).flat_map(|f| pose_values(broot[f], &brot[f * j..(f + 1) * j])).collect();
+        let fixes = |k: usize, gr: usize| fixed.is_empty() || fixed[k * g + gr];
+        let per_group: Vec<Vec<(usize, usize)>> =
+            (0..g).map(|gr| (0..frames.len()).filter(|&k| fixes(k, gr)).map(|k| (k, frames[k])).collect()).collect();
+        let groups = key_groups(j);
+        let mut features = Vec::with_capacity(n * self.input_width());
+        let mut env = vec![0.0f64; n * d];
+        let mut group_env = vec![0.0f64; g];
+        let mut prev = vec![0.0f64; d];
+        let mut next = vec![0.0f64; d];
+        for t in 0..n {
+            let bez = &bezier[t * d..(t + 1) * d];
+            for (gr, keys) in per_group.iter().enumerate() {
+                group_env[gr] = around(keys, t).map_or(0.0, |((_, a), (_, c))| envelope(a, c, t));
+            }
+            for i in 0..d {
+                let (a, c) = match around(&per_group[groups[i]], t) {
+                    Some(((a, _), (c, _))) => (a, c),
+                    None => (per_group[groups[i]][0].0, per_group[groups[i]][0].0),
+                };
+                prev[i] = key_value(key(a), bez, i) - bez[i];
+                next[i] = key_value(key(c), bez, i) - bez[i];
+                env[t * d + i] = group_env[groups[i]];
+            }
+            features.extend(bez.iter().zip(&self.mean).zip(&self.std).map(|((v, m), s)| ((v - m) / s) as f32));
+            features.extend(prev.iter().zip(&self.std).map(|(v, s)| (v / s) as f32));
+            features.extend(next.iter().zip(&self.std).map(|(v, s)| (v / s) as f32));
+            let ((_, a), (_, c)) = around(&per_group[0], t).unwrap_or(((0, 0), (0, 0)));
+            let phase = if c > a { (t - a) as f64 / (c - a) as f64 } else { 0.0 };
+            features.push(phase as f32);
+            features.push(((c - a) as f64 / self.gap_unit) as f32);
+            features.extend((0..g).map(|gr| if per_group[gr].iter().any(|(_, f)| *f == t) { 1.0f32 } else { 0.0 }));
+            features.extend(group_env.iter().map(|&e| e as f32));
+        }
+        Ok(ShotInputs { frames: n, features, bezier, envelope: env })
+    }
+
+    /// The completed value `x` (flat index, frame-major) of a shot from the network's correction
+    /// (normalised units, frames x d): `b + e * correction * std`, in f64, so that a value
+    /// equals its Bezier value, and so its key, on every key frame fixing it.
+    pub fn compose(&self, shot: &ShotInputs, correction: &[f32], x: usize) -> f64 {
+        let d = self.dofs();
+        shot.bezier[x] + shot.envelope[x] * correction[x] as f64 * self.std[x % d]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn features() -> InbetweenFeatures {
+        InbetweenFeatures { orders: vec![EulerOrder::Zxy; 3], gap_unit: 30.0, mean: vec![0.0; 15], std: vec![0.5; 15] }
+    }
+
+    fn keys() -> (Vec<usize>, Vec<f64>) {
+        let frames = vec![0, 7, 15, 20];
+        let poses = frames
+            .iter()
+            .flat_map(|&f| {
+                let a = f as f64 * 0.1;
+                let rot = [DQuat::from_rotation_y(a), DQuat::from_rotation_x(-a), DQuat::from_rotation_z(0.5 * a)];
+                pose_values(DVec3::new(f as f64, 90.0, 0.5 * f as f64), &rot)
+            })
+            .collect();
+        (frames, poses)
+    }
+
+    #[test]
+    fn features_have_the_documented_width_envelope_and_flags() {
+        let f = features();
+        let (frames, poses) = keys();
+        let (d, w) = (f.dofs(), f.input_width());
+        assert_eq!((d, f.groups(), w), (15, 4, 3 * 15 + 2 + 8));
+        let s = f.shot(&frames, &poses, &[]).unwrap();
+        assert_eq!((s.frames, s.features.len(), s.envelope.len()), (21, 21 * w, 21 * d));
+        for &k in &frames {
+            assert!(s.envelope[k * d..(k + 1) * d].iter().all(|&e| e == 0.0));
+            // A key frame: every group flagged, and the Bezier pose is the key.
+            assert!(s.features[k * w + 3 * d + 2..k * w + 3 * d + 6].iter().all(|&v| v == 1.0));
+        }
+        // Midway between keys 7 and 15 (frame 11) the envelope peaks at 1, the phase is 1/2 and
+        // the gap 8 frames.
+        assert!((s.envelope[11 * d] - 1.0).abs() < 1e-12);
+        assert_eq!(&s.features[11 * w + 3 * d..11 * w + 3 * d + 2], &[0.5, (8.0 / 30.0) as f32]);
+        // Composed with any correction, every key frame is its key.
+        let correction: Vec<f32> = (0..21 * d).map(|i| (i % 7) as f32 - 3.0).collect();
+        for (k, &frame) in frames.iter().enumerate() {
+            for i in 0..3 {
+                let v = f.compose(&s, &correction, frame * d + i);
+                assert!((v - poses[k * d + i]).abs() < 1e-9, "key {k} value {i}: {v}");
+            }
+        }
+    }
+
+    #[test]
+    fn partial_keys_leave_free_groups_to_the_curves_through_the_others() {
+        let f = features();
+        let (frames, poses) = keys();
+        let g = f.groups();
+        // Key 1 leaves joint 1 (group 2) free, key 2 the root.
+        let mut fixed = vec![true; 4 * g];
+        fixed[g + 2] = false;
+        fixed[2 * g] = false;
+        let s = f.shot(&frames, &poses, &fixed).unwrap();
+        let d = f.dofs();
+        // The root's envelope runs from key 1 (frame 7) to key 3 (frame 20) past the free key.
+        assert!(s.envelope[15 * d] > 0.0 && s.envelope[15 * d + 7] == 0.0);
+        let whole = f.shot(&frames, &poses, &[]).unwrap();
+        assert_ne!(s.features, whole.features);
+    }
+
+    #[test]
+    fn bad_keys_and_settings_are_refused() {
+        let f = features();
+        let (frames, poses) = keys();
+        let err = |r: Result<ShotInputs, InbetweenError>| r.unwrap_err().to_string();
+        assert!(err(f.shot(&[1, 7, 15, 20], &poses, &[])).contains("from frame 0"));
+        assert!(err(f.shot(&[0], &poses[..15], &[])).contains("at least two"));
+        assert!(err(f.shot(&frames, &poses[..45], &[])).contains("got 45 values"));
+        let mut nan = poses.clone();
+        nan[3] = f64::NAN;
+        assert!(err(f.shot(&frames, &nan, &[])).contains("key 0 value 3 is NaN"));
+        let mut none_fix = vec![true; 16];
+        for k in 0..4 {
+            none_fix[k * 4 + 2] = false;
+        }
+        assert!(err(f.shot(&frames, &poses, &none_fix)).contains("no key fixes group 2"));
+        assert!(err(f.shot(&frames, &poses, &none_fix[..15])).contains("16 flags"));
+        assert!(InbetweenFeatures { std: vec![0.0; 15], ..f.clone() }.check().unwrap_err().0.contains("positive"));
+        assert!(InbetweenFeatures { mean: vec![0.0; 14], ..f.clone() }.check().is_err());
+        assert!(InbetweenFeatures { gap_unit: 0.0, ..f.clone() }.check().is_err());
+        assert!(InbetweenFeatures { orders: vec![], ..f }.check().is_err());
+    }
+
+    #[test]
+    fn pose_layout_helpers_agree() {
+        assert_eq!(key_groups(2), vec![0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2]);
+        let rot = [DQuat::from_rotation_y(0.3), DQuat::IDENTITY];
+        let v = pose_values(DVec3::new(1.0, 2.0, 3.0), &rot);
+        let (root, back) = decode_pose(&v, 2);
+        assert_eq!(root, DVec3::new(1.0, 2.0, 3.0));
+        assert!(back[0].abs_diff_eq(rot[0], 1e-15) && back[1] == DQuat::IDENTITY);
+        // A zero quaternion decodes to the identity.
+        assert_eq!(decode_pose(&[0.0; 7], 1).1[0], DQuat::IDENTITY);
+    }
+}

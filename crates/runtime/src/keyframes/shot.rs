@@ -1,0 +1,155 @@
+//! The in-betweening design of the keyframes task (`zoo train arnn --design inbetween`, exported
+//! by `zoo_arnn::inbetween_export`): one whole-shot graph call per character, instead of one
+//! step per frame.
+//!
+//! Per character: the features of its keys ([`zoo_motion::inbetween::InbetweenFeatures::shot`],
+//! the code training uses, from the section's Euler orders, gap unit and f64 statistics); the
+//! graph maps `features [batch, frames, width]` to `correction [batch, frames, dofs]`; the
+//! completed pose is `b + e * correction * std` composed in f64 (the keys' Bezier pose `b`, the
+//! envelope `e`, zero on every key frame fixing a value), as `zoo_arnn::inbetween::complete_shots`
+//! composes it. The graph is planned once for one shot of any number of frames (batch 1: see
+//! [`plan`]). Unlike the step graph, a call allocates: the features, the Bezier poses and
+//! tract's tensors of each shot.
+
+use super::MotionKeys;
+use crate::error::{MotionError, chain};
+use crate::metadata::MotionModelMetadata;
+use crate::model::Plan;
+use tract_onnx::pb;
+use tract_onnx::prelude::*;
+use zoo_motion::inbetween::{InbetweenFeatures, ShotInputs};
+
+/// The whole-shot graph of an in-betweening keyframe model, planned, with its feature settings.
+#[derive(Debug)]
+pub(super) struct ShotGraph {
+    pub(super) metadata: MotionModelMetadata,
+    plan: Plan,
+    features: InbetweenFeatures,
+}
+
+/// The dims of a graph input or output (each `None` where symbolic); `None` when it is not an
+/// f32 tensor with a shape.
+fn dims(v: &pb::ValueInfoProto) -> Option<Vec<Option<i64>>> {
+    use pb::tensor_shape_proto::dimension::Value as D;
+    let Some(pb::TypeProto { value: Some(pb::type_proto::Value::TensorType(t)), .. }) = &v.r#type else {
+        return None;
+    };
+    if t.elem_type != pb::tensor_proto::DataType::Float as i32 {
+        return None;
+    }
+    let shape = t.shape.as_ref()?;
+    Some(
+        shape
+            .dim
+            .iter()
+            .map(|d| match &d.value {
+                Some(D::DimValue(n)) => Some(*n),
+                _ => None,
+            })
+            .collect(),
+    )
+}
+
+/// Plans the graph for one shot of any length (`[1, frames, width]`): tract 0.23.9 plans an ONNX
+/// `GRU` without `initial_h` only for a concrete batch size (it panics on a symbolic one), so
+/// a planning panic is reported as an error.
+fn plan(mut model: InferenceModel, width: usize) -> Result<Plan, MotionError> {
+    let frames = model.symbols.sym("frames");
+    let planned = std::panic::catch_unwind(std::panic::AssertUnwindSafe(move || -> TractResult<Plan> {
+        model.set_input_fact(0, f32::fact(tvec![TDim::from(1usize), frames.into(), TDim::from(width)]).into())?;
+        model.into_optimized()?.into_runnable()
+    }));
+    match planned {
+        Ok(plan) => plan.map_err(|e| MotionError::Unsupported { reason: chain(&e) }),
+        Err(_) => Err(MotionError::Unsupported { reason: "tract panicked while planning the whole-shot graph".into() }),
+    }
+}
+
+impl ShotGraph {
+    /// Loads the graph of a `keyframes` file whose section has the in-betweening settings
+    /// (the format crate checked them against the skeleton): input `features` `[batch, frames,
+    /// input_width]`, output `correction` `[batch, frames, dofs]`, both f32.
+    pub(super) fn load(bytes: &[u8], origin: &str, metadata: MotionModelMetadata) -> Result<Self, MotionError> {
+        let section = metadata.task.as_keyframes().and_then(|t| t.inbetween.as_ref());
+        let Some(section) = section else {
+            return Err(MotionError::wrong_task(&metadata, "in-betweening keyframes", "KeyframeModel"));
+        };
+        let features = section
+            .features()
+            .map_err(|reason| MotionError::from(zoo_format::FormatError::bad(zoo_format::keys::KEYFRAMES, reason)))?;
+        let (proto, model) = crate::model::read_graph(bytes, origin)?;
+        let graph = proto.graph.as_ref().expect("read_graph checked the graph");
+        let io = |vs: &[pb::ValueInfoProto]| vs.iter().map(|v| (v.name.clone(), dims(v))).collect::<Vec<_>>();
+        let (inputs, outputs) = (io(&graph.input), io(&graph.output));
+        let (w, d) = (features.input_width() as i64, features.dofs() as i64);
+        let want_in = vec![("features".to_string(), Some(vec![None, None, Some(w)]))];
+        let want_out = vec![("correction".to_string(), Some(vec![None, None, Some(d)]))];
+        if inputs != want_in || outputs != want_out {
+            return Err(MotionError::BadGraphIo {
+                what: "input",
+                name: inputs.first().map(|i| i.0.clone()).unwrap_or_default(),
+                reason: format!(
+                    "the in-betweening keyframes graph takes {inputs:?} and gives {outputs:?} (name, dims; None is \
+                     symbolic); its section needs one f32 input `features` [batch, frames, {w}] and one f32 output \
+                     `correction` [batch, frames, {d}]: re-export the model with `zoo export --onnx RUN_DIR`"
+                ),
+            });
+        }
+        let plan = plan(model, w as usize)?;
+        Ok(ShotGraph { metadata, plan, features })
+    }
+
+    /// The features of each character's keys (checked by [`MotionKeys::check`] before), or the
+    /// first character whose keys the motion core refuses.
+    fn shots(&self, keys: &[MotionKeys<'_>]) -> Result<Vec<ShotInputs>, MotionError> {
+        let mut poses = Vec::new();
+        let mut fixed = Vec::new();
+        keys.iter()
+            .enumerate()
+            .map(|(c, k)| {
+                poses.clear();
+                poses.extend(k.poses.iter().map(|v| *v as f64));
+                fixed.clear();
+                fixed.extend(k.fixed.iter().map(|v| *v == 1.0));
+                self.features
+                    .shot(k.frames, &poses, &fixed)
+                    .map_err(|e| MotionError::Keys { character: c, reason: e.to_string() })
+            })
+            .collect()
+    }
+
+    /// The graph's correction of one shot, `frames x dofs` values.
+    fn correction(&self, shot: &ShotInputs) -> Result<Vec<f32>, MotionError> {
+        let run = |reason: String| MotionError::Run { reason };
+        let (n, w, d) = (shot.frames, self.features.input_width(), self.features.dofs());
+        let input = Tensor::from_shape::<f32>(&[1, n, w], &shot.features).map_err(|e| run(chain(&e)))?;
+        let result = self.plan.run(tvec![input.into()]).map_err(|e| run(chain(&e)))?;
+        let y = result[0].try_as_plain_ram().and_then(|t| t.as_slice::<f32>()).map_err(|e| run(chain(&e)))?;
+        if y.len() != n * d {
+            return Err(run(format!("the graph returned {} values for a shot of {n} frames x {d}", y.len())));
+        }
+        if let Some(i) = y.iter().position(|v| !v.is_finite()) {
+            return Err(run(format!(
+                "the network's correction is {} at frame {}, value {}: check the model's weights",
+                y[i],
+                i / d,
+                i % d
+            )));
+        }
+        Ok(y.to_vec())
+    }
+
+    /// Completes checked keys into checked buffers (`out[c]`: `keys[c].len() * dofs` values):
+    /// the graph runs once per character, and every character's features and correction are
+    /// made before anything is written.
+    pub(super) fn complete(&self, keys: &[MotionKeys<'_>], out: &mut [&mut [f32]]) -> Result<(), MotionError> {
+        let shots = self.shots(keys)?;
+        let corrections: Vec<Vec<f32>> = shots.iter().map(|s| self.correction(s)).collect::<Result<_, _>>()?;
+        for ((shot, correction), o) in shots.iter().zip(&corrections).zip(out.iter_mut()) {
+            for (x, v) in o.iter_mut().enumerate() {
+                *v = self.features.compose(shot, correction, x) as f32;
+            }
+        }
+        Ok(())
+    }
+}
