@@ -279,6 +279,9 @@ fn write_models_and_references(data: &Path) {
     let done =
         zoo_arnn::humanoid::complete_clip(zoo_arnn::humanoid::HumanoidNet::Arnn(&arnn_model), &arnn_norm, &clip, &keys)
             .expect("candle completes");
+    // The runtime locks a humanoid's feet between the keys, as `zoo complete` does.
+    let mut done = done;
+    assert!(zoo_arnn::completion::lock_feet(&mut done.clip, &[0, 15, 30]) > 0, "the test skeleton has legs");
     let (h, r) = world_arrays(&done.clip, 0..done.clip.frames());
     refs.insert(
         "keyframes".into(),

@@ -55,6 +55,14 @@ pub struct InbetweenSection {
     pub std: Vec<f64>,
     /// Values per frame of the graph's `features` input, `3 D + 2 + 2 G`.
     pub input_width: usize,
+    /// How the graph's correction is made zero on the keys (files written before the field:
+    /// the envelope).
+    #[serde(default, skip_serializing_if = "is_envelope")]
+    pub residual: zoo_motion::inbetween::Residual,
+}
+
+fn is_envelope(r: &zoo_motion::inbetween::Residual) -> bool {
+    *r == zoo_motion::inbetween::Residual::Envelope
 }
 
 impl InbetweenSection {
@@ -83,6 +91,7 @@ impl InbetweenSection {
             gap_unit: self.gap_unit,
             mean: self.mean.clone(),
             std: self.std.clone(),
+            residual: self.residual,
         })
     }
 

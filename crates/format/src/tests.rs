@@ -306,6 +306,7 @@ fn inbetween_sample() -> MotionModelMetadata {
         mean: vec![0.25; 11],
         std: vec![0.5; 11],
         input_width: 41,
+        residual: zoo_motion::inbetween::Residual::KeyLerp,
     };
     MotionModelMetadata {
         model_kind: "arnn".into(),

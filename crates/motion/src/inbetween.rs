@@ -18,8 +18,10 @@
 //! - per group, 1 where a key fixes it at `t`, and its envelope `e_g(t) = 4 s (1 - s)` (`s` the
 //!   phase between the keys fixing the group; 0 on them and outside them).
 //!
-//! The completed pose is `b_t + e(t) * correction_t * std` ([`InbetweenFeatures::compose`],
-//! f64), `e` per value its group's envelope, `correction` the network's output.
+//! The completed pose is `b_t + r_t * std` ([`InbetweenFeatures::compose`], f64), the residual
+//! `r` made from the network's output `c` so that it is zero on every key frame fixing a value
+//! ([`Residual`]): `e(t) c_t` (`e` per value its group's envelope) or `c_t` minus the straight
+//! line through `c` on the keys around `t` fixing the value.
 
 use crate::euler::EulerOrder;
 use crate::fcurve::{ShotKeys, bezier_inbetween};
@@ -29,6 +31,22 @@ use glam::{DQuat, DVec3};
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 #[error("{0}")]
 pub struct InbetweenError(pub String);
+
+/// How the network's correction `c` becomes the residual `r` added to the Bezier pose, zero on
+/// every key frame fixing a value so that the keys are met by construction.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Residual {
+    /// `r = e(t) c(t)`, the envelope `4 s (1 - s)` of the value's phase `s` between the keys
+    /// fixing it. Smooth through a key only where `c` changes sign there: with a correction
+    /// that does not, the motion has a kink on every key.
+    #[default]
+    Envelope,
+    /// `r = c(t) - ((1 - s) c(t-) + s c(t+))`: the correction minus the straight line through
+    /// its own values on the keys `t-` and `t+` fixing the value. Smooth through a key wherever
+    /// the correction's values on the neighbouring keys lie on a line (e.g. are zero).
+    KeyLerp,
+}
 
 /// What a shot's features depend on besides its keys: the skeleton's Euler orders (the F-curves
 /// are drawn on these channels, as Blender draws them), the gap unit and the pose statistics.
@@ -42,6 +60,8 @@ pub struct InbetweenFeatures {
     pub mean: Vec<f64>,
     /// Standard deviation per pose value (`d` values, positive).
     pub std: Vec<f64>,
+    /// How the correction is made zero on the keys.
+    pub residual: Residual,
 }
 
 /// One shot's features and its Bezier poses.
@@ -55,6 +75,10 @@ pub struct ShotInputs {
     pub bezier: Vec<f64>,
     /// The envelope of each value, frames x d (0 on a key frame fixing its group).
     pub envelope: Vec<f64>,
+    /// Per frame and value (frames x d), the frames of the keys fixing the value before `t` (at
+    /// or before it) and after it, and the phase between them ([`Residual::KeyLerp`]); `(t, t,
+    /// 0)` on those keys, before the first and after the last, where the residual is zero.
+    pub lerp: Vec<(u32, u32, f64)>,
 }
 
 /// Values per pose of `joints` joints, `3 + 4 J`.
@@ -232,6 +256,7 @@ impl InbetweenFeatures {
         let groups = key_groups(j);
         let mut features = Vec::with_capacity(n * self.input_width());
         let mut env = vec![0.0f64; n * d];
+        let mut lerp = vec![(0u32, 0u32, 0.0f64); n * d];
         let mut group_env = vec![0.0f64; g];
         let mut prev = vec![0.0f64; d];
         let mut next = vec![0.0f64; d];
@@ -248,6 +273,12 @@ impl InbetweenFeatures {
                 prev[i] = key_value(key(a), bez, i) - bez[i];
                 next[i] = key_value(key(c), bez, i) - bez[i];
                 env[t * d + i] = group_env[groups[i]];
+                lerp[t * d + i] = match around(&per_group[groups[i]], t) {
+                    Some(((_, fa), (_, fc))) if fc > fa && t > fa => {
+                        (fa as u32, fc as u32, (t - fa) as f64 / (fc - fa) as f64)
+                    }
+                    _ => (t as u32, t as u32, 0.0),
+                };
             }
             features.extend(bez.iter().zip(&self.mean).zip(&self.std).map(|((v, m), s)| ((v - m) / s) as f32));
             features.extend(prev.iter().zip(&self.std).map(|(v, s)| (v / s) as f32));
@@ -259,15 +290,24 @@ impl InbetweenFeatures {
             features.extend((0..g).map(|gr| if per_group[gr].iter().any(|(_, f)| *f == t) { 1.0f32 } else { 0.0 }));
             features.extend(group_env.iter().map(|&e| e as f32));
         }
-        Ok(ShotInputs { frames: n, features, bezier, envelope: env })
+        Ok(ShotInputs { frames: n, features, bezier, envelope: env, lerp })
     }
 
     /// The completed value `x` (flat index, frame-major) of a shot from the network's correction
-    /// (normalised units, frames x d): `b + e * correction * std`, in f64, so that a value
+    /// (normalised units, frames x d): `b + r * std` ([`Residual`]), in f64, so that a value
     /// equals its Bezier value, and so its key, on every key frame fixing it.
     pub fn compose(&self, shot: &ShotInputs, correction: &[f32], x: usize) -> f64 {
         let d = self.dofs();
-        shot.bezier[x] + shot.envelope[x] * correction[x] as f64 * self.std[x % d]
+        let r = match self.residual {
+            Residual::Envelope => shot.envelope[x] * correction[x] as f64,
+            Residual::KeyLerp => {
+                let (a, c, s) = shot.lerp[x];
+                let v = x % d;
+                let (ya, yc) = (correction[a as usize * d + v] as f64, correction[c as usize * d + v] as f64);
+                correction[x] as f64 - (ya + s * (yc - ya))
+            }
+        };
+        shot.bezier[x] + r * self.std[x % d]
     }
 }
 
@@ -276,7 +316,13 @@ mod tests {
     use super::*;
 
     fn features() -> InbetweenFeatures {
-        InbetweenFeatures { orders: vec![EulerOrder::Zxy; 3], gap_unit: 30.0, mean: vec![0.0; 15], std: vec![0.5; 15] }
+        InbetweenFeatures {
+            orders: vec![EulerOrder::Zxy; 3],
+            gap_unit: 30.0,
+            mean: vec![0.0; 15],
+            std: vec![0.5; 15],
+            residual: Residual::Envelope,
+        }
     }
 
     fn keys() -> (Vec<usize>, Vec<f64>) {
@@ -334,6 +380,40 @@ mod tests {
         assert!(s.envelope[15 * d] > 0.0 && s.envelope[15 * d + 7] == 0.0);
         let whole = f.shot(&frames, &poses, &[]).unwrap();
         assert_ne!(s.features, whole.features);
+    }
+
+    #[test]
+    fn both_residuals_meet_the_keys_and_the_key_line_removes_straight_corrections() {
+        let (frames, poses) = keys();
+        let partial: Vec<bool> = (0..4).flat_map(|k| [true, k != 1, true, k != 2]).collect();
+        for fixed in [vec![], partial] {
+            for residual in [Residual::Envelope, Residual::KeyLerp] {
+                let f = InbetweenFeatures { residual, ..features() };
+                let s = f.shot(&frames, &poses, &fixed).unwrap();
+                let d = f.dofs();
+                // A correction that is nowhere zero, varying per frame and value.
+                let wavy: Vec<f32> = (0..s.frames * d).map(|x| 1.0 + ((x * 7 % 13) as f32) * 0.1).collect();
+                let g = f.groups();
+                let groups = key_groups(f.joints());
+                for (k, &t) in frames.iter().enumerate() {
+                    for v in 0..d {
+                        if fixed.is_empty() || fixed[k * g + groups[v]] {
+                            let x = t * d + v;
+                            assert_eq!(f.compose(&s, &wavy, x), s.bezier[x], "{residual:?} key {k} value {v}");
+                        }
+                    }
+                }
+                // A correction that is a straight line in time leaves the curve unchanged with
+                // the key line (it is its own line through the keys); the envelope keeps it.
+                let line: Vec<f32> = (0..s.frames * d).map(|x| 0.3 + 0.05 * (x / d) as f32).collect();
+                let moved =
+                    (0..s.frames * d).map(|x| (f.compose(&s, &line, x) - s.bezier[x]).abs()).fold(0.0, f64::max);
+                match residual {
+                    Residual::KeyLerp => assert!(moved < 1e-6, "{moved}"),
+                    Residual::Envelope => assert!(moved > 0.1, "{moved}"),
+                }
+            }
+        }
     }
 
     #[test]

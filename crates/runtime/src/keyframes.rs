@@ -12,8 +12,9 @@
 //!   `zoo_arnn::inbetween_export`): the features of each character's keys are built by
 //!   [`zoo_motion::inbetween`] (the code training uses), the graph corrects the keys' Bezier
 //!   curves over the whole shot in one call per character, and the completion is `bezier +
-//!   envelope * correction * std`, composed in f64 as `zoo_arnn::inbetween::complete_shots`
-//!   does. Its poses are the humanoid pose vector (root
+//!   residual * std`, the residual made from the correction zero on the keys as the file's
+//!   `residual` says ([`zoo_motion::inbetween::Residual`]), composed in f64 as
+//!   `zoo_arnn::inbetween::complete_shots` does. Its poses are the humanoid pose vector (root
 //!   position, then a `(w, x, y, z)` quaternion per joint, the clips' units).
 //!
 //! The keys of a character are frames (strictly increasing, the first one 0) and one pose per
@@ -25,6 +26,11 @@
 //! humanoid's rotations are compared up to sign. [`KeyframeRunner::set_hit_keys`] turns this
 //! off to read the network's own output (the in-betweening design meets its keys by
 //! construction, to float rounding).
+//!
+//! A humanoid's completion then has its feet locked between the keys, as `zoo complete` does
+//! ([`zoo_motion::keylock`]: planted feet held, the legs refitted, the key frames unchanged;
+//! the model's skeleton and bone offsets from its file, legs found by joint name).
+//! [`KeyframeRunner::set_foot_lock`] turns this off.
 //!
 //! ```no_run
 //! use zoo_runtime::keyframes::{KeyframeModel, MotionKeys};
@@ -44,6 +50,7 @@ use crate::error::MotionError;
 use crate::metadata::MotionModelMetadata;
 use crate::model::{MotionModel, MotionState};
 use crate::runner::MotionRunner;
+use glam::{DQuat, DVec3};
 use shot::ShotGraph;
 use std::path::Path;
 use std::sync::Arc;
@@ -290,7 +297,65 @@ impl KeyframeModel {
             groups: self.groups,
             key_groups: self.key_groups.clone(),
             hit_keys: true,
+            feet: if self.groups > 0 { KeyFeet::new(&self.metadata().skeleton, d) } else { None },
+            foot_lock: true,
         })
+    }
+}
+
+/// The foot lock between the keys of a humanoid completion ([`zoo_motion::keylock`], as `zoo
+/// complete` applies it): the model's skeleton, its legs, and buffers.
+#[derive(Clone, Debug)]
+struct KeyFeet {
+    lock: zoo_motion::footlock::FootLock,
+    skeleton: zoo_motion::Skeleton,
+    root: Vec<DVec3>,
+    rot: Vec<DQuat>,
+    before: Vec<DQuat>,
+}
+
+impl KeyFeet {
+    /// The lock of a skeleton with legs whose humanoid poses have `dofs` values; `None` otherwise.
+    fn new(info: &crate::metadata::MotionSkeletonInfo, dofs: usize) -> Option<Self> {
+        let j = info.names.len();
+        if j == 0 || info.parents.len() != j || info.offsets.len() != j || dofs != zoo_motion::inbetween::dofs(j) {
+            return None;
+        }
+        let skeleton = zoo_motion::Skeleton {
+            names: info.names.clone(),
+            parents: info.parents.iter().map(|&p| usize::try_from(p).ok()).collect(),
+            offsets: info.offsets.iter().map(|o| DVec3::from_array(*o)).collect(),
+            end_sites: vec![None; j],
+            channels: vec![zoo_motion::JointChannels::default(); j],
+        };
+        let lock = zoo_motion::keylock::key_foot_lock(&skeleton)?;
+        Some(KeyFeet { lock, skeleton, root: vec![], rot: vec![], before: vec![] })
+    }
+
+    /// Locks the feet of one completion (`keys.len() * dofs` humanoid pose values) between its
+    /// key frames; writes back the rotations the lock changed (with the sign of the old ones).
+    fn apply(&mut self, frames: &[usize], out: &mut [f32]) {
+        let j = self.skeleton.len();
+        let d = zoo_motion::inbetween::dofs(j);
+        self.root.clear();
+        self.rot.clear();
+        for p in out.chunks_exact(d) {
+            self.root.push(DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64));
+            self.rot.extend(p[3..].chunks_exact(4).map(|q| {
+                let q = DQuat::from_xyzw(q[1] as f64, q[2] as f64, q[3] as f64, q[0] as f64);
+                if q.length_squared() > 1e-12 { q.normalize() } else { DQuat::IDENTITY }
+            }));
+        }
+        self.before.clone_from(&self.rot);
+        let s = &self.skeleton;
+        zoo_motion::keylock::lock_feet_between_keys(&self.lock, s, &s.offsets, frames, &self.root, &mut self.rot);
+        for (i, (new, old)) in self.rot.iter().zip(&self.before).enumerate() {
+            if new != old {
+                let q = if new.dot(*old) < 0.0 { -*new } else { *new };
+                let at = (i / j) * d + 3 + 4 * (i % j);
+                out[at..at + 4].copy_from_slice(&[q.w as f32, q.x as f32, q.y as f32, q.z as f32]);
+            }
+        }
     }
 }
 
@@ -385,6 +450,8 @@ pub struct KeyframeRunner {
     groups: usize,
     key_groups: Vec<usize>,
     hit_keys: bool,
+    feet: Option<KeyFeet>,
+    foot_lock: bool,
 }
 
 impl KeyframeRunner {
@@ -397,6 +464,13 @@ impl KeyframeRunner {
     /// network's own output (`false`: its key misses measure the network).
     pub fn set_hit_keys(&mut self, on: bool) {
         self.hit_keys = on;
+    }
+
+    /// Whether a humanoid's completions have their feet locked between the keys (the default,
+    /// as `zoo complete`; nothing to lock for a model without legs) or are left as the network
+    /// and the key correction made them (`false`).
+    pub fn set_foot_lock(&mut self, on: bool) {
+        self.foot_lock = on;
     }
 
     /// Sets each key frame of a completion to its key and spreads the network's miss over the
@@ -450,6 +524,11 @@ impl KeyframeRunner {
         if self.hit_keys {
             for (k, o) in keys.iter().zip(out.iter_mut()) {
                 self.hit(k, o);
+            }
+        }
+        if let (Some(feet), true) = (&mut self.feet, self.foot_lock) {
+            for (k, o) in keys.iter().zip(out.iter_mut()) {
+                feet.apply(k.frames, o);
             }
         }
         Ok(())

@@ -423,8 +423,9 @@ fn write_outputs(
 }
 
 /// The foot lock between the keys of a completed humanoid clip ([`zoo_motion::keylock`], the
-/// clip's own bone offsets); returns the number of frames it changed (0 without legs).
-fn lock_feet(clip: &mut zoo_motion::Clip, key_frames: &[usize]) -> usize {
+/// clip's own bone offsets), as `zoo complete` and the runtime's keyframes task apply it;
+/// returns the number of frames it changed (0 without legs).
+pub fn lock_feet(clip: &mut zoo_motion::Clip, key_frames: &[usize]) -> usize {
     let Some(lock) = zoo_motion::keylock::key_foot_lock(&clip.skeleton) else { return 0 };
     let j = clip.joints();
     let offsets = zoo_motion::pipeline::rest_offsets(clip);

@@ -21,7 +21,10 @@
 //! - per group, 1 where a key fixes it at `t`, and its envelope `e_g(t) = 4 s (1 - s)` (`s` the
 //!   phase between the keys fixing the group; 0 on them and outside them).
 //!
-//! Output: `x_t = b_t + e(t) * D(BGRU(E(input_t)))`, `e` per value its group's envelope.
+//! Output: `x_t = b_t + r_t`, the residual `r` made from the correction `c_t =
+//! D(BGRU(E(input_t)))` zero on every key ([`Residual`], the config's `residual`): `e(t) c_t`
+//! with `e` per value its group's envelope, or `c_t` minus the straight line through `c` on the
+//! keys around `t` fixing the value (new runs; smooth through the keys).
 
 use crate::config::HumanoidSkeleton;
 use crate::train::Normalization;
@@ -32,6 +35,7 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 use zoo_motion::EulerOrder;
 use zoo_motion::inbetween::InbetweenFeatures;
+pub use zoo_motion::inbetween::Residual;
 use zoo_nn::{Activation, BiGru, Mlp, RowRngs};
 
 /// The `design` field of an in-betweening run's `config.json`.
@@ -99,6 +103,10 @@ pub struct InbetweenConfig {
     pub max_grad_norm: f64,
     /// Seed of the weights and of the key draws.
     pub seed: u64,
+    /// How the correction is made zero on the keys (runs written before the field: the
+    /// envelope).
+    #[serde(default)]
+    pub residual: Residual,
 }
 
 impl InbetweenConfig {
@@ -133,6 +141,7 @@ impl InbetweenConfig {
             lr_half_life: 0,
             max_grad_norm: 1.0,
             seed: 1,
+            residual: Residual::KeyLerp,
         }
     }
 
@@ -277,11 +286,19 @@ impl Inbetween {
         Ok(self.decoder.forward(&h)?)
     }
 
-    /// The completed poses in network units, `b + e * correction`, from a batch of shot
+    /// The completed poses in network units, `b + r` ([`Residual`]), from a batch of shot
     /// tensors ([`ShotBatch`]).
     pub fn forward(&self, batch: &ShotBatch, rng: Option<&mut RowRngs>) -> ArnnResult<Tensor> {
         let delta = self.correction(&batch.features, rng)?;
-        Ok((&batch.bezier + delta.mul(&batch.envelope)?)?)
+        let r = match self.config.residual {
+            Residual::Envelope => delta.mul(&batch.envelope)?,
+            Residual::KeyLerp => {
+                let (a, c) = (delta.gather(&batch.lerp_a, 1)?, delta.gather(&batch.lerp_c, 1)?);
+                let line = (&a + (c - &a)?.mul(&batch.lerp_s)?)?;
+                (delta - line)?
+            }
+        };
+        Ok((&batch.bezier + r)?)
     }
 }
 
@@ -298,6 +315,12 @@ pub struct ShotBatch {
     pub bezier: Tensor,
     /// Envelopes.
     pub envelope: Tensor,
+    /// [`ShotInputs::lerp`]: the frame of the key before (`u32`), `(b, T, d)`.
+    pub lerp_a: Tensor,
+    /// [`ShotInputs::lerp`]: the frame of the key after (`u32`), `(b, T, d)`.
+    pub lerp_c: Tensor,
+    /// [`ShotInputs::lerp`]: the phase between them, `(b, T, d)`.
+    pub lerp_s: Tensor,
 }
 
 impl ShotBatch {
@@ -311,10 +334,16 @@ impl ShotBatch {
         let features: Vec<f32> = shots.iter().flat_map(|s| s.features.iter().copied()).collect();
         let bez: Vec<f32> = shots.iter().flat_map(|s| s.bezier.chunks_exact(d).flat_map(|p| norm.apply(p))).collect();
         let env: Vec<f32> = shots.iter().flat_map(|s| s.envelope.iter().map(|&e| e as f32)).collect();
+        let lerp_a: Vec<u32> = shots.iter().flat_map(|s| s.lerp.iter().map(|l| l.0)).collect();
+        let lerp_c: Vec<u32> = shots.iter().flat_map(|s| s.lerp.iter().map(|l| l.1)).collect();
+        let lerp_s: Vec<f32> = shots.iter().flat_map(|s| s.lerp.iter().map(|l| l.2 as f32)).collect();
         Ok(ShotBatch {
             features: Tensor::from_vec(features, (b, t, w), device)?,
             bezier: Tensor::from_vec(bez, (b, t, d), device)?,
             envelope: Tensor::from_vec(env, (b, t, d), device)?,
+            lerp_a: Tensor::from_vec(lerp_a, (b, t, d), device)?,
+            lerp_c: Tensor::from_vec(lerp_c, (b, t, d), device)?,
+            lerp_s: Tensor::from_vec(lerp_s, (b, t, d), device)?,
         })
     }
 }
@@ -326,6 +355,7 @@ pub fn features(config: &InbetweenConfig, norm: &Normalization) -> ArnnResult<In
         gap_unit: config.gap_unit,
         mean: norm.mean.clone(),
         std: norm.std.clone(),
+        residual: config.residual,
     };
     f.check().map_err(|e| ArnnError::Config(e.to_string()))?;
     Ok(f)

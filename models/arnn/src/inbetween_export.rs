@@ -56,6 +56,7 @@ pub fn metadata(config: &InbetweenConfig, norm: &Normalization) -> Result<Motion
         mean: norm.mean.clone(),
         std: norm.std.clone(),
         input_width: config.input_width(),
+        residual: config.residual,
     };
     let metadata = MotionModelMetadata {
         format_version: FORMAT_VERSION,

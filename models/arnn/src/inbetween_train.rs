@@ -346,6 +346,9 @@ impl InbetweenTrainer {
             features: p.batch.features.narrow(0, r.start, n)?,
             bezier: p.batch.bezier.narrow(0, r.start, n)?,
             envelope: p.batch.envelope.narrow(0, r.start, n)?,
+            lerp_a: p.batch.lerp_a.narrow(0, r.start, n)?,
+            lerp_c: p.batch.lerp_c.narrow(0, r.start, n)?,
+            lerp_s: p.batch.lerp_s.narrow(0, r.start, n)?,
         };
         let target = p.target.narrow(0, r.start, n)?;
         let x = self.model.forward(&sub, rng)?;
