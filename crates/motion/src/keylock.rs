@@ -11,21 +11,18 @@
 //! and the key frames are unchanged, so every key stays hit exactly.
 //!
 //! [`key_foot_lock`] is the lock's setting for keys: the transitions' defaults (half the slide
-//! taken out) without lifting dragged feet. On bandai2's keys-only benchmark (keys every 5 and
-//! 15 frames, the in-betweening network) lifting took the skate from 0.31 / 0.36 cm per frame to
-//! 0.22 / 0.22 (the truth's 0.27) but raised L2P from 1.05 / 1.84 to 1.22 / 1.88; a full pin
-//! (strength 1) 0.05 / 0.08 at L2P 1.29 / 1.98; smoothing the lock's rotation changes over 5
-//! frames gave the skate back (0.50) for little (NPSS 0.0600 against 0.0619 at K = 5).
+//! taken out, dragged feet lifted). What the other settings did on bandai2's keys-only benchmark
+//! is in docs/keys-only.md ("The foot lock between the keys").
 
 use crate::footlock::FootLock;
 use crate::pipeline::{fit_frames, skeleton_positions_f32};
 use crate::skeleton::Skeleton;
 use glam::{DQuat, DVec3};
 
-/// The foot lock for completed keys ([`FootLock::from_skeleton`] without lifting dragged feet);
-/// `None` for a skeleton without legs.
+/// The foot lock for completed keys: [`FootLock::from_skeleton`]'s defaults, the transitions'
+/// (`None` for a skeleton without legs).
 pub fn key_foot_lock(skeleton: &Skeleton) -> Option<FootLock> {
-    FootLock::from_skeleton(&skeleton.names, &skeleton.parents).map(|l| FootLock { lift_speed: 0.0, ..l })
+    FootLock::from_skeleton(&skeleton.names, &skeleton.parents)
 }
 
 /// Locks the feet of a completed motion between its keys, in place.
