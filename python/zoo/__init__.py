@@ -387,7 +387,9 @@ class KeyframeModel(Model):
         """Completes humanoid keys: ``frames`` ``(n,)``, ``keys`` the key poses (``Poses`` with
         prefix ``(n,)`` or ``(hips, rotations)``), ``fixed`` ``(n, 1 + K)`` flags (group 0 the root
         position, ``1 + j`` joint ``j``'s rotation; the first key fixes all) or ``None``.
-        Returns ``(hips, rotations)`` for every frame from the first key to the last."""
+        Returns ``(hips, rotations)`` for every frame from the first key to the last: every key
+        hit, and the feet locked between the keys when the skeleton has legs (as ``zoo
+        complete``)."""
         h, r = _bvh_style(keys, "keys")
         f = np.ascontiguousarray(frames, dtype=np.int64)
         fx = None if fixed is None else _f32(fixed, "fixed")

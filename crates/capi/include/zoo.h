@@ -385,8 +385,10 @@ void zoo_keyframes_runner_free(struct ZooKeyframesRunner *runner);
 // and 0 for whole keys or `frames_len * G` flags for partial keys (a model with key groups
 // only; the first key fixes every group), `out` `(frames[frames_len - 1] + 1) * D` floats. Keys
 // and buffers are checked before anything is written. Every key frame of `out` equals its key
-// (in the groups it fixes): the network's miss is spread over the frames before it. The
-// runner: one thread at a time.
+// (in the groups it fixes): the network's miss is spread over the frames before it. A humanoid
+// model's completion (key groups, a skeleton with joints named `foot`) then has its feet locked
+// between the keys, key frames unchanged, as `zoo complete` does. The runner: one thread at a
+// time.
 //
 // # Safety
 // `runner` is NULL or live and used by this thread only; each buffer is NULL or holds its given

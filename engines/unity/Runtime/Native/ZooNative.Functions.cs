@@ -190,8 +190,10 @@ namespace Zoo.Native
         /// and 0 for whole keys or <c>frames_len * G</c> flags for partial keys (a model with key groups
         /// only; the first key fixes every group), <c>out</c> <c>(frames[frames_len - 1] + 1) * D</c> floats. Keys
         /// and buffers are checked before anything is written. Every key frame of <c>out</c> equals its key
-        /// (in the groups it fixes): the network's miss is spread over the frames before it. The
-        /// runner: one thread at a time.
+        /// (in the groups it fixes): the network's miss is spread over the frames before it. A humanoid
+        /// model's completion (key groups, a skeleton with joints named <c>foot</c>) then has its feet locked
+        /// between the keys, key frames unchanged, as <c>zoo complete</c> does. The runner: one thread at a
+        /// time.
         /// </summary>
         /// <remarks>
         /// Safety:
