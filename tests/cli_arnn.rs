@@ -672,4 +672,23 @@ fn inbetween_design_trains_resumes_scores_keys_and_completes() {
     let portable = dir.path().join("ib_portable.onnx");
     let (ok, _, stderr) = run(&["export", "--onnx", r, "--out", portable.to_str().unwrap(), "--portable"]);
     assert!(!ok && stderr.contains("does not hold; export it without --portable") && !portable.exists(), "{stderr}");
+    // The export through the runtime scores as candle does in the keys-only benchmark, with its
+    // own foot lock as with the benchmark's.
+    let (o, ol) = (format!("onnx:{}", onnx.display()), format!("onnx+lock:{}", onnx.display()));
+    let json = dir.path().join("keys_onnx.json");
+    let methods = format!("{method},{locked},{o},{ol}");
+    let (ok, stdout, stderr) = run(&[&bench[..], &["--methods", &methods, "--json", json.to_str().unwrap()]].concat());
+    assert!(ok, "{stdout}\n{stderr}");
+    let result: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    for (candle, runtime) in [(&method, &o), (&locked, &ol)] {
+        for k in [10, 30] {
+            for m in ["l2p", "l2q", "npss", "skate"] {
+                let key = format!("{m}@{k}");
+                let (a, b) = (&result["methods"][candle.as_str()][&key], &result["methods"][runtime.as_str()][&key]);
+                let (a, b) = (a.as_f64().unwrap(), b.as_f64().unwrap());
+                assert!((a - b).abs() <= 1e-4 * a.abs().max(1e-3), "{key}: {candle} {a}, {runtime} {b}");
+            }
+            assert!(result["methods"][runtime.as_str()][format!("keymiss_cm@{k}")].as_f64().unwrap() < 1e-2);
+        }
+    }
 }

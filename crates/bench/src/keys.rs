@@ -30,6 +30,10 @@
 //!
 //! `METHOD+lock` (`bezier+lock`, `arnn+lock:RUN_DIR`, ...) runs the method, then the foot lock
 //! between its keys ([`zoo_motion::keylock`]; key frames unchanged).
+//!
+//! `onnx:FILE.onnx` runs an exported humanoid keyframe model (`zoo export --onnx`) through the
+//! engine runtime's keyframes task on tract, with its foot lock off; `onnx+lock:FILE.onnx` with
+//! the runtime's own foot lock on, as an engine gets it.
 
 use crate::Result;
 use glam::{DQuat, DVec3};
@@ -359,6 +363,74 @@ pub fn methods(specs: &[String]) -> Result<Vec<Box<dyn KeyMethod>>> {
     specs.iter().map(|m| method(m.trim())).collect()
 }
 
+/// An exported keyframe model run by the engine runtime ([`zoo_runtime::KeyframeRunner`], one
+/// character per call), its foot lock on or off.
+pub struct RuntimeKeys {
+    name: String,
+    model: zoo_runtime::KeyframeModel,
+    foot_lock: bool,
+}
+
+impl RuntimeKeys {
+    /// Loads `zoo export --onnx` output of a humanoid keyframe model.
+    pub fn load(path: &Path, name: String, foot_lock: bool) -> Result<Self> {
+        let model = zoo_runtime::KeyframeModel::load(path)?;
+        if model.groups() == 0 {
+            bail!("{}: a keyframe model of {} values per pose, not a humanoid one", path.display(), model.dofs());
+        }
+        Ok(RuntimeKeys { name, model, foot_lock })
+    }
+
+    fn one(&self, runner: &mut zoo_runtime::KeyframeRunner, t: &KeyTask<'_>) -> Result<Filled> {
+        let j = t.skeleton.len();
+        let (d, g) = (self.model.dofs(), self.model.groups());
+        if d != zoo_motion::inbetween::dofs(j) || g != 1 + j {
+            bail!("the model completes poses of {d} values in {g} groups, the data's skeleton has {j} joints");
+        }
+        let poses: Vec<f32> =
+            zoo_arnn::humanoid::poses(&t.root, &t.rot, j).iter().flatten().map(|&v| v as f32).collect();
+        let whole = t.fixed.iter().all(|m| m.iter().all(|&v| v));
+        let fixed: Vec<f32> =
+            if whole { vec![] } else { t.fixed.iter().flatten().map(|&v| if v { 1.0 } else { 0.0 }).collect() };
+        let mut out = vec![0.0f32; t.len() * d];
+        runner.complete(zoo_runtime::MotionKeys { frames: &t.frames, poses: &poses, fixed: &fixed }, &mut out)?;
+        let mut f = Filled { root: Vec::with_capacity(t.len()), rot: Vec::with_capacity(t.len() * j), raw_miss: None };
+        let mut last = t.rot[..j].to_vec();
+        for p in out.chunks_exact(d) {
+            let p: Vec<f64> = p.iter().map(|&v| v as f64).collect();
+            let (root, mut rot) = zoo_motion::inbetween::decode_pose(&p, j);
+            for (q, l) in rot.iter_mut().zip(last.iter_mut()) {
+                if q.dot(*l) < 0.0 {
+                    *q = -*q;
+                }
+                *l = *q;
+            }
+            f.root.push(root);
+            f.rot.extend(rot);
+        }
+        Ok(f)
+    }
+}
+
+impl KeyMethod for RuntimeKeys {
+    fn name(&self) -> String {
+        self.name.clone()
+    }
+
+    fn fill(&self, tasks: &[KeyTask<'_>]) -> std::result::Result<Vec<Filled>, String> {
+        let err = |e: crate::BenchError| format!("{}: {e}", self.name);
+        tasks
+            .par_chunks(16.max(tasks.len() / 8))
+            .map(|chunk| {
+                let mut runner = self.model.runner(1).map_err(|e| err(e.into()))?;
+                runner.set_foot_lock(self.foot_lock);
+                chunk.iter().map(|t| self.one(&mut runner, t).map_err(err)).collect::<std::result::Result<Vec<_>, _>>()
+            })
+            .collect::<std::result::Result<Vec<Vec<Filled>>, String>>()
+            .map(|v| v.into_iter().flatten().collect())
+    }
+}
+
 /// A method followed by the foot lock between its keys ([`zoo_motion::keylock::key_foot_lock`],
 /// the skeleton's legs found by name and its rest offsets; key frames unchanged).
 pub struct WithFootLock {
@@ -387,6 +459,9 @@ impl KeyMethod for WithFootLock {
 /// optionally with `+lock` after its kind (`bezier+lock`, `arnn+lock:RUN_DIR`).
 pub fn method(spec: &str) -> Result<Box<dyn KeyMethod>> {
     let (kind, rest) = spec.split_once(':').map_or((spec, None), |(k, r)| (k, Some(r)));
+    if let (Some(file), "onnx" | "onnx+lock") = (rest, kind) {
+        return Ok(Box::new(RuntimeKeys::load(Path::new(file), spec.to_string(), kind == "onnx+lock")?));
+    }
     if let Some(base) = kind.strip_suffix("+lock") {
         let inner = method(&rest.map_or(base.to_string(), |r| format!("{base}:{r}")))?;
         return Ok(Box::new(WithFootLock { name: spec.to_string(), inner }));
@@ -400,7 +475,8 @@ pub fn method(spec: &str) -> Result<Box<dyn KeyMethod>> {
         Some(("arnn", dir)) => Ok(Box::new(ArnnKeys::load(Path::new(dir), spec.to_string())?)),
         _ => bail!(
             "method `{spec}` is not one of the keys-only benchmark's: `linear`, `bezier`, `arnn:RUN_DIR` (a humanoid \
-             `zoo train arnn --data` run folder), each optionally with `+lock` after its kind (`arnn+lock:RUN_DIR`)"
+             `zoo train arnn --data` run folder), `onnx:FILE.onnx` (its export, run by the engine runtime), each optionally \
+             with `+lock` after its kind (`arnn+lock:RUN_DIR`)"
         ),
     }
 }
