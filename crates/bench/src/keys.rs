@@ -117,6 +117,33 @@ pub struct Filled {
     pub raw_miss: Option<(f64, f64)>,
 }
 
+impl Filled {
+    /// A motion of humanoid pose vectors (`3 + 4 J` values per frame, [`zoo_motion::inbetween`]'s
+    /// layout), each rotation taken on the side of the previous frame's (from `first`, the
+    /// rotations of the first key) so that the quaternions stay continuous.
+    pub fn from_poses<'p>(
+        poses: impl IntoIterator<Item = &'p [f64]>,
+        first: &[DQuat],
+        raw_miss: Option<(f64, f64)>,
+    ) -> Filled {
+        let j = first.len();
+        let mut f = Filled { raw_miss, ..Filled::default() };
+        let mut last = first.to_vec();
+        for p in poses {
+            let (root, mut rot) = zoo_motion::inbetween::decode_pose(p, j);
+            for (q, l) in rot.iter_mut().zip(last.iter_mut()) {
+                if q.dot(*l) < 0.0 {
+                    *q = -*q;
+                }
+                *l = *q;
+            }
+            f.root.push(root);
+            f.rot.extend(rot);
+        }
+        f
+    }
+}
+
 /// A method of the keys-only benchmark.
 pub trait KeyMethod: Sync {
     /// Row name in the table and key in the JSON.
@@ -224,7 +251,7 @@ impl ArnnKeys {
     }
 
     fn one(&self, t: &KeyTask<'_>) -> zoo_arnn::ArnnResult<Filled> {
-        use zoo_arnn::humanoid::{decode, poses};
+        use zoo_arnn::humanoid::poses;
         zoo_arnn::humanoid::check_skeleton(self.model.config(), t.skeleton)?;
         let j = t.skeleton.len();
         let key_poses = poses(&t.root, &t.rot, j);
@@ -233,23 +260,8 @@ impl ArnnKeys {
         let raw = zoo_arnn::complete_partial_raw(&self.model, &self.norm, &t.frames, &key_poses, fixed)?;
         let mut corrected = raw.clone();
         zoo_arnn::hit_keys(self.model.config(), &t.frames, &key_poses, fixed, &mut corrected);
-        let mut out =
-            Filled { root: Vec::with_capacity(t.len()), rot: Vec::with_capacity(t.len() * j), raw_miss: None };
-        let mut last = t.rot[..j].to_vec();
-        for p in &corrected {
-            let (root, mut rot) = decode(p, j);
-            for (q, l) in rot.iter_mut().zip(last.iter_mut()) {
-                if q.dot(*l) < 0.0 {
-                    *q = -*q;
-                }
-                *l = *q;
-            }
-            out.root.push(root);
-            out.rot.extend(rot);
-        }
         let (root_miss, (angle_miss, _, _)) = zoo_arnn::humanoid::key_misses(&raw, &t.frames, &key_poses, fixed, j);
-        out.raw_miss = Some((root_miss, angle_miss));
-        Ok(out)
+        Ok(Filled::from_poses(corrected.iter().map(Vec::as_slice), &t.rot[..j], Some((root_miss, angle_miss))))
     }
 }
 
@@ -281,7 +293,7 @@ impl InbetweenKeys {
     }
 
     fn all(&self, tasks: &[KeyTask<'_>]) -> zoo_arnn::ArnnResult<Vec<Filled>> {
-        use zoo_arnn::humanoid::{decode, poses};
+        use zoo_arnn::humanoid::poses;
         let c = self.model.config();
         let Some(first) = tasks.first() else { return Ok(vec![]) };
         let names = &first.skeleton.names;
@@ -316,24 +328,7 @@ impl InbetweenKeys {
             let key_flat: Vec<f64> = kp.iter().flatten().copied().collect();
             let fixes = |k: usize, g: usize| fx.get(k).is_none_or(|m| m[g]);
             zoo_motion::keyhit::hit_keys(layout, &key_flat, fixes, &mut flat, &mut vec![0.0; d]);
-            let mut f = Filled {
-                root: Vec::with_capacity(t.len()),
-                rot: Vec::with_capacity(t.len() * j),
-                raw_miss: Some((root_miss, angle_miss)),
-            };
-            let mut last = t.rot[..j].to_vec();
-            for p in flat.chunks_exact(d) {
-                let (root, mut rot) = decode(p, j);
-                for (q, l) in rot.iter_mut().zip(last.iter_mut()) {
-                    if q.dot(*l) < 0.0 {
-                        *q = -*q;
-                    }
-                    *l = *q;
-                }
-                f.root.push(root);
-                f.rot.extend(rot);
-            }
-            out.push(f);
+            out.push(Filled::from_poses(flat.chunks_exact(d), &t.rot[..j], Some((root_miss, angle_miss))));
         }
         Ok(out)
     }
@@ -394,21 +389,8 @@ impl RuntimeKeys {
             if whole { vec![] } else { t.fixed.iter().flatten().map(|&v| if v { 1.0 } else { 0.0 }).collect() };
         let mut out = vec![0.0f32; t.len() * d];
         runner.complete(zoo_runtime::MotionKeys { frames: &t.frames, poses: &poses, fixed: &fixed }, &mut out)?;
-        let mut f = Filled { root: Vec::with_capacity(t.len()), rot: Vec::with_capacity(t.len() * j), raw_miss: None };
-        let mut last = t.rot[..j].to_vec();
-        for p in out.chunks_exact(d) {
-            let p: Vec<f64> = p.iter().map(|&v| v as f64).collect();
-            let (root, mut rot) = zoo_motion::inbetween::decode_pose(&p, j);
-            for (q, l) in rot.iter_mut().zip(last.iter_mut()) {
-                if q.dot(*l) < 0.0 {
-                    *q = -*q;
-                }
-                *l = *q;
-            }
-            f.root.push(root);
-            f.rot.extend(rot);
-        }
-        Ok(f)
+        let out: Vec<f64> = out.iter().map(|&v| v as f64).collect();
+        Ok(Filled::from_poses(out.chunks_exact(d), &t.rot[..j], None))
     }
 }
 

@@ -432,16 +432,21 @@ pub fn run(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
     );
     let seed = trainer.config().seed;
     let state = train(a, &mut trainer, &out, (data.source.clone(), extra, resumed), seed)?;
-    println!(
-        "done: {} epochs ({} steps) in {:.1} min, best test loss {:.5} at epoch {}; model in {}",
+    println!("{}", done_line(&state, "test", &out));
+    test_best(&out, &data.test)
+}
+
+/// The line a finished run prints: epochs, steps, minutes, the best `loss` loss and the folder.
+fn done_line(state: &train_loop::TrainState, loss: &str, out: &Path) -> String {
+    format!(
+        "done: {} epochs ({} steps) in {:.1} min, best {loss} loss {:.5} at epoch {}; model in {}",
         state.epoch,
         state.steps,
         state.seconds / 60.0,
         state.best_valid.unwrap_or(f64::NAN),
         state.best_epoch,
         out.display()
-    );
-    test_best(&out, &data.test)
+    )
 }
 
 /// Trains with the shared loop on the run's threads (`data`: the source in words, the fields
@@ -637,14 +642,8 @@ pub fn train_humanoid(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
     let seed = trainer.config().seed;
     let state = train(a, &mut trainer, &out, (source, extra, resumed), seed)?;
     println!(
-        "done: {} epochs ({} steps) in {:.1} min, best validation loss {:.5} at epoch {}; model in {}\nscore it: zoo \
-         bench --data {} --valid-glob '{}' --methods interp,arnn:{}",
-        state.epoch,
-        state.steps,
-        state.seconds / 60.0,
-        state.best_valid.unwrap_or(f64::NAN),
-        state.best_epoch,
-        out.display(),
+        "{}\nscore it: zoo bench --data {} --valid-glob '{}' --methods interp,arnn:{}",
+        done_line(&state, "validation", &out),
         s.dir.display(),
         s.valid_glob,
         out.display()
@@ -734,16 +733,11 @@ pub fn train_inbetween(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
     };
     let state = train_loop::train(&mut trainer, &opts)?;
     println!(
-        "done: {} epochs ({} steps) in {:.1} min, best validation loss {:.5} at epoch {}; model in {}\nscore it: zoo \
-         bench --data {} --valid-glob '{}' --layout keys --methods linear,bezier,arnn:{}",
-        state.epoch,
-        state.steps,
-        state.seconds / 60.0,
-        state.best_valid.unwrap_or(f64::NAN),
-        state.best_epoch,
-        out.display(),
+        "{}\nscore it: zoo bench --data {} --valid-glob '{}' --layout keys --methods linear,bezier,arnn:{},arnn+lock:{}",
+        done_line(&state, "validation", &out),
         s.dir.display(),
         s.valid_glob,
+        out.display(),
         out.display()
     );
     Ok(())
