@@ -33,6 +33,14 @@ fn train_resume_transition_and_decompress() {
     }
     let size = std::fs::metadata(runp.join("model.safetensors")).unwrap().len();
     assert!(size <= 15 * 1024 * 1024, "parameter file is {size} bytes");
+    // The default trains over the benchmark's lengths 5-45 with the time-to-arrival input.
+    let config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(runp.join("config.json")).unwrap()).unwrap();
+    assert_eq!(config["train"]["lengths"], serde_json::json!([5, 45]), "{config}");
+    assert_eq!(
+        (config["transition_frames"].as_u64(), config["time_to_arrival"]["dims"].as_u64()),
+        (Some(45), Some(16))
+    );
     // Resuming on other data (here more synthetic minutes) is refused and changes nothing.
     let state_before = std::fs::read(runp.join("train_state.json")).unwrap();
     let (ok, stdout, stderr) = run(&["train", "rtn", "--synth-minutes", "3", "--epochs", "2", "--resume", run_dir]);
@@ -251,6 +259,37 @@ fn training_over_lengths_reads_the_time_to_arrival() {
         out.to_str().unwrap(),
     ]);
     assert!(!ok && stderr.contains("--time-to-arrival 7") && stderr.contains("even number"), "{stderr}");
+}
+
+/// `--lengths N-N` trains one length without the time input; `--speed-range` needs `--augment
+/// speed`, and a range faster than the standard one trains (on continued windows) and is
+/// recorded; `--synth-runs` mixes synthetic running into the training split.
+#[test]
+fn one_length_speed_ranges_and_synthetic_running() {
+    let dir = tempfile::tempdir().unwrap();
+    let train = |name: &str, extra: &[&str]| {
+        let out = dir.path().join(name);
+        let mut args = vec!["train", "rtn", "--preset", "tiny", "--synth-minutes", "0.5", "--epochs", "1"];
+        args.extend(["--out", out.to_str().unwrap()]);
+        args.extend(extra);
+        let (ok, stdout, stderr) = run(&args);
+        let config = ok.then(|| {
+            serde_json::from_str::<serde_json::Value>(&std::fs::read_to_string(out.join("config.json")).unwrap())
+                .unwrap()
+        });
+        (config, stdout, stderr)
+    };
+    let (c, out, err) = train("one", &["--lengths", "9-9"]);
+    let c = c.unwrap_or_else(|| panic!("{out}\n{err}"));
+    assert_eq!((c["transition_frames"].as_u64(), &c["time_to_arrival"]), (Some(9), &serde_json::Value::Null));
+    assert_eq!(c["train"]["lengths"], serde_json::Value::Null);
+    let (c, _, err) = train("no-aug", &["--speed-range", "0.7-2.0"]);
+    assert!(c.is_none() && err.contains("--speed-range sets the factors of --augment speed"), "{err}");
+    let (c, out, err) = train("fast", &["--augment", "speed", "--speed-range", "0.8-2.5", "--lengths", "3-8"]);
+    let c = c.unwrap_or_else(|| panic!("{out}\n{err}"));
+    assert_eq!(c["train"]["augment"]["speed_range"], serde_json::json!([0.8, 2.5]));
+    let (c, out, err) = train("runs", &["--synth-runs", "0.5"]);
+    assert!(c.is_some() && out.contains("--synth-runs 0.5: 3 clips"), "{out}\n{err}");
 }
 
 #[test]

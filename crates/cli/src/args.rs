@@ -287,6 +287,18 @@ pub fn length_range(s: &str) -> Result<[usize; 2], String> {
     Ok([lo, hi])
 }
 
+/// A range of speed factors `SLOWEST-FASTEST` (`zoo train rtn --speed-range 0.7-2.0`), each in
+/// `(0, 4]`, the slowest first.
+pub fn speed_range(s: &str) -> Result<(f32, f32), String> {
+    let (a, b) = s.split_once('-').ok_or_else(|| format!("`{s}` is not a range SLOWEST-FASTEST, e.g. 0.7-2.0"))?;
+    let lo = real_in(a, Interval { lo: 0.0, lo_open: true, hi: 4.0, hi_open: false }, "")?;
+    let hi = real_in(b, Interval { lo: 0.0, lo_open: true, hi: 4.0, hi_open: false }, "")?;
+    if lo > hi {
+        return Err(format!("{s}: the slowest factor comes first, e.g. {b}-{a}"));
+    }
+    Ok((lo as f32, hi as f32))
+}
+
 /// The longest transition a training range may ask for (frames).
 pub const MAX_TRANSITION_FRAMES: usize = 1000;
 
@@ -492,6 +504,16 @@ mod tests {
         assert!(length_range("0-45").unwrap_err().contains("1..=1000"));
         assert!(length_range("5-1001").unwrap_err().contains("1..=1000"));
         assert!(length_range("30").unwrap_err().contains("SHORTEST-LONGEST"));
+    }
+
+    #[test]
+    fn speed_ranges_are_two_positive_factors_slowest_first() {
+        assert_eq!(speed_range("0.7-2.0"), Ok((0.7, 2.0)));
+        assert_eq!(speed_range("1-1"), Ok((1.0, 1.0)));
+        assert!(speed_range("2-0.7").unwrap_err().contains("slowest factor comes first"));
+        assert!(speed_range("0-2").unwrap_err().contains("not a positive number"));
+        assert!(speed_range("0.7-5").unwrap_err().contains("(0, 4]"), "{:?}", speed_range("0.7-5"));
+        assert!(speed_range("1.5").unwrap_err().contains("SLOWEST-FASTEST"));
     }
 
     #[test]

@@ -562,6 +562,19 @@ pub fn windows(clips: &[NamedClip], opts: &WindowOptions) -> Windows {
 /// the parent-relative (local) transforms of the other joints as they are.
 pub fn prepare_window(rot: &mut [DQuat], pos: &mut [DVec3], joints: usize, opts: &WindowOptions) {
     let frames = rot.len() / joints;
+    let t = window_transform(rot, pos, joints, frames, opts);
+    apply_window_transform(rot, pos, joints, t);
+}
+
+/// The centring (mean root x/z of the first `frames` frames) and facing (the inverse yaw of the
+/// root at frame `n_past - 1`) that [`prepare_window`] applies.
+fn window_transform(
+    rot: &[DQuat],
+    pos: &[DVec3],
+    joints: usize,
+    frames: usize,
+    opts: &WindowOptions,
+) -> (f64, f64, DQuat) {
     let (mut mx, mut mz) = (0.0, 0.0);
     for f in 0..frames {
         mx += pos[f * joints].x;
@@ -569,18 +582,57 @@ pub fn prepare_window(rot: &mut [DQuat], pos: &mut [DVec3], joints: usize, opts:
     }
     mx /= frames as f64;
     mz /= frames as f64;
-    for f in 0..frames {
-        pos[f * joints].x -= mx;
-        pos[f * joints].z -= mz;
-    }
     let key = rot[(opts.n_past - 1) * joints];
     let fwd = key * opts.forward_axis;
     let fwd = DVec3::new(fwd.x, 0.0, fwd.z).normalize();
-    let inv = yaw_between(DVec3::X, fwd).inverse();
-    for f in 0..frames {
+    (mx, mz, yaw_between(DVec3::X, fwd).inverse())
+}
+
+fn apply_window_transform(rot: &mut [DQuat], pos: &mut [DVec3], joints: usize, (mx, mz, inv): (f64, f64, DQuat)) {
+    for f in 0..rot.len() / joints {
+        pos[f * joints].x -= mx;
+        pos[f * joints].z -= mz;
         rot[f * joints] = inv * rot[f * joints];
         pos[f * joints] = inv * pos[f * joints];
     }
+}
+
+/// The windows of `w` (cut from `clips` with `opts`) continued to `frames` frames where their
+/// clips go on: global positions (`w.count * frames * 3K`, frame-major), each window in the
+/// frame [`windows`] put it in (its first `w.window` frames are `w`'s), frames past its clip's
+/// end repeating the clip's last frame, and how many frames of each are the clip's (at least
+/// `w.window`). For augmentations that read past a window's end (e.g. playing it faster).
+pub fn windows_continued(
+    clips: &[NamedClip],
+    w: &Windows,
+    opts: &WindowOptions,
+    frames: usize,
+) -> (Vec<f32>, Vec<usize>) {
+    let frames = frames.max(w.window);
+    let j = w.joints();
+    let per = frames * j;
+    let real: Vec<usize> = w.source.iter().map(|&(ci, start)| frames.min(clips[ci].clip.frames() - start)).collect();
+    let mut out = vec![0f32; w.count * per * 3];
+    out.par_chunks_mut((per * 3).max(1)).zip(w.source.par_iter().zip(real.par_iter())).for_each(
+        |(o, (&(ci, start), &n))| {
+            let clip = &clips[ci].clip;
+            let mut rot = Vec::with_capacity(per);
+            let mut pos = Vec::with_capacity(per);
+            for f in 0..frames {
+                let at = (start + f.min(n - 1)) * j;
+                rot.extend_from_slice(&clip.local_rotations[at..at + j]);
+                pos.extend_from_slice(&clip.local_positions[at..at + j]);
+            }
+            let t = window_transform(&rot, &pos, j, w.window, opts);
+            apply_window_transform(&mut rot, &mut pos, j, t);
+            let (mut gr, mut gp) = (vec![DQuat::IDENTITY; per], vec![DVec3::ZERO; per]);
+            forward_kinematics(&w.skeleton.parents, &rot, &pos, &mut gr, &mut gp);
+            for (dst, p) in o.chunks_exact_mut(3).zip(&gp) {
+                dst.copy_from_slice(&[p.x as f32, p.y as f32, p.z as f32]);
+            }
+        },
+    );
+    (out, real)
 }
 
 /// Normalization statistics of global joint positions (benchmark step 6).
@@ -680,6 +732,31 @@ mod tests {
         assert_eq!(names, ["b.bvh", "c.bvh"]);
         assert!(d.skipped.len() == 1 && d.skipped[0].path.ends_with("a_stray.bvh"), "{:?}", d.skipped);
         assert!(d.notices.iter().any(|n| n.contains("what most share, 2 of 3 clips")), "{:?}", d.notices);
+    }
+
+    #[test]
+    fn continued_windows_start_as_the_windows_and_go_on_where_their_clips_do() {
+        let cfg = crate::synth::SynthConfig { minutes: 0.5, seed: 3, clip_seconds: 5.0, ..Default::default() };
+        let clips: Vec<NamedClip> = crate::synth::generate(&cfg).into_iter().map(named_synth).collect();
+        let opts = WindowOptions::TRAIN;
+        let w = windows(&clips, &opts);
+        let (frames, d) = (w.window + 40, 3 * w.joints());
+        let (long, real) = windows_continued(&clips, &w, &opts, frames);
+        assert_eq!((long.len(), real.len()), (w.count * frames * d, w.count));
+        let short = w.global_positions_f32();
+        for i in 0..w.count {
+            let (a, b) = (&long[i * frames * d..][..w.window * d], &short[i * w.window * d..][..w.window * d]);
+            let err = a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0f32, f32::max);
+            assert!(err < 1e-3, "window {i}: its first frames differ by {err}");
+            let (ci, start) = w.source[i];
+            assert_eq!(real[i], frames.min(clips[ci].clip.frames() - start));
+            // Past the clip's end the last frame repeats.
+            let win = &long[i * frames * d..][..frames * d];
+            for f in real[i]..frames {
+                assert_eq!(&win[f * d..][..d], &win[(real[i] - 1) * d..][..d]);
+            }
+        }
+        assert!(real.iter().any(|&n| n == frames) && real.iter().any(|&n| n < frames), "{real:?}");
     }
 
     #[test]

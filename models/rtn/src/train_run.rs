@@ -45,7 +45,7 @@ pub enum RtnAugment {
     Reverse,
     /// Left-right mirroring.
     Mirror,
-    /// Speed changes (factors 0.7-1.2).
+    /// Speed changes (factors 0.7-1.2 unless `--speed-range` says otherwise).
     Speed,
 }
 
@@ -59,8 +59,8 @@ pub enum RtnPreset {
     Tiny,
 }
 
-/// Speed factors of `--augment speed`.
-const SPEED_RANGE: (f32, f32) = (0.7, 1.2);
+/// Speed factors of `--augment speed` unless `--speed-range` says otherwise.
+pub const SPEED_RANGE: (f32, f32) = (0.7, 1.2);
 
 /// Probabilities of `--augment reverse`, `mirror` and `speed` for each training window.
 const AUGMENT_P: (f64, f64, f64) = (0.3, 0.5, 0.3);
@@ -84,13 +84,19 @@ pub struct RtnRunOptions {
     pub augment: Vec<RtnAugment>,
     /// Minutes of the synthetic generator's stepping clips mixed into the training split.
     pub synth_steps: f64,
+    /// Minutes of the synthetic generator's jogging and running clips mixed into the training
+    /// split.
+    pub synth_runs: f64,
+    /// Speed factors of `--augment speed` (`None`: [`SPEED_RANGE`]).
+    pub speed_range: Option<(f32, f32)>,
     /// Mini-batch size (`None`: the preset's).
     pub batch_size: Option<usize>,
     /// Learning rate (`None`: the preset's).
     pub lr: Option<f64>,
     /// Decay of the moving average of the weights (0: none).
     pub ema: f64,
-    /// Transition lengths to train over, `[shortest, longest]` (`None`: the preset's one length).
+    /// Transition lengths to train over, `[shortest, longest]` (`None`: [`DEFAULT_LENGTHS`] for
+    /// the paper's sizes, the tiny preset's one length; `[n, n]`: one length, `n` frames).
     pub lengths: Option<[usize; 2]>,
     /// Values of the time-to-arrival embedding (`None`: [`DEFAULT_TTA_DIMS`] with `lengths`, none
     /// without; `Some(0)`: none).
@@ -100,11 +106,57 @@ pub struct RtnRunOptions {
 /// Values of the time-to-arrival embedding of a run over several lengths unless told otherwise.
 pub const DEFAULT_TTA_DIMS: usize = 16;
 
-/// The training windows of a run: the standard 50 frames, longer when the longest transition
-/// to train needs more (10 context frames, the transition, the target and the frame after).
-fn window_options(o: &RtnRunOptions) -> WindowOptions {
-    let need = o.lengths.map_or(0, |[_, hi]| WindowOptions::TRAIN.n_past + hi + 2);
+/// The transition lengths a paper-size run trains over unless `--lengths` says otherwise: the
+/// benchmark's 5-45 (docs/rtn.md: better than one length at every length but the one).
+pub const DEFAULT_LENGTHS: [usize; 2] = [5, 45];
+
+impl RtnRunOptions {
+    /// The lengths a fresh run trains over, `[shortest, longest]` with `shortest < longest`
+    /// (`--lengths`, [`DEFAULT_LENGTHS`] for the paper's sizes), or `None` for one length (the
+    /// tiny preset's, or `--lengths N-N`).
+    pub fn trained_lengths(&self) -> Option<[usize; 2]> {
+        let lengths = match (self.lengths, self.preset) {
+            (Some(l), _) => l,
+            (None, RtnPreset::Paper) => DEFAULT_LENGTHS,
+            (None, RtnPreset::Tiny) => return None,
+        };
+        (lengths[0] < lengths[1]).then_some(lengths)
+    }
+}
+
+/// The validation windows of a run: the standard 50 frames, longer when the longest
+/// transition to train needs more (10 context frames, the transition, the target and the frame
+/// after).
+fn window_options(longest: Option<usize>) -> WindowOptions {
+    let need = longest.map_or(0, |hi| WindowOptions::TRAIN.n_past + hi + 2);
     WindowOptions { window: WindowOptions::TRAIN.window.max(need), ..WindowOptions::TRAIN }
+}
+
+/// The frames a training window holds for a `--speed-range` faster than [`SPEED_RANGE`]: the
+/// windows are continued past their end where their clips go on
+/// ([`dataset::windows_continued`]), so that the fastest factor can play the frames a step
+/// reads (`factor * (frames - 1) + 1`). `None` within the standard range: the windows are the
+/// validation ones (a factor a window is too short for is clamped), as docs/ood.md's runs had.
+fn continued_frames(longest: Option<usize>, fastest: f32) -> Option<usize> {
+    let frames = WindowOptions::TRAIN.n_past + longest.unwrap_or(30) + 2;
+    (fastest > SPEED_RANGE.1).then(|| (fastest * (frames - 1) as f32).ceil() as usize + 1)
+}
+
+/// The longest transition and the fastest speed change of a run: a resumed run's own (its
+/// `config.json`), a fresh run's options.
+fn run_shape(o: &RtnRunOptions) -> (Option<usize>, f32) {
+    let from_options = || {
+        let fastest = if o.augment.contains(&RtnAugment::Speed) { o.speed_range.unwrap_or(SPEED_RANGE).1 } else { 0.0 };
+        (o.lengths.or(o.trained_lengths()).map(|[_, hi]| hi), fastest)
+    };
+    let Some(dir) = &o.run.resume else { return from_options() };
+    match crate::checkpoint::read_meta(&train_loop::resume_dir(dir)) {
+        Ok((c, _)) => (
+            Some(c.transition_frames),
+            c.train.augment.as_ref().filter(|a| a.speed > 0.0).map_or(0.0, |a| a.speed_range.1),
+        ),
+        Err(_) => from_options(),
+    }
 }
 
 /// The files and folders of a run that `--overwrite` deletes (the ones training writes).
@@ -135,6 +187,9 @@ fn check_terrain_options(o: &RtnRunOptions, terrain: bool) -> RtnResult<()> {
     }
     if o.synth_steps > 0.0 {
         bail!("--synth-steps adds clips without terrain: leave it out with --terrain");
+    }
+    if o.synth_runs > 0.0 {
+        bail!("--synth-runs adds clips without terrain: leave it out with --terrain");
     }
     Ok(())
 }
@@ -249,10 +304,16 @@ fn fresh_config(
         if !(1 <= lo && lo <= hi) {
             bail!("--lengths {lo}-{hi}: give the shortest and the longest transition, 1 <= shortest <= longest");
         }
+    }
+    let lengths = a.trained_lengths();
+    if let Some([lo, hi]) = lengths {
         config.transition_frames = hi;
         config.train.lengths = Some([lo, hi]);
+    } else if let Some([_, n]) = a.lengths {
+        // One length (`--lengths 30-30`): the paper's windows of that length.
+        config.transition_frames = n;
     }
-    let dims = a.time_to_arrival.unwrap_or(if a.lengths.is_some() { DEFAULT_TTA_DIMS } else { 0 });
+    let dims = a.time_to_arrival.unwrap_or(if lengths.is_some() { DEFAULT_TTA_DIMS } else { 0 });
     if dims > 0 {
         // Constant from the longest transition trained on: the context frames before it look alike.
         let z = zoo_format::TimeToArrival { dims, max: config.transition_frames };
@@ -264,6 +325,9 @@ fn fresh_config(
     config.train.seed = a.run.seed;
     config.interp_residual = a.interp_residual;
     config.terrain = a.terrain;
+    if a.speed_range.is_some() && !a.augment.contains(&RtnAugment::Speed) {
+        bail!("--speed-range sets the factors of --augment speed: add `--augment speed` (or leave --speed-range out)");
+    }
     if !a.augment.is_empty() {
         let has = |x| a.augment.contains(&x);
         let mirror_pairs = if has(RtnAugment::Mirror) {
@@ -278,7 +342,7 @@ fn fresh_config(
             mirror: if has(RtnAugment::Mirror) { AUGMENT_P.1 } else { 0.0 },
             mirror_pairs,
             speed: if has(RtnAugment::Speed) { AUGMENT_P.2 } else { 0.0 },
-            speed_range: SPEED_RANGE,
+            speed_range: a.speed_range.unwrap_or(SPEED_RANGE),
         });
     }
     if !(0.0..1.0).contains(&a.ema) {
@@ -295,8 +359,15 @@ fn fresh_config(
 struct Data {
     tw: dataset::Windows,
     vw: dataset::Windows,
+    /// The training windows' global positions, `train_stride` frames each.
     train_pos: Vec<f32>,
+    /// How many frames of each training window are its clip's (at least `tw.window`).
+    train_frames: Vec<usize>,
+    train_stride: usize,
     valid_pos: Vec<f32>,
+    /// Windows (`vw`'s length) the fallback is calibrated on beside the validation ones: held-out
+    /// synthetic running of a run with `--synth-runs`.
+    calib_pos: Vec<f32>,
     train_maps: Vec<Heightmap>,
     valid_maps: Vec<Heightmap>,
     source: String,
@@ -316,9 +387,17 @@ fn data(o: &RtnRunOptions, terrain: bool, p: &dyn Progress) -> RtnResult<Data> {
         let (train, valid, source) = dataset::training_clips(&o.data, p)?;
         (train, valid, Vec::new(), Vec::new(), source)
     };
-    let wo = window_options(o);
+    let (longest, fastest) = run_shape(o);
+    let wo = window_options(longest);
     let tw = dataset::windows(&train, &wo);
     let vw = dataset::windows(&valid, &wo);
+    let continued = continued_frames(longest, fastest).filter(|&n| n > wo.window);
+    if terrain && continued.is_some() {
+        bail!(
+            "--speed-range above {}: the terrain-aware RTN keeps the standard range; leave it out with --terrain",
+            SPEED_RANGE.1
+        );
+    }
     if tw.count == 0 || vw.count == 0 {
         bail!(
             "need at least one {}-frame window in both splits (training {}, validation {})",
@@ -332,30 +411,91 @@ fn data(o: &RtnRunOptions, terrain: bool, p: &dyn Progress) -> RtnResult<Data> {
     } else {
         (tw.global_positions_f32(), vw.global_positions_f32())
     };
+    let mut train_frames = vec![tw.window; tw.count];
+    if let Some(n) = continued {
+        (train_pos, train_frames) = dataset::windows_continued(&train, &tw, &wo, n);
+    }
     let mut extra = serde_json::Map::new();
-    // Stepping clips: a resumed run keeps what it was started with.
+    // Synthetic clips: a resumed run keeps what it was started with.
     let saved = o.run.resume.as_ref().map(|dir| train_loop::read_state(dir)).transpose()?;
-    let synth_steps = match &saved {
-        Some(state) => state.extra.get("synth_steps").and_then(|v| v.as_f64()).unwrap_or(0.0),
-        None => o.synth_steps,
-    };
-    extra.insert("synth_steps".into(), synth_steps.into());
-    if synth_steps > 0.0 {
-        train_pos.extend(stepping_windows(o, &tw, synth_steps)?);
+    let mut calib_pos = Vec::new();
+    for kind in [SynthKind::Steps, SynthKind::Runs] {
+        let minutes = match &saved {
+            Some(state) => state.extra.get(kind.key()).and_then(|v| v.as_f64()).unwrap_or(0.0),
+            None => kind.minutes(o),
+        };
+        extra.insert(kind.key().into(), minutes.into());
+        if minutes > 0.0 {
+            let (pos, frames) = synth_windows(o, &tw, kind, minutes, continued)?;
+            train_pos.extend(pos);
+            train_frames.extend(frames);
+            if let SynthKind::Runs = kind {
+                calib_pos = running_calibration_windows(o, &vw, minutes);
+            }
+        }
     }
     let fps = train.first().map_or(30.0, |c| c.clip.fps() as f32);
-    Ok(Data { tw, vw, train_pos, valid_pos, train_maps, valid_maps, source, fps, extra })
+    let train_stride = continued.unwrap_or(tw.window);
+    Ok(Data {
+        tw,
+        vw,
+        train_pos,
+        train_frames,
+        train_stride,
+        valid_pos,
+        calib_pos,
+        train_maps,
+        valid_maps,
+        source,
+        fps,
+        extra,
+    })
 }
 
-/// The global positions of the windows of `minutes` of the synthetic generator's stepping
-/// clips (on bandai2's skeleton, which the data must be on).
-fn stepping_windows(o: &RtnRunOptions, tw: &dataset::Windows, minutes: f64) -> RtnResult<Vec<f32>> {
+/// Synthetic clips mixed into the training split of `--data`.
+#[derive(Clone, Copy)]
+enum SynthKind {
+    /// `--synth-steps`: walks made mostly of side and back steps.
+    Steps,
+    /// `--synth-runs`: jogging and running.
+    Runs,
+}
+
+impl SynthKind {
+    /// The key of `train_state.json` and the option's name without its dashes.
+    fn key(self) -> &'static str {
+        match self {
+            SynthKind::Steps => "synth_steps",
+            SynthKind::Runs => "synth_runs",
+        }
+    }
+
+    fn minutes(self, o: &RtnRunOptions) -> f64 {
+        match self {
+            SynthKind::Steps => o.synth_steps,
+            SynthKind::Runs => o.synth_runs,
+        }
+    }
+}
+
+/// The global positions of the training windows (`tw`'s length, or `continued` frames as
+/// [`dataset::windows_continued`] has them) of `minutes` of the synthetic generator's stepping
+/// or running clips (on bandai2's skeleton, which the data must be on), and the frames of each
+/// that are its clip's.
+fn synth_windows(
+    o: &RtnRunOptions,
+    tw: &dataset::Windows,
+    kind: SynthKind,
+    minutes: f64,
+    continued: Option<usize>,
+) -> RtnResult<(Vec<f32>, Vec<usize>)> {
+    let option = format!("--{}", kind.key().replace('_', "-"));
     let names = &tw.skeleton.names;
     let sk = synth::skeleton();
     if *names != sk.names || tw.skeleton.parents != sk.parents {
         bail!(
-            "--synth-steps: the synthetic clips are on bandai2's skeleton ({} joints, `{}` first) but the data's \
-             differs ({} joints, `{}` first); leave --synth-steps out for this data",
+            "{option}: the synthetic clips are on bandai2's skeleton ({} joints, `{}` first) but the data's \
+             differs ({} joints, `{}` first); leave {option} out for this data",
             sk.names.len(),
             sk.names[0],
             names.len(),
@@ -363,10 +503,34 @@ fn stepping_windows(o: &RtnRunOptions, tw: &dataset::Windows, minutes: f64) -> R
         );
     }
     let cfg = SynthConfig { minutes, seed: o.run.seed, terrain: false, ..SynthConfig::default() };
-    let steps: Vec<NamedClip> = synth::generate_stepping(&cfg).into_iter().map(dataset::named_synth).collect();
-    let sw = dataset::windows(&steps, &window_options(o));
-    println!("--synth-steps {minutes}: {} clips, {} windows of side and back steps", steps.len(), sw.count);
-    Ok(sw.global_positions_f32())
+    let (clips, what) = match kind {
+        SynthKind::Steps => (synth::generate_stepping(&cfg), "side and back steps"),
+        SynthKind::Runs => (synth::generate_running(&cfg), "jogging and running"),
+    };
+    let clips: Vec<NamedClip> = clips.into_iter().map(dataset::named_synth).collect();
+    let wo = WindowOptions { window: tw.window, ..WindowOptions::TRAIN };
+    let sw = dataset::windows(&clips, &wo);
+    println!("{option} {minutes}: {} clips, {} windows of {what}", clips.len(), sw.count);
+    Ok(match continued {
+        Some(n) => dataset::windows_continued(&clips, &sw, &wo, n),
+        None => (sw.global_positions_f32(), vec![sw.window; sw.count]),
+    })
+}
+
+/// The seed offset of the held-out synthetic running the fallback of a `--synth-runs` run is
+/// calibrated on (clips the training never sees).
+const RUNNING_CALIBRATION_SEED: u64 = 0x0ca1_1b4a_7e00;
+
+/// The global positions of validation-length windows (`vw`'s) of held-out synthetic running, a
+/// tenth of the `minutes` trained on (at least a minute), generated with another seed: with
+/// `--synth-runs` the network is trained to run, so the fallback's calibration must know how far
+/// it misses on running, not only on the validation clips.
+fn running_calibration_windows(o: &RtnRunOptions, vw: &dataset::Windows, minutes: f64) -> Vec<f32> {
+    let seed = o.run.seed.wrapping_add(RUNNING_CALIBRATION_SEED);
+    let cfg = SynthConfig { minutes: (minutes / 10.0).max(1.0), seed, terrain: false, ..SynthConfig::default() };
+    let clips: Vec<NamedClip> = synth::generate_running(&cfg).into_iter().map(dataset::named_synth).collect();
+    let wo = WindowOptions { window: vw.window, ..WindowOptions::TRAIN };
+    dataset::windows(&clips, &wo).global_positions_f32()
 }
 
 /// The trainer of a resumed run (its configuration and statistics, refused on another
@@ -417,11 +581,15 @@ pub fn run(o: &RtnRunOptions, p: &dyn Progress) -> RtnResult<()> {
     };
     check_terrain_options(o, terrain)?;
     let mut d = data(o, terrain, p)?;
-    let per = d.tw.window * d.tw.joints() * 3;
+    let (per, valid_per) = (d.train_stride * d.tw.joints() * 3, d.vw.window * d.vw.joints() * 3);
     let (train_pos, valid_pos) = (std::mem::take(&mut d.train_pos), std::mem::take(&mut d.valid_pos));
     let (train_maps, valid_maps) = (std::mem::take(&mut d.train_maps), std::mem::take(&mut d.valid_maps));
-    let train_windows = motion_windows(&train_pos, per, &d.tw, &train_maps);
-    let valid_windows = motion_windows(&valid_pos, per, &d.vw, &valid_maps);
+    let mut train_windows = motion_windows(&train_pos, per, &d.tw, &train_maps);
+    // A continued window ends where its clip does.
+    for (w, &frames) in train_windows.iter_mut().zip(&d.train_frames) {
+        w.positions = &w.positions[..frames * d.tw.joints() * 3];
+    }
+    let valid_windows = motion_windows(&valid_pos, valid_per, &d.vw, &valid_maps);
     // A resume on other data (another --synth-minutes, --data or split) is refused.
     let fingerprint =
         train_loop::data_fingerprint(&train_pos) ^ train_loop::data_fingerprint(&valid_pos).rotate_left(1);
@@ -456,7 +624,17 @@ pub fn run(o: &RtnRunOptions, p: &dyn Progress) -> RtnResult<()> {
     };
     let state = train_loop::train(&mut training, &opts)?;
     println!("{}", zoo_nn::run_folder::done_line(&state, &out));
-    calibrate_fallback(&out, &valid_windows, &candle_core::Device::Cpu)
+    let calib = std::mem::take(&mut d.calib_pos);
+    let mut calib_windows = valid_windows.clone();
+    calib_windows.extend(calib.chunks_exact(valid_per).map(MotionWindow::new));
+    if !calib.is_empty() {
+        println!(
+            "the fallback is calibrated on the {} validation windows and {} windows of held-out synthetic running",
+            valid_windows.len(),
+            calib_windows.len() - valid_windows.len()
+        );
+    }
+    calibrate_fallback(&out, &calib_windows, &candle_core::Device::Cpu)
 }
 
 /// Calibrates the fallback of the best model in `out` on the validation windows

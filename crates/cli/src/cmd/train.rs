@@ -76,14 +76,26 @@ pub struct RtnArgs {
     /// stored in config.json as `train.augment`): `reverse` (time reversal, 30% of the windows:
     /// forward walks become backward walks), `mirror` (left-right mirroring, 50%, joints
     /// paired by name: `_L`/`_R`, `.L`/`.R`, `Left`/`Right`), `speed` (30%, resampled at a
-    /// factor drawn from 0.7-1.2). Epochs keep their size; validation is never augmented.
+    /// factor drawn from 0.7-1.2, or from `--speed-range`). Epochs keep their size; validation
+    /// is never augmented.
     #[arg(long, value_enum, value_delimiter = ',')]
     pub augment: Vec<RtnAugment>,
+    /// The speed factors of `--augment speed`, SLOWEST-FASTEST (e.g. `0.7-2.0`: up to twice as
+    /// fast, walks towards jogging); above 1.2 the training windows are lengthened to hold the
+    /// fastest [default: 0.7-1.2].
+    #[arg(long, value_name = "SLOWEST-FASTEST", value_parser = crate::args::speed_range)]
+    pub speed_range: Option<(f32, f32)>,
     /// Minutes of the synthetic generator's stepping clips (walks made mostly of side and back
     /// steps, `zoo_data::synth::generate_stepping`) mixed into the training split of `--data`;
     /// its skeleton is bandai2's, so the data must be on it. 0: none.
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true, value_parser = synth_steps_minutes)]
     pub synth_steps: f64,
+    /// Minutes of the synthetic generator's jogging and running clips
+    /// (`zoo_data::synth::generate_running`, 2 - 4.8 m/s) mixed into the training split of
+    /// `--data`, for data without running; its skeleton is bandai2's, so the data must be on
+    /// it. 0: none.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true, value_parser = synth_steps_minutes)]
+    pub synth_runs: f64,
     /// Mini-batch size [default: the preset's; paper: 32].
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::batch_size)]
     pub batch_size: Option<usize>,
@@ -95,14 +107,15 @@ pub struct RtnArgs {
     /// 0 keeps no average (the paper's recipe exactly).
     #[arg(long, default_value_t = 0.999, allow_hyphen_values = true, value_parser = crate::args::decay)]
     pub ema: f64,
-    /// Train over every transition length from SHORTEST to LONGEST frames (e.g. `5-45`, the
-    /// benchmark's lengths), one drawn per mini-batch, validated at 5, 15, 30 and 45 within the
-    /// range; the windows hold the longest [default: the preset's one length, 30].
+    /// Train over every transition length from SHORTEST to LONGEST frames, one drawn per
+    /// mini-batch, validated at 5, 15, 30 and 45 within the range; the windows hold the longest.
+    /// `N-N` trains one length, as the paper does (`30-30`: its 30 frames) [default: 5-45, the
+    /// benchmark's lengths; the tiny preset: its one length].
     #[arg(long, value_name = "SHORTEST-LONGEST", value_parser = crate::args::length_range)]
     pub lengths: Option<[usize; 2]>,
     /// Values of the time-to-arrival embedding the frame encoder reads (the frames left to the
-    /// target, Harvey et al. 2020), an even number up to 256; 0 for none [default: 16 with
-    /// `--lengths`, none without].
+    /// target, Harvey et al. 2020), an even number up to 256; 0 for none [default: 16 over
+    /// several lengths, none for one].
     #[arg(long, value_name = "DIMS", value_parser = clap::value_parser!(u16).range(0..=256))]
     pub time_to_arrival: Option<u16>,
 }
@@ -140,6 +153,8 @@ fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
         terrain: a.terrain,
         augment: a.augment,
         synth_steps: a.synth_steps,
+        synth_runs: a.synth_runs,
+        speed_range: a.speed_range,
         batch_size: a.batch_size,
         lr: a.lr,
         ema: a.ema,

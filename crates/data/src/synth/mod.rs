@@ -254,7 +254,7 @@ impl TerrainKind {
 
 /// Generates clip `index` (0-based) of `cfg`; the same (seed, index) gives the same clip.
 pub fn generate_clip(cfg: &SynthConfig, index: usize) -> SynthClip {
-    generate_clip_with(cfg, index, None)
+    generate_clip_with(cfg, index, Plan::Default)
 }
 
 /// Share of the segments of a stepping clip ([`generate_stepping_clip`]) that step sideways
@@ -266,7 +266,7 @@ pub const STEPPING_STRAFE_SHARE: f64 = 0.75;
 /// a forward-only mocap session lacks (issue 19). Named `synth_step_NNNN`; the same
 /// (seed, index) gives the same clip, and a different one from [`generate_clip`]'s.
 pub fn generate_stepping_clip(cfg: &SynthConfig, index: usize) -> SynthClip {
-    let mut c = generate_clip_with(cfg, index, Some(STEPPING_STRAFE_SHARE));
+    let mut c = generate_clip_with(cfg, index, Plan::Stepping(STEPPING_STRAFE_SHARE));
     c.name = format!("synth_step_{:04}", index + 1);
     c
 }
@@ -276,15 +276,55 @@ pub fn generate_stepping(cfg: &SynthConfig) -> Vec<SynthClip> {
     (0..cfg.clip_count()).into_par_iter().map(|i| generate_stepping_clip(cfg, i)).collect()
 }
 
-/// `stepping`: `Some(share)` plans a walk with that share of side / back step segments from a
-/// stream of its own; `None` draws the gait as the default data does.
-fn generate_clip_with(cfg: &SynthConfig, index: usize, stepping: Option<f64>) -> SynthClip {
-    // The stepping data uses streams above 2^32 so that its clips differ from the default ones.
-    let stream = index as u64 + if stepping.is_some() { 1 << 32 } else { 0 };
+/// Clip `index` of the running data of `cfg`: jogging (a third of the clips) and running
+/// (2 - 4.8 m/s), the content a walking-only capture lacks (issue 48). Named
+/// `synth_jog_NNNN` / `synth_run_NNNN` like the default data's clips of those gaits; the same
+/// (seed, index) gives the same clip, and a different one from [`generate_clip`]'s and
+/// [`generate_stepping_clip`]'s.
+pub fn generate_running_clip(cfg: &SynthConfig, index: usize) -> SynthClip {
+    generate_clip_with(cfg, index, Plan::Running)
+}
+
+/// Every clip of the running data of `cfg` ([`generate_running_clip`]).
+pub fn generate_running(cfg: &SynthConfig) -> Vec<SynthClip> {
+    (0..cfg.clip_count()).into_par_iter().map(|i| generate_running_clip(cfg, i)).collect()
+}
+
+/// What a clip is planned as.
+#[derive(Clone, Copy)]
+enum Plan {
+    /// The gait drawn as the default data does.
+    Default,
+    /// A walk with this share of side / back step segments, from a stream of its own.
+    Stepping(f64),
+    /// Jogging or running, from a stream of its own.
+    Running,
+}
+
+fn generate_clip_with(cfg: &SynthConfig, index: usize, plan: Plan) -> SynthClip {
+    // The stepping and running data use streams above 2^32 so that their clips differ from
+    // the default ones.
+    let stream = index as u64
+        + match plan {
+            Plan::Default => 0,
+            Plan::Stepping(_) => 1 << 32,
+            Plan::Running => 2 << 32,
+        };
     let mut rng = SplitMix64::with_stream(cfg.seed, stream);
-    let gait = match stepping {
-        Some(_) => Gait::Walk,
-        None => Gait::draw(&mut rng),
+    let gait = match plan {
+        Plan::Stepping(_) => Gait::Walk,
+        Plan::Running => {
+            if rng.next_f64() < 1.0 / 3.0 {
+                Gait::Jog
+            } else {
+                Gait::Run
+            }
+        }
+        Plan::Default => Gait::draw(&mut rng),
+    };
+    let stepping = match plan {
+        Plan::Stepping(share) => Some(share),
+        _ => None,
     };
     let style = Style::sample(&mut rng);
     let terrain_kind = if cfg.terrain { TerrainKind::draw(&mut rng) } else { TerrainKind::Flat };
@@ -496,6 +536,27 @@ mod tests {
         // Deterministic, and not the default data's clips.
         assert_eq!(generate_stepping_clip(&c, 4).clip, stepping[4].clip);
         assert_ne!(generate_clip(&c, 4).clip.local_rotations, stepping[4].clip.local_rotations);
+    }
+
+    #[test]
+    fn running_clips_jog_and_run_plausibly() {
+        let c = cfg(2, false, 3.0);
+        let running = generate_running(&c);
+        assert_eq!(running.len(), 18);
+        assert!(running.iter().all(|s| matches!(s.gait, Gait::Jog | Gait::Run)));
+        assert!(running.iter().any(|s| s.gait == Gait::Jog) && running.iter().any(|s| s.gait == Gait::Run));
+        let set: Vec<(&Clip, Option<&Heightmap>, &str)> =
+            running.iter().map(|c| (&c.clip, None, c.gait.name())).collect();
+        let p = plausibility::measure(&set);
+        assert!(p.max_foot_penetration <= 1.0 && p.max_bone_length_error < 1e-6, "{p:?}");
+        // Faster than the default data's walks (1 - 1.9 m/s): at least 1.9 m/s at the median.
+        for (label, v) in &p.median_root_speed {
+            assert!(*v > 1.9, "{label}: median root speed {v} m/s");
+        }
+        // Deterministic, and neither the default nor the stepping data's clips.
+        assert_eq!(generate_running_clip(&c, 4).clip, running[4].clip);
+        assert_ne!(generate_clip(&c, 4).clip.local_rotations, running[4].clip.local_rotations);
+        assert_ne!(generate_stepping_clip(&c, 4).clip.local_rotations, running[4].clip.local_rotations);
     }
 
     #[test]
