@@ -191,6 +191,13 @@ fn check_terrain_options(o: &RtnRunOptions, terrain: bool) -> RtnResult<()> {
     if o.synth_runs > 0.0 {
         bail!("--synth-runs adds clips without terrain: leave it out with --terrain");
     }
+    let (_, fastest) = run_shape(o);
+    if fastest > SPEED_RANGE.1 {
+        bail!(
+            "--speed-range above {}: the terrain-aware RTN keeps the standard range; leave it out with --terrain",
+            SPEED_RANGE.1
+        );
+    }
     Ok(())
 }
 
@@ -392,12 +399,6 @@ fn data(o: &RtnRunOptions, terrain: bool, p: &dyn Progress) -> RtnResult<Data> {
     let tw = dataset::windows(&train, &wo);
     let vw = dataset::windows(&valid, &wo);
     let continued = continued_frames(longest, fastest).filter(|&n| n > wo.window);
-    if terrain && continued.is_some() {
-        bail!(
-            "--speed-range above {}: the terrain-aware RTN keeps the standard range; leave it out with --terrain",
-            SPEED_RANGE.1
-        );
-    }
     if tw.count == 0 || vw.count == 0 {
         bail!(
             "need at least one {}-frame window in both splits (training {}, validation {})",
@@ -507,9 +508,7 @@ fn synth_windows(
         SynthKind::Steps => (synth::generate_stepping(&cfg), "side and back steps"),
         SynthKind::Runs => (synth::generate_running(&cfg), "jogging and running"),
     };
-    let clips: Vec<NamedClip> = clips.into_iter().map(dataset::named_synth).collect();
-    let wo = WindowOptions { window: tw.window, ..WindowOptions::TRAIN };
-    let sw = dataset::windows(&clips, &wo);
+    let (clips, sw, wo) = synth_clip_windows(clips, tw.window);
     println!("{option} {minutes}: {} clips, {} windows of {what}", clips.len(), sw.count);
     Ok(match continued {
         Some(n) => dataset::windows_continued(&clips, &sw, &wo, n),
@@ -528,9 +527,18 @@ const RUNNING_CALIBRATION_SEED: u64 = 0x0ca1_1b4a_7e00;
 fn running_calibration_windows(o: &RtnRunOptions, vw: &dataset::Windows, minutes: f64) -> Vec<f32> {
     let seed = o.run.seed.wrapping_add(RUNNING_CALIBRATION_SEED);
     let cfg = SynthConfig { minutes: (minutes / 10.0).max(1.0), seed, terrain: false, ..SynthConfig::default() };
-    let clips: Vec<NamedClip> = synth::generate_running(&cfg).into_iter().map(dataset::named_synth).collect();
-    let wo = WindowOptions { window: vw.window, ..WindowOptions::TRAIN };
-    dataset::windows(&clips, &wo).global_positions_f32()
+    synth_clip_windows(synth::generate_running(&cfg), vw.window).1.global_positions_f32()
+}
+
+/// Synthetic clips cut into windows of `window` frames (the benchmark's offset and context).
+fn synth_clip_windows(
+    clips: Vec<synth::SynthClip>,
+    window: usize,
+) -> (Vec<NamedClip>, dataset::Windows, WindowOptions) {
+    let clips: Vec<NamedClip> = clips.into_iter().map(dataset::named_synth).collect();
+    let wo = WindowOptions { window, ..WindowOptions::TRAIN };
+    let w = dataset::windows(&clips, &wo);
+    (clips, w, wo)
 }
 
 /// The trainer of a resumed run (its configuration and statistics, refused on another
@@ -629,7 +637,7 @@ pub fn run(o: &RtnRunOptions, p: &dyn Progress) -> RtnResult<()> {
     calib_windows.extend(calib.chunks_exact(valid_per).map(MotionWindow::new));
     if !calib.is_empty() {
         println!(
-            "the fallback is calibrated on the {} validation windows and {} windows of held-out synthetic running",
+            "the fallback is calibrated on the {} validation windows and {} of held-out synthetic running",
             valid_windows.len(),
             calib_windows.len() - valid_windows.len()
         );
@@ -673,7 +681,7 @@ fn calibrate_fallback(out: &Path, valid: &[MotionWindow], device: &candle_core::
     checkpoint::write_json(&out.join(checkpoint::CONFIG_FILE), &config)?;
     let mean = misses.iter().sum::<f32>() / misses.len() as f32;
     println!(
-        "fallback calibrated on {} validation windows (target miss mean {mean:.2}): towards interpolation from a \
+        "fallback calibrated on {} windows (target miss mean {mean:.2}): towards interpolation from a \
          miss of {:.2} (95th percentile), fully at {:.2}; stored in config.json",
         misses.len(),
         fallback.start,
