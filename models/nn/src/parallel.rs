@@ -87,6 +87,27 @@ impl DataParallel {
         self.pools[0].install(f)
     }
 
+    /// `f(0)`, ..., `f(n - 1)` in order, the indices shared out among the workers in contiguous
+    /// ranges ([`DataParallel::shards`]), each worker running its own on its one thread: for
+    /// work without gradients, such as validation, whose items do not depend on each other.
+    pub fn map<T: Send>(&self, n: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
+        let shards = self.shards(n);
+        if shards.len() <= 1 {
+            return self.pools[0].install(|| (0..n).map(&f).collect());
+        }
+        let run = |k: usize, r: Range<usize>| -> Vec<T> { self.pools[k].install(|| r.map(&f).collect()) };
+        std::thread::scope(|s| {
+            let run = &run;
+            let handles: Vec<_> =
+                shards.iter().enumerate().skip(1).map(|(k, r)| s.spawn(move || run(k, r.clone()))).collect();
+            let mut out = run(0, shards[0].clone());
+            for h in handles {
+                out.extend(h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)));
+            }
+            out
+        })
+    }
+
     /// The loss of a batch of `n` samples and its gradients with respect to `vars`.
     ///
     /// `loss(range)` returns the mean loss (a scalar tensor) of the samples `range` of the
@@ -206,6 +227,22 @@ mod tests {
         let ys = y.narrow(0, r.start, r.len())?;
         let pred = xs.matmul(w.as_tensor())?.broadcast_add(b.as_tensor())?.tanh()?;
         (pred - ys)?.sqr()?.mean_all()
+    }
+
+    #[test]
+    fn map_returns_every_item_in_order_on_the_workers_threads() {
+        for threads in [1, 2, 3] {
+            let dp = DataParallel::new(threads).unwrap();
+            let out = dp.map(7, |i| (i * i, std::thread::current().name().map(str::to_string)));
+            assert_eq!(out.iter().map(|(v, _)| *v).collect::<Vec<_>>(), [0, 1, 4, 9, 16, 25, 36]);
+            // Each item ran on a worker, contiguous ranges per worker.
+            let names: Vec<String> = out.iter().map(|(_, n)| n.clone().unwrap_or_default()).collect();
+            assert!(names.iter().all(|n| n.starts_with("zoo-train-")), "{names:?}");
+            let mut distinct = names.clone();
+            distinct.dedup();
+            assert_eq!(distinct.len(), threads, "{names:?}");
+            assert!(dp.map(0, |i| i).is_empty());
+        }
     }
 
     #[test]

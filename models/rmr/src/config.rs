@@ -152,6 +152,13 @@ pub struct Config {
     /// displacement, on the frames where the ground truth has that contact.
     #[serde(default)]
     pub lambda_slide: f64,
+    /// Weight of the velocity term (ours, 0 in the paper's loss): the per-frame change of the
+    /// output's pose values against the ground truth's, `|(x_out,t - x_out,t-1) - (x_gt,t -
+    /// x_gt,t-1)|_1` over `r, p, q, v`, weighted per frame like the pose loss (so
+    /// [`Config::seam_weight`] stresses the seams): a refiner that moves a joint faster than the
+    /// ground truth near a seam makes a pop that the pose loss barely sees (issue 49).
+    #[serde(default)]
+    pub lambda_velocity: f64,
     /// Extra weight of the pose loss on the frames within [`SEAM_FRAMES`] of a seam of the
     /// training pair (their per-frame L1 counts `1 + seam_weight` times). 0: the paper's loss
     /// (the default, and that of configurations saved before the switch); see docs/rmr.md.
@@ -200,6 +207,7 @@ impl Config {
             lambda_begin: 1.0,
             lambda_fk: 0.0,
             lambda_slide: 0.0,
+            lambda_velocity: 0.0,
             pre_blend: false,
             fallback: None,
             seam_weight: 0.0,
@@ -331,7 +339,11 @@ impl Config {
         if !(0.0..=1000.0).contains(&self.seam_weight) {
             return bad(format!("seam_weight must be in 0..=1000, got {}", self.seam_weight));
         }
-        for (name, w) in [("lambda_fk", self.lambda_fk), ("lambda_slide", self.lambda_slide)] {
+        for (name, w) in [
+            ("lambda_fk", self.lambda_fk),
+            ("lambda_slide", self.lambda_slide),
+            ("lambda_velocity", self.lambda_velocity),
+        ] {
             if !(0.0..=1000.0).contains(&w) {
                 return bad(format!("{name} must be in 0..=1000, got {w}"));
             }

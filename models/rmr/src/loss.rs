@@ -22,6 +22,10 @@
 //!   the horizontal displacement (cm) of that contact joint from `t - 1` to `t`, by forward
 //!   kinematics and the output's root displacement `r_t`, summed over the four contacts and
 //!   averaged over frames and the batch.
+//!
+//! And one on the normalised pose values (weight [`Config::lambda_velocity`], 0 in the paper's):
+//! - `L_vel`: `|(x_out,t - x_out,t-1) - (x_gt,t - x_gt,t-1)|_1` over `r, p, q, v` for `t >= 1`,
+//!   weighted per frame like `L_pose` (the seam weights), averaged over frames and the batch.
 
 use crate::config::Config;
 use crate::error::RmrResult;
@@ -65,6 +69,8 @@ pub struct LossTerms {
     pub fk: Tensor,
     /// `L_slide` (0 unless its weight is positive).
     pub slide: Tensor,
+    /// `L_vel` (0 unless its weight is positive).
+    pub velocity: Tensor,
 }
 
 /// The loss terms as numbers.
@@ -84,6 +90,8 @@ pub struct LossValues {
     pub fk: f64,
     /// `L_slide`.
     pub slide: f64,
+    /// `L_vel`.
+    pub velocity: f64,
 }
 
 impl LossTerms {
@@ -98,6 +106,7 @@ impl LossTerms {
             begin: v(&self.begin)?,
             fk: v(&self.fk)?,
             slide: v(&self.slide)?,
+            velocity: v(&self.velocity)?,
         })
     }
 }
@@ -108,6 +117,7 @@ impl LossTerms {
 pub struct Loss {
     fl: FeatureLayout,
     lambda: [f64; 4],
+    lambda_velocity: f64,
     t_begin: usize,
     unit: f64,
     root_mean: Tensor,
@@ -147,6 +157,7 @@ impl Loss {
         Ok(Loss {
             fl,
             lambda: [config.lambda_pose, config.lambda_trajectory, config.lambda_foot, config.lambda_begin],
+            lambda_velocity: config.lambda_velocity,
             t_begin: config.t_begin,
             unit: config.trajectory_unit,
             root_mean,
@@ -236,8 +247,33 @@ impl Loss {
             }
             None => (pose.zeros_like()?, pose.zeros_like()?),
         };
-        Ok(LossTerms { total, pose, trajectory, foot, begin, fk, slide })
+        let velocity = if self.lambda_velocity > 0.0 {
+            let v = velocity_term(&out.narrow(2, 0, n_pose)?, &target.narrow(2, 0, n_pose)?, frame_weights)?;
+            total = (total + (&v * self.lambda_velocity)?)?;
+            v
+        } else {
+            pose.zeros_like()?
+        };
+        Ok(LossTerms { total, pose, trajectory, foot, begin, fk, slide, velocity })
     }
+}
+
+/// `L_vel` of pose values `out` and `target` `(batch, frames, values)`: the L1 norm of the
+/// difference of their per-frame changes, summed over values, weighted by `frame_weights`
+/// `(batch, frames)` at the later frame of each pair (`None`: 1), averaged over the `frames - 1`
+/// changes and the batch. 0 for a single frame.
+pub fn velocity_term(out: &Tensor, target: &Tensor, frame_weights: Option<&Tensor>) -> RmrResult<Tensor> {
+    let frames = out.dim(1)?;
+    if frames < 2 {
+        return Ok(out.sum_all()?.zeros_like()?);
+    }
+    let change =
+        |x: &Tensor| -> candle_core::Result<Tensor> { x.narrow(1, 1, frames - 1)? - x.narrow(1, 0, frames - 1)? };
+    let per_frame = abs0(&(change(out)? - change(target)?)?)?.sum(D::Minus1)?;
+    Ok(match frame_weights {
+        None => per_frame.mean_all()?,
+        Some(w) => (per_frame * w.narrow(1, 1, frames - 1)?)?.mean_all()?,
+    })
 }
 
 /// Hamilton product of quaternions `(.., 4)` stored `x, y, z, w`.

@@ -197,6 +197,7 @@ impl RmrTrainer {
             acc.begin += v.begin * f;
             acc.fk += v.fk * f;
             acc.slide += v.slide * f;
+            acc.velocity += v.velocity * f;
         }
         Ok((acc, grads))
     }
@@ -228,6 +229,7 @@ impl RmrTrainer {
             acc.begin += v.begin * w;
             acc.fk += v.fk * w;
             acc.slide += v.slide * w;
+            acc.velocity += v.velocity * w;
         }
         Ok(acc)
     }

@@ -72,6 +72,8 @@ pub struct RmrRunOptions {
     pub fk_weight: Option<f64>,
     /// Weight of the foot-slide term.
     pub slide_weight: Option<f64>,
+    /// Weight of the velocity term.
+    pub velocity_weight: Option<f64>,
     /// Units of each recurrent layer, per direction.
     pub hidden: Option<usize>,
     /// Mini-batch size.
@@ -124,6 +126,9 @@ fn fresh_config(a: &RmrRunOptions, skeleton: &zoo_motion::Skeleton) -> RmrResult
     }
     if let Some(w) = a.slide_weight {
         config.lambda_slide = w;
+    }
+    if let Some(w) = a.velocity_weight {
+        config.lambda_velocity = w;
     }
     if let Some(h) = a.hidden {
         config.hidden = h;
@@ -201,7 +206,7 @@ pub fn run(a: &RmrRunOptions, p: &dyn Progress) -> RmrResult<()> {
     };
     let c = trainer.config();
     println!(
-        "training RMR ({:?}, {} decoder, T_begin {}, trajectory loss {}, seam weight {}, fk weight {}, slide weight {}) on {source}: \
+        "training RMR ({:?}, {} decoder, T_begin {}, trajectory loss {}, seam weight {}, fk weight {}, slide weight {}, velocity weight {}) on {source}: \
          {} parameters, batch {}, lr {:e}, run folder {}",
         c.cell,
         if c.residual { "residual" } else { "absolute" },
@@ -210,6 +215,7 @@ pub fn run(a: &RmrRunOptions, p: &dyn Progress) -> RmrResult<()> {
         c.seam_weight,
         c.lambda_fk,
         c.lambda_slide,
+        c.lambda_velocity,
         crate::model::parameter_count(trainer.varmap()),
         c.train.batch_size,
         c.train.learning_rate,

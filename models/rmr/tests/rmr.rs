@@ -552,6 +552,38 @@ fn the_seam_weight_weights_the_frames_around_the_seams() {
     assert!(config.validate().unwrap_err().to_string().contains("seam_weight"));
 }
 
+/// Our velocity term (issue 49): each frame's change of the output against the ground truth's,
+/// weighted at the later frame like the pose loss; off (0) unless its weight is set, and a
+/// constant offset (a pose error, no motion) costs nothing in it.
+#[test]
+fn the_velocity_term_weighs_a_jump_and_not_an_offset() {
+    let (_, mut config) = one_joint_loss(0, false);
+    let stats = FeatureStats { mean: vec![0.0; 17], std: vec![1.0; 17] };
+    let zero = seq(&[[0.0; 17]; 3]);
+    // A one-frame jump of 3 in v at frame 1: changes +3 (0 -> 1) and -3 (1 -> 2).
+    let mut out = [[0.0f32; 17]; 3];
+    out[1][12] = 3.0;
+    let off = Loss::new(&config, &stats, &Device::Cpu).unwrap().terms(&seq(&out), &zero, &zero).unwrap();
+    assert_eq!(value(&off.velocity), 0.0);
+    config.lambda_velocity = 2.0;
+    let loss = Loss::new(&config, &stats, &Device::Cpu).unwrap();
+    let t = loss.terms(&seq(&out), &zero, &zero).unwrap();
+    assert!((value(&t.velocity) - 3.0).abs() < 1e-6, "{}", value(&t.velocity)); // (3 + 3) / 2
+    let plain = value(&t.pose) + value(&t.foot) * config.lambda_foot;
+    assert!((value(&t.total) - plain - 6.0).abs() < 1e-5, "{} {plain}", value(&t.total));
+    // Frame weights 1, 5, 1 weigh the change into frame 1 five times: (15 + 3) / 2.
+    let fw = Tensor::from_vec(vec![1.0f32, 5.0, 1.0], (1, 3), &Device::Cpu).unwrap();
+    let t = loss.terms_weighted(&seq(&out), &zero, &zero, Some(&fw)).unwrap();
+    assert!((value(&t.velocity) - 9.0).abs() < 1e-6, "{}", value(&t.velocity));
+    // The same offset on every frame is a pose error but no change.
+    let shifted = seq(&[[1.0f32; 17]; 3]);
+    let t = loss.terms(&shifted, &zero, &zero).unwrap();
+    assert_eq!(value(&t.velocity), 0.0);
+    assert!(value(&t.pose) > 0.0);
+    config.lambda_velocity = -1.0;
+    assert!(config.validate().unwrap_err().to_string().contains("lambda_velocity"));
+}
+
 /// RMR sec. 5's output processing: the ankles placed at the predicted lower-body positions by
 /// IK. On the identity refiner the predicted positions are the input's, so the motion stays.
 #[test]

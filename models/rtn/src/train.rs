@@ -186,18 +186,6 @@ impl RtnTrainer {
         self.step
     }
 
-    /// Encodes windows, rotating each one about the vertical axis in [-pi, pi] when `rotate`
-    /// (RTN sec. 3.3: on global positions before any processing; the terrain follows).
-    fn encode<'a>(
-        &mut self,
-        windows: &[MotionWindow<'a>],
-        rotate: bool,
-        n: usize,
-    ) -> RtnResult<crate::transition::EncodedBatch<'a>> {
-        let items = self.sequence_inputs(windows, rotate, false, n)?;
-        encode_batch(&self.stats, &items, self.model.device())
-    }
-
     /// The transition length of the next training batch: drawn in
     /// [`crate::TrainConfig::lengths`] (one draw of the trainer's generator), else the window's.
     fn draw_length(&mut self) -> usize {
@@ -211,73 +199,6 @@ impl RtnTrainer {
     /// [`crate::TrainConfig::lengths`] (its longest when none is), else the window's.
     pub fn validation_lengths(&self) -> Vec<usize> {
         self.config.validation_lengths()
-    }
-
-    /// The sequences of `windows` to encode, each rotated as [`RtnTrainer::encode`] says (one
-    /// draw of the trainer's generator per window when `rotate`).
-    /// `augment`: apply the configured augmentation ([`crate::TrainConfig::augment`]; training
-    /// steps only), drawn before each window's rotation.
-    fn sequence_inputs<'a>(
-        &mut self,
-        windows: &[MotionWindow<'a>],
-        rotate: bool,
-        augment: bool,
-        n: usize,
-    ) -> RtnResult<Vec<SequenceInput<'a>>> {
-        let c = &self.config;
-        let d = c.dim();
-        let tf = c.past_frames + n.min(c.transition_frames);
-        let mut items = Vec::with_capacity(windows.len());
-        for (i, w) in windows.iter().enumerate() {
-            check_frames(&format!("training window {i}"), w.positions.len(), c.window_frames(), c.joints, true)?;
-            if !w.positions[..(tf + 2) * d].iter().all(|v| v.is_finite()) {
-                return Err(RtnError::Config(format!("training window {i} holds NaN or inf positions")));
-            }
-            // Augmentation (time reversal, mirroring, speed) before the rotation, in training
-            // steps only, and only when configured, so runs without it draw as before.
-            let mut p = match (&c.train.augment, augment) {
-                (Some(aug), true) => aug.apply(w.positions, c.joints, tf + 2, &mut self.rng),
-                _ => w.positions[..(tf + 2) * d].to_vec(),
-            };
-            let rotation = if rotate {
-                let angle = ((self.rng.next_f64() * 2.0 - 1.0) * std::f64::consts::PI) as f32;
-                let r = features::root_of(&p[(c.past_frames - 1) * d..]);
-                let rot = YawAbout { angle, center: [r[0], r[2]] };
-                features::rotate_about_y(&mut p, rot.angle, rot.center);
-                Some(rot)
-            } else {
-                None
-            };
-            items.push(SequenceInput {
-                target: p[tf * d..(tf + 1) * d].to_vec().into(),
-                next: p[(tf + 1) * d..(tf + 2) * d].to_vec().into(),
-                known: {
-                    p.truncate((tf + 1) * d);
-                    p.into()
-                },
-                terrain: w.terrain,
-                rotation,
-            });
-        }
-        Ok(items)
-    }
-
-    /// Generated and ground-truth frames `(batch, P + 1, D)` of a batch.
-    fn predict(
-        &mut self,
-        windows: &[MotionWindow],
-        rotate: bool,
-        p_teacher: f64,
-        n: usize,
-    ) -> RtnResult<(Tensor, Tensor)> {
-        let batch = self.encode(windows, rotate, n)?;
-        let (past, n_out) = (self.config.past_frames, n + 1);
-        let rng = &mut self.rng;
-        let mut teacher = || p_teacher > 0.0 && (p_teacher >= 1.0 || rng.next_f64() < p_teacher);
-        let outs = generate(&self.model, &self.stats, &self.offsets, &batch, past, n_out, true, &mut teacher)?;
-        let pred = Tensor::stack(&outs, 1)?;
-        let truth = Tensor::stack(&batch.x[past..past + n_out], 1)?;
-        Ok((pred, truth))
     }
 
     /// One AMSGrad step on a mini-batch; returns the loss before the step: the MSE over the
@@ -326,7 +247,7 @@ impl RtnTrainer {
         let p = self.config.train.teacher_forcing.probability(self.step);
         let rotate = self.config.train.random_rotation;
         let n = self.draw_length();
-        let items = self.sequence_inputs(windows, rotate, true, n)?;
+        let items = sequence_inputs(&self.config, windows, Some(&mut self.rng), rotate, true, n)?;
         let (past, n_out) = (self.config.past_frames, n + 1);
         let calls = teacher_calls(past, n_out, past + n + 1);
         let rng = &mut self.rng;
@@ -369,13 +290,13 @@ impl RtnTrainer {
         self.ema.as_ref().map(Ema::state)
     }
 
-    /// Validation loss: the same MSE without teacher forcing and without rotation.
-    pub fn eval_loss(&mut self, windows: &[MotionWindow]) -> RtnResult<f32> {
+    /// Validation loss: the same MSE without teacher forcing and without rotation, averaged over
+    /// the [`RtnTrainer::validation_lengths`].
+    pub fn eval_loss(&self, windows: &[MotionWindow]) -> RtnResult<f32> {
         let lengths = self.validation_lengths();
         let mut sum = 0.0;
         for &n in &lengths {
-            let (pred, truth) = self.predict(windows, false, 0.0, n)?;
-            sum += (pred.detach() - truth)?.sqr()?.mean_all()?.to_scalar::<f32>()?;
+            sum += chunk_loss(self, windows, n)?;
         }
         Ok(sum / lengths.len() as f32)
     }
@@ -459,10 +380,77 @@ fn in_file(path: &Path, e: zoo_nn::NnError) -> RtnError {
 }
 
 /// Mean loss over `windows` in chunks of 64 (the RTN's validation batches).
-fn mean_eval_loss(trainer: &mut RtnTrainer, windows: &[MotionWindow]) -> RtnResult<f64> {
+/// The sequences of `windows` to encode at transition length `n`, each rotated about the
+/// vertical when `rotate` (one draw of `rng` per window). `augment`: apply the configured
+/// augmentation ([`crate::TrainConfig::augment`]; training steps only), drawn before each
+/// window's rotation. Without `rng` (validation) nothing is drawn: no rotation, no augmentation.
+fn sequence_inputs<'a>(
+    c: &Config,
+    windows: &[MotionWindow<'a>],
+    mut rng: Option<&mut SplitMix64>,
+    rotate: bool,
+    augment: bool,
+    n: usize,
+) -> RtnResult<Vec<SequenceInput<'a>>> {
+    let d = c.dim();
+    let tf = c.past_frames + n.min(c.transition_frames);
+    let mut items = Vec::with_capacity(windows.len());
+    for (i, w) in windows.iter().enumerate() {
+        check_frames(&format!("training window {i}"), w.positions.len(), c.window_frames(), c.joints, true)?;
+        if !w.positions[..(tf + 2) * d].iter().all(|v| v.is_finite()) {
+            return Err(RtnError::Config(format!("training window {i} holds NaN or inf positions")));
+        }
+        // Augmentation (time reversal, mirroring, speed) before the rotation, in training
+        // steps only, and only when configured, so runs without it draw as before.
+        let mut p = match (&c.train.augment, augment, rng.as_deref_mut()) {
+            (Some(aug), true, Some(r)) => aug.apply(w.positions, c.joints, tf + 2, r),
+            _ => w.positions[..(tf + 2) * d].to_vec(),
+        };
+        let rotation = match (rotate, rng.as_deref_mut()) {
+            (true, Some(r)) => {
+                let angle = ((r.next_f64() * 2.0 - 1.0) * std::f64::consts::PI) as f32;
+                let root = features::root_of(&p[(c.past_frames - 1) * d..]);
+                let rot = YawAbout { angle, center: [root[0], root[2]] };
+                features::rotate_about_y(&mut p, rot.angle, rot.center);
+                Some(rot)
+            }
+            _ => None,
+        };
+        items.push(SequenceInput {
+            target: p[tf * d..(tf + 1) * d].to_vec().into(),
+            next: p[(tf + 1) * d..(tf + 2) * d].to_vec().into(),
+            known: {
+                p.truncate((tf + 1) * d);
+                p.into()
+            },
+            terrain: w.terrain,
+            rotation,
+        });
+    }
+    Ok(items)
+}
+
+/// The validation MSE of `windows` at transition length `n`: the unroll without teacher
+/// forcing, rotation or any draw, over the `P + 1` predicted frames.
+fn chunk_loss(t: &RtnTrainer, windows: &[MotionWindow], n: usize) -> RtnResult<f32> {
+    let items = sequence_inputs(&t.config, windows, None, false, false, n)?;
+    let batch = encode_batch(&t.stats, &items, t.model.device())?;
+    let (past, n_out) = (t.config.past_frames, n + 1);
+    let outs = generate(&t.model, &t.stats, &t.offsets, &batch, past, n_out, false, &mut || false)?;
+    let pred = Tensor::stack(&outs, 1)?;
+    let truth = Tensor::stack(&batch.x[past..past + n_out], 1)?;
+    Ok((pred - truth)?.sqr()?.mean_all()?.to_scalar::<f32>()?)
+}
+
+/// [`RtnTrainer::eval_loss`] of `windows` in chunks of 64, the chunks shared out among the
+/// data-parallel workers (each on its one thread, as in a training step) and summed in order:
+/// the same value for every thread count, in about `1 / threads` of the time.
+fn mean_eval_loss(trainer: &RtnTrainer, windows: &[MotionWindow]) -> RtnResult<f64> {
+    let chunks: Vec<&[MotionWindow]> = windows.chunks(64).collect();
+    let losses = trainer.parallel.map(chunks.len(), |i| trainer.eval_loss(chunks[i]));
     let mut sum = 0.0;
-    for c in windows.chunks(64) {
-        sum += trainer.eval_loss(c)? as f64 * c.len() as f64;
+    for (c, l) in chunks.iter().zip(losses) {
+        sum += l? as f64 * c.len() as f64;
     }
     Ok(sum / windows.len() as f64)
 }
@@ -523,7 +511,7 @@ impl Trainable for RtnTraining<'_> {
 
     fn validate(&mut self) -> Result<Validation, TrainError> {
         let valid = self.valid;
-        let loss = mean_eval_loss(&mut self.trainer, valid)?;
+        let loss = mean_eval_loss(&self.trainer, valid)?;
         let averaged = if self.trainer.has_ema() {
             Some(self.trainer.with_ema_weights(|t| mean_eval_loss(t, valid))?)
         } else {

@@ -672,3 +672,28 @@ fn two_thread_data_parallel_step_matches_the_one_thread_step() {
     assert_eq!(weights(&again), w2);
     assert!(two.set_threads(0).unwrap_err().to_string().contains("1..=256"));
 }
+
+/// Validation shares its chunks of 64 windows out among the data-parallel workers and sums
+/// them in order: the same loss, bit for bit, for one and two threads, equal to the mean of
+/// `eval_loss` over the chunks.
+#[test]
+fn validation_is_the_same_for_every_thread_count() {
+    use zoo_nn::train_loop::Trainable;
+    let config = tiny();
+    let ws = windows(&config, 150);
+    let stats = stats_for(&config, &ws);
+    let mw: Vec<MotionWindow> = ws.iter().map(|w| MotionWindow::new(w)).collect();
+    let loss = |threads: usize| {
+        let mut t = RtnTrainer::new(&config, stats.clone(), &Device::Cpu).unwrap();
+        t.set_threads(threads).unwrap();
+        let mut training = RtnTraining::new(t, &mw[..8], &mw).unwrap();
+        training.validate().unwrap().loss
+    };
+    let (one, two) = (loss(1), loss(2));
+    assert_eq!(one.to_bits(), two.to_bits(), "1 thread {one}, 2 threads {two}");
+    let t = RtnTrainer::new(&config, stats.clone(), &Device::Cpu).unwrap();
+    let serial: f64 =
+        mw.chunks(64).map(|c| t.eval_loss(c).unwrap() as f64 * c.len() as f64).sum::<f64>() / mw.len() as f64;
+    assert_eq!(one.to_bits(), serial.to_bits(), "{one} vs {serial}");
+    assert!(one.is_finite() && one > 0.0);
+}

@@ -61,6 +61,11 @@ pub struct RmrArgs {
     /// the ground truth's contact frames, by forward kinematics (0: the paper's loss) [default: 0].
     #[arg(long, allow_hyphen_values = true, value_parser = seam_weight)]
     pub slide_weight: Option<f64>,
+    /// Weight of our velocity term: each frame's change of the output's pose values against
+    /// the ground truth's, weighted like the pose loss (so `--seam-weight` stresses the seams):
+    /// fewer pops at the seams (0: the paper's loss) [default: 0; docs/rmr.md].
+    #[arg(long, allow_hyphen_values = true, value_parser = seam_weight)]
+    pub velocity_weight: Option<f64>,
     /// Units of each recurrent layer, per direction [default: the preset's; paper: 256].
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::layer_width)]
     pub hidden: Option<usize>,
@@ -76,7 +81,7 @@ pub struct RmrArgs {
     pub database_stride: Option<usize>,
 }
 
-/// `--seam-weight`, `--fk-weight`, `--slide-weight`: a weight in `[0, 1000]`.
+/// `--seam-weight`, `--fk-weight`, `--slide-weight`, `--velocity-weight`: a weight in `[0, 1000]`.
 fn seam_weight(s: &str) -> Result<f64, String> {
     crate::args::real_in(s, crate::args::Interval::closed(0.0, 1000.0), "")
 }
@@ -94,6 +99,7 @@ pub fn run(a: RmrArgs) -> anyhow::Result<()> {
         seam_weight: a.seam_weight,
         fk_weight: a.fk_weight,
         slide_weight: a.slide_weight,
+        velocity_weight: a.velocity_weight,
         hidden: a.hidden,
         batch_size: a.batch_size,
         lr: a.lr,
