@@ -307,10 +307,10 @@ fn fresh_config(
     if config.train.batch_size == 0 {
         bail!("--batch-size must be at least 1");
     }
-    if let Some([lo, hi]) = a.lengths {
-        if !(1 <= lo && lo <= hi) {
-            bail!("--lengths {lo}-{hi}: give the shortest and the longest transition, 1 <= shortest <= longest");
-        }
+    if let Some([lo, hi]) = a.lengths
+        && !(1 <= lo && lo <= hi)
+    {
+        bail!("--lengths {lo}-{hi}: give the shortest and the longest transition, 1 <= shortest <= longest");
     }
     let lengths = a.trained_lengths();
     if let Some([lo, hi]) = lengths {
