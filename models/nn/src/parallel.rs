@@ -92,9 +92,6 @@ impl DataParallel {
     /// work without gradients, such as validation, whose items do not depend on each other.
     pub fn map<T: Send>(&self, n: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
         let shards = self.shards(n);
-        if shards.len() <= 1 {
-            return self.pools[0].install(|| (0..n).map(&f).collect());
-        }
         let run = |k: usize, r: Range<usize>| -> Vec<T> { self.pools[k].install(|| r.map(&f).collect()) };
         std::thread::scope(|s| {
             let run = &run;

@@ -257,11 +257,7 @@ impl RtnTrainer {
             let batch = encode_batch(stats, &items[r], model.device()).map_err(candle_core::Error::wrap)?;
             let mut next = draws.iter().copied();
             let mut teacher = || next.next().unwrap_or(false);
-            let outs = generate(model, stats, offsets, &batch, past, n_out, true, &mut teacher)
-                .map_err(candle_core::Error::wrap)?;
-            let pred = Tensor::stack(&outs, 1)?;
-            let truth = Tensor::stack(&batch.x[past..past + n_out], 1)?;
-            (pred - truth)?.sqr()?.mean_all()
+            unroll_mse(model, stats, offsets, &batch, n_out, true, &mut teacher).map_err(candle_core::Error::wrap)
         };
         let (value, grads) = self.parallel.backward(items.len(), &self.vars, shard_loss)?;
         let value = value as f32;
@@ -435,11 +431,27 @@ fn sequence_inputs<'a>(
 fn chunk_loss(t: &RtnTrainer, windows: &[MotionWindow], n: usize) -> RtnResult<f32> {
     let items = sequence_inputs(&t.config, windows, None, false, false, n)?;
     let batch = encode_batch(&t.stats, &items, t.model.device())?;
-    let (past, n_out) = (t.config.past_frames, n + 1);
-    let outs = generate(&t.model, &t.stats, &t.offsets, &batch, past, n_out, false, &mut || false)?;
+    let mse = unroll_mse(&t.model, &t.stats, &t.offsets, &batch, n + 1, false, &mut || false)?;
+    Ok(mse.to_scalar::<f32>()?)
+}
+
+/// The MSE (RTN eq. 17, averaged over values) of the `n_out` frames the model unrolls after
+/// the batch's past frames against the batch's own frames: the training loss (`grad`, with
+/// the step's teacher-forcing draws) and the validation loss (no graph, no forcing).
+fn unroll_mse(
+    model: &Rtn,
+    stats: &FeatureStats,
+    offsets: &OffsetTensors,
+    batch: &crate::transition::EncodedBatch,
+    n_out: usize,
+    grad: bool,
+    teacher: &mut dyn FnMut() -> bool,
+) -> RtnResult<Tensor> {
+    let past = model.config().past_frames;
+    let outs = generate(model, stats, offsets, batch, past, n_out, grad, teacher)?;
     let pred = Tensor::stack(&outs, 1)?;
     let truth = Tensor::stack(&batch.x[past..past + n_out], 1)?;
-    Ok((pred - truth)?.sqr()?.mean_all()?.to_scalar::<f32>()?)
+    Ok((pred - truth)?.sqr()?.mean_all()?)
 }
 
 /// [`RtnTrainer::eval_loss`] of `windows` in chunks of 64, the chunks shared out among the
