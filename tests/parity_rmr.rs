@@ -501,9 +501,13 @@ fn runtime_inertializes_the_seams_like_zoo_stitch_pre_blend() {
     let (poses, clip) = aligned_poses(100);
     let offline_x = zoo_rmr::features::encode_clip(&clip, &f.config.layout).unwrap();
     f.stats = FeatureStats::fit([offline_x.as_slice()], zoo_rmr::features::FeatureLayout::new(21, 9));
-    let refiner = StitchRefiner::from_bytes(&export_rmr(&f.config, &f.stats, &f.varmap).unwrap().to_bytes()).unwrap();
+    let mut refiner =
+        StitchRefiner::from_bytes(&export_rmr(&f.config, &f.stats, &f.varmap).unwrap().to_bytes()).unwrap();
+    // The refiner alone here (the stream has no guard); the guard's parity is the next test's.
+    assert!(refiner.seam_guard(), "the guard is on by default, as in `zoo stitch`");
+    refiner.set_seam_guard(false);
     let seams = [30, 31, 60, 97];
-    let post = PostProcess { ankle_ik: false, foot_lock: false, pre_blend: true };
+    let post = PostProcess { ankle_ik: false, foot_lock: false, pre_blend: true, seam_guard: false };
     let want = refine_seams(&f.model, &f.stats, &clip, &seams, RefineOptions::of(&f.config), post).unwrap();
     let (n, j) = (poses.len(), refiner.joints());
     let mut out = vec![EnginePose::new(j); n];
@@ -556,6 +560,46 @@ fn runtime_inertializes_the_seams_like_zoo_stitch_pre_blend() {
         same.len()
     );
     assert!(worst <= 1e-4, "the stream differs by {worst} cm");
+}
+
+/// What `zoo stitch` writes for a `--pre-blend` model by default (seams inertialized, refined,
+/// ankles by IK, seams guarded against pops, feet locked): the runtime's whole-sequence form
+/// gives the same motion as the offline path.
+#[test]
+fn runtime_guards_the_seams_like_zoo_stitch() {
+    use zoo_rmr::stitch::{PostProcess, RefineOptions, refine_seams};
+    use zoo_runtime::stitch::FootCleanup;
+    use zoo_runtime::{EnginePose, StitchRefiner};
+    let mut f = fixture(RefinerCell::Bgru);
+    let (poses, clip) = aligned_poses(100);
+    let offline_x = zoo_rmr::features::encode_clip(&clip, &f.config.layout).unwrap();
+    f.stats = FeatureStats::fit([offline_x.as_slice()], zoo_rmr::features::FeatureLayout::new(21, 9));
+    let mut refiner =
+        StitchRefiner::from_bytes(&export_rmr(&f.config, &f.stats, &f.varmap).unwrap().to_bytes()).unwrap();
+    let seams = [30, 60];
+    let post = PostProcess { ankle_ik: true, foot_lock: true, pre_blend: true, seam_guard: true };
+    let want = refine_seams(&f.model, &f.stats, &clip, &seams, RefineOptions::of(&f.config), post).unwrap();
+    let guarded = want.guarded.as_ref().expect("the guard ran");
+    assert!(guarded.iter().any(|g| g.weight > 0.0), "the guard acted on a seam: {guarded:?}");
+    let (n, j) = (poses.len(), refiner.joints());
+    let mut out = vec![EnginePose::new(j); n];
+    let mut contacts = vec![[false; 4]; n];
+    refiner.refine_poses_at_seams(&poses, &seams, FootCleanup::default(), &mut out, &mut contacts).unwrap();
+    let skeleton = refiner.skeleton().clone();
+    let whole = world_positions(&out, &skeleton);
+    let worst = max_distance(&whole, &want.clip.global().1);
+    // Without the guard the motion is another: the comparison above covers it.
+    refiner.set_seam_guard(false);
+    let mut plain = vec![EnginePose::new(j); n];
+    refiner.refine_poses_at_seams(&poses, &seams, FootCleanup::default(), &mut plain, &mut contacts).unwrap();
+    let moved = max_distance(&world_positions(&plain, &skeleton), &whole);
+    println!(
+        "refine_poses_at_seams vs zoo_rmr refine_seams (pre-blend, IK, guard, lock): max joint distance {worst:e} cm; \
+         the guard moved joints by up to {moved:.3} cm ({guarded:?})"
+    );
+    // As in `runtime_refines_engine_poses_like_zoo_stitch`: the leg IK magnifies float differences.
+    assert!(worst <= 0.1, "joint positions differ by {worst} cm");
+    assert!(moved > 10.0 * worst.max(1e-3), "the guard moved joints by only {moved} cm");
 }
 
 /// Bad input to the pose and streaming forms: clear errors, no panic.

@@ -16,7 +16,9 @@
 //! core's pose vector ([`zoo_motion::stitch`], the code the offline tools use), refines it,
 //! decodes it from the input's first ground root and, as `zoo stitch` does by default, puts the
 //! ankles where the refiner predicts them and locks the planted feet by the predicted contacts
-//! ([`zoo_motion::stitch::lock`]), writing into the caller's poses.
+//! ([`zoo_motion::stitch::lock`]), writing into the caller's poses. Given the seams
+//! ([`StitchRefiner::refine_poses_at_seams`]) it also guards them against pops between the two
+//! ([`zoo_motion::stitch::guard`]), as `zoo stitch` does.
 //!
 //! Streaming for motion matching: [`StitchStream`] (from [`StitchRefiner::stream`]) takes one
 //! pose per frame as the engine decides it and gives refined poses back with a fixed latency of
@@ -25,7 +27,8 @@
 //! every `s` frames; at [`StitchStream::finish`] one ending on the last frame), so up to the
 //! last `w` frames of a finished stream its output is the whole-sequence form's, value for
 //! value. The foot lock needs whole contact runs, so the stream returns the predicted contacts
-//! with each pose for the engine's own foot IK instead of locking.
+//! with each pose for the engine's own foot IK instead of locking; it does not guard the seams
+//! either (the guard follows the ankle IK, which the stream leaves to the engine).
 
 use crate::error::{MotionError, chain};
 use crate::metadata::MotionModelMetadata;
@@ -62,6 +65,7 @@ pub struct StitchRefiner {
     layout: StitchLayout,
     pre_blend: bool,
     fallback: Option<StitchFallback>,
+    seam_guard: bool,
 }
 
 fn stitch_err(reason: impl Into<String>) -> MotionError {
@@ -143,6 +147,7 @@ impl StitchRefiner {
             layout,
             pre_blend,
             fallback,
+            seam_guard: true,
         })
     }
 
@@ -229,6 +234,20 @@ impl StitchRefiner {
         }
         self.fallback = fallback;
         Ok(())
+    }
+
+    /// Whether [`StitchRefiner::refine_poses_at_seams`] guards the seams (on unless switched
+    /// off): where the refined motion, after the ankle IK, moves a joint faster within 5 frames
+    /// of a seam than the inertialized input does there, it is blended towards itself smoothed
+    /// until it does not, before the foot lock ([`zoo_motion::stitch::guard`], what `zoo stitch`
+    /// does unless given `--no-seam-guard`).
+    pub fn seam_guard(&self) -> bool {
+        self.seam_guard
+    }
+
+    /// Switches the seam guard of [`StitchRefiner::seam_guard`] on or off.
+    pub fn set_seam_guard(&mut self, on: bool) {
+        self.seam_guard = on;
     }
 
     /// Window starts over `frames` frames: every stride while the window fits, plus one ending
@@ -437,6 +456,13 @@ impl StitchRefiner {
                 found: out.len(),
             });
         }
+        let frames = self.inertialized_frames(poses, seams)?;
+        zoo_motion::stitch::encode_frames(&self.layout, &frames, out);
+        Ok(())
+    }
+
+    /// The frames of `poses` inertialized at `seams` (checked, as the encoder reads them).
+    fn inertialized_frames(&self, poses: &[EnginePose], seams: &[usize]) -> Result<Vec<PoseFrame>, MotionError> {
         if let Some(&s) = seams.iter().find(|&&s| s >= poses.len()) {
             return Err(stitch_err(format!(
                 "seam at frame {s} of a sequence of {} poses: give the frames where a clip starts, within the sequence",
@@ -455,8 +481,7 @@ impl StitchRefiner {
             frames.push(frame);
         };
         blend.run(poses.len(), seams, read, put)?;
-        zoo_motion::stitch::encode_frames(&self.layout, &frames, out);
-        Ok(())
+        Ok(frames)
     }
 
     /// Refines a whole aligned sequence of poses (the clips already put end to start, at the
@@ -477,7 +502,9 @@ impl StitchRefiner {
     }
 
     /// [`StitchRefiner::refine_poses`] of the sequence inertialized at `seams` (the frames where
-    /// a clip starts; [`StitchRefiner::encode_poses_at_seams`]): `zoo stitch --pre-blend`.
+    /// a clip starts; [`StitchRefiner::encode_poses_at_seams`]), with the seams guarded against
+    /// pops after the ankle IK and before the foot lock ([`StitchRefiner::seam_guard`]): what
+    /// `zoo stitch` writes for a model trained with `--pre-blend` (the default).
     pub fn refine_poses_at_seams(
         &self,
         input: &[EnginePose],
@@ -504,6 +531,11 @@ impl StitchRefiner {
         let d = self.dim;
         let mut x = vec![0.0f32; frames * d];
         self.encode_poses_at_seams(input, seams, &mut x)?;
+        // The guard's reference: the input inertialized at the seams, as a clip.
+        let reference = (self.seam_guard && !seams.is_empty() && frames >= 2)
+            .then(|| self.inertialized_frames(input, seams))
+            .transpose()?
+            .map(|inert| self.frames_to_clip(&inert));
         let mut y = vec![0.0f32; x.len()];
         self.refine_sequence(&x, &mut y)?;
         let mut rotations = Vec::with_capacity(self.joints);
@@ -517,12 +549,33 @@ impl StitchRefiner {
                 zoo_motion::stitch::predicted_ankles(&y, self.layout.pose_layout(self.joints), &self.layout, start);
             zoo_motion::stitch::lock::place_ankles(&mut clip, &ankles, &self.layout);
         }
+        if let Some(reference) = &reference {
+            zoo_motion::stitch::guard::guard_seams(&mut clip, reference, seams, &self.layout);
+        }
         if cleanup.lock_feet {
             zoo_motion::stitch::lock::lock_feet(&mut clip, &predicted, &self.layout);
         }
         contacts.copy_from_slice(&predicted);
         write_poses(&clip, out);
         Ok(())
+    }
+
+    /// Encoder frames as a clip on the model's skeleton (joint 0's rotation is the hips' world
+    /// rotation, its position the hips' world position).
+    fn frames_to_clip(&self, frames: &[PoseFrame]) -> Clip {
+        let j = self.joints;
+        let mut clip = Clip {
+            skeleton: self.skeleton.clone(),
+            frame_time: 1.0 / self.fps,
+            local_rotations: Vec::with_capacity(frames.len() * j),
+            local_positions: Vec::with_capacity(frames.len() * j),
+        };
+        for f in frames {
+            clip.local_rotations.extend_from_slice(&f.local_rotations);
+            clip.local_positions.push(f.global_positions[0]);
+            clip.local_positions.extend_from_slice(&self.skeleton.offsets[1..]);
+        }
+        clip
     }
 
     /// A stream over this refiner for motion matching: push poses as they are decided, pop
@@ -571,7 +624,8 @@ fn write_poses(clip: &Clip, out: &mut [EnginePose]) {
 /// the whole-sequence form would have refined them once more, so the two agree on every frame
 /// except those. Each pose comes with the predicted contacts (heel L, toe L, heel R, toe R) for
 /// the engine's foot IK; the stream does not lock feet (the lock pins each contact at its mean
-/// over the whole contact, which a stream does not know yet).
+/// over the whole contact, which a stream does not know yet) and does not guard the seams (the
+/// guard follows the ankle IK; [`StitchRefiner::seam_guard`]).
 ///
 /// After its first window (and its first marked seam), pushing and popping allocate nothing on
 /// our side as long as the engine pops every frame it can (the buffer then holds at most `2 w + 1` frames); what tract

@@ -73,13 +73,17 @@ impl StitchMethod {
             _ => {}
         }
         let forms = "concat, inertialize, interp, rmr:RUN_DIR, rmr+ik:RUN_DIR, rmr+lock:RUN_DIR, \
-                     rmr+ik+lock:RUN_DIR (each also as inert+rmr...), rtn:RUN_DIR, rtn+lock:RUN_DIR";
+                     rmr+ik+lock:RUN_DIR (each also as inert+rmr..., and with +guard after rmr or rmr+ik, as in rmr+ik+guard+lock:RUN_DIR), rtn:RUN_DIR, rtn+lock:RUN_DIR";
         let Some((head, path)) = spec.split_once(':') else { bail!("unknown method `{spec}`: expected {forms}") };
         // `inert+rmr...`: the seams inertialized before the RMR refines (`zoo stitch --pre-blend`).
         let (pre_blend, head) = match head.strip_prefix("inert+") {
             Some(rest) if rest.starts_with("rmr") => (true, rest),
             _ => (false, head),
         };
+        // `rmr+guard...`, `rmr+ik+guard+lock`: the seam guard after the ankle IK, before the lock.
+        let seam_guard = head.starts_with("rmr") && head.contains("+guard");
+        let head = if seam_guard { head.replacen("+guard", "", 1) } else { head.to_string() };
+        let head = head.as_str();
         let (lock, ik) = match head {
             "rmr" => (false, false),
             "rmr+ik" => (false, true),
@@ -98,7 +102,7 @@ impl StitchMethod {
         }
         let (model, stats) = crate::checkpoint::load(&dir, &candle_core::Device::Cpu)
             .with_context(|| format!("method `{spec}`: loading the RMR in {}", dir.display()))?;
-        let post = PostProcess { ankle_ik: ik, foot_lock: lock, pre_blend };
+        let post = PostProcess { ankle_ik: ik, foot_lock: lock, pre_blend, seam_guard };
         Ok(StitchMethod::Rmr { name: spec.to_string(), model: Box::new(model), stats, post })
     }
 

@@ -240,6 +240,10 @@ pub struct PostProcess {
     /// The seams inertialized over the blend before the RMR refines (not in the paper; `zoo
     /// stitch --pre-blend`, `inert+rmr...` in the benchmark).
     pub pre_blend: bool,
+    /// No seam moves a joint faster than the inertialized clips do there
+    /// ([`zoo_motion::stitch::guard`]; not in the paper; after the ankle IK, before the lock;
+    /// `rmr+ik+guard+lock` in the benchmark).
+    pub seam_guard: bool,
 }
 
 /// An RMR's stitch of an aligned sequence, with what the post-processing did.
@@ -253,10 +257,13 @@ pub struct RefinedSeams {
     pub ankle_move: Option<f64>,
     /// Mean ankle correction of the foot lock (clip units), when it ran.
     pub lock_move: Option<f64>,
+    /// What the seam guard did at each seam, when it ran.
+    pub guarded: Option<Vec<zoo_motion::stitch::guard::GuardedSeam>>,
 }
 
-/// Refines the aligned sequence `aligned` (seams at `seams`) with `model`, then applies `post`;
-/// `opts.blend_frames` is also the pre-blend's length.
+/// Refines the aligned sequence `aligned` (seams at `seams`) with `model`, then applies `post`
+/// (ankle IK, seam guard, foot lock, in that order); `opts.blend_frames` is also the length of
+/// the pre-blend and of the guard's inertialized reference.
 pub fn refine_seams(
     model: &Rmr,
     stats: &FeatureStats,
@@ -266,16 +273,21 @@ pub fn refine_seams(
     post: PostProcess,
 ) -> RmrResult<RefinedSeams> {
     let layout = &model.config().layout;
-    let refined = if post.pre_blend || model.config().pre_blend {
-        let blended = crate::pairs::baselines::inertialize_seams(aligned, seams, opts.blend_frames);
-        refine_clip_full(model, stats, &blended, opts)?
-    } else {
-        refine_clip_full(model, stats, aligned, opts)?
+    let pre_blend = post.pre_blend || model.config().pre_blend;
+    let blended = (pre_blend || post.seam_guard)
+        .then(|| crate::pairs::baselines::inertialize_seams(aligned, seams, opts.blend_frames));
+    let refined = match (&blended, pre_blend) {
+        (Some(b), true) => refine_clip_full(model, stats, b, opts)?,
+        _ => refine_clip_full(model, stats, aligned, opts)?,
     };
     let mut clip = refined.clip;
     let ankle_move = post.ankle_ik.then(|| crate::footlock::place_ankles(&mut clip, &refined.ankles, layout));
+    let guarded = match (&blended, post.seam_guard) {
+        (Some(reference), true) => Some(zoo_motion::stitch::guard::guard_seams(&mut clip, reference, seams, layout)),
+        _ => None,
+    };
     let lock_move = post.foot_lock.then(|| crate::footlock::lock_feet(&mut clip, &refined.contacts, layout));
-    Ok(RefinedSeams { clip, ankles: refined.ankles, ankle_move, lock_move })
+    Ok(RefinedSeams { clip, ankles: refined.ankles, ankle_move, lock_move, guarded })
 }
 
 /// How `zoo stitch` smooths the seams of the aligned clips.
@@ -438,6 +450,10 @@ pub fn stitch_command(
             }
             if let Some(moved) = r.ankle_move {
                 note += &format!(", ankles placed at the predicted positions (mean move {moved:.2} units)");
+            }
+            if let Some(g) = &r.guarded {
+                let n = g.iter().filter(|s| s.weight > 0.0).count();
+                note += &format!(", {n} of {} seams guarded against pops", g.len());
             }
             if let Some(moved) = r.lock_move {
                 note += &format!(", feet locked by the predicted contacts (mean ankle correction {moved:.2} units)");

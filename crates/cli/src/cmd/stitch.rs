@@ -56,6 +56,11 @@ pub struct StitchArgs {
     /// output processing; done before the foot lock).
     #[arg(long)]
     pub no_ankle_ik: bool,
+    /// Do not guard the seams: by default, where the RMR's output moves a joint faster within 5
+    /// frames of a seam than inertialization does there, it is blended towards itself smoothed
+    /// until it does not (after the ankle IK, before the foot lock; docs/rmr.md, "The seam guard").
+    #[arg(long)]
+    pub no_seam_guard: bool,
     /// Inertialize each seam over `--blend-frames` frames before the RMR refines the sequence
     /// (not in the paper). For clips cut anywhere, whose seams are larger than those of the
     /// retrieved neighbours RMR trained on: on bandai2's free cases it brings the pops from
@@ -170,6 +175,7 @@ pub fn run(a: StitchArgs) -> anyhow::Result<()> {
             ankle_ik: !a.no_ankle_ik,
             foot_lock: !a.no_foot_lock,
             pre_blend: a.pre_blend,
+            seam_guard: !a.no_seam_guard,
         }),
         StitchMethod::Inertialize => SeamMethod::Inertialize,
         StitchMethod::Interp => SeamMethod::Interp,

@@ -23,6 +23,7 @@
 //! The first frame has no predecessor: its `r` and `v` repeat frame 1's. The layout is
 //! contiguous, so the "pose" part is the first `dim - 4` values.
 
+pub mod guard;
 pub mod lock;
 
 use crate::facing::{ground_forward, heading_angle};

@@ -1,0 +1,273 @@
+//! The seam guard (issue 49, not in the paper): no seam of a stitched sequence moves a joint
+//! faster than the inertialized sequence does there, at little cost in foot sliding.
+//!
+//! A refiner meeting motion it never saw can add a pop at a seam: the largest joint speed within
+//! a few frames of the seam comes out above what inertialization gives there (docs/rmr.md, "On
+//! moves it never saw"). The guard measures, at every seam, that largest speed (every joint,
+//! global positions, frames `seam - GUARD_FRAMES ..= seam + GUARD_FRAMES`: the span of the
+//! stitching benchmark's pop measure) in the output and in the reference, the aligned clips
+//! inertialized at their seams. Where the output's is higher, the output is blended towards
+//! itself smoothed over three frames (weights 1, 2, 1) by the smallest weight (bisection) that
+//! brings it down to the reference's, constant over the seam's frames and eased out over
+//! [`GUARD_RAMP`] frames on each side; a seam that full smoothing cannot bring down gets the
+//! full weight. The blend keeps the output's ground root (its path and heading) and changes
+//! what is relative to it: the hips' height and rotation relative to the root's heading and
+//! every other joint's local rotation.
+//!
+//! Smoothing the output, rather than blending it towards the inertialized clips, lowers a short
+//! burst of speed and leaves a planted foot where it is: on held-out turns of bandai2 the blend
+//! towards inertialization cost 11 % more foot sliding for the same pops, the smoothing nothing
+//! measurable (docs/rmr.md, "The seam guard"). `zoo stitch` runs it after the ankle IK and
+//! before the foot lock, whose correction changes by at most 1 cm per frame.
+
+use super::StitchLayout;
+use crate::Clip;
+use crate::fk::forward_kinematics_frame;
+use glam::{DQuat, DVec3};
+
+/// Frames on each side of a seam over which the largest joint speed is compared.
+pub const GUARD_FRAMES: usize = 5;
+/// Frames over which a guarded seam's weight eases out on each side.
+pub const GUARD_RAMP: usize = 10;
+/// Frames on each side of the smoothing the guard blends towards (weights 1, 2, 1).
+pub const SMOOTH_RADIUS: usize = 1;
+/// Bisection steps of a seam's weight (the weight is found to `2^-10`).
+const STEPS: usize = 10;
+
+/// What the guard did to one seam.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GuardedSeam {
+    /// The seam's first frame.
+    pub seam: usize,
+    /// Largest joint speed near the seam before the guard (clip units per frame).
+    pub before: f64,
+    /// The reference's largest joint speed there.
+    pub reference: f64,
+    /// Blend weight towards the reference (0: untouched).
+    pub weight: f64,
+}
+
+/// Frames `lo ..= hi` whose speeds (frame minus the one before) are compared at `seam`, or
+/// `None` when the sequence is too short.
+fn zone(seam: usize, frames: usize) -> Option<(usize, usize)> {
+    if seam == 0 || seam >= frames {
+        return None;
+    }
+    let lo = seam.saturating_sub(GUARD_FRAMES).max(1);
+    let hi = (seam + GUARD_FRAMES).min(frames.checked_sub(1)?);
+    (lo <= hi).then_some((lo, hi))
+}
+
+/// The largest joint speed over frames `lo ..= hi` of global positions `gp` (`joints` per frame).
+fn top_speed(gp: &[DVec3], joints: usize, lo: usize, hi: usize) -> f64 {
+    let mut m: f64 = 0.0;
+    for f in lo..=hi {
+        for k in 0..joints {
+            m = m.max((gp[f * joints + k] - gp[(f - 1) * joints + k]).length());
+        }
+    }
+    m
+}
+
+/// Pose of frame `f` of `out` blended towards `target` by `w` on `out`'s ground root, into `rot`
+/// (local rotations) and the returned hips position.
+fn blend_frame(out: &Clip, target: &Clip, layout: &StitchLayout, f: usize, w: f64, rot: &mut [DQuat]) -> DVec3 {
+    let (ro, rr) = (out.rotations_at(f), target.rotations_at(f));
+    let (po, pr) = (out.positions_at(f)[0], target.positions_at(f)[0]);
+    if w <= 0.0 {
+        rot.copy_from_slice(ro);
+        return po;
+    }
+    let (go, gr) = (layout.root_of(ro[0], po), layout.root_of(rr[0], pr));
+    let local_o = go.rotation().inverse() * ro[0];
+    let local_r = gr.rotation().inverse() * rr[0];
+    rot[0] = (go.rotation() * local_o.slerp(local_r, w)).normalize();
+    for k in 1..rot.len() {
+        rot[k] = ro[k].slerp(rr[k], w).normalize();
+    }
+    DVec3::new(po.x, po.y + w * (pr.y - po.y), po.z)
+}
+
+/// `clip` smoothed over `radius` frames on each side (triangular weights): local rotations
+/// averaged in the centre frame's hemisphere, the hips' position averaged.
+fn smooth(clip: &Clip, radius: usize) -> Clip {
+    let (frames, j) = (clip.frames(), clip.joints());
+    let mut out = clip.clone();
+    for f in 0..frames {
+        let lo = f.saturating_sub(radius);
+        let hi = (f + radius).min(frames - 1);
+        for k in 0..j {
+            let c = clip.local_rotations[f * j + k];
+            let mut acc = glam::DVec4::ZERO;
+            let mut pos = DVec3::ZERO;
+            let mut total = 0.0;
+            for g in lo..=hi {
+                let w = (radius + 1 - f.abs_diff(g)) as f64;
+                let mut q = clip.local_rotations[g * j + k];
+                if q.dot(c) < 0.0 {
+                    q = -q;
+                }
+                acc += w * glam::DVec4::from(q);
+                if k == 0 {
+                    pos += w * clip.local_positions[g * j];
+                }
+                total += w;
+            }
+            out.local_rotations[f * j + k] = DQuat::from_vec4(acc).normalize();
+            if k == 0 {
+                out.local_positions[f * j] = pos / total;
+            }
+        }
+    }
+    out
+}
+
+/// A seam's weight profile: 1 over the compared frames (and the frame before them), easing to
+/// 0 over [`GUARD_RAMP`] frames on each side.
+fn profile(f: usize, lo: usize, hi: usize) -> f64 {
+    let d = if f + 1 < lo {
+        lo - 1 - f
+    } else if f > hi {
+        f - hi
+    } else {
+        return 1.0;
+    };
+    if d > GUARD_RAMP {
+        return 0.0;
+    }
+    let x = 1.0 - d as f64 / (GUARD_RAMP + 1) as f64;
+    x * x * (3.0 - 2.0 * x)
+}
+
+/// Guards the seams of `out` against `reference` (the same frames and skeleton: the aligned clips
+/// inertialized at `seams`), changing `out` in place; returns what it did per seam. A `reference`
+/// of another size leaves `out` as it is and returns nothing; a seam out of `1..frames` is
+/// skipped.
+pub fn guard_seams(out: &mut Clip, reference: &Clip, seams: &[usize], layout: &StitchLayout) -> Vec<GuardedSeam> {
+    let (frames, j) = (out.frames(), out.joints());
+    if reference.frames() != frames || reference.joints() != j || frames < 2 {
+        return Vec::new();
+    }
+    let (_, ref_gp) = reference.global();
+    let smoothed = smooth(out, SMOOTH_RADIUS);
+    let parents = &out.skeleton.parents;
+    let mut weights = vec![0.0f64; frames];
+    let mut report = Vec::with_capacity(seams.len());
+    // Scratch for one frame's forward kinematics and the zone's positions.
+    let (mut rot, mut grot, mut gpos) = (vec![DQuat::IDENTITY; j], vec![DQuat::IDENTITY; j], vec![DVec3::ZERO; j]);
+    let mut local_pos = vec![DVec3::ZERO; j];
+    let mut zone_gp = Vec::new();
+    for &seam in seams {
+        let Some((lo, hi)) = zone(seam, frames) else { continue };
+        let reference_top = top_speed(&ref_gp, j, lo, hi);
+        let mut speed_at = |w: f64, weights: &[f64], zone_gp: &mut Vec<DVec3>| {
+            zone_gp.clear();
+            for f in lo - 1..=hi {
+                let wf = weights[f].max(w * profile(f, lo, hi));
+                let hips = blend_frame(out, &smoothed, layout, f, wf, &mut rot);
+                local_pos.copy_from_slice(out.positions_at(f));
+                local_pos[0] = hips;
+                forward_kinematics_frame(parents, &rot, &local_pos, &mut grot, &mut gpos);
+                zone_gp.extend_from_slice(&gpos);
+            }
+            top_speed(zone_gp, j, 1, hi - lo + 1)
+        };
+        let before = speed_at(0.0, &weights, &mut zone_gp);
+        let mut weight = 0.0;
+        if before > reference_top {
+            let (mut a, mut b) = (0.0f64, 1.0f64);
+            for _ in 0..STEPS {
+                let m = 0.5 * (a + b);
+                if speed_at(m, &weights, &mut zone_gp) > reference_top {
+                    a = m;
+                } else {
+                    b = m;
+                }
+            }
+            weight = b;
+            let from = (lo - 1).saturating_sub(GUARD_RAMP);
+            for (f, wf) in weights.iter_mut().enumerate().take((hi + GUARD_RAMP + 1).min(frames)).skip(from) {
+                *wf = wf.max(weight * profile(f, lo, hi));
+            }
+        }
+        report.push(GuardedSeam { seam, before, reference: reference_top, weight });
+    }
+    for f in 0..frames {
+        if weights[f] > 0.0 {
+            let hips = blend_frame(out, &smoothed, layout, f, weights[f], &mut rot);
+            out.local_rotations[f * j..(f + 1) * j].copy_from_slice(&rot);
+            out.local_positions[f * j] = hips;
+        }
+    }
+    report
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Skeleton;
+
+    /// A three-joint leg walking along +Z whose middle joint swings; `wiggle` adds a
+    /// frame-to-frame jitter of that joint around frame 20.
+    fn clip(wiggle: f64) -> Clip {
+        let skeleton = Skeleton {
+            names: vec!["Hips".into(), "Leg".into(), "Foot".into()],
+            parents: vec![None, Some(0), Some(1)],
+            offsets: vec![DVec3::ZERO, DVec3::new(0.0, -40.0, 0.0), DVec3::new(0.0, -40.0, 0.0)],
+            end_sites: vec![None; 3],
+            channels: vec![crate::JointChannels::default(); 3],
+        };
+        let mut local_rotations = Vec::new();
+        let mut local_positions = Vec::new();
+        for f in 0..40 {
+            let sign = if f % 2 == 0 { 1.0 } else { -1.0 };
+            let swing = 0.3 * (f as f64 * 0.2).sin() + if (8..33).contains(&f) { wiggle * sign } else { 0.0 };
+            local_rotations.extend([DQuat::IDENTITY, DQuat::from_rotation_x(swing), DQuat::IDENTITY]);
+            local_positions.extend([
+                DVec3::new(0.0, 90.0, 2.0 * f as f64),
+                DVec3::new(0.0, -40.0, 0.0),
+                DVec3::new(0.0, -40.0, 0.0),
+            ]);
+        }
+        Clip { skeleton, frame_time: 1.0 / 30.0, local_rotations, local_positions }
+    }
+
+    fn layout() -> StitchLayout {
+        StitchLayout {
+            lower_body: vec![0, 1, 2],
+            contacts: [2, 2, 2, 2],
+            contact_thresholds: [2.5; 4],
+            planted: [0.0; 4],
+            forward_axis: DVec3::Z,
+        }
+    }
+
+    #[test]
+    fn a_seam_faster_than_the_reference_is_brought_down_to_it_and_a_calm_one_is_left_alone() {
+        let reference = clip(0.0);
+        let mut out = clip(0.1);
+        let (_, gp) = out.global();
+        let report = guard_seams(&mut out, &reference, &[20], &layout());
+        assert_eq!(report.len(), 1);
+        let g = report[0];
+        assert!(g.before > 2.0 * g.reference, "{g:?}");
+        assert!(g.weight > 0.0 && g.weight <= 1.0, "{g:?}");
+        let (_, after) = out.global();
+        let (lo, hi) = zone(20, 40).unwrap();
+        let top = top_speed(&after, 3, lo, hi);
+        assert!(top <= g.reference * (1.0 + 1e-3), "{top} > {}", g.reference);
+        // Far from the seam the output is untouched, and the root's path is the output's.
+        assert_eq!(&after[..3], &gp[..3]);
+        assert_eq!(&after[3 * 36..], &gp[3 * 36..]);
+        for f in 0..40 {
+            let (a, b) = (out.positions_at(f)[0], clip(0.1).positions_at(f)[0]);
+            assert!((a.x - b.x).abs() < 1e-12 && (a.z - b.z).abs() < 1e-12, "frame {f}");
+        }
+
+        let mut calm = clip(0.0);
+        let before = calm.clone();
+        let report = guard_seams(&mut calm, &clip(0.1), &[20], &layout());
+        assert_eq!(report[0].weight, 0.0);
+        assert_eq!(calm.local_rotations, before.local_rotations);
+    }
+}
