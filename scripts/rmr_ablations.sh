@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The RMR ablations of issue 12 (docs/rmr.md, "Ablations") at equal budgets: every run trains
-# the same number of epochs from the same seed on the same pairs, with the paper's loss and
+# the same number of epochs from the same seed on the same pairs, with the paper's input (`--paper`), loss and
 # learning rate. Table 1: the refiner cell (LSTM, GRU, BLSTM, BGRU); Table 2: T_begin (3, 5,
 # 10); Figure 9: without the root trajectory loss. Then the stitching benchmark over all of
 # them and the root-drift plot of Figure 9.
@@ -50,7 +50,7 @@ train() {
     local again=()
     [ -d "$dir" ] && again=(--overwrite)
     # shellcheck disable=SC2086
-    $ZOO train rmr --data "$DATA" --valid-glob "$GLOB" --epochs "$EPOCHS" --out "$dir" "${again[@]}" "$@" $EXTRA
+    $ZOO train rmr --data "$DATA" --valid-glob "$GLOB" --epochs "$EPOCHS" --out "$dir" --paper "${again[@]}" "$@" $EXTRA
   fi
 }
 

@@ -18,23 +18,18 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
-/// A tiny RMR trained on 1.5 minutes of synthetic motion into `dir/run`.
+/// A tiny RMR trained on 1.5 minutes of synthetic motion into `dir/run` (the default recipe).
 fn train_tiny(dir: &Path, epochs: &str) -> PathBuf {
-    let run_dir = dir.join("run");
-    let (ok, stdout, stderr) = run(&[
-        "train",
-        "rmr",
-        "--preset",
-        "tiny",
-        "--synth-minutes",
-        "1.5",
-        "--epochs",
-        epochs,
-        "--seed",
-        "3",
-        "--out",
-        s(&run_dir),
-    ]);
+    train_tiny_with(dir, "run", epochs, &[])
+}
+
+/// [`train_tiny`] into `dir/name` with more arguments.
+fn train_tiny_with(dir: &Path, name: &str, epochs: &str, more: &[&str]) -> PathBuf {
+    let run_dir = dir.join(name);
+    let mut args = vec!["train", "rmr", "--preset", "tiny", "--synth-minutes", "1.5", "--epochs", epochs];
+    args.extend(["--seed", "3", "--out", s(&run_dir)]);
+    args.extend(more);
+    let (ok, stdout, stderr) = run(&args);
     assert!(ok, "{stdout}\n{stderr}");
     run_dir
 }
@@ -67,6 +62,9 @@ fn train_resume_and_stitch() {
     let config: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(run_dir.join("config.json")).unwrap()).unwrap();
     assert_eq!(config["model"], "rmr");
+    // The default recipe: trained on inertialized seams, seam weight 4, velocity weight 1.
+    assert_eq!((config["pre_blend"].as_bool(), config["seam_weight"].as_f64()), (Some(true), Some(4.0)));
+    assert_eq!(config["lambda_velocity"].as_f64(), Some(1.0));
     // The fallback is calibrated on the validation pairs at the end of training.
     let (start, full) = (config["fallback"]["start"].as_f64().unwrap(), config["fallback"]["full"].as_f64().unwrap());
     assert!(start > 0.0 && (full - 2.0 * start).abs() < 1e-6 * full, "{}", config["fallback"]);
@@ -145,26 +143,12 @@ fn train_resume_and_stitch() {
         s(&unguarded),
         "--no-seam-guard",
     ]);
-    assert!(
-        ok,
-        "{stdout}
-{stderr}"
-    );
+    assert!(ok, "{stdout}\n{stderr}");
     assert!(!stdout.contains("seams guarded"), "{stdout}");
     let unguarded = read(&unguarded);
     let differs = (0..frames).any(|f| unguarded.rotations_at(f) != stitched.rotations_at(f));
     assert_eq!(differs, guarded > 0, "{guarded} seams guarded, outputs differ: {differs}");
-    // --pre-blend: the seams inertialized before refining; the first clip's frames before the
-    // first seam's blend are refined from the same input, frames after it from another one.
-    let pre = dir.path().join("pre.bvh");
-    let (ok, stdout, stderr) =
-        run(&["stitch", "--model", s(&run_dir), &ranges[0], &ranges[1], &ranges[2], "--out", s(&pre), "--pre-blend"]);
-    assert!(ok, "{stdout}\n{stderr}");
     assert!(stdout.contains("seams inertialized over 10 frames first"), "{stdout}");
-    let pre = read(&pre);
-    assert_eq!(pre.frames(), frames);
-    let moved = (50..60).map(|f| (pre.root_position(f) - stitched.root_position(f)).length()).fold(0.0, f64::max);
-    assert!(moved > 1e-3, "--pre-blend changed nothing after the seam ({moved})");
     for method in ["inertialize", "interp", "concat"] {
         let o = dir.path().join(format!("{method}.bvh"));
         let (ok, stdout, stderr) = run(&["stitch", &ranges[0], &ranges[1], "--method", method, "--out", s(&o)]);
@@ -443,21 +427,25 @@ fn training_and_the_benchmark_leave_out_excluded_clips() {
     assert!(!ok && stderr.contains("--exclude-glob leaves clips of --data out: pass --data too"), "{stderr}");
 }
 
-/// `zoo train rmr --pre-blend`: the run trains on inertialized seams, says so in its
+/// `zoo train rmr` (and `--pre-blend`, the default): the run trains on inertialized seams, says so in its
 /// configuration, and `zoo stitch` inertializes the seams of what it refines without being told.
 #[test]
 fn a_model_trained_on_inertialized_seams_stitches_them_so() {
     let dir = tempfile::tempdir().unwrap();
-    let run_dir = dir.path().join("pre");
-    let mut args = vec!["train", "rmr", "--preset", "tiny", "--synth-minutes", "1.5", "--epochs", "1", "--seed", "3"];
-    args.extend(["--pre-blend", "--out", s(&run_dir)]);
-    let (ok, stdout, stderr) = run(&args);
-    assert!(ok, "{stdout}\n{stderr}");
+    // `--pre-blend` is the default (kept for scripts); `--paper` trains on the raw concatenation
+    // with the paper's loss.
+    let run_dir = train_tiny_with(dir.path(), "pre", "1", &["--pre-blend"]);
     let config: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(run_dir.join("config.json")).unwrap()).unwrap();
     assert_eq!(config["pre_blend"], true);
-    // The same run without it trains on other inputs: another validation loss.
-    let plain = train_tiny(dir.path(), "1");
+    let plain = train_tiny_with(dir.path(), "paper", "1", &["--paper"]);
+    let config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(plain.join("config.json")).unwrap()).unwrap();
+    assert_eq!((config["pre_blend"].as_bool(), config["seam_weight"].as_f64()), (Some(false), Some(0.0)));
+    assert_eq!(config["lambda_velocity"].as_f64(), Some(0.0));
+    let (ok, _, stderr) = run(&["train", "rmr", "--paper", "--pre-blend", "--out", s(&dir.path().join("both"))]);
+    assert!(!ok && stderr.contains("cannot be used with"), "{stderr}");
+    // The two trained on other inputs: another validation loss.
     let loss = |d: &Path| {
         let s: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(d.join("summary.json")).unwrap()).unwrap();
@@ -470,4 +458,16 @@ fn a_model_trained_on_inertialized_seams_stitches_them_so() {
     let (ok, stdout, stderr) = run(&["stitch", "--model", s(&run_dir), &ranges[0], &ranges[1], "--out", s(&out)]);
     assert!(ok, "{stdout}\n{stderr}");
     assert!(stdout.contains("seams inertialized over 10 frames first"), "{stdout}");
+    // The paper's model refines the raw concatenation unless `zoo stitch --pre-blend` says
+    // otherwise: then the frames after the seam are refined from another input.
+    let raw = dir.path().join("raw.bvh");
+    let (ok, stdout, stderr) = run(&["stitch", "--model", s(&plain), &ranges[0], &ranges[1], "--out", s(&raw)]);
+    assert!(ok && !stdout.contains("inertialized"), "{stdout}\n{stderr}");
+    let pre = dir.path().join("pre.bvh");
+    let (ok, stdout, stderr) =
+        run(&["stitch", "--model", s(&plain), &ranges[0], &ranges[1], "--out", s(&pre), "--pre-blend"]);
+    assert!(ok && stdout.contains("seams inertialized over 10 frames first"), "{stdout}\n{stderr}");
+    let (raw, pre) = (read(&raw), read(&pre));
+    let moved = (50..60).map(|f| (pre.root_position(f) - raw.root_position(f)).length()).fold(0.0, f64::max);
+    assert!(moved > 1e-3, "--pre-blend changed nothing after the seam ({moved})");
 }

@@ -68,6 +68,13 @@ impl Stitch {
         self.model.dim()
     }
 
+    /// Whether the model was trained on clips inertialized at their seams (`zoo train rmr`'s
+    /// default): give it the seams, as `stitch` does for it.
+    #[getter]
+    fn pre_blend(&self) -> bool {
+        self.model.pre_blend()
+    }
+
     /// Shortest clip stitched.
     #[getter]
     fn min_clip_frames(&self) -> usize {

@@ -186,6 +186,7 @@ def test_stitch_matches_the_runtime_and_zoo_datas_alignment(data, ref, clip):
     assert starts == r["starts"] == [0, 45] and t == 95
     assert max_diff(hips, arr(r["aligned_hips"], t, 3)) < 1e-3
     assert quat_diff(rot, arr(r["aligned_rotations"], t, K, 4)) < 1e-5
+    assert m.pre_blend is False  # the fixture refines the raw concatenation: `stitch` gives no seams
     poses, contacts, starts = m.stitch([a, b])
     assert poses.shape == (t,) and contacts.shape == (t, 4) and contacts.dtype == bool
     assert max_diff(poses.hips, arr(r["hips"], t, 3)) < 1e-2

@@ -419,6 +419,12 @@ class StitchModel(Model):
         """The shortest clip stitched."""
         return self._native.min_clip_frames
 
+    @property
+    def pre_blend(self) -> bool:
+        """Whether the model was trained on clips inertialized at their seams (``zoo train
+        rmr``'s default): ``stitch`` then inertializes the seams it refines."""
+        return self._native.pre_blend
+
     def align(self, clips: Sequence[Union[Poses, Tuple[np.ndarray, np.ndarray]]]) -> Tuple[np.ndarray, np.ndarray, List[int]]:
         """Puts clips end to start (each moved on the ground so that it starts where the previous
         one ends), as ``zoo stitch`` does. Returns ``(hips, rotations, starts)``."""
@@ -430,14 +436,17 @@ class StitchModel(Model):
         clips: Sequence[Union[Poses, Tuple[np.ndarray, np.ndarray]]],
         place_ankles: bool = True,
         lock_feet: bool = True,
-        pre_blend: bool = False,
+        pre_blend: Optional[bool] = None,
     ) -> Tuple[Poses, np.ndarray, List[int]]:
-        """Aligns ``clips`` end to start and refines the whole (``zoo stitch``'s default; with
-        ``pre_blend`` the seams are inertialized first, ``zoo stitch --pre-blend``).
+        """Aligns ``clips`` end to start and refines the whole, as ``zoo stitch`` does: with
+        ``pre_blend`` (by default the model's own, ``self.pre_blend``) the seams are inertialized
+        first and guarded against pops after the ankle IK (``zoo stitch --pre-blend``).
         Returns ``(poses, contacts, starts)``: the refined ``Poses`` (prefix ``(T,)``), the
         predicted contacts ``(T, 4)`` (heel L, toe L, heel R, toe R) and the first frame of each
         clip in the result."""
         h, r, starts = self.align(clips)
+        if pre_blend is None:
+            pre_blend = self.pre_blend
         seams = starts[1:] if pre_blend else ()
         poses, contacts = self.refine_poses((h, r), place_ankles, lock_feet, seams)
         return poses, contacts, starts

@@ -179,6 +179,12 @@ pub struct Config {
     pub train: TrainConfig,
 }
 
+/// `zoo train rmr`'s default [`Config::seam_weight`] (issue 49: with the pre-blend and the
+/// velocity term, the recipe that stitches moves the model never saw; `--paper` sets 0).
+pub const RECIPE_SEAM_WEIGHT: f64 = 4.0;
+/// `zoo train rmr`'s default [`Config::lambda_velocity`] (`--paper` sets 0).
+pub const RECIPE_VELOCITY_WEIGHT: f64 = 1.0;
+
 impl Config {
     /// The paper's RMR for bandai2's skeleton (also the synthetic skeleton): `T = 60` frames,
     /// BGRU, `T_begin = 5`, trajectory loss on, runtime window 60 / stride 30.

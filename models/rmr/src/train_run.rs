@@ -64,8 +64,11 @@ pub struct RmrRunOptions {
     pub no_trajectory_loss: bool,
     /// The paper's decoder (the pose itself) instead of the residual one.
     pub no_residual: bool,
-    /// Train on the inputs inertialized at their seams ([`crate::Config::pre_blend`]).
-    pub pre_blend: bool,
+    /// The paper's training: the raw concatenation as input ([`crate::Config::pre_blend`]
+    /// off) and its loss alone (seam and velocity weights 0 unless given). Without it the run
+    /// trains on the inputs inertialized at their seams with [`crate::config::RECIPE_SEAM_WEIGHT`]
+    /// and [`crate::config::RECIPE_VELOCITY_WEIGHT`] (issue 49's recipe; docs/rmr.md).
+    pub paper: bool,
     /// Extra weight of the pose loss within 5 frames of each seam.
     pub seam_weight: Option<f64>,
     /// Weight of the forward-kinematics term.
@@ -114,7 +117,11 @@ fn fresh_config(a: &RmrRunOptions, skeleton: &zoo_motion::Skeleton) -> RmrResult
     if a.no_trajectory_loss {
         config = config.with_trajectory_loss(false);
     }
-    config.pre_blend = a.pre_blend;
+    if !a.paper {
+        config.pre_blend = true;
+        config.seam_weight = crate::config::RECIPE_SEAM_WEIGHT;
+        config.lambda_velocity = crate::config::RECIPE_VELOCITY_WEIGHT;
+    }
     if a.no_residual {
         config = config.with_residual(false);
     }

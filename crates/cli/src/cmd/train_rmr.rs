@@ -44,13 +44,19 @@ pub struct RmrArgs {
     /// decoder (a correction added to the input, starting at zero; docs/rmr.md).
     #[arg(long)]
     pub no_residual: bool,
-    /// Train on the aligned clips inertialized at their seams, as `zoo stitch --pre-blend`
-    /// refines them (not in the paper); `zoo stitch` and the benchmark then always inertialize
-    /// the seams of what this model refines.
+    /// The paper's training: the raw concatenation of the clips as the refiner's input and the
+    /// paper's loss alone (seam and velocity weights 0 unless given). Without it the refiner
+    /// learns to refine the clips inertialized at their seams, with seam weight 4 and velocity
+    /// weight 1: fewer pops and less sliding on motion it never saw (docs/rmr.md).
+    #[arg(long, conflicts_with = "pre_blend")]
+    pub paper: bool,
+    /// Train on the aligned clips inertialized at their seams (the default; `--paper` trains on
+    /// the raw concatenation). `zoo stitch` and the benchmark always inertialize the seams of
+    /// what such a model refines.
     #[arg(long)]
     pub pre_blend: bool,
     /// Extra weight of the pose loss within 5 frames of each seam of the training pairs
-    /// (0: the paper's loss) [default: 0].
+    /// (0: the paper's loss) [default: 4; with --paper: 0].
     #[arg(long, allow_hyphen_values = true, value_parser = seam_weight)]
     pub seam_weight: Option<f64>,
     /// Weight of our forward-kinematics term: the lower-body positions the output's rotations
@@ -63,7 +69,7 @@ pub struct RmrArgs {
     pub slide_weight: Option<f64>,
     /// Weight of our velocity term: each frame's change of the output's pose values against
     /// the ground truth's, weighted like the pose loss (so `--seam-weight` stresses the seams):
-    /// fewer pops at the seams (0: the paper's loss) [default: 0; docs/rmr.md].
+    /// fewer pops at the seams (0: the paper's loss) [default: 1; with --paper: 0; docs/rmr.md].
     #[arg(long, allow_hyphen_values = true, value_parser = seam_weight)]
     pub velocity_weight: Option<f64>,
     /// Units of each recurrent layer, per direction [default: the preset's; paper: 256].
@@ -95,7 +101,7 @@ pub fn run(a: RmrArgs) -> anyhow::Result<()> {
         t_begin: a.t_begin,
         no_trajectory_loss: a.no_trajectory_loss,
         no_residual: a.no_residual,
-        pre_blend: a.pre_blend,
+        paper: a.paper && !a.pre_blend,
         seam_weight: a.seam_weight,
         fk_weight: a.fk_weight,
         slide_weight: a.slide_weight,
