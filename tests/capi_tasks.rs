@@ -213,6 +213,8 @@ fn model_calls() -> Vec<Call> {
             zoo_stitch_info(m, &mut ZooStitchInfo::default())
         }),
         call("zoo_stitch_set_window", "zoo_stitch_*", Stitch, |m| unsafe { zoo_stitch_set_window(m, 30, 15) }),
+        call("zoo_stitch_pre_blend", "zoo_stitch_*", Stitch, |m| unsafe { zoo_stitch_pre_blend(m, &mut false) }),
+        call("zoo_stitch_set_seam_guard", "zoo_stitch_*", Stitch, |m| unsafe { zoo_stitch_set_seam_guard(m, true) }),
         call("zoo_stitch_refine", "zoo_stitch_*", Stitch, |m| unsafe {
             let roots = [ZooRootMotion::default(); 2];
             let rotations = [0.0f32; 8];
@@ -1276,6 +1278,12 @@ fn stitching_through_the_c_abi_matches_the_rust_api() {
         let mut info = ZooStitchInfo::default();
         assert_ok(zoo_stitch_info(model, &mut info));
         assert_eq!(info, ZooStitchInfo { window: 30, stride: 15, blend_frames: 10, latency: 29 });
+        // The fixture refines the raw concatenation (its file's `stitch.pre_blend` is false).
+        let mut pre_blend = true;
+        assert_ok(zoo_stitch_pre_blend(model, &mut pre_blend));
+        assert_eq!(pre_blend, refiner.pre_blend());
+        assert!(!pre_blend);
+        assert_error(zoo_stitch_pre_blend(model, null_mut()), ZooStatus::NullPointer, "`out` is NULL");
         let mut common = ZooModelInfo::default();
         assert_ok(zoo_model_info(model, &mut common));
         assert_eq!((common.task, common.joints, common.fps), (ZooTask::Stitch, 21, 30.0));
@@ -1373,7 +1381,20 @@ fn stitching_at_seams_through_the_c_abi_matches_the_rust_api() {
             "zoo_stitch_stream_mark_seam: the stream is finished",
         );
         assert_error(zoo_stitch_stream_mark_seam(null_mut()), ZooStatus::NullPointer, "`stream` is NULL");
+        // The seam guard is switched while no stream lives: off, the Rust API's unguarded poses.
+        let status = zoo_stitch_set_seam_guard(model, false);
+        assert_error(
+            status,
+            ZooStatus::InvalidState,
+            "free them (zoo_stitch_stream_free) before switching the seam guard",
+        );
         zoo_stitch_stream_free(stream);
+        assert_ok(zoo_stitch_set_seam_guard(model, false));
+        assert_ok(call(&mut out, seams.as_ptr(), seams.len()));
+        let mut unguarded = refiner.clone();
+        unguarded.set_seam_guard(false);
+        assert!(out.frames(k) == rust_refine_at(&unguarded, &poses, &seams, cleanup), "the C ABI's guard is off");
+        assert_error(zoo_stitch_set_seam_guard(null_mut(), true), ZooStatus::NullPointer, "`model` is NULL");
         zoo_model_free(model);
     }
 }

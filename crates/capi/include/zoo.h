@@ -501,6 +501,25 @@ enum ZooStatus zoo_stitch_info(const struct ZooModel *model, struct ZooStitchInf
 // `model` is NULL or a live model used by no other thread during the call.
 enum ZooStatus zoo_stitch_set_window(struct ZooModel *model, size_t window, size_t stride);
 
+// Writes into `*out` whether the model was trained on clips inertialized at their seams
+// (`zoo train rmr`'s default since 2026-11-28; the file's `stitch.pre_blend`): refine such a
+// model's sequences with [`zoo_stitch_refine_at_seams`] and mark a stream's seams
+// ([`zoo_stitch_stream_mark_seam`]), as `zoo stitch` does. Thread-safe.
+//
+// # Safety
+// `model` is NULL or a live model; `out` is NULL or valid for a write.
+enum ZooStatus zoo_stitch_pre_blend(const struct ZooModel *model, bool *out);
+
+// Switches the seam guard of [`zoo_stitch_refine_at_seams`] on (the default, as `zoo stitch`)
+// or off: where the refined motion, after the ankle IK, moves a joint faster within 5 frames
+// of a seam than the inertialized input does there, it is blended towards itself smoothed until
+// it does not, before the foot lock. Not thread-safe, as [`zoo_stitch_set_window`]: no other
+// thread may use the model during the call, and streams made from it must be freed first.
+//
+// # Safety
+// `model` is NULL or a live model used by no other thread during the call.
+enum ZooStatus zoo_stitch_set_seam_guard(struct ZooModel *model, bool on);
+
 // Refines a whole aligned sequence of `frames` poses (`roots` holds `frames` roots, `rotations`
 // `frames * 4K` floats; at least `window` frames) into `out_roots` / `out_rotations` (the same
 // sizes, root deltas filled, zero on the first frame) and the predicted contacts into
@@ -528,7 +547,9 @@ enum ZooStatus zoo_stitch_refine(const struct ZooModel *model,
 // [`zoo_stitch_refine`] of the sequence inertialized at `seams` first (`seams_len` frame
 // indices where a clip starts, each below `frames`): from each seam on, the jump to the
 // previous clip decays over `blend_frames` frames before the refiner runs (`zoo stitch
-// --pre-blend`). Seams on frames 0, 1 and the last change nothing. Thread-safe.
+// --pre-blend`; what a model trained on inertialized seams needs: [`zoo_stitch_pre_blend`]).
+// Seams on frames 0, 1 and the last change nothing. With seams given, the seams are also
+// guarded against pops after the ankle IK ([`zoo_stitch_set_seam_guard`]). Thread-safe.
 //
 // # Safety
 // `model` is NULL or a live model; each buffer is NULL or holds its given length.

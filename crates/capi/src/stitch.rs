@@ -82,6 +82,46 @@ pub unsafe extern "C" fn zoo_stitch_set_window(model: *mut ZooModel, window: usi
     })
 }
 
+/// Writes into `*out` whether the model was trained on clips inertialized at their seams
+/// (`zoo train rmr`'s default since 2026-11-28; the file's `stitch.pre_blend`): refine such a
+/// model's sequences with [`zoo_stitch_refine_at_seams`] and mark a stream's seams
+/// ([`zoo_stitch_stream_mark_seam`]), as `zoo stitch` does. Thread-safe.
+///
+/// # Safety
+/// `model` is NULL or a live model; `out` is NULL or valid for a write.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_stitch_pre_blend(model: *const ZooModel, out: *mut bool) -> ZooStatus {
+    guard("zoo_stitch_pre_blend", || {
+        let r = unsafe { self::model(model) }?.stitch()?;
+        unsafe { write_out(out, r.pre_blend(), "out") }
+    })
+}
+
+/// Switches the seam guard of [`zoo_stitch_refine_at_seams`] on (the default, as `zoo stitch`)
+/// or off: where the refined motion, after the ankle IK, moves a joint faster within 5 frames
+/// of a seam than the inertialized input does there, it is blended towards itself smoothed until
+/// it does not, before the foot lock. Not thread-safe, as [`zoo_stitch_set_window`]: no other
+/// thread may use the model during the call, and streams made from it must be freed first.
+///
+/// # Safety
+/// `model` is NULL or a live model used by no other thread during the call.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_stitch_set_seam_guard(model: *mut ZooModel, on: bool) -> ZooStatus {
+    guard("zoo_stitch_set_seam_guard", || {
+        let m = unsafe { handle_mut(model, "model") }?.stitch_mut()?;
+        let refiner = Arc::get_mut(m).ok_or_else(|| {
+            (
+                ZooStatus::InvalidState,
+                "streams made from this model are alive; free them (zoo_stitch_stream_free) before switching the seam \
+                 guard"
+                    .to_string(),
+            )
+        })?;
+        refiner.set_seam_guard(on);
+        Ok(())
+    })
+}
+
 /// Refines a whole aligned sequence of `frames` poses (`roots` holds `frames` roots, `rotations`
 /// `frames * 4K` floats; at least `window` frames) into `out_roots` / `out_rotations` (the same
 /// sizes, root deltas filled, zero on the first frame) and the predicted contacts into
@@ -116,7 +156,9 @@ pub unsafe extern "C" fn zoo_stitch_refine(
 /// [`zoo_stitch_refine`] of the sequence inertialized at `seams` first (`seams_len` frame
 /// indices where a clip starts, each below `frames`): from each seam on, the jump to the
 /// previous clip decays over `blend_frames` frames before the refiner runs (`zoo stitch
-/// --pre-blend`). Seams on frames 0, 1 and the last change nothing. Thread-safe.
+/// --pre-blend`; what a model trained on inertialized seams needs: [`zoo_stitch_pre_blend`]).
+/// Seams on frames 0, 1 and the last change nothing. With seams given, the seams are also
+/// guarded against pops after the ankle IK ([`zoo_stitch_set_seam_guard`]). Thread-safe.
 ///
 /// # Safety
 /// `model` is NULL or a live model; each buffer is NULL or holds its given length.

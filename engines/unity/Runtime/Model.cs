@@ -208,6 +208,22 @@ namespace Zoo
             }
         }
 
+        /// <summary>Whether a stitching model was trained on clips inertialized at their seams (<c>zoo_stitch_pre_blend</c>; <c>zoo train rmr</c>'s default): refine its sequences with <see cref="StitchRefineAtSeams"/> and mark a stream's seams, as <c>zoo stitch</c> does.</summary>
+        public bool StitchPreBlend
+        {
+            get
+            {
+                bool e = false;
+                try
+                {
+                    bool b = false;
+                    Errors.Check(ZooNative.zoo_stitch_pre_blend((Native.ZooModel*)Enter(this, ref e), &b), this);
+                    return b;
+                }
+                finally { Exit(this, e); }
+            }
+        }
+
         /// <summary>What a synthesis model expects (<c>zoo_synthesis_info</c>).</summary>
         public ZooSynthesisInfo SynthesisInfo
         {
@@ -229,6 +245,14 @@ namespace Zoo
         {
             bool e = false;
             try { Errors.Check(ZooNative.zoo_stitch_set_window((Native.ZooModel*)Enter(this, ref e), Size.Of(window), Size.Of(stride)), this); }
+            finally { Exit(this, e); }
+        }
+
+        /// <summary>Switches the seam guard of <see cref="StitchRefineAtSeams"/> on (the default, as <c>zoo stitch</c>) or off (<c>zoo_stitch_set_seam_guard</c>). Not thread-safe: no other thread may use the model meanwhile, and its streams must be disposed first.</summary>
+        public void SetStitchSeamGuard(bool on)
+        {
+            bool e = false;
+            try { Errors.Check(ZooNative.zoo_stitch_set_seam_guard((Native.ZooModel*)Enter(this, ref e), on), this); }
             finally { Exit(this, e); }
         }
 

@@ -319,6 +319,7 @@ namespace Zoo.Tests
                 values += 2 * (outRoots.Length * 14 + outRotations.Length);
             }
             Expect(rmr.JointNames().SequenceEqual(v.S("st.names")), "stitch joint names");
+            Expect(!rmr.StitchPreBlend, "the tiny stitching model refines the raw concatenation (stitch.pre_blend false)");
             Console.WriteLine("parity stitch: worst=" + worst.ToString("G3") + " values=" + values + " (whole sequence of " + frames + " frames with ankles and foot lock, and the stream; latency " + rmr.StitchInfo.LatencyFrames + ")");
         }
 

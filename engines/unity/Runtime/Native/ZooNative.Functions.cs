@@ -320,6 +320,33 @@ namespace Zoo.Native
         public static extern ZooStatus zoo_stitch_set_window(ZooModel* model, UIntPtr window, UIntPtr stride);
 
         /// <summary>
+        /// Writes into <c>*out</c> whether the model was trained on clips inertialized at their seams
+        /// (<c>zoo train rmr</c>'s default since 2026-11-28; the file's <c>stitch.pre_blend</c>): refine such a
+        /// model's sequences with <c>zoo_stitch_refine_at_seams</c> and mark a stream's seams
+        /// (<c>zoo_stitch_stream_mark_seam</c>), as <c>zoo stitch</c> does. Thread-safe.
+        /// </summary>
+        /// <remarks>
+        /// Safety:
+        /// <c>model</c> is NULL or a live model; <c>out</c> is NULL or valid for a write.
+        /// </remarks>
+        [DllImport(Library, EntryPoint = "zoo_stitch_pre_blend", CallingConvention = CallingConvention.Cdecl, ExactSpelling = true)]
+        public static extern ZooStatus zoo_stitch_pre_blend(ZooModel* model, bool* @out);
+
+        /// <summary>
+        /// Switches the seam guard of <c>zoo_stitch_refine_at_seams</c> on (the default, as <c>zoo stitch</c>)
+        /// or off: where the refined motion, after the ankle IK, moves a joint faster within 5 frames
+        /// of a seam than the inertialized input does there, it is blended towards itself smoothed until
+        /// it does not, before the foot lock. Not thread-safe, as <c>zoo_stitch_set_window</c>: no other
+        /// thread may use the model during the call, and streams made from it must be freed first.
+        /// </summary>
+        /// <remarks>
+        /// Safety:
+        /// <c>model</c> is NULL or a live model used by no other thread during the call.
+        /// </remarks>
+        [DllImport(Library, EntryPoint = "zoo_stitch_set_seam_guard", CallingConvention = CallingConvention.Cdecl, ExactSpelling = true)]
+        public static extern ZooStatus zoo_stitch_set_seam_guard(ZooModel* model, [MarshalAs(UnmanagedType.U1)] bool on);
+
+        /// <summary>
         /// Refines a whole aligned sequence of <c>frames</c> poses (<c>roots</c> holds <c>frames</c> roots, <c>rotations</c>
         /// <c>frames * 4K</c> floats; at least <c>window</c> frames) into <c>out_roots</c> / <c>out_rotations</c> (the same
         /// sizes, root deltas filled, zero on the first frame) and the predicted contacts into
@@ -339,7 +366,9 @@ namespace Zoo.Native
         /// <c>zoo_stitch_refine</c> of the sequence inertialized at <c>seams</c> first (<c>seams_len</c> frame
         /// indices where a clip starts, each below <c>frames</c>): from each seam on, the jump to the
         /// previous clip decays over <c>blend_frames</c> frames before the refiner runs (`zoo stitch
-        /// --pre-blend`). Seams on frames 0, 1 and the last change nothing. Thread-safe.
+        /// --pre-blend`; what a model trained on inertialized seams needs: <c>zoo_stitch_pre_blend</c>).
+        /// Seams on frames 0, 1 and the last change nothing. With seams given, the seams are also
+        /// guarded against pops after the ankle IK (<c>zoo_stitch_set_seam_guard</c>). Thread-safe.
         /// </summary>
         /// <remarks>
         /// Safety:
