@@ -483,9 +483,9 @@ fn every_task_loads_runs_and_is_refused_by_the_other_families() {
             refusals += 1;
         }
     }
-    // 17 functions: 4 transition, 2 keyframes, 4 stitch, 5 synthesis, 2 control.
-    assert_eq!(calls.len(), 17);
-    assert_eq!(refusals, 13 + 15 + 13 + 2 * 10, "every other family's functions were called on every model");
+    // 19 functions: 4 transition, 2 keyframes, 6 stitch, 5 synthesis, 2 control.
+    assert_eq!(calls.len(), 19);
+    assert_eq!(refusals, 15 + 17 + 13 + 2 * 12, "every other family's functions were called on every model");
 }
 
 /// `zoo_synthesis_set_refine` on a file with a refiner: runners and characters made after
