@@ -488,6 +488,18 @@ fn stitch_stream_matches_the_whole_sequence_with_fixed_latency() {
     }
 }
 
+/// The BGRU fixture with statistics of 100 aligned frames (two synthetic clips), those frames
+/// as engine poses and as a clip, and its exported refiner.
+fn seam_fixture() -> (Fixture, Vec<zoo_runtime::EnginePose>, zoo_motion::Clip, zoo_runtime::StitchRefiner) {
+    let mut f = fixture(RefinerCell::Bgru);
+    let (poses, clip) = aligned_poses(100);
+    let offline_x = zoo_rmr::features::encode_clip(&clip, &f.config.layout).unwrap();
+    f.stats = FeatureStats::fit([offline_x.as_slice()], zoo_rmr::features::FeatureLayout::new(21, 9));
+    let bytes = export_rmr(&f.config, &f.stats, &f.varmap).unwrap().to_bytes();
+    let refiner = zoo_runtime::StitchRefiner::from_bytes(&bytes).unwrap();
+    (f, poses, clip, refiner)
+}
+
 /// `zoo stitch --pre-blend`: the runtime inertializes the seams it is given before refining,
 /// as the offline tools do, in the whole-sequence form and in the stream (`mark_seam`). The
 /// seams: the real one at frame 60 where the second clip starts, two adjacent ones and one
@@ -495,14 +507,9 @@ fn stitch_stream_matches_the_whole_sequence_with_fixed_latency() {
 #[test]
 fn runtime_inertializes_the_seams_like_zoo_stitch_pre_blend() {
     use zoo_rmr::stitch::{PostProcess, RefineOptions, refine_seams};
+    use zoo_runtime::EnginePose;
     use zoo_runtime::stitch::FootCleanup;
-    use zoo_runtime::{EnginePose, StitchRefiner};
-    let mut f = fixture(RefinerCell::Bgru);
-    let (poses, clip) = aligned_poses(100);
-    let offline_x = zoo_rmr::features::encode_clip(&clip, &f.config.layout).unwrap();
-    f.stats = FeatureStats::fit([offline_x.as_slice()], zoo_rmr::features::FeatureLayout::new(21, 9));
-    let mut refiner =
-        StitchRefiner::from_bytes(&export_rmr(&f.config, &f.stats, &f.varmap).unwrap().to_bytes()).unwrap();
+    let (f, poses, clip, mut refiner) = seam_fixture();
     // The refiner alone here (the stream has no guard); the guard's parity is the next test's.
     assert!(refiner.seam_guard(), "the guard is on by default, as in `zoo stitch`");
     refiner.set_seam_guard(false);
@@ -568,14 +575,9 @@ fn runtime_inertializes_the_seams_like_zoo_stitch_pre_blend() {
 #[test]
 fn runtime_guards_the_seams_like_zoo_stitch() {
     use zoo_rmr::stitch::{PostProcess, RefineOptions, refine_seams};
+    use zoo_runtime::EnginePose;
     use zoo_runtime::stitch::FootCleanup;
-    use zoo_runtime::{EnginePose, StitchRefiner};
-    let mut f = fixture(RefinerCell::Bgru);
-    let (poses, clip) = aligned_poses(100);
-    let offline_x = zoo_rmr::features::encode_clip(&clip, &f.config.layout).unwrap();
-    f.stats = FeatureStats::fit([offline_x.as_slice()], zoo_rmr::features::FeatureLayout::new(21, 9));
-    let mut refiner =
-        StitchRefiner::from_bytes(&export_rmr(&f.config, &f.stats, &f.varmap).unwrap().to_bytes()).unwrap();
+    let (f, poses, clip, mut refiner) = seam_fixture();
     let seams = [30, 60];
     let post = PostProcess { ankle_ik: true, foot_lock: true, pre_blend: true, seam_guard: true };
     let want = refine_seams(&f.model, &f.stats, &clip, &seams, RefineOptions::of(&f.config), post).unwrap();
