@@ -440,6 +440,16 @@ impl StitchRefiner {
         seams: &[usize],
         out: &mut [f32],
     ) -> Result<(), MotionError> {
+        self.encode_frames_at_seams(poses, seams, out).map(|_| ())
+    }
+
+    /// [`StitchRefiner::encode_poses_at_seams`], returning the inertialized frames it encoded.
+    fn encode_frames_at_seams(
+        &self,
+        poses: &[EnginePose],
+        seams: &[usize],
+        out: &mut [f32],
+    ) -> Result<Vec<PoseFrame>, MotionError> {
         if poses.len() < 2 {
             return Err(stitch_err(format!(
                 "{} pose(s): a sequence needs at least 2 frames (the root motion is a difference of frames)",
@@ -458,7 +468,7 @@ impl StitchRefiner {
         }
         let frames = self.inertialized_frames(poses, seams)?;
         zoo_motion::stitch::encode_frames(&self.layout, &frames, out);
-        Ok(())
+        Ok(frames)
     }
 
     /// The frames of `poses` inertialized at `seams` (checked, as the encoder reads them).
@@ -530,12 +540,9 @@ impl StitchRefiner {
         }
         let d = self.dim;
         let mut x = vec![0.0f32; frames * d];
-        self.encode_poses_at_seams(input, seams, &mut x)?;
+        let inertialized = self.encode_frames_at_seams(input, seams, &mut x)?;
         // The guard's reference: the input inertialized at the seams, as a clip.
-        let reference = (self.seam_guard && !seams.is_empty() && frames >= 2)
-            .then(|| self.inertialized_frames(input, seams))
-            .transpose()?
-            .map(|inert| self.frames_to_clip(&inert));
+        let reference = (self.seam_guard && !seams.is_empty()).then(|| self.frames_to_clip(&inertialized));
         let mut y = vec![0.0f32; x.len()];
         self.refine_sequence(&x, &mut y)?;
         let mut rotations = Vec::with_capacity(self.joints);
