@@ -13,4 +13,6 @@ if ! command -v mcs >/dev/null && command -v apt-get >/dev/null && [ "$(id -u)" 
 fi
 # The CLI tests in tests/ run the `zoo` binary itself.
 cargo build --workspace --bins
-cargo test --workspace --all-targets "$@"
+# --no-fail-fast: every test binary runs even when one fails (the command still ends non-zero),
+# so one failing test never hides the others.
+cargo test --workspace --all-targets --no-fail-fast "$@"

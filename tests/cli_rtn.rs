@@ -207,6 +207,7 @@ fn train_resume_transition_and_decompress() {
     let (ok, stdout, stderr) =
         run(&["bench", "runtime", "--model", onnx, "--rounds", "1", "--work", "8", "--batch", "1,4"]);
     assert!(ok, "{stdout}\n{stderr}");
+    assert!(!stdout.contains("note:"), "every backend agrees with tract f32 on the first step:\n{stdout}");
     for backend in ["candle", "tract", "onnxruntime"] {
         let rows = stdout.lines().filter(|l| l.split_whitespace().nth(1) == Some(backend)).count();
         assert_eq!(rows, 2, "one row per batch size for {backend}:\n{stdout}");
@@ -796,6 +797,7 @@ fn terrain_run_trains_transitions_and_exports_for_the_runtime() {
     let (ok, stdout, stderr) =
         run(&["bench", "runtime", "--model", onnx.to_str().unwrap(), "--rounds", "1", "--work", "2", "--batch", "1"]);
     assert!(ok && stdout.lines().any(|l| l.split_whitespace().nth(1) == Some("candle")), "{stdout}\n{stderr}");
+    assert!(stdout.contains("from tract f32") && !stdout.contains("note:"), "the backends agree:\n{stdout}");
     let map = zoo_data::terrain::read(&heightmap).unwrap();
     let c = zoo_data::bvh::read_model_clip(&clip).unwrap();
     let (_, gp) = c.global();

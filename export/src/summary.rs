@@ -57,7 +57,7 @@ pub fn summarize(proto: &pb::ModelProto) -> GraphSummary {
         *op_counts.entry(n.op_type.clone()).or_insert(0) += 1;
     }
     use pb::tensor_proto::DataType;
-    let widths = [DataType::Float as i32, DataType::Float16 as i32, DataType::Int8 as i32];
+    let widths = [DataType::Float as i32, DataType::Float16 as i32, DataType::Int8 as i32, DataType::Uint8 as i32];
     let int8 = |name: &str| graph.initializer.iter().any(|t| t.name == format!("{name}.int8"));
     let parameters = graph
         .initializer

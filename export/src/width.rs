@@ -12,15 +12,19 @@
 //! - `f16`: weight `N` becomes the half-float initializer `N.f16` and a `Cast` node whose
 //!   output is `N`: the runtimes widen it once when they load the model (same speed as f32,
 //!   half the bytes on disk).
-//! - `int8`: weight `N` becomes the signed-byte initializer `N.int8` (same layout) and the f32
+//! - `int8`: weight `N` becomes the 8-bit initializer `N.int8` (same layout) and the f32
 //!   scales `N.scale`, one per output channel (symmetric: `w = q * scale`, `q` in -127..=127).
-//!   A `Gemm`/`MatMul` that uses it runs as a symmetric int8 quantization of its input (one
-//!   scale per call over the whole input tensor, `max|x| / 127`, in elementwise ops),
-//!   `MatMulInteger`, a `Cast` to f32 and a `Mul` by the input scale times the channel scales
-//!   (then the `Gemm`'s bias).
-//!   The recurrent ops' `W`/`R` are widened by `DequantizeLinear` (per channel, axis 1) and
-//!   run in f32. Dynamic quantization is per tensor: at batch > 1 one character's activations
-//!   set the input scale of every character of the call.
+//!   A `Gemm`/`MatMul` that uses it runs as a symmetric 8-bit quantization of each row of its
+//!   input (one scale per character, `max|x| / 127` over the row, in elementwise ops),
+//!   `MatMulInteger`, a `Cast` to f32, a `Mul` by the channel scales and one by the row's scale
+//!   (then the `Gemm`'s bias). Both operands of `MatMulInteger` are u8 with zero point 128
+//!   (the weights stored as `q + 128`): x86 CPUs without VNNI (AVX2, AVX-512 without VNNI)
+//!   multiply u8 by s8 in pairs summed in saturating 16-bit lanes, which 8-bit weights
+//!   overflow (`255 * 127 * 2 > 32767`), while u8 x u8 products are widened to 32 bits first;
+//!   so every backend computes the same integers on every x86 class, at full 8-bit precision.
+//!   The recurrent ops' `W`/`R` are stored as i8 and widened by `DequantizeLinear` (per
+//!   channel, axis 1) to run in f32. Each character is quantized on its own: its outputs do not
+//!   depend on the other characters of its call.
 
 use crate::error::ExportError;
 use crate::model::OnnxModel;
@@ -141,8 +145,12 @@ fn weights(graph: &pb::GraphProto) -> HashMap<String, (Use, usize)> {
     out
 }
 
-/// Per-channel symmetric int8 quantization of `values` of shape `dims` along `axis`:
-/// `(q, scales)` with `values ≈ q * scale[channel]`.
+/// The zero point of both operands of an integer product: activations and weights are u8,
+/// `128 + q` for `q` in -127..=127.
+pub const ZERO_POINT: u8 = 128;
+
+/// Per-channel symmetric int8 quantization of `values` of shape `dims` along `axis`, `q` in
+/// -127..=127: `(q, scales)` with `values ≈ q * scale[channel]`.
 pub fn quantize_per_channel(values: &[f32], dims: &[usize], axis: usize) -> (Vec<i8>, Vec<f32>) {
     let channels = dims[axis];
     let inner: usize = dims[axis + 1..].iter().product();
@@ -151,11 +159,12 @@ pub fn quantize_per_channel(values: &[f32], dims: &[usize], axis: usize) -> (Vec
     for (i, v) in values.iter().enumerate() {
         max[channel(i)] = max[channel(i)].max(v.abs());
     }
-    let scales: Vec<f32> = max.iter().map(|m| if *m > 0.0 { m / 127.0 } else { 1.0 }).collect();
+    let q_max = 127.0;
+    let scales: Vec<f32> = max.iter().map(|m| if *m > 0.0 { m / q_max } else { 1.0 }).collect();
     let q = values
         .iter()
         .enumerate()
-        .map(|(i, v)| (v / scales[channel(i)]).round_ties_even().clamp(-127.0, 127.0) as i8)
+        .map(|(i, v)| (v / scales[channel(i)]).round_ties_even().clamp(-q_max, q_max) as i8)
         .collect();
     (q, scales)
 }
@@ -182,21 +191,25 @@ fn node(
 }
 
 /// The nodes that compute `Gemm`/`MatMul` `consumer` with its int8 weight `q` (`[in, out]`)
-/// and channel scales `scale`. The input is quantized per call, symmetrically:
-/// `s = max|x| / 127` (at least [`MIN_INPUT_SCALE`]), `x / s` in -127..=127 rounded half up
+/// and channel scales `scale`. Each row of the input (one character) is quantized on its own,
+/// symmetrically: `s = max|x| / 127` over the row (at least [`MIN_INPUT_SCALE`]), `x / s` in
+/// -127..=127 rounded half up
 /// and stored as u8 with zero point 128: `Cast(x / s + 128.5)` (`Cast` to an integer
 /// truncates, and the value lies in 1.5..=255.5, so no `Round` and no `Clip` are needed), in
 /// elementwise ops rather than `DynamicQuantizeLinear`: tract 0.23.9 runs that op element by
 /// element in scalar code, slower than the whole integer product it feeds at batch 64
-/// (docs/runtime.md). The input scale is a true scalar (`keepdims = 0`): onnxruntime 1.31's
-/// `MatMulIntegerToFloat` fusion computes wrong products (0.15 off here) with a `[1, 1]` one.
+/// (docs/runtime.md). The row scales keep the reduced axis (`[.., rows, 1]`), so they
+/// broadcast over the output channels. The channel scales multiply first and the row scales
+/// after: onnxruntime 1.31 fuses `MatMulInteger`, `Cast` and a `Mul` by the product of the
+/// two scales into `MatMulIntegerToFloat`, which takes one input scale per call and reads a
+/// per-row one wrong (0.4 off in normalized units on the test fixture's RTN).
 fn integer_matmul(consumer: &pb::NodeProto, q: &str, scale: &str, shared: &SharedConstants) -> Vec<pb::NodeProto> {
     let p = &consumer.name;
     let out = &consumer.output[0];
     let v = |suffix: &str| format!("{p}.int8_{suffix}");
     let scaled = if consumer.op_type == "Gemm" && consumer.input.len() > 2 { v("scaled") } else { out.clone() };
     let x = consumer.input[0].as_str();
-    let reduce = vec![attr_int("keepdims", 0)];
+    let reduce = vec![attr_int("keepdims", 1), attr_ints("axes", &[-1])];
     let to = |dt: DataType| vec![attr_int("to", dt as i64)];
     let mut nodes = vec![
         node("Abs", v("input_abs"), &[x], &[&v("input_abs")], vec![]),
@@ -209,13 +222,13 @@ fn integer_matmul(consumer: &pb::NodeProto, q: &str, scale: &str, shared: &Share
         node(
             "MatMulInteger",
             v("matmul_integer"),
-            &[&v("input_q"), q, &shared.zero_point],
+            &[&v("input_q"), q, &shared.zero_point, &shared.zero_point],
             &[&v("accumulated")],
             vec![],
         ),
         node("Cast", v("to_f32"), &[&v("accumulated")], &[&v("accumulated_f32")], to(DataType::Float)),
-        node("Mul", v("int8_scales"), &[&v("input_scale"), scale], &[&v("int8_scales")], vec![]),
-        node("Mul", v("rescale"), &[&v("accumulated_f32"), &v("int8_scales")], &[&scaled], vec![]),
+        node("Mul", v("channels"), &[&v("accumulated_f32"), scale], &[&v("channels")], vec![]),
+        node("Mul", v("rescale"), &[&v("channels"), &v("input_scale")], &[&scaled], vec![]),
     ];
     if scaled != *out {
         // `use_of` takes only Gemms with alpha and beta 1: the bias is added as it is.
@@ -238,7 +251,8 @@ struct SharedConstants {
     q_max: String,
     /// 128.5: the zero point plus the half that turns `Cast`'s truncation into rounding.
     offset: String,
-    /// 128, the activations' zero point (`MatMulInteger`'s `a_zero_point`, u8).
+    /// 128, the zero point of the activations and of the weights (`MatMulInteger`'s
+    /// `a_zero_point` and `b_zero_point`, u8).
     zero_point: String,
     min_scale: String,
 }
@@ -255,7 +269,7 @@ impl SharedConstants {
         for (name, v) in floats {
             graph.initializer.push(tensor(name.clone(), &[], DataType::Float, v.to_le_bytes().to_vec()));
         }
-        graph.initializer.push(tensor(c.zero_point.clone(), &[], DataType::Uint8, vec![128]));
+        graph.initializer.push(tensor(c.zero_point.clone(), &[], DataType::Uint8, vec![ZERO_POINT]));
         c
     }
 }
@@ -289,12 +303,13 @@ fn rewrite_graph(graph: &pb::GraphProto, width: WeightWidth) -> Result<pb::Graph
                 let axis = u.axis(dims.len());
                 let (q, scales) = quantize_per_channel(&values, &dims, axis);
                 let (qn, sn) = (format!("{name}.int8"), format!("{name}.scale"));
-                out.initializer.push(tensor(
-                    qn.clone(),
-                    &init.dims,
-                    DataType::Int8,
-                    q.iter().map(|v| *v as u8).collect(),
-                ));
+                // Recurrent weights as i8 for `DequantizeLinear`, the integer products' as u8
+                // with zero point 128 (see the module documentation).
+                let (data_type, bytes): (DataType, Vec<u8>) = match u {
+                    Use::Recurrent => (DataType::Int8, q.iter().map(|v| *v as u8).collect()),
+                    _ => (DataType::Uint8, q.iter().map(|v| (i16::from(*v) + i16::from(ZERO_POINT)) as u8).collect()),
+                };
+                out.initializer.push(tensor(qn.clone(), &init.dims, data_type, bytes));
                 let scale_raw = scales.iter().flat_map(|v| v.to_le_bytes()).collect();
                 out.initializer.push(tensor(sn.clone(), &[scales.len() as i64], DataType::Float, scale_raw));
                 let c = &graph.node[consumer];
@@ -348,7 +363,7 @@ fn rewrite_graph(graph: &pb::GraphProto, width: WeightWidth) -> Result<pb::Graph
 
 /// The f32 values of every weight of `graph` by its name, in its original layout, whatever
 /// the width it is stored in (the inverse of [`with_weights`] up to rounding): f32
-/// initializers as they are, `N.f16` widened, `N.int8` times `N.scale`. What tools that
+/// initializers as they are, `N.f16` widened, `N.int8` (i8, or u8 less 128) times `N.scale`. What tools that
 /// rebuild the model elsewhere (candle in `zoo bench runtime`) read.
 pub fn weight_values(graph: &pb::GraphProto) -> Result<HashMap<String, (Vec<usize>, Vec<f32>)>, ExportError> {
     let bad = |name: &str, why: &str| ExportError::model(format!("initializer `{name}`: {why}"));
@@ -376,7 +391,9 @@ pub fn weight_values(graph: &pb::GraphProto) -> Result<HashMap<String, (Vec<usiz
                 return Err(bad(&t.name, "its scales do not match its channels"));
             }
             let inner: usize = dims[axis + 1..].iter().product();
-            let v = t.raw_data.iter().enumerate().map(|(i, q)| *q as i8 as f32 * scale[(i / inner) % scale.len()]);
+            let unsigned = t.data_type == DataType::Uint8 as i32;
+            let q = |b: u8| if unsigned { f32::from(b) - f32::from(ZERO_POINT) } else { f32::from(b as i8) };
+            let v = t.raw_data.iter().enumerate().map(|(i, b)| q(*b) * scale[(i / inner) % scale.len()]);
             (base.to_string(), v.collect())
         } else if let Some(v) = f32_values(t) {
             (t.name.clone(), v)
@@ -467,6 +484,18 @@ mod tests {
         let int8 = with_weights(&f32_model, WeightWidth::Int8).unwrap();
         assert_eq!(int8.summary().op_counts["MatMulInteger"], 2, "both linear layers run in integers");
         assert_eq!(int8.summary().op_counts["MatMul"], 1, "the 0/1 selector stays an exact f32 MatMul");
+        let graph = int8.proto().graph.as_ref().unwrap();
+        let bytes = graph.initializer.iter().find(|t| t.name == "l0.weight.int8").unwrap();
+        assert_eq!(bytes.data_type, DataType::Uint8 as i32, "the integer products' weights are u8");
+        assert_eq!(bytes.raw_data[1], 128 - 127, "-1.0, the channel's largest magnitude, is 128 - 127");
+        for n in graph.node.iter().filter(|n| n.op_type == "MatMulInteger") {
+            assert_eq!(n.input.len(), 4, "both zero points given: {:?}", n.input);
+            assert_eq!(n.input[2], n.input[3], "activations and weights share zero point 128");
+        }
+        let reduce = graph.node.iter().find(|n| n.op_type == "ReduceMax").unwrap();
+        let keep = reduce.attribute.iter().find(|a| a.name == "keepdims").map(|a| a.i);
+        let axes = reduce.attribute.iter().find(|a| a.name == "axes").map(|a| a.ints.clone());
+        assert_eq!((keep, axes), (Some(1), Some(vec![-1])), "one activation scale per row");
         let f16 = with_weights(&f32_model, WeightWidth::F16).unwrap();
         assert_eq!(f16.summary().op_counts["Cast"], 2);
         let half = f16.proto().graph.as_ref().unwrap().initializer.iter().find(|t| t.name == "l0.weight.f16").unwrap();

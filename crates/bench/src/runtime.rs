@@ -334,32 +334,38 @@ fn files_at_widths(o: &RuntimeOptions, bytes: &[u8]) -> Result<Vec<(WeightWidth,
     o.widths.iter().map(|w| Ok((*w, at(*w)?.to_bytes()))).collect()
 }
 
-/// The CPU features that decide which matrix kernels tract and onnxruntime pick, as found in
-/// `/proc/cpuinfo` (Linux; `None` elsewhere).
+/// The CPU features that decide which matrix kernels tract and onnxruntime pick (x86-64;
+/// `None` elsewhere).
 pub fn cpu_features() -> Option<String> {
-    const FLAGS: [(&str, &str); 11] = [
-        ("avx2", "AVX2"),
-        ("fma", "FMA"),
-        ("f16c", "F16C"),
-        ("avx512f", "AVX-512F"),
-        ("avx512bw", "AVX-512BW"),
-        ("avx512_vnni", "AVX-512 VNNI"),
-        ("avx_vnni", "AVX-VNNI"),
-        ("avx512_bf16", "AVX-512 BF16"),
-        ("amx_tile", "AMX"),
-        ("amx_int8", "AMX-INT8"),
-        ("amx_bf16", "AMX-BF16"),
-    ];
-    let info = std::fs::read_to_string("/proc/cpuinfo").ok()?;
-    let flags: Vec<&str> = info.lines().find(|l| l.starts_with("flags"))?.split_whitespace().collect();
-    let found = |f: &str| flags.contains(&f);
-    let have: Vec<&str> = FLAGS.iter().filter(|(f, _)| found(f)).map(|(_, n)| *n).collect();
-    let lack: Vec<&str> = FLAGS.iter().filter(|(f, _)| !found(f)).map(|(_, n)| *n).collect();
-    Some(format!(
-        "CPU features: {}; absent: {}",
-        have.join(", "),
-        if lack.is_empty() { "none".into() } else { lack.join(", ") }
-    ))
+    #[cfg(target_arch = "x86_64")]
+    {
+        // What CPUID says, as tract and onnxruntime read it when they pick their kernels (an
+        // emulated CPU included), not /proc/cpuinfo. AMX is read from CPUID leaf 7 (its
+        // feature test is unstable in std).
+        let amx = std::arch::x86_64::__cpuid_count(7, 0).edx;
+        let flags = [
+            (std::arch::is_x86_feature_detected!("avx2"), "AVX2"),
+            (std::arch::is_x86_feature_detected!("fma"), "FMA"),
+            (std::arch::is_x86_feature_detected!("f16c"), "F16C"),
+            (std::arch::is_x86_feature_detected!("avx512f"), "AVX-512F"),
+            (std::arch::is_x86_feature_detected!("avx512bw"), "AVX-512BW"),
+            (std::arch::is_x86_feature_detected!("avx512vnni"), "AVX-512 VNNI"),
+            (std::arch::is_x86_feature_detected!("avxvnni"), "AVX-VNNI"),
+            (std::arch::is_x86_feature_detected!("avx512bf16"), "AVX-512 BF16"),
+            (amx >> 24 & 1 == 1, "AMX"),
+            (amx >> 25 & 1 == 1, "AMX-INT8"),
+            (amx >> 22 & 1 == 1, "AMX-BF16"),
+        ];
+        let have: Vec<&str> = flags.iter().filter(|(f, _)| *f).map(|(_, n)| *n).collect();
+        let lack: Vec<&str> = flags.iter().filter(|(f, _)| !*f).map(|(_, n)| *n).collect();
+        Some(format!(
+            "CPU features: {}; absent: {}",
+            if have.is_empty() { "none".into() } else { have.join(", ") },
+            if lack.is_empty() { "none".into() } else { lack.join(", ") }
+        ))
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    None
 }
 
 /// The step graph through tract from the frame inputs `frame` and the initial states `states`
@@ -488,47 +494,53 @@ fn models(o: &RuntimeOptions, bytes: &[u8]) -> Result<(MotionModel, Option<Rtn>)
     })
 }
 
-/// One step of every backend from the same state and inputs: the f32 ones must agree with
-/// tract f32 (1e-3), and onnxruntime at each other width with tract at that width (the
-/// tolerance of that width: [`AGREEMENT`]). Returns the largest difference per backend.
-fn check_agreement(backends: &mut [Box<dyn StepBackend>]) -> Result<Vec<(String, f32)>> {
+/// One step of every backend from the same state and inputs, each compared with the f32
+/// reference (tract f32; tract at the file's width when f32 is not measured). Never refuses a
+/// width: the difference is reported, with a note when it is above what that width usually
+/// costs ([`USUAL_DIFFERENCE`]). Returns `(backend, largest difference, note)`.
+fn check_agreement(backends: &mut [Box<dyn StepBackend>]) -> Result<Vec<(String, f32, Option<String>)>> {
     for b in backends.iter_mut() {
         b.step().with_context(|| format!("{} step", b.name()))?;
     }
-    let width_of = |name: &str| name.split(' ').nth(1).map(str::to_string);
+    let reference = backends
+        .iter()
+        .find(|r| r.name() == "tract f32" || r.name() == "tract")
+        .or_else(|| backends.iter().find(|r| r.name().starts_with("tract")))
+        .ok_or_else(|| msg!("no tract backend"))?;
     let mut diffs = Vec::new();
-    for b in backends.iter().filter(|b| !b.output().is_empty()) {
-        let width = width_of(b.name());
-        let reference_name = match (&width, b.name().starts_with("candle")) {
-            (Some(w), false) => format!("tract {w}"),
-            (Some(_), true) | (None, _) => "tract".to_string(),
-        };
-        let reference = backends
-            .iter()
-            .find(|r| r.name() == reference_name || (width.is_none() && r.name() == "tract f32"))
-            .or_else(|| backends.iter().find(|r| r.name().starts_with("tract")))
-            .ok_or_else(|| msg!("no tract backend"))?;
-        let diff = b.output().iter().zip(reference.output()).map(|(p, q)| (p - q).abs()).fold(0.0f32, f32::max);
-        let tolerance = AGREEMENT.iter().find(|(w, _)| width.as_deref() == Some(w.name())).map_or(1e-3, |(_, t)| *t);
-        if b.output().len() != reference.output().len() || diff > tolerance {
+    for b in backends.iter().filter(|b| !b.output().is_empty() && b.name() != reference.name()) {
+        if b.output().len() != reference.output().len() {
             bail!(
-                "{} disagrees with {} on the first step (max abs diff {diff}, tolerance {tolerance}): the benchmark \
-                 would compare different computations",
+                "{} gives {} values a step and {} gives {}: they do not run the same computation",
                 b.name(),
-                reference.name()
+                b.output().len(),
+                reference.name(),
+                reference.output().len()
             );
         }
-        diffs.push((b.name().to_string(), diff));
+        let diff = b.output().iter().zip(reference.output()).map(|(p, q)| (p - q).abs()).fold(0.0f32, f32::max);
+        let width = b.name().split(' ').nth(1).unwrap_or("f32");
+        let usual = USUAL_DIFFERENCE.iter().find(|(w, _)| w.name() == width).map_or(1e-3, |(_, t)| *t);
+        let note = (!(diff <= usual)).then(|| {
+            format!(
+                "{} is {diff:.1e} from {} on the first step, more than the usual {usual:.0e} at {width}: its time is \
+                 of a computation that differs from the model's",
+                b.name(),
+                reference.name()
+            )
+        });
+        diffs.push((b.name().to_string(), diff, note));
     }
     Ok(diffs)
 }
 
-/// How far onnxruntime may be from tract on one step at each width (normalized units): f32
-/// and f16 compute in f32 in both (their kernels sum in different orders); at int8 the
-/// dynamic quantization of the activations rounds in each runtime's own way, and one step
-/// of the u8 input a value rounds to can differ.
-pub const AGREEMENT: [(WeightWidth, f32); 3] =
-    [(WeightWidth::F32, 1e-3), (WeightWidth::F16, 1e-3), (WeightWidth::Int8, 5e-2)];
+/// The largest first-step difference from the f32 reference that each width usually gives
+/// (normalized units): f32 and f16 sum in other orders (f16 also rounds the weights); int8
+/// rounds the weights and each character's activations. Measured on the README's RTN and the
+/// RNN-GMM generator on AVX2 and AVX-512 VNNI machines (docs/runtime.md); a larger one is
+/// reported, not refused.
+pub const USUAL_DIFFERENCE: [(WeightWidth, f32); 3] =
+    [(WeightWidth::F32, 1e-3), (WeightWidth::F16, 1e-2), (WeightWidth::Int8, 1e-1)];
 
 /// Times `rounds` rounds of every backend at batch `batch` (after a warm-up).
 fn time_backends(
@@ -618,11 +630,15 @@ pub fn run(o: &RuntimeOptions, p: &dyn Progress) -> Result<RuntimeReport> {
         if candle.is_none() {
             backends.push(Box::new(SynthesisBackend::new(&bytes, batch)?));
         }
-        agreement.extend(check_agreement(&mut backends)?.into_iter().map(|(b, d)| (batch, b, d)));
+        agreement.extend(check_agreement(&mut backends)?.into_iter().map(|(b, d, note)| (batch, b, d, note)));
         figures.extend(time_backends(o, &mut backends, batch, p)?);
     }
-    let agreement: Vec<String> = agreement.iter().map(|(b, n, d)| format!("{n} at batch {b}: {d:.1e}")).collect();
-    let header = format!("{header}\nfirst step, max abs difference from tract (same width): {}", agreement.join(", "));
+    let notes: Vec<&str> = agreement.iter().filter_map(|(_, _, _, note)| note.as_deref()).collect();
+    let agreement: Vec<String> = agreement.iter().map(|(b, n, d, _)| format!("{n} at batch {b}: {d:.1e}")).collect();
+    let mut header = format!("{header}\nfirst step, max abs difference from tract f32: {}", agreement.join(", "));
+    for note in notes {
+        header += &format!("\nnote: {note}");
+    }
     Ok(RuntimeReport { header, figures })
 }
 
