@@ -1,7 +1,7 @@
 """PyTorch reference for `zoo bench train --model rtn`: the paper-size RTN training step
 (K = 22 joints, D = 66, batch 32, 10 past frames, 30 transition frames + the target,
 AMSGrad lr 5e-4, teacher forcing p = 0.2 per frame), with the same layer shapes and the same
-per-frame operations as models/rtn (frame/target/offset encoders, one fused LSTM gate matmul,
+per-frame operations as offline/models/rtn (frame/target/offset encoders, one fused LSTM gate matmul,
 residual decoder, root integration, offsets recomputed in the graph, learned initial state).
 
 Prints one JSON line per thread count: windows per second (median over repeats).

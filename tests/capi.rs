@@ -1,4 +1,4 @@
-//! The C ABI's transitions (`crates/capi`, `zoo_transition_*`): the C example compiles with the
+//! The C ABI's transitions (`runtime/capi`, `zoo_transition_*`): the C example compiles with the
 //! system C compiler as C99 and with the system C++ compiler as C++17, runs a batch of characters
 //! for 300 frames and prints what the Rust API computes; every malformed call returns an error
 //! code and a readable message that names the C function. (The header is checked by the capi

@@ -1,4 +1,4 @@
-//! The C examples of `crates/capi/examples` built and run by `tests/capi.rs` and
+//! The C examples of `runtime/capi/examples` built and run by `tests/capi.rs` and
 //! `tests/capi_tasks.rs` (a module of both, not a test target of its own).
 
 use std::path::{Path, PathBuf};

@@ -1,4 +1,4 @@
-//! One model file format and one runtime for every task, through the C ABI (`crates/capi`):
+//! One model file format and one runtime for every task, through the C ABI (`runtime/capi`):
 //! `zoo_model_load` loads a tiny exported model of each kind (RTN, ARNN, RMR, RNN-GMM with and
 //! without its refiner), `zoo_model_task` says its task, its task's functions run it as the Rust
 //! API does, and every other task's functions refuse it with `ZOO_STATUS_WRONG_MODEL` and a

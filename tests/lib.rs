@@ -231,7 +231,7 @@ pub mod capi {
 
     /// The C ABI crate's folder.
     pub fn capi_dir() -> PathBuf {
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../crates/capi")
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../runtime/capi")
     }
 
     /// The calling thread's last error message.

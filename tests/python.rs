@@ -1,18 +1,18 @@
-//! The Python package (`python/`) and the Blender add-on (`blender/`), run by the real
+//! The Python package (`runtime/python/`) and the Blender add-on (`apps/blender/`), run by the real
 //! interpreters.
 //!
 //! The extension is built in this suite's profile and target dir, with the rest of the
 //! workspace (`cargo build --workspace --lib`: the same features as the suite's build, so tract
 //! is not compiled a second time), packed into a wheel with maturin's metadata
-//! (`python/pack_wheel.py`) and installed with pip into a temporary folder. The models are
+//! (`runtime/python/pack_wheel.py`) and installed with pip into a temporary folder. The models are
 //! tiny ones of every task exported here (seeded weights, the synthetic locomotion's 21-joint
 //! skeleton); the references are the Rust runtime's own outputs for the same inputs, so the
-//! pytest suite (`python/tests`) checks the package against the runtime it wraps.
+//! pytest suite (`runtime/python/tests`) checks the package against the runtime it wraps.
 //!
 //! `pytest_package` runs pytest with a Python virtual environment in `target/python-venv`
 //! (numpy, pytest, maturin from PyPI, made on first use). `blender_addon` runs
-//! `blender/tests/test_addon.py` in Blender headless (`blender -b --factory-startup`): it installs
-//! the add-on zip made by `blender/make_addon.py` with the wheel inside, imports the clip with
+//! `apps/blender/tests/test_addon.py` in Blender headless (`blender -b --factory-startup`): it installs
+//! the add-on zip made by `apps/blender/make_addon.py` with the wheel inside, imports the clip with
 //! Blender's BVH importer and runs each operator; it reports its figures (in-between error,
 //! walk distance, speed) in the test log. Without Blender it says so and checks nothing, unless
 //! `ZOO_REQUIRE_BLENDER=1` (set by `.ci/run`, which installs Blender) makes that a failure.
@@ -102,7 +102,7 @@ fn fixture() -> &'static Fixture {
         let wheels = dir.path().join("wheels");
         let out = run(
             Command::new(&python)
-                .arg(repo().join("python/pack_wheel.py"))
+                .arg(repo().join("runtime/python/pack_wheel.py"))
                 .arg("--lib")
                 .arg(&lib)
                 .arg("--out")
@@ -411,7 +411,7 @@ fn pytest_package() {
     let f = fixture();
     let out = Command::new(&f.python)
         .args(["-m", "pytest", "-q", "-p", "no:cacheprovider"])
-        .arg(repo().join("python/tests"))
+        .arg(repo().join("runtime/python/tests"))
         .env("PYTHONPATH", &f.site)
         .env("ZOO_TEST_DATA", &f.data)
         .env("ZOO_TEST_WHEEL", &f.wheel)
@@ -433,7 +433,7 @@ fn blender() -> Option<PathBuf> {
     std::env::split_paths(&path).map(|d| d.join("blender")).find(|p| p.is_file())
 }
 
-/// The add-on zip made by `blender/make_addon.py` with the test's wheel inside (made once).
+/// The add-on zip made by `apps/blender/make_addon.py` with the test's wheel inside (made once).
 fn addon_zip() -> &'static Path {
     static Z: OnceLock<PathBuf> = OnceLock::new();
     Z.get_or_init(|| {
@@ -441,12 +441,12 @@ fn addon_zip() -> &'static Path {
         let zip = f.data.join("zoo_blender.zip");
         run(
             Command::new(&f.python)
-                .arg(repo().join("blender/make_addon.py"))
+                .arg(repo().join("apps/blender/make_addon.py"))
                 .arg("--wheel")
                 .arg(&f.wheel)
                 .arg("--out")
                 .arg(&zip),
-            "making the add-on zip (blender/make_addon.py)",
+            "making the add-on zip (apps/blender/make_addon.py)",
         );
         zip
     })
@@ -499,14 +499,14 @@ fn bandai2_inputs() -> &'static Option<(PathBuf, PathBuf)> {
     })
 }
 
-/// Runs `blender/tests/test_addon.py` with `cmd` (Blender, or Python with `bpy`) on the test's
+/// Runs `apps/blender/tests/test_addon.py` with `cmd` (Blender, or Python with `bpy`) on the test's
 /// models and clips, its user folders under `user`, and prints the figures it reports.
 fn run_addon_test(mut cmd: Command, user: &str, report: &str) {
     let f = fixture();
     let zip = addon_zip();
     let report = f.data.join(report);
     let bandai2 = bandai2_inputs();
-    cmd.arg(repo().join("blender/tests/test_addon.py"))
+    cmd.arg(repo().join("apps/blender/tests/test_addon.py"))
         .arg("--")
         .arg("--addon-zip")
         .arg(zip)

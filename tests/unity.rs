@@ -1,9 +1,9 @@
-//! The Unity package (`engines/unity`, issue 43) without Unity: its bindings and safe wrappers
+//! The Unity package (`runtime/unity`, issue 43) without Unity: its bindings and safe wrappers
 //! (everything that does not touch `UnityEngine`) compiled with Mono's C# compiler into a console
-//! test program (`engines/unity/Tests~`) that runs against the C ABI library cargo built for these
+//! test program (`runtime/unity/Tests~`) that runs against the C ABI library cargo built for these
 //! tests (`libzoo_capi.so`).
 //!
-//! - `bindings_match_zoo_h`: the binding check passes on `crates/capi/include/zoo.h` and fails on
+//! - `bindings_match_zoo_h`: the binding check passes on `runtime/capi/include/zoo.h` and fails on
 //!   copies of it with a function removed, a function added and a parameter changed.
 //! - `console_test_matches_the_rust_runtime`: each task on a tiny exported model of each kind
 //!   (RTN, ARNN, RMR, RNN-GMM with its control) through C#, compared with what the Rust runtime
@@ -39,11 +39,11 @@ const UNITY: CoordinateFrame =
     CoordinateFrame { metres_per_unit: 1.0, up_axis: UpAxis::Y, handedness: Handedness::Left };
 
 fn package() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../engines/unity")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../runtime/unity")
 }
 
 fn header() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../crates/capi/include/zoo.h")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../runtime/capi/include/zoo.h")
 }
 
 /// The tool `name` on the PATH.
@@ -187,7 +187,7 @@ fn run_tests_exe(args: &[&str]) -> Output {
 #[test]
 fn bindings_match_zoo_h() {
     let out = run_tests_exe(&["check-bindings", header().to_str().unwrap()]);
-    check(&out, "the binding check on crates/capi/include/zoo.h");
+    check(&out, "the binding check on runtime/capi/include/zoo.h");
     eprintln!("{}", String::from_utf8_lossy(&out.stdout).trim());
 
     // The generated functions are what Tools~/update-bindings.sh writes from the header now.
@@ -209,7 +209,7 @@ fn bindings_match_zoo_h() {
     let committed = std::fs::read_to_string(pkg.join("Runtime/Native/ZooNative.Functions.cs")).unwrap();
     assert!(
         std::fs::read_to_string(&generated).unwrap() == committed,
-        "engines/unity/Runtime/Native/ZooNative.Functions.cs is not what zoo.h generates: run engines/unity/Tools~/update-bindings.sh"
+        "runtime/unity/Runtime/Native/ZooNative.Functions.cs is not what zoo.h generates: run runtime/unity/Tools~/update-bindings.sh"
     );
 
     // The check fails on a header that drifted from the bindings: a function removed, one added,

@@ -1,0 +1,488 @@
+"""The add-on in the real Blender, headless:
+
+    blender -b --factory-startup -t 1 --python-exit-code 1 --python apps/blender/tests/test_addon.py -- \
+        --addon-zip zoo_blender.zip --data DIR --report report.json [--bandai2-clip BVH --bandai2-model ONNX]
+
+or, for Blender 4.2+ as a Python module (`pip install bpy==4.2.0`), `python
+apps/blender/tests/test_addon.py -- ...` with the same arguments. `tests/python.rs` (`blender_addon`,
+`blender_extension`) runs it with the models, clips and wheel it makes. Installs the add-on zip
+(the wheel inside) as a user would: as an add-on before Blender 4.2, as an extension from 4.2
+on (Blender installs the bundled wheel itself); imports the clips with Blender's own BVH
+importer, runs every operator and compares with the `zoo` package called directly on the clip's
+frames. Writes the figures to the report and prints them; exits non-zero on the first failure.
+"""
+
+import argparse
+import json
+import math
+import statistics
+import sys
+import time
+import traceback
+from pathlib import Path
+
+import bpy
+import numpy as np
+
+argv = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else []
+ap = argparse.ArgumentParser()
+ap.add_argument("--addon-zip", required=True)
+ap.add_argument("--data", required=True, type=Path)
+ap.add_argument("--report", required=True, type=Path)
+ap.add_argument("--bandai2-clip", type=Path)
+ap.add_argument("--bandai2-model", type=Path)
+ARGS = ap.parse_args(argv)
+DATA = ARGS.data
+REPO = Path(__file__).resolve().parents[3]
+REPORT = {}
+LOG = []
+
+
+def log(msg):
+    LOG.append(msg)
+    print(f"[zoo test] {msg}", flush=True)
+
+
+def check(cond, msg):
+    if not cond:
+        raise AssertionError(msg)
+
+
+# --- set-up ------------------------------------------------------------------------------------
+
+
+# The add-on's package: `zoo_blender` as an add-on, `bl_ext.user_default.zoo_blender` as an extension.
+ADDON = "zoo_blender"
+
+
+def addon_module(name):
+    """A module of the installed add-on (`runtime`, `rig`, `walk`)."""
+    import importlib
+
+    return importlib.import_module(f"{ADDON}.{name}")
+
+
+def install_addon():
+    global ADDON
+    if bpy.app.version >= (4, 2, 0):
+        # As a user installs an extension from disk (Blender installs the bundled wheel).
+        r = bpy.ops.extensions.package_install_files(filepath=str(ARGS.addon_zip), repo="user_default", enable_on_install=True)
+        check(r == {"FINISHED"}, f"installing the extension gave {r}")
+        ADDON = "bl_ext.user_default.zoo_blender"
+        import addon_utils
+
+        check(addon_utils.check(ADDON)[1], f"the extension {ADDON} is not enabled")
+    else:
+        bpy.ops.preferences.addon_install(filepath=str(ARGS.addon_zip), overwrite=True)
+        bpy.ops.preferences.addon_enable(module="zoo_blender")
+    return addon_module("runtime").zoo()
+
+
+def bvh_importer_on_python_311():
+    """Debian's Blender 3.4 runs on Python 3.11, where its BVH importer's `open(path, 'rU')`
+    fails ("invalid mode: 'rU'"; the 'U' mode was removed in 3.11): the importer's module
+    reads files with that mode dropped. Nothing else of the importer changes."""
+    import builtins
+
+    import io_anim_bvh.import_bvh as importer
+
+    def open_without_u(file, mode="r", *args, **kwargs):
+        return builtins.open(file, mode.replace("U", ""), *args, **kwargs)
+
+    importer.open = open_without_u
+
+
+def import_bvh(path):
+    """Blender's own BVH importer, metres (the file is in centimetres); returns the armature."""
+    bpy.ops.object.select_all(action="DESELECT") if bpy.context.object else None
+    bpy.ops.import_anim.bvh(filepath=str(path), global_scale=0.01, rotate_mode="NATIVE", frame_start=1)
+    arm = bpy.context.active_object
+    check(arm is not None and arm.type == "ARMATURE", f"importing {path} gave no armature")
+    return arm.name
+
+
+def activate(name):
+    ob = bpy.data.objects[name]
+    for o in bpy.context.view_layer.objects:
+        o.select_set(False)
+    ob.select_set(True)
+    bpy.context.view_layer.objects.active = ob
+    return ob
+
+
+def snapshot():
+    """Everything the operators may touch: every action's keys (values, handles, interpolation),
+    the actions, and each armature's bones and active action."""
+    out = {}
+    for a in bpy.data.actions:
+        curves = {}
+        for fc in a.fcurves:
+            n = len(fc.keyframe_points)
+            arrays = []
+            for prop in ("co", "handle_left", "handle_right"):
+                v = np.empty(2 * n, dtype=np.float32)
+                fc.keyframe_points.foreach_get(prop, v)
+                arrays.append(v.tobytes())
+            arrays.append(tuple(p.interpolation for p in fc.keyframe_points))
+            curves[(fc.data_path, fc.array_index)] = tuple(arrays)
+        out[("action", a.name)] = curves
+    for o in bpy.data.objects:
+        if o.type == "ARMATURE":
+            ad = o.animation_data
+            out[("armature", o.name)] = (
+                tuple(b.name for b in o.data.bones),
+                ad.action.name if ad and ad.action else None,
+            )
+    return out
+
+
+def keys_outside(action, lo, hi):
+    """Per F-curve: the keys at frames <= lo or >= hi (values, handles, interpolation)."""
+    out = {}
+    for fc in action.fcurves:
+        n = len(fc.keyframe_points)
+        co = np.empty(2 * n, dtype=np.float32)
+        hl = np.empty(2 * n, dtype=np.float32)
+        hr = np.empty(2 * n, dtype=np.float32)
+        fc.keyframe_points.foreach_get("co", co)
+        fc.keyframe_points.foreach_get("handle_left", hl)
+        fc.keyframe_points.foreach_get("handle_right", hr)
+        x = co[0::2]
+        sel = (x <= lo) | (x >= hi)
+        idx = np.nonzero(sel)[0]
+        interp = tuple(fc.keyframe_points[int(i)].interpolation for i in idx)
+        out[(fc.data_path, fc.array_index)] = (
+            co.reshape(-1, 2)[sel].tobytes(),
+            hl.reshape(-1, 2)[sel].tobytes(),
+            hr.reshape(-1, 2)[sel].tobytes(),
+            interp,
+        )
+    return out
+
+
+def keys_at(action, frame):
+    """Per F-curve: the keys at `frame` (values, handles, interpolation)."""
+    out = {}
+    for fc in action.fcurves:
+        pts = [p for p in fc.keyframe_points if abs(p.co.x - frame) < 0.5]
+        out[(fc.data_path, fc.array_index)] = [
+            (tuple(p.co), tuple(p.handle_left), tuple(p.handle_right), p.interpolation) for p in pts
+        ]
+    return out
+
+
+def world_positions(arm_name, names, frames):
+    """Each joint's bone head in the armature's space at each frame, as Blender evaluates it."""
+    arm = bpy.data.objects[arm_name]
+    out = np.empty((len(frames), len(names), 3))
+    for i, f in enumerate(frames):
+        bpy.context.scene.frame_set(f)
+        for j, n in enumerate(names):
+            out[i, j] = tuple(arm.pose.bones[n].head)
+    return out
+
+
+def to_model_cm(zoo, positions_m):
+    return zoo.convert_positions(positions_m, zoo.BLENDER, zoo.ZOO_CM).astype(np.float64)
+
+
+def refused(op, needle, **kwargs):
+    """Runs the operator, expecting a refusal whose message holds `needle` and no change."""
+    before = snapshot()
+    try:
+        op(**kwargs)
+    except RuntimeError as e:
+        msg = str(e)
+    else:
+        raise AssertionError(f"{op.idname()} was not refused (expected: {needle})")
+    check(needle in msg, f"{op.idname()}: refusal {msg!r} does not say {needle!r}")
+    check(snapshot() == before, f"{op.idname()} changed the file although it refused ({msg})")
+    return msg.strip()
+
+
+# --- the tests ---------------------------------------------------------------------------------
+
+
+def test_inbetween(zoo, arm_name, model_file, clip_file, drop_dummy_root, start, end, key):
+    """In-between `start`..`end` (Blender frames; BVH frame = Blender frame - 1) with a
+    transition model: against the package on the clip's frames, ends and outside keys
+    bit-identical, one undo restores."""
+    sc = bpy.context.scene
+    sc.zoo.model_path = str(model_file)
+    arm = activate(arm_name)
+    action = arm.animation_data.action
+    model = zoo.load(model_file)
+    names = model.skeleton.names
+    clip = zoo.read_bvh(clip_file, drop_dummy_root=drop_dummy_root)
+    p = clip.poses(names)
+    b0, b1 = start - 1, end - 1
+    P = model.past_frames
+    expected = model.transition(p[b0 - P + 1 : b0 + 1], p[b1], p[b1 + 1], frames=end - start - 1)
+    outside = keys_outside(action, start, end)
+    all_before = snapshot()
+    bpy.ops.ed.undo_push(message="before in-between")
+    t0 = time.perf_counter()
+    # As from the user interface: the operator pushes its undo step (the second argument).
+    bpy.ops.zoo.inbetween("EXEC_DEFAULT", True, start=start, end=end)
+    call_ms = 1000 * (time.perf_counter() - t0)
+    action = bpy.data.objects[arm_name].animation_data.action
+    check(keys_outside(action, start, end) == outside, "a key at an end or outside the range changed")
+    inner = list(range(start + 1, end))
+    got = to_model_cm(zoo, world_positions(arm_name, names, inner))
+    want = expected.global_positions[: len(inner)].astype(np.float64)
+    err = float(np.max(np.linalg.norm(got - want, axis=-1)))
+    log(f"{key}: in-between {start}-{end} ({len(inner)} frames): largest joint distance to the package {err:.4f} cm; call {call_ms:.1f} ms")
+    check(err < 0.5, f"{key}: Blender's joints are {err:.3f} cm from the package's (tolerance 0.5 cm)")
+    bpy.ops.ed.undo()
+    check(snapshot() == all_before, "one undo did not restore the action")
+    log(f"{key}: ends and {sum(len(v[0]) for v in outside.values()) // 8} outside keys bit-identical; one undo restored the action")
+    REPORT[key] = {"frames": len(inner), "max_joint_error_cm": err, "call_ms": call_ms, "undo_restores": True, "ends_bit_identical": True}
+
+
+def test_speed(zoo, arm_name, start, end):
+    """The paper-sized RTN: median over 10 in-betweens of 30 frames of the operator's time."""
+    sc = bpy.context.scene
+    sc.zoo.model_path = str(DATA / "transition_paper.onnx")
+    activate(arm_name)
+    bpy.ops.zoo.check_bones()  # loads the model outside the timing
+    inside, calls = [], []
+    for _ in range(10):
+        t0 = time.perf_counter()
+        bpy.ops.zoo.inbetween("EXEC_DEFAULT", True, start=start, end=end)
+        calls.append(1000 * (time.perf_counter() - t0))
+        inside.append(float(sc["zoo_last_ms"]))
+    med, med_call = statistics.median(inside), statistics.median(calls)
+    log(
+        f"speed: in-between of {end - start - 1} frames, {len(bpy.data.objects[arm_name].data.bones)}-bone armature, paper-sized RTN, "
+        f"Blender -t 1: operator {med:.1f} ms median of 10 (min {min(inside):.1f}, max {max(inside):.1f}); "
+        f"bpy.ops call with its undo push {med_call:.1f} ms"
+    )
+    REPORT["speed"] = {"operator_ms_median": med, "operator_ms_all": inside, "call_ms_median": med_call}
+
+
+def test_keyframes(zoo, arm_name, clip_file, start, mid, end):
+    """A keyframe model on the selected keys: the keys stay, the frames between are the package's."""
+    sc = bpy.context.scene
+    sc.zoo.model_path = str(DATA / "keyframes.onnx")
+    arm = activate(arm_name)
+    action = arm.animation_data.action
+    keys = [start, mid, end]
+    for fc in action.fcurves:
+        for kp in fc.keyframe_points:
+            kp.select_control_point = int(round(kp.co.x)) in keys
+    model = zoo.load(DATA / "keyframes.onnx")
+    p = zoo.read_bvh(clip_file).poses(model.skeleton.names)
+    hips, rot = model.complete_poses(np.array(keys) - start, p[[k - 1 for k in keys]])
+    want = zoo.Poses.from_world(hips, rot, model.skeleton).global_positions
+    kept = {k: keys_at(action, k) for k in keys}
+    bpy.ops.ed.undo_push(message="before keyframes")
+    bpy.ops.zoo.inbetween("EXEC_DEFAULT", True)
+    action = bpy.data.objects[arm_name].animation_data.action
+    for k in keys:
+        check(keys_at(action, k) == kept[k], f"the key at frame {k} changed")
+    frames = [f for f in range(start + 1, end) if f != mid]
+    got = to_model_cm(zoo, world_positions(arm_name, model.skeleton.names, frames))
+    err = float(np.max(np.linalg.norm(got - want[[f - start for f in frames]], axis=-1)))
+    log(f"keyframes: {len(frames)} frames completed from keys {keys}: largest joint distance to the package {err:.4f} cm; keys bit-identical")
+    check(err < 0.5, f"keyframe completion is {err:.3f} cm from the package's")
+    bpy.ops.ed.undo()
+    REPORT["keyframes"] = {"frames": len(frames), "max_joint_error_cm": err}
+
+
+def test_stitch(zoo, arm_name, other_name):
+    """Two actions stitched into a new one of their total length; its joints are the package's
+    stitch of the frames the add-on read (the package's stitch of the files' frames is reported:
+    the refiner integrates the root over the sequence, so float rounding of the inputs grows)."""
+    rig = addon_module("rig")
+
+    sc = bpy.context.scene
+    sc.zoo.model_path = str(DATA / "stitch.onnx")
+    arm = activate(arm_name)
+    first = arm.animation_data.action
+    second = bpy.data.objects[other_name].animation_data.action
+    sc.zoo.stitch_first, sc.zoo.stitch_second = first, second
+    n1 = int(first.frame_range[1] - first.frame_range[0]) + 1
+    n2 = int(second.frame_range[1] - second.frame_range[0]) + 1
+    model = zoo.load(DATA / "stitch.onnx")
+    names = model.skeleton.names
+    r = rig.Rig(arm, model)
+    sampled = [r.sample(first, range(1, n1 + 1)), r.sample(second, range(1, n2 + 1))]
+    expected, _, starts = model.stitch(sampled)
+    files = [zoo.read_bvh(DATA / n).poses(names) for n in ("clip.bvh", "clip2.bvh")]
+    from_files, _, _ = model.stitch(files)
+    t0 = time.perf_counter()
+    bpy.ops.zoo.stitch()
+    ms = 1000 * (time.perf_counter() - t0)
+    arm = bpy.data.objects[arm_name]
+    new = arm.animation_data.action
+    check(new.name not in (first.name, second.name), "no new action")
+    length = int(new.frame_range[1] - new.frame_range[0]) + 1
+    check(length == n1 + n2, f"the stitched action has {length} frames, expected {n1} + {n2}")
+    frames = list(range(int(new.frame_range[0]), int(new.frame_range[0]) + length, 7))
+    idx = [f - int(new.frame_range[0]) for f in frames]
+    got = to_model_cm(zoo, world_positions(arm_name, names, frames))
+    err = float(np.max(np.linalg.norm(got - expected.global_positions[idx], axis=-1)))
+    err_files = float(np.max(np.linalg.norm(got - from_files.global_positions[idx], axis=-1)))
+    log(
+        f"stitch: '{new.name}' {length} frames ({n1} + {n2}), seam at {starts[1]}; joints {err:.4f} cm from the package's "
+        f"stitch of the frames read, {err_files:.3f} cm from its stitch of the files' frames; {ms:.0f} ms"
+    )
+    check(err < 0.5, f"the stitched action is {err:.3f} cm from the package's")
+    # The same two actions as NLA strips of the armature, selected, with no actions chosen.
+    track = arm.animation_data.nla_tracks.new()
+    strips = [track.strips.new("walk A", 1, first), track.strips.new("walk B", n1 + 20, second)]
+    for st in strips:
+        st.select = True
+    sc.zoo.stitch_first = sc.zoo.stitch_second = None
+    bpy.ops.zoo.stitch()
+    nla = bpy.data.objects[arm_name].animation_data.action
+    nla_length = int(nla.frame_range[1] - nla.frame_range[0]) + 1
+    want = f"{strips[0].name}+{strips[1].name}"  # Blender names a new strip after its action
+    check(nla.name.startswith(want) and nla_length == n1 + n2, f"stitching the NLA strips gave '{nla.name}' of {nla_length} frames")
+    got = to_model_cm(zoo, world_positions(arm_name, names, frames))
+    err_nla = float(np.max(np.linalg.norm(got - expected.global_positions[idx], axis=-1)))
+    check(err_nla < 0.5, f"stitching the NLA strips is {err_nla:.3f} cm from stitching the actions")
+    log(f"stitch: the two selected NLA strips give '{nla.name}', {nla_length} frames, {err_nla:.4f} cm from the actions' stitch")
+    arm.animation_data.nla_tracks.remove(track)
+    REPORT["stitch"] = {"frames": length, "expected": n1 + n2, "max_joint_error_cm": err, "max_joint_error_vs_files_cm": err_files, "ms": ms}
+
+
+def make_curve(name, points):
+    cu = bpy.data.curves.new(name, type="CURVE")
+    cu.dimensions = "3D"
+    sp = cu.splines.new("POLY")
+    sp.points.add(len(points) - 1)
+    for p, (x, y) in zip(sp.points, points):
+        p.co = (x, y, 0.0, 1.0)
+    ob = bpy.data.objects.new(name, cu)
+    bpy.context.collection.objects.link(ob)
+    return ob
+
+
+def test_walk(zoo, arm_name):
+    """The path-following benchmark's `corner` path (docs/paths/corner.json: 5 m, a 120-degree
+    turn, 4 m) as a curve, walked at the model's own speed by the generator trained in the test,
+    to the curve's end."""
+    walk = addon_module("walk")
+
+    sc = bpy.context.scene
+    model_file = DATA / "synthesis_trained.onnx"
+    sc.zoo.model_path = str(model_file)
+    model = zoo.load(model_file)
+    ground = np.array(json.loads((REPO / "docs/paths/corner.json").read_text())["points"], dtype=np.float64)
+    # The path is in the model's frame (cm, Y up): Blender's curve is in metres, Z up.
+    bl = zoo.convert_positions(np.stack([ground[:, 0], np.zeros(len(ground)), ground[:, 1]], -1), model.frame, zoo.BLENDER)
+    curve = make_curve("corner", [(p[0], p[1]) for p in bl])
+    sc.zoo.curve = curve
+    sc.zoo.walk_speed = 0.0
+    sc.frame_set(1)
+    activate(arm_name)
+    speed = walk.natural_speed(model)
+    most = 3 * walk.walk_frames(ground, speed, model.fps) + int(model.fps)
+    expected, _, reached = walk.follow(model, ground, speed, seed=sc.zoo.seed, max_frames=most)
+    frames = len(expected.hips)
+    check(reached, f"the package's walk stopped after {frames} frames before the curve's end")
+    t0 = time.perf_counter()
+    bpy.ops.zoo.walk()
+    ms = 1000 * (time.perf_counter() - t0)
+    new = bpy.data.objects[arm_name].animation_data.action
+    length = int(new.frame_range[1] - new.frame_range[0]) + 1
+    check(length == frames, f"the walk has {length} frames, the package's {frames}")
+    names = model.skeleton.names
+    got = to_model_cm(zoo, world_positions(arm_name, names[:1], range(1, 1 + frames)))[:, 0]
+    err = float(np.max(np.linalg.norm(got - expected.hips, axis=-1)))
+    # The root's ground position (the hips projected) against the curve, measured here in Python.
+    d = walk.distances_to_path(ground, np.stack([got[:, 0], got[:, 2]], -1))
+    mean_cm, max_cm = float(d.mean()), float(d.max())
+    end_cm = float(np.linalg.norm(got[-1, [0, 2]] - ground[-1]))
+    length_m = float(walk.arc_lengths(ground)[-1]) * model.frame.metres_per_unit
+    log(
+        f"walk: '{new.name}' {length} frames along the {length_m:.2f} m corner path at the model's {speed / 100:.2f} m/s "
+        f"asked ({length_m / (length / model.fps):.2f} m/s walked): hips {err:.4f} cm from the package's; root (ground) "
+        f"to curve {mean_cm:.2f} cm mean, {max_cm:.2f} cm max; last frame {end_cm:.1f} cm from the curve's end; {ms:.0f} ms"
+    )
+    check(err < 0.5, f"the walk's hips are {err:.3f} cm from the package's")
+    # `zoo bench follow --model rnngmm_run --paths corner` on this generator: 2.21 cm mean,
+    # 10.57 cm max (2026-11-27), creeping (1385 frames without reaching the end).
+    check(mean_cm < 2.5, f"the walk strays {mean_cm:.2f} cm from the curve on average")
+    check(max_cm < 12.0, f"the walk strays up to {max_cm:.2f} cm from the curve")
+    REPORT["walk"] = {
+        "frames": length,
+        "curve_m": length_m,
+        "speed_m_s": speed / 100,
+        "root_to_curve_cm_mean": mean_cm,
+        "root_to_curve_cm_max": max_cm,
+        "end_cm": end_cm,
+        "ms": ms,
+    }
+
+
+def test_refusals(zoo, arm_name):
+    sc = bpy.context.scene
+    ops = bpy.ops.zoo
+    # A missing bone: a second armature with one bone renamed.
+    other = import_bvh(DATA / "clip.bvh")
+    ob = bpy.data.objects[other]
+    ob.data.bones["Foot_L"].name = "LeftFoot"
+    activate(other)
+    sc.zoo.model_path = str(DATA / "transition.onnx")
+    m1 = refused(ops.inbetween, "has no bone for 1 of the model's 21 joints: Foot_L", start=51, end=82)
+    # The same armature with a bone map naming the renamed bone: matched, in-betweened.
+    bone_map = DATA / "bone_map.json"
+    bone_map.write_text(json.dumps({"Foot_L": "LeftFoot"}))
+    sc.zoo.bone_map = str(bone_map)
+    bpy.ops.zoo.inbetween(start=51, end=82)
+    sc.zoo.bone_map = ""
+    log("bone map: the armature with Foot_L renamed LeftFoot is matched through {\"Foot_L\": \"LeftFoot\"}")
+    # A model of another task.
+    activate(arm_name)
+    sc.zoo.model_path = str(DATA / "stitch.onnx")
+    m2 = refused(ops.inbetween, "is a stitch model", start=51, end=82)
+    sc.zoo.model_path = str(DATA / "transition.onnx")
+    m3 = refused(ops.walk, "is a transition model")
+    # A range without enough context frames.
+    m4 = refused(ops.inbetween, "needs 10 frames of context", start=5, end=36)
+    for m in (m1, m2, m3, m4):
+        log(f"refused, nothing changed: {m}")
+    REPORT["refusals"] = [m1, m2, m3, m4]
+    bpy.data.objects.remove(ob)
+
+
+def main():
+    t_start = time.perf_counter()
+    zoo = install_addon()
+    if sys.version_info >= (3, 11) and bpy.app.version < (3, 5, 0):
+        bvh_importer_on_python_311()
+    log(
+        f"Blender {bpy.app.version_string}: {ADDON} installed from {Path(ARGS.addon_zip).name}; "
+        f"zoo {zoo.__version__} from {Path(zoo.__file__).parent}"
+    )
+    REPORT["blender"] = bpy.app.version_string
+    arm = import_bvh(DATA / "clip.bvh")
+    other = import_bvh(DATA / "clip2.bvh")
+    clip_action = bpy.data.objects[arm].animation_data.action.name
+    test_inbetween(zoo, arm, DATA / "transition.onnx", DATA / "clip.bvh", False, 51, 82, "inbetween")
+    test_refusals(zoo, arm)
+    test_keyframes(zoo, arm, DATA / "clip.bvh", 101, 116, 131)
+    test_stitch(zoo, arm, other)
+    test_walk(zoo, arm)
+    bpy.data.objects[arm].animation_data.action = bpy.data.actions[clip_action]
+    test_speed(zoo, arm, 51, 82)
+    if ARGS.bandai2_clip:
+        b = import_bvh(ARGS.bandai2_clip)
+        test_inbetween(zoo, b, ARGS.bandai2_model, ARGS.bandai2_clip, True, 51, 82, "inbetween_bandai2")
+    REPORT["seconds"] = time.perf_counter() - t_start
+    log(f"all Blender tests passed in {REPORT['seconds']:.1f} s")
+
+
+try:
+    main()
+    ok = True
+except Exception:
+    traceback.print_exc()
+    ok = False
+REPORT["passed"] = ok
+REPORT["log"] = LOG
+ARGS.report.write_text(json.dumps(REPORT, indent=1))
+if not ok:
+    sys.exit(1)
