@@ -1361,7 +1361,7 @@ fn stitching_at_seams_through_the_c_abi_matches_the_rust_api() {
         assert_error(call(&mut out, null(), 2), ZooStatus::NullPointer, "zoo_stitch_refine_at_seams: `seams` is NULL");
         let past = [n];
         let status = call(&mut out, past.as_ptr(), 1);
-        assert_error(status, ZooStatus::InvalidArgument, &format!("seam at frame {n} of a sequence of {n} poses"));
+        assert_error(status, ZooStatus::InvalidArgument, &format!("seam at frame {n} of a sequence of {n} frames"));
 
         let stream = stitch_stream(model);
         let mut got = Vec::new();

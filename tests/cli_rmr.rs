@@ -119,6 +119,13 @@ fn train_resume_and_stitch() {
     let (stitched, input) = (read(&out), read(&dir.path().join("stitched.input.bvh")));
     assert_eq!((stitched.frames(), input.frames()), (frames, frames));
     assert!(stitched.local_rotations.iter().all(|q| q.is_finite()));
+    // The exported file is what the run folder runs (the folder is exported in memory): the
+    // same stitch to the bit.
+    let from_file = dir.path().join("from_file.bvh");
+    let (ok, stdout_file, stderr) =
+        run(&["stitch", "--model", s(&onnx), &ranges[0], &ranges[1], &ranges[2], "--out", s(&from_file)]);
+    assert!(ok, "{stdout_file}\n{stderr}");
+    assert_eq!(std::fs::read(&from_file).unwrap(), std::fs::read(&out).unwrap(), "the exported file stitches otherwise");
     // The input is the aligned concatenation: the first clip unchanged.
     for f in [0, 25, 49] {
         assert!((input.root_position(f) - la.root_position(f)).length() < 1e-3, "frame {f}");
@@ -294,7 +301,7 @@ fn stitch_refuses_an_rtn_where_an_rmr_is_expected() {
     let (ok, _, stderr) = run(&["export", "--onnx", s(&rtn), "--out", s(&onnx)]);
     assert!(ok, "{stderr}");
     let e = refused(&onnx, dir.path(), &[a, b]);
-    assert!(e.contains("rtn.onnx is a file") && e.contains("run folder of `zoo train rmr`"), "{e}");
+    assert!(e.contains("rtn.onnx holds a `transition` model (`rtn`)") && e.contains("zoo transition"), "{e}");
     // A folder that is no run at all.
     let e = refused(&dir.path().join("missing"), dir.path(), &[a, b]);
     assert!(e.contains("missing") && e.contains("not a run folder"), "{e}");

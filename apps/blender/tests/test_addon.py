@@ -22,7 +22,14 @@ import traceback
 from pathlib import Path
 
 import bpy
-import numpy as np
+
+try:
+    import numpy as np
+except ModuleNotFoundError:
+    sys.exit(
+        "Blender's Python has no numpy (the add-on needs it): on Debian, "
+        "`apt-get install -y python3-numpy`"
+    )
 
 argv = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else []
 ap = argparse.ArgumentParser()

@@ -1,5 +1,6 @@
 //! Transition blending: inertialization (Bollo, GDC 2018) and target blending.
 
+use crate::Clip;
 use crate::quat::{from_scaled_axis, to_scaled_axis};
 use glam::{DQuat, DVec3};
 
@@ -294,6 +295,34 @@ impl SeamInertializer {
         self.last[1].1 = self.out[i].1;
         self.released = i + 1;
     }
+}
+
+/// Inertialization at each seam (Bollo, GDC 2018; [`Inertializer`]) of an aligned sequence of
+/// clips put end to start (joint 0 holding the root): from
+/// each seam `s` on (the first frame of a clip), the offset between the frames before the seam
+/// and the frames from it (local rotations of every joint and the root joint's position, with
+/// their velocities) is decayed to zero over `blend_frames` frames. Frame `s + k` receives the
+/// offset at `(k + 1)` frame times, so the motion continues the previous clip's. Seams are
+/// treated in order on the already blended sequence; a seam without two frames on each side
+/// is left as it is.
+pub fn inertialize_seams(aligned: &Clip, seams: &[usize], blend_frames: usize) -> Clip {
+    let mut out = aligned.clone();
+    let (frames, j) = (out.frames(), out.joints());
+    // The frame-by-frame form, which the runtime's stitch stream runs too.
+    let mut next = 0;
+    let read = |f: usize, r: &mut Vec<DQuat>| {
+        r.clear();
+        r.extend_from_slice(&aligned.local_rotations[f * j..(f + 1) * j]);
+        Ok::<_, std::convert::Infallible>(aligned.local_positions[f * j])
+    };
+    let write = |r: &[DQuat], p: DVec3| {
+        out.local_rotations[next * j..(next + 1) * j].copy_from_slice(r);
+        out.local_positions[next * j] = p;
+        next += 1;
+    };
+    let Ok(()) = SeamInertializer::new(j, blend_frames, aligned.frame_time).run(frames, seams, read, write);
+    out.remove_sign_flips();
+    out
 }
 
 /// Target-blend weight of RTN (Harvey & Pal 2018, eq. 15-16): the weight of the generated

@@ -2,35 +2,43 @@
 //! loaded model and what this runtime computes from them, step by step, as plain numbers
 //! ([`ReferenceVectors`], written as JSON by `zoo export --onnx RUN --reference FILE.json`). An
 //! implementation of docs/runtime-protocol.md on another inference engine reproduces every number
-//! within float rounding; `scripts/runtime_protocol.py` is one, checked by `tests/protocol.rs`.
+//! within the tolerance that page states; `scripts/runtime_protocol.py` is one, checked by
+//! `tests/protocol.rs`.
 //!
 //! The inputs derive from the model's own metadata and [`SplitMix64`] seeded with the given seed:
 //! transition poses walk at 0.8 to 1.6 m/s in the model's units (`zoo.frame`) and frame rate
 //! (`zoo.fps`) on the model's skeleton with smoothly swinging joints; stitching poses move as
 //! the pose-vector statistics say (mean root motion, hips height and joint rotations, the
-//! rotations jittered by their deviations); keys and start frames are the normalization means
-//! plus seeded multiples of the deviations. The same model and seed give the same file.
+//! rotations jittered by their deviations); keys are the normalization means plus seeded
+//! multiples of the deviations (a humanoid's root walks from key to key and its rotations are
+//! unit quaternions); synthesis start frames likewise. The same model and seed give the same
+//! file.
 //!
-//! What each task's cases hold (every value in the model's units, `f32`; rotations are
-//! quaternions `[x, y, z, w]`; poses are [`ReferencePose`]s):
+//! What each task's cases hold (every value in the model's units, `f32` unless said; rotations
+//! are quaternions `[x, y, z, w]`; poses are [`ReferencePose`]s):
 //! - transition: engine-pose inputs and their global positions, then for each of the `N + 1`
 //!   frames the network's raw frame (before the target blend), the target-blended frame, the
 //!   target miss, the frames of `generate` with a fallback and its weight, and the engine poses
 //!   of `step_posed`;
-//! - keyframes (the ARNN's step graph; the in-betweening design has no reference vectors yet):
-//!   key sets (whole keys; partial keys when the model has groups), the key interval and
-//!   `t_rel` of every frame, and the completed poses;
-//! - stitch: an aligned sequence of engine poses with a pop in its middle, its pose vectors, the
-//!   windows, the first window's normalised input and raw graph output, the refined pose vectors
-//!   and the refined engine poses without foot cleanup;
-//! - synthesis: a seeded character's start, and for every step its input frame, the mixture,
-//!   the sampled frame, the random generator's state, the refined frame (with a refiner), the
-//!   engine pose with global positions and the contacts.
+//! - keyframes, either design: key sets (whole keys; partial keys when the model has groups);
+//!   for the ARNN's step graph the key interval and `t_rel` of every frame, for the
+//!   in-betweening design the whole-shot graph's features and the keys' Bezier poses (`f64`);
+//!   the network's completion, the completion with every key hit, and the final poses (after
+//!   the foot lock between the keys, for a humanoid with legs);
+//! - stitch: an aligned sequence of engine poses with a pop in its middle, refined with the
+//!   file's settings; the same sequence with the pop given as a seam (inertialized before
+//!   encoding when the file's `pre_blend` says so) and a fallback around the windows'
+//!   corrections. Each case: its pose vectors, every window's correction size and fallback
+//!   weight, the first window's normalised input and raw graph output, the refined pose
+//!   vectors and the refined engine poses (no foot cleanup, no seam guard);
+//! - synthesis: a seeded character's start (a full 64-bit seed), and for every step its input
+//!   frame, the mixture, the sampled frame, the random generator's state, the refined frame
+//!   (with a refiner), the engine pose with global positions and the contacts.
 
 use crate::error::MotionError;
 use crate::keyframes::{KeyframeModel, MotionKeys};
 use crate::loaded::LoadedModel;
-use crate::metadata::{MotionModelMetadata, MotionTaskKind, TransitionFallback};
+use crate::metadata::{MotionModelMetadata, MotionTaskKind, StitchFallback, TransitionFallback};
 use crate::pose::EnginePose;
 use crate::stitch::{FootCleanup, StitchRefiner};
 use crate::synthesis::SynthesisModel;
@@ -45,7 +53,7 @@ use zoo_motion::rng::SplitMix64;
 /// `format` of a reference file.
 pub const REFERENCE_FORMAT: &str = "zoo-reference-vectors";
 /// `version` of the reference files this release writes.
-pub const REFERENCE_VERSION: u32 = 1;
+pub const REFERENCE_VERSION: u32 = 2;
 /// The seed `zoo export --reference` uses.
 pub const REFERENCE_SEED: u64 = 1;
 
@@ -201,10 +209,26 @@ pub struct KeyframesCase {
     pub key_poses: Vec<Vec<f32>>,
     /// Partial keys: the groups each key fixes (1) or leaves free (0); empty for whole keys.
     pub fixed: Vec<Vec<f32>>,
-    /// The keys fed at every frame after the first.
+    /// The ARNN's step graph: the keys fed at every frame after the first (empty for the
+    /// in-betweening design).
     pub intervals: Vec<ReferenceInterval>,
-    /// The completed poses, frames `0..=last key frame` (`dofs` values each): frame 0 is the
-    /// first key, every later frame the step graph's `pose`.
+    /// The in-betweening design: the whole-shot graph's input `features`, one row of
+    /// `input_width` values per frame `0..=last key frame` (empty for the step graph).
+    pub features: Vec<Vec<f32>>,
+    /// The in-betweening design: the keys' Bezier poses, `dofs` values per frame, `f64` (empty
+    /// for the step graph).
+    pub bezier: Vec<Vec<f64>>,
+    /// The network's completion, frames `0..=last key frame` (`dofs` values each): the step
+    /// graph's poses after the first key, or the in-betweening design's Bezier poses with the
+    /// graph's correction composed; no key hit, no foot lock.
+    pub network: Vec<Vec<f32>>,
+    /// `network` with every key hit.
+    pub hit: Vec<Vec<f32>>,
+    /// Whether the runtime locks the feet between the keys (a humanoid pose on a skeleton
+    /// with legs).
+    pub foot_lock: bool,
+    /// The completed poses the runtime gives: `hit`, with the feet locked between the keys
+    /// when `foot_lock`.
     pub poses: Vec<Vec<f32>>,
 }
 
@@ -219,6 +243,18 @@ pub struct ReferenceWindow {
     pub output: Vec<Vec<f32>>,
 }
 
+/// One window of a stitched sequence: how much the graph changed it and the fallback's weight.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ReferenceWindowRun {
+    /// First frame of the window.
+    pub start: usize,
+    /// The correction size of the graph's output against its input (normalised units, RMS over
+    /// the pose values).
+    pub correction: f32,
+    /// The fallback's weight on the window (0 without a fallback).
+    pub weight: f32,
+}
+
 /// One aligned sequence refined.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StitchCase {
@@ -228,17 +264,30 @@ pub struct StitchCase {
     pub window: usize,
     /// See `window`.
     pub stride: usize,
-    /// The aligned sequence as engine poses (the input of `refine_poses`).
+    /// Frames over which each window's first-frame difference is blended away, and of the
+    /// seams' inertialization.
+    pub blend_frames: usize,
+    /// The aligned sequence as engine poses (the input of `refine_poses_at_seams`).
     pub input_poses: Vec<ReferencePose>,
-    /// Its raw pose vectors (`encode_poses`; the input of `refine_sequence`).
+    /// The frames where a clip starts (empty: none given).
+    pub seams: Vec<usize>,
+    /// Whether the seams were inertialized before encoding (the file's `pre_blend`, with seams).
+    pub pre_blend: bool,
+    /// The fallback towards the refiner's input every window got (`null`: none).
+    pub fallback: Option<StitchFallback>,
+    /// The raw pose vectors of `input_poses`, inertialized at the seams when `pre_blend`
+    /// (`encode_poses_at_seams`; the input of `refine_sequence`).
     pub sequence: Vec<Vec<f32>>,
     /// First frame of every window, in the order they run.
     pub window_starts: Vec<usize>,
+    /// Every window, in the order they run.
+    pub windows: Vec<ReferenceWindowRun>,
     /// The first window through the graph.
     pub first_window: ReferenceWindow,
     /// The refined raw pose vectors (`refine_sequence`), contacts 0 or 1.
     pub refined: Vec<Vec<f32>>,
-    /// The refined engine poses (`refine_poses` without ankle placement and foot lock).
+    /// The refined engine poses (`refine_poses_at_seams` without ankle placement, seam guard
+    /// and foot lock).
     pub poses: Vec<ReferencePose>,
     /// The predicted contacts per frame: left heel, left toe, right heel, right toe.
     pub contacts: Vec<[bool; 4]>,
@@ -272,7 +321,7 @@ pub struct SynthesisStep {
 pub struct SynthesisCase {
     /// What the case exercises.
     pub name: String,
-    /// The character's seed (`SplitMix64::new(seed)`).
+    /// The character's seed (`SplitMix64::new(seed)`), any 64-bit value.
     pub seed: u64,
     /// The scale on the mixture's standard deviations.
     pub temperature: f32,
@@ -656,34 +705,85 @@ fn transition_case(
     })
 }
 
-fn keyframes_cases(model: &KeyframeModel, rng: &mut SplitMix64) -> Result<Vec<KeyframesCase>, MotionError> {
-    if model.is_inbetween() {
-        return Err(MotionError::BadGraphIo {
-            what: "input",
-            name: "features".into(),
-            reason: "reference vectors cover the ARNN's per-frame step graph (docs/runtime-protocol.md); the \
-                     in-betweening design's whole-shot graph has none yet"
-                .into(),
-        });
-    }
+/// Whether a keyframe model's pose is the humanoid pose vector (root position, then one
+/// quaternion per joint of its skeleton, one key group each).
+fn is_humanoid(model: &KeyframeModel) -> bool {
+    let j = model.metadata().skeleton.len();
+    model.groups() == 1 + j && model.dofs() == zoo_motion::inbetween::dofs(j)
+}
+
+/// Whether the runtime locks the feet of this keyframe model's completions: a humanoid pose on
+/// a skeleton with legs (joints named `foot`, [`zoo_motion::footlock::FootLock::from_skeleton`]).
+fn locks_feet(model: &KeyframeModel) -> bool {
+    let s = &model.metadata().skeleton;
+    let parents: Vec<Option<usize>> = s.parents.iter().map(|&p| usize::try_from(p).ok()).collect();
+    is_humanoid(model) && zoo_motion::footlock::FootLock::from_skeleton(&s.names, &parents).is_some()
+}
+
+/// Seeded key poses, `keys * dofs` values: the `pose` group's means plus seeded multiples of
+/// its deviations. A humanoid's root walks at 0.8 to 1.6 m/s on a seeded heading from key to
+/// key (its height within 0.3 deviations of the mean), and each joint's quaternion is its mean
+/// jittered by half its deviations, normalised.
+fn seeded_keys(model: &KeyframeModel, frames: &[usize], rng: &mut SplitMix64) -> Vec<f32> {
     let m = model.metadata();
-    let (d, g) = (model.dofs(), model.groups());
-    // Keys around the poses the model was trained on: the `pose` group's means and deviations
-    // (0 and 1 for a file without the group).
+    let d = model.dofs();
+    // Keys around the poses the model was trained on (0 and 1 for a file without the group).
     let (mean, std) = match m.normalization.get("pose").filter(|s| s.mean.len() == d && s.std.len() == d) {
         Some(s) => (s.mean.clone(), s.std.clone()),
         None => (vec![0.0; d], vec![1.0; d]),
     };
-    let mut sets: Vec<(&str, Vec<usize>, bool)> =
-        vec![("four whole keys", vec![0, 5, 12, 20], false), ("two whole keys", vec![0, 9], false)];
-    if g > 0 {
-        sets.push(("partial keys", vec![0, 6, 14, 22], true));
+    if !is_humanoid(model) {
+        let n = frames.len();
+        return (0..n * d).map(|i| mean[i % d] + std[i % d] * rng.range(-1.0, 1.0) as f32).collect();
     }
+    let (mean, std): (Vec<f64>, Vec<f64>) = (mean.iter().map(|v| *v as f64).collect(), std.iter().map(|v| *v as f64).collect());
+    let heading = rng.range(-PI, PI);
+    let speed = rng.range(0.8, 1.6) * units_per_metre(m) / m.fps as f64;
+    let start = [mean[0] + 0.5 * std[0] * rng.range(-1.0, 1.0), mean[2] + 0.5 * std[2] * rng.range(-1.0, 1.0)];
+    let mut out = Vec::with_capacity(frames.len() * d);
+    for &f in frames {
+        let walked = speed * f as f64;
+        out.extend([
+            start[0] + walked * heading.sin(),
+            mean[1] + 0.3 * std[1] * rng.range(-1.0, 1.0),
+            start[1] + walked * heading.cos(),
+        ]);
+        for q in (3..d).step_by(4) {
+            let v: [f64; 4] = std::array::from_fn(|c| mean[q + c] + 0.5 * std[q + c] * rng.range(-1.0, 1.0));
+            let n = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+            out.extend(if n > 1e-6 { v.map(|x| x / n) } else { [1.0, 0.0, 0.0, 0.0] });
+        }
+    }
+    out.into_iter().map(|v| v as f32).collect()
+}
+
+fn keyframes_cases(model: &KeyframeModel, rng: &mut SplitMix64) -> Result<Vec<KeyframesCase>, MotionError> {
+    let (d, g) = (model.dofs(), model.groups());
+    let humanoid = is_humanoid(model);
+    // A humanoid's keys lie further apart: time for the feet to plant and lift between them.
+    let sets: Vec<(&str, Vec<usize>, bool)> = if humanoid {
+        vec![
+            ("four whole keys", vec![0, 8, 20, 33], false),
+            ("two whole keys", vec![0, 15], false),
+            ("partial keys", vec![0, 9, 21, 30], true),
+        ]
+    } else {
+        let mut sets = vec![("four whole keys", vec![0, 5, 12, 20], false), ("two whole keys", vec![0, 9], false)];
+        if g > 0 {
+            sets.push(("partial keys", vec![0, 6, 14, 22], true));
+        }
+        sets
+    };
+    let inbetween = match model.metadata().task.as_keyframes().and_then(|t| t.inbetween.as_ref()) {
+        Some(section) => Some(section.features().map_err(|reason| MotionError::Run { reason })?),
+        None => None,
+    };
+    let foot_lock = locks_feet(model);
     let mut runner = model.runner(1)?;
     let mut cases = Vec::new();
     for (name, key_frames, partial) in sets {
         let n = key_frames.len();
-        let poses: Vec<f32> = (0..n * d).map(|i| mean[i % d] + std[i % d] * rng.range(-1.0, 1.0) as f32).collect();
+        let poses = seeded_keys(model, &key_frames, rng);
         let mut fixed = Vec::new();
         if partial {
             fixed = vec![1.0f32; n * g];
@@ -698,25 +798,101 @@ fn keyframes_cases(model: &KeyframeModel, rng: &mut SplitMix64) -> Result<Vec<Ke
             }
         }
         let keys = MotionKeys { frames: &key_frames, poses: &poses, fixed: &fixed };
-        let mut out = vec![0.0f32; keys.len() * d];
-        runner.complete(keys, &mut out)?;
-        finite("a completed pose", &out)?;
-        let intervals = (1..keys.len())
-            .map(|t| {
-                let (a, b, t_rel) = keys.interval(t);
-                ReferenceInterval { t, a, b, t_rel }
-            })
-            .collect();
+        let len = keys.len() * d;
+        let mut complete = |hit: bool, lock: bool| -> Result<Vec<f32>, MotionError> {
+            runner.set_hit_keys(hit);
+            runner.set_foot_lock(lock);
+            let mut out = vec![0.0f32; len];
+            runner.complete(keys, &mut out)?;
+            finite("a completed pose", &out)?;
+            Ok(out)
+        };
+        let (network, hit, out) = (complete(false, false)?, complete(true, false)?, complete(true, true)?);
+        let (mut features, mut bezier, mut intervals) = (Vec::new(), Vec::new(), Vec::new());
+        if let Some(f) = &inbetween {
+            // The whole-shot graph's input, built as the runtime builds it (f32 keys as f64).
+            let poses: Vec<f64> = poses.iter().map(|v| *v as f64).collect();
+            let flags: Vec<bool> = fixed.iter().map(|v| *v == 1.0).collect();
+            let shot = f.shot(&key_frames, &poses, &flags).map_err(|e| MotionError::Keys { character: 0, reason: e.to_string() })?;
+            features = rows(&shot.features, f.input_width());
+            bezier = shot.bezier.chunks_exact(d).map(<[f64]>::to_vec).collect();
+        } else {
+            intervals = (1..keys.len())
+                .map(|t| {
+                    let (a, b, t_rel) = keys.interval(t);
+                    ReferenceInterval { t, a, b, t_rel }
+                })
+                .collect();
+        }
         cases.push(KeyframesCase {
             name: name.to_string(),
             key_frames: key_frames.clone(),
             key_poses: rows(&poses, d),
             fixed: if partial { rows(&fixed, g) } else { Vec::new() },
             intervals,
+            features,
+            bezier,
+            network: rows(&network, d),
+            hit: rows(&hit, d),
+            foot_lock,
             poses: rows(&out, d),
         });
     }
     Ok(cases)
+}
+
+/// The windows of `refine_sequence` on `sequence` (raw pose vectors), run one by one as it runs
+/// them: the refined sequence, every window's correction size and fallback weight, and the
+/// first window's input and raw output.
+type WindowRuns = (Vec<f32>, Vec<ReferenceWindowRun>, ReferenceWindow);
+
+fn run_windows(refiner: &StitchRefiner, sequence: &[f32]) -> Result<WindowRuns, MotionError> {
+    let (w, d, blend) = (refiner.window(), refiner.dim(), refiner.blend_frames());
+    let pose = d - 4;
+    let stats = refiner.metadata().group("x", d)?;
+    let mut x = sequence.to_vec();
+    for row in x.chunks_exact_mut(d) {
+        stats.normalize(row);
+    }
+    let (mut runs, mut first) = (Vec::new(), None);
+    let mut y = vec![0.0f32; w * d];
+    for ws in refiner.window_starts(sequence.len() / d) {
+        let input = x[ws * d..(ws + w) * d].to_vec();
+        refiner.refine_window_normalized(&input, &mut y)?;
+        finite("a window's output", &y)?;
+        if first.is_none() {
+            first = Some(ReferenceWindow { start: ws, input: rows(&input, d), output: rows(&y, d) });
+        }
+        let correction = crate::metadata::stitch::correction_size(&input, &y, d, pose);
+        let weight = refiner.fallback().map_or(0.0, |f| f.apply(&input, &mut y, d, pose));
+        if ws > 0 {
+            // The previous output at the window's first frame against the new one.
+            let offset: Vec<f32> = (0..pose).map(|i| input[i] - y[i]).collect();
+            for k in 0..blend.min(w) {
+                let a = 1.0 - k as f32 / blend as f32;
+                for (v, o) in y[k * d..k * d + pose].iter_mut().zip(&offset) {
+                    *v += a * o;
+                }
+            }
+        }
+        for row in y.chunks_exact_mut(d) {
+            for c in &mut row[pose..] {
+                *c = if *c > 0.0 { 1.0 } else { 0.0 };
+            }
+        }
+        x[ws * d..(ws + w) * d].copy_from_slice(&y);
+        runs.push(ReferenceWindowRun { start: ws, correction, weight });
+    }
+    for row in x.chunks_exact_mut(d) {
+        for ((v, m), s) in row.iter_mut().zip(&stats.mean).zip(&stats.std) {
+            *v = *v * s + m;
+        }
+        for c in &mut row[pose..] {
+            *c = if *c > 0.5 { 1.0 } else { 0.0 };
+        }
+    }
+    let first = first.ok_or_else(|| MotionError::Run { reason: "a sequence shorter than the window".into() })?;
+    Ok((x, runs, first))
 }
 
 fn stitch_cases(refiner: &StitchRefiner, rng: &mut SplitMix64) -> Result<Vec<StitchCase>, MotionError> {
@@ -725,35 +901,71 @@ fn stitch_cases(refiner: &StitchRefiner, rng: &mut SplitMix64) -> Result<Vec<Sti
     // Two regular windows and one more ending on the last frame.
     let frames = w + s + s.div_ceil(2).max(1);
     let stats = m.group("x", d)?;
-    let input = seeded_motion(m, &MotionStyle::stitch(refiner, stats), frames, Some(frames / 2), rng);
+    let pop = frames / 2;
+    let input = seeded_motion(m, &MotionStyle::stitch(refiner, stats), frames, Some(pop), rng);
+    let file = stitch_case(refiner, "an aligned sequence with a pop in its middle, the file's settings", &input, &[], refiner.fallback())?;
+    // Thresholds around the windows' corrections of the seam case, so that the fallback's
+    // weights lie between 0 and 1.
+    let mut bare = refiner.clone();
+    bare.set_fallback(None)?;
+    let probe = stitch_case(&bare, "", &input, &[pop], None)?;
+    let mean = probe.windows.iter().map(|r| r.correction).sum::<f32>() / probe.windows.len() as f32;
+    let fallback = StitchFallback { start: 0.5 * mean, full: 2.0 * mean };
+    let seam = stitch_case(
+        refiner,
+        "the pop given as a seam, a fallback from half to twice the windows' mean correction",
+        &input,
+        &[pop],
+        Some(fallback),
+    )?;
+    Ok(vec![file, seam])
+}
+
+fn stitch_case(
+    refiner: &StitchRefiner,
+    name: &str,
+    input: &[EnginePose],
+    seams: &[usize],
+    fallback: Option<StitchFallback>,
+) -> Result<StitchCase, MotionError> {
+    let mut refiner = refiner.clone();
+    refiner.set_fallback(fallback)?;
+    // The seam guard follows the ankle IK, a post-process the reference leaves out.
+    refiner.set_seam_guard(false);
+    let (frames, d) = (input.len(), refiner.dim());
+    let pre_blend = refiner.pre_blend() && !seams.is_empty();
     let mut sequence = vec![0.0f32; frames * d];
-    refiner.encode_poses(&input, &mut sequence)?;
+    refiner.encode_poses_at_seams(input, if pre_blend { seams } else { &[] }, &mut sequence)?;
     finite("a pose vector", &sequence)?;
-    let mut window = sequence[..w * d].to_vec();
-    for row in window.chunks_exact_mut(d) {
-        stats.normalize(row);
+    let (refined, windows, first_window) = run_windows(&refiner, &sequence)?;
+    let mut check = vec![0.0f32; frames * d];
+    refiner.refine_sequence(&sequence, &mut check)?;
+    if check != refined {
+        return Err(MotionError::Run {
+            reason: "the reference's windows differ from refine_sequence; this is a bug, please report it".into(),
+        });
     }
-    let mut y = vec![0.0f32; w * d];
-    refiner.refine_window_normalized(&window, &mut y)?;
-    finite("the first window's output", &y)?;
-    let mut refined = vec![0.0f32; frames * d];
-    refiner.refine_sequence(&sequence, &mut refined)?;
     finite("a refined pose vector", &refined)?;
     let mut out = vec![EnginePose::new(refiner.joints()); frames];
     let mut contacts = vec![[false; 4]; frames];
-    refiner.refine_poses(&input, FootCleanup::NONE, &mut out, &mut contacts)?;
-    Ok(vec![StitchCase {
-        name: "an aligned sequence with a pop in its middle".into(),
-        window: w,
-        stride: s,
+    refiner.refine_poses_at_seams(input, seams, FootCleanup::NONE, &mut out, &mut contacts)?;
+    Ok(StitchCase {
+        name: name.into(),
+        window: refiner.window(),
+        stride: refiner.stride(),
+        blend_frames: refiner.blend_frames(),
         input_poses: input.iter().map(|p| reference_pose("an input pose", p)).collect::<Result<_, _>>()?,
+        seams: seams.to_vec(),
+        pre_blend,
+        fallback,
         sequence: rows(&sequence, d),
         window_starts: refiner.window_starts(frames),
-        first_window: ReferenceWindow { start: 0, input: rows(&window, d), output: rows(&y, d) },
+        windows,
+        first_window,
         refined: rows(&refined, d),
         poses: out.iter().map(|p| reference_pose("a refined pose", p)).collect::<Result<_, _>>()?,
         contacts,
-    }])
+    })
 }
 
 fn synthesis_cases(model: &SynthesisModel, rng: &mut SplitMix64) -> Result<Vec<SynthesisCase>, MotionError> {
@@ -775,7 +987,7 @@ fn synthesis_cases(model: &SynthesisModel, rng: &mut SplitMix64) -> Result<Vec<S
         ]
     };
     for (name, model, temperature) in variants {
-        let seed = rng.next_u64() >> 11;
+        let seed = rng.next_u64();
         // A start frame near the data's mean, contacts 0 or 1.
         let mut start: Vec<f32> =
             (0..d).map(|i| stats.mean[i] + 0.5 * stats.std[i] * rng.range(-1.0, 1.0) as f32).collect();

@@ -102,6 +102,27 @@ impl FootCleanup {
     pub const NONE: FootCleanup = FootCleanup { place_ankles: false, lock_feet: false };
 }
 
+/// A stitched sequence ([`StitchRefiner::refine_clip`]) and what each step did.
+#[derive(Clone, Debug)]
+pub struct StitchedClip {
+    /// The stitched motion, on the model's skeleton.
+    pub clip: Clip,
+    /// Predicted contacts per frame (heel L, toe L, heel R, toe R).
+    pub contacts: Vec<[bool; 4]>,
+    /// The ankles' global positions the refiner predicts (left, right) per frame: its raw
+    /// lower-body positions placed in its accumulated ground roots (empty when the layout's
+    /// heel joints are not lower body).
+    pub ankles: Vec<[DVec3; 2]>,
+    /// Mean move of the ankles by the IK (clip units), when it ran.
+    pub ankle_move: Option<f64>,
+    /// Mean ankle correction of the foot lock (clip units), when it ran.
+    pub lock_move: Option<f64>,
+    /// What the seam guard did at each seam, when it ran.
+    pub guarded: Option<Vec<zoo_motion::stitch::guard::GuardedSeam>>,
+    /// The fallback's weight on each window (empty without a fallback).
+    pub fallback_weights: Vec<f32>,
+}
+
 impl StitchRefiner {
     /// Loads an exported RMR (`.onnx`), planned for its section's window; a file of another
     /// task is refused ([`MotionError::WrongTask`]).
@@ -250,6 +271,25 @@ impl StitchRefiner {
         self.seam_guard = on;
     }
 
+    /// Sets whether the seams given to [`StitchRefiner::refine_clip`] and
+    /// [`StitchRefiner::refine_poses_at_seams`] are inertialized before the refiner sees them
+    /// (default: the file's [`StitchRefiner::pre_blend`], the input its model was trained on;
+    /// `zoo stitch --pre-blend` turns it on for a model trained without it).
+    pub fn set_pre_blend(&mut self, on: bool) {
+        self.pre_blend = on;
+    }
+
+    /// Sets the frames over which each window's first-frame difference is blended away, which
+    /// are also the frames of the seams' inertialization (the pre-blend and the seam guard's
+    /// reference; default: the file's; `zoo stitch --blend-frames`).
+    pub fn set_blend_frames(&mut self, frames: usize) -> Result<(), MotionError> {
+        if frames == 0 {
+            return Err(stitch_err("a blend of 0 frames: blend over at least 1 frame"));
+        }
+        self.blend_frames = frames;
+        Ok(())
+    }
+
     /// Window starts over `frames` frames: every stride while the window fits, plus one ending
     /// on the last frame when the stride does not land there.
     pub fn window_starts(&self, frames: usize) -> Vec<usize> {
@@ -298,9 +338,17 @@ impl StitchRefiner {
     }
 
     /// Refines a whole aligned sequence of raw pose vectors (`frames * dim`, `frames >= w`)
-    /// into `out` (same size): raw pose vectors, contacts 0/1. The same computation as the
-    /// offline `zoo_rmr::stitch::refine_sequence`.
+    /// into `out` (same size): raw pose vectors, contacts 0/1. Windows every `s` frames plus
+    /// one ending on the last frame; each window's input holds the frames already refined;
+    /// each window gets the fallback ([`StitchRefiner::fallback`]), and the difference at each
+    /// window's first frame is blended away over [`StitchRefiner::blend_frames`] frames.
     pub fn refine_sequence(&self, features: &[f32], out: &mut [f32]) -> Result<(), MotionError> {
+        self.refine_sequence_weights(features, out).map(|_| ())
+    }
+
+    /// [`StitchRefiner::refine_sequence`], returning the fallback's weight on each window (0:
+    /// the refined window kept; empty without a fallback).
+    pub fn refine_sequence_weights(&self, features: &[f32], out: &mut [f32]) -> Result<Vec<f32>, MotionError> {
         let d = self.dim;
         if features.is_empty() || !features.len().is_multiple_of(d) || out.len() != features.len() {
             return Err(MotionError::BufferLength {
@@ -328,13 +376,17 @@ impl StitchRefiner {
         }
         let mut y = vec![0.0f32; self.window * d];
         let mut offset = vec![0.0f32; self.pose];
+        let mut weights = Vec::new();
         for ws in self.window_starts(frames) {
-            self.refine_window_in_place(&mut out[ws * d..(ws + self.window) * d], ws == 0, &mut y, &mut offset)?;
+            let w = self.refine_window_in_place(&mut out[ws * d..(ws + self.window) * d], ws == 0, &mut y, &mut offset)?;
+            if self.fallback.is_some() {
+                weights.push(w);
+            }
         }
         for f in out.chunks_exact_mut(d) {
             self.denormalize_frame(f);
         }
-        Ok(())
+        Ok(weights)
     }
 
     fn normalize_frame(&self, f: &mut [f32]) {
@@ -358,19 +410,20 @@ impl StitchRefiner {
     /// that input ([`StitchRefiner::fallback`]), then, unless it is the
     /// sequence's first window, the difference between the previous output at the window's
     /// first frame and the new one blended away over `blend_frames` frames; contacts to 0/1.
-    /// `y` (`w * dim`) and `offset` (`dim - 4`) are scratch.
+    /// `y` (`w * dim`) and `offset` (`dim - 4`) are scratch. Returns the fallback's weight.
     fn refine_window_in_place(
         &self,
         frames: &mut [f32],
         first: bool,
         y: &mut [f32],
         offset: &mut [f32],
-    ) -> Result<(), MotionError> {
+    ) -> Result<f32, MotionError> {
         let (d, pose) = (self.dim, self.pose);
         self.refine_window_normalized(frames, y)?;
-        if let Some(f) = &self.fallback {
-            f.apply(frames, y, d, pose);
-        }
+        let weight = match &self.fallback {
+            Some(f) => f.apply(frames, y, d, pose),
+            None => 0.0,
+        };
         if !first {
             // frames[0] is the previous output at the window's first frame (RMR sec. 6).
             for (i, o) in offset.iter_mut().enumerate() {
@@ -389,7 +442,7 @@ impl StitchRefiner {
             }
         }
         frames.copy_from_slice(y);
-        Ok(())
+        Ok(weight)
     }
 
     /// Checks that pose `index` fits the model (its joint count, finite values).
@@ -432,7 +485,7 @@ impl StitchRefiner {
     /// [`StitchRefiner::encode_poses`] with the sequence inertialized at `seams` first (the
     /// frames where a clip starts, `zoo stitch --pre-blend`): from each seam on, the jump to the
     /// previous clip decays over [`StitchRefiner::blend_frames`] frames
-    /// ([`zoo_motion::blend::SeamInertializer`], what the offline tools run). Seams out of
+    /// ([`zoo_motion::blend::inertialize_seams`], what the offline tools run). Seams out of
     /// `2..frames - 1` change nothing.
     pub fn encode_poses_at_seams(
         &self,
@@ -440,22 +493,6 @@ impl StitchRefiner {
         seams: &[usize],
         out: &mut [f32],
     ) -> Result<(), MotionError> {
-        self.encode_frames_at_seams(poses, seams, out).map(|_| ())
-    }
-
-    /// [`StitchRefiner::encode_poses_at_seams`], returning the inertialized frames it encoded.
-    fn encode_frames_at_seams(
-        &self,
-        poses: &[EnginePose],
-        seams: &[usize],
-        out: &mut [f32],
-    ) -> Result<Vec<PoseFrame>, MotionError> {
-        if poses.len() < 2 {
-            return Err(stitch_err(format!(
-                "{} pose(s): a sequence needs at least 2 frames (the root motion is a difference of frames)",
-                poses.len()
-            )));
-        }
         let d = self.dim;
         if out.len() != poses.len() * d {
             return Err(MotionError::BufferLength {
@@ -466,32 +503,19 @@ impl StitchRefiner {
                 found: out.len(),
             });
         }
-        let frames = self.inertialized_frames(poses, seams)?;
-        zoo_motion::stitch::encode_frames(&self.layout, &frames, out);
-        Ok(frames)
-    }
-
-    /// The frames of `poses` inertialized at `seams` (checked, as the encoder reads them).
-    fn inertialized_frames(&self, poses: &[EnginePose], seams: &[usize]) -> Result<Vec<PoseFrame>, MotionError> {
         if let Some(&s) = seams.iter().find(|&&s| s >= poses.len()) {
             return Err(stitch_err(format!(
                 "seam at frame {s} of a sequence of {} poses: give the frames where a clip starts, within the sequence",
                 poses.len()
             )));
         }
-        let mut blend = SeamInertializer::new(self.joints, self.blend_frames, 1.0 / self.fps);
-        let mut frames: Vec<PoseFrame> = Vec::with_capacity(poses.len());
-        let read = |f: usize, rotations: &mut Vec<DQuat>| {
-            self.check_pose(&poses[f], f)?;
-            Ok::<_, MotionError>(Self::model_space(&poses[f], rotations))
-        };
-        let put = |r: &[DQuat], hips: DVec3| {
-            let mut frame = PoseFrame::default();
-            frame.set(&self.skeleton, &self.layout, r, hips);
-            frames.push(frame);
-        };
-        blend.run(poses.len(), seams, read, put)?;
-        Ok(frames)
+        let mut clip = self.poses_to_clip(poses)?;
+        if !seams.is_empty() {
+            clip = zoo_motion::blend::inertialize_seams(&clip, seams, self.blend_frames);
+        }
+        let x = zoo_motion::stitch::encode_clip(&clip, &self.layout).map_err(|e| stitch_err(e.to_string()))?;
+        out.copy_from_slice(&x);
+        Ok(())
     }
 
     /// Refines a whole aligned sequence of poses (the clips already put end to start, at the
@@ -511,10 +535,10 @@ impl StitchRefiner {
         self.refine_poses_at_seams(input, &[], cleanup, out, contacts)
     }
 
-    /// [`StitchRefiner::refine_poses`] of the sequence inertialized at `seams` (the frames where
-    /// a clip starts; [`StitchRefiner::encode_poses_at_seams`]), with the seams guarded against
-    /// pops after the ankle IK and before the foot lock ([`StitchRefiner::seam_guard`]): what
-    /// `zoo stitch` writes for a model trained with `--pre-blend` (the default).
+    /// [`StitchRefiner::refine_poses`] of a sequence whose clips start at `seams`: the seams
+    /// inertialized before the refiner sees them when [`StitchRefiner::pre_blend`] (the model was
+    /// trained so), and guarded against pops after the ankle IK and before the foot lock
+    /// ([`StitchRefiner::seam_guard`]): what `zoo stitch` writes ([`StitchRefiner::refine_clip`]).
     pub fn refine_poses_at_seams(
         &self,
         input: &[EnginePose],
@@ -538,51 +562,82 @@ impl StitchRefiner {
                 self.joints
             )));
         }
-        let d = self.dim;
-        let mut x = vec![0.0f32; frames * d];
-        let inertialized = self.encode_frames_at_seams(input, seams, &mut x)?;
-        // The guard's reference: the input inertialized at the seams, as a clip.
-        let reference = (self.seam_guard && !seams.is_empty()).then(|| self.frames_to_clip(&inertialized));
-        let mut y = vec![0.0f32; x.len()];
-        self.refine_sequence(&x, &mut y)?;
-        let mut rotations = Vec::with_capacity(self.joints);
-        let hips = Self::model_space(&input[0], &mut rotations);
-        let start = self.layout.root_of(rotations[0], hips);
-        let frame_time = 1.0 / self.fps;
-        let (mut clip, predicted) = zoo_motion::stitch::decode(&y, &self.skeleton, &self.layout, frame_time, start)
-            .map_err(|e| stitch_err(e.to_string()))?;
-        if cleanup.place_ankles {
-            let ankles =
-                zoo_motion::stitch::predicted_ankles(&y, self.layout.pose_layout(self.joints), &self.layout, start);
-            zoo_motion::stitch::lock::place_ankles(&mut clip, &ankles, &self.layout);
-        }
-        if let Some(reference) = &reference {
-            zoo_motion::stitch::guard::guard_seams(&mut clip, reference, seams, &self.layout);
-        }
-        if cleanup.lock_feet {
-            zoo_motion::stitch::lock::lock_feet(&mut clip, &predicted, &self.layout);
-        }
-        contacts.copy_from_slice(&predicted);
-        write_poses(&clip, out);
+        let clip = self.poses_to_clip(input)?;
+        let stitched = self.refine_clip(&clip, seams, cleanup)?;
+        contacts.copy_from_slice(&stitched.contacts);
+        write_poses(&stitched.clip, out);
         Ok(())
     }
 
-    /// Encoder frames as a clip on the model's skeleton (joint 0's rotation is the hips' world
-    /// rotation, its position the hips' world position).
-    fn frames_to_clip(&self, frames: &[PoseFrame]) -> Clip {
+    /// The poses as a clip on the model's skeleton (joint 0: the hips' world rotation and
+    /// position), checked.
+    fn poses_to_clip(&self, poses: &[EnginePose]) -> Result<Clip, MotionError> {
+        if poses.len() < 2 {
+            return Err(stitch_err(format!(
+                "{} pose(s): a sequence needs at least 2 frames (the root motion is a difference of frames)",
+                poses.len()
+            )));
+        }
         let j = self.joints;
         let mut clip = Clip {
             skeleton: self.skeleton.clone(),
             frame_time: 1.0 / self.fps,
-            local_rotations: Vec::with_capacity(frames.len() * j),
-            local_positions: Vec::with_capacity(frames.len() * j),
+            local_rotations: Vec::with_capacity(poses.len() * j),
+            local_positions: Vec::with_capacity(poses.len() * j),
         };
-        for f in frames {
-            clip.local_rotations.extend_from_slice(&f.local_rotations);
-            clip.local_positions.push(f.global_positions[0]);
+        let mut rotations = Vec::with_capacity(j);
+        for (f, pose) in poses.iter().enumerate() {
+            self.check_pose(pose, f)?;
+            let hips = Self::model_space(pose, &mut rotations);
+            clip.local_rotations.extend_from_slice(&rotations);
+            clip.local_positions.push(hips);
             clip.local_positions.extend_from_slice(&self.skeleton.offsets[1..]);
         }
-        clip
+        Ok(clip)
+    }
+
+    /// Stitches `aligned`, a sequence of clips already put end to start on the model's skeleton
+    /// at its frame rate (joint 0 holding the hips' world transform, at least `w` frames), whose
+    /// clips start at `seams`: the seams inertialized first when [`StitchRefiner::pre_blend`],
+    /// the refiner window by window ([`StitchRefiner::refine_sequence`], with its fallback),
+    /// the output decoded from the input's first ground root, then `cleanup`'s ankle IK, the
+    /// seam guard ([`StitchRefiner::seam_guard`], against the input inertialized at the seams)
+    /// and `cleanup`'s foot lock, in that order (RMR secs. 5-6): what `zoo stitch` writes and
+    /// `zoo bench stitch` measures. Without seams there is nothing to pre-blend or guard.
+    pub fn refine_clip(&self, aligned: &Clip, seams: &[usize], cleanup: FootCleanup) -> Result<StitchedClip, MotionError> {
+        if aligned.joints() != self.joints {
+            return Err(stitch_err(format!(
+                "the sequence has {} joints, the model's skeleton {}: retarget it to the model's rig",
+                aligned.joints(),
+                self.joints
+            )));
+        }
+        if let Some(&s) = seams.iter().find(|&&s| s >= aligned.frames()) {
+            return Err(stitch_err(format!(
+                "seam at frame {s} of a sequence of {} frames: give the frames where a clip starts, within the sequence",
+                aligned.frames()
+            )));
+        }
+        let inertialized = (!seams.is_empty() && (self.pre_blend || self.seam_guard))
+            .then(|| zoo_motion::blend::inertialize_seams(aligned, seams, self.blend_frames));
+        let input = match (&inertialized, self.pre_blend) {
+            (Some(blended), true) => blended,
+            _ => aligned,
+        };
+        let x = zoo_motion::stitch::encode_clip(input, &self.layout).map_err(|e| stitch_err(e.to_string()))?;
+        let mut y = vec![0.0f32; x.len()];
+        let fallback_weights = self.refine_sequence_weights(&x, &mut y)?;
+        let start = zoo_motion::stitch::ground_roots(input, &self.layout)[0];
+        let ankles = zoo_motion::stitch::predicted_ankles(&y, self.layout.pose_layout(self.joints), &self.layout, start);
+        let (mut clip, contacts) = zoo_motion::stitch::decode(&y, &self.skeleton, &self.layout, aligned.frame_time, start)
+            .map_err(|e| stitch_err(e.to_string()))?;
+        let ankle_move = cleanup.place_ankles.then(|| zoo_motion::stitch::lock::place_ankles(&mut clip, &ankles, &self.layout));
+        let guarded = match (&inertialized, self.seam_guard) {
+            (Some(reference), true) => Some(zoo_motion::stitch::guard::guard_seams(&mut clip, reference, seams, &self.layout)),
+            _ => None,
+        };
+        let lock_move = cleanup.lock_feet.then(|| zoo_motion::stitch::lock::lock_feet(&mut clip, &contacts, &self.layout));
+        Ok(StitchedClip { clip, contacts, ankles, ankle_move, lock_move, guarded, fallback_weights })
     }
 
     /// A stream over this refiner for motion matching: push poses as they are decided, pop
@@ -801,6 +856,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         let d = r.dim;
         let from = (ws - self.base) * d;
         r.refine_window_in_place(&mut self.buf[from..from + r.window * d], ws == 0, &mut self.y, &mut self.offset)
+            .map(|_| ())
     }
 
     /// Drops the frames no later window and no pop needs, once a window's worth of them has

@@ -1,12 +1,12 @@
-//! `zoo stitch`: join locomotion clips into one ([`zoo_rmr::stitch::stitch_command`]): the
-//! clips aligned end to start (RMR sec. 6), the seams smoothed by the RMR (ankles placed at its
-//! predicted positions, feet locked by its predicted contacts), inertialization, interpolation,
-//! or nothing (`concat`).
+//! `zoo stitch`: join locomotion clips into one ([`zoo_tasks::stitch`], run by the engine
+//! runtime): the clips aligned end to start (RMR sec. 6), the seams smoothed by the RMR (ankles
+//! placed at its predicted positions, seams guarded, feet locked by its predicted contacts),
+//! inertialization, interpolation, or nothing (`concat`).
 
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
 use std::path::{Path, PathBuf};
-use zoo_rmr::stitch::{ClipRange, PostProcess, SeamMethod, StitchOptions};
+use zoo_tasks::stitch::{ClipRange, PostProcess, SeamMethod, StitchOptions};
 
 /// How the seams are smoothed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -29,8 +29,9 @@ pub struct StitchArgs {
     /// an empty TO means the clip's end). At least two, each at least 10 frames.
     #[arg(required = true, num_args = 2.., value_name = "CLIP.bvh[:FROM:TO]")]
     pub clips: Vec<String>,
-    /// Run folder of `zoo train rmr` (needed by `--method rmr`; with another method its
-    /// planted foot heights and frame rate are used for the checks).
+    /// Run folder of `zoo train rmr`, or its exported file (`zoo export --onnx`): needed by
+    /// `--method rmr`; with another method its skeleton, frame rate and planted foot heights
+    /// are used for the checks.
     #[arg(long)]
     pub model: Option<PathBuf>,
     /// Output BVH.
@@ -118,37 +119,10 @@ pub fn parse_clip_spec(s: &str) -> anyhow::Result<ClipRange> {
     Ok(ClipRange { path: PathBuf::from(s), from: 0, to: None })
 }
 
-/// Why a file given as `--model` is refused, naming the model kind of an exported ONNX file.
-fn model_file_message(path: &Path) -> String {
-    let kind = std::fs::read(path)
-        .ok()
-        .and_then(|bytes| zoo_export::OnnxModel::from_bytes(&bytes, &path.display().to_string()).ok())
-        .and_then(|m| m.metadata_value("zoo.model_kind").map(str::to_string));
-    let what = match kind {
-        Some(k) => format!("an exported `{k}` ONNX model"),
-        None => "not a folder".to_string(),
-    };
-    format!(
-        "--model {} is a file ({what}); `zoo stitch` takes the run folder of `zoo train rmr` (the folder holding \
-         config.json and model.safetensors)",
-        path.display()
-    )
-}
-
 /// `OUT.input.bvh` beside `OUT.bvh`.
 fn input_path(out: &Path) -> PathBuf {
     let stem = out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "stitched".into());
     out.with_file_name(format!("{stem}.input.bvh"))
-}
-
-/// The RMR of `--model` (refusing a file or another kind of run folder).
-fn load_model(dir: &Path) -> anyhow::Result<(zoo_rmr::Rmr, zoo_rmr::features::FeatureStats)> {
-    if dir.is_file() {
-        bail!("{}", model_file_message(dir));
-    }
-    zoo_models::require_task(dir, zoo_runtime::MotionTaskKind::Stitch, "stitch").map_err(anyhow::Error::msg)?;
-    zoo_rmr::checkpoint::load(dir, &candle_core::Device::Cpu)
-        .with_context(|| format!("loading the RMR in {}", dir.display()))
 }
 
 /// Runs `zoo stitch`.
@@ -161,8 +135,6 @@ pub fn run(a: StitchArgs) -> anyhow::Result<()> {
         crate::cmd::check_output_file("--positions", p)?;
     }
     let specs = a.clips.iter().map(|s| parse_clip_spec(s)).collect::<anyhow::Result<Vec<_>>>()?;
-    let model = a.model.as_deref().map(load_model).transpose()?;
-    let clips = zoo_rmr::stitch::read_clips(&specs, model.as_ref().map(|(m, _)| m.config()))?;
     let names: Vec<String> = specs.iter().map(|s| s.path.display().to_string()).collect();
     let method = match a.method {
         StitchMethod::Rmr => SeamMethod::Rmr(PostProcess {
@@ -175,8 +147,15 @@ pub fn run(a: StitchArgs) -> anyhow::Result<()> {
         StitchMethod::Interp => SeamMethod::Interp,
         StitchMethod::Concat => SeamMethod::Concat,
     };
-    let opts = StitchOptions { method, window: a.window, stride: a.stride, blend_frames: a.blend_frames };
-    let done = zoo_rmr::stitch::stitch_command(model.as_ref(), &clips, &names, opts)?;
+    let opts = StitchOptions {
+        clips: specs,
+        model: a.model.clone(),
+        method,
+        window: a.window,
+        stride: a.stride,
+        blend_frames: a.blend_frames,
+    };
+    let done = zoo_tasks::stitch::stitch(&opts, &names)?;
     zoo_data::clip_io::write(&done.output, &a.out)?;
     if let Some(p) = &a.positions {
         let ankles = done
@@ -196,7 +175,7 @@ pub fn run(a: StitchArgs) -> anyhow::Result<()> {
     }
     println!(
         "stitched {} clips ({} frames, seams at {:?}) with {:?} in {:.3} s{}: {}",
-        clips.len(),
+        names.len(),
         done.output.frames(),
         done.seams,
         a.method,

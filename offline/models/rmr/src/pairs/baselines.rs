@@ -3,36 +3,9 @@
 //! itself.
 
 use zoo_motion::Clip;
-use zoo_motion::blend::SeamInertializer;
-use zoo_motion::glam::{DQuat, DVec3};
 use zoo_motion::quat::slerp;
 
-/// Inertialization at each seam (Bollo, GDC 2018; [`zoo_motion::blend::Inertializer`]): from
-/// each seam `s` on (the first frame of a clip), the offset between the frames before the seam
-/// and the frames from it (local rotations of every joint and the root joint's position, with
-/// their velocities) is decayed to zero over `blend_frames` frames. Frame `s + k` receives the
-/// offset at `(k + 1)` frame times, so the motion continues the previous clip's. Seams are
-/// treated in order on the already blended sequence; a seam without two frames on each side
-/// is left as it is.
-pub fn inertialize_seams(aligned: &Clip, seams: &[usize], blend_frames: usize) -> Clip {
-    let mut out = aligned.clone();
-    let (frames, j) = (out.frames(), out.joints());
-    // The motion core's frame-by-frame form, which the runtime's stitch stream runs too.
-    let mut next = 0;
-    let read = |f: usize, r: &mut Vec<DQuat>| {
-        r.clear();
-        r.extend_from_slice(&aligned.local_rotations[f * j..(f + 1) * j]);
-        Ok::<_, std::convert::Infallible>(aligned.local_positions[f * j])
-    };
-    let write = |r: &[DQuat], p: DVec3| {
-        out.local_rotations[next * j..(next + 1) * j].copy_from_slice(r);
-        out.local_positions[next * j] = p;
-        next += 1;
-    };
-    let Ok(()) = SeamInertializer::new(j, blend_frames, aligned.frame_time).run(frames, seams, read, write);
-    out.remove_sign_flips();
-    out
-}
+pub use zoo_motion::blend::inertialize_seams;
 
 /// Interpolation across each seam: the `2h` frames `s - h .. s + h` around seam `s`
 /// (`h = max(blend_frames / 2, 1)`) are replaced by a linear blend from the frame before them

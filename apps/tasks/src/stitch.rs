@@ -1,0 +1,275 @@
+//! `zoo stitch` on the runtime's stitch task (`zoo_runtime::StitchRefiner`): the clips read and
+//! cut, checked against the model's skeleton and frame rate, aligned end to start (RMR sec. 6),
+//! and the seams smoothed by the refiner (with the ankle IK, the seam guard and the foot lock, as
+//! the runtime applies them for every engine), by inertialization, by interpolation, or not at
+//! all (`concat`).
+
+use crate::{ModelSource, TaskResult};
+use std::path::PathBuf;
+use zoo_data::{Context, Message, bail};
+use zoo_format::MotionTaskKind;
+use zoo_motion::Clip;
+use zoo_motion::glam::DVec3;
+use zoo_motion::stitch::StitchLayout;
+use zoo_rmr::pairs::{MIN_CLIP_FRAMES, align_clips, baselines};
+use zoo_runtime::{FootCleanup, StitchRefiner};
+
+/// A clip argument of `zoo stitch`: a file and a frame range.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ClipRange {
+    /// The clip file.
+    pub path: PathBuf,
+    /// First frame (0 when not given).
+    pub from: usize,
+    /// End frame, excluded (`None`: the clip's end).
+    pub to: Option<usize>,
+}
+
+/// What follows the refiner (`zoo stitch` by default: all but `pre_blend`, in this order) and
+/// what comes before it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PostProcess {
+    /// The ankles placed at the refiner's predicted positions by IK (RMR sec. 5).
+    pub ankle_ik: bool,
+    /// The feet locked by the predicted contacts.
+    pub foot_lock: bool,
+    /// The seams inertialized over the blend before the refiner runs (also when the model was
+    /// trained so).
+    pub pre_blend: bool,
+    /// No seam moves a joint faster than the inertialized clips do there.
+    pub seam_guard: bool,
+}
+
+/// How the seams of the aligned clips are smoothed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SeamMethod {
+    /// The refiner of the model, with its post-processing.
+    Rmr(PostProcess),
+    /// Inertialization at each seam over the blend.
+    Inertialize,
+    /// Interpolation across each seam over the blend.
+    Interp,
+    /// The aligned concatenation as it is.
+    Concat,
+}
+
+/// The options of `zoo stitch`.
+#[derive(Clone, Debug)]
+pub struct StitchOptions {
+    /// The clips, in order.
+    pub clips: Vec<ClipRange>,
+    /// Run folder of `zoo train rmr` or its exported file: needed by [`SeamMethod::Rmr`]; with
+    /// another method its skeleton, frame rate and planted foot heights are used for the checks.
+    pub model: Option<PathBuf>,
+    /// How the seams are smoothed.
+    pub method: SeamMethod,
+    /// Refiner window in frames (default: the model's).
+    pub window: Option<usize>,
+    /// Refiner window step in frames (default: the model's; half the window when `window` is
+    /// given).
+    pub stride: Option<usize>,
+    /// Frames of the blend at each seam (inertialize, interp, pre-blend, the guard's reference)
+    /// or after each refiner window.
+    pub blend_frames: usize,
+}
+
+/// What `zoo stitch` made.
+#[derive(Clone, Debug)]
+pub struct StitchOutcome {
+    /// The aligned concatenation.
+    pub aligned: Clip,
+    /// The stitched motion.
+    pub output: Clip,
+    /// First frame of each clip after the first.
+    pub seams: Vec<usize>,
+    /// The refiner's predicted ankle positions per frame ([`SeamMethod::Rmr`] only).
+    pub predicted_ankles: Option<Vec<[DVec3; 2]>>,
+    /// What the method did beyond the refinement (`, feet locked by ...`), for the summary line.
+    pub note: String,
+    /// Seconds the method took.
+    pub seconds: f64,
+}
+
+/// The model's rig and frame rate, which the clips must have.
+struct ModelRig<'a> {
+    source: &'a ModelSource,
+    skeleton: zoo_motion::Skeleton,
+}
+
+impl ModelRig<'_> {
+    fn fits(&self, s: &zoo_motion::Skeleton) -> bool {
+        s.names == self.skeleton.names && s.parents_i32() == self.skeleton.parents_i32()
+    }
+
+    /// Refuses a clip on another rig, naming the first joint that differs.
+    fn check(&self, clip: &Clip, name: &str) -> TaskResult<()> {
+        if self.fits(&clip.skeleton) {
+            return Ok(());
+        }
+        let (want, got) = (&self.skeleton, &clip.skeleton);
+        let (wp, gp) = (want.parents_i32(), got.parents_i32());
+        let why = if got.len() != want.len() {
+            format!("expected {} joints, found {}", want.len(), got.len())
+        } else {
+            (0..want.len())
+                .find(|&j| got.names[j] != want.names[j] || gp[j] != wp[j])
+                .map(|j| format!("joint {j}: expected `{}`, found `{}`", want.names[j], got.names[j]))
+                .unwrap_or_default()
+        };
+        bail!(
+            "{name}: the clips' skeleton is not the model's in {} ({why}); retarget the clips to the model's rig",
+            self.source.path.display()
+        )
+    }
+}
+
+/// Reads the clips of `ranges` (dummy root dropped, sign flips removed) and cuts their ranges;
+/// a range outside its clip or shorter than [`MIN_CLIP_FRAMES`] is refused. Each clip is brought
+/// to the model's skeleton or else to the first clip's by the one rule of
+/// [`zoo_data::clip_io::conform`] (reordered joints, a moving dummy root folded), said on stderr.
+fn read_clips(ranges: &[ClipRange], model: Option<&ModelRig>) -> TaskResult<Vec<Clip>> {
+    let mut first: Option<zoo_motion::Skeleton> = None;
+    let mut read = |spec: &ClipRange| -> TaskResult<Clip> {
+        let mut clip = zoo_data::clip_io::read_model_clip(&spec.path)
+            .with_context(|| format!("reading {}", spec.path.display()))?;
+        let how = match (model, &first) {
+            (Some(m), _) => zoo_data::clip_io::conform(&mut clip, &|s: &zoo_motion::Skeleton| m.fits(s), None),
+            (None, Some(f)) => zoo_data::clip_io::conform_to(&mut clip, f),
+            (None, None) => None,
+        };
+        if let Some(zoo_data::clip_io::Conformed::Folded(how)) = how {
+            eprintln!("{}: {how}", spec.path.display());
+        }
+        first.get_or_insert_with(|| clip.skeleton.clone());
+        let frames = clip.frames();
+        let to = spec.to.unwrap_or(frames);
+        if to > frames || spec.from >= to {
+            bail!(
+                "{}: the range {}:{} is outside the clip's {frames} frames (frames are 0..{frames})",
+                spec.path.display(),
+                spec.from,
+                to
+            );
+        }
+        let clip = clip.slice(spec.from, to);
+        if clip.frames() < MIN_CLIP_FRAMES {
+            bail!(
+                "{} ({}..{to}) has {} frames; stitching needs at least {MIN_CLIP_FRAMES} frames per clip: give a \
+                 longer range",
+                spec.path.display(),
+                spec.from,
+                clip.frames()
+            );
+        }
+        Ok(clip)
+    };
+    ranges.iter().map(&mut read).collect()
+}
+
+/// Refuses clips on another rig or at another frame rate than the first (`names` name them),
+/// and, with a model, clips on another rig or at another frame rate than the model's.
+fn check_clips(clips: &[Clip], names: &[String], model: Option<(&ModelRig, f64)>) -> TaskResult<()> {
+    for (i, (c, name)) in clips.iter().zip(names).enumerate().skip(1) {
+        if let Some(why) = clips[0].skeleton.topology_difference(&c.skeleton) {
+            bail!("{name} has another skeleton than {} ({why}): every clip must use the same rig", names[0]);
+        }
+        if (c.fps() - clips[0].fps()).abs() > 1e-6 * clips[0].fps() {
+            bail!("{name} is {} fps, {} is {} fps: resample clip {i} first", c.fps(), names[0], clips[0].fps());
+        }
+    }
+    let Some((rig, fps)) = model else { return Ok(()) };
+    for (c, name) in clips.iter().zip(names) {
+        rig.check(c, name)?;
+        if (c.fps() - fps).abs() > 1e-6 * fps {
+            bail!("{name} is {} fps but the model was trained at {fps} fps: resample it first", c.fps());
+        }
+    }
+    Ok(())
+}
+
+/// Sets `r` up for `zoo stitch` on a sequence of `frames` frames: the window and stride asked
+/// for (the model's by default; half the window when only the window is given), the blend, the
+/// pre-blend (asked for, or the model's) and the seam guard.
+fn configure(r: &mut StitchRefiner, frames: usize, opts: &StitchOptions, post: PostProcess) -> TaskResult<()> {
+    let window = opts.window.unwrap_or(r.window());
+    let stride = opts.stride.unwrap_or(if opts.window.is_some() { window / 2 } else { r.stride() }).max(1);
+    if stride > window {
+        bail!("--stride {stride} is longer than the window {window}: use a stride of at most {window}");
+    }
+    if window > frames {
+        bail!(
+            "the window of {window} frames is longer than the stitched sequence ({frames} frames): pass --window {} or \
+             longer clips",
+            frames.min(r.window())
+        );
+    }
+    if (window, stride) != (r.window(), r.stride()) {
+        r.set_window(window, stride)?;
+    }
+    r.set_blend_frames(opts.blend_frames)?;
+    let pre_blend = post.pre_blend || r.pre_blend();
+    r.set_pre_blend(pre_blend);
+    r.set_seam_guard(post.seam_guard);
+    Ok(())
+}
+
+/// `zoo stitch`: reads and aligns the clips end to start and smooths the seams by
+/// `opts.method`. `names` name the clips in messages.
+pub fn stitch(opts: &StitchOptions, names: &[String]) -> TaskResult<StitchOutcome> {
+    let source = opts.model.as_deref().map(|p| ModelSource::open(p, MotionTaskKind::Stitch, "stitch")).transpose()?;
+    let rig = source.as_ref().map(|s| ModelRig { source: s, skeleton: s.skeleton() });
+    let clips = read_clips(&opts.clips, rig.as_ref())?;
+    check_clips(&clips, names, rig.as_ref().map(|r| (r, f64::from(r.source.metadata.fps))))?;
+    let mut refiner = source.as_ref().map(|s| -> TaskResult<StitchRefiner> { Ok(s.load()?.into_stitch()?) }).transpose()?;
+    // The model's layout (its planted foot heights) when one is given, else bandai2's joints.
+    let layout = match &refiner {
+        Some(r) => r.layout().clone(),
+        None => StitchLayout::bandai2(&clips[0].skeleton)
+            .map_err(|e| Message(format!("{}: a joint stitching reads is missing ({e})", names[0])))?,
+    };
+    let aligned = align_clips(&clips, &layout, MIN_CLIP_FRAMES).map_err(|e| Message(e.to_string()))?;
+    let seams = aligned.starts[1..].to_vec();
+    let blend = opts.blend_frames;
+    let (mut note, mut predicted_ankles) = (String::new(), None);
+    let t0 = std::time::Instant::now();
+    let output = match opts.method {
+        SeamMethod::Concat => aligned.clip.clone(),
+        SeamMethod::Inertialize => baselines::inertialize_seams(&aligned.clip, &seams, blend),
+        SeamMethod::Interp => baselines::interpolate_seams(&aligned.clip, &seams, blend),
+        SeamMethod::Rmr(post) => {
+            let Some(r) = refiner.as_mut() else {
+                bail!(
+                    "--method rmr needs --model (a run folder of `zoo train rmr` or its exported file); or use \
+                     --method inertialize"
+                )
+            };
+            configure(r, aligned.clip.frames(), opts, post)?;
+            let cleanup = FootCleanup { place_ankles: post.ankle_ik, lock_feet: post.foot_lock };
+            let done = r.refine_clip(&aligned.clip, &seams, cleanup)?;
+            if r.pre_blend() {
+                note = format!(", seams inertialized over {blend} frames first");
+            }
+            if !done.fallback_weights.is_empty() {
+                let n = done.fallback_weights.iter().filter(|w| **w > 0.0).count();
+                note += &format!(
+                    ", {n} of {} windows blended towards their input by the model's fallback",
+                    done.fallback_weights.len()
+                );
+            }
+            if let Some(moved) = done.ankle_move {
+                note += &format!(", ankles placed at the predicted positions (mean move {moved:.2} units)");
+            }
+            if let Some(g) = &done.guarded {
+                let n = g.iter().filter(|s| s.weight > 0.0).count();
+                note += &format!(", {n} of {} seams guarded against pops", g.len());
+            }
+            if let Some(moved) = done.lock_move {
+                note += &format!(", feet locked by the predicted contacts (mean ankle correction {moved:.2} units)");
+            }
+            predicted_ankles = Some(done.ankles);
+            done.clip
+        }
+    };
+    let seconds = t0.elapsed().as_secs_f64();
+    Ok(StitchOutcome { aligned: aligned.clip, output, seams, predicted_ankles, note, seconds })
+}
