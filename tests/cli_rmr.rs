@@ -333,7 +333,7 @@ fn the_stitching_benchmark_measures_every_method() {
     assert!(ok, "{stdout}\n{stderr}");
     let methods = format!(
         "concat,inertialize,interp,rmr:{0},rmr+ik:{0},rmr+lock:{0},rmr+ik+lock:{0},rmr+ik+guard+lock:{0},\
-         inert+rmr+ik+lock:{0},rtn:{1}",
+         inert+rmr+ik+lock:{0},candle-rmr+ik+guard+lock:{0},rtn:{1}",
         s(&run_dir),
         s(&rtn)
     );
@@ -357,13 +357,23 @@ fn the_stitching_benchmark_measures_every_method() {
     assert!(stdout.contains("cases with ground truth") && stdout.contains("free cases"), "{stdout}");
     // Each RMR method applies the run's calibrated fallback and says how often it acted.
     let acted = |out: &str| out.matches("the fallback towards the refiner's input acted on").count();
-    assert_eq!(acted(&stdout), 6, "{stdout}");
+    assert_eq!(acted(&stdout), 7, "{stdout}");
     let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let cases = r["cases"].as_u64().unwrap();
     assert!(cases >= 10, "{cases} cases");
     assert_eq!(r["free_cases"], 6);
     let rows = r["methods"].as_object().unwrap();
-    assert_eq!(rows.len(), 10);
+    assert_eq!(rows.len(), 11);
+    // The RMR methods run the exported model in the engine runtime; the training model in candle
+    // (`candle-...`) measures the same within float rounding.
+    let (runtime, candle) = (
+        &rows[&format!("rmr+ik+guard+lock:{}", s(&run_dir))],
+        &rows[&format!("candle-rmr+ik+guard+lock:{}", s(&run_dir))],
+    );
+    for m in ["l2p", "l2q", "root_deviation", "pops_mean"] {
+        let (a, b) = (runtime[m].as_f64().unwrap(), candle[m].as_f64().unwrap());
+        assert!((a - b).abs() <= 1e-3 * b.abs().max(1.0), "{m}: runtime {a}, candle {b}");
+    }
     // The seam guard takes pops out (an untrained model's output is far from inertialization's, so
     // not down to it here).
     let pops = |m: String| rows[&m]["pops_mean"].as_f64().unwrap();

@@ -1,12 +1,16 @@
-//! docs/runtime-protocol.md is enough to run every exported task with another inference engine:
-//! `scripts/runtime_protocol.py`, written from that page alone (numpy and the onnxruntime
-//! Python wheel, which `bash scripts/onnxruntime.sh` installs into `.onnxruntime/venv`),
-//! reproduces the reference vectors of one tiny model of each kind (`zoo_runtime::reference`,
-//! what `zoo export --reference` writes) within 1e-3 model units at every step: RTN (the paper's,
-//! an interpolation-residual one with a calibrated fallback, a terrain-aware one), ARNN (the
-//! lamp, and a humanoid with partial keys), RMR, RNN-GMM with its refiner. The expected numbers
-//! come from the Rust runtime (tract); the Python side recomputes them from each case's inputs
-//! with onnxruntime. A missing venv fails the tests with the command that provisions it.
+//! docs/runtime-protocol.md (and its task pages) is enough to run every exported task with another
+//! inference engine: `scripts/runtime_protocol.py`, written from those pages alone (numpy and the
+//! onnxruntime Python wheel, which `bash scripts/onnxruntime.sh` installs into
+//! `.onnxruntime/venv`), reproduces the reference vectors of tiny models of each kind
+//! (`zoo_runtime::reference`, what `zoo export --reference` writes) within the documented bound
+//! (`1e-3 + 2e-5 S` model units per field, `S` its largest value; the tiny models here stay
+//! within 1e-3) at every step: RTN (the paper's, an interpolation-residual one with a calibrated
+//! fallback, a terrain-aware one), keyframes (the lamp ARNN, humanoid ARNNs with partial keys,
+//! one with legs whose feet are locked between the keys, and the in-betweening design with its
+//! Bezier curves, features and foot lock), RMR (the file's settings, and a pre-blend model with
+//! a seam and a fallback), RNN-GMM with its refiner. The expected numbers come from the Rust
+//! runtime (tract); the Python side recomputes them from each case's inputs with onnxruntime. A
+//! missing venv fails the tests with the command that provisions it.
 //!
 //! The CLI tests at the end need the `zoo` binary (`cargo build --bin zoo`, which
 //! `scripts/test.sh` runs first).
@@ -16,7 +20,9 @@ use std::process::Command;
 use zoo_runtime::LoadedModel;
 use zoo_runtime::reference::{REFERENCE_SEED, ReferenceVectors, reference_vectors};
 
-/// The bound of the acceptance: model units (cm for the RTN, RMR and RNN-GMM files here).
+/// What the tiny models here meet: model units (cm for the RTN, RMR, RNN-GMM and humanoid
+/// files here). The documented bound (the script's default) is `1e-3 + 2e-5 S` per field, `S`
+/// the field's largest value: a paper-size RTN's positions differ by up to 2e-3 cm.
 const TOLERANCE: f64 = 1e-3;
 
 fn workspace() -> PathBuf {
@@ -38,13 +44,14 @@ fn python() -> PathBuf {
 struct Report {
     /// The whole report (per case and field: the largest difference).
     json: serde_json::Value,
-    /// Largest difference over every compared value.
+    /// Largest difference over every compared value (model units).
     worst: f64,
     /// Output of the script (its table), for messages.
     stdout: String,
 }
 
 impl Report {
+    /// The largest difference of `field` in each case that compared it.
     fn fields(&self, field: &str) -> Vec<f64> {
         self.json["cases"].as_array().unwrap().iter().filter_map(|c| c["fields"][field]["max_diff"].as_f64()).collect()
     }
@@ -76,6 +83,7 @@ fn run_python(model: &Path, reference: &Path) -> Result<Report, String> {
     }
     let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
     let worst = json["max_diff"].as_f64().unwrap();
+    assert_eq!(json["failed"].as_bool(), Some(false), "the script passed but its report says it failed:\n{stdout}");
     Ok(Report { json, worst, stdout })
 }
 
@@ -202,23 +210,146 @@ fn tiny_humanoid_arnn() -> zoo_export::OnnxModel {
     zoo_arnn::export::export_arnn(&config, &zoo_arnn::Normalization { mean, std }, &varmap).unwrap()
 }
 
+/// A humanoid skeleton with two legs (hips, spine, and per side upper leg, lower leg, foot and
+/// toes; joint names with `Foot` are the ankles the foot lock finds), 30 fps.
+fn legged_skeleton() -> zoo_arnn::HumanoidSkeleton {
+    let names = ["Hips", "Spine", "UpperLeg_L", "LowerLeg_L", "Foot_L", "Toes_L", "UpperLeg_R", "LowerLeg_R", "Foot_R", "Toes_R"];
+    zoo_arnn::HumanoidSkeleton {
+        names: names.iter().map(|s| s.to_string()).collect(),
+        parents: vec![-1, 0, 0, 2, 3, 4, 0, 6, 7, 8],
+        offsets: vec![
+            [0.0; 3],
+            [0.0, 10.0, 0.0],
+            [10.0, -5.0, 0.0],
+            [0.0, -40.0, 0.0],
+            [0.0, -37.0, 0.0],
+            [0.0, -5.0, 12.0],
+            [-10.0, -5.0, 0.0],
+            [0.0, -40.0, 0.0],
+            [0.0, -37.0, 0.0],
+            [0.0, -5.0, 12.0],
+        ],
+        fps: 30.0,
+    }
+}
+
+/// Pose statistics of a humanoid of `joints` joints: the hips 87 cm up, every joint's mean
+/// rotation a small bend about X.
+fn humanoid_normalization(joints: usize) -> zoo_arnn::Normalization {
+    let mut mean = vec![0.0, 87.0, 0.0];
+    mean.extend([0.9, 0.1, 0.0, 0.0].repeat(joints));
+    let mut std = vec![40.0, 5.0, 40.0];
+    std.extend([0.1, 0.2, 0.3, 0.2].repeat(joints));
+    zoo_arnn::Normalization { mean, std }
+}
+
+/// A tiny humanoid ARNN with key groups (partial keys) on `skeleton`, seeded weights.
+fn tiny_humanoid_arnn_on(skeleton: zoo_arnn::HumanoidSkeleton) -> zoo_export::OnnxModel {
+    use candle_core::{DType, Device};
+    use zoo_arnn::ArnnConfig;
+    let names = skeleton.names.clone();
+    let (dof_names, groups) = zoo_arnn::humanoid::pose_layout(&names);
+    let config = ArnnConfig::humanoid(skeleton, dof_names, groups).sized_like(&ArnnConfig::tiny());
+    let varmap = candle_nn::VarMap::new();
+    zoo_arnn::Arnn::new(&config, zoo_nn::SeededVarMap::builder(&varmap, 11, DType::F32, &Device::Cpu)).unwrap();
+    zoo_arnn::export::export_arnn(&config, &humanoid_normalization(names.len()), &varmap).unwrap()
+}
+
+/// A tiny in-betweening network (`zoo train arnn --design inbetween`) on `skeleton`, Euler
+/// channels ZXY, seeded weights.
+fn tiny_inbetween_on(skeleton: zoo_arnn::HumanoidSkeleton) -> zoo_export::OnnxModel {
+    use candle_core::{DType, Device};
+    use zoo_arnn::inbetween::{Inbetween, InbetweenConfig};
+    let joints = skeleton.names.len();
+    let config = InbetweenConfig::tiny(skeleton, vec![[2, 0, 1]; joints]);
+    let varmap = candle_nn::VarMap::new();
+    Inbetween::new(&config, zoo_nn::SeededVarMap::builder(&varmap, 13, DType::F32, &Device::Cpu)).unwrap();
+    zoo_arnn::inbetween_export::export_inbetween(&config, &humanoid_normalization(joints), &varmap).unwrap()
+}
+
+/// The largest difference between two lists of frames.
+fn frames_gap(a: &[Vec<f32>], b: &[Vec<f32>]) -> f32 {
+    a.iter().flatten().zip(b.iter().flatten()).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
+}
+
 #[test]
 fn keyframes_reproduce_from_the_page() {
     let dir = kept_dir("keyframes");
     let (lamp, report) = check(&dir, "arnn", &zoo_tests::tiny_arnn_onnx());
-    report.assert_compared(&["intervals", "poses"]);
-    assert!(lamp.keyframes.iter().all(|c| c.fixed.is_empty()));
+    report.assert_compared(&["intervals", "t_rel", "network", "hit", "poses"]);
+    assert!(lamp.keyframes.iter().all(|c| c.fixed.is_empty() && !c.foot_lock));
+    // The hit moved the network's own frames.
+    assert!(lamp.keyframes.iter().any(|c| frames_gap(&c.network, &c.hit) > 1e-3));
     let (humanoid, report) = check(&dir, "arnn_humanoid", &tiny_humanoid_arnn());
-    report.assert_compared(&["intervals", "poses"]);
+    report.assert_compared(&["intervals", "network", "hit", "poses"]);
     let partial = humanoid.keyframes.iter().find(|c| !c.fixed.is_empty()).expect("a case of partial keys");
     assert!(partial.fixed[1..].iter().flatten().any(|f| *f == 0.0), "a key leaves a group free");
+    assert!(humanoid.keyframes.iter().all(|c| !c.foot_lock), "a skeleton without legs has nothing to lock");
+}
+
+/// The foot lock between the keys of a humanoid completion: the step graph's and the
+/// in-betweening design's, each on a skeleton with legs.
+#[test]
+fn humanoid_foot_locks_reproduce_from_the_page() {
+    let dir = kept_dir("keyframes_legs");
+    for (name, model) in
+        [("arnn_legs", tiny_humanoid_arnn_on(legged_skeleton())), ("inbetween_legs", tiny_inbetween_on(legged_skeleton()))]
+    {
+        let (vectors, report) = check(&dir, name, &model);
+        report.assert_compared(&["network", "hit", "foot_lock", "poses"]);
+        assert!(vectors.keyframes.iter().all(|c| c.foot_lock), "{name}: the legs are locked");
+        // The lock moved the legs between the keys and left every key frame as it was.
+        let moved = vectors.keyframes.iter().map(|c| frames_gap(&c.hit, &c.poses)).fold(0.0, f32::max);
+        assert!(moved > 1e-3, "{name}: the foot lock changed nothing ({moved})");
+        for c in &vectors.keyframes {
+            for &k in &c.key_frames {
+                assert_eq!(c.hit[k], c.poses[k], "{name} `{}`: key frame {k} unchanged", c.name);
+            }
+        }
+    }
+}
+
+/// The in-betweening design: its features, the keys' Bezier curves (Blender's default F-curves),
+/// the graph's correction composed on them, the hit and the foot lock.
+#[test]
+fn inbetweening_reproduces_from_the_page() {
+    let dir = kept_dir("inbetween");
+    let (vectors, report) = check(&dir, "inbetween", &zoo_tests::tiny_inbetween_onnx());
+    report.assert_compared(&["features", "bezier", "network", "hit", "poses"]);
+    assert!(vectors.keyframes.iter().all(|c| c.intervals.is_empty() && !c.features.is_empty()));
+    let partial = vectors.keyframes.iter().find(|c| !c.fixed.is_empty()).expect("a case of partial keys");
+    assert!(partial.fixed[1..].iter().flatten().any(|f| *f == 0.0), "a key leaves a group free");
+    for c in &vectors.keyframes {
+        // The correction moved the curves between the keys, and the keys are met by construction.
+        let bezier: Vec<Vec<f32>> = c.bezier.iter().map(|r| r.iter().map(|v| *v as f32).collect()).collect();
+        assert!(frames_gap(&bezier, &c.network) > 1e-2, "`{}`: the graph's correction is zero", c.name);
+        assert!(frames_gap(&c.network, &c.hit) < 1e-4, "`{}`: the design meets its keys", c.name);
+    }
+}
+
+/// [`zoo_tests::tiny_rmr_onnx`]'s model trained on sequences inertialized at their seams
+/// (`zoo train rmr --pre-blend`), with a fallback in its file.
+fn tiny_pre_blend_rmr() -> zoo_export::OnnxModel {
+    use candle_core::{DType, Device};
+    use zoo_rmr::features::{FeatureLayout, FeatureStats, encode_clip};
+    let mut config = zoo_rmr::Config::tiny();
+    config.pre_blend = true;
+    config.fallback = Some(zoo_rmr::fallback::Fallback { start: 0.05, full: 0.2 });
+    let varmap = candle_nn::VarMap::new();
+    zoo_rmr::Rmr::new(&config, zoo_nn::SeededVarMap::builder(&varmap, 7, DType::F32, &Device::Cpu)).unwrap();
+    let synth = zoo_data::synth::SynthConfig { minutes: 0.2, seed: 5, clip_seconds: 4.0, ..Default::default() };
+    let clip = zoo_data::synth::generate_clip(&synth, 0).clip;
+    let x = encode_clip(&clip, &config.layout).unwrap();
+    let stats = FeatureStats::fit([x.as_slice()], FeatureLayout::new(config.joints, config.layout.lower_body.len()));
+    zoo_rmr::export::export_rmr(&config, &stats, &varmap).unwrap()
 }
 
 #[test]
 fn stitching_reproduces_from_the_page() {
     let dir = kept_dir("stitch");
+    let fields = ["pre_blend", "sequence", "window_starts", "windows", "first_window", "refined", "poses", "contacts"];
     let (rmr, report) = check(&dir, "rmr", &zoo_tests::tiny_rmr_onnx());
-    report.assert_compared(&["sequence", "window_starts", "first_window", "refined", "poses", "contacts"]);
+    report.assert_compared(&fields);
     let case = &rmr.stitch[0];
     // Two regular windows and the one ending on the last frame, whose first frames were refined.
     assert_eq!(case.window_starts.len(), 3, "{:?}", case.window_starts);
@@ -226,6 +357,20 @@ fn stitching_reproduces_from_the_page() {
     // Refining changed the sequence.
     let moved = case.sequence.iter().flatten().zip(case.refined.iter().flatten()).any(|(a, b)| (a - b).abs() > 1e-2);
     assert!(moved, "the refiner left the sequence as it was");
+    // The seam case: no pre-blend for this file, a fallback whose weights lie between 0 and 1.
+    let seam = &rmr.stitch[1];
+    assert!(!seam.seams.is_empty() && !seam.pre_blend && seam.fallback.is_some());
+    assert!(seam.windows.iter().any(|w| w.weight > 0.0 && w.weight < 1.0), "{:?}", seam.windows);
+
+    // A model trained on inertialized seams: the seam case's input is inertialized there.
+    let (blended, report) = check(&dir, "rmr_pre_blend", &tiny_pre_blend_rmr());
+    report.assert_compared(&fields);
+    let (plain, seam) = (&blended.stitch[0], &blended.stitch[1]);
+    assert!(!plain.pre_blend && seam.pre_blend);
+    let at = seam.seams[0];
+    assert!(frames_gap(&plain.sequence[at..at + 1], &seam.sequence[at..at + 1]) > 1e-2, "the seam was inertialized");
+    assert_eq!(plain.sequence[..at - 1], seam.sequence[..at - 1], "frames before the seam are as they were");
+    assert!(plain.fallback.is_some() && seam.windows.iter().any(|w| w.weight > 0.0));
 }
 
 /// A tiny RNN-GMM generator ([`zoo_tests::rnngmm_fixture`]) with its adversarial refiner
@@ -286,7 +431,7 @@ fn reference_vectors_are_deterministic_and_round_trip() {
     assert_ne!(a.keyframes[0].key_poses, reference_vectors(&model, 6).unwrap().keyframes[0].key_poses);
     let back: ReferenceVectors = serde_json::from_str(&serde_json::to_string(&a).unwrap()).unwrap();
     assert_eq!(a, back);
-    assert_eq!((a.format.as_str(), a.version), ("zoo-reference-vectors", 1));
+    assert_eq!((a.format.as_str(), a.version), ("zoo-reference-vectors", 2));
 }
 
 fn zoo(args: &[&str]) -> (bool, String, String) {
@@ -412,6 +557,79 @@ fn export_writes_reference_vectors_and_transition_writes_raw_positions() {
     assert!(worst <= 1e-3, "the blended positions of `zoo transition` and the runtime differ by {worst}");
     // The raw frames are the network's own: its target frame misses the target.
     assert!(raw[12 * d..].iter().zip(&target).any(|(a, b)| (a - b).abs() > 1e-3));
+}
+
+/// Windows of a 3-joint chain swinging (hips, spine, hand; Euler channels ZXY): the training
+/// data of an in-betweening run folder.
+fn chain_windows(count: usize, frames: usize) -> zoo_data::dataset::Windows {
+    use glam::{DQuat, DVec3};
+    use zoo_motion::{EulerOrder, JointChannels, Skeleton};
+    let skeleton = Skeleton {
+        names: vec!["Hips".into(), "Spine".into(), "Hand".into()],
+        parents: vec![None, Some(0), Some(1)],
+        offsets: vec![DVec3::ZERO, DVec3::new(0.0, 10.0, 0.0), DVec3::new(0.0, 10.0, 0.0)],
+        end_sites: vec![None; 3],
+        channels: (0..3).map(|j| JointChannels { position: j == 0, order: EulerOrder::Zxy }).collect(),
+    };
+    let (mut local_rot, mut local_pos) = (Vec::new(), Vec::new());
+    for w in 0..count {
+        for f in 0..frames {
+            let a = 0.3 * (f as f64 * 0.4 + w as f64).sin();
+            local_rot.extend([DQuat::from_rotation_y(a), DQuat::from_rotation_x(2.0 * a), DQuat::from_rotation_z(a)]);
+            local_pos.extend([DVec3::new(f as f64, 90.0 + 5.0 * a, 0.0), skeleton.offsets[1], skeleton.offsets[2]]);
+        }
+    }
+    let source = (0..count).map(|w| (w, 0)).collect();
+    zoo_data::dataset::Windows { skeleton, window: frames, count, local_rot, local_pos, source }
+}
+
+/// `zoo export --onnx RUN --reference` for the run folders of the other kinds (the RTN's is
+/// above): an ARNN trained one epoch, an in-betweening network's folder, an RMR's and an
+/// RNN-GMM's; the Python implementation reproduces each reference within the documented bound.
+#[test]
+fn export_writes_reference_vectors_of_every_kind() {
+    let dir = tempfile::tempdir().unwrap();
+    let arnn = dir.path().join("arnn");
+    let (ok, stdout, stderr) = zoo(&[
+        "train", "arnn", "--preset", "tiny", "--epochs", "1", "--sequences", "5", "--k-max", "2", "--seed", "3", "--out",
+        s(&arnn),
+    ]);
+    assert!(ok, "{stdout}\n{stderr}");
+    let inbetween = dir.path().join("inbetween");
+    {
+        use zoo_arnn::inbetween::{InbetweenConfig, config_for};
+        use zoo_arnn::inbetween_train::{InbetweenTrainer, window_normalization};
+        let (train, valid) = (chain_windows(8, 66), chain_windows(4, 66));
+        let c = config_for(&train.skeleton, 30.0);
+        let config = InbetweenConfig { seed: 3, ..InbetweenConfig::tiny(c.skeleton, c.euler_axes) };
+        let norm = window_normalization(&train);
+        let mut trainer = InbetweenTrainer::new(&config, norm, train, &valid).unwrap();
+        trainer.train_on(&[0, 1, 2, 3]).unwrap();
+        trainer.save(&inbetween).unwrap();
+    }
+    let rmr = dir.path().join("rmr");
+    {
+        use zoo_rmr::{Config, RmrTrainer, features::FeatureStats};
+        let config = Config::tiny();
+        let d = config.dim();
+        let stats = FeatureStats { mean: vec![0.0; d], std: vec![1.0; d] };
+        RmrTrainer::new(&config, stats, &candle_core::Device::Cpu).unwrap().save(&rmr).unwrap();
+    }
+    let rnngmm = dir.path().join("rnngmm");
+    let (_, _, trainer) = zoo_tests::rnngmm_fixture(zoo_rnngmm::prelude::Config::tiny());
+    trainer.save(&rnngmm).unwrap();
+    for (name, run, task) in
+        [("arnn", &arnn, "keyframes"), ("inbetween", &inbetween, "keyframes"), ("rmr", &rmr, "stitch"), ("rnngmm", &rnngmm, "synthesis")]
+    {
+        let (onnx, reference) = (dir.path().join(format!("{name}.onnx")), dir.path().join(format!("{name}.reference.json")));
+        let (ok, stdout, stderr) = zoo(&["export", "--onnx", s(run), "--out", s(&onnx), "--reference", s(&reference)]);
+        assert!(ok, "{name}: {stdout}\n{stderr}");
+        let v = read_json(&reference);
+        assert_eq!((v["version"].as_u64(), v["task"].as_str()), (Some(2), Some(task)), "{name}");
+        assert!(v[task].as_array().is_some_and(|c| !c.is_empty()), "{name}: no case");
+        let report = run_python(&onnx, &reference).unwrap_or_else(|e| panic!("{name}: runtime_protocol.py failed:\n{e}"));
+        eprintln!("zoo export --reference ({name}): largest difference {:.2e}", report.worst);
+    }
 }
 
 /// `zoo stitch`, `zoo generate` and `zoo complete` write the global positions of what they

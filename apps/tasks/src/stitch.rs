@@ -25,20 +25,7 @@ pub struct ClipRange {
     pub to: Option<usize>,
 }
 
-/// What follows the refiner (`zoo stitch` by default: all but `pre_blend`, in this order) and
-/// what comes before it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct PostProcess {
-    /// The ankles placed at the refiner's predicted positions by IK (RMR sec. 5).
-    pub ankle_ik: bool,
-    /// The feet locked by the predicted contacts.
-    pub foot_lock: bool,
-    /// The seams inertialized over the blend before the refiner runs (also when the model was
-    /// trained so).
-    pub pre_blend: bool,
-    /// No seam moves a joint faster than the inertialized clips do there.
-    pub seam_guard: bool,
-}
+pub use zoo_rmr::stitch::PostProcess;
 
 /// How the seams of the aligned clips are smoothed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -272,4 +259,92 @@ pub fn stitch(opts: &StitchOptions, names: &[String]) -> TaskResult<StitchOutcom
     };
     let seconds = t0.elapsed().as_secs_f64();
     Ok(StitchOutcome { aligned: aligned.clip, output, seams, predicted_ankles, note, seconds })
+}
+
+/// The engine runtime's refiner of an exported RMR with its post-processing, as a method of the
+/// stitching benchmark (`rmr...:RUN`): what `zoo stitch` runs, sized per sequence (a sequence
+/// shorter than the model's window is refined as one window).
+pub struct RuntimeSeamRefiner {
+    refiner: StitchRefiner,
+    post: PostProcess,
+    /// Refiners planned for sequences shorter than the window, by length.
+    short: std::cell::RefCell<std::collections::HashMap<usize, StitchRefiner>>,
+    /// Windows refined, windows the fallback acted on, and the sum of its weights.
+    counts: std::cell::Cell<(u64, u64, f64)>,
+}
+
+impl RuntimeSeamRefiner {
+    /// The stitch model at `path` (a run folder of `zoo train rmr`, exported in memory, or its
+    /// exported file), followed (and preceded) by `post`.
+    pub fn load(path: &std::path::Path, post: PostProcess) -> TaskResult<RuntimeSeamRefiner> {
+        let refiner = ModelSource::open(path, MotionTaskKind::Stitch, "bench stitch")?.load()?.into_stitch()?;
+        Ok(RuntimeSeamRefiner { refiner, post, short: Default::default(), counts: Default::default() })
+    }
+
+    fn run(&self, aligned: &Clip, seams: &[usize], blend: usize) -> TaskResult<Clip> {
+        let frames = aligned.frames();
+        let mut r = if self.refiner.window() <= frames {
+            self.refiner.clone()
+        } else {
+            let mut short = self.short.borrow_mut();
+            match short.get(&frames) {
+                Some(r) => r.clone(),
+                None => {
+                    let mut r = self.refiner.clone();
+                    r.set_window(frames, frames)?;
+                    short.insert(frames, r.clone());
+                    r
+                }
+            }
+        };
+        r.set_blend_frames(blend)?;
+        let pre_blend = self.post.pre_blend || self.refiner.pre_blend();
+        r.set_pre_blend(pre_blend);
+        r.set_seam_guard(self.post.seam_guard);
+        let cleanup = FootCleanup { place_ankles: self.post.ankle_ik, lock_feet: self.post.foot_lock };
+        let done = r.refine_clip(aligned, seams, cleanup)?;
+        let (mut n, mut acted, mut sum) = self.counts.get();
+        for w in &done.fallback_weights {
+            n += 1;
+            acted += u64::from(*w > 0.0);
+            sum += f64::from(*w);
+        }
+        self.counts.set((n, acted, sum));
+        Ok(done.clip)
+    }
+}
+
+impl zoo_rmr::bench::SeamRefiner for RuntimeSeamRefiner {
+    fn stitch(&self, aligned: &Clip, seams: &[usize], blend: usize) -> Result<Clip, Message> {
+        self.run(aligned, seams, blend).map_err(|e| Message(e.to_string()))
+    }
+
+    fn check_skeleton(&self, skeleton: &zoo_motion::Skeleton) -> Result<(), Message> {
+        let want = self.refiner.skeleton();
+        if skeleton.names == want.names && skeleton.parents_i32() == want.parents_i32() {
+            return Ok(());
+        }
+        let why = if skeleton.len() != want.len() {
+            format!("expected {} joints, found {}", want.len(), skeleton.len())
+        } else {
+            (0..want.len())
+                .find(|&j| skeleton.names[j] != want.names[j] || skeleton.parents[j] != want.parents[j])
+                .map(|j| format!("joint {j}: expected `{}`, found `{}`", want.names[j], skeleton.names[j]))
+                .unwrap_or_default()
+        };
+        Err(Message(format!("the clips' skeleton is not the model's ({why}); retarget the clips to the model's rig")))
+    }
+
+    fn drop_fallback(&mut self) {
+        // Setting no fallback cannot fail.
+        let _ = self.refiner.set_fallback(None);
+        self.short.borrow_mut().clear();
+    }
+
+    fn fallback_summary(&self) -> Option<(u64, f64, f64)> {
+        self.refiner.fallback()?;
+        let (n, acted, sum) = self.counts.get();
+        let d = n.max(1) as f64;
+        Some((n, acted as f64 / d, sum / d))
+    }
 }

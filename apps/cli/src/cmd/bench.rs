@@ -103,21 +103,22 @@ pub enum BenchCommand {
     /// Training throughput per thread count (data-parallel), GFLOP/s and the fraction of a
     /// candle matmul, optionally beside the PyTorch reference of the same shapes.
     Train(crate::cmd::bench_speed::TrainBenchArgs),
-    /// The stitching benchmark (RMR, issue 12): concatenation, inertialization, interpolation
-    /// and trained RMRs on section-4 cases with a ground truth and on free multi-clip cases.
+    /// The stitching benchmark (RMR): concatenation, inertialization, interpolation and trained
+    /// RMRs on cases with a ground truth (the RMR paper's section-4 pairs) and on free
+    /// multi-clip cases (protocol in docs/rmr.md).
     Stitch(crate::cmd::bench_stitch::StitchBenchArgs),
     /// The exported ARNN's step through tract and onnxruntime (batch 1 latency, batch 64 throughput) and whole keyframe completions.
     Keyframes(crate::cmd::bench_speed::RuntimeArgs),
-    /// The synthesis benchmark (RNN-GMM, issue 14): seeded sequences against held-out real
+    /// The synthesis benchmark (RNN-GMM): seeded sequences against held-out real
     /// motion, with and without the refiner (protocol in docs/rnn-gmm.md).
     Synthesis(crate::cmd::bench_synthesis::BenchSynthesisArgs),
-    /// The denoising benchmark (RNN-GMM control, issue 15): held-out clips with seeded noise,
+    /// The denoising benchmark (RNN-GMM control): held-out clips with seeded noise,
     /// cleaned by the MAP denoiser and by Savitzky-Golay filters (protocol in docs/rnn-gmm-control.md).
     Denoise(crate::cmd::bench_denoise::BenchDenoiseArgs),
-    /// The path-following benchmark (RNN-GMM control, issue 15): five test paths from each start
+    /// The path-following benchmark (RNN-GMM control): five test paths from each start
     /// clip, root-to-path distance, foot skate and time (protocol in docs/rnn-gmm-control.md).
     Follow(crate::cmd::bench_follow::BenchFollowArgs),
-    /// The online control benchmark (RNN-GMM control, issue 15): a script of speed and heading
+    /// The online control benchmark (RNN-GMM control): a script of speed and heading
     /// changes followed by the candle and the runtime controllers (protocol in docs/rnn-gmm-control.md).
     Control(Box<crate::cmd::bench_control::BenchControlArgs>),
 }

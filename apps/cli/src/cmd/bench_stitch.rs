@@ -18,12 +18,15 @@ pub struct StitchBenchArgs {
     #[arg(long)]
     pub test_data: Option<PathBuf>,
     /// Comma-separated methods: `concat` (aligned concatenation), `inertialize`, `interp`,
-    /// `rmr:RUN_DIR` (a `zoo train rmr` folder, no post-process), `rmr+ik:RUN_DIR` (the ankles
-    /// placed at its predicted lower-body positions by IK, RMR sec. 5), `rmr+lock:RUN_DIR` (with
-    /// the foot lock by its predicted contacts), `rmr+ik+lock:RUN_DIR` (both, in that order: what
-    /// `zoo stitch` writes by default), each RMR form also as `inert+rmr...:RUN_DIR` (the seams
-    /// inertialized before refining: `zoo stitch --pre-blend`), `rtn:RUN_DIR` / `rtn+lock:RUN_DIR` (a `zoo train rtn`
-    /// folder in-betweening across each seam: 10 context frames before, target after).
+    /// `rmr:RUN` (a `zoo train rmr` folder or its exported file, run by the engine runtime as
+    /// `zoo stitch` runs it; no post-process), `rmr+ik:RUN` (the ankles placed at its predicted
+    /// lower-body positions by IK, RMR sec. 5), `rmr+lock:RUN` (with the foot lock by its
+    /// predicted contacts), `rmr+ik+lock:RUN` (both, in that order), `+guard` after `rmr` or
+    /// `rmr+ik` for the seam guard (`rmr+ik+guard+lock:RUN` is what `zoo stitch` writes by
+    /// default), each RMR form also as `inert+rmr...:RUN` (the seams inertialized before
+    /// refining: `zoo stitch --pre-blend`) and as `candle-rmr...:RUN_DIR` (the training model in
+    /// candle, for parity checks), `rtn:RUN_DIR` / `rtn+lock:RUN_DIR` (a `zoo train rtn` folder
+    /// in-betweening across each seam: 10 context frames before, target after).
     #[arg(long, default_value = "concat,inertialize,interp", value_delimiter = ',')]
     pub methods: Vec<String>,
     /// Frames of the blend at each seam (inertialize, interp) and after each RMR window.
@@ -62,11 +65,20 @@ pub fn run(a: StitchBenchArgs) -> anyhow::Result<()> {
     let methods = a
         .methods
         .iter()
-        .map(|m| StitchMethod::parse(m.trim(), |spec| load(spec).map_err(crate::cmd::message)))
+        .map(|m| {
+            StitchMethod::parse(
+                m.trim(),
+                |spec| load(spec).map_err(crate::cmd::message),
+                |path, post| {
+                    let r = zoo_tasks::stitch::RuntimeSeamRefiner::load(path, post).map_err(|e| zoo_data::Message(e.to_string()))?;
+                    Ok(Box::new(r) as Box<dyn zoo_rmr::bench::SeamRefiner>)
+                },
+            )
+        })
         .map(|m| {
             m.map(|mut m| {
-                if let (true, StitchMethod::Rmr { model, .. }) = (a.no_fallback, &mut m) {
-                    model.set_fallback(None);
+                if let (true, StitchMethod::Rmr { refiner, .. }) = (a.no_fallback, &mut m) {
+                    refiner.drop_fallback();
                 }
                 m
             })
@@ -89,8 +101,8 @@ pub fn run(a: StitchBenchArgs) -> anyhow::Result<()> {
     drop(bar);
     println!("{}", zoo_rmr::bench::table(&result));
     for m in &methods {
-        if let StitchMethod::Rmr { name, model, .. } = m
-            && let Some((windows, triggered, weight)) = model.fallback_summary()
+        if let StitchMethod::Rmr { name, refiner, .. } = m
+            && let Some((windows, triggered, weight)) = refiner.fallback_summary()
         {
             println!(
                 "{name}: the fallback towards the refiner's input acted on {:.1} % of {windows} windows (mean weight {weight:.3})",

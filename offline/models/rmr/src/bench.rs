@@ -30,6 +30,65 @@ use zoo_motion::Clip;
 use zoo_motion::glam::{DQuat, DVec3};
 use zoo_motion::rng::SplitMix64;
 
+/// A trained RMR with its post-processing (ankle IK, seam guard, foot lock, pre-blend), as a
+/// method of the benchmark: [`CandleRmr`] here, the engine runtime's refiner in the commands'
+/// crate (`zoo-tasks`), which the benchmark runs by default.
+pub trait SeamRefiner {
+    /// Stitches an aligned sequence with seams at `seams`; `blend` frames of blend after each
+    /// window, of the pre-blend and of the guard's inertialized reference. A sequence shorter
+    /// than the model's window is refined as one window.
+    fn stitch(&self, aligned: &Clip, seams: &[usize], blend: usize) -> Result<Clip, Message>;
+    /// Refuses clips on another skeleton than the model's, naming the first joint that differs.
+    fn check_skeleton(&self, skeleton: &zoo_motion::Skeleton) -> Result<(), Message>;
+    /// Drops the model's fallback towards the refiner's input (`--no-fallback`).
+    fn drop_fallback(&mut self);
+    /// Windows refined, the fraction of them the fallback acted on and its mean weight, so far;
+    /// `None` without a fallback.
+    fn fallback_summary(&self) -> Option<(u64, f64, f64)>;
+}
+
+/// The candle RMR of a run folder with its post-processing (`candle-rmr...:RUN_DIR`).
+pub struct CandleRmr {
+    model: crate::Rmr,
+    stats: crate::features::FeatureStats,
+    post: PostProcess,
+}
+
+impl CandleRmr {
+    /// The RMR of the run folder `dir`, followed (and preceded) by `post`.
+    pub fn load(dir: &std::path::Path, post: PostProcess) -> Result<CandleRmr, Message> {
+        let kind = zoo_nn::checkpoint::model_kind(dir).map_err(|e| Message(e.to_string()))?;
+        if kind != "rmr" {
+            bail!("{} holds a `{kind}` model, not an RMR (`zoo train rmr`)", dir.display());
+        }
+        let (model, stats) = crate::checkpoint::load(dir, &candle_core::Device::Cpu)
+            .with_context(|| format!("loading the RMR in {}", dir.display()))?;
+        Ok(CandleRmr { model, stats, post })
+    }
+}
+
+impl SeamRefiner for CandleRmr {
+    fn stitch(&self, aligned: &Clip, seams: &[usize], blend: usize) -> Result<Clip, Message> {
+        let c = self.model.config();
+        let frames = aligned.frames();
+        let (window, stride) = if c.window <= frames { (c.window, c.stride) } else { (frames, frames) };
+        let opts = RefineOptions { window, stride, blend_frames: blend };
+        Ok(refine_seams(&self.model, &self.stats, aligned, seams, opts, self.post).map_err(|e| Message(e.to_string()))?.clip)
+    }
+
+    fn check_skeleton(&self, skeleton: &zoo_motion::Skeleton) -> Result<(), Message> {
+        self.model.config().check_skeleton(skeleton).map_err(|e| Message(e.to_string()))
+    }
+
+    fn drop_fallback(&mut self) {
+        self.model.set_fallback(None);
+    }
+
+    fn fallback_summary(&self) -> Option<(u64, f64, f64)> {
+        self.model.fallback_summary()
+    }
+}
+
 /// A method of the benchmark (`--methods`).
 pub enum StitchMethod {
     /// `concat`: the aligned concatenation.
@@ -38,16 +97,14 @@ pub enum StitchMethod {
     Inertialize,
     /// `interp`: interpolation across each seam.
     Interp,
-    /// `rmr...:RUN_DIR`: a trained RMR and its post-processing.
+    /// `rmr...:RUN_DIR` (the exported model through the engine runtime, what `zoo stitch` and
+    /// engines run) or `candle-rmr...:RUN_DIR` (the training model in candle, for parity
+    /// checks): a trained RMR and its post-processing.
     Rmr {
         /// The spec, the method's name.
         name: String,
-        /// The model.
-        model: Box<crate::Rmr>,
-        /// Its statistics.
-        stats: crate::features::FeatureStats,
-        /// What follows (and precedes) the refiner.
-        post: PostProcess,
+        /// The refiner with its post-processing.
+        refiner: Box<dyn SeamRefiner>,
     },
     /// A transition model of the in-betweening benchmark (`rtn:DIR`, `rtn+lock:DIR`) across
     /// each seam.
@@ -61,10 +118,12 @@ pub enum StitchMethod {
 
 impl StitchMethod {
     /// Parses and loads a `--methods` entry; `transition` loads the in-betweening methods
-    /// (`rtn:DIR`, `rtn+lock:DIR`) from their spec.
+    /// (`rtn:DIR`, `rtn+lock:DIR`) from their spec, `runtime` the engine runtime's refiner of
+    /// `rmr...:PATH` (a run folder or its exported file) with its post-processing.
     pub fn parse(
         spec: &str,
         transition: impl FnOnce(&str) -> Result<Box<dyn TransitionMethod>, Message>,
+        runtime: impl FnOnce(&std::path::Path, PostProcess) -> Result<Box<dyn SeamRefiner>, Message>,
     ) -> RmrResult<StitchMethod> {
         match spec {
             "concat" => return Ok(StitchMethod::Concat),
@@ -72,9 +131,16 @@ impl StitchMethod {
             "interp" => return Ok(StitchMethod::Interp),
             _ => {}
         }
-        let forms = "concat, inertialize, interp, rmr:RUN_DIR, rmr+ik:RUN_DIR, rmr+lock:RUN_DIR, \
-                     rmr+ik+lock:RUN_DIR (each also as inert+rmr..., and with +guard after rmr or rmr+ik, as in rmr+ik+guard+lock:RUN_DIR), rtn:RUN_DIR, rtn+lock:RUN_DIR";
+        let forms = "concat, inertialize, interp, rmr:RUN, rmr+ik:RUN, rmr+lock:RUN, \
+                     rmr+ik+lock:RUN (each also as inert+rmr..., with +guard after rmr or rmr+ik, as in \
+                     rmr+ik+guard+lock:RUN, and as candle-rmr... for the training model in candle), rtn:RUN_DIR, \
+                     rtn+lock:RUN_DIR";
         let Some((head, path)) = spec.split_once(':') else { bail!("unknown method `{spec}`: expected {forms}") };
+        // `candle-...`: the training model in candle instead of the exported one in the runtime.
+        let (candle, head) = match head.strip_prefix("candle-") {
+            Some(rest) => (true, rest),
+            None => (false, head),
+        };
         // `inert+rmr...`: the seams inertialized before the RMR refines (`zoo stitch --pre-blend`).
         let (pre_blend, head) = match head.strip_prefix("inert+") {
             Some(rest) if rest.starts_with("rmr") => (true, rest),
@@ -90,20 +156,19 @@ impl StitchMethod {
             "rmr+lock" => (true, false),
             // What `zoo stitch` writes by default: ankles by IK, then the foot lock.
             "rmr+ik+lock" => (true, true),
-            "rtn" | "rtn+lock" => {
+            "rtn" | "rtn+lock" if !candle => {
                 return Ok(StitchMethod::Transition { name: spec.to_string(), method: transition(spec)? });
             }
             _ => bail!("unknown method `{spec}`: expected {forms} (other kinds do not stitch)"),
         };
         let dir = PathBuf::from(path);
-        let kind = zoo_nn::checkpoint::model_kind(&dir).with_context(|| format!("method `{spec}`"))?;
-        if kind != "rmr" {
-            bail!("method `{spec}`: {} holds a `{kind}` model, not an RMR (`zoo train rmr`)", dir.display());
-        }
-        let (model, stats) = crate::checkpoint::load(&dir, &candle_core::Device::Cpu)
-            .with_context(|| format!("method `{spec}`: loading the RMR in {}", dir.display()))?;
         let post = PostProcess { ankle_ik: ik, foot_lock: lock, pre_blend, seam_guard };
-        Ok(StitchMethod::Rmr { name: spec.to_string(), model: Box::new(model), stats, post })
+        let refiner: Box<dyn SeamRefiner> = if candle {
+            Box::new(CandleRmr::load(&dir, post).with_context(|| format!("method `{spec}`"))?)
+        } else {
+            runtime(&dir, post).with_context(|| format!("method `{spec}`"))?
+        };
+        Ok(StitchMethod::Rmr { name: spec.to_string(), refiner })
     }
 
     /// The method's name in the tables: its spec.
@@ -122,14 +187,7 @@ impl StitchMethod {
             StitchMethod::Concat => aligned.clone(),
             StitchMethod::Inertialize => inertialize_seams(aligned, seams, blend),
             StitchMethod::Interp => interpolate_seams(aligned, seams, blend),
-            StitchMethod::Rmr { model, stats, post, .. } => {
-                let c = model.config();
-                let frames = aligned.frames();
-                // A sequence shorter than the model's window is refined as one window.
-                let (window, stride) = if c.window <= frames { (c.window, c.stride) } else { (frames, frames) };
-                let opts = RefineOptions { window, stride, blend_frames: blend };
-                refine_seams(model, stats, aligned, seams, opts, *post)?.clip
-            }
+            StitchMethod::Rmr { refiner, .. } => refiner.stitch(aligned, seams, blend)?,
             StitchMethod::Transition { method, .. } => transition_seams(method.as_ref(), aligned, seams, blend)?,
         })
     }
@@ -398,9 +456,8 @@ pub fn run(
     let start = Instant::now();
     let skeleton = train.first().context("no training clips: the training split is empty")?.clip.skeleton.clone();
     for m in methods {
-        if let StitchMethod::Rmr { name, model, .. } = m {
-            model
-                .config()
+        if let StitchMethod::Rmr { name, refiner } = m {
+            refiner
                 .check_skeleton(&skeleton)
                 .with_context(|| format!("method `{name}` and the clips of {}", data.display()))?;
         }
