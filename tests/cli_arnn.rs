@@ -156,6 +156,13 @@ fn train_resume_and_complete() {
     assert!(ok && stdout.contains("ARNN step graph"), "{stdout}\n{stderr}");
     let m = zoo_runtime::MotionModel::load(&onnx).unwrap();
     assert_eq!((m.metadata().model_kind.as_str(), m.states().len()), ("arnn", 2));
+    // `zoo complete` runs the exported file as it runs the run folder (exported in memory).
+    let from_file = dir.path().join("hop_file.bvh");
+    let keys_arg = keys.to_str().unwrap();
+    let (ok, _, stderr) =
+        run(&["complete", "--model", onnx.to_str().unwrap(), "--keys", keys_arg, "--out", from_file.to_str().unwrap()]);
+    assert!(ok, "{stderr}");
+    assert_eq!(std::fs::read(&from_file).unwrap(), std::fs::read(&bvh).unwrap(), "the exported file completes otherwise");
     // The step through tract and onnxruntime and whole completions, timed (figures not checked).
     let (ok, stdout, stderr) = run(&[
         "bench",
@@ -669,6 +676,12 @@ fn inbetween_design_trains_resumes_scores_keys_and_completes() {
     assert!(ok && stdout.contains("ARNN in-betweening whole-shot graph"), "{stdout}\n{stderr}");
     let km = zoo_runtime::KeyframeModel::load(&onnx).unwrap();
     assert!(km.is_inbetween() && km.groups() == names.len() + 1, "{} groups", km.groups());
+    // `zoo complete` runs the exported file as it runs the run folder (exported in memory).
+    let from_file = dir.path().join("done_file.bvh");
+    let (ok, _, stderr) =
+        run(&["complete", "--model", onnx.to_str().unwrap(), "--keys", kp, "--out", from_file.to_str().unwrap()]);
+    assert!(ok, "{stderr}");
+    assert_eq!(std::fs::read(&from_file).unwrap(), std::fs::read(&out).unwrap(), "the exported file completes otherwise");
     let portable = dir.path().join("ib_portable.onnx");
     let (ok, _, stderr) = run(&["export", "--onnx", r, "--out", portable.to_str().unwrap(), "--portable"]);
     assert!(!ok && stderr.contains("does not hold; export it without --portable") && !portable.exists(), "{stderr}");

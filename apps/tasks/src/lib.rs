@@ -4,6 +4,7 @@
 //! clips: a run folder of `zoo train` is exported in memory first ([`model`]), an exported file
 //! is run as it is. No command runs a second implementation of a model.
 
+pub mod complete;
 pub mod model;
 pub mod stitch;
 pub mod transition;

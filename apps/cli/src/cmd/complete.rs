@@ -1,5 +1,6 @@
-//! `zoo complete`: an animator's keys completed into a whole motion by a trained ARNN
-//! ([`zoo_arnn::completion`]; keys file format in docs/arnn.md, "Keys file").
+//! `zoo complete`: an animator's keys completed into a whole motion by a trained keyframe
+//! network, run by the engine runtime ([`zoo_tasks::complete`]; keys file format in docs/arnn.md,
+//! "Keys file").
 
 use anyhow::bail;
 use clap::Args;
@@ -8,7 +9,7 @@ use std::path::PathBuf;
 /// Arguments of `zoo complete`.
 #[derive(Args)]
 pub struct CompleteArgs {
-    /// Run folder of `zoo train arnn`.
+    /// Run folder of `zoo train arnn`, or its exported file (`zoo export --onnx`).
     #[arg(long)]
     pub model: PathBuf,
     /// Keys file: frames and poses (format in docs/arnn.md, example in docs/arnn-keys-example.json).
@@ -59,8 +60,6 @@ pub struct CompleteArgs {
 
 /// Runs `zoo complete`.
 pub fn run(a: CompleteArgs) -> anyhow::Result<()> {
-    zoo_models::require_task(&a.model, zoo_runtime::MotionTaskKind::Keyframes, "complete")
-        .map_err(anyhow::Error::msg)?;
     crate::cmd::check_output_file("--out", &a.out)?;
     for (option, path) in [("--json", &a.json), ("--plot", &a.plot), ("--positions", &a.positions)] {
         if let Some(p) = path {
@@ -98,6 +97,6 @@ pub fn run(a: CompleteArgs) -> anyhow::Result<()> {
         fps: a.fps,
         positions: a.positions,
     };
-    println!("{}", zoo_arnn::completion::complete_command(&o)?);
+    println!("{}", zoo_tasks::complete::complete(&o)?);
     Ok(())
 }

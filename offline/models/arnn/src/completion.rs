@@ -5,7 +5,7 @@
 
 use crate::luxo::LampPose;
 use crate::luxo::sequence::poses_to_clip;
-use crate::{Arnn, ArnnResult, Normalization};
+use crate::ArnnResult;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use zoo_data::{Context, Message, bail};
@@ -441,22 +441,27 @@ pub fn lock_feet(clip: &mut zoo_motion::Clip, key_frames: &[usize]) -> usize {
     )
 }
 
-/// Completes the keys of `o` with the ARNN of its run folder and writes what `o` asks for;
-/// returns the summary the command prints.
-pub fn complete_command(o: &CompleteOptions) -> ArnnResult<String> {
-    if crate::inbetween::is_inbetween_run(&o.model) {
-        let (model, norm) = crate::inbetween::load(&o.model, &candle_core::Device::Cpu)
-            .with_context(|| format!("loading the in-betweening network in {}", o.model.display()))?;
-        let names = model.config().skeleton.names.clone();
-        return complete_humanoid(o, crate::humanoid::HumanoidNet::Inbetween(&model), &norm, &names);
-    }
-    let (model, norm) = crate::checkpoint::load(&o.model, &candle_core::Device::Cpu)
-        .with_context(|| format!("loading the ARNN in {}", o.model.display()))?;
-    match &model.config().skeleton {
-        Some(skeleton) => {
-            complete_humanoid(o, crate::humanoid::HumanoidNet::Arnn(&model), &norm, &skeleton.names.clone())
-        }
-        None => complete_lamp(o, &model, &norm),
+/// The keyframe network `zoo complete` runs: the exported model through the engine runtime
+/// (`zoo_tasks::complete`), what engines, Python and Blender run.
+pub trait KeyNet {
+    /// A humanoid network's skeleton and frame rate; `None` for the lamp.
+    fn humanoid(&self) -> Option<&crate::config::HumanoidSkeleton>;
+    /// The lamp ARNN's configuration (its geometry, degrees of freedom and their names); `None`
+    /// for a humanoid network.
+    fn lamp(&self) -> Option<&crate::ArnnConfig>;
+    /// The network's own completion of keys (frames from 0, one pose per key, per key and group
+    /// whether the key fixes it, or nothing for whole keys): the poses of frames `0..=last key`,
+    /// keys not hit, feet not locked.
+    fn complete(&self, frames: &[usize], poses: &[Vec<f64>], fixed: &[Vec<bool>]) -> ArnnResult<Vec<Vec<f64>>>;
+}
+
+/// Completes the keys of `o` with `net` and writes what `o` asks for; returns the summary the
+/// command prints.
+pub fn complete_command(o: &CompleteOptions, net: &dyn KeyNet) -> ArnnResult<String> {
+    match (net.humanoid(), net.lamp()) {
+        (Some(skeleton), _) => complete_humanoid(o, net, skeleton),
+        (None, Some(config)) => complete_lamp(o, net, config),
+        (None, None) => bail!("{}: the model is neither a humanoid nor the lamp's keyframe network", o.model.display()),
     }
 }
 
@@ -478,8 +483,7 @@ fn misses_at_keys(frames: &[Vec<f64>], key_frames: &[usize], key_poses: &[Vec<f6
 }
 
 /// `zoo complete` with the lamp's ARNN.
-fn complete_lamp(o: &CompleteOptions, model: &Arnn, norm: &Normalization) -> ArnnResult<String> {
-    let config = model.config();
+fn complete_lamp(o: &CompleteOptions, net: &dyn KeyNet, config: &crate::ArnnConfig) -> ArnnResult<String> {
     let Some(lamp) = config.lamp.clone() else {
         bail!("{}: the model has no lamp geometry in config.json (retrain it with `zoo train arnn`)", o.model.display())
     };
@@ -493,7 +497,7 @@ fn complete_lamp(o: &CompleteOptions, model: &Arnn, norm: &Normalization) -> Arn
     }
     let keys = read_keys(&o.keys, &dof_names)?;
     let fps = o.fps.or(keys.fps).unwrap_or(DEFAULT_FPS);
-    let mut frames = crate::complete_raw(model, norm, &keys.frames, &keys.poses)?;
+    let mut frames = net.complete(&keys.frames, &keys.poses, &[])?;
     // The network's own misses, before the keys are hit.
     let raw_misses = misses_at_keys(&frames, &keys.frames, &keys.poses);
     crate::hit_keys(config, &keys.frames, &keys.poses, &[], &mut frames);
@@ -575,10 +579,10 @@ pub fn key_poses(path: &Path, fps: f64) -> Result<(zoo_motion::Clip, Vec<usize>)
 /// `zoo complete` with a humanoid ARNN: key poses from a BVH, partial keys, a clip out.
 fn complete_humanoid(
     o: &CompleteOptions,
-    model: crate::humanoid::HumanoidNet<'_>,
-    norm: &Normalization,
-    joint_names: &[String],
+    net: &dyn KeyNet,
+    skeleton: &crate::config::HumanoidSkeleton,
 ) -> ArnnResult<String> {
+    let joint_names = &skeleton.names;
     if o.plot.is_some() || o.no_ground {
         bail!(
             "--plot and --no-ground are for the lamp; look at a humanoid completion with `zoo render {}`",
@@ -620,7 +624,11 @@ fn complete_humanoid(
             (keys, source, format!("--keys {}", o.keys.display()))
         }
     };
-    let mut done = crate::humanoid::complete_clip(model, norm, &source, &keys.keys).context(what)?;
+    crate::humanoid::check_trained_skeleton(skeleton, &source.skeleton).context(what.clone())?;
+    let mut done = crate::humanoid::complete_clip_with(&source, &keys.keys, Some(skeleton.fps), |f, p, x| {
+        net.complete(f, p, x)
+    })
+    .context(what)?;
     let key_frames: Vec<usize> = keys.keys.iter().map(|k| k.frame).collect();
     let locked = if o.no_foot_lock { 0 } else { lock_feet(&mut done.clip, &key_frames) };
     if let Some(fps) = o.fps.or(keys.fps) {

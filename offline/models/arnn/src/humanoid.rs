@@ -320,21 +320,23 @@ impl HumanoidNet<'_> {
     pub fn check_skeleton(&self, skeleton: &Skeleton) -> ArnnResult<()> {
         match self {
             HumanoidNet::Arnn(m) => check_skeleton(m.config(), skeleton),
-            HumanoidNet::Inbetween(m) => {
-                let s = &m.config().skeleton;
-                let info = skeleton_info(skeleton, s.fps);
-                if s.names != info.names || s.parents != info.parents {
-                    return Err(ArnnError::Config(format!(
-                        "the network was trained on a skeleton of {} joints, the clip has {}: use a model trained on \
-                         this skeleton",
-                        s.names.len(),
-                        info.names.len()
-                    )));
-                }
-                Ok(())
-            }
+            HumanoidNet::Inbetween(m) => check_trained_skeleton(&m.config().skeleton, skeleton),
         }
     }
+}
+
+/// Checks that a network trained on `trained` can complete keys on `skeleton` (same joint names
+/// and parents).
+pub fn check_trained_skeleton(trained: &HumanoidSkeleton, skeleton: &Skeleton) -> ArnnResult<()> {
+    let info = skeleton_info(skeleton, trained.fps);
+    if trained.names != info.names || trained.parents != info.parents {
+        return Err(ArnnError::Config(format!(
+            "the network was trained on a skeleton of {} joints, the clip has {}: use a model trained on this skeleton",
+            trained.names.len(),
+            info.names.len()
+        )));
+    }
+    Ok(())
 }
 
 /// Hits the keys in completed humanoid poses ([`zoo_motion::keyhit`], as [`crate::hit_keys`]):
@@ -397,6 +399,23 @@ pub fn complete_clip(
     keys: &[HumanoidKey],
 ) -> ArnnResult<HumanoidCompletion> {
     model.check_skeleton(&source.skeleton)?;
+    complete_clip_with(source, keys, model.skeleton().map(|s| s.fps), |frames, key_poses, fixed| match model {
+        HumanoidNet::Arnn(m) => crate::train::complete_partial_raw(m, norm, frames, key_poses, fixed),
+        HumanoidNet::Inbetween(m) => Ok(crate::inbetween::complete_shots(m, norm, &[(frames, key_poses, fixed)])?.remove(0)),
+    })
+}
+
+/// [`complete_clip`] with any network: `net` completes keys in the canonical frame (key frames
+/// from 0, one pose per key, partial-key flags per key and group or none) into poses of frames
+/// `0..=last key` without hitting them; `fps` is the frame rate the network was trained at
+/// (the clip's is refused when it differs by more than 1 %). The clip's skeleton is checked by
+/// the caller.
+pub fn complete_clip_with(
+    source: &zoo_motion::Clip,
+    keys: &[HumanoidKey],
+    fps: Option<f64>,
+    net: impl FnOnce(&[usize], &[Vec<f64>], &[Vec<bool>]) -> ArnnResult<Vec<Vec<f64>>>,
+) -> ArnnResult<HumanoidCompletion> {
     let j = source.skeleton.len();
     let n = source.frames();
     if let Some((i, k)) = keys.iter().enumerate().find(|(_, k)| k.source >= n) {
@@ -410,12 +429,11 @@ pub fn complete_clip(
         return Err(ArnnError::Config("no key given".into()));
     }
     let groups = 1 + j;
-    if let Some(s) = model.skeleton() {
+    if let Some(trained) = fps {
         let fps = 1.0 / source.frame_time;
-        if (fps / s.fps - 1.0).abs() > 0.01 {
+        if (fps / trained - 1.0).abs() > 0.01 {
             return Err(ArnnError::Config(format!(
-                "the clip is at {fps:.3} fps, the model was trained at {} fps: resample the clip to {} fps",
-                s.fps, s.fps
+                "the clip is at {fps:.3} fps, the model was trained at {trained} fps: resample the clip to {trained} fps"
             )));
         }
     }
@@ -446,12 +464,7 @@ pub fn complete_clip(
     } else {
         keys.iter().map(|k| k.fixed.clone().unwrap_or_else(|| vec![true; groups])).collect()
     };
-    let mut out = match model {
-        HumanoidNet::Arnn(m) => crate::train::complete_partial_raw(m, norm, &frames, &key_poses, &fixed)?,
-        HumanoidNet::Inbetween(m) => {
-            crate::inbetween::complete_shots(m, norm, &[(&frames, &key_poses, &fixed)])?.remove(0)
-        }
-    };
+    let mut out = net(&frames, &key_poses, &fixed)?;
     let raw_miss = key_misses(&out, &frames, &key_poses, &fixed, j);
     hit_humanoid_keys(&source.skeleton.names, &frames, &key_poses, &fixed, &mut out);
     let (root_miss, angle_miss) = key_misses(&out, &frames, &key_poses, &fixed, j);
