@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The RMR ablations of issue 12 (docs/rmr.md, "Ablations") at equal budgets: every run trains
+# The RMR ablations (docs/rmr-benchmarks.md, "Ablations") at equal budgets: every run trains
 # the same number of epochs from the same seed on the same pairs, with the paper's input (`--paper`), loss and
 # learning rate. Table 1: the refiner cell (LSTM, GRU, BLSTM, BGRU); Table 2: T_begin (3, 5,
 # 10); Figure 9: without the root trajectory loss. Then the stitching benchmark over all of

@@ -4,7 +4,7 @@
 //! zero, negative, NaN, infinite or absurdly large value.
 //!
 //! The ranges are wide enough that a real use never meets them and narrow enough that no value
-//! overflows, allocates more than the machine holds or runs for years (`docs/reliability.md`
+//! overflows, allocates more than the machine holds or runs for years (`docs/option-ranges.md`
 //! lists them). Use the parser named after what the option counts (`epochs`, `batch_size`,
 //! `learning_rate`, `fps`, `seed`, ...) in `#[arg(value_parser = zoo_nn::args::NAME)]`, with
 //! `allow_hyphen_values = true` so that a negative value reaches the parser (and gets its

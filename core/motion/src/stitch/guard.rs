@@ -1,4 +1,4 @@
-//! The seam guard (issue 49, not in the paper): no seam of a stitched sequence moves a joint
+//! The seam guard (not in the paper): no seam of a stitched sequence moves a joint
 //! faster than the inertialized sequence does there, at little cost in foot sliding.
 //!
 //! A refiner meeting motion it never saw can add a pop at a seam: the largest joint speed within

@@ -156,7 +156,7 @@ pub struct Config {
     /// output's pose values against the ground truth's, `|(x_out,t - x_out,t-1) - (x_gt,t -
     /// x_gt,t-1)|_1` over `r, p, q, v`, weighted per frame like the pose loss (so
     /// [`Config::seam_weight`] stresses the seams): a refiner that moves a joint faster than the
-    /// ground truth near a seam makes a pop that the pose loss barely sees (issue 49).
+    /// ground truth near a seam makes a pop that the pose loss barely sees (the seam guard's recipe).
     #[serde(default)]
     pub lambda_velocity: f64,
     /// Extra weight of the pose loss on the frames within [`SEAM_FRAMES`] of a seam of the
@@ -179,7 +179,7 @@ pub struct Config {
     pub train: TrainConfig,
 }
 
-/// `zoo train rmr`'s default [`Config::seam_weight`] (issue 49: with the pre-blend and the
+/// `zoo train rmr`'s default [`Config::seam_weight`] (the default recipe: with the pre-blend and the
 /// velocity term, the recipe that stitches moves the model never saw; `--paper` sets 0).
 pub const RECIPE_SEAM_WEIGHT: f64 = 4.0;
 /// `zoo train rmr`'s default [`Config::lambda_velocity`] (`--paper` sets 0).

@@ -1,4 +1,4 @@
-//! The fallback towards the refiner's input (issue 49, not in the paper): a window that the
+//! The fallback towards the refiner's input (not in the paper): a window that the
 //! refiner corrects far more than it corrected the validation seams is blended back towards
 //! what it was given.
 //!

@@ -65,7 +65,7 @@ pub struct RmrRunOptions {
     /// The paper's training: the raw concatenation as input ([`crate::Config::pre_blend`]
     /// off) and its loss alone (seam and velocity weights 0 unless given). Without it the run
     /// trains on the inputs inertialized at their seams with [`crate::config::RECIPE_SEAM_WEIGHT`]
-    /// and [`crate::config::RECIPE_VELOCITY_WEIGHT`] (issue 49's recipe; docs/rmr.md).
+    /// and [`crate::config::RECIPE_VELOCITY_WEIGHT`] (the default recipe; docs/rmr.md).
     pub paper: bool,
     /// Extra weight of the pose loss within 5 frames of each seam.
     pub seam_weight: Option<f64>,

@@ -104,7 +104,7 @@ pub struct RtnRunOptions {
 pub const DEFAULT_TTA_DIMS: usize = 16;
 
 /// The transition lengths a paper-size run trains over unless `--lengths` says otherwise: the
-/// benchmark's 5-45 (docs/rtn.md: better than one length at every length but the one).
+/// benchmark's 5-45 (docs/experiments/rtn.md: better than one length at every length but the one).
 pub const DEFAULT_LENGTHS: [usize; 2] = [5, 45];
 
 impl RtnRunOptions {
