@@ -5,6 +5,7 @@
 //! is run as it is. No command runs a second implementation of a model.
 
 pub mod complete;
+pub mod generate;
 pub mod model;
 pub mod stitch;
 pub mod transition;

@@ -22,8 +22,10 @@
 //! character's), and decodes the refined frame; the generator still reads its own samples. The
 //! refiner adds no latency in frames (it is causal: frame `t` needs frames up to `t`). The
 //! refiner graph runs once per step for the whole batch; tract allocates its tensors per call
-//! there (the generator's batched step does not). Not here yet: the initial state estimation
-//! of eq. 26 (a start from the zero state, as the paper's baseline).
+//! there (the generator's batched step does not). A character starts from the zero state (the
+//! paper's baseline) or from a state estimated elsewhere
+//! ([`SynthesisCharacter::generator_state_mut`]: `zoo generate` fits it to the seed frames, eq.
+//! 26, on the training model), and takes more seed frames with [`SynthesisRunner::feed`].
 
 use crate::error::MotionError;
 use crate::metadata::MotionModelMetadata;
@@ -296,6 +298,14 @@ impl SynthesisCharacter {
         Ok(())
     }
 
+    /// The generator's recurrent state, to start from a state estimated elsewhere (e.g. `zoo
+    /// generate`'s fit of the seed frames, the paper's eq. 26): slot `k` holds the values of
+    /// [`MotionModel::states`]`()[k]` (`h{l}` and `c{l}`, the LSTM's output and cell state of layer
+    /// `l`). Set it after [`SynthesisCharacter::start`], which zeroes it.
+    pub fn generator_state_mut(&mut self) -> &mut MotionState {
+        &mut self.state
+    }
+
     /// The state of the character's random numbers (`SplitMix64::from_state` restores it).
     pub fn rng_state(&self) -> u64 {
         self.rng.state()
@@ -379,6 +389,51 @@ impl SynthesisRunner {
         let mut contacts = [[false; 2]];
         self.step_batch(std::slice::from_mut(character), temperature, std::slice::from_mut(pose), &mut contacts)?;
         Ok(contacts[0])
+    }
+
+    /// Feeds `frame` (a feature frame in clip units) to a started character as if it had been
+    /// sampled: the generator steps on the character's current frame (its state advances, the
+    /// mixture is not drawn from, no random number is used) and `frame` becomes the current
+    /// frame, the next step's input; with a refiner, its end effectors are the new frame's
+    /// (the refiner's own state is left as it is). Seeds a character with more than one frame
+    /// of a clip: [`SynthesisCharacter::start`] with the first, then `feed` each later one.
+    pub fn feed(&mut self, character: &mut SynthesisCharacter, frame: &[f32]) -> Result<(), MotionError> {
+        let (d, m) = (self.model.task.frame_dim, self.model.task.components);
+        if !character.started {
+            return Err(MotionError::TransitionSequence {
+                character: 0,
+                reason: "it was not started: call SynthesisCharacter::start first".into(),
+            });
+        }
+        check_len("fed frame", frame.len(), 1, d)?;
+        check_finite("fed frame", frame, d)?;
+        // A batch of one padded to two, as `step_batch` runs it (the module's doc).
+        if self.x.len() < 2 * d {
+            self.x.resize(2 * d, 0.0);
+            self.weights.resize(2 * m, 0.0);
+            self.means.resize(2 * m * d, 0.0);
+            self.stds.resize(2 * m * d, 0.0);
+        }
+        self.x[..d].copy_from_slice(&character.x);
+        self.x.copy_within(0..d, d);
+        self.states.clear();
+        self.states.push(std::mem::replace(&mut character.state, MotionState { slots: Vec::new() }));
+        self.states.push(std::mem::replace(&mut self.pad, MotionState { slots: Vec::new() }));
+        let run = self.runner.step_batch_invariant(
+            &mut self.states,
+            &[&self.x[..2 * d]],
+            &mut [&mut self.weights[..2 * m], &mut self.means[..2 * m * d], &mut self.stds[..2 * m * d]],
+        );
+        self.pad = self.states.pop().expect("the pad pushed above");
+        character.state = self.states.pop().expect("the character pushed above");
+        run?;
+        for (i, v) in frame.iter().enumerate() {
+            character.x[i] = (v - self.model.mean[i]) / self.model.std[i];
+        }
+        if let Some(r) = &self.model.refiner {
+            self.model.effector_positions(&character.x, &r.stats, &mut character.effectors, &mut self.fk_rot, &mut self.fk_pos);
+        }
+        Ok(())
     }
 
     /// Generates the next frame of every character in one graph run: `poses[c]` and

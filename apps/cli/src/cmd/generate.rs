@@ -1,13 +1,14 @@
 //! `zoo generate`: random motion synthesis of any length with a trained RNN-GMM (and its
-//! refiner), streamed to BVH with the contact labels in a JSON file beside it
-//! ([`zoo_rnngmm::run::generate_files`]).
+//! refiner), run by the engine runtime and streamed to BVH with the contact labels in a JSON
+//! file beside it ([`zoo_tasks::generate`]).
 
 use anyhow::{Context, bail};
 use clap::Args;
 use std::path::{Path, PathBuf};
 use zoo_data::Progress;
 use zoo_rnngmm::SynthesisOptions;
-use zoo_rnngmm::run::{generate_files, load_run, start_clip};
+use zoo_rnngmm::run::start_clip;
+use zoo_tasks::generate::{Generator, generate_files};
 
 /// Arguments of `zoo generate`.
 #[derive(Args)]
@@ -123,10 +124,10 @@ fn frame_count(a: &GenerateArgs, fps: f64) -> anyhow::Result<usize> {
 /// Runs `zoo generate`.
 pub fn run(a: GenerateArgs) -> anyhow::Result<()> {
     let single = check_outputs(&a)?;
-    let (g, refiner) = load_run(&a.model, a.no_refiner)?;
-    let frames = frame_count(&a, g.spec.fps)?;
+    let g = Generator::load(&a.model, a.no_refiner)?;
+    let frames = frame_count(&a, g.candle.spec.fps)?;
     let from = a.from.as_deref().map(crate::args::clip_and_frame).transpose()?;
-    let (clip, frame, from) = start_clip(&a.model, from.as_ref().map(|(p, f)| (p.as_path(), *f)), &g)?;
+    let (clip, frame, from) = start_clip(&a.model, from.as_ref().map(|(p, f)| (p.as_path(), *f)), &g.candle)?;
     let bar = zoo_nn::progress::Bar::new();
     bar.start((frames as u64).saturating_mul(a.count as u64), "generating (frames)");
     for i in 0..a.count as u64 {
@@ -141,15 +142,14 @@ pub fn run(a: GenerateArgs) -> anyhow::Result<()> {
         let (bvh, json) = outputs(&a.out, single, seed);
         let positions = a.positions.is_some();
         let context = || format!("generating sequence {} (seed {seed})", i + 1);
-        let xyz = generate_files(&g, refiner.as_ref(), (&clip, frame), &opts, (&bvh, &json), positions, &bar)
-            .with_context(context)?;
+        let xyz = generate_files(&g, (&clip, frame), &opts, (&bvh, &json), positions, &bar).with_context(context)?;
         if let Some(p) = &a.positions {
             let v = serde_json::json!({
                 "format": zoo_data::positions::POSITIONS_FORMAT,
                 "version": 1,
                 "command": "generate",
                 "joints": clip.skeleton.names,
-                "fps": g.spec.fps,
+                "fps": g.candle.spec.fps,
                 "seed": opts.seed,
                 "frames": xyz,
             });
@@ -161,8 +161,8 @@ pub fn run(a: GenerateArgs) -> anyhow::Result<()> {
     println!(
         "wrote {} sequence(s) of {frames} frames ({:.1} s) from {from}, {}, temperature {}: {}{}",
         a.count,
-        frames as f64 / g.spec.fps,
-        if refiner.is_some() { "refined" } else { "generator only" },
+        frames as f64 / g.candle.spec.fps,
+        if g.refined() { "refined" } else { "generator only" },
         a.temperature,
         first.display(),
         if a.count > 1 { " ..." } else { "" }

@@ -242,9 +242,21 @@ impl<W: std::io::Write> BvhStream<W> {
 
 use std::io::Write as _;
 
-/// Generates one sequence continuing `frame` of `clip` into the BVH file `bvh` and its contact
-/// labels `json`, chunk by chunk (each file written atomically); returns the global joint
-/// positions of every frame when `positions` asks for them.
+/// Frames of a generated motion, chunk by chunk: the engine runtime's synthesis (`zoo
+/// generate`, `zoo_tasks::generate`) or the candle model's [`crate::SynthesisStream`].
+pub trait MotionChunks {
+    /// The next `frames` frames (at least 1), placed where the previous chunk ended.
+    fn next_motion(&mut self, frames: usize) -> RnnGmmResult<crate::features::DecodedMotion>;
+}
+
+impl MotionChunks for crate::SynthesisStream<'_> {
+    fn next_motion(&mut self, frames: usize) -> RnnGmmResult<crate::features::DecodedMotion> {
+        Ok(self.next_chunk(frames)?.motion)
+    }
+}
+
+/// Generates one sequence continuing `frame` of `clip` with the candle model into the BVH file
+/// `bvh` and its contact labels `json` ([`write_generated`]).
 pub fn generate_files(
     g: &LoadedGenerator,
     refiner: Option<&RefinerNets>,
@@ -255,6 +267,20 @@ pub fn generate_files(
     p: &dyn Progress,
 ) -> RnnGmmResult<Vec<Vec<[f32; 3]>>> {
     let mut stream = crate::SynthesisStream::new(g, refiner, clip, frame, opts)?;
+    write_generated(&mut stream, g.spec.fps, opts.frames, (bvh, json), positions, p)
+}
+
+/// Writes `frames` frames of `stream` (at `fps`) into the BVH file `bvh` and its contact labels
+/// `json`, chunk by chunk (each file written atomically); returns the global joint positions of
+/// every frame when `positions` asks for them.
+pub fn write_generated(
+    stream: &mut dyn MotionChunks,
+    fps: f64,
+    frames: usize,
+    (bvh, json): (&Path, &Path),
+    positions: bool,
+    p: &dyn Progress,
+) -> RnnGmmResult<Vec<Vec<[f32; 3]>>> {
     let mut frames_xyz = Vec::new();
     let mut failure = None;
     let written = zoo_motion::atomic::write_with(bvh, |bvh_file| {
@@ -262,22 +288,22 @@ pub fn generate_files(
             // The root always carries position channels, so every chunk has the same hierarchy.
             let mut out = BvhStream { w: std::io::BufWriter::new(&mut *bvh_file), header: None };
             let mut cj = std::io::BufWriter::new(json_file);
-            if !g.spec.fps.is_finite() {
+            if !fps.is_finite() {
                 failure =
-                    Some(zoo_data::Message(format!("the model's frame rate is {}: re-export it", g.spec.fps)).into());
+                    Some(zoo_data::Message(format!("the model's frame rate is {}: re-export it", fps)).into());
                 return Err(std::io::Error::other("generation failed"));
             }
             write!(
                 cj,
                 "{{\n\"fps\": {},\n\"frames\": {},\n\"feet\": [\"left\", \"right\"],\n\"contacts\": [",
-                g.spec.fps, opts.frames
+                fps, frames
             )?;
             let mut done = 0;
-            while done < opts.frames {
-                let n = CHUNK.min(opts.frames - done);
-                let chunk = stream.next_chunk(n).and_then(|mut chunk| {
-                    chunk.motion.clip.skeleton.channels[0].position = true;
-                    out.write(&chunk.motion.clip, opts.frames)?;
+            while done < frames {
+                let n = CHUNK.min(frames - done);
+                let chunk = stream.next_motion(n).and_then(|mut chunk| {
+                    chunk.clip.skeleton.channels[0].position = true;
+                    out.write(&chunk.clip, frames)?;
                     Ok(chunk)
                 });
                 let chunk = match chunk {
@@ -288,9 +314,9 @@ pub fn generate_files(
                     }
                 };
                 if positions {
-                    frames_xyz.extend(zoo_data::positions::clip_positions(&chunk.motion.clip));
+                    frames_xyz.extend(zoo_data::positions::clip_positions(&chunk.clip));
                 }
-                for (i, c) in chunk.motion.contacts.iter().enumerate() {
+                for (i, c) in chunk.contacts.iter().enumerate() {
                     let sep = if done + i == 0 { "\n" } else { ",\n" };
                     write!(cj, "{sep}[{}, {}]", c[0] as u8, c[1] as u8)?;
                 }
