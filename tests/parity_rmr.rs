@@ -532,7 +532,7 @@ fn runtime_inertializes_the_seams_like_zoo_stitch_pre_blend() {
     assert!(moved > 0.1, "the pre-blend moved joints by only {moved} cm");
     // A seam out of the sequence is refused.
     let err = refiner.refine_poses_at_seams(&poses, &[100], FootCleanup::NONE, &mut out, &mut contacts).unwrap_err();
-    assert!(err.to_string().contains("seam at frame 100 of a sequence of 100 poses"), "{err}");
+    assert!(err.to_string().contains("seam at frame 100 of a sequence of 100 frames"), "{err}");
 
     // The stream with the same seams marked: the whole sequence's poses on every frame the last
     // window did not revisit.

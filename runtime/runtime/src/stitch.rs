@@ -494,6 +494,7 @@ impl StitchRefiner {
         out: &mut [f32],
     ) -> Result<(), MotionError> {
         let d = self.dim;
+        let mut clip = self.poses_to_clip(poses)?;
         if out.len() != poses.len() * d {
             return Err(MotionError::BufferLength {
                 name: "pose vectors".into(),
@@ -509,7 +510,6 @@ impl StitchRefiner {
                 poses.len()
             )));
         }
-        let mut clip = self.poses_to_clip(poses)?;
         if !seams.is_empty() {
             clip = zoo_motion::blend::inertialize_seams(&clip, seams, self.blend_frames);
         }
@@ -536,9 +536,10 @@ impl StitchRefiner {
     }
 
     /// [`StitchRefiner::refine_poses`] of a sequence whose clips start at `seams`: the seams
-    /// inertialized before the refiner sees them when [`StitchRefiner::pre_blend`] (the model was
-    /// trained so), and guarded against pops after the ankle IK and before the foot lock
-    /// ([`StitchRefiner::seam_guard`]): what `zoo stitch` writes ([`StitchRefiner::refine_clip`]).
+    /// inertialized before the refiner sees them (as the stream's `mark_seam` does; give seams to
+    /// a model trained so, [`StitchRefiner::pre_blend`]), and guarded against pops after the
+    /// ankle IK and before the foot lock ([`StitchRefiner::seam_guard`]): what `zoo stitch`
+    /// writes for such a model ([`StitchRefiner::refine_clip`]).
     pub fn refine_poses_at_seams(
         &self,
         input: &[EnginePose],
@@ -563,7 +564,8 @@ impl StitchRefiner {
             )));
         }
         let clip = self.poses_to_clip(input)?;
-        let stitched = self.refine_clip(&clip, seams, cleanup)?;
+        // The seams an engine gives are inertialized (the stream's `mark_seam` does the same).
+        let stitched = self.refine_clip_with(&clip, seams, cleanup, true)?;
         contacts.copy_from_slice(&stitched.contacts);
         write_poses(&stitched.clip, out);
         Ok(())
@@ -605,6 +607,18 @@ impl StitchRefiner {
     /// and `cleanup`'s foot lock, in that order (RMR secs. 5-6): what `zoo stitch` writes and
     /// `zoo bench stitch` measures. Without seams there is nothing to pre-blend or guard.
     pub fn refine_clip(&self, aligned: &Clip, seams: &[usize], cleanup: FootCleanup) -> Result<StitchedClip, MotionError> {
+        self.refine_clip_with(aligned, seams, cleanup, self.pre_blend)
+    }
+
+    /// [`StitchRefiner::refine_clip`], the seams inertialized before the refiner when
+    /// `pre_blend`.
+    fn refine_clip_with(
+        &self,
+        aligned: &Clip,
+        seams: &[usize],
+        cleanup: FootCleanup,
+        pre_blend: bool,
+    ) -> Result<StitchedClip, MotionError> {
         if aligned.joints() != self.joints {
             return Err(stitch_err(format!(
                 "the sequence has {} joints, the model's skeleton {}: retarget it to the model's rig",
@@ -618,9 +632,9 @@ impl StitchRefiner {
                 aligned.frames()
             )));
         }
-        let inertialized = (!seams.is_empty() && (self.pre_blend || self.seam_guard))
+        let inertialized = (!seams.is_empty() && (pre_blend || self.seam_guard))
             .then(|| zoo_motion::blend::inertialize_seams(aligned, seams, self.blend_frames));
-        let input = match (&inertialized, self.pre_blend) {
+        let input = match (&inertialized, pre_blend) {
             (Some(blended), true) => blended,
             _ => aligned,
         };
