@@ -10,10 +10,8 @@ use zoo_runtime::{LoadedModel, MotionTaskKind};
 pub fn commands_for(task: MotionTaskKind) -> &'static str {
     match task {
         MotionTaskKind::Transition => "`zoo bench --methods onnx:FILE` and `zoo bench runtime --model FILE`",
-        MotionTaskKind::Keyframes => "`zoo bench keyframes --model FILE`",
-        MotionTaskKind::Stitch => {
-            "the engine runtime (`zoo_runtime::StitchRefiner`, `zoo_stitch_*` in C); `zoo stitch` takes the run folder"
-        }
+        MotionTaskKind::Keyframes => "`zoo complete --model FILE` and `zoo bench keyframes --model FILE`",
+        MotionTaskKind::Stitch => "`zoo stitch --model FILE` and `zoo bench stitch --methods rmr:FILE`",
         MotionTaskKind::Synthesis => "`zoo bench runtime --model FILE` and `zoo bench control --onnx FILE`",
         MotionTaskKind::Step => "the raw step-graph API (`zoo_runtime::MotionModel`)",
     }

@@ -23,13 +23,14 @@ pub struct TrainedOn {
 pub fn method(spec: &str) -> Result<(Box<dyn TransitionMethod>, Option<TrainedOn>)> {
     let parsed = crate::registry::parse_method(spec)?;
     match &parsed {
-        MethodSpec::Model { name, kind, path, foot_lock } if kind == crate::registry::ONNX_KIND => {
+        MethodSpec::Model { name, kind, path, foot_lock, .. } if kind == crate::registry::ONNX_KIND => {
             let (m, s) = crate::onnx::load_onnx_with_skeleton(path, name.clone(), *foot_lock)?;
             // `zoo export` without `--skeleton` names the joints `joint0`, `joint1`, ...
             let placeholder = s.names.iter().enumerate().all(|(j, n)| *n == format!("joint{j}"));
             Ok((Box::new(m), Some(TrainedOn { parents: s.parents, names: (!placeholder).then_some(s.names) })))
         }
         MethodSpec::Model { kind, path, .. } if kind == "rtn" => {
+            // The run folder's hierarchy (the exported file's is the same).
             let m = crate::registry::load_method(&parsed)?;
             let (config, _) = zoo_rtn::checkpoint::read_meta(path)
                 .with_context(|| format!("method `{spec}`: loading the RTN in {}", path.display()))?;

@@ -44,6 +44,7 @@ use std::time::Instant;
 use zoo_data::benchmark::{BenchResult, Benchmark};
 use zoo_data::dataset::NamedClip;
 use zoo_data::{Message, Progress, bail};
+use zoo_data::Context as _;
 use zoo_motion::Skeleton;
 use zoo_motion::euler::EulerOrder;
 use zoo_motion::fk::forward_kinematics_frame;
@@ -369,7 +370,17 @@ pub struct RuntimeKeys {
 impl RuntimeKeys {
     /// Loads `zoo export --onnx` output of a humanoid keyframe model.
     pub fn load(path: &Path, name: String, foot_lock: bool) -> Result<Self> {
-        let model = zoo_runtime::KeyframeModel::load(path)?;
+        Self::of(zoo_runtime::KeyframeModel::load(path)?, path, name, foot_lock)
+    }
+
+    /// A humanoid keyframe model's run folder `dir`, exported in memory (`arnn:RUN_DIR`).
+    pub fn of_run(dir: &Path, name: String, foot_lock: bool) -> Result<Self> {
+        let exported = zoo_models::export_run(dir, &Default::default())
+            .with_context(|| format!("exporting the run folder {} for the runtime", dir.display()))?;
+        Self::of(zoo_runtime::KeyframeModel::from_bytes(&exported.model.to_bytes())?, dir, name, foot_lock)
+    }
+
+    fn of(model: zoo_runtime::KeyframeModel, path: &Path, name: String, foot_lock: bool) -> Result<Self> {
         if model.groups() == 0 {
             bail!("{}: a keyframe model of {} values per pose, not a humanoid one", path.display(), model.dofs());
         }
@@ -444,8 +455,43 @@ pub fn method(spec: &str) -> Result<Box<dyn KeyMethod>> {
     if let (Some(file), "onnx" | "onnx+lock") = (rest, kind) {
         return Ok(Box::new(RuntimeKeys::load(Path::new(file), spec.to_string(), kind == "onnx+lock")?));
     }
+    // A run folder runs exported through the runtime, as `zoo complete` and engines run it, with
+    // the runtime's foot lock; `candle-arnn...` runs the training model with the benchmark's.
+    if let (Some(dir), "arnn" | "arnn+lock") = (rest, kind) {
+        return Ok(Box::new(RuntimeKeys::of_run(Path::new(dir), spec.to_string(), kind == "arnn+lock")?));
+    }
+    let (kind, spec_inner) = match kind.strip_prefix("candle-") {
+        Some(k) => (k, rest.map_or(k.to_string(), |r| format!("{k}:{r}"))),
+        None => (kind, spec.to_string()),
+    };
+    if spec_inner != spec {
+        // `candle-arnn...:DIR`: named as given.
+        let inner = candle_method(&spec_inner, kind, rest)?;
+        return Ok(Box::new(Renamed { name: spec.to_string(), inner }));
+    }
+    candle_method(spec, kind, rest)
+}
+
+/// A method under another name (`candle-arnn:DIR` for the candle method of `arnn:DIR`).
+struct Renamed {
+    name: String,
+    inner: Box<dyn KeyMethod>,
+}
+
+impl KeyMethod for Renamed {
+    fn name(&self) -> String {
+        self.name.clone()
+    }
+
+    fn fill(&self, tasks: &[KeyTask<'_>]) -> std::result::Result<Vec<Filled>, String> {
+        self.inner.fill(tasks)
+    }
+}
+
+/// The keys-only methods of the training model in candle and the baselines.
+fn candle_method(spec: &str, kind: &str, rest: Option<&str>) -> Result<Box<dyn KeyMethod>> {
     if let Some(base) = kind.strip_suffix("+lock") {
-        let inner = method(&rest.map_or(base.to_string(), |r| format!("{base}:{r}")))?;
+        let inner = candle_method(&rest.map_or(base.to_string(), |r| format!("{base}:{r}")), base, rest)?;
         return Ok(Box::new(WithFootLock { name: spec.to_string(), inner }));
     }
     match spec.split_once(':') {
@@ -457,8 +503,9 @@ pub fn method(spec: &str) -> Result<Box<dyn KeyMethod>> {
         Some(("arnn", dir)) => Ok(Box::new(ArnnKeys::load(Path::new(dir), spec.to_string())?)),
         _ => bail!(
             "method `{spec}` is not one of the keys-only benchmark's: `linear`, `bezier`, `arnn:RUN_DIR` (a humanoid \
-             `zoo train arnn --data` run folder), `onnx:FILE.onnx` (its export, run by the engine runtime), each optionally \
-             with `+lock` after its kind (`arnn+lock:RUN_DIR`)"
+             `zoo train arnn --data` run folder, exported and run by the engine runtime), `onnx:FILE.onnx` (its \
+             export), `candle-arnn:RUN_DIR` (the training model in candle), each optionally with `+lock` after its \
+             kind (`arnn+lock:RUN_DIR`)"
         ),
     }
 }

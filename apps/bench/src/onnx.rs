@@ -3,7 +3,10 @@
 //! lock as `rtn:DIR` ([`zoo_data::position_method`]), and the same fallback (the thresholds
 //! calibrated in training, carried by the file; off with `zoo bench --no-fallback`).
 
+use std::collections::BTreeMap;
 use std::path::Path;
+use std::sync::Mutex;
+use zoo_rtn::method::FallbackCount;
 use zoo_data::position_method::{PositionGenerator, PositionMethod};
 use zoo_runtime::metadata::MotionSkeletonInfo;
 use zoo_runtime::{MotionTaskKind, TransitionModel, TransitionRunner, TransitionState};
@@ -14,6 +17,16 @@ pub struct OnnxGenerator {
     /// Whether the model's calibrated fallback applies (its thresholds for each transition's
     /// length), unless `zoo bench --no-fallback`.
     fallback: bool,
+    /// How often it acted, per transition length (said on stderr when the method is dropped).
+    counts: Mutex<BTreeMap<usize, FallbackCount>>,
+}
+
+impl Drop for OnnxGenerator {
+    fn drop(&mut self) {
+        if let (true, Ok(counts)) = (self.fallback, self.counts.lock()) {
+            zoo_rtn::method::report_fallback(&counts);
+        }
+    }
 }
 
 impl PositionGenerator for OnnxGenerator {
@@ -43,6 +56,12 @@ impl PositionGenerator for OnnxGenerator {
     ) -> Result<Vec<f32>, String> {
         let mut y = vec![0.0; (frames + 1) * target.len()];
         runner.generate(state, past, target, next, &mut y).map_err(|e| e.to_string())?;
+        if let (true, Some(f)) = (self.fallback, self.model.default_fallback_for(frames))
+            && let Ok(mut counts) = self.counts.lock()
+        {
+            let thresholds = zoo_rtn::fallback::Fallback { start: f.start, full: f.full };
+            counts.entry(frames).or_default().count(thresholds, state.fallback_weight());
+        }
         Ok(y)
     }
 }
@@ -63,7 +82,13 @@ pub fn load_onnx_with_skeleton(
     let model = crate::exported::load(path, &[MotionTaskKind::Transition], "`zoo bench --methods onnx:FILE`")?
         .into_transition()?;
     let skeleton = model.model().metadata().skeleton.clone();
+    Ok((onnx_method(model, name, foot_lock), skeleton))
+}
+
+/// The benchmark method of a loaded transition model named `name` (`+fallback` appended when
+/// its calibrated fallback applies), foot-locked when `foot_lock`.
+pub fn onnx_method(model: TransitionModel, name: String, foot_lock: bool) -> PositionMethod<OnnxGenerator> {
     let fallback = model.default_fallback().is_some() && zoo_rtn::method::fallback_enabled();
     let name = if fallback { format!("{name}+fallback") } else { name };
-    Ok((PositionMethod::new(name, OnnxGenerator { model, fallback }, foot_lock), skeleton))
+    PositionMethod::new(name, OnnxGenerator { model, fallback, counts: Mutex::default() }, foot_lock)
 }

@@ -28,21 +28,38 @@ pub struct ModelEntry {
     pub kind: &'static str,
     /// What the model is for, in a few words (said when it is used for something else).
     pub purpose: fn() -> &'static str,
-    /// Its benchmark method, for models that generate transitions.
+    /// Its benchmark method in candle (`candle-KIND:DIR`, and `KIND:DIR` when the runtime has
+    /// none), for models that generate transitions.
     pub bench: Option<BenchLoader>,
+    /// Its benchmark method through the engine runtime (the run folder exported in memory):
+    /// what `KIND:DIR` runs, what users get.
+    pub runtime: Option<BenchLoader>,
     /// Whether its benchmark method takes the foot lock (`KIND+lock:RUN_DIR`).
     pub foot_lock: bool,
 }
 
 /// The models the benchmarks know.
 pub const MODELS: &[ModelEntry] = &[
-    ModelEntry { kind: "rtn", purpose: || zoo_rtn::RtnModel.purpose(), bench: Some(load_rtn_method), foot_lock: true },
-    ModelEntry { kind: "rmr", purpose: || zoo_rmr::RmrModel.purpose(), bench: None, foot_lock: false },
-    ModelEntry { kind: "rnn-gmm", purpose: || zoo_rnngmm::RnnGmmModel.purpose(), bench: None, foot_lock: false },
+    ModelEntry {
+        kind: "rtn",
+        purpose: || zoo_rtn::RtnModel.purpose(),
+        bench: Some(load_rtn_method),
+        runtime: Some(load_rtn_runtime),
+        foot_lock: true,
+    },
+    ModelEntry { kind: "rmr", purpose: || zoo_rmr::RmrModel.purpose(), bench: None, runtime: None, foot_lock: false },
+    ModelEntry {
+        kind: "rnn-gmm",
+        purpose: || zoo_rnngmm::RnnGmmModel.purpose(),
+        bench: None,
+        runtime: None,
+        foot_lock: false,
+    },
     ModelEntry {
         kind: "arnn",
         purpose: || zoo_arnn::ArnnModel.purpose(),
         bench: Some(load_arnn_method),
+        runtime: None,
         foot_lock: false,
     },
 ];
@@ -57,6 +74,15 @@ fn load_arnn_method(dir: &Path, name: String, foot_lock: bool) -> Result<Box<dyn
     let m = zoo_arnn::humanoid::ArnnMethod::load(dir, name)
         .with_context(|| format!("loading the ARNN in {}", dir.display()))?;
     Ok(Box::new(m))
+}
+
+/// `rtn:DIR`: the run folder exported in memory and run by the engine runtime, as `zoo
+/// transition` and engines run it.
+fn load_rtn_runtime(dir: &Path, name: String, foot_lock: bool) -> Result<Box<dyn TransitionMethod>> {
+    let exported = zoo_models::export_run(dir, &Default::default())
+        .with_context(|| format!("exporting the run folder {} for the runtime", dir.display()))?;
+    let model = zoo_runtime::TransitionModel::from_bytes(&exported.model.to_bytes())?;
+    Ok(Box::new(crate::onnx::onnx_method(model, name, foot_lock)))
 }
 
 fn load_rtn_method(dir: &Path, name: String, foot_lock: bool) -> Result<Box<dyn TransitionMethod>> {
@@ -99,6 +125,9 @@ pub enum MethodSpec {
         path: PathBuf,
         /// `+lock`: foot-lock the fitted transitions.
         foot_lock: bool,
+        /// `candle-KIND:DIR`: the training model in candle (for parity checks) instead of the
+        /// exported one in the runtime.
+        candle: bool,
     },
 }
 
@@ -112,6 +141,7 @@ fn method_forms(models: &[ModelEntry]) -> String {
         });
     }
     forms.push(format!("{ONNX_KIND}:FILE.onnx, {ONNX_KIND}+lock:FILE.onnx"));
+    forms.push("candle-KIND:RUN_DIR (the training model in candle)".into());
     forms.join(", ")
 }
 
@@ -124,10 +154,17 @@ fn parse_method_in(models: &[ModelEntry], spec: &str) -> Result<MethodSpec> {
     let Some((head, path)) = spec.split_once(':') else {
         bail!("unknown method `{spec}`: expected {}", method_forms(models));
     };
+    let (candle, head) = match head.strip_prefix("candle-") {
+        Some(rest) => (true, rest),
+        None => (false, head),
+    };
     let (kind, foot_lock) = match head.strip_suffix("+lock") {
         Some(kind) => (kind, true),
         None => (head, false),
     };
+    if candle && kind == ONNX_KIND {
+        bail!("method `{spec}`: `candle-` runs a run folder's training model; an exported file runs as `{ONNX_KIND}:FILE`");
+    }
     if path.is_empty() {
         bail!("method `{spec}`: the path after `{head}:` is empty");
     }
@@ -138,7 +175,7 @@ fn parse_method_in(models: &[ModelEntry], spec: &str) -> Result<MethodSpec> {
             bail!("method `{spec}`: a `{kind}` model is for {}, not for the transition benchmark", (entry.purpose)());
         }
     }
-    Ok(MethodSpec::Model { name: spec.to_string(), kind: kind.to_string(), path: PathBuf::from(path), foot_lock })
+    Ok(MethodSpec::Model { name: spec.to_string(), kind: kind.to_string(), path: PathBuf::from(path), foot_lock, candle })
 }
 
 /// Parses one `--methods` entry (`zerovel`, `interp`, `KIND:PATH`, `KIND+lock:PATH`).
@@ -162,13 +199,14 @@ fn load_method_in(models: &[ModelEntry], spec: &MethodSpec) -> Result<Box<dyn Tr
     Ok(match spec {
         MethodSpec::ZeroVelocity => Box::new(ZeroVelocity),
         MethodSpec::Interpolation => Box::new(Interpolation),
-        MethodSpec::Model { name, kind, path, foot_lock } if kind == ONNX_KIND => {
+        MethodSpec::Model { name, kind, path, foot_lock, .. } if kind == ONNX_KIND => {
             Box::new(crate::onnx::load_onnx(path, name.clone(), *foot_lock)?)
         }
-        MethodSpec::Model { name, kind, path, foot_lock } => {
+        MethodSpec::Model { name, kind, path, foot_lock, candle } => {
             check_folder_kind(name, kind, path, &model_kind(path)?)?;
             let entry = entry_in(models, kind)?;
-            let Some(load) = entry.bench else {
+            let loader = if *candle { entry.bench } else { entry.runtime.or(entry.bench) };
+            let Some(load) = loader else {
                 bail!(
                     "method `{name}`: a `{kind}` model is for {}, not for the transition benchmark",
                     (entry.purpose)()
@@ -195,9 +233,9 @@ mod tests {
     /// RTN plus two made-up kinds: one for something else, one benchmarked but not a
     /// `zoo transition` model.
     const TEST_MODELS: &[ModelEntry] = &[
-        ModelEntry { kind: "rtn", purpose: || "transitions", bench: Some(no_bench), foot_lock: true },
-        ModelEntry { kind: "gmm", purpose: || "sampling poses", bench: None, foot_lock: true },
-        ModelEntry { kind: "arnn", purpose: || "long in-betweens", bench: Some(no_bench), foot_lock: true },
+        ModelEntry { kind: "rtn", purpose: || "transitions", bench: Some(no_bench), runtime: None, foot_lock: true },
+        ModelEntry { kind: "gmm", purpose: || "sampling poses", bench: None, runtime: None, foot_lock: true },
+        ModelEntry { kind: "arnn", purpose: || "long in-betweens", bench: Some(no_bench), runtime: None, foot_lock: true },
     ];
 
     fn err<T, E: std::fmt::Display>(r: std::result::Result<T, E>) -> String {
@@ -211,16 +249,17 @@ mod tests {
     fn the_known_spellings_parse() {
         assert_eq!(parse_method("zerovel").unwrap(), MethodSpec::ZeroVelocity);
         assert_eq!(parse_method("interp").unwrap(), MethodSpec::Interpolation);
-        for (spec, kind, lock) in [
-            ("rtn:runs/a", "rtn", false),
-            ("rtn+lock:runs/a", "rtn", true),
-            ("onnx:m.onnx", "onnx", false),
-            ("onnx+lock:m.onnx", "onnx", true),
+        for (spec, kind, lock, on_candle) in [
+            ("rtn:runs/a", "rtn", false, false),
+            ("rtn+lock:runs/a", "rtn", true, false),
+            ("candle-rtn+lock:runs/a", "rtn", true, true),
+            ("onnx:m.onnx", "onnx", false, false),
+            ("onnx+lock:m.onnx", "onnx", true, false),
         ] {
-            let MethodSpec::Model { name, kind: k, path, foot_lock } = parse_method(spec).unwrap() else {
+            let MethodSpec::Model { name, kind: k, path, foot_lock, candle } = parse_method(spec).unwrap() else {
                 panic!("{spec}: not a model method")
             };
-            assert_eq!((name.as_str(), k.as_str(), foot_lock), (spec, kind, lock));
+            assert_eq!((name.as_str(), k.as_str(), foot_lock, candle), (spec, kind, lock, on_candle));
             assert_eq!(path, PathBuf::from(spec.split_once(':').unwrap().1));
         }
     }

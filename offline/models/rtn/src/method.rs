@@ -90,34 +90,45 @@ impl PositionGenerator for RtnGenerator {
         if let Some(f) = fallback
             && let Ok(mut counts) = self.counts.lock()
         {
-            let c = counts.entry(frames).or_default();
-            c.thresholds = f;
-            c.transitions += 1;
-            c.triggered += usize::from(t.weight > 0.0);
-            c.full += usize::from(t.weight >= 1.0);
-            c.weight_sum += t.weight as f64;
+            counts.entry(frames).or_default().count(f, t.weight);
         }
         Ok(t.frames)
+    }
+}
+
+impl FallbackCount {
+    /// Counts one transition blended with weight `weight` under `thresholds`.
+    pub fn count(&mut self, thresholds: Fallback, weight: f32) {
+        self.thresholds = thresholds;
+        self.transitions += 1;
+        self.triggered += usize::from(weight > 0.0);
+        self.full += usize::from(weight >= 1.0);
+        self.weight_sum += weight as f64;
+    }
+}
+
+/// Says on stderr how often the fallback acted at each transition length.
+pub fn report_fallback(counts: &BTreeMap<usize, FallbackCount>) {
+    for (n, c) in counts {
+        let f = c.thresholds;
+        eprintln!(
+            "fallback (start {:.2}, full {:.2}) at n = {n}: triggered on {} of {} transitions ({:.1}%), full on {}, \
+             mean weight {:.3}",
+            f.start,
+            f.full,
+            c.triggered,
+            c.transitions,
+            100.0 * c.triggered as f64 / c.transitions.max(1) as f64,
+            c.full,
+            c.weight_sum / c.transitions.max(1) as f64
+        );
     }
 }
 
 impl Drop for RtnGenerator {
     fn drop(&mut self) {
         if self.fallback {
-            for (n, c) in self.counts() {
-                let f = c.thresholds;
-                eprintln!(
-                    "fallback (start {:.2}, full {:.2}) at n = {n}: triggered on {} of {} transitions ({:.1}%), \
-                     full on {}, mean weight {:.3}",
-                    f.start,
-                    f.full,
-                    c.triggered,
-                    c.transitions,
-                    100.0 * c.triggered as f64 / c.transitions.max(1) as f64,
-                    c.full,
-                    c.weight_sum / c.transitions.max(1) as f64
-                );
-            }
+            report_fallback(&self.counts());
         }
     }
 }
