@@ -28,9 +28,11 @@ pub struct BenchArgs {
     #[arg(long)]
     pub test_data: Option<PathBuf>,
     /// Comma-separated methods: `zerovel`, `interp`, `KIND:RUN_DIR` (a `zoo train KIND` run
-    /// folder whose config.json names model KIND, e.g. `rtn:runs/rtn`), `onnx:FILE.onnx` (a
-    /// `zoo export --onnx` file run by the engine runtime on tract); `KIND+lock:RUN_DIR` and
-    /// `onnx+lock:FILE.onnx` add the foot-lock post-process.
+    /// folder whose config.json names model KIND, e.g. `rtn:runs/rtn`: exported in memory and
+    /// run by the engine runtime, as the commands and engines run it), `onnx:FILE.onnx` (a `zoo
+    /// export --onnx` file, likewise), `candle-KIND:RUN_DIR` (the training model in candle, for
+    /// parity checks); `KIND+lock:RUN_DIR` and `onnx+lock:FILE.onnx` add the foot-lock
+    /// post-process.
     #[arg(long, default_value = "zerovel,interp", value_delimiter = ',')]
     pub methods: Vec<String>,
     /// Comma-separated transition lengths in frames.
@@ -74,8 +76,8 @@ pub struct BenchArgs {
     pub test_every: u64,
     /// What a method is given: `context` (the LaFAN1 protocol: 10 context frames and a target),
     /// `keys` (key poses every K frames and nothing else; methods `linear`, `bezier`,
-    /// `arnn:RUN_DIR`) or `keys-partial` (the keys between the first and the last fix the root
-    /// and the limbs' end joints only).
+    /// `arnn:RUN_DIR`, `onnx:FILE.onnx`, `candle-arnn:RUN_DIR`) or `keys-partial` (the keys
+    /// between the first and the last fix the root and the limbs' end joints only).
     #[arg(long, value_enum, default_value_t = Layout::Context)]
     pub layout: Layout,
     /// With `--layout keys` / `keys-partial`: the key spacings K in frames (the table's columns).
