@@ -2,7 +2,7 @@
 //! node on one thread, the time of each node summed over `--reps` windows.
 //!
 //! ```text
-//! cargo build -p zoo-rmr --example rmr_tract_profile
+//! cargo build -p zoo-bench --example rmr_tract_profile
 //! RAYON_NUM_THREADS=1 target/debug/examples/rmr_tract_profile [--window 60] [--reps 200]
 //! ```
 
