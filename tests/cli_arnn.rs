@@ -602,14 +602,17 @@ fn inbetween_design_trains_resumes_scores_keys_and_completes() {
     let row = &result["methods"][method.as_str()];
     for k in [10, 30] {
         assert!(row[format!("l2p@{k}")].as_f64().unwrap().is_finite(), "{row}");
-        // Met by construction: the network's own miss is float rounding.
-        assert!(row[format!("keymiss_raw_cm@{k}")].as_f64().unwrap() < 1e-6, "{row}");
+        // Met by construction: the network's own miss is float rounding (the runtime's f32
+        // poses, about 1e-7 of the root's distance from the origin).
+        assert!(row[format!("keymiss_raw_cm@{k}")].as_f64().unwrap() < 1e-4, "{row}");
         assert!(row[format!("keymiss_raw_deg@{k}")].as_f64().unwrap() < 1e-3, "{row}");
         // The foot lock between the keys leaves every key hit.
         for m in [locked.as_str(), "bezier+lock"] {
             let row = &result["methods"][m];
             assert!(row[format!("skate@{k}")].as_f64().unwrap().is_finite(), "{m}: {row}");
-            assert!(row[format!("keymiss_cm@{k}")].as_f64().unwrap() < 1e-6, "{m}: {row}");
+            // The run through the runtime: its f32 poses (see above).
+            let bound = if m == locked { 1e-4 } else { 1e-6 };
+            assert!(row[format!("keymiss_cm@{k}")].as_f64().unwrap() < bound, "{m}: {row}");
             assert!(row[format!("keymiss_deg@{k}")].as_f64().unwrap() < 1e-3, "{m}: {row}");
         }
     }
@@ -685,9 +688,10 @@ fn inbetween_design_trains_resumes_scores_keys_and_completes() {
     let portable = dir.path().join("ib_portable.onnx");
     let (ok, _, stderr) = run(&["export", "--onnx", r, "--out", portable.to_str().unwrap(), "--portable"]);
     assert!(!ok && stderr.contains("does not hold; export it without --portable") && !portable.exists(), "{stderr}");
-    // The export through the runtime scores as candle does in the keys-only benchmark, with its
-    // own foot lock as with the benchmark's.
+    // The export through the runtime scores as the training model in candle does in the
+    // keys-only benchmark, with its own foot lock as with the benchmark's.
     let (o, ol) = (format!("onnx:{}", onnx.display()), format!("onnx+lock:{}", onnx.display()));
+    let (method, locked) = (format!("candle-{method}"), format!("candle-{locked}"));
     let json = dir.path().join("keys_onnx.json");
     let methods = format!("{method},{locked},{o},{ol}");
     let (ok, stdout, stderr) = run(&[&bench[..], &["--methods", &methods, "--json", json.to_str().unwrap()]].concat());

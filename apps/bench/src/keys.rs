@@ -393,15 +393,25 @@ impl RuntimeKeys {
         if d != zoo_motion::inbetween::dofs(j) || g != 1 + j {
             bail!("the model completes poses of {d} values in {g} groups, the data's skeleton has {j} joints");
         }
-        let poses: Vec<f32> =
-            zoo_arnn::humanoid::poses(&t.root, &t.rot, j).iter().flatten().map(|&v| v as f32).collect();
+        let key_poses = zoo_arnn::humanoid::poses(&t.root, &t.rot, j);
+        let poses: Vec<f32> = key_poses.iter().flatten().map(|&v| v as f32).collect();
         let whole = t.fixed.iter().all(|m| m.iter().all(|&v| v));
         let fixed: Vec<f32> =
             if whole { vec![] } else { t.fixed.iter().flatten().map(|&v| if v { 1.0 } else { 0.0 }).collect() };
+        let keys = zoo_runtime::MotionKeys { frames: &t.frames, poses: &poses, fixed: &fixed };
+        // The network's own misses (keys not hit, feet not locked), then the output.
         let mut out = vec![0.0f32; t.len() * d];
-        runner.complete(zoo_runtime::MotionKeys { frames: &t.frames, poses: &poses, fixed: &fixed }, &mut out)?;
+        runner.set_hit_keys(false);
+        runner.set_foot_lock(false);
+        runner.complete(keys, &mut out)?;
+        let raw: Vec<Vec<f64>> = out.chunks_exact(d).map(|p| p.iter().map(|&v| v as f64).collect()).collect();
+        let bools: &[Vec<bool>] = if whole { &[] } else { &t.fixed };
+        let (root_miss, (angle_miss, _, _)) = zoo_arnn::humanoid::key_misses(&raw, &t.frames, &key_poses, bools, j);
+        runner.set_hit_keys(true);
+        runner.set_foot_lock(self.foot_lock);
+        runner.complete(keys, &mut out)?;
         let out: Vec<f64> = out.iter().map(|&v| v as f64).collect();
-        Ok(Filled::from_poses(out.chunks_exact(d), &t.rot[..j], None))
+        Ok(Filled::from_poses(out.chunks_exact(d), &t.rot[..j], Some((root_miss, angle_miss))))
     }
 }
 

@@ -12,7 +12,6 @@ use crate::Result;
 use std::path::{Path, PathBuf};
 use zoo_data::benchmark::{Interpolation, TransitionMethod, ZeroVelocity};
 use zoo_data::{Context, bail};
-use zoo_nn::ZooModel;
 
 pub use zoo_nn::checkpoint::{CONFIG_FILE, DEFAULT_KIND, kind_of_config};
 
@@ -20,14 +19,14 @@ pub use zoo_nn::checkpoint::{CONFIG_FILE, DEFAULT_KIND, kind_of_config};
 pub const ONNX_KIND: &str = "onnx";
 
 /// Loads a benchmark method from a run folder: `(folder, method name, foot lock)`.
-type BenchLoader = fn(&Path, String, bool) -> Result<Box<dyn TransitionMethod>>;
+type BenchLoader = fn(&Path, String, bool) -> std::result::Result<Box<dyn TransitionMethod>, zoo_nn::zoo_model::BoxError>;
 
 /// What the benchmarks do with one kind of model.
 pub struct ModelEntry {
     /// The kind's name, as in `config.json` and `--methods KIND:DIR`.
     pub kind: &'static str,
     /// What the model is for, in a few words (said when it is used for something else).
-    pub purpose: fn() -> &'static str,
+    pub purpose: &'static str,
     /// Its benchmark method in candle (`candle-KIND:DIR`, and `KIND:DIR` when the runtime has
     /// none), for models that generate transitions.
     pub bench: Option<BenchLoader>,
@@ -38,57 +37,37 @@ pub struct ModelEntry {
     pub foot_lock: bool,
 }
 
-/// The models the benchmarks know.
-pub const MODELS: &[ModelEntry] = &[
-    ModelEntry {
-        kind: "rtn",
-        purpose: || zoo_rtn::RtnModel.purpose(),
-        bench: Some(load_rtn_method),
-        runtime: Some(load_rtn_runtime),
-        foot_lock: true,
-    },
-    ModelEntry { kind: "rmr", purpose: || zoo_rmr::RmrModel.purpose(), bench: None, runtime: None, foot_lock: false },
-    ModelEntry {
-        kind: "rnn-gmm",
-        purpose: || zoo_rnngmm::RnnGmmModel.purpose(),
-        bench: None,
-        runtime: None,
-        foot_lock: false,
-    },
-    ModelEntry {
-        kind: "arnn",
-        purpose: || zoo_arnn::ArnnModel.purpose(),
-        bench: Some(load_arnn_method),
-        runtime: None,
-        foot_lock: false,
-    },
-];
-
-fn load_arnn_method(dir: &Path, name: String, foot_lock: bool) -> Result<Box<dyn TransitionMethod>> {
-    if foot_lock {
-        bail!(
-            "`arnn+lock`: the foot lock is applied to RTN and exported transition models; use `arnn:{}`",
-            dir.display()
-        );
-    }
-    let m = zoo_arnn::humanoid::ArnnMethod::load(dir, name)
-        .with_context(|| format!("loading the ARNN in {}", dir.display()))?;
-    Ok(Box::new(m))
+/// The models the benchmarks know: the table of models ([`zoo_models::MODELS`]). A model of the
+/// runtime's transition task runs exported through the runtime; a model with transitions in
+/// candle ([`zoo_nn::ZooModel::candle_transitions`]) also runs as `candle-KIND:DIR`.
+pub fn models() -> Vec<ModelEntry> {
+    zoo_models::MODELS
+        .iter()
+        .map(|m| {
+            let candle = m.candle_transitions();
+            let transition = m.task() == zoo_runtime::MotionTaskKind::Transition;
+            ModelEntry {
+                kind: m.kind(),
+                purpose: m.purpose(),
+                bench: candle.map(|c| c.load),
+                runtime: transition.then_some(load_runtime_transition as BenchLoader),
+                foot_lock: transition || candle.is_some_and(|c| c.foot_lock),
+            }
+        })
+        .collect()
 }
 
-/// `rtn:DIR`: the run folder exported in memory and run by the engine runtime, as `zoo
-/// transition` and engines run it.
-fn load_rtn_runtime(dir: &Path, name: String, foot_lock: bool) -> Result<Box<dyn TransitionMethod>> {
+/// `KIND:DIR` of a transition model: the run folder exported in memory and run by the engine
+/// runtime, as `zoo transition` and engines run it.
+fn load_runtime_transition(
+    dir: &Path,
+    name: String,
+    foot_lock: bool,
+) -> std::result::Result<Box<dyn TransitionMethod>, zoo_nn::zoo_model::BoxError> {
     let exported = zoo_models::export_run(dir, &Default::default())
         .with_context(|| format!("exporting the run folder {} for the runtime", dir.display()))?;
     let model = zoo_runtime::TransitionModel::from_bytes(&exported.model.to_bytes())?;
     Ok(Box::new(crate::onnx::onnx_method(model, name, foot_lock)))
-}
-
-fn load_rtn_method(dir: &Path, name: String, foot_lock: bool) -> Result<Box<dyn TransitionMethod>> {
-    let m =
-        zoo_rtn::method::load(dir, name, foot_lock).with_context(|| format!("loading the RTN in {}", dir.display()))?;
-    Ok(Box::new(m))
 }
 
 fn known_kinds(models: &[ModelEntry]) -> String {
@@ -172,7 +151,7 @@ fn parse_method_in(models: &[ModelEntry], spec: &str) -> Result<MethodSpec> {
         let entry =
             entry_in(models, kind).with_context(|| format!("method `{spec}`: expected {}", method_forms(models)))?;
         if entry.bench.is_none() {
-            bail!("method `{spec}`: a `{kind}` model is for {}, not for the transition benchmark", (entry.purpose)());
+            bail!("method `{spec}`: a `{kind}` model is for {}, not for the transition benchmark", entry.purpose);
         }
     }
     Ok(MethodSpec::Model { name: spec.to_string(), kind: kind.to_string(), path: PathBuf::from(path), foot_lock, candle })
@@ -180,7 +159,7 @@ fn parse_method_in(models: &[ModelEntry], spec: &str) -> Result<MethodSpec> {
 
 /// Parses one `--methods` entry (`zerovel`, `interp`, `KIND:PATH`, `KIND+lock:PATH`).
 pub fn parse_method(spec: &str) -> Result<MethodSpec> {
-    parse_method_in(MODELS, spec)
+    parse_method_in(&models(), spec)
 }
 
 /// Refuses a method spec whose kind is not the one the folder's `config.json` names.
@@ -207,35 +186,36 @@ fn load_method_in(models: &[ModelEntry], spec: &MethodSpec) -> Result<Box<dyn Tr
             let entry = entry_in(models, kind)?;
             let loader = if *candle { entry.bench } else { entry.runtime.or(entry.bench) };
             let Some(load) = loader else {
-                bail!(
-                    "method `{name}`: a `{kind}` model is for {}, not for the transition benchmark",
-                    (entry.purpose)()
-                );
+                bail!("method `{name}`: a `{kind}` model is for {}, not for the transition benchmark", entry.purpose);
             };
-            load(path, name.clone(), *foot_lock)?
+            load(path, name.clone(), *foot_lock).map_err(|e| zoo_data::Message(e.to_string()))?
         }
     })
 }
 
 /// Loads a parsed `--methods` entry.
 pub fn load_method(spec: &MethodSpec) -> Result<Box<dyn TransitionMethod>> {
-    load_method_in(MODELS, spec)
+    load_method_in(&models(), spec)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn no_bench(_: &Path, _: String, _: bool) -> Result<Box<dyn TransitionMethod>> {
+    fn no_bench(
+        _: &Path,
+        _: String,
+        _: bool,
+    ) -> std::result::Result<Box<dyn TransitionMethod>, zoo_nn::zoo_model::BoxError> {
         unreachable!("the test registry's loader is never called")
     }
 
     /// RTN plus two made-up kinds: one for something else, one benchmarked but not a
     /// `zoo transition` model.
     const TEST_MODELS: &[ModelEntry] = &[
-        ModelEntry { kind: "rtn", purpose: || "transitions", bench: Some(no_bench), runtime: None, foot_lock: true },
-        ModelEntry { kind: "gmm", purpose: || "sampling poses", bench: None, runtime: None, foot_lock: true },
-        ModelEntry { kind: "arnn", purpose: || "long in-betweens", bench: Some(no_bench), runtime: None, foot_lock: true },
+        ModelEntry { kind: "rtn", purpose: "transitions", bench: Some(no_bench), runtime: None, foot_lock: true },
+        ModelEntry { kind: "gmm", purpose: "sampling poses", bench: None, runtime: None, foot_lock: true },
+        ModelEntry { kind: "arnn", purpose: "long in-betweens", bench: Some(no_bench), runtime: None, foot_lock: true },
     ];
 
     fn err<T, E: std::fmt::Display>(r: std::result::Result<T, E>) -> String {

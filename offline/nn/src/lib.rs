@@ -54,4 +54,4 @@ pub use parallel::DataParallel;
 pub use recurrent::{BiGru, BiLstm, Gru, GruState, Lstm, LstmState};
 pub use rng::SplitMix64;
 pub use train_loop::{TrainOptions, TrainState, Trainable, Validation};
-pub use zoo_model::{ExportOptions, Exported, Portable, ZooModel};
+pub use zoo_model::{CandleTransitions, ExportOptions, Exported, Portable, ZooModel};

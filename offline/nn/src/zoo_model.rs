@@ -10,6 +10,7 @@
 
 use std::error::Error;
 use std::path::Path;
+use zoo_data::benchmark::TransitionMethod;
 use zoo_export::{ExportError, OnnxModel};
 use zoo_format::MotionTaskKind;
 
@@ -76,6 +77,16 @@ pub struct Exported {
     pub with: String,
 }
 
+/// A model's transitions in candle for the in-betweening benchmark ([`ZooModel::candle_transitions`]).
+#[derive(Clone, Copy)]
+pub struct CandleTransitions {
+    /// The method of run folder `run`, named `name` (the `--methods` entry), foot-locked when
+    /// asked (`KIND+lock:`).
+    pub load: fn(run: &Path, name: String, foot_lock: bool) -> Result<Box<dyn TransitionMethod>, BoxError>,
+    /// Whether it takes the foot lock (`KIND+lock:RUN_DIR`).
+    pub foot_lock: bool,
+}
+
 /// One model of the zoo.
 pub trait ZooModel: Sync {
     /// The kind its run folders record (`config.json`'s `"model"`) and its files carry
@@ -101,6 +112,13 @@ pub trait ZooModel: Sync {
 
     /// The run folder `run` as one file (f32 weights; `zoo export --weights` narrows them).
     fn export(&self, run: &Path, options: &ExportOptions) -> Result<Exported, ExportError>;
+
+    /// The model as a method of the in-betweening benchmark run in candle (`zoo bench --methods
+    /// candle-KIND:RUN_DIR`; also `KIND:RUN_DIR` for a model whose files are not of the
+    /// runtime's transition task): `None` for models that make no transitions.
+    fn candle_transitions(&self) -> Option<CandleTransitions> {
+        None
+    }
 
     /// How the file of `run` goes to the portable profile; `frames`: `zoo export --frames`.
     fn portable(&self, _run: &Path, frames: Option<u32>) -> Result<Portable, ExportError> {

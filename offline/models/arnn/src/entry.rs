@@ -6,9 +6,10 @@ use crate::train_run::{ArnnDesign, ArnnPreset, ArnnRunOptions, ArnnVariant, NoMe
 use clap::{Args, FromArgMatches};
 use std::path::{Path, PathBuf};
 use zoo_export::ExportError;
+use zoo_data::benchmark::TransitionMethod;
 use zoo_format::MotionTaskKind;
 use zoo_nn::train_args::{RunArgs, TrainDefaults};
-use zoo_nn::zoo_model::{BoxError, ExportOptions, Exported, Portable, ZooModel};
+use zoo_nn::zoo_model::{BoxError, CandleTransitions, ExportOptions, Exported, Portable, ZooModel};
 
 /// The ARNN (both designs) in the table of models.
 pub struct ArnnModel;
@@ -50,6 +51,14 @@ impl ZooModel for ArnnModel {
             "ARNN step graph"
         };
         Ok(Exported { model, what, with })
+    }
+
+    fn candle_transitions(&self) -> Option<CandleTransitions> {
+        // The humanoid ARNN on the context layout (its keys: the context and the target).
+        fn load(run: &Path, name: String, _: bool) -> Result<Box<dyn TransitionMethod>, BoxError> {
+            Ok(Box::new(crate::humanoid::ArnnMethod::load(run, name)?))
+        }
+        Some(CandleTransitions { load, foot_lock: false })
     }
 
     fn portable(&self, run: &Path, frames: Option<u32>) -> Result<Portable, ExportError> {

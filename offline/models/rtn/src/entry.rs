@@ -5,9 +5,10 @@ use crate::train_run::{RtnAugment, RtnPreset, RtnRunOptions, RtnVariant};
 use clap::{Args, FromArgMatches};
 use std::path::Path;
 use zoo_export::ExportError;
+use zoo_data::benchmark::TransitionMethod;
 use zoo_format::MotionTaskKind;
 use zoo_nn::train_args::{DataArgs, RunArgs, TrainDefaults};
-use zoo_nn::zoo_model::{BoxError, ExportOptions, Exported, ZooModel};
+use zoo_nn::zoo_model::{BoxError, CandleTransitions, ExportOptions, Exported, ZooModel};
 
 /// The RTN in the table of models.
 pub struct RtnModel;
@@ -43,6 +44,13 @@ impl ZooModel for RtnModel {
         let model = crate::export::export_run(run, options)?;
         let with = "with its start graph and metadata".to_string();
         Ok(Exported { model, what: "RTN step graph", with })
+    }
+
+    fn candle_transitions(&self) -> Option<CandleTransitions> {
+        fn load(run: &Path, name: String, foot_lock: bool) -> Result<Box<dyn TransitionMethod>, BoxError> {
+            Ok(Box::new(crate::method::load(run, name, foot_lock)?))
+        }
+        Some(CandleTransitions { load, foot_lock: true })
     }
 }
 

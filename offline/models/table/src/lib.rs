@@ -9,7 +9,7 @@
 
 use std::path::Path;
 use zoo_format::MotionTaskKind;
-pub use zoo_nn::zoo_model::{BoxError, ExportOptions, Exported, Portable, ZooModel};
+pub use zoo_nn::zoo_model::{BoxError, CandleTransitions, ExportOptions, Exported, Portable, ZooModel};
 
 /// Every model of the zoo, in the order `zoo train --help` lists them.
 pub static MODELS: [&dyn ZooModel; 4] =
