@@ -21,6 +21,8 @@ pub struct Generator {
     /// The run folder's generator in candle.
     pub candle: LoadedGenerator,
     model: SynthesisModel,
+    /// The generator alone (the refined model's own draws, without its refiner).
+    plain: SynthesisModel,
 }
 
 impl Generator {
@@ -34,7 +36,8 @@ impl Generator {
         }
         let model = ModelSource::open(dir, MotionTaskKind::Synthesis, "generate")?.load()?.into_synthesis()?;
         let model = if no_refiner { model.without_refiner() } else { model };
-        Ok(Generator { candle, model })
+        let plain = model.clone().without_refiner();
+        Ok(Generator { candle, model, plain })
     }
 
     /// Whether the runtime refines the sampled frames.
@@ -45,7 +48,7 @@ impl Generator {
 
 /// A synthesis in the runtime, chunk by chunk, decoded onto the model's skeleton.
 struct RuntimeSynthesis<'a> {
-    g: &'a Generator,
+    candle: &'a LoadedGenerator,
     runner: SynthesisRunner,
     character: SynthesisCharacter,
     pose: EnginePose,
@@ -57,8 +60,14 @@ impl<'a> RuntimeSynthesis<'a> {
     /// generator's state before them estimated (eq. 26, `opts.init_steps`, in candle), the first
     /// started, the others fed, the motion placed where the clip stands at `frame`; sampling
     /// with `opts.seed`.
-    fn new(g: &'a Generator, clip: &Clip, frame: usize, opts: &SynthesisOptions) -> TaskResult<Self> {
-        let (spec, norm) = (&g.candle.spec, &g.candle.norm);
+    fn new(
+        candle: &'a LoadedGenerator,
+        model: &SynthesisModel,
+        clip: &Clip,
+        frame: usize,
+        opts: &SynthesisOptions,
+    ) -> TaskResult<Self> {
+        let (spec, norm) = (&candle.spec, &candle.norm);
         let d = spec.dim();
         if opts.seed_frames < 2 || frame + 1 < opts.seed_frames || frame >= clip.frames() {
             bail!(
@@ -82,19 +91,19 @@ impl<'a> RuntimeSynthesis<'a> {
             let x = enc.frame(f);
             placement = placement.advance(x[0] as f64, x[1] as f64, x[2] as f64);
         }
-        let mut character = g.model.new_character(opts.seed);
-        character.start(&g.model, &seed[..d], placement.x as f32, placement.z as f32, placement.yaw as f32)?;
+        let mut character = model.new_character(opts.seed);
+        character.start(model, &seed[..d], placement.x as f32, placement.z as f32, placement.yaw as f32)?;
         if opts.init_steps > 0 {
             let mut normalized = seed.to_vec();
             norm.normalize(&mut normalized);
             let est = zoo_rnngmm::initial_state::estimate_initial_state(
-                &g.candle.generator,
+                &candle.generator,
                 &normalized,
                 opts.init_steps,
                 opts.init_lr,
             )
             .map_err(rnn)?;
-            let infos = g.model.model().states().to_vec();
+            let infos = model.model().states().to_vec();
             let state = character.generator_state_mut();
             for (slot, info) in infos.iter().enumerate() {
                 let (layer, cell) = match (info.input.strip_prefix('h'), info.input.strip_prefix('c')) {
@@ -113,23 +122,23 @@ impl<'a> RuntimeSynthesis<'a> {
                 state.slot_mut(slot).copy_from_slice(&values);
             }
         }
-        let mut runner = g.model.runner(1)?;
+        let mut runner = model.runner(1)?;
         for x in seed[d..].chunks_exact(d) {
             runner.feed(&mut character, x)?;
         }
-        let mut pose = EnginePose::new(g.model.joints());
+        let mut pose = EnginePose::new(model.joints());
         pose.global_positions.clear();
-        Ok(RuntimeSynthesis { g, runner, character, pose, temperature: opts.temperature as f32 })
+        Ok(RuntimeSynthesis { candle, runner, character, pose, temperature: opts.temperature as f32 })
     }
 }
 
 impl MotionChunks for RuntimeSynthesis<'_> {
     fn next_motion(&mut self, frames: usize) -> RnnGmmResult<DecodedMotion> {
-        let skeleton = &self.g.candle.spec.skeleton;
+        let skeleton = &self.candle.spec.skeleton;
         let j = skeleton.len();
         let mut clip = Clip {
             skeleton: skeleton.clone(),
-            frame_time: 1.0 / self.g.candle.spec.fps,
+            frame_time: 1.0 / self.candle.spec.fps,
             local_rotations: Vec::with_capacity(frames * j),
             local_positions: Vec::with_capacity(frames * j),
         };
@@ -162,9 +171,32 @@ pub fn generate_files(
     positions: bool,
     p: &dyn Progress,
 ) -> TaskResult<Vec<Vec<[f32; 3]>>> {
-    let mut stream = RuntimeSynthesis::new(g, clip, frame, opts)?;
+    let mut stream = RuntimeSynthesis::new(&g.candle, &g.model, clip, frame, opts)?;
     let fps = g.candle.spec.fps;
     Ok(zoo_rnngmm::run::write_generated(&mut stream, fps, opts.frames, (bvh, json), positions, p)
         .map_err(|e| Message(e.to_string()))?)
 }
 
+
+impl zoo_rnngmm::bench::synthesis::Synthesizer for Generator {
+    fn synthesize(
+        &self,
+        clip: &Clip,
+        frame: usize,
+        opts: &SynthesisOptions,
+    ) -> RnnGmmResult<(Option<DecodedMotion>, DecodedMotion)> {
+        let err = |e: crate::TaskError| zoo_rnngmm::RnnGmmError::Motion(e.to_string());
+        // The generator reads its own samples: without its refiner, the same seed draws the same
+        // frames, which the refined run refines.
+        let raw = RuntimeSynthesis::new(&self.candle, &self.plain, clip, frame, opts).map_err(err)?.next_motion(opts.frames)?;
+        let refined = match self.model.has_refiner() {
+            true => Some(
+                RuntimeSynthesis::new(&self.candle, &self.model, clip, frame, opts)
+                    .map_err(err)?
+                    .next_motion(opts.frames)?,
+            ),
+            false => None,
+        };
+        Ok((refined, raw))
+    }
+}

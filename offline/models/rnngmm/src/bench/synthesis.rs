@@ -9,7 +9,7 @@ use crate::checkpoint::LoadedGenerator;
 use crate::error::RnnGmmResult;
 use crate::features::{CONTACT_DIMS, ROOT_DIMS};
 use crate::refiner::RefinerNets;
-use crate::{SynthesisOptions, SynthesisStream};
+use crate::{DecodedMotion, SynthesisOptions, SynthesisStream};
 use glam::{DQuat, DVec3};
 use serde::Serialize;
 use std::path::PathBuf;
@@ -321,8 +321,51 @@ fn joint_jump(a: &[DVec3], b: &[DVec3], joints: usize) -> f64 {
 /// One generated sequence: the chunk (refined, with the unrefined frames kept) and its first
 /// frame from the zero state.
 struct Generated {
-    chunk: crate::SynthesisChunk,
-    first: crate::SynthesisChunk,
+    /// The refined motion (`None` without a refiner).
+    refined: Option<DecodedMotion>,
+    /// The generator's own motion.
+    raw: DecodedMotion,
+    /// The first frame from the zero state (same seed), for the first-frame jump.
+    first: DecodedMotion,
+}
+
+/// What generates the benchmark's sequences: the exported model through the engine runtime
+/// (`zoo_tasks::generate`, what `zoo generate` and engines run; the default) or the training
+/// model in candle ([`CandleSynthesizer`], `zoo bench synthesis --candle`).
+pub trait Synthesizer: Sync {
+    /// `opts.frames` frames continuing frame `frame` of `clip` (the seed frames' state estimated
+    /// by `opts.init_steps`, sampling with `opts.seed`): the refined motion (`None` without a
+    /// refiner) and the generator's own, from the same draws.
+    fn synthesize(
+        &self,
+        clip: &Clip,
+        frame: usize,
+        opts: &SynthesisOptions,
+    ) -> RnnGmmResult<(Option<DecodedMotion>, DecodedMotion)>;
+}
+
+/// The training model in candle as the benchmark's [`Synthesizer`].
+pub struct CandleSynthesizer<'a> {
+    /// The generator.
+    pub g: &'a LoadedGenerator,
+    /// Its refiner, when benchmarked.
+    pub refiner: Option<&'a RefinerNets>,
+}
+
+impl Synthesizer for CandleSynthesizer<'_> {
+    fn synthesize(
+        &self,
+        clip: &Clip,
+        frame: usize,
+        opts: &SynthesisOptions,
+    ) -> RnnGmmResult<(Option<DecodedMotion>, DecodedMotion)> {
+        let mut stream = SynthesisStream::new(self.g, self.refiner, clip, frame, opts)?.keep_unrefined();
+        let chunk = stream.next_chunk(opts.frames)?;
+        Ok(match chunk.unrefined {
+            Some(raw) => (Some(chunk.motion), raw),
+            None => (None, chunk.motion),
+        })
+    }
 }
 
 /// The held-out clips and the joint-angle range the sequences are measured against.
@@ -412,7 +455,7 @@ struct Generation {
 fn generate(
     o: &SynthesisBenchOptions,
     g: &LoadedGenerator,
-    refiner: Option<&RefinerNets>,
+    synth: &dyn Synthesizer,
     reals: &Reals,
     m: &Measure,
     frames: usize,
@@ -440,12 +483,11 @@ fn generate(
             temperature: o.temperature,
             ..SynthesisOptions::default()
         };
-        let mut stream = SynthesisStream::new(g, refiner, clip, frame, &opts)?.keep_unrefined();
-        let chunk = stream.next_chunk(frames)?;
+        let (refined, raw) = synth.synthesize(clip, frame, &opts)?;
         // First frame from the zero state (same seed), for the first-frame jump.
         let zero = SynthesisOptions { init_steps: 0, frames: 1, ..opts };
-        let first = SynthesisStream::new(g, None, clip, frame, &zero)?.next_chunk(1)?;
-        Ok(Generated { chunk, first })
+        let (_, first) = synth.synthesize(clip, frame, &zero)?;
+        Ok(Generated { refined, raw, first })
     };
     let mut out = Generation::default();
     std::thread::scope(|scope| -> RnnGmmResult<()> {
@@ -477,17 +519,16 @@ fn generate(
             pending.insert(i, done.with_context(|| format!("sequence {i}"))?);
             while let Some(done) = pending.remove(&next) {
                 let (c, frame) = starts[next];
-                let chunk = &done.chunk;
-                let raw = chunk.unrefined.as_ref().unwrap_or(&chunk.motion);
+                let raw = &done.raw;
                 m.add(&mut out.rnn, &raw.clip, Some(raw.contacts.as_slice()))?;
-                if refiner.is_some() {
-                    m.add(&mut out.refined, &chunk.motion.clip, Some(chunk.motion.contacts.as_slice()))?;
+                if let Some(refined) = &done.refined {
+                    m.add(&mut out.refined, &refined.clip, Some(refined.contacts.as_slice()))?;
                 }
                 let (_, seed_gp) = reals.clips[c].clip.global();
                 let last_seed = &seed_gp[frame * joints..(frame + 1) * joints];
                 let (_, gp) = raw.clip.global();
                 out.jump26 += joint_jump(&gp[..joints], last_seed, joints);
-                let (_, gp0) = done.first.motion.clip.global();
+                let (_, gp0) = done.first.clip.global();
                 out.jump0 += joint_jump(&gp0[..joints], last_seed, joints);
                 next += 1;
                 p.advance(frames as u64);
@@ -503,8 +544,9 @@ fn generate(
     Ok(out)
 }
 
-/// Runs the benchmark.
-pub fn run(o: &SynthesisBenchOptions, p: &dyn Progress) -> RnnGmmResult<Report> {
+/// Runs the benchmark, its sequences generated by `synth` (the training model in candle when
+/// `None`).
+pub fn run(o: &SynthesisBenchOptions, synth: Option<&dyn Synthesizer>, p: &dyn Progress) -> RnnGmmResult<Report> {
     let (g, refiner) = crate::run::load_run(&o.model, o.no_refiner)?;
     let reals = reals(o, &g, p)?;
     let spec = &g.spec;
@@ -525,7 +567,8 @@ pub fn run(o: &SynthesisBenchOptions, p: &dyn Progress) -> RnnGmmResult<Report> 
         }
     }
     let started = Instant::now();
-    let gen_ = generate(o, &g, refiner.as_ref(), &reals, &m, frames, p)?;
+    let candle = CandleSynthesizer { g: &g, refiner: refiner.as_ref() };
+    let gen_ = generate(o, &g, synth.unwrap_or(&candle), &reals, &m, frames, p)?;
     let per_seq = started.elapsed().as_secs_f64() / o.sequences as f64;
     let real_jerk = real.jerk.0 / real.jerk.1.max(1) as f64;
     let rot_joints = joints - 1;
