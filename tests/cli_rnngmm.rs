@@ -215,6 +215,9 @@ fn generate_is_deterministic_streams_and_refuses_bad_input() {
     let model = zoo_runtime::synthesis::SynthesisModel::load(&onnx).unwrap();
     assert_eq!(model.model().metadata().model_kind, "rnn-gmm");
     assert!(model.has_refiner());
+    // `zoo generate` fits the seed frames' state on the training model: the run folder, not the file.
+    let e = fails(&["generate", "--model", &onnx, "--frames", "10", "--out", &out("f.bvh")]);
+    assert!(e.contains("is a file") && e.contains("takes the run folder of `zoo train rnn-gmm`"), "{e}");
     let stdout = ok(&["export", "--onnx", &gen_dir, "--out", &onnx]);
     assert!(stdout.contains("without a refiner"), "{stdout}");
     assert!(!zoo_runtime::synthesis::SynthesisModel::load(&onnx).unwrap().has_refiner());

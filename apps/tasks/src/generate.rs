@@ -29,6 +29,14 @@ impl Generator {
     /// The model of the run folder `dir`: the generator, and the refiner unless `no_refiner`
     /// (refused, with what to do, when the folder has none).
     pub fn load(dir: &Path, no_refiner: bool) -> TaskResult<Generator> {
+        if dir.is_file() {
+            bail!(
+                "--model {} is a file; `zoo generate` takes the run folder of `zoo train rnn-gmm`: the generator's \
+                 state before the seed frames is fitted on the training model (eq. 26), which the exported file does \
+                 not hold (engines start it from the zero state)",
+                dir.display()
+            );
+        }
         let (candle, _) = zoo_rnngmm::run::load_run(dir, true).map_err(|e| Message(e.to_string()))?;
         if !no_refiner && !dir.join(zoo_rnngmm::refiner::REFINER_FILE).is_file() {
             // load_run says what to do.
