@@ -11,6 +11,13 @@ bash scripts/onnxruntime.sh >/dev/null
 if ! command -v mcs >/dev/null && command -v apt-get >/dev/null && [ "$(id -u)" = 0 ]; then
   apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq mono-complete >/dev/null
 fi
+# Debian's Blender (when installed) runs the add-on's tests on the system Python, which needs
+# numpy (Debian's python3-numpy, only recommended by the blender package): installed when
+# missing and apt-get can (as root); without it those tests fail and say so.
+if command -v blender >/dev/null && ! /usr/bin/python3 -c "import numpy" 2>/dev/null \
+  && command -v apt-get >/dev/null && [ "$(id -u)" = 0 ]; then
+  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq python3-numpy >/dev/null
+fi
 # The CLI tests in tests/ run the `zoo` binary itself.
 cargo build --workspace --bins
 # --no-fail-fast: every test binary runs even when one fails (the command still ends non-zero),

@@ -356,12 +356,13 @@ fn stitching_reproduces_from_the_page() {
     // Refining changed the sequence.
     let moved = case.sequence.iter().flatten().zip(case.refined.iter().flatten()).any(|(a, b)| (a - b).abs() > 1e-2);
     assert!(moved, "the refiner left the sequence as it was");
-    // The seam case: no pre-blend for this file, a fallback whose weights lie between 0 and 1.
+    // The seam case: the seam given is inertialized (whatever the file's `pre_blend`), a
+    // fallback whose weights lie between 0 and 1.
     let seam = &rmr.stitch[1];
-    assert!(!seam.seams.is_empty() && !seam.pre_blend && seam.fallback.is_some());
+    assert!(!seam.seams.is_empty() && seam.pre_blend && seam.fallback.is_some());
     assert!(seam.windows.iter().any(|w| w.weight > 0.0 && w.weight < 1.0), "{:?}", seam.windows);
 
-    // A model trained on inertialized seams: the seam case's input is inertialized there.
+    // A model trained on inertialized seams: likewise, the seam case's input inertialized there.
     let (blended, report) = check(&dir, "rmr_pre_blend", &tiny_pre_blend_rmr());
     report.assert_compared(&fields);
     let (plain, seam) = (&blended.stitch[0], &blended.stitch[1]);

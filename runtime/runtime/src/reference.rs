@@ -27,7 +27,7 @@
 //!   the foot lock between the keys, for a humanoid with legs);
 //! - stitch: an aligned sequence of engine poses with a pop in its middle, refined with the
 //!   file's settings; the same sequence with the pop given as a seam (inertialized before
-//!   encoding when the file's `pre_blend` says so) and a fallback around the windows'
+//!   encoding) and a fallback around the windows'
 //!   corrections. Each case: its pose vectors, every window's correction size and fallback
 //!   weight, the first window's normalised input and raw graph output, the refined pose
 //!   vectors and the refined engine poses (no foot cleanup, no seam guard);
@@ -271,7 +271,7 @@ pub struct StitchCase {
     pub input_poses: Vec<ReferencePose>,
     /// The frames where a clip starts (empty: none given).
     pub seams: Vec<usize>,
-    /// Whether the seams were inertialized before encoding (the file's `pre_blend`, with seams).
+    /// Whether the seams were inertialized before encoding (whenever seams are given).
     pub pre_blend: bool,
     /// The fallback towards the refiner's input every window got (`null`: none).
     pub fallback: Option<StitchFallback>,
@@ -933,7 +933,8 @@ fn stitch_case(
     // The seam guard follows the ankle IK, a post-process the reference leaves out.
     refiner.set_seam_guard(false);
     let (frames, d) = (input.len(), refiner.dim());
-    let pre_blend = refiner.pre_blend() && !seams.is_empty();
+    // Seams given to the runtime are inertialized before encoding (`refine_poses_at_seams`).
+    let pre_blend = !seams.is_empty();
     let mut sequence = vec![0.0f32; frames * d];
     refiner.encode_poses_at_seams(input, if pre_blend { seams } else { &[] }, &mut sequence)?;
     finite("a pose vector", &sequence)?;
