@@ -90,24 +90,31 @@ impl ModelRig<'_> {
 
     /// Refuses a clip on another rig, naming the first joint that differs.
     fn check(&self, clip: &Clip, name: &str) -> TaskResult<()> {
-        if self.fits(&clip.skeleton) {
-            return Ok(());
+        match rig_difference(&self.skeleton, &clip.skeleton) {
+            None => Ok(()),
+            Some(why) => bail!(
+                "{name}: the clips' skeleton is not the model's in {} ({why}); retarget the clips to the model's rig",
+                self.source.path.display()
+            ),
         }
-        let (want, got) = (&self.skeleton, &clip.skeleton);
-        let (wp, gp) = (want.parents_i32(), got.parents_i32());
-        let why = if got.len() != want.len() {
-            format!("expected {} joints, found {}", want.len(), got.len())
-        } else {
-            (0..want.len())
-                .find(|&j| got.names[j] != want.names[j] || gp[j] != wp[j])
-                .map(|j| format!("joint {j}: expected `{}`, found `{}`", want.names[j], got.names[j]))
-                .unwrap_or_default()
-        };
-        bail!(
-            "{name}: the clips' skeleton is not the model's in {} ({why}); retarget the clips to the model's rig",
-            self.source.path.display()
-        )
     }
+}
+
+/// How skeleton `got` differs from the model's `want` (joint count, or the first joint whose name
+/// or parent differs); `None` when they are the same rig.
+fn rig_difference(want: &zoo_motion::Skeleton, got: &zoo_motion::Skeleton) -> Option<String> {
+    let (wp, gp) = (want.parents_i32(), got.parents_i32());
+    if got.names == want.names && gp == wp {
+        return None;
+    }
+    Some(if got.len() != want.len() {
+        format!("expected {} joints, found {}", want.len(), got.len())
+    } else {
+        (0..want.len())
+            .find(|&j| got.names[j] != want.names[j] || gp[j] != wp[j])
+            .map(|j| format!("joint {j}: expected `{}`, found `{}`", want.names[j], got.names[j]))
+            .unwrap_or_default()
+    })
 }
 
 /// Reads the clips of `ranges` (dummy root dropped, sign flips removed) and cuts their ranges;
@@ -320,19 +327,12 @@ impl zoo_rmr::bench::SeamRefiner for RuntimeSeamRefiner {
     }
 
     fn check_skeleton(&self, skeleton: &zoo_motion::Skeleton) -> Result<(), Message> {
-        let want = self.refiner.skeleton();
-        if skeleton.names == want.names && skeleton.parents_i32() == want.parents_i32() {
-            return Ok(());
+        match rig_difference(self.refiner.skeleton(), skeleton) {
+            None => Ok(()),
+            Some(why) => Err(Message(format!(
+                "the clips' skeleton is not the model's ({why}); retarget the clips to the model's rig"
+            ))),
         }
-        let why = if skeleton.len() != want.len() {
-            format!("expected {} joints, found {}", want.len(), skeleton.len())
-        } else {
-            (0..want.len())
-                .find(|&j| skeleton.names[j] != want.names[j] || skeleton.parents[j] != want.parents[j])
-                .map(|j| format!("joint {j}: expected `{}`, found `{}`", want.names[j], skeleton.names[j]))
-                .unwrap_or_default()
-        };
-        Err(Message(format!("the clips' skeleton is not the model's ({why}); retarget the clips to the model's rig")))
     }
 
     fn drop_fallback(&mut self) {
