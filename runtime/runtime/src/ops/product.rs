@@ -1,0 +1,367 @@
+//! One matrix product of the zoo ops, `y[c, o] = sum_i x[c, i] * w[o, i]` for the characters
+//! `c` of a call, on tract-linalg's kernels: the weights are packed once (when a plan is made),
+//! the activations packed per call into a buffer kept between calls, and the kernel run with
+//! its fused output stage.
+//!
+//! - f32: the activations of several inputs are packed side by side along `i`, so one kernel
+//!   call computes a sum of products (an LSTM's gate pre-activations) and the bias, a
+//!   per-character addend and a LeakyReLU run in the kernel's output stage.
+//! - int8 (the files `zoo export --weights int8` writes): each character's row of each input is
+//!   quantized and packed in one pass, with exactly the ONNX graph's arithmetic (`s = max(max|x|
+//!   / 127, 1e-30)`, `q = trunc(x / s + 128.5) - 128`, true divisions), the integer product runs
+//!   on tract-linalg's i32 kernel (AVX-512 VNNI where present, AVX2 otherwise), which is exact,
+//!   and [`Product::dequantize`] applies `(acc * channel_scale) * row_scale` as the graph does.
+//!   So the integers are the graph's on every CPU.
+//!
+//! `unsafe` is confined to this file: the calls into tract-linalg's kernel entry point, which
+//! read the packed operands and write the output through raw pointers (the contract tract's own
+//! matmul op keeps): every operand is sized for the `m`, `k`, `n` passed here and outlives the
+//! call.
+#![allow(unsafe_code)]
+
+use std::cell::RefCell;
+use std::sync::Arc;
+use tract_onnx::prelude::tract_linalg::mmm::{
+    AsInputValue, EagerPackedInput, FusedSpec, MMMInputFormat, MMMInputValue, MatMatMul, Query, ScratchSpace,
+};
+use tract_onnx::prelude::tract_linalg::pack::{PackedFormat, PackedI8K4};
+use tract_onnx::prelude::tract_linalg::{BinOp, MmmDispatch};
+use tract_onnx::tract_core::internal::*;
+
+/// The largest activation of a row maps to this integer.
+const Q_MAX: f32 = 127.0;
+/// The smallest row scale (an all-zero row quantizes to zeros).
+const MIN_SCALE: f32 = 1e-30;
+
+/// Weights in one of the two arithmetics.
+#[derive(Clone, Debug)]
+pub(crate) enum Weights {
+    /// `[out, in]` f32.
+    F32(Vec<f32>),
+    /// `[out, in]` integers in -127..=127 and one scale per output channel.
+    I8 { q: Vec<i8>, scales: Vec<f32> },
+}
+
+/// The kernel, its packing and the packed weights of a product.
+#[derive(Clone, Debug)]
+pub(crate) struct Product {
+    /// Output channels.
+    pub(crate) m: usize,
+    /// Width of each input (the `in` of each weight part).
+    pub(crate) ks: Vec<usize>,
+    kernel: Box<dyn MatMatMul>,
+    packing: usize,
+    /// f32: one packed matrix over all inputs; int8: one per input.
+    a: Vec<Arc<Box<dyn MMMInputValue>>>,
+    /// int8: the channel scales of each input's weights.
+    scales: Vec<Arc<Vec<f32>>>,
+}
+
+impl PartialEq for Product {
+    fn eq(&self, other: &Self) -> bool {
+        self.m == other.m
+            && self.ks == other.ks
+            && self.kernel.name() == other.kernel.name()
+            && self.a.iter().zip(&other.a).all(|(a, b)| Arc::ptr_eq(a, b))
+    }
+}
+impl Eq for Product {}
+
+impl std::hash::Hash for Product {
+    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
+        self.m.hash(state);
+        self.ks.hash(state);
+        self.kernel.name().hash(state);
+    }
+}
+
+impl Product {
+    /// Packs `parts` (each `[m, k_i]`, the same arithmetic) for the kernel tract-linalg picks
+    /// for `n` characters (`None`: any).
+    pub(crate) fn new(m: usize, parts: &[Weights], n: Option<usize>) -> TractResult<Product> {
+        let int8 = matches!(parts.first(), Some(Weights::I8 { .. }));
+        let ks: Vec<usize> = parts
+            .iter()
+            .map(|w| match w {
+                Weights::F32(v) => v.len() / m.max(1),
+                Weights::I8 { q, .. } => q.len() / m.max(1),
+            })
+            .collect();
+        let k_total: usize = ks.iter().sum();
+        let (acc, k_query) = if int8 { (DatumType::I32, ks.iter().max().copied()) } else { (DatumType::F32, Some(k_total)) };
+        let (kernel, packing, _) = MmmDispatch::native()
+            .pick(&Query { allow_extractor: false, ..Query::plain(acc, Some(m), k_query, n) })
+            .with_context(|| format!("no {acc:?} matrix kernel on this CPU"))?;
+        let (pa, _) = &kernel.packings()[packing];
+        let mut a = Vec::new();
+        let mut scales = Vec::new();
+        if int8 {
+            for w in parts {
+                let Weights::I8 { q, scales: s } = w else { bail!("an int8 product mixes f32 weights") };
+                let t = Tensor::from_shape(&[m, q.len() / m], q)?;
+                a.push(Arc::new(pa.prepare_one(&t, 1, 0)?));
+                scales.push(Arc::new(s.clone()));
+            }
+        } else {
+            let mut all = vec![0f32; m * k_total];
+            let mut offset = 0;
+            for (w, &k) in parts.iter().zip(&ks) {
+                let Weights::F32(v) = w else { bail!("an f32 product mixes int8 weights") };
+                for o in 0..m {
+                    all[o * k_total + offset..o * k_total + offset + k].copy_from_slice(&v[o * k..(o + 1) * k]);
+                }
+                offset += k;
+            }
+            let t = Tensor::from_shape(&[m, k_total], &all)?;
+            a.push(Arc::new(pa.prepare_one(&t, 1, 0)?));
+        }
+        Ok(Product { m, ks, kernel, packing, a, scales })
+    }
+
+    pub(crate) fn int8(&self) -> bool {
+        !self.scales.is_empty()
+    }
+
+    pub(crate) fn kernel_name(&self) -> &str {
+        self.kernel.name()
+    }
+
+    /// f32: `out[c, o] = act(sum_i x_i[c] . w_i[o] + bias[o] + addend[c, o])` for the `n` rows
+    /// of `xs` (each `[n, k_i]`), in one kernel call; `out` is `[n, m]`.
+    pub(crate) fn run_f32(
+        &self,
+        xs: &[&[f32]],
+        n: usize,
+        bias: Option<&Tensor>,
+        addend: Option<&Tensor>,
+        leaky: Option<&Tensor>,
+        out: &mut Tensor,
+    ) -> TractResult<()> {
+        ensure!(!self.int8() && out.shape() == [n, self.m]);
+        SCRATCH.with_borrow_mut(|s| {
+            let (_, pb) = &self.kernel.packings()[self.packing];
+            let format = pb.downcast_ref::<PackedFormat>().context("f32 activations in a plain packing")?;
+            let k: usize = self.ks.iter().sum();
+            let b = packed(&mut s.packed, format, k, n)?;
+            pack_f32(format, b, xs, &self.ks, n)?;
+            let space = space(&mut s.spaces, &*self.kernel);
+            let m = self.m;
+            // Output, bias and addend are row-major `[n, m]`: the kernel's rows are our channels.
+            unsafe {
+                let store = self.kernel.c_from_data_and_strides(4, 1, m as isize);
+                let mut ops: TVec<FusedSpec> = tvec![FusedSpec::AddMatMul {
+                    a: AsInputValue::Borrowed(&**self.a[0]),
+                    b: AsInputValue::Borrowed(&*b),
+                    packing: self.packing,
+                }];
+                if let Some(bias) = bias {
+                    ops.push(FusedSpec::BinPerRow(bias.view(), BinOp::Add));
+                }
+                let addend_view = addend.map(|t| t.view());
+                if let Some(v) = &addend_view {
+                    ops.push(FusedSpec::AddUnicast(store.wrap(v)));
+                }
+                if let Some(alpha) = leaky {
+                    ops.push(FusedSpec::LeakyRelu(alpha));
+                }
+                let out_view = out.view_mut();
+                ops.push(FusedSpec::Store(store.wrap(&out_view)));
+                self.kernel.run_with_scratch_space(m, n, &mut **space, &ops)?;
+            }
+            Ok(())
+        })
+    }
+
+    /// int8: quantizes each row of each `xs[i]` (`[n, k_i]`), runs the integer products and
+    /// calls `f(i, acc, row_scales, channel_scales)` with input `i`'s i32 sums (`[n, m]`
+    /// row-major), its row scales (`[n]`) and its weights' channel scales (`[m]`).
+    pub(crate) fn run_i8(
+        &self,
+        xs: &[&[f32]],
+        n: usize,
+        mut f: impl FnMut(usize, &[i32], &[f32], &[f32]) -> TractResult<()>,
+    ) -> TractResult<()> {
+        ensure!(self.int8() && xs.len() == self.ks.len());
+        SCRATCH.with_borrow_mut(|s| {
+            let (_, pb) = &self.kernel.packings()[self.packing];
+            let m = self.m;
+            for (i, (x, &k)) in xs.iter().zip(&self.ks).enumerate() {
+                ensure!(x.len() == n * k, "input {i} has {} values, expected {n} x {k}", x.len());
+                s.row_scales.clear();
+                s.row_scales.extend(x.chunks_exact(k).map(row_scale));
+                let b = packed_i8(&mut s.packed, &**pb, k, n)?;
+                pack_i8(&**pb, b, x, &s.row_scales, k)?;
+                if s.acc.shape() != [n, m] {
+                    s.acc = Tensor::zero::<i32>(&[n, m])?;
+                }
+                let space = space(&mut s.spaces, &*self.kernel);
+                unsafe {
+                    let store = self.kernel.c_from_data_and_strides(4, 1, m as isize);
+                    let acc_view = s.acc.view_mut();
+                    let ops = [
+                        FusedSpec::AddMatMul {
+                            a: AsInputValue::Borrowed(&**self.a[i]),
+                            b: AsInputValue::Borrowed(&*b),
+                            packing: self.packing,
+                        },
+                        FusedSpec::Store(store.wrap(&acc_view)),
+                    ];
+                    self.kernel.run_with_scratch_space(m, n, &mut **space, &ops)?;
+                }
+                let acc = s.acc.try_as_plain_ram()?.as_slice::<i32>()?;
+                f(i, acc, &s.row_scales, &self.scales[i])?;
+            }
+            Ok(())
+        })
+    }
+
+    /// `out[c, o] (+)= (acc[c, o] as f32 * channel[o]) * row[c]`: the graph's `Cast`, `Mul` by
+    /// the channel scales and `Mul` by the row scale, in that order.
+    pub(crate) fn dequantize(acc: &[i32], row: &[f32], channel: &[f32], out: &mut [f32], add: bool) {
+        let m = channel.len();
+        for ((acc, out), &s) in acc.chunks_exact(m).zip(out.chunks_exact_mut(m)).zip(row) {
+            if add {
+                for ((o, &a), &w) in out.iter_mut().zip(acc).zip(channel) {
+                    *o += (a as f32 * w) * s;
+                }
+            } else {
+                for ((o, &a), &w) in out.iter_mut().zip(acc).zip(channel) {
+                    *o = (a as f32 * w) * s;
+                }
+            }
+        }
+    }
+}
+
+/// The scale of one row: the graph's `Abs`, `ReduceMax`, `Div` by 127 and `Max` with 1e-30.
+fn row_scale(x: &[f32]) -> f32 {
+    let max = x.iter().fold(0f32, |m, v| m.max(v.abs()));
+    (max / Q_MAX).max(MIN_SCALE)
+}
+
+/// The integer of `x` at row scale `s`: the graph's `Div`, `Add` 128.5 and `Cast` to u8 (which
+/// truncates), less the zero point 128.
+#[inline(always)]
+fn quantize(x: f32, s: f32) -> i8 {
+    (((x / s) + 128.5) as u8 as i16 - 128) as i8
+}
+
+fn pack_f32(format: &PackedFormat, b: &mut EagerPackedInput, xs: &[&[f32]], ks: &[usize], n: usize) -> TractResult<()> {
+    let r = format.r;
+    let panel = b.panel_bytes / 4;
+    let blob = Arc::get_mut(&mut b.packed).context("packed activations are shared")?;
+    let dst = blob.as_bytes_mut();
+    let mut offset = 0;
+    for (x, &k) in xs.iter().zip(ks) {
+        ensure!(x.len() == n * k, "an input has {} values, expected {n} x {k}", x.len());
+        for (c, row) in x.chunks_exact(k).enumerate() {
+            let base = (c / r) * panel + offset * r + c % r;
+            for (i, v) in row.iter().enumerate() {
+                let at = (base + i * r) * 4;
+                dst[at..at + 4].copy_from_slice(&v.to_ne_bytes());
+            }
+        }
+        offset += k;
+    }
+    Ok(())
+}
+
+fn pack_i8(format: &dyn MMMInputFormat, b: &mut EagerPackedInput, x: &[f32], scales: &[f32], k: usize) -> TractResult<()> {
+    let panel = b.panel_bytes;
+    let blob = Arc::get_mut(&mut b.packed).context("packed activations are shared")?;
+    let dst = blob.as_bytes_mut();
+    if let Some(f) = format.downcast_ref::<PackedI8K4>() {
+        // Panels of `r` characters; within one, blocks of 4 inputs, each character's 4 bytes
+        // together.
+        let r = f.r;
+        for (c, (row, &s)) in x.chunks_exact(k).zip(scales).enumerate() {
+            let base = (c / r) * panel + (c % r) * 4;
+            for (block, chunk) in row.chunks(4).enumerate() {
+                let at = base + block * r * 4;
+                for (j, v) in chunk.iter().enumerate() {
+                    dst[at + j] = quantize(*v, s) as u8;
+                }
+            }
+        }
+    } else if let Some(f) = format.downcast_ref::<PackedFormat>() {
+        let r = f.r;
+        for (c, (row, &s)) in x.chunks_exact(k).zip(scales).enumerate() {
+            let base = (c / r) * panel + c % r;
+            for (i, v) in row.iter().enumerate() {
+                dst[base + i * r] = quantize(*v, s) as u8;
+            }
+        }
+    } else {
+        bail!("no int8 packing for {format:?}");
+    }
+    Ok(())
+}
+
+/// Buffers reused from call to call on one thread (one op runs at a time on a thread): packed
+/// activations by format and size, the kernels' scratch spaces, integer sums, row scales.
+#[derive(Default)]
+struct Scratch {
+    packed: PackedBuffers,
+    spaces: Vec<(String, Box<dyn ScratchSpace>)>,
+    acc: Tensor,
+    row_scales: Vec<f32>,
+}
+
+thread_local! {
+    static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch { acc: Tensor::default(), ..Default::default() });
+}
+
+type PackedBuffers = Vec<(String, usize, usize, EagerPackedInput)>;
+
+fn packed_at(
+    buffers: &mut PackedBuffers,
+    key: String,
+    k: usize,
+    n: usize,
+    make: impl FnOnce() -> TractResult<EagerPackedInput>,
+) -> TractResult<&mut EagerPackedInput> {
+    let at = match buffers.iter().position(|(f, kk, nn, _)| *f == key && *kk == k && *nn == n) {
+        Some(at) => at,
+        None => {
+            // A few shapes per thread at most (one per input width and batch size).
+            if buffers.len() >= 16 {
+                buffers.remove(0);
+            }
+            buffers.push((key, k, n, make()?));
+            buffers.len() - 1
+        }
+    };
+    Ok(&mut buffers[at].3)
+}
+
+fn packed<'s>(buffers: &'s mut PackedBuffers, format: &PackedFormat, k: usize, n: usize) -> TractResult<&'s mut EagerPackedInput> {
+    packed_at(buffers, format.to_string(), k, n, || format.new_packed_buffer(k, n))
+}
+
+fn packed_i8<'s>(
+    buffers: &'s mut PackedBuffers,
+    format: &dyn MMMInputFormat,
+    k: usize,
+    n: usize,
+) -> TractResult<&'s mut EagerPackedInput> {
+    packed_at(buffers, format.to_string(), k, n, || {
+        // A zero tensor packed once gives the buffer with its padding zeroed.
+        format
+            .prepare_one(&Tensor::zero::<i8>(&[n, k])?, 1, 0)?
+            .downcast::<EagerPackedInput>()
+            .map(|b| *b)
+            .map_err(|_| format_err!("{format:?} does not pack eagerly"))
+    })
+}
+
+fn space<'s>(spaces: &'s mut Vec<(String, Box<dyn ScratchSpace>)>, kernel: &dyn MatMatMul) -> &'s mut Box<dyn ScratchSpace> {
+    let at = match spaces.iter().position(|(name, _)| name == kernel.name()) {
+        Some(at) => at,
+        None => {
+            // SAFETY: a fresh scratch space of the kernel that will use it.
+            spaces.push((kernel.name().to_string(), unsafe { kernel.allocate_scratch_space() }));
+            spaces.len() - 1
+        }
+    };
+    &mut spaces[at].1
+}
