@@ -263,26 +263,17 @@ impl EvalOp for DenseOp {
         } else {
             let mut view = out.try_as_plain_ram_mut()?;
             let o = view.as_slice_mut::<f32>()?;
+            let bias = self.bias.as_ref().map(|b| b.try_as_plain_ram()?.as_slice::<f32>()).transpose()?;
             p.run_i8(&[x], n, |_, acc, rows, channels| {
-                Product::dequantize(acc, rows, channels, o, false);
+                Product::dequantize(acc, rows, channels, bias, o, false);
                 Ok(())
             })?;
-            if let Some(b) = &self.bias {
-                let b = b.try_as_plain_ram()?.as_slice::<f32>()?;
-                for row in o.chunks_exact_mut(p.m) {
-                    row.iter_mut().zip(b).for_each(|(o, b)| *o += b);
-                }
-            }
             if self.addend {
                 o.iter_mut().zip(plain_f32(&inputs[1])?).for_each(|(o, a)| *o += a);
             }
             if let Some(alpha) = &self.alpha {
                 let alpha = alpha.try_as_plain_ram()?.as_slice::<f32>()?[0];
-                o.iter_mut().for_each(|v| {
-                    if *v < 0.0 {
-                        *v *= alpha
-                    }
-                });
+                o.iter_mut().for_each(|v| *v = if *v < 0.0 { *v * alpha } else { *v });
             }
         }
         Ok(tvec!(out.into_tvalue()))
@@ -396,16 +387,11 @@ impl EvalOp for LstmOp {
             let mut view = gates.try_as_plain_ram_mut()?;
             let z = view.as_slice_mut::<f32>()?;
             if p.int8() {
+                let bias = self.bias.as_ref().map(|b| b.try_as_plain_ram()?.as_slice::<f32>()).transpose()?;
                 p.run_i8(&xs, n, |i, acc, rows, channels| {
-                    Product::dequantize(acc, rows, channels, z, i > 0);
+                    Product::dequantize(acc, rows, channels, if i == 0 { bias } else { None }, z, i > 0);
                     Ok(())
                 })?;
-                if let Some(b) = &self.bias {
-                    let b = b.try_as_plain_ram()?.as_slice::<f32>()?;
-                    for row in z.chunks_exact_mut(4 * h) {
-                        row.iter_mut().zip(b).for_each(|(o, b)| *o += b);
-                    }
-                }
             }
             for a in rest {
                 z.iter_mut().zip(plain_f32(a)?).for_each(|(o, a)| *o += a);

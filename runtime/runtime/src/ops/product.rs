@@ -187,10 +187,8 @@ impl Product {
             let m = self.m;
             for (i, (x, &k)) in xs.iter().zip(&self.ks).enumerate() {
                 ensure!(x.len() == n * k, "input {i} has {} values, expected {n} x {k}", x.len());
-                s.row_scales.clear();
-                s.row_scales.extend(x.chunks_exact(k).map(row_scale));
                 let b = packed_i8(&mut s.packed, &**pb, k, n)?;
-                pack_i8(&**pb, b, x, &s.row_scales, k)?;
+                pack_i8(&**pb, b, x, &mut s.row_scales, k, &mut s.row)?;
                 if s.acc.shape() != [n, m] {
                     s.acc = Tensor::zero::<i32>(&[n, m])?;
                 }
@@ -215,35 +213,104 @@ impl Product {
         })
     }
 
-    /// `out[c, o] (+)= (acc[c, o] as f32 * channel[o]) * row[c]`: the graph's `Cast`, `Mul` by
-    /// the channel scales and `Mul` by the row scale, in that order.
-    pub(crate) fn dequantize(acc: &[i32], row: &[f32], channel: &[f32], out: &mut [f32], add: bool) {
-        let m = channel.len();
-        for ((acc, out), &s) in acc.chunks_exact(m).zip(out.chunks_exact_mut(m)).zip(row) {
-            if add {
+    /// `out[c, o] = (acc[c, o] as f32 * channel[o]) * row[c]` (the graph's `Cast`, `Mul` by the
+    /// channel scales and `Mul` by the row scale, in that order), added to `out` when `add`,
+    /// then `+ bias[o]`.
+    pub(crate) fn dequantize(acc: &[i32], row: &[f32], channel: &[f32], bias: Option<&[f32]>, out: &mut [f32], add: bool) {
+        let bias = bias.unwrap_or_default();
+        #[cfg(target_arch = "x86_64")]
+        if avx2() {
+            // SAFETY: the CPU has AVX2 and FMA (checked above).
+            return unsafe { dequantize_avx2(acc, row, channel, bias, out, add) };
+        }
+        dequantize_body(acc, row, channel, bias, out, add)
+    }
+}
+
+/// Quantizes one row (`x`, into `q`, padded with zeros) as the graph does and returns its scale:
+/// `s = max(max|x| / 127, 1e-30)` (`Abs`, `ReduceMax`, `Div`, `Max`), then `trunc(x / s + 128.5)`
+/// (`Div`, `Add`, `Cast` to u8, which truncates) less the zero point 128.
+#[inline(always)]
+fn quantize_row_body(x: &[f32], q: &mut [u8]) -> f32 {
+    // The largest magnitude through the bits (the same order for non-negative floats; a loop
+    // the compiler vectorizes); anything at or past infinity's bits is not finite.
+    let bits = x.iter().fold(0u32, |m, v| m.max(v.to_bits() & 0x7fff_ffff));
+    if bits < 0x7f80_0000 {
+        let s = (f32::from_bits(bits) / Q_MAX).max(MIN_SCALE);
+        // `x / s + 128.5` lies in 1.5..=255.5 for every `x` of a finite row, so the conversion
+        // needs no saturation.
+        for (q, v) in q.iter_mut().zip(x) {
+            // SAFETY: finite and within i32 (above).
+            let i: i32 = unsafe { ((v / s) + 128.5).to_int_unchecked() };
+            *q = (i as u8) ^ 0x80;
+        }
+        s
+    } else {
+        let s = (x.iter().fold(0f32, |m, v| m.max(v.abs())) / Q_MAX).max(MIN_SCALE);
+        for (q, v) in q.iter_mut().zip(x) {
+            *q = ((((v / s) + 128.5) as i32 as u8) ^ 0x80) as u8;
+        }
+        s
+    }
+}
+
+/// The `out` rows of [`Product::dequantize`].
+#[inline(always)]
+fn dequantize_body(acc: &[i32], row: &[f32], channel: &[f32], bias: &[f32], out: &mut [f32], add: bool) {
+    let m = channel.len();
+    for ((acc, out), &s) in acc.chunks_exact(m).zip(out.chunks_exact_mut(m)).zip(row) {
+        match (add, bias.len() == m) {
+            (false, false) => {
+                for ((o, &a), &w) in out.iter_mut().zip(acc).zip(channel) {
+                    *o = (a as f32 * w) * s;
+                }
+            }
+            (false, true) => {
+                for (((o, &a), &w), &b) in out.iter_mut().zip(acc).zip(channel).zip(bias) {
+                    *o = (a as f32 * w) * s + b;
+                }
+            }
+            (true, false) => {
                 for ((o, &a), &w) in out.iter_mut().zip(acc).zip(channel) {
                     *o += (a as f32 * w) * s;
                 }
-            } else {
-                for ((o, &a), &w) in out.iter_mut().zip(acc).zip(channel) {
-                    *o = (a as f32 * w) * s;
+            }
+            (true, true) => {
+                for (((o, &a), &w), &b) in out.iter_mut().zip(acc).zip(channel).zip(bias) {
+                    *o += (a as f32 * w) * s + b;
                 }
             }
         }
     }
 }
 
-/// The scale of one row: the graph's `Abs`, `ReduceMax`, `Div` by 127 and `Max` with 1e-30.
-fn row_scale(x: &[f32]) -> f32 {
-    let max = x.iter().fold(0f32, |m, v| m.max(v.abs()));
-    (max / Q_MAX).max(MIN_SCALE)
+/// Whether the element-wise loops may use AVX2 (the CPU has it and `TRACT_CPU_ISA` leaves it).
+#[cfg(target_arch = "x86_64")]
+fn avx2() -> bool {
+    use tract_onnx::tract_core::tract_linalg::isa::{Isa, native};
+    static AVX2: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *AVX2.get_or_init(|| native().has(Isa::X86_64Avx2) && native().has(Isa::X86_64Fma))
 }
 
-/// The integer of `x` at row scale `s`: the graph's `Div`, `Add` 128.5 and `Cast` to u8 (which
-/// truncates), less the zero point 128.
-#[inline(always)]
-fn quantize(x: f32, s: f32) -> i8 {
-    (((x / s) + 128.5) as u8 as i16 - 128) as i8
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn quantize_row_avx2(x: &[f32], q: &mut [u8]) -> f32 {
+    quantize_row_body(x, q)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn dequantize_avx2(acc: &[i32], row: &[f32], channel: &[f32], bias: &[f32], out: &mut [f32], add: bool) {
+    dequantize_body(acc, row, channel, bias, out, add)
+}
+
+fn quantize_row(x: &[f32], q: &mut [u8]) -> f32 {
+    #[cfg(target_arch = "x86_64")]
+    if avx2() {
+        // SAFETY: the CPU has AVX2 and FMA (checked above).
+        return unsafe { quantize_row_avx2(x, q) };
+    }
+    quantize_row_body(x, q)
 }
 
 fn pack_f32(format: &PackedFormat, b: &mut EagerPackedInput, xs: &[&[f32]], ks: &[usize], n: usize) -> TractResult<()> {
@@ -266,29 +333,40 @@ fn pack_f32(format: &PackedFormat, b: &mut EagerPackedInput, xs: &[&[f32]], ks: 
     Ok(())
 }
 
-fn pack_i8(format: &dyn MMMInputFormat, b: &mut EagerPackedInput, x: &[f32], scales: &[f32], k: usize) -> TractResult<()> {
+/// Quantizes the rows of `x` (`[n, k]`) into `b`, laid out for the kernel, and their scales
+/// into `scales`.
+fn pack_i8(
+    format: &dyn MMMInputFormat,
+    b: &mut EagerPackedInput,
+    x: &[f32],
+    scales: &mut Vec<f32>,
+    k: usize,
+    row: &mut Vec<u8>,
+) -> TractResult<()> {
     let panel = b.panel_bytes;
     let blob = Arc::get_mut(&mut b.packed).context("packed activations are shared")?;
     let dst = blob.as_bytes_mut();
+    row.resize(k.div_ceil(4) * 4, 0);
+    scales.clear();
     if let Some(f) = format.downcast_ref::<PackedI8K4>() {
         // Panels of `r` characters; within one, blocks of 4 inputs, each character's 4 bytes
         // together.
         let r = f.r;
-        for (c, (row, &s)) in x.chunks_exact(k).zip(scales).enumerate() {
+        for (c, x) in x.chunks_exact(k).enumerate() {
+            scales.push(quantize_row(x, row));
             let base = (c / r) * panel + (c % r) * 4;
-            for (block, chunk) in row.chunks(4).enumerate() {
+            for (block, bytes) in row.chunks_exact(4).enumerate() {
                 let at = base + block * r * 4;
-                for (j, v) in chunk.iter().enumerate() {
-                    dst[at + j] = quantize(*v, s) as u8;
-                }
+                dst[at..at + 4].copy_from_slice(bytes);
             }
         }
     } else if let Some(f) = format.downcast_ref::<PackedFormat>() {
         let r = f.r;
-        for (c, (row, &s)) in x.chunks_exact(k).zip(scales).enumerate() {
+        for (c, x) in x.chunks_exact(k).enumerate() {
+            scales.push(quantize_row(x, row));
             let base = (c / r) * panel + c % r;
-            for (i, v) in row.iter().enumerate() {
-                dst[base + i * r] = quantize(*v, s) as u8;
+            for (i, q) in row[..k].iter().enumerate() {
+                dst[base + i * r] = *q;
             }
         }
     } else {
@@ -305,6 +383,7 @@ struct Scratch {
     spaces: Vec<(String, Box<dyn ScratchSpace>)>,
     acc: Tensor,
     row_scales: Vec<f32>,
+    row: Vec<u8>,
 }
 
 thread_local! {
