@@ -55,6 +55,181 @@ pub(crate) struct Product {
     a: Vec<Arc<Box<dyn MMMInputValue>>>,
     /// int8: the channel scales of each input's weights.
     scales: Vec<Arc<Vec<f32>>>,
+    /// int8: each input's weights laid out for one character at a time ([`Gemv`]), when
+    /// plans may run one character.
+    gemv: Vec<Arc<Gemv>>,
+}
+
+/// int8 weights for a product of one character (a matrix-vector product, which the tiled
+/// kernels run at a fraction of their speed): `[m, kp]` row-major, `kp` the input width
+/// rounded up to 32 with zeros, and each row's sum (the VNNI form multiplies the activations
+/// as u8, `q + 128`, and takes `128 * sum` back).
+#[derive(Debug)]
+pub(crate) struct Gemv {
+    kp: usize,
+    w: Vec<i8>,
+    sums: Vec<i32>,
+}
+
+impl Gemv {
+    fn new(q: &[i8], m: usize) -> Gemv {
+        let k = q.len() / m.max(1);
+        let kp = k.div_ceil(32) * 32;
+        let mut w = vec![0i8; m * kp];
+        for (dst, src) in w.chunks_exact_mut(kp).zip(q.chunks_exact(k.max(1))) {
+            dst[..k].copy_from_slice(src);
+        }
+        let sums = q.chunks_exact(k.max(1)).map(|r| r.iter().map(|v| i32::from(*v)).sum()).collect();
+        Gemv { kp, w, sums }
+    }
+
+    /// `out[o] = sum_i w[o, i] * q[i]` for `q` the quantized row (i8 bits, zero-padded to `kp`).
+    fn run(&self, q: &[u8], q16: &mut Vec<i16>, out: &mut [i32]) {
+        #[cfg(target_arch = "x86_64")]
+        match gemv_isa() {
+            GemvIsa::Vnni => {
+                // SAFETY: the CPU has the features (`gemv_isa`); `w` is `out.len() x kp` and `q`
+                // holds `kp` bytes (checked by the caller).
+                return unsafe { gemv_vnni(&self.w, &self.sums, self.kp, q, out) };
+            }
+            GemvIsa::Avx2 => {
+                q16.clear();
+                q16.extend(q.iter().map(|v| i16::from(*v as i8)));
+                // SAFETY: as above, `q16` holds `kp` values.
+                return unsafe { gemv_avx2(&self.w, self.kp, q16, out) };
+            }
+            GemvIsa::None => {}
+        }
+        let _ = q16;
+        for (o, row) in out.iter_mut().zip(self.w.chunks_exact(self.kp)) {
+            *o = row.iter().zip(q).map(|(w, q)| i32::from(*w) * i32::from(*q as i8)).sum();
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy, PartialEq)]
+enum GemvIsa {
+    Vnni,
+    Avx2,
+    None,
+}
+
+/// The matrix-vector form this CPU runs (`TRACT_CPU_ISA` can take features away).
+#[cfg(target_arch = "x86_64")]
+fn gemv_isa() -> GemvIsa {
+    use tract_onnx::tract_core::tract_linalg::isa::{Isa, native};
+    static ISA: std::sync::OnceLock<GemvIsa> = std::sync::OnceLock::new();
+    *ISA.get_or_init(|| {
+        let isa = native();
+        if isa.has(Isa::X86_64Avx512Vnni) && isa.has(Isa::X86_64Avx512f) && std::arch::is_x86_feature_detected!("avx512vl") {
+            GemvIsa::Vnni
+        } else if isa.has(Isa::X86_64Avx2) {
+            GemvIsa::Avx2
+        } else {
+            GemvIsa::None
+        }
+    })
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn hsum(v: std::arch::x86_64::__m256i) -> i32 {
+    use std::arch::x86_64::*;
+    let s = _mm_add_epi32(_mm256_castsi256_si128(v), _mm256_extracti128_si256::<1>(v));
+    let s = _mm_add_epi32(s, _mm_shuffle_epi32::<0b01_00_11_10>(s));
+    let s = _mm_add_epi32(s, _mm_shuffle_epi32::<0b10_11_00_01>(s));
+    _mm_cvtsi128_si32(s)
+}
+
+/// `out[o] = sum_i w[o, i] * q[i]` with VNNI's u8 x s8 dot products of 4: the activations as
+/// `q + 128` (u8), less `128 * sum_i w[o, i]`. Exact.
+///
+/// # Safety
+/// The CPU has AVX2, AVX-512F/VL/VNNI; `w.len() >= out.len() * kp`, `q.len() >= kp`, `kp` a
+/// multiple of 32.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f,avx512vl,avx512vnni")]
+unsafe fn gemv_vnni(w: &[i8], sums: &[i32], kp: usize, q: &[u8], out: &mut [i32]) {
+    use std::arch::x86_64::*;
+    debug_assert!(kp % 32 == 0 && q.len() >= kp && w.len() >= out.len() * kp);
+    let flip = _mm256_set1_epi8(-128);
+    let (w, q) = (w.as_ptr(), q.as_ptr());
+    let load = |p: *const i8| unsafe { _mm256_loadu_si256(p as *const __m256i) };
+    let m = out.len();
+    let mut o = 0;
+    while o + 4 <= m {
+        let mut acc = [_mm256_setzero_si256(); 4];
+        let rows = [0, 1, 2, 3].map(|j| unsafe { w.add((o + j) * kp) });
+        let mut c = 0;
+        while c < kp {
+            let x = _mm256_xor_si256(load(unsafe { q.add(c) } as *const i8), flip);
+            for j in 0..4 {
+                acc[j] = _mm256_dpbusd_epi32(acc[j], x, load(unsafe { rows[j].add(c) }));
+            }
+            c += 32;
+        }
+        for j in 0..4 {
+            out[o + j] = hsum(acc[j]) - 128 * sums[o + j];
+        }
+        o += 4;
+    }
+    while o < m {
+        let mut acc = _mm256_setzero_si256();
+        let row = unsafe { w.add(o * kp) };
+        let mut c = 0;
+        while c < kp {
+            let x = _mm256_xor_si256(load(unsafe { q.add(c) } as *const i8), flip);
+            acc = _mm256_dpbusd_epi32(acc, x, load(unsafe { row.add(c) }));
+            c += 32;
+        }
+        out[o] = hsum(acc) - 128 * sums[o];
+        o += 1;
+    }
+}
+
+/// `out[o] = sum_i w[o, i] * q[i]` with AVX2's 16-bit pair products (`vpmaddwd` on the
+/// weights widened to 16 bits). Exact.
+///
+/// # Safety
+/// The CPU has AVX2; `w.len() >= out.len() * kp`, `q16.len() >= kp`, `kp` a multiple of 32.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn gemv_avx2(w: &[i8], kp: usize, q16: &[i16], out: &mut [i32]) {
+    use std::arch::x86_64::*;
+    debug_assert!(kp % 32 == 0 && q16.len() >= kp && w.len() >= out.len() * kp);
+    let (w, q) = (w.as_ptr(), q16.as_ptr());
+    let widen = |p: *const i8| unsafe { _mm256_cvtepi8_epi16(_mm_loadu_si128(p as *const __m128i)) };
+    let m = out.len();
+    let mut o = 0;
+    while o + 4 <= m {
+        let mut acc = [_mm256_setzero_si256(); 4];
+        let rows = [0, 1, 2, 3].map(|j| unsafe { w.add((o + j) * kp) });
+        let mut c = 0;
+        while c < kp {
+            let x = unsafe { _mm256_loadu_si256(q.add(c) as *const __m256i) };
+            for j in 0..4 {
+                acc[j] = _mm256_add_epi32(acc[j], _mm256_madd_epi16(widen(unsafe { rows[j].add(c) }), x));
+            }
+            c += 16;
+        }
+        for j in 0..4 {
+            out[o + j] = hsum(acc[j]);
+        }
+        o += 4;
+    }
+    while o < m {
+        let mut acc = _mm256_setzero_si256();
+        let row = unsafe { w.add(o * kp) };
+        let mut c = 0;
+        while c < kp {
+            let x = unsafe { _mm256_loadu_si256(q.add(c) as *const __m256i) };
+            acc = _mm256_add_epi32(acc, _mm256_madd_epi16(widen(unsafe { row.add(c) }), x));
+            c += 16;
+        }
+        out[o] = hsum(acc);
+        o += 1;
+    }
 }
 
 impl PartialEq for Product {
@@ -95,12 +270,16 @@ impl Product {
         let (pa, _) = &kernel.packings()[packing];
         let mut a = Vec::new();
         let mut scales = Vec::new();
+        let mut gemv = Vec::new();
         if int8 {
             for w in parts {
                 let Weights::I8 { q, scales: s } = w else { bail!("an int8 product mixes f32 weights") };
                 let t = Tensor::from_shape(&[m, q.len() / m], q)?;
                 a.push(Arc::new(pa.prepare_one(&t, 1, 0)?));
                 scales.push(Arc::new(s.clone()));
+                if n.is_none_or(|n| n == 1) {
+                    gemv.push(Arc::new(Gemv::new(q, m)));
+                }
             }
         } else {
             let mut all = vec![0f32; m * k_total];
@@ -115,7 +294,7 @@ impl Product {
             let t = Tensor::from_shape(&[m, k_total], &all)?;
             a.push(Arc::new(pa.prepare_one(&t, 1, 0)?));
         }
-        Ok(Product { m, ks, kernel, packing, a, scales })
+        Ok(Product { m, ks, kernel, packing, a, scales, gemv })
     }
 
     pub(crate) fn int8(&self) -> bool {
@@ -187,6 +366,22 @@ impl Product {
             let m = self.m;
             for (i, (x, &k)) in xs.iter().zip(&self.ks).enumerate() {
                 ensure!(x.len() == n * k, "input {i} has {} values, expected {n} x {k}", x.len());
+                if n == 1 && !self.gemv.is_empty() {
+                    let g = &self.gemv[i];
+                    s.row.resize(g.kp, 0);
+                    s.row_scales.clear();
+                    s.row_scales.push(quantize_row(x, &mut s.row[..k]));
+                    s.row[k..].fill(0);
+                    if s.acc.shape() != [1, m] {
+                        s.acc = Tensor::zero::<i32>(&[1, m])?;
+                    }
+                    let mut view = s.acc.try_as_plain_ram_mut()?;
+                    g.run(&s.row, &mut s.row16, view.as_slice_mut::<i32>()?);
+                    drop(view);
+                    let acc = s.acc.try_as_plain_ram()?.as_slice::<i32>()?;
+                    f(i, acc, &s.row_scales, &self.scales[i])?;
+                    continue;
+                }
                 let b = packed_i8(&mut s.packed, &**pb, k, n)?;
                 pack_i8(&**pb, b, x, &mut s.row_scales, k, &mut s.row)?;
                 if s.acc.shape() != [n, m] {
@@ -352,8 +547,9 @@ fn pack_i8(
         // Panels of `r` characters; within one, blocks of 4 inputs, each character's 4 bytes
         // together.
         let r = f.r;
+        row[k..].fill(0);
         for (c, x) in x.chunks_exact(k).enumerate() {
-            scales.push(quantize_row(x, row));
+            scales.push(quantize_row(x, &mut row[..k]));
             let base = (c / r) * panel + (c % r) * 4;
             for (block, bytes) in row.chunks_exact(4).enumerate() {
                 let at = base + block * r * 4;
@@ -363,7 +559,7 @@ fn pack_i8(
     } else if let Some(f) = format.downcast_ref::<PackedFormat>() {
         let r = f.r;
         for (c, x) in x.chunks_exact(k).enumerate() {
-            scales.push(quantize_row(x, row));
+            scales.push(quantize_row(x, &mut row[..k]));
             let base = (c / r) * panel + c % r;
             for (i, q) in row[..k].iter().enumerate() {
                 dst[base + i * r] = *q;
@@ -384,6 +580,7 @@ struct Scratch {
     acc: Tensor,
     row_scales: Vec<f32>,
     row: Vec<u8>,
+    row16: Vec<i16>,
 }
 
 thread_local! {
