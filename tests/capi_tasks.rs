@@ -64,7 +64,7 @@ fn tiny_rnngmm_refined_onnx(dir: &Path) -> zoo_export::OnnxModel {
     }
     let run = dir.join("refined");
     adv.save(&run).unwrap();
-    zoo_rnngmm::export::export_generator_dir(&run).unwrap()
+    zoo_rnngmm::export::export_run(&run, &Default::default()).unwrap()
 }
 
 fn files() -> &'static Files {

@@ -366,7 +366,7 @@ fn bad_keys_and_folders_are_refused_with_clear_errors() {
         ])
     };
     let (ok, _, e) = args(&rtn);
-    assert!(!ok && e.contains("`zoo complete` runs an ARNN run folder") && e.contains("`rtn` model"), "{e}");
+    assert!(!ok && e.contains("`zoo complete` runs a run folder of model `arnn`") && e.contains("`rtn` model"), "{e}");
     let (ok, _, e) = args(dir.path());
     assert!(!ok && e.contains("is not a run folder of `zoo train` (no config.json)"), "{e}");
     let (ok, _, e) = run(&["eval-arnn", "--model", rtn.to_str().unwrap()]);

@@ -79,7 +79,7 @@ fn fixture() -> &'static Fixture {
         std::fs::create_dir_all(&dir).unwrap();
         trainer.save(&dir).unwrap();
         let (model, norm) = zoo_arnn::inbetween::load(&dir, &Device::Cpu).unwrap();
-        let onnx = zoo_arnn::export::export_arnn_dir(&dir).unwrap();
+        let onnx = zoo_arnn::export::export_run(&dir, &Default::default()).unwrap();
         Fixture { model, norm, onnx }
     })
 }

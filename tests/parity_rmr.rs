@@ -15,7 +15,7 @@ use candle_core::{DType, Device, Tensor};
 use candle_nn::VarMap;
 use std::borrow::Cow;
 use zoo_export::OnnxModel;
-use zoo_rmr::export::{MODEL_KIND, export_rmr, export_rmr_dir};
+use zoo_rmr::export::{MODEL_KIND, export_rmr, export_run};
 use zoo_rmr::features::FeatureStats;
 use zoo_rmr::{Config, RefinerCell, Rmr};
 use zoo_tests::onnxruntime::ort_environment;
@@ -172,12 +172,12 @@ fn rmr_metadata_and_run_folder_export() {
     assert!(m.state.is_empty());
     let dir = tempfile::tempdir().unwrap();
     zoo_rmr::checkpoint::save(dir.path(), &f.config, &f.varmap, &f.stats).unwrap();
-    let from_dir = export_rmr_dir(dir.path()).unwrap();
+    let from_dir = export_run(dir.path(), &Default::default()).unwrap();
     assert_eq!(from_dir.to_bytes(), onnx.to_bytes(), "a run folder exports the same file");
     let bad = FeatureStats { mean: vec![0.0; 3], std: vec![1.0; 3] };
     let err = export_rmr(&f.config, &bad, &f.varmap).unwrap_err().to_string();
     assert!(err.contains("statistics have 3 values"), "{err}");
-    let err = export_rmr_dir(&dir.path().join("nope")).unwrap_err().to_string();
+    let err = export_run(&dir.path().join("nope"), &Default::default()).unwrap_err().to_string();
     assert!(err.contains("nope"), "{err}");
 }
 

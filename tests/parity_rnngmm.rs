@@ -242,7 +242,7 @@ fn assert_poses_match(trainer: &GeneratorTrainer, runtime: &[(EnginePose, [bool;
 
 #[test]
 fn runtime_synthesis_refines_like_candle() {
-    use zoo_rnngmm::export::export_generator_dir;
+    use zoo_rnngmm::export::export_run;
     let (config, data, trainer) = fixture_with_data();
     let dir = tempfile::tempdir().unwrap();
     let gen_dir = dir.path().join("generator");
@@ -253,7 +253,7 @@ fn runtime_synthesis_refines_like_candle() {
     }
     let run = dir.path().join("run");
     adv.save(&run).unwrap();
-    let model = SynthesisModel::from_bytes(&export_generator_dir(&run).unwrap().to_bytes()).unwrap();
+    let model = SynthesisModel::from_bytes(&export_run(&run, &Default::default()).unwrap().to_bytes()).unwrap();
     assert!(model.has_refiner());
     let start = start_frame(&trainer);
     let frames = 20;
@@ -388,7 +388,7 @@ fn tract_runner(graph: &zoo_export::OnnxModel, widths: &[usize]) -> impl FnMut(&
 /// carried from step to step; tract and onnxruntime both within 1e-4.
 #[test]
 fn the_exported_refiner_step_matches_candle_in_tract_and_onnxruntime() {
-    use zoo_rnngmm::export::{REFINER_GRAPH_KEY, export_generator_dir};
+    use zoo_rnngmm::export::{REFINER_GRAPH_KEY, export_run};
     let (config, data, trainer) = fixture_with_data();
     let dir = tempfile::tempdir().unwrap();
     let gen_dir = dir.path().join("generator");
@@ -399,7 +399,7 @@ fn the_exported_refiner_step_matches_candle_in_tract_and_onnxruntime() {
     }
     let run = dir.path().join("run");
     adv.save(&run).unwrap();
-    let onnx = export_generator_dir(&run).unwrap();
+    let onnx = export_run(&run, &Default::default()).unwrap();
     let refiner =
         zoo_export::OnnxModel::from_base64(onnx.metadata_value(REFINER_GRAPH_KEY).unwrap(), "refiner").unwrap();
     let nets = adv.nets();

@@ -766,7 +766,7 @@ fn run_folder_and_cli_export() {
         .unwrap();
     assert!(!err.status.success());
     let stderr = String::from_utf8_lossy(&err.stderr);
-    assert!(stderr.contains("model `nope`") && stderr.contains("exports: rtn"), "{stderr}");
+    assert!(stderr.contains("unknown model kind `nope`") && stderr.contains("knows rtn, rmr"), "{stderr}");
 }
 
 /// The engine-facing API (`zoo_runtime::TransitionRunner`) against candle's `Rtn::transition`:
@@ -1150,8 +1150,12 @@ fn global_positions(info: &zoo_runtime::MotionSkeletonInfo, pose: &EnginePose) -
     pos.iter().flat_map(|v| v.to_array()).collect()
 }
 
+/// The runtime's foot lock is the one `zoo transition --foot-lock` and the benchmark's `+lock`
+/// ran before they moved to the runtime (`zoo_motion::pipeline::foot_lock_fitted`: the frames
+/// on the skeleton, locked, fitted again), here on the file's skeleton.
 #[test]
-fn runtime_foot_lock_is_the_motion_core_post_process() {
+fn runtime_foot_lock_is_the_fitted_post_process() {
+    use zoo_motion::pipeline::{fit_frames, foot_lock_fitted, skeleton_positions_f32};
     let f = fixture(tiny());
     let model = TransitionModel::new(MotionModel::from_bytes(&export(&f).to_bytes()).unwrap()).unwrap();
     let lock = model.default_foot_lock().expect("the fixture skeleton has a Foot_L joint");
@@ -1159,17 +1163,30 @@ fn runtime_foot_lock_is_the_motion_core_post_process() {
     assert_eq!((lock.legs[0].hip, lock.legs[0].knee, lock.legs[0].ankle), (0, 2, 3));
     let c = character(&f.stats, 2);
     let d = f.config.dim();
+    let k = d / 3;
     let mut runner = model.runner().unwrap();
     runner.allow_beyond_trained(true);
     let mut state = model.new_transition();
     let mut plain = vec![0.0; (FRAMES + 1) * d];
     runner.generate(&mut state, &c.past, &c.target_pose, &c.next_pose, &mut plain).unwrap();
     runner.set_foot_lock(Some(lock.clone()));
+    assert!(runner.foot_lock().is_some());
     let mut locked = vec![0.0; (FRAMES + 1) * d];
     runner.generate(&mut state, &c.past, &c.target_pose, &c.next_pose, &mut locked).unwrap();
-    let mut want = plain.clone();
-    lock.apply(&c.past[c.past.len() - d..], &mut want);
-    assert_eq!(locked, want);
+    let skeleton = model.model().metadata().skeleton.to_skeleton();
+    let offsets: Vec<glam::DVec3> =
+        skeleton.offsets.iter().enumerate().map(|(j, o)| if j == 0 { glam::DVec3::ZERO } else { *o }).collect();
+    let reference = vec![glam::DQuat::IDENTITY; FRAMES * k];
+    let fitted = fit_frames(&skeleton, &offsets, &plain[..FRAMES * d], &reference);
+    let prev = &c.past[c.past.len() - d..];
+    let (rot, root) = foot_lock_fitted(&skeleton, &offsets, fitted, prev, &plain[FRAMES * d..], &reference);
+    let mut want = Vec::new();
+    skeleton_positions_f32(&skeleton, &offsets, &rot, &root, &mut want);
+    want.extend_from_slice(&plain[FRAMES * d..]);
+    let diff = max_abs_diff(&locked, &want);
+    assert!(diff < 1e-3, "the runtime's lock is the fitted lock (max abs diff {diff})");
+    assert_eq!(&locked[FRAMES * d..], &plain[FRAMES * d..], "the target frame is kept");
+    assert!(max_abs_diff(&locked, &plain) > 1e-2, "the lock moves the feet");
 }
 
 /// The exported RTN with metadata entry `key` replaced by `value` (`None`: removed).
@@ -1456,4 +1473,41 @@ fn a_terrain_section_that_does_not_match_the_graph_is_refused() {
     let bytes = with_prop(&f, keys::TRANSITION, Some(&serde_json::to_string(&task).unwrap()));
     let err = LoadedModel::from_bytes(&bytes).unwrap_err();
     assert!(err.to_string().contains("terrain patch of side 0 (1..=1024)"), "{err}");
+}
+
+/// Temporal super-resolution (`zoo decompress`) on the runtime: every keyframe is met, and the
+/// chain of transitions is candle's (`Rtn::transition` chained the same way).
+#[test]
+fn super_resolution_on_the_runtime_hits_every_key_and_matches_candle() {
+    let f = fixture(tiny());
+    let model = TransitionModel::new(MotionModel::from_bytes(&export(&f).to_bytes()).unwrap()).unwrap();
+    let mut runner = model.runner().unwrap();
+    runner.allow_beyond_trained(true);
+    let d = f.config.dim();
+    let interval = 5;
+    let clip: Vec<f32> = (0..PAST + 2 * interval + 1).flat_map(|t| pose(1, t)).collect();
+    let context = &clip[..PAST * d];
+    let mut keys = Vec::new();
+    for k in 1..=2 {
+        let t = PAST - 1 + interval * k;
+        keys.extend_from_slice(&clip[t * d..(t + 2) * d]);
+    }
+    let out = zoo_tasks::transition::super_resolve(&model, &mut runner, context, &keys, interval).unwrap();
+    assert_eq!(out.len(), (PAST + 2 * interval) * d);
+    for k in 1..=2 {
+        let t = PAST - 1 + interval * k;
+        assert!(max_abs_diff(&out[t * d..(t + 1) * d], &clip[t * d..(t + 1) * d]) < 1e-3, "key {k} is met");
+    }
+    // The same chain in candle: the first segment from the context, the second from the
+    // frames generated so far with the stored frame after the first key at its end.
+    let first = f.model.transition(&f.stats, context, &keys[..d], &keys[d..2 * d], interval - 1, None).unwrap();
+    let mut want = context.to_vec();
+    want.extend_from_slice(&first);
+    let mut ctx = want[want.len() - (PAST - 1) * d..].to_vec();
+    ctx.extend_from_slice(&keys[d..2 * d]);
+    let second = f.model.transition(&f.stats, &ctx, &keys[2 * d..3 * d], &keys[3 * d..], interval - 2, None).unwrap();
+    want.extend_from_slice(&keys[d..2 * d]);
+    want.extend_from_slice(&second);
+    let diff = max_abs_diff(&out, &want);
+    assert!(diff < 1e-3, "runtime and candle chains differ by {diff}");
 }

@@ -12,8 +12,8 @@ use crate::Result;
 use std::path::{Path, PathBuf};
 use zoo_data::benchmark::{Interpolation, TransitionMethod, ZeroVelocity};
 use zoo_data::{Context, bail};
+use zoo_nn::ZooModel;
 
-use zoo_nn::checkpoint::MODEL_KINDS;
 pub use zoo_nn::checkpoint::{CONFIG_FILE, DEFAULT_KIND, kind_of_config};
 
 /// The method kind of exported ONNX files (`onnx:FILE.onnx`).
@@ -27,7 +27,7 @@ pub struct ModelEntry {
     /// The kind's name, as in `config.json` and `--methods KIND:DIR`.
     pub kind: &'static str,
     /// What the model is for, in a few words (said when it is used for something else).
-    pub purpose: &'static str,
+    pub purpose: fn() -> &'static str,
     /// Its benchmark method, for models that generate transitions.
     pub bench: Option<BenchLoader>,
     /// Whether its benchmark method takes the foot lock (`KIND+lock:RUN_DIR`).
@@ -36,10 +36,15 @@ pub struct ModelEntry {
 
 /// The models the benchmarks know.
 pub const MODELS: &[ModelEntry] = &[
-    ModelEntry { kind: "rtn", purpose: MODEL_KINDS[0].1, bench: Some(load_rtn_method), foot_lock: true },
-    ModelEntry { kind: "rmr", purpose: MODEL_KINDS[1].1, bench: None, foot_lock: false },
-    ModelEntry { kind: "rnn-gmm", purpose: MODEL_KINDS[2].1, bench: None, foot_lock: false },
-    ModelEntry { kind: "arnn", purpose: MODEL_KINDS[3].1, bench: Some(load_arnn_method), foot_lock: false },
+    ModelEntry { kind: "rtn", purpose: || zoo_rtn::RtnModel.purpose(), bench: Some(load_rtn_method), foot_lock: true },
+    ModelEntry { kind: "rmr", purpose: || zoo_rmr::RmrModel.purpose(), bench: None, foot_lock: false },
+    ModelEntry { kind: "rnn-gmm", purpose: || zoo_rnngmm::RnnGmmModel.purpose(), bench: None, foot_lock: false },
+    ModelEntry {
+        kind: "arnn",
+        purpose: || zoo_arnn::ArnnModel.purpose(),
+        bench: Some(load_arnn_method),
+        foot_lock: false,
+    },
 ];
 
 fn load_arnn_method(dir: &Path, name: String, foot_lock: bool) -> Result<Box<dyn TransitionMethod>> {
@@ -130,7 +135,7 @@ fn parse_method_in(models: &[ModelEntry], spec: &str) -> Result<MethodSpec> {
         let entry =
             entry_in(models, kind).with_context(|| format!("method `{spec}`: expected {}", method_forms(models)))?;
         if entry.bench.is_none() {
-            bail!("method `{spec}`: a `{kind}` model is for {}, not for the transition benchmark", entry.purpose);
+            bail!("method `{spec}`: a `{kind}` model is for {}, not for the transition benchmark", (entry.purpose)());
         }
     }
     Ok(MethodSpec::Model { name: spec.to_string(), kind: kind.to_string(), path: PathBuf::from(path), foot_lock })
@@ -164,7 +169,10 @@ fn load_method_in(models: &[ModelEntry], spec: &MethodSpec) -> Result<Box<dyn Tr
             check_folder_kind(name, kind, path, &model_kind(path)?)?;
             let entry = entry_in(models, kind)?;
             let Some(load) = entry.bench else {
-                bail!("method `{name}`: a `{kind}` model is for {}, not for the transition benchmark", entry.purpose);
+                bail!(
+                    "method `{name}`: a `{kind}` model is for {}, not for the transition benchmark",
+                    (entry.purpose)()
+                );
             };
             load(path, name.clone(), *foot_lock)?
         }
@@ -187,9 +195,9 @@ mod tests {
     /// RTN plus two made-up kinds: one for something else, one benchmarked but not a
     /// `zoo transition` model.
     const TEST_MODELS: &[ModelEntry] = &[
-        ModelEntry { kind: "rtn", purpose: "transitions", bench: Some(no_bench), foot_lock: true },
-        ModelEntry { kind: "gmm", purpose: "sampling poses", bench: None, foot_lock: true },
-        ModelEntry { kind: "arnn", purpose: "long in-betweens", bench: Some(no_bench), foot_lock: true },
+        ModelEntry { kind: "rtn", purpose: || "transitions", bench: Some(no_bench), foot_lock: true },
+        ModelEntry { kind: "gmm", purpose: || "sampling poses", bench: None, foot_lock: true },
+        ModelEntry { kind: "arnn", purpose: || "long in-betweens", bench: Some(no_bench), foot_lock: true },
     ];
 
     fn err<T, E: std::fmt::Display>(r: std::result::Result<T, E>) -> String {

@@ -2,7 +2,6 @@
 
 mod args;
 mod cmd;
-mod progress;
 
 use clap::{Parser, Subcommand};
 

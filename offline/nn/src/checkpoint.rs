@@ -77,42 +77,6 @@ impl RunSkeleton {
     }
 }
 
-/// The model kinds of zoo's run folders and what each is for, in a few words (said when a
-/// folder is used for something else).
-pub const MODEL_KINDS: [(&str, &str); 4] = [
-    ("rtn", "transitions between a context and a target pose (Recurrent Transition Network)"),
-    ("rmr", "stitching locomotion clips (Recurrent Motion Refiner; `zoo stitch`, `zoo bench stitch`)"),
-    ("rnn-gmm", "random motion synthesis (`zoo generate`, `zoo bench synthesis`)"),
-    (
-        "arnn",
-        "completing an animator's keys (`zoo complete`, keyframe autocompletion ARNN; humanoid runs also in `zoo \
-         bench`)",
-    ),
-];
-
-/// Refuses a run folder `dir` of another kind than `want` for `zoo COMMAND`, saying what the
-/// folder's model is for (`want_name`: the model `command` runs, e.g. "an RTN").
-pub fn require_kind(dir: &Path, want: &str, want_name: &str, command: &str) -> NnResult<()> {
-    let kind = model_kind(dir)?;
-    if kind == want {
-        return Ok(());
-    }
-    match MODEL_KINDS.iter().find(|(k, _)| *k == kind) {
-        Some((_, purpose)) => Err(NnError::Config(format!(
-            "`zoo {command}` runs {want_name} run folder; {} holds a `{kind}` model, which is for {purpose}",
-            dir.display()
-        ))),
-        None => {
-            let known: Vec<&str> = MODEL_KINDS.iter().map(|(k, _)| *k).collect();
-            Err(NnError::Config(format!(
-                "{}: unknown model kind `{kind}`: this zoo knows {} (update zoo for newer models)",
-                dir.display(),
-                known.join(", ")
-            )))
-        }
-    }
-}
-
 /// The kind assumed when `config.json` has no `"model"` field (folders written before the
 /// field existed hold an RTN).
 pub const DEFAULT_KIND: &str = "rtn";
@@ -309,26 +273,6 @@ fn sibling(dst: &Path, what: &str) -> PathBuf {
 mod tests {
     use super::*;
     use candle_nn::Init;
-
-    #[test]
-    fn a_folder_of_another_kind_is_refused_with_its_purpose() {
-        let dir = tempfile::tempdir().unwrap();
-        let err = |kind: &str, command: &str| {
-            std::fs::write(dir.path().join(CONFIG_FILE), format!(r#"{{"model": "{kind}"}}"#)).unwrap();
-            require_kind(dir.path(), "rtn", "an RTN", command).map(|_| String::new()).unwrap_or_else(|e| e.to_string())
-        };
-        assert_eq!(err("rtn", "transition"), "");
-        let e = err("rmr", "decompress");
-        assert!(
-            e.contains("`zoo decompress` runs an RTN run folder;")
-                && e.contains("holds a `rmr` model, which is for stitching locomotion clips"),
-            "{e}"
-        );
-        let e = err("gmm", "transition");
-        assert!(e.contains("unknown model kind `gmm`: this zoo knows rtn, rmr, rnn-gmm, arnn"), "{e}");
-        let e = require_kind(&dir.path().join("missing"), "rtn", "an RTN", "transition").unwrap_err().to_string();
-        assert!(e.contains("is not a run folder of `zoo train` (no config.json)"), "{e}");
-    }
 
     #[test]
     fn atomic_writes_leave_no_temporary_files_and_refuse_nan() -> NnResult<()> {

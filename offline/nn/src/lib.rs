@@ -14,9 +14,14 @@
 //! - [`parallel`]: data-parallel training steps ([`DataParallel`]: one worker thread per
 //!   share of the batch, gradients summed before the one optimiser step);
 //! - [`train_loop`]: the one training loop, driving any model that implements [`Trainable`];
-//! - [`plot`]: the loss-curve PNG.
+//! - [`plot`]: the loss-curve PNG;
+//! - [`zoo_model`]: the one table of models ([`ZooModel`], each model crate's entry);
+//! - [`train_args`], [`args`]: the options of `zoo train` every model shares, and the value
+//!   parsers of every numeric option;
+//! - [`progress`]: progress on the terminal.
 
 pub mod act;
+pub mod args;
 pub mod calibrate;
 pub mod cells;
 pub mod checkpoint;
@@ -29,12 +34,15 @@ pub mod ops;
 pub mod optim;
 pub mod parallel;
 pub mod plot;
+pub mod progress;
 pub mod recurrent;
 pub mod rng;
 pub mod run_folder;
 pub mod speed;
 pub mod tape;
+pub mod train_args;
 pub mod train_loop;
+pub mod zoo_model;
 
 pub use ema::Ema;
 pub use error::{NnError, NnResult, TrainError};
@@ -46,3 +54,4 @@ pub use parallel::DataParallel;
 pub use recurrent::{BiGru, BiLstm, Gru, GruState, Lstm, LstmState};
 pub use rng::SplitMix64;
 pub use train_loop::{TrainOptions, TrainState, Trainable, Validation};
+pub use zoo_model::{ExportOptions, Exported, Portable, ZooModel};

@@ -19,6 +19,7 @@
 //! `3K` values for `K` joints, the model's skeleton order); [`crate::pose`] converts glam
 //! vectors. Batched calls take character-major buffers (character `c` at `c * 3K`).
 
+mod lock;
 mod posed;
 
 use crate::error::MotionError;
@@ -219,7 +220,7 @@ pub struct TransitionRunner {
     /// Characters of a step call that compute their blend window ahead.
     ahead_sel: Vec<usize>,
     /// Foot-lock post-process of `generate`, off unless set.
-    foot_lock: Option<FootLock>,
+    foot_lock: Option<lock::FittedLock>,
     /// Whether transitions longer than the trained length are accepted.
     beyond_trained: bool,
     /// Fallback towards interpolation of `generate`, off unless set.
@@ -473,10 +474,22 @@ impl TransitionRunner {
     }
 
     /// Sets the foot-lock post-process that [`TransitionRunner::generate`] applies after the
-    /// target blend (`None`: off, the default). Per-frame stepping never applies it: it needs
-    /// the whole transition. See `zoo_motion::footlock`.
+    /// target blend and the fallback (`None`: off, the default): the frames are put on the
+    /// model's skeleton (rotations fitted, bones at their rest lengths), locked, and fitted
+    /// again, so the locked feet are the skeleton's (see `zoo_motion::footlock`). Per-frame
+    /// stepping never applies it: it needs the whole transition.
     pub fn set_foot_lock(&mut self, lock: Option<FootLock>) {
-        self.foot_lock = lock;
+        self.foot_lock = lock.map(|lock| {
+            let sk = &self.model.model.metadata().skeleton;
+            let parents = sk.parents.iter().map(|&p| usize::try_from(p).ok()).collect();
+            let offsets = sk.offsets.iter().map(|o| glam::DVec3::from_array(*o)).collect();
+            lock::FittedLock::new(lock, parents, offsets)
+        });
+    }
+
+    /// The foot lock [`TransitionRunner::generate`] applies, if any.
+    pub fn foot_lock(&self) -> Option<&FootLock> {
+        self.foot_lock.as_ref().map(lock::FittedLock::lock)
     }
 
     /// Sets the fallback that [`TransitionRunner::generate`] applies after the target blend
@@ -1030,7 +1043,7 @@ impl TransitionRunner {
                 blend_towards_interpolation(&mut out[c * per..(c + 1) * per], last, &target[c * d..(c + 1) * d], w);
             }
         }
-        if let Some(lock) = &self.foot_lock {
+        if let Some(lock) = &mut self.foot_lock {
             for c in 0..n {
                 lock.apply(&past[(c + 1) * past_per - d..(c + 1) * past_per], &mut out[c * per..(c + 1) * per]);
             }

@@ -154,7 +154,7 @@ fn inbetween(a: BenchArgs) -> anyhow::Result<()> {
     }
     let start = Instant::now();
     let (methods, trained_on) = zoo_bench::inbetween::load_methods(&a.methods)?;
-    let bar = crate::progress::Bar::new();
+    let bar = zoo_nn::progress::Bar::new();
     let (train, test) = load(&a, &data, &bar)?;
     zoo_bench::inbetween::check_skeletons(&a.methods, &trained_on, &train)?;
     let o = InbetweenOptions { lengths: a.lengths.clone(), save_bvh: a.save_bvh.clone(), save_count: a.save_count };
@@ -181,7 +181,7 @@ fn keys(a: BenchArgs, data: &std::path::Path) -> anyhow::Result<()> {
     let layout = if a.layout == Layout::Keys { KeyLayout::Whole } else { KeyLayout::Partial };
     let methods = zoo_bench::keys::methods(&a.methods)?;
     let start = Instant::now();
-    let bar = crate::progress::Bar::new();
+    let bar = zoo_nn::progress::Bar::new();
     let (train, test) = load(&a, data, &bar)?;
     bar.stage("preparing windows and statistics");
     let bench = KeysBench::new(&train, &test)?;
@@ -196,7 +196,7 @@ fn keys(a: BenchArgs, data: &std::path::Path) -> anyhow::Result<()> {
 fn load(
     a: &BenchArgs,
     data: &std::path::Path,
-    bar: &crate::progress::Bar,
+    bar: &zoo_nn::progress::Bar,
 ) -> anyhow::Result<(Vec<zoo_data::dataset::NamedClip>, Vec<zoo_data::dataset::NamedClip>)> {
     let split = crate::cmd::Split {
         valid_glob: a.valid_glob.as_deref(),

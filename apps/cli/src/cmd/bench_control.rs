@@ -80,7 +80,7 @@ pub fn run(a: BenchControlArgs) -> anyhow::Result<()> {
         plots: a.plots,
         online: a.online.options(),
     };
-    let report = zoo_bench::control::run(&o, &crate::progress::Bar::new())?;
+    let report = zoo_bench::control::run(&o, &zoo_nn::progress::Bar::new())?;
     println!("{}", report.text());
     crate::cmd::write_report(a.json.as_deref(), &report)
 }

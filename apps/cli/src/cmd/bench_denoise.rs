@@ -102,7 +102,7 @@ pub fn run(a: BenchDenoiseArgs) -> anyhow::Result<()> {
         threads: a.threads,
         skip_invalid: a.skip_invalid,
     };
-    let report = zoo_rnngmm::bench::denoise::run(&o, &crate::progress::Bar::new())?;
+    let report = zoo_rnngmm::bench::denoise::run(&o, &zoo_nn::progress::Bar::new())?;
     println!("{}", report.text(o.known_noise));
     crate::cmd::write_report(a.json.as_deref(), &report)
 }

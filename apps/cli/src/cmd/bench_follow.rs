@@ -76,7 +76,7 @@ pub fn run(a: BenchFollowArgs) -> anyhow::Result<()> {
         speed: a.speed,
         runtime_seed_frames: a.runtime_seed_frames,
     };
-    let report = zoo_bench::follow::run(&o, &crate::progress::Bar::new())?;
+    let report = zoo_bench::follow::run(&o, &zoo_nn::progress::Bar::new())?;
     println!("{}", report.text());
     if let Some(p) = &a.json {
         crate::cmd::write_json(p, &report)?;

@@ -113,7 +113,7 @@ pub fn runtime(a: RuntimeArgs) -> anyhow::Result<()> {
     if let Some(path) = &a.json {
         crate::cmd::check_output_file("--json", path)?;
     }
-    let report = zoo_bench::runtime::run(&a.options(), &crate::progress::Bar::new())?;
+    let report = zoo_bench::runtime::run(&a.options(), &zoo_nn::progress::Bar::new())?;
     println!("{}", report.header);
     println!("{}", zoo_bench::runtime::table(&report.figures, a.rounds, a.work));
     if let Some(path) = &a.json {
@@ -160,7 +160,7 @@ pub fn train(a: TrainBenchArgs) -> anyhow::Result<()> {
         pytorch: a.pytorch,
         batch: a.batch,
     };
-    let report = zoo_bench::train::run(&o, &crate::progress::Bar::new())?;
+    let report = zoo_bench::train::run(&o, &zoo_nn::progress::Bar::new())?;
     for line in report.header.iter().chain(&report.lines) {
         println!("{line}");
     }

@@ -72,7 +72,7 @@ pub fn run(a: StitchBenchArgs) -> anyhow::Result<()> {
             })
         })
         .collect::<Result<Vec<_>, _>>()?;
-    let bar = crate::progress::Bar::new();
+    let bar = zoo_nn::progress::Bar::new();
     let split = crate::cmd::Split {
         valid_glob: a.valid_glob.as_deref(),
         test_data: a.test_data.as_deref(),

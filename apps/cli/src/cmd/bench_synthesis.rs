@@ -73,7 +73,7 @@ pub fn run(a: BenchSynthesisArgs) -> anyhow::Result<()> {
         skip_invalid: a.skip_invalid,
         threads: a.threads,
     };
-    let report = zoo_rnngmm::bench::synthesis::run(&o, &crate::progress::Bar::new())?;
+    let report = zoo_rnngmm::bench::synthesis::run(&o, &zoo_nn::progress::Bar::new())?;
     println!("{}", report.text(o.range_margin));
     crate::cmd::write_report(a.json.as_deref(), &report)
 }

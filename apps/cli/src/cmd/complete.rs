@@ -59,13 +59,8 @@ pub struct CompleteArgs {
 
 /// Runs `zoo complete`.
 pub fn run(a: CompleteArgs) -> anyhow::Result<()> {
-    let kind = zoo_nn::checkpoint::model_kind(&a.model)?;
-    if kind != "arnn" {
-        bail!(
-            "--model {}: `zoo complete` runs an ARNN run folder (`zoo train arnn`), this one holds a `{kind}` model",
-            a.model.display()
-        );
-    }
+    zoo_models::require_task(&a.model, zoo_runtime::MotionTaskKind::Keyframes, "complete")
+        .map_err(anyhow::Error::msg)?;
     crate::cmd::check_output_file("--out", &a.out)?;
     for (option, path) in [("--json", &a.json), ("--plot", &a.plot), ("--positions", &a.positions)] {
         if let Some(p) = path {

@@ -98,7 +98,7 @@ pub fn run(a: ControlArgs) -> anyhow::Result<()> {
     let from = a.from.as_deref().map(crate::args::clip_and_frame).transpose()?;
     let (clip, frame, from) = start_clip(&a.model, from.as_ref().map(|(p, f)| (p.as_path(), *f)), &g)?;
     let opts = a.online.options();
-    let c = control_with_progress(&g, &clip, frame, &script, &opts, "controlling", &crate::progress::Bar::new())
+    let c = control_with_progress(&g, &clip, frame, &script, &opts, "controlling", &zoo_nn::progress::Bar::new())
         .with_context(|| format!("following the controls of {} from {from}", a.script.display()))?;
     let json = write_motion(&a.out, &c.motion, &clip.skeleton, g.spec.fps)?;
     if let Some(p) = &a.plot {

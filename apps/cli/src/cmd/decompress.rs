@@ -1,15 +1,14 @@
 //! `zoo decompress`: temporal super-resolution (RTN sec. 7.4), rebuilding a clip from its
-//! first 10 frames and one keyframe per interval by chaining RTN transitions.
+//! first 10 frames and one keyframe per interval by chaining RTN transitions on the runtime
+//! ([`zoo_tasks::transition::decompress`]).
 
-use anyhow::Context;
 use clap::Args;
 use std::path::PathBuf;
-use zoo_motion::pipeline;
 
 /// Arguments of `zoo decompress`.
 #[derive(Args)]
 pub struct DecompressArgs {
-    /// Run folder of `zoo train rtn`.
+    /// Run folder of `zoo train rtn`, or its exported file (`zoo export --onnx`).
     #[arg(long)]
     pub model: PathBuf,
     /// Clip to compress and rebuild.
@@ -25,30 +24,8 @@ pub struct DecompressArgs {
 /// Runs `zoo decompress`.
 pub fn run(a: DecompressArgs) -> anyhow::Result<()> {
     crate::cmd::check_output_file("--out", &a.out)?;
-    let mut clip = zoo_data::clip_io::read_model_clip(&a.input)?;
-    let (model, stats) = zoo_rtn::checkpoint::load_run(&a.model, "decompress")?;
-    zoo_rtn::command::check_skeleton(&a.model, model.config(), &mut clip, &a.input)?;
-    let interval = a.interval.unwrap_or_else(|| clip.fps().round() as usize).max(1);
-    let j = clip.joints();
-    let keys = pipeline::keyframe_inputs(&clip, interval).with_context(|| format!("{}", a.input.display()))?;
-    let y = model.super_resolve(&stats, &keys.context, &keys.keys, interval).context("rebuilding the clip")?;
-    let frames = y.len() / (3 * j);
-    let mut out = pipeline::rebuild_from_keyframes(&clip, interval, &y);
-    let tail = pipeline::fill_tail(&mut out, &clip);
-    zoo_data::clip_io::write(&out, &a.out)?;
-    let err = pipeline::mean_position_error(&clip, &y);
-    let tail = match tail {
-        0 => String::new(),
-        n => format!(", and the last {n} frame(s) after the last keyframe in-betweened to the clip's last frame"),
-    };
-    println!(
-        "rebuilt {frames} frames of {} from {} context frames and {} keyframes (every {interval}){tail}; \
-         mean joint position error {err:.2} (clip units, network frames); wrote {} ({} frames)",
-        a.input.display(),
-        pipeline::CONTEXT_FRAMES,
-        keys.key_count,
-        a.out.display(),
-        out.frames()
-    );
+    let o =
+        zoo_tasks::transition::DecompressOptions { model: a.model, input: a.input, interval: a.interval, out: a.out };
+    println!("{}", zoo_tasks::transition::decompress(&o)?);
     Ok(())
 }

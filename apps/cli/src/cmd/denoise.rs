@@ -59,7 +59,7 @@ pub fn run(a: DenoiseArgs) -> anyhow::Result<()> {
         );
     }
     let opts = a.options();
-    let bar = crate::progress::Bar::new();
+    let bar = zoo_nn::progress::Bar::new();
     bar.start(opts.iterations as u64, "denoising (energy evaluations)");
     let started = std::time::Instant::now();
     let mut done = 0;

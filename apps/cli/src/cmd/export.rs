@@ -8,12 +8,13 @@
 //! refiner) as `.onnx` files of their own beside the main file.
 //!
 //! The run folder's `config.json` names its model (`"model"`; folders written before the field
-//! existed are RTN folders); each kind's exporter lives beside its candle model.
+//! existed are RTN folders), and the table of models (`zoo_models`) exports it.
 
 use anyhow::{Context, bail};
 use clap::Args;
 use std::path::PathBuf;
 use zoo_export::OnnxModel;
+use zoo_models::{ExportOptions, Portable};
 
 /// Arguments of `zoo export`.
 #[derive(Args)]
@@ -93,23 +94,12 @@ fn write_reference(a: &ExportArgs, model: &OnnxModel) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The model kinds `zoo export` writes.
-const EXPORT_KINDS: [&str; 4] = [
-    zoo_rtn::export::MODEL_KIND,
-    zoo_rmr::export::MODEL_KIND,
-    zoo_rnngmm::export::MODEL_KIND,
-    zoo_arnn::export::MODEL_KIND,
-];
-
 /// Lowers `model` to the portable profile and writes it to `a.out` with its companion files;
 /// `frames`: the fixed size of a `frames` dimension (window graphs).
 fn write_portable(a: &ExportArgs, model: &OnnxModel, what: &str, frames: Option<usize>) -> anyhow::Result<()> {
     use zoo_export::portable::{EmbeddedGraph, PortableOptions, to_portable};
     use zoo_export::unity::{UNITY_OPERATORS_URL, UNITY_PACKAGE, UNITY_VERSION};
     use zoo_runtime::portable::{PORTABLE_GRAPHS, PORTABLE_KEY};
-    if a.frames.is_some() && frames.is_none() {
-        bail!("--frames applies to window graphs (RMR); this model's graphs run one frame per call");
-    }
     let mut options = PortableOptions::default();
     if let Some(n) = frames {
         options.fixed_dims.insert("frames".into(), n);
@@ -153,96 +143,13 @@ fn write_portable(a: &ExportArgs, model: &OnnxModel, what: &str, frames: Option<
     Ok(())
 }
 
-/// The exported model of a run folder of `kind`, what it is in words (the portable profile's
-/// line), what the regular file's line adds after the file name, and the fixed frames of its
-/// window graph (RMR, with `--portable`).
-fn export_kind(a: &ExportArgs, kind: &str) -> anyhow::Result<(OnnxModel, &'static str, String, Option<usize>)> {
-    let context = || format!("exporting {}", a.onnx.display());
-    let counts = |m: &OnnxModel| {
-        let summary = m.summary();
-        format!("{} nodes, {} parameters", summary.op_counts.values().sum::<usize>(), summary.parameters)
-    };
-    Ok(match kind {
-        zoo_rmr::export::MODEL_KIND => {
-            let model = zoo_rmr::export::export_rmr_dir(&a.onnx).with_context(context)?;
-            let frames = match a.portable {
-                true => {
-                    let (frames, source) = zoo_rmr::export::portable_window(&a.onnx, a.frames)?;
-                    println!("fixing the RMR window graph's `frames` dimension to {frames} ({source})");
-                    Some(frames)
-                }
-                false => None,
-            };
-            let what = "RMR window refiner";
-            (model, what, format!("{what} with its configuration and statistics"), frames)
-        }
-        zoo_rnngmm::export::MODEL_KIND => {
-            let model = zoo_rnngmm::export::export_generator_dir(&a.onnx).with_context(context)?;
-            let refiner = model.metadata_value(zoo_rnngmm::export::REFINER_GRAPH_KEY).is_some();
-            let what = "RNN-GMM generator step graph";
-            let with =
-                if refiner { "and the refiner's step graph" } else { "without a refiner (generator stage only)" };
-            let line = format!("{what} ({}) with its metadata, {with}", counts(&model));
-            (model, what, line, None)
-        }
-        zoo_arnn::export::MODEL_KIND if zoo_arnn::inbetween::is_inbetween_run(&a.onnx) => {
-            if a.portable {
-                bail!(
-                    "--portable: the in-betweening design's graph runs whole shots of any length through a \
-                     bidirectional GRU, which the portable profile (recurrent layers unrolled over a fixed number of \
-                     frames) does not hold; export it without --portable"
-                );
-            }
-            if a.reference.is_some() {
-                bail!(
-                    "--reference: reference vectors (docs/runtime-protocol.md) cover the ARNN's step graph, not the \
-                     in-betweening design's whole-shot graph; export it without --reference"
-                );
-            }
-            let model = zoo_arnn::export::export_arnn_dir(&a.onnx).with_context(context)?;
-            let what = "ARNN in-betweening whole-shot graph";
-            let line = format!("{what} ({}) with its metadata", counts(&model));
-            (model, what, line, None)
-        }
-        zoo_arnn::export::MODEL_KIND => {
-            let model = zoo_arnn::export::export_arnn_dir(&a.onnx).with_context(context)?;
-            let what = "ARNN step graph";
-            let line = format!("{what} ({}) with its metadata", counts(&model));
-            (model, what, line, None)
-        }
-        zoo_rtn::export::MODEL_KIND => {
-            let model = export_rtn(a)?;
-            let what = "RTN step graph";
-            let line = format!("{what} ({}) with its start graph and metadata", counts(&model));
-            (model, what, line, None)
-        }
-        other => bail!(
-            "{}: `zoo export` does not know model `{other}` (config.json \"model\"); it exports: {}",
-            a.onnx.display(),
-            EXPORT_KINDS.join(", ")
-        ),
-    })
-}
-
-/// The RTN of the run folder with the skeleton, fps and units of the options.
-fn export_rtn(a: &ExportArgs) -> anyhow::Result<OnnxModel> {
-    let inputs =
-        zoo_rtn::export::RunExportInputs { skeleton: a.skeleton.as_deref(), fps: a.fps, units: a.units.as_deref() };
-    Ok(zoo_rtn::export::export_rtn_run(&a.onnx, &inputs)?)
-}
-
 /// Runs `zoo export`.
 pub fn run(a: ExportArgs) -> anyhow::Result<()> {
     crate::cmd::check_output_file("--out", &a.out)?;
     if let Some(r) = &a.reference {
         crate::cmd::check_output_file("--reference", r)?;
     }
-    let config_path = a.onnx.join(zoo_rtn::checkpoint::CONFIG_FILE);
-    if !config_path.is_file() {
-        bail!("{} is not a run folder of `zoo train` (no config.json)", a.onnx.display());
-    }
-    let text = std::fs::read_to_string(&config_path).with_context(|| format!("reading {}", config_path.display()))?;
-    let kind = zoo_nn::checkpoint::kind_of_config(&text, &config_path)?;
+    let model = zoo_models::of_run(&a.onnx).map_err(anyhow::Error::msg)?;
     let width = zoo_export::WeightWidth::parse(&a.weights).map_err(anyhow::Error::msg)?;
     if a.portable && width != zoo_export::WeightWidth::F32 {
         bail!(
@@ -250,14 +157,29 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
              drop --weights {width} or --portable"
         );
     }
-    let (model, what, line, frames) = export_kind(&a, &kind)?;
-    let model = zoo_export::with_weights(&model, width).with_context(|| format!("storing the weights as {width}"))?;
-    let line = format!("{line}, {width} weights ({} bytes)", model.to_bytes().len());
+    let frames = match (a.portable, model.portable(&a.onnx, a.frames)?) {
+        (false, _) | (true, Portable::Step) => None,
+        (true, Portable::Window(frames, source)) => {
+            println!("fixing the window graph's `frames` dimension to {frames} ({source})");
+            Some(frames)
+        }
+        (true, Portable::Refused(why)) => bail!("{why}"),
+    };
+    let options = ExportOptions { skeleton: a.skeleton.as_deref(), fps: a.fps, units: a.units.as_deref() };
+    let exported = model.export(&a.onnx, &options).with_context(|| format!("exporting {}", a.onnx.display()))?;
+    let m =
+        zoo_export::with_weights(&exported.model, width).with_context(|| format!("storing the weights as {width}"))?;
     if a.portable {
-        write_portable(&a, &model, what, frames)?;
+        write_portable(&a, &m, exported.what, frames)?;
     } else {
-        model.write(&a.out)?;
-        println!("wrote {}: {line}", a.out.display());
+        m.write(&a.out)?;
+        let summary = m.summary();
+        let (nodes, parameters) = (summary.op_counts.values().sum::<usize>(), summary.parameters);
+        let (what, with, bytes) = (exported.what, exported.with, m.to_bytes().len());
+        println!(
+            "wrote {}: {what} ({nodes} nodes, {parameters} parameters) {with}, {width} weights ({bytes} bytes)",
+            a.out.display()
+        );
     }
-    write_reference(&a, &model)
+    write_reference(&a, &m)
 }

@@ -83,7 +83,7 @@ pub fn run(a: FollowArgs) -> anyhow::Result<()> {
     let from = a.from.as_deref().map(crate::args::clip_and_frame).transpose()?;
     let (clip, frame, from) = start_clip(&a.model, from.as_ref().map(|(p, f)| (p.as_path(), *f)), &g)?;
     let started = std::time::Instant::now();
-    let bar = crate::progress::Bar::new();
+    let bar = zoo_nn::progress::Bar::new();
     let f = follow_with_progress(&g, &clip, frame, &path, &a.optimiser.options(), "following", &bar)
         .with_context(|| format!("following {} from {from}", a.path.display()))?;
     let seconds = started.elapsed().as_secs_f64();

@@ -127,7 +127,7 @@ pub fn run(a: GenerateArgs) -> anyhow::Result<()> {
     let frames = frame_count(&a, g.spec.fps)?;
     let from = a.from.as_deref().map(crate::args::clip_and_frame).transpose()?;
     let (clip, frame, from) = start_clip(&a.model, from.as_ref().map(|(p, f)| (p.as_path(), *f)), &g)?;
-    let bar = crate::progress::Bar::new();
+    let bar = zoo_nn::progress::Bar::new();
     bar.start((frames as u64).saturating_mul(a.count as u64), "generating (frames)");
     for i in 0..a.count as u64 {
         let seed = a.seed.wrapping_add(i);

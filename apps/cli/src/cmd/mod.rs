@@ -20,11 +20,7 @@ pub mod generate;
 pub mod render;
 pub mod stitch;
 pub mod train;
-pub mod train_args;
-pub mod train_arnn;
 pub mod train_resume;
-pub mod train_rmr;
-pub mod train_rnngmm;
 pub mod transition;
 
 use anyhow::{Context, bail};
@@ -70,13 +66,7 @@ pub fn load_dataset(
 }
 
 /// Notices on standard error, no progress shown.
-pub struct Stderr;
-
-impl zoo_data::Progress for Stderr {
-    fn notice(&self, message: &str) {
-        eprintln!("{message}");
-    }
-}
+pub use zoo_nn::progress::Stderr;
 
 /// Leaves out the clips whose file name matches `exclude` (`--exclude-glob`: e.g. a content
 /// type held out of training for the out-of-distribution protocol, docs/ood.md); says how many.

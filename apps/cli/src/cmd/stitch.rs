@@ -146,13 +146,7 @@ fn load_model(dir: &Path) -> anyhow::Result<(zoo_rmr::Rmr, zoo_rmr::features::Fe
     if dir.is_file() {
         bail!("{}", model_file_message(dir));
     }
-    let kind = zoo_nn::checkpoint::model_kind(dir)?;
-    if kind != "rmr" {
-        bail!(
-            "--model {}: the folder holds a `{kind}` model; `zoo stitch` runs an RMR run folder of `zoo train rmr`",
-            dir.display()
-        );
-    }
+    zoo_models::require_task(dir, zoo_runtime::MotionTaskKind::Stitch, "stitch").map_err(anyhow::Error::msg)?;
     zoo_rmr::checkpoint::load(dir, &candle_core::Device::Cpu)
         .with_context(|| format!("loading the RMR in {}", dir.display()))
 }

@@ -1,194 +1,53 @@
-//! `zoo train ...`: train a model of the zoo on BVH data or on the embedded synthetic data (the
-//! options every trainer takes: [`crate::cmd::train_args`]; the training itself is each model
-//! crate's, `zoo_rtn::train_run`, ...).
+//! `zoo train MODEL`: train a model of the zoo. The subcommands are the table of models
+//! (`zoo_models::MODELS`): each model's options and training are its crate's entry
+//! (`zoo_nn::ZooModel`); the options every trainer takes are `zoo_nn::train_args`.
 
-use crate::cmd::train_args::{DataArgs, RunArgs, TrainDefaults};
-use clap::{Args, Subcommand};
-use zoo_rtn::train_run::{RtnAugment, RtnPreset, RtnRunOptions, RtnVariant};
+use clap::{ArgMatches, FromArgMatches, Subcommand};
 
-/// `zoo train` subcommands.
-#[derive(Subcommand)]
-pub enum TrainCommand {
-    /// The Recurrent Transition Network (Harvey & Pal 2018).
-    Rtn(RtnArgs),
-    /// The Recurrent Motion Refiner for locomotion stitching (Kim et al. 2023).
-    Rmr(crate::cmd::train_rmr::RmrArgs),
-    /// RNN-GMM with an adversarial refiner (Wang, Chai & Xia 2019): random motion synthesis.
-    RnnGmm(crate::cmd::train_rnngmm::RnnGmmArgs),
-    /// The keyframe autocompletion network ARNN (Zhang & van de Panne 2018) on the simulated lamp.
-    Arnn(crate::cmd::train_arnn::ArnnArgs),
-}
-
-/// The RTN's defaults: the README's quick model (docs/rtn.md).
-#[derive(Clone)]
-pub struct RtnDefaults;
-
-impl TrainDefaults for RtnDefaults {
-    const EPOCHS: &'static str = "20";
-    const OUT: &'static str = "runs/rtn";
-    const SYNTH_MINUTES: &'static str = "30";
-}
-
-/// Minutes of stepping clips: `0..=600`.
-fn synth_steps_minutes(s: &str) -> Result<f64, String> {
-    match s.trim().parse::<f64>() {
-        Ok(m) if (0.0..=600.0).contains(&m) => Ok(m),
-        _ => Err(format!("`{s}` is not a number of minutes: valid range 0..=600")),
-    }
-}
-
-/// Arguments of `zoo train rtn`.
-#[derive(Args)]
-pub struct RtnArgs {
-    /// The run folder, its length, seed and threads.
-    #[command(flatten)]
-    pub run: RunArgs<RtnDefaults>,
-    /// The clips.
-    #[command(flatten)]
-    pub data: DataArgs<RtnDefaults>,
-    /// Leave out of `--data` every clip whose file name matches this glob (e.g. a content type
-    /// held out for the out-of-distribution protocol of docs/ood.md).
-    #[arg(long)]
-    pub exclude_glob: Option<String>,
-    /// Model variant (Table 4 ablations).
-    #[arg(long, value_enum, default_value_t = RtnVariant::Rtn)]
-    pub variant: RtnVariant,
-    /// Model sizes.
-    #[arg(long, value_enum, default_value_t = RtnPreset::Paper)]
-    pub preset: RtnPreset,
-    /// Predict a correction on top of the interpolation of context and target instead of the
-    /// next frame (the Delta-interpolator idea of Oreshkin et al. 2022; `interp_residual` in
-    /// config.json): an untrained model is the interpolation, and what the network learns is
-    /// added to it. On by default: it learns faster and stays near interpolation on motion the
-    /// data lacks (docs/ood.md). `--interp-residual false` trains the paper's RTN, which
-    /// predicts the next frame itself.
-    #[arg(long, default_value_t = true, num_args = 0..=1, default_missing_value = "true", action = clap::ArgAction::Set)]
-    pub interp_residual: bool,
-    /// Train the terrain-aware RTN (RTN sec. 3.2: the local terrain patch under the root feeds
-    /// the frame encoder; `terrain` in config.json). Every clip needs its heightmap: `--data`
-    /// written by `zoo data synth --terrain` (`NAME.terrain.json` beside each clip), or without
-    /// `--data` synthetic locomotion over uneven terrain generated in memory. The windows stay
-    /// in the clips' world frame, the heightmaps'. Run the model with `zoo transition
-    /// --heightmap` or the runtime's `TransitionState::set_heightmap`.
-    #[arg(long)]
-    pub terrain: bool,
-    /// Augment the training windows on the fly with motion the data lacks (comma-separated;
-    /// stored in config.json as `train.augment`): `reverse` (time reversal, 30% of the windows:
-    /// forward walks become backward walks), `mirror` (left-right mirroring, 50%, joints
-    /// paired by name: `_L`/`_R`, `.L`/`.R`, `Left`/`Right`), `speed` (30%, resampled at a
-    /// factor drawn from 0.7-1.2, or from `--speed-range`). Epochs keep their size; validation
-    /// is never augmented.
-    #[arg(long, value_enum, value_delimiter = ',')]
-    pub augment: Vec<RtnAugment>,
-    /// The speed factors of `--augment speed`, SLOWEST-FASTEST (e.g. `0.7-2.0`: up to twice as
-    /// fast, walks towards jogging); above 1.2 the training windows are lengthened to hold the
-    /// fastest [default: 0.7-1.2].
-    #[arg(long, value_name = "SLOWEST-FASTEST", value_parser = crate::args::speed_range)]
-    pub speed_range: Option<(f32, f32)>,
-    /// Minutes of the synthetic generator's stepping clips (walks made mostly of side and back
-    /// steps, `zoo_data::synth::generate_stepping`) mixed into the training split of `--data`;
-    /// its skeleton is bandai2's, so the data must be on it. 0: none.
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true, value_parser = synth_steps_minutes)]
-    pub synth_steps: f64,
-    /// Minutes of the synthetic generator's jogging and running clips
-    /// (`zoo_data::synth::generate_running`, 2 - 4.8 m/s) mixed into the training split of
-    /// `--data`, for data without running; its skeleton is bandai2's, so the data must be on
-    /// it. 0: none.
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true, value_parser = synth_steps_minutes)]
-    pub synth_runs: f64,
-    /// Mini-batch size [default: the preset's; paper: 32].
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::batch_size)]
-    pub batch_size: Option<usize>,
-    /// AMSGrad learning rate [default: the preset's; paper: 5e-4].
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::learning_rate)]
-    pub lr: Option<f64>,
-    /// Decay of a moving average of the weights kept beside the trained ones (not in the
-    /// paper). Each epoch both are validated and the better one becomes the best checkpoint;
-    /// 0 keeps no average (the paper's recipe exactly).
-    #[arg(long, default_value_t = 0.999, allow_hyphen_values = true, value_parser = crate::args::decay)]
-    pub ema: f64,
-    /// Train over every transition length from SHORTEST to LONGEST frames, one drawn per
-    /// mini-batch, validated at 5, 15, 30 and 45 within the range; the windows hold the longest.
-    /// `N-N` trains one length, as the paper does (`30-30`: its 30 frames) [default: 5-45, the
-    /// benchmark's lengths; the tiny preset: its one length].
-    #[arg(long, value_name = "SHORTEST-LONGEST", value_parser = crate::args::length_range)]
-    pub lengths: Option<[usize; 2]>,
-    /// Values of the time-to-arrival embedding the frame encoder reads (the frames left to the
-    /// target, Harvey et al. 2020), an even number up to 256; 0 for none [default: 16 over
-    /// several lengths, none for one].
-    #[arg(long, value_name = "DIMS", value_parser = clap::value_parser!(u16).range(0..=256))]
-    pub time_to_arrival: Option<u16>,
+/// `zoo train MODEL ...`: the model's kind and its parsed options.
+pub struct TrainCommand {
+    kind: String,
+    options: ArgMatches,
+    command: Vec<(String, Vec<String>)>,
 }
 
 impl TrainCommand {
     /// Records `command` (the options of a fresh run) to be written in its run folder.
     pub fn record(&mut self, command: Vec<(String, Vec<String>)>) {
-        match self {
-            TrainCommand::Rtn(a) => a.run.command = command,
-            TrainCommand::Rmr(a) => a.run.command = command,
-            TrainCommand::RnnGmm(a) => a.run.command = command,
-            TrainCommand::Arnn(a) => a.run.command = command,
-        }
+        self.command = command;
+    }
+}
+
+impl FromArgMatches for TrainCommand {
+    fn from_arg_matches(matches: &ArgMatches) -> Result<Self, clap::Error> {
+        let (kind, options) = matches
+            .subcommand()
+            .ok_or_else(|| clap::Error::raw(clap::error::ErrorKind::MissingSubcommand, "a model to train"))?;
+        Ok(TrainCommand { kind: kind.to_string(), options: options.clone(), command: Vec::new() })
+    }
+
+    fn update_from_arg_matches(&mut self, matches: &ArgMatches) -> Result<(), clap::Error> {
+        *self = Self::from_arg_matches(matches)?;
+        Ok(())
+    }
+}
+
+impl Subcommand for TrainCommand {
+    fn augment_subcommands(cmd: clap::Command) -> clap::Command {
+        cmd.subcommands(zoo_models::MODELS.iter().map(|m| m.train_command())).subcommand_required(true)
+    }
+
+    fn augment_subcommands_for_update(cmd: clap::Command) -> clap::Command {
+        Self::augment_subcommands(cmd)
+    }
+
+    fn has_subcommand(name: &str) -> bool {
+        zoo_models::find(name).is_some()
     }
 }
 
 /// Runs a `zoo train` subcommand.
 pub fn run(cmd: TrainCommand) -> anyhow::Result<()> {
-    match cmd {
-        TrainCommand::Rtn(a) => train_rtn(a),
-        TrainCommand::Rmr(a) => crate::cmd::train_rmr::run(a),
-        TrainCommand::RnnGmm(a) => crate::cmd::train_rnngmm::run(a),
-        TrainCommand::Arnn(a) => crate::cmd::train_arnn::run(a),
-    }
-}
-
-/// Runs `zoo train rtn` ([`zoo_rtn::train_run`]).
-fn train_rtn(a: RtnArgs) -> anyhow::Result<()> {
-    let o = RtnRunOptions {
-        data: a.data.spec(a.exclude_glob.clone(), a.run.seed)?,
-        run: a.run.spec(),
-        variant: a.variant,
-        preset: a.preset,
-        interp_residual: a.interp_residual,
-        terrain: a.terrain,
-        augment: a.augment,
-        synth_steps: a.synth_steps,
-        synth_runs: a.synth_runs,
-        speed_range: a.speed_range,
-        batch_size: a.batch_size,
-        lr: a.lr,
-        ema: a.ema,
-        lengths: a.lengths,
-        time_to_arrival: a.time_to_arrival.map(usize::from),
-    };
-    Ok(zoo_rtn::train_run::run(&o, &crate::cmd::Stderr)?)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use clap::Parser;
-
-    #[derive(Parser)]
-    struct Train {
-        #[command(subcommand)]
-        command: TrainCommand,
-    }
-
-    /// Each trainer keeps its own defaults of the shared groups (one generic group, one set
-    /// of defaults per model).
-    #[test]
-    fn each_trainer_keeps_its_defaults() {
-        let parse = |args: &[&str]| Train::try_parse_from([&["train"], args].concat()).unwrap().command;
-        let TrainCommand::Rtn(a) = parse(&["rtn"]) else { panic!("rtn") };
-        assert_eq!((a.run.epochs, a.run.out.to_str(), a.data.synth_minutes), (20, Some("runs/rtn"), 30.0));
-        let TrainCommand::Rmr(a) = parse(&["rmr"]) else { panic!("rmr") };
-        assert_eq!((a.run.epochs, a.run.out.to_str(), a.data.synth_minutes), (10, Some("runs/rmr"), 10.0));
-        let TrainCommand::RnnGmm(a) = parse(&["rnn-gmm"]) else { panic!("rnn-gmm") };
-        assert_eq!((a.run.epochs, a.run.out.to_str(), a.data.synth_minutes), (10, Some("runs/rnn-gmm"), 10.0));
-        let TrainCommand::Arnn(a) = parse(&["arnn", "--epochs", "7"]) else { panic!("arnn") };
-        assert_eq!((a.run.epochs, a.run.out.to_str(), a.run.seed), (7, Some("runs/arnn"), 1));
-        let TrainCommand::Arnn(a) = parse(&["arnn"]) else { panic!("arnn") };
-        assert_eq!(a.run.epochs, 300);
-    }
+    let model = zoo_models::find(&cmd.kind).ok_or_else(|| anyhow::anyhow!("no model `{}`", cmd.kind))?;
+    model.train(&cmd.options, cmd.command).map_err(|e| anyhow::anyhow!(e))
 }

@@ -1,5 +1,5 @@
-//! `zoo transition`: generate a transition between two clips with a trained RTN
-//! ([`zoo_rtn::command`]).
+//! `zoo transition`: generate a transition between two clips with a trained RTN, run by the
+//! engine runtime ([`zoo_tasks::transition`]).
 
 use clap::Args;
 use std::path::PathBuf;
@@ -7,7 +7,7 @@ use std::path::PathBuf;
 /// Arguments of `zoo transition`.
 #[derive(Args)]
 pub struct TransitionArgs {
-    /// Run folder of `zoo train rtn`.
+    /// Run folder of `zoo train rtn`, or its exported file (`zoo export --onnx`).
     #[arg(long)]
     pub model: PathBuf,
     /// Source clip and frame, `A.bvh:FRAME`: the transition starts after the 10 frames before FRAME.
@@ -63,7 +63,7 @@ pub fn run(a: TransitionArgs) -> anyhow::Result<()> {
     if let Some(p) = &a.positions {
         crate::cmd::check_output_file("--positions", p)?;
     }
-    let o = zoo_rtn::command::TransitionOptions {
+    let o = zoo_tasks::transition::TransitionOptions {
         from: crate::args::clip_and_frame(&a.from)?,
         to: crate::args::clip_and_frame(&a.to)?,
         from_label: a.from,
@@ -78,6 +78,6 @@ pub fn run(a: TransitionArgs) -> anyhow::Result<()> {
         heightmap: a.heightmap,
         positions: a.positions,
     };
-    print!("{}", zoo_rtn::command::run(&o, &crate::cmd::Stderr)?);
+    print!("{}", zoo_tasks::transition::run(&o, &crate::cmd::Stderr)?);
     Ok(())
 }

@@ -44,10 +44,12 @@ pub const FPS: f32 = 50.0;
 
 /// Loads a `zoo train arnn` run folder and exports it: the step graph of [`export_arnn`], or
 /// for the in-betweening design (`--design inbetween`) its whole-shot graph
-/// ([`crate::inbetween_export`]).
-pub fn export_arnn_dir(dir: &Path) -> Result<OnnxModel, ExportError> {
+/// ([`crate::inbetween_export`]). The one export signature of every model
+/// ([`zoo_nn::ZooModel::export`]): the run folder records its skeleton and frame rate.
+pub fn export_run(dir: &Path, options: &zoo_nn::ExportOptions<'_>) -> Result<OnnxModel, ExportError> {
+    options.from_the_run_folder("ARNN")?;
     if crate::inbetween::is_inbetween_run(dir) {
-        return crate::inbetween_export::export_inbetween_dir(dir);
+        return crate::inbetween_export::export_inbetween_run(dir);
     }
     let (config, norm) =
         checkpoint::read_meta(dir).map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;

@@ -36,7 +36,7 @@ use zoo_nn::ExportWeights as Weights;
 use zoo_nn::export::{RecurrentStack, mlp_matmul, recurrent_layers};
 
 /// Loads an in-betweening run folder and exports it (see [`export_inbetween`]).
-pub fn export_inbetween_dir(dir: &Path) -> Result<OnnxModel, ExportError> {
+pub(crate) fn export_inbetween_run(dir: &Path) -> Result<OnnxModel, ExportError> {
     let (config, norm) =
         crate::inbetween::read_meta(dir).map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
     let varmap = zoo_nn::export::load_run_varmap(dir, "in-betweening network", |vb| Inbetween::new(&config, vb))?;

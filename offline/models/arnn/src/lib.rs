@@ -9,6 +9,7 @@
 pub mod checkpoint;
 pub mod completion;
 pub mod config;
+pub mod entry;
 pub mod eval;
 pub mod export;
 pub mod humanoid;
@@ -23,6 +24,7 @@ pub mod train;
 pub mod train_run;
 
 pub use config::{Architecture, ArnnConfig, Curriculum, HumanoidSkeleton, KeySampling, NoMemoryOutput};
+pub use entry::ArnnModel;
 pub use eval::{CompletionError, CompletionReport};
 pub use model::{Arnn, ArnnState};
 pub use train::{ArnnTrainer, Normalization, complete, complete_partial, complete_partial_raw, complete_raw, hit_keys};

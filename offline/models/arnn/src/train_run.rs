@@ -18,8 +18,7 @@ use zoo_nn::run_folder::RunSpec;
 use zoo_nn::train_loop::{self, TrainOptions};
 
 /// Which ARNN to train.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
 pub enum ArnnVariant {
     /// The paper's ARNN with its curriculum (omega annealing and scheduled sampling).
@@ -49,8 +48,7 @@ impl ArnnVariant {
 }
 
 /// Which network `zoo train arnn` trains.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
 pub enum ArnnDesign {
     /// The paper's autoregressive ARNN (lamp or humanoid clips).
@@ -62,8 +60,7 @@ pub enum ArnnDesign {
 }
 
 /// What the no-memory net's output is added to ([`NoMemoryOutput`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum NoMemoryOutputArg {
     /// Nothing: the output is the pose (the first design).
     Pose,
@@ -84,8 +81,7 @@ impl From<NoMemoryOutputArg> for NoMemoryOutput {
 }
 
 /// Sizes of the ARNN to train.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum ArnnPreset {
     /// The paper's sizes (`ArnnConfig::paper`: GRUs of 100, decoder of 10).
     Paper,
@@ -785,8 +781,7 @@ pub fn report_text(r: &CompletionReport) -> String {
 }
 
 /// Which weights of a run folder to evaluate.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Checkpoint {
     /// The run folder's checkpoint: the best validation loss (frame + key).
     Best,

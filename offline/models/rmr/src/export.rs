@@ -51,8 +51,11 @@ pub fn portable_window(dir: &Path, frames: Option<u32>) -> Result<(usize, &'stat
     })
 }
 
-/// Loads a `zoo train rmr` run folder and exports it (see [`export_rmr`]).
-pub fn export_rmr_dir(dir: &Path) -> Result<OnnxModel, ExportError> {
+/// Loads a `zoo train rmr` run folder and exports it (see [`export_rmr`]; the one export
+/// signature of every model, [`zoo_nn::ZooModel::export`]: the run folder records its skeleton,
+/// frame rate and units, so `options` sets none of them).
+pub fn export_run(dir: &Path, options: &zoo_nn::ExportOptions<'_>) -> Result<OnnxModel, ExportError> {
+    options.from_the_run_folder("RMR")?;
     let (config, stats) =
         crate::checkpoint::read_meta(dir).map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
     let varmap = zoo_nn::export::load_run_varmap(dir, "RMR", |vb| crate::Rmr::new(&config, vb))?;

@@ -24,6 +24,7 @@ pub mod bench;
 pub mod checkpoint;
 pub mod config;
 pub mod data;
+pub mod entry;
 pub mod error;
 pub mod export;
 pub mod fallback;
@@ -38,6 +39,7 @@ pub mod train;
 pub mod train_run;
 
 pub use config::{Config, ModelName, RefinerCell, TrainConfig};
+pub use entry::RmrModel;
 pub use error::{RmrError, RmrResult};
 pub use model::Rmr;
 pub use train::{RmrTrainer, RmrTraining};

@@ -13,8 +13,7 @@ use zoo_nn::run_folder::RunSpec;
 use zoo_nn::train_loop::{self, TrainOptions};
 
 /// Sizes of the RMR to train.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum RmrPreset {
     /// The paper's sizes (`Config::paper`: encoder 256, BGRU 2 x 256, T = 60 frames).
     Paper,
@@ -23,8 +22,7 @@ pub enum RmrPreset {
 }
 
 /// The refiner cell (RMR Table 1).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum CellArg {
     /// Unidirectional LSTM.
     Lstm,

@@ -48,8 +48,11 @@ use zoo_nn::ExportWeights as Weights;
 pub const MODEL_KIND: &str = "rnn-gmm";
 
 /// Loads the generator of a run folder (`config.json`, `model.safetensors`, `features.json`,
-/// `normalization.json`) and exports its step graph (see [`export_generator`]).
-pub fn export_generator_dir(dir: &Path) -> Result<OnnxModel, ExportError> {
+/// `normalization.json`) and exports its step graph (see [`export_generator`]), with the
+/// refiner's step graph when the folder has one (the one export signature of every model,
+/// [`zoo_nn::ZooModel::export`]: the run folder records its skeleton, frame rate and units).
+pub fn export_run(dir: &Path, options: &zoo_nn::ExportOptions<'_>) -> Result<OnnxModel, ExportError> {
+    options.from_the_run_folder("RNN-GMM")?;
     let (config, spec, norm) =
         crate::checkpoint::read_meta(dir).map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
     let config_json = zoo_nn::export::config_text(dir)?;

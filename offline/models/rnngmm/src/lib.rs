@@ -40,6 +40,7 @@ pub mod config;
 pub mod control;
 pub mod controls;
 pub mod denoise;
+pub mod entry;
 pub mod error;
 pub mod export;
 pub mod features;
@@ -60,6 +61,7 @@ pub mod train_run;
 
 pub use config::{Config, ModelName, RefinerConfig, TrainConfig};
 pub use denoise::{DenoiseOptions, Denoised, EnergyTerms, denoise};
+pub use entry::RnnGmmModel;
 pub use error::{RnnGmmError, RnnGmmResult};
 pub use features::{ContactParams, DecodedMotion, EncodedClip, FeatureSpec, Normalization, RootPlacement};
 pub use follow::{FollowOptions, Followed, follow};

@@ -32,8 +32,7 @@ pub const REFINER_DIR: &str = "refiner";
 const START_FRAMES: usize = 90;
 
 /// Which stage(s) to train.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Stage {
     /// The generator, then the refiner on it.
     Both,
@@ -45,8 +44,7 @@ pub enum Stage {
 }
 
 /// Sizes of the RNN-GMM to train.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum RnnGmmPreset {
     /// `Config::paper`: 3 x 512 fully connected, 2 x 512 LSTM, M = 5, refiner 256, discriminator 128.
     Paper,

@@ -185,10 +185,17 @@ pub fn load(dir: &Path, device: &Device) -> RtnResult<(Rtn, FeatureStats)> {
     Ok((model, stats))
 }
 
-/// The RTN of run folder `dir` for `zoo COMMAND` (`transition`, `decompress`); a folder of
-/// another kind is refused with what that kind is for.
+/// The RTN of run folder `dir` for `zoo COMMAND` (`transition`, `decompress`; the command
+/// checks the folder's kind first, `zoo_models::require_task`).
 pub fn load_run(dir: &Path, command: &str) -> RtnResult<(Rtn, FeatureStats)> {
-    zoo_nn::checkpoint::require_kind(dir, "rtn", "an RTN", command).map_err(|e| zoo_data::Message::new(e))?;
+    let kind = zoo_nn::checkpoint::model_kind(dir).map_err(|e| zoo_data::Message::new(e))?;
+    if kind != crate::export::MODEL_KIND {
+        return Err(zoo_data::Message(format!(
+            "`zoo {command}`: {} holds a `{kind}` model, not an RTN",
+            dir.display()
+        ))
+        .into());
+    }
     load(dir, &Device::Cpu).map_err(|e| zoo_data::Message(format!("loading the RTN in {}: {e}", dir.display())).into())
 }
 

@@ -87,23 +87,12 @@ impl RtnExportOptions {
     }
 }
 
-/// What `zoo export` takes for an RTN run folder besides the folder.
-#[derive(Clone, Debug, Default)]
-pub struct RunExportInputs<'a> {
-    /// A clip of the training skeleton (joint names, parents, rest offsets, fps), for run
-    /// folders without `skeleton.json`.
-    pub skeleton: Option<&'a Path>,
-    /// Frames per second of the training data.
-    pub fps: Option<f32>,
-    /// Units of the training data (`cm`, `m`, `mm`, `in`).
-    pub units: Option<&'a str>,
-}
-
-/// The RTN of run folder `dir` with the skeleton, fps and units of `inputs` (`zoo export`): a
-/// skeleton clip must have the training hierarchy; without one, the run folder's
-/// `skeleton.json` is required; BVH does not say its unit, so without `units` or a
-/// `skeleton.json` the data is taken as zoo's centimetres, Y up.
-pub fn export_rtn_run(dir: &Path, inputs: &RunExportInputs<'_>) -> Result<OnnxModel, ExportError> {
+/// The RTN of run folder `dir` with the skeleton, fps and units of `inputs` (`zoo export`; the
+/// one export signature of every model, [`zoo_nn::ZooModel::export`]): a skeleton clip must
+/// have the training hierarchy; without one, the run folder's `skeleton.json` is required; BVH
+/// does not say its unit, so without `units` or a `skeleton.json` the data is taken as zoo's
+/// centimetres, Y up.
+pub fn export_run(dir: &Path, inputs: &zoo_nn::ExportOptions<'_>) -> Result<OnnxModel, ExportError> {
     let err = |m: String| ExportError::model(m);
     let mut options = RtnExportOptions { fps: inputs.fps, ..RtnExportOptions::default() };
     if let Some(u) = inputs.units {

@@ -21,8 +21,8 @@
 
 pub mod augment;
 pub mod checkpoint;
-pub mod command;
 pub mod config;
+pub mod entry;
 pub mod error;
 pub mod export;
 pub mod fallback;
@@ -35,6 +35,7 @@ pub mod train_run;
 pub mod transition;
 
 pub use config::{Config, InitState, ModelName, TeacherForcing, TrainConfig};
+pub use entry::RtnModel;
 pub use error::{RtnError, RtnResult};
 pub use model::{Rtn, RtnInputs, RtnSequence, RtnState};
 pub use train::{MotionWindow, RtnTrainer, RtnTraining, fit_stats};

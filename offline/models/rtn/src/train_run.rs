@@ -15,8 +15,7 @@ use zoo_nn::run_folder::RunSpec;
 use zoo_nn::train_loop::{self, TrainOptions};
 
 /// Which RTN to train: the paper's model or one of its Table 4 ablations.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
 pub enum RtnVariant {
     /// The paper's RTN (future conditioning, learned initial state, residual, p = 0.2).
@@ -38,8 +37,7 @@ pub enum RtnVariant {
 }
 
 /// A training-window augmentation of `zoo train rtn --augment` ([`crate::augment`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum RtnAugment {
     /// Time reversal (walking backwards).
     Reverse,
@@ -50,8 +48,7 @@ pub enum RtnAugment {
 }
 
 /// Sizes of the RTN to train.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum RtnPreset {
     /// The paper's sizes (`Config::paper`).
     Paper,

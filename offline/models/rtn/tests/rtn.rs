@@ -464,27 +464,6 @@ fn nan_positions_are_rejected() {
 }
 
 #[test]
-fn super_resolution_chains_transitions() {
-    let c = tiny();
-    let ws = windows(&c, 2);
-    let stats = stats_for(&c, &ws);
-    let (model, _) = build(&c);
-    let d = c.dim();
-    let clip = synthetic_window(4 + 2 * 5 + 1, 1);
-    let context = &clip[..4 * d];
-    let mut keys = Vec::new();
-    for k in 1..=2 {
-        let f = 3 + 5 * k;
-        keys.extend_from_slice(&clip[f * d..(f + 2) * d]);
-    }
-    let out = model.super_resolve(&stats, context, &keys, 5).unwrap();
-    assert_eq!(out.len(), (4 + 10) * d);
-    // each keyframe is hit exactly thanks to the target blend
-    assert!(max_abs_diff(&out[8 * d..9 * d], &clip[8 * d..9 * d]) < 1e-3);
-    assert!(max_abs_diff(&out[13 * d..14 * d], &clip[13 * d..14 * d]) < 1e-3);
-}
-
-#[test]
 fn saving_nan_parameters_is_refused_and_keeps_the_old_checkpoint() {
     let c = tiny();
     let ws = windows(&c, 4);

@@ -1,4 +1,5 @@
-//! The library's [`Progress`] shown on the terminal: a spinner for stages, a bar for counted work.
+//! [`Progress`] shown on the terminal: [`Bar`], a spinner for stages and a bar for counted
+//! work; [`Stderr`], notices only.
 
 use indicatif::{ProgressBar, ProgressStyle};
 use std::sync::Mutex;
@@ -66,5 +67,14 @@ impl Progress for Bar {
 impl Drop for Bar {
     fn drop(&mut self) {
         self.0.lock().unwrap_or_else(|e| e.into_inner()).finish_and_clear();
+    }
+}
+
+/// Notices on standard error, no progress shown.
+pub struct Stderr;
+
+impl Progress for Stderr {
+    fn notice(&self, message: &str) {
+        eprintln!("{message}");
     }
 }

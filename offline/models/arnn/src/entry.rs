@@ -1,11 +1,74 @@
-//! `zoo train arnn`: the keyframe autocompletion network (Zhang & van de Panne 2018) on hop
-//! sequences of the simulated lamp, or on humanoid BVH clips with `--valid-glob`
-//! ([`zoo_arnn::train_run`]).
+//! The ARNN's entry in the table of models ([`zoo_nn::ZooModel`]): `zoo train arnn`'s options
+//! (hop sequences of the simulated lamp, or humanoid clips with `--valid-glob`, in either
+//! design), its training and its export.
 
-use crate::cmd::train_args::{RunArgs, TrainDefaults};
-use clap::Args;
-use std::path::PathBuf;
-use zoo_arnn::train_run::{ArnnDesign, ArnnPreset, ArnnRunOptions, ArnnVariant, NoMemoryOutputArg};
+use crate::train_run::{ArnnDesign, ArnnPreset, ArnnRunOptions, ArnnVariant, NoMemoryOutputArg};
+use clap::{Args, FromArgMatches};
+use std::path::{Path, PathBuf};
+use zoo_export::ExportError;
+use zoo_format::MotionTaskKind;
+use zoo_nn::train_args::{RunArgs, TrainDefaults};
+use zoo_nn::zoo_model::{BoxError, ExportOptions, Exported, Portable, ZooModel};
+
+/// The ARNN (both designs) in the table of models.
+pub struct ArnnModel;
+
+impl ZooModel for ArnnModel {
+    fn kind(&self) -> &'static str {
+        crate::export::MODEL_KIND
+    }
+
+    fn about(&self) -> &'static str {
+        "The keyframe autocompletion network ARNN (Zhang & van de Panne 2018) on the simulated lamp, or the \
+         in-betweening design on humanoid clips"
+    }
+
+    fn purpose(&self) -> &'static str {
+        "completing an animator's keys (`zoo complete`, `zoo bench --layout keys`)"
+    }
+
+    fn task(&self) -> MotionTaskKind {
+        MotionTaskKind::Keyframes
+    }
+
+    fn train_command(&self) -> clap::Command {
+        ArnnArgs::augment_args(clap::Command::new(self.kind()).about(self.about()))
+    }
+
+    fn train(&self, options: &clap::ArgMatches, command: Vec<(String, Vec<String>)>) -> Result<(), BoxError> {
+        let mut a = ArnnArgs::from_arg_matches(options)?;
+        a.run.command = command;
+        train(a)
+    }
+
+    fn export(&self, run: &Path, options: &ExportOptions) -> Result<Exported, ExportError> {
+        let model = crate::export::export_run(run, options)?;
+        let with = "with its metadata".to_string();
+        let what = if crate::inbetween::is_inbetween_run(run) {
+            "ARNN in-betweening whole-shot graph"
+        } else {
+            "ARNN step graph"
+        };
+        Ok(Exported { model, what, with })
+    }
+
+    fn portable(&self, run: &Path, frames: Option<u32>) -> Result<Portable, ExportError> {
+        if crate::inbetween::is_inbetween_run(run) {
+            return Ok(Portable::Refused(
+                "--portable: the in-betweening design's graph runs whole shots of any length through a bidirectional \
+                 GRU, which the portable profile (recurrent layers unrolled over a fixed number of frames) does not \
+                 hold; export it without --portable"
+                    .to_string(),
+            ));
+        }
+        match frames {
+            Some(_) => Err(ExportError::model(
+                "--frames applies to window graphs (RMR); this model's graphs run one frame per call",
+            )),
+            None => Ok(Portable::Step),
+        }
+    }
+}
 
 /// The ARNN's defaults.
 #[derive(Clone)]
@@ -34,15 +97,15 @@ pub struct ArnnArgs {
     #[arg(long, requires = "data")]
     pub valid_glob: Option<String>,
     /// Sequences generated when `--data` is not given.
-    #[arg(long, default_value_t = 24, conflicts_with = "data", allow_hyphen_values = true, value_parser = crate::args::sequences)]
+    #[arg(long, default_value_t = 24, conflicts_with = "data", allow_hyphen_values = true, value_parser = zoo_nn::args::sequences)]
     pub sequences: usize,
     /// Simulated annealing iterations per run for the generated sequences (the paper's
     /// K_max = 1000; fewer is faster and gives hops closer to the hand-set one).
-    #[arg(long, default_value_t = 100, conflicts_with = "data", allow_hyphen_values = true, value_parser = crate::args::anneal_iterations)]
+    #[arg(long, default_value_t = 100, conflicts_with = "data", allow_hyphen_values = true, value_parser = zoo_nn::args::anneal_iterations)]
     pub k_max: usize,
     /// Fraction of the sequences held out as the test set (whole sequences, fixed by `--seed`;
     /// 0.2 gives the paper's 240/60 of 300). The test set also picks the best checkpoint.
-    #[arg(long, default_value_t = 0.2, allow_hyphen_values = true, value_parser = crate::args::unit_fraction, conflicts_with = "valid_glob")]
+    #[arg(long, default_value_t = 0.2, allow_hyphen_values = true, value_parser = zoo_nn::args::unit_fraction, conflicts_with = "valid_glob")]
     pub test_fraction: f64,
     /// Model variant: the ARNN, or a comparison of Table 1 (no curriculum) or Table 2
     /// (no-memory, segregated; parameter counts matched to the ARNN's).
@@ -62,10 +125,10 @@ pub struct ArnnArgs {
     #[arg(long, value_enum, default_value_t = ArnnPreset::Paper)]
     pub preset: ArnnPreset,
     /// Sequences per batch [default: the preset's].
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::batch_size)]
+    #[arg(long, allow_hyphen_values = true, value_parser = zoo_nn::args::batch_size)]
     pub batch_size: Option<usize>,
     /// Adam learning rate [default: the preset's; paper: 1e-3].
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::learning_rate)]
+    #[arg(long, allow_hyphen_values = true, value_parser = zoo_nn::args::learning_rate)]
     pub lr: Option<f64>,
     /// Weight of the ground penalty on the base plate sinking below the ground [default: 0,
     /// off] (docs/arnn.md, "The ground"; `zoo complete` lifts a sunken base onto the ground).
@@ -85,21 +148,21 @@ pub struct ArnnArgs {
 
 /// `--frame-phase`: a fraction in [0, 1).
 fn frame_phase(s: &str) -> Result<f64, String> {
-    crate::args::real_in(s, crate::args::Interval { lo: 0.0, lo_open: false, hi: 1.0, hi_open: true }, "")
+    zoo_nn::args::real_in(s, zoo_nn::args::Interval { lo: 0.0, lo_open: false, hi: 1.0, hi_open: true }, "")
 }
 
 /// `--frame-phase-omega`: a weight in [0, 1].
 fn frame_phase_omega(s: &str) -> Result<f64, String> {
-    crate::args::real_in(s, crate::args::Interval::closed(0.0, 1.0), "")
+    zoo_nn::args::real_in(s, zoo_nn::args::Interval::closed(0.0, 1.0), "")
 }
 
 /// `--ground-weight`: a weight in [0, 1e6].
 fn ground_weight(s: &str) -> Result<f64, String> {
-    crate::args::real_in(s, crate::args::Interval::closed(0.0, 1e6), "")
+    zoo_nn::args::real_in(s, zoo_nn::args::Interval::closed(0.0, 1e6), "")
 }
 
 /// Runs `zoo train arnn`.
-pub fn run(a: ArnnArgs) -> anyhow::Result<()> {
+fn train(a: ArnnArgs) -> Result<(), BoxError> {
     let o = ArnnRunOptions {
         run: a.run.spec(),
         data: a.data,
@@ -117,5 +180,5 @@ pub fn run(a: ArnnArgs) -> anyhow::Result<()> {
         frame_phase: a.frame_phase,
         frame_phase_omega: a.frame_phase_omega,
     };
-    Ok(zoo_arnn::train_run::run(&o, &crate::progress::Bar::new())?)
+    Ok(crate::train_run::run(&o, &zoo_nn::progress::Bar::new())?)
 }

@@ -1,10 +1,55 @@
-//! `zoo train rmr`: train the Recurrent Motion Refiner (Kim et al. 2023) on BVH data or on the
-//! embedded synthetic locomotion ([`zoo_rmr::train_run`]; the pair plans are cached in the run
-//! folder).
+//! The RMR's entry in the table of models ([`zoo_nn::ZooModel`]): `zoo train rmr`'s options,
+//! its training and its export.
 
-use crate::cmd::train_args::{DataArgs, RunArgs, TrainDefaults};
-use clap::Args;
-use zoo_rmr::train_run::{CellArg, RmrPreset, RmrRunOptions};
+use crate::train_run::{CellArg, RmrPreset, RmrRunOptions};
+use clap::{Args, FromArgMatches};
+use std::path::Path;
+use zoo_export::ExportError;
+use zoo_format::MotionTaskKind;
+use zoo_nn::train_args::{DataArgs, RunArgs, TrainDefaults};
+use zoo_nn::zoo_model::{BoxError, ExportOptions, Exported, Portable, ZooModel};
+
+/// The RMR in the table of models.
+pub struct RmrModel;
+
+impl ZooModel for RmrModel {
+    fn kind(&self) -> &'static str {
+        crate::export::MODEL_KIND
+    }
+
+    fn about(&self) -> &'static str {
+        "The Recurrent Motion Refiner for locomotion stitching (Kim et al. 2023)"
+    }
+
+    fn purpose(&self) -> &'static str {
+        "stitching locomotion clips (`zoo stitch`, `zoo bench stitch`)"
+    }
+
+    fn task(&self) -> MotionTaskKind {
+        MotionTaskKind::Stitch
+    }
+
+    fn train_command(&self) -> clap::Command {
+        RmrArgs::augment_args(clap::Command::new(self.kind()).about(self.about()))
+    }
+
+    fn train(&self, options: &clap::ArgMatches, command: Vec<(String, Vec<String>)>) -> Result<(), BoxError> {
+        let mut a = RmrArgs::from_arg_matches(options)?;
+        a.run.command = command;
+        train(a)
+    }
+
+    fn export(&self, run: &Path, options: &ExportOptions) -> Result<Exported, ExportError> {
+        let model = crate::export::export_run(run, options)?;
+        let what = "RMR window refiner";
+        Ok(Exported { model, what, with: "with its configuration and statistics".to_string() })
+    }
+
+    fn portable(&self, run: &Path, frames: Option<u32>) -> Result<Portable, ExportError> {
+        let (frames, source) = crate::export::portable_window(run, frames)?;
+        Ok(Portable::Window(frames, source.to_string()))
+    }
+}
 
 /// The RMR's defaults.
 #[derive(Clone)]
@@ -35,7 +80,7 @@ pub struct RmrArgs {
     #[arg(long, value_enum)]
     pub cell: Option<CellArg>,
     /// Frames of the beginning loss, `T_begin` (Table 2: 3, 5, 10; 0 turns it off) [default: 5].
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::frames_or_zero)]
+    #[arg(long, allow_hyphen_values = true, value_parser = zoo_nn::args::frames_or_zero)]
     pub t_begin: Option<usize>,
     /// Train without the root trajectory loss (the Figure 9 ablation).
     #[arg(long)]
@@ -73,28 +118,28 @@ pub struct RmrArgs {
     #[arg(long, allow_hyphen_values = true, value_parser = seam_weight)]
     pub velocity_weight: Option<f64>,
     /// Units of each recurrent layer, per direction [default: the preset's; paper: 256].
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::layer_width)]
+    #[arg(long, allow_hyphen_values = true, value_parser = zoo_nn::args::layer_width)]
     pub hidden: Option<usize>,
     /// Mini-batch size [default: the preset's; paper: 32].
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::batch_size)]
+    #[arg(long, allow_hyphen_values = true, value_parser = zoo_nn::args::batch_size)]
     pub batch_size: Option<usize>,
     /// Adam learning rate [default: the preset's; paper: 1e-4].
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::learning_rate)]
+    #[arg(long, allow_hyphen_values = true, value_parser = zoo_nn::args::learning_rate)]
     pub lr: Option<f64>,
     /// Database segments start every this many frames (1: every frame, the exact search over
     /// every segment; 2 halves the databases and the planning time) [default: the preset's].
-    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::frame_count)]
+    #[arg(long, allow_hyphen_values = true, value_parser = zoo_nn::args::frame_count)]
     pub database_stride: Option<usize>,
 }
 
 /// `--seam-weight`, `--fk-weight`, `--slide-weight`, `--velocity-weight`: a weight in `[0, 1000]`.
 fn seam_weight(s: &str) -> Result<f64, String> {
-    crate::args::real_in(s, crate::args::Interval::closed(0.0, 1000.0), "")
+    zoo_nn::args::real_in(s, zoo_nn::args::Interval::closed(0.0, 1000.0), "")
 }
 
 /// Runs `zoo train rmr`.
-pub fn run(a: RmrArgs) -> anyhow::Result<()> {
-    let (run, data) = crate::cmd::train_args::specs(&a.run, &a.data, a.exclude_glob.clone())?;
+fn train(a: RmrArgs) -> Result<(), BoxError> {
+    let (run, data) = zoo_nn::train_args::specs(&a.run, &a.data, a.exclude_glob.clone())?;
     let o = RmrRunOptions {
         preset: a.preset,
         cell: a.cell,
@@ -113,5 +158,5 @@ pub fn run(a: RmrArgs) -> anyhow::Result<()> {
         run,
         data,
     };
-    Ok(zoo_rmr::train_run::run(&o, &crate::progress::Bar::new())?)
+    Ok(crate::train_run::run(&o, &zoo_nn::progress::Bar::new())?)
 }

@@ -1,11 +1,12 @@
-//! The options every trainer takes, one clap group ([`RunArgs`]; [`DataArgs`] for the trainers
-//! that read clips), each model's defaults given by [`TrainDefaults`].
+//! The options every trainer takes (`zoo train MODEL`), one clap group ([`RunArgs`];
+//! [`DataArgs`] for the trainers that read clips), each model's defaults given by
+//! [`TrainDefaults`].
 
+use crate::run_folder::RunSpec;
 use clap::Args;
 use std::marker::PhantomData;
 use std::path::PathBuf;
 use zoo_data::dataset::TrainingClips;
-use zoo_nn::run_folder::RunSpec;
 
 /// A trainer's defaults of the shared options, as the command line writes them (clap's
 /// `default_value_t` keeps one static per field across the generic group's instances, so the
@@ -49,7 +50,8 @@ pub struct RunArgs<M: TrainDefaults> {
     /// for a fixed seed and thread count, not across thread counts.
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::training_threads)]
     pub threads: Option<usize>,
-    /// The command's options, recorded in a fresh run's folder (`cmd::train_resume`).
+    /// The command's options, recorded in a fresh run's folder (`zoo train --resume` takes them
+    /// from there).
     #[arg(skip)]
     pub command: Vec<(String, Vec<String>)>,
     #[arg(skip)]
@@ -96,11 +98,10 @@ pub struct DataArgs<M: TrainDefaults> {
 impl<M: TrainDefaults> DataArgs<M> {
     /// The library's data options (`exclude_glob`: the RTN's `--exclude-glob`), after checking
     /// that the synthetic data gives clips.
-    pub fn spec(&self, exclude_glob: Option<String>, seed: u64) -> anyhow::Result<TrainingClips> {
+    pub fn spec(&self, exclude_glob: Option<String>, seed: u64) -> Result<TrainingClips, String> {
         if self.data.is_none() {
             let cfg = zoo_data::synth::SynthConfig::default();
-            crate::args::check_synth_size(("--synth-minutes", self.synth_minutes), cfg.clip_seconds, cfg.fps)
-                .map_err(anyhow::Error::msg)?;
+            crate::args::check_synth_size(("--synth-minutes", self.synth_minutes), cfg.clip_seconds, cfg.fps)?;
         }
         Ok(TrainingClips {
             data: self.data.clone(),
@@ -119,6 +120,6 @@ pub fn specs<M: TrainDefaults>(
     run: &RunArgs<M>,
     data: &DataArgs<M>,
     exclude_glob: Option<String>,
-) -> anyhow::Result<(RunSpec, TrainingClips)> {
+) -> Result<(RunSpec, TrainingClips), String> {
     Ok((run.spec(), data.spec(exclude_glob, run.seed)?))
 }
