@@ -22,8 +22,9 @@ use tract_onnx::tract_hir::prelude::tract_linalg::Func;
 
 /// The ONNX domain of the zoo nodes (in memory only, never written to a file).
 pub(crate) const DOMAIN: &str = "zoo";
-/// A product, its bias and activation: inputs `x [batch, in]` (and a per-character addend),
-/// output `[batch, out]`.
+/// A product, its bias and activation: inputs `x [..., in]` (every axis but the last counts
+/// rows: characters, or frames x characters) and an optional addend of the output's shape,
+/// output `[..., out]`.
 pub(crate) const ZOO_DENSE: &str = "ZooDense";
 /// An LSTM cell: inputs `c [batch, hidden]`, the products' inputs, the addends; outputs `h`, `c`.
 pub(crate) const ZOO_LSTM: &str = "ZooLstmCell";
@@ -173,6 +174,13 @@ fn batch(model: &TypedModel, x: OutletId) -> TractResult<Option<usize>> {
     Ok(model.outlet_fact(x)?.shape.first().and_then(|d| d.to_usize().ok()))
 }
 
+/// The rows of a product's input (every axis but the last: characters, or frames x
+/// characters), when they are concrete.
+fn rows(model: &TypedModel, x: OutletId) -> TractResult<Option<usize>> {
+    let shape = &model.outlet_fact(x)?.shape;
+    Ok(shape.iter().take(shape.len().saturating_sub(1)).map(|d| d.to_usize().ok()).product())
+}
+
 /// A parsed [`ZOO_DENSE`] node: packed into a [`DenseOp`] when a plan is made (the kernel
 /// depends on the batch size).
 #[derive(Clone, Debug)]
@@ -199,10 +207,16 @@ impl Expansion for DenseSpec {
         check_output_arity(outputs, 1)?;
         s.equals(&inputs[0].datum_type, f32::datum_type())?;
         s.equals(&outputs[0].datum_type, f32::datum_type())?;
-        s.equals(&inputs[0].rank, 2)?;
-        s.equals(&outputs[0].rank, 2)?;
-        s.equals(&outputs[0].shape[0], &inputs[0].shape[0])?;
-        s.equals(&outputs[0].shape[1], self.m.to_dim())?;
+        s.equals(&outputs[0].rank, &inputs[0].rank)?;
+        let m = self.m.to_dim();
+        s.given(&inputs[0].rank, move |s, rank| {
+            let rank = rank as usize;
+            ensure!(rank >= 2, "ZooDense on a rank {rank} input");
+            for axis in 0..rank - 1 {
+                s.equals(&outputs[0].shape[axis], &inputs[0].shape[axis])?;
+            }
+            s.equals(&outputs[0].shape[rank - 1], m.clone())
+        })?;
         if self.addend {
             s.equals(&inputs[1].shape, &outputs[0].shape)?;
         }
@@ -210,7 +224,7 @@ impl Expansion for DenseSpec {
     }
 
     fn wire(&self, prefix: &str, model: &mut TypedModel, inputs: &[OutletId]) -> TractResult<TVec<OutletId>> {
-        let product = Product::new(self.m, &self.weights, batch(model, inputs[0])?)?;
+        let product = Product::new(self.m, &self.weights, rows(model, inputs[0])?)?;
         let op = DenseOp { product, bias: self.bias.clone(), alpha: self.alpha.clone(), addend: self.addend };
         model.wire_node(prefix, op, inputs)
     }
@@ -254,9 +268,12 @@ impl EvalOp for DenseOp {
 
     fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
         let p = &self.product;
-        let n = inputs[0].shape()[0];
+        let shape = inputs[0].shape();
+        let n = shape[..shape.len() - 1].iter().product();
         let x = plain_f32(&inputs[0])?;
-        let mut out = Tensor::zero::<f32>(&[n, p.m])?;
+        let mut out_shape: TVec<usize> = shape.into();
+        *out_shape.last_mut().context("ZooDense on a scalar")? = p.m;
+        let mut out = Tensor::zero::<f32>(&out_shape)?;
         if !p.int8() {
             let addend = if self.addend { Some(&*inputs[1]) } else { None };
             p.run_f32(&[x], n, self.bias.as_deref(), addend, self.alpha.as_deref(), &mut out)?;
@@ -284,8 +301,9 @@ impl TypedOp for DenseOp {
     as_op!();
 
     fn output_facts(&self, inputs: &[&TypedFact]) -> TractResult<TVec<TypedFact>> {
-        let n = inputs[0].shape[0].clone();
-        Ok(tvec!(f32::fact([n, self.product.m.to_dim()])))
+        let mut shape: TVec<TDim> = inputs[0].shape.iter().cloned().collect();
+        *shape.last_mut().context("ZooDense on a scalar")? = self.product.m.to_dim();
+        Ok(tvec!(f32::fact(shape)))
     }
 }
 
