@@ -762,8 +762,8 @@ mod peak {
     /// f32 multiply-adds per second (billions) of 8-lane FMAs.
     #[target_feature(enable = "avx2,fma")]
     pub(super) fn fma() -> f64 {
-        let (b, c) = (_mm256_set1_ps(0.999), _mm256_set1_ps(1e-3));
-        let mut a = [_mm256_set1_ps(1.0); 12];
+        let (b, c) = (std::hint::black_box(_mm256_set1_ps(0.999)), std::hint::black_box(_mm256_set1_ps(1e-3)));
+        let mut a = std::hint::black_box([_mm256_set1_ps(1.0); 12]);
         let t = Instant::now();
         for _ in 0..ROUNDS {
             for v in a.iter_mut() {
@@ -779,8 +779,8 @@ mod peak {
     /// 8-bit multiply-adds per second (billions) of 256-bit `vpdpbusd` (32 a call).
     #[target_feature(enable = "avx2,avx512f,avx512vl,avx512vnni")]
     pub(super) fn vnni() -> f64 {
-        let (b, c) = (_mm256_set1_epi8(3), _mm256_set1_epi8(5));
-        let mut a = [_mm256_set1_epi32(1); 12];
+        let (b, c) = (std::hint::black_box(_mm256_set1_epi8(3)), std::hint::black_box(_mm256_set1_epi8(5)));
+        let mut a = std::hint::black_box([_mm256_set1_epi32(1); 12]);
         let t = Instant::now();
         for _ in 0..ROUNDS {
             for v in a.iter_mut() {
@@ -797,8 +797,8 @@ mod peak {
     /// accumulates it (16 a pair).
     #[target_feature(enable = "avx2")]
     pub(super) fn madd() -> f64 {
-        let (b, c) = (_mm256_set1_epi16(3), _mm256_set1_epi16(5));
-        let mut a = [_mm256_set1_epi32(1); 12];
+        let (b, c) = (std::hint::black_box(_mm256_set1_epi16(3)), std::hint::black_box(_mm256_set1_epi16(5)));
+        let mut a = std::hint::black_box([_mm256_set1_epi32(1); 12]);
         let t = Instant::now();
         for _ in 0..ROUNDS {
             for v in a.iter_mut() {

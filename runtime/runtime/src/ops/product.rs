@@ -9,8 +9,9 @@
 //! - int8 (the files `zoo export --weights int8` writes): each character's row of each input is
 //!   quantized and packed in one pass, with exactly the ONNX graph's arithmetic (`s = max(max|x|
 //!   / 127, 1e-30)`, `q = trunc(x / s + 128.5) - 128`, true divisions), the integer product runs
-//!   on tract-linalg's i32 kernel (AVX-512 VNNI where present, AVX2 otherwise), which is exact,
-//!   and [`Product::dequantize`] applies `(acc * channel_scale) * row_scale` as the graph does.
+//!   on tract-linalg's i32 kernel where the CPU has VNNI (or AMX), else on its f32 kernel with
+//!   the integers held as floats (both exact, see [`Product::new`]), and
+//!   [`Product::dequantize`] applies `(acc * channel_scale) * row_scale` as the graph does.
 //!   So the integers are the graph's on every CPU.
 //!
 //! `unsafe` is confined to this file: the calls into tract-linalg's kernel entry point, which
@@ -58,6 +59,8 @@ pub(crate) struct Product {
     /// int8: each input's weights laid out for one character at a time ([`Gemv`]), when
     /// plans may run one character.
     gemv: Vec<Arc<Gemv>>,
+    /// int8 on an f32 kernel, the integers held as floats (exact; CPUs without VNNI).
+    int8_in_f32: bool,
 }
 
 /// int8 weights for a product of one character (a matrix-vector product, which the tiled
@@ -263,10 +266,25 @@ impl Product {
             })
             .collect();
         let k_total: usize = ks.iter().sum();
-        let (acc, k_query) = if int8 { (DatumType::I32, ks.iter().max().copied()) } else { (DatumType::F32, Some(k_total)) };
-        let (kernel, packing, _) = MmmDispatch::native()
-            .pick(&Query { allow_extractor: false, ..Query::plain(acc, Some(m), k_query, n) })
-            .with_context(|| format!("no {acc:?} matrix kernel on this CPU"))?;
+        let pick = |acc: DatumType, k: Option<usize>| {
+            MmmDispatch::native()
+                .pick(&Query { allow_extractor: false, ..Query::plain(acc, Some(m), k, n) })
+                .with_context(|| format!("no {acc:?} matrix kernel on this CPU"))
+        };
+        let (mut kernel, mut packing, _) =
+            if int8 { pick(DatumType::I32, ks.iter().max().copied())? } else { pick(DatumType::F32, Some(k_total))? };
+        // Without VNNI, tract's integer kernels run at a third of its f32 ones (AVX2 widens
+        // the bytes to 16 bits in the loop); the integers are then multiplied in f32, exactly:
+        // both operands are the graph's u8 values less their zero point 128, so in -127..=127
+        // (weights checked when read, activations by construction, `quantize_row`), every
+        // product is a whole number of magnitude at most 127 * 127 and every partial sum of
+        // `k` of them, in whatever order the kernel adds them, is a whole number below 2^24,
+        // which f32 holds exactly (k <= 1040).
+        let int8_in_f32 = int8 && !kernel.name().contains("vnni") && !kernel.name().contains("amx")
+            && ks.iter().all(|k| 127 * 127 * k < 1 << 24);
+        if int8_in_f32 {
+            (kernel, packing, _) = pick(DatumType::F32, ks.iter().max().copied())?;
+        }
         let (pa, _) = &kernel.packings()[packing];
         let mut a = Vec::new();
         let mut scales = Vec::new();
@@ -274,7 +292,12 @@ impl Product {
         if int8 {
             for w in parts {
                 let Weights::I8 { q, scales: s } = w else { bail!("an int8 product mixes f32 weights") };
-                let t = Tensor::from_shape(&[m, q.len() / m], q)?;
+                let t = if int8_in_f32 {
+                    let f: Vec<f32> = q.iter().map(|v| f32::from(*v)).collect();
+                    Tensor::from_shape(&[m, q.len() / m], &f)?
+                } else {
+                    Tensor::from_shape(&[m, q.len() / m], q)?
+                };
                 a.push(Arc::new(pa.prepare_one(&t, 1, 0)?));
                 scales.push(Arc::new(s.clone()));
                 if n.is_none_or(|n| n == 1) {
@@ -294,7 +317,7 @@ impl Product {
             let t = Tensor::from_shape(&[m, k_total], &all)?;
             a.push(Arc::new(pa.prepare_one(&t, 1, 0)?));
         }
-        Ok(Product { m, ks, kernel, packing, a, scales, gemv })
+        Ok(Product { m, ks, kernel, packing, a, scales, gemv, int8_in_f32 })
     }
 
     pub(crate) fn int8(&self) -> bool {
@@ -316,7 +339,7 @@ impl Product {
         leaky: Option<&Tensor>,
         out: &mut Tensor,
     ) -> TractResult<()> {
-        ensure!(!self.int8() && out.shape() == [n, self.m]);
+        ensure!(!self.int8() && out.len() == n * self.m && xs.iter().zip(&self.ks).all(|(x, k)| x.len() == n * k));
         SCRATCH.with_borrow_mut(|s| {
             let (_, pb) = &self.kernel.packings()[self.packing];
             let format = pb.downcast_ref::<PackedFormat>().context("f32 activations in a plain packing")?;
@@ -382,11 +405,49 @@ impl Product {
                     f(i, acc, &s.row_scales, &self.scales[i])?;
                     continue;
                 }
-                let b = packed_i8(&mut s.packed, &**pb, k, n)?;
-                pack_i8(&**pb, b, x, &mut s.row_scales, k, &mut s.row)?;
                 if s.acc.shape() != [n, m] {
                     s.acc = Tensor::zero::<i32>(&[n, m])?;
                 }
+                if self.int8_in_f32 {
+                    let format = pb.downcast_ref::<PackedFormat>().context("f32 activations in a plain packing")?;
+                    s.row.resize(k, 0);
+                    s.quantized.clear();
+                    s.row_scales.clear();
+                    for x in x.chunks_exact(k) {
+                        s.row_scales.push(quantize_row(x, &mut s.row[..k]));
+                        s.quantized.extend(s.row[..k].iter().map(|q| f32::from(*q as i8)));
+                    }
+                    let b = packed(&mut s.packed, format, k, n)?;
+                    pack_f32(format, b, &[&s.quantized], &[k], n)?;
+                    if s.sums.shape() != [n, m] {
+                        s.sums = Tensor::zero::<f32>(&[n, m])?;
+                    }
+                    let space = space(&mut s.spaces, &*self.kernel);
+                    unsafe {
+                        let store = self.kernel.c_from_data_and_strides(4, 1, m as isize);
+                        let sums_view = s.sums.view_mut();
+                        let ops = [
+                            FusedSpec::AddMatMul {
+                                a: AsInputValue::Borrowed(&**self.a[i]),
+                                b: AsInputValue::Borrowed(&*b),
+                                packing: self.packing,
+                            },
+                            FusedSpec::Store(store.wrap(&sums_view)),
+                        ];
+                        self.kernel.run_with_scratch_space(m, n, &mut **space, &ops)?;
+                    }
+                    {
+                        let sums = s.sums.try_as_plain_ram()?.as_slice::<f32>()?;
+                        let mut view = s.acc.try_as_plain_ram_mut()?;
+                        // Whole numbers below 2^24: the conversion is exact.
+                        view.as_slice_mut::<i32>()?.iter_mut().zip(sums).for_each(|(a, v)| *a = *v as i32);
+                    }
+                    let acc = s.acc.try_as_plain_ram()?.as_slice::<i32>()?;
+                    f(i, acc, &s.row_scales, &self.scales[i])?;
+                    continue;
+                }
+                let b = packed_i8(&mut s.packed, &**pb, k, n)?;
+                pack_i8(&**pb, b, x, &mut s.row_scales, k, &mut s.row)?;
                 let space = space(&mut s.spaces, &*self.kernel);
                 unsafe {
                     let store = self.kernel.c_from_data_and_strides(4, 1, m as isize);
@@ -581,10 +642,12 @@ struct Scratch {
     row_scales: Vec<f32>,
     row: Vec<u8>,
     row16: Vec<i16>,
+    quantized: Vec<f32>,
+    sums: Tensor,
 }
 
 thread_local! {
-    static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch { acc: Tensor::default(), ..Default::default() });
+    static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
 }
 
 type PackedBuffers = Vec<(String, usize, usize, EagerPackedInput)>;
