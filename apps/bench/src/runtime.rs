@@ -54,6 +54,27 @@ pub struct BackendFigure {
     pub frames_per_second: f64,
     /// Every round's mean step time, milliseconds.
     pub rounds_ms: Vec<f64>,
+    /// Multiply-adds per second at that median, billions (0 when not counted).
+    pub gmacs: f64,
+    /// `gmacs` as a fraction of this core's peak for the backend's arithmetic (f32 FMA, or
+    /// 8-bit dot products for int8), when measured.
+    pub of_peak: Option<f64>,
+}
+
+/// What one step costs and what the core can do: the roofline of `zoo bench runtime`.
+#[derive(Clone, Debug, Serialize)]
+pub struct Roofline {
+    /// Multiply-adds of the graph's matrix products per character and step.
+    pub macs_per_character: u64,
+    /// Bytes of the weight matrices per width measured, as the files store them.
+    pub weight_bytes: Vec<(String, u64)>,
+    /// f32 multiply-adds per second of one core, billions: 8-lane FMA loops on registers.
+    pub f32_peak_gmacs: Option<f64>,
+    /// 8-bit multiply-adds per second of one core, billions: AVX-512 VNNI's `vpdpbusd` on 256
+    /// bits where the CPU has it, else AVX2's `vpmaddwd` (16-bit pairs).
+    pub int8_peak_gmacs: Option<f64>,
+    /// Which instruction `int8_peak_gmacs` was measured with.
+    pub int8_peak_with: &'static str,
 }
 
 /// A backend under test: one step of the whole batch per call.
@@ -310,8 +331,78 @@ fn make_backends(
         )?;
         ort.label = label("onnxruntime", *width);
         backends.push(Box::new(ort));
+        if *width == WeightWidth::Int8 {
+            // onnxruntime's fastest int8 form of the same model, as its speed reference.
+            let fast = onnxruntime_u8s8(bytes)?;
+            let frame = Frame { names: frame.names.clone(), data: frame.data.clone() };
+            let mut ort = ort_backend(env, &fast, &at_width, frame, states.clone(), batch)?;
+            ort.label = U8S8_LABEL.into();
+            backends.push(Box::new(ort));
+        }
     }
     Ok(backends)
+}
+
+/// The label of onnxruntime on [`onnxruntime_u8s8`]'s form of the int8 file.
+pub const U8S8_LABEL: &str = "onnxruntime int8 u8s8-7bit";
+
+/// onnxruntime's fastest int8 form of an int8 file, a speed reference only: every
+/// `MatMulInteger`'s weights re-quantized to 7 bits (`|q| <= 63`, one scale per output
+/// channel) and stored as s8 with zero point 0, which onnxruntime runs on its u8 x s8 kernels
+/// (2.5-3x its u8 x u8 ones on AVX-512 VNNI) and which stay exact without VNNI (`255 * 63 * 2`
+/// fits the 16-bit pair sums). Not what `zoo export` writes: 7-bit weights cost quality
+/// (docs/runtime.md).
+pub fn onnxruntime_u8s8(bytes: &[u8]) -> Result<Vec<u8>> {
+    use zoo_export::pb::tensor_proto::DataType;
+    let model = zoo_export::OnnxModel::from_bytes(bytes, "the int8 file").map_err(|e| msg!("{e}"))?;
+    let mut proto = model.proto().clone();
+    let Some(graph) = proto.graph.as_mut() else { bail!("the int8 file has no graph") };
+    let zero = "int8.zero_point_s8";
+    graph.initializer.push(zoo_export::pb::TensorProto {
+        name: zero.into(),
+        data_type: DataType::Int8 as i32,
+        raw_data: vec![0],
+        ..Default::default()
+    });
+    let mut done = std::collections::HashSet::new();
+    let nodes = graph.node.clone();
+    for (i, node) in nodes.iter().enumerate() {
+        if node.op_type != "MatMulInteger" || node.input.len() != 4 {
+            continue;
+        }
+        // The weight initializer, directly (`[in, out]`) or through a Transpose (`[out, in]`).
+        let w = &node.input[1];
+        let (init, axis) = match nodes.iter().find(|t| t.op_type == "Transpose" && t.output.first() == Some(w)) {
+            Some(t) => (t.input[0].clone(), 0),
+            None => (w.clone(), 1),
+        };
+        graph.node[i].input[3] = zero.into();
+        if !done.insert(init.clone()) {
+            continue;
+        }
+        let base = init.strip_suffix(".int8").ok_or_else(|| msg!("`{init}` is not an int8 weight"))?;
+        let scale_name = format!("{base}.scale");
+        let t = graph.initializer.iter().find(|t| t.name == init).ok_or_else(|| msg!("no `{init}`"))?.clone();
+        let st = graph.initializer.iter().find(|t| t.name == scale_name).ok_or_else(|| msg!("no `{scale_name}`"))?;
+        let scales: Vec<f32> = st.raw_data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+        let (rows, cols) = (t.dims[0] as usize, t.dims[1] as usize);
+        let channel = |j: usize| if axis == 0 { j / cols } else { j % cols };
+        let w: Vec<f32> = t.raw_data.iter().enumerate().map(|(j, b)| (f32::from(*b) - 128.0) * scales[channel(j)]).collect();
+        let mut max = vec![0f32; scales.len()];
+        for (j, v) in w.iter().enumerate() {
+            max[channel(j)] = max[channel(j)].max(v.abs());
+        }
+        let s7: Vec<f32> = max.iter().map(|m| if *m > 0.0 { m / 63.0 } else { 1.0 }).collect();
+        let q: Vec<u8> =
+            w.iter().enumerate().map(|(j, v)| (v / s7[channel(j)]).round().clamp(-63.0, 63.0) as i8 as u8).collect();
+        debug_assert_eq!(q.len(), rows * cols);
+        let wt = graph.initializer.iter_mut().find(|t| t.name == init).expect("found above");
+        wt.data_type = DataType::Int8 as i32;
+        wt.raw_data = q;
+        let st = graph.initializer.iter_mut().find(|t| t.name == scale_name).expect("found above");
+        st.raw_data = s7.iter().flat_map(|v| v.to_le_bytes()).collect();
+    }
+    Ok(zoo_export::OnnxModel::from_proto(proto).to_bytes())
 }
 
 /// The file's bytes at each width asked (the file as it is when none is asked, or when the one
@@ -581,7 +672,143 @@ impl BackendFigure {
             step_ms,
             frames_per_second: batch as f64 * 1e3 / step_ms,
             rounds_ms,
+            gmacs: 0.0,
+            of_peak: None,
         }
+    }
+
+    /// Sets [`Self::gmacs`] and [`Self::of_peak`] from the roofline.
+    pub fn with_roofline(mut self, r: &Roofline) -> BackendFigure {
+        self.gmacs = r.macs_per_character as f64 * self.frames_per_second / 1e9;
+        let peak = if self.backend.contains("int8") { r.int8_peak_gmacs } else { r.f32_peak_gmacs };
+        self.of_peak = peak.filter(|p| *p > 0.0 && self.gmacs > 0.0).map(|p| self.gmacs / p);
+        self
+    }
+}
+
+/// Multiply-adds per character and step, and weight bytes, of the matrix products of an
+/// exported file (`Gemm`, `MatMul`, `MatMulInteger` on a weight initializer, directly or through
+/// `Cast`, `Transpose` or `DequantizeLinear`; the `W` and `R` of recurrent ops once per step).
+pub fn graph_cost(bytes: &[u8]) -> Result<(u64, u64)> {
+    let model = zoo_export::OnnxModel::from_bytes(bytes, "the file").map_err(|e| msg!("{e}"))?;
+    let Some(graph) = model.proto().graph.as_ref() else { bail!("the file has no graph") };
+    let init = |name: &str| graph.initializer.iter().find(|t| t.name == name);
+    let weight = |name: &str| {
+        let mut name = name.to_string();
+        for _ in 0..3 {
+            if let Some(t) = init(&name) {
+                return (t.dims.len() >= 2).then_some(t);
+            }
+            let through = graph.node.iter().find(|n| {
+                n.output.first() == Some(&name) && matches!(n.op_type.as_str(), "Cast" | "Transpose" | "DequantizeLinear")
+            });
+            name = through?.input.first()?.clone();
+        }
+        None
+    };
+    let (mut macs, mut bytes) = (0u64, 0u64);
+    let mut seen = std::collections::HashSet::new();
+    for n in &graph.node {
+        let slots: &[usize] = match n.op_type.as_str() {
+            "Gemm" | "MatMul" | "MatMulInteger" => &[1],
+            "LSTM" | "GRU" | "RNN" => &[1, 2],
+            _ => &[],
+        };
+        for &slot in slots {
+            let Some(t) = n.input.get(slot).and_then(|i| weight(i)) else { continue };
+            let count: i64 = t.dims.iter().product();
+            macs += count.max(0) as u64;
+            if seen.insert(t.name.clone()) {
+                bytes += if t.raw_data.is_empty() { 4 * count.max(0) as u64 } else { t.raw_data.len() as u64 };
+            }
+        }
+    }
+    Ok((macs, bytes))
+}
+
+/// This core's f32 and 8-bit multiply-add peaks (billions per second) and the instruction of
+/// the latter, measured with loops of 12 independent accumulators held in registers (best of
+/// 3 runs of ~20 ms). `None` off x86-64 or without AVX2/FMA.
+pub fn peaks() -> (Option<f64>, Option<f64>, &'static str) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::is_x86_feature_detected as has;
+        if !(has!("avx2") && has!("fma")) {
+            return (None, None, "none");
+        }
+        let best = |f: &dyn Fn() -> f64| (0..3).map(|_| f()).fold(0f64, f64::max);
+        // SAFETY: each loop runs only where the CPU has the features it is compiled for.
+        #[allow(unsafe_code)]
+        let f32_peak = best(&|| unsafe { peak::fma() });
+        #[allow(unsafe_code)]
+        let (int8, with) = if has!("avx512vnni") && has!("avx512vl") {
+            (best(&|| unsafe { peak::vnni() }), "AVX-512 VNNI vpdpbusd (256-bit)")
+        } else {
+            (best(&|| unsafe { peak::madd() }), "AVX2 vpmaddwd")
+        };
+        (Some(f32_peak), Some(int8), with)
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    (None, None, "none")
+}
+
+#[cfg(target_arch = "x86_64")]
+mod peak {
+    use std::arch::x86_64::*;
+    use std::time::Instant;
+
+    const ROUNDS: usize = 2_000_000;
+
+    /// f32 multiply-adds per second (billions) of 8-lane FMAs.
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) fn fma() -> f64 {
+        let (b, c) = (std::hint::black_box(_mm256_set1_ps(0.999)), std::hint::black_box(_mm256_set1_ps(1e-3)));
+        let mut a = std::hint::black_box([_mm256_set1_ps(1.0); 12]);
+        let t = Instant::now();
+        for _ in 0..ROUNDS {
+            for v in a.iter_mut() {
+                *v = _mm256_fmadd_ps(*v, b, c);
+            }
+        }
+        let secs = t.elapsed().as_secs_f64();
+        let sum = a.iter().fold(_mm256_setzero_ps(), |s, v| _mm256_add_ps(s, *v));
+        std::hint::black_box(sum);
+        (ROUNDS * 12 * 8) as f64 / secs / 1e9
+    }
+
+    /// 8-bit multiply-adds per second (billions) of 256-bit `vpdpbusd` (32 a call).
+    #[target_feature(enable = "avx2,avx512f,avx512vl,avx512vnni")]
+    pub(super) fn vnni() -> f64 {
+        let (b, c) = (std::hint::black_box(_mm256_set1_epi8(3)), std::hint::black_box(_mm256_set1_epi8(5)));
+        let mut a = std::hint::black_box([_mm256_set1_epi32(1); 12]);
+        let t = Instant::now();
+        for _ in 0..ROUNDS {
+            for v in a.iter_mut() {
+                *v = _mm256_dpbusd_epi32(*v, b, c);
+            }
+        }
+        let secs = t.elapsed().as_secs_f64();
+        let sum = a.iter().fold(_mm256_setzero_si256(), |s, v| _mm256_add_epi32(s, *v));
+        std::hint::black_box(sum);
+        (ROUNDS * 12 * 32) as f64 / secs / 1e9
+    }
+
+    /// 16-bit multiply-adds per second (billions) of AVX2's `vpmaddwd` and the `vpaddd` that
+    /// accumulates it (16 a pair).
+    #[target_feature(enable = "avx2")]
+    pub(super) fn madd() -> f64 {
+        let (b, c) = (std::hint::black_box(_mm256_set1_epi16(3)), std::hint::black_box(_mm256_set1_epi16(5)));
+        let mut a = std::hint::black_box([_mm256_set1_epi32(1); 12]);
+        let t = Instant::now();
+        for _ in 0..ROUNDS {
+            for v in a.iter_mut() {
+                *v = _mm256_add_epi32(*v, _mm256_madd_epi16(b, c));
+            }
+        }
+        let secs = t.elapsed().as_secs_f64();
+        let sum = a.iter().fold(_mm256_setzero_si256(), |s, v| _mm256_add_epi32(s, *v));
+        std::hint::black_box(sum);
+        (ROUNDS * 12 * 16) as f64 / secs / 1e9
     }
 }
 
@@ -592,6 +819,8 @@ pub struct RuntimeReport {
     pub header: String,
     /// The figures, one per backend and batch size (the JSON of the command).
     pub figures: Vec<BackendFigure>,
+    /// The step's cost and the core's peaks.
+    pub roofline: Roofline,
 }
 
 /// Runs the benchmark.
@@ -633,21 +862,52 @@ pub fn run(o: &RuntimeOptions, p: &dyn Progress) -> Result<RuntimeReport> {
         agreement.extend(check_agreement(&mut backends)?.into_iter().map(|(b, d, note)| (batch, b, d, note)));
         figures.extend(time_backends(o, &mut backends, batch, p)?);
     }
+    let (macs, _) = graph_cost(&bytes)?;
+    let mut weight_bytes = Vec::new();
+    for (w, b) in &files {
+        weight_bytes.push((w.name().to_string(), graph_cost(b)?.1));
+    }
+    let (f32_peak, int8_peak, with) = peaks();
+    let roofline = Roofline {
+        macs_per_character: macs,
+        weight_bytes,
+        f32_peak_gmacs: f32_peak,
+        int8_peak_gmacs: int8_peak,
+        int8_peak_with: with,
+    };
+    let figures: Vec<BackendFigure> = figures.into_iter().map(|f| f.with_roofline(&roofline)).collect();
     let notes: Vec<&str> = agreement.iter().filter_map(|(_, _, _, note)| note.as_deref()).collect();
     let agreement: Vec<String> = agreement.iter().map(|(b, n, d, _)| format!("{n} at batch {b}: {d:.1e}")).collect();
     let mut header = format!("{header}\nfirst step, max abs difference from tract f32: {}", agreement.join(", "));
     for note in notes {
         header += &format!("\nnote: {note}");
     }
-    Ok(RuntimeReport { header, figures })
+    header += &format!("\n{}", roofline_line(&roofline));
+    Ok(RuntimeReport { header, figures, roofline })
+}
+
+/// The roofline in one line.
+pub fn roofline_line(r: &Roofline) -> String {
+    let mb: Vec<String> = r.weight_bytes.iter().map(|(w, b)| format!("{w} {:.1} MB", *b as f64 / 1e6)).collect();
+    let gm = |p: Option<f64>| p.map_or("not measured".to_string(), |p| format!("{p:.0} GMAC/s"));
+    format!(
+        "roofline: {:.2} M multiply-adds per character and step; weights {}; this core's peak (one thread, \
+         measured): f32 FMA {}, 8-bit {} ({}); `of peak` below is each backend's multiply-adds per second over \
+         the peak of its arithmetic",
+        r.macs_per_character as f64 / 1e6,
+        mb.join(", "),
+        gm(r.f32_peak_gmacs),
+        gm(r.int8_peak_gmacs),
+        r.int8_peak_with
+    )
 }
 
 /// The figures as a text table with ratios to onnxruntime.
 pub fn table(figures: &[BackendFigure], rounds: usize, work: usize) -> String {
     let mut s = format!(
         "median of {rounds} rounds, ~{work} character-steps per backend per round\n\
-         {:<6} {:<18} {:>12} {:>16} {:>12} {:>14}\n",
-        "batch", "backend", "step (ms)", "frames/s", "time/ort", "throughput/ort"
+         {:<6} {:<27} {:>12} {:>16} {:>12} {:>14} {:>8} {:>8}\n",
+        "batch", "backend", "step (ms)", "frames/s", "time/ort", "throughput/ort", "GMAC/s", "of peak"
     );
     for f in figures {
         let ort = figures
@@ -656,9 +916,10 @@ pub fn table(figures: &[BackendFigure], rounds: usize, work: usize) -> String {
             .or_else(|| figures.iter().find(|g| g.batch == f.batch && g.backend.starts_with("onnxruntime")));
         let (rt, rf) =
             ort.map_or((f64::NAN, f64::NAN), |o| (f.step_ms / o.step_ms, f.frames_per_second / o.frames_per_second));
+        let peak = f.of_peak.map_or("-".to_string(), |p| format!("{:.0}%", 100.0 * p));
         s += &format!(
-            "{:<6} {:<18} {:>12.4} {:>16.0} {:>11.2}x {:>13.2}x\n",
-            f.batch, f.backend, f.step_ms, f.frames_per_second, rt, rf
+            "{:<6} {:<27} {:>12.4} {:>16.0} {:>11.2}x {:>13.2}x {:>8.1} {:>8}\n",
+            f.batch, f.backend, f.step_ms, f.frames_per_second, rt, rf, f.gmacs, peak
         );
     }
     s

@@ -17,7 +17,9 @@ fn main() -> TractResult<()> {
     let steps: usize = args.get(3).map_or(2000, |s| s.parse().expect("steps"));
     let bytes = std::fs::read(path)?;
     let proto = <tract_onnx::pb::ModelProto as prost::Message>::decode(bytes.as_slice())?;
-    let mut model = tract_onnx::onnx().model_for_proto_model(&proto)?;
+    // Through the runtime's loader (its load-time rewrite included; `ZOO_RUNTIME_FUSE=0` for
+    // the graph as written).
+    let mut model = zoo_runtime::model::tract_graph(&bytes)?;
     let mut widths = Vec::new();
     for (i, v) in proto.graph.as_ref().expect("graph").input.iter().enumerate() {
         use tract_onnx::pb::tensor_shape_proto::dimension::Value;
@@ -58,7 +60,8 @@ fn main() -> TractResult<()> {
         state.run_plan_with_eval(inputs.clone(), |ctx, op_state, node, input| {
             let t = Instant::now();
             let r = eval(ctx, op_state, node, input);
-            let e = per_node.entry(format!("{} ({})", node.name, node.op().name())).or_default();
+            let info = node.op().info().unwrap_or_default().join("; ");
+            let e = per_node.entry(format!("{} ({}) {info}", node.name, node.op().name())).or_default();
             e.0 += t.elapsed().as_secs_f64();
             e.1 += 1;
             r
@@ -68,7 +71,7 @@ fn main() -> TractResult<()> {
     rows.sort_by(|a, b| b.1.0.total_cmp(&a.1.0));
     let total: f64 = rows.iter().map(|r| r.1.0).sum::<f64>() / steps as f64;
     println!("batch {batch}: plain run {:.1} us/step; sum of node times {:.1} us/step", plain * 1e6, total * 1e6);
-    for (name, (t, _)) in rows.iter().take(25) {
+    for (name, (t, _)) in rows.iter().take(usize::MAX) {
         println!("{:>9.2} us  {name}", t / steps as f64 * 1e6);
     }
     Ok(())

@@ -35,6 +35,7 @@ pub mod loaded;
 /// The exported file format: the `zoo-format` crate.
 pub use zoo_format as metadata;
 pub mod model;
+mod ops;
 pub mod portable;
 pub mod pose;
 pub mod reference;

@@ -199,10 +199,27 @@ pub(crate) fn read_graph(bytes: &[u8], origin: &str) -> Result<(pb::ModelProto, 
     check_names(graph).map_err(not_onnx)?;
     // tract 0.23.9 panics on some malformed graphs (found by `fuzz/fuzz_targets/model_load.rs`);
     // `check_names` refuses the known ones first, and a panic left is reported as an error.
-    let model = std::panic::catch_unwind(|| tract_onnx::onnx().model_for_proto_model(&proto))
-        .map_err(|_| not_onnx("tract could not read the graph (it panicked on it)".into()))?
-        .map_err(|e| MotionError::Unsupported { reason: chain(&e) })?;
+    let read = |p: &pb::ModelProto| {
+        std::panic::catch_unwind(|| crate::ops::onnx().model_for_proto_model(p))
+            .map_err(|_| not_onnx("tract could not read the graph (it panicked on it)".into()))?
+            .map_err(|e| MotionError::Unsupported { reason: chain(&e) })
+    };
+    // The products and LSTM cells as zoo ops (`crate::ops`); the graph as written when the
+    // rewrite is off or its result does not read.
+    let fused = crate::ops::enabled().then(|| crate::ops::fuse(&proto)).flatten();
+    let model = match fused.as_ref().map(read) {
+        Some(Ok(model)) => model,
+        _ => read(&proto)?,
+    };
     Ok((proto, model))
+}
+
+/// The tract model the runtime plans for an exported file's main graph (after the load-time
+/// rewrite of [`crate::ops`]): for tools that profile a step graph (`examples/profile_step.rs`),
+/// not part of the engine API.
+#[doc(hidden)]
+pub fn tract_graph(bytes: &[u8]) -> Result<InferenceModel, MotionError> {
+    Ok(read_graph(bytes, "the given bytes")?.1)
 }
 
 /// Refuses a graph whose outputs or node inputs name a value that no graph input,

@@ -1,0 +1,455 @@
+//! zoo's own tract ops and the load-time rewrite that uses them.
+//!
+//! When a file is loaded, [`rewrite::rewrite`] replaces the matrix products of its graphs
+//! (f32, f16 or int8, as `zoo export` writes them) by [`ZOO_DENSE`] nodes (a product, its bias,
+//! its LeakyReLU) and its LSTM cells by [`ZOO_LSTM`] nodes (the gate products, the gate
+//! nonlinearities and the state update), which [`onnx`] parses into [`DenseOp`] and [`LstmOp`].
+//! Both run their products on tract-linalg's kernels ([`product`]): one kernel call for the
+//! sum of an LSTM's gate products in f32, the int8 products quantized and packed in one pass
+//! and run on the integer kernels. The file itself stays standard ONNX; set
+//! `ZOO_RUNTIME_FUSE=0` to run the graph as written (for comparisons).
+
+mod product;
+pub(crate) mod rewrite;
+
+use product::{Product, Weights};
+use std::sync::Arc;
+use tract_onnx::model::ParsingContext;
+use tract_onnx::pb;
+use tract_onnx::tract_core::{as_op, op_as_typed_op, op_out_of_plan};
+use tract_onnx::tract_hir::internal::*;
+use tract_onnx::tract_hir::prelude::tract_linalg::Func;
+
+/// The ONNX domain of the zoo nodes (in memory only, never written to a file).
+pub(crate) const DOMAIN: &str = "zoo";
+/// A product, its bias and activation: inputs `x [..., in]` (every axis but the last counts
+/// rows: characters, or frames x characters) and an optional addend of the output's shape,
+/// output `[..., out]`.
+pub(crate) const ZOO_DENSE: &str = "ZooDense";
+/// An LSTM cell: inputs `c [batch, hidden]`, the products' inputs, the addends; outputs `h`, `c`.
+pub(crate) const ZOO_LSTM: &str = "ZooLstmCell";
+
+/// Whether loads rewrite graphs (`ZOO_RUNTIME_FUSE=0` turns it off).
+pub(crate) fn enabled() -> bool {
+    std::env::var("ZOO_RUNTIME_FUSE").map_or(true, |v| v != "0")
+}
+
+/// `proto` with its products and LSTM cells as zoo nodes, or `None` when it has none.
+pub(crate) fn fuse(proto: &pb::ModelProto) -> Option<pb::ModelProto> {
+    let graph = rewrite::rewrite(proto.graph.as_ref()?)?;
+    let mut out = proto.clone();
+    out.graph = Some(graph);
+    out.opset_import.push(pb::OperatorSetIdProto { domain: DOMAIN.into(), version: 1 });
+    Some(out)
+}
+
+/// tract's ONNX parser with the zoo ops.
+pub(crate) fn onnx() -> tract_onnx::Onnx {
+    let mut onnx = tract_onnx::onnx();
+    onnx.op_register.insert(ZOO_DENSE, parse_dense);
+    onnx.op_register.insert(ZOO_LSTM, parse_lstm);
+    onnx
+}
+
+pub(crate) mod attr {
+    use tract_onnx::pb;
+    type T = pb::attribute_proto::AttributeType;
+
+    fn a(name: &str, t: T) -> pb::AttributeProto {
+        pb::AttributeProto { name: name.into(), r#type: t as i32, ..Default::default() }
+    }
+    pub(crate) fn string(name: &str, v: &str) -> pb::AttributeProto {
+        pb::AttributeProto { s: v.as_bytes().to_vec(), ..a(name, T::String) }
+    }
+    pub(crate) fn strings<'v>(name: &str, v: impl Iterator<Item = &'v str>) -> pb::AttributeProto {
+        pb::AttributeProto { strings: v.map(|s| s.as_bytes().to_vec()).collect(), ..a(name, T::Strings) }
+    }
+    pub(crate) fn int(name: &str, v: i64) -> pb::AttributeProto {
+        pb::AttributeProto { i: v, ..a(name, T::Int) }
+    }
+    pub(crate) fn ints(name: &str, v: impl Iterator<Item = i64>) -> pb::AttributeProto {
+        pb::AttributeProto { ints: v.collect(), ..a(name, T::Ints) }
+    }
+    pub(crate) fn float(name: &str, v: f32) -> pb::AttributeProto {
+        pb::AttributeProto { f: v, ..a(name, T::Float) }
+    }
+}
+
+/// The f32 values of an f32 or f16 initializer.
+pub(crate) fn tensor_f32(t: &pb::TensorProto) -> Option<Vec<f32>> {
+    type Dt = pb::tensor_proto::DataType;
+    if t.data_type == Dt::Float as i32 {
+        Some(if t.raw_data.is_empty() {
+            t.float_data.clone()
+        } else {
+            t.raw_data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
+        })
+    } else if t.data_type == Dt::Float16 as i32 {
+        Some(if t.raw_data.is_empty() {
+            t.int32_data.iter().map(|v| f16::from_bits(*v as u16).to_f32()).collect()
+        } else {
+            t.raw_data.chunks_exact(2).map(|b| f16::from_le_bytes([b[0], b[1]]).to_f32()).collect()
+        })
+    } else {
+        None
+    }
+}
+
+fn node_attr<'n>(node: &'n pb::NodeProto, name: &str) -> Option<&'n pb::AttributeProto> {
+    node.attribute.iter().find(|a| a.name == name)
+}
+
+fn init<'c>(ctx: &'c ParsingContext, name: &str) -> TractResult<&'c pb::TensorProto> {
+    ctx.model
+        .graph
+        .as_ref()
+        .and_then(|g| g.initializer.iter().find(|t| t.name == name))
+        .with_context(|| format!("initializer `{name}` not found"))
+}
+
+/// The weights named by a zoo node, each `[out, in]`.
+fn weights(ctx: &ParsingContext, node: &pb::NodeProto) -> TractResult<(usize, Vec<Weights>)> {
+    let names = &node_attr(node, "weights").context("no weights")?.strings;
+    let transposed = &node_attr(node, "transposed").context("no layouts")?.ints;
+    let scales = node_attr(node, "scales").map(|a| &a.strings);
+    let mut m = None;
+    let mut out = Vec::new();
+    for (i, name) in names.iter().enumerate() {
+        let t = init(ctx, &String::from_utf8_lossy(name))?;
+        let d: Vec<usize> = t.dims.iter().map(|d| (*d).max(0) as usize).collect();
+        ensure!(d.len() == 2, "weight `{}` is not a matrix", t.name);
+        let (rows, cols, t_in) = if transposed[i] == 1 { (d[0], d[1], false) } else { (d[1], d[0], true) };
+        ensure!(m.is_none_or(|m| m == rows), "the weights of `{}` have different outputs", node.name);
+        m = Some(rows);
+        // `[out, in]` from `[in, out]` when stored the other way.
+        let at = |j: usize| {
+            let (o, i) = (j / cols, j % cols);
+            if t_in { i * rows + o } else { o * cols + i }
+        };
+        if let Some(scales) = scales {
+            let s = tensor_f32(init(ctx, &String::from_utf8_lossy(&scales[i]))?).context("scales are not f32")?;
+            ensure!(s.len() == rows, "`{}` has {} scales for {rows} channels", t.name, s.len());
+            ensure!(t.raw_data.len() == rows * cols, "int8 weight `{}` is not raw u8", t.name);
+            let q: Vec<i8> = t.raw_data.iter().map(|b| (i16::from(*b) - 128) as i8).collect();
+            ensure!(q.iter().all(|v| *v >= -127), "int8 weight `{}` holds -128", t.name);
+            out.push(Weights::I8 { q: (0..rows * cols).map(|j| q[at(j)]).collect(), scales: s });
+        } else {
+            let v = tensor_f32(t).context("weights are not f32 or f16")?;
+            out.push(Weights::F32((0..rows * cols).map(|j| v[at(j)]).collect()));
+        }
+    }
+    Ok((m.context("no weights")?, out))
+}
+
+fn bias(ctx: &ParsingContext, node: &pb::NodeProto, m: usize) -> TractResult<Option<Arc<Tensor>>> {
+    let Some(a) = node_attr(node, "bias") else { return Ok(None) };
+    let v = tensor_f32(init(ctx, &String::from_utf8_lossy(&a.s))?).context("bias is not f32")?;
+    ensure!(v.len() == m, "bias of `{}` has {} values for {m} outputs", node.name, v.len());
+    Ok(Some(Arc::new(tensor1(&v))))
+}
+
+fn parse_dense(ctx: &ParsingContext, node: &pb::NodeProto) -> TractResult<(Box<dyn InferenceOp>, Vec<String>)> {
+    let (m, w) = weights(ctx, node)?;
+    let spec = DenseSpec {
+        m,
+        weights: Arc::new(w),
+        bias: bias(ctx, node, m)?,
+        alpha: node_attr(node, "alpha").map(|a| Arc::new(tensor0(a.f))),
+        addend: node.input.len() > 1,
+    };
+    Ok((expand(spec), vec![]))
+}
+
+fn parse_lstm(ctx: &ParsingContext, node: &pb::NodeProto) -> TractResult<(Box<dyn InferenceOp>, Vec<String>)> {
+    let (m, w) = weights(ctx, node)?;
+    ensure!(m % 4 == 0, "`{}`: {m} gate rows is not 4 blocks", node.name);
+    let addends = node_attr(node, "addends").map_or(0, |a| a.i as usize);
+    ensure!(node.input.len() == 1 + w.len() + addends, "`{}`: wrong input count", node.name);
+    let spec = LstmSpec { hidden: m / 4, weights: Arc::new(w), bias: bias(ctx, node, m)?, addends };
+    Ok((expand(spec), vec![]))
+}
+
+/// The batch size of a plan, when it is concrete.
+fn batch(model: &TypedModel, x: OutletId) -> TractResult<Option<usize>> {
+    Ok(model.outlet_fact(x)?.shape.first().and_then(|d| d.to_usize().ok()))
+}
+
+/// The rows of a product's input (every axis but the last: characters, or frames x
+/// characters), when they are concrete.
+fn rows(model: &TypedModel, x: OutletId) -> TractResult<Option<usize>> {
+    let shape = &model.outlet_fact(x)?.shape;
+    Ok(shape.iter().take(shape.len().saturating_sub(1)).map(|d| d.to_usize().ok()).product())
+}
+
+/// A parsed [`ZOO_DENSE`] node: packed into a [`DenseOp`] when a plan is made (the kernel
+/// depends on the batch size).
+#[derive(Clone, Debug)]
+struct DenseSpec {
+    m: usize,
+    weights: Arc<Vec<Weights>>,
+    bias: Option<Arc<Tensor>>,
+    alpha: Option<Arc<Tensor>>,
+    addend: bool,
+}
+
+impl Expansion for DenseSpec {
+    fn name(&self) -> StaticName {
+        "ZooDense".into()
+    }
+
+    fn rules<'r, 'p: 'r, 's: 'r>(
+        &'s self,
+        s: &mut Solver<'r>,
+        inputs: &'p [TensorProxy],
+        outputs: &'p [TensorProxy],
+    ) -> InferenceResult {
+        check_input_arity(inputs, 1 + self.addend as usize)?;
+        check_output_arity(outputs, 1)?;
+        s.equals(&inputs[0].datum_type, f32::datum_type())?;
+        s.equals(&outputs[0].datum_type, f32::datum_type())?;
+        s.equals(&outputs[0].rank, &inputs[0].rank)?;
+        let m = self.m.to_dim();
+        s.given(&inputs[0].rank, move |s, rank| {
+            let rank = rank as usize;
+            ensure!(rank >= 2, "ZooDense on a rank {rank} input");
+            for axis in 0..rank - 1 {
+                s.equals(&outputs[0].shape[axis], &inputs[0].shape[axis])?;
+            }
+            s.equals(&outputs[0].shape[rank - 1], m.clone())
+        })?;
+        if self.addend {
+            s.equals(&inputs[1].shape, &outputs[0].shape)?;
+        }
+        Ok(())
+    }
+
+    fn wire(&self, prefix: &str, model: &mut TypedModel, inputs: &[OutletId]) -> TractResult<TVec<OutletId>> {
+        let product = Product::new(self.m, &self.weights, rows(model, inputs[0])?)?;
+        let op = DenseOp { product, bias: self.bias.clone(), alpha: self.alpha.clone(), addend: self.addend };
+        model.wire_node(prefix, op, inputs)
+    }
+}
+
+/// A product, its bias, a per-character addend and a LeakyReLU, on one tract-linalg kernel.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct DenseOp {
+    product: Product,
+    bias: Option<Arc<Tensor>>,
+    alpha: Option<Arc<Tensor>>,
+    addend: bool,
+}
+
+fn plain_f32(t: &TValue) -> TractResult<&[f32]> {
+    t.try_as_plain_ram()?.as_slice::<f32>()
+}
+
+impl Op for DenseOp {
+    fn name(&self) -> StaticName {
+        "ZooDense".into()
+    }
+
+    fn info(&self) -> TractResult<Vec<String>> {
+        let p = &self.product;
+        Ok(vec![format!(
+            "{} x {:?} {} on {}{}",
+            p.m,
+            p.ks,
+            if p.int8() { "int8" } else { "f32" },
+            p.kernel_name(),
+            if self.alpha.is_some() { ", LeakyReLU" } else { "" }
+        )])
+    }
+
+    op_as_typed_op!();
+}
+
+impl EvalOp for DenseOp {
+    op_out_of_plan!();
+
+    fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
+        let p = &self.product;
+        let shape = inputs[0].shape();
+        let n = shape[..shape.len() - 1].iter().product();
+        let x = plain_f32(&inputs[0])?;
+        let mut out_shape: TVec<usize> = shape.into();
+        *out_shape.last_mut().context("ZooDense on a scalar")? = p.m;
+        let mut out = Tensor::zero::<f32>(&out_shape)?;
+        if !p.int8() {
+            let addend = if self.addend { Some(&*inputs[1]) } else { None };
+            p.run_f32(&[x], n, self.bias.as_deref(), addend, self.alpha.as_deref(), &mut out)?;
+        } else {
+            let mut view = out.try_as_plain_ram_mut()?;
+            let o = view.as_slice_mut::<f32>()?;
+            let bias = self.bias.as_ref().map(|b| b.try_as_plain_ram()?.as_slice::<f32>()).transpose()?;
+            p.run_i8(&[x], n, |_, acc, rows, channels| {
+                Product::dequantize(acc, rows, channels, bias, o, false);
+                Ok(())
+            })?;
+            if self.addend {
+                o.iter_mut().zip(plain_f32(&inputs[1])?).for_each(|(o, a)| *o += a);
+            }
+            if let Some(alpha) = &self.alpha {
+                let alpha = alpha.try_as_plain_ram()?.as_slice::<f32>()?[0];
+                o.iter_mut().for_each(|v| *v = if *v < 0.0 { *v * alpha } else { *v });
+            }
+        }
+        Ok(tvec!(out.into_tvalue()))
+    }
+}
+
+impl TypedOp for DenseOp {
+    as_op!();
+
+    fn output_facts(&self, inputs: &[&TypedFact]) -> TractResult<TVec<TypedFact>> {
+        let mut shape: TVec<TDim> = inputs[0].shape.iter().cloned().collect();
+        *shape.last_mut().context("ZooDense on a scalar")? = self.product.m.to_dim();
+        Ok(tvec!(f32::fact(shape)))
+    }
+}
+
+/// A parsed [`ZOO_LSTM`] node.
+#[derive(Clone, Debug)]
+struct LstmSpec {
+    hidden: usize,
+    weights: Arc<Vec<Weights>>,
+    bias: Option<Arc<Tensor>>,
+    addends: usize,
+}
+
+impl Expansion for LstmSpec {
+    fn name(&self) -> StaticName {
+        "ZooLstmCell".into()
+    }
+
+    fn nboutputs(&self) -> TractResult<usize> {
+        Ok(2)
+    }
+
+    fn rules<'r, 'p: 'r, 's: 'r>(
+        &'s self,
+        s: &mut Solver<'r>,
+        inputs: &'p [TensorProxy],
+        outputs: &'p [TensorProxy],
+    ) -> InferenceResult {
+        check_input_arity(inputs, 1 + self.weights.len() + self.addends)?;
+        check_output_arity(outputs, 2)?;
+        for o in outputs {
+            s.equals(&o.datum_type, f32::datum_type())?;
+            s.equals(&o.shape, &inputs[0].shape)?;
+        }
+        s.equals(&inputs[0].rank, 2)?;
+        s.equals(&inputs[0].shape[1], self.hidden.to_dim())?;
+        Ok(())
+    }
+
+    fn wire(&self, prefix: &str, model: &mut TypedModel, inputs: &[OutletId]) -> TractResult<TVec<OutletId>> {
+        let product = Product::new(4 * self.hidden, &self.weights, batch(model, inputs[0])?)?;
+        let op = LstmOp { product, hidden: self.hidden, bias: self.bias.clone(), addends: self.addends };
+        model.wire_node(prefix, op, inputs)
+    }
+}
+
+/// An LSTM cell (gates in the order i, f, g, o): the sum of its gate products, biases and
+/// addends, `i, f, o = sigmoid`, `g = tanh`, `c' = f * c + i * g`, `h' = o * tanh(c')`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct LstmOp {
+    product: Product,
+    hidden: usize,
+    bias: Option<Arc<Tensor>>,
+    addends: usize,
+}
+
+thread_local! {
+    /// The gate pre-activations of the last call on this thread, reused.
+    static GATES: std::cell::RefCell<Tensor> = std::cell::RefCell::new(Tensor::default());
+}
+
+impl Op for LstmOp {
+    fn name(&self) -> StaticName {
+        "ZooLstmCell".into()
+    }
+
+    fn info(&self) -> TractResult<Vec<String>> {
+        let p = &self.product;
+        Ok(vec![format!(
+            "hidden {} over {:?} {} on {}",
+            self.hidden,
+            p.ks,
+            if p.int8() { "int8" } else { "f32" },
+            p.kernel_name()
+        )])
+    }
+
+    op_as_typed_op!();
+}
+
+impl EvalOp for LstmOp {
+    op_out_of_plan!();
+
+    fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
+        let (p, h) = (&self.product, self.hidden);
+        let n = inputs[0].shape()[0];
+        let terms = p.ks.len();
+        let xs: TVec<&[f32]> = inputs[1..1 + terms].iter().map(plain_f32).collect::<TractResult<_>>()?;
+        let addends = &inputs[1 + terms..];
+        GATES.with_borrow_mut(|gates| {
+            if gates.shape() != [n, 4 * h] {
+                *gates = Tensor::zero::<f32>(&[n, 4 * h])?;
+            }
+            let mut rest = addends;
+            if !p.int8() {
+                let first = addends.first().map(|t| &**t);
+                p.run_f32(&xs, n, self.bias.as_deref(), first, None, gates)?;
+                rest = addends.get(1..).unwrap_or_default();
+            }
+            let mut view = gates.try_as_plain_ram_mut()?;
+            let z = view.as_slice_mut::<f32>()?;
+            if p.int8() {
+                let bias = self.bias.as_ref().map(|b| b.try_as_plain_ram()?.as_slice::<f32>()).transpose()?;
+                p.run_i8(&xs, n, |i, acc, rows, channels| {
+                    Product::dequantize(acc, rows, channels, if i == 0 { bias } else { None }, z, i > 0);
+                    Ok(())
+                })?;
+            }
+            for a in rest {
+                z.iter_mut().zip(plain_f32(a)?).for_each(|(o, a)| *o += a);
+            }
+            let sigmoid = Func::Sigmoid.ew_f32()?;
+            let tanh = Func::Tanh.ew_f32()?;
+            let c_prev = plain_f32(&inputs[0])?;
+            let mut h_out = Tensor::zero::<f32>(&[n, h])?;
+            let mut c_out = Tensor::zero::<f32>(&[n, h])?;
+            {
+                let mut hv = h_out.try_as_plain_ram_mut()?;
+                let hs = hv.as_slice_mut::<f32>()?;
+                let mut cv = c_out.try_as_plain_ram_mut()?;
+                let cs = cv.as_slice_mut::<f32>()?;
+                for (r, row) in z.chunks_exact_mut(4 * h).enumerate() {
+                    let (ifg, o) = row.split_at_mut(3 * h);
+                    let (if_, g) = ifg.split_at_mut(2 * h);
+                    sigmoid.run(if_)?;
+                    tanh.run(g)?;
+                    sigmoid.run(o)?;
+                    let (i, f) = if_.split_at(h);
+                    let (cp, c, hh) = (&c_prev[r * h..][..h], &mut cs[r * h..][..h], &mut hs[r * h..][..h]);
+                    for j in 0..h {
+                        c[j] = f[j] * cp[j] + i[j] * g[j];
+                    }
+                    hh.copy_from_slice(c);
+                    tanh.run(hh)?;
+                    hh.iter_mut().zip(o.iter()).for_each(|(v, o)| *v *= o);
+                }
+            }
+            Ok(tvec!(h_out.into_tvalue(), c_out.into_tvalue()))
+        })
+    }
+}
+
+impl TypedOp for LstmOp {
+    as_op!();
+
+    fn output_facts(&self, inputs: &[&TypedFact]) -> TractResult<TVec<TypedFact>> {
+        let fact = f32::fact(inputs[0].shape.clone());
+        Ok(tvec!(fact.clone(), fact))
+    }
+}

@@ -1,0 +1,706 @@
+//! One matrix product of the zoo ops, `y[c, o] = sum_i x[c, i] * w[o, i]` for the characters
+//! `c` of a call, on tract-linalg's kernels: the weights are packed once (when a plan is made),
+//! the activations packed per call into a buffer kept between calls, and the kernel run with
+//! its fused output stage.
+//!
+//! - f32: the activations of several inputs are packed side by side along `i`, so one kernel
+//!   call computes a sum of products (an LSTM's gate pre-activations) and the bias, a
+//!   per-character addend and a LeakyReLU run in the kernel's output stage.
+//! - int8 (the files `zoo export --weights int8` writes): each character's row of each input is
+//!   quantized and packed in one pass, with exactly the ONNX graph's arithmetic (`s = max(max|x|
+//!   / 127, 1e-30)`, `q = trunc(x / s + 128.5) - 128`, true divisions), the integer product runs
+//!   on tract-linalg's i32 kernel where the CPU has VNNI (or AMX), else on its f32 kernel with
+//!   the integers held as floats (both exact, see [`Product::new`]), and
+//!   [`Product::dequantize`] applies `(acc * channel_scale) * row_scale` as the graph does.
+//!   So the integers are the graph's on every CPU.
+//!
+//! `unsafe` is confined to this file: the calls into tract-linalg's kernel entry point, which
+//! read the packed operands and write the output through raw pointers (the contract tract's own
+//! matmul op keeps): every operand is sized for the `m`, `k`, `n` passed here and outlives the
+//! call.
+#![allow(unsafe_code)]
+
+use std::cell::RefCell;
+use std::sync::Arc;
+use tract_onnx::prelude::tract_linalg::mmm::{
+    AsInputValue, EagerPackedInput, FusedSpec, MMMInputFormat, MMMInputValue, MatMatMul, Query, ScratchSpace,
+};
+use tract_onnx::prelude::tract_linalg::pack::{PackedFormat, PackedI8K4};
+use tract_onnx::prelude::tract_linalg::{BinOp, MmmDispatch};
+use tract_onnx::tract_core::internal::*;
+
+/// The largest activation of a row maps to this integer.
+const Q_MAX: f32 = 127.0;
+/// The smallest row scale (an all-zero row quantizes to zeros).
+const MIN_SCALE: f32 = 1e-30;
+
+/// Weights in one of the two arithmetics.
+#[derive(Clone, Debug)]
+pub(crate) enum Weights {
+    /// `[out, in]` f32.
+    F32(Vec<f32>),
+    /// `[out, in]` integers in -127..=127 and one scale per output channel.
+    I8 { q: Vec<i8>, scales: Vec<f32> },
+}
+
+/// The kernel, its packing and the packed weights of a product.
+#[derive(Clone, Debug)]
+pub(crate) struct Product {
+    /// Output channels.
+    pub(crate) m: usize,
+    /// Width of each input (the `in` of each weight part).
+    pub(crate) ks: Vec<usize>,
+    kernel: Box<dyn MatMatMul>,
+    packing: usize,
+    /// f32: one packed matrix over all inputs; int8: one per input.
+    a: Vec<Arc<Box<dyn MMMInputValue>>>,
+    /// int8: the channel scales of each input's weights.
+    scales: Vec<Arc<Vec<f32>>>,
+    /// int8: each input's weights laid out for one character at a time ([`Gemv`]), when
+    /// plans may run one character.
+    gemv: Vec<Arc<Gemv>>,
+    /// int8 on an f32 kernel, the integers held as floats (exact; CPUs without VNNI).
+    int8_in_f32: bool,
+}
+
+/// int8 weights for a product of one character (a matrix-vector product, which the tiled
+/// kernels run at a fraction of their speed): `[m, kp]` row-major, `kp` the input width
+/// rounded up to 32 with zeros, and each row's sum (the VNNI form multiplies the activations
+/// as u8, `q + 128`, and takes `128 * sum` back).
+#[derive(Debug)]
+pub(crate) struct Gemv {
+    kp: usize,
+    w: Vec<i8>,
+    sums: Vec<i32>,
+}
+
+impl Gemv {
+    fn new(q: &[i8], m: usize) -> Gemv {
+        let k = q.len() / m.max(1);
+        let kp = k.div_ceil(32) * 32;
+        let mut w = vec![0i8; m * kp];
+        for (dst, src) in w.chunks_exact_mut(kp).zip(q.chunks_exact(k.max(1))) {
+            dst[..k].copy_from_slice(src);
+        }
+        let sums = q.chunks_exact(k.max(1)).map(|r| r.iter().map(|v| i32::from(*v)).sum()).collect();
+        Gemv { kp, w, sums }
+    }
+
+    /// `out[o] = sum_i w[o, i] * q[i]` for `q` the quantized row (i8 bits, zero-padded to `kp`).
+    fn run(&self, q: &[u8], q16: &mut Vec<i16>, out: &mut [i32]) {
+        #[cfg(target_arch = "x86_64")]
+        match gemv_isa() {
+            GemvIsa::Vnni => {
+                // SAFETY: the CPU has the features (`gemv_isa`); `w` is `out.len() x kp` and `q`
+                // holds `kp` bytes (checked by the caller).
+                return unsafe { gemv_vnni(&self.w, &self.sums, self.kp, q, out) };
+            }
+            GemvIsa::Avx2 => {
+                q16.clear();
+                q16.extend(q.iter().map(|v| i16::from(*v as i8)));
+                // SAFETY: as above, `q16` holds `kp` values.
+                return unsafe { gemv_avx2(&self.w, self.kp, q16, out) };
+            }
+            GemvIsa::None => {}
+        }
+        let _ = q16;
+        for (o, row) in out.iter_mut().zip(self.w.chunks_exact(self.kp)) {
+            *o = row.iter().zip(q).map(|(w, q)| i32::from(*w) * i32::from(*q as i8)).sum();
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy, PartialEq)]
+enum GemvIsa {
+    Vnni,
+    Avx2,
+    None,
+}
+
+/// The matrix-vector form this CPU runs (`TRACT_CPU_ISA` can take features away).
+#[cfg(target_arch = "x86_64")]
+fn gemv_isa() -> GemvIsa {
+    use tract_onnx::tract_core::tract_linalg::isa::{Isa, native};
+    static ISA: std::sync::OnceLock<GemvIsa> = std::sync::OnceLock::new();
+    *ISA.get_or_init(|| {
+        let isa = native();
+        if isa.has(Isa::X86_64Avx512Vnni) && isa.has(Isa::X86_64Avx512f) && std::arch::is_x86_feature_detected!("avx512vl") {
+            GemvIsa::Vnni
+        } else if isa.has(Isa::X86_64Avx2) {
+            GemvIsa::Avx2
+        } else {
+            GemvIsa::None
+        }
+    })
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn hsum(v: std::arch::x86_64::__m256i) -> i32 {
+    use std::arch::x86_64::*;
+    let s = _mm_add_epi32(_mm256_castsi256_si128(v), _mm256_extracti128_si256::<1>(v));
+    let s = _mm_add_epi32(s, _mm_shuffle_epi32::<0b01_00_11_10>(s));
+    let s = _mm_add_epi32(s, _mm_shuffle_epi32::<0b10_11_00_01>(s));
+    _mm_cvtsi128_si32(s)
+}
+
+/// `out[o] = sum_i w[o, i] * q[i]` with VNNI's u8 x s8 dot products of 4: the activations as
+/// `q + 128` (u8), less `128 * sum_i w[o, i]`. Exact.
+///
+/// # Safety
+/// The CPU has AVX2, AVX-512F/VL/VNNI; `w.len() >= out.len() * kp`, `q.len() >= kp`, `kp` a
+/// multiple of 32.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f,avx512vl,avx512vnni")]
+unsafe fn gemv_vnni(w: &[i8], sums: &[i32], kp: usize, q: &[u8], out: &mut [i32]) {
+    use std::arch::x86_64::*;
+    debug_assert!(kp % 32 == 0 && q.len() >= kp && w.len() >= out.len() * kp);
+    let flip = _mm256_set1_epi8(-128);
+    let (w, q) = (w.as_ptr(), q.as_ptr());
+    let load = |p: *const i8| unsafe { _mm256_loadu_si256(p as *const __m256i) };
+    let m = out.len();
+    let mut o = 0;
+    while o + 4 <= m {
+        let mut acc = [_mm256_setzero_si256(); 4];
+        let rows = [0, 1, 2, 3].map(|j| unsafe { w.add((o + j) * kp) });
+        let mut c = 0;
+        while c < kp {
+            let x = _mm256_xor_si256(load(unsafe { q.add(c) } as *const i8), flip);
+            for j in 0..4 {
+                acc[j] = _mm256_dpbusd_epi32(acc[j], x, load(unsafe { rows[j].add(c) }));
+            }
+            c += 32;
+        }
+        for j in 0..4 {
+            out[o + j] = hsum(acc[j]) - 128 * sums[o + j];
+        }
+        o += 4;
+    }
+    while o < m {
+        let mut acc = _mm256_setzero_si256();
+        let row = unsafe { w.add(o * kp) };
+        let mut c = 0;
+        while c < kp {
+            let x = _mm256_xor_si256(load(unsafe { q.add(c) } as *const i8), flip);
+            acc = _mm256_dpbusd_epi32(acc, x, load(unsafe { row.add(c) }));
+            c += 32;
+        }
+        out[o] = hsum(acc) - 128 * sums[o];
+        o += 1;
+    }
+}
+
+/// `out[o] = sum_i w[o, i] * q[i]` with AVX2's 16-bit pair products (`vpmaddwd` on the
+/// weights widened to 16 bits). Exact.
+///
+/// # Safety
+/// The CPU has AVX2; `w.len() >= out.len() * kp`, `q16.len() >= kp`, `kp` a multiple of 32.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn gemv_avx2(w: &[i8], kp: usize, q16: &[i16], out: &mut [i32]) {
+    use std::arch::x86_64::*;
+    debug_assert!(kp % 32 == 0 && q16.len() >= kp && w.len() >= out.len() * kp);
+    let (w, q) = (w.as_ptr(), q16.as_ptr());
+    let widen = |p: *const i8| unsafe { _mm256_cvtepi8_epi16(_mm_loadu_si128(p as *const __m128i)) };
+    let m = out.len();
+    let mut o = 0;
+    while o + 4 <= m {
+        let mut acc = [_mm256_setzero_si256(); 4];
+        let rows = [0, 1, 2, 3].map(|j| unsafe { w.add((o + j) * kp) });
+        let mut c = 0;
+        while c < kp {
+            let x = unsafe { _mm256_loadu_si256(q.add(c) as *const __m256i) };
+            for j in 0..4 {
+                acc[j] = _mm256_add_epi32(acc[j], _mm256_madd_epi16(widen(unsafe { rows[j].add(c) }), x));
+            }
+            c += 16;
+        }
+        for j in 0..4 {
+            out[o + j] = hsum(acc[j]);
+        }
+        o += 4;
+    }
+    while o < m {
+        let mut acc = _mm256_setzero_si256();
+        let row = unsafe { w.add(o * kp) };
+        let mut c = 0;
+        while c < kp {
+            let x = unsafe { _mm256_loadu_si256(q.add(c) as *const __m256i) };
+            acc = _mm256_add_epi32(acc, _mm256_madd_epi16(widen(unsafe { row.add(c) }), x));
+            c += 16;
+        }
+        out[o] = hsum(acc);
+        o += 1;
+    }
+}
+
+impl PartialEq for Product {
+    fn eq(&self, other: &Self) -> bool {
+        self.m == other.m
+            && self.ks == other.ks
+            && self.kernel.name() == other.kernel.name()
+            && self.a.iter().zip(&other.a).all(|(a, b)| Arc::ptr_eq(a, b))
+    }
+}
+impl Eq for Product {}
+
+impl std::hash::Hash for Product {
+    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
+        self.m.hash(state);
+        self.ks.hash(state);
+        self.kernel.name().hash(state);
+    }
+}
+
+impl Product {
+    /// Packs `parts` (each `[m, k_i]`, the same arithmetic) for the kernel tract-linalg picks
+    /// for `n` characters (`None`: any).
+    pub(crate) fn new(m: usize, parts: &[Weights], n: Option<usize>) -> TractResult<Product> {
+        let int8 = matches!(parts.first(), Some(Weights::I8 { .. }));
+        let ks: Vec<usize> = parts
+            .iter()
+            .map(|w| match w {
+                Weights::F32(v) => v.len() / m.max(1),
+                Weights::I8 { q, .. } => q.len() / m.max(1),
+            })
+            .collect();
+        let k_total: usize = ks.iter().sum();
+        let pick = |acc: DatumType, k: Option<usize>| {
+            MmmDispatch::native()
+                .pick(&Query { allow_extractor: false, ..Query::plain(acc, Some(m), k, n) })
+                .with_context(|| format!("no {acc:?} matrix kernel on this CPU"))
+        };
+        let (mut kernel, mut packing, _) =
+            if int8 { pick(DatumType::I32, ks.iter().max().copied())? } else { pick(DatumType::F32, Some(k_total))? };
+        // Without VNNI, tract's integer kernels run at a third of its f32 ones (AVX2 widens
+        // the bytes to 16 bits in the loop); the integers are then multiplied in f32, exactly:
+        // both operands are the graph's u8 values less their zero point 128, so in -127..=127
+        // (weights checked when read, activations by construction, `quantize_row`), every
+        // product is a whole number of magnitude at most 127 * 127 and every partial sum of
+        // `k` of them, in whatever order the kernel adds them, is a whole number below 2^24,
+        // which f32 holds exactly (k <= 1040).
+        let int8_in_f32 = int8 && !kernel.name().contains("vnni") && !kernel.name().contains("amx")
+            && ks.iter().all(|k| 127 * 127 * k < 1 << 24);
+        if int8_in_f32 {
+            (kernel, packing, _) = pick(DatumType::F32, ks.iter().max().copied())?;
+        }
+        let (pa, _) = &kernel.packings()[packing];
+        let mut a = Vec::new();
+        let mut scales = Vec::new();
+        let mut gemv = Vec::new();
+        if int8 {
+            for w in parts {
+                let Weights::I8 { q, scales: s } = w else { bail!("an int8 product mixes f32 weights") };
+                let t = if int8_in_f32 {
+                    let f: Vec<f32> = q.iter().map(|v| f32::from(*v)).collect();
+                    Tensor::from_shape(&[m, q.len() / m], &f)?
+                } else {
+                    Tensor::from_shape(&[m, q.len() / m], q)?
+                };
+                a.push(Arc::new(pa.prepare_one(&t, 1, 0)?));
+                scales.push(Arc::new(s.clone()));
+                if n.is_none_or(|n| n == 1) {
+                    gemv.push(Arc::new(Gemv::new(q, m)));
+                }
+            }
+        } else {
+            let mut all = vec![0f32; m * k_total];
+            let mut offset = 0;
+            for (w, &k) in parts.iter().zip(&ks) {
+                let Weights::F32(v) = w else { bail!("an f32 product mixes int8 weights") };
+                for o in 0..m {
+                    all[o * k_total + offset..o * k_total + offset + k].copy_from_slice(&v[o * k..(o + 1) * k]);
+                }
+                offset += k;
+            }
+            let t = Tensor::from_shape(&[m, k_total], &all)?;
+            a.push(Arc::new(pa.prepare_one(&t, 1, 0)?));
+        }
+        Ok(Product { m, ks, kernel, packing, a, scales, gemv, int8_in_f32 })
+    }
+
+    pub(crate) fn int8(&self) -> bool {
+        !self.scales.is_empty()
+    }
+
+    pub(crate) fn kernel_name(&self) -> &str {
+        self.kernel.name()
+    }
+
+    /// f32: `out[c, o] = act(sum_i x_i[c] . w_i[o] + bias[o] + addend[c, o])` for the `n` rows
+    /// of `xs` (each `[n, k_i]`), in one kernel call; `out` is `[n, m]`.
+    pub(crate) fn run_f32(
+        &self,
+        xs: &[&[f32]],
+        n: usize,
+        bias: Option<&Tensor>,
+        addend: Option<&Tensor>,
+        leaky: Option<&Tensor>,
+        out: &mut Tensor,
+    ) -> TractResult<()> {
+        ensure!(!self.int8() && out.len() == n * self.m && xs.iter().zip(&self.ks).all(|(x, k)| x.len() == n * k));
+        SCRATCH.with_borrow_mut(|s| {
+            let (_, pb) = &self.kernel.packings()[self.packing];
+            let format = pb.downcast_ref::<PackedFormat>().context("f32 activations in a plain packing")?;
+            let k: usize = self.ks.iter().sum();
+            let b = packed(&mut s.packed, format, k, n)?;
+            pack_f32(format, b, xs, &self.ks, n)?;
+            let space = space(&mut s.spaces, &*self.kernel);
+            let m = self.m;
+            // Output, bias and addend are row-major `[n, m]`: the kernel's rows are our channels.
+            unsafe {
+                let store = self.kernel.c_from_data_and_strides(4, 1, m as isize);
+                let mut ops: TVec<FusedSpec> = tvec![FusedSpec::AddMatMul {
+                    a: AsInputValue::Borrowed(&**self.a[0]),
+                    b: AsInputValue::Borrowed(&*b),
+                    packing: self.packing,
+                }];
+                if let Some(bias) = bias {
+                    ops.push(FusedSpec::BinPerRow(bias.view(), BinOp::Add));
+                }
+                let addend_view = addend.map(|t| t.view());
+                if let Some(v) = &addend_view {
+                    ops.push(FusedSpec::AddUnicast(store.wrap(v)));
+                }
+                if let Some(alpha) = leaky {
+                    ops.push(FusedSpec::LeakyRelu(alpha));
+                }
+                let out_view = out.view_mut();
+                ops.push(FusedSpec::Store(store.wrap(&out_view)));
+                self.kernel.run_with_scratch_space(m, n, &mut **space, &ops)?;
+            }
+            Ok(())
+        })
+    }
+
+    /// int8: quantizes each row of each `xs[i]` (`[n, k_i]`), runs the integer products and
+    /// calls `f(i, acc, row_scales, channel_scales)` with input `i`'s i32 sums (`[n, m]`
+    /// row-major), its row scales (`[n]`) and its weights' channel scales (`[m]`).
+    pub(crate) fn run_i8(
+        &self,
+        xs: &[&[f32]],
+        n: usize,
+        mut f: impl FnMut(usize, &[i32], &[f32], &[f32]) -> TractResult<()>,
+    ) -> TractResult<()> {
+        ensure!(self.int8() && xs.len() == self.ks.len());
+        SCRATCH.with_borrow_mut(|s| {
+            let (_, pb) = &self.kernel.packings()[self.packing];
+            let m = self.m;
+            for (i, (x, &k)) in xs.iter().zip(&self.ks).enumerate() {
+                ensure!(x.len() == n * k, "input {i} has {} values, expected {n} x {k}", x.len());
+                if n == 1 && !self.gemv.is_empty() {
+                    let g = &self.gemv[i];
+                    s.row.resize(g.kp, 0);
+                    s.row_scales.clear();
+                    s.row_scales.push(quantize_row(x, &mut s.row[..k]));
+                    s.row[k..].fill(0);
+                    if s.acc.shape() != [1, m] {
+                        s.acc = Tensor::zero::<i32>(&[1, m])?;
+                    }
+                    let mut view = s.acc.try_as_plain_ram_mut()?;
+                    g.run(&s.row, &mut s.row16, view.as_slice_mut::<i32>()?);
+                    drop(view);
+                    let acc = s.acc.try_as_plain_ram()?.as_slice::<i32>()?;
+                    f(i, acc, &s.row_scales, &self.scales[i])?;
+                    continue;
+                }
+                if s.acc.shape() != [n, m] {
+                    s.acc = Tensor::zero::<i32>(&[n, m])?;
+                }
+                if self.int8_in_f32 {
+                    let format = pb.downcast_ref::<PackedFormat>().context("f32 activations in a plain packing")?;
+                    s.row.resize(k, 0);
+                    s.quantized.clear();
+                    s.row_scales.clear();
+                    for x in x.chunks_exact(k) {
+                        s.row_scales.push(quantize_row(x, &mut s.row[..k]));
+                        s.quantized.extend(s.row[..k].iter().map(|q| f32::from(*q as i8)));
+                    }
+                    let b = packed(&mut s.packed, format, k, n)?;
+                    pack_f32(format, b, &[&s.quantized], &[k], n)?;
+                    if s.sums.shape() != [n, m] {
+                        s.sums = Tensor::zero::<f32>(&[n, m])?;
+                    }
+                    let space = space(&mut s.spaces, &*self.kernel);
+                    unsafe {
+                        let store = self.kernel.c_from_data_and_strides(4, 1, m as isize);
+                        let sums_view = s.sums.view_mut();
+                        let ops = [
+                            FusedSpec::AddMatMul {
+                                a: AsInputValue::Borrowed(&**self.a[i]),
+                                b: AsInputValue::Borrowed(&*b),
+                                packing: self.packing,
+                            },
+                            FusedSpec::Store(store.wrap(&sums_view)),
+                        ];
+                        self.kernel.run_with_scratch_space(m, n, &mut **space, &ops)?;
+                    }
+                    {
+                        let sums = s.sums.try_as_plain_ram()?.as_slice::<f32>()?;
+                        let mut view = s.acc.try_as_plain_ram_mut()?;
+                        // Whole numbers below 2^24: the conversion is exact.
+                        view.as_slice_mut::<i32>()?.iter_mut().zip(sums).for_each(|(a, v)| *a = *v as i32);
+                    }
+                    let acc = s.acc.try_as_plain_ram()?.as_slice::<i32>()?;
+                    f(i, acc, &s.row_scales, &self.scales[i])?;
+                    continue;
+                }
+                let b = packed_i8(&mut s.packed, &**pb, k, n)?;
+                pack_i8(&**pb, b, x, &mut s.row_scales, k, &mut s.row)?;
+                let space = space(&mut s.spaces, &*self.kernel);
+                unsafe {
+                    let store = self.kernel.c_from_data_and_strides(4, 1, m as isize);
+                    let acc_view = s.acc.view_mut();
+                    let ops = [
+                        FusedSpec::AddMatMul {
+                            a: AsInputValue::Borrowed(&**self.a[i]),
+                            b: AsInputValue::Borrowed(&*b),
+                            packing: self.packing,
+                        },
+                        FusedSpec::Store(store.wrap(&acc_view)),
+                    ];
+                    self.kernel.run_with_scratch_space(m, n, &mut **space, &ops)?;
+                }
+                let acc = s.acc.try_as_plain_ram()?.as_slice::<i32>()?;
+                f(i, acc, &s.row_scales, &self.scales[i])?;
+            }
+            Ok(())
+        })
+    }
+
+    /// `out[c, o] = (acc[c, o] as f32 * channel[o]) * row[c]` (the graph's `Cast`, `Mul` by the
+    /// channel scales and `Mul` by the row scale, in that order), added to `out` when `add`,
+    /// then `+ bias[o]`.
+    pub(crate) fn dequantize(acc: &[i32], row: &[f32], channel: &[f32], bias: Option<&[f32]>, out: &mut [f32], add: bool) {
+        let bias = bias.unwrap_or_default();
+        #[cfg(target_arch = "x86_64")]
+        if avx2() {
+            // SAFETY: the CPU has AVX2 and FMA (checked above).
+            return unsafe { dequantize_avx2(acc, row, channel, bias, out, add) };
+        }
+        dequantize_body(acc, row, channel, bias, out, add)
+    }
+}
+
+/// Quantizes one row (`x`, into `q`, padded with zeros) as the graph does and returns its scale:
+/// `s = max(max|x| / 127, 1e-30)` (`Abs`, `ReduceMax`, `Div`, `Max`), then `trunc(x / s + 128.5)`
+/// (`Div`, `Add`, `Cast` to u8, which truncates) less the zero point 128.
+#[inline(always)]
+fn quantize_row_body(x: &[f32], q: &mut [u8]) -> f32 {
+    // The largest magnitude through the bits (the same order for non-negative floats; a loop
+    // the compiler vectorizes); anything at or past infinity's bits is not finite.
+    let bits = x.iter().fold(0u32, |m, v| m.max(v.to_bits() & 0x7fff_ffff));
+    if bits < 0x7f80_0000 {
+        let s = (f32::from_bits(bits) / Q_MAX).max(MIN_SCALE);
+        // `x / s + 128.5` lies in 1.5..=255.5 for every `x` of a finite row, so the conversion
+        // needs no saturation.
+        for (q, v) in q.iter_mut().zip(x) {
+            // SAFETY: finite and within i32 (above).
+            let i: i32 = unsafe { ((v / s) + 128.5).to_int_unchecked() };
+            *q = (i as u8) ^ 0x80;
+        }
+        s
+    } else {
+        let s = (x.iter().fold(0f32, |m, v| m.max(v.abs())) / Q_MAX).max(MIN_SCALE);
+        for (q, v) in q.iter_mut().zip(x) {
+            *q = ((((v / s) + 128.5) as i32 as u8) ^ 0x80) as u8;
+        }
+        s
+    }
+}
+
+/// The `out` rows of [`Product::dequantize`].
+#[inline(always)]
+fn dequantize_body(acc: &[i32], row: &[f32], channel: &[f32], bias: &[f32], out: &mut [f32], add: bool) {
+    let m = channel.len();
+    for ((acc, out), &s) in acc.chunks_exact(m).zip(out.chunks_exact_mut(m)).zip(row) {
+        match (add, bias.len() == m) {
+            (false, false) => {
+                for ((o, &a), &w) in out.iter_mut().zip(acc).zip(channel) {
+                    *o = (a as f32 * w) * s;
+                }
+            }
+            (false, true) => {
+                for (((o, &a), &w), &b) in out.iter_mut().zip(acc).zip(channel).zip(bias) {
+                    *o = (a as f32 * w) * s + b;
+                }
+            }
+            (true, false) => {
+                for ((o, &a), &w) in out.iter_mut().zip(acc).zip(channel) {
+                    *o += (a as f32 * w) * s;
+                }
+            }
+            (true, true) => {
+                for (((o, &a), &w), &b) in out.iter_mut().zip(acc).zip(channel).zip(bias) {
+                    *o += (a as f32 * w) * s + b;
+                }
+            }
+        }
+    }
+}
+
+/// Whether the element-wise loops may use AVX2 (the CPU has it and `TRACT_CPU_ISA` leaves it).
+#[cfg(target_arch = "x86_64")]
+fn avx2() -> bool {
+    use tract_onnx::tract_core::tract_linalg::isa::{Isa, native};
+    static AVX2: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *AVX2.get_or_init(|| native().has(Isa::X86_64Avx2) && native().has(Isa::X86_64Fma))
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn quantize_row_avx2(x: &[f32], q: &mut [u8]) -> f32 {
+    quantize_row_body(x, q)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn dequantize_avx2(acc: &[i32], row: &[f32], channel: &[f32], bias: &[f32], out: &mut [f32], add: bool) {
+    dequantize_body(acc, row, channel, bias, out, add)
+}
+
+fn quantize_row(x: &[f32], q: &mut [u8]) -> f32 {
+    #[cfg(target_arch = "x86_64")]
+    if avx2() {
+        // SAFETY: the CPU has AVX2 and FMA (checked above).
+        return unsafe { quantize_row_avx2(x, q) };
+    }
+    quantize_row_body(x, q)
+}
+
+fn pack_f32(format: &PackedFormat, b: &mut EagerPackedInput, xs: &[&[f32]], ks: &[usize], n: usize) -> TractResult<()> {
+    let r = format.r;
+    let panel = b.panel_bytes / 4;
+    let blob = Arc::get_mut(&mut b.packed).context("packed activations are shared")?;
+    let dst = blob.as_bytes_mut();
+    let mut offset = 0;
+    for (x, &k) in xs.iter().zip(ks) {
+        ensure!(x.len() == n * k, "an input has {} values, expected {n} x {k}", x.len());
+        for (c, row) in x.chunks_exact(k).enumerate() {
+            let base = (c / r) * panel + offset * r + c % r;
+            for (i, v) in row.iter().enumerate() {
+                let at = (base + i * r) * 4;
+                dst[at..at + 4].copy_from_slice(&v.to_ne_bytes());
+            }
+        }
+        offset += k;
+    }
+    Ok(())
+}
+
+/// Quantizes the rows of `x` (`[n, k]`) into `b`, laid out for the kernel, and their scales
+/// into `scales`.
+fn pack_i8(
+    format: &dyn MMMInputFormat,
+    b: &mut EagerPackedInput,
+    x: &[f32],
+    scales: &mut Vec<f32>,
+    k: usize,
+    row: &mut Vec<u8>,
+) -> TractResult<()> {
+    let panel = b.panel_bytes;
+    let blob = Arc::get_mut(&mut b.packed).context("packed activations are shared")?;
+    let dst = blob.as_bytes_mut();
+    row.resize(k.div_ceil(4) * 4, 0);
+    scales.clear();
+    if let Some(f) = format.downcast_ref::<PackedI8K4>() {
+        // Panels of `r` characters; within one, blocks of 4 inputs, each character's 4 bytes
+        // together.
+        let r = f.r;
+        row[k..].fill(0);
+        for (c, x) in x.chunks_exact(k).enumerate() {
+            scales.push(quantize_row(x, &mut row[..k]));
+            let base = (c / r) * panel + (c % r) * 4;
+            for (block, bytes) in row.chunks_exact(4).enumerate() {
+                let at = base + block * r * 4;
+                dst[at..at + 4].copy_from_slice(bytes);
+            }
+        }
+    } else if let Some(f) = format.downcast_ref::<PackedFormat>() {
+        let r = f.r;
+        for (c, x) in x.chunks_exact(k).enumerate() {
+            scales.push(quantize_row(x, &mut row[..k]));
+            let base = (c / r) * panel + c % r;
+            for (i, q) in row[..k].iter().enumerate() {
+                dst[base + i * r] = *q;
+            }
+        }
+    } else {
+        bail!("no int8 packing for {format:?}");
+    }
+    Ok(())
+}
+
+/// Buffers reused from call to call on one thread (one op runs at a time on a thread): packed
+/// activations by format and size, the kernels' scratch spaces, integer sums, row scales.
+#[derive(Default)]
+struct Scratch {
+    packed: PackedBuffers,
+    spaces: Vec<(String, Box<dyn ScratchSpace>)>,
+    acc: Tensor,
+    row_scales: Vec<f32>,
+    row: Vec<u8>,
+    row16: Vec<i16>,
+    quantized: Vec<f32>,
+    sums: Tensor,
+}
+
+thread_local! {
+    static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
+}
+
+type PackedBuffers = Vec<(String, usize, usize, EagerPackedInput)>;
+
+fn packed_at(
+    buffers: &mut PackedBuffers,
+    key: String,
+    k: usize,
+    n: usize,
+    make: impl FnOnce() -> TractResult<EagerPackedInput>,
+) -> TractResult<&mut EagerPackedInput> {
+    let at = match buffers.iter().position(|(f, kk, nn, _)| *f == key && *kk == k && *nn == n) {
+        Some(at) => at,
+        None => {
+            // A few shapes per thread at most (one per input width and batch size).
+            if buffers.len() >= 16 {
+                buffers.remove(0);
+            }
+            buffers.push((key, k, n, make()?));
+            buffers.len() - 1
+        }
+    };
+    Ok(&mut buffers[at].3)
+}
+
+fn packed<'s>(buffers: &'s mut PackedBuffers, format: &PackedFormat, k: usize, n: usize) -> TractResult<&'s mut EagerPackedInput> {
+    packed_at(buffers, format.to_string(), k, n, || format.new_packed_buffer(k, n))
+}
+
+fn packed_i8<'s>(
+    buffers: &'s mut PackedBuffers,
+    format: &dyn MMMInputFormat,
+    k: usize,
+    n: usize,
+) -> TractResult<&'s mut EagerPackedInput> {
+    packed_at(buffers, format.to_string(), k, n, || {
+        // A zero tensor packed once gives the buffer with its padding zeroed.
+        format
+            .prepare_one(&Tensor::zero::<i8>(&[n, k])?, 1, 0)?
+            .downcast::<EagerPackedInput>()
+            .map(|b| *b)
+            .map_err(|_| format_err!("{format:?} does not pack eagerly"))
+    })
+}
+
+fn space<'s>(spaces: &'s mut Vec<(String, Box<dyn ScratchSpace>)>, kernel: &dyn MatMatMul) -> &'s mut Box<dyn ScratchSpace> {
+    let at = match spaces.iter().position(|(name, _)| name == kernel.name()) {
+        Some(at) => at,
+        None => {
+            // SAFETY: a fresh scratch space of the kernel that will use it.
+            spaces.push((kernel.name().to_string(), unsafe { kernel.allocate_scratch_space() }));
+            spaces.len() - 1
+        }
+    };
+    &mut spaces[at].1
+}
