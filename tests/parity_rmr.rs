@@ -677,7 +677,10 @@ fn runtime_stitch_poses_and_stream_refuse_bad_input() {
 /// 60 to 150 frames and aligned end to start as `zoo stitch` aligns them, refined by the RMR of
 /// the run folder `ZOO_RMR_RUN` (default `../runs/rmr20`, trained with `--valid-glob
 /// '*_youthful_*'`) exported through `zoo_models`. Prints the largest joint-position difference
-/// in cm and the lookahead.
+/// in cm (and the mean and 99th percentile of each frame's largest) with the lookahead, for the
+/// refiner with its ankle IK and seam guard and for `zoo stitch`'s whole default. The first must
+/// be within 0.05 cm; the foot lock's rate limit makes the second depend on frames beyond any
+/// bounded lookahead (docs/rmr.md), so it is reported, not asserted.
 #[test]
 #[ignore = "needs ../shared/data/bandai2"]
 fn stitch_stream_matches_zoo_stitch_on_bandai2() {
@@ -699,8 +702,7 @@ fn stitch_stream_matches_zoo_stitch_on_bandai2() {
     let j = refiner.joints();
     assert!(clips.iter().all(|c| c.joints() == j), "the clips are on the model's rig");
     let skeleton = refiner.skeleton().clone();
-    let (mut worst, mut worst_zoo, mut frames, mut cases) = (0.0f64, 0.0f64, 0usize, 0usize);
-    let mut latency = 0;
+    let mut cases = Vec::new();
     for k in (0..clips.len().saturating_sub(2)).step_by(6) {
         for n in [2, 3] {
             let parts: Vec<zoo_motion::Clip> = (0..n)
@@ -713,52 +715,48 @@ fn stitch_stream_matches_zoo_stitch_on_bandai2() {
                 .collect();
             let aligned = align_clips(&parts, refiner.layout(), MIN_CLIP_FRAMES).unwrap();
             let seams = aligned.starts[1..].to_vec();
-            let clip = &aligned.clip;
+            let clip = aligned.clip;
             let poses: Vec<EnginePose> = (0..clip.frames())
                 .map(|f| {
                     let rotations: Vec<glam::Quat> = clip.rotations_at(f).iter().map(|q| q.as_quat()).collect();
                     EnginePose::from_world(clip.root_position(f).as_vec3(), &rotations)
                 })
                 .collect();
-            // `zoo stitch`'s default output: the whole sequence, on the poses as the engine has them
-            // and on the aligned clip itself.
-            let mut whole = vec![EnginePose::new(j); poses.len()];
-            let mut contacts = vec![[false; 4]; poses.len()];
-            refiner.refine_poses_at_seams(&poses, &seams, FootCleanup::default(), &mut whole, &mut contacts).unwrap();
-            let zoo = refiner.refine_clip(clip, &seams, FootCleanup::default()).unwrap().clip.global().1;
-            let mut stream = refiner.stream();
-            latency = stream.latency();
-            let mut got = Vec::new();
-            let mut pose = EnginePose::new(j);
-            for (t, p) in poses.iter().enumerate() {
-                if seams.contains(&t) {
-                    stream.mark_seam();
-                }
-                stream.push(p).unwrap();
-                while stream.pop(&mut pose).unwrap().is_some() {
-                    got.push(pose.clone());
-                }
-            }
-            stream.finish().unwrap();
-            while stream.pop(&mut pose).unwrap().is_some() {
-                got.push(pose.clone());
-            }
-            let streamed = world_positions(&got, &skeleton);
-            let d = max_distance(&streamed, &world_positions(&whole, &skeleton));
-            let dz = max_distance(&streamed, &zoo);
-            if d > 1e-3 {
-                println!("case {k}+{n} ({} frames, seams {seams:?}): {d:.4} cm", poses.len());
-            }
-            worst = worst.max(d);
-            worst_zoo = worst_zoo.max(dz);
-            frames += poses.len();
-            cases += 1;
+            cases.push((clip, seams, poses));
         }
     }
-    println!(
-        "StitchStream (latency {latency} frames) vs the whole sequence on {cases} bandai2 youthful cases ({frames} \
-         frames): largest joint difference {worst:.2e} cm (refine_poses_at_seams), {worst_zoo:.2e} cm (refine_clip on \
-         the aligned clip, as zoo stitch)"
-    );
-    assert!(worst <= 0.05 && worst_zoo <= 0.05, "the stream differs by {worst} cm ({worst_zoo} cm from zoo stitch)");
+    let ik = FootCleanup { place_ankles: true, lock_feet: false };
+    let mut worst_ik = 0.0;
+    for (name, cleanup) in [("ankle IK and seam guard", ik), ("zoo stitch's default", FootCleanup::default())] {
+        let (mut per_frame, mut worst_zoo, mut latency) = (Vec::new(), 0.0f64, 0);
+        for (clip, seams, poses) in &cases {
+            // The whole sequence, on the poses as the engine has them and on the aligned clip itself.
+            let mut whole = vec![EnginePose::new(j); poses.len()];
+            let mut contacts = vec![[false; 4]; poses.len()];
+            refiner.refine_poses_at_seams(poses, seams, cleanup, &mut whole, &mut contacts).unwrap();
+            let zoo = refiner.refine_clip(clip, seams, cleanup).unwrap().clip.global().1;
+            let mut stream = refiner.stream();
+            stream.set_cleanup(cleanup).unwrap();
+            latency = stream.latency();
+            let (got, streamed_contacts) = stream_all(&refiner, poses, seams, cleanup, true);
+            assert_eq!(streamed_contacts, contacts, "contacts agree");
+            let (a, b) = (world_positions(&got, &skeleton), world_positions(&whole, &skeleton));
+            per_frame.extend((0..poses.len()).map(|t| max_distance(&a[t * j..(t + 1) * j], &b[t * j..(t + 1) * j])));
+            worst_zoo = worst_zoo.max(max_distance(&a, &zoo));
+        }
+        let mean = per_frame.iter().sum::<f64>() / per_frame.len() as f64;
+        let p99 = zoo_motion::stitch::percentile(&mut per_frame, 99.0);
+        let worst = per_frame.iter().copied().fold(0.0, f64::max);
+        println!(
+            "StitchStream ({name}, latency {latency} frames) vs the whole sequence on {} bandai2 youthful cases ({} \
+             frames): largest joint difference {worst:.2e} cm (mean {mean:.2e}, 99th percentile {p99:.2e}) against \
+             refine_poses_at_seams, {worst_zoo:.2e} cm against refine_clip on the aligned clip (zoo stitch)",
+            cases.len(),
+            per_frame.len()
+        );
+        if cleanup == ik {
+            worst_ik = worst.max(worst_zoo);
+        }
+    }
+    assert!(worst_ik <= 0.05, "with the ankle IK and the guard the stream differs by {worst_ik} cm");
 }
