@@ -699,7 +699,8 @@ fn write_poses(clip: &Clip, out: &mut [EnginePose]) {
 
 /// Frames of lookahead the stream's foot lock and seam guard take beyond the refiner's window
 /// ([`StitchStream::latency`]): the guard of a seam reads about 17 frames after it, the lock
-/// each contact run whole and the run after it (bandai2's steps: 10 to 25 frames).
+/// each contact run whole and the run after it (bandai2's steps: 10 to 25 frames), but not the
+/// whole reach of its rate limit ([`StitchStream`]).
 pub const STREAM_LOOKAHEAD: usize = 45;
 
 /// Frames of already popped motion the stream's foot lock and seam guard read again, for the
@@ -727,10 +728,13 @@ pub const STREAM_CHUNK: usize = 10;
 /// [`STREAM_CHUNK`] frames over the refined frames at hand, [`STREAM_HISTORY`] frames already
 /// popped included, and release the frames at least [`STREAM_LOOKAHEAD`] frames from the newest
 /// one. The latency is then `w + STREAM_LOOKAHEAD + STREAM_CHUNK - 1` frames (114 for `w` = 60,
-/// 3.8 s at 30 fps); with [`FootCleanup::NONE`] and the guard off it is `w`. The lock pins each
-/// contact at its mean over the contact: a contact longer than the lookahead (a foot planted
-/// through an idle) is pinned at its mean over the frames at hand, where the whole sequence pins
-/// it at its mean over the whole contact (docs/rmr.md measures the difference on bandai2).
+/// 3.8 s at 30 fps); with [`FootCleanup::NONE`] and the guard off it is `w`. The ankle IK and
+/// the guard then give the whole sequence's poses exactly. The foot lock does not: it pins each
+/// contact at its mean over the contact and limits its correction's change per frame forwards
+/// and backwards ([`zoo_motion::stitch::lock::LOCK_MAX_STEP`]), and where that limit stays
+/// clamped for long a frame's correction depends on frames beyond any bounded lookahead (on
+/// bandai2 the stream's feet differ from `zoo stitch`'s by 0.45 cm on average, up to 24.7 cm;
+/// docs/rmr.md).
 /// Each pose comes with the predicted contacts (heel L, toe L, heel R, toe R).
 ///
 /// After its first window (and its first marked seam), pushing and popping allocate nothing on
