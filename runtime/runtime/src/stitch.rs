@@ -737,11 +737,11 @@ pub const STREAM_CHUNK: usize = 10;
 /// docs/rmr.md).
 /// Each pose comes with the predicted contacts (heel L, toe L, heel R, toe R).
 ///
-/// After its first window (and its first marked seam), pushing and popping allocate nothing on
-/// our side without the guard and the lock ([`FootCleanup::NONE`], guard off) as long as the
-/// engine pops every frame it can; the guard and the lock allocate their scratch once per
-/// [`STREAM_CHUNK`] frames. What tract allocates per window is counted by
-/// `examples/rmr_window_latency` (docs/rmr.md).
+/// After its first pop (and its first marked seam), pushing and popping allocate nothing on our
+/// side as long as the engine pops every frame it can: the buffers, and the scratch of the
+/// guard and the lock ([`zoo_motion::stitch::lock::LockScratch`],
+/// [`zoo_motion::stitch::guard::GuardScratch`]), are sized when the stream is made. What tract
+/// allocates per window is counted by `examples/rmr_window_latency` (docs/rmr.md).
 ///
 /// The stream borrows its refiner ([`StitchRefiner::stream`]) or shares it through an `Arc`
 /// ([`StitchRefiner::shared_stream`], for a stream that must own what it runs, such as a handle
@@ -807,6 +807,9 @@ pub struct StitchStreamOf<R> {
     work: Clip,
     reference: Clip,
     window_seams: Vec<usize>,
+    lock_scratch: zoo_motion::stitch::lock::LockScratch,
+    guard_scratch: zoo_motion::stitch::guard::GuardScratch,
+    guard_report: Vec<zoo_motion::stitch::guard::GuardedSeam>,
 }
 
 impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
@@ -824,6 +827,10 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         };
         let (work, reference) = (clip(), clip());
         let guard = refiner.seam_guard;
+        let mut lock_scratch = zoo_motion::stitch::lock::LockScratch::default();
+        lock_scratch.reserve(frames, j);
+        let mut guard_scratch = zoo_motion::stitch::guard::GuardScratch::default();
+        guard_scratch.reserve(frames, j);
         StitchStreamOf {
             // At most w frames waiting to be dropped, w + 1 still needed.
             buf: Vec::with_capacity((2 * w + 2) * d),
@@ -866,6 +873,9 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             work,
             reference,
             window_seams: Vec::with_capacity(64),
+            lock_scratch,
+            guard_scratch,
+            guard_report: Vec::with_capacity(64),
             refiner,
         }
     }
@@ -1076,16 +1086,29 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         fill_clip(&mut self.work, &self.dec_rot[i0 * j..i1 * j], &self.dec_hips[i0..i1], &r.skeleton);
         if self.cleanup.place_ankles {
             let ankles = if self.ankle_slots.is_some() { &self.dec_ankles[i0..i1] } else { &[][..] };
-            zoo_motion::stitch::lock::place_ankles(&mut self.work, ankles, &r.layout);
+            zoo_motion::stitch::lock::place_ankles_into(&mut self.work, ankles, &r.layout, &mut self.lock_scratch);
         }
         self.window_seams.clear();
         self.window_seams.extend(self.seams.iter().filter(|&&s| s >= a && s < b).map(|&s| s - a));
         if self.guard && !self.window_seams.is_empty() {
             fill_clip(&mut self.reference, &self.ref_rot[i0 * j..i1 * j], &self.ref_hips[i0..i1], &r.skeleton);
-            zoo_motion::stitch::guard::guard_seams(&mut self.work, &self.reference, &self.window_seams, &r.layout);
+            zoo_motion::stitch::guard::guard_seams_into(
+                &mut self.work,
+                &self.reference,
+                &self.window_seams,
+                &r.layout,
+                &mut self.guard_scratch,
+                &mut self.guard_report,
+            );
         }
         if self.cleanup.lock_feet {
-            zoo_motion::stitch::lock::lock_feet(&mut self.work, &self.dec_contacts[i0..i1], &r.layout);
+            zoo_motion::stitch::lock::lock_feet_into(
+                &mut self.work,
+                &self.dec_contacts[i0..i1],
+                &r.layout,
+                zoo_motion::stitch::lock::LOCK_MAX_STEP,
+                &mut self.lock_scratch,
+            );
         }
         for f in self.released..to {
             let i = f - a;
