@@ -33,11 +33,12 @@ pub const LOCK_MAX_STEP: f64 = 1.0;
 /// `corrections` with no step between neighbouring frames longer than `max_step`: the
 /// forward-limited and the backward-limited sequences, averaged. `max_step <= 0` or not finite
 /// leaves them unchanged.
+#[cfg(test)]
 fn limit_rate(corrections: &mut [DVec3], max_step: f64) {
     limit_rate_into(corrections, max_step, &mut Vec::new());
 }
 
-/// [`limit_rate`] with `forward` as scratch.
+/// `corrections` rate-limited as `limit_rate` says, with `forward` as scratch.
 fn limit_rate_into(corrections: &mut [DVec3], max_step: f64, forward: &mut Vec<DVec3>) {
     if !(max_step > 0.0 && max_step.is_finite()) || corrections.len() < 2 {
         return;
@@ -92,7 +93,7 @@ fn fill_gaps(known: &[Option<DVec3>]) -> Vec<DVec3> {
     out
 }
 
-/// [`fill_gaps`] into `out` (resized to `known.len()`).
+/// The corrections of `fill_gaps` into `out` (resized to `known.len()`).
 fn fill_gaps_into(known: &[Option<DVec3>], out: &mut Vec<DVec3>) {
     out.clear();
     out.resize(known.len(), DVec3::ZERO);
