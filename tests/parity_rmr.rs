@@ -507,8 +507,9 @@ fn stitch_stream_matches_the_whole_sequence_with_fixed_latency() {
             assert_eq!(contacts, whole_contacts, "contacts agree");
             if cleanup.lock_feet {
                 // This fixture's random refiner keeps three of the four contacts on through the
-                // whole sequence: the lock pins them at their mean over the frames at hand before
-                // the finish (docs/rmr.md: a contact longer than the lookahead).
+                // whole sequence: before the finish the lock pins them at their mean over the
+                // frames at hand, and its rate limit reaches past them (docs/rmr.md); the frames
+                // released at the finish, locked with the whole sequence at hand, are exact.
                 assert!(worst_end <= 1e-4, "{frames} frames, {cleanup:?}: the stream differs by {worst_end} cm");
             } else {
                 assert!(worst <= 1e-4, "{frames} frames, {cleanup:?}: the stream differs by {worst} cm");
