@@ -29,7 +29,7 @@ use zoo_runtime::control::{Control, ControlRunner, ControlSettings, ControlledCh
 use zoo_runtime::glam::{Quat, Vec3};
 use zoo_runtime::keyframes::{KeyframeModel, MotionKeys};
 use zoo_runtime::metadata::MotionTaskKind;
-use zoo_runtime::stitch::FootCleanup;
+use zoo_runtime::stitch::{FootCleanup, STREAM_CHUNK, STREAM_LOOKAHEAD, StitchStream};
 use zoo_runtime::synthesis::SynthesisModel;
 use zoo_runtime::{EnginePose, LoadedModel, StitchRefiner, TransitionModel};
 use zoo_tests::capi::{assert_error, assert_ok, c_path, last_error, pose_values};
@@ -1170,8 +1170,12 @@ fn rust_stream(refiner: &StitchRefiner, poses: &[EnginePose]) -> Vec<(Vec<f32>, 
 
 /// [`rust_stream`] with `seams` marked before their frames.
 fn rust_stream_at(refiner: &StitchRefiner, poses: &[EnginePose], seams: &[usize]) -> Vec<(Vec<f32>, Vec<u8>)> {
-    let mut stream = refiner.stream();
-    let mut pose = EnginePose::new(refiner.joints());
+    rust_stream_of(refiner.stream(), poses, seams)
+}
+
+/// [`rust_stream_at`] through `stream`.
+fn rust_stream_of(mut stream: StitchStream<'_>, poses: &[EnginePose], seams: &[usize]) -> Vec<(Vec<f32>, Vec<u8>)> {
+    let mut pose = EnginePose::new(poses[0].joints());
     let mut got = Vec::new();
     for f in 0..=poses.len() {
         if seams.contains(&f) {
@@ -1277,7 +1281,10 @@ fn stitching_through_the_c_abi_matches_the_rust_api() {
         let model = stitch_model();
         let mut info = ZooStitchInfo::default();
         assert_ok(zoo_stitch_info(model, &mut info));
-        assert_eq!(info, ZooStitchInfo { window: 30, stride: 15, blend_frames: 10, latency: 29 });
+        // The default stream's latency: the window, the lookahead of the guard and the lock, and
+        // the frames they release at once.
+        let latency = 30 + STREAM_LOOKAHEAD + STREAM_CHUNK - 1;
+        assert_eq!(info, ZooStitchInfo { window: 30, stride: 15, blend_frames: 10, latency });
         // The fixture refines the raw concatenation (its file's `stitch.pre_blend` is false).
         let mut pre_blend = true;
         assert_ok(zoo_stitch_pre_blend(model, &mut pre_blend));
@@ -1314,6 +1321,36 @@ fn stitching_through_the_c_abi_matches_the_rust_api() {
         assert_ok(zoo_stitch_stream_finish(stream)); // twice: nothing more
         pop_ready(stream, k, &mut got);
         assert!(got == rust_stream(&refiner, &poses), "the C ABI's stream differs from the Rust API's");
+        let mut n = 0;
+        assert_ok(zoo_stitch_stream_latency(stream, &mut n));
+        assert_eq!(n, info.latency);
+        assert_error(
+            zoo_stitch_stream_set_cleanup(stream, false, false),
+            ZooStatus::InvalidState,
+            "zoo_stitch_stream_set_cleanup: stitching: the foot cleanup of a stream is set before its first push",
+        );
+        zoo_stitch_stream_free(stream);
+        // A stream without the ankle IK and the lock (the guard, on, has no seams to guard here).
+        let model = stitch_model();
+        let stream = stitch_stream(model);
+        zoo_model_free(model);
+        assert_ok(zoo_stitch_stream_set_cleanup(stream, false, false));
+        assert_ok(zoo_stitch_stream_latency(stream, &mut n));
+        assert_eq!(n, info.latency, "the guard keeps its lookahead");
+        let mut got = Vec::new();
+        for f in 0..poses.len() {
+            assert_ok(zoo_stitch_stream_push(stream, &roots[f], rotations[f * 4 * k..].as_ptr(), 4 * k));
+            pop_ready(stream, k, &mut got);
+        }
+        assert_ok(zoo_stitch_stream_finish(stream));
+        pop_ready(stream, k, &mut got);
+        let mut rust = refiner.stream();
+        rust.set_cleanup(FootCleanup::NONE).unwrap();
+        assert!(
+            got == rust_stream_of(rust, &poses, &[]),
+            "the C ABI's stream without cleanup differs from the Rust API's"
+        );
+        assert_error(zoo_stitch_stream_set_cleanup(null_mut(), true, true), ZooStatus::NullPointer, "`stream` is NULL");
         zoo_stitch_stream_free(stream);
     }
 }
@@ -1561,6 +1598,7 @@ fn stitching_refuses_wrong_sizes() {
         for f in 0..n {
             assert_ok(h.push(stream, f));
         }
+        assert_ok(zoo_stitch_stream_finish(stream));
         let mut pop = Pop::new(k, 1);
         assert_error(pop.pop_with(stream, 4 * k + 1, 4), ZooStatus::InvalidArgument, "`rotations`");
         assert_error(pop.pop_with(stream, 4 * k, 5), ZooStatus::InvalidArgument, "`contacts`");
@@ -1604,7 +1642,10 @@ fn stitch_streams_refuse_calls_out_of_order() {
         assert_error(
             status,
             ZooStatus::NotAvailable,
-            "the refined pose of frame 0 is not ready: it is once frame 29 is pushed",
+            &format!(
+                "the refined pose of frame 0 is not ready: it is once frame {} is pushed",
+                30 + STREAM_LOOKAHEAD + STREAM_CHUNK - 1
+            ),
         );
         for f in 0..10 {
             assert_ok(h.push(stream, f));
@@ -1632,7 +1673,7 @@ fn stitch_streams_refuse_calls_out_of_order() {
         assert_ok(zoo_stitch_set_window(model, 20, 10));
         let mut info = ZooStitchInfo::default();
         assert_ok(zoo_stitch_info(model, &mut info));
-        assert_eq!((info.window, info.stride, info.latency), (20, 10, 19));
+        assert_eq!((info.window, info.stride, info.latency), (20, 10, 20 + STREAM_LOOKAHEAD + STREAM_CHUNK - 1));
     }
 }
 

@@ -430,60 +430,90 @@ fn runtime_refines_engine_poses_like_zoo_stitch() {
     }
 }
 
-/// The streaming form gives the whole-sequence form's poses with a fixed latency of `w - 1`
-/// frames: exactly when the windows line up with the end, and on every frame the last window
-/// did not revisit otherwise.
+/// Streams `poses` (seams marked before the frames in `seams`) through a stream with `cleanup`
+/// and the seam guard `guard`, popping every frame as soon as it is ready; checks the fixed
+/// latency on every push and returns the poses and contacts.
+fn stream_all(
+    refiner: &zoo_runtime::StitchRefiner,
+    poses: &[zoo_runtime::EnginePose],
+    seams: &[usize],
+    cleanup: zoo_runtime::stitch::FootCleanup,
+    guard: bool,
+) -> (Vec<zoo_runtime::EnginePose>, Vec<[bool; 4]>) {
+    let mut stream = refiner.stream();
+    stream.set_cleanup(cleanup).unwrap();
+    stream.set_seam_guard(guard).unwrap();
+    let latency = stream.latency();
+    let (mut got, mut contacts) = (Vec::new(), Vec::new());
+    let mut pose = zoo_runtime::EnginePose::new(refiner.joints());
+    for (t, p) in poses.iter().enumerate() {
+        if seams.contains(&t) {
+            stream.mark_seam();
+        }
+        stream.push(p).unwrap();
+        // Ready exactly `latency` frames after: frame t - latency once frame t is pushed.
+        while let Some(c) = stream.pop(&mut pose).unwrap() {
+            got.push(pose.clone());
+            contacts.push(c);
+        }
+        assert_eq!(got.len(), (t + 1).saturating_sub(latency), "after pushing frame {t}");
+    }
+    stream.finish().unwrap();
+    while let Some(c) = stream.pop(&mut pose).unwrap() {
+        got.push(pose.clone());
+        contacts.push(c);
+    }
+    assert_eq!(got.len(), poses.len());
+    (got, contacts)
+}
+
+/// The streaming form gives the whole-sequence form's poses with a fixed latency: `w` frames
+/// for the refiner alone (value for value: no later window revisits a popped frame), `w +`
+/// lookahead `+` chunk `- 1` with the ankle IK and the foot lock of `zoo stitch`.
 #[test]
 fn stitch_stream_matches_the_whole_sequence_with_fixed_latency() {
-    use zoo_runtime::stitch::FootCleanup;
+    use zoo_runtime::stitch::{FootCleanup, STREAM_CHUNK, STREAM_HISTORY, STREAM_LOOKAHEAD};
     use zoo_runtime::{EnginePose, StitchRefiner};
     let f = fixture(RefinerCell::Bgru);
     let refiner = StitchRefiner::from_bytes(&export_rmr(&f.config, &f.stats, &f.varmap).unwrap().to_bytes()).unwrap();
     let (w, s) = (refiner.window(), refiner.stride());
-    for frames in [w + 4 * s, w + 4 * s + 7] {
+    let mut stream = refiner.stream();
+    assert_eq!(stream.latency(), w + STREAM_LOOKAHEAD + STREAM_CHUNK - 1, "the default: IK, guard and lock");
+    stream.set_cleanup(FootCleanup::NONE).unwrap();
+    stream.set_seam_guard(false).unwrap();
+    assert_eq!(stream.latency(), w, "the refiner alone");
+    let j = refiner.joints();
+    let skeleton = refiner.skeleton();
+    // The frames the stream releases at its finish: with at most STREAM_HISTORY frames
+    // released before, the guard and the lock then see the whole sequence.
+    let at_finish = |frames: usize| frames.saturating_sub(w + STREAM_LOOKAHEAD)..frames;
+    for frames in [w + 4 * s, w + 4 * s + 7, 120] {
+        assert!(frames - w - STREAM_LOOKAHEAD <= STREAM_HISTORY);
         let (poses, _) = aligned_poses(frames);
-        let mut whole = vec![EnginePose::new(refiner.joints()); frames];
-        let mut whole_contacts = vec![[false; 4]; frames];
-        refiner.refine_poses(&poses, FootCleanup::NONE, &mut whole, &mut whole_contacts).unwrap();
-        let mut stream = refiner.stream();
-        assert_eq!(stream.latency(), w - 1);
-        let mut got = Vec::new();
-        let mut pose = EnginePose::new(refiner.joints());
-        for (t, p) in poses.iter().enumerate() {
-            stream.push(p).unwrap();
-            // Ready exactly `latency` frames after: frame t - (w - 1) once frame t is pushed.
-            let expected = (t + 1).saturating_sub(w - 1);
-            while let Some(c) = stream.pop(&mut pose).unwrap() {
-                got.push((pose.clone(), c));
+        for cleanup in [FootCleanup::NONE, FootCleanup { place_ankles: true, lock_feet: false }, FootCleanup::default()]
+        {
+            let mut whole = vec![EnginePose::new(j); frames];
+            let mut whole_contacts = vec![[false; 4]; frames];
+            refiner.refine_poses(&poses, cleanup, &mut whole, &mut whole_contacts).unwrap();
+            let (got, contacts) = stream_all(&refiner, &poses, &[], cleanup, cleanup.lock_feet);
+            let (a, b) = (world_positions(&got, skeleton), world_positions(&whole, skeleton));
+            let frame = |t: usize| max_distance(&a[t * j..(t + 1) * j], &b[t * j..(t + 1) * j]);
+            let worst = (0..frames).map(frame).fold(0.0, f64::max);
+            let worst_end = at_finish(frames).map(frame).fold(0.0, f64::max);
+            println!(
+                "stream vs whole sequence, {frames} frames, {cleanup:?}: max joint distance {worst:e} cm, {worst_end:e} \
+                 cm on the frames released at the finish"
+            );
+            assert_eq!(contacts, whole_contacts, "contacts agree");
+            if cleanup.lock_feet {
+                // This fixture's random refiner keeps three of the four contacts on through the
+                // whole sequence: before the finish the lock pins them at their mean over the
+                // frames at hand, and its rate limit reaches past them (docs/rmr.md); the frames
+                // released at the finish, locked with the whole sequence at hand, are exact.
+                assert!(worst_end <= 1e-4, "{frames} frames, {cleanup:?}: the stream differs by {worst_end} cm");
+            } else {
+                assert!(worst <= 1e-4, "{frames} frames, {cleanup:?}: the stream differs by {worst} cm");
             }
-            assert_eq!(got.len(), expected, "after pushing frame {t}");
-        }
-        let before_finish = got.len();
-        stream.finish().unwrap();
-        while let Some(c) = stream.pop(&mut pose).unwrap() {
-            got.push((pose.clone(), c));
-        }
-        assert_eq!(got.len(), frames);
-        let last_window = frames - w;
-        let skeleton = refiner.skeleton();
-        let streamed: Vec<EnginePose> = got.iter().map(|(p, _)| p.clone()).collect();
-        let a = world_positions(&streamed, skeleton);
-        let b = world_positions(&whole, skeleton);
-        let j = refiner.joints();
-        let aligned = last_window % s == 0;
-        let same: Vec<usize> = (0..frames).filter(|&t| aligned || t < last_window || t >= before_finish).collect();
-        let worst =
-            same.iter().map(|&t| max_distance(&a[t * j..(t + 1) * j], &b[t * j..(t + 1) * j])).fold(0.0, f64::max);
-        println!(
-            "stream vs whole sequence, {frames} frames: max joint distance {worst:e} cm on {} frames ({} revisited by \
-             the last window)",
-            same.len(),
-            frames - same.len()
-        );
-        assert!(worst <= 1e-4, "{frames} frames: the stream differs by {worst} cm");
-        assert!(same.iter().all(|&t| got[t].1 == whole_contacts[t]), "contacts agree");
-        if aligned {
-            assert_eq!(same.len(), frames);
         }
     }
 }
@@ -534,38 +564,10 @@ fn runtime_inertializes_the_seams_like_zoo_stitch_pre_blend() {
     let err = refiner.refine_poses_at_seams(&poses, &[100], FootCleanup::NONE, &mut out, &mut contacts).unwrap_err();
     assert!(err.to_string().contains("seam at frame 100 of a sequence of 100 frames"), "{err}");
 
-    // The stream with the same seams marked: the whole sequence's poses on every frame the last
-    // window did not revisit.
-    let (w, s) = (refiner.window(), refiner.stride());
-    let mut stream = refiner.stream();
-    let mut got = Vec::new();
-    let mut pose = EnginePose::new(j);
-    for (t, p) in poses.iter().enumerate() {
-        if seams.contains(&t) {
-            stream.mark_seam();
-        }
-        stream.push(p).unwrap();
-        while stream.pop(&mut pose).unwrap().is_some() {
-            got.push(pose.clone());
-        }
-    }
-    let before_finish = got.len();
-    stream.finish().unwrap();
-    while stream.pop(&mut pose).unwrap().is_some() {
-        got.push(pose.clone());
-    }
-    assert_eq!(got.len(), n);
-    let streamed = world_positions(&got, skeleton);
-    let last_window = n - w;
-    let same: Vec<usize> = (0..n).filter(|&t| last_window % s == 0 || t < last_window || t >= before_finish).collect();
-    let worst = same
-        .iter()
-        .map(|&t| max_distance(&streamed[t * j..(t + 1) * j], &whole[t * j..(t + 1) * j]))
-        .fold(0.0, f64::max);
-    println!(
-        "stream with marked seams vs the whole sequence: max joint distance {worst:e} cm on {} frames",
-        same.len()
-    );
+    // The stream with the same seams marked: the whole sequence's poses on every frame.
+    let (got, _) = stream_all(&refiner, &poses, &seams, FootCleanup::NONE, false);
+    let worst = max_distance(&world_positions(&got, skeleton), &whole);
+    println!("stream with marked seams vs the whole sequence: max joint distance {worst:e} cm on {n} frames");
     assert!(worst <= 1e-4, "the stream differs by {worst} cm");
 }
 
@@ -602,6 +604,15 @@ fn runtime_guards_the_seams_like_zoo_stitch() {
     // As in `runtime_refines_engine_poses_like_zoo_stitch`: the leg IK magnifies float differences.
     assert!(worst <= 0.1, "joint positions differ by {worst} cm");
     assert!(moved > 10.0 * worst.max(1e-3), "the guard moved joints by only {moved} cm");
+    // The stream with the seams marked and its guard: the whole sequence's poses on every frame
+    // (with the lock: see `stitch_stream_matches_the_whole_sequence_with_fixed_latency`).
+    refiner.set_seam_guard(true);
+    let ik = FootCleanup { place_ankles: true, lock_feet: false };
+    refiner.refine_poses_at_seams(&poses, &seams, ik, &mut out, &mut contacts).unwrap();
+    let (got, _) = stream_all(&refiner, &poses, &seams, ik, true);
+    let worst = max_distance(&world_positions(&got, &skeleton), &world_positions(&out, &skeleton));
+    println!("stream with marked seams, ankle IK and guard vs the whole sequence: max joint distance {worst:e} cm");
+    assert!(worst <= 1e-4, "the stream differs by {worst} cm");
 }
 
 /// Bad input to the pose and streaming forms: clear errors, no panic.
@@ -659,4 +670,162 @@ fn runtime_stitch_poses_and_stream_refuse_bad_input() {
         n += 1;
     }
     assert_eq!(n, 40);
+}
+
+/// `StitchStream` against `zoo stitch`'s default output (seams inertialized, refined with the
+/// fallback, ankles by IK, seams guarded, feet locked) on bandai2's youthful stitching cases:
+/// every sixth validation clip with the next one (pairs) and the next two (triples), each cut to
+/// 60 to 150 frames and aligned end to start as `zoo stitch` aligns them, refined by the RMR of
+/// the run folder `ZOO_RMR_RUN` (default `../runs/rmr20`, trained with `--valid-glob
+/// '*_youthful_*'`) exported through `zoo_models`. Prints the largest joint-position difference
+/// in cm (and the mean and 99th percentile of each frame's largest) with the lookahead, for the
+/// refiner with its ankle IK and seam guard and for `zoo stitch`'s whole default. The first must
+/// be within 0.05 cm; the foot lock's rate limit makes the second depend on frames beyond any
+/// bounded lookahead (docs/rmr.md), so it is reported, not asserted.
+#[test]
+#[ignore = "needs ../shared/data/bandai2"]
+fn stitch_stream_matches_zoo_stitch_on_bandai2() {
+    use zoo_rmr::pairs::{MIN_CLIP_FRAMES, align_clips};
+    use zoo_runtime::stitch::FootCleanup;
+    use zoo_runtime::{EnginePose, StitchRefiner};
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let data = std::env::var("ZOO_BANDAI2").map_or_else(|_| root.join("../shared/data/bandai2"), Into::into);
+    let run = std::env::var("ZOO_RMR_RUN").map_or_else(|_| root.join("../runs/rmr20"), Into::into);
+    let exported = zoo_models::export_run(&run, &Default::default()).unwrap();
+    let refiner = StitchRefiner::from_bytes(&exported.model.to_bytes()).unwrap();
+    let mut names: Vec<std::path::PathBuf> = std::fs::read_dir(&data)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.file_name().is_some_and(|n| n.to_string_lossy().contains("_youthful_")))
+        .collect();
+    names.sort();
+    let clips: Vec<zoo_motion::Clip> = names.iter().map(|p| zoo_data::clip_io::read_model_clip(p).unwrap()).collect();
+    let j = refiner.joints();
+    assert!(clips.iter().all(|c| c.joints() == j), "the clips are on the model's rig");
+    let skeleton = refiner.skeleton().clone();
+    let mut cases = Vec::new();
+    for k in (0..clips.len().saturating_sub(2)).step_by(6) {
+        for n in [2, 3] {
+            let parts: Vec<zoo_motion::Clip> = (0..n)
+                .map(|i| {
+                    let c = &clips[k + i];
+                    let len = (60 + 37 * (k + i) % 91).min(c.frames());
+                    let from = (c.frames() - len) / 3;
+                    c.slice(from, from + len)
+                })
+                .collect();
+            let aligned = align_clips(&parts, refiner.layout(), MIN_CLIP_FRAMES).unwrap();
+            let seams = aligned.starts[1..].to_vec();
+            let clip = aligned.clip;
+            let poses: Vec<EnginePose> = (0..clip.frames())
+                .map(|f| {
+                    let rotations: Vec<glam::Quat> = clip.rotations_at(f).iter().map(|q| q.as_quat()).collect();
+                    EnginePose::from_world(clip.root_position(f).as_vec3(), &rotations)
+                })
+                .collect();
+            cases.push((clip, seams, poses));
+        }
+    }
+    let ik = FootCleanup { place_ankles: true, lock_feet: false };
+    let mut worst_ik = 0.0;
+    for (name, cleanup) in [("ankle IK and seam guard", ik), ("zoo stitch's default", FootCleanup::default())] {
+        let (mut per_frame, mut worst_zoo, mut latency) = (Vec::new(), 0.0f64, 0);
+        for (clip, seams, poses) in &cases {
+            // The whole sequence, on the poses as the engine has them and on the aligned clip itself.
+            let mut whole = vec![EnginePose::new(j); poses.len()];
+            let mut contacts = vec![[false; 4]; poses.len()];
+            refiner.refine_poses_at_seams(poses, seams, cleanup, &mut whole, &mut contacts).unwrap();
+            let zoo = refiner.refine_clip(clip, seams, cleanup).unwrap().clip.global().1;
+            let mut stream = refiner.stream();
+            stream.set_cleanup(cleanup).unwrap();
+            latency = stream.latency();
+            let (got, streamed_contacts) = stream_all(&refiner, poses, seams, cleanup, true);
+            assert_eq!(streamed_contacts, contacts, "contacts agree");
+            let (a, b) = (world_positions(&got, &skeleton), world_positions(&whole, &skeleton));
+            per_frame.extend((0..poses.len()).map(|t| max_distance(&a[t * j..(t + 1) * j], &b[t * j..(t + 1) * j])));
+            worst_zoo = worst_zoo.max(max_distance(&a, &zoo));
+        }
+        let mean = per_frame.iter().sum::<f64>() / per_frame.len() as f64;
+        let p99 = zoo_motion::stitch::percentile(&mut per_frame, 99.0);
+        let worst = per_frame.iter().copied().fold(0.0, f64::max);
+        println!(
+            "StitchStream ({name}, latency {latency} frames) vs the whole sequence on {} bandai2 youthful cases ({} \
+             frames): largest joint difference {worst:.2e} cm (mean {mean:.2e}, 99th percentile {p99:.2e}) against \
+             refine_poses_at_seams, {worst_zoo:.2e} cm against refine_clip on the aligned clip (zoo stitch)",
+            cases.len(),
+            per_frame.len()
+        );
+        if cleanup == ik {
+            worst_ik = worst.max(worst_zoo);
+        }
+    }
+    assert!(worst_ik <= 0.05, "with the ankle IK and the guard the stream differs by {worst_ik} cm");
+}
+
+/// Why the stream's foot lock differs from the whole sequence's: `lock_feet_with` over windows
+/// of the refined, ankle-placed and guarded triples of `stitch_stream_matches_zoo_stitch_on_bandai2`
+/// (each 10 frames locked with `lookahead` frames after them and `history` before), against the
+/// whole sequence locked at once. Without the rate limit the windows give the whole sequence's
+/// lock exactly from 45 frames on; with `zoo stitch`'s 1 cm per frame they need about 200.
+#[test]
+#[ignore = "needs ../shared/data/bandai2"]
+fn foot_lock_in_windows_is_the_whole_sequences_only_without_its_rate_limit() {
+    use zoo_rmr::pairs::{MIN_CLIP_FRAMES, align_clips};
+    use zoo_runtime::StitchRefiner;
+    use zoo_runtime::stitch::FootCleanup;
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let data = std::env::var("ZOO_BANDAI2").map_or_else(|_| root.join("../shared/data/bandai2"), Into::into);
+    let run = std::env::var("ZOO_RMR_RUN").map_or_else(|_| root.join("../runs/rmr20"), Into::into);
+    let exported = zoo_models::export_run(&run, &Default::default()).unwrap();
+    let refiner = StitchRefiner::from_bytes(&exported.model.to_bytes()).unwrap();
+    let mut names: Vec<std::path::PathBuf> = std::fs::read_dir(&data)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.file_name().is_some_and(|n| n.to_string_lossy().contains("_youthful_")))
+        .collect();
+    names.sort();
+    let clips: Vec<zoo_motion::Clip> = names.iter().map(|p| zoo_data::clip_io::read_model_clip(p).unwrap()).collect();
+    let layout = refiner.layout().clone();
+    for step in [1.0, 2.0, f64::INFINITY] {
+        for (l, h) in [(45usize, 45usize), (100, 100), (200, 200)] {
+            let mut worst = 0.0f64;
+            for k in (0..clips.len().saturating_sub(2)).step_by(6) {
+                let parts: Vec<zoo_motion::Clip> = (0..3)
+                    .map(|i| {
+                        let c = &clips[k + i];
+                        let len = (60 + 37 * (k + i) % 91).min(c.frames());
+                        let from = (c.frames() - len) / 3;
+                        c.slice(from, from + len)
+                    })
+                    .collect();
+                let aligned = align_clips(&parts, &layout, MIN_CLIP_FRAMES).unwrap();
+                let seams = aligned.starts[1..].to_vec();
+                let done = refiner
+                    .refine_clip(&aligned.clip, &seams, FootCleanup { place_ankles: true, lock_feet: false })
+                    .unwrap();
+                let n = done.clip.frames();
+                let mut full = done.clip.clone();
+                zoo_motion::stitch::lock::lock_feet_with(&mut full, &done.contacts, &layout, step);
+                let (_, fp) = full.global();
+                let j = full.joints();
+                let mut t0 = 0;
+                while t0 < n {
+                    let (a, b) = (t0.saturating_sub(h), (t0 + 10 + l).min(n));
+                    let mut w = done.clip.slice(a, b);
+                    zoo_motion::stitch::lock::lock_feet_with(&mut w, &done.contacts[a..b], &layout, step);
+                    let (_, wp) = w.global();
+                    for t in t0..(t0 + 10).min(n) {
+                        for q in 0..j {
+                            worst = worst.max((wp[(t - a) * j + q] - fp[t * j + q]).length());
+                        }
+                    }
+                    t0 += 10;
+                }
+            }
+            println!("max step {step}, lookahead {l}, history {h}: largest difference {worst:.3} cm");
+            if step.is_infinite() {
+                assert!(worst <= 1e-9, "without the rate limit the windows differ by {worst} cm");
+            }
+        }
+    }
 }

@@ -190,8 +190,8 @@ fn keyframes_allocations() {
 /// The stitching task (issue 12): heap allocations per window of
 /// `StitchRefiner::refine_window_normalized` (tract's per-run tensors) and of a `StitchStream`
 /// (pushes, pops and the window they trigger), on the tiny seeded RMR. The stream's own work
-/// (encoding, normalising, blending, decoding, inertializing marked seams) must add nothing to
-/// tract's.
+/// (encoding, normalising, blending, decoding, inertializing marked seams, and the ankle IK,
+/// seam guard and foot lock on their preallocated scratch) must add nothing to tract's.
 fn stitch_allocations() {
     use candle_core::{DType, Device};
     let config = zoo_rmr::Config::tiny();
@@ -215,40 +215,49 @@ fn stitch_allocations() {
             EnginePose::from_world(aligned.root_position(f).as_vec3(), &r)
         })
         .collect();
-    let mut stream = refiner.stream();
-    let mut out = EnginePose::new(refiner.joints());
-    let mut frames = poses.iter();
-    // Up to the first window: the stream sizes its buffers, and a first marked seam its blend's.
-    for (f, p) in frames.by_ref().take(w).enumerate() {
-        if f == w / 2 {
-            stream.mark_seam();
+    // The refiner alone (no ankle IK, guard or lock), then `zoo stitch`'s cleanup.
+    for cleanup in [zoo_runtime::FootCleanup::NONE, zoo_runtime::FootCleanup::default()] {
+        let bare = cleanup == zoo_runtime::FootCleanup::NONE;
+        let mut stream = refiner.stream();
+        stream.set_cleanup(cleanup).unwrap();
+        stream.set_seam_guard(!bare).unwrap();
+        let mut out = EnginePose::new(refiner.joints());
+        let mut frames = poses.iter();
+        // Up to the first pop: the stream sizes its buffers, and a first marked seam its blend's.
+        for (f, p) in frames.by_ref().take(stream.latency() + 1).enumerate() {
+            if f == w / 2 {
+                stream.mark_seam();
+            }
+            stream.push(p).unwrap();
+            while stream.pop(&mut out).unwrap().is_some() {}
         }
-        stream.push(p).unwrap();
-        while stream.pop(&mut out).unwrap().is_some() {}
-    }
-    let before = ALLOCATIONS.load(Ordering::Relaxed);
-    let mut pushed = 0;
-    COUNTED.with(|c| c.set(true));
-    for p in frames.by_ref().take(20 * s) {
-        // A seam every 25 frames (`zoo stitch --pre-blend` in a stream): no allocation either.
-        if pushed % 25 == 7 {
-            stream.mark_seam();
+        let before = ALLOCATIONS.load(Ordering::Relaxed);
+        let mut pushed = 0;
+        COUNTED.with(|c| c.set(true));
+        for p in frames.by_ref().take(20 * s) {
+            // A seam every 25 frames (`zoo stitch --pre-blend` in a stream): no allocation either.
+            if pushed % 25 == 7 {
+                stream.mark_seam();
+            }
+            stream.push(p).unwrap();
+            while stream.pop(&mut out).unwrap().is_some() {}
+            pushed += 1;
         }
-        stream.push(p).unwrap();
-        while stream.pop(&mut out).unwrap().is_some() {}
-        pushed += 1;
+        COUNTED.with(|c| c.set(false));
+        assert_eq!(pushed, 20 * s, "the synthetic motion is long enough for 20 more windows");
+        let stream_per_window = (ALLOCATIONS.load(Ordering::Relaxed) - before) as f64 / 20.0;
+        eprintln!(
+            "tiny RMR (window {w}, stride {s}): {per_window:.1} allocations per refine_window_normalized, \
+             {stream_per_window:.1} per window of a StitchStream with {cleanup:?}, guard {} (its {s} pushes and pops \
+             included)",
+            !bare
+        );
+        assert!(
+            (stream_per_window - per_window).abs() < 0.5,
+            "the stream's own work allocates ({cleanup:?}): {stream_per_window} per window vs {per_window} for the \
+             window alone"
+        );
     }
-    COUNTED.with(|c| c.set(false));
-    assert_eq!(pushed, 20 * s, "the synthetic motion is long enough for 20 more windows");
-    let stream_per_window = (ALLOCATIONS.load(Ordering::Relaxed) - before) as f64 / 20.0;
-    eprintln!(
-        "tiny RMR (window {w}, stride {s}): {per_window:.1} allocations per refine_window_normalized, \
-         {stream_per_window:.1} per window of a StitchStream (its {s} pushes and pops included)"
-    );
-    assert!(
-        (stream_per_window - per_window).abs() < 0.5,
-        "the stream's own work allocates: {stream_per_window} per window vs {per_window} for the window alone"
-    );
 }
 
 /// `TransitionRunner::step_raw` (feature decoding, offsets, root integration around the graph

@@ -205,8 +205,10 @@ typedef struct ZooStitchInfo {
   size_t stride;
   // Frames over which each window's first-frame difference is blended away.
   size_t blend_frames;
-  // Latency of a stream in frames (`w - 1`): the refined pose of frame `t` is ready once frame
-  // `t + latency` is pushed.
+  // Latency of a new stream in frames (`w` + the lookahead of its foot lock and seam guard +
+  // the frames they release at once - 1: 114 for `w` = 60): the refined pose of frame `t` is
+  // ready once frame `t + latency` is pushed. A stream without them
+  // ([`zoo_stitch_stream_set_cleanup`], the guard off) has `w`: [`zoo_stitch_stream_latency`].
   size_t latency;
 } ZooStitchInfo;
 
@@ -595,6 +597,25 @@ enum ZooStatus zoo_stitch_stream_push(struct ZooStitchStream *stream,
                                       const float *rotations,
                                       size_t rotations_len);
 
+// Sets what follows the refiner in `stream`, before its first push (`ZOO_STATUS_INVALID_STATE`
+// after): `place_ankles` puts the ankles where the refiner predicts them, `lock_feet` locks the
+// planted feet by the predicted contacts (both on by default, as `zoo stitch`); the seam guard
+// follows the model's ([`zoo_stitch_set_seam_guard`]). Both off with the guard off: the
+// refiner's poses as they are, at a latency of `window` frames. One thread at a time.
+//
+// # Safety
+// `stream` is NULL or live and used by this thread only.
+enum ZooStatus zoo_stitch_stream_set_cleanup(struct ZooStitchStream *stream,
+                                             bool place_ankles,
+                                             bool lock_feet);
+
+// Writes into `*out` the stream's latency in frames: the refined pose of frame `t` is ready
+// once frame `t + latency` is pushed. One thread at a time.
+//
+// # Safety
+// `stream` is NULL or live and used by this thread only; `out` is NULL or writable.
+enum ZooStatus zoo_stitch_stream_latency(const struct ZooStitchStream *stream, size_t *out);
+
 // Writes into `*ready` whether the next refined pose can be popped. One thread at a time.
 //
 // # Safety
@@ -604,8 +625,9 @@ enum ZooStatus zoo_stitch_stream_ready(const struct ZooStitchStream *stream, boo
 // Pops the next refined pose into `root` and `rotations` (`4K` floats; root deltas from the
 // previous popped pose) and its predicted contacts into `contacts` (4 bytes). Before it is
 // ready (fewer than `latency` frames pushed after it, and not finished) the call is
-// `ZOO_STATUS_NOT_AVAILABLE` and writes nothing. The stream does not lock feet: use the contacts
-// for the engine's foot IK. One thread at a time.
+// `ZOO_STATUS_NOT_AVAILABLE` and writes nothing. The pose has the ankle IK, the seam guard and
+// the foot lock of `zoo stitch` unless [`zoo_stitch_stream_set_cleanup`] turned them off. One
+// thread at a time.
 //
 // # Safety
 // `stream` is NULL or live and used by this thread only; `root` is NULL or writable; each buffer
@@ -618,8 +640,8 @@ enum ZooStatus zoo_stitch_stream_pop(struct ZooStitchStream *stream,
                                      size_t contacts_len);
 
 // Marks the next pushed pose as the first frame of a new clip: the stream inertializes the seam
-// before refining, as [`zoo_stitch_refine_at_seams`] does (the seam frame is encoded once the
-// frame after it is pushed). A seam on frame 0 or 1 changes nothing. One thread at a time.
+// before refining and guards it, as [`zoo_stitch_refine_at_seams`] does (the seam frame is
+// encoded once the frame after it is pushed). A seam on frame 0 or 1 is not inertialized. One thread at a time.
 //
 // # Safety
 // `stream` is NULL or live and used by this thread only.

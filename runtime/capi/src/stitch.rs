@@ -2,7 +2,9 @@
 //! motion put together from clips (aligned end to start, at the model's frame rate, on its
 //! skeleton: [`crate::zoo_model_skeleton`]), either a whole sequence at once
 //! ([`zoo_stitch_refine`]) or as a stream for motion matching ([`ZooStitchStream`]: one pose
-//! pushed per frame, refined poses popped with a fixed latency of `window - 1` frames).
+//! pushed per frame, refined poses popped with a fixed latency: `ZooStitchInfo.latency` frames
+//! with the ankle IK, the seam guard and the foot lock of `zoo stitch`, `window` frames without
+//! them, [`zoo_stitch_stream_set_cleanup`]).
 //!
 //! Poses are engine poses: a [`ZooRootMotion`] and `4K` local rotations each. Contacts are 4
 //! bytes per frame, heel left, toe left, heel right, toe right (1: on the ground).
@@ -36,8 +38,10 @@ pub struct ZooStitchInfo {
     pub stride: usize,
     /// Frames over which each window's first-frame difference is blended away.
     pub blend_frames: usize,
-    /// Latency of a stream in frames (`w - 1`): the refined pose of frame `t` is ready once frame
-    /// `t + latency` is pushed.
+    /// Latency of a new stream in frames (`w` + the lookahead of its foot lock and seam guard +
+    /// the frames they release at once - 1: 114 for `w` = 60): the refined pose of frame `t` is
+    /// ready once frame `t + latency` is pushed. A stream without them
+    /// ([`zoo_stitch_stream_set_cleanup`], the guard off) has `w`: [`zoo_stitch_stream_latency`].
     pub latency: usize,
 }
 
@@ -287,6 +291,39 @@ pub unsafe extern "C" fn zoo_stitch_stream_push(
     })
 }
 
+/// Sets what follows the refiner in `stream`, before its first push (`ZOO_STATUS_INVALID_STATE`
+/// after): `place_ankles` puts the ankles where the refiner predicts them, `lock_feet` locks the
+/// planted feet by the predicted contacts (both on by default, as `zoo stitch`); the seam guard
+/// follows the model's ([`zoo_stitch_set_seam_guard`]). Both off with the guard off: the
+/// refiner's poses as they are, at a latency of `window` frames. One thread at a time.
+///
+/// # Safety
+/// `stream` is NULL or live and used by this thread only.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_stitch_stream_set_cleanup(
+    stream: *mut ZooStitchStream,
+    place_ankles: bool,
+    lock_feet: bool,
+) -> ZooStatus {
+    guard("zoo_stitch_stream_set_cleanup", || {
+        let s = unsafe { handle_mut(stream, "stream") }?;
+        s.stream.set_cleanup(FootCleanup { place_ankles, lock_feet }).map_err(stream_failure)
+    })
+}
+
+/// Writes into `*out` the stream's latency in frames: the refined pose of frame `t` is ready
+/// once frame `t + latency` is pushed. One thread at a time.
+///
+/// # Safety
+/// `stream` is NULL or live and used by this thread only; `out` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_stitch_stream_latency(stream: *const ZooStitchStream, out: *mut usize) -> ZooStatus {
+    guard("zoo_stitch_stream_latency", || {
+        let s = unsafe { handle(stream, "stream") }?;
+        unsafe { write_out(out, s.stream.latency(), "out") }
+    })
+}
+
 /// Writes into `*ready` whether the next refined pose can be popped. One thread at a time.
 ///
 /// # Safety
@@ -302,8 +339,9 @@ pub unsafe extern "C" fn zoo_stitch_stream_ready(stream: *const ZooStitchStream,
 /// Pops the next refined pose into `root` and `rotations` (`4K` floats; root deltas from the
 /// previous popped pose) and its predicted contacts into `contacts` (4 bytes). Before it is
 /// ready (fewer than `latency` frames pushed after it, and not finished) the call is
-/// `ZOO_STATUS_NOT_AVAILABLE` and writes nothing. The stream does not lock feet: use the contacts
-/// for the engine's foot IK. One thread at a time.
+/// `ZOO_STATUS_NOT_AVAILABLE` and writes nothing. The pose has the ankle IK, the seam guard and
+/// the foot lock of `zoo stitch` unless [`zoo_stitch_stream_set_cleanup`] turned them off. One
+/// thread at a time.
 ///
 /// # Safety
 /// `stream` is NULL or live and used by this thread only; `root` is NULL or writable; each buffer
@@ -346,8 +384,8 @@ pub unsafe extern "C" fn zoo_stitch_stream_pop(
 }
 
 /// Marks the next pushed pose as the first frame of a new clip: the stream inertializes the seam
-/// before refining, as [`zoo_stitch_refine_at_seams`] does (the seam frame is encoded once the
-/// frame after it is pushed). A seam on frame 0 or 1 changes nothing. One thread at a time.
+/// before refining and guards it, as [`zoo_stitch_refine_at_seams`] does (the seam frame is
+/// encoded once the frame after it is pushed). A seam on frame 0 or 1 is not inertialized. One thread at a time.
 ///
 /// # Safety
 /// `stream` is NULL or live and used by this thread only.

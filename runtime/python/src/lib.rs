@@ -141,6 +141,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<transition::Transition>()?;
     m.add_class::<keyframes::Keyframes>()?;
     m.add_class::<stitch::Stitch>()?;
+    m.add_class::<stitch::StitchStream>()?;
     m.add_class::<synthesis::Synthesis>()?;
     m.add_class::<synthesis::Controller>()?;
     m.add_class::<synthesis::PathFollower>()?;

@@ -6,7 +6,8 @@ use glam::{DQuat, DVec3, Vec3};
 use numpy::{PyArrayDyn, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use zoo_runtime::{EnginePose, FootCleanup, StitchRefiner};
+use std::sync::{Arc, Mutex, MutexGuard};
+use zoo_runtime::{EnginePose, FootCleanup, StitchRefiner, StitchStreamOf};
 
 /// Shortest clip the refiner stitches: the shortest segment of its training data (RMR sec. 6;
 /// `zoo_rmr::pairs::MIN_CLIP_FRAMES`, what `zoo stitch` requires).
@@ -15,7 +16,7 @@ pub const MIN_CLIP_FRAMES: usize = 10;
 /// A loaded stitching model (the refiner is `Send + Sync`: no runner to lock).
 #[pyclass(module = "zoo._native", name = "Stitch", frozen)]
 pub struct Stitch {
-    model: StitchRefiner,
+    model: Arc<StitchRefiner>,
     parents: Vec<i32>,
     offsets: Vec<Vec3>,
 }
@@ -26,7 +27,7 @@ impl Stitch {
         let s = &model.metadata().skeleton;
         let parents = s.parents.clone();
         let offsets = (0..s.len()).map(|j| s.offset(j)).collect();
-        Stitch { model, parents, offsets }
+        Stitch { model: Arc::new(model), parents, offsets }
     }
 
     fn read_poses(
@@ -201,5 +202,101 @@ impl Stitch {
         }
         let contacts: Vec<bool> = contacts.iter().flatten().copied().collect();
         Ok((arrays.into_dict(py, &[t])?, array(py, contacts, &[t, 4])?))
+    }
+}
+
+/// A stitching stream for motion matching (`zoo_runtime::StitchStream`): frames pushed as they
+/// are decided, refined frames popped `latency` frames later, with the ankle IK, the guard of
+/// the marked seams and the foot lock of `zoo stitch` (each of the first and last optional).
+#[pyclass(module = "zoo._native", name = "StitchStream")]
+pub struct StitchStream {
+    inner: Mutex<StitchStreamOf<Arc<StitchRefiner>>>,
+    parents: Vec<i32>,
+    offsets: Vec<Vec3>,
+    joints: usize,
+}
+
+impl StitchStream {
+    fn lock(&self) -> MutexGuard<'_, StitchStreamOf<Arc<StitchRefiner>>> {
+        self.inner.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+#[pymethods]
+impl StitchStream {
+    /// A stream over `model`; `place_ankles` and `lock_feet` as in `Stitch.refine_poses` (the
+    /// seam guard is on, as in `zoo stitch`, unless `seam_guard` is false).
+    #[new]
+    #[pyo3(signature = (model, place_ankles=true, lock_feet=true, seam_guard=true))]
+    fn new(model: &Stitch, place_ankles: bool, lock_feet: bool, seam_guard: bool) -> PyResult<Self> {
+        let mut stream = Arc::clone(&model.model).shared_stream();
+        stream.set_cleanup(FootCleanup { place_ankles, lock_feet }).or_py()?;
+        stream.set_seam_guard(seam_guard).or_py()?;
+        Ok(StitchStream {
+            inner: Mutex::new(stream),
+            parents: model.parents.clone(),
+            offsets: model.offsets.clone(),
+            joints: model.model.joints(),
+        })
+    }
+
+    /// Frames between pushing frame `t` and popping it refined.
+    #[getter]
+    fn latency(&self) -> usize {
+        self.lock().latency()
+    }
+
+    /// Frames pushed so far.
+    #[getter]
+    fn pushed(&self) -> usize {
+        self.lock().pushed()
+    }
+
+    /// Frames popped so far.
+    #[getter]
+    fn popped(&self) -> usize {
+        self.lock().popped()
+    }
+
+    /// Marks the next pushed frame as the first of a new clip (inertialized and guarded).
+    fn mark_seam(&self) {
+        self.lock().mark_seam();
+    }
+
+    /// Pushes frames of the aligned motion: BVH-style `hips` `(T, 3)` and `rotations`
+    /// `(T, K, 4)`.
+    fn push(&self, hips: PyReadonlyArrayDyn<'_, f32>, rotations: PyReadonlyArrayDyn<'_, f32>) -> PyResult<()> {
+        let k = self.joints;
+        let (h, hd) = values("pushed hips", &hips, &[("T", None), ("", Some(3))])?;
+        let (r, _) = values("pushed rotations", &rotations, &[("T", Some(hd[0])), ("K", Some(k)), ("", Some(4))])?;
+        let poses = poses_from_world("pushed rotations", h, r, hd[0], k)?;
+        let mut stream = self.lock();
+        for p in &poses {
+            stream.push(p).or_py()?;
+        }
+        Ok(())
+    }
+
+    /// Ends the motion: every remaining frame becomes ready.
+    fn finish(&self) -> PyResult<()> {
+        self.lock().finish().or_py()
+    }
+
+    /// Pops every refined frame that is ready. Returns `(poses, contacts)`: the fields of
+    /// `zoo.Poses` with prefix `(N,)` and the predicted contacts `(N, 4)`.
+    fn pop<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyDict>, Bound<'py, PyArrayDyn<bool>>)> {
+        let k = self.joints;
+        let mut stream = self.lock();
+        let mut arrays = PoseArrays::new(k, 0);
+        let mut bits = Vec::new();
+        let mut pose = EnginePose::new(k);
+        let mut n = 0;
+        while let Some(c) = stream.pop(&mut pose).or_py()? {
+            forward_kinematics(&mut pose, &self.parents, &self.offsets);
+            arrays.push(&pose);
+            bits.extend(c);
+            n += 1;
+        }
+        Ok((arrays.into_dict(py, &[n])?, array(py, bits, &[n, 4])?))
     }
 }

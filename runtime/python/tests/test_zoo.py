@@ -201,6 +201,37 @@ def test_stitch_matches_the_runtime_and_zoo_datas_alignment(data, ref, clip):
         m.refine_poses((hips, rot), seams=[95])
 
 
+def test_stitch_stream_gives_the_whole_sequence(data, ref, clip):
+    m = zoo.load(data / "stitch.onnx")
+    r = ref["stitch"]
+    other = zoo.read_bvh(data / "clip2.bvh")
+    a, b = clip.poses()[slice(*r["a"])], other.poses()[slice(*r["b"])]
+    hips, rot, starts = m.align([a, b])
+    t = len(hips)
+    whole, whole_contacts = m.refine_poses((hips, rot), seams=starts[1:])
+    for cleanup in [True, False]:
+        s = m.stream(place_ankles=cleanup, lock_feet=cleanup, seam_guard=cleanup)
+        assert s.latency == (m.window + 54 if cleanup else m.window)
+        got, contacts = [], []
+        for f in range(t):
+            if f in starts[1:]:
+                s.mark_seam()
+            s.push((hips[f : f + 1], rot[f : f + 1]))
+            p, c = s.pop()
+            assert len(p) == (1 if f >= s.latency else 0)
+            got.append(p)
+            contacts.append(c)
+        s.finish()
+        p, c = s.pop()
+        got.append(p)
+        contacts.append(c)
+        hips_out = np.concatenate([g.hips for g in got])
+        assert hips_out.shape == (t, 3) and s.popped == t
+        if cleanup:
+            assert max_diff(hips_out, whole.hips) < 1e-3
+            assert np.array_equal(np.concatenate(contacts), whole_contacts)
+
+
 def test_stitch_refuses_short_clips(data, clip):
     m = zoo.load(data / "stitch.onnx")
     p = clip.poses()

@@ -62,6 +62,7 @@ __all__ = [
     "TransitionModel",
     "KeyframeModel",
     "StitchModel",
+    "StitchStream",
     "SynthesisModel",
     "Controller",
     "ZooError",
@@ -473,6 +474,56 @@ class StitchModel(Model):
     def refine(self, features) -> np.ndarray:
         """Refines raw pose vectors ``(T, dim)`` (``T >= window``)."""
         return self._native.refine(_f32(features, "features"))
+
+    def stream(self, place_ankles: bool = True, lock_feet: bool = True, seam_guard: bool = True) -> "StitchStream":
+        """A stream for motion matching: push frames as they are decided, pop them refined
+        ``latency`` frames later, with the ankle IK, the seam guard and the foot lock of ``zoo
+        stitch`` (what ``refine_poses`` gives for the same frames and seams)."""
+        return StitchStream(self, place_ankles, lock_feet, seam_guard)
+
+
+class StitchStream:
+    """Stitching as a stream (``zoo_runtime::StitchStream``): ``push`` the aligned motion as it is
+    decided (``mark_seam`` before a clip's first frame), ``pop`` what is refined; the refined
+    frame ``t`` is ready once frame ``t + latency`` is pushed, or after ``finish``."""
+
+    def __init__(self, model: StitchModel, place_ankles: bool = True, lock_feet: bool = True, seam_guard: bool = True):
+        self.model = model
+        self._native = _native.StitchStream(model._native, place_ankles, lock_feet, seam_guard)
+
+    @property
+    def latency(self) -> int:
+        """Frames between pushing a frame and popping it refined: the window, plus the lookahead
+        of the seam guard and the foot lock when they run."""
+        return self._native.latency
+
+    @property
+    def pushed(self) -> int:
+        """Frames pushed so far."""
+        return self._native.pushed
+
+    @property
+    def popped(self) -> int:
+        """Frames popped so far."""
+        return self._native.popped
+
+    def mark_seam(self) -> None:
+        """Marks the next pushed frame as the first of a new clip: inertialized and guarded."""
+        self._native.mark_seam()
+
+    def push(self, frames: Union[Poses, Tuple[np.ndarray, np.ndarray]]) -> None:
+        """Pushes frames of the aligned motion (``Poses`` or BVH-style ``(hips, rotations)``)."""
+        h, r = _bvh_style(frames, "frames")
+        self._native.push(h, r)
+
+    def pop(self) -> Tuple[Poses, np.ndarray]:
+        """Every refined frame that is ready: ``(poses, contacts)`` (prefix ``(N,)``, ``N`` may be 0)."""
+        d, contacts = self._native.pop()
+        return Poses._from_dict(d), contacts
+
+    def finish(self) -> None:
+        """Ends the motion: every remaining frame becomes ready to pop."""
+        self._native.finish()
 
 
 class SynthesisModel(Model):

@@ -21,14 +21,13 @@
 //! ([`zoo_motion::stitch::guard`]), as `zoo stitch` does.
 //!
 //! Streaming for motion matching: [`StitchStream`] (from [`StitchRefiner::stream`]) takes one
-//! pose per frame as the engine decides it and gives refined poses back with a fixed latency of
-//! `w - 1` frames ([`StitchStream::latency`]): the refined pose of frame `t` is ready once frame
-//! `t + w - 1` is pushed. It runs the same windows as [`StitchRefiner::refine_sequence`] (one
-//! every `s` frames; at [`StitchStream::finish`] one ending on the last frame), so up to the
-//! last `w` frames of a finished stream its output is the whole-sequence form's, value for
-//! value. The foot lock needs whole contact runs, so the stream returns the predicted contacts
-//! with each pose for the engine's own foot IK instead of locking; it does not guard the seams
-//! either (the guard follows the ankle IK, which the stream leaves to the engine).
+//! pose per frame as the engine decides it and gives refined poses back with a fixed latency
+//! ([`StitchStream::latency`]: `w` frames for the refiner alone, `w +` [`STREAM_LOOKAHEAD`] `+`
+//! [`STREAM_CHUNK`] `- 1` with the foot lock or the seam guard). It runs the same windows as
+//! [`StitchRefiner::refine_sequence`], so its refined pose vectors are the whole sequence's, then
+//! the ankle IK, the guard of the marked seams and the foot lock of `zoo stitch` over a
+//! lookahead: its poses are [`StitchRefiner::refine_poses_at_seams`]'s within what docs/rmr.md
+//! measures.
 
 use crate::error::{MotionError, chain};
 use crate::metadata::MotionModelMetadata;
@@ -378,7 +377,8 @@ impl StitchRefiner {
         let mut offset = vec![0.0f32; self.pose];
         let mut weights = Vec::new();
         for ws in self.window_starts(frames) {
-            let w = self.refine_window_in_place(&mut out[ws * d..(ws + self.window) * d], ws == 0, &mut y, &mut offset)?;
+            let w =
+                self.refine_window_in_place(&mut out[ws * d..(ws + self.window) * d], ws == 0, &mut y, &mut offset)?;
             if self.fallback.is_some() {
                 weights.push(w);
             }
@@ -606,7 +606,12 @@ impl StitchRefiner {
     /// seam guard ([`StitchRefiner::seam_guard`], against the input inertialized at the seams)
     /// and `cleanup`'s foot lock, in that order (RMR secs. 5-6): what `zoo stitch` writes and
     /// `zoo bench stitch` measures. Without seams there is nothing to pre-blend or guard.
-    pub fn refine_clip(&self, aligned: &Clip, seams: &[usize], cleanup: FootCleanup) -> Result<StitchedClip, MotionError> {
+    pub fn refine_clip(
+        &self,
+        aligned: &Clip,
+        seams: &[usize],
+        cleanup: FootCleanup,
+    ) -> Result<StitchedClip, MotionError> {
         self.refine_clip_with(aligned, seams, cleanup, self.pre_blend)
     }
 
@@ -642,20 +647,26 @@ impl StitchRefiner {
         let mut y = vec![0.0f32; x.len()];
         let fallback_weights = self.refine_sequence_weights(&x, &mut y)?;
         let start = zoo_motion::stitch::ground_roots(input, &self.layout)[0];
-        let ankles = zoo_motion::stitch::predicted_ankles(&y, self.layout.pose_layout(self.joints), &self.layout, start);
-        let (mut clip, contacts) = zoo_motion::stitch::decode(&y, &self.skeleton, &self.layout, aligned.frame_time, start)
-            .map_err(|e| stitch_err(e.to_string()))?;
-        let ankle_move = cleanup.place_ankles.then(|| zoo_motion::stitch::lock::place_ankles(&mut clip, &ankles, &self.layout));
+        let ankles =
+            zoo_motion::stitch::predicted_ankles(&y, self.layout.pose_layout(self.joints), &self.layout, start);
+        let (mut clip, contacts) =
+            zoo_motion::stitch::decode(&y, &self.skeleton, &self.layout, aligned.frame_time, start)
+                .map_err(|e| stitch_err(e.to_string()))?;
+        let ankle_move =
+            cleanup.place_ankles.then(|| zoo_motion::stitch::lock::place_ankles(&mut clip, &ankles, &self.layout));
         let guarded = match (&inertialized, self.seam_guard) {
-            (Some(reference), true) => Some(zoo_motion::stitch::guard::guard_seams(&mut clip, reference, seams, &self.layout)),
+            (Some(reference), true) => {
+                Some(zoo_motion::stitch::guard::guard_seams(&mut clip, reference, seams, &self.layout))
+            }
             _ => None,
         };
-        let lock_move = cleanup.lock_feet.then(|| zoo_motion::stitch::lock::lock_feet(&mut clip, &contacts, &self.layout));
+        let lock_move =
+            cleanup.lock_feet.then(|| zoo_motion::stitch::lock::lock_feet(&mut clip, &contacts, &self.layout));
         Ok(StitchedClip { clip, contacts, ankles, ankle_move, lock_move, guarded, fallback_weights })
     }
 
     /// A stream over this refiner for motion matching: push poses as they are decided, pop
-    /// refined ones `w - 1` frames later (see [`StitchStream`]).
+    /// refined ones [`StitchStream::latency`] frames later (see [`StitchStream`]).
     pub fn stream(&self) -> StitchStream<'_> {
         StitchStreamOf::new(self)
     }
@@ -686,25 +697,50 @@ fn write_poses(clip: &Clip, out: &mut [EnginePose]) {
     }
 }
 
+/// Frames of lookahead the stream's foot lock and seam guard take beyond the refiner's window
+/// ([`StitchStream::latency`]): the guard of a seam reads about 17 frames after it, the lock
+/// each contact run whole and the run after it (bandai2's steps: 10 to 25 frames), but not the
+/// whole reach of its rate limit ([`StitchStream`]).
+pub const STREAM_LOOKAHEAD: usize = 45;
+
+/// Frames of already popped motion the stream's foot lock and seam guard read again, for the
+/// contact runs and seams that span what was popped and what was not.
+pub const STREAM_HISTORY: usize = 45;
+
+/// Frames the stream's foot lock and seam guard release at once (they run once per this many
+/// pushes; the latency grows by this less one).
+pub const STREAM_CHUNK: usize = 10;
+
 /// Stitching as a stream, for motion matching (RMR sec. 6 online): the engine pushes the aligned
 /// motion one pose per frame as it decides it ([`StitchStream::push`]) and pops the refined
-/// motion ([`StitchStream::pop`]) with a fixed latency of [`StitchStream::latency`] = `w - 1`
-/// frames: the refined pose of frame `t` is ready once frame `t + w - 1` has been pushed (59
-/// frames, about 2 s at 30 fps, for `w` = 60; plan a shorter window with
-/// [`StitchRefiner::set_window`] for less, at the quality the benchmark measures for it).
+/// motion ([`StitchStream::pop`]) with a fixed latency of [`StitchStream::latency`] frames: the
+/// refined pose of frame `t` is ready once frame `t + latency()` has been pushed.
 ///
 /// Every `s` frames the stream runs one window over the last `w` frames, exactly as
 /// [`StitchRefiner::refine_sequence`] does; [`StitchStream::finish`] runs the last window, the
-/// one ending on the last frame, and makes the remaining frames ready. Poses popped before the
-/// finish are final: where that last window overlaps them (at most its first `w - s` frames)
-/// the whole-sequence form would have refined them once more, so the two agree on every frame
-/// except those. Each pose comes with the predicted contacts (heel L, toe L, heel R, toe R) for
-/// the engine's foot IK; the stream does not lock feet (the lock pins each contact at its mean
-/// over the whole contact, which a stream does not know yet) and does not guard the seams (the
-/// guard follows the ankle IK; [`StitchRefiner::seam_guard`]).
+/// one ending on the last frame. Frame `t` is refined for good once frame `t + w` is pushed (no
+/// later window, the last one included, reaches back to it), so the stream's refined pose
+/// vectors are the whole sequence's, value for value.
 ///
-/// After its first window (and its first marked seam), pushing and popping allocate nothing on
-/// our side as long as the engine pops every frame it can (the buffer then holds at most `2 w + 1` frames); what tract
+/// What follows the refiner is [`StitchStream::cleanup`] (default: [`FootCleanup::default`], as
+/// `zoo stitch`) and the seam guard of the marked seams ([`StitchRefiner::seam_guard`], on by
+/// default): the ankle IK is per frame; the guard and the foot lock run every
+/// [`STREAM_CHUNK`] frames over the refined frames at hand, [`STREAM_HISTORY`] frames already
+/// popped included, and release the frames at least [`STREAM_LOOKAHEAD`] frames from the newest
+/// one. The latency is then `w + STREAM_LOOKAHEAD + STREAM_CHUNK - 1` frames (114 for `w` = 60,
+/// 3.8 s at 30 fps); with [`FootCleanup::NONE`] and the guard off it is `w`. The ankle IK and
+/// the guard then give the whole sequence's poses exactly. The foot lock does not: it pins each
+/// contact at its mean over the contact and limits its correction's change per frame forwards
+/// and backwards ([`zoo_motion::stitch::lock::LOCK_MAX_STEP`]), and where that limit stays
+/// clamped for long a frame's correction depends on frames beyond any bounded lookahead (on
+/// bandai2 the stream's feet differ from `zoo stitch`'s by 0.45 cm on average, up to 24.7 cm;
+/// docs/rmr.md).
+/// Each pose comes with the predicted contacts (heel L, toe L, heel R, toe R).
+///
+/// After its first pop (and its first marked seam), pushing and popping allocate nothing on our
+/// side as long as the engine pops every frame it can: the buffers, and the scratch of the
+/// guard and the lock ([`zoo_motion::stitch::lock::LockScratch`],
+/// [`zoo_motion::stitch::guard::GuardScratch`]), are sized when the stream is made. What tract
 /// allocates per window is counted by `examples/rmr_window_latency` (docs/rmr.md).
 ///
 /// The stream borrows its refiner ([`StitchRefiner::stream`]) or shares it through an `Arc`
@@ -716,7 +752,7 @@ pub type StitchStream<'a> = StitchStreamOf<&'a StitchRefiner>;
 #[derive(Debug)]
 pub struct StitchStreamOf<R> {
     refiner: R,
-    /// Normalised pose vectors of frames `base..pushed` (refined where a window covered them).
+    /// Normalised pose vectors of frames `base..encoded` (refined where a window covered them).
     buf: Vec<f32>,
     base: usize,
     /// Frames encoded so far (frame 0 is encoded when frame 1 arrives).
@@ -730,6 +766,8 @@ pub struct StitchStreamOf<R> {
     seam_next: bool,
     /// Start of the next regular window.
     next_window: usize,
+    /// Frames refined for good and decoded so far.
+    refined: usize,
     /// Frames popped so far.
     read: usize,
     finished: bool,
@@ -737,22 +775,63 @@ pub struct StitchStreamOf<R> {
     cur: PoseFrame,
     continuity: Option<Vec<DQuat>>,
     rotations: Vec<DQuat>,
-    rotations_f32: Vec<Quat>,
     x: Vec<f32>,
     y: Vec<f32>,
     offset: Vec<f32>,
-    /// Ground root of the last popped frame (the first: the input's).
+    /// Ground root of the last decoded frame (the first: the input's).
     root: GroundRoot,
     start_root: GroundRoot,
     last_out: Option<(Vec3, Quat)>,
+    cleanup: FootCleanup,
+    guard: bool,
+    /// Frames the marked seams start on.
+    seams: Vec<usize>,
+    /// Decoded frames `dec_base..refined`: model-space rotations, hips, contacts, predicted
+    /// ankles; the input inertialized at the seams (the guard's reference), `dec_base..finals`.
+    dec_base: usize,
+    dec_rot: Vec<DQuat>,
+    dec_hips: Vec<DVec3>,
+    dec_contacts: Vec<[bool; 4]>,
+    dec_ankles: Vec<[DVec3; 2]>,
+    ref_rot: Vec<DQuat>,
+    ref_hips: Vec<DVec3>,
+    /// Slots of the heel joints in the lower body, when both are in it.
+    ankle_slots: Option<(usize, usize)>,
+    /// Refined poses ready to pop, frames `out_base..released`.
+    out_base: usize,
+    released: usize,
+    out_rot: Vec<Quat>,
+    out_hips: Vec<Vec3>,
+    out_contacts: Vec<[bool; 4]>,
+    /// Scratch of the guard and the lock: the frames they run over, the reference, the seams.
+    work: Clip,
+    reference: Clip,
+    window_seams: Vec<usize>,
+    lock_scratch: zoo_motion::stitch::lock::LockScratch,
+    guard_scratch: zoo_motion::stitch::guard::GuardScratch,
+    guard_report: Vec<zoo_motion::stitch::guard::GuardedSeam>,
 }
 
 impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
     fn new(refiner: R) -> Self {
         let (w, d, j) = (refiner.window, refiner.dim, refiner.joints);
         let blend = SeamInertializer::new(j, refiner.blend_frames, 1.0 / refiner.fps);
+        let slot = |joint: usize| refiner.layout.lower_body.iter().position(|&k| k == joint);
+        let ankle_slots = slot(refiner.layout.contacts[0]).zip(slot(refiner.layout.contacts[2]));
+        let frames = 2 * (w + STREAM_HISTORY + STREAM_LOOKAHEAD + STREAM_CHUNK) + 4;
+        let clip = || Clip {
+            skeleton: refiner.skeleton.clone(),
+            frame_time: 1.0 / refiner.fps,
+            local_rotations: Vec::with_capacity(frames * j),
+            local_positions: Vec::with_capacity(frames * j),
+        };
+        let (work, reference) = (clip(), clip());
+        let guard = refiner.seam_guard;
+        let mut lock_scratch = zoo_motion::stitch::lock::LockScratch::default();
+        lock_scratch.reserve(frames, j);
+        let mut guard_scratch = zoo_motion::stitch::guard::GuardScratch::default();
+        guard_scratch.reserve(frames, j);
         StitchStreamOf {
-            refiner,
             // At most w frames waiting to be dropped, w + 1 still needed.
             buf: Vec::with_capacity((2 * w + 2) * d),
             base: 0,
@@ -762,26 +841,92 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             blend,
             seam_next: false,
             next_window: 0,
+            refined: 0,
             read: 0,
             finished: false,
             prev: PoseFrame::default(),
             cur: PoseFrame::default(),
             continuity: None,
             rotations: Vec::with_capacity(j),
-            rotations_f32: vec![Quat::IDENTITY; j],
             x: vec![0.0; d],
             y: vec![0.0; w * d],
             offset: vec![0.0; d - 4],
             root: GroundRoot::IDENTITY,
             start_root: GroundRoot::IDENTITY,
             last_out: None,
+            cleanup: FootCleanup::default(),
+            guard,
+            seams: Vec::with_capacity(64),
+            dec_base: 0,
+            dec_rot: Vec::with_capacity(frames * j),
+            dec_hips: Vec::with_capacity(frames),
+            dec_contacts: Vec::with_capacity(frames),
+            dec_ankles: Vec::with_capacity(frames),
+            ref_rot: Vec::with_capacity(frames * j),
+            ref_hips: Vec::with_capacity(frames),
+            ankle_slots,
+            out_base: 0,
+            released: 0,
+            out_rot: Vec::with_capacity(frames * j),
+            out_hips: Vec::with_capacity(frames),
+            out_contacts: Vec::with_capacity(frames),
+            work,
+            reference,
+            window_seams: Vec::with_capacity(64),
+            lock_scratch,
+            guard_scratch,
+            guard_report: Vec::with_capacity(64),
+            refiner,
         }
     }
 
+    /// What follows the refiner: the ankle IK and the foot lock ([`FootCleanup`]; default
+    /// [`FootCleanup::default`], as `zoo stitch`).
+    pub fn cleanup(&self) -> FootCleanup {
+        self.cleanup
+    }
+
+    /// Sets [`StitchStream::cleanup`]; only before the first push (it sets the latency).
+    pub fn set_cleanup(&mut self, cleanup: FootCleanup) -> Result<(), MotionError> {
+        if self.pushed > 0 {
+            return Err(stitch_err(
+                "the foot cleanup of a stream is set before its first push: set it on a new stream",
+            ));
+        }
+        self.cleanup = cleanup;
+        Ok(())
+    }
+
+    /// Whether the stream guards its marked seams (the refiner's [`StitchRefiner::seam_guard`]
+    /// when the stream was made).
+    pub fn seam_guard(&self) -> bool {
+        self.guard
+    }
+
+    /// Switches the seam guard on or off; only before the first push (it sets the latency).
+    pub fn set_seam_guard(&mut self, on: bool) -> Result<(), MotionError> {
+        if self.pushed > 0 {
+            return Err(stitch_err("the seam guard of a stream is set before its first push: set it on a new stream"));
+        }
+        self.guard = on;
+        Ok(())
+    }
+
+    /// Frames the guard and the lock look ahead ([`STREAM_LOOKAHEAD`], or 0 without them).
+    fn lookahead(&self) -> usize {
+        if self.cleanup.lock_feet || self.guard { STREAM_LOOKAHEAD } else { 0 }
+    }
+
+    /// Frames released at once (1 without the guard and the lock).
+    fn chunk(&self) -> usize {
+        if self.lookahead() > 0 { STREAM_CHUNK } else { 1 }
+    }
+
     /// Frames between pushing frame `t` and popping its refined pose: the refined pose of frame
-    /// `t` is ready right after frame `t + latency()` is pushed.
+    /// `t` is ready right after frame `t + latency()` is pushed. `w` for the refiner alone; `w +`
+    /// [`STREAM_LOOKAHEAD`] `+` [`STREAM_CHUNK`] `- 1` with the foot lock or the seam guard.
     pub fn latency(&self) -> usize {
-        self.refiner.window.max(2) - 1
+        self.refiner.window.max(2) + self.lookahead() + self.chunk() - 1
     }
 
     /// Poses pushed so far.
@@ -797,14 +942,16 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
     /// Marks the next pushed pose as the first frame of a new clip: the stream inertializes the
     /// seam before refining ([`zoo_motion::blend::SeamInertializer`] over the model's
     /// [`StitchRefiner::blend_frames`]), as [`StitchRefiner::refine_poses_at_seams`] and `zoo
-    /// stitch --pre-blend` do. The seam frame is encoded once the frame after it is pushed, so
-    /// the windows over it run one push later. A seam on frame 0 or 1 changes nothing.
+    /// stitch --pre-blend` do, and guards it ([`StitchStream::seam_guard`]). The seam frame is
+    /// encoded once the frame after it is pushed, so the windows over it run one push later. A
+    /// seam on frame 0 or 1 is not inertialized.
     pub fn mark_seam(&mut self) {
         self.seam_next = true;
     }
 
     /// Pushes the next frame of the aligned motion (at the model's frame rate, on its
-    /// skeleton). Runs a window when one is due.
+    /// skeleton). Runs a window when one is due, and the guard and the lock when a chunk of
+    /// frames is due.
     pub fn push(&mut self, pose: &EnginePose) -> Result<(), MotionError> {
         if self.finished {
             return Err(stitch_err("the stream is finished: start another with StitchRefiner::stream"));
@@ -813,12 +960,20 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         r.check_pose(pose, self.pushed)?;
         let hips = StitchRefiner::model_space(pose, &mut self.rotations);
         let seam = std::mem::take(&mut self.seam_next);
+        if seam {
+            self.seams.push(self.pushed);
+        }
         self.pushed += 1;
         let n = self.blend.push(&self.rotations, hips, seam);
         for i in 0..n {
             self.take_final(i);
         }
         self.run_due_windows()?;
+        // Frame t is refined for good once the regular windows over it ran and frame t + w is
+        // pushed (the last window, at finish, then starts after it).
+        let upto = self.next_window.min(self.pushed.saturating_sub(self.refiner.window)).min(self.encoded);
+        self.decode_upto(upto);
+        self.release(false);
         self.compact();
         Ok(())
     }
@@ -827,6 +982,8 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
     fn take_final(&mut self, i: usize) {
         let r = self.refiner.clone();
         let (rotations, hips) = self.blend.released(i);
+        self.ref_rot.extend_from_slice(rotations);
+        self.ref_hips.push(hips);
         std::mem::swap(&mut self.prev, &mut self.cur);
         self.cur.set(&r.skeleton, &r.layout, rotations, hips);
         self.finals += 1;
@@ -873,16 +1030,134 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             .map(|_| ())
     }
 
-    /// Drops the frames no later window and no pop needs, once a window's worth of them has
-    /// piled up (one move of at most `w` frames every `w` frames, not one per frame).
+    /// Decodes the frames refined for good up to `upto` (from the input's first ground root, as
+    /// the whole-sequence form): rotations, hips, contacts and the ankles the refiner predicts.
+    fn decode_upto(&mut self, upto: usize) {
+        let r = self.refiner.clone();
+        let (d, j) = (r.dim, r.joints);
+        let fl = r.layout.pose_layout(j);
+        self.rotations.resize(j, DQuat::IDENTITY);
+        while self.refined < upto {
+            let t = self.refined;
+            let from = (t - self.base) * d;
+            self.x.copy_from_slice(&self.buf[from..from + d]);
+            r.denormalize_frame(&mut self.x);
+            self.root = if t == 0 { self.start_root } else { next_root(&self.root, &self.x) };
+            let (hips, contacts) = decode_pose(&r.layout, &self.x, &self.root, &mut self.rotations);
+            self.dec_rot.extend_from_slice(&self.rotations);
+            self.dec_hips.push(hips);
+            self.dec_contacts.push(contacts);
+            let at = |k: usize| {
+                let v = &self.x[fl.positions() + 3 * k..][..3];
+                self.root.to_world(DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64))
+            };
+            let ankles = self.ankle_slots.map(|(a, b)| [at(a), at(b)]).unwrap_or_default();
+            self.dec_ankles.push(ankles);
+            self.refined += 1;
+        }
+    }
+
+    /// Moves decoded frames to the poses ready to pop: as they are without the guard and the
+    /// lock; with them, once [`StitchStream::chunk`] frames lie [`STREAM_LOOKAHEAD`] frames
+    /// before the newest decoded one (all of them at the finish), after the ankle IK, the guard
+    /// of the seams in reach and the lock over the decoded frames from [`STREAM_HISTORY`]
+    /// frames before the first released one.
+    fn release(&mut self, at_finish: bool) {
+        let (look, chunk) = (self.lookahead(), self.chunk());
+        let b = self.refined;
+        let to = if at_finish { b } else { b.saturating_sub(look) };
+        if to < self.released + chunk && !(at_finish && to > self.released) {
+            return;
+        }
+        let r = self.refiner.clone();
+        let j = r.joints;
+        if look == 0 && !self.cleanup.place_ankles {
+            for f in self.released..to {
+                let i = f - self.dec_base;
+                self.out_rot.extend(self.dec_rot[i * j..(i + 1) * j].iter().map(|q| q.as_quat()));
+                self.out_hips.push(self.dec_hips[i].as_vec3());
+                self.out_contacts.push(self.dec_contacts[i]);
+            }
+            self.released = to;
+            return;
+        }
+        let a = self.released.saturating_sub(if look == 0 { 0 } else { STREAM_HISTORY }).max(self.dec_base);
+        let (i0, i1) = (a - self.dec_base, b - self.dec_base);
+        fill_clip(&mut self.work, &self.dec_rot[i0 * j..i1 * j], &self.dec_hips[i0..i1], &r.skeleton);
+        if self.cleanup.place_ankles {
+            let ankles = if self.ankle_slots.is_some() { &self.dec_ankles[i0..i1] } else { &[][..] };
+            zoo_motion::stitch::lock::place_ankles_into(&mut self.work, ankles, &r.layout, &mut self.lock_scratch);
+        }
+        self.window_seams.clear();
+        self.window_seams.extend(self.seams.iter().filter(|&&s| s >= a && s < b).map(|&s| s - a));
+        if self.guard && !self.window_seams.is_empty() {
+            fill_clip(&mut self.reference, &self.ref_rot[i0 * j..i1 * j], &self.ref_hips[i0..i1], &r.skeleton);
+            zoo_motion::stitch::guard::guard_seams_into(
+                &mut self.work,
+                &self.reference,
+                &self.window_seams,
+                &r.layout,
+                &mut self.guard_scratch,
+                &mut self.guard_report,
+            );
+        }
+        if self.cleanup.lock_feet {
+            zoo_motion::stitch::lock::lock_feet_into(
+                &mut self.work,
+                &self.dec_contacts[i0..i1],
+                &r.layout,
+                zoo_motion::stitch::lock::LOCK_MAX_STEP,
+                &mut self.lock_scratch,
+            );
+        }
+        for f in self.released..to {
+            let i = f - a;
+            let prev = self.out_rot.len().checked_sub(j);
+            for k in 0..j {
+                let mut q = self.work.local_rotations[i * j + k].as_quat();
+                // Continuous with the frame before, as the whole sequence's.
+                if prev.is_some_and(|p| self.out_rot[p + k].dot(q) < 0.0) {
+                    q = -q;
+                }
+                self.out_rot.push(q);
+            }
+            self.out_hips.push(self.work.local_positions[i * j].as_vec3());
+            self.out_contacts.push(self.dec_contacts[f - self.dec_base]);
+        }
+        self.released = to;
+    }
+
+    /// Drops the frames no later window, decoding, guard, lock or pop needs, once a window's
+    /// worth of them has piled up (one move of at most `w` frames every `w` frames, not one per
+    /// frame).
     fn compact(&mut self) {
-        let keep = self.read.min(self.pushed.saturating_sub(self.refiner.window)).min(self.next_window);
-        if keep >= self.base + self.refiner.window {
-            let d = self.refiner.dim;
+        let (w, d, j) = (self.refiner.window, self.refiner.dim, self.refiner.joints);
+        let keep = self.refined.min(self.pushed.saturating_sub(w)).min(self.next_window);
+        if keep >= self.base + w {
             let n = (keep - self.base) * d;
             self.buf.copy_within(n.., 0);
             self.buf.truncate(self.buf.len() - n);
             self.base = keep;
+        }
+        let keep = self.released.saturating_sub(STREAM_HISTORY);
+        if keep >= self.dec_base + w {
+            let n = keep - self.dec_base;
+            self.dec_rot.drain(..n * j);
+            self.dec_hips.drain(..n);
+            self.dec_contacts.drain(..n);
+            self.dec_ankles.drain(..n);
+            self.ref_rot.drain(..n * j);
+            self.ref_hips.drain(..n);
+            self.dec_base = keep;
+            let first = self.seams.partition_point(|&s| s < keep);
+            self.seams.drain(..first);
+        }
+        if self.read >= self.out_base + w {
+            let n = self.read - self.out_base;
+            self.out_rot.drain(..n * j);
+            self.out_hips.drain(..n);
+            self.out_contacts.drain(..n);
+            self.out_base = self.read;
         }
     }
 
@@ -893,49 +1168,39 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
 
     /// Whether the next refined pose is ready.
     pub fn ready(&self) -> bool {
-        self.read < self.encoded && (self.finished || self.read + self.refiner.window <= self.pushed)
+        self.read < self.released && (self.finished || self.read + self.latency() < self.pushed)
     }
 
     /// The next refined pose (frame [`StitchStream::popped`]) into `pose` (the model's joint
     /// count: `EnginePose::new(refiner.joints())`) with its predicted contacts, or `None` while
     /// it is not ready (fewer than `latency()` frames pushed after it, and not finished).
     pub fn pop(&mut self, pose: &mut EnginePose) -> Result<Option<[bool; 4]>, MotionError> {
-        let r = self.refiner.clone();
-        if pose.joints() != r.joints {
+        let j = self.refiner.joints;
+        if pose.joints() != j {
             return Err(stitch_err(format!(
-                "the output pose has {} joints, the model {}: allocate it with EnginePose::new(refiner.joints())",
+                "the output pose has {} joints, the model {j}: allocate it with EnginePose::new(refiner.joints())",
                 pose.joints(),
-                r.joints
             )));
         }
         if !self.ready() {
             return Ok(None);
         }
-        let d = r.dim;
-        let from = (self.read - self.base) * d;
-        self.x.copy_from_slice(&self.buf[from..from + d]);
-        r.denormalize_frame(&mut self.x);
-        if self.read > 0 {
-            self.root = next_root(&self.root, &self.x);
-        }
-        self.rotations.resize(r.joints, DQuat::IDENTITY);
-        let (hips, contacts) = decode_pose(&r.layout, &self.x, &self.root, &mut self.rotations);
-        for (o, q) in self.rotations_f32.iter_mut().zip(&self.rotations) {
-            *o = q.as_quat();
-        }
-        pose.set_world(hips.as_vec3(), &self.rotations_f32);
+        let i = self.read - self.out_base;
+        pose.set_world(self.out_hips[i], &self.out_rot[i * j..(i + 1) * j]);
         (pose.root_delta_position, pose.root_delta_yaw) = match self.last_out {
             Some((p, q)) => root_delta(p, q, pose.root_position, pose.root_rotation),
             None => (Vec3::ZERO, 0.0),
         };
         self.last_out = Some((pose.root_position, pose.root_rotation));
+        let contacts = self.out_contacts[i];
         self.read += 1;
         self.compact();
         Ok(Some(contacts))
     }
 
     /// Ends the motion: runs the window ending on the last frame (unless a regular window
-    /// ended there) and makes every remaining frame ready. Needs at least `w` frames pushed.
+    /// ended there), then the guard and the lock over the rest, and makes every remaining frame
+    /// ready. Needs at least `w` frames pushed.
     pub fn finish(&mut self) -> Result<(), MotionError> {
         if self.finished {
             return Ok(());
@@ -958,17 +1223,30 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         // The regular windows ran at 0, s, ..., next_window - s; the last of them ends on the
         // last frame exactly when next_window - s == last.
         if self.next_window == 0 || self.next_window - s != last {
-            if last < self.base {
+            if last < self.base || last < self.refined {
                 return Err(stitch_err(format!(
-                    "frame {last} was dropped before finish (the buffer starts at frame {}); this is a bug, please \
-                     report it",
-                    self.base
+                    "frame {last} was dropped or decoded before finish (the buffer starts at frame {}, {} decoded); \
+                     this is a bug, please report it",
+                    self.base, self.refined
                 )));
             }
             self.run_window(last)?;
         }
+        self.decode_upto(self.encoded);
+        self.release(true);
         self.finished = true;
         Ok(())
+    }
+}
+
+/// Refills `clip` (on `skeleton`) with the frames of model-space `rotations` and `hips`.
+fn fill_clip(clip: &mut Clip, rotations: &[DQuat], hips: &[DVec3], skeleton: &Skeleton) {
+    clip.local_rotations.clear();
+    clip.local_rotations.extend_from_slice(rotations);
+    clip.local_positions.clear();
+    for &h in hips {
+        clip.local_positions.push(h);
+        clip.local_positions.extend_from_slice(&skeleton.offsets[1..]);
     }
 }
 

@@ -13,7 +13,7 @@ namespace Zoo
     /// </summary>
     public sealed unsafe class StitchStream : ZooObject
     {
-        readonly int latency;
+        int latency;
         readonly PoseConversion toModel;
         readonly PoseConversion toEngine;
         float[] rotations;
@@ -43,8 +43,31 @@ namespace Zoo
             finally { Exit(model, e); }
         }
 
-        /// <summary>Frames between pushing a pose and popping it refined (w - 1).</summary>
+        /// <summary>
+        /// Frames between pushing a pose and popping it refined (<c>zoo_stitch_stream_latency</c>): the window,
+        /// the lookahead of the seam guard and the foot lock, and the frames they release at once, less one
+        /// (<see cref="ZooStitchInfo.Latency"/>); the window alone without them.
+        /// </summary>
         public int Latency { get { return latency; } }
+
+        /// <summary>
+        /// Sets what follows the refiner, before the first push (<c>zoo_stitch_stream_set_cleanup</c>): the ankle IK
+        /// and the foot lock of <c>zoo stitch</c> (both on by default); the seam guard follows the model's
+        /// (<see cref="Model.SetStitchSeamGuard"/>). Updates <see cref="Latency"/>.
+        /// </summary>
+        public void SetCleanup(bool placeAnkles, bool lockFeet)
+        {
+            bool e = false;
+            try
+            {
+                var s = (Native.ZooStitchStream*)Enter(this, ref e);
+                Errors.Check(ZooNative.zoo_stitch_stream_set_cleanup(s, placeAnkles, lockFeet), this);
+                UIntPtr n = UIntPtr.Zero;
+                Errors.Check(ZooNative.zoo_stitch_stream_latency(s, &n), this);
+                latency = (int)n.ToUInt64();
+            }
+            finally { Exit(this, e); }
+        }
 
         /// <summary>Pushes the next pose of the aligned motion (<c>zoo_stitch_stream_push</c>): a root and 4K rotations.</summary>
         public void Push(ZooRootMotion root, ReadOnlySpan<float> poseRotations)
@@ -109,7 +132,7 @@ namespace Zoo
 
         /// <summary>
         /// Marks the next pushed pose as the first of a new clip (<c>zoo_stitch_stream_mark_seam</c>): the stream
-        /// inertializes the seam before refining, as <see cref="Model.StitchRefineAtSeams"/> does.
+        /// inertializes the seam before refining and guards it, as <see cref="Model.StitchRefineAtSeams"/> does.
         /// </summary>
         public void MarkSeam()
         {

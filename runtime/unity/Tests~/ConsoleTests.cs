@@ -563,6 +563,12 @@ namespace Zoo.Tests
                 stream.Finish();
                 Refused<ZooException>("stream push after finish", State, "zoo_stitch_stream_push", "", () => stream.Push(sRoots[0], new ReadOnlySpan<float>(sRot, 0, 4 * kr)));
                 Refused<ZooException>("stream mark seam after finish", State, "zoo_stitch_stream_mark_seam", "finished", () => stream.MarkSeam());
+                Refused<ZooException>("stream cleanup after a push", State, "zoo_stitch_stream_set_cleanup", "before its first push", () => stream.SetCleanup(false, false));
+                using (var bare = new StitchStream(rmr))
+                {
+                    bare.SetCleanup(false, false);
+                    Expect(bare.Latency == rmr.StitchInfo.LatencyFrames, "without ankle IK and lock the guard keeps the lookahead");
+                }
                 Refused<ZooException>("stitch window while a stream lives", State, "zoo_stitch_set_window", "", () => rmr.SetStitchWindow(10, 5));
             }
 

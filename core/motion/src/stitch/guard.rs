@@ -69,11 +69,20 @@ fn top_speed(gp: &[DVec3], joints: usize, lo: usize, hi: usize) -> f64 {
     m
 }
 
+/// Local rotations and hips position of frame `f` of a target the guard blends towards.
+#[derive(Clone, Copy)]
+struct Target<'a> {
+    rotations: &'a [DQuat],
+    positions: &'a [DVec3],
+    joints: usize,
+}
+
 /// Pose of frame `f` of `out` blended towards `target` by `w` on `out`'s ground root, into `rot`
 /// (local rotations) and the returned hips position.
-fn blend_frame(out: &Clip, target: &Clip, layout: &StitchLayout, f: usize, w: f64, rot: &mut [DQuat]) -> DVec3 {
-    let (ro, rr) = (out.rotations_at(f), target.rotations_at(f));
-    let (po, pr) = (out.positions_at(f)[0], target.positions_at(f)[0]);
+fn blend_frame(out: &Clip, target: Target<'_>, layout: &StitchLayout, f: usize, w: f64, rot: &mut [DQuat]) -> DVec3 {
+    let j = target.joints;
+    let (ro, rr) = (out.rotations_at(f), &target.rotations[f * j..(f + 1) * j]);
+    let (po, pr) = (out.positions_at(f)[0], target.positions[f * j]);
     if w <= 0.0 {
         rot.copy_from_slice(ro);
         return po;
@@ -89,10 +98,12 @@ fn blend_frame(out: &Clip, target: &Clip, layout: &StitchLayout, f: usize, w: f6
 }
 
 /// `clip` smoothed over `radius` frames on each side (triangular weights): local rotations
-/// averaged in the centre frame's hemisphere, the hips' position averaged.
-fn smooth(clip: &Clip, radius: usize) -> Clip {
+/// averaged in the centre frame's hemisphere, the hips' position averaged; its local rotations
+/// and positions into `rotations` and `positions`.
+fn smooth_into(clip: &Clip, radius: usize, rotations: &mut Vec<DQuat>, positions: &mut Vec<DVec3>) {
     let (frames, j) = (clip.frames(), clip.joints());
-    let mut out = clip.clone();
+    rotations.clone_from(&clip.local_rotations);
+    positions.clone_from(&clip.local_positions);
     for f in 0..frames {
         let lo = f.saturating_sub(radius);
         let hi = (f + radius).min(frames - 1);
@@ -113,13 +124,12 @@ fn smooth(clip: &Clip, radius: usize) -> Clip {
                 }
                 total += w;
             }
-            out.local_rotations[f * j + k] = DQuat::from_vec4(acc).normalize();
+            rotations[f * j + k] = DQuat::from_vec4(acc).normalize();
             if k == 0 {
-                out.local_positions[f * j] = pos / total;
+                positions[f * j] = pos / total;
             }
         }
     }
-    out
 }
 
 /// A seam's weight profile: 1 over the compared frames (and the frame before them), easing to
@@ -144,41 +154,113 @@ fn profile(f: usize, lo: usize, hi: usize) -> f64 {
 /// of another size leaves `out` as it is and returns nothing; a seam out of `1..frames` is
 /// skipped.
 pub fn guard_seams(out: &mut Clip, reference: &Clip, seams: &[usize], layout: &StitchLayout) -> Vec<GuardedSeam> {
+    let mut report = Vec::with_capacity(seams.len());
+    guard_seams_into(out, reference, seams, layout, &mut GuardScratch::default(), &mut report);
+    report
+}
+
+/// Scratch space of [`guard_seams_into`], reused from call to call so that a caller guarding
+/// every few frames (the runtime's stitching stream) allocates nothing once it has grown to the
+/// longest clip.
+#[derive(Clone, Debug, Default)]
+pub struct GuardScratch {
+    ref_gr: Vec<DQuat>,
+    ref_gp: Vec<DVec3>,
+    smooth_rot: Vec<DQuat>,
+    smooth_pos: Vec<DVec3>,
+    weights: Vec<f64>,
+    zone_gp: Vec<DVec3>,
+    rot: Vec<DQuat>,
+    grot: Vec<DQuat>,
+    gpos: Vec<DVec3>,
+    local_pos: Vec<DVec3>,
+}
+
+impl GuardScratch {
+    /// Room for clips of up to `frames` frames of `joints` joints.
+    pub fn reserve(&mut self, frames: usize, joints: usize) {
+        let n = frames * joints;
+        for v in [&mut self.ref_gr, &mut self.smooth_rot] {
+            v.reserve(n.saturating_sub(v.len()));
+        }
+        for v in [&mut self.ref_gp, &mut self.smooth_pos] {
+            v.reserve(n.saturating_sub(v.len()));
+        }
+        self.weights.reserve(frames.saturating_sub(self.weights.len()));
+        self.zone_gp.reserve((2 * GUARD_FRAMES + 2) * joints);
+        for v in [&mut self.rot, &mut self.grot] {
+            v.reserve(joints);
+        }
+        for v in [&mut self.gpos, &mut self.local_pos] {
+            v.reserve(joints);
+        }
+    }
+}
+
+/// [`guard_seams`] with its scratch space in `scratch` and what it did per seam into `report`
+/// (cleared first).
+pub fn guard_seams_into(
+    out: &mut Clip,
+    reference: &Clip,
+    seams: &[usize],
+    layout: &StitchLayout,
+    scratch: &mut GuardScratch,
+    report: &mut Vec<GuardedSeam>,
+) {
+    report.clear();
     let (frames, j) = (out.frames(), out.joints());
     if reference.frames() != frames || reference.joints() != j || frames < 2 {
-        return Vec::new();
+        return;
     }
-    let (_, ref_gp) = reference.global();
-    let smoothed = smooth(out, SMOOTH_RADIUS);
+    let GuardScratch { ref_gr, ref_gp, smooth_rot, smooth_pos, weights, zone_gp, rot, grot, gpos, local_pos } = scratch;
+    let n = reference.local_rotations.len();
+    ref_gr.clear();
+    ref_gr.resize(n, DQuat::IDENTITY);
+    ref_gp.clear();
+    ref_gp.resize(n, DVec3::ZERO);
+    crate::fk::forward_kinematics(
+        &reference.skeleton.parents,
+        &reference.local_rotations,
+        &reference.local_positions,
+        ref_gr,
+        ref_gp,
+    );
+    smooth_into(out, SMOOTH_RADIUS, smooth_rot, smooth_pos);
+    let smoothed = Target { rotations: smooth_rot, positions: smooth_pos, joints: j };
     let parents = &out.skeleton.parents;
-    let mut weights = vec![0.0f64; frames];
-    let mut report = Vec::with_capacity(seams.len());
+    weights.clear();
+    weights.resize(frames, 0.0);
     // Scratch for one frame's forward kinematics and the zone's positions.
-    let (mut rot, mut grot, mut gpos) = (vec![DQuat::IDENTITY; j], vec![DQuat::IDENTITY; j], vec![DVec3::ZERO; j]);
-    let mut local_pos = vec![DVec3::ZERO; j];
-    let mut zone_gp = Vec::new();
+    for v in [&mut *rot, &mut *grot] {
+        v.clear();
+        v.resize(j, DQuat::IDENTITY);
+    }
+    for v in [&mut *gpos, &mut *local_pos] {
+        v.clear();
+        v.resize(j, DVec3::ZERO);
+    }
     for &seam in seams {
         let Some((lo, hi)) = zone(seam, frames) else { continue };
-        let reference_top = top_speed(&ref_gp, j, lo, hi);
+        let reference_top = top_speed(ref_gp, j, lo, hi);
         let mut speed_at = |w: f64, weights: &[f64], zone_gp: &mut Vec<DVec3>| {
             zone_gp.clear();
             for f in lo - 1..=hi {
                 let wf = weights[f].max(w * profile(f, lo, hi));
-                let hips = blend_frame(out, &smoothed, layout, f, wf, &mut rot);
+                let hips = blend_frame(out, smoothed, layout, f, wf, rot);
                 local_pos.copy_from_slice(out.positions_at(f));
                 local_pos[0] = hips;
-                forward_kinematics_frame(parents, &rot, &local_pos, &mut grot, &mut gpos);
-                zone_gp.extend_from_slice(&gpos);
+                forward_kinematics_frame(parents, rot, local_pos, grot, gpos);
+                zone_gp.extend_from_slice(gpos);
             }
             top_speed(zone_gp, j, 1, hi - lo + 1)
         };
-        let before = speed_at(0.0, &weights, &mut zone_gp);
+        let before = speed_at(0.0, weights, zone_gp);
         let mut weight = 0.0;
         if before > reference_top {
             let (mut a, mut b) = (0.0f64, 1.0f64);
             for _ in 0..STEPS {
                 let m = 0.5 * (a + b);
-                if speed_at(m, &weights, &mut zone_gp) > reference_top {
+                if speed_at(m, weights, zone_gp) > reference_top {
                     a = m;
                 } else {
                     b = m;
@@ -194,12 +276,11 @@ pub fn guard_seams(out: &mut Clip, reference: &Clip, seams: &[usize], layout: &S
     }
     for f in 0..frames {
         if weights[f] > 0.0 {
-            let hips = blend_frame(out, &smoothed, layout, f, weights[f], &mut rot);
-            out.local_rotations[f * j..(f + 1) * j].copy_from_slice(&rot);
+            let hips = blend_frame(out, smoothed, layout, f, weights[f], rot);
+            out.local_rotations[f * j..(f + 1) * j].copy_from_slice(rot);
             out.local_positions[f * j] = hips;
         }
     }
-    report
 }
 
 #[cfg(test)]

@@ -33,7 +33,13 @@ pub const LOCK_MAX_STEP: f64 = 1.0;
 /// `corrections` with no step between neighbouring frames longer than `max_step`: the
 /// forward-limited and the backward-limited sequences, averaged. `max_step <= 0` or not finite
 /// leaves them unchanged.
+#[cfg(test)]
 fn limit_rate(corrections: &mut [DVec3], max_step: f64) {
+    limit_rate_into(corrections, max_step, &mut Vec::new());
+}
+
+/// `corrections` rate-limited as `limit_rate` says, with `forward` as scratch.
+fn limit_rate_into(corrections: &mut [DVec3], max_step: f64, forward: &mut Vec<DVec3>) {
     if !(max_step > 0.0 && max_step.is_finite()) || corrections.len() < 2 {
         return;
     }
@@ -41,7 +47,8 @@ fn limit_rate(corrections: &mut [DVec3], max_step: f64) {
         let d = to - from;
         if d.length() > max_step { from + d.normalize() * max_step } else { to }
     };
-    let mut forward = corrections.to_vec();
+    forward.clear();
+    forward.extend_from_slice(corrections);
     for f in 1..forward.len() {
         forward[f] = clamp(forward[f - 1], forward[f]);
     }
@@ -49,7 +56,7 @@ fn limit_rate(corrections: &mut [DVec3], max_step: f64) {
     for f in (0..n - 1).rev() {
         corrections[f] = clamp(corrections[f + 1], corrections[f]);
     }
-    for (c, fw) in corrections.iter_mut().zip(&forward) {
+    for (c, fw) in corrections.iter_mut().zip(forward.iter()) {
         *c = (*c + *fw) * 0.5;
     }
 }
@@ -65,53 +72,71 @@ struct LockLeg {
     toe_contact: usize,
 }
 
-fn legs(clip: &Clip, layout: &StitchLayout) -> Vec<LockLeg> {
+fn legs(clip: &Clip, layout: &StitchLayout) -> impl Iterator<Item = LockLeg> + use<> {
     let parents = &clip.skeleton.parents;
-    [(0, 1), (2, 3)]
-        .iter()
-        .filter_map(|&(h, t)| {
-            let ankle = layout.contacts[h];
-            let knee = parents.get(ankle).copied().flatten()?;
-            let hip = parents.get(knee).copied().flatten()?;
-            parents.get(hip).copied().flatten()?;
-            Some(LockLeg { hip, knee, ankle, toe: layout.contacts[t], heel_contact: h, toe_contact: t })
-        })
-        .collect()
+    let leg = |h: usize, t: usize| {
+        let ankle = layout.contacts[h];
+        let knee = parents.get(ankle).copied().flatten()?;
+        let hip = parents.get(knee).copied().flatten()?;
+        parents.get(hip).copied().flatten()?;
+        Some(LockLeg { hip, knee, ankle, toe: layout.contacts[t], heel_contact: h, toe_contact: t })
+    };
+    [leg(0, 1), leg(2, 3)].into_iter().flatten()
 }
 
 /// Horizontal corrections `(x, z)` per frame from the corrections known on contact frames
 /// (`None` elsewhere): linear in between, held at both ends, zero without any contact.
+#[cfg(test)]
 fn fill_gaps(known: &[Option<DVec3>]) -> Vec<DVec3> {
-    let mut out = vec![DVec3::ZERO; known.len()];
-    let idx: Vec<usize> = (0..known.len()).filter(|&f| known[f].is_some()).collect();
-    let (Some(&first), Some(&last)) = (idx.first(), idx.last()) else { return out };
+    let mut out = Vec::new();
+    fill_gaps_into(known, &mut out);
+    out
+}
+
+/// The corrections of `fill_gaps` into `out` (resized to `known.len()`).
+fn fill_gaps_into(known: &[Option<DVec3>], out: &mut Vec<DVec3>) {
+    out.clear();
+    out.resize(known.len(), DVec3::ZERO);
+    let (Some(first), Some(last)) = (known.iter().position(Option::is_some), known.iter().rposition(Option::is_some))
+    else {
+        return;
+    };
+    let (mut prev, mut next) = (first, first);
     for (f, o) in out.iter_mut().enumerate() {
         *o = if f <= first {
             known[first].unwrap_or_default()
         } else if f >= last {
             known[last].unwrap_or_default()
         } else if let Some(k) = known[f] {
+            prev = f;
             k
         } else {
-            let prev = idx[idx.partition_point(|&i| i < f) - 1];
-            let next = idx[idx.partition_point(|&i| i < f)];
+            if next <= f {
+                next = f + known[f..].iter().position(Option::is_some).unwrap_or(0);
+            }
             let a = (f - prev) as f64 / (next - prev) as f64;
             known[prev].unwrap_or_default().lerp(known[next].unwrap_or_default(), a)
         };
     }
-    out
 }
 
 /// Runs of `true` in `flags`: `(first, end)` half-open.
+#[cfg(test)]
 fn runs(flags: impl Iterator<Item = bool>) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
+    for_runs(flags, |s, e| out.push((s, e)));
+    out
+}
+
+/// Calls `run(first, end)` (half-open) for each run of `true` in `flags`, in order.
+fn for_runs(flags: impl Iterator<Item = bool>, mut run: impl FnMut(usize, usize)) {
     let mut start = None;
     let mut n = 0;
     for (f, on) in flags.enumerate() {
         match (on, start) {
             (true, None) => start = Some(f),
             (false, Some(s)) => {
-                out.push((s, f));
+                run(s, f);
                 start = None;
             }
             _ => {}
@@ -119,9 +144,46 @@ fn runs(flags: impl Iterator<Item = bool>) -> Vec<(usize, usize)> {
         n = f + 1;
     }
     if let Some(s) = start {
-        out.push((s, n));
+        run(s, n);
     }
-    out
+}
+
+/// Scratch space of [`place_ankles_into`] and [`lock_feet_into`], reused from call to call so
+/// that a caller running them every few frames (the runtime's stitching stream) allocates
+/// nothing once it has grown to the longest clip.
+#[derive(Clone, Debug, Default)]
+pub struct LockScratch {
+    gr: Vec<DQuat>,
+    gp: Vec<DVec3>,
+    known: Vec<Option<DVec3>>,
+    toe_known: Vec<Option<DVec3>>,
+    corrections: Vec<DVec3>,
+    forward: Vec<DVec3>,
+}
+
+impl LockScratch {
+    /// Room for clips of up to `frames` frames of `joints` joints.
+    pub fn reserve(&mut self, frames: usize, joints: usize) {
+        let n = frames * joints;
+        self.gr.reserve(n.saturating_sub(self.gr.len()));
+        self.gp.reserve(n.saturating_sub(self.gp.len()));
+        for v in [&mut self.known, &mut self.toe_known] {
+            v.reserve(frames.saturating_sub(v.len()));
+        }
+        for v in [&mut self.corrections, &mut self.forward] {
+            v.reserve(frames.saturating_sub(v.len()));
+        }
+    }
+}
+
+/// Global rotations and positions of every frame of `clip` into `gr`, `gp`.
+fn global_into(clip: &Clip, gr: &mut Vec<DQuat>, gp: &mut Vec<DVec3>) {
+    let n = clip.local_rotations.len();
+    gr.clear();
+    gr.resize(n, DQuat::IDENTITY);
+    gp.clear();
+    gp.resize(n, DVec3::ZERO);
+    crate::fk::forward_kinematics(&clip.skeleton.parents, &clip.local_rotations, &clip.local_positions, gr, gp);
 }
 
 fn horizontal(v: DVec3) -> DVec3 {
@@ -168,16 +230,27 @@ fn bend_leg(clip: &mut Clip, gr: &mut [DQuat], gp: &[DVec3], leg: LockLeg, f: us
 /// positions using inverse kinematics". Returns the mean ankle displacement (clip units); a
 /// clip without legs to bend or with another number of goals than frames is left unchanged.
 pub fn place_ankles(clip: &mut Clip, goals: &[[DVec3; 2]], layout: &StitchLayout) -> f64 {
+    place_ankles_into(clip, goals, layout, &mut LockScratch::default())
+}
+
+/// [`place_ankles`] with its scratch space in `scratch`.
+pub fn place_ankles_into(
+    clip: &mut Clip,
+    goals: &[[DVec3; 2]],
+    layout: &StitchLayout,
+    scratch: &mut LockScratch,
+) -> f64 {
     let frames = clip.frames();
     if goals.len() != frames || frames == 0 {
         return 0.0;
     }
     let (mut total, mut count) = (0.0, 0usize);
+    let (gr, gp) = (&mut scratch.gr, &mut scratch.gp);
     for leg in legs(clip, layout) {
         let side = leg.heel_contact / 2;
-        let (mut gr, gp) = clip.global();
+        global_into(clip, gr, gp);
         for (f, g) in goals.iter().enumerate() {
-            total += bend_leg(clip, &mut gr, &gp, leg, f, g[side]);
+            total += bend_leg(clip, gr, gp, leg, f, g[side]);
             count += 1;
         }
     }
@@ -197,48 +270,59 @@ pub fn lock_feet(clip: &mut Clip, contacts: &[[bool; 4]], layout: &StitchLayout)
 /// [`lock_feet`] with another limit on the correction's change per frame (`f64::INFINITY`:
 /// none, the lock before commit f0394c3 of 2026-11-25).
 pub fn lock_feet_with(clip: &mut Clip, contacts: &[[bool; 4]], layout: &StitchLayout, max_step: f64) -> f64 {
+    lock_feet_into(clip, contacts, layout, max_step, &mut LockScratch::default())
+}
+
+/// [`lock_feet_with`] with its scratch space in `scratch`.
+pub fn lock_feet_into(
+    clip: &mut Clip,
+    contacts: &[[bool; 4]],
+    layout: &StitchLayout,
+    max_step: f64,
+    scratch: &mut LockScratch,
+) -> f64 {
     let (frames, j) = (clip.frames(), clip.joints());
     if contacts.len() != frames || frames == 0 {
         return 0.0;
     }
-    let legs = legs(clip, layout);
-    let (mut gr, mut gp) = clip.global();
+    let LockScratch { gr, gp, known, toe_known, corrections, forward } = scratch;
+    global_into(clip, gr, gp);
     let mut total = 0.0;
     let mut count = 0usize;
-    for leg in legs {
+    for leg in legs(clip, layout) {
         // Pins: the mean horizontal position of the joint over each contact run.
-        let mut known: Vec<Option<DVec3>> = vec![None; frames];
-        let mut toe_known: Vec<Option<DVec3>> = vec![None; frames];
+        for target in [&mut *known, &mut *toe_known] {
+            target.clear();
+            target.resize(frames, None);
+        }
         for (joint, contact, target) in
-            [(leg.ankle, leg.heel_contact, &mut known), (leg.toe, leg.toe_contact, &mut toe_known)]
+            [(leg.ankle, leg.heel_contact, &mut *known), (leg.toe, leg.toe_contact, &mut *toe_known)]
         {
-            for (s, e) in runs(contacts.iter().map(|c| c[contact])) {
+            for_runs(contacts.iter().map(|c| c[contact]), |s, e| {
                 let pin = (s..e).map(|f| horizontal(gp[f * j + joint])).sum::<DVec3>() / (e - s) as f64;
                 for f in s..e {
                     target[f] = Some(pin - horizontal(gp[f * j + joint]));
                 }
-            }
+            });
         }
         for f in 0..frames {
             if known[f].is_none() {
                 known[f] = toe_known[f];
             }
         }
-        let mut corrections = fill_gaps(&known);
-        limit_rate(&mut corrections, max_step);
+        fill_gaps_into(known, corrections);
+        limit_rate_into(corrections, max_step, forward);
         for (f, c) in corrections.iter().enumerate() {
             if c.length_squared() < 1e-12 {
                 continue;
             }
             let goal = gp[f * j + leg.ankle] + DVec3::new(c.x, 0.0, c.z);
-            total += bend_leg(clip, &mut gr, &gp, leg, f, goal);
+            total += bend_leg(clip, gr, gp, leg, f, goal);
             count += 1;
         }
         // Positions of the changed leg for the next leg's reads (the legs do not share joints,
         // but the toes and ankles of this one moved).
-        let (r, p) = clip.global();
-        gr = r;
-        gp = p;
+        global_into(clip, gr, gp);
     }
     clip.remove_sign_flips();
     if count == 0 { 0.0 } else { total / count as f64 }
@@ -255,6 +339,9 @@ mod tests {
         let xs: Vec<f64> = got.iter().map(|v| v.x).collect();
         assert_eq!(xs, vec![1.0, 1.0, 2.0, 3.0, 4.0, 4.0]);
         assert!(fill_gaps(&[None, None]).iter().all(|v| *v == DVec3::ZERO));
+        let got = fill_gaps(&[x(1.0), None, x(3.0), None, None, x(6.0), x(7.0), None, x(9.0)]);
+        let xs: Vec<f64> = got.iter().map(|v| v.x).collect();
+        assert_eq!(xs, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]);
         assert_eq!(runs([true, true, false, true].into_iter()), vec![(0, 2), (3, 4)]);
         assert_eq!(runs([false, true, true].into_iter()), vec![(1, 3)]);
     }

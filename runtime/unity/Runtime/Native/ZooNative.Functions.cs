@@ -413,6 +413,31 @@ namespace Zoo.Native
         public static extern ZooStatus zoo_stitch_stream_push(ZooStitchStream* stream, ZooRootMotion* root, float* rotations, UIntPtr rotations_len);
 
         /// <summary>
+        /// Sets what follows the refiner in <c>stream</c>, before its first push (<c>ZOO_STATUS_INVALID_STATE</c>
+        /// after): <c>place_ankles</c> puts the ankles where the refiner predicts them, <c>lock_feet</c> locks the
+        /// planted feet by the predicted contacts (both on by default, as <c>zoo stitch</c>); the seam guard
+        /// follows the model's (<c>zoo_stitch_set_seam_guard</c>). Both off with the guard off: the
+        /// refiner's poses as they are, at a latency of <c>window</c> frames. One thread at a time.
+        /// </summary>
+        /// <remarks>
+        /// Safety:
+        /// <c>stream</c> is NULL or live and used by this thread only.
+        /// </remarks>
+        [DllImport(Library, EntryPoint = "zoo_stitch_stream_set_cleanup", CallingConvention = CallingConvention.Cdecl, ExactSpelling = true)]
+        public static extern ZooStatus zoo_stitch_stream_set_cleanup(ZooStitchStream* stream, [MarshalAs(UnmanagedType.U1)] bool place_ankles, [MarshalAs(UnmanagedType.U1)] bool lock_feet);
+
+        /// <summary>
+        /// Writes into <c>*out</c> the stream's latency in frames: the refined pose of frame <c>t</c> is ready
+        /// once frame <c>t + latency</c> is pushed. One thread at a time.
+        /// </summary>
+        /// <remarks>
+        /// Safety:
+        /// <c>stream</c> is NULL or live and used by this thread only; <c>out</c> is NULL or writable.
+        /// </remarks>
+        [DllImport(Library, EntryPoint = "zoo_stitch_stream_latency", CallingConvention = CallingConvention.Cdecl, ExactSpelling = true)]
+        public static extern ZooStatus zoo_stitch_stream_latency(ZooStitchStream* stream, UIntPtr* @out);
+
+        /// <summary>
         /// Writes into <c>*ready</c> whether the next refined pose can be popped. One thread at a time.
         /// </summary>
         /// <remarks>
@@ -426,8 +451,9 @@ namespace Zoo.Native
         /// Pops the next refined pose into <c>root</c> and <c>rotations</c> (<c>4K</c> floats; root deltas from the
         /// previous popped pose) and its predicted contacts into <c>contacts</c> (4 bytes). Before it is
         /// ready (fewer than <c>latency</c> frames pushed after it, and not finished) the call is
-        /// <c>ZOO_STATUS_NOT_AVAILABLE</c> and writes nothing. The stream does not lock feet: use the contacts
-        /// for the engine's foot IK. One thread at a time.
+        /// <c>ZOO_STATUS_NOT_AVAILABLE</c> and writes nothing. The pose has the ankle IK, the seam guard and
+        /// the foot lock of <c>zoo stitch</c> unless <c>zoo_stitch_stream_set_cleanup</c> turned them off. One
+        /// thread at a time.
         /// </summary>
         /// <remarks>
         /// Safety:
@@ -439,8 +465,8 @@ namespace Zoo.Native
 
         /// <summary>
         /// Marks the next pushed pose as the first frame of a new clip: the stream inertializes the seam
-        /// before refining, as <c>zoo_stitch_refine_at_seams</c> does (the seam frame is encoded once the
-        /// frame after it is pushed). A seam on frame 0 or 1 changes nothing. One thread at a time.
+        /// before refining and guards it, as <c>zoo_stitch_refine_at_seams</c> does (the seam frame is
+        /// encoded once the frame after it is pushed). A seam on frame 0 or 1 is not inertialized. One thread at a time.
         /// </summary>
         /// <remarks>
         /// Safety:

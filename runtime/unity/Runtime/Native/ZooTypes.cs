@@ -232,7 +232,7 @@ namespace Zoo.Native
         public UIntPtr Stride;
         /// <summary>Frames over which each window's first-frame difference is blended away.</summary>
         public UIntPtr BlendFrames;
-        /// <summary>Latency of a stream in frames (w - 1).</summary>
+        /// <summary>Latency of a new stream in frames: the window, the lookahead of its seam guard and foot lock, and the frames they release at once, less one.</summary>
         public UIntPtr Latency;
 
         /// <summary><see cref="Window"/> as an int.</summary>
