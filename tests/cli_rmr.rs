@@ -282,6 +282,15 @@ fn stitch_refuses_clips_of_another_frame_rate() {
     // Both at 60 fps: against the model's 30.
     let e = refused(&model, dir.path(), &[s(&fast_path), s(&fast_path)]);
     assert!(e.contains("60 fps but the model was trained at 30 fps") && e.contains("resample"), "{e}");
+    // A frame time stored rounded (bandai2's 0.0333333 s, 30.00003 fps) is the model's rate.
+    let mut rounded = read(&clips[1]);
+    rounded.frame_time = 0.0333333;
+    let rounded_path = dir.path().join("rounded.bvh");
+    zoo_data::bvh::write_file(&rounded, &rounded_path).unwrap();
+    let out = dir.path().join("rounded_out.bvh");
+    let (ok, _, stderr) =
+        run(&["stitch", "--model", s(&model), "--method", "inertialize", a, s(&rounded_path), "--out", s(&out)]);
+    assert!(ok, "{stderr}");
 }
 
 #[test]

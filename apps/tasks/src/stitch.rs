@@ -167,14 +167,14 @@ fn check_clips(clips: &[Clip], names: &[String], model: Option<(&ModelRig, f64)>
         if let Some(why) = clips[0].skeleton.topology_difference(&c.skeleton) {
             bail!("{name} has another skeleton than {} ({why}): every clip must use the same rig", names[0]);
         }
-        if (c.fps() - clips[0].fps()).abs() > 1e-6 * clips[0].fps() {
+        if !c.plays_at(clips[0].fps()) {
             bail!("{name} is {} fps, {} is {} fps: resample clip {i} first", c.fps(), names[0], clips[0].fps());
         }
     }
     let Some((rig, fps)) = model else { return Ok(()) };
     for (c, name) in clips.iter().zip(names) {
         rig.check(c, name)?;
-        if (c.fps() - fps).abs() > 1e-6 * fps {
+        if !c.plays_at(fps) {
             bail!("{name} is {} fps but the model was trained at {fps} fps: resample it first", c.fps());
         }
     }

@@ -56,6 +56,11 @@ impl Clip {
         1.0 / self.frame_time
     }
 
+    /// Whether this clip plays at `fps` ([`same_frame_rate`]).
+    pub fn plays_at(&self, fps: f64) -> bool {
+        same_frame_rate(self.fps(), fps)
+    }
+
     /// Duration in seconds.
     pub fn duration(&self) -> f64 {
         self.frames() as f64 * self.frame_time
@@ -152,4 +157,10 @@ impl Clip {
         self.local_positions = pos;
         true
     }
+}
+
+/// Whether two frame rates are the same rate: within 0.01 %, as BVH files store the frame time
+/// rounded (bandai2's 0.0333333 s is 30.00003 fps) and exported models store their rate as f32.
+pub fn same_frame_rate(a: f64, b: f64) -> bool {
+    (a - b).abs() <= 1e-4 * b.abs()
 }

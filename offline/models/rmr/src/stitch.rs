@@ -153,7 +153,7 @@ pub fn stitch_clips(model: &Rmr, stats: &FeatureStats, clips: &[Clip], opts: Ref
     let config = model.config();
     for (i, c) in clips.iter().enumerate() {
         config.check_skeleton(&c.skeleton).map_err(|e| RmrError::Config(format!("clip {i}: {e}")))?;
-        if (c.fps() - config.fps).abs() > 1e-6 * config.fps {
+        if !c.plays_at(config.fps) {
             return Err(RmrError::Config(format!(
                 "clip {i} is {} fps but the model was trained at {} fps; resample it first",
                 c.fps(),

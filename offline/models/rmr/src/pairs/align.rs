@@ -32,7 +32,7 @@ pub fn align_clips(clips: &[Clip], layout: &StitchLayout, min_frames: usize) -> 
         if let Some(why) = first.skeleton.topology_difference(&c.skeleton) {
             return Err(StitchError::Skeleton { index: i, name: String::new(), why });
         }
-        if (c.fps() - fps).abs() > 1e-6 * fps {
+        if !c.plays_at(fps) {
             return Err(StitchError::FrameRate { index: i, name: String::new(), expected: fps, found: c.fps() });
         }
         if c.frames() < min_frames.max(1) {

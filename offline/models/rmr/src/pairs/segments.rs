@@ -53,7 +53,7 @@ impl MotionSet {
             if let Some(why) = first.skeleton.topology_difference(&c.skeleton) {
                 return Err(StitchError::Skeleton { index: i, name: label(i), why });
             }
-            if (c.fps() - fps).abs() > 1e-6 * fps {
+            if !c.plays_at(fps) {
                 return Err(StitchError::FrameRate { index: i, name: label(i), expected: fps, found: c.fps() });
             }
         }
@@ -103,7 +103,7 @@ impl MotionSet {
         if let Some(why) = self.clips[0].skeleton.topology_difference(&other.clips[0].skeleton) {
             return Err(StitchError::Mismatch(format!("skeletons differ ({why})")));
         }
-        if (self.fps - other.fps).abs() > 1e-6 * self.fps {
+        if !zoo_motion::clip::same_frame_rate(other.fps, self.fps) {
             return Err(StitchError::Mismatch(format!("{} fps vs {} fps", self.fps, other.fps)));
         }
         Ok(())
