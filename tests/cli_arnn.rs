@@ -162,7 +162,11 @@ fn train_resume_and_complete() {
     let (ok, _, stderr) =
         run(&["complete", "--model", onnx.to_str().unwrap(), "--keys", keys_arg, "--out", from_file.to_str().unwrap()]);
     assert!(ok, "{stderr}");
-    assert_eq!(std::fs::read(&from_file).unwrap(), std::fs::read(&bvh).unwrap(), "the exported file completes otherwise");
+    assert_eq!(
+        std::fs::read(&from_file).unwrap(),
+        std::fs::read(&bvh).unwrap(),
+        "the exported file completes otherwise"
+    );
     // The step through tract and onnxruntime and whole completions, timed (figures not checked).
     let (ok, stdout, stderr) = run(&[
         "bench",
@@ -684,7 +688,11 @@ fn inbetween_design_trains_resumes_scores_keys_and_completes() {
     let (ok, _, stderr) =
         run(&["complete", "--model", onnx.to_str().unwrap(), "--keys", kp, "--out", from_file.to_str().unwrap()]);
     assert!(ok, "{stderr}");
-    assert_eq!(std::fs::read(&from_file).unwrap(), std::fs::read(&out).unwrap(), "the exported file completes otherwise");
+    assert_eq!(
+        std::fs::read(&from_file).unwrap(),
+        std::fs::read(&out).unwrap(),
+        "the exported file completes otherwise"
+    );
     let portable = dir.path().join("ib_portable.onnx");
     let (ok, _, stderr) = run(&["export", "--onnx", r, "--out", portable.to_str().unwrap(), "--portable"]);
     assert!(!ok && stderr.contains("does not hold; export it without --portable") && !portable.exists(), "{stderr}");

@@ -125,7 +125,11 @@ fn train_resume_and_stitch() {
     let (ok, stdout_file, stderr) =
         run(&["stitch", "--model", s(&onnx), &ranges[0], &ranges[1], &ranges[2], "--out", s(&from_file)]);
     assert!(ok, "{stdout_file}\n{stderr}");
-    assert_eq!(std::fs::read(&from_file).unwrap(), std::fs::read(&out).unwrap(), "the exported file stitches otherwise");
+    assert_eq!(
+        std::fs::read(&from_file).unwrap(),
+        std::fs::read(&out).unwrap(),
+        "the exported file stitches otherwise"
+    );
     // The input is the aligned concatenation: the first clip unchanged.
     for f in [0, 25, 49] {
         assert!((input.root_position(f) - la.root_position(f)).length() < 1e-3, "frame {f}");

@@ -6,8 +6,8 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::Mutex;
-use zoo_rtn::method::FallbackCount;
 use zoo_data::position_method::{PositionGenerator, PositionMethod};
+use zoo_rtn::method::FallbackCount;
 use zoo_runtime::metadata::MotionSkeletonInfo;
 use zoo_runtime::{MotionTaskKind, TransitionModel, TransitionRunner, TransitionState};
 

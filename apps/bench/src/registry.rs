@@ -19,7 +19,8 @@ pub use zoo_nn::checkpoint::{CONFIG_FILE, DEFAULT_KIND, kind_of_config};
 pub const ONNX_KIND: &str = "onnx";
 
 /// Loads a benchmark method from a run folder: `(folder, method name, foot lock)`.
-type BenchLoader = fn(&Path, String, bool) -> std::result::Result<Box<dyn TransitionMethod>, zoo_nn::zoo_model::BoxError>;
+type BenchLoader =
+    fn(&Path, String, bool) -> std::result::Result<Box<dyn TransitionMethod>, zoo_nn::zoo_model::BoxError>;
 
 /// What the benchmarks do with one kind of model.
 pub struct ModelEntry {
@@ -142,7 +143,9 @@ fn parse_method_in(models: &[ModelEntry], spec: &str) -> Result<MethodSpec> {
         None => (head, false),
     };
     if candle && kind == ONNX_KIND {
-        bail!("method `{spec}`: `candle-` runs a run folder's training model; an exported file runs as `{ONNX_KIND}:FILE`");
+        bail!(
+            "method `{spec}`: `candle-` runs a run folder's training model; an exported file runs as `{ONNX_KIND}:FILE`"
+        );
     }
     if path.is_empty() {
         bail!("method `{spec}`: the path after `{head}:` is empty");
@@ -154,7 +157,13 @@ fn parse_method_in(models: &[ModelEntry], spec: &str) -> Result<MethodSpec> {
             bail!("method `{spec}`: a `{kind}` model is for {}, not for the transition benchmark", entry.purpose);
         }
     }
-    Ok(MethodSpec::Model { name: spec.to_string(), kind: kind.to_string(), path: PathBuf::from(path), foot_lock, candle })
+    Ok(MethodSpec::Model {
+        name: spec.to_string(),
+        kind: kind.to_string(),
+        path: PathBuf::from(path),
+        foot_lock,
+        candle,
+    })
 }
 
 /// Parses one `--methods` entry (`zerovel`, `interp`, `KIND:PATH`, `KIND+lock:PATH`).

@@ -384,10 +384,12 @@ pub fn onnxruntime_u8s8(bytes: &[u8]) -> Result<Vec<u8>> {
         let scale_name = format!("{base}.scale");
         let t = graph.initializer.iter().find(|t| t.name == init).ok_or_else(|| msg!("no `{init}`"))?.clone();
         let st = graph.initializer.iter().find(|t| t.name == scale_name).ok_or_else(|| msg!("no `{scale_name}`"))?;
-        let scales: Vec<f32> = st.raw_data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+        let scales: Vec<f32> =
+            st.raw_data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
         let (rows, cols) = (t.dims[0] as usize, t.dims[1] as usize);
         let channel = |j: usize| if axis == 0 { j / cols } else { j % cols };
-        let w: Vec<f32> = t.raw_data.iter().enumerate().map(|(j, b)| (f32::from(*b) - 128.0) * scales[channel(j)]).collect();
+        let w: Vec<f32> =
+            t.raw_data.iter().enumerate().map(|(j, b)| (f32::from(*b) - 128.0) * scales[channel(j)]).collect();
         let mut max = vec![0f32; scales.len()];
         for (j, v) in w.iter().enumerate() {
             max[channel(j)] = max[channel(j)].max(v.abs());
@@ -700,7 +702,8 @@ pub fn graph_cost(bytes: &[u8]) -> Result<(u64, u64)> {
                 return (t.dims.len() >= 2).then_some(t);
             }
             let through = graph.node.iter().find(|n| {
-                n.output.first() == Some(&name) && matches!(n.op_type.as_str(), "Cast" | "Transpose" | "DequantizeLinear")
+                n.output.first() == Some(&name)
+                    && matches!(n.op_type.as_str(), "Cast" | "Transpose" | "DequantizeLinear")
             });
             name = through?.input.first()?.clone();
         }

@@ -125,7 +125,12 @@ impl<'a> RuntimeSynthesis<'a> {
                 };
                 let values = t.flatten_all().and_then(|t| t.to_vec1::<f32>()).map_err(|e| Message(e.to_string()))?;
                 if values.len() != info.width {
-                    bail!("the estimated state of `{}` has {} values, the graph {}", info.input, values.len(), info.width);
+                    bail!(
+                        "the estimated state of `{}` has {} values, the graph {}",
+                        info.input,
+                        values.len(),
+                        info.width
+                    );
                 }
                 state.slot_mut(slot).copy_from_slice(&values);
             }
@@ -185,7 +190,6 @@ pub fn generate_files(
         .map_err(|e| Message(e.to_string()))?)
 }
 
-
 impl zoo_rnngmm::bench::synthesis::Synthesizer for Generator {
     fn synthesize(
         &self,
@@ -196,7 +200,9 @@ impl zoo_rnngmm::bench::synthesis::Synthesizer for Generator {
         let err = |e: crate::TaskError| zoo_rnngmm::RnnGmmError::Motion(e.to_string());
         // The generator reads its own samples: without its refiner, the same seed draws the same
         // frames, which the refined run refines.
-        let raw = RuntimeSynthesis::new(&self.candle, &self.plain, clip, frame, opts).map_err(err)?.next_motion(opts.frames)?;
+        let raw = RuntimeSynthesis::new(&self.candle, &self.plain, clip, frame, opts)
+            .map_err(err)?
+            .next_motion(opts.frames)?;
         let refined = match self.model.has_refiner() {
             true => Some(
                 RuntimeSynthesis::new(&self.candle, &self.model, clip, frame, opts)

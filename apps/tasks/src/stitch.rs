@@ -214,7 +214,8 @@ pub fn stitch(opts: &StitchOptions, names: &[String]) -> TaskResult<StitchOutcom
     let rig = source.as_ref().map(|s| ModelRig { source: s, skeleton: s.skeleton() });
     let clips = read_clips(&opts.clips, rig.as_ref())?;
     check_clips(&clips, names, rig.as_ref().map(|r| (r, f64::from(r.source.metadata.fps))))?;
-    let mut refiner = source.as_ref().map(|s| -> TaskResult<StitchRefiner> { Ok(s.load()?.into_stitch()?) }).transpose()?;
+    let mut refiner =
+        source.as_ref().map(|s| -> TaskResult<StitchRefiner> { Ok(s.load()?.into_stitch()?) }).transpose()?;
     // The model's layout (its planted foot heights) when one is given, else bandai2's joints.
     let layout = match &refiner {
         Some(r) => r.layout().clone(),

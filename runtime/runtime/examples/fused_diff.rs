@@ -22,7 +22,9 @@ fn main() -> TractResult<()> {
             panic!("input {} has no tensor type", v.name)
         };
         let dims = &t.shape.as_ref().expect("shape").dim;
-        widths.push(dims[1..].iter().map(|d| if let Some(Value::DimValue(n)) = d.value { n as usize } else { 1 }).product());
+        widths.push(
+            dims[1..].iter().map(|d| if let Some(Value::DimValue(n)) = d.value { n as usize } else { 1 }).product(),
+        );
     }
     let plan = |mut m: InferenceModel| -> TractResult<_> {
         for (i, w) in widths.iter().enumerate() {

@@ -736,7 +736,8 @@ fn seeded_keys(model: &KeyframeModel, frames: &[usize], rng: &mut SplitMix64) ->
         let n = frames.len();
         return (0..n * d).map(|i| mean[i % d] + std[i % d] * rng.range(-1.0, 1.0) as f32).collect();
     }
-    let (mean, std): (Vec<f64>, Vec<f64>) = (mean.iter().map(|v| *v as f64).collect(), std.iter().map(|v| *v as f64).collect());
+    let (mean, std): (Vec<f64>, Vec<f64>) =
+        (mean.iter().map(|v| *v as f64).collect(), std.iter().map(|v| *v as f64).collect());
     let heading = rng.range(-PI, PI);
     let speed = rng.range(0.8, 1.6) * units_per_metre(m) / m.fps as f64;
     let start = [mean[0] + 0.5 * std[0] * rng.range(-1.0, 1.0), mean[2] + 0.5 * std[2] * rng.range(-1.0, 1.0)];
@@ -813,7 +814,9 @@ fn keyframes_cases(model: &KeyframeModel, rng: &mut SplitMix64) -> Result<Vec<Ke
             // The whole-shot graph's input, built as the runtime builds it (f32 keys as f64).
             let poses: Vec<f64> = poses.iter().map(|v| *v as f64).collect();
             let flags: Vec<bool> = fixed.iter().map(|v| *v == 1.0).collect();
-            let shot = f.shot(&key_frames, &poses, &flags).map_err(|e| MotionError::Keys { character: 0, reason: e.to_string() })?;
+            let shot = f
+                .shot(&key_frames, &poses, &flags)
+                .map_err(|e| MotionError::Keys { character: 0, reason: e.to_string() })?;
             features = rows(&shot.features, f.input_width());
             bezier = shot.bezier.chunks_exact(d).map(<[f64]>::to_vec).collect();
         } else {
@@ -903,7 +906,13 @@ fn stitch_cases(refiner: &StitchRefiner, rng: &mut SplitMix64) -> Result<Vec<Sti
     let stats = m.group("x", d)?;
     let pop = frames / 2;
     let input = seeded_motion(m, &MotionStyle::stitch(refiner, stats), frames, Some(pop), rng);
-    let file = stitch_case(refiner, "an aligned sequence with a pop in its middle, the file's settings", &input, &[], refiner.fallback())?;
+    let file = stitch_case(
+        refiner,
+        "an aligned sequence with a pop in its middle, the file's settings",
+        &input,
+        &[],
+        refiner.fallback(),
+    )?;
     // Thresholds around the windows' corrections of the seam case, so that the fallback's
     // weights lie between 0 and 1.
     let mut bare = refiner.clone();

@@ -431,7 +431,13 @@ impl SynthesisRunner {
             character.x[i] = (v - self.model.mean[i]) / self.model.std[i];
         }
         if let Some(r) = &self.model.refiner {
-            self.model.effector_positions(&character.x, &r.stats, &mut character.effectors, &mut self.fk_rot, &mut self.fk_pos);
+            self.model.effector_positions(
+                &character.x,
+                &r.stats,
+                &mut character.effectors,
+                &mut self.fk_rot,
+                &mut self.fk_pos,
+            );
         }
         Ok(())
     }

@@ -70,7 +70,8 @@ pub fn run(a: StitchBenchArgs) -> anyhow::Result<()> {
                 m.trim(),
                 |spec| load(spec).map_err(crate::cmd::message),
                 |path, post| {
-                    let r = zoo_tasks::stitch::RuntimeSeamRefiner::load(path, post).map_err(|e| zoo_data::Message(e.to_string()))?;
+                    let r = zoo_tasks::stitch::RuntimeSeamRefiner::load(path, post)
+                        .map_err(|e| zoo_data::Message(e.to_string()))?;
                     Ok(Box::new(r) as Box<dyn zoo_rmr::bench::SeamRefiner>)
                 },
             )

@@ -3,9 +3,9 @@
 //! completion written as a clip (and as JSON, positions and a plot of every degree of freedom,
 //! like the paper's Figure 8).
 
+use crate::ArnnResult;
 use crate::luxo::LampPose;
 use crate::luxo::sequence::poses_to_clip;
-use crate::ArnnResult;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use zoo_data::{Context, Message, bail};
@@ -625,10 +625,9 @@ fn complete_humanoid(
         }
     };
     crate::humanoid::check_trained_skeleton(skeleton, &source.skeleton).context(what.clone())?;
-    let mut done = crate::humanoid::complete_clip_with(&source, &keys.keys, Some(skeleton.fps), |f, p, x| {
-        net.complete(f, p, x)
-    })
-    .context(what)?;
+    let mut done =
+        crate::humanoid::complete_clip_with(&source, &keys.keys, Some(skeleton.fps), |f, p, x| net.complete(f, p, x))
+            .context(what)?;
     let key_frames: Vec<usize> = keys.keys.iter().map(|k| k.frame).collect();
     let locked = if o.no_foot_lock { 0 } else { lock_feet(&mut done.clip, &key_frames) };
     if let Some(fps) = o.fps.or(keys.fps) {

@@ -5,8 +5,8 @@
 use crate::train_run::{ArnnDesign, ArnnPreset, ArnnRunOptions, ArnnVariant, NoMemoryOutputArg};
 use clap::{Args, FromArgMatches};
 use std::path::{Path, PathBuf};
-use zoo_export::ExportError;
 use zoo_data::benchmark::TransitionMethod;
+use zoo_export::ExportError;
 use zoo_format::MotionTaskKind;
 use zoo_nn::train_args::{RunArgs, TrainDefaults};
 use zoo_nn::zoo_model::{BoxError, CandleTransitions, ExportOptions, Exported, Portable, ZooModel};

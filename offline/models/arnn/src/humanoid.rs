@@ -401,7 +401,9 @@ pub fn complete_clip(
     model.check_skeleton(&source.skeleton)?;
     complete_clip_with(source, keys, model.skeleton().map(|s| s.fps), |frames, key_poses, fixed| match model {
         HumanoidNet::Arnn(m) => crate::train::complete_partial_raw(m, norm, frames, key_poses, fixed),
-        HumanoidNet::Inbetween(m) => Ok(crate::inbetween::complete_shots(m, norm, &[(frames, key_poses, fixed)])?.remove(0)),
+        HumanoidNet::Inbetween(m) => {
+            Ok(crate::inbetween::complete_shots(m, norm, &[(frames, key_poses, fixed)])?.remove(0))
+        }
     })
 }
 

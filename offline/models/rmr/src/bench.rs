@@ -73,7 +73,9 @@ impl SeamRefiner for CandleRmr {
         let frames = aligned.frames();
         let (window, stride) = if c.window <= frames { (c.window, c.stride) } else { (frames, frames) };
         let opts = RefineOptions { window, stride, blend_frames: blend };
-        Ok(refine_seams(&self.model, &self.stats, aligned, seams, opts, self.post).map_err(|e| Message(e.to_string()))?.clip)
+        Ok(refine_seams(&self.model, &self.stats, aligned, seams, opts, self.post)
+            .map_err(|e| Message(e.to_string()))?
+            .clip)
     }
 
     fn check_skeleton(&self, skeleton: &zoo_motion::Skeleton) -> Result<(), Message> {

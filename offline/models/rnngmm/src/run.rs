@@ -289,8 +289,7 @@ pub fn write_generated(
             let mut out = BvhStream { w: std::io::BufWriter::new(&mut *bvh_file), header: None };
             let mut cj = std::io::BufWriter::new(json_file);
             if !fps.is_finite() {
-                failure =
-                    Some(zoo_data::Message(format!("the model's frame rate is {}: re-export it", fps)).into());
+                failure = Some(zoo_data::Message(format!("the model's frame rate is {}: re-export it", fps)).into());
                 return Err(std::io::Error::other("generation failed"));
             }
             write!(

@@ -4,8 +4,8 @@
 use crate::train_run::{RtnAugment, RtnPreset, RtnRunOptions, RtnVariant};
 use clap::{Args, FromArgMatches};
 use std::path::Path;
-use zoo_export::ExportError;
 use zoo_data::benchmark::TransitionMethod;
+use zoo_export::ExportError;
 use zoo_format::MotionTaskKind;
 use zoo_nn::train_args::{DataArgs, RunArgs, TrainDefaults};
 use zoo_nn::zoo_model::{BoxError, CandleTransitions, ExportOptions, Exported, ZooModel};

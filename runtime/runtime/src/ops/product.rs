@@ -125,7 +125,10 @@ fn gemv_isa() -> GemvIsa {
     static ISA: std::sync::OnceLock<GemvIsa> = std::sync::OnceLock::new();
     *ISA.get_or_init(|| {
         let isa = native();
-        if isa.has(Isa::X86_64Avx512Vnni) && isa.has(Isa::X86_64Avx512f) && std::arch::is_x86_feature_detected!("avx512vl") {
+        if isa.has(Isa::X86_64Avx512Vnni)
+            && isa.has(Isa::X86_64Avx512f)
+            && std::arch::is_x86_feature_detected!("avx512vl")
+        {
             GemvIsa::Vnni
         } else if isa.has(Isa::X86_64Avx2) {
             GemvIsa::Avx2
@@ -280,7 +283,9 @@ impl Product {
         // product is a whole number of magnitude at most 127 * 127 and every partial sum of
         // `k` of them, in whatever order the kernel adds them, is a whole number below 2^24,
         // which f32 holds exactly (k <= 1040).
-        let int8_in_f32 = int8 && !kernel.name().contains("vnni") && !kernel.name().contains("amx")
+        let int8_in_f32 = int8
+            && !kernel.name().contains("vnni")
+            && !kernel.name().contains("amx")
             && ks.iter().all(|k| 127 * 127 * k < 1 << 24);
         if int8_in_f32 {
             (kernel, packing, _) = pick(DatumType::F32, ks.iter().max().copied())?;
@@ -472,7 +477,14 @@ impl Product {
     /// `out[c, o] = (acc[c, o] as f32 * channel[o]) * row[c]` (the graph's `Cast`, `Mul` by the
     /// channel scales and `Mul` by the row scale, in that order), added to `out` when `add`,
     /// then `+ bias[o]`.
-    pub(crate) fn dequantize(acc: &[i32], row: &[f32], channel: &[f32], bias: Option<&[f32]>, out: &mut [f32], add: bool) {
+    pub(crate) fn dequantize(
+        acc: &[i32],
+        row: &[f32],
+        channel: &[f32],
+        bias: Option<&[f32]>,
+        out: &mut [f32],
+        add: bool,
+    ) {
         let bias = bias.unwrap_or_default();
         #[cfg(target_arch = "x86_64")]
         if avx2() {
@@ -673,7 +685,12 @@ fn packed_at(
     Ok(&mut buffers[at].3)
 }
 
-fn packed<'s>(buffers: &'s mut PackedBuffers, format: &PackedFormat, k: usize, n: usize) -> TractResult<&'s mut EagerPackedInput> {
+fn packed<'s>(
+    buffers: &'s mut PackedBuffers,
+    format: &PackedFormat,
+    k: usize,
+    n: usize,
+) -> TractResult<&'s mut EagerPackedInput> {
     packed_at(buffers, format.to_string(), k, n, || format.new_packed_buffer(k, n))
 }
 
@@ -693,7 +710,10 @@ fn packed_i8<'s>(
     })
 }
 
-fn space<'s>(spaces: &'s mut Vec<(String, Box<dyn ScratchSpace>)>, kernel: &dyn MatMatMul) -> &'s mut Box<dyn ScratchSpace> {
+fn space<'s>(
+    spaces: &'s mut Vec<(String, Box<dyn ScratchSpace>)>,
+    kernel: &dyn MatMatMul,
+) -> &'s mut Box<dyn ScratchSpace> {
     let at = match spaces.iter().position(|(name, _)| name == kernel.name()) {
         Some(at) => at,
         None => {

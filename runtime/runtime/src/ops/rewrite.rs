@@ -217,7 +217,11 @@ impl<'g> Index<'g> {
                         continue;
                     }
                     let Some(mut prod) = self.product(pn) else { continue };
-                    if prod.bias.is_some() || prod.addend.is_some() || Self::elements(bias) != prod.m || bias.dims.len() > 2 {
+                    if prod.bias.is_some()
+                        || prod.addend.is_some()
+                        || Self::elements(bias) != prod.m
+                        || bias.dims.len() > 2
+                    {
                         continue;
                     }
                     prod.bias = Some(bias.name.clone());
@@ -361,7 +365,14 @@ fn dense(idx: &Index, i: usize) -> Option<Replacement> {
 
 /// The terms of the sum `tensor`: products, constant biases, per-character addends; and the
 /// `Add` nodes of the sum.
-fn terms(idx: &Index, tensor: &str, products: &mut Vec<Product>, biases: &mut Vec<String>, addends: &mut Vec<String>, adds: &mut Vec<usize>) -> Option<()> {
+fn terms(
+    idx: &Index,
+    tensor: &str,
+    products: &mut Vec<Product>,
+    biases: &mut Vec<String>,
+    addends: &mut Vec<String>,
+    adds: &mut Vec<usize>,
+) -> Option<()> {
     if let Some(p) = idx.product(tensor) {
         if let Some(a) = &p.addend {
             addends.push(a.clone());
