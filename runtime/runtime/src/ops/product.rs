@@ -427,20 +427,7 @@ impl Product {
                     if s.sums.shape() != [n, m] {
                         s.sums = Tensor::zero::<f32>(&[n, m])?;
                     }
-                    let space = space(&mut s.spaces, &*self.kernel);
-                    unsafe {
-                        let store = self.kernel.c_from_data_and_strides(4, 1, m as isize);
-                        let sums_view = s.sums.view_mut();
-                        let ops = [
-                            FusedSpec::AddMatMul {
-                                a: AsInputValue::Borrowed(&**self.a[i]),
-                                b: AsInputValue::Borrowed(&*b),
-                                packing: self.packing,
-                            },
-                            FusedSpec::Store(store.wrap(&sums_view)),
-                        ];
-                        self.kernel.run_with_scratch_space(m, n, &mut **space, &ops)?;
-                    }
+                    self.store_product(i, b, space(&mut s.spaces, &*self.kernel), &mut s.sums, m, n)?;
                     {
                         let sums = s.sums.try_as_plain_ram()?.as_slice::<f32>()?;
                         let mut view = s.acc.try_as_plain_ram_mut()?;
@@ -453,25 +440,40 @@ impl Product {
                 }
                 let b = packed_i8(&mut s.packed, &**pb, k, n)?;
                 pack_i8(&**pb, b, x, &mut s.row_scales, k, &mut s.row)?;
-                let space = space(&mut s.spaces, &*self.kernel);
-                unsafe {
-                    let store = self.kernel.c_from_data_and_strides(4, 1, m as isize);
-                    let acc_view = s.acc.view_mut();
-                    let ops = [
-                        FusedSpec::AddMatMul {
-                            a: AsInputValue::Borrowed(&**self.a[i]),
-                            b: AsInputValue::Borrowed(&*b),
-                            packing: self.packing,
-                        },
-                        FusedSpec::Store(store.wrap(&acc_view)),
-                    ];
-                    self.kernel.run_with_scratch_space(m, n, &mut **space, &ops)?;
-                }
+                self.store_product(i, b, space(&mut s.spaces, &*self.kernel), &mut s.acc, m, n)?;
                 let acc = s.acc.try_as_plain_ram()?.as_slice::<i32>()?;
                 f(i, acc, &s.row_scales, &self.scales[i])?;
             }
             Ok(())
         })
+    }
+
+    /// Runs the kernel on input `i`'s packed weights and the packed activations `b` into `out`
+    /// (`[n, m]`, 4-byte values: the f32 sums or the i32 accumulators), overwriting it.
+    fn store_product(
+        &self,
+        i: usize,
+        b: &EagerPackedInput,
+        space: &mut Box<dyn ScratchSpace>,
+        out: &mut Tensor,
+        m: usize,
+        n: usize,
+    ) -> TractResult<()> {
+        // SAFETY: `out` is `[n, m]` of 4-byte values, as the store's strides say; the packed
+        // operands were sized for `m`, `k` and `n` by this product's plan.
+        unsafe {
+            let store = self.kernel.c_from_data_and_strides(4, 1, m as isize);
+            let view = out.view_mut();
+            let ops = [
+                FusedSpec::AddMatMul {
+                    a: AsInputValue::Borrowed(&**self.a[i]),
+                    b: AsInputValue::Borrowed(b),
+                    packing: self.packing,
+                },
+                FusedSpec::Store(store.wrap(&view)),
+            ];
+            self.kernel.run_with_scratch_space(m, n, &mut **space, &ops)
+        }
     }
 
     /// `out[c, o] = (acc[c, o] as f32 * channel[o]) * row[c]` (the graph's `Cast`, `Mul` by the
