@@ -36,6 +36,31 @@ fn walk_pose(k: usize, hips_height: f64, speed: f64, c: usize, f: usize) -> Engi
     pose
 }
 
+/// `tests/c/refusals.c`, an engine's mistakes in C: counts of 1<<40, SIZE_MAX and -1, lengths no
+/// buffer has, a batch above the runner's `max_batch`, enum values outside their enums, bytes that
+/// are not a model: each refused with its status and a message naming the argument, the process
+/// alive, nothing on stderr (even with `RUST_BACKTRACE=1`), and a model loaded from memory runs
+/// bit-identically to the same file. The program is linked statically, and its stack is not
+/// executable (`readelf -lW`: the `GNU_STACK` segment is `RW`).
+#[test]
+fn refusals_in_c_and_a_model_from_memory() {
+    let tmp = tempfile::tempdir().unwrap();
+    let model_path = model_file(tmp.path());
+    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("c/refusals.c");
+    let exe = zoo_tests::capi::compile_c(&source, tmp.path());
+    let out = std::process::Command::new(&exe).arg(&model_path).env("RUST_BACKTRACE", "1").output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "refusals.c failed:\n{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    assert!(out.stderr.is_empty(), "the library printed on stderr:\n{}", String::from_utf8_lossy(&out.stderr));
+    assert!(stdout.contains("memory: identical"), "{stdout}");
+    assert_eq!(stdout.lines().filter(|l| l.contains(" ZOO_STATUS_")).count(), 15, "{stdout}");
+    let readelf = std::process::Command::new("readelf").arg("-lW").arg(&exe).output();
+    let readelf = readelf.expect("readelf is missing: install it with `apt-get install -y binutils`");
+    let text = String::from_utf8_lossy(&readelf.stdout);
+    let stack = text.lines().find(|l| l.contains("GNU_STACK")).unwrap_or_else(|| panic!("no GNU_STACK:\n{text}"));
+    assert!(!stack.contains("RWE"), "the statically linked program has an executable stack: {stack}");
+}
+
 #[test]
 fn c_example_matches_the_rust_api_as_c99_and_cpp17() {
     let tmp = tempfile::tempdir().unwrap();
@@ -168,9 +193,9 @@ fn malformed_calls_return_an_error_code_and_a_message() {
         let (k, p) = (common.joints, info.transition_frames);
         assert_eq!((k, p), (4, zoo_rtn::Config::tiny().transition_frames));
         let mut runner = ptr::null_mut();
-        let status = zoo_transition_runner_new(ptr::null(), &mut runner);
+        let status = zoo_transition_runner_new(ptr::null(), 1, &mut runner);
         assert_error(status, ZooStatus::NullPointer, "zoo_transition_runner_new: `model` is NULL");
-        assert_eq!(zoo_transition_runner_new(model, &mut runner), ZooStatus::Ok);
+        assert_eq!(zoo_transition_runner_new(model, 2, &mut runner), ZooStatus::Ok);
         let mut chars = ptr::null_mut();
         let status = zoo_transition_characters_new(model, 0, &mut chars);
         assert_error(status, ZooStatus::InvalidArgument, "zoo_transition_characters_new: `count` is 0");
@@ -263,14 +288,21 @@ fn malformed_calls_return_an_error_code_and_a_message() {
                 past_rotations.as_ptr(),
                 past_rotations.len(),
                 past_roots.as_ptr(),
-                identity.as_ptr(),
-                past_roots.as_ptr(),
+                2,
                 identity.as_ptr(),
                 rotations_len,
+                past_roots.as_ptr(),
+                2,
+                identity.as_ptr(),
+                2 * 4 * k,
                 p,
             )
         };
-        assert_error(start_posed(2 * 4 * k - 1, &identity), ZooStatus::InvalidArgument, "rotations_len");
+        assert_error(
+            start_posed(2 * 4 * k - 1, &identity),
+            ZooStatus::InvalidArgument,
+            "zoo_transition_start_posed: `target_rotations` holds",
+        );
         assert_error(
             start_posed(2 * 4 * k, &identity[..identity.len() - 4]),
             ZooStatus::InvalidArgument,
@@ -278,7 +310,24 @@ fn malformed_calls_return_an_error_code_and_a_message() {
         );
         let mut nan = identity.clone();
         nan[3] = f32::NAN;
-        assert_error(start_posed(2 * 4 * k, &nan), ZooStatus::InvalidArgument, "non-finite");
+        assert_error(
+            start_posed(2 * 4 * k, &nan),
+            ZooStatus::InvalidArgument,
+            "`past_rotations` values 0..4 (rotation 0) are [0.0, 0.0, 0.0, NaN], not finite",
+        );
+        // A zero quaternion is named in the caller's buffer, not reported as a NaN in an
+        // internal one.
+        let mut zero = identity.clone();
+        zero[4 * k + 3] = 0.0;
+        assert_error(
+            start_posed(2 * 4 * k, &zero),
+            ZooStatus::InvalidArgument,
+            &format!(
+                "`past_rotations` values {}..{} (rotation {k}) are [0.0, 0.0, 0.0, 0.0], a zero quaternion",
+                4 * k,
+                4 * k + 4
+            ),
+        );
         assert_eq!(start_posed(2 * 4 * k, &identity), ZooStatus::Ok, "{}", last_error());
         assert_eq!(
             zoo_transition_step_posed(runner, chars, roots.as_mut_ptr(), 2, rotations.as_mut_ptr(), rotations.len()),
@@ -421,7 +470,7 @@ fn terrain_models_take_a_heightmap_through_the_c_abi() {
         let (target, next) = (pose(40), pose(41));
         let length = info.transition_frames;
         let (mut runner, mut chars) = (ptr::null_mut(), ptr::null_mut());
-        assert_eq!(zoo_transition_runner_new(model, &mut runner), ZooStatus::Ok);
+        assert_eq!(zoo_transition_runner_new(model, 2, &mut runner), ZooStatus::Ok);
         assert_eq!(zoo_transition_characters_new(model, 1, &mut chars), ZooStatus::Ok);
         let start = |chars| start_with(runner, chars, &past, &target, &next, length);
         assert_error(start(chars), ZooStatus::InvalidState, "(zoo_transition_set_heightmap) before starting");
@@ -493,5 +542,139 @@ fn terrain_models_take_a_heightmap_through_the_c_abi() {
         zoo_transition_characters_free(chars);
         zoo_transition_runner_free(runner);
         zoo_model_free(model);
+    }
+}
+
+/// A transition begun and fed frame by frame through the C ABI (`zoo_transition_begin_posed`,
+/// `zoo_transition_feed_posed`) gives the engine poses `zoo_transition_start_posed` gives for the
+/// same context, bit for bit, at batch 3; feeding with nothing due and a context of 0 frames are
+/// refused.
+#[test]
+fn a_transition_fed_per_frame_through_the_c_abi_equals_one_started_at_once() {
+    let tmp = tempfile::tempdir().unwrap();
+    let path = model_file(tmp.path());
+    let (n, k) = (3usize, 4usize);
+    let pose = |c: usize, f: usize| walk_pose(k, 90.0, 4.0, c, f);
+    unsafe {
+        let model = load(&path);
+        let mut info = ZooTransitionInfo::default();
+        assert_eq!(zoo_transition_info(model, &mut info), ZooStatus::Ok);
+        let (past, length) = (info.past_frames, info.transition_frames);
+        let (mut runner, mut a, mut b) = (ptr::null_mut(), ptr::null_mut(), ptr::null_mut());
+        assert_eq!(zoo_transition_runner_new(model, n, &mut runner), ZooStatus::Ok);
+        assert_eq!(zoo_transition_characters_new(model, n, &mut a), ZooStatus::Ok);
+        assert_eq!(zoo_transition_characters_new(model, n, &mut b), ZooStatus::Ok);
+        let buffers = |poses: &[EnginePose]| {
+            let mut roots = vec![ZooRootMotion::default(); poses.len()];
+            let mut rotations = vec![0.0f32; poses.len() * 4 * k];
+            for (i, p) in poses.iter().enumerate() {
+                write_engine_pose(p, &mut roots[i], &mut rotations[i * 4 * k..(i + 1) * 4 * k]);
+            }
+            (roots, rotations)
+        };
+        let context: Vec<EnginePose> = (0..n).flat_map(|c| (0..past).map(move |f| pose(c, f))).collect();
+        let (target, next): (Vec<EnginePose>, Vec<EnginePose>) =
+            (0..n).map(|c| (pose(c, past + length), pose(c, past + length + 1))).unzip();
+        let (cr, cq) = buffers(&context);
+        let (tr, tq) = buffers(&target);
+        let (xr, xq) = buffers(&next);
+        let status = zoo_transition_start_posed(
+            runner,
+            a,
+            cr.as_ptr(),
+            cr.len(),
+            cq.as_ptr(),
+            cq.len(),
+            tr.as_ptr(),
+            n,
+            tq.as_ptr(),
+            tq.len(),
+            xr.as_ptr(),
+            n,
+            xq.as_ptr(),
+            xq.len(),
+            length,
+        );
+        assert_eq!(status, ZooStatus::Ok, "{}", last_error());
+        let frame = |f: usize| buffers(&(0..n).map(|c| pose(c, f)).collect::<Vec<_>>());
+        let (fr, fq) = frame(0);
+        let status = zoo_transition_begin_posed(
+            runner,
+            b,
+            fr.as_ptr(),
+            n,
+            fq.as_ptr(),
+            fq.len(),
+            tr.as_ptr(),
+            n,
+            tq.as_ptr(),
+            tq.len(),
+            xr.as_ptr(),
+            n,
+            xq.as_ptr(),
+            xq.len(),
+            0,
+            length,
+        );
+        assert_error(status, ZooStatus::InvalidArgument, "zoo_transition_begin_posed: `past_frames` is 0");
+        let status = zoo_transition_begin_posed(
+            runner,
+            b,
+            fr.as_ptr(),
+            n,
+            fq.as_ptr(),
+            fq.len(),
+            tr.as_ptr(),
+            n,
+            tq.as_ptr(),
+            tq.len(),
+            xr.as_ptr(),
+            n,
+            xq.as_ptr(),
+            xq.len(),
+            past,
+            length,
+        );
+        assert_eq!(status, ZooStatus::Ok, "{}", last_error());
+        for f in 1..past {
+            let (fr, fq) = frame(f);
+            assert_eq!(zoo_transition_feed_posed(runner, b, fr.as_ptr(), n, fq.as_ptr(), fq.len()), ZooStatus::Ok);
+        }
+        let status = zoo_transition_feed_posed(runner, b, fr.as_ptr(), n, fq.as_ptr(), fq.len());
+        assert_error(
+            status,
+            ZooStatus::InvalidState,
+            "no context frame is due: begin a transition (zoo_transition_begin",
+        );
+        let (mut ra, mut qa) = (vec![ZooRootMotion::default(); n], vec![0.0f32; n * 4 * k]);
+        let (mut rb, mut qb) = (vec![ZooRootMotion::default(); n], vec![0.0f32; n * 4 * k]);
+        for f in 0..=length {
+            assert_eq!(
+                zoo_transition_step_posed(runner, a, ra.as_mut_ptr(), n, qa.as_mut_ptr(), qa.len()),
+                ZooStatus::Ok
+            );
+            assert_eq!(
+                zoo_transition_step_posed(runner, b, rb.as_mut_ptr(), n, qb.as_mut_ptr(), qb.len()),
+                ZooStatus::Ok
+            );
+            assert!(ra == rb && qa == qb, "frame {f}: the fed transition differs from the started one");
+        }
+        zoo_transition_characters_free(a);
+        zoo_transition_characters_free(b);
+        zoo_transition_runner_free(runner);
+        zoo_model_free(model);
+    }
+}
+
+/// An engine pose as a C root and `4K` rotation values.
+fn write_engine_pose(p: &EnginePose, root: &mut ZooRootMotion, rotations: &mut [f32]) {
+    *root = ZooRootMotion {
+        root_position: p.root_position.to_array(),
+        root_rotation: p.root_rotation.to_array(),
+        hips_position: p.hips_position.to_array(),
+        ..Default::default()
+    };
+    for (out, q) in rotations.chunks_exact_mut(4).zip(&p.local_rotations) {
+        out.copy_from_slice(&q.to_array());
     }
 }

@@ -190,7 +190,7 @@ fn model_calls() -> Vec<Call> {
         }),
         call("zoo_transition_runner_new", "zoo_transition_*", Transition, |m| unsafe {
             let mut out = null_mut();
-            let status = zoo_transition_runner_new(m, &mut out);
+            let status = zoo_transition_runner_new(m, 1, &mut out);
             zoo_transition_runner_free(out);
             status
         }),
@@ -266,7 +266,7 @@ fn model_calls() -> Vec<Call> {
         }),
         call("zoo_control_runner_new", "zoo_control_*", Synthesis, |m| unsafe {
             let mut out = null_mut();
-            let status = zoo_control_runner_new(m, &mut out);
+            let status = zoo_control_runner_new(m, 1, &mut out);
             zoo_control_runner_free(out);
             status
         }),
@@ -319,7 +319,7 @@ unsafe fn run_transition(model: *mut ZooModel, rust: &TransitionModel) {
     runner.start_batch_for(&mut states, &past, &target, &next, length).unwrap();
     let (mut c_runner, mut chars) = (null_mut(), null_mut());
     unsafe {
-        assert_ok(zoo_transition_runner_new(model, &mut c_runner));
+        assert_ok(zoo_transition_runner_new(model, 64, &mut c_runner));
         assert_ok(zoo_transition_characters_new(model, n, &mut chars));
         assert_ok(zoo_transition_start(
             c_runner,
@@ -395,7 +395,7 @@ unsafe fn run_synthesis(model: *mut ZooModel, rust: &SynthesisModel) {
             assert_ok(step.synthesis(runner, chars, 1.0));
             assert!(step.frame() == *want, "synthesis frame {t}: the C ABI differs from the Rust API");
         }
-        assert_ok(zoo_control_runner_new(model, &mut crunner));
+        assert_ok(zoo_control_runner_new(model, 64, &mut crunner));
         assert_ok(zoo_control_characters_new(model, SEEDS.as_ptr(), n, null(), &mut cchars));
         assert_ok(zoo_control_start(cchars, start.0.as_ptr(), start.0.len(), start.1.as_ptr(), start.1.len()));
         for (t, want) in rust_control(rust, n, frames).iter().enumerate() {
@@ -592,7 +592,7 @@ fn per_frame_calls_allocate_no_more_than_the_rust_api() {
         let past: Vec<f32> = (0..n).flat_map(|_| (0..rust.past_frames()).flat_map(pose)).collect();
         let (target, next): (Vec<f32>, Vec<f32>) = ([pose(40), pose(40)].concat(), [pose(41), pose(41)].concat());
         let (mut runner, mut chars) = (null_mut(), null_mut());
-        assert_ok(zoo_transition_runner_new(model.0, &mut runner));
+        assert_ok(zoo_transition_runner_new(model.0, 64, &mut runner));
         assert_ok(zoo_transition_characters_new(model.0, n, &mut chars));
         let mut rust_runner = rust.runner().unwrap();
         let mut states: Vec<_> = (0..n).map(|_| rust.new_transition()).collect();
@@ -649,8 +649,11 @@ fn per_frame_calls_allocate_no_more_than_the_rust_api() {
                 identity.as_ptr(),
                 identity.len(),
                 roots.as_ptr(),
+                n,
                 identity.as_ptr(),
+                n * 4 * k,
                 roots.as_ptr(),
+                n,
                 identity.as_ptr(),
                 n * 4 * k,
                 length,
@@ -847,11 +850,11 @@ fn keyframes_through_the_c_abi_match_the_rust_api() {
         let model = load(&files().arnn);
         let mut info = ZooKeyframesInfo::default();
         assert_ok(zoo_keyframes_info(model, &mut info));
-        assert_eq!(info, ZooKeyframesInfo { dofs: 6, groups: 0 });
+        assert_eq!(info, ZooKeyframesInfo { frame_values: 6, groups: 0 });
         let mut common = ZooModelInfo::default();
         assert_ok(zoo_model_info(model, &mut common));
         assert_eq!((common.task, common.fps), (ZooTask::Keyframes, zoo_arnn::export::FPS));
-        let d = info.dofs;
+        let d = info.frame_values;
         let (counts, frames, poses) = example_keys(d);
         let runner = keyframe_runner(model, 2);
         zoo_model_free(model); // the runner keeps what it needs
@@ -896,7 +899,7 @@ impl Keyframes {
         &mut self,
         frames: &[usize],
         poses: &[f32],
-        fixed: (*const f32, usize),
+        fixed: (*const u8, usize),
         out_len: usize,
     ) -> ZooStatus {
         let out = &mut self.out[..out_len];
@@ -933,7 +936,7 @@ fn keyframes_refuse_null_pointers() {
         let status = zoo_keyframes_complete(null_mut(), f, 4, p, 24, null(), 0, o, 240);
         assert_error(status, ZooStatus::NullPointer, "zoo_keyframes_complete: `runner` is NULL");
         let status = zoo_keyframes_complete(h.runner, null(), 4, p, 24, null(), 0, o, 240);
-        assert_error(status, ZooStatus::NullPointer, "`frames` is NULL");
+        assert_error(status, ZooStatus::NullPointer, "`key_frames` is NULL");
         let status = zoo_keyframes_complete(h.runner, f, 4, null(), 24, null(), 0, o, 240);
         assert_error(status, ZooStatus::NullPointer, "`poses` is NULL");
         let status = zoo_keyframes_complete(h.runner, f, 4, p, 24, null(), 0, null_mut(), 240);
@@ -961,7 +964,7 @@ fn keyframes_refuse_wrong_sizes() {
         assert_error(status, ZooStatus::InvalidArgument, "`poses` holds 23 floats, this call needs 24");
         let status = h.complete(f, p, (null(), 0), 239);
         assert_error(status, ZooStatus::InvalidArgument, "`out` holds 239 floats, this call needs 240");
-        let flags = [1.0f32; 4];
+        let flags = [1u8; 4];
         assert_error(h.complete(f, p, (flags.as_ptr(), 4), 240), ZooStatus::InvalidArgument, "whole keys only");
         // A batch: key counts that do not add up, none, more characters than the runner takes.
         let mut out = vec![7.0f32; 71 * 6];
@@ -970,7 +973,7 @@ fn keyframes_refuse_wrong_sizes() {
             zoo_keyframes_complete_batch(h.runner, counts.as_ptr(), n, f, 7, p, 42, null(), 0, o, len)
         };
         let status = batch(&[4, 2], 2, 426);
-        assert_error(status, ZooStatus::InvalidArgument, "`key_counts` add up to 6 keys but `frames` holds 7");
+        assert_error(status, ZooStatus::InvalidArgument, "`key_counts` add up to 6 keys but `key_frames` holds 7");
         assert_error(batch(&[], 0, 426), ZooStatus::InvalidArgument, "`count` is 0");
         assert_error(batch(&counts, 2, 426), ZooStatus::InvalidArgument, "the runner was made for at most 1");
         let status = batch(&counts, 2, 420);
@@ -1000,13 +1003,20 @@ fn keyframes_refuse_keys_out_of_order() {
     let p = &poses[..24];
     unsafe {
         let status = h.complete(&[0, 24, 9, 39], p, (null(), 0), 240);
-        assert_error(status, ZooStatus::InvalidArgument, "key 2 is at frame 9 but key 1 is at frame 24");
+        assert_error(
+            status,
+            ZooStatus::InvalidArgument,
+            "`key_frames`[2] is 9 after 24; key frames must be strictly increasing",
+        );
+        // A key-order mistake is reported as one, not as the output size the keys would imply.
+        let status = h.complete(&[0, 50, 9, 39], p, (null(), 0), 240);
+        assert_error(status, ZooStatus::InvalidArgument, "`key_frames`[2] is 9 after 50");
         let status = h.complete(&[3, 9, 24, 39], p, (null(), 0), 240);
-        assert_error(status, ZooStatus::InvalidArgument, "key frames start at 0");
+        assert_error(status, ZooStatus::InvalidArgument, "`key_frames` starts at frame 3; the first key is frame 0");
         let status = h.complete(&[0], &p[..6], (null(), 0), 6);
         assert_error(status, ZooStatus::InvalidArgument, "completion needs at least 2");
         let status = h.complete(&[0, 9, 24, usize::MAX], p, (null(), 0), 240);
-        assert_error(status, ZooStatus::InvalidArgument, "too large");
+        assert_error(status, ZooStatus::InvalidArgument, "a completion has at most ZOO_MAX_FRAMES (1048576) frames");
     }
     assert!(h.untouched(), "a refused call writes nothing");
 }
@@ -1029,6 +1039,8 @@ fn inbetween_keyframes_through_the_c_abi_match_the_rust_api() {
         MotionKeys { frames: &frames[..4], poses: &poses[..4 * d], fixed: &fixed[..4 * g] },
         MotionKeys { frames: &frames[4..], poses: &poses[4 * d..], fixed: &fixed[4 * g..] },
     ];
+    // The C ABI's flags are bytes.
+    let fixed: Vec<u8> = fixed.iter().map(|&f| f as u8).collect();
     let (mut a, mut b) = (vec![0.0; 40 * d], vec![0.0; 31 * d]);
     rust.runner(2).unwrap().complete_batch(&keys, &mut [&mut a, &mut b]).unwrap();
     let expected = [a, b].concat();
@@ -1036,7 +1048,7 @@ fn inbetween_keyframes_through_the_c_abi_match_the_rust_api() {
         let model = load(path);
         let mut info = ZooKeyframesInfo::default();
         assert_ok(zoo_keyframes_info(model, &mut info));
-        assert_eq!(info, ZooKeyframesInfo { dofs: d, groups: g });
+        assert_eq!(info, ZooKeyframesInfo { frame_values: d, groups: g });
         let mut common = ZooModelInfo::default();
         assert_ok(zoo_model_info(model, &mut common));
         assert_eq!((common.task, common.fps, common.joints), (ZooTask::Keyframes, 30.0, 3));
@@ -1076,7 +1088,7 @@ fn inbetween_keyframes_through_the_c_abi_match_the_rust_api() {
         assert!(alone[..] == expected[40 * d..], "alone vs in a batch");
         // The first key must fix every group; the output is left as it was.
         let mut bad = fixed[16..].to_vec();
-        bad[0] = 0.0;
+        bad[0] = 0;
         let mut untouched = vec![7.0f32; 31 * d];
         let status = zoo_keyframes_complete(
             runner,
@@ -1837,7 +1849,7 @@ impl Handles {
         unsafe {
             assert_ok(zoo_synthesis_runner_new(model, n, &mut runner));
             assert_ok(zoo_synthesis_characters_new(model, SEEDS.as_ptr(), n, &mut chars));
-            assert_ok(zoo_control_runner_new(model, &mut crunner));
+            assert_ok(zoo_control_runner_new(model, 64, &mut crunner));
             assert_ok(zoo_control_characters_new(model, SEEDS.as_ptr(), n, null(), &mut cchars));
             if started {
                 assert_ok(zoo_synthesis_start(chars, start.0.as_ptr(), start.0.len(), start.1.as_ptr(), start.1.len()));
@@ -1881,13 +1893,13 @@ fn synthesis_through_the_c_abi_matches_the_rust_api() {
         let model = synthesis_model();
         let mut info = ZooSynthesisInfo::default();
         assert_ok(zoo_synthesis_info(model, &mut info));
-        assert_eq!(info, ZooSynthesisInfo { frame_dim: rust.frame_dim(), has_refiner: false });
+        assert_eq!(info, ZooSynthesisInfo { frame_values: rust.frame_dim(), has_refiner: false });
         let mut common = ZooModelInfo::default();
         assert_ok(zoo_model_info(model, &mut common));
         assert_eq!((common.task, common.joints, common.fps), (ZooTask::Synthesis, k, 30.0));
-        let mut mean = vec![0.0f32; info.frame_dim];
+        let mut mean = vec![0.0f32; info.frame_values];
         assert_ok(zoo_synthesis_mean_frame(model, mean.as_mut_ptr(), mean.len()));
-        assert_eq!(mean, start.0[..info.frame_dim]);
+        assert_eq!(mean, start.0[..info.frame_values]);
         let (mut parents, mut offsets) = (vec![0i32; k], vec![0.0f32; 3 * k]);
         assert_ok(zoo_model_skeleton(model, parents.as_mut_ptr(), k, offsets.as_mut_ptr(), 3 * k));
         assert_eq!(parents, rust.model().metadata().skeleton.parents);
@@ -1922,7 +1934,7 @@ fn control_through_the_c_abi_matches_the_rust_api() {
         );
         assert!(settings.speed_offsets.is_null() && settings.turn_offsets_len == 0);
         let (mut runner, mut chars) = (null_mut(), null_mut());
-        assert_ok(zoo_control_runner_new(model, &mut runner));
+        assert_ok(zoo_control_runner_new(model, 64, &mut runner));
         assert_ok(zoo_control_characters_new(model, SEEDS.as_ptr(), n, &settings, &mut chars));
         zoo_model_free(model);
         assert_ok(zoo_control_start(chars, start.0.as_ptr(), start.0.len(), start.1.as_ptr(), start.1.len()));
@@ -1977,7 +1989,7 @@ fn synthesis_refuses_null_pointers() {
         let status = zoo_control_settings_default(null_mut());
         assert_error(status, ZooStatus::NullPointer, "zoo_control_settings_default: `out` is NULL");
         let mut crunner = null_mut();
-        let status = zoo_control_runner_new(null(), &mut crunner);
+        let status = zoo_control_runner_new(null(), 1, &mut crunner);
         assert_error(status, ZooStatus::NullPointer, "zoo_control_runner_new: `model` is NULL");
         let settings = ZooControlSettings { speed_offsets_len: 3, ..default_settings() };
         let mut cchars = null_mut();

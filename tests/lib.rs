@@ -297,13 +297,20 @@ pub mod capi {
     /// Compiles `examples/NAME.c` with the system C compiler (`CC`, else `cc`; C99, every
     /// warning an error) against the static library into `dir/NAME`.
     pub fn compile_example(name: &str, dir: &Path) -> PathBuf {
-        let exe = dir.join(name);
+        compile_c(&capi_dir().join(format!("examples/{name}.c")), dir)
+    }
+
+    /// Compiles the C99 program `source` (every warning an error) against the static library
+    /// into `dir`, named after the source.
+    pub fn compile_c(source: &Path, dir: &Path) -> PathBuf {
+        let name = source.file_stem().unwrap().to_string_lossy().into_owned();
+        let exe = dir.join(&name);
         let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
         let capi = capi_dir();
         let out = Command::new(&cc)
             .args(["-std=c99", "-Wall", "-Wextra", "-Werror", "-I"])
             .arg(capi.join("include"))
-            .arg(capi.join(format!("examples/{name}.c")))
+            .arg(source)
             .arg(static_lib())
             .args(["-lm", "-lpthread", "-ldl", "-lrt", "-lgcc_s", "-lc", "-o"])
             .arg(&exe)

@@ -370,3 +370,54 @@ fn a_start_graph_writing_an_unknown_state_is_refused() {
     );
     assert!(err.to_string().contains("`c`"), "{err}");
 }
+
+/// A transition whose context is fed frame by frame (`begin_batch`, then `feed_batch` per
+/// frame, as a game plays it) is the transition `start_batch` starts from the same frames, bit
+/// for bit, for a batch of characters and for context lengths of 1, 2 and the trained 10; a step
+/// before the context is fed, a feed with nothing due and characters fed out of step are refused.
+#[test]
+fn a_transition_fed_frame_by_frame_equals_one_started_at_once() {
+    use zoo_runtime::TransitionModel;
+    let model = TransitionModel::new(MotionModel::from_bytes(&zoo_tests::tiny_rtn_onnx().to_bytes()).unwrap()).unwrap();
+    let (k, length, n) = (model.joints(), model.transition_frames(), 3);
+    let d = 3 * k;
+    let pose = |c: usize, f: usize| -> Vec<f32> {
+        (0..d).map(|i| (i as f32 * 0.7 + f as f32 * 0.3 + c as f32).sin() * 20.0 + 4.0 * f as f32).collect()
+    };
+    for past in [1usize, 2, model.past_frames()] {
+        let frames: Vec<Vec<f32>> = (0..past).map(|f| (0..n).flat_map(|c| pose(c, f)).collect()).collect();
+        let all: Vec<f32> = (0..n).flat_map(|c| (0..past).flat_map(move |f| pose(c, f))).collect();
+        let target: Vec<f32> = (0..n).flat_map(|c| pose(c, past + length)).collect();
+        let next: Vec<f32> = (0..n).flat_map(|c| pose(c, past + length + 1)).collect();
+        let mut runner = model.runner().unwrap();
+        let mut started: Vec<_> = (0..n).map(|_| model.new_transition()).collect();
+        runner.start_batch(&mut started, &all, &target, &next).unwrap();
+        let mut fed: Vec<_> = (0..n).map(|_| model.new_transition()).collect();
+        runner.begin_batch(&mut fed, &frames[0], &target, &next, past, length).unwrap();
+        let mut out = vec![0.0f32; n * d];
+        if past > 1 {
+            let err = runner.step_batch(&mut fed, &mut out).unwrap_err();
+            assert!(err.to_string().contains("start the transition"), "{err}");
+        }
+        for frame in &frames[1..] {
+            runner.feed_batch(&mut fed, frame).unwrap();
+        }
+        let err = runner.feed_batch(&mut fed, &frames[0]).unwrap_err();
+        assert!(err.to_string().contains("no context frame is due"), "{err}");
+        let (mut a, mut b) = (vec![0.0f32; n * d], vec![0.0f32; n * d]);
+        for f in 0..=length {
+            runner.step_batch(&mut started, &mut a).unwrap();
+            runner.step_batch(&mut fed, &mut b).unwrap();
+            assert!(a == b, "{past} context frames: frame {f} of the fed transition differs");
+        }
+    }
+    // Characters at different points of their context are not fed together.
+    let mut runner = model.runner().unwrap();
+    let mut states: Vec<_> = (0..2).map(|_| model.new_transition()).collect();
+    let two: Vec<f32> = (0..2).flat_map(|c| pose(c, 0)).collect();
+    runner.begin_batch(&mut states[..1], &two[..d], &two[..d], &two[..d], 3, length).unwrap();
+    runner.feed_batch(&mut states[..1], &two[..d]).unwrap();
+    runner.begin_batch(&mut states[1..], &two[..d], &two[..d], &two[..d], 3, length).unwrap();
+    let err = runner.feed_batch(&mut states, &two).unwrap_err();
+    assert!(err.to_string().contains("feed characters at the same point"), "{err}");
+}

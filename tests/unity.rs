@@ -4,7 +4,8 @@
 //! tests (`libzoo_capi.so`).
 //!
 //! - `bindings_match_zoo_h`: the binding check passes on `runtime/capi/include/zoo.h` and fails on
-//!   copies of it with a function removed, a function added and a parameter changed.
+//!   copies of it with a function removed, a function added, a parameter changed, the log
+//!   callback's typedef changed and a `#define` (`ZOO_MAX_BATCH`) changed.
 //! - `console_test_matches_the_rust_runtime`: each task on a tiny exported model of each kind
 //!   (RTN, ARNN, RMR, RNN-GMM with its control) through C#, compared with what the Rust runtime
 //!   API computes here for the same inputs (written to a vectors file: every `f32` as its bits,
@@ -13,7 +14,14 @@
 //!   lengths, NaN, another task's model, missing bones) raises a managed exception with the
 //!   runtime's message; no managed allocation over 1000 steps of every per-frame call; and the
 //!   per-frame cost through C# against the same C ABI called from C (`Tests~/cbench.c`), batch 1 and
-//!   64, medians of 11 interleaved rounds, within 10%.
+//!   64, medians of 11 interleaved rounds, within 10%. Then the named cases of C ABI 3 ([`CASES`],
+//!   each printed `case NAME: passed`): a count of `int.MaxValue` (above `ZOO_MAX_BATCH`) refused
+//!   by the runtime with its message and a negative one by the wrapper, for every constructor that
+//!   takes a count; a runner's `max_batch` a hard limit; a coordinate frame's up axis or handedness
+//!   outside its enum refused by name; `Model.FromBytes` the same model as `Model.Load`, bit for
+//!   bit, for each task; the library's version, status names, empty last error after a success and
+//!   log callback; disposed wrappers' cached properties. The program exits 0 with nothing on
+//!   stderr (the library never prints, no managed exception escapes).
 //! - `samples_compile_against_the_unity_api_they_use`: the Unity glue (`Runtime/Unity`) and the
 //!   samples type-check against a stub of the few `UnityEngine` members they use
 //!   (`Tests~/UnityStub.cs`; this checks their C#, not their behaviour in Unity).
@@ -213,7 +221,7 @@ fn bindings_match_zoo_h() {
     );
 
     // The check fails on a header that drifted from the bindings: a function removed, one added,
-    // a parameter's type changed.
+    // a parameter's type changed, a callback's parameter changed, a constant changed.
     let text = std::fs::read_to_string(header()).unwrap();
     let start = text.find("enum ZooStatus zoo_transition_frames_left(").unwrap();
     let end = start + text[start..].find(';').unwrap() + 1;
@@ -227,6 +235,11 @@ fn bindings_match_zoo_h() {
         "uint32_t index,\n                                          size_t *out);",
     );
     assert_ne!(changed, text, "zoo_transition_frames_left's declaration moved: update this test");
+    let callback =
+        text.replace("typedef void (*ZooLogCallback)(int32_t level,", "typedef void (*ZooLogCallback)(uint32_t level,");
+    assert_ne!(callback, text, "ZooLogCallback's typedef moved: update this test");
+    let constant = text.replace("#define ZOO_MAX_BATCH 65536", "#define ZOO_MAX_BATCH 4096");
+    assert_ne!(constant, text, "ZOO_MAX_BATCH's #define changed: update this test");
     let dir = built().dir.join("drifted");
     std::fs::create_dir_all(&dir).unwrap();
     for (name, header, needle) in [
@@ -237,6 +250,12 @@ fn bindings_match_zoo_h() {
         ),
         ("added.h", added, "zoo_pose_blend has no binding in ZooNative"),
         ("changed.h", changed, "parameter `index` is System.UIntPtr, zoo.h uint32_t"),
+        (
+            "callback.h",
+            callback,
+            "delegate Zoo.Native.ZooLogCallback differs from zoo.h's ZooLogCallback: parameter `level` is System.Int32, zoo.h uint32_t",
+        ),
+        ("constant.h", constant, "ZooNative.ZOO_MAX_BATCH is 65536, zoo.h's is 4096"),
     ] {
         let path = dir.join(name);
         std::fs::write(&path, header).unwrap();
@@ -742,6 +761,41 @@ fn figure(text: &str, tag: &str, key: &str) -> f64 {
     value.parse().unwrap_or_else(|_| panic!("`{value}` in `{line}` is not a number"))
 }
 
+/// The named cases of the console test (`Tests~/ConsoleTests.cs`, `Cases`), each of which must
+/// print `case NAME: passed`.
+const CASES: &[&str] = &[
+    "count_int_max.transition_runner",
+    "count_negative.transition_runner",
+    "count_int_max.transition_characters",
+    "count_negative.transition_characters",
+    "count_int_max.keyframes_runner",
+    "count_negative.keyframes_runner",
+    "count_int_max.synthesis_runner",
+    "count_negative.synthesis_runner",
+    "count_int_max.control_runner",
+    "count_negative.control_runner",
+    "count_above_max_batch.synthesis_characters",
+    "count_above_max_batch.control_characters",
+    "count_int_max.pose_buffer",
+    "count_negative.pose_buffer",
+    "count_negative.other_sizes",
+    "max_batch_is_a_limit",
+    "frame_bad_up_axis",
+    "frame_bad_handedness",
+    "frame_enum_values",
+    "from_bytes.transition",
+    "from_bytes.keyframes",
+    "from_bytes.stitch",
+    "from_bytes.synthesis",
+    "from_bytes.control",
+    "from_bytes.refused",
+    "library_version",
+    "library_status_names",
+    "library_last_error_empty_after_success",
+    "library_log_callback",
+    "disposed_properties",
+];
+
 #[test]
 fn console_test_matches_the_rust_runtime() {
     let dir = built().dir.join("models");
@@ -751,6 +805,11 @@ fn console_test_matches_the_rust_runtime() {
     let text = String::from_utf8_lossy(&out.stdout).into_owned();
     eprintln!("{text}{}", String::from_utf8_lossy(&out.stderr));
     check(&out, "the console test (mono zoo-tests.exe run)");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.trim().is_empty(), "the console test wrote to stderr (the library never prints):\n{stderr}");
+    for case in CASES {
+        assert!(text.lines().any(|l| l == format!("case {case}: passed")), "case `{case}` did not pass:\n{text}");
+    }
     for tag in ["parity transition", "parity keyframes", "parity stitch", "parity synthesis", "parity control"] {
         let worst = figure(&text, tag, "worst");
         assert!(worst <= 1e-5, "{tag}: worst difference {worst} > 1e-5");

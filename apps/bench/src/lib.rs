@@ -17,6 +17,7 @@ pub mod control;
 pub mod exported;
 pub use zoo_motion::fcurve;
 pub mod follow;
+pub mod frame_budget;
 pub mod inbetween;
 pub mod keyframes;
 pub mod keys;

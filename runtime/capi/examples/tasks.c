@@ -64,7 +64,7 @@ static float key_value(size_t c, size_t k, size_t j, size_t frame) {
 static int keyframes(const ZooModel *model) {
     ZooKeyframesInfo info;
     CHECK(zoo_keyframes_info(model, &info));
-    size_t d = info.dofs;
+    size_t d = info.frame_values;
     /* Character 0: keys at 0, 9, 24, 39; character 1: at 0, 12, 30. */
     const size_t counts[2] = {4, 3};
     const size_t frames[7] = {0, 9, 24, 39, 0, 12, 30};
@@ -189,7 +189,7 @@ static int synthesis(const ZooModel *model, size_t n, size_t total) {
     ZooSynthesisInfo info;
     CHECK(zoo_model_info(model, &model_info));
     CHECK(zoo_synthesis_info(model, &info));
-    size_t k = model_info.joints, d = info.frame_dim;
+    size_t k = model_info.joints, d = info.frame_values;
     /* Every character starts from the data's mean frame, side by side, seeds 100, 101, ... */
     uint64_t *seeds = NEW(uint64_t, n);
     float *frames = NEW(float, n * d);
@@ -224,7 +224,7 @@ static int synthesis(const ZooModel *model, size_t n, size_t total) {
     CHECK(zoo_control_settings_default(&settings));
     ZooControlRunner *control_runner = NULL;
     ZooControlCharacters *controlled = NULL;
-    CHECK(zoo_control_runner_new(model, &control_runner));
+    CHECK(zoo_control_runner_new(model, n, &control_runner));
     CHECK(zoo_control_characters_new(model, seeds, n, &settings, &controlled));
     CHECK(zoo_control_start(controlled, frames, n * d, placements, n * 3));
     ZooControl *controls = NEW(ZooControl, n);

@@ -96,7 +96,7 @@ int main(int argc, char **argv) {
 
     ZooTransitionRunner *runner = NULL;
     ZooTransitionCharacters *characters = NULL;
-    if ((s = zoo_transition_runner_new(model, &runner)) != ZOO_STATUS_OK)
+    if ((s = zoo_transition_runner_new(model, n, &runner)) != ZOO_STATUS_OK)
         return fail("zoo_transition_runner_new", s);
     if ((s = zoo_transition_characters_new(model, n, &characters)) != ZOO_STATUS_OK)
         return fail("zoo_transition_characters_new", s);
@@ -125,8 +125,8 @@ int main(int argc, char **argv) {
                 walk_pose(k, hips_height, speed, c, t + 1, &next_roots[c], &next_rotations[c * 4 * k]);
             }
             s = zoo_transition_start_posed(runner, characters, past_roots, n * past_frames, past_rotations,
-                                           n * past_frames * 4 * k, target_roots, target_rotations, next_roots,
-                                           next_rotations, n * 4 * k, length);
+                                           n * past_frames * 4 * k, target_roots, n, target_rotations, n * 4 * k,
+                                           next_roots, n, next_rotations, n * 4 * k, length);
             if (s != ZOO_STATUS_OK) return fail("zoo_transition_start_posed", s);
         }
         s = zoo_transition_step_posed(runner, characters, roots, n, rotations, n * 4 * k);

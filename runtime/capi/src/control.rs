@@ -1,22 +1,22 @@
 //! Speed and facing control of a `synthesis` model (`zoo_runtime::control`): characters of a
 //! synthesis model that walk at a target speed and turn to a target facing
-//! ([`ZooControl`], one per character and frame), stepped one frame per [`zoo_control_step`] of a
-//! [`ZooControlRunner`]. A control shows in the motion 1 to `batch` frames after it is given
+//! (`ZooControl`, one per character and frame), stepped one frame per `zoo_control_step` of a
+//! `ZooControlRunner`. A control shows in the motion 1 to `batch` frames after it is given
 //! (see `zoo_runtime::control`). A character's frames depend only on its model, settings, seed,
 //! seed frames, placement and controls, bit for bit.
 
 use crate::model::{Family, model};
 use crate::synthesis::{Shape, check_shape, not_started, shape, start_all, step_out};
 use crate::{
-    Failure, ZooModel, ZooRootMotion, ZooStatus, check_count, check_size, free_handle, guard, handle_mut, new_handle,
-    optional_slice, runtime_failure, slice, write_out,
+    Failure, ZooModel, ZooRootMotion, ZooStatus, check_batch, check_count, check_size, free_handle, guard, handle_mut,
+    new_handle, optional_slice, runtime_failure, slice, write_out,
 };
 use zoo_runtime::EnginePose;
 use zoo_runtime::control::{Control, ControlRunner, ControlSettings, ControlledCharacter};
 use zoo_runtime::synthesis::SynthesisModel;
 
 /// How controlled characters plan (docs/rnn-gmm-control.md);
-/// [`zoo_control_settings_default`] fills the defaults.
+/// `zoo_control_settings_default` fills the defaults.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ZooControlSettings {
@@ -53,6 +53,7 @@ pub struct ZooControl {
 pub struct ZooControlRunner {
     runner: ControlRunner,
     shape: Shape,
+    max_batch: usize,
 }
 
 /// A batch of controlled characters (opaque). One thread at a time.
@@ -66,8 +67,7 @@ pub struct ZooControlCharacters {
 /// Writes the default settings into `*out` (batches of 3 frames, 5 x 5 candidates, the default
 /// offsets as NULL). Thread-safe.
 ///
-/// # Safety
-/// `out` is NULL or valid for a write.
+/// Safety: `out` is NULL or valid for a write.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_control_settings_default(out: *mut ZooControlSettings) -> ZooStatus {
     guard("zoo_control_settings_default", || {
@@ -86,18 +86,27 @@ pub unsafe extern "C" fn zoo_control_settings_default(out: *mut ZooControlSettin
     })
 }
 
-/// Creates scratch space for stepping controlled characters of `model` on one thread at a time
-/// into `*out`; free it with [`zoo_control_runner_free`]. Thread-safe (the model is shared).
+/// Creates scratch space for stepping up to `max_batch` controlled characters of `model` per call
+/// (1..`ZOO_MAX_BATCH`; a larger batch is refused) on one thread at a time
+/// into `*out`; free it with `zoo_control_runner_free`. Thread-safe (the model is shared).
 ///
-/// # Safety
-/// `model` is NULL or a live model; `out` is NULL or valid for a write.
+/// Safety: `model` is NULL or a live model; `out` is NULL or valid for a write.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_control_runner_new(model: *const ZooModel, out: *mut *mut ZooControlRunner) -> ZooStatus {
+pub unsafe extern "C" fn zoo_control_runner_new(
+    model: *const ZooModel,
+    max_batch: usize,
+    out: *mut *mut ZooControlRunner,
+) -> ZooStatus {
     guard("zoo_control_runner_new", || {
         let m = unsafe { self::model(model) }?.synthesis(Family::Control)?;
+        check_count("max_batch", max_batch)?;
         unsafe {
             new_handle(out, || {
-                Ok(ZooControlRunner { runner: ControlRunner::new(m).map_err(runtime_failure)?, shape: shape(m) })
+                Ok(ZooControlRunner {
+                    runner: ControlRunner::new(m).map_err(runtime_failure)?,
+                    shape: shape(m),
+                    max_batch,
+                })
             })
         }
     })
@@ -105,8 +114,7 @@ pub unsafe extern "C" fn zoo_control_runner_new(model: *const ZooModel, out: *mu
 
 /// Frees a runner (NULL is ignored).
 ///
-/// # Safety
-/// `runner` is NULL or a pointer from [`zoo_control_runner_new`] not freed before and not in use.
+/// Safety: `runner` is NULL or a pointer from `zoo_control_runner_new` not freed before and not in use.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_control_runner_free(runner: *mut ZooControlRunner) {
     unsafe { free_handle(runner) }
@@ -114,8 +122,7 @@ pub unsafe extern "C" fn zoo_control_runner_free(runner: *mut ZooControlRunner) 
 
 /// The runtime's settings from the C struct (NULL offsets: the defaults).
 ///
-/// # Safety
-/// The offsets pointers are NULL or hold their given lengths.
+/// Safety: The offsets pointers are NULL or hold their given lengths.
 unsafe fn settings_of(s: &ZooControlSettings) -> Result<ControlSettings, Failure> {
     let d = ControlSettings::default();
     let offsets = |ptr, len, what, default: Vec<f32>| -> Result<Vec<f32>, Failure> {
@@ -135,11 +142,10 @@ unsafe fn settings_of(s: &ZooControlSettings) -> Result<ControlSettings, Failure
 
 /// Creates `count` controlled characters of `model`, character `c` seeded with `seeds[c]`,
 /// planning with `settings` (NULL: the defaults; checked) into `*out`; start them with
-/// [`zoo_control_start`], free them with [`zoo_control_characters_free`]. Thread-safe (the model
+/// `zoo_control_start`, free them with `zoo_control_characters_free`. Thread-safe (the model
 /// is shared).
 ///
-/// # Safety
-/// `model` is NULL or a live model; `seeds` is NULL or holds `count` values; `settings` is NULL
+/// Safety: `model` is NULL or a live model; `seeds` is NULL or holds `count` values; `settings` is NULL
 /// or readable (its offsets NULL or holding their lengths); `out` is NULL or valid for a write.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_control_characters_new(
@@ -151,6 +157,7 @@ pub unsafe extern "C" fn zoo_control_characters_new(
 ) -> ZooStatus {
     guard("zoo_control_characters_new", || {
         let m = unsafe { self::model(model) }?.synthesis(Family::Control)?;
+        check_count("count", count)?;
         let seeds = unsafe { slice(seeds, count, "seeds") }?;
         let settings = match unsafe { settings.as_ref() } {
             Some(s) => unsafe { settings_of(s) }?,
@@ -158,7 +165,6 @@ pub unsafe extern "C" fn zoo_control_characters_new(
         };
         unsafe {
             new_handle(out, || {
-                check_count(count)?;
                 let characters = seeds
                     .iter()
                     .map(|&s| ControlledCharacter::new(m, s, settings.clone()))
@@ -177,8 +183,7 @@ pub unsafe extern "C" fn zoo_control_characters_new(
 
 /// Frees controlled characters (NULL is ignored).
 ///
-/// # Safety
-/// `characters` is NULL or a pointer from [`zoo_control_characters_new`] not freed before and
+/// Safety: `characters` is NULL or a pointer from `zoo_control_characters_new` not freed before and
 /// not in use.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_control_characters_free(characters: *mut ZooControlCharacters) {
@@ -191,8 +196,7 @@ pub unsafe extern "C" fn zoo_control_characters_free(characters: *mut ZooControl
 /// (`placements`: `x z yaw` per character). Drops any plan; the random numbers are not reset.
 /// Everything is checked before any character changes. One thread at a time.
 ///
-/// # Safety
-/// `characters` is NULL or live and used by this thread only; each buffer is NULL or holds its
+/// Safety: `characters` is NULL or live and used by this thread only; each buffer is NULL or holds its
 /// given length.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_control_start(
@@ -211,7 +215,7 @@ pub unsafe extern "C" fn zoo_control_start(
             return Err((
                 ZooStatus::InvalidArgument,
                 format!(
-                    "`frames` holds {} floats; it needs the same number of seed frames (at least one) of {d} floats (zoo_synthesis_info's `frame_dim`) for each of the {n} characters",
+                    "`frames` holds {} floats; it needs the same number of seed frames (at least one) of {d} floats (zoo_synthesis_info's `frame_values`) for each of the {n} characters",
                     frames.len()
                 ),
             ));
@@ -226,11 +230,10 @@ pub unsafe extern "C" fn zoo_control_start(
 
 /// Plays every character's next frame under its control (`controls`: one per character) into
 /// `roots` (`N`), `rotations` (`N * 4K` floats) and `contacts` (`N * 2` bytes: left, right
-/// foot). Stepping before [`zoo_control_start`] is `ZOO_STATUS_INVALID_STATE`; a bad control is
+/// foot). Stepping before `zoo_control_start` is `ZOO_STATUS_INVALID_STATE`; a bad control is
 /// refused before any character moves. Runner and characters: one thread at a time each.
 ///
-/// # Safety
-/// Handles are NULL or live and used by this thread only; each buffer is NULL or holds its
+/// Safety: Handles are NULL or live and used by this thread only; each buffer is NULL or holds its
 /// given length.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_control_step(
@@ -252,6 +255,7 @@ pub unsafe extern "C" fn zoo_control_step(
         let mut out = unsafe { step_out(roots, roots_len, rotations, rotations_len, contacts, contacts_len) }?;
         check_shape(r.shape, shape(&chars.model))?;
         let n = chars.characters.len();
+        check_batch(n, r.max_batch, "zoo_control_runner_new")?;
         check_size("controls", controls.len(), n, "controls", "the batch, one per character")?;
         out.check(n, chars.model.joints(), 2, "character")?;
         let control = |c: &ZooControl| Control::new(c.speed, c.heading);

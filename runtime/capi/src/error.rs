@@ -1,21 +1,27 @@
-//! What a C caller sees of an error: a [`ZooStatus`] and a message in C terms.
+//! What a C caller sees of an error: a `ZooStatus` and a message in C terms.
 //!
-//! [`guard`] runs the body of every C function: it catches panics and prefixes each message
-//! with the function's name. [`runtime_failure`] gives the status of a runtime error and, with
-//! [`c_message`], a message that names C functions and C arguments where the runtime's names
+//! `guard` runs the body of every C function: it catches panics and prefixes each message
+//! with the function's name. `runtime_failure` gives the status of a runtime error and, with
+//! `c_message`, a message that names C functions and C arguments where the runtime's names
 //! Rust API (`TransitionRunner::start`, `StitchRefiner::set_window`, ...).
 
 use crate::ZooStatus;
-use std::cell::RefCell;
+use std::cell::{Cell, RefCell};
 use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::sync::Once;
 use zoo_runtime::MotionError;
 use zoo_runtime::metadata::MotionTaskKind;
 
 thread_local! {
     static LAST_ERROR: RefCell<String> = const { RefCell::new(String::new()) };
+    /// Whether the thread runs the body of a C function (inside `guard`): a panic there is
+    /// recorded, not printed.
+    static IN_CALL: Cell<bool> = const { Cell::new(false) };
+    /// The message and place of the last panic caught inside a C function.
+    static PANIC: RefCell<String> = const { RefCell::new(String::new()) };
 }
 
-/// An error status and its message (without the function's name, which [`guard`] adds).
+/// An error status and its message (without the function's name, which `guard` adds).
 pub(crate) type Failure = (ZooStatus, String);
 
 /// Calls `f` with the calling thread's last error message.
@@ -34,29 +40,67 @@ pub(crate) fn set_error(function: &str, message: &str) {
     });
 }
 
-/// Runs the body `f` of the C function `function`, records its error message (prefixed with
-/// the function's name), and turns a panic into `ZooStatus::Panic`. Allocates nothing when `f`
-/// succeeds.
+/// Clears the calling thread's last error (a successful call). Allocates nothing.
+fn clear_error() {
+    LAST_ERROR.with(|e| {
+        if let Ok(mut e) = e.try_borrow_mut() {
+            e.clear();
+        }
+    });
+}
+
+/// Installs, once per process, a panic hook that keeps the library quiet: a panic inside a C
+/// function is recorded for its error message and never printed (no message, no backtrace on
+/// stderr, whatever `RUST_BACKTRACE` says); a panic elsewhere in the process (a Rust host's own
+/// code) goes to the hook that was installed before.
+fn install_quiet_panic_hook() {
+    static HOOK: Once = Once::new();
+    HOOK.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if IN_CALL.with(Cell::get) {
+                let what = info
+                    .payload()
+                    .downcast_ref::<&str>()
+                    .map(|s| s.to_string())
+                    .or_else(|| info.payload().downcast_ref::<String>().cloned())
+                    .unwrap_or_else(|| "unknown panic".into());
+                let at = info.location().map(|l| format!(" at {}:{}", l.file(), l.line())).unwrap_or_default();
+                PANIC.with(|p| *p.borrow_mut() = format!("{what}{at}"));
+            } else {
+                previous(info);
+            }
+        }));
+    });
+}
+
+/// Runs the body `f` of the C function `function`: on success clears the thread's last error;
+/// on an error records its message (prefixed with the function's name); turns a panic into
+/// `ZooStatus::Panic` with the panic's message as the last error, printing nothing. Allocates
+/// nothing when `f` succeeds.
 pub(crate) fn guard(function: &str, f: impl FnOnce() -> Result<(), Failure>) -> ZooStatus {
-    match catch_unwind(AssertUnwindSafe(f)) {
-        Ok(Ok(())) => ZooStatus::Ok,
+    install_quiet_panic_hook();
+    let outer = IN_CALL.with(|c| c.replace(true));
+    let result = catch_unwind(AssertUnwindSafe(f));
+    IN_CALL.with(|c| c.set(outer));
+    match result {
+        Ok(Ok(())) => {
+            clear_error();
+            ZooStatus::Ok
+        }
         Ok(Err((status, message))) => {
             set_error(function, &message);
             status
         }
-        Err(panic) => {
-            let what = panic
-                .downcast_ref::<&str>()
-                .map(|s| s.to_string())
-                .or_else(|| panic.downcast_ref::<String>().cloned())
-                .unwrap_or_else(|| "unknown panic".into());
+        Err(_) => {
+            let what = PANIC.with(|p| std::mem::take(&mut *p.borrow_mut()));
             set_error(function, &format!("internal error in the zoo runtime ({what}); please report it"));
             ZooStatus::Panic
         }
     }
 }
 
-/// The status of a runtime error and its message in C terms ([`c_message`]).
+/// The status of a runtime error and its message in C terms (`c_message`).
 pub(crate) fn runtime_failure(e: MotionError) -> Failure {
     let status = match &e {
         MotionError::Io { .. }
@@ -93,9 +137,14 @@ pub(crate) fn functions_of(task: MotionTaskKind) -> &'static str {
 
 /// Rust API named in the runtime's messages, and what a C caller calls instead. Applied in
 /// order, so a longer name comes before a shorter one it contains.
-const RUST_TO_C: [(&str, &str); 12] = [
+const RUST_TO_C: [(&str, &str); 14] = [
     ("TransitionState::set_heightmap(None)", "zoo_transition_set_heightmap with no heights"),
     ("TransitionState::set_heightmap", "zoo_transition_set_heightmap"),
+    ("TransitionRunner::begin_batch", "zoo_transition_begin or zoo_transition_begin_posed"),
+    (
+        "begun from positions (begin_batch); feed it positions (feed_batch)",
+        "begun from positions (zoo_transition_begin); feed it positions (zoo_transition_feed)",
+    ),
     ("TransitionRunner::start", "zoo_transition_start or zoo_transition_start_posed"),
     (
         "started from positions (start); start it with start_posed",
@@ -112,7 +161,7 @@ const RUST_TO_C: [(&str, &str); 12] = [
 ];
 
 /// The message of a runtime error in C terms: the variants whose message names Rust API are
-/// rebuilt from their fields; the others' text has every Rust name of [`RUST_TO_C`] replaced by
+/// rebuilt from their fields; the others' text has every Rust name of `RUST_TO_C` replaced by
 /// its C equivalent.
 pub(crate) fn c_message(e: &MotionError) -> String {
     match e {
@@ -138,7 +187,7 @@ pub(crate) fn c_message(e: &MotionError) -> String {
     }
 }
 
-/// `message` with every Rust name of [`RUST_TO_C`] replaced by its C equivalent.
+/// `message` with every Rust name of `RUST_TO_C` replaced by its C equivalent.
 fn translate(message: &str) -> String {
     let mut out = message.to_string();
     for (rust, c) in RUST_TO_C {
@@ -282,7 +331,7 @@ mod tests {
         })
     }
 
-    /// Literals whose Rust names a C caller never sees: the messages [`c_message`] rebuilds from
+    /// Literals whose Rust names a C caller never sees: the messages `c_message` rebuilds from
     /// the error's fields, and the hints of `WrongTask` (which it drops).
     const REBUILT: [&str; 6] = [
         "takes only `{expected}` models",

@@ -1,10 +1,8 @@
-//! Coordinate frames ([`ZooCoordinateFrame`]): an engine whose units and axes differ from the
-//! model's ([`ZooModelInfo`]'s `metres_per_unit`, `up_axis`, `handedness`) converts engine poses
-//! with [`zoo_pose_convert`] and joint positions with [`zoo_positions_convert`], in place, with
+//! Coordinate frames (`ZooCoordinateFrame`): an engine whose units and axes differ from the
+//! model's (`ZooModelInfo`'s `metres_per_unit`, `up_axis`, `handedness`) converts engine poses
+//! with `zoo_pose_convert` and joint positions with `zoo_positions_convert`, in place, with
 //! the runtime's conversion (`zoo_runtime::Conversion`, `EnginePose::convert`): model to engine
 //! after a call that writes poses, engine to model before a call that reads them.
-//!
-//! [`ZooModelInfo`]: crate::ZooModelInfo
 
 use crate::{Failure, ZooHandedness, ZooRootMotion, ZooStatus, ZooUpAxis, guard, handle, optional_slice_mut};
 use zoo_runtime::glam::{Quat, Vec3};
@@ -19,10 +17,13 @@ use zoo_runtime::{Conversion, CoordinateFrame, Handedness, UpAxis};
 pub struct ZooCoordinateFrame {
     /// Metres per length unit (0.01: centimetres, 1: metres); finite and positive.
     pub metres_per_unit: f32,
-    /// The up axis.
-    pub up_axis: ZooUpAxis,
-    /// The handedness of the axes.
-    pub handedness: ZooHandedness,
+    /// The up axis: a `ZooUpAxis` value (`ZOO_UP_AXIS_Y` or `ZOO_UP_AXIS_Z`); any other value is
+    /// refused. Stored as an integer so that a value from outside the enum is read and refused,
+    /// not misread.
+    pub up_axis: u32,
+    /// The handedness of the axes: a `ZooHandedness` value (`ZOO_HANDEDNESS_RIGHT` or
+    /// `ZOO_HANDEDNESS_LEFT`); any other value is refused.
+    pub handedness: u32,
 }
 
 impl ZooCoordinateFrame {
@@ -31,12 +32,33 @@ impl ZooCoordinateFrame {
         let frame = CoordinateFrame {
             metres_per_unit: self.metres_per_unit,
             up_axis: match self.up_axis {
-                ZooUpAxis::Y => UpAxis::Y,
-                ZooUpAxis::Z => UpAxis::Z,
+                v if v == ZooUpAxis::Y as u32 => UpAxis::Y,
+                v if v == ZooUpAxis::Z as u32 => UpAxis::Z,
+                v => {
+                    return Err((
+                        ZooStatus::InvalidArgument,
+                        format!(
+                            "`{what}.up_axis` is {v}, not a ZooUpAxis; use ZOO_UP_AXIS_Y ({}) or ZOO_UP_AXIS_Z ({})",
+                            ZooUpAxis::Y as u32,
+                            ZooUpAxis::Z as u32
+                        ),
+                    ));
+                }
             },
             handedness: match self.handedness {
-                ZooHandedness::Right => Handedness::Right,
-                ZooHandedness::Left => Handedness::Left,
+                v if v == ZooHandedness::Right as u32 => Handedness::Right,
+                v if v == ZooHandedness::Left as u32 => Handedness::Left,
+                v => {
+                    return Err((
+                        ZooStatus::InvalidArgument,
+                        format!(
+                            "`{what}.handedness` is {v}, not a ZooHandedness; use ZOO_HANDEDNESS_RIGHT ({}) or \
+                             ZOO_HANDEDNESS_LEFT ({})",
+                            ZooHandedness::Right as u32,
+                            ZooHandedness::Left as u32
+                        ),
+                    ));
+                }
             },
         };
         frame.check().map_err(|e| (ZooStatus::InvalidArgument, format!("`{what}`: {e}")))?;
@@ -46,8 +68,7 @@ impl ZooCoordinateFrame {
 
 /// The conversion from `*from` to `*to`.
 ///
-/// # Safety
-/// Each pointer is NULL or readable.
+/// Safety: Each pointer is NULL or readable.
 unsafe fn conversion(from: *const ZooCoordinateFrame, to: *const ZooCoordinateFrame) -> Result<Conversion, Failure> {
     let from = unsafe { handle(from, "from") }?.runtime("from")?;
     let to = unsafe { handle(to, "to") }?.runtime("to")?;
@@ -64,8 +85,7 @@ unsafe fn conversion(from: *const ZooCoordinateFrame, to: *const ZooCoordinateFr
 /// writes them (`from`: the model's frame from `zoo_model_info`) and the engine's to the model's
 /// before a call that reads them. Allocates nothing. Thread-safe.
 ///
-/// # Safety
-/// `from` and `to` are NULL or readable; each buffer is NULL or holds its given length of
+/// Safety: `from` and `to` are NULL or readable; each buffer is NULL or holds its given length of
 /// writable values.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_pose_convert(
@@ -113,8 +133,7 @@ pub unsafe extern "C" fn zoo_pose_convert(
 /// `zoo_transition_step`, the rest offsets of `zoo_model_skeleton`. Allocates nothing.
 /// Thread-safe.
 ///
-/// # Safety
-/// `from` and `to` are NULL or readable; `positions` is NULL or holds `positions_len` writable
+/// Safety: `from` and `to` are NULL or readable; `positions` is NULL or holds `positions_len` writable
 /// floats.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_positions_convert(
@@ -146,12 +165,21 @@ mod tests {
     use std::ptr::{null, null_mut};
     use zoo_runtime::EnginePose;
 
-    const ZOO_CM: ZooCoordinateFrame =
-        ZooCoordinateFrame { metres_per_unit: 0.01, up_axis: ZooUpAxis::Y, handedness: ZooHandedness::Right };
-    const UNITY: ZooCoordinateFrame =
-        ZooCoordinateFrame { metres_per_unit: 1.0, up_axis: ZooUpAxis::Y, handedness: ZooHandedness::Left };
-    const UNREAL: ZooCoordinateFrame =
-        ZooCoordinateFrame { metres_per_unit: 0.01, up_axis: ZooUpAxis::Z, handedness: ZooHandedness::Left };
+    const ZOO_CM: ZooCoordinateFrame = ZooCoordinateFrame {
+        metres_per_unit: 0.01,
+        up_axis: ZooUpAxis::Y as u32,
+        handedness: ZooHandedness::Right as u32,
+    };
+    const UNITY: ZooCoordinateFrame = ZooCoordinateFrame {
+        metres_per_unit: 1.0,
+        up_axis: ZooUpAxis::Y as u32,
+        handedness: ZooHandedness::Left as u32,
+    };
+    const UNREAL: ZooCoordinateFrame = ZooCoordinateFrame {
+        metres_per_unit: 0.01,
+        up_axis: ZooUpAxis::Z as u32,
+        handedness: ZooHandedness::Left as u32,
+    };
 
     fn pose() -> EnginePose {
         let mut p = EnginePose::with_global_positions(3);
@@ -258,5 +286,25 @@ mod tests {
         }
         assert_eq!(r, [0.0; 12], "a refused call writes nothing");
         assert_eq!(root, ZooRootMotion::default());
+    }
+
+    /// An enum value from outside the enum (what C lets a caller store) is refused by name, not
+    /// read as another value.
+    #[test]
+    fn refuses_values_outside_the_enums() {
+        let mut q = Quat::IDENTITY.to_array();
+        let up7 = ZooCoordinateFrame { up_axis: 7, ..UNITY };
+        let hand2 = ZooCoordinateFrame { handedness: 2, ..UNITY };
+        unsafe {
+            let status = zoo_pose_convert(&up7, &UNITY, null_mut(), 0, q.as_mut_ptr(), 4);
+            refused(status, ZooStatus::InvalidArgument, "zoo_pose_convert: `from.up_axis` is 7, not a ZooUpAxis");
+            let status = zoo_positions_convert(&UNITY, &hand2, q.as_mut_ptr(), 3);
+            refused(
+                status,
+                ZooStatus::InvalidArgument,
+                "zoo_positions_convert: `to.handedness` is 2, not a ZooHandedness; use ZOO_HANDEDNESS_RIGHT (0)",
+            );
+        }
+        assert_eq!(q, Quat::IDENTITY.to_array());
     }
 }

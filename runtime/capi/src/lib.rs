@@ -2,41 +2,41 @@
 //! Unity (P/Invoke), Unreal and Godot (C/C++), or any language with a C FFI.
 //!
 //! One loader, one model handle, one naming pattern per task:
-//! - [`zoo_model_load`] loads any file written by `zoo export --onnx` (or a `--portable` main
-//!   file with its companions) into a [`ZooModel`]; [`zoo_model_task`] says its task
-//!   ([`ZooTask`]); [`zoo_model_info`], [`zoo_model_skeleton`] and [`zoo_model_joint_name`]
-//!   describe every model (joints, frame rate, units and axes, skeleton, joint names); [`zoo_model_free`] frees it (`model.rs`).
+//! - `zoo_model_load` loads any file written by `zoo export --onnx` (or a `--portable` main
+//!   file with its companions) into a `ZooModel`; `zoo_model_task` says its task
+//!   (`ZooTask`); `zoo_model_info`, `zoo_model_skeleton` and `zoo_model_joint_name`
+//!   describe every model (joints, frame rate, units and axes, skeleton, joint names); `zoo_model_free` frees it (`model.rs`).
 //! - Each task's functions take that handle and share a prefix:
-//!   - `zoo_transition_*`: transitions (RTN, task `transition`): [`ZooTransitionRunner`],
-//!     [`ZooTransitionCharacters`], start from positions or engine poses, one step per frame
+//!   - `zoo_transition_*`: transitions (RTN, task `transition`): `ZooTransitionRunner`,
+//!     `ZooTransitionCharacters`, start from positions or engine poses, one step per frame
 //!     (`transition.rs`);
-//!   - `zoo_keyframes_*`: keyframe completion (ARNN, task `keyframes`): [`ZooKeyframesRunner`]
+//!   - `zoo_keyframes_*`: keyframe completion (ARNN, task `keyframes`): `ZooKeyframesRunner`
 //!     (`keyframes.rs`);
 //!   - `zoo_stitch_*`: locomotion stitching (RMR, task `stitch`): the whole-sequence
-//!     [`zoo_stitch_refine`] and the streaming [`ZooStitchStream`] (`stitch.rs`);
+//!     `zoo_stitch_refine` and the streaming `ZooStitchStream` (`stitch.rs`);
 //!   - `zoo_synthesis_*`: random synthesis (RNN-GMM, task `synthesis`):
-//!     [`ZooSynthesisRunner`], [`ZooSynthesisCharacters`] (`synthesis.rs`);
-//!   - `zoo_control_*`: speed / facing control of a `synthesis` model: [`ZooControlRunner`],
-//!     [`ZooControlCharacters`] (`control.rs`).
+//!     `ZooSynthesisRunner`, `ZooSynthesisCharacters` (`synthesis.rs`);
+//!   - `zoo_control_*`: speed / facing control of a `synthesis` model: `ZooControlRunner`,
+//!     `ZooControlCharacters` (`control.rs`).
 //!
 //!   A function given a model of another task returns `ZOO_STATUS_WRONG_MODEL`, and its message
 //!   names the task of the model and the functions that run it.
-//! - [`zoo_pose_convert`] and [`zoo_positions_convert`] convert poses and positions in place
-//!   between the model's units and axes and an engine's ([`ZooCoordinateFrame`]: Unity's metres,
+//! - `zoo_pose_convert` and `zoo_positions_convert` convert poses and positions in place
+//!   between the model's units and axes and an engine's (`ZooCoordinateFrame`: Unity's metres,
 //!   left-handed, Y up; Unreal's centimetres, left-handed, Z up), with the runtime's conversion
 //!   (`frame.rs`).
-//! - [`zoo_abi_version`] is the version of this ABI ([`ZOO_ABI_VERSION`] in the header an engine
+//! - `zoo_abi_version` is the version of this ABI (`ZOO_ABI_VERSION` in the header an engine
 //!   compiled against); it goes up whenever the ABI changes incompatibly.
 //!
 //! The header `include/zoo.h` is generated from these files by cbindgen
 //! (`runtime/capi/cbindgen.toml`) and checked up to date by `tests/capi.rs`;
 //! `examples/transition.c` (a transition engine loop) and `examples/tasks.c` (keyframes,
-//! stitching, synthesis and control, dispatched on [`zoo_model_task`]) are complete programs
+//! stitching, synthesis and control, dispatched on `zoo_model_task`) are complete programs
 //! that compile as C99 and as C++17.
 //!
 //! # Conventions
-//! - Every fallible function returns a [`ZooStatus`]; `ZOO_STATUS_OK` is 0. On any other status,
-//!   [`zoo_last_error`] gives a readable message (per thread) that starts with the function's
+//! - Every fallible function returns a `ZooStatus`; `ZOO_STATUS_OK` is 0. On any other status,
+//!   `zoo_last_error` gives a readable message (per thread) that starts with the function's
 //!   name and names the problem and the fix in C terms: C functions and C argument names.
 //! - Handles are opaque (models, runners, characters, streams). Each has a `_free` function
 //!   that accepts NULL.
@@ -47,36 +47,50 @@
 //! - A per-frame call (a step, a stream push or pop) allocates nothing once its handles exist.
 //! - Poses in positions are global joint positions, joint-major (`x0 y0 z0 x1 ...`), character-major
 //!   across a batch. Rotations are quaternions `x y z w`, joint-major, the model skeleton's order.
-//!   An engine pose is a [`ZooRootMotion`] and `4K` local rotations (`K` joints); a batch or a
+//!   An engine pose is a `ZooRootMotion` and `4K` local rotations (`K` joints); a batch or a
 //!   sequence of them is an array of roots and one rotation buffer of `4K` values per root.
 //!   Contacts are bytes, 1 for a foot on the ground and 0 otherwise. Units and axes are the
-//!   model's ([`ZooModelInfo`]); [`zoo_pose_convert`] converts them to an engine's.
+//!   model's (`ZooModelInfo`); `zoo_pose_convert` converts them to an engine's.
 //!
 //! # Thread safety
 //! - A loaded model is immutable after loading: any number of threads may use it at once (create
 //!   runners, characters and streams from it, read its info, refine a whole stitching
 //!   sequence). Free it after everything made from it, or before: what is made from a model
 //!   keeps what it needs. Two calls change a model and need it to themselves:
-//!   [`zoo_stitch_set_window`] and [`zoo_synthesis_set_refine`].
+//!   `zoo_stitch_set_window` and `zoo_synthesis_set_refine`.
 //! - Runners, characters and streams may be used by one thread at a time (move them between
 //!   threads freely); a call takes one runner and one characters handle, so threads each with
 //!   their own pair run in parallel.
-//! - The conversions ([`zoo_pose_convert`], [`zoo_positions_convert`]) are thread-safe.
-//! - [`zoo_last_error`] reports the last error of the calling thread.
+//! - The conversions (`zoo_pose_convert`, `zoo_positions_convert`) are thread-safe.
+//! - `zoo_last_error` reports the last error of the calling thread.
 
 // The boundary itself needs raw pointers; every other crate of the workspace denies unsafe code.
 #![allow(unsafe_code)]
+// The doc comments are the C header's (cbindgen copies them): each unsafe function states its
+// contract in a plain "Safety:" paragraph that reads well in C, not rustdoc's `# Safety` heading.
+#![allow(clippy::missing_safety_doc)]
 
-mod control;
-mod error;
-mod frame;
-mod keyframes;
+// The modules in the order a user meets them; cbindgen writes the header's functions in this
+// order (one group each, so that rustfmt keeps it).
 mod model;
-mod stitch;
-mod synthesis;
+// Tasks, in the order of the documentation.
 mod transition;
+//
+mod keyframes;
+//
+mod stitch;
+//
+mod synthesis;
+//
+mod control;
+// Engine coordinate frames.
+mod frame;
+// Errors, version, logging.
+mod diagnostics;
+mod error;
 
 pub use control::*;
+pub use diagnostics::*;
 pub use frame::*;
 pub use keyframes::*;
 pub use model::*;
@@ -90,11 +104,11 @@ use std::ffi::{CStr, c_char};
 use zoo_runtime::EnginePose;
 use zoo_runtime::glam::{Quat, Vec3};
 
-/// The version of this C ABI. [`zoo_abi_version`] returns the library's; an engine compares it
+/// The version of this C ABI. `zoo_abi_version` returns the library's; an engine compares it
 /// with the value of the header it was compiled against and refuses to run on a mismatch.
 /// Version 2: one loader and one model handle for every task, `zoo_<task>_*` functions (version
 /// 1 had a loader and a model type per task, and unprefixed transition functions).
-pub const ZOO_ABI_VERSION: u32 = 2;
+pub const ZOO_ABI_VERSION: u32 = 3;
 
 /// Result of a call.
 #[repr(C)]
@@ -146,33 +160,11 @@ pub struct ZooRootMotion {
     pub hips_position: [f32; 3],
 }
 
-/// The version of this library's C ABI: [`ZOO_ABI_VERSION`] of the header it was built with.
+/// The version of this library's C ABI: `ZOO_ABI_VERSION` of the header it was built with.
 /// Thread-safe.
 #[unsafe(no_mangle)]
 pub extern "C" fn zoo_abi_version() -> u32 {
     ZOO_ABI_VERSION
-}
-
-/// Copies the calling thread's last error message into `buffer` (at most `capacity` bytes,
-/// NUL-terminated, truncated if needed) and returns the message's full length in bytes without
-/// the NUL (0 when the thread has no error). `buffer` may be NULL to ask for the length.
-/// Thread-safe.
-///
-/// # Safety
-/// `buffer` is NULL or valid for `capacity` bytes of writes.
-#[unsafe(no_mangle)]
-pub unsafe extern "C" fn zoo_last_error(buffer: *mut c_char, capacity: usize) -> usize {
-    error::with_last_error(|message| {
-        if !buffer.is_null() && capacity > 0 {
-            let n = message.len().min(capacity - 1);
-            // SAFETY: the caller gives `capacity` writable bytes; n + 1 <= capacity.
-            unsafe {
-                std::ptr::copy_nonoverlapping(message.as_ptr(), buffer.cast::<u8>(), n);
-                buffer.add(n).write(0);
-            }
-        }
-        message.len()
-    })
 }
 
 pub(crate) fn null(what: &str) -> Failure {
@@ -181,46 +173,59 @@ pub(crate) fn null(what: &str) -> Failure {
 
 /// A shared reference from a handle pointer.
 ///
-/// # Safety
-/// `ptr` is NULL or a valid pointer to a live `T`.
+/// Safety: `ptr` is NULL or a valid pointer to a live `T`.
 pub(crate) unsafe fn handle<'a, T>(ptr: *const T, what: &str) -> Result<&'a T, Failure> {
     unsafe { ptr.as_ref() }.ok_or_else(|| null(what))
 }
 
 /// A mutable reference from a handle pointer.
 ///
-/// # Safety
-/// `ptr` is NULL or a valid, exclusively used pointer to a live `T`.
+/// Safety: `ptr` is NULL or a valid, exclusively used pointer to a live `T`.
 pub(crate) unsafe fn handle_mut<'a, T>(ptr: *mut T, what: &str) -> Result<&'a mut T, Failure> {
     unsafe { ptr.as_mut() }.ok_or_else(|| null(what))
 }
 
 /// A slice from a pointer and a length.
 ///
-/// # Safety
-/// `ptr` is NULL or points to `len` readable values.
+/// Safety: `ptr` is NULL or points to `len` readable values.
 pub(crate) unsafe fn slice<'a, T>(ptr: *const T, len: usize, what: &str) -> Result<&'a [T], Failure> {
     if ptr.is_null() {
         return Err(null(what));
     }
+    check_length::<T>(len, what)?;
     Ok(unsafe { std::slice::from_raw_parts(ptr, len) })
 }
 
 /// A mutable slice from a pointer and a length.
 ///
-/// # Safety
-/// `ptr` is NULL or points to `len` writable values not aliased elsewhere during the call.
+/// Safety: `ptr` is NULL or points to `len` writable values not aliased elsewhere during the call.
 pub(crate) unsafe fn slice_mut<'a, T>(ptr: *mut T, len: usize, what: &str) -> Result<&'a mut [T], Failure> {
     if ptr.is_null() {
         return Err(null(what));
     }
+    check_length::<T>(len, what)?;
     Ok(unsafe { std::slice::from_raw_parts_mut(ptr, len) })
+}
+
+/// Refuses a buffer length no buffer can have (more bytes than half the address space: a
+/// negative count cast to `size_t`, or `SIZE_MAX`), before it is read.
+fn check_length<T>(len: usize, what: &str) -> Result<(), Failure> {
+    let bytes = len.checked_mul(std::mem::size_of::<T>().max(1));
+    if bytes.is_none_or(|b| b > isize::MAX as usize) {
+        return Err((
+            ZooStatus::InvalidArgument,
+            format!(
+                "the length of `{what}` is {len}, more than any buffer can hold (a negative count converted to \
+                 size_t?); pass the buffer's real length in elements"
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// An optional buffer: NULL with a length of 0 is empty.
 ///
-/// # Safety
-/// As [`slice`].
+/// Safety: As `slice`.
 pub(crate) unsafe fn optional_slice<'a, T>(ptr: *const T, len: usize, what: &str) -> Result<&'a [T], Failure> {
     if ptr.is_null() && len == 0 {
         return Ok(&[]);
@@ -230,8 +235,7 @@ pub(crate) unsafe fn optional_slice<'a, T>(ptr: *const T, len: usize, what: &str
 
 /// An optional mutable buffer: NULL with a length of 0 is empty.
 ///
-/// # Safety
-/// As [`slice_mut`].
+/// Safety: As `slice_mut`.
 pub(crate) unsafe fn optional_slice_mut<'a, T>(ptr: *mut T, len: usize, what: &str) -> Result<&'a mut [T], Failure> {
     if ptr.is_null() && len == 0 {
         return Ok(&mut []);
@@ -261,18 +265,50 @@ pub(crate) fn check_size(
 /// Where the joint count `K` of every pose buffer comes from.
 pub(crate) const JOINTS: &str = "zoo_model_info's `joints`";
 
-/// Refuses a batch of no characters.
-pub(crate) fn check_count(count: usize) -> Result<(), Failure> {
+/// The most characters one handle holds or one call runs (`count`, `max_batch`): a larger count
+/// is refused before anything is allocated. Make several handles for a larger crowd.
+pub const ZOO_MAX_BATCH: usize = 65_536;
+
+/// The most frames one call completes or refines (a sequence, a shot): about 9.7 hours at 30
+/// frames per second. A longer one is refused before anything is allocated.
+pub const ZOO_MAX_FRAMES: usize = 1_048_576;
+
+/// Refuses a count of characters `name` of 0 or above `ZOO_MAX_BATCH` (before anything is
+/// allocated for them).
+pub(crate) fn check_count(name: &str, count: usize) -> Result<(), Failure> {
     if count == 0 {
-        return Err((ZooStatus::InvalidArgument, "`count` is 0; a batch needs at least one character".into()));
+        return Err((ZooStatus::InvalidArgument, format!("`{name}` is 0; a batch needs at least one character")));
+    }
+    if count > ZOO_MAX_BATCH {
+        return Err((
+            ZooStatus::InvalidArgument,
+            format!(
+                "`{name}` is {count}, more than ZOO_MAX_BATCH ({ZOO_MAX_BATCH}) characters; split the crowd over \
+                 several handles of at most {ZOO_MAX_BATCH}"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Refuses a call on `count` characters with a runner made for at most `max_batch` (the
+/// runner's `max_batch`: its scratch space is sized for it, so a call allocates nothing).
+pub(crate) fn check_batch(count: usize, max_batch: usize, runner_new: &str) -> Result<(), Failure> {
+    if count > max_batch {
+        return Err((
+            ZooStatus::InvalidArgument,
+            format!(
+                "the characters are a batch of {count}, more than the runner's `max_batch` ({max_batch}); make the \
+                 runner with {runner_new} and a `max_batch` of at least {count}"
+            ),
+        ));
     }
     Ok(())
 }
 
 /// A UTF-8 string from a NUL-terminated C string.
 ///
-/// # Safety
-/// `ptr` is NULL or a NUL-terminated string.
+/// Safety: `ptr` is NULL or a NUL-terminated string.
 pub(crate) unsafe fn c_str<'a>(ptr: *const c_char, what: &str) -> Result<&'a str, Failure> {
     if ptr.is_null() {
         return Err(null(what));
@@ -285,8 +321,7 @@ pub(crate) unsafe fn c_str<'a>(ptr: *const c_char, what: &str) -> Result<&'a str
 
 /// Makes a handle with `make` and writes it through `out` (checked before `make` runs).
 ///
-/// # Safety
-/// `out` is NULL or valid for a write.
+/// Safety: `out` is NULL or valid for a write.
 pub(crate) unsafe fn new_handle<T>(out: *mut *mut T, make: impl FnOnce() -> Result<T, Failure>) -> Result<(), Failure> {
     if out.is_null() {
         return Err(null("out"));
@@ -297,10 +332,9 @@ pub(crate) unsafe fn new_handle<T>(out: *mut *mut T, make: impl FnOnce() -> Resu
     Ok(())
 }
 
-/// Frees a handle made by [`new_handle`] (NULL is ignored).
+/// Frees a handle made by `new_handle` (NULL is ignored).
 ///
-/// # Safety
-/// `ptr` is NULL or a pointer from [`new_handle`] not freed before and not in use.
+/// Safety: `ptr` is NULL or a pointer from `new_handle` not freed before and not in use.
 pub(crate) unsafe fn free_handle<T>(ptr: *mut T) {
     if !ptr.is_null() {
         // SAFETY: a pointer from Box::into_raw in new_handle, freed once.
@@ -310,8 +344,7 @@ pub(crate) unsafe fn free_handle<T>(ptr: *mut T) {
 
 /// Writes `value` through the output pointer `out`.
 ///
-/// # Safety
-/// `out` is NULL or valid for writes.
+/// Safety: `out` is NULL or valid for writes.
 pub(crate) unsafe fn write_out<T>(out: *mut T, value: T, what: &str) -> Result<(), Failure> {
     if out.is_null() {
         return Err(null(what));
@@ -375,8 +408,7 @@ pub(crate) type Buffer<'a, T> = (*mut T, usize, &'a str);
 impl<'a> PoseOut<'a> {
     /// The buffers, each non-NULL.
     ///
-    /// # Safety
-    /// Each pointer is NULL or holds its given length of writable values.
+    /// Safety: Each pointer is NULL or holds its given length of writable values.
     pub(crate) unsafe fn new(
         roots: Buffer<'a, ZooRootMotion>,
         rotations: Buffer<'a, f32>,

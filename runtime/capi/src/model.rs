@@ -1,6 +1,6 @@
-//! The one model handle: [`zoo_model_load`] loads any exported file (through
-//! `zoo_runtime::LoadedModel`) into a [`ZooModel`], [`zoo_model_task`] says its task, and
-//! [`zoo_model_info`] / [`zoo_model_skeleton`] / [`zoo_model_joint_name`] describe it, whatever
+//! The one model handle: `zoo_model_load` loads any exported file (through
+//! `zoo_runtime::LoadedModel`) into a `ZooModel`, `zoo_model_task` says its task, and
+//! `zoo_model_info` / `zoo_model_skeleton` / `zoo_model_joint_name` describe it, whatever
 //! its task. The task's own
 //! functions (`zoo_transition_*`, `zoo_keyframes_*`, `zoo_stitch_*`, `zoo_synthesis_*`,
 //! `zoo_control_*`) take the handle and refuse a model of another task with
@@ -8,7 +8,7 @@
 
 use crate::error::functions_of;
 use crate::{
-    Failure, ZooStatus, c_str, check_size, free_handle, guard, handle, new_handle, runtime_failure, slice_mut,
+    Failure, ZooStatus, c_str, check_size, free_handle, guard, handle, new_handle, runtime_failure, slice, slice_mut,
     write_out,
 };
 use std::ffi::c_char;
@@ -20,7 +20,7 @@ use zoo_runtime::{Handedness, KeyframeModel, LoadedModel, StitchRefiner, Synthes
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum ZooTask {
-    /// No model (what [`zoo_model_task`] returns for a NULL handle).
+    /// No model (what `zoo_model_task` returns for a NULL handle).
     #[default]
     None = 0,
     /// Transitions between poses (RTN): `zoo_transition_*`.
@@ -56,7 +56,7 @@ pub enum ZooHandedness {
     Left = 1,
 }
 
-/// What every model is, whatever its task ([`zoo_model_info`]); each task's info function
+/// What every model is, whatever its task (`zoo_model_info`); each task's info function
 /// gives the rest (`zoo_transition_info`, `zoo_keyframes_info`, `zoo_stitch_info`,
 /// `zoo_synthesis_info`).
 #[repr(C)]
@@ -64,7 +64,7 @@ pub enum ZooHandedness {
 pub struct ZooModelInfo {
     /// The model's task.
     pub task: ZooTask,
-    /// Number of joints `K` of the model's skeleton ([`zoo_model_skeleton`]): a pose in
+    /// Number of joints `K` of the model's skeleton (`zoo_model_skeleton`): a pose in
     /// positions is `3K` floats, an engine pose a root and `4K` rotation values.
     pub joints: usize,
     /// Frames per second of the model's motion (its training data's).
@@ -138,8 +138,13 @@ impl ZooModel {
     /// Loads `path` (a portable main file with its companions) with the runtime's one loader.
     fn load(path: &str) -> Result<Self, Failure> {
         let bytes = zoo_runtime::portable::assemble(path).map_err(runtime_failure)?;
-        let in_file = |(status, message): Failure| (status, format!("{path}: {message}"));
-        let loaded = LoadedModel::from_bytes(&bytes).map_err(runtime_failure).map_err(in_file)?;
+        Self::from_bytes(&bytes, path)
+    }
+
+    /// Loads a model from the bytes of its file; `origin` names them in messages.
+    fn from_bytes(bytes: &[u8], origin: &str) -> Result<Self, Failure> {
+        let in_file = |(status, message): Failure| (status, format!("{origin}: {message}"));
+        let loaded = LoadedModel::from_bytes(bytes).map_err(runtime_failure).map_err(in_file)?;
         let model = match loaded {
             LoadedModel::Transition(t) => TaskModel::Transition(t),
             LoadedModel::Keyframes(k) => TaskModel::Keyframes(k),
@@ -220,7 +225,7 @@ impl ZooModel {
         }
     }
 
-    /// [`ZooModel::stitch`] to change.
+    /// `ZooModel::stitch` to change.
     pub(crate) fn stitch_mut(&mut self) -> Result<&mut Arc<StitchRefiner>, Failure> {
         if !matches!(self.model, TaskModel::Stitch(_)) {
             return Err(self.wrong_model(Family::Stitch));
@@ -255,21 +260,19 @@ impl ZooModel {
 
 /// The model behind a handle.
 ///
-/// # Safety
-/// `model` is NULL or a live model.
+/// Safety: `model` is NULL or a live model.
 pub(crate) unsafe fn model<'a>(model: *const ZooModel) -> Result<&'a ZooModel, Failure> {
     unsafe { handle(model, "model") }
 }
 
 /// Loads a model exported by `zoo export --onnx` (any task: transition, keyframes, stitch,
 /// synthesis) from the file `path` (UTF-8, NUL-terminated) into `*out`; a `zoo export --portable`
-/// main file is loaded with the companion files beside it. [`zoo_model_task`] says what it does.
+/// main file is loaded with the companion files beside it. `zoo_model_task` says what it does.
 /// A file that is not an exported model, of a format version this library does not read, or a
 /// bare step graph with no task is `ZOO_STATUS_LOAD_FAILED` with a message naming the fix. Free
-/// the model with [`zoo_model_free`]. Thread-safe.
+/// the model with `zoo_model_free`. Thread-safe.
 ///
-/// # Safety
-/// `path` is NULL or a NUL-terminated string; `out` is NULL or valid for a write.
+/// Safety: `path` is NULL or a NUL-terminated string; `out` is NULL or valid for a write.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_model_load(path: *const c_char, out: *mut *mut ZooModel) -> ZooStatus {
     guard("zoo_model_load", || {
@@ -278,11 +281,35 @@ pub unsafe extern "C" fn zoo_model_load(path: *const c_char, out: *mut *mut ZooM
     })
 }
 
-/// Frees a model from [`zoo_model_load`] (NULL is ignored). Runners, characters and streams made
+/// Loads a model from memory: `bytes` holds the `bytes_len` bytes of a file written by `zoo export
+/// --onnx` (read from an archive, an APK's assets, a resource pack...), with the same checks as
+/// `zoo_model_load` and the same model as loading that file (a `--portable` export, whose
+/// weights are in companion files, loads from its files only). The library keeps no pointer to
+/// `bytes`: free or reuse them when the call returns. Thread-safe.
+///
+/// Safety: `bytes` is NULL or holds `bytes_len` readable bytes; `out` is NULL or valid for a write.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_model_load_memory(
+    bytes: *const u8,
+    bytes_len: usize,
+    out: *mut *mut ZooModel,
+) -> ZooStatus {
+    guard("zoo_model_load_memory", || {
+        let bytes = unsafe { slice(bytes, bytes_len, "bytes") }?;
+        if bytes.is_empty() {
+            return Err((
+                ZooStatus::LoadFailed,
+                "`bytes_len` is 0; pass the bytes of a file written by `zoo export --onnx`".into(),
+            ));
+        }
+        unsafe { new_handle(out, || ZooModel::from_bytes(bytes, "the model in memory")) }
+    })
+}
+
+/// Frees a model from `zoo_model_load` (NULL is ignored). Runners, characters and streams made
 /// from it keep what they need, so they may be freed before or after it.
 ///
-/// # Safety
-/// `model` is NULL or a pointer from [`zoo_model_load`] not freed before and not in use.
+/// Safety: `model` is NULL or a pointer from `zoo_model_load` not freed before and not in use.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_model_free(model: *mut ZooModel) {
     unsafe { free_handle(model) }
@@ -291,8 +318,7 @@ pub unsafe extern "C" fn zoo_model_free(model: *mut ZooModel) {
 /// The task of `model`: which functions run it. `ZOO_TASK_NONE` for a NULL handle (the last
 /// error says so). Thread-safe.
 ///
-/// # Safety
-/// `model` is NULL or a live model.
+/// Safety: `model` is NULL or a live model.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_model_task(model: *const ZooModel) -> ZooTask {
     let mut task = ZooTask::None;
@@ -306,8 +332,7 @@ pub unsafe extern "C" fn zoo_model_task(model: *const ZooModel) -> ZooTask {
 /// Writes what every model is (task, joints, frame rate, units and axes) into `*out`.
 /// Thread-safe.
 ///
-/// # Safety
-/// `model` is NULL or a live model; `out` is NULL or valid for a write.
+/// Safety: `model` is NULL or a live model; `out` is NULL or valid for a write.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_model_info(model: *const ZooModel, out: *mut ZooModelInfo) -> ZooStatus {
     guard("zoo_model_info", || {
@@ -334,11 +359,10 @@ pub unsafe extern "C" fn zoo_model_info(model: *const ZooModel, out: *mut ZooMod
 
 /// Writes the model's skeleton: `parents` receives `K` parent indices (-1 for the root, every
 /// parent before its child) and `offsets` `3K` rest offsets from the parent (model units), both
-/// in the joint order of every pose (`K`: [`zoo_model_info`]'s `joints`). Poses given to a
+/// in the joint order of every pose (`K`: `zoo_model_info`'s `joints`). Poses given to a
 /// stitching model must have these bone lengths. Thread-safe.
 ///
-/// # Safety
-/// `model` is NULL or a live model; each buffer is NULL or holds its given length.
+/// Safety: `model` is NULL or a live model; each buffer is NULL or holds its given length.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_model_skeleton(
     model: *const ZooModel,
@@ -365,11 +389,10 @@ pub unsafe extern "C" fn zoo_model_skeleton(
 /// Copies the name of joint `joint` of the model's skeleton (UTF-8, the training clips' joint
 /// name) into `buffer` (at most `capacity` bytes, NUL-terminated, truncated if needed) and writes
 /// its full length in bytes without the NUL into `*length`; `buffer` NULL with `capacity` 0 asks
-/// for the length. Joints are in the order of every pose (`joint` < [`zoo_model_info`]'s
+/// for the length. Joints are in the order of every pose (`joint` < `zoo_model_info`'s
 /// `joints`): an engine maps its bones to them by name. Thread-safe.
 ///
-/// # Safety
-/// `model` is NULL or a live model; `buffer` is NULL or valid for `capacity` bytes of writes;
+/// Safety: `model` is NULL or a live model; `buffer` is NULL or valid for `capacity` bytes of writes;
 /// `length` is NULL or writable.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_model_joint_name(

@@ -1,12 +1,12 @@
 //! Locomotion stitching (RMR, task `stitch`, `zoo_runtime::stitch`): a `stitch` model refines
 //! motion put together from clips (aligned end to start, at the model's frame rate, on its
-//! skeleton: [`crate::zoo_model_skeleton`]), either a whole sequence at once
-//! ([`zoo_stitch_refine`]) or as a stream for motion matching ([`ZooStitchStream`]: one pose
+//! skeleton: `crate::zoo_model_skeleton`), either a whole sequence at once
+//! (`zoo_stitch_refine`) or as a stream for motion matching (`ZooStitchStream`: one pose
 //! pushed per frame, refined poses popped with a fixed latency: `ZooStitchInfo.latency` frames
 //! with the ankle IK, the seam guard and the foot lock of `zoo stitch`, `window` frames without
-//! them, [`zoo_stitch_stream_set_cleanup`]).
+//! them, `zoo_stitch_stream_set_cleanup`).
 //!
-//! Poses are engine poses: a [`ZooRootMotion`] and `4K` local rotations each. Contacts are 4
+//! Poses are engine poses: a `ZooRootMotion` and `4K` local rotations each. Contacts are 4
 //! bytes per frame, heel left, toe left, heel right, toe right (1: on the ground).
 
 use crate::model::model;
@@ -22,7 +22,7 @@ use zoo_runtime::{EnginePose, MotionError};
 /// frames later. One thread at a time.
 pub struct ZooStitchStream {
     /// Holds the model's refiner (an `Arc`), so the stream outlives nothing it needs, and
-    /// [`zoo_stitch_set_window`] refuses to change that refiner while this handle lives.
+    /// `zoo_stitch_set_window` refuses to change that refiner while this handle lives.
     stream: StitchStreamOf<Arc<StitchRefiner>>,
     pose: EnginePose,
 }
@@ -41,15 +41,14 @@ pub struct ZooStitchInfo {
     /// Latency of a new stream in frames (`w` + the lookahead of its foot lock and seam guard +
     /// the frames they release at once - 1: 114 for `w` = 60): the refined pose of frame `t` is
     /// ready once frame `t + latency` is pushed. A stream without them
-    /// ([`zoo_stitch_stream_set_cleanup`], the guard off) has `w`: [`zoo_stitch_stream_latency`].
+    /// (`zoo_stitch_stream_set_cleanup`, the guard off) has `w`: `zoo_stitch_stream_latency`.
     pub latency: usize,
 }
 
 /// Writes what a stitching model expects into `*out` (for the window it is planned for).
 /// Thread-safe.
 ///
-/// # Safety
-/// `model` is NULL or a live model; `out` is NULL or valid for a write.
+/// Safety: `model` is NULL or a live model; `out` is NULL or valid for a write.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_stitch_info(model: *const ZooModel, out: *mut ZooStitchInfo) -> ZooStatus {
     guard("zoo_stitch_info", || {
@@ -64,17 +63,28 @@ pub unsafe extern "C" fn zoo_stitch_info(model: *const ZooModel, out: *mut ZooSt
     })
 }
 
+/// The longest window `zoo_stitch_set_window` plans (frames).
+pub const ZOO_MAX_WINDOW: usize = 4096;
+
 /// Plans the model for another window `w` and stride `s` (`1 <= s <= w`; shorter windows give
 /// streams less latency, at the quality the stitching benchmark measures for them). Not
 /// thread-safe: no other thread may use the model during the call, and streams made from it
 /// must be freed first (`ZOO_STATUS_INVALID_STATE` otherwise).
 ///
-/// # Safety
-/// `model` is NULL or a live model used by no other thread during the call.
+/// Safety: `model` is NULL or a live model used by no other thread during the call.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_stitch_set_window(model: *mut ZooModel, window: usize, stride: usize) -> ZooStatus {
     guard("zoo_stitch_set_window", || {
         let m = unsafe { handle_mut(model, "model") }?.stitch_mut()?;
+        if window > ZOO_MAX_WINDOW {
+            return Err((
+                ZooStatus::InvalidArgument,
+                format!(
+                    "`window` is {window} frames, more than ZOO_MAX_WINDOW ({ZOO_MAX_WINDOW}); the model is trained \
+                     on windows of tens of frames (zoo_stitch_info's `window`)"
+                ),
+            ));
+        }
         let refiner = Arc::get_mut(m).ok_or_else(|| {
             (
                 ZooStatus::InvalidState,
@@ -88,11 +98,10 @@ pub unsafe extern "C" fn zoo_stitch_set_window(model: *mut ZooModel, window: usi
 
 /// Writes into `*out` whether the model was trained on clips inertialized at their seams
 /// (`zoo train rmr`'s default since 2026-11-28; the file's `stitch.pre_blend`): refine such a
-/// model's sequences with [`zoo_stitch_refine_at_seams`] and mark a stream's seams
-/// ([`zoo_stitch_stream_mark_seam`]), as `zoo stitch` does. Thread-safe.
+/// model's sequences with `zoo_stitch_refine_at_seams` and mark a stream's seams
+/// (`zoo_stitch_stream_mark_seam`), as `zoo stitch` does. Thread-safe.
 ///
-/// # Safety
-/// `model` is NULL or a live model; `out` is NULL or valid for a write.
+/// Safety: `model` is NULL or a live model; `out` is NULL or valid for a write.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_stitch_pre_blend(model: *const ZooModel, out: *mut bool) -> ZooStatus {
     guard("zoo_stitch_pre_blend", || {
@@ -101,14 +110,13 @@ pub unsafe extern "C" fn zoo_stitch_pre_blend(model: *const ZooModel, out: *mut 
     })
 }
 
-/// Switches the seam guard of [`zoo_stitch_refine_at_seams`] on (the default, as `zoo stitch`)
+/// Switches the seam guard of `zoo_stitch_refine_at_seams` on (the default, as `zoo stitch`)
 /// or off: where the refined motion, after the ankle IK, moves a joint faster within 5 frames
 /// of a seam than the inertialized input does there, it is blended towards itself smoothed until
-/// it does not, before the foot lock. Not thread-safe, as [`zoo_stitch_set_window`]: no other
+/// it does not, before the foot lock. Not thread-safe, as `zoo_stitch_set_window`: no other
 /// thread may use the model during the call, and streams made from it must be freed first.
 ///
-/// # Safety
-/// `model` is NULL or a live model used by no other thread during the call.
+/// Safety: `model` is NULL or a live model used by no other thread during the call.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_stitch_set_seam_guard(model: *mut ZooModel, on: bool) -> ZooStatus {
     guard("zoo_stitch_set_seam_guard", || {
@@ -134,8 +142,7 @@ pub unsafe extern "C" fn zoo_stitch_set_seam_guard(model: *mut ZooModel, on: boo
 /// `zoo stitch` writes). Allocates the sequence's scratch space per call. Thread-safe: threads may
 /// refine with one model at once.
 ///
-/// # Safety
-/// `model` is NULL or a live model; each buffer is NULL or holds its given length.
+/// Safety: `model` is NULL or a live model; each buffer is NULL or holds its given length.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_stitch_refine(
     model: *const ZooModel,
@@ -157,15 +164,14 @@ pub unsafe extern "C" fn zoo_stitch_refine(
     unsafe { refine_guarded("zoo_stitch_refine", model, input, FootCleanup { place_ankles, lock_feet }, outs) }
 }
 
-/// [`zoo_stitch_refine`] of the sequence inertialized at `seams` first (`seams_len` frame
+/// `zoo_stitch_refine` of the sequence inertialized at `seams` first (`seams_len` frame
 /// indices where a clip starts, each below `frames`): from each seam on, the jump to the
 /// previous clip decays over `blend_frames` frames before the refiner runs (`zoo stitch
-/// --pre-blend`; what a model trained on inertialized seams needs: [`zoo_stitch_pre_blend`]).
+/// --pre-blend`; what a model trained on inertialized seams needs: `zoo_stitch_pre_blend`).
 /// Seams on frames 0, 1 and the last change nothing. With seams given, the seams are also
-/// guarded against pops after the ankle IK ([`zoo_stitch_set_seam_guard`]). Thread-safe.
+/// guarded against pops after the ankle IK (`zoo_stitch_set_seam_guard`). Thread-safe.
 ///
-/// # Safety
-/// `model` is NULL or a live model; each buffer is NULL or holds its given length.
+/// Safety: `model` is NULL or a live model; each buffer is NULL or holds its given length.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_stitch_refine_at_seams(
     model: *const ZooModel,
@@ -189,17 +195,16 @@ pub unsafe extern "C" fn zoo_stitch_refine_at_seams(
     unsafe { refine_guarded("zoo_stitch_refine_at_seams", model, input, FootCleanup { place_ankles, lock_feet }, outs) }
 }
 
-/// The input buffers of [`zoo_stitch_refine_at_seams`]: roots (`frames` of them), rotations,
+/// The input buffers of `zoo_stitch_refine_at_seams`: roots (`frames` of them), rotations,
 /// seams (NULL when there are none).
 type RefineInput = (*const ZooRootMotion, usize, *const f32, usize, *const usize, usize);
 
-/// The output buffers of [`zoo_stitch_refine`]: roots, rotations and contacts with their lengths.
+/// The output buffers of `zoo_stitch_refine`: roots, rotations and contacts with their lengths.
 type RefineOutput = (*mut ZooRootMotion, usize, *mut f32, usize, *mut u8, usize);
 
-/// What [`zoo_stitch_refine`] and [`zoo_stitch_refine_at_seams`] do, errors named `function`.
+/// What `zoo_stitch_refine` and `zoo_stitch_refine_at_seams` do, errors named `function`.
 ///
-/// # Safety
-/// As for [`zoo_stitch_refine_at_seams`].
+/// Safety: As for `zoo_stitch_refine_at_seams`.
 unsafe fn refine_guarded(
     function: &'static str,
     model: *const ZooModel,
@@ -236,11 +241,10 @@ unsafe fn refine_guarded(
 }
 
 /// Creates a stitching stream over `model` into `*out`; free it with
-/// [`zoo_stitch_stream_free`]. Thread-safe (the model is shared); the stream: one thread at a
+/// `zoo_stitch_stream_free`. Thread-safe (the model is shared); the stream: one thread at a
 /// time.
 ///
-/// # Safety
-/// `model` is NULL or a live model; `out` is NULL or valid for a write.
+/// Safety: `model` is NULL or a live model; `out` is NULL or valid for a write.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_stitch_stream_new(model: *const ZooModel, out: *mut *mut ZooStitchStream) -> ZooStatus {
     guard("zoo_stitch_stream_new", || {
@@ -252,8 +256,7 @@ pub unsafe extern "C" fn zoo_stitch_stream_new(model: *const ZooModel, out: *mut
 
 /// Frees a stream (NULL is ignored).
 ///
-/// # Safety
-/// `stream` is NULL or a pointer from [`zoo_stitch_stream_new`] not freed before and not in use.
+/// Safety: `stream` is NULL or a pointer from `zoo_stitch_stream_new` not freed before and not in use.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_stitch_stream_free(stream: *mut ZooStitchStream) {
     unsafe { free_handle(stream) }
@@ -268,11 +271,10 @@ fn stream_failure(e: MotionError) -> Failure {
 }
 
 /// Pushes the next frame of the aligned motion: one pose, `root` and `4K` floats of
-/// `rotations`. Runs a window when one is due. Pushing after [`zoo_stitch_stream_finish`] is
+/// `rotations`. Runs a window when one is due. Pushing after `zoo_stitch_stream_finish` is
 /// `ZOO_STATUS_INVALID_STATE`. One thread at a time.
 ///
-/// # Safety
-/// `stream` is NULL or live and used by this thread only; `root` is NULL or readable; `rotations`
+/// Safety: `stream` is NULL or live and used by this thread only; `root` is NULL or readable; `rotations`
 /// is NULL or holds `rotations_len` floats.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_stitch_stream_push(
@@ -294,11 +296,10 @@ pub unsafe extern "C" fn zoo_stitch_stream_push(
 /// Sets what follows the refiner in `stream`, before its first push (`ZOO_STATUS_INVALID_STATE`
 /// after): `place_ankles` puts the ankles where the refiner predicts them, `lock_feet` locks the
 /// planted feet by the predicted contacts (both on by default, as `zoo stitch`); the seam guard
-/// follows the model's ([`zoo_stitch_set_seam_guard`]). Both off with the guard off: the
+/// follows the model's (`zoo_stitch_set_seam_guard`). Both off with the guard off: the
 /// refiner's poses as they are, at a latency of `window` frames. One thread at a time.
 ///
-/// # Safety
-/// `stream` is NULL or live and used by this thread only.
+/// Safety: `stream` is NULL or live and used by this thread only.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_stitch_stream_set_cleanup(
     stream: *mut ZooStitchStream,
@@ -314,8 +315,7 @@ pub unsafe extern "C" fn zoo_stitch_stream_set_cleanup(
 /// Writes into `*out` the stream's latency in frames: the refined pose of frame `t` is ready
 /// once frame `t + latency` is pushed. One thread at a time.
 ///
-/// # Safety
-/// `stream` is NULL or live and used by this thread only; `out` is NULL or writable.
+/// Safety: `stream` is NULL or live and used by this thread only; `out` is NULL or writable.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_stitch_stream_latency(stream: *const ZooStitchStream, out: *mut usize) -> ZooStatus {
     guard("zoo_stitch_stream_latency", || {
@@ -326,8 +326,7 @@ pub unsafe extern "C" fn zoo_stitch_stream_latency(stream: *const ZooStitchStrea
 
 /// Writes into `*ready` whether the next refined pose can be popped. One thread at a time.
 ///
-/// # Safety
-/// `stream` is NULL or live and used by this thread only; `ready` is NULL or writable.
+/// Safety: `stream` is NULL or live and used by this thread only; `ready` is NULL or writable.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_stitch_stream_ready(stream: *const ZooStitchStream, ready: *mut bool) -> ZooStatus {
     guard("zoo_stitch_stream_ready", || {
@@ -340,11 +339,10 @@ pub unsafe extern "C" fn zoo_stitch_stream_ready(stream: *const ZooStitchStream,
 /// previous popped pose) and its predicted contacts into `contacts` (4 bytes). Before it is
 /// ready (fewer than `latency` frames pushed after it, and not finished) the call is
 /// `ZOO_STATUS_NOT_AVAILABLE` and writes nothing. The pose has the ankle IK, the seam guard and
-/// the foot lock of `zoo stitch` unless [`zoo_stitch_stream_set_cleanup`] turned them off. One
+/// the foot lock of `zoo stitch` unless `zoo_stitch_stream_set_cleanup` turned them off. One
 /// thread at a time.
 ///
-/// # Safety
-/// `stream` is NULL or live and used by this thread only; `root` is NULL or writable; each buffer
+/// Safety: `stream` is NULL or live and used by this thread only; `root` is NULL or writable; each buffer
 /// is NULL or holds its given length.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_stitch_stream_pop(
@@ -384,11 +382,10 @@ pub unsafe extern "C" fn zoo_stitch_stream_pop(
 }
 
 /// Marks the next pushed pose as the first frame of a new clip: the stream inertializes the seam
-/// before refining and guards it, as [`zoo_stitch_refine_at_seams`] does (the seam frame is
+/// before refining and guards it, as `zoo_stitch_refine_at_seams` does (the seam frame is
 /// encoded once the frame after it is pushed). A seam on frame 0 or 1 is not inertialized. One thread at a time.
 ///
-/// # Safety
-/// `stream` is NULL or live and used by this thread only.
+/// Safety: `stream` is NULL or live and used by this thread only.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_stitch_stream_mark_seam(stream: *mut ZooStitchStream) -> ZooStatus {
     guard("zoo_stitch_stream_mark_seam", || {
@@ -408,8 +405,7 @@ pub unsafe extern "C" fn zoo_stitch_stream_mark_seam(stream: *mut ZooStitchStrea
 /// ready to pop. Needs at least `window` frames pushed (`ZOO_STATUS_INVALID_STATE` before);
 /// finishing twice does nothing. One thread at a time.
 ///
-/// # Safety
-/// `stream` is NULL or live and used by this thread only.
+/// Safety: `stream` is NULL or live and used by this thread only.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_stitch_stream_finish(stream: *mut ZooStitchStream) -> ZooStatus {
     guard("zoo_stitch_stream_finish", || {

@@ -1,17 +1,17 @@
 //! Random motion synthesis (RNN-GMM, task `synthesis`, `zoo_runtime::synthesis`): a `synthesis`
-//! model generates motion for a batch of seeded characters ([`ZooSynthesisCharacters`]), one
-//! frame per [`zoo_synthesis_step`] of a [`ZooSynthesisRunner`], as engine poses and left /
+//! model generates motion for a batch of seeded characters (`ZooSynthesisCharacters`), one
+//! frame per `zoo_synthesis_step` of a `ZooSynthesisRunner`, as engine poses and left /
 //! right foot contacts. Its speed / facing controller is `control.rs` (`zoo_control_*`).
 //!
 //! A character's frames depend only on its seed, its start frame and placement: the same in
 //! any batch, on any thread, in any run, bit for bit. A feature frame (`D` floats, clip units)
 //! is the model's own encoding of a pose (`zoo_rnngmm::FeatureSpec::encode`); engines without
-//! one start from the data's mean frame ([`zoo_synthesis_mean_frame`]).
+//! one start from the data's mean frame (`zoo_synthesis_mean_frame`).
 
 use crate::model::{Family, model};
 use crate::{
-    Failure, PoseOut, ZooModel, ZooRootMotion, ZooStatus, check_count, check_size, free_handle, guard, handle_mut,
-    new_handle, runtime_failure, slice, slice_mut, write_out,
+    Failure, PoseOut, ZooModel, ZooRootMotion, ZooStatus, check_batch, check_count, check_size, free_handle, guard,
+    handle_mut, new_handle, runtime_failure, slice, slice_mut, write_out,
 };
 use zoo_runtime::synthesis::{SynthesisCharacter, SynthesisModel, SynthesisRunner};
 use zoo_runtime::{EnginePose, MotionError};
@@ -20,6 +20,7 @@ use zoo_runtime::{EnginePose, MotionError};
 pub struct ZooSynthesisRunner {
     runner: SynthesisRunner,
     shape: Shape,
+    max_batch: usize,
 }
 
 /// The generators of a batch of characters (opaque). One thread at a time.
@@ -37,15 +38,15 @@ pub struct ZooSynthesisCharacters {
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ZooSynthesisInfo {
     /// Values `D` of a feature frame (a start frame): `6 + 3 (K - 1) + 2`.
-    pub frame_dim: usize,
+    pub frame_values: usize,
     /// Whether runners and characters made now refine each generated frame (the file embeds the
-    /// refiner and [`zoo_synthesis_set_refine`] did not turn it off).
+    /// refiner and `zoo_synthesis_set_refine` did not turn it off).
     pub has_refiner: bool,
 }
 
 const INFO: &str = "zoo_synthesis_info";
 
-/// What must agree between a runner and the characters it steps (`frame_dim`, joints,
+/// What must agree between a runner and the characters it steps (`frame_values`, joints,
 /// refiner).
 pub(crate) type Shape = (usize, usize, bool);
 
@@ -68,13 +69,12 @@ pub(crate) fn check_shape(runner: Shape, characters: Shape) -> Result<(), Failur
 
 /// Writes what a synthesis model expects into `*out`. Thread-safe.
 ///
-/// # Safety
-/// `model` is NULL or a live model; `out` is NULL or valid for a write.
+/// Safety: `model` is NULL or a live model; `out` is NULL or valid for a write.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_synthesis_info(model: *const ZooModel, out: *mut ZooSynthesisInfo) -> ZooStatus {
     guard("zoo_synthesis_info", || {
         let m = unsafe { self::model(model) }?.synthesis(Family::Synthesis)?;
-        unsafe { write_out(out, ZooSynthesisInfo { frame_dim: m.frame_dim(), has_refiner: m.has_refiner() }, "out") }
+        unsafe { write_out(out, ZooSynthesisInfo { frame_values: m.frame_dim(), has_refiner: m.has_refiner() }, "out") }
     })
 }
 
@@ -83,8 +83,7 @@ pub unsafe extern "C" fn zoo_synthesis_info(model: *const ZooModel, out: *mut Zo
 /// loading) or the generator's own frames. Those made before keep theirs. Not thread-safe: no
 /// other thread may use the model during the call.
 ///
-/// # Safety
-/// `model` is NULL or a live model used by no other thread during the call.
+/// Safety: `model` is NULL or a live model used by no other thread during the call.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_synthesis_set_refine(model: *mut ZooModel, refine: bool) -> ZooStatus {
     guard("zoo_synthesis_set_refine", || unsafe { handle_mut(model, "model") }?.set_refine(refine))
@@ -93,8 +92,7 @@ pub unsafe extern "C" fn zoo_synthesis_set_refine(model: *mut ZooModel, refine: 
 /// Writes the training data's mean feature frame (`D` floats, clip units) into `frame`: a
 /// neutral start frame for an engine that has no encoded frame of its own. Thread-safe.
 ///
-/// # Safety
-/// `model` is NULL or a live model; `frame` is NULL or holds `frame_len` writable floats.
+/// Safety: `model` is NULL or a live model; `frame` is NULL or holds `frame_len` writable floats.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_synthesis_mean_frame(
     model: *const ZooModel,
@@ -104,7 +102,7 @@ pub unsafe extern "C" fn zoo_synthesis_mean_frame(
     guard("zoo_synthesis_mean_frame", || {
         let m = unsafe { self::model(model) }?.synthesis(Family::Synthesis)?;
         let frame = unsafe { slice_mut(frame, frame_len, "frame") }?;
-        check_size("frame", frame.len(), m.frame_dim(), "floats", format_args!("{INFO} (`frame_dim`)"))?;
+        check_size("frame", frame.len(), m.frame_dim(), "floats", format_args!("{INFO} (`frame_values`)"))?;
         let mean = m.model().metadata().normalization.get("x").map(|n| n.mean.as_slice()).unwrap_or_default();
         if mean.len() != frame.len() {
             return Err((ZooStatus::RunFailed, "the model has no mean frame; re-export it".into()));
@@ -114,12 +112,11 @@ pub unsafe extern "C" fn zoo_synthesis_mean_frame(
     })
 }
 
-/// Creates scratch space for stepping up to `max_batch` characters of `model` per call (larger
-/// batches grow it once) on one thread at a time into `*out`; free it with
-/// [`zoo_synthesis_runner_free`]. Thread-safe (the model is shared).
+/// Creates scratch space for stepping up to `max_batch` characters of `model` per call
+/// (1..`ZOO_MAX_BATCH`; a larger batch is refused) on one thread at a time into `*out`; free it with
+/// `zoo_synthesis_runner_free`. Thread-safe (the model is shared).
 ///
-/// # Safety
-/// `model` is NULL or a live model; `out` is NULL or valid for a write.
+/// Safety: `model` is NULL or a live model; `out` is NULL or valid for a write.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_synthesis_runner_new(
     model: *const ZooModel,
@@ -128,9 +125,14 @@ pub unsafe extern "C" fn zoo_synthesis_runner_new(
 ) -> ZooStatus {
     guard("zoo_synthesis_runner_new", || {
         let m = unsafe { self::model(model) }?.synthesis(Family::Synthesis)?;
+        check_count("max_batch", max_batch)?;
         unsafe {
             new_handle(out, || {
-                Ok(ZooSynthesisRunner { runner: m.runner(max_batch).map_err(runtime_failure)?, shape: shape(m) })
+                Ok(ZooSynthesisRunner {
+                    runner: m.runner(max_batch).map_err(runtime_failure)?,
+                    shape: shape(m),
+                    max_batch,
+                })
             })
         }
     })
@@ -138,19 +140,17 @@ pub unsafe extern "C" fn zoo_synthesis_runner_new(
 
 /// Frees a runner (NULL is ignored).
 ///
-/// # Safety
-/// `runner` is NULL or a pointer from [`zoo_synthesis_runner_new`] not freed before and not in use.
+/// Safety: `runner` is NULL or a pointer from `zoo_synthesis_runner_new` not freed before and not in use.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_synthesis_runner_free(runner: *mut ZooSynthesisRunner) {
     unsafe { free_handle(runner) }
 }
 
 /// Creates `count` characters of `model`, character `c` seeded with `seeds[c]`, into `*out`;
-/// start them with [`zoo_synthesis_start`], free them with [`zoo_synthesis_characters_free`].
+/// start them with `zoo_synthesis_start`, free them with `zoo_synthesis_characters_free`.
 /// Thread-safe (the model is shared).
 ///
-/// # Safety
-/// `model` is NULL or a live model; `seeds` is NULL or holds `count` values; `out` is NULL or
+/// Safety: `model` is NULL or a live model; `seeds` is NULL or holds `count` values; `out` is NULL or
 /// valid for a write.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_synthesis_characters_new(
@@ -161,10 +161,10 @@ pub unsafe extern "C" fn zoo_synthesis_characters_new(
 ) -> ZooStatus {
     guard("zoo_synthesis_characters_new", || {
         let m = unsafe { self::model(model) }?.synthesis(Family::Synthesis)?;
+        check_count("count", count)?;
         let seeds = unsafe { slice(seeds, count, "seeds") }?;
         unsafe {
             new_handle(out, || {
-                check_count(count)?;
                 Ok(ZooSynthesisCharacters {
                     model: m.clone(),
                     characters: seeds.iter().map(|&s| m.new_character(s)).collect(),
@@ -179,8 +179,7 @@ pub unsafe extern "C" fn zoo_synthesis_characters_new(
 
 /// Frees characters (NULL is ignored).
 ///
-/// # Safety
-/// `characters` is NULL or a pointer from [`zoo_synthesis_characters_new`] not freed before and
+/// Safety: `characters` is NULL or a pointer from `zoo_synthesis_characters_new` not freed before and
 /// not in use.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_synthesis_characters_free(characters: *mut ZooSynthesisCharacters) {
@@ -222,8 +221,7 @@ pub(crate) fn start_all<C>(
 /// floats, `x z yaw` per character), from the zero generator state. The random numbers are not
 /// reset. Everything is checked before any character changes. One thread at a time.
 ///
-/// # Safety
-/// `characters` is NULL or live and used by this thread only; each buffer is NULL or holds its
+/// Safety: `characters` is NULL or live and used by this thread only; each buffer is NULL or holds its
 /// given length.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_synthesis_start(
@@ -238,7 +236,7 @@ pub unsafe extern "C" fn zoo_synthesis_start(
         let frames = unsafe { slice(frames, frames_len, "frames") }?;
         let placements = unsafe { slice(placements, placements_len, "placements") }?;
         let (n, d) = (chars.characters.len(), chars.model.frame_dim());
-        check_size("frames", frames.len(), n * d, "floats", format_args!("{INFO} (`frame_dim` per character)"))?;
+        check_size("frames", frames.len(), n * d, "floats", format_args!("{INFO} (`frame_values` per character)"))?;
         let model = &chars.model;
         start_all(&mut chars.characters, frames, d, placements, |ch, f, [x, z, yaw]| ch.start(model, f, x, z, yaw))?;
         chars.started = true;
@@ -249,11 +247,10 @@ pub unsafe extern "C" fn zoo_synthesis_start(
 /// Generates the next frame of every character in one graph run: `roots` receives `N` roots,
 /// `rotations` `N * 4K` floats and `contacts` `N * 2` bytes (left, right foot). `temperature`
 /// scales the mixture's standard deviations (1: the model's; finite, >= 0). Stepping before
-/// [`zoo_synthesis_start`] is `ZOO_STATUS_INVALID_STATE`. Allocates nothing per frame (without a
+/// `zoo_synthesis_start` is `ZOO_STATUS_INVALID_STATE`. Allocates nothing per frame (without a
 /// refiner). Runner and characters: one thread at a time each.
 ///
-/// # Safety
-/// Handles are NULL or live and used by this thread only; each buffer is NULL or holds its
+/// Safety: Handles are NULL or live and used by this thread only; each buffer is NULL or holds its
 /// given length of writable values.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_synthesis_step(
@@ -272,6 +269,7 @@ pub unsafe extern "C" fn zoo_synthesis_step(
         let chars = unsafe { handle_mut(characters, "characters") }?;
         let mut out = unsafe { step_out(roots, roots_len, rotations, rotations_len, contacts, contacts_len) }?;
         check_shape(r.shape, shape(&chars.model))?;
+        check_batch(chars.characters.len(), r.max_batch, "zoo_synthesis_runner_new")?;
         out.check(chars.characters.len(), chars.model.joints(), 2, "character")?;
         if !chars.started {
             return Err(not_started("zoo_synthesis_start"));
@@ -288,8 +286,7 @@ pub unsafe extern "C" fn zoo_synthesis_step(
 
 /// The output buffers of a step: a root, `4K` rotations and 2 contacts per character.
 ///
-/// # Safety
-/// Each pointer is NULL or holds its given length of writable values.
+/// Safety: Each pointer is NULL or holds its given length of writable values.
 pub(crate) unsafe fn step_out<'a>(
     roots: *mut ZooRootMotion,
     roots_len: usize,

@@ -1,23 +1,25 @@
 //! Transitions (RTN, task `transition`, `zoo_runtime::transition`): from a few context frames
-//! to a target pose, for a batch of characters ([`ZooTransitionCharacters`]), one frame per
-//! [`zoo_transition_step`] (global positions) or [`zoo_transition_step_posed`] (engine poses)
-//! of a [`ZooTransitionRunner`].
+//! to a target pose, for a batch of characters (`ZooTransitionCharacters`), one frame per
+//! `zoo_transition_step` (global positions) or `zoo_transition_step_posed` (engine poses)
+//! of a `ZooTransitionRunner`.
 //!
 //! A transition of `length` frames returns `length` frames and then the target frame; the
-//! model was trained for [`ZooTransitionInfo`]'s `transition_frames` (longer ones need
-//! [`zoo_transition_allow_beyond_trained`]). A terrain-aware model ([`zoo_transition_terrain`])
-//! needs each character's ground ([`zoo_transition_set_heightmap`]) before the start.
+//! model was trained for `ZooTransitionInfo`'s `transition_frames` (longer ones need
+//! `zoo_transition_allow_beyond_trained`). A terrain-aware model (`zoo_transition_terrain`)
+//! needs each character's ground (`zoo_transition_set_heightmap`) before the start.
 
 use crate::model::model;
 use crate::{
-    Failure, JOINTS, ZooModel, ZooRootMotion, ZooStatus, check_count, check_size, free_handle, guard, handle,
-    handle_mut, new_handle, optional_slice, read_pose, runtime_failure, slice, slice_mut, write_out, write_pose,
+    Failure, JOINTS, ZooModel, ZooRootMotion, ZooStatus, check_batch, check_count, check_size, free_handle, guard,
+    handle, handle_mut, new_handle, optional_slice, read_pose, runtime_failure, slice, slice_mut, write_out,
+    write_pose,
 };
 use zoo_runtime::{EnginePose, TransitionRunner, TransitionState};
 
 /// Scratch space for running a transition model (opaque). One thread at a time.
 pub struct ZooTransitionRunner {
     runner: TransitionRunner,
+    max_batch: usize,
 }
 
 /// The transitions of a batch of characters (opaque). One thread at a time.
@@ -45,8 +47,7 @@ const INFO: &str = "zoo_transition_info";
 
 /// Writes what a transition model expects into `*out`. Thread-safe.
 ///
-/// # Safety
-/// `model` is NULL or a live model; `out` is NULL or valid for a write.
+/// Safety: `model` is NULL or a live model; `out` is NULL or valid for a write.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_transition_info(model: *const ZooModel, out: *mut ZooTransitionInfo) -> ZooStatus {
     guard("zoo_transition_info", || {
@@ -64,8 +65,7 @@ pub unsafe extern "C" fn zoo_transition_info(model: *const ZooModel, out: *mut Z
 /// of `*extent` model units around the root. `ZOO_STATUS_NOT_AVAILABLE` for a model without
 /// terrain input (a flat-ground model). Thread-safe.
 ///
-/// # Safety
-/// `model` is NULL or a live model; `side` and `extent` are NULL or writable.
+/// Safety: `model` is NULL or a live model; `side` and `extent` are NULL or writable.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_transition_terrain(
     model: *const ZooModel,
@@ -85,27 +85,30 @@ pub unsafe extern "C" fn zoo_transition_terrain(
     })
 }
 
-/// Creates scratch space for running `model` on one thread at a time into `*out`; free it with
-/// [`zoo_transition_runner_free`]. Transitions longer than the trained length are refused unless
-/// [`zoo_transition_allow_beyond_trained`]. Thread-safe (the model is shared).
+/// Creates scratch space for running `model` for up to `max_batch` characters per call
+/// (1..`ZOO_MAX_BATCH`; a larger batch is refused), on one thread at a time, into `*out`; free it with
+/// `zoo_transition_runner_free`. Transitions longer than the trained length are refused unless
+/// `zoo_transition_allow_beyond_trained`. Thread-safe (the model is shared).
 ///
-/// # Safety
-/// `model` is NULL or a live model; `out` is NULL or valid for a write.
+/// Safety: `model` is NULL or a live model; `out` is NULL or valid for a write.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_transition_runner_new(
     model: *const ZooModel,
+    max_batch: usize,
     out: *mut *mut ZooTransitionRunner,
 ) -> ZooStatus {
     guard("zoo_transition_runner_new", || {
         let m = unsafe { self::model(model) }?.transition()?;
-        unsafe { new_handle(out, || Ok(ZooTransitionRunner { runner: m.runner().map_err(runtime_failure)? })) }
+        check_count("max_batch", max_batch)?;
+        unsafe {
+            new_handle(out, || Ok(ZooTransitionRunner { runner: m.runner().map_err(runtime_failure)?, max_batch }))
+        }
     })
 }
 
 /// Frees a runner (NULL is ignored).
 ///
-/// # Safety
-/// `runner` is NULL or a pointer from [`zoo_transition_runner_new`] not freed before and not in
+/// Safety: `runner` is NULL or a pointer from `zoo_transition_runner_new` not freed before and not in
 /// use.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_transition_runner_free(runner: *mut ZooTransitionRunner) {
@@ -115,8 +118,7 @@ pub unsafe extern "C" fn zoo_transition_runner_free(runner: *mut ZooTransitionRu
 /// Whether `runner` accepts transitions longer than the model was trained for (off by default:
 /// beyond its training length the network drifts from the target).
 ///
-/// # Safety
-/// `runner` is NULL or a live runner used by this thread only.
+/// Safety: `runner` is NULL or a live runner used by this thread only.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_transition_allow_beyond_trained(
     runner: *mut ZooTransitionRunner,
@@ -129,10 +131,9 @@ pub unsafe extern "C" fn zoo_transition_allow_beyond_trained(
 }
 
 /// Creates the transition states of `count` characters of `model` into `*out`; free them with
-/// [`zoo_transition_characters_free`]. Thread-safe (the model is shared).
+/// `zoo_transition_characters_free`. Thread-safe (the model is shared).
 ///
-/// # Safety
-/// `model` is NULL or a live model; `out` is NULL or valid for a write.
+/// Safety: `model` is NULL or a live model; `out` is NULL or valid for a write.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_transition_characters_new(
     model: *const ZooModel,
@@ -143,7 +144,7 @@ pub unsafe extern "C" fn zoo_transition_characters_new(
         let m = unsafe { self::model(model) }?.transition()?;
         unsafe {
             new_handle(out, || {
-                check_count(count)?;
+                check_count("count", count)?;
                 let k = m.joints();
                 Ok(ZooTransitionCharacters {
                     states: (0..count).map(|_| m.new_transition()).collect(),
@@ -158,8 +159,7 @@ pub unsafe extern "C" fn zoo_transition_characters_new(
 
 /// Frees characters (NULL is ignored).
 ///
-/// # Safety
-/// `characters` is NULL or a pointer from [`zoo_transition_characters_new`] not freed before and
+/// Safety: `characters` is NULL or a pointer from `zoo_transition_characters_new` not freed before and
 /// not in use.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_transition_characters_free(characters: *mut ZooTransitionCharacters) {
@@ -168,14 +168,15 @@ pub unsafe extern "C" fn zoo_transition_characters_free(characters: *mut ZooTran
 
 /// The runner and the characters of a call, refused when made from models of different sizes.
 ///
-/// # Safety
-/// Handles are NULL or live and used by this thread only.
+/// Safety: Handles are NULL or live and used by this thread only.
 unsafe fn pair<'a>(
     runner: *mut ZooTransitionRunner,
     characters: *mut ZooTransitionCharacters,
 ) -> Result<(&'a mut TransitionRunner, &'a mut ZooTransitionCharacters), Failure> {
-    let runner = &mut unsafe { handle_mut(runner, "runner") }?.runner;
+    let runner = unsafe { handle_mut(runner, "runner") }?;
     let chars = unsafe { handle_mut(characters, "characters") }?;
+    check_batch(chars.states.len(), runner.max_batch, "zoo_transition_runner_new")?;
+    let runner = &mut runner.runner;
     let k = runner.model().joints();
     if k != chars.joints {
         return Err((
@@ -191,13 +192,12 @@ unsafe fn pair<'a>(
 
 /// Starts a transition of `length` frames for every character from global joint positions:
 /// `past` holds `N * frames * 3K` values (the same number of context frames per character, at
-/// least one; the model was trained with [`ZooTransitionInfo`]'s `past_frames`), `target` and
+/// least one; the model was trained with `ZooTransitionInfo`'s `past_frames`), `target` and
 /// `next` `N * 3K` each (the target pose and the pose after it). `length` is the number of
 /// frames before the target frame; pass `transition_frames` for the trained length. Then step it
-/// with [`zoo_transition_step`]. One thread at a time.
+/// with `zoo_transition_step`. One thread at a time.
 ///
-/// # Safety
-/// Handles are NULL or live and used by this thread only; each buffer is NULL or holds its
+/// Safety: Handles are NULL or live and used by this thread only; each buffer is NULL or holds its
 /// given length.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_transition_start(
@@ -220,12 +220,219 @@ pub unsafe extern "C" fn zoo_transition_start(
     })
 }
 
+/// Begins a transition of `length` frames for every character whose context the game feeds
+/// frame by frame as it plays it, so that no call encodes the whole context at once (a frame
+/// budget; `zoo_transition_start` runs one graph pass per context frame in one call): `first`
+/// holds each character's first context frame (`N * 3K` global positions), `target` and `next`
+/// as in `zoo_transition_start`, `past_frames` the context frames in all (the model was
+/// trained with `ZooTransitionInfo`'s `past_frames`). Runs no graph pass (one when
+/// `past_frames` is 1). Then call `zoo_transition_feed` once per frame for the other
+/// `past_frames - 1` context frames (the first feed runs two passes, the others one) and step.
+/// The frames are those `zoo_transition_start` gives for the same context, bit for bit. One
+/// thread at a time.
+///
+/// Safety: Handles are NULL or live and used by this thread only; each buffer is NULL or holds its
+/// given length.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_transition_begin(
+    runner: *mut ZooTransitionRunner,
+    characters: *mut ZooTransitionCharacters,
+    first: *const f32,
+    first_len: usize,
+    target: *const f32,
+    target_len: usize,
+    next: *const f32,
+    next_len: usize,
+    past_frames: usize,
+    length: usize,
+) -> ZooStatus {
+    guard("zoo_transition_begin", || {
+        let (runner, chars) = unsafe { pair(runner, characters) }?;
+        let first = unsafe { slice(first, first_len, "first") }?;
+        let target = unsafe { slice(target, target_len, "target") }?;
+        let next = unsafe { slice(next, next_len, "next") }?;
+        let n = chars.states.len();
+        let d = 3 * chars.joints;
+        check_size("first", first.len(), n * d, "floats", format_args!("3 * {JOINTS} per character"))?;
+        check_size("target", target.len(), n * d, "floats", format_args!("3 * {JOINTS} per character"))?;
+        check_size("next", next.len(), n * d, "floats", format_args!("3 * {JOINTS} per character"))?;
+        check_past_frames(past_frames)?;
+        runner.begin_batch(&mut chars.states, first, target, next, past_frames, length).map_err(runtime_failure)
+    })
+}
+
+/// Feeds the next context frame of every character's transition begun with
+/// `zoo_transition_begin`: `frame` holds `N * 3K` global positions. One graph pass (two for the
+/// second context frame). After the last one, step the transition. One thread at a time.
+///
+/// Safety: Handles are NULL or live and used by this thread only; `frame` is NULL or holds
+/// `frame_len` floats.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_transition_feed(
+    runner: *mut ZooTransitionRunner,
+    characters: *mut ZooTransitionCharacters,
+    frame: *const f32,
+    frame_len: usize,
+) -> ZooStatus {
+    guard("zoo_transition_feed", || {
+        let (runner, chars) = unsafe { pair(runner, characters) }?;
+        let frame = unsafe { slice(frame, frame_len, "frame") }?;
+        let d = 3 * chars.joints;
+        check_size("frame", frame.len(), chars.states.len() * d, "floats", format_args!("3 * {JOINTS} per character"))?;
+        runner.feed_batch(&mut chars.states, frame).map_err(runtime_failure)
+    })
+}
+
+/// `zoo_transition_begin` from engine poses: `first_roots`, `target_roots` and `next_roots` hold
+/// one root per character (`N`), the rotation buffers `N * 4K` values; then
+/// `zoo_transition_feed_posed` per context frame and `zoo_transition_step_posed`. One thread at a
+/// time.
+///
+/// Safety: Handles are NULL or live and used by this thread only; each buffer is NULL or holds its
+/// given length.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_transition_begin_posed(
+    runner: *mut ZooTransitionRunner,
+    characters: *mut ZooTransitionCharacters,
+    first_roots: *const ZooRootMotion,
+    first_roots_len: usize,
+    first_rotations: *const f32,
+    first_rotations_len: usize,
+    target_roots: *const ZooRootMotion,
+    target_roots_len: usize,
+    target_rotations: *const f32,
+    target_rotations_len: usize,
+    next_roots: *const ZooRootMotion,
+    next_roots_len: usize,
+    next_rotations: *const f32,
+    next_rotations_len: usize,
+    past_frames: usize,
+    length: usize,
+) -> ZooStatus {
+    guard("zoo_transition_begin_posed", || {
+        let (runner, chars) = unsafe { pair(runner, characters) }?;
+        let (n, k) = (chars.states.len(), chars.joints);
+        let buffers = [
+            unsafe {
+                posed_buffers(
+                    first_roots,
+                    first_roots_len,
+                    first_rotations,
+                    first_rotations_len,
+                    ["first_roots", "first_rotations"],
+                    n,
+                    k,
+                )
+            }?,
+            unsafe {
+                posed_buffers(
+                    target_roots,
+                    target_roots_len,
+                    target_rotations,
+                    target_rotations_len,
+                    ["target_roots", "target_rotations"],
+                    n,
+                    k,
+                )
+            }?,
+            unsafe {
+                posed_buffers(
+                    next_roots,
+                    next_roots_len,
+                    next_rotations,
+                    next_rotations_len,
+                    ["next_roots", "next_rotations"],
+                    n,
+                    k,
+                )
+            }?,
+        ];
+        check_past_frames(past_frames)?;
+        let mut inputs = std::mem::take(&mut chars.inputs);
+        inputs.resize_with(3 * n, || EnginePose::new(k));
+        for (b, (roots, rotations)) in buffers.iter().enumerate() {
+            for c in 0..n {
+                read_pose(&roots[c], &rotations[c * 4 * k..(c + 1) * 4 * k], &mut inputs[b * n + c]);
+            }
+        }
+        let (first, rest) = inputs.split_at(n);
+        let (target, next) = rest.split_at(n);
+        let result = runner.begin_posed_batch(&mut chars.states, first, target, next, past_frames, length);
+        chars.inputs = inputs;
+        result.map_err(runtime_failure)
+    })
+}
+
+/// `zoo_transition_feed` from engine poses: one root per character (`N`) and `N * 4K` rotation
+/// values. One thread at a time.
+///
+/// Safety: Handles are NULL or live and used by this thread only; each buffer is NULL or holds its
+/// given length.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_transition_feed_posed(
+    runner: *mut ZooTransitionRunner,
+    characters: *mut ZooTransitionCharacters,
+    roots: *const ZooRootMotion,
+    roots_len: usize,
+    rotations: *const f32,
+    rotations_len: usize,
+) -> ZooStatus {
+    guard("zoo_transition_feed_posed", || {
+        let (runner, chars) = unsafe { pair(runner, characters) }?;
+        let (n, k) = (chars.states.len(), chars.joints);
+        let (roots, rotations) =
+            unsafe { posed_buffers(roots, roots_len, rotations, rotations_len, ["roots", "rotations"], n, k) }?;
+        let mut inputs = std::mem::take(&mut chars.inputs);
+        inputs.resize_with(n, || EnginePose::new(k));
+        for c in 0..n {
+            read_pose(&roots[c], &rotations[c * 4 * k..(c + 1) * 4 * k], &mut inputs[c]);
+        }
+        let result = runner.feed_posed_batch(&mut chars.states, &inputs[..n]);
+        chars.inputs = inputs;
+        result.map_err(runtime_failure)
+    })
+}
+
+/// One pose per character from a roots buffer and a rotations buffer (`names`), their lengths
+/// and values checked.
+///
+/// Safety: each pointer is NULL or holds its given length.
+unsafe fn posed_buffers<'a>(
+    roots: *const ZooRootMotion,
+    roots_len: usize,
+    rotations: *const f32,
+    rotations_len: usize,
+    names: [&str; 2],
+    n: usize,
+    k: usize,
+) -> Result<(&'a [ZooRootMotion], &'a [f32]), Failure> {
+    let roots = unsafe { slice(roots, roots_len, names[0]) }?;
+    let rotations = unsafe { slice(rotations, rotations_len, names[1]) }?;
+    check_size(names[0], roots.len(), n, "roots", "the batch, one per character")?;
+    check_size(names[1], rotations.len(), n * 4 * k, "floats", format_args!("4 * {JOINTS} per character"))?;
+    check_poses(roots, rotations, names)?;
+    Ok((roots, rotations))
+}
+
+/// Refuses a context of no frames or of more than `ZOO_MAX_FRAMES`.
+fn check_past_frames(past_frames: usize) -> Result<(), Failure> {
+    if past_frames == 0 || past_frames > crate::ZOO_MAX_FRAMES {
+        return Err((
+            ZooStatus::InvalidArgument,
+            format!(
+                "`past_frames` is {past_frames}; a transition has 1..=ZOO_MAX_FRAMES context frames (the model was \
+                 trained with {INFO}'s `past_frames`)"
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// The next frame of every character's transition into `poses` (`N * 3K` global positions): the
 /// target-blended frames, the last one the target. Stepping past the target frame is
 /// `ZOO_STATUS_INVALID_STATE`. One thread at a time.
 ///
-/// # Safety
-/// Handles are NULL or live and used by this thread only; `poses` is NULL or holds `poses_len`
+/// Safety: Handles are NULL or live and used by this thread only; `poses` is NULL or holds `poses_len`
 /// writable floats.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_transition_step(
@@ -242,13 +449,13 @@ pub unsafe extern "C" fn zoo_transition_step(
 }
 
 /// Starts a transition of `length` frames for every character from engine poses: each pose is a
-/// [`ZooRootMotion`] and `4K` rotation values. `past_roots` holds `N * frames` roots (the same
+/// `ZooRootMotion` and `4K` rotation values. `past_roots` holds `N * frames` roots (the same
 /// number of context frames per character, character-major) and `past_rotations` `4K` values
-/// per root; `target_*` and `next_*` one pose per character (`rotations_len`: `N * 4K`, the
-/// length of both rotation buffers). Then [`zoo_transition_step_posed`]. One thread at a time.
+/// per root; `target_roots` and `next_roots` one root per character (`N`), `target_rotations`
+/// and `next_rotations` `N * 4K` values. Every root must be finite and every rotation a finite,
+/// non-zero quaternion. Then `zoo_transition_step_posed`. One thread at a time.
 ///
-/// # Safety
-/// Handles are NULL or live and used by this thread only; each buffer is NULL or holds its
+/// Safety: Handles are NULL or live and used by this thread only; each buffer is NULL or holds its
 /// given length.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_transition_start_posed(
@@ -259,10 +466,13 @@ pub unsafe extern "C" fn zoo_transition_start_posed(
     past_rotations: *const f32,
     past_rotations_len: usize,
     target_roots: *const ZooRootMotion,
+    target_roots_len: usize,
     target_rotations: *const f32,
+    target_rotations_len: usize,
     next_roots: *const ZooRootMotion,
+    next_roots_len: usize,
     next_rotations: *const f32,
-    rotations_len: usize,
+    next_rotations_len: usize,
     length: usize,
 ) -> ZooStatus {
     guard("zoo_transition_start_posed", || {
@@ -270,17 +480,10 @@ pub unsafe extern "C" fn zoo_transition_start_posed(
         let (n, k) = (chars.states.len(), chars.joints);
         let past_roots = unsafe { slice(past_roots, past_roots_len, "past_roots") }?;
         let past_rotations = unsafe { slice(past_rotations, past_rotations_len, "past_rotations") }?;
-        let target_roots = unsafe { slice(target_roots, n, "target_roots") }?;
-        let next_roots = unsafe { slice(next_roots, n, "next_roots") }?;
-        check_size(
-            "target_rotations / next_rotations (rotations_len)",
-            rotations_len,
-            n * 4 * k,
-            "floats",
-            format_args!("4 * {JOINTS} per character"),
-        )?;
-        let target_rotations = unsafe { slice(target_rotations, rotations_len, "target_rotations") }?;
-        let next_rotations = unsafe { slice(next_rotations, rotations_len, "next_rotations") }?;
+        let target_roots = unsafe { slice(target_roots, target_roots_len, "target_roots") }?;
+        let target_rotations = unsafe { slice(target_rotations, target_rotations_len, "target_rotations") }?;
+        let next_roots = unsafe { slice(next_roots, next_roots_len, "next_roots") }?;
+        let next_rotations = unsafe { slice(next_rotations, next_rotations_len, "next_rotations") }?;
         if past_roots.is_empty() || !past_roots.len().is_multiple_of(n) {
             return Err((
                 ZooStatus::InvalidArgument,
@@ -297,6 +500,29 @@ pub unsafe extern "C" fn zoo_transition_start_posed(
             "floats",
             format_args!("4 * {JOINTS} per root"),
         )?;
+        check_size("target_roots", target_roots.len(), n, "roots", "the batch, one per character")?;
+        check_size(
+            "target_rotations",
+            target_rotations.len(),
+            n * 4 * k,
+            "floats",
+            format_args!("4 * {JOINTS} per character"),
+        )?;
+        check_size("next_roots", next_roots.len(), n, "roots", "the batch, one per character")?;
+        check_size(
+            "next_rotations",
+            next_rotations.len(),
+            n * 4 * k,
+            "floats",
+            format_args!("4 * {JOINTS} per character"),
+        )?;
+        for (roots, rotations, names) in [
+            (past_roots, past_rotations, ["past_roots", "past_rotations"]),
+            (target_roots, target_rotations, ["target_roots", "target_rotations"]),
+            (next_roots, next_rotations, ["next_roots", "next_rotations"]),
+        ] {
+            check_poses(roots, rotations, names)?;
+        }
         let mut inputs = std::mem::take(&mut chars.inputs);
         inputs.resize_with(past_roots.len() + 2 * n, || EnginePose::new(k));
         for (i, root) in past_roots.iter().enumerate() {
@@ -316,12 +542,11 @@ pub unsafe extern "C" fn zoo_transition_start_posed(
 }
 
 /// The next frame of every character's transition (started with
-/// [`zoo_transition_start_posed`]) as engine poses: `roots` receives `N` [`ZooRootMotion`] and
+/// `zoo_transition_start_posed`) as engine poses: `roots` receives `N` `ZooRootMotion` and
 /// `rotations` `N * 4K` local rotations (the hips' relative to the root), fitted to the
 /// network's frame inside the runtime. One thread at a time.
 ///
-/// # Safety
-/// Handles are NULL or live and used by this thread only; each buffer is NULL or holds its
+/// Safety: Handles are NULL or live and used by this thread only; each buffer is NULL or holds its
 /// given length of writable values.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_transition_step_posed(
@@ -351,12 +576,11 @@ pub unsafe extern "C" fn zoo_transition_step_posed(
 /// Y up) on a regular grid in the XZ plane, sample `(i, k)` at `(origin_x + i * cell, origin_z +
 /// k * cell)` stored at `heights[k * cols + i]`, bilinear between samples and extended beyond
 /// the border (the `zoo-heightfield` layout of `zoo data synth --terrain`). The map is copied.
-/// A terrain-aware model ([`zoo_transition_terrain`]) needs it before [`zoo_transition_start`]
-/// or [`zoo_transition_start_posed`]; a flat-ground model ignores it. `heights` NULL with
+/// A terrain-aware model (`zoo_transition_terrain`) needs it before `zoo_transition_start`
+/// or `zoo_transition_start_posed`; a flat-ground model ignores it. `heights` NULL with
 /// `heights_len` 0 removes the ground. Takes effect at the next step. One thread at a time.
 ///
-/// # Safety
-/// `characters` is NULL or live and used by this thread only; `heights` is NULL or holds
+/// Safety: `characters` is NULL or live and used by this thread only; `heights` is NULL or holds
 /// `heights_len` floats.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_transition_set_heightmap(
@@ -406,8 +630,7 @@ pub unsafe extern "C" fn zoo_transition_set_heightmap(
 
 /// Frames character `index`'s transition still returns (0 once it returned its target frame).
 ///
-/// # Safety
-/// `characters` is NULL or live and used by this thread only; `out` is NULL or writable.
+/// Safety: `characters` is NULL or live and used by this thread only; `out` is NULL or writable.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_transition_frames_left(
     characters: *const ZooTransitionCharacters,
@@ -425,8 +648,7 @@ pub unsafe extern "C" fn zoo_transition_frames_left(
 /// before the blend hid it (mean and largest joint distance, model units): a cue to fall back
 /// to inertialization. `ZOO_STATUS_NOT_AVAILABLE` before stepping reaches the blend window.
 ///
-/// # Safety
-/// `characters` is NULL or live and used by this thread only; `mean` and `max` are NULL or
+/// Safety: `characters` is NULL or live and used by this thread only; `mean` and `max` are NULL or
 /// writable.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn zoo_transition_target_miss(
@@ -455,4 +677,48 @@ fn character(chars: &ZooTransitionCharacters, index: usize) -> Result<&Transitio
             format!("character {index} (`index`) does not exist: the batch has {} (0-based)", chars.states.len()),
         )
     })
+}
+
+/// Refuses a non-finite root value or a rotation that is not a finite, non-zero quaternion,
+/// naming the caller's buffer and the element (`names`: the roots' and the rotations' buffers).
+pub(crate) fn check_poses(roots: &[ZooRootMotion], rotations: &[f32], names: [&str; 2]) -> Result<(), Failure> {
+    for (i, r) in roots.iter().enumerate() {
+        let fields = [
+            ("root_position", &r.root_position[..]),
+            ("root_rotation", &r.root_rotation[..]),
+            ("hips_position", &r.hips_position[..]),
+        ];
+        for (field, v) in fields {
+            if v.iter().any(|x| !x.is_finite()) {
+                return Err((
+                    ZooStatus::InvalidArgument,
+                    format!("`{}[{i}].{field}` is {v:?}, not finite; pass finite values", names[0]),
+                ));
+            }
+        }
+        let q = &r.root_rotation;
+        if q.iter().map(|x| x * x).sum::<f32>() < 1e-12 {
+            return Err((
+                ZooStatus::InvalidArgument,
+                format!("`{}[{i}].root_rotation` is a zero quaternion; pass a rotation (identity: 0 0 0 1)", names[0]),
+            ));
+        }
+    }
+    for (j, q) in rotations.chunks_exact(4).enumerate() {
+        let norm2: f32 = q.iter().map(|x| x * x).sum();
+        if !norm2.is_finite() || norm2 < 1e-12 {
+            let what = if norm2.is_finite() { "a zero quaternion" } else { "not finite" };
+            return Err((
+                ZooStatus::InvalidArgument,
+                format!(
+                    "`{}` values {}..{} (rotation {j}) are {q:?}, {what}; pass a finite, non-zero quaternion x y z w \
+                     (identity: 0 0 0 1)",
+                    names[1],
+                    4 * j,
+                    4 * j + 4
+                ),
+            ));
+        }
+    }
+    Ok(())
 }

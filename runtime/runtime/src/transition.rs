@@ -98,6 +98,13 @@ pub struct TransitionState {
     /// Raw frames generated since the context (the index of the next interpolation frame).
     generated: usize,
     started: bool,
+    /// Context frames of the transition (`start`: all of them at once; `begin`: fed one by one).
+    context_total: usize,
+    /// Context frames fed so far; the transition can be stepped once all are.
+    context_fed: usize,
+    /// The normalized target vector (target pose, target velocity) of a transition begun with
+    /// `begin_batch`, until its first graph run.
+    target_vec: Vec<f32>,
     /// Frames returned since the transition started (blended or raw).
     frames: usize,
     /// Transition length `L` of this transition: frames `0..L` lead to the target frame `L`.
@@ -217,8 +224,8 @@ pub struct TransitionRunner {
     motion: Vec<MotionState>,
     /// Characters of the current graph run (indices into the states of the call).
     sel: Vec<usize>,
-    /// Characters of a step call that compute their blend window ahead.
-    ahead_sel: Vec<usize>,
+    /// Network frames each character of a step call has computed by the end of the call.
+    need: Vec<usize>,
     /// Foot-lock post-process of `generate`, off unless set.
     foot_lock: Option<lock::FittedLock>,
     /// Whether transitions longer than the trained length are accepted.
@@ -428,9 +435,12 @@ impl TransitionModel {
             last: vec![0.0; d],
             generated: 0,
             started: false,
+            context_total: 0,
+            context_fed: 0,
+            target_vec: vec![0.0; 2 * d],
             frames: 0,
             length: 0,
-            ahead: Vec::with_capacity((self.target_blend + 1) * d),
+            ahead: Vec::with_capacity((self.target_blend + 2) * d),
             ahead_from: 0,
             raw: false,
             miss: None,
@@ -456,7 +466,7 @@ impl TransitionModel {
             poses: Vec::new(),
             motion: Vec::new(),
             sel: Vec::new(),
-            ahead_sel: Vec::new(),
+            need: Vec::new(),
             foot_lock: None,
             beyond_trained: false,
             fallback: None,
@@ -609,6 +619,8 @@ impl TransitionRunner {
             s.x.copy_from_slice(&self.feats[c * per..c * per + d]);
             s.root = features::root_of(&past[c * per..]);
             s.started = true;
+            s.context_total = frames;
+            s.context_fed = 1;
             s.frames = 0;
             s.length = length;
             s.ahead.clear();
@@ -631,6 +643,7 @@ impl TransitionRunner {
                 let at = c * per + f * d;
                 s.x.copy_from_slice(&self.feats[at..at + d]);
                 s.root = features::root_of(&past[at..]);
+                s.context_fed = f + 1;
             }
         }
         self.sel = sel;
@@ -638,6 +651,179 @@ impl TransitionRunner {
             states.iter_mut().for_each(|s| s.started = false);
         }
         result
+    }
+
+    /// Begins a transition whose context the game feeds as it plays it, so that no call does
+    /// the whole context's work at once (a frame budget): `first` holds each character's first
+    /// context frame (`N * 3K` global positions), `target` and `next` as in
+    /// [`TransitionRunner::start_batch_for`], `past_frames` the context frames in all (at
+    /// least one; the model was trained with [`TransitionModel::past_frames`]) and `length` the
+    /// transition's length. Runs no graph (one graph run when `past_frames` is 1); then
+    /// [`TransitionRunner::feed_batch`] the other `past_frames - 1` frames, one per call (the
+    /// first feed runs two graph runs, the others one), and step. The transition is the one
+    /// [`TransitionRunner::start_batch_for`] starts from the same frames, bit for bit.
+    pub fn begin_batch(
+        &mut self,
+        states: &mut [TransitionState],
+        first: &[f32],
+        target: &[f32],
+        next: &[f32],
+        past_frames: usize,
+        length: usize,
+    ) -> Result<(), MotionError> {
+        let per = self.check_start(states, first, target, next, length)?;
+        let d = 3 * self.model.joints;
+        if per != d {
+            return Err(wrong_len("first", d, states.len(), first.len()));
+        }
+        if past_frames == 0 {
+            return Err(MotionError::TransitionSequence {
+                character: 0,
+                reason: "a transition needs at least one context frame (past_frames >= 1)".into(),
+            });
+        }
+        for (c, s) in states.iter_mut().enumerate() {
+            s.target.copy_from_slice(&target[c * d..(c + 1) * d]);
+            s.last.copy_from_slice(&first[c * d..(c + 1) * d]);
+            s.root = features::root_of(&first[c * d..]);
+            s.started = false;
+            s.context_total = past_frames;
+            s.context_fed = 0;
+            s.frames = 0;
+            s.length = length;
+            s.generated = 0;
+            s.ahead.clear();
+            s.ahead_from = 0;
+            s.raw = false;
+            s.miss = None;
+            s.fallback_weight = 0.0;
+            s.posed.active = false;
+        }
+        // The target vectors, kept by each character until its first graph run.
+        for (c, s) in states.iter_mut().enumerate() {
+            let tv = &mut s.target_vec;
+            features::target_vector(&target[c * d..(c + 1) * d], &next[c * d..(c + 1) * d], tv);
+            self.model.x.normalize(&mut tv[..d]);
+            self.model.velocity.normalize(&mut tv[d..]);
+        }
+        if past_frames == 1 {
+            // The first frame's features need no second frame: start now.
+            self.first_pass(states, first, None)?;
+        }
+        Ok(())
+    }
+
+    /// Feeds the next context frame of transitions begun with
+    /// [`TransitionRunner::begin_batch`]: `frame` holds `N * 3K` global positions (every
+    /// character of the call at the same point of its context). One graph run (two for the
+    /// second context frame, whose arrival lets the first be encoded); after the last one the
+    /// transitions can be stepped.
+    pub fn feed_batch(&mut self, states: &mut [TransitionState], frame: &[f32]) -> Result<(), MotionError> {
+        let (n, k) = (states.len(), self.model.joints);
+        let d = 3 * k;
+        if n == 0 {
+            return Err(MotionError::EmptyBatch);
+        }
+        check_rows("frame", frame, n, d)?;
+        let fed = states[0].context_fed;
+        for (c, s) in states.iter().enumerate() {
+            if s.started || s.context_total == 0 || s.context_fed >= s.context_total {
+                return Err(MotionError::TransitionSequence {
+                    character: c,
+                    reason: "no context frame is due: begin a transition (TransitionRunner::begin_batch) and feed \
+                             its context frames, then step it"
+                        .into(),
+                });
+            }
+            if s.context_fed != fed {
+                return Err(MotionError::TransitionSequence {
+                    character: c,
+                    reason: format!(
+                        "it has {} context frames fed, character 0 {fed}: feed characters at the same point of \
+                         their context together",
+                        s.context_fed
+                    ),
+                });
+            }
+        }
+        if fed == 0 {
+            // The second context frame: the first one's features (its root velocity comes from
+            // this frame) and the first graph run, then this frame's run.
+            self.first_pass(states, frame, Some(frame))?;
+        }
+        // This frame's features, its previous root in `s.root`.
+        self.feats.resize(n * d, 0.0);
+        for (c, s) in states.iter().enumerate() {
+            let f = &mut self.feats[c * d..(c + 1) * d];
+            features::encode_frame(s.root, &frame[c * d..(c + 1) * d], f);
+            self.model.x.normalize(f);
+        }
+        let mut sel = std::mem::take(&mut self.sel);
+        sel.clear();
+        sel.extend(0..n);
+        let result = self.advance(states, &sel, Some((d, 0)));
+        self.sel = sel;
+        if let Err(e) = result {
+            states.iter_mut().for_each(|s| s.context_total = 0);
+            return Err(e);
+        }
+        for (c, s) in states.iter_mut().enumerate() {
+            s.x.copy_from_slice(&self.feats[c * d..(c + 1) * d]);
+            s.root = features::root_of(&frame[c * d..]);
+            s.context_fed += 1;
+            if s.context_fed == s.context_total {
+                s.last.copy_from_slice(&frame[c * d..(c + 1) * d]);
+                s.started = true;
+            }
+        }
+        Ok(())
+    }
+
+    /// The first graph run of begun transitions: the first context frame (in `s.last`) encoded
+    /// with the root velocity towards `second` (or none when there is no second frame), the
+    /// start graph run on it and the target vectors of `begin_batch`.
+    fn first_pass(
+        &mut self,
+        states: &mut [TransitionState],
+        first: &[f32],
+        second: Option<&[f32]>,
+    ) -> Result<(), MotionError> {
+        let (n, d) = (states.len(), 3 * self.model.joints);
+        self.x0.resize(n * d, 0.0);
+        self.target_vec.resize(n * 2 * d, 0.0);
+        for (c, s) in states.iter().enumerate() {
+            self.target_vec[c * 2 * d..(c + 1) * 2 * d].copy_from_slice(&s.target_vec);
+            let f0 = &s.last;
+            let prev = match second {
+                Some(second) => {
+                    let (r0, r1) = (features::root_of(f0), features::root_of(&second[c * d..]));
+                    [2.0 * r0[0] - r1[0], 2.0 * r0[1] - r1[1], 2.0 * r0[2] - r1[2]]
+                }
+                None => features::root_of(&first[c * d..]),
+            };
+            let x0 = &mut self.x0[c * d..(c + 1) * d];
+            features::encode_frame(prev, f0, x0);
+            self.model.x.normalize(x0);
+        }
+        let m = &self.model;
+        let (target_vec, x0) = (&self.target_vec[..], &self.x0[..]);
+        let inputs: Vec<&[f32]> = m.start_target.iter().map(|&t| if t { target_vec } else { x0 }).collect();
+        let result = with_motion_states(&mut self.motion, states, 0..n, &m.model, |runner_states| {
+            self.runner.start_batch(runner_states, &inputs)
+        });
+        if let Err(e) = result {
+            states.iter_mut().for_each(|s| s.context_total = 0);
+            return Err(e);
+        }
+        for (c, s) in states.iter_mut().enumerate() {
+            s.x.copy_from_slice(&self.x0[c * d..(c + 1) * d]);
+            s.root = features::root_of(&s.last);
+            s.context_fed = 1;
+            if s.context_total == 1 {
+                s.started = true;
+            }
+        }
+        Ok(())
     }
 
     /// The checks of [`TransitionRunner::start_batch_for`] before any work: a batch, a length the
@@ -722,7 +908,7 @@ impl TransitionRunner {
                 // Frames from the predicted frame to the target: context frame `f` of `per / d`
                 // predicts frame `f`, the target is `length` frames after the context.
                 let left = match context {
-                    Some((per, f)) => per / d + s.length - f,
+                    Some(_) => s.context_total + s.length - s.context_fed,
                     None => s.length.saturating_sub(s.generated),
                 };
                 z.embed(left, &mut self.tta[row * z.dims..(row + 1) * z.dims]);
@@ -862,77 +1048,52 @@ impl TransitionRunner {
     /// receives `N * 3K` values, character-major. Characters may be at different frames of
     /// their transitions. Results match one-by-one stepping up to float rounding of tract's
     /// batched kernels (below 1e-3 clip units over a 30-frame transition in the tests).
+    ///
+    /// The target blend needs the network's predicted target frame before the first blended
+    /// frame (RTN eq. 15-16), so the runner computes the network's frames ahead of the ones it
+    /// returns: one extra graph run per character per step, spread so that no step runs more
+    /// than two per character (a frame budget), and across a batch so that few characters run
+    /// their extra one in the same step. Transitions shorter than about twice the blend
+    /// window compute the rest of the window in the step that enters it.
     pub fn step_batch(&mut self, states: &mut [TransitionState], poses: &mut [f32]) -> Result<(), MotionError> {
         self.check_steppable(states, poses.len(), false)?;
         let (d, blend) = (3 * self.model.joints, self.model.target_blend);
-        let (mut sel, mut ahead_sel) = (std::mem::take(&mut self.sel), std::mem::take(&mut self.ahead_sel));
-        sel.clear();
-        ahead_sel.clear();
+        let n = states.len();
+        // How many network frames each character has computed by the end of this step.
+        let mut need = std::mem::take(&mut self.need);
+        need.clear();
+        let mut rounds = 0;
         for (c, s) in states.iter().enumerate() {
-            let f = s.frames;
-            if f >= s.ahead_from && f < s.ahead_from + s.ahead.len() / d {
-                continue; // served from the blend window computed ahead
+            let (f, length) = (s.frames, s.length);
+            let b = (0..=length).find(|&t| features_blend_weight(t, length, blend) > 0.0).unwrap_or(length);
+            let extra = length - b;
+            // This character's extra runs start at `first` (staggered across the batch) and
+            // bring it `extra` frames ahead by frame `b`.
+            let slack = b.saturating_sub(extra);
+            let first = slack - c * slack / n;
+            let lead = if f >= first { (f - first + 1).min(extra) } else { 0 };
+            let mut k = (f + 1 + lead).min(length + 1);
+            if f >= b {
+                k = length + 1;
             }
-            sel.push(c);
-            if features_blend_weight(f, s.length, blend) > 0.0 {
-                ahead_sel.push(c);
-            }
+            let k = k.max(s.generated);
+            rounds = rounds.max(k - s.generated);
+            need.push(k);
         }
-        let result = self.step_selected(states, poses, &mut sel, &ahead_sel);
-        self.sel = sel;
-        self.ahead_sel = ahead_sel;
-        result?;
-        for (s, pose) in states.iter_mut().zip(poses.chunks_exact_mut(d)) {
-            let f = s.frames;
-            if f >= s.ahead_from && f < s.ahead_from + s.ahead.len() / d {
-                let i = f - s.ahead_from;
-                pose.copy_from_slice(&s.ahead[i * d..(i + 1) * d]);
-            }
-            s.frames += 1;
-        }
-        Ok(())
-    }
-
-    /// One graph run for the characters in `sel` (their next raw frame goes to `poses`), then
-    /// the blend windows of the characters in `ahead_sel` (a subset) computed ahead.
-    fn step_selected(
-        &mut self,
-        states: &mut [TransitionState],
-        poses: &mut [f32],
-        sel: &mut Vec<usize>,
-        ahead_sel: &[usize],
-    ) -> Result<(), MotionError> {
-        let (d, blend) = (3 * self.model.joints, self.model.target_blend);
-        if sel.is_empty() {
-            return Ok(());
-        }
-        self.advance(states, sel, None)?;
-        for (row, &c) in sel.iter().enumerate() {
-            let s = &mut states[c];
-            if ahead_sel.contains(&c) {
-                // The first frame of the blend window: keep it raw in `ahead`.
-                s.ahead_from = s.frames;
-                s.ahead.resize(d, 0.0);
-                let mut frame = std::mem::take(&mut s.ahead);
-                self.take_raw(s, row, &mut frame[..d]);
-                s.ahead = frame;
-            } else {
-                self.take_raw(s, row, &mut poses[c * d..(c + 1) * d]);
-            }
-        }
-        // The rest of each blend window, all characters that need it in one run per frame.
-        loop {
+        let mut sel = std::mem::take(&mut self.sel);
+        let mut result = Ok(());
+        for _ in 0..rounds {
             sel.clear();
-            sel.extend(ahead_sel.iter().copied().filter(|&c| {
-                let s = &states[c];
-                s.ahead_from + s.ahead.len() / d <= s.length
-            }));
-            if sel.is_empty() {
+            sel.extend((0..n).filter(|&c| states[c].generated < need[c]));
+            result = self.advance(states, &sel, None);
+            if result.is_err() {
                 break;
             }
-            self.advance(states, sel, None)?;
             for (row, &c) in sel.iter().enumerate() {
                 let s = &mut states[c];
+                if s.ahead.is_empty() {
+                    s.ahead_from = s.generated;
+                }
                 let at = s.ahead.len();
                 s.ahead.resize(at + d, 0.0);
                 let mut frames = std::mem::take(&mut s.ahead);
@@ -940,9 +1101,18 @@ impl TransitionRunner {
                 s.ahead = frames;
             }
         }
-        for &c in ahead_sel {
-            let s = &mut states[c];
-            s.miss = Some(blend_window(&mut s.ahead, s.ahead_from, s.length, &s.target, blend));
+        self.sel = sel;
+        self.need = need;
+        result?;
+        for (s, pose) in states.iter_mut().zip(poses.chunks_exact_mut(d)) {
+            if s.generated == s.length + 1 && s.miss.is_none() {
+                s.miss = Some(blend_window(&mut s.ahead, s.ahead_from, s.length, &s.target, blend));
+            }
+            debug_assert_eq!(s.ahead_from, s.frames);
+            pose.copy_from_slice(&s.ahead[..d]);
+            s.ahead.drain(..d);
+            s.ahead_from += 1;
+            s.frames += 1;
         }
         Ok(())
     }

@@ -1,4 +1,4 @@
-// The model: zoo_model_load, zoo_model_task, zoo_model_info, zoo_model_skeleton,
+// The model: zoo_model_load, zoo_model_load_memory, zoo_model_task, zoo_model_info, zoo_model_skeleton,
 // zoo_model_joint_name, each task's info, and the calls on a model itself (zoo_transition_terrain,
 // zoo_stitch_set_window, zoo_stitch_refine, zoo_stitch_refine_at_seams, zoo_synthesis_set_refine, zoo_synthesis_mean_frame).
 using System;
@@ -35,9 +35,36 @@ namespace Zoo
             ZooStatus s;
             fixed (byte* b = utf8) s = ZooNative.zoo_model_load(b, (Native.ZooModel**)&p);
             Errors.Check(s);
+            return Loaded(p);
+        }
+
+        /// <summary>
+        /// Loads a model from the bytes of its file (<c>zoo_model_load_memory</c>), with the same checks and
+        /// the same model as <see cref="Load"/> of that file: for a file that is not on the file system, such
+        /// as one in an Android APK's <c>StreamingAssets</c> (read it with <c>UnityWebRequest</c>), an asset
+        /// bundle or a <c>TextAsset</c>'s <c>bytes</c> (Documentation~/zoo.md, Loading a model). The library
+        /// keeps no reference to <paramref name="bytes"/>. A <c>zoo export --portable</c> file, whose weights
+        /// are in companion files, loads from its files only.
+        /// </summary>
+        public static Model FromBytes(byte[] bytes)
+        {
+            CheckLibrary();
+            IntPtr p = IntPtr.Zero;
+            ZooStatus s;
+            // An empty array is passed as a valid pointer and 0 (the runtime refuses it as no model), not as NULL.
+            byte none = 0;
+            fixed (byte* b = bytes)
+                s = ZooNative.zoo_model_load_memory(bytes == null ? null : bytes.Length == 0 ? &none : b, bytes == null ? UIntPtr.Zero : (UIntPtr)(uint)bytes.Length, (Native.ZooModel**)&p);
+            Errors.Check(s);
+            return Loaded(p);
+        }
+
+        /// <summary>The wrapper of a model the runtime just loaded into <paramref name="p"/>, with its info.</summary>
+        static Model Loaded(IntPtr p)
+        {
             var handle = Wrap(HandleKind.Model, p);
             var info = default(ZooModelInfo);
-            s = ZooNative.zoo_model_info((Native.ZooModel*)p, &info);
+            var s = ZooNative.zoo_model_info((Native.ZooModel*)p, &info);
             if (s != ZooStatus.Ok)
             {
                 var e = Errors.Fail(s);
@@ -47,43 +74,31 @@ namespace Zoo
             return new Model(handle, info);
         }
 
-        /// <summary>Throws when the native library is missing or of another C ABI version than these bindings.</summary>
+        /// <summary>Throws when the native library is missing or of another C ABI version than these bindings (<see cref="Library.Check"/>).</summary>
         public static void CheckLibrary()
         {
-            uint version;
-            try
-            {
-                version = ZooNative.zoo_abi_version();
-            }
-            catch (DllNotFoundException e)
-            {
-                throw new DllNotFoundException(
-                    "zoo: the native library zoo_capi (libzoo_capi.so, libzoo_capi.dylib or zoo_capi.dll) was not found: build it with "
-                    + "Tools~/build-native.sh and put it under the package's Runtime/Plugins/<platform>/ (Documentation~/zoo.md, Install)", e);
-            }
-            if (version != ZooNative.ZOO_ABI_VERSION)
-                throw new ZooException(ZooStatus.LoadFailed, "zoo: the native library zoo_capi has C ABI version " + version + ", these bindings version "
-                    + ZooNative.ZOO_ABI_VERSION + ": build the library from the same zoo checkout as the package (Tools~/build-native.sh)");
+            Library.Check();
         }
 
-        /// <summary>What every model is (<c>zoo_model_info</c>, read at load).</summary>
-        public ZooModelInfo Info { get { return info; } }
+        /// <summary>What every model is (<c>zoo_model_info</c>, read at load). Like every member, throws <see cref="ZooDisposedException"/> once the model is disposed.</summary>
+        public ZooModelInfo Info { get { ThrowIfDisposed("Info"); return info; } }
 
         /// <summary>The model's task: which wrappers run it.</summary>
-        public ZooTask Task { get { return info.Task; } }
+        public ZooTask Task { get { ThrowIfDisposed("Task"); return info.Task; } }
 
         /// <summary>Joints K of the model's skeleton: a pose is a root and 4K rotation values.</summary>
-        public int Joints { get { return info.JointCount; } }
+        public int Joints { get { ThrowIfDisposed("Joints"); return info.JointCount; } }
 
         /// <summary>Frames per second of the model's motion.</summary>
-        public float Fps { get { return info.Fps; } }
+        public float Fps { get { ThrowIfDisposed("Fps"); return info.Fps; } }
 
         /// <summary>The model's units and axes.</summary>
-        public ZooCoordinateFrame Frame { get { return info.Frame; } }
+        public ZooCoordinateFrame Frame { get { ThrowIfDisposed("Frame"); return info.Frame; } }
 
         /// <summary>The conversion of this model's poses to an engine's frame (e.g. <see cref="ZooCoordinateFrame.Unity"/>).</summary>
         public PoseConversion ToEngine(ZooCoordinateFrame engine)
         {
+            ThrowIfDisposed("ToEngine");
             return new PoseConversion(info.Frame, engine);
         }
 
@@ -243,8 +258,10 @@ namespace Zoo
         /// <summary>Plans a stitching model for another window and stride (<c>zoo_stitch_set_window</c>). Not thread-safe: no other thread may use the model meanwhile, and its streams must be disposed first.</summary>
         public void SetStitchWindow(int window, int stride)
         {
+            var w = Size.Count(window, "window", "zoo_stitch_set_window");
+            var st = Size.Count(stride, "stride", "zoo_stitch_set_window");
             bool e = false;
-            try { Errors.Check(ZooNative.zoo_stitch_set_window((Native.ZooModel*)Enter(this, ref e), Size.Of(window), Size.Of(stride)), this); }
+            try { Errors.Check(ZooNative.zoo_stitch_set_window((Native.ZooModel*)Enter(this, ref e), w, st), this); }
             finally { Exit(this, e); }
         }
 
@@ -308,6 +325,7 @@ namespace Zoo
         {
             if (engine.HasValue)
             {
+                ThrowIfDisposed("StitchRefine");
                 var toModel = new PoseConversion(engine.Value, info.Frame);
                 var r = roots.ToArray();
                 var q = rotations.ToArray();

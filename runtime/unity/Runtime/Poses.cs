@@ -29,9 +29,14 @@ namespace Zoo
         /// <summary>Contact bytes (1: foot on the ground), pose-major.</summary>
         public readonly byte[] Contacts;
 
-        /// <summary>Buffers for <paramref name="count"/> poses of <paramref name="joints"/> joints, rotations the identity.</summary>
+        /// <summary>
+        /// Buffers for <paramref name="count"/> poses of <paramref name="joints"/> joints, rotations the identity.
+        /// A negative argument, or buffers larger than an array holds (2 GiB), is refused with an
+        /// <see cref="ArgumentOutOfRangeException"/> before anything is allocated.
+        /// </summary>
         public PoseBuffer(int count, int joints, int contactsPerPose = 0)
         {
+            Check(count, joints, contactsPerPose);
             Count = count;
             Joints = joints;
             ContactsPerPose = contactsPerPose;
@@ -40,6 +45,34 @@ namespace Zoo
             Contacts = new byte[count * contactsPerPose];
             for (int i = 0; i < count; i++) Roots[i].RootRotation = ZooFloat4.Identity;
             for (int i = 3; i < Rotations.Length; i += 4) Rotations[i] = 1f;
+        }
+
+        /// <summary>The largest array the buffers may use, in bytes (2 GiB less one: what every .NET runtime Unity uses allocates).</summary>
+        const long MaxArrayBytes = int.MaxValue;
+
+        static void Check(int count, int joints, int contactsPerPose)
+        {
+            Size.Count(count, "count", "PoseBuffer");
+            Size.Count(joints, "joints", "PoseBuffer");
+            Size.Count(contactsPerPose, "contactsPerPose", "PoseBuffer");
+            const int RootBytes = 14 * sizeof(float);
+            long rotations = (long)count * joints;
+            string what = null, name = "count";
+            int value = count;
+            if ((long)count * RootBytes > MaxArrayBytes) what = count + " roots of " + RootBytes + " bytes";
+            else if (rotations > MaxArrayBytes / (4 * sizeof(float)))
+            {
+                what = count + " * " + joints + " rotations of 16 bytes";
+                if (joints > count) { name = "joints"; value = joints; }
+            }
+            else if ((long)count * contactsPerPose > MaxArrayBytes)
+            {
+                what = count + " * " + contactsPerPose + " contact bytes";
+                if (contactsPerPose > count) { name = "contactsPerPose"; value = contactsPerPose; }
+            }
+            if (what != null)
+                throw new ArgumentOutOfRangeException(name, value, "PoseBuffer: " + what + " are more than one array holds (" + MaxArrayBytes
+                    + " bytes); a batch holds at most ZOO_MAX_BATCH (" + ZooNative.ZOO_MAX_BATCH + ") characters: use several buffers");
         }
 
         /// <summary>The 4K rotation values of pose <paramref name="pose"/>.</summary>

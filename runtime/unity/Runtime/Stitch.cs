@@ -48,7 +48,7 @@ namespace Zoo
         /// the lookahead of the seam guard and the foot lock, and the frames they release at once, less one
         /// (<see cref="ZooStitchInfo.Latency"/>); the window alone without them.
         /// </summary>
-        public int Latency { get { return latency; } }
+        public int Latency { get { ThrowIfDisposed("Latency"); return latency; } }
 
         /// <summary>
         /// Sets what follows the refiner, before the first push (<c>zoo_stitch_stream_set_cleanup</c>): the ankle IK

@@ -11,16 +11,17 @@ namespace Zoo
     {
         SynthesisRunner(ZooSafeHandle handle) : base(handle) { }
 
-        /// <summary>A runner for up to <paramref name="maxBatch"/> characters per step (<c>zoo_synthesis_runner_new</c>; larger batches grow it once).</summary>
+        /// <summary>A runner for up to <paramref name="maxBatch"/> characters per step (<c>zoo_synthesis_runner_new</c>; 1 to <see cref="ZooNative.ZOO_MAX_BATCH"/>; a larger batch is refused at its step).</summary>
         public SynthesisRunner(Model model, int maxBatch) : this(Create(model, maxBatch)) { }
 
         static ZooSafeHandle Create(Model model, int maxBatch)
         {
+            var batch = Size.Count(maxBatch, "maxBatch", "zoo_synthesis_runner_new");
             bool e = false;
             try
             {
                 IntPtr p = IntPtr.Zero;
-                Errors.Check(ZooNative.zoo_synthesis_runner_new((Native.ZooModel*)Enter(model, ref e), Size.Of(maxBatch), (Native.ZooSynthesisRunner**)&p), model);
+                Errors.Check(ZooNative.zoo_synthesis_runner_new((Native.ZooModel*)Enter(model, ref e), batch, (Native.ZooSynthesisRunner**)&p), model);
                 return Wrap(HandleKind.SynthesisRunner, p);
             }
             finally { Exit(model, e); }
@@ -63,7 +64,7 @@ namespace Zoo
         }
 
         /// <summary>Characters N in the batch.</summary>
-        public int Count { get { return count; } }
+        public int Count { get { ThrowIfDisposed("Count"); return count; } }
 
         /// <summary>Starts every character (<c>zoo_synthesis_start</c>): <paramref name="frames"/> N * D feature frames, <paramref name="placements"/> <c>x z yaw</c> per character (model units and axes).</summary>
         public void Start(ReadOnlySpan<float> frames, ReadOnlySpan<float> placements)
@@ -131,16 +132,17 @@ namespace Zoo
     {
         ControlRunner(ZooSafeHandle handle) : base(handle) { }
 
-        /// <summary>A runner for <paramref name="model"/> (<c>zoo_control_runner_new</c>).</summary>
-        public ControlRunner(Model model) : this(Create(model)) { }
+        /// <summary>A runner for up to <paramref name="maxBatch"/> controlled characters of <paramref name="model"/> per step (<c>zoo_control_runner_new</c>; 1 to <see cref="ZooNative.ZOO_MAX_BATCH"/>; a larger batch is refused at its step).</summary>
+        public ControlRunner(Model model, int maxBatch) : this(Create(model, maxBatch)) { }
 
-        static ZooSafeHandle Create(Model model)
+        static ZooSafeHandle Create(Model model, int maxBatch)
         {
+            var batch = Size.Count(maxBatch, "maxBatch", "zoo_control_runner_new");
             bool e = false;
             try
             {
                 IntPtr p = IntPtr.Zero;
-                Errors.Check(ZooNative.zoo_control_runner_new((Native.ZooModel*)Enter(model, ref e), (Native.ZooControlRunner**)&p), model);
+                Errors.Check(ZooNative.zoo_control_runner_new((Native.ZooModel*)Enter(model, ref e), batch, (Native.ZooControlRunner**)&p), model);
                 return Wrap(HandleKind.ControlRunner, p);
             }
             finally { Exit(model, e); }
@@ -169,6 +171,7 @@ namespace Zoo
 
         static ZooSafeHandle Create(Model model, ReadOnlySpan<ulong> seeds, ControlSettings settings)
         {
+            var planned = settings == null ? UIntPtr.Zero : Size.Count(settings.Batch, "settings.Batch", "zoo_control_characters_new");
             bool e = false;
             try
             {
@@ -188,7 +191,7 @@ namespace Zoo
                         {
                             var c = new ZooControlSettings
                             {
-                                Batch = Size.Of(settings.Batch),
+                                Batch = planned,
                                 SigmaSpeed = settings.SigmaSpeed,
                                 SigmaHeading = settings.SigmaHeading,
                                 Temperature = settings.Temperature,
@@ -208,7 +211,7 @@ namespace Zoo
         }
 
         /// <summary>Characters N in the batch.</summary>
-        public int Count { get { return count; } }
+        public int Count { get { ThrowIfDisposed("Count"); return count; } }
 
         /// <summary>Starts every character from its seed frames (<c>zoo_control_start</c>): N * F * D floats, <c>x z yaw</c> placements per character.</summary>
         public void Start(ReadOnlySpan<float> frames, ReadOnlySpan<float> placements)

@@ -11,16 +11,22 @@ namespace Zoo
     {
         TransitionRunner(ZooSafeHandle handle) : base(handle) { }
 
-        /// <summary>A runner for <paramref name="model"/> (<c>zoo_transition_runner_new</c>); a model of another task is refused.</summary>
-        public TransitionRunner(Model model) : this(Create(model)) { }
+        /// <summary>
+        /// A runner for batches of up to <paramref name="maxBatch"/> characters of <paramref name="model"/>
+        /// (<c>zoo_transition_runner_new</c>; 1 to <see cref="ZooNative.ZOO_MAX_BATCH"/>): a larger batch is refused
+        /// at its start and step, so size it from the largest <see cref="TransitionCharacters"/> it runs. A model of
+        /// another task is refused.
+        /// </summary>
+        public TransitionRunner(Model model, int maxBatch) : this(Create(model, maxBatch)) { }
 
-        static ZooSafeHandle Create(Model model)
+        static ZooSafeHandle Create(Model model, int maxBatch)
         {
+            var batch = Size.Count(maxBatch, "maxBatch", "zoo_transition_runner_new");
             bool e = false;
             try
             {
                 IntPtr p = IntPtr.Zero;
-                Errors.Check(ZooNative.zoo_transition_runner_new((Native.ZooModel*)Enter(model, ref e), (Native.ZooTransitionRunner**)&p), model);
+                Errors.Check(ZooNative.zoo_transition_runner_new((Native.ZooModel*)Enter(model, ref e), batch, (Native.ZooTransitionRunner**)&p), model);
                 return Wrap(HandleKind.TransitionRunner, p);
             }
             finally { Exit(model, e); }
@@ -61,26 +67,27 @@ namespace Zoo
             }
         }
 
-        /// <summary><paramref name="count"/> characters of <paramref name="model"/> (<c>zoo_transition_characters_new</c>); poses in <paramref name="engine"/>'s frame when given.</summary>
+        /// <summary><paramref name="count"/> characters of <paramref name="model"/> (<c>zoo_transition_characters_new</c>; 1 to <see cref="ZooNative.ZOO_MAX_BATCH"/>); poses in <paramref name="engine"/>'s frame when given.</summary>
         public TransitionCharacters(Model model, int count, ZooCoordinateFrame? engine = null) : this(Create(model, count), model, count, engine) { }
 
         static ZooSafeHandle Create(Model model, int count)
         {
+            var n = Size.Count(count, "count", "zoo_transition_characters_new");
             bool e = false;
             try
             {
                 IntPtr p = IntPtr.Zero;
-                Errors.Check(ZooNative.zoo_transition_characters_new((Native.ZooModel*)Enter(model, ref e), Size.Of(count), (Native.ZooTransitionCharacters**)&p), model);
+                Errors.Check(ZooNative.zoo_transition_characters_new((Native.ZooModel*)Enter(model, ref e), n, (Native.ZooTransitionCharacters**)&p), model);
                 return Wrap(HandleKind.TransitionCharacters, p);
             }
             finally { Exit(model, e); }
         }
 
         /// <summary>Characters N in the batch.</summary>
-        public int Count { get { return count; } }
+        public int Count { get { ThrowIfDisposed("Count"); return count; } }
 
         /// <summary>Joints K of every pose.</summary>
-        public int Joints { get { return joints; } }
+        public int Joints { get { ThrowIfDisposed("Joints"); return joints; } }
 
         /// <summary>
         /// Starts a transition of <paramref name="length"/> frames from global joint positions
@@ -89,6 +96,7 @@ namespace Zoo
         /// </summary>
         public void Start(TransitionRunner runner, ReadOnlySpan<float> past, ReadOnlySpan<float> target, ReadOnlySpan<float> next, int length)
         {
+            var frames = Size.Count(length, "length", "zoo_transition_start");
             if (toModel != null)
             {
                 var all = Size.Fit(ref floats, past.Length + target.Length + next.Length);
@@ -114,7 +122,7 @@ namespace Zoo
                 fixed (float* p = &MemoryMarshal.GetReference(past))
                 fixed (float* t = &MemoryMarshal.GetReference(target))
                 fixed (float* n = &MemoryMarshal.GetReference(next))
-                    s = ZooNative.zoo_transition_start(rp, cp, p, Size.Of(past.Length), t, Size.Of(target.Length), n, Size.Of(next.Length), Size.Of(length));
+                    s = ZooNative.zoo_transition_start(rp, cp, p, Size.Of(past.Length), t, Size.Of(target.Length), n, Size.Of(next.Length), frames);
                 Errors.Check(s, runner, this);
             }
             finally { Exit(runner, r); Exit(this, c); }
@@ -141,39 +149,33 @@ namespace Zoo
         /// Starts a transition of <paramref name="length"/> frames from engine poses
         /// (<c>zoo_transition_start_posed</c>): <paramref name="pastRoots"/> holds the same number of
         /// context frames per character (character-major) and <paramref name="pastRotations"/> 4K per
-        /// root; the target and next poses one per character (N roots, N * 4K rotations each).
+        /// root; the target and next poses one per character (N roots, N * 4K rotations each). The
+        /// runtime checks every length.
         /// </summary>
         public void StartPosed(TransitionRunner runner, ReadOnlySpan<ZooRootMotion> pastRoots, ReadOnlySpan<float> pastRotations,
             ReadOnlySpan<ZooRootMotion> targetRoots, ReadOnlySpan<float> targetRotations,
             ReadOnlySpan<ZooRootMotion> nextRoots, ReadOnlySpan<float> nextRotations, int length)
         {
-            const string function = "zoo_transition_start_posed";
-            // The C function reads N target and next roots and one rotations_len for both rotation
-            // buffers: sizes it cannot check, so checked here.
-            if (targetRoots.Length != count || nextRoots.Length != count)
-                throw Errors.Invalid(function, "`target_roots` holds " + targetRoots.Length + " roots and `next_roots` " + nextRoots.Length
-                    + ", this call needs " + count + " each; size them from the batch, one per character");
-            if (targetRotations.Length != nextRotations.Length)
-                throw Errors.Invalid(function, "`target_rotations` holds " + targetRotations.Length + " floats and `next_rotations` "
-                    + nextRotations.Length + "; both need 4 * zoo_model_info's `joints` per character (`rotations_len`)");
+            var frames = Size.Count(length, "length", "zoo_transition_start_posed");
             if (toModel != null)
             {
-                int np = pastRoots.Length;
-                var rs = Size.Fit(ref roots, np + 2 * count);
-                var fs = Size.Fit(ref floats, pastRotations.Length + 2 * targetRotations.Length);
+                int np = pastRoots.Length, nt = targetRoots.Length, nn = nextRoots.Length;
+                int fp = pastRotations.Length, ft = targetRotations.Length, fn = nextRotations.Length;
+                var rs = Size.Fit(ref roots, np + nt + nn);
+                var fs = Size.Fit(ref floats, fp + ft + fn);
                 var pr = new Span<ZooRootMotion>(rs, 0, np);
-                var tr = new Span<ZooRootMotion>(rs, np, count);
-                var nr = new Span<ZooRootMotion>(rs, np + count, count);
-                var pq = new Span<float>(fs, 0, pastRotations.Length);
-                var tq = new Span<float>(fs, pastRotations.Length, targetRotations.Length);
-                var nq = new Span<float>(fs, pastRotations.Length + targetRotations.Length, nextRotations.Length);
+                var tr = new Span<ZooRootMotion>(rs, np, nt);
+                var nr = new Span<ZooRootMotion>(rs, np + nt, nn);
+                var pq = new Span<float>(fs, 0, fp);
+                var tq = new Span<float>(fs, fp, ft);
+                var nq = new Span<float>(fs, fp + ft, fn);
                 pastRoots.CopyTo(pr);
                 targetRoots.CopyTo(tr);
                 nextRoots.CopyTo(nr);
                 pastRotations.CopyTo(pq);
                 targetRotations.CopyTo(tq);
                 nextRotations.CopyTo(nq);
-                toModel.Poses(new Span<ZooRootMotion>(rs, 0, np + 2 * count), Span<float>.Empty);
+                toModel.Poses(new Span<ZooRootMotion>(rs, 0, np + nt + nn), Span<float>.Empty);
                 toModel.RotationsLenient(pq);
                 toModel.RotationsLenient(tq);
                 toModel.RotationsLenient(nq);
@@ -197,7 +199,7 @@ namespace Zoo
                 fixed (ZooRootMotion* nr = &MemoryMarshal.GetReference(nextRoots))
                 fixed (float* nq = &MemoryMarshal.GetReference(nextRotations))
                     s = ZooNative.zoo_transition_start_posed(rp, cp, pr, Size.Of(pastRoots.Length), pq, Size.Of(pastRotations.Length),
-                        tr, tq, nr, nq, Size.Of(targetRotations.Length), Size.Of(length));
+                        tr, Size.Of(targetRoots.Length), tq, Size.Of(targetRotations.Length), nr, Size.Of(nextRoots.Length), nq, Size.Of(nextRotations.Length), frames);
                 Errors.Check(s, runner, this);
             }
             finally { Exit(runner, r); Exit(this, c); }
@@ -224,12 +226,14 @@ namespace Zoo
         /// <summary>Sets the ground under character <paramref name="index"/> (<c>zoo_transition_set_heightmap</c>; heights, cell and origin in model units and axes); empty heights remove it.</summary>
         public void SetHeightmap(int index, int cols, int rows, float cell, float originX, float originZ, ReadOnlySpan<float> heights)
         {
+            var nc = Size.Count(cols, "cols", "zoo_transition_set_heightmap");
+            var nr = Size.Count(rows, "rows", "zoo_transition_set_heightmap");
             bool c = false;
             try
             {
                 ZooStatus s;
                 fixed (float* h = &MemoryMarshal.GetReference(heights))
-                    s = ZooNative.zoo_transition_set_heightmap((Native.ZooTransitionCharacters*)Enter(this, ref c), Size.Of(index), Size.Of(cols), Size.Of(rows),
+                    s = ZooNative.zoo_transition_set_heightmap((Native.ZooTransitionCharacters*)Enter(this, ref c), Size.Of(index), nc, nr,
                         cell, originX, originZ, h, Size.Of(heights.Length));
                 Errors.Check(s, this);
             }

@@ -3,7 +3,11 @@
 // call (so another thread's Dispose cannot free it during the call), and turns a status other
 // than ZOO_STATUS_OK into an exception carrying zoo_last_error's message. A disposed handle is
 // passed to the runtime as NULL, which refuses it with its own message; the wrapper then throws
-// ZooDisposedException (an ObjectDisposedException) with that message.
+// ZooDisposedException (an ObjectDisposedException) with that message. What a wrapper answers
+// without a native call (a model's cached info, a batch's count) checks for disposal itself. A
+// negative count or size is refused with an ArgumentOutOfRangeException before anything is
+// allocated (C's size_t has no negative values); a count the runtime cannot take (above
+// ZOO_MAX_BATCH) is passed on and refused by the runtime with its message.
 using System;
 using System.Runtime.InteropServices;
 using System.Text;
@@ -21,6 +25,17 @@ namespace Zoo
         public ZooException(ZooStatus status, string message) : base(message)
         {
             Status = status;
+        }
+
+        /// <summary>The status's C name, e.g. <c>ZOO_STATUS_INVALID_ARGUMENT</c> (<see cref="Library.StatusName"/>).</summary>
+        public string StatusName { get { return Library.StatusName(Status); } }
+
+        /// <summary>The exception with its status's C name: <c>Zoo.ZooException (ZOO_STATUS_INVALID_ARGUMENT): zoo_...: ...</c> and the stack trace.</summary>
+        public override string ToString()
+        {
+            var text = base.ToString();
+            var type = GetType().FullName;
+            return text.StartsWith(type, StringComparison.Ordinal) ? type + " (" + StatusName + ")" + text.Substring(type.Length) : text;
         }
     }
 
@@ -106,6 +121,15 @@ namespace Zoo
         /// <summary>Whether <see cref="Dispose"/> was called.</summary>
         public bool IsDisposed { get { return handle.IsClosed; } }
 
+        /// <summary>Throws <see cref="ZooDisposedException"/> when disposed: for what a wrapper answers without a native call (<paramref name="member"/>, e.g. <c>Joints</c>).</summary>
+        internal void ThrowIfDisposed(string member)
+        {
+            if (!handle.IsClosed) return;
+            var name = GetType().Name;
+            throw new ZooDisposedException(name, ZooStatus.NullPointer,
+                name + "." + member + ": this " + name + " is disposed; read it before disposing it, or keep it alive while it is used");
+        }
+
         /// <summary>Frees the native handle. Throws <see cref="ZooDisposedException"/> when it was already disposed (nothing is freed twice).</summary>
         public void Dispose()
         {
@@ -143,6 +167,15 @@ namespace Zoo
     /// <summary>Statuses to exceptions.</summary>
     internal static unsafe class Errors
     {
+        /// <summary>A static NUL-terminated UTF-8 string of the library (<c>zoo_version_string</c>, <c>zoo_status_string</c>) or a message valid during a callback.</summary>
+        internal static string Utf8(byte* text)
+        {
+            if (text == null) return "";
+            int n = 0;
+            while (text[n] != 0) n++;
+            return Encoding.UTF8.GetString(text, n);
+        }
+
         /// <summary>The calling thread's last error message (allocates: only on a refusal).</summary>
         internal static string LastError()
         {
@@ -179,6 +212,18 @@ namespace Zoo
     /// <summary>Conversions between C# and C sizes.</summary>
     internal static class Size
     {
+        /// <summary>
+        /// A count or size argument as a size_t: a negative one is refused with an
+        /// <see cref="ArgumentOutOfRangeException"/> naming the parameter (<paramref name="name"/>) and
+        /// the C function or constructor (<paramref name="where"/>), before anything is allocated.
+        /// </summary>
+        internal static UIntPtr Count(int value, string name, string where)
+        {
+            if (value < 0)
+                throw new ArgumentOutOfRangeException(name, value, where + ": `" + name + "` is " + value + ", a negative count or size, which C's size_t does not have");
+            return (UIntPtr)(uint)value;
+        }
+
         /// <summary>An int as a size_t (a negative value becomes a huge one, which the runtime refuses).</summary>
         internal static UIntPtr Of(int value)
         {

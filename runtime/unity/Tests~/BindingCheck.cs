@@ -3,8 +3,10 @@
 // calling convention, return type, parameter names and types (bool marshalled as one byte); every
 // enum the same members and values; every struct the same fields in the same order with the same
 // C layout (offsets and size computed from the header for this platform, compared with the
-// marshalled layout); every opaque type an empty struct; the ABI version the header's. And nothing
-// more: a binding of a function or a type the header no longer has fails too.
+// marshalled layout); every opaque type an empty struct; every function-pointer typedef a delegate
+// of the same signature, called Cdecl; every integer #define a constant of ZooNative of the same
+// value (ZOO_ABI_VERSION a uint). And nothing more: a binding of a function or a type the header no
+// longer has fails too.
 using System;
 using System.Collections.Generic;
 using System.Linq;
@@ -27,7 +29,14 @@ namespace Zoo.Tests
                 return problems;
             }
             CheckVersion(h, native, problems);
+            CheckConstants(h, native, problems);
             var known = new HashSet<string> { "ZooNative", "ZooFloat3", "ZooFloat4" };
+            // ZooLogLevel is the type of zoo_set_log_callback's `max_level` and of the callback's
+            // `level` (both int32_t in zoo.h, whose comments name its values ZOO_LOG_LEVEL_*). A
+            // header that declares the enum has it checked below like every enum; one that only
+            // names it leaves the C# enum unchecked rather than "removed from the C ABI".
+            if (!h.Enums.Any(e => e.Name == "ZooLogLevel")) known.Add("ZooLogLevel");
+            foreach (var c in h.Callbacks) { known.Add(c.Name); CheckCallback(c, bindings, problems); }
             foreach (var e in h.Enums) { known.Add(e.Name); CheckEnum(e, bindings, problems); }
             foreach (var s in h.Structs) { known.Add(s.Name); CheckStruct(s, h, bindings, problems); }
             foreach (var o in h.Opaque) { known.Add(o); CheckOpaque(o, bindings, problems); }
@@ -43,8 +52,8 @@ namespace Zoo.Tests
                 if (!names.Contains(entry))
                     problems.Add("ZooNative." + m.Name + " binds `" + entry + "`, which zoo.h does not declare (removed from the C ABI?): regenerate ZooNative.Functions.cs");
             }
-            summary = string.Format("{0} functions, {1} structs, {2} enums, {3} opaque types, C ABI version {4}",
-                h.Functions.Count, h.Structs.Count, h.Enums.Count, h.Opaque.Count, h.AbiVersion);
+            summary = string.Format("{0} functions, {1} structs, {2} enums, {3} opaque types, {4} callback types, {5} constants, C ABI version {6}",
+                h.Functions.Count, h.Structs.Count, h.Enums.Count, h.Opaque.Count, h.Callbacks.Count, h.Constants.Count, h.AbiVersion);
             return problems;
         }
 
@@ -55,6 +64,54 @@ namespace Zoo.Tests
                 problems.Add("ZooNative has no `public const uint ZOO_ABI_VERSION`");
             else if ((uint)field.GetRawConstantValue() != h.AbiVersion)
                 problems.Add("ZooNative.ZOO_ABI_VERSION is " + field.GetRawConstantValue() + ", zoo.h's is " + h.AbiVersion + ": regenerate ZooNative.Functions.cs");
+        }
+
+        static void CheckConstants(CHeader h, Type native, List<string> problems)
+        {
+            var names = new HashSet<string>();
+            foreach (var c in h.Constants.Where(c => c.Name != "ZOO_ABI_VERSION"))
+            {
+                names.Add(c.Name);
+                var field = native.GetField(c.Name, BindingFlags.Public | BindingFlags.Static);
+                if (field == null || !field.IsLiteral)
+                    problems.Add("zoo.h's #define " + c.Name + " " + c.Value + " has no constant in ZooNative; add (or regenerate ZooNative.Functions.cs):\n        " + Mapping.ConstantDeclaration(c.Name, c.Value));
+                else if (Convert.ToInt64(field.GetRawConstantValue()) != c.Value)
+                    problems.Add("ZooNative." + c.Name + " is " + field.GetRawConstantValue() + ", zoo.h's is " + c.Value + ": regenerate ZooNative.Functions.cs");
+            }
+            foreach (var f in native.GetFields(BindingFlags.Public | BindingFlags.Static).Where(f => f.IsLiteral && f.Name.StartsWith("ZOO_", StringComparison.Ordinal)))
+                if (f.Name != "ZOO_ABI_VERSION" && !names.Contains(f.Name))
+                    problems.Add("ZooNative." + f.Name + " has no #define in zoo.h (removed from the C ABI?): regenerate ZooNative.Functions.cs");
+        }
+
+        static void CheckCallback(CCallback c, Assembly bindings, List<string> problems)
+        {
+            var t = bindings.GetType(Mapping.Namespace + "." + c.Name);
+            if (t == null || !typeof(Delegate).IsAssignableFrom(t))
+            {
+                problems.Add("function-pointer typedef " + c.Name + " has no C# delegate " + Mapping.Namespace + "." + c.Name);
+                return;
+            }
+            var diffs = new List<string>();
+            var ufp = (UnmanagedFunctionPointerAttribute)t.GetCustomAttributes(typeof(UnmanagedFunctionPointerAttribute), false).FirstOrDefault();
+            if (ufp == null || ufp.CallingConvention != CallingConvention.Cdecl) diffs.Add("needs [UnmanagedFunctionPointer(CallingConvention.Cdecl)]");
+            var invoke = t.GetMethod("Invoke");
+            string why;
+            var ret = Mapping.Resolve(c.Return, bindings, out why);
+            if (ret == null) diffs.Add("return: " + why);
+            else if (invoke.ReturnType != ret) diffs.Add("returns " + invoke.ReturnType + ", zoo.h " + c.Return + " (" + ret + ")");
+            var ps = invoke.GetParameters();
+            if (ps.Length != c.Params.Count) diffs.Add("takes " + ps.Length + " parameters, zoo.h " + c.Params.Count);
+            for (int i = 0; i < Math.Min(ps.Length, c.Params.Count); i++)
+            {
+                var cp = c.Params[i];
+                var pt = Mapping.Resolve(cp.Type, bindings, out why);
+                if (ps[i].Name != cp.Name) diffs.Add("parameter " + i + " is `" + ps[i].Name + "`, zoo.h's `" + cp.Name + "`");
+                if (pt == null) diffs.Add("parameter `" + cp.Name + "`: " + why);
+                else if (ps[i].ParameterType != pt) diffs.Add("parameter `" + cp.Name + "` is " + ps[i].ParameterType + ", zoo.h " + cp.Type + " (" + pt + ")");
+                if (pt == typeof(bool) && !MarshalledAsByte(ps[i].GetCustomAttributes(false)))
+                    diffs.Add("parameter `" + cp.Name + "` is a C bool (one byte): mark it [MarshalAs(UnmanagedType.U1)]");
+            }
+            if (diffs.Count > 0) problems.Add("delegate " + t.FullName + " differs from zoo.h's " + c.Name + ": " + string.Join("; ", diffs));
         }
 
         static string EntryPoint(MethodInfo m)
@@ -142,7 +199,7 @@ namespace Zoo.Tests
         /// <summary>Size and alignment of a C type on this platform (C struct layout rules).</summary>
         static void CLayout(CType t, int arrayLength, CHeader h, out int size, out int align)
         {
-            if (t.Pointers > 0) { size = align = IntPtr.Size; }
+            if (t.Pointers > 0 || t.IsCallback) { size = align = IntPtr.Size; }
             else if (t.IsEnum) { size = align = 4; }
             else if (t.IsStruct)
             {

@@ -1,7 +1,9 @@
 // The console test: every task through the safe wrappers on the tiny models tests/unity.rs
 // exported, against the outputs the Rust runtime wrote for the same inputs; the bad calls; the
-// managed allocation of every per-frame call; the per-frame cost against C. Prints one summary line
-// per figure (tests/unity.rs reads them) and returns 1 when anything failed.
+// named cases of C ABI 3 (limits, enum values, loading from memory, the library's version and
+// log); the managed allocation of every per-frame call; the per-frame cost against C. Prints one
+// summary line per figure and one `case NAME: passed` line per case (tests/unity.rs reads them)
+// and returns 1 when anything failed.
 using System;
 using System.Collections.Generic;
 using System.Diagnostics;
@@ -71,7 +73,7 @@ namespace Zoo.Tests
         public static int Run(Vectors v, string dir)
         {
             Model.CheckLibrary();
-            Console.WriteLine("native library: C ABI version " + ZooNative.zoo_abi_version());
+            Console.WriteLine("native library: " + Library.Version + ", C ABI version " + ZooNative.zoo_abi_version());
             using (var rtn = Model.Load(Path.Combine(dir, "rtn.onnx")))
             using (var arnn = Model.Load(Path.Combine(dir, "arnn.onnx")))
             using (var rmr = Model.Load(Path.Combine(dir, "rmr.onnx")))
@@ -85,6 +87,7 @@ namespace Zoo.Tests
                 Stitch(v, rmr);
                 Synthesis(v, syn);
                 BadCalls(v, dir, rtn, arnn, rmr, syn);
+                Cases(v, dir, rtn, arnn, rmr, syn);
                 Allocation(v, rtn, arnn, rmr, syn);
                 Timing(v, Path.Combine(dir, "rtn.onnx"), rtn);
             }
@@ -114,7 +117,7 @@ namespace Zoo.Tests
             {
                 ZooCoordinateFrame? engine = null;
                 if (frame == "unity") engine = ZooCoordinateFrame.Unity;
-                using (var runner = new TransitionRunner(rtn))
+                using (var runner = new TransitionRunner(rtn, n))
                 using (var chars = new TransitionCharacters(rtn, n, engine))
                 {
                     var p = "tr." + frame;
@@ -150,7 +153,7 @@ namespace Zoo.Tests
             {
                 ZooCoordinateFrame? engine = null;
                 if (frame == "unity.pos") engine = ZooCoordinateFrame.Unity;
-                using (var runner = new TransitionRunner(rtn))
+                using (var runner = new TransitionRunner(rtn, n))
                 using (var chars = new TransitionCharacters(rtn, n, engine))
                 {
                     var p = "tr." + frame;
@@ -233,7 +236,7 @@ namespace Zoo.Tests
         static void Keyframes(Vectors v, Model arnn)
         {
             var info = arnn.KeyframesInfo;
-            int d = info.DofCount;
+            int d = info.FrameValueCount;
             var counts = v.I("kf.counts");
             var frames = v.I("kf.frames");
             var poses = v.F("kf.poses");
@@ -241,10 +244,10 @@ namespace Zoo.Tests
             using (var runner = new KeyframesRunner(arnn, 2))
             {
                 var batch = new float[(frames[counts[0] - 1] + 1 + frames[frames.Length - 1] + 1) * d];
-                runner.CompleteBatch(counts, frames, poses, ReadOnlySpan<float>.Empty, batch);
+                runner.CompleteBatch(counts, frames, poses, ReadOnlySpan<byte>.Empty, batch);
                 worst = Worst(batch, v.F("kf.batch"), "keyframes batch");
                 var single = new float[(frames[counts[0] - 1] + 1) * d];
-                runner.Complete(new ReadOnlySpan<int>(frames, 0, counts[0]), new ReadOnlySpan<float>(poses, 0, counts[0] * d), ReadOnlySpan<float>.Empty, single);
+                runner.Complete(new ReadOnlySpan<int>(frames, 0, counts[0]), new ReadOnlySpan<float>(poses, 0, counts[0] * d), ReadOnlySpan<byte>.Empty, single);
                 worst = Math.Max(worst, Worst(single, v.F("kf.single"), "keyframes single"));
                 Expect(arnn.JointNames().SequenceEqual(v.S("kf.names")), "keyframes joint names");
                 Console.WriteLine("parity keyframes: worst=" + worst.ToString("G3") + " values=" + (batch.Length + single.Length) + " (2 characters in one batch and one alone, D=" + d + ")");
@@ -330,7 +333,7 @@ namespace Zoo.Tests
             int n = seeds.Length;
             var frames = v.F("sy.frames");
             var placements = v.F("sy.placements");
-            var mean = new float[syn.SynthesisInfo.FrameDimension];
+            var mean = new float[syn.SynthesisInfo.FrameValueCount];
             syn.SynthesisMeanFrame(mean);
             float worst = Worst(mean, new ReadOnlySpan<float>(frames, 0, mean.Length), "synthesis mean frame");
             int values = 0;
@@ -359,7 +362,7 @@ namespace Zoo.Tests
             }
             Console.WriteLine("parity synthesis: worst=" + worst.ToString("G3") + " values=" + values + " (" + n + " characters x " + steps + " frames, model frame and Unity's)");
             var controls = MemoryMarshal.Cast<float, ZooControl>(v.F("ct.controls").AsSpan()).ToArray();
-            using (var runner = new ControlRunner(syn))
+            using (var runner = new ControlRunner(syn, n))
             using (var chars = new ControlCharacters(syn, seeds))
             {
                 chars.Start(frames, placements);
@@ -384,7 +387,7 @@ namespace Zoo.Tests
 
         // Bad calls.
 
-        static int refused, unexpected, wrapperChecked, disposedTwice;
+        static int refused, unexpected, disposedTwice;
 
         /// <summary>Runs a call that must be refused with <typeparamref name="T"/>, status <paramref name="status"/> and a message starting with <paramref name="function"/> and containing <paramref name="needle"/>.</summary>
         static void Refused<T>(string name, ZooStatus status, string function, string needle, Action call) where T : Exception
@@ -450,13 +453,13 @@ namespace Zoo.Tests
             Refused<ZooException>("load a null path", Null, "zoo_model_load", "`path` is NULL", () => Model.Load(null));
 
             // A model of another task.
-            Refused<ZooException>("transition runner on a keyframes model", WrongModel, "zoo_transition_runner_new", "use zoo_keyframes_*", () => new TransitionRunner(arnn));
+            Refused<ZooException>("transition runner on a keyframes model", WrongModel, "zoo_transition_runner_new", "use zoo_keyframes_*", () => new TransitionRunner(arnn, 1));
             Refused<ZooException>("transition characters on a synthesis model", WrongModel, "zoo_transition_characters_new", "`synthesis` model", () => new TransitionCharacters(syn, 1));
             Refused<ZooException>("keyframes runner on a transition model", WrongModel, "zoo_keyframes_runner_new", "use zoo_transition_*", () => new KeyframesRunner(rtn, 1));
             Refused<ZooException>("stitch stream on a synthesis model", WrongModel, "zoo_stitch_stream_new", "`synthesis` model", () => new StitchStream(syn));
             Refused<ZooException>("synthesis runner on a stitch model", WrongModel, "zoo_synthesis_runner_new", "`stitch` model", () => new SynthesisRunner(rmr, 1));
             Refused<ZooException>("synthesis characters on a transition model", WrongModel, "zoo_synthesis_characters_new", "`transition` model", () => new SynthesisCharacters(rtn, new ulong[] { 1 }));
-            Refused<ZooException>("control runner on a transition model", WrongModel, "zoo_control_runner_new", "`transition` model", () => new ControlRunner(rtn));
+            Refused<ZooException>("control runner on a transition model", WrongModel, "zoo_control_runner_new", "`transition` model", () => new ControlRunner(rtn, 1));
             Refused<ZooException>("control characters on a keyframes model", WrongModel, "zoo_control_characters_new", "`keyframes` model", () => new ControlCharacters(arnn, new ulong[] { 1 }));
             Refused<ZooException>("transition info of a keyframes model", WrongModel, "zoo_transition_info", "zoo_keyframes_*", () => { var i = arnn.TransitionInfo; });
             Refused<ZooException>("keyframes info of a stitch model", WrongModel, "zoo_keyframes_info", "zoo_stitch_*", () => { var i = rmr.KeyframesInfo; });
@@ -469,7 +472,7 @@ namespace Zoo.Tests
             Refused<ZooException>("stitch refine with a transition model", WrongModel, "zoo_stitch_refine", "zoo_transition_*", () => rtn.StitchRefine(new ZooRootMotion[1], new float[4 * k], true, true, new ZooRootMotion[1], new float[4 * k], new byte[4]));
 
             // Wrong lengths and indices, every buffer of every call.
-            using (var runner = new TransitionRunner(rtn))
+            using (var runner = new TransitionRunner(rtn, n))
             using (var chars = new TransitionCharacters(rtn, n))
             using (var other = new TransitionCharacters(rtn, n, ZooCoordinateFrame.Unity))
             {
@@ -488,12 +491,12 @@ namespace Zoo.Tests
                 Refused<ZooException>("step: poses null", Null, "zoo_transition_step", "`poses` is NULL", () => chars.Step(runner, null));
                 Wrong("start posed: past roots not whole frames", "zoo_transition_start_posed", "`past_roots`", () => chars.StartPosed(runner, new ReadOnlySpan<ZooRootMotion>(pastRoots, 0, pastRoots.Length - 1), pastRot, targetRoots, targetRot, nextRoots, nextRot, length));
                 Wrong("start posed: past rotations short", "zoo_transition_start_posed", "`past_rotations`", () => chars.StartPosed(runner, pastRoots, new ReadOnlySpan<float>(pastRot, 0, pastRot.Length - 4), targetRoots, targetRot, nextRoots, nextRot, length));
-                Wrong("start posed: target rotations short", "zoo_transition_start_posed", "rotations_len", () => chars.StartPosed(runner, pastRoots, pastRot, targetRoots, new ReadOnlySpan<float>(targetRot, 0, targetRot.Length - 4), nextRoots, new ReadOnlySpan<float>(nextRot, 0, nextRot.Length - 4), length));
+                Wrong("start posed: target rotations short", "zoo_transition_start_posed", "`target_rotations`", () => chars.StartPosed(runner, pastRoots, pastRot, targetRoots, new ReadOnlySpan<float>(targetRot, 0, targetRot.Length - 4), nextRoots, nextRot, length));
                 Wrong("start posed (Unity): past rotations not whole", "zoo_transition_start_posed", "`past_rotations`", () => other.StartPosed(runner, pastRoots, new ReadOnlySpan<float>(pastRot, 0, pastRot.Length - 2), targetRoots, targetRot, nextRoots, nextRot, length));
-                wrapperChecked += 3;
-                Wrong("start posed: target roots short (checked by the wrapper)", "zoo_transition_start_posed", "`target_roots`", () => chars.StartPosed(runner, pastRoots, pastRot, new ReadOnlySpan<ZooRootMotion>(targetRoots, 0, n - 1), targetRot, nextRoots, nextRot, length));
-                Wrong("start posed: next roots long (checked by the wrapper)", "zoo_transition_start_posed", "`next_roots`", () => chars.StartPosed(runner, pastRoots, pastRot, targetRoots, targetRot, new ZooRootMotion[n + 1], nextRot, length));
-                Wrong("start posed: next rotations differ from target's (checked by the wrapper)", "zoo_transition_start_posed", "`next_rotations`", () => chars.StartPosed(runner, pastRoots, pastRot, targetRoots, targetRot, nextRoots, new ReadOnlySpan<float>(nextRot, 0, nextRot.Length - 4), length));
+                Wrong("start posed: target roots short", "zoo_transition_start_posed", "`target_roots`", () => chars.StartPosed(runner, pastRoots, pastRot, new ReadOnlySpan<ZooRootMotion>(targetRoots, 0, n - 1), targetRot, nextRoots, nextRot, length));
+                Wrong("start posed: next roots long", "zoo_transition_start_posed", "`next_roots`", () => chars.StartPosed(runner, pastRoots, pastRot, targetRoots, targetRot, new ZooRootMotion[n + 1], nextRot, length));
+                Wrong("start posed: next rotations short", "zoo_transition_start_posed", "`next_rotations`", () => chars.StartPosed(runner, pastRoots, pastRot, targetRoots, targetRot, nextRoots, new ReadOnlySpan<float>(nextRot, 0, nextRot.Length - 4), length));
+                Wrong("start posed (Unity): next roots short", "zoo_transition_start_posed", "`next_roots`", () => other.StartPosed(runner, pastRoots, pastRot, targetRoots, targetRot, new ReadOnlySpan<ZooRootMotion>(nextRoots, 0, n - 1), nextRot, length));
                 var nanRot = (float[])targetRot.Clone();
                 nanRot[2] = float.NaN;
                 Wrong("start posed: NaN rotation", "zoo_transition_start_posed", "NaN", () => chars.StartPosed(runner, pastRoots, pastRot, targetRoots, nanRot, nextRoots, nextRot, length));
@@ -519,23 +522,23 @@ namespace Zoo.Tests
 
             using (var runner = new KeyframesRunner(arnn, 2))
             {
-                int d = arnn.KeyframesInfo.DofCount;
+                int d = arnn.KeyframesInfo.FrameValueCount;
                 var frames = v.I("kf.frames");
                 var counts = v.I("kf.counts");
                 var kposes = v.F("kf.poses");
                 var outA = new float[40 * d];
                 var f4 = frames.Take(4).ToArray();
                 var p4 = kposes.Take(4 * d).ToArray();
-                Wrong("keyframes: poses short", "zoo_keyframes_complete", "`poses`", () => runner.Complete(f4, new ReadOnlySpan<float>(kposes, 0, 4 * d - 1), ReadOnlySpan<float>.Empty, outA));
-                Wrong("keyframes: out short", "zoo_keyframes_complete", "`out`", () => runner.Complete(f4, p4, ReadOnlySpan<float>.Empty, new float[39 * d]));
-                Wrong("keyframes: fixed of a model without groups", "zoo_keyframes_complete", "fixed", () => runner.Complete(f4, p4, new float[4], outA));
-                Wrong("keyframes: NaN key", "zoo_keyframes_complete", "NaN", () => { var p = (float[])p4.Clone(); p[3] = float.NaN; runner.Complete(f4, p, ReadOnlySpan<float>.Empty, outA); });
-                Wrong("keyframes: frames out of order", "zoo_keyframes_complete", "strictly increase", () => runner.Complete(new[] { 0, 9, 9, 39 }, p4, ReadOnlySpan<float>.Empty, outA));
-                Wrong("keyframes: negative frame", "zoo_keyframes_complete", "", () => runner.Complete(new[] { 0, -9, 24, 39 }, p4, ReadOnlySpan<float>.Empty, outA));
+                Wrong("keyframes: poses short", "zoo_keyframes_complete", "`poses`", () => runner.Complete(f4, new ReadOnlySpan<float>(kposes, 0, 4 * d - 1), ReadOnlySpan<byte>.Empty, outA));
+                Wrong("keyframes: out short", "zoo_keyframes_complete", "`out`", () => runner.Complete(f4, p4, ReadOnlySpan<byte>.Empty, new float[39 * d]));
+                Wrong("keyframes: fixed of a model without groups", "zoo_keyframes_complete", "fixed", () => runner.Complete(f4, p4, new byte[4], outA));
+                Wrong("keyframes: NaN key", "zoo_keyframes_complete", "NaN", () => { var p = (float[])p4.Clone(); p[3] = float.NaN; runner.Complete(f4, p, ReadOnlySpan<byte>.Empty, outA); });
+                Wrong("keyframes: frames out of order", "zoo_keyframes_complete", "strictly increas", () => runner.Complete(new[] { 0, 9, 9, 39 }, p4, ReadOnlySpan<byte>.Empty, outA));
+                Wrong("keyframes: negative frame", "zoo_keyframes_complete", "", () => runner.Complete(new[] { 0, -9, 24, 39 }, p4, ReadOnlySpan<byte>.Empty, outA));
                 var batchOut = new float[71 * d];
-                Wrong("keyframes batch: counts do not add up", "zoo_keyframes_complete_batch", "key_counts", () => runner.CompleteBatch(new[] { 4, 2 }, frames, kposes, ReadOnlySpan<float>.Empty, batchOut));
-                Wrong("keyframes batch: out short", "zoo_keyframes_complete_batch", "`out`", () => runner.CompleteBatch(counts, frames, kposes, ReadOnlySpan<float>.Empty, new float[70 * d]));
-                Wrong("keyframes batch: more characters than the runner's batch", "zoo_keyframes_complete_batch", "made for at most 2", () => runner.CompleteBatch(new[] { 4, 3, 4 }, frames.Concat(frames.Take(4)).ToArray(), kposes.Concat(kposes.Take(4 * d)).ToArray(), ReadOnlySpan<float>.Empty, new float[111 * d]));
+                Wrong("keyframes batch: counts do not add up", "zoo_keyframes_complete_batch", "key_counts", () => runner.CompleteBatch(new[] { 4, 2 }, frames, kposes, ReadOnlySpan<byte>.Empty, batchOut));
+                Wrong("keyframes batch: out short", "zoo_keyframes_complete_batch", "`out`", () => runner.CompleteBatch(counts, frames, kposes, ReadOnlySpan<byte>.Empty, new float[70 * d]));
+                Wrong("keyframes batch: more characters than the runner's batch", "zoo_keyframes_complete_batch", "made for at most 2", () => runner.CompleteBatch(new[] { 4, 3, 4 }, frames.Concat(frames.Take(4)).ToArray(), kposes.Concat(kposes.Take(4 * d)).ToArray(), ReadOnlySpan<byte>.Empty, new float[111 * d]));
             }
 
             int kr = rmr.Joints;
@@ -578,7 +581,7 @@ namespace Zoo.Tests
             var splace = v.F("sy.placements");
             using (var runner = new SynthesisRunner(syn, ns))
             using (var chars = new SynthesisCharacters(syn, seeds))
-            using (var crunner = new ControlRunner(syn))
+            using (var crunner = new ControlRunner(syn, ns))
             using (var cchars = new ControlCharacters(syn, seeds))
             {
                 var b = new PoseBuffer(ns, ks, 2);
@@ -621,7 +624,7 @@ namespace Zoo.Tests
             // ZooDisposedException naming the wrapper, nothing freed twice), then used: refused
             // with the runtime's NULL message.
             var model = Model.Load(Path.Combine(dir, "rtn.onnx"));
-            var tr = new TransitionRunner(model);
+            var tr = new TransitionRunner(model, n);
             var tc = new TransitionCharacters(model, n);
             var kfModel = Model.Load(Path.Combine(dir, "arnn.onnx"));
             var kr2 = new KeyframesRunner(kfModel, 1);
@@ -630,7 +633,7 @@ namespace Zoo.Tests
             var syModel = Model.Load(Path.Combine(dir, "rnngmm.onnx"));
             var sr = new SynthesisRunner(syModel, 1);
             var sc = new SynthesisCharacters(syModel, new ulong[] { 1 });
-            var cr = new ControlRunner(syModel);
+            var cr = new ControlRunner(syModel, 1);
             var cc = new ControlCharacters(syModel, new ulong[] { 1 });
             var all = new ZooObject[] { tr, tc, kr2, ss, sr, sc, cr, cc, model, kfModel, stModel, syModel };
             foreach (var o in all)
@@ -642,16 +645,16 @@ namespace Zoo.Tests
                 if (refused > before) disposedTwice++;
                 Expect(o.IsDisposed, o.GetType().Name + ".IsDisposed");
             }
-            using (var liveRunner = new TransitionRunner(rtn))
+            using (var liveRunner = new TransitionRunner(rtn, n))
             using (var liveChars = new TransitionCharacters(rtn, n))
             using (var liveSr = new SynthesisRunner(syn, 1))
             using (var liveSc = new SynthesisCharacters(syn, new ulong[] { 1 }))
-            using (var liveCr = new ControlRunner(syn))
+            using (var liveCr = new ControlRunner(syn, 1))
             using (var liveCc = new ControlCharacters(syn, new ulong[] { 1 }))
             {
                 var b = new PoseBuffer(n, k);
                 var one = new PoseBuffer(1, syn.Joints, 2);
-                Disposed("disposed model: runner", "zoo_transition_runner_new", "`model` is NULL", () => new TransitionRunner(model));
+                Disposed("disposed model: runner", "zoo_transition_runner_new", "`model` is NULL", () => new TransitionRunner(model, 1));
                 Disposed("disposed model: characters", "zoo_transition_characters_new", "`model` is NULL", () => new TransitionCharacters(model, 1));
                 Disposed("disposed model: info", "zoo_transition_info", "`model` is NULL", () => { var i = model.TransitionInfo; });
                 Disposed("disposed model: task", "zoo_model_task", "`model` is NULL", () => model.QueryTask());
@@ -669,7 +672,7 @@ namespace Zoo.Tests
                 Disposed("disposed model: mean frame", "zoo_synthesis_mean_frame", "`model` is NULL", () => syModel.SynthesisMeanFrame(new float[4]));
                 Disposed("disposed model: synthesis runner", "zoo_synthesis_runner_new", "`model` is NULL", () => new SynthesisRunner(syModel, 1));
                 Disposed("disposed model: synthesis characters", "zoo_synthesis_characters_new", "`model` is NULL", () => new SynthesisCharacters(syModel, new ulong[] { 1 }));
-                Disposed("disposed model: control runner", "zoo_control_runner_new", "`model` is NULL", () => new ControlRunner(syModel));
+                Disposed("disposed model: control runner", "zoo_control_runner_new", "`model` is NULL", () => new ControlRunner(syModel, 1));
                 Disposed("disposed model: control characters", "zoo_control_characters_new", "`model` is NULL", () => new ControlCharacters(syModel, new ulong[] { 1 }));
                 Disposed("disposed runner: allow beyond trained", "zoo_transition_allow_beyond_trained", "`runner` is NULL", () => tr.AllowBeyondTrained(true));
                 Disposed("disposed runner: start", "zoo_transition_start", "`runner` is NULL", () => liveChars.Start(tr, past, target, next, length));
@@ -680,8 +683,8 @@ namespace Zoo.Tests
                 Disposed("disposed characters: heightmap", "zoo_transition_set_heightmap", "`characters` is NULL", () => tc.SetHeightmap(0, 1, 1, 1f, 0f, 0f, new[] { 0f }));
                 Disposed("disposed characters: frames left", "zoo_transition_frames_left", "`characters` is NULL", () => tc.FramesLeft(0));
                 Disposed("disposed characters: target miss", "zoo_transition_target_miss", "`characters` is NULL", () => { float a, c; tc.TryGetTargetMiss(0, out a, out c); });
-                Disposed("disposed keyframes runner: complete", "zoo_keyframes_complete", "`runner` is NULL", () => kr2.Complete(new[] { 0, 5 }, new float[12], ReadOnlySpan<float>.Empty, new float[36]));
-                Disposed("disposed keyframes runner: batch", "zoo_keyframes_complete_batch", "`runner` is NULL", () => kr2.CompleteBatch(new[] { 2 }, new[] { 0, 5 }, new float[12], ReadOnlySpan<float>.Empty, new float[36]));
+                Disposed("disposed keyframes runner: complete", "zoo_keyframes_complete", "`runner` is NULL", () => kr2.Complete(new[] { 0, 5 }, new float[12], ReadOnlySpan<byte>.Empty, new float[36]));
+                Disposed("disposed keyframes runner: batch", "zoo_keyframes_complete_batch", "`runner` is NULL", () => kr2.CompleteBatch(new[] { 2 }, new[] { 0, 5 }, new float[12], ReadOnlySpan<byte>.Empty, new float[36]));
                 Disposed("disposed stream: push", "zoo_stitch_stream_push", "`stream` is NULL", () => ss.Push(sRoots[0], new ReadOnlySpan<float>(sRot, 0, 4 * kr)));
                 Disposed("disposed stream: ready", "zoo_stitch_stream_ready", "`stream` is NULL", () => { var r = ss.Ready; });
                 Disposed("disposed stream: pop", "zoo_stitch_stream_pop", "`stream` is NULL", () => { var root = new ZooRootMotion(); ss.TryPop(ref root, new float[4 * kr], new byte[4]); });
@@ -695,7 +698,7 @@ namespace Zoo.Tests
             }
 
             // Everything still works after the refusals.
-            using (var runner = new TransitionRunner(rtn))
+            using (var runner = new TransitionRunner(rtn, n))
             using (var chars = new TransitionCharacters(rtn, n))
             {
                 var b = new PoseBuffer(n, k);
@@ -703,7 +706,455 @@ namespace Zoo.Tests
                 chars.StepPosed(runner, b.Roots, b.Rotations);
             }
             Console.WriteLine("bad calls: refused=" + refused + " unexpected=" + unexpected + " (each a managed exception with the runtime's status and message, the process alive; "
-                + wrapperChecked + " of them refused by the wrapper where the C ABI takes a buffer without its length; disposed twice: " + disposedTwice + " wrappers, each second Dispose refused)");
+                + "disposed twice: " + disposedTwice + " wrappers, each second Dispose refused)");
+        }
+
+        // Named cases (C ABI 3): each prints `case NAME: passed` or `case NAME: FAILED`.
+
+        static void Case(string name, Action body)
+        {
+            int before = failures;
+            try { body(); }
+            catch (Exception e) { Fail(name + ": raised " + e.GetType().Name + ": " + e.Message); }
+            Console.WriteLine("case " + name + ": " + (failures == before ? "passed" : "FAILED"));
+        }
+
+        /// <summary>A call refused by the runtime with a ZooException of <paramref name="status"/>, its message starting with <paramref name="function"/> and containing <paramref name="needle"/>.</summary>
+        static void ByRuntime(string what, ZooStatus status, string function, string needle, Action call)
+        {
+            try
+            {
+                call();
+                Fail(what + ": not refused");
+            }
+            catch (ZooException e)
+            {
+                if (e.Status != status || !e.Message.StartsWith(function + ": ", StringComparison.Ordinal) || !e.Message.Contains(needle))
+                    Fail(what + ": ZooException " + e.Status + " `" + e.Message + "`, expected " + status + " from " + function + " mentioning `" + needle + "`");
+                else if (!e.StatusName.StartsWith("ZOO_STATUS_", StringComparison.Ordinal) || e.StatusName == "ZOO_STATUS_UNKNOWN")
+                    Fail(what + ": StatusName " + e.StatusName);
+                else Console.WriteLine("  " + what + ": " + e.StatusName + " `" + e.Message + "`");
+            }
+            catch (Exception e)
+            {
+                Fail(what + ": raised " + e.GetType().Name + ": " + e.Message + " (expected a ZooException from the runtime)");
+            }
+        }
+
+        /// <summary>A call refused before anything reaches the runtime with an ArgumentOutOfRangeException naming <paramref name="parameter"/> and <paramref name="where"/>.</summary>
+        static void OutOfRange(string what, string parameter, string where, Action call)
+        {
+            try
+            {
+                call();
+                Fail(what + ": not refused");
+            }
+            catch (ArgumentOutOfRangeException e)
+            {
+                if (e.ParamName != parameter || !e.Message.StartsWith(where + ": ", StringComparison.Ordinal))
+                    Fail(what + ": ArgumentOutOfRangeException for `" + e.ParamName + "`: " + e.Message + " (expected `" + parameter + "`, from " + where + ")");
+                else Console.WriteLine("  " + what + ": ArgumentOutOfRangeException `" + e.Message.Split('\n')[0] + "`");
+            }
+            catch (Exception e)
+            {
+                Fail(what + ": raised " + e.GetType().Name + ": " + e.Message + " (expected an ArgumentOutOfRangeException)");
+            }
+        }
+
+        /// <summary>A member of a disposed wrapper: a ZooDisposedException (an ObjectDisposedException) naming the wrapper and the member.</summary>
+        static void DisposedMember(string what, string type, Action call)
+        {
+            try
+            {
+                call();
+                Fail(what + ": answered after Dispose");
+            }
+            catch (ZooDisposedException e)
+            {
+                if (!(e is ObjectDisposedException) || e.ObjectName != type || !e.Message.Contains(what))
+                    Fail(what + ": ZooDisposedException for " + e.ObjectName + ": " + e.Message);
+            }
+            catch (Exception e)
+            {
+                Fail(what + ": raised " + e.GetType().Name + ": " + e.Message + " (expected an ObjectDisposedException)");
+            }
+        }
+
+        static bool SameBits(float[] a, float[] b, string what)
+        {
+            bool same = a.Length == b.Length && MemoryMarshal.Cast<float, int>(a.AsSpan()).SequenceEqual(MemoryMarshal.Cast<float, int>(b.AsSpan()));
+            if (!same) Fail(what + ": the model loaded from bytes gives other outputs than the one loaded from its file (" + a.Length + " and " + b.Length + " values)");
+            return same;
+        }
+
+        static float[] Concat(List<ZooRootMotion> roots, List<float> rotations, List<byte> contacts)
+        {
+            var all = new List<float>(Floats(roots.ToArray()).ToArray());
+            all.AddRange(rotations);
+            if (contacts != null) all.AddRange(contacts.Select(c => (float)c));
+            return all.ToArray();
+        }
+
+        /// <summary>Everything the transition test computes, in one array: posed and positions, the model's frame and Unity's, target misses.</summary>
+        static float[] TransitionOutputs(Vectors v, Model m)
+        {
+            int n = v.Int("tr.n"), length = v.Int("tr.length"), k = m.Joints;
+            var all = new List<float>();
+            foreach (var frame in new[] { "posed", "unity" })
+                using (var runner = new TransitionRunner(m, n))
+                using (var chars = new TransitionCharacters(m, n, frame == "unity" ? ZooCoordinateFrame.Unity : (ZooCoordinateFrame?)null))
+                {
+                    var p = "tr." + frame;
+                    chars.StartPosed(runner, v.Roots(p + ".past"), v.Rotations(p + ".past"), v.Roots(p + ".target"), v.Rotations(p + ".target"),
+                        v.Roots(p + ".next"), v.Rotations(p + ".next"), length);
+                    var b = new PoseBuffer(n, k);
+                    var roots = new List<ZooRootMotion>();
+                    var rotations = new List<float>();
+                    for (int s = 0; s <= length; s++)
+                    {
+                        chars.StepPosed(runner, b.Roots, b.Rotations);
+                        Record(b, roots, rotations, null);
+                    }
+                    all.AddRange(Concat(roots, rotations, null));
+                    for (int c = 0; c < n; c++)
+                    {
+                        float mean, max;
+                        chars.TryGetTargetMiss(c, out mean, out max);
+                        all.Add(mean);
+                        all.Add(max);
+                    }
+                }
+            foreach (var frame in new[] { "pos", "unity.pos" })
+                using (var runner = new TransitionRunner(m, n))
+                using (var chars = new TransitionCharacters(m, n, frame == "unity.pos" ? ZooCoordinateFrame.Unity : (ZooCoordinateFrame?)null))
+                {
+                    var p = "tr." + frame;
+                    chars.Start(runner, v.F(p + ".past"), v.F(p + ".target"), v.F(p + ".next"), length);
+                    var poses = new float[n * 3 * k];
+                    for (int s = 0; s <= length; s++)
+                    {
+                        chars.Step(runner, poses);
+                        all.AddRange(poses);
+                    }
+                }
+            var offsets = new float[3 * k];
+            m.GetSkeleton(new int[k], offsets);
+            all.AddRange(offsets);
+            return all.ToArray();
+        }
+
+        static float[] KeyframesOutputs(Vectors v, Model m)
+        {
+            int d = m.KeyframesInfo.FrameValueCount;
+            var counts = v.I("kf.counts");
+            var frames = v.I("kf.frames");
+            var poses = v.F("kf.poses");
+            using (var runner = new KeyframesRunner(m, 2))
+            {
+                var batch = new float[(frames[counts[0] - 1] + 1 + frames[frames.Length - 1] + 1) * d];
+                runner.CompleteBatch(counts, frames, poses, ReadOnlySpan<byte>.Empty, batch);
+                var single = new float[(frames[counts[0] - 1] + 1) * d];
+                runner.Complete(new ReadOnlySpan<int>(frames, 0, counts[0]), new ReadOnlySpan<float>(poses, 0, counts[0] * d), ReadOnlySpan<byte>.Empty, single);
+                return batch.Concat(single).ToArray();
+            }
+        }
+
+        static float[] StitchOutputs(Vectors v, Model m)
+        {
+            int k = m.Joints;
+            var roots = v.Roots("st.in");
+            var rotations = v.Rotations("st.in");
+            int frames = roots.Length;
+            var outRoots = new ZooRootMotion[frames];
+            var outRotations = new float[frames * 4 * k];
+            var contacts = new byte[frames * 4];
+            m.StitchRefine(roots, rotations, true, true, outRoots, outRotations, contacts);
+            var all = new List<float>(Concat(outRoots.ToList(), outRotations.ToList(), contacts.ToList()));
+            m.StitchRefineAtSeams(roots, rotations, v.I("st.seams"), true, true, outRoots, outRotations, contacts, ZooCoordinateFrame.Unity);
+            all.AddRange(Concat(outRoots.ToList(), outRotations.ToList(), contacts.ToList()));
+            using (var stream = new StitchStream(m))
+            {
+                var popped = new List<ZooRootMotion>();
+                var poppedRotations = new List<float>();
+                var poppedContacts = new List<byte>();
+                var root = new ZooRootMotion();
+                var q = new float[4 * k];
+                var c = new byte[4];
+                for (int f = 0; f <= frames; f++)
+                {
+                    if (f < frames) stream.Push(roots[f], new ReadOnlySpan<float>(rotations, f * 4 * k, 4 * k));
+                    else stream.Finish();
+                    while (stream.TryPop(ref root, q, c))
+                    {
+                        popped.Add(root);
+                        poppedRotations.AddRange(q);
+                        poppedContacts.AddRange(c);
+                    }
+                }
+                all.AddRange(Concat(popped, poppedRotations, poppedContacts));
+            }
+            return all.ToArray();
+        }
+
+        static float[] SynthesisOutputs(Vectors v, Model m)
+        {
+            int k = m.Joints, steps = v.Int("sy.steps");
+            var seeds = Array.ConvertAll(v.L("sy.seeds"), s => (ulong)s);
+            int n = seeds.Length;
+            var mean = new float[m.SynthesisInfo.FrameValueCount];
+            m.SynthesisMeanFrame(mean);
+            var all = new List<float>(mean);
+            using (var runner = new SynthesisRunner(m, n))
+            using (var chars = new SynthesisCharacters(m, seeds, ZooCoordinateFrame.Unity))
+            {
+                chars.Start(v.F("sy.frames"), v.F("sy.placements"));
+                var b = new PoseBuffer(n, k, 2);
+                var roots = new List<ZooRootMotion>();
+                var rotations = new List<float>();
+                var contacts = new List<byte>();
+                for (int s = 0; s < steps; s++)
+                {
+                    chars.Step(runner, 1f, b.Roots, b.Rotations, b.Contacts);
+                    Record(b, roots, rotations, contacts);
+                }
+                all.AddRange(Concat(roots, rotations, contacts));
+            }
+            return all.ToArray();
+        }
+
+        static float[] ControlOutputs(Vectors v, Model m)
+        {
+            int k = m.Joints, steps = v.Int("sy.steps");
+            var seeds = Array.ConvertAll(v.L("sy.seeds"), s => (ulong)s);
+            int n = seeds.Length;
+            var controls = MemoryMarshal.Cast<float, ZooControl>(v.F("ct.controls").AsSpan()).ToArray();
+            using (var runner = new ControlRunner(m, n))
+            using (var chars = new ControlCharacters(m, seeds))
+            {
+                chars.Start(v.F("sy.frames"), v.F("sy.placements"));
+                var b = new PoseBuffer(n, k, 2);
+                var z = new ZooControl[n];
+                var roots = new List<ZooRootMotion>();
+                var rotations = new List<float>();
+                var contacts = new List<byte>();
+                for (int s = 0; s < steps; s++)
+                {
+                    for (int c = 0; c < n; c++) z[c] = controls[s];
+                    chars.Step(runner, z, b.Roots, b.Rotations, b.Contacts);
+                    Record(b, roots, rotations, contacts);
+                }
+                return Concat(roots, rotations, contacts);
+            }
+        }
+
+        /// <summary>The model of <paramref name="file"/> loaded from its bytes gives the outputs of the one loaded from the file, bit for bit.</summary>
+        static void FromBytesCase(string dir, string file, Model fromFile, Func<Model, float[]> outputs)
+        {
+            using (var fromBytes = Model.FromBytes(File.ReadAllBytes(Path.Combine(dir, file))))
+            {
+                var a = fromFile.Info;
+                var b = fromBytes.Info;
+                Expect(a.Task == b.Task && a.JointCount == b.JointCount && a.Fps == b.Fps && a.MetresPerUnit == b.MetresPerUnit && a.UpAxis == b.UpAxis
+                    && a.Handedness == b.Handedness && a.FormatVersion == b.FormatVersion, file + ": the info differs between the file and its bytes");
+                Expect(fromFile.JointNames().SequenceEqual(fromBytes.JointNames()), file + ": the joint names differ between the file and its bytes");
+                var x = outputs(fromFile);
+                var y = outputs(fromBytes);
+                if (SameBits(x, y, file)) Console.WriteLine("  " + file + ": " + x.Length + " output values bit-identical from the file and from its bytes");
+            }
+        }
+
+        static void Cases(Vectors v, string dir, Model rtn, Model arnn, Model rmr, Model syn)
+        {
+            const ZooStatus Invalid = ZooStatus.InvalidArgument;
+            const int Max = ZooNative.ZOO_MAX_BATCH;
+            int k = rtn.Joints, n = v.Int("tr.n"), length = v.Int("tr.length");
+            var seeds = Array.ConvertAll(v.L("sy.seeds"), s => (ulong)s);
+
+            // Counts: int.MaxValue (above ZOO_MAX_BATCH: refused by the runtime with its message, no
+            // allocation, no crash) and negative (refused by the wrapper) for every constructor that
+            // takes one.
+            Case("count_int_max.transition_runner", () => ByRuntime("new TransitionRunner(model, int.MaxValue)", Invalid, "zoo_transition_runner_new", "`max_batch` is 2147483647, more than ZOO_MAX_BATCH (" + Max + ")", () => new TransitionRunner(rtn, int.MaxValue)));
+            Case("count_negative.transition_runner", () => OutOfRange("new TransitionRunner(model, -1)", "maxBatch", "zoo_transition_runner_new", () => new TransitionRunner(rtn, -1)));
+            Case("count_int_max.transition_characters", () => ByRuntime("new TransitionCharacters(model, int.MaxValue)", Invalid, "zoo_transition_characters_new", "`count` is 2147483647, more than ZOO_MAX_BATCH", () => new TransitionCharacters(rtn, int.MaxValue)));
+            Case("count_negative.transition_characters", () => OutOfRange("new TransitionCharacters(model, -1)", "count", "zoo_transition_characters_new", () => new TransitionCharacters(rtn, -1, ZooCoordinateFrame.Unity)));
+            Case("count_int_max.keyframes_runner", () => ByRuntime("new KeyframesRunner(model, int.MaxValue)", Invalid, "zoo_keyframes_runner_new", "`max_batch` is 2147483647, more than ZOO_MAX_BATCH", () => new KeyframesRunner(arnn, int.MaxValue)));
+            Case("count_negative.keyframes_runner", () => OutOfRange("new KeyframesRunner(model, -1)", "maxBatch", "zoo_keyframes_runner_new", () => new KeyframesRunner(arnn, -1)));
+            Case("count_int_max.synthesis_runner", () => ByRuntime("new SynthesisRunner(model, int.MaxValue)", Invalid, "zoo_synthesis_runner_new", "`max_batch` is 2147483647, more than ZOO_MAX_BATCH", () => new SynthesisRunner(syn, int.MaxValue)));
+            Case("count_negative.synthesis_runner", () => OutOfRange("new SynthesisRunner(model, -1)", "maxBatch", "zoo_synthesis_runner_new", () => new SynthesisRunner(syn, -1)));
+            Case("count_int_max.control_runner", () => ByRuntime("new ControlRunner(model, int.MaxValue)", Invalid, "zoo_control_runner_new", "`max_batch` is 2147483647, more than ZOO_MAX_BATCH", () => new ControlRunner(syn, int.MaxValue)));
+            Case("count_negative.control_runner", () => OutOfRange("new ControlRunner(model, -1)", "maxBatch", "zoo_control_runner_new", () => new ControlRunner(syn, -1)));
+            // The characters of synthesis and control take one seed per character: a count above
+            // ZOO_MAX_BATCH is ZOO_MAX_BATCH + 1 seeds (never negative, never int.MaxValue).
+            Case("count_above_max_batch.synthesis_characters", () => ByRuntime("new SynthesisCharacters(model, ZOO_MAX_BATCH + 1 seeds)", Invalid, "zoo_synthesis_characters_new", "`count` is " + (Max + 1) + ", more than ZOO_MAX_BATCH", () => new SynthesisCharacters(syn, new ulong[Max + 1])));
+            Case("count_above_max_batch.control_characters", () => ByRuntime("new ControlCharacters(model, ZOO_MAX_BATCH + 1 seeds)", Invalid, "zoo_control_characters_new", "`count` is " + (Max + 1) + ", more than ZOO_MAX_BATCH", () => new ControlCharacters(syn, new ulong[Max + 1])));
+            Case("count_int_max.pose_buffer", () => OutOfRange("new PoseBuffer(int.MaxValue, K)", "count", "PoseBuffer", () => new PoseBuffer(int.MaxValue, k)));
+            Case("count_negative.pose_buffer", () =>
+            {
+                OutOfRange("new PoseBuffer(-1, K)", "count", "PoseBuffer", () => new PoseBuffer(-1, k));
+                OutOfRange("new PoseBuffer(1, -1)", "joints", "PoseBuffer", () => new PoseBuffer(1, -1));
+                OutOfRange("new PoseBuffer(1, K, -2)", "contactsPerPose", "PoseBuffer", () => new PoseBuffer(1, k, -2));
+                OutOfRange("new PoseBuffer(1, int.MaxValue)", "joints", "PoseBuffer", () => new PoseBuffer(1, int.MaxValue));
+            });
+            // The other counts and sizes a wrapper takes as an int.
+            Case("count_negative.other_sizes", () =>
+            {
+                using (var runner = new TransitionRunner(rtn, n))
+                using (var chars = new TransitionCharacters(rtn, n))
+                {
+                    OutOfRange("TransitionCharacters.Start(length -1)", "length", "zoo_transition_start", () => chars.Start(runner, v.F("tr.pos.past"), v.F("tr.pos.target"), v.F("tr.pos.next"), -1));
+                    OutOfRange("TransitionCharacters.StartPosed(length -1)", "length", "zoo_transition_start_posed", () => chars.StartPosed(runner, v.Roots("tr.posed.past"), v.Rotations("tr.posed.past"), v.Roots("tr.posed.target"), v.Rotations("tr.posed.target"), v.Roots("tr.posed.next"), v.Rotations("tr.posed.next"), -1));
+                    OutOfRange("TransitionCharacters.SetHeightmap(cols -1)", "cols", "zoo_transition_set_heightmap", () => chars.SetHeightmap(0, -1, 1, 1f, 0f, 0f, new[] { 0f }));
+                    OutOfRange("TransitionCharacters.SetHeightmap(rows -3)", "rows", "zoo_transition_set_heightmap", () => chars.SetHeightmap(0, 1, -3, 1f, 0f, 0f, new[] { 0f }));
+                }
+                OutOfRange("Model.SetStitchWindow(-60, 5)", "window", "zoo_stitch_set_window", () => rmr.SetStitchWindow(-60, 5));
+                OutOfRange("Model.SetStitchWindow(60, -5)", "stride", "zoo_stitch_set_window", () => rmr.SetStitchWindow(60, -5));
+                using (var runner = new KeyframesRunner(arnn, 2))
+                {
+                    int d = arnn.KeyframesInfo.FrameValueCount;
+                    OutOfRange("KeyframesRunner.CompleteBatch(key count -3)", "keyCounts[1]", "zoo_keyframes_complete_batch", () => runner.CompleteBatch(new[] { 4, -3 }, v.I("kf.frames"), v.F("kf.poses"), ReadOnlySpan<byte>.Empty, new float[71 * d]));
+                }
+                OutOfRange("new ControlCharacters(settings.Batch -1)", "settings.Batch", "zoo_control_characters_new", () => { var s = ControlSettings.Default(); s.Batch = -1; new ControlCharacters(syn, seeds, s); });
+            });
+            // A runner's max_batch is a hard limit: a larger batch is refused at its call.
+            Case("max_batch_is_a_limit", () =>
+            {
+                using (var runner = new TransitionRunner(rtn, n - 1))
+                using (var chars = new TransitionCharacters(rtn, n))
+                    ByRuntime("transition start of " + n + " characters on a runner of max_batch " + (n - 1), Invalid, "zoo_transition_start_posed", "more than the runner's `max_batch` (" + (n - 1) + ")",
+                        () => chars.StartPosed(runner, v.Roots("tr.posed.past"), v.Rotations("tr.posed.past"), v.Roots("tr.posed.target"), v.Rotations("tr.posed.target"), v.Roots("tr.posed.next"), v.Rotations("tr.posed.next"), length));
+                int ns = seeds.Length;
+                var sb = new PoseBuffer(ns, syn.Joints, 2);
+                using (var runner = new SynthesisRunner(syn, ns - 1))
+                using (var chars = new SynthesisCharacters(syn, seeds))
+                {
+                    chars.Start(v.F("sy.frames"), v.F("sy.placements"));
+                    ByRuntime("synthesis step of " + ns + " characters on a runner of max_batch " + (ns - 1), Invalid, "zoo_synthesis_step", "more than the runner's `max_batch`", () => chars.Step(runner, 1f, sb.Roots, sb.Rotations, sb.Contacts));
+                }
+                using (var runner = new ControlRunner(syn, 1))
+                using (var chars = new ControlCharacters(syn, seeds))
+                {
+                    chars.Start(v.F("sy.frames"), v.F("sy.placements"));
+                    ByRuntime("control step of " + ns + " characters on a runner of max_batch 1", Invalid, "zoo_control_step", "more than the runner's `max_batch` (1)", () => chars.Step(runner, new ZooControl[ns], sb.Roots, sb.Rotations, sb.Contacts));
+                }
+            });
+
+            // Coordinate frames: the axis and handedness are integers, a value outside the enum is
+            // refused by the runtime by its field's name.
+            Case("frame_bad_up_axis", () =>
+            {
+                var bad = new ZooCoordinateFrame(1f, (ZooUpAxis)7, ZooHandedness.Left);
+                Expect(bad.UpAxis == 7u && bad.Up == (ZooUpAxis)7, "the frame keeps the value 7");
+                var roots = new ZooRootMotion[1];
+                roots[0].RootRotation = ZooFloat4.Identity;
+                ByRuntime("PoseConversion from a frame with up axis 7", Invalid, "zoo_pose_convert", "`from.up_axis` is 7, not a ZooUpAxis", () => new PoseConversion(bad, rtn.Frame).Poses(roots, new float[] { 0f, 0f, 0f, 1f }));
+                ByRuntime("PoseConversion to a frame with up axis 7", Invalid, "zoo_positions_convert", "`to.up_axis` is 7", () => rtn.ToEngine(bad).Positions(new float[3]));
+                using (var runner = new TransitionRunner(rtn, n))
+                using (var chars = new TransitionCharacters(rtn, n, bad))
+                    ByRuntime("TransitionCharacters in a frame with up axis 7", Invalid, "zoo_positions_convert", "`from.up_axis` is 7", () => chars.Start(runner, v.F("tr.pos.past"), v.F("tr.pos.target"), v.F("tr.pos.next"), length));
+            });
+            Case("frame_bad_handedness", () =>
+            {
+                var bad = new ZooCoordinateFrame(1f, ZooUpAxis.Y, (ZooHandedness)2);
+                ByRuntime("PoseConversion to a frame with handedness 2", Invalid, "zoo_pose_convert", "`to.handedness` is 2, not a ZooHandedness", () => rtn.ToEngine(bad).Rotation(ZooFloat4.Identity));
+            });
+            Case("frame_enum_values", () =>
+            {
+                var f = new ZooCoordinateFrame(0.01f, ZooUpAxis.Z, ZooHandedness.Left);
+                Expect(f.UpAxis == 1u && f.Handedness == 1u && f.Up == ZooUpAxis.Z && f.Hand == ZooHandedness.Left, "ZooCoordinateFrame(0.01, Z, Left): " + f);
+                f.Up = ZooUpAxis.Y;
+                f.Hand = ZooHandedness.Right;
+                Expect(f.UpAxis == 0u && f.Handedness == 0u, "Up = Y, Hand = Right: " + f.UpAxis + " " + f.Handedness);
+                Expect(ZooCoordinateFrame.Unity.Up == ZooUpAxis.Y && ZooCoordinateFrame.Unity.Hand == ZooHandedness.Left, "Unity's frame: " + ZooCoordinateFrame.Unity);
+                Expect(rtn.Frame.Up == rtn.Info.UpAxis && rtn.Frame.Hand == rtn.Info.Handedness, "the model's frame: " + rtn.Frame);
+                Expect(ZooCoordinateFrame.Unity.ToString() == "1 m/unit, Y up, Left-handed", "ToString: " + ZooCoordinateFrame.Unity);
+            });
+
+            // Loading from memory: the same model, bit for bit.
+            Case("from_bytes.transition", () => FromBytesCase(dir, "rtn.onnx", rtn, m => TransitionOutputs(v, m)));
+            Case("from_bytes.keyframes", () => FromBytesCase(dir, "arnn.onnx", arnn, m => KeyframesOutputs(v, m)));
+            Case("from_bytes.stitch", () => FromBytesCase(dir, "rmr.onnx", rmr, m => StitchOutputs(v, m)));
+            Case("from_bytes.synthesis", () => FromBytesCase(dir, "rnngmm.onnx", syn, m => SynthesisOutputs(v, m)));
+            Case("from_bytes.control", () => FromBytesCase(dir, "rnngmm.onnx", syn, m => ControlOutputs(v, m)));
+            Case("from_bytes.refused", () =>
+            {
+                ByRuntime("Model.FromBytes(null)", ZooStatus.NullPointer, "zoo_model_load_memory", "`bytes` is NULL", () => Model.FromBytes(null));
+                ByRuntime("Model.FromBytes(empty)", ZooStatus.LoadFailed, "zoo_model_load_memory", "`bytes_len` is 0", () => Model.FromBytes(new byte[0]));
+                ByRuntime("Model.FromBytes(garbage)", ZooStatus.LoadFailed, "zoo_model_load_memory", "the model in memory", () => Model.FromBytes(Encoding.UTF8.GetBytes("not a model")));
+                var bytes = File.ReadAllBytes(Path.Combine(dir, "rtn.onnx"));
+                ByRuntime("Model.FromBytes(truncated)", ZooStatus.LoadFailed, "zoo_model_load_memory", "", () => Model.FromBytes(bytes.Take(bytes.Length / 2).ToArray()));
+            });
+
+            // The library: version, status names, last error, log callback.
+            Case("library_version", () =>
+            {
+                var version = Zoo.Library.Version;
+                Console.WriteLine("  Library.Version: " + version);
+                Expect(System.Text.RegularExpressions.Regex.IsMatch(version, @"^zoo \d+\.\d+\.\d+\S* \(C ABI 3\)$"), "Library.Version `" + version + "` is not `zoo X.Y.Z (C ABI 3)`");
+                Expect(Zoo.Library.AbiVersion == ZooNative.ZOO_ABI_VERSION, "Library.AbiVersion " + Zoo.Library.AbiVersion);
+            });
+            Case("library_status_names", () =>
+            {
+                Expect(Zoo.Library.StatusName(ZooStatus.Ok) == "ZOO_STATUS_OK", "StatusName(Ok): " + Zoo.Library.StatusName(ZooStatus.Ok));
+                Expect(Zoo.Library.StatusName(ZooStatus.InvalidArgument) == "ZOO_STATUS_INVALID_ARGUMENT", "StatusName(InvalidArgument): " + Zoo.Library.StatusName(ZooStatus.InvalidArgument));
+                Expect(Zoo.Library.StatusName((ZooStatus)99) == "ZOO_STATUS_UNKNOWN", "StatusName(99): " + Zoo.Library.StatusName((ZooStatus)99));
+                try { new TransitionCharacters(rtn, 0); Fail("count 0 was not refused"); }
+                catch (ZooException e)
+                {
+                    Expect(e.StatusName == "ZOO_STATUS_INVALID_ARGUMENT", "ZooException.StatusName: " + e.StatusName);
+                    Expect(e.ToString().StartsWith("Zoo.ZooException (ZOO_STATUS_INVALID_ARGUMENT): zoo_transition_characters_new: ", StringComparison.Ordinal), "ZooException.ToString: " + e.ToString().Split('\n')[0]);
+                }
+            });
+            Case("library_last_error_empty_after_success", () =>
+            {
+                try { rtn.JointName(k); } catch (ZooException) { }
+                Expect(ZooNative.zoo_last_error(null, UIntPtr.Zero).ToUInt64() > 0, "a refused call leaves a message");
+                rtn.JointName(0);
+                Expect(ZooNative.zoo_last_error(null, UIntPtr.Zero).ToUInt64() == 0, "zoo_last_error is not empty after a successful call");
+            });
+            Case("library_log_callback", () =>
+            {
+                var messages = new List<string>();
+                Zoo.Library.SetLogCallback((level, message) => { lock (messages) messages.Add(level + " " + message); }, ZooLogLevel.Debug);
+                try
+                {
+                    using (var m = Model.FromBytes(File.ReadAllBytes(Path.Combine(dir, "rtn.onnx"))))
+                    using (var runner = new TransitionRunner(m, 1))
+                    {
+                    }
+                    GC.Collect();
+                    GC.WaitForPendingFinalizers();
+                    using (var m = Model.Load(Path.Combine(dir, "arnn.onnx"))) { }
+                }
+                finally { Zoo.Library.SetLogCallback(null); }
+                Console.WriteLine("  log messages up to Debug while loading two models (the delegate kept alive over a GC): " + messages.Count + (messages.Count > 0 ? ", e.g. `" + messages[0] + "`" : ""));
+                ByRuntime("SetLogCallback at level 9", Invalid, "zoo_set_log_callback", "max_level", () => Zoo.Library.SetLogCallback((l, m) => { }, (ZooLogLevel)9));
+                Zoo.Library.SetLogCallback((level, message) => { throw new InvalidOperationException("a handler that throws"); }, ZooLogLevel.Debug);
+                try { using (var m = Model.Load(Path.Combine(dir, "rtn.onnx"))) { } }
+                finally { Zoo.Library.SetLogCallback(null); }
+            });
+
+            // Disposal: what a wrapper answers without a native call checks for it too.
+            Case("disposed_properties", () =>
+            {
+                var m = Model.Load(Path.Combine(dir, "rtn.onnx"));
+                var tc = new TransitionCharacters(m, n);
+                var sm = Model.Load(Path.Combine(dir, "rnngmm.onnx"));
+                var sc = new SynthesisCharacters(sm, seeds);
+                var cc = new ControlCharacters(sm, seeds);
+                var st = new StitchStream(rmr);
+                foreach (var o in new ZooObject[] { m, tc, sm, sc, cc, st }) o.Dispose();
+                DisposedMember("Info", "Model", () => { var x = m.Info; });
+                DisposedMember("Task", "Model", () => { var x = m.Task; });
+                DisposedMember("Joints", "Model", () => { var x = m.Joints; });
+                DisposedMember("Fps", "Model", () => { var x = m.Fps; });
+                DisposedMember("Frame", "Model", () => { var x = m.Frame; });
+                DisposedMember("ToEngine", "Model", () => m.ToEngine(ZooCoordinateFrame.Unity));
+                DisposedMember("Count", "TransitionCharacters", () => { var x = tc.Count; });
+                DisposedMember("Joints", "TransitionCharacters", () => { var x = tc.Joints; });
+                DisposedMember("Count", "SynthesisCharacters", () => { var x = sc.Count; });
+                DisposedMember("Count", "ControlCharacters", () => { var x = cc.Count; });
+                DisposedMember("Latency", "StitchStream", () => { var x = st.Latency; });
+            });
         }
 
         // Managed allocation per step.
@@ -731,7 +1182,7 @@ namespace Zoo.Tests
             var targetRot = v.Rotations("tr.unity.target");
             var nextRoots = v.Roots("tr.unity.next");
             var nextRot = v.Rotations("tr.unity.next");
-            using (var runner = new TransitionRunner(rtn))
+            using (var runner = new TransitionRunner(rtn, n))
             using (var chars = new TransitionCharacters(rtn, n, ZooCoordinateFrame.Unity))
             {
                 var b = new PoseBuffer(n, k);
@@ -755,7 +1206,7 @@ namespace Zoo.Tests
             var placements = v.F("sy.placements");
             using (var runner = new SynthesisRunner(syn, seeds.Length))
             using (var chars = new SynthesisCharacters(syn, seeds, ZooCoordinateFrame.Unity))
-            using (var crunner = new ControlRunner(syn))
+            using (var crunner = new ControlRunner(syn, seeds.Length))
             using (var cchars = new ControlCharacters(syn, seeds, null, ZooCoordinateFrame.Unity))
             {
                 chars.Start(frames, placements);
@@ -783,12 +1234,12 @@ namespace Zoo.Tests
             }
             using (var runner = new KeyframesRunner(arnn, 2))
             {
-                int d = arnn.KeyframesInfo.DofCount;
+                int d = arnn.KeyframesInfo.FrameValueCount;
                 var counts = v.I("kf.counts");
                 var kf = v.I("kf.frames");
                 var kp = v.F("kf.poses");
                 var output = new float[71 * d];
-                total += Measure("keyframes complete batch", Steps, i => runner.CompleteBatch(counts, kf, kp, ReadOnlySpan<float>.Empty, output), report);
+                total += Measure("keyframes complete batch", Steps, i => runner.CompleteBatch(counts, kf, kp, ReadOnlySpan<byte>.Empty, output), report);
             }
             Console.WriteLine("allocation: bytes=" + total + " (GC.GetAllocatedBytesForCurrentThread over " + Steps + " calls each: " + report.ToString().TrimEnd(',', ' ') + ")");
         }
@@ -886,7 +1337,7 @@ namespace Zoo.Tests
                     var csTimes = new List<double>();
                     try
                     {
-                        using (var runner = new TransitionRunner(rtn))
+                        using (var runner = new TransitionRunner(rtn, batch))
                         using (var chars = new TransitionCharacters(rtn, batch, engine))
                         {
                             var b = new PoseBuffer(batch, k);

@@ -1,5 +1,6 @@
 // A reader of runtime/capi/include/zoo.h as cbindgen writes it (C99 declarations: typedef enums,
-// typedef structs, opaque typedefs, #define ZOO_ABI_VERSION, functions), and the C-to-C# mapping
+// typedef structs, opaque typedefs, function-pointer typedefs, integer #defines such as
+// ZOO_ABI_VERSION and ZOO_MAX_BATCH, functions), and the C-to-C# mapping
 // of the bindings in Runtime/Native: what BindingCheck.cs compares the compiled bindings with and
 // what Tools~/update-bindings.sh writes ZooNative.Functions.cs from. Anything else in the
 // header is an error, so that a new kind of declaration cannot slip past the check.
@@ -12,12 +13,14 @@ using System.Text.RegularExpressions;
 
 namespace Zoo.Tests
 {
-    /// <summary>A C type: a base name (<c>float</c>, <c>size_t</c>, <c>ZooModel</c>), whether it is an enum or a struct, its pointer depth.</summary>
+    /// <summary>A C type: a base name (<c>float</c>, <c>size_t</c>, <c>ZooModel</c>, <c>ZooLogCallback</c>), whether it is an enum, a struct or a function-pointer typedef of the header, its pointer depth.</summary>
     sealed class CType
     {
         public string Base;
         public bool IsEnum;
         public bool IsStruct;
+        /// <summary>A function-pointer typedef of the header (<c>typedef void (*ZooLogCallback)(...)</c>), bound by a C# delegate of the same name.</summary>
+        public bool IsCallback;
         public int Pointers;
 
         public static CType Parse(string text)
@@ -73,9 +76,28 @@ namespace Zoo.Tests
         public List<string> Doc = new List<string>();
     }
 
+    /// <summary>An integer <c>#define</c> of the header and its comment.</summary>
+    sealed class CConstant
+    {
+        public string Name;
+        public long Value;
+        public List<string> Doc = new List<string>();
+    }
+
+    /// <summary>A function-pointer typedef: <c>typedef RETURN (*NAME)(PARAMS);</c>.</summary>
+    sealed class CCallback
+    {
+        public string Name;
+        public CType Return;
+        public List<CParam> Params = new List<CParam>();
+    }
+
     sealed class CHeader
     {
         public uint AbiVersion;
+        /// <summary>Every <c>#define ZOO_NAME value</c> with an integer value, in the header's order (ZOO_ABI_VERSION, ZOO_MAX_BATCH, ...).</summary>
+        public List<CConstant> Constants = new List<CConstant>();
+        public List<CCallback> Callbacks = new List<CCallback>();
         public List<CEnum> Enums = new List<CEnum>();
         public List<CStruct> Structs = new List<CStruct>();
         public List<string> Opaque = new List<string>();
@@ -85,8 +107,9 @@ namespace Zoo.Tests
         static readonly Regex StructRx = new Regex(@"^typedef struct (\w+) \{(.*)\} (\w+);$");
         static readonly Regex OpaqueRx = new Regex(@"^typedef struct (\w+) (\w+);$");
         static readonly Regex FunctionRx = new Regex(@"^(.*?)\b(zoo_\w+)\((.*)\);$");
+        static readonly Regex CallbackRx = new Regex(@"^typedef (.*?)\(\*(\w+)\)\((.*)\);$");
         static readonly Regex FieldRx = new Regex(@"^(.*?)(\w+)(\[(\d+)\])?$");
-        static readonly Regex DefineRx = new Regex(@"^#define ZOO_ABI_VERSION (\d+)$");
+        static readonly Regex DefineRx = new Regex(@"^#define (ZOO_\w+) (\d+)$");
 
         public static CHeader Parse(string text)
         {
@@ -108,7 +131,12 @@ namespace Zoo.Tests
                 if (line.StartsWith("#", StringComparison.Ordinal))
                 {
                     var m = DefineRx.Match(line);
-                    if (m.Success) { h.AbiVersion = uint.Parse(m.Groups[1].Value, CultureInfo.InvariantCulture); sawVersion = true; }
+                    if (m.Success)
+                    {
+                        var value = long.Parse(m.Groups[2].Value, CultureInfo.InvariantCulture);
+                        h.Constants.Add(new CConstant { Name = m.Groups[1].Value, Value = value, Doc = new List<string>(doc) });
+                        if (m.Groups[1].Value == "ZOO_ABI_VERSION") { h.AbiVersion = (uint)value; sawVersion = true; }
+                    }
                     doc.Clear();
                     continue;
                 }
@@ -127,7 +155,33 @@ namespace Zoo.Tests
             }
             if (statement.Length != 0) throw new FormatException("zoo.h ends inside a declaration: " + statement);
             if (!sawVersion) throw new FormatException("zoo.h has no `#define ZOO_ABI_VERSION`");
+            h.MarkCallbacks();
             return h;
+        }
+
+        /// <summary>Marks every use of a function-pointer typedef (parameters, fields, returns) as a callback type.</summary>
+        void MarkCallbacks()
+        {
+            var names = new HashSet<string>(Callbacks.Select(c => c.Name));
+            var types = new List<CType>();
+            foreach (var f in Functions) { types.Add(f.Return); types.AddRange(f.Params.Select(p => p.Type)); }
+            foreach (var c in Callbacks) { types.Add(c.Return); types.AddRange(c.Params.Select(p => p.Type)); }
+            foreach (var s in Structs) types.AddRange(s.Fields.Select(f => f.Type));
+            foreach (var t in types)
+                if (!t.IsEnum && !t.IsStruct && names.Contains(t.Base)) t.IsCallback = true;
+        }
+
+        static List<CParam> Params(string text)
+        {
+            var list = new List<CParam>();
+            var ps = text.Trim();
+            if (ps == "void" || ps.Length == 0) return list;
+            foreach (var p in ps.Split(','))
+            {
+                var pm = Regex.Match(p.Trim(), @"^(.*?)(\w+)$");
+                list.Add(new CParam { Type = CType.Parse(pm.Groups[1].Value), Name = pm.Groups[2].Value });
+            }
+            return list;
         }
 
         void Add(string s, List<string> doc)
@@ -166,19 +220,13 @@ namespace Zoo.Tests
             {
                 Opaque.Add(m.Groups[1].Value);
             }
+            else if ((m = CallbackRx.Match(s)).Success)
+            {
+                Callbacks.Add(new CCallback { Name = m.Groups[2].Value, Return = CType.Parse(m.Groups[1].Value), Params = Params(m.Groups[3].Value) });
+            }
             else if ((m = FunctionRx.Match(s)).Success)
             {
-                var f = new CFunction { Name = m.Groups[2].Value, Return = CType.Parse(m.Groups[1].Value), Doc = doc };
-                var ps = m.Groups[3].Value.Trim();
-                if (ps != "void" && ps.Length > 0)
-                {
-                    foreach (var p in ps.Split(','))
-                    {
-                        var pm = Regex.Match(p.Trim(), @"^(.*?)(\w+)$");
-                        f.Params.Add(new CParam { Type = CType.Parse(pm.Groups[1].Value), Name = pm.Groups[2].Value });
-                    }
-                }
-                Functions.Add(f);
+                Functions.Add(new CFunction { Name = m.Groups[2].Value, Return = CType.Parse(m.Groups[1].Value), Doc = doc, Params = Params(m.Groups[3].Value) });
             }
             else
             {
@@ -218,7 +266,12 @@ namespace Zoo.Tests
         {
             why = null;
             Type b;
-            if (t.IsEnum || t.IsStruct)
+            if (t.IsCallback)
+            {
+                b = bindings.GetType(Namespace + "." + t.Base);
+                if (b == null || !typeof(Delegate).IsAssignableFrom(b)) { why = "no delegate " + Namespace + "." + t.Base + " for zoo.h's function-pointer typedef " + t.Base; return null; }
+            }
+            else if (t.IsEnum || t.IsStruct)
             {
                 b = bindings.GetType(Namespace + "." + t.Base);
                 if (b == null) { why = "no type " + Namespace + "." + t.Base; return null; }
@@ -237,7 +290,7 @@ namespace Zoo.Tests
         {
             string b;
             Type p;
-            if (t.IsEnum || t.IsStruct) b = t.Base;
+            if (t.IsEnum || t.IsStruct || t.IsCallback) b = t.Base;
             else if (Primitives.TryGetValue(t.Base, out p)) b = Keywords[p];
             else throw new FormatException("the C type `" + t.Base + "` has no C# mapping in Tests~/Header.cs");
             return b + new string('*', t.Pointers);
@@ -304,6 +357,12 @@ namespace Zoo.Tests
             return Regex.Replace(line, @"`([^`]*)`", "<c>$1</c>");
         }
 
+        /// <summary>The C# declaration of a <c>#define</c> of the header other than ZOO_ABI_VERSION: an int (a count, a length) when it fits, else a long.</summary>
+        public static string ConstantDeclaration(string name, long value)
+        {
+            return (value <= int.MaxValue ? "public const int " : "public const long ") + name + " = " + value.ToString(CultureInfo.InvariantCulture) + ";";
+        }
+
         /// <summary>The whole ZooNative.Functions.cs for a header.</summary>
         public static string Generate(CHeader h)
         {
@@ -315,6 +374,8 @@ namespace Zoo.Tests
             sb.Append("    public static unsafe partial class ZooNative\n    {\n");
             sb.Append("        /// <summary>The C ABI version these bindings were generated from (<c>ZOO_ABI_VERSION</c> of zoo.h).</summary>\n");
             sb.Append("        public const uint ZOO_ABI_VERSION = ").Append(h.AbiVersion).Append(";\n");
+            foreach (var c in h.Constants.Where(c => c.Name != "ZOO_ABI_VERSION"))
+                sb.Append('\n').Append(DocComment(c.Doc, "        ")).Append("        ").Append(ConstantDeclaration(c.Name, c.Value)).Append('\n');
             foreach (var f in h.Functions)
             {
                 sb.Append('\n').Append(DocComment(f.Doc, "        ")).Append("        ").Append(Declaration(f)).Append('\n');

@@ -48,7 +48,7 @@ void zoo_cbench_free(ZooCbench *b) {
   free(b);
 }
 
-/* Loads `path`, makes a runner and `batch` characters and copies the inputs of a posed
+/* Loads `path`, makes a runner for `batch` characters and `batch` characters and copies the inputs of a posed
  * transition of `length` frames (`past_*`: the context of every character, `target_*` / `next_*`:
  * one pose per character, `rotations_len` floats each). With `engine` NULL the poses are in the
  * model's frame; else they are in `engine`'s, converted to the model's once here and every stepped
@@ -62,14 +62,14 @@ ZooCbench *zoo_cbench_new(const char *path, size_t batch, const ZooRootMotion *p
   ZooCbench *b = (ZooCbench *)calloc(1, sizeof(ZooCbench));
   if (b == NULL) return NULL;
   if (zoo_model_load(path, &b->model) != ZOO_STATUS_OK || zoo_model_info(b->model, &info) != ZOO_STATUS_OK ||
-      zoo_transition_runner_new(b->model, &b->runner) != ZOO_STATUS_OK ||
+      zoo_transition_runner_new(b->model, batch, &b->runner) != ZOO_STATUS_OK ||
       zoo_transition_characters_new(b->model, batch, &b->chars) != ZOO_STATUS_OK) {
     zoo_cbench_free(b);
     return NULL;
   }
   b->frame.metres_per_unit = info.metres_per_unit;
-  b->frame.up_axis = info.up_axis;
-  b->frame.handedness = info.handedness;
+  b->frame.up_axis = (uint32_t)info.up_axis;
+  b->frame.handedness = (uint32_t)info.handedness;
   b->convert = engine != NULL;
   if (engine != NULL) b->engine = *engine;
   b->batch = batch;
@@ -103,8 +103,9 @@ double zoo_cbench_transition(ZooCbench *b) {
   double start, spent;
   size_t s, n = b->batch, k = b->joints;
   ZooStatus status = zoo_transition_start_posed(b->runner, b->chars, b->past, b->past_len, b->past_rotations,
-                                                b->past_rotations_len, b->target, b->target_rotations, b->next,
-                                                b->next_rotations, b->rotations_len, b->length);
+                                                b->past_rotations_len, b->target, n, b->target_rotations,
+                                                b->rotations_len, b->next, n, b->next_rotations, b->rotations_len,
+                                                b->length);
   start = now();
   for (s = 0; s <= b->length && status == ZOO_STATUS_OK; s++) {
     status = zoo_transition_step_posed(b->runner, b->chars, b->roots, n, b->rotations, n * 4 * k);

@@ -1,6 +1,7 @@
 //! `zoo bench runtime`, `zoo bench keyframes` and `zoo bench train`: the speed benchmarks of
 //! [`zoo_bench::runtime`], [`zoo_bench::keyframes`] and [`zoo_bench::train`].
 
+use anyhow::Context as _;
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
 use zoo_bench::runtime::RuntimeOptions;
@@ -34,6 +35,12 @@ pub struct RuntimeArgs {
     /// it is rewritten at each, as `zoo export --weights` writes it.
     #[arg(long, value_delimiter = ',', value_parser = ["f32", "f16", "int8"])]
     pub weights: Vec<String>,
+    /// `zoo bench runtime`: instead of throughput, time N single per-frame calls of the model's
+    /// task at each batch size (transition starts and steps, keyframe completions, stitch
+    /// stream frames, synthesis and control steps) and report their median, 99th percentile and
+    /// maximum: what a game's frame budget sees.
+    #[arg(long, value_name = "N", allow_hyphen_values = true, value_parser = |v: &str| whole_in(v, 10, 1_000_000))]
+    pub per_call: Option<usize>,
 }
 
 /// Models `zoo bench train` can measure.
@@ -112,6 +119,23 @@ impl RuntimeArgs {
 pub fn runtime(a: RuntimeArgs) -> anyhow::Result<()> {
     if let Some(path) = &a.json {
         crate::cmd::check_output_file("--json", path)?;
+    }
+    if let Some(calls) = a.per_call {
+        if !a.weights.is_empty() {
+            anyhow::bail!("--per-call times the file as it is; drop --weights (export at another width to time it)");
+        }
+        let bytes = std::fs::read(&a.model).with_context(|| format!("cannot read {}", a.model.display()))?;
+        let figures = zoo_bench::frame_budget::run(&bytes, &a.batch, calls)?;
+        println!(
+            "per-call times of {} on one thread ({}):",
+            a.model.display(),
+            zoo_bench::runtime::cpu_features().unwrap_or_else(|| "CPU features unknown".into())
+        );
+        println!("{}", zoo_bench::frame_budget::table(&figures));
+        if let Some(path) = &a.json {
+            crate::cmd::write_json(path, &figures)?;
+        }
+        return Ok(());
     }
     let report = zoo_bench::runtime::run(&a.options(), &zoo_nn::progress::Bar::new())?;
     println!("{}", report.header);

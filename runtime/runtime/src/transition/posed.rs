@@ -185,6 +185,98 @@ impl TransitionRunner {
         Ok(())
     }
 
+    /// [`TransitionRunner::begin_batch`] from engine poses: `first` holds each character's first
+    /// context frame, `target` and `next` one pose each; then
+    /// [`TransitionRunner::feed_posed_batch`] the other `past_frames - 1` context frames as the
+    /// game plays them, and [`TransitionRunner::step_posed_batch`]. The transition
+    /// [`TransitionRunner::start_posed_batch_for`] starts from the same poses, bit for bit.
+    pub fn begin_posed_batch(
+        &mut self,
+        states: &mut [TransitionState],
+        first: &[EnginePose],
+        target: &[EnginePose],
+        next: &[EnginePose],
+        past_frames: usize,
+        length: usize,
+    ) -> Result<(), MotionError> {
+        let n = states.len();
+        if n == 0 {
+            return Err(MotionError::EmptyBatch);
+        }
+        for (name, poses) in [("first", first), ("target", target), ("next", next)] {
+            if poses.len() != n {
+                return Err(wrong_len(name, 1, n, poses.len()));
+            }
+            for (i, p) in poses.iter().enumerate() {
+                self.check_pose(name, i, p)?;
+            }
+        }
+        let (mut p, mut t, mut x) = (
+            std::mem::take(&mut self.posed.past),
+            std::mem::take(&mut self.posed.target),
+            std::mem::take(&mut self.posed.next),
+        );
+        p.clear();
+        t.clear();
+        x.clear();
+        for pose in first {
+            self.pose_positions(pose, &mut p);
+        }
+        for pose in target {
+            self.pose_positions(pose, &mut t);
+        }
+        for pose in next {
+            self.pose_positions(pose, &mut x);
+        }
+        let result = self.begin_batch(states, &p, &t, &x, past_frames, length);
+        self.posed.past = p;
+        self.posed.target = t;
+        self.posed.next = x;
+        result?;
+        for (c, s) in states.iter_mut().enumerate() {
+            world_rotations(&first[c], &mut s.posed.from);
+            world_rotations(&target[c], &mut s.posed.to);
+            s.posed.root = root_of(first[c].hips_world(), first[c].hips_world_rotation());
+            s.posed.active = true;
+        }
+        Ok(())
+    }
+
+    /// [`TransitionRunner::feed_batch`] from engine poses: the next context frame of each
+    /// character of a transition begun with [`TransitionRunner::begin_posed_batch`].
+    pub fn feed_posed_batch(
+        &mut self,
+        states: &mut [TransitionState],
+        frame: &[EnginePose],
+    ) -> Result<(), MotionError> {
+        let n = states.len();
+        if frame.len() != n {
+            return Err(wrong_len("frame", 1, n, frame.len()));
+        }
+        for (i, p) in frame.iter().enumerate() {
+            self.check_pose("frame", i, p)?;
+        }
+        if let Some(c) = states.iter().position(|s| !s.posed.active) {
+            return Err(MotionError::TransitionSequence {
+                character: c,
+                reason: "this transition was begun from positions (begin_batch); feed it positions (feed_batch)".into(),
+            });
+        }
+        let mut p = std::mem::take(&mut self.posed.past);
+        p.clear();
+        for pose in frame {
+            self.pose_positions(pose, &mut p);
+        }
+        let result = self.feed_batch(states, &p);
+        self.posed.past = p;
+        result?;
+        for (c, s) in states.iter_mut().enumerate() {
+            world_rotations(&frame[c], &mut s.posed.from);
+            s.posed.root = root_of(frame[c].hips_world(), frame[c].hips_world_rotation());
+        }
+        Ok(())
+    }
+
     /// The next frame of a transition started with [`TransitionRunner::start_posed`], as an
     /// engine pose: the frame [`TransitionRunner::step`] returns, with local rotations fitted
     /// to it, the root motion since the previous frame (the last context frame for the first

@@ -1,9 +1,10 @@
-// The types of the C ABI (runtime/capi/include/zoo.h, C ABI version 2), one C# type per C type with
+// The types of the C ABI (runtime/capi/include/zoo.h, C ABI version 3), one C# type per C type with
 // the same layout: enums (int-sized), data structs (sequential, C field order; a `float name[N]`
-// array is a ZooFloatN), and the opaque handle structs (only ever behind a pointer). Field names
-// are the C names in PascalCase, enum members the C names without the enum's prefix in PascalCase.
-// The binding check (Tests~/BindingCheck.cs) compares every one of them with the header; the
-// properties below add nothing to the layout.
+// array is a ZooFloatN), the opaque handle structs (only ever behind a pointer) and the delegate of
+// the function-pointer typedef ZooLogCallback. Field names are the C names in PascalCase, enum
+// members the C names without the enum's prefix in PascalCase. The binding check
+// (Tests~/BindingCheck.cs) compares every one of them with the header; the properties below add
+// nothing to the layout.
 using System;
 using System.Runtime.InteropServices;
 
@@ -16,7 +17,7 @@ namespace Zoo.Native
         Ok = 0,
         /// <summary>A required pointer (handle, buffer or output) was NULL.</summary>
         NullPointer = 1,
-        /// <summary>An argument is wrong: a buffer of the wrong length, a non-finite value, a count of zero.</summary>
+        /// <summary>An argument is wrong: a buffer of the wrong length, a non-finite value, a count of zero or above <c>ZOO_MAX_BATCH</c>, a value outside its enum.</summary>
         InvalidArgument = 2,
         /// <summary>The model file cannot be read or is not an exported zoo model of a task this library runs.</summary>
         LoadFailed = 3,
@@ -64,6 +65,28 @@ namespace Zoo.Native
         /// <summary>Left-handed (Unity, Unreal).</summary>
         Left = 1,
     }
+
+    /// <summary>The severity of a log message (<c>ZooLogLevel</c>: the <c>level</c> of <see cref="ZooLogCallback"/>, the <c>max_level</c> of <c>zoo_set_log_callback</c>).</summary>
+    public enum ZooLogLevel
+    {
+        /// <summary>Something failed and was worked around or reported as a status.</summary>
+        Error = 1,
+        /// <summary>Something the engine programmer should know (the library degraded or ignored something).</summary>
+        Warning = 2,
+        /// <summary>What the library does, once per model or handle (loading, graph optimisation).</summary>
+        Info = 3,
+        /// <summary>Details for diagnosing a problem; frequent.</summary>
+        Debug = 4,
+    }
+
+    /// <summary>
+    /// The logging callback of <c>zoo_set_log_callback</c> (<c>ZooLogCallback</c>): <paramref name="level"/> a
+    /// <see cref="ZooLogLevel"/> value, <paramref name="message"/> a NUL-terminated UTF-8 string valid only during
+    /// the call, <paramref name="user_data"/> the pointer given with the callback. Called from any thread that calls
+    /// the library; it must not call back into it. <c>Zoo.Library.SetLogCallback</c> wires one for you.
+    /// </summary>
+    [UnmanagedFunctionPointer(CallingConvention.Cdecl)]
+    public unsafe delegate void ZooLogCallback(int level, byte* message, void* user_data);
 
     /// <summary>Three floats: a C <c>float[3]</c> (a position); the layout of Unity's <c>Vector3</c>.</summary>
     [StructLayout(LayoutKind.Sequential)]
@@ -132,23 +155,44 @@ namespace Zoo.Native
         public ZooFloat3 HipsPosition;
     }
 
-    /// <summary>A coordinate frame: length unit, up axis and handedness (<c>ZooCoordinateFrame</c>).</summary>
+    /// <summary>
+    /// A coordinate frame: length unit, up axis and handedness (<c>ZooCoordinateFrame</c>). The axis and the
+    /// handedness are stored as integers (C's <c>uint32_t</c>) holding a <see cref="ZooUpAxis"/> and a
+    /// <see cref="ZooHandedness"/> value, so that a value from outside the enum reaches the runtime, which refuses
+    /// it by name, rather than being misread: make frames with the constructor
+    /// (<c>new ZooCoordinateFrame(1f, ZooUpAxis.Y, ZooHandedness.Left)</c>) and read them with
+    /// <see cref="Up"/> and <see cref="Hand"/>.
+    /// </summary>
     [StructLayout(LayoutKind.Sequential)]
     public struct ZooCoordinateFrame
     {
         /// <summary>Metres per length unit (0.01: centimetres, 1: metres); finite and positive.</summary>
         public float MetresPerUnit;
-        /// <summary>The up axis.</summary>
-        public ZooUpAxis UpAxis;
-        /// <summary>The handedness.</summary>
-        public ZooHandedness Handedness;
+        /// <summary>The up axis: a <see cref="ZooUpAxis"/> value (<see cref="Up"/> reads and writes it as one); any other value is refused by the runtime.</summary>
+        public uint UpAxis;
+        /// <summary>The handedness: a <see cref="ZooHandedness"/> value (<see cref="Hand"/> reads and writes it as one); any other value is refused by the runtime.</summary>
+        public uint Handedness;
 
         /// <summary>A frame.</summary>
         public ZooCoordinateFrame(float metresPerUnit, ZooUpAxis upAxis, ZooHandedness handedness)
         {
             MetresPerUnit = metresPerUnit;
-            UpAxis = upAxis;
-            Handedness = handedness;
+            UpAxis = (uint)upAxis;
+            Handedness = (uint)handedness;
+        }
+
+        /// <summary><see cref="UpAxis"/> as a <see cref="ZooUpAxis"/>.</summary>
+        public ZooUpAxis Up
+        {
+            get { return (ZooUpAxis)UpAxis; }
+            set { UpAxis = (uint)value; }
+        }
+
+        /// <summary><see cref="Handedness"/> as a <see cref="ZooHandedness"/>.</summary>
+        public ZooHandedness Hand
+        {
+            get { return (ZooHandedness)Handedness; }
+            set { Handedness = (uint)value; }
         }
 
         /// <summary>Unity's frame: metres, Y up, left-handed.</summary>
@@ -157,10 +201,10 @@ namespace Zoo.Native
         /// <summary>zoo's data frame: centimetres, Y up, right-handed (bandai2, the synthetic data).</summary>
         public static ZooCoordinateFrame ZooCentimetres { get { return new ZooCoordinateFrame(0.01f, ZooUpAxis.Y, ZooHandedness.Right); } }
 
-        /// <summary>A readable form, e.g. <c>0.01 m/unit, Y up, Right-handed</c>.</summary>
+        /// <summary>A readable form, e.g. <c>0.01 m/unit, Y up, Right-handed</c> (a value outside the enums as its number).</summary>
         public override string ToString()
         {
-            return MetresPerUnit.ToString(System.Globalization.CultureInfo.InvariantCulture) + " m/unit, " + UpAxis + " up, " + Handedness + "-handed";
+            return MetresPerUnit.ToString(System.Globalization.CultureInfo.InvariantCulture) + " m/unit, " + Up + " up, " + Hand + "-handed";
         }
     }
 
@@ -211,13 +255,13 @@ namespace Zoo.Native
     [StructLayout(LayoutKind.Sequential)]
     public struct ZooKeyframesInfo
     {
-        /// <summary>Values per pose D.</summary>
-        public UIntPtr Dofs;
+        /// <summary>Values per pose D: a key and a completed frame are D floats (6 for the lamp).</summary>
+        public UIntPtr FrameValues;
         /// <summary>Key groups G a partial key fixes or leaves free; 0: keys are whole poses.</summary>
         public UIntPtr Groups;
 
-        /// <summary><see cref="Dofs"/> as an int.</summary>
-        public int DofCount { get { return (int)Dofs.ToUInt64(); } }
+        /// <summary><see cref="FrameValues"/> as an int.</summary>
+        public int FrameValueCount { get { return (int)FrameValues.ToUInt64(); } }
         /// <summary><see cref="Groups"/> as an int.</summary>
         public int GroupCount { get { return (int)Groups.ToUInt64(); } }
     }
@@ -246,13 +290,13 @@ namespace Zoo.Native
     public struct ZooSynthesisInfo
     {
         /// <summary>Values D of a feature frame (a start frame).</summary>
-        public UIntPtr FrameDim;
+        public UIntPtr FrameValues;
         /// <summary>Whether runners and characters made now refine each generated frame.</summary>
         [MarshalAs(UnmanagedType.U1)]
         public bool HasRefiner;
 
-        /// <summary><see cref="FrameDim"/> as an int.</summary>
-        public int FrameDimension { get { return (int)FrameDim.ToUInt64(); } }
+        /// <summary><see cref="FrameValues"/> as an int.</summary>
+        public int FrameValueCount { get { return (int)FrameValues.ToUInt64(); } }
     }
 
     /// <summary>How controlled characters plan (<c>ZooControlSettings</c>); the wrapper's <c>Zoo.ControlSettings</c> fills it.</summary>

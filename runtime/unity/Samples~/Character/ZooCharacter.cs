@@ -40,13 +40,15 @@ namespace Zoo.Samples
 
         void Awake()
         {
+            // On Android StreamingAssets is inside the APK: read the bytes with UnityWebRequest and
+            // use Model.FromBytes instead (Documentation~/zoo.md, Loading a model).
             model = Model.Load(Path.Combine(Application.streamingAssetsPath, modelFile));
             var info = model.TransitionInfo;
             length = info.TransitionFrameCount;
             dt = 1f / model.Fps;
             // Refuses a character that lacks any of the model's bones, with their list.
             rig = new ZooRig(hips, model.JointNames(), boneMap != null ? boneMap.ToDictionary() : null);
-            runner = new TransitionRunner(model);
+            runner = new TransitionRunner(model, 1);
             character = new TransitionCharacters(model, 1, ZooCoordinateFrame.Unity);
             int k = model.Joints;
             history = new PoseBuffer(info.PastFrameCount, k);

@@ -32,10 +32,12 @@ namespace Zoo.Samples
 
         void Start()
         {
+            // On Android StreamingAssets is inside the APK: read the bytes with UnityWebRequest and
+            // use Model.FromBytes instead (Documentation~/zoo.md, Loading a model).
             model = Model.Load(Path.Combine(Application.streamingAssetsPath, modelFile));
             dt = 1f / model.Fps;
             var joints = model.JointNames();
-            int d = model.SynthesisInfo.FrameDimension, side = Mathf.CeilToInt(Mathf.Sqrt(count));
+            int d = model.SynthesisInfo.FrameValueCount, side = Mathf.CeilToInt(Mathf.Sqrt(count));
             var seeds = new ulong[count];
             var frames = new float[count * d];
             var placements = new float[count * 3];
