@@ -141,12 +141,18 @@ fn synth_clip(index: usize) -> Clip {
 /// interpolation residual) on `clip`'s skeleton, or the paper's sizes with `paper`; seeded
 /// weights, statistics of `clip`'s windows.
 fn rtn_onnx(clip: &Clip, paper: bool) -> Vec<u8> {
+    rtn_onnx_with(clip, paper, None)
+}
+
+/// [`rtn_onnx`] with calibrated fallback thresholds in its file (as `zoo train rtn` writes them).
+fn rtn_onnx_with(clip: &Clip, paper: bool, fallback: Option<zoo_rtn::fallback::Fallback>) -> Vec<u8> {
     let sk = &clip.skeleton;
     let base = if paper { zoo_rtn::Config::paper() } else { zoo_rtn::Config::tiny() };
     let mut config = base.with_parents(&sk.parents);
     config.past_frames = 10;
     config.transition_frames = 30;
     config.interp_residual = true;
+    config.fallback = fallback;
     let varmap = candle_nn::VarMap::new();
     zoo_rtn::Rtn::new(&config, zoo_nn::SeededVarMap::builder(&varmap, 7, DType::F32, &Device::Cpu)).expect("RTN");
     let (_, global) = clip.global();
@@ -223,6 +229,8 @@ fn write_models_and_references(data: &Path) {
     };
     let clip = read_back(&synth_clip(0), "clip.bvh");
     let other = read_back(&synth_clip(1), "clip2.bvh");
+    // The glTF route into Blender: the clip as `zoo data convert clip.bvh clip.glb` writes it.
+    zoo_data::clip_io::write(&clip, &data.join("clip.glb")).expect("writing clip.glb");
     let k = clip.joints();
     let mut refs = serde_json::Map::new();
 
@@ -254,6 +262,11 @@ fn write_models_and_references(data: &Path) {
                "global_positions": global, "positions": out,
                "past_positions": past_pos, "target_positions": pos(60), "next_positions": pos(61)}),
     );
+
+    // The same RTN with fallback thresholds (in centimetres of target miss) that a target lifted
+    // a metre exceeds: the fallback's default and its settings not carrying over between calls.
+    let fallback = zoo_rtn::fallback::Fallback { start: 0.5, full: 2.0 };
+    std::fs::write(data.join("transition_fallback.onnx"), rtn_onnx_with(&clip, false, Some(fallback))).unwrap();
 
     // The paper-sized RTN (Blender's speed figure).
     std::fs::write(data.join("transition_paper.onnx"), rtn_onnx(&clip, true)).unwrap();

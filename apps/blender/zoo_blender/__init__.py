@@ -28,10 +28,41 @@ class ZooSettings(bpy.types.PropertyGroup):
     model_path: bpy.props.StringProperty(
         name="Model", subtype="FILE_PATH", description="A model exported by `zoo export --onnx` (.onnx)"
     )
+    bone_names: bpy.props.EnumProperty(
+        name="Bone names",
+        items=[
+            ("MODEL", "Model's", "Bones named as the model's joints (case and a namespace prefix ignored)"),
+            ("MIXAMO", "Mixamo", "Mixamo's names (mixamorig:Hips, LeftUpLeg, ...; maps/mixamo.json)"),
+            ("RIGIFY", "Rigify", "Rigify's metarig names (spine, thigh.L, ...; maps/rigify.json)"),
+        ],
+        default="MODEL",
+    )
     bone_map: bpy.props.StringProperty(
         name="Bone map",
         subtype="FILE_PATH",
-        description='Optional JSON {"model joint": "bone"} for bones named otherwise than the model\'s joints',
+        description='Optional JSON {"model joint": "bone"} for bones named otherwise (over the names chosen above)',
+    )
+    key_spacing: bpy.props.EnumProperty(
+        name="Keys",
+        items=[("1", "Every frame", ""), ("2", "Every 2 frames", ""), ("4", "Every 4 frames", "")],
+        default="1",
+        description="In-between keys on every frame, or every 2 or 4 frames from the range's start (Blender's curves between)",
+    )
+    strength: bpy.props.FloatProperty(
+        name="Strength",
+        default=1.0,
+        min=0.0,
+        max=1.0,
+        subtype="FACTOR",
+        description="0: the action's own curves, 1: the model's motion; between, each channel blended",
+    )
+    keep_root: bpy.props.BoolProperty(
+        name="Keep root path", default=False, description="The root bone's location keeps the action's curves"
+    )
+    pinned_bones: bpy.props.StringProperty(
+        name="Pinned",
+        description="Bones whose keyed rotations a keyframe model keeps at the keys inside the range (comma-separated; "
+        "empty: every key fixes every bone)",
     )
     stitch_first: bpy.props.PointerProperty(name="First", type=bpy.types.Action)
     stitch_second: bpy.props.PointerProperty(name="Second", type=bpy.types.Action)
@@ -58,10 +89,21 @@ class ZOO_PT_panel(bpy.types.Panel):
         s = context.scene.zoo
         col = self.layout.column()
         col.prop(s, "model_path")
+        col.prop(s, "bone_names")
         col.prop(s, "bone_map")
         col.operator("zoo.check_bones", icon="BONE_DATA")
         box = self.layout.box()
-        box.label(text="In-between (selected keys or preview range)")
+        box.label(text="In-between")
+        rules = box.column(align=True)
+        rules.label(text="Range: the preview range when on,")
+        rules.label(text="else two selected markers,")
+        rules.label(text="else the selected keys' first and last")
+        box.prop(s, "key_spacing")
+        box.prop(s, "strength", slider=True)
+        box.prop(s, "keep_root")
+        row = box.row(align=True)
+        row.prop(s, "pinned_bones")
+        row.operator("zoo.pin_selected", text="", icon="PINNED")
         box.operator("zoo.inbetween", icon="IPO_BEZIER")
         box = self.layout.box()
         box.label(text="Stitch two actions (or two NLA strips)")

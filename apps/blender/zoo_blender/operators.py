@@ -27,9 +27,33 @@ def active_armature(context):
     return ob
 
 
+def bone_map(s):
+    """The bone map of the panel: the shipped one chosen (Mixamo, Rigify), then the JSON file's
+    entries over it."""
+    m = {} if s.bone_names == "MODEL" else rigmod.shipped_map(s.bone_names.lower())
+    m.update(rigmod.read_bone_map(s.bone_map))
+    return m
+
+
 def matched_rig(context, model):
     s = settings(context)
-    return rigmod.Rig(active_armature(context), model, rigmod.read_bone_map(s.bone_map))
+    return rigmod.Rig(active_armature(context), model, bone_map(s))
+
+
+def scene_fps(scene):
+    return scene.render.fps / scene.render.fps_base
+
+
+def check_frame_rate(context, model, operation):
+    """Refuses a scene whose frame rate differs from the model's by more than 0.01 % (a BVH frame
+    time is stored rounded: 30.00003 fps is 30), naming the fix."""
+    fps = scene_fps(context.scene)
+    if abs(fps - model.fps) > 1e-4 * model.fps:
+        raise Refusal(
+            f"{operation}: the scene runs at {fps:g} fps but the model was trained at {model.fps:g} fps: set the scene's "
+            f"frame rate to {model.fps:g} fps (Output Properties > Format > Frame Rate; the action's keys stay on their "
+            "frames), or use a model trained at the scene's rate"
+        )
 
 
 class Progress:
@@ -68,6 +92,11 @@ def action_frames(action):
     return list(range(int(math.floor(a + 1e-6)), int(math.floor(b + 1e-6)) + 1))
 
 
+def selected_markers(scene):
+    """Frames of the selected timeline markers."""
+    return sorted(m.frame for m in scene.timeline_markers if m.select)
+
+
 def selected_key_frames(action, rig):
     """Frames holding a selected key on a matched bone's channels."""
     frames = set()
@@ -87,6 +116,52 @@ def selected_key_frames(action, rig):
     return frames
 
 
+def pinned_bones(s):
+    """The bones named in the panel's Pinned bones (comma-separated)."""
+    return [b.strip() for b in s.pinned_bones.split(",") if b.strip()]
+
+
+def pinned_flags(s, rig, keys, start, end):
+    """The keyframe model's `fixed` flags `(n, 1 + K)` for `keys`: with pinned bones, the keys
+    strictly inside the range fix only those bones' rotations (and the root's position when the
+    root bone is pinned), the two ends fix everything; without, every key fixes everything
+    (`None`)."""
+    pins = pinned_bones(s)
+    if not pins:
+        return None
+    unknown = [b for b in pins if b not in rig.bones]
+    if unknown:
+        raise Refusal(
+            f"pinned bones {', '.join(unknown)} are not bones matched to the model's joints: fix Pinned bones in the zoo panel"
+        )
+    flags = np.ones((len(keys), 1 + rig.joints), dtype=np.float32)
+    for i, f in enumerate(keys):
+        if start < f < end:
+            flags[i] = 0.0
+            flags[i, 0] = 1.0 if rig.bones[0] in pins else 0.0
+            for b in pins:
+                flags[i, 1 + rig.bones.index(b)] = 1.0
+    return flags
+
+
+class ZOO_OT_pin_selected(bpy.types.Operator):
+    """Pin the selected pose bones: at the keys inside the range a keyframe model keeps only their keyed rotations"""
+
+    bl_idname = "zoo.pin_selected"
+    bl_label = "Pin selected bones"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        ob = context.active_object
+        if ob is None or ob.type != "ARMATURE":
+            self.report({"ERROR"}, "zoo: select an armature: the active object is not one")
+            return {"CANCELLED"}
+        names = [b.name for b in ob.data.bones if b.select]
+        settings(context).pinned_bones = ", ".join(names)
+        self.report({"INFO"}, f"zoo: pinned {len(names)} bones" + (f": {', '.join(names)}" if names else " (none: every key fixes every bone)"))
+        return {"FINISHED"}
+
+
 class ZOO_OT_check_bones(bpy.types.Operator):
     """Match the active armature's bones to the model's joints and report what is missing"""
 
@@ -97,7 +172,7 @@ class ZOO_OT_check_bones(bpy.types.Operator):
         def body():
             model = model_of_task(settings(context).model_path, ("transition", "keyframes", "stitch", "synthesis"), "zoo")
             r = matched_rig(context, model)
-            msg = f"zoo: all {r.joints} joints of {model.kind} matched ({r.units_per_metre:.3g} armature units per metre)"
+            msg = f"zoo: all {r.joints} joints of {model.kind} matched ({r.describe()})"
             w = r.warnings()
             self.report({"WARNING"} if w else {"INFO"}, msg + ("; " + "; ".join(w) if w else ""))
             return {"FINISHED"}
@@ -122,16 +197,24 @@ class ZOO_OT_inbetween(bpy.types.Operator):
     allow_longer: bpy.props.BoolProperty(name="Allow longer than trained", default=False)
 
     def range(self, context, action, rig):
+        """The range, by the first rule that gives one: the operator's Start and End, the preview
+        range when it is on, two selected markers, the span of the selected keys."""
         if self.start >= 0 and self.end >= 0:
             return self.start, self.end, "given"
-        sel = selected_key_frames(action, rig)
-        if len(sel) >= 2:
-            return min(sel), max(sel), "selected keys"
         sc = context.scene
         if sc.use_preview_range:
             return sc.frame_preview_start, sc.frame_preview_end, "preview range"
+        markers = selected_markers(sc)
+        if len(markers) == 2:
+            return markers[0], markers[1], "selected markers"
+        if len(markers) > 2:
+            raise Refusal(f"{len(markers)} markers are selected: select the two at the range's ends")
+        sel = selected_key_frames(action, rig)
+        if len(sel) >= 2:
+            return min(sel), max(sel), "selected keys"
         raise Refusal(
-            "no range: select the keys at both ends of the range (Dope Sheet or Graph Editor), or set a preview range"
+            "no range: set a preview range, select two markers, or select the keys at both ends of the range (Dope "
+            "Sheet or Graph Editor)"
         )
 
     def execute(self, context):
@@ -141,6 +224,7 @@ class ZOO_OT_inbetween(bpy.types.Operator):
         t0 = time.perf_counter()
         s = settings(context)
         model = model_of_task(s.model_path, ("transition", "keyframes"), "In-between")
+        check_frame_rate(context, model, "In-between")
         r = matched_rig(context, model)
         ad = r.arm.animation_data
         action = ad.action if ad else None
@@ -184,18 +268,41 @@ class ZOO_OT_inbetween(bpy.types.Operator):
                 )
             keys = sorted({start, end} | {f for f in selected_key_frames(action, r) if start < f < end})
             hips, rot = r.sample(action, keys)
-            all_h, all_r = model.complete_poses(np.array(keys) - start, (hips, rot))
-            write_frames = [f for f in inner if f not in keys]
+            fixed = pinned_flags(s, r, keys, start, end)
+            all_h, all_r = model.complete_poses(np.array(keys) - start, (hips, rot), fixed)
+            if fixed is None:
+                write_frames = [f for f in inner if f not in keys]
+                keyset = set(keys)
+                # Everything strictly inside goes, except the keys the completion kept.
+                drop = lambda x: start < x < end and not (abs(x - round(x)) < 1e-4 and int(round(x)) in keyset)  # noqa: E731
+            else:
+                # Pinned bones: the keys inside are partial, so their frames are the model's too
+                # (the pinned bones' keyed rotations hit, the other bones free).
+                write_frames = inner
+                drop = lambda x: start < x < end  # noqa: E731
             idx = [f - start for f in write_frames]
             new_hips, new_rot = all_h[idx], all_r[idx]
-            keyset = set(keys)
-            # Everything strictly inside goes, except the keys the completion kept.
-            drop = lambda x: start < x < end and not (abs(x - round(x)) < 1e-4 and int(round(x)) in keyset)  # noqa: E731
+        spacing = int(s.key_spacing)
+        if spacing > 1:
+            every = [i for i, f in enumerate(write_frames) if (f - start) % spacing == 0]
+            write_frames = [write_frames[i] for i in every]
+            new_hips, new_rot = new_hips[every], new_rot[every]
         if write_frames:
-            r.write(action, write_frames, new_hips, new_rot, drop=drop, previous=start)
+            r.write(
+                action, write_frames, new_hips, new_rot, drop=drop, previous=start, strength=s.strength, keep_root=s.keep_root
+            )
         ms = 1000 * (time.perf_counter() - t0)
         context.scene["zoo_last_ms"] = ms
-        msg = f"zoo: in-between {start}-{end} ({source}): {len(write_frames)} frames from {model.kind} in {ms:.0f} ms"
+        context.scene["zoo_last_range"] = [start, end]
+        context.scene["zoo_last_range_source"] = source
+        how = [f"keys every {spacing} frames"] if spacing > 1 else []
+        how += [f"strength {s.strength:.2f}"] if s.strength < 1 else []
+        how += ["root path kept"] if s.keep_root else []
+        msg = (
+            f"zoo: in-between {start}-{end} ({source}): {len(write_frames)} keyed frames from {model.kind}"
+            + (f" ({', '.join(how)})" if how else "")
+            + f" in {ms:.0f} ms"
+        )
         w = r.warnings()
         self.report({"WARNING"} if w else {"INFO"}, msg + ("; " + "; ".join(w) if w else ""))
         return {"FINISHED"}
@@ -233,6 +340,7 @@ class ZOO_OT_stitch(bpy.types.Operator):
         t0 = time.perf_counter()
         s = settings(context)
         model = model_of_task(s.model_path, ("stitch",), "Stitch")
+        check_frame_rate(context, model, "Stitch")
         r = matched_rig(context, model)
         clips = stitch_inputs(context, r)
         for name, _, frames in clips:
@@ -288,6 +396,7 @@ class ZOO_OT_walk(bpy.types.Operator):
         t0 = time.perf_counter()
         s = settings(context)
         model = model_of_task(s.model_path, ("synthesis",), "Walk along curve")
+        check_frame_rate(context, model, "Walk along curve")
         if model.frame.up_axis != "y":
             raise Refusal("the model's frame is not Y up; synthesis models steer about +Y")
         r = matched_rig(context, model)
@@ -330,4 +439,4 @@ class ZOO_OT_walk(bpy.types.Operator):
         return {"FINISHED"}
 
 
-classes = (ZOO_OT_check_bones, ZOO_OT_inbetween, ZOO_OT_stitch, ZOO_OT_walk)
+classes = (ZOO_OT_check_bones, ZOO_OT_pin_selected, ZOO_OT_inbetween, ZOO_OT_stitch, ZOO_OT_walk)

@@ -1,9 +1,17 @@
 """An armature matched to a model's skeleton, and its keyframes to and from the model's poses.
 
-Matching: each joint of the model's skeleton is the bone of the same name (or the name a JSON
-map gives it; case is ignored when the exact name is absent), and the bone of each joint's
-parent must be that bone's parent. Bones above the model's root (bandai2's `joint_Root`) are
-taken at rest; other bones are left alone.
+Matching: each joint of the model's skeleton is the bone of the same name, or the name a bone
+map gives it (Mixamo's and Rigify's shipped in `maps/`, or a JSON file); a namespace prefix
+(`mixamorig:`) and case are ignored when the exact name is absent. The bone of each joint's parent
+must be that bone's parent or one of its ancestors: bones between them (Mixamo's `Spine1`) and
+above the model's root (bandai2's `joint_Root`) are taken at rest; other bones are left alone.
+
+Rest pose: when the armature's bones point elsewhere at rest than the model's (an A-pose against
+a T-pose, other bone rolls), each joint's rest alignment `C_j` (the rotation taking the
+armature's rest directions to its mapped children onto the model's: two children give a whole
+frame, one the shortest arc, a leaf bone its parent's) is put between the model's rotations and
+the bones', in and out; bone lengths are the armature's (its size is the median ratio of its bone
+lengths to the model's).
 
 Conversion: the model's poses are BVH style (the hips' world position and rotation, local
 rotations of the other joints, rest orientations the identity) in its frame (`zoo.frame`:
@@ -11,11 +19,11 @@ centimetres, Y up). They are converted to Blender's axes and metres with the run
 conversion (`zoo.Poses.convert`), to the armature's units by the ratio of its bone lengths to
 the model's, and to each pose bone's rest frame:
 
-    basis_j = rest_j^-1 * q_j * rest_j             (q_j in the armature's axes)
+    basis_j = rest_j^-1 * C_parent^-1 * q_j * C_j * rest_j      (q_j in the armature's axes)
     location_root = rest_root^-1 * (hips - rest_head_root)
 
-which is what Blender's own BVH importer writes, so a clip imported with it reads back to the
-poses of the file. Keys are written in each bone's rotation mode (quaternion, Euler of any
+which, with every `C` the identity (the model's own rest pose), is what Blender's own BVH importer
+writes, so a clip imported with it reads back to the poses of the file. Keys are written in each bone's rotation mode (quaternion, Euler of any
 order, axis-angle), Euler angles continuous from the previous key.
 
 Quaternions are `(x, y, z, w)` in numpy arrays, as in `zoo`.
@@ -50,6 +58,21 @@ def qrot(q, v):
     u, w = q[..., :3], q[..., 3:4]
     t = 2.0 * np.cross(u, v)
     return v + w * t + np.cross(u, t)
+
+
+MAPS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "maps")
+"""The shipped bone maps: `mixamo.json`, `rigify.json` (zoo's joint names to the rig's)."""
+
+
+def shipped_map(name):
+    """The shipped bone map `name` (`"mixamo"`, `"rigify"`)."""
+    with open(os.path.join(MAPS, f"{name}.json")) as f:
+        return json.load(f)
+
+
+def strip_namespace(name):
+    """A bone name without its namespace: `mixamorig:Hips` -> `Hips`."""
+    return name.rsplit(":", 1)[-1]
 
 
 def read_bone_map(path):
@@ -91,9 +114,10 @@ class Rig:
         z = zoo()
         sk = model.skeleton
         bones = arm.data.bones
-        lower = {}
+        lower, bare = {}, {}
         for b in bones:
             lower.setdefault(b.name.lower(), []).append(b.name)
+            bare.setdefault(strip_namespace(b.name).lower(), []).append(b.name)
         bone_map = bone_map or {}
         names, missing = [], []
         for n in sk.names:
@@ -102,6 +126,8 @@ class Rig:
                 names.append(want)
             elif len(lower.get(want.lower(), [])) == 1:
                 names.append(lower[want.lower()][0])
+            elif len(bare.get(strip_namespace(want).lower(), [])) == 1:
+                names.append(bare[strip_namespace(want).lower()][0])
             else:
                 missing.append(n if want == n else f"{n} (mapped to {want})")
                 names.append(None)
@@ -116,11 +142,16 @@ class Rig:
         for j in range(1, len(names)):
             p = names[int(sk.parents[j])]
             parent = bones[names[j]].parent
-            if parent is None or parent.name != p:
+            ancestors = []
+            a = parent
+            while a is not None:
+                ancestors.append(a.name)
+                a = a.parent
+            if p not in ancestors:
                 raise Refusal(
                     f"bone '{names[j]}' (joint {sk.names[j]}) has parent "
-                    f"'{parent.name if parent else 'none'}' but the model's parent joint is bone '{p}': the armature's "
-                    "hierarchy must be the model's"
+                    f"'{parent.name if parent else 'none'}' but the model's parent joint is bone '{p}', which is not "
+                    "above it: the armature's hierarchy must be the model's"
                 )
         self.bones = names
         k = len(names)
@@ -153,6 +184,26 @@ class Rig:
         n = np.linalg.norm(d_arm, axis=1) * np.linalg.norm(d_mod, axis=1)
         cos = np.sum(d_arm * d_mod, axis=1) / np.where(n > 0, n, 1)
         self.rest_angle = float(np.degrees(np.arccos(np.clip(cos[n > 0], -1, 1))).max()) if (n > 0).any() else 0.0
+        # The rest alignment of each joint: the armature's rest directions onto the model's.
+        rest_pos = np.zeros((k, 3))
+        for j in range(1, k):
+            rest_pos[j] = rest_pos[par[j]] + off[j]
+        align = np.tile([0.0, 0.0, 0.0, 1.0], (k, 1))
+        for j in range(k):
+            kids = [c for c in range(1, k) if par[c] == j]
+            pairs = [(heads[c] - heads[j], rest_pos[c] - rest_pos[j]) for c in kids]
+            pairs = [(a, b) for a, b in pairs if np.linalg.norm(a) > 1e-9 and np.linalg.norm(b) > 1e-9]
+            if pairs:
+                align[j] = frame_alignment(pairs)
+            elif j > 0:
+                align[j] = align[par[j]]
+        # A rest pose that agrees to 0.001 degrees is the model's: no alignment at all.
+        angle = 2 * np.degrees(np.arccos(np.clip(np.abs(align[:, 3]), 0, 1)))
+        align[angle < 1e-3] = [0.0, 0.0, 0.0, 1.0]
+        self.align = align
+        self.parent_align = np.tile([0.0, 0.0, 0.0, 1.0], (k, 1))
+        self.parent_align[1:] = align[par[1:]]
+        self.aligned_degrees = float(angle.max())
 
     @property
     def joints(self):
@@ -163,9 +214,16 @@ class Rig:
         w = []
         if self.proportion_error > 0.05:
             w.append(f"the armature's proportions differ from the model's by up to {100 * self.proportion_error:.0f}%")
-        if self.rest_angle > 10:
-            w.append(f"the armature's rest pose differs from the model's (bones up to {self.rest_angle:.0f} deg apart)")
         return w
+
+    def describe(self):
+        """How the armature maps onto the model, for the status bar."""
+        rest = (
+            f"rest pose aligned (bones up to {self.rest_angle:.0f} deg from the model's)"
+            if self.aligned_degrees > 0
+            else "the model's rest pose"
+        )
+        return f"{self.units_per_metre:.3g} armature units per metre, {rest}"
 
     # --- reading ------------------------------------------------------------------------------
 
@@ -193,7 +251,8 @@ class Rig:
                     q = mathutils.Euler(values[i], mode).to_quaternion()
                 basis[i, j] = (q.x, q.y, q.z, q.w)
         loc = self._channel_values(action, pose[self.bones[0]], "location", 3, frames)
-        q = qmul(qmul(self.rest, basis), qinv(self.rest))
+        # q_j = C_parent * rest_j * basis_j * rest_j^-1 * C_j^-1
+        q = qmul(qmul(qmul(qmul(self.parent_align, self.rest), basis), qinv(self.rest)), qinv(self.align))
         hips = (self.rest_head + qrot(self.rest[0], loc)) / self.units_per_metre
         return z.convert_world(hips, q, z.BLENDER, self.model.frame)
 
@@ -218,19 +277,24 @@ class Rig:
         z = zoo()
         h, q = z.convert_world(hips, rotations, self.model.frame, z.BLENDER)
         q = q.astype(np.float64)
-        basis = qmul(qmul(qinv(self.rest), q), self.rest)
+        basis = qmul(qmul(qmul(qmul(qinv(self.rest), qinv(self.parent_align)), q), self.align), self.rest)
         h = h.astype(np.float64) * self.units_per_metre
         loc = qrot(qinv(self.rest[0]), h - self.rest_head)
         return basis, loc
 
-    def write(self, action, frames, hips, rotations, drop=None, previous=None):
+    def write(self, action, frames, hips, rotations, drop=None, previous=None, strength=1.0, keep_root=False):
         """Keys the poses (BVH style, the model's frame) at `frames` on every matched bone's
         rotation and the root's location. Existing keys at frames where `drop(frame)` is true
         are removed first (default: those at `frames`). `previous`: the frame whose value the
-        first key continues from (quaternion signs, Euler angles); none for a new action."""
+        first key continues from (quaternion signs, Euler angles); none for a new action.
+        `strength` blends each channel between the action's own curves (0: their values at
+        `frames`, exactly) and the poses (1); `keep_root`: the root's location keeps the
+        action's curves."""
         import mathutils
 
         basis, loc = self.channels(hips, rotations)
+        strength = float(strength)
+        old_of = (lambda pb, path, size: self._channel_values(action, pb, path, size, list(frames))) if action else None
         frames = np.asarray(frames, dtype=np.float64)
         keyed = set(np.round(frames).astype(int).tolist())
         if drop is None:
@@ -258,13 +322,52 @@ class Rig:
                     v = np.array(e)
                 values[i] = v
                 prev = v
+            if strength < 1.0 and old_of is not None:
+                values = blend(old_of(pb, path, size), values, strength, mode)
             data_path = pb.path_from_id(path)
             for c in range(size):
                 write_channel(action, data_path, c, name, frames, values[:, c], drop)
         root = pose[self.bones[0]]
+        if old_of is not None and (keep_root or strength < 1.0):
+            loc = blend(old_of(root, "location", 3), loc, 0.0 if keep_root else strength, "LOCATION")
         data_path = root.path_from_id("location")
         for c in range(3):
             write_channel(action, data_path, c, self.bones[0], frames, loc[:, c], drop)
+
+
+def frame_alignment(pairs):
+    """The rotation `(x, y, z, w)` taking the first direction of each pair onto the second: the
+    whole frame of the first two that are not parallel, else the shortest arc of the first."""
+    import mathutils
+
+    a0, b0 = (mathutils.Vector(v).normalized() for v in pairs[0])
+    for a, b in pairs[1:]:
+        a1, b1 = mathutils.Vector(a).normalized(), mathutils.Vector(b).normalized()
+        if a1.cross(a0).length > 1e-3 and b1.cross(b0).length > 1e-3:
+
+            def frame(x, y):
+                z = x.cross(y).normalized()
+                return mathutils.Matrix((x, z.cross(x), z)).transposed()
+
+            q = (frame(b0, b1) @ frame(a0, a1).transposed()).to_quaternion()
+            return np.array([q.x, q.y, q.z, q.w])
+    q = a0.rotation_difference(b0)
+    return np.array([q.x, q.y, q.z, q.w])
+
+
+def blend(old, new, strength, mode):
+    """Channel values between the action's (`old`, strength 0: exactly) and the model's (`new`,
+    strength 1: exactly): linear, quaternions on the same hemisphere and normalised."""
+    if strength <= 0.0:
+        return np.array(old, dtype=np.float64)
+    if strength >= 1.0:
+        return new
+    old = np.asarray(old, dtype=np.float64)
+    if mode == "QUATERNION":
+        new = np.where(np.sum(old * new, axis=-1, keepdims=True) < 0, -new, new)
+        v = (1 - strength) * old + strength * new
+        return v / np.linalg.norm(v, axis=-1, keepdims=True)
+    return (1 - strength) * old + strength * new
 
 
 def write_channel(action, data_path, index, group, frames, values, drop):
@@ -309,6 +412,10 @@ def write_channel(action, data_path, index, group, frames, values, drop):
         p.interpolation = interpolation
         p.handle_left_type = "AUTO_CLAMPED"
         p.handle_right_type = "AUTO_CLAMPED"
+        # The keys written are not selected: the next in-between's range is not taken from them.
+        p.select_control_point = False
+        p.select_left_handle = False
+        p.select_right_handle = False
     fc.update()
     if nk:
         co = np.empty(2 * (nk + n), dtype=np.float32)

@@ -54,7 +54,10 @@ pub fn values<'a>(name: &str, a: &'a PyReadonlyArrayDyn<'_, f32>, spec: &[Dim]) 
     let dims = check_shape(name, a.shape(), spec)?;
     let v = a.as_slice().map_err(|_| shape(format!("`{name}` must be a C-contiguous float32 array")))?;
     if let Some(i) = v.iter().position(|x| !x.is_finite()) {
-        return Err(shape(format!("`{name}` holds {} at flat index {i}; every value must be finite", v[i])));
+        return Err(crate::error::non_finite(format!(
+            "`{name}` holds {} at flat index {i}; every value must be finite",
+            v[i]
+        )));
     }
     Ok((v, dims))
 }

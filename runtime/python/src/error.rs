@@ -5,7 +5,8 @@
 //! attribute), with two subclasses a script may want to tell apart: `WrongTaskError` (a model
 //! of another task) and `ModelFileError` (a file that cannot be read or is not an exported
 //! model). `ShapeError` is an array of the wrong shape or type given to the package, caught
-//! before the runtime sees it; `BvhError` a BVH file that cannot be read or written.
+//! before the runtime sees it; `NonFiniteError` a NaN or infinity in an array (given to the package,
+//! or met by the runtime); `BvhError` a BVH file that cannot be read or written.
 
 use pyo3::create_exception;
 use pyo3::exceptions::PyException;
@@ -39,6 +40,12 @@ create_exception!(
     "An array of the wrong shape, type or values given to the package (checked before the runtime runs)."
 );
 create_exception!(zoo, BvhError, ZooError, "A BVH file that cannot be read or written.");
+create_exception!(
+    zoo,
+    NonFiniteError,
+    ZooError,
+    "A NaN or an infinity in an array given to the package (the message names the array and the index)."
+);
 
 /// The name of a runtime error's variant (the exception's `kind`), from its `Debug` form so
 /// that a variant added to the runtime needs no change here.
@@ -52,6 +59,7 @@ pub fn motion(e: RuntimeError) -> PyErr {
     let message = e.to_string();
     let err = match &e {
         RuntimeError::WrongTask { .. } => WrongTaskError::new_err(message),
+        RuntimeError::NonFinite { .. } => NonFiniteError::new_err(message),
         RuntimeError::Io { .. }
         | RuntimeError::Format(_)
         | RuntimeError::NotOnnx { .. }
@@ -66,6 +74,11 @@ pub fn motion(e: RuntimeError) -> PyErr {
         let _ = err.value(py).setattr("kind", kind(&e));
     });
     err
+}
+
+/// A [`NonFiniteError`] with `message`.
+pub fn non_finite(message: impl Into<String>) -> PyErr {
+    NonFiniteError::new_err(message.into())
 }
 
 /// A [`ShapeError`] with `message`.
@@ -94,5 +107,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("ModelFileError", py.get_type::<ModelFileError>())?;
     m.add("ShapeError", py.get_type::<ShapeError>())?;
     m.add("BvhError", py.get_type::<BvhError>())?;
+    m.add("NonFiniteError", py.get_type::<NonFiniteError>())?;
     Ok(())
 }

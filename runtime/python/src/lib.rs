@@ -31,10 +31,30 @@ use zoo_runtime::pose::root_delta;
 
 /// Loads an exported model file of any task through `zoo_runtime::LoadedModel::load`.
 /// Returns `(task, model)`, `model` the native object of the task (`Transition`, `Keyframes`,
-/// `Stitch`, `Synthesis`).
+/// `Stitch`, `Synthesis`). A folder (a training run) is refused with the command that exports it.
 #[pyfunction]
 fn load(py: Python<'_>, path: PathBuf) -> PyResult<(String, Py<PyAny>)> {
+    if path.is_dir() {
+        return Err(error::ModelFileError::new_err(format!(
+            "{0} is a folder (a training run?), not an exported model: export it with `zoo export --onnx {0} --out \
+             model.onnx` and load model.onnx",
+            path.display()
+        )));
+    }
     let model = LoadedModel::load(&path).or_py()?;
+    wrap(py, model, &path.display().to_string())
+}
+
+/// Loads an exported model from the bytes of its file (`zoo_runtime::LoadedModel::from_bytes`):
+/// the same model as `load` of that file.
+#[pyfunction]
+fn load_bytes(py: Python<'_>, data: &[u8]) -> PyResult<(String, Py<PyAny>)> {
+    let model = LoadedModel::from_bytes(data).or_py()?;
+    wrap(py, model, "the model's bytes")
+}
+
+/// `(task, native object)` of a loaded model; `what` names it in errors.
+fn wrap(py: Python<'_>, model: LoadedModel, what: &str) -> PyResult<(String, Py<PyAny>)> {
     let task = model.task().name().to_string();
     let object: Py<PyAny> = match model {
         LoadedModel::Transition(m) => Py::new(py, transition::Transition::new(m).or_py()?)?.into_any(),
@@ -43,8 +63,7 @@ fn load(py: Python<'_>, path: PathBuf) -> PyResult<(String, Py<PyAny>)> {
         LoadedModel::Synthesis(m) => Py::new(py, synthesis::Synthesis::new(m))?.into_any(),
         other => {
             return Err(error::ModelFileError::new_err(format!(
-                "{}: a `{}` model, which this package does not run yet",
-                path.display(),
+                "{what}: a `{}` model, which this package does not run yet",
                 other.task()
             )));
         }
@@ -134,6 +153,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", VERSION)?;
     m.add("FORMAT_VERSION", zoo_runtime::FORMAT_VERSION)?;
     m.add_function(wrap_pyfunction!(load, m)?)?;
+    m.add_function(wrap_pyfunction!(load_bytes, m)?)?;
     m.add_function(wrap_pyfunction!(poses_from_world, m)?)?;
     m.add_function(wrap_pyfunction!(convert_poses, m)?)?;
     m.add_function(wrap_pyfunction!(bvh::read_bvh, m)?)?;

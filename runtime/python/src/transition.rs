@@ -73,8 +73,11 @@ impl Transition {
     }
 
     /// A transition of `N` characters in global positions: `past` `(N, P, K, 3)`, `target`
-    /// and `next` `(N, K, 3)`; returns `(N, L + 1, K, 3)`, the last frame the target.
-    #[pyo3(signature = (past, target, next, frames=None, allow_beyond_trained=false, foot_lock=false, fallback=false))]
+    /// and `next` `(N, K, 3)`; returns `(N, L + 1, K, 3)`, the last frame the target. Every
+    /// setting is the call's own (the runner is set afresh each call, nothing carries over to the
+    /// next); the defaults are `zoo transition`'s: the model's calibrated fallback on, the foot
+    /// lock off.
+    #[pyo3(signature = (past, target, next, frames=None, allow_beyond_trained=false, foot_lock=false, fallback=true))]
     #[allow(clippy::too_many_arguments)]
     fn positions<'py>(
         &self,
@@ -101,6 +104,8 @@ impl Transition {
         runner.set_foot_lock(if foot_lock { self.model.default_foot_lock() } else { None });
         if fallback {
             runner.set_model_fallback();
+        } else {
+            runner.set_fallback(None);
         }
         runner.generate_batch(&mut states, past, target, next, &mut out).or_py()?;
         drop(runner);

@@ -129,6 +129,81 @@ def test_transition_length_and_the_trained_limit(data, clip):
     assert m.transition(p[20:30], p[80], p[81], frames=50, allow_beyond_trained=True).shape == (51,)
 
 
+def lifted_target(clip):
+    """Positions of frames 20..30, and frame 60 (and 61) lifted 1 m: a target the network misses."""
+    g = clip.poses().global_positions
+    up = np.array([0.0, 100.0, 0.0], np.float32)
+    return g[20:30], g[60] + up, g[61] + up
+
+
+def test_positions_apply_the_calibrated_fallback_by_default(data, clip):
+    m = zoo.load(data / "transition_fallback.onnx")
+    past, target, nxt = lifted_target(clip)
+    default = m.transition_positions(past, target, nxt)
+    on = m.transition_positions(past, target, nxt, fallback=True)
+    off = m.transition_positions(past, target, nxt, fallback=False)
+    # `zoo transition`'s default: the fallback on.
+    assert max_diff(default, on) == 0.0
+    # Missing a target lifted a metre, the fallback moves the frames (centimetres).
+    assert max_diff(on, off) > 1.0
+
+
+def test_transition_settings_do_not_carry_over_between_calls(data, clip):
+    m = zoo.load(data / "transition_fallback.onnx")
+    past, target, nxt = lifted_target(clip)
+    off = m.transition_positions(past, target, nxt, fallback=False)
+    plain = m.transition_positions(past, target, nxt, fallback=False, foot_lock=False)
+    m.transition_positions(past, target, nxt, fallback=True, foot_lock=True)
+    assert max_diff(m.transition_positions(past, target, nxt, fallback=False), off) == 0.0
+    assert max_diff(plain, off) == 0.0
+    # A longer transition allowed once is not allowed on the next call.
+    p = clip.poses()
+    m.transition(p[20:30], p[80], p[81], frames=50, allow_beyond_trained=True)
+    with pytest.raises(zoo.MotionError):
+        m.transition(p[20:30], p[80], p[81], frames=50)
+
+
+def test_load_bytes_gives_the_files_outputs_bit_for_bit(data, clip):
+    path = data / "transition_fallback.onnx"
+    a = zoo.load(path)
+    b = zoo.load_bytes(path.read_bytes())
+    assert type(b) is zoo.TransitionModel and b.path == "<bytes>"
+    assert b.skeleton.names == a.skeleton.names and b.fps == a.fps
+    past, target, nxt = lifted_target(clip)
+    assert np.array_equal(a.transition_positions(past, target, nxt), b.transition_positions(past, target, nxt))
+    p = clip.poses()
+    ta, tb = a.transition(p[20:30], p[60], p[61]), b.transition(p[20:30], p[60], p[61])
+    for f in zoo._POSE_FIELDS:
+        assert np.array_equal(getattr(ta, f), getattr(tb, f)), f
+    s = zoo.load_bytes((data / "stitch.onnx").read_bytes())
+    assert type(s) is zoo.StitchModel
+    with pytest.raises(zoo.ModelFileError, match="zoo export"):
+        zoo.load_bytes(b"HIERARCHY\nROOT Hips\n")
+    with pytest.raises(TypeError, match="zoo.load"):
+        zoo.load_bytes(str(path))
+
+
+def test_clip_resample_keeps_the_duration_and_the_frames_it_lands_on(clip):
+    assert clip.resample(clip.fps * (1 + 1e-6)) is clip
+    half = clip.resample(clip.fps / 2)
+    assert half.fps == pytest.approx(clip.fps / 2)
+    assert half.frames == (clip.frames - 1) // 2 + 1
+    # Every other frame of the clip, exactly where the new frames land on the old ones.
+    assert max_diff(half.positions, clip.positions[::2][: half.frames]) < 1e-9
+    assert quat_diff(half.rotations, clip.rotations[::2][: half.frames]) < 1e-9
+    up = clip.resample(clip.fps * 2)
+    assert up.frames == 2 * (clip.frames - 1) + 1
+    mid = up.positions[1]
+    assert max_diff(mid, (clip.positions[0] + clip.positions[1]) / 2) < 1e-9
+
+
+def test_a_clip_at_another_rate_is_refused_naming_the_fix(data, clip):
+    m = zoo.load(data / "transition.onnx")
+    m.check_fps(30.000030000029998)
+    with pytest.raises(zoo.ShapeError, match=r"24 fps but the model was trained at 30 fps: resample it first \(`zoo.Clip.resample\(30\)`\)"):
+        m.check_fps(24)
+
+
 # --- keyframes ---------------------------------------------------------------------------------
 
 
@@ -414,12 +489,42 @@ def test_wrong_shapes_are_shape_errors(data, clip):
     p = clip.poses()
     with pytest.raises(zoo.ShapeError, match=r"`past_rotations` must have shape \(N=1, P=10, K=21, 4\), found \(1, 10, 20, 4\)"):
         m.transition((p.hips[0:10], p.rotations[0:10, :20]), p[60], p[61])
-    with pytest.raises(zoo.ShapeError, match="every value must be finite"):
-        m.transition_positions(np.full((10, K, 3), np.nan), np.zeros((K, 3)), np.zeros((K, 3)))
     with pytest.raises(zoo.ShapeError, match="zero quaternion"):
         m.transition((p.hips[0:10], np.zeros((10, K, 4))), p[60], p[61])
     with pytest.raises(zoo.ShapeError, match="must be zoo.Poses"):
         m.transition("walk", p[60], p[61])
+
+
+def test_a_nan_is_a_non_finite_error_not_a_shape_error(data, clip):
+    m = zoo.load(data / "transition.onnx")
+    p = clip.poses()
+    with pytest.raises(zoo.NonFiniteError, match=r"`past` holds NaN at flat index 0; every value must be finite"):
+        m.transition_positions(np.full((10, K, 3), np.nan), np.zeros((K, 3)), np.zeros((K, 3)))
+    h = p.hips[20:30].copy()
+    h[3, 1] = np.inf
+    with pytest.raises(zoo.NonFiniteError) as e:
+        m.transition((h, p.rotations[20:30]), p[60], p[61])
+    assert not isinstance(e.value, zoo.ShapeError) and isinstance(e.value, zoo.ZooError)
+
+
+def test_a_model_of_another_task_is_a_wrong_task_error(data, clip):
+    stitch = zoo.load(data / "stitch.onnx")
+    p = clip.poses()
+    with pytest.raises(zoo.WrongTaskError, match=r"`transition` is a method of transition models, but .*stitch.onnx is a stitch model \(rmr\)"):
+        stitch.transition(p[20:30], p[60], p[61])
+    with pytest.raises(zoo.WrongTaskError, match="keyframes models"):
+        zoo.load(data / "transition.onnx").complete_poses([0, 10], p[[0, 10]])
+    # Not a method of any task: the usual AttributeError.
+    with pytest.raises(AttributeError):
+        stitch.no_such_thing
+
+
+def test_a_run_folder_is_answered_with_the_export_command(tmp_path):
+    run = tmp_path / "rtn_run"
+    run.mkdir()
+    with pytest.raises(zoo.ModelFileError) as e:
+        zoo.load(run)
+    assert f"zoo export --onnx {run} --out model.onnx" in str(e.value)
 
 
 # --- the package itself ------------------------------------------------------------------------

@@ -21,8 +21,13 @@ Conventions (the runtime's):
 
 Every error is a ``zoo.ZooError``; the runtime's are ``zoo.MotionError`` with its message (and
 ``kind``, the runtime's variant), ``zoo.WrongTaskError`` for a model of another task and
-``zoo.ModelFileError`` for a file that is not an exported model; arrays of the wrong shape raise
-``zoo.ShapeError``.
+``zoo.ModelFileError`` for a file that is not an exported model (a training run's folder is
+answered with the ``zoo export --onnx`` command that makes one); arrays of the wrong shape raise
+``zoo.ShapeError``, a NaN or an infinity ``zoo.NonFiniteError``.
+
+Every setting is the call's own: nothing one call sets carries over to the next. The defaults
+are the CLI's (``transition_positions``: the model's calibrated fallback on, the foot lock off,
+as ``zoo transition``; ``complete_poses``: every key hit and the feet locked, as ``zoo complete``).
 """
 
 from __future__ import annotations
@@ -38,6 +43,7 @@ from ._native import (  # noqa: F401  (re-exported)
     BvhError,
     ModelFileError,
     MotionError,
+    NonFiniteError,
     ShapeError,
     WrongTaskError,
     ZooError,
@@ -48,6 +54,7 @@ FORMAT_VERSION: int = _native.FORMAT_VERSION
 
 __all__ = [
     "load",
+    "load_bytes",
     "read_bvh",
     "write_bvh",
     "Poses",
@@ -70,6 +77,7 @@ __all__ = [
     "WrongTaskError",
     "ModelFileError",
     "ShapeError",
+    "NonFiniteError",
     "BvhError",
     "FORMAT_VERSION",
 ]
@@ -274,6 +282,26 @@ class Model:
     def __repr__(self) -> str:
         return f"<zoo.{type(self).__name__} {self.kind} ({self.task}) {self.joints} joints at {self.fps:g} fps: {self.path}>"
 
+    def __getattr__(self, name: str):
+        # Only reached for attributes the model does not have: a method of another task's
+        # model is a `WrongTaskError` naming both tasks, anything else the usual AttributeError.
+        for task, cls in _MODEL_TYPES.items():
+            if task != self.__dict__.get("task") and name in vars(cls) and not name.startswith("_"):
+                raise WrongTaskError(
+                    f"`{name}` is a method of {task} models, but {self.__dict__.get('path')} is a "
+                    f"{self.__dict__.get('task')} model ({self.__dict__.get('kind')}): load a {task} model"
+                )
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    def check_fps(self, fps: float, what: str = "the clip") -> None:
+        """Raises ``zoo.ShapeError`` unless ``fps`` is the model's frame rate within 0.01 %
+        (a BVH frame time is stored rounded: 30.00003 fps is 30), naming the fix."""
+        if not abs(float(fps) - self.fps) <= 1e-4 * self.fps:
+            raise ShapeError(
+                f"{what} is at {float(fps):g} fps but the model was trained at {self.fps:g} fps: resample it first "
+                f"(`zoo.Clip.resample({self.fps:g})`)"
+            )
+
 
 def _bvh_style(p: Union[Poses, Tuple[np.ndarray, np.ndarray]], name: str) -> Tuple[np.ndarray, np.ndarray]:
     if isinstance(p, Poses):
@@ -340,13 +368,15 @@ class TransitionModel(Model):
         frames: Optional[int] = None,
         allow_beyond_trained: bool = False,
         foot_lock: bool = False,
-        fallback: bool = False,
+        fallback: bool = True,
     ) -> np.ndarray:
         """A transition in global joint positions: ``past`` ``(P, K, 3)``, ``target`` and
         ``next`` ``(K, 3)`` (or with a leading ``N`` for ``N`` characters). Returns
         ``(frames + 1, K, 3)`` (or ``(N, frames + 1, K, 3)``), the last frame the target:
-        the network's positions, target-blended; ``foot_lock`` and ``fallback`` add the
-        runtime's foot lock and interpolation fallback."""
+        the network's positions, target-blended, then (as ``zoo transition``) moved towards the
+        interpolation when the target is missed by more than the model's calibrated thresholds
+        (``fallback``, on by default) and foot-locked with ``foot_lock`` (off by default). The
+        settings hold for this call only."""
         p = _f32(past, "past")
         t = _f32(target, "target")
         n = _f32(next, "next")
@@ -688,10 +718,21 @@ _MODEL_TYPES = {
 def load(path: PathLike) -> Union[TransitionModel, KeyframeModel, StitchModel, SynthesisModel]:
     """Loads any model file of ``zoo export --onnx`` (the runtime's one loader) and returns the
     type of its task. Raises ``zoo.ModelFileError`` for a file that is not an exported model
-    (with the runtime's message: the key, the version, the fix)."""
+    (with the runtime's message: the key, the version, the fix), or a folder (a training run:
+    the message gives the ``zoo export --onnx`` command)."""
     p = os.fspath(path)
     task, native = _native.load(p)
     return _MODEL_TYPES[task](native, p)
+
+
+def load_bytes(data: bytes) -> Union[TransitionModel, KeyframeModel, StitchModel, SynthesisModel]:
+    """Loads a model from the bytes of an exported file (e.g. read from an archive or a
+    database): the same model, and the same outputs, as ``load`` of that file. Its ``path`` is
+    ``"<bytes>"``."""
+    if not isinstance(data, (bytes, bytearray, memoryview)):
+        raise TypeError(f"load_bytes takes the file's bytes, not {type(data).__name__}: use zoo.load for a path")
+    task, native = _native.load_bytes(bytes(data))
+    return _MODEL_TYPES[task](native, "<bytes>")
 
 
 @dataclass
@@ -719,6 +760,46 @@ class Clip:
     @property
     def fps(self) -> float:
         return 1.0 / self.frame_time
+
+    def resample(self, fps: float) -> "Clip":
+        """The clip at another frame rate: the same duration (the last frame at or before the
+        clip's end), positions interpolated linearly and rotations spherically between the
+        frames around each new frame. A rate within 0.01 % of the clip's returns it unchanged
+        (a BVH frame time is stored rounded: 30.00003 fps is 30)."""
+        fps = float(fps)
+        if not fps > 0:
+            raise ShapeError(f"resample: the frame rate must be positive, found {fps}")
+        if abs(fps - self.fps) <= 1e-4 * fps:
+            return self
+        duration = (self.frames - 1) * self.frame_time
+        n = int(np.floor(duration * fps + 1e-6)) + 1
+        t = np.arange(n) / fps / self.frame_time
+        i0 = np.minimum(np.floor(t).astype(int), self.frames - 1)
+        i1 = np.minimum(i0 + 1, self.frames - 1)
+        w = (t - i0)[:, None, None]
+        pos = (1 - w) * self.positions[i0] + w * self.positions[i1]
+        a, b = self.rotations[i0], self.rotations[i1]
+        dot = np.sum(a * b, axis=-1, keepdims=True)
+        b = np.where(dot < 0, -b, b)
+        dot = np.clip(np.abs(dot), -1.0, 1.0)
+        theta = np.arccos(dot)
+        sin = np.sin(theta)
+        small = sin < 1e-6
+        wa = np.where(small, 1 - w, np.sin((1 - w) * theta) / np.where(small, 1, sin))
+        wb = np.where(small, w, np.sin(w * theta) / np.where(small, 1, sin))
+        rot = wa * a + wb * b
+        rot /= np.linalg.norm(rot, axis=-1, keepdims=True)
+        return Clip(
+            names=list(self.names),
+            parents=self.parents,
+            offsets=self.offsets,
+            rotations=rot,
+            positions=pos,
+            frame_time=1.0 / fps,
+            euler_orders=list(self.euler_orders),
+            end_sites=self.end_sites,
+            position_channels=self.position_channels,
+        )
 
     @property
     def skeleton(self) -> Skeleton:
