@@ -17,6 +17,8 @@
  *      per-character state of a batch of at most ZOO_MAX_BATCH), e.g.
  *      zoo_transition_runner_new() and zoo_transition_characters_new().
  *   4. Every frame: one call per batch, e.g. zoo_transition_step(); streams push and pop.
+ *      A transition's context can be fed as the game plays it (zoo_transition_begin, then
+ *      zoo_transition_feed per frame) so that no call does the whole context's work.
  *   5. Free everything with its _free function, in any order (NULL is ignored).
  *
  * Families, in this file's order: zoo_model_* (loading), zoo_transition_*, zoo_keyframes_*,
@@ -427,7 +429,9 @@ void zoo_transition_characters_free(struct ZooTransitionCharacters *characters);
 // least one; the model was trained with `ZooTransitionInfo`'s `past_frames`), `target` and
 // `next` `N * 3K` each (the target pose and the pose after it). `length` is the number of
 // frames before the target frame; pass `transition_frames` for the trained length. Then step it
-// with `zoo_transition_step`. One thread at a time.
+// with `zoo_transition_step`. Cost: one graph pass per context frame, all in this call (ten
+// steps' worth for the paper's model); to spread them over the frames the game plays, use
+// `zoo_transition_begin` and `zoo_transition_feed`. One thread at a time.
 //
 // Safety: Handles are NULL or live and used by this thread only; each buffer is NULL or holds its
 // given length.
@@ -514,7 +518,9 @@ enum ZooStatus zoo_transition_feed_posed(struct ZooTransitionRunner *runner,
 
 // The next frame of every character's transition into `poses` (`N * 3K` global positions): the
 // target-blended frames, the last one the target. Stepping past the target frame is
-// `ZOO_STATUS_INVALID_STATE`. One thread at a time.
+// `ZOO_STATUS_INVALID_STATE`. Cost: one graph pass per character, two in the few steps before
+// the blend window (the blend needs the network's own target frame, computed ahead; staggered
+// across a batch). One thread at a time.
 //
 // Safety: Handles are NULL or live and used by this thread only; `poses` is NULL or holds `poses_len`
 // writable floats.

@@ -196,7 +196,9 @@ namespace Zoo.Native
         /// least one; the model was trained with <c>ZooTransitionInfo</c>'s <c>past_frames</c>), <c>target</c> and
         /// <c>next</c> <c>N * 3K</c> each (the target pose and the pose after it). <c>length</c> is the number of
         /// frames before the target frame; pass <c>transition_frames</c> for the trained length. Then step it
-        /// with <c>zoo_transition_step</c>. One thread at a time.
+        /// with <c>zoo_transition_step</c>. Cost: one graph pass per context frame, all in this call (ten
+        /// steps' worth for the paper's model); to spread them over the frames the game plays, use
+        /// <c>zoo_transition_begin</c> and <c>zoo_transition_feed</c>. One thread at a time.
         /// </summary>
         /// <remarks>
         /// Safety: Handles are NULL or live and used by this thread only; each buffer is NULL or holds its
@@ -263,7 +265,9 @@ namespace Zoo.Native
         /// <summary>
         /// The next frame of every character's transition into <c>poses</c> (<c>N * 3K</c> global positions): the
         /// target-blended frames, the last one the target. Stepping past the target frame is
-        /// <c>ZOO_STATUS_INVALID_STATE</c>. One thread at a time.
+        /// <c>ZOO_STATUS_INVALID_STATE</c>. Cost: one graph pass per character, two in the few steps before
+        /// the blend window (the blend needs the network's own target frame, computed ahead; staggered
+        /// across a batch). One thread at a time.
         /// </summary>
         /// <remarks>
         /// Safety: Handles are NULL or live and used by this thread only; <c>poses</c> is NULL or holds <c>poses_len</c>
