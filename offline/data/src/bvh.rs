@@ -17,7 +17,7 @@
 use fast_float2::parse_partial;
 use glam::{DQuat, DVec3};
 use std::collections::HashSet;
-use std::io::{Read, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use zoo_motion::{Clip, EulerOrder, JointChannels, Skeleton};
 
@@ -55,9 +55,9 @@ pub enum BvhError {
 /// Reads a `.bvh` or `.bvh.gz` file (gzip detected by its magic bytes).
 pub fn read_file(path: &Path, opts: &ReadOptions) -> Result<Clip, BvhError> {
     let io = |source| BvhError::Io { path: path.to_path_buf(), source };
-    let raw = std::fs::read(path).map_err(io)?;
+    let raw = crate::limits::read_file(path).map_err(io)?;
     if raw.starts_with(&[0x1f, 0x8b]) {
-        let text = gunzip(&raw).map_err(io)?;
+        let text = crate::limits::read_unpacked(path, || flate2::read::MultiGzDecoder::new(&raw[..])).map_err(io)?;
         parse_bytes(&text, path, opts)
     } else {
         parse_bytes(&raw, path, opts)
@@ -72,19 +72,6 @@ pub fn read_model_clip(path: &Path) -> Result<Clip, BvhError> {
     Ok(clip)
 }
 
-/// Decompresses a (possibly multi-member) gzip buffer.
-fn gunzip(raw: &[u8]) -> std::io::Result<Vec<u8>> {
-    // The trailer's ISIZE is the uncompressed size modulo 2^32: a good first capacity, capped
-    // by deflate's maximum ratio so a forged trailer cannot request a huge allocation.
-    let n = raw.len();
-    let isize_hint =
-        if n >= 18 { u32::from_le_bytes([raw[n - 4], raw[n - 3], raw[n - 2], raw[n - 1]]) as usize } else { 0 };
-    let cap = isize_hint.min(n.saturating_mul(1032)).max(n.saturating_mul(4)) + 64;
-    let mut out = Vec::with_capacity(cap);
-    flate2::read::MultiGzDecoder::new(raw).read_to_end(&mut out)?;
-    Ok(out)
-}
-
 /// Parses BVH text; `path` is only used in error messages.
 pub fn parse(text: &str, path: &Path, opts: &ReadOptions) -> Result<Clip, BvhError> {
     parse_bytes(text.as_bytes(), path, opts)
@@ -93,6 +80,15 @@ pub fn parse(text: &str, path: &Path, opts: &ReadOptions) -> Result<Clip, BvhErr
 /// Parses BVH bytes (ASCII/UTF-8 text); `path` is only used in error messages.
 pub fn parse_bytes(bytes: &[u8], path: &Path, opts: &ReadOptions) -> Result<Clip, BvhError> {
     let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
+    if bytes.contains(&b'\r') && !bytes.contains(&b'\n') {
+        return Err(BvhError::Parse {
+            path: path.to_path_buf(),
+            line: 1,
+            message: "the lines end in CR alone (classic Mac OS line endings), which zoo does not read: convert the \
+                      file to LF or CRLF line endings"
+                .into(),
+        });
+    }
     let mut p = Parser { b: bytes, pos: 0, line: 1, path };
     let h = p.hierarchy()?;
     let mut clip = p.motion(h)?;
@@ -264,6 +260,16 @@ impl<'a> Parser<'a> {
             let name = String::from_utf8_lossy(name_tok.text).into_owned();
             let open = self.expect("{", &format!("after joint `{name}`"))?;
             let j = sk.names.len();
+            if j >= Skeleton::MAX_JOINTS {
+                return Err(self.err(
+                    name_tok.line,
+                    format!(
+                        "joint `{name}` is joint {}; zoo reads at most {} joints (real skeletons have under 1000)",
+                        j + 1,
+                        Skeleton::MAX_JOINTS
+                    ),
+                ));
+            }
             sk.names.push(name);
             sk.parents.push(parent);
             sk.offsets.push(DVec3::ZERO);

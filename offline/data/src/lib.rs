@@ -12,6 +12,7 @@ pub mod clip_io;
 pub mod dataset;
 pub mod fbx;
 pub mod gltf;
+pub mod limits;
 pub mod metrics;
 pub mod plausibility;
 pub mod position_method;
