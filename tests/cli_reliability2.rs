@@ -164,10 +164,23 @@ fn no_output_lands_inside_a_dataset_folder() {
     let saved = data.join("saved");
     let err = failed(&["bench", "--data", dd, "--valid-glob", "*a*", "--save-bvh", s(&saved)]);
     assert!(err.contains("--save-bvh") && err.contains("is inside the dataset folder --data"), "{err}");
-    let err = failed(&["data", "stats", dd, "--json", s(&data.join("stats.json"))]);
-    assert!(err.contains("is inside the dataset folder the dataset"), "{err}");
-    // Beside the folder is fine.
-    let (ok, _, stderr) = zoo(&["data", "stats", dd, "--json", s(&dir.path().join("stats.json"))]);
+    let model = dir.path().join("no-model");
+    let from = format!("{}:20", s(&data.join("a.bvh")));
+    let err = failed(&[
+        "bench",
+        "follow",
+        "--model",
+        s(&model),
+        "--from",
+        &from,
+        "--data",
+        dd,
+        "--plots",
+        s(&data.join("plots")),
+    ]);
+    assert!(err.contains("--plots") && err.contains("is inside the dataset folder --data"), "{err}");
+    // A report beside the clips is not a clip: it does not join the dataset.
+    let (ok, _, stderr) = zoo(&["data", "stats", dd, "--json", s(&data.join("stats.json"))]);
     assert!(ok, "{stderr}");
 }
 

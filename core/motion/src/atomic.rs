@@ -32,7 +32,10 @@ pub fn check_destination(path: &Path) -> io::Result<()> {
             Err(_) => "a symbolic link; give the path of the file itself".to_string(),
         }
     } else if kind.is_dir() {
-        "a folder; give a file name".to_string()
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            format!("{}: is a folder; give a file name", path.display()),
+        ));
     } else {
         format!("{}; zoo writes only regular files: give a file name", special_kind(&kind))
     };

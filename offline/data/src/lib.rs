@@ -8,11 +8,11 @@
 
 pub mod benchmark;
 pub mod bvh;
+pub use bvh::limits;
 pub mod clip_io;
 pub mod dataset;
 pub mod fbx;
 pub mod gltf;
-pub mod limits;
 pub mod metrics;
 pub mod plausibility;
 pub mod position_method;

@@ -1,7 +1,7 @@
 //! The one check of a command's paths before any work: no output is one of the command's
 //! inputs (the same file after resolving links, hard links included) or another of its
-//! outputs, no output replaces a file of a run folder the command reads, no output lands inside
-//! a dataset folder it reads, and no output exists as something other than a regular file
+//! outputs, no output replaces a file of a run folder the command reads, no clip file or output
+//! folder lands inside a dataset folder it reads, and no output exists as something other than a regular file
 //! (a symbolic link, a folder given for a file, a device, a FIFO). The paths of every
 //! command are listed in one place, `main.rs`'s `io_of`.
 
@@ -136,7 +136,10 @@ impl Io {
                 }
             }
         }
-        let written = self.outputs.iter().chain(&self.output_dirs);
+        // A clip file or a folder (which receives clips) would join a dataset it lands in; a
+        // report (JSON, PNG) beside the clips is not read as a clip.
+        let is_clip = |p: &PathBuf| zoo_data::clip_io::ClipFormat::of(p).is_some();
+        let written = self.outputs.iter().filter(|(_, p)| is_clip(p)).chain(&self.output_dirs);
         for (option, out) in written {
             let Some(canon) = Key::of(out).path else { continue };
             for (data_option, data) in &self.data {
