@@ -383,7 +383,9 @@ fn bad_keys_and_folders_are_refused_with_clear_errors() {
     let (ok, _, e) = run(&["eval-arnn", "--model", rtn.to_str().unwrap()]);
     assert!(!ok && e.contains("holds a `rtn` run, not an ARNN"), "{e}");
     // Data options that do not fit are refused before any work.
-    let y = dir.path().join("y");
+    // (The run folder outside the data folder: an output inside a dataset folder is refused.)
+    let elsewhere = tempfile::tempdir().unwrap();
+    let y = elsewhere.path().join("y");
     let (ok, _, e) = run(&["train", "arnn", "--data", dir.path().to_str().unwrap(), "--out", y.to_str().unwrap()]);
     assert!(!ok && e.contains("no luxo_*.json sequence found"), "{e}");
     let (ok, _, e) = run(&["train", "arnn", "--test-fraction", "1", "--out", dir.path().join("x").to_str().unwrap()]);

@@ -37,6 +37,7 @@ fn every_numeric_option_of_every_subcommand_refuses_bad_values_with_its_range() 
     let bs = ["bench", "stitch", "--data", "d", "--valid-glob", "*x*"];
     let sy = ["data", "synth", "--out", "d"];
     let lx = ["data", "luxo", "--out", "d"];
+    let rs = ["data", "resample", "a.bvh", "b.bvh"];
     let with = |base: &[&'static str], more: [&'static str; 2]| [base, &more[..]].concat();
     let frames = "valid range 1..=100000";
     let cases: Vec<(Vec<&str>, &str, &str)> = vec![
@@ -205,6 +206,9 @@ fn every_numeric_option_of_every_subcommand_refuses_bad_values_with_its_range() 
         (with(&lx, ["--k-max", "1000001"]), "--k-max <K_MAX>", "valid range 1..=1000000"),
         (with(&lx, ["--max-attempts", "0"]), "--max-attempts <MAX_ATTEMPTS>", "valid range 1..=1000"),
         (with(&lx, ["--max-attempts", "1001"]), "--max-attempts <MAX_ATTEMPTS>", "valid range 1..=1000"),
+        (with(&rs, ["--fps", "0"]), "--fps <FPS>", "not a positive number (valid range [1, 1000])"),
+        (with(&rs, ["--max-memory", "0"]), "--max-memory <MAX_MEMORY>", "valid range (0, 1000000]"),
+        (with(&rs, ["--max-memory", "NaN"]), "--max-memory <MAX_MEMORY>", "not a finite number"),
     ];
     for (args, option, says) in cases {
         let err = refused(&args);

@@ -11,3 +11,8 @@ pub fn clip_and_frame(s: &str) -> anyhow::Result<(std::path::PathBuf, usize)> {
     let frame = frame.parse().with_context(|| format!("`{s}`: `{frame}` is not a frame number"))?;
     Ok((std::path::PathBuf::from(path), frame))
 }
+
+/// A memory bound in GB, `(0, 1e6]` (`--max-memory`).
+pub fn memory_gb(s: &str) -> Result<f64, String> {
+    real_in(s, Interval::above(0.0, 1e6), " GB")
+}

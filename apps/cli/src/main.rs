@@ -109,22 +109,44 @@ fn training_environment() {
     }
 }
 
-/// Whether a panic is `println!` failing on a closed pipe (`zoo data stats ... | head`).
-fn is_broken_pipe(info: &std::panic::PanicHookInfo) -> bool {
+/// The error of a panic that is `println!` failing (`failed printing to stdout: ...`): a closed
+/// pipe (`zoo data stats ... | head`) or a full device (`> /dev/full`).
+fn stdout_failure(info: &std::panic::PanicHookInfo) -> Option<String> {
     let payload = info.payload();
     let text = payload.downcast_ref::<String>().map(String::as_str).or_else(|| payload.downcast_ref::<&str>().copied());
-    text.is_some_and(|t| t.contains("failed printing to stdout") && t.contains("Broken pipe"))
+    text.and_then(|t| t.strip_prefix("failed printing to stdout: ")).map(str::to_string)
+}
+
+/// Whether this command line trains (`zoo train ...`, `zoo bench train`).
+fn is_training() -> bool {
+    let args: Vec<String> = std::env::args().skip(1).take(2).collect();
+    args.first().is_some_and(|a| a == "train") || args == ["bench", "train"]
 }
 
 fn main() -> anyhow::Result<()> {
-    // Rust ignores SIGPIPE, so printing to a pipe whose reader has gone makes `println!` panic:
-    // end quietly instead, like a tool killed by SIGPIPE would, without a panic message.
+    // Rust ignores SIGPIPE, so printing to a pipe whose reader has gone makes `println!` panic.
+    // A command that only prints ends quietly (exit 0), like a tool killed by SIGPIPE would,
+    // without a panic message. A training has not finished: it says so and exits 1, its last
+    // checkpoint kept, its lock released (an old run an `--overwrite` kept aside comes back if
+    // the new run never finished an epoch). Any other failure to print (a full device) is an
+    // error that names it, exit 1.
     let default_hook = std::panic::take_hook();
     std::panic::set_hook(Box::new(move |info| {
-        if is_broken_pipe(info) {
+        let Some(error) = stdout_failure(info) else { return default_hook(info) };
+        let closed = error.contains("Broken pipe");
+        if is_training() {
+            eprintln!(
+                "zoo: standard output failed ({error}); the training stops here: its last checkpoint is kept, \
+                 continue it with --resume"
+            );
+            zoo_nn::run_folder::end_of_command(false);
+            std::process::exit(1);
+        }
+        if closed {
             std::process::exit(0);
         }
-        default_hook(info)
+        eprintln!("zoo: cannot write to standard output: {error}");
+        std::process::exit(1);
     }));
     training_environment();
     let result = parse().and_then(run);
@@ -156,7 +178,141 @@ fn parse() -> anyhow::Result<Cli> {
     Ok(cli)
 }
 
+/// Every path of a command line, by role (inputs, run folders, datasets, outputs), for the one
+/// check of `cmd::io_check` that every command goes through before its work.
+fn io_of(command: &Command) -> cmd::io_check::Io {
+    use cmd::bench::BenchCommand as B;
+    use cmd::data::DataCommand as D;
+    let io = cmd::io_check::Io::default();
+    match command {
+        Command::Data(D::Stats(a)) => io.data("the dataset", Some(&a.path)).output("--json", a.json.as_deref()),
+        Command::Data(D::Synth(a)) => io.output_dir("--out", Some(&a.out)),
+        Command::Data(D::Luxo(a)) => {
+            io.input("--lamp", a.lamp.as_deref()).input("--init", a.init.as_deref()).output_dir("--out", Some(&a.out))
+        }
+        Command::Data(D::Convert(a)) => {
+            io.input("the input clip", Some(&a.input)).output("the output clip", Some(&a.output))
+        }
+        Command::Data(D::Resample(a)) => {
+            io.input("the input clip", Some(&a.input)).output("the output clip", Some(&a.output))
+        }
+        Command::Bench(a) => match &a.command {
+            None => io
+                .data("--data", a.data.as_deref())
+                .data("--test-data", a.test_data.as_deref())
+                .input("--reference", a.reference.as_deref())
+                .output("--json", a.json.as_deref())
+                .output_dir("--save-bvh", a.save_bvh.as_deref()),
+            Some(B::Runtime(r)) | Some(B::Keyframes(r)) => io
+                .input("--model", Some(&r.model))
+                .input("--onnxruntime", r.onnxruntime.as_deref())
+                .output("--json", r.json.as_deref()),
+            Some(B::Train(t)) => io.output("--json", t.json.as_deref()),
+            Some(B::Stitch(s)) => io
+                .data("--data", Some(&s.data))
+                .data("--test-data", s.test_data.as_deref())
+                .output("--json", s.json.as_deref()),
+            Some(B::Synthesis(s)) => {
+                io.model("--model", Some(&s.model)).data("--data", Some(&s.data)).output("--json", s.json.as_deref())
+            }
+            Some(B::Denoise(s)) => {
+                io.model("--model", Some(&s.model)).data("--data", Some(&s.data)).output("--json", s.json.as_deref())
+            }
+            Some(B::Follow(s)) => s
+                .from
+                .iter()
+                .fold(io, |io, f| io.clip_spec("--from", Some(f)))
+                .model("--model", Some(&s.model))
+                .input("--onnx", s.onnx.as_deref())
+                .data("--data", s.data.as_deref())
+                .output_dir("--plots", s.plots.as_deref())
+                .output("--json", s.json.as_deref()),
+            Some(B::Control(s)) => io
+                .clip_spec("--from", s.from.as_deref())
+                .model("--model", Some(&s.model))
+                .input("--onnx", s.onnx.as_deref())
+                .input("--script", s.script.as_deref())
+                .data("--data", s.data.as_deref())
+                .output_dir("--plots", s.plots.as_deref())
+                .output("--json", s.json.as_deref()),
+        },
+        Command::Train(t) => {
+            let m = t.options();
+            let path = |id: &str| m.try_get_one::<std::path::PathBuf>(id).ok().flatten().cloned();
+            io.data("--data", path("data").as_deref()).output_dir("--out", path("out").as_deref())
+        }
+        Command::Transition(a) => io
+            .model("--model", Some(&a.model))
+            .clip_spec("--from", Some(&a.from))
+            .clip_spec("--to", Some(&a.to))
+            .input("--rig-map", a.rig_map.as_deref())
+            .input("--heightmap", a.heightmap.as_deref())
+            .output("--out", Some(&a.out))
+            .output("--positions", a.positions.as_deref()),
+        Command::Decompress(a) => {
+            io.model("--model", Some(&a.model)).input("the input clip", Some(&a.input)).output("--out", Some(&a.out))
+        }
+        Command::Export(a) => io
+            .model("--onnx", Some(&a.onnx))
+            .input("--skeleton", a.skeleton.as_deref())
+            .output("--out", Some(&a.out))
+            .output("--reference", a.reference.as_deref()),
+        Command::Render(a) => a
+            .compare
+            .iter()
+            .fold(io.input("the clip", Some(&a.clip)), |io, c| io.input("--compare", Some(c)))
+            .input("--terrain", a.terrain.as_deref())
+            .output("--out", Some(&a.out)),
+        Command::Stitch(a) => {
+            let io = a.clips.iter().fold(io, |io, c| io.clip_spec("the clip", Some(c)));
+            let saved = a.save_input.then(|| cmd::stitch::input_path(&a.out));
+            io.model("--model", a.model.as_deref())
+                .output("--out", Some(&a.out))
+                .output("--save-input", saved.as_deref())
+                .output("--positions", a.positions.as_deref())
+        }
+        Command::Generate(a) => {
+            let io = io.model("--model", Some(&a.model)).clip_spec("--from", a.from.as_deref());
+            let io = if a.out.is_dir() {
+                io.output_dir("--out", Some(&a.out))
+            } else {
+                io.output_with_contacts("--out", &a.out)
+            };
+            io.output("--positions", a.positions.as_deref())
+        }
+        Command::Denoise(a) => io
+            .model("--model", Some(&a.model))
+            .input("the input clip", Some(&a.input))
+            .output_with_contacts("--out", &a.out),
+        Command::Follow(a) => io
+            .model("--model", Some(&a.model))
+            .input("--path", Some(&a.path))
+            .output_with_contacts("--out", &a.out)
+            .output("--plot", a.plot.as_deref()),
+        Command::Control(a) => io
+            .model("--model", Some(&a.model))
+            .input("--script", Some(&a.script))
+            .output_with_contacts("--out", &a.out)
+            .output("--plot", a.plot.as_deref()),
+        Command::BenchSynthesis(s) => {
+            io.model("--model", Some(&s.model)).data("--data", Some(&s.data)).output("--json", s.json.as_deref())
+        }
+        Command::Complete(a) => io
+            .model("--model", Some(&a.model))
+            .input("--keys", a.keys.as_deref())
+            .input("--poses", a.poses.as_deref())
+            .output("--out", Some(&a.out))
+            .output("--json", a.json.as_deref())
+            .output("--plot", a.plot.as_deref())
+            .output("--positions", a.positions.as_deref()),
+        Command::EvalArnn(a) => {
+            io.model("--model", Some(&a.model)).data("--data", a.data.as_deref()).output("--json", a.json.as_deref())
+        }
+    }
+}
+
 fn run(cli: Cli) -> anyhow::Result<()> {
+    io_of(&cli.command).check()?;
     match cli.command {
         Command::Data(c) => cmd::data::run(c),
         Command::Bench(a) => cmd::bench::run(a),

@@ -168,14 +168,24 @@ fn check_clips(clips: &[Clip], names: &[String], model: Option<(&ModelRig, f64)>
             bail!("{name} has another skeleton than {} ({why}): every clip must use the same rig", names[0]);
         }
         if !c.plays_at(clips[0].fps()) {
-            bail!("{name} is {} fps, {} is {} fps: resample clip {i} first", c.fps(), names[0], clips[0].fps());
+            bail!(
+                "{name} is {} fps, {} is {} fps: resample clip {i} first (`zoo data resample {name} OUT.bvh --fps {}`)",
+                c.fps(),
+                names[0],
+                clips[0].fps(),
+                clips[0].fps()
+            );
         }
     }
     let Some((rig, fps)) = model else { return Ok(()) };
     for (c, name) in clips.iter().zip(names) {
         rig.check(c, name)?;
         if !c.plays_at(fps) {
-            bail!("{name} is {} fps but the model was trained at {fps} fps: resample it first", c.fps());
+            bail!(
+                "{name} is {} fps but the model was trained at {fps} fps: resample it first (`zoo data resample \
+                 {name} OUT.bvh --fps {fps}`)",
+                c.fps()
+            );
         }
     }
     Ok(())

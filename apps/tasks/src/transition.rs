@@ -42,6 +42,9 @@ pub struct TransitionOptions {
     pub heightmap: Option<PathBuf>,
     /// The network's global joint positions (a positions file).
     pub positions: Option<PathBuf>,
+    /// Leave the target clip where it is (both clips share one world frame) instead of moving
+    /// it to follow on from the source.
+    pub in_place: bool,
 }
 
 /// The heightmap of `zoo transition` and `--heightmap`'s checks against the model: required by
@@ -253,11 +256,26 @@ pub fn run(a: &TransitionOptions, p: &dyn Progress) -> TaskResult<String> {
         note_other_names(&source.skeleton(), &ca, p);
     }
     check_skeleton(&source, &mut cb, &pb)?;
+    // Clips at another frame rate than the model's are resampled to it (a note says so), their
+    // frame numbers carried to the new rate; the output is at the model's rate.
+    let fps = f64::from(source.metadata.fps);
+    let (mut fa, mut fb) = (fa, fb);
+    for (clip, frame, path) in [(&mut ca, &mut fa, &pa), (&mut cb, &mut fb, &pb)] {
+        if let Some((note, ratio)) = clip_io::to_frame_rate(clip, fps, path).map_err(Message)? {
+            eprintln!("{note}");
+            *frame = ((*frame as f64 * ratio).round() as usize).min(clip.frames().saturating_sub(1));
+        }
+    }
+    pipeline::check_transition(&ca, fa, &cb, fb, a.frames).with_context(|| {
+        format!("--from {} --to {} --frames {} (at the model's {fps} fps)", a.from_label, a.to_label, a.frames)
+    })?;
     // On terrain both clips stand in the heightmap's world frame: the target stays on its
-    // ground instead of being moved to where the source's last speed would take it.
-    let inputs = match a.heightmap {
-        Some(_) => pipeline::transition_inputs_in_place(&ca, fa, &cb, fb, a.frames),
-        None => pipeline::transition_inputs(&ca, fa, &mut cb, fb, a.frames),
+    // ground instead of being moved to where the source's last speed would take it. With
+    // `--in-place` the user says the clips share one world frame.
+    let inputs = if a.heightmap.is_some() || a.in_place {
+        pipeline::transition_inputs_in_place(&ca, fa, &cb, fb, a.frames)
+    } else {
+        pipeline::transition_inputs(&ca, fa, &mut cb, fb, a.frames)
     }
     .with_context(|| format!("--from {} --to {} --frames {}", a.from_label, a.to_label, a.frames))?;
     let (model, mut runner) = runner(&source, a.no_fallback, a.foot_lock)?;
@@ -386,6 +404,11 @@ pub fn decompress(a: &DecompressOptions) -> TaskResult<String> {
     let mut clip = clip_io::read_model_clip(&a.input).map_err(Message::new)?;
     let source = ModelSource::open(&a.model, MotionTaskKind::Transition, "decompress")?;
     check_skeleton(&source, &mut clip, &a.input)?;
+    if let Some((note, _)) =
+        clip_io::to_frame_rate(&mut clip, f64::from(source.metadata.fps), &a.input).map_err(Message)?
+    {
+        eprintln!("{note}");
+    }
     let (model, mut runner) = runner(&source, true, false)?;
     let interval = a.interval.unwrap_or_else(|| clip.fps().round() as usize).max(1);
     let j = clip.joints();

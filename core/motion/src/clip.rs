@@ -103,6 +103,40 @@ impl Clip {
         }
     }
 
+    /// The number of frames of this clip resampled at `fps` ([`Clip::resampled`]): the same
+    /// span from the first frame to the last, at most one frame past it left out.
+    pub fn resampled_frames(&self, fps: f64) -> usize {
+        let n = self.frames();
+        if n == 0 {
+            return 0;
+        }
+        let span = (n - 1) as f64 * self.frame_time * fps;
+        // A span a hair under a whole number of frames (rounding) keeps its last frame.
+        (span + 1e-6).floor() as usize + 1
+    }
+
+    /// This clip at `fps` frames per second over the same span: frame `k` at `k / fps` s is
+    /// interpolated between the two source frames around it, rotations by slerp (shortest path)
+    /// and positions linearly. The caller bounds the size first ([`Clip::resampled_frames`]).
+    pub fn resampled(&self, fps: f64) -> Clip {
+        let (j, n, m) = (self.joints(), self.frames(), self.resampled_frames(fps));
+        let mut local_rotations = Vec::with_capacity(m * j);
+        let mut local_positions = Vec::with_capacity(m * j);
+        for k in 0..m {
+            let t = k as f64 / fps / self.frame_time;
+            let i = (t.floor() as usize).min(n.saturating_sub(1));
+            let (i1, a) = if i + 1 < n { (i + 1, t - i as f64) } else { (i, 0.0) };
+            for joint in 0..j {
+                let (r0, r1) = (self.local_rotations[i * j + joint], self.local_rotations[i1 * j + joint]);
+                let r1 = if r0.dot(r1) < 0.0 { -r1 } else { r1 };
+                local_rotations.push(if a == 0.0 { r0 } else { r0.slerp(r1, a).normalize() });
+                let (p0, p1) = (self.local_positions[i * j + joint], self.local_positions[i1 * j + joint]);
+                local_positions.push(p0.lerp(p1, a));
+            }
+        }
+        Clip { skeleton: self.skeleton.clone(), frame_time: 1.0 / fps, local_rotations, local_positions }
+    }
+
     /// Makes consecutive quaternions of each joint lie in the same hemisphere
     /// (see [`crate::quat::remove_sign_flips`]).
     pub fn remove_sign_flips(&mut self) {
@@ -163,4 +197,42 @@ impl Clip {
 /// rounded (bandai2's 0.0333333 s is 30.00003 fps) and exported models store their rate as f32.
 pub fn same_frame_rate(a: f64, b: f64) -> bool {
     (a - b).abs() <= 1e-4 * b.abs()
+}
+
+#[cfg(test)]
+mod resample_tests {
+    use super::*;
+
+    /// A one-joint clip turning about Y at `deg` degrees per frame and moving 1 unit a frame.
+    fn turning(frames: usize, fps: f64, deg: f64) -> Clip {
+        let skeleton = Skeleton {
+            names: vec!["root".into()],
+            parents: vec![None],
+            offsets: vec![DVec3::ZERO],
+            end_sites: vec![None],
+            channels: vec![Default::default()],
+        };
+        Clip {
+            skeleton,
+            frame_time: 1.0 / fps,
+            local_rotations: (0..frames).map(|f| DQuat::from_rotation_y((f as f64 * deg).to_radians())).collect(),
+            local_positions: (0..frames).map(|f| DVec3::new(f as f64, 0.0, 0.0)).collect(),
+        }
+    }
+
+    #[test]
+    fn resampling_slerps_rotations_and_lerps_positions_over_the_same_span() {
+        let c = turning(31, 60.0, 10.0);
+        let half = c.resampled(30.0);
+        assert_eq!(half.frames(), 16);
+        assert!((half.fps() - 30.0).abs() < 1e-12);
+        // Frame 3 at 30 fps is frame 6 at 60 fps.
+        assert!(half.local_rotations[3].angle_between(c.local_rotations[6]) < 1e-9);
+        let double = c.resampled(120.0);
+        assert_eq!(double.frames(), 61);
+        // Halfway between frames 0 and 1: 5 degrees, 0.5 units.
+        assert!(double.local_rotations[1].angle_between(DQuat::from_rotation_y(5f64.to_radians())) < 1e-9);
+        assert!((double.local_positions[1].x - 0.5).abs() < 1e-12);
+        assert!((double.local_positions[60].x - 30.0).abs() < 1e-9);
+    }
 }

@@ -24,7 +24,8 @@ pub const CONTEXT_FRAMES: usize = 10;
 pub enum PipelineError {
     /// The source frame has too few frames before it.
     #[error(
-        "source frame {frame}: needs {CONTEXT_FRAMES} context frames before it in a clip of {frames} frames (pick a frame in {CONTEXT_FRAMES}..={frames})"
+        "source frame {frame}: needs {CONTEXT_FRAMES} context frames before it in a clip of {frames} frames ({})",
+        if *frames >= CONTEXT_FRAMES { format!("pick a frame in {CONTEXT_FRAMES}..={frames}") } else { format!("the clip is shorter than that: give a clip of at least {CONTEXT_FRAMES} frames") }
     )]
     SourceFrame {
         /// The frame asked for.

@@ -51,6 +51,11 @@ impl Skeleton {
     /// (printing, writing, fitting) meets an unbounded depth.
     pub const MAX_DEPTH: usize = 1000;
 
+    /// The most joints a file may define. Real skeletons have under 1000; some walks over a
+    /// skeleton (children of every joint) take time growing with the square of the count, so
+    /// readers refuse more at parse time.
+    pub const MAX_JOINTS: usize = 10_000;
+
     /// The number of levels below the root (0 for a lone root); parents come before children,
     /// so one pass suffices.
     pub fn depth(&self) -> usize {

@@ -17,7 +17,7 @@
 use fast_float2::parse_partial;
 use glam::{DQuat, DVec3};
 use std::collections::HashSet;
-use std::io::{Read, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use zoo_motion::{Clip, EulerOrder, JointChannels, Skeleton};
 
@@ -52,12 +52,106 @@ pub enum BvhError {
     },
 }
 
+/// The memory bound of reading: a file's bytes (unpacked, for `.bvh.gz`) are counted before they
+/// are held, and a file past the bound is refused with its size, the bound and how to raise it.
+/// The bound is 2 GB of memory by default (`ZOO_MEMORY_GB` raises or lowers it); a clip file may
+/// hold a quarter of it, as parsing holds the text, its numbers and the clip at once.
+/// (A module of this file, so that the Python binding, which compiles this file alone, reads
+/// files the same way.)
+pub mod limits {
+    use std::io::{self, Read};
+    use std::path::Path;
+
+    /// The memory bound in bytes: `ZOO_MEMORY_GB` (a number of GB in (0, 1e6]) or 2 GB.
+    pub fn memory_bound() -> u64 {
+        std::env::var("ZOO_MEMORY_GB")
+            .ok()
+            .and_then(|v| v.trim().parse::<f64>().ok())
+            .filter(|g| g.is_finite() && *g > 0.0 && *g <= 1e6)
+            .map_or(2_000_000_000, |g| (g * 1e9) as u64)
+    }
+
+    /// The largest file (unpacked) a reader holds: a quarter of [`memory_bound`].
+    pub fn file_bound() -> u64 {
+        memory_bound() / 4
+    }
+
+    fn too_large(path: &Path, what: &str, size: Option<u64>) -> io::Error {
+        let bound = file_bound();
+        let size = size
+            .map_or_else(|| format!("more than {:.1} MB", bound as f64 / 1e6), |s| format!("{:.1} MB", s as f64 / 1e6));
+        io::Error::new(
+            io::ErrorKind::InvalidData,
+            format!(
+                "{}: {what} {size}, past the {:.1} MB a file may hold (a quarter of the memory bound of {:.2} GB); \
+                 raise the bound with the environment variable ZOO_MEMORY_GB=N if the machine holds it",
+                path.display(),
+                bound as f64 / 1e6,
+                memory_bound() as f64 / 1e9
+            ),
+        )
+    }
+
+    /// Reads the regular file `path` whole, after checking its size against [`file_bound`]; a
+    /// device, FIFO or other special file is refused (reading `/dev/zero` never ends).
+    pub fn read_file(path: &Path) -> io::Result<Vec<u8>> {
+        let mut file = std::fs::File::open(path)?;
+        let meta = file.metadata()?;
+        if !meta.is_file() {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!("{}: not a regular file (a device, FIFO or folder); zoo reads files", path.display()),
+            ));
+        }
+        if meta.len() > file_bound() {
+            return Err(too_large(path, "is", Some(meta.len())));
+        }
+        let mut out = Vec::with_capacity(meta.len() as usize);
+        file.by_ref().take(file_bound() + 1).read_to_end(&mut out)?;
+        if out.len() as u64 > file_bound() {
+            return Err(too_large(path, "is", None));
+        }
+        Ok(out)
+    }
+
+    /// The bytes `open()` gives, counted first without holding them: refused past [`file_bound`]
+    /// (a few MB of gzip can unpack to gigabytes), else read into a buffer of the counted size.
+    pub fn read_unpacked<R: Read>(path: &Path, open: impl Fn() -> R) -> io::Result<Vec<u8>> {
+        let bound = file_bound();
+        let n = io::copy(&mut open().take(bound + 1), &mut io::sink())?;
+        if n > bound {
+            return Err(too_large(path, "unpacks to", None));
+        }
+        let mut out = Vec::with_capacity(n as usize);
+        open().take(n).read_to_end(&mut out)?;
+        Ok(out)
+    }
+
+    #[cfg(test)]
+    mod tests {
+        use super::*;
+
+        #[test]
+        fn a_device_is_refused_and_sizes_are_counted_before_they_are_held() {
+            let e = read_file(Path::new("/dev/zero")).unwrap_err().to_string();
+            assert!(e.contains("not a regular file"), "{e}");
+            let zeros = || io::repeat(0);
+            let e = read_unpacked(Path::new("x.bvh.gz"), zeros).unwrap_err().to_string();
+            assert!(
+                e.contains("x.bvh.gz: unpacks to more than 500.0 MB, past the 500.0 MB") && e.contains("ZOO_MEMORY_GB"),
+                "{e}"
+            );
+            assert_eq!(read_unpacked(Path::new("x"), || &b"abc"[..]).unwrap(), b"abc");
+        }
+    }
+}
+
 /// Reads a `.bvh` or `.bvh.gz` file (gzip detected by its magic bytes).
 pub fn read_file(path: &Path, opts: &ReadOptions) -> Result<Clip, BvhError> {
     let io = |source| BvhError::Io { path: path.to_path_buf(), source };
-    let raw = std::fs::read(path).map_err(io)?;
+    let raw = limits::read_file(path).map_err(io)?;
     if raw.starts_with(&[0x1f, 0x8b]) {
-        let text = gunzip(&raw).map_err(io)?;
+        let text = limits::read_unpacked(path, || flate2::read::MultiGzDecoder::new(&raw[..])).map_err(io)?;
         parse_bytes(&text, path, opts)
     } else {
         parse_bytes(&raw, path, opts)
@@ -72,19 +166,6 @@ pub fn read_model_clip(path: &Path) -> Result<Clip, BvhError> {
     Ok(clip)
 }
 
-/// Decompresses a (possibly multi-member) gzip buffer.
-fn gunzip(raw: &[u8]) -> std::io::Result<Vec<u8>> {
-    // The trailer's ISIZE is the uncompressed size modulo 2^32: a good first capacity, capped
-    // by deflate's maximum ratio so a forged trailer cannot request a huge allocation.
-    let n = raw.len();
-    let isize_hint =
-        if n >= 18 { u32::from_le_bytes([raw[n - 4], raw[n - 3], raw[n - 2], raw[n - 1]]) as usize } else { 0 };
-    let cap = isize_hint.min(n.saturating_mul(1032)).max(n.saturating_mul(4)) + 64;
-    let mut out = Vec::with_capacity(cap);
-    flate2::read::MultiGzDecoder::new(raw).read_to_end(&mut out)?;
-    Ok(out)
-}
-
 /// Parses BVH text; `path` is only used in error messages.
 pub fn parse(text: &str, path: &Path, opts: &ReadOptions) -> Result<Clip, BvhError> {
     parse_bytes(text.as_bytes(), path, opts)
@@ -93,6 +174,15 @@ pub fn parse(text: &str, path: &Path, opts: &ReadOptions) -> Result<Clip, BvhErr
 /// Parses BVH bytes (ASCII/UTF-8 text); `path` is only used in error messages.
 pub fn parse_bytes(bytes: &[u8], path: &Path, opts: &ReadOptions) -> Result<Clip, BvhError> {
     let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
+    if bytes.contains(&b'\r') && !bytes.contains(&b'\n') {
+        return Err(BvhError::Parse {
+            path: path.to_path_buf(),
+            line: 1,
+            message: "the lines end in CR alone (classic Mac OS line endings), which zoo does not read: convert the \
+                      file to LF or CRLF line endings"
+                .into(),
+        });
+    }
     let mut p = Parser { b: bytes, pos: 0, line: 1, path };
     let h = p.hierarchy()?;
     let mut clip = p.motion(h)?;
@@ -264,6 +354,16 @@ impl<'a> Parser<'a> {
             let name = String::from_utf8_lossy(name_tok.text).into_owned();
             let open = self.expect("{", &format!("after joint `{name}`"))?;
             let j = sk.names.len();
+            if j >= Skeleton::MAX_JOINTS {
+                return Err(self.err(
+                    name_tok.line,
+                    format!(
+                        "joint `{name}` is joint {}; zoo reads at most {} joints (real skeletons have under 1000)",
+                        j + 1,
+                        Skeleton::MAX_JOINTS
+                    ),
+                ));
+            }
             sk.names.push(name);
             sk.parents.push(parent);
             sk.offsets.push(DVec3::ZERO);

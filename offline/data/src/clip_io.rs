@@ -133,6 +133,14 @@ pub enum ClipError {
         /// What is wrong and what to do.
         message: String,
     },
+    /// The clip holds values a model cannot take (see [`check_model_values`]).
+    #[error("{path}: {message}")]
+    Values {
+        /// File.
+        path: PathBuf,
+        /// The value, where it is, and the valid range.
+        message: String,
+    },
     /// The file name has no extension zoo knows.
     #[error("{path}: unknown clip format: expected a file name ending in {expected}")]
     Extension {
@@ -178,6 +186,13 @@ fn checked(path: &Path, format: &'static str, read: (Clip, ClipSource)) -> Resul
 
 /// Refuses a hierarchy deeper than [`zoo_motion::Skeleton::MAX_DEPTH`].
 fn check_depth(path: &Path, format: &'static str, clip: &Clip) -> Result<(), ClipError> {
+    if clip.joints() > zoo_motion::Skeleton::MAX_JOINTS {
+        return Err(ClipError::Format {
+            path: path.to_path_buf(),
+            format,
+            message: format!("{} joints; zoo reads at most {}", clip.joints(), zoo_motion::Skeleton::MAX_JOINTS),
+        });
+    }
     let depth = clip.skeleton.depth();
     if depth > zoo_motion::Skeleton::MAX_DEPTH {
         return Err(ClipError::Format {
@@ -232,8 +247,99 @@ pub fn read_model_clip(path: &Path) -> Result<Clip, ClipError> {
 pub fn read_model_clip_with(path: &Path, opts: &ReadOptions) -> Result<Clip, ClipError> {
     let opts = ReadOptions { drop_dummy_root: true, ..opts.clone() };
     let mut clip = read(path, &opts)?;
+    check_model_values(&clip).map_err(|message| ClipError::Values { path: path.to_path_buf(), message })?;
     clip.remove_sign_flips();
     Ok(clip)
+}
+
+/// The largest offset or position (clip units: 1e7 cm is 100 km) a clip given to a model may
+/// hold. A model computes in 32-bit floats (at most about 3.4e38), and its steps (differences,
+/// squares, velocities) overflow long before: a value of 1e39 made `zoo stitch` panic.
+pub const MAX_MODEL_VALUE: f64 = 1e7;
+
+/// Checks a clip read for a model where it enters: at least one frame, every offset and
+/// position within [`MAX_MODEL_VALUE`], every rotation finite and non-zero.
+pub fn check_model_values(clip: &Clip) -> Result<(), String> {
+    if clip.frames() == 0 {
+        return Err("the clip has no frame; a model needs at least one".into());
+    }
+    let j = clip.joints().max(1);
+    let far = |v: &zoo_motion::glam::DVec3| !(v.abs().max_element() <= MAX_MODEL_VALUE);
+    if let Some(i) = clip.skeleton.offsets.iter().position(far) {
+        return Err(format!(
+            "joint `{}` has the offset {:?}, outside the valid range [-{MAX_MODEL_VALUE:e}, {MAX_MODEL_VALUE:e}] \
+             (clip units) of a clip given to a model",
+            clip.skeleton.names[i], clip.skeleton.offsets[i]
+        ));
+    }
+    if let Some(i) = clip.local_positions.iter().position(far) {
+        return Err(format!(
+            "frame {} joint `{}` has the position {:?}, outside the valid range [-{MAX_MODEL_VALUE:e}, \
+             {MAX_MODEL_VALUE:e}] (clip units) of a clip given to a model",
+            i / j,
+            clip.skeleton.names[i % j],
+            clip.local_positions[i]
+        ));
+    }
+    if let Some(i) = clip.local_rotations.iter().position(|q| !(q.is_finite() && q.length() > 1e-9)) {
+        return Err(format!(
+            "frame {} joint `{}` has no valid rotation ({:?})",
+            i / j,
+            clip.skeleton.names[i % j],
+            clip.local_rotations[i]
+        ));
+    }
+    Ok(())
+}
+
+/// The memory a command may give one clip it makes (2 GB by default): sizes are computed and
+/// checked against it before anything is allocated.
+pub const DEFAULT_MEMORY_BOUND: u64 = 2_000_000_000;
+
+/// Bytes a clip of `frames` frames and `joints` joints holds in memory (a rotation and a position
+/// per joint and frame: 56 bytes), saturating.
+pub fn clip_bytes(frames: usize, joints: usize) -> u64 {
+    (frames as u64).saturating_mul(joints as u64).saturating_mul(56)
+}
+
+/// Refuses a clip of `frames` x `joints` past `bound` bytes, naming the size, the bound and
+/// `option`, the option that raises it.
+pub fn check_clip_size(frames: usize, joints: usize, bound: u64, option: &str) -> Result<(), String> {
+    let bytes = clip_bytes(frames, joints);
+    if bytes > bound {
+        return Err(format!(
+            "{frames} frames of {joints} joints need {:.2} GB, past the memory bound of {:.2} GB; raise it with \
+             {option} (in GB) if the machine holds it",
+            bytes as f64 / 1e9,
+            bound as f64 / 1e9
+        ));
+    }
+    Ok(())
+}
+
+/// Brings a clip read from `path` to the frame rate `fps` of the model it is given to: a clip at
+/// the same rate (within 0.01 %, [`zoo_motion::clip::same_frame_rate`]) is kept; another rate is
+/// resampled (rotations by slerp, positions linearly, [`Clip::resampled`]) after its size is
+/// checked against [`DEFAULT_MEMORY_BOUND`]. Returns the note to print, and the factor that maps
+/// a frame number of the file to the resampled clip's.
+pub fn to_frame_rate(clip: &mut Clip, fps: f64, path: &Path) -> Result<Option<(String, f64)>, String> {
+    if clip.plays_at(fps) {
+        return Ok(None);
+    }
+    let from = clip.fps();
+    let frames = clip.resampled_frames(fps);
+    check_clip_size(frames, clip.joints(), DEFAULT_MEMORY_BOUND, "`zoo data resample --max-memory`")
+        .map_err(|e| format!("{}: resampling {from:.3} fps to the model's {fps:.3} fps: {e}", path.display()))?;
+    let old = clip.frames();
+    *clip = clip.resampled(fps);
+    let note = format!(
+        "note: {} is at {from:.3} fps, the model at {fps:.3} fps: resampled to {fps:.3} fps ({old} frames become {}; \
+         `zoo data resample {} OUT --fps {fps}` writes it once)",
+        path.display(),
+        frames,
+        path.display()
+    );
+    Ok(Some((note, fps / from)))
 }
 
 /// How [`conform`] brought a clip to the skeleton a command needs.

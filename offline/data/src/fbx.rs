@@ -47,7 +47,7 @@ fn axis(a: ufbx::CoordinateAxis) -> Option<usize> {
 
 /// Reads an FBX clip (see the module documentation).
 pub fn read_file(path: &Path, opts: &ReadOptions) -> Result<(Clip, ClipSource), ClipError> {
-    let bytes = std::fs::read(path).map_err(|source| ClipError::Io {
+    let bytes = crate::limits::read_file(path).map_err(|source| ClipError::Io {
         path: path.to_path_buf(),
         action: "cannot read",
         source,
@@ -229,7 +229,12 @@ pub fn read_bytes(bytes: &[u8], path: &Path, opts: &ReadOptions) -> Result<(Clip
     let (t0, t1) = (stack.time_begin, stack.time_end);
     let span = (t1 - t0) * fps;
     if !(0.0..1e7).contains(&span) {
-        return Err(err(path, format!("take `{}` runs from {t0} s to {t1} s: not a time range", stack.element.name)));
+        let why = if span.is_nan() || span < 0.0 {
+            "it ends before it begins".to_string()
+        } else {
+            format!("{span:.0} frames at {fps} fps, past the 10000000 frames zoo reads")
+        };
+        return Err(err(path, format!("take `{}` runs from {t0} s to {t1} s: {why}", stack.element.name)));
     }
     let frames = span.round() as usize + 1;
     if frames.saturating_mul(joints.len()) > crate::gltf::MAX_JOINT_FRAMES {

@@ -53,7 +53,11 @@ pub fn read_file(path: &Path, opts: &ReadOptions) -> Result<(Clip, ClipSource), 
 
 /// The bytes of the file at `path`.
 fn file_bytes(path: &Path) -> Result<Vec<u8>, ClipError> {
-    std::fs::read(path).map_err(|source| ClipError::Io { path: path.to_path_buf(), action: "cannot read", source })
+    crate::limits::read_file(path).map_err(|source| ClipError::Io {
+        path: path.to_path_buf(),
+        action: "cannot read",
+        source,
+    })
 }
 
 /// Reads a glTF clip from bytes; `path` names it in messages and locates external buffers.
@@ -152,7 +156,7 @@ fn load_buffers<'a>(
             }
             ::gltf::buffer::Source::Uri(uri) => {
                 let file = path.parent().unwrap_or(Path::new(".")).join(uri.replace("%20", " "));
-                Cow::Owned(std::fs::read(&file).map_err(|e| {
+                Cow::Owned(crate::limits::read_file(&file).map_err(|e| {
                     err(
                         path,
                         format!(
@@ -527,9 +531,13 @@ fn read_document(
             return Err(err(
                 path,
                 format!(
-                    "animation `{}`, {property:?} of `{name}`: {} keys but {} values; the file is damaged",
+                    "animation `{}`, {property:?} of `{name}`: {} keys need {} values of {comps} numbers ({} per key \
+                     with {:?} interpolation), the file has {}; the file is damaged",
                     anim.name().unwrap_or(""),
                     times.len(),
+                    times.len() * per,
+                    per,
+                    s.interpolation(),
                     values.len() / comps
                 ),
             ));
@@ -897,11 +905,44 @@ pub fn to_gltf_json(clip: &Clip) -> String {
     serde_json::to_string_pretty(&doc).expect("a JSON value serializes")
 }
 
+/// The largest offset or position (clip units) the glTF writer accepts: 32-bit floats hold
+/// about 3.4e38, and 1e30 leaves room for the unit conversion and the sums of the skin.
+pub const MAX_WRITE_VALUE: f64 = 1e30;
+
+/// What glTF cannot hold: no frame (an animation needs a key), a value past [`MAX_WRITE_VALUE`].
+fn check_writable(clip: &Clip) -> Result<(), String> {
+    if clip.frames() == 0 {
+        return Err("the clip has no frame, and a glTF animation needs at least one key".into());
+    }
+    let j = clip.joints();
+    let far = |v: &zoo_motion::glam::DVec3| v.abs().max_element() > MAX_WRITE_VALUE;
+    if let Some(i) = clip.skeleton.offsets.iter().position(far) {
+        return Err(format!(
+            "joint `{}` has the offset {:?}, past the {MAX_WRITE_VALUE:e} that glTF's 32-bit floats hold",
+            clip.skeleton.names[i], clip.skeleton.offsets[i]
+        ));
+    }
+    if let Some(i) = clip.local_positions.iter().position(far) {
+        return Err(format!(
+            "frame {} joint `{}` has the position {:?}, past the {MAX_WRITE_VALUE:e} that glTF's 32-bit floats hold",
+            i / j.max(1),
+            clip.skeleton.names[i % j.max(1)],
+            clip.local_positions[i]
+        ));
+    }
+    Ok(())
+}
+
 /// Writes a clip as `.glb` (binary) or, for any other name, `.gltf` JSON (see the module
 /// documentation), through a temporary file and a rename.
 /// A clip holding NaN or infinity is refused ([`zoo_motion::finite::check_clip`]).
+/// A clip with no frame, or with an offset or position past [`MAX_WRITE_VALUE`] (glTF stores
+/// 32-bit floats: a larger value would be written as infinity or `null`), is refused too.
 pub fn write_file(clip: &Clip, path: &Path) -> std::io::Result<()> {
     zoo_motion::finite::check_clip(&path.display().to_string(), clip)?;
+    check_writable(clip).map_err(|m| {
+        std::io::Error::new(std::io::ErrorKind::InvalidData, format!("{}: {m}; nothing was written", path.display()))
+    })?;
     let glb = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("glb"));
     let bytes = if glb { to_glb(clip) } else { to_gltf_json(clip).into_bytes() };
     zoo_motion::atomic::write(path, &bytes)

@@ -8,6 +8,7 @@
 
 pub mod benchmark;
 pub mod bvh;
+pub use bvh::limits;
 pub mod clip_io;
 pub mod dataset;
 pub mod fbx;

@@ -179,6 +179,12 @@ fn parse_header(path: &Path, text: &str) -> Result<(Header, usize), TerrainFileE
             )));
         }
     }
+    if header.nx == 0 || header.nz == 0 {
+        return Err(bad(format!(
+            "a grid of {} x {} samples holds no height: give at least 1 sample in each direction",
+            header.nx, header.nz
+        )));
+    }
     let expected =
         header.nx.checked_mul(header.nz).filter(|n| *n <= MAX_SAMPLES).map(|n| n * 4).ok_or_else(|| {
             bad(format!("{} x {} samples: at most {MAX_SAMPLES} samples in all", header.nx, header.nz))

@@ -126,6 +126,7 @@ pub struct Staged {
 pub fn stage(dst: &Path, write: impl FnOnce(&Path) -> NnResult<()>) -> NnResult<Staged> {
     let dir = dst.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir).map_err(io(dir))?;
+    zoo_motion::atomic::check_destination(dst).map_err(io(dst))?;
     let tmp = zoo_motion::atomic::temp_path(dst).map_err(io(dst))?;
     write(&tmp)?;
     Ok(Staged { tmp, dst: dst.to_path_buf() })
@@ -211,7 +212,42 @@ pub fn read_varmap(path: &Path, varmap: &VarMap) -> NnResult<()> {
     vm.load(path).map_err(|e| NnError::Tensors {
         path: path.into(),
         message: format!("{e} (the file was written for another model or configuration)"),
-    })
+    })?;
+    check_weights(path, varmap)
+}
+
+/// The largest weight magnitude a weights file may hold. Trained weights stay far below
+/// (under 100 in zoo's runs); a larger value overflows f32 in the network's sums.
+pub const MAX_WEIGHT: f32 = 1e6;
+
+/// Checks the weights read from `path` where they enter: every value finite and within
+/// [`MAX_WEIGHT`]; the error names the file and the tensor, not a later stage.
+fn check_weights(path: &Path, varmap: &VarMap) -> NnResult<()> {
+    let data = varmap.data().lock().expect("the VarMap lock is not poisoned");
+    let mut names: Vec<&String> = data.keys().collect();
+    names.sort();
+    for name in names {
+        let t = data[name].as_tensor();
+        if t.elem_count() == 0 {
+            continue;
+        }
+        let bad = |e: candle_core::Error| NnError::Tensors { path: path.into(), message: e.to_string() };
+        let abs = t.abs().map_err(bad)?.flatten_all().map_err(bad)?;
+        let sum = abs.sum_all().map_err(bad)?.to_dtype(DType::F32).map_err(bad)?.to_scalar::<f32>().map_err(bad)?;
+        let max = abs.max(0).map_err(bad)?.to_dtype(DType::F32).map_err(bad)?.to_scalar::<f32>().map_err(bad)?;
+        if !sum.is_finite() || !(max <= MAX_WEIGHT) {
+            let what =
+                if sum.is_nan() || max.is_nan() { "NaN".to_string() } else { format!("a value of magnitude {max:e}") };
+            return Err(NnError::Tensors {
+                path: path.into(),
+                message: format!(
+                    "tensor `{name}` holds {what}, outside the weights' range [-{MAX_WEIGHT:e}, {MAX_WEIGHT:e}]: the \
+                     weights file is damaged (or its training diverged); use an earlier checkpoint or train again"
+                ),
+            });
+        }
+    }
+    Ok(())
 }
 
 /// Checks that every variable is finite; the error names the first bad one (in name order).
@@ -315,6 +351,24 @@ mod tests {
         write_tensors(&dir.path().join("w.safetensors"), &t).unwrap();
         let err = read_varmap(&dir.path().join("w.safetensors"), &vm).unwrap_err().to_string();
         assert!(err.contains("w.safetensors") && err.contains("another model"), "{err}");
+    }
+
+    /// Weights are checked where they enter: NaN or a value past f32's sums (3e38 exported with
+    /// exit 0 and the runtime blamed the caller's data) names the file and the tensor.
+    #[test]
+    fn weights_that_are_nan_or_too_large_are_refused_where_they_are_read() -> NnResult<()> {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join(WEIGHTS_FILE);
+        for (value, says) in [(f32::NAN, "holds NaN"), (3e38, "holds a value of magnitude 3e38")] {
+            let t = Tensor::new(&[0.5f32, value, 1.0], &Device::Cpu)?;
+            candle_core::safetensors::save(&HashMap::from([("layer.w".to_string(), t)]), &p)
+                .map_err(|e| NnError::Config(e.to_string()))?;
+            let vm = VarMap::new();
+            vm.get(3, "layer.w", Init::Const(0.0), DType::F32, &Device::Cpu)?;
+            let err = read_varmap(&p, &vm).unwrap_err().to_string();
+            assert!(err.contains("model.safetensors: tensor `layer.w`") && err.contains(says), "{err}");
+        }
+        Ok(())
     }
 
     #[test]

@@ -17,6 +17,27 @@ pub enum DataCommand {
     /// Convert a clip between formats: BVH, glTF or FBX in; the output's extension picks BVH
     /// (`.bvh`, `.bvh.gz`) or glTF (`.glb`, `.gltf`) (`zoo data convert take.fbx take.glb`).
     Convert(ConvertArgs),
+    /// Resample a clip to another frame rate over the same span (rotations by slerp, positions
+    /// linearly): BVH, glTF or FBX in, BVH or glTF out (`zoo data resample take60.bvh take30.bvh --fps 30`).
+    Resample(ResampleArgs),
+}
+
+/// Arguments of `zoo data resample`.
+#[derive(Args)]
+pub struct ResampleArgs {
+    /// The clip to read (`.bvh`, `.bvh.gz`, `.glb`, `.gltf`, `.fbx`).
+    pub input: PathBuf,
+    /// The file to write: `.bvh`, `.bvh.gz`, `.glb` or `.gltf`.
+    pub output: PathBuf,
+    /// Frames per second of the output.
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::fps)]
+    pub fps: f64,
+    /// The animation to read: an FBX take or a glTF animation, by name (default: the first).
+    #[arg(long)]
+    pub take: Option<String>,
+    /// Memory bound of the resampled clip, in GB (its size is computed before it is made).
+    #[arg(long, default_value_t = 2.0, allow_hyphen_values = true, value_parser = crate::args::memory_gb)]
+    pub max_memory: f64,
 }
 
 /// Arguments of `zoo data convert`.
@@ -79,7 +100,42 @@ pub fn run(cmd: DataCommand) -> anyhow::Result<()> {
         DataCommand::Synth(a) => run_synth(a),
         DataCommand::Luxo(a) => super::data_luxo::run(a),
         DataCommand::Convert(a) => convert(a),
+        DataCommand::Resample(a) => resample(a),
     }
+}
+
+/// `zoo data resample`: one clip read, resampled ([`zoo_motion::Clip::resampled`]) and written
+/// through `zoo_data::clip_io`, after its size is checked against `--max-memory`.
+fn resample(a: ResampleArgs) -> anyhow::Result<()> {
+    use zoo_data::clip_io;
+    if clip_io::ClipFormat::of(&a.output).is_none_or(|f| f == clip_io::ClipFormat::Fbx) {
+        anyhow::bail!(
+            "{}: the output's extension must be .bvh, .bvh.gz, .glb or .gltf (zoo writes BVH and glTF)",
+            a.output.display()
+        );
+    }
+    crate::cmd::check_output_file("output", &a.output)?;
+    let opts = clip_io::ReadOptions { drop_dummy_root: false, take: a.take.clone() };
+    let clip = clip_io::read(&a.input, &opts)?;
+    if clip.frames() == 0 {
+        anyhow::bail!("{}: the clip has no frame; there is nothing to resample", a.input.display());
+    }
+    let frames = clip.resampled_frames(a.fps);
+    let bound = (a.max_memory * 1e9) as u64;
+    clip_io::check_clip_size(frames, clip.joints(), bound, "--max-memory")
+        .map_err(|e| anyhow::anyhow!("--fps {}: {e}", a.fps))?;
+    let out = clip.resampled(a.fps);
+    clip_io::write(&out, &a.output)?;
+    println!(
+        "wrote {}: {} frames at {} fps, resampled from {} frames at {:.3} fps ({})",
+        a.output.display(),
+        out.frames(),
+        a.fps,
+        clip.frames(),
+        clip.fps(),
+        a.input.display()
+    );
+    Ok(())
 }
 
 /// `zoo data convert`: one clip read and written through `zoo_data::clip_io` (units and axes

@@ -58,6 +58,11 @@ pub fn run(a: DenoiseArgs) -> anyhow::Result<()> {
             a.model.display()
         );
     }
+    if let Some((note, _)) =
+        zoo_data::clip_io::to_frame_rate(&mut clip, g.spec.fps, &a.input).map_err(anyhow::Error::msg)?
+    {
+        eprintln!("{note}");
+    }
     let opts = a.options();
     let bar = zoo_nn::progress::Bar::new();
     bar.start(opts.iterations as u64, "denoising (energy evaluations)");

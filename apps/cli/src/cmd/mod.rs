@@ -17,6 +17,7 @@ pub mod eval_arnn;
 pub mod export;
 pub mod follow;
 pub mod generate;
+pub mod io_check;
 pub mod render;
 pub mod stitch;
 pub mod train;
@@ -32,6 +33,7 @@ pub fn check_output_file(option: &str, path: &Path) -> anyhow::Result<()> {
     if path.is_dir() {
         bail!("{option} {}: is a folder; give a file name", path.display());
     }
+    zoo_motion::atomic::check_destination(path).map_err(|e| anyhow::anyhow!("{option} {e}"))?;
     let parent = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     if !parent.is_dir() {
         bail!("{option} {}: the folder {} does not exist (create it first)", path.display(), parent.display());

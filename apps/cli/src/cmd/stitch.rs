@@ -120,7 +120,7 @@ pub fn parse_clip_spec(s: &str) -> anyhow::Result<ClipRange> {
 }
 
 /// `OUT.input.bvh` beside `OUT.bvh`.
-fn input_path(out: &Path) -> PathBuf {
+pub(crate) fn input_path(out: &Path) -> PathBuf {
     let stem = out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "stitched".into());
     out.with_file_name(format!("{stem}.input.bvh"))
 }

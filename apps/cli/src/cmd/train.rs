@@ -12,6 +12,11 @@ pub struct TrainCommand {
 }
 
 impl TrainCommand {
+    /// The model's parsed options.
+    pub fn options(&self) -> &ArgMatches {
+        &self.options
+    }
+
     /// Records `command` (the options of a fresh run) to be written in its run folder.
     pub fn record(&mut self, command: Vec<(String, Vec<String>)>) {
         self.command = command;

@@ -55,6 +55,10 @@ pub struct TransitionArgs {
     /// are fitted to, in the model's units, on the model's skeleton.
     #[arg(long, value_name = "FILE.json")]
     pub positions: Option<PathBuf>,
+    /// Leave the --to clip where it is: both clips share one world frame (by default the --to
+    /// clip is moved and turned to follow on from the --from clip's last position and heading).
+    #[arg(long)]
+    pub in_place: bool,
 }
 
 /// Runs `zoo transition`.
@@ -77,6 +81,7 @@ pub fn run(a: TransitionArgs) -> anyhow::Result<()> {
         no_fallback: a.no_fallback,
         heightmap: a.heightmap,
         positions: a.positions,
+        in_place: a.in_place,
     };
     print!("{}", zoo_tasks::transition::run(&o, &crate::cmd::Stderr)?);
     Ok(())

@@ -346,8 +346,28 @@ impl PoseKeys {
         if frames.len() < 2 {
             return Err(format!("{} key(s): completion needs at least two", frames.len()));
         }
+        if frames.len() > MAX_FRAMES {
+            return Err(format!(
+                "{} key frames given: at most {MAX_FRAMES} (one per frame of the longest completion)",
+                frames.len()
+            ));
+        }
+        if let Some(&f) = frames.iter().find(|&&f| f > MAX_KEY_FRAME) {
+            return Err(format!(
+                "key frame {f} is outside the valid range 0..={MAX_KEY_FRAME} (the bound of a keys file's frames)"
+            ));
+        }
         if let Some(i) = frames.windows(2).position(|w| w[0] >= w[1]) {
             return Err(format!("--key-frames must strictly increase: {} then {}", frames[i], frames[i + 1]));
+        }
+        let span = frames[frames.len() - 1] - frames[0];
+        if span >= MAX_FRAMES {
+            return Err(format!(
+                "the key frames span {span} frames (frame {} to {}), past the {MAX_FRAMES} frames zoo complete \
+                 generates: bring the keys closer",
+                frames[0],
+                frames[frames.len() - 1]
+            ));
         }
         if self.sample {
             if let Some(&f) = frames.iter().find(|&&f| f >= n) {
@@ -625,14 +645,36 @@ fn complete_humanoid(
         }
     };
     crate::humanoid::check_trained_skeleton(skeleton, &source.skeleton).context(what.clone())?;
+    // The output is at the model's frame rate: key frames numbered at another rate (the keys
+    // file's `fps`, or `--fps`) are carried to it, with a note.
+    let mut keys = keys;
+    if let Some(given) = o.fps.or(keys.fps)
+        && !zoo_motion::clip::same_frame_rate(given, skeleton.fps)
+    {
+        let ratio = skeleton.fps / given;
+        for k in &mut keys.keys {
+            k.frame = (k.frame as f64 * ratio).round() as usize;
+        }
+        if let Some(w) = keys.keys.windows(2).find(|w| w[0].frame >= w[1].frame) {
+            bail!(
+                "{what}: two keys fall on frame {} at the model's {} fps (the keys are numbered at {given} fps): space \
+                 them further apart",
+                w[1].frame,
+                skeleton.fps
+            );
+        }
+        eprintln!(
+            "note: the keys are numbered at {given} fps, the model runs at {} fps: their frames are carried to {} fps, \
+             the rate of the output",
+            skeleton.fps, skeleton.fps
+        );
+    }
     let mut done =
         crate::humanoid::complete_clip_with(&source, &keys.keys, Some(skeleton.fps), |f, p, x| net.complete(f, p, x))
             .context(what)?;
     let key_frames: Vec<usize> = keys.keys.iter().map(|k| k.frame).collect();
     let locked = if o.no_foot_lock { 0 } else { lock_feet(&mut done.clip, &key_frames) };
-    if let Some(fps) = o.fps.or(keys.fps) {
-        done.clip.frame_time = 1.0 / fps;
-    }
+    done.clip.frame_time = 1.0 / skeleton.fps;
     let (raw_root, (deg, key, joint)) = done.raw_miss;
     zoo_motion::finite::check_serialize(
         "the completion's key misses (root, angle, the network's root and angle)",
@@ -819,6 +861,23 @@ mod tests {
         let e = p(Some(vec![0, 60]), None, true).keys(50).unwrap_err();
         assert!(e.contains("key frame 60 is past the clip's 50 frames"), "{e}");
         assert!(p(None, None, false).keys(3).unwrap_err().contains("--key-frames LIST or --every K"));
+    }
+
+    /// `--key-frames 0,X` with X up to 2^64-1 divided by zero (X + 1 frames wrapped to 0),
+    /// aborted at 2^32 and ran a minute at 10^7: the frames are bounded like a keys file's.
+    #[test]
+    fn key_frames_past_the_keys_files_bounds_are_refused_before_any_work() {
+        let p =
+            |frames: Vec<usize>| PoseKeys { clip: "k.bvh".into(), frames: Some(frames), every: None, sample: false };
+        for x in [usize::MAX, 1 << 32, 10_000_001] {
+            let e = p(vec![0, x]).keys(2).unwrap_err();
+            assert!(e.contains(&format!("key frame {x} is outside the valid range 0..=10000000")), "{e}");
+        }
+        let e = p(vec![0, 10_000_000]).keys(2).unwrap_err();
+        assert!(e.contains("the key frames span 10000000 frames (frame 0 to 10000000), past the 100000 frames"), "{e}");
+        let e = p(vec![0, 100_000]).keys(2).unwrap_err();
+        assert!(e.contains("span 100000 frames"), "{e}");
+        assert_eq!(p(vec![0, 99_999]).keys(2).unwrap()[1].frame, 99_999);
     }
 
     #[test]

@@ -411,6 +411,14 @@ pub fn complete_shots(
         return Err(ArnnError::Config(format!("normalization of {} values for a model of {d}", norm.mean.len())));
     }
     let features = features(c, norm)?;
+    // Each shot makes `last key + 1` frames of `d` values: bounded before anything is allocated
+    // (a last key of usize::MAX wrapped to 0 frames and divided by zero).
+    if let Some(last) = shots.iter().filter_map(|(f, _, _)| f.last()).find(|&&l| l >= crate::completion::MAX_FRAMES) {
+        return Err(ArnnError::Config(format!(
+            "a shot's last key is at frame {last}: at most {} frames are completed at a time",
+            crate::completion::MAX_FRAMES
+        )));
+    }
     let shot = |(f, p, m): &ShotKeyRefs<'_>| {
         let (p, m) = flatten(f, p, m, (d, c.groups()))?;
         features.shot(f, &p, &m).map_err(|e| ArnnError::Config(e.to_string()))

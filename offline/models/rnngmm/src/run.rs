@@ -18,7 +18,11 @@ use zoo_motion::Clip;
 pub fn load_run(dir: &Path, no_refiner: bool) -> RnnGmmResult<(LoadedGenerator, Option<RefinerNets>)> {
     let kind = zoo_nn::checkpoint::model_kind(dir).map_err(|e| zoo_data::Message::new(e))?;
     if kind != "rnn-gmm" {
-        bail!("{} holds a `{kind}` model; `zoo generate` runs an `rnn-gmm` run folder", dir.display());
+        bail!(
+            "{} holds a `{kind}` model, not an `rnn-gmm` one: `zoo generate`, `zoo denoise`, `zoo follow` and `zoo \
+             control` run a run folder of `zoo train rnn-gmm`",
+            dir.display()
+        );
     }
     let weights = dir.join(crate::checkpoint::WEIGHTS_FILE);
     if !weights.is_file() {
@@ -74,13 +78,23 @@ pub fn start_clip(
     {
         eprintln!("{}: {how}", path.display());
     }
-    let frame = if frame == usize::MAX { clip.frames().saturating_sub(1).min(29) } else { frame };
     if let Some(d) = g.spec.skeleton.topology_difference(&clip.skeleton) {
         bail!(
             "{} is on another skeleton than the model's ({d}); start from a clip of the training skeleton",
             path.display()
         );
     }
+    // A clip at another frame rate than the model's is resampled to it, its start frame with it.
+    let mut frame = frame;
+    if let Some((note, ratio)) =
+        zoo_data::clip_io::to_frame_rate(&mut clip, g.spec.fps, &path).map_err(zoo_data::Message)?
+    {
+        eprintln!("{note}");
+        if frame != usize::MAX {
+            frame = (frame as f64 * ratio).round() as usize;
+        }
+    }
+    let frame = if frame == usize::MAX { clip.frames().saturating_sub(1).min(29) } else { frame };
     if frame >= clip.frames() {
         bail!("{}: frame {frame} is past the clip's last frame {}", path.display(), clip.frames().saturating_sub(1));
     }

@@ -95,6 +95,7 @@ impl RtnExportOptions {
 pub fn export_run(dir: &Path, inputs: &zoo_nn::ExportOptions<'_>) -> Result<OnnxModel, ExportError> {
     let err = |m: String| ExportError::model(m);
     let mut options = RtnExportOptions { fps: inputs.fps, ..RtnExportOptions::default() };
+    let mut clip_fps = None;
     if let Some(u) = inputs.units {
         let metres_per_unit =
             CoordinateFrame::metres_per(u).ok_or_else(|| err(format!("--units {u}: cm, m, mm or in")))?;
@@ -107,9 +108,20 @@ pub fn export_run(dir: &Path, inputs: &zoo_nn::ExportOptions<'_>) -> Result<Onnx
         options.names = Some(s.names.clone());
         options.offsets = Some(s.offsets.iter().map(|o| o.as_vec3().to_array()).collect());
         options.parents = Some(s.parents.iter().map(|p| p.map_or(-1, |p| p as i32)).collect());
-        options.fps = options.fps.or(Some(clip.fps() as f32));
+        clip_fps = Some(clip.fps() as f32);
     }
     let run_skeleton = RunSkeleton::read(dir).map_err(|e| err(format!("{}: {e}", dir.display())))?;
+    // The model's frame rate is its training data's (the run's skeleton.json); a skeleton clip
+    // at another rate gives its joints, not its rate.
+    match (options.fps, run_skeleton.as_ref().map(|s| s.fps), clip_fps) {
+        (None, Some(run), Some(clip)) if !zoo_motion::clip::same_frame_rate(f64::from(clip), f64::from(run)) => {
+            eprintln!(
+                "note: --skeleton is at {clip} fps, the model was trained at {run} fps: the file records {run} fps"
+            );
+        }
+        (None, None, Some(clip)) => options.fps = Some(clip),
+        _ => {}
+    }
     if inputs.skeleton.is_none() && run_skeleton.is_none() {
         return Err(err(format!(
             "{} has no skeleton.json (trained by an older zoo): pass --skeleton FILE.bvh, a clip of the training \

@@ -40,10 +40,27 @@ fn alive(pid: u32) -> Option<bool> {
     proc.join("self").exists().then(|| proc.join(pid.to_string()).exists())
 }
 
-/// The lock's holder: (pid, start time as written).
-fn holder(text: &str) -> (Option<u32>, String) {
+/// The lock's holder: (pid, start time as written, the process's start as [`process_start`]
+/// gave it when the lock was taken).
+fn holder(text: &str) -> (Option<u32>, String, Option<String>) {
     let field = |name: &str| text.lines().find_map(|l| l.strip_prefix(name)).map(str::trim);
-    (field("pid ").and_then(|p| p.parse().ok()), field("started ").unwrap_or("at an unknown time").to_string())
+    (
+        field("pid ").and_then(|p| p.parse().ok()),
+        field("started ").unwrap_or("at an unknown time").to_string(),
+        field("process-start ").map(str::to_string),
+    )
+}
+
+/// When process `pid` started, as the kernel tells it (`/proc/sys/kernel/random/boot_id` and
+/// the start time in clock ticks since boot, field 22 of `/proc/PID/stat`): a process id used
+/// again by another process has another start, so a lock outliving its process is told apart
+/// from a running training even when its process id was given to another process.
+fn process_start(pid: u32) -> Option<String> {
+    let boot = std::fs::read_to_string("/proc/sys/kernel/random/boot_id").ok()?;
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    let after_name = &stat[stat.rfind(')')? + 1..];
+    let ticks = after_name.split_whitespace().nth(19)?;
+    Some(format!("{} {ticks}", boot.trim()))
 }
 
 /// Seconds since 1970 as `YYYY-MM-DD HH:MM:SS UTC` (the civil-from-days algorithm of
@@ -74,7 +91,10 @@ pub fn lock(dir: &Path) -> Result<(), TrainError> {
     }
     let path = dir.join(LOCK_FILE);
     let started = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
-    let me = format!("pid {}\nstarted {}\n", std::process::id(), utc(started));
+    let mut me = format!("pid {}\nstarted {}\n", std::process::id(), utc(started));
+    if let Some(start) = process_start(std::process::id()) {
+        me.push_str(&format!("process-start {start}\n"));
+    }
     for _ in 0..3 {
         match std::fs::OpenOptions::new().write(true).create_new(true).open(&path) {
             Ok(mut f) => {
@@ -86,13 +106,23 @@ pub fn lock(dir: &Path) -> Result<(), TrainError> {
                 return put_back_unfinished(dir);
             }
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
-                let (pid, when) = holder(&std::fs::read_to_string(&path).unwrap_or_default());
+                let (pid, when, start) = holder(&std::fs::read_to_string(&path).unwrap_or_default());
                 match pid.map(|p| (p, alive(p))) {
                     Some((p, _)) if p == std::process::id() => {}
+                    Some((p, Some(true)))
+                        if start.is_some() && process_start(p).is_some_and(|now| Some(now) != start) =>
+                    {
+                        eprintln!(
+                            "{}: taking over the lock of process {p} (started {when}), which no longer runs (its \
+                             process id now belongs to another process)",
+                            dir.display()
+                        )
+                    }
                     Some((p, Some(true))) => {
                         return Err(config(format!(
                             "{} is in use by another training: process {p}, started {when} (lock file {}); wait \
-                             for it to end or choose another folder",
+                             for it to end or choose another folder (if process {p} is not a zoo training, delete \
+                             the lock file)",
                             dir.display(),
                             path.display()
                         )));
@@ -285,5 +315,17 @@ mod tests {
         assert!(!dir.path().join(".config.json.77.tmp").exists() && !dir.path().join(".last.tmp").exists());
         end_of_command(true);
         assert!(!dir.path().join(LOCK_FILE).exists());
+        // Process 1 runs, but it is not the process that took the lock (another start): the
+        // process id was used again, and the lock is taken over.
+        if let Some(start) = process_start(1) {
+            assert!(text.contains("process-start "), "{text}");
+            let stale = format!("pid 1\nstarted 2026-01-01 00:00:00 UTC\nprocess-start {start}9\n");
+            std::fs::write(dir.path().join(LOCK_FILE), stale).unwrap();
+            lock(dir.path()).unwrap();
+            end_of_command(true);
+            let same = format!("pid 1\nstarted 2026-01-01 00:00:00 UTC\nprocess-start {start}\n");
+            std::fs::write(dir.path().join(LOCK_FILE), same).unwrap();
+            assert!(lock(dir.path()).unwrap_err().to_string().contains("if process 1 is not a zoo training, delete"));
+        }
     }
 }
