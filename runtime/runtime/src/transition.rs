@@ -226,6 +226,10 @@ pub struct TransitionRunner {
     sel: Vec<usize>,
     /// Network frames each character of a step call has computed by the end of the call.
     need: Vec<usize>,
+    /// Whether `step_batch` spreads the frames it computes ahead over the steps before the
+    /// blend (a frame budget); `generate` turns it off, computing them in one step (fewer graph
+    /// runs in all).
+    spread_ahead: bool,
     /// Foot-lock post-process of `generate`, off unless set.
     foot_lock: Option<lock::FittedLock>,
     /// Whether transitions longer than the trained length are accepted.
@@ -467,6 +471,7 @@ impl TransitionModel {
             motion: Vec::new(),
             sel: Vec::new(),
             need: Vec::new(),
+            spread_ahead: true,
             foot_lock: None,
             beyond_trained: false,
             fallback: None,
@@ -1068,9 +1073,10 @@ impl TransitionRunner {
             let b = (0..=length).find(|&t| features_blend_weight(t, length, blend) > 0.0).unwrap_or(length);
             let extra = length - b;
             // This character's extra runs start at `first` (staggered across the batch) and
-            // bring it `extra` frames ahead by frame `b`.
+            // bring it `extra` frames ahead by frame `b`. Without spreading (`generate`, where
+            // no frame is budgeted), all of them run in the step that enters the blend.
             let slack = b.saturating_sub(extra);
-            let first = slack - c * slack / n;
+            let first = if self.spread_ahead { slack - c * slack / n } else { b + 1 };
             let lead = if f >= first { (f - first + 1).min(extra) } else { 0 };
             let mut k = (f + 1 + lead).min(length + 1);
             if f >= b {
@@ -1189,6 +1195,8 @@ impl TransitionRunner {
         let mut poses = std::mem::take(&mut self.poses);
         poses.resize(n * d, 0.0);
         let mut result = Ok(());
+        // A whole transition in one call: the frames ahead in one step each (fewest graph runs).
+        self.spread_ahead = false;
         for f in 0..steps {
             result = self.step_batch(states, &mut poses);
             if result.is_err() {
@@ -1198,6 +1206,7 @@ impl TransitionRunner {
                 out[c * per + f * d..c * per + (f + 1) * d].copy_from_slice(&poses[c * d..(c + 1) * d]);
             }
         }
+        self.spread_ahead = true;
         self.poses = poses;
         result?;
         let past_per = past.len() / n;
