@@ -177,8 +177,9 @@ impl TransitionState {
     /// How far the network's own prediction of the target frame lies from the requested
     /// target, before the target blend hides it: the engine's cue to fall back (e.g. to
     /// inertialization) when the network is far off. Known once stepping reaches the blend
-    /// window (the last [`TransitionModel::target_blend`] frames, where the runner computes the
-    /// rest of the transition ahead) and after [`TransitionRunner::generate`]; `None` before.
+    /// window (the last [`TransitionModel::target_blend`] frames, whose network frames the
+    /// runner has computed ahead by then) and after [`TransitionRunner::generate`]; `None`
+    /// before.
     pub fn target_miss(&self) -> Option<TargetMiss> {
         self.miss
     }
@@ -984,12 +985,12 @@ impl TransitionRunner {
 
     /// The next frame of one character's transition into `pose` (`3K` global positions):
     /// frame `i` of `0..=L` of the target-blended transition (RTN eq. 15-16), the same frames
-    /// [`TransitionRunner::generate`] writes (without its optional foot lock). When stepping
-    /// reaches the blend window (the last [`TransitionModel::target_blend`] frames), this call
-    /// computes the rest of the transition ahead (the blend needs the network's predicted
-    /// target frame), so that call costs up to `target_blend + 1` graph runs and the later
-    /// ones none; [`TransitionState::target_miss`] is known from then on. Stepping past the
-    /// target frame is an error.
+    /// [`TransitionRunner::generate`] writes (without its optional foot lock). The blend over
+    /// the last [`TransitionModel::target_blend`] frames needs the network's predicted target
+    /// frame, so the steps before the blend window compute the network's frames ahead, one
+    /// extra graph run per step at most ([`TransitionRunner::step_batch`]);
+    /// [`TransitionState::target_miss`] is known once stepping reaches the window. Stepping past
+    /// the target frame is an error.
     pub fn step(&mut self, state: &mut TransitionState, pose: &mut [f32]) -> Result<(), MotionError> {
         self.step_batch(std::slice::from_mut(state), pose)
     }
