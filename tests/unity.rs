@@ -764,6 +764,7 @@ fn figure(text: &str, tag: &str, key: &str) -> f64 {
 /// The named cases of the console test (`Tests~/ConsoleTests.cs`, `Cases`), each of which must
 /// print `case NAME: passed`.
 const CASES: &[&str] = &[
+    "transition_fed_per_frame",
     "count_int_max.transition_runner",
     "count_negative.transition_runner",
     "count_int_max.transition_characters",

@@ -128,6 +128,72 @@ namespace Zoo
             finally { Exit(runner, r); Exit(this, c); }
         }
 
+        /// <summary>
+        /// Begins a transition of <paramref name="length"/> frames whose context is fed one frame
+        /// per game frame (<c>zoo_transition_begin</c>), so that no frame encodes the whole context:
+        /// <paramref name="first"/> holds each character's first context frame (N * 3K global
+        /// positions), <paramref name="target"/> and <paramref name="next"/> N * 3K each,
+        /// <paramref name="pastFrames"/> the context frames in all. Then <see cref="Feed"/> the other
+        /// <c>pastFrames - 1</c> frames and step: the same frames as <see cref="Start"/>, bit for bit.
+        /// </summary>
+        public void Begin(TransitionRunner runner, ReadOnlySpan<float> first, ReadOnlySpan<float> target, ReadOnlySpan<float> next, int pastFrames, int length)
+        {
+            var frames = Size.Count(length, "length", "zoo_transition_begin");
+            var past = Size.Count(pastFrames, "pastFrames", "zoo_transition_begin");
+            if (toModel != null)
+            {
+                var all = Size.Fit(ref floats, first.Length + target.Length + next.Length);
+                var f = new Span<float>(all, 0, first.Length);
+                var t = new Span<float>(all, first.Length, target.Length);
+                var n = new Span<float>(all, first.Length + target.Length, next.Length);
+                first.CopyTo(f);
+                target.CopyTo(t);
+                next.CopyTo(n);
+                toModel.PositionsLenient(f);
+                toModel.PositionsLenient(t);
+                toModel.PositionsLenient(n);
+                first = f;
+                target = t;
+                next = n;
+            }
+            bool r = false, c = false;
+            try
+            {
+                var rp = (Native.ZooTransitionRunner*)Enter(runner, ref r);
+                var cp = (Native.ZooTransitionCharacters*)Enter(this, ref c);
+                ZooStatus s;
+                fixed (float* f = &MemoryMarshal.GetReference(first))
+                fixed (float* t = &MemoryMarshal.GetReference(target))
+                fixed (float* n = &MemoryMarshal.GetReference(next))
+                    s = ZooNative.zoo_transition_begin(rp, cp, f, Size.Of(first.Length), t, Size.Of(target.Length), n, Size.Of(next.Length), past, frames);
+                Errors.Check(s, runner, this);
+            }
+            finally { Exit(runner, r); Exit(this, c); }
+        }
+
+        /// <summary>Feeds the next context frame of a transition begun with <see cref="Begin"/> (<c>zoo_transition_feed</c>; <paramref name="frame"/> N * 3K global positions).</summary>
+        public void Feed(TransitionRunner runner, ReadOnlySpan<float> frame)
+        {
+            if (toModel != null)
+            {
+                var f = new Span<float>(Size.Fit(ref floats, frame.Length), 0, frame.Length);
+                frame.CopyTo(f);
+                toModel.PositionsLenient(f);
+                frame = f;
+            }
+            bool r = false, c = false;
+            try
+            {
+                var rp = (Native.ZooTransitionRunner*)Enter(runner, ref r);
+                var cp = (Native.ZooTransitionCharacters*)Enter(this, ref c);
+                ZooStatus s;
+                fixed (float* f = &MemoryMarshal.GetReference(frame))
+                    s = ZooNative.zoo_transition_feed(rp, cp, f, Size.Of(frame.Length));
+                Errors.Check(s, runner, this);
+            }
+            finally { Exit(runner, r); Exit(this, c); }
+        }
+
         /// <summary>The next frame of every character's transition as global positions (<c>zoo_transition_step</c>; <paramref name="poses"/> N * 3K).</summary>
         public void Step(TransitionRunner runner, Span<float> poses)
         {

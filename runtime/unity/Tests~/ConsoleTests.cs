@@ -1038,6 +1038,40 @@ namespace Zoo.Tests
                 }
             });
 
+            // A transition whose context is fed frame by frame (Begin, then Feed per frame) steps
+            // the frames Start gives for the same context, bit for bit.
+            Case("transition_fed_per_frame", () =>
+            {
+                var past = v.F("tr.pos.past");
+                var target = v.F("tr.pos.target");
+                var next = v.F("tr.pos.next");
+                int d = 3 * k, frames = past.Length / (n * d);
+                using (var runner = new TransitionRunner(rtn, n))
+                using (var a = new TransitionCharacters(rtn, n))
+                using (var b = new TransitionCharacters(rtn, n))
+                {
+                    a.Start(runner, past, target, next, length);
+                    var frame = new float[n * d];
+                    for (int f = 0; f < frames; f++)
+                    {
+                        for (int c = 0; c < n; c++)
+                            Array.Copy(past, (c * frames + f) * d, frame, c * d, d);
+                        if (f == 0) b.Begin(runner, frame, target, next, frames, length);
+                        else b.Feed(runner, frame);
+                    }
+                    var pa = new float[n * d];
+                    var pb = new float[n * d];
+                    for (int i = 0; i <= length; i++)
+                    {
+                        a.Step(runner, pa);
+                        b.Step(runner, pb);
+                        for (int j = 0; j < pa.Length; j++)
+                            if (BitConverter.SingleToInt32Bits(pa[j]) != BitConverter.SingleToInt32Bits(pb[j]))
+                                throw new Exception("frame " + i + " value " + j + " of the fed transition differs from the started one");
+                    }
+                }
+            });
+
             // Coordinate frames: the axis and handedness are integers, a value outside the enum is
             // refused by the runtime by its field's name.
             Case("frame_bad_up_axis", () =>
