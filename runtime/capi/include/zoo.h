@@ -4,8 +4,9 @@
  *
  * The library runs models exported by `zoo export --onnx` (transitions, keyframe completion,
  * stitching, synthesis and its control) for a batch of characters, one frame at a time. It is
- * C99 and C++ compatible, allocates nothing in a per-frame call, never prints, and never aborts
- * or unwinds into the caller: every mistake is a status and a message.
+ * C99 and C++ compatible, allocates nothing in a per-frame call, never prints, and never unwinds
+ * into the caller; every count and length outside its documented range is refused before
+ * anything is allocated: a caller's mistake is a status and a message, not an abort.
  *
  * Lifecycle
  *   1. Check the library: zoo_abi_version() == ZOO_ABI_VERSION (zoo_version_string() for a
