@@ -423,3 +423,26 @@ fn files_past_the_memory_bound_are_refused_before_they_are_held() {
     let err = failed(&["data", "stats", s(&wide)]);
     assert!(err.contains("joint `J10000` is joint 10001; zoo reads at most 10000 joints"), "{err}");
 }
+
+/// A network width typed too large (`zoo train rmr --hidden 65536` asks for about 100 GB) is
+/// refused before its weights are allocated, naming the size, the bound and how to raise it;
+/// the process stays well under a 2 GB address-space limit. The same width passes the check
+/// under a raised bound (it then fails only for the memory it really lacks, not tested here).
+#[test]
+fn a_network_past_the_memory_bound_is_refused_before_it_is_allocated() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out_dir = tmp.path().join("run");
+    let script = format!(
+        "ulimit -v 4000000; exec {} train rmr --preset tiny --synth-minutes 0.5 --epochs 1 --hidden 65536 --out {}",
+        zoo_bin().display(),
+        s(&out_dir)
+    );
+    let out = Command::new("bash").args(["-c", &script]).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "a 100 GB network was accepted:\n{err}");
+    assert!(
+        err.contains("past the memory bound of 2.00 GB") && err.contains("ZOO_MEMORY_GB"),
+        "the refusal should name the bound and how to raise it:\n{err}"
+    );
+    assert!(!err.contains("memory allocation of"), "the process aborted on the allocation:\n{err}");
+}

@@ -68,6 +68,29 @@ impl SeededVarMap {
     }
 }
 
+/// Bytes a trained weight holds: itself, its gradient and Adam's two moments, f32 each.
+const BYTES_PER_TRAINED_WEIGHT: u64 = 16;
+
+/// Refuses a variable of `new` values when the model's `held` values and it, trained (weight,
+/// gradient, optimizer state), would pass the memory bound (`zoo_data::limits::memory_bound`):
+/// checked before the variable is allocated, so that a width typed too large is an error that
+/// names it, not an abort of the process.
+fn check_memory(held: u64, new: u64) -> Result<()> {
+    let need = held.saturating_add(new).saturating_mul(BYTES_PER_TRAINED_WEIGHT);
+    let bound = zoo_data::limits::memory_bound();
+    if need > bound {
+        candle_core::bail!(
+            "the network's {} weights need {:.2} GB with their gradients and the optimizer's state, past the \
+             memory bound of {:.2} GB: make the network smaller (its widths, e.g. --hidden), or raise the bound \
+             with the environment variable ZOO_MEMORY_GB=N",
+            held.saturating_add(new),
+            need as f64 / 1e9,
+            bound as f64 / 1e9
+        );
+    }
+    Ok(())
+}
+
 impl SimpleBackend for SeededVarMap {
     fn get(&self, shape: Shape, name: &str, init: Init, dtype: DType, dev: &Device) -> Result<Tensor> {
         let mut data = self.varmap.data().lock().expect("the VarMap lock is not poisoned");
@@ -77,6 +100,7 @@ impl SimpleBackend for SeededVarMap {
             }
             return Ok(var.as_tensor().clone());
         }
+        check_memory(data.values().map(|v| v.elem_count() as u64).sum::<u64>(), shape.elem_count() as u64)?;
         let values = init_values(init, &shape, name, self.seed);
         let tensor = Tensor::from_vec(values, shape, dev)?.to_dtype(dtype)?;
         let var = Var::from_tensor(&tensor)?;
