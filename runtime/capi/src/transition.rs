@@ -351,12 +351,7 @@ pub unsafe extern "C" fn zoo_transition_begin_posed(
         ];
         check_past_frames(past_frames)?;
         let mut inputs = std::mem::take(&mut chars.inputs);
-        inputs.resize_with(3 * n, || EnginePose::new(k));
-        for (b, (roots, rotations)) in buffers.iter().enumerate() {
-            for c in 0..n {
-                read_pose(&roots[c], &rotations[c * 4 * k..(c + 1) * 4 * k], &mut inputs[b * n + c]);
-            }
-        }
+        read_into(&mut inputs, &buffers, k);
         let (first, rest) = inputs.split_at(n);
         let (target, next) = rest.split_at(n);
         let result = runner.begin_posed_batch(&mut chars.states, first, target, next, past_frames, length);
@@ -385,11 +380,8 @@ pub unsafe extern "C" fn zoo_transition_feed_posed(
         let (roots, rotations) =
             unsafe { posed_buffers(roots, roots_len, rotations, rotations_len, ["roots", "rotations"], n, k) }?;
         let mut inputs = std::mem::take(&mut chars.inputs);
-        inputs.resize_with(n, || EnginePose::new(k));
-        for c in 0..n {
-            read_pose(&roots[c], &rotations[c * 4 * k..(c + 1) * 4 * k], &mut inputs[c]);
-        }
-        let result = runner.feed_posed_batch(&mut chars.states, &inputs[..n]);
+        read_into(&mut inputs, &[(roots, rotations)], k);
+        let result = runner.feed_posed_batch(&mut chars.states, &inputs);
         chars.inputs = inputs;
         result.map_err(runtime_failure)
     })
@@ -414,6 +406,19 @@ unsafe fn posed_buffers<'a>(
     check_size(names[1], rotations.len(), n * 4 * k, "floats", format_args!("4 * {JOINTS} per character"))?;
     check_poses(roots, rotations, names)?;
     Ok((roots, rotations))
+}
+
+/// Reads the engine poses of `buffers` (roots and `4K` rotation values per root, sizes checked)
+/// one buffer after the other into `inputs`, resized to all of them.
+fn read_into(inputs: &mut Vec<EnginePose>, buffers: &[(&[ZooRootMotion], &[f32])], k: usize) {
+    inputs.resize_with(buffers.iter().map(|(roots, _)| roots.len()).sum(), || EnginePose::new(k));
+    let mut at = 0;
+    for (roots, rotations) in buffers {
+        for ((root, r), pose) in roots.iter().zip(rotations.chunks_exact(4 * k)).zip(&mut inputs[at..]) {
+            read_pose(root, r, pose);
+        }
+        at += roots.len();
+    }
 }
 
 /// Refuses a context of no frames or of more than `ZOO_MAX_FRAMES`.
@@ -484,10 +489,6 @@ pub unsafe extern "C" fn zoo_transition_start_posed(
         let (n, k) = (chars.states.len(), chars.joints);
         let past_roots = unsafe { slice(past_roots, past_roots_len, "past_roots") }?;
         let past_rotations = unsafe { slice(past_rotations, past_rotations_len, "past_rotations") }?;
-        let target_roots = unsafe { slice(target_roots, target_roots_len, "target_roots") }?;
-        let target_rotations = unsafe { slice(target_rotations, target_rotations_len, "target_rotations") }?;
-        let next_roots = unsafe { slice(next_roots, next_roots_len, "next_roots") }?;
-        let next_rotations = unsafe { slice(next_rotations, next_rotations_len, "next_rotations") }?;
         if past_roots.is_empty() || !past_roots.len().is_multiple_of(n) {
             return Err((
                 ZooStatus::InvalidArgument,
@@ -504,39 +505,17 @@ pub unsafe extern "C" fn zoo_transition_start_posed(
             "floats",
             format_args!("4 * {JOINTS} per root"),
         )?;
-        check_size("target_roots", target_roots.len(), n, "roots", "the batch, one per character")?;
-        check_size(
-            "target_rotations",
-            target_rotations.len(),
-            n * 4 * k,
-            "floats",
-            format_args!("4 * {JOINTS} per character"),
-        )?;
-        check_size("next_roots", next_roots.len(), n, "roots", "the batch, one per character")?;
-        check_size(
-            "next_rotations",
-            next_rotations.len(),
-            n * 4 * k,
-            "floats",
-            format_args!("4 * {JOINTS} per character"),
-        )?;
-        for (roots, rotations, names) in [
-            (past_roots, past_rotations, ["past_roots", "past_rotations"]),
-            (target_roots, target_rotations, ["target_roots", "target_rotations"]),
-            (next_roots, next_rotations, ["next_roots", "next_rotations"]),
-        ] {
-            check_poses(roots, rotations, names)?;
-        }
+        let names = ["target_roots", "target_rotations"];
+        let target = unsafe {
+            posed_buffers(target_roots, target_roots_len, target_rotations, target_rotations_len, names, n, k)
+        }?;
+        let names = ["next_roots", "next_rotations"];
+        let next =
+            unsafe { posed_buffers(next_roots, next_roots_len, next_rotations, next_rotations_len, names, n, k) }?;
+        check_poses(past_roots, past_rotations, ["past_roots", "past_rotations"])?;
         let mut inputs = std::mem::take(&mut chars.inputs);
-        inputs.resize_with(past_roots.len() + 2 * n, || EnginePose::new(k));
-        for (i, root) in past_roots.iter().enumerate() {
-            read_pose(root, &past_rotations[i * 4 * k..(i + 1) * 4 * k], &mut inputs[i]);
-        }
+        read_into(&mut inputs, &[(past_roots, past_rotations), target, next], k);
         let at = past_roots.len();
-        for c in 0..n {
-            read_pose(&target_roots[c], &target_rotations[c * 4 * k..(c + 1) * 4 * k], &mut inputs[at + c]);
-            read_pose(&next_roots[c], &next_rotations[c * 4 * k..(c + 1) * 4 * k], &mut inputs[at + n + c]);
-        }
         let (past, rest) = inputs.split_at(at);
         let (target, next) = rest.split_at(n);
         let result = runner.start_posed_batch_for(&mut chars.states, past, target, next, length);

@@ -109,6 +109,8 @@ pub struct TransitionState {
     frames: usize,
     /// Transition length `L` of this transition: frames `0..L` lead to the target frame `L`.
     length: usize,
+    /// The first frame the target blend moves (its weight above 0), from `length`.
+    blend_from: usize,
     /// Frames of the blend window computed ahead (global positions, blended), capacity
     /// `(target_blend + 1) * 3K`, allocated once by `new_transition`.
     ahead: Vec<f32>,
@@ -445,6 +447,7 @@ impl TransitionModel {
             target_vec: vec![0.0; 2 * d],
             frames: 0,
             length: 0,
+            blend_from: 0,
             ahead: Vec::with_capacity((self.target_blend + 2) * d),
             ahead_from: 0,
             raw: false,
@@ -591,6 +594,7 @@ impl TransitionRunner {
         length: usize,
     ) -> Result<(), MotionError> {
         let per = self.check_start(states, past, target, next, length)?;
+        let blend_from = self.blend_from(length);
         let n = states.len();
         let (k, d) = (self.model.joints, 3 * self.model.joints);
         let frames = per / d;
@@ -629,6 +633,7 @@ impl TransitionRunner {
             s.context_fed = 1;
             s.frames = 0;
             s.length = length;
+            s.blend_from = blend_from;
             s.ahead.clear();
             s.ahead_from = 0;
             s.raw = false;
@@ -678,6 +683,7 @@ impl TransitionRunner {
         length: usize,
     ) -> Result<(), MotionError> {
         let per = self.check_start(states, first, target, next, length)?;
+        let blend_from = self.blend_from(length);
         let d = 3 * self.model.joints;
         if per != d {
             return Err(wrong_len("first", d, states.len(), first.len()));
@@ -697,6 +703,7 @@ impl TransitionRunner {
             s.context_fed = 0;
             s.frames = 0;
             s.length = length;
+            s.blend_from = blend_from;
             s.generated = 0;
             s.ahead.clear();
             s.ahead_from = 0;
@@ -830,6 +837,12 @@ impl TransitionRunner {
             }
         }
         Ok(())
+    }
+
+    /// The first frame of a transition of `length` frames that the target blend moves.
+    fn blend_from(&self, length: usize) -> usize {
+        let blend = self.model.target_blend;
+        (0..=length).find(|&t| features_blend_weight(t, length, blend) > 0.0).unwrap_or(length)
     }
 
     /// The checks of [`TransitionRunner::start_batch_for`] before any work: a batch, a length the
@@ -1070,8 +1083,7 @@ impl TransitionRunner {
         need.clear();
         let mut rounds = 0;
         for (c, s) in states.iter().enumerate() {
-            let (f, length) = (s.frames, s.length);
-            let b = (0..=length).find(|&t| features_blend_weight(t, length, blend) > 0.0).unwrap_or(length);
+            let (f, length, b) = (s.frames, s.length, s.blend_from);
             let extra = length - b;
             // This character's extra runs start at `first` (staggered across the batch) and
             // bring it `extra` frames ahead by frame `b`. Without spreading (`generate`, where

@@ -97,22 +97,7 @@ namespace Zoo
         public void Start(TransitionRunner runner, ReadOnlySpan<float> past, ReadOnlySpan<float> target, ReadOnlySpan<float> next, int length)
         {
             var frames = Size.Count(length, "length", "zoo_transition_start");
-            if (toModel != null)
-            {
-                var all = Size.Fit(ref floats, past.Length + target.Length + next.Length);
-                var p = new Span<float>(all, 0, past.Length);
-                var t = new Span<float>(all, past.Length, target.Length);
-                var n = new Span<float>(all, past.Length + target.Length, next.Length);
-                past.CopyTo(p);
-                target.CopyTo(t);
-                next.CopyTo(n);
-                toModel.PositionsLenient(p);
-                toModel.PositionsLenient(t);
-                toModel.PositionsLenient(n);
-                past = p;
-                target = t;
-                next = n;
-            }
+            ToModelFrame(ref past, ref target, ref next);
             bool r = false, c = false;
             try
             {
@@ -140,22 +125,7 @@ namespace Zoo
         {
             var frames = Size.Count(length, "length", "zoo_transition_begin");
             var past = Size.Count(pastFrames, "pastFrames", "zoo_transition_begin");
-            if (toModel != null)
-            {
-                var all = Size.Fit(ref floats, first.Length + target.Length + next.Length);
-                var f = new Span<float>(all, 0, first.Length);
-                var t = new Span<float>(all, first.Length, target.Length);
-                var n = new Span<float>(all, first.Length + target.Length, next.Length);
-                first.CopyTo(f);
-                target.CopyTo(t);
-                next.CopyTo(n);
-                toModel.PositionsLenient(f);
-                toModel.PositionsLenient(t);
-                toModel.PositionsLenient(n);
-                first = f;
-                target = t;
-                next = n;
-            }
+            ToModelFrame(ref first, ref target, ref next);
             bool r = false, c = false;
             try
             {
@@ -174,13 +144,8 @@ namespace Zoo
         /// <summary>Feeds the next context frame of a transition begun with <see cref="Begin"/> (<c>zoo_transition_feed</c>; <paramref name="frame"/> N * 3K global positions).</summary>
         public void Feed(TransitionRunner runner, ReadOnlySpan<float> frame)
         {
-            if (toModel != null)
-            {
-                var f = new Span<float>(Size.Fit(ref floats, frame.Length), 0, frame.Length);
-                frame.CopyTo(f);
-                toModel.PositionsLenient(f);
-                frame = f;
-            }
+            ReadOnlySpan<float> none = default;
+            ToModelFrame(ref frame, ref none, ref none);
             bool r = false, c = false;
             try
             {
@@ -192,6 +157,28 @@ namespace Zoo
                 Errors.Check(s, runner, this);
             }
             finally { Exit(runner, r); Exit(this, c); }
+        }
+
+        /// <summary>
+        /// Position buffers in the model's frame: copied into the scratch array and converted when
+        /// the characters were made with an engine frame, left as they are otherwise.
+        /// </summary>
+        void ToModelFrame(ref ReadOnlySpan<float> a, ref ReadOnlySpan<float> b, ref ReadOnlySpan<float> c)
+        {
+            if (toModel == null) return;
+            var all = Size.Fit(ref floats, a.Length + b.Length + c.Length);
+            var sa = new Span<float>(all, 0, a.Length);
+            var sb = new Span<float>(all, a.Length, b.Length);
+            var sc = new Span<float>(all, a.Length + b.Length, c.Length);
+            a.CopyTo(sa);
+            b.CopyTo(sb);
+            c.CopyTo(sc);
+            toModel.PositionsLenient(sa);
+            toModel.PositionsLenient(sb);
+            toModel.PositionsLenient(sc);
+            a = sa;
+            b = sb;
+            c = sc;
         }
 
         /// <summary>The next frame of every character's transition as global positions (<c>zoo_transition_step</c>; <paramref name="poses"/> N * 3K).</summary>

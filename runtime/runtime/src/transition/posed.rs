@@ -152,28 +152,7 @@ impl TransitionRunner {
                 self.check_pose(name, i, p)?;
             }
         }
-        let (mut p, mut t, mut x) = (
-            std::mem::take(&mut self.posed.past),
-            std::mem::take(&mut self.posed.target),
-            std::mem::take(&mut self.posed.next),
-        );
-        p.clear();
-        t.clear();
-        x.clear();
-        for pose in past {
-            self.pose_positions(pose, &mut p);
-        }
-        for pose in target {
-            self.pose_positions(pose, &mut t);
-        }
-        for pose in next {
-            self.pose_positions(pose, &mut x);
-        }
-        let result = self.start_batch_for(states, &p, &t, &x, length);
-        self.posed.past = p;
-        self.posed.target = t;
-        self.posed.next = x;
-        result?;
+        self.with_positions([past, target, next], |r, [p, t, x]| r.start_batch_for(states, p, t, x, length))?;
         let per = past.len() / n;
         for (c, s) in states.iter_mut().enumerate() {
             let last = &past[(c + 1) * per - 1];
@@ -211,28 +190,7 @@ impl TransitionRunner {
                 self.check_pose(name, i, p)?;
             }
         }
-        let (mut p, mut t, mut x) = (
-            std::mem::take(&mut self.posed.past),
-            std::mem::take(&mut self.posed.target),
-            std::mem::take(&mut self.posed.next),
-        );
-        p.clear();
-        t.clear();
-        x.clear();
-        for pose in first {
-            self.pose_positions(pose, &mut p);
-        }
-        for pose in target {
-            self.pose_positions(pose, &mut t);
-        }
-        for pose in next {
-            self.pose_positions(pose, &mut x);
-        }
-        let result = self.begin_batch(states, &p, &t, &x, past_frames, length);
-        self.posed.past = p;
-        self.posed.target = t;
-        self.posed.next = x;
-        result?;
+        self.with_positions([first, target, next], |r, [p, t, x]| r.begin_batch(states, p, t, x, past_frames, length))?;
         for (c, s) in states.iter_mut().enumerate() {
             world_rotations(&first[c], &mut s.posed.from);
             world_rotations(&target[c], &mut s.posed.to);
@@ -262,19 +220,32 @@ impl TransitionRunner {
                 reason: "this transition was begun from positions (begin_batch); feed it positions (feed_batch)".into(),
             });
         }
-        let mut p = std::mem::take(&mut self.posed.past);
-        p.clear();
-        for pose in frame {
-            self.pose_positions(pose, &mut p);
-        }
-        let result = self.feed_batch(states, &p);
-        self.posed.past = p;
-        result?;
+        self.with_positions([frame, &[], &[]], |r, [p, _, _]| r.feed_batch(states, p))?;
         for (c, s) in states.iter_mut().enumerate() {
             world_rotations(&frame[c], &mut s.posed.from);
             s.posed.root = root_of(frame[c].hips_world(), frame[c].hips_world_rotation());
         }
         Ok(())
+    }
+
+    /// Runs `f` on the global positions of three groups of poses (past, target, next), held in
+    /// the runner's buffers, which are kept for the next call.
+    fn with_positions<R>(&mut self, groups: [&[EnginePose]; 3], f: impl FnOnce(&mut Self, [&[f32]; 3]) -> R) -> R {
+        let mut buffers = [
+            std::mem::take(&mut self.posed.past),
+            std::mem::take(&mut self.posed.target),
+            std::mem::take(&mut self.posed.next),
+        ];
+        for (poses, buffer) in groups.iter().zip(buffers.iter_mut()) {
+            buffer.clear();
+            for pose in *poses {
+                self.pose_positions(pose, buffer);
+            }
+        }
+        let result = f(self, [&buffers[0], &buffers[1], &buffers[2]]);
+        let [p, t, x] = buffers;
+        (self.posed.past, self.posed.target, self.posed.next) = (p, t, x);
+        result
     }
 
     /// The next frame of a transition started with [`TransitionRunner::start_posed`], as an
