@@ -678,3 +678,158 @@ fn write_engine_pose(p: &EnginePose, root: &mut ZooRootMotion, rotations: &mut [
         out.copy_from_slice(&q.to_array());
     }
 }
+
+/// One behaviour wherever a transition runs: a whole transition in engine poses with the model's
+/// calibrated fallback and the foot lock, through the runtime (`generate_posed_batch`, what the
+/// Python package and the Blender add-on call), the C ABI (`zoo_transition_generate_posed`) and
+/// `zoo transition --in-place --foot-lock` on the same clip frames. The C ABI gives the runtime's
+/// poses bit for bit; the CLI's clip (written to BVH at 6 decimals) the same joint positions
+/// within 0.01 cm. The fallback moves the transition (its weight strictly between 0 and 1 here),
+/// and without the fallback and the lock the whole transition is the one stepped frame by frame.
+#[test]
+fn a_whole_posed_transition_with_fallback_and_foot_lock_is_the_same_in_the_runtime_c_and_the_cli() {
+    use zoo_runtime::{TransitionRunner, TransitionState};
+    let tmp = tempfile::tempdir().unwrap();
+    let bvh = tmp.path().join("clip.bvh");
+    zoo_data::bvh::write_file(&zoo_tests::synth_biped_clip(0), &bvh).unwrap();
+    let clip = zoo_data::bvh::read_file(&bvh, &zoo_data::bvh::ReadOptions::default()).unwrap();
+    let k = clip.joints();
+    let pose = |f: usize| {
+        let rot: Vec<Quat> = clip.rotations_at(f).iter().map(|q| q.as_quat().normalize()).collect();
+        EnginePose::from_world(clip.root_position(f).as_vec3(), &rot)
+    };
+    let (from, to, length) = (40usize, 100usize, 30usize);
+    let past: Vec<EnginePose> = (from - 10..from).map(pose).collect();
+    let (target, next) = (vec![pose(to)], vec![pose(to + 1)]);
+    let generate = |runner: &mut TransitionRunner, state: &mut TransitionState| {
+        let mut out: Vec<EnginePose> = (0..=length).map(|_| EnginePose::with_global_positions(k)).collect();
+        runner.generate_posed_batch(std::slice::from_mut(state), &past, &target, &next, length, &mut out).unwrap();
+        out
+    };
+    // Thresholds around this seeded model's own miss, so that the fallback blends partly.
+    let plain = LoadedModel::from_bytes(&zoo_tests::biped_rtn_onnx(&clip, false, None)).unwrap();
+    let plain = plain.into_transition().unwrap();
+    let mut state = plain.new_transition();
+    let unlocked = generate(&mut plain.runner().unwrap(), &mut state);
+    let miss = state.target_miss().unwrap().mean;
+    let fallback = zoo_rtn::fallback::Fallback { start: 0.5 * miss, full: 1.5 * miss };
+    let bytes = zoo_tests::biped_rtn_onnx(&clip, false, Some(fallback));
+    let model_path = tmp.path().join("rtn.onnx");
+    std::fs::write(&model_path, &bytes).unwrap();
+    let model = LoadedModel::from_bytes(&bytes).unwrap().into_transition().unwrap();
+
+    // Without the fallback and the lock: the frames of a stepped transition.
+    let mut runner = model.runner().unwrap();
+    let mut stepped = model.new_transition();
+    runner.start_posed_batch_for(std::slice::from_mut(&mut stepped), &past, &target, &next, length).unwrap();
+    let mut p = EnginePose::with_global_positions(k);
+    for want in &unlocked {
+        runner.step_posed(&mut stepped, &mut p).unwrap();
+        assert_eq!(pose_values(&p), pose_values(want));
+        assert_eq!(p.global_positions, want.global_positions);
+    }
+
+    // The runtime with the model's fallback and the default lock.
+    runner.set_model_fallback();
+    runner.set_foot_lock(model.default_foot_lock());
+    let mut state = model.new_transition();
+    let locked = generate(&mut runner, &mut state);
+    let w = state.fallback_weight();
+    assert!(w > 0.0 && w < 1.0, "fallback weight {w} (miss {miss})");
+    let moved = unlocked
+        .iter()
+        .zip(&locked)
+        .flat_map(|(a, b)| a.global_positions.iter().zip(&b.global_positions).map(|(p, q)| p.distance(*q)))
+        .fold(0.0f32, f32::max);
+    assert!(moved > 0.1, "the fallback and the lock moved the transition by {moved} cm only");
+
+    // The C ABI, the same inputs: bit for bit.
+    unsafe {
+        let model = load(&model_path);
+        let (mut runner, mut chars) = (ptr::null_mut(), ptr::null_mut());
+        assert_eq!(zoo_transition_runner_new(model, 1, &mut runner), ZooStatus::Ok);
+        assert_eq!(zoo_transition_characters_new(model, 1, &mut chars), ZooStatus::Ok);
+        let buffers = |poses: &[EnginePose]| {
+            let mut roots = vec![ZooRootMotion::default(); poses.len()];
+            let mut rotations = vec![0.0f32; poses.len() * 4 * k];
+            for (i, p) in poses.iter().enumerate() {
+                write_engine_pose(p, &mut roots[i], &mut rotations[i * 4 * k..(i + 1) * 4 * k]);
+            }
+            (roots, rotations)
+        };
+        let ((pr, pq), (tr, tq), (xr, xq)) = (buffers(&past), buffers(&target), buffers(&next));
+        let mut roots = vec![ZooRootMotion::default(); length + 1];
+        let mut rotations = vec![0.0f32; (length + 1) * 4 * k];
+        let call = |fallback: u8, lock: u8, roots: &mut [ZooRootMotion], rotations: &mut [f32]| {
+            zoo_transition_generate_posed(
+                runner,
+                chars,
+                pr.as_ptr(),
+                pr.len(),
+                pq.as_ptr(),
+                pq.len(),
+                tr.as_ptr(),
+                1,
+                tq.as_ptr(),
+                tq.len(),
+                xr.as_ptr(),
+                1,
+                xq.as_ptr(),
+                xq.len(),
+                length,
+                fallback,
+                lock,
+                roots.as_mut_ptr(),
+                roots.len(),
+                rotations.as_mut_ptr(),
+                rotations.len(),
+            )
+        };
+        assert_error(
+            call(2, 1, &mut roots, &mut rotations),
+            ZooStatus::InvalidArgument,
+            "zoo_transition_generate_posed: `fallback` is 2",
+        );
+        assert_error(
+            call(1, 1, &mut roots[..length], &mut rotations),
+            ZooStatus::InvalidArgument,
+            "zoo_transition_generate_posed: `out_roots`",
+        );
+        assert_eq!(call(1, 1, &mut roots, &mut rotations), ZooStatus::Ok, "{}", last_error());
+        for (f, want) in locked.iter().enumerate() {
+            let (mut r, mut q) = (ZooRootMotion::default(), vec![0.0f32; 4 * k]);
+            write_engine_pose(want, &mut r, &mut q);
+            assert_eq!(roots[f].root_position, r.root_position, "frame {f}");
+            assert_eq!(roots[f].hips_position, r.hips_position, "frame {f}");
+            assert_eq!(&rotations[f * 4 * k..(f + 1) * 4 * k], &q[..], "frame {f}");
+        }
+        zoo_transition_characters_free(chars);
+        zoo_transition_runner_free(runner);
+        zoo_model_free(model);
+    }
+
+    // The CLI on the clip: the transition replaces frames `from..from + length` of the output.
+    let out = tmp.path().join("out.bvh");
+    let status = std::process::Command::new(zoo_tests::zoo_bin())
+        .args(["transition", "--model"])
+        .arg(&model_path)
+        .arg("--from")
+        .arg(format!("{}:{from}", bvh.display()))
+        .arg("--to")
+        .arg(format!("{}:{to}", bvh.display()))
+        .args(["--frames", &length.to_string(), "--foot-lock", "--in-place", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(status.status.success(), "{}", String::from_utf8_lossy(&status.stderr));
+    let written = zoo_data::bvh::read_file(&out, &zoo_data::bvh::ReadOptions::default()).unwrap();
+    let (_, global) = written.global();
+    let mut worst = 0.0f64;
+    for (i, want) in locked[..length].iter().enumerate() {
+        for (j, q) in want.global_positions.iter().enumerate() {
+            worst = worst.max(global[(from + i) * k + j].distance(q.as_dvec3()));
+        }
+    }
+    eprintln!("zoo transition --in-place --foot-lock against the runtime's posed transition: {worst:.2e} cm");
+    assert!(worst < 0.01, "the CLI's transition is {worst} cm from the runtime's");
+}

@@ -22,6 +22,51 @@ pub fn zoo_bin() -> PathBuf {
     bin
 }
 
+/// The synthetic locomotion clip `index` (8 s at 30 fps, the 21-joint skeleton).
+pub fn synth_biped_clip(index: usize) -> Clip {
+    let cfg = zoo_data::synth::SynthConfig {
+        minutes: 0.5,
+        seed: 11,
+        clip_seconds: 8.0,
+        ..zoo_data::synth::SynthConfig::default()
+    };
+    zoo_data::synth::generate_clip(&cfg, index).clip
+}
+
+/// A tiny RTN (`Config::tiny` widths, the paper's 10 context and 30 transition frames, the
+/// interpolation residual) on `clip`'s skeleton, or the paper's sizes with `paper`; seeded
+/// weights, statistics of `clip`'s windows; calibrated fallback thresholds in its file when
+/// given (as `zoo train rtn` writes them).
+pub fn biped_rtn_onnx(clip: &Clip, paper: bool, fallback: Option<zoo_rtn::fallback::Fallback>) -> Vec<u8> {
+    let sk = &clip.skeleton;
+    let base = if paper { zoo_rtn::Config::paper() } else { zoo_rtn::Config::tiny() };
+    let mut config = base.with_parents(&sk.parents);
+    config.past_frames = 10;
+    config.transition_frames = 30;
+    config.interp_residual = true;
+    config.fallback = fallback;
+    let varmap = candle_nn::VarMap::new();
+    zoo_rtn::Rtn::new(
+        &config,
+        zoo_nn::SeededVarMap::builder(&varmap, 7, candle_core::DType::F32, &candle_core::Device::Cpu),
+    )
+    .expect("RTN");
+    let (_, global) = clip.global();
+    let k = sk.len();
+    let flat: Vec<f32> = global.iter().flat_map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect();
+    let w = config.target_frame() + 2;
+    let windows: Vec<&[f32]> = (0..clip.frames() - w).step_by(10).map(|s| &flat[s * 3 * k..(s + w) * 3 * k]).collect();
+    let stats = zoo_rtn::features::FeatureStats::fit(windows, k, config.target_frame(), true);
+    let options = zoo_rtn::export::RtnExportOptions {
+        names: Some(sk.names.clone()),
+        offsets: Some(sk.offsets.iter().map(|o| o.as_vec3().to_array()).collect()),
+        parents: None,
+        fps: Some(30.0),
+        frame: Some(zoo_runtime::CoordinateFrame::ZOO_CM),
+    };
+    zoo_rtn::export::export_rtn(&config, None, &stats, &varmap, &options).expect("the RTN exports").to_bytes()
+}
+
 /// The real dataset folder, when this checkout sits beside `shared/`.
 pub fn bandai2() -> Option<PathBuf> {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/bandai2");

@@ -23,7 +23,6 @@ use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
-use zoo_data::synth::{SynthConfig, generate_clip};
 use zoo_motion::Clip;
 use zoo_runtime::control::{Control, ControlRunner, ControlSettings, ControlledCharacter};
 use zoo_runtime::follow::{PathGoal, PathSettings};
@@ -131,46 +130,6 @@ fn fixture() -> &'static Fixture {
     })
 }
 
-/// The synthetic locomotion clip `index` (8 s at 30 fps, the 21-joint skeleton).
-fn synth_clip(index: usize) -> Clip {
-    let cfg = SynthConfig { minutes: 0.5, seed: 11, clip_seconds: 8.0, ..SynthConfig::default() };
-    generate_clip(&cfg, index).clip
-}
-
-/// A tiny RTN (`Config::tiny` widths, the paper's 10 context and 30 transition frames, the
-/// interpolation residual) on `clip`'s skeleton, or the paper's sizes with `paper`; seeded
-/// weights, statistics of `clip`'s windows.
-fn rtn_onnx(clip: &Clip, paper: bool) -> Vec<u8> {
-    rtn_onnx_with(clip, paper, None)
-}
-
-/// [`rtn_onnx`] with calibrated fallback thresholds in its file (as `zoo train rtn` writes them).
-fn rtn_onnx_with(clip: &Clip, paper: bool, fallback: Option<zoo_rtn::fallback::Fallback>) -> Vec<u8> {
-    let sk = &clip.skeleton;
-    let base = if paper { zoo_rtn::Config::paper() } else { zoo_rtn::Config::tiny() };
-    let mut config = base.with_parents(&sk.parents);
-    config.past_frames = 10;
-    config.transition_frames = 30;
-    config.interp_residual = true;
-    config.fallback = fallback;
-    let varmap = candle_nn::VarMap::new();
-    zoo_rtn::Rtn::new(&config, zoo_nn::SeededVarMap::builder(&varmap, 7, DType::F32, &Device::Cpu)).expect("RTN");
-    let (_, global) = clip.global();
-    let k = sk.len();
-    let flat: Vec<f32> = global.iter().flat_map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect();
-    let w = config.target_frame() + 2;
-    let windows: Vec<&[f32]> = (0..clip.frames() - w).step_by(10).map(|s| &flat[s * 3 * k..(s + w) * 3 * k]).collect();
-    let stats = zoo_rtn::features::FeatureStats::fit(windows, k, config.target_frame(), true);
-    let options = zoo_rtn::export::RtnExportOptions {
-        names: Some(sk.names.clone()),
-        offsets: Some(sk.offsets.iter().map(|o| o.as_vec3().to_array()).collect()),
-        parents: None,
-        fps: Some(30.0),
-        frame: Some(zoo_runtime::CoordinateFrame::ZOO_CM),
-    };
-    zoo_rtn::export::export_rtn(&config, None, &stats, &varmap, &options).expect("the RTN exports").to_bytes()
-}
-
 /// A tiny humanoid ARNN on `clip`'s skeleton (seeded weights, statistics of its poses), with
 /// its candle model and statistics for the reference completion.
 fn humanoid_arnn(clip: &Clip) -> (Vec<u8>, zoo_arnn::Arnn, zoo_arnn::Normalization) {
@@ -227,15 +186,15 @@ fn write_models_and_references(data: &Path) {
         zoo_data::bvh::write_file(clip, &path).unwrap();
         zoo_data::bvh::read_file(&path, &zoo_data::bvh::ReadOptions::default()).unwrap()
     };
-    let clip = read_back(&synth_clip(0), "clip.bvh");
-    let other = read_back(&synth_clip(1), "clip2.bvh");
+    let clip = read_back(&zoo_tests::synth_biped_clip(0), "clip.bvh");
+    let other = read_back(&zoo_tests::synth_biped_clip(1), "clip2.bvh");
     // The glTF route into Blender: the clip as `zoo data convert clip.bvh clip.glb` writes it.
     zoo_data::clip_io::write(&clip, &data.join("clip.glb")).expect("writing clip.glb");
     let k = clip.joints();
     let mut refs = serde_json::Map::new();
 
     // Transition: context frames 20..30, target 60, next 61, in engine poses.
-    let rtn = rtn_onnx(&clip, false);
+    let rtn = zoo_tests::biped_rtn_onnx(&clip, false, None);
     std::fs::write(data.join("transition.onnx"), &rtn).unwrap();
     let model = LoadedModel::from_bytes(&rtn).unwrap().into_transition().unwrap();
     let mut runner = model.runner().unwrap();
@@ -266,10 +225,31 @@ fn write_models_and_references(data: &Path) {
     // The same RTN with fallback thresholds (in centimetres of target miss) that a target lifted
     // a metre exceeds: the fallback's default and its settings not carrying over between calls.
     let fallback = zoo_rtn::fallback::Fallback { start: 0.5, full: 2.0 };
-    std::fs::write(data.join("transition_fallback.onnx"), rtn_onnx_with(&clip, false, Some(fallback))).unwrap();
+    let rtn_fallback = zoo_tests::biped_rtn_onnx(&clip, false, Some(fallback));
+    std::fs::write(data.join("transition_fallback.onnx"), &rtn_fallback).unwrap();
+    // The runtime's whole posed transition with that fallback and the foot lock (what
+    // `zoo transition --in-place --foot-lock` writes), frames 20..30 to 60.
+    let model = LoadedModel::from_bytes(&rtn_fallback).unwrap().into_transition().unwrap();
+    let mut runner = model.runner().unwrap();
+    runner.set_model_fallback();
+    runner.set_foot_lock(model.default_foot_lock());
+    let mut out: Vec<EnginePose> = (0..=30).map(|_| EnginePose::with_global_positions(k)).collect();
+    let mut state = model.new_transition();
+    let (target, next) = ([engine_pose(&clip, 60)], [engine_pose(&clip, 61)]);
+    runner.generate_posed_batch(std::slice::from_mut(&mut state), &past, &target, &next, 30, &mut out).unwrap();
+    let (mut hips, mut rot, mut global) = (Vec::new(), Vec::new(), Vec::new());
+    for pose in &out {
+        push_world(pose, &mut hips, &mut rot);
+        global.extend(pose.global_positions.iter().flat_map(|p| p.to_array()));
+    }
+    refs.insert(
+        "transition_locked".into(),
+        json!({"hips": hips, "rotations": rot, "global_positions": global,
+               "fallback_weight": state.fallback_weight()}),
+    );
 
     // The paper-sized RTN (Blender's speed figure).
-    std::fs::write(data.join("transition_paper.onnx"), rtn_onnx(&clip, true)).unwrap();
+    std::fs::write(data.join("transition_paper.onnx"), zoo_tests::biped_rtn_onnx(&clip, true, None)).unwrap();
 
     // Keyframes: the lamp (raw pose vectors) and a humanoid model.
     let lamp = zoo_tests::tiny_arnn_onnx().to_bytes();
@@ -506,7 +486,7 @@ fn bandai2_inputs() -> &'static Option<(PathBuf, PathBuf)> {
             let mut model_clip = file.clone();
             assert!(model_clip.drop_root(), "bandai2's clip has its dummy root");
             let model = f.data.join("transition_bandai2.onnx");
-            std::fs::write(&model, rtn_onnx(&model_clip, false)).unwrap();
+            std::fs::write(&model, zoo_tests::biped_rtn_onnx(&model_clip, false, None)).unwrap();
             (bvh, model)
         })
     })

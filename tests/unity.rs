@@ -765,6 +765,7 @@ fn figure(text: &str, tag: &str, key: &str) -> f64 {
 /// print `case NAME: passed`.
 const CASES: &[&str] = &[
     "transition_fed_per_frame",
+    "transition_generate_posed",
     "count_int_max.transition_runner",
     "count_negative.transition_runner",
     "count_int_max.transition_characters",

@@ -569,6 +569,44 @@ enum ZooStatus zoo_transition_step_posed(struct ZooTransitionRunner *runner,
                                          float *rotations,
                                          size_t rotations_len);
 
+// A whole transition of `length` frames for every character from engine poses, in one call:
+// the inputs as in `zoo_transition_start_posed`, then `out_roots` receives `N * (length + 1)`
+// roots and `out_rotations` `4K` rotations per root (character-major: each character's
+// `length` frames, then its target frame). `fallback` 1 moves a transition that misses its
+// target by more than the model's calibrated thresholds towards the interpolation (the model's
+// thresholds for this length; `zoo transition`'s default), 0 keeps the network's; `foot_lock` 1
+// locks the feet (`zoo transition --foot-lock`), 0 does not. The frames are those `zoo
+// transition --in-place` writes for the same poses. Only a whole transition gets the fallback
+// and the foot lock (both look at the whole transition); with both 0 the frames are those of
+// `zoo_transition_start_posed` and `length + 1` calls of `zoo_transition_step_posed` (bit for bit
+// for one character; for several, up to the rounding of batched kernels). The
+// transitions are finished afterwards. Cost: every pass of the transition in this call. One
+// thread at a time.
+//
+// Safety: Handles are NULL or live and used by this thread only; each buffer is NULL or holds its
+// given length (the outputs writable).
+enum ZooStatus zoo_transition_generate_posed(struct ZooTransitionRunner *runner,
+                                             struct ZooTransitionCharacters *characters,
+                                             const struct ZooRootMotion *past_roots,
+                                             size_t past_roots_len,
+                                             const float *past_rotations,
+                                             size_t past_rotations_len,
+                                             const struct ZooRootMotion *target_roots,
+                                             size_t target_roots_len,
+                                             const float *target_rotations,
+                                             size_t target_rotations_len,
+                                             const struct ZooRootMotion *next_roots,
+                                             size_t next_roots_len,
+                                             const float *next_rotations,
+                                             size_t next_rotations_len,
+                                             size_t length,
+                                             uint8_t fallback,
+                                             uint8_t foot_lock,
+                                             struct ZooRootMotion *out_roots,
+                                             size_t out_roots_len,
+                                             float *out_rotations,
+                                             size_t out_rotations_len);
+
 // Sets the ground under character `index`: a heightmap of `cols * rows` heights (model units,
 // Y up) on a regular grid in the XZ plane, sample `(i, k)` at `(origin_x + i * cell, origin_z +
 // k * cell)` stored at `heights[k * cols + i]`, bilinear between samples and extended beyond

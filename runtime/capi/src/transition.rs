@@ -555,6 +555,141 @@ pub unsafe extern "C" fn zoo_transition_step_posed(
     })
 }
 
+/// A whole transition of `length` frames for every character from engine poses, in one call:
+/// the inputs as in `zoo_transition_start_posed`, then `out_roots` receives `N * (length + 1)`
+/// roots and `out_rotations` `4K` rotations per root (character-major: each character's
+/// `length` frames, then its target frame). `fallback` 1 moves a transition that misses its
+/// target by more than the model's calibrated thresholds towards the interpolation (the model's
+/// thresholds for this length; `zoo transition`'s default), 0 keeps the network's; `foot_lock` 1
+/// locks the feet (`zoo transition --foot-lock`), 0 does not. The frames are those `zoo
+/// transition --in-place` writes for the same poses. Only a whole transition gets the fallback
+/// and the foot lock (both look at the whole transition); with both 0 the frames are those of
+/// `zoo_transition_start_posed` and `length + 1` calls of `zoo_transition_step_posed` (bit for bit
+/// for one character; for several, up to the rounding of batched kernels). The
+/// transitions are finished afterwards. Cost: every pass of the transition in this call. One
+/// thread at a time.
+///
+/// Safety: Handles are NULL or live and used by this thread only; each buffer is NULL or holds its
+/// given length (the outputs writable).
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_transition_generate_posed(
+    runner: *mut ZooTransitionRunner,
+    characters: *mut ZooTransitionCharacters,
+    past_roots: *const ZooRootMotion,
+    past_roots_len: usize,
+    past_rotations: *const f32,
+    past_rotations_len: usize,
+    target_roots: *const ZooRootMotion,
+    target_roots_len: usize,
+    target_rotations: *const f32,
+    target_rotations_len: usize,
+    next_roots: *const ZooRootMotion,
+    next_roots_len: usize,
+    next_rotations: *const f32,
+    next_rotations_len: usize,
+    length: usize,
+    fallback: u8,
+    foot_lock: u8,
+    out_roots: *mut ZooRootMotion,
+    out_roots_len: usize,
+    out_rotations: *mut f32,
+    out_rotations_len: usize,
+) -> ZooStatus {
+    guard("zoo_transition_generate_posed", || {
+        let (runner, chars) = unsafe { pair(runner, characters) }?;
+        let (n, k) = (chars.states.len(), chars.joints);
+        for (name, flag, what) in
+            [("fallback", fallback, "the model's calibrated fallback"), ("foot_lock", foot_lock, "the foot lock")]
+        {
+            if flag > 1 {
+                return Err((
+                    ZooStatus::InvalidArgument,
+                    format!("`{name}` is {flag}; a flag is 1 ({what} on) or 0 (off)"),
+                ));
+            }
+        }
+        if length == 0 || length > crate::ZOO_MAX_FRAMES {
+            return Err((
+                ZooStatus::InvalidArgument,
+                format!(
+                    "`length` is {length}; a transition has 1..=ZOO_MAX_FRAMES frames ({INFO}'s `transition_frames` as \
+                     trained)"
+                ),
+            ));
+        }
+        let past_roots = unsafe { slice(past_roots, past_roots_len, "past_roots") }?;
+        let past_rotations = unsafe { slice(past_rotations, past_rotations_len, "past_rotations") }?;
+        if past_roots.is_empty() || !past_roots.len().is_multiple_of(n) {
+            return Err((
+                ZooStatus::InvalidArgument,
+                format!(
+                    "`past_roots` holds {} roots; it needs the same number of context frames (at least one; {INFO}'s `past_frames` as trained) for each of the {n} characters",
+                    past_roots.len()
+                ),
+            ));
+        }
+        check_size(
+            "past_rotations",
+            past_rotations.len(),
+            past_roots.len() * 4 * k,
+            "floats",
+            format_args!("4 * {JOINTS} per root"),
+        )?;
+        let names = ["target_roots", "target_rotations"];
+        let target = unsafe {
+            posed_buffers(target_roots, target_roots_len, target_rotations, target_rotations_len, names, n, k)
+        }?;
+        let names = ["next_roots", "next_rotations"];
+        let next =
+            unsafe { posed_buffers(next_roots, next_roots_len, next_rotations, next_rotations_len, names, n, k) }?;
+        let out_roots = unsafe { slice_mut(out_roots, out_roots_len, "out_roots") }?;
+        let out_rotations = unsafe { slice_mut(out_rotations, out_rotations_len, "out_rotations") }?;
+        let frames = n * (length + 1);
+        if frames > crate::ZOO_MAX_FRAMES {
+            return Err((
+                ZooStatus::InvalidArgument,
+                format!(
+                    "{n} characters of {} frames are {frames} poses, more than ZOO_MAX_FRAMES in one call: generate \
+                     fewer characters per call",
+                    length + 1
+                ),
+            ));
+        }
+        check_size("out_roots", out_roots.len(), frames, "roots", "`length + 1` per character")?;
+        check_size(
+            "out_rotations",
+            out_rotations.len(),
+            frames * 4 * k,
+            "floats",
+            format_args!("4 * {JOINTS} per root of `out_roots`"),
+        )?;
+        check_poses(past_roots, past_rotations, ["past_roots", "past_rotations"])?;
+        let mut inputs = std::mem::take(&mut chars.inputs);
+        read_into(&mut inputs, &[(past_roots, past_rotations), target, next], k);
+        let at = past_roots.len();
+        let (past, rest) = inputs.split_at(at);
+        let (target, next) = rest.split_at(n);
+        runner.set_foot_lock(if foot_lock == 1 { runner.model().default_foot_lock() } else { None });
+        if fallback == 1 {
+            runner.set_model_fallback();
+        } else {
+            runner.set_fallback(None);
+        }
+        let mut poses = std::mem::take(&mut chars.poses);
+        poses.resize_with(frames, || EnginePose::new(k));
+        let result = runner.generate_posed_batch(&mut chars.states, past, target, next, length, &mut poses);
+        if result.is_ok() {
+            for ((pose, root), rotations) in poses.iter().zip(out_roots).zip(out_rotations.chunks_exact_mut(4 * k)) {
+                write_pose(pose, root, rotations);
+            }
+        }
+        poses.truncate(n);
+        chars.poses = poses;
+        chars.inputs = inputs;
+        result.map_err(runtime_failure)
+    })
+}
+
 /// Sets the ground under character `index`: a heightmap of `cols * rows` heights (model units,
 /// Y up) on a regular grid in the XZ plane, sample `(i, k)` at `(origin_x + i * cell, origin_z +
 /// k * cell)` stored at `heights[k * cols + i]`, bilinear between samples and extended beyond

@@ -27,6 +27,17 @@ impl Transition {
         self.runner.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
     }
 
+    /// Sets a call's post-processes on its runner (nothing carries over to the next call): the
+    /// model's calibrated fallback and the model's default foot lock, each when asked.
+    fn set_post(&self, runner: &mut TransitionRunner, foot_lock: bool, fallback: bool) {
+        runner.set_foot_lock(if foot_lock { self.model.default_foot_lock() } else { None });
+        if fallback {
+            runner.set_model_fallback();
+        } else {
+            runner.set_fallback(None);
+        }
+    }
+
     /// The transition length of a call: `frames`, or the trained length.
     fn length(&self, frames: Option<usize>) -> usize {
         frames.unwrap_or(self.model.transition_frames())
@@ -101,12 +112,7 @@ impl Transition {
         let mut states: Vec<_> = (0..n).map(|_| self.model.new_transition()).collect();
         let mut runner = self.runner();
         runner.allow_beyond_trained(allow_beyond_trained);
-        runner.set_foot_lock(if foot_lock { self.model.default_foot_lock() } else { None });
-        if fallback {
-            runner.set_model_fallback();
-        } else {
-            runner.set_fallback(None);
-        }
+        self.set_post(&mut runner, foot_lock, fallback);
         runner.generate_batch(&mut states, past, target, next, &mut out).or_py()?;
         drop(runner);
         array(py, out, &[n, length + 1, k, 3])
@@ -117,8 +123,9 @@ impl Transition {
     /// positions, `*_rotations` the hips' world rotation then every other joint's local
     /// rotation, `(x, y, z, w)`). Returns the fields of `zoo.Poses` with shape prefix
     /// `(N, L + 1)`: root motion, local rotations fitted to the network's positions, and the
-    /// global positions of those rotations (the skeleton's bone lengths).
-    #[pyo3(signature = (past_hips, past_rotations, target_hips, target_rotations, next_hips, next_rotations, frames=None, allow_beyond_trained=false))]
+    /// global positions of those rotations (the skeleton's bone lengths). The fallback and the
+    /// foot lock as in `positions` (and `zoo transition --in-place`).
+    #[pyo3(signature = (past_hips, past_rotations, target_hips, target_rotations, next_hips, next_rotations, frames=None, allow_beyond_trained=false, foot_lock=false, fallback=true))]
     #[allow(clippy::too_many_arguments)]
     fn poses<'py>(
         &self,
@@ -131,6 +138,8 @@ impl Transition {
         next_rotations: PyReadonlyArrayDyn<'py, f32>,
         frames: Option<usize>,
         allow_beyond_trained: bool,
+        foot_lock: bool,
+        fallback: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         let k = self.model.joints();
         let (ph, pd) = values("past_hips", &past_hips, &[("N", None), ("P", None), ("", Some(3))])?;
@@ -151,20 +160,14 @@ impl Transition {
         let next = poses_from_world("next_rotations", nh, nr, n, k)?;
         let length = self.length(frames);
         let mut states: Vec<_> = (0..n).map(|_| self.model.new_transition()).collect();
-        let mut poses: Vec<EnginePose> = (0..n).map(|_| EnginePose::with_global_positions(k)).collect();
+        let mut poses: Vec<EnginePose> = (0..n * (length + 1)).map(|_| EnginePose::with_global_positions(k)).collect();
         let mut out = PoseArrays::new(k, n * (length + 1));
-        let mut frames_out: Vec<Vec<EnginePose>> = vec![Vec::with_capacity(length + 1); n];
         let mut runner = self.runner();
         runner.allow_beyond_trained(allow_beyond_trained);
-        runner.start_posed_batch_for(&mut states, &past, &target, &next, length).or_py()?;
-        for _ in 0..=length {
-            runner.step_posed_batch(&mut states, &mut poses).or_py()?;
-            for (c, pose) in poses.iter().enumerate() {
-                frames_out[c].push(pose.clone());
-            }
-        }
+        self.set_post(&mut runner, foot_lock, fallback);
+        runner.generate_posed_batch(&mut states, &past, &target, &next, length, &mut poses).or_py()?;
         drop(runner);
-        for pose in frames_out.iter().flatten() {
+        for pose in &poses {
             out.push(pose);
         }
         out.into_dict(py, &[n, length + 1])

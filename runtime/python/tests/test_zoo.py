@@ -163,6 +163,25 @@ def test_transition_settings_do_not_carry_over_between_calls(data, clip):
         m.transition(p[20:30], p[80], p[81], frames=50)
 
 
+def test_posed_transitions_apply_the_fallback_and_foot_lock_as_the_cli(data, ref, clip):
+    m = zoo.load(data / "transition_fallback.onnx")
+    r = ref["transition_locked"]
+    h, q = clip.hips, clip.rotations
+    args = ((h[20:30], q[20:30]), (h[60], q[60]), (h[61], q[61]))
+    # The runtime's whole posed transition (`zoo transition --in-place --foot-lock`): the same bits.
+    locked = m.transition(*args, foot_lock=True)
+    assert r["fallback_weight"] > 0.0
+    assert max_diff(locked.global_positions, arr(r["global_positions"], 31, K, 3)) == 0.0
+    assert max_diff(locked.hips, arr(r["hips"], 31, 3)) == 0.0
+    assert max_diff(locked.rotations, arr(r["rotations"], 31, K, 4)) == 0.0
+    # The fallback is on by default, as in `zoo transition`, and a setting holds for one call.
+    default = m.transition(*args)
+    off = m.transition(*args, fallback=False)
+    assert max_diff(default.global_positions, m.transition(*args, fallback=True).global_positions) == 0.0
+    assert max_diff(default.global_positions, off.global_positions) > 1.0
+    assert max_diff(m.transition(*args).global_positions, default.global_positions) == 0.0
+
+
 def test_load_bytes_gives_the_files_outputs_bit_for_bit(data, clip):
     path = data / "transition_fallback.onnx"
     a = zoo.load(path)

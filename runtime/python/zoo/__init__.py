@@ -336,6 +336,8 @@ class TransitionModel(Model):
         next: Union[Poses, Tuple[np.ndarray, np.ndarray]],
         frames: Optional[int] = None,
         allow_beyond_trained: bool = False,
+        foot_lock: bool = False,
+        fallback: bool = True,
     ) -> Poses:
         """A transition in engine poses.
 
@@ -348,7 +350,10 @@ class TransitionModel(Model):
         in-between frames (default ``transition_frames``) then the target frame; local rotations
         are fitted to the network's joint positions and ``global_positions`` are those rotations'
         (the skeleton's bone lengths). Longer than the trained length only with
-        ``allow_beyond_trained``.
+        ``allow_beyond_trained``. As ``zoo transition --in-place`` on the same poses: moved
+        towards the interpolation when the target is missed by more than the model's calibrated
+        thresholds (``fallback``, on by default) and foot-locked with ``foot_lock`` (off by
+        default). The settings hold for this call only.
         """
         ph, pr = _bvh_style(past, "past")
         th, tr = _bvh_style(target, "target")
@@ -356,7 +361,7 @@ class TransitionModel(Model):
         single = ph.ndim == 2
         if single:
             ph, pr, th, tr, nh, nr = ph[None], pr[None], th[None], tr[None], nh[None], nr[None]
-        d = self._native.poses(ph, pr, th, tr, nh, nr, frames, allow_beyond_trained)
+        d = self._native.poses(ph, pr, th, tr, nh, nr, frames, allow_beyond_trained, foot_lock, fallback)
         out = Poses._from_dict(d)
         return out[0] if single else out
 

@@ -210,35 +210,7 @@ namespace Zoo
             ReadOnlySpan<ZooRootMotion> nextRoots, ReadOnlySpan<float> nextRotations, int length)
         {
             var frames = Size.Count(length, "length", "zoo_transition_start_posed");
-            if (toModel != null)
-            {
-                int np = pastRoots.Length, nt = targetRoots.Length, nn = nextRoots.Length;
-                int fp = pastRotations.Length, ft = targetRotations.Length, fn = nextRotations.Length;
-                var rs = Size.Fit(ref roots, np + nt + nn);
-                var fs = Size.Fit(ref floats, fp + ft + fn);
-                var pr = new Span<ZooRootMotion>(rs, 0, np);
-                var tr = new Span<ZooRootMotion>(rs, np, nt);
-                var nr = new Span<ZooRootMotion>(rs, np + nt, nn);
-                var pq = new Span<float>(fs, 0, fp);
-                var tq = new Span<float>(fs, fp, ft);
-                var nq = new Span<float>(fs, fp + ft, fn);
-                pastRoots.CopyTo(pr);
-                targetRoots.CopyTo(tr);
-                nextRoots.CopyTo(nr);
-                pastRotations.CopyTo(pq);
-                targetRotations.CopyTo(tq);
-                nextRotations.CopyTo(nq);
-                toModel.Poses(new Span<ZooRootMotion>(rs, 0, np + nt + nn), Span<float>.Empty);
-                toModel.RotationsLenient(pq);
-                toModel.RotationsLenient(tq);
-                toModel.RotationsLenient(nq);
-                pastRoots = pr;
-                targetRoots = tr;
-                nextRoots = nr;
-                pastRotations = pq;
-                targetRotations = tq;
-                nextRotations = nq;
-            }
+            ToModelPosed(ref pastRoots, ref pastRotations, ref targetRoots, ref targetRotations, ref nextRoots, ref nextRotations);
             bool r = false, c = false;
             try
             {
@@ -256,6 +228,81 @@ namespace Zoo
                 Errors.Check(s, runner, this);
             }
             finally { Exit(runner, r); Exit(this, c); }
+        }
+
+        /// <summary>The posed inputs in the model's frame (copies in this object's buffers), when the characters have an engine frame.</summary>
+        void ToModelPosed(ref ReadOnlySpan<ZooRootMotion> pastRoots, ref ReadOnlySpan<float> pastRotations,
+            ref ReadOnlySpan<ZooRootMotion> targetRoots, ref ReadOnlySpan<float> targetRotations,
+            ref ReadOnlySpan<ZooRootMotion> nextRoots, ref ReadOnlySpan<float> nextRotations)
+        {
+            if (toModel == null) return;
+            int np = pastRoots.Length, nt = targetRoots.Length, nn = nextRoots.Length;
+            int fp = pastRotations.Length, ft = targetRotations.Length, fn = nextRotations.Length;
+            var rs = Size.Fit(ref roots, np + nt + nn);
+            var fs = Size.Fit(ref floats, fp + ft + fn);
+            var pr = new Span<ZooRootMotion>(rs, 0, np);
+            var tr = new Span<ZooRootMotion>(rs, np, nt);
+            var nr = new Span<ZooRootMotion>(rs, np + nt, nn);
+            var pq = new Span<float>(fs, 0, fp);
+            var tq = new Span<float>(fs, fp, ft);
+            var nq = new Span<float>(fs, fp + ft, fn);
+            pastRoots.CopyTo(pr);
+            targetRoots.CopyTo(tr);
+            nextRoots.CopyTo(nr);
+            pastRotations.CopyTo(pq);
+            targetRotations.CopyTo(tq);
+            nextRotations.CopyTo(nq);
+            toModel.Poses(new Span<ZooRootMotion>(rs, 0, np + nt + nn), Span<float>.Empty);
+            toModel.RotationsLenient(pq);
+            toModel.RotationsLenient(tq);
+            toModel.RotationsLenient(nq);
+            pastRoots = pr;
+            targetRoots = tr;
+            nextRoots = nr;
+            pastRotations = pq;
+            targetRotations = tq;
+            nextRotations = nq;
+        }
+
+        /// <summary>
+        /// A whole transition of <paramref name="length"/> frames from engine poses in one call
+        /// (<c>zoo_transition_generate_posed</c>): the inputs as in <see cref="StartPosed"/>;
+        /// <paramref name="outRoots"/> receives N * (length + 1) roots and <paramref name="outRotations"/> 4K
+        /// rotations per root (each character's frames, then its target frame).
+        /// <paramref name="fallback"/> moves a transition that misses its target by more than the model's
+        /// calibrated thresholds towards the interpolation (<c>zoo transition</c>'s default: true);
+        /// <paramref name="footLock"/> locks the feet (<c>zoo transition --foot-lock</c>). The frames
+        /// <c>zoo transition --in-place</c> writes for the same poses; with both false, those of
+        /// <see cref="StartPosed"/> and length + 1 calls of <see cref="StepPosed"/> (up to float rounding for several characters).
+        /// </summary>
+        public void GeneratePosed(TransitionRunner runner, ReadOnlySpan<ZooRootMotion> pastRoots, ReadOnlySpan<float> pastRotations,
+            ReadOnlySpan<ZooRootMotion> targetRoots, ReadOnlySpan<float> targetRotations,
+            ReadOnlySpan<ZooRootMotion> nextRoots, ReadOnlySpan<float> nextRotations, int length, bool fallback, bool footLock,
+            Span<ZooRootMotion> outRoots, Span<float> outRotations)
+        {
+            var frames = Size.Count(length, "length", "zoo_transition_generate_posed");
+            ToModelPosed(ref pastRoots, ref pastRotations, ref targetRoots, ref targetRotations, ref nextRoots, ref nextRotations);
+            bool r = false, c = false;
+            try
+            {
+                var rp = (Native.ZooTransitionRunner*)Enter(runner, ref r);
+                var cp = (Native.ZooTransitionCharacters*)Enter(this, ref c);
+                ZooStatus s;
+                fixed (ZooRootMotion* pr = &MemoryMarshal.GetReference(pastRoots))
+                fixed (float* pq = &MemoryMarshal.GetReference(pastRotations))
+                fixed (ZooRootMotion* tr = &MemoryMarshal.GetReference(targetRoots))
+                fixed (float* tq = &MemoryMarshal.GetReference(targetRotations))
+                fixed (ZooRootMotion* nr = &MemoryMarshal.GetReference(nextRoots))
+                fixed (float* nq = &MemoryMarshal.GetReference(nextRotations))
+                fixed (ZooRootMotion* o = &MemoryMarshal.GetReference(outRoots))
+                fixed (float* q = &MemoryMarshal.GetReference(outRotations))
+                    s = ZooNative.zoo_transition_generate_posed(rp, cp, pr, Size.Of(pastRoots.Length), pq, Size.Of(pastRotations.Length),
+                        tr, Size.Of(targetRoots.Length), tq, Size.Of(targetRotations.Length), nr, Size.Of(nextRoots.Length), nq, Size.Of(nextRotations.Length),
+                        frames, (byte)(fallback ? 1 : 0), (byte)(footLock ? 1 : 0), o, Size.Of(outRoots.Length), q, Size.Of(outRotations.Length));
+                Errors.Check(s, runner, this);
+            }
+            finally { Exit(runner, r); Exit(this, c); }
+            if (toEngine != null) toEngine.Poses(outRoots, outRotations);
         }
 
         /// <summary>The next frame of every character's transition as engine poses (<c>zoo_transition_step_posed</c>): <paramref name="roots"/> N, <paramref name="rotations"/> N * 4K local rotations.</summary>

@@ -1072,6 +1072,47 @@ namespace Zoo.Tests
                 }
             });
 
+            // A whole posed transition (GeneratePosed) without the fallback and the lock is the
+            // one StartPosed and StepPosed give (up to the rounding of tract's batched kernels: a
+            // whole transition runs its graph passes in other batches than stepping); with them it
+            // runs and is finite.
+            Case("transition_generate_posed", () =>
+            {
+                var p = "tr.posed";
+                using (var runner = new TransitionRunner(rtn, n))
+                using (var a = new TransitionCharacters(rtn, n))
+                using (var b = new TransitionCharacters(rtn, n))
+                {
+                    var outRoots = new ZooRootMotion[n * (length + 1)];
+                    var outRotations = new float[n * (length + 1) * 4 * k];
+                    a.GeneratePosed(runner, v.Roots(p + ".past"), v.Rotations(p + ".past"), v.Roots(p + ".target"), v.Rotations(p + ".target"),
+                        v.Roots(p + ".next"), v.Rotations(p + ".next"), length, false, false, outRoots, outRotations);
+                    b.StartPosed(runner, v.Roots(p + ".past"), v.Rotations(p + ".past"), v.Roots(p + ".target"), v.Rotations(p + ".target"),
+                        v.Roots(p + ".next"), v.Rotations(p + ".next"), length);
+                    var buf = new PoseBuffer(n, k);
+                    for (int f = 0; f <= length; f++)
+                    {
+                        b.StepPosed(runner, buf.Roots, buf.Rotations);
+                        for (int c = 0; c < n; c++)
+                        {
+                            int at = c * (length + 1) + f;
+                            var g = outRoots[at].RootPosition;
+                            var st = buf.Roots[c].RootPosition;
+                            Expect(Math.Abs(g.X - st.X) + Math.Abs(g.Y - st.Y) + Math.Abs(g.Z - st.Z) < 1e-3f, "frame " + f + " character " + c + ": the generated root differs from the stepped one");
+                            for (int j = 0; j < 4 * k; j++)
+                                if (Math.Abs(outRotations[at * 4 * k + j] - buf.Rotations[c * 4 * k + j]) > 1e-4f)
+                                    throw new Exception("frame " + f + " character " + c + " rotation value " + j + " differs from the stepped one");
+                        }
+                    }
+                    a.GeneratePosed(runner, v.Roots(p + ".past"), v.Rotations(p + ".past"), v.Roots(p + ".target"), v.Rotations(p + ".target"),
+                        v.Roots(p + ".next"), v.Rotations(p + ".next"), length, true, true, outRoots, outRotations);
+                    foreach (var x in outRotations)
+                        Expect(!float.IsNaN(x) && !float.IsInfinity(x), "a generated rotation is not finite");
+                    ByRuntime("GeneratePosed with one root too few", Invalid, "zoo_transition_generate_posed", "`out_roots`", () => a.GeneratePosed(runner, v.Roots(p + ".past"), v.Rotations(p + ".past"), v.Roots(p + ".target"), v.Rotations(p + ".target"),
+                        v.Roots(p + ".next"), v.Rotations(p + ".next"), length, true, false, new ZooRootMotion[n * (length + 1) - 1], outRotations));
+                }
+            });
+
             // Coordinate frames: the axis and handedness are integers, a value outside the enum is
             // refused by the runtime by its field's name.
             Case("frame_bad_up_axis", () =>

@@ -129,7 +129,21 @@ impl TransitionRunner {
         next: &[EnginePose],
         length: usize,
     ) -> Result<(), MotionError> {
-        let n = states.len();
+        self.check_posed_inputs(states.len(), past, target, next)?;
+        self.with_positions([past, target, next], |r, [p, t, x]| r.start_batch_for(states, p, t, x, length))?;
+        Self::set_posed(states, past, target);
+        Ok(())
+    }
+
+    /// The checks of the posed starts before any work: a batch, the same number of context
+    /// frames per character, one target and next pose each, every pose of the model's joints.
+    fn check_posed_inputs(
+        &self,
+        n: usize,
+        past: &[EnginePose],
+        target: &[EnginePose],
+        next: &[EnginePose],
+    ) -> Result<(), MotionError> {
         if n == 0 {
             return Err(MotionError::EmptyBatch);
         }
@@ -152,8 +166,13 @@ impl TransitionRunner {
                 self.check_pose(name, i, p)?;
             }
         }
-        self.with_positions([past, target, next], |r, [p, t, x]| r.start_batch_for(states, p, t, x, length))?;
-        let per = past.len() / n;
+        Ok(())
+    }
+
+    /// Records, per character of a posed start, the rotations the fit's twist goes between
+    /// (the last context frame's and the target's) and the root it starts from.
+    fn set_posed(states: &mut [TransitionState], past: &[EnginePose], target: &[EnginePose]) {
+        let per = past.len() / states.len();
         for (c, s) in states.iter_mut().enumerate() {
             let last = &past[(c + 1) * per - 1];
             world_rotations(last, &mut s.posed.from);
@@ -161,7 +180,60 @@ impl TransitionRunner {
             s.posed.root = root_of(last.hips_world(), last.hips_world_rotation());
             s.posed.active = true;
         }
-        Ok(())
+    }
+
+    /// A whole transition of `length` frames for `states.len()` characters from engine poses
+    /// (`past`, `target` and `next` as in [`TransitionRunner::start_posed_batch_for`]) into
+    /// `out` (`N * (length + 1)` poses, character-major: the transition, then the target frame):
+    /// the frames of [`TransitionRunner::generate_batch`] (target blend, then the fallback and
+    /// the foot lock this runner is set to, [`TransitionRunner::set_model_fallback`] and
+    /// [`TransitionRunner::set_foot_lock`]) with local rotations fitted as
+    /// [`TransitionRunner::step_posed`] fits them. With neither set, the poses
+    /// [`TransitionRunner::start_posed_batch_for`] and `length + 1` steps return (bit for bit for
+    /// one character; for several, up to the rounding of tract's batched kernels). This is what
+    /// `zoo transition --in-place` writes for the same poses: the fallback and the foot lock
+    /// look at the whole transition, so only a whole one gets them (per-frame stepping
+    /// returns frames before the target is reached).
+    pub fn generate_posed_batch(
+        &mut self,
+        states: &mut [TransitionState],
+        past: &[EnginePose],
+        target: &[EnginePose],
+        next: &[EnginePose],
+        length: usize,
+        out: &mut [EnginePose],
+    ) -> Result<(), MotionError> {
+        let n = states.len();
+        self.check_posed_inputs(n, past, target, next)?;
+        let steps = length.checked_add(1).ok_or_else(|| MotionError::BeyondTrainedLength {
+            requested: length,
+            trained: self.model.transition_frames,
+        })?;
+        if out.len() != n.saturating_mul(steps) {
+            return Err(wrong_len("out", steps, n, out.len()));
+        }
+        for (i, p) in out.iter().enumerate() {
+            self.check_pose("out", i, p)?;
+        }
+        if length > self.model.transition_frames && !self.beyond_trained {
+            return Err(MotionError::BeyondTrainedLength { requested: length, trained: self.model.transition_frames });
+        }
+        let d = 3 * self.model.joints;
+        let mut flat = std::mem::take(&mut self.posed.poses);
+        flat.resize(n * steps * d, 0.0);
+        let result =
+            self.with_positions([past, target, next], |r, [p, t, x]| r.generate_batch(states, p, t, x, &mut flat));
+        if result.is_ok() {
+            Self::set_posed(states, past, target);
+            for (c, s) in states.iter_mut().enumerate() {
+                for f in 0..steps {
+                    let at = (c * steps + f) * d;
+                    self.fit_pose(s, f, &flat[at..at + d], &mut out[c * steps + f]);
+                }
+            }
+        }
+        self.posed.poses = flat;
+        result
     }
 
     /// [`TransitionRunner::begin_batch`] from engine poses: `first` holds each character's first
@@ -284,21 +356,21 @@ impl TransitionRunner {
         let result = self.step_batch(states, &mut flat);
         if result.is_ok() {
             for (c, (s, pose)) in states.iter_mut().zip(poses.iter_mut()).enumerate() {
-                self.fit_pose(s, &flat[c * d..(c + 1) * d], pose);
+                let f = s.frames - 1;
+                self.fit_pose(s, f, &flat[c * d..(c + 1) * d], pose);
             }
         }
         self.posed.poses = flat;
         result
     }
 
-    /// Fits the local rotations of the frame just returned (`positions`, `3K` values) and
-    /// writes the engine pose.
-    fn fit_pose(&mut self, s: &mut TransitionState, positions: &[f32], pose: &mut EnginePose) {
+    /// Fits the local rotations of frame `f` of `0..=L` (`positions`, `3K` values), the frame
+    /// after the one fitted last, and writes the engine pose.
+    fn fit_pose(&mut self, s: &mut TransitionState, f: usize, positions: &[f32], pose: &mut EnginePose) {
         let m = &self.model;
         let scratch = &mut self.posed;
         let k = m.joints;
         // Frame f of 0..=L: the twist goes from the last context frame (w = 0) to the target (w = 1).
-        let f = s.frames - 1;
         let w = (f + 1) as f64 / (s.length + 1) as f64;
         scratch.positions.clear();
         scratch.positions.extend(positions.chunks_exact(3).map(|p| DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64)));

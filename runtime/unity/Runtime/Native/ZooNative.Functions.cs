@@ -305,6 +305,28 @@ namespace Zoo.Native
         public static extern ZooStatus zoo_transition_step_posed(ZooTransitionRunner* runner, ZooTransitionCharacters* characters, ZooRootMotion* roots, UIntPtr roots_len, float* rotations, UIntPtr rotations_len);
 
         /// <summary>
+        /// A whole transition of <c>length</c> frames for every character from engine poses, in one call:
+        /// the inputs as in <c>zoo_transition_start_posed</c>, then <c>out_roots</c> receives <c>N * (length + 1)</c>
+        /// roots and <c>out_rotations</c> <c>4K</c> rotations per root (character-major: each character's
+        /// <c>length</c> frames, then its target frame). <c>fallback</c> 1 moves a transition that misses its
+        /// target by more than the model's calibrated thresholds towards the interpolation (the model's
+        /// thresholds for this length; <c>zoo transition</c>'s default), 0 keeps the network's; <c>foot_lock</c> 1
+        /// locks the feet (<c>zoo transition --foot-lock</c>), 0 does not. The frames are those `zoo
+        /// transition --in-place` writes for the same poses. Only a whole transition gets the fallback
+        /// and the foot lock (both look at the whole transition); with both 0 the frames are those of
+        /// <c>zoo_transition_start_posed</c> and <c>length + 1</c> calls of <c>zoo_transition_step_posed</c> (bit for bit
+        /// for one character; for several, up to the rounding of batched kernels). The
+        /// transitions are finished afterwards. Cost: every pass of the transition in this call. One
+        /// thread at a time.
+        /// </summary>
+        /// <remarks>
+        /// Safety: Handles are NULL or live and used by this thread only; each buffer is NULL or holds its
+        /// given length (the outputs writable).
+        /// </remarks>
+        [DllImport(Library, EntryPoint = "zoo_transition_generate_posed", CallingConvention = CallingConvention.Cdecl, ExactSpelling = true)]
+        public static extern ZooStatus zoo_transition_generate_posed(ZooTransitionRunner* runner, ZooTransitionCharacters* characters, ZooRootMotion* past_roots, UIntPtr past_roots_len, float* past_rotations, UIntPtr past_rotations_len, ZooRootMotion* target_roots, UIntPtr target_roots_len, float* target_rotations, UIntPtr target_rotations_len, ZooRootMotion* next_roots, UIntPtr next_roots_len, float* next_rotations, UIntPtr next_rotations_len, UIntPtr length, byte fallback, byte foot_lock, ZooRootMotion* out_roots, UIntPtr out_roots_len, float* out_rotations, UIntPtr out_rotations_len);
+
+        /// <summary>
         /// Sets the ground under character <c>index</c>: a heightmap of <c>cols * rows</c> heights (model units,
         /// Y up) on a regular grid in the XZ plane, sample <c>(i, k)</c> at `(origin_x + i * cell, origin_z +
         /// k * cell)<c> stored at </c>heights[k * cols + i]`, bilinear between samples and extended beyond
