@@ -1293,9 +1293,10 @@ fn stitching_through_the_c_abi_matches_the_rust_api() {
         let model = stitch_model();
         let mut info = ZooStitchInfo::default();
         assert_ok(zoo_stitch_info(model, &mut info));
-        // The default stream's latency: the window, the lookahead of the guard and the lock, and
-        // the frames they release at once.
-        let latency = 30 + STREAM_LOOKAHEAD + STREAM_CHUNK - 1;
+        // The default stream's latency: the window, the pushes each window is spread over
+        // (`s - 1`) less one, the lookahead of the guard and the lock, and the frames they
+        // release at once.
+        let latency = 30 + (15 - 2) + STREAM_LOOKAHEAD + STREAM_CHUNK - 1;
         assert_eq!(info, ZooStitchInfo { window: 30, stride: 15, blend_frames: 10, latency });
         // The fixture refines the raw concatenation (its file's `stitch.pre_blend` is false).
         let mut pre_blend = true;
@@ -1656,7 +1657,7 @@ fn stitch_streams_refuse_calls_out_of_order() {
             ZooStatus::NotAvailable,
             &format!(
                 "the refined pose of frame 0 is not ready: it is once frame {} is pushed",
-                30 + STREAM_LOOKAHEAD + STREAM_CHUNK - 1
+                30 + (15 - 2) + STREAM_LOOKAHEAD + STREAM_CHUNK - 1
             ),
         );
         for f in 0..10 {
@@ -1685,7 +1686,10 @@ fn stitch_streams_refuse_calls_out_of_order() {
         assert_ok(zoo_stitch_set_window(model, 20, 10));
         let mut info = ZooStitchInfo::default();
         assert_ok(zoo_stitch_info(model, &mut info));
-        assert_eq!((info.window, info.stride, info.latency), (20, 10, 20 + STREAM_LOOKAHEAD + STREAM_CHUNK - 1));
+        assert_eq!(
+            (info.window, info.stride, info.latency),
+            (20, 10, 20 + (10 - 2) + STREAM_LOOKAHEAD + STREAM_CHUNK - 1)
+        );
     }
 }
 

@@ -421,3 +421,34 @@ fn a_transition_fed_frame_by_frame_equals_one_started_at_once() {
     let err = runner.feed_batch(&mut states, &two).unwrap_err();
     assert!(err.to_string().contains("feed characters at the same point"), "{err}");
 }
+
+/// The chunked window graph a stitching stream spreads over its pushes (each GRU layer as a
+/// chain of GRUs over a few frames) computes the refiner's window: value for value for the tiny
+/// RMR, within 1e-5 for the paper-size one of `ZOO_RMR_FILE` when given (tract's kernels round
+/// the per-chunk products differently: 6.6e-7 for rmr20).
+#[test]
+fn the_chunked_window_graph_is_the_window_graph() {
+    let mut files = vec![(zoo_tests::tiny_rmr_onnx().to_bytes(), true)];
+    if let Some(path) = std::env::var_os("ZOO_RMR_FILE") {
+        files.push((std::fs::read(path).unwrap(), false));
+    }
+    for (bytes, exact) in files {
+        let refiner = zoo_runtime::StitchRefiner::from_bytes(&bytes).unwrap();
+        let n = refiner.window() * refiner.dim();
+        let x: Vec<f32> = (0..n).map(|i| (0.37 * i as f32).sin()).collect();
+        let (mut whole, mut chunked) = (vec![0.0f32; n], vec![0.0f32; n]);
+        refiner.refine_window_normalized(&x, &mut whole).unwrap();
+        refiner.refine_window_chunked(&x, &mut chunked).expect("a GRU refiner has recurrences to chunk").unwrap();
+        let worst = whole.iter().zip(&chunked).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+        eprintln!(
+            "window {} x {}: chunked against whole, largest difference {worst:e}",
+            refiner.window(),
+            refiner.dim()
+        );
+        if exact {
+            assert_eq!(whole, chunked);
+        } else {
+            assert!(worst <= 1e-5, "chunked against whole: {worst}");
+        }
+    }
+}

@@ -192,6 +192,13 @@ fn parse(bytes: &[u8], origin: &str) -> Result<Parsed, MotionError> {
 pub(crate) fn read_graph(bytes: &[u8], origin: &str) -> Result<(pb::ModelProto, InferenceModel), MotionError> {
     let not_onnx = |reason: String| MotionError::NotOnnx { origin: origin.to_string(), reason };
     let proto = pb::ModelProto::decode(bytes).map_err(|e| not_onnx(format!("protobuf decoding failed: {e}")))?;
+    let model = read_proto(&proto, origin)?;
+    Ok((proto, model))
+}
+
+/// The tract model of a decoded graph ([`read_graph`] after decoding).
+pub(crate) fn read_proto(proto: &pb::ModelProto, origin: &str) -> Result<InferenceModel, MotionError> {
+    let not_onnx = |reason: String| MotionError::NotOnnx { origin: origin.to_string(), reason };
     let graph = match &proto.graph {
         Some(g) if proto.ir_version > 0 && !g.node.is_empty() => g,
         _ => return Err(not_onnx("no IR version or no graph nodes".into())),
@@ -206,12 +213,11 @@ pub(crate) fn read_graph(bytes: &[u8], origin: &str) -> Result<(pb::ModelProto, 
     };
     // The products and LSTM cells as zoo ops (`crate::ops`); the graph as written when the
     // rewrite is off or its result does not read.
-    let fused = crate::ops::enabled().then(|| crate::ops::fuse(&proto)).flatten();
-    let model = match fused.as_ref().map(read) {
-        Some(Ok(model)) => model,
-        _ => read(&proto)?,
-    };
-    Ok((proto, model))
+    let fused = crate::ops::enabled().then(|| crate::ops::fuse(proto)).flatten();
+    match fused.as_ref().map(read) {
+        Some(Ok(model)) => Ok(model),
+        _ => read(proto),
+    }
 }
 
 /// The tract model the runtime plans for an exported file's main graph (after the load-time

@@ -22,7 +22,8 @@
 //!
 //! Streaming for motion matching: [`StitchStream`] (from [`StitchRefiner::stream`]) takes one
 //! pose per frame as the engine decides it and gives refined poses back with a fixed latency
-//! ([`StitchStream::latency`]: `w` frames for the refiner alone, `w +` [`STREAM_LOOKAHEAD`] `+`
+//! ([`StitchStream::latency`]: `w + s - 2` frames for the refiner alone, as it spreads each
+//! window's network work over the `s - 1` pushes after it; `+` [`STREAM_LOOKAHEAD`] `+`
 //! [`STREAM_CHUNK`] `- 1` with the foot lock or the seam guard). It runs the same windows as
 //! [`StitchRefiner::refine_sequence`], so its refined pose vectors are the whole sequence's, then
 //! the ankle IK, the guard of the marked seams and the foot lock of `zoo stitch` over a
@@ -44,6 +45,71 @@ use zoo_motion::{Clip, Skeleton};
 
 type Plan = Arc<TypedRunnableModel>;
 
+/// Frames per chunk of the window graph a stream runs over several pushes ([`SpreadPlan`]).
+const SPREAD_CHUNK: usize = 15;
+
+/// A window a stream is running node by node: the graph's state, the next node (an index in
+/// [`SpreadPlan`]'s order) and the pushes that worked on it.
+struct WindowJob {
+    state: TypedSimpleState,
+    at: usize,
+    worked: usize,
+}
+
+impl std::fmt::Debug for WindowJob {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("WindowJob").field("at", &self.at).field("worked", &self.worked).finish()
+    }
+}
+
+/// The refiner's window graph with its recurrences in chunks of [`SPREAD_CHUNK`] frames
+/// (`crate::ops::chunk`), run node by node so that a stream spreads a window over the pushes
+/// before its result is needed: the plan, its nodes in evaluation order and the share of a
+/// window's time spent up to the end of each node (measured when the plan is made, on this
+/// machine; it only decides how many nodes a push runs, never what they compute).
+#[derive(Debug)]
+pub(crate) struct SpreadPlan {
+    plan: Plan,
+    order: Vec<usize>,
+    done_after: Vec<f64>,
+}
+
+impl SpreadPlan {
+    /// The chunked plan of `proto` for windows of `window` frames of `dim` values, or `None`
+    /// when the graph has no recurrence to chunk or the chunked graph does not plan.
+    fn new(proto: &tract_onnx::pb::ModelProto, window: usize, dim: usize) -> Option<SpreadPlan> {
+        let chunked = crate::ops::chunk::chunk_recurrences(proto, window, SPREAD_CHUNK)?;
+        let model = crate::model::read_proto(&chunked, "the chunked window graph").ok()?;
+        let plan = plan_for(&model, window, dim).ok()?;
+        let order = plan.order_without_consts().to_vec();
+        let input = || Tensor::zero::<f32>(&[window, 1, dim]).map(|t| tvec![t.into_tvalue()]);
+        // Four runs node by node (a fresh state each, as every window gets: the recurrences'
+        // ops keep their state across turns), the fastest of the last three for each node.
+        let mut best = vec![f64::INFINITY; order.len()];
+        for run in 0..4 {
+            let mut state = plan.spawn().ok()?;
+            state.set_inputs(input().ok()?).ok()?;
+            for (i, &node) in order.iter().enumerate() {
+                let t = std::time::Instant::now();
+                state.compute_one(node).ok()?;
+                if run > 0 {
+                    best[i] = best[i].min(t.elapsed().as_secs_f64());
+                }
+            }
+        }
+        let total: f64 = best.iter().sum();
+        let mut done = 0.0;
+        let done_after = best
+            .iter()
+            .map(|t| {
+                done += t;
+                done / total
+            })
+            .collect();
+        Some(SpreadPlan { plan, order, done_after })
+    }
+}
+
 /// An exported RMR, planned for one window size, ready to refine sequences. `Send + Sync`: one
 /// loaded refiner serves every thread.
 #[derive(Clone, Debug)]
@@ -51,6 +117,9 @@ pub struct StitchRefiner {
     metadata: Arc<MotionModelMetadata>,
     model: InferenceModel,
     plan: Plan,
+    /// The decoded file, for the chunked plan of streams ([`SpreadPlan`]), made on first use.
+    proto: Arc<tract_onnx::pb::ModelProto>,
+    spread: Arc<std::sync::OnceLock<Option<Arc<SpreadPlan>>>>,
     window: usize,
     stride: usize,
     blend_frames: usize,
@@ -139,7 +208,7 @@ impl StitchRefiner {
         let Some(task) = metadata.task.as_stitch() else {
             return Err(MotionError::wrong_task(&metadata, "stitch", "StitchRefiner"));
         };
-        let (_, model) = crate::model::read_graph(bytes, origin)?;
+        let (proto, model) = crate::model::read_graph(bytes, origin)?;
         let skeleton = metadata.skeleton.to_skeleton();
         let joints = skeleton.len();
         let dim = task.dim(joints);
@@ -154,6 +223,8 @@ impl StitchRefiner {
             metadata: Arc::new(metadata),
             model,
             plan,
+            proto: Arc::new(proto),
+            spread: Arc::default(),
             window,
             stride,
             blend_frames,
@@ -185,6 +256,7 @@ impl StitchRefiner {
             )));
         }
         self.plan = plan_for(&self.model, window, self.dim)?;
+        self.spread = Arc::default();
         self.window = window;
         self.stride = stride;
         Ok(())
@@ -336,6 +408,37 @@ impl StitchRefiner {
         Ok(())
     }
 
+    /// The chunked plan of this window size, made on first use (`None`: the graph has no
+    /// recurrence to chunk, and streams run each window in one push).
+    fn spread_plan(&self) -> Option<Arc<SpreadPlan>> {
+        // `ZOO_STREAM_SPREAD=0` runs each window whole (for comparisons).
+        if std::env::var("ZOO_STREAM_SPREAD").is_ok_and(|v| v == "0") {
+            return None;
+        }
+        self.spread.get_or_init(|| SpreadPlan::new(&self.proto, self.window, self.dim).map(Arc::new)).clone()
+    }
+
+    /// [`StitchRefiner::refine_window_normalized`] through the chunked graph a stream spreads
+    /// over its pushes, node by node (for tests: the two give the same values); `None` when
+    /// the graph has nothing to chunk.
+    #[doc(hidden)]
+    pub fn refine_window_chunked(&self, x: &[f32], out: &mut [f32]) -> Option<Result<(), MotionError>> {
+        let spread = self.spread_plan()?;
+        let run = |e: TractError| MotionError::Run { reason: chain(&e) };
+        Some((|| {
+            let mut state = spread.plan.spawn().map_err(run)?;
+            let input = Tensor::from_shape::<f32>(&[self.window, 1, self.dim], x).map_err(run)?;
+            state.set_inputs(tvec![input.into()]).map_err(run)?;
+            for &node in &spread.order {
+                state.compute_one(node).map_err(run)?;
+            }
+            let y = state.outputs().map_err(run)?;
+            let y = y[0].try_as_plain_ram().and_then(|t| t.as_slice::<f32>()).map_err(run)?;
+            out.copy_from_slice(y);
+            Ok(())
+        })())
+    }
+
     /// Refines a whole aligned sequence of raw pose vectors (`frames * dim`, `frames >= w`)
     /// into `out` (same size): raw pose vectors, contacts 0/1. Windows every `s` frames plus
     /// one ending on the last frame; each window's input holds the frames already refined;
@@ -418,8 +521,15 @@ impl StitchRefiner {
         y: &mut [f32],
         offset: &mut [f32],
     ) -> Result<f32, MotionError> {
-        let (d, pose) = (self.dim, self.pose);
         self.refine_window_normalized(frames, y)?;
+        Ok(self.finish_window(frames, first, y, offset))
+    }
+
+    /// The rest of [`StitchRefiner::refine_window_in_place`] once the network's output `y` of
+    /// the window `frames` is at hand: the fallback, the blend at the window's first frame, the
+    /// contacts to 0/1, written into `frames`. Returns the fallback's weight.
+    fn finish_window(&self, frames: &mut [f32], first: bool, y: &mut [f32], offset: &mut [f32]) -> f32 {
+        let (d, pose) = (self.dim, self.pose);
         let weight = match &self.fallback {
             Some(f) => f.apply(frames, y, d, pose),
             None => 0.0,
@@ -442,7 +552,7 @@ impl StitchRefiner {
             }
         }
         frames.copy_from_slice(y);
-        Ok(weight)
+        weight
     }
 
     /// Checks that pose `index` fits the model (its joint count, finite values).
@@ -716,20 +826,26 @@ pub const STREAM_CHUNK: usize = 10;
 /// motion ([`StitchStream::pop`]) with a fixed latency of [`StitchStream::latency`] frames: the
 /// refined pose of frame `t` is ready once frame `t + latency()` has been pushed.
 ///
-/// Every `s` frames the stream runs one window over the last `w` frames, exactly as
-/// [`StitchRefiner::refine_sequence`] does; [`StitchStream::finish`] runs the last window, the
-/// one ending on the last frame. Frame `t` is refined for good once frame `t + w` is pushed (no
-/// later window, the last one included, reaches back to it), so the stream's refined pose
-/// vectors are the whole sequence's, value for value.
+/// Every `s` frames the stream runs one window over the last `w` frames, the windows of
+/// [`StitchRefiner::refine_sequence`]; [`StitchStream::finish`] runs the last window, the one
+/// ending on the last frame. So that no push does a whole window's work (a frame budget), a
+/// window runs through the refiner's graph with its recurrences in chunks of a few frames
+/// (the same function: equal for small models, within 1e-6 normalised units for the paper's),
+/// a share of it per push over the `s - 1` pushes after it is due. Frame `t` is refined for
+/// good once frame `t + w + s - 2` is pushed (no later window, the last one included, reaches
+/// back to it). A graph without recurrences to chunk runs each window whole in the push that
+/// completes it, and frame `t` is final at `t + w`.
 ///
 /// What follows the refiner is [`StitchStream::cleanup`] (default: [`FootCleanup::default`], as
 /// `zoo stitch`) and the seam guard of the marked seams ([`StitchRefiner::seam_guard`], on by
-/// default): the ankle IK is per frame; the guard and the foot lock run every
-/// [`STREAM_CHUNK`] frames over the refined frames at hand, [`STREAM_HISTORY`] frames already
-/// popped included, and release the frames at least [`STREAM_LOOKAHEAD`] frames from the newest
-/// one. The latency is then `w + STREAM_LOOKAHEAD + STREAM_CHUNK - 1` frames (114 for `w` = 60,
-/// 3.8 s at 30 fps); with [`FootCleanup::NONE`] and the guard off it is `w`. The ankle IK and
-/// the guard then give the whole sequence's poses exactly. The foot lock does not: it pins each
+/// default): the ankle IK is per frame, run once per frame; the guard weighs each seam once,
+/// when the frames it reads are refined; the blend of the guarded frames and the foot lock run
+/// over the refined frames at hand, [`STREAM_HISTORY`] frames already popped included, and
+/// release [`STREAM_CHUNK`] frames at a time (at most one chunk per push), at least
+/// [`STREAM_LOOKAHEAD`] frames from the newest one. The latency is then `w + s - 2 +
+/// STREAM_LOOKAHEAD + STREAM_CHUNK - 1` frames (142 for `w` = 60, `s` = 30: 4.7 s at 30 fps);
+/// with [`FootCleanup::NONE`] and the guard off it is `w + s - 2`. The ankle IK and the guard
+/// then give the whole sequence's poses (up to the chunked graph's rounding). The foot lock does not: it pins each
 /// contact at its mean over the contact and limits its correction's change per frame forwards
 /// and backwards ([`zoo_motion::stitch::lock::LOCK_MAX_STEP`]), and where that limit stays
 /// clamped for long a frame's correction depends on frames beyond any bounded lookahead (on
@@ -764,10 +880,20 @@ pub struct StitchStreamOf<R> {
     /// The seam blend (`mark_seam`), and whether the next pushed pose starts a clip.
     blend: SeamInertializer,
     seam_next: bool,
-    /// Start of the next regular window.
+    /// Start of the next regular window (the one in `job` while it runs).
     next_window: usize,
+    /// The chunked window graph this stream spreads each window over (`None`: each window runs
+    /// whole in the push that completes it), and the window it is running.
+    spread: Option<Arc<SpreadPlan>>,
+    job: Option<WindowJob>,
     /// Frames refined for good and decoded so far.
     refined: usize,
+    /// Frames whose rotations in `dec_rot` have the ankle IK (`FootCleanup::place_ankles`).
+    ik_done: usize,
+    /// The seam guard's weight of each decoded frame (`dec_base..refined`), and the first frame
+    /// from which seams are still to be weighed.
+    guard_w: Vec<f64>,
+    guard_next: usize,
     /// Frames popped so far.
     read: usize,
     finished: bool,
@@ -841,7 +967,12 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             blend,
             seam_next: false,
             next_window: 0,
+            spread: refiner.spread_plan(),
+            job: None,
             refined: 0,
+            ik_done: 0,
+            guard_w: Vec::with_capacity(frames),
+            guard_next: 0,
             read: 0,
             finished: false,
             prev: PoseFrame::default(),
@@ -923,10 +1054,17 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
     }
 
     /// Frames between pushing frame `t` and popping its refined pose: the refined pose of frame
-    /// `t` is ready right after frame `t + latency()` is pushed. `w` for the refiner alone; `w +`
+    /// `t` is ready right after frame `t + latency()` is pushed. `w + s - 2` for the refiner
+    /// alone (`w` for a graph without recurrences to chunk); `+`
     /// [`STREAM_LOOKAHEAD`] `+` [`STREAM_CHUNK`] `- 1` with the foot lock or the seam guard.
     pub fn latency(&self) -> usize {
-        self.refiner.window.max(2) + self.lookahead() + self.chunk() - 1
+        self.refiner.window.max(2) + self.spread_pushes() - 1 + self.lookahead() + self.chunk() - 1
+    }
+
+    /// Pushes a window's network work is spread over: `s - 1` (at least 1) with the chunked
+    /// graph, so that a window is done one push before the next one can be due; 1 without.
+    fn spread_pushes(&self) -> usize {
+        if self.spread.is_some() { self.refiner.stride.saturating_sub(1).max(1) } else { 1 }
     }
 
     /// Poses pushed so far.
@@ -968,7 +1106,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         for i in 0..n {
             self.take_final(i);
         }
-        self.run_due_windows()?;
+        self.run_due_windows(false)?;
         // Frame t is refined for good once the regular windows over it ran and frame t + w is
         // pushed (the last window, at finish, then starts after it).
         let upto = self.next_window.min(self.pushed.saturating_sub(self.refiner.window)).min(self.encoded);
@@ -999,15 +1137,66 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         self.encode(false);
     }
 
-    /// Runs the regular windows that the encoded frames cover.
-    fn run_due_windows(&mut self) -> Result<(), MotionError> {
+    /// Runs the regular windows that the encoded frames cover: whole, or with the chunked
+    /// graph a share of each per push (every remaining node with `all`, at the finish).
+    fn run_due_windows(&mut self, all: bool) -> Result<(), MotionError> {
         let (w, s) = (self.refiner.window, self.refiner.stride);
-        while self.next_window + w <= self.encoded {
-            let ws = self.next_window;
-            self.run_window(ws)?;
+        let Some(spread) = self.spread.clone() else {
+            while self.next_window + w <= self.encoded {
+                let ws = self.next_window;
+                self.run_window(ws)?;
+                self.next_window += s;
+            }
+            return Ok(());
+        };
+        let run = |e: TractError| MotionError::Run { reason: chain(&e) };
+        let pushes = self.spread_pushes();
+        loop {
+            if self.job.is_none() {
+                if self.next_window + w > self.encoded {
+                    return Ok(());
+                }
+                let from = (self.next_window - self.base) * self.refiner.dim;
+                let x = &self.buf[from..from + w * self.refiner.dim];
+                if let Some(i) = x.iter().position(|v| !v.is_finite()) {
+                    return Err(MotionError::NonFinite { name: "window".into(), index: i, character: 0, value: x[i] });
+                }
+                let input = Tensor::from_shape::<f32>(&[w, 1, self.refiner.dim], x).map_err(run)?;
+                let mut state = spread.plan.spawn().map_err(run)?;
+                state.set_inputs(tvec![input.into()]).map_err(run)?;
+                self.job = Some(WindowJob { state, at: 0, worked: 0 });
+            }
+            let job = self.job.as_mut().expect("a window runs");
+            // This push's share: the window done by the end of push `worked` of `pushes`; a node
+            // runs when most of it falls within the share.
+            job.worked += 1;
+            let target = if all { f64::INFINITY } else { job.worked as f64 / pushes as f64 };
+            while job.at < spread.order.len() {
+                let before = if job.at == 0 { 0.0 } else { spread.done_after[job.at - 1] };
+                if 0.5 * (before + spread.done_after[job.at]) > target {
+                    break;
+                }
+                job.state.compute_one(spread.order[job.at]).map_err(run)?;
+                job.at += 1;
+            }
+            if job.at < spread.order.len() {
+                return Ok(());
+            }
+            let y = job.state.outputs().map_err(run)?;
+            let y = y[0].try_as_plain_ram().and_then(|t| t.as_slice::<f32>()).map_err(run)?;
+            if y.len() != self.y.len() {
+                return Err(MotionError::Run {
+                    reason: format!("the graph returned {} values for a window of {}", y.len(), self.y.len()),
+                });
+            }
+            self.y.copy_from_slice(y);
+            self.job = None;
+            let (ws, d) = (self.next_window, self.refiner.dim);
+            let from = (ws - self.base) * d;
+            let r = self.refiner.clone();
+            r.finish_window(&mut self.buf[from..from + w * d], ws == 0, &mut self.y, &mut self.offset);
             self.next_window += s;
         }
-        Ok(())
     }
 
     /// Appends the normalised pose vector of `prev` (frame 0, `first`) or `cur`.
@@ -1053,6 +1242,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             };
             let ankles = self.ankle_slots.map(|(a, b)| [at(a), at(b)]).unwrap_or_default();
             self.dec_ankles.push(ankles);
+            self.guard_w.push(0.0);
             self.refined += 1;
         }
     }
@@ -1069,6 +1259,9 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         if to < self.released + chunk && !(at_finish && to > self.released) {
             return;
         }
+        // One chunk per push (a window's decoded frames arrive at once): the same frames, the
+        // work spread over the pushes after it.
+        let to = if at_finish { to } else { to.min(self.released + chunk) };
         let r = self.refiner.clone();
         let j = r.joints;
         if look == 0 && !self.cleanup.place_ankles {
@@ -1085,29 +1278,66 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         let (i0, i1) = (a - self.dec_base, b - self.dec_base);
         fill_clip(&mut self.work, &self.dec_rot[i0 * j..i1 * j], &self.dec_hips[i0..i1], &r.skeleton);
         if self.cleanup.place_ankles {
+            // The ankle IK of each frame reads that frame alone: the frames placed by an earlier
+            // release keep their rotations in `dec_rot`, the new ones are placed and kept.
             let ankles = if self.ankle_slots.is_some() { &self.dec_ankles[i0..i1] } else { &[][..] };
-            zoo_motion::stitch::lock::place_ankles_into(&mut self.work, ankles, &r.layout, &mut self.lock_scratch);
-        }
-        self.window_seams.clear();
-        self.window_seams.extend(self.seams.iter().filter(|&&s| s >= a && s < b).map(|&s| s - a));
-        if self.guard && !self.window_seams.is_empty() {
-            fill_clip(&mut self.reference, &self.ref_rot[i0 * j..i1 * j], &self.ref_hips[i0..i1], &r.skeleton);
-            zoo_motion::stitch::guard::guard_seams_into(
+            let new = self.ik_done.max(a) - a..b - a;
+            zoo_motion::stitch::lock::place_ankles_range_into(
                 &mut self.work,
-                &self.reference,
-                &self.window_seams,
+                ankles,
+                &r.layout,
+                &mut self.lock_scratch,
+                new.clone(),
+            );
+            for f in new {
+                let at = (a - self.dec_base + f) * j;
+                self.dec_rot[at..at + j].copy_from_slice(&self.work.local_rotations[f * j..(f + 1) * j]);
+            }
+            self.ik_done = b;
+        }
+        if self.guard {
+            // Each seam is weighed once, when the frames its guard reads and weighs are decoded
+            // (all at the finish), with the weights of the seams before it; the weights of every
+            // frame at hand are applied at each release.
+            use zoo_motion::stitch::guard::{GUARD_FRAMES, GUARD_RAMP};
+            let next = self.guard_next;
+            self.window_seams.clear();
+            self.window_seams.extend(
+                self.seams
+                    .iter()
+                    .filter(|&&s| s >= next && s >= a && (at_finish || s + GUARD_FRAMES + GUARD_RAMP + 2 <= b))
+                    .map(|&s| s - a),
+            );
+            self.guard_report.clear();
+            if let Some(&last) = self.window_seams.last() {
+                fill_clip(&mut self.reference, &self.ref_rot[i0 * j..i1 * j], &self.ref_hips[i0..i1], &r.skeleton);
+                zoo_motion::stitch::guard::guard_weights_into(
+                    &self.work,
+                    &self.reference,
+                    &self.window_seams,
+                    &r.layout,
+                    &mut self.guard_scratch,
+                    &mut self.guard_w[i0..i1],
+                    &mut self.guard_report,
+                );
+                self.guard_next = a + last + 1;
+            }
+            zoo_motion::stitch::guard::apply_guard_weights(
+                &mut self.work,
+                &self.guard_w[i0..i1],
                 &r.layout,
                 &mut self.guard_scratch,
-                &mut self.guard_report,
             );
         }
         if self.cleanup.lock_feet {
-            zoo_motion::stitch::lock::lock_feet_into(
+            // Only the frames released now are kept: only their legs are bent.
+            zoo_motion::stitch::lock::lock_feet_range_into(
                 &mut self.work,
                 &self.dec_contacts[i0..i1],
                 &r.layout,
                 zoo_motion::stitch::lock::LOCK_MAX_STEP,
                 &mut self.lock_scratch,
+                self.released - a..to - a,
             );
         }
         for f in self.released..to {
@@ -1146,6 +1376,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             self.dec_hips.drain(..n);
             self.dec_contacts.drain(..n);
             self.dec_ankles.drain(..n);
+            self.guard_w.drain(..n);
             self.ref_rot.drain(..n * j);
             self.ref_hips.drain(..n);
             self.dec_base = keep;
@@ -1218,7 +1449,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         for i in 0..n {
             self.take_final(i);
         }
-        self.run_due_windows()?;
+        self.run_due_windows(true)?;
         let last = self.pushed - w;
         // The regular windows ran at 0, s, ..., next_window - s; the last of them ends on the
         // last frame exactly when next_window - s == last.

@@ -97,14 +97,22 @@ fn blend_frame(out: &Clip, target: Target<'_>, layout: &StitchLayout, f: usize, 
     DVec3::new(po.x, po.y + w * (pr.y - po.y), po.z)
 }
 
-/// `clip` smoothed over `radius` frames on each side (triangular weights): local rotations
-/// averaged in the centre frame's hemisphere, the hips' position averaged; its local rotations
-/// and positions into `rotations` and `positions`.
-fn smooth_into(clip: &Clip, radius: usize, rotations: &mut Vec<DQuat>, positions: &mut Vec<DVec3>) {
+/// `clip` smoothed over `radius` frames on each side (triangular weights), for the frames
+/// `wanted` accepts (the others' rotations left as they were): local rotations averaged in the
+/// centre frame's hemisphere, the hips' position averaged; its local rotations and positions
+/// into `rotations` and `positions`.
+fn smooth_frames_into(
+    clip: &Clip,
+    radius: usize,
+    rotations: &mut Vec<DQuat>,
+    positions: &mut Vec<DVec3>,
+    wanted: impl Fn(usize) -> bool,
+) {
     let (frames, j) = (clip.frames(), clip.joints());
-    rotations.clone_from(&clip.local_rotations);
-    positions.clone_from(&clip.local_positions);
-    for f in 0..frames {
+    rotations.resize(clip.local_rotations.len(), DQuat::IDENTITY);
+    positions.resize(clip.local_positions.len(), DVec3::ZERO);
+    positions.copy_from_slice(&clip.local_positions);
+    for f in (0..frames).filter(|&f| wanted(f)) {
         let lo = f.saturating_sub(radius);
         let hi = (f + radius).min(frames - 1);
         for k in 0..j {
@@ -208,28 +216,57 @@ pub fn guard_seams_into(
     report: &mut Vec<GuardedSeam>,
 ) {
     report.clear();
+    let mut weights = std::mem::take(&mut scratch.weights);
+    weights.clear();
+    weights.resize(out.frames(), 0.0);
+    guard_weights_into(out, reference, seams, layout, scratch, &mut weights, report);
+    apply_guard_weights(out, &weights, layout, scratch);
+    scratch.weights = weights;
+}
+
+/// The first half of [`guard_seams_into`]: the guard's blend weight of every frame for
+/// `seams` (in order, each seam's weight found with those of the seams before it), combined
+/// with the weights already in `weights` (one per frame of `out`; zeros for a fresh clip) by
+/// their largest, and a report per seam appended to `report`. `out` is not changed; a seam
+/// reads the frames within [`GUARD_FRAMES`] `+ 2` of it and weighs those within
+/// [`GUARD_FRAMES`] `+` [`GUARD_RAMP`] `+ 1`, so a caller holding part of a sequence (the
+/// runtime's stitching stream) gets the whole sequence's weights for the seams whose frames it
+/// holds.
+pub fn guard_weights_into(
+    out: &Clip,
+    reference: &Clip,
+    seams: &[usize],
+    layout: &StitchLayout,
+    scratch: &mut GuardScratch,
+    weights: &mut [f64],
+    report: &mut Vec<GuardedSeam>,
+) {
     let (frames, j) = (out.frames(), out.joints());
-    if reference.frames() != frames || reference.joints() != j || frames < 2 {
+    if reference.frames() != frames || reference.joints() != j || frames < 2 || weights.len() != frames {
         return;
     }
-    let GuardScratch { ref_gr, ref_gp, smooth_rot, smooth_pos, weights, zone_gp, rot, grot, gpos, local_pos } = scratch;
+    let GuardScratch { ref_gr, ref_gp, smooth_rot, smooth_pos, zone_gp, rot, grot, gpos, local_pos, .. } = scratch;
+    // The reference's positions and the smoothed output over the seams' zones only (the frames
+    // a seam compares, and the one before them).
     let n = reference.local_rotations.len();
+    let in_zone = |f: usize| seams.iter().filter_map(|&s| zone(s, frames)).any(|(lo, hi)| f + 1 >= lo && f <= hi);
     ref_gr.clear();
     ref_gr.resize(n, DQuat::IDENTITY);
     ref_gp.clear();
     ref_gp.resize(n, DVec3::ZERO);
-    crate::fk::forward_kinematics(
-        &reference.skeleton.parents,
-        &reference.local_rotations,
-        &reference.local_positions,
-        ref_gr,
-        ref_gp,
-    );
-    smooth_into(out, SMOOTH_RADIUS, smooth_rot, smooth_pos);
+    for f in (0..frames).filter(|&f| in_zone(f)) {
+        let at = f * j..(f + 1) * j;
+        forward_kinematics_frame(
+            &reference.skeleton.parents,
+            &reference.local_rotations[at.clone()],
+            &reference.local_positions[at.clone()],
+            &mut ref_gr[at.clone()],
+            &mut ref_gp[at],
+        );
+    }
+    smooth_frames_into(out, SMOOTH_RADIUS, smooth_rot, smooth_pos, in_zone);
     let smoothed = Target { rotations: smooth_rot, positions: smooth_pos, joints: j };
     let parents = &out.skeleton.parents;
-    weights.clear();
-    weights.resize(frames, 0.0);
     // Scratch for one frame's forward kinematics and the zone's positions.
     for v in [&mut *rot, &mut *grot] {
         v.clear();
@@ -274,8 +311,22 @@ pub fn guard_seams_into(
         }
         report.push(GuardedSeam { seam, before, reference: reference_top, weight });
     }
+}
+
+/// The second half of [`guard_seams_into`]: blends each frame of `out` with a weight in
+/// `weights` (one per frame) towards `out` smoothed.
+pub fn apply_guard_weights(out: &mut Clip, weights: &[f64], layout: &StitchLayout, scratch: &mut GuardScratch) {
+    let (frames, j) = (out.frames(), out.joints());
+    if weights.len() != frames || weights.iter().all(|&w| w <= 0.0) {
+        return;
+    }
+    let GuardScratch { smooth_rot, smooth_pos, rot, .. } = scratch;
+    smooth_frames_into(out, SMOOTH_RADIUS, smooth_rot, smooth_pos, |f| weights[f] > 0.0);
+    rot.clear();
+    rot.resize(j, DQuat::IDENTITY);
     for f in 0..frames {
         if weights[f] > 0.0 {
+            let smoothed = Target { rotations: smooth_rot, positions: smooth_pos, joints: j };
             let hips = blend_frame(out, smoothed, layout, f, weights[f], rot);
             out.local_rotations[f * j..(f + 1) * j].copy_from_slice(rot);
             out.local_positions[f * j] = hips;

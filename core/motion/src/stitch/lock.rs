@@ -84,6 +84,21 @@ fn legs(clip: &Clip, layout: &StitchLayout) -> impl Iterator<Item = LockLeg> + u
     [leg(0, 1), leg(2, 3)].into_iter().flatten()
 }
 
+/// Whether bending `bent` moves a joint `leg` reads (its hip's parent, hip, knee, ankle, toe):
+/// one of them lies below `bent`'s hip, knee or ankle.
+fn moves(parents: &[Option<usize>], leg: &LockLeg, bent: &LockLeg) -> bool {
+    [leg.hip, leg.knee, leg.ankle, leg.toe].into_iter().any(|joint| {
+        let mut at = Some(joint);
+        while let Some(k) = at {
+            if k == bent.hip || k == bent.knee || k == bent.ankle {
+                return true;
+            }
+            at = parents[k];
+        }
+        false
+    })
+}
+
 /// Horizontal corrections `(x, z)` per frame from the corrections known on contact frames
 /// (`None` elsewhere): linear in between, held at both ends, zero without any contact.
 #[cfg(test)]
@@ -240,17 +255,36 @@ pub fn place_ankles_into(
     layout: &StitchLayout,
     scratch: &mut LockScratch,
 ) -> f64 {
+    place_ankles_range_into(clip, goals, layout, scratch, 0..clip.frames())
+}
+
+/// [`place_ankles_into`] on the frames `bend` only (each frame's IK reads that frame alone, so
+/// they are the frames the whole clip's call gives): for a caller that keeps the frames
+/// already placed (the runtime's stitching stream).
+pub fn place_ankles_range_into(
+    clip: &mut Clip,
+    goals: &[[DVec3; 2]],
+    layout: &StitchLayout,
+    scratch: &mut LockScratch,
+    bend: std::ops::Range<usize>,
+) -> f64 {
     let frames = clip.frames();
     if goals.len() != frames || frames == 0 {
         return 0.0;
     }
+    let bend = bend.start.min(frames)..bend.end.min(frames);
     let (mut total, mut count) = (0.0, 0usize);
     let (gr, gp) = (&mut scratch.gr, &mut scratch.gp);
+    global_into(clip, gr, gp);
+    let mut prev: Option<LockLeg> = None;
     for leg in legs(clip, layout) {
         let side = leg.heel_contact / 2;
-        global_into(clip, gr, gp);
-        for (f, g) in goals.iter().enumerate() {
-            total += bend_leg(clip, gr, gp, leg, f, g[side]);
+        if prev.is_some_and(|p| moves(&clip.skeleton.parents, &leg, &p)) {
+            global_into(clip, gr, gp);
+        }
+        prev = Some(leg);
+        for f in bend.clone() {
+            total += bend_leg(clip, gr, gp, leg, f, goals[f][side]);
             count += 1;
         }
     }
@@ -281,6 +315,20 @@ pub fn lock_feet_into(
     max_step: f64,
     scratch: &mut LockScratch,
 ) -> f64 {
+    lock_feet_range_into(clip, contacts, layout, max_step, scratch, 0..clip.frames())
+}
+
+/// [`lock_feet_into`] that bends the legs of the frames `bend` only: the corrections read the
+/// whole clip, so those frames are the whole call's (for a caller that keeps only them, as the
+/// runtime's stitching stream keeps the frames it releases).
+pub fn lock_feet_range_into(
+    clip: &mut Clip,
+    contacts: &[[bool; 4]],
+    layout: &StitchLayout,
+    max_step: f64,
+    scratch: &mut LockScratch,
+    bend: std::ops::Range<usize>,
+) -> f64 {
     let (frames, j) = (clip.frames(), clip.joints());
     if contacts.len() != frames || frames == 0 {
         return 0.0;
@@ -289,7 +337,14 @@ pub fn lock_feet_into(
     global_into(clip, gr, gp);
     let mut total = 0.0;
     let mut count = 0usize;
+    let mut prev: Option<LockLeg> = None;
     for leg in legs(clip, layout) {
+        // Positions of the changed leg for this leg's reads, when they depend on it (the legs
+        // of a humanoid do not share joints: nothing to update).
+        if prev.is_some_and(|p| moves(&clip.skeleton.parents, &leg, &p)) {
+            global_into(clip, gr, gp);
+        }
+        prev = Some(leg);
         // Pins: the mean horizontal position of the joint over each contact run.
         for target in [&mut *known, &mut *toe_known] {
             target.clear();
@@ -313,16 +368,13 @@ pub fn lock_feet_into(
         fill_gaps_into(known, corrections);
         limit_rate_into(corrections, max_step, forward);
         for (f, c) in corrections.iter().enumerate() {
-            if c.length_squared() < 1e-12 {
+            if c.length_squared() < 1e-12 || !bend.contains(&f) {
                 continue;
             }
             let goal = gp[f * j + leg.ankle] + DVec3::new(c.x, 0.0, c.z);
             total += bend_leg(clip, gr, gp, leg, f, goal);
             count += 1;
         }
-        // Positions of the changed leg for the next leg's reads (the legs do not share joints,
-        // but the toes and ankles of this one moved).
-        global_into(clip, gr, gp);
     }
     clip.remove_sign_flips();
     if count == 0 { 0.0 } else { total / count as f64 }

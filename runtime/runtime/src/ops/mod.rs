@@ -9,6 +9,7 @@
 //! and run on the integer kernels. The file itself stays standard ONNX; set
 //! `ZOO_RUNTIME_FUSE=0` to run the graph as written (for comparisons).
 
+pub(crate) mod chunk;
 mod product;
 pub(crate) mod rewrite;
 
