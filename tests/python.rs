@@ -234,6 +234,15 @@ fn write_models_and_references(data: &Path) {
     let k = clip.joints();
     let mut refs = serde_json::Map::new();
 
+    // The clip at 24 fps as `zoo data resample` makes it (`zoo_motion::Clip::resampled`).
+    let at24 = clip.resampled(24.0);
+    refs.insert(
+        "resample".into(),
+        json!({"fps": 24.0, "frames": at24.frames(),
+               "rotations": at24.local_rotations.iter().flat_map(|q| q.to_array()).collect::<Vec<f64>>(),
+               "positions": at24.local_positions.iter().flat_map(|p| p.to_array()).collect::<Vec<f64>>()}),
+    );
+
     // Transition: context frames 20..30, target 60, next 61, in engine poses.
     let rtn = rtn_onnx(&clip, false);
     std::fs::write(data.join("transition.onnx"), &rtn).unwrap();
