@@ -46,7 +46,8 @@ class ZooSettings(bpy.types.PropertyGroup):
         name="Keys",
         items=[("1", "Every frame", ""), ("2", "Every 2 frames", ""), ("4", "Every 4 frames", "")],
         default="1",
-        description="In-between keys on every frame, or every 2 or 4 frames from the range's start (Blender's curves between)",
+        description="In-between keys on every frame, or every 2 or 4 frames from the range's start and on the frames "
+        "next to the keys that stay (Blender's curves between)",
     )
     fit_handles: bpy.props.BoolProperty(
         name="Fit handles",
