@@ -336,6 +336,8 @@ def test_frame_rate(zoo, arm_name, action_name):
     fs = sc.render.fps / sc.render.fps_base
     check(abs(fs - 24) < 1e-3, f"the 24 fps clip set the scene to {fs} fps")
     activate(arm24)
+    clean24 = bpy.data.objects[arm24].animation_data.action.name
+    fresh_action(arm24, clean24)
     # Blender frames 41-65 at 24 fps are the clip's seconds of frames 51-81 at 30 fps.
     start, end = 41, 65
     bpy.ops.zoo.inbetween(start=start, end=end)
@@ -370,8 +372,14 @@ def test_frame_rate(zoo, arm_name, action_name):
     input_cm = float(np.max(np.linalg.norm(ctx - p30.global_positions[50 - P + 1 : 51], axis=-1)))
     check(input_cm < 5.0, f"the context resampled from 24 fps is {input_cm:.2f} cm from the clip's 30 fps frames")
     check(shared_cm < 15.0, f"the 24 fps in-between is {shared_cm:.2f} cm from the 30 fps one at the frames both share")
-    # A keyframe model too: keys 41, 53 and 65 at frames 0, 15 and 30 of the model's rate.
+    # A keyframe model too: keys 41, 53 and 65 at frames 0, 15 and 30 of the model's rate. They are
+    # the poses of the 30 fps clip's frames 51, 66 and 81 (the resampled frames land on them), so
+    # at the frames both rates share the result is the package's completion of those keys at 30 fps.
     sc.zoo.model_path = str(DATA / "keyframes.onnx")
+    fresh_action(arm24, clean24)
+    kmodel = zoo.load(DATA / "keyframes.onnx")
+    kh, kr = kmodel.complete_poses(np.array([0, 15, 30]), p30[[50, 65, 80]])
+    want30 = zoo.Poses.from_world(kh, kr, kmodel.skeleton).global_positions
     action = bpy.data.objects[arm24].animation_data.action
     keys = [41, 53, 65]
     for fc in action.fcurves:
@@ -381,6 +389,10 @@ def test_frame_rate(zoo, arm_name, action_name):
     bpy.ops.zoo.inbetween()
     check(all(keys_at(action, k) == kept[k] for k in keys), "the keys at 24 fps changed")
     check(sc["zoo_last_keys"] == 22, f"{sc['zoo_last_keys']} frames keyed between the 24 fps keys, expected 22")
+    on = [45, 49, 57, 61]
+    got_k = to_model_cm(zoo, world_positions(arm24, kmodel.skeleton.names, on))
+    keys_cm = float(np.max(np.linalg.norm(got_k - want30[[(f - 41) * 5 // 4 for f in on]], axis=-1)))
+    check(keys_cm < 0.05, f"the keyframe model at 24 fps is {keys_cm:.3f} cm from its completion at 30 fps at the shared frames")
     # Stitch at 24 fps: the two actions (192 frames each) resampled to 239 frames at 30 fps, the
     # 478 frames stitched, resampled back to 382 frames at 24 fps.
     sc.zoo.model_path = str(DATA / "stitch.onnx")
@@ -396,13 +408,15 @@ def test_frame_rate(zoo, arm_name, action_name):
         f"zoo.Clip.resample) in-between {start}-{end} resampled to 30 fps and back: {err:.4f} cm from the package on the same "
         f"resampled frames, {shared_cm:.2f} cm from the 30 fps clip's in-between at the {len(shared)} frames both rates share "
         f"(its context {input_cm:.2f} cm from the clip's 30 fps frames); "
-        "a keyframe model at 24 fps keeps its keys; two 192-frame actions at 24 fps stitch into 382 frames"
+        f"a keyframe model at 24 fps keeps its keys and is {keys_cm:.4f} cm from its completion of the same keys at 30 fps at "
+        "the frames both rates share; two 192-frame actions at 24 fps stitch into 382 frames"
     )
     REPORT["frame_rate"] = {
         "accepted_fps": rate,
         "fps24_vs_package_cm": err,
         "fps24_vs_30fps_shared_cm": shared_cm,
         "fps24_context_vs_30fps_cm": input_cm,
+        "fps24_keyframes_vs_30fps_shared_cm": keys_cm,
     }
     bpy.data.objects.remove(bpy.data.objects[arm24])
     sc.render.fps, sc.render.fps_base = fps, base
