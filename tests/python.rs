@@ -193,6 +193,15 @@ fn write_models_and_references(data: &Path) {
     let k = clip.joints();
     let mut refs = serde_json::Map::new();
 
+    // The clip at 24 fps as `zoo data resample` makes it (`zoo_motion::Clip::resampled`).
+    let at24 = clip.resampled(24.0);
+    refs.insert(
+        "resample".into(),
+        json!({"fps": 24.0, "frames": at24.frames(),
+               "rotations": at24.local_rotations.iter().flat_map(|q| q.to_array()).collect::<Vec<f64>>(),
+               "positions": at24.local_positions.iter().flat_map(|p| p.to_array()).collect::<Vec<f64>>()}),
+    );
+
     // Transition: context frames 20..30, target 60, next 61, in engine poses.
     let rtn = zoo_tests::biped_rtn_onnx(&clip, false, None);
     std::fs::write(data.join("transition.onnx"), &rtn).unwrap();
@@ -494,7 +503,12 @@ fn bandai2_inputs() -> &'static Option<(PathBuf, PathBuf)> {
 
 /// Runs `apps/blender/tests/test_addon.py` with `cmd` (Blender, or Python with `bpy`) on the test's
 /// models and clips, its user folders under `user`, and prints the figures it reports.
-fn run_addon_test(mut cmd: Command, user: &str, report: &str) {
+fn run_addon_test(cmd: Command, user: &str, report: &str) -> String {
+    run_addon_test_with(cmd, user, report, &[])
+}
+
+/// [`run_addon_test`] with more arguments for the script; returns its report (JSON).
+fn run_addon_test_with(mut cmd: Command, user: &str, report: &str, more: &[&std::ffi::OsStr]) -> String {
     let f = fixture();
     let zip = addon_zip();
     let report = f.data.join(report);
@@ -516,12 +530,14 @@ fn run_addon_test(mut cmd: Command, user: &str, report: &str) {
     if let Some((bvh, model)) = bandai2 {
         cmd.arg("--bandai2-clip").arg(bvh).arg("--bandai2-model").arg(model);
     }
+    cmd.args(more);
     let out = cmd.output().expect("running Blender");
     let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
     let figures = std::fs::read_to_string(&report).unwrap_or_default();
     println!("{text}\nfigures: {figures}");
     assert!(out.status.success(), "the Blender tests failed ({}):\n{text}", out.status);
     assert!(!figures.is_empty(), "the Blender tests wrote no report:\n{text}");
+    figures
 }
 
 #[test]
@@ -540,6 +556,36 @@ fn blender_addon() {
     // One thread: the speed figure is for one core.
     cmd.args(["-b", "--factory-startup", "-noaudio", "-t", "1", "--python-exit-code", "1", "--python"]);
     run_addon_test(cmd, "blender-user", "blender_report.json");
+}
+
+/// The add-on with a model trained on bandai2: a humanoid keyframe model (`ZOO_INB_ONNX`,
+/// default `../runs/inb20.onnx`, exported by `zoo export --onnx ../runs/inb20 --out
+/// ../runs/inb20.onnx`) in-betweens bandai2's walk on a Mixamo-named rig with another rest pose
+/// and on zoo's skeleton, in Debian's Blender; keys every 4 frames with fitted handles on it.
+/// The figures are in the test log (`--nocapture`) and docs/blender.md.
+#[test]
+#[ignore = "needs ../shared/data/bandai2 and a keyframe model trained on it (ZOO_INB_ONNX, default ../runs/inb20.onnx)"]
+fn blender_addon_bandai2_model() {
+    let model = std::env::var_os("ZOO_INB_ONNX").map_or_else(|| repo().join("../runs/inb20.onnx"), PathBuf::from);
+    assert!(
+        model.is_file(),
+        "{} is missing: train a keyframe model on bandai2 (`zoo train arnn --design inbetween --data \
+         ../shared/data/bandai2 --valid-glob '*_youthful_*' --time-limit 20 --out ../runs/inb20`) and export it (`zoo export --onnx ../runs/inb20 --out \
+         ../runs/inb20.onnx`), or set ZOO_INB_ONNX",
+        model.display()
+    );
+    assert!(bandai2_inputs().is_some(), "../shared/data/bandai2 is missing");
+    let blender = blender().expect("Blender is not installed: apt-get install -y blender");
+    let mut cmd = Command::new(&blender);
+    cmd.args(["-b", "--factory-startup", "-noaudio", "-t", "1", "--python-exit-code", "1", "--python"]);
+    let report = run_addon_test_with(
+        cmd,
+        "blender-user-bandai2",
+        "blender_bandai2_report.json",
+        &["--bandai2-keyframes-model".as_ref(), model.as_os_str()],
+    );
+    let report: Value = serde_json::from_str(&report).expect("the report is JSON");
+    assert!(report["bandai2_model"].is_object(), "the bandai2 model's test did not run: {report}");
 }
 
 /// The add-on as a Blender 4.2+ extension (`blender_manifest.toml`, the wheel installed by

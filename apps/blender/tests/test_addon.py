@@ -39,6 +39,7 @@ ap.add_argument("--data", required=True, type=Path)
 ap.add_argument("--report", required=True, type=Path)
 ap.add_argument("--bandai2-clip", type=Path)
 ap.add_argument("--bandai2-model", type=Path)
+ap.add_argument("--bandai2-keyframes-model", type=Path, help="a humanoid keyframe model trained on bandai2 (zoo export --onnx)")
 ARGS = ap.parse_args(argv)
 DATA = ARGS.data
 REPO = Path(__file__).resolve().parents[3]
@@ -127,17 +128,7 @@ def snapshot():
     the actions, and each armature's bones and active action."""
     out = {}
     for a in bpy.data.actions:
-        curves = {}
-        for fc in a.fcurves:
-            n = len(fc.keyframe_points)
-            arrays = []
-            for prop in ("co", "handle_left", "handle_right"):
-                v = np.empty(2 * n, dtype=np.float32)
-                fc.keyframe_points.foreach_get(prop, v)
-                arrays.append(v.tobytes())
-            arrays.append(tuple(p.interpolation for p in fc.keyframe_points))
-            curves[(fc.data_path, fc.array_index)] = tuple(arrays)
-        out[("action", a.name)] = curves
+        out[("action", a.name)] = action_keys(a)
     for o in bpy.data.objects:
         if o.type == "ARMATURE":
             ad = o.animation_data
@@ -320,19 +311,117 @@ def test_range_rules(zoo, arm_name, action_name):
     bpy.data.objects[arm_name].animation_data.action = bpy.data.actions[action_name]
 
 
-def test_frame_rate(zoo, arm_name):
-    """A scene at another rate than the model's is refused naming the fix; 30.00003 fps is 30."""
+def test_frame_rate(zoo, arm_name, action_name):
+    """A scene at 30.00003 fps runs the 30 fps model as it is; a scene at 24 fps (the clip
+    resampled to 24 fps by the package, imported with Blender's importer) is resampled to the
+    model's rate, in-betweened and resampled back, with a note: the package's transition on the
+    same resampled frames, and, at the frames both rates share, near the 30 fps clip's in-between."""
     sc = bpy.context.scene
-    sc.zoo.model_path = str(DATA / "transition.onnx")
-    activate(arm_name)
+    model_file = DATA / "transition.onnx"
+    sc.zoo.model_path = str(model_file)
+    model = zoo.load(model_file)
+    names = model.skeleton.names
     fps, base = sc.render.fps, sc.render.fps_base
-    rate = fps / base
-    check(abs(rate - 30) < 1e-3, f"the imported scene runs at {rate} fps")
-    sc.render.fps, sc.render.fps_base = 24, 1.0
-    msg = refused(bpy.ops.zoo.inbetween, "the scene runs at 24 fps but the model was trained at 30 fps: set the scene's frame rate to 30 fps", start=51, end=82)
+    activate(arm_name)
+    fresh_action(arm_name, action_name)
+    # 30.00003 fps (bandai2's frame time, 0.0333333 s) is the model's 30: no resampling.
+    sc.render.fps_base = 30 / 30.00003
+    rate = sc.render.fps / sc.render.fps_base
+    check(abs(rate - 30.00003) < 1e-5, f"the scene runs at {rate!r} fps")
+    bpy.ops.zoo.inbetween(start=51, end=82)
+    check(not sc["zoo_last_resampled"], f"the scene at {rate} fps was resampled for the 30 fps model")
+    clip = zoo.read_bvh(DATA / "clip.bvh")
+    zoo.write_bvh(DATA / "clip24.bvh", clip.resample(24))
+    arm24 = import_bvh(DATA / "clip24.bvh")
+    fs = sc.render.fps / sc.render.fps_base
+    check(abs(fs - 24) < 1e-3, f"the 24 fps clip set the scene to {fs} fps")
+    activate(arm24)
+    clean24 = bpy.data.objects[arm24].animation_data.action.name
+    fresh_action(arm24, clean24)
+    # Blender frames 41-65 at 24 fps are the clip's seconds of frames 51-81 at 30 fps.
+    start, end = 41, 65
+    bpy.ops.zoo.inbetween(start=start, end=end)
+    check(sc["zoo_last_resampled"], "the scene at 24 fps was not resampled")
+    inner = list(range(start + 1, end))
+    got = to_model_cm(zoo, world_positions(arm24, names, inner))
+    check(sc["zoo_last_keys"] == len(inner), f"{sc['zoo_last_keys']} keyed frames at 24 fps, expected {len(inner)}")
+    # The package on the same frames: 8 frames before the range (the model's 10 context frames
+    # at 30 fps, resampled backwards from the range's first frame), the target and the frame after it
+    # resampled; 29 frames at 30 fps between, resampled back to 24 fps.
+    p24 = zoo.read_bvh(DATA / "clip24.bvh").poses(names)
+    i0, i1, P = start - 1, end - 1, model.past_frames
+    h, q = zoo.resample_world(p24.hips[i0 - 8 : i0 + 1][::-1], p24.rotations[i0 - 8 : i0 + 1][::-1], fs, model.fps)
+    past = (h[:P][::-1], q[:P][::-1])
+    h, q = zoo.resample_world(p24.hips[i1 : i1 + 2], p24.rotations[i1 : i1 + 2], fs, model.fps)
+    out = model.transition(past, (h[0], q[0]), (h[1], q[1]), frames=29)
+    h, q = zoo.resample_world(
+        np.concatenate([past[0][-1:], out.hips[:30]]), np.concatenate([past[1][-1:], out.rotations[:30]]), 30 / 24, 1
+    )
+    want = zoo.Poses.from_world(h[1 : end - start], q[1 : end - start], model.skeleton).global_positions
+    err = float(np.max(np.linalg.norm(got - want, axis=-1)))
+    check(err < 0.5, f"the 24 fps in-between is {err:.3f} cm from the package's on the resampled frames")
+    # The 30 fps clip's in-between (Blender frames 51-81 at 30 fps) at the frames both rates share.
+    p30 = clip.poses(names)
+    ref = model.transition(p30[50 - P + 1 : 51], p30[80], p30[81], frames=29).global_positions
+    shared = [f for f in inner if (f - start) % 4 == 0]
+    idx30 = [(f - start) * 5 // 4 - 1 for f in shared]
+    shared_cm = float(np.max(np.linalg.norm(got[[inner.index(f) for f in shared]] - ref[idx30], axis=-1)))
+    # The model's context at 30 fps resampled from 24 fps against the clip's own 30 fps frames:
+    # what the round trip through 24 fps changes in the input (the tiny random RTN amplifies it).
+    ctx = zoo.Poses.from_world(past[0], past[1], model.skeleton).global_positions
+    input_cm = float(np.max(np.linalg.norm(ctx - p30.global_positions[50 - P + 1 : 51], axis=-1)))
+    check(input_cm < 5.0, f"the context resampled from 24 fps is {input_cm:.2f} cm from the clip's 30 fps frames")
+    check(shared_cm < 15.0, f"the 24 fps in-between is {shared_cm:.2f} cm from the 30 fps one at the frames both share")
+    # A keyframe model too: keys 41, 53 and 65 at frames 0, 15 and 30 of the model's rate. They are
+    # the poses of the 30 fps clip's frames 51, 66 and 81 (the resampled frames land on them), so
+    # at the frames both rates share the result is the package's completion of those keys at 30 fps.
+    sc.zoo.model_path = str(DATA / "keyframes.onnx")
+    fresh_action(arm24, clean24)
+    kmodel = zoo.load(DATA / "keyframes.onnx")
+    kh, kr = kmodel.complete_poses(np.array([0, 15, 30]), p30[[50, 65, 80]])
+    want30 = zoo.Poses.from_world(kh, kr, kmodel.skeleton).global_positions
+    action = bpy.data.objects[arm24].animation_data.action
+    keys = [41, 53, 65]
+    for fc in action.fcurves:
+        for kp in fc.keyframe_points:
+            kp.select_control_point = int(round(kp.co.x)) in keys
+    kept = {k: keys_at(action, k) for k in keys}
+    bpy.ops.zoo.inbetween()
+    check(all(keys_at(action, k) == kept[k] for k in keys), "the keys at 24 fps changed")
+    check(sc["zoo_last_keys"] == 22, f"{sc['zoo_last_keys']} frames keyed between the 24 fps keys, expected 22")
+    on = [45, 49, 57, 61]
+    got_k = to_model_cm(zoo, world_positions(arm24, kmodel.skeleton.names, on))
+    keys_cm = float(np.max(np.linalg.norm(got_k - want30[[(f - 41) * 5 // 4 for f in on]], axis=-1)))
+    check(keys_cm < 0.05, f"the keyframe model at 24 fps is {keys_cm:.3f} cm from its completion at 30 fps at the shared frames")
+    # Stitch at 24 fps: the two actions (192 frames each) resampled to 239 frames at 30 fps, the
+    # 478 frames stitched, resampled back to 382 frames at 24 fps.
+    sc.zoo.model_path = str(DATA / "stitch.onnx")
+    sc.zoo.stitch_first = sc.zoo.stitch_second = action
+    bpy.ops.zoo.stitch()
+    sc.zoo.stitch_first = sc.zoo.stitch_second = None
+    stitched = bpy.data.objects[arm24].animation_data.action
+    n = int(stitched.frame_range[1] - stitched.frame_range[0]) + 1
+    check(stitched != action and n == 382, f"stitching two 192-frame actions at 24 fps gave '{stitched.name}' of {n} frames")
+    sc.zoo.model_path = str(model_file)
+    log(
+        f"frame rate: the scene at {rate:.6f} fps runs the 30 fps model as it is; at 24 fps (the clip resampled by "
+        f"zoo.Clip.resample) in-between {start}-{end} resampled to 30 fps and back: {err:.4f} cm from the package on the same "
+        f"resampled frames, {shared_cm:.2f} cm from the 30 fps clip's in-between at the {len(shared)} frames both rates share "
+        f"(its context {input_cm:.2f} cm from the clip's 30 fps frames); "
+        f"a keyframe model at 24 fps keeps its keys and is {keys_cm:.4f} cm from its completion of the same keys at 30 fps at "
+        "the frames both rates share; two 192-frame actions at 24 fps stitch into 382 frames"
+    )
+    REPORT["frame_rate"] = {
+        "accepted_fps": rate,
+        "fps24_vs_package_cm": err,
+        "fps24_vs_30fps_shared_cm": shared_cm,
+        "fps24_context_vs_30fps_cm": input_cm,
+        "fps24_keyframes_vs_30fps_shared_cm": keys_cm,
+    }
+    bpy.data.objects.remove(bpy.data.objects[arm24])
     sc.render.fps, sc.render.fps_base = fps, base
-    log(f"frame rate: the scene at {rate:.6f} fps accepted; at 24 fps refused, nothing changed: {msg}")
-    REPORT["frame_rate"] = {"accepted_fps": rate, "refusal": msg}
+    activate(arm_name)
+    bpy.data.objects[arm_name].animation_data.action = bpy.data.actions[action_name]
 
 
 def test_strength_spacing_root(zoo, arm_name, action_name, start, end):
@@ -372,24 +461,42 @@ def test_strength_spacing_root(zoo, arm_name, action_name, start, end):
     loc = [i for i, fc in enumerate(action.fcurves) if fc.data_path.endswith(".location")]
     check(np.allclose(half[loc], (before[loc] + model_vals[loc]) / 2, atol=1e-5), "strength 0.5 is not halfway on the root's location")
     sc.zoo.strength = 1.0
-    # Keys every 4 frames.
-    action = fresh_action(arm_name, action_name)
-    sc.zoo.key_spacing = "4"
-    bpy.ops.zoo.inbetween(start=start, end=end)
-    sc.zoo.key_spacing = "1"
-    check(keys_outside(action, start, end) == outside, "spacing 4: a key outside the range changed")
-    inside = keys_inside(action, start, end)
+    # Keys every 4 frames, their handles fitted (the default), then automatic handles.
     want = [float(f) for f in range(start + 4, end, 4)]
-    check(all(f == want for f, _ in inside.values()), f"spacing 4: keys at {next(iter(inside.values()))[0]}, expected {want}")
-    sparse = to_model_cm(zoo, world_positions(arm_name, names, inner))
-    sparse_cm = float(np.max(np.linalg.norm(sparse - dense, axis=-1)))
+    sparse = {}
+    for fit in (True, False):
+        action = fresh_action(arm_name, action_name)
+        sc.zoo.key_spacing, sc.zoo.fit_handles = "4", fit
+        bpy.ops.zoo.inbetween(start=start, end=end)
+        sc.zoo.key_spacing, sc.zoo.fit_handles = "1", True
+        check(keys_outside(action, start, end) == outside, f"spacing 4 (fit {fit}): a key outside the range changed")
+        inside = keys_inside(action, start, end)
+        # The frames next to the ends are keyed too.
+        keyed = sorted({float(start + 1), float(end - 1)} | set(want))
+        check(all(f == keyed for f, _ in inside.values()), f"spacing 4: keys at {next(iter(inside.values()))[0]}, expected {keyed}")
+        check(sc["zoo_last_keys"] == len(keyed), f"the operator reports {sc['zoo_last_keys']} keys, expected {len(keyed)}")
+        joints = to_model_cm(zoo, world_positions(arm_name, names, inner))
+        channel = float(np.max(np.abs(curve_values(action, inner) - model_vals)))
+        sparse[fit] = (float(np.max(np.linalg.norm(joints - dense, axis=-1))), channel, float(sc["zoo_last_fit_residual"]))
+    sparse_cm, fit_channel, predicted = sparse[True]
+    auto_cm = sparse[False][0]
+    # The fit's own evaluation of the curves (Blender's Bezier segments, handles shortened as
+    # Blender shortens them) is what Blender evaluates.
+    check(abs(fit_channel - predicted) < 1e-4, f"Blender's curves are {fit_channel} from the dense values, the fit predicted {predicted}")
+    check(sparse_cm < auto_cm, f"fitted handles ({sparse_cm:.2f} cm) are no closer to the dense result than automatic ones ({auto_cm:.2f} cm)")
     # Keys every 4 frames of the clip's own motion (strength 0): what sparse keys lose on smooth motion.
     action = fresh_action(arm_name, action_name)
     clip_joints = to_model_cm(zoo, world_positions(arm_name, names, inner))
-    sc.zoo.key_spacing, sc.zoo.strength = "4", 0.0
-    bpy.ops.zoo.inbetween(start=start, end=end)
-    sc.zoo.key_spacing, sc.zoo.strength = "1", 1.0
-    clip_sparse_cm = float(np.max(np.linalg.norm(to_model_cm(zoo, world_positions(arm_name, names, inner)) - clip_joints, axis=-1)))
+    clip_sparse = {}
+    for fit in (True, False):
+        action = fresh_action(arm_name, action_name)
+        sc.zoo.key_spacing, sc.zoo.strength, sc.zoo.fit_handles = "4", 0.0, fit
+        bpy.ops.zoo.inbetween(start=start, end=end)
+        sc.zoo.key_spacing, sc.zoo.strength, sc.zoo.fit_handles = "1", 1.0, True
+        got = to_model_cm(zoo, world_positions(arm_name, names, inner))
+        clip_sparse[fit] = float(np.max(np.linalg.norm(got - clip_joints, axis=-1)))
+    clip_sparse_cm, clip_auto_cm = clip_sparse[True], clip_sparse[False]
+    check(clip_sparse_cm < clip_auto_cm, f"on the clip's motion fitted handles ({clip_sparse_cm:.2f} cm) are no better than automatic ({clip_auto_cm:.2f} cm)")
     # The root path as keyed.
     action = fresh_action(arm_name, action_name)
     sc.zoo.keep_root = True
@@ -399,18 +506,87 @@ def test_strength_spacing_root(zoo, arm_name, action_name, start, end):
     check(np.array_equal(kept[loc], before[loc]), "keep root: the root's location changed")
     check(np.array_equal(kept[[i for i in range(len(kept)) if i not in loc]], model_vals[[i for i in range(len(kept)) if i not in loc]]), "keep root: the rotations are not the model's")
     log(
-        f"strength: 0 keys the curves exactly, 1 the model's, 0.5 halfway; keys every 4 frames: {len(want)} keys per curve "
-        f"(every frame: {len(inner)}), largest joint distance to the dense result {sparse_cm:.3f} cm (on the clip's own motion "
-        f"{clip_sparse_cm:.3f} cm); keep root: the root's "
-        "location as keyed; keys outside the range bit-identical"
+        f"strength: 0 keys the curves exactly, 1 the model's, 0.5 halfway; keys every 4 frames: {len(keyed)} keys per curve "
+        f"(every frame: {len(inner)}), largest joint distance to the dense result {sparse_cm:.3f} cm with fitted handles, "
+        f"{auto_cm:.3f} cm with automatic ones (on the clip's own motion {clip_sparse_cm:.3f} cm fitted, {clip_auto_cm:.3f} cm "
+        f"automatic); the fit's curves as Blender evaluates them (largest channel residual {fit_channel:.5f}, predicted "
+        f"{predicted:.5f}); keep root: the root's location as keyed; keys outside the range bit-identical"
     )
     REPORT["editable"] = {
-        "spacing4_keys": len(want),
+        "spacing4_keys": len(keyed),
         "dense_keys": len(inner),
-        "spacing4_max_cm": sparse_cm,
-        "spacing4_clip_motion_max_cm": clip_sparse_cm,
+        "spacing4_fitted_max_cm": sparse_cm,
+        "spacing4_auto_max_cm": auto_cm,
+        "spacing4_clip_motion_fitted_max_cm": clip_sparse_cm,
+        "spacing4_clip_motion_auto_max_cm": clip_auto_cm,
+        "fit_channel_residual": fit_channel,
+        "fit_predicted_residual": predicted,
     }
     bpy.data.objects[arm_name].animation_data.action = bpy.data.actions[action_name]
+
+
+def action_keys(action):
+    """Every key of `action` (values, handles, interpolation), per F-curve."""
+    curves = {}
+    for fc in action.fcurves:
+        n = len(fc.keyframe_points)
+        arrays = []
+        for prop in ("co", "handle_left", "handle_right"):
+            v = np.empty(2 * n, dtype=np.float32)
+            fc.keyframe_points.foreach_get(prop, v)
+            arrays.append(v.tobytes())
+        arrays.append(tuple(p.interpolation for p in fc.keyframe_points))
+        curves[(fc.data_path, fc.array_index)] = tuple(arrays)
+    return curves
+
+
+def test_preview(zoo, arm_name, action_name, start, end):
+    """Preview writes the in-between into a copy made the armature's action and leaves the action
+    untouched; Discard gives the action back as it was; Apply puts the preview in its place,
+    equal to what In-between writes."""
+    sc = bpy.context.scene
+    sc.zoo.model_path = str(DATA / "transition.onnx")
+    activate(arm_name)
+    ad = bpy.data.objects[arm_name].animation_data
+    # What In-between writes (on a copy).
+    fresh_action(arm_name, action_name)
+    sc.zoo.key_spacing = "4"
+    bpy.ops.zoo.inbetween(start=start, end=end)
+    inbetween_keys = action_keys(ad.action)
+    # The original action, under preview.
+    original = fresh_action(arm_name, action_name)
+    name = original.name
+    before = action_keys(original)
+    actions_before = len(bpy.data.actions)
+    bpy.ops.zoo.preview("EXEC_DEFAULT", True, start=start, end=end)
+    preview = ad.action
+    check(preview.name == f"{name} (zoo preview)", f"the preview action is '{preview.name}'")
+    check(action_keys(bpy.data.actions[name]) == before, "Preview changed the original action")
+    check(action_keys(preview) == inbetween_keys, "the preview differs from what In-between writes")
+    msg = refused(bpy.ops.zoo.inbetween, "shows a preview: Apply or Discard it first", start=start, end=end)
+    # Previewing again (another setting) replaces the preview.
+    sc.zoo.strength = 0.5
+    bpy.ops.zoo.preview(start=start, end=end)
+    sc.zoo.strength = 1.0
+    check(len(bpy.data.actions) == actions_before + 1, "previewing twice left two previews")
+    check(action_keys(ad.action) != inbetween_keys, "the second preview (strength 0.5) is the first")
+    bpy.ops.zoo.discard_preview("EXEC_DEFAULT", True)
+    check(ad.action.name == name and action_keys(ad.action) == before, "Discard did not give back the action as it was")
+    check(len(bpy.data.actions) == actions_before and not bpy.data.actions[name].use_fake_user, "Discard left an action or a fake user")
+    # Preview, then Apply.
+    bpy.ops.zoo.preview(start=start, end=end)
+    check(action_keys(bpy.data.actions[name]) == before, "the second Preview changed the original action")
+    bpy.ops.zoo.apply_preview("EXEC_DEFAULT", True)
+    applied = bpy.data.actions[name]
+    check(ad.action == applied and action_keys(applied) == inbetween_keys, "after Apply the action is not the in-between")
+    check(len(bpy.data.actions) == actions_before and "zoo_preview_of" not in applied.keys(), "Apply left the preview behind")
+    sc.zoo.key_spacing = "1"
+    log(
+        f"preview: '{name} (zoo preview)' played in place of '{name}', which stayed bit-identical; Discard gave it back "
+        f"as it was; Apply left '{name}' equal to In-between's result, key for key; In-between refused during a preview ({msg})"
+    )
+    REPORT["preview"] = {"original_untouched": True, "discard_restores": True, "apply_equals_inbetween": True}
+    ad.action = bpy.data.actions[action_name]
 
 
 def test_pinning(zoo, arm_name, action_name, start, mid, end, pins):
@@ -552,6 +728,106 @@ def test_mixamo_rig(zoo, arm_name, action_name, start, end, scale=1.3, a_pose_de
     bpy.data.objects.remove(ob)
 
 
+def select_keys(action, frames):
+    """Selects the keys at `frames` on every F-curve of `action`, and only those."""
+    for fc in action.fcurves:
+        for kp in fc.keyframe_points:
+            kp.select_control_point = int(round(kp.co.x)) in frames
+
+
+def test_bandai2_model(zoo, arm_name, clip_file, model_file, start, mid, end, scale=1.3, a_pose_deg=40.0):
+    """A model trained on bandai2 (`model_file`, a humanoid keyframe ARNN: in-betweening from
+    keys) on bandai2's walk, imported with its `joint_Root`. On a Mixamo-named rig with another
+    rest pose (arms `a_pose_deg` down, random bone rolls, an extra Spine1, `scale` times the
+    size) the clip is put through the Mixamo map and in-betweened from keys `start`, `mid`, `end`;
+    its joints (divided by its size) against the same in-between on zoo's skeleton (the imported
+    armature) and against the package on the file's frames; keys outside the range and the keys
+    unchanged. Then keys every 4 frames with fitted handles against every frame, on this model."""
+    rig = addon_module("rig")
+    sc = bpy.context.scene
+    sc.zoo.model_path = str(model_file)
+    model = zoo.load(model_file)
+    check(model.task == "keyframes" and model.humanoid, f"{model_file} is not a humanoid keyframe model")
+    names = model.skeleton.names
+    src_action = bpy.data.objects[arm_name].animation_data.action.name
+    mix = make_mixamo_rig(arm_name, scale, a_pose_deg)
+    ob = bpy.data.objects[mix]
+    r = rig.Rig(ob, model, rig.shipped_map("mixamo"))
+    check(r.aligned_degrees > a_pose_deg - 1, f"the rest alignment found {r.aligned_degrees:.1f} degrees")
+    p = zoo.read_bvh(clip_file, drop_dummy_root=True).poses(names)
+    action = bpy.data.actions.new("mixamo bandai2")
+    r.write(action, list(range(1, len(p) + 1)), p.hips, p.rotations)
+    ob.animation_data_create().action = action
+    outside = list(range(start - 20, start + 1)) + list(range(end, end + 20))
+    zoo_out = to_model_cm(zoo, world_positions(arm_name, names, outside))
+    mix_out = to_model_cm(zoo, world_positions(mix, r.bones, outside) / scale)
+    same_motion_cm = float(np.max(np.linalg.norm(mix_out - zoo_out, axis=-1)))
+    keys = [start, mid, end]
+    hips, rot = model.complete_poses(np.array(keys) - start, p[[k - 1 for k in keys]])
+    want = zoo.Poses.from_world(hips, rot, model.skeleton).global_positions
+    # The Mixamo rig, from its selected keys.
+    sc.zoo.bone_names = "MIXAMO"
+    activate(mix)
+    select_keys(action, keys)
+    before_out, before_mid = keys_outside(action, start, end), keys_at(action, mid)
+    bpy.ops.zoo.inbetween()
+    check(last_range(sc) == [start, end, "selected keys"], f"the Mixamo rig's range was {last_range(sc)}")
+    check(keys_outside(action, start, end) == before_out, "a key of the Mixamo rig outside the range changed")
+    check(keys_at(action, mid) == before_mid, f"the Mixamo rig's key at {mid} changed")
+    # zoo's skeleton (the imported armature), the same way.
+    sc.zoo.bone_names = "MODEL"
+    activate(arm_name)
+    zaction = fresh_action(arm_name, src_action)
+    select_keys(zaction, keys)
+    bpy.ops.zoo.inbetween()
+    frames = [f for f in range(start + 1, end) if f != mid]
+    idx = [f - start for f in frames]
+    zoo_in = to_model_cm(zoo, world_positions(arm_name, names, frames))
+    mix_in = to_model_cm(zoo, world_positions(mix, r.bones, frames) / scale)
+    inbetween_cm = float(np.max(np.linalg.norm(mix_in - zoo_in, axis=-1)))
+    package_cm = float(np.max(np.linalg.norm(zoo_in - want[idx], axis=-1)))
+    moved_cm = float(np.max(np.linalg.norm(want[idx] - p.global_positions[[f - 1 for f in frames]], axis=-1)))
+    check(same_motion_cm < 0.1, f"the Mixamo rig's motion is {same_motion_cm:.3f} cm from zoo's skeleton's")
+    check(inbetween_cm < 0.5, f"the Mixamo rig's in-between is {inbetween_cm:.3f} cm from zoo's skeleton's")
+    check(package_cm < 0.5, f"zoo's skeleton's in-between is {package_cm:.3f} cm from the package's")
+    # Keys every 4 frames on this model: fitted handles and automatic ones against every frame.
+    inner = list(range(start + 1, end))
+    dense = to_model_cm(zoo, world_positions(arm_name, names, inner))
+    sparse = {}
+    for fit in (True, False):
+        a = fresh_action(arm_name, src_action)
+        select_keys(a, keys)
+        sc.zoo.key_spacing, sc.zoo.fit_handles = "4", fit
+        bpy.ops.zoo.inbetween()
+        sc.zoo.key_spacing, sc.zoo.fit_handles = "1", True
+        n_keys = int(sc["zoo_last_keys"])
+        got = to_model_cm(zoo, world_positions(arm_name, names, inner))
+        sparse[fit] = (float(np.max(np.linalg.norm(got - dense, axis=-1))), n_keys)
+    check(sparse[True][0] < sparse[False][0], f"with the bandai2 model fitted handles ({sparse[True][0]:.2f} cm) are no better than automatic ({sparse[False][0]:.2f} cm)")
+    log(
+        f"bandai2 model {Path(model_file).name} on a Mixamo rig (mixamorig: names, extra Spine1, arms {a_pose_deg:.0f} deg down, "
+        f"random rolls, x{scale}), keys {keys} of bandai2's walk: the clip {same_motion_cm:.4f} cm from zoo's skeleton; the "
+        f"in-between {inbetween_cm:.4f} cm from zoo's skeleton's, which is {package_cm:.4f} cm from the package's (the model "
+        f"moves joints up to {moved_cm:.1f} cm from the clip); keys outside the range and the keys bit-identical. Keys "
+        f"every 4 frames: {sparse[True][1]} keyed frames instead of {len(frames)}, {sparse[True][0]:.3f} cm from every frame "
+        f"with fitted handles, {sparse[False][0]:.3f} cm with automatic ones"
+    )
+    REPORT["bandai2_model"] = {
+        "model": str(model_file),
+        "keys": keys,
+        "mixamo_same_motion_max_cm": same_motion_cm,
+        "mixamo_inbetween_max_cm": inbetween_cm,
+        "zoo_skeleton_vs_package_max_cm": package_cm,
+        "model_vs_clip_max_cm": moved_cm,
+        "spacing4_keys": sparse[True][1],
+        "dense_keys": len(frames),
+        "spacing4_fitted_max_cm": sparse[True][0],
+        "spacing4_auto_max_cm": sparse[False][0],
+    }
+    bpy.data.objects[arm_name].animation_data.action = bpy.data.actions[src_action]
+    bpy.data.objects.remove(ob)
+
+
 def gltf_importer_on_numpy_124():
     """Debian's Blender 3.4 glTF importer uses `numpy.bool`, which numpy 1.24 removed: the alias
     is put back (the note in docs/blender.md)."""
@@ -603,7 +879,7 @@ def run_doc_examples():
     import tempfile
 
     blocks = doc_examples()
-    check(len(blocks) >= 2, f"docs/blender.md has {len(blocks)} Blender examples")
+    check(len(blocks) >= 3, f"docs/blender.md has {len(blocks)} Blender examples")
     tmp = Path(tempfile.mkdtemp())
     for src, dst in (("clip.bvh", "walk.bvh"), ("clip.glb", "walk.glb"), ("transition.onnx", "rtn.onnx")):
         shutil.copy(DATA / src, tmp / dst)
@@ -614,6 +890,11 @@ def run_doc_examples():
             exec(compile(b, f"docs/blender.md example {i + 1}", "exec"), {"__name__": "__doc_example__"})
     finally:
         os.chdir(cwd)
+    # The preview example applied its preview: no preview action is left, and the keys are sparse.
+    sc = bpy.context.scene
+    check(not any(a.name.endswith("(zoo preview)") for a in bpy.data.actions), "the docs' preview example left a preview")
+    check(sc["zoo_last_keys"] == 9, f"the docs' preview example keyed {sc['zoo_last_keys']} frames, expected 9")
+    sc.zoo.key_spacing = "1"
     log(f"docs/blender.md: {len(blocks)} Blender examples ran as written")
     REPORT["doc_examples"] = len(blocks)
 
@@ -851,14 +1132,17 @@ def main():
     sc = bpy.context.scene
     sc.zoo.bone_names, sc.zoo.strength, sc.zoo.key_spacing, sc.zoo.keep_root = "MODEL", 1.0, "1", False
     test_range_rules(zoo, arm, clip_action)
-    test_frame_rate(zoo, arm)
+    test_frame_rate(zoo, arm, clip_action)
     test_strength_spacing_root(zoo, arm, clip_action, 51, 82)
+    test_preview(zoo, arm, clip_action, 51, 82)
     test_pinning(zoo, arm, clip_action, 101, 116, 131, ["Hips", "UpperLeg_L", "LowerLeg_L"])
     test_mixamo_rig(zoo, arm, clip_action, 51, 82)
     test_gltf_route(zoo)
     if ARGS.bandai2_clip:
         b = import_bvh(ARGS.bandai2_clip)
         test_inbetween(zoo, b, ARGS.bandai2_model, ARGS.bandai2_clip, True, 51, 82, "inbetween_bandai2")
+        if ARGS.bandai2_keyframes_model:
+            test_bandai2_model(zoo, b, ARGS.bandai2_clip, ARGS.bandai2_keyframes_model, 51, 66, 81)
     run_doc_examples()
     REPORT["seconds"] = time.perf_counter() - t_start
     log(f"all Blender tests passed in {REPORT['seconds']:.1f} s")

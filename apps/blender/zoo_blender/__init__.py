@@ -46,7 +46,14 @@ class ZooSettings(bpy.types.PropertyGroup):
         name="Keys",
         items=[("1", "Every frame", ""), ("2", "Every 2 frames", ""), ("4", "Every 4 frames", "")],
         default="1",
-        description="In-between keys on every frame, or every 2 or 4 frames from the range's start (Blender's curves between)",
+        description="In-between keys on every frame, or every 2 or 4 frames from the range's start and on the frames "
+        "next to the keys that stay (Blender's curves between)",
+    )
+    fit_handles: bpy.props.BoolProperty(
+        name="Fit handles",
+        default=True,
+        description="With keys every 2 or 4 frames: Bezier handles fitted to the model's motion between the keys (least "
+        "squares), so that the curves follow it; off: automatic handles",
     )
     strength: bpy.props.FloatProperty(
         name="Strength",
@@ -98,13 +105,19 @@ class ZOO_PT_panel(bpy.types.Panel):
         rules.label(text="Range: the preview range when on,")
         rules.label(text="else two selected markers,")
         rules.label(text="else the selected keys' first and last")
-        box.prop(s, "key_spacing")
+        row = box.row(align=True)
+        row.prop(s, "key_spacing")
+        row.prop(s, "fit_handles", text="Fit")
         box.prop(s, "strength", slider=True)
         box.prop(s, "keep_root")
         row = box.row(align=True)
         row.prop(s, "pinned_bones")
         row.operator("zoo.pin_selected", text="", icon="PINNED")
         box.operator("zoo.inbetween", icon="IPO_BEZIER")
+        row = box.row(align=True)
+        row.operator("zoo.preview", icon="HIDE_OFF")
+        row.operator("zoo.apply_preview", icon="CHECKMARK")
+        row.operator("zoo.discard_preview", icon="X")
         box = self.layout.box()
         box.label(text="Stitch two actions (or two NLA strips)")
         box.prop(s, "stitch_first")

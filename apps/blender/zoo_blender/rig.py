@@ -282,14 +282,20 @@ class Rig:
         loc = qrot(qinv(self.rest[0]), h - self.rest_head)
         return basis, loc
 
-    def write(self, action, frames, hips, rotations, drop=None, previous=None, strength=1.0, keep_root=False):
+    def write(
+        self, action, frames, hips, rotations, drop=None, previous=None, strength=1.0, keep_root=False, keys=None, fit=False
+    ):
         """Keys the poses (BVH style, the model's frame) at `frames` on every matched bone's
         rotation and the root's location. Existing keys at frames where `drop(frame)` is true
         are removed first (default: those at `frames`). `previous`: the frame whose value the
         first key continues from (quaternion signs, Euler angles); none for a new action.
         `strength` blends each channel between the action's own curves (0: their values at
         `frames`, exactly) and the poses (1); `keep_root`: the root's location keeps the
-        action's curves."""
+        action's curves. `keys`: key only these of `frames` (default: all); with `fit`, their
+        Bezier handles are fitted to the values at all `frames` (`fit_handles`). Returns the
+        largest difference, over every channel, between the F-curves and the values at `frames`
+        as the fit predicts Blender evaluates them (0 without `fit`), and the most keys written on
+        one F-curve."""
         import mathutils
 
         basis, loc = self.channels(hips, rotations)
@@ -300,6 +306,7 @@ class Rig:
         if drop is None:
             drop = lambda x: int(round(x)) in keyed  # noqa: E731
         pose = self.arm.pose.bones
+        residual, most = 0.0, 0
         for j, name in enumerate(self.bones):
             pb = pose[name]
             path, size = rotation_channel(pb)
@@ -326,13 +333,29 @@ class Rig:
                 values = blend(old_of(pb, path, size), values, strength, mode)
             data_path = pb.path_from_id(path)
             for c in range(size):
-                write_channel(action, data_path, c, name, frames, values[:, c], drop)
+                r, n = self._key(action, data_path, c, name, frames, values[:, c], drop, keys, fit)
+                residual, most = max(residual, r), max(most, n)
         root = pose[self.bones[0]]
         if old_of is not None and (keep_root or strength < 1.0):
             loc = blend(old_of(root, "location", 3), loc, 0.0 if keep_root else strength, "LOCATION")
         data_path = root.path_from_id("location")
         for c in range(3):
-            write_channel(action, data_path, c, self.bones[0], frames, loc[:, c], drop)
+            r, n = self._key(action, data_path, c, self.bones[0], frames, loc[:, c], drop, keys, fit)
+            residual, most = max(residual, r), max(most, n)
+        return residual, most
+
+    @staticmethod
+    def _key(action, data_path, index, group, frames, values, drop, keys, fit):
+        """One channel of `write`: every frame keyed, or only `keys` (their handles fitted to
+        every frame's value with `fit`); returns the fit's largest residual and the keys written."""
+        if keys is None:
+            write_channel(action, data_path, index, group, frames, values, drop)
+            return 0.0, len(frames)
+        at = np.isin(np.round(frames).astype(int), np.round(np.asarray(keys)).astype(int))
+        residual = write_channel(
+            action, data_path, index, group, frames[at], values[at], drop, fit=(frames, values) if fit else None
+        )
+        return residual, int(at.sum())
 
 
 def frame_alignment(pairs):
@@ -370,10 +393,12 @@ def blend(old, new, strength, mode):
     return (1 - strength) * old + strength * new
 
 
-def write_channel(action, data_path, index, group, frames, values, drop):
+def write_channel(action, data_path, index, group, frames, values, drop, fit=None):
     """Keys `values` at `frames` on one F-curve (made when absent), after removing its keys at
     frames where `drop(frame)` is true. The other keys stay as they were, handles included (the
-    F-curve's update recomputes automatic handles; theirs are put back)."""
+    F-curve's update recomputes automatic handles; theirs are put back). `fit`: `(frames,
+    values)` of every frame the keys stand for: the new keys are Bezier keys with aligned handles
+    fitted to them (`fit_handles`). Returns the fit's largest residual (0 without one)."""
     fc = action.fcurves.find(data_path, index=index)
     if fc is None:
         fc = action.fcurves.new(data_path, index=index, action_group=group)
@@ -392,6 +417,9 @@ def write_channel(action, data_path, index, group, frames, values, drop):
             interpolation = points[before[-1] if before else kept[0]].interpolation
         for i in reversed(gone):
             points.remove(points[i], fast=True)
+    if fit is not None:
+        interpolation = "BEZIER"
+    handle = "AUTO_CLAMPED" if fit is None else "ALIGNED"
     nk = len(points)
     kept_co = np.empty(2 * nk, dtype=np.float32)
     kept_left = np.empty(2 * nk, dtype=np.float32)
@@ -410,25 +438,129 @@ def write_channel(action, data_path, index, group, frames, values, drop):
     for i in range(nk, nk + n):
         p = points[i]
         p.interpolation = interpolation
-        p.handle_left_type = "AUTO_CLAMPED"
-        p.handle_right_type = "AUTO_CLAMPED"
+        p.handle_left_type = handle
+        p.handle_right_type = handle
         # The keys written are not selected: the next in-between's range is not taken from them.
         p.select_control_point = False
         p.select_left_handle = False
         p.select_right_handle = False
     fc.update()
+    total = nk + n
+    co = np.empty(2 * total, dtype=np.float32)
+    points.foreach_get("co", co)
+    xs = co[0::2]
+    left = np.empty(2 * total, dtype=np.float32)
+    right = np.empty(2 * total, dtype=np.float32)
+    points.foreach_get("handle_left", left)
+    points.foreach_get("handle_right", right)
     if nk:
-        co = np.empty(2 * (nk + n), dtype=np.float32)
-        points.foreach_get("co", co)
-        xs = co[0::2]
         at = np.searchsorted(xs, kept_co[0::2])
         if np.all(at < len(xs)) and np.array_equal(xs[np.minimum(at, len(xs) - 1)], kept_co[0::2]):
-            left = np.empty(2 * (nk + n), dtype=np.float32)
-            right = np.empty(2 * (nk + n), dtype=np.float32)
-            points.foreach_get("handle_left", left)
-            points.foreach_get("handle_right", right)
             for c in range(2):
                 left[2 * at + c] = kept_left[c::2]
                 right[2 * at + c] = kept_right[c::2]
             points.foreach_set("handle_left", left)
             points.foreach_set("handle_right", right)
+    if fit is None:
+        return 0.0
+    new = np.isin(xs, np.asarray(frames, dtype=np.float32))
+    interp = [p.interpolation for p in points]
+    left2, right2, residual = fit_handles(
+        xs.astype(np.float64),
+        co[1::2].astype(np.float64),
+        left.reshape(-1, 2).astype(np.float64),
+        right.reshape(-1, 2).astype(np.float64),
+        interp,
+        new,
+        np.asarray(fit[0], dtype=np.float64),
+        np.asarray(fit[1], dtype=np.float64),
+    )
+    points.foreach_set("handle_left", left2.astype(np.float32).ravel())
+    points.foreach_set("handle_right", right2.astype(np.float32).ravel())
+    return residual
+
+
+def bezier_t(x0, x1, x2, x3, x):
+    """The parameters `t` in [0, 1] where the cubic Bezier with control abscissas `x0..x3`
+    (handles within the segment, as Blender's correction makes them) reaches `x` (bisection)."""
+    lo, hi = np.zeros_like(x), np.ones_like(x)
+    for _ in range(45):
+        t = (lo + hi) / 2
+        u = 1 - t
+        xt = u * u * u * x0 + 3 * u * u * t * x1 + 3 * u * t * t * x2 + t * t * t * x3
+        below = xt < x
+        lo = np.where(below, t, lo)
+        hi = np.where(below, hi, t)
+    return (lo + hi) / 2
+
+
+def fit_handles(xs, ys, left, right, interpolation, new, sx, sy, aligned=True):
+    """Handles of the new keys of one F-curve (`new`: a mask over its keys `xs`, `ys`, with
+    handles `left`, `right` `(n, 2)` and `interpolation`), fitted to the samples `(sx, sy)`.
+
+    Each new key gets aligned handles a third of the way to its neighbouring keys in time, with
+    one slope `m` (the handles at `y -/+ m * dx`); the slopes of all new keys are the least-squares
+    solution over every sample strictly between two keys, with Blender's evaluation of the
+    segments: a Bezier segment (the left key's interpolation) with each handle longer in time
+    than the segment shortened to it, as Blender does; a linear or constant one as it is (no
+    slope enters it). The other keys keep their handles. Returns `(left, right, residual)`: the new
+    handles and the largest difference between the fitted curve and the samples."""
+    left, right = left.copy(), right.copy()
+    n = len(xs)
+    idx = np.nonzero(new)[0]
+    # The unknown slopes: one per new key (aligned handles), or one per handle (free).
+    col_l = {int(k): (c if aligned else 2 * c) for c, k in enumerate(idx)}
+    col_r = {int(k): (c if aligned else 2 * c + 1) for c, k in enumerate(idx)}
+    unknowns = len(idx) if aligned else 2 * len(idx)
+    dl = np.zeros(n)
+    dr = np.zeros(n)
+    for k in idx:
+        dl[k] = (xs[k] - xs[k - 1]) / 3 if k > 0 else 1.0
+        dr[k] = (xs[k + 1] - xs[k]) / 3 if k + 1 < n else 1.0
+    rows, rhs, parts = [], [], []
+    for a in range(n - 1):
+        b = a + 1
+        inside = (sx > xs[a] + 1e-6) & (sx < xs[b] - 1e-6)
+        if not inside.any():
+            continue
+        x, y = sx[inside], sy[inside]
+        coef = np.zeros((len(x), unknowns))
+        if interpolation[a] == "BEZIER":
+            # The handles' time offsets and value offsets (per unit slope for a new key).
+            hx_a = dr[a] if new[a] else right[a, 0] - xs[a]
+            hx_b = dl[b] if new[b] else xs[b] - left[b, 0]
+            # Blender shortens a handle longer in time than the segment to the segment's length.
+            span = xs[b] - xs[a]
+            fa = min(1.0, span / hx_a) if hx_a > 0 else 1.0
+            fb = min(1.0, span / hx_b) if hx_b > 0 else 1.0
+            t = bezier_t(xs[a], xs[a] + fa * hx_a, xs[b] - fb * hx_b, xs[b], x)
+            u = 1 - t
+            b0, b1, b2, b3 = u**3, 3 * u * u * t, 3 * u * t * t, t**3
+            known = (b0 + b1) * ys[a] + (b2 + b3) * ys[b]
+            if new[a]:
+                coef[:, col_r[a]] += b1 * fa * dr[a]
+            else:
+                known = known + b1 * fa * (right[a, 1] - ys[a])
+            if new[b]:
+                coef[:, col_l[b]] -= b2 * fb * dl[b]
+            else:
+                known = known + b2 * fb * (left[b, 1] - ys[b])
+        elif interpolation[a] == "LINEAR":
+            w = (x - xs[a]) / (xs[b] - xs[a])
+            known = (1 - w) * ys[a] + w * ys[b]
+        elif interpolation[a] == "CONSTANT":
+            known = np.full(len(x), ys[a])
+        else:
+            continue
+        rows.append(coef)
+        rhs.append(y - known)
+        parts.append(known)
+    if not rows or not len(idx):
+        return left, right, 0.0
+    A, r = np.concatenate(rows), np.concatenate(rhs)
+    m = np.linalg.lstsq(A, r, rcond=None)[0] if A.any() else np.zeros(unknowns)
+    for k in idx:
+        left[k] = (xs[k] - dl[k], ys[k] - m[col_l[int(k)]] * dl[k])
+        right[k] = (xs[k] + dr[k], ys[k] + m[col_r[int(k)]] * dr[k])
+    residual = float(np.max(np.abs(A @ m - r)))
+    return left, right, residual

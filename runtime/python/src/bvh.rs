@@ -6,7 +6,7 @@
 use crate::arrays::{array, check_shape};
 use crate::error::{BvhError, shape};
 use glam::{DQuat, DVec3};
-use numpy::{PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use numpy::{PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;
@@ -123,4 +123,64 @@ pub fn write_bvh(
         local_positions: pos.chunks_exact(3).map(|p| DVec3::new(p[0], p[1], p[2])).collect(),
     };
     source::write_file(&clip, &path).map_err(|e| BvhError::new_err(format!("{}: cannot write: {e}", path.display())))
+}
+
+/// A clip's local `rotations` `(F, J, 4)` and `positions` `(F, J, 3)` (float64, one frame every
+/// `frame_time` seconds) at `fps` frames per second over the same span: `zoo_motion`'s
+/// `Clip::resampled`, the resampling of `zoo data resample` (rotations by slerp on the shortest
+/// path, positions linearly, between the two source frames around each new frame). Returns
+/// `(rotations, positions)` with `resampled_frames(fps)` frames.
+#[pyfunction]
+pub fn resample<'py>(
+    py: Python<'py>,
+    rotations: PyReadonlyArrayDyn<'_, f64>,
+    positions: PyReadonlyArrayDyn<'_, f64>,
+    frame_time: f64,
+    fps: f64,
+) -> PyResult<(Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<f64>>)> {
+    let dims = check_shape("rotations", rotations.shape(), &[("F", None), ("J", None), ("", Some(4))])?;
+    let (f, j) = (dims[0], dims[1]);
+    check_shape("positions", positions.shape(), &[("F", Some(f)), ("J", Some(j)), ("", Some(3))])?;
+    if f == 0 || j == 0 {
+        return Err(shape("resample: the clip has no frame or no joint"));
+    }
+    if !(frame_time.is_finite() && frame_time > 0.0) {
+        return Err(shape(format!("resample: frame_time is {frame_time}; give the seconds per frame (> 0)")));
+    }
+    if !(fps.is_finite() && fps > 0.0) {
+        return Err(shape(format!("resample: the frame rate must be positive, found {fps}")));
+    }
+    let rot: Vec<f64> = rotations.to_owned_array().iter().copied().collect();
+    let pos: Vec<f64> = positions.to_owned_array().iter().copied().collect();
+    if let Some(i) = rot.iter().chain(&pos).position(|v| !v.is_finite()) {
+        return Err(crate::error::non_finite(format!(
+            "resample: value {i} of the rotations or positions is not finite"
+        )));
+    }
+    // The resampling reads only the frames and the frame time; the skeleton is a placeholder.
+    let skeleton = Skeleton {
+        names: (0..j).map(|i| format!("j{i}")).collect(),
+        parents: (0..j).map(|i| i.checked_sub(1)).collect(),
+        offsets: vec![DVec3::ZERO; j],
+        end_sites: vec![None; j],
+        channels: vec![JointChannels { position: false, order: EulerOrder::Zxy }; j],
+    };
+    let clip = Clip {
+        skeleton,
+        frame_time,
+        local_rotations: rot.chunks_exact(4).map(|q| DQuat::from_xyzw(q[0], q[1], q[2], q[3])).collect(),
+        local_positions: pos.chunks_exact(3).map(|p| DVec3::new(p[0], p[1], p[2])).collect(),
+    };
+    // A bound on what one call may allocate (100 million joint-frames, 5.6 GB).
+    let m = clip.resampled_frames(fps);
+    if m.saturating_mul(j) > 100_000_000 {
+        return Err(shape(format!(
+            "resample: {f} frames at {:.3} fps are {m} frames at {fps} fps; resample a shorter clip",
+            1.0 / frame_time
+        )));
+    }
+    let out = clip.resampled(fps);
+    let r = array(py, out.local_rotations.iter().flat_map(|q| q.to_array()).collect(), &[m, j, 4])?;
+    let p = array(py, out.local_positions.iter().flat_map(|v| v.to_array()).collect(), &[m, j, 3])?;
+    Ok((r, p))
 }

@@ -158,6 +158,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(convert_poses, m)?)?;
     m.add_function(wrap_pyfunction!(bvh::read_bvh, m)?)?;
     m.add_function(wrap_pyfunction!(bvh::write_bvh, m)?)?;
+    m.add_function(wrap_pyfunction!(bvh::resample, m)?)?;
     m.add_class::<transition::Transition>()?;
     m.add_class::<keyframes::Keyframes>()?;
     m.add_class::<stitch::Stitch>()?;

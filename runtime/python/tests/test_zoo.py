@@ -216,6 +216,25 @@ def test_clip_resample_keeps_the_duration_and_the_frames_it_lands_on(clip):
     assert max_diff(mid, (clip.positions[0] + clip.positions[1]) / 2) < 1e-9
 
 
+def test_clip_resample_is_zoo_data_resample(clip, ref):
+    # `tests/python.rs` wrote the clip resampled to 24 fps by `zoo_motion::Clip::resampled`, the
+    # code of `zoo data resample`: the package calls the same code, bit for bit.
+    want = ref["resample"]
+    got = clip.resample(want["fps"])
+    assert got.frames == want["frames"] == 192
+    assert np.array_equal(got.rotations.ravel(), np.array(want["rotations"]))
+    assert np.array_equal(got.positions.ravel(), np.array(want["positions"]))
+    # BVH-style poses (a model's input): the same resampling of the hips and the rotations.
+    hips, rot = zoo.resample_world(clip.hips, clip.rotations, clip.fps, want["fps"])
+    assert hips.dtype == rot.dtype == np.float32 and rot.shape == (192, K, 4)
+    assert np.array_equal(hips, got.positions[:, 0].astype(np.float32))
+    assert np.array_equal(rot, got.rotations.astype(np.float32))
+    back_h, back_r = zoo.resample_world(hips, rot, want["fps"], clip.fps)
+    assert back_h.shape == (239, 3)  # 191 frames at 24 fps span 7.958 s: 239 frames at 30 fps
+    with pytest.raises(zoo.ShapeError, match="resample_world takes hips"):
+        zoo.resample_world(clip.hips, clip.rotations[:-1], 30, 24)
+
+
 def test_a_clip_at_another_rate_is_refused_naming_the_fix(data, clip):
     m = zoo.load(data / "transition.onnx")
     m.check_fps(30.000030000029998)

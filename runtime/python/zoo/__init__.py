@@ -61,6 +61,7 @@ __all__ = [
     "Clip",
     "convert_positions",
     "convert_world",
+    "resample_world",
     "ZOO_CM",
     "BLENDER",
     "Skeleton",
@@ -243,6 +244,23 @@ def convert_world(hips, rotations, from_frame: CoordinateFrame, to_frame: Coordi
         {"hips": _f32(hips, "hips"), "rotations": _f32(rotations, "rotations")}, from_frame._tuple(), to_frame._tuple()
     )
     return d["hips"], d["rotations"]
+
+
+def resample_world(hips, rotations, fps: float, new_fps: float) -> Tuple[np.ndarray, np.ndarray]:
+    """BVH-style poses (``hips`` ``(T, 3)``, ``rotations`` ``(T, K, 4)``), one every ``1 / fps``
+    seconds, at ``new_fps`` over the same span, resampled as ``zoo data resample`` and
+    ``Clip.resample`` do (the same code): ``(hips (T', 3), rotations (T', K, 4))``, float32,
+    ``T' = floor((T - 1) * new_fps / fps) + 1``; the first frame stays where it is."""
+    h = _f64(hips, "hips")
+    r = _f64(rotations, "rotations")
+    if h.ndim != 2 or h.shape[1] != 3 or r.ndim != 3 or r.shape[2] != 4 or r.shape[0] != h.shape[0]:
+        raise ShapeError(f"resample_world takes hips (T, 3) and rotations (T, K, 4), found {h.shape} and {r.shape}")
+    if not (float(fps) > 0 and float(new_fps) > 0):
+        raise ShapeError(f"resample_world: the frame rates must be positive, found {fps} and {new_fps}")
+    pos = np.zeros(r.shape[:2] + (3,))
+    pos[:, 0] = h
+    rot, pos = _native.resample(r, pos, 1.0 / float(fps), float(new_fps))
+    return pos[:, 0].astype(np.float32), rot.astype(np.float32)
 
 
 class Model:
@@ -767,33 +785,19 @@ class Clip:
         return 1.0 / self.frame_time
 
     def resample(self, fps: float) -> "Clip":
-        """The clip at another frame rate: the same duration (the last frame at or before the
-        clip's end), positions interpolated linearly and rotations spherically between the
-        frames around each new frame. A rate within 0.01 % of the clip's returns it unchanged
-        (a BVH frame time is stored rounded: 30.00003 fps is 30)."""
+        """The clip at another frame rate, resampled as ``zoo data resample`` does (the same
+        code): the same span from the first frame to the last (the last new frame at or before
+        the clip's end), rotations by slerp on the shortest path and positions linearly between
+        the two frames around each new frame. A rate within 0.01 % of the clip's returns it
+        unchanged (a BVH frame time is stored rounded: 30.00003 fps is 30)."""
         fps = float(fps)
         if not fps > 0:
             raise ShapeError(f"resample: the frame rate must be positive, found {fps}")
         if abs(fps - self.fps) <= 1e-4 * fps:
             return self
-        duration = (self.frames - 1) * self.frame_time
-        n = int(np.floor(duration * fps + 1e-6)) + 1
-        t = np.arange(n) / fps / self.frame_time
-        i0 = np.minimum(np.floor(t).astype(int), self.frames - 1)
-        i1 = np.minimum(i0 + 1, self.frames - 1)
-        w = (t - i0)[:, None, None]
-        pos = (1 - w) * self.positions[i0] + w * self.positions[i1]
-        a, b = self.rotations[i0], self.rotations[i1]
-        dot = np.sum(a * b, axis=-1, keepdims=True)
-        b = np.where(dot < 0, -b, b)
-        dot = np.clip(np.abs(dot), -1.0, 1.0)
-        theta = np.arccos(dot)
-        sin = np.sin(theta)
-        small = sin < 1e-6
-        wa = np.where(small, 1 - w, np.sin((1 - w) * theta) / np.where(small, 1, sin))
-        wb = np.where(small, w, np.sin(w * theta) / np.where(small, 1, sin))
-        rot = wa * a + wb * b
-        rot /= np.linalg.norm(rot, axis=-1, keepdims=True)
+        rot, pos = _native.resample(
+            _f64(self.rotations, "rotations"), _f64(self.positions, "positions"), float(self.frame_time), fps
+        )
         return Clip(
             names=list(self.names),
             parents=self.parents,

@@ -46,6 +46,9 @@ def write_bvh(
     end_sites: Optional[npt.NDArray[np.float64]] = None,
     position_channels: Optional[npt.NDArray[np.bool_]] = None,
 ) -> None: ...
+def resample(
+    rotations: npt.NDArray[np.float64], positions: npt.NDArray[np.float64], frame_time: float, fps: float
+) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
 
 class Transition:
     metadata: Dict[str, object]
