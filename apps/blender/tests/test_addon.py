@@ -206,10 +206,11 @@ def refused(op, needle, **kwargs):
 # --- the tests ---------------------------------------------------------------------------------
 
 
-def test_inbetween(zoo, arm_name, model_file, clip_file, drop_dummy_root, start, end, key, first=1):
+def test_inbetween(zoo, arm_name, model_file, clip_file, drop_dummy_root, start, end, key, first=1, foot_lock=False):
     """In-between `start`..`end` (Blender frames; the clip's frame = Blender frame - `first`:
-    the BVH importer starts at frame 1, the glTF importer at 0) with a transition model: against
-    the package on the clip's frames, ends and outside keys bit-identical, one undo restores."""
+    the BVH importer starts at frame 1, the glTF importer at 0) with a transition model (its
+    fallback on, the foot lock as given, as `zoo transition`): against the package on the clip's
+    frames, ends and outside keys bit-identical, one undo restores."""
     sc = bpy.context.scene
     sc.zoo.model_path = str(model_file)
     arm = activate(arm_name)
@@ -220,13 +221,13 @@ def test_inbetween(zoo, arm_name, model_file, clip_file, drop_dummy_root, start,
     p = clip.poses(names)
     b0, b1 = start - first, end - first
     P = model.past_frames
-    expected = model.transition(p[b0 - P + 1 : b0 + 1], p[b1], p[b1 + 1], frames=end - start - 1)
+    expected = model.transition(p[b0 - P + 1 : b0 + 1], p[b1], p[b1 + 1], frames=end - start - 1, foot_lock=foot_lock)
     outside = keys_outside(action, start, end)
     all_before = snapshot()
     bpy.ops.ed.undo_push(message="before in-between")
     t0 = time.perf_counter()
     # As from the user interface: the operator pushes its undo step (the second argument).
-    bpy.ops.zoo.inbetween("EXEC_DEFAULT", True, start=start, end=end)
+    bpy.ops.zoo.inbetween("EXEC_DEFAULT", True, start=start, end=end, foot_lock=foot_lock)
     call_ms = 1000 * (time.perf_counter() - t0)
     action = bpy.data.objects[arm_name].animation_data.action
     check(keys_outside(action, start, end) == outside, "a key at an end or outside the range changed")
@@ -1123,6 +1124,9 @@ def main():
     other = import_bvh(DATA / "clip2.bvh")
     clip_action = bpy.data.objects[arm].animation_data.action.name
     test_inbetween(zoo, arm, DATA / "transition.onnx", DATA / "clip.bvh", False, 51, 82, "inbetween")
+    # With the model's calibrated fallback (on by default) and the foot lock, as `zoo transition
+    # --foot-lock` and the package.
+    test_inbetween(zoo, arm, DATA / "transition_fallback.onnx", DATA / "clip.bvh", False, 51, 82, "inbetween_locked", foot_lock=True)
     test_refusals(zoo, arm)
     test_keyframes(zoo, arm, DATA / "clip.bvh", 101, 116, 131)
     test_stitch(zoo, arm, other)

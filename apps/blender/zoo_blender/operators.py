@@ -191,6 +191,19 @@ class Inbetween:
         name="End", default=-1, options={"SKIP_SAVE"}, description="Last frame of the range (-1: the selected keys or the preview range)"
     )
     allow_longer: bpy.props.BoolProperty(name="Allow longer than trained", default=False)
+    # A transition model's post-processes, as `zoo transition` (and the Python package) default them.
+    fallback: bpy.props.BoolProperty(
+        name="Fallback",
+        default=True,
+        options={"SKIP_SAVE"},
+        description="Move a transition that misses its target by more than the model's calibrated thresholds towards the interpolation (zoo transition's default)",
+    )
+    foot_lock: bpy.props.BoolProperty(
+        name="Foot lock",
+        default=False,
+        options={"SKIP_SAVE"},
+        description="Lock the planted feet of a transition (zoo transition --foot-lock)",
+    )
     preview = False
 
     def range(self, context, action, rig):
@@ -328,7 +341,15 @@ class Inbetween:
             else:
                 h, q = r.sample(action, [end])
                 target = after = (h[0], q[0])
-        out = model.transition(past, target, after, frames=length, allow_beyond_trained=self.allow_longer)
+        out = model.transition(
+            past,
+            target,
+            after,
+            frames=length,
+            allow_beyond_trained=self.allow_longer,
+            fallback=self.fallback,
+            foot_lock=self.foot_lock,
+        )
         new_hips, new_rot = out.hips[:length], out.rotations[:length]
         if rate is not None:
             # The range's first frame, the model's frames and its target span the range: they are
