@@ -564,14 +564,7 @@ fn a_transition_fed_per_frame_through_the_c_abi_equals_one_started_at_once() {
         assert_eq!(zoo_transition_runner_new(model, n, &mut runner), ZooStatus::Ok);
         assert_eq!(zoo_transition_characters_new(model, n, &mut a), ZooStatus::Ok);
         assert_eq!(zoo_transition_characters_new(model, n, &mut b), ZooStatus::Ok);
-        let buffers = |poses: &[EnginePose]| {
-            let mut roots = vec![ZooRootMotion::default(); poses.len()];
-            let mut rotations = vec![0.0f32; poses.len() * 4 * k];
-            for (i, p) in poses.iter().enumerate() {
-                write_engine_pose(p, &mut roots[i], &mut rotations[i * 4 * k..(i + 1) * 4 * k]);
-            }
-            (roots, rotations)
-        };
+        let buffers = |poses: &[EnginePose]| engine_buffers(poses, k);
         let context: Vec<EnginePose> = (0..n).flat_map(|c| (0..past).map(move |f| pose(c, f))).collect();
         let (target, next): (Vec<EnginePose>, Vec<EnginePose>) =
             (0..n).map(|c| (pose(c, past + length), pose(c, past + length + 1))).unzip();
@@ -666,6 +659,16 @@ fn a_transition_fed_per_frame_through_the_c_abi_equals_one_started_at_once() {
     }
 }
 
+/// Engine poses as C roots and `4K` rotation values per root.
+fn engine_buffers(poses: &[EnginePose], k: usize) -> (Vec<ZooRootMotion>, Vec<f32>) {
+    let mut roots = vec![ZooRootMotion::default(); poses.len()];
+    let mut rotations = vec![0.0f32; poses.len() * 4 * k];
+    for (i, p) in poses.iter().enumerate() {
+        write_engine_pose(p, &mut roots[i], &mut rotations[i * 4 * k..(i + 1) * 4 * k]);
+    }
+    (roots, rotations)
+}
+
 /// An engine pose as a C root and `4K` rotation values.
 fn write_engine_pose(p: &EnginePose, root: &mut ZooRootMotion, rotations: &mut [f32]) {
     *root = ZooRootMotion {
@@ -749,14 +752,7 @@ fn a_whole_posed_transition_with_fallback_and_foot_lock_is_the_same_in_the_runti
         let (mut runner, mut chars) = (ptr::null_mut(), ptr::null_mut());
         assert_eq!(zoo_transition_runner_new(model, 1, &mut runner), ZooStatus::Ok);
         assert_eq!(zoo_transition_characters_new(model, 1, &mut chars), ZooStatus::Ok);
-        let buffers = |poses: &[EnginePose]| {
-            let mut roots = vec![ZooRootMotion::default(); poses.len()];
-            let mut rotations = vec![0.0f32; poses.len() * 4 * k];
-            for (i, p) in poses.iter().enumerate() {
-                write_engine_pose(p, &mut roots[i], &mut rotations[i * 4 * k..(i + 1) * 4 * k]);
-            }
-            (roots, rotations)
-        };
+        let buffers = |poses: &[EnginePose]| engine_buffers(poses, k);
         let ((pr, pq), (tr, tq), (xr, xq)) = (buffers(&past), buffers(&target), buffers(&next));
         let mut roots = vec![ZooRootMotion::default(); length + 1];
         let mut rotations = vec![0.0f32; (length + 1) * 4 * k];

@@ -387,6 +387,48 @@ pub unsafe extern "C" fn zoo_transition_feed_posed(
     })
 }
 
+/// The engine poses of a posed start (`zoo_transition_start_posed`,
+/// `zoo_transition_generate_posed`): `buffers` holds the past, target and next roots and
+/// rotations with their lengths. Checks them all (the same number of context frames per
+/// character, the sizes, finite roots, non-zero quaternions), then reads them into the
+/// characters' input poses, taken from them (give them back): the past (`N * frames` poses),
+/// then the `N` targets, then the `N` next poses.
+///
+/// Safety: each buffer is NULL or holds its given length.
+unsafe fn read_posed_start(
+    chars: &mut ZooTransitionCharacters,
+    buffers: [(*const ZooRootMotion, usize, *const f32, usize); 3],
+) -> Result<Vec<EnginePose>, Failure> {
+    let (n, k) = (chars.states.len(), chars.joints);
+    let [(past_roots, past_roots_len, past_rotations, past_rotations_len), target, next] = buffers;
+    let past_roots = unsafe { slice(past_roots, past_roots_len, "past_roots") }?;
+    let past_rotations = unsafe { slice(past_rotations, past_rotations_len, "past_rotations") }?;
+    if past_roots.is_empty() || !past_roots.len().is_multiple_of(n) {
+        return Err((
+            ZooStatus::InvalidArgument,
+            format!(
+                "`past_roots` holds {} roots; it needs the same number of context frames (at least one; {INFO}'s `past_frames` as trained) for each of the {n} characters",
+                past_roots.len()
+            ),
+        ));
+    }
+    check_size(
+        "past_rotations",
+        past_rotations.len(),
+        past_roots.len() * 4 * k,
+        "floats",
+        format_args!("4 * {JOINTS} per root"),
+    )?;
+    let names = ["target_roots", "target_rotations"];
+    let target = unsafe { posed_buffers(target.0, target.1, target.2, target.3, names, n, k) }?;
+    let names = ["next_roots", "next_rotations"];
+    let next = unsafe { posed_buffers(next.0, next.1, next.2, next.3, names, n, k) }?;
+    check_poses(past_roots, past_rotations, ["past_roots", "past_rotations"])?;
+    let mut inputs = std::mem::take(&mut chars.inputs);
+    read_into(&mut inputs, &[(past_roots, past_rotations), target, next], k);
+    Ok(inputs)
+}
+
 /// One pose per character from a roots buffer and a rotations buffer (`names`), their lengths
 /// and values checked.
 ///
@@ -486,36 +528,14 @@ pub unsafe extern "C" fn zoo_transition_start_posed(
 ) -> ZooStatus {
     guard("zoo_transition_start_posed", || {
         let (runner, chars) = unsafe { pair(runner, characters) }?;
-        let (n, k) = (chars.states.len(), chars.joints);
-        let past_roots = unsafe { slice(past_roots, past_roots_len, "past_roots") }?;
-        let past_rotations = unsafe { slice(past_rotations, past_rotations_len, "past_rotations") }?;
-        if past_roots.is_empty() || !past_roots.len().is_multiple_of(n) {
-            return Err((
-                ZooStatus::InvalidArgument,
-                format!(
-                    "`past_roots` holds {} roots; it needs the same number of context frames (at least one; {INFO}'s `past_frames` as trained) for each of the {n} characters",
-                    past_roots.len()
-                ),
-            ));
-        }
-        check_size(
-            "past_rotations",
-            past_rotations.len(),
-            past_roots.len() * 4 * k,
-            "floats",
-            format_args!("4 * {JOINTS} per root"),
-        )?;
-        let names = ["target_roots", "target_rotations"];
-        let target = unsafe {
-            posed_buffers(target_roots, target_roots_len, target_rotations, target_rotations_len, names, n, k)
-        }?;
-        let names = ["next_roots", "next_rotations"];
-        let next =
-            unsafe { posed_buffers(next_roots, next_roots_len, next_rotations, next_rotations_len, names, n, k) }?;
-        check_poses(past_roots, past_rotations, ["past_roots", "past_rotations"])?;
-        let mut inputs = std::mem::take(&mut chars.inputs);
-        read_into(&mut inputs, &[(past_roots, past_rotations), target, next], k);
-        let at = past_roots.len();
+        let n = chars.states.len();
+        let buffers = [
+            (past_roots, past_roots_len, past_rotations, past_rotations_len),
+            (target_roots, target_roots_len, target_rotations, target_rotations_len),
+            (next_roots, next_roots_len, next_rotations, next_rotations_len),
+        ];
+        let inputs = unsafe { read_posed_start(chars, buffers) }?;
+        let at = inputs.len() - 2 * n;
         let (past, rest) = inputs.split_at(at);
         let (target, next) = rest.split_at(n);
         let result = runner.start_posed_batch_for(&mut chars.states, past, target, next, length);
@@ -617,56 +637,45 @@ pub unsafe extern "C" fn zoo_transition_generate_posed(
                 ),
             ));
         }
-        let past_roots = unsafe { slice(past_roots, past_roots_len, "past_roots") }?;
-        let past_rotations = unsafe { slice(past_rotations, past_rotations_len, "past_rotations") }?;
-        if past_roots.is_empty() || !past_roots.len().is_multiple_of(n) {
-            return Err((
-                ZooStatus::InvalidArgument,
-                format!(
-                    "`past_roots` holds {} roots; it needs the same number of context frames (at least one; {INFO}'s `past_frames` as trained) for each of the {n} characters",
-                    past_roots.len()
-                ),
-            ));
-        }
-        check_size(
-            "past_rotations",
-            past_rotations.len(),
-            past_roots.len() * 4 * k,
-            "floats",
-            format_args!("4 * {JOINTS} per root"),
-        )?;
-        let names = ["target_roots", "target_rotations"];
-        let target = unsafe {
-            posed_buffers(target_roots, target_roots_len, target_rotations, target_rotations_len, names, n, k)
-        }?;
-        let names = ["next_roots", "next_rotations"];
-        let next =
-            unsafe { posed_buffers(next_roots, next_roots_len, next_rotations, next_rotations_len, names, n, k) }?;
-        let out_roots = unsafe { slice_mut(out_roots, out_roots_len, "out_roots") }?;
-        let out_rotations = unsafe { slice_mut(out_rotations, out_rotations_len, "out_rotations") }?;
-        let frames = n * (length + 1);
-        if frames > crate::ZOO_MAX_FRAMES {
-            return Err((
-                ZooStatus::InvalidArgument,
-                format!(
-                    "{n} characters of {} frames are {frames} poses, more than ZOO_MAX_FRAMES in one call: generate \
-                     fewer characters per call",
-                    length + 1
-                ),
-            ));
-        }
-        check_size("out_roots", out_roots.len(), frames, "roots", "`length + 1` per character")?;
-        check_size(
-            "out_rotations",
-            out_rotations.len(),
-            frames * 4 * k,
-            "floats",
-            format_args!("4 * {JOINTS} per root of `out_roots`"),
-        )?;
-        check_poses(past_roots, past_rotations, ["past_roots", "past_rotations"])?;
-        let mut inputs = std::mem::take(&mut chars.inputs);
-        read_into(&mut inputs, &[(past_roots, past_rotations), target, next], k);
-        let at = past_roots.len();
+        let buffers = [
+            (past_roots, past_roots_len, past_rotations, past_rotations_len),
+            (target_roots, target_roots_len, target_rotations, target_rotations_len),
+            (next_roots, next_roots_len, next_rotations, next_rotations_len),
+        ];
+        let inputs = unsafe { read_posed_start(chars, buffers) }?;
+        // The outputs' sizes after the inputs' (the inputs given back when they are wrong).
+        let outputs = (|| {
+            let out_roots = unsafe { slice_mut(out_roots, out_roots_len, "out_roots") }?;
+            let out_rotations = unsafe { slice_mut(out_rotations, out_rotations_len, "out_rotations") }?;
+            let frames = n * (length + 1);
+            if frames > crate::ZOO_MAX_FRAMES {
+                return Err((
+                    ZooStatus::InvalidArgument,
+                    format!(
+                        "{n} characters of {} frames are {frames} poses, more than ZOO_MAX_FRAMES in one call: generate \
+                         fewer characters per call",
+                        length + 1
+                    ),
+                ));
+            }
+            check_size("out_roots", out_roots.len(), frames, "roots", "`length + 1` per character")?;
+            check_size(
+                "out_rotations",
+                out_rotations.len(),
+                frames * 4 * k,
+                "floats",
+                format_args!("4 * {JOINTS} per root of `out_roots`"),
+            )?;
+            Ok((out_roots, out_rotations, frames))
+        })();
+        let (out_roots, out_rotations, frames) = match outputs {
+            Ok(o) => o,
+            Err(e) => {
+                chars.inputs = inputs;
+                return Err(e);
+            }
+        };
+        let at = inputs.len() - 2 * n;
         let (past, rest) = inputs.split_at(at);
         let (target, next) = rest.split_at(n);
         runner.set_foot_lock(if foot_lock == 1 { runner.model().default_foot_lock() } else { None });
