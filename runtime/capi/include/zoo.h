@@ -237,10 +237,11 @@ typedef struct ZooStitchInfo {
   size_t stride;
   // Frames over which each window's first-frame difference is blended away.
   size_t blend_frames;
-  // Latency of a new stream in frames (`w` + the lookahead of its foot lock and seam guard +
-  // the frames they release at once - 1: 114 for `w` = 60): the refined pose of frame `t` is
-  // ready once frame `t + latency` is pushed. A stream without them
-  // (`zoo_stitch_stream_set_cleanup`, the guard off) has `w`: `zoo_stitch_stream_latency`.
+  // Latency of a new stream in frames (`w`, + `s - 2` for each window's work spread over the
+  // pushes after it, + the lookahead of its foot lock and seam guard + the frames they release
+  // at once - 1: 142 for `w` = 60, `s` = 30): the refined pose of frame `t` is ready once frame
+  // `t + latency` is pushed. A stream without them (`zoo_stitch_stream_set_cleanup`, the guard
+  // off) has `w + s - 2`: `zoo_stitch_stream_latency`.
   size_t latency;
 } ZooStitchInfo;
 
@@ -814,7 +815,7 @@ enum ZooStatus zoo_stitch_stream_push(struct ZooStitchStream *stream,
 // after): `place_ankles` puts the ankles where the refiner predicts them, `lock_feet` locks the
 // planted feet by the predicted contacts (both on by default, as `zoo stitch`); the seam guard
 // follows the model's (`zoo_stitch_set_seam_guard`). Both off with the guard off: the
-// refiner's poses as they are, at a latency of `window` frames. One thread at a time.
+// refiner's poses as they are, at a latency of `window + stride - 2` frames. One thread at a time.
 //
 // Safety: `stream` is NULL or live and used by this thread only.
 enum ZooStatus zoo_stitch_stream_set_cleanup(struct ZooStitchStream *stream,

@@ -540,7 +540,7 @@ namespace Zoo.Native
         /// after): <c>place_ankles</c> puts the ankles where the refiner predicts them, <c>lock_feet</c> locks the
         /// planted feet by the predicted contacts (both on by default, as <c>zoo stitch</c>); the seam guard
         /// follows the model's (<c>zoo_stitch_set_seam_guard</c>). Both off with the guard off: the
-        /// refiner's poses as they are, at a latency of <c>window</c> frames. One thread at a time.
+        /// refiner's poses as they are, at a latency of <c>window + stride - 2</c> frames. One thread at a time.
         /// </summary>
         /// <remarks>
         /// Safety: <c>stream</c> is NULL or live and used by this thread only.
