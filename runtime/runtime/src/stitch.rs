@@ -72,6 +72,9 @@ pub(crate) struct SpreadPlan {
     plan: Plan,
     order: Vec<usize>,
     done_after: Vec<f64>,
+    /// A window's measured time with a fifth more for the stream's other work: a push's budget
+    /// is this over the pushes a window is spread over.
+    window_time: std::time::Duration,
 }
 
 impl SpreadPlan {
@@ -106,7 +109,8 @@ impl SpreadPlan {
                 done / total
             })
             .collect();
-        Some(SpreadPlan { plan, order, done_after })
+        let window_time = std::time::Duration::from_secs_f64(1.2 * total);
+        Some(SpreadPlan { plan, order, done_after, window_time })
     }
 }
 
@@ -817,6 +821,15 @@ pub const STREAM_LOOKAHEAD: usize = 45;
 /// contact runs and seams that span what was popped and what was not.
 pub const STREAM_HISTORY: usize = 45;
 
+/// Frames a stream puts the ankles of per push (a window decodes `s` frames every `s` pushes).
+const IK_FRAMES: usize = 10;
+
+/// Evaluations of a seam's guard weight a stream runs per push (a seam takes 11).
+const WEIGH_EVALUATIONS: usize = 3;
+
+/// Frames on each side of a seam the stream's guard weighs it from (all it reads and weighs).
+const ZONE: usize = zoo_motion::stitch::guard::GUARD_FRAMES + zoo_motion::stitch::guard::GUARD_RAMP + 2;
+
 /// Frames the stream's foot lock and seam guard release at once (they run once per this many
 /// pushes; the latency grows by this less one).
 pub const STREAM_CHUNK: usize = 10;
@@ -894,6 +907,13 @@ pub struct StitchStreamOf<R> {
     /// from which seams are still to be weighed.
     guard_w: Vec<f64>,
     guard_next: usize,
+    /// The seam being weighed a few evaluations per push (its first frame in the sequence is the
+    /// zone clips' frame 0), the zone of output and reference it reads and the weights there.
+    weighing: Option<(zoo_motion::stitch::guard::SeamWeighing, usize)>,
+    zone_out: Clip,
+    zone_ref: Clip,
+    zone_w: Vec<f64>,
+    weigh_scratch: zoo_motion::stitch::guard::GuardScratch,
     /// Frames popped so far.
     read: usize,
     finished: bool,
@@ -929,13 +949,10 @@ pub struct StitchStreamOf<R> {
     out_rot: Vec<Quat>,
     out_hips: Vec<Vec3>,
     out_contacts: Vec<[bool; 4]>,
-    /// Scratch of the guard and the lock: the frames they run over, the reference, the seams.
+    /// Scratch of the guard and the lock: the frames they run over.
     work: Clip,
-    reference: Clip,
-    window_seams: Vec<usize>,
     lock_scratch: zoo_motion::stitch::lock::LockScratch,
     guard_scratch: zoo_motion::stitch::guard::GuardScratch,
-    guard_report: Vec<zoo_motion::stitch::guard::GuardedSeam>,
 }
 
 impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
@@ -951,7 +968,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             local_rotations: Vec::with_capacity(frames * j),
             local_positions: Vec::with_capacity(frames * j),
         };
-        let (work, reference) = (clip(), clip());
+        let work = clip();
         let guard = refiner.seam_guard;
         let mut lock_scratch = zoo_motion::stitch::lock::LockScratch::default();
         lock_scratch.reserve(frames, j);
@@ -973,6 +990,15 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             ik_done: 0,
             guard_w: Vec::with_capacity(frames),
             guard_next: 0,
+            weighing: None,
+            zone_out: clip(),
+            zone_ref: clip(),
+            zone_w: Vec::with_capacity(4 * ZONE),
+            weigh_scratch: {
+                let mut g = zoo_motion::stitch::guard::GuardScratch::default();
+                g.reserve(4 * ZONE, j);
+                g
+            },
             read: 0,
             finished: false,
             prev: PoseFrame::default(),
@@ -1002,11 +1028,8 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             out_hips: Vec::with_capacity(frames),
             out_contacts: Vec::with_capacity(frames),
             work,
-            reference,
-            window_seams: Vec::with_capacity(64),
             lock_scratch,
             guard_scratch,
-            guard_report: Vec::with_capacity(64),
             refiner,
         }
     }
@@ -1106,14 +1129,24 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         for i in 0..n {
             self.take_final(i);
         }
-        self.run_due_windows(false)?;
-        // Frame t is refined for good once the regular windows over it ran and frame t + w is
-        // pushed (the last window, at finish, then starts after it).
-        let upto = self.next_window.min(self.pushed.saturating_sub(self.refiner.window)).min(self.encoded);
-        self.decode_upto(upto);
+        // The cleanup first, then the window's share with what is left of this push's time (at
+        // least its share of the schedule), then what that window made final.
+        let start = std::time::Instant::now();
+        self.decode_final();
+        self.place_new_ankles(false);
+        self.weigh_seams(false);
         self.release(false);
         self.compact();
+        self.run_due_windows(false, Some(start))?;
+        self.decode_final();
         Ok(())
+    }
+
+    /// Decodes the frames refined for good: once the regular windows over them ran and the frame
+    /// `w` after them is pushed (the last window, at finish, then starts after it).
+    fn decode_final(&mut self) {
+        let upto = self.next_window.min(self.pushed.saturating_sub(self.refiner.window)).min(self.encoded);
+        self.decode_upto(upto);
     }
 
     /// Encodes final frame `i` of the seam blend's last release.
@@ -1138,8 +1171,11 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
     }
 
     /// Runs the regular windows that the encoded frames cover: whole, or with the chunked
-    /// graph a share of each per push (every remaining node with `all`, at the finish).
-    fn run_due_windows(&mut self, all: bool) -> Result<(), MotionError> {
+    /// graph a share of each per push (every remaining node with `all`, at the finish). A push
+    /// that began at `push_start` runs its window's share of the schedule, and more nodes while
+    /// the push is within the window's measured time per push (a window ahead of schedule lets
+    /// a push busy with the cleanup run fewer); the last of its pushes finishes it.
+    fn run_due_windows(&mut self, all: bool, push_start: Option<std::time::Instant>) -> Result<(), MotionError> {
         let (w, s) = (self.refiner.window, self.refiner.stride);
         let Some(spread) = self.spread.clone() else {
             while self.next_window + w <= self.encoded {
@@ -1167,13 +1203,17 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
                 self.job = Some(WindowJob { state, at: 0, worked: 0 });
             }
             let job = self.job.as_mut().expect("a window runs");
-            // This push's share: the window done by the end of push `worked` of `pushes`; a node
-            // runs when most of it falls within the share.
+            // The least this push runs: the window on its schedule (done by the end of push
+            // `worked` of `pushes`), all of it on its last push; a node counts as run when most
+            // of it falls within that. More while the push's time allows: a window ahead of its
+            // schedule leaves busy pushes (the cleanup's) the time they take.
             job.worked += 1;
-            let target = if all { f64::INFINITY } else { job.worked as f64 / pushes as f64 };
+            let floor = if all || job.worked >= pushes { f64::INFINITY } else { job.worked as f64 / pushes as f64 };
+            let deadline = push_start.map(|t| t + spread.window_time.mul_f64(1.0 / pushes as f64));
             while job.at < spread.order.len() {
                 let before = if job.at == 0 { 0.0 } else { spread.done_after[job.at - 1] };
-                if 0.5 * (before + spread.done_after[job.at]) > target {
+                let behind = 0.5 * (before + spread.done_after[job.at]) <= floor;
+                if !behind && !deadline.is_some_and(|d| std::time::Instant::now() < d) {
                     break;
                 }
                 job.state.compute_one(spread.order[job.at]).map_err(run)?;
@@ -1247,6 +1287,96 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         }
     }
 
+    /// Puts the ankles of decoded frames where the refiner predicts them ([`FootCleanup`]'s
+    /// `place_ankles`), [`IK_FRAMES`] frames per push (all with `all`): each frame's IK reads that
+    /// frame alone, and its rotations are kept in `dec_rot`.
+    fn place_new_ankles(&mut self, all: bool) {
+        if !self.cleanup.place_ankles || self.ik_done >= self.refined {
+            self.ik_done = self.ik_done.max(self.dec_base);
+            return;
+        }
+        let r = self.refiner.clone();
+        let j = r.joints;
+        let from = self.ik_done.max(self.dec_base);
+        let to = if all { self.refined } else { self.refined.min(from + IK_FRAMES) };
+        let (i0, i1) = (from - self.dec_base, to - self.dec_base);
+        // `work` is refilled by every release: a scratch clip here.
+        fill_clip(&mut self.work, &self.dec_rot[i0 * j..i1 * j], &self.dec_hips[i0..i1], &r.skeleton);
+        let ankles = if self.ankle_slots.is_some() { &self.dec_ankles[i0..i1] } else { &[][..] };
+        zoo_motion::stitch::lock::place_ankles_into(&mut self.work, ankles, &r.layout, &mut self.lock_scratch);
+        self.dec_rot[i0 * j..i1 * j].copy_from_slice(&self.work.local_rotations);
+        self.ik_done = to;
+    }
+
+    /// The first frame the guard of a seam not weighed yet may blend (none without the guard).
+    fn unweighed_from(&self) -> usize {
+        use zoo_motion::stitch::guard::{GUARD_FRAMES, GUARD_RAMP};
+        if !self.guard {
+            return usize::MAX;
+        }
+        let next = match &self.weighing {
+            Some((w, z0)) => Some(z0 + w.seam()),
+            None => self.seams.iter().copied().find(|&s| s >= self.guard_next),
+        };
+        next.map_or(usize::MAX, |s| s.saturating_sub(GUARD_FRAMES + GUARD_RAMP + 1))
+    }
+
+    /// Weighs the marked seams for the guard, [`WEIGH_EVALUATIONS`] evaluations per push (all of
+    /// them with `all`, at the finish), one seam at a time in order, each from a clip of the
+    /// frames it reads and weighs once those have the ankle IK: the whole sequence's weights.
+    fn weigh_seams(&mut self, all: bool) {
+        use zoo_motion::stitch::guard::SeamWeighing;
+        if !self.guard {
+            return;
+        }
+        let r = self.refiner.clone();
+        let j = r.joints;
+        let mut budget = if all { usize::MAX } else { WEIGH_EVALUATIONS };
+        while budget > 0 {
+            if self.weighing.is_none() {
+                // The next seam, once the frames within its reach have the ankle IK.
+                let ready = if self.cleanup.place_ankles { self.ik_done } else { self.refined };
+                let Some(s) = self.seams.iter().copied().find(|&s| s >= self.guard_next) else { return };
+                if !all && s + ZONE > ready {
+                    return;
+                }
+                let (z0, z1) = (s.saturating_sub(ZONE).max(self.dec_base), (s + ZONE).min(ready));
+                let (i0, i1) = (z0 - self.dec_base, z1 - self.dec_base);
+                let placed = &self.dec_rot[i0 * j..i1 * j];
+                fill_clip(&mut self.zone_out, placed, &self.dec_hips[i0..i1], &r.skeleton);
+                fill_clip(&mut self.zone_ref, &self.ref_rot[i0 * j..i1 * j], &self.ref_hips[i0..i1], &r.skeleton);
+                self.zone_w.clear();
+                self.zone_w.extend_from_slice(&self.guard_w[i0..i1]);
+                self.guard_next = s + 1;
+                let started = SeamWeighing::start(
+                    &self.zone_out,
+                    &self.zone_ref,
+                    s - z0,
+                    &r.layout,
+                    &mut self.weigh_scratch,
+                    &self.zone_w,
+                );
+                budget -= 1;
+                match started {
+                    Some(w) => self.weighing = Some((w, z0)),
+                    None => continue,
+                }
+            }
+            let (w, z0) = self.weighing.as_mut().expect("a seam is being weighed");
+            let done = w.run(budget, &self.zone_out, &r.layout, &mut self.weigh_scratch, &self.zone_w);
+            if done.is_none() {
+                return;
+            }
+            w.apply(&mut self.zone_w);
+            let at = *z0 - self.dec_base;
+            self.guard_w[at..at + self.zone_w.len()].copy_from_slice(&self.zone_w);
+            self.weighing = None;
+            if !all {
+                return;
+            }
+        }
+    }
+
     /// Moves decoded frames to the poses ready to pop: as they are without the guard and the
     /// lock; with them, once [`StitchStream::chunk`] frames lie [`STREAM_LOOKAHEAD`] frames
     /// before the newest decoded one (all of them at the finish), after the ankle IK, the guard
@@ -1254,14 +1384,18 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
     /// frames before the first released one.
     fn release(&mut self, at_finish: bool) {
         let (look, chunk) = (self.lookahead(), self.chunk());
-        let b = self.refined;
+        // The frames at hand: decoded, with the ankle IK when it runs.
+        let b = if self.cleanup.place_ankles { self.refined.min(self.ik_done) } else { self.refined };
         let to = if at_finish { b } else { b.saturating_sub(look) };
         if to < self.released + chunk && !(at_finish && to > self.released) {
             return;
         }
         // One chunk per push (a window's decoded frames arrive at once): the same frames, the
-        // work spread over the pushes after it.
-        let to = if at_finish { to } else { to.min(self.released + chunk) };
+        // work spread over the pushes after it; never a frame a seam not weighed yet may blend.
+        let to = if at_finish { to } else { to.min(self.released + chunk).min(self.unweighed_from()) };
+        if to <= self.released {
+            return;
+        }
         let r = self.refiner.clone();
         let j = r.joints;
         if look == 0 && !self.cleanup.place_ankles {
@@ -1277,51 +1411,8 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         let a = self.released.saturating_sub(if look == 0 { 0 } else { STREAM_HISTORY }).max(self.dec_base);
         let (i0, i1) = (a - self.dec_base, b - self.dec_base);
         fill_clip(&mut self.work, &self.dec_rot[i0 * j..i1 * j], &self.dec_hips[i0..i1], &r.skeleton);
-        if self.cleanup.place_ankles {
-            // The ankle IK of each frame reads that frame alone: the frames placed by an earlier
-            // release keep their rotations in `dec_rot`, the new ones are placed and kept.
-            let ankles = if self.ankle_slots.is_some() { &self.dec_ankles[i0..i1] } else { &[][..] };
-            let new = self.ik_done.max(a) - a..b - a;
-            zoo_motion::stitch::lock::place_ankles_range_into(
-                &mut self.work,
-                ankles,
-                &r.layout,
-                &mut self.lock_scratch,
-                new.clone(),
-            );
-            for f in new {
-                let at = (a - self.dec_base + f) * j;
-                self.dec_rot[at..at + j].copy_from_slice(&self.work.local_rotations[f * j..(f + 1) * j]);
-            }
-            self.ik_done = b;
-        }
         if self.guard {
-            // Each seam is weighed once, when the frames its guard reads and weighs are decoded
-            // (all at the finish), with the weights of the seams before it; the weights of every
-            // frame at hand are applied at each release.
-            use zoo_motion::stitch::guard::{GUARD_FRAMES, GUARD_RAMP};
-            let next = self.guard_next;
-            self.window_seams.clear();
-            self.window_seams.extend(
-                self.seams
-                    .iter()
-                    .filter(|&&s| s >= next && s >= a && (at_finish || s + GUARD_FRAMES + GUARD_RAMP + 2 <= b))
-                    .map(|&s| s - a),
-            );
-            self.guard_report.clear();
-            if let Some(&last) = self.window_seams.last() {
-                fill_clip(&mut self.reference, &self.ref_rot[i0 * j..i1 * j], &self.ref_hips[i0..i1], &r.skeleton);
-                zoo_motion::stitch::guard::guard_weights_into(
-                    &self.work,
-                    &self.reference,
-                    &self.window_seams,
-                    &r.layout,
-                    &mut self.guard_scratch,
-                    &mut self.guard_w[i0..i1],
-                    &mut self.guard_report,
-                );
-                self.guard_next = a + last + 1;
-            }
+            // The weights of every frame at hand (each seam weighed once, `weigh_seams`).
             zoo_motion::stitch::guard::apply_guard_weights(
                 &mut self.work,
                 &self.guard_w[i0..i1],
@@ -1449,7 +1540,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         for i in 0..n {
             self.take_final(i);
         }
-        self.run_due_windows(true)?;
+        self.run_due_windows(true, None)?;
         let last = self.pushed - w;
         // The regular windows ran at 0, s, ..., next_window - s; the last of them ends on the
         // last frame exactly when next_window - s == last.
@@ -1464,6 +1555,8 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             self.run_window(last)?;
         }
         self.decode_upto(self.encoded);
+        self.place_new_ankles(true);
+        self.weigh_seams(true);
         self.release(true);
         self.finished = true;
         Ok(())

@@ -227,11 +227,7 @@ pub fn guard_seams_into(
 /// The first half of [`guard_seams_into`]: the guard's blend weight of every frame for
 /// `seams` (in order, each seam's weight found with those of the seams before it), combined
 /// with the weights already in `weights` (one per frame of `out`; zeros for a fresh clip) by
-/// their largest, and a report per seam appended to `report`. `out` is not changed; a seam
-/// reads the frames within [`GUARD_FRAMES`] `+ 2` of it and weighs those within
-/// [`GUARD_FRAMES`] `+` [`GUARD_RAMP`] `+ 1`, so a caller holding part of a sequence (the
-/// runtime's stitching stream) gets the whole sequence's weights for the seams whose frames it
-/// holds.
+/// their largest, and a report per seam appended to `report`. `out` is not changed.
 pub fn guard_weights_into(
     out: &Clip,
     reference: &Clip,
@@ -241,75 +237,151 @@ pub fn guard_weights_into(
     weights: &mut [f64],
     report: &mut Vec<GuardedSeam>,
 ) {
-    let (frames, j) = (out.frames(), out.joints());
-    if reference.frames() != frames || reference.joints() != j || frames < 2 || weights.len() != frames {
-        return;
-    }
-    let GuardScratch { ref_gr, ref_gp, smooth_rot, smooth_pos, zone_gp, rot, grot, gpos, local_pos, .. } = scratch;
-    // The reference's positions and the smoothed output over the seams' zones only (the frames
-    // a seam compares, and the one before them).
-    let n = reference.local_rotations.len();
-    let in_zone = |f: usize| seams.iter().filter_map(|&s| zone(s, frames)).any(|(lo, hi)| f + 1 >= lo && f <= hi);
-    ref_gr.clear();
-    ref_gr.resize(n, DQuat::IDENTITY);
-    ref_gp.clear();
-    ref_gp.resize(n, DVec3::ZERO);
-    for f in (0..frames).filter(|&f| in_zone(f)) {
-        let at = f * j..(f + 1) * j;
-        forward_kinematics_frame(
-            &reference.skeleton.parents,
-            &reference.local_rotations[at.clone()],
-            &reference.local_positions[at.clone()],
-            &mut ref_gr[at.clone()],
-            &mut ref_gp[at],
-        );
-    }
-    smooth_frames_into(out, SMOOTH_RADIUS, smooth_rot, smooth_pos, in_zone);
-    let smoothed = Target { rotations: smooth_rot, positions: smooth_pos, joints: j };
-    let parents = &out.skeleton.parents;
-    // Scratch for one frame's forward kinematics and the zone's positions.
-    for v in [&mut *rot, &mut *grot] {
-        v.clear();
-        v.resize(j, DQuat::IDENTITY);
-    }
-    for v in [&mut *gpos, &mut *local_pos] {
-        v.clear();
-        v.resize(j, DVec3::ZERO);
-    }
     for &seam in seams {
-        let Some((lo, hi)) = zone(seam, frames) else { continue };
+        let Some(mut weighing) = SeamWeighing::start(out, reference, seam, layout, scratch, weights) else { continue };
+        while weighing.run(usize::MAX, out, layout, scratch, weights).is_none() {}
+        weighing.apply(weights);
+        report.push(weighing.report());
+    }
+}
+
+/// One seam's guard weight (what [`guard_weights_into`] does per seam), found a few evaluations
+/// at a time: each evaluation blends the frames the seam compares at one weight and measures
+/// their largest joint speed (the bisection takes `STEPS`). A seam reads the frames within
+/// [`GUARD_FRAMES`] `+ 2` of it and weighs those within [`GUARD_FRAMES`] `+` [`GUARD_RAMP`] `+ 1`:
+/// a caller holding part of a sequence (the runtime's stitching stream, which spreads the
+/// evaluations over its pushes) gets the whole sequence's weight from a clip of those frames.
+#[derive(Clone, Debug)]
+pub struct SeamWeighing {
+    seam: usize,
+    lo: usize,
+    hi: usize,
+    reference_top: f64,
+    before: f64,
+    /// The bisection's bounds and steps taken; the weight once found.
+    a: f64,
+    b: f64,
+    steps: usize,
+    weight: Option<f64>,
+}
+
+impl SeamWeighing {
+    /// Starts weighing `seam` of `out` (its reference the inertialized `reference`, the weights
+    /// of the seams before it in `weights`): one evaluation. `None` for a seam with no frames to
+    /// compare (frame 0, or past the end).
+    pub fn start(
+        out: &Clip,
+        reference: &Clip,
+        seam: usize,
+        layout: &StitchLayout,
+        scratch: &mut GuardScratch,
+        weights: &[f64],
+    ) -> Option<SeamWeighing> {
+        let (frames, j) = (out.frames(), out.joints());
+        if reference.frames() != frames || reference.joints() != j || frames < 2 || weights.len() != frames {
+            return None;
+        }
+        let (lo, hi) = zone(seam, frames)?;
+        let GuardScratch { ref_gr, ref_gp, .. } = scratch;
+        let n = reference.local_rotations.len();
+        ref_gr.resize(n, DQuat::IDENTITY);
+        ref_gp.resize(n, DVec3::ZERO);
+        for f in lo - 1..=hi {
+            let at = f * j..(f + 1) * j;
+            forward_kinematics_frame(
+                &reference.skeleton.parents,
+                &reference.local_rotations[at.clone()],
+                &reference.local_positions[at.clone()],
+                &mut ref_gr[at.clone()],
+                &mut ref_gp[at],
+            );
+        }
         let reference_top = top_speed(ref_gp, j, lo, hi);
-        let mut speed_at = |w: f64, weights: &[f64], zone_gp: &mut Vec<DVec3>| {
-            zone_gp.clear();
-            for f in lo - 1..=hi {
-                let wf = weights[f].max(w * profile(f, lo, hi));
-                let hips = blend_frame(out, smoothed, layout, f, wf, rot);
-                local_pos.copy_from_slice(out.positions_at(f));
-                local_pos[0] = hips;
-                forward_kinematics_frame(parents, rot, local_pos, grot, gpos);
-                zone_gp.extend_from_slice(gpos);
+        let mut w = SeamWeighing { seam, lo, hi, reference_top, before: 0.0, a: 0.0, b: 1.0, steps: 0, weight: None };
+        w.before = w.speed_at(0.0, out, layout, scratch, weights);
+        if w.before <= reference_top {
+            w.weight = Some(0.0);
+        }
+        Some(w)
+    }
+
+    /// Runs up to `evaluations` more steps of the bisection; the weight once found.
+    pub fn run(
+        &mut self,
+        evaluations: usize,
+        out: &Clip,
+        layout: &StitchLayout,
+        scratch: &mut GuardScratch,
+        weights: &[f64],
+    ) -> Option<f64> {
+        for _ in 0..evaluations {
+            if self.weight.is_some() {
+                break;
             }
-            top_speed(zone_gp, j, 1, hi - lo + 1)
-        };
-        let before = speed_at(0.0, weights, zone_gp);
-        let mut weight = 0.0;
-        if before > reference_top {
-            let (mut a, mut b) = (0.0f64, 1.0f64);
-            for _ in 0..STEPS {
-                let m = 0.5 * (a + b);
-                if speed_at(m, weights, zone_gp) > reference_top {
-                    a = m;
-                } else {
-                    b = m;
-                }
+            let m = 0.5 * (self.a + self.b);
+            if self.speed_at(m, out, layout, scratch, weights) > self.reference_top {
+                self.a = m;
+            } else {
+                self.b = m;
             }
-            weight = b;
-            let from = (lo - 1).saturating_sub(GUARD_RAMP);
-            for (f, wf) in weights.iter_mut().enumerate().take((hi + GUARD_RAMP + 1).min(frames)).skip(from) {
-                *wf = wf.max(weight * profile(f, lo, hi));
+            self.steps += 1;
+            if self.steps == STEPS {
+                self.weight = Some(self.b);
             }
         }
-        report.push(GuardedSeam { seam, before, reference: reference_top, weight });
+        self.weight
+    }
+
+    /// Combines the found weight into `weights` by the largest (the seam's profile: constant
+    /// over its compared frames, eased out over [`GUARD_RAMP`] frames on each side).
+    pub fn apply(&self, weights: &mut [f64]) {
+        let Some(weight) = self.weight.filter(|&w| w > 0.0) else { return };
+        let (lo, hi) = (self.lo, self.hi);
+        let from = (lo - 1).saturating_sub(GUARD_RAMP);
+        let frames = weights.len();
+        for (f, wf) in weights.iter_mut().enumerate().take((hi + GUARD_RAMP + 1).min(frames)).skip(from) {
+            *wf = wf.max(weight * profile(f, lo, hi));
+        }
+    }
+
+    /// The seam's first frame in the weighed clip.
+    pub fn seam(&self) -> usize {
+        self.seam
+    }
+
+    /// What the guard did to the seam (weight 0 until found).
+    pub fn report(&self) -> GuardedSeam {
+        GuardedSeam {
+            seam: self.seam,
+            before: self.before,
+            reference: self.reference_top,
+            weight: self.weight.unwrap_or(0.0),
+        }
+    }
+
+    /// The largest joint speed over the seam's compared frames with the output blended towards
+    /// itself smoothed by `w` there (by the weights of the seams before it elsewhere).
+    fn speed_at(&self, w: f64, out: &Clip, layout: &StitchLayout, scratch: &mut GuardScratch, weights: &[f64]) -> f64 {
+        let (lo, hi, j) = (self.lo, self.hi, out.joints());
+        let GuardScratch { smooth_rot, smooth_pos, zone_gp, rot, grot, gpos, local_pos, .. } = scratch;
+        smooth_frames_into(out, SMOOTH_RADIUS, smooth_rot, smooth_pos, |f| f + 1 >= lo && f <= hi);
+        let smoothed = Target { rotations: smooth_rot, positions: smooth_pos, joints: j };
+        for v in [&mut *rot, &mut *grot] {
+            v.resize(j, DQuat::IDENTITY);
+        }
+        for v in [&mut *gpos, &mut *local_pos] {
+            v.resize(j, DVec3::ZERO);
+        }
+        zone_gp.clear();
+        for f in lo - 1..=hi {
+            let wf = weights[f].max(w * profile(f, lo, hi));
+            let hips = blend_frame(out, smoothed, layout, f, wf, rot);
+            local_pos.copy_from_slice(out.positions_at(f));
+            local_pos[0] = hips;
+            forward_kinematics_frame(&out.skeleton.parents, rot, local_pos, grot, gpos);
+            zone_gp.extend_from_slice(gpos);
+        }
+        top_speed(zone_gp, j, 1, hi - lo + 1)
     }
 }
 
