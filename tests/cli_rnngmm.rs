@@ -215,6 +215,22 @@ fn generate_is_deterministic_streams_and_refuses_bad_input() {
     let model = zoo_runtime::synthesis::SynthesisModel::load(&onnx).unwrap();
     assert_eq!(model.model().metadata().model_kind, "rnn-gmm");
     assert!(model.has_refiner());
+    // Refiner weights past f32's sums (or NaN) are refused at export, naming the file and the tensor.
+    let damaged = dir.path().join("damaged");
+    std::fs::create_dir(&damaged).unwrap();
+    for e in std::fs::read_dir(&r).unwrap().map(|e| e.unwrap()).filter(|e| e.path().is_file()) {
+        std::fs::copy(e.path(), damaged.join(e.file_name())).unwrap();
+    }
+    for value in [3e38f32, f32::NAN] {
+        let weights = damaged.join("refiner.safetensors");
+        let mut bytes = std::fs::read(&weights).unwrap();
+        let n = bytes.len();
+        bytes[n - 4..].copy_from_slice(&value.to_le_bytes());
+        std::fs::write(&weights, bytes).unwrap();
+        let e = fails(&["export", "--onnx", damaged.to_str().unwrap(), "--out", &out("damaged.onnx")]);
+        assert!(e.contains("refiner.safetensors: tensor `") && e.contains("outside the weights' range"), "{e}");
+        assert!(!dir.path().join("damaged.onnx").exists());
+    }
     // `zoo generate` fits the seed frames' state on the training model: the run folder, not the file.
     let e = fails(&["generate", "--model", &onnx, "--frames", "10", "--out", &out("f.bvh")]);
     assert!(e.contains("is a file") && e.contains("takes the run folder of `zoo train rnn-gmm`"), "{e}");
