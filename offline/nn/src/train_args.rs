@@ -102,6 +102,7 @@ impl<M: TrainDefaults> DataArgs<M> {
         if self.data.is_none() {
             let cfg = zoo_data::synth::SynthConfig::default();
             crate::args::check_synth_size(("--synth-minutes", self.synth_minutes), cfg.clip_seconds, cfg.fps)?;
+            crate::args::check_synth_memory(("--synth-minutes", self.synth_minutes), cfg.clip_seconds, cfg.fps)?;
         }
         Ok(TrainingClips {
             data: self.data.clone(),
