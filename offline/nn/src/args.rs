@@ -194,27 +194,27 @@ pub fn check_synth_size(minutes: (&str, f64), clip_seconds: f64, fps: f64) -> Re
     Ok(())
 }
 
-/// Bytes a training holds per frame of synthetic motion: the clips, their windows and the
-/// features cut from them (measured: `zoo train rtn --preset tiny` peaks at 12.1 GB on
-/// 2,000,000 frames, 6.05 KB each), rounded up.
-pub const TRAINING_BYTES_PER_SYNTH_FRAME: f64 = 6_500.0;
-
 /// Refuses synthetic training data whose frames ([`check_synth_size`]'s count) would need more
 /// than the memory bound (`zoo_data::limits::memory_bound`) once the training holds them
-/// ([`TRAINING_BYTES_PER_SYNTH_FRAME`] each): checked before the motion is generated, naming
-/// the size, the bound, the longest length within it and how to raise it.
-pub fn check_synth_memory(minutes: (&str, f64), clip_seconds: f64, fps: f64) -> Result<(), String> {
+/// (`bytes_per_frame` each, the trainer's measure): checked before the motion is generated,
+/// naming the size, the bound, the longest length within it and how to raise it.
+pub fn check_synth_memory(
+    minutes: (&str, f64),
+    clip_seconds: f64,
+    fps: f64,
+    bytes_per_frame: f64,
+) -> Result<(), String> {
     let (option, minutes) = minutes;
     let clips = (minutes * 60.0 / clip_seconds).ceil().max(1.0);
     let frames = clips * (clip_seconds * fps).round();
-    let need = frames * TRAINING_BYTES_PER_SYNTH_FRAME;
+    let need = frames * bytes_per_frame;
     let bound = zoo_data::limits::memory_bound() as f64;
     if need > bound {
-        let most = (bound / TRAINING_BYTES_PER_SYNTH_FRAME / fps / 60.0).floor();
+        let most = (bound / bytes_per_frame / fps / 60.0).floor();
         return Err(format!(
-            "{option} {minutes} at {fps} fps is {frames:.0} frames, which a training holds in about {:.1} GB, past \
-             the memory bound of {:.2} GB: give at most {most:.0} minutes, or raise the bound with the environment \
-             variable ZOO_MEMORY_GB=N",
+            "{option} {minutes} at {fps} fps is {frames:.0} frames, which this training holds in about {:.1} GB, \
+             past the memory bound of {:.2} GB: give at most {most:.0} minutes, or raise the bound with the \
+             environment variable ZOO_MEMORY_GB=N",
             need / 1e9,
             bound / 1e9
         ));
@@ -594,9 +594,10 @@ mod tests {
         assert!(check_synth_size(("--minutes", 1.0), 0.1, 30.0).is_ok());
         // Within the frame cap, past the memory bound (2 GB by default): refused before the work.
         assert!(check_synth_size(("--synth-minutes", 1111.0), 10.0, 30.0).is_ok());
-        let e = check_synth_memory(("--synth-minutes", 1111.0), 10.0, 30.0).unwrap_err();
+        let e = check_synth_memory(("--synth-minutes", 1111.0), 10.0, 30.0, 6_500.0).unwrap_err();
         assert!(e.contains("1999800 frames") && e.contains("13.0 GB") && e.contains("ZOO_MEMORY_GB"), "{e}");
-        assert!(check_synth_memory(("--synth-minutes", 10.0), 10.0, 30.0).is_ok());
+        assert!(e.contains("at most 170 minutes"), "{e}");
+        assert!(check_synth_memory(("--synth-minutes", 30.0), 10.0, 30.0, 6_500.0).is_ok());
     }
 }
 
