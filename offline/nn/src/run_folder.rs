@@ -123,7 +123,12 @@ fn holds_run(dir: &Path) -> bool {
 /// folder is trained again from the start by the command that started it (`--out DIR`) and by
 /// `--resume DIR` alike: there is nothing to continue, and nothing trained to lose.
 pub fn unfinished(dir: &Path) -> bool {
-    dir.join(COMMAND_FILE).is_file() && train_loop::read_state(dir).is_err()
+    if !dir.join(COMMAND_FILE).is_file() || train_loop::read_state(dir).is_ok() {
+        return false;
+    }
+    // A model's stage folders (`zoo train rnn-gmm`'s generator/ and refiner/) hold their own state.
+    let stages = std::fs::read_dir(dir).into_iter().flatten().flatten().map(|e| e.path());
+    !stages.filter(|p| p.is_dir()).any(|p| train_loop::read_state(&p).is_ok())
 }
 
 /// Creates `dir` (an option's output folder) if needed and checks, before the long work, that

@@ -130,6 +130,8 @@ pub fn resolve(train: &ArgMatches, def: &clap::Command) -> anyhow::Result<Resolv
         if let Some(v) = merged.remove("resume") {
             merged.insert("out".into(), v);
         }
+        // What the folder holds never finished an epoch: kept aside until the new start has.
+        merged.insert("overwrite".into(), vec!["true".into()]);
         eprintln!(
             "--resume {}: the run never finished an epoch (stopped before its first checkpoint), so there is nothing to \
              continue; it is trained from the start with the options it was started with ({COMMAND_FILE})",
