@@ -8,7 +8,9 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 mod guard;
-pub use guard::{ASIDE_DIR, LOCK_FILE, checkpoint_writing, end_of_command, epoch_done, lock, set_aside, stop_on_signal};
+pub use guard::{
+    ASIDE_DIR, LOCK_FILE, checkpoint_writing, end_of_command, epoch_done, lock, set_aside, stop_on_signal,
+};
 
 /// The options every training command takes.
 #[derive(Clone, Debug, PartialEq)]

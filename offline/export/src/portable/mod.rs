@@ -269,7 +269,11 @@ pub fn lower(model: &OnnxModel, options: &PortableOptions) -> Result<OnnxModel, 
 
 /// Refuses a graph whose recurrent nodes, unrolled over `lengths` frames, would hold more than
 /// `bound` bytes ([`BYTES_PER_UNROLLED_STEP`] per frame and direction), before unrolling.
-fn check_unrolled_size(graph: &pb::GraphProto, lengths: &HashMap<String, usize>, bound: u64) -> Result<(), ExportError> {
+fn check_unrolled_size(
+    graph: &pb::GraphProto,
+    lengths: &HashMap<String, usize>,
+    bound: u64,
+) -> Result<(), ExportError> {
     let mut steps = 0u64;
     let mut frames = 0usize;
     for node in graph.node.iter().filter(|n| Cell::of(n).is_some()) {

@@ -602,7 +602,12 @@ pub fn key_poses(path: &Path, fps: f64) -> Result<(zoo_motion::Clip, Vec<usize>)
 /// keys' clip frames carried to the new rate (with `--sample` the output frames too: they are
 /// the clip's). A clip of key poses only (one pose per frame) has no motion between its frames:
 /// its rate says nothing and it is taken at the model's.
-fn at_model_rate(o: &CompleteOptions, source: &mut zoo_motion::Clip, keys: &mut HumanoidKeys, fps: f64) -> ArnnResult<()> {
+fn at_model_rate(
+    o: &CompleteOptions,
+    source: &mut zoo_motion::Clip,
+    keys: &mut HumanoidKeys,
+    fps: f64,
+) -> ArnnResult<()> {
     let sample = match &o.poses {
         Some(p) if !p.sample => {
             source.frame_time = 1.0 / fps;
