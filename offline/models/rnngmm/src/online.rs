@@ -166,7 +166,7 @@ impl OnlineOptions {
         let need = self.proposal_bytes(config);
         let bound = zoo_data::limits::memory_bound();
         if need > bound {
-            return Err(RnnGmmError::Config(format!(
+            return Err(RnnGmmError::Message(zoo_data::Message(format!(
                 "{} proposals ({} speed offsets x {} turn offsets) of {} frames each need {:.2} GB, past the memory \
                  bound of {:.2} GB: give fewer --speed-offsets or --turn-offsets (the default is 5 of each), or raise \
                  the bound with the environment variable ZOO_MEMORY_GB=N",
@@ -176,7 +176,7 @@ impl OnlineOptions {
                 self.batch,
                 need as f64 / 1e9,
                 bound as f64 / 1e9
-            )));
+            ))));
         }
         Ok(())
     }
