@@ -494,6 +494,32 @@ fn humanoid_arnn_trains_on_bvh_and_runs_in_the_benchmark() {
     assert!(ok && stdout.contains("completed 31 frames from 3 keys"), "{stdout}\n{stderr}");
     let motion_of = |p: &Path| std::fs::read_to_string(p).unwrap().split_once("MOTION").unwrap().1.to_string();
     assert_eq!(motion_of(&from_poses), motion_of(&sampled));
+    // The whole clip at 60 fps: resampled to the model's 30 fps with a note, its key frames
+    // carried over (60, 84, 120 are 30, 42, 60 at 30 fps), the output at the model's rate.
+    let c60 = dir.path().join("c60.bvh");
+    let (ok, _, stderr) = run(&["data", "resample", clip.to_str().unwrap(), c60.to_str().unwrap(), "--fps", "60"]);
+    assert!(ok, "{stderr}");
+    let sampled60 = dir.path().join("sampled60.bvh");
+    let args = ["complete", "--model", r, "--poses", c60.to_str().unwrap(), "--key-frames", "60,84,120", "--sample"];
+    let (ok, stdout, stderr) = run(&[&args[..], &["--out", sampled60.to_str().unwrap()]].concat());
+    assert!(ok && stdout.contains("completed 31 frames from 3 keys"), "{stdout}\n{stderr}");
+    assert!(stderr.contains("is at 60.000 fps, the model at 30.000 fps: resampled to 30.000 fps"), "{stderr}");
+    let (a, b) = (
+        zoo_data::bvh::read_file(&sampled60, &Default::default()).unwrap(),
+        zoo_data::bvh::read_file(&sampled, &Default::default()).unwrap(),
+    );
+    assert!((a.fps() - 30.0).abs() < 1e-3, "written at {} fps", a.fps());
+    for f in [0, 12, 30] {
+        assert!((a.root_position(f) - b.root_position(f)).length() < 1e-2, "frame {f}");
+    }
+    // A clip of key poses only says nothing by its frame rate: taken at the model's.
+    let keys_bvh60 = dir.path().join("key_poses60.bvh");
+    std::fs::write(&keys_bvh60, format!("{head}MOTION\nFrames: 3\nFrame Time: 0.0166667\n{poses}\n")).unwrap();
+    let from60 = dir.path().join("from_poses60.bvh");
+    let args = ["complete", "--model", r, "--poses", keys_bvh60.to_str().unwrap(), "--key-frames", "0,12,30"];
+    let (ok, stdout, stderr) = run(&[&args[..], &["--out", from60.to_str().unwrap()]].concat());
+    assert!(ok && stdout.contains("completed 31 frames from 3 keys"), "{stdout}\n{stderr}");
+    assert_eq!(motion_of(&from60), motion_of(&from_poses));
     let (ok, _, stderr) = run(&["complete", "--model", r, "--poses", kb, "--key-frames", "0,12", "--out", fp]);
     assert!(!ok && stderr.contains("2 key frames for a clip of 3 poses"), "{stderr}");
     let (ok, _, stderr) = run(&["complete", "--model", r, "--poses", kb, "--out", fp]);

@@ -446,3 +446,165 @@ fn a_network_past_the_memory_bound_is_refused_before_it_is_allocated() {
     );
     assert!(!err.contains("memory allocation of"), "the process aborted on the allocation:\n{err}");
 }
+
+/// Runs `zoo ARGS` under `ulimit -v 2000000` (2 GB of address space, the measure);
+/// returns (exit code, stderr).
+#[cfg(unix)]
+fn under_2gb(args: &[&str]) -> (Option<i32>, String) {
+    let quoted: Vec<String> = args.iter().map(|a| format!("'{a}'")).collect();
+    let script = format!("ulimit -v 2000000; exec {} {}", zoo_bin().display(), quoted.join(" "));
+    let out = Command::new("bash").args(["-c", &script]).env("RAYON_NUM_THREADS", "1").output().unwrap();
+    (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+/// Work sizes are computed before they are allocated: synthetic training data past the memory
+/// bound (`--synth-minutes 1111` held 12.1 GB) and a portable export unrolled over 100,000
+/// frames are refused under a 2 GB address-space limit with the size, the bound and the options
+/// that lower or raise it, instead of aborting on the allocation; and `zoo bench runtime` says
+/// that a portable export is not the runtime's file (it said "cannot export the model").
+#[cfg(unix)]
+#[test]
+fn work_sizes_past_the_memory_bound_are_refused_before_they_are_allocated() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let synth = d.join("synth");
+    let (code, err) = under_2gb(&["train", "rtn", "--preset", "tiny", "--synth-minutes", "1111", "--out", s(&synth)]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(
+        err.contains("--synth-minutes 1111 at 30 fps is 1999800 frames")
+            && err.contains("past the memory bound of 2.00 GB")
+            && err.contains("ZOO_MEMORY_GB"),
+        "{err}"
+    );
+    assert!(!err.contains("memory allocation of") && !synth.join("config.json").exists(), "{err}");
+
+    let rmr = d.join("rmr");
+    let args = ["train", "rmr", "--preset", "tiny", "--synth-minutes", "0.5", "--seed", "5", "--epochs", "1"];
+    let (ok, _, stderr) = zoo(&[&args[..], &["--out", s(&rmr)]].concat());
+    assert!(ok, "{stderr}");
+    let onnx = d.join("rmr.onnx");
+    let (code, err) = under_2gb(&["export", "--onnx", s(&rmr), "--out", s(&onnx), "--portable", "--frames", "100000"]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(
+        err.contains("over 100000 frames makes")
+            && err.contains("past the memory bound of 2.00 GB")
+            && err.contains("--frames N")
+            && err.contains("ZOO_MEMORY_GB"),
+        "{err}"
+    );
+    assert!(!onnx.exists() && !err.contains("memory allocation of"), "{err}");
+    // Within the bound, the same export is written.
+    let (code, err) = under_2gb(&["export", "--onnx", s(&rmr), "--out", s(&onnx), "--portable", "--frames", "60"]);
+    assert_eq!(code, Some(0), "{err}");
+
+    // `zoo bench runtime` on a portable export names what it is and the file to measure.
+    let rtn = d.join("rtn");
+    let args = ["train", "rtn", "--preset", "tiny", "--synth-minutes", "0.5", "--seed", "5", "--epochs", "1"];
+    let (ok, _, stderr) = zoo(&[&args[..], &["--out", s(&rtn)]].concat());
+    assert!(ok, "{stderr}");
+    let portable = d.join("rtn.onnx");
+    let (ok, _, stderr) = zoo(&["export", "--onnx", s(&rtn), "--out", s(&portable), "--portable"]);
+    assert!(ok, "{stderr}");
+    for extra in [&[][..], &["--per-call", "10"][..]] {
+        let err = failed(&[&["bench", "runtime", "--model", s(&portable)][..], extra].concat());
+        assert!(
+            err.contains("is a portable export (`zoo export --portable`")
+                && err.contains("export the run without --portable")
+                && !err.contains("cannot export the model"),
+            "{err}"
+        );
+    }
+}
+
+/// The first `--resume` after an `--overwrite` killed in its first epoch continues the old run
+/// (its options were read before the old run was put back: "trained on other data"); a run
+/// stopped before its first checkpoint (a full disk, a kill) is trained again from the start by
+/// the command that started it and by `--resume` alike (`--out` called it a run and `--resume`
+/// called it not a run).
+#[test]
+fn an_interrupted_first_epoch_leaves_a_folder_one_command_continues() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let base = ["train", "rtn", "--preset", "tiny", "--seed", "5", "--epochs", "1"];
+    let (ok, _, stderr) = zoo(&[&base[..], &["--synth-minutes", "0.5", "--out", s(&run)]].concat());
+    assert!(ok, "{stderr}");
+    // What a SIGKILL in the first epoch of `--overwrite --synth-minutes 1` leaves: the old run
+    // aside, the new run's options recorded.
+    let aside = run.join(zoo_nn::run_folder::ASIDE_DIR);
+    std::fs::create_dir(&aside).unwrap();
+    for entry in std::fs::read_dir(&run).unwrap().flatten() {
+        if entry.file_name() != zoo_nn::run_folder::ASIDE_DIR {
+            std::fs::rename(entry.path(), aside.join(entry.file_name())).unwrap();
+        }
+    }
+    let recorded = std::fs::read_to_string(aside.join(zoo_nn::run_folder::COMMAND_FILE)).unwrap();
+    assert!(recorded.contains("\"0.5\""), "{recorded}");
+    std::fs::write(run.join(zoo_nn::run_folder::COMMAND_FILE), recorded.replace("\"0.5\"", "\"1\"")).unwrap();
+    let (ok, stdout, stderr) = zoo(&["train", "rtn", "--epochs", "2", "--resume", s(&run)]);
+    assert!(ok, "{stdout}{stderr}");
+    assert!(stderr.contains("put back the run that an interrupted --overwrite had kept aside"), "{stderr}");
+    assert!(stdout.contains("epoch   2:") && !stderr.contains("other data"), "{stdout}{stderr}");
+
+    // A full disk while the first epoch's checkpoint was written: the best weights and the
+    // run's files are there, its `last/` and training state are not.
+    let unfinished = |run: &Path| {
+        for f in ["last", "train_state.json", "summary.json"] {
+            let p = run.join(f);
+            if p.is_dir() { std::fs::remove_dir_all(&p).unwrap() } else { std::fs::remove_file(&p).unwrap() }
+        }
+        assert!(run.join("model.safetensors").is_file() && run.join("config.json").is_file());
+    };
+    unfinished(&run);
+    let (ok, stdout, stderr) = zoo(&[&base[..], &["--synth-minutes", "0.5", "--out", s(&run)]].concat());
+    assert!(ok && stdout.contains("never finished an epoch") && stdout.contains("epoch   1:"), "{stdout}{stderr}");
+    unfinished(&run);
+    let (ok, stdout, stderr) = zoo(&["train", "rtn", "--epochs", "1", "--resume", s(&run)]);
+    assert!(ok, "{stdout}{stderr}");
+    assert!(stderr.contains("never finished an epoch") && stdout.contains("epoch   1:"), "{stdout}{stderr}");
+    assert!(run.join("train_state.json").is_file() && run.join("last").is_dir());
+    let (ok, stdout, stderr) = zoo(&["train", "rtn", "--epochs", "2", "--resume", s(&run)]);
+    assert!(ok && stdout.contains("epoch   2:"), "{stdout}{stderr}");
+}
+
+/// A training stopped by SIGTERM or SIGINT says so, keeps its last checkpoint, releases its
+/// lock and exits non-zero (128 + the signal); `--resume` continues it.
+#[cfg(unix)]
+#[test]
+fn a_training_stopped_by_a_signal_says_so_keeps_its_checkpoint_and_releases_its_lock() {
+    use std::io::BufRead;
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let stop = |args: &[&str], signal: &str| {
+        let mut child = Command::new(zoo_bin())
+            .args(args)
+            .env("RAYON_NUM_THREADS", "1")
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut lines = std::io::BufReader::new(child.stdout.take().unwrap()).lines();
+        let first = lines.by_ref().map_while(Result::ok).find(|l| l.starts_with("epoch "));
+        assert!(first.is_some(), "no epoch line");
+        let killed = Command::new("kill").args([signal, &child.id().to_string()]).status().unwrap();
+        assert!(killed.success());
+        let out = child.wait_with_output().unwrap();
+        (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
+    };
+    let args = ["train", "rtn", "--preset", "tiny", "--synth-minutes", "0.5", "--seed", "5", "--epochs", "200"];
+    let (code, err) = stop(&[&args[..], &["--out", s(&run)]].concat(), "-TERM");
+    assert_eq!(code, Some(143), "{err}");
+    assert!(err.contains("stopped by SIGTERM before the training finished; the checkpoint of epoch"), "{err}");
+    assert!(err.contains(&format!("continue it with `--resume {}`", s(&run))), "{err}");
+    assert!(!run.join(zoo_nn::run_folder::LOCK_FILE).exists(), "the lock outlived the training");
+    let epoch = |p: &Path| {
+        let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap();
+        v["epoch"].as_u64().unwrap()
+    };
+    let done = epoch(&run.join("train_state.json"));
+    assert!(done >= 1 && epoch(&run.join("last/train_state.json")) == done);
+    let (code, err) = stop(&["train", "rtn", "--epochs", "200", "--resume", s(&run)], "-INT");
+    assert_eq!(code, Some(130), "{err}");
+    assert!(err.contains("stopped by SIGINT") && !err.contains("panicked"), "{err}");
+    assert!(!run.join(zoo_nn::run_folder::LOCK_FILE).exists());
+    assert!(epoch(&run.join("train_state.json")) > done);
+}

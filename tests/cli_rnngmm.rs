@@ -215,6 +215,22 @@ fn generate_is_deterministic_streams_and_refuses_bad_input() {
     let model = zoo_runtime::synthesis::SynthesisModel::load(&onnx).unwrap();
     assert_eq!(model.model().metadata().model_kind, "rnn-gmm");
     assert!(model.has_refiner());
+    // Refiner weights past f32's sums (or NaN) are refused at export, naming the file and the tensor.
+    let damaged = dir.path().join("damaged");
+    std::fs::create_dir(&damaged).unwrap();
+    for e in std::fs::read_dir(&r).unwrap().map(|e| e.unwrap()).filter(|e| e.path().is_file()) {
+        std::fs::copy(e.path(), damaged.join(e.file_name())).unwrap();
+    }
+    for value in [3e38f32, f32::NAN] {
+        let weights = damaged.join("refiner.safetensors");
+        let mut bytes = std::fs::read(&weights).unwrap();
+        let n = bytes.len();
+        bytes[n - 4..].copy_from_slice(&value.to_le_bytes());
+        std::fs::write(&weights, bytes).unwrap();
+        let e = fails(&["export", "--onnx", damaged.to_str().unwrap(), "--out", &out("damaged.onnx")]);
+        assert!(e.contains("refiner.safetensors: tensor `") && e.contains("outside the weights' range"), "{e}");
+        assert!(!dir.path().join("damaged.onnx").exists());
+    }
     // `zoo generate` fits the seed frames' state on the training model: the run folder, not the file.
     let e = fails(&["generate", "--model", &onnx, "--frames", "10", "--out", &out("f.bvh")]);
     assert!(e.contains("is a file") && e.contains("takes the run folder of `zoo train rnn-gmm`"), "{e}");
@@ -389,6 +405,20 @@ fn follow_walks_a_path_writes_a_plot_and_refuses_bad_input() {
     assert!(clip.frames() > 0 && clip.local_rotations.iter().all(|q| q.is_finite()));
     assert_eq!(json(&dir.path().join("f.contacts.json"))["contacts"].as_array().unwrap().len(), clip.frames());
     assert_eq!(&std::fs::read(dir.path().join("f.png")).unwrap()[1..4], b"PNG");
+    // A start clip at 60 fps is resampled to the model's 30 fps with a note; the output is at 30 fps.
+    let start60 = out("start60.bvh");
+    let start = Path::new(&r).join("start.bvh");
+    ok(&["data", "resample", start.to_str().unwrap(), &start60, "--fps", "60"]);
+    let from = format!("{start60}:58");
+    let mut args = vec!["follow", "--model", &r, "--path", &path, "--from", &from];
+    let f60 = out("f60.bvh");
+    args.extend_from_slice(&["--out", &f60]);
+    args.extend_from_slice(&fast);
+    let (ok60, stdout, stderr) = run(&args);
+    assert!(ok60, "{stdout}\n{stderr}");
+    assert!(stderr.contains("is at 60.000 fps, the model at 30.000 fps: resampled to 30.000 fps"), "{stderr}");
+    let clip60 = zoo_data::bvh::read_file(Path::new(&f60), &Default::default()).unwrap();
+    assert!((clip60.fps() - 30.0).abs() < 1e-3, "written at {} fps", clip60.fps());
     // SVG path data are read too.
     let svg = write("p.svg", r#"<svg xmlns="http://www.w3.org/2000/svg"><path d="M 0 0 C 0 50 20 100 0 150"/></svg>"#);
     let mut args = vec!["follow", "--model", &r, "--path", &svg, "--out", &g_bvh];
@@ -474,6 +504,38 @@ fn control_follows_a_script_in_candle_and_the_runtime_and_refuses_bad_input() {
     assert!(clip.local_rotations.iter().all(|q| q.is_finite()));
     assert_eq!(json(&dir.path().join("c.contacts.json"))["contacts"].as_array().unwrap().len(), 90);
     assert_eq!(&std::fs::read(&c_png).unwrap()[1..4], b"PNG");
+    // A start clip at 60 fps is resampled to the model's 30 fps with a note (its frame carried
+    // over); the script is in seconds, so the motion is the same 90 frames at the model's rate.
+    let start60 = out("start60.bvh");
+    let start = Path::new(&r).join("start.bvh");
+    ok(&["data", "resample", start.to_str().unwrap(), &start60, "--fps", "60"]);
+    let from = format!("{start60}:58");
+    let (ok60, stdout, stderr) =
+        run(&["control", "--model", &r, "--script", &script, "--from", &from, "--out", &out("c60.bvh")]);
+    assert!(ok60, "{stdout}\n{stderr}");
+    assert!(stderr.contains("is at 60.000 fps, the model at 30.000 fps: resampled to 30.000 fps"), "{stderr}");
+    let c60 = zoo_data::bvh::read_file(&dir.path().join("c60.bvh"), &Default::default()).unwrap();
+    assert!(c60.frames() == 90 && (c60.fps() - 30.0).abs() < 1e-3, "{} frames at {} fps", c60.frames(), c60.fps());
+    // 300 speed and 300 turn offsets (90,000 proposals held 2.7 GB) are refused before any
+    // proposal is made, under a 2 GB address-space limit, with the size and the options.
+    let offsets: Vec<String> = (0..300).map(|i| format!("{:.2}", -1.5 + 0.01 * i as f64)).collect();
+    let offsets = offsets.join(",");
+    let script_line = format!(
+        "ulimit -v 2000000; exec {} control --model {r} --script {script} --out {} --speed-offsets={offsets} \
+         --turn-offsets={offsets}",
+        zoo_tests::zoo_bin().display(),
+        out("big.bvh")
+    );
+    let o = std::process::Command::new("bash").args(["-c", &script_line]).output().unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(
+        e.contains("90000 proposals (300 speed offsets x 300 turn offsets)")
+            && e.contains("past the memory bound of 2.00 GB")
+            && e.contains("ZOO_MEMORY_GB"),
+        "{e}"
+    );
+    assert!(!dir.path().join("big.bvh").exists());
     // Bad input: a negative speed, a speed that is not a number, a heading that is not finite,
     // another skeleton, a bad option, a missing script; nothing is written.
     for (text, want) in [

@@ -427,6 +427,22 @@ fn files_at_widths(o: &RuntimeOptions, bytes: &[u8]) -> Result<Vec<(WeightWidth,
     o.widths.iter().map(|w| Ok((*w, at(*w)?.to_bytes()))).collect()
 }
 
+/// Refuses a portable export (`zoo export --portable`): its recurrent layers are unrolled into
+/// cell equations and its start graph is a file of its own, so neither candle nor the timed
+/// backends read it as the runtime's file; the message says so and names the file to measure.
+pub fn refuse_portable(path: &Path, bytes: &[u8]) -> Result<()> {
+    let origin = path.display().to_string();
+    let model = zoo_export::OnnxModel::from_bytes(bytes, &origin).map_err(|e| msg!("{e}"))?;
+    if model.metadata_value(zoo_runtime::portable::PORTABLE_KEY).is_some() {
+        bail!(
+            "{origin} is a portable export (`zoo export --portable`: recurrent layers unrolled for Unity Inference \
+             Engine, the start graph in a file beside it); `zoo bench runtime` measures the engine runtime's file: \
+             export the run without --portable (`zoo export --onnx RUN --out FILE.onnx`) and measure that"
+        );
+    }
+    Ok(())
+}
+
 /// The CPU features that decide which matrix kernels tract and onnxruntime pick (x86-64;
 /// `None` elsewhere).
 pub fn cpu_features() -> Option<String> {
@@ -829,6 +845,7 @@ pub struct RuntimeReport {
 /// Runs the benchmark.
 pub fn run(o: &RuntimeOptions, p: &dyn Progress) -> Result<RuntimeReport> {
     let bytes = std::fs::read(&o.model).with_context(|| format!("reading {}", o.model.display()))?;
+    refuse_portable(&o.model, &bytes)?;
     let (model, candle) = models(o, &bytes)?;
     let lib = onnxruntime_library(o.onnxruntime.as_deref())?;
     let env = onnxruntime_env(&lib)?;

@@ -149,11 +149,37 @@ fn main() -> anyhow::Result<()> {
         std::process::exit(1);
     }));
     training_environment();
+    if is_training() {
+        stop_training_on_signals();
+    }
     let result = parse().and_then(run);
     // A training that failed puts back the run its --overwrite kept aside; locks are released.
     zoo_nn::run_folder::end_of_command(result.is_ok());
     result
 }
+
+/// A training stopped by SIGINT (Ctrl-C) or SIGTERM has not finished: a thread receives the
+/// signal, waits for a checkpoint write in progress to end, says that the training stopped and
+/// which checkpoint is kept, releases the lock (and puts back an old run an `--overwrite` kept
+/// aside, when the new run never finished an epoch) and exits with 128 + the signal's number.
+#[cfg(unix)]
+fn stop_training_on_signals() {
+    use signal_hook::consts::{SIGINT, SIGTERM};
+    match signal_hook::iterator::Signals::new([SIGINT, SIGTERM]) {
+        Ok(mut signals) => {
+            std::thread::spawn(move || {
+                if let Some(signal) = signals.forever().next() {
+                    let name = if signal == SIGINT { "SIGINT" } else { "SIGTERM" };
+                    zoo_nn::run_folder::stop_on_signal(name, signal);
+                }
+            });
+        }
+        Err(e) => eprintln!("note: cannot watch for SIGINT and SIGTERM ({e}); a signal ends the training at once"),
+    }
+}
+
+#[cfg(not(unix))]
+fn stop_training_on_signals() {}
 
 /// The command line; `zoo train ... --resume DIR` with the options the run was started with
 /// (`cmd::train_resume`).
@@ -173,6 +199,12 @@ fn parse() -> anyhow::Result<Cli> {
             }
         }
         cmd::train_resume::Resolved::Resume(argv) => cli = Cli::try_parse_from(argv)?,
+        cmd::train_resume::Resolved::Restart(argv, command) => {
+            cli = Cli::try_parse_from(argv)?;
+            if let Command::Train(t) = &mut cli.command {
+                t.record(command);
+            }
+        }
         cmd::train_resume::Resolved::AsGiven => {}
     }
     Ok(cli)

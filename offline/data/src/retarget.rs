@@ -23,6 +23,10 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use zoo_motion::{Clip, Skeleton};
 
+/// The range of a name map's `root_scale`: units from kilometres to micrometres and back, with
+/// room to spare; a larger scale moves the root past what a clip may hold.
+pub const ROOT_SCALE_RANGE: std::ops::RangeInclusive<f64> = 1e-6..=1e6;
+
 /// A joint-name map from a clip's rig to a target rig, read from JSON:
 ///
 /// ```json
@@ -96,9 +100,15 @@ impl RigMap {
             ))
         })?;
         if let Some(s) = map.root_scale
-            && !(s.is_finite() && s > 0.0)
+            && !(s.is_finite() && ROOT_SCALE_RANGE.contains(&s))
         {
-            return Err(file(format!("root_scale {s} is not a positive number")));
+            return Err(file(format!(
+                "root_scale {s:e} is outside its range [{:e}, {:e}]: it is the model's length units per rig unit \
+                 (100 for a rig in metres driving a model in centimetres); leave it out to use the ratio of the \
+                 rigs' leg lengths",
+                ROOT_SCALE_RANGE.start(),
+                ROOT_SCALE_RANGE.end()
+            )));
         }
         Ok(map)
     }
@@ -331,6 +341,21 @@ mod tests {
             end_sites: vec![None; names.len()],
             channels: vec![JointChannels::default(); names.len()],
         }
+    }
+
+    /// A `root_scale` past its range (1e300 was blamed on the model's normalization.json) is
+    /// refused where it enters, naming the map file.
+    #[test]
+    fn a_root_scale_out_of_range_is_refused_naming_the_map() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("map.json");
+        for bad in ["1e300", "1e-300", "0", "-2"] {
+            std::fs::write(&path, format!(r#"{{"joints": {{}}, "root_scale": {bad}}}"#)).unwrap();
+            let e = RigMap::read(&path).unwrap_err().to_string();
+            assert!(e.contains("map.json: root_scale") && e.contains("is outside its range [1e-6, 1e6]"), "{e}");
+        }
+        std::fs::write(&path, r#"{"joints": {}, "root_scale": 100}"#).unwrap();
+        assert_eq!(RigMap::read(&path).unwrap().root_scale, Some(100.0));
     }
 
     #[test]

@@ -194,6 +194,34 @@ pub fn check_synth_size(minutes: (&str, f64), clip_seconds: f64, fps: f64) -> Re
     Ok(())
 }
 
+/// Refuses synthetic training data whose frames ([`check_synth_size`]'s count) would need more
+/// than the memory bound (`zoo_data::limits::memory_bound`) once the training holds them
+/// (`bytes_per_frame` each, the trainer's measure): checked before the motion is generated,
+/// naming the size, the bound, the longest length within it and how to raise it.
+pub fn check_synth_memory(
+    minutes: (&str, f64),
+    clip_seconds: f64,
+    fps: f64,
+    bytes_per_frame: f64,
+) -> Result<(), String> {
+    let (option, minutes) = minutes;
+    let clips = (minutes * 60.0 / clip_seconds).ceil().max(1.0);
+    let frames = clips * (clip_seconds * fps).round();
+    let need = frames * bytes_per_frame;
+    let bound = zoo_data::limits::memory_bound() as f64;
+    if need > bound {
+        let most = (bound / bytes_per_frame / fps / 60.0).floor();
+        return Err(format!(
+            "{option} {minutes} at {fps} fps is {frames:.0} frames, which this training holds in about {:.1} GB, \
+             past the memory bound of {:.2} GB: give at most {most:.0} minutes, or raise the bound with the \
+             environment variable ZOO_MEMORY_GB=N",
+            need / 1e9,
+            bound / 1e9
+        ));
+    }
+    Ok(())
+}
+
 /// A frame count or interval in `1..=MAX_FRAMES` (`--frames`, `--interval`, `--lengths`,
 /// `--every`).
 pub fn frame_count(s: &str) -> Result<usize, String> {
@@ -564,6 +592,12 @@ mod tests {
         assert!(e.contains("too short for the motion generator (at least 0.910 s at this frame rate)"), "{e}");
         assert!(check_synth_size(("--minutes", 1.0), 0.91, 1000.0).is_ok());
         assert!(check_synth_size(("--minutes", 1.0), 0.1, 30.0).is_ok());
+        // Within the frame cap, past the memory bound (2 GB by default): refused before the work.
+        assert!(check_synth_size(("--synth-minutes", 1111.0), 10.0, 30.0).is_ok());
+        let e = check_synth_memory(("--synth-minutes", 1111.0), 10.0, 30.0, 6_500.0).unwrap_err();
+        assert!(e.contains("1999800 frames") && e.contains("13.0 GB") && e.contains("ZOO_MEMORY_GB"), "{e}");
+        assert!(e.contains("at most 170 minutes"), "{e}");
+        assert!(check_synth_memory(("--synth-minutes", 30.0), 10.0, 30.0, 6_500.0).is_ok());
     }
 }
 

@@ -224,10 +224,23 @@ pub const MAX_WEIGHT: f32 = 1e6;
 /// [`MAX_WEIGHT`]; the error names the file and the tensor, not a later stage.
 fn check_weights(path: &Path, varmap: &VarMap) -> NnResult<()> {
     let data = varmap.data().lock().expect("the VarMap lock is not poisoned");
-    let mut names: Vec<&String> = data.keys().collect();
-    names.sort();
-    for name in names {
-        let t = data[name].as_tensor();
+    check_weight_tensors(path, data.iter().map(|(name, v)| (name, v.as_tensor())))
+}
+
+/// Reads the named tensors of the weights file `path` ([`read_tensors`]) and checks them as
+/// [`read_varmap`] does: for weights read without a model built around them (e.g. the RNN-GMM
+/// refiner's, read by its export).
+pub fn read_weight_tensors(path: &Path, device: &Device) -> NnResult<HashMap<String, Tensor>> {
+    let tensors = read_tensors(path, device)?;
+    check_weight_tensors(path, tensors.iter())?;
+    Ok(tensors)
+}
+
+/// [`check_weights`] on named tensors, in name order.
+fn check_weight_tensors<'a>(path: &Path, tensors: impl Iterator<Item = (&'a String, &'a Tensor)>) -> NnResult<()> {
+    let mut tensors: Vec<(&String, &Tensor)> = tensors.collect();
+    tensors.sort_by(|a, b| a.0.cmp(b.0));
+    for (name, t) in tensors {
         if t.elem_count() == 0 {
             continue;
         }
@@ -367,7 +380,14 @@ mod tests {
             vm.get(3, "layer.w", Init::Const(0.0), DType::F32, &Device::Cpu)?;
             let err = read_varmap(&p, &vm).unwrap_err().to_string();
             assert!(err.contains("model.safetensors: tensor `layer.w`") && err.contains(says), "{err}");
+            // Weights read without a model around them (the RNN-GMM refiner's, by its export).
+            let err = read_weight_tensors(&p, &Device::Cpu).unwrap_err().to_string();
+            assert!(err.contains("model.safetensors: tensor `layer.w`") && err.contains(says), "{err}");
         }
+        let t = Tensor::new(&[0.5f32, -2.0, 1.0], &Device::Cpu)?;
+        candle_core::safetensors::save(&HashMap::from([("layer.w".to_string(), t)]), &p)
+            .map_err(|e| NnError::Config(e.to_string()))?;
+        assert_eq!(read_weight_tensors(&p, &Device::Cpu)?.len(), 1);
         Ok(())
     }
 

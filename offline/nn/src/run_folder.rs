@@ -8,7 +8,9 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 mod guard;
-pub use guard::{ASIDE_DIR, LOCK_FILE, end_of_command, epoch_done, lock, set_aside};
+pub use guard::{
+    ASIDE_DIR, LOCK_FILE, checkpoint_writing, end_of_command, epoch_done, lock, set_aside, stop_on_signal,
+};
 
 /// The options every training command takes.
 #[derive(Clone, Debug, PartialEq)]
@@ -117,6 +119,20 @@ fn holds_run(dir: &Path) -> bool {
         .any(|f| dir.join(f).exists())
 }
 
+/// Whether `dir` holds a run that never finished an epoch: a fresh run recorded its command
+/// there ([`COMMAND_FILE`]) and may have begun its files, but no epoch's training state was
+/// written (the process was killed, or the disk filled, before the first checkpoint). Such a
+/// folder is trained again from the start by the command that started it (`--out DIR`) and by
+/// `--resume DIR` alike: there is nothing to continue, and nothing trained to lose.
+pub fn unfinished(dir: &Path) -> bool {
+    if !dir.join(COMMAND_FILE).is_file() || train_loop::read_state(dir).is_ok() {
+        return false;
+    }
+    // A model's stage folders (`zoo train rnn-gmm`'s generator/ and refiner/) hold their own state.
+    let stages = std::fs::read_dir(dir).into_iter().flatten().flatten().map(|e| e.path());
+    !stages.filter(|p| p.is_dir()).any(|p| train_loop::read_state(&p).is_ok())
+}
+
 /// Creates `dir` (an option's output folder) if needed and checks, before the long work, that
 /// files can be written in it.
 pub fn writable_dir(option: &str, dir: &Path) -> Result<(), TrainError> {
@@ -159,7 +175,15 @@ pub fn prepare(
         guard::lock(out)?;
     }
     if holds_run(out) {
-        if !spec.overwrite {
+        let unfinished = unfinished(out);
+        if unfinished && !spec.overwrite {
+            println!(
+                "--out {}: the run there never finished an epoch (stopped before its first checkpoint); it is \
+                 trained again from the start",
+                out.display()
+            );
+        }
+        if !spec.overwrite && !unfinished {
             let what = match train_loop::read_state(out).ok() {
                 Some(s) if s.epoch > 0 => format!(
                     "a run trained for {} epochs (best validation loss {:.5} at epoch {})",

@@ -18,6 +18,10 @@ pub trait TrainDefaults: Clone + Send + Sync + 'static {
     const OUT: &'static str;
     /// `--synth-minutes`.
     const SYNTH_MINUTES: &'static str = "10";
+    /// Bytes the trainer holds per frame of synthetic motion (its clips, windows and features),
+    /// measured and rounded up: the size [`crate::args::check_synth_memory`] bounds. The default
+    /// covers the largest measured (`zoo train rmr`, 8.9 KB).
+    const BYTES_PER_SYNTH_FRAME: f64 = 10_000.0;
 }
 
 /// The options every trainer takes: the run folder, the length of the run, the seed, the threads.
@@ -102,6 +106,8 @@ impl<M: TrainDefaults> DataArgs<M> {
         if self.data.is_none() {
             let cfg = zoo_data::synth::SynthConfig::default();
             crate::args::check_synth_size(("--synth-minutes", self.synth_minutes), cfg.clip_seconds, cfg.fps)?;
+            let minutes = ("--synth-minutes", self.synth_minutes);
+            crate::args::check_synth_memory(minutes, cfg.clip_seconds, cfg.fps, M::BYTES_PER_SYNTH_FRAME)?;
         }
         Ok(TrainingClips {
             data: self.data.clone(),

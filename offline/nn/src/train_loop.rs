@@ -325,6 +325,7 @@ fn end_epoch<M: Trainable + ?Sized>(
     }
     let best = state.best_valid.is_none_or(|b| vbest < b);
     if best {
+        let _writing = crate::run_folder::checkpoint_writing();
         model.save_model(out, use_avg)?;
         state.best_valid = Some(vbest);
         state.best_epoch = state.epoch;
@@ -335,6 +336,7 @@ fn end_epoch<M: Trainable + ?Sized>(
 
 /// Writes `last/` (the model and its training state) and the run's state and loss curve.
 fn write_epoch<M: Trainable + ?Sized>(model: &mut M, out: &Path, state: &TrainState) -> Result<(), TrainError> {
+    let _writing = crate::run_folder::checkpoint_writing();
     checkpoint::replace_dir(&out.join(LAST_DIR), |dir| -> Result<(), TrainError> {
         model.save_model(dir, false)?;
         model.save_training_state(dir)?;

@@ -125,6 +125,7 @@ pub fn runtime(a: RuntimeArgs) -> anyhow::Result<()> {
             anyhow::bail!("--per-call times the file as it is; drop --weights (export at another width to time it)");
         }
         let bytes = std::fs::read(&a.model).with_context(|| format!("cannot read {}", a.model.display()))?;
+        zoo_bench::runtime::refuse_portable(&a.model, &bytes)?;
         let figures = zoo_bench::frame_budget::run(&bytes, &a.batch, calls)?;
         println!(
             "per-call times of {} on one thread ({}):",

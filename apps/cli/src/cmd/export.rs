@@ -100,7 +100,7 @@ fn write_portable(a: &ExportArgs, model: &OnnxModel, what: &str, frames: Option<
     use zoo_export::portable::{EmbeddedGraph, PortableOptions, to_portable};
     use zoo_export::unity::{UNITY_OPERATORS_URL, UNITY_PACKAGE, UNITY_VERSION};
     use zoo_runtime::portable::{PORTABLE_GRAPHS, PORTABLE_KEY};
-    let mut options = PortableOptions::default();
+    let mut options = PortableOptions { memory_bound: Some(zoo_data::limits::memory_bound()), ..Default::default() };
     if let Some(n) = frames {
         options.fixed_dims.insert("frames".into(), n);
     }

@@ -26,6 +26,10 @@ pub enum Resolved {
     /// A resume of a run that recorded its options: the command line to run instead
     /// (`zoo train MODEL` and the options).
     Resume(Vec<OsString>),
+    /// A resume of a run that never finished an epoch (`zoo_nn::run_folder::unfinished`): the
+    /// command line that trains it again from the start with its recorded options (`--out DIR`
+    /// instead of `--resume DIR`), and the options to record.
+    Restart(Vec<OsString>, Vec<(String, Vec<String>)>),
     /// A resume of a run that recorded nothing (started by an older zoo): as given.
     AsGiven,
 }
@@ -78,7 +82,13 @@ pub fn resolve(train: &ArgMatches, def: &clap::Command) -> anyhow::Result<Resolv
         let recorded = given.into_iter().filter(|g| g.from_command_line && !own(&g.name));
         return Ok(Resolved::Fresh(recorded.map(|g| (g.name, g.values)).collect()));
     };
+    // An old run that an interrupted `--overwrite` kept aside is put back (under the folder's
+    // lock) before the run's recorded options are read: they are the old run's.
+    if dir.join(zoo_nn::run_folder::ASIDE_DIR).is_dir() {
+        let _ = zoo_nn::run_folder::lock(dir);
+    }
     let Some(recorded) = zoo_nn::run_folder::read_command(dir)? else { return Ok(Resolved::AsGiven) };
+    let restart = zoo_nn::run_folder::unfinished(dir);
     let mut merged: BTreeMap<String, Vec<String>> = BTreeMap::new();
     for (name, values) in &recorded {
         if !OWN_OPTIONS.contains(&name.as_str()) {
@@ -116,6 +126,18 @@ pub fn resolve(train: &ArgMatches, def: &clap::Command) -> anyhow::Result<Resolv
         .filter(|a| matches!(a.get_action(), ArgAction::SetTrue))
         .filter_map(|a| a.get_long().map(str::to_string))
         .collect();
+    if restart {
+        if let Some(v) = merged.remove("resume") {
+            merged.insert("out".into(), v);
+        }
+        // What the folder holds never finished an epoch: kept aside until the new start has.
+        merged.insert("overwrite".into(), vec!["true".into()]);
+        eprintln!(
+            "--resume {}: the run never finished an epoch (stopped before its first checkpoint), so there is nothing to \
+             continue; it is trained from the start with the options it was started with ({COMMAND_FILE})",
+            dir.display()
+        );
+    }
     let mut argv: Vec<OsString> = vec!["zoo".into(), "train".into(), model.into()];
     for (name, values) in merged {
         if flags.contains(&name) {
@@ -125,6 +147,9 @@ pub fn resolve(train: &ArgMatches, def: &clap::Command) -> anyhow::Result<Resolv
         } else if !values.is_empty() {
             argv.push(format!("--{name}={}", values.join(",")).into());
         }
+    }
+    if restart {
+        return Ok(Resolved::Restart(argv, recorded.into_iter().collect()));
     }
     Ok(Resolved::Resume(argv))
 }

@@ -48,7 +48,17 @@ pub struct PortableOptions {
     /// needed where a recurrent op runs over a symbolic sequence length. The batch dimension
     /// can stay symbolic.
     pub fixed_dims: BTreeMap<String, usize>,
+    /// The bytes the lowering may hold (`None`: unbounded): the unrolled size
+    /// ([`BYTES_PER_UNROLLED_STEP`] per frame and direction of each recurrent node) is computed
+    /// before unrolling, and a graph past it is refused with the size and how to lower it.
+    pub memory_bound: Option<u64>,
 }
+
+/// Bytes a portable export holds per unrolled frame of one direction of a recurrent node: its
+/// dozen cell nodes with their names, in the built graph, its copies and the written bytes
+/// (measured with `zoo export --portable --frames N` on a tiny RMR, 4 cell steps a frame: 97 MB
+/// peak at 500 frames, 259 MB at 2000, 27.6 KB a step; rounded up).
+pub const BYTES_PER_UNROLLED_STEP: u64 = 32_000;
 
 /// A graph the regular file embeds in its metadata (base64 ONNX) and the portable export
 /// writes as a file of its own.
@@ -217,6 +227,9 @@ pub fn lower(model: &OnnxModel, options: &PortableOptions) -> Result<OnnxModel, 
         fixed.graph = Some(graph.clone());
         sequence_lengths(&fixed, &graph.name, &recurrent, options)?
     };
+    if let Some(bound) = options.memory_bound {
+        check_unrolled_size(&graph, &lengths, bound)?;
+    }
     let used: HashSet<String> = graph
         .node
         .iter()
@@ -252,6 +265,37 @@ pub fn lower(model: &OnnxModel, options: &PortableOptions) -> Result<OnnxModel, 
     proto.graph = Some(lowered);
     proto.opset_import = vec![pb::OperatorSetIdProto { domain: String::new(), version: PORTABLE_OPSET }];
     Ok(OnnxModel::from_proto(proto))
+}
+
+/// Refuses a graph whose recurrent nodes, unrolled over `lengths` frames, would hold more than
+/// `bound` bytes ([`BYTES_PER_UNROLLED_STEP`] per frame and direction), before unrolling.
+fn check_unrolled_size(
+    graph: &pb::GraphProto,
+    lengths: &HashMap<String, usize>,
+    bound: u64,
+) -> Result<(), ExportError> {
+    let mut steps = 0u64;
+    let mut frames = 0usize;
+    for node in graph.node.iter().filter(|n| Cell::of(n).is_some()) {
+        let bidirectional = node.attribute.iter().any(|a| a.name == "direction" && a.s == b"bidirectional");
+        let n = lengths.get(node_name(node)).copied().unwrap_or(0);
+        frames = frames.max(n);
+        steps = steps.saturating_add((n as u64).saturating_mul(if bidirectional { 2 } else { 1 }));
+    }
+    let need = steps.saturating_mul(BYTES_PER_UNROLLED_STEP);
+    if need > bound {
+        return Err(ExportError::NotPortable {
+            graph: graph.name.clone(),
+            message: format!(
+                "unrolling its recurrent nodes over {frames} frames makes {steps} cell steps, about {:.2} GB to \
+                 build and write, past the memory bound of {:.2} GB: fix fewer frames (zoo export --portable \
+                 --frames N), or raise the bound with the environment variable ZOO_MEMORY_GB=N",
+                need as f64 / 1e9,
+                bound as f64 / 1e9
+            ),
+        });
+    }
+    Ok(())
 }
 
 fn node_name(n: &pb::NodeProto) -> &str {
@@ -382,6 +426,22 @@ mod tests {
         assert!(err.contains("clip"), "{err}");
         let layout = attr_int("layout", 1);
         assert!(lower(&lstm_model(vec![layout]), &PortableOptions::default()).is_err());
+    }
+
+    /// The unrolled size is computed from the frame count before unrolling, and a graph past
+    /// the bound is refused with the size and the option that lowers it.
+    #[test]
+    fn an_unrolled_size_past_the_memory_bound_is_refused_before_unrolling() {
+        let within = PortableOptions { memory_bound: Some(3 * BYTES_PER_UNROLLED_STEP), ..Default::default() };
+        lower(&lstm_model(vec![]), &within).unwrap();
+        let past = PortableOptions { memory_bound: Some(3 * BYTES_PER_UNROLLED_STEP - 1), ..Default::default() };
+        let err = lower(&lstm_model(vec![]), &past).unwrap_err().to_string();
+        assert!(
+            err.contains("over 3 frames makes 3 cell steps")
+                && err.contains("--frames N")
+                && err.contains("ZOO_MEMORY_GB"),
+            "{err}"
+        );
     }
 
     #[test]

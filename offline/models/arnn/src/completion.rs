@@ -596,6 +596,54 @@ pub fn key_poses(path: &Path, fps: f64) -> Result<(zoo_motion::Clip, Vec<usize>)
     Ok((clip, frames))
 }
 
+/// Brings the clip the keys' poses come from to the model's frame rate `fps`. A whole motion
+/// (the keys file's clip, or `--poses` with `--sample`) at another rate is resampled as every
+/// command resamples a clip ([`zoo_data::clip_io::to_frame_rate`], with its note), and the
+/// keys' clip frames carried to the new rate (with `--sample` the output frames too: they are
+/// the clip's). A clip of key poses only (one pose per frame) has no motion between its frames:
+/// its rate says nothing and it is taken at the model's.
+fn at_model_rate(
+    o: &CompleteOptions,
+    source: &mut zoo_motion::Clip,
+    keys: &mut HumanoidKeys,
+    fps: f64,
+) -> ArnnResult<()> {
+    let sample = match &o.poses {
+        Some(p) if !p.sample => {
+            source.frame_time = 1.0 / fps;
+            return Ok(());
+        }
+        Some(_) => true,
+        None => false,
+    };
+    let path = match &o.poses {
+        Some(p) => p.clip.clone(),
+        None => o.keys.parent().unwrap_or(Path::new(".")).join(&keys.bvh),
+    };
+    let Some((note, ratio)) = zoo_data::clip_io::to_frame_rate(source, fps, &path).map_err(Message)? else {
+        return Ok(());
+    };
+    eprintln!("{note}");
+    let last = source.frames().saturating_sub(1);
+    for k in &mut keys.keys {
+        k.source = ((k.source as f64 * ratio).round() as usize).min(last);
+    }
+    if sample {
+        let first = keys.keys[0].source;
+        for k in &mut keys.keys {
+            k.frame = k.source - first;
+        }
+        keys.offset = first;
+        if let Some(w) = keys.keys.windows(2).find(|w| w[0].frame >= w[1].frame) {
+            bail!(
+                "two keys fall on frame {} of the clip at the model's {fps} fps: space the key frames further apart",
+                w[1].source
+            );
+        }
+    }
+    Ok(())
+}
+
 /// `zoo complete` with a humanoid ARNN: key poses from a BVH, partial keys, a clip out.
 fn complete_humanoid(
     o: &CompleteOptions,
@@ -645,9 +693,10 @@ fn complete_humanoid(
         }
     };
     crate::humanoid::check_trained_skeleton(skeleton, &source.skeleton).context(what.clone())?;
+    let (mut source, mut keys) = (source, keys);
+    at_model_rate(o, &mut source, &mut keys, skeleton.fps).context(what.clone())?;
     // The output is at the model's frame rate: key frames numbered at another rate (the keys
     // file's `fps`, or `--fps`) are carried to it, with a note.
-    let mut keys = keys;
     if let Some(given) = o.fps.or(keys.fps)
         && !zoo_motion::clip::same_frame_rate(given, skeleton.fps)
     {

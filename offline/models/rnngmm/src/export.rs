@@ -64,8 +64,8 @@ pub fn export_run(dir: &Path, options: &zoo_nn::ExportOptions<'_>) -> Result<Onn
     let eff: crate::EffectorNorm = zoo_nn::checkpoint::read_json(&dir.join(crate::refiner::EFFECTORS_FILE))
         .map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
     let path = dir.join(crate::refiner::REFINER_FILE);
-    let tensors = candle_core::safetensors::load(&path, &candle_core::Device::Cpu)
-        .map_err(|e| ExportError::model(format!("{}: {e}", path.display())))?;
+    let tensors = zoo_nn::checkpoint::read_weight_tensors(&path, &candle_core::Device::Cpu)
+        .map_err(|e| ExportError::model(format!("{}: {e}", dir.display())))?;
     let refiner = export_refiner(&config, &eff, &tensors)?;
     // The generator's file with the refiner in its section and its graph beside it.
     let mut task = synthesis_task(&config, &spec)?;

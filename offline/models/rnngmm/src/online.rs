@@ -48,6 +48,12 @@ use zoo_motion::rng::SplitMix64;
 /// Step sizes tried along the gradient, all in one batched rollout.
 const STEP_SIZES: [f64; 4] = [1.0, 1.0 / 3.0, 1.0 / 9.0, 1.0 / 27.0];
 
+/// How many copies of a proposal row's per-frame values the energy holds at once (inputs,
+/// layer outputs, the mixture's terms, the decoded features and their sums): measured with
+/// `zoo control` on the tiny preset (1,600 and 6,400 proposals of 3 frames: 91 and 260 MB peak,
+/// 35.4 KB a proposal, 2.06 copies of its 1,435 values a frame), rounded up.
+const UNROLL_COPIES: u64 = 3;
+
 /// Settings of [`control`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct OnlineOptions {
@@ -131,6 +137,46 @@ impl OnlineOptions {
         }
         if let Some(v) = self.speed_offsets.iter().chain(&self.turn_offsets).find(|v| !v.is_finite()) {
             return Err(RnnGmmError::Config(format!("proposal offsets must be finite, found {v}")));
+        }
+        Ok(())
+    }
+
+    /// Bytes the proposals of one batch hold while they are unrolled together (`K` rows of
+    /// `batch` frames through a generator of `config`'s sizes): per row and frame its layers'
+    /// activations, the LSTM's gates and states, the mixture's parameters and the state-sized
+    /// draws, offsets and decoded features, f32 each, times [`UNROLL_COPIES`] for the
+    /// intermediate tensors of the energy.
+    pub fn proposal_bytes(&self, config: &crate::Config) -> u64 {
+        let dim = config.dim as u64;
+        let per_frame = config.fc.iter().map(|&w| w as u64).sum::<u64>()
+            + 6 * (config.lstm * config.lstm_layers) as u64
+            + config.components as u64 * (2 * dim + 1)
+            + 8 * dim;
+        (self.speed_offsets.len() as u64)
+            .saturating_mul(self.turn_offsets.len() as u64)
+            .saturating_mul(self.batch as u64)
+            .saturating_mul(per_frame)
+            .saturating_mul(4 * UNROLL_COPIES)
+    }
+
+    /// Refuses proposals whose unrolled batch ([`Self::proposal_bytes`]) would pass the memory
+    /// bound (`zoo_data::limits::memory_bound`), before anything is allocated: their number is
+    /// the product of the two offset lists, so it grows with the square of their lengths.
+    pub fn check_memory(&self, config: &crate::Config) -> RnnGmmResult<()> {
+        let need = self.proposal_bytes(config);
+        let bound = zoo_data::limits::memory_bound();
+        if need > bound {
+            return Err(RnnGmmError::Message(zoo_data::Message(format!(
+                "{} proposals ({} speed offsets x {} turn offsets) of {} frames each need {:.2} GB, past the memory \
+                 bound of {:.2} GB: give fewer --speed-offsets or --turn-offsets (the default is 5 of each), or raise \
+                 the bound with the environment variable ZOO_MEMORY_GB=N",
+                self.speed_offsets.len() * self.turn_offsets.len(),
+                self.speed_offsets.len(),
+                self.turn_offsets.len(),
+                self.batch,
+                need as f64 / 1e9,
+                bound as f64 / 1e9
+            ))));
         }
         Ok(())
     }
@@ -229,6 +275,7 @@ pub fn control(
     progress: &mut dyn FnMut(usize),
 ) -> RnnGmmResult<Controlled> {
     opts.validate()?;
+    opts.check_memory(model.generator.config())?;
     let (spec, norm) = (&model.spec, &model.norm);
     let (dim, fps, n) = (spec.dim(), spec.fps, opts.batch);
     let dev = Device::Cpu;

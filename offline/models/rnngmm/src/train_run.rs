@@ -185,7 +185,8 @@ fn plan(a: &RnnGmmRunOptions) -> RnnGmmResult<Plan> {
             if wants_gen {
                 let parts = [out.to_path_buf(), out.join(GENERATOR_DIR), out.join(REFINER_DIR)];
                 if parts.iter().any(|p| holds_run(p)) {
-                    if !a.run.overwrite {
+                    // A run stopped before its first checkpoint is trained again from the start.
+                    if !a.run.overwrite && !zoo_nn::run_folder::unfinished(out) {
                         bail!(
                             "--out {} already holds a run: continue it with `--resume {0}`, replace it with \
                              --overwrite, or choose another --out",

@@ -236,6 +236,10 @@ pub fn set_aside(out: &Path, names: &[&str]) -> Result<(), TrainError> {
 fn put_back(out: &Path) -> Result<(), TrainError> {
     let aside = out.join(ASIDE_DIR);
     let fail = |e: std::io::Error| config(format!("cannot put back the old run from {}: {e}", aside.display()));
+    // The new run's record of its options is not the old run's: a resume would read them.
+    if !aside.join(super::COMMAND_FILE).exists() && out.join(super::COMMAND_FILE).is_file() {
+        std::fs::remove_file(out.join(super::COMMAND_FILE)).map_err(fail)?;
+    }
     for entry in std::fs::read_dir(&aside).map_err(fail)?.flatten() {
         let to = out.join(entry.file_name());
         if to.is_dir() {
@@ -246,6 +250,41 @@ fn put_back(out: &Path) -> Result<(), TrainError> {
         std::fs::rename(entry.path(), &to).map_err(fail)?;
     }
     std::fs::remove_dir_all(&aside).map_err(fail)
+}
+
+/// Held while a training writes its checkpoint ([`checkpoint_writing`]): a stop on a signal
+/// ([`stop_on_signal`]) waits for the write to end, so that the checkpoint it keeps is whole.
+static WRITING: Mutex<()> = Mutex::new(());
+
+/// Taken by the training loop for the time it writes an epoch's checkpoint (see [`WRITING`]).
+pub fn checkpoint_writing() -> MutexGuard<'static, ()> {
+    WRITING.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// A training stopped by a signal (`SIGINT`, `SIGTERM`; called from the thread that receives
+/// it): once a checkpoint write in progress has ended, says that the training stopped, which
+/// checkpoint is kept and how to continue it, puts back an old run kept aside by an
+/// `--overwrite` that never finished an epoch, releases the locks, and exits with 128 + the
+/// signal's number (130 for SIGINT, 143 for SIGTERM), never 0.
+pub fn stop_on_signal(name: &str, number: i32) -> ! {
+    let writing = checkpoint_writing();
+    let dirs: Vec<PathBuf> = held().locks.clone();
+    let mut kept = String::new();
+    for dir in &dirs {
+        kept.push_str(&match crate::train_loop::read_state(dir) {
+            Ok(s) if s.epoch > 0 => format!(
+                "; the checkpoint of epoch {} in {} is kept: continue it with `--resume {}`",
+                s.epoch,
+                dir.display(),
+                dir.display()
+            ),
+            _ => format!("; {} holds no finished epoch yet", dir.display()),
+        });
+    }
+    eprintln!("zoo: stopped by {name} before the training finished{kept}");
+    end_of_command(false);
+    drop(writing);
+    std::process::exit(128 + number)
 }
 
 /// Called by the training loop when an epoch's checkpoint of the run in `dir` is written: an
