@@ -558,9 +558,11 @@ fn an_interrupted_first_epoch_leaves_a_folder_one_command_continues() {
     let (ok, stdout, stderr) = zoo(&[&base[..], &["--synth-minutes", "0.5", "--out", s(&run)]].concat());
     assert!(ok && stdout.contains("never finished an epoch") && stdout.contains("epoch   1:"), "{stdout}{stderr}");
     unfinished(&run);
-    let (ok, stdout, stderr) = zoo(&["train", "rtn", "--epochs", "1", "--resume", s(&run)]);
+    // Without --epochs the restart keeps the run's own (1, recorded), not the default.
+    let (ok, stdout, stderr) = zoo(&["train", "rtn", "--resume", s(&run)]);
     assert!(ok, "{stdout}{stderr}");
     assert!(stderr.contains("never finished an epoch") && stdout.contains("epoch   1:"), "{stdout}{stderr}");
+    assert!(!stdout.contains("epoch   2:"), "the restart trained past the run's recorded --epochs 1:\n{stdout}");
     assert!(run.join("train_state.json").is_file() && run.join("last").is_dir());
     let (ok, stdout, stderr) = zoo(&["train", "rtn", "--epochs", "2", "--resume", s(&run)]);
     assert!(ok && stdout.contains("epoch   2:"), "{stdout}{stderr}");

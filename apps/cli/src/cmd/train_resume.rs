@@ -127,6 +127,12 @@ pub fn resolve(train: &ArgMatches, def: &clap::Command) -> anyhow::Result<Resolv
         .filter_map(|a| a.get_long().map(str::to_string))
         .collect();
     if restart {
+        // Trained again from the start: the run's own length too, unless this command gives it.
+        for (name, values) in &recorded {
+            if OWN_OPTIONS.contains(&name.as_str()) && !matches!(name.as_str(), "resume" | "out" | "overwrite") {
+                merged.entry(name.clone()).or_insert_with(|| values.clone());
+            }
+        }
         if let Some(v) = merged.remove("resume") {
             merged.insert("out".into(), v);
         }
