@@ -59,7 +59,8 @@ pub struct StitchArgs {
     pub no_ankle_ik: bool,
     /// Do not guard the seams: by default, where the RMR's output moves a joint faster within 5
     /// frames of a seam than inertialization does there, it is blended towards itself smoothed
-    /// until it does not (after the ankle IK, before the foot lock; docs/rmr.md, "The seam guard").
+    /// until it does not (after the ankle IK, before the foot lock; docs/rmr-benchmarks.md, "The
+    /// seam guard: how it works").
     #[arg(long)]
     pub no_seam_guard: bool,
     /// Inertialize each seam over `--blend-frames` frames before the RMR refines the sequence
