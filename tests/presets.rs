@@ -72,3 +72,24 @@ fn the_command_line_takes_the_quick_presets_where_they_apply() {
     assert!(stderr.contains("--synth-minutes gives the in-betweening design"), "{stderr}");
     assert!(!out.exists());
 }
+
+#[test]
+fn the_inbetweening_design_trains_on_synthetic_locomotion_without_data_and_resumes() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("ib");
+    let r = out.to_str().unwrap();
+    let args = ["train", "arnn", "--design", "inbetween", "--preset", "tiny", "--synth-minutes", "1"];
+    let (ok, stdout, stderr) = run(&[&args[..], &["--epochs", "1", "--threads", "1", "--out", r]].concat());
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("synthetic locomotion, 1 min, seed 1"), "{stdout}");
+    assert!(stdout.contains("zoo data synth --out synth-test --seed 1001"), "{stdout}");
+    let config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("config.json")).unwrap()).unwrap();
+    assert_eq!((config["design"].as_str(), config["encoder"].as_u64()), (Some("inbetween"), Some(16)));
+    // Resumed on the same synthetic clips; --data is refused for it (the recorded command).
+    let (ok, stdout, stderr) = run(&["train", "arnn", "--epochs", "2", "--threads", "1", "--resume", r]);
+    assert!(ok && stdout.contains("epoch   2"), "{stdout}\n{stderr}");
+    let (ok, _, stderr) =
+        run(&["train", "arnn", "--epochs", "3", "--resume", r, "--data", dir.path().to_str().unwrap()]);
+    assert!(!ok && stderr.contains("was started with no --data"), "{stderr}");
+}

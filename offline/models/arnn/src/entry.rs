@@ -122,9 +122,9 @@ pub struct ArnnArgs {
     #[arg(long, value_enum, default_value_t = ArnnVariant::Arnn)]
     pub variant: ArnnVariant,
     /// Which network: the paper's autoregressive ARNN, or (humanoid clips, with `--data` and
-    /// `--valid-glob`) the in-betweening design, a bidirectional GRU correcting Blender's Bezier
-    /// curves through the keys, every key met by construction (docs/keys-only.md). A resumed
-    /// run keeps its own.
+    /// `--valid-glob`, or synthetic locomotion without them) the in-betweening design, a
+    /// bidirectional GRU correcting Blender's Bezier curves through the keys, every key met by
+    /// construction (docs/keys-only.md). A resumed run keeps its own.
     #[arg(long, value_enum, default_value_t = ArnnDesign::Autoregressive)]
     pub design: ArnnDesign,
     /// With `--variant no-memory`: what the net's output is added to [default: interpolation]
