@@ -501,3 +501,48 @@ fn a_model_trained_on_inertialized_seams_stitches_them_so() {
     let moved = (50..60).map(|f| (pre.root_position(f) - raw.root_position(f)).length()).fold(0.0, f64::max);
     assert!(moved > 1e-3, "--pre-blend changed nothing after the seam ({moved})");
 }
+
+/// The largest distance (cm) between a joint of `a` and of `b` over the frames `reach` or more
+/// frames from every seam.
+fn largest_move_beyond(a: &zoo_motion::Clip, b: &zoo_motion::Clip, seams: &[usize], reach: usize) -> f64 {
+    zoo_motion::stitch::reach::largest_move_beyond(a, b, seams, reach)
+}
+
+#[test]
+fn a_stitch_leaves_the_clips_alone_beyond_the_seams_reach() {
+    let dir = tempfile::tempdir().unwrap();
+    let run_dir = train_tiny(dir.path(), "1");
+    let (_, clips) = synth_clips(dir.path(), "1");
+    let ranges = [0, 1, 2].map(|i| format!("{}:0:120", s(&clips[i])));
+    let stitch = |name: &str, more: &[&str]| {
+        let out = dir.path().join(format!("{name}.bvh"));
+        let mut args = vec!["stitch", "--model", s(&run_dir), &ranges[0], &ranges[1], &ranges[2]];
+        args.extend(["--out", s(&out), "--save-input"]);
+        args.extend(more);
+        let (ok, stdout, stderr) = run(&args);
+        assert!(ok, "{stdout}\n{stderr}");
+        assert!(stdout.contains("seams at [120, 240]"), "{stdout}");
+        let input = read(&dir.path().join(format!("{name}.input.bvh")));
+        (read(&out), input, stdout)
+    };
+    // The tiny model's window is 30 frames: by default nothing 30 or more frames from a seam
+    // moves (frames 0-89, 150-209 and 270-359), up to the BVH's rounding.
+    let (out, input, stdout) = stitch("kept", &[]);
+    let seams = [120, 240];
+    let moved = largest_move_beyond(&out, &input, &seams, 30);
+    assert!(moved < 0.01, "moved {moved} cm beyond the seams' reach");
+    assert!(stdout.contains("240 frames 30 or more from every seam kept as they were"), "{stdout}");
+    // Near the seams the model still acts.
+    assert!(largest_move_beyond(&out, &input, &seams, 0) > moved);
+    // A reach given in frames, and the whole sequence refined as before.
+    let (out, input, stdout) = stitch("reach50", &["--seam-reach", "50"]);
+    assert!(largest_move_beyond(&out, &input, &seams, 50) < 0.01);
+    assert!(stdout.contains("frames 50 or more from every seam kept"), "{stdout}");
+    let (out, input, stdout) = stitch("everywhere", &["--refine-everywhere"]);
+    assert!(stdout.contains("every frame refined"), "{stdout}");
+    let everywhere = largest_move_beyond(&out, &input, &seams, 30);
+    println!(
+        "a tiny RMR of one epoch: largest joint move beyond the reach {everywhere:.2} cm refining everywhere, {moved:.4} cm kept"
+    );
+    assert!(everywhere > 1.0, "refining everywhere moved the far frames by {everywhere} cm only");
+}

@@ -546,7 +546,14 @@ fn runtime_inertializes_the_seams_like_zoo_stitch_pre_blend() {
     assert!(refiner.seam_guard(), "the guard is on by default, as in `zoo stitch`");
     refiner.set_seam_guard(false);
     let seams = [30, 31, 60, 97];
-    let post = PostProcess { ankle_ik: false, foot_lock: false, pre_blend: true, seam_guard: false };
+    let post = PostProcess {
+        ankle_ik: false,
+        foot_lock: false,
+        pre_blend: true,
+        seam_guard: false,
+        keep_untouched: false,
+        reach: None,
+    };
     let want = refine_seams(&f.model, &f.stats, &clip, &seams, RefineOptions::of(&f.config), post).unwrap();
     let (n, j) = (poses.len(), refiner.joints());
     let mut out = vec![EnginePose::new(j); n];
@@ -583,7 +590,14 @@ fn runtime_guards_the_seams_like_zoo_stitch() {
     use zoo_runtime::stitch::FootCleanup;
     let (f, poses, clip, mut refiner) = seam_fixture();
     let seams = [30, 60];
-    let post = PostProcess { ankle_ik: true, foot_lock: true, pre_blend: true, seam_guard: true };
+    let post = PostProcess {
+        ankle_ik: true,
+        foot_lock: true,
+        pre_blend: true,
+        seam_guard: true,
+        keep_untouched: false,
+        reach: None,
+    };
     let want = refine_seams(&f.model, &f.stats, &clip, &seams, RefineOptions::of(&f.config), post).unwrap();
     let guarded = want.guarded.as_ref().expect("the guard ran");
     assert!(guarded.iter().any(|g| g.weight > 0.0), "the guard acted on a seam: {guarded:?}");

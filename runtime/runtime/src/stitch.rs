@@ -138,6 +138,7 @@ pub struct StitchRefiner {
     pre_blend: bool,
     fallback: Option<StitchFallback>,
     seam_guard: bool,
+    seam_reach: Option<usize>,
 }
 
 fn stitch_err(reason: impl Into<String>) -> MotionError {
@@ -193,6 +194,9 @@ pub struct StitchedClip {
     pub guarded: Option<Vec<zoo_motion::stitch::guard::GuardedSeam>>,
     /// The fallback's weight on each window (empty without a fallback).
     pub fallback_weights: Vec<f32>,
+    /// Frames set back to the input beyond the seams' reach, when a reach was set
+    /// ([`StitchRefiner::seam_reach`]).
+    pub untouched: Option<usize>,
 }
 
 impl StitchRefiner {
@@ -243,6 +247,7 @@ impl StitchRefiner {
             pre_blend,
             fallback,
             seam_guard: true,
+            seam_reach: None,
         })
     }
 
@@ -344,6 +349,25 @@ impl StitchRefiner {
     /// Switches the seam guard of [`StitchRefiner::seam_guard`] on or off.
     pub fn set_seam_guard(&mut self, on: bool) {
         self.seam_guard = on;
+    }
+
+    /// The seams' reach of [`StitchRefiner::refine_clip`] and
+    /// [`StitchRefiner::refine_poses_at_seams`], when set: every frame this many frames or
+    /// more from the nearest seam is the input's exactly, the output is eased back to the
+    /// input from half of it on, and each stretch near seams starts on the input's ground root
+    /// ([`zoo_motion::stitch::reach`], after the foot lock; `zoo stitch` sets the window unless
+    /// given `--seam-reach`). `None` (the default): the whole sequence is refined.
+    pub fn seam_reach(&self) -> Option<usize> {
+        self.seam_reach
+    }
+
+    /// Sets [`StitchRefiner::seam_reach`] (`Some(0)` is refused: `None` refines everywhere).
+    pub fn set_seam_reach(&mut self, frames: Option<usize>) -> Result<(), MotionError> {
+        if frames == Some(0) {
+            return Err(stitch_err("a seam reach of 0 frames: give at least 1, or None to refine the whole sequence"));
+        }
+        self.seam_reach = frames;
+        Ok(())
     }
 
     /// Sets whether the seams given to [`StitchRefiner::refine_clip`] and
@@ -776,7 +800,13 @@ impl StitchRefiner {
         };
         let lock_move =
             cleanup.lock_feet.then(|| zoo_motion::stitch::lock::lock_feet(&mut clip, &contacts, &self.layout));
-        Ok(StitchedClip { clip, contacts, ankles, ankle_move, lock_move, guarded, fallback_weights })
+        let untouched = match self.seam_reach {
+            Some(reach) if !seams.is_empty() => {
+                Some(zoo_motion::stitch::reach::keep_untouched(&mut clip, input, seams, reach, &self.layout))
+            }
+            _ => None,
+        };
+        Ok(StitchedClip { clip, contacts, ankles, ankle_move, lock_move, guarded, fallback_weights, untouched })
     }
 
     /// A stream over this refiner for motion matching: push poses as they are decided, pop

@@ -59,7 +59,8 @@ pub struct StitchArgs {
     pub no_ankle_ik: bool,
     /// Do not guard the seams: by default, where the RMR's output moves a joint faster within 5
     /// frames of a seam than inertialization does there, it is blended towards itself smoothed
-    /// until it does not (after the ankle IK, before the foot lock; docs/rmr.md, "The seam guard").
+    /// until it does not (after the ankle IK, before the foot lock; docs/rmr-benchmarks.md, "The
+    /// seam guard: how it works").
     #[arg(long)]
     pub no_seam_guard: bool,
     /// Inertialize each seam over `--blend-frames` frames before the RMR refines the sequence
@@ -69,6 +70,15 @@ pub struct StitchArgs {
     /// ground truth (docs/rmr.md).
     #[arg(long)]
     pub pre_blend: bool,
+    /// Frames from the nearest seam beyond which the clips are kept exactly as they are (the
+    /// RMR's output is eased back to them from half of it on) [default: the model's window]
+    /// (docs/rmr.md, "The seams' reach").
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::args::frame_count, conflicts_with = "refine_everywhere")]
+    pub seam_reach: Option<usize>,
+    /// Let the RMR change the whole sequence, however far from a seam (as before the seams'
+    /// reach existed; `zoo bench stitch`'s methods without `+reach`).
+    #[arg(long)]
+    pub refine_everywhere: bool,
     /// Also write the raw aligned concatenation beside `--out` (`OUT.input.bvh`).
     #[arg(long)]
     pub save_input: bool,
@@ -142,6 +152,8 @@ pub fn run(a: StitchArgs) -> anyhow::Result<()> {
             foot_lock: !a.no_foot_lock,
             pre_blend: a.pre_blend,
             seam_guard: !a.no_seam_guard,
+            keep_untouched: !a.refine_everywhere,
+            reach: a.seam_reach,
         }),
         StitchMethod::Inertialize => SeamMethod::Inertialize,
         StitchMethod::Interp => SeamMethod::Interp,

@@ -17,8 +17,9 @@
 //! Smoothing the output, rather than blending it towards the inertialized clips, lowers a short
 //! burst of speed and leaves a planted foot where it is: on held-out turns of bandai2 the blend
 //! towards inertialization cost 11 % more foot sliding for the same pops, the smoothing nothing
-//! measurable (docs/rmr.md, "The seam guard"). `zoo stitch` runs it after the ankle IK and
-//! before the foot lock, whose correction changes by at most 1 cm per frame.
+//! measurable (docs/rmr-benchmarks.md, "The seam guard: how it works"). `zoo stitch` runs it
+//! after the ankle IK and before the foot lock, whose correction changes by at most 1 cm per
+//! frame.
 
 use super::StitchLayout;
 use crate::Clip;

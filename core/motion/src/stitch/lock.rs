@@ -15,7 +15,7 @@
 //! forwards and backwards and averaged, so it leads a pin as much as it lags it): without the
 //! limit, the switch from one pin to the next and from the heel's pin to the toe's moved the
 //! ankle by several centimetres in one frame, which the stitching benchmark counts as pops at the
-//! seams (measured 2026-11-25, commit 91c7c30: docs/rmr.md, "The foot lock's pops").
+//! seams (measured 2026-11-25, commit 91c7c30: docs/rmr-benchmarks.md, "The foot lock's pops").
 //!
 //! In the motion core so that the engine's runtime (`zoo_runtime::StitchRefiner`) applies the
 //! same lock as the offline `zoo stitch`.
@@ -26,8 +26,8 @@ use glam::{DQuat, DVec3};
 
 /// The largest change of a foot's horizontal correction from one frame to the next (clip
 /// units per frame: 1 cm at bandai2's scale). Chosen on the bandai2 validation stitching cases
-/// among 0.5, 1 and 2 and a moving average of radius 2 or 4 (docs/rmr.md, "The foot lock's
-/// pops").
+/// among 0.5, 1 and 2 and a moving average of radius 2 or 4 (docs/rmr-benchmarks.md, "The
+/// foot lock's pops").
 pub const LOCK_MAX_STEP: f64 = 1.0;
 
 /// `corrections` with no step between neighbouring frames longer than `max_step`: the

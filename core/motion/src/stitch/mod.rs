@@ -25,6 +25,7 @@
 
 pub mod guard;
 pub mod lock;
+pub mod reach;
 
 use crate::facing::{ground_forward, heading_angle};
 use crate::fk::forward_kinematics_frame;

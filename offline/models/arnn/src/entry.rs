@@ -39,7 +39,8 @@ impl ZooModel for ArnnModel {
     fn train(&self, options: &clap::ArgMatches, command: Vec<(String, Vec<String>)>) -> Result<(), BoxError> {
         let mut a = ArnnArgs::from_arg_matches(options)?;
         a.run.command = command;
-        train(a)
+        let epochs_given = options.value_source("epochs") == Some(clap::parser::ValueSource::CommandLine);
+        train(a, epochs_given)
     }
 
     fn export(&self, run: &Path, options: &ExportOptions) -> Result<Exported, ExportError> {
@@ -121,18 +122,23 @@ pub struct ArnnArgs {
     #[arg(long, value_enum, default_value_t = ArnnVariant::Arnn)]
     pub variant: ArnnVariant,
     /// Which network: the paper's autoregressive ARNN, or (humanoid clips, with `--data` and
-    /// `--valid-glob`) the in-betweening design, a bidirectional GRU correcting Blender's Bezier
-    /// curves through the keys, every key met by construction (docs/keys-only.md). A resumed
-    /// run keeps its own.
+    /// `--valid-glob`, or synthetic locomotion without them) the in-betweening design, a
+    /// bidirectional GRU correcting Blender's Bezier curves through the keys, every key met by
+    /// construction (docs/keys-only.md). A resumed run keeps its own.
     #[arg(long, value_enum, default_value_t = ArnnDesign::Autoregressive)]
     pub design: ArnnDesign,
     /// With `--variant no-memory`: what the net's output is added to [default: interpolation]
     /// (docs/arnn.md, "Table 2 and the no-memory net's output")
     #[arg(long, value_enum)]
     pub no_memory_output: Option<NoMemoryOutputArg>,
-    /// Model sizes.
+    /// Model sizes (`quick`: the in-betweening design to try in minutes, its own epochs unless
+    /// `--epochs` is given; docs/keys-only.md).
     #[arg(long, value_enum, default_value_t = ArnnPreset::Paper)]
     pub preset: ArnnPreset,
+    /// With `--design inbetween` and no `--data`: minutes of synthetic locomotion to train on
+    /// (every tenth clip validates) [default: 10; with --preset quick: 20].
+    #[arg(long, conflicts_with = "data", allow_hyphen_values = true, value_parser = zoo_nn::args::synth_minutes)]
+    pub synth_minutes: Option<f64>,
     /// Sequences per batch [default: the preset's].
     #[arg(long, allow_hyphen_values = true, value_parser = zoo_nn::args::batch_size)]
     pub batch_size: Option<usize>,
@@ -171,7 +177,7 @@ fn ground_weight(s: &str) -> Result<f64, String> {
 }
 
 /// Runs `zoo train arnn`.
-fn train(a: ArnnArgs) -> Result<(), BoxError> {
+fn train(a: ArnnArgs, epochs_given: bool) -> Result<(), BoxError> {
     let o = ArnnRunOptions {
         run: a.run.spec(),
         data: a.data,
@@ -183,6 +189,8 @@ fn train(a: ArnnArgs) -> Result<(), BoxError> {
         design: a.design,
         no_memory_output: a.no_memory_output,
         preset: a.preset,
+        epochs_given,
+        synth_minutes: a.synth_minutes,
         batch_size: a.batch_size,
         lr: a.lr,
         ground_weight: a.ground_weight,

@@ -150,6 +150,20 @@ impl InbetweenConfig {
         InbetweenConfig { encoder: 16, hidden: 16, decoder: 16, batch_size: 4, ..Self::humanoid(skeleton, euler_axes) }
     }
 
+    /// The quick sizes (`zoo train arnn --design inbetween --preset quick`): the humanoid
+    /// design at half width (encoder 128, one bidirectional GRU layer of 128 per direction,
+    /// decoder 128), batch 32, Adam 2e-3; about 5 minutes of one thread on 20 minutes of
+    /// synthetic locomotion (docs/keys-only.md, "Try it in minutes").
+    pub fn quick(skeleton: HumanoidSkeleton, euler_axes: Vec<[usize; 3]>) -> Self {
+        InbetweenConfig {
+            encoder: 128,
+            hidden: 128,
+            decoder: 128,
+            learning_rate: 2e-3,
+            ..Self::humanoid(skeleton, euler_axes)
+        }
+    }
+
     /// Joints.
     pub fn joints(&self) -> usize {
         self.skeleton.names.len()

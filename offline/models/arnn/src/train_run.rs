@@ -83,9 +83,16 @@ impl From<NoMemoryOutputArg> for NoMemoryOutput {
 /// Sizes of the ARNN to train.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum ArnnPreset {
-    /// The paper's sizes (`ArnnConfig::paper`: GRUs of 100, decoder of 10).
+    /// The paper's sizes (`ArnnConfig::paper`: GRUs of 100, decoder of 10; with `--design
+    /// inbetween`, `InbetweenConfig::humanoid`).
     Paper,
-    /// A small model for tests and quick checks (`ArnnConfig::tiny`).
+    /// The in-betweening design to try in minutes (`InbetweenConfig::quick`: widths of 128;
+    /// [`QUICK_INBETWEEN_EPOCHS`] epochs and, without `--data`, [`QUICK_SYNTH_MINUTES`] of
+    /// synthetic locomotion unless given): about 5 minutes of one thread, under half Bezier's
+    /// pose error from keys 10 frames apart on held-out synthetic clips (docs/keys-only.md).
+    /// `--design inbetween` only.
+    Quick,
+    /// A small model for tests (`ArnnConfig::tiny`, `InbetweenConfig::tiny`).
     Tiny,
 }
 
@@ -112,6 +119,10 @@ pub struct ArnnRunOptions {
     pub no_memory_output: Option<NoMemoryOutputArg>,
     /// Model sizes.
     pub preset: ArnnPreset,
+    /// Whether `--epochs` was given (the quick preset has its own epochs otherwise).
+    pub epochs_given: bool,
+    /// The in-betweening design without `--data`: minutes of synthetic locomotion.
+    pub synth_minutes: Option<f64>,
     /// Sequences per batch.
     pub batch_size: Option<usize>,
     /// Adam learning rate.
@@ -273,8 +284,12 @@ fn phase_note(c: &crate::Curriculum) -> String {
 /// The data of a humanoid run, recorded in `train_state.json` so that `--resume` rebuilds it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct HumanoidData {
-    /// The BVH folder or file.
+    /// The BVH folder or file (empty with `synth_minutes`).
     pub dir: PathBuf,
+    /// Synthetic locomotion of this many minutes instead of `dir` (seed `seed`; every tenth
+    /// clip validates): the in-betweening design without `--data`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub synth_minutes: Option<f64>,
     /// Glob of the validation split.
     pub valid_glob: String,
     /// Seed of the validation keys.
@@ -355,6 +370,7 @@ fn fresh_lamp_trainer(a: &ArnnRunOptions, data: &LampData, variant: ArnnVariant)
     let mut config = match a.preset {
         ArnnPreset::Paper => ArnnConfig::paper(),
         ArnnPreset::Tiny => ArnnConfig::tiny(),
+        ArnnPreset::Quick => bail!("{QUICK_ONLY}"),
     };
     config.dof_names = DOF_NAMES.iter().map(|s| s.to_string()).collect();
     config.lamp = Some(data.lamp.clone());
@@ -378,6 +394,21 @@ fn fresh_lamp_trainer(a: &ArnnRunOptions, data: &LampData, variant: ArnnVariant)
     ArnnTrainer::new(&config, data.train.clone(), data.test.clone(), &candle_core::Device::Cpu)
 }
 
+/// The refusal of `--preset quick` outside the in-betweening design.
+const QUICK_ONLY: &str = "--preset quick is the in-betweening design's (add --design inbetween); the autoregressive ARNN \
+                          takes --preset paper or tiny";
+
+/// Minutes of synthetic locomotion of the in-betweening design without `--data` and
+/// `--synth-minutes`.
+pub const DEFAULT_SYNTH_MINUTES: f64 = 10.0;
+
+/// Epochs of `--preset quick` when `--epochs` is not given: about 5 minutes of one thread on its
+/// [`QUICK_SYNTH_MINUTES`] of synthetic locomotion (docs/keys-only.md, "Try it in minutes").
+pub const QUICK_INBETWEEN_EPOCHS: usize = 30;
+
+/// Minutes of synthetic locomotion of `--preset quick` without `--data` and `--synth-minutes`.
+pub const QUICK_SYNTH_MINUTES: f64 = 20.0;
+
 /// Runs `zoo train arnn` (a humanoid run with `valid_glob` or on a humanoid run folder).
 pub fn run(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
     let resumed_inbetween = a.run.resume.as_deref().is_some_and(|d| {
@@ -385,6 +416,15 @@ pub fn run(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
     });
     if a.design == ArnnDesign::Inbetween || resumed_inbetween {
         return train_inbetween(a, p);
+    }
+    if a.preset == ArnnPreset::Quick {
+        bail!("{QUICK_ONLY}");
+    }
+    if a.synth_minutes.is_some() {
+        bail!(
+            "--synth-minutes gives the in-betweening design synthetic locomotion (add --design inbetween); the \
+             autoregressive ARNN trains on lamp hops (--sequences) or --data"
+        );
     }
     check_options(a)?;
     if a.valid_glob.is_some() || a.run.resume.as_deref().is_some_and(is_humanoid_run) {
@@ -505,14 +545,30 @@ impl HumanoidData {
     /// Loads the clips, splits them by `valid_glob` and cuts both splits into the humanoid
     /// training windows ([`humanoid::WINDOW`]); refuses a split without a window.
     fn load(&self, p: &dyn Progress) -> ArnnResult<(Vec<NamedClip>, Vec<NamedClip>, Windows, Windows)> {
-        let clips = zoo_data::dataset::load_reporting(&self.dir, None, false, p)?;
-        let (train_clips, valid_clips) = zoo_data::dataset::split(clips, &self.valid_glob).map_err(Message::new)?;
+        let (train_clips, valid_clips) = match self.synth_minutes {
+            Some(minutes) => {
+                let t = zoo_data::dataset::TrainingClips {
+                    data: None,
+                    valid_glob: None,
+                    exclude_glob: None,
+                    skip_invalid: false,
+                    synth_minutes: minutes,
+                    seed: self.seed,
+                };
+                let (train, valid, _) = zoo_data::dataset::training_clips(&t, p).map_err(|e| Message::new(e.0))?;
+                (train, valid)
+            }
+            None => {
+                let clips = zoo_data::dataset::load_reporting(&self.dir, None, false, p)?;
+                zoo_data::dataset::split(clips, &self.valid_glob).map_err(Message::new)?
+            }
+        };
         let train_w = zoo_data::dataset::windows(&train_clips, &humanoid::WINDOW);
         let valid_w = zoo_data::dataset::windows(&valid_clips, &humanoid::WINDOW);
         if train_w.count == 0 || valid_w.count == 0 {
             bail!(
                 "{}: {} training and {} validation windows of {} frames: both splits need clips longer than {} frames",
-                self.dir.display(),
+                self.source(),
                 train_w.count,
                 valid_w.count,
                 humanoid::WINDOW.window,
@@ -520,6 +576,14 @@ impl HumanoidData {
             );
         }
         Ok((train_clips, valid_clips, train_w, valid_w))
+    }
+
+    /// Where the clips come from, in words.
+    fn source(&self) -> String {
+        match self.synth_minutes {
+            Some(minutes) => format!("synthetic locomotion, {minutes} min, seed {}", self.seed),
+            None => self.dir.display().to_string(),
+        }
     }
 }
 
@@ -530,10 +594,22 @@ fn humanoid_settings(
     extra: &mut serde_json::Map<String, serde_json::Value>,
 ) -> ArnnResult<(HumanoidData, bool)> {
     let Some(dir) = &a.run.resume else {
-        let s = HumanoidData {
-            dir: a.data.clone().context("pass --data BVH_FOLDER")?,
-            valid_glob: a.valid_glob.clone().context("pass --valid-glob GLOB")?,
-            seed: a.run.seed,
+        let s = match (&a.data, a.design) {
+            (None, ArnnDesign::Inbetween) => HumanoidData {
+                dir: PathBuf::new(),
+                synth_minutes: Some(a.synth_minutes.unwrap_or(match a.preset {
+                    ArnnPreset::Quick => QUICK_SYNTH_MINUTES,
+                    _ => DEFAULT_SYNTH_MINUTES,
+                })),
+                valid_glob: String::new(),
+                seed: a.run.seed,
+            },
+            _ => HumanoidData {
+                dir: a.data.clone().context("pass --data BVH_FOLDER")?,
+                synth_minutes: None,
+                valid_glob: a.valid_glob.clone().context("pass --valid-glob GLOB")?,
+                seed: a.run.seed,
+            },
         };
         extra.insert(STATE_KEY.into(), serde_json::to_value(&s).context("the humanoid data")?);
         return Ok((s, false));
@@ -547,6 +623,9 @@ fn humanoid_settings(
     })?;
     let mut s: HumanoidData = serde_json::from_value(stored).context("the recorded humanoid data")?;
     if let Some(d) = &a.data {
+        if s.synth_minutes.is_some() {
+            bail!("--resume {}: the run trained on synthetic locomotion, not on --data", dir.display());
+        }
         s.dir = d.clone();
     }
     if let Some(g) = &a.valid_glob
@@ -663,13 +742,23 @@ pub fn train_inbetween(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
             "--variant, --no-memory-output, --frame-phase, --frame-phase-omega and --ground-weight are settings of the autoregressive ARNN; the in-betweening design has none of them: drop them"
         );
     }
-    if a.run.resume.is_none() && (a.data.is_none() || a.valid_glob.is_none()) {
-        bail!("--design inbetween trains on humanoid clips: pass --data BVH_FOLDER --valid-glob GLOB");
+    if a.run.resume.is_none() && a.data.is_some() != a.valid_glob.is_some() {
+        bail!(
+            "--design inbetween trains on humanoid clips: pass --data BVH_FOLDER --valid-glob GLOB, or neither for \
+             synthetic locomotion (--synth-minutes)"
+        );
+    }
+    if a.data.is_some() && a.synth_minutes.is_some() {
+        bail!("--synth-minutes is the synthetic locomotion used without --data: drop one of them");
     }
     let out = prepare_run_folder(a)?;
     let mut extra = serde_json::Map::new();
     extra.insert("design".into(), crate::inbetween::DESIGN.into());
     let (s, resumed) = humanoid_settings(a, &mut extra)?;
+    let epochs = match (a.preset, a.epochs_given || resumed) {
+        (ArnnPreset::Quick, false) => QUICK_INBETWEEN_EPOCHS,
+        _ => a.run.epochs,
+    };
     let (train_clips, valid_clips, train_w, valid_w) = s.load(p)?;
     let skeleton = &train_clips[0].clip.skeleton;
     let (config, norm) = if resumed {
@@ -677,14 +766,16 @@ pub fn train_inbetween(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
         let (config, norm) = crate::inbetween::read_meta(&from)
             .with_context(|| format!("resuming from {}: it holds no in-betweening checkpoint", from.display()))?;
         if config.skeleton.names != skeleton.names {
-            bail!("--resume {}: the run was trained on another skeleton than {}'s", out.display(), s.dir.display());
+            bail!("--resume {}: the run was trained on another skeleton than {}'s", out.display(), s.source());
         }
         (config, norm)
     } else {
         let fps = 1.0 / train_clips[0].clip.frame_time;
         let mut config = crate::inbetween::config_for(skeleton, fps);
-        if a.preset == ArnnPreset::Tiny {
-            config = crate::inbetween::InbetweenConfig::tiny(config.skeleton, config.euler_axes);
+        match a.preset {
+            ArnnPreset::Paper => {}
+            ArnnPreset::Quick => config = crate::inbetween::InbetweenConfig::quick(config.skeleton, config.euler_axes),
+            ArnnPreset::Tiny => config = crate::inbetween::InbetweenConfig::tiny(config.skeleton, config.euler_axes),
         }
         if let Some(b) = a.batch_size {
             config.batch_size = b;
@@ -693,19 +784,27 @@ pub fn train_inbetween(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
             config.learning_rate = lr;
         }
         config.seed = a.run.seed;
-        config.lr_half_life = (train_w.count.div_ceil(config.batch_size) * a.run.epochs).div_ceil(4) as u64;
+        config.lr_half_life = (train_w.count.div_ceil(config.batch_size) * epochs).div_ceil(4) as u64;
         let norm = crate::inbetween_train::window_normalization(&train_w);
         (config, norm)
     };
     let (n_train, n_valid) = (train_w.count, valid_w.count);
     let mut trainer = crate::inbetween_train::InbetweenTrainer::new(&config, norm, train_w, &valid_w)?;
-    let source = format!(
-        "{} ({} training clips, {} validation clips matching `{}`)",
-        s.dir.display(),
-        train_clips.len(),
-        valid_clips.len(),
-        s.valid_glob
-    );
+    let source = match s.synth_minutes {
+        Some(_) => format!(
+            "{} ({} training clips, {} validation clips: every tenth)",
+            s.source(),
+            train_clips.len(),
+            valid_clips.len()
+        ),
+        None => format!(
+            "{} ({} training clips, {} validation clips matching `{}`)",
+            s.dir.display(),
+            train_clips.len(),
+            valid_clips.len(),
+            s.valid_glob
+        ),
+    };
     println!(
         "training the in-betweening network on {source}: {n_train} training / {n_valid} validation windows of {} \
          frames, {} joints, {} parameters, learning rate {} halved every {} steps, run folder {}",
@@ -725,17 +824,24 @@ pub fn train_inbetween(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
         resume: resumed,
         data: source,
         extra,
-        ..TrainOptions::new(&out, a.run.epochs, config.seed)
+        ..TrainOptions::new(&out, epochs, config.seed)
     };
     let state = train_loop::train(&mut trainer, &opts)?;
-    println!(
-        "{}\nscore it: zoo bench --data {} --valid-glob '{}' --layout keys --methods linear,bezier,arnn:{},arnn+lock:{}",
-        done_line(&state, "validation", &out),
-        s.dir.display(),
-        s.valid_glob,
-        out.display(),
-        out.display()
-    );
+    let methods = format!("linear,bezier,arnn:{},arnn+lock:{}", out.display(), out.display());
+    match s.synth_minutes {
+        Some(_) => println!(
+            "{}\nscore it on clips it never saw: zoo data synth --out synth-test --seed {} && zoo bench --data synth-test \
+             --valid-glob '*' --layout keys --methods {methods}",
+            done_line(&state, "validation", &out),
+            s.seed + 1000,
+        ),
+        None => println!(
+            "{}\nscore it: zoo bench --data {} --valid-glob '{}' --layout keys --methods {methods}",
+            done_line(&state, "validation", &out),
+            s.dir.display(),
+            s.valid_glob,
+        ),
+    }
     Ok(())
 }
 

@@ -135,7 +135,8 @@ impl StitchMethod {
         }
         let forms = "concat, inertialize, interp, rmr:RUN, rmr+ik:RUN, rmr+lock:RUN, \
                      rmr+ik+lock:RUN (each also as inert+rmr..., with +guard after rmr or rmr+ik, as in \
-                     rmr+ik+guard+lock:RUN, and as candle-rmr... for the training model in candle), rtn:RUN_DIR, \
+                     rmr+ik+guard+lock:RUN, with +reach at the end, and as candle-rmr... for the training model in candle), \
+                     rtn:RUN_DIR, \
                      rtn+lock:RUN_DIR";
         let Some((head, path)) = spec.split_once(':') else { bail!("unknown method `{spec}`: expected {forms}") };
         // `candle-...`: the training model in candle instead of the exported one in the runtime.
@@ -151,6 +152,14 @@ impl StitchMethod {
         // `rmr+guard...`, `rmr+ik+guard+lock`: the seam guard after the ankle IK, before the lock.
         let seam_guard = head.starts_with("rmr") && head.contains("+guard");
         let head = if seam_guard { head.replacen("+guard", "", 1) } else { head.to_string() };
+        // `...+reach`: the clips kept as they are a window away from every seam (`zoo stitch`'s default).
+        // `...+reachN`: that reach in frames.
+        let (keep_untouched, reach, head) = match head.rsplit_once("+reach") {
+            Some((rest, n)) if rest.starts_with("rmr") && (n.is_empty() || n.parse::<usize>().is_ok_and(|n| n > 0)) => {
+                (true, n.parse::<usize>().ok(), rest.to_string())
+            }
+            _ => (false, None, head),
+        };
         let head = head.as_str();
         let (lock, ik) = match head {
             "rmr" => (false, false),
@@ -164,7 +173,7 @@ impl StitchMethod {
             _ => bail!("unknown method `{spec}`: expected {forms} (other kinds do not stitch)"),
         };
         let dir = PathBuf::from(path);
-        let post = PostProcess { ankle_ik: ik, foot_lock: lock, pre_blend, seam_guard };
+        let post = PostProcess { ankle_ik: ik, foot_lock: lock, pre_blend, seam_guard, keep_untouched, reach };
         let refiner: Box<dyn SeamRefiner> = if candle {
             Box::new(CandleRmr::load(&dir, post).with_context(|| format!("method `{spec}`"))?)
         } else {

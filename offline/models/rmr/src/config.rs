@@ -226,7 +226,8 @@ impl Config {
         }
     }
 
-    /// A small model for tests: tiny layers, `T = 30` frames in units of 10, batch 8, lr 3e-3,
+    /// A small model for tests (it trains in seconds and learns little; `quick` is the one to
+    /// try): tiny layers, `T = 30` frames in units of 10, batch 8, lr 3e-3,
     /// database segments every 2 frames.
     pub fn tiny() -> Self {
         let mut c = Config::paper();
@@ -240,12 +241,28 @@ impl Config {
         c
     }
 
-    /// A preset by name: `paper` or `tiny`.
+    /// The quick model, to try the tools in minutes (`zoo train rmr --preset quick`): the paper's
+    /// windows (`T = 60`, runtime 60/30) and layers at half width (encoder 128, 128; BGRU 2 x
+    /// 128; decoder 128), batch 8, the paper's lr 1e-4 (at 3e-4 with batch 16 the decoder's units
+    /// died in the first epochs), database segments every 2 frames. On the default synthetic data
+    /// its 80 epochs take about 5 minutes of one thread (docs/rmr.md, "Quick start").
+    pub fn quick() -> Self {
+        let mut c = Config::paper();
+        c.encoder = vec![128, 128];
+        c.hidden = 128;
+        c.decoder = vec![128];
+        c.pairs = PairConfig { database_stride: 2, ..PairConfig::default() };
+        c.train = TrainConfig { learning_rate: 1e-4, batch_size: 8, ..TrainConfig::default() };
+        c
+    }
+
+    /// A preset by name: `paper`, `quick` or `tiny`.
     pub fn preset(name: &str) -> RmrResult<Config> {
         match name {
             "paper" => Ok(Config::paper()),
+            "quick" => Ok(Config::quick()),
             "tiny" => Ok(Config::tiny()),
-            _ => Err(RmrError::Config(format!("unknown preset `{name}`: use paper or tiny"))),
+            _ => Err(RmrError::Config(format!("unknown preset `{name}`: use paper, quick or tiny"))),
         }
     }
 

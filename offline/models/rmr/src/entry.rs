@@ -36,7 +36,8 @@ impl ZooModel for RmrModel {
     fn train(&self, options: &clap::ArgMatches, command: Vec<(String, Vec<String>)>) -> Result<(), BoxError> {
         let mut a = RmrArgs::from_arg_matches(options)?;
         a.run.command = command;
-        train(a)
+        let epochs_given = options.value_source("epochs") == Some(clap::parser::ValueSource::CommandLine);
+        train(a, epochs_given)
     }
 
     fn export(&self, run: &Path, options: &ExportOptions) -> Result<Exported, ExportError> {
@@ -73,7 +74,8 @@ pub struct RmrArgs {
     /// held out to test stitching on moves the model never saw, as docs/ood.md does for the RTN).
     #[arg(long)]
     pub exclude_glob: Option<String>,
-    /// Model sizes.
+    /// Model sizes (`quick`: to try the tools in minutes, its own epochs unless `--epochs` is
+    /// given; docs/rmr.md).
     #[arg(long, value_enum, default_value_t = RmrPreset::Paper)]
     pub preset: RmrPreset,
     /// Refiner cell (Table 1 ablation) [default: the preset's, bgru].
@@ -138,10 +140,11 @@ fn seam_weight(s: &str) -> Result<f64, String> {
 }
 
 /// Runs `zoo train rmr`.
-fn train(a: RmrArgs) -> Result<(), BoxError> {
+fn train(a: RmrArgs, epochs_given: bool) -> Result<(), BoxError> {
     let (run, data) = zoo_nn::train_args::specs(&a.run, &a.data, a.exclude_glob.clone())?;
     let o = RmrRunOptions {
         preset: a.preset,
+        epochs_given,
         cell: a.cell,
         t_begin: a.t_begin,
         no_trajectory_loss: a.no_trajectory_loss,

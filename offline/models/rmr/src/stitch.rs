@@ -244,6 +244,13 @@ pub struct PostProcess {
     /// ([`zoo_motion::stitch::guard`]; not in the paper; after the ankle IK, before the lock;
     /// `rmr+ik+guard+lock` in the benchmark).
     pub seam_guard: bool,
+    /// The clips kept as they are from one window away from every seam, eased back to them
+    /// from half a window on ([`zoo_motion::stitch::reach`]; not in the paper; after the lock;
+    /// `zoo stitch` by default, `+reach` at the end of a benchmark method).
+    pub keep_untouched: bool,
+    /// The reach in frames with `keep_untouched` (`None`:
+    /// [`zoo_motion::stitch::reach::default_reach`] of the window; `+reachN` in the benchmark).
+    pub reach: Option<usize>,
 }
 
 /// An RMR's stitch of an aligned sequence, with what the post-processing did.
@@ -287,5 +294,10 @@ pub fn refine_seams(
         _ => None,
     };
     let lock_move = post.foot_lock.then(|| crate::footlock::lock_feet(&mut clip, &refined.contacts, layout));
+    if post.keep_untouched {
+        let input = if pre_blend { blended.as_ref().unwrap_or(aligned) } else { aligned };
+        let reach = post.reach.unwrap_or(zoo_motion::stitch::reach::default_reach(opts.window));
+        zoo_motion::stitch::reach::keep_untouched(&mut clip, input, seams, reach, layout);
+    }
     Ok(RefinedSeams { clip, ankles: refined.ankles, ankle_move, lock_move, guarded })
 }

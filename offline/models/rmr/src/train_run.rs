@@ -17,7 +17,12 @@ use zoo_nn::train_loop::{self, TrainOptions};
 pub enum RmrPreset {
     /// The paper's sizes (`Config::paper`: encoder 256, BGRU 2 x 256, T = 60 frames).
     Paper,
-    /// A small model for tests and quick checks (`Config::tiny`: 30-frame windows).
+    /// The model to try the tools with (`Config::quick`: the paper's windows, half its widths;
+    /// 80 epochs unless `--epochs` is given): about 5 minutes of one thread on the default
+    /// synthetic data, less foot sliding than inertialization on held-out cases with a ground
+    /// truth (docs/rmr.md, "Quick start").
+    Quick,
+    /// A small model for tests (`Config::tiny`: 30-frame windows; trains in seconds, learns little).
     Tiny,
 }
 
@@ -54,6 +59,8 @@ pub struct RmrRunOptions {
     pub data: TrainingClips,
     /// Model sizes.
     pub preset: RmrPreset,
+    /// Whether `--epochs` was given (the quick preset has its own, [`QUICK_EPOCHS`], otherwise).
+    pub epochs_given: bool,
     /// Refiner cell (Table 1 ablation).
     pub cell: Option<CellArg>,
     /// Frames of the beginning loss `T_begin` (0 turns it off).
@@ -85,6 +92,10 @@ pub struct RmrRunOptions {
     pub database_stride: Option<usize>,
 }
 
+/// Epochs of `--preset quick` when `--epochs` is not given: under 10 minutes on one thread on the
+/// default 10 minutes of synthetic locomotion (docs/rmr.md, "Quick start").
+pub const QUICK_EPOCHS: usize = 80;
+
 /// The run folder, checked before any data is loaded: a fresh run never replaces a trained one
 /// unless `--overwrite` says so (the cached pair plans are kept), a resumed run must be an RMR
 /// run folder, and the folder must be writable.
@@ -100,6 +111,7 @@ fn prepare_run_folder(o: &RmrRunOptions) -> RmrResult<PathBuf> {
 fn fresh_config(a: &RmrRunOptions, skeleton: &zoo_motion::Skeleton) -> RmrResult<Config> {
     let preset = match a.preset {
         RmrPreset::Paper => Config::paper(),
+        RmrPreset::Quick => Config::quick(),
         RmrPreset::Tiny => Config::tiny(),
     };
     let layout = StitchLayout::bandai2(skeleton).context(
@@ -227,6 +239,10 @@ pub fn run(a: &RmrRunOptions, p: &dyn Progress) -> RmrResult<()> {
         out.display()
     );
     let seed = c.train.seed;
+    let epochs = match (a.preset, a.epochs_given || a.run.resume.is_some()) {
+        (RmrPreset::Quick, false) => QUICK_EPOCHS,
+        _ => a.run.epochs,
+    };
     let mut trainer = trainer;
     let threads = a.run.thread_count();
     trainer.set_threads(threads)?;
@@ -241,7 +257,7 @@ pub fn run(a: &RmrRunOptions, p: &dyn Progress) -> RmrResult<()> {
         resume: a.run.resume.is_some(),
         data: source,
         extra,
-        ..TrainOptions::new(&out, a.run.epochs, seed)
+        ..TrainOptions::new(&out, epochs, seed)
     };
     let state = train_loop::train(&mut training, &opts)?;
     println!("{}", zoo_nn::run_folder::done_line(&state, &out));

@@ -185,7 +185,7 @@ fn ablation_switches_change_the_loss_and_parse() {
     assert!((value(&on.total) - value(&off.total) - value(&on.trajectory)).abs() < 1e-4);
     assert_eq!(RefinerCell::parse("BGRU").unwrap(), RefinerCell::Bgru);
     assert!(RefinerCell::parse("rnn").unwrap_err().to_string().contains("lstm, gru, blstm or bgru"));
-    assert!(Config::preset("huge").unwrap_err().to_string().contains("paper or tiny"));
+    assert!(Config::preset("huge").unwrap_err().to_string().contains("paper, quick or tiny"));
     let json = serde_json::to_value(Config::paper().with_cell(RefinerCell::Blstm)).unwrap();
     assert_eq!(json["model"], "rmr");
     assert_eq!(json["cell"], "blstm");
