@@ -477,6 +477,11 @@ fn work_sizes_past_the_memory_bound_are_refused_before_they_are_allocated() {
         "{err}"
     );
     assert!(!err.contains("memory allocation of") && !synth.join("config.json").exists(), "{err}");
+    // `zoo data synth` holds its clips until it writes them: the same bound.
+    let (code, err) = under_2gb(&["data", "synth", "--minutes", "1111", "--out", s(&synth)]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("--minutes 1111 at 30 fps") && err.contains("ZOO_MEMORY_GB"), "{err}");
+    assert!(!synth.exists(), "{err}");
 
     let rmr = d.join("rmr");
     let args = ["train", "rmr", "--preset", "tiny", "--synth-minutes", "0.5", "--seed", "5", "--epochs", "1"];

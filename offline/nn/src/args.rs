@@ -212,7 +212,7 @@ pub fn check_synth_memory(
     if need > bound {
         let most = (bound / bytes_per_frame / fps / 60.0).floor();
         return Err(format!(
-            "{option} {minutes} at {fps} fps is {frames:.0} frames, which this training holds in about {:.1} GB, \
+            "{option} {minutes} at {fps} fps is {frames:.0} frames, which this command holds in about {:.1} GB, \
              past the memory bound of {:.2} GB: give at most {most:.0} minutes, or raise the bound with the \
              environment variable ZOO_MEMORY_GB=N",
             need / 1e9,
