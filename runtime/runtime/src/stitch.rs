@@ -852,10 +852,10 @@ pub const STREAM_LOOKAHEAD: usize = 45;
 pub const STREAM_HISTORY: usize = 45;
 
 /// Frames a stream puts the ankles of per push (a window decodes `s` frames every `s` pushes).
-const IK_FRAMES: usize = 10;
+const IK_FRAMES: usize = 6;
 
 /// Evaluations of a seam's guard weight a stream runs per push (a seam takes 11).
-const WEIGH_EVALUATIONS: usize = 3;
+const WEIGH_EVALUATIONS: usize = 2;
 
 /// Frames on each side of a seam the stream's guard weighs it from (all it reads and weighs).
 const ZONE: usize = zoo_motion::stitch::guard::GUARD_FRAMES + zoo_motion::stitch::guard::GUARD_RAMP + 2;
