@@ -78,6 +78,17 @@ pub(crate) struct SpreadPlan {
 }
 
 impl SpreadPlan {
+    /// A fresh state of the graph with the window `x` (`window * dim` normalised values) set as
+    /// its input, ready to run node by node (a fresh state per window: the recurrences' ops keep
+    /// their state across turns).
+    fn start(&self, x: &[f32], window: usize, dim: usize) -> Result<TypedSimpleState, MotionError> {
+        let run = |e: TractError| MotionError::Run { reason: chain(&e) };
+        let input = Tensor::from_shape::<f32>(&[window, 1, dim], x).map_err(run)?;
+        let mut state = self.plan.spawn().map_err(run)?;
+        state.set_inputs(tvec![input.into()]).map_err(run)?;
+        Ok(state)
+    }
+
     /// The chunked plan of `proto` for windows of `window` frames of `dim` values, or `None`
     /// when the graph has no recurrence to chunk or the chunked graph does not plan.
     fn new(proto: &tract_onnx::pb::ModelProto, window: usize, dim: usize) -> Option<SpreadPlan> {
@@ -454,9 +465,7 @@ impl StitchRefiner {
         let spread = self.spread_plan()?;
         let run = |e: TractError| MotionError::Run { reason: chain(&e) };
         Some((|| {
-            let mut state = spread.plan.spawn().map_err(run)?;
-            let input = Tensor::from_shape::<f32>(&[self.window, 1, self.dim], x).map_err(run)?;
-            state.set_inputs(tvec![input.into()]).map_err(run)?;
+            let mut state = spread.start(x, self.window, self.dim)?;
             for &node in &spread.order {
                 state.compute_one(node).map_err(run)?;
             }
@@ -929,6 +938,10 @@ pub struct StitchStreamOf<R> {
     /// whole in the push that completes it), and the window it is running.
     spread: Option<Arc<SpreadPlan>>,
     job: Option<WindowJob>,
+    /// Whether a push runs its window ahead of schedule while it has time (off with
+    /// `ZOO_STREAM_AHEAD=0`: the schedule alone, the same nodes in the same pushes on every run,
+    /// for comparisons).
+    ahead: bool,
     /// Frames refined for good and decoded so far.
     refined: usize,
     /// Frames whose rotations in `dec_rot` have the ankle IK (`FootCleanup::place_ankles`).
@@ -1016,6 +1029,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             next_window: 0,
             spread: refiner.spread_plan(),
             job: None,
+            ahead: std::env::var("ZOO_STREAM_AHEAD").map_or(true, |v| v != "0"),
             refined: 0,
             ik_done: 0,
             guard_w: Vec::with_capacity(frames),
@@ -1167,7 +1181,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         self.weigh_seams(false);
         self.release(false);
         self.compact();
-        self.run_due_windows(false, Some(start))?;
+        self.run_due_windows(false, self.ahead.then_some(start))?;
         self.decode_final();
         Ok(())
     }
@@ -1227,9 +1241,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
                 if let Some(i) = x.iter().position(|v| !v.is_finite()) {
                     return Err(MotionError::NonFinite { name: "window".into(), index: i, character: 0, value: x[i] });
                 }
-                let input = Tensor::from_shape::<f32>(&[w, 1, self.refiner.dim], x).map_err(run)?;
-                let mut state = spread.plan.spawn().map_err(run)?;
-                state.set_inputs(tvec![input.into()]).map_err(run)?;
+                let state = spread.start(x, w, self.refiner.dim)?;
                 self.job = Some(WindowJob { state, at: 0, worked: 0 });
             }
             let job = self.job.as_mut().expect("a window runs");

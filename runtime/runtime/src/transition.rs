@@ -145,6 +145,27 @@ impl TransitionState {
         self.heightmap.as_ref()
     }
 
+    /// Sets up a new transition of `length` frames towards `target` (global positions) after the
+    /// last context frame `last`, with `context` frames of context, whose target blend starts
+    /// at frame `blend_from`: nothing generated, nothing computed ahead, no miss, no fallback,
+    /// not posed. The caller sets the start's own fields (`x`, `root`, `started`,
+    /// `context_fed`).
+    fn reset(&mut self, target: &[f32], last: &[f32], context: usize, length: usize, blend_from: usize) {
+        self.target.copy_from_slice(target);
+        self.last.copy_from_slice(last);
+        self.context_total = context;
+        self.frames = 0;
+        self.length = length;
+        self.blend_from = blend_from;
+        self.generated = 0;
+        self.ahead.clear();
+        self.ahead_from = 0;
+        self.raw = false;
+        self.miss = None;
+        self.fallback_weight = 0.0;
+        self.posed.active = false;
+    }
+
     /// Whether [`TransitionRunner::start`] was called for this state.
     pub fn is_started(&self) -> bool {
         self.started
@@ -623,23 +644,11 @@ impl TransitionRunner {
         });
         result?;
         for (c, s) in states.iter_mut().enumerate() {
-            s.target.copy_from_slice(&target[c * d..(c + 1) * d]);
-            s.last.copy_from_slice(&past[(c + 1) * per - d..(c + 1) * per]);
-            s.generated = 0;
+            s.reset(&target[c * d..(c + 1) * d], &past[(c + 1) * per - d..(c + 1) * per], frames, length, blend_from);
             s.x.copy_from_slice(&self.feats[c * per..c * per + d]);
             s.root = features::root_of(&past[c * per..]);
             s.started = true;
-            s.context_total = frames;
             s.context_fed = 1;
-            s.frames = 0;
-            s.length = length;
-            s.blend_from = blend_from;
-            s.ahead.clear();
-            s.ahead_from = 0;
-            s.raw = false;
-            s.miss = None;
-            s.fallback_weight = 0.0;
-            s.posed.active = false;
         }
         let mut sel = std::mem::take(&mut self.sel);
         sel.clear();
@@ -695,22 +704,11 @@ impl TransitionRunner {
             });
         }
         for (c, s) in states.iter_mut().enumerate() {
-            s.target.copy_from_slice(&target[c * d..(c + 1) * d]);
-            s.last.copy_from_slice(&first[c * d..(c + 1) * d]);
-            s.root = features::root_of(&first[c * d..]);
+            let first = &first[c * d..(c + 1) * d];
+            s.reset(&target[c * d..(c + 1) * d], first, past_frames, length, blend_from);
+            s.root = features::root_of(first);
             s.started = false;
-            s.context_total = past_frames;
             s.context_fed = 0;
-            s.frames = 0;
-            s.length = length;
-            s.blend_from = blend_from;
-            s.generated = 0;
-            s.ahead.clear();
-            s.ahead_from = 0;
-            s.raw = false;
-            s.miss = None;
-            s.fallback_weight = 0.0;
-            s.posed.active = false;
         }
         // The target vectors, kept by each character until its first graph run.
         for (c, s) in states.iter_mut().enumerate() {

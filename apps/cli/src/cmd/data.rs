@@ -104,17 +104,23 @@ pub fn run(cmd: DataCommand) -> anyhow::Result<()> {
     }
 }
 
+/// Refuses an output clip zoo cannot write (FBX, or another extension) or may not replace.
+fn check_clip_output(output: &std::path::Path) -> anyhow::Result<()> {
+    use zoo_data::clip_io::ClipFormat;
+    if ClipFormat::of(output).is_none_or(|f| f == ClipFormat::Fbx) {
+        anyhow::bail!(
+            "{}: the output's extension must be .bvh, .bvh.gz, .glb or .gltf (zoo writes BVH and glTF)",
+            output.display()
+        );
+    }
+    crate::cmd::check_output_file("output", output)
+}
+
 /// `zoo data resample`: one clip read, resampled ([`zoo_motion::Clip::resampled`]) and written
 /// through `zoo_data::clip_io`, after its size is checked against `--max-memory`.
 fn resample(a: ResampleArgs) -> anyhow::Result<()> {
     use zoo_data::clip_io;
-    if clip_io::ClipFormat::of(&a.output).is_none_or(|f| f == clip_io::ClipFormat::Fbx) {
-        anyhow::bail!(
-            "{}: the output's extension must be .bvh, .bvh.gz, .glb or .gltf (zoo writes BVH and glTF)",
-            a.output.display()
-        );
-    }
-    crate::cmd::check_output_file("output", &a.output)?;
+    check_clip_output(&a.output)?;
     let opts = clip_io::ReadOptions { drop_dummy_root: false, take: a.take.clone() };
     let clip = clip_io::read(&a.input, &opts)?;
     if clip.frames() == 0 {
@@ -142,13 +148,7 @@ fn resample(a: ResampleArgs) -> anyhow::Result<()> {
 /// converted to zoo's on reading and to the output format's on writing).
 fn convert(a: ConvertArgs) -> anyhow::Result<()> {
     use zoo_data::clip_io;
-    if clip_io::ClipFormat::of(&a.output).is_none_or(|f| f == clip_io::ClipFormat::Fbx) {
-        anyhow::bail!(
-            "{}: the output's extension must be .bvh, .bvh.gz, .glb or .gltf (zoo writes BVH and glTF)",
-            a.output.display()
-        );
-    }
-    crate::cmd::check_output_file("output", &a.output)?;
+    check_clip_output(&a.output)?;
     let opts = clip_io::ReadOptions { drop_dummy_root: false, take: a.take.clone() };
     let (clip, source) = clip_io::read_with_source(&a.input, &opts)?;
     clip_io::write(&clip, &a.output)?;
