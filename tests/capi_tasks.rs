@@ -215,6 +215,8 @@ fn model_calls() -> Vec<Call> {
         call("zoo_stitch_set_window", "zoo_stitch_*", Stitch, |m| unsafe { zoo_stitch_set_window(m, 30, 15) }),
         call("zoo_stitch_pre_blend", "zoo_stitch_*", Stitch, |m| unsafe { zoo_stitch_pre_blend(m, &mut false) }),
         call("zoo_stitch_set_seam_guard", "zoo_stitch_*", Stitch, |m| unsafe { zoo_stitch_set_seam_guard(m, true) }),
+        call("zoo_stitch_set_seam_reach", "zoo_stitch_*", Stitch, |m| unsafe { zoo_stitch_set_seam_reach(m, 30) }),
+        call("zoo_stitch_seam_reach", "zoo_stitch_*", Stitch, |m| unsafe { zoo_stitch_seam_reach(m, &mut 0) }),
         call("zoo_stitch_refine", "zoo_stitch_*", Stitch, |m| unsafe {
             let roots = [ZooRootMotion::default(); 2];
             let rotations = [0.0f32; 8];
@@ -483,9 +485,9 @@ fn every_task_loads_runs_and_is_refused_by_the_other_families() {
             refusals += 1;
         }
     }
-    // 19 functions: 4 transition, 2 keyframes, 6 stitch, 5 synthesis, 2 control.
-    assert_eq!(calls.len(), 19);
-    assert_eq!(refusals, 15 + 17 + 13 + 2 * 12, "every other family's functions were called on every model");
+    // 21 functions: 4 transition, 2 keyframes, 8 stitch, 5 synthesis, 2 control.
+    assert_eq!(calls.len(), 21);
+    assert_eq!(refusals, 17 + 19 + 13 + 2 * 14, "every other family's functions were called on every model");
 }
 
 /// `zoo_synthesis_set_refine` on a file with a refiner: runners and characters made after
@@ -734,7 +736,7 @@ fn per_frame_calls_allocate_no_more_than_the_rust_api() {
         let model = Model::load(&f.rmr);
         // Safety: the other tests of this binary read no environment variable of zoo's but this
         // one, whose only effect is when a window's nodes run.
-        unsafe { std::env::set_var("ZOO_STREAM_AHEAD", "0") };
+        std::env::set_var("ZOO_STREAM_AHEAD", "0");
         let stream = stitch_stream(model.0);
         let mut rust_stream = refiner.clone().shared_stream();
         let mut pop = Pop::new(k, 0);
@@ -1320,7 +1322,7 @@ fn stitching_through_the_c_abi_matches_the_rust_api() {
         // The default stream's latency: the window, the pushes each window is spread over
         // (`s - 1`) less one, the lookahead of the guard and the lock, and the frames they
         // release at once.
-        let latency = 30 + (15 - 2) + STREAM_LOOKAHEAD + STREAM_CHUNK - 1;
+        let latency = 30 + (15 - 1) + STREAM_LOOKAHEAD + STREAM_CHUNK - 1;
         assert_eq!(info, ZooStitchInfo { window: 30, stride: 15, blend_frames: 10, latency });
         // The fixture refines the raw concatenation (its file's `stitch.pre_blend` is false).
         let mut pre_blend = true;
@@ -1469,6 +1471,21 @@ fn stitching_at_seams_through_the_c_abi_matches_the_rust_api() {
         unguarded.set_seam_guard(false);
         assert!(out.frames(k) == rust_refine_at(&unguarded, &poses, &seams, cleanup), "the C ABI's guard is off");
         assert_error(zoo_stitch_set_seam_guard(null_mut(), true), ZooStatus::NullPointer, "`model` is NULL");
+        // The seams' reach: the window by default, 0 refines everywhere, past the maximum refused.
+        let mut reach = 0usize;
+        assert_ok(zoo_stitch_seam_reach(model, &mut reach));
+        assert_eq!(reach, refiner.window(), "the reach is the window by default, as in zoo stitch");
+        assert_ok(zoo_stitch_set_seam_reach(model, 0));
+        assert_ok(zoo_stitch_seam_reach(model, &mut reach));
+        assert_eq!(reach, 0);
+        assert_ok(call(&mut out, seams.as_ptr(), seams.len()));
+        let mut everywhere = unguarded.clone();
+        everywhere.set_seam_reach(None).unwrap();
+        let refined_everywhere = rust_refine_at(&everywhere, &poses, &seams, cleanup);
+        assert!(out.frames(k) == refined_everywhere, "the C ABI refines everywhere");
+        assert!(refined_everywhere != rust_refine_at(&unguarded, &poses, &seams, cleanup), "the reach changed nothing");
+        let status = zoo_stitch_set_seam_reach(model, 1 << 40);
+        assert_error(status, ZooStatus::InvalidArgument, "more than 3600");
         zoo_model_free(model);
     }
 }
@@ -1681,7 +1698,7 @@ fn stitch_streams_refuse_calls_out_of_order() {
             ZooStatus::NotAvailable,
             &format!(
                 "the refined pose of frame 0 is not ready: it is once frame {} is pushed",
-                30 + (15 - 2) + STREAM_LOOKAHEAD + STREAM_CHUNK - 1
+                30 + (15 - 1) + STREAM_LOOKAHEAD + STREAM_CHUNK - 1
             ),
         );
         for f in 0..10 {
@@ -1712,7 +1729,7 @@ fn stitch_streams_refuse_calls_out_of_order() {
         assert_ok(zoo_stitch_info(model, &mut info));
         assert_eq!(
             (info.window, info.stride, info.latency),
-            (20, 10, 20 + (10 - 2) + STREAM_LOOKAHEAD + STREAM_CHUNK - 1)
+            (20, 10, 20 + (10 - 1) + STREAM_LOOKAHEAD + STREAM_CHUNK - 1)
         );
     }
 }

@@ -328,7 +328,9 @@ fn aligned_poses(frames: usize) -> (Vec<zoo_runtime::EnginePose>, zoo_motion::Cl
     let cfg = zoo_data::synth::SynthConfig { minutes: 0.5, seed: 5, clip_seconds: 4.0, ..Default::default() };
     let clips: Vec<zoo_motion::Clip> = zoo_data::synth::generate(&cfg).into_iter().map(|c| c.clip).collect();
     let layout = StitchLayout::bandai2(&clips[0].skeleton).unwrap();
-    let aligned = align_clips(&[clips[0].slice(10, 70), clips[3].slice(20, 90)], &layout, 10).unwrap().clip;
+    // Two clips; more after them for longer sequences (the first 130 frames are the same).
+    let parts = [clips[0].slice(10, 70), clips[3].slice(20, 90), clips[1].slice(0, 110), clips[2].slice(5, 115)];
+    let aligned = align_clips(&parts, &layout, 10).unwrap().clip;
     let clip = aligned.slice(0, frames);
     let j = clip.joints();
     let poses: Vec<zoo_runtime::EnginePose> = (0..frames)
@@ -441,6 +443,9 @@ fn stream_all(
     guard: bool,
 ) -> (Vec<zoo_runtime::EnginePose>, Vec<[bool; 4]>) {
     let mut stream = refiner.stream();
+    // Each window on the schedule alone, as a loaded machine runs it: the latest its frames are
+    // refined (a window run ahead of schedule only makes them ready sooner).
+    stream.set_run_ahead(false);
     stream.set_cleanup(cleanup).unwrap();
     stream.set_seam_guard(guard).unwrap();
     let latency = stream.latency();
@@ -469,28 +474,29 @@ fn stream_all(
 
 /// The streaming form gives the whole-sequence form's poses with a fixed latency: `w` frames
 /// for the refiner alone (value for value: no later window revisits a popped frame), `w +`
-/// lookahead `+` chunk `- 1` with the ankle IK and the foot lock of `zoo stitch`.
+/// lookahead `+` chunk `- 1` with the ankle IK and the foot lock of `zoo stitch`. Without
+/// seams, with the seams' reach off (a stream with a reach passes motion without seams through).
 #[test]
 fn stitch_stream_matches_the_whole_sequence_with_fixed_latency() {
-    use zoo_runtime::stitch::{FootCleanup, STREAM_CHUNK, STREAM_HISTORY, STREAM_LOOKAHEAD};
+    use zoo_runtime::stitch::{FootCleanup, STREAM_CHUNK, STREAM_LOOKAHEAD};
     use zoo_runtime::{EnginePose, StitchRefiner};
     let f = fixture(RefinerCell::Bgru);
-    let refiner = StitchRefiner::from_bytes(&export_rmr(&f.config, &f.stats, &f.varmap).unwrap().to_bytes()).unwrap();
+    let mut refiner =
+        StitchRefiner::from_bytes(&export_rmr(&f.config, &f.stats, &f.varmap).unwrap().to_bytes()).unwrap();
     let (w, s) = (refiner.window(), refiner.stride());
+    assert_eq!(refiner.seam_reach(), Some(w), "the seams' reach is on by default, as in `zoo stitch`");
+    refiner.set_seam_reach(None).unwrap();
     let mut stream = refiner.stream();
-    // Each window's network work is spread over the `s - 1` pushes after it is due.
-    let spread = s - 2;
+    // Each window's network work is spread over the `s - 1` pushes after it is due, one push
+    // more for a marked seam's frame, encoded one push late.
+    let spread = s - 1;
     assert_eq!(stream.latency(), w + spread + STREAM_LOOKAHEAD + STREAM_CHUNK - 1, "the default: IK, guard and lock");
     stream.set_cleanup(FootCleanup::NONE).unwrap();
     stream.set_seam_guard(false).unwrap();
     assert_eq!(stream.latency(), w + spread, "the refiner alone");
     let j = refiner.joints();
     let skeleton = refiner.skeleton();
-    // The frames the stream releases at its finish: with at most STREAM_HISTORY frames
-    // released before, the guard and the lock then see the whole sequence.
-    let at_finish = |frames: usize| frames.saturating_sub(w + STREAM_LOOKAHEAD)..frames;
-    for frames in [w + 4 * s, w + 4 * s + 7, 120] {
-        assert!(frames - w - STREAM_LOOKAHEAD <= STREAM_HISTORY);
+    for frames in [w + 4 * s, w + 4 * s + 7, 120, 340] {
         let (poses, _) = aligned_poses(frames);
         for cleanup in [FootCleanup::NONE, FootCleanup { place_ankles: true, lock_feet: false }, FootCleanup::default()]
         {
@@ -501,21 +507,10 @@ fn stitch_stream_matches_the_whole_sequence_with_fixed_latency() {
             let (a, b) = (world_positions(&got, skeleton), world_positions(&whole, skeleton));
             let frame = |t: usize| max_distance(&a[t * j..(t + 1) * j], &b[t * j..(t + 1) * j]);
             let worst = (0..frames).map(frame).fold(0.0, f64::max);
-            let worst_end = at_finish(frames).map(frame).fold(0.0, f64::max);
-            println!(
-                "stream vs whole sequence, {frames} frames, {cleanup:?}: max joint distance {worst:e} cm, {worst_end:e} \
-                 cm on the frames released at the finish"
-            );
+            println!("stream vs whole sequence, {frames} frames, {cleanup:?}: max joint distance {worst:e} cm");
             assert_eq!(contacts, whole_contacts, "contacts agree");
-            if cleanup.lock_feet {
-                // This fixture's random refiner keeps three of the four contacts on through the
-                // whole sequence: before the finish the lock pins them at their mean over the
-                // frames at hand, and its rate limit reaches past them (docs/rmr.md); the frames
-                // released at the finish, locked with the whole sequence at hand, are exact.
-                assert!(worst_end <= 1e-4, "{frames} frames, {cleanup:?}: the stream differs by {worst_end} cm");
-            } else {
-                assert!(worst <= 1e-4, "{frames} frames, {cleanup:?}: the stream differs by {worst} cm");
-            }
+            // The lock of a frame reads the frames within its reach, which the stream holds.
+            assert!(worst <= 1e-4, "{frames} frames, {cleanup:?}: the stream differs by {worst} cm");
         }
     }
 }
@@ -551,7 +546,7 @@ fn runtime_inertializes_the_seams_like_zoo_stitch_pre_blend() {
         foot_lock: false,
         pre_blend: true,
         seam_guard: false,
-        keep_untouched: false,
+        keep_untouched: true,
         reach: None,
     };
     let want = refine_seams(&f.model, &f.stats, &clip, &seams, RefineOptions::of(&f.config), post).unwrap();
@@ -595,7 +590,7 @@ fn runtime_guards_the_seams_like_zoo_stitch() {
         foot_lock: true,
         pre_blend: true,
         seam_guard: true,
-        keep_untouched: false,
+        keep_untouched: true,
         reach: None,
     };
     let want = refine_seams(&f.model, &f.stats, &clip, &seams, RefineOptions::of(&f.config), post).unwrap();
@@ -620,15 +615,68 @@ fn runtime_guards_the_seams_like_zoo_stitch() {
     // As in `runtime_refines_engine_poses_like_zoo_stitch`: the leg IK magnifies float differences.
     assert!(worst <= 0.1, "joint positions differ by {worst} cm");
     assert!(moved > 10.0 * worst.max(1e-3), "the guard moved joints by only {moved} cm");
-    // The stream with the seams marked and its guard: the whole sequence's poses on every frame
-    // (with the lock: see `stitch_stream_matches_the_whole_sequence_with_fixed_latency`).
+    // The stream with the seams marked and its guard: the whole sequence's poses on every frame,
+    // with the seams' reach (the default) and without.
     refiner.set_seam_guard(true);
+    for reach in [Some(refiner.window()), None] {
+        refiner.set_seam_reach(reach).unwrap();
+        for cleanup in [FootCleanup { place_ankles: true, lock_feet: false }, FootCleanup::default()] {
+            refiner.refine_poses_at_seams(&poses, &seams, cleanup, &mut out, &mut contacts).unwrap();
+            let (got, _) = stream_all(&refiner, &poses, &seams, cleanup, true);
+            let worst = max_distance(&world_positions(&got, &skeleton), &world_positions(&out, &skeleton));
+            println!(
+                "stream with marked seams, {cleanup:?}, guard, reach {reach:?} vs the whole sequence: max joint \
+                 distance {worst:e} cm"
+            );
+            assert!(worst <= 1e-4, "the stream differs by {worst} cm");
+        }
+    }
+}
+
+/// Seams as dense as stitching takes them (a clip every 10 frames, the shortest it stitches):
+/// the stream keeps its latency (each seam's guard weighed before the lock reads the frames it
+/// blends) and gives the whole sequence's poses, lock and reach included.
+#[test]
+fn a_stream_with_a_seam_every_ten_frames_keeps_its_latency() {
+    use zoo_runtime::EnginePose;
+    use zoo_runtime::stitch::FootCleanup;
+    let f = fixture(RefinerCell::Bgru);
+    let mut refiner =
+        zoo_runtime::StitchRefiner::from_bytes(&export_rmr(&f.config, &f.stats, &f.varmap).unwrap().to_bytes())
+            .unwrap();
+    let (poses, _) = aligned_poses(340);
+    let j = refiner.joints();
     let ik = FootCleanup { place_ankles: true, lock_feet: false };
-    refiner.refine_poses_at_seams(&poses, &seams, ik, &mut out, &mut contacts).unwrap();
-    let (got, _) = stream_all(&refiner, &poses, &seams, ik, true);
-    let worst = max_distance(&world_positions(&got, &skeleton), &world_positions(&out, &skeleton));
-    println!("stream with marked seams, ankle IK and guard vs the whole sequence: max joint distance {worst:e} cm");
-    assert!(worst <= 1e-4, "the stream differs by {worst} cm");
+    for (cleanup, guard, reach) in [
+        (FootCleanup::NONE, false, None),
+        (FootCleanup::NONE, false, Some(60)),
+        (ik, false, None),
+        (ik, true, None),
+        (FootCleanup::default(), false, None),
+        (FootCleanup::default(), true, Some(60)),
+    ] {
+        refiner.set_seam_guard(guard);
+        refiner.set_seam_reach(reach).unwrap();
+        for first in [10, 13, 17, 19] {
+            let seams: Vec<usize> = (first..330).step_by(10).collect();
+            let mut out = vec![EnginePose::new(j); poses.len()];
+            let mut contacts = vec![[false; 4]; poses.len()];
+            refiner.refine_poses_at_seams(&poses, &seams, cleanup, &mut out, &mut contacts).unwrap();
+            let (got, _) = stream_all(&refiner, &poses, &seams, cleanup, guard);
+            let skeleton = refiner.skeleton();
+            let (a, b) = (world_positions(&got, skeleton), world_positions(&out, skeleton));
+            let per: Vec<f64> =
+                (0..poses.len()).map(|t| max_distance(&a[t * j..(t + 1) * j], &b[t * j..(t + 1) * j])).collect();
+            let worst = per.iter().copied().fold(0.0, f64::max);
+            let at = per.iter().position(|&d| d == worst).unwrap();
+            println!(
+                "stream with {} seams 10 frames apart ({cleanup:?}, guard {guard}, reach {reach:?}) vs the whole \
+                 sequence: max joint distance {worst:e} cm at frame {at}",
+                seams.len()
+            );
+            assert!(worst <= 1e-4, "the stream differs by {worst} cm at frame {at}");
+        }
+    }
 }
 
 /// Bad input to the pose and streaming forms: clear errors, no panic.
@@ -694,10 +742,9 @@ fn runtime_stitch_poses_and_stream_refuse_bad_input() {
 /// 60 to 150 frames and aligned end to start as `zoo stitch` aligns them, refined by the RMR of
 /// the run folder `ZOO_RMR_RUN` (default `../runs/rmr20`, trained with `--valid-glob
 /// '*_youthful_*'`) exported through `zoo_models`. Prints the largest joint-position difference
-/// in cm (and the mean and 99th percentile of each frame's largest) with the lookahead, for the
-/// refiner with its ankle IK and seam guard and for `zoo stitch`'s whole default. The first must
-/// be within 0.05 cm; the foot lock's rate limit makes the second depend on frames beyond any
-/// bounded lookahead (docs/rmr.md), so it is reported, not asserted.
+/// in cm (and the mean and 99th percentile of each frame's largest) with the latency, for the
+/// refiner with its ankle IK and seam guard and for `zoo stitch`'s whole default (the foot lock
+/// and the seams' reach included); both must be within 0.05 cm.
 #[test]
 #[ignore = "needs ../shared/data/bandai2"]
 fn stitch_stream_matches_zoo_stitch_on_bandai2() {
@@ -743,7 +790,7 @@ fn stitch_stream_matches_zoo_stitch_on_bandai2() {
         }
     }
     let ik = FootCleanup { place_ankles: true, lock_feet: false };
-    let mut worst_ik = 0.0;
+    let mut worst_all: f64 = 0.0;
     for (name, cleanup) in [("ankle IK and seam guard", ik), ("zoo stitch's default", FootCleanup::default())] {
         let (mut per_frame, mut worst_zoo, mut latency) = (Vec::new(), 0.0f64, 0);
         for (clip, seams, poses) in &cases {
@@ -771,77 +818,7 @@ fn stitch_stream_matches_zoo_stitch_on_bandai2() {
             cases.len(),
             per_frame.len()
         );
-        if cleanup == ik {
-            worst_ik = worst.max(worst_zoo);
-        }
+        worst_all = worst_all.max(worst.max(worst_zoo));
     }
-    assert!(worst_ik <= 0.05, "with the ankle IK and the guard the stream differs by {worst_ik} cm");
-}
-
-/// Why the stream's foot lock differs from the whole sequence's: `lock_feet_with` over windows
-/// of the refined, ankle-placed and guarded triples of `stitch_stream_matches_zoo_stitch_on_bandai2`
-/// (each 10 frames locked with `lookahead` frames after them and `history` before), against the
-/// whole sequence locked at once. Without the rate limit the windows give the whole sequence's
-/// lock exactly from 45 frames on; with `zoo stitch`'s 1 cm per frame they need about 200.
-#[test]
-#[ignore = "needs ../shared/data/bandai2"]
-fn foot_lock_in_windows_is_the_whole_sequences_only_without_its_rate_limit() {
-    use zoo_rmr::pairs::{MIN_CLIP_FRAMES, align_clips};
-    use zoo_runtime::StitchRefiner;
-    use zoo_runtime::stitch::FootCleanup;
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let data = std::env::var("ZOO_BANDAI2").map_or_else(|_| root.join("../shared/data/bandai2"), Into::into);
-    let run = std::env::var("ZOO_RMR_RUN").map_or_else(|_| root.join("../runs/rmr20"), Into::into);
-    let exported = zoo_models::export_run(&run, &Default::default()).unwrap();
-    let refiner = StitchRefiner::from_bytes(&exported.model.to_bytes()).unwrap();
-    let mut names: Vec<std::path::PathBuf> = std::fs::read_dir(&data)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.file_name().is_some_and(|n| n.to_string_lossy().contains("_youthful_")))
-        .collect();
-    names.sort();
-    let clips: Vec<zoo_motion::Clip> = names.iter().map(|p| zoo_data::clip_io::read_model_clip(p).unwrap()).collect();
-    let layout = refiner.layout().clone();
-    for step in [1.0, 2.0, f64::INFINITY] {
-        for (l, h) in [(45usize, 45usize), (100, 100), (200, 200)] {
-            let mut worst = 0.0f64;
-            for k in (0..clips.len().saturating_sub(2)).step_by(6) {
-                let parts: Vec<zoo_motion::Clip> = (0..3)
-                    .map(|i| {
-                        let c = &clips[k + i];
-                        let len = (60 + 37 * (k + i) % 91).min(c.frames());
-                        let from = (c.frames() - len) / 3;
-                        c.slice(from, from + len)
-                    })
-                    .collect();
-                let aligned = align_clips(&parts, &layout, MIN_CLIP_FRAMES).unwrap();
-                let seams = aligned.starts[1..].to_vec();
-                let done = refiner
-                    .refine_clip(&aligned.clip, &seams, FootCleanup { place_ankles: true, lock_feet: false })
-                    .unwrap();
-                let n = done.clip.frames();
-                let mut full = done.clip.clone();
-                zoo_motion::stitch::lock::lock_feet_with(&mut full, &done.contacts, &layout, step);
-                let (_, fp) = full.global();
-                let j = full.joints();
-                let mut t0 = 0;
-                while t0 < n {
-                    let (a, b) = (t0.saturating_sub(h), (t0 + 10 + l).min(n));
-                    let mut w = done.clip.slice(a, b);
-                    zoo_motion::stitch::lock::lock_feet_with(&mut w, &done.contacts[a..b], &layout, step);
-                    let (_, wp) = w.global();
-                    for t in t0..(t0 + 10).min(n) {
-                        for q in 0..j {
-                            worst = worst.max((wp[(t - a) * j + q] - fp[t * j + q]).length());
-                        }
-                    }
-                    t0 += 10;
-                }
-            }
-            println!("max step {step}, lookahead {l}, history {h}: largest difference {worst:.3} cm");
-            if step.is_infinite() {
-                assert!(worst <= 1e-9, "without the rate limit the windows differ by {worst} cm");
-            }
-        }
-    }
+    assert!(worst_all <= 0.05, "the stream differs from the whole sequence by {worst_all} cm");
 }

@@ -237,11 +237,12 @@ typedef struct ZooStitchInfo {
   size_t stride;
   // Frames over which each window's first-frame difference is blended away.
   size_t blend_frames;
-  // Latency of a new stream in frames (`w`, + `s - 2` for each window's work spread over the
-  // pushes after it, + the lookahead of its foot lock and seam guard + the frames they release
-  // at once - 1: 142 for `w` = 60, `s` = 30): the refined pose of frame `t` is ready once frame
-  // `t + latency` is pushed. A stream without them (`zoo_stitch_stream_set_cleanup`, the guard
-  // off) has `w + s - 2`: `zoo_stitch_stream_latency`.
+  // Latency of a new stream in frames (`w`, + `s - 1` for each window's work spread over the
+  // pushes after it and a seam's frame encoded one push late, + the lookahead of its foot
+  // lock, seam guard and seams' reach + the frames they release at once - 1: 178 for `w` =
+  // 60, `s` = 30): the refined pose of frame `t` is ready once frame `t + latency` is pushed.
+  // A stream without them (`zoo_stitch_stream_set_cleanup`, the guard off, the reach 0) has
+  // `w + s - 1`: `zoo_stitch_stream_latency`.
   size_t latency;
 } ZooStitchInfo;
 
@@ -741,6 +742,23 @@ enum ZooStatus zoo_stitch_pre_blend(const struct ZooModel *model, bool *out);
 // Safety: `model` is NULL or a live model used by no other thread during the call.
 enum ZooStatus zoo_stitch_set_seam_guard(struct ZooModel *model, bool on);
 
+// Sets the seams' reach of `zoo_stitch_refine_at_seams` and of the streams made afterwards:
+// frames `frames` or more from every seam are left as they were given, frames within half of
+// it are the refined output, eased from one to the other between (each stretch near seams first
+// moved on the ground to start on the input's ground root), as `zoo stitch --seam-reach` does.
+// 0 refines the whole sequence (`zoo stitch --refine-everywhere`). Default: the model's window,
+// as `zoo stitch`. A stream with a reach passes the frames away from every marked seam through
+// as they were pushed. Not thread-safe, as `zoo_stitch_set_window`.
+//
+// Safety: `model` is NULL or a live model used by no other thread during the call.
+enum ZooStatus zoo_stitch_set_seam_reach(struct ZooModel *model, size_t frames);
+
+// Writes into `*out` the seams' reach of `zoo_stitch_set_seam_reach` (0: the whole sequence is
+// refined). Thread-safe.
+//
+// Safety: `model` is NULL or a live model; `out` is NULL or valid for a write.
+enum ZooStatus zoo_stitch_seam_reach(const struct ZooModel *model, size_t *out);
+
 // Refines a whole aligned sequence of `frames` poses (`roots` holds `frames` roots, `rotations`
 // `frames * 4K` floats; at least `window` frames) into `out_roots` / `out_rotations` (the same
 // sizes, root deltas filled, zero on the first frame) and the predicted contacts into
@@ -814,8 +832,9 @@ enum ZooStatus zoo_stitch_stream_push(struct ZooStitchStream *stream,
 // Sets what follows the refiner in `stream`, before its first push (`ZOO_STATUS_INVALID_STATE`
 // after): `place_ankles` puts the ankles where the refiner predicts them, `lock_feet` locks the
 // planted feet by the predicted contacts (both on by default, as `zoo stitch`); the seam guard
-// follows the model's (`zoo_stitch_set_seam_guard`). Both off with the guard off: the
-// refiner's poses as they are, at a latency of `window + stride - 2` frames. One thread at a time.
+// and the seams' reach follow the model's (`zoo_stitch_set_seam_guard`,
+// `zoo_stitch_set_seam_reach`). Both off with the guard and the reach off: the refiner's poses
+// as they are, at a latency of `window + stride - 1` frames. One thread at a time.
 //
 // Safety: `stream` is NULL or live and used by this thread only.
 enum ZooStatus zoo_stitch_stream_set_cleanup(struct ZooStitchStream *stream,

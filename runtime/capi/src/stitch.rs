@@ -38,11 +38,12 @@ pub struct ZooStitchInfo {
     pub stride: usize,
     /// Frames over which each window's first-frame difference is blended away.
     pub blend_frames: usize,
-    /// Latency of a new stream in frames (`w`, + `s - 2` for each window's work spread over the
-    /// pushes after it, + the lookahead of its foot lock and seam guard + the frames they release
-    /// at once - 1: 142 for `w` = 60, `s` = 30): the refined pose of frame `t` is ready once frame
-    /// `t + latency` is pushed. A stream without them (`zoo_stitch_stream_set_cleanup`, the guard
-    /// off) has `w + s - 2`: `zoo_stitch_stream_latency`.
+    /// Latency of a new stream in frames (`w`, + `s - 1` for each window's work spread over the
+    /// pushes after it and a seam's frame encoded one push late, + the lookahead of its foot
+    /// lock, seam guard and seams' reach + the frames they release at once - 1: 178 for `w` =
+    /// 60, `s` = 30): the refined pose of frame `t` is ready once frame `t + latency` is pushed.
+    /// A stream without them (`zoo_stitch_stream_set_cleanup`, the guard off, the reach 0) has
+    /// `w + s - 1`: `zoo_stitch_stream_latency`.
     pub latency: usize,
 }
 
@@ -132,6 +133,43 @@ pub unsafe extern "C" fn zoo_stitch_set_seam_guard(model: *mut ZooModel, on: boo
         })?;
         refiner.set_seam_guard(on);
         Ok(())
+    })
+}
+
+/// Sets the seams' reach of `zoo_stitch_refine_at_seams` and of the streams made afterwards:
+/// frames `frames` or more from every seam are left as they were given, frames within half of
+/// it are the refined output, eased from one to the other between (each stretch near seams first
+/// moved on the ground to start on the input's ground root), as `zoo stitch --seam-reach` does.
+/// 0 refines the whole sequence (`zoo stitch --refine-everywhere`). Default: the model's window,
+/// as `zoo stitch`. A stream with a reach passes the frames away from every marked seam through
+/// as they were pushed. Not thread-safe, as `zoo_stitch_set_window`.
+///
+/// Safety: `model` is NULL or a live model used by no other thread during the call.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_stitch_set_seam_reach(model: *mut ZooModel, frames: usize) -> ZooStatus {
+    guard("zoo_stitch_set_seam_reach", || {
+        let m = unsafe { handle_mut(model, "model") }?.stitch_mut()?;
+        let refiner = Arc::get_mut(m).ok_or_else(|| {
+            (
+                ZooStatus::InvalidState,
+                "streams made from this model are alive; free them (zoo_stitch_stream_free) before setting the seams' \
+                 reach"
+                    .to_string(),
+            )
+        })?;
+        refiner.set_seam_reach((frames > 0).then_some(frames)).map_err(runtime_failure)
+    })
+}
+
+/// Writes into `*out` the seams' reach of `zoo_stitch_set_seam_reach` (0: the whole sequence is
+/// refined). Thread-safe.
+///
+/// Safety: `model` is NULL or a live model; `out` is NULL or valid for a write.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn zoo_stitch_seam_reach(model: *const ZooModel, out: *mut usize) -> ZooStatus {
+    guard("zoo_stitch_seam_reach", || {
+        let r = unsafe { self::model(model) }?.stitch()?;
+        unsafe { write_out(out, r.seam_reach().unwrap_or(0), "out") }
     })
 }
 
@@ -297,8 +335,9 @@ pub unsafe extern "C" fn zoo_stitch_stream_push(
 /// Sets what follows the refiner in `stream`, before its first push (`ZOO_STATUS_INVALID_STATE`
 /// after): `place_ankles` puts the ankles where the refiner predicts them, `lock_feet` locks the
 /// planted feet by the predicted contacts (both on by default, as `zoo stitch`); the seam guard
-/// follows the model's (`zoo_stitch_set_seam_guard`). Both off with the guard off: the
-/// refiner's poses as they are, at a latency of `window + stride - 2` frames. One thread at a time.
+/// and the seams' reach follow the model's (`zoo_stitch_set_seam_guard`,
+/// `zoo_stitch_set_seam_reach`). Both off with the guard and the reach off: the refiner's poses
+/// as they are, at a latency of `window + stride - 1` frames. One thread at a time.
 ///
 /// Safety: `stream` is NULL or live and used by this thread only.
 #[unsafe(no_mangle)]

@@ -178,8 +178,10 @@ impl Stitch {
     /// planted feet locked (each step optional). Returns `(poses, contacts)`: the fields of
     /// `zoo.Poses` with prefix `(T,)` and the predicted contacts `(T, 4)` (heel L, toe L,
     /// heel R, toe R). `seams`: frames where a clip starts, inertialized before refining
-    /// (`zoo stitch --pre-blend`).
-    #[pyo3(signature = (hips, rotations, place_ankles=true, lock_feet=true, seams=Vec::new()))]
+    /// (`zoo stitch --pre-blend`). `seam_reach`: frames from every seam from which the input is
+    /// kept (`None`: the model's window, as `zoo stitch`; 0: refine everywhere).
+    #[pyo3(signature = (hips, rotations, place_ankles=true, lock_feet=true, seams=Vec::new(), seam_reach=None))]
+    #[allow(clippy::too_many_arguments)]
     fn refine_poses<'py>(
         &self,
         py: Python<'py>,
@@ -188,13 +190,15 @@ impl Stitch {
         place_ankles: bool,
         lock_feet: bool,
         seams: Vec<usize>,
+        seam_reach: Option<usize>,
     ) -> PyResult<(Bound<'py, PyDict>, Bound<'py, PyArrayDyn<bool>>)> {
         let input = self.read_poses(&hips, &rotations, "sequence")?;
         let (t, k) = (input.len(), self.model.joints());
         let mut out: Vec<EnginePose> = (0..t).map(|_| EnginePose::new(k)).collect();
         let mut contacts = vec![[false; 4]; t];
         let cleanup = FootCleanup { place_ankles, lock_feet };
-        self.model.refine_poses_at_seams(&input, &seams, cleanup, &mut out, &mut contacts).or_py()?;
+        let reach = seam_reach.map_or(self.model.seam_reach(), |n| (n > 0).then_some(n));
+        self.model.refine_poses_reaching(&input, &seams, (cleanup, reach), &mut out, &mut contacts).or_py()?;
         let mut arrays = PoseArrays::new(k, t);
         for pose in &mut out {
             forward_kinematics(pose, &self.parents, &self.offsets);
@@ -224,14 +228,24 @@ impl StitchStream {
 
 #[pymethods]
 impl StitchStream {
-    /// A stream over `model`; `place_ankles` and `lock_feet` as in `Stitch.refine_poses` (the
-    /// seam guard is on, as in `zoo stitch`, unless `seam_guard` is false).
+    /// A stream over `model`; `place_ankles`, `lock_feet` and `seam_reach` as in
+    /// `Stitch.refine_poses` (the seam guard is on, as in `zoo stitch`, unless `seam_guard` is
+    /// false).
     #[new]
-    #[pyo3(signature = (model, place_ankles=true, lock_feet=true, seam_guard=true))]
-    fn new(model: &Stitch, place_ankles: bool, lock_feet: bool, seam_guard: bool) -> PyResult<Self> {
+    #[pyo3(signature = (model, place_ankles=true, lock_feet=true, seam_guard=true, seam_reach=None))]
+    fn new(
+        model: &Stitch,
+        place_ankles: bool,
+        lock_feet: bool,
+        seam_guard: bool,
+        seam_reach: Option<usize>,
+    ) -> PyResult<Self> {
         let mut stream = Arc::clone(&model.model).shared_stream();
         stream.set_cleanup(FootCleanup { place_ankles, lock_feet }).or_py()?;
         stream.set_seam_guard(seam_guard).or_py()?;
+        if let Some(n) = seam_reach {
+            stream.set_seam_reach((n > 0).then_some(n)).or_py()?;
+        }
         Ok(StitchStream {
             inner: Mutex::new(stream),
             parents: model.parents.clone(),

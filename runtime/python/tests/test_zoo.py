@@ -323,11 +323,11 @@ def test_stitch_stream_gives_the_whole_sequence(data, ref, clip):
     t = len(hips)
     whole, whole_contacts = m.refine_poses((hips, rot), seams=starts[1:])
     for cleanup in [True, False]:
-        s = m.stream(place_ankles=cleanup, lock_feet=cleanup, seam_guard=cleanup)
+        s = m.stream(place_ankles=cleanup, lock_feet=cleanup, seam_guard=cleanup, refine_everywhere=not cleanup)
         # The window, spread over the `stride - 1` pushes after it, then the lookahead of the
-        # guard and the lock and the frames they release at once.
-        spread = m.window + m.stride - 2
-        assert s.latency == (spread + 54 if cleanup else spread)
+        # guard, the lock and the seams' reach and the frames they release at once.
+        spread = m.window + m.stride - 1
+        assert s.latency == (spread + 89 if cleanup else spread)
         got, contacts = [], []
         for f in range(t):
             if f in starts[1:]:
@@ -346,6 +346,29 @@ def test_stitch_stream_gives_the_whole_sequence(data, ref, clip):
         if cleanup:
             assert max_diff(hips_out, whole.hips) < 1e-3
             assert np.array_equal(np.concatenate(contacts), whole_contacts)
+
+
+def test_stitch_keeps_the_clips_away_from_their_seams_by_default(data, ref, clip):
+    m = zoo.load(data / "stitch.onnx")
+    r = ref["stitch"]
+    other = zoo.read_bvh(data / "clip2.bvh")
+    a, b = clip.poses()[slice(*r["a"])], other.poses()[slice(*r["b"])]
+    hips, rot, starts = m.align([a, b])
+    seams = starts[1:]
+    kept, _ = m.refine_poses((hips, rot), seams=seams, seam_reach=12)
+    everywhere, _ = m.refine_poses((hips, rot), seams=seams, refine_everywhere=True)
+    far = [f for f in range(len(hips)) if min(abs(f - s) if f >= s else s - 1 - f for s in seams) >= 12]
+    assert far, "frames 12 or more from the seam"
+    assert max_diff(kept.hips[far], hips[far]) < 1e-4
+    assert max_diff(everywhere.hips[far], hips[far]) > 1e-3
+    # The default is the model's window, and nothing sticks between calls.
+    default, _ = m.refine_poses((hips, rot), seams=seams)
+    window, _ = m.refine_poses((hips, rot), seams=seams, seam_reach=m.window)
+    assert max_diff(default.hips, window.hips) == 0.0
+    with pytest.raises(ValueError, match="contradict"):
+        m.refine_poses((hips, rot), seams=seams, seam_reach=5, refine_everywhere=True)
+    with pytest.raises(ValueError, match="at least 1"):
+        m.refine_poses((hips, rot), seams=seams, seam_reach=0)
 
 
 def test_stitch_refuses_short_clips(data, clip):

@@ -450,6 +450,17 @@ class KeyframeModel(Model):
         return self._native.complete_poses(f, h, r, fx)
 
 
+def _reach(seam_reach: Optional[int], refine_everywhere: bool) -> Optional[int]:
+    """The native seams' reach: None for the model's, 0 for none."""
+    if refine_everywhere:
+        if seam_reach is not None:
+            raise ValueError("seam_reach and refine_everywhere=True contradict each other: give one of them")
+        return 0
+    if seam_reach is not None and (not isinstance(seam_reach, (int, np.integer)) or seam_reach < 1):
+        raise ValueError(f"seam_reach is {seam_reach!r}: give a number of frames of at least 1, or refine_everywhere=True")
+    return None if seam_reach is None else int(seam_reach)
+
+
 class StitchModel(Model):
     """A stitching model (RMR): clips joined end to start and refined into one motion."""
 
@@ -491,10 +502,14 @@ class StitchModel(Model):
         place_ankles: bool = True,
         lock_feet: bool = True,
         pre_blend: Optional[bool] = None,
+        seam_reach: Optional[int] = None,
+        refine_everywhere: bool = False,
     ) -> Tuple[Poses, np.ndarray, List[int]]:
         """Aligns ``clips`` end to start and refines the whole, as ``zoo stitch`` does: with
         ``pre_blend`` (by default the model's own, ``self.pre_blend``) the seams are inertialized
-        first and guarded against pops after the ankle IK (``zoo stitch --pre-blend``).
+        first and guarded against pops after the ankle IK (``zoo stitch --pre-blend``), and the
+        frames ``seam_reach`` (default: the model's window) or more from every seam are the
+        clips as given (``refine_everywhere=True``: none are).
         Returns ``(poses, contacts, starts)``: the refined ``Poses`` (prefix ``(T,)``), the
         predicted contacts ``(T, 4)`` (heel L, toe L, heel R, toe R) and the first frame of each
         clip in the result."""
@@ -502,7 +517,7 @@ class StitchModel(Model):
         if pre_blend is None:
             pre_blend = self.pre_blend
         seams = starts[1:] if pre_blend else ()
-        poses, contacts = self.refine_poses((h, r), place_ankles, lock_feet, seams)
+        poses, contacts = self.refine_poses((h, r), place_ankles, lock_feet, seams, seam_reach, refine_everywhere)
         return poses, contacts, starts
 
     def refine_poses(
@@ -511,12 +526,17 @@ class StitchModel(Model):
         place_ankles: bool = True,
         lock_feet: bool = True,
         seams: Sequence[int] = (),
+        seam_reach: Optional[int] = None,
+        refine_everywhere: bool = False,
     ) -> Tuple[Poses, np.ndarray]:
         """Refines an aligned sequence (at least ``window`` frames); ``seams``: the frames where a
-        clip starts, inertialized before refining (``zoo stitch --pre-blend``). Returns
-        ``(poses, contacts)``."""
+        clip starts, inertialized before refining (``zoo stitch --pre-blend``); frames
+        ``seam_reach`` (default: the model's window) or more from every seam are kept as given
+        (``zoo stitch --seam-reach``; ``refine_everywhere=True``: ``--refine-everywhere``).
+        Returns ``(poses, contacts)``."""
         h, r = _bvh_style(sequence, "sequence")
-        d, contacts = self._native.refine_poses(h, r, place_ankles, lock_feet, [int(s) for s in seams])
+        reach = _reach(seam_reach, refine_everywhere)
+        d, contacts = self._native.refine_poses(h, r, place_ankles, lock_feet, [int(s) for s in seams], reach)
         return Poses._from_dict(d), contacts
 
     def encode(self, sequence: Union[Poses, Tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
@@ -528,11 +548,19 @@ class StitchModel(Model):
         """Refines raw pose vectors ``(T, dim)`` (``T >= window``)."""
         return self._native.refine(_f32(features, "features"))
 
-    def stream(self, place_ankles: bool = True, lock_feet: bool = True, seam_guard: bool = True) -> "StitchStream":
+    def stream(
+        self,
+        place_ankles: bool = True,
+        lock_feet: bool = True,
+        seam_guard: bool = True,
+        seam_reach: Optional[int] = None,
+        refine_everywhere: bool = False,
+    ) -> "StitchStream":
         """A stream for motion matching: push frames as they are decided, pop them refined
-        ``latency`` frames later, with the ankle IK, the seam guard and the foot lock of ``zoo
-        stitch`` (what ``refine_poses`` gives for the same frames and seams)."""
-        return StitchStream(self, place_ankles, lock_feet, seam_guard)
+        ``latency`` frames later, with the ankle IK, the seam guard, the foot lock and the seams'
+        reach of ``zoo stitch`` (what ``refine_poses`` gives for the same frames and seams; with
+        a reach, frames away from every marked seam pass through as pushed)."""
+        return StitchStream(self, place_ankles, lock_feet, seam_guard, seam_reach, refine_everywhere)
 
 
 class StitchStream:
@@ -540,9 +568,18 @@ class StitchStream:
     decided (``mark_seam`` before a clip's first frame), ``pop`` what is refined; the refined
     frame ``t`` is ready once frame ``t + latency`` is pushed, or after ``finish``."""
 
-    def __init__(self, model: StitchModel, place_ankles: bool = True, lock_feet: bool = True, seam_guard: bool = True):
+    def __init__(
+        self,
+        model: StitchModel,
+        place_ankles: bool = True,
+        lock_feet: bool = True,
+        seam_guard: bool = True,
+        seam_reach: Optional[int] = None,
+        refine_everywhere: bool = False,
+    ):
         self.model = model
-        self._native = _native.StitchStream(model._native, place_ankles, lock_feet, seam_guard)
+        reach = _reach(seam_reach, refine_everywhere)
+        self._native = _native.StitchStream(model._native, place_ankles, lock_feet, seam_guard, reach)
 
     @property
     def latency(self) -> int:

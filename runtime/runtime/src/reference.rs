@@ -286,8 +286,8 @@ pub struct StitchCase {
     pub first_window: ReferenceWindow,
     /// The refined raw pose vectors (`refine_sequence`), contacts 0 or 1.
     pub refined: Vec<Vec<f32>>,
-    /// The refined engine poses (`refine_poses_at_seams` without ankle placement, seam guard
-    /// and foot lock).
+    /// The refined engine poses (`refine_poses_at_seams` without ankle placement, seam guard,
+    /// foot lock and seams' reach).
     pub poses: Vec<ReferencePose>,
     /// The predicted contacts per frame: left heel, left toe, right heel, right toe.
     pub contacts: Vec<[bool; 4]>,
@@ -939,8 +939,10 @@ fn stitch_case(
 ) -> Result<StitchCase, MotionError> {
     let mut refiner = refiner.clone();
     refiner.set_fallback(fallback)?;
-    // The seam guard follows the ankle IK, a post-process the reference leaves out.
+    // The seam guard follows the ankle IK, and the seams' reach the foot lock: post-processes
+    // the reference leaves out.
     refiner.set_seam_guard(false);
+    refiner.set_seam_reach(None)?;
     let (frames, d) = (input.len(), refiner.dim());
     // Seams given to the runtime are inertialized before encoding (`refine_poses_at_seams`).
     let pre_blend = !seams.is_empty();

@@ -22,13 +22,13 @@
 //!
 //! Streaming for motion matching: [`StitchStream`] (from [`StitchRefiner::stream`]) takes one
 //! pose per frame as the engine decides it and gives refined poses back with a fixed latency
-//! ([`StitchStream::latency`]: `w + s - 2` frames for the refiner alone, as it spreads each
+//! ([`StitchStream::latency`]: `w + s - 1` frames for the refiner alone, as it spreads each
 //! window's network work over the `s - 1` pushes after it; `+` [`STREAM_LOOKAHEAD`] `+`
-//! [`STREAM_CHUNK`] `- 1` with the foot lock or the seam guard). It runs the same windows as
-//! [`StitchRefiner::refine_sequence`], so its refined pose vectors are the whole sequence's, then
-//! the ankle IK, the guard of the marked seams and the foot lock of `zoo stitch` over a
-//! lookahead: its poses are [`StitchRefiner::refine_poses_at_seams`]'s within what docs/rmr.md
-//! measures.
+//! [`STREAM_CHUNK`] `- 1` with the foot lock, the seam guard or the seams' reach). It runs the
+//! same windows as [`StitchRefiner::refine_sequence`], so its refined pose vectors are the whole
+//! sequence's, then the ankle IK, the guard of the marked seams, the foot lock and the seams'
+//! reach of `zoo stitch` over a lookahead: its poses are
+//! [`StitchRefiner::refine_poses_at_seams`]'s up to float rounding.
 
 use crate::error::{MotionError, chain};
 use crate::metadata::MotionModelMetadata;
@@ -149,7 +149,34 @@ pub struct StitchRefiner {
     pre_blend: bool,
     fallback: Option<StitchFallback>,
     seam_guard: bool,
-    seam_reach: Option<usize>,
+    seam_reach: SeamReach,
+}
+
+/// The longest seams' reach a refiner or a stream takes, frames (2 minutes at 30 fps: a stream
+/// holds about twice its reach of frames).
+pub const MAX_SEAM_REACH: usize = 3600;
+
+/// Refuses a seams' reach of 0 frames or more than [`MAX_SEAM_REACH`].
+fn check_reach(frames: Option<usize>) -> Result<(), MotionError> {
+    match frames {
+        Some(0) => Err(stitch_err("a seam reach of 0 frames: give at least 1, or None to refine the whole sequence")),
+        Some(n) if n > MAX_SEAM_REACH => Err(stitch_err(format!(
+            "a seam reach of {n} frames, more than {MAX_SEAM_REACH}: give the frames around a seam that the stitch may \
+             change (the window by default), or None to refine the whole sequence"
+        ))),
+        _ => Ok(()),
+    }
+}
+
+/// The seams' reach a refiner applies ([`StitchRefiner::seam_reach`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum SeamReach {
+    /// The window's ([`zoo_motion::stitch::reach::default_reach`]), following
+    /// [`StitchRefiner::set_window`]: the default.
+    Window,
+    Frames(usize),
+    /// None: the whole sequence is refined.
+    Everywhere,
 }
 
 fn stitch_err(reason: impl Into<String>) -> MotionError {
@@ -258,7 +285,7 @@ impl StitchRefiner {
             pre_blend,
             fallback,
             seam_guard: true,
-            seam_reach: None,
+            seam_reach: SeamReach::Window,
         })
     }
 
@@ -362,22 +389,26 @@ impl StitchRefiner {
         self.seam_guard = on;
     }
 
-    /// The seams' reach of [`StitchRefiner::refine_clip`] and
-    /// [`StitchRefiner::refine_poses_at_seams`], when set: every frame this many frames or
-    /// more from the nearest seam is the input's exactly, the output is eased back to the
-    /// input from half of it on, and each stretch near seams starts on the input's ground root
-    /// ([`zoo_motion::stitch::reach`], after the foot lock; `zoo stitch` sets the window unless
-    /// given `--seam-reach`). `None` (the default): the whole sequence is refined.
+    /// The seams' reach of [`StitchRefiner::refine_clip`], [`StitchRefiner::refine_poses_at_seams`]
+    /// and the streams made afterwards, when set: every frame this many frames or more from the
+    /// nearest seam is the input's exactly, the output is eased back to the input from half of
+    /// it on, and each stretch near seams starts on the input's ground root
+    /// ([`zoo_motion::stitch::reach`], after the foot lock). Default: the window (as `zoo
+    /// stitch`; it follows [`StitchRefiner::set_window`]). `None`: the whole sequence is refined
+    /// (`zoo stitch --refine-everywhere`). Without seams nothing is kept.
     pub fn seam_reach(&self) -> Option<usize> {
-        self.seam_reach
+        match self.seam_reach {
+            SeamReach::Window => Some(zoo_motion::stitch::reach::default_reach(self.window)),
+            SeamReach::Frames(n) => Some(n),
+            SeamReach::Everywhere => None,
+        }
     }
 
-    /// Sets [`StitchRefiner::seam_reach`] (`Some(0)` is refused: `None` refines everywhere).
+    /// Sets [`StitchRefiner::seam_reach`] (`None` refines everywhere; 0 frames and more than
+    /// [`MAX_SEAM_REACH`] are refused).
     pub fn set_seam_reach(&mut self, frames: Option<usize>) -> Result<(), MotionError> {
-        if frames == Some(0) {
-            return Err(stitch_err("a seam reach of 0 frames: give at least 1, or None to refine the whole sequence"));
-        }
-        self.seam_reach = frames;
+        check_reach(frames)?;
+        self.seam_reach = frames.map_or(SeamReach::Everywhere, SeamReach::Frames);
         Ok(())
     }
 
@@ -695,6 +726,21 @@ impl StitchRefiner {
         out: &mut [EnginePose],
         contacts: &mut [[bool; 4]],
     ) -> Result<(), MotionError> {
+        self.refine_poses_reaching(input, seams, (cleanup, self.seam_reach()), out, contacts)
+    }
+
+    /// [`StitchRefiner::refine_poses_at_seams`] with another seams' reach for this call
+    /// (`None`: refine everywhere), the refiner's own left as it is (for callers that share the
+    /// refiner, such as the Python package).
+    pub fn refine_poses_reaching(
+        &self,
+        input: &[EnginePose],
+        seams: &[usize],
+        (cleanup, reach): (FootCleanup, Option<usize>),
+        out: &mut [EnginePose],
+        contacts: &mut [[bool; 4]],
+    ) -> Result<(), MotionError> {
+        check_reach(reach)?;
         let frames = input.len();
         if out.len() != frames || contacts.len() != frames {
             return Err(stitch_err(format!(
@@ -712,7 +758,7 @@ impl StitchRefiner {
         }
         let clip = self.poses_to_clip(input)?;
         // The seams an engine gives are inertialized (the stream's `mark_seam` does the same).
-        let stitched = self.refine_clip_with(&clip, seams, cleanup, true)?;
+        let stitched = self.refine_clip_with(&clip, seams, (cleanup, reach), true)?;
         contacts.copy_from_slice(&stitched.contacts);
         write_poses(&stitched.clip, out);
         Ok(())
@@ -759,16 +805,16 @@ impl StitchRefiner {
         seams: &[usize],
         cleanup: FootCleanup,
     ) -> Result<StitchedClip, MotionError> {
-        self.refine_clip_with(aligned, seams, cleanup, self.pre_blend)
+        self.refine_clip_with(aligned, seams, (cleanup, self.seam_reach()), self.pre_blend)
     }
 
-    /// [`StitchRefiner::refine_clip`], the seams inertialized before the refiner when
-    /// `pre_blend`.
+    /// [`StitchRefiner::refine_clip`] with the seams' reach `reach`, the seams inertialized before
+    /// the refiner when `pre_blend`.
     fn refine_clip_with(
         &self,
         aligned: &Clip,
         seams: &[usize],
-        cleanup: FootCleanup,
+        (cleanup, reach): (FootCleanup, Option<usize>),
         pre_blend: bool,
     ) -> Result<StitchedClip, MotionError> {
         if aligned.joints() != self.joints {
@@ -809,7 +855,7 @@ impl StitchRefiner {
         };
         let lock_move =
             cleanup.lock_feet.then(|| zoo_motion::stitch::lock::lock_feet(&mut clip, &contacts, &self.layout));
-        let untouched = match self.seam_reach {
+        let untouched = match reach {
             Some(reach) if !seams.is_empty() => {
                 Some(zoo_motion::stitch::reach::keep_untouched(&mut clip, input, seams, reach, &self.layout))
             }
@@ -821,13 +867,14 @@ impl StitchRefiner {
     /// A stream over this refiner for motion matching: push poses as they are decided, pop
     /// refined ones [`StitchStream::latency`] frames later (see [`StitchStream`]).
     pub fn stream(&self) -> StitchStream<'_> {
-        StitchStreamOf::new(self)
+        StitchStreamOf::new(self, self.seam_reach())
     }
 
     /// [`StitchRefiner::stream`] over a shared refiner: the stream holds the `Arc` (no borrow),
     /// so it can live as long as the caller needs.
     pub fn shared_stream(self: Arc<Self>) -> StitchStreamOf<Arc<StitchRefiner>> {
-        StitchStreamOf::new(self)
+        let reach = self.seam_reach();
+        StitchStreamOf::new(self, reach)
     }
 }
 
@@ -850,15 +897,20 @@ fn write_poses(clip: &Clip, out: &mut [EnginePose]) {
     }
 }
 
-/// Frames of lookahead the stream's foot lock and seam guard take beyond the refiner's window
-/// ([`StitchStream::latency`]): the guard of a seam reads about 17 frames after it, the lock
-/// each contact run whole and the run after it (bandai2's steps: 10 to 25 frames), but not the
-/// whole reach of its rate limit ([`StitchStream`]).
-pub const STREAM_LOOKAHEAD: usize = 45;
+/// Frames of lookahead the stream's foot lock, seam guard and seams' reach take beyond the
+/// refiner's window ([`StitchStream::latency`]): the lock of a frame reads the
+/// [`zoo_motion::stitch::lock::LOCK_REACH`] frames after it, each guarded with its neighbours,
+/// and those must be past the guard of every seam that may blend them: a seam's guard reads
+/// the 17 frames after it once they have the ankle IK, and its weight takes a few pushes to
+/// compute. 72 frames is the least with which a stream of bandai2's stitching cases and one with
+/// a seam every 10 frames kept their latency (`tests/parity_rmr.rs`); this is 8 more.
+pub const STREAM_LOOKAHEAD: usize =
+    zoo_motion::stitch::lock::LOCK_REACH + zoo_motion::stitch::guard::SMOOTH_RADIUS + 2 * ZONE;
 
-/// Frames of already popped motion the stream's foot lock and seam guard read again, for the
-/// contact runs and seams that span what was popped and what was not.
-pub const STREAM_HISTORY: usize = 45;
+/// Frames of already popped motion the stream's foot lock reads again: the lock of a frame
+/// reads the [`zoo_motion::stitch::lock::LOCK_REACH`] frames before it, each guarded with its
+/// neighbours ([`zoo_motion::stitch::guard::SMOOTH_RADIUS`]).
+pub const STREAM_HISTORY: usize = zoo_motion::stitch::lock::LOCK_REACH + zoo_motion::stitch::guard::SMOOTH_RADIUS;
 
 /// Frames a stream puts the ankles of per push (a window decodes `s` frames every `s` pushes).
 const IK_FRAMES: usize = 6;
@@ -884,25 +936,27 @@ pub const STREAM_CHUNK: usize = 10;
 /// window runs through the refiner's graph with its recurrences in chunks of a few frames
 /// (the same function: equal for small models, within 1e-6 normalised units for the paper's),
 /// a share of it per push over the `s - 1` pushes after it is due. Frame `t` is refined for
-/// good once frame `t + w + s - 2` is pushed (no later window, the last one included, reaches
-/// back to it). A graph without recurrences to chunk runs each window whole in the push that
-/// completes it, and frame `t` is final at `t + w`.
+/// good once frame `t + w + s - 1` is pushed (no later window, the last one included, reaches
+/// back to it; a marked seam's frame is encoded one push late). A graph without recurrences to
+/// chunk runs each window whole in the push that completes it, and frame `t` is final at
+/// `t + w + 1`.
 ///
-/// What follows the refiner is [`StitchStream::cleanup`] (default: [`FootCleanup::default`], as
-/// `zoo stitch`) and the seam guard of the marked seams ([`StitchRefiner::seam_guard`], on by
-/// default): the ankle IK is per frame, run once per frame; the guard weighs each seam once,
-/// when the frames it reads are refined; the blend of the guarded frames and the foot lock run
-/// over the refined frames at hand, [`STREAM_HISTORY`] frames already popped included, and
-/// release [`STREAM_CHUNK`] frames at a time (at most one chunk per push), at least
-/// [`STREAM_LOOKAHEAD`] frames from the newest one. The latency is then `w + s - 2 +
-/// STREAM_LOOKAHEAD + STREAM_CHUNK - 1` frames (142 for `w` = 60, `s` = 30: 4.7 s at 30 fps);
-/// with [`FootCleanup::NONE`] and the guard off it is `w + s - 2`. The ankle IK and the guard
-/// then give the whole sequence's poses (up to the chunked graph's rounding). The foot lock does not: it pins each
-/// contact at its mean over the contact and limits its correction's change per frame forwards
-/// and backwards ([`zoo_motion::stitch::lock::LOCK_MAX_STEP`]), and where that limit stays
-/// clamped for long a frame's correction depends on frames beyond any bounded lookahead (on
-/// bandai2 the stream's feet differ from `zoo stitch`'s by 0.45 cm on average, up to 24.7 cm;
-/// docs/rmr.md).
+/// What follows the refiner is what `zoo stitch` does by default: [`StitchStream::cleanup`]
+/// (default: [`FootCleanup::default`]), the seam guard of the marked seams
+/// ([`StitchRefiner::seam_guard`], on by default) and the seams' reach
+/// ([`StitchStream::seam_reach`], the refiner's: the window by default). The ankle IK is per
+/// frame, run once per frame; the guard weighs each seam once, when the frames it reads are
+/// refined; the blend of the guarded frames and the foot lock run over the refined frames at
+/// hand, [`STREAM_HISTORY`] frames already popped included, and release [`STREAM_CHUNK`] frames
+/// at a time (at most one chunk per push), at least [`STREAM_LOOKAHEAD`] frames from the newest
+/// one; the reach keeps each released frame as `zoo stitch` does. The latency is then `w + s - 1
+/// + STREAM_LOOKAHEAD + STREAM_CHUNK - 1` frames (178 for `w` = 60, `s` = 30: 5.9 s at 30 fps);
+/// with [`FootCleanup::NONE`], the guard and the reach off it is `w + s - 1`. Every frame's lock
+/// reads the frames within [`zoo_motion::stitch::lock::LOCK_REACH`] of it, all at hand, so the
+/// stream gives the whole sequence's poses ([`StitchRefiner::refine_poses_at_seams`]) up to the
+/// chunked graph's rounding (on bandai2's stitching cases within 7.4e-3 cm of `zoo stitch`,
+/// docs/rmr.md). A stream with a reach passes the frames away from every marked seam through as
+/// they were pushed (every frame, while no seam is marked).
 /// Each pose comes with the predicted contacts (heel L, toe L, heel R, toe R).
 ///
 /// After its first pop (and its first marked seam), pushing and popping allocate nothing on our
@@ -973,6 +1027,10 @@ pub struct StitchStreamOf<R> {
     last_out: Option<(Vec3, Quat)>,
     cleanup: FootCleanup,
     guard: bool,
+    /// The seams' reach ([`StitchRefiner::seam_reach`]) and the stretch of the frames released
+    /// last.
+    reach: Option<usize>,
+    keep: zoo_motion::stitch::reach::KeepUntouched,
     /// Frames the marked seams start on.
     seams: Vec<usize>,
     /// Decoded frames `dec_base..refined`: model-space rotations, hips, contacts, predicted
@@ -999,12 +1057,13 @@ pub struct StitchStreamOf<R> {
 }
 
 impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
-    fn new(refiner: R) -> Self {
+    /// A stream over `refiner` with the seams' reach `reach`, its buffers sized for it.
+    fn new(refiner: R, reach: Option<usize>) -> Self {
         let (w, d, j) = (refiner.window, refiner.dim, refiner.joints);
         let blend = SeamInertializer::new(j, refiner.blend_frames, 1.0 / refiner.fps);
         let slot = |joint: usize| refiner.layout.lower_body.iter().position(|&k| k == joint);
         let ankle_slots = slot(refiner.layout.contacts[0]).zip(slot(refiner.layout.contacts[2]));
-        let frames = 2 * (w + STREAM_HISTORY + STREAM_LOOKAHEAD + STREAM_CHUNK) + 4;
+        let frames = 2 * (w + STREAM_HISTORY + STREAM_LOOKAHEAD.max(reach.unwrap_or(0)) + STREAM_CHUNK) + 4;
         let clip = || Clip {
             skeleton: refiner.skeleton.clone(),
             frame_time: 1.0 / refiner.fps,
@@ -1057,6 +1116,8 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             last_out: None,
             cleanup: FootCleanup::default(),
             guard,
+            reach,
+            keep: Default::default(),
             seams: Vec::with_capacity(64),
             dec_base: 0,
             dec_rot: Vec::with_capacity(frames * j),
@@ -1110,22 +1171,64 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         Ok(())
     }
 
-    /// Frames the guard and the lock look ahead ([`STREAM_LOOKAHEAD`], or 0 without them).
-    fn lookahead(&self) -> usize {
-        if self.cleanup.lock_feet || self.guard { STREAM_LOOKAHEAD } else { 0 }
+    /// Whether a push runs its window's network work ahead of schedule while the push is
+    /// within the window's measured time per push (default: on, unless the environment sets
+    /// `ZOO_STREAM_AHEAD=0`). Off, each window runs on its schedule alone: the same nodes in the
+    /// same pushes on every run, whatever the machine's load (for comparisons and tests).
+    pub fn set_run_ahead(&mut self, on: bool) {
+        self.ahead = on;
     }
 
-    /// Frames released at once (1 without the guard and the lock).
+    /// The seams' reach of the stream ([`StitchRefiner::seam_reach`] when it was made).
+    pub fn seam_reach(&self) -> Option<usize> {
+        self.reach
+    }
+
+    /// Sets [`StitchStream::seam_reach`] (`None`: refine everywhere); only before the first push
+    /// (it may set the latency). A stream with a reach passes the frames `reach` or more from
+    /// every marked seam through as they were pushed (all of them while no seam is marked).
+    pub fn set_seam_reach(&mut self, frames: Option<usize>) -> Result<(), MotionError> {
+        if self.pushed > 0 {
+            return Err(stitch_err("the seam reach of a stream is set before its first push: set it on a new stream"));
+        }
+        check_reach(frames)?;
+        // Made again with buffers for the reach (nothing was pushed).
+        let (cleanup, guard, ahead) = (self.cleanup, self.guard, self.ahead);
+        *self = Self::new(self.refiner.clone(), frames);
+        (self.cleanup, self.guard, self.ahead) = (cleanup, guard, ahead);
+        Ok(())
+    }
+
+    /// Frames the guard, the lock and the seams' reach look ahead ([`STREAM_LOOKAHEAD`], more
+    /// for a reach longer than the window and the lookahead together); 1 for the ankle IK alone
+    /// (a window's frames are decoded at the end of a push, their IK starts in the next); 0
+    /// without any of them.
+    fn lookahead(&self) -> usize {
+        let own = self.refiner.window.max(2) + self.spread_pushes();
+        let reach = self.reach.map_or(0, |r| r.saturating_sub(own));
+        if self.releases_in_chunks() { STREAM_LOOKAHEAD.max(reach) } else { usize::from(self.cleanup.place_ankles) }
+    }
+
+    /// Whether the lock, the guard or the seams' reach run: frames are then released
+    /// [`STREAM_CHUNK`] at a time.
+    fn releases_in_chunks(&self) -> bool {
+        self.cleanup.lock_feet || self.guard || self.reach.is_some()
+    }
+
+    /// Frames released at once (1 without the guard, the lock and the reach).
     fn chunk(&self) -> usize {
-        if self.lookahead() > 0 { STREAM_CHUNK } else { 1 }
+        if self.releases_in_chunks() { STREAM_CHUNK } else { 1 }
     }
 
     /// Frames between pushing frame `t` and popping its refined pose: the refined pose of frame
-    /// `t` is ready right after frame `t + latency()` is pushed. `w + s - 2` for the refiner
-    /// alone (`w` for a graph without recurrences to chunk); `+`
-    /// [`STREAM_LOOKAHEAD`] `+` [`STREAM_CHUNK`] `- 1` with the foot lock or the seam guard.
+    /// `t` is ready right after frame `t + latency()` is pushed. `w + s - 1` for the refiner
+    /// alone (`w + 1` for a graph without recurrences to chunk; the 1: a marked seam's frame is
+    /// encoded one push late, [`StitchStream::mark_seam`]); `+ 1` with the ankle IK alone; `+`
+    /// [`STREAM_LOOKAHEAD`] `+` [`STREAM_CHUNK`] `- 1` with the foot lock, the seam guard or the
+    /// seams' reach (a longer lookahead for a reach longer than `w + s - 1 +`
+    /// [`STREAM_LOOKAHEAD`]).
     pub fn latency(&self) -> usize {
-        self.refiner.window.max(2) + self.spread_pushes() - 1 + self.lookahead() + self.chunk() - 1
+        self.refiner.window.max(2) + self.spread_pushes() + self.lookahead() + self.chunk() - 1
     }
 
     /// Pushes a window's network work is spread over: `s - 1` (at least 1) with the chunked
@@ -1433,8 +1536,15 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             return;
         }
         // One chunk per push (a window's decoded frames arrive at once): the same frames, the
-        // work spread over the pushes after it; never a frame a seam not weighed yet may blend.
-        let to = if at_finish { to } else { to.min(self.released + chunk).min(self.unweighed_from()) };
+        // work spread over the pushes after it; never a frame whose lock reads a frame a seam not
+        // weighed yet may blend, nor one a seam not pushed yet may reach.
+        let to = if at_finish {
+            to
+        } else {
+            let lock_reach = if self.cleanup.lock_feet { zoo_motion::stitch::lock::LOCK_REACH } else { 0 };
+            let seams_known = self.reach.map_or(usize::MAX, |r| self.pushed.saturating_sub(r));
+            to.min(self.released + chunk).min(self.unweighed_from().saturating_sub(lock_reach)).min(seams_known)
+        };
         if to <= self.released {
             return;
         }
@@ -1450,7 +1560,8 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             self.released = to;
             return;
         }
-        let a = self.released.saturating_sub(if look == 0 { 0 } else { STREAM_HISTORY }).max(self.dec_base);
+        let a =
+            self.released.saturating_sub(if self.releases_in_chunks() { STREAM_HISTORY } else { 0 }).max(self.dec_base);
         let (i0, i1) = (a - self.dec_base, b - self.dec_base);
         fill_clip(&mut self.work, &self.dec_rot[i0 * j..i1 * j], &self.dec_hips[i0..i1], &r.skeleton);
         if self.guard {
@@ -1475,6 +1586,19 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         }
         for f in self.released..to {
             let i = f - a;
+            if let Some(reach) = self.reach {
+                // The seams' reach; no marked seam within reach: the frame as pushed.
+                let w = match zoo_motion::stitch::reach::seam_distance(f, &self.seams) {
+                    Some(_) => zoo_motion::stitch::reach::weight(f, &self.seams, reach),
+                    None => 0.0,
+                };
+                let mut hips = self.work.local_positions[i * j];
+                let d = f - self.dec_base;
+                let input = (&self.ref_rot[d * j..(d + 1) * j], self.ref_hips[d]);
+                let rotations = &mut self.work.local_rotations[i * j..(i + 1) * j];
+                self.keep.frame((f, w), (rotations, &mut hips), input, &r.layout);
+                self.work.local_positions[i * j] = hips;
+            }
             let prev = self.out_rot.len().checked_sub(j);
             for k in 0..j {
                 let mut q = self.work.local_rotations[i * j + k].as_quat();
@@ -1513,7 +1637,9 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             self.ref_rot.drain(..n * j);
             self.ref_hips.drain(..n);
             self.dec_base = keep;
-            let first = self.seams.partition_point(|&s| s < keep);
+            // The seams a released frame may still be within reach of stay.
+            let reach = self.reach.unwrap_or(0);
+            let first = self.seams.partition_point(|&s| s < keep.min(self.released.saturating_sub(reach)));
             self.seams.drain(..first);
         }
         if self.read >= self.out_base + w {

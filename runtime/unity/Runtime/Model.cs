@@ -273,6 +273,20 @@ namespace Zoo
             finally { Exit(this, e); }
         }
 
+        /// <summary>
+        /// The seams' reach of <see cref="StitchRefineAtSeams"/> and of the streams made from now on
+        /// (<c>zoo_stitch_set_seam_reach</c>): frames <paramref name="frames"/> or more from every seam are
+        /// left as given; 0 refines the whole sequence. Default: the model's window, as <c>zoo stitch</c>.
+        /// Not thread-safe; streams made from the model must be disposed first.
+        /// </summary>
+        public void SetStitchSeamReach(int frames)
+        {
+            if (frames < 0) throw new ArgumentOutOfRangeException(nameof(frames), frames, "the seams' reach is a number of frames, 0 or more (0: refine everywhere)");
+            bool e = false;
+            try { Errors.Check(ZooNative.zoo_stitch_set_seam_reach((Native.ZooModel*)Enter(this, ref e), (UIntPtr)(ulong)frames), this); }
+            finally { Exit(this, e); }
+        }
+
         /// <summary>Whether synthesis runners and characters made from now on refine each frame (<c>zoo_synthesis_set_refine</c>). Not thread-safe.</summary>
         public void SetSynthesisRefine(bool refine)
         {

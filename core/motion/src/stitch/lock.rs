@@ -17,6 +17,15 @@
 //! ankle by several centimetres in one frame, which the stitching benchmark counts as pops at the
 //! seams (measured 2026-11-25, commit 91c7c30: docs/rmr-benchmarks.md, "The foot lock's pops").
 //!
+//! Each frame's correction reads the frames within [`LOCK_REACH`] of it and no others: it is
+//! the correction of the frame in the lock of those frames alone (contact runs, gaps and the
+//! rate limit cut at their edges). A rate limit that stays clamped would otherwise carry a
+//! correction along the whole sequence, and a stream (the runtime's stitching stream, which
+//! locks the frames it releases with this many frames on each side) could not give the whole
+//! sequence's lock with any bounded latency. Contact runs and gaps up to about
+//! [`LOCK_REACH`] frames long (bandai2's steps: 10 to 25 frames) are locked as by a lock of the
+//! whole sequence.
+//!
 //! In the motion core so that the engine's runtime (`zoo_runtime::StitchRefiner`) applies the
 //! same lock as the offline `zoo stitch`.
 
@@ -29,6 +38,9 @@ use glam::{DQuat, DVec3};
 /// among 0.5, 1 and 2 and a moving average of radius 2 or 4 (docs/rmr-benchmarks.md, "The
 /// foot lock's pops").
 pub const LOCK_MAX_STEP: f64 = 1.0;
+
+/// Frames on each side of a frame that its lock correction reads (module docs).
+pub const LOCK_REACH: usize = 45;
 
 /// `corrections` with no step between neighbouring frames longer than `max_step`: the
 /// forward-limited and the backward-limited sequences, averaged. `max_step <= 0` or not finite
@@ -292,6 +304,52 @@ pub fn place_ankles_range_into(
     if count == 0 { 0.0 } else { total / count as f64 }
 }
 
+/// The horizontal ankle correction of `leg` at frame `f` in the lock of the frames `window`
+/// alone (global positions `gp` of `j` joints per frame): pins at each contact run's mean
+/// position within the window, the heel's before the toe's, gaps filled linearly and held at
+/// the window's edges, the change per frame limited to `max_step`. The vectors are scratch.
+#[allow(clippy::too_many_arguments)]
+fn correction_at(
+    gp: &[DVec3],
+    j: usize,
+    contacts: &[[bool; 4]],
+    leg: LockLeg,
+    window: std::ops::Range<usize>,
+    f: usize,
+    max_step: f64,
+    (known, toe_known, corrections, forward): (
+        &mut Vec<Option<DVec3>>,
+        &mut Vec<Option<DVec3>>,
+        &mut Vec<DVec3>,
+        &mut Vec<DVec3>,
+    ),
+) -> DVec3 {
+    let (w0, n) = (window.start, window.len());
+    for target in [&mut *known, &mut *toe_known] {
+        target.clear();
+        target.resize(n, None);
+    }
+    for (joint, contact, target) in
+        [(leg.ankle, leg.heel_contact, &mut *known), (leg.toe, leg.toe_contact, &mut *toe_known)]
+    {
+        let at = |i: usize| horizontal(gp[(w0 + i) * j + joint]);
+        for_runs(contacts[window.clone()].iter().map(|c| c[contact]), |s, e| {
+            let pin = (s..e).map(at).sum::<DVec3>() / (e - s) as f64;
+            for i in s..e {
+                target[i] = Some(pin - at(i));
+            }
+        });
+    }
+    for (k, t) in known.iter_mut().zip(toe_known.iter()) {
+        if k.is_none() {
+            *k = *t;
+        }
+    }
+    fill_gaps_into(known, corrections);
+    limit_rate_into(corrections, max_step, forward);
+    corrections[f - w0]
+}
+
 /// Locks the feet of `clip` where `contacts` (per frame: heel L, toe L, heel R, toe R) say they
 /// are planted; `layout.contacts` names the heel and toe joints. Returns the mean horizontal
 /// ankle correction applied (clip units). A clip whose contact joints have no grandparent
@@ -318,9 +376,11 @@ pub fn lock_feet_into(
     lock_feet_range_into(clip, contacts, layout, max_step, scratch, 0..clip.frames())
 }
 
-/// [`lock_feet_into`] that bends the legs of the frames `bend` only: the corrections read the
-/// whole clip, so those frames are the whole call's (for a caller that keeps only them, as the
-/// runtime's stitching stream keeps the frames it releases).
+/// [`lock_feet_into`] that bends the legs of the frames `bend` only: each frame's correction
+/// reads the frames within [`LOCK_REACH`] of it, so those frames are the whole clip's lock
+/// wherever the clip holds [`LOCK_REACH`] frames on each side of them (or starts or ends
+/// there): a caller that keeps only them (the runtime's stitching stream keeps the frames it
+/// releases) gets the whole sequence's lock.
 pub fn lock_feet_range_into(
     clip: &mut Clip,
     contacts: &[[bool; 4]],
@@ -334,6 +394,7 @@ pub fn lock_feet_range_into(
         return 0.0;
     }
     let LockScratch { gr, gp, known, toe_known, corrections, forward } = scratch;
+    let bend = bend.start.min(frames)..bend.end.min(frames);
     global_into(clip, gr, gp);
     let mut total = 0.0;
     let mut count = 0usize;
@@ -345,30 +406,11 @@ pub fn lock_feet_range_into(
             global_into(clip, gr, gp);
         }
         prev = Some(leg);
-        // Pins: the mean horizontal position of the joint over each contact run.
-        for target in [&mut *known, &mut *toe_known] {
-            target.clear();
-            target.resize(frames, None);
-        }
-        for (joint, contact, target) in
-            [(leg.ankle, leg.heel_contact, &mut *known), (leg.toe, leg.toe_contact, &mut *toe_known)]
-        {
-            for_runs(contacts.iter().map(|c| c[contact]), |s, e| {
-                let pin = (s..e).map(|f| horizontal(gp[f * j + joint])).sum::<DVec3>() / (e - s) as f64;
-                for f in s..e {
-                    target[f] = Some(pin - horizontal(gp[f * j + joint]));
-                }
-            });
-        }
-        for f in 0..frames {
-            if known[f].is_none() {
-                known[f] = toe_known[f];
-            }
-        }
-        fill_gaps_into(known, corrections);
-        limit_rate_into(corrections, max_step, forward);
-        for (f, c) in corrections.iter().enumerate() {
-            if c.length_squared() < 1e-12 || !bend.contains(&f) {
+        for f in bend.clone() {
+            let window = f.saturating_sub(LOCK_REACH)..(f + LOCK_REACH + 1).min(frames);
+            let parts = (&mut *known, &mut *toe_known, &mut *corrections, &mut *forward);
+            let c = correction_at(gp, j, contacts, leg, window, f, max_step, parts);
+            if c.length_squared() < 1e-12 {
                 continue;
             }
             let goal = gp[f * j + leg.ankle] + DVec3::new(c.x, 0.0, c.z);

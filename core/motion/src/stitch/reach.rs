@@ -15,7 +15,7 @@
 use super::StitchLayout;
 use crate::Clip;
 use crate::fk::forward_kinematics_frame;
-use glam::DVec3;
+use glam::{DQuat, DVec3};
 
 /// The reach of a refiner of `window` frames when none is given (`zoo stitch`'s default):
 /// the window.
@@ -29,23 +29,78 @@ pub fn seam_distance(f: usize, seams: &[usize]) -> Option<usize> {
     seams.iter().map(|&s| if f >= s { f - s } else { s - 1 - f }).min()
 }
 
-/// The weight of the stitched output at each of `frames` frames (1: the output, 0: the input):
-/// 1 within `reach / 2` frames of a seam, 0 from `reach` frames on, a smoothstep between.
-/// Without seams or with `reach` 0, every weight is 1 (nothing kept).
-pub fn weights(frames: usize, seams: &[usize], reach: usize) -> Vec<f64> {
+/// The weight of the stitched output at frame `f` (1: the output, 0: the input): 1 within
+/// `reach / 2` frames of a seam, 0 from `reach` frames on, a smoothstep between. Without seams
+/// or with `reach` 0 it is 1 (nothing kept). It reads the seams within `reach` frames of `f`.
+pub fn weight(f: usize, seams: &[usize], reach: usize) -> f64 {
     let inner = reach / 2;
-    (0..frames)
-        .map(|f| match seam_distance(f, seams) {
-            None => 1.0,
-            _ if reach == 0 => 1.0,
-            Some(d) if d <= inner => 1.0,
-            Some(d) if d >= reach => 0.0,
-            Some(d) => {
-                let x = (reach - d) as f64 / (reach - inner) as f64;
-                x * x * (3.0 - 2.0 * x)
+    match seam_distance(f, seams) {
+        None => 1.0,
+        _ if reach == 0 => 1.0,
+        Some(d) if d <= inner => 1.0,
+        Some(d) if d >= reach => 0.0,
+        Some(d) => {
+            let x = (reach - d) as f64 / (reach - inner) as f64;
+            x * x * (3.0 - 2.0 * x)
+        }
+    }
+}
+
+/// [`weight`] of each of `frames` frames.
+pub fn weights(frames: usize, seams: &[usize], reach: usize) -> Vec<f64> {
+    (0..frames).map(|f| weight(f, seams, reach)).collect()
+}
+
+/// [`keep_untouched`] one frame at a time, in order (the runtime's stitching stream keeps the
+/// frames it releases this way): the move of the stretch near seams the last frame was in.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct KeepUntouched {
+    /// The ground move of the current stretch (`None`: the stretch that starts the sequence,
+    /// or no stretch).
+    to_input: Option<super::GroundRoot>,
+    /// Whether the frame before was in a stretch near seams.
+    in_stretch: bool,
+}
+
+impl KeepUntouched {
+    /// Keeps frame `f` (its weight `w` of [`weight`]; frames given in order from 0): the
+    /// output frame's rotations (joint 0 the hips') and hips position become the input's where
+    /// `w` is 0, are moved with their stretch and eased towards the input where it is below 1.
+    /// Returns whether the frame was set to the input.
+    pub fn frame(
+        &mut self,
+        (f, w): (usize, f64),
+        (rotations, hips): (&mut [DQuat], &mut DVec3),
+        (input_rotations, input_hips): (&[DQuat], DVec3),
+        layout: &StitchLayout,
+    ) -> bool {
+        if w == 0.0 {
+            rotations.copy_from_slice(input_rotations);
+            *hips = input_hips;
+            self.in_stretch = false;
+            self.to_input = None;
+            return true;
+        }
+        if !self.in_stretch {
+            // A stretch near seams starts: after frame 0, on the input's ground root.
+            self.in_stretch = true;
+            self.to_input = (f > 0).then(|| {
+                let (ri, ro) = (layout.root_of(input_rotations[0], input_hips), layout.root_of(rotations[0], *hips));
+                ri.compose(&ro.inverse())
+            });
+        }
+        if let Some(m) = self.to_input {
+            (rotations[0], *hips) = m.apply(rotations[0], *hips);
+        }
+        if w < 1.0 {
+            *hips = input_hips.lerp(*hips, w);
+            for (qo, &qi) in rotations.iter_mut().zip(input_rotations) {
+                let o = if qi.dot(*qo) < 0.0 { -*qo } else { *qo };
+                *qo = qi.slerp(o, w).normalize();
             }
-        })
-        .collect()
+        }
+        false
+    }
 }
 
 /// Keeps `input`'s frames beyond `reach` frames of every seam in `output` (same skeleton and
@@ -57,45 +112,14 @@ pub fn keep_untouched(output: &mut Clip, input: &Clip, seams: &[usize], reach: u
     let (frames, j) = (output.frames(), output.joints());
     assert_eq!(frames, input.frames(), "the output and the input must have the same frames");
     assert_eq!(j, input.joints(), "the output and the input must have the same joints");
-    let w = weights(frames, seams, reach);
+    let mut keep = KeepUntouched::default();
     let mut kept = 0;
-    let mut f = 0;
-    while f < frames {
-        if w[f] == 0.0 {
-            kept += 1;
-            output.local_rotations[f * j..(f + 1) * j].copy_from_slice(&input.local_rotations[f * j..(f + 1) * j]);
-            output.local_positions[f * j] = input.local_positions[f * j];
-            f += 1;
-            continue;
-        }
-        // A stretch of frames near seams: f .. end.
-        let end = (f..frames).find(|&g| w[g] == 0.0).unwrap_or(frames);
-        if f > 0 {
-            let (ri, ro) = (
-                layout.root_of(input.local_rotations[f * j], input.local_positions[f * j]),
-                layout.root_of(output.local_rotations[f * j], output.local_positions[f * j]),
-            );
-            let to_input = ri.compose(&ro.inverse());
-            for g in f..end {
-                let (r, p) = to_input.apply(output.local_rotations[g * j], output.local_positions[g * j]);
-                output.local_rotations[g * j] = r;
-                output.local_positions[g * j] = p;
-            }
-        }
-        for g in f..end {
-            let a = w[g];
-            if a >= 1.0 {
-                continue;
-            }
-            let p = input.local_positions[g * j].lerp(output.local_positions[g * j], a);
-            output.local_positions[g * j] = p;
-            for k in 0..j {
-                let (qi, qo) = (input.local_rotations[g * j + k], output.local_rotations[g * j + k]);
-                let qo = if qi.dot(qo) < 0.0 { -qo } else { qo };
-                output.local_rotations[g * j + k] = qi.slerp(qo, a).normalize();
-            }
-        }
-        f = end;
+    for f in 0..frames {
+        let mut hips = output.local_positions[f * j];
+        let rotations = &mut output.local_rotations[f * j..(f + 1) * j];
+        let inputs = (&input.local_rotations[f * j..(f + 1) * j], input.local_positions[f * j]);
+        kept += usize::from(keep.frame((f, weight(f, seams, reach)), (rotations, &mut hips), inputs, layout));
+        output.local_positions[f * j] = hips;
     }
     kept
 }
@@ -125,7 +149,6 @@ pub fn largest_move_beyond(a: &Clip, b: &Clip, seams: &[usize], reach: usize) ->
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::DQuat;
 
     #[test]
     fn weights_keep_the_output_near_seams_and_the_input_beyond_reach() {

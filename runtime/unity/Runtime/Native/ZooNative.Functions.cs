@@ -475,6 +475,31 @@ namespace Zoo.Native
         public static extern ZooStatus zoo_stitch_set_seam_guard(ZooModel* model, [MarshalAs(UnmanagedType.U1)] bool on);
 
         /// <summary>
+        /// Sets the seams' reach of <c>zoo_stitch_refine_at_seams</c> and of the streams made afterwards:
+        /// frames <c>frames</c> or more from every seam are left as they were given, frames within half of
+        /// it are the refined output, eased from one to the other between (each stretch near seams first
+        /// moved on the ground to start on the input's ground root), as <c>zoo stitch --seam-reach</c> does.
+        /// 0 refines the whole sequence (<c>zoo stitch --refine-everywhere</c>). Default: the model's window,
+        /// as <c>zoo stitch</c>. A stream with a reach passes the frames away from every marked seam through
+        /// as they were pushed. Not thread-safe, as <c>zoo_stitch_set_window</c>.
+        /// </summary>
+        /// <remarks>
+        /// Safety: <c>model</c> is NULL or a live model used by no other thread during the call.
+        /// </remarks>
+        [DllImport(Library, EntryPoint = "zoo_stitch_set_seam_reach", CallingConvention = CallingConvention.Cdecl, ExactSpelling = true)]
+        public static extern ZooStatus zoo_stitch_set_seam_reach(ZooModel* model, UIntPtr frames);
+
+        /// <summary>
+        /// Writes into <c>*out</c> the seams' reach of <c>zoo_stitch_set_seam_reach</c> (0: the whole sequence is
+        /// refined). Thread-safe.
+        /// </summary>
+        /// <remarks>
+        /// Safety: <c>model</c> is NULL or a live model; <c>out</c> is NULL or valid for a write.
+        /// </remarks>
+        [DllImport(Library, EntryPoint = "zoo_stitch_seam_reach", CallingConvention = CallingConvention.Cdecl, ExactSpelling = true)]
+        public static extern ZooStatus zoo_stitch_seam_reach(ZooModel* model, UIntPtr* @out);
+
+        /// <summary>
         /// Refines a whole aligned sequence of <c>frames</c> poses (<c>roots</c> holds <c>frames</c> roots, <c>rotations</c>
         /// <c>frames * 4K</c> floats; at least <c>window</c> frames) into <c>out_roots</c> / <c>out_rotations</c> (the same
         /// sizes, root deltas filled, zero on the first frame) and the predicted contacts into
@@ -539,8 +564,9 @@ namespace Zoo.Native
         /// Sets what follows the refiner in <c>stream</c>, before its first push (<c>ZOO_STATUS_INVALID_STATE</c>
         /// after): <c>place_ankles</c> puts the ankles where the refiner predicts them, <c>lock_feet</c> locks the
         /// planted feet by the predicted contacts (both on by default, as <c>zoo stitch</c>); the seam guard
-        /// follows the model's (<c>zoo_stitch_set_seam_guard</c>). Both off with the guard off: the
-        /// refiner's poses as they are, at a latency of <c>window + stride - 2</c> frames. One thread at a time.
+        /// and the seams' reach follow the model's (<c>zoo_stitch_set_seam_guard</c>,
+        /// <c>zoo_stitch_set_seam_reach</c>). Both off with the guard and the reach off: the refiner's poses
+        /// as they are, at a latency of <c>window + stride - 1</c> frames. One thread at a time.
         /// </summary>
         /// <remarks>
         /// Safety: <c>stream</c> is NULL or live and used by this thread only.
