@@ -1562,7 +1562,9 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         }
         let a =
             self.released.saturating_sub(if self.releases_in_chunks() { STREAM_HISTORY } else { 0 }).max(self.dec_base);
-        let (i0, i1) = (a - self.dec_base, b - self.dec_base);
+        // The frames the lock of the released ones reads, each guarded with its neighbours.
+        let e = if self.releases_in_chunks() { b.min(to + STREAM_HISTORY) } else { b };
+        let (i0, i1) = (a - self.dec_base, e - self.dec_base);
         fill_clip(&mut self.work, &self.dec_rot[i0 * j..i1 * j], &self.dec_hips[i0..i1], &r.skeleton);
         if self.guard {
             // The weights of every frame at hand (each seam weighed once, `weigh_seams`).
