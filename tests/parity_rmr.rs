@@ -762,7 +762,7 @@ fn stitch_stream_matches_zoo_stitch_on_bandai2() {
             worst_zoo = worst_zoo.max(max_distance(&a, &zoo));
         }
         let mean = per_frame.iter().sum::<f64>() / per_frame.len() as f64;
-        let p99 = zoo_motion::stitch::percentile(&mut per_frame, 99.0);
+        let p99 = zoo_protocol::stitch::percentile(&mut per_frame, 99.0);
         let worst = per_frame.iter().copied().fold(0.0, f64::max);
         println!(
             "StitchStream ({name}, latency {latency} frames) vs the whole sequence on {} bandai2 youthful cases ({} \
@@ -821,14 +821,14 @@ fn foot_lock_in_windows_is_the_whole_sequences_only_without_its_rate_limit() {
                     .unwrap();
                 let n = done.clip.frames();
                 let mut full = done.clip.clone();
-                zoo_motion::stitch::lock::lock_feet_with(&mut full, &done.contacts, &layout, step);
+                zoo_protocol::stitch::lock::lock_feet_with(&mut full, &done.contacts, &layout, step);
                 let (_, fp) = full.global();
                 let j = full.joints();
                 let mut t0 = 0;
                 while t0 < n {
                     let (a, b) = (t0.saturating_sub(h), (t0 + 10 + l).min(n));
                     let mut w = done.clip.slice(a, b);
-                    zoo_motion::stitch::lock::lock_feet_with(&mut w, &done.contacts[a..b], &layout, step);
+                    zoo_protocol::stitch::lock::lock_feet_with(&mut w, &done.contacts[a..b], &layout, step);
                     let (_, wp) = w.global();
                     for t in t0..(t0 + 10).min(n) {
                         for q in 0..j {

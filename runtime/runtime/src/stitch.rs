@@ -13,12 +13,12 @@
 //!
 //! Poses in and out: [`StitchRefiner::refine_poses`] takes a whole aligned sequence of
 //! [`EnginePose`]s (root transform plus local joint rotations), encodes it with the motion
-//! core's pose vector ([`zoo_motion::stitch`], the code the offline tools use), refines it,
+//! core's pose vector ([`zoo_protocol::stitch`], the code the offline tools use), refines it,
 //! decodes it from the input's first ground root and, as `zoo stitch` does by default, puts the
 //! ankles where the refiner predicts them and locks the planted feet by the predicted contacts
-//! ([`zoo_motion::stitch::lock`]), writing into the caller's poses. Given the seams
+//! ([`zoo_protocol::stitch::lock`]), writing into the caller's poses. Given the seams
 //! ([`StitchRefiner::refine_poses_at_seams`]) it also guards them against pops between the two
-//! ([`zoo_motion::stitch::guard`]), as `zoo stitch` does.
+//! ([`zoo_protocol::stitch::guard`]), as `zoo stitch` does.
 //!
 //! Streaming for motion matching: [`StitchStream`] (from [`StitchRefiner::stream`]) takes one
 //! pose per frame as the engine decides it and gives refined poses back with a fixed latency
@@ -40,8 +40,8 @@ use std::sync::Arc;
 use tract_onnx::prelude::*;
 use zoo_format::StitchFallback;
 use zoo_motion::blend::SeamInertializer;
-use zoo_motion::stitch::{GroundRoot, PoseFrame, StitchLayout, decode_pose, encode_pose, next_root};
 use zoo_motion::{Clip, Skeleton};
+use zoo_protocol::stitch::{GroundRoot, PoseFrame, StitchLayout, decode_pose, encode_pose, next_root};
 
 type Plan = Arc<TypedRunnableModel>;
 
@@ -202,7 +202,7 @@ pub struct StitchedClip {
     /// Mean ankle correction of the foot lock (clip units), when it ran.
     pub lock_move: Option<f64>,
     /// What the seam guard did at each seam, when it ran.
-    pub guarded: Option<Vec<zoo_motion::stitch::guard::GuardedSeam>>,
+    pub guarded: Option<Vec<zoo_protocol::stitch::guard::GuardedSeam>>,
     /// The fallback's weight on each window (empty without a fallback).
     pub fallback_weights: Vec<f32>,
     /// Frames set back to the input beyond the seams' reach, when a reach was set
@@ -351,7 +351,7 @@ impl StitchRefiner {
     /// Whether [`StitchRefiner::refine_poses_at_seams`] guards the seams (on unless switched
     /// off): where the refined motion, after the ankle IK, moves a joint faster within 5 frames
     /// of a seam than the inertialized input does there, it is blended towards itself smoothed
-    /// until it does not, before the foot lock ([`zoo_motion::stitch::guard`], what `zoo stitch`
+    /// until it does not, before the foot lock ([`zoo_protocol::stitch::guard`], what `zoo stitch`
     /// does unless given `--no-seam-guard`).
     pub fn seam_guard(&self) -> bool {
         self.seam_guard
@@ -366,7 +366,7 @@ impl StitchRefiner {
     /// [`StitchRefiner::refine_poses_at_seams`], when set: every frame this many frames or
     /// more from the nearest seam is the input's exactly, the output is eased back to the
     /// input from half of it on, and each stretch near seams starts on the input's ground root
-    /// ([`zoo_motion::stitch::reach`], after the foot lock; `zoo stitch` sets the window unless
+    /// ([`zoo_protocol::stitch::reach`], after the foot lock; `zoo stitch` sets the window unless
     /// given `--seam-reach`). `None` (the default): the whole sequence is refined.
     pub fn seam_reach(&self) -> Option<usize> {
         self.seam_reach
@@ -660,7 +660,7 @@ impl StitchRefiner {
         if !seams.is_empty() {
             clip = zoo_motion::blend::inertialize_seams(&clip, seams, self.blend_frames);
         }
-        let x = zoo_motion::stitch::encode_clip(&clip, &self.layout).map_err(|e| stitch_err(e.to_string()))?;
+        let x = zoo_protocol::stitch::encode_clip(&clip, &self.layout).map_err(|e| stitch_err(e.to_string()))?;
         out.copy_from_slice(&x);
         Ok(())
     }
@@ -790,28 +790,28 @@ impl StitchRefiner {
             (Some(blended), true) => blended,
             _ => aligned,
         };
-        let x = zoo_motion::stitch::encode_clip(input, &self.layout).map_err(|e| stitch_err(e.to_string()))?;
+        let x = zoo_protocol::stitch::encode_clip(input, &self.layout).map_err(|e| stitch_err(e.to_string()))?;
         let mut y = vec![0.0f32; x.len()];
         let fallback_weights = self.refine_sequence_weights(&x, &mut y)?;
-        let start = zoo_motion::stitch::ground_roots(input, &self.layout)[0];
+        let start = zoo_protocol::stitch::ground_roots(input, &self.layout)[0];
         let ankles =
-            zoo_motion::stitch::predicted_ankles(&y, self.layout.pose_layout(self.joints), &self.layout, start);
+            zoo_protocol::stitch::predicted_ankles(&y, self.layout.pose_layout(self.joints), &self.layout, start);
         let (mut clip, contacts) =
-            zoo_motion::stitch::decode(&y, &self.skeleton, &self.layout, aligned.frame_time, start)
+            zoo_protocol::stitch::decode(&y, &self.skeleton, &self.layout, aligned.frame_time, start)
                 .map_err(|e| stitch_err(e.to_string()))?;
         let ankle_move =
-            cleanup.place_ankles.then(|| zoo_motion::stitch::lock::place_ankles(&mut clip, &ankles, &self.layout));
+            cleanup.place_ankles.then(|| zoo_protocol::stitch::lock::place_ankles(&mut clip, &ankles, &self.layout));
         let guarded = match (&inertialized, self.seam_guard) {
             (Some(reference), true) => {
-                Some(zoo_motion::stitch::guard::guard_seams(&mut clip, reference, seams, &self.layout))
+                Some(zoo_protocol::stitch::guard::guard_seams(&mut clip, reference, seams, &self.layout))
             }
             _ => None,
         };
         let lock_move =
-            cleanup.lock_feet.then(|| zoo_motion::stitch::lock::lock_feet(&mut clip, &contacts, &self.layout));
+            cleanup.lock_feet.then(|| zoo_protocol::stitch::lock::lock_feet(&mut clip, &contacts, &self.layout));
         let untouched = match self.seam_reach {
             Some(reach) if !seams.is_empty() => {
-                Some(zoo_motion::stitch::reach::keep_untouched(&mut clip, input, seams, reach, &self.layout))
+                Some(zoo_protocol::stitch::reach::keep_untouched(&mut clip, input, seams, reach, &self.layout))
             }
             _ => None,
         };
@@ -867,7 +867,7 @@ const IK_FRAMES: usize = 6;
 const WEIGH_EVALUATIONS: usize = 2;
 
 /// Frames on each side of a seam the stream's guard weighs it from (all it reads and weighs).
-const ZONE: usize = zoo_motion::stitch::guard::GUARD_FRAMES + zoo_motion::stitch::guard::GUARD_RAMP + 2;
+const ZONE: usize = zoo_protocol::stitch::guard::GUARD_FRAMES + zoo_protocol::stitch::guard::GUARD_RAMP + 2;
 
 /// Frames the stream's foot lock and seam guard release at once (they run once per this many
 /// pushes; the latency grows by this less one).
@@ -899,7 +899,7 @@ pub const STREAM_CHUNK: usize = 10;
 /// with [`FootCleanup::NONE`] and the guard off it is `w + s - 2`. The ankle IK and the guard
 /// then give the whole sequence's poses (up to the chunked graph's rounding). The foot lock does not: it pins each
 /// contact at its mean over the contact and limits its correction's change per frame forwards
-/// and backwards ([`zoo_motion::stitch::lock::LOCK_MAX_STEP`]), and where that limit stays
+/// and backwards ([`zoo_protocol::stitch::lock::LOCK_MAX_STEP`]), and where that limit stays
 /// clamped for long a frame's correction depends on frames beyond any bounded lookahead (on
 /// bandai2 the stream's feet differ from `zoo stitch`'s by 0.45 cm on average, up to 24.7 cm;
 /// docs/rmr.md).
@@ -907,8 +907,8 @@ pub const STREAM_CHUNK: usize = 10;
 ///
 /// After its first pop (and its first marked seam), pushing and popping allocate nothing on our
 /// side as long as the engine pops every frame it can: the buffers, and the scratch of the
-/// guard and the lock ([`zoo_motion::stitch::lock::LockScratch`],
-/// [`zoo_motion::stitch::guard::GuardScratch`]), are sized when the stream is made. What tract
+/// guard and the lock ([`zoo_protocol::stitch::lock::LockScratch`],
+/// [`zoo_protocol::stitch::guard::GuardScratch`]), are sized when the stream is made. What tract
 /// allocates per window is counted by `examples/rmr_window_latency` (docs/rmr.md).
 ///
 /// The stream borrows its refiner ([`StitchRefiner::stream`]) or shares it through an `Arc`
@@ -952,11 +952,11 @@ pub struct StitchStreamOf<R> {
     guard_next: usize,
     /// The seam being weighed a few evaluations per push (its first frame in the sequence is the
     /// zone clips' frame 0), the zone of output and reference it reads and the weights there.
-    weighing: Option<(zoo_motion::stitch::guard::SeamWeighing, usize)>,
+    weighing: Option<(zoo_protocol::stitch::guard::SeamWeighing, usize)>,
     zone_out: Clip,
     zone_ref: Clip,
     zone_w: Vec<f64>,
-    weigh_scratch: zoo_motion::stitch::guard::GuardScratch,
+    weigh_scratch: zoo_protocol::stitch::guard::GuardScratch,
     /// Frames popped so far.
     read: usize,
     finished: bool,
@@ -994,8 +994,8 @@ pub struct StitchStreamOf<R> {
     out_contacts: Vec<[bool; 4]>,
     /// Scratch of the guard and the lock: the frames they run over.
     work: Clip,
-    lock_scratch: zoo_motion::stitch::lock::LockScratch,
-    guard_scratch: zoo_motion::stitch::guard::GuardScratch,
+    lock_scratch: zoo_protocol::stitch::lock::LockScratch,
+    guard_scratch: zoo_protocol::stitch::guard::GuardScratch,
 }
 
 impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
@@ -1013,9 +1013,9 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         };
         let work = clip();
         let guard = refiner.seam_guard;
-        let mut lock_scratch = zoo_motion::stitch::lock::LockScratch::default();
+        let mut lock_scratch = zoo_protocol::stitch::lock::LockScratch::default();
         lock_scratch.reserve(frames, j);
-        let mut guard_scratch = zoo_motion::stitch::guard::GuardScratch::default();
+        let mut guard_scratch = zoo_protocol::stitch::guard::GuardScratch::default();
         guard_scratch.reserve(frames, j);
         StitchStreamOf {
             // At most w frames waiting to be dropped, w + 1 still needed.
@@ -1039,7 +1039,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             zone_ref: clip(),
             zone_w: Vec::with_capacity(4 * ZONE),
             weigh_scratch: {
-                let mut g = zoo_motion::stitch::guard::GuardScratch::default();
+                let mut g = zoo_protocol::stitch::guard::GuardScratch::default();
                 g.reserve(4 * ZONE, j);
                 g
             },
@@ -1345,14 +1345,14 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         // `work` is refilled by every release: a scratch clip here.
         fill_clip(&mut self.work, &self.dec_rot[i0 * j..i1 * j], &self.dec_hips[i0..i1], &r.skeleton);
         let ankles = if self.ankle_slots.is_some() { &self.dec_ankles[i0..i1] } else { &[][..] };
-        zoo_motion::stitch::lock::place_ankles_into(&mut self.work, ankles, &r.layout, &mut self.lock_scratch);
+        zoo_protocol::stitch::lock::place_ankles_into(&mut self.work, ankles, &r.layout, &mut self.lock_scratch);
         self.dec_rot[i0 * j..i1 * j].copy_from_slice(&self.work.local_rotations);
         self.ik_done = to;
     }
 
     /// The first frame the guard of a seam not weighed yet may blend (none without the guard).
     fn unweighed_from(&self) -> usize {
-        use zoo_motion::stitch::guard::{GUARD_FRAMES, GUARD_RAMP};
+        use zoo_protocol::stitch::guard::{GUARD_FRAMES, GUARD_RAMP};
         if !self.guard {
             return usize::MAX;
         }
@@ -1367,7 +1367,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
     /// them with `all`, at the finish), one seam at a time in order, each from a clip of the
     /// frames it reads and weighs once those have the ankle IK: the whole sequence's weights.
     fn weigh_seams(&mut self, all: bool) {
-        use zoo_motion::stitch::guard::SeamWeighing;
+        use zoo_protocol::stitch::guard::SeamWeighing;
         if !self.guard {
             return;
         }
@@ -1455,7 +1455,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         fill_clip(&mut self.work, &self.dec_rot[i0 * j..i1 * j], &self.dec_hips[i0..i1], &r.skeleton);
         if self.guard {
             // The weights of every frame at hand (each seam weighed once, `weigh_seams`).
-            zoo_motion::stitch::guard::apply_guard_weights(
+            zoo_protocol::stitch::guard::apply_guard_weights(
                 &mut self.work,
                 &self.guard_w[i0..i1],
                 &r.layout,
@@ -1464,11 +1464,11 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         }
         if self.cleanup.lock_feet {
             // Only the frames released now are kept: only their legs are bent.
-            zoo_motion::stitch::lock::lock_feet_range_into(
+            zoo_protocol::stitch::lock::lock_feet_range_into(
                 &mut self.work,
                 &self.dec_contacts[i0..i1],
                 &r.layout,
-                zoo_motion::stitch::lock::LOCK_MAX_STEP,
+                zoo_protocol::stitch::lock::LOCK_MAX_STEP,
                 &mut self.lock_scratch,
                 self.released - a..to - a,
             );

@@ -27,10 +27,10 @@ pub mod guard;
 pub mod lock;
 pub mod reach;
 
-use crate::facing::{ground_forward, heading_angle};
-use crate::fk::forward_kinematics_frame;
-use crate::{Clip, Skeleton};
 use glam::{DQuat, DVec3};
+use zoo_motion::facing::{ground_forward, heading_angle};
+use zoo_motion::fk::forward_kinematics_frame;
+use zoo_motion::{Clip, Skeleton};
 
 /// Lower-body joints of bandai2 (and of the synthetic skeleton, which is bandai2's): the hips,
 /// both legs and both feet. The paper's LaFAN1 list has 11 joints; bandai2 has no second
