@@ -505,7 +505,7 @@ fn a_model_trained_on_inertialized_seams_stitches_them_so() {
 /// The largest distance (cm) between a joint of `a` and of `b` over the frames `reach` or more
 /// frames from every seam.
 fn largest_move_beyond(a: &zoo_motion::Clip, b: &zoo_motion::Clip, seams: &[usize], reach: usize) -> f64 {
-    zoo_motion::stitch::reach::largest_move_beyond(a, b, seams, reach)
+    zoo_protocol::stitch::reach::largest_move_beyond(a, b, seams, reach)
 }
 
 #[test]

@@ -234,7 +234,7 @@ pub fn humanoid_keys(frames: &[usize], phase: f64) -> Vec<f32> {
                 DQuat::from_rotation_z(0.8 * (0.7 * a).sin()),
             ];
             let root = DVec3::new(f as f64, 90.0 + 3.0 * (2.0 * a).sin(), 0.3 * f as f64);
-            let pose = zoo_motion::inbetween::pose_values(root, &rot);
+            let pose = zoo_protocol::inbetween::pose_values(root, &rot);
             pose.into_iter().map(|v| v as f32).collect::<Vec<f32>>()
         })
         .collect()

@@ -7,7 +7,7 @@
 //!
 //! Where the expected numbers come from: candle's `complete_shots` on the run folder's weights.
 //! The keys are f32 values (the runtime's `MotionKeys` are f32), given to candle as f64, so both
-//! build bit-identical features ([`zoo_motion::inbetween`], one implementation); onnxruntime
+//! build bit-identical features ([`zoo_protocol::inbetween`], one implementation); onnxruntime
 //! runs the exported graph on those features and its correction is composed the same way
 //! (`b + e * correction * std`, f64). Every pair must agree within 1e-4 on the quaternion
 //! components and within 1e-4 of the roots' scale on the root positions (1 + the largest
@@ -238,14 +238,14 @@ fn candle_tract_and_onnxruntime_complete_the_same_keys() {
     // group of every key its key (a rotation up to its sign).
     runner.set_hit_keys(true);
     let hit = runtime_completion(&mut runner, &chars);
-    let key_groups = zoo_motion::inbetween::key_groups(3);
+    let key_groups = zoo_protocol::inbetween::key_groups(3);
     for (c, k) in chars.iter().enumerate() {
         let mut want = candle[c].clone();
         let layout =
-            zoo_motion::keyhit::KeyLayout { dofs: D, frames: &k.frames, key_groups: &key_groups, quaternions: true };
+            zoo_protocol::keyhit::KeyLayout { dofs: D, frames: &k.frames, key_groups: &key_groups, quaternions: true };
         let poses: Vec<f64> = k.poses.iter().map(|v| *v as f64).collect();
         let fixes = |key: usize, g: usize| k.fixed.is_empty() || k.fixed[key * G + g] == 1.0;
-        zoo_motion::keyhit::hit_keys(layout, &poses, fixes, &mut want, &mut [0.0; D]);
+        zoo_protocol::keyhit::hit_keys(layout, &poses, fixes, &mut want, &mut [0.0; D]);
         let s = scale(&want);
         let diff = diffs(&want, &hit[c]);
         let raw_miss = key_miss(k, &tract[c]);
@@ -278,7 +278,7 @@ fn tract_correction(exported: &OnnxModel, features: &[f32], n: usize) -> Vec<f32
 /// The largest difference of a completion from its keys in the groups they fix (a rotation up to
 /// its sign).
 fn key_miss(k: &Keys, out: &[f64]) -> f64 {
-    let key_groups = zoo_motion::inbetween::key_groups(3);
+    let key_groups = zoo_protocol::inbetween::key_groups(3);
     let mut worst = 0.0f64;
     for (key, &frame) in k.frames.iter().enumerate() {
         for g in (0..G).filter(|&g| k.fixed.is_empty() || k.fixed[key * G + g] == 1.0) {

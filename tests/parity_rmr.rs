@@ -809,7 +809,7 @@ fn stitch_stream_matches_zoo_stitch_on_bandai2() {
             worst_zoo = worst_zoo.max(max_distance(&a, &zoo));
         }
         let mean = per_frame.iter().sum::<f64>() / per_frame.len() as f64;
-        let p99 = zoo_motion::stitch::percentile(&mut per_frame, 99.0);
+        let p99 = zoo_protocol::stitch::percentile(&mut per_frame, 99.0);
         let worst = per_frame.iter().copied().fold(0.0, f64::max);
         println!(
             "StitchStream ({name}, latency {latency} frames) vs the whole sequence on {} bandai2 youthful cases ({} \

@@ -1151,11 +1151,11 @@ fn global_positions(info: &zoo_runtime::MotionSkeletonInfo, pose: &EnginePose) -
 }
 
 /// The runtime's foot lock is the one `zoo transition --foot-lock` and the benchmark's `+lock`
-/// ran before they moved to the runtime (`zoo_motion::pipeline::foot_lock_fitted`: the frames
+/// ran before they moved to the runtime (`zoo_protocol::pipeline::foot_lock_fitted`: the frames
 /// on the skeleton, locked, fitted again), here on the file's skeleton.
 #[test]
 fn runtime_foot_lock_is_the_fitted_post_process() {
-    use zoo_motion::pipeline::{fit_frames, foot_lock_fitted, skeleton_positions_f32};
+    use zoo_protocol::pipeline::{fit_frames, foot_lock_fitted, skeleton_positions_f32};
     let f = fixture(tiny());
     let model = TransitionModel::new(MotionModel::from_bytes(&export(&f).to_bytes()).unwrap()).unwrap();
     let lock = model.default_foot_lock().expect("the fixture skeleton has a Foot_L joint");

@@ -29,7 +29,7 @@
 //! the keys are its keys, partial keys its partial keys).
 //!
 //! `METHOD+lock` (`bezier+lock`, `arnn+lock:RUN_DIR`, ...) runs the method, then the foot lock
-//! between its keys ([`zoo_motion::keylock`]; key frames unchanged).
+//! between its keys ([`zoo_protocol::keylock`]; key frames unchanged).
 //!
 //! `onnx:FILE.onnx` runs an exported humanoid keyframe model (`zoo export --onnx`) through the
 //! engine runtime's keyframes task on tract, with its foot lock off; `onnx+lock:FILE.onnx` with
@@ -119,7 +119,7 @@ pub struct Filled {
 }
 
 impl Filled {
-    /// A motion of humanoid pose vectors (`3 + 4 J` values per frame, [`zoo_motion::inbetween`]'s
+    /// A motion of humanoid pose vectors (`3 + 4 J` values per frame, [`zoo_protocol::inbetween`]'s
     /// layout), each rotation taken on the side of the previous frame's (from `first`, the
     /// rotations of the first key) so that the quaternions stay continuous.
     pub fn from_poses<'p>(
@@ -131,7 +131,7 @@ impl Filled {
         let mut f = Filled { raw_miss, ..Filled::default() };
         let mut last = first.to_vec();
         for p in poses {
-            let (root, mut rot) = zoo_motion::inbetween::decode_pose(p, j);
+            let (root, mut rot) = zoo_protocol::inbetween::decode_pose(p, j);
             for (q, l) in rot.iter_mut().zip(last.iter_mut()) {
                 if q.dot(*l) < 0.0 {
                     *q = -*q;
@@ -204,7 +204,7 @@ pub fn linear(t: &KeyTask<'_>) -> Filled {
     out
 }
 
-pub use zoo_motion::fcurve::euler_near;
+pub use zoo_protocol::fcurve::euler_near;
 
 /// The Euler channels (degrees) of joint `jj` at the keys that fix it, continuous along them.
 pub fn euler_keys(t: &KeyTask<'_>, jj: usize) -> Vec<(f64, [f64; 3])> {
@@ -221,11 +221,11 @@ pub fn euler_keys(t: &KeyTask<'_>, jj: usize) -> Vec<(f64, [f64; 3])> {
 
 /// Blender's default F-curves through the root position channels and each joint's Euler
 /// channels at the keys that fix them, evaluated at every frame
-/// ([`zoo_motion::fcurve::bezier_inbetween`]).
+/// ([`zoo_protocol::fcurve::bezier_inbetween`]).
 pub fn bezier(t: &KeyTask<'_>) -> std::result::Result<Filled, String> {
     let orders: Vec<EulerOrder> = t.skeleton.channels.iter().map(|c| c.order).collect();
-    let keys = zoo_motion::fcurve::ShotKeys { frames: &t.frames, root: &t.root, rot: &t.rot, fixed: &t.fixed };
-    let (root, rot) = zoo_motion::fcurve::bezier_inbetween(&orders, &keys)
+    let keys = zoo_protocol::fcurve::ShotKeys { frames: &t.frames, root: &t.root, rot: &t.rot, fixed: &t.fixed };
+    let (root, rot) = zoo_protocol::fcurve::bezier_inbetween(&orders, &keys)
         .ok_or_else(|| format!("keys at frames {:?} do not make F-curves (a joint no key fixes?)", t.frames))?;
     Ok(Filled { root, rot, raw_miss: None })
 }
@@ -278,7 +278,7 @@ impl KeyMethod for ArnnKeys {
 
 /// An in-betweening run folder (`zoo train arnn --design inbetween`) as a keys-only method
 /// (candle; shots of one length as one batch): the network's poses, then the keys hit
-/// ([`zoo_motion::keyhit`]; the network meets them by construction, so this changes nothing
+/// ([`zoo_protocol::keyhit`]; the network meets them by construction, so this changes nothing
 /// beyond float rounding).
 pub struct InbetweenKeys {
     name: String,
@@ -325,10 +325,10 @@ impl InbetweenKeys {
             let d = c.dofs();
             let mut flat: Vec<f64> = raw.iter().flatten().copied().collect();
             let layout =
-                zoo_motion::keyhit::KeyLayout { dofs: d, frames: &t.frames, key_groups: &groups, quaternions: true };
+                zoo_protocol::keyhit::KeyLayout { dofs: d, frames: &t.frames, key_groups: &groups, quaternions: true };
             let key_flat: Vec<f64> = kp.iter().flatten().copied().collect();
             let fixes = |k: usize, g: usize| fx.get(k).is_none_or(|m| m[g]);
-            zoo_motion::keyhit::hit_keys(layout, &key_flat, fixes, &mut flat, &mut vec![0.0; d]);
+            zoo_protocol::keyhit::hit_keys(layout, &key_flat, fixes, &mut flat, &mut vec![0.0; d]);
             out.push(Filled::from_poses(flat.chunks_exact(d), &t.rot[..j], Some((root_miss, angle_miss))));
         }
         Ok(out)
@@ -390,7 +390,7 @@ impl RuntimeKeys {
     fn one(&self, runner: &mut zoo_runtime::KeyframeRunner, t: &KeyTask<'_>) -> Result<Filled> {
         let j = t.skeleton.len();
         let (d, g) = (self.model.dofs(), self.model.groups());
-        if d != zoo_motion::inbetween::dofs(j) || g != 1 + j {
+        if d != zoo_protocol::inbetween::dofs(j) || g != 1 + j {
             bail!("the model completes poses of {d} values in {g} groups, the data's skeleton has {j} joints");
         }
         let key_poses = zoo_arnn::humanoid::poses(&t.root, &t.rot, j);
@@ -434,7 +434,7 @@ impl KeyMethod for RuntimeKeys {
     }
 }
 
-/// A method followed by the foot lock between its keys ([`zoo_motion::keylock::key_foot_lock`],
+/// A method followed by the foot lock between its keys ([`zoo_protocol::keylock::key_foot_lock`],
 /// the skeleton's legs found by name and its rest offsets; key frames unchanged).
 pub struct WithFootLock {
     name: String,
@@ -450,8 +450,8 @@ impl KeyMethod for WithFootLock {
         let mut filled = self.inner.fill(tasks)?;
         filled.par_iter_mut().zip(tasks).for_each(|(f, t)| {
             let s = t.skeleton;
-            if let Some(lock) = zoo_motion::keylock::key_foot_lock(s) {
-                zoo_motion::keylock::lock_feet_between_keys(&lock, s, &s.offsets, &t.frames, &f.root, &mut f.rot);
+            if let Some(lock) = zoo_protocol::keylock::key_foot_lock(s) {
+                zoo_protocol::keylock::lock_feet_between_keys(&lock, s, &s.offsets, &t.frames, &f.root, &mut f.rot);
             }
         });
         Ok(filled)

@@ -15,7 +15,7 @@
 
 pub mod control;
 pub mod exported;
-pub use zoo_motion::fcurve;
+pub use zoo_protocol::fcurve;
 pub mod follow;
 pub mod frame_budget;
 pub mod inbetween;

@@ -10,7 +10,7 @@ use zoo_data::{Context, Message, bail};
 use zoo_format::MotionTaskKind;
 use zoo_motion::Clip;
 use zoo_motion::glam::DVec3;
-use zoo_motion::stitch::StitchLayout;
+use zoo_protocol::stitch::StitchLayout;
 use zoo_rmr::pairs::{MIN_CLIP_FRAMES, align_clips, baselines};
 use zoo_runtime::{FootCleanup, StitchRefiner};
 
@@ -214,7 +214,7 @@ fn configure(r: &mut StitchRefiner, frames: usize, opts: &StitchOptions, post: P
     let pre_blend = post.pre_blend || r.pre_blend();
     r.set_pre_blend(pre_blend);
     r.set_seam_guard(post.seam_guard);
-    let reach = post.reach.unwrap_or(zoo_motion::stitch::reach::default_reach(window));
+    let reach = post.reach.unwrap_or(zoo_protocol::stitch::reach::default_reach(window));
     r.set_seam_reach(post.keep_untouched.then_some(reach))?;
     Ok(())
 }
@@ -273,8 +273,8 @@ pub fn stitch(opts: &StitchOptions, names: &[String]) -> TaskResult<StitchOutcom
             if let Some(moved) = done.lock_move {
                 note += &format!(", feet locked by the predicted contacts (mean ankle correction {moved:.2} units)");
             }
-            let reach = r.seam_reach().unwrap_or(zoo_motion::stitch::reach::default_reach(r.window()));
-            let moved = zoo_motion::stitch::reach::largest_move_beyond(&done.clip, &aligned.clip, &seams, reach);
+            let reach = r.seam_reach().unwrap_or(zoo_protocol::stitch::reach::default_reach(r.window()));
+            let moved = zoo_protocol::stitch::reach::largest_move_beyond(&done.clip, &aligned.clip, &seams, reach);
             note += &match done.untouched {
                 Some(kept) => format!(", {kept} frames {reach} or more from every seam kept as they were"),
                 None => ", every frame refined".to_string(),
@@ -328,7 +328,7 @@ impl RuntimeSeamRefiner {
         let pre_blend = self.post.pre_blend || self.refiner.pre_blend();
         r.set_pre_blend(pre_blend);
         r.set_seam_guard(self.post.seam_guard);
-        let reach = self.post.reach.unwrap_or(zoo_motion::stitch::reach::default_reach(r.window()));
+        let reach = self.post.reach.unwrap_or(zoo_protocol::stitch::reach::default_reach(r.window()));
         r.set_seam_reach(self.post.keep_untouched.then_some(reach))?;
         let cleanup = FootCleanup { place_ankles: self.post.ankle_ik, lock_feet: self.post.foot_lock };
         let done = r.refine_clip(aligned, seams, cleanup)?;

@@ -10,7 +10,8 @@ use std::sync::Arc;
 use zoo_data::clip_io;
 use zoo_data::{Context, Message, Progress, bail};
 use zoo_format::MotionTaskKind;
-use zoo_motion::{Clip, Skeleton, pipeline};
+use zoo_motion::{Clip, Skeleton};
+use zoo_protocol::pipeline;
 use zoo_runtime::{TransitionModel, TransitionRunner, TransitionState};
 
 /// The options of `zoo transition`.
@@ -227,7 +228,8 @@ pub fn run(a: &TransitionOptions, p: &dyn Progress) -> TaskResult<String> {
         Some(s) => map_rig(a, s, ca, cb)?,
         None => (ca, cb, None),
     };
-    if a.foot_lock && zoo_motion::footlock::FootLock::from_skeleton(&ca.skeleton.names, &ca.skeleton.parents).is_none()
+    if a.foot_lock
+        && zoo_protocol::footlock::FootLock::from_skeleton(&ca.skeleton.names, &ca.skeleton.parents).is_none()
     {
         bail!(
             "--foot-lock: the skeleton of {} has no foot joint (a joint named like `foot` with a parent and a \

@@ -7,7 +7,7 @@
 //!   besides its recurrent state, and gives `pose` (`dofs`);
 //! - the in-betweening network (`zoo train arnn --design inbetween`, the section's
 //!   [`InbetweenSection`]), a whole-shot graph: it takes `features` `[batch, frames,
-//!   input_width]` (built from the keys by `zoo_motion::inbetween`) and gives `correction`
+//!   input_width]` (built from the keys by `zoo_protocol::inbetween`) and gives `correction`
 //!   `[batch, frames, dofs]`, which the runtime composes with the keys' Bezier curves.
 //!
 //! Files written before the in-betweening design have no `inbetween` field: they load as ARNN
@@ -37,7 +37,7 @@ pub struct KeyframesTask {
 }
 
 /// What the runtime needs to build the in-betweening network's features from keys and to
-/// compose its output (`zoo_motion::inbetween::InbetweenFeatures`): poses are the humanoid pose
+/// compose its output (`zoo_protocol::inbetween::InbetweenFeatures`): poses are the humanoid pose
 /// vector (root position, one `(w, x, y, z)` quaternion per joint, `D = 3 + 4 J`), with one key
 /// group for the root and one per joint (`G = 1 + J`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -58,11 +58,11 @@ pub struct InbetweenSection {
     /// How the graph's correction is made zero on the keys (files written before the field:
     /// the envelope).
     #[serde(default, skip_serializing_if = "is_envelope")]
-    pub residual: zoo_motion::inbetween::Residual,
+    pub residual: zoo_protocol::inbetween::Residual,
 }
 
-fn is_envelope(r: &zoo_motion::inbetween::Residual) -> bool {
-    *r == zoo_motion::inbetween::Residual::Envelope
+fn is_envelope(r: &zoo_protocol::inbetween::Residual) -> bool {
+    *r == zoo_protocol::inbetween::Residual::Envelope
 }
 
 impl InbetweenSection {
@@ -84,9 +84,9 @@ impl InbetweenSection {
             .collect()
     }
 
-    /// The feature settings of the motion core.
-    pub fn features(&self) -> Result<zoo_motion::inbetween::InbetweenFeatures, String> {
-        Ok(zoo_motion::inbetween::InbetweenFeatures {
+    /// The feature settings of the in-betweening inputs (`zoo_protocol::inbetween`).
+    pub fn features(&self) -> Result<zoo_protocol::inbetween::InbetweenFeatures, String> {
+        Ok(zoo_protocol::inbetween::InbetweenFeatures {
             orders: self.orders()?,
             gap_unit: self.gap_unit,
             mean: self.mean.clone(),
@@ -103,7 +103,9 @@ impl InbetweenSection {
         }
         let f = self.features()?;
         f.check().map_err(|e| format!("inbetween: {e}"))?;
-        if task.dofs != f.dofs() || task.groups != f.groups() || task.key_groups != zoo_motion::inbetween::key_groups(j)
+        if task.dofs != f.dofs()
+            || task.groups != f.groups()
+            || task.key_groups != zoo_protocol::inbetween::key_groups(j)
         {
             return Err(format!(
                 "the in-betweening design's pose has {} values in {} groups (root, then one per joint) for {j} joints, \

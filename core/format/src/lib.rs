@@ -2,7 +2,9 @@
 //! version 5), one format for every task. This crate is its one owner: exporters build a
 //! [`MotionModelMetadata`] and write [`MotionModelMetadata::to_props`]; the runtime reads it back
 //! with [`MotionModelMetadata::read`] (or [`MotionModelMetadata::from_props`]) and refuses files
-//! without it. No tract, no candle: [`pb`] holds the ONNX protobuf messages.
+//! without it. No tract, no candle: [`pb`] holds the ONNX protobuf messages. The one way files
+//! are written in the workspace ([`atomic`]: a temporary file renamed into place) lives here too,
+//! so that every crate, the BVH writer the Python package compiles in included, shares it.
 //!
 //! Every entry is a string; structured entries are JSON, parsed strictly (a missing or malformed
 //! entry is an error naming the key and the fix, never a silent default).
@@ -40,6 +42,7 @@
 //! its key in [`keys`], and its check in [`MotionModelMetadata::check`]
 //! (docs/adding-a-model.md).
 
+pub mod atomic;
 mod error;
 pub mod keyframes;
 pub mod pb;

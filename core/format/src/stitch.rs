@@ -8,7 +8,7 @@
 //! `zoo.state` is empty.
 
 use serde::{Deserialize, Serialize};
-pub use zoo_motion::stitch::StitchLayout;
+pub use zoo_protocol::stitch::StitchLayout;
 
 /// metadata_props key of the [`StitchTask`] section.
 pub const KEY: &str = "zoo.stitch";

@@ -306,14 +306,14 @@ fn inbetween_sample() -> MotionModelMetadata {
         mean: vec![0.25; 11],
         std: vec![0.5; 11],
         input_width: 41,
-        residual: zoo_motion::inbetween::Residual::KeyLerp,
+        residual: zoo_protocol::inbetween::Residual::KeyLerp,
     };
     MotionModelMetadata {
         model_kind: "arnn".into(),
         task: MotionTask::Keyframes(KeyframesTask {
             dofs: 11,
             groups: 3,
-            key_groups: zoo_motion::inbetween::key_groups(2),
+            key_groups: zoo_protocol::inbetween::key_groups(2),
             inbetween: Some(section),
         }),
         state: vec![],

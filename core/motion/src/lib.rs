@@ -1,40 +1,29 @@
-//! The small motion core of zoo.
+//! The small motion core of zoo: what every task uses.
 //!
 //! Skeletons, clips of local joint transforms, quaternion and Euler utilities, forward
-//! kinematics, facing/heading helpers, transition blending, the positional features the
-//! runtime shares with training, terrain heightmaps, the seeded random generator, and the
-//! motion pipeline around a model (fitting rotations to generated positions, the foot lock,
-//! splicing clips). Offline data tools, the candle models and the engine-side runtime all read
-//! motion through these types, so they share one implementation of every convention (units,
-//! frames, rotation orders). Nothing here reads files or depends on candle; the one way files are
-//! written in the workspace ([`atomic`]: a temporary file renamed into place) lives here so
-//! that every crate, the BVH writer the Python package compiles in included, shares it.
+//! kinematics, facing/heading helpers, transition blending, coordinate frames, the seeded random
+//! generator, the check that values about to be written are finite, and the grid lines of a
+//! drawing. Offline data tools, the candle models and the engine-side runtime all read motion
+//! through these types, so they share one implementation of every convention (units, frames,
+//! rotation orders). What a task's network reads and writes (RTN's features, RMR's pose vector,
+//! the in-betweening inputs, terrain patches, the foot locks) lives in `zoo_protocol`, files in
+//! `zoo_format` and `zoo_data`. Nothing here reads or writes files or depends on candle or
+//! tract, and no other crate of the workspace is a dependency.
 //!
 //! Conventions: quaternions are glam `DQuat` (stored x, y, z, w; the benchmark prints w first),
 //! positions are `DVec3` in the clip's own units (bandai2 and the synthetic data: cm, Y up).
 //! Per-frame arrays are laid out frame-major: `index = frame * joints + joint`.
 
-pub mod atomic;
 pub mod blend;
 pub mod clip;
 pub mod euler;
 pub mod facing;
-pub mod fcurve;
-pub mod features;
 pub mod finite;
-pub mod fit;
 pub mod fk;
-pub mod footlock;
 pub mod frame;
-pub mod inbetween;
-pub mod keyhit;
-pub mod keylock;
-pub mod pipeline;
 pub mod quat;
 pub mod rng;
 pub mod skeleton;
-pub mod stitch;
-pub mod terrain;
 pub mod ticks;
 
 pub use clip::Clip;

@@ -859,7 +859,7 @@ pub fn write_file(clip: &Clip, path: &Path) -> std::io::Result<()> {
     zoo_motion::finite::check_clip(&path.display().to_string(), clip)?;
     let text = to_string(clip);
     let gz = path.file_name().is_some_and(|n| n.to_string_lossy().ends_with(".gz"));
-    zoo_motion::atomic::write_with(path, |file| {
+    zoo_format::atomic::write_with(path, |file| {
         let mut w = std::io::BufWriter::new(file);
         if gz {
             let mut enc = flate2::write::GzEncoder::new(w, flate2::Compression::default());

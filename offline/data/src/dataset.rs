@@ -667,7 +667,7 @@ pub fn position_stats(global_pos: &[DVec3], joints: usize) -> PositionStats {
     PositionStats { mean, std }
 }
 
-pub use zoo_motion::stitch::percentile;
+pub use zoo_protocol::stitch::percentile;
 
 #[cfg(test)]
 mod tests {

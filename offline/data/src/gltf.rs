@@ -945,5 +945,5 @@ pub fn write_file(clip: &Clip, path: &Path) -> std::io::Result<()> {
     })?;
     let glb = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("glb"));
     let bytes = if glb { to_glb(clip) } else { to_gltf_json(clip).into_bytes() };
-    zoo_motion::atomic::write(path, &bytes)
+    zoo_format::atomic::write(path, &bytes)
 }

@@ -3,12 +3,12 @@
 //! of the context frames, of the target frame and of the one after it; joint rotations are
 //! fitted to what it generates (`BENCHMARK.md`), with twist from the interpolation of the
 //! context and target rotations, and optionally foot-locked. The fit and the foot lock are
-//! those of [`zoo_motion::pipeline`], shared with `zoo transition` and the engine.
+//! those of [`zoo_protocol::pipeline`], shared with `zoo transition` and the engine.
 
 use crate::benchmark::{self, N_PAST, Transition, TransitionMethod, TransitionTask};
 use glam::{DQuat, DVec3};
 use rayon::prelude::*;
-use zoo_motion::pipeline::{fit_frames, foot_lock_fitted, skeleton_positions_f32};
+use zoo_protocol::pipeline::{fit_frames, foot_lock_fitted, skeleton_positions_f32};
 
 /// A model generating a transition as global joint positions (`f32`, frame-major,
 /// `3 * joints` per frame, Y up, clip units).

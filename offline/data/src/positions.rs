@@ -43,5 +43,5 @@ pub fn clip_positions_json(
 
 /// Writes a positions file (compact JSON, atomically).
 pub fn write(path: &Path, value: &serde_json::Value) -> std::io::Result<()> {
-    zoo_motion::atomic::write(path, serde_json::to_string(value)?)
+    zoo_format::atomic::write(path, serde_json::to_string(value)?)
 }

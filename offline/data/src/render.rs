@@ -399,7 +399,7 @@ pub fn render_gif(clips: &[RenderClip], opts: &RenderOptions, path: &Path) -> Re
         }
         Ok(())
     };
-    zoo_motion::atomic::write_with(path, |file| encode(file).map_err(std::io::Error::other))
+    zoo_format::atomic::write_with(path, |file| encode(file).map_err(std::io::Error::other))
         .with_context(|| format!("{}: cannot write", path.display()))?;
     Ok(count)
 }
@@ -429,7 +429,7 @@ pub fn render_sheet(clips: &[RenderClip], opts: &RenderOptions, path: &Path) -> 
         }
     }
     let png = pm.encode_png().with_context(|| format!("{}: cannot encode PNG", path.display()))?;
-    zoo_motion::atomic::write(path, png).with_context(|| format!("{}: cannot write PNG", path.display()))?;
+    zoo_format::atomic::write(path, png).with_context(|| format!("{}: cannot write PNG", path.display()))?;
     Ok(frames.len())
 }
 

@@ -1,7 +1,7 @@
 //! Terrain files and the facing-aligned terrain patch around a clip's root.
 //!
-//! The grid itself is the motion core's [`Heightmap`] (units are the clip's, cm, Y up; see
-//! [`zoo_motion::terrain`] for the layout). File format (written by [`write`]): `NAME.json`, a
+//! The grid itself is the core layer's [`Heightmap`] (units are the clip's, cm, Y up; see
+//! [`zoo_protocol::terrain`] for the layout). File format (written by [`write`]): `NAME.json`, a
 //! small header `{"format": "zoo-heightfield", "version": 1, "nx", "nz", "cell", "origin_x",
 //! "origin_z", "units": "cm", "data": "NAME.f32"}` (`nx`, `nz`: the map's `cols`, `rows`), and
 //! beside it `NAME.f32`, the `nx * nz` heights as little-endian `f32`, row `k = 0` first (the
@@ -10,7 +10,7 @@
 use glam::{DQuat, DVec3};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
-pub use zoo_motion::terrain::Heightmap;
+pub use zoo_protocol::terrain::Heightmap;
 
 /// Side of the RTN terrain patch, in samples (RTN section 3.3: 13 x 13).
 pub const PATCH_SAMPLES: usize = 13;
@@ -112,8 +112,8 @@ pub fn write(map: &Heightmap, path: &Path) -> Result<(), TerrainFileError> {
         bytes.extend_from_slice(&h.to_le_bytes());
     }
     // The heights before the header that names them: a reader never finds a header without them.
-    zoo_motion::atomic::write(&data_path, bytes).map_err(io_err(&data_path))?;
-    zoo_motion::atomic::write(path, text).map_err(io_err(path))
+    zoo_format::atomic::write(&data_path, bytes).map_err(io_err(&data_path))?;
+    zoo_format::atomic::write(path, text).map_err(io_err(path))
 }
 
 /// The largest sample spacing of a heightmap file, clip units (10 km in cm).

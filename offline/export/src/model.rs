@@ -79,7 +79,7 @@ impl OnnxModel {
         if let Some(g) = &self.proto.graph {
             check_initializers(g).map_err(|e| io(e.into()))?;
         }
-        zoo_motion::atomic::write(path, self.to_bytes()).map_err(io)
+        zoo_format::atomic::write(path, self.to_bytes()).map_err(io)
     }
 
     /// Inputs, outputs and op counts, for snapshots and logs.

@@ -126,8 +126,8 @@ pub struct Staged {
 pub fn stage(dst: &Path, write: impl FnOnce(&Path) -> NnResult<()>) -> NnResult<Staged> {
     let dir = dst.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir).map_err(io(dir))?;
-    zoo_motion::atomic::check_destination(dst).map_err(io(dst))?;
-    let tmp = zoo_motion::atomic::temp_path(dst).map_err(io(dst))?;
+    zoo_format::atomic::check_destination(dst).map_err(io(dst))?;
+    let tmp = zoo_format::atomic::temp_path(dst).map_err(io(dst))?;
     write(&tmp)?;
     Ok(Staged { tmp, dst: dst.to_path_buf() })
 }

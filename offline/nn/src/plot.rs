@@ -225,7 +225,7 @@ fn draw_top_view(pm: &mut Pixmap, series: &[TopSeries], grid: f64, w: f32, origi
 fn save_png(path: &Path, pm: &Pixmap) -> NnResult<()> {
     let png =
         pm.encode_png().map_err(|e| NnError::Config(format!("{}: cannot encode the PNG: {e}", path.display())))?;
-    zoo_motion::atomic::write(path, png).map_err(io(path))
+    zoo_format::atomic::write(path, png).map_err(io(path))
 }
 
 #[cfg(test)]

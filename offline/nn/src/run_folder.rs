@@ -86,7 +86,7 @@ pub fn record_command(out: &Path, spec: &RunSpec) -> Result<(), TrainError> {
     let v = serde_json::json!({"format": COMMAND_FORMAT, "version": 1, "options": options});
     let path = out.join(COMMAND_FILE);
     let text = serde_json::to_string_pretty(&v).map_err(|e| TrainError::Config(format!("{}: {e}", path.display())))?;
-    zoo_motion::atomic::write(&path, text.as_bytes())
+    zoo_format::atomic::write(&path, text.as_bytes())
         .map_err(|e| TrainError::Config(format!("cannot write {}: {e}", path.display())))
 }
 

@@ -1,7 +1,8 @@
 //! BVH read/write for scripts: zoo's own reader and writer (`zoo_data::bvh`), compiled in from
 //! its source file. Linking `zoo-data` would pull its dataset tooling (rapier2d, ufbx's C
-//! library, glTF, FFT) into the wheel; the BVH module itself needs only the motion core,
-//! `fast-float2` and `flate2`, so the package builds that one file.
+//! library, glTF, FFT) into the wheel; the BVH module itself needs only the motion core, the
+//! model file's crate (its atomic write), `fast-float2` and `flate2`, so the package builds
+//! that one file.
 
 use crate::arrays::{array, check_shape};
 use crate::error::{BvhError, shape};

@@ -10,10 +10,10 @@
 //!   are stepped on (their outputs discarded) until the longest one ends;
 //! - the in-betweening network's whole-shot graph (`zoo train arnn --design inbetween`,
 //!   `zoo_arnn::inbetween_export`): the features of each character's keys are built by
-//!   [`zoo_motion::inbetween`] (the code training uses), the graph corrects the keys' Bezier
+//!   [`zoo_protocol::inbetween`] (the code training uses), the graph corrects the keys' Bezier
 //!   curves over the whole shot in one call per character, and the completion is `bezier +
 //!   residual * std`, the residual made from the correction zero on the keys as the file's
-//!   `residual` says ([`zoo_motion::inbetween::Residual`]), composed in f64 as
+//!   `residual` says ([`zoo_protocol::inbetween::Residual`]), composed in f64 as
 //!   `zoo_arnn::inbetween::complete_shots` does. Its poses are the humanoid pose vector (root
 //!   position, then a `(w, x, y, z)` quaternion per joint, the clips' units).
 //!
@@ -22,13 +22,13 @@
 //!
 //! Every key is hit: after the network has run, each key frame is set to its key (in the
 //! groups it fixes) and the network's miss is spread over the frames before it
-//! ([`zoo_motion::keyhit`], like RTN's target blend), so the motion stays continuous. A
+//! ([`zoo_protocol::keyhit`], like RTN's target blend), so the motion stays continuous. A
 //! humanoid's rotations are compared up to sign. [`KeyframeRunner::set_hit_keys`] turns this
 //! off to read the network's own output (the in-betweening design meets its keys by
 //! construction, to float rounding).
 //!
 //! A humanoid's completion then has its feet locked between the keys, as `zoo complete` does
-//! ([`zoo_motion::keylock`]: planted feet held, the legs refitted, the key frames unchanged;
+//! ([`zoo_protocol::keylock`]: planted feet held, the legs refitted, the key frames unchanged;
 //! the model's skeleton and bone offsets from its file, legs found by joint name).
 //! [`KeyframeRunner::set_foot_lock`] turns this off.
 //!
@@ -303,11 +303,11 @@ impl KeyframeModel {
     }
 }
 
-/// The foot lock between the keys of a humanoid completion ([`zoo_motion::keylock`], as `zoo
+/// The foot lock between the keys of a humanoid completion ([`zoo_protocol::keylock`], as `zoo
 /// complete` applies it): the model's skeleton, its legs, and buffers.
 #[derive(Clone, Debug)]
 struct KeyFeet {
-    lock: zoo_motion::footlock::FootLock,
+    lock: zoo_protocol::footlock::FootLock,
     skeleton: zoo_motion::Skeleton,
     root: Vec<DVec3>,
     rot: Vec<DQuat>,
@@ -318,7 +318,7 @@ impl KeyFeet {
     /// The lock of a skeleton with legs whose humanoid poses have `dofs` values; `None` otherwise.
     fn new(info: &crate::metadata::MotionSkeletonInfo, dofs: usize) -> Option<Self> {
         let j = info.names.len();
-        if j == 0 || info.parents.len() != j || info.offsets.len() != j || dofs != zoo_motion::inbetween::dofs(j) {
+        if j == 0 || info.parents.len() != j || info.offsets.len() != j || dofs != zoo_protocol::inbetween::dofs(j) {
             return None;
         }
         let skeleton = zoo_motion::Skeleton {
@@ -328,7 +328,7 @@ impl KeyFeet {
             end_sites: vec![None; j],
             channels: vec![zoo_motion::JointChannels::default(); j],
         };
-        let lock = zoo_motion::keylock::key_foot_lock(&skeleton)?;
+        let lock = zoo_protocol::keylock::key_foot_lock(&skeleton)?;
         Some(KeyFeet { lock, skeleton, root: vec![], rot: vec![], before: vec![] })
     }
 
@@ -336,7 +336,7 @@ impl KeyFeet {
     /// key frames; writes back the rotations the lock changed (with the sign of the old ones).
     fn apply(&mut self, frames: &[usize], out: &mut [f32]) {
         let j = self.skeleton.len();
-        let d = zoo_motion::inbetween::dofs(j);
+        let d = zoo_protocol::inbetween::dofs(j);
         self.root.clear();
         self.rot.clear();
         for p in out.chunks_exact(d) {
@@ -348,7 +348,7 @@ impl KeyFeet {
         }
         self.before.clone_from(&self.rot);
         let s = &self.skeleton;
-        zoo_motion::keylock::lock_feet_between_keys(&self.lock, s, &s.offsets, frames, &self.root, &mut self.rot);
+        zoo_protocol::keylock::lock_feet_between_keys(&self.lock, s, &s.offsets, frames, &self.root, &mut self.rot);
         for (i, (new, old)) in self.rot.iter().zip(&self.before).enumerate() {
             if new != old {
                 let q = if new.dot(*old) < 0.0 { -*new } else { *new };
@@ -474,17 +474,17 @@ impl KeyframeRunner {
     }
 
     /// Sets each key frame of a completion to its key and spreads the network's miss over the
-    /// frames before it ([`zoo_motion::keyhit::hit_keys`]).
+    /// frames before it ([`zoo_protocol::keyhit::hit_keys`]).
     fn hit(&mut self, keys: &MotionKeys<'_>, out: &mut [f32]) {
         let g = self.groups;
-        let layout = zoo_motion::keyhit::KeyLayout {
+        let layout = zoo_protocol::keyhit::KeyLayout {
             dofs: self.dofs,
             frames: keys.frames,
             key_groups: &self.key_groups,
             quaternions: g > 0,
         };
         let fixes = |k: usize, group: usize| keys.fixed.is_empty() || keys.fixed[k * g + group] == 1.0;
-        zoo_motion::keyhit::hit_keys(layout, keys.poses, fixes, out, &mut self.scratch);
+        zoo_protocol::keyhit::hit_keys(layout, keys.poses, fixes, out, &mut self.scratch);
     }
 
     /// Completes one character's keys into `out` (`keys.len() * dofs` values, frame-major).

@@ -10,7 +10,8 @@
 //! per call by a per-thread [`MotionRunner`] (state in, state out, preallocated buffers). The
 //! graph runs on tract; the public API takes and returns plain `f32` slices and glam types only.
 //!
-//! Depends on tract-onnx and the motion core only: never on candle, the dataset tooling or
+//! Depends on tract-onnx and the core crates only (the motion core, the task protocol
+//! `zoo_protocol` and the model file `zoo_format`): never on candle, the dataset tooling or
 //! the CLI (checked with `cargo tree -p zoo-runtime -e normal`).
 //!
 //! ```no_run

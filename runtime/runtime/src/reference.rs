@@ -709,15 +709,15 @@ fn transition_case(
 /// quaternion per joint of its skeleton, one key group each).
 fn is_humanoid(model: &KeyframeModel) -> bool {
     let j = model.metadata().skeleton.len();
-    model.groups() == 1 + j && model.dofs() == zoo_motion::inbetween::dofs(j)
+    model.groups() == 1 + j && model.dofs() == zoo_protocol::inbetween::dofs(j)
 }
 
 /// Whether the runtime locks the feet of this keyframe model's completions: a humanoid pose on
-/// a skeleton with legs (joints named `foot`, [`zoo_motion::footlock::FootLock::from_skeleton`]).
+/// a skeleton with legs (joints named `foot`, [`zoo_protocol::footlock::FootLock::from_skeleton`]).
 fn locks_feet(model: &KeyframeModel) -> bool {
     let s = &model.metadata().skeleton;
     let parents: Vec<Option<usize>> = s.parents.iter().map(|&p| usize::try_from(p).ok()).collect();
-    is_humanoid(model) && zoo_motion::footlock::FootLock::from_skeleton(&s.names, &parents).is_some()
+    is_humanoid(model) && zoo_protocol::footlock::FootLock::from_skeleton(&s.names, &parents).is_some()
 }
 
 /// Seeded key poses, `keys * dofs` values: the `pose` group's means plus seeded multiples of

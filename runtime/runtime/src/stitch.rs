@@ -12,13 +12,13 @@
 //! contacts returned as 0/1.
 //!
 //! Poses in and out: [`StitchRefiner::refine_poses`] takes a whole aligned sequence of
-//! [`EnginePose`]s (root transform plus local joint rotations), encodes it with the motion
-//! core's pose vector ([`zoo_motion::stitch`], the code the offline tools use), refines it,
+//! [`EnginePose`]s (root transform plus local joint rotations), encodes it with the task
+//! protocol's pose vector ([`zoo_protocol::stitch`], the code the offline tools use), refines it,
 //! decodes it from the input's first ground root and, as `zoo stitch` does by default, puts the
 //! ankles where the refiner predicts them and locks the planted feet by the predicted contacts
-//! ([`zoo_motion::stitch::lock`]), writing into the caller's poses. Given the seams
+//! ([`zoo_protocol::stitch::lock`]), writing into the caller's poses. Given the seams
 //! ([`StitchRefiner::refine_poses_at_seams`]) it also guards them against pops between the two
-//! ([`zoo_motion::stitch::guard`]), as `zoo stitch` does.
+//! ([`zoo_protocol::stitch::guard`]), as `zoo stitch` does.
 //!
 //! Streaming for motion matching: [`StitchStream`] (from [`StitchRefiner::stream`]) takes one
 //! pose per frame as the engine decides it and gives refined poses back with a fixed latency
@@ -40,8 +40,8 @@ use std::sync::Arc;
 use tract_onnx::prelude::*;
 use zoo_format::StitchFallback;
 use zoo_motion::blend::SeamInertializer;
-use zoo_motion::stitch::{GroundRoot, PoseFrame, StitchLayout, decode_pose, encode_pose, next_root};
 use zoo_motion::{Clip, Skeleton};
+use zoo_protocol::stitch::{GroundRoot, PoseFrame, StitchLayout, decode_pose, encode_pose, next_root};
 
 type Plan = Arc<TypedRunnableModel>;
 
@@ -171,7 +171,7 @@ fn check_reach(frames: Option<usize>) -> Result<(), MotionError> {
 /// The seams' reach a refiner applies ([`StitchRefiner::seam_reach`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum SeamReach {
-    /// The window's ([`zoo_motion::stitch::reach::default_reach`]), following
+    /// The window's ([`zoo_protocol::stitch::reach::default_reach`]), following
     /// [`StitchRefiner::set_window`]: the default.
     Window,
     Frames(usize),
@@ -229,7 +229,7 @@ pub struct StitchedClip {
     /// Mean ankle correction of the foot lock (clip units), when it ran.
     pub lock_move: Option<f64>,
     /// What the seam guard did at each seam, when it ran.
-    pub guarded: Option<Vec<zoo_motion::stitch::guard::GuardedSeam>>,
+    pub guarded: Option<Vec<zoo_protocol::stitch::guard::GuardedSeam>>,
     /// The fallback's weight on each window (empty without a fallback).
     pub fallback_weights: Vec<f32>,
     /// Frames set back to the input beyond the seams' reach, when a reach was set
@@ -378,7 +378,7 @@ impl StitchRefiner {
     /// Whether [`StitchRefiner::refine_poses_at_seams`] guards the seams (on unless switched
     /// off): where the refined motion, after the ankle IK, moves a joint faster within 5 frames
     /// of a seam than the inertialized input does there, it is blended towards itself smoothed
-    /// until it does not, before the foot lock ([`zoo_motion::stitch::guard`], what `zoo stitch`
+    /// until it does not, before the foot lock ([`zoo_protocol::stitch::guard`], what `zoo stitch`
     /// does unless given `--no-seam-guard`).
     pub fn seam_guard(&self) -> bool {
         self.seam_guard
@@ -393,12 +393,12 @@ impl StitchRefiner {
     /// and the streams made afterwards, when set: every frame this many frames or more from the
     /// nearest seam is the input's exactly, the output is eased back to the input from half of
     /// it on, and each stretch near seams starts on the input's ground root
-    /// ([`zoo_motion::stitch::reach`], after the foot lock). Default: the window (as `zoo
+    /// ([`zoo_protocol::stitch::reach`], after the foot lock). Default: the window (as `zoo
     /// stitch`; it follows [`StitchRefiner::set_window`]). `None`: the whole sequence is refined
     /// (`zoo stitch --refine-everywhere`). Without seams nothing is kept.
     pub fn seam_reach(&self) -> Option<usize> {
         match self.seam_reach {
-            SeamReach::Window => Some(zoo_motion::stitch::reach::default_reach(self.window)),
+            SeamReach::Window => Some(zoo_protocol::stitch::reach::default_reach(self.window)),
             SeamReach::Frames(n) => Some(n),
             SeamReach::Everywhere => None,
         }
@@ -691,7 +691,7 @@ impl StitchRefiner {
         if !seams.is_empty() {
             clip = zoo_motion::blend::inertialize_seams(&clip, seams, self.blend_frames);
         }
-        let x = zoo_motion::stitch::encode_clip(&clip, &self.layout).map_err(|e| stitch_err(e.to_string()))?;
+        let x = zoo_protocol::stitch::encode_clip(&clip, &self.layout).map_err(|e| stitch_err(e.to_string()))?;
         out.copy_from_slice(&x);
         Ok(())
     }
@@ -836,28 +836,28 @@ impl StitchRefiner {
             (Some(blended), true) => blended,
             _ => aligned,
         };
-        let x = zoo_motion::stitch::encode_clip(input, &self.layout).map_err(|e| stitch_err(e.to_string()))?;
+        let x = zoo_protocol::stitch::encode_clip(input, &self.layout).map_err(|e| stitch_err(e.to_string()))?;
         let mut y = vec![0.0f32; x.len()];
         let fallback_weights = self.refine_sequence_weights(&x, &mut y)?;
-        let start = zoo_motion::stitch::ground_roots(input, &self.layout)[0];
+        let start = zoo_protocol::stitch::ground_roots(input, &self.layout)[0];
         let ankles =
-            zoo_motion::stitch::predicted_ankles(&y, self.layout.pose_layout(self.joints), &self.layout, start);
+            zoo_protocol::stitch::predicted_ankles(&y, self.layout.pose_layout(self.joints), &self.layout, start);
         let (mut clip, contacts) =
-            zoo_motion::stitch::decode(&y, &self.skeleton, &self.layout, aligned.frame_time, start)
+            zoo_protocol::stitch::decode(&y, &self.skeleton, &self.layout, aligned.frame_time, start)
                 .map_err(|e| stitch_err(e.to_string()))?;
         let ankle_move =
-            cleanup.place_ankles.then(|| zoo_motion::stitch::lock::place_ankles(&mut clip, &ankles, &self.layout));
+            cleanup.place_ankles.then(|| zoo_protocol::stitch::lock::place_ankles(&mut clip, &ankles, &self.layout));
         let guarded = match (&inertialized, self.seam_guard) {
             (Some(reference), true) => {
-                Some(zoo_motion::stitch::guard::guard_seams(&mut clip, reference, seams, &self.layout))
+                Some(zoo_protocol::stitch::guard::guard_seams(&mut clip, reference, seams, &self.layout))
             }
             _ => None,
         };
         let lock_move =
-            cleanup.lock_feet.then(|| zoo_motion::stitch::lock::lock_feet(&mut clip, &contacts, &self.layout));
+            cleanup.lock_feet.then(|| zoo_protocol::stitch::lock::lock_feet(&mut clip, &contacts, &self.layout));
         let untouched = match reach {
             Some(reach) if !seams.is_empty() => {
-                Some(zoo_motion::stitch::reach::keep_untouched(&mut clip, input, seams, reach, &self.layout))
+                Some(zoo_protocol::stitch::reach::keep_untouched(&mut clip, input, seams, reach, &self.layout))
             }
             _ => None,
         };
@@ -899,18 +899,18 @@ fn write_poses(clip: &Clip, out: &mut [EnginePose]) {
 
 /// Frames of lookahead the stream's foot lock, seam guard and seams' reach take beyond the
 /// refiner's window ([`StitchStream::latency`]): the lock of a frame reads the
-/// [`zoo_motion::stitch::lock::LOCK_REACH`] frames after it, each guarded with its neighbours,
+/// [`zoo_protocol::stitch::lock::LOCK_REACH`] frames after it, each guarded with its neighbours,
 /// and those must be past the guard of every seam that may blend them: a seam's guard reads
 /// the 17 frames after it once they have the ankle IK, and its weight takes a few pushes to
 /// compute. 72 frames is the least with which a stream of bandai2's stitching cases and one with
 /// a seam every 10 frames kept their latency (`tests/parity_rmr.rs`); this is 8 more.
 pub const STREAM_LOOKAHEAD: usize =
-    zoo_motion::stitch::lock::LOCK_REACH + zoo_motion::stitch::guard::SMOOTH_RADIUS + 2 * ZONE;
+    zoo_protocol::stitch::lock::LOCK_REACH + zoo_protocol::stitch::guard::SMOOTH_RADIUS + 2 * ZONE;
 
 /// Frames of already popped motion the stream's foot lock reads again: the lock of a frame
-/// reads the [`zoo_motion::stitch::lock::LOCK_REACH`] frames before it, each guarded with its
-/// neighbours ([`zoo_motion::stitch::guard::SMOOTH_RADIUS`]).
-pub const STREAM_HISTORY: usize = zoo_motion::stitch::lock::LOCK_REACH + zoo_motion::stitch::guard::SMOOTH_RADIUS;
+/// reads the [`zoo_protocol::stitch::lock::LOCK_REACH`] frames before it, each guarded with its
+/// neighbours ([`zoo_protocol::stitch::guard::SMOOTH_RADIUS`]).
+pub const STREAM_HISTORY: usize = zoo_protocol::stitch::lock::LOCK_REACH + zoo_protocol::stitch::guard::SMOOTH_RADIUS;
 
 /// Frames a stream puts the ankles of per push (a window decodes `s` frames every `s` pushes).
 const IK_FRAMES: usize = 6;
@@ -919,7 +919,7 @@ const IK_FRAMES: usize = 6;
 const WEIGH_EVALUATIONS: usize = 2;
 
 /// Frames on each side of a seam the stream's guard weighs it from (all it reads and weighs).
-const ZONE: usize = zoo_motion::stitch::guard::GUARD_FRAMES + zoo_motion::stitch::guard::GUARD_RAMP + 2;
+const ZONE: usize = zoo_protocol::stitch::guard::GUARD_FRAMES + zoo_protocol::stitch::guard::GUARD_RAMP + 2;
 
 /// Frames the stream's foot lock and seam guard release at once (they run once per this many
 /// pushes; the latency grows by this less one).
@@ -952,7 +952,7 @@ pub const STREAM_CHUNK: usize = 10;
 /// one; the reach keeps each released frame as `zoo stitch` does. The latency is then `w + s - 1
 /// + STREAM_LOOKAHEAD + STREAM_CHUNK - 1` frames (178 for `w` = 60, `s` = 30: 5.9 s at 30 fps);
 /// with [`FootCleanup::NONE`], the guard and the reach off it is `w + s - 1`. Every frame's lock
-/// reads the frames within [`zoo_motion::stitch::lock::LOCK_REACH`] of it, all at hand, so the
+/// reads the frames within [`zoo_protocol::stitch::lock::LOCK_REACH`] of it, all at hand, so the
 /// stream gives the whole sequence's poses ([`StitchRefiner::refine_poses_at_seams`]) up to the
 /// chunked graph's rounding (on bandai2's stitching cases within 7.4e-3 cm of `zoo stitch`,
 /// docs/rmr.md). A stream with a reach passes the frames away from every marked seam through as
@@ -961,8 +961,8 @@ pub const STREAM_CHUNK: usize = 10;
 ///
 /// After its first pop (and its first marked seam), pushing and popping allocate nothing on our
 /// side as long as the engine pops every frame it can: the buffers, and the scratch of the
-/// guard and the lock ([`zoo_motion::stitch::lock::LockScratch`],
-/// [`zoo_motion::stitch::guard::GuardScratch`]), are sized when the stream is made. What tract
+/// guard and the lock ([`zoo_protocol::stitch::lock::LockScratch`],
+/// [`zoo_protocol::stitch::guard::GuardScratch`]), are sized when the stream is made. What tract
 /// allocates per window is counted by `examples/rmr_window_latency` (docs/rmr.md).
 ///
 /// The stream borrows its refiner ([`StitchRefiner::stream`]) or shares it through an `Arc`
@@ -1006,11 +1006,11 @@ pub struct StitchStreamOf<R> {
     guard_next: usize,
     /// The seam being weighed a few evaluations per push (its first frame in the sequence is the
     /// zone clips' frame 0), the zone of output and reference it reads and the weights there.
-    weighing: Option<(zoo_motion::stitch::guard::SeamWeighing, usize)>,
+    weighing: Option<(zoo_protocol::stitch::guard::SeamWeighing, usize)>,
     zone_out: Clip,
     zone_ref: Clip,
     zone_w: Vec<f64>,
-    weigh_scratch: zoo_motion::stitch::guard::GuardScratch,
+    weigh_scratch: zoo_protocol::stitch::guard::GuardScratch,
     /// Frames popped so far.
     read: usize,
     finished: bool,
@@ -1030,7 +1030,7 @@ pub struct StitchStreamOf<R> {
     /// The seams' reach ([`StitchRefiner::seam_reach`]) and the stretch of the frames released
     /// last.
     reach: Option<usize>,
-    keep: zoo_motion::stitch::reach::KeepUntouched,
+    keep: zoo_protocol::stitch::reach::KeepUntouched,
     /// Frames the marked seams start on.
     seams: Vec<usize>,
     /// Decoded frames `dec_base..refined`: model-space rotations, hips, contacts, predicted
@@ -1052,8 +1052,8 @@ pub struct StitchStreamOf<R> {
     out_contacts: Vec<[bool; 4]>,
     /// Scratch of the guard and the lock: the frames they run over.
     work: Clip,
-    lock_scratch: zoo_motion::stitch::lock::LockScratch,
-    guard_scratch: zoo_motion::stitch::guard::GuardScratch,
+    lock_scratch: zoo_protocol::stitch::lock::LockScratch,
+    guard_scratch: zoo_protocol::stitch::guard::GuardScratch,
 }
 
 impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
@@ -1072,9 +1072,9 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         };
         let work = clip();
         let guard = refiner.seam_guard;
-        let mut lock_scratch = zoo_motion::stitch::lock::LockScratch::default();
+        let mut lock_scratch = zoo_protocol::stitch::lock::LockScratch::default();
         lock_scratch.reserve(frames, j);
-        let mut guard_scratch = zoo_motion::stitch::guard::GuardScratch::default();
+        let mut guard_scratch = zoo_protocol::stitch::guard::GuardScratch::default();
         guard_scratch.reserve(frames, j);
         StitchStreamOf {
             // At most w frames waiting to be dropped, w + 1 still needed.
@@ -1098,7 +1098,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             zone_ref: clip(),
             zone_w: Vec::with_capacity(4 * ZONE),
             weigh_scratch: {
-                let mut g = zoo_motion::stitch::guard::GuardScratch::default();
+                let mut g = zoo_protocol::stitch::guard::GuardScratch::default();
                 g.reserve(4 * ZONE, j);
                 g
             },
@@ -1448,14 +1448,14 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         // `work` is refilled by every release: a scratch clip here.
         fill_clip(&mut self.work, &self.dec_rot[i0 * j..i1 * j], &self.dec_hips[i0..i1], &r.skeleton);
         let ankles = if self.ankle_slots.is_some() { &self.dec_ankles[i0..i1] } else { &[][..] };
-        zoo_motion::stitch::lock::place_ankles_into(&mut self.work, ankles, &r.layout, &mut self.lock_scratch);
+        zoo_protocol::stitch::lock::place_ankles_into(&mut self.work, ankles, &r.layout, &mut self.lock_scratch);
         self.dec_rot[i0 * j..i1 * j].copy_from_slice(&self.work.local_rotations);
         self.ik_done = to;
     }
 
     /// The first frame the guard of a seam not weighed yet may blend (none without the guard).
     fn unweighed_from(&self) -> usize {
-        use zoo_motion::stitch::guard::{GUARD_FRAMES, GUARD_RAMP};
+        use zoo_protocol::stitch::guard::{GUARD_FRAMES, GUARD_RAMP};
         if !self.guard {
             return usize::MAX;
         }
@@ -1470,7 +1470,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
     /// them with `all`, at the finish), one seam at a time in order, each from a clip of the
     /// frames it reads and weighs once those have the ankle IK: the whole sequence's weights.
     fn weigh_seams(&mut self, all: bool) {
-        use zoo_motion::stitch::guard::SeamWeighing;
+        use zoo_protocol::stitch::guard::SeamWeighing;
         if !self.guard {
             return;
         }
@@ -1541,7 +1541,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         let to = if at_finish {
             to
         } else {
-            let lock_reach = if self.cleanup.lock_feet { zoo_motion::stitch::lock::LOCK_REACH } else { 0 };
+            let lock_reach = if self.cleanup.lock_feet { zoo_protocol::stitch::lock::LOCK_REACH } else { 0 };
             let seams_known = self.reach.map_or(usize::MAX, |r| self.pushed.saturating_sub(r));
             to.min(self.released + chunk).min(self.unweighed_from().saturating_sub(lock_reach)).min(seams_known)
         };
@@ -1568,7 +1568,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         fill_clip(&mut self.work, &self.dec_rot[i0 * j..i1 * j], &self.dec_hips[i0..i1], &r.skeleton);
         if self.guard {
             // The weights of every frame at hand (each seam weighed once, `weigh_seams`).
-            zoo_motion::stitch::guard::apply_guard_weights(
+            zoo_protocol::stitch::guard::apply_guard_weights(
                 &mut self.work,
                 &self.guard_w[i0..i1],
                 &r.layout,
@@ -1577,11 +1577,11 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         }
         if self.cleanup.lock_feet {
             // Only the frames released now are kept: only their legs are bent.
-            zoo_motion::stitch::lock::lock_feet_range_into(
+            zoo_protocol::stitch::lock::lock_feet_range_into(
                 &mut self.work,
                 &self.dec_contacts[i0..i1],
                 &r.layout,
-                zoo_motion::stitch::lock::LOCK_MAX_STEP,
+                zoo_protocol::stitch::lock::LOCK_MAX_STEP,
                 &mut self.lock_scratch,
                 self.released - a..to - a,
             );
@@ -1590,8 +1590,8 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             let i = f - a;
             if let Some(reach) = self.reach {
                 // The seams' reach; no marked seam within reach: the frame as pushed.
-                let w = match zoo_motion::stitch::reach::seam_distance(f, &self.seams) {
-                    Some(_) => zoo_motion::stitch::reach::weight(f, &self.seams, reach),
+                let w = match zoo_protocol::stitch::reach::seam_distance(f, &self.seams) {
+                    Some(_) => zoo_protocol::stitch::reach::weight(f, &self.seams, reach),
                     None => 0.0,
                 };
                 let mut hips = self.work.local_positions[i * j];

@@ -2,7 +2,7 @@
 //! at a time (global joint positions in and out), generate a whole target-blended transition
 //! into a caller-owned buffer, or do either for N characters in one graph run.
 //!
-//! Feature encoding, offsets and the target blend come from `zoo_motion::features`, the code
+//! Feature encoding, offsets and the target blend come from `zoo_protocol::features`, the code
 //! the training uses. The step and start graphs are those of `zoo export --onnx` for an RTN
 //! (`zoo.model_kind = "rtn"`, `zoo.task = "transition"`): frame inputs `x` and (with future
 //! conditioning) `offset`, frame output `x_next`, start inputs `target` and/or `x0`. How to drive
@@ -12,7 +12,7 @@
 //! A terrain-aware RTN (`zoo train rtn --terrain`, `zoo.transition`'s `terrain` section) also
 //! takes the step input `terrain`: the local patch under the root of the frame fed, sampled from
 //! the character's heightmap ([`TransitionState::set_heightmap`]) by
-//! [`zoo_motion::terrain::terrain_patch`], the function training calls, and normalized with the
+//! [`zoo_protocol::terrain::terrain_patch`], the function training calls, and normalized with the
 //! file's `terrain` group (docs/runtime-protocol.md).
 //!
 //! Poses are flat `f32` buffers of global joint positions, joint-major (`[x0, y0, z0, x1, ...]`,
@@ -30,10 +30,10 @@ use glam::DVec3;
 use posed::{PosedScratch, PosedState};
 use std::path::Path;
 use std::sync::Arc;
-use zoo_motion::features;
-use zoo_motion::footlock::FootLock;
-pub use zoo_motion::terrain::Heightmap;
-use zoo_motion::terrain::terrain_patch;
+use zoo_protocol::features;
+use zoo_protocol::footlock::FootLock;
+pub use zoo_protocol::terrain::Heightmap;
+use zoo_protocol::terrain::terrain_patch;
 
 /// What a frame input of the step graph is fed from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -516,7 +516,7 @@ impl TransitionRunner {
     /// Sets the foot-lock post-process that [`TransitionRunner::generate`] applies after the
     /// target blend and the fallback (`None`: off, the default): the frames are put on the
     /// model's skeleton (rotations fitted, bones at their rest lengths), locked, and fitted
-    /// again, so the locked feet are the skeleton's (see `zoo_motion::footlock`). Per-frame
+    /// again, so the locked feet are the skeleton's (see `zoo_protocol::footlock`). Per-frame
     /// stepping never applies it: it needs the whole transition.
     pub fn set_foot_lock(&mut self, lock: Option<FootLock>) {
         self.foot_lock = lock.map(|lock| {

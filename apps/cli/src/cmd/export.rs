@@ -73,7 +73,7 @@ fn write_reference(a: &ExportArgs, model: &OnnxModel) -> anyhow::Result<()> {
         .with_context(|| format!("--reference {}: computing the reference vectors", path.display()))?;
     let cases = vectors.transition.len() + vectors.keyframes.len() + vectors.stitch.len() + vectors.synthesis.len();
     zoo_motion::finite::check_serialize(&path.display().to_string(), &vectors)?;
-    zoo_motion::atomic::write(path, serde_json::to_string(&vectors)?)
+    zoo_format::atomic::write(path, serde_json::to_string(&vectors)?)
         .with_context(|| format!("writing {}", path.display()))?;
     let check = if a.portable {
         String::new()

@@ -100,7 +100,7 @@ impl Io {
             if out.as_os_str() == "-" {
                 continue;
             }
-            zoo_motion::atomic::check_destination(out).map_err(|e| anyhow::anyhow!("{option} {e}"))?;
+            zoo_format::atomic::check_destination(out).map_err(|e| anyhow::anyhow!("{option} {e}"))?;
             let key = Key::of(out);
             for (in_option, input) in &self.inputs {
                 if key.same(&Key::of(input)) {

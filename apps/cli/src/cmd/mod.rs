@@ -33,7 +33,7 @@ pub fn check_output_file(option: &str, path: &Path) -> anyhow::Result<()> {
     if path.is_dir() {
         bail!("{option} {}: is a folder; give a file name", path.display());
     }
-    zoo_motion::atomic::check_destination(path).map_err(|e| anyhow::anyhow!("{option} {e}"))?;
+    zoo_format::atomic::check_destination(path).map_err(|e| anyhow::anyhow!("{option} {e}"))?;
     let parent = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     if !parent.is_dir() {
         bail!("{option} {}: the folder {} does not exist (create it first)", path.display(), parent.display());
@@ -128,7 +128,7 @@ pub fn load_split(
 pub fn write_json(path: &Path, value: &impl serde::Serialize) -> anyhow::Result<()> {
     zoo_motion::finite::check_serialize(&path.display().to_string(), value)?;
     let text = serde_json::to_string_pretty(value)?;
-    zoo_motion::atomic::write(path, text).with_context(|| format!("writing {}", path.display()))
+    zoo_format::atomic::write(path, text).with_context(|| format!("writing {}", path.display()))
 }
 
 /// A command-line error as a library message (for callbacks the libraries call).

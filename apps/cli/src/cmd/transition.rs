@@ -34,7 +34,7 @@ pub struct TransitionArgs {
     /// on the --from clip's rig.
     #[arg(long)]
     pub rig_map: Option<PathBuf>,
-    /// Foot-lock the transition (`zoo_motion::footlock`: planted feet slide less, dragged feet
+    /// Foot-lock the transition (`zoo_protocol::footlock`: planted feet slide less, dragged feet
     /// are lifted); legs are found by joints named `foot`.
     #[arg(long)]
     pub foot_lock: bool,

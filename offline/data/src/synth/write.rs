@@ -74,7 +74,7 @@ pub fn write_dir(
     zoo_motion::finite::check_serialize("the synthetic data's manifest", &manifest)
         .map_err(|e| invalid(&path, e.to_string()))?;
     let text = serde_json::to_string(&manifest).map_err(|e| invalid(&path, e.to_string()))?;
-    zoo_motion::atomic::write(&path, text).map_err(|source| SynthWriteError::Io { path, source })
+    zoo_format::atomic::write(&path, text).map_err(|source| SynthWriteError::Io { path, source })
 }
 
 /// Why synthetic data could not be written.

@@ -310,7 +310,7 @@ pub struct CompleteOptions {
     pub plot: Option<PathBuf>,
     /// Keep a base that sinks below the ground where the network put it (lamp only).
     pub no_ground: bool,
-    /// Humanoid keys: no foot lock between the keys ([`zoo_motion::keylock`]).
+    /// Humanoid keys: no foot lock between the keys ([`zoo_protocol::keylock`]).
     pub no_foot_lock: bool,
     /// Frames per second of the output (`None`: the keys file's, else [`DEFAULT_FPS`]).
     pub fps: Option<f64>,
@@ -410,7 +410,7 @@ fn write_positions(o: &CompleteOptions, clip: &zoo_motion::Clip, first_frame: us
 /// Writes `value` as pretty JSON to `path` (atomically).
 fn write_json(path: &Path, value: &serde_json::Value) -> ArnnResult<()> {
     let text = serde_json::to_string_pretty(value).context("JSON")?;
-    zoo_motion::atomic::write(path, text).with_context(|| format!("writing {}", path.display()))?;
+    zoo_format::atomic::write(path, text).with_context(|| format!("writing {}", path.display()))?;
     Ok(())
 }
 
@@ -442,16 +442,16 @@ fn write_outputs(
     write_json(j, &v)
 }
 
-/// The foot lock between the keys of a completed humanoid clip ([`zoo_motion::keylock`], the
+/// The foot lock between the keys of a completed humanoid clip ([`zoo_protocol::keylock`], the
 /// clip's own bone offsets), as `zoo complete` and the runtime's keyframes task apply it;
 /// returns the number of frames it changed (0 without legs).
 pub fn lock_feet(clip: &mut zoo_motion::Clip, key_frames: &[usize]) -> usize {
-    let Some(lock) = zoo_motion::keylock::key_foot_lock(&clip.skeleton) else { return 0 };
+    let Some(lock) = zoo_protocol::keylock::key_foot_lock(&clip.skeleton) else { return 0 };
     let j = clip.joints();
-    let offsets = zoo_motion::pipeline::rest_offsets(clip);
+    let offsets = zoo_protocol::pipeline::rest_offsets(clip);
     let root: Vec<glam::DVec3> = clip.local_positions.iter().step_by(j.max(1)).copied().collect();
     let skeleton = clip.skeleton.clone();
-    zoo_motion::keylock::lock_feet_between_keys(
+    zoo_protocol::keylock::lock_feet_between_keys(
         &lock,
         &skeleton,
         &offsets,
@@ -825,7 +825,7 @@ pub fn plot_dofs(path: &Path, series: &[DofSeries], keys: &[(usize, Vec<f64>)]) 
         }
     }
     let png = pm.encode_png().map_err(|e| Message(format!("{}: cannot encode the PNG: {e}", path.display())))?;
-    zoo_motion::atomic::write(path, png).with_context(|| format!("writing {}", path.display()))?;
+    zoo_format::atomic::write(path, png).with_context(|| format!("writing {}", path.display()))?;
     Ok(())
 }
 

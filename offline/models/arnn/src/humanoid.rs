@@ -46,7 +46,7 @@ pub fn pose_layout(names: &[String]) -> (Vec<String>, Vec<usize>) {
     for n in names {
         dof_names.extend(["qw", "qx", "qy", "qz"].map(|c| format!("{n}_{c}")));
     }
-    (dof_names, zoo_motion::inbetween::key_groups(names.len()))
+    (dof_names, zoo_protocol::inbetween::key_groups(names.len()))
 }
 
 /// The humanoid configuration for a skeleton and the clips' frame rate ([`ArnnConfig::humanoid`]).
@@ -95,7 +95,7 @@ pub fn poses(root: &[DVec3], rot: &[DQuat], joints: usize) -> Vec<Vec<f64>> {
 }
 
 /// The root position and unit rotations of a pose.
-pub use zoo_motion::inbetween::decode_pose as decode;
+pub use zoo_protocol::inbetween::decode_pose as decode;
 
 /// Training or validation sequences from prepared windows; each gets keys drawn once with
 /// `sampling` and `seed` (the fixed keys validation uses; training draws new ones each time).
@@ -339,7 +339,7 @@ pub fn check_trained_skeleton(trained: &HumanoidSkeleton, skeleton: &Skeleton) -
     Ok(())
 }
 
-/// Hits the keys in completed humanoid poses ([`zoo_motion::keyhit`], as [`crate::hit_keys`]):
+/// Hits the keys in completed humanoid poses ([`zoo_protocol::keyhit`], as [`crate::hit_keys`]):
 /// each key frame equals its key on the groups it fixes, the frames before it blended towards it.
 pub fn hit_humanoid_keys(
     names: &[String],
@@ -350,11 +350,12 @@ pub fn hit_humanoid_keys(
 ) {
     let (_, groups) = pose_layout(names);
     let d = groups.len();
-    let layout = zoo_motion::keyhit::KeyLayout { dofs: d, frames: key_frames, key_groups: &groups, quaternions: true };
+    let layout =
+        zoo_protocol::keyhit::KeyLayout { dofs: d, frames: key_frames, key_groups: &groups, quaternions: true };
     let poses: Vec<f64> = key_poses.iter().flatten().copied().collect();
     let mut flat: Vec<f64> = out.iter().flatten().copied().collect();
     let fixes = |k: usize, g: usize| fixed.get(k).is_none_or(|m| m.get(g).copied().unwrap_or(true));
-    zoo_motion::keyhit::hit_keys(layout, &poses, fixes, &mut flat, &mut vec![0.0; d]);
+    zoo_protocol::keyhit::hit_keys(layout, &poses, fixes, &mut flat, &mut vec![0.0; d]);
     for (o, f) in out.iter_mut().zip(flat.chunks_exact(d)) {
         o.copy_from_slice(f);
     }

@@ -1,6 +1,6 @@
 //! The key-to-key in-betweening network for humanoid keys (issue 46, beyond the ARNN paper): a
 //! bidirectional GRU over a whole shot that predicts a correction of Blender's default F-curves
-//! through the keys ([`zoo_motion::fcurve::bezier_inbetween`]), scaled per value by an envelope
+//! through the keys ([`zoo_protocol::fcurve::bezier_inbetween`]), scaled per value by an envelope
 //! that is zero on the key frames fixing it, so that every key is met by construction. It is
 //! the residual-on-interpolation idea of the RTN (Harvey et al. 2020, sec. 3.3, where it took
 //! the RTN from worse than interpolation to a third of its error) applied to an animator's keys,
@@ -10,7 +10,7 @@
 //! Poses are the humanoid ARNN's ([`crate::humanoid`]): the root position, then one quaternion
 //! `(w, x, y, z)` per joint, `d = 3 + 4 J` values, in network units `(x - mean) / std`. Key
 //! groups: group 0 is the root position, group `1 + j` joint `j`'s rotation. Per frame `t` of a
-//! shot (frames `0..=last key`) the network reads ([`zoo_motion::inbetween`] builds them, for
+//! shot (frames `0..=last key`) the network reads ([`zoo_protocol::inbetween`] builds them, for
 //! training and for the runtime alike):
 //! - `b_t`, the Bezier pose;
 //! - `k-_t - b_t` and `k+_t - b_t`: per value, the previous key fixing its group (at or before
@@ -34,9 +34,9 @@ use candle_nn::VarBuilder;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use zoo_motion::EulerOrder;
-use zoo_motion::inbetween::InbetweenFeatures;
-pub use zoo_motion::inbetween::Residual;
 use zoo_nn::{Activation, BiGru, Mlp, RowRngs};
+use zoo_protocol::inbetween::InbetweenFeatures;
+pub use zoo_protocol::inbetween::Residual;
 
 /// The `design` field of an in-betweening run's `config.json`.
 pub const DESIGN: &str = "inbetween";
@@ -316,8 +316,8 @@ impl Inbetween {
     }
 }
 
-/// One shot's network inputs and its Bezier poses (built by [`zoo_motion::inbetween`]).
-pub use zoo_motion::inbetween::ShotInputs;
+/// One shot's network inputs and its Bezier poses (built by [`zoo_protocol::inbetween`]).
+pub use zoo_protocol::inbetween::ShotInputs;
 
 /// Tensors of shots of one length: features `(b, T, in)`, Bezier poses (normalised) and
 /// envelopes `(b, T, d)`.
@@ -375,7 +375,7 @@ pub fn features(config: &InbetweenConfig, norm: &Normalization) -> ArnnResult<In
     Ok(f)
 }
 
-/// Key poses and flags flattened key-major for [`zoo_motion::inbetween`], each pose's `d`
+/// Key poses and flags flattened key-major for [`zoo_protocol::inbetween`], each pose's `d`
 /// values and each row's `g` flags counted first.
 fn flatten(
     frames: &[usize],

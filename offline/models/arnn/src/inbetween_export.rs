@@ -4,14 +4,14 @@
 //! metadata through the format crate (model kind `arnn`, task `keyframes`, its section
 //! `zoo.keyframes` with the in-betweening settings, `zoo_format::InbetweenSection`). The
 //! runtime's `KeyframeModel` runs it: it builds the features from the keys
-//! (`zoo_motion::inbetween`), runs the graph once per shot and composes `b + e * correction *
+//! (`zoo_protocol::inbetween`), runs the graph once per shot and composes `b + e * correction *
 //! std` in f64, as [`crate::inbetween::complete_shots`] does.
 //!
 //! Graph (`batch` and `frames` symbolic; the runtime plans it for one shot at a time, as tract
 //! plans a `GRU` without `initial_h` for a concrete batch only; no recurrent state: a call is a
 //! whole shot):
 //! - input `features`: `[batch, frames, 3 D + 2 + 2 G]`, the features of
-//!   [`zoo_motion::inbetween`];
+//!   [`zoo_protocol::inbetween`];
 //! - output `correction`: `[batch, frames, D]`, normalised units, before the envelope.
 //!
 //! `features` is made time-major by a `Transpose`; the encoder (one ReLU layer) and the decoder

@@ -553,7 +553,7 @@ pub fn complete_partial(
 
 /// Corrects a completion (`key_frames.last() + 1` poses) so that each key frame equals its key
 /// in the groups the key fixes, the miss spread over the frames before it
-/// ([`zoo_motion::keyhit`]; a humanoid's rotations are compared up to sign).
+/// ([`zoo_protocol::keyhit`]; a humanoid's rotations are compared up to sign).
 pub fn hit_keys(
     config: &ArnnConfig,
     key_frames: &[usize],
@@ -562,7 +562,7 @@ pub fn hit_keys(
     out: &mut [Vec<f64>],
 ) {
     let d = config.dofs;
-    let keys = zoo_motion::keyhit::KeyLayout {
+    let keys = zoo_protocol::keyhit::KeyLayout {
         dofs: d,
         frames: key_frames,
         key_groups: &config.key_groups,
@@ -571,7 +571,7 @@ pub fn hit_keys(
     let poses: Vec<f64> = key_poses.iter().flatten().copied().collect();
     let mut flat: Vec<f64> = out.iter().flatten().copied().collect();
     let fixes = |k: usize, g: usize| fixed.get(k).is_none_or(|m| m.get(g).copied().unwrap_or(true));
-    zoo_motion::keyhit::hit_keys(keys, &poses, fixes, &mut flat, &mut vec![0.0; d]);
+    zoo_protocol::keyhit::hit_keys(keys, &poses, fixes, &mut flat, &mut vec![0.0; d]);
     for (o, f) in out.iter_mut().zip(flat.chunks_exact(d)) {
         o.copy_from_slice(f);
     }

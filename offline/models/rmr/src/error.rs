@@ -53,8 +53,8 @@ impl From<zoo_nn::NnError> for RmrError {
     }
 }
 
-impl From<zoo_motion::stitch::LayoutError> for RmrError {
-    fn from(e: zoo_motion::stitch::LayoutError) -> Self {
+impl From<zoo_protocol::stitch::LayoutError> for RmrError {
+    fn from(e: zoo_protocol::stitch::LayoutError) -> Self {
         RmrError::Stitch(e.into())
     }
 }

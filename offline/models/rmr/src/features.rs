@@ -1,12 +1,12 @@
-//! The pose vector of RMR sec. 4 and back (defined in the motion core,
-//! [`zoo_motion::stitch`], which the engine's runtime shares: see there for the layout), and
+//! The pose vector of RMR sec. 4 and back (defined in the core layer,
+//! [`zoo_protocol::stitch`], which the engine's runtime shares: see there for the layout), and
 //! its normalisation statistics.
 
 use crate::error::{RmrError, RmrResult};
 use crate::pairs::StitchLayout;
 use serde::{Deserialize, Serialize};
 
-pub use zoo_motion::stitch::{PoseLayout as FeatureLayout, accumulate_roots, decode, encode_clip};
+pub use zoo_protocol::stitch::{PoseLayout as FeatureLayout, accumulate_roots, decode, encode_clip};
 
 /// Per-value mean and standard deviation of the pose vector over the generated training data
 /// (RMR sec. 5). Contacts are left as they are (mean 0, std 1) so that the sigmoid of the

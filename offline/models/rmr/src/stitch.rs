@@ -16,7 +16,7 @@ use crate::pairs::{MIN_CLIP_FRAMES, StitchLayout, align_clips, ground_roots};
 use zoo_motion::Clip;
 use zoo_motion::glam::DVec3;
 
-pub use zoo_motion::stitch::predicted_ankles;
+pub use zoo_protocol::stitch::predicted_ankles;
 
 /// How a sequence is refined.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -241,15 +241,15 @@ pub struct PostProcess {
     /// stitch --pre-blend`, `inert+rmr...` in the benchmark).
     pub pre_blend: bool,
     /// No seam moves a joint faster than the inertialized clips do there
-    /// ([`zoo_motion::stitch::guard`]; not in the paper; after the ankle IK, before the lock;
+    /// ([`zoo_protocol::stitch::guard`]; not in the paper; after the ankle IK, before the lock;
     /// `rmr+ik+guard+lock` in the benchmark).
     pub seam_guard: bool,
     /// The clips kept as they are from one window away from every seam, eased back to them
-    /// from half a window on ([`zoo_motion::stitch::reach`]; not in the paper; after the lock;
+    /// from half a window on ([`zoo_protocol::stitch::reach`]; not in the paper; after the lock;
     /// `zoo stitch` by default, `+reach` at the end of a benchmark method).
     pub keep_untouched: bool,
     /// The reach in frames with `keep_untouched` (`None`:
-    /// [`zoo_motion::stitch::reach::default_reach`] of the window; `+reachN` in the benchmark).
+    /// [`zoo_protocol::stitch::reach::default_reach`] of the window; `+reachN` in the benchmark).
     pub reach: Option<usize>,
 }
 
@@ -265,7 +265,7 @@ pub struct RefinedSeams {
     /// Mean ankle correction of the foot lock (clip units), when it ran.
     pub lock_move: Option<f64>,
     /// What the seam guard did at each seam, when it ran.
-    pub guarded: Option<Vec<zoo_motion::stitch::guard::GuardedSeam>>,
+    pub guarded: Option<Vec<zoo_protocol::stitch::guard::GuardedSeam>>,
 }
 
 /// Refines the aligned sequence `aligned` (seams at `seams`) with `model`, then applies `post`
@@ -290,14 +290,14 @@ pub fn refine_seams(
     let mut clip = refined.clip;
     let ankle_move = post.ankle_ik.then(|| crate::footlock::place_ankles(&mut clip, &refined.ankles, layout));
     let guarded = match (&blended, post.seam_guard) {
-        (Some(reference), true) => Some(zoo_motion::stitch::guard::guard_seams(&mut clip, reference, seams, layout)),
+        (Some(reference), true) => Some(zoo_protocol::stitch::guard::guard_seams(&mut clip, reference, seams, layout)),
         _ => None,
     };
     let lock_move = post.foot_lock.then(|| crate::footlock::lock_feet(&mut clip, &refined.contacts, layout));
     if post.keep_untouched {
         let input = if pre_blend { blended.as_ref().unwrap_or(aligned) } else { aligned };
-        let reach = post.reach.unwrap_or(zoo_motion::stitch::reach::default_reach(opts.window));
-        zoo_motion::stitch::reach::keep_untouched(&mut clip, input, seams, reach, layout);
+        let reach = post.reach.unwrap_or(zoo_protocol::stitch::reach::default_reach(opts.window));
+        zoo_protocol::stitch::reach::keep_untouched(&mut clip, input, seams, reach, layout);
     }
     Ok(RefinedSeams { clip, ankles: refined.ankles, ankle_move, lock_move, guarded })
 }

@@ -43,7 +43,7 @@ pub fn feature_dim(joints: usize) -> usize {
 }
 
 /// How foot contacts are detected. The rule is the foot lock's
-/// ([`zoo_motion::footlock::FootLock`]) with its default thresholds: each foot joint (ankle and
+/// (`zoo_protocol::footlock::FootLock`) with its default thresholds: each foot joint (ankle and
 /// toes) has a contact weight `clamp(2 - 2^(h / height), 0, 1) * gate(v)` at height `h` above
 /// its ground level and horizontal speed `v`, the gate being 1 up to `lock_speed` and 0 from
 /// `swing_speed` on; a foot is planted when one of its joints has a weight of at least 1/2.

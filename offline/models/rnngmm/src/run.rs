@@ -115,7 +115,7 @@ pub fn write_contacts(path: &Path, fps: f64, contacts: &[[bool; 2]]) -> RnnGmmRe
     let rows: Vec<[u8; 2]> = contacts.iter().map(|c| [u8::from(c[0]), u8::from(c[1])]).collect();
     let json = serde_json::json!({ "fps": fps, "frames": contacts.len(), "feet": ["left", "right"], "contacts": rows });
     let text = serde_json::to_string(&json).context("contact labels")?;
-    zoo_motion::atomic::write(path, text).with_context(|| format!("writing {}", path.display()))?;
+    zoo_format::atomic::write(path, text).with_context(|| format!("writing {}", path.display()))?;
     Ok(())
 }
 
@@ -297,8 +297,8 @@ pub fn write_generated(
 ) -> RnnGmmResult<Vec<Vec<[f32; 3]>>> {
     let mut frames_xyz = Vec::new();
     let mut failure = None;
-    let written = zoo_motion::atomic::write_with(bvh, |bvh_file| {
-        zoo_motion::atomic::write_with(json, |json_file| {
+    let written = zoo_format::atomic::write_with(bvh, |bvh_file| {
+        zoo_format::atomic::write_with(json, |json_file| {
             // The root always carries position channels, so every chunk has the same hierarchy.
             let mut out = BvhStream { w: std::io::BufWriter::new(&mut *bvh_file), header: None };
             let mut cj = std::io::BufWriter::new(json_file);

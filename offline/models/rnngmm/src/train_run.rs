@@ -293,7 +293,7 @@ fn publish(from: &Path, out: &Path, refiner: bool) -> RnnGmmResult<()> {
         let src = from.join(f);
         if src.is_file() {
             let bytes = std::fs::read(&src).with_context(|| format!("reading {}", src.display()))?;
-            zoo_motion::atomic::write(&out.join(f), bytes)
+            zoo_format::atomic::write(&out.join(f), bytes)
                 .with_context(|| format!("writing {}", out.join(f).display()))?;
         }
     }

@@ -1,18 +1,18 @@
 //! RTN's own features (Harvey & Pal 2018, sec. 3.2-3.3): the normalization statistics
 //! ([`FeatureStats`], fitted on training windows), the global offset `o_t`, the local terrain
 //! patch `p_t` and the yaw augmentation. The encoding shared with the engine runtime (feature
-//! frames, target vector, target blend) lives in [`zoo_motion::features`] and is re-exported
+//! frames, target vector, target blend) lives in [`zoo_protocol::features`] and is re-exported
 //! here, so RTN code reads every feature through this module.
 //!
-//! Layout conventions are those of [`zoo_motion::features`]; the global offset
+//! Layout conventions are those of [`zoo_protocol::features`]; the global offset
 //! `o_t = y_T - y_t` of every joint has `D = 3 * joints` values.
 
 use serde::{Deserialize, Serialize};
-pub use zoo_motion::features::{
+pub use zoo_protocol::features::{
     decode_features, decode_frame, decode_frame_in_place, encode_frame, encode_positions, feature_dim, root_of,
     target_blend, target_vector,
 };
-pub use zoo_motion::terrain::{Heightmap, YawAbout, rotate_about_y, terrain_patch};
+pub use zoo_protocol::terrain::{Heightmap, YawAbout, rotate_about_y, terrain_patch};
 
 /// Global offset `o_t = y_T - y_t` of every joint from the target frame (RTN sec. 3.2).
 pub fn global_offset(frame: &[f32], target: &[f32], out: &mut [f32]) {

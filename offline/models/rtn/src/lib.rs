@@ -4,7 +4,7 @@
 //! (optimiser, moving average, checkpoints, the training loop via [`RtnTraining`]).
 //!
 //! Data in and out are global joint positions (`f32`, `frames * joints * 3`, frame-major, Y up,
-//! clip units); the feature encoding lives in [`zoo_motion::features`] so the runtime shares it.
+//! clip units); the feature encoding lives in [`zoo_protocol::features`] so the runtime shares it.
 //!
 //! ```no_run
 //! use zoo_rtn::prelude::*;

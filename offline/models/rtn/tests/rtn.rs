@@ -176,7 +176,7 @@ fn zeroed_decoder_outputs_the_input_frame() {
 
 /// With p = 1 every input after the context is the ground truth: the same outputs as stepping
 /// the model by hand over ground-truth frames, with features, offsets and the target vector
-/// computed on slices by the motion core (an independent path from the in-graph offsets).
+/// computed on slices by `zoo_protocol::features` (an independent path from the in-graph offsets).
 #[test]
 fn teacher_forcing_one_feeds_the_ground_truth() {
     let c = tiny();

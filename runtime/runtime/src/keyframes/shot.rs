@@ -2,7 +2,7 @@
 //! by `zoo_arnn::inbetween_export`): one whole-shot graph call per character, instead of one
 //! step per frame.
 //!
-//! Per character: the features of its keys ([`zoo_motion::inbetween::InbetweenFeatures::shot`],
+//! Per character: the features of its keys ([`zoo_protocol::inbetween::InbetweenFeatures::shot`],
 //! the code training uses, from the section's Euler orders, gap unit and f64 statistics); the
 //! graph maps `features [batch, frames, width]` to `correction [batch, frames, dofs]`; the
 //! completed pose is `b + e * correction * std` composed in f64 (the keys' Bezier pose `b`, the
@@ -17,7 +17,7 @@ use crate::metadata::MotionModelMetadata;
 use crate::model::Plan;
 use tract_onnx::pb;
 use tract_onnx::prelude::*;
-use zoo_motion::inbetween::{InbetweenFeatures, ShotInputs};
+use zoo_protocol::inbetween::{InbetweenFeatures, ShotInputs};
 
 /// The whole-shot graph of an in-betweening keyframe model, planned, with its feature settings.
 #[derive(Debug)]
@@ -100,7 +100,7 @@ impl ShotGraph {
     }
 
     /// The features of each character's keys (checked by [`MotionKeys::check`] before), or the
-    /// first character whose keys the motion core refuses.
+    /// first character whose keys the in-betweening inputs (`zoo_protocol::inbetween`) refuse.
     fn shots(&self, keys: &[MotionKeys<'_>]) -> Result<Vec<ShotInputs>, MotionError> {
         let mut poses = Vec::new();
         let mut fixed = Vec::new();

@@ -1,15 +1,15 @@
 //! The transition's foot lock, the one every entry point runs (`zoo transition --foot-lock`,
 //! the benchmark's `+lock` methods, the C ABI, Python, Unity): the generated positions are
-//! first put on the model's skeleton (rotations fitted, `zoo_motion::fit`; bones at their rest
-//! lengths), the skeleton's own positions locked (`zoo_motion::footlock`), and the locked
+//! first put on the model's skeleton (rotations fitted, `zoo_protocol::fit`; bones at their rest
+//! lengths), the skeleton's own positions locked (`zoo_protocol::footlock`), and the locked
 //! positions fitted again. Locking the skeleton's positions rather than the network's makes the
 //! fitted result keep the locked feet exactly: a skinned character, or a clip written from the
 //! rotations, shows what was locked.
 
 use glam::{DQuat, DVec3};
-use zoo_motion::fit::{FitScratch, fit_rotations_with};
 use zoo_motion::fk::forward_kinematics_frame;
-use zoo_motion::footlock::FootLock;
+use zoo_protocol::fit::{FitScratch, fit_rotations_with};
+use zoo_protocol::footlock::FootLock;
 
 /// A [`FootLock`] on a skeleton, with its buffers.
 #[derive(Clone, Debug)]

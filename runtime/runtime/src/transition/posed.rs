@@ -3,7 +3,7 @@
 //! skinned character.
 //!
 //! The network works on global joint positions; around it, forward kinematics turns the input
-//! poses into positions, and the rotation fit of `zoo_motion::fit` turns each generated frame
+//! poses into positions, and the rotation fit of `zoo_protocol::fit` turns each generated frame
 //! back into local rotations (twist, which positions cannot see, slerped from the last context
 //! frame's rotations to the target's, as `zoo transition` does). The fit runs on buffers
 //! allocated once per runner and state: stepping allocates nothing of its own.
@@ -12,8 +12,8 @@ use super::{TransitionRunner, TransitionState, wrong_len};
 use crate::error::MotionError;
 use crate::pose::{EnginePose, root_delta, root_of, to_dquat, to_dvec3};
 use glam::{DQuat, DVec3, Quat, Vec3};
-use zoo_motion::fit::{FitScratch, fit_rotations_with};
 use zoo_motion::quat::slerp;
+use zoo_protocol::fit::{FitScratch, fit_rotations_with};
 
 /// Per-runner buffers of posed transitions.
 #[derive(Debug, Default)]

@@ -266,7 +266,7 @@ impl LuxoSequence {
 
 /// Writes bytes to `path` through a temporary file in the same folder.
 pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), LuxoError> {
-    zoo_motion::atomic::write(path, bytes).map_err(|source| LuxoError::Io { path: path.to_path_buf(), source })
+    zoo_format::atomic::write(path, bytes).map_err(|source| LuxoError::Io { path: path.to_path_buf(), source })
 }
 
 /// The lamp as a BVH skeleton: `base` (root, with position channels), `leg`, `neck`, `head`

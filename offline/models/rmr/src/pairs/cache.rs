@@ -87,7 +87,7 @@ impl PairPlan {
         let io = |e: &dyn std::fmt::Display| StitchError::Io { path: path.to_path_buf(), message: e.to_string() };
         zoo_motion::finite::check_serialize("the stitch pair plan", self).map_err(|e| io(&e))?;
         let text = serde_json::to_string(self).map_err(|e| io(&e))?;
-        zoo_motion::atomic::write(path, text).map_err(|e| io(&e))
+        zoo_format::atomic::write(path, text).map_err(|e| io(&e))
     }
 
     /// Reads a plan written by [`PairPlan::save`].

@@ -1,8 +1,8 @@
 //! The joints RMR reads (lower body, feet), the ground root and foot contacts (RMR sec. 4):
-//! defined in the motion core ([`zoo_motion::stitch`]), which the engine's runtime shares, and
+//! defined in the core layer ([`zoo_protocol::stitch`]), which the engine's runtime shares, and
 //! re-exported here for the offline tools.
 
-pub use zoo_motion::stitch::{
+pub use zoo_protocol::stitch::{
     BANDAI2_CONTACTS, BANDAI2_LOWER_BODY, CONTACT_THRESHOLDS, GroundRoot, LayoutError, StitchLayout, ground_roots,
 };
 

@@ -22,9 +22,9 @@
 //! frame.
 
 use super::StitchLayout;
-use crate::Clip;
-use crate::fk::forward_kinematics_frame;
 use glam::{DQuat, DVec3};
+use zoo_motion::Clip;
+use zoo_motion::fk::forward_kinematics_frame;
 
 /// Frames on each side of a seam over which the largest joint speed is compared.
 pub const GUARD_FRAMES: usize = 5;
@@ -410,7 +410,7 @@ pub fn apply_guard_weights(out: &mut Clip, weights: &[f64], layout: &StitchLayou
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Skeleton;
+    use zoo_motion::Skeleton;
 
     /// A three-joint leg walking along +Z whose middle joint swings; `wiggle` adds a
     /// frame-to-frame jitter of that joint around frame 20.
@@ -420,7 +420,7 @@ mod tests {
             parents: vec![None, Some(0), Some(1)],
             offsets: vec![DVec3::ZERO, DVec3::new(0.0, -40.0, 0.0), DVec3::new(0.0, -40.0, 0.0)],
             end_sites: vec![None; 3],
-            channels: vec![crate::JointChannels::default(); 3],
+            channels: vec![zoo_motion::JointChannels::default(); 3],
         };
         let mut local_rotations = Vec::new();
         let mut local_positions = Vec::new();

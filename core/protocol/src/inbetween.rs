@@ -1,4 +1,4 @@
-//! The inputs of the key-to-key in-betweening network (issue 46; the candle model is
+//! The inputs of the key-to-key in-betweening network (the candle model is
 //! `zoo_arnn::inbetween`, the exported graph runs in the runtime's keyframes task): per frame of
 //! a shot, features built from an animator's keys around Blender's default F-curves through them
 //! ([`crate::fcurve::bezier_inbetween`]), and the envelope that scales the network's correction
@@ -23,9 +23,9 @@
 //! ([`Residual`]): `e(t) c_t` (`e` per value its group's envelope) or `c_t` minus the straight
 //! line through `c` on the keys around `t` fixing the value.
 
-use crate::euler::EulerOrder;
 use crate::fcurve::{ShotKeys, bezier_inbetween};
 use glam::{DQuat, DVec3};
+use zoo_motion::euler::EulerOrder;
 
 /// Keys or settings the features cannot be built from, said in words with the fix.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]

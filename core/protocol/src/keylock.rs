@@ -16,8 +16,8 @@
 
 use crate::footlock::FootLock;
 use crate::pipeline::{fit_frames, skeleton_positions_f32};
-use crate::skeleton::Skeleton;
 use glam::{DQuat, DVec3};
+use zoo_motion::skeleton::Skeleton;
 
 /// The foot lock for completed keys: [`FootLock::from_skeleton`]'s defaults, the transitions'
 /// (`None` for a skeleton without legs).
@@ -76,7 +76,7 @@ pub fn lock_feet_between_keys(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{EulerOrder, JointChannels};
+    use zoo_motion::{EulerOrder, JointChannels};
 
     fn legged() -> Skeleton {
         Skeleton {

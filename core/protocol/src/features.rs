@@ -12,7 +12,7 @@
 //!   forward root velocity `r_(T+1) - r_T`, because frame `T - 1` is what is being generated)
 //!   followed by the global velocities `y_(T+1) - y_T` of every joint.
 
-use crate::blend::target_blend_offset_weight;
+use zoo_motion::blend::target_blend_offset_weight;
 
 /// Number of values of one feature frame for `joints` joints.
 pub fn feature_dim(joints: usize) -> usize {

@@ -2,7 +2,7 @@
 //! the ground using inverse kinematics"): the refiner outputs four contacts per frame (heel and
 //! toe, left and right); each run of frames with a contact pins that joint horizontally at its
 //! mean position over the run, and the leg reaches the pinned foot by two-bone IK
-//! ([`zoo_motion::footlock::two_bone_ik`]).
+//! ([`crate::footlock::two_bone_ik`]).
 //!
 //! Per leg and frame, the horizontal correction of the ankle is the one that puts the heel
 //! (the ankle joint) on its pin when the heel is in contact, else the toe on its pin when the
@@ -26,12 +26,12 @@
 //! [`LOCK_REACH`] frames long (bandai2's steps: 10 to 25 frames) are locked as by a lock of the
 //! whole sequence.
 //!
-//! In the motion core so that the engine's runtime (`zoo_runtime::StitchRefiner`) applies the
-//! same lock as the offline `zoo stitch`.
+//! In the core layer (`zoo_protocol`) so that the engine's runtime
+//! (`zoo_runtime::StitchRefiner`) applies the same lock as the offline `zoo stitch`.
 
 use super::StitchLayout;
-use crate::Clip;
 use glam::{DQuat, DVec3};
+use zoo_motion::Clip;
 
 /// The largest change of a foot's horizontal correction from one frame to the next (clip
 /// units per frame: 1 cm at bandai2's scale). Chosen on the bandai2 validation stitching cases
@@ -210,7 +210,7 @@ fn global_into(clip: &Clip, gr: &mut Vec<DQuat>, gp: &mut Vec<DVec3>) {
     gr.resize(n, DQuat::IDENTITY);
     gp.clear();
     gp.resize(n, DVec3::ZERO);
-    crate::fk::forward_kinematics(&clip.skeleton.parents, &clip.local_rotations, &clip.local_positions, gr, gp);
+    zoo_motion::fk::forward_kinematics(&clip.skeleton.parents, &clip.local_rotations, &clip.local_positions, gr, gp);
 }
 
 fn horizontal(v: DVec3) -> DVec3 {

@@ -7,14 +7,14 @@
 //! Positions are `f32`, frame-major, `frames * joints * 3` (Y up, clip units), as in
 //! [`crate::features`]; rotations are local joint rotations, `frames * joints`.
 
-use crate::Clip;
-use crate::facing::{ground_forward, heading_angle};
 use crate::fit::fit_rotations;
-use crate::fk::forward_kinematics_frame;
 use crate::footlock::FootLock;
-use crate::quat::slerp;
-use crate::skeleton::Skeleton;
 use glam::{DQuat, DVec3};
+use zoo_motion::Clip;
+use zoo_motion::facing::{ground_forward, heading_angle};
+use zoo_motion::fk::forward_kinematics_frame;
+use zoo_motion::quat::slerp;
+use zoo_motion::skeleton::Skeleton;
 
 /// Context frames a transition model reads before the transition (RTN sec. 5: 10 frames).
 pub const CONTEXT_FRAMES: usize = 10;
@@ -386,7 +386,7 @@ pub fn mean_position_error(clip: &Clip, positions: &[f32]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{EulerOrder, JointChannels};
+    use zoo_motion::{EulerOrder, JointChannels};
 
     fn chain_clip(frames: usize, shift: f64) -> Clip {
         let skeleton = Skeleton {

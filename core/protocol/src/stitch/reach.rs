@@ -13,9 +13,9 @@
 //! there: the drift the output gathered before the stretch does not reach it.
 
 use super::StitchLayout;
-use crate::Clip;
-use crate::fk::forward_kinematics_frame;
 use glam::{DQuat, DVec3};
+use zoo_motion::Clip;
+use zoo_motion::fk::forward_kinematics_frame;
 
 /// The reach of a refiner of `window` frames when none is given (`zoo stitch`'s default):
 /// the window.
@@ -167,12 +167,12 @@ mod tests {
 
     /// A three-joint leg walking along +Z, its middle joint swinging.
     fn walk(frames: usize) -> Clip {
-        let skeleton = crate::Skeleton {
+        let skeleton = zoo_motion::Skeleton {
             names: vec!["Hips".into(), "Leg".into(), "Foot".into()],
             parents: vec![None, Some(0), Some(1)],
             offsets: vec![DVec3::ZERO, DVec3::new(0.0, -40.0, 0.0), DVec3::new(0.0, -40.0, 0.0)],
             end_sites: vec![None; 3],
-            channels: vec![crate::JointChannels::default(); 3],
+            channels: vec![zoo_motion::JointChannels::default(); 3],
         };
         let (mut local_rotations, mut local_positions) = (Vec::new(), Vec::new());
         for f in 0..frames {

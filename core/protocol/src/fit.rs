@@ -7,8 +7,8 @@
 //! context and target frames' rotations, interpolated): the fit is the smallest correction of
 //! the reference.
 
-use crate::quat::shortest_arc;
 use glam::{DQuat, DVec3};
+use zoo_motion::quat::shortest_arc;
 
 /// Reusable buffers of [`fit_rotations_with`]: after the first frame of a skeleton, fitting
 /// allocates nothing.
@@ -165,7 +165,7 @@ fn jacobi_eigen4(mut a: [[f64; 4]; 4]) -> ([f64; 4], [[f64; 4]; 4]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fk::forward_kinematics_frame;
+    use zoo_motion::fk::forward_kinematics_frame;
 
     fn skeleton() -> (Vec<Option<usize>>, Vec<DVec3>) {
         // root with three children (like Hips), a chain below each

@@ -26,8 +26,8 @@
 //!    that the equations pull back into its range is released (at most twice), as Blender does.
 //! 5. Outside the keys the curve holds the first and the last value.
 
-use crate::euler::EulerOrder;
 use glam::{DQuat, DVec3};
+use zoo_motion::euler::EulerOrder;
 
 /// One key of a curve with its handles (time, value).
 #[derive(Clone, Copy, Debug, PartialEq)]

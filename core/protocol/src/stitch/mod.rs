@@ -3,7 +3,7 @@
 //! root (the hips projected on the floor, [`GroundRoot`]), foot contacts, and the encoding of
 //! poses into pose vectors and back ([`encode_pose`], [`decode_pose`]).
 //!
-//! It lives in the motion core because three sides share it: the offline pair generator and
+//! It lives in the core layer (`zoo_protocol`) because three sides share it: the offline pair generator and
 //! benchmark (`zoo_rmr::pairs`), the candle model (`zoo_rmr`) and the engine's runtime, which
 //! turns the poses it is given (root transform plus local joint rotations) into pose vectors
 //! and the refined pose vectors back into poses, frame by frame. [`lock`] is the foot lock by
@@ -27,10 +27,10 @@ pub mod guard;
 pub mod lock;
 pub mod reach;
 
-use crate::facing::{ground_forward, heading_angle};
-use crate::fk::forward_kinematics_frame;
-use crate::{Clip, Skeleton};
 use glam::{DQuat, DVec3};
+use zoo_motion::facing::{ground_forward, heading_angle};
+use zoo_motion::fk::forward_kinematics_frame;
+use zoo_motion::{Clip, Skeleton};
 
 /// Lower-body joints of bandai2 (and of the synthetic skeleton, which is bandai2's): the hips,
 /// both legs and both feet. The paper's LaFAN1 list has 11 joints; bandai2 has no second
