@@ -65,6 +65,17 @@ pub unsafe extern "C" fn zoo_stitch_info(model: *const ZooModel, out: *mut ZooSt
     })
 }
 
+/// The refiner of a model no stream uses, for a call that changes it (`doing`: what the call
+/// does, for the message); `ZOO_STATUS_INVALID_STATE` while streams made from it are alive.
+fn without_streams<'a>(m: &'a mut Arc<StitchRefiner>, doing: &str) -> Result<&'a mut StitchRefiner, Failure> {
+    Arc::get_mut(m).ok_or_else(|| {
+        (
+            ZooStatus::InvalidState,
+            format!("streams made from this model are alive; free them (zoo_stitch_stream_free) before {doing}"),
+        )
+    })
+}
+
 /// The longest window `zoo_stitch_set_window` plans (frames).
 pub const ZOO_MAX_WINDOW: usize = 4096;
 
@@ -87,14 +98,7 @@ pub unsafe extern "C" fn zoo_stitch_set_window(model: *mut ZooModel, window: usi
                 ),
             ));
         }
-        let refiner = Arc::get_mut(m).ok_or_else(|| {
-            (
-                ZooStatus::InvalidState,
-                "streams made from this model are alive; free them (zoo_stitch_stream_free) before planning another window"
-                    .to_string(),
-            )
-        })?;
-        refiner.set_window(window, stride).map_err(runtime_failure)
+        without_streams(m, "planning another window")?.set_window(window, stride).map_err(runtime_failure)
     })
 }
 
@@ -123,15 +127,7 @@ pub unsafe extern "C" fn zoo_stitch_pre_blend(model: *const ZooModel, out: *mut 
 pub unsafe extern "C" fn zoo_stitch_set_seam_guard(model: *mut ZooModel, on: bool) -> ZooStatus {
     guard("zoo_stitch_set_seam_guard", || {
         let m = unsafe { handle_mut(model, "model") }?.stitch_mut()?;
-        let refiner = Arc::get_mut(m).ok_or_else(|| {
-            (
-                ZooStatus::InvalidState,
-                "streams made from this model are alive; free them (zoo_stitch_stream_free) before switching the seam \
-                 guard"
-                    .to_string(),
-            )
-        })?;
-        refiner.set_seam_guard(on);
+        without_streams(m, "switching the seam guard")?.set_seam_guard(on);
         Ok(())
     })
 }
@@ -149,15 +145,9 @@ pub unsafe extern "C" fn zoo_stitch_set_seam_guard(model: *mut ZooModel, on: boo
 pub unsafe extern "C" fn zoo_stitch_set_seam_reach(model: *mut ZooModel, frames: usize) -> ZooStatus {
     guard("zoo_stitch_set_seam_reach", || {
         let m = unsafe { handle_mut(model, "model") }?.stitch_mut()?;
-        let refiner = Arc::get_mut(m).ok_or_else(|| {
-            (
-                ZooStatus::InvalidState,
-                "streams made from this model are alive; free them (zoo_stitch_stream_free) before setting the seams' \
-                 reach"
-                    .to_string(),
-            )
-        })?;
-        refiner.set_seam_reach((frames > 0).then_some(frames)).map_err(runtime_failure)
+        without_streams(m, "setting the seams' reach")?
+            .set_seam_reach((frames > 0).then_some(frames))
+            .map_err(runtime_failure)
     })
 }
 

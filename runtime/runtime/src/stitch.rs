@@ -949,8 +949,8 @@ pub const STREAM_CHUNK: usize = 10;
 /// refined; the blend of the guarded frames and the foot lock run over the refined frames at
 /// hand, [`STREAM_HISTORY`] frames already popped included, and release [`STREAM_CHUNK`] frames
 /// at a time (at most one chunk per push), at least [`STREAM_LOOKAHEAD`] frames from the newest
-/// one; the reach keeps each released frame as `zoo stitch` does. The latency is then `w + s - 1
-/// + STREAM_LOOKAHEAD + STREAM_CHUNK - 1` frames (178 for `w` = 60, `s` = 30: 5.9 s at 30 fps);
+/// one; the reach keeps each released frame as `zoo stitch` does. The latency is then
+/// `w + s - 1 + STREAM_LOOKAHEAD + STREAM_CHUNK - 1` frames (178 for `w` = 60, `s` = 30: 5.9 s at 30 fps);
 /// with [`FootCleanup::NONE`], the guard and the reach off it is `w + s - 1`. Every frame's lock
 /// reads the frames within [`zoo_protocol::stitch::lock::LOCK_REACH`] of it, all at hand, so the
 /// stream gives the whole sequence's poses ([`StitchRefiner::refine_poses_at_seams`]) up to the
@@ -1358,7 +1358,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             while job.at < spread.order.len() {
                 let before = if job.at == 0 { 0.0 } else { spread.done_after[job.at - 1] };
                 let behind = 0.5 * (before + spread.done_after[job.at]) <= floor;
-                if !behind && !deadline.is_some_and(|d| std::time::Instant::now() < d) {
+                if !behind && deadline.is_none_or(|d| std::time::Instant::now() >= d) {
                     break;
                 }
                 job.state.compute_one(spread.order[job.at]).map_err(run)?;

@@ -304,6 +304,10 @@ pub fn place_ankles_range_into(
     if count == 0 { 0.0 } else { total / count as f64 }
 }
 
+/// The vectors [`correction_at`] works in: the heel's and the toe's known corrections, the
+/// filled corrections and the rate limit's forward pass.
+type Scratch<'a> = (&'a mut Vec<Option<DVec3>>, &'a mut Vec<Option<DVec3>>, &'a mut Vec<DVec3>, &'a mut Vec<DVec3>);
+
 /// The horizontal ankle correction of `leg` at frame `f` in the lock of the frames `window`
 /// alone (global positions `gp` of `j` joints per frame): pins at each contact run's mean
 /// position within the window, the heel's before the toe's, gaps filled linearly and held at
@@ -317,12 +321,7 @@ fn correction_at(
     window: std::ops::Range<usize>,
     f: usize,
     max_step: f64,
-    (known, toe_known, corrections, forward): (
-        &mut Vec<Option<DVec3>>,
-        &mut Vec<Option<DVec3>>,
-        &mut Vec<DVec3>,
-        &mut Vec<DVec3>,
-    ),
+    (known, toe_known, corrections, forward): Scratch<'_>,
 ) -> DVec3 {
     let (w0, n) = (window.start, window.len());
     for target in [&mut *known, &mut *toe_known] {
