@@ -1050,7 +1050,19 @@ pub struct StitchStreamOf<R> {
     out_rot: Vec<Quat>,
     out_hips: Vec<Vec3>,
     out_contacts: Vec<[bool; 4]>,
-    /// Scratch of the guard and the lock: the frames they run over.
+    /// Decoded frames `dec_base..guarded` with the seam guard applied (each once, when its
+    /// weight is final and the frame after it has the ankle IK), and their global rotations and
+    /// positions (each frame's forward kinematics once), for the lock.
+    guarded: usize,
+    gd_rot: Vec<DQuat>,
+    gd_hips: Vec<DVec3>,
+    gd_gr: Vec<DQuat>,
+    gd_gp: Vec<DVec3>,
+    /// Scratch of one frame's guard (the frame and its neighbours) and forward kinematics.
+    tri: Clip,
+    tri_w: Vec<f64>,
+    fk_pos: Vec<DVec3>,
+    /// Scratch of the lock: the frames it runs over.
     work: Clip,
     lock_scratch: zoo_protocol::stitch::lock::LockScratch,
     guard_scratch: zoo_protocol::stitch::guard::GuardScratch,
@@ -1075,7 +1087,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         let mut lock_scratch = zoo_protocol::stitch::lock::LockScratch::default();
         lock_scratch.reserve(frames, j);
         let mut guard_scratch = zoo_protocol::stitch::guard::GuardScratch::default();
-        guard_scratch.reserve(frames, j);
+        guard_scratch.reserve(3, j);
         StitchStreamOf {
             // At most w frames waiting to be dropped, w + 1 still needed.
             buf: Vec::with_capacity((2 * w + 2) * d),
@@ -1132,6 +1144,14 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             out_rot: Vec::with_capacity(frames * j),
             out_hips: Vec::with_capacity(frames),
             out_contacts: Vec::with_capacity(frames),
+            guarded: 0,
+            gd_rot: Vec::with_capacity(frames * j),
+            gd_hips: Vec::with_capacity(frames),
+            gd_gr: Vec::with_capacity(frames * j),
+            gd_gp: Vec::with_capacity(frames * j),
+            tri: clip(),
+            tri_w: Vec::with_capacity(3),
+            fk_pos: Vec::with_capacity(j),
             work,
             lock_scratch,
             guard_scratch,
@@ -1282,6 +1302,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         self.decode_final();
         self.place_new_ankles(false);
         self.weigh_seams(false);
+        self.guard_new_frames(false);
         self.release(false);
         self.compact();
         self.run_due_windows(false, self.ahead.then_some(start))?;
@@ -1522,6 +1543,59 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         }
     }
 
+    /// Guards the decoded frames whose guard is final (their seam weighed, the frame after them
+    /// with the ankle IK; all of them with `all`, at the finish) and computes their forward
+    /// kinematics, each frame once: what the lock of the released frames reads.
+    fn guard_new_frames(&mut self, all: bool) {
+        if !self.releases_in_chunks() {
+            return;
+        }
+        let r = self.refiner.clone();
+        let j = r.joints;
+        let b = if self.cleanup.place_ankles { self.refined.min(self.ik_done) } else { self.refined };
+        let radius = zoo_protocol::stitch::guard::SMOOTH_RADIUS;
+        let limit = if all { b } else { b.saturating_sub(radius).min(self.unweighed_from()) };
+        for g in self.guarded.max(self.dec_base)..limit {
+            let i = g - self.dec_base;
+            let w = if self.guard { self.guard_w[i] } else { 0.0 };
+            if w > 0.0 {
+                // The frame blended towards itself smoothed with its neighbours, as the guard of
+                // the whole sequence blends it.
+                let (t0, t1) = (g.saturating_sub(radius).max(self.dec_base), (g + radius + 1).min(b));
+                let (k0, k1) = (t0 - self.dec_base, t1 - self.dec_base);
+                fill_clip(&mut self.tri, &self.dec_rot[k0 * j..k1 * j], &self.dec_hips[k0..k1], &r.skeleton);
+                self.tri_w.clear();
+                self.tri_w.extend((t0..t1).map(|h| if h == g { w } else { 0.0 }));
+                zoo_protocol::stitch::guard::apply_guard_weights(
+                    &mut self.tri,
+                    &self.tri_w,
+                    &r.layout,
+                    &mut self.guard_scratch,
+                );
+                let m = g - t0;
+                self.gd_rot.extend_from_slice(&self.tri.local_rotations[m * j..(m + 1) * j]);
+                self.gd_hips.push(self.tri.local_positions[m * j]);
+            } else {
+                self.gd_rot.extend_from_slice(&self.dec_rot[i * j..(i + 1) * j]);
+                self.gd_hips.push(self.dec_hips[i]);
+            }
+            self.fk_pos.clear();
+            self.fk_pos.push(self.gd_hips[i]);
+            self.fk_pos.extend_from_slice(&r.skeleton.offsets[1..]);
+            let n = i * j;
+            self.gd_gr.resize(n + j, DQuat::IDENTITY);
+            self.gd_gp.resize(n + j, DVec3::ZERO);
+            zoo_motion::fk::forward_kinematics_frame(
+                &r.skeleton.parents,
+                &self.gd_rot[n..n + j],
+                &self.fk_pos,
+                &mut self.gd_gr[n..n + j],
+                &mut self.gd_gp[n..n + j],
+            );
+        }
+        self.guarded = self.guarded.max(limit);
+    }
+
     /// Moves decoded frames to the poses ready to pop: as they are without the guard and the
     /// lock; with them, once [`StitchStream::chunk`] frames lie [`STREAM_LOOKAHEAD`] frames
     /// before the newest decoded one (all of them at the finish), after the ankle IK, the guard
@@ -1536,14 +1610,16 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             return;
         }
         // One chunk per push (a window's decoded frames arrive at once): the same frames, the
-        // work spread over the pushes after it; never a frame whose lock reads a frame a seam not
-        // weighed yet may blend, nor one a seam not pushed yet may reach.
+        // work spread over the pushes after it; never a frame whose lock reads a frame not guarded
+        // yet (`guard_new_frames`), nor one a seam not pushed yet may reach.
+        let chunked = self.releases_in_chunks();
+        let lock_reach = if self.cleanup.lock_feet { zoo_protocol::stitch::lock::LOCK_REACH } else { 0 };
         let to = if at_finish {
             to
         } else {
-            let lock_reach = if self.cleanup.lock_feet { zoo_protocol::stitch::lock::LOCK_REACH } else { 0 };
             let seams_known = self.reach.map_or(usize::MAX, |r| self.pushed.saturating_sub(r));
-            to.min(self.released + chunk).min(self.unweighed_from().saturating_sub(lock_reach)).min(seams_known)
+            let guarded = if chunked { self.guarded.saturating_sub(lock_reach) } else { usize::MAX };
+            to.min(self.released + chunk).min(guarded).min(seams_known)
         };
         if to <= self.released {
             return;
@@ -1560,24 +1636,23 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             self.released = to;
             return;
         }
-        let a =
-            self.released.saturating_sub(if self.releases_in_chunks() { STREAM_HISTORY } else { 0 }).max(self.dec_base);
-        // The frames the lock of the released ones reads, each guarded with its neighbours.
-        let e = if self.releases_in_chunks() { b.min(to + STREAM_HISTORY) } else { b };
+        // The frames the lock of the released ones reads: the guarded ones, with their forward
+        // kinematics (the ankle IK alone: the decoded frames).
+        let (a, e) = if chunked {
+            (self.released.saturating_sub(lock_reach), b.min(to + lock_reach).min(self.guarded))
+        } else {
+            (self.released, to)
+        };
+        let a = a.max(self.dec_base);
         let (i0, i1) = (a - self.dec_base, e - self.dec_base);
-        fill_clip(&mut self.work, &self.dec_rot[i0 * j..i1 * j], &self.dec_hips[i0..i1], &r.skeleton);
-        if self.guard {
-            // The weights of every frame at hand (each seam weighed once, `weigh_seams`).
-            zoo_protocol::stitch::guard::apply_guard_weights(
-                &mut self.work,
-                &self.guard_w[i0..i1],
-                &r.layout,
-                &mut self.guard_scratch,
-            );
-        }
+        let (rot, hips) = if chunked { (&self.gd_rot, &self.gd_hips) } else { (&self.dec_rot, &self.dec_hips) };
+        fill_clip(&mut self.work, &rot[i0 * j..i1 * j], &hips[i0..i1], &r.skeleton);
         if self.cleanup.lock_feet {
+            let (gr, gp) = self.lock_scratch.globals_mut();
+            gr.extend_from_slice(&self.gd_gr[i0 * j..i1 * j]);
+            gp.extend_from_slice(&self.gd_gp[i0 * j..i1 * j]);
             // Only the frames released now are kept: only their legs are bent.
-            zoo_protocol::stitch::lock::lock_feet_range_into(
+            zoo_protocol::stitch::lock::lock_feet_given_globals(
                 &mut self.work,
                 &self.dec_contacts[i0..i1],
                 &r.layout,
@@ -1638,6 +1713,12 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             self.guard_w.drain(..n);
             self.ref_rot.drain(..n * j);
             self.ref_hips.drain(..n);
+            // Empty without the guard, the lock and the reach.
+            let g = n.min(self.gd_hips.len());
+            self.gd_rot.drain(..g * j);
+            self.gd_hips.drain(..g);
+            self.gd_gr.drain(..g * j);
+            self.gd_gp.drain(..g * j);
             self.dec_base = keep;
             // The seams a released frame may still be within reach of stay.
             let reach = self.reach.unwrap_or(0);
@@ -1727,6 +1808,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         self.decode_upto(self.encoded);
         self.place_new_ankles(true);
         self.weigh_seams(true);
+        self.guard_new_frames(true);
         self.release(true);
         self.finished = true;
         Ok(())

@@ -189,6 +189,14 @@ pub struct LockScratch {
 }
 
 impl LockScratch {
+    /// The global rotations and positions [`lock_feet_given_globals`] reads, to be filled
+    /// with those of the clip it is given (cleared first).
+    pub fn globals_mut(&mut self) -> (&mut Vec<DQuat>, &mut Vec<DVec3>) {
+        self.gr.clear();
+        self.gp.clear();
+        (&mut self.gr, &mut self.gp)
+    }
+
     /// Room for clips of up to `frames` frames of `joints` joints.
     pub fn reserve(&mut self, frames: usize, joints: usize) {
         let n = frames * joints;
@@ -388,13 +396,31 @@ pub fn lock_feet_range_into(
     scratch: &mut LockScratch,
     bend: std::ops::Range<usize>,
 ) -> f64 {
+    if contacts.len() != clip.frames() || clip.frames() == 0 {
+        return 0.0;
+    }
+    global_into(clip, &mut scratch.gr, &mut scratch.gp);
+    lock_feet_given_globals(clip, contacts, layout, max_step, scratch, bend)
+}
+
+/// [`lock_feet_range_into`] with the global rotations and positions of `clip`'s frames already
+/// in `scratch` ([`LockScratch::globals_mut`]): for a caller that keeps them from call to call
+/// (the runtime's stitching stream computes each frame's once).
+pub fn lock_feet_given_globals(
+    clip: &mut Clip,
+    contacts: &[[bool; 4]],
+    layout: &StitchLayout,
+    max_step: f64,
+    scratch: &mut LockScratch,
+    bend: std::ops::Range<usize>,
+) -> f64 {
     let (frames, j) = (clip.frames(), clip.joints());
     if contacts.len() != frames || frames == 0 {
         return 0.0;
     }
     let LockScratch { gr, gp, known, toe_known, corrections, forward } = scratch;
+    assert_eq!(gp.len(), frames * j, "the scratch holds the clip's global positions");
     let bend = bend.start.min(frames)..bend.end.min(frames);
-    global_into(clip, gr, gp);
     let mut total = 0.0;
     let mut count = 0usize;
     let mut prev: Option<LockLeg> = None;
