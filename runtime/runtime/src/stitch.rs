@@ -1596,11 +1596,11 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         self.guarded = self.guarded.max(limit);
     }
 
-    /// Moves decoded frames to the poses ready to pop: as they are without the guard and the
-    /// lock; with them, once [`StitchStream::chunk`] frames lie [`STREAM_LOOKAHEAD`] frames
-    /// before the newest decoded one (all of them at the finish), after the ankle IK, the guard
-    /// of the seams in reach and the lock over the decoded frames from [`STREAM_HISTORY`]
-    /// frames before the first released one.
+    /// Moves decoded frames to the poses ready to pop: as they are (with the ankle IK) without
+    /// the guard, the lock and the reach; with them, once [`StitchStream::chunk`] frames lie
+    /// [`STREAM_LOOKAHEAD`] frames before the newest decoded one and the frames their lock reads
+    /// are guarded (all of them at the finish): the guarded frames, locked with the
+    /// [`zoo_protocol::stitch::lock::LOCK_REACH`] frames on each side, then kept by the reach.
     fn release(&mut self, at_finish: bool) {
         let (look, chunk) = (self.lookahead(), self.chunk());
         // The frames at hand: decoded, with the ankle IK when it runs.
