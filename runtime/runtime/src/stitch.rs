@@ -908,9 +908,9 @@ pub const STREAM_LOOKAHEAD: usize =
     zoo_protocol::stitch::lock::LOCK_REACH + zoo_protocol::stitch::guard::SMOOTH_RADIUS + 2 * ZONE;
 
 /// Frames of already popped motion the stream's foot lock reads again: the lock of a frame
-/// reads the [`zoo_protocol::stitch::lock::LOCK_REACH`] frames before it, each guarded with its
-/// neighbours ([`zoo_protocol::stitch::guard::SMOOTH_RADIUS`]).
-pub const STREAM_HISTORY: usize = zoo_protocol::stitch::lock::LOCK_REACH + zoo_protocol::stitch::guard::SMOOTH_RADIUS;
+/// reads the [`zoo_protocol::stitch::lock::LOCK_REACH`] frames before it (guarded when they
+/// became final).
+pub const STREAM_HISTORY: usize = zoo_protocol::stitch::lock::LOCK_REACH;
 
 /// Frames a stream puts the ankles of per push (a window decodes `s` frames every `s` pushes).
 const IK_FRAMES: usize = 6;
@@ -1050,10 +1050,9 @@ pub struct StitchStreamOf<R> {
     out_rot: Vec<Quat>,
     out_hips: Vec<Vec3>,
     out_contacts: Vec<[bool; 4]>,
-    /// Decoded frames `dec_base..guarded` with the seam guard applied (each once, when its
+    /// Decoded frames from `dec_base` on with the seam guard applied (each once, when its
     /// weight is final and the frame after it has the ankle IK), and their global rotations and
-    /// positions (each frame's forward kinematics once), for the lock.
-    guarded: usize,
+    /// positions (each frame's forward kinematics once), for the lock ([`StitchStream::guarded`]).
     gd_rot: Vec<DQuat>,
     gd_hips: Vec<DVec3>,
     gd_gr: Vec<DQuat>,
@@ -1144,7 +1143,6 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             out_rot: Vec::with_capacity(frames * j),
             out_hips: Vec::with_capacity(frames),
             out_contacts: Vec::with_capacity(frames),
-            guarded: 0,
             gd_rot: Vec::with_capacity(frames * j),
             gd_hips: Vec::with_capacity(frames),
             gd_gr: Vec::with_capacity(frames * j),
@@ -1555,7 +1553,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         let b = if self.cleanup.place_ankles { self.refined.min(self.ik_done) } else { self.refined };
         let radius = zoo_protocol::stitch::guard::SMOOTH_RADIUS;
         let limit = if all { b } else { b.saturating_sub(radius).min(self.unweighed_from()) };
-        for g in self.guarded.max(self.dec_base)..limit {
+        for g in self.guarded()..limit {
             let i = g - self.dec_base;
             let w = if self.guard { self.guard_w[i] } else { 0.0 };
             if w > 0.0 {
@@ -1593,7 +1591,12 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
                 &mut self.gd_gp[n..n + j],
             );
         }
-        self.guarded = self.guarded.max(limit);
+    }
+
+    /// The frames guarded so far ([`StitchStream::guard_new_frames`]; without the guard, the
+    /// lock and the reach none is, and this is `dec_base`).
+    fn guarded(&self) -> usize {
+        self.dec_base + self.gd_hips.len()
     }
 
     /// Moves decoded frames to the poses ready to pop: as they are (with the ankle IK) without
@@ -1618,7 +1621,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             to
         } else {
             let seams_known = self.reach.map_or(usize::MAX, |r| self.pushed.saturating_sub(r));
-            let guarded = if chunked { self.guarded.saturating_sub(lock_reach) } else { usize::MAX };
+            let guarded = if chunked { self.guarded().saturating_sub(lock_reach) } else { usize::MAX };
             to.min(self.released + chunk).min(guarded).min(seams_known)
         };
         if to <= self.released {
@@ -1639,7 +1642,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
         // The frames the lock of the released ones reads: the guarded ones, with their forward
         // kinematics (the ankle IK alone: the decoded frames).
         let (a, e) = if chunked {
-            (self.released.saturating_sub(lock_reach), b.min(to + lock_reach).min(self.guarded))
+            (self.released.saturating_sub(lock_reach), b.min(to + lock_reach).min(self.guarded()))
         } else {
             (self.released, to)
         };
