@@ -621,6 +621,7 @@ fn inbetween_design_trains_resumes_scores_keys_and_completes() {
     let config: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(runp.join("config.json")).unwrap()).unwrap();
     assert_eq!((config["model"].as_str(), config["design"].as_str()), (Some("arnn"), Some("inbetween")));
+    assert_eq!(config["transition_fraction"].as_f64(), Some(0.0));
     let (ok, stdout, stderr) = run(&["train", "arnn", "--epochs", "2", "--threads", "1", "--resume", r]);
     assert!(ok && stdout.contains("epoch   2"), "{stdout}\n{stderr}");
     let method = format!("arnn:{r}");
@@ -702,8 +703,41 @@ fn inbetween_design_trains_resumes_scores_keys_and_completes() {
     for key in [0, 12, 30] {
         assert_eq!(locked_rows[key], raw_rows[key], "key frame {key}");
     }
-    let (ok, _, stderr) = run(&["bench", "--data", d, "--valid-glob", "*_0005.bvh", "--methods", &method]);
-    assert!(!ok && stderr.contains("holds the in-betweening design"), "{stderr}");
+    // The in-betweening benchmark's transitions: the context and the target as keys, the whole
+    // gap in one pass; trained with a share of its batches in that layout.
+    let tr = dir.path().join("ib_transitions");
+    let trs = tr.to_str().unwrap();
+    let args = ["--preset", "tiny", "--threads", "1", "--epochs", "1", "--transition-fraction", "0.5", "--out", trs];
+    let (ok, stdout, stderr) = run(&[&base[..], &args].concat());
+    assert!(ok, "{stdout}\n{stderr}");
+    let tconfig: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(tr.join("config.json")).unwrap()).unwrap();
+    assert_eq!(tconfig["transition_fraction"].as_f64(), Some(0.5));
+    let tjson = dir.path().join("transitions.json");
+    let tmethod = format!("arnn:{trs}");
+    let (ok, stdout, stderr) = run(&[
+        "bench",
+        "--data",
+        d,
+        "--valid-glob",
+        "*_0005.bvh",
+        "--lengths",
+        "5,15",
+        "--methods",
+        &format!("interp,{method},{tmethod}"),
+        "--json",
+        tjson.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stdout}\n{stderr}");
+    let result: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&tjson).unwrap()).unwrap();
+    for m in [method.as_str(), tmethod.as_str()] {
+        for n in [5, 15] {
+            let l2p = result["methods"][m][format!("l2p@{n}")].as_f64();
+            assert!(l2p.is_some_and(f64::is_finite), "{m} at {n}: {}", result["methods"][m]);
+        }
+    }
+    let (ok, _, stderr) = run(&["train", "arnn", "--transition-fraction", "0.5", "--epochs", "1", "--out", trs]);
+    assert!(!ok && stderr.contains("--transition-fraction sets the in-betweening design's"), "{stderr}");
     // `zoo export` writes its whole-shot graph, which the runtime's keyframes task loads (the
     // portable profile and reference vectors are refused by name, before anything is written).
     let onnx = dir.path().join("ib.onnx");

@@ -15,7 +15,7 @@ pub fn read_meta(dir: &Path) -> ArnnResult<(ArnnConfig, Normalization)> {
     if crate::inbetween::is_inbetween_run(dir) {
         return Err(ArnnError::Config(format!(
             "{} holds the in-betweening design (`zoo train arnn --design inbetween`), which runs in `zoo complete`, \
-             `zoo bench --layout keys` and `zoo export` only (no context layout or lamp evaluation yet)",
+             `zoo bench` (both layouts) and `zoo export` only (no lamp evaluation)",
             dir.display()
         )));
     }

@@ -55,8 +55,12 @@ impl ZooModel for ArnnModel {
     }
 
     fn candle_transitions(&self) -> Option<CandleTransitions> {
-        // The humanoid ARNN on the context layout (its keys: the context and the target).
+        // The humanoid ARNN, either design, on the context layout (its keys: the context and
+        // the target).
         fn load(run: &Path, name: String, _: bool) -> Result<Box<dyn TransitionMethod>, BoxError> {
+            if crate::inbetween::is_inbetween_run(run) {
+                return Ok(Box::new(crate::humanoid::InbetweenTransitions::load(run, name)?));
+            }
             Ok(Box::new(crate::humanoid::ArnnMethod::load(run, name)?))
         }
         Some(CandleTransitions { load, foot_lock: false })
@@ -139,6 +143,12 @@ pub struct ArnnArgs {
     /// (every tenth clip validates) [default: 10; with --preset quick: 20].
     #[arg(long, conflicts_with = "data", allow_hyphen_values = true, value_parser = zoo_nn::args::synth_minutes)]
     pub synth_minutes: Option<f64>,
+    /// With `--design inbetween`: fraction of training batches in the in-betweening benchmark's
+    /// transition layout (the first 10 frames all keys, then the target 5 to 45 frames after
+    /// them), for a network that also makes transitions (`zoo bench --methods arnn:RUN`); the
+    /// others keep the keys' layouts [default: 0].
+    #[arg(long, allow_hyphen_values = true, value_parser = zoo_nn::args::unit_fraction)]
+    pub transition_fraction: Option<f64>,
     /// Sequences per batch [default: the preset's].
     #[arg(long, allow_hyphen_values = true, value_parser = zoo_nn::args::batch_size)]
     pub batch_size: Option<usize>,
@@ -191,6 +201,7 @@ fn train(a: ArnnArgs, epochs_given: bool) -> Result<(), BoxError> {
         preset: a.preset,
         epochs_given,
         synth_minutes: a.synth_minutes,
+        transition_fraction: a.transition_fraction,
         batch_size: a.batch_size,
         lr: a.lr,
         ground_weight: a.ground_weight,

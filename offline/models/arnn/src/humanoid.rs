@@ -270,6 +270,84 @@ impl TransitionMethod for ArnnMethod {
     }
 }
 
+/// The in-betweening design (`zoo train arnn --design inbetween`) on the in-betweening
+/// benchmark's transitions: the whole gap in one pass, the keys the context frames and the
+/// target (`0..N_PAST` and `N_PAST + n`), every key met by construction.
+pub struct InbetweenTransitions {
+    name: String,
+    model: crate::inbetween::Inbetween,
+    norm: Normalization,
+}
+
+impl InbetweenTransitions {
+    /// Loads a `zoo train arnn --design inbetween` run folder; `name` is the table's row name.
+    pub fn load(dir: &Path, name: String) -> ArnnResult<Self> {
+        let (model, norm) = crate::inbetween::load(dir, &Device::Cpu)?;
+        Ok(InbetweenTransitions { name, model, norm })
+    }
+
+    /// The transitions of `tasks` (any lengths: the shots of one length run as one batch).
+    fn all(&self, tasks: &[TransitionTask<'_>]) -> ArnnResult<Vec<Transition>> {
+        let c = self.model.config();
+        let j = c.joints();
+        if let Some(t) = tasks.iter().find(|t| t.skeleton.names != c.skeleton.names) {
+            return Err(ArnnError::Config(format!(
+                "the model was trained on a skeleton of {} joints, the benchmark's has {}: use a model trained on \
+                 this skeleton",
+                j,
+                t.skeleton.len()
+            )));
+        }
+        let frames: Vec<Vec<usize>> =
+            tasks.iter().map(|t| (0..N_PAST).chain(std::iter::once(N_PAST + t.frames)).collect()).collect();
+        let key_poses: Vec<Vec<Vec<f64>>> = tasks
+            .iter()
+            .map(|t| {
+                let mut roots = t.past_root[..N_PAST].to_vec();
+                roots.push(t.target_root[0]);
+                let mut rot = t.past_rot[..N_PAST * j].to_vec();
+                rot.extend_from_slice(&t.target_rot[..j]);
+                poses(&roots, &rot, j)
+            })
+            .collect();
+        let shots: Vec<crate::inbetween::ShotKeyRefs<'_>> =
+            frames.iter().zip(&key_poses).map(|(f, p)| (f.as_slice(), p.as_slice(), &[][..])).collect();
+        let raw = crate::inbetween::complete_shots(&self.model, &self.norm, &shots)?;
+        Ok(raw
+            .into_iter()
+            .zip(tasks)
+            .map(|(shot, t)| {
+                let n = t.frames;
+                let mut tr =
+                    Transition { root: Vec::with_capacity(n), rot: Vec::with_capacity(n * j), raw_positions: None };
+                // Signs continuous from the last context frame's own (see `ArnnMethod::batch`).
+                let mut last = t.past_rot[(N_PAST - 1) * j..N_PAST * j].to_vec();
+                for p in &shot[N_PAST..N_PAST + n] {
+                    let (root, mut rot) = decode(p, j);
+                    continue_signs(&mut rot, &mut last);
+                    tr.root.push(root);
+                    tr.rot.extend(rot);
+                }
+                tr
+            })
+            .collect())
+    }
+}
+
+impl TransitionMethod for InbetweenTransitions {
+    fn name(&self) -> String {
+        self.name.clone()
+    }
+
+    fn generate(&self, tasks: &[TransitionTask<'_>]) -> Result<Vec<Transition>, String> {
+        let mut out = Vec::with_capacity(tasks.len());
+        for chunk in tasks.chunks(256) {
+            out.extend(self.all(chunk).map_err(|e| format!("{}: {e}", self.name))?);
+        }
+        Ok(out)
+    }
+}
+
 /// A key of a humanoid completion ([`complete_clip`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct HumanoidKey {

@@ -90,6 +90,11 @@ pub struct InbetweenConfig {
     /// Training keys: fraction of shots whose keys between the first and the last fix the root
     /// and the limbs' end joints only (the benchmark's partial layout).
     pub partial_fraction: f64,
+    /// Training keys: fraction of batches in the in-betweening benchmark's transition layout:
+    /// the first `N_PAST` frames all keys (the context), then the target `5..=45` frames after
+    /// them, whole keys (runs written before the field: none).
+    #[serde(default)]
+    pub transition_fraction: f64,
     /// Shots per batch.
     pub batch_size: usize,
     /// Adam learning rate.
@@ -136,6 +141,7 @@ impl InbetweenConfig {
             max_gap: 30,
             regular_fraction: 0.5,
             partial_fraction: 0.2,
+            transition_fraction: 0.0,
             batch_size: 32,
             learning_rate: 1e-3,
             lr_half_life: 0,
@@ -231,9 +237,9 @@ impl InbetweenConfig {
         if self.min_gap < 2 || self.max_gap < self.min_gap {
             return bad(format!("key gaps {}-{}: need 2 <= min_gap <= max_gap", self.min_gap, self.max_gap));
         }
-        let fractions = [self.dropout, self.regular_fraction, self.partial_fraction];
+        let fractions = [self.dropout, self.regular_fraction, self.partial_fraction, self.transition_fraction];
         if fractions.iter().any(|f| !(0.0..=1.0).contains(f)) {
-            return bad("dropout, regular_fraction and partial_fraction must be in [0, 1]".into());
+            return bad("dropout, regular_fraction, partial_fraction and transition_fraction must be in [0, 1]".into());
         }
         let positive = [self.gap_unit, self.fk_unit, self.vel_unit, self.learning_rate];
         let weights = [self.lambda_fk, self.lambda_vel, self.foot_weight];

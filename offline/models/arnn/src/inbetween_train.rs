@@ -23,6 +23,7 @@ use crate::{ArnnError, ArnnResult};
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{Optimizer, VarMap};
 use std::path::Path;
+use zoo_data::benchmark::N_PAST;
 use zoo_data::dataset::Windows;
 use zoo_nn::checkpoint as ck;
 use zoo_nn::optim::{Adam, ParamsAdam, StatefulOptimizer};
@@ -47,6 +48,16 @@ pub fn partial_groups(config: &InbetweenConfig) -> Vec<bool> {
         }
     }
     g
+}
+
+/// Transition lengths (frames between the context and the target) drawn for the transition
+/// layout ([`InbetweenConfig::transition_fraction`]): the in-betweening benchmark's 5 to 45.
+pub const TRANSITION_GAPS: (usize, usize) = (5, 45);
+
+/// The key frames of a transition of `n` frames: the context `0..N_PAST`, the target at
+/// `N_PAST + n`.
+pub fn transition_keys(n: usize) -> Vec<usize> {
+    (0..N_PAST).chain(std::iter::once(N_PAST + n)).collect()
 }
 
 /// Key frames `0..=span` with base spacing `k`: regular, or each gap drawn in `[0.6 k, 1.4 k]`;
@@ -270,6 +281,24 @@ impl InbetweenTrainer {
             let prepared = t.prepare(&items)?;
             t.valid.push(prepared);
         }
+        if config.transition_fraction > 0.0 {
+            // The transition layout too: the benchmark's lengths in turn, one batch per length.
+            for (l, n) in [5, 15, 30, 45].into_iter().enumerate() {
+                let frames = transition_keys(n);
+                let shots: Vec<(Vec<usize>, Vec<Vec<f64>>)> = picked
+                    .iter()
+                    .skip(l)
+                    .step_by(4)
+                    .map(|&i| (frames.clone(), window_poses(valid, i, 0, N_PAST + n)))
+                    .collect();
+                for chunk in shots.chunks(64) {
+                    let items: Vec<TruthShot<'_>> =
+                        chunk.iter().map(|(k, p)| (k.as_slice(), p.as_slice(), vec![])).collect();
+                    let prepared = t.prepare(&items)?;
+                    t.valid.push(prepared);
+                }
+            }
+        }
         Ok(t)
     }
 
@@ -375,12 +404,27 @@ impl InbetweenTrainer {
     /// before the batch is shared out, so they do not depend on the thread count.
     pub fn train_on(&mut self, samples: &[usize]) -> ArnnResult<f64> {
         let w = self.train.window - 1;
+        // A batch in the transition layout (drawn only when the configuration asks for some, so
+        // that runs without them draw the same keys as before).
+        let c = &self.config;
+        if c.transition_fraction > 0.0 && w >= N_PAST + TRANSITION_GAPS.0 && self.rng.next_f64() < c.transition_fraction
+        {
+            let longest = TRANSITION_GAPS.1.min(w - N_PAST);
+            let n = TRANSITION_GAPS.0 + self.rng.below((longest - TRANSITION_GAPS.0 + 1) as u64) as usize;
+            let span = N_PAST + n;
+            let frames = transition_keys(n);
+            let mut shots: Vec<OwnedShot> = Vec::with_capacity(samples.len());
+            for &i in samples {
+                let start = self.rng.below((w - span + 1) as u64) as usize;
+                shots.push((frames.clone(), window_poses(&self.train, i, start, span), vec![]));
+            }
+            return self.step_on(shots, samples.len());
+        }
         let span = if w >= 60 && self.rng.next_f64() < 0.5 {
             60
         } else {
             40.min(w) + self.rng.below((w - 40.min(w) + 1) as u64) as usize
         };
-        let c = &self.config;
         let partial = partial_groups(c);
         let mut shots: Vec<OwnedShot> = Vec::with_capacity(samples.len());
         for &i in samples {
@@ -398,10 +442,15 @@ impl InbetweenTrainer {
             };
             shots.push((frames, window_poses(&self.train, i, start, span), fixed));
         }
+        self.step_on(shots, samples.len())
+    }
+
+    /// One Adam step on `shots` (one per sample of the batch).
+    fn step_on(&mut self, shots: Vec<OwnedShot>, samples: usize) -> ArnnResult<f64> {
         let seed = self.rng.next_u64();
         let items: Vec<TruthShot<'_>> = shots.iter().map(|(k, p, m)| (k.as_slice(), p.as_slice(), m.clone())).collect();
         let prepared = self.prepare(&items)?;
-        let n = samples.len();
+        let n = samples;
         let this = &*self;
         let shard_loss = |r: std::ops::Range<usize>| -> candle_core::Result<Tensor> {
             let mut rngs = RowRngs::new(seed, r.clone());
@@ -528,12 +577,32 @@ mod tests {
     }
 
     fn trainer(seed: u64) -> InbetweenTrainer {
+        trainer_with(seed, 0.0)
+    }
+
+    fn trainer_with(seed: u64, transition_fraction: f64) -> InbetweenTrainer {
         let train = windows(8, 66, 0.0);
         let valid = windows(4, 66, 0.5);
         let mut config = crate::inbetween::config_for(&train.skeleton, 30.0);
-        config = InbetweenConfig { seed, ..InbetweenConfig::tiny(config.skeleton, config.euler_axes) };
+        config =
+            InbetweenConfig { seed, transition_fraction, ..InbetweenConfig::tiny(config.skeleton, config.euler_axes) };
         let norm = window_normalization(&train);
         InbetweenTrainer::new(&config, norm, train, &valid).unwrap()
+    }
+
+    #[test]
+    fn transitions_train_as_keys_of_the_context_and_the_target() {
+        assert_eq!(transition_keys(5), vec![0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 15]);
+        // Validation: one batch of keys (4 windows), then one per transition length.
+        let (keys_only, both) = (trainer_with(5, 0.0), trainer_with(5, 1.0));
+        assert_eq!((keys_only.valid.len(), both.valid.len()), (1, 5));
+        let mut t = trainer_with(5, 1.0);
+        let before = t.evaluate().unwrap().0;
+        for _ in 0..30 {
+            t.train_on(&[0, 1, 2, 3, 4, 5, 6, 7]).unwrap();
+        }
+        let after = t.evaluate().unwrap().0;
+        assert!(after < 0.8 * before, "validation loss {before} -> {after}");
     }
 
     #[test]

@@ -123,6 +123,8 @@ pub struct ArnnRunOptions {
     pub epochs_given: bool,
     /// The in-betweening design without `--data`: minutes of synthetic locomotion.
     pub synth_minutes: Option<f64>,
+    /// The in-betweening design: fraction of batches in the transition layout.
+    pub transition_fraction: Option<f64>,
     /// Sequences per batch.
     pub batch_size: Option<usize>,
     /// Adam learning rate.
@@ -424,6 +426,12 @@ pub fn run(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
         bail!(
             "--synth-minutes gives the in-betweening design synthetic locomotion (add --design inbetween); the \
              autoregressive ARNN trains on lamp hops (--sequences) or --data"
+        );
+    }
+    if a.transition_fraction.is_some() {
+        bail!(
+            "--transition-fraction sets the in-betweening design's training keys (add --design inbetween); the \
+             autoregressive ARNN's humanoid keys already include the benchmark's transition layout"
         );
     }
     check_options(a)?;
@@ -782,6 +790,9 @@ pub fn train_inbetween(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
         }
         if let Some(lr) = a.lr {
             config.learning_rate = lr;
+        }
+        if let Some(f) = a.transition_fraction {
+            config.transition_fraction = f;
         }
         config.seed = a.run.seed;
         config.lr_half_life = (train_w.count.div_ceil(config.batch_size) * epochs).div_ceil(4) as u64;
