@@ -440,6 +440,8 @@ fn humanoid_arnn_trains_on_bvh_and_runs_in_the_benchmark() {
     let row = stdout.lines().find(|l| l.trim_start().starts_with(&method)).unwrap_or_else(|| panic!("{stdout}"));
     let values: Vec<f64> = row.split_whitespace().skip(1).map(|v| v.parse().unwrap()).collect();
     assert!(values.len() == 2 && values.iter().all(|v| v.is_finite() && *v >= 0.0), "{row}");
+    let (ok, _, stderr) = run(&[&bench[..], &["--methods", &format!("arnn+lock:{r}")]].concat());
+    assert!(!ok && stderr.contains("the autoregressive ARNN has no foot lock on transitions"), "{stderr}");
     // Completion of humanoid keys taken from a clip, one of them partial (the root and one
     // joint), written as a BVH on the clip's skeleton.
     let names: Vec<String> =
@@ -715,6 +717,7 @@ fn inbetween_design_trains_resumes_scores_keys_and_completes() {
     assert_eq!(tconfig["transition_fraction"].as_f64(), Some(0.5));
     let tjson = dir.path().join("transitions.json");
     let tmethod = format!("arnn:{trs}");
+    let (tlocked, tcandle) = (format!("arnn+lock:{trs}"), format!("candle-arnn:{trs}"));
     let (ok, stdout, stderr) = run(&[
         "bench",
         "--data",
@@ -724,18 +727,27 @@ fn inbetween_design_trains_resumes_scores_keys_and_completes() {
         "--lengths",
         "5,15",
         "--methods",
-        &format!("interp,{method},{tmethod}"),
+        &format!("interp,{method},{tmethod},{tlocked},{tcandle}"),
         "--json",
         tjson.to_str().unwrap(),
     ]);
     assert!(ok, "{stdout}\n{stderr}");
     let result: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&tjson).unwrap()).unwrap();
-    for m in [method.as_str(), tmethod.as_str()] {
-        for n in [5, 15] {
-            let l2p = result["methods"][m][format!("l2p@{n}")].as_f64();
-            assert!(l2p.is_some_and(f64::is_finite), "{m} at {n}: {}", result["methods"][m]);
+    let value = |m: &str, key: &str| result["methods"][m][key].as_f64().unwrap_or(f64::NAN);
+    for n in [5, 15] {
+        for m in [method.as_str(), tmethod.as_str(), tlocked.as_str(), tcandle.as_str()] {
+            assert!(value(m, &format!("l2p@{n}")).is_finite(), "{m} at {n}: {}", result["methods"][m]);
+        }
+        // `arnn:` runs the runtime's keyframes task (tract), `candle-arnn:` the training model:
+        // the same transitions up to f32 rounding.
+        for key in [format!("l2p@{n}"), format!("l2q@{n}")] {
+            let (runtime, candle) = (value(&tmethod, &key), value(&tcandle, &key));
+            assert!((runtime - candle).abs() < 1e-3, "{key}: runtime {runtime}, candle {candle}");
         }
     }
+    let (ok, _, stderr) =
+        run(&["bench", "--data", d, "--valid-glob", "*_0005.bvh", "--methods", &format!("candle-arnn+lock:{trs}")]);
+    assert!(!ok && stderr.contains("the ARNN in candle has no foot lock on transitions"), "{stderr}");
     let (ok, _, stderr) = run(&["train", "arnn", "--transition-fraction", "0.5", "--epochs", "1", "--out", trs]);
     assert!(!ok && stderr.contains("--transition-fraction sets the in-betweening design's"), "{stderr}");
     // `zoo export` writes its whole-shot graph, which the runtime's keyframes task loads (the

@@ -434,6 +434,61 @@ impl KeyMethod for RuntimeKeys {
     }
 }
 
+/// A key method on the in-betweening benchmark's transitions (`zoo bench --methods
+/// arnn:RUN_DIR` of an in-betweening run): the context frames and the target are its keys, whole;
+/// the transition is the frames between the last context frame and the target.
+pub struct KeysOnTransitions {
+    inner: Box<dyn KeyMethod>,
+}
+
+impl KeysOnTransitions {
+    /// `inner` on the transition layout.
+    pub fn new(inner: Box<dyn KeyMethod>) -> Self {
+        KeysOnTransitions { inner }
+    }
+}
+
+impl zoo_data::benchmark::TransitionMethod for KeysOnTransitions {
+    fn name(&self) -> String {
+        self.inner.name()
+    }
+
+    fn generate(
+        &self,
+        tasks: &[zoo_data::benchmark::TransitionTask<'_>],
+    ) -> std::result::Result<Vec<zoo_data::benchmark::Transition>, String> {
+        use zoo_data::benchmark::N_PAST;
+        let keys: Vec<KeyTask<'_>> = tasks
+            .iter()
+            .map(|t| {
+                let j = t.skeleton.len();
+                let mut root = t.past_root[..N_PAST].to_vec();
+                root.push(t.target_root[0]);
+                let mut rot = t.past_rot[..N_PAST * j].to_vec();
+                rot.extend_from_slice(&t.target_rot[..j]);
+                let frames = zoo_arnn::inbetween_train::transition_keys(t.frames);
+                let fixed = vec![vec![true; 1 + j]; frames.len()];
+                KeyTask { skeleton: t.skeleton, frames, root, rot, fixed }
+            })
+            .collect();
+        let filled = self.inner.fill(&keys)?;
+        Ok(filled
+            .into_iter()
+            .zip(tasks)
+            .map(|(f, t)| {
+                let (j, n) = (t.skeleton.len(), t.frames);
+                let mut rot = f.rot[N_PAST * j..(N_PAST + n) * j].to_vec();
+                // Signs continuous from the last context frame's own, as the other methods'.
+                let mut last = t.past_rot[(N_PAST - 1) * j..N_PAST * j].to_vec();
+                for frame in rot.chunks_exact_mut(j) {
+                    zoo_arnn::humanoid::continue_signs(frame, &mut last);
+                }
+                zoo_data::benchmark::Transition { root: f.root[N_PAST..N_PAST + n].to_vec(), rot, raw_positions: None }
+            })
+            .collect())
+    }
+}
+
 /// A method followed by the foot lock between its keys ([`zoo_protocol::keylock::key_foot_lock`],
 /// the skeleton's legs found by name and its rest offsets; key frames unchanged).
 pub struct WithFootLock {

@@ -47,12 +47,20 @@ pub fn models() -> Vec<ModelEntry> {
         .map(|m| {
             let candle = m.candle_transitions();
             let transition = m.task() == zoo_runtime::MotionTaskKind::Transition;
+            // Keyframe models with transitions in candle: the in-betweening design through the
+            // runtime's keyframes task, with its foot lock.
+            let keys = m.task() == zoo_runtime::MotionTaskKind::Keyframes && candle.is_some();
+            let runtime = if transition {
+                Some(load_runtime_transition as BenchLoader)
+            } else {
+                keys.then_some(load_runtime_keys as BenchLoader)
+            };
             ModelEntry {
                 kind: m.kind(),
                 purpose: m.purpose(),
                 bench: candle.map(|c| c.load),
-                runtime: transition.then_some(load_runtime_transition as BenchLoader),
-                foot_lock: transition || candle.is_some_and(|c| c.foot_lock),
+                runtime,
+                foot_lock: transition || keys || candle.is_some_and(|c| c.foot_lock),
             }
         })
         .collect()
@@ -69,6 +77,29 @@ fn load_runtime_transition(
         .with_context(|| format!("exporting the run folder {} for the runtime", dir.display()))?;
     let model = zoo_runtime::TransitionModel::from_bytes(&exported.model.to_bytes())?;
     Ok(Box::new(crate::onnx::onnx_method(model, name, foot_lock)))
+}
+
+/// `KIND:DIR` of a keyframe model on the transition layout: the in-betweening design exported
+/// in memory and run by the runtime's keyframes task (the context and the target its keys; the
+/// runtime's foot lock with `+lock`), as `zoo complete` and engines run it. The autoregressive
+/// ARNN keeps its own context layout in candle.
+fn load_runtime_keys(
+    dir: &Path,
+    name: String,
+    foot_lock: bool,
+) -> std::result::Result<Box<dyn TransitionMethod>, zoo_nn::zoo_model::BoxError> {
+    if !zoo_arnn::inbetween::is_inbetween_run(dir) {
+        if foot_lock {
+            return Err(format!(
+                "method `{name}`: the autoregressive ARNN has no foot lock on transitions; drop `+lock` (the \
+                 in-betweening design, `zoo train arnn --design inbetween`, has one)"
+            )
+            .into());
+        }
+        return Ok(Box::new(zoo_arnn::humanoid::ArnnMethod::load(dir, name)?));
+    }
+    let keys = crate::keys::RuntimeKeys::of_run(dir, name, foot_lock).map_err(|e| e.to_string())?;
+    Ok(Box::new(crate::keys::KeysOnTransitions::new(Box::new(keys))))
 }
 
 fn known_kinds(models: &[ModelEntry]) -> String {

@@ -57,7 +57,14 @@ impl ZooModel for ArnnModel {
     fn candle_transitions(&self) -> Option<CandleTransitions> {
         // The humanoid ARNN, either design, on the context layout (its keys: the context and
         // the target).
-        fn load(run: &Path, name: String, _: bool) -> Result<Box<dyn TransitionMethod>, BoxError> {
+        fn load(run: &Path, name: String, foot_lock: bool) -> Result<Box<dyn TransitionMethod>, BoxError> {
+            if foot_lock {
+                return Err(format!(
+                    "method `{name}`: the ARNN in candle has no foot lock on transitions; the in-betweening design's \
+                     is the runtime's (`arnn+lock:RUN_DIR`)"
+                )
+                .into());
+            }
             if crate::inbetween::is_inbetween_run(run) {
                 return Ok(Box::new(crate::humanoid::InbetweenTransitions::load(run, name)?));
             }

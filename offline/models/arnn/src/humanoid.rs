@@ -74,13 +74,33 @@ fn push_pose(root: DVec3, rot: &[DQuat], prev: Option<&[f64]>, out: &mut Vec<f64
 
 /// Flips each rotation of a frame to the sign nearest the previous frame's (`last`, updated to
 /// this frame's): the pose is the same, the components continue (L2Q and BVH curves compare them).
-fn continue_signs(rot: &mut [DQuat], last: &mut [DQuat]) {
+pub fn continue_signs(rot: &mut [DQuat], last: &mut [DQuat]) {
     for (q, l) in rot.iter_mut().zip(last) {
         if q.dot(*l) < 0.0 {
             *q = -*q;
         }
         *l = *q;
     }
+}
+
+/// The transition of `task` made of humanoid pose vectors `poses` (one per transition frame),
+/// its rotations signed as the data's: continuous from the last context frame's own signs (a
+/// quaternion's sign does not change the pose, but the benchmark's L2Q compares components).
+pub fn transition_of(poses: &[Vec<f64>], task: &TransitionTask<'_>) -> Transition {
+    let j = task.skeleton.len();
+    let mut tr = Transition {
+        root: Vec::with_capacity(poses.len()),
+        rot: Vec::with_capacity(poses.len() * j),
+        raw_positions: None,
+    };
+    let mut last = task.past_rot[(N_PAST - 1) * j..N_PAST * j].to_vec();
+    for p in poses {
+        let (root, mut rot) = decode(p, j);
+        continue_signs(&mut rot, &mut last);
+        tr.root.push(root);
+        tr.rot.extend(rot);
+    }
+    tr
 }
 
 /// Poses of consecutive frames: `rot` frames x joints, `root` one per frame.
@@ -225,24 +245,7 @@ impl ArnnMethod {
             }
             prev = y;
         }
-        // Rotations signed as the data's: continuous from the last context frame's own signs (a
-        // quaternion's sign does not change the pose, but the benchmark's L2Q compares components).
-        Ok(out
-            .into_iter()
-            .zip(tasks)
-            .map(|(frames, task)| {
-                let mut tr =
-                    Transition { root: Vec::with_capacity(n), rot: Vec::with_capacity(n * j), raw_positions: None };
-                let mut last = task.past_rot[(N_PAST - 1) * j..N_PAST * j].to_vec();
-                for p in &frames {
-                    let (root, mut rot) = decode(p, j);
-                    continue_signs(&mut rot, &mut last);
-                    tr.root.push(root);
-                    tr.rot.extend(rot);
-                }
-                tr
-            })
-            .collect())
+        Ok(out.iter().zip(tasks).map(|(frames, task)| transition_of(frames, task)).collect())
     }
 }
 
@@ -313,24 +316,7 @@ impl InbetweenTransitions {
         let shots: Vec<crate::inbetween::ShotKeyRefs<'_>> =
             frames.iter().zip(&key_poses).map(|(f, p)| (f.as_slice(), p.as_slice(), &[][..])).collect();
         let raw = crate::inbetween::complete_shots(&self.model, &self.norm, &shots)?;
-        Ok(raw
-            .into_iter()
-            .zip(tasks)
-            .map(|(shot, t)| {
-                let n = t.frames;
-                let mut tr =
-                    Transition { root: Vec::with_capacity(n), rot: Vec::with_capacity(n * j), raw_positions: None };
-                // Signs continuous from the last context frame's own (see `ArnnMethod::batch`).
-                let mut last = t.past_rot[(N_PAST - 1) * j..N_PAST * j].to_vec();
-                for p in &shot[N_PAST..N_PAST + n] {
-                    let (root, mut rot) = decode(p, j);
-                    continue_signs(&mut rot, &mut last);
-                    tr.root.push(root);
-                    tr.rot.extend(rot);
-                }
-                tr
-            })
-            .collect())
+        Ok(raw.iter().zip(tasks).map(|(shot, t)| transition_of(&shot[N_PAST..N_PAST + t.frames], t)).collect())
     }
 }
 
