@@ -1,9 +1,10 @@
 //! Per-node time of an exported step graph in tract: where a step's time goes.
 //!
-//! `cargo run --release -p zoo-runtime --example profile_step -- MODEL.onnx [BATCH] [STEPS]`
+//! `cargo run --release -p zoo-runtime --example profile_step -- MODEL.onnx [BATCH] [STEPS] [FRAMES]`
 //!
 //! Plans the step graph for a concrete batch like `MotionRunner` does, runs it `STEPS` times on
-//! fixed inputs and prints the nodes of the optimized plan by total time.
+//! fixed inputs and prints the nodes of the optimized plan by total time. With `FRAMES`, a
+//! window graph (RMR): inputs `[FRAMES, BATCH, values]`.
 
 use std::collections::HashMap;
 use std::time::Instant;
@@ -15,6 +16,7 @@ fn main() -> TractResult<()> {
     let path = args.get(1).expect("usage: profile_step MODEL.onnx [BATCH] [STEPS]");
     let batch: usize = args.get(2).map_or(1, |s| s.parse().expect("batch"));
     let steps: usize = args.get(3).map_or(2000, |s| s.parse().expect("steps"));
+    let frames: Option<usize> = args.get(4).map(|s| s.parse().expect("frames"));
     let bytes = std::fs::read(path)?;
     let proto = <tract_onnx::pb::ModelProto as prost::Message>::decode(bytes.as_slice())?;
     // Through the runtime's loader (its load-time rewrite included; `ZOO_RUNTIME_FUSE=0` for
@@ -28,7 +30,8 @@ fn main() -> TractResult<()> {
             panic!("input {} has no tensor type", v.name)
         };
         let dims = &t.shape.as_ref().expect("shape").dim;
-        let w: usize = dims[1..]
+        let skip = if frames.is_some() { 2 } else { 1 };
+        let w: usize = dims[skip..]
             .iter()
             .map(|d| match d.value {
                 Some(Value::DimValue(n)) => n as usize,
@@ -36,15 +39,23 @@ fn main() -> TractResult<()> {
             })
             .product();
         widths.push(w);
-        model.set_input_fact(i, f32::fact([batch, w]).into())?;
+        match frames {
+            Some(f) => model.set_input_fact(i, f32::fact([f, batch, w]).into())?,
+            None => model.set_input_fact(i, f32::fact([batch, w]).into())?,
+        }
     }
     let plan = model.into_optimized()?.into_runnable()?;
     let mut state = plan.spawn()?;
     let inputs: TVec<TValue> = widths
         .iter()
         .map(|&w| {
-            let v: Vec<f32> = (0..batch * w).map(|i| ((i * 37 % 101) as f32 / 101.0 - 0.5) * 0.5).collect();
-            tensor1(&v).into_shape(&[batch, w]).unwrap().into_tvalue()
+            let rows = batch * frames.unwrap_or(1);
+            let v: Vec<f32> = (0..rows * w).map(|i| ((i * 37 % 101) as f32 / 101.0 - 0.5) * 0.5).collect();
+            let shape = match frames {
+                Some(f) => vec![f, batch, w],
+                None => vec![batch, w],
+            };
+            tensor1(&v).into_shape(&shape).unwrap().into_tvalue()
         })
         .collect();
     for _ in 0..20 {

@@ -211,8 +211,8 @@ pub(crate) fn read_proto(proto: &pb::ModelProto, origin: &str) -> Result<Inferen
             .map_err(|_| not_onnx("tract could not read the graph (it panicked on it)".into()))?
             .map_err(|e| MotionError::Unsupported { reason: chain(&e) })
     };
-    // The products and LSTM cells as zoo ops (`crate::ops`); the graph as written when the
-    // rewrite is off or its result does not read.
+    // The products, LSTM cells and GRU layers as zoo ops (`crate::ops`); the graph as written
+    // when the rewrite is off or its result does not read.
     let fused = crate::ops::enabled().then(|| crate::ops::fuse(proto)).flatten();
     match fused.as_ref().map(read) {
         Some(Ok(model)) => Ok(model),

@@ -10,6 +10,7 @@
 //! `ZOO_RUNTIME_FUSE=0` to run the graph as written (for comparisons).
 
 pub(crate) mod chunk;
+mod gru;
 mod product;
 pub(crate) mod rewrite;
 
@@ -30,12 +31,19 @@ pub(crate) const ZOO_DENSE: &str = "ZooDense";
 /// An LSTM cell: inputs `c [batch, hidden]`, the products' inputs, the addends; outputs `h`, `c`.
 pub(crate) const ZOO_LSTM: &str = "ZooLstmCell";
 
+/// One direction of a GRU layer's recurrence (`linear_before_reset = 1`, gates z, r, h in ONNX's
+/// order): inputs `xw [frames, batch, blocks x 3 hidden]` (the input products with their
+/// biases, this direction's in block `xw_block`) and
+/// optionally the initial states `h0 [directions, batch, hidden]` (row `h0_index`); outputs
+/// `y [frames, 1, batch, hidden]` and the last state `[1, batch, hidden]`.
+pub(crate) const ZOO_GRU: &str = "ZooGru";
+
 /// Whether loads rewrite graphs (`ZOO_RUNTIME_FUSE=0` turns it off).
 pub(crate) fn enabled() -> bool {
     std::env::var("ZOO_RUNTIME_FUSE").map_or(true, |v| v != "0")
 }
 
-/// `proto` with its products and LSTM cells as zoo nodes, or `None` when it has none.
+/// `proto` with its products, LSTM cells and GRU layers as zoo nodes, or `None` when it has none.
 pub(crate) fn fuse(proto: &pb::ModelProto) -> Option<pb::ModelProto> {
     let graph = rewrite::rewrite(proto.graph.as_ref()?)?;
     let mut out = proto.clone();
@@ -49,6 +57,7 @@ pub(crate) fn onnx() -> tract_onnx::Onnx {
     let mut onnx = tract_onnx::onnx();
     onnx.op_register.insert(ZOO_DENSE, parse_dense);
     onnx.op_register.insert(ZOO_LSTM, parse_lstm);
+    onnx.op_register.insert(ZOO_GRU, parse_gru);
     onnx
 }
 
@@ -167,6 +176,24 @@ fn parse_lstm(ctx: &ParsingContext, node: &pb::NodeProto) -> TractResult<(Box<dy
     let addends = node_attr(node, "addends").map_or(0, |a| a.i as usize);
     ensure!(node.input.len() == 1 + w.len() + addends, "`{}`: wrong input count", node.name);
     let spec = LstmSpec { hidden: m / 4, weights: Arc::new(w), bias: bias(ctx, node, m)?, addends };
+    Ok((expand(spec), vec![]))
+}
+
+fn parse_gru(ctx: &ParsingContext, node: &pb::NodeProto) -> TractResult<(Box<dyn InferenceOp>, Vec<String>)> {
+    let (m, w) = weights(ctx, node)?;
+    ensure!(m % 3 == 0, "`{}`: {m} gate rows is not 3 blocks", node.name);
+    ensure!(w.iter().all(|w| matches!(w, Weights::F32(_))), "`{}`: GRU weights are f32", node.name);
+    let has_h0 = node.input.len() > 1 && !node.input[1].is_empty();
+    let int = |name: &str| node_attr(node, name).map_or(0, |a| a.i);
+    let spec = gru::GruSpec {
+        hidden: m / 3,
+        weights: Arc::new(w),
+        bias: bias(ctx, node, m)?,
+        reverse: int("reverse") != 0,
+        h0_index: int("h0_index").max(0) as usize,
+        has_h0,
+        xw_block: int("xw_block").max(0) as usize,
+    };
     Ok((expand(spec), vec![]))
 }
 

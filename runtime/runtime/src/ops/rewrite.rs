@@ -497,8 +497,155 @@ fn lstm(idx: &Index, i: usize, new_inits: &mut Vec<pb::TensorProto>) -> Option<R
     Some(Replacement { at: c_i.min(h_i), nodes, node })
 }
 
-/// `graph` with its products and LSTM cells as zoo nodes; `None` when it has none.
+fn f32_init(name: &str, dims: &[usize], values: &[f32]) -> pb::TensorProto {
+    pb::TensorProto {
+        name: name.into(),
+        dims: dims.iter().map(|&d| d as i64).collect(),
+        data_type: Dt::Float as i32,
+        raw_data: values.iter().flat_map(|v| v.to_le_bytes()).collect(),
+        ..Default::default()
+    }
+}
+
+/// The zoo nodes of an ONNX `GRU` node (`linear_before_reset = 1`, the default activations, no
+/// sequence lengths, constant f32 or f16 weights): one [`super::ZOO_DENSE`] of every frame's
+/// input products for every direction with their biases, then per direction a
+/// [`super::ZOO_GRU`] of the recurrence; both directions' outputs concatenated as the `GRU`
+/// node's. `None` for any other form.
+fn gru(idx: &Index, node: &pb::NodeProto, inits: &mut Vec<pb::TensorProto>) -> Option<Vec<pb::NodeProto>> {
+    let allowed = ["hidden_size", "direction", "linear_before_reset", "layout"];
+    if node.op_type != "GRU"
+        || !node.domain.is_empty()
+        || int_attr(node, "linear_before_reset", 0) != 1
+        || int_attr(node, "layout", 0) != 0
+        || node.attribute.iter().any(|a| !allowed.contains(&a.name.as_str()))
+        || node.input.len() < 3
+        || node.input.get(4).is_some_and(|l| !l.is_empty())
+    {
+        return None;
+    }
+    let dirs = match get_attr(node, "direction").map_or(&b"forward"[..], |a| a.s.as_slice()) {
+        b"forward" | b"reverse" => 1,
+        b"bidirectional" => 2,
+        _ => return None,
+    };
+    let backward = get_attr(node, "direction").is_some_and(|a| a.s == b"reverse");
+    let values = |name: &str| idx.float_init(name).and_then(|t| Some((t.dims.clone(), super::tensor_f32(t)?)));
+    let (wd, w) = values(&node.input[1])?;
+    let (rd, r) = values(&node.input[2])?;
+    let h = int_attr(node, "hidden_size", 0).max(0) as usize;
+    if wd.len() != 3 || rd != [dirs as i64, 3 * h as i64, h as i64] || wd[0] != dirs as i64 || wd[1] != 3 * h as i64 {
+        return None;
+    }
+    let k = wd[2].max(0) as usize;
+    if h == 0 || k == 0 || w.len() != dirs * 3 * h * k || r.len() != dirs * 3 * h * h {
+        return None;
+    }
+    let b = match node.input.get(3).filter(|b| !b.is_empty()) {
+        Some(name) => {
+            let (bd, b) = values(name)?;
+            (bd == [dirs as i64, 6 * h as i64] && b.len() == dirs * 6 * h).then_some(Some(b))?
+        }
+        None => None,
+    };
+    let h0 = node.input.get(5).filter(|t| !t.is_empty());
+    let p = format!("{}.zoo_gru", node.name);
+    let out = |i: usize| node.output.get(i).filter(|o| !o.is_empty()).cloned();
+    // Every direction's input products in one node: `W` is `[dirs, 3H, in]`, so `[dirs x 3H, in]`
+    // as stored, its bias the first `3H` of each direction's `6H`.
+    inits.push(f32_init(&format!("{p}.w"), &[dirs * 3 * h, k], &w));
+    let mut dense_attrs = vec![
+        attr::strings("weights", std::iter::once(format!("{p}.w").as_str())),
+        attr::ints("transposed", [1].into_iter()),
+    ];
+    if let Some(b) = &b {
+        let wb: Vec<f32> = b.chunks_exact(6 * h).flat_map(|d| d[..3 * h].iter().copied()).collect();
+        inits.push(f32_init(&format!("{p}.wb"), &[dirs * 3 * h], &wb));
+        dense_attrs.push(attr::string("bias", &format!("{p}.wb")));
+    }
+    let xw = format!("{p}.xw");
+    let mut nodes = vec![pb::NodeProto {
+        name: xw.clone(),
+        op_type: super::ZOO_DENSE.into(),
+        domain: super::DOMAIN.into(),
+        input: vec![node.input[0].clone()],
+        output: vec![xw.clone()],
+        attribute: dense_attrs,
+        ..Default::default()
+    }];
+    let (mut ys, mut hs) = (Vec::new(), Vec::new());
+    for d in 0..dirs {
+        let q = format!("{p}.d{d}");
+        inits.push(f32_init(&format!("{q}.r"), &[3 * h, h], &r[d * 3 * h * h..(d + 1) * 3 * h * h]));
+        let mut gru_attrs = vec![
+            attr::strings("weights", std::iter::once(format!("{q}.r").as_str())),
+            attr::ints("transposed", [1].into_iter()),
+        ];
+        if let Some(b) = &b {
+            inits.push(f32_init(&format!("{q}.rb"), &[3 * h], &b[d * 6 * h + 3 * h..(d + 1) * 6 * h]));
+            gru_attrs.push(attr::string("bias", &format!("{q}.rb")));
+        }
+        gru_attrs.push(attr::int("reverse", i64::from(d == 1 || backward)));
+        gru_attrs.push(attr::int("h0_index", d as i64));
+        gru_attrs.push(attr::int("xw_block", d as i64));
+        let (y, hl) = if dirs == 1 {
+            (out(0).unwrap_or(format!("{q}.y")), out(1).unwrap_or(format!("{q}.h")))
+        } else {
+            (format!("{q}.y"), format!("{q}.h"))
+        };
+        nodes.push(pb::NodeProto {
+            name: q.clone(),
+            op_type: super::ZOO_GRU.into(),
+            domain: super::DOMAIN.into(),
+            input: std::iter::once(xw.clone()).chain(h0.cloned()).collect(),
+            output: vec![y.clone(), hl.clone()],
+            attribute: gru_attrs,
+            ..Default::default()
+        });
+        ys.push(y);
+        hs.push(hl);
+    }
+    if dirs == 2 {
+        for (i, parts, axis) in [(0, ys, 1), (1, hs, 0)] {
+            if let Some(o) = out(i) {
+                nodes.push(pb::NodeProto {
+                    name: format!("{p}.out{i}"),
+                    op_type: "Concat".into(),
+                    input: parts,
+                    output: vec![o],
+                    attribute: vec![attr::int("axis", axis)],
+                    ..Default::default()
+                });
+            }
+        }
+    }
+    Some(nodes)
+}
+
+/// `graph` with its `GRU` nodes as zoo nodes ([`gru`]), or `None` when it has none.
+fn expand_grus(graph: &pb::GraphProto) -> Option<pb::GraphProto> {
+    let idx = Index::new(graph);
+    let mut inits = Vec::new();
+    let mut out = graph.clone();
+    out.node.clear();
+    let mut changed = false;
+    for n in &graph.node {
+        match gru(&idx, n, &mut inits) {
+            Some(nodes) => {
+                changed = true;
+                out.node.extend(nodes);
+            }
+            None => out.node.push(n.clone()),
+        }
+    }
+    out.initializer.extend(inits);
+    changed.then_some(out)
+}
+
+/// `graph` with its products, LSTM cells and GRU layers as zoo nodes; `None` when it has none.
 pub(crate) fn rewrite(graph: &pb::GraphProto) -> Option<pb::GraphProto> {
+    let grus = expand_grus(graph);
+    let graph = grus.as_ref().unwrap_or(graph);
     let idx = Index::new(graph);
     let mut taken = HashSet::new();
     let mut replacements = Vec::new();
@@ -524,7 +671,7 @@ pub(crate) fn rewrite(graph: &pb::GraphProto) -> Option<pb::GraphProto> {
         }
     }
     if replacements.is_empty() {
-        return None;
+        return grus;
     }
     let mut at: HashMap<usize, pb::NodeProto> = replacements.into_iter().map(|r| (r.at, r.node)).collect();
     let mut out = graph.clone();

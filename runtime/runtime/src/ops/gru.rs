@@ -1,0 +1,323 @@
+//! [`super::ZOO_GRU`]: one direction of a GRU layer's recurrence on tract-linalg's kernel, its
+//! input products computed before it, for every frame and both directions at once, by one
+//! [`super::ZOO_DENSE`] node.
+
+use super::plain_f32;
+use super::product::{Product, Weights};
+use std::sync::Arc;
+use tract_onnx::tract_core::{as_op, op_as_typed_op, op_out_of_plan};
+use tract_onnx::tract_hir::internal::*;
+use tract_onnx::tract_hir::prelude::tract_linalg::Func;
+
+/// A parsed [`super::ZOO_GRU`] node.
+#[derive(Clone, Debug)]
+pub(super) struct GruSpec {
+    pub(super) hidden: usize,
+    pub(super) weights: Arc<Vec<Weights>>,
+    pub(super) bias: Option<Arc<Tensor>>,
+    pub(super) reverse: bool,
+    pub(super) h0_index: usize,
+    pub(super) has_h0: bool,
+    /// Which `3 hidden` block of each `xw` row is this direction's (both directions' input
+    /// products come from one node).
+    pub(super) xw_block: usize,
+}
+
+impl Expansion for GruSpec {
+    fn name(&self) -> StaticName {
+        "ZooGru".into()
+    }
+
+    fn nboutputs(&self) -> TractResult<usize> {
+        Ok(2)
+    }
+
+    fn rules<'r, 'p: 'r, 's: 'r>(
+        &'s self,
+        s: &mut Solver<'r>,
+        inputs: &'p [TensorProxy],
+        outputs: &'p [TensorProxy],
+    ) -> InferenceResult {
+        check_input_arity(inputs, 1 + self.has_h0 as usize)?;
+        check_output_arity(outputs, 2)?;
+        s.equals(&inputs[0].datum_type, f32::datum_type())?;
+        s.equals(&inputs[0].rank, 3)?;
+        s.given(&inputs[0].shape[2], move |_, width| {
+            let width = width.to_usize()?;
+            ensure!(
+                width % (3 * self.hidden) == 0 && width / (3 * self.hidden) > self.xw_block,
+                "ZooGru: input rows of {width} values hold no gate block {}",
+                self.xw_block
+            );
+            Ok(())
+        })?;
+        for o in outputs {
+            s.equals(&o.datum_type, f32::datum_type())?;
+        }
+        let (y, h) = (&outputs[0], &outputs[1]);
+        s.equals(&y.rank, 4)?;
+        s.equals(&y.shape[0], &inputs[0].shape[0])?;
+        s.equals(&y.shape[1], 1.to_dim())?;
+        s.equals(&y.shape[2], &inputs[0].shape[1])?;
+        s.equals(&y.shape[3], self.hidden.to_dim())?;
+        s.equals(&h.rank, 3)?;
+        s.equals(&h.shape[0], 1.to_dim())?;
+        s.equals(&h.shape[1], &inputs[0].shape[1])?;
+        s.equals(&h.shape[2], self.hidden.to_dim())?;
+        if self.has_h0 {
+            s.equals(&inputs[1].rank, 3)?;
+            s.equals(&inputs[1].shape[1], &inputs[0].shape[1])?;
+            s.equals(&inputs[1].shape[2], self.hidden.to_dim())?;
+        }
+        Ok(())
+    }
+
+    fn wire(&self, prefix: &str, model: &mut TypedModel, inputs: &[OutletId]) -> TractResult<TVec<OutletId>> {
+        let batch = model.outlet_fact(inputs[0])?.shape.get(1).and_then(|d| d.to_usize().ok());
+        let product = Product::new(3 * self.hidden, &self.weights, batch)?;
+        let op = GruOp {
+            product,
+            hidden: self.hidden,
+            bias: self.bias.clone(),
+            reverse: self.reverse,
+            h0_index: self.h0_index,
+            has_h0: self.has_h0,
+            xw_block: self.xw_block,
+        };
+        model.wire_node(prefix, op, inputs)
+    }
+}
+
+/// One direction of a GRU layer over a sequence: per frame the recurrent product
+/// `g = h R^T + Rb` of the three gates in one kernel call, then
+/// `z, r = sigmoid(xw + g)`, `n = tanh(xw_h + r * g_h)`, `h' = (1 - z) * n + z * h`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct GruOp {
+    product: Product,
+    hidden: usize,
+    bias: Option<Arc<Tensor>>,
+    reverse: bool,
+    h0_index: usize,
+    has_h0: bool,
+    xw_block: usize,
+}
+
+thread_local! {
+    /// The recurrent products and the state of the last GRU call on this thread, reused.
+    static GRU_SCRATCH: std::cell::RefCell<(Tensor, Vec<f32>)> = std::cell::RefCell::new((Tensor::default(), Vec::new()));
+}
+
+impl Op for GruOp {
+    fn name(&self) -> StaticName {
+        "ZooGru".into()
+    }
+
+    fn info(&self) -> TractResult<Vec<String>> {
+        Ok(vec![format!(
+            "hidden {}{} on {}",
+            self.hidden,
+            if self.reverse { ", reversed" } else { "" },
+            self.product.kernel_name()
+        )])
+    }
+
+    op_as_typed_op!();
+}
+
+impl EvalOp for GruOp {
+    op_out_of_plan!();
+
+    fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
+        let (p, h) = (&self.product, self.hidden);
+        let shape = inputs[0].shape();
+        let (frames, n, width) = (shape[0], shape[1], shape[2]);
+        ensure!(width >= (self.xw_block + 1) * 3 * h, "ZooGru: no gate block {} in {width} values", self.xw_block);
+        let xw = plain_f32(&inputs[0])?;
+        let mut y = Tensor::zero::<f32>(&[frames, 1, n, h])?;
+        let mut last = Tensor::zero::<f32>(&[1, n, h])?;
+        GRU_SCRATCH.with_borrow_mut(|(gates, state)| {
+            if gates.shape() != [n, 3 * h] {
+                *gates = Tensor::zero::<f32>(&[n, 3 * h])?;
+            }
+            state.clear();
+            if self.has_h0 {
+                let h0 = plain_f32(&inputs[1])?;
+                let at = self.h0_index * n * h;
+                ensure!(h0.len() >= at + n * h, "ZooGru: no initial state {} in {} values", self.h0_index, h0.len());
+                state.extend_from_slice(&h0[at..at + n * h]);
+            } else {
+                state.resize(n * h, 0.0);
+            }
+            let sigmoid = Func::Sigmoid.ew_f32()?;
+            let tanh = Func::Tanh.ew_f32()?;
+            let mut yv = y.try_as_plain_ram_mut()?;
+            let ys = yv.as_slice_mut::<f32>()?;
+            for step in 0..frames {
+                let t = if self.reverse { frames - 1 - step } else { step };
+                p.run_f32(&[state.as_slice()], n, self.bias.as_deref(), None, None, gates)?;
+                let mut gv = gates.try_as_plain_ram_mut()?;
+                let g = gv.as_slice_mut::<f32>()?;
+                for r in 0..n {
+                    let x = &xw[(t * n + r) * width + self.xw_block * 3 * h..][..3 * h];
+                    let row = &mut g[r * 3 * h..][..3 * h];
+                    let (zr, gh) = row.split_at_mut(2 * h);
+                    zr.iter_mut().zip(&x[..2 * h]).for_each(|(v, x)| *v += x);
+                    sigmoid.run(zr)?;
+                    let (z, rr) = zr.split_at(h);
+                    gh.iter_mut().zip(rr).zip(&x[2 * h..]).for_each(|((v, r), x)| *v = x + r * *v);
+                    tanh.run(gh)?;
+                    let hs = &mut state[r * h..][..h];
+                    for j in 0..h {
+                        hs[j] = (1.0 - z[j]) * gh[j] + z[j] * hs[j];
+                    }
+                    ys[(t * n + r) * h..][..h].copy_from_slice(hs);
+                }
+            }
+            let mut lv = last.try_as_plain_ram_mut()?;
+            lv.as_slice_mut::<f32>()?.copy_from_slice(state);
+            Ok::<_, TractError>(())
+        })?;
+        Ok(tvec!(y.into_tvalue(), last.into_tvalue()))
+    }
+}
+
+impl TypedOp for GruOp {
+    as_op!();
+
+    fn output_facts(&self, inputs: &[&TypedFact]) -> TractResult<TVec<TypedFact>> {
+        let s = &inputs[0].shape;
+        let h = self.hidden.to_dim();
+        Ok(tvec!(
+            f32::fact([s[0].clone(), 1.to_dim(), s[1].clone(), h.clone()]),
+            f32::fact([1.to_dim(), s[1].clone(), h])
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::attr;
+    use tract_onnx::pb;
+    use tract_onnx::prelude::*;
+
+    type Dt = pb::tensor_proto::DataType;
+
+    fn value(name: &str) -> pb::ValueInfoProto {
+        pb::ValueInfoProto { name: name.into(), ..Default::default() }
+    }
+
+    /// A graph input of f32 values (its shape set when planned).
+    fn f32_input(name: &str) -> pb::ValueInfoProto {
+        let tensor = pb::type_proto::Tensor { elem_type: Dt::Float as i32, shape: None };
+        let r#type = pb::TypeProto { value: Some(pb::type_proto::Value::TensorType(tensor)), ..Default::default() };
+        pb::ValueInfoProto { name: name.into(), r#type: Some(r#type), ..Default::default() }
+    }
+
+    fn init(name: &str, dims: &[usize], seed: usize) -> pb::TensorProto {
+        let n: usize = dims.iter().product();
+        let v: Vec<f32> = (0..n).map(|i| ((((i + seed) * 7919) % 211) as f32 / 211.0 - 0.5) * 0.8).collect();
+        pb::TensorProto {
+            name: name.into(),
+            dims: dims.iter().map(|&d| d as i64).collect(),
+            data_type: Dt::Float as i32,
+            raw_data: v.iter().flat_map(|x| x.to_le_bytes()).collect(),
+            ..Default::default()
+        }
+    }
+
+    /// A graph of one ONNX `GRU` node over `x [frames, batch, 5]`, hidden 6, in `direction`,
+    /// with an initial state input when `h0`; outputs `Y` and `Y_h`.
+    fn gru_graph(direction: &str, h0: bool) -> pb::ModelProto {
+        let (dirs, h, k) = (if direction == "bidirectional" { 2 } else { 1 }, 6, 5);
+        let mut inputs = vec!["x".to_string(), "W".into(), "R".into(), "B".into()];
+        let mut graph_inputs = vec![f32_input("x")];
+        if h0 {
+            inputs.extend(["".to_string(), "h0".to_string()]);
+            graph_inputs.push(f32_input("h0"));
+        }
+        let node = pb::NodeProto {
+            name: "gru".into(),
+            op_type: "GRU".into(),
+            input: inputs,
+            output: vec!["Y".into(), "Y_h".into()],
+            attribute: vec![
+                attr::int("hidden_size", h as i64),
+                attr::string("direction", direction),
+                attr::int("linear_before_reset", 1),
+            ],
+            ..Default::default()
+        };
+        let graph = pb::GraphProto {
+            node: vec![node],
+            initializer: vec![
+                init("W", &[dirs, 3 * h, k], 1),
+                init("R", &[dirs, 3 * h, h], 2),
+                init("B", &[dirs, 6 * h], 3),
+            ],
+            input: graph_inputs,
+            output: vec![value("Y"), value("Y_h")],
+            ..Default::default()
+        };
+        pb::ModelProto {
+            ir_version: 8,
+            opset_import: vec![pb::OperatorSetIdProto { domain: String::new(), version: 17 }],
+            graph: Some(graph),
+            ..Default::default()
+        }
+    }
+
+    fn run(model: InferenceModel, inputs: &[Tensor]) -> TVec<TValue> {
+        let mut model = model;
+        for (i, t) in inputs.iter().enumerate() {
+            model.set_input_fact(i, f32::fact(t.shape()).into()).unwrap();
+        }
+        let plan = model.into_optimized().unwrap().into_runnable().unwrap();
+        plan.run(inputs.iter().cloned().map(|t| t.into_tvalue()).collect()).unwrap()
+    }
+
+    #[test]
+    fn zoo_gru_nodes_compute_the_onnx_gru() {
+        let (frames, batch, h) = (7, 3, 6);
+        for direction in ["forward", "bidirectional", "reverse"] {
+            for h0 in [false, true] {
+                let proto = gru_graph(direction, h0);
+                let fused = super::super::fuse(&proto).expect("the GRU is rewritten");
+                let ops: Vec<&str> = fused.graph.as_ref().unwrap().node.iter().map(|n| n.op_type.as_str()).collect();
+                assert!(ops.contains(&"ZooGru") && ops.contains(&"ZooDense") && !ops.contains(&"GRU"), "{ops:?}");
+                let dirs = if direction == "bidirectional" { 2 } else { 1 };
+                let x: Vec<f32> = (0..frames * batch * 5).map(|i| ((i as f32) * 0.37).sin()).collect();
+                let mut inputs = vec![Tensor::from_shape(&[frames, batch, 5], &x).unwrap()];
+                if h0 {
+                    let v: Vec<f32> = (0..dirs * batch * h).map(|i| ((i as f32) * 0.71).cos() * 0.5).collect();
+                    inputs.push(Tensor::from_shape(&[dirs, batch, h], &v).unwrap());
+                }
+                let zoo = run(super::super::onnx().model_for_proto_model(&fused).unwrap(), &inputs);
+                // The reference: tract's own GRU; for `reverse`, its forward GRU over the frames in
+                // reverse order, the output put back in order (tract 0.23.9's `reverse` GRU
+                // disagrees with onnxruntime, which agrees with this).
+                let plain = if direction == "reverse" {
+                    let flip = |t: &Tensor| {
+                        let (f, rest) = (t.shape()[0], t.len() / t.shape()[0]);
+                        let v = t.try_as_plain_ram().unwrap().as_slice::<f32>().unwrap().to_vec();
+                        let r: Vec<f32> = (0..f).rev().flat_map(|i| v[i * rest..(i + 1) * rest].to_vec()).collect();
+                        Tensor::from_shape(t.shape(), &r).unwrap()
+                    };
+                    let mut flipped = inputs.clone();
+                    flipped[0] = flip(&inputs[0]);
+                    let forward = gru_graph("forward", h0);
+                    let out = run(tract_onnx::onnx().model_for_proto_model(&forward).unwrap(), &flipped);
+                    let y = flip(&out[0].clone().into_tensor());
+                    tvec![y.into_tvalue(), out[1].clone()]
+                } else {
+                    run(tract_onnx::onnx().model_for_proto_model(&proto).unwrap(), &inputs)
+                };
+                for (o, (a, b)) in plain.iter().zip(&zoo).enumerate() {
+                    assert_eq!(a.shape(), b.shape(), "{direction}, h0 {h0}: output {o}");
+                    let (a, b) = (super::plain_f32(a).unwrap(), super::plain_f32(b).unwrap());
+                    let diff = a.iter().zip(b).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+                    assert!(diff < 1e-5, "{direction}, h0 {h0}: output {o} differs by {diff}");
+                }
+            }
+        }
+    }
+}
