@@ -281,6 +281,16 @@ fn generate_is_deterministic_streams_and_refuses_bad_input() {
         r.as_object_mut().unwrap().remove("seconds_per_sequence");
     }
     assert_eq!(j, k, "bench synthesis with 1 and 2 threads");
+    // Each width's quality: the exported model's weights stored as `zoo export --weights` does.
+    let f16 = out("bench_f16.json");
+    let mut args = vec!["bench", "synthesis", "--model", &r, "--data", &data, "--glob", "*", "--sequences", "3"];
+    args.extend(["--seconds", "3", "--threads", "1", "--weights", "f16", "--json", &f16]);
+    ok(&args);
+    let h = json(Path::new(&f16));
+    for (a, b) in h["rows"].as_array().unwrap().iter().zip(k["rows"].as_array().unwrap()).skip(1) {
+        let (a, b) = (a["foot_skate"].as_f64().unwrap(), b["foot_skate"].as_f64().unwrap());
+        assert!(a.is_finite() && a > 0.0 && (a - b).abs() < 0.5 * b, "f16 skate {a}, f32 {b}");
+    }
     // The range from more clips than the held-out ones: never narrower, so no row leaves it
     // more often; the other clips are checked against the held-out clips' own range.
     let range = |extra: &[&str], report: &str| {

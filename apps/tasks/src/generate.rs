@@ -29,6 +29,12 @@ impl Generator {
     /// The model of the run folder `dir`: the generator, and the refiner unless `no_refiner`
     /// (refused, with what to do, when the folder has none).
     pub fn load(dir: &Path, no_refiner: bool) -> TaskResult<Generator> {
+        Self::load_at(dir, no_refiner, zoo_format::WeightWidth::F32)
+    }
+
+    /// [`Generator::load`] with the exported model's weights stored at `width` (what `zoo export
+    /// --weights` writes), for the quality of each width.
+    pub fn load_at(dir: &Path, no_refiner: bool, width: zoo_format::WeightWidth) -> TaskResult<Generator> {
         if dir.is_file() {
             bail!(
                 "--model {} is a file; `zoo generate` takes the run folder of `zoo train rnn-gmm`: the generator's \
@@ -42,7 +48,14 @@ impl Generator {
             // load_run says what to do.
             zoo_rnngmm::run::load_run(dir, false).map_err(|e| Message(e.to_string()))?;
         }
-        let model = ModelSource::open(dir, MotionTaskKind::Synthesis, "generate")?.load()?.into_synthesis()?;
+        let mut source = ModelSource::open(dir, MotionTaskKind::Synthesis, "generate")?;
+        if width != zoo_format::WeightWidth::F32 {
+            let onnx = zoo_export::OnnxModel::from_bytes(&source.bytes, "the exported run folder")
+                .and_then(|m| zoo_export::with_weights(&m, width))
+                .map_err(|e| Message(format!("storing the weights as {width}: {e}")))?;
+            source.bytes = onnx.to_bytes();
+        }
+        let model = source.load()?.into_synthesis()?;
         let model = if no_refiner { model.without_refiner() } else { model };
         let plain = model.clone().without_refiner();
         Ok(Generator { candle, model, plain })

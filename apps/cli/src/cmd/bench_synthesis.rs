@@ -53,6 +53,10 @@ pub struct BenchSynthesisArgs {
     /// runtime (what `zoo generate` and engines run), for parity checks.
     #[arg(long)]
     pub candle: bool,
+    /// The width the exported model's weights are stored in (f32, f16 or int8, as `zoo export
+    /// --weights` writes them), for each width's quality; not with --candle.
+    #[arg(long, default_value = "f32", value_parser = ["f32", "f16", "int8"], conflicts_with = "candle")]
+    pub weights: String,
     /// Worker threads generating sequences (each on its own thread) [default: the cores
     /// available]. The figures do not depend on it.
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::training_threads)]
@@ -78,7 +82,9 @@ pub fn run(a: BenchSynthesisArgs) -> anyhow::Result<()> {
         skip_invalid: a.skip_invalid,
         threads: a.threads,
     };
-    let runtime = if a.candle { None } else { Some(zoo_tasks::generate::Generator::load(&o.model, o.no_refiner)?) };
+    let width = zoo_export::WeightWidth::parse(&a.weights).map_err(anyhow::Error::msg)?;
+    let runtime =
+        if a.candle { None } else { Some(zoo_tasks::generate::Generator::load_at(&o.model, o.no_refiner, width)?) };
     let synth = runtime.as_ref().map(|g| g as &dyn zoo_rnngmm::bench::synthesis::Synthesizer);
     let report = zoo_rnngmm::bench::synthesis::run(&o, synth, &zoo_nn::progress::Bar::new())?;
     println!("{}", report.text(o.range_margin));
