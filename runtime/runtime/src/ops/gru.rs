@@ -216,13 +216,7 @@ mod tests {
     fn init(name: &str, dims: &[usize], seed: usize) -> pb::TensorProto {
         let n: usize = dims.iter().product();
         let v: Vec<f32> = (0..n).map(|i| ((((i + seed) * 7919) % 211) as f32 / 211.0 - 0.5) * 0.8).collect();
-        pb::TensorProto {
-            name: name.into(),
-            dims: dims.iter().map(|&d| d as i64).collect(),
-            data_type: Dt::Float as i32,
-            raw_data: v.iter().flat_map(|x| x.to_le_bytes()).collect(),
-            ..Default::default()
-        }
+        super::super::rewrite::f32_init(name, dims, &v)
     }
 
     /// A graph of one ONNX `GRU` node over `x [frames, batch, 5]`, hidden 6, in `direction`,

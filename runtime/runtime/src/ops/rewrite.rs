@@ -497,7 +497,8 @@ fn lstm(idx: &Index, i: usize, new_inits: &mut Vec<pb::TensorProto>) -> Option<R
     Some(Replacement { at: c_i.min(h_i), nodes, node })
 }
 
-fn f32_init(name: &str, dims: &[usize], values: &[f32]) -> pb::TensorProto {
+/// An f32 initializer `name` of shape `dims`.
+pub(crate) fn f32_init(name: &str, dims: &[usize], values: &[f32]) -> pb::TensorProto {
     pb::TensorProto {
         name: name.into(),
         dims: dims.iter().map(|&d| d as i64).collect(),
