@@ -784,7 +784,12 @@ fn per_frame_calls_allocate_no_more_than_the_rust_api() {
     }
     eprintln!("allocations (C ABI, Rust API) over the counted frames: {report:?}");
     for (name, c, rust) in report {
-        assert!(c <= rust, "{name}: the C ABI allocates {c} times where the Rust API allocates {rust}");
+        // The two streams' schedules come from each loaded model's own measurement of its
+        // window's nodes, so when counting starts one may have run a node or two more of the
+        // window in progress (two tensors each, seen under an emulated CPU); an allocation per
+        // frame would be hundreds more.
+        let slack = if name.starts_with("zoo_stitch_stream") { 8 } else { 0 };
+        assert!(c <= rust + slack, "{name}: the C ABI allocates {c} times where the Rust API allocates {rust}");
     }
 }
 
