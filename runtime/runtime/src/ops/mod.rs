@@ -2,8 +2,10 @@
 //!
 //! When a file is loaded, [`rewrite::rewrite`] replaces the matrix products of its graphs
 //! (f32, f16 or int8, as `zoo export` writes them) by [`ZOO_DENSE`] nodes (a product, its bias,
-//! its LeakyReLU) and its LSTM cells by [`ZOO_LSTM`] nodes (the gate products, the gate
-//! nonlinearities and the state update), which [`onnx`] parses into [`DenseOp`] and [`LstmOp`].
+//! its LeakyReLU), its LSTM cells by [`ZOO_LSTM`] nodes (the gate products, the gate
+//! nonlinearities and the state update) and its GRU layers by a [`ZOO_DENSE`] of every frame's
+//! input products and a [`ZOO_GRU`] per direction, which [`onnx`] parses into [`DenseOp`],
+//! [`LstmOp`] and `gru::GruOp`.
 //! Both run their products on tract-linalg's kernels ([`product`]): one kernel call for the
 //! sum of an LSTM's gate products in f32, the int8 products quantized and packed in one pass
 //! and run on the integer kernels. The file itself stays standard ONNX; set

@@ -1,6 +1,7 @@
 //! The load-time rewrite: finds, in a decoded ONNX graph, the products zoo's exporters write
-//! (in f32, f16 or int8) and the LSTM cells built from them, and replaces each by one zoo node
-//! ([`super::ZOO_DENSE`], [`super::ZOO_LSTM`]) that names its weights by initializer. Nodes it
+//! (in f32, f16 or int8), the LSTM cells built from them and the `GRU` nodes, and replaces each
+//! by zoo nodes ([`super::ZOO_DENSE`], [`super::ZOO_LSTM`], [`super::ZOO_GRU`]) that name their
+//! weights by initializer. Nodes it
 //! does not recognise are left as they are; so is the file on disk (standard ONNX).
 //!
 //! A product is, with `W` an initializer (f32, or f16 widened by a `Cast`):
