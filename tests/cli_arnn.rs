@@ -441,7 +441,7 @@ fn humanoid_arnn_trains_on_bvh_and_runs_in_the_benchmark() {
     let values: Vec<f64> = row.split_whitespace().skip(1).map(|v| v.parse().unwrap()).collect();
     assert!(values.len() == 2 && values.iter().all(|v| v.is_finite() && *v >= 0.0), "{row}");
     let (ok, _, stderr) = run(&[&bench[..], &["--methods", &format!("arnn+lock:{r}")]].concat());
-    assert!(!ok && stderr.contains("the autoregressive ARNN has no foot lock on transitions"), "{stderr}");
+    assert!(!ok && stderr.contains("the ARNN in candle has no foot lock on transitions"), "{stderr}");
     // Completion of humanoid keys taken from a clip, one of them partial (the root and one
     // joint), written as a BVH on the clip's skeleton.
     let names: Vec<String> =

@@ -359,6 +359,13 @@ pub fn methods(specs: &[String]) -> Result<Vec<Box<dyn KeyMethod>>> {
     specs.iter().map(|m| method(m.trim())).collect()
 }
 
+/// The keyframe model of the run folder `dir`, exported in memory and loaded by the runtime.
+pub fn exported(dir: &Path) -> Result<zoo_runtime::KeyframeModel> {
+    let exported = zoo_models::export_run(dir, &Default::default())
+        .with_context(|| format!("exporting the run folder {} for the runtime", dir.display()))?;
+    Ok(zoo_runtime::KeyframeModel::from_bytes(&exported.model.to_bytes())?)
+}
+
 /// An exported keyframe model run by the engine runtime ([`zoo_runtime::KeyframeRunner`], one
 /// character per call), its foot lock on or off.
 pub struct RuntimeKeys {
@@ -375,12 +382,11 @@ impl RuntimeKeys {
 
     /// A humanoid keyframe model's run folder `dir`, exported in memory (`arnn:RUN_DIR`).
     pub fn of_run(dir: &Path, name: String, foot_lock: bool) -> Result<Self> {
-        let exported = zoo_models::export_run(dir, &Default::default())
-            .with_context(|| format!("exporting the run folder {} for the runtime", dir.display()))?;
-        Self::of(zoo_runtime::KeyframeModel::from_bytes(&exported.model.to_bytes())?, dir, name, foot_lock)
+        Self::of(exported(dir)?, dir, name, foot_lock)
     }
 
-    fn of(model: zoo_runtime::KeyframeModel, path: &Path, name: String, foot_lock: bool) -> Result<Self> {
+    /// `model` (loaded from `path`) as the method `name`.
+    pub fn of(model: zoo_runtime::KeyframeModel, path: &Path, name: String, foot_lock: bool) -> Result<Self> {
         if model.groups() == 0 {
             bail!("{}: a keyframe model of {} values per pose, not a humanoid one", path.display(), model.dofs());
         }

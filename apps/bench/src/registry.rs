@@ -79,27 +79,26 @@ fn load_runtime_transition(
     Ok(Box::new(crate::onnx::onnx_method(model, name, foot_lock)))
 }
 
-/// `KIND:DIR` of a keyframe model on the transition layout: the in-betweening design exported
-/// in memory and run by the runtime's keyframes task (the context and the target its keys; the
-/// runtime's foot lock with `+lock`), as `zoo complete` and engines run it. The autoregressive
-/// ARNN keeps its own context layout in candle.
+/// `KIND:DIR` of a keyframe model on the transition layout: a whole-shot model (the
+/// in-betweening design) exported in memory and run by the runtime's keyframes task (the context
+/// and the target its keys; the runtime's foot lock with `+lock`), as `zoo complete` and engines
+/// run it; a model that completes frame by frame (the autoregressive ARNN) keeps its own context
+/// layout in candle.
 fn load_runtime_keys(
     dir: &Path,
     name: String,
     foot_lock: bool,
 ) -> std::result::Result<Box<dyn TransitionMethod>, zoo_nn::zoo_model::BoxError> {
-    if !zoo_arnn::inbetween::is_inbetween_run(dir) {
-        if foot_lock {
-            return Err(format!(
-                "method `{name}`: the autoregressive ARNN has no foot lock on transitions; drop `+lock` (the \
-                 in-betweening design, `zoo train arnn --design inbetween`, has one)"
-            )
-            .into());
-        }
-        return Ok(Box::new(zoo_arnn::humanoid::ArnnMethod::load(dir, name)?));
+    let model = crate::keys::exported(dir).map_err(|e| e.to_string())?;
+    if model.is_inbetween() {
+        let keys = crate::keys::RuntimeKeys::of(model, dir, name, foot_lock).map_err(|e| e.to_string())?;
+        return Ok(Box::new(crate::keys::KeysOnTransitions::new(Box::new(keys))));
     }
-    let keys = crate::keys::RuntimeKeys::of_run(dir, name, foot_lock).map_err(|e| e.to_string())?;
-    Ok(Box::new(crate::keys::KeysOnTransitions::new(Box::new(keys))))
+    let kind = model_kind(dir).map_err(|e| e.to_string())?;
+    match zoo_models::MODELS.iter().find(|m| m.kind() == kind).and_then(|m| m.candle_transitions()) {
+        Some(candle) => (candle.load)(dir, name, foot_lock),
+        None => Err(format!("method `{name}`: a `{kind}` model makes no transitions").into()),
+    }
 }
 
 fn known_kinds(models: &[ModelEntry]) -> String {
