@@ -791,3 +791,43 @@ fn inbetween_design_trains_resumes_scores_keys_and_completes() {
         }
     }
 }
+
+/// `zoo bench keyframes` on an in-betweening file times whole transitions in one call, beside an
+/// RTN's start and steps on the same gap (`--against`), and writes both per batch size; an RTN
+/// where the in-betweener belongs, and `--against` beside an ARNN step graph, are refused by name.
+#[test]
+fn keyframes_bench_times_whole_transitions_beside_the_rtn() {
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, model: zoo_export::OnnxModel| {
+        let path = dir.path().join(name);
+        model.write(&path).unwrap();
+        path.to_str().unwrap().to_string()
+    };
+    let (ib, rtn, arnn) = (
+        write("ib.onnx", zoo_tests::tiny_inbetween_onnx()),
+        write("rtn.onnx", zoo_tests::tiny_rtn_onnx()),
+        write("arnn.onnx", zoo_tests::tiny_arnn_onnx()),
+    );
+    let json = dir.path().join("cost.json");
+    let base = ["bench", "keyframes", "--batch", "1,3", "--rounds", "2", "--work", "10", "--gap", "7"];
+    let (ok, stdout, stderr) =
+        run(&[&base[..], &["--model", &ib, "--against", &rtn, "--json", json.to_str().unwrap()]].concat());
+    assert!(
+        ok && stdout.contains("whole shot (one call)") && stdout.contains("RTN (start + 8 steps)"),
+        "{stdout}\n{stderr}"
+    );
+    let figures: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let figures = figures.as_array().unwrap();
+    assert_eq!(figures.len(), 4, "{figures:?}");
+    for (f, (batch, method)) in figures.iter().zip([(1, "whole"), (1, "RTN"), (3, "whole"), (3, "RTN")]) {
+        assert_eq!(f["batch"].as_u64(), Some(batch));
+        assert!(f["method"].as_str().unwrap().starts_with(method), "{f}");
+        assert_eq!(f["gap"].as_u64(), Some(7));
+        assert_eq!(f["rounds_cpu_ms"].as_array().unwrap().len(), 2);
+        assert!(f["wall_ms"].as_f64().unwrap() > 0.0 && f["cpu_ms"].as_f64().unwrap() >= 0.0, "{f}");
+    }
+    let (ok, _, stderr) = run(&[&base[..], &["--model", &ib, "--against", &arnn]].concat());
+    assert!(!ok && stderr.contains("it takes an RTN written by `zoo export --onnx`"), "{stderr}");
+    let (ok, _, stderr) = run(&[&base[..], &["--model", &arnn, "--against", &rtn]].concat());
+    assert!(!ok && stderr.contains("is an ARNN step graph"), "{stderr}");
+}

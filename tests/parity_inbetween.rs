@@ -3,7 +3,7 @@
 //! keys` run), tract (the runtime's keyframes task, `KeyframeRunner`) and onnxruntime (through
 //! `ort`, on the exported whole-shot graph) complete the same keys with a tiny network trained
 //! 3 steps and saved as a run folder, exported from the folder as `zoo export --onnx` does:
-//! whole and partial keys, three characters of two lengths in one batch.
+//! whole and partial keys and a transition's keys, four characters of two lengths in one batch.
 //!
 //! Where the expected numbers come from: candle's `complete_shots` on the run folder's weights.
 //! The keys are f32 values (the runtime's `MotionKeys` are f32), given to candle as f64, so both
@@ -110,7 +110,8 @@ impl Keys {
 }
 
 /// Character 0: four whole keys over 40 frames; 1: four keys over 31 frames, the middle two
-/// partial; 2: four whole keys over 40 frames.
+/// partial; 2: four whole keys over 40 frames; 3: the in-betweening benchmark's transition layout
+/// (`zoo bench`'s `arnn:`): ten context frames as keys and the target after a 29-frame gap.
 fn characters() -> Vec<Keys> {
     let partial = [[1.0; G], [1.0, 0.0, 1.0, 0.0], [0.0, 1.0, 0.0, 0.0], [1.0; G]].concat();
     let keys =
@@ -119,6 +120,7 @@ fn characters() -> Vec<Keys> {
         keys(vec![0, 9, 24, 39], 0.0, vec![]),
         keys(vec![0, 8, 17, 30], 0.7, partial),
         keys(vec![0, 7, 20, 39], 1.9, vec![]),
+        keys(zoo_arnn::inbetween_train::transition_keys(29), 2.6, vec![]),
     ]
 }
 
@@ -197,7 +199,7 @@ fn candle_tract_and_onnxruntime_complete_the_same_keys() {
     let km = KeyframeModel::from_bytes(&f.onnx.to_bytes()).unwrap();
     assert!(km.is_inbetween() && km.step_model().is_none());
     assert_eq!((km.dofs(), km.groups(), km.metadata().model_kind.as_str()), (D, G, "arnn"));
-    let mut runner = km.runner(3).unwrap();
+    let mut runner = km.runner(4).unwrap();
     runner.set_hit_keys(false);
     let tract = runtime_completion(&mut runner, &chars);
     let (inputs, ort, ort_correction) = onnxruntime_completion(f, &chars);
@@ -384,12 +386,12 @@ fn narrow_weight_files_load_and_complete() {
     let f = fixture();
     let chars = characters();
     let f32_file = KeyframeModel::from_bytes(&f.onnx.to_bytes()).unwrap();
-    let base = runtime_completion(&mut f32_file.runner(3).unwrap(), &chars);
+    let base = runtime_completion(&mut f32_file.runner(chars.len()).unwrap(), &chars);
     for width in [zoo_export::WeightWidth::F16, zoo_export::WeightWidth::Int8] {
         let narrow = zoo_export::with_weights(&f.onnx, width).unwrap();
         let km = KeyframeModel::from_bytes(&narrow.to_bytes()).unwrap();
         assert_eq!(km.metadata().weights, width);
-        let out = runtime_completion(&mut km.runner(3).unwrap(), &chars);
+        let out = runtime_completion(&mut km.runner(chars.len()).unwrap(), &chars);
         for (c, k) in chars.iter().enumerate() {
             assert!(out[c].iter().all(|v| v.is_finite()));
             assert!(key_miss(k, &out[c]) <= 1e-5 * scale(&out[c]), "{width}: character {c} misses a key");

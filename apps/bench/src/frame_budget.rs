@@ -132,7 +132,7 @@ pub fn run(bytes: &[u8], batches: &[usize], calls: usize) -> Result<Vec<CallFigu
 }
 
 /// A walking pose in global positions: joint `j` of character `c` at frame `f`.
-fn walk_positions(k: usize, c: usize, f: usize, out: &mut [f32]) {
+pub(crate) fn walk_positions(k: usize, c: usize, f: usize, out: &mut [f32]) {
     for j in 0..k {
         let phase = 0.3 * f as f32 + j as f32 + 0.5 * c as f32;
         out[3 * j] = 50.0 * c as f32 + 4.0 * j as f32 + 2.0 * phase.sin();

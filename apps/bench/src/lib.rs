@@ -10,6 +10,8 @@
 //! - [`keys`]: the keys-only in-betweening benchmark (`zoo bench --layout keys`): key poses
 //!   every K frames, the linear and Blender Bezier ([`fcurve`]) baselines and keyframe models;
 //! - [`train`]: the training step's speed per thread count (`zoo bench train`);
+//! - [`whole_shot`]: whole transitions of the in-betweening design through the runtime, beside
+//!   an RTN's start and steps (`zoo bench keyframes --against`);
 //! - [`control`] and [`follow`]: RNN-GMM online control (`zoo bench control`) and path
 //!   following (`zoo bench follow`) by the candle controllers and the runtime's.
 
@@ -25,6 +27,7 @@ pub mod onnx;
 pub mod registry;
 pub mod runtime;
 pub mod train;
+pub mod whole_shot;
 
 pub use zoo_data::Message;
 

@@ -235,10 +235,15 @@ fn io_of(command: &Command) -> cmd::io_check::Io {
                 .input("--reference", a.reference.as_deref())
                 .output("--json", a.json.as_deref())
                 .output_dir("--save-bvh", a.save_bvh.as_deref()),
-            Some(B::Runtime(r)) | Some(B::Keyframes(r)) => io
+            Some(B::Runtime(r)) => io
                 .input("--model", Some(&r.model))
                 .input("--onnxruntime", r.onnxruntime.as_deref())
                 .output("--json", r.json.as_deref()),
+            Some(B::Keyframes(k)) => io
+                .input("--model", Some(&k.runtime.model))
+                .input("--against", k.against.as_deref())
+                .input("--onnxruntime", k.runtime.onnxruntime.as_deref())
+                .output("--json", k.runtime.json.as_deref()),
             Some(B::Train(t)) => io.output("--json", t.json.as_deref()),
             Some(B::Stitch(s)) => io
                 .data("--data", Some(&s.data))

@@ -335,11 +335,22 @@ fn bezier(q0: f64, q1: f64, q2: f64, q3: f64, s: f64) -> f64 {
 }
 
 /// The parameter at which the segment's time `x(s)` (monotonic after [`correct_segment`])
-/// equals `x`: bisection to full f64 precision.
+/// equals `x`. Handles a third of the segment long in time (automatic handles, every curve of
+/// the keys' in-betweening) make `x(s)` linear, `x0 + s (x3 - x0)`, solved directly; other
+/// handles by bisection to full f64 precision, which stops once the interval's midpoint is one
+/// of its ends (the result of more halvings).
 fn solve_time(x: f64, x0: f64, x1: f64, x2: f64, x3: f64) -> f64 {
+    let len = x3 - x0;
+    let third = |h: f64, at: f64| (h - at).abs() <= 1e-12 * len.abs();
+    if len > 0.0 && third(x1, x0 + len / 3.0) && third(x2, x3 - len / 3.0) {
+        return ((x - x0) / len).clamp(0.0, 1.0);
+    }
     let (mut a, mut b) = (0.0f64, 1.0f64);
     for _ in 0..80 {
         let m = 0.5 * (a + b);
+        if m == a || m == b {
+            break;
+        }
         if bezier(x0, x1, x2, x3, m) < x {
             a = m;
         } else {
@@ -467,6 +478,37 @@ mod tests {
             let v = c.eval(f as f64 * 0.1);
             assert!(v >= prev - 1e-12 && (0.0..=10.0).contains(&v), "frame {}: {v}", f as f64 * 0.1);
             prev = v;
+        }
+    }
+
+    /// The segment's parameter by 80 halvings, as it was solved before the direct solution.
+    fn bisect(x: f64, q: [f64; 4]) -> f64 {
+        let (mut a, mut b) = (0.0f64, 1.0f64);
+        for _ in 0..80 {
+            let m = 0.5 * (a + b);
+            if bezier(q[0], q[1], q[2], q[3], m) < x {
+                a = m;
+            } else {
+                b = m;
+            }
+        }
+        0.5 * (a + b)
+    }
+
+    #[test]
+    fn segment_times_solve_as_by_eighty_halvings() {
+        let mut rng = zoo_motion::rng::SplitMix64::new(3);
+        for _ in 0..2000 {
+            let x0 = 60.0 * rng.next_f64() - 10.0;
+            let len = 0.5 + 40.0 * rng.next_f64();
+            let x = x0 + len * rng.next_f64();
+            // Automatic handles (a third of the segment): the direct solution, within rounding.
+            let thirds = [x0, x0 + len / 3.0, x0 + len - len / 3.0, x0 + len];
+            let (got, want) = (solve_time(x, thirds[0], thirds[1], thirds[2], thirds[3]), bisect(x, thirds));
+            assert!((got - want).abs() <= 1e-13, "{got} vs {want} at {x} in {thirds:?}");
+            // Other handles: the same bisection, stopped once nothing changes.
+            let other = [x0, x0 + 0.6 * len * rng.next_f64(), x0 + len * (0.4 + 0.6 * rng.next_f64()), x0 + len];
+            assert_eq!(solve_time(x, other[0], other[1], other[2], other[3]), bisect(x, other), "{other:?} at {x}");
         }
     }
 

@@ -4,7 +4,8 @@
 //!
 //! Plans the step graph for a concrete batch like `MotionRunner` does, runs it `STEPS` times on
 //! fixed inputs and prints the nodes of the optimized plan by total time. With `FRAMES`, a
-//! window graph (RMR): inputs `[FRAMES, BATCH, values]`.
+//! window graph (RMR): inputs `[FRAMES, BATCH, values]`; with `FRAMES batch-first`, a whole-shot
+//! graph (the in-betweening design): `[BATCH, FRAMES, values]`.
 
 use std::collections::HashMap;
 use std::time::Instant;
@@ -17,6 +18,7 @@ fn main() -> TractResult<()> {
     let batch: usize = args.get(2).map_or(1, |s| s.parse().expect("batch"));
     let steps: usize = args.get(3).map_or(2000, |s| s.parse().expect("steps"));
     let frames: Option<usize> = args.get(4).map(|s| s.parse().expect("frames"));
+    let batch_first = args.get(5).is_some_and(|s| s == "batch-first");
     let bytes = std::fs::read(path)?;
     let proto = <tract_onnx::pb::ModelProto as prost::Message>::decode(bytes.as_slice())?;
     // Through the runtime's loader (its load-time rewrite included; `ZOO_RUNTIME_FUSE=0` for
@@ -40,6 +42,7 @@ fn main() -> TractResult<()> {
             .product();
         widths.push(w);
         match frames {
+            Some(f) if batch_first => model.set_input_fact(i, f32::fact([batch, f, w]).into())?,
             Some(f) => model.set_input_fact(i, f32::fact([f, batch, w]).into())?,
             None => model.set_input_fact(i, f32::fact([batch, w]).into())?,
         }
@@ -52,6 +55,7 @@ fn main() -> TractResult<()> {
             let rows = batch * frames.unwrap_or(1);
             let v: Vec<f32> = (0..rows * w).map(|i| ((i * 37 % 101) as f32 / 101.0 - 0.5) * 0.5).collect();
             let shape = match frames {
+                Some(f) if batch_first => vec![batch, f, w],
                 Some(f) => vec![f, batch, w],
                 None => vec![batch, w],
             };

@@ -109,8 +109,10 @@ pub enum BenchCommand {
     /// RMRs on cases with a ground truth (the RMR paper's section-4 pairs) and on free
     /// multi-clip cases (protocol in docs/rmr.md).
     Stitch(crate::cmd::bench_stitch::StitchBenchArgs),
-    /// The exported ARNN's step through tract and onnxruntime (batch 1 latency, batch 64 throughput) and whole keyframe completions.
-    Keyframes(crate::cmd::bench_speed::RuntimeArgs),
+    /// The exported ARNN's step through tract and onnxruntime (batch 1 latency, batch 64
+    /// throughput) and whole keyframe completions; for the in-betweening design, whole
+    /// transitions in one call, beside an RTN's start and steps (`--against`).
+    Keyframes(crate::cmd::bench_speed::KeyframesArgs),
     /// The synthesis benchmark (RNN-GMM): seeded sequences against held-out real
     /// motion, with and without the refiner (protocol in docs/rnn-gmm.md).
     Synthesis(crate::cmd::bench_synthesis::BenchSynthesisArgs),

@@ -43,6 +43,20 @@ pub struct RuntimeArgs {
     pub per_call: Option<usize>,
 }
 
+/// Arguments of `zoo bench keyframes`.
+#[derive(Args)]
+pub struct KeyframesArgs {
+    #[command(flatten)]
+    pub runtime: RuntimeArgs,
+    /// In-betweening design: also time this RTN (a file written by `zoo export --onnx`) on the
+    /// same transitions, its start and one step per frame, beside the whole shot's one call.
+    #[arg(long)]
+    pub against: Option<PathBuf>,
+    /// In-betweening design: frames between the last context frame and the target.
+    #[arg(long, default_value_t = 30, allow_hyphen_values = true, value_parser = |v: &str| whole_in(v, 1, 1_000))]
+    pub gap: usize,
+}
+
 /// Models `zoo bench train` can measure.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum TrainBenchModel {
@@ -148,13 +162,38 @@ pub fn runtime(a: RuntimeArgs) -> anyhow::Result<()> {
 }
 
 /// Runs `zoo bench keyframes` (the arguments of `zoo bench runtime`, `--model` naming an
-/// exported ARNN).
-pub fn keyframes(a: RuntimeArgs) -> anyhow::Result<()> {
+/// exported ARNN or in-betweening network).
+pub fn keyframes(k: KeyframesArgs) -> anyhow::Result<()> {
+    let a = k.runtime;
     if let Some(path) = &a.json {
         crate::cmd::check_output_file("--json", path)?;
     }
     if !a.weights.is_empty() {
         anyhow::bail!("--weights applies to `zoo bench runtime`; `zoo bench keyframes` measures the file as it is");
+    }
+    if a.per_call.is_some() {
+        anyhow::bail!("--per-call applies to `zoo bench runtime` (it times a keyframe model's calls too)");
+    }
+    let km = zoo_bench::exported::load(&a.model, &[zoo_runtime::MotionTaskKind::Keyframes], "`zoo bench keyframes`")?
+        .into_keyframes()?;
+    if km.is_inbetween() {
+        let figures = zoo_bench::whole_shot::run(&km, k.against.as_deref(), k.gap, &a.batch, a.rounds, a.work)?;
+        println!(
+            "{}: in-betweening design; {}",
+            a.model.display(),
+            zoo_bench::runtime::cpu_features().unwrap_or_else(|| "CPU features unknown".into())
+        );
+        println!("{}", zoo_bench::whole_shot::table(&figures, a.rounds));
+        if let Some(path) = &a.json {
+            crate::cmd::write_json(path, &figures)?;
+        }
+        return Ok(());
+    }
+    if k.against.is_some() {
+        anyhow::bail!(
+            "--against times whole transitions of the in-betweening design; {} is an ARNN step graph",
+            a.model.display()
+        );
     }
     let (header, figures) = zoo_bench::keyframes::run(&a.options())?;
     println!("{header}");

@@ -7,8 +7,11 @@
 //! graph maps `features [batch, frames, width]` to `correction [batch, frames, dofs]`; the
 //! completed pose is `b + e * correction * std` composed in f64 (the keys' Bezier pose `b`, the
 //! envelope `e`, zero on every key frame fixing a value), as `zoo_arnn::inbetween::complete_shots`
-//! composes it. The graph is planned once for one shot of any number of frames (batch 1: see
-//! [`plan`]). Unlike the step graph, a call allocates: the features, the Bezier poses and
+//! composes it. The graph is planned once for one shot of any number of frames, and once more
+//! for any number of shots of one length where tract can ([`plan`]): the characters of a call
+//! whose shots have the same number of frames then run in one graph call, so that the
+//! recurrent layer's weights are read once per frame for all of them instead of once per
+//! character. Unlike the step graph, a call allocates: the features, the Bezier poses and
 //! tract's tensors of each shot.
 
 use super::MotionKeys;
@@ -23,7 +26,10 @@ use zoo_protocol::inbetween::{InbetweenFeatures, ShotInputs};
 #[derive(Debug)]
 pub(super) struct ShotGraph {
     pub(super) metadata: MotionModelMetadata,
+    /// The plan for one shot (`[1, frames, width]`).
     plan: Plan,
+    /// The plan for shots of one length (`[batch, frames, width]`), when tract plans it.
+    batched: Option<Plan>,
     features: InbetweenFeatures,
 }
 
@@ -50,13 +56,18 @@ fn dims(v: &pb::ValueInfoProto) -> Option<Vec<Option<i64>>> {
     )
 }
 
-/// Plans the graph for one shot of any length (`[1, frames, width]`): tract 0.23.9 plans an ONNX
-/// `GRU` without `initial_h` only for a concrete batch size (it panics on a symbolic one), so
-/// a planning panic is reported as an error.
-fn plan(mut model: InferenceModel, width: usize) -> Result<Plan, MotionError> {
+/// Plans the graph for `batch` shots (`None`: any number) of any length (`[batch, frames,
+/// width]`): tract 0.23.9 plans an ONNX `GRU` without `initial_h` only for a concrete batch size
+/// (it panics on a symbolic one; the runtime's own GRU op, `crate::ops`, plans either), so a
+/// planning panic is reported as an error.
+fn plan(mut model: InferenceModel, batch: Option<usize>, width: usize) -> Result<Plan, MotionError> {
     let frames = model.symbols.sym("frames");
+    let batch = match batch {
+        Some(b) => TDim::from(b),
+        None => model.symbols.sym("batch").into(),
+    };
     let planned = std::panic::catch_unwind(std::panic::AssertUnwindSafe(move || -> TractResult<Plan> {
-        model.set_input_fact(0, f32::fact(tvec![TDim::from(1usize), frames.into(), TDim::from(width)]).into())?;
+        model.set_input_fact(0, f32::fact(tvec![batch, frames.into(), TDim::from(width)]).into())?;
         model.into_optimized()?.into_runnable()
     }));
     match planned {
@@ -95,8 +106,12 @@ impl ShotGraph {
                 ),
             });
         }
-        let plan = plan(model, w as usize)?;
-        Ok(ShotGraph { metadata, plan, features })
+        // Shots of one length in one call where tract plans it (the runtime's GRU op; not tract's
+        // own, kept by 8-bit files and with the runtime's ops off): one at a time otherwise.
+        let tract_gru = model.nodes().iter().any(|n| n.op.name() == "GRU");
+        let batched = (!tract_gru).then(|| plan(model.clone(), None, w as usize).ok()).flatten();
+        let plan = plan(model, Some(1), w as usize)?;
+        Ok(ShotGraph { metadata, plan, batched, features })
     }
 
     /// The features of each character's keys (checked by [`MotionKeys::check`] before), or the
@@ -118,33 +133,56 @@ impl ShotGraph {
             .collect()
     }
 
-    /// The graph's correction of one shot, `frames x dofs` values.
-    fn correction(&self, shot: &ShotInputs) -> Result<Vec<f32>, MotionError> {
+    /// The graph's corrections of shots of one length (`frames x dofs` values each), in one
+    /// graph call: the one-shot plan for one shot, the batched plan for more.
+    fn corrections(&self, shots: &[&ShotInputs]) -> Result<Vec<Vec<f32>>, MotionError> {
         let run = |reason: String| MotionError::Run { reason };
-        let (n, w, d) = (shot.frames, self.features.input_width(), self.features.dofs());
-        let input = Tensor::from_shape::<f32>(&[1, n, w], &shot.features).map_err(|e| run(chain(&e)))?;
-        let result = self.plan.run(tvec![input.into()]).map_err(|e| run(chain(&e)))?;
+        let (b, n, w, d) = (shots.len(), shots[0].frames, self.features.input_width(), self.features.dofs());
+        let plan = match &self.batched {
+            Some(batched) if b > 1 => batched,
+            _ => &self.plan,
+        };
+        let mut x = Vec::with_capacity(b * n * w);
+        shots.iter().for_each(|s| x.extend_from_slice(&s.features));
+        let input = Tensor::from_shape::<f32>(&[b, n, w], &x).map_err(|e| run(chain(&e)))?;
+        let result = plan.run(tvec![input.into()]).map_err(|e| run(chain(&e)))?;
         let y = result[0].try_as_plain_ram().and_then(|t| t.as_slice::<f32>()).map_err(|e| run(chain(&e)))?;
-        if y.len() != n * d {
-            return Err(run(format!("the graph returned {} values for a shot of {n} frames x {d}", y.len())));
+        if y.len() != b * n * d {
+            return Err(run(format!("the graph returned {} values for {b} shots of {n} frames x {d}", y.len())));
         }
         if let Some(i) = y.iter().position(|v| !v.is_finite()) {
             return Err(run(format!(
                 "the network's correction is {} at frame {}, value {}: check the model's weights",
                 y[i],
-                i / d,
+                (i / d) % n,
                 i % d
             )));
         }
-        Ok(y.to_vec())
+        Ok(y.chunks_exact(n * d).map(|c| c.to_vec()).collect())
     }
 
     /// Completes checked keys into checked buffers (`out[c]`: `keys[c].len() * dofs` values):
-    /// the graph runs once per character, and every character's features and correction are
-    /// made before anything is written.
+    /// the graph runs once per shot length (once per character where tract plans no batch), and
+    /// every character's features and correction are made before anything is written.
     pub(super) fn complete(&self, keys: &[MotionKeys<'_>], out: &mut [&mut [f32]]) -> Result<(), MotionError> {
         let shots = self.shots(keys)?;
-        let corrections: Vec<Vec<f32>> = shots.iter().map(|s| self.correction(s)).collect::<Result<_, _>>()?;
+        let mut corrections: Vec<Vec<f32>> = vec![Vec::new(); shots.len()];
+        let mut lengths: Vec<usize> = shots.iter().map(|s| s.frames).collect();
+        lengths.sort_unstable();
+        lengths.dedup();
+        for n in lengths {
+            let group: Vec<usize> = (0..shots.len()).filter(|&c| shots[c].frames == n).collect();
+            let chunks: Vec<Vec<usize>> = match self.batched {
+                Some(_) => vec![group],
+                None => group.into_iter().map(|c| vec![c]).collect(),
+            };
+            for chunk in chunks {
+                let refs: Vec<&ShotInputs> = chunk.iter().map(|&c| &shots[c]).collect();
+                for (c, y) in chunk.into_iter().zip(self.corrections(&refs)?) {
+                    corrections[c] = y;
+                }
+            }
+        }
         for ((shot, correction), o) in shots.iter().zip(&corrections).zip(out.iter_mut()) {
             for (x, v) in o.iter_mut().enumerate() {
                 *v = self.features.compose(shot, correction, x) as f32;
