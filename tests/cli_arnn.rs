@@ -767,6 +767,49 @@ fn inbetween_design_trains_resumes_scores_keys_and_completes() {
         std::fs::read(&out).unwrap(),
         "the exported file completes otherwise"
     );
+    // `zoo transition` runs the design on a transition's layout (the context frames and the
+    // target are its keys): the --from clip up to its frame, the gap, then the --to clip, the
+    // target frame's joint rotations as the clip's.
+    let c = clip.to_str().unwrap();
+    let tr = dir.path().join("tr.bvh");
+    let transition = |extra: &[&str]| {
+        let (from, to) = (format!("{c}:40"), format!("{c}:60"));
+        let base = ["transition", "--model", r, "--from", &from, "--to", &to, "--frames", "12"];
+        run(&[&base[..], &["--out", tr.to_str().unwrap()], extra].concat())
+    };
+    let (ok, stdout, stderr) = transition(&["--foot-lock"]);
+    assert!(
+        ok && stdout.contains("the gap filled in one call") && stdout.contains("12 generated"),
+        "{stdout}\n{stderr}"
+    );
+    let src = zoo_data::bvh::read_file(&clip, &Default::default()).unwrap();
+    let got = zoo_data::bvh::read_file(&tr, &Default::default()).unwrap();
+    assert_eq!(got.frames(), 40 + 12 + src.frames() - 60);
+    let j = src.joints();
+    for (f, g) in [(39, 39), (60, 52)] {
+        for k in 1..j {
+            let (a, b) = (src.local_rotations[f * j + k], got.local_rotations[g * j + k]);
+            assert!(a.dot(b).abs() > 1.0 - 1e-6, "frame {g}, joint {k}: {a:?} vs {b:?}");
+        }
+    }
+    assert!(got.local_rotations.iter().all(|q| q.is_finite()));
+    let (ok, _, stderr) = transition(&["--positions", dir.path().join("p.json").to_str().unwrap()]);
+    assert!(!ok && stderr.contains("--positions: the in-betweening network"), "{stderr}");
+    let arnn = dir.path().join("lamp.onnx");
+    zoo_tests::tiny_arnn_onnx().write(&arnn).unwrap();
+    let (from, to) = (format!("{c}:40"), format!("{c}:60"));
+    let (ok, _, stderr) = run(&[
+        "transition",
+        "--model",
+        arnn.to_str().unwrap(),
+        "--from",
+        &from,
+        "--to",
+        &to,
+        "--out",
+        tr.to_str().unwrap(),
+    ]);
+    assert!(!ok && stderr.contains("is an ARNN step graph"), "{stderr}");
     let portable = dir.path().join("ib_portable.onnx");
     let (ok, _, stderr) = run(&["export", "--onnx", r, "--out", portable.to_str().unwrap(), "--portable"]);
     assert!(!ok && stderr.contains("does not hold; export it without --portable") && !portable.exists(), "{stderr}");

@@ -24,8 +24,19 @@ impl ModelSource {
     /// model checked against the task first, with what a model of another task is for), a file
     /// read; either is refused when it holds another task.
     pub fn open(path: &Path, task: MotionTaskKind, command: &str) -> TaskResult<ModelSource> {
+        Self::open_for(path, &[task], command)
+    }
+
+    /// [`ModelSource::open`] for a command that runs models of any of `tasks` (a run folder's
+    /// refusal is the first task's).
+    pub fn open_for(path: &Path, tasks: &[MotionTaskKind], command: &str) -> TaskResult<ModelSource> {
+        let task = tasks[0];
         let bytes = if path.is_dir() {
-            let model = zoo_models::require_task(path, task, command).map_err(Message)?;
+            let fits = tasks.iter().find_map(|&t| zoo_models::require_task(path, t, command).ok());
+            let model = match fits {
+                Some(m) => m,
+                None => zoo_models::require_task(path, task, command).map_err(Message)?,
+            };
             let exported = model
                 .export(path, &Default::default())
                 .with_context(|| format!("exporting the run folder {} for the runtime", path.display()))?;
@@ -40,11 +51,13 @@ impl ModelSource {
         };
         let metadata = MotionModelMetadata::read(&bytes, &path.display().to_string())
             .with_context(|| format!("{}", path.display()))?;
-        if metadata.task.kind() != task {
+        if !tasks.contains(&metadata.task.kind()) {
             let what = zoo_models::find(&metadata.model_kind)
                 .map_or(String::new(), |m| format!(", which is for {}", m.purpose()));
+            let runs: Vec<String> = tasks.iter().map(|t| format!("`{t}`")).collect();
             bail!(
-                "`zoo {command}` runs a `{task}` model; {} holds a `{}` model (`{}`){what}",
+                "`zoo {command}` runs a {} model; {} holds a `{}` model (`{}`){what}",
+                runs.join(" or "),
                 path.display(),
                 metadata.task.kind(),
                 metadata.model_kind

@@ -2,7 +2,9 @@
 //! (`zoo_runtime::TransitionModel`): the clips read (mapped onto the model's rig with a
 //! joint-name map), the skeleton and terrain checked against the model, the transition
 //! generated (with its fallback and foot lock, as the runtime applies them for every engine)
-//! and spliced between the clips, and its positions file.
+//! and spliced between the clips, and its positions file. With the in-betweening design (`zoo
+//! train arnn --design inbetween`), the ten context frames and the target are its keys and the
+//! runtime's keyframes task fills the whole gap in one call ([`run_inbetween`]).
 
 use crate::{ModelSource, TaskResult};
 use std::path::{Path, PathBuf};
@@ -221,7 +223,7 @@ pub fn run(a: &TransitionOptions, p: &dyn Progress) -> TaskResult<String> {
     // The model's skeleton is needed first only to map another rig onto it.
     let mut source = None;
     if a.rig_map.is_some() {
-        source = Some(ModelSource::open(&a.model, MotionTaskKind::Transition, "transition")?);
+        source = Some(ModelSource::open_for(&a.model, TASKS, "transition")?);
     }
     let model_skeleton = source.as_ref().map(ModelSource::skeleton);
     let (mut ca, mut cb, rig_back) = match &model_skeleton {
@@ -251,8 +253,12 @@ pub fn run(a: &TransitionOptions, p: &dyn Progress) -> TaskResult<String> {
         .with_context(|| format!("--from {} --to {} --frames {}", a.from_label, a.to_label, a.frames))?;
     let source = match source {
         Some(s) => s,
-        None => ModelSource::open(&a.model, MotionTaskKind::Transition, "transition")?,
+        None => ModelSource::open_for(&a.model, TASKS, "transition")?,
     };
+    let inbetween = source.metadata.task.kind() == MotionTaskKind::Keyframes;
+    if inbetween {
+        refuse_for_inbetween(a, &source)?;
+    }
     check_skeleton(&source, &mut ca, &pa)?;
     if rig_back.is_none() {
         note_other_names(&source.skeleton(), &ca, p);
@@ -271,6 +277,9 @@ pub fn run(a: &TransitionOptions, p: &dyn Progress) -> TaskResult<String> {
     pipeline::check_transition(&ca, fa, &cb, fb, a.frames).with_context(|| {
         format!("--from {} --to {} --frames {} (at the model's {fps} fps)", a.from_label, a.to_label, a.frames)
     })?;
+    if inbetween {
+        return run_inbetween(a, &source, (&ca, fa), (cb, fb), rig_back.as_ref());
+    }
     // On terrain both clips stand in the heightmap's world frame: the target stays on its
     // ground instead of being moved to where the source's last speed would take it. With
     // `--in-place` the user says the clips share one world frame.
@@ -333,6 +342,95 @@ pub fn run(a: &TransitionOptions, p: &dyn Progress) -> TaskResult<String> {
             fa,
             fa + a.frames
         ))
+}
+
+/// The tasks `zoo transition` runs: the RTN's, and the in-betweening design's whole shots.
+const TASKS: &[MotionTaskKind] = &[MotionTaskKind::Transition, MotionTaskKind::Keyframes];
+
+/// Refuses what the in-betweening design cannot do (an ARNN step graph, a heightmap, a
+/// positions file), before the clips are prepared.
+fn refuse_for_inbetween(a: &TransitionOptions, source: &ModelSource) -> TaskResult<()> {
+    let model = source.path.display();
+    if source.metadata.task.as_keyframes().and_then(|k| k.inbetween.as_ref()).is_none() {
+        bail!(
+            "{model} is an ARNN step graph (`zoo train arnn` without --design inbetween): it completes keys (`zoo              complete`); `zoo transition` runs an RTN or the in-betweening design"
+        );
+    }
+    if a.heightmap.is_some() {
+        bail!(
+            "--heightmap: the in-betweening network in {model} has no terrain input; drop --heightmap, or use a model              trained with `zoo train rtn --terrain`"
+        );
+    }
+    if a.positions.is_some() {
+        bail!(
+            "--positions: the in-betweening network in {model} works on joint rotations, not global positions, so              there is no positions file; drop --positions (the output clip holds its frames)"
+        );
+    }
+    Ok(())
+}
+
+/// `zoo transition` with the in-betweening design: the `CONTEXT_FRAMES` frames before the --from
+/// frame and the (aligned) --to frame are its keys, and the runtime's keyframes task fills the
+/// gap in one call, as `zoo bench` scores it (`arnn:`); the keys are met exactly, and
+/// `--foot-lock` locks the feet between them as `zoo complete` does.
+fn run_inbetween(
+    a: &TransitionOptions,
+    source: &ModelSource,
+    (ca, fa): (&Clip, usize),
+    (mut cb, fb): (Clip, usize),
+    rig_back: Option<&(Skeleton, zoo_data::retarget::RigMatch)>,
+) -> TaskResult<String> {
+    let context = || format!("--from {} --to {} --frames {}", a.from_label, a.to_label, a.frames);
+    if !a.in_place {
+        // The --to clip moved and turned to follow on from the --from clip, as for the RTN.
+        pipeline::transition_inputs(ca, fa, &mut cb, fb, a.frames).with_context(context)?;
+    }
+    let (j, n, past) = (ca.joints(), a.frames, pipeline::CONTEXT_FRAMES);
+    // The shot: the context, `n` frames the network fills (their values are never read), the
+    // target.
+    let mut shot = ca.slice(fa - past, fa);
+    for _ in 0..n {
+        shot.local_rotations.extend_from_slice(&ca.local_rotations[(fa - 1) * j..fa * j]);
+        shot.local_positions.extend_from_slice(&ca.local_positions[(fa - 1) * j..fa * j]);
+    }
+    shot.local_rotations.extend_from_slice(&cb.local_rotations[fb * j..(fb + 1) * j]);
+    shot.local_positions.extend_from_slice(&cb.local_positions[fb * j..(fb + 1) * j]);
+    let key = |f: usize| zoo_arnn::humanoid::HumanoidKey { frame: f, source: f, fixed: None };
+    let keys: Vec<_> = (0..past).chain([past + n]).map(key).collect();
+    let net = crate::complete::RuntimeKeyNet::new(source)?;
+    let fps = f64::from(source.metadata.fps);
+    let mut done = zoo_arnn::humanoid::complete_clip_with(&shot, &keys, Some(fps), |frames, poses, fixed| {
+        zoo_arnn::completion::KeyNet::complete(&net, frames, poses, fixed)
+    })
+    .map_err(|e| Message(format!("{}: {e}", context())))?;
+    if a.foot_lock {
+        let frames: Vec<usize> = keys.iter().map(|k| k.frame).collect();
+        zoo_arnn::completion::lock_feet(&mut done.clip, &frames);
+    }
+    let mut out = ca.slice(0, fa);
+    out.local_rotations.extend_from_slice(&done.clip.local_rotations[past * j..(past + n) * j]);
+    out.local_positions.extend_from_slice(&done.clip.local_positions[past * j..(past + n) * j]);
+    out.local_rotations.extend_from_slice(&cb.local_rotations[fb * j..]);
+    out.local_positions.extend_from_slice(&cb.local_positions[fb * j..]);
+    out.remove_sign_flips();
+    if let Some((rig, back)) = rig_back {
+        out = zoo_data::retarget::retarget(&out, rig, back);
+    }
+    clip_io::write(&out, &a.out).map_err(Message::new)?;
+    Ok(format!(
+        "in-betweening design: the gap filled in one call, keys met within {:.1e} cm and {:.1e} deg\n\
+         wrote {}: {} frames of {}, {} generated, {} of {} (transition frames {}..{})",
+        done.root_miss,
+        done.angle_miss.0,
+        a.out.display(),
+        fa,
+        a.from.0.display(),
+        n,
+        cb.frames() - fb,
+        a.to.0.display(),
+        fa,
+        fa + n
+    ))
 }
 
 /// Temporal super-resolution (RTN sec. 7.4) on the runtime: rebuilds a clip from its `context`

@@ -10,8 +10,8 @@ use zoo_bench::train::{SpeedModel, TrainSpeedOptions};
 /// Arguments of `zoo bench runtime`.
 #[derive(Args)]
 pub struct RuntimeArgs {
-    /// A file written by `zoo export --onnx` (an RTN for `zoo bench runtime`, an ARNN for `zoo
-    /// bench keyframes`).
+    /// A file written by `zoo export --onnx` (an RTN for `zoo bench runtime`, an ARNN or an
+    /// in-betweening network for `zoo bench keyframes`).
     #[arg(long)]
     pub model: PathBuf,
     /// Batch sizes to measure (characters per step).

@@ -83,6 +83,6 @@ pub fn run(a: TransitionArgs) -> anyhow::Result<()> {
         positions: a.positions,
         in_place: a.in_place,
     };
-    print!("{}", zoo_tasks::transition::run(&o, &crate::cmd::Stderr)?);
+    println!("{}", zoo_tasks::transition::run(&o, &crate::cmd::Stderr)?);
     Ok(())
 }
