@@ -67,6 +67,12 @@ enum Command {
 /// - `MIMALLOC_PURGE_DELAY=-1`: mimalloc keeps freed pages instead of returning them to the
 ///   kernel, which zeroes them again when the next step allocates (a quarter of a training
 ///   step in a profile);
+/// - for `zoo bench runtime --per-call`, only `MIMALLOC_PURGE_DELAY=-1` and `MIMALLOC_ALLOW_THP=0`: an
+///   engine's allocator keeps the pages it was given, and mimalloc's transparent huge pages
+///   make the first use of each 2 MB of memory a call of its own to clear it (up to 8 ms in
+///   one push of a stitching stream at 64 streams, in a profile), which is the allocator's
+///   cost, not the runtime's; the system allocator's figures come from
+///   `apps/bench/examples/frame_budget.rs`;
 /// - `RAYON_NUM_THREADS=<the cores available>` (the size rayon gives its pool anyway): candle
 ///   asks for its thread count at every matmul, and without this variable it counts the
 ///   physical cores by reading `/proc/cpuinfo` each time (2-3% of a training step in a
@@ -88,7 +94,10 @@ fn training_environment() {
     let one_core = matches!(sub.first(), Some(&"follow") | Some(&"control"))
         || sub == ["bench", "follow"]
         || sub == ["bench", "control"];
-    if !(training || one_core) || std::env::var_os("ZOO_TRAINING_ENV").is_some() {
+    // The runtime's per-call benchmark: only the allocator's settings (below).
+    let runtime =
+        sub == ["bench", "runtime"] && args.iter().any(|a| a.to_str().is_some_and(|a| a.starts_with("--per-call")));
+    if !(training || one_core || runtime) || std::env::var_os("ZOO_TRAINING_ENV").is_some() {
         return;
     }
     #[cfg(unix)]
@@ -98,8 +107,12 @@ fn training_environment() {
         let mut cmd = std::process::Command::new(exe);
         cmd.args(&args[1..]).env("ZOO_TRAINING_ENV", "1");
         let cores = if one_core { 1 } else { std::thread::available_parallelism().map_or(1, |n| n.get()) }.to_string();
-        for (key, value) in [("CANDLE_NUM_THREADS", "1"), ("MIMALLOC_PURGE_DELAY", "-1"), ("RAYON_NUM_THREADS", &cores)]
-        {
+        let vars: &[(&str, &str)] = if runtime {
+            &[("MIMALLOC_PURGE_DELAY", "-1"), ("MIMALLOC_ALLOW_THP", "0")]
+        } else {
+            &[("CANDLE_NUM_THREADS", "1"), ("MIMALLOC_PURGE_DELAY", "-1"), ("RAYON_NUM_THREADS", &cores)]
+        };
+        for &(key, value) in vars {
             if std::env::var_os(key).is_none() {
                 cmd.env(key, value);
             }

@@ -45,8 +45,15 @@ use zoo_protocol::stitch::{GroundRoot, PoseFrame, StitchLayout, decode_pose, enc
 
 type Plan = Arc<TypedRunnableModel>;
 
-/// Frames per chunk of the window graph a stream runs over several pushes ([`SpreadPlan`]).
-const SPREAD_CHUNK: usize = 15;
+/// Frames per node of the window graph a stream runs over several pushes ([`SpreadPlan`]): each
+/// recurrence in chunks of this many frames, each product over the window too. Nodes of a
+/// third of a push's share or less at the default stride (finer ones re-read the products'
+/// weights more often: 5 frames made a window 1.3x slower).
+const SPREAD_CHUNK: usize = 10;
+
+/// A push's time for its window's share: the window's measured time over the pushes it is spread
+/// over, times this (the rest of the stream's work, the lock and the guard, takes the margin).
+const SPREAD_SLACK: f64 = 1.4;
 
 /// A window a stream is running node by node: the graph's state, the next node (an index in
 /// [`SpreadPlan`]'s order) and the pushes that worked on it.
@@ -72,8 +79,7 @@ pub(crate) struct SpreadPlan {
     plan: Plan,
     order: Vec<usize>,
     done_after: Vec<f64>,
-    /// A window's measured time with a fifth more for the stream's other work: a push's budget
-    /// is this over the pushes a window is spread over.
+    /// A window's measured time, node by node.
     window_time: std::time::Duration,
 }
 
@@ -92,7 +98,12 @@ impl SpreadPlan {
     /// The chunked plan of `proto` for windows of `window` frames of `dim` values, or `None`
     /// when the graph has no recurrence to chunk or the chunked graph does not plan.
     fn new(proto: &tract_onnx::pb::ModelProto, window: usize, dim: usize) -> Option<SpreadPlan> {
-        let chunked = crate::ops::chunk::chunk_recurrences(proto, window, SPREAD_CHUNK)?;
+        let mut chunked = crate::ops::chunk::chunk_recurrences(proto, window, SPREAD_CHUNK)?;
+        // The products as zoo nodes, those over the whole window in chunks of frames too.
+        if let Some(mut fused) = crate::ops::enabled().then(|| crate::ops::fuse(&chunked)).flatten() {
+            crate::ops::chunk::chunk_dense(&mut fused, SPREAD_CHUNK);
+            chunked = fused;
+        }
         let model = crate::model::read_proto(&chunked, "the chunked window graph").ok()?;
         let plan = plan_for(&model, window, dim).ok()?;
         let order = plan.order_without_consts().to_vec();
@@ -120,7 +131,7 @@ impl SpreadPlan {
                 done / total
             })
             .collect();
-        let window_time = std::time::Duration::from_secs_f64(1.2 * total);
+        let window_time = std::time::Duration::from_secs_f64(total);
         Some(SpreadPlan { plan, order, done_after, window_time })
     }
 }
@@ -1367,17 +1378,24 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
                 self.job = Some(WindowJob { state, at: 0, worked: 0 });
             }
             let job = self.job.as_mut().expect("a window runs");
-            // The least this push runs: the window on its schedule (done by the end of push
-            // `worked` of `pushes`), all of it on its last push; a node counts as run when most
-            // of it falls within that. More while the push's time allows: a window ahead of its
-            // schedule leaves busy pushes (the cleanup's) the time they take.
+            // The least this push runs: the window on a schedule that starts a quarter of its
+            // pushes late (the first pushes of a window are the ones that lock and guard the frames
+            // the last window made final) and is done by the end of its last push; a node counts
+            // as run when most of it falls within that. More while the push's budget allows
+            // (`SPREAD_SLACK`): the next node runs when its measured time fits in what is left.
             job.worked += 1;
-            let floor = if all || job.worked >= pushes { f64::INFINITY } else { job.worked as f64 / pushes as f64 };
-            let deadline = push_start.map(|t| t + spread.window_time.mul_f64(1.0 / pushes as f64));
+            let late = pushes / 4;
+            let floor = if all || job.worked >= pushes {
+                f64::INFINITY
+            } else {
+                job.worked.saturating_sub(late) as f64 / (pushes - late) as f64
+            };
+            let deadline = push_start.map(|t| t + spread.window_time.mul_f64(SPREAD_SLACK / pushes as f64));
             while job.at < spread.order.len() {
                 let before = if job.at == 0 { 0.0 } else { spread.done_after[job.at - 1] };
                 let behind = 0.5 * (before + spread.done_after[job.at]) <= floor;
-                if !behind && deadline.is_none_or(|d| std::time::Instant::now() >= d) {
+                let cost = spread.window_time.mul_f64(spread.done_after[job.at] - before);
+                if !behind && deadline.is_none_or(|d| std::time::Instant::now() + cost > d) {
                     break;
                 }
                 job.state.compute_one(spread.order[job.at]).map_err(run)?;

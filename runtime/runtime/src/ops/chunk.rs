@@ -203,3 +203,14 @@ pub(crate) fn chunk_recurrences(proto: &pb::ModelProto, frames: usize, chunk: us
     out.graph = Some(g);
     Some(out)
 }
+
+/// `proto` (a graph after [`super::fuse`]) with every [`super::ZOO_DENSE`] node split into nodes
+/// of at most `chunk` frames of its input's first axis when it is planned
+/// ([`super::FRAME_CHUNK`]): the same function, for a caller that runs the graph node by node.
+pub(crate) fn chunk_dense(proto: &mut pb::ModelProto, chunk: usize) {
+    let Some(graph) = proto.graph.as_mut() else { return };
+    for n in graph.node.iter_mut().filter(|n| n.op_type == super::ZOO_DENSE && n.domain == super::DOMAIN) {
+        n.attribute.retain(|a| a.name != super::FRAME_CHUNK);
+        n.attribute.push(attr::int(super::FRAME_CHUNK, chunk as i64));
+    }
+}

@@ -168,6 +168,7 @@ fn parse_dense(ctx: &ParsingContext, node: &pb::NodeProto) -> TractResult<(Box<d
         bias: bias(ctx, node, m)?,
         alpha: node_attr(node, "alpha").map(|a| Arc::new(tensor0(a.f))),
         addend: node.input.len() > 1,
+        frame_chunk: node_attr(node, FRAME_CHUNK).map_or(0, |a| a.i.max(0) as usize),
     };
     Ok((expand(spec), vec![]))
 }
@@ -220,6 +221,8 @@ struct DenseSpec {
     bias: Option<Arc<Tensor>>,
     alpha: Option<Arc<Tensor>>,
     addend: bool,
+    /// Frames per node when a plan is made ([`FRAME_CHUNK`]; 0: one node).
+    frame_chunk: usize,
 }
 
 impl Expansion for DenseSpec {
@@ -254,11 +257,35 @@ impl Expansion for DenseSpec {
     }
 
     fn wire(&self, prefix: &str, model: &mut TypedModel, inputs: &[OutletId]) -> TractResult<TVec<OutletId>> {
-        let product = Product::new(self.m, &self.weights, rows(model, inputs[0])?)?;
-        let op = DenseOp { product, bias: self.bias.clone(), alpha: self.alpha.clone(), addend: self.addend };
-        model.wire_node(prefix, op, inputs)
+        let shape = model.outlet_fact(inputs[0])?.shape.to_tvec();
+        let frames = shape.first().filter(|_| shape.len() >= 2).and_then(|d| d.to_usize().ok());
+        let chunk = self.frame_chunk;
+        let Some(frames) = frames.filter(|&f| chunk > 0 && f > chunk) else {
+            let product = Product::new(self.m, &self.weights, rows(model, inputs[0])?)?;
+            let op = DenseOp { product, bias: self.bias.clone(), alpha: self.alpha.clone(), addend: self.addend };
+            return model.wire_node(prefix, op, inputs);
+        };
+        // The same product on every `chunk` frames of the first axis, one node each, joined.
+        let mut parts = tvec![];
+        for (c, from) in (0..frames).step_by(chunk).enumerate() {
+            let to = (from + chunk).min(frames);
+            let mut part = tvec![];
+            for (i, &input) in inputs.iter().enumerate() {
+                let slice = tract_onnx::tract_core::ops::array::Slice::new(0, from, to);
+                part.push(model.wire_node(format!("{prefix}.frames{c}.in{i}"), slice, &[input])?[0]);
+            }
+            let product = Product::new(self.m, &self.weights, rows(model, part[0])?)?;
+            let op = DenseOp { product, bias: self.bias.clone(), alpha: self.alpha.clone(), addend: self.addend };
+            parts.push(model.wire_node(format!("{prefix}.frames{c}"), op, &part)?[0]);
+        }
+        model.wire_node(prefix, tract_onnx::tract_core::ops::array::TypedConcat { axis: 0 }, &parts)
     }
 }
+
+/// The attribute of a [`ZOO_DENSE`] node that splits its product into nodes of this many frames
+/// (the first axis) when a plan is made: for a caller that runs a window's graph node by node
+/// (`crate::ops::chunk::chunk_dense`); the result is the same.
+pub(crate) const FRAME_CHUNK: &str = "frame_chunk";
 
 /// A product, its bias, a per-character addend and a LeakyReLU, on one tract-linalg kernel.
 #[derive(Clone, Debug, PartialEq, Eq)]
