@@ -422,6 +422,72 @@ fn a_transition_fed_frame_by_frame_equals_one_started_at_once() {
     assert!(err.to_string().contains("feed characters at the same point"), "{err}");
 }
 
+/// One character alone, fed and stepped as a game plays it, spreads its graph runs over the
+/// calls (a frame budget): some calls end with a run in progress. Its frames are those of a
+/// transition started at once and generated whole, bit for bit, also when a second runner (another
+/// thread's) takes every other call; when it joins a batch with a run in progress, up to the
+/// batch's rounding.
+#[test]
+fn a_character_alone_spreads_its_runs_over_calls_with_the_same_frames() {
+    use zoo_runtime::TransitionModel;
+    let model = TransitionModel::new(MotionModel::from_bytes(&zoo_tests::tiny_rtn_onnx().to_bytes()).unwrap()).unwrap();
+    let (k, length, past) = (model.joints(), model.transition_frames(), model.past_frames());
+    let d = 3 * k;
+    let pose = |c: usize, f: usize| -> Vec<f32> {
+        (0..d).map(|i| (i as f32 * 0.7 + f as f32 * 0.3 + c as f32).sin() * 20.0 + 4.0 * f as f32).collect()
+    };
+    let all: Vec<f32> = (0..past).flat_map(|f| pose(0, f)).collect();
+    let (target, next) = (pose(0, past + length), pose(0, past + length + 1));
+    let mut whole = vec![0.0f32; (length + 1) * d];
+    let mut reference = model.runner().unwrap();
+    let mut state = model.new_transition();
+    reference.generate(&mut state, &all, &target, &next, &mut whole).unwrap();
+    // 0: one runner; 1: two runners taking turns; 2: stepped alone, then in a batch of two.
+    for case in 0..3 {
+        let mut runners = [model.runner().unwrap(), model.runner().unwrap()];
+        let mut states = [model.new_transition(), model.new_transition()];
+        let mut call = 0usize;
+        let mut pending = 0usize;
+        runners[0].begin_batch(&mut states[..1], &all[..d], &target, &next, past, length).unwrap();
+        for f in 1..past {
+            let r = if case == 1 { call % 2 } else { 0 };
+            runners[r].feed_batch(&mut states[..1], &all[f * d..(f + 1) * d]).unwrap();
+            pending += states[0].has_run_in_progress() as usize;
+            call += 1;
+        }
+        if case == 2 {
+            runners[0].start(&mut states[1], &all, &target, &next).unwrap();
+        }
+        let mut out = vec![0.0f32; 2 * d];
+        // Case 2 joins the batch with the context's last run in progress.
+        let mut joined = case == 2 && states[0].has_run_in_progress();
+        for f in 0..=length {
+            let batch = joined;
+            if batch {
+                runners[0].step_batch(&mut states, &mut out).unwrap();
+            } else {
+                let r = if case == 1 { call % 2 } else { 0 };
+                runners[r].step(&mut states[0], &mut out[..d]).unwrap();
+                if case == 2 {
+                    let mut other = vec![0.0f32; d];
+                    runners[1].step(&mut states[1], &mut other).unwrap();
+                }
+            }
+            pending += states[0].has_run_in_progress() as usize;
+            call += 1;
+            if batch {
+                // A batch runs tract's kernels for two: the same frames up to their rounding.
+                let worst = out[..d].iter().zip(&whole[f * d..]).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+                assert!(worst < 1e-3, "case {case}: frame {f} differs from generate by {worst}");
+            } else {
+                assert!(out[..d] == whole[f * d..(f + 1) * d], "case {case}: frame {f} differs from generate");
+            }
+        }
+        assert!(pending > 0, "case {case}: no call left a run in progress");
+        assert!(case != 2 || joined, "case 2: the context left no run in progress to join the batch with");
+    }
+}
+
 /// The chunked window graph a stitching stream spreads over its pushes (each GRU layer as a
 /// chain of GRUs over a few frames) computes the refiner's window: value for value for the tiny
 /// RMR, within 1e-5 for the paper-size one of `ZOO_RMR_FILE` when given (tract's kernels round

@@ -39,6 +39,8 @@ pub struct MotionRunner {
     batched: Option<Session>,
     /// Start-graph session, created on the first `start` (and when the batch size changes).
     start: Option<Session>,
+    /// The one-character plan's node costs, for runs spread over calls (measured on first use).
+    costs: Option<Arc<PassCosts>>,
 }
 
 fn check_states(inner: &Inner, states: &[MotionState]) -> Result<(), MotionError> {
@@ -85,7 +87,7 @@ pub(crate) fn check_finite(name: &str, data: &[f32], width: usize) -> Result<(),
 impl MotionRunner {
     pub(crate) fn new(model: MotionModel) -> Result<Self, MotionError> {
         let single = Session::new(&model.inner.single, 1, &model.inner.graph_input_widths)?;
-        Ok(MotionRunner { model, single, batched: None, start: None })
+        Ok(MotionRunner { model, single, batched: None, start: None, costs: None })
     }
 
     /// The model this runner steps.
@@ -246,61 +248,239 @@ impl MotionRunner {
         };
         let run_err = |e: TractError| MotionError::Run { reason: chain(&e) };
 
-        // Fill the preallocated input tensors.
-        for (g, source) in inner.graph_inputs.iter().enumerate() {
-            let width = inner.graph_input_widths[g];
-            // Exclusive unless tract kept a reference; then this copies once.
-            let tensor = Arc::make_mut(&mut session.inputs[g]);
-            let mut view = tensor.try_as_plain_ram_mut().map_err(run_err)?;
-            let dst = view.as_slice_mut::<f32>().map_err(run_err)?;
-            match *source {
-                Source::Frame(i) => dst.copy_from_slice(inputs[i]),
-                Source::State(k) => {
-                    for (c, state) in states.iter().enumerate() {
-                        dst[c * width..(c + 1) * width].copy_from_slice(&state.slots[k]);
-                    }
+        let values = fill_inputs(inner, session, states, inputs)?;
+        let results = session.state.run(values).map_err(run_err)?;
+        read_outputs(inner, &results, states, outputs)
+    }
+}
+
+/// Copies the frame inputs and the characters' states into the session's preallocated input
+/// tensors and returns them as the graph's input values.
+fn fill_inputs(
+    inner: &Inner,
+    session: &mut Session,
+    states: &[MotionState],
+    inputs: &[&[f32]],
+) -> Result<TVec<TValue>, MotionError> {
+    let run_err = |e: TractError| MotionError::Run { reason: chain(&e) };
+    for (g, source) in inner.graph_inputs.iter().enumerate() {
+        let width = inner.graph_input_widths[g];
+        // Exclusive unless tract kept a reference; then this copies once.
+        let tensor = Arc::make_mut(&mut session.inputs[g]);
+        let mut view = tensor.try_as_plain_ram_mut().map_err(run_err)?;
+        let dst = view.as_slice_mut::<f32>().map_err(run_err)?;
+        match *source {
+            Source::Frame(i) => dst.copy_from_slice(inputs[i]),
+            Source::State(k) => {
+                for (c, state) in states.iter().enumerate() {
+                    dst[c * width..(c + 1) * width].copy_from_slice(&state.slots[k]);
                 }
             }
         }
-        // A TVec holds up to 4 values inline: no allocation for graphs of up to 4 inputs.
-        let values: TVec<TValue> = session.inputs.iter().map(|t| TValue::from_const(t.clone())).collect();
-        let results = session.state.run(values).map_err(run_err)?;
+    }
+    // A TVec holds up to 4 values inline: no allocation for graphs of up to 4 inputs.
+    Ok(session.inputs.iter().map(|t| TValue::from_const(t.clone())).collect())
+}
 
-        for (o, source) in inner.graph_outputs.iter().enumerate() {
-            let view = results[o].try_as_plain_ram().map_err(run_err)?;
-            let src = view.as_slice::<f32>().map_err(run_err)?;
-            match *source {
-                Source::Frame(i) => {
-                    if src.len() != outputs[i].len() {
-                        return Err(MotionError::Run {
-                            reason: format!(
-                                "output `{}` has {} values, expected {}",
-                                inner.outputs[i].name,
-                                src.len(),
-                                outputs[i].len()
-                            ),
-                        });
-                    }
-                    outputs[i].copy_from_slice(src);
+/// Copies a graph run's results into the frame outputs and the characters' states.
+fn read_outputs(
+    inner: &Inner,
+    results: &[TValue],
+    states: &mut [MotionState],
+    outputs: &mut [&mut [f32]],
+) -> Result<(), MotionError> {
+    let run_err = |e: TractError| MotionError::Run { reason: chain(&e) };
+    let batch = states.len();
+    for (o, source) in inner.graph_outputs.iter().enumerate() {
+        let view = results[o].try_as_plain_ram().map_err(run_err)?;
+        let src = view.as_slice::<f32>().map_err(run_err)?;
+        match *source {
+            Source::Frame(i) => {
+                if src.len() != outputs[i].len() {
+                    return Err(MotionError::Run {
+                        reason: format!(
+                            "output `{}` has {} values, expected {}",
+                            inner.outputs[i].name,
+                            src.len(),
+                            outputs[i].len()
+                        ),
+                    });
                 }
-                Source::State(k) => {
-                    let width = inner.states[k].width;
-                    if src.len() != batch * width {
-                        return Err(MotionError::Run {
-                            reason: format!(
-                                "state output `{}` has {} values, expected {}",
-                                inner.states[k].output,
-                                src.len(),
-                                batch * width
-                            ),
-                        });
-                    }
-                    for (c, state) in states.iter_mut().enumerate() {
-                        state.slots[k].copy_from_slice(&src[c * width..(c + 1) * width]);
-                    }
+                outputs[i].copy_from_slice(src);
+            }
+            Source::State(k) => {
+                let width = inner.states[k].width;
+                if src.len() != batch * width {
+                    return Err(MotionError::Run {
+                        reason: format!(
+                            "state output `{}` has {} values, expected {}",
+                            inner.states[k].output,
+                            src.len(),
+                            batch * width
+                        ),
+                    });
+                }
+                for (c, state) in states.iter_mut().enumerate() {
+                    state.slots[k].copy_from_slice(&src[c * width..(c + 1) * width]);
                 }
             }
+        }
+    }
+    Ok(())
+}
+
+/// One character's graph run in progress, node by node, on a tract state of its own (the
+/// one-character plan, the same arithmetic as [`MotionRunner::step`]): so that a caller with a
+/// frame budget can spread a run over calls ([`MotionRunner::partial_begin`]).
+#[derive(Debug)]
+pub(crate) struct PartialRun {
+    session: Session,
+    /// The next node, an index in [`PassCosts::order`].
+    at: usize,
+    /// Whether the tract state holds a run's values (cleared before the next run).
+    begun: bool,
+}
+
+/// The nodes of the one-character plan in evaluation order and the share of a run's time spent
+/// up to the end of each (measured once per runner; it decides how many nodes a call runs,
+/// never what they compute), and a whole run's time, seconds.
+#[derive(Debug)]
+pub(crate) struct PassCosts {
+    pub(crate) order: Vec<usize>,
+    pub(crate) done_after: Vec<f64>,
+    pub(crate) run_time: f64,
+}
+
+impl PartialRun {
+    /// The share of the run done (0 when begun, 1 when every node ran).
+    pub(crate) fn done(&self, costs: &PassCosts) -> f64 {
+        if self.at == 0 { 0.0 } else { costs.done_after[self.at - 1] }
+    }
+
+    /// The share of the run its next node takes (0 when every node ran).
+    pub(crate) fn next_cost(&self, costs: &PassCosts) -> f64 {
+        costs.done_after.get(self.at).map_or(0.0, |d| d - self.done(costs))
+    }
+
+    /// Whether every node ran.
+    pub(crate) fn complete(&self, costs: &PassCosts) -> bool {
+        self.at >= costs.order.len()
+    }
+}
+
+impl MotionRunner {
+    /// The node costs of the one-character plan ([`PassCosts`]), measured on the first call.
+    pub(crate) fn pass_costs(&mut self) -> Result<Arc<PassCosts>, MotionError> {
+        if let Some(c) = &self.costs {
+            return Ok(c.clone());
+        }
+        let run = |e: TractError| MotionError::Run { reason: chain(&e) };
+        let inner = self.model.inner.clone();
+        let order = inner.single.order_without_consts().to_vec();
+        let zeros = || -> Result<TVec<TValue>, MotionError> {
+            inner
+                .graph_input_widths
+                .iter()
+                .map(|&w| Tensor::zero::<f32>(&[1, w]).map(|t| t.into_tvalue()).map_err(run))
+                .collect()
+        };
+        // Four runs node by node, the fastest of the last three for each node.
+        let mut best = vec![f64::INFINITY; order.len()];
+        let mut state = inner.single.spawn().map_err(run)?;
+        for round in 0..4 {
+            state.set_inputs(zeros()?).map_err(run)?;
+            for (i, &node) in order.iter().enumerate() {
+                let t = std::time::Instant::now();
+                state.compute_one(node).map_err(run)?;
+                if round > 0 {
+                    best[i] = best[i].min(t.elapsed().as_secs_f64());
+                }
+            }
+            state.reset_turn().map_err(run)?;
+        }
+        let total: f64 = best.iter().sum::<f64>().max(1e-9);
+        let mut done = 0.0;
+        let done_after: Vec<f64> = best
+            .iter()
+            .map(|t| {
+                done += t;
+                done / total
+            })
+            .collect();
+        let costs = Arc::new(PassCosts { order, done_after, run_time: total });
+        self.costs = Some(costs.clone());
+        Ok(costs)
+    }
+
+    /// A fresh [`PartialRun`] (a tract state of the one-character plan and its input tensors).
+    pub(crate) fn partial(&self) -> Result<PartialRun, MotionError> {
+        let inner = &*self.model.inner;
+        Ok(PartialRun { session: Session::new(&inner.single, 1, &inner.graph_input_widths)?, at: 0, begun: false })
+    }
+
+    /// Begins one character's graph run on `p`: checks and copies the inputs as
+    /// [`MotionRunner::step`] does; nothing runs yet ([`MotionRunner::partial_node`]).
+    pub(crate) fn partial_begin(
+        &self,
+        p: &mut PartialRun,
+        state: &MotionState,
+        inputs: &[&[f32]],
+    ) -> Result<(), MotionError> {
+        let inner = &*self.model.inner;
+        if inputs.len() != inner.inputs.len() {
+            return Err(MotionError::BufferCount { what: "inputs", expected: inner.inputs.len(), found: inputs.len() });
+        }
+        for (info, data) in inner.inputs.iter().zip(inputs) {
+            check_len(&info.name, data.len(), 1, info.width)?;
+            check_finite(&info.name, data, info.width)?;
+        }
+        check_states(inner, std::slice::from_ref(state))?;
+        let run_err = |e: TractError| MotionError::Run { reason: chain(&e) };
+        if p.begun {
+            p.session.state.reset_turn().map_err(run_err)?;
+        }
+        let values = fill_inputs(inner, &mut p.session, std::slice::from_ref(state), inputs)?;
+        p.session.state.set_inputs(values).map_err(run_err)?;
+        p.at = 0;
+        p.begun = true;
+        Ok(())
+    }
+
+    /// Runs the next node of `p`.
+    pub(crate) fn partial_node(&self, p: &mut PartialRun, costs: &PassCosts) -> Result<(), MotionError> {
+        if let Some(&node) = costs.order.get(p.at) {
+            p.session.state.compute_one(node).map_err(|e| MotionError::Run { reason: chain(&e) })?;
+            p.at += 1;
         }
         Ok(())
+    }
+
+    /// Runs what is left of `p` and writes its outputs, as [`MotionRunner::step`] does.
+    pub(crate) fn partial_finish(
+        &self,
+        p: &mut PartialRun,
+        costs: &PassCosts,
+        state: &mut MotionState,
+        outputs: &mut [&mut [f32]],
+    ) -> Result<(), MotionError> {
+        let inner = &*self.model.inner;
+        if outputs.len() != inner.outputs.len() {
+            return Err(MotionError::BufferCount {
+                what: "outputs",
+                expected: inner.outputs.len(),
+                found: outputs.len(),
+            });
+        }
+        for (info, data) in inner.outputs.iter().zip(outputs.iter()) {
+            check_len(&info.name, data.len(), 1, info.width)?;
+        }
+        while !p.complete(costs) {
+            self.partial_node(p, costs)?;
+        }
+        let run_err = |e: TractError| MotionError::Run { reason: chain(&e) };
+        let results = p.session.state.outputs().map_err(run_err)?;
+        p.session.state.reset_turn().map_err(run_err)?;
+        p.begun = false;
+        read_outputs(inner, &results, std::slice::from_mut(state), outputs)
     }
 }

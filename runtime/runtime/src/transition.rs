@@ -25,7 +25,7 @@ mod posed;
 use crate::error::MotionError;
 use crate::metadata::{MotionMeanStd, MotionTask, TransitionFallback, keys};
 use crate::model::{MotionModel, MotionState};
-use crate::runner::{MotionRunner, check_finite, check_len};
+use crate::runner::{MotionRunner, PartialRun, PassCosts, check_finite, check_len};
 use glam::DVec3;
 use posed::{PosedScratch, PosedState};
 use std::path::Path;
@@ -125,7 +125,42 @@ pub struct TransitionState {
     posed: PosedState,
     /// The ground under this character (terrain-aware models).
     heightmap: Option<Arc<Heightmap>>,
+    /// A graph run begun and not finished ([`TransitionRunner::step`] and `feed` for one
+    /// character spread runs over calls, a frame budget): what it is for. Its frame inputs are
+    /// in `pending_inputs` and its recurrent state is `motion`, unchanged until it ends, so any
+    /// runner can finish it; the runner that began it continues it (`pending_key`).
+    pending: Option<PassKind>,
+    pending_inputs: Vec<f32>,
+    pending_key: u64,
 }
+
+/// What a graph run in progress is for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum PassKind {
+    /// A context frame's: it only moves the recurrent state.
+    Context,
+    /// The next raw frame's: it goes to the frames computed ahead.
+    Generation,
+}
+
+/// Keys of the graph runs in progress (unique in the process).
+static PENDING_KEYS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+
+/// The most work one call of a character stepped alone does by choice, in runs of the step
+/// graph: enough to run two recurrent cells in a call (RTN's LSTM is about three quarters of a
+/// run), which is how the frames the target blend needs are computed ahead, a fraction per step.
+const CALL_BUDGET: f64 = 1.85;
+
+/// The most a context frame's call does by choice, in runs: its own run, or what is left of the
+/// last one and the start of its own. The second frame's call runs the start graph, which
+/// leaves the step graph's weights out of the cache; catching up in the calls after it would
+/// put two recurrent cells, cold, in one call (2.3x a step, measured): the context's calls stay
+/// a run behind instead, and the first step finishes the last one (two cells, warm).
+const CONTEXT_BUDGET: f64 = 1.2;
+
+/// Graph runs in progress one runner keeps (characters stepped one at a time); beyond, the
+/// oldest is dropped and its character runs it again whole.
+const MAX_PARTIALS: usize = 256;
 
 impl TransitionState {
     /// Sets the ground under this character: the heightmap a terrain-aware model
@@ -164,6 +199,15 @@ impl TransitionState {
         self.miss = None;
         self.fallback_weight = 0.0;
         self.posed.active = false;
+        self.pending = None;
+    }
+
+    /// Whether a graph run of this character is in progress (a call for one character spread
+    /// it over calls, a frame budget): any runner finishes it when the character is next fed or
+    /// stepped. For tests.
+    #[doc(hidden)]
+    pub fn has_run_in_progress(&self) -> bool {
+        self.pending.is_some()
     }
 
     /// Whether [`TransitionRunner::start`] was called for this state.
@@ -254,6 +298,10 @@ pub struct TransitionRunner {
     /// blend (a frame budget); `generate` turns it off, computing them in one step (fewer graph
     /// runs in all).
     spread_ahead: bool,
+    /// Graph runs in progress of characters stepped one at a time, by `pending_key`, oldest
+    /// first; `spare`: finished ones, reused.
+    partials: Vec<(u64, PartialRun)>,
+    spare: Vec<PartialRun>,
     /// Foot-lock post-process of `generate`, off unless set.
     foot_lock: Option<lock::FittedLock>,
     /// Whether transitions longer than the trained length are accepted.
@@ -476,6 +524,9 @@ impl TransitionModel {
             fallback_weight: 0.0,
             posed: PosedState::new(self.joints),
             heightmap: None,
+            pending: None,
+            pending_inputs: Vec::new(),
+            pending_key: 0,
         }
     }
 
@@ -497,6 +548,8 @@ impl TransitionModel {
             sel: Vec::new(),
             need: Vec::new(),
             spread_ahead: true,
+            partials: Vec::new(),
+            spare: Vec::new(),
             foot_lock: None,
             beyond_trained: false,
             fallback: None,
@@ -757,10 +810,28 @@ impl TransitionRunner {
                 });
             }
         }
+        // One character alone: the last frame's run, if left in progress, then this frame's
+        // run node by node within the call's budget (the rest in the next call).
+        let costs = if n == 1 { Some(self.runner.pass_costs()?) } else { None };
+        let mut spent = 0.0;
+        let settled = match &costs {
+            Some(costs) => {
+                spent += self.remaining(&states[0], costs);
+                self.finish_pending(states, 0, costs)
+            }
+            None => self.settle(states),
+        };
+        if let Err(e) = settled {
+            states.iter_mut().for_each(|s| s.context_total = 0);
+            return Err(e);
+        }
         if fed == 0 {
             // The second context frame: the first one's features (its root velocity comes from
             // this frame) and the first graph run, then this frame's run.
+            // Its cost as it comes (the start graph's weights are seldom in the cache).
+            let t = std::time::Instant::now();
             self.first_pass(states, frame, Some(frame))?;
+            spent += costs.as_ref().map_or(0.0, |c| t.elapsed().as_secs_f64() / c.run_time);
         }
         // This frame's features, its previous root in `s.root`.
         self.feats.resize(n * d, 0.0);
@@ -769,11 +840,19 @@ impl TransitionRunner {
             features::encode_frame(s.root, &frame[c * d..(c + 1) * d], f);
             self.model.x.normalize(f);
         }
-        let mut sel = std::mem::take(&mut self.sel);
-        sel.clear();
-        sel.extend(0..n);
-        let result = self.advance(states, &sel, Some((d, 0)));
-        self.sel = sel;
+        let result = match &costs {
+            Some(costs) => self
+                .begin_pending(states, 0, PassKind::Context, Some((d, 0)))
+                .and_then(|()| self.run_pending(states, costs, &mut spent, CONTEXT_BUDGET, f64::INFINITY)),
+            None => {
+                let mut sel = std::mem::take(&mut self.sel);
+                sel.clear();
+                sel.extend(0..n);
+                let result = self.advance(states, &sel, Some((d, 0)));
+                self.sel = sel;
+                result
+            }
+        };
         if let Err(e) = result {
             states.iter_mut().for_each(|s| s.context_total = 0);
             return Err(e);
@@ -899,6 +978,25 @@ impl TransitionRunner {
         sel: &[usize],
         context: Option<(usize, usize)>,
     ) -> Result<(), MotionError> {
+        self.pass_inputs(states, sel, context)?;
+        let inputs =
+            frame_input_slices(&self.model.frame_inputs, [&self.xb, &self.offset, &self.base, &self.patch, &self.tta]);
+        let inputs = &inputs[..self.model.frame_inputs.len()];
+        let next = &mut self.next[..];
+        let runner = &mut self.runner;
+        with_motion_states(&mut self.motion, states, sel.iter().copied(), &self.model.model, |s| {
+            runner.step_batch(s, inputs, &mut [next])
+        })
+    }
+
+    /// The frame inputs of a graph run of the characters `sel` (see [`TransitionRunner::advance`])
+    /// into the runner's buffers ([`TransitionRunner::frame_inputs`]).
+    fn pass_inputs(
+        &mut self,
+        states: &[TransitionState],
+        sel: &[usize],
+        context: Option<(usize, usize)>,
+    ) -> Result<(), MotionError> {
         let m = &self.model;
         let (n, d) = (sel.len(), 3 * m.joints);
         self.xb.resize(n * d, 0.0);
@@ -962,24 +1060,155 @@ impl TransitionRunner {
             }
             m.offset.normalize(ob);
         }
-        let (x, offset, base, patch) = (&self.xb[..], &self.offset[..], &self.base[..], &self.patch[..]);
-        let tta = &self.tta[..];
-        let mut inputs: [&[f32]; 5] = [&[], &[], &[], &[], &[]];
-        for (slot, which) in inputs.iter_mut().zip(&m.frame_inputs) {
-            *slot = match which {
-                FrameInput::X => x,
-                FrameInput::Offset => offset,
-                FrameInput::Base => base,
-                FrameInput::Terrain => patch,
-                FrameInput::Tta => tta,
-            };
+        Ok(())
+    }
+
+    /// The frame inputs [`TransitionRunner::pass_inputs`] wrote, in the graph's order (the
+    /// first `frame_inputs.len()`).
+    fn frame_inputs(&self) -> [&[f32]; 5] {
+        frame_input_slices(&self.model.frame_inputs, [&self.xb, &self.offset, &self.base, &self.patch, &self.tta])
+    }
+
+    /// Begins character `c`'s next graph run without running it (a frame budget spreads it
+    /// over calls): its frame inputs now (kept in the state), its recurrent state when it ends.
+    fn begin_pending(
+        &mut self,
+        states: &mut [TransitionState],
+        c: usize,
+        kind: PassKind,
+        context: Option<(usize, usize)>,
+    ) -> Result<(), MotionError> {
+        debug_assert!(states[c].pending.is_none());
+        self.pass_inputs(states, &[c], context)?;
+        let mut stored = std::mem::take(&mut states[c].pending_inputs);
+        stored.clear();
+        let inputs = self.frame_inputs();
+        for i in &inputs[..self.model.frame_inputs.len()] {
+            stored.extend_from_slice(i);
         }
-        let inputs = &inputs[..m.frame_inputs.len()];
-        let next = &mut self.next[..];
-        let runner = &mut self.runner;
-        with_motion_states(&mut self.motion, states, sel.iter().copied(), &m.model, |s| {
-            runner.step_batch(s, inputs, &mut [next])
-        })
+        let s = &mut states[c];
+        s.pending_inputs = stored;
+        s.pending = Some(kind);
+        s.pending_key = PENDING_KEYS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        self.resume(s).map(|_| ())
+    }
+
+    /// The index in `partials` of the run `s` has in progress, begun again from its stored
+    /// inputs when this runner does not hold it.
+    fn resume(&mut self, s: &TransitionState) -> Result<usize, MotionError> {
+        if let Some(i) = self.partials.iter().position(|(k, _)| *k == s.pending_key) {
+            return Ok(i);
+        }
+        let mut run = match self.spare.pop() {
+            Some(r) => r,
+            None => self.runner.partial()?,
+        };
+        let mut slices: [&[f32]; 5] = [&[], &[], &[], &[], &[]];
+        let (mut at, mut count) = (0, 0);
+        for (slot, info) in slices.iter_mut().zip(self.runner.model().inputs()) {
+            *slot = &s.pending_inputs[at..at + info.width];
+            at += info.width;
+            count += 1;
+        }
+        self.runner.partial_begin(&mut run, &s.motion, &slices[..count])?;
+        if self.partials.len() >= MAX_PARTIALS {
+            let (_, old) = self.partials.remove(0);
+            self.spare.push(old);
+        }
+        self.partials.push((s.pending_key, run));
+        Ok(self.partials.len() - 1)
+    }
+
+    /// Finishes character `c`'s run in progress, if any: the recurrent state and, for a
+    /// generated frame, the frame computed ahead.
+    fn finish_pending(
+        &mut self,
+        states: &mut [TransitionState],
+        c: usize,
+        costs: &PassCosts,
+    ) -> Result<(), MotionError> {
+        let Some(kind) = states[c].pending else { return Ok(()) };
+        let d = 3 * self.model.joints;
+        let i = self.resume(&states[c])?;
+        let (_, mut run) = self.partials.remove(i);
+        if self.next.len() < d {
+            self.next.resize(d, 0.0);
+        }
+        let s = &mut states[c];
+        let result = self.runner.partial_finish(&mut run, costs, &mut s.motion, &mut [&mut self.next[..d]]);
+        self.spare.push(run);
+        s.pending = None;
+        result?;
+        if kind == PassKind::Generation {
+            self.keep_ahead(s, 0);
+        }
+        Ok(())
+    }
+
+    /// The share of a run left of `s`'s run in progress (0 without one, 1 when this runner did
+    /// not begin it).
+    fn remaining(&self, s: &TransitionState, costs: &PassCosts) -> f64 {
+        if s.pending.is_none() {
+            return 0.0;
+        }
+        let at = self.partials.iter().find(|(k, _)| *k == s.pending_key);
+        1.0 - at.map_or(0.0, |(_, r)| r.done(costs))
+    }
+
+    /// Runs the next nodes of the one character's run in progress while the call's work
+    /// (`spent`, in runs) stays within `budget` and the character's frames generated, in
+    /// runs, within `cap`; finishes the run when its last node ran. `budget`: [`CALL_BUDGET`]
+    /// or [`CONTEXT_BUDGET`].
+    fn run_pending(
+        &mut self,
+        states: &mut [TransitionState],
+        costs: &PassCosts,
+        spent: &mut f64,
+        budget: f64,
+        cap: f64,
+    ) -> Result<(), MotionError> {
+        if states[0].pending.is_none() {
+            return Ok(());
+        }
+        let i = self.resume(&states[0])?;
+        loop {
+            let run = &mut self.partials[i].1;
+            if run.complete(costs) {
+                return self.finish_pending(states, 0, costs);
+            }
+            let next = run.next_cost(costs);
+            if *spent + next > budget || states[0].generated as f64 + run.done(costs) + next > cap + 1e-9 {
+                return Ok(());
+            }
+            self.runner.partial_node(run, costs)?;
+            *spent += next;
+        }
+    }
+
+    /// Finishes every run in progress of `states` (before a call that runs them together).
+    fn settle(&mut self, states: &mut [TransitionState]) -> Result<(), MotionError> {
+        if states.iter().all(|s| s.pending.is_none()) {
+            return Ok(());
+        }
+        let costs = self.runner.pass_costs()?;
+        for c in 0..states.len() {
+            self.finish_pending(states, c, &costs)?;
+        }
+        Ok(())
+    }
+
+    /// Row `row` of the last graph run as `s`'s next raw frame, kept in its frames computed
+    /// ahead.
+    fn keep_ahead(&self, s: &mut TransitionState, row: usize) {
+        let d = 3 * self.model.joints;
+        if s.ahead.is_empty() {
+            s.ahead_from = s.generated;
+        }
+        let at = s.ahead.len();
+        s.ahead.resize(at + d, 0.0);
+        let mut frames = std::mem::take(&mut s.ahead);
+        self.take_raw(s, row, &mut frames[at..at + d]);
+        s.ahead = frames;
     }
 
     /// Takes row `row` of the last graph run as character `s`'s next raw frame: feeds it back
@@ -1074,6 +1303,10 @@ impl TransitionRunner {
     /// window compute the rest of the window in the step that enters it.
     pub fn step_batch(&mut self, states: &mut [TransitionState], poses: &mut [f32]) -> Result<(), MotionError> {
         self.check_steppable(states, poses.len(), false)?;
+        if states.len() == 1 && self.spread_ahead {
+            return self.step_one(&mut states[0], poses);
+        }
+        self.settle(states)?;
         let (d, blend) = (3 * self.model.joints, self.model.target_blend);
         let n = states.len();
         // How many network frames each character has computed by the end of this step.
@@ -1107,15 +1340,7 @@ impl TransitionRunner {
                 break;
             }
             for (row, &c) in sel.iter().enumerate() {
-                let s = &mut states[c];
-                if s.ahead.is_empty() {
-                    s.ahead_from = s.generated;
-                }
-                let at = s.ahead.len();
-                s.ahead.resize(at + d, 0.0);
-                let mut frames = std::mem::take(&mut s.ahead);
-                self.take_raw(s, row, &mut frames[at..at + d]);
-                s.ahead = frames;
+                self.keep_ahead(&mut states[c], row);
             }
         }
         self.sel = sel;
@@ -1134,6 +1359,60 @@ impl TransitionRunner {
         Ok(())
     }
 
+    /// [`TransitionRunner::step_batch`] for one character, with a frame budget: the runs its
+    /// frame needs (its own, the context's last one if left in progress), then its next runs
+    /// node by node while the call stays within [`CALL_BUDGET`] runs and the frames computed
+    /// ahead within a schedule that brings them to the blend window by its first frame (a
+    /// share of a run per step, where `step_batch` spreads whole runs over a batch). The same
+    /// frames, bit for bit: every run is the one-character plan's, on the same inputs.
+    fn step_one(&mut self, s: &mut TransitionState, pose: &mut [f32]) -> Result<(), MotionError> {
+        let costs = self.runner.pass_costs()?;
+        let states = std::slice::from_mut(s);
+        let (f, length, b) = (states[0].frames, states[0].length, states[0].blend_from);
+        // Runs of this call, in runs: what the step needs first, then what fits.
+        let mut spent = 0.0;
+        if states[0].pending == Some(PassKind::Context) {
+            spent += self.remaining(&states[0], &costs);
+            self.finish_pending(states, 0, &costs)?;
+        }
+        let must = if f >= b { length + 1 } else { f + 1 };
+        while states[0].generated < must {
+            if states[0].pending.is_none() {
+                self.begin_pending(states, 0, PassKind::Generation, None)?;
+            }
+            spent += self.remaining(&states[0], &costs);
+            self.finish_pending(states, 0, &costs)?;
+        }
+        // The schedule of the frames computed ahead: `length - b` more than the step's own by
+        // step `b - 1`, growing evenly from the first step.
+        let extra = (length - b) as f64;
+        let cap = ((f + 1) as f64 + extra * (f + 1) as f64 / b.max(1) as f64).min((length + 1) as f64);
+        while states[0].generated < length + 1 {
+            if states[0].pending.is_none() {
+                if states[0].generated as f64 >= cap {
+                    break;
+                }
+                self.begin_pending(states, 0, PassKind::Generation, None)?;
+            }
+            let before = (states[0].generated, spent);
+            self.run_pending(states, &costs, &mut spent, CALL_BUDGET, cap)?;
+            if states[0].pending.is_some() || (states[0].generated, spent) == before {
+                break;
+            }
+        }
+        let s = &mut states[0];
+        let (d, blend) = (3 * self.model.joints, self.model.target_blend);
+        if s.generated == s.length + 1 && s.miss.is_none() {
+            s.miss = Some(blend_window(&mut s.ahead, s.ahead_from, s.length, &s.target, blend));
+        }
+        debug_assert_eq!(s.ahead_from, s.frames);
+        pose[..d].copy_from_slice(&s.ahead[..d]);
+        s.ahead.drain(..d);
+        s.ahead_from += 1;
+        s.frames += 1;
+        Ok(())
+    }
+
     /// The network's next frame, without the target blend and without a length limit: the
     /// frames of the raw unroll (what the model predicts, as candle's `Rtn::unroll`), for
     /// callers that post-process themselves. A transition is stepped either raw or blended.
@@ -1144,6 +1423,7 @@ impl TransitionRunner {
     /// [`TransitionRunner::step_raw`] for `states.len()` characters in one graph run.
     pub fn step_raw_batch(&mut self, states: &mut [TransitionState], poses: &mut [f32]) -> Result<(), MotionError> {
         self.check_steppable(states, poses.len(), true)?;
+        self.settle(states)?;
         let d = 3 * self.model.joints;
         let mut sel = std::mem::take(&mut self.sel);
         sel.clear();
@@ -1305,6 +1585,21 @@ fn blend_window(ahead: &mut [f32], from: usize, length: usize, target: &[f32], b
 
 /// Runs `f` on the recurrent states of the characters `which` (indices into `states`)
 /// gathered into `scratch` (swapped, not copied), and swaps them back whatever `f` returns.
+/// `[x, offset, base, patch, tta]` in the order of the graph's frame inputs `which`.
+fn frame_input_slices<'a>(which: &[FrameInput], [x, offset, base, patch, tta]: [&'a [f32]; 5]) -> [&'a [f32]; 5] {
+    let mut inputs: [&[f32]; 5] = [&[], &[], &[], &[], &[]];
+    for (slot, which) in inputs.iter_mut().zip(which) {
+        *slot = match which {
+            FrameInput::X => x,
+            FrameInput::Offset => offset,
+            FrameInput::Base => base,
+            FrameInput::Terrain => patch,
+            FrameInput::Tta => tta,
+        };
+    }
+    inputs
+}
+
 fn with_motion_states<R>(
     scratch: &mut Vec<MotionState>,
     states: &mut [TransitionState],
