@@ -146,17 +146,17 @@ enum PassKind {
 /// Keys of the graph runs in progress (unique in the process).
 static PENDING_KEYS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
 
-/// The most work one call of a character stepped alone does by choice, in runs of the step
-/// graph: enough to run two recurrent cells in a call (RTN's LSTM is about three quarters of a
-/// run), which is how the frames the target blend needs are computed ahead, a fraction per step.
-const CALL_BUDGET: f64 = 1.85;
+/// The most one step of a character stepped alone does by choice, in the time of a run of the
+/// step graph (measured once per runner, without the call's own work, so about 1.6x a step's
+/// median): enough to add half of an LSTM cell (a node of its own at batch 1) to a step's run,
+/// which is how the frames the target blend needs are computed ahead, a fraction per step.
+const CALL_BUDGET: f64 = 2.0;
 
-/// The most a context frame's call does by choice, in runs: its own run, or what is left of the
-/// last one and the start of its own. The second frame's call runs the start graph, which
-/// leaves the step graph's weights out of the cache; catching up in the calls after it would
-/// put two recurrent cells, cold, in one call (2.3x a step, measured): the context's calls stay
-/// a run behind instead, and the first step finishes the last one (two cells, warm).
-const CONTEXT_BUDGET: f64 = 1.2;
+/// The same for a context frame's call. The second one runs the start graph, which leaves the
+/// step graph's weights out of the cache, so the calls after it run slower than measured and
+/// finish what the start left behind a part per call; the context is caught up before the
+/// first step.
+const CONTEXT_BUDGET: f64 = 1.6;
 
 /// Graph runs in progress one runner keeps (characters stepped one at a time); beyond, the
 /// oldest is dropped and its character runs it again whole.
@@ -812,13 +812,10 @@ impl TransitionRunner {
         }
         // One character alone: the last frame's run, if left in progress, then this frame's
         // run node by node within the call's budget (the rest in the next call).
+        let began = std::time::Instant::now();
         let costs = if n == 1 { Some(self.runner.pass_costs()?) } else { None };
-        let mut spent = 0.0;
         let settled = match &costs {
-            Some(costs) => {
-                spent += self.remaining(&states[0], costs);
-                self.finish_pending(states, 0, costs)
-            }
+            Some(costs) => self.finish_pending(states, 0, costs),
             None => self.settle(states),
         };
         if let Err(e) = settled {
@@ -828,10 +825,7 @@ impl TransitionRunner {
         if fed == 0 {
             // The second context frame: the first one's features (its root velocity comes from
             // this frame) and the first graph run, then this frame's run.
-            // Its cost as it comes (the start graph's weights are seldom in the cache).
-            let t = std::time::Instant::now();
             self.first_pass(states, frame, Some(frame))?;
-            spent += costs.as_ref().map_or(0.0, |c| t.elapsed().as_secs_f64() / c.run_time);
         }
         // This frame's features, its previous root in `s.root`.
         self.feats.resize(n * d, 0.0);
@@ -843,7 +837,7 @@ impl TransitionRunner {
         let result = match &costs {
             Some(costs) => self
                 .begin_pending(states, 0, PassKind::Context, Some((d, 0)))
-                .and_then(|()| self.run_pending(states, costs, &mut spent, CONTEXT_BUDGET, f64::INFINITY)),
+                .and_then(|()| self.run_pending(states, costs, began, CONTEXT_BUDGET, f64::INFINITY).map(|_| ())),
             None => {
                 let mut sel = std::mem::take(&mut self.sel);
                 sel.clear();
@@ -1145,43 +1139,36 @@ impl TransitionRunner {
         Ok(())
     }
 
-    /// The share of a run left of `s`'s run in progress (0 without one, 1 when this runner did
-    /// not begin it).
-    fn remaining(&self, s: &TransitionState, costs: &PassCosts) -> f64 {
-        if s.pending.is_none() {
-            return 0.0;
-        }
-        let at = self.partials.iter().find(|(k, _)| *k == s.pending_key);
-        1.0 - at.map_or(0.0, |(_, r)| r.done(costs))
-    }
-
-    /// Runs the next nodes of the one character's run in progress while the call's work
-    /// (`spent`, in runs) stays within `budget` and the character's frames generated, in
-    /// runs, within `cap`; finishes the run when its last node ran. `budget`: [`CALL_BUDGET`]
-    /// or [`CONTEXT_BUDGET`].
+    /// Runs the next nodes of the one character's run in progress while the call (`began`)
+    /// stays within `budget` runs of the step graph ([`PassCosts::run_time`], with the next
+    /// node's measured share) and the character's frames generated, in runs, within `cap`;
+    /// finishes the run when its last node ran. Whether it ran a node.
     fn run_pending(
         &mut self,
         states: &mut [TransitionState],
         costs: &PassCosts,
-        spent: &mut f64,
+        began: std::time::Instant,
         budget: f64,
         cap: f64,
-    ) -> Result<(), MotionError> {
+    ) -> Result<bool, MotionError> {
         if states[0].pending.is_none() {
-            return Ok(());
+            return Ok(false);
         }
         let i = self.resume(&states[0])?;
+        let mut ran = false;
         loop {
             let run = &mut self.partials[i].1;
             if run.complete(costs) {
-                return self.finish_pending(states, 0, costs);
+                self.finish_pending(states, 0, costs)?;
+                return Ok(true);
             }
             let next = run.next_cost(costs);
-            if *spent + next > budget || states[0].generated as f64 + run.done(costs) + next > cap + 1e-9 {
-                return Ok(());
+            let spent = began.elapsed().as_secs_f64() / costs.run_time;
+            if spent + next > budget || states[0].generated as f64 + run.done(costs) + next > cap + 1e-9 {
+                return Ok(ran);
             }
             self.runner.partial_node(run, costs)?;
-            *spent += next;
+            ran = true;
         }
     }
 
@@ -1366,13 +1353,13 @@ impl TransitionRunner {
     /// share of a run per step, where `step_batch` spreads whole runs over a batch). The same
     /// frames, bit for bit: every run is the one-character plan's, on the same inputs.
     fn step_one(&mut self, s: &mut TransitionState, pose: &mut [f32]) -> Result<(), MotionError> {
+        let began = std::time::Instant::now();
         let costs = self.runner.pass_costs()?;
         let states = std::slice::from_mut(s);
         let (f, length, b) = (states[0].frames, states[0].length, states[0].blend_from);
-        // Runs of this call, in runs: what the step needs first, then what fits.
-        let mut spent = 0.0;
+        // What the step needs first: the context's last run, then its own frame (every frame
+        // from the blend window on).
         if states[0].pending == Some(PassKind::Context) {
-            spent += self.remaining(&states[0], &costs);
             self.finish_pending(states, 0, &costs)?;
         }
         let must = if f >= b { length + 1 } else { f + 1 };
@@ -1380,11 +1367,10 @@ impl TransitionRunner {
             if states[0].pending.is_none() {
                 self.begin_pending(states, 0, PassKind::Generation, None)?;
             }
-            spent += self.remaining(&states[0], &costs);
             self.finish_pending(states, 0, &costs)?;
         }
-        // The schedule of the frames computed ahead: `length - b` more than the step's own by
-        // step `b - 1`, growing evenly from the first step.
+        // Then the next runs as far as the call's budget and the schedule of the frames computed
+        // ahead allow: `length - b` more than the step's own by step `b - 1`, growing evenly.
         let extra = (length - b) as f64;
         let cap = ((f + 1) as f64 + extra * (f + 1) as f64 / b.max(1) as f64).min((length + 1) as f64);
         while states[0].generated < length + 1 {
@@ -1394,9 +1380,8 @@ impl TransitionRunner {
                 }
                 self.begin_pending(states, 0, PassKind::Generation, None)?;
             }
-            let before = (states[0].generated, spent);
-            self.run_pending(states, &costs, &mut spent, CALL_BUDGET, cap)?;
-            if states[0].pending.is_some() || (states[0].generated, spent) == before {
+            let ran = self.run_pending(states, &costs, began, CALL_BUDGET, cap)?;
+            if !ran || states[0].pending.is_some() {
                 break;
             }
         }

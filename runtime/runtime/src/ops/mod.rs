@@ -400,9 +400,105 @@ impl Expansion for LstmSpec {
     }
 
     fn wire(&self, prefix: &str, model: &mut TypedModel, inputs: &[OutletId]) -> TractResult<TVec<OutletId>> {
-        let product = Product::new(4 * self.hidden, &self.weights, batch(model, inputs[0])?)?;
-        let op = LstmOp { product, hidden: self.hidden, bias: self.bias.clone(), addends: self.addends };
-        model.wire_node(prefix, op, inputs)
+        let (n, h) = (batch(model, inputs[0])?, self.hidden);
+        if n != Some(1) || std::env::var("ZOO_LSTM_SPLIT").is_ok_and(|v| v == "0") {
+            let product = Product::new(4 * h, &self.weights, n)?;
+            let op = LstmOp { product, hidden: h, bias: self.bias.clone(), addends: self.addends, split: false };
+            return model.wire_node(prefix, op, inputs);
+        }
+        // One character: the gate products in two nodes, gates i and f, then g and o with the
+        // state update, so that a caller running the plan node by node can stop between the
+        // halves of the cell (three quarters of a transition model's run); the same sums, the
+        // same kernel over each half's rows, the addends added in the same order.
+        let half = |from: usize, to: usize| -> TractResult<(Vec<Weights>, Option<Arc<Tensor>>)> {
+            let w = self.weights.iter().map(|w| w.channels(4 * h, from, to)).collect();
+            let b = match &self.bias {
+                Some(b) => Some(Arc::new(tensor1(&b.try_as_plain_ram()?.as_slice::<f32>()?[from..to]))),
+                None => None,
+            };
+            Ok((w, b))
+        };
+        let ((wa, ba), (wb, bb)) = (half(0, 2 * h)?, half(2 * h, 4 * h)?);
+        let gates = LstmGatesOp { product: Product::new(2 * h, &wa, n)?, bias: ba, addends: self.addends };
+        let if_ = model.wire_node(format!("{prefix}.gates_if"), gates, &inputs[1..])?[0];
+        let op =
+            LstmOp { product: Product::new(2 * h, &wb, n)?, hidden: h, bias: bb, addends: self.addends, split: true };
+        let mut all: TVec<OutletId> = inputs.into();
+        all.push(if_);
+        model.wire_node(prefix, op, &all)
+    }
+}
+
+/// Gate pre-activations of output channels `from..from + m` of an LSTM cell into `z` (`[n, m]`):
+/// the product, the bias, then each addend's channels (`[n, 4 x hidden]`) added in turn.
+fn gate_half(
+    p: &Product,
+    bias: Option<&Tensor>,
+    xs: &[&[f32]],
+    addends: &[TValue],
+    n: usize,
+    from: usize,
+    z: &mut Tensor,
+) -> TractResult<()> {
+    let m = p.m;
+    if !p.int8() {
+        p.run_f32(xs, n, bias, None, None, z)?;
+    }
+    let mut view = z.try_as_plain_ram_mut()?;
+    let z = view.as_slice_mut::<f32>()?;
+    if p.int8() {
+        let bias = bias.map(|b| b.try_as_plain_ram()?.as_slice::<f32>()).transpose()?;
+        p.run_i8(xs, n, |i, acc, rows, channels| {
+            Product::dequantize(acc, rows, channels, if i == 0 { bias } else { None }, z, i > 0);
+            Ok(())
+        })?;
+    }
+    for a in addends {
+        let a = plain_f32(a)?;
+        let width = a.len() / n.max(1);
+        for (row, out) in z.chunks_exact_mut(m).enumerate() {
+            out.iter_mut().zip(&a[row * width + from..]).for_each(|(o, a)| *o += a);
+        }
+    }
+    Ok(())
+}
+
+/// Gates i and f of a one-character LSTM cell (see [`LstmSpec`]'s wiring): inputs the products'
+/// inputs and the addends, output the pre-activations `[n, 2 x hidden]`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct LstmGatesOp {
+    product: Product,
+    bias: Option<Arc<Tensor>>,
+    addends: usize,
+}
+
+impl Op for LstmGatesOp {
+    fn name(&self) -> StaticName {
+        "ZooLstmGates".into()
+    }
+
+    op_as_typed_op!();
+}
+
+impl EvalOp for LstmGatesOp {
+    op_out_of_plan!();
+
+    fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
+        let p = &self.product;
+        let n = inputs[0].shape()[0];
+        let terms = p.ks.len();
+        let xs: TVec<&[f32]> = inputs[..terms].iter().map(plain_f32).collect::<TractResult<_>>()?;
+        let mut z = Tensor::zero::<f32>(&[n, p.m])?;
+        gate_half(p, self.bias.as_deref(), &xs, &inputs[terms..], n, 0, &mut z)?;
+        Ok(tvec!(z.into_tvalue()))
+    }
+}
+
+impl TypedOp for LstmGatesOp {
+    as_op!();
+
+    fn output_facts(&self, inputs: &[&TypedFact]) -> TractResult<TVec<TypedFact>> {
+        Ok(tvec!(f32::fact([inputs[0].shape[0].clone(), self.product.m.to_dim()])))
     }
 }
 
@@ -414,11 +510,15 @@ pub(crate) struct LstmOp {
     hidden: usize,
     bias: Option<Arc<Tensor>>,
     addends: usize,
+    /// Gates g and o only; gates i and f come as the last input ([`LstmGatesOp`]).
+    split: bool,
 }
 
 thread_local! {
     /// The gate pre-activations of the last call on this thread, reused.
     static GATES: std::cell::RefCell<Tensor> = std::cell::RefCell::new(Tensor::default());
+    /// Gates g and o of a split cell's last call on this thread, reused.
+    static HALF: std::cell::RefCell<Tensor> = std::cell::RefCell::new(Tensor::default());
 }
 
 impl Op for LstmOp {
@@ -448,10 +548,29 @@ impl EvalOp for LstmOp {
         let n = inputs[0].shape()[0];
         let terms = p.ks.len();
         let xs: TVec<&[f32]> = inputs[1..1 + terms].iter().map(plain_f32).collect::<TractResult<_>>()?;
-        let addends = &inputs[1 + terms..];
+        let addends = &inputs[1 + terms..1 + terms + self.addends];
         GATES.with_borrow_mut(|gates| {
             if gates.shape() != [n, 4 * h] {
                 *gates = Tensor::zero::<f32>(&[n, 4 * h])?;
+            }
+            if self.split {
+                let if_ = plain_f32(&inputs[1 + terms + self.addends])?;
+                HALF.with_borrow_mut(|half| -> TractResult<()> {
+                    if half.shape() != [n, 2 * h] {
+                        *half = Tensor::zero::<f32>(&[n, 2 * h])?;
+                    }
+                    gate_half(p, self.bias.as_deref(), &xs, addends, n, 2 * h, half)?;
+                    let mut view = gates.try_as_plain_ram_mut()?;
+                    let z = view.as_slice_mut::<f32>()?;
+                    let go = half.try_as_plain_ram()?;
+                    let go = go.as_slice::<f32>()?;
+                    for (r, row) in z.chunks_exact_mut(4 * h).enumerate() {
+                        row[..2 * h].copy_from_slice(&if_[r * 2 * h..(r + 1) * 2 * h]);
+                        row[2 * h..].copy_from_slice(&go[r * 2 * h..(r + 1) * 2 * h]);
+                    }
+                    Ok(())
+                })?;
+                return lstm_update(gates, &inputs[0], n, h);
             }
             let mut rest = addends;
             if !p.int8() {
@@ -471,35 +590,43 @@ impl EvalOp for LstmOp {
             for a in rest {
                 z.iter_mut().zip(plain_f32(a)?).for_each(|(o, a)| *o += a);
             }
-            let sigmoid = Func::Sigmoid.ew_f32()?;
-            let tanh = Func::Tanh.ew_f32()?;
-            let c_prev = plain_f32(&inputs[0])?;
-            let mut h_out = Tensor::zero::<f32>(&[n, h])?;
-            let mut c_out = Tensor::zero::<f32>(&[n, h])?;
-            {
-                let mut hv = h_out.try_as_plain_ram_mut()?;
-                let hs = hv.as_slice_mut::<f32>()?;
-                let mut cv = c_out.try_as_plain_ram_mut()?;
-                let cs = cv.as_slice_mut::<f32>()?;
-                for (r, row) in z.chunks_exact_mut(4 * h).enumerate() {
-                    let (ifg, o) = row.split_at_mut(3 * h);
-                    let (if_, g) = ifg.split_at_mut(2 * h);
-                    sigmoid.run(if_)?;
-                    tanh.run(g)?;
-                    sigmoid.run(o)?;
-                    let (i, f) = if_.split_at(h);
-                    let (cp, c, hh) = (&c_prev[r * h..][..h], &mut cs[r * h..][..h], &mut hs[r * h..][..h]);
-                    for j in 0..h {
-                        c[j] = f[j] * cp[j] + i[j] * g[j];
-                    }
-                    hh.copy_from_slice(c);
-                    tanh.run(hh)?;
-                    hh.iter_mut().zip(o.iter()).for_each(|(v, o)| *v *= o);
-                }
-            }
-            Ok(tvec!(h_out.into_tvalue(), c_out.into_tvalue()))
+            lstm_update(gates, &inputs[0], n, h)
         })
     }
+}
+
+/// The state update of an LSTM cell from its gate pre-activations `gates` (`[n, 4 x hidden]`,
+/// i, f, g, o) and the last cell state `c`: `h'`, `c'`.
+fn lstm_update(gates: &mut Tensor, c: &TValue, n: usize, h: usize) -> TractResult<TVec<TValue>> {
+    let mut view = gates.try_as_plain_ram_mut()?;
+    let z = view.as_slice_mut::<f32>()?;
+    let sigmoid = Func::Sigmoid.ew_f32()?;
+    let tanh = Func::Tanh.ew_f32()?;
+    let c_prev = plain_f32(c)?;
+    let mut h_out = Tensor::zero::<f32>(&[n, h])?;
+    let mut c_out = Tensor::zero::<f32>(&[n, h])?;
+    {
+        let mut hv = h_out.try_as_plain_ram_mut()?;
+        let hs = hv.as_slice_mut::<f32>()?;
+        let mut cv = c_out.try_as_plain_ram_mut()?;
+        let cs = cv.as_slice_mut::<f32>()?;
+        for (r, row) in z.chunks_exact_mut(4 * h).enumerate() {
+            let (ifg, o) = row.split_at_mut(3 * h);
+            let (if_, g) = ifg.split_at_mut(2 * h);
+            sigmoid.run(if_)?;
+            tanh.run(g)?;
+            sigmoid.run(o)?;
+            let (i, f) = if_.split_at(h);
+            let (cp, c, hh) = (&c_prev[r * h..][..h], &mut cs[r * h..][..h], &mut hs[r * h..][..h]);
+            for j in 0..h {
+                c[j] = f[j] * cp[j] + i[j] * g[j];
+            }
+            hh.copy_from_slice(c);
+            tanh.run(hh)?;
+            hh.iter_mut().zip(o.iter()).for_each(|(v, o)| *v *= o);
+        }
+    }
+    Ok(tvec!(h_out.into_tvalue(), c_out.into_tvalue()))
 }
 
 impl TypedOp for LstmOp {

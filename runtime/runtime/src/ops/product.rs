@@ -43,6 +43,22 @@ pub(crate) enum Weights {
     I8 { q: Vec<i8>, scales: Vec<f32> },
 }
 
+impl Weights {
+    /// Output channels `from..to` of these weights (`m` channels in all).
+    pub(crate) fn channels(&self, m: usize, from: usize, to: usize) -> Weights {
+        match self {
+            Weights::F32(v) => {
+                let k = v.len() / m.max(1);
+                Weights::F32(v[from * k..to * k].to_vec())
+            }
+            Weights::I8 { q, scales } => {
+                let k = q.len() / m.max(1);
+                Weights::I8 { q: q[from * k..to * k].to_vec(), scales: scales[from..to].to_vec() }
+            }
+        }
+    }
+}
+
 /// The kernel, its packing and the packed weights of a product.
 #[derive(Clone, Debug)]
 pub(crate) struct Product {
