@@ -14,8 +14,8 @@ use crate::runtime::{
 };
 use std::time::Instant;
 use zoo_data::{Context, bail};
+use zoo_runtime::MotionModel;
 use zoo_runtime::keyframes::{KeyframeModel, MotionKeys};
-use zoo_runtime::{MotionModel, MotionTaskKind};
 
 /// Rest pose of the lamp (base x, y, angle, three joint angles).
 const REST: [f32; 6] = [0.0, 0.02, 0.0, 0.5, -1.1, -1.2];
@@ -127,18 +127,10 @@ fn measure(
         .collect())
 }
 
-/// Runs `zoo bench keyframes`: the header line and the figures.
-pub fn run(o: &RuntimeOptions) -> Result<(String, Vec<BackendFigure>)> {
+/// Runs `zoo bench keyframes` on `km`, the ARNN step-graph export loaded from `o.model` (the
+/// in-betweening design is timed by `crate::whole_shot`): the header line and the figures.
+pub fn run(o: &RuntimeOptions, km: &KeyframeModel) -> Result<(String, Vec<BackendFigure>)> {
     let bytes = std::fs::read(&o.model).with_context(|| format!("reading {}", o.model.display()))?;
-    let km =
-        crate::exported::load(&o.model, &[MotionTaskKind::Keyframes], "`zoo bench keyframes`")?.into_keyframes()?;
-    if km.is_inbetween() {
-        bail!(
-            "{}: the in-betweening design has no per-frame step graph; `zoo bench keyframes` times the ARNN's step \
-             graph (tract against onnxruntime): pass an ARNN step-graph export",
-            o.model.display()
-        );
-    }
     let lib = onnxruntime_library(o.onnxruntime.as_deref())?;
     let env = onnxruntime_env(&lib)?;
     let header = format!(
@@ -149,7 +141,7 @@ pub fn run(o: &RuntimeOptions) -> Result<(String, Vec<BackendFigure>)> {
     );
     let mut figures = Vec::new();
     for &batch in &o.batch {
-        figures.extend(measure(o, &km, &bytes, &env, batch)?);
+        figures.extend(measure(o, km, &bytes, &env, batch)?);
     }
     Ok((header, figures))
 }

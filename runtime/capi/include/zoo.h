@@ -455,7 +455,8 @@ enum ZooStatus zoo_transition_start(struct ZooTransitionRunner *runner,
 // as in `zoo_transition_start`, `past_frames` the context frames in all (the model was
 // trained with `ZooTransitionInfo`'s `past_frames`). Runs no graph pass (one when
 // `past_frames` is 1). Then call `zoo_transition_feed` once per frame for the other
-// `past_frames - 1` context frames (the first feed runs two passes, the others one) and step.
+// `past_frames - 1` context frames (one graph pass each, and the start graph with the first) and
+// step. For one character the runner spreads these passes over the calls, node by node.
 // The frames are those `zoo_transition_start` gives for the same context, bit for bit. One
 // thread at a time.
 //
@@ -473,8 +474,9 @@ enum ZooStatus zoo_transition_begin(struct ZooTransitionRunner *runner,
                                     size_t length);
 
 // Feeds the next context frame of every character's transition begun with
-// `zoo_transition_begin`: `frame` holds `N * 3K` global positions. One graph pass (two for the
-// second context frame). After the last one, step the transition. One thread at a time.
+// `zoo_transition_begin`: `frame` holds `N * 3K` global positions. One graph pass (and the start
+// graph on the first context frame, with the second); for one character the pass may finish in
+// the next call (a frame budget). After the last one, step the transition. One thread at a time.
 //
 // Safety: Handles are NULL or live and used by this thread only; `frame` is NULL or holds
 // `frame_len` floats.

@@ -779,9 +779,11 @@ impl TransitionRunner {
 
     /// Feeds the next context frame of transitions begun with
     /// [`TransitionRunner::begin_batch`]: `frame` holds `N * 3K` global positions (every
-    /// character of the call at the same point of its context). One graph run (two for the
-    /// second context frame, whose arrival lets the first be encoded); after the last one the
-    /// transitions can be stepped.
+    /// character of the call at the same point of its context). One graph run (and the start
+    /// graph on the first context frame with the second, whose arrival lets the first be
+    /// encoded); for one character alone the run goes node by node within a budget per call and
+    /// may finish in the next call (a frame budget). After the last one the transitions can be
+    /// stepped.
     pub fn feed_batch(&mut self, states: &mut [TransitionState], frame: &[f32]) -> Result<(), MotionError> {
         let (n, k) = (states.len(), self.model.joints);
         let d = 3 * k;

@@ -195,7 +195,7 @@ pub fn keyframes(k: KeyframesArgs) -> anyhow::Result<()> {
             a.model.display()
         );
     }
-    let (header, figures) = zoo_bench::keyframes::run(&a.options())?;
+    let (header, figures) = zoo_bench::keyframes::run(&a.options(), &km)?;
     println!("{header}");
     println!("{}", zoo_bench::keyframes::table(&figures, a.rounds, a.work));
     if let Some(path) = &a.json {

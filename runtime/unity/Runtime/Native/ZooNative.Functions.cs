@@ -215,7 +215,8 @@ namespace Zoo.Native
         /// as in <c>zoo_transition_start</c>, <c>past_frames</c> the context frames in all (the model was
         /// trained with <c>ZooTransitionInfo</c>'s <c>past_frames</c>). Runs no graph pass (one when
         /// <c>past_frames</c> is 1). Then call <c>zoo_transition_feed</c> once per frame for the other
-        /// <c>past_frames - 1</c> context frames (the first feed runs two passes, the others one) and step.
+        /// <c>past_frames - 1</c> context frames (one graph pass each, and the start graph with the first) and
+        /// step. For one character the runner spreads these passes over the calls, node by node.
         /// The frames are those <c>zoo_transition_start</c> gives for the same context, bit for bit. One
         /// thread at a time.
         /// </summary>
@@ -228,8 +229,9 @@ namespace Zoo.Native
 
         /// <summary>
         /// Feeds the next context frame of every character's transition begun with
-        /// <c>zoo_transition_begin</c>: <c>frame</c> holds <c>N * 3K</c> global positions. One graph pass (two for the
-        /// second context frame). After the last one, step the transition. One thread at a time.
+        /// <c>zoo_transition_begin</c>: <c>frame</c> holds <c>N * 3K</c> global positions. One graph pass (and the start
+        /// graph on the first context frame, with the second); for one character the pass may finish in
+        /// the next call (a frame budget). After the last one, step the transition. One thread at a time.
         /// </summary>
         /// <remarks>
         /// Safety: Handles are NULL or live and used by this thread only; <c>frame</c> is NULL or holds
