@@ -484,3 +484,118 @@ impl MotionRunner {
         read_outputs(inner, &results, std::slice::from_mut(state), outputs)
     }
 }
+
+/// A one-character run of the start graph begun before all its inputs are known: the nodes that
+/// need only the known ones ran ([`MotionRunner::start_begin`]; a transition's target is known
+/// before its context's second frame, which the first frame's features need).
+#[derive(Debug)]
+pub(crate) struct PartialStart {
+    session: Session,
+    /// Per graph input: whether it comes at [`MotionRunner::start_finish`].
+    late: Vec<bool>,
+    /// Per node of the plan: whether it needs a late input.
+    waits: Vec<bool>,
+}
+
+impl MotionRunner {
+    /// Begins the start graph for one character with the inputs known now (`None`: comes at
+    /// [`MotionRunner::start_finish`]) and runs every node that needs only those; `None` without
+    /// a start graph.
+    pub(crate) fn start_begin(&self, inputs: &[Option<&[f32]>]) -> Result<Option<PartialStart>, MotionError> {
+        let inner = &*self.model.inner;
+        let Some(start) = &inner.start else { return Ok(None) };
+        if inputs.len() != start.inputs.len() {
+            return Err(MotionError::BufferCount {
+                what: "start inputs",
+                expected: start.inputs.len(),
+                found: inputs.len(),
+            });
+        }
+        for (info, data) in start.inputs.iter().zip(inputs) {
+            if let Some(data) = data {
+                check_len(&info.name, data.len(), 1, info.width)?;
+                check_finite(&info.name, data, info.width)?;
+            }
+        }
+        let run_err = |e: TractError| MotionError::Run { reason: chain(&e) };
+        let mut session = Session::new(&start.single, 1, &start.widths)?;
+        for (g, data) in inputs.iter().enumerate() {
+            if let Some(data) = data {
+                let tensor = Arc::make_mut(&mut session.inputs[g]);
+                let mut view = tensor.try_as_plain_ram_mut().map_err(run_err)?;
+                view.as_slice_mut::<f32>().map_err(run_err)?.copy_from_slice(data);
+            }
+        }
+        let values: TVec<TValue> = session.inputs.iter().map(|t| TValue::from_const(t.clone())).collect();
+        session.state.set_inputs(values).map_err(run_err)?;
+        let model = start.single.model();
+        let late: Vec<bool> = inputs.iter().map(Option::is_none).collect();
+        let mut waits = vec![false; model.nodes().len()];
+        for (g, outlet) in model.input_outlets().map_err(run_err)?.iter().enumerate() {
+            waits[outlet.node] = late[g];
+        }
+        for &node in start.single.order_without_consts() {
+            waits[node] |= model.nodes()[node].inputs.iter().any(|i| waits[i.node]);
+            if !waits[node] {
+                session.state.compute_one(node).map_err(run_err)?;
+            }
+        }
+        Ok(Some(PartialStart { session, late, waits }))
+    }
+
+    /// Finishes `p` with the late inputs (`inputs` as [`MotionRunner::start`] takes them; the
+    /// others were given to [`MotionRunner::start_begin`]) and sets `state` as
+    /// [`MotionRunner::start`] does.
+    pub(crate) fn start_finish(
+        &self,
+        p: &mut PartialStart,
+        state: &mut MotionState,
+        inputs: &[&[f32]],
+    ) -> Result<(), MotionError> {
+        let inner = &*self.model.inner;
+        let start =
+            inner.start.as_ref().ok_or_else(|| MotionError::Run { reason: "the model has no start graph".into() })?;
+        check_states(inner, std::slice::from_ref(state))?;
+        if inputs.len() != start.inputs.len() {
+            return Err(MotionError::BufferCount {
+                what: "start inputs",
+                expected: start.inputs.len(),
+                found: inputs.len(),
+            });
+        }
+        let run_err = |e: TractError| MotionError::Run { reason: chain(&e) };
+        for (g, (info, data)) in start.inputs.iter().zip(inputs).enumerate() {
+            if !p.late[g] {
+                continue;
+            }
+            check_len(&info.name, data.len(), 1, info.width)?;
+            check_finite(&info.name, data, info.width)?;
+            let tensor = Tensor::from_shape::<f32>(&[1, info.width], data).map_err(run_err)?;
+            p.session.state.set_input(g, tensor.into_tvalue()).map_err(run_err)?;
+        }
+        for &node in start.single.order_without_consts() {
+            if p.waits[node] {
+                p.session.state.compute_one(node).map_err(run_err)?;
+            }
+        }
+        let results = p.session.state.outputs().map_err(run_err)?;
+        state.reset();
+        for (o, &k) in start.out_slots.iter().enumerate() {
+            let view = results[o].try_as_plain_ram().map_err(run_err)?;
+            let src = view.as_slice::<f32>().map_err(run_err)?;
+            let slot = &mut state.slots[k];
+            if src.len() != slot.len() {
+                return Err(MotionError::Run {
+                    reason: format!(
+                        "start output for state `{}` has {} values, expected {}",
+                        inner.states[k].input,
+                        src.len(),
+                        slot.len()
+                    ),
+                });
+            }
+            slot.copy_from_slice(src);
+        }
+        Ok(())
+    }
+}

@@ -25,7 +25,7 @@ mod posed;
 use crate::error::MotionError;
 use crate::metadata::{MotionMeanStd, MotionTask, TransitionFallback, keys};
 use crate::model::{MotionModel, MotionState};
-use crate::runner::{MotionRunner, PartialRun, PassCosts, check_finite, check_len};
+use crate::runner::{MotionRunner, PartialRun, PartialStart, PassCosts, check_finite, check_len};
 use glam::DVec3;
 use posed::{PosedScratch, PosedState};
 use std::path::Path;
@@ -302,6 +302,10 @@ pub struct TransitionRunner {
     /// first; `spare`: finished ones, reused.
     partials: Vec<(u64, PartialRun)>,
     spare: Vec<PartialRun>,
+    /// Start-graph runs begun by `begin` for one character (its target part), by `pending_key`.
+    starts: Vec<(u64, PartialStart)>,
+    /// [`CALL_BUDGET`] and [`CONTEXT_BUDGET`] (tests set them).
+    budgets: (f64, f64),
     /// Foot-lock post-process of `generate`, off unless set.
     foot_lock: Option<lock::FittedLock>,
     /// Whether transitions longer than the trained length are accepted.
@@ -550,6 +554,8 @@ impl TransitionModel {
             spread_ahead: true,
             partials: Vec::new(),
             spare: Vec::new(),
+            starts: Vec::new(),
+            budgets: (CALL_BUDGET, CONTEXT_BUDGET),
             foot_lock: None,
             beyond_trained: false,
             fallback: None,
@@ -773,6 +779,19 @@ impl TransitionRunner {
         if past_frames == 1 {
             // The first frame's features need no second frame: start now.
             self.first_pass(states, first, None)?;
+        } else if states.len() == 1 {
+            // One character: the start graph's target part now (a frame budget), the rest with
+            // the second frame.
+            let s = &mut states[0];
+            let given: Vec<Option<&[f32]>> =
+                self.model.start_target.iter().map(|&t| t.then_some(&s.target_vec[..])).collect();
+            if let Some(p) = self.runner.start_begin(&given)? {
+                s.pending_key = PENDING_KEYS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                if self.starts.len() >= MAX_PARTIALS {
+                    self.starts.remove(0);
+                }
+                self.starts.push((s.pending_key, p));
+            }
         }
         Ok(())
     }
@@ -839,7 +858,7 @@ impl TransitionRunner {
         let result = match &costs {
             Some(costs) => self
                 .begin_pending(states, 0, PassKind::Context, Some((d, 0)))
-                .and_then(|()| self.run_pending(states, costs, began, CONTEXT_BUDGET, f64::INFINITY).map(|_| ())),
+                .and_then(|()| self.run_pending(states, costs, began, self.budgets.1, f64::INFINITY).map(|_| ())),
             None => {
                 let mut sel = std::mem::take(&mut self.sel);
                 sel.clear();
@@ -894,9 +913,19 @@ impl TransitionRunner {
         let m = &self.model;
         let (target_vec, x0) = (&self.target_vec[..], &self.x0[..]);
         let inputs: Vec<&[f32]> = m.start_target.iter().map(|&t| if t { target_vec } else { x0 }).collect();
-        let result = with_motion_states(&mut self.motion, states, 0..n, &m.model, |runner_states| {
-            self.runner.start_batch(runner_states, &inputs)
-        });
+        let begun = match n {
+            1 => self.starts.iter().position(|(k, _)| *k == states[0].pending_key),
+            _ => None,
+        };
+        let result = match begun {
+            Some(i) => {
+                let (_, mut p) = self.starts.remove(i);
+                self.runner.start_finish(&mut p, &mut states[0].motion, &inputs)
+            }
+            None => with_motion_states(&mut self.motion, states, 0..n, &m.model, |runner_states| {
+                self.runner.start_batch(runner_states, &inputs)
+            }),
+        };
         if let Err(e) = result {
             states.iter_mut().for_each(|s| s.context_total = 0);
             return Err(e);
@@ -1382,7 +1411,7 @@ impl TransitionRunner {
                 }
                 self.begin_pending(states, 0, PassKind::Generation, None)?;
             }
-            let ran = self.run_pending(states, &costs, began, CALL_BUDGET, cap)?;
+            let ran = self.run_pending(states, &costs, began, self.budgets.0, cap)?;
             if !ran || states[0].pending.is_some() {
                 break;
             }
@@ -1398,6 +1427,14 @@ impl TransitionRunner {
         s.ahead_from += 1;
         s.frames += 1;
         Ok(())
+    }
+
+    /// Sets the budgets of a step and of a context frame's call for one character, in runs of the
+    /// step graph (defaults 2.0 and 1.6): 0 runs only what each call needs, leaving every run it
+    /// can in progress, whatever the machine's speed. For tests.
+    #[doc(hidden)]
+    pub fn set_call_budgets(&mut self, step: f64, context: f64) {
+        self.budgets = (step, context);
     }
 
     /// The network's next frame, without the target blend and without a length limit: the
