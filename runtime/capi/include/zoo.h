@@ -454,7 +454,8 @@ enum ZooStatus zoo_transition_start(struct ZooTransitionRunner *runner,
 // holds each character's first context frame (`N * 3K` global positions), `target` and `next`
 // as in `zoo_transition_start`, `past_frames` the context frames in all (the model was
 // trained with `ZooTransitionInfo`'s `past_frames`). Runs no graph pass (one when
-// `past_frames` is 1). Then call `zoo_transition_feed` once per frame for the other
+// `past_frames` is 1; for one character, the start graph's part that needs only the target).
+// Then call `zoo_transition_feed` once per frame for the other
 // `past_frames - 1` context frames (one graph pass each, and the start graph with the first) and
 // step. For one character the runner spreads these passes over the calls, node by node.
 // The frames are those `zoo_transition_start` gives for the same context, bit for bit. One

@@ -214,7 +214,8 @@ namespace Zoo.Native
         /// holds each character's first context frame (<c>N * 3K</c> global positions), <c>target</c> and <c>next</c>
         /// as in <c>zoo_transition_start</c>, <c>past_frames</c> the context frames in all (the model was
         /// trained with <c>ZooTransitionInfo</c>'s <c>past_frames</c>). Runs no graph pass (one when
-        /// <c>past_frames</c> is 1). Then call <c>zoo_transition_feed</c> once per frame for the other
+        /// <c>past_frames</c> is 1; for one character, the start graph's part that needs only the target).
+        /// Then call <c>zoo_transition_feed</c> once per frame for the other
         /// <c>past_frames - 1</c> context frames (one graph pass each, and the start graph with the first) and
         /// step. For one character the runner spreads these passes over the calls, node by node.
         /// The frames are those <c>zoo_transition_start</c> gives for the same context, bit for bit. One
