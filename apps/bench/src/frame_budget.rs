@@ -16,7 +16,10 @@
 //! Each call is timed alone, on the wall clock (`Instant`) and in the thread's CPU time (what a
 //! core dedicated to the game would see: on a shared machine the wall clock's slowest calls are
 //! often the system running other work); the first calls (one transition, or 3 calls) warm the
-//! caches and are not counted.
+//! caches and are not counted. Calls that repeat a cycle (a transition's begin, feeds and steps;
+//! a stream's windows and seams) are also grouped by their place in it: the slowest place's
+//! median is what the schedule costs, which another process's work at random moments does not
+//! reach.
 
 use crate::Result;
 use serde::Serialize;
@@ -58,6 +61,15 @@ pub struct CallFigure {
     pub cpu_max_ms: f64,
     /// `cpu_max_ms / cpu_median_ms`.
     pub cpu_max_over_median: f64,
+    /// Calls in the sequence's cycle (a transition's begin, feeds and steps; a stitch stream's
+    /// windows and seams), or 1 for calls that all do the same work.
+    pub period: usize,
+    /// The slowest place of the cycle: the largest median thread CPU time of the calls at one
+    /// place of the cycle over `cpu_median_ms`. What the calls' schedule costs, which another
+    /// process's work at random moments does not reach (1 without a cycle).
+    pub cpu_slowest_place_over_median: f64,
+    /// That place's call kind and its index in the cycle (from the first call timed).
+    pub slowest_place: String,
 }
 
 /// Times `calls` calls of `next` (which runs one call and names its kind) after `warm` calls.
@@ -66,6 +78,7 @@ fn time_calls(
     batch: usize,
     warm: usize,
     calls: usize,
+    period: usize,
     mut next: impl FnMut() -> Result<&'static str>,
 ) -> Result<CallFigure> {
     for _ in 0..warm {
@@ -90,6 +103,19 @@ fn time_calls(
         (at(0.5), at(0.99), sorted[calls - 1])
     };
     let ((median, p99, max), (cpu_median, cpu_p99, cpu_max)) = (stats(&times), stats(&cpu));
+    // The median of each place of the cycle, the slowest of them.
+    let period = period.clamp(1, calls);
+    let mut place = (0usize, cpu_median);
+    if period > 1 {
+        for at in 0..period {
+            let mut v: Vec<f64> = cpu.iter().skip(at).step_by(period).copied().collect();
+            v.sort_by(f64::total_cmp);
+            let m = v[v.len() / 2];
+            if m > place.1 {
+                place = (at, m);
+            }
+        }
+    }
     Ok(CallFigure {
         calls: label.to_string(),
         batch,
@@ -103,6 +129,13 @@ fn time_calls(
         cpu_p99_ms: cpu_p99,
         cpu_max_ms: cpu_max,
         cpu_max_over_median: cpu_max / cpu_median,
+        period,
+        cpu_slowest_place_over_median: place.1 / cpu_median,
+        slowest_place: if period > 1 {
+            format!("{} (place {} of {period})", kinds[place.0], place.0)
+        } else {
+            "-".into()
+        },
     })
 }
 
@@ -192,7 +225,8 @@ fn transition(m: &TransitionModel, batch: usize, calls: usize, fed: bool) -> Res
         Ok("step")
     };
     let label = if fed { "transition (context fed per frame)" } else { "transition (start)" };
-    time_calls(label, batch, length + past + 1, calls, next_call)
+    let period = if fed { past + length + 1 } else { length + 2 };
+    time_calls(label, batch, length + past + 1, calls, period, next_call)
 }
 
 fn keyframes(m: &KeyframeModel, batch: usize, calls: usize) -> Result<CallFigure> {
@@ -202,7 +236,7 @@ fn keyframes(m: &KeyframeModel, batch: usize, calls: usize) -> Result<CallFigure
         (0..batch).map(|c| (0..4 * d).map(|i| ((i + 7 * c) as f32 * 0.37).sin() * 0.5).collect()).collect();
     let mut runner = m.runner(batch)?;
     let mut outs: Vec<Vec<f32>> = vec![vec![0.0; 40 * d]; batch];
-    time_calls("keyframes (one 40-frame shot per character)", batch, 3, calls, || {
+    time_calls("keyframes (one 40-frame shot per character)", batch, 3, calls, 1, || {
         let keys: Vec<MotionKeys> = poses.iter().map(|p| MotionKeys::whole(&frames, p)).collect();
         let mut out: Vec<&mut [f32]> = outs.iter_mut().map(|o| o.as_mut_slice()).collect();
         runner.complete_batch(&keys, &mut out)?;
@@ -220,7 +254,9 @@ fn stitch(r: &StitchRefiner, batch: usize, calls: usize) -> Result<CallFigure> {
     let mut streams: Vec<_> = (0..batch).map(|_| r.stream()).collect();
     let mut out = EnginePose::new(k);
     let mut f = 0usize;
-    time_calls("stitch stream (one frame per stream: push, then pop)", batch, 3, calls, || {
+    // Windows every `stride` frames, a seam every 45.
+    let period = num_lcm(r.stride(), 45);
+    time_calls("stitch stream (one frame per stream: push, then pop)", batch, 3, calls, period, || {
         for (c, s) in streams.iter_mut().enumerate() {
             if f > 0 && f % 45 == 0 {
                 s.mark_seam();
@@ -250,7 +286,7 @@ fn synthesis(m: &SynthesisModel, batch: usize, calls: usize) -> Result<CallFigur
     let mut runner = m.runner(batch)?;
     let mut poses = vec![EnginePose::new(m.joints()); batch];
     let mut contacts = vec![[false; 2]; batch];
-    time_calls("synthesis", batch, 3, calls, || {
+    time_calls("synthesis", batch, 3, calls, 1, || {
         runner.step_batch(&mut characters, 1.0, &mut poses, &mut contacts)?;
         Ok("step")
     })
@@ -267,7 +303,7 @@ fn control(m: &SynthesisModel, batch: usize, calls: usize) -> Result<CallFigure>
     let mut runner = ControlRunner::new(m)?;
     let mut pose = EnginePose::new(m.joints());
     let mut f = 0usize;
-    time_calls("control", batch, 3, calls, || {
+    time_calls("control", batch, 3, calls, 1, || {
         let control = Control::new(if (f / 60) % 2 == 0 { 1.2 } else { 0.6 }, 0.5 * (f / 60) as f32);
         for ch in characters.iter_mut() {
             runner.step(ch, control, &mut pose)?;
@@ -280,11 +316,11 @@ fn control(m: &SynthesisModel, batch: usize, calls: usize) -> Result<CallFigure>
 /// The figures as a table.
 pub fn table(figures: &[CallFigure]) -> String {
     let mut s = String::from(
-        "| calls | batch | count | median ms | p99 ms | max ms | max / median | slowest | CPU median / p99 / max ms | CPU max / median |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
+        "| calls | batch | count | median ms | p99 ms | max ms | max / median | slowest | CPU median / p99 / max ms | CPU max / median | CPU slowest place / median |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
     );
     for f in figures {
         s.push_str(&format!(
-            "| {} | {} | {} | {:.3} | {:.3} | {:.3} | {:.2} | {} | {:.3} / {:.3} / {:.3} | {:.2} |\n",
+            "| {} | {} | {} | {:.3} | {:.3} | {:.3} | {:.2} | {} | {:.3} / {:.3} / {:.3} | {:.2} | {:.2} {} |\n",
             f.calls,
             f.batch,
             f.count,
@@ -296,8 +332,57 @@ pub fn table(figures: &[CallFigure]) -> String {
             f.cpu_median_ms,
             f.cpu_p99_ms,
             f.cpu_max_ms,
-            f.cpu_max_over_median
+            f.cpu_max_over_median,
+            f.cpu_slowest_place_over_median,
+            f.slowest_place
         ));
     }
     s
+}
+
+/// The least common multiple of `a` and `b` (both at least 1).
+fn num_lcm(a: usize, b: usize) -> usize {
+    let (mut x, mut y) = (a.max(1), b.max(1));
+    while y != 0 {
+        (x, y) = (y, x % y);
+    }
+    a.max(1) / x * b.max(1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Busy for `ms` milliseconds of this thread's CPU time.
+    fn spin(ms: f64) {
+        let t = cpu_time::ThreadTime::now();
+        while t.elapsed().as_secs_f64() * 1e3 < ms {
+            std::hint::black_box(0u64);
+        }
+    }
+
+    /// A cycle of five calls whose fourth does three times the work: the slowest place is that
+    /// one, at about 3x the median, whatever a single call elsewhere costs.
+    #[test]
+    fn the_slowest_place_of_a_cycle_is_found() {
+        let mut i = 0usize;
+        let f = time_calls("cycle", 1, 0, 60, 5, || {
+            let heavy = i % 5 == 3;
+            // One call at another place, once, as another process's work would.
+            spin(if heavy {
+                0.6
+            } else if i == 7 {
+                2.0
+            } else {
+                0.2
+            });
+            i += 1;
+            Ok(if heavy { "heavy" } else { "light" })
+        })
+        .unwrap();
+        assert_eq!(f.slowest_place, "heavy (place 3 of 5)");
+        assert!((2.5..3.6).contains(&f.cpu_slowest_place_over_median), "{}", f.cpu_slowest_place_over_median);
+        assert!(f.cpu_max_over_median > 8.0, "{}", f.cpu_max_over_median);
+        assert_eq!((num_lcm(30, 45), num_lcm(5, 1), num_lcm(7, 7)), (90, 5, 7));
+    }
 }
