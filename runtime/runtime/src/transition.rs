@@ -534,11 +534,14 @@ impl TransitionModel {
         }
     }
 
-    /// Scratch space for one thread.
+    /// Scratch space for one thread (measures the cost of the step graph's nodes once: a few runs).
     pub fn runner(&self) -> Result<TransitionRunner, MotionError> {
+        let mut runner = self.model.runner()?;
+        // The node costs of a run, measured now (a few runs) rather than in a frame's call.
+        runner.pass_costs()?;
         Ok(TransitionRunner {
             model: self.clone(),
-            runner: self.model.runner()?,
+            runner,
             feats: Vec::new(),
             target_vec: Vec::new(),
             x0: Vec::new(),
