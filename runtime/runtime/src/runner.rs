@@ -183,26 +183,7 @@ impl MotionRunner {
         }
         let values: TVec<TValue> = session.inputs.iter().map(|t| TValue::from_const(t.clone())).collect();
         let results = session.state.run(values).map_err(run_err)?;
-        states.iter_mut().for_each(MotionState::reset);
-        for (o, &k) in start.out_slots.iter().enumerate() {
-            let view = results[o].try_as_plain_ram().map_err(run_err)?;
-            let src = view.as_slice::<f32>().map_err(run_err)?;
-            let width = inner.states[k].width;
-            if src.len() != batch * width {
-                return Err(MotionError::Run {
-                    reason: format!(
-                        "start output for state `{}` has {} values, expected {}",
-                        inner.states[k].input,
-                        src.len(),
-                        batch * width
-                    ),
-                });
-            }
-            for (c, state) in states.iter_mut().enumerate() {
-                state.slots[k].copy_from_slice(&src[c * width..(c + 1) * width]);
-            }
-        }
-        Ok(())
+        read_start_outputs(inner, &start.out_slots, &results, states)
     }
 
     fn run(
@@ -254,6 +235,46 @@ impl MotionRunner {
     }
 }
 
+/// Resets the characters' states and sets them from a start-graph run's results (output `o`
+/// into state slot `out_slots[o]`); slots the start graph does not produce stay zero.
+fn read_start_outputs(
+    inner: &Inner,
+    out_slots: &[usize],
+    results: &[TValue],
+    states: &mut [MotionState],
+) -> Result<(), MotionError> {
+    let run_err = |e: TractError| MotionError::Run { reason: chain(&e) };
+    states.iter_mut().for_each(MotionState::reset);
+    for (o, &k) in out_slots.iter().enumerate() {
+        let view = results[o].try_as_plain_ram().map_err(run_err)?;
+        let src = view.as_slice::<f32>().map_err(run_err)?;
+        write_slot(inner, k, src, states, "start output for state", &inner.states[k].input)?;
+    }
+    Ok(())
+}
+
+/// Sets state slot `k` of every character from `src` (character-major), or names the graph's
+/// output (`what` `name`) that has the wrong size.
+fn write_slot(
+    inner: &Inner,
+    k: usize,
+    src: &[f32],
+    states: &mut [MotionState],
+    what: &str,
+    name: &str,
+) -> Result<(), MotionError> {
+    let (batch, width) = (states.len(), inner.states[k].width);
+    if src.len() != batch * width {
+        return Err(MotionError::Run {
+            reason: format!("{what} `{name}` has {} values, expected {}", src.len(), batch * width),
+        });
+    }
+    for (c, state) in states.iter_mut().enumerate() {
+        state.slots[k].copy_from_slice(&src[c * width..(c + 1) * width]);
+    }
+    Ok(())
+}
+
 /// Copies the frame inputs and the characters' states into the session's preallocated input
 /// tensors and returns them as the graph's input values.
 fn fill_inputs(
@@ -290,7 +311,6 @@ fn read_outputs(
     outputs: &mut [&mut [f32]],
 ) -> Result<(), MotionError> {
     let run_err = |e: TractError| MotionError::Run { reason: chain(&e) };
-    let batch = states.len();
     for (o, source) in inner.graph_outputs.iter().enumerate() {
         let view = results[o].try_as_plain_ram().map_err(run_err)?;
         let src = view.as_slice::<f32>().map_err(run_err)?;
@@ -308,22 +328,7 @@ fn read_outputs(
                 }
                 outputs[i].copy_from_slice(src);
             }
-            Source::State(k) => {
-                let width = inner.states[k].width;
-                if src.len() != batch * width {
-                    return Err(MotionError::Run {
-                        reason: format!(
-                            "state output `{}` has {} values, expected {}",
-                            inner.states[k].output,
-                            src.len(),
-                            batch * width
-                        ),
-                    });
-                }
-                for (c, state) in states.iter_mut().enumerate() {
-                    state.slots[k].copy_from_slice(&src[c * width..(c + 1) * width]);
-                }
-            }
+            Source::State(k) => write_slot(inner, k, src, states, "state output", &inner.states[k].output)?,
         }
     }
     Ok(())
@@ -579,23 +584,6 @@ impl MotionRunner {
             }
         }
         let results = p.session.state.outputs().map_err(run_err)?;
-        state.reset();
-        for (o, &k) in start.out_slots.iter().enumerate() {
-            let view = results[o].try_as_plain_ram().map_err(run_err)?;
-            let src = view.as_slice::<f32>().map_err(run_err)?;
-            let slot = &mut state.slots[k];
-            if src.len() != slot.len() {
-                return Err(MotionError::Run {
-                    reason: format!(
-                        "start output for state `{}` has {} values, expected {}",
-                        inner.states[k].input,
-                        src.len(),
-                        slot.len()
-                    ),
-                });
-            }
-            slot.copy_from_slice(src);
-        }
-        Ok(())
+        read_start_outputs(inner, &start.out_slots, &results, std::slice::from_mut(state))
     }
 }
