@@ -465,7 +465,7 @@ fn a_character_alone_spreads_its_runs_over_calls_with_the_same_frames() {
         }
         let mut out = vec![0.0f32; 2 * d];
         // Case 2 joins the batch with the context's last run in progress.
-        let mut joined = case == 2 && states[0].has_run_in_progress();
+        let joined = case == 2 && states[0].has_run_in_progress();
         for f in 0..=length {
             let batch = joined;
             if batch {
