@@ -433,6 +433,31 @@ fn humanoid_arnn_trains_on_bvh_and_runs_in_the_benchmark() {
     let (ok, stdout, stderr) = run(&["train", "arnn", "--epochs", "2", "--threads", "1", "--resume", r]);
     assert!(ok, "{stdout}\n{stderr}");
     assert!(stdout.contains("epoch   2"), "{stdout}");
+    // A content held out of both splits: left out of the run, kept by its resumption, and
+    // refused without humanoid clips or with another glob on resuming.
+    let held = dir.path().join("held");
+    let hr = held.to_str().unwrap();
+    let exclude = ["--exclude-glob", "*_0003.bvh"];
+    let (ok, stdout, stderr) = run(&[&base[..], &exclude[..], &["--epochs", "1", "--seed", "2", "--out", hr]].concat());
+    assert!(ok, "{stdout}\n{stderr}");
+    let all = std::fs::read_dir(&data)
+        .unwrap()
+        .filter(|e| e.as_ref().unwrap().path().extension().is_some_and(|x| x == "bvh"))
+        .count();
+    let notice = format!("--exclude-glob *_0003.bvh: left out 1 of {all} clips");
+    assert!(stdout.contains(&notice) || stderr.contains(&notice), "{stdout}\n{stderr}");
+    let state = std::fs::read_to_string(held.join("train_state.json")).unwrap();
+    assert!(
+        state.contains("\"exclude_glob\": \"*_0003.bvh\"") || state.contains("\"exclude_glob\":\"*_0003.bvh\""),
+        "{state}"
+    );
+    let (ok, stdout, stderr) = run(&["train", "arnn", "--epochs", "2", "--threads", "1", "--resume", hr]);
+    assert!(ok && (stdout.contains(&notice) || stderr.contains(&notice)), "{stdout}\n{stderr}");
+    let (ok, _, stderr) =
+        run(&["train", "arnn", "--epochs", "2", "--threads", "1", "--resume", hr, "--exclude-glob", "*_0004.bvh"]);
+    assert!(!ok && stderr.contains("was started with --exclude-glob *_0003.bvh"), "{stderr}");
+    let (ok, _, stderr) = run(&["train", "arnn", "--preset", "tiny", "--epochs", "1", "--exclude-glob", "*_0003.bvh"]);
+    assert!(!ok && stderr.contains("--exclude-glob leaves humanoid clips of --data out"), "{stderr}");
     let method = format!("arnn:{r}");
     let bench = ["bench", "--data", d, "--valid-glob", "*_0005.bvh", "--lengths", "5,15"];
     let (ok, stdout, stderr) = run(&[&bench[..], &["--methods", &format!("interp,{method}")]].concat());

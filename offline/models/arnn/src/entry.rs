@@ -117,6 +117,11 @@ pub struct ArnnArgs {
     /// split; keys are drawn every 5-30 frames and in the in-betweening benchmark's layout.
     #[arg(long, requires = "data")]
     pub valid_glob: Option<String>,
+    /// With `--valid-glob`: leave out of both splits every clip of `--data` whose file name
+    /// matches this glob (a content held out for the out-of-distribution protocol of
+    /// docs/ood.md, so that no checkpoint is chosen on it). A resumed run keeps its own.
+    #[arg(long)]
+    pub exclude_glob: Option<String>,
     /// Sequences generated when `--data` is not given.
     #[arg(long, default_value_t = 24, conflicts_with = "data", allow_hyphen_values = true, value_parser = zoo_nn::args::sequences)]
     pub sequences: usize,
@@ -199,6 +204,7 @@ fn train(a: ArnnArgs, epochs_given: bool) -> Result<(), BoxError> {
         run: a.run.spec(),
         data: a.data,
         valid_glob: a.valid_glob,
+        exclude_glob: a.exclude_glob,
         sequences: a.sequences,
         k_max: a.k_max,
         test_fraction: a.test_fraction,

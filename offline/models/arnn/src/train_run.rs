@@ -105,6 +105,8 @@ pub struct ArnnRunOptions {
     pub data: Option<PathBuf>,
     /// Humanoid clips: the validation split of `data`.
     pub valid_glob: Option<String>,
+    /// Humanoid clips: clips of `data` left out of both splits (a held-out content).
+    pub exclude_glob: Option<String>,
     /// Lamp sequences generated without `data`.
     pub sequences: usize,
     /// Simulated annealing iterations per run for the generated sequences.
@@ -294,6 +296,9 @@ pub struct HumanoidData {
     pub synth_minutes: Option<f64>,
     /// Glob of the validation split.
     pub valid_glob: String,
+    /// Glob of the clips of `dir` left out of both splits.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exclude_glob: Option<String>,
     /// Seed of the validation keys.
     pub seed: u64,
 }
@@ -307,6 +312,13 @@ pub fn is_humanoid_run(dir: &Path) -> bool {
 
 /// Refuses option combinations of `zoo train arnn` that cannot work, before any data is read.
 fn check_options(a: &ArnnRunOptions) -> ArnnResult<()> {
+    let humanoid = match &a.run.resume {
+        Some(dir) => is_humanoid_run(dir),
+        None => a.valid_glob.is_some(),
+    };
+    if a.exclude_glob.is_some() && !humanoid {
+        bail!("--exclude-glob leaves humanoid clips of --data out: pass --data BVH_FOLDER --valid-glob GLOB too");
+    }
     // `--frame-phase 0` (none) fits a run without a curriculum.
     let phase_args = a.frame_phase.is_some_and(|f| f > 0.0) || a.frame_phase_omega.is_some();
     let resumed = a.run.resume.is_some();
@@ -567,8 +579,16 @@ impl HumanoidData {
                 (train, valid)
             }
             None => {
-                let clips = zoo_data::dataset::load_reporting(&self.dir, None, false, p)?;
-                zoo_data::dataset::split(clips, &self.valid_glob).map_err(Message::new)?
+                let t = zoo_data::dataset::TrainingClips {
+                    data: Some(self.dir.clone()),
+                    valid_glob: Some(self.valid_glob.clone()),
+                    exclude_glob: self.exclude_glob.clone(),
+                    skip_invalid: false,
+                    synth_minutes: 0.0,
+                    seed: self.seed,
+                };
+                let (train, valid, _) = zoo_data::dataset::training_clips(&t, p).map_err(|e| Message::new(e.0))?;
+                (train, valid)
             }
         };
         let train_w = zoo_data::dataset::windows(&train_clips, &humanoid::WINDOW);
@@ -610,12 +630,14 @@ fn humanoid_settings(
                     _ => DEFAULT_SYNTH_MINUTES,
                 })),
                 valid_glob: String::new(),
+                exclude_glob: None,
                 seed: a.run.seed,
             },
             _ => HumanoidData {
                 dir: a.data.clone().context("pass --data BVH_FOLDER")?,
                 synth_minutes: None,
                 valid_glob: a.valid_glob.clone().context("pass --valid-glob GLOB")?,
+                exclude_glob: a.exclude_glob.clone(),
                 seed: a.run.seed,
             },
         };
@@ -640,6 +662,14 @@ fn humanoid_settings(
         && *g != s.valid_glob
     {
         bail!("--resume {}: the run validates on `{}`, not `{g}`", dir.display(), s.valid_glob);
+    }
+    if a.exclude_glob.is_some() && a.exclude_glob != s.exclude_glob {
+        bail!(
+            "--resume {}: the run leaves out {}, not `{}`: resume without --exclude-glob",
+            dir.display(),
+            s.exclude_glob.as_deref().map_or("no clip".to_string(), |g| format!("`{g}`")),
+            a.exclude_glob.as_deref().unwrap_or_default()
+        );
     }
     Ok((s, true))
 }
