@@ -443,11 +443,16 @@ fn a_character_alone_spreads_its_runs_over_calls_with_the_same_frames() {
     let mut state = model.new_transition();
     reference.generate(&mut state, &all, &target, &next, &mut whole).unwrap();
     // 0: one runner; 1: two runners taking turns; 2: stepped alone, then in a batch of two; 3:
-    // the default budgets (0-2 run nothing by choice: every call leaves what it can in progress,
-    // whatever the machine's speed).
-    for case in 0..4 {
-        let mut runners = [model.runner().unwrap(), model.runner().unwrap()];
-        if case < 3 {
+    // the default budgets (the others run nothing by choice: every call leaves what it can in
+    // progress, whatever the machine's speed).
+    // 4: case 0 again on case 0's runners (their state of a finished transition reused).
+    let mut kept = None;
+    for case in 0..5 {
+        let mut runners = match kept.take() {
+            Some(r) if case == 4 => r,
+            _ => [model.runner().unwrap(), model.runner().unwrap()],
+        };
+        if case != 3 {
             runners.iter_mut().for_each(|r| r.set_call_budgets(0.0, 0.0));
         }
         let mut states = [model.new_transition(), model.new_transition()];
@@ -490,6 +495,9 @@ fn a_character_alone_spreads_its_runs_over_calls_with_the_same_frames() {
         }
         assert!(case == 3 || pending > 0, "case {case}: no call left a run in progress");
         assert!(case != 2 || joined, "case 2: the context left no run in progress to join the batch with");
+        if case == 0 {
+            kept = Some(runners);
+        }
     }
 }
 

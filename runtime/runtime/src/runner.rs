@@ -159,17 +159,7 @@ impl MotionRunner {
             states.iter_mut().for_each(MotionState::reset);
             return Ok(());
         };
-        if inputs.len() != start.inputs.len() {
-            return Err(MotionError::BufferCount {
-                what: "start inputs",
-                expected: start.inputs.len(),
-                found: inputs.len(),
-            });
-        }
-        for (info, data) in start.inputs.iter().zip(inputs) {
-            check_len(&info.name, data.len(), batch, info.width)?;
-            check_finite(&info.name, data, info.width)?;
-        }
+        check_start_inputs(start, inputs.iter().map(|d| Some(*d)), batch)?;
         if self.start.as_ref().is_none_or(|s| s.batch != batch) {
             let plan = if batch == 1 { &start.single } else { &start.batched };
             self.start = Some(Session::new(plan, batch, &start.widths)?);
@@ -233,6 +223,29 @@ impl MotionRunner {
         let results = session.state.run(values).map_err(run_err)?;
         read_outputs(inner, &results, states, outputs)
     }
+}
+
+/// Checks the start graph's inputs for `batch` characters: their count, then each given one's
+/// size and values (`None`: an input given later).
+fn check_start_inputs<'a>(
+    start: &crate::model::StartGraph,
+    inputs: impl ExactSizeIterator<Item = Option<&'a [f32]>>,
+    batch: usize,
+) -> Result<(), MotionError> {
+    if inputs.len() != start.inputs.len() {
+        return Err(MotionError::BufferCount {
+            what: "start inputs",
+            expected: start.inputs.len(),
+            found: inputs.len(),
+        });
+    }
+    for (info, data) in start.inputs.iter().zip(inputs) {
+        if let Some(data) = data {
+            check_len(&info.name, data.len(), batch, info.width)?;
+            check_finite(&info.name, data, info.width)?;
+        }
+    }
+    Ok(())
 }
 
 /// Resets the characters' states and sets them from a start-graph run's results (output `o`
@@ -506,24 +519,24 @@ impl MotionRunner {
     /// Begins the start graph for one character with the inputs known now (`None`: comes at
     /// [`MotionRunner::start_finish`]) and runs every node that needs only those; `None` without
     /// a start graph.
-    pub(crate) fn start_begin(&self, inputs: &[Option<&[f32]>]) -> Result<Option<PartialStart>, MotionError> {
+    /// `reuse`: a [`PartialStart`] this runner finished, whose tract state and tensors it takes.
+    pub(crate) fn start_begin(
+        &self,
+        inputs: &[Option<&[f32]>],
+        reuse: Option<PartialStart>,
+    ) -> Result<Option<PartialStart>, MotionError> {
         let inner = &*self.model.inner;
         let Some(start) = &inner.start else { return Ok(None) };
-        if inputs.len() != start.inputs.len() {
-            return Err(MotionError::BufferCount {
-                what: "start inputs",
-                expected: start.inputs.len(),
-                found: inputs.len(),
-            });
-        }
-        for (info, data) in start.inputs.iter().zip(inputs) {
-            if let Some(data) = data {
-                check_len(&info.name, data.len(), 1, info.width)?;
-                check_finite(&info.name, data, info.width)?;
-            }
-        }
+        check_start_inputs(start, inputs.iter().copied(), 1)?;
         let run_err = |e: TractError| MotionError::Run { reason: chain(&e) };
-        let mut session = Session::new(&start.single, 1, &start.widths)?;
+        // A finished run's tract state and input tensors, cleared, else new ones.
+        let mut session = match reuse {
+            Some(mut p) => {
+                p.session.state.reset_turn().map_err(run_err)?;
+                p.session
+            }
+            None => Session::new(&start.single, 1, &start.widths)?,
+        };
         for (g, data) in inputs.iter().enumerate() {
             if let Some(data) = data {
                 let tensor = Arc::make_mut(&mut session.inputs[g]);
@@ -561,20 +574,12 @@ impl MotionRunner {
         let start =
             inner.start.as_ref().ok_or_else(|| MotionError::Run { reason: "the model has no start graph".into() })?;
         check_states(inner, std::slice::from_ref(state))?;
-        if inputs.len() != start.inputs.len() {
-            return Err(MotionError::BufferCount {
-                what: "start inputs",
-                expected: start.inputs.len(),
-                found: inputs.len(),
-            });
-        }
+        check_start_inputs(start, inputs.iter().zip(&p.late).map(|(d, &late)| late.then_some(*d)), 1)?;
         let run_err = |e: TractError| MotionError::Run { reason: chain(&e) };
         for (g, (info, data)) in start.inputs.iter().zip(inputs).enumerate() {
             if !p.late[g] {
                 continue;
             }
-            check_len(&info.name, data.len(), 1, info.width)?;
-            check_finite(&info.name, data, info.width)?;
             let tensor = Tensor::from_shape::<f32>(&[1, info.width], data).map_err(run_err)?;
             p.session.state.set_input(g, tensor.into_tvalue()).map_err(run_err)?;
         }

@@ -304,6 +304,8 @@ pub struct TransitionRunner {
     spare: Vec<PartialRun>,
     /// Start-graph runs begun by `begin` for one character (its target part), by `pending_key`.
     starts: Vec<(u64, PartialStart)>,
+    /// A finished one, reused by the next `begin`.
+    spare_start: Option<PartialStart>,
     /// [`CALL_BUDGET`] and [`CONTEXT_BUDGET`] (tests set them).
     budgets: (f64, f64),
     /// Foot-lock post-process of `generate`, off unless set.
@@ -558,6 +560,7 @@ impl TransitionModel {
             partials: Vec::new(),
             spare: Vec::new(),
             starts: Vec::new(),
+            spare_start: None,
             budgets: (CALL_BUDGET, CONTEXT_BUDGET),
             foot_lock: None,
             beyond_trained: false,
@@ -788,10 +791,10 @@ impl TransitionRunner {
             let s = &mut states[0];
             let given: Vec<Option<&[f32]>> =
                 self.model.start_target.iter().map(|&t| t.then_some(&s.target_vec[..])).collect();
-            if let Some(p) = self.runner.start_begin(&given)? {
+            if let Some(p) = self.runner.start_begin(&given, self.spare_start.take())? {
                 s.pending_key = PENDING_KEYS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                 if self.starts.len() >= MAX_PARTIALS {
-                    self.starts.remove(0);
+                    self.spare_start = Some(self.starts.remove(0).1);
                 }
                 self.starts.push((s.pending_key, p));
             }
@@ -923,7 +926,9 @@ impl TransitionRunner {
         let result = match begun {
             Some(i) => {
                 let (_, mut p) = self.starts.remove(i);
-                self.runner.start_finish(&mut p, &mut states[0].motion, &inputs)
+                let r = self.runner.start_finish(&mut p, &mut states[0].motion, &inputs);
+                self.spare_start = Some(p);
+                r
             }
             None => with_motion_states(&mut self.motion, states, 0..n, &m.model, |runner_states| {
                 self.runner.start_batch(runner_states, &inputs)
