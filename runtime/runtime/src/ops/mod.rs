@@ -265,8 +265,10 @@ impl Expansion for DenseSpec {
             let op = DenseOp { product, bias: self.bias.clone(), alpha: self.alpha.clone(), addend: self.addend };
             return model.wire_node(prefix, op, inputs);
         };
-        // The same product on every `chunk` frames of the first axis, one node each, joined.
+        // The same product on every `chunk` frames of the first axis, one node each, joined; the
+        // chunks of one size share one packing of the weights.
         let mut parts = tvec![];
+        let mut packed: Option<(Option<usize>, Product)> = None;
         for (c, from) in (0..frames).step_by(chunk).enumerate() {
             let to = (from + chunk).min(frames);
             let mut part = tvec![];
@@ -274,7 +276,12 @@ impl Expansion for DenseSpec {
                 let slice = tract_onnx::tract_core::ops::array::Slice::new(0, from, to);
                 part.push(model.wire_node(format!("{prefix}.frames{c}.in{i}"), slice, &[input])?[0]);
             }
-            let product = Product::new(self.m, &self.weights, rows(model, part[0])?)?;
+            let n = rows(model, part[0])?;
+            let product = match &packed {
+                Some((rows, p)) if *rows == n => p.clone(),
+                _ => Product::new(self.m, &self.weights, n)?,
+            };
+            packed = Some((n, product.clone()));
             let op = DenseOp { product, bias: self.bias.clone(), alpha: self.alpha.clone(), addend: self.addend };
             parts.push(model.wire_node(format!("{prefix}.frames{c}"), op, &part)?[0]);
         }
