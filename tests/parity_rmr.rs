@@ -822,3 +822,36 @@ fn stitch_stream_matches_zoo_stitch_on_bandai2() {
     }
     assert!(worst_all <= 0.05, "the stream differs from the whole sequence by {worst_all} cm");
 }
+
+/// The runtime refines a window of one character at every weight width as onnxruntime does on
+/// the same file: at f16 and int8 the GRU's recurrence runs on the file's own 16- or 8-bit
+/// weights (a character alone), at f32 on tract-linalg's kernel.
+#[test]
+fn the_runtime_window_agrees_with_onnxruntime_at_every_width() {
+    for cell in [RefinerCell::Bgru, RefinerCell::Gru] {
+        let f = fixture(cell);
+        let d = f.config.dim();
+        let onnx = export_rmr(&f.config, &f.stats, &f.varmap).unwrap();
+        let x = lcg(12, FRAMES * d, 2.0);
+        for width in [zoo_export::WeightWidth::F32, zoo_export::WeightWidth::F16, zoo_export::WeightWidth::Int8] {
+            let narrow = zoo_export::with_weights(&onnx, width).unwrap();
+            let mut refiner = zoo_runtime::StitchRefiner::from_bytes(&narrow.to_bytes()).unwrap();
+            refiner.set_window(FRAMES, FRAMES / 2).unwrap();
+            let mut y = vec![f32::NAN; FRAMES * d];
+            refiner.refine_window_normalized(&x, &mut y).unwrap();
+            let mut session = ort::session::Session::builder(ort_environment())
+                .unwrap()
+                .with_intra_threads(1)
+                .unwrap()
+                .commit_from_memory(&narrow.to_bytes())
+                .expect("onnxruntime loads the RMR graph");
+            let t = ort::value::Tensor::from_array((vec![FRAMES as i64, 1, d as i64], x.clone())).unwrap();
+            let inputs: Vec<(Cow<'_, str>, ort::session::SessionInputValue<'_>)> = vec![(Cow::Borrowed("x"), t.into())];
+            let out = session.run(inputs).expect("onnxruntime runs the RMR graph");
+            let o = out["y"].try_extract_tensor::<f32>().unwrap().1.to_vec();
+            let diff = max_abs_diff(&y, &o);
+            println!("{cell:?} {width}: runtime-ort max |diff| {diff:e}");
+            assert!(diff <= 1e-5, "{cell:?} {width}: runtime-ort max |diff| {diff}");
+        }
+    }
+}

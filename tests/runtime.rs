@@ -503,11 +503,17 @@ fn a_character_alone_spreads_its_runs_over_calls_with_the_same_frames() {
 
 /// The chunked window graph a stitching stream spreads over its pushes (each GRU layer as a
 /// chain of GRUs over a few frames) computes the refiner's window: value for value for the tiny
-/// RMR, within 1e-5 for the paper-size one of `ZOO_RMR_FILE` when given (tract's kernels round
-/// the per-chunk products differently: 6.6e-7 for rmr20).
+/// RMR at every weight width (the f16 and int8 files' GRU weights are widened by nodes, which
+/// the chunks keep), within 1e-5 for the paper-size one of `ZOO_RMR_FILE` when given (0 for
+/// rmr20 at every width).
 #[test]
 fn the_chunked_window_graph_is_the_window_graph() {
-    let mut files = vec![(zoo_tests::tiny_rmr_onnx().to_bytes(), true)];
+    let tiny = zoo_tests::tiny_rmr_onnx();
+    let mut files: Vec<(Vec<u8>, bool)> =
+        [zoo_export::WeightWidth::F32, zoo_export::WeightWidth::F16, zoo_export::WeightWidth::Int8]
+            .into_iter()
+            .map(|w| (zoo_export::with_weights(&tiny, w).unwrap().to_bytes(), true))
+            .collect();
     if let Some(path) = std::env::var_os("ZOO_RMR_FILE") {
         files.push((std::fs::read(path).unwrap(), false));
     }

@@ -5,10 +5,13 @@
 //!
 //! ```text
 //! cargo build --workspace --examples
-//! RAYON_NUM_THREADS=1 target/debug/examples/rmr_window_latency [RUN_DIR] [--window 60] [--rounds 11] [--reps 10] [--weights f32|f16|int8]
+//! RAYON_NUM_THREADS=1 target/debug/examples/rmr_window_latency [RUN_DIR] [--window 60] [--rounds 11] [--reps 10] [--weights f32,f16,int8]
 //! ```
 //! Without `RUN_DIR`, the seeded paper-size model (BGRU 2 x 256) is used: latency does not
 //! depend on the weights. onnxruntime: `ORT_DYLIB_PATH`, else `.onnxruntime/libonnxruntime.so.1.31.1`.
+//! `--weights` lists the widths to measure (the file rewritten at each as `zoo export --weights`
+//! writes it); each is timed on tract and on onnxruntime at that width, and compared with
+//! onnxruntime's f32 too.
 //!
 //! Then the runtime's streaming form (`zoo_runtime::StitchStream`) over synthetic walking and
 //! running (`--stream-frames`, default 600): its latency in frames, the median cost per frame
@@ -53,13 +56,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let model = Rmr::new(&config, candle_nn::VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu))?;
     let d = config.dim();
-    let width = args.iter().position(|a| a == "--weights").and_then(|i| args.get(i + 1));
-    let width = zoo_export::WeightWidth::parse(width.map_or("f32", String::as_str))?;
-    let onnx = zoo_export::with_weights(&zoo_rmr::export::export_rmr(&config, &stats, &varmap)?, width)?;
-    let bytes = onnx.to_bytes();
-    println!("weights: {width} ({} bytes)", bytes.len());
-    let mut tract = zoo_runtime::StitchRefiner::from_bytes(&bytes)?;
-    tract.set_window(window, window / 2)?;
+    let widths = args.iter().position(|a| a == "--weights").and_then(|i| args.get(i + 1));
+    let widths = widths
+        .map_or("f32", String::as_str)
+        .split(',')
+        .map(zoo_export::WeightWidth::parse)
+        .collect::<Result<Vec<_>, _>>()?;
     let lib = std::env::var_os("ORT_DYLIB_PATH")
         .map(PathBuf::from)
         .unwrap_or_else(|| PathBuf::from(".onnxruntime/libonnxruntime.so.1.31.1"));
@@ -67,50 +69,76 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         return Err(format!("onnxruntime library not found at {}: set ORT_DYLIB_PATH", lib.display()).into());
     }
     let env = ort::init_from(&lib)?.build()?;
-    let mut ort_session = ort::session::Session::builder(&env)?.with_intra_threads(1)?.commit_from_memory(&bytes)?;
+    let f32_onnx = zoo_rmr::export::export_rmr(&config, &stats, &varmap)?;
+    // Each width's tract refiner and onnxruntime session, onnxruntime's f32 one always (the
+    // figure every width is compared with).
+    let mut backends = Vec::new();
+    for width in widths.iter().copied().chain([zoo_export::WeightWidth::F32]) {
+        if backends.iter().any(|(w, _, _)| *w == width) {
+            continue;
+        }
+        let bytes = zoo_export::with_weights(&f32_onnx, width)?.to_bytes();
+        println!("weights: {width} ({} bytes)", bytes.len());
+        let mut tract = zoo_runtime::StitchRefiner::from_bytes(&bytes)?;
+        tract.set_window(window, window / 2)?;
+        let session = ort::session::Session::builder(&env)?.with_intra_threads(1)?.commit_from_memory(&bytes)?;
+        backends.push((width, tract, session));
+    }
     let x: Vec<f32> = (0..window * d).map(|i| ((i * 7919 % 1000) as f32 / 500.0) - 1.0).collect();
     let mut y = vec![0.0f32; window * d];
     let xs = Tensor::from_slice(&x, (1, window, d), &Device::Cpu)?;
-    let mut ort_once = |x: &[f32]| -> Result<Vec<f32>, Box<dyn std::error::Error>> {
+    let ort_once = |session: &mut ort::session::Session, x: &[f32]| -> Result<Vec<f32>, Box<dyn std::error::Error>> {
         let t = ort::value::Tensor::from_array((vec![window as i64, 1, d as i64], x.to_vec()))?;
         let inputs: Vec<(Cow<'_, str>, ort::session::SessionInputValue<'_>)> = vec![(Cow::Borrowed("x"), t.into())];
-        let out = ort_session.run(inputs)?;
+        let out = session.run(inputs)?;
         Ok(out["y"].try_extract_tensor::<f32>()?.1.to_vec())
     };
-    // Agreement first (time-major [window, 1, d] equals batch-first [1, window, d] at batch 1).
-    tract.refine_window_normalized(&x, &mut y)?;
-    let o = ort_once(&x)?;
-    let c: Vec<f32> = model.forward(&xs, None)?.flatten_all()?.to_vec1()?;
     let diff = |a: &[f32], b: &[f32]| a.iter().zip(b).map(|(p, q)| (p - q).abs()).fold(0.0f32, f32::max);
+    let c: Vec<f32> = model.forward(&xs, None)?.flatten_all()?.to_vec1()?;
     println!(
-        "{} (dim {d}, {:?} x {}), window {window}, batch 1: max |diff| tract-ort {:e}, tract-candle {:e}",
+        "{} (dim {d}, {:?} x {}), window {window}, batch 1",
         run.as_ref().map_or("seeded paper-size RMR".to_string(), |p| p.display().to_string()),
         config.cell,
         config.hidden,
-        diff(&y, &o),
-        diff(&y, &c)
     );
-    let (mut t_tract, mut t_ort, mut t_candle) = (Vec::new(), Vec::new(), Vec::new());
+    // Agreement first (time-major [window, 1, d] equals batch-first [1, window, d] at batch 1).
+    for (width, tract, session) in &mut backends {
+        tract.refine_window_normalized(&x, &mut y)?;
+        let o = ort_once(session, &x)?;
+        println!("{width}: max |diff| tract-ort {:e}, tract-candle f32 {:e}", diff(&y, &o), diff(&y, &c));
+    }
+    let mut times = vec![(Vec::new(), Vec::new()); backends.len()];
+    let mut t_candle = Vec::new();
     for _ in 0..rounds {
-        let t0 = Instant::now();
-        for _ in 0..reps {
-            tract.refine_window_normalized(&x, &mut y)?;
+        for ((_, tract, session), (t_tract, t_ort)) in backends.iter_mut().zip(times.iter_mut()) {
+            let t0 = Instant::now();
+            for _ in 0..reps {
+                tract.refine_window_normalized(&x, &mut y)?;
+            }
+            t_tract.push(t0.elapsed().as_secs_f64() * 1e3 / reps as f64);
+            let t0 = Instant::now();
+            for _ in 0..reps {
+                std::hint::black_box(ort_once(session, &x)?);
+            }
+            t_ort.push(t0.elapsed().as_secs_f64() * 1e3 / reps as f64);
         }
-        t_tract.push(t0.elapsed().as_secs_f64() * 1e3 / reps as f64);
-        let t0 = Instant::now();
-        for _ in 0..reps {
-            std::hint::black_box(ort_once(&x)?);
-        }
-        t_ort.push(t0.elapsed().as_secs_f64() * 1e3 / reps as f64);
         let t0 = Instant::now();
         for _ in 0..reps {
             std::hint::black_box(model.forward(&xs, None)?);
         }
         t_candle.push(t0.elapsed().as_secs_f64() * 1e3 / reps as f64);
     }
-    let (a, b, c) = (median(t_tract), median(t_ort), median(t_candle));
-    println!("median ms per window over {rounds} rounds of {reps}: tract {a:.3}, onnxruntime {b:.3}, candle {c:.3}");
-    println!("tract / onnxruntime = {:.2}x (target <= 1.25x)", a / b);
+    let medians: Vec<(f64, f64)> = times.into_iter().map(|(a, b)| (median(a), median(b))).collect();
+    let ort_f32 =
+        backends.iter().zip(&medians).find(|((w, _, _), _)| *w == zoo_export::WeightWidth::F32).map(|(_, m)| m.1);
+    let ort_f32 = ort_f32.ok_or("no f32 session")?;
+    println!("median ms per window over {rounds} rounds of {reps} (candle f32 {:.3}):", median(t_candle));
+    println!("| weights | tract | onnxruntime | tract / onnxruntime | tract / onnxruntime f32 |");
+    println!("| --- | --- | --- | --- | --- |");
+    for ((width, _, _), (a, b)) in backends.iter().zip(&medians) {
+        println!("| {width} | {a:.3} | {b:.3} | {:.2}x | {:.2}x |", a / b, a / ort_f32);
+    }
+    let tract = backends.swap_remove(0).1;
     stream(&tract, &config, opt("--stream-frames").transpose()?.unwrap_or(600), rounds)
 }
 

@@ -32,6 +32,20 @@ fn node(
     pb::NodeProto { op_type: op.into(), name, input: inputs, output: outputs, attribute: attrs, ..Default::default() }
 }
 
+/// The node that widens a stored weight into `name`, as `zoo export --weights` writes them: a
+/// `Cast` of an f16 initializer, or a `DequantizeLinear` of an int8 one by channels of axis 1
+/// (which a slice along axis 0 keeps).
+fn widened_by<'g>(graph: &'g pb::GraphProto, name: &str) -> Option<&'g pb::NodeProto> {
+    let n = graph.node.iter().find(|n| n.output.first().is_some_and(|o| o == name))?;
+    let axis = n.attribute.iter().find(|a| a.name == "axis").map_or(1, |a| a.i);
+    let ok = match n.op_type.as_str() {
+        "Cast" => n.input.len() == 1,
+        "DequantizeLinear" => axis == 1 && (n.input.len() == 2 || n.input.get(2).is_some_and(|z| z.is_empty())),
+        _ => false,
+    };
+    (ok && n.domain.is_empty() && graph.initializer.iter().any(|t| t.name == n.input[0])).then_some(n)
+}
+
 /// Direction `d` of `dirs` of a recurrent weight initializer `[dirs, ...]` as an initializer
 /// `[1, ...]` named `name`, when its values are stored in a way this reads.
 fn direction_of(t: &pb::TensorProto, d: usize, dirs: usize, name: &str) -> Option<pb::TensorProto> {
@@ -117,16 +131,31 @@ pub(crate) fn chunk_recurrences(proto: &pb::ModelProto, frames: usize, chunk: us
                 let Some(input) = input else { continue };
                 let out = format!("{p}.d{d}.{tag}");
                 // A constant slice of an initializer (tract runs a GRU with constant weights as
-                // one fused op, as it does the whole layer), else a Slice node.
-                match graph.initializer.iter().find(|t| &t.name == input).and_then(|t| direction_of(t, d, dirs, &out)) {
-                    Some(t) => inits.push(t),
-                    None => nodes.push(node(
+                // one fused op, as it does the whole layer), of the f16 or int8 initializer a
+                // weight is widened from, else a Slice node.
+                let init = |name: &str, out: &str| {
+                    graph.initializer.iter().find(|t| t.name == name).and_then(|t| direction_of(t, d, dirs, out))
+                };
+                if let Some(t) = init(input, &out) {
+                    inits.push(t);
+                } else if let Some((t, widen)) = widened_by(graph, input).and_then(|w| {
+                    let stored = format!("{out}.stored");
+                    let mut widen = w.clone();
+                    widen.name = format!("{out}.widen");
+                    widen.input[0] = stored.clone();
+                    widen.output = vec![out.clone()];
+                    Some((init(&w.input[0], &stored)?, widen))
+                }) {
+                    inits.push(t);
+                    nodes.push(widen);
+                } else {
+                    nodes.push(node(
                         "Slice",
                         out.clone(),
                         vec![input.clone(), starts.clone(), ends.clone(), axes.clone()],
                         vec![out.clone()],
                         vec![],
-                    )),
+                    ));
                 }
                 weights.push(out);
             }

@@ -3,7 +3,7 @@
 //! [`super::ZOO_DENSE`] node.
 
 use super::plain_f32;
-use super::product::{Product, Weights};
+use super::product::{Product, Recurrent, RecurrentWidth, Weights};
 use std::sync::Arc;
 use tract_onnx::tract_core::{as_op, op_as_typed_op, op_out_of_plan};
 use tract_onnx::tract_hir::internal::*;
@@ -21,6 +21,17 @@ pub(super) struct GruSpec {
     /// Which `3 hidden` block of each `xw` row is this direction's (both directions' input
     /// products come from one node).
     pub(super) xw_block: usize,
+    /// The recurrent weights as the file stores them, for the product of one character.
+    pub(super) compact: Option<Arc<Compact>>,
+}
+
+/// The recurrent weights' width in the file: f16 (the f32 weights are their exact values) or
+/// int8 (`w = q * scale`, one scale per row).
+#[derive(Clone, Debug)]
+pub(super) struct Compact {
+    pub(super) width: RecurrentWidth,
+    pub(super) q: Vec<i8>,
+    pub(super) scales: Vec<f32>,
 }
 
 impl Expansion for GruSpec {
@@ -75,7 +86,15 @@ impl Expansion for GruSpec {
     fn wire(&self, prefix: &str, model: &mut TypedModel, inputs: &[OutletId]) -> TractResult<TVec<OutletId>> {
         let batch = model.outlet_fact(inputs[0])?.shape.get(1).and_then(|d| d.to_usize().ok());
         let product = Product::new(3 * self.hidden, &self.weights, batch)?;
+        let recurrent = match (&self.compact, batch, self.weights.as_slice()) {
+            (Some(c), None | Some(1), [Weights::F32(w)]) => {
+                let (m, k) = (3 * self.hidden, self.hidden);
+                Some(Arc::new(Recurrent::new(m, k, c.width, w, &c.q, &c.scales)?))
+            }
+            _ => None,
+        };
         let op = GruOp {
+            recurrent,
             product,
             hidden: self.hidden,
             bias: self.bias.clone(),
@@ -94,6 +113,8 @@ impl Expansion for GruSpec {
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub(crate) struct GruOp {
     product: Product,
+    /// The product of one character on the file's own width of weights, if it has one.
+    recurrent: Option<Arc<Recurrent>>,
     hidden: usize,
     bias: Option<Arc<Tensor>>,
     reverse: bool,
@@ -114,10 +135,11 @@ impl Op for GruOp {
 
     fn info(&self) -> TractResult<Vec<String>> {
         Ok(vec![format!(
-            "hidden {}{} on {}",
+            "hidden {}{} on {}{}",
             self.hidden,
             if self.reverse { ", reversed" } else { "" },
-            self.product.kernel_name()
+            self.product.kernel_name(),
+            self.recurrent.as_ref().map_or(String::new(), |r| format!(", one character on {:?} weights", r.width()))
         )])
     }
 
@@ -154,7 +176,17 @@ impl EvalOp for GruOp {
             let ys = yv.as_slice_mut::<f32>()?;
             for step in 0..frames {
                 let t = if self.reverse { frames - 1 - step } else { step };
-                p.run_f32(&[state.as_slice()], n, self.bias.as_deref(), None, None, gates)?;
+                match &self.recurrent {
+                    Some(rec) if n == 1 => {
+                        let mut gv = gates.try_as_plain_ram_mut()?;
+                        let g = gv.as_slice_mut::<f32>()?;
+                        rec.run(state, g);
+                        if let Some(b) = &self.bias {
+                            g.iter_mut().zip(b.try_as_plain_ram()?.as_slice::<f32>()?).for_each(|(g, b)| *g += b);
+                        }
+                    }
+                    _ => p.run_f32(&[state.as_slice()], n, self.bias.as_deref(), None, None, gates)?,
+                }
                 let mut gv = gates.try_as_plain_ram_mut()?;
                 let g = gv.as_slice_mut::<f32>()?;
                 for r in 0..n {
@@ -220,8 +252,10 @@ mod tests {
     }
 
     /// A graph of one ONNX `GRU` node over `x [frames, batch, 5]`, hidden 6, in `direction`,
-    /// with an initial state input when `h0`; outputs `Y` and `Y_h`.
-    fn gru_graph(direction: &str, h0: bool) -> pb::ModelProto {
+    /// with an initial state input when `h0`; outputs `Y` and `Y_h`. Its weights at `width`, as
+    /// `zoo export --weights` writes them: "f32"; "f16" (half-float initializers and a `Cast`);
+    /// "int8" (integers per row of axis 1, widened by `DequantizeLinear`).
+    fn gru_graph(direction: &str, h0: bool, width: &str) -> pb::ModelProto {
         let (dirs, h, k) = (if direction == "bidirectional" { 2 } else { 1 }, 6, 5);
         let mut inputs = vec!["x".to_string(), "W".into(), "R".into(), "B".into()];
         let mut graph_inputs = vec![f32_input("x")];
@@ -241,13 +275,55 @@ mod tests {
             ],
             ..Default::default()
         };
+        let mut nodes = Vec::new();
+        let mut initializer = vec![init("B", &[dirs, 6 * h], 3)];
+        for (name, dims, seed) in [("W", [dirs, 3 * h, k], 1), ("R", [dirs, 3 * h, h], 2)] {
+            let t = init(name, &dims, seed);
+            let v = super::super::tensor_f32(&t).unwrap();
+            let stored = |suffix: &str, dt: Dt, raw: Vec<u8>| pb::TensorProto {
+                name: format!("{name}.{suffix}"),
+                dims: dims.iter().map(|d| *d as i64).collect(),
+                data_type: dt as i32,
+                raw_data: raw,
+                ..Default::default()
+            };
+            match width {
+                "f32" => initializer.push(t),
+                "f16" => {
+                    let raw = v.iter().flat_map(|x| f16::from_f32(*x).to_le_bytes()).collect();
+                    initializer.push(stored("f16", Dt::Float16, raw));
+                    nodes.push(pb::NodeProto {
+                        op_type: "Cast".into(),
+                        input: vec![format!("{name}.f16")],
+                        output: vec![name.into()],
+                        attribute: vec![attr::int("to", Dt::Float as i64)],
+                        ..Default::default()
+                    });
+                }
+                "int8" => {
+                    let (rows, inner) = (dims[1], dims[2]);
+                    let mut scales = vec![0f32; rows];
+                    for (i, x) in v.iter().enumerate() {
+                        scales[(i / inner) % rows] = scales[(i / inner) % rows].max(x.abs() / 127.0);
+                    }
+                    let q = v.iter().enumerate().map(|(i, x)| (x / scales[(i / inner) % rows]).round() as i8 as u8);
+                    initializer.push(stored("int8", Dt::Int8, q.collect()));
+                    initializer.push(super::super::rewrite::f32_init(&format!("{name}.scale"), &[rows], &scales));
+                    nodes.push(pb::NodeProto {
+                        op_type: "DequantizeLinear".into(),
+                        input: vec![format!("{name}.int8"), format!("{name}.scale")],
+                        output: vec![name.into()],
+                        attribute: vec![attr::int("axis", 1)],
+                        ..Default::default()
+                    });
+                }
+                other => panic!("no width {other}"),
+            }
+        }
+        nodes.push(node);
         let graph = pb::GraphProto {
-            node: vec![node],
-            initializer: vec![
-                init("W", &[dirs, 3 * h, k], 1),
-                init("R", &[dirs, 3 * h, h], 2),
-                init("B", &[dirs, 6 * h], 3),
-            ],
+            node: nodes,
+            initializer,
             input: graph_inputs,
             output: vec![value("Y"), value("Y_h")],
             ..Default::default()
@@ -260,57 +336,72 @@ mod tests {
         }
     }
 
-    fn run(model: InferenceModel, inputs: &[Tensor]) -> TVec<TValue> {
+    /// The outputs of `model` on `inputs`, and what its `ZooGru` nodes say of themselves.
+    fn run(model: InferenceModel, inputs: &[Tensor]) -> (TVec<TValue>, Vec<String>) {
         let mut model = model;
         for (i, t) in inputs.iter().enumerate() {
             model.set_input_fact(i, f32::fact(t.shape()).into()).unwrap();
         }
-        let plan = model.into_optimized().unwrap().into_runnable().unwrap();
-        plan.run(inputs.iter().cloned().map(|t| t.into_tvalue()).collect()).unwrap()
+        let optimized = model.into_optimized().unwrap();
+        let info = optimized
+            .nodes
+            .iter()
+            .filter(|n| n.op.name() == "ZooGru")
+            .map(|n| n.op.info().unwrap().join(" "))
+            .collect();
+        let plan = optimized.into_runnable().unwrap();
+        (plan.run(inputs.iter().cloned().map(|t| t.into_tvalue()).collect()).unwrap(), info)
     }
 
     #[test]
     fn zoo_gru_nodes_compute_the_onnx_gru() {
-        let (frames, batch, h) = (7, 3, 6);
-        for direction in ["forward", "bidirectional", "reverse"] {
-            for h0 in [false, true] {
-                let proto = gru_graph(direction, h0);
-                let fused = super::super::fuse(&proto).expect("the GRU is rewritten");
-                let ops: Vec<&str> = fused.graph.as_ref().unwrap().node.iter().map(|n| n.op_type.as_str()).collect();
-                assert!(ops.contains(&"ZooGru") && ops.contains(&"ZooDense") && !ops.contains(&"GRU"), "{ops:?}");
-                let dirs = if direction == "bidirectional" { 2 } else { 1 };
-                let x: Vec<f32> = (0..frames * batch * 5).map(|i| ((i as f32) * 0.37).sin()).collect();
-                let mut inputs = vec![Tensor::from_shape(&[frames, batch, 5], &x).unwrap()];
-                if h0 {
-                    let v: Vec<f32> = (0..dirs * batch * h).map(|i| ((i as f32) * 0.71).cos() * 0.5).collect();
-                    inputs.push(Tensor::from_shape(&[dirs, batch, h], &v).unwrap());
-                }
-                let zoo = run(super::super::onnx().model_for_proto_model(&fused).unwrap(), &inputs);
-                // The reference: tract's own GRU; for `reverse`, its forward GRU over the frames in
-                // reverse order, the output put back in order (tract 0.23.9's `reverse` GRU
-                // disagrees with onnxruntime, which agrees with this).
-                let plain = if direction == "reverse" {
-                    let flip = |t: &Tensor| {
-                        let (f, rest) = (t.shape()[0], t.len() / t.shape()[0]);
-                        let v = t.try_as_plain_ram().unwrap().as_slice::<f32>().unwrap().to_vec();
-                        let r: Vec<f32> = (0..f).rev().flat_map(|i| v[i * rest..(i + 1) * rest].to_vec()).collect();
-                        Tensor::from_shape(t.shape(), &r).unwrap()
-                    };
-                    let mut flipped = inputs.clone();
-                    flipped[0] = flip(&inputs[0]);
-                    let forward = gru_graph("forward", h0);
-                    let out = run(tract_onnx::onnx().model_for_proto_model(&forward).unwrap(), &flipped);
-                    let y = flip(&out[0].clone().into_tensor());
-                    tvec![y.into_tvalue(), out[1].clone()]
-                } else {
-                    run(tract_onnx::onnx().model_for_proto_model(&proto).unwrap(), &inputs)
+        let (frames, h) = (7, 6);
+        for (direction, h0, width, batch) in ["forward", "bidirectional", "reverse"]
+            .into_iter()
+            .flat_map(|d| [false, true].map(|h0| (d, h0)))
+            .flat_map(|(d, h0)| ["f32", "f16", "int8"].map(|w| (d, h0, w)))
+            .flat_map(|(d, h0, w)| [1, 3].map(|b| (d, h0, w, b)))
+        {
+            let case = format!("{direction}, h0 {h0}, {width} weights, batch {batch}");
+            let proto = gru_graph(direction, h0, width);
+            let fused = super::super::fuse(&proto).expect("the GRU is rewritten");
+            let ops: Vec<&str> = fused.graph.as_ref().unwrap().node.iter().map(|n| n.op_type.as_str()).collect();
+            assert!(ops.contains(&"ZooGru") && ops.contains(&"ZooDense") && !ops.contains(&"GRU"), "{case}: {ops:?}");
+            let dirs = if direction == "bidirectional" { 2 } else { 1 };
+            let x: Vec<f32> = (0..frames * batch * 5).map(|i| ((i as f32) * 0.37).sin()).collect();
+            let mut inputs = vec![Tensor::from_shape(&[frames, batch, 5], &x).unwrap()];
+            if h0 {
+                let v: Vec<f32> = (0..dirs * batch * h).map(|i| ((i as f32) * 0.71).cos() * 0.5).collect();
+                inputs.push(Tensor::from_shape(&[dirs, batch, h], &v).unwrap());
+            }
+            let (zoo, info) = run(super::super::onnx().model_for_proto_model(&fused).unwrap(), &inputs);
+            // A character alone runs the recurrence on the file's own 16- or 8-bit weights.
+            let compact = width != "f32" && batch == 1;
+            assert!(info.iter().all(|i| i.contains("one character on") == compact), "{case}: {info:?}");
+            // The reference: tract's own GRU; for `reverse`, its forward GRU over the frames in
+            // reverse order, the output put back in order (tract 0.23.9's `reverse` GRU
+            // disagrees with onnxruntime, which agrees with this).
+            let plain = if direction == "reverse" {
+                let flip = |t: &Tensor| {
+                    let (f, rest) = (t.shape()[0], t.len() / t.shape()[0]);
+                    let v = t.try_as_plain_ram().unwrap().as_slice::<f32>().unwrap().to_vec();
+                    let r: Vec<f32> = (0..f).rev().flat_map(|i| v[i * rest..(i + 1) * rest].to_vec()).collect();
+                    Tensor::from_shape(t.shape(), &r).unwrap()
                 };
-                for (o, (a, b)) in plain.iter().zip(&zoo).enumerate() {
-                    assert_eq!(a.shape(), b.shape(), "{direction}, h0 {h0}: output {o}");
-                    let (a, b) = (super::plain_f32(a).unwrap(), super::plain_f32(b).unwrap());
-                    let diff = a.iter().zip(b).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
-                    assert!(diff < 1e-5, "{direction}, h0 {h0}: output {o} differs by {diff}");
-                }
+                let mut flipped = inputs.clone();
+                flipped[0] = flip(&inputs[0]);
+                let forward = gru_graph("forward", h0, width);
+                let (out, _) = run(tract_onnx::onnx().model_for_proto_model(&forward).unwrap(), &flipped);
+                let y = flip(&out[0].clone().into_tensor());
+                tvec![y.into_tvalue(), out[1].clone()]
+            } else {
+                run(tract_onnx::onnx().model_for_proto_model(&proto).unwrap(), &inputs).0
+            };
+            for (o, (a, b)) in plain.iter().zip(&zoo).enumerate() {
+                assert_eq!(a.shape(), b.shape(), "{case}: output {o}");
+                let (a, b) = (super::plain_f32(a).unwrap(), super::plain_f32(b).unwrap());
+                let diff = a.iter().zip(b).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+                assert!(diff < 1e-5, "{case}: output {o} differs by {diff}");
             }
         }
     }

@@ -196,8 +196,38 @@ fn parse_gru(ctx: &ParsingContext, node: &pb::NodeProto) -> TractResult<(Box<dyn
         h0_index: int("h0_index").max(0) as usize,
         has_h0,
         xw_block: int("xw_block").max(0) as usize,
+        compact: compact(ctx, node, m)?,
     };
     Ok((expand(spec), vec![]))
+}
+
+/// A [`ZOO_GRU`]'s recurrent weights as the file stores them (`recurrent_width` "f16" or
+/// "int8", the latter with its integers `recurrent_q` and row scales `recurrent_scales`).
+fn compact(ctx: &ParsingContext, node: &pb::NodeProto, m: usize) -> TractResult<Option<Arc<gru::Compact>>> {
+    use product::RecurrentWidth;
+    let width = match node_attr(node, "recurrent_width").map(|a| a.s.as_slice()) {
+        None => return Ok(None),
+        Some(b"f16") => RecurrentWidth::F16,
+        Some(b"int8") => RecurrentWidth::I8,
+        Some(other) => bail!("`{}`: unknown recurrent width {}", node.name, String::from_utf8_lossy(other)),
+    };
+    let (mut q, mut scales) = (Vec::new(), Vec::new());
+    if width == RecurrentWidth::I8 {
+        let name = |a: &str| node_attr(node, a).map(|a| String::from_utf8_lossy(&a.s).into_owned());
+        let t = init(ctx, &name("recurrent_q").context("no recurrent_q")?)?;
+        ensure!(t.data_type == pb::tensor_proto::DataType::Int8 as i32, "`{}`: recurrent_q is not int8", node.name);
+        q = t.raw_data.iter().map(|b| *b as i8).collect();
+        scales = tensor_f32(init(ctx, &name("recurrent_scales").context("no recurrent_scales")?)?)
+            .context("recurrent scales are not f32")?;
+        ensure!(
+            scales.len() == m && q.len() % m == 0,
+            "`{}`: {} scales, {} integers for {m} rows",
+            node.name,
+            scales.len(),
+            q.len()
+        );
+    }
+    Ok(Some(Arc::new(gru::Compact { width, q, scales })))
 }
 
 /// The batch size of a plan, when it is concrete.

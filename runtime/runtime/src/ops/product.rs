@@ -34,6 +34,28 @@ const Q_MAX: f32 = 127.0;
 /// The smallest row scale (an all-zero row quantizes to zeros).
 const MIN_SCALE: f32 = 1e-30;
 
+/// tract-linalg's f32 tiles that run well below [`WIDE_ON_AMD`] on AMD's AVX-512 cores.
+const SLOW_ON_AMD: [&str; 2] = ["avx512_mmm_f32_16x12", "avx512_mmm_f32_16x8"];
+/// The f32 tile used instead of [`SLOW_ON_AMD`] on AMD.
+const WIDE_ON_AMD: &str = "avx512_mmm_f32_32x6";
+
+/// Whether this is an AMD CPU (its vendor string).
+fn amd_cpu() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        static AMD: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+        *AMD.get_or_init(|| {
+            // SAFETY: `cpuid` leaf 0 exists on every x86-64 CPU.
+            #[allow(unused_unsafe)]
+            let r = unsafe { std::arch::x86_64::__cpuid(0) };
+            let vendor: Vec<u8> = [r.ebx, r.edx, r.ecx].iter().flat_map(|v| v.to_le_bytes()).collect();
+            vendor == b"AuthenticAMD"
+        })
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
 /// Weights in one of the two arithmetics.
 #[derive(Clone, Debug)]
 pub(crate) enum Weights {
@@ -124,6 +146,156 @@ impl Gemv {
             *o = row.iter().zip(q).map(|(w, q)| i32::from(*w) * i32::from(*q as i8)).sum();
         }
     }
+}
+
+/// Rows of a [`Recurrent`] block: eight AVX2 registers of eight lanes.
+const BLOCK_ROWS: usize = 64;
+
+/// How a file stores the weights of a [`Recurrent`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum RecurrentWidth {
+    /// Half floats.
+    F16,
+    /// Integers in -127..=127 with one scale per row (`w = q * scale`).
+    I8,
+}
+
+/// Weights for a matrix-vector product of one character, `out[o] = sum_i w[o, i] * x[i]`, held
+/// in 16 bits: a recurrence multiplies the same weights every frame, and in f32 a GRU layer's
+/// (786 KB at 256 hidden) do not stay in the core's cache beside its other data, while in 16
+/// bits they do. The f16 file's weights are its half floats; the int8 file's integers are held
+/// as half floats too (exact: every integer up to 2048 is one), which the CPU widens faster
+/// than bytes, and each row's sum is multiplied by the row's scale. Rows in blocks of
+/// [`BLOCK_ROWS`], each block `[k, 64]` (the 64 rows' weights of one input side by side), the
+/// last block padded with zeros.
+#[derive(Debug, PartialEq, Eq)]
+pub(crate) struct Recurrent {
+    m: usize,
+    k: usize,
+    width: RecurrentWidth,
+    /// The weights' (or integers') f16 bits.
+    w: Vec<u16>,
+    /// `I8`: the f32 bits of each row's scale, padded to the blocks.
+    scales: Vec<u32>,
+}
+
+impl Recurrent {
+    /// `[m, k]` row-major weights: for `F16`, `w` must hold f16 values (widened to f32); for
+    /// `I8`, `q` and `scales` are the file's integers and row scales (`w` unused).
+    pub(crate) fn new(
+        m: usize,
+        k: usize,
+        width: RecurrentWidth,
+        w: &[f32],
+        q: &[i8],
+        scales: &[f32],
+    ) -> TractResult<Recurrent> {
+        let blocks = m.div_ceil(BLOCK_ROWS);
+        let at = |o: usize, i: usize| (o / BLOCK_ROWS * k + i) * BLOCK_ROWS + o % BLOCK_ROWS;
+        let mut r = Recurrent { m, k, width, w: vec![0; blocks * BLOCK_ROWS * k], scales: Vec::new() };
+        match width {
+            RecurrentWidth::F16 => {
+                ensure!(w.len() == m * k, "{} weights for {m} x {k}", w.len());
+                for o in 0..m {
+                    for i in 0..k {
+                        let (v, h) = (w[o * k + i], f16::from_f32(w[o * k + i]));
+                        ensure!(h.to_f32().to_bits() == v.to_bits(), "weight {v} is not a half float");
+                        r.w[at(o, i)] = h.to_bits();
+                    }
+                }
+            }
+            RecurrentWidth::I8 => {
+                ensure!(
+                    q.len() == m * k && scales.len() == m,
+                    "{} integers and {} scales for {m} x {k}",
+                    q.len(),
+                    scales.len()
+                );
+                for o in 0..m {
+                    for i in 0..k {
+                        r.w[at(o, i)] = f16::from_f32(f32::from(q[o * k + i])).to_bits();
+                    }
+                }
+                r.scales = scales.iter().map(|s| s.to_bits()).collect();
+                r.scales.resize(blocks * BLOCK_ROWS, 0);
+            }
+        }
+        Ok(r)
+    }
+
+    pub(crate) fn width(&self) -> RecurrentWidth {
+        self.width
+    }
+
+    /// `out[o] = sum_i w[o, i] * x[i]` (`x` of `k` values, `out` of `m`).
+    pub(crate) fn run(&self, x: &[f32], out: &mut [f32]) {
+        assert!(x.len() == self.k && out.len() == self.m, "a recurrent product of the wrong size");
+        let mut tile = [0f32; BLOCK_ROWS];
+        for (b, rows) in out.chunks_mut(BLOCK_ROWS).enumerate() {
+            let w = &self.w[b * self.k * BLOCK_ROWS..(b + 1) * self.k * BLOCK_ROWS];
+            #[cfg(target_arch = "x86_64")]
+            if recurrent_avx2() {
+                // SAFETY: the CPU has AVX2, FMA and F16C (`recurrent_avx2`).
+                unsafe { block_avx2(w, x, &mut tile) };
+            } else {
+                block(w, x, &mut tile);
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            block(w, x, &mut tile);
+            for (j, o) in rows.iter_mut().enumerate() {
+                *o = match self.width {
+                    RecurrentWidth::F16 => tile[j],
+                    RecurrentWidth::I8 => tile[j] * f32::from_bits(self.scales[b * BLOCK_ROWS + j]),
+                };
+            }
+        }
+    }
+}
+
+/// One block of [`Recurrent::run`]: `tile[j] = sum_i w[i, j] * x[i]`, `w` `[x.len(), 64]`.
+fn block(w: &[u16], x: &[f32], tile: &mut [f32; BLOCK_ROWS]) {
+    tile.fill(0.0);
+    for (row, xi) in w.chunks_exact(BLOCK_ROWS).zip(x) {
+        for (t, v) in tile.iter_mut().zip(row) {
+            *t = f16::from_bits(*v).to_f32().mul_add(*xi, *t);
+        }
+    }
+}
+
+/// [`block`] on AVX2: eight registers of eight rows, each weight widened by F16C.
+///
+/// # Safety
+/// The CPU has AVX2, FMA and F16C.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma,f16c")]
+unsafe fn block_avx2(w: &[u16], x: &[f32], tile: &mut [f32; BLOCK_ROWS]) {
+    use std::arch::x86_64::*;
+    assert!(w.len() == x.len() * BLOCK_ROWS, "a block of the wrong size");
+    let mut acc = [_mm256_setzero_ps(); 8];
+    for (row, xi) in w.chunks_exact(BLOCK_ROWS).zip(x) {
+        let xb = _mm256_set1_ps(*xi);
+        for (r, a) in acc.iter_mut().enumerate() {
+            // SAFETY: `row` holds 64 values, so `8 r + 8 <= 64`.
+            let h = unsafe { _mm_loadu_si128(row.as_ptr().add(r * 8) as *const __m128i) };
+            *a = _mm256_fmadd_ps(_mm256_cvtph_ps(h), xb, *a);
+        }
+    }
+    for (r, a) in acc.iter().enumerate() {
+        // SAFETY: `tile` holds 64 values.
+        unsafe { _mm256_storeu_ps(tile.as_mut_ptr().add(r * 8), *a) };
+    }
+}
+
+/// Whether [`Recurrent::run`] has its AVX2 form on this CPU (`TRACT_CPU_ISA` can take
+/// features away, as for tract's kernels).
+#[cfg(target_arch = "x86_64")]
+fn recurrent_avx2() -> bool {
+    use tract_onnx::tract_core::tract_linalg::isa::{Isa, native};
+    static AVX2: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *AVX2.get_or_init(|| {
+        let isa = native();
+        isa.has(Isa::X86_64Avx2) && isa.has(Isa::X86_64Fma) && std::arch::is_x86_feature_detected!("f16c")
+    })
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -286,9 +458,20 @@ impl Product {
             .collect();
         let k_total: usize = ks.iter().sum();
         let pick = |acc: DatumType, k: Option<usize>| {
-            MmmDispatch::native()
-                .pick(&Query { allow_extractor: false, ..Query::plain(acc, Some(m), k, n) })
-                .with_context(|| format!("no {acc:?} matrix kernel on this CPU"))
+            let dispatch = MmmDispatch::native();
+            let query = Query { allow_extractor: false, ..Query::plain(acc, Some(m), k, n) };
+            let picked = dispatch.pick(&query).with_context(|| format!("no {acc:?} matrix kernel on this CPU"))?;
+            // tract's AMD model picks the 16-row AVX-512 tiles for many of these products, which
+            // ran at 0.63-0.80x the 32x6 tile on every product shape of the zoo's models on a
+            // Zen 4 core (`examples/mmm_kernels`); its Intel model is left as it is.
+            if acc == DatumType::F32 && n != Some(1) && amd_cpu() && SLOW_ON_AMD.contains(&picked.0.name()) {
+                if let Some(wide) =
+                    dispatch.suitable(&query).into_iter().find(|(k, _, e)| k.name() == WIDE_ON_AMD && e.is_none())
+                {
+                    return Ok(wide);
+                }
+            }
+            Ok::<_, TractError>(picked)
         };
         let (mut kernel, mut packing, _) =
             if int8 { pick(DatumType::I32, ks.iter().max().copied())? } else { pick(DatumType::F32, Some(k_total))? };
@@ -741,4 +924,56 @@ fn space<'s>(
         }
     };
     &mut spaces[at].1
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `m x k` values of some spread, and a vector of `k`.
+    fn data(m: usize, k: usize) -> (Vec<f32>, Vec<f32>) {
+        let w = (0..m * k).map(|i| ((i * 7919 % 1009) as f32 / 1009.0 - 0.5) * 0.9).collect();
+        let x = (0..k).map(|i| ((i as f32) * 0.61).sin()).collect();
+        (w, x)
+    }
+
+    #[test]
+    fn a_recurrent_product_is_its_weights_times_the_vector() {
+        // 130 rows: two full blocks of 64 and a padded one; several widths of input.
+        for (m, k) in [(130, 37), (18, 6), (768, 256)] {
+            let (w, x) = data(m, k);
+            // f16: the weights rounded to half floats first (the file's own values).
+            let w16: Vec<f32> = w.iter().map(|v| f16::from_f32(*v).to_f32()).collect();
+            // int8: integers and row scales, `w = q * scale`.
+            let scales: Vec<f32> = w.chunks(k).map(|r| r.iter().fold(0f32, |a, v| a.max(v.abs())) / 127.0).collect();
+            let q: Vec<i8> = w.iter().enumerate().map(|(i, v)| (v / scales[i / k]).round() as i8).collect();
+            for width in [RecurrentWidth::F16, RecurrentWidth::I8] {
+                let r = Recurrent::new(m, k, width, &w16, &q, &scales).unwrap();
+                let mut out = vec![f32::NAN; m];
+                r.run(&x, &mut out);
+                for o in 0..m {
+                    let want: f64 = (0..k)
+                        .map(|i| {
+                            let wi = match width {
+                                RecurrentWidth::F16 => f64::from(w16[o * k + i]),
+                                RecurrentWidth::I8 => f64::from(q[o * k + i]) * f64::from(scales[o]),
+                            };
+                            wi * f64::from(x[i])
+                        })
+                        .sum();
+                    let err = (f64::from(out[o]) - want).abs();
+                    assert!(err <= 1e-5 * (1.0 + want.abs()), "{width:?} {m}x{k} row {o}: {} against {want}", out[o]);
+                }
+                // The portable form gives the same sums as the vector form, to rounding.
+                let mut tile = [0f32; BLOCK_ROWS];
+                block(&r.w[..k * BLOCK_ROWS], &x, &mut tile);
+                let scale = |j: usize| if width == RecurrentWidth::I8 { f32::from_bits(r.scales[j]) } else { 1.0 };
+                for j in 0..m.min(BLOCK_ROWS) {
+                    assert!((tile[j] * scale(j) - out[j]).abs() <= 1e-5 * (1.0 + out[j].abs()), "{width:?} row {j}");
+                }
+            }
+        }
+        // Weights that are not half floats are refused, not rounded.
+        assert!(Recurrent::new(1, 1, RecurrentWidth::F16, &[0.1], &[], &[]).is_err());
+    }
 }

@@ -112,6 +112,34 @@ impl<'g> Index<'g> {
         (int_attr(cast, "to", 0) == Dt::Float as i64 && t.data_type == Dt::Float16 as i32).then_some(*t)
     }
 
+    /// The f32 values of a recurrent op's weight and how the file stores them: an f32 or f16
+    /// constant ([`Self::float_init`]), or int8 widened by `DequantizeLinear` per channel of
+    /// axis 1 without a zero point (as `zoo export --weights int8` writes a `GRU`'s), whose
+    /// values are `q * scale` in f32, as `DequantizeLinear` computes them.
+    fn recurrent_values(&self, name: &str) -> Option<(Vec<i64>, Vec<f32>, Stored)> {
+        if let Some(t) = self.float_init(name) {
+            let stored = if t.data_type == Dt::Float16 as i32 { Stored::F16 } else { Stored::F32 };
+            return Some((t.dims.clone(), super::tensor_f32(t)?, stored));
+        }
+        let (_, dq) = self.node_op(name, "DequantizeLinear")?;
+        if dq.input.get(2).is_some_and(|z| !z.is_empty()) || int_attr(dq, "axis", 1) != 1 {
+            return None;
+        }
+        let q = self.inits.get(dq.input.first()?.as_str())?;
+        let s = self.inits.get(dq.input.get(1)?.as_str())?;
+        let dims: Vec<usize> = q.dims.iter().map(|d| (*d).max(0) as usize).collect();
+        if q.data_type != Dt::Int8 as i32 || dims.len() != 3 || q.raw_data.len() != Self::elements(q) {
+            return None;
+        }
+        let scales = (s.data_type == Dt::Float as i32).then(|| super::tensor_f32(s)).flatten()?;
+        if scales.len() != dims[1] {
+            return None;
+        }
+        let q: Vec<i8> = q.raw_data.iter().map(|b| *b as i8).collect();
+        let values = q.iter().enumerate().map(|(i, v)| f32::from(*v) * scales[(i / dims[2]) % dims[1]]).collect();
+        Some((dims.iter().map(|d| *d as i64).collect(), values, Stored::I8 { q, scales }))
+    }
+
     fn scalar(&self, name: &str) -> Option<f32> {
         let t = self.inits.get(name)?;
         if Self::elements(t) != 1 || t.data_type != Dt::Float as i32 {
@@ -509,6 +537,17 @@ pub(crate) fn f32_init(name: &str, dims: &[usize], values: &[f32]) -> pb::Tensor
     }
 }
 
+/// How a file stores a recurrent weight ([`Index::recurrent_values`]).
+enum Stored {
+    F32,
+    F16,
+    /// The integers (`[dirs, rows, in]`) and the scales of the rows, shared by the directions.
+    I8 {
+        q: Vec<i8>,
+        scales: Vec<f32>,
+    },
+}
+
 /// The zoo nodes of an ONNX `GRU` node (`linear_before_reset = 1`, the default activations, no
 /// sequence lengths, constant f32 or f16 weights): one [`super::ZOO_DENSE`] of every frame's
 /// input products for every direction with their biases, then per direction a
@@ -533,8 +572,8 @@ fn gru(idx: &Index, node: &pb::NodeProto, inits: &mut Vec<pb::TensorProto>) -> O
     };
     let backward = get_attr(node, "direction").is_some_and(|a| a.s == b"reverse");
     let values = |name: &str| idx.float_init(name).and_then(|t| Some((t.dims.clone(), super::tensor_f32(t)?)));
-    let (wd, w) = values(&node.input[1])?;
-    let (rd, r) = values(&node.input[2])?;
+    let (wd, w, _) = idx.recurrent_values(&node.input[1])?;
+    let (rd, r, stored) = idx.recurrent_values(&node.input[2])?;
     let h = int_attr(node, "hidden_size", 0).max(0) as usize;
     if wd.len() != 3 || rd != [dirs as i64, 3 * h as i64, h as i64] || wd[0] != dirs as i64 || wd[1] != 3 * h as i64 {
         return None;
@@ -586,6 +625,28 @@ fn gru(idx: &Index, node: &pb::NodeProto, inits: &mut Vec<pb::TensorProto>) -> O
         if let Some(b) = &b {
             inits.push(f32_init(&format!("{q}.rb"), &[3 * h], &b[d * 6 * h + 3 * h..(d + 1) * 6 * h]));
             gru_attrs.push(attr::string("bias", &format!("{q}.rb")));
+        }
+        // The recurrent weights also as the file stores them: a character alone multiplies
+        // them every frame, faster from a compact copy (`super::gru`).
+        match &stored {
+            Stored::F32 => {}
+            Stored::F16 => gru_attrs.push(attr::string("recurrent_width", "f16")),
+            Stored::I8 { q: ints, scales } => {
+                let raw = ints[d * 3 * h * h..(d + 1) * 3 * h * h].iter().map(|v| *v as u8).collect();
+                let dims = vec![3 * h as i64, h as i64];
+                let data_type = Dt::Int8 as i32;
+                inits.push(pb::TensorProto {
+                    name: format!("{q}.rq"),
+                    dims,
+                    data_type,
+                    raw_data: raw,
+                    ..Default::default()
+                });
+                inits.push(f32_init(&format!("{q}.rs"), &[3 * h], scales));
+                gru_attrs.push(attr::string("recurrent_width", "int8"));
+                gru_attrs.push(attr::string("recurrent_q", &format!("{q}.rq")));
+                gru_attrs.push(attr::string("recurrent_scales", &format!("{q}.rs")));
+            }
         }
         gru_attrs.push(attr::int("reverse", i64::from(d == 1 || backward)));
         gru_attrs.push(attr::int("h0_index", d as i64));
