@@ -786,15 +786,20 @@ fn pack_f32(format: &PackedFormat, b: &mut EagerPackedInput, xs: &[&[f32]], ks: 
     let r = format.r;
     let panel = b.panel_bytes / 4;
     let blob = Arc::get_mut(&mut b.packed).context("packed activations are shared")?;
-    let dst = blob.as_bytes_mut();
+    let dst: &mut [f32] = bytemuck::try_cast_slice_mut(blob.as_bytes_mut())
+        .map_err(|e| format_err!("packed activations are not f32: {e:?}"))?;
     let mut offset = 0;
     for (x, &k) in xs.iter().zip(ks) {
         ensure!(x.len() == n * k, "an input has {} values, expected {n} x {k}", x.len());
-        for (c, row) in x.chunks_exact(k).enumerate() {
-            let base = (c / r) * panel + offset * r + c % r;
-            for (i, v) in row.iter().enumerate() {
-                let at = (base + i * r) * 4;
-                dst[at..at + 4].copy_from_slice(&v.to_ne_bytes());
+        // Panel `p` holds characters `p r..`: for each input `i`, their `r` values side by
+        // side. Written in that order (one contiguous run per input), reading `r` rows.
+        for (p, rows) in x.chunks(k * r).enumerate() {
+            let chars = rows.len() / k.max(1);
+            let out = &mut dst[p * panel + offset * r..][..k * r];
+            for (i, cell) in out.chunks_exact_mut(r).enumerate() {
+                for (j, v) in cell[..chars].iter_mut().enumerate() {
+                    *v = rows[j * k + i];
+                }
             }
         }
         offset += k;
