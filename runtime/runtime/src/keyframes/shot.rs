@@ -107,7 +107,7 @@ impl ShotGraph {
             });
         }
         // Shots of one length in one call where tract plans it (the runtime's GRU op; not tract's
-        // own, kept by 8-bit files and with the runtime's ops off): one at a time otherwise.
+        // own, kept with the runtime's ops off): one at a time otherwise.
         let tract_gru = model.nodes().iter().any(|n| n.op.name() == "GRU");
         let batched = (!tract_gru).then(|| plan(model.clone(), None, w as usize).ok()).flatten();
         let plan = plan(model, Some(1), w as usize)?;

@@ -549,10 +549,11 @@ enum Stored {
 }
 
 /// The zoo nodes of an ONNX `GRU` node (`linear_before_reset = 1`, the default activations, no
-/// sequence lengths, constant f32 or f16 weights): one [`super::ZOO_DENSE`] of every frame's
-/// input products for every direction with their biases, then per direction a
-/// [`super::ZOO_GRU`] of the recurrence; both directions' outputs concatenated as the `GRU`
-/// node's. `None` for any other form.
+/// sequence lengths, constant weights in f32, f16 or int8 ([`Index::recurrent_values`])): one
+/// [`super::ZOO_DENSE`] of every frame's input products for every direction with their biases,
+/// then per direction a [`super::ZOO_GRU`] of the recurrence, naming the f16 or int8 form of
+/// its weights too (`recurrent_width`, and `recurrent_q`/`recurrent_scales` for int8); both
+/// directions' outputs concatenated as the `GRU` node's. `None` for any other form.
 fn gru(idx: &Index, node: &pb::NodeProto, inits: &mut Vec<pb::TensorProto>) -> Option<Vec<pb::NodeProto>> {
     let allowed = ["hidden_size", "direction", "linear_before_reset", "layout"];
     if node.op_type != "GRU"
