@@ -82,13 +82,18 @@ fn tract_run(exported: &OnnxModel, x_tm: &[f32], d: usize) -> Vec<f32> {
 }
 
 fn ort_run(onnx: &OnnxModel, x_tm: &[f32], d: usize) -> Vec<f32> {
+    ort_run_batch(onnx, x_tm, d, BATCH)
+}
+
+/// onnxruntime's output for `batch` time-major windows `x_tm` (`[FRAMES, batch, d]`).
+fn ort_run_batch(onnx: &OnnxModel, x_tm: &[f32], d: usize, batch: usize) -> Vec<f32> {
     let mut session = ort::session::Session::builder(ort_environment())
         .unwrap()
         .with_intra_threads(1)
         .unwrap()
         .commit_from_memory(&onnx.to_bytes())
         .expect("onnxruntime loads the RMR graph");
-    let t = ort::value::Tensor::from_array((vec![FRAMES as i64, BATCH as i64, d as i64], x_tm.to_vec())).unwrap();
+    let t = ort::value::Tensor::from_array((vec![FRAMES as i64, batch as i64, d as i64], x_tm.to_vec())).unwrap();
     let inputs: Vec<(Cow<'_, str>, ort::session::SessionInputValue<'_>)> = vec![(Cow::Borrowed("x"), t.into())];
     let out = session.run(inputs).expect("onnxruntime runs the RMR graph");
     out["y"].try_extract_tensor::<f32>().unwrap().1.to_vec()
@@ -839,16 +844,7 @@ fn the_runtime_window_agrees_with_onnxruntime_at_every_width() {
             refiner.set_window(FRAMES, FRAMES / 2).unwrap();
             let mut y = vec![f32::NAN; FRAMES * d];
             refiner.refine_window_normalized(&x, &mut y).unwrap();
-            let mut session = ort::session::Session::builder(ort_environment())
-                .unwrap()
-                .with_intra_threads(1)
-                .unwrap()
-                .commit_from_memory(&narrow.to_bytes())
-                .expect("onnxruntime loads the RMR graph");
-            let t = ort::value::Tensor::from_array((vec![FRAMES as i64, 1, d as i64], x.clone())).unwrap();
-            let inputs: Vec<(Cow<'_, str>, ort::session::SessionInputValue<'_>)> = vec![(Cow::Borrowed("x"), t.into())];
-            let out = session.run(inputs).expect("onnxruntime runs the RMR graph");
-            let o = out["y"].try_extract_tensor::<f32>().unwrap().1.to_vec();
+            let o = ort_run_batch(&narrow, &x, d, 1);
             let diff = max_abs_diff(&y, &o);
             println!("{cell:?} {width}: runtime-ort max |diff| {diff:e}");
             assert!(diff <= 1e-5, "{cell:?} {width}: runtime-ort max |diff| {diff}");
