@@ -25,8 +25,7 @@ pub(super) struct GruSpec {
     pub(super) compact: Option<Arc<Compact>>,
 }
 
-/// The recurrent weights' width in the file: f16 (the f32 weights are their exact values) or
-/// int8 (`w = q * scale`, one scale per row).
+/// The int8 file's recurrent weights: `w = q * scale`, one scale per row.
 #[derive(Clone, Debug)]
 pub(super) struct Compact {
     pub(super) width: RecurrentWidth,
@@ -139,7 +138,11 @@ impl Op for GruOp {
             self.hidden,
             if self.reverse { ", reversed" } else { "" },
             self.product.kernel_name(),
-            self.recurrent.as_ref().map_or(String::new(), |r| format!(", one character on {:?} weights", r.width()))
+            match (&self.recurrent, self.product.half()) {
+                (Some(r), _) => format!(", one character on {:?} weights", r.width()),
+                (None, true) => ", one character on f16 weights".to_string(),
+                (None, false) => String::new(),
+            }
         )])
     }
 

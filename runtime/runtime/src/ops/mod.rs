@@ -201,13 +201,13 @@ fn parse_gru(ctx: &ParsingContext, node: &pb::NodeProto) -> TractResult<(Box<dyn
     Ok((expand(spec), vec![]))
 }
 
-/// A [`ZOO_GRU`]'s recurrent weights as the file stores them (`recurrent_width` "f16" or
-/// "int8", the latter with its integers `recurrent_q` and row scales `recurrent_scales`).
+/// A [`ZOO_GRU`]'s recurrent weights as the int8 file stores them (`recurrent_width` "int8",
+/// its integers `recurrent_q` and row scales `recurrent_scales`; f16 weights need none, see
+/// `product::Product`).
 fn compact(ctx: &ParsingContext, node: &pb::NodeProto, m: usize) -> TractResult<Option<Arc<gru::Compact>>> {
     use product::RecurrentWidth;
     let width = match node_attr(node, "recurrent_width").map(|a| a.s.as_slice()) {
         None => return Ok(None),
-        Some(b"f16") => RecurrentWidth::F16,
         Some(b"int8") => RecurrentWidth::I8,
         Some(other) => bail!("`{}`: unknown recurrent width {}", node.name, String::from_utf8_lossy(other)),
     };
@@ -345,11 +345,12 @@ impl Op for DenseOp {
     fn info(&self) -> TractResult<Vec<String>> {
         let p = &self.product;
         Ok(vec![format!(
-            "{} x {:?} {} on {}{}",
+            "{} x {:?} {} on {}{}{}",
             p.m,
             p.ks,
             if p.int8() { "int8" } else { "f32" },
             p.kernel_name(),
+            if p.half() { ", one character on f16 weights" } else { "" },
             if self.alpha.is_some() { ", LeakyReLU" } else { "" }
         )])
     }
@@ -566,11 +567,12 @@ impl Op for LstmOp {
     fn info(&self) -> TractResult<Vec<String>> {
         let p = &self.product;
         Ok(vec![format!(
-            "hidden {} over {:?} {} on {}",
+            "hidden {} over {:?} {} on {}{}",
             self.hidden,
             p.ks,
             if p.int8() { "int8" } else { "f32" },
-            p.kernel_name()
+            p.kernel_name(),
+            if p.half() { ", one character on f16 weights" } else { "" }
         )])
     }
 

@@ -99,6 +99,9 @@ pub(crate) struct Product {
     gemv: Vec<Arc<Gemv>>,
     /// int8 on an f32 kernel, the integers held as floats (exact; CPUs without VNNI).
     int8_in_f32: bool,
+    /// f32 weights that are all half floats (a file written with `--weights f16`), held in 16
+    /// bits, in plans for one character.
+    half: Option<Arc<Recurrent>>,
 }
 
 /// int8 weights for a product of one character (a matrix-vector product, which the tiled
@@ -493,6 +496,7 @@ impl Product {
         let mut a = Vec::new();
         let mut scales = Vec::new();
         let mut gemv = Vec::new();
+        let mut all_f32 = None;
         if int8 {
             for w in parts {
                 let Weights::I8 { q, scales: s } = w else { bail!("an int8 product mixes f32 weights") };
@@ -520,8 +524,17 @@ impl Product {
             }
             let t = Tensor::from_shape(&[m, k_total], &all)?;
             a.push(Arc::new(pa.prepare_one(&t, 1, 0)?));
+            all_f32 = Some(all);
         }
-        Ok(Product { m, ks, kernel, packing, a, scales, gemv, int8_in_f32 })
+        // Only in plans for one character: a plan for any number keeps one arithmetic for all
+        // (synthesis gives a character the same frames whatever the others of its call).
+        let half = match (&all_f32, n) {
+            (Some(all), Some(1)) if all.iter().all(|v| f16::from_f32(*v).to_f32().to_bits() == v.to_bits()) => {
+                Some(Arc::new(Recurrent::new(m, k_total, RecurrentWidth::F16, all, &[], &[])?))
+            }
+            _ => None,
+        };
+        Ok(Product { m, ks, kernel, packing, a, scales, gemv, int8_in_f32, half })
     }
 
     pub(crate) fn int8(&self) -> bool {
@@ -530,6 +543,11 @@ impl Product {
 
     pub(crate) fn kernel_name(&self) -> &str {
         self.kernel.name()
+    }
+
+    /// Whether one character runs on weights held in 16 bits (f16 files, [`Recurrent`]).
+    pub(crate) fn half(&self) -> bool {
+        self.half.is_some()
     }
 
     /// f32: `out[c, o] = act(sum_i x_i[c] . w_i[o] + bias[o] + addend[c, o])` for the `n` rows
@@ -544,6 +562,9 @@ impl Product {
         out: &mut Tensor,
     ) -> TractResult<()> {
         ensure!(!self.int8() && out.len() == n * self.m && xs.iter().zip(&self.ks).all(|(x, k)| x.len() == n * k));
+        if let (Some(half), 1) = (&self.half, n) {
+            return self.run_half(half, xs, bias, addend, leaky, out);
+        }
         SCRATCH.with_borrow_mut(|s| {
             let (_, pb) = &self.kernel.packings()[self.packing];
             let format = pb.downcast_ref::<PackedFormat>().context("f32 activations in a plain packing")?;
@@ -576,6 +597,37 @@ impl Product {
             }
             Ok(())
         })
+    }
+
+    /// [`Product::run_f32`] for one character on the weights held in 16 bits: the product, then
+    /// the bias, the addend and the LeakyReLU in the kernel's order.
+    fn run_half(
+        &self,
+        half: &Recurrent,
+        xs: &[&[f32]],
+        bias: Option<&Tensor>,
+        addend: Option<&Tensor>,
+        leaky: Option<&Tensor>,
+        out: &mut Tensor,
+    ) -> TractResult<()> {
+        let mut view = out.try_as_plain_ram_mut()?;
+        let y = view.as_slice_mut::<f32>()?;
+        SCRATCH.with_borrow_mut(|s| {
+            s.quantized.clear();
+            xs.iter().for_each(|x| s.quantized.extend_from_slice(x));
+            half.run(&s.quantized, y);
+        });
+        if let Some(b) = bias {
+            y.iter_mut().zip(b.try_as_plain_ram()?.as_slice::<f32>()?).for_each(|(y, b)| *y += b);
+        }
+        if let Some(a) = addend {
+            y.iter_mut().zip(a.try_as_plain_ram()?.as_slice::<f32>()?).for_each(|(y, a)| *y += a);
+        }
+        if let Some(alpha) = leaky {
+            let alpha = *alpha.try_as_plain_ram()?.as_slice::<f32>()?.first().context("no LeakyReLU slope")?;
+            y.iter_mut().filter(|y| **y < 0.0).for_each(|y| *y *= alpha);
+        }
+        Ok(())
     }
 
     /// int8: quantizes each row of each `xs[i]` (`[n, k_i]`), runs the integer products and
@@ -980,5 +1032,39 @@ mod tests {
         }
         // Weights that are not half floats are refused, not rounded.
         assert!(Recurrent::new(1, 1, RecurrentWidth::F16, &[0.1], &[], &[]).is_err());
+    }
+
+    #[test]
+    fn one_character_on_half_float_weights_is_the_kernel_product() {
+        // Two inputs (as an LSTM's gate products), f16 weights: the plan for one character
+        // holds them in 16 bits, a plan for any number does not; the same outputs, with the
+        // bias, a per-character addend and a LeakyReLU.
+        let (m, ks) = (70, [13usize, 9]);
+        let parts: Vec<Weights> = ks
+            .iter()
+            .map(|&k| Weights::F32(data(m, k).0.iter().map(|v| f16::from_f32(*v).to_f32()).collect()))
+            .collect();
+        let one = Product::new(m, &parts, Some(1)).unwrap();
+        let any = Product::new(m, &parts, None).unwrap();
+        assert!(one.half() && !any.half());
+        let xs: Vec<Vec<f32>> = ks.iter().map(|&k| data(1, k).1).collect();
+        let xs: Vec<&[f32]> = xs.iter().map(|x| x.as_slice()).collect();
+        let bias = tensor1(&(0..m).map(|o| (o as f32 * 0.3).cos()).collect::<Vec<f32>>());
+        let addend =
+            Tensor::from_shape(&[1, m], &(0..m).map(|o| (o as f32 * 0.7).sin()).collect::<Vec<f32>>()).unwrap();
+        let alpha = tensor0(0.1f32);
+        let run = |p: &Product| {
+            let mut out = Tensor::zero::<f32>(&[1, m]).unwrap();
+            p.run_f32(&xs, 1, Some(&bias), Some(&addend), Some(&alpha), &mut out).unwrap();
+            out.try_as_plain_ram().unwrap().as_slice::<f32>().unwrap().to_vec()
+        };
+        let (a, b) = (run(&one), run(&any));
+        assert!(a.iter().any(|v| *v < 0.0) && a.iter().any(|v| *v > 0.0), "{a:?}");
+        for (o, (a, b)) in a.iter().zip(&b).enumerate() {
+            assert!((a - b).abs() <= 1e-5 * (1.0 + b.abs()), "channel {o}: {a} against {b}");
+        }
+        // f32 weights that are not all half floats stay on the kernel.
+        let f32_parts: Vec<Weights> = ks.iter().map(|&k| Weights::F32(data(m, k).0)).collect();
+        assert!(!Product::new(m, &f32_parts, Some(1)).unwrap().half());
     }
 }

@@ -118,8 +118,7 @@ impl<'g> Index<'g> {
     /// values are `q * scale` in f32, as `DequantizeLinear` computes them.
     fn recurrent_values(&self, name: &str) -> Option<(Vec<i64>, Vec<f32>, Stored)> {
         if let Some(t) = self.float_init(name) {
-            let stored = if t.data_type == Dt::Float16 as i32 { Stored::F16 } else { Stored::F32 };
-            return Some((t.dims.clone(), super::tensor_f32(t)?, stored));
+            return Some((t.dims.clone(), super::tensor_f32(t)?, Stored::Float));
         }
         let (_, dq) = self.node_op(name, "DequantizeLinear")?;
         if dq.input.get(2).is_some_and(|z| !z.is_empty()) || int_attr(dq, "axis", 1) != 1 {
@@ -539,20 +538,17 @@ pub(crate) fn f32_init(name: &str, dims: &[usize], values: &[f32]) -> pb::Tensor
 
 /// How a file stores a recurrent weight ([`Index::recurrent_values`]).
 enum Stored {
-    F32,
-    F16,
+    /// f32, or f16 widened by a `Cast`.
+    Float,
     /// The integers (`[dirs, rows, in]`) and the scales of the rows, shared by the directions.
-    I8 {
-        q: Vec<i8>,
-        scales: Vec<f32>,
-    },
+    I8 { q: Vec<i8>, scales: Vec<f32> },
 }
 
 /// The zoo nodes of an ONNX `GRU` node (`linear_before_reset = 1`, the default activations, no
 /// sequence lengths, constant weights in f32, f16 or int8 ([`Index::recurrent_values`])): one
 /// [`super::ZOO_DENSE`] of every frame's input products for every direction with their biases,
-/// then per direction a [`super::ZOO_GRU`] of the recurrence, naming the f16 or int8 form of
-/// its weights too (`recurrent_width`, and `recurrent_q`/`recurrent_scales` for int8); both
+/// then per direction a [`super::ZOO_GRU`] of the recurrence, naming the int8 form of its
+/// weights too (`recurrent_width`, `recurrent_q`, `recurrent_scales`); both
 /// directions' outputs concatenated as the `GRU` node's. `None` for any other form.
 fn gru(idx: &Index, node: &pb::NodeProto, inits: &mut Vec<pb::TensorProto>) -> Option<Vec<pb::NodeProto>> {
     let allowed = ["hidden_size", "direction", "linear_before_reset", "layout"];
@@ -627,11 +623,11 @@ fn gru(idx: &Index, node: &pb::NodeProto, inits: &mut Vec<pb::TensorProto>) -> O
             inits.push(f32_init(&format!("{q}.rb"), &[3 * h], &b[d * 6 * h + 3 * h..(d + 1) * 6 * h]));
             gru_attrs.push(attr::string("bias", &format!("{q}.rb")));
         }
-        // The recurrent weights also as the file stores them: a character alone multiplies
-        // them every frame, faster from a compact copy (`super::gru`).
+        // The int8 file's recurrent weights also as it stores them: a character alone
+        // multiplies them every frame, faster from a compact copy (`super::gru`; f16 weights
+        // are found by the product itself).
         match &stored {
-            Stored::F32 => {}
-            Stored::F16 => gru_attrs.push(attr::string("recurrent_width", "f16")),
+            Stored::Float => {}
             Stored::I8 { q: ints, scales } => {
                 let raw = ints[d * 3 * h * h..(d + 1) * 3 * h * h].iter().map(|v| *v as u8).collect();
                 let dims = vec![3 * h as i64, h as i64];
