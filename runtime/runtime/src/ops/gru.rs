@@ -86,7 +86,7 @@ impl Expansion for GruSpec {
         let batch = model.outlet_fact(inputs[0])?.shape.get(1).and_then(|d| d.to_usize().ok());
         let product = Product::new(3 * self.hidden, &self.weights, batch)?;
         let recurrent = match (&self.compact, batch, self.weights.as_slice()) {
-            (Some(c), None | Some(1), [Weights::F32(w)]) => {
+            (Some(c), None | Some(1), [Weights::F32(w)]) if Recurrent::available() => {
                 let (m, k) = (3 * self.hidden, self.hidden);
                 Some(Arc::new(Recurrent::new(m, k, c.width, w, &c.q, &c.scales)?))
             }
@@ -379,7 +379,7 @@ mod tests {
             }
             let (zoo, info) = run(super::super::onnx().model_for_proto_model(&fused).unwrap(), &inputs);
             // A character alone runs the recurrence on the file's own 16- or 8-bit weights.
-            let compact = width != "f32" && batch == 1;
+            let compact = width != "f32" && batch == 1 && super::super::product::Recurrent::available();
             assert!(
                 !info.is_empty() && info.iter().all(|i| i.contains("one character on") == compact),
                 "{case}: {info:?}"

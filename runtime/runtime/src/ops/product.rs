@@ -230,6 +230,16 @@ impl Recurrent {
         self.width
     }
 
+    /// Whether this CPU runs [`Recurrent::run`] in vector form (x86-64 with AVX2, FMA and
+    /// F16C); elsewhere tract-linalg's own kernels are faster than its portable form, which
+    /// is kept for tests.
+    pub(crate) fn available() -> bool {
+        #[cfg(target_arch = "x86_64")]
+        return recurrent_avx2();
+        #[cfg(not(target_arch = "x86_64"))]
+        false
+    }
+
     /// `out[o] = sum_i w[o, i] * x[i]` (`x` of `k` values, `out` of `m`).
     pub(crate) fn run(&self, x: &[f32], out: &mut [f32]) {
         assert!(x.len() == self.k && out.len() == self.m, "a recurrent product of the wrong size");
@@ -529,7 +539,10 @@ impl Product {
         // Only in plans for one character: a plan for any number keeps one arithmetic for all
         // (synthesis gives a character the same frames whatever the others of its call).
         let half = match (&all_f32, n) {
-            (Some(all), Some(1)) if all.iter().all(|v| f16::from_f32(*v).to_f32().to_bits() == v.to_bits()) => {
+            (Some(all), Some(1))
+                if Recurrent::available()
+                    && all.iter().all(|v| f16::from_f32(*v).to_f32().to_bits() == v.to_bits()) =>
+            {
                 Some(Arc::new(Recurrent::new(m, k_total, RecurrentWidth::F16, all, &[], &[])?))
             }
             _ => None,
@@ -1046,7 +1059,7 @@ mod tests {
             .collect();
         let one = Product::new(m, &parts, Some(1)).unwrap();
         let any = Product::new(m, &parts, None).unwrap();
-        assert!(one.half() && !any.half());
+        assert!(one.half() == Recurrent::available() && !any.half());
         let xs: Vec<Vec<f32>> = ks.iter().map(|&k| data(1, k).1).collect();
         let xs: Vec<&[f32]> = xs.iter().map(|x| x.as_slice()).collect();
         let bias = tensor1(&(0..m).map(|o| (o as f32 * 0.3).cos()).collect::<Vec<f32>>());
