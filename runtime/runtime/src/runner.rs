@@ -188,23 +188,8 @@ impl MotionRunner {
         if batch == 0 {
             return Err(MotionError::EmptyBatch);
         }
-        if inputs.len() != inner.inputs.len() {
-            return Err(MotionError::BufferCount { what: "inputs", expected: inner.inputs.len(), found: inputs.len() });
-        }
-        if outputs.len() != inner.outputs.len() {
-            return Err(MotionError::BufferCount {
-                what: "outputs",
-                expected: inner.outputs.len(),
-                found: outputs.len(),
-            });
-        }
-        for (info, data) in inner.inputs.iter().zip(inputs) {
-            check_len(&info.name, data.len(), batch, info.width)?;
-            check_finite(&info.name, data, info.width)?;
-        }
-        for (info, data) in inner.outputs.iter().zip(outputs.iter()) {
-            check_len(&info.name, data.len(), batch, info.width)?;
-        }
+        check_inputs(inner, inputs, batch)?;
+        check_outputs(inner, outputs, batch)?;
         check_states(inner, states)?;
 
         let session = if batch == 1 && !symbolic {
@@ -223,6 +208,29 @@ impl MotionRunner {
         let results = session.state.run(values).map_err(run_err)?;
         read_outputs(inner, &results, states, outputs)
     }
+}
+
+/// Checks a step's inputs for `batch` characters: their count, then each one's size and values.
+fn check_inputs(inner: &Inner, inputs: &[&[f32]], batch: usize) -> Result<(), MotionError> {
+    if inputs.len() != inner.inputs.len() {
+        return Err(MotionError::BufferCount { what: "inputs", expected: inner.inputs.len(), found: inputs.len() });
+    }
+    for (info, data) in inner.inputs.iter().zip(inputs) {
+        check_len(&info.name, data.len(), batch, info.width)?;
+        check_finite(&info.name, data, info.width)?;
+    }
+    Ok(())
+}
+
+/// Checks a step's output buffers for `batch` characters: their count, then each one's size.
+fn check_outputs(inner: &Inner, outputs: &[&mut [f32]], batch: usize) -> Result<(), MotionError> {
+    if outputs.len() != inner.outputs.len() {
+        return Err(MotionError::BufferCount { what: "outputs", expected: inner.outputs.len(), found: outputs.len() });
+    }
+    for (info, data) in inner.outputs.iter().zip(outputs) {
+        check_len(&info.name, data.len(), batch, info.width)?;
+    }
+    Ok(())
 }
 
 /// Checks the start graph's inputs for `batch` characters: their count, then each given one's
@@ -445,13 +453,7 @@ impl MotionRunner {
         inputs: &[&[f32]],
     ) -> Result<(), MotionError> {
         let inner = &*self.model.inner;
-        if inputs.len() != inner.inputs.len() {
-            return Err(MotionError::BufferCount { what: "inputs", expected: inner.inputs.len(), found: inputs.len() });
-        }
-        for (info, data) in inner.inputs.iter().zip(inputs) {
-            check_len(&info.name, data.len(), 1, info.width)?;
-            check_finite(&info.name, data, info.width)?;
-        }
+        check_inputs(inner, inputs, 1)?;
         check_states(inner, std::slice::from_ref(state))?;
         let run_err = |e: TractError| MotionError::Run { reason: chain(&e) };
         if p.begun {
@@ -482,16 +484,7 @@ impl MotionRunner {
         outputs: &mut [&mut [f32]],
     ) -> Result<(), MotionError> {
         let inner = &*self.model.inner;
-        if outputs.len() != inner.outputs.len() {
-            return Err(MotionError::BufferCount {
-                what: "outputs",
-                expected: inner.outputs.len(),
-                found: outputs.len(),
-            });
-        }
-        for (info, data) in inner.outputs.iter().zip(outputs.iter()) {
-            check_len(&info.name, data.len(), 1, info.width)?;
-        }
+        check_outputs(inner, outputs, 1)?;
         while !p.complete(costs) {
             self.partial_node(p, costs)?;
         }
