@@ -28,7 +28,6 @@ pub(super) struct GruSpec {
 /// The int8 file's recurrent weights: `w = q * scale`, one scale per row.
 #[derive(Clone, Debug)]
 pub(super) struct Compact {
-    pub(super) width: RecurrentWidth,
     pub(super) q: Vec<i8>,
     pub(super) scales: Vec<f32>,
 }
@@ -84,16 +83,12 @@ impl Expansion for GruSpec {
 
     fn wire(&self, prefix: &str, model: &mut TypedModel, inputs: &[OutletId]) -> TractResult<TVec<OutletId>> {
         let batch = model.outlet_fact(inputs[0])?.shape.get(1).and_then(|d| d.to_usize().ok());
-        let product = Product::new(3 * self.hidden, &self.weights, batch)?;
-        let recurrent = match (&self.compact, batch, self.weights.as_slice()) {
-            (Some(c), None | Some(1), [Weights::F32(w)]) if Recurrent::available() => {
-                let (m, k) = (3 * self.hidden, self.hidden);
-                Some(Arc::new(Recurrent::new(m, k, c.width, w, &c.q, &c.scales)?))
-            }
-            _ => None,
-        };
+        let mut product = Product::new(3 * self.hidden, &self.weights, batch)?;
+        if let (Some(c), Some(1), true) = (&self.compact, batch, Recurrent::available()) {
+            let (m, k) = (3 * self.hidden, self.hidden);
+            product = product.with_recurrent(Recurrent::new(m, k, RecurrentWidth::I8, &[], &c.q, &c.scales)?)?;
+        }
         let op = GruOp {
-            recurrent,
             product,
             hidden: self.hidden,
             bias: self.bias.clone(),
@@ -112,8 +107,6 @@ impl Expansion for GruSpec {
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub(crate) struct GruOp {
     product: Product,
-    /// The product of one character on the file's own width of weights, if it has one.
-    recurrent: Option<Arc<Recurrent>>,
     hidden: usize,
     bias: Option<Arc<Tensor>>,
     reverse: bool,
@@ -138,11 +131,7 @@ impl Op for GruOp {
             self.hidden,
             if self.reverse { ", reversed" } else { "" },
             self.product.kernel_name(),
-            match (&self.recurrent, self.product.half()) {
-                (Some(r), _) => format!(", one character on {:?} weights", r.width()),
-                (None, true) => ", one character on f16 weights".to_string(),
-                (None, false) => String::new(),
-            }
+            super::one_character(&self.product)
         )])
     }
 
@@ -179,17 +168,7 @@ impl EvalOp for GruOp {
             let ys = yv.as_slice_mut::<f32>()?;
             for step in 0..frames {
                 let t = if self.reverse { frames - 1 - step } else { step };
-                match &self.recurrent {
-                    Some(rec) if n == 1 => {
-                        let mut gv = gates.try_as_plain_ram_mut()?;
-                        let g = gv.as_slice_mut::<f32>()?;
-                        rec.run(state, g);
-                        if let Some(b) = &self.bias {
-                            g.iter_mut().zip(b.try_as_plain_ram()?.as_slice::<f32>()?).for_each(|(g, b)| *g += b);
-                        }
-                    }
-                    _ => p.run_f32(&[state.as_slice()], n, self.bias.as_deref(), None, None, gates)?,
-                }
+                p.run_f32(&[state.as_slice()], n, self.bias.as_deref(), None, None, gates)?;
                 let mut gv = gates.try_as_plain_ram_mut()?;
                 let g = gv.as_slice_mut::<f32>()?;
                 for r in 0..n {

@@ -201,33 +201,34 @@ fn parse_gru(ctx: &ParsingContext, node: &pb::NodeProto) -> TractResult<(Box<dyn
     Ok((expand(spec), vec![]))
 }
 
+/// What a product's description says of one character's weights held in 16 bits.
+fn one_character(p: &Product) -> String {
+    p.one_character().map_or(String::new(), |w| format!(", one character on {w:?} weights"))
+}
+
 /// A [`ZOO_GRU`]'s recurrent weights as the int8 file stores them (`recurrent_width` "int8",
 /// its integers `recurrent_q` and row scales `recurrent_scales`; f16 weights need none, see
 /// `product::Product`).
 fn compact(ctx: &ParsingContext, node: &pb::NodeProto, m: usize) -> TractResult<Option<Arc<gru::Compact>>> {
-    use product::RecurrentWidth;
-    let width = match node_attr(node, "recurrent_width").map(|a| a.s.as_slice()) {
+    match node_attr(node, "recurrent_width").map(|a| a.s.as_slice()) {
         None => return Ok(None),
-        Some(b"int8") => RecurrentWidth::I8,
+        Some(b"int8") => {}
         Some(other) => bail!("`{}`: unknown recurrent width {}", node.name, String::from_utf8_lossy(other)),
-    };
-    let (mut q, mut scales) = (Vec::new(), Vec::new());
-    if width == RecurrentWidth::I8 {
-        let name = |a: &str| node_attr(node, a).map(|a| String::from_utf8_lossy(&a.s).into_owned());
-        let t = init(ctx, &name("recurrent_q").context("no recurrent_q")?)?;
-        ensure!(t.data_type == pb::tensor_proto::DataType::Int8 as i32, "`{}`: recurrent_q is not int8", node.name);
-        q = t.raw_data.iter().map(|b| *b as i8).collect();
-        scales = tensor_f32(init(ctx, &name("recurrent_scales").context("no recurrent_scales")?)?)
-            .context("recurrent scales are not f32")?;
-        ensure!(
-            scales.len() == m && q.len() % m == 0,
-            "`{}`: {} scales, {} integers for {m} rows",
-            node.name,
-            scales.len(),
-            q.len()
-        );
     }
-    Ok(Some(Arc::new(gru::Compact { width, q, scales })))
+    let name = |a: &str| node_attr(node, a).map(|a| String::from_utf8_lossy(&a.s).into_owned());
+    let t = init(ctx, &name("recurrent_q").context("no recurrent_q")?)?;
+    ensure!(t.data_type == pb::tensor_proto::DataType::Int8 as i32, "`{}`: recurrent_q is not int8", node.name);
+    let q: Vec<i8> = t.raw_data.iter().map(|b| *b as i8).collect();
+    let scales = tensor_f32(init(ctx, &name("recurrent_scales").context("no recurrent_scales")?)?)
+        .context("recurrent scales are not f32")?;
+    ensure!(
+        scales.len() == m && q.len() % m == 0,
+        "`{}`: {} scales, {} integers for {m} rows",
+        node.name,
+        scales.len(),
+        q.len()
+    );
+    Ok(Some(Arc::new(gru::Compact { q, scales })))
 }
 
 /// The batch size of a plan, when it is concrete.
@@ -350,7 +351,7 @@ impl Op for DenseOp {
             p.ks,
             if p.int8() { "int8" } else { "f32" },
             p.kernel_name(),
-            if p.half() { ", one character on f16 weights" } else { "" },
+            one_character(p),
             if self.alpha.is_some() { ", LeakyReLU" } else { "" }
         )])
     }
@@ -572,7 +573,7 @@ impl Op for LstmOp {
             p.ks,
             if p.int8() { "int8" } else { "f32" },
             p.kernel_name(),
-            if p.half() { ", one character on f16 weights" } else { "" }
+            one_character(p)
         )])
     }
 

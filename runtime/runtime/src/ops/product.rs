@@ -99,9 +99,10 @@ pub(crate) struct Product {
     gemv: Vec<Arc<Gemv>>,
     /// int8 on an f32 kernel, the integers held as floats (exact; CPUs without VNNI).
     int8_in_f32: bool,
-    /// f32 weights that are all half floats (a file written with `--weights f16`), held in 16
-    /// bits, in plans for one character.
-    half: Option<Arc<Recurrent>>,
+    /// The weights held in 16 bits for a plan for one character: f32 weights that are all
+    /// half floats (a file written with `--weights f16`), or the int8 file's integers of a
+    /// GRU's recurrence ([`Product::with_recurrent`]).
+    one: Option<Arc<Recurrent>>,
 }
 
 /// int8 weights for a product of one character (a matrix-vector product, which the tiled
@@ -538,7 +539,7 @@ impl Product {
         }
         // Only in plans for one character: a plan for any number keeps one arithmetic for all
         // (synthesis gives a character the same frames whatever the others of its call).
-        let half = match (&all_f32, n) {
+        let one = match (&all_f32, n) {
             (Some(all), Some(1))
                 if Recurrent::available()
                     && all.iter().all(|v| f16::from_f32(*v).to_f32().to_bits() == v.to_bits()) =>
@@ -547,7 +548,7 @@ impl Product {
             }
             _ => None,
         };
-        Ok(Product { m, ks, kernel, packing, a, scales, gemv, int8_in_f32, half })
+        Ok(Product { m, ks, kernel, packing, a, scales, gemv, int8_in_f32, one })
     }
 
     pub(crate) fn int8(&self) -> bool {
@@ -558,9 +559,21 @@ impl Product {
         self.kernel.name()
     }
 
-    /// Whether one character runs on weights held in 16 bits (f16 files, [`Recurrent`]).
-    pub(crate) fn half(&self) -> bool {
-        self.half.is_some()
+    /// The width of the weights one character runs on when they are held in 16 bits
+    /// ([`Recurrent`]).
+    pub(crate) fn one_character(&self) -> Option<RecurrentWidth> {
+        self.one.as_ref().map(|r| r.width())
+    }
+
+    /// This product with `one` as the weights of one character (an f32 product whose weights
+    /// `one` holds in 16 bits: the int8 file's GRU weights, `q * scale`).
+    pub(crate) fn with_recurrent(mut self, one: Recurrent) -> TractResult<Product> {
+        ensure!(
+            !self.int8() && (one.m, one.k) == (self.m, self.ks.iter().sum()),
+            "a recurrent product of another size"
+        );
+        self.one = Some(Arc::new(one));
+        Ok(self)
     }
 
     /// f32: `out[c, o] = act(sum_i x_i[c] . w_i[o] + bias[o] + addend[c, o])` for the `n` rows
@@ -575,8 +588,8 @@ impl Product {
         out: &mut Tensor,
     ) -> TractResult<()> {
         ensure!(!self.int8() && out.len() == n * self.m && xs.iter().zip(&self.ks).all(|(x, k)| x.len() == n * k));
-        if let (Some(half), 1) = (&self.half, n) {
-            return self.run_half(half, xs, bias, addend, leaky, out);
+        if let (Some(one), 1) = (&self.one, n) {
+            return self.run_one(one, xs, bias, addend, leaky, out);
         }
         SCRATCH.with_borrow_mut(|s| {
             let (_, pb) = &self.kernel.packings()[self.packing];
@@ -614,9 +627,9 @@ impl Product {
 
     /// [`Product::run_f32`] for one character on the weights held in 16 bits: the product, then
     /// the bias, the addend and the LeakyReLU in the kernel's order.
-    fn run_half(
+    fn run_one(
         &self,
-        half: &Recurrent,
+        one: &Recurrent,
         xs: &[&[f32]],
         bias: Option<&Tensor>,
         addend: Option<&Tensor>,
@@ -628,7 +641,7 @@ impl Product {
         SCRATCH.with_borrow_mut(|s| {
             s.quantized.clear();
             xs.iter().for_each(|x| s.quantized.extend_from_slice(x));
-            half.run(&s.quantized, y);
+            one.run(&s.quantized, y);
         });
         if let Some(b) = bias {
             y.iter_mut().zip(b.try_as_plain_ram()?.as_slice::<f32>()?).for_each(|(y, b)| *y += b);
@@ -1059,7 +1072,7 @@ mod tests {
             .collect();
         let one = Product::new(m, &parts, Some(1)).unwrap();
         let any = Product::new(m, &parts, None).unwrap();
-        assert!(one.half() == Recurrent::available() && !any.half());
+        assert!(one.one_character().is_some() == Recurrent::available() && any.one_character().is_none());
         let xs: Vec<Vec<f32>> = ks.iter().map(|&k| data(1, k).1).collect();
         let xs: Vec<&[f32]> = xs.iter().map(|x| x.as_slice()).collect();
         let bias = tensor1(&(0..m).map(|o| (o as f32 * 0.3).cos()).collect::<Vec<f32>>());
@@ -1078,6 +1091,6 @@ mod tests {
         }
         // f32 weights that are not all half floats stay on the kernel.
         let f32_parts: Vec<Weights> = ks.iter().map(|&k| Weights::F32(data(m, k).0)).collect();
-        assert!(!Product::new(m, &f32_parts, Some(1)).unwrap().half());
+        assert!(Product::new(m, &f32_parts, Some(1)).unwrap().one_character().is_none());
     }
 }
