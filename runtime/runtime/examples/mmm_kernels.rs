@@ -6,13 +6,15 @@
 //!
 //! Each kernel multiplies packed A (`M x K`, the weights, packed once) by packed B (`K x N`,
 //! the activations, packed once) into a plain `N x M` output, best of 7 rounds of ~20 ms.
-//! f32 kernels run on f32; i32 kernels on i8 x i8 (their `i8i8` packing).
+//! f32 kernels run on f32; i32 kernels on i8 x i8 (their `i8i8` packing). The runtime's own
+//! f32 tiles (`zoo_*`) are timed as the runtime calls them: the activations packed in each call.
 #![allow(unsafe_code)] // runs tract-linalg's kernels directly, as tract's own matmul op does
 
 use std::time::Instant;
 use tract_onnx::prelude::tract_linalg::mmm::{AsInputValue, FusedSpec, MatMatMul};
 use tract_onnx::prelude::tract_linalg::{self, isa};
 use tract_onnx::prelude::*;
+use zoo_runtime::tiles::{Epilogue, TileIsa, Tiles};
 
 fn bench(ker: &dyn MatMatMul, packing: usize, m: usize, k: usize, n: usize) -> TractResult<f64> {
     let (pa, pb) = &ker.packings()[packing];
@@ -44,6 +46,24 @@ fn bench(ker: &dyn MatMatMul, packing: usize, m: usize, k: usize, n: usize) -> T
     Ok(macs / best / 1e9)
 }
 
+fn bench_tiles(isa: TileIsa, m: usize, k: usize, n: usize) -> f64 {
+    let tiles = Tiles::new(isa, &vec![0.0; m * k], m, k);
+    let x = vec![0.0; n * k];
+    let mut out = vec![0.0; n * m];
+    let mut packed = Vec::new();
+    let macs = (m * k * n) as f64;
+    let reps = ((20e-3 * 30e9 / macs) as usize).clamp(3, 100_000);
+    let mut best = f64::MAX;
+    for _ in 0..7 {
+        let t = Instant::now();
+        for _ in 0..reps {
+            tiles.run(&[&x], &[k], n, Epilogue::default(), &mut out, &mut packed);
+        }
+        best = best.min(t.elapsed().as_secs_f64() / reps as f64);
+    }
+    macs / best / 1e9
+}
+
 fn main() -> TractResult<()> {
     let shapes: Vec<(usize, usize, usize)> = {
         let args: Vec<String> = std::env::args().skip(1).collect();
@@ -58,6 +78,15 @@ fn main() -> TractResult<()> {
     println!("ISA: {:?}", isa::native());
     for (m, k, n) in shapes {
         println!("M={m} K={k} N={n}: GMAC/s (best of 7)");
+        let isas = match TileIsa::native() {
+            Some(TileIsa::Avx512) => vec![TileIsa::Avx512, TileIsa::Avx2],
+            Some(TileIsa::Avx2) => vec![TileIsa::Avx2],
+            None => vec![],
+        };
+        for isa in isas.into_iter().filter(|_| n > 1) {
+            let g = bench_tiles(isa, m, k, n);
+            println!("  {:<32} {:>3}x{:<3} {:>7.1}", isa.name(), isa.mr(), isa.nr(), g);
+        }
         for ker in tract_linalg::MmmDispatch::native().runnable() {
             let packing = match ker.internal_type() {
                 DatumType::F32 => 0,

@@ -45,6 +45,12 @@ pub mod stitch;
 pub mod synthesis;
 pub mod transition;
 
+/// The runtime's own f32 product tiles, for `examples/mmm_kernels` (not a stable API).
+#[doc(hidden)]
+pub mod tiles {
+    pub use crate::ops::tiles::{Epilogue, TileIsa, Tiles};
+}
+
 pub use error::MotionError;
 pub use keyframes::{KeyframeModel, KeyframeRunner, MotionKeys};
 pub use loaded::LoadedModel;

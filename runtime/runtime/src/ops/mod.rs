@@ -15,6 +15,7 @@ pub(crate) mod chunk;
 mod gru;
 mod product;
 pub(crate) mod rewrite;
+pub(crate) mod tiles;
 
 use product::{Product, Weights};
 use std::sync::Arc;

@@ -5,7 +5,9 @@
 //!
 //! - f32: the activations of several inputs are packed side by side along `i`, so one kernel
 //!   call computes a sum of products (an LSTM's gate pre-activations) and the bias, a
-//!   per-character addend and a LeakyReLU run in the kernel's output stage.
+//!   per-character addend and a LeakyReLU run in the kernel's output stage. On x86-64 with
+//!   AVX2 + FMA (or AVX-512F) a plan for a given number of characters above one runs on the
+//!   runtime's own tiles instead ([`super::tiles`]), which reach more of the core's peak there.
 //! - int8 (the files `zoo export --weights int8` writes): each character's row of each input is
 //!   quantized and packed in one pass, with exactly the ONNX graph's arithmetic (`s = max(max|x|
 //!   / 127, 1e-30)`, `q = trunc(x / s + 128.5) - 128`, true divisions), the integer product runs
@@ -14,12 +16,13 @@
 //!   [`Product::dequantize`] applies `(acc * channel_scale) * row_scale` as the graph does.
 //!   So the integers are the graph's on every CPU.
 //!
-//! `unsafe` is confined to this file: the calls into tract-linalg's kernel entry point, which
+//! `unsafe` is confined to this file (and the tiles' vector code): the calls into tract-linalg's kernel entry point, which
 //! read the packed operands and write the output through raw pointers (the contract tract's own
 //! matmul op keeps): every operand is sized for the `m`, `k`, `n` passed here and outlives the
 //! call.
 #![allow(unsafe_code)]
 
+use super::tiles::{Epilogue, TileIsa, Tiles};
 use std::cell::RefCell;
 use std::sync::Arc;
 use tract_onnx::prelude::tract_linalg::mmm::{
@@ -103,6 +106,9 @@ pub(crate) struct Product {
     /// half floats (a file written with `--weights f16`), or the int8 file's integers of a
     /// GRU's recurrence ([`Product::with_recurrent`]).
     one: Option<Arc<Recurrent>>,
+    /// f32 weights packed for the runtime's own tiles ([`Tiles`]), which then run every product
+    /// of this plan in place of `kernel` (plans for a given number of characters above one).
+    tiles: Option<Arc<Tiles>>,
 }
 
 /// int8 weights for a product of one character (a matrix-vector product, which the tiled
@@ -446,6 +452,10 @@ impl PartialEq for Product {
             && self.ks == other.ks
             && self.kernel.name() == other.kernel.name()
             && self.a.iter().zip(&other.a).all(|(a, b)| Arc::ptr_eq(a, b))
+            && match (&self.tiles, &other.tiles) {
+                (Some(a), Some(b)) => Arc::ptr_eq(a, b),
+                (a, b) => a.is_none() && b.is_none(),
+            }
     }
 }
 impl Eq for Product {}
@@ -508,6 +518,7 @@ impl Product {
         let mut scales = Vec::new();
         let mut gemv = Vec::new();
         let mut all_f32 = None;
+        let mut tiles = None;
         if int8 {
             for w in parts {
                 let Weights::I8 { q, scales: s } = w else { bail!("an int8 product mixes f32 weights") };
@@ -533,8 +544,18 @@ impl Product {
                 }
                 offset += k;
             }
-            let t = Tensor::from_shape(&[m, k_total], &all)?;
-            a.push(Arc::new(pa.prepare_one(&t, 1, 0)?));
+            // The runtime's tiles for plans of a known number of characters above one. A plan for
+            // one keeps tract-linalg's matrix-vector kernel (or the 16-bit weights below); a
+            // plan for any number (synthesis) keeps tract-linalg's kernel too: its one or two
+            // characters per call read the weights from memory faster on tract's 64-row
+            // panels than on the tiles' 32-row ones (a synthesis frame took 1.15-1.2x the time).
+            match TileIsa::native().filter(|_| n.is_some_and(|n| n > 1)) {
+                Some(isa) => tiles = Some(Arc::new(Tiles::new(isa, &all, m, k_total))),
+                None => {
+                    let t = Tensor::from_shape(&[m, k_total], &all)?;
+                    a.push(Arc::new(pa.prepare_one(&t, 1, 0)?));
+                }
+            }
             all_f32 = Some(all);
         }
         // Only in plans for one character: a plan for any number keeps one arithmetic for all
@@ -548,7 +569,7 @@ impl Product {
             }
             _ => None,
         };
-        Ok(Product { m, ks, kernel, packing, a, scales, gemv, int8_in_f32, one })
+        Ok(Product { m, ks, kernel, packing, a, scales, gemv, int8_in_f32, one, tiles })
     }
 
     pub(crate) fn int8(&self) -> bool {
@@ -556,7 +577,10 @@ impl Product {
     }
 
     pub(crate) fn kernel_name(&self) -> &str {
-        self.kernel.name()
+        match &self.tiles {
+            Some(t) => t.isa().name(),
+            None => self.kernel.name(),
+        }
     }
 
     /// The width of the weights one character runs on when they are held in 16 bits
@@ -590,6 +614,19 @@ impl Product {
         ensure!(!self.int8() && out.len() == n * self.m && xs.iter().zip(&self.ks).all(|(x, k)| x.len() == n * k));
         if let (Some(one), 1) = (&self.one, n) {
             return self.run_one(one, xs, bias, addend, leaky, out);
+        }
+        if let Some(tiles) = &self.tiles {
+            let epilogue = Epilogue {
+                bias: bias.map(|t| t.try_as_plain_ram()?.as_slice::<f32>()).transpose()?,
+                addend: addend.map(|t| t.try_as_plain_ram()?.as_slice::<f32>()).transpose()?,
+                alpha: leaky
+                    .map(|t| t.try_as_plain_ram()?.as_slice::<f32>()?.first().copied().context("no LeakyReLU slope"))
+                    .transpose()?,
+            };
+            let mut view = out.try_as_plain_ram_mut()?;
+            let y = view.as_slice_mut::<f32>()?;
+            SCRATCH.with_borrow_mut(|s| tiles.run(xs, &self.ks, n, epilogue, y, &mut s.tiles));
+            return Ok(());
         }
         SCRATCH.with_borrow_mut(|s| {
             let (_, pb) = &self.kernel.packings()[self.packing];
@@ -940,6 +977,8 @@ struct Scratch {
     row16: Vec<i16>,
     quantized: Vec<f32>,
     sums: Tensor,
+    /// The characters packed for [`Tiles`].
+    tiles: Vec<f32>,
 }
 
 thread_local! {
