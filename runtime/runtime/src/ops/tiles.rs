@@ -203,20 +203,13 @@ impl Tiles {
                     // `out[at + c * m..]`, all inside `out` (`[n, m]`), with the addend read at
                     // the same places; any other stores into `tile` (`cols x together x mr`
                     // values, at most 256).
+                    #[cfg(target_arch = "x86_64")]
                     unsafe {
-                        match self.isa {
-                            #[cfg(target_arch = "x86_64")]
-                            TileIsa::Avx512 => {
-                                x86::tiles_avx512(together, cols, a, b, k, m, full, at, epilogue, out, &mut tile)
-                            }
-                            #[cfg(target_arch = "x86_64")]
-                            TileIsa::Avx2 => {
-                                x86::tiles_avx2(together, cols, a, b, k, m, full, at, epilogue, out, &mut tile)
-                            }
-                            #[cfg(not(target_arch = "x86_64"))]
-                            _ => unreachable!("tiles exist only on x86-64"),
-                        }
-                    }
+                        let call = x86::Call { a, b, k, m, full, at, ep: epilogue };
+                        x86::tiles(self.isa, together, cols, call, out, &mut tile)
+                    };
+                    #[cfg(not(target_arch = "x86_64"))]
+                    unreachable!("tiles exist only on x86-64");
                     if !full {
                         let width = together * mr;
                         for c in 0..cols {
@@ -235,7 +228,7 @@ impl Tiles {
 
 #[cfg(target_arch = "x86_64")]
 mod x86 {
-    use super::Epilogue;
+    use super::{Epilogue, TileIsa};
     use std::arch::x86_64::*;
 
     /// One kernel per instruction set: `$name::<P, C>` runs `P` consecutive row panels of `$mr`
@@ -246,18 +239,8 @@ mod x86 {
         ($name:ident, $feature:literal, $mr:literal, $nr:literal, $lanes:literal, $v:ty, $zero:ident, $load:ident,
          $store:ident, $splat:ident, $fma:ident, $add:ident, $leaky:expr) => {
             #[target_feature(enable = $feature)]
-            #[allow(clippy::too_many_arguments)]
-            unsafe fn $name<const P: usize, const C: usize>(
-                a: &[f32],
-                b: &[f32],
-                k: usize,
-                m: usize,
-                full: bool,
-                at: usize,
-                ep: Epilogue,
-                out: &mut [f32],
-                tile: &mut [f32; 256],
-            ) {
+            unsafe fn $name<const P: usize, const C: usize>(call: Call, out: &mut [f32], tile: &mut [f32; 256]) {
+                let Call { a, b, k, m, full, at, ep } = call;
                 // SAFETY: the caller's (`Tiles::run`): `a` holds `P` panels of `k x $mr` values,
                 // `b` `k x $nr`; the stores of a full call land inside `out` and read the addend
                 // at the same places; the others inside `tile` (`C x P x $mr <= 256`).
@@ -378,42 +361,36 @@ mod x86 {
         };
     }
 
-    /// `together` panels of 32 rows by `cols` characters on AVX-512F (see `kernel!`).
-    #[allow(clippy::too_many_arguments)]
-    pub(super) unsafe fn tiles_avx512(
-        together: usize,
-        cols: usize,
-        a: &[f32],
-        b: &[f32],
-        k: usize,
-        m: usize,
-        full: bool,
-        at: usize,
-        ep: Epilogue,
-        out: &mut [f32],
-        tile: &mut [f32; 256],
-    ) {
-        // SAFETY: the caller's.
-        unsafe { dispatch!(avx512_of, together, cols, a, b, k, m, full, at, ep, out, tile) }
+    /// One call's operands: `P` panels of weights `a`, the characters `b` (`k` rows each), the
+    /// output's width `m`, whether the call stores into the output (`full`) at `at`, and the
+    /// epilogue.
+    pub(super) struct Call<'a> {
+        pub(super) a: &'a [f32],
+        pub(super) b: &'a [f32],
+        pub(super) k: usize,
+        pub(super) m: usize,
+        pub(super) full: bool,
+        pub(super) at: usize,
+        pub(super) ep: Epilogue<'a>,
     }
 
-    /// `together` panels of 16 rows by `cols` characters on AVX2 + FMA (see `kernel!`).
-    #[allow(clippy::too_many_arguments)]
-    pub(super) unsafe fn tiles_avx2(
+    /// `together` panels of `isa`'s rows by `cols` characters (see `kernel!`).
+    pub(super) unsafe fn tiles(
+        isa: TileIsa,
         together: usize,
         cols: usize,
-        a: &[f32],
-        b: &[f32],
-        k: usize,
-        m: usize,
-        full: bool,
-        at: usize,
-        ep: Epilogue,
+        call: Call,
         out: &mut [f32],
         tile: &mut [f32; 256],
     ) {
-        // SAFETY: the caller's.
-        unsafe { dispatch!(avx2_of, together, cols, a, b, k, m, full, at, ep, out, tile) }
+        // SAFETY: the caller's, and `isa` is one this CPU runs (checked when the weights were
+        // packed, `Tiles::new`).
+        unsafe {
+            match isa {
+                TileIsa::Avx512 => dispatch!(avx512_of, together, cols, call, out, tile),
+                TileIsa::Avx2 => dispatch!(avx2_of, together, cols, call, out, tile),
+            }
+        }
     }
 }
 
