@@ -167,12 +167,32 @@ impl Tiles {
             panel.iter_mut().skip(c % nr).step_by(nr).for_each(|v| *v = 0.0);
         }
         for c in 0..n {
+            // Full panels of 8 on AVX-512 CPUs: 8 x 8 blocks transposed in registers below.
+            if nr == 8 && c - c % 8 + 8 <= n && self.isa == TileIsa::Avx512 {
+                continue;
+            }
             let panel = &mut packed[(c / nr) * nr * k..];
             let mut at = c % nr;
             for (x, &ki) in xs.iter().zip(ks) {
                 for v in &x[c * ki..(c + 1) * ki] {
                     panel[at] = *v;
                     at += nr;
+                }
+            }
+        }
+        #[cfg(target_arch = "x86_64")]
+        if nr == 8 && self.isa == TileIsa::Avx512 {
+            for q in 0..n / 8 {
+                let panel = &mut packed[q * 8 * k..(q + 1) * 8 * k];
+                let mut offset = 0;
+                for (x, &ki) in xs.iter().zip(ks) {
+                    // SAFETY: AVX-512F implies AVX (checked in `Tiles::new`); the rows read are
+                    // characters `8q..8q + 8` of `x` (`[n, ki]`), the values written lie in
+                    // `panel` (`k` rows of 8).
+                    unsafe {
+                        x86::pack8(&x[q * 8 * ki..(q + 1) * 8 * ki], ki, &mut panel[offset * 8..(offset + ki) * 8])
+                    };
+                    offset += ki;
                 }
             }
         }
@@ -359,6 +379,56 @@ mod x86 {
                 (p, c) => unreachable!("{p} row panels by {c} characters"),
             }
         };
+    }
+
+    /// Characters `x` (`[8, ki]`) packed as `ki` rows of 8 values into `panel`: 8 x 8 blocks
+    /// transposed in registers, the last `ki % 8` columns one value at a time.
+    #[target_feature(enable = "avx")]
+    pub(super) unsafe fn pack8(x: &[f32], ki: usize, panel: &mut [f32]) {
+        debug_assert!(x.len() == 8 * ki && panel.len() == 8 * ki);
+        let full = ki - ki % 8;
+        // SAFETY: every load reads 8 values of a row `c` at `j < full`, inside `x`; every store
+        // writes row `j + r < full` of `panel`.
+        unsafe {
+            let (src, dst) = (x.as_ptr(), panel.as_mut_ptr());
+            for j in (0..full).step_by(8) {
+                let r: [__m256; 8] = std::array::from_fn(|c| _mm256_loadu_ps(src.add(c * ki + j)));
+                let t0 = _mm256_unpacklo_ps(r[0], r[1]);
+                let t1 = _mm256_unpackhi_ps(r[0], r[1]);
+                let t2 = _mm256_unpacklo_ps(r[2], r[3]);
+                let t3 = _mm256_unpackhi_ps(r[2], r[3]);
+                let t4 = _mm256_unpacklo_ps(r[4], r[5]);
+                let t5 = _mm256_unpackhi_ps(r[4], r[5]);
+                let t6 = _mm256_unpacklo_ps(r[6], r[7]);
+                let t7 = _mm256_unpackhi_ps(r[6], r[7]);
+                let u0 = _mm256_shuffle_ps::<0x44>(t0, t2);
+                let u1 = _mm256_shuffle_ps::<0xEE>(t0, t2);
+                let u2 = _mm256_shuffle_ps::<0x44>(t1, t3);
+                let u3 = _mm256_shuffle_ps::<0xEE>(t1, t3);
+                let u4 = _mm256_shuffle_ps::<0x44>(t4, t6);
+                let u5 = _mm256_shuffle_ps::<0xEE>(t4, t6);
+                let u6 = _mm256_shuffle_ps::<0x44>(t5, t7);
+                let u7 = _mm256_shuffle_ps::<0xEE>(t5, t7);
+                let rows = [
+                    _mm256_permute2f128_ps::<0x20>(u0, u4),
+                    _mm256_permute2f128_ps::<0x20>(u1, u5),
+                    _mm256_permute2f128_ps::<0x20>(u2, u6),
+                    _mm256_permute2f128_ps::<0x20>(u3, u7),
+                    _mm256_permute2f128_ps::<0x31>(u0, u4),
+                    _mm256_permute2f128_ps::<0x31>(u1, u5),
+                    _mm256_permute2f128_ps::<0x31>(u2, u6),
+                    _mm256_permute2f128_ps::<0x31>(u3, u7),
+                ];
+                for (i, row) in rows.into_iter().enumerate() {
+                    _mm256_storeu_ps(dst.add((j + i) * 8), row);
+                }
+            }
+        }
+        for j in full..ki {
+            for c in 0..8 {
+                panel[j * 8 + c] = x[c * ki + j];
+            }
+        }
     }
 
     /// One call's operands: `P` panels of weights `a`, the characters `b` (`k` rows each), the
