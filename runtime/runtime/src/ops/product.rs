@@ -16,10 +16,10 @@
 //!   [`Product::dequantize`] applies `(acc * channel_scale) * row_scale` as the graph does.
 //!   So the integers are the graph's on every CPU.
 //!
-//! `unsafe` is confined to this file (and the tiles' vector code): the calls into tract-linalg's kernel entry point, which
-//! read the packed operands and write the output through raw pointers (the contract tract's own
-//! matmul op keeps): every operand is sized for the `m`, `k`, `n` passed here and outlives the
-//! call.
+//! `unsafe` is confined to this file and the tiles' vector code: here, the calls into
+//! tract-linalg's kernel entry point, which read the packed operands and write the output
+//! through raw pointers (the contract tract's own matmul op keeps): every operand is sized for
+//! the `m`, `k`, `n` passed here and outlives the call.
 #![allow(unsafe_code)]
 
 use super::tiles::{Epilogue, TileIsa, Tiles};
