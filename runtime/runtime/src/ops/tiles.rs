@@ -200,6 +200,8 @@ impl Tiles {
         // characters passes over them); a panel of one or two characters runs on two or four
         // row panels at once, so that its sums still fill the vector units.
         let row_panels = m.div_ceil(mr);
+        // The raw sums of calls that do not store into `out` (partial rows).
+        let mut tile = [0f32; 32 * 8];
         for block in (0..row_panels).step_by(4) {
             let block_end = (block + 4).min(row_panels);
             for q in 0..panels {
@@ -217,7 +219,6 @@ impl Tiles {
                     let full = rows == together * mr;
                     let at = q * nr * m + first * mr;
                     let a = &self.a[first * mr * k..(first + together) * mr * k];
-                    let mut tile = [0f32; 32 * 8];
                     // SAFETY: `a` holds `together` panels of `k x mr` values and `b` `k x nr`; a
                     // full call stores `cols` rows of `together x mr` outputs at
                     // `out[at + c * m..]`, all inside `out` (`[n, m]`), with the addend read at
