@@ -168,7 +168,7 @@ fn plan(model: &InferenceModel, concrete_batch: Option<usize>, dims: &[Vec<usize
             model.set_input_fact(i, f32::fact(&shape).into())?;
         }
     }
-    model.into_optimized()?.into_runnable()
+    planned(model)
 }
 
 /// A decoded ONNX model, its tract model and the per-character dims of its inputs and outputs.
@@ -226,6 +226,16 @@ pub(crate) fn read_proto(proto: &pb::ModelProto, origin: &str) -> Result<Inferen
 #[doc(hidden)]
 pub fn tract_graph(bytes: &[u8]) -> Result<InferenceModel, MotionError> {
     Ok(read_graph(bytes, "the given bytes")?.1)
+}
+
+/// `model` optimized and planned as the runtime runs it: its tract ops that the runtime runs
+/// into kept tensors swapped for them (`crate::ops::kept`). Public for tools that profile a
+/// plan (`examples/profile_step.rs`), not part of the engine API.
+#[doc(hidden)]
+pub fn planned(model: InferenceModel) -> TractResult<Plan> {
+    let mut typed = model.into_optimized()?;
+    crate::ops::kept::keep_outputs(&mut typed)?;
+    typed.into_runnable()
 }
 
 /// Refuses a graph whose outputs or node inputs name a value that no graph input,

@@ -16,6 +16,9 @@ struct Session {
     inputs: Vec<Arc<Tensor>>,
     /// Made from the symbolic-batch plan (see [`MotionRunner::step_batch_invariant`]).
     symbolic: bool,
+    /// A run's node inputs and outputs, reused (`crate::ops::kept::run`).
+    scratch: Vec<TValue>,
+    results: Vec<TValue>,
 }
 
 impl Session {
@@ -27,7 +30,7 @@ impl Session {
             .map(|&w| Tensor::zero::<f32>(&[batch, w]).map(Arc::new))
             .collect::<TractResult<Vec<_>>>()
             .map_err(run)?;
-        Ok(Session { batch, state, inputs, symbolic: false })
+        Ok(Session { batch, state, inputs, symbolic: false, scratch: Vec::new(), results: Vec::new() })
     }
 }
 
@@ -171,9 +174,12 @@ impl MotionRunner {
             let mut view = tensor.try_as_plain_ram_mut().map_err(run_err)?;
             view.as_slice_mut::<f32>().map_err(run_err)?.copy_from_slice(data);
         }
-        let values: TVec<TValue> = session.inputs.iter().map(|t| TValue::from_const(t.clone())).collect();
-        let results = session.state.run(values).map_err(run_err)?;
-        read_start_outputs(inner, &start.out_slots, &results, states)
+        let values = session.inputs.iter().map(|t| TValue::from_const(t.clone()));
+        crate::ops::kept::run(&mut session.state, values, &mut session.scratch, &mut session.results)
+            .map_err(run_err)?;
+        let read = read_start_outputs(inner, &start.out_slots, &session.results, states);
+        session.results.clear();
+        read
     }
 
     fn run(
@@ -204,9 +210,14 @@ impl MotionRunner {
         };
         let run_err = |e: TractError| MotionError::Run { reason: chain(&e) };
 
-        let values = fill_inputs(inner, session, states, inputs)?;
-        let results = session.state.run(values).map_err(run_err)?;
-        read_outputs(inner, &results, states, outputs)
+        fill_inputs(inner, session, states, inputs)?;
+        let values = session.inputs.iter().map(|t| TValue::from_const(t.clone()));
+        crate::ops::kept::run(&mut session.state, values, &mut session.scratch, &mut session.results)
+            .map_err(run_err)?;
+        let read = read_outputs(inner, &session.results, states, outputs);
+        // Let go of the outputs, so that the next run writes into the same tensors.
+        session.results.clear();
+        read
     }
 }
 
@@ -297,13 +308,13 @@ fn write_slot(
 }
 
 /// Copies the frame inputs and the characters' states into the session's preallocated input
-/// tensors and returns them as the graph's input values.
+/// tensors.
 fn fill_inputs(
     inner: &Inner,
     session: &mut Session,
     states: &[MotionState],
     inputs: &[&[f32]],
-) -> Result<TVec<TValue>, MotionError> {
+) -> Result<(), MotionError> {
     let run_err = |e: TractError| MotionError::Run { reason: chain(&e) };
     for (g, source) in inner.graph_inputs.iter().enumerate() {
         let width = inner.graph_input_widths[g];
@@ -320,8 +331,7 @@ fn fill_inputs(
             }
         }
     }
-    // A TVec holds up to 4 values inline: no allocation for graphs of up to 4 inputs.
-    Ok(session.inputs.iter().map(|t| TValue::from_const(t.clone())).collect())
+    Ok(())
 }
 
 /// Copies a graph run's results into the frame outputs and the characters' states.
@@ -459,8 +469,9 @@ impl MotionRunner {
         if p.begun {
             p.session.state.reset_turn().map_err(run_err)?;
         }
-        let values = fill_inputs(inner, &mut p.session, std::slice::from_ref(state), inputs)?;
-        p.session.state.set_inputs(values).map_err(run_err)?;
+        fill_inputs(inner, &mut p.session, std::slice::from_ref(state), inputs)?;
+        let values = p.session.inputs.iter().map(|t| TValue::from_const(t.clone()));
+        crate::ops::kept::set_inputs(&mut p.session.state, values).map_err(run_err)?;
         p.at = 0;
         p.begun = true;
         Ok(())
@@ -469,7 +480,9 @@ impl MotionRunner {
     /// Runs the next node of `p`.
     pub(crate) fn partial_node(&self, p: &mut PartialRun, costs: &PassCosts) -> Result<(), MotionError> {
         if let Some(&node) = costs.order.get(p.at) {
-            p.session.state.compute_one(node).map_err(|e| MotionError::Run { reason: chain(&e) })?;
+            let s = &mut p.session;
+            crate::ops::kept::compute(&mut s.state, node, &mut s.scratch)
+                .map_err(|e| MotionError::Run { reason: chain(&e) })?;
             p.at += 1;
         }
         Ok(())
@@ -489,10 +502,13 @@ impl MotionRunner {
             self.partial_node(p, costs)?;
         }
         let run_err = |e: TractError| MotionError::Run { reason: chain(&e) };
-        let results = p.session.state.outputs().map_err(run_err)?;
-        p.session.state.reset_turn().map_err(run_err)?;
+        let s = &mut p.session;
+        crate::ops::kept::read_outputs(&s.state, &mut s.results).map_err(run_err)?;
+        s.state.reset_turn().map_err(run_err)?;
         p.begun = false;
-        read_outputs(inner, &results, std::slice::from_mut(state), outputs)
+        let read = read_outputs(inner, &s.results, std::slice::from_mut(state), outputs);
+        s.results.clear();
+        read
     }
 }
 
@@ -537,8 +553,8 @@ impl MotionRunner {
                 view.as_slice_mut::<f32>().map_err(run_err)?.copy_from_slice(data);
             }
         }
-        let values: TVec<TValue> = session.inputs.iter().map(|t| TValue::from_const(t.clone())).collect();
-        session.state.set_inputs(values).map_err(run_err)?;
+        let values = session.inputs.iter().map(|t| TValue::from_const(t.clone()));
+        crate::ops::kept::set_inputs(&mut session.state, values).map_err(run_err)?;
         let model = start.single.model();
         let late: Vec<bool> = inputs.iter().map(Option::is_none).collect();
         let mut waits = vec![false; model.nodes().len()];
@@ -548,7 +564,7 @@ impl MotionRunner {
         for &node in start.single.order_without_consts() {
             waits[node] |= model.nodes()[node].inputs.iter().any(|i| waits[i.node]);
             if !waits[node] {
-                session.state.compute_one(node).map_err(run_err)?;
+                crate::ops::kept::compute(&mut session.state, node, &mut session.scratch).map_err(run_err)?;
             }
         }
         Ok(Some(PartialStart { session, late, waits }))
@@ -578,10 +594,14 @@ impl MotionRunner {
         }
         for &node in start.single.order_without_consts() {
             if p.waits[node] {
-                p.session.state.compute_one(node).map_err(run_err)?;
+                let s = &mut p.session;
+                crate::ops::kept::compute(&mut s.state, node, &mut s.scratch).map_err(run_err)?;
             }
         }
-        let results = p.session.state.outputs().map_err(run_err)?;
-        read_start_outputs(inner, &start.out_slots, &results, std::slice::from_mut(state))
+        let s = &mut p.session;
+        crate::ops::kept::read_outputs(&s.state, &mut s.results).map_err(run_err)?;
+        let read = read_start_outputs(inner, &start.out_slots, &s.results, std::slice::from_mut(state));
+        s.results.clear();
+        read
     }
 }

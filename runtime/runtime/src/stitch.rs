@@ -198,7 +198,7 @@ fn plan_for(model: &InferenceModel, window: usize, dim: usize) -> Result<Plan, M
     let mut m = model.clone();
     let planned = (|| -> TractResult<Plan> {
         m.set_input_fact(0, f32::fact([window, 1, dim]).into())?;
-        m.into_optimized()?.into_runnable()
+        crate::model::planned(m)
     })();
     planned.map_err(|e| MotionError::Unsupported { reason: chain(&e) })
 }

@@ -104,7 +104,7 @@ fn load_refiner(bytes: &[u8], origin: &str, task: &SynthesisTask) -> Result<Opti
     // Planned now, so that a graph tract cannot run is refused at load.
     use tract_onnx::prelude::*;
     let run = |err: TractError| MotionError::Run { reason: format!("{err:#}") };
-    let plan = source.into_optimized().and_then(|m| m.into_runnable()).map_err(run)?;
+    let plan = crate::model::planned(source).map_err(run)?;
     Ok(Some(Refiner { plan, stats, hidden: h }))
 }
 

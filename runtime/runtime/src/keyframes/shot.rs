@@ -68,7 +68,7 @@ fn plan(mut model: InferenceModel, batch: Option<usize>, width: usize) -> Result
     };
     let planned = std::panic::catch_unwind(std::panic::AssertUnwindSafe(move || -> TractResult<Plan> {
         model.set_input_fact(0, f32::fact(tvec![batch, frames.into(), TDim::from(width)]).into())?;
-        model.into_optimized()?.into_runnable()
+        crate::model::planned(model)
     }));
     match planned {
         Ok(plan) => plan.map_err(|e| MotionError::Unsupported { reason: chain(&e) }),

@@ -140,15 +140,18 @@ impl Op for GruOp {
 
 impl EvalOp for GruOp {
     op_out_of_plan!();
+    super::kept_eval!();
+}
 
-    fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
+impl super::WritesKept for GruOp {
+    fn eval_kept(&self, inputs: &[TValue], kept: &mut super::Kept) -> TractResult<()> {
         let (p, h) = (&self.product, self.hidden);
         let shape = inputs[0].shape();
         let (frames, n, width) = (shape[0], shape[1], shape[2]);
         ensure!(width >= (self.xw_block + 1) * 3 * h, "ZooGru: no gate block {} in {width} values", self.xw_block);
         let xw = plain_f32(&inputs[0])?;
-        let mut y = Tensor::zero::<f32>(&[frames, 1, n, h])?;
-        let mut last = Tensor::zero::<f32>(&[1, n, h])?;
+        let mut outs = kept.outputs(&[&[frames, 1, n, h], &[1, n, h]])?;
+        let [y, last] = &mut outs[..] else { bail!("a GRU has two outputs") };
         GRU_SCRATCH.with_borrow_mut(|(gates, state)| {
             if gates.shape() != [n, 3 * h] {
                 *gates = Tensor::zero::<f32>(&[n, 3 * h])?;
@@ -190,8 +193,7 @@ impl EvalOp for GruOp {
             let mut lv = last.try_as_plain_ram_mut()?;
             lv.as_slice_mut::<f32>()?.copy_from_slice(state);
             Ok::<_, TractError>(())
-        })?;
-        Ok(tvec!(y.into_tvalue(), last.into_tvalue()))
+        })
     }
 }
 

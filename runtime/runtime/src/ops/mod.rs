@@ -13,10 +13,12 @@
 
 pub(crate) mod chunk;
 mod gru;
+pub(crate) mod kept;
 mod product;
 pub(crate) mod rewrite;
 pub(crate) mod tiles;
 
+use kept::{Kept, WritesKept, kept_eval};
 use product::{Product, Weights};
 use std::sync::Arc;
 use tract_onnx::model::ParsingContext;
@@ -362,18 +364,22 @@ impl Op for DenseOp {
 
 impl EvalOp for DenseOp {
     op_out_of_plan!();
+    kept_eval!();
+}
 
-    fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
+impl WritesKept for DenseOp {
+    fn eval_kept(&self, inputs: &[TValue], kept: &mut Kept) -> TractResult<()> {
         let p = &self.product;
         let shape = inputs[0].shape();
         let n = shape[..shape.len() - 1].iter().product();
         let x = plain_f32(&inputs[0])?;
         let mut out_shape: TVec<usize> = shape.into();
         *out_shape.last_mut().context("ZooDense on a scalar")? = p.m;
-        let mut out = Tensor::zero::<f32>(&out_shape)?;
+        let mut outs = kept.outputs(&[&out_shape])?;
+        let out = &mut *outs[0];
         if !p.int8() {
             let addend = if self.addend { Some(&*inputs[1]) } else { None };
-            p.run_f32(&[x], n, self.bias.as_deref(), addend, self.alpha.as_deref(), &mut out)?;
+            p.run_f32(&[x], n, self.bias.as_deref(), addend, self.alpha.as_deref(), out)?;
         } else {
             let mut view = out.try_as_plain_ram_mut()?;
             let o = view.as_slice_mut::<f32>()?;
@@ -390,7 +396,7 @@ impl EvalOp for DenseOp {
                 o.iter_mut().for_each(|v| *v = if *v < 0.0 { *v * alpha } else { *v });
             }
         }
-        Ok(tvec!(out.into_tvalue()))
+        Ok(())
     }
 }
 
@@ -522,15 +528,17 @@ impl Op for LstmGatesOp {
 
 impl EvalOp for LstmGatesOp {
     op_out_of_plan!();
+    kept_eval!();
+}
 
-    fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
+impl WritesKept for LstmGatesOp {
+    fn eval_kept(&self, inputs: &[TValue], kept: &mut Kept) -> TractResult<()> {
         let p = &self.product;
         let n = inputs[0].shape()[0];
         let terms = p.ks.len();
         let xs: TVec<&[f32]> = inputs[..terms].iter().map(plain_f32).collect::<TractResult<_>>()?;
-        let mut z = Tensor::zero::<f32>(&[n, p.m])?;
-        gate_half(p, self.bias.as_deref(), &xs, &inputs[terms..], n, 0, &mut z)?;
-        Ok(tvec!(z.into_tvalue()))
+        let mut z = kept.outputs(&[&[n, p.m]])?;
+        gate_half(p, self.bias.as_deref(), &xs, &inputs[terms..], n, 0, z[0])
     }
 }
 
@@ -583,8 +591,11 @@ impl Op for LstmOp {
 
 impl EvalOp for LstmOp {
     op_out_of_plan!();
+    kept_eval!();
+}
 
-    fn eval(&self, _ctx: &EvalContext, inputs: TVec<TValue>) -> TractResult<TVec<TValue>> {
+impl WritesKept for LstmOp {
+    fn eval_kept(&self, inputs: &[TValue], kept: &mut Kept) -> TractResult<()> {
         let (p, h) = (&self.product, self.hidden);
         let n = inputs[0].shape()[0];
         let terms = p.ks.len();
@@ -611,7 +622,7 @@ impl EvalOp for LstmOp {
                     }
                     Ok(())
                 })?;
-                return lstm_update(gates, &inputs[0], n, h);
+                return lstm_update(gates, &inputs[0], n, h, kept);
             }
             let mut rest = addends;
             if !p.int8() {
@@ -631,21 +642,21 @@ impl EvalOp for LstmOp {
             for a in rest {
                 z.iter_mut().zip(plain_f32(a)?).for_each(|(o, a)| *o += a);
             }
-            lstm_update(gates, &inputs[0], n, h)
+            lstm_update(gates, &inputs[0], n, h, kept)
         })
     }
 }
 
 /// The state update of an LSTM cell from its gate pre-activations `gates` (`[n, 4 x hidden]`,
-/// i, f, g, o) and the last cell state `c`: `h'`, `c'`.
-fn lstm_update(gates: &mut Tensor, c: &TValue, n: usize, h: usize) -> TractResult<TVec<TValue>> {
+/// i, f, g, o) and the last cell state `c`: `h'`, `c'` (`kept`'s outputs).
+fn lstm_update(gates: &mut Tensor, c: &TValue, n: usize, h: usize, kept: &mut Kept) -> TractResult<()> {
     let mut view = gates.try_as_plain_ram_mut()?;
     let z = view.as_slice_mut::<f32>()?;
     let sigmoid = Func::Sigmoid.ew_f32()?;
     let tanh = Func::Tanh.ew_f32()?;
     let c_prev = plain_f32(c)?;
-    let mut h_out = Tensor::zero::<f32>(&[n, h])?;
-    let mut c_out = Tensor::zero::<f32>(&[n, h])?;
+    let mut outs = kept.outputs(&[&[n, h], &[n, h]])?;
+    let [h_out, c_out] = &mut outs[..] else { bail!("an LSTM cell has two outputs") };
     {
         let mut hv = h_out.try_as_plain_ram_mut()?;
         let hs = hv.as_slice_mut::<f32>()?;
@@ -667,7 +678,7 @@ fn lstm_update(gates: &mut Tensor, c: &TValue, n: usize, h: usize) -> TractResul
             hh.iter_mut().zip(o.iter()).for_each(|(v, o)| *v *= o);
         }
     }
-    Ok(tvec!(h_out.into_tvalue(), c_out.into_tvalue()))
+    Ok(())
 }
 
 impl TypedOp for LstmOp {

@@ -714,19 +714,15 @@ impl Product {
                     s.row_scales.clear();
                     s.row_scales.push(quantize_row(x, &mut s.row[..k]));
                     s.row[k..].fill(0);
-                    if s.acc.shape() != [1, m] {
-                        s.acc = Tensor::zero::<i32>(&[1, m])?;
-                    }
+                    at_least::<i32>(&mut s.acc, m)?;
                     let mut view = s.acc.try_as_plain_ram_mut()?;
-                    g.run(&s.row, &mut s.row16, view.as_slice_mut::<i32>()?);
+                    g.run(&s.row, &mut s.row16, &mut view.as_slice_mut::<i32>()?[..m]);
                     drop(view);
-                    let acc = s.acc.try_as_plain_ram()?.as_slice::<i32>()?;
+                    let acc = &s.acc.try_as_plain_ram()?.as_slice::<i32>()?[..m];
                     f(i, acc, &s.row_scales, &self.scales[i])?;
                     continue;
                 }
-                if s.acc.shape() != [n, m] {
-                    s.acc = Tensor::zero::<i32>(&[n, m])?;
-                }
+                at_least::<i32>(&mut s.acc, n * m)?;
                 if self.int8_in_f32 {
                     let format = pb.downcast_ref::<PackedFormat>().context("f32 activations in a plain packing")?;
                     s.row.resize(k, 0);
@@ -738,24 +734,22 @@ impl Product {
                     }
                     let b = packed(&mut s.packed, format, k, n)?;
                     pack_f32(format, b, &[&s.quantized], &[k], n)?;
-                    if s.sums.shape() != [n, m] {
-                        s.sums = Tensor::zero::<f32>(&[n, m])?;
-                    }
+                    at_least::<f32>(&mut s.sums, n * m)?;
                     self.store_product(i, b, space(&mut s.spaces, &*self.kernel), &mut s.sums, m, n)?;
                     {
-                        let sums = s.sums.try_as_plain_ram()?.as_slice::<f32>()?;
+                        let sums = &s.sums.try_as_plain_ram()?.as_slice::<f32>()?[..n * m];
                         let mut view = s.acc.try_as_plain_ram_mut()?;
                         // Whole numbers below 2^24: the conversion is exact.
                         view.as_slice_mut::<i32>()?.iter_mut().zip(sums).for_each(|(a, v)| *a = *v as i32);
                     }
-                    let acc = s.acc.try_as_plain_ram()?.as_slice::<i32>()?;
+                    let acc = &s.acc.try_as_plain_ram()?.as_slice::<i32>()?[..n * m];
                     f(i, acc, &s.row_scales, &self.scales[i])?;
                     continue;
                 }
                 let b = packed_i8(&mut s.packed, &**pb, k, n)?;
                 pack_i8(&**pb, b, x, &mut s.row_scales, k, &mut s.row)?;
                 self.store_product(i, b, space(&mut s.spaces, &*self.kernel), &mut s.acc, m, n)?;
-                let acc = s.acc.try_as_plain_ram()?.as_slice::<i32>()?;
+                let acc = &s.acc.try_as_plain_ram()?.as_slice::<i32>()?[..n * m];
                 f(i, acc, &s.row_scales, &self.scales[i])?;
             }
             Ok(())
@@ -763,7 +757,8 @@ impl Product {
     }
 
     /// Runs the kernel on input `i`'s packed weights and the packed activations `b` into `out`
-    /// (`[n, m]`, 4-byte values: the f32 sums or the i32 accumulators), overwriting it.
+    /// (4-byte values, the f32 sums or the i32 accumulators, `[n, m]` row-major at its start:
+    /// it may hold more), overwriting them.
     fn store_product(
         &self,
         i: usize,
@@ -971,11 +966,14 @@ fn pack_i8(
 struct Scratch {
     packed: PackedBuffers,
     spaces: Vec<(String, Box<dyn ScratchSpace>)>,
+    /// Integer sums, `[n, m]` row-major at the start (grown, never shrunk: products of
+    /// different sizes share it without allocating).
     acc: Tensor,
     row_scales: Vec<f32>,
     row: Vec<u8>,
     row16: Vec<i16>,
     quantized: Vec<f32>,
+    /// f32 sums, like `acc`.
     sums: Tensor,
     /// The characters packed for [`Tiles`].
     tiles: Vec<f32>,
@@ -985,11 +983,36 @@ thread_local! {
     static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
 }
 
-type PackedBuffers = Vec<(String, usize, usize, EagerPackedInput)>;
+/// Packed activation buffers by packing (the hash of its name), depth and width.
+type PackedBuffers = Vec<(u64, usize, usize, EagerPackedInput)>;
+
+/// `T` at least `len` values long (a 1-D tensor, grown when shorter).
+fn at_least<T: Datum + tract_onnx::tract_core::num_traits::Zero>(t: &mut Tensor, len: usize) -> TractResult<()> {
+    if t.datum_type() != T::datum_type() || t.len() < len {
+        *t = Tensor::zero::<T>(&[len])?;
+    }
+    Ok(())
+}
+
+/// A key for a packing: the hash of what it displays, computed without allocating (a per-call
+/// `to_string` allocated in every product).
+fn packing_key(format: &dyn std::fmt::Display) -> u64 {
+    use std::hash::Hasher;
+    struct Feed(std::collections::hash_map::DefaultHasher);
+    impl std::fmt::Write for Feed {
+        fn write_str(&mut self, s: &str) -> std::fmt::Result {
+            self.0.write(s.as_bytes());
+            Ok(())
+        }
+    }
+    let mut feed = Feed(std::collections::hash_map::DefaultHasher::new());
+    let _ = std::fmt::write(&mut feed, format_args!("{format}"));
+    feed.0.finish()
+}
 
 fn packed_at(
     buffers: &mut PackedBuffers,
-    key: String,
+    key: u64,
     k: usize,
     n: usize,
     make: impl FnOnce() -> TractResult<EagerPackedInput>,
@@ -1014,7 +1037,7 @@ fn packed<'s>(
     k: usize,
     n: usize,
 ) -> TractResult<&'s mut EagerPackedInput> {
-    packed_at(buffers, format.to_string(), k, n, || format.new_packed_buffer(k, n))
+    packed_at(buffers, packing_key(format), k, n, || format.new_packed_buffer(k, n))
 }
 
 fn packed_i8<'s>(
@@ -1023,7 +1046,7 @@ fn packed_i8<'s>(
     k: usize,
     n: usize,
 ) -> TractResult<&'s mut EagerPackedInput> {
-    packed_at(buffers, format.to_string(), k, n, || {
+    packed_at(buffers, packing_key(format), k, n, || {
         // A zero tensor packed once gives the buffer with its padding zeroed.
         format
             .prepare_one(&Tensor::zero::<i8>(&[n, k])?, 1, 0)?
