@@ -19,6 +19,8 @@ struct Session {
     /// A run's node inputs and outputs, reused (`crate::ops::kept::run`).
     scratch: Vec<TValue>,
     results: Vec<TValue>,
+    /// Whether `crate::ops::kept::run` runs the plan itself.
+    itself: bool,
 }
 
 impl Session {
@@ -30,7 +32,8 @@ impl Session {
             .map(|&w| Tensor::zero::<f32>(&[batch, w]).map(Arc::new))
             .collect::<TractResult<Vec<_>>>()
             .map_err(run)?;
-        Ok(Session { batch, state, inputs, symbolic: false, scratch: Vec::new(), results: Vec::new() })
+        let itself = crate::ops::kept::runs_itself(plan);
+        Ok(Session { batch, state, inputs, symbolic: false, scratch: Vec::new(), results: Vec::new(), itself })
     }
 }
 
@@ -175,7 +178,7 @@ impl MotionRunner {
             view.as_slice_mut::<f32>().map_err(run_err)?.copy_from_slice(data);
         }
         let values = session.inputs.iter().map(|t| TValue::from_const(t.clone()));
-        crate::ops::kept::run(&mut session.state, values, &mut session.scratch, &mut session.results)
+        crate::ops::kept::run(&mut session.state, session.itself, values, &mut session.scratch, &mut session.results)
             .map_err(run_err)?;
         let read = read_start_outputs(inner, &start.out_slots, &session.results, states);
         session.results.clear();
@@ -212,7 +215,7 @@ impl MotionRunner {
 
         fill_inputs(inner, session, states, inputs)?;
         let values = session.inputs.iter().map(|t| TValue::from_const(t.clone()));
-        crate::ops::kept::run(&mut session.state, values, &mut session.scratch, &mut session.results)
+        crate::ops::kept::run(&mut session.state, session.itself, values, &mut session.scratch, &mut session.results)
             .map_err(run_err)?;
         let read = read_outputs(inner, &session.results, states, outputs);
         // Let go of the outputs, so that the next run writes into the same tensors.

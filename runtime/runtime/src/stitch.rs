@@ -61,6 +61,10 @@ struct WindowJob {
     state: TypedSimpleState,
     at: usize,
     worked: usize,
+    /// The window's input tensor (reused by the next window's state).
+    input: Arc<Tensor>,
+    /// The node inputs of a run (reused: `crate::ops::kept::compute`).
+    scratch: Vec<TValue>,
 }
 
 impl std::fmt::Debug for WindowJob {
@@ -84,15 +88,47 @@ pub(crate) struct SpreadPlan {
 }
 
 impl SpreadPlan {
-    /// A fresh state of the graph with the window `x` (`window * dim` normalised values) set as
-    /// its input, ready to run node by node (a fresh state per window: the recurrences' ops keep
-    /// their state across turns).
-    fn start(&self, x: &[f32], window: usize, dim: usize) -> Result<TypedSimpleState, MotionError> {
+    /// A job for the window `x` (`window * dim` normalised values), set as its graph's input,
+    /// ready to run node by node: on `done`'s state and tensors (a finished window's) when its
+    /// nodes keep nothing between runs but their outputs, else on a fresh state (tract's
+    /// recurrences keep their state across turns).
+    fn start(&self, x: &[f32], window: usize, dim: usize, done: Option<WindowJob>) -> Result<WindowJob, MotionError> {
         let run = |e: TractError| MotionError::Run { reason: chain(&e) };
-        let input = Tensor::from_shape::<f32>(&[window, 1, dim], x).map_err(run)?;
-        let mut state = self.plan.spawn().map_err(run)?;
-        state.set_inputs(tvec![input.into()]).map_err(run)?;
-        Ok(state)
+        let mut job = match done.filter(|j| crate::ops::kept::keeps_only_outputs(&j.state)) {
+            Some(mut j) => {
+                j.state.reset_turn().map_err(run)?;
+                j.at = 0;
+                j.worked = 0;
+                j
+            }
+            None => WindowJob {
+                state: self.plan.spawn().map_err(run)?,
+                at: 0,
+                worked: 0,
+                input: Arc::new(Tensor::zero::<f32>(&[window, 1, dim]).map_err(run)?),
+                scratch: Vec::new(),
+            },
+        };
+        {
+            // Exclusive again once the last window's values were cleared; else this copies once.
+            let input = Arc::make_mut(&mut job.input);
+            let mut view = input.try_as_plain_ram_mut().map_err(run)?;
+            let v = view.as_slice_mut::<f32>().map_err(run)?;
+            if v.len() != x.len() {
+                return Err(MotionError::Run { reason: format!("a window of {} values for {}", x.len(), v.len()) });
+            }
+            v.copy_from_slice(x);
+        }
+        let input = TValue::from_const(job.input.clone());
+        crate::ops::kept::set_inputs(&mut job.state, std::iter::once(input)).map_err(run)?;
+        Ok(job)
+    }
+
+    /// Runs the job's next node.
+    fn step(&self, job: &mut WindowJob) -> TractResult<()> {
+        crate::ops::kept::compute(&mut job.state, self.order[job.at], &mut job.scratch)?;
+        job.at += 1;
+        Ok(())
     }
 
     /// The chunked plan of `proto` for windows of `window` frames of `dim` values, or `None`
@@ -507,12 +543,12 @@ impl StitchRefiner {
         let spread = self.spread_plan()?;
         let run = |e: TractError| MotionError::Run { reason: chain(&e) };
         Some((|| {
-            let mut state = spread.start(x, self.window, self.dim)?;
-            for &node in &spread.order {
-                state.compute_one(node).map_err(run)?;
+            let mut job = spread.start(x, self.window, self.dim, None)?;
+            while job.at < spread.order.len() {
+                spread.step(&mut job).map_err(run)?;
             }
-            let y = state.outputs().map_err(run)?;
-            let y = y[0].try_as_plain_ram().and_then(|t| t.as_slice::<f32>()).map_err(run)?;
+            let y = job.state.output(0).map_err(run)?;
+            let y = y.try_as_plain_ram().and_then(|t| t.as_slice::<f32>()).map_err(run)?;
             out.copy_from_slice(y);
             Ok(())
         })())
@@ -1003,6 +1039,8 @@ pub struct StitchStreamOf<R> {
     /// whole in the push that completes it), and the window it is running.
     spread: Option<Arc<SpreadPlan>>,
     job: Option<WindowJob>,
+    /// The last window's finished job, whose state and tensors the next window reuses.
+    done: Option<WindowJob>,
     /// Whether a push runs its window ahead of schedule while it has time (off with
     /// `ZOO_STREAM_AHEAD=0`: the schedule alone, the same nodes in the same pushes on every run,
     /// for comparisons).
@@ -1110,6 +1148,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
             next_window: 0,
             spread: refiner.spread_plan(),
             job: None,
+            done: None,
             ahead: std::env::var("ZOO_STREAM_AHEAD").map_or(true, |v| v != "0"),
             refined: 0,
             ik_done: 0,
@@ -1374,8 +1413,7 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
                 if let Some(i) = x.iter().position(|v| !v.is_finite()) {
                     return Err(MotionError::NonFinite { name: "window".into(), index: i, character: 0, value: x[i] });
                 }
-                let state = spread.start(x, w, self.refiner.dim)?;
-                self.job = Some(WindowJob { state, at: 0, worked: 0 });
+                self.job = Some(spread.start(x, w, self.refiner.dim, self.done.take())?);
             }
             let job = self.job.as_mut().expect("a window runs");
             // The least this push runs: the window on a schedule that starts a quarter of its
@@ -1398,21 +1436,21 @@ impl<R: Deref<Target = StitchRefiner> + Clone> StitchStreamOf<R> {
                 if !behind && deadline.is_none_or(|d| std::time::Instant::now() + cost > d) {
                     break;
                 }
-                job.state.compute_one(spread.order[job.at]).map_err(run)?;
-                job.at += 1;
+                spread.step(job).map_err(run)?;
             }
             if job.at < spread.order.len() {
                 return Ok(());
             }
-            let y = job.state.outputs().map_err(run)?;
-            let y = y[0].try_as_plain_ram().and_then(|t| t.as_slice::<f32>()).map_err(run)?;
+            let y = job.state.output(0).map_err(run)?;
+            let y = y.try_as_plain_ram().and_then(|t| t.as_slice::<f32>()).map_err(run)?;
             if y.len() != self.y.len() {
                 return Err(MotionError::Run {
                     reason: format!("the graph returned {} values for a window of {}", y.len(), self.y.len()),
                 });
             }
             self.y.copy_from_slice(y);
-            self.job = None;
+            // Kept for the next window (its state's values are cleared when that starts).
+            self.done = self.job.take();
             let (ws, d) = (self.next_window, self.refiner.dim);
             let from = (ws - self.base) * d;
             let r = self.refiner.clone();

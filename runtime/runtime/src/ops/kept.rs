@@ -11,8 +11,9 @@
 //! exact arithmetic), so results do not change by a bit.
 
 use std::sync::Arc;
-use tract_onnx::tract_core::ops::array::{Slice, TypedConcat};
+use tract_onnx::tract_core::ops::array::{Gather, Slice, TypedConcat};
 use tract_onnx::tract_core::ops::binary::{OptBinByScalar, OptBinChain, OptBinUnicast, TypedBinOp};
+use tract_onnx::tract_core::ops::change_axes::{AxisOp, IntoShape};
 use tract_onnx::tract_core::ops::element_wise::ElementWiseOp;
 use tract_onnx::tract_core::ops::nn::{Softmax, SoftmaxKind};
 use tract_onnx::tract_core::{as_op, op_as_typed_op, op_out_of_plan};
@@ -102,36 +103,68 @@ impl OpState for KeptState {
     }
 }
 
+/// Whether [`run`] can run `plan` itself: every shape in it is concrete or made of symbols its
+/// inputs' shapes give (a batch size), which the first run resolves and later runs keep.
+pub(crate) fn runs_itself(plan: &TypedRunnableModel) -> bool {
+    let model = plan.model();
+    let Ok(inputs) = model.input_outlets() else { return false };
+    let mut given = std::collections::HashSet::new();
+    for &o in inputs {
+        match model.outlet_fact(o) {
+            Ok(f) => f.shape.iter().for_each(|d| given.extend(d.symbols())),
+            Err(_) => return false,
+        }
+    }
+    model
+        .nodes()
+        .iter()
+        .all(|n| n.outputs.iter().all(|o| o.fact.shape.iter().all(|d| d.symbols().iter().all(|s| given.contains(s)))))
+}
+
 /// Runs a plan like tract's `SimpleState::run`, without allocating once the plan's nodes have
 /// their kept tensors: tract gathers each node's inputs, and the plan's outputs, into vectors
-/// that allocate past four entries; here they go through `scratch` (reused). Plans with
-/// symbols to resolve, and a state's first run (which sets up its value table), go through
-/// tract's `run`. The outputs are left in `outputs` (cleared first; clear it once read, so
-/// that the next run can write into the same tensors).
+/// that allocate past four entries, and resolves a symbolic plan's symbols anew on every run;
+/// here the vectors are `scratch` and `outputs` (reused) and the symbols stay resolved between
+/// runs (a state runs one batch size). A plan that does not [`runs_itself`], and a state's first
+/// run (which sets up its value table), go through tract's `run`. The outputs are left in
+/// `outputs` (cleared first; clear it once read, so that the next run can write into the same
+/// tensors).
 pub(crate) fn run(
     state: &mut TypedSimpleState,
+    itself: bool,
     inputs: impl ExactSizeIterator<Item = TValue>,
     scratch: &mut Vec<TValue>,
     outputs: &mut Vec<TValue>,
 ) -> TractResult<()> {
     outputs.clear();
-    let concrete = || state.model().nodes().iter().all(|n| n.outputs.iter().all(|o| o.fact.shape.is_concrete()));
-    if state.turn_state.values.is_empty() || !concrete() {
+    if state.turn_state.values.is_empty() || !itself {
         let values: TVec<TValue> = inputs.collect();
         outputs.extend(state.run(values)?);
         return Ok(());
     }
+    let plan = state.plan().clone();
     let ran = (|| -> TractResult<()> {
         set_inputs(state, inputs)?;
-        let plan = state.plan().clone();
         for &n in plan.order_without_consts() {
             compute(state, n, scratch)?;
         }
         read_outputs(state, outputs)
     })();
     scratch.clear();
-    state.reset_turn()?;
+    // tract's `reset_turn`, less the symbols.
+    for &n in plan.order_without_consts() {
+        state.turn_state.values[n] = None;
+    }
+    if ran.is_err() {
+        state.reset_turn()?;
+    }
     ran
+}
+
+/// Whether `state` keeps nothing from one run to the next but its nodes' kept tensors, so that
+/// it can run another input after `reset_turn` as a fresh state would.
+pub(crate) fn keeps_only_outputs(state: &TypedSimpleState) -> bool {
+    state.op_states.iter().flatten().all(|s| s.downcast_ref::<KeptState>().is_some())
 }
 
 /// Runs node `n` of `state`'s plan as tract's `SimpleState::compute_one` does, its inputs
@@ -271,6 +304,17 @@ enum Work {
     Chain(TVec<(Bin, Share)>),
     /// `a` and `b` broadcast against each other (numpy's rules).
     Broadcast(Bin),
+    /// The values as they are, in another shape (axes of one added or removed, a reshape).
+    Reshape(TVec<usize>),
+    /// Axis `from` moved to position `to` (a transposition).
+    Move {
+        from: usize,
+        to: usize,
+    },
+    /// Input 0's blocks along `axis` picked by the integers of input 1 (ONNX `Gather`).
+    Gather {
+        axis: usize,
+    },
     /// A unary kernel of tract-linalg in place.
     Map(Arc<dyn ElementWise<f32>>),
     /// Softmax over the trailing `row` values, on tract's kernels.
@@ -449,6 +493,70 @@ impl WritesKept for KeptTract {
                     Ok(())
                 })
             }
+            Work::Reshape(shape) => kept.write(shape, |out| {
+                let xs = natural(x)?;
+                ensure!(xs.len() == out.len(), "a reshape of {} values into {}", xs.len(), out.len());
+                out.copy_from_slice(xs);
+                Ok(())
+            }),
+            Work::Move { from, to } => {
+                let rank = x.rank();
+                ensure!(*from < rank && *to < rank, "an axis move past the rank");
+                // Output axis i is input axis perm[i].
+                let mut perm: TVec<usize> = (0..rank).collect();
+                let moved = perm.remove(*from);
+                perm.insert(*to, moved);
+                let strides = Tensor::natural_strides(x.shape());
+                let shape: TVec<usize> = perm.iter().map(|&a| x.shape()[a]).collect();
+                let xs = natural(x)?;
+                kept.write(&shape, |out| {
+                    let last = shape.last().copied().unwrap_or(1).max(1);
+                    let step = perm.last().map_or(0, |&a| strides[a] as usize);
+                    for (row, o) in out.chunks_exact_mut(last).enumerate() {
+                        let (mut at, mut r) = (0, row);
+                        for i in (0..rank.saturating_sub(1)).rev() {
+                            at += (r % shape[i]) * strides[perm[i]] as usize;
+                            r /= shape[i];
+                        }
+                        o.iter_mut().enumerate().for_each(|(j, o)| *o = xs[at + j * step]);
+                    }
+                    Ok(())
+                })
+            }
+            Work::Gather { axis } => {
+                let axis = *axis;
+                let picks = inputs.get(1).context("a gather without indices")?;
+                let dim = x.shape()[axis];
+                let inner: usize = x.shape()[axis + 1..].iter().product();
+                let outer: usize = x.shape()[..axis].iter().product();
+                let mut shape: TVec<usize> = x.shape()[..axis].into();
+                shape.extend(picks.shape().iter().copied());
+                shape.extend(x.shape()[axis + 1..].iter().copied());
+                let xs = natural(x)?;
+                let picks = picks.try_as_plain_ram()?;
+                let index = |i: usize| -> TractResult<usize> {
+                    let v = match picks.datum_type() {
+                        DatumType::I64 => picks.as_slice::<i64>()?[i],
+                        DatumType::I32 => picks.as_slice::<i32>()?[i] as i64,
+                        dt => bail!("gather indices of type {dt:?}"),
+                    };
+                    let v = if v < 0 { v + dim as i64 } else { v };
+                    ensure!((0..dim as i64).contains(&v), "gather index {v} out of 0..{dim}");
+                    Ok(v as usize)
+                };
+                let count: usize = picks.shape().iter().product();
+                kept.write(&shape, |out| {
+                    let mut at = 0;
+                    for o in 0..outer {
+                        for i in 0..count {
+                            let from = (o * dim + index(i)?) * inner;
+                            out[at..at + inner].copy_from_slice(&xs[from..from + inner]);
+                            at += inner;
+                        }
+                    }
+                    Ok(())
+                })
+            }
             Work::Map(kernel) => kept.write(x.shape(), |out| {
                 out.copy_from_slice(natural(x)?);
                 kernel.run(out)
@@ -483,15 +591,30 @@ impl WritesKept for KeptTract {
 fn work(model: &TypedModel, id: usize) -> TractResult<Option<Work>> {
     let node = model.node(id);
     let facts = model.node_input_facts(id)?;
-    let f32_only = facts.iter().all(|f| f.datum_type == f32::datum_type())
-        && node.outputs.iter().all(|o| o.fact.datum_type == f32::datum_type());
+    let op = node.op();
+    let f32_out = node.outputs.iter().all(|o| o.fact.datum_type == f32::datum_type());
+    if let Some(g) = op.downcast_ref::<Gather>() {
+        let ints = facts.get(1).is_some_and(|f| matches!(f.datum_type, DatumType::I64 | DatumType::I32));
+        let ok = f32_out && g.output_type.is_none() && facts[0].datum_type == f32::datum_type() && ints;
+        return Ok(ok.then_some(Work::Gather { axis: g.axis }));
+    }
+    let f32_only = facts.iter().all(|f| f.datum_type == f32::datum_type()) && f32_out;
     if !f32_only || facts.is_empty() {
         return Ok(None);
     }
-    let op = node.op();
+    // The output's shape, when the plan fixes it.
+    let out_shape = || node.outputs.first().and_then(|o| o.fact.shape.as_concrete().map(TVec::from));
     let bin = |name: &str| Bin::named(name);
     Ok(if let Some(c) = op.downcast_ref::<TypedConcat>() {
         Some(Work::Concat { axis: c.axis })
+    } else if let Some(a) = op.downcast_ref::<AxisOp>() {
+        match a {
+            AxisOp::Add(_) | AxisOp::Rm(_) | AxisOp::Reshape(..) => out_shape().map(Work::Reshape),
+            AxisOp::Move(from, to) => Some(Work::Move { from: *from, to: *to }),
+        }
+    } else if let Some(r) = op.downcast_ref::<IntoShape>() {
+        let plain = *r.strides == *Tensor::natural_strides(&r.dims);
+        if plain { out_shape().map(Work::Reshape) } else { None }
     } else if let Some(s) = op.downcast_ref::<Slice>() {
         match (s.start.to_usize(), s.end.to_usize()) {
             (Ok(start), Ok(end)) if start <= end => Some(Work::Slice { axis: s.axis, start, end }),
