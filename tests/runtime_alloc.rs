@@ -164,6 +164,19 @@ fn synthesis_allocations() {
         eprintln!("tiny RNN-GMM synthesis: {per_step:.1} allocations per step of {n} characters");
         assert_eq!(per_step, 0.0, "a synthesis step of {n} characters allocates");
     }
+    // Control: every frame rolls the candidates out by one step (one batch), and the frame that
+    // ends a plan selects the next; 100 frames cover several plans.
+    use zoo_runtime::control::{Control, ControlRunner, ControlSettings, ControlledCharacter};
+    let mut ch = ControlledCharacter::new(&model, 3, ControlSettings::default()).unwrap();
+    ch.start(&model, &frame, 0.0, 0.0, 0.0).unwrap();
+    let mut runner = ControlRunner::new(&model).unwrap();
+    let mut pose = EnginePose::new(model.joints());
+    let control = Control::new(1.0, 0.5);
+    let per_frame_control = per_frame(100, || {
+        runner.step(&mut ch, control, &mut pose).unwrap();
+    });
+    eprintln!("tiny RNN-GMM control: {per_frame_control:.1} allocations per frame");
+    assert_eq!(per_frame_control, 0.0, "a control frame allocates");
 }
 
 /// The keyframes task (issue 13): a completion of `KeyframeRunner::complete` (picking the keys
