@@ -17,6 +17,7 @@ pub(crate) mod kept;
 mod product;
 pub(crate) mod rewrite;
 pub(crate) mod tiles;
+pub(crate) mod tiles_i8;
 
 use kept::{Kept, WritesKept, kept_eval};
 use product::{Product, Weights};

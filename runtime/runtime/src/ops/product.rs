@@ -23,6 +23,7 @@
 #![allow(unsafe_code)]
 
 use super::tiles::{Epilogue, TileIsa, Tiles};
+use super::tiles_i8::I8Tiles;
 use std::cell::RefCell;
 use std::sync::Arc;
 use tract_onnx::prelude::tract_linalg::mmm::{
@@ -109,6 +110,9 @@ pub(crate) struct Product {
     /// f32 weights packed for the runtime's own tiles ([`Tiles`]), which then run every product
     /// of this plan in place of `kernel` (plans for a given number of characters above one).
     tiles: Option<Arc<Tiles>>,
+    /// int8: each input's weights packed for the runtime's own VNNI tiles ([`I8Tiles`]), which
+    /// then run in place of `kernel` (the same plans as `tiles`, on AVX-512 VNNI).
+    i8_tiles: Vec<Arc<I8Tiles>>,
 }
 
 /// int8 weights for a product of one character (a matrix-vector product, which the tiled
@@ -519,9 +523,17 @@ impl Product {
         let mut gemv = Vec::new();
         let mut all_f32 = None;
         let mut tiles = None;
+        let mut i8_tiles = Vec::new();
+        // The same plans as the f32 tiles below: a known number of characters above one.
+        let own_i8 = int8 && !int8_in_f32 && n.is_some_and(|n| n > 1) && I8Tiles::available();
         if int8 {
             for w in parts {
                 let Weights::I8 { q, scales: s } = w else { bail!("an int8 product mixes f32 weights") };
+                if own_i8 {
+                    i8_tiles.push(Arc::new(I8Tiles::new(q, m, q.len() / m.max(1))));
+                    scales.push(Arc::new(s.clone()));
+                    continue;
+                }
                 let t = if int8_in_f32 {
                     let f: Vec<f32> = q.iter().map(|v| f32::from(*v)).collect();
                     Tensor::from_shape(&[m, q.len() / m], &f)?
@@ -569,7 +581,7 @@ impl Product {
             }
             _ => None,
         };
-        Ok(Product { m, ks, kernel, packing, a, scales, gemv, int8_in_f32, one, tiles })
+        Ok(Product { m, ks, kernel, packing, a, scales, gemv, int8_in_f32, one, tiles, i8_tiles })
     }
 
     pub(crate) fn int8(&self) -> bool {
@@ -579,6 +591,7 @@ impl Product {
     pub(crate) fn kernel_name(&self) -> &str {
         match &self.tiles {
             Some(t) => t.isa().name(),
+            None if !self.i8_tiles.is_empty() => I8Tiles::name(),
             None => self.kernel.name(),
         }
     }
@@ -742,6 +755,22 @@ impl Product {
                         // Whole numbers below 2^24: the conversion is exact.
                         view.as_slice_mut::<i32>()?.iter_mut().zip(sums).for_each(|(a, v)| *a = *v as i32);
                     }
+                    let acc = &s.acc.try_as_plain_ram()?.as_slice::<i32>()?[..n * m];
+                    f(i, acc, &s.row_scales, &self.scales[i])?;
+                    continue;
+                }
+                if let Some(tiles) = self.i8_tiles.get(i) {
+                    s.rows8.resize(n * k, 0);
+                    s.row_scales.clear();
+                    for (x, q) in x.chunks_exact(k).zip(s.rows8.chunks_exact_mut(k)) {
+                        s.row_scales.push(quantize_row(x, q));
+                    }
+                    tiles.run(
+                        &s.rows8,
+                        n,
+                        &mut s.acc.try_as_plain_ram_mut()?.as_slice_mut::<i32>()?[..n * m],
+                        &mut s.packed8,
+                    );
                     let acc = &s.acc.try_as_plain_ram()?.as_slice::<i32>()?[..n * m];
                     f(i, acc, &s.row_scales, &self.scales[i])?;
                     continue;
@@ -977,6 +1006,9 @@ struct Scratch {
     sums: Tensor,
     /// The characters packed for [`Tiles`].
     tiles: Vec<f32>,
+    /// The characters' quantized rows, and as packed for [`I8Tiles`].
+    rows8: Vec<u8>,
+    packed8: Vec<u8>,
 }
 
 thread_local! {
