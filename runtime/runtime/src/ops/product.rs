@@ -23,7 +23,7 @@
 #![allow(unsafe_code)]
 
 use super::tiles::{Epilogue, TileIsa, Tiles};
-use super::tiles_i8::I8Tiles;
+use super::tiles_i8::{I8Isa, I8Tiles};
 use std::cell::RefCell;
 use std::sync::Arc;
 use tract_onnx::prelude::tract_linalg::mmm::{
@@ -111,7 +111,7 @@ pub(crate) struct Product {
     /// of this plan in place of `kernel` (plans for a given number of characters above one).
     tiles: Option<Arc<Tiles>>,
     /// int8: each input's weights packed for the runtime's own VNNI tiles ([`I8Tiles`]), which
-    /// then run in place of `kernel` (the same plans as `tiles`, on AVX-512 VNNI).
+    /// then run in place of `kernel` (the same plans as `tiles`; AVX-512 VNNI or AVX2).
     i8_tiles: Vec<Arc<I8Tiles>>,
 }
 
@@ -525,12 +525,12 @@ impl Product {
         let mut tiles = None;
         let mut i8_tiles = Vec::new();
         // The same plans as the f32 tiles below: a known number of characters above one.
-        let own_i8 = int8 && !int8_in_f32 && n.is_some_and(|n| n > 1) && I8Tiles::available();
+        let own_i8 = if int8 && n.is_some_and(|n| n > 1) { I8Isa::native() } else { None };
         if int8 {
             for w in parts {
                 let Weights::I8 { q, scales: s } = w else { bail!("an int8 product mixes f32 weights") };
-                if own_i8 {
-                    i8_tiles.push(Arc::new(I8Tiles::new(q, m, q.len() / m.max(1))));
+                if let Some(isa) = own_i8 {
+                    i8_tiles.push(Arc::new(I8Tiles::new(isa, q, m, q.len() / m.max(1))));
                     scales.push(Arc::new(s.clone()));
                     continue;
                 }
@@ -591,7 +591,7 @@ impl Product {
     pub(crate) fn kernel_name(&self) -> &str {
         match &self.tiles {
             Some(t) => t.isa().name(),
-            None if !self.i8_tiles.is_empty() => I8Tiles::name(),
+            None if !self.i8_tiles.is_empty() => self.i8_tiles[0].isa().name(),
             None => self.kernel.name(),
         }
     }
@@ -736,6 +736,22 @@ impl Product {
                     continue;
                 }
                 at_least::<i32>(&mut s.acc, n * m)?;
+                if let Some(tiles) = self.i8_tiles.get(i) {
+                    s.rows8.resize(n * k, 0);
+                    s.row_scales.clear();
+                    for (x, q) in x.chunks_exact(k).zip(s.rows8.chunks_exact_mut(k)) {
+                        s.row_scales.push(quantize_row(x, q));
+                    }
+                    tiles.run(
+                        &s.rows8,
+                        n,
+                        &mut s.acc.try_as_plain_ram_mut()?.as_slice_mut::<i32>()?[..n * m],
+                        &mut s.packed8,
+                    );
+                    let acc = &s.acc.try_as_plain_ram()?.as_slice::<i32>()?[..n * m];
+                    f(i, acc, &s.row_scales, &self.scales[i])?;
+                    continue;
+                }
                 if self.int8_in_f32 {
                     let format = pb.downcast_ref::<PackedFormat>().context("f32 activations in a plain packing")?;
                     s.row.resize(k, 0);
@@ -755,22 +771,6 @@ impl Product {
                         // Whole numbers below 2^24: the conversion is exact.
                         view.as_slice_mut::<i32>()?.iter_mut().zip(sums).for_each(|(a, v)| *a = *v as i32);
                     }
-                    let acc = &s.acc.try_as_plain_ram()?.as_slice::<i32>()?[..n * m];
-                    f(i, acc, &s.row_scales, &self.scales[i])?;
-                    continue;
-                }
-                if let Some(tiles) = self.i8_tiles.get(i) {
-                    s.rows8.resize(n * k, 0);
-                    s.row_scales.clear();
-                    for (x, q) in x.chunks_exact(k).zip(s.rows8.chunks_exact_mut(k)) {
-                        s.row_scales.push(quantize_row(x, q));
-                    }
-                    tiles.run(
-                        &s.rows8,
-                        n,
-                        &mut s.acc.try_as_plain_ram_mut()?.as_slice_mut::<i32>()?[..n * m],
-                        &mut s.packed8,
-                    );
                     let acc = &s.acc.try_as_plain_ram()?.as_slice::<i32>()?[..n * m];
                     f(i, acc, &s.row_scales, &self.scales[i])?;
                     continue;
