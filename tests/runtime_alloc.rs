@@ -179,7 +179,7 @@ fn synthesis_allocations() {
     assert_eq!(per_frame_control, 0.0, "a control frame allocates");
 }
 
-/// The keyframes task (issue 13): a completion of `KeyframeRunner::complete` (picking the keys
+/// The keyframes task: a completion of `KeyframeRunner::complete` (picking the keys
 /// around each frame, copies in and out) allocates what its graph runs do, for whole keys and
 /// for partial keys (a humanoid-shaped ARNN with key groups).
 fn keyframes_allocations() {
@@ -231,7 +231,7 @@ fn keyframes_allocations() {
     }
 }
 
-/// The stitching task (issue 12): heap allocations per window of
+/// The stitching task: heap allocations per window of
 /// the chunked window graph on a fresh state (printed) and of a `StitchStream` (pushes, pops
 /// and the window they trigger), on the tiny seeded RMR. A stream allocates nothing: its
 /// windows reuse one graph state and its tensors, and its own work (encoding, normalising,

@@ -811,7 +811,8 @@ enum ZooStatus zoo_stitch_refine_at_seams(const struct ZooModel *model,
 
 // Creates a stitching stream over `model` into `*out`; free it with
 // `zoo_stitch_stream_free`. Thread-safe (the model is shared); the stream: one thread at a
-// time.
+// time. Runs one window of the refiner on zeros (about a window's time: a few milliseconds for
+// a paper-size model), so that no per-frame call makes the stream's buffers.
 //
 // Safety: `model` is NULL or a live model; `out` is NULL or valid for a write.
 enum ZooStatus zoo_stitch_stream_new(const struct ZooModel *model, struct ZooStitchStream **out);

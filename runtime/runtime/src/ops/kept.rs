@@ -1,7 +1,7 @@
 //! Node outputs a plan's state keeps from one run to the next, so that a step allocates nothing.
 //!
 //! tract evaluates a node into new tensors on every run. The zoo ops, and the few tract ops a
-//! step graph keeps around them ([`keep_outputs`] swaps them for [`Kept`] equivalents when a
+//! step graph keeps around them ([`keep_outputs`] swaps them for [`KeptTract`] when a
 //! plan is made), instead write into tensors their node's state holds: tract gets a shared
 //! reference to each, drops it when the run is over, and on the next run the node writes into
 //! the same memory again. A tensor something still holds (a caller keeping a run's outputs) is

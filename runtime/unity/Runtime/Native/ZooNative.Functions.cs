@@ -534,7 +534,8 @@ namespace Zoo.Native
         /// <summary>
         /// Creates a stitching stream over <c>model</c> into <c>*out</c>; free it with
         /// <c>zoo_stitch_stream_free</c>. Thread-safe (the model is shared); the stream: one thread at a
-        /// time.
+        /// time. Runs one window of the refiner on zeros (about a window's time: a few milliseconds for
+        /// a paper-size model), so that no per-frame call makes the stream's buffers.
         /// </summary>
         /// <remarks>
         /// Safety: <c>model</c> is NULL or a live model; <c>out</c> is NULL or valid for a write.
