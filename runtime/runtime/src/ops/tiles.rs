@@ -18,6 +18,25 @@
 //! [`Tiles::run`] (checked there before any tile runs).
 #![allow(unsafe_code)]
 
+/// Which of the runtime's tiles `ZOO_RUNTIME_TILES` allows (f32 and integer alike).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Setting {
+    /// `0`: tract-linalg's kernels only.
+    Off,
+    /// `avx2`: the AVX2 tiles only, on any CPU that has them.
+    Avx2,
+    /// Unset or anything else: the widest this CPU runs.
+    All,
+}
+
+pub(crate) fn setting() -> Setting {
+    match std::env::var("ZOO_RUNTIME_TILES").as_deref() {
+        Ok("0") => Setting::Off,
+        Ok("avx2") => Setting::Avx2,
+        _ => Setting::All,
+    }
+}
+
 /// The instruction set a [`Tiles`] product runs on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum TileIsa {
@@ -33,10 +52,10 @@ impl TileIsa {
     pub fn native() -> Option<TileIsa> {
         static ISA: std::sync::OnceLock<Option<TileIsa>> = std::sync::OnceLock::new();
         *ISA.get_or_init(|| {
-            let allowed: &[TileIsa] = match std::env::var("ZOO_RUNTIME_TILES").as_deref() {
-                Ok("0") => &[],
-                Ok("avx2") => &[TileIsa::Avx2],
-                _ => &[TileIsa::Avx512, TileIsa::Avx2],
+            let allowed: &[TileIsa] = match setting() {
+                Setting::Off => &[],
+                Setting::Avx2 => &[TileIsa::Avx2],
+                Setting::All => &[TileIsa::Avx512, TileIsa::Avx2],
             };
             allowed.iter().copied().find(|isa| isa.supported())
         })

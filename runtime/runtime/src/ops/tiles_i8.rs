@@ -34,11 +34,12 @@ impl I8Isa {
     /// The tile this CPU runs, if any (see the module's doc for `ZOO_RUNTIME_TILES`).
     pub fn native() -> Option<I8Isa> {
         static ISA: std::sync::OnceLock<Option<I8Isa>> = std::sync::OnceLock::new();
+        use super::tiles::{Setting, setting};
         *ISA.get_or_init(|| {
-            let allowed: &[I8Isa] = match std::env::var("ZOO_RUNTIME_TILES").as_deref() {
-                Ok("0") => &[],
-                Ok("avx2") => &[I8Isa::Avx2],
-                _ => &[I8Isa::Vnni, I8Isa::Avx2],
+            let allowed: &[I8Isa] = match setting() {
+                Setting::Off => &[],
+                Setting::Avx2 => &[I8Isa::Avx2],
+                Setting::All => &[I8Isa::Vnni, I8Isa::Avx2],
             };
             allowed.iter().copied().find(|isa| isa.supported())
         })
