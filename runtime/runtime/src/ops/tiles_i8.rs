@@ -207,7 +207,6 @@ impl I8Tiles {
                 }
             }
         }
-        let _ = k;
     }
 }
 
