@@ -854,6 +854,7 @@ class Inbetween:
         self.std = np.array(s["std"], dtype=np.float64)
         self.width = s["input_width"]
         self.residual = s.get("residual", "envelope")
+        self.fallback = s.get("fallback")
         self.groups = [0, 0, 0] + [1 + j for j in range(self.j) for _ in range(4)]
 
     def bezier(self, frames, keys, fixes):
@@ -935,18 +936,46 @@ class Inbetween:
             features[t] = row.astype(F)
         return features, bez, env, lerp
 
-    def compose(self, bez, env, lerp, correction):
+    def kept(self, frames, r):
+        """The fallback's kept share of the residual per frame (1 everywhere without one)."""
+        n = len(r)
+        kept, edge = np.ones(n), np.ones(n)
+        if self.fallback is None:
+            return kept
+        pairs = []
+        for a, b in zip(frames[:-1], frames[1:]):
+            if b - a < 2:
+                continue
+            # The size and the weight in float32, as the page says the thresholds are.
+            z = F(math.sqrt(float(np.mean(r[a + 1:b] ** 2))))
+            gaps = self.fallback["gaps"]
+            th = next((g for g in gaps if b - a <= g["up_to"]), gaps[-1])
+            start, full = F(th["start"]), F(th["full"])
+            w = 1.0 if not np.isfinite(z) else min(max(float((z - start) / (full - start)), 0.0), 1.0)
+            pairs.append((a, b, 1.0 - w))
+            edge[a], edge[b] = min(edge[a], pairs[-1][2]), min(edge[b], pairs[-1][2])
+        for a, b, k in pairs:
+            for t in range(a, b + 1):
+                u = (t - a) / (b - a)
+                kept[t] = edge[a] + (k - edge[a]) * 2.0 * u if u <= 0.5 else edge[b] + (k - edge[b]) * 2.0 * (1.0 - u)
+        return kept
+
+    def compose(self, frames, bez, env, lerp, correction):
         n, d = bez.shape
         c = correction.astype(np.float64)
-        out = np.zeros((n, d), dtype=F)
+        r = np.zeros((n, d))
         for t in range(n):
             for v in range(d):
                 if self.residual == "key-lerp":
                     fa, fc, s = lerp[t][v]
-                    r = c[t, v] - (c[fa, v] + s * (c[fc, v] - c[fa, v]))
+                    r[t, v] = c[t, v] - (c[fa, v] + s * (c[fc, v] - c[fa, v]))
                 else:
-                    r = env[t, v] * c[t, v]
-                out[t, v] = F(bez[t, v] + r * self.std[v])
+                    r[t, v] = env[t, v] * c[t, v]
+        kept = self.kept(frames, r)
+        out = np.zeros((n, d), dtype=F)
+        for t in range(n):
+            for v in range(d):
+                out[t, v] = F(bez[t, v] + kept[t] * r[t, v] * self.std[v])
         return out
 
 
@@ -1134,7 +1163,7 @@ def check_keyframes(model, ref, cmp):
             cmp.values(c, "bezier", bez, case["bezier"])
             name = model.sess.get_inputs()[0].name
             correction = model.sess.run(None, {name: features.reshape(1, len(features), -1)})[0]
-            network = inbetween.compose(bez, env, lerp, correction.reshape(len(features), d))
+            network = inbetween.compose(frames, bez, env, lerp, correction.reshape(len(features), d))
         else:
             state = model.zero_state()
             prev, network = keys[0], [keys[0]]

@@ -645,19 +645,24 @@ fn inbetween_design_trains_resumes_scores_keys_and_completes() {
         run(&[&base[..], &["--preset", "tiny", "--threads", "1", "--epochs", "1", "--seed", "2", "--out", r]].concat());
     assert!(ok, "{stdout}\n{stderr}");
     assert!(stdout.contains("training the in-betweening network"), "{stdout}");
+    // The fallback towards the curves is calibrated on the validation windows at the end.
+    assert!(stdout.contains("fallback calibrated on") && stdout.contains("stored in config.json"), "{stdout}");
     let config: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(runp.join("config.json")).unwrap()).unwrap();
     assert_eq!((config["model"].as_str(), config["design"].as_str()), (Some("arnn"), Some("inbetween")));
     assert_eq!(config["transition_fraction"].as_f64(), Some(0.0));
+    assert!(config["fallback"]["gaps"][0]["start"].as_f64().is_some(), "{}", config["fallback"]);
     let (ok, stdout, stderr) = run(&["train", "arnn", "--epochs", "2", "--threads", "1", "--resume", r]);
-    assert!(ok && stdout.contains("epoch   2"), "{stdout}\n{stderr}");
-    let method = format!("arnn:{r}");
+    assert!(ok && stdout.contains("epoch   2") && stdout.contains("fallback calibrated"), "{stdout}\n{stderr}");
+    // Methods of runs with a fallback are named with a `+fallback` suffix, as the RTN's.
+    let method = format!("arnn:{r}+fallback");
     let json = dir.path().join("keys.json");
     let bench = ["bench", "--data", d, "--valid-glob", "*_0005.bvh", "--layout", "keys", "--every", "10,30"];
-    let locked = format!("arnn+lock:{r}");
-    let methods = format!("bezier,bezier+lock,{method},{locked}");
+    let locked = format!("arnn+lock:{r}+fallback");
+    let methods = format!("bezier,bezier+lock,arnn:{r},arnn+lock:{r}");
     let (ok, stdout, stderr) = run(&[&bench[..], &["--methods", &methods, "--json", json.to_str().unwrap()]].concat());
     assert!(ok, "{stdout}\n{stderr}");
+    assert!(stderr.contains(&format!("{method}: the fallback towards the curves acted on")), "{stderr}");
     let result: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let row = &result["methods"][method.as_str()];
     for k in [10, 30] {
@@ -730,6 +735,15 @@ fn inbetween_design_trains_resumes_scores_keys_and_completes() {
     for key in [0, 12, 30] {
         assert_eq!(locked_rows[key], raw_rows[key], "key frame {key}");
     }
+    // Without the fallback towards the curves: the network alone, the keys written alike.
+    let alone = dir.path().join("alone.bvh");
+    let (ok, stdout, stderr) =
+        run(&["complete", "--model", r, "--keys", kp, "--out", alone.to_str().unwrap(), "--no-fallback"]);
+    assert!(ok, "{stdout}\n{stderr}");
+    let alone_rows = motion(&alone);
+    for key in [0, 12, 30] {
+        assert_eq!(locked_rows[key], alone_rows[key], "key frame {key} without the fallback");
+    }
     // The in-betweening benchmark's transitions: the context and the target as keys, the whole
     // gap in one pass; trained with a share of its batches in that layout.
     let tr = dir.path().join("ib_transitions");
@@ -741,8 +755,8 @@ fn inbetween_design_trains_resumes_scores_keys_and_completes() {
         serde_json::from_str(&std::fs::read_to_string(tr.join("config.json")).unwrap()).unwrap();
     assert_eq!(tconfig["transition_fraction"].as_f64(), Some(0.5));
     let tjson = dir.path().join("transitions.json");
-    let tmethod = format!("arnn:{trs}");
-    let (tlocked, tcandle) = (format!("arnn+lock:{trs}"), format!("candle-arnn:{trs}"));
+    let tmethod = format!("arnn:{trs}+fallback");
+    let (tlocked, tcandle) = (format!("arnn+lock:{trs}+fallback"), format!("candle-arnn:{trs}"));
     let (ok, stdout, stderr) = run(&[
         "bench",
         "--data",
@@ -752,7 +766,7 @@ fn inbetween_design_trains_resumes_scores_keys_and_completes() {
         "--lengths",
         "5,15",
         "--methods",
-        &format!("interp,{method},{tmethod},{tlocked},{tcandle}"),
+        &format!("interp,arnn:{r},arnn:{trs},arnn+lock:{trs},{tcandle}"),
         "--json",
         tjson.to_str().unwrap(),
     ]);
@@ -840,12 +854,15 @@ fn inbetween_design_trains_resumes_scores_keys_and_completes() {
     assert!(!ok && stderr.contains("does not hold; export it without --portable") && !portable.exists(), "{stderr}");
     // The export through the runtime scores as the training model in candle does in the
     // keys-only benchmark, with its own foot lock as with the benchmark's.
+    // Both apply the run's fallback (the file carries it); the runtime's methods say so in
+    // their names.
     let (o, ol) = (format!("onnx:{}", onnx.display()), format!("onnx+lock:{}", onnx.display()));
-    let (method, locked) = (format!("candle-{method}"), format!("candle-{locked}"));
+    let (method, locked) = (format!("candle-arnn:{r}"), format!("candle-arnn+lock:{r}"));
     let json = dir.path().join("keys_onnx.json");
     let methods = format!("{method},{locked},{o},{ol}");
     let (ok, stdout, stderr) = run(&[&bench[..], &["--methods", &methods, "--json", json.to_str().unwrap()]].concat());
     assert!(ok, "{stdout}\n{stderr}");
+    let (o, ol) = (format!("{o}+fallback"), format!("{ol}+fallback"));
     let result: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     for (candle, runtime) in [(&method, &o), (&locked, &ol)] {
         for k in [10, 30] {

@@ -205,9 +205,14 @@ pub fn inbetween_skeleton() -> zoo_arnn::HumanoidSkeleton {
 /// statistics (cm and quaternion components), exported as `zoo export --onnx` would: the
 /// keyframes task's in-betweening test model.
 pub fn tiny_inbetween_onnx() -> zoo_export::OnnxModel {
+    tiny_inbetween_onnx_with(None)
+}
+
+/// [`tiny_inbetween_onnx`] with a fallback towards the curves in its file.
+pub fn tiny_inbetween_onnx_with(fallback: Option<zoo_protocol::inbetween::Fallback>) -> zoo_export::OnnxModel {
     use candle_core::{DType, Device};
     use zoo_arnn::inbetween::{Inbetween, InbetweenConfig};
-    let config = InbetweenConfig::tiny(inbetween_skeleton(), vec![[2, 0, 1]; 3]);
+    let config = InbetweenConfig { fallback, ..InbetweenConfig::tiny(inbetween_skeleton(), vec![[2, 0, 1]; 3]) };
     let varmap = candle_nn::VarMap::new();
     Inbetween::new(&config, zoo_nn::SeededVarMap::builder(&varmap, 7, DType::F32, &Device::Cpu))
         .expect("tiny in-betweening network");

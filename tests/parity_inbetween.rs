@@ -265,6 +265,88 @@ fn candle_tract_and_onnxruntime_complete_the_same_keys() {
     assert!(alone[0] == hit[2], "character 2 alone differs from its completion in the batch");
 }
 
+/// The fallback towards the curves: calibrated on validation windows as `zoo train arnn` does,
+/// stored in the run folder's config, carried by the export, and applied alike by candle and the
+/// runtime; `set_fallback(None)` gives the network alone, and a fallback that always acts gives
+/// the keys' Bezier curves.
+#[test]
+fn the_fallback_towards_the_curves_runs_alike_in_candle_and_the_runtime() {
+    let f = fixture();
+    let valid = windows(4, 66, 0.5);
+    let (calibrated, sizes) = zoo_arnn::inbetween_train::calibrate_fallback(&f.model, &f.norm, &valid).unwrap();
+    let calibrated = calibrated.expect("4 windows of 9 shots make enough intervals");
+    // 4 windows keyed every 5/10/15/20/30 frames (12 + 6 + 4 + 3 + 2 intervals) and in the
+    // transition layout (one interval each, 4 lengths).
+    assert_eq!(sizes.len(), 4 * (27 + 4));
+    calibrated.check().unwrap();
+    // Thresholds at the median, so that the test's characters fall back in part.
+    let median = zoo_protocol::inbetween::Fallback::calibrate(&sizes, 0.5, 2.0).unwrap();
+    let src = Path::new(env!("CARGO_TARGET_TMPDIR")).join("parity_inbetween");
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("parity_inbetween_fallback");
+    std::fs::create_dir_all(&dir).unwrap();
+    for file in ["model.safetensors", "normalization.json"] {
+        std::fs::copy(src.join(file), dir.join(file)).unwrap();
+    }
+    let config = InbetweenConfig { fallback: Some(median.clone()), ..f.model.config().clone() };
+    std::fs::write(dir.join("config.json"), serde_json::to_string_pretty(&config).unwrap()).unwrap();
+    let (model, norm) = zoo_arnn::inbetween::load(&dir, &Device::Cpu).unwrap();
+    assert_eq!(model.config().fallback.as_ref(), Some(&median));
+    let onnx = zoo_arnn::export::export_run(&dir, &Default::default()).unwrap();
+
+    let chars = characters();
+    let (poses, fixed): (Vec<_>, Vec<_>) = chars.iter().map(|k| (k.poses_f64(), k.fixed_bool())).unzip();
+    let shots: Vec<zoo_arnn::inbetween::ShotKeyRefs> =
+        (0..chars.len()).map(|c| (chars[c].frames.as_slice(), poses[c].as_slice(), fixed[c].as_slice())).collect();
+    let candle: Vec<Vec<f64>> =
+        zoo_arnn::inbetween::complete_shots(&model, &norm, &shots).unwrap().into_iter().map(|c| c.concat()).collect();
+    let km = KeyframeModel::from_bytes(&onnx.to_bytes()).unwrap();
+    let mut runner = km.runner(4).unwrap();
+    assert_eq!(runner.fallback(), Some(&median));
+    runner.set_hit_keys(false);
+    runner.set_foot_lock(false);
+    let tract = runtime_completion(&mut runner, &chars);
+    let weights = runner.fallback_weights().to_vec();
+    eprintln!("fallback weights at the median thresholds: {weights:?}");
+    assert_eq!(weights.len(), 4);
+    assert!(weights.iter().any(|&w| w > 0.0), "{weights:?}");
+    runner.set_fallback(None).unwrap();
+    let alone = runtime_completion(&mut runner, &chars);
+    assert!(runner.fallback_weights().is_empty());
+    let inputs: Vec<ShotInputs> = chars
+        .iter()
+        .map(|k| zoo_arnn::inbetween::shot_inputs(&config, &norm, &k.frames, &k.poses_f64(), &k.fixed_bool()).unwrap())
+        .collect();
+    for c in 0..chars.len() {
+        assert!(agree(&candle[c], &tract[c]), "character {c}: candle and tract differ with the fallback");
+        // A character the fallback acted on moved towards its curves, the others are the network's.
+        let (to_curves, alone_to_curves) =
+            (max_diff(&tract[c], &inputs[c].bezier), max_diff(&alone[c], &inputs[c].bezier));
+        if weights[c] > 0.0 {
+            assert!(to_curves < alone_to_curves, "character {c}: {to_curves:e} >= {alone_to_curves:e}");
+        } else {
+            assert_eq!(tract[c], alone[c], "character {c}");
+        }
+        // The keys are still met as the network alone meets them.
+        assert!(key_miss(&chars[c], &tract[c]) <= 1e-4 * scale(&tract[c]));
+    }
+    // A fallback that always acts: the curves themselves (f32 output).
+    let always = zoo_protocol::inbetween::Fallback {
+        gaps: vec![zoo_protocol::inbetween::GapFallback { up_to: 60, start: 0.0, full: 1e-9 }],
+    };
+    runner.set_fallback(Some(always)).unwrap();
+    let curves = runtime_completion(&mut runner, &chars);
+    for c in 0..chars.len() {
+        let diff = max_diff(&curves[c], &inputs[c].bezier);
+        assert!(diff <= 1e-5 * scale(&inputs[c].bezier), "character {c}: {diff:e} from the curves");
+    }
+    assert_eq!(runner.fallback_weights(), &[1.0; 4]);
+    let bad = zoo_protocol::inbetween::Fallback {
+        gaps: vec![zoo_protocol::inbetween::GapFallback { up_to: 60, start: 0.5, full: 0.5 }],
+    };
+    let err = runner.set_fallback(Some(bad)).unwrap_err().to_string();
+    assert!(err.contains("full above start"), "{err}");
+}
+
 /// tract's correction of one shot's features (`[1, n, width]`), the exported graph run directly.
 fn tract_correction(exported: &OnnxModel, features: &[f32], n: usize) -> Vec<f32> {
     use tract_onnx::prelude::*;

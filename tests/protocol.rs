@@ -326,6 +326,25 @@ fn inbetweening_reproduces_from_the_page() {
     }
 }
 
+/// The in-betweening design's fallback towards the curves, from the page: keys up to 10 frames
+/// apart fall back fully, further ones keep the network's correction, with the ramps between.
+#[test]
+fn the_inbetweening_fallback_reproduces_from_the_page() {
+    use zoo_protocol::inbetween::{Fallback, GapFallback};
+    let dir = kept_dir("inbetween_fallback");
+    let fallback = Fallback {
+        gaps: vec![GapFallback { up_to: 10, start: 0.0, full: 1e-6 }, GapFallback { up_to: 60, start: 1e5, full: 2e5 }],
+    };
+    let (vectors, report) = check(&dir, "inbetween_fallback", &zoo_tests::tiny_inbetween_onnx_with(Some(fallback)));
+    report.assert_compared(&["features", "bezier", "network", "hit", "poses"]);
+    let case = vectors.keyframes.iter().find(|c| c.key_frames == [0, 8, 20, 33]).expect("the four whole keys");
+    let gap =
+        |t: usize| case.bezier[t].iter().zip(&case.network[t]).map(|(b, n)| (*b as f32 - n).abs()).fold(0.0, f32::max);
+    // Keys 0 and 8 are the curves between them; keys 20 and 33 keep the correction in the middle.
+    assert!((1..8).all(|t| gap(t) < 1e-4), "{:?}", (1..8).map(gap).collect::<Vec<_>>());
+    assert!(gap(26) > 1e-2, "{}", gap(26));
+}
+
 /// [`zoo_tests::tiny_rmr_onnx`]'s model trained on sequences inertialized at their seams
 /// (`zoo train rmr --pre-blend`), with a fallback in its file.
 fn tiny_pre_blend_rmr() -> zoo_export::OnnxModel {

@@ -367,11 +367,33 @@ pub fn exported(dir: &Path) -> Result<zoo_runtime::KeyframeModel> {
 }
 
 /// An exported keyframe model run by the engine runtime ([`zoo_runtime::KeyframeRunner`], one
-/// character per call), its foot lock on or off.
+/// character per call), its foot lock on or off, with the file's fallback towards the curves
+/// unless `zoo bench --no-fallback` (the method is then named with a `+fallback` suffix, and
+/// how often the fallback acted is said on stderr when the method is dropped).
 pub struct RuntimeKeys {
     name: String,
     model: zoo_runtime::KeyframeModel,
     foot_lock: bool,
+    fallback: bool,
+    /// Shots completed, shots with a fallback weight above 0, and the sum of the weights in
+    /// millionths.
+    counts: [std::sync::atomic::AtomicU64; 3],
+}
+
+impl Drop for RuntimeKeys {
+    fn drop(&mut self) {
+        use std::sync::atomic::Ordering::Relaxed;
+        let [n, hit, sum] = &self.counts;
+        let (n, hit, sum) = (n.load(Relaxed), hit.load(Relaxed), sum.load(Relaxed));
+        if self.fallback && n > 0 {
+            eprintln!(
+                "{}: the fallback towards the curves acted on {hit} of {n} shots ({:.1} %), mean weight {:.3}",
+                self.name,
+                100.0 * hit as f64 / n as f64,
+                sum as f64 * 1e-6 / n as f64
+            );
+        }
+    }
 }
 
 impl RuntimeKeys {
@@ -390,7 +412,9 @@ impl RuntimeKeys {
         if model.groups() == 0 {
             bail!("{}: a keyframe model of {} values per pose, not a humanoid one", path.display(), model.dofs());
         }
-        Ok(RuntimeKeys { name, model, foot_lock })
+        let fallback = model.runner(1)?.fallback().is_some() && zoo_rtn::method::fallback_enabled();
+        let name = if fallback { format!("{name}+fallback") } else { name };
+        Ok(RuntimeKeys { name, model, foot_lock, fallback, counts: Default::default() })
     }
 
     fn one(&self, runner: &mut zoo_runtime::KeyframeRunner, t: &KeyTask<'_>) -> Result<Filled> {
@@ -416,6 +440,12 @@ impl RuntimeKeys {
         runner.set_hit_keys(true);
         runner.set_foot_lock(self.foot_lock);
         runner.complete(keys, &mut out)?;
+        if let Some(&w) = runner.fallback_weights().first() {
+            use std::sync::atomic::Ordering::Relaxed;
+            self.counts[0].fetch_add(1, Relaxed);
+            self.counts[1].fetch_add(u64::from(w > 0.0), Relaxed);
+            self.counts[2].fetch_add((w as f64 * 1e6).round() as u64, Relaxed);
+        }
         let out: Vec<f64> = out.iter().map(|&v| v as f64).collect();
         Ok(Filled::from_poses(out.chunks_exact(d), &t.rot[..j], Some((root_miss, angle_miss))))
     }
@@ -433,6 +463,9 @@ impl KeyMethod for RuntimeKeys {
             .map(|chunk| {
                 let mut runner = self.model.runner(1).map_err(|e| err(e.into()))?;
                 runner.set_foot_lock(self.foot_lock);
+                if !self.fallback {
+                    runner.set_fallback(None).map_err(|e| err(e.into()))?;
+                }
                 chunk.iter().map(|t| self.one(&mut runner, t).map_err(err)).collect::<std::result::Result<Vec<_>, _>>()
             })
             .collect::<std::result::Result<Vec<Vec<Filled>>, String>>()

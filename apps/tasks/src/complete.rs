@@ -15,7 +15,7 @@ use zoo_runtime::{KeyframeRunner, MotionKeys};
 
 /// An exported keyframe network in the runtime, as `zoo complete` runs it.
 pub struct RuntimeKeyNet {
-    runner: RefCell<KeyframeRunner>,
+    pub(crate) runner: RefCell<KeyframeRunner>,
     dofs: usize,
     groups: usize,
     humanoid: Option<HumanoidSkeleton>,
@@ -84,5 +84,8 @@ impl KeyNet for RuntimeKeyNet {
 pub fn complete(o: &CompleteOptions) -> TaskResult<String> {
     let source = ModelSource::open(&o.model, MotionTaskKind::Keyframes, "complete")?;
     let net = RuntimeKeyNet::new(&source)?;
+    if o.no_fallback {
+        net.runner.borrow_mut().set_fallback(None)?;
+    }
     Ok(zoo_arnn::completion::complete_command(o, &net).map_err(|e| Message(e.to_string()))?)
 }

@@ -398,6 +398,9 @@ fn run_inbetween(
     let key = |f: usize| zoo_arnn::humanoid::HumanoidKey { frame: f, source: f, fixed: None };
     let keys: Vec<_> = (0..past).chain([past + n]).map(key).collect();
     let net = crate::complete::RuntimeKeyNet::new(source)?;
+    if a.no_fallback {
+        net.runner.borrow_mut().set_fallback(None)?;
+    }
     let fps = f64::from(source.metadata.fps);
     let mut done = zoo_arnn::humanoid::complete_clip_with(&shot, &keys, Some(fps), |frames, poses, fixed| {
         zoo_arnn::completion::KeyNet::complete(&net, frames, poses, fixed)

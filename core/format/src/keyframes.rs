@@ -59,6 +59,11 @@ pub struct InbetweenSection {
     /// the envelope).
     #[serde(default, skip_serializing_if = "is_envelope")]
     pub residual: zoo_protocol::inbetween::Residual,
+    /// The fallback towards the curves that `zoo train arnn --design inbetween` calibrates
+    /// (`zoo_protocol::inbetween::Fallback`; absent: the network alone, as files written before
+    /// the field).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fallback: Option<zoo_protocol::inbetween::Fallback>,
 }
 
 fn is_envelope(r: &zoo_protocol::inbetween::Residual) -> bool {
@@ -103,6 +108,9 @@ impl InbetweenSection {
         }
         let f = self.features()?;
         f.check().map_err(|e| format!("inbetween: {e}"))?;
+        if let Some(fb) = &self.fallback {
+            fb.check().map_err(|e| format!("inbetween.fallback: {e}"))?;
+        }
         if task.dofs != f.dofs()
             || task.groups != f.groups()
             || task.key_groups != zoo_protocol::inbetween::key_groups(j)

@@ -307,6 +307,12 @@ fn inbetween_sample() -> MotionModelMetadata {
         std: vec![0.5; 11],
         input_width: 41,
         residual: zoo_protocol::inbetween::Residual::KeyLerp,
+        fallback: Some(zoo_protocol::inbetween::Fallback {
+            gaps: vec![
+                zoo_protocol::inbetween::GapFallback { up_to: 12, start: 0.1, full: 0.2 },
+                zoo_protocol::inbetween::GapFallback { up_to: usize::MAX, start: 0.3, full: 0.6 },
+            ],
+        }),
     };
     MotionModelMetadata {
         model_kind: "arnn".into(),
@@ -349,6 +355,10 @@ fn an_inbetween_keyframes_section_round_trips_and_is_checked() {
         s.mean.pop();
     });
     assert!(err.contains("10 means and 11 standard deviations"), "{err}");
+    let err = section(&|s| s.fallback.as_mut().unwrap().gaps[1].full = 0.3);
+    assert!(err.contains("inbetween.fallback: fallback thresholds start 0.3 and full 0.3"), "{err}");
+    let err = section(&|s| s.fallback.as_mut().unwrap().gaps[1].up_to = 12);
+    assert!(err.contains("up_to strictly increasing"), "{err}");
 }
 
 #[test]

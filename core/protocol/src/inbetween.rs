@@ -79,6 +79,163 @@ pub struct ShotInputs {
     /// or before it) and after it, and the phase between them ([`Residual::KeyLerp`]); `(t, t,
     /// 0)` on those keys, before the first and after the last, where the residual is zero.
     pub lerp: Vec<(u32, u32, f64)>,
+    /// The shot's key frames (from 0, increasing), whole or partial.
+    pub keys: Vec<usize>,
+}
+
+/// The fallback towards the curves through the keys (not in any paper): an interval between
+/// keys whose network correction is larger than the corrections it made on in-distribution
+/// validation shots with keys as far apart is blended back towards the Bezier curves, which
+/// meet the same keys.
+///
+/// The confidence signal is computed from the inputs only: per interval between two consecutive
+/// key frames at least two frames apart, the root mean square of the residual `r` (normalised
+/// units, every pose value, the frames strictly between the keys;
+/// [`InbetweenFeatures::interval_sizes`]). Each interval's size gives a weight `w` in `[0, 1]`
+/// from the thresholds of its gap (0 below `start`, 1 from `full` on, linear between). The
+/// completed pose is `b + k(t) r std` with `k = 1 - w` at the middle of each interval, on a key
+/// frame the smaller `k` of the two intervals it joins, and linear between ([`Fallback::kept`]):
+/// the keys are still met by construction and the motion stays continuous.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Fallback {
+    /// Thresholds per range of gaps, by increasing `up_to`: an interval of `n` frames uses the
+    /// first entry with `n <= up_to`, the last one beyond them all.
+    pub gaps: Vec<GapFallback>,
+}
+
+/// The fallback's thresholds for intervals of at most `up_to` frames (and more than the
+/// previous entry's).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GapFallback {
+    /// The longest interval (frames from key to key) these thresholds are for.
+    pub up_to: usize,
+    /// Correction size (normalised RMS) from which the shot is blended towards the curves.
+    pub start: f32,
+    /// Size from which the shot is the curves.
+    pub full: f32,
+}
+
+impl Fallback {
+    /// Checks the thresholds: at least one range, `up_to` strictly increasing, every `start`
+    /// finite and at least 0, every `full` above its `start`.
+    pub fn check(&self) -> Result<(), InbetweenError> {
+        if self.gaps.is_empty() || self.gaps.windows(2).any(|w| w[0].up_to >= w[1].up_to) {
+            return Err(InbetweenError(
+                "the fallback needs at least one range of gaps, their up_to strictly increasing".into(),
+            ));
+        }
+        if let Some(g) = self.gaps.iter().find(|g| !(g.start.is_finite() && g.start >= 0.0 && g.full > g.start)) {
+            return Err(InbetweenError(format!(
+                "fallback thresholds start {} and full {} (gaps up to {} frames): start must be finite and at least 0, \
+                 full above start",
+                g.start, g.full, g.up_to
+            )));
+        }
+        Ok(())
+    }
+
+    /// The thresholds for an interval of `gap` frames.
+    pub fn thresholds(&self, gap: usize) -> GapFallback {
+        *self.gaps.iter().find(|g| gap <= g.up_to).or(self.gaps.last()).expect("checked: at least one range")
+    }
+
+    /// The weight towards the curves of an interval of `gap` frames whose correction has `size`.
+    pub fn weight(&self, gap: usize, size: f32) -> f32 {
+        let t = self.thresholds(gap);
+        if !size.is_finite() {
+            return 1.0;
+        }
+        ((size - t.start) / (t.full - t.start)).clamp(0.0, 1.0)
+    }
+
+    /// The largest weight of a shot's intervals ([`InbetweenFeatures::interval_sizes`]).
+    pub fn shot_weight(&self, sizes: &[IntervalSize]) -> f32 {
+        sizes.iter().map(|i| self.weight(i.gap(), i.size)).fold(0.0, f32::max)
+    }
+
+    /// The share `k(t)` of the residual kept on each of a shot's `frames` frames, from its
+    /// intervals' sizes: `1 - w` at the middle of an interval, on a key frame the smaller of the
+    /// two intervals' (1 for an interval without frames between its keys), linear between.
+    pub fn kept(&self, frames: usize, sizes: &[IntervalSize]) -> Vec<f64> {
+        let mut kept = vec![1.0f64; frames];
+        let mut edge = vec![1.0f64; frames];
+        let own: Vec<f64> = sizes.iter().map(|i| 1.0 - self.weight(i.gap(), i.size) as f64).collect();
+        for (i, &k) in sizes.iter().zip(&own) {
+            for f in [i.from, i.to] {
+                if f < frames {
+                    edge[f] = edge[f].min(k);
+                }
+            }
+        }
+        for (i, &k) in sizes.iter().zip(&own) {
+            let n = i.gap() as f64;
+            for t in i.from..=i.to.min(frames.saturating_sub(1)) {
+                let s = (t - i.from) as f64 / n;
+                kept[t] = if s <= 0.5 {
+                    edge[i.from] + (k - edge[i.from]) * 2.0 * s
+                } else {
+                    edge[i.to] + (k - edge[i.to]) * 2.0 * (1.0 - s)
+                };
+            }
+        }
+        kept
+    }
+
+    /// Thresholds from the intervals of in-distribution shots: per range of gaps of
+    /// [`FALLBACK_GAP_RANGES`] holding at least [`FALLBACK_MIN_INTERVALS`] of them, `start` at
+    /// their sizes' `quantile` (nearest rank) and `full` at `factor` times it (at least 1e-6
+    /// above); `None` when no range has enough.
+    pub fn calibrate(sizes: &[IntervalSize], quantile: f64, factor: f32) -> Option<Fallback> {
+        let mut gaps = Vec::new();
+        let mut low = 0;
+        for &up_to in FALLBACK_GAP_RANGES {
+            let range: Vec<(usize, f32)> = sizes
+                .iter()
+                .map(|i| (i.gap(), i.size))
+                .filter(|(g, s)| *g > low && *g <= up_to && s.is_finite())
+                .collect();
+            low = up_to;
+            if range.len() < FALLBACK_MIN_INTERVALS {
+                continue;
+            }
+            let mut v: Vec<f32> = range.iter().map(|(_, s)| *s).collect();
+            v.sort_by(f32::total_cmp);
+            let start = v[((v.len() - 1) as f64 * quantile.clamp(0.0, 1.0)).round() as usize].max(0.0);
+            // The open range ends at its longest interval (the last range covers longer ones).
+            let longest = range.iter().map(|(g, _)| *g).max().unwrap_or(up_to);
+            gaps.push(GapFallback { up_to: up_to.min(longest), start, full: (start * factor).max(start + 1e-6) });
+        }
+        (!gaps.is_empty()).then_some(Fallback { gaps })
+    }
+}
+
+/// The ranges of gaps (frames from key to key, upper bounds) the fallback is calibrated on:
+/// around the keys-only benchmark's spacings (5, 10, 15, 20, 30) and the transition benchmark's
+/// gaps (6, 16, 31, 46 frames from the last context frame to the target).
+pub const FALLBACK_GAP_RANGES: &[usize] = &[7, 12, 17, 25, 37, usize::MAX];
+
+/// Intervals a range of gaps needs for its own thresholds.
+pub const FALLBACK_MIN_INTERVALS: usize = 20;
+
+/// The [`Fallback`]'s signal on one interval between consecutive key frames `from < to`: the
+/// root mean square `size` of the residual over the frames strictly between them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct IntervalSize {
+    /// The interval's first key frame.
+    pub from: usize,
+    /// Its last key frame.
+    pub to: usize,
+    /// The residual's root mean square (normalised units).
+    pub size: f32,
+}
+
+impl IntervalSize {
+    /// Frames from key to key.
+    pub fn gap(&self) -> usize {
+        self.to - self.from
+    }
 }
 
 /// Values per pose of `joints` joints, `3 + 4 J`.
@@ -290,15 +447,15 @@ impl InbetweenFeatures {
             features.extend((0..g).map(|gr| if per_group[gr].iter().any(|(_, f)| *f == t) { 1.0f32 } else { 0.0 }));
             features.extend(group_env.iter().map(|&e| e as f32));
         }
-        Ok(ShotInputs { frames: n, features, bezier, envelope: env, lerp })
+        Ok(ShotInputs { frames: n, features, bezier, envelope: env, lerp, keys: frames.to_vec() })
     }
 
-    /// The completed value `x` (flat index, frame-major) of a shot from the network's correction
-    /// (normalised units, frames x d): `b + r * std` ([`Residual`]), in f64, so that a value
-    /// equals its Bezier value, and so its key, on every key frame fixing it.
-    pub fn compose(&self, shot: &ShotInputs, correction: &[f32], x: usize) -> f64 {
+    /// The residual of value `x` (flat index, frame-major) of a shot from the network's
+    /// correction (normalised units, frames x d; [`Residual`]): zero on every key frame fixing
+    /// the value.
+    pub fn residual(&self, shot: &ShotInputs, correction: &[f32], x: usize) -> f64 {
         let d = self.dofs();
-        let r = match self.residual {
+        match self.residual {
             Residual::Envelope => shot.envelope[x] * correction[x] as f64,
             Residual::KeyLerp => {
                 let (a, c, s) = shot.lerp[x];
@@ -306,8 +463,51 @@ impl InbetweenFeatures {
                 let (ya, yc) = (correction[a as usize * d + v] as f64, correction[c as usize * d + v] as f64);
                 correction[x] as f64 - (ya + s * (yc - ya))
             }
+        }
+    }
+
+    /// The completed value `x` (flat index, frame-major) of a shot from the network's correction
+    /// (normalised units, frames x d): `b + r * std` ([`Residual`]), in f64, so that a value
+    /// equals its Bezier value, and so its key, on every key frame fixing it.
+    pub fn compose(&self, shot: &ShotInputs, correction: &[f32], x: usize) -> f64 {
+        self.compose_kept(shot, correction, x, 1.0)
+    }
+
+    /// [`InbetweenFeatures::compose`] with the residual scaled by `kept` (the
+    /// [`Fallback::kept`] share of the value's frame): `b + kept * r * std`.
+    pub fn compose_kept(&self, shot: &ShotInputs, correction: &[f32], x: usize, kept: f64) -> f64 {
+        shot.bezier[x] + kept * self.residual(shot, correction, x) * self.std[x % self.dofs()]
+    }
+
+    /// The [`Fallback`]'s signal: per interval between consecutive key frames at least two
+    /// frames apart, the root mean square of the residual over the frames strictly between the
+    /// keys and every pose value (normalised units).
+    pub fn interval_sizes(&self, shot: &ShotInputs, correction: &[f32]) -> Vec<IntervalSize> {
+        let d = self.dofs();
+        shot.keys
+            .windows(2)
+            .filter(|w| w[1] - w[0] >= 2 && w[1] < shot.frames)
+            .map(|w| {
+                let xs = (w[0] + 1) * d..w[1] * d;
+                let n = xs.len() as f64;
+                let sum: f64 = xs.map(|x| self.residual(shot, correction, x).powi(2)).sum();
+                IntervalSize { from: w[0], to: w[1], size: (sum / n).sqrt() as f32 }
+            })
+            .collect()
+    }
+
+    /// The completed shot (frames x d, clip units) from the network's correction, with the
+    /// `fallback` when given; also the largest weight of its intervals (0 without one).
+    pub fn complete(&self, shot: &ShotInputs, correction: &[f32], fallback: Option<&Fallback>) -> (Vec<f64>, f32) {
+        let d = self.dofs();
+        let (kept, w) = match fallback {
+            Some(f) => {
+                let sizes = self.interval_sizes(shot, correction);
+                (f.kept(shot.frames, &sizes), f.shot_weight(&sizes))
+            }
+            None => (vec![1.0; shot.frames], 0.0),
         };
-        shot.bezier[x] + r * self.std[x % d]
+        ((0..shot.frames * d).map(|x| self.compose_kept(shot, correction, x, kept[x / d])).collect(), w)
     }
 }
 
@@ -449,5 +649,98 @@ mod tests {
         assert!(back[0].abs_diff_eq(rot[0], 1e-15) && back[1] == DQuat::IDENTITY);
         // A zero quaternion decodes to the identity.
         assert_eq!(decode_pose(&[0.0; 7], 1).1[0], DQuat::IDENTITY);
+    }
+
+    fn fallback() -> Fallback {
+        Fallback {
+            gaps: vec![
+                GapFallback { up_to: 7, start: 0.1, full: 0.2 },
+                GapFallback { up_to: 16, start: 0.5, full: 1.0 },
+            ],
+        }
+    }
+
+    #[test]
+    fn the_fallback_weighs_each_interval_by_its_gaps_thresholds() {
+        let f = fallback();
+        f.check().unwrap();
+        // Gaps up to 7 use the first thresholds, longer ones the second, beyond 16 the last.
+        assert_eq!(f.weight(5, 0.05), 0.0);
+        assert!((f.weight(5, 0.15) - 0.5).abs() < 1e-6);
+        assert_eq!(f.weight(7, 0.3), 1.0);
+        assert_eq!(f.weight(8, 0.3), 0.0);
+        assert!((f.weight(40, 0.75) - 0.5).abs() < 1e-6);
+        assert_eq!(f.weight(10, f32::NAN), 1.0);
+        let bad = |gaps: Vec<GapFallback>| Fallback { gaps }.check().unwrap_err().0;
+        assert!(bad(vec![]).contains("at least one range"));
+        assert!(bad(vec![GapFallback { up_to: 5, start: 0.2, full: 0.2 }]).contains("full above start"));
+        assert!(bad(vec![GapFallback { up_to: 5, start: f32::NAN, full: 1.0 }]).contains("finite"));
+        let mut twice = fallback();
+        twice.gaps[1].up_to = 7;
+        assert!(twice.check().is_err());
+    }
+
+    #[test]
+    fn the_kept_share_is_the_intervals_at_their_middles_the_smaller_on_keys_and_continuous() {
+        let f = fallback();
+        // Keys at 0, 4, 12 and 20: the first interval in range, the second at weight 1/2, the
+        // third fully fallen back.
+        let sizes = [
+            IntervalSize { from: 0, to: 4, size: 0.05 },
+            IntervalSize { from: 4, to: 12, size: 0.75 },
+            IntervalSize { from: 12, to: 20, size: 2.0 },
+        ];
+        assert_eq!(f.shot_weight(&sizes), 1.0);
+        let k = f.kept(21, &sizes);
+        assert_eq!(k[0], 1.0);
+        // The first interval keeps all at its middle and ramps to the next one's 1/2 on key 4.
+        assert_eq!((k[2], k[3]), (1.0, 0.75), "{k:?}");
+        assert_eq!((k[4], k[8], k[12], k[16], k[20]), (0.5, 0.5, 0.0, 0.0, 0.0));
+        // Never more than the interval's own share, and no jump larger than a linear ramp's.
+        assert!(k[5..12].iter().all(|&v| v <= 0.5) && k[13..].iter().all(|&v| v == 0.0));
+        assert!(k.windows(2).all(|w| (w[1] - w[0]).abs() <= 0.25 + 1e-12), "{k:?}");
+    }
+
+    #[test]
+    fn a_shot_fallen_back_is_the_curves_and_keeps_its_keys() {
+        let (frames, poses) = keys();
+        let f = InbetweenFeatures { residual: Residual::KeyLerp, ..features() };
+        let s = f.shot(&frames, &poses, &[]).unwrap();
+        let d = f.dofs();
+        let wavy: Vec<f32> = (0..s.frames * d).map(|x| ((x * 7 % 13) as f32) * 0.3 - 1.5).collect();
+        let sizes = f.interval_sizes(&s, &wavy);
+        assert_eq!(sizes.iter().map(|i| (i.from, i.to)).collect::<Vec<_>>(), vec![(0, 7), (7, 15), (15, 20)]);
+        assert!(sizes.iter().all(|i| i.size > 0.1));
+        let (alone, w0) = f.complete(&s, &wavy, None);
+        assert_eq!(w0, 0.0);
+        assert!((0..s.frames * d).all(|x| alone[x] == f.compose(&s, &wavy, x)));
+        // Thresholds far below every interval's size: the curves themselves, keys included.
+        let tiny = Fallback { gaps: vec![GapFallback { up_to: 30, start: 0.0, full: 1e-3 }] };
+        let (back, w) = f.complete(&s, &wavy, Some(&tiny));
+        assert_eq!(w, 1.0);
+        assert!(back.iter().zip(&s.bezier).all(|(a, b)| a == b));
+        // Thresholds far above: the network's completion.
+        let huge = Fallback { gaps: vec![GapFallback { up_to: 30, start: 1e3, full: 2e3 }] };
+        assert_eq!(f.complete(&s, &wavy, Some(&huge)).0, alone);
+    }
+
+    #[test]
+    fn the_fallback_calibrates_per_range_of_gaps_at_the_quantile() {
+        // 100 intervals of 5 frames sized 0.01..1.00, 100 of 30 frames sized ten times more, and
+        // 5 of 10 frames (too few for their own range).
+        let mut sizes: Vec<IntervalSize> =
+            (1..=100).map(|i| IntervalSize { from: 0, to: 5, size: i as f32 * 0.01 }).collect();
+        sizes.extend((1..=100).map(|i| IntervalSize { from: 10, to: 40, size: i as f32 * 0.1 }));
+        sizes.extend((0..5).map(|_| IntervalSize { from: 0, to: 10, size: 100.0 }));
+        let f = Fallback::calibrate(&sizes, 0.95, 2.0).unwrap();
+        f.check().unwrap();
+        assert_eq!(f.gaps.len(), 2);
+        assert_eq!(f.gaps[0], GapFallback { up_to: 5, start: 0.95, full: 1.9 });
+        assert_eq!(f.gaps[1].up_to, 30);
+        assert!((f.gaps[1].start - 9.5).abs() < 1e-5 && (f.gaps[1].full - 19.0).abs() < 1e-4, "{f:?}");
+        // Gaps of 10 frames use the next range's thresholds; longer than 30 the last.
+        assert_eq!(f.thresholds(10).up_to, 30);
+        assert_eq!(f.thresholds(45).up_to, 30);
+        assert!(Fallback::calibrate(&sizes[..10], 0.95, 2.0).is_none());
     }
 }

@@ -54,6 +54,7 @@ use glam::{DQuat, DVec3};
 use shot::ShotGraph;
 use std::path::Path;
 use std::sync::Arc;
+pub use zoo_protocol::inbetween::{Fallback, GapFallback};
 
 /// One character's keys: `frames` strictly increasing from 0, `poses` `frames.len() * dofs`
 /// values (key-major); for a model with key groups (a humanoid model, either design), optionally
@@ -289,7 +290,11 @@ impl KeyframeModel {
             })),
             KeyframeGraph::Shot(shot) => RunnerGraph::Shot(shot.clone()),
         };
+        let fallback =
+            self.metadata().task.as_keyframes().and_then(|t| t.inbetween.as_ref()).and_then(|s| s.fallback.clone());
         Ok(KeyframeRunner {
+            fallback,
+            fallback_weights: Vec::with_capacity(max_batch),
             graph,
             max_batch,
             scratch: vec![0.0; d],
@@ -452,9 +457,43 @@ pub struct KeyframeRunner {
     hit_keys: bool,
     feet: Option<KeyFeet>,
     foot_lock: bool,
+    fallback: Option<Fallback>,
+    fallback_weights: Vec<f32>,
 }
 
 impl KeyframeRunner {
+    /// The in-betweening design's fallback towards the curves through the keys: the file's
+    /// calibrated `inbetween.fallback` ([`Fallback`], as `zoo complete` applies it) unless
+    /// [`KeyframeRunner::set_fallback`] changed it; `None`: the network alone (and always for
+    /// the ARNN's step graph).
+    pub fn fallback(&self) -> Option<&Fallback> {
+        self.fallback.as_ref()
+    }
+
+    /// Sets the fallback of [`KeyframeRunner::fallback`]: `None` for the network alone (`zoo
+    /// bench --no-fallback`), or thresholds of your own (checked). The ARNN's step graph has no
+    /// fallback and refuses one.
+    pub fn set_fallback(&mut self, fallback: Option<Fallback>) -> Result<(), MotionError> {
+        if let Some(f) = &fallback {
+            if matches!(self.graph, RunnerGraph::Step(_)) {
+                return Err(MotionError::Unsupported {
+                    reason: "the ARNN's step graph has no fallback towards the curves: only the in-betweening design \
+                             (`zoo train arnn --design inbetween`) has one"
+                        .into(),
+                });
+            }
+            f.check().map_err(|e| MotionError::Unsupported { reason: format!("fallback: {e}") })?;
+        }
+        self.fallback = fallback;
+        Ok(())
+    }
+
+    /// The fallback's weight towards the curves of each character of the last completion (0:
+    /// the network's completion kept, 1: the curves); empty without a fallback.
+    pub fn fallback_weights(&self) -> &[f32] {
+        &self.fallback_weights
+    }
+
     /// Most characters per call.
     pub fn max_batch(&self) -> usize {
         self.max_batch
@@ -519,7 +558,10 @@ impl KeyframeRunner {
         }
         match &mut self.graph {
             RunnerGraph::Step(step) => step.complete(keys, out, d, g)?,
-            RunnerGraph::Shot(shot) => shot.complete(keys, out)?,
+            RunnerGraph::Shot(shot) => {
+                self.fallback_weights.clear();
+                shot.complete(keys, out, self.fallback.as_ref(), &mut self.fallback_weights)?
+            }
         }
         if self.hit_keys {
             for (k, o) in keys.iter().zip(out.iter_mut()) {

@@ -65,9 +65,10 @@ pub struct BenchArgs {
     #[arg(long)]
     pub exclude_glob: Option<String>,
     /// Benchmark RTN run folders and exported files without their fallback towards
-    /// interpolation (the thresholds `zoo train rtn` calibrates; docs/ood.md). With it on (the
-    /// default) such methods are named with a `+fallback` suffix and how often the fallback
-    /// triggered is printed per length.
+    /// interpolation (the thresholds `zoo train rtn` calibrates; docs/ood.md), and in-betweening
+    /// runs and files without theirs towards the curves through the keys (`zoo train arnn
+    /// --design inbetween`; docs/keys-only.md). With it on (the default) such methods are named
+    /// with a `+fallback` suffix and how often the fallback acted is printed.
     #[arg(long)]
     pub no_fallback: bool,
     /// Test every K-th clip of the test split only (in name order: clips 0, K, 2K, ...), for a

@@ -48,6 +48,11 @@ pub struct CompleteArgs {
     /// (planted feet held, legs refitted; key frames unchanged; docs/keys-only.md).
     #[arg(long)]
     pub no_foot_lock: bool,
+    /// In-betweening models: write the network's completion without the fallback towards
+    /// Blender's curves where its correction is larger than on motion like its training data's
+    /// (calibrated by `zoo train arnn --design inbetween`; docs/keys-only.md).
+    #[arg(long)]
+    pub no_fallback: bool,
     /// Frames per second of the output [default: the keys file's `fps`, else 50].
     #[arg(long, allow_hyphen_values = true, value_parser = crate::args::fps)]
     pub fps: Option<f64>,
@@ -94,6 +99,7 @@ pub fn run(a: CompleteArgs) -> anyhow::Result<()> {
         plot: a.plot,
         no_ground: a.no_ground,
         no_foot_lock: a.no_foot_lock,
+        no_fallback: a.no_fallback,
         fps: a.fps,
         positions: a.positions,
     };

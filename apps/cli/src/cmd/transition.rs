@@ -40,7 +40,9 @@ pub struct TransitionArgs {
     pub foot_lock: bool,
     /// Keep the network's transition even when its own miss at the target is large. By
     /// default a run whose config.json holds calibrated fallback thresholds (written by `zoo
-    /// train rtn`) blends towards interpolation on a large miss (docs/ood.md).
+    /// train rtn`) blends towards interpolation on a large miss (docs/ood.md); an in-betweening
+    /// run (`zoo train arnn --design inbetween`) blends towards the curves through the context
+    /// and the target where its correction is larger than on motion like its training data's.
     #[arg(long)]
     pub no_fallback: bool,
     /// The ground for a terrain-aware model (`zoo train rtn --terrain`): a heightmap header

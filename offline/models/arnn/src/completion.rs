@@ -312,6 +312,9 @@ pub struct CompleteOptions {
     pub no_ground: bool,
     /// Humanoid keys: no foot lock between the keys ([`zoo_protocol::keylock`]).
     pub no_foot_lock: bool,
+    /// The in-betweening design: the network alone, without the fallback towards the curves its
+    /// run calibrated ([`zoo_protocol::inbetween::Fallback`]).
+    pub no_fallback: bool,
     /// Frames per second of the output (`None`: the keys file's, else [`DEFAULT_FPS`]).
     pub fps: Option<f64>,
     /// The global joint positions of every completed frame (a positions file).

@@ -112,6 +112,11 @@ pub struct InbetweenConfig {
     /// envelope).
     #[serde(default)]
     pub residual: Residual,
+    /// The fallback towards the curves, calibrated at the end of training on the validation
+    /// shots (`zoo_protocol::inbetween::Fallback`; absent: the network alone, as runs written
+    /// before it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fallback: Option<zoo_protocol::inbetween::Fallback>,
 }
 
 impl InbetweenConfig {
@@ -148,6 +153,7 @@ impl InbetweenConfig {
             max_grad_norm: 1.0,
             seed: 1,
             residual: Residual::KeyLerp,
+            fallback: None,
         }
     }
 
@@ -231,6 +237,9 @@ impl InbetweenConfig {
             return bad("joint 0 must be the root and every other joint's parent must come before it".into());
         }
         self.orders()?;
+        if let Some(f) = &self.fallback {
+            f.check().map_err(|e| ArnnError::Config(format!("fallback: {e}")))?;
+        }
         if [self.encoder, self.hidden, self.layers, self.decoder, self.batch_size].contains(&0) {
             return bad("encoder, hidden, layers, decoder and batch_size must be positive".into());
         }
@@ -419,12 +428,32 @@ pub fn shot_inputs(
 /// Completes shots: per shot its key frames (from 0), key poses and fixed groups (empty: whole
 /// keys); returns each shot's poses of frames `0..=last key` in clip units, composed in f64
 /// (`b + e * correction * std`), so that a value equals its Bezier value, and so its key, on
-/// every key frame fixing it. Shots of one length run as one batch (at most 64 at a time).
+/// every key frame fixing it, with the run's fallback towards the curves
+/// (`zoo_protocol::inbetween::Fallback`) when it has one. Shots of one length run as one batch
+/// (at most 64 at a time).
 pub fn complete_shots(
     model: &Inbetween,
     norm: &Normalization,
     shots: &[ShotKeyRefs<'_>],
 ) -> ArnnResult<Vec<Vec<Vec<f64>>>> {
+    let c = model.config();
+    let features = features(c, norm)?;
+    let done = shot_corrections(model, norm, shots)?;
+    Ok(done
+        .iter()
+        .map(|(s, dl)| {
+            features.complete(s, dl, c.fallback.as_ref()).0.chunks_exact(c.dofs()).map(<[f64]>::to_vec).collect()
+        })
+        .collect())
+}
+
+/// Each shot's inputs and the network's correction (normalised units, frames x d), as
+/// [`complete_shots`] makes them before composing.
+pub fn shot_corrections(
+    model: &Inbetween,
+    norm: &Normalization,
+    shots: &[ShotKeyRefs<'_>],
+) -> ArnnResult<Vec<(ShotInputs, Vec<f32>)>> {
     let c = model.config();
     let d = c.dofs();
     if norm.mean.len() != d || norm.std.len() != d {
@@ -444,7 +473,7 @@ pub fn complete_shots(
         features.shot(f, &p, &m).map_err(|e| ArnnError::Config(e.to_string()))
     };
     let inputs: Vec<ShotInputs> = shots.iter().map(shot).collect::<ArnnResult<_>>()?;
-    let mut out: Vec<Vec<Vec<f64>>> = vec![Vec::new(); shots.len()];
+    let mut deltas: Vec<Vec<f32>> = vec![Vec::new(); shots.len()];
     let mut lengths: Vec<usize> = inputs.iter().map(|s| s.frames).collect();
     lengths.sort_unstable();
     lengths.dedup();
@@ -455,13 +484,11 @@ pub fn complete_shots(
             let batch = ShotBatch::new(&group, norm, model.device())?;
             let delta: Vec<f32> = model.correction(&batch.features, None)?.flatten_all()?.to_vec1()?;
             for (k, &i) in chunk.iter().enumerate() {
-                let s = &inputs[i];
-                let dl = &delta[k * n * d..(k + 1) * n * d];
-                out[i] = (0..n).map(|t| (t * d..(t + 1) * d).map(|x| features.compose(s, dl, x)).collect()).collect();
+                deltas[i] = delta[k * n * d..(k + 1) * n * d].to_vec();
             }
         }
     }
-    Ok(out)
+    Ok(inputs.into_iter().zip(deltas).collect())
 }
 
 /// One shot's keys for [`complete_shots`]: key frames (from 0), key poses, fixed groups (empty:

@@ -57,6 +57,7 @@ pub fn metadata(config: &InbetweenConfig, norm: &Normalization) -> Result<Motion
         std: norm.std.clone(),
         input_width: config.input_width(),
         residual: config.residual,
+        fallback: config.fallback.clone(),
     };
     let metadata = MotionModelMetadata {
         format_version: FORMAT_VERSION,

@@ -182,6 +182,51 @@ fn window_poses(w: &Windows, i: usize, start: usize, span: usize) -> Vec<Vec<f64
     crate::humanoid::poses(&root, &rot[start * j..(start + span + 1) * j], j)
 }
 
+/// Quantile of the validation intervals' correction sizes that the fallback's `start` is set
+/// to (per range of gaps): shots like the training data's trigger it about 5 % of the time.
+pub const FALLBACK_QUANTILE: f64 = 0.95;
+/// The fallback's `full` is this multiple of its `start`.
+pub const FALLBACK_FACTOR: f32 = 2.0;
+
+/// The fallback towards the curves ([`zoo_protocol::inbetween::Fallback`]) calibrated on
+/// in-distribution windows `valid` (at most [`VALID_MAX`], evenly spaced): each window keyed
+/// every 5, 10, 15, 20 and 30 frames over frames `0..=60`, and in the transition layout with the
+/// target 5, 15, 30 and 45 frames after the context, whole keys, as both benchmarks lay them
+/// out. Returns the thresholds (`None` without enough intervals) and the intervals' sizes.
+pub fn calibrate_fallback(
+    model: &Inbetween,
+    norm: &Normalization,
+    valid: &Windows,
+) -> ArnnResult<(Option<zoo_protocol::inbetween::Fallback>, Vec<zoo_protocol::inbetween::IntervalSize>)> {
+    let features = crate::inbetween::features(model.config(), norm)?;
+    let stride = valid.count.div_ceil(VALID_MAX).max(1);
+    let mut shots: Vec<(Vec<usize>, Vec<Vec<f64>>)> = Vec::new();
+    let keyed = |frames: Vec<usize>, poses: Vec<Vec<f64>>| {
+        let keys = frames.iter().map(|&f| poses[f].clone()).collect();
+        (frames, keys)
+    };
+    for i in (0..valid.count).step_by(stride) {
+        for k in [5, 10, 15, 20, 30] {
+            shots.push(keyed((0..=60).step_by(k).collect(), window_poses(valid, i, 0, 60)));
+        }
+        for n in [5, 15, 30, 45] {
+            if N_PAST + n < valid.window {
+                shots.push(keyed(transition_keys(n), window_poses(valid, i, 0, N_PAST + n)));
+            }
+        }
+    }
+    let mut sizes = Vec::new();
+    for chunk in shots.chunks(256) {
+        let refs: Vec<crate::inbetween::ShotKeyRefs<'_>> =
+            chunk.iter().map(|(f, p)| (f.as_slice(), p.as_slice(), &[][..])).collect();
+        for (shot, correction) in crate::inbetween::shot_corrections(model, norm, &refs)? {
+            sizes.extend(features.interval_sizes(&shot, &correction));
+        }
+    }
+    let fallback = zoo_protocol::inbetween::Fallback::calibrate(&sizes, FALLBACK_QUANTILE, FALLBACK_FACTOR);
+    Ok((fallback, sizes))
+}
+
 /// Normalisation statistics of every frame of the windows (standard deviations at least
 /// [`crate::humanoid::STD_FLOOR`]).
 pub fn window_normalization(w: &Windows) -> Normalization {

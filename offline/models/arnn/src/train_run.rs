@@ -868,6 +868,7 @@ pub fn train_inbetween(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
         ..TrainOptions::new(&out, epochs, config.seed)
     };
     let state = train_loop::train(&mut trainer, &opts)?;
+    calibrate_inbetween(&out, &valid_w)?;
     let methods = format!("linear,bezier,arnn:{},arnn+lock:{}", out.display(), out.display());
     match s.synth_minutes {
         Some(_) => println!(
@@ -883,6 +884,37 @@ pub fn train_inbetween(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
             s.valid_glob,
         ),
     }
+    Ok(())
+}
+
+/// Calibrates the fallback towards the curves of the best in-betweening network in `out`
+/// ([`crate::inbetween_train::calibrate_fallback`]) on the validation windows and writes it into
+/// the folder's `config.json` (atomically). `--resume RUN --epochs N` with `N` the epochs done
+/// calibrates an older run without training it.
+fn calibrate_inbetween(out: &std::path::Path, valid: &zoo_data::dataset::Windows) -> ArnnResult<()> {
+    if !out.join(zoo_nn::checkpoint::CONFIG_FILE).is_file() || valid.count == 0 {
+        return Ok(());
+    }
+    let (model, norm) = crate::inbetween::load(out, &candle_core::Device::Cpu)?;
+    let (fallback, sizes) = crate::inbetween_train::calibrate_fallback(&model, &norm, valid)?;
+    let Some(fallback) = fallback else { return Ok(()) };
+    let mut config = model.config().clone();
+    config.fallback = Some(fallback.clone());
+    zoo_nn::checkpoint::write_json(&out.join(zoo_nn::checkpoint::CONFIG_FILE), &config)?;
+    let ranges: Vec<String> = fallback
+        .gaps
+        .iter()
+        .map(|g| match g.up_to {
+            usize::MAX => format!("longer {:.3}-{:.3}", g.start, g.full),
+            n => format!("up to {n} frames {:.3}-{:.3}", g.start, g.full),
+        })
+        .collect();
+    println!(
+        "fallback calibrated on {} validation intervals between keys: towards the curves from the 95th percentile of \
+         the correction size per gap, fully at twice it ({}); stored in config.json",
+        sizes.len(),
+        ranges.join(", ")
+    );
     Ok(())
 }
 

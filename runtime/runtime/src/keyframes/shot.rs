@@ -20,7 +20,7 @@ use crate::metadata::MotionModelMetadata;
 use crate::model::Plan;
 use tract_onnx::pb;
 use tract_onnx::prelude::*;
-use zoo_protocol::inbetween::{InbetweenFeatures, ShotInputs};
+use zoo_protocol::inbetween::{Fallback, InbetweenFeatures, ShotInputs};
 
 /// The whole-shot graph of an in-betweening keyframe model, planned, with its feature settings.
 #[derive(Debug)]
@@ -163,8 +163,15 @@ impl ShotGraph {
 
     /// Completes checked keys into checked buffers (`out[c]`: `keys[c].len() * dofs` values):
     /// the graph runs once per shot length (once per character where tract plans no batch), and
-    /// every character's features and correction are made before anything is written.
-    pub(super) fn complete(&self, keys: &[MotionKeys<'_>], out: &mut [&mut [f32]]) -> Result<(), MotionError> {
+    /// every character's features and correction are made before anything is written. With a
+    /// `fallback`, each character's weight towards the curves is pushed to `weights`.
+    pub(super) fn complete(
+        &self,
+        keys: &[MotionKeys<'_>],
+        out: &mut [&mut [f32]],
+        fallback: Option<&Fallback>,
+        weights: &mut Vec<f32>,
+    ) -> Result<(), MotionError> {
         let shots = self.shots(keys)?;
         let mut corrections: Vec<Vec<f32>> = vec![Vec::new(); shots.len()];
         let mut lengths: Vec<usize> = shots.iter().map(|s| s.frames).collect();
@@ -184,8 +191,12 @@ impl ShotGraph {
             }
         }
         for ((shot, correction), o) in shots.iter().zip(&corrections).zip(out.iter_mut()) {
-            for (x, v) in o.iter_mut().enumerate() {
-                *v = self.features.compose(shot, correction, x) as f32;
+            let (poses, w) = self.features.complete(shot, correction, fallback);
+            if fallback.is_some() {
+                weights.push(w);
+            }
+            for (v, p) in o.iter_mut().zip(poses) {
+                *v = p as f32;
             }
         }
         Ok(())
