@@ -741,9 +741,14 @@ fn inbetween_design_trains_resumes_scores_keys_and_completes() {
         run(&["complete", "--model", r, "--keys", kp, "--out", alone.to_str().unwrap(), "--no-fallback"]);
     assert!(ok, "{stdout}\n{stderr}");
     let alone_rows = motion(&alone);
-    for key in [0, 12, 30] {
-        assert_eq!(locked_rows[key], alone_rows[key], "key frame {key} without the fallback");
+    for key in [0, 30] {
+        assert_eq!(locked_rows[key], alone_rows[key], "whole key frame {key} without the fallback");
     }
+    // The partial key at frame 12 fixes the root: its position channels are written alike.
+    let root = |row: &str| row.split_whitespace().take(3).map(str::to_string).collect::<Vec<_>>();
+    assert_eq!(root(&locked_rows[12]), root(&alone_rows[12]));
+    // This tiny network's correction is out of what it saw on this shot: the fallback moved it.
+    assert!((1..30).any(|f| locked_rows[f] != alone_rows[f]), "the fallback changed nothing");
     // The in-betweening benchmark's transitions: the context and the target as keys, the whole
     // gap in one pass; trained with a share of its batches in that layout.
     let tr = dir.path().join("ib_transitions");

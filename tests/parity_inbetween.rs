@@ -273,8 +273,14 @@ fn candle_tract_and_onnxruntime_complete_the_same_keys() {
 fn the_fallback_towards_the_curves_runs_alike_in_candle_and_the_runtime() {
     let f = fixture();
     let valid = windows(4, 66, 0.5);
-    let (calibrated, sizes) = zoo_arnn::inbetween_train::calibrate_fallback(&f.model, &f.norm, &valid).unwrap();
-    let calibrated = calibrated.expect("4 windows of 9 shots make enough intervals");
+    let cal = zoo_arnn::inbetween_train::calibrate_fallback(&f.model, &f.norm, &valid).unwrap();
+    let (calibrated, sizes) = (cal.fallback.expect("4 windows of 9 shots make enough intervals"), cal.sizes);
+    assert_eq!(cal.ranges.len(), calibrated.gaps.len());
+    for (r, g) in cal.ranges.iter().zip(&calibrated.gaps) {
+        assert!(r.pose.is_finite() && r.change.is_finite() && r.up_to == g.up_to, "{r:?}");
+        // A range where the network gains too little is the curves.
+        assert_eq!(r.curves, *g == zoo_protocol::inbetween::GapFallback::curves(g.up_to), "{r:?} {g:?}");
+    }
     // 4 windows keyed every 5/10/15/20/30 frames (12 + 6 + 4 + 3 + 2 intervals) and in the
     // transition layout (one interval each, 4 lengths).
     assert_eq!(sizes.len(), 4 * (27 + 4));

@@ -375,24 +375,32 @@ pub struct RuntimeKeys {
     model: zoo_runtime::KeyframeModel,
     foot_lock: bool,
     fallback: bool,
-    /// Shots completed, shots with a fallback weight above 0, and the sum of the weights in
-    /// millionths.
-    counts: [std::sync::atomic::AtomicU64; 3],
+    /// Per largest gap between a shot's keys: shots completed, shots with a fallback weight
+    /// above 0, and the sum of the weights.
+    counts: std::sync::Mutex<std::collections::BTreeMap<usize, (usize, usize, f64)>>,
 }
 
 impl Drop for RuntimeKeys {
     fn drop(&mut self) {
-        use std::sync::atomic::Ordering::Relaxed;
-        let [n, hit, sum] = &self.counts;
-        let (n, hit, sum) = (n.load(Relaxed), hit.load(Relaxed), sum.load(Relaxed));
-        if self.fallback && n > 0 {
-            eprintln!(
-                "{}: the fallback towards the curves acted on {hit} of {n} shots ({:.1} %), mean weight {:.3}",
-                self.name,
-                100.0 * hit as f64 / n as f64,
-                sum as f64 * 1e-6 / n as f64
-            );
+        let Ok(counts) = self.counts.lock() else { return };
+        if !self.fallback || counts.is_empty() {
+            return;
         }
+        let (n, hit, sum) = counts.values().fold((0, 0, 0.0), |a, c| (a.0 + c.0, a.1 + c.1, a.2 + c.2));
+        let per_gap: Vec<String> = counts
+            .iter()
+            .map(|(gap, (n, hit, sum))| {
+                format!("{gap}: {:.0} % at {:.3}", 100.0 * *hit as f64 / *n as f64, sum / *n as f64)
+            })
+            .collect();
+        eprintln!(
+            "{}: the fallback towards the curves acted on {hit} of {n} shots ({:.1} %), mean weight {:.3}; by the \
+             largest gap between keys, shots it acted on and the mean weight: {}",
+            self.name,
+            100.0 * hit as f64 / n as f64,
+            sum / n as f64,
+            per_gap.join(", ")
+        );
     }
 }
 
@@ -440,11 +448,10 @@ impl RuntimeKeys {
         runner.set_hit_keys(true);
         runner.set_foot_lock(self.foot_lock);
         runner.complete(keys, &mut out)?;
-        if let Some(&w) = runner.fallback_weights().first() {
-            use std::sync::atomic::Ordering::Relaxed;
-            self.counts[0].fetch_add(1, Relaxed);
-            self.counts[1].fetch_add(u64::from(w > 0.0), Relaxed);
-            self.counts[2].fetch_add((w as f64 * 1e6).round() as u64, Relaxed);
+        if let (Some(&w), Ok(mut counts)) = (runner.fallback_weights().first(), self.counts.lock()) {
+            let gap = t.frames.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(0);
+            let c = counts.entry(gap).or_default();
+            *c = (c.0 + 1, c.1 + usize::from(w > 0.0), c.2 + w as f64);
         }
         let out: Vec<f64> = out.iter().map(|&v| v as f64).collect();
         Ok(Filled::from_poses(out.chunks_exact(d), &t.rot[..j], Some((root_miss, angle_miss))))

@@ -117,6 +117,14 @@ pub struct GapFallback {
     pub full: f32,
 }
 
+impl GapFallback {
+    /// Thresholds under which every interval of at most `up_to` frames is the curves: `start`
+    /// 0 and `full` 1e-6 (a range where the network is not used).
+    pub fn curves(up_to: usize) -> Self {
+        GapFallback { up_to, start: 0.0, full: 1e-6 }
+    }
+}
+
 impl Fallback {
     /// Checks the thresholds: at least one range, `up_to` strictly increasing, every `start`
     /// finite and at least 0, every `full` above its `start`.
@@ -213,8 +221,9 @@ impl Fallback {
 
 /// The ranges of gaps (frames from key to key, upper bounds) the fallback is calibrated on:
 /// around the keys-only benchmark's spacings (5, 10, 15, 20, 30) and the transition benchmark's
-/// gaps (6, 16, 31, 46 frames from the last context frame to the target).
-pub const FALLBACK_GAP_RANGES: &[usize] = &[7, 12, 17, 25, 37, usize::MAX];
+/// gaps (6, 16, 31, 46 frames from the last context frame to the target; keys 5 frames apart
+/// and transitions of 5 frames fall in ranges of their own).
+pub const FALLBACK_GAP_RANGES: &[usize] = &[5, 7, 12, 17, 25, 37, usize::MAX];
 
 /// Intervals a range of gaps needs for its own thresholds.
 pub const FALLBACK_MIN_INTERVALS: usize = 20;

@@ -188,22 +188,55 @@ pub const FALLBACK_QUANTILE: f64 = 0.95;
 /// The fallback's `full` is this multiple of its `start`.
 pub const FALLBACK_FACTOR: f32 = 2.0;
 
+/// The least share of the curves' error that the network must take off on the validation shots
+/// with keys as far apart, in pose values and in their frame-to-frame changes, for a range of
+/// gaps to use it: where it gains less, the curves are nearly as good on motion like the training
+/// data's and can be much better on motion it never saw (keys 5 frames apart on held-out running,
+/// docs/ood.md), so such a range is the curves.
+pub const FALLBACK_MIN_GAIN: f64 = 0.1;
+
+/// What [`calibrate_fallback`] found: the thresholds (`None` without enough intervals), every
+/// interval's size, and per calibrated range of gaps the network's error over the curves' (pose
+/// values, frame-to-frame changes, normalised L1) and whether the range is the curves.
+#[derive(Clone, Debug)]
+pub struct Calibration {
+    /// The thresholds, per range of gaps.
+    pub fallback: Option<zoo_protocol::inbetween::Fallback>,
+    /// Every validation interval's correction size.
+    pub sizes: Vec<zoo_protocol::inbetween::IntervalSize>,
+    /// The network's gain over the curves per calibrated range (as `fallback.gaps`).
+    pub ranges: Vec<RangeGain>,
+}
+
+/// The network's error over the curves' on one range of gaps of the validation shots.
+#[derive(Clone, Copy, Debug)]
+pub struct RangeGain {
+    /// The range's longest gap.
+    pub up_to: usize,
+    /// Network over curves, pose values (normalised L1 between the keys).
+    pub pose: f64,
+    /// Network over curves, frame-to-frame changes of the pose values.
+    pub change: f64,
+    /// Whether the range is the curves ([`FALLBACK_MIN_GAIN`]).
+    pub curves: bool,
+}
+
 /// The fallback towards the curves ([`zoo_protocol::inbetween::Fallback`]) calibrated on
 /// in-distribution windows `valid` (at most [`VALID_MAX`], evenly spaced): each window keyed
 /// every 5, 10, 15, 20 and 30 frames over frames `0..=60`, and in the transition layout with the
 /// target 5, 15, 30 and 45 frames after the context, whole keys, as both benchmarks lay them
-/// out. Returns the thresholds (`None` without enough intervals) and the intervals' sizes.
-pub fn calibrate_fallback(
-    model: &Inbetween,
-    norm: &Normalization,
-    valid: &Windows,
-) -> ArnnResult<(Option<zoo_protocol::inbetween::Fallback>, Vec<zoo_protocol::inbetween::IntervalSize>)> {
+/// out. Thresholds per range of gaps from the intervals' correction sizes; a range where the
+/// network takes off less than [`FALLBACK_MIN_GAIN`] of the curves' error is the curves.
+pub fn calibrate_fallback(model: &Inbetween, norm: &Normalization, valid: &Windows) -> ArnnResult<Calibration> {
+    use zoo_protocol::inbetween::{FALLBACK_GAP_RANGES, Fallback, GapFallback};
     let features = crate::inbetween::features(model.config(), norm)?;
+    let d = features.dofs();
     let stride = valid.count.div_ceil(VALID_MAX).max(1);
-    let mut shots: Vec<(Vec<usize>, Vec<Vec<f64>>)> = Vec::new();
+    // Per shot its key frames, key poses and every frame's pose (the truth).
+    let mut shots: Vec<(Vec<usize>, Vec<Vec<f64>>, Vec<Vec<f64>>)> = Vec::new();
     let keyed = |frames: Vec<usize>, poses: Vec<Vec<f64>>| {
         let keys = frames.iter().map(|&f| poses[f].clone()).collect();
-        (frames, keys)
+        (frames, keys, poses)
     };
     for i in (0..valid.count).step_by(stride) {
         for k in [5, 10, 15, 20, 30] {
@@ -216,15 +249,61 @@ pub fn calibrate_fallback(
         }
     }
     let mut sizes = Vec::new();
+    // Per range: network and curves errors of the pose values and of their changes.
+    let mut errors = vec![[0.0f64; 4]; FALLBACK_GAP_RANGES.len()];
     for chunk in shots.chunks(256) {
         let refs: Vec<crate::inbetween::ShotKeyRefs<'_>> =
-            chunk.iter().map(|(f, p)| (f.as_slice(), p.as_slice(), &[][..])).collect();
-        for (shot, correction) in crate::inbetween::shot_corrections(model, norm, &refs)? {
-            sizes.extend(features.interval_sizes(&shot, &correction));
+            chunk.iter().map(|(f, p, _)| (f.as_slice(), p.as_slice(), &[][..])).collect();
+        for ((shot, correction), (_, _, truth)) in
+            crate::inbetween::shot_corrections(model, norm, &refs)?.iter().zip(chunk)
+        {
+            let (net, _) = features.complete(shot, correction, None);
+            let bez = &shot.bezier;
+            // The truth's quaternions with the curves' signs, normalised like the outputs.
+            let mut y = vec![0.0f64; shot.frames * d];
+            for (t, pose) in truth.iter().enumerate().take(shot.frames) {
+                let b = &bez[t * d..(t + 1) * d];
+                y[t * d..(t + 1) * d].copy_from_slice(pose);
+                for q in (3..d).step_by(4) {
+                    if (q..q + 4).map(|k| pose[k] * b[k]).sum::<f64>() < 0.0 {
+                        y[t * d + q..t * d + q + 4].iter_mut().for_each(|v| *v = -*v);
+                    }
+                }
+            }
+            let at = |x: &[f64], t: usize, v: usize| x[t * d + v] / norm.std[v];
+            for i in features.interval_sizes(shot, correction) {
+                let r = FALLBACK_GAP_RANGES.iter().position(|&u| i.gap() <= u).expect("the last range is open");
+                let e = &mut errors[r];
+                for t in i.from + 1..=i.to {
+                    for v in 0..d {
+                        let truth_change = at(&y, t, v) - at(&y, t - 1, v);
+                        if t < i.to {
+                            e[0] += (at(&net, t, v) - at(&y, t, v)).abs();
+                            e[1] += (at(bez, t, v) - at(&y, t, v)).abs();
+                        }
+                        e[2] += (at(&net, t, v) - at(&net, t - 1, v) - truth_change).abs();
+                        e[3] += (at(bez, t, v) - at(bez, t - 1, v) - truth_change).abs();
+                    }
+                }
+                sizes.push(i);
+            }
         }
     }
-    let fallback = zoo_protocol::inbetween::Fallback::calibrate(&sizes, FALLBACK_QUANTILE, FALLBACK_FACTOR);
-    Ok((fallback, sizes))
+    let mut fallback = Fallback::calibrate(&sizes, FALLBACK_QUANTILE, FALLBACK_FACTOR);
+    let mut ranges = Vec::new();
+    if let Some(f) = &mut fallback {
+        for g in &mut f.gaps {
+            let r = FALLBACK_GAP_RANGES.iter().position(|&u| g.up_to <= u).expect("the last range is open");
+            let e = errors[r];
+            let (pose, change) = (e[0] / e[1].max(1e-12), e[2] / e[3].max(1e-12));
+            let curves = pose.max(change) > 1.0 - FALLBACK_MIN_GAIN;
+            if curves {
+                *g = GapFallback::curves(g.up_to);
+            }
+            ranges.push(RangeGain { up_to: g.up_to, pose, change, curves });
+        }
+    }
+    Ok(Calibration { fallback, sizes, ranges })
 }
 
 /// Normalisation statistics of every frame of the windows (standard deviations at least

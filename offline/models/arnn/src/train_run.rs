@@ -896,24 +896,30 @@ fn calibrate_inbetween(out: &std::path::Path, valid: &zoo_data::dataset::Windows
         return Ok(());
     }
     let (model, norm) = crate::inbetween::load(out, &candle_core::Device::Cpu)?;
-    let (fallback, sizes) = crate::inbetween_train::calibrate_fallback(&model, &norm, valid)?;
-    let Some(fallback) = fallback else { return Ok(()) };
+    let cal = crate::inbetween_train::calibrate_fallback(&model, &norm, valid)?;
+    let Some(fallback) = cal.fallback else { return Ok(()) };
     let mut config = model.config().clone();
     config.fallback = Some(fallback.clone());
     zoo_nn::checkpoint::write_json(&out.join(zoo_nn::checkpoint::CONFIG_FILE), &config)?;
     let ranges: Vec<String> = fallback
         .gaps
         .iter()
-        .map(|g| match g.up_to {
-            usize::MAX => format!("longer {:.3}-{:.3}", g.start, g.full),
-            n => format!("up to {n} frames {:.3}-{:.3}", g.start, g.full),
+        .zip(&cal.ranges)
+        .map(|(g, r)| {
+            let gain = format!("network/curves error {:.2} (pose), {:.2} (changes)", r.pose, r.change);
+            match r.curves {
+                true => format!("up to {} frames: the curves ({gain})", g.up_to),
+                false => format!("up to {} frames: {:.3}-{:.3} ({gain})", g.up_to, g.start, g.full),
+            }
         })
         .collect();
     println!(
         "fallback calibrated on {} validation intervals between keys: towards the curves from the 95th percentile of \
-         the correction size per gap, fully at twice it ({}); stored in config.json",
-        sizes.len(),
-        ranges.join(", ")
+         the correction size per gap, fully at twice it; the curves alone where the network takes off less than {:.0} \
+         % of their error; stored in config.json:\n  {}",
+        cal.sizes.len(),
+        100.0 * crate::inbetween_train::FALLBACK_MIN_GAIN,
+        ranges.join("\n  ")
     );
     Ok(())
 }
