@@ -936,15 +936,16 @@ class Inbetween:
             features[t] = row.astype(F)
         return features, bez, env, lerp
 
-    def kept(self, frames, r):
+    def kept(self, frames, fixed, r):
         """The fallback's kept share of the residual per frame (1 everywhere without one)."""
         n = len(r)
         kept, edge = np.ones(n), np.ones(n)
         if self.fallback is None:
             return kept
+        whole = [len(fixed) == 0 or all(v == 1.0 for v in fixed[k]) for k in range(len(frames))]
         pairs = []
-        for a, b in zip(frames[:-1], frames[1:]):
-            if b - a < 2:
+        for k, (a, b) in enumerate(zip(frames[:-1], frames[1:])):
+            if b - a < 2 or not (whole[k] and whole[k + 1]):
                 continue
             # The size and the weight in float32, as the page says the thresholds are.
             z = F(math.sqrt(float(np.mean(r[a + 1:b] ** 2))))
@@ -960,7 +961,7 @@ class Inbetween:
                 kept[t] = edge[a] + (k - edge[a]) * 2.0 * u if u <= 0.5 else edge[b] + (k - edge[b]) * 2.0 * (1.0 - u)
         return kept
 
-    def compose(self, frames, bez, env, lerp, correction):
+    def compose(self, frames, fixed, bez, env, lerp, correction):
         n, d = bez.shape
         c = correction.astype(np.float64)
         r = np.zeros((n, d))
@@ -971,7 +972,7 @@ class Inbetween:
                     r[t, v] = c[t, v] - (c[fa, v] + s * (c[fc, v] - c[fa, v]))
                 else:
                     r[t, v] = env[t, v] * c[t, v]
-        kept = self.kept(frames, r)
+        kept = self.kept(frames, fixed, r)
         out = np.zeros((n, d), dtype=F)
         for t in range(n):
             for v in range(d):
@@ -1163,7 +1164,7 @@ def check_keyframes(model, ref, cmp):
             cmp.values(c, "bezier", bez, case["bezier"])
             name = model.sess.get_inputs()[0].name
             correction = model.sess.run(None, {name: features.reshape(1, len(features), -1)})[0]
-            network = inbetween.compose(frames, bez, env, lerp, correction.reshape(len(features), d))
+            network = inbetween.compose(frames, fixed, bez, env, lerp, correction.reshape(len(features), d))
         else:
             state = model.zero_state()
             prev, network = keys[0], [keys[0]]

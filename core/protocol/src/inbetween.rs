@@ -81,6 +81,8 @@ pub struct ShotInputs {
     pub lerp: Vec<(u32, u32, f64)>,
     /// The shot's key frames (from 0, increasing), whole or partial.
     pub keys: Vec<usize>,
+    /// Per key, whether it fixes every group (a whole key).
+    pub whole: Vec<bool>,
 }
 
 /// The fallback towards the curves through the keys (not in any paper): an interval between
@@ -89,7 +91,7 @@ pub struct ShotInputs {
 /// meet the same keys.
 ///
 /// The confidence signal is computed from the inputs only: per interval between two consecutive
-/// key frames at least two frames apart, the root mean square of the residual `r` (normalised
+/// key frames at least two frames apart, both whole keys, the root mean square of the residual `r` (normalised
 /// units, every pose value, the frames strictly between the keys;
 /// [`InbetweenFeatures::interval_sizes`]). Each interval's size gives a weight `w` in `[0, 1]`
 /// from the thresholds of its gap (0 below `start`, 1 from `full` on, linear between). The
@@ -456,7 +458,8 @@ impl InbetweenFeatures {
             features.extend((0..g).map(|gr| if per_group[gr].iter().any(|(_, f)| *f == t) { 1.0f32 } else { 0.0 }));
             features.extend(group_env.iter().map(|&e| e as f32));
         }
-        Ok(ShotInputs { frames: n, features, bezier, envelope: env, lerp, keys: frames.to_vec() })
+        let whole = (0..frames.len()).map(|k| (0..g).all(|gr| fixes(k, gr))).collect();
+        Ok(ShotInputs { frames: n, features, bezier, envelope: env, lerp, keys: frames.to_vec(), whole })
     }
 
     /// The residual of value `x` (flat index, frame-major) of a shot from the network's
@@ -488,13 +491,16 @@ impl InbetweenFeatures {
         shot.bezier[x] + kept * self.residual(shot, correction, x) * self.std[x % self.dofs()]
     }
 
-    /// The [`Fallback`]'s signal: per interval between consecutive key frames at least two
+    /// The [`Fallback`]'s signal: per interval between consecutive whole keys at least two
     /// frames apart, the root mean square of the residual over the frames strictly between the
-    /// keys and every pose value (normalised units).
+    /// keys and every pose value (normalised units). An interval next to a partial key has
+    /// none: the fallback is calibrated on whole keys, and between partial keys the network
+    /// fills the free joints from keys far apart, where the curves are much worse.
     pub fn interval_sizes(&self, shot: &ShotInputs, correction: &[f32]) -> Vec<IntervalSize> {
         let d = self.dofs();
-        shot.keys
-            .windows(2)
+        (0..shot.keys.len().saturating_sub(1))
+            .filter(|&k| shot.whole[k] && shot.whole[k + 1])
+            .map(|k| [shot.keys[k], shot.keys[k + 1]])
             .filter(|w| w[1] - w[0] >= 2 && w[1] < shot.frames)
             .map(|w| {
                 let xs = (w[0] + 1) * d..w[1] * d;
@@ -731,6 +737,14 @@ mod tests {
         // Thresholds far above: the network's completion.
         let huge = Fallback { gaps: vec![GapFallback { up_to: 30, start: 1e3, full: 2e3 }] };
         assert_eq!(f.complete(&s, &wavy, Some(&huge)).0, alone);
+        // Key 1 partial: the intervals next to it have no signal and keep the network's values.
+        let partial: Vec<bool> = (0..4).flat_map(|k| [true, k != 1, true, true]).collect();
+        let p = f.shot(&frames, &poses, &partial).unwrap();
+        assert_eq!(p.whole, [true, false, true, true]);
+        let sizes = f.interval_sizes(&p, &wavy);
+        assert_eq!(sizes.iter().map(|i| (i.from, i.to)).collect::<Vec<_>>(), vec![(15, 20)]);
+        let (back, _) = f.complete(&p, &wavy, Some(&tiny));
+        assert_eq!(back[3 * d..4 * d], f.complete(&p, &wavy, None).0[3 * d..4 * d]);
     }
 
     #[test]
