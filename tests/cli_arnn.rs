@@ -735,20 +735,38 @@ fn inbetween_design_trains_resumes_scores_keys_and_completes() {
     for key in [0, 12, 30] {
         assert_eq!(locked_rows[key], raw_rows[key], "key frame {key}");
     }
-    // Without the fallback towards the curves: the network alone, the keys written alike.
-    let alone = dir.path().join("alone.bvh");
-    let (ok, stdout, stderr) =
-        run(&["complete", "--model", r, "--keys", kp, "--out", alone.to_str().unwrap(), "--no-fallback"]);
-    assert!(ok, "{stdout}\n{stderr}");
-    let alone_rows = motion(&alone);
-    for key in [0, 30] {
-        assert_eq!(locked_rows[key], alone_rows[key], "whole key frame {key} without the fallback");
+    // `--no-fallback`: the network alone, as the same run folder without its fallback completes.
+    let whole_keys = dir.path().join("whole_keys.json");
+    let text = format!(
+        r#"{{"format": "zoo-arnn-keys", "version": 1, "bvh": "{}",
+            "keys": [{{"frame": 0, "source_frame": 30}}, {{"frame": 12, "source_frame": 42}},
+                     {{"frame": 30, "source_frame": 60}}]}}"#,
+        clip.display()
+    );
+    std::fs::write(&whole_keys, text).unwrap();
+    let bare = dir.path().join("ib_bare");
+    std::fs::create_dir_all(&bare).unwrap();
+    for f in ["model.safetensors", "normalization.json"] {
+        std::fs::copy(runp.join(f), bare.join(f)).unwrap();
     }
-    // The partial key at frame 12 fixes the root: its position channels are written alike.
-    let root = |row: &str| row.split_whitespace().take(3).map(str::to_string).collect::<Vec<_>>();
-    assert_eq!(root(&locked_rows[12]), root(&alone_rows[12]));
-    // This tiny network's correction is out of what it saw on this shot: the fallback moved it.
-    assert!((1..30).any(|f| locked_rows[f] != alone_rows[f]), "the fallback changed nothing");
+    let mut bare_config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(runp.join("config.json")).unwrap()).unwrap();
+    assert!(bare_config["fallback"].is_object(), "{bare_config}");
+    bare_config.as_object_mut().unwrap().remove("fallback");
+    std::fs::write(bare.join("config.json"), bare_config.to_string()).unwrap();
+    let (alone, from_bare) = (dir.path().join("alone.bvh"), dir.path().join("bare.bvh"));
+    let wk = whole_keys.to_str().unwrap();
+    let (ok, stdout, stderr) =
+        run(&["complete", "--model", r, "--keys", wk, "--out", alone.to_str().unwrap(), "--no-fallback"]);
+    assert!(ok, "{stdout}\n{stderr}");
+    let (ok, stdout, stderr) =
+        run(&["complete", "--model", bare.to_str().unwrap(), "--keys", wk, "--out", from_bare.to_str().unwrap()]);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert_eq!(
+        std::fs::read(&alone).unwrap(),
+        std::fs::read(&from_bare).unwrap(),
+        "--no-fallback is not the network alone"
+    );
     // The in-betweening benchmark's transitions: the context and the target as keys, the whole
     // gap in one pass; trained with a share of its batches in that layout.
     let tr = dir.path().join("ib_transitions");
