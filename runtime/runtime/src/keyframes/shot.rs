@@ -7,7 +7,8 @@
 //! graph maps `features [batch, frames, width]` to `correction [batch, frames, dofs]`; the
 //! completed pose is `b + e * correction * std` composed in f64 (the keys' Bezier pose `b`, the
 //! envelope `e`, zero on every key frame fixing a value), as `zoo_arnn::inbetween::complete_shots`
-//! composes it. The graph is planned once for one shot of any number of frames, and once more
+//! composes it, with the residual scaled down towards the curves where the runner's fallback
+//! says so ([`zoo_protocol::inbetween::Fallback`]). The graph is planned once for one shot of any number of frames, and once more
 //! for any number of shots of one length where tract can ([`plan`]): the characters of a call
 //! whose shots have the same number of frames then run in one graph call, so that the
 //! recurrent layer's weights are read once per frame for all of them instead of once per
