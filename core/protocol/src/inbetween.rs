@@ -91,8 +91,8 @@ pub struct ShotInputs {
 /// meet the same keys.
 ///
 /// The confidence signal is computed from the inputs only: per interval between two consecutive
-/// key frames at least two frames apart, both whole keys, the root mean square of the residual `r` (normalised
-/// units, every pose value, the frames strictly between the keys;
+/// key frames at least two frames apart, both whole keys, the root mean square of the residual
+/// `r` (normalised units, every pose value, the frames strictly between the keys;
 /// [`InbetweenFeatures::interval_sizes`]). Each interval's size gives a weight `w` in `[0, 1]`
 /// from the thresholds of its gap (0 below `start`, 1 from `full` on, linear between). The
 /// completed pose is `b + k(t) r std` with `k = 1 - w` at the middle of each interval, on a key
@@ -113,9 +113,9 @@ pub struct Fallback {
 pub struct GapFallback {
     /// The longest interval (frames from key to key) these thresholds are for.
     pub up_to: usize,
-    /// Correction size (normalised RMS) from which the shot is blended towards the curves.
+    /// Correction size (normalised RMS) from which the interval is blended towards the curves.
     pub start: f32,
-    /// Size from which the shot is the curves.
+    /// Size from which the interval is the curves.
     pub full: f32,
 }
 
