@@ -342,10 +342,16 @@ fn the_fallback_towards_the_curves_runs_alike_in_candle_and_the_runtime() {
     runner.set_fallback(Some(always)).unwrap();
     let curves = runtime_completion(&mut runner, &chars);
     for c in 0..chars.len() {
-        let diff = max_diff(&curves[c], &inputs[c].bezier);
-        assert!(diff <= 1e-5 * scale(&inputs[c].bezier), "character {c}: {diff:e} from the curves");
+        if chars[c].fixed.is_empty() {
+            let diff = max_diff(&curves[c], &inputs[c].bezier);
+            assert!(diff <= 1e-5 * scale(&inputs[c].bezier), "character {c}: {diff:e} from the curves");
+        } else {
+            // Character 1's middle keys are partial: every interval touches one, and the
+            // fallback (calibrated on whole keys) leaves them to the network.
+            assert_eq!(curves[c], alone[c], "character {c}");
+        }
     }
-    assert_eq!(runner.fallback_weights(), &[1.0; 4]);
+    assert_eq!(runner.fallback_weights(), &[1.0, 0.0, 1.0, 1.0]);
     let bad = zoo_protocol::inbetween::Fallback {
         gaps: vec![zoo_protocol::inbetween::GapFallback { up_to: 60, start: 0.5, full: 0.5 }],
     };

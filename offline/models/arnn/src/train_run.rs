@@ -801,8 +801,10 @@ pub fn train_inbetween(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
     let skeleton = &train_clips[0].clip.skeleton;
     let (config, norm) = if resumed {
         let from = train_loop::resume_dir(&out);
-        let (config, norm) = crate::inbetween::read_meta(&from)
+        let (mut config, norm) = crate::inbetween::read_meta(&from)
             .with_context(|| format!("resuming from {}: it holds no in-betweening checkpoint", from.display()))?;
+        // The fallback is calibrated again at the end, on the weights trained by then.
+        config.fallback = None;
         if config.skeleton.names != skeleton.names {
             bail!("--resume {}: the run was trained on another skeleton than {}'s", out.display(), s.source());
         }
