@@ -306,6 +306,7 @@ fn the_fallback_towards_the_curves_runs_alike_in_candle_and_the_runtime() {
     let candle: Vec<Vec<f64>> =
         zoo_arnn::inbetween::complete_shots(&model, &norm, &shots).unwrap().into_iter().map(|c| c.concat()).collect();
     let km = KeyframeModel::from_bytes(&onnx.to_bytes()).unwrap();
+    assert_eq!(km.default_fallback(), Some(&median));
     let mut runner = km.runner(4).unwrap();
     assert_eq!(runner.fallback(), Some(&median));
     runner.set_hit_keys(false);

@@ -420,7 +420,7 @@ impl RuntimeKeys {
         if model.groups() == 0 {
             bail!("{}: a keyframe model of {} values per pose, not a humanoid one", path.display(), model.dofs());
         }
-        let fallback = model.runner(1)?.fallback().is_some() && zoo_rtn::method::fallback_enabled();
+        let fallback = model.default_fallback().is_some() && zoo_rtn::method::fallback_enabled();
         let name = if fallback { format!("{name}+fallback") } else { name };
         Ok(RuntimeKeys { name, model, foot_lock, fallback, counts: Default::default() })
     }

@@ -269,6 +269,12 @@ impl KeyframeModel {
         }
     }
 
+    /// The in-betweening design's calibrated fallback towards the curves, as the file carries it
+    /// (`inbetween.fallback`), which every runner starts with; `None` without one.
+    pub fn default_fallback(&self) -> Option<&Fallback> {
+        self.metadata().task.as_keyframes().and_then(|t| t.inbetween.as_ref()).and_then(|s| s.fallback.as_ref())
+    }
+
     /// A runner for up to `max_batch` characters per call (the step graph's buffers sized once
     /// here).
     pub fn runner(&self, max_batch: usize) -> Result<KeyframeRunner, MotionError> {
@@ -290,10 +296,8 @@ impl KeyframeModel {
             })),
             KeyframeGraph::Shot(shot) => RunnerGraph::Shot(shot.clone()),
         };
-        let fallback =
-            self.metadata().task.as_keyframes().and_then(|t| t.inbetween.as_ref()).and_then(|s| s.fallback.clone());
         Ok(KeyframeRunner {
-            fallback,
+            fallback: self.default_fallback().cloned(),
             fallback_weights: Vec::with_capacity(max_batch),
             graph,
             max_batch,
@@ -463,7 +467,7 @@ pub struct KeyframeRunner {
 
 impl KeyframeRunner {
     /// The in-betweening design's fallback towards the curves through the keys: the file's
-    /// calibrated `inbetween.fallback` ([`Fallback`], as `zoo complete` applies it) unless
+    /// ([`KeyframeModel::default_fallback`], as `zoo complete` applies it) unless
     /// [`KeyframeRunner::set_fallback`] changed it; `None`: the network alone (and always for
     /// the ARNN's step graph).
     pub fn fallback(&self) -> Option<&Fallback> {
