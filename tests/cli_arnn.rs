@@ -767,6 +767,25 @@ fn inbetween_design_trains_resumes_scores_keys_and_completes() {
         std::fs::read(&from_bare).unwrap(),
         "--no-fallback is not the network alone"
     );
+    // A fallback that hands every interval to the curves: the foot lock follows it and leaves
+    // them as the curves draw them (the same folder without a fallback locks the feet).
+    let curves = dir.path().join("ib_curves");
+    std::fs::create_dir_all(&curves).unwrap();
+    for f in ["model.safetensors", "normalization.json"] {
+        std::fs::copy(runp.join(f), curves.join(f)).unwrap();
+    }
+    let mut curves_config = bare_config.clone();
+    curves_config["fallback"] = serde_json::json!({"gaps": [{"up_to": 100, "start": 0.0, "full": 1e-6}]});
+    std::fs::write(curves.join("config.json"), curves_config.to_string()).unwrap();
+    for (model, frames) in [(&curves, 0), (&bare, 28)] {
+        let j = dir.path().join("lock.json");
+        let o = dir.path().join("lock.bvh");
+        let m = model.to_str().unwrap();
+        let (ok, stdout, stderr) =
+            run(&["complete", "--model", m, "--keys", wk, "--out", o.to_str().unwrap(), "--json", j.to_str().unwrap()]);
+        assert!(ok, "{stdout}\n{stderr}");
+        assert_eq!(lock_frames(&j), Some(frames), "{m}: {stdout}");
+    }
     // The in-betweening benchmark's transitions: the context and the target as keys, the whole
     // gap in one pass; trained with a share of its batches in that layout.
     let tr = dir.path().join("ib_transitions");
@@ -900,6 +919,62 @@ fn inbetween_design_trains_resumes_scores_keys_and_completes() {
     }
 }
 
+/// `--synth-mix MINUTES` mixes the synthetic generator's locomotion into an in-betweening run's
+/// training split (recorded, kept on resume), and is refused with the fix on data of another
+/// skeleton, on a resume that asks for another amount, and outside the in-betweening design.
+#[test]
+fn inbetween_synth_mix_adds_synthetic_locomotion_and_is_refused_where_it_cannot_apply() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("synth");
+    let d = data.to_str().unwrap();
+    let (ok, _, stderr) = run(&["data", "synth", "--out", d, "--minutes", "1", "--seed", "3"]);
+    assert!(ok, "{stderr}");
+    let runp = dir.path().join("mix");
+    let r = runp.to_str().unwrap();
+    let base = ["train", "arnn", "--design", "inbetween", "--data", d, "--valid-glob", "*_0005.bvh"];
+    let tiny = ["--preset", "tiny", "--threads", "1", "--epochs", "1", "--seed", "2"];
+    let (ok, stdout, stderr) = run(&[&base[..], &tiny[..], &["--synth-mix", "0.5", "--out", r]].concat());
+    assert!(ok, "{stdout}\n{stderr}");
+    // 30 seconds of clips of 10 seconds.
+    assert!(stdout.contains("--synth-mix 0.5: 3 synthetic clips"), "{stdout}");
+    assert!(stdout.contains("training clips with 0.5 min of synthetic locomotion"), "{stdout}");
+    let windows = |s: &str| -> usize {
+        let (head, _) = s.split_once(" training / ").unwrap();
+        head.rsplit(' ').next().unwrap().parse().unwrap()
+    };
+    let plain = dir.path().join("plain");
+    let (ok, plain_out, stderr) = run(&[&base[..], &tiny[..], &["--out", plain.to_str().unwrap()]].concat());
+    assert!(ok, "{plain_out}\n{stderr}");
+    assert!(windows(&stdout) > windows(&plain_out), "{stdout}\n{plain_out}");
+    let state: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(runp.join("train_state.json")).unwrap()).unwrap();
+    assert_eq!(state["humanoid_data"]["synth_mix"].as_f64(), Some(0.5), "{state}");
+    // A resume keeps the recorded mix; asking for another one is refused.
+    let (ok, _, stderr) = run(&["train", "arnn", "--epochs", "2", "--resume", r, "--data", d, "--synth-mix", "1"]);
+    assert!(
+        !ok && stderr.contains("was started with --synth-mix 0.5") && stderr.contains("drop --synth-mix"),
+        "{stderr}"
+    );
+    let (ok, stdout, stderr) = run(&["train", "arnn", "--epochs", "2", "--threads", "1", "--resume", r]);
+    assert!(
+        ok && stdout.contains("epoch   2") && stdout.contains("--synth-mix 0.5: 3 synthetic clips"),
+        "{stdout}\n{stderr}"
+    );
+    // Data on another skeleton: named, with the fix.
+    let other = dir.path().join("other");
+    std::fs::create_dir(&other).unwrap();
+    for (name, phase) in [("a.bvh", 0.0), ("b.bvh", 1.0)] {
+        std::fs::write(other.join(name), zoo_data::bvh::to_string(&zoo_tests::toy_clip(90, phase))).unwrap();
+    }
+    let o = other.to_str().unwrap();
+    let args = ["train", "arnn", "--design", "inbetween", "--data", o, "--valid-glob", "b.bvh", "--synth-mix", "1"];
+    let (ok, _, stderr) = run(&[&args[..], &tiny[..], &["--out", dir.path().join("o").to_str().unwrap()]].concat());
+    assert!(!ok && stderr.contains("bandai2's skeleton") && stderr.contains("leave --synth-mix out"), "{stderr}");
+    // The autoregressive ARNN has no use for it.
+    let ar = ["train", "arnn", "--data", d, "--valid-glob", "*_0005.bvh", "--synth-mix", "1", "--preset", "tiny"];
+    let (ok, _, stderr) = run(&[&ar[..], &["--out", dir.path().join("ar").to_str().unwrap()]].concat());
+    assert!(!ok && stderr.contains("add --design inbetween"), "{stderr}");
+}
 /// `zoo bench keyframes` on an in-betweening file times whole transitions in one call, beside an
 /// RTN's start and steps on the same gap (`--against`), and writes both per batch size; an RTN
 /// where the in-betweener belongs, and `--against` beside an ARNN step graph, are refused by name.

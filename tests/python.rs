@@ -283,7 +283,7 @@ fn write_models_and_references(data: &Path) {
             .expect("candle completes");
     // The runtime locks a humanoid's feet between the keys, as `zoo complete` does.
     let mut done = done;
-    assert!(zoo_arnn::completion::lock_feet(&mut done.clip, &[0, 15, 30]) > 0, "the test skeleton has legs");
+    assert!(zoo_arnn::completion::lock_feet(&mut done.clip, &[0, 15, 30], &[]) > 0, "the test skeleton has legs");
     let (h, r) = world_arrays(&done.clip, 0..done.clip.frames());
     refs.insert(
         "keyframes".into(),

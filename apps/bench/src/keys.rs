@@ -116,6 +116,9 @@ pub struct Filled {
     /// The largest key misses before any correction (root distance in clip units, rotation
     /// angle in degrees), for methods that can miss a key.
     pub raw_miss: Option<(f64, f64)>,
+    /// The share of an in-betweening network's correction its fallback kept per frame (empty:
+    /// none), which scales the foot lock of `+lock` ([`zoo_protocol::keylock`]).
+    pub kept: Vec<f64>,
 }
 
 impl Filled {
@@ -188,7 +191,7 @@ fn bracket(keys: &[(usize, usize)], f: usize) -> (usize, usize, f64) {
 /// Root LERP and local-rotation SLERP between the keys fixing each group.
 pub fn linear(t: &KeyTask<'_>) -> Filled {
     let (n, j) = (t.len(), t.skeleton.len());
-    let mut out = Filled { root: vec![DVec3::ZERO; n], rot: vec![DQuat::IDENTITY; n * j], raw_miss: None };
+    let mut out = Filled { root: vec![DVec3::ZERO; n], rot: vec![DQuat::IDENTITY; n * j], ..Filled::default() };
     let root_keys: Vec<(usize, usize)> = t.keys_fixing(0).collect();
     for f in 0..n {
         let (a, b, w) = bracket(&root_keys, f);
@@ -227,7 +230,7 @@ pub fn bezier(t: &KeyTask<'_>) -> std::result::Result<Filled, String> {
     let keys = zoo_protocol::fcurve::ShotKeys { frames: &t.frames, root: &t.root, rot: &t.rot, fixed: &t.fixed };
     let (root, rot) = zoo_protocol::fcurve::bezier_inbetween(&orders, &keys)
         .ok_or_else(|| format!("keys at frames {:?} do not make F-curves (a joint no key fixes?)", t.frames))?;
-    Ok(Filled { root, rot, raw_miss: None })
+    Ok(Filled { root, rot, ..Filled::default() })
 }
 
 /// A humanoid ARNN run folder as a keys-only method (candle, one completion per window).
@@ -317,10 +320,10 @@ impl InbetweenKeys {
             .zip(&fixed)
             .map(|((t, p), f)| (t.frames.as_slice(), p.as_slice(), f.as_slice()))
             .collect();
-        let raw = zoo_arnn::inbetween::complete_shots(&self.model, &self.norm, &shots)?;
+        let raw = zoo_arnn::inbetween::complete_shots_kept(&self.model, &self.norm, &shots)?;
         let groups = c.key_groups();
         let mut out = Vec::with_capacity(tasks.len());
-        for (((t, kp), fx), raw) in tasks.iter().zip(&key_poses).zip(&fixed).zip(raw) {
+        for (((t, kp), fx), (raw, kept)) in tasks.iter().zip(&key_poses).zip(&fixed).zip(raw) {
             let (root_miss, (angle_miss, _, _)) = zoo_arnn::humanoid::key_misses(&raw, &t.frames, kp, fx, j);
             let d = c.dofs();
             let mut flat: Vec<f64> = raw.iter().flatten().copied().collect();
@@ -329,7 +332,8 @@ impl InbetweenKeys {
             let key_flat: Vec<f64> = kp.iter().flatten().copied().collect();
             let fixes = |k: usize, g: usize| fx.get(k).is_none_or(|m| m[g]);
             zoo_protocol::keyhit::hit_keys(layout, &key_flat, fixes, &mut flat, &mut vec![0.0; d]);
-            out.push(Filled::from_poses(flat.chunks_exact(d), &t.rot[..j], Some((root_miss, angle_miss))));
+            let filled = Filled::from_poses(flat.chunks_exact(d), &t.rot[..j], Some((root_miss, angle_miss)));
+            out.push(Filled { kept, ..filled });
         }
         Ok(out)
     }
@@ -552,7 +556,9 @@ impl KeyMethod for WithFootLock {
         filled.par_iter_mut().zip(tasks).for_each(|(f, t)| {
             let s = t.skeleton;
             if let Some(lock) = zoo_protocol::keylock::key_foot_lock(s) {
-                zoo_protocol::keylock::lock_feet_between_keys(&lock, s, &s.offsets, &t.frames, &f.root, &mut f.rot);
+                zoo_protocol::keylock::lock_feet_between_keys(
+                    &lock, s, &s.offsets, &t.frames, &f.kept, &f.root, &mut f.rot,
+                );
             }
         });
         Ok(filled)

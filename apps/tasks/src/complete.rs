@@ -76,6 +76,10 @@ impl KeyNet for RuntimeKeyNet {
         self.runner.borrow_mut().complete(keys, &mut out).map_err(|e| Message(e.to_string()))?;
         Ok(out.chunks_exact(d).map(|p| p.iter().map(|v| f64::from(*v)).collect()).collect())
     }
+
+    fn kept(&self) -> Vec<f64> {
+        self.runner.borrow().fallback_kept(0).to_vec()
+    }
 }
 
 /// `zoo complete`: completes the keys of `o` with the keyframe model of `o.model` (a run folder

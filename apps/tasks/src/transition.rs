@@ -408,7 +408,7 @@ fn run_inbetween(
     .map_err(|e| Message(format!("{}: {e}", context())))?;
     if a.foot_lock {
         let frames: Vec<usize> = keys.iter().map(|k| k.frame).collect();
-        zoo_arnn::completion::lock_feet(&mut done.clip, &frames);
+        zoo_arnn::completion::lock_feet(&mut done.clip, &frames, &zoo_arnn::completion::KeyNet::kept(&net));
     }
     let mut out = ca.slice(0, fa);
     out.local_rotations.extend_from_slice(&done.clip.local_rotations[past * j..(past + n) * j]);

@@ -511,19 +511,33 @@ impl InbetweenFeatures {
             .collect()
     }
 
-    /// The completed shot (frames x d, clip units) from the network's correction, with the
-    /// `fallback` when given; also the largest weight of its intervals (0 without one).
-    pub fn complete(&self, shot: &ShotInputs, correction: &[f32], fallback: Option<&Fallback>) -> (Vec<f64>, f32) {
+    /// The completed shot from the network's correction, with the `fallback` when given.
+    pub fn complete(&self, shot: &ShotInputs, correction: &[f32], fallback: Option<&Fallback>) -> Completed {
         let d = self.dofs();
-        let (kept, w) = match fallback {
+        let (kept, weight) = match fallback {
             Some(f) => {
                 let sizes = self.interval_sizes(shot, correction);
                 (f.kept(shot.frames, &sizes), f.shot_weight(&sizes))
             }
             None => (vec![1.0; shot.frames], 0.0),
         };
-        ((0..shot.frames * d).map(|x| self.compose_kept(shot, correction, x, kept[x / d])).collect(), w)
+        let poses = (0..shot.frames * d).map(|x| self.compose_kept(shot, correction, x, kept[x / d])).collect();
+        Completed { poses, weight, kept }
     }
+}
+
+/// A shot completed by [`InbetweenFeatures::complete`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Completed {
+    /// The poses, frames x d, clip units.
+    pub poses: Vec<f64>,
+    /// The largest weight towards the curves of the shot's intervals (0 without a fallback).
+    pub weight: f32,
+    /// The share of the network's residual kept on each frame ([`Fallback::kept`]; all 1
+    /// without a fallback): the foot lock between the keys is scaled by it
+    /// ([`crate::keylock::lock_feet_between_keys`]), so that where the fallback hands an
+    /// interval to the curves, the output is the curves as they are drawn.
+    pub kept: Vec<f64>,
 }
 
 #[cfg(test)]
@@ -726,25 +740,27 @@ mod tests {
         let sizes = f.interval_sizes(&s, &wavy);
         assert_eq!(sizes.iter().map(|i| (i.from, i.to)).collect::<Vec<_>>(), vec![(0, 7), (7, 15), (15, 20)]);
         assert!(sizes.iter().all(|i| i.size > 0.1));
-        let (alone, w0) = f.complete(&s, &wavy, None);
+        let Completed { poses: alone, weight: w0, .. } = f.complete(&s, &wavy, None);
         assert_eq!(w0, 0.0);
         assert!((0..s.frames * d).all(|x| alone[x] == f.compose(&s, &wavy, x)));
         // Thresholds far below every interval's size: the curves themselves, keys included.
         let tiny = Fallback { gaps: vec![GapFallback { up_to: 30, start: 0.0, full: 1e-3 }] };
-        let (back, w) = f.complete(&s, &wavy, Some(&tiny));
+        let Completed { poses: back, weight: w, kept } = f.complete(&s, &wavy, Some(&tiny));
         assert_eq!(w, 1.0);
         assert!(back.iter().zip(&s.bezier).all(|(a, b)| a == b));
+        assert!(kept.iter().all(|&k| k == 0.0), "{kept:?}");
+        assert!(f.complete(&s, &wavy, None).kept.iter().all(|&k| k == 1.0));
         // Thresholds far above: the network's completion.
         let huge = Fallback { gaps: vec![GapFallback { up_to: 30, start: 1e3, full: 2e3 }] };
-        assert_eq!(f.complete(&s, &wavy, Some(&huge)).0, alone);
+        assert_eq!(f.complete(&s, &wavy, Some(&huge)).poses, alone);
         // Key 1 partial: the intervals next to it have no signal and keep the network's values.
         let partial: Vec<bool> = (0..4).flat_map(|k| [true, k != 1, true, true]).collect();
         let p = f.shot(&frames, &poses, &partial).unwrap();
         assert_eq!(p.whole, [true, false, true, true]);
         let sizes = f.interval_sizes(&p, &wavy);
         assert_eq!(sizes.iter().map(|i| (i.from, i.to)).collect::<Vec<_>>(), vec![(15, 20)]);
-        let (back, _) = f.complete(&p, &wavy, Some(&tiny));
-        assert_eq!(back[3 * d..4 * d], f.complete(&p, &wavy, None).0[3 * d..4 * d]);
+        let back = f.complete(&p, &wavy, Some(&tiny)).poses;
+        assert_eq!(back[3 * d..4 * d], f.complete(&p, &wavy, None).poses[3 * d..4 * d]);
     }
 
     #[test]

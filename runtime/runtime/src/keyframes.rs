@@ -299,6 +299,7 @@ impl KeyframeModel {
         Ok(KeyframeRunner {
             fallback: self.default_fallback().cloned(),
             fallback_weights: Vec::with_capacity(max_batch),
+            fallback_kept: Vec::with_capacity(max_batch),
             graph,
             max_batch,
             scratch: vec![0.0; d],
@@ -342,8 +343,9 @@ impl KeyFeet {
     }
 
     /// Locks the feet of one completion (`keys.len() * dofs` humanoid pose values) between its
-    /// key frames; writes back the rotations the lock changed (with the sign of the old ones).
-    fn apply(&mut self, frames: &[usize], out: &mut [f32]) {
+    /// key frames, scaled by the share of the correction the fallback `kept` per frame (empty:
+    /// none); writes back the rotations the lock changed (with the sign of the old ones).
+    fn apply(&mut self, frames: &[usize], kept: &[f64], out: &mut [f32]) {
         let j = self.skeleton.len();
         let d = zoo_protocol::inbetween::dofs(j);
         self.root.clear();
@@ -357,7 +359,15 @@ impl KeyFeet {
         }
         self.before.clone_from(&self.rot);
         let s = &self.skeleton;
-        zoo_protocol::keylock::lock_feet_between_keys(&self.lock, s, &s.offsets, frames, &self.root, &mut self.rot);
+        zoo_protocol::keylock::lock_feet_between_keys(
+            &self.lock,
+            s,
+            &s.offsets,
+            frames,
+            kept,
+            &self.root,
+            &mut self.rot,
+        );
         for (i, (new, old)) in self.rot.iter().zip(&self.before).enumerate() {
             if new != old {
                 let q = if new.dot(*old) < 0.0 { -*new } else { *new };
@@ -463,6 +473,7 @@ pub struct KeyframeRunner {
     foot_lock: bool,
     fallback: Option<Fallback>,
     fallback_weights: Vec<f32>,
+    fallback_kept: Vec<Vec<f64>>,
 }
 
 impl KeyframeRunner {
@@ -496,6 +507,15 @@ impl KeyframeRunner {
     /// the network's completion kept, 1: the curves); empty without a fallback.
     pub fn fallback_weights(&self) -> &[f32] {
         &self.fallback_weights
+    }
+
+    /// The share of the network's correction the fallback kept on each frame of `character`'s
+    /// last completion (1: the network's, 0: the curves); empty without a fallback. The foot
+    /// lock between the keys is scaled by it (an interval handed to the curves is not locked);
+    /// an application that locks the feet itself passes it to
+    /// `zoo_protocol::keylock::lock_feet_between_keys`.
+    pub fn fallback_kept(&self, character: usize) -> &[f64] {
+        self.fallback_kept.get(character).map_or(&[], Vec::as_slice)
     }
 
     /// Most characters per call.
@@ -564,7 +584,9 @@ impl KeyframeRunner {
             RunnerGraph::Step(step) => step.complete(keys, out, d, g)?,
             RunnerGraph::Shot(shot) => {
                 self.fallback_weights.clear();
-                shot.complete(keys, out, self.fallback.as_ref(), &mut self.fallback_weights)?
+                self.fallback_kept.clear();
+                let fallback = self.fallback.as_ref();
+                shot.complete(keys, out, fallback, &mut self.fallback_weights, &mut self.fallback_kept)?
             }
         }
         if self.hit_keys {
@@ -573,8 +595,8 @@ impl KeyframeRunner {
             }
         }
         if let (Some(feet), true) = (&mut self.feet, self.foot_lock) {
-            for (k, o) in keys.iter().zip(out.iter_mut()) {
-                feet.apply(k.frames, o);
+            for (c, (k, o)) in keys.iter().zip(out.iter_mut()).enumerate() {
+                feet.apply(k.frames, self.fallback_kept.get(c).map_or(&[], Vec::as_slice), o);
             }
         }
         Ok(())

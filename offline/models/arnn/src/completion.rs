@@ -446,9 +446,10 @@ fn write_outputs(
 }
 
 /// The foot lock between the keys of a completed humanoid clip ([`zoo_protocol::keylock`], the
-/// clip's own bone offsets), as `zoo complete` and the runtime's keyframes task apply it;
-/// returns the number of frames it changed (0 without legs).
-pub fn lock_feet(clip: &mut zoo_motion::Clip, key_frames: &[usize]) -> usize {
+/// clip's own bone offsets), as `zoo complete` and the runtime's keyframes task apply it,
+/// scaled by the share of the correction the fallback `kept` per frame (empty: none;
+/// [`KeyNet::kept`]); returns the number of frames it changed (0 without legs).
+pub fn lock_feet(clip: &mut zoo_motion::Clip, key_frames: &[usize], kept: &[f64]) -> usize {
     let Some(lock) = zoo_protocol::keylock::key_foot_lock(&clip.skeleton) else { return 0 };
     let j = clip.joints();
     let offsets = zoo_protocol::pipeline::rest_offsets(clip);
@@ -459,6 +460,7 @@ pub fn lock_feet(clip: &mut zoo_motion::Clip, key_frames: &[usize]) -> usize {
         &skeleton,
         &offsets,
         key_frames,
+        kept,
         &root,
         &mut clip.local_rotations,
     )
@@ -476,6 +478,11 @@ pub trait KeyNet {
     /// whether the key fixes it, or nothing for whole keys): the poses of frames `0..=last key`,
     /// keys not hit, feet not locked.
     fn complete(&self, frames: &[usize], poses: &[Vec<f64>], fixed: &[Vec<bool>]) -> ArnnResult<Vec<Vec<f64>>>;
+    /// The share of the network's correction its fallback towards the curves kept on each
+    /// frame of the last completion (empty: no fallback), which scales the foot lock.
+    fn kept(&self) -> Vec<f64> {
+        Vec::new()
+    }
 }
 
 /// Completes the keys of `o` with `net` and writes what `o` asks for; returns the summary the
@@ -725,7 +732,7 @@ fn complete_humanoid(
         crate::humanoid::complete_clip_with(&source, &keys.keys, Some(skeleton.fps), |f, p, x| net.complete(f, p, x))
             .context(what)?;
     let key_frames: Vec<usize> = keys.keys.iter().map(|k| k.frame).collect();
-    let locked = if o.no_foot_lock { 0 } else { lock_feet(&mut done.clip, &key_frames) };
+    let locked = if o.no_foot_lock { 0 } else { lock_feet(&mut done.clip, &key_frames, &net.kept()) };
     done.clip.frame_time = 1.0 / skeleton.fps;
     let (raw_root, (deg, key, joint)) = done.raw_miss;
     zoo_motion::finite::check_serialize(

@@ -155,6 +155,12 @@ pub struct ArnnArgs {
     /// (every tenth clip validates) [default: 10; with --preset quick: 20].
     #[arg(long, conflicts_with = "data", allow_hyphen_values = true, value_parser = zoo_nn::args::synth_minutes)]
     pub synth_minutes: Option<f64>,
+    /// With `--design inbetween --data`: minutes of the synthetic generator's locomotion (walks
+    /// with turns, jogging, running; on bandai2's skeleton, which the data must be on) mixed into
+    /// the training split, for moves the capture lacks (docs/ood.md); validation stays on the
+    /// data's clips. A resumed run keeps its own [default: 0].
+    #[arg(long, requires = "data", allow_hyphen_values = true, value_parser = zoo_nn::args::synth_minutes)]
+    pub synth_mix: Option<f64>,
     /// With `--design inbetween`: fraction of training batches in the in-betweening benchmark's
     /// transition layout (the first 10 frames all keys, then the target 5 to 45 frames after
     /// them), for a network that also makes transitions (`zoo bench --methods arnn:RUN`); the
@@ -214,6 +220,7 @@ fn train(a: ArnnArgs, epochs_given: bool) -> Result<(), BoxError> {
         preset: a.preset,
         epochs_given,
         synth_minutes: a.synth_minutes,
+        synth_mix: a.synth_mix,
         transition_fraction: a.transition_fraction,
         batch_size: a.batch_size,
         lr: a.lr,

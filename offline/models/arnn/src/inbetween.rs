@@ -436,13 +436,25 @@ pub fn complete_shots(
     norm: &Normalization,
     shots: &[ShotKeyRefs<'_>],
 ) -> ArnnResult<Vec<Vec<Vec<f64>>>> {
+    Ok(complete_shots_kept(model, norm, shots)?.into_iter().map(|(poses, _)| poses).collect())
+}
+
+/// [`complete_shots`], with each shot's share of the correction the fallback kept per frame
+/// (`zoo_protocol::inbetween::Completed::kept`, all 1 without a fallback), which scales the foot
+/// lock between the keys.
+pub fn complete_shots_kept(
+    model: &Inbetween,
+    norm: &Normalization,
+    shots: &[ShotKeyRefs<'_>],
+) -> ArnnResult<Vec<(Vec<Vec<f64>>, Vec<f64>)>> {
     let c = model.config();
     let features = features(c, norm)?;
     let done = shot_corrections(model, norm, shots)?;
     Ok(done
         .iter()
         .map(|(s, dl)| {
-            features.complete(s, dl, c.fallback.as_ref()).0.chunks_exact(c.dofs()).map(<[f64]>::to_vec).collect()
+            let done = features.complete(s, dl, c.fallback.as_ref());
+            (done.poses.chunks_exact(c.dofs()).map(<[f64]>::to_vec).collect(), done.kept)
         })
         .collect())
 }

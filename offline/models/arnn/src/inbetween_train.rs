@@ -257,7 +257,7 @@ pub fn calibrate_fallback(model: &Inbetween, norm: &Normalization, valid: &Windo
         for ((shot, correction), (_, _, truth)) in
             crate::inbetween::shot_corrections(model, norm, &refs)?.iter().zip(chunk)
         {
-            let (net, _) = features.complete(shot, correction, None);
+            let net = features.complete(shot, correction, None).poses;
             let bez = &shot.bezier;
             // The truth's quaternions with the curves' signs, normalised like the outputs.
             let mut y = vec![0.0f64; shot.frames * d];

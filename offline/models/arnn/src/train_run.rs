@@ -125,6 +125,9 @@ pub struct ArnnRunOptions {
     pub epochs_given: bool,
     /// The in-betweening design without `--data`: minutes of synthetic locomotion.
     pub synth_minutes: Option<f64>,
+    /// The in-betweening design with `data`: minutes of synthetic locomotion mixed into the
+    /// training split.
+    pub synth_mix: Option<f64>,
     /// The in-betweening design: fraction of batches in the transition layout.
     pub transition_fraction: Option<f64>,
     /// Sequences per batch.
@@ -294,6 +297,9 @@ pub struct HumanoidData {
     /// clip validates): the in-betweening design without `--data`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub synth_minutes: Option<f64>,
+    /// Minutes of synthetic locomotion (seed `seed`) mixed into the training split of `dir`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub synth_mix: Option<f64>,
     /// Glob of the validation split.
     pub valid_glob: String,
     /// Glob of the clips of `dir` left out of both splits.
@@ -434,10 +440,10 @@ pub fn run(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
     if a.preset == ArnnPreset::Quick {
         bail!("{QUICK_ONLY}");
     }
-    if a.synth_minutes.is_some() {
+    if a.synth_minutes.is_some() || a.synth_mix.is_some() {
         bail!(
-            "--synth-minutes gives the in-betweening design synthetic locomotion (add --design inbetween); the \
-             autoregressive ARNN trains on lamp hops (--sequences) or --data"
+            "--synth-minutes and --synth-mix give the in-betweening design synthetic locomotion (add --design \
+             inbetween); the autoregressive ARNN trains on lamp hops (--sequences) or --data"
         );
     }
     if a.transition_fraction.is_some() {
@@ -587,7 +593,10 @@ impl HumanoidData {
                     synth_minutes: 0.0,
                     seed: self.seed,
                 };
-                let (train, valid, _) = zoo_data::dataset::training_clips(&t, p).map_err(|e| Message::new(e.0))?;
+                let (mut train, valid, _) = zoo_data::dataset::training_clips(&t, p).map_err(|e| Message::new(e.0))?;
+                if let Some(minutes) = self.synth_mix {
+                    train.extend(self.synth_mix_clips(&train, minutes)?);
+                }
                 (train, valid)
             }
         };
@@ -604,6 +613,33 @@ impl HumanoidData {
             );
         }
         Ok((train_clips, valid_clips, train_w, valid_w))
+    }
+
+    /// `minutes` of the synthetic generator's default locomotion (walks with turns, jogging,
+    /// running, standing; seed `seed`, flat ground) for the training split of `--synth-mix`,
+    /// refused unless `train` (the data's clips) is on the generator's skeleton and frame rate.
+    fn synth_mix_clips(&self, train: &[NamedClip], minutes: f64) -> ArnnResult<Vec<NamedClip>> {
+        let sk = zoo_data::synth::skeleton();
+        let cfg = zoo_data::synth::SynthConfig { minutes, seed: self.seed, ..Default::default() };
+        if let Some(c) = train.first() {
+            let (s, fps) = (&c.clip.skeleton, c.clip.fps());
+            if s.names != sk.names || s.parents != sk.parents || (fps - cfg.fps).abs() > 0.01 {
+                bail!(
+                    "--synth-mix: the synthetic clips are on bandai2's skeleton ({} joints, `{}` first) at {} fps, but \
+                     {} is on {} joints (`{}` first) at {fps:.3} fps; leave --synth-mix out for this data",
+                    sk.names.len(),
+                    sk.names[0],
+                    cfg.fps,
+                    c.name,
+                    s.names.len(),
+                    s.names.first().map_or("", String::as_str)
+                );
+            }
+        }
+        let clips: Vec<NamedClip> =
+            zoo_data::synth::generate(&cfg).into_iter().map(zoo_data::dataset::named_synth).collect();
+        println!("--synth-mix {minutes}: {} synthetic clips of walks, turns, jogging and running", clips.len());
+        Ok(clips)
     }
 
     /// Where the clips come from, in words.
@@ -629,6 +665,7 @@ fn humanoid_settings(
                     ArnnPreset::Quick => QUICK_SYNTH_MINUTES,
                     _ => DEFAULT_SYNTH_MINUTES,
                 })),
+                synth_mix: None,
                 valid_glob: String::new(),
                 exclude_glob: None,
                 seed: a.run.seed,
@@ -636,6 +673,7 @@ fn humanoid_settings(
             _ => HumanoidData {
                 dir: a.data.clone().context("pass --data BVH_FOLDER")?,
                 synth_minutes: None,
+                synth_mix: a.synth_mix.filter(|&m| m > 0.0),
                 valid_glob: a.valid_glob.clone().context("pass --valid-glob GLOB")?,
                 exclude_glob: a.exclude_glob.clone(),
                 seed: a.run.seed,
@@ -841,9 +879,10 @@ pub fn train_inbetween(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
             valid_clips.len()
         ),
         None => format!(
-            "{} ({} training clips, {} validation clips matching `{}`)",
+            "{} ({} training clips{}, {} validation clips matching `{}`)",
             s.dir.display(),
             train_clips.len(),
+            s.synth_mix.map_or(String::new(), |m| format!(" with {m} min of synthetic locomotion")),
             valid_clips.len(),
             s.valid_glob
         ),

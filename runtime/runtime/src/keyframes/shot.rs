@@ -165,13 +165,15 @@ impl ShotGraph {
     /// Completes checked keys into checked buffers (`out[c]`: `keys[c].len() * dofs` values):
     /// the graph runs once per shot length (once per character where tract plans no batch), and
     /// every character's features and correction are made before anything is written. With a
-    /// `fallback`, each character's weight towards the curves is pushed to `weights`.
+    /// `fallback`, each character's weight towards the curves is pushed to `weights` and its
+    /// share of the correction kept per frame to `kept`.
     pub(super) fn complete(
         &self,
         keys: &[MotionKeys<'_>],
         out: &mut [&mut [f32]],
         fallback: Option<&Fallback>,
         weights: &mut Vec<f32>,
+        kept: &mut Vec<Vec<f64>>,
     ) -> Result<(), MotionError> {
         let shots = self.shots(keys)?;
         let mut corrections: Vec<Vec<f32>> = vec![Vec::new(); shots.len()];
@@ -192,11 +194,12 @@ impl ShotGraph {
             }
         }
         for ((shot, correction), o) in shots.iter().zip(&corrections).zip(out.iter_mut()) {
-            let (poses, w) = self.features.complete(shot, correction, fallback);
+            let done = self.features.complete(shot, correction, fallback);
             if fallback.is_some() {
-                weights.push(w);
+                weights.push(done.weight);
+                kept.push(done.kept);
             }
-            for (v, p) in o.iter_mut().zip(poses) {
+            for (v, p) in o.iter_mut().zip(done.poses) {
                 *v = p as f32;
             }
         }
