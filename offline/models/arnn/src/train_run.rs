@@ -440,9 +440,15 @@ pub fn run(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
     if a.preset == ArnnPreset::Quick {
         bail!("{QUICK_ONLY}");
     }
-    if a.synth_minutes.is_some() || a.synth_mix.is_some() {
+    if a.synth_minutes.is_some() {
         bail!(
-            "--synth-minutes and --synth-mix give the in-betweening design synthetic locomotion (add --design \
+            "--synth-minutes gives the in-betweening design synthetic locomotion (add --design inbetween); the \
+             autoregressive ARNN trains on lamp hops (--sequences) or --data"
+        );
+    }
+    if a.synth_mix.is_some() {
+        bail!(
+            "--synth-mix mixes synthetic locomotion into the in-betweening design's training (add --design \
              inbetween); the autoregressive ARNN trains on lamp hops (--sequences) or --data"
         );
     }
