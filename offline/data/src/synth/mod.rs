@@ -29,7 +29,9 @@ mod trajectory;
 mod write;
 
 pub use geometry::{look_rotation, two_bone_ik};
-pub use skeleton::{ANKLE_HEIGHT, FOOT_JOINTS, JOINT_NAMES, JOINT_OFFSETS, JOINT_PARENTS, TOE_HEIGHT, skeleton};
+pub use skeleton::{
+    ANKLE_HEIGHT, FOOT_JOINTS, JOINT_NAMES, JOINT_OFFSETS, JOINT_PARENTS, TOE_HEIGHT, check_mixable, skeleton,
+};
 pub use write::{SynthWriteError, write_dir};
 
 use crate::terrain::Heightmap;
@@ -375,6 +377,23 @@ mod tests {
     use super::skeleton::{FOOT, TOES};
     use super::*;
     use crate::plausibility;
+
+    #[test]
+    fn data_mixes_with_the_generators_clips_only_on_its_skeleton_and_frame_rate() {
+        let sk = skeleton();
+        assert_eq!(check_mixable("--opt", "a", &sk, Some(30.0), 30.0), Ok(()));
+        assert_eq!(check_mixable("--opt", "a", &sk, None, 30.0), Ok(()));
+        let rate = check_mixable("--opt", "clip_a", &sk, Some(60.0), 30.0).unwrap_err();
+        assert!(rate.contains("clip_a") && rate.contains("60.000 fps") && rate.contains("leave --opt out"), "{rate}");
+        let mut other = sk.clone();
+        other.parents[4] = Some(1);
+        let parents = check_mixable("--opt", "b", &other, None, 30.0).unwrap_err();
+        assert!(parents.contains("bandai2's skeleton") && parents.contains("21 joints"), "{parents}");
+        let mut fewer = sk.clone();
+        fewer.names.pop();
+        fewer.parents.pop();
+        assert!(check_mixable("--opt", "c", &fewer, None, 30.0).unwrap_err().contains("on 20 joints"));
+    }
 
     fn cfg(seed: u64, terrain: bool, minutes: f64) -> SynthConfig {
         SynthConfig { minutes, seed, terrain, ..SynthConfig::default() }

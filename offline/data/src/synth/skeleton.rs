@@ -95,6 +95,34 @@ pub fn skeleton() -> Skeleton {
     }
 }
 
+/// Whether clips on `skeleton` (the first of them named `first`, at `fps` frames per second
+/// where it is known) can be trained with the generator's clips at `generator_fps`: the same
+/// joint names and parents (offsets may differ: bandai2's performers do), and the same frame
+/// rate. The refusal names the training option `option`, the difference and the fix.
+pub fn check_mixable(
+    option: &str,
+    first: &str,
+    skeleton: &Skeleton,
+    fps: Option<f64>,
+    generator_fps: f64,
+) -> Result<(), String> {
+    let names: Vec<&str> = skeleton.names.iter().map(String::as_str).collect();
+    let parents: Vec<Option<usize>> = JOINT_PARENTS.iter().map(|&p| (p >= 0).then_some(p as usize)).collect();
+    let other_rate = fps.is_some_and(|f| (f - generator_fps).abs() > 0.01);
+    if names == JOINT_NAMES && skeleton.parents == parents && !other_rate {
+        return Ok(());
+    }
+    let rate = fps.map_or(String::new(), |f| format!(" at {f:.3} fps"));
+    Err(format!(
+        "{option}: the synthetic clips are on bandai2's skeleton ({} joints, `{}` first) at {generator_fps} fps, but \
+         {first} is on {} joints (`{}` first){rate}; leave {option} out for this data",
+        JOINT_NAMES.len(),
+        JOINT_NAMES[0],
+        names.len(),
+        names.first().copied().unwrap_or("")
+    ))
+}
+
 /// Lengths (cm) of the thigh (hip to knee) and of the shin (knee to ankle).
 pub(super) fn leg_lengths() -> (f64, f64) {
     (DVec3::from_array(JOINT_OFFSETS[14]).length(), DVec3::from_array(JOINT_OFFSETS[15]).length())

@@ -488,19 +488,10 @@ fn synth_windows(
     continued: Option<usize>,
 ) -> RtnResult<(Vec<f32>, Vec<usize>)> {
     let option = format!("--{}", kind.key().replace('_', "-"));
-    let names = &tw.skeleton.names;
-    let sk = synth::skeleton();
-    if *names != sk.names || tw.skeleton.parents != sk.parents {
-        bail!(
-            "{option}: the synthetic clips are on bandai2's skeleton ({} joints, `{}` first) but the data's \
-             differs ({} joints, `{}` first); leave {option} out for this data",
-            sk.names.len(),
-            sk.names[0],
-            names.len(),
-            names.first().map_or("", String::as_str)
-        );
-    }
     let cfg = SynthConfig { minutes, seed: o.run.seed, terrain: false, ..SynthConfig::default() };
+    if let Err(m) = synth::check_mixable(&option, "the data", &tw.skeleton, None, cfg.fps) {
+        bail!("{m}");
+    }
     let (clips, what) = match kind {
         SynthKind::Steps => (synth::generate_stepping(&cfg), "side and back steps"),
         SynthKind::Runs => (synth::generate_running(&cfg), "jogging and running"),
