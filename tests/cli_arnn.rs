@@ -975,6 +975,48 @@ fn inbetween_synth_mix_adds_synthetic_locomotion_and_is_refused_where_it_cannot_
     let (ok, _, stderr) = run(&[&ar[..], &["--out", dir.path().join("ar").to_str().unwrap()]].concat());
     assert!(!ok && stderr.contains("add --design inbetween"), "{stderr}");
 }
+/// `--backbone transformer`: the in-betweening design with a transformer encoder over the shot
+/// trains (recorded in `config.json`), resumes with its own backbone (another refused), runs in
+/// `zoo bench` through the runtime on both layouts, and is refused outside the design.
+#[test]
+fn inbetween_transformer_backbone_trains_resumes_and_runs_in_the_benchmark() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("synth");
+    let d = data.to_str().unwrap();
+    let (ok, _, stderr) = run(&["data", "synth", "--out", d, "--minutes", "1", "--seed", "3"]);
+    assert!(ok, "{stderr}");
+    let runp = dir.path().join("tf");
+    let r = runp.to_str().unwrap();
+    let base = ["train", "arnn", "--design", "inbetween", "--data", d, "--valid-glob", "*_0005.bvh"];
+    let tiny = ["--preset", "tiny", "--threads", "1", "--epochs", "1", "--seed", "2", "--transition-fraction", "0.5"];
+    let (ok, stdout, stderr) = run(&[&base[..], &tiny[..], &["--backbone", "transformer", "--out", r]].concat());
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains("training the in-betweening network (transformer)"), "{stdout}");
+    let config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(runp.join("config.json")).unwrap()).unwrap();
+    assert_eq!((config["backbone"].as_str(), config["heads"].as_u64()), (Some("transformer"), Some(2)), "{config}");
+    let (ok, _, stderr) = run(&["train", "arnn", "--epochs", "2", "--resume", r, "--backbone", "bgru"]);
+    assert!(!ok && stderr.contains("drop --backbone"), "{stderr}");
+    let (ok, stdout, stderr) = run(&["train", "arnn", "--epochs", "2", "--threads", "1", "--resume", r]);
+    assert!(ok && stdout.contains("epoch   2") && stdout.contains("(transformer)"), "{stdout}\n{stderr}");
+    for layout in [&["--layout", "keys", "--every", "10"][..], &["--lengths", "15"][..]] {
+        let json = dir.path().join("bench.json");
+        let bench = ["bench", "--data", d, "--valid-glob", "*_0005.bvh", "--methods"];
+        let methods = format!("arnn:{r}");
+        let args = [&bench[..], &[methods.as_str(), "--json", json.to_str().unwrap()], layout].concat();
+        let (ok, stdout, stderr) = run(&args);
+        assert!(ok, "{stdout}\n{stderr}");
+        let result: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        let row = &result["methods"][format!("arnn:{r}+fallback").as_str()];
+        let l2p = row.as_object().unwrap().iter().find(|(k, _)| k.starts_with("l2p@")).map(|(_, v)| v.as_f64());
+        assert!(l2p.flatten().is_some_and(f64::is_finite), "{row}");
+    }
+    let ar = ["train", "arnn", "--data", d, "--valid-glob", "*_0005.bvh", "--backbone", "transformer"];
+    let (ok, _, stderr) =
+        run(&[&ar[..], &["--preset", "tiny", "--out", dir.path().join("ar").to_str().unwrap()]].concat());
+    assert!(!ok && stderr.contains("add --design inbetween"), "{stderr}");
+}
+
 /// `zoo bench keyframes` on an in-betweening file times whole transitions in one call, beside an
 /// RTN's start and steps on the same gap (`--against`), and writes both per batch size; an RTN
 /// where the in-betweener belongs, and `--against` beside an ARNN step graph, are refused by name.

@@ -3,7 +3,8 @@
 //! keys` run), tract (the runtime's keyframes task, `KeyframeRunner`) and onnxruntime (through
 //! `ort`, on the exported whole-shot graph) complete the same keys with a tiny network trained
 //! 3 steps and saved as a run folder, exported from the folder as `zoo export --onnx` does:
-//! whole and partial keys and a transition's keys, four characters of two lengths in one batch.
+//! whole and partial keys and a transition's keys, four characters of two lengths in one batch;
+//! with the bidirectional GRU and with the transformer backbone.
 //!
 //! Where the expected numbers come from: candle's `complete_shots` on the run folder's weights.
 //! The keys are f32 values (the runtime's `MotionKeys` are f32), given to candle as f64, so both
@@ -21,7 +22,7 @@ use glam::{DQuat, DVec3};
 use std::path::Path;
 use std::sync::OnceLock;
 use zoo_arnn::Normalization;
-use zoo_arnn::inbetween::{Inbetween, InbetweenConfig, ShotInputs};
+use zoo_arnn::inbetween::{Backbone, Inbetween, InbetweenConfig, ShotInputs};
 use zoo_arnn::inbetween_train::{InbetweenTrainer, window_normalization};
 use zoo_data::dataset::Windows;
 use zoo_export::OnnxModel;
@@ -66,22 +67,33 @@ struct Fixture {
 
 fn fixture() -> &'static Fixture {
     static F: OnceLock<Fixture> = OnceLock::new();
-    F.get_or_init(|| {
+    F.get_or_init(|| trained(Backbone::Bgru, "parity_inbetween"))
+}
+
+/// The fixture with the transformer backbone.
+fn transformer_fixture() -> &'static Fixture {
+    static F: OnceLock<Fixture> = OnceLock::new();
+    F.get_or_init(|| trained(Backbone::Transformer, "parity_inbetween_transformer"))
+}
+
+fn trained(backbone: Backbone, folder: &str) -> Fixture {
+    {
         let (train, valid) = (windows(8, 66, 0.0), windows(4, 66, 0.5));
         let c = zoo_arnn::inbetween::config_for(&train.skeleton, 30.0);
-        let config = InbetweenConfig { seed: 3, ..InbetweenConfig::tiny(c.skeleton, c.euler_axes) };
+        let config =
+            InbetweenConfig { seed: 3, ..InbetweenConfig::tiny(c.skeleton, c.euler_axes) }.with_backbone(backbone);
         let norm = window_normalization(&train);
         let mut trainer = InbetweenTrainer::new(&config, norm, train, &valid).unwrap();
         for _ in 0..3 {
             trainer.train_on(&[0, 1, 2, 3, 4, 5, 6, 7]).unwrap();
         }
-        let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("parity_inbetween");
+        let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(folder);
         std::fs::create_dir_all(&dir).unwrap();
         trainer.save(&dir).unwrap();
         let (model, norm) = zoo_arnn::inbetween::load(&dir, &Device::Cpu).unwrap();
         let onnx = zoo_arnn::export::export_run(&dir, &Default::default()).unwrap();
         Fixture { model, norm, onnx }
-    })
+    }
 }
 
 /// One character's keys: frames, f32 poses and 0/1 flags (empty: whole keys).
@@ -185,7 +197,23 @@ fn onnxruntime_completion(f: &Fixture, chars: &[Keys]) -> (Vec<ShotInputs>, Vec<
 
 #[test]
 fn candle_tract_and_onnxruntime_complete_the_same_keys() {
-    let f = fixture();
+    complete_alike(fixture());
+}
+
+/// The transformer backbone: the same parity, and its graph (no recurrent node; per block one
+/// softmax and two layer normalisations, one more before the decoder).
+#[test]
+fn the_transformer_backbone_completes_alike_in_candle_tract_and_onnxruntime() {
+    let f = transformer_fixture();
+    let ops = &f.onnx.summary().op_counts;
+    assert!(!ops.contains_key("GRU"), "{ops:?}");
+    assert_eq!((ops["Softmax"], ops["LayerNormalization"], ops["Range"]), (2, 5, 1), "{ops:?}");
+    complete_alike(f);
+}
+
+/// Candle, tract and onnxruntime complete [`characters`] alike with the network of `f`, keys hit
+/// or not, in a batch or alone.
+fn complete_alike(f: &Fixture) {
     let chars = characters();
     let (poses, fixed): (Vec<_>, Vec<_>) = chars.iter().map(|k| (k.poses_f64(), k.fixed_bool())).unzip();
     let shots: Vec<zoo_arnn::inbetween::ShotKeyRefs> =

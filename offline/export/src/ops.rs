@@ -134,6 +134,52 @@ impl GraphBuilder {
         self.node("Squeeze", name, &[x, &a], vec![])
     }
 
+    /// `Softmax(x, axis)`.
+    pub fn softmax(&mut self, name: &str, x: &Value, axis: i64) -> Value {
+        self.node("Softmax", name, &[x], vec![attr_int("axis", axis)])
+    }
+
+    /// `LayerNormalization(x, scale, bias)` over the axes from `axis` on, with `epsilon`.
+    pub fn layer_norm(&mut self, name: &str, x: &Value, scale: &Value, bias: &Value, axis: i64, epsilon: f32) -> Value {
+        self.node(
+            "LayerNormalization",
+            name,
+            &[x, scale, bias],
+            vec![attr_int("axis", axis), attr_float("epsilon", epsilon)],
+        )
+    }
+
+    /// `Abs(x)`.
+    pub fn abs(&mut self, name: &str, x: &Value) -> Value {
+        self.node("Abs", name, &[x], vec![])
+    }
+
+    /// `Shape(x)`: the dims of `x` as a 1-D i64 tensor.
+    pub fn shape(&mut self, name: &str, x: &Value) -> Value {
+        self.node("Shape", name, &[x], vec![])
+    }
+
+    /// `Range(start, limit, delta)` of i64 scalars (initializers `<name>.start` and
+    /// `<name>.delta`; `limit` a scalar value of the graph, e.g. a dim read by
+    /// [`GraphBuilder::shape`] and gathered with a scalar index).
+    pub fn range_i64(&mut self, name: &str, start: i64, limit: &Value, delta: i64) -> Value {
+        let s = self.initializer_i64(&format!("{name}.start"), &[], &[start]);
+        let d = self.initializer_i64(&format!("{name}.delta"), &[], &[delta]);
+        self.node("Range", name, &[&s, limit, &d], vec![])
+    }
+
+    /// `Gather(x, index, axis)` with one constant scalar index (initializer `<name>.index`): the
+    /// result drops the axis.
+    pub fn gather_scalar(&mut self, name: &str, x: &Value, index: i64, axis: i64) -> Value {
+        let i = self.initializer_i64(&format!("{name}.index"), &[], &[index]);
+        self.node("Gather", name, &[x, &i], vec![attr_int("axis", axis)])
+    }
+
+    /// `Cast(x)` to f32.
+    pub fn cast_f32(&mut self, name: &str, x: &Value) -> Value {
+        self.node("Cast", name, &[x], vec![attr_int("to", pb::tensor_proto::DataType::Float as i64)])
+    }
+
     /// `Transpose(x, perm)`.
     pub fn transpose(&mut self, name: &str, x: &Value, perm: &[i64]) -> Value {
         self.node("Transpose", name, &[x], vec![attr_ints("perm", perm)])

@@ -161,6 +161,11 @@ pub struct ArnnArgs {
     /// data's clips. A resumed run keeps its own [default: 0].
     #[arg(long, requires = "data", allow_hyphen_values = true, value_parser = zoo_nn::args::synth_minutes)]
     pub synth_mix: Option<f64>,
+    /// With `--design inbetween`: the network over the shot, a bidirectional GRU or a
+    /// transformer encoder (frames as tokens, positions by a distance bias; docs/keys-only.md).
+    /// A resumed run keeps its own [default: bgru].
+    #[arg(long, value_enum)]
+    pub backbone: Option<crate::inbetween::Backbone>,
     /// With `--design inbetween`: fraction of training batches in the in-betweening benchmark's
     /// transition layout (the first 10 frames all keys, then the target 5 to 45 frames after
     /// them), for a network that also makes transitions (`zoo bench --methods arnn:RUN`); the
@@ -222,6 +227,7 @@ fn train(a: ArnnArgs, epochs_given: bool) -> Result<(), BoxError> {
         synth_minutes: a.synth_minutes,
         synth_mix: a.synth_mix,
         transition_fraction: a.transition_fraction,
+        backbone: a.backbone,
         batch_size: a.batch_size,
         lr: a.lr,
         ground_weight: a.ground_weight,

@@ -25,6 +25,9 @@
 //! D(BGRU(E(input_t)))` zero on every key ([`Residual`], the config's `residual`): `e(t) c_t`
 //! with `e` per value its group's envelope, or `c_t` minus the straight line through `c` on the
 //! keys around `t` fixing the value (new runs; smooth through the keys).
+//!
+//! The backbone between E and D is a bidirectional GRU, or a transformer encoder over the frames
+//! ([`Backbone`], `zoo train arnn --design inbetween --backbone transformer`).
 
 use crate::config::HumanoidSkeleton;
 use crate::train::Normalization;
@@ -53,12 +56,19 @@ pub struct InbetweenConfig {
     /// Each joint's Euler channel order as axis indices (0 = X, 1 = Y, 2 = Z; bandai2: ZXY =
     /// `[2, 0, 1]`): the Bezier curves are drawn on these channels, as Blender draws them.
     pub euler_axes: Vec<[usize; 3]>,
-    /// Width of the per-frame encoder E (one ReLU layer).
+    /// The network over the shot between the per-frame encoder and decoder (runs written
+    /// before the field: the bidirectional GRU).
+    #[serde(default)]
+    pub backbone: Backbone,
+    /// Width of the per-frame encoder E (one ReLU layer); the transformer's token width.
     pub encoder: usize,
-    /// GRU units per direction.
+    /// GRU units per direction; the transformer's feed-forward width.
     pub hidden: usize,
-    /// Bidirectional GRU layers.
+    /// Bidirectional GRU layers; the transformer's encoder blocks.
     pub layers: usize,
+    /// The transformer's attention heads (`encoder` a multiple of it; unused by the GRU).
+    #[serde(default = "heads")]
+    pub heads: usize,
     /// Hidden width of the decoder D (one ReLU layer, then a linear layer to `d` values).
     pub decoder: usize,
     /// Dropout between GRU layers in training.
@@ -131,9 +141,11 @@ impl InbetweenConfig {
             design: DESIGN.into(),
             skeleton,
             euler_axes,
+            backbone: Backbone::Bgru,
             encoder: 256,
             hidden: 256,
             layers: 1,
+            heads: heads(),
             decoder: 256,
             dropout: 0.0,
             gap_unit: 30.0,
@@ -176,6 +188,22 @@ impl InbetweenConfig {
         }
     }
 
+    /// This configuration with `backbone`: the GRU keeps the sizes; the transformer's tokens are
+    /// `encoder` values wide, its feed-forward width twice that, 3 blocks of 8 heads (the
+    /// humanoid sizes: 256, 512; test sizes under 128: 2 blocks of 2 heads); the decoder, keys
+    /// and losses stay.
+    pub fn with_backbone(self, backbone: Backbone) -> Self {
+        match backbone {
+            Backbone::Bgru => InbetweenConfig { backbone, ..self },
+            Backbone::Transformer if self.encoder >= 128 => {
+                InbetweenConfig { backbone, hidden: 2 * self.encoder, layers: 3, heads: 8, ..self }
+            }
+            Backbone::Transformer => {
+                InbetweenConfig { backbone, hidden: 2 * self.encoder, layers: 2, heads: 2, ..self }
+            }
+        }
+    }
+
     /// Joints.
     pub fn joints(&self) -> usize {
         self.skeleton.names.len()
@@ -194,6 +222,15 @@ impl InbetweenConfig {
     /// The group of each pose value.
     pub fn key_groups(&self) -> Vec<usize> {
         crate::humanoid::pose_layout(&self.skeleton.names).1
+    }
+
+    /// Values per frame the encoder reads: the input features, and with the transformer the
+    /// Bezier pose's frame-to-frame change ([`velocity`]).
+    pub fn encoder_input(&self) -> usize {
+        match self.backbone {
+            Backbone::Bgru => self.input_width(),
+            Backbone::Transformer => self.input_width() + self.dofs(),
+        }
     }
 
     /// Values per frame of the network's input, `3 d + 2 + 2 (1 + J)`.
@@ -240,8 +277,14 @@ impl InbetweenConfig {
         if let Some(f) = &self.fallback {
             f.check().map_err(|e| ArnnError::Config(format!("fallback: {e}")))?;
         }
-        if [self.encoder, self.hidden, self.layers, self.decoder, self.batch_size].contains(&0) {
-            return bad("encoder, hidden, layers, decoder and batch_size must be positive".into());
+        if [self.encoder, self.hidden, self.layers, self.decoder, self.batch_size, self.heads].contains(&0) {
+            return bad("encoder, hidden, layers, heads, decoder and batch_size must be positive".into());
+        }
+        if self.backbone == Backbone::Transformer && self.encoder % self.heads != 0 {
+            return bad(format!(
+                "the transformer's token width (encoder {}) must be a multiple of its heads ({})",
+                self.encoder, self.heads
+            ));
         }
         if self.min_gap < 2 || self.max_gap < self.min_gap {
             return bad(format!("key gaps {}-{}: need 2 <= min_gap <= max_gap", self.min_gap, self.max_gap));
@@ -267,13 +310,136 @@ fn one() -> f64 {
     1.0
 }
 
+fn heads() -> usize {
+    8
+}
+
+/// The network over the shot, between the per-frame encoder E and decoder D.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum Backbone {
+    /// Bidirectional GRU layers (`hidden` units per direction).
+    #[default]
+    Bgru,
+    /// A transformer encoder over the shot's frames as tokens (not in any paper in this form;
+    /// the scope of the whole-shot in-betweener asks for one after Qin et al. 2022 and SILK,
+    /// Akhoundi et al. 2025): pre-norm blocks of multi-head self-attention and a ReLU
+    /// feed-forward layer, each added to its input; positions by the attention's linear bias on
+    /// the frame distance (ALiBi, Press et al. 2022: head `h` of `H` adds `-2^(-8 (h + 1) / H)
+    /// |i - j|` to the scores), so that a shot of any length runs; the keys and the context are
+    /// flagged in the features; the encoder also reads the Bezier pose's frame-to-frame change
+    /// ([`velocity`]); a last layer normalisation before the decoder.
+    Transformer,
+}
+
+/// Factor of the Bezier pose's frame-to-frame change (normalised units) in the transformer's
+/// input: a change of 0.1 normalised units per frame reads as 1.
+pub const VELOCITY_SCALE: f64 = 10.0;
+
+/// The Bezier pose's frame-to-frame change of features `(batch, frames, width)` (the first `d`
+/// values of a frame are its normalised Bezier pose): `VELOCITY_SCALE (b_t - b_(t-1))`, 0 on the
+/// first frame; `(batch, frames, d)`.
+pub fn velocity(features: &Tensor, d: usize) -> candle_core::Result<Tensor> {
+    let b = features.narrow(2, 0, d)?;
+    let t = b.dim(1)?;
+    // b_(t-1), the first frame standing for its own predecessor.
+    let prev = match t {
+        1 => b.clone(),
+        _ => Tensor::cat(&[&b.narrow(1, 0, 1)?, &b.narrow(1, 0, t - 1)?], 1)?,
+    };
+    (b - prev)? * VELOCITY_SCALE
+}
+
+/// The transformer's attention bias `(heads, frames, frames)`: head `h` adds `-m_h |i - j|`,
+/// `m_h = 2^(-8 (h + 1) / heads)` ([`Backbone::Transformer`]).
+pub fn alibi_slopes(heads: usize) -> Vec<f32> {
+    (0..heads).map(|h| 2f32.powf(-8.0 * (h + 1) as f32 / heads as f32)).collect()
+}
+
+/// Epsilon of the transformer's layer normalisations.
+pub const LAYER_NORM_EPS: f64 = 1e-5;
+
+/// A layer normalisation over the last dimension, from candle's differentiable ops.
+#[derive(Clone, Debug)]
+struct LayerNorm {
+    weight: Tensor,
+    bias: Tensor,
+}
+
+impl LayerNorm {
+    fn new(width: usize, vb: VarBuilder) -> candle_core::Result<Self> {
+        let weight = vb.get_with_hints(width, "weight", candle_nn::Init::Const(1.0))?;
+        let bias = vb.get_with_hints(width, "bias", candle_nn::Init::Const(0.0))?;
+        Ok(LayerNorm { weight, bias })
+    }
+
+    fn forward(&self, x: &Tensor) -> candle_core::Result<Tensor> {
+        use candle_core::D;
+        let xc = x.broadcast_sub(&x.mean_keepdim(D::Minus1)?)?;
+        let var = xc.sqr()?.mean_keepdim(D::Minus1)?;
+        xc.broadcast_div(&(var + LAYER_NORM_EPS)?.sqrt()?)?.broadcast_mul(&self.weight)?.broadcast_add(&self.bias)
+    }
+}
+
+/// One pre-norm transformer encoder block: `h + O(attention(LN1 h))`, then `h + F(LN2 h)`.
+/// Weights `ln1`, `q.0`, `k.0`, `v.0`, `o.0`, `ln2`, `ffn.{0,1}`.
+#[derive(Clone, Debug)]
+struct Block {
+    ln1: LayerNorm,
+    q: Mlp,
+    k: Mlp,
+    v: Mlp,
+    o: Mlp,
+    ln2: LayerNorm,
+    ffn: Mlp,
+    heads: usize,
+}
+
+impl Block {
+    fn new(width: usize, ffn: usize, heads: usize, vb: VarBuilder) -> candle_core::Result<Self> {
+        let linear = |name: &str| Mlp::new(width, &[width], Activation::Relu, false, vb.pp(name));
+        Ok(Block {
+            ln1: LayerNorm::new(width, vb.pp("ln1"))?,
+            q: linear("q")?,
+            k: linear("k")?,
+            v: linear("v")?,
+            o: linear("o")?,
+            ln2: LayerNorm::new(width, vb.pp("ln2"))?,
+            ffn: Mlp::new(width, &[ffn, width], Activation::Relu, false, vb.pp("ffn"))?,
+            heads,
+        })
+    }
+
+    /// `h` `(batch, frames, width)`, `bias` `(heads, frames, frames)`.
+    fn forward(&self, h: &Tensor, bias: &Tensor) -> candle_core::Result<Tensor> {
+        let (b, t, e) = h.dims3()?;
+        let dh = e / self.heads;
+        let a = self.ln1.forward(h)?;
+        let split = |m: &Mlp| m.forward(&a)?.reshape((b, t, self.heads, dh))?.transpose(1, 2)?.contiguous();
+        let (q, k, v) = (split(&self.q)?, split(&self.k)?, split(&self.v)?);
+        let scores = (q.matmul(&k.t()?.contiguous()?)? / (dh as f64).sqrt())?.broadcast_add(bias)?;
+        let p = candle_nn::ops::softmax(&scores, candle_core::D::Minus1)?;
+        let o = p.matmul(&v)?.transpose(1, 2)?.reshape((b, t, e))?;
+        let h = (h + self.o.forward(&o)?)?;
+        &h + self.ffn.forward(&self.ln2.forward(&h)?)?
+    }
+}
+
+/// The network over the shot.
+#[derive(Clone, Debug)]
+enum Body {
+    Bgru(BiGru),
+    Transformer { blocks: Vec<Block>, ln: LayerNorm, heads: usize },
+}
+
 /// The in-betweening network. Weights: `encoder.0`, `bgru.weight_ih_l0` ... (PyTorch's GRU
-/// names, `_reverse` for the backward direction), `decoder.{0,1}`.
+/// names, `_reverse` for the backward direction) or the transformer's `blocks.{i}.*` and `ln`,
+/// `decoder.{0,1}`.
 #[derive(Clone, Debug)]
 pub struct Inbetween {
     config: InbetweenConfig,
     encoder: Mlp,
-    bgru: BiGru,
+    body: Body,
     decoder: Mlp,
     device: Device,
 }
@@ -283,10 +449,20 @@ impl Inbetween {
     pub fn new(config: &InbetweenConfig, vb: VarBuilder) -> ArnnResult<Self> {
         config.validate()?;
         let c = config;
-        let encoder = Mlp::new(c.input_width(), &[c.encoder], Activation::Relu, true, vb.pp("encoder"))?;
-        let bgru = BiGru::new(c.encoder, c.hidden, c.layers, c.dropout, vb.pp("bgru"))?;
-        let decoder = Mlp::new(2 * c.hidden, &[c.decoder, c.dofs()], Activation::Relu, false, vb.pp("decoder"))?;
-        Ok(Inbetween { config: config.clone(), encoder, bgru, decoder, device: vb.device().clone() })
+        let encoder = Mlp::new(c.encoder_input(), &[c.encoder], Activation::Relu, true, vb.pp("encoder"))?;
+        let (body, width) = match c.backbone {
+            Backbone::Bgru => {
+                (Body::Bgru(BiGru::new(c.encoder, c.hidden, c.layers, c.dropout, vb.pp("bgru"))?), 2 * c.hidden)
+            }
+            Backbone::Transformer => {
+                let blocks = (0..c.layers)
+                    .map(|i| Block::new(c.encoder, c.hidden, c.heads, vb.pp(format!("blocks.{i}"))))
+                    .collect::<candle_core::Result<_>>()?;
+                (Body::Transformer { blocks, ln: LayerNorm::new(c.encoder, vb.pp("ln"))?, heads: c.heads }, c.encoder)
+            }
+        };
+        let decoder = Mlp::new(width, &[c.decoder, c.dofs()], Activation::Relu, false, vb.pp("decoder"))?;
+        Ok(Inbetween { config: config.clone(), encoder, body, decoder, device: vb.device().clone() })
     }
 
     /// The configuration.
@@ -299,7 +475,8 @@ impl Inbetween {
         &self.device
     }
 
-    /// The correction `D(BGRU(E(x)))` of input features `(batch, frames, input_width)`:
+    /// The correction `D(BGRU(E(x)))` (the transformer: `D(LN(blocks(E([x, v]))))`, `v` the
+    /// [`velocity`]) of input features `(batch, frames, input_width)`:
     /// `(batch, frames, d)`, normalised units, before the envelope. Dropout from `rng` when it
     /// is `Some` (training).
     pub fn correction(&self, features: &Tensor, rng: Option<&mut RowRngs>) -> ArnnResult<Tensor> {
@@ -310,8 +487,24 @@ impl Inbetween {
                 "the in-betweening network takes (batch, frames >= 1, {w}) features, got shape {dims:?}"
             )));
         }
-        let h = self.encoder.forward(features)?;
-        let h = self.bgru.forward(&h, rng)?;
+        let h = match &self.body {
+            Body::Bgru(bgru) => bgru.forward(&self.encoder.forward(features)?, rng)?,
+            Body::Transformer { blocks, ln, heads } => {
+                let x = Tensor::cat(&[features, &velocity(features, self.config.dofs())?], 2)?;
+                let mut h = self.encoder.forward(&x)?;
+                let t = dims[1];
+                let slopes = alibi_slopes(*heads);
+                let bias: Vec<f32> = slopes
+                    .iter()
+                    .flat_map(|m| (0..t * t).map(move |ij| -m * (ij / t).abs_diff(ij % t) as f32))
+                    .collect();
+                let bias = Tensor::from_vec(bias, (*heads, t, t), &self.device)?;
+                for b in blocks {
+                    h = b.forward(&h, &bias)?;
+                }
+                ln.forward(&h)?
+            }
+        };
         Ok(self.decoder.forward(&h)?)
     }
 
@@ -635,8 +828,48 @@ mod tests {
         assert!(err(shot_inputs(&c, &norm, &frames, &kp, &none_fix_spine)).contains("group 2"));
         let bad = InbetweenConfig { euler_axes: vec![[0, 0, 1]; 3], ..c.clone() };
         assert!(bad.validate().unwrap_err().to_string().contains("three different axes"));
+        let bad = InbetweenConfig { heads: 3, ..c.clone().with_backbone(Backbone::Transformer) };
+        assert!(bad.validate().unwrap_err().to_string().contains("multiple of its heads (3)"));
         let bad = InbetweenConfig { min_gap: 1, ..c };
         assert!(bad.validate().is_err());
+    }
+
+    /// The transformer: keys met by construction; a frame's correction depends on the frames
+    /// around it (not a per-frame network) and on their distance (the attention bias), and a
+    /// shot's correction does not depend on the other shots of its batch.
+    #[test]
+    fn the_transformer_hits_the_keys_and_reads_the_whole_shot() {
+        let c = tiny().with_backbone(Backbone::Transformer);
+        let varmap = candle_nn::VarMap::new();
+        let vb = zoo_nn::SeededVarMap::builder(&varmap, 3, candle_core::DType::F32, &Device::Cpu);
+        let model = Inbetween::new(&c, vb).unwrap();
+        let (frames, kp) = keys();
+        let norm = unit_norm(c.dofs());
+        let out = complete_shots(&model, &norm, &[(&frames, &kp, &[])]).unwrap().remove(0);
+        let (root, (deg, _, _)) = crate::humanoid::key_misses(&out, &frames, &kp, &[], 3);
+        assert!(root < 1e-9 && deg < 1e-5, "key misses {root} / {deg} degrees");
+        let w = c.input_width();
+        let x: Vec<f32> = (0..2 * 9 * w).map(|i| ((i * 37 % 101) as f32 / 50.0 - 1.0)).collect();
+        let x = Tensor::from_vec(x, (2, 9, w), &Device::Cpu).unwrap();
+        let both: Vec<f32> = model.correction(&x, None).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+        let first: Vec<f32> =
+            model.correction(&x.narrow(0, 0, 1).unwrap(), None).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+        let diff = first.iter().zip(&both).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+        assert!(diff < 1e-5, "shot 0 alone differs by {diff}");
+        // Changing the last frame's features moves frame 0's correction.
+        let mut y: Vec<f32> = x.narrow(0, 0, 1).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+        y[8 * w..].iter_mut().for_each(|v| *v += 1.0);
+        let y = Tensor::from_vec(y, (1, 9, w), &Device::Cpu).unwrap();
+        let moved: Vec<f32> = model.correction(&y, None).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+        let d = c.dofs();
+        assert!((0..d).any(|v| (moved[v] - first[v]).abs() > 1e-5), "frame 0 does not read frame 8");
+        // The velocity input: 0 on the first frame, the scaled change of the Bezier pose after.
+        let v: Vec<f32> = velocity(&x.narrow(0, 0, 1).unwrap(), d).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+        let xs: Vec<f32> = x.narrow(0, 0, 1).unwrap().flatten_all().unwrap().to_vec1().unwrap();
+        assert!(v[..d].iter().all(|&a| a == 0.0));
+        let want = (xs[w] - xs[0]) * VELOCITY_SCALE as f32;
+        assert!((v[d] - want).abs() < 1e-5, "{} vs {want}", v[d]);
+        assert_eq!(alibi_slopes(2), [0.0625, 0.00390625]);
     }
 
     #[test]

@@ -21,12 +21,21 @@
 //! its `Y` concatenated forward then backward ([`zoo_nn::export::recurrent_layers`], as the RMR
 //! exports its BGRU); a last `Transpose` makes the output batch-major. Initializers keep the
 //! candle paths (`encoder.0.weight`, ...; the GRU's stacked weights `bgru.l0.W`, `.R`, `.B`).
+//!
+//! With the transformer backbone (`crate::inbetween::Backbone::Transformer`) the graph stays
+//! batch-major and has no recurrent node: the velocity input (`Slice`, `Concat`, `Sub`, `Mul`),
+//! the encoder, the attention's distance bias built from the shot's length (`Shape`, `Gather`,
+//! `Range`, `Cast`, `Abs`: any number of frames), per block `LayerNormalization`, the heads'
+//! `MatMul`s with `Reshape`/`Transpose` and a `Softmax`, the feed-forward layers, then a last
+//! `LayerNormalization` and the decoder. Initializers keep the candle paths (`blocks.0.q.0.weight`,
+//! `blocks.0.ln1.weight`, `ln.bias`, ...).
 
-use crate::inbetween::{Inbetween, InbetweenConfig};
+use crate::inbetween::{Backbone, Inbetween, InbetweenConfig};
 use crate::train::Normalization;
 use candle_nn::VarMap;
 use std::collections::BTreeMap;
 use std::path::Path;
+use zoo_export::Value;
 use zoo_export::{Dim, ExportError, GraphBuilder, OnnxModel, RnnDirection};
 use zoo_format::{
     CoordinateFrame, FORMAT_VERSION, InbetweenSection, KeyframesTask, MotionFeatureSegment, MotionMeanStd,
@@ -109,21 +118,98 @@ pub fn export_inbetween(
     );
     let frames = || Dim::Symbol("frames".into());
     let features = g.input("features", &[Dim::batch(), frames(), Dim::Fixed(width)]);
-    let x = g.transpose("features.time_major", &features, &[1, 0, 2]);
-    let h = mlp_matmul(&mut g, &w, ("encoder", 1), &x, true)?;
-    let stack = RecurrentStack {
-        prefix: "bgru",
-        lstm: false,
-        direction: RnnDirection::Bidirectional,
-        layers: config.layers,
-        hidden: config.hidden,
+    let correction = match config.backbone {
+        Backbone::Bgru => {
+            let x = g.transpose("features.time_major", &features, &[1, 0, 2]);
+            let h = mlp_matmul(&mut g, &w, ("encoder", 1), &x, true)?;
+            let stack = RecurrentStack {
+                prefix: "bgru",
+                lstm: false,
+                direction: RnnDirection::Bidirectional,
+                layers: config.layers,
+                hidden: config.hidden,
+            };
+            let h = recurrent_layers(&mut g, &w, &stack, &h)?;
+            let y = mlp_matmul(&mut g, &w, ("decoder", 2), &h, false)?;
+            g.transpose("correction.batch_major", &y, &[1, 0, 2])
+        }
+        Backbone::Transformer => {
+            let h = transformer(&mut g, &w, config, &features)?;
+            mlp_matmul(&mut g, &w, ("decoder", 2), &h, false)?
+        }
     };
-    let h = recurrent_layers(&mut g, &w, &stack, &h)?;
-    let y = mlp_matmul(&mut g, &w, ("decoder", 2), &h, false)?;
-    let correction = g.transpose("correction.batch_major", &y, &[1, 0, 2]);
     g.output("correction", &correction, &[Dim::batch(), frames(), Dim::Fixed(d)]);
     for (k, v) in metadata(config, norm)?.to_props() {
         g.metadata(&k, &v);
     }
     g.finish()
+}
+
+/// The transformer backbone ([`Backbone::Transformer`]) of `features` `[batch, frames, width]`,
+/// batch-major throughout: the velocity input (`Slice`, `Concat`, `Sub`, `Mul`), the encoder, the
+/// attention bias from the frame distance (`Shape`, `Gather`, `Range`, `Cast`, `Sub`, `Abs`,
+/// `Mul` by the negated slopes), the blocks (`LayerNormalization`, `MatMul`, `Reshape`,
+/// `Transpose`, `Softmax`) and the last layer normalisation: `[batch, frames, encoder]`.
+fn transformer(
+    g: &mut GraphBuilder,
+    w: &Weights,
+    config: &InbetweenConfig,
+    features: &Value,
+) -> Result<Value, ExportError> {
+    let (d, e, heads) = (config.dofs() as i64, config.encoder, config.heads);
+    let dh = e / heads;
+    // The Bezier pose's change, b_t - b_(t-1) with b_(-1) = b_0 (`crate::inbetween::velocity`).
+    let b = g.slice("velocity.bezier", features, &[2], &[0], &[d]);
+    let first = g.slice("velocity.first", &b, &[1], &[0], &[1]);
+    let most = g.slice("velocity.most", &b, &[1], &[0], &[-1]);
+    let prev = g.concat("velocity.prev", &[&first, &most], 1);
+    let change = g.sub("velocity.change", &b, &prev);
+    let scale = g.initializer_f32("velocity.scale", &[], &[crate::inbetween::VELOCITY_SCALE as f32]);
+    let v = g.mul("velocity", &change, &scale);
+    let x = g.concat("encoder.input", &[features, &v], 2);
+    let mut h = mlp_matmul(g, w, ("encoder", 1), &x, true)?;
+    // The attention bias [heads, frames, frames]: -m_h |i - j|.
+    let shape = g.shape("alibi.shape", &h);
+    let frames = g.gather_scalar("alibi.frames", &shape, 1, 0);
+    let positions = g.range_i64("alibi.range", 0, &frames, 1);
+    let positions = g.cast_f32("alibi.positions", &positions);
+    let rows = g.unsqueeze("alibi.rows", &positions, &[1]);
+    let cols = g.unsqueeze("alibi.cols", &positions, &[0]);
+    let diff = g.sub("alibi.diff", &rows, &cols);
+    let distance = g.abs("alibi.distance", &diff);
+    let slopes: Vec<f32> = crate::inbetween::alibi_slopes(heads).iter().map(|m| -m).collect();
+    let slopes = g.initializer_f32("alibi.slopes", &[heads, 1, 1], &slopes);
+    let bias = g.mul("alibi", &distance, &slopes);
+    let inv_sqrt = g.initializer_f32("attention.scale", &[], &[1.0 / (dh as f32).sqrt()]);
+    let eps = crate::inbetween::LAYER_NORM_EPS as f32;
+    let norm = |g: &mut GraphBuilder, p: &str, x: &Value| -> Result<Value, ExportError> {
+        let (s, b) = (w.init(g, &format!("{p}.weight"))?, w.init(g, &format!("{p}.bias"))?);
+        Ok(g.layer_norm(p, x, &s, &b, -1, eps))
+    };
+    for i in 0..config.layers {
+        let p = format!("blocks.{i}");
+        let a = norm(g, &format!("{p}.ln1"), &h)?;
+        // [batch, frames, e] -> [batch, heads, frames, dh] (k: [batch, heads, dh, frames]).
+        let split = |g: &mut GraphBuilder, m: &str, perm: &[i64]| -> Result<Value, ExportError> {
+            let y = mlp_matmul(g, w, (format!("{p}.{m}").as_str(), 1), &a, false)?;
+            let y = g.reshape(&format!("{p}.{m}.heads"), &y, &[0, 0, heads as i64, dh as i64]);
+            Ok(g.transpose(&format!("{p}.{m}.split"), &y, perm))
+        };
+        let q = split(g, "q", &[0, 2, 1, 3])?;
+        let k = split(g, "k", &[0, 2, 3, 1])?;
+        let v = split(g, "v", &[0, 2, 1, 3])?;
+        let scores = g.matmul(&format!("{p}.scores"), &q, &k);
+        let scores = g.mul(&format!("{p}.scores.scaled"), &scores, &inv_sqrt);
+        let scores = g.add(&format!("{p}.scores.biased"), &scores, &bias);
+        let attn = g.softmax(&format!("{p}.softmax"), &scores, -1);
+        let o = g.matmul(&format!("{p}.attend"), &attn, &v);
+        let o = g.transpose(&format!("{p}.merge"), &o, &[0, 2, 1, 3]);
+        let o = g.reshape(&format!("{p}.merged"), &o, &[0, 0, e as i64]);
+        let o = mlp_matmul(g, w, (format!("{p}.o").as_str(), 1), &o, false)?;
+        h = g.add(&format!("{p}.attention.residual"), &h, &o);
+        let f = norm(g, &format!("{p}.ln2"), &h)?;
+        let f = mlp_matmul(g, w, (format!("{p}.ffn").as_str(), 2), &f, false)?;
+        h = g.add(&format!("{p}.ffn.residual"), &h, &f);
+    }
+    norm(g, "ln", &h)
 }

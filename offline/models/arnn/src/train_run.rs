@@ -130,6 +130,8 @@ pub struct ArnnRunOptions {
     pub synth_mix: Option<f64>,
     /// The in-betweening design: fraction of batches in the transition layout.
     pub transition_fraction: Option<f64>,
+    /// The in-betweening design: the network over the shot.
+    pub backbone: Option<crate::inbetween::Backbone>,
     /// Sequences per batch.
     pub batch_size: Option<usize>,
     /// Adam learning rate.
@@ -452,6 +454,12 @@ pub fn run(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
              inbetween); the autoregressive ARNN trains on lamp hops (--sequences) or --data"
         );
     }
+    if a.backbone.is_some() {
+        bail!(
+            "--backbone chooses the in-betweening design's network (add --design inbetween); the autoregressive ARNN \
+             is its own network"
+        );
+    }
     if a.transition_fraction.is_some() {
         bail!(
             "--transition-fraction sets the in-betweening design's training keys (add --design inbetween); the \
@@ -625,21 +633,11 @@ impl HumanoidData {
     /// running, standing; seed `seed`, flat ground) for the training split of `--synth-mix`,
     /// refused unless `train` (the data's clips) is on the generator's skeleton and frame rate.
     fn synth_mix_clips(&self, train: &[NamedClip], minutes: f64) -> ArnnResult<Vec<NamedClip>> {
-        let sk = zoo_data::synth::skeleton();
         let cfg = zoo_data::synth::SynthConfig { minutes, seed: self.seed, ..Default::default() };
         if let Some(c) = train.first() {
-            let (s, fps) = (&c.clip.skeleton, c.clip.fps());
-            if s.names != sk.names || s.parents != sk.parents || (fps - cfg.fps).abs() > 0.01 {
-                bail!(
-                    "--synth-mix: the synthetic clips are on bandai2's skeleton ({} joints, `{}` first) at {} fps, but \
-                     {} is on {} joints (`{}` first) at {fps:.3} fps; leave --synth-mix out for this data",
-                    sk.names.len(),
-                    sk.names[0],
-                    cfg.fps,
-                    c.name,
-                    s.names.len(),
-                    s.names.first().map_or("", String::as_str)
-                );
+            let fps = Some(c.clip.fps());
+            if let Err(m) = zoo_data::synth::check_mixable("--synth-mix", &c.name, &c.clip.skeleton, fps, cfg.fps) {
+                bail!("{m}");
             }
         }
         let clips: Vec<NamedClip> =
@@ -852,6 +850,14 @@ pub fn train_inbetween(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
         if config.skeleton.names != skeleton.names {
             bail!("--resume {}: the run was trained on another skeleton than {}'s", out.display(), s.source());
         }
+        if let Some(b) = a.backbone.filter(|&b| b != config.backbone) {
+            bail!(
+                "--resume {}: the run's network is the {:?} backbone, not {b:?}: drop --backbone to resume it, or \
+                 train a new run",
+                out.display(),
+                config.backbone
+            );
+        }
         (config, norm)
     } else {
         let fps = 1.0 / train_clips[0].clip.frame_time;
@@ -860,6 +866,9 @@ pub fn train_inbetween(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
             ArnnPreset::Paper => {}
             ArnnPreset::Quick => config = crate::inbetween::InbetweenConfig::quick(config.skeleton, config.euler_axes),
             ArnnPreset::Tiny => config = crate::inbetween::InbetweenConfig::tiny(config.skeleton, config.euler_axes),
+        }
+        if let Some(b) = a.backbone {
+            config = config.with_backbone(b);
         }
         if let Some(b) = a.batch_size {
             config.batch_size = b;
@@ -894,8 +903,12 @@ pub fn train_inbetween(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
         ),
     };
     println!(
-        "training the in-betweening network on {source}: {n_train} training / {n_valid} validation windows of {} \
+        "training the in-betweening network ({}) on {source}: {n_train} training / {n_valid} validation windows of {} \
          frames, {} joints, {} parameters, learning rate {} halved every {} steps, run folder {}",
+        match config.backbone {
+            crate::inbetween::Backbone::Bgru => "bidirectional GRU",
+            crate::inbetween::Backbone::Transformer => "transformer",
+        },
         humanoid::WINDOW.window,
         skeleton.len(),
         trainer.parameter_count(),
