@@ -849,7 +849,7 @@ mod tests {
         let (root, (deg, _, _)) = crate::humanoid::key_misses(&out, &frames, &kp, &[], 3);
         assert!(root < 1e-9 && deg < 1e-5, "key misses {root} / {deg} degrees");
         let w = c.input_width();
-        let x: Vec<f32> = (0..2 * 9 * w).map(|i| ((i * 37 % 101) as f32 / 50.0 - 1.0)).collect();
+        let x: Vec<f32> = (0..2 * 9 * w).map(|i| (i * 37 % 101) as f32 / 50.0 - 1.0).collect();
         let x = Tensor::from_vec(x, (2, 9, w), &Device::Cpu).unwrap();
         let both: Vec<f32> = model.correction(&x, None).unwrap().flatten_all().unwrap().to_vec1().unwrap();
         let first: Vec<f32> =
