@@ -989,12 +989,14 @@ fn inbetween_transformer_backbone_trains_resumes_and_runs_in_the_benchmark() {
     let r = runp.to_str().unwrap();
     let base = ["train", "arnn", "--design", "inbetween", "--data", d, "--valid-glob", "*_0005.bvh"];
     let tiny = ["--preset", "tiny", "--threads", "1", "--epochs", "1", "--seed", "2", "--transition-fraction", "0.5"];
-    let (ok, stdout, stderr) = run(&[&base[..], &tiny[..], &["--backbone", "transformer", "--out", r]].concat());
+    let transformer = ["--backbone", "transformer", "--dropout", "0.1", "--out", r];
+    let (ok, stdout, stderr) = run(&[&base[..], &tiny[..], &transformer[..]].concat());
     assert!(ok, "{stdout}\n{stderr}");
     assert!(stdout.contains("training the in-betweening network (transformer)"), "{stdout}");
     let config: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(runp.join("config.json")).unwrap()).unwrap();
     assert_eq!((config["backbone"].as_str(), config["heads"].as_u64()), (Some("transformer"), Some(2)), "{config}");
+    assert_eq!(config["dropout"].as_f64(), Some(0.1), "{config}");
     let (ok, _, stderr) = run(&["train", "arnn", "--epochs", "2", "--resume", r, "--backbone", "bgru"]);
     assert!(!ok && stderr.contains("drop --backbone"), "{stderr}");
     let (ok, stdout, stderr) = run(&["train", "arnn", "--epochs", "2", "--threads", "1", "--resume", r]);
@@ -1015,6 +1017,12 @@ fn inbetween_transformer_backbone_trains_resumes_and_runs_in_the_benchmark() {
     let (ok, _, stderr) =
         run(&[&ar[..], &["--preset", "tiny", "--out", dir.path().join("ar").to_str().unwrap()]].concat());
     assert!(!ok && stderr.contains("add --design inbetween"), "{stderr}");
+    let ar = ["train", "arnn", "--data", d, "--valid-glob", "*_0005.bvh", "--dropout", "0.1"];
+    let (ok, _, stderr) =
+        run(&[&ar[..], &["--preset", "tiny", "--out", dir.path().join("ar").to_str().unwrap()]].concat());
+    assert!(!ok && stderr.contains("--dropout sets the in-betweening design's dropout"), "{stderr}");
+    let (ok, _, stderr) = run(&[&base[..], &tiny[..], &["--dropout", "1", "--out", r]].concat());
+    assert!(!ok && stderr.contains("--dropout"), "{stderr}");
 }
 
 /// `zoo bench keyframes` on an in-betweening file times whole transitions in one call, beside an

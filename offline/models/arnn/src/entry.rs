@@ -172,6 +172,11 @@ pub struct ArnnArgs {
     /// others keep the keys' layouts [default: 0].
     #[arg(long, allow_hyphen_values = true, value_parser = zoo_nn::args::unit_fraction)]
     pub transition_fraction: Option<f64>,
+    /// With `--design inbetween`: dropout in training, the transformer's on each block's
+    /// attention and feed-forward outputs (the GRU's between its layers: none with the one layer
+    /// of the default sizes). A resumed run keeps its own [default: 0].
+    #[arg(long, allow_hyphen_values = true, value_parser = dropout)]
+    pub dropout: Option<f64>,
     /// Sequences per batch [default: the preset's].
     #[arg(long, allow_hyphen_values = true, value_parser = zoo_nn::args::batch_size)]
     pub batch_size: Option<usize>,
@@ -192,6 +197,11 @@ pub struct ArnnArgs {
     /// [default: 0.01]
     #[arg(long, allow_hyphen_values = true, value_parser = frame_phase_omega)]
     pub frame_phase_omega: Option<f64>,
+}
+
+/// `--dropout`: a probability in [0, 1).
+fn dropout(s: &str) -> Result<f64, String> {
+    zoo_nn::args::real_in(s, zoo_nn::args::Interval { lo: 0.0, lo_open: false, hi: 1.0, hi_open: true }, "")
 }
 
 /// `--frame-phase`: a fraction in [0, 1).
@@ -227,6 +237,7 @@ fn train(a: ArnnArgs, epochs_given: bool) -> Result<(), BoxError> {
         synth_minutes: a.synth_minutes,
         synth_mix: a.synth_mix,
         transition_fraction: a.transition_fraction,
+        dropout: a.dropout,
         backbone: a.backbone,
         batch_size: a.batch_size,
         lr: a.lr,

@@ -37,7 +37,7 @@ use candle_nn::VarBuilder;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use zoo_motion::EulerOrder;
-use zoo_nn::{Activation, BiGru, Mlp, RowRngs};
+use zoo_nn::{Activation, BiGru, Dropout, Mlp, RowRngs};
 use zoo_protocol::inbetween::InbetweenFeatures;
 pub use zoo_protocol::inbetween::Residual;
 
@@ -71,7 +71,8 @@ pub struct InbetweenConfig {
     pub heads: usize,
     /// Hidden width of the decoder D (one ReLU layer, then a linear layer to `d` values).
     pub decoder: usize,
-    /// Dropout between GRU layers in training.
+    /// Dropout in training: between GRU layers; the transformer's on each block's attention and
+    /// feed-forward outputs, before they are added to the block's input.
     pub dropout: f64,
     /// Frames the gap input is divided by.
     pub gap_unit: f64,
@@ -289,9 +290,12 @@ impl InbetweenConfig {
         if self.min_gap < 2 || self.max_gap < self.min_gap {
             return bad(format!("key gaps {}-{}: need 2 <= min_gap <= max_gap", self.min_gap, self.max_gap));
         }
-        let fractions = [self.dropout, self.regular_fraction, self.partial_fraction, self.transition_fraction];
+        let fractions = [self.regular_fraction, self.partial_fraction, self.transition_fraction];
         if fractions.iter().any(|f| !(0.0..=1.0).contains(f)) {
-            return bad("dropout, regular_fraction, partial_fraction and transition_fraction must be in [0, 1]".into());
+            return bad("regular_fraction, partial_fraction and transition_fraction must be in [0, 1]".into());
+        }
+        if !(0.0..1.0).contains(&self.dropout) {
+            return bad(format!("dropout {}: must be in [0, 1)", self.dropout));
         }
         let positive = [self.gap_unit, self.fk_unit, self.vel_unit, self.learning_rate];
         let weights = [self.lambda_fk, self.lambda_vel, self.foot_weight];
@@ -410,8 +414,15 @@ impl Block {
         })
     }
 
-    /// `h` `(batch, frames, width)`, `bias` `(heads, frames, frames)`.
-    fn forward(&self, h: &Tensor, bias: &Tensor) -> candle_core::Result<Tensor> {
+    /// `h` `(batch, frames, width)`, `bias` `(heads, frames, frames)`; `drop` on the attention's
+    /// and the feed-forward's outputs when `rng` is `Some` (training).
+    fn forward(
+        &self,
+        h: &Tensor,
+        bias: &Tensor,
+        drop: &Dropout,
+        mut rng: Option<&mut RowRngs>,
+    ) -> candle_core::Result<Tensor> {
         let (b, t, e) = h.dims3()?;
         let dh = e / self.heads;
         let a = self.ln1.forward(h)?;
@@ -420,8 +431,8 @@ impl Block {
         let scores = (q.matmul(&k.t()?.contiguous()?)? / (dh as f64).sqrt())?.broadcast_add(bias)?;
         let p = candle_nn::ops::softmax(&scores, candle_core::D::Minus1)?;
         let o = p.matmul(&v)?.transpose(1, 2)?.reshape((b, t, e))?;
-        let h = (h + self.o.forward(&o)?)?;
-        &h + self.ffn.forward(&self.ln2.forward(&h)?)?
+        let h = (h + drop.forward(&self.o.forward(&o)?, rng.as_deref_mut())?)?;
+        &h + drop.forward(&self.ffn.forward(&self.ln2.forward(&h)?)?, rng)?
     }
 }
 
@@ -499,8 +510,10 @@ impl Inbetween {
                     .flat_map(|m| (0..t * t).map(move |ij| -m * (ij / t).abs_diff(ij % t) as f32))
                     .collect();
                 let bias = Tensor::from_vec(bias, (*heads, t, t), &self.device)?;
+                let drop = Dropout::new(self.config.dropout);
+                let mut rng = rng;
                 for b in blocks {
-                    h = b.forward(&h, &bias)?;
+                    h = b.forward(&h, &bias, &drop, rng.as_deref_mut())?;
                 }
                 ln.forward(&h)?
             }
@@ -870,6 +883,36 @@ mod tests {
         let want = (xs[w] - xs[0]) * VELOCITY_SCALE as f32;
         assert!((v[d] - want).abs() < 1e-5, "{} vs {want}", v[d]);
         assert_eq!(alibi_slopes(2), [0.0625, 0.00390625]);
+    }
+
+    /// The transformer's dropout: off without generators (evaluation, export), seeded in
+    /// training (the same draws give the same correction, others another), and a dropout of 1 is
+    /// refused.
+    #[test]
+    fn the_transformers_dropout_is_seeded_and_off_in_evaluation() {
+        let plain = tiny().with_backbone(Backbone::Transformer);
+        let c = InbetweenConfig { dropout: 0.3, ..plain.clone() };
+        let build = |c: &InbetweenConfig| {
+            let varmap = candle_nn::VarMap::new();
+            let vb = zoo_nn::SeededVarMap::builder(&varmap, 3, candle_core::DType::F32, &Device::Cpu);
+            Inbetween::new(c, vb).unwrap()
+        };
+        let (with, without) = (build(&c), build(&plain));
+        let w = c.input_width();
+        let x: Vec<f32> = (0..2 * 9 * w).map(|i| (i * 37 % 101) as f32 / 50.0 - 1.0).collect();
+        let x = Tensor::from_vec(x, (2, 9, w), &Device::Cpu).unwrap();
+        let run = |m: &Inbetween, rng: Option<&mut RowRngs>| -> Vec<f32> {
+            m.correction(&x, rng).unwrap().flatten_all().unwrap().to_vec1().unwrap()
+        };
+        assert_eq!(run(&with, None), run(&without, None));
+        let a = run(&with, Some(&mut RowRngs::new(5, 0..2)));
+        assert_eq!(a, run(&with, Some(&mut RowRngs::new(5, 0..2))));
+        assert_ne!(a, run(&with, Some(&mut RowRngs::new(6, 0..2))));
+        assert_ne!(a, run(&with, None));
+        // Without dropout the generators change nothing.
+        assert_eq!(run(&without, Some(&mut RowRngs::new(5, 0..2))), run(&without, None));
+        let bad = InbetweenConfig { dropout: 1.0, ..c };
+        assert!(bad.validate().unwrap_err().to_string().contains("dropout 1: must be in [0, 1)"));
     }
 
     #[test]

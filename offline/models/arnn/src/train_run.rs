@@ -130,6 +130,8 @@ pub struct ArnnRunOptions {
     pub synth_mix: Option<f64>,
     /// The in-betweening design: fraction of batches in the transition layout.
     pub transition_fraction: Option<f64>,
+    /// The in-betweening design: dropout in training.
+    pub dropout: Option<f64>,
     /// The in-betweening design: the network over the shot.
     pub backbone: Option<crate::inbetween::Backbone>,
     /// Sequences per batch.
@@ -458,6 +460,12 @@ pub fn run(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
         bail!(
             "--backbone chooses the in-betweening design's network (add --design inbetween); the autoregressive ARNN \
              is its own network"
+        );
+    }
+    if a.dropout.is_some() {
+        bail!(
+            "--dropout sets the in-betweening design's dropout (add --design inbetween); the autoregressive ARNN's \
+             dropout is part of its --preset"
         );
     }
     if a.transition_fraction.is_some() {
@@ -851,11 +859,15 @@ pub fn train_inbetween(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
             bail!("--resume {}: the run was trained on another skeleton than {}'s", out.display(), s.source());
         }
         if let Some(b) = a.backbone.filter(|&b| b != config.backbone) {
+            let name = |b: crate::inbetween::Backbone| {
+                clap::ValueEnum::to_possible_value(&b).map_or_else(|| format!("{b:?}"), |v| v.get_name().to_string())
+            };
             bail!(
-                "--resume {}: the run's network is the {:?} backbone, not {b:?}: drop --backbone to resume it, or \
-                 train a new run",
+                "--resume {}: the run's network is the {} backbone, not {}: drop --backbone to resume it, or train a \
+                 new run",
                 out.display(),
-                config.backbone
+                name(config.backbone),
+                name(b)
             );
         }
         (config, norm)
@@ -878,6 +890,9 @@ pub fn train_inbetween(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
         }
         if let Some(f) = a.transition_fraction {
             config.transition_fraction = f;
+        }
+        if let Some(p) = a.dropout {
+            config.dropout = p;
         }
         config.seed = a.run.seed;
         config.lr_half_life = (train_w.count.div_ceil(config.batch_size) * epochs).div_ceil(4) as u64;
