@@ -1022,7 +1022,7 @@ fn inbetween_transformer_backbone_trains_resumes_and_runs_in_the_benchmark() {
         run(&[&ar[..], &["--preset", "tiny", "--out", dir.path().join("ar").to_str().unwrap()]].concat());
     assert!(!ok && stderr.contains("--dropout sets the in-betweening design's dropout"), "{stderr}");
     let (ok, _, stderr) = run(&[&base[..], &tiny[..], &["--dropout", "1", "--out", r]].concat());
-    assert!(!ok && stderr.contains("--dropout"), "{stderr}");
+    assert!(!ok && stderr.contains("--dropout") && stderr.contains("valid range [0, 1)"), "{stderr}");
 }
 
 /// `zoo bench keyframes` on an in-betweening file times whole transitions in one call, beside an

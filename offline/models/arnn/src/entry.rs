@@ -175,7 +175,7 @@ pub struct ArnnArgs {
     /// With `--design inbetween`: dropout in training, the transformer's on each block's
     /// attention and feed-forward outputs (the GRU's between its layers: none with the one layer
     /// of the default sizes). A resumed run keeps its own [default: 0].
-    #[arg(long, allow_hyphen_values = true, value_parser = dropout)]
+    #[arg(long, allow_hyphen_values = true, value_parser = zoo_nn::args::fraction_or_zero)]
     pub dropout: Option<f64>,
     /// Sequences per batch [default: the preset's].
     #[arg(long, allow_hyphen_values = true, value_parser = zoo_nn::args::batch_size)]
@@ -197,11 +197,6 @@ pub struct ArnnArgs {
     /// [default: 0.01]
     #[arg(long, allow_hyphen_values = true, value_parser = frame_phase_omega)]
     pub frame_phase_omega: Option<f64>,
-}
-
-/// `--dropout`: a probability in [0, 1).
-fn dropout(s: &str) -> Result<f64, String> {
-    zoo_nn::args::real_in(s, zoo_nn::args::Interval { lo: 0.0, lo_open: false, hi: 1.0, hi_open: true }, "")
 }
 
 /// `--frame-phase`: a fraction in [0, 1).

@@ -490,7 +490,7 @@ impl Inbetween {
     /// [`velocity`]) of input features `(batch, frames, input_width)`:
     /// `(batch, frames, d)`, normalised units, before the envelope. Dropout from `rng` when it
     /// is `Some` (training).
-    pub fn correction(&self, features: &Tensor, rng: Option<&mut RowRngs>) -> ArnnResult<Tensor> {
+    pub fn correction(&self, features: &Tensor, mut rng: Option<&mut RowRngs>) -> ArnnResult<Tensor> {
         let w = self.config.input_width();
         let dims = features.dims();
         if dims.len() != 3 || dims[2] != w || dims[1] == 0 {
@@ -511,7 +511,6 @@ impl Inbetween {
                     .collect();
                 let bias = Tensor::from_vec(bias, (*heads, t, t), &self.device)?;
                 let drop = Dropout::new(self.config.dropout);
-                let mut rng = rng;
                 for b in blocks {
                     h = b.forward(&h, &bias, &drop, rng.as_deref_mut())?;
                 }

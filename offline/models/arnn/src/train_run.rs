@@ -859,8 +859,12 @@ pub fn train_inbetween(a: &ArnnRunOptions, p: &dyn Progress) -> ArnnResult<()> {
             bail!("--resume {}: the run was trained on another skeleton than {}'s", out.display(), s.source());
         }
         if let Some(b) = a.backbone.filter(|&b| b != config.backbone) {
+            // The names `--backbone` takes (no variant is skipped).
             let name = |b: crate::inbetween::Backbone| {
-                clap::ValueEnum::to_possible_value(&b).map_or_else(|| format!("{b:?}"), |v| v.get_name().to_string())
+                clap::ValueEnum::to_possible_value(&b)
+                    .expect("every backbone has an option value")
+                    .get_name()
+                    .to_string()
             };
             bail!(
                 "--resume {}: the run's network is the {} backbone, not {}: drop --backbone to resume it, or train a \
