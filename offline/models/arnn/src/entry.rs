@@ -191,17 +191,12 @@ pub struct ArnnArgs {
     /// `--frame-phase-omega` (section 9's extra training that weights the frame loss more; the
     /// curriculum's ramps then run over the other epochs; 0: the paper's schedule alone)
     /// [default: 0.25 for lamp runs, 0 for humanoid clips] (docs/arnn.md, "The frame phase")
-    #[arg(long, allow_hyphen_values = true, value_parser = frame_phase)]
+    #[arg(long, allow_hyphen_values = true, value_parser = zoo_nn::args::fraction_or_zero)]
     pub frame_phase: Option<f64>,
     /// Key importance omega in the frame phase (the key loss weighs `100 omega` there)
     /// [default: 0.01]
     #[arg(long, allow_hyphen_values = true, value_parser = frame_phase_omega)]
     pub frame_phase_omega: Option<f64>,
-}
-
-/// `--frame-phase`: a fraction in [0, 1).
-fn frame_phase(s: &str) -> Result<f64, String> {
-    zoo_nn::args::real_in(s, zoo_nn::args::Interval { lo: 0.0, lo_open: false, hi: 1.0, hi_open: true }, "")
 }
 
 /// `--frame-phase-omega`: a weight in [0, 1].
